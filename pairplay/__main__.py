@@ -1,0 +1,5 @@
+import sys
+
+from pairplay.services.cli import main
+
+sys.exit(main())

@@ -1,0 +1,1 @@
+"""The MCAP event log: write, read, fold into state, re-publish, verify."""

@@ -1,0 +1,1 @@
+"""The contract: msgspec Structs for every event, config and file format."""

@@ -1,0 +1,45 @@
+"""`pairplay <verb>`: one command line whose verbs match what a researcher does.
+
+Each verb lives in its own module with `add_arguments(parser)` and
+`run(args) -> int`; it is imported only when used, so `pairplay --help` and a
+verb's start-up stay fast. To add a verb, add one line to VERBS.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import sys
+
+# verb -> (module, one-line help)
+VERBS: dict[str, tuple[str, str]] = {
+    "study": ("pairplay.services.study_cli", "run the simulated study of thesis chapter 6"),
+    "bench": ("pairplay.services.bench_cli", "measure speed beside raw references, print a table"),
+}
+
+
+def build_parser(argv: list[str]) -> tuple[argparse.ArgumentParser, argparse.ArgumentParser | None]:
+    parser = argparse.ArgumentParser(prog="pairplay", description=__doc__.splitlines()[0])
+    sub = parser.add_subparsers(dest="verb", metavar="VERB")
+    chosen = None
+    for verb, (module, help_text) in VERBS.items():
+        p = sub.add_parser(verb, help=help_text, description=help_text)
+        if verb in argv[:1]:
+            importlib.import_module(module).add_arguments(p)
+            chosen = p
+    return parser, chosen
+
+
+def main(argv: list[str] | None = None) -> int:
+    argv = list(sys.argv[1:] if argv is None else argv)
+    parser, _ = build_parser(argv)
+    args = parser.parse_args(argv)
+    if not args.verb:
+        parser.print_help()
+        return 2
+    module = importlib.import_module(VERBS[args.verb][0])
+    return int(module.run(args) or 0)
+
+
+if __name__ == "__main__":
+    sys.exit(main())
