@@ -1,0 +1,51 @@
+"""The key space of the bus: `pairplay/<session>/<source>/<event tag>`.
+
+Rule: every event is published on exactly one key built from its envelope and
+tag, so a subscriber to `pairplay/<session>/**` sees the whole session and the
+recorder keeps one MCAP channel per key. Session ids and source names are single
+key chunks: no `/`, no zenoh wildcards or verbatim markers (`* $ # ?`), no `@`.
+Requests that need an answer (the recorder's log, for a restarting service) use
+queryables on `pairplay/<session>/_query/<service>/<name>`, outside the event space.
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+ROOT = "pairplay"
+QUERY_CHUNK = "_query"
+_FORBIDDEN = set("/*$#?@ ")
+
+
+class EventKey(NamedTuple):
+    session: str
+    source: str
+    tag: str
+
+
+def check_chunk(what: str, value: str) -> str:
+    """Return `value` if it is a legal single key chunk, else raise ValueError."""
+    if not value or _FORBIDDEN & set(value):
+        raise ValueError(f"{what} {value!r} must be non-empty and free of / * $ # ? @ and spaces")
+    return value
+
+
+def event_key(session: str, source: str, tag: str) -> str:
+    return f"{ROOT}/{check_chunk('session', session)}/{check_chunk('source', source)}/{tag}"
+
+
+def session_keys(session: str) -> str:
+    """Wildcard of everything published in one session."""
+    return f"{ROOT}/{check_chunk('session', session)}/**"
+
+
+def query_key(session: str, service: str, name: str) -> str:
+    return f"{ROOT}/{check_chunk('session', session)}/{QUERY_CHUNK}/{service}/{name}"
+
+
+def parse_event_key(key: str) -> EventKey:
+    """Split an event key; ValueError if it is not `pairplay/<session>/<source>/<tag>`."""
+    parts = str(key).split("/")
+    if len(parts) != 4 or parts[0] != ROOT or parts[1] == QUERY_CHUNK or parts[2] == QUERY_CHUNK:
+        raise ValueError(f"key {key!r} is not {ROOT}/<session>/<source>/<event>")
+    return EventKey(parts[1], parts[2], parts[3])

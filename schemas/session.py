@@ -1,0 +1,54 @@
+"""The configuration of one session, recorded whole in its SessionStarted event.
+
+Rule: everything a replay needs to reproduce a session is in this Struct: the
+participant, the seed and game index that name the RNG streams, the algorithm
+and its schedule, the bias or fixed policy itself (as greedy actions, not a
+path: a recording must not depend on files beside it), and the software version.
+New fields get defaults and go at the end.
+"""
+
+from __future__ import annotations
+
+import msgspec
+
+ALGORITHMS = ("q-learning", "pi-reuse", "fixed")
+OBSERVED_SOURCES = ("intended", "first-pick")
+# How the learner decides that a suggestion was ignored (no reward, no update):
+# "perceived": the simulated participant reports it (SuggestionPerceived);
+# "time": the two picks of a turn came less than `ignore_window_ms` apart (thesis 7.1.2).
+IGNORE_RULES = ("perceived", "time")
+
+
+class SessionConfig(msgspec.Struct, frozen=True, kw_only=True):
+    session: str
+    participant: str  # "sim:<persona>" or "human:<id>"
+    seed: int
+    rounds: int
+    persona: str = ""
+    game_index: int = 0
+    algorithm: str = "q-learning"
+    observed_source: str = "intended"
+    ignore_rule: str = "perceived"
+    ignore_window_ms: float = 1500.0
+    # Greedy action per state of the bias policy (pi-reuse) or the fixed policy.
+    policy_actions: list[int] = []
+    # Keyword arguments of the learner's schedule (core.learning), by name.
+    learner: dict[str, float] = {}
+    software_version: str = ""
+
+    def validate(self) -> None:
+        """Raise ValueError with a clear reason if the config cannot run."""
+        if not self.session or any(c in self.session for c in "/*$#?@ "):
+            raise ValueError(f"session id {self.session!r} must be non-empty, without / * $ # ? @ or spaces")
+        if self.rounds < 1:
+            raise ValueError(f"rounds must be >= 1, got {self.rounds}")
+        if self.algorithm not in ALGORITHMS:
+            raise ValueError(f"algorithm {self.algorithm!r} is not one of {ALGORITHMS}")
+        if self.observed_source not in OBSERVED_SOURCES:
+            raise ValueError(f"observed_source {self.observed_source!r} is not one of {OBSERVED_SOURCES}")
+        if self.ignore_rule not in IGNORE_RULES:
+            raise ValueError(f"ignore_rule {self.ignore_rule!r} is not one of {IGNORE_RULES}")
+        if self.algorithm in ("pi-reuse", "fixed") and not self.policy_actions:
+            raise ValueError(f"algorithm {self.algorithm!r} needs policy_actions (a bias or fixed policy)")
+        if self.participant.startswith("sim:") and not self.persona:
+            raise ValueError("a simulated participant needs a persona")
