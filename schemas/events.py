@@ -123,6 +123,8 @@ class SuggestionPerceived(Event, tag="SuggestionPerceived"):
     consistent: bool
     candidate_size: int
     from_memory: bool = False  # the match was known: the suggestion is not learned from
+    candidate_mask: int = 0  # the candidate set (0 when inconsistent or not considered)
+    second: int = -1  # the card the user will pick second
 
 
 class WrongSuggestionPressed(Event, tag="WrongSuggestionPressed"):

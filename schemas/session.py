@@ -9,7 +9,11 @@ New fields get defaults and go at the end.
 
 from __future__ import annotations
 
+from typing import Union
+
 import msgspec
+
+from .config import LearnerConfig
 
 ALGORITHMS = ("q-learning", "pi-reuse", "fixed")
 OBSERVED_SOURCES = ("intended", "first-pick")
@@ -32,9 +36,18 @@ class SessionConfig(msgspec.Struct, frozen=True, kw_only=True):
     ignore_window_ms: float = 1500.0
     # Greedy action per state of the bias policy (pi-reuse) or the fixed policy.
     policy_actions: list[int] = []
-    # Keyword arguments of the learner's schedule (core.learning), by name.
-    learner: dict[str, float] = {}
+    # The learner's schedule: the fields of schemas.config.LearnerConfig that
+    # differ from its defaults (a plain mapping, so that a newer LearnerConfig
+    # field never makes an old reader reject this event).
+    learner: dict[str, Union[float, int, None]] = {}
     software_version: str = ""
+
+    def learner_config(self) -> LearnerConfig:
+        """The learner's schedule as the strict config Struct (ValueError if unknown keys)."""
+        try:
+            return msgspec.convert(self.learner, LearnerConfig)
+        except msgspec.ValidationError as err:
+            raise ValueError(f"learner schedule {self.learner!r}: {err}") from None
 
     def validate(self) -> None:
         """Raise ValueError with a clear reason if the config cannot run."""
@@ -52,3 +65,10 @@ class SessionConfig(msgspec.Struct, frozen=True, kw_only=True):
             raise ValueError(f"algorithm {self.algorithm!r} needs policy_actions (a bias or fixed policy)")
         if self.participant.startswith("sim:") and not self.persona:
             raise ValueError("a simulated participant needs a persona")
+        self.learner_config()
+
+
+def learner_overrides(config: LearnerConfig) -> dict[str, Union[float, int, None]]:
+    """The fields of `config` that differ from LearnerConfig's defaults."""
+    default = LearnerConfig()
+    return {f: getattr(config, f) for f in config.__struct_fields__ if getattr(config, f) != getattr(default, f)}
