@@ -1,0 +1,133 @@
+"""State as a fold over events: what the learner learned and how the game went.
+
+Rule: `SessionFold.evolve(event)` folds one event; a session's state is the
+fold of its log in order. The Q-table is rebuilt from QUpdated events with
+`core.learning.q_update`, the very expression the live learner applies (eq.
+5.2), on the recorded reward and alpha, so the rebuilt table equals the live
+learner's bit for bit. Each QUpdated also carries the learner's q_before: a
+disagreement (a lost or reordered update) is counted, not hidden.
+Learning curves come from RoundEnded (turns per round: 9 is perfect play) and
+RewardGiven (reward per round).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from pairplay.core.actions import N_ACTIONS
+from pairplay.core.geometry import N_STATES
+from pairplay.core.learning import q_update
+from pairplay.schemas import events as ev
+from pairplay.schemas.envelope import Event
+from pairplay.schemas.session import SessionConfig
+
+
+@dataclass
+class RoundStats:
+    turns: int = 0
+    matches: int = 0
+    reward: float = 0.0
+    learned: int = 0
+    inconsistent: int = 0
+
+
+@dataclass
+class SessionFold:
+    config: SessionConfig | None = None
+    q_rows: list[list[float]] = field(default_factory=lambda: [[0.0] * N_ACTIONS for _ in range(N_STATES)])
+    visits: list[int] = field(default_factory=lambda: [0] * N_STATES)
+    rounds: dict[int, RoundStats] = field(default_factory=dict)
+    counts: dict[str, int] = field(default_factory=dict)
+    q_mismatches: int = 0
+    rejections: list[str] = field(default_factory=list)
+    ended: ev.SessionEnded | None = None
+    events: int = 0
+
+    @property
+    def q(self) -> np.ndarray:
+        return np.array(self.q_rows, dtype=np.float64)
+
+    def round(self, index: int) -> RoundStats:
+        stats = self.rounds.get(index)
+        if stats is None:
+            stats = self.rounds[index] = RoundStats()
+        return stats
+
+    def evolve(self, event: Event) -> None:
+        self.events += 1
+        name = type(event).__name__
+        self.counts[name] = self.counts.get(name, 0) + 1
+        handler = _HANDLERS.get(name)
+        if handler is not None:
+            handler(self, event)
+
+    def fold(self, events) -> "SessionFold":
+        for e in events:
+            self.evolve(e)
+        return self
+
+    def turns_per_round(self) -> list[int]:
+        return [self.rounds[r].turns for r in sorted(self.rounds)]
+
+    def reward_per_round(self) -> list[float]:
+        return [self.rounds[r].reward for r in sorted(self.rounds)]
+
+
+def _session_started(s: SessionFold, e: ev.SessionStarted) -> None:
+    s.config = e.config
+
+
+def _q_updated(s: SessionFold, e: ev.QUpdated) -> None:
+    row = s.q_rows[e.state]
+    if row[e.action] != e.q_before:
+        s.q_mismatches += 1
+    row[e.action] = q_update(row[e.action], e.reward, e.alpha)
+    s.visits[e.state] += 1
+
+
+def _reward(s: SessionFold, e: ev.RewardGiven) -> None:
+    stats = s.round(e.round)
+    stats.reward += e.reward
+    stats.learned += e.learned
+
+
+def _perceived(s: SessionFold, e: ev.SuggestionPerceived) -> None:
+    if e.considered and not e.consistent:
+        s.round(e.round).inconsistent += 1
+
+
+def _round_ended(s: SessionFold, e: ev.RoundEnded) -> None:
+    stats = s.round(e.round)
+    stats.turns, stats.matches = e.turns, e.matches
+
+
+def _rejected(s: SessionFold, e) -> None:
+    s.rejections.append(f"{e.source}: {e.reason}")
+
+
+def _ended(s: SessionFold, e: ev.SessionEnded) -> None:
+    s.ended = e
+
+
+_HANDLERS = {
+    "SessionStarted": _session_started, "QUpdated": _q_updated, "RewardGiven": _reward,
+    "SuggestionPerceived": _perceived, "RoundEnded": _round_ended, "MessageRejected": _rejected,
+    "PickRejected": _rejected, "SessionEnded": _ended,
+}
+
+
+def fold_events(events) -> SessionFold:
+    return SessionFold().fold(events)
+
+
+def fold_sessions(events) -> dict[str, SessionFold]:
+    """One fold per session id, for logs that hold several sessions."""
+    folds: dict[str, SessionFold] = {}
+    for e in events:
+        f = folds.get(e.session)
+        if f is None:
+            f = folds[e.session] = SessionFold()
+        f.evolve(e)
+    return folds

@@ -1,0 +1,112 @@
+"""Reading the event log, also when the file was cut short by a crash.
+
+Rule: records are read in file order with mcap's StreamReader, the one reader
+that yields every complete record of a truncated file; a truncated or corrupt
+tail ends the read with `truncated=True` and the reason, never an exception,
+and loses nothing before it. Each message is decoded with msgspec into its
+event class; a message that does not decode is kept as a `BadMessage` with the
+reason (a recording is evidence: nothing is dropped silently).
+`EventDecoderFactory` plugs the same decoding into mcap's own readers.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Callable, Iterator, NamedTuple, Optional
+
+import msgspec
+from mcap.decoder import DecoderFactory
+from mcap.records import Channel, Footer, Message, Metadata, Schema
+from mcap.stream_reader import StreamReader
+
+from pairplay.schemas.envelope import Event
+from pairplay.schemas.events import decode_event
+
+
+class RecordedEvent(NamedTuple):
+    key: str  # the channel topic: the bus key
+    event: Event
+    log_time_ns: int
+    payload: bytes
+
+
+class BadMessage(NamedTuple):
+    key: str
+    reason: str
+    log_time_ns: int
+    payload: bytes
+
+
+@dataclass
+class EventLog:
+    """Everything a recording holds, in file order."""
+
+    path: str
+    events: list[RecordedEvent] = field(default_factory=list)
+    metadata: dict[str, dict[str, str]] = field(default_factory=dict)
+    bad: list[BadMessage] = field(default_factory=list)
+    truncated: bool = False
+    error: str = ""  # why reading stopped early
+    channels: dict[int, tuple[str, str]] = field(default_factory=dict)  # id -> (topic, schema name)
+    schemas: dict[int, tuple[str, str, bytes]] = field(default_factory=dict)  # id -> (name, encoding, data)
+
+    def of(self, *tags: str) -> list[Event]:
+        """The events with one of these tags, in order."""
+        return [r.event for r in self.events if type(r.event).__name__ in tags]
+
+
+def iter_records(path: str | Path) -> Iterator[Any]:
+    """Every complete record of the file; raises at a truncated or corrupt tail."""
+    with open(path, "rb") as f:
+        yield from StreamReader(f, record_size_limit=1 << 30).records
+
+
+def read_log(path: str | Path) -> EventLog:
+    """Read a recording (complete or truncated); see the module rule."""
+    log = EventLog(str(path))
+    channels: dict[int, str] = {}
+    decode = decode_event
+    append = log.events.append
+    try:
+        for record in iter_records(path):
+            if isinstance(record, Message):
+                key = channels.get(record.channel_id)
+                if key is None:
+                    log.bad.append(BadMessage("", f"message on unknown channel {record.channel_id}",
+                                              record.log_time, record.data))
+                    continue
+                try:
+                    append(RecordedEvent(key, decode(record.data), record.log_time, record.data))
+                except (msgspec.DecodeError, msgspec.ValidationError) as err:
+                    log.bad.append(BadMessage(key, str(err), record.log_time, record.data))
+            elif isinstance(record, Channel):
+                channels[record.id] = record.topic
+                log.channels[record.id] = (record.topic, str(record.schema_id))
+            elif isinstance(record, Schema):
+                log.schemas[record.id] = (record.name, record.encoding, record.data)
+            elif isinstance(record, Metadata):
+                log.metadata[record.name] = dict(record.metadata)
+            elif isinstance(record, Footer):
+                break
+    except FileNotFoundError:
+        raise
+    except Exception as err:  # a cut or corrupt tail: keep what came before it
+        log.truncated = True
+        log.error = f"{type(err).__name__}: {err}" if str(err) else type(err).__name__
+    return log
+
+
+def read_events(path: str | Path) -> list[Event]:
+    """Just the decoded events of a recording, in file order."""
+    return [r.event for r in read_log(path).events]
+
+
+class EventDecoderFactory(DecoderFactory):
+    """msgspec decoding of pairplay JSON channels for mcap's readers
+    (`make_reader(f, decoder_factories=[EventDecoderFactory()])`)."""
+
+    def decoder_for(self, message_encoding: str, schema: Optional[Schema]) -> Optional[Callable[[bytes], Any]]:
+        if message_encoding == "json" and schema is not None and schema.encoding == "jsonschema":
+            return decode_event
+        return None

@@ -1,0 +1,101 @@
+"""Writing the event log: one MCAP channel per bus key, JSON messages, bounded loss.
+
+Rule: a message is written as the exact JSON bytes seen on the bus, on the
+channel named by its key, with the flattened JSON Schema of its event class
+(schemas/jsonschema.py), so `mcap` tools and Foxglove read the file as it is.
+Loss on a crash is bounded by time: `maybe_flush(now_ns)` closes the open chunk
+and flushes the file once `flush_interval_ns` (default 0.1 s) has passed since
+the last flush, so a writer killed with SIGKILL loses at most that long a tail
+(plus what never reached it). Metadata records (session config, seed, software
+version) can be added at any point of the file. The caller owns the clock: every
+time is an argument.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import BinaryIO
+
+from mcap.writer import CompressionType, Writer
+
+from pairplay.schemas.events import EVENT_BY_TAG
+from pairplay.schemas.jsonschema import schema_text
+from pairplay.schemas.keys import parse_event_key
+
+PROFILE = "pairplay"
+FLUSH_INTERVAL_NS = 100_000_000  # 0.1 s: the most a crash may lose
+CHUNK_SIZE = 256 * 1024  # a chunk also closes when this full, whatever the time
+
+
+class EventLogWriter:
+    """Append bus messages to an MCAP file; see the module rule."""
+
+    def __init__(self, output: str | Path | BinaryIO, *, flush_interval_ns: int = FLUSH_INTERVAL_NS,
+                 chunk_size: int = CHUNK_SIZE, library: str = "pairplay"):
+        self._own = isinstance(output, (str, Path))
+        self._stream = open(output, "wb") if self._own else output
+        self._writer = Writer(self._stream, chunk_size=chunk_size, compression=CompressionType.ZSTD)
+        self._writer.start(profile=PROFILE, library=library)
+        self._schemas: dict[str, int] = {}
+        self._channels: dict[str, int] = {}
+        self.flush_interval_ns = int(flush_interval_ns)
+        self._last_flush_ns: int | None = None
+        self._unflushed = 0
+        self.count = 0
+        self.closed = False
+
+    def channel_for(self, key: str) -> int:
+        """The channel id of a bus key, registering it (and its schema) on first use."""
+        channel = self._channels.get(key)
+        if channel is None:
+            tag = parse_event_key(key).tag
+            if tag not in EVENT_BY_TAG:
+                raise ValueError(f"no event type {tag!r} for key {key!r}")
+            schema = self._schemas.get(tag)
+            if schema is None:
+                schema = self._writer.register_schema(tag, "jsonschema", schema_text(EVENT_BY_TAG[tag]).encode())
+                self._schemas[tag] = schema
+            channel = self._writer.register_channel(key, "json", schema)
+            self._channels[key] = channel
+        return channel
+
+    def write(self, key: str, payload: bytes, *, log_time_ns: int, publish_time_ns: int = 0, sequence: int = 0) -> None:
+        """Append one message (already validated JSON of the key's event type)."""
+        self._writer.add_message(self.channel_for(key), log_time_ns, payload, publish_time_ns or log_time_ns,
+                                 sequence & 0xFFFFFFFF)
+        self.count += 1
+        self._unflushed += 1
+        if self._last_flush_ns is None:
+            self._last_flush_ns = log_time_ns
+
+    def add_metadata(self, name: str, data: dict[str, str]) -> None:
+        self._writer.add_metadata(name, {str(k): str(v) for k, v in data.items()})
+
+    def due_in_ns(self, now_ns: int) -> int | None:
+        """How long until the next flush is due (None: nothing waits to be flushed)."""
+        if not self._unflushed or self._last_flush_ns is None:
+            return None
+        return max(0, self._last_flush_ns + self.flush_interval_ns - now_ns)
+
+    def maybe_flush(self, now_ns: int) -> bool:
+        """Flush if the interval has passed since the last flush; True if it did."""
+        due = self.due_in_ns(now_ns)
+        if due is None or due > 0:
+            return False
+        self.flush(now_ns)
+        return True
+
+    def flush(self, now_ns: int) -> None:
+        self._writer.flush()
+        self._last_flush_ns = now_ns
+        self._unflushed = 0
+
+    def close(self) -> None:
+        """Write the summary and close: the file is then complete and indexed."""
+        if self.closed:
+            return
+        self.closed = True
+        self._writer.finish()
+        self._stream.flush()
+        if self._own:
+            self._stream.close()

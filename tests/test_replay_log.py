@@ -1,0 +1,127 @@
+"""The event log: what is written reads back, a cut file keeps everything
+before the last flush, `recover` completes it, and the fold rebuilds Q."""
+
+import json
+
+import jsonschema
+import numpy as np
+import pytest
+from mcap.reader import make_reader
+
+from pairplay.core.learning import q_update
+from pairplay.replay.fold import fold_events
+from pairplay.replay.reader import EventDecoderFactory, read_log
+from pairplay.replay.recover import recover
+from pairplay.replay.writer import EventLogWriter
+from pairplay.schemas import keys
+from pairplay.schemas.envelope import stamped
+from pairplay.schemas.events import CardPicked, QUpdated, encode_event
+
+SESSION = "s1"
+
+
+def picks(n):
+    for i in range(n):
+        e = stamped(CardPicked(round=0, turn=i, card=i % 18), session=SESSION, source="participant",
+                    seq=i + 1, time_ns=1_000 + i)
+        yield keys.event_key(SESSION, "participant", "CardPicked"), encode_event(e), e
+
+
+def write(path, n, flush_every=None, close=True):
+    w = EventLogWriter(path)
+    w.add_metadata("pairplay.session", {"seed": "7"})
+    for i, (key, payload, e) in enumerate(picks(n)):
+        w.write(key, payload, log_time_ns=e.time_ns, sequence=e.seq)
+        if flush_every and (i + 1) % flush_every == 0:
+            w.flush(e.time_ns)
+    if close:
+        w.close()
+    return w
+
+
+def test_written_events_read_back_with_metadata_and_validate(tmp_path):
+    path = tmp_path / "a.mcap"
+    write(path, 50)
+    log = read_log(path)
+    assert not log.truncated and not log.bad
+    assert [r.event.turn for r in log.events] == list(range(50))
+    assert log.metadata["pairplay.session"] == {"seed": "7"}
+    # the mcap package's standard reader with our decoder, and each message against its channel's schema
+    with open(path, "rb") as f:
+        reader = make_reader(f, decoder_factories=[EventDecoderFactory()])
+        decoded = list(reader.iter_decoded_messages())
+    assert len(decoded) == 50
+    for schema, channel, message, event in decoded:
+        assert channel.topic == "pairplay/s1/participant/CardPicked"
+        jsonschema.validate(json.loads(message.data), json.loads(schema.data))
+        assert event.card == (message.sequence - 1) % 18
+
+
+def test_flush_interval_is_time_based():
+    import io
+    w = EventLogWriter(io.BytesIO(), flush_interval_ns=100)
+    assert w.due_in_ns(0) is None  # nothing to flush
+    key, payload, e = next(picks(1))
+    w.write(key, payload, log_time_ns=1000)
+    assert not w.maybe_flush(1050)
+    assert w.maybe_flush(1100)
+    assert w.due_in_ns(1200) is None
+
+
+@pytest.mark.parametrize("cut", [0.3, 0.6, 0.95])
+def test_a_cut_file_reads_up_to_the_last_flush_and_recovers(tmp_path, cut):
+    path = tmp_path / "full.mcap"
+    write(path, 400, flush_every=100, close=False)  # killed: never closed, last 0 unflushed
+    data = path.read_bytes()
+    cut_path = tmp_path / "cut.mcap"
+    cut_path.write_bytes(data[: int(len(data) * cut)])
+    log = read_log(cut_path)
+    assert log.truncated and log.error
+    n = len(log.events)
+    assert n % 100 == 0 and [r.event.turn for r in log.events] == list(range(n))  # whole chunks, in order
+    done = recover(cut_path)
+    assert done.truncated and done.messages == n
+    fixed = read_log(done.output)
+    assert not fixed.truncated and len(fixed.events) == n
+    assert fixed.metadata["pairplay.recovered"]["messages"] == str(n)
+    with open(done.output, "rb") as f:
+        assert sum(1 for _ in make_reader(f).iter_messages()) == n
+
+
+def test_unflushed_writer_file_holds_every_flushed_chunk(tmp_path):
+    path = tmp_path / "live.mcap"
+    w = write(path, 250, flush_every=100, close=False)
+    w._stream.flush()
+    assert len(read_log(path).events) == 200  # the open chunk (50) is what a SIGKILL loses
+
+
+def test_recover_refuses_to_overwrite_its_input(tmp_path):
+    path = tmp_path / "a.mcap"
+    write(path, 3)
+    with pytest.raises(ValueError):
+        recover(path, path)
+
+
+def test_a_garbage_file_is_reported_not_raised(tmp_path):
+    path = tmp_path / "junk.mcap"
+    path.write_bytes(b"not an mcap file at all")
+    log = read_log(path)
+    assert log.truncated and not log.events
+
+
+def test_fold_rebuilds_q_with_the_learners_update_and_flags_gaps():
+    rng = np.random.default_rng(0)
+    q = np.zeros((24, 88))
+    events = []
+    for i in range(300):
+        s, a, r, alpha = int(rng.integers(24)), int(rng.integers(88)), float(rng.normal()), float(rng.random())
+        before = q[s, a]
+        q[s, a] = q_update(q[s, a], r, alpha)
+        events.append(QUpdated(round=0, turn=i, attempt=0, state=s, action=a, alpha=alpha, reward=r,
+                               q_before=float(before), q_after=float(q[s, a])))
+    folded = fold_events(events)
+    assert np.array_equal(folded.q, q) and folded.q_mismatches == 0
+    first = QUpdated(round=0, turn=0, attempt=0, state=3, action=4, alpha=0.5, reward=1.0, q_before=0.0, q_after=0.5)
+    second = QUpdated(round=0, turn=1, attempt=0, state=3, action=4, alpha=0.5, reward=1.0, q_before=0.5, q_after=0.75)
+    assert fold_events([first, second]).q_mismatches == 0
+    assert fold_events([second]).q_mismatches == 1  # a lost update shows
