@@ -144,3 +144,10 @@ def neighbours_mask(card: int) -> int:
 def bits_of(mask: int) -> list[int]:
     """Card indices in a bit mask, ascending."""
     return [i for i in range(N_CARDS) if mask >> i & 1]
+
+
+def states_of(observed: np.ndarray, match: np.ndarray, covered: np.ndarray) -> np.ndarray:
+    """`state_of` for a batch of games (arrays of equal shape)."""
+    cell = CELL_OF[observed, match]
+    n = np.bitwise_count(CELL_MASK[observed, cell].astype(np.int64) & covered)
+    return STATE_INDEX[cell, LEVEL_OF_COUNT[n]].astype(np.int64)

@@ -1,0 +1,74 @@
+"""Configuration of learners and studies: the knobs a study designer may turn.
+
+Rule: defaults are the thesis's values (section 6.2 for the virtual study,
+section 7.2 for the human study); every choice SPEC.md or this project made
+where the thesis is silent is a field here, so the other reading is one flag
+away. Config files are strict: unknown fields are an error.
+"""
+
+from __future__ import annotations
+
+import msgspec
+
+
+class LearnerConfig(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
+    """Online Q-learning (thesis 5.1, algorithm 1) with optional pi-reuse (5.3).
+
+    epsilon(round) = max(epsilon_min, epsilon_start - epsilon_step * (round // epsilon_every))
+    alpha(round)   = max(alpha_min,   alpha_start   - alpha_step   * (round // alpha_every))
+    The virtual study: epsilon 0.9 minus 0.1 every 50 rounds, floor 0.1; alpha 0.5
+    minus 0.05 every 50 rounds. The thesis gives alpha no floor; it reaches 0.05 at
+    round 450 of 500, and alpha_min keeps it there for longer games (0 would stop
+    learning).
+    pi-reuse (algorithm 5): with probability psi the bias policy's action, else
+    epsilon-greedy on the new Q; psi starts each round (episode) at
+    psi_start * psi_round_decay**round and is multiplied by psi_decay (v) after
+    every suggestion; from round `reuse_rounds` on (if set) psi is 0, so the last
+    rounds use the new policy alone.
+    """
+
+    epsilon_start: float = 0.9
+    epsilon_step: float = 0.1
+    epsilon_every: int = 50
+    epsilon_min: float = 0.1
+    alpha_start: float = 0.5
+    alpha_step: float = 0.05
+    alpha_every: int = 50
+    alpha_min: float = 0.05
+    psi_start: float = 1.0
+    psi_decay: float = 0.95
+    psi_round_decay: float = 1.0
+    reuse_rounds: int | None = None
+
+    @classmethod
+    def human_phase1(cls, rounds: int = 5) -> "LearnerConfig":
+        """Thesis 7.2: epsilon 0.9 falling by a fifth of 0.9 each round (5 rounds)."""
+        return cls(epsilon_start=0.9, epsilon_step=0.9 / rounds, epsilon_every=1, epsilon_min=0.0,
+                   alpha_start=0.5, alpha_step=0.0, alpha_every=1, alpha_min=0.5)
+
+    @classmethod
+    def human_phase2(cls, rounds: int = 5) -> "LearnerConfig":
+        """Thesis 7.2: pi-reuse on the bias policy, the last round on the new policy alone."""
+        return cls(epsilon_start=0.9, epsilon_step=0.9 / rounds, epsilon_every=1, epsilon_min=0.0,
+                   alpha_start=0.5, alpha_step=0.0, alpha_every=1, alpha_min=0.5,
+                   psi_start=1.0, psi_decay=0.95, psi_round_decay=1.0 - 1.0 / rounds,
+                   reuse_rounds=rounds - 1)
+
+
+class Persona(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
+    """A simulated user of appendix A: features on the thesis's 1..6 scale."""
+
+    key: str
+    name: str
+    focus: int
+    memory: int
+    hearing: int
+    sight: int
+    inferred: tuple[str, ...] = ()  # features not stated in the thesis's text
+    basis: str = ""  # the text the values come from
+
+    def __post_init__(self) -> None:
+        for feature in ("focus", "memory", "hearing", "sight"):
+            value = getattr(self, feature)
+            if not 1 <= value <= 6:
+                raise ValueError(f"persona {self.key}: {feature} must be 1..6, got {value}")
