@@ -1,0 +1,146 @@
+"""The learner service: suggestions, rewards and Q updates for one session.
+
+Rule (thesis 5.1, 5.3, 6.1.3, 7.1.2): the session config picks the algorithm:
+Q-learning ("q-learning"), pi-reuse of the bias policy ("pi-reuse") or a fixed
+policy ("fixed"); the learner is core.learning.Learner with a batch of one and
+the session's "agent" stream, so a session on the bus learns exactly what the
+in-process study (core.simulate) learns for the same seed and persona.
+Each SuggestionRequested gets one SuggestionMade. A suggestion is settled once
+its turn is resolved and, under the "perceived" ignore rule, the participant
+has said what it perceived: RewardGiven (always, learned or not) and QUpdated
+(when the table changed, with q_before/q_after). A new request in the same
+turn means "wrong suggestion" (thesis 7.1.3): the open one gets -3 first.
+The next suggestion waits until the previous one is settled (NotYet), so Q is
+updated in the same order as in the study whatever order the bus delivered.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from pairplay.core.actions import ACTION_NAMES, N_ACTIONS
+from pairplay.core.geometry import N_STATES
+from pairplay.core.learning import How, Learner, alpha_at, epsilon_at
+from pairplay.core.reward import WRONG_SUGGESTION, human_reward, simulated_reward
+from pairplay.core.rng import UniformStream
+from pairplay.schemas import events as ev
+
+from .node import NotYet, Rejected, stream_seed
+
+MODE_OF_ALGORITHM = {"q-learning": "q", "pi-reuse": "reuse", "fixed": "fixed"}
+HOW_NAMES = {How.GREEDY: "greedy", How.EXPLORE: "explore", How.BIAS: "bias", How.FIXED: "fixed"}
+
+
+class LearnerLogic:
+    name = "learner"
+    consumes = frozenset({"SessionStarted", "SuggestionRequested", "SuggestionPerceived", "TurnResolved",
+                          "SessionEnded"})
+
+    def __init__(self):
+        self.config = None
+        self.learner: Learner | None = None
+        self.open: ev.SuggestionMade | None = None
+        self.perceived: dict[tuple[int, int, int], ev.SuggestionPerceived] = {}
+        self.resolved: dict[tuple[int, int], ev.TurnResolved] = {}
+        self.round_started = -1
+        self.ended = False
+
+    @property
+    def done(self) -> bool:
+        return self.ended and self.open is None
+
+    def start(self) -> list[ev.Event]:
+        return []
+
+    def handle(self, e: ev.Event) -> list[ev.Event]:
+        if isinstance(e, ev.SessionStarted):
+            return self._configure(e)
+        if self.config is None:
+            raise NotYet
+        if isinstance(e, ev.SuggestionRequested):
+            return self._suggest(e)
+        if isinstance(e, ev.SuggestionPerceived):
+            self.perceived[(e.round, e.turn, e.attempt)] = e
+        elif isinstance(e, ev.TurnResolved):
+            self.resolved[(e.round, e.turn)] = e
+        elif isinstance(e, ev.SessionEnded):
+            self.ended = True
+        return self._settle()
+
+    def _configure(self, e: ev.SessionStarted) -> list[ev.Event]:
+        if self.config is not None:
+            raise Rejected("the session has already started")
+        try:
+            e.config.validate()
+            schedule = e.config.learner_config()
+        except ValueError as err:
+            raise Rejected(f"cannot learn with this session config: {err}") from None
+        policy = np.array(e.config.policy_actions, dtype=np.int64) if e.config.policy_actions else None
+        if policy is not None and (policy.shape != (N_STATES,) or policy.min() < 0 or policy.max() >= N_ACTIONS):
+            raise Rejected(f"policy_actions must be {N_STATES} action codes 0..{N_ACTIONS - 1}")
+        mode = MODE_OF_ALGORITHM[e.config.algorithm]
+        self.learner = Learner(1, UniformStream([stream_seed(e.config)], "agent"), schedule, mode,
+                               bias=policy if mode == "reuse" else None, policy=policy if mode == "fixed" else None)
+        self.schedule, self.mode, self.config = schedule, mode, e.config
+        return []
+
+    def _suggest(self, r: ev.SuggestionRequested) -> list[ev.Event]:
+        if not (0 <= r.state < N_STATES):
+            raise Rejected(f"state {r.state} is outside 0..{N_STATES - 1}")
+        out: list[ev.Event] = []
+        if self.open is not None:
+            o = self.open
+            if (r.round, r.turn, r.attempt) != (o.round, o.turn, o.attempt + 1):
+                raise NotYet  # the previous suggestion is not settled yet
+            out += self._reward(o, WRONG_SUGGESTION, True, "wrong suggestion pressed")
+        if r.round != self.round_started:
+            self.learner.start_round(np.array([r.round]))
+            self.round_started = r.round
+        rounds = np.array([r.round])
+        psi = float(self.learner.psi[0])
+        actions, how = self.learner.suggest(np.array([r.state]), rounds)
+        action = int(actions[0])
+        self.open = ev.SuggestionMade(
+            round=r.round, turn=r.turn, attempt=r.attempt, state=r.state, action=action,
+            chosen_by=HOW_NAMES[How(int(how[0]))], epsilon=float(epsilon_at(self.schedule, r.round)),
+            alpha=float(alpha_at(self.schedule, r.round)), psi=psi if self.mode == "reuse" else 0.0,
+            observed=r.observed, target=r.match, action_name=ACTION_NAMES[action], request_seq=r.seq)
+        return out + [self.open]
+
+    def _settle(self) -> list[ev.Event]:
+        o = self.open
+        if o is None:
+            return []
+        turn = self.resolved.get((o.round, o.turn))
+        if turn is None:
+            return []
+        if self.config.ignore_rule == "time":
+            reward, learn = human_reward(turn.matched, turn.interval_ms / 1000.0, self.config.ignore_window_ms / 1000.0)
+            why = "ignored: picked too fast" if not learn else ("match" if turn.matched else "miss")
+        else:
+            p = self.perceived.get((o.round, o.turn, o.attempt))
+            if p is None:
+                return []  # the participant has not said yet what it perceived
+            rewards, learns = simulated_reward(np.array([turn.matched]), np.array([p.considered]),
+                                               np.array([p.consistent]), np.array([p.candidate_size]))
+            reward, learn = float(rewards[0]), bool(learns[0])
+            why = ("ignored: match from memory" if p.from_memory else "ignored: not considered") if not learn else (
+                "inconsistent" if not p.consistent else ("match" if turn.matched else "miss"))
+        self.perceived.pop((o.round, o.turn, o.attempt), None)
+        self.resolved.pop((o.round, o.turn), None)
+        self.open = None
+        return self._reward(o, reward, learn, why)
+
+    def _reward(self, o: ev.SuggestionMade, reward: float, learn: bool, why: str) -> list[ev.Event]:
+        self.open = None
+        learned = learn and self.mode != "fixed"
+        out: list[ev.Event] = [ev.RewardGiven(round=o.round, turn=o.turn, attempt=o.attempt, state=o.state,
+                                              action=o.action, reward=float(reward), learned=learned, reason=why)]
+        if learned:
+            before = float(self.learner.q[0, o.state, o.action])
+            self.learner.learn(np.array([o.state]), np.array([o.action]), np.array([float(reward)]),
+                               np.array([True]), np.array([o.round]))
+            out.append(ev.QUpdated(round=o.round, turn=o.turn, attempt=o.attempt, state=o.state, action=o.action,
+                                   alpha=float(alpha_at(self.schedule, o.round)), reward=float(reward),
+                                   q_before=before, q_after=float(self.learner.q[0, o.state, o.action])))
+        return out

@@ -1,0 +1,199 @@
+"""The shell every service runs in: check the envelope, feed the logic, stamp, publish.
+
+Rule: a service's decisions live in a *logic* object (GameLogic, LearnerLogic,
+ParticipantLogic) that turns input events into output events and knows
+nothing of Zenoh or clocks. The `Driver` around it never trusts input: a
+payload that does not decode, a key that disagrees with its payload, another
+session, a sequence number not above the last one seen from that source (a
+duplicate or out-of-order message) or an input the logic refuses (`Rejected`)
+becomes a MessageRejected event with the reason; the service goes on. An input
+that arrives before what it depends on (messages from different sources may
+overtake each other on different links) raises `NotYet`: it is kept and
+retried after every later input, so the logic sees a causal order whatever the
+network did. That makes a logic a deterministic function of its inputs, which
+three things rely on:
+- live: `Node` runs a Driver on the bus;
+- restart: `Driver.resume(log)` re-feeds a crashed service's recorded inputs,
+  holds back the outputs the log already has (the first N outputs are the N
+  recorded ones) and publishes only what the crash left undone;
+- verify: the same re-feeding on a whole recording, every output compared.
+"""
+
+from __future__ import annotations
+
+import logging
+from collections import deque
+from typing import Callable, Iterable, Protocol
+
+import msgspec
+
+from pairplay.core.rng import game_seed
+from pairplay.schemas.envelope import Event, stamped
+from pairplay.schemas.events import MessageRejected, ServiceStarted, decode_event
+from pairplay.schemas.keys import parse_event_key
+from pairplay.schemas.session import SessionConfig
+
+log = logging.getLogger("pairplay.node")
+SHELL_TAGS = frozenset({"ServiceStarted", "MessageRejected"})  # published by the shell, not the logic
+EXCERPT = 200
+
+
+class Rejected(Exception):
+    """The logic refuses an input; the message is the reason recorded."""
+
+
+class NotYet(Exception):
+    """The input depends on one that has not arrived yet: keep it and retry."""
+
+
+class Logic(Protocol):
+    name: str
+    consumes: frozenset[str]
+    done: bool
+
+    def start(self) -> list[Event]: ...
+
+    def handle(self, event: Event) -> list[Event]: ...
+
+
+def stream_seed(config: SessionConfig) -> int:
+    """The seed of this session's per-role streams (core.rng), named as in the study."""
+    return game_seed(config.seed, config.persona or config.participant, config.game_index)
+
+
+def content(event: Event) -> Event:
+    """The event without its envelope: what verify and resume compare."""
+    return msgspec.structs.replace(event, session="", source="", seq=0, time_ns=0)
+
+
+class Driver:
+    def __init__(self, logic: Logic, session: str, clock: Callable[[], int]):
+        self.logic, self.session, self.clock = logic, session, clock
+        self.last_seq: dict[str, int] = {}
+        self.seq = 0
+        self.deferred: list[Event] = []
+        self.held_back: deque[Event] = deque()  # recorded outputs a resume must not repeat
+        self.mismatches: list[str] = []
+        self.rejections = 0
+        self.replaying = False  # during resume/verify: rejections were already recorded live
+
+    # -- output -------------------------------------------------------------
+    def _stamp(self, events: Iterable[Event]) -> list[Event]:
+        out = []
+        for e in events:
+            if self.held_back and not isinstance(e, (MessageRejected, ServiceStarted)):
+                recorded = self.held_back.popleft()
+                if content(recorded) != content(e):
+                    self.mismatches.append(f"{type(recorded).__name__} seq {recorded.seq}: recorded "
+                                           f"{content(recorded)!r}, recomputed {content(e)!r}")
+                continue
+            self.seq += 1
+            out.append(stamped(e, session=self.session, source=self.logic.name, seq=self.seq, time_ns=self.clock()))
+        return out
+
+    def reject(self, reason: str, key: str, source: str = "", seq: int = 0, payload: bytes = b"") -> list[Event]:
+        self.rejections += 1
+        if self.replaying:
+            return []
+        log.warning("%s rejected %s from %r seq %s: %s", self.logic.name, key, source, seq, reason)
+        return self._stamp([MessageRejected(reason=reason, key=key, offending_source=source, offending_seq=seq,
+                                            excerpt=payload[:EXCERPT].decode("utf-8", "replace"))])
+
+    def start(self) -> list[Event]:
+        return self._stamp(self.logic.start())
+
+    # -- input --------------------------------------------------------------
+    def receive(self, key: str, payload: bytes, overlap: bool = False) -> list[Event]:
+        """One bus message in, the stamped events to publish out (see rule).
+
+        `overlap`: the message may also have been folded from the log during a
+        resume; an old sequence number then means "already seen", not an error.
+        """
+        try:
+            event = decode_event(payload)
+        except (msgspec.DecodeError, msgspec.ValidationError) as err:
+            return self.reject(f"malformed payload: {err}", key, payload=payload)
+        try:
+            k = parse_event_key(key)
+        except ValueError as err:
+            return self.reject(str(err), key, event.source, event.seq, payload)
+        tag = type(event).__name__
+        if (k.session, k.source, k.tag) != (event.session, event.source, tag):
+            return self.reject(f"key {key} does not match the payload's session {event.session!r}, source "
+                               f"{event.source!r}, event {tag}", key, event.source, event.seq, payload)
+        if event.session != self.session:
+            return self.reject(f"wrong session {event.session!r} (this is {self.session!r})", key,
+                               event.source, event.seq, payload)
+        if event.source == self.logic.name:
+            return []  # our own publication, delivered back to us
+        last = self.last_seq.get(event.source, 0)
+        if event.seq <= last:
+            if overlap:
+                return []
+            return self.reject(f"sequence number {event.seq} from {event.source} is not above the last one seen "
+                               f"({last}): duplicate or out of order", key, event.source, event.seq, payload)
+        self.last_seq[event.source] = event.seq
+        return self.feed(event, key, payload)
+
+    def feed(self, event: Event, key: str = "", payload: bytes = b"") -> list[Event]:
+        """Hand an accepted event to the logic, then retry what waits on it."""
+        if type(event).__name__ not in self.logic.consumes:
+            return []
+        out = self._handle(event, key, payload)
+        progress = True
+        while progress and self.deferred:
+            progress = False
+            for waiting in list(self.deferred):
+                try:
+                    produced = self.logic.handle(waiting)
+                except NotYet:
+                    continue
+                except Rejected as err:
+                    self.deferred.remove(waiting)
+                    out += self.reject(str(err), "", waiting.source, waiting.seq)
+                    progress = True
+                    break
+                self.deferred.remove(waiting)
+                out += self._stamp(produced)
+                progress = True
+                break
+        return out
+
+    def _handle(self, event: Event, key: str, payload: bytes) -> list[Event]:
+        try:
+            return self._stamp(self.logic.handle(event))
+        except NotYet:
+            self.deferred.append(event)
+            return []
+        except Rejected as err:
+            return self.reject(str(err), key, event.source, event.seq, payload)
+        except Exception as err:  # a bug must not stop the service: record it and go on
+            log.exception("%s failed on %s", self.logic.name, type(event).__name__)
+            return self.reject(f"internal error {type(err).__name__}: {err}", key, event.source, event.seq, payload)
+
+    # -- restart and verify ------------------------------------------------
+    def resume(self, recorded: list[Event], start: bool = True) -> list[Event]:
+        """Re-feed a recorded session (file order); return the outputs it still owes.
+
+        The service's own recorded outputs are held back: the first outputs the
+        logic recomputes are compared with them instead of being published.
+        """
+        own = [e for e in recorded if e.source == self.logic.name and e.session == self.session]
+        self.held_back = deque(e for e in own if type(e).__name__ not in SHELL_TAGS)
+        self.seq = max([self.seq] + [e.seq for e in own])  # new outputs continue the numbering
+        self.replaying = True
+        try:
+            out = self.start() if start else []
+            for e in recorded:
+                if e.source == self.logic.name or e.session != self.session:
+                    continue
+                if e.seq <= self.last_seq.get(e.source, 0):
+                    continue  # a duplicate the live service rejected then
+                self.last_seq[e.source] = e.seq
+                out += self.feed(e)
+        finally:
+            self.replaying = False
+        # anything still held back was recorded but not recomputed: a divergence
+        self.mismatches += [f"recorded {type(e).__name__} seq {e.seq} was not recomputed" for e in self.held_back]
+        self.held_back.clear()
+        return out
