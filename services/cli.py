@@ -15,6 +15,7 @@ import sys
 VERBS: dict[str, tuple[str, str]] = {
     "study": ("pairplay.services.study_cli", "run the simulated study of thesis chapter 6"),
     "bench": ("pairplay.services.bench_cli", "measure speed beside raw references, print a table"),
+    "view": ("pairplay.services.view_cli", "watch a session live or a recording in rerun: board, suggestion, Q-table"),
 }
 
 

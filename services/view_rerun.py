@@ -1,0 +1,192 @@
+"""Draw a ViewModel in rerun: the board, the suggestion, the Q-table, the curves.
+
+Rule: the drawing layer logs only what an event changed (view_model.Change),
+on three timelines: `event` (the view's event count), `round` and
+`session_time` (the publisher's envelope time, so a recording replays on the
+time it was made). The 24 x 88 Q-table is the costly entity (a Tensor costs
+~0.45 ms, LIBRARY-NOTES), so it is rate-limited on session time: at most once
+per `q_interval_s` while it changes, and always at the end of a round and of the
+view, so the last table logged equals the learner's. The rate limit is on
+session time, not the wall clock, so one recording always gives the same .rrd
+whatever the replay speed.
+
+Entity paths (the readback test and docs/view.md rely on them):
+  board/cells      SegmentationImage 3x6 of view_model.Cell (covered/face up/matched)
+  board/faces      Boxes2D of the visible cards, labelled with their face (A..I)
+  board/observed, board/match, board/candidates   Boxes2D highlights (Clear when none)
+  suggestion       TextDocument: state and the suggestion's four parts in words
+  q/table          Tensor (state, action), float64
+  learning/reward, learning/schedule/{epsilon,alpha,psi}, learning/picks_per_round   Scalars
+  session          TextDocument;  events   TextLog, one line per event
+"""
+
+from __future__ import annotations
+
+import string
+
+import numpy as np
+import rerun as rr
+import rerun.blueprint as rrb
+
+from pairplay.core.geometry import COLS, N_CARDS, ROWS, card_col, card_row
+
+from .view_model import Cell, Change, ViewModel
+
+APP_ID = "pairplay"
+FACE_LETTERS = string.ascii_uppercase
+CELL_CLASSES = (  # class id, label, colour of the board image
+    (Cell.COVERED, "covered", (70, 82, 105)),
+    (Cell.FACE_UP, "face up", (235, 232, 215)),
+    (Cell.MATCHED, "matched", (80, 165, 90)),
+)
+OBSERVED_COLOUR, MATCH_COLOUR, CANDIDATE_COLOUR = (40, 140, 255), (255, 140, 0), (255, 220, 0)
+Q_RANGE = (-3.0, 2.0)  # Q lies between the worst reward (-3) and the best (+1 + 1/1)
+
+
+def blueprint() -> rrb.Blueprint:
+    """Board and suggestion on the left; Q-table, curves and the event log on the right."""
+    return rrb.Blueprint(
+        rrb.Horizontal(
+            rrb.Vertical(
+                rrb.Spatial2DView(name="Board", origin="board",
+                                  visual_bounds=rrb.VisualBounds2D(x_range=(-0.1, COLS + 0.1), y_range=(-0.1, ROWS + 0.1))),
+                rrb.TextDocumentView(name="Suggestion", origin="suggestion"),
+                rrb.TextDocumentView(name="Session", origin="session"),
+                row_shares=[4, 4, 1],
+            ),
+            rrb.Vertical(
+                rrb.TensorView(name="Q-table (state x action)", origin="q/table",
+                               slice_selection=rrb.TensorSliceSelection(width=1, height=0),  # dims: 0 state, 1 action
+                               scalar_mapping=rrb.TensorScalarMapping(colormap="viridis")),
+                rrb.Horizontal(
+                    rrb.TimeSeriesView(name="Reward", origin="learning/reward"),
+                    rrb.TimeSeriesView(name="epsilon, alpha, psi", origin="learning/schedule"),
+                    rrb.TimeSeriesView(name="Picks per round", origin="learning/picks_per_round"),
+                ),
+                rrb.TextLogView(name="Events", origin="events"),
+                row_shares=[4, 3, 2],
+            ),
+            column_shares=[2, 3],
+        ),
+        rrb.TimePanel(state="collapsed"),
+        collapse_panels=True,
+    )
+
+
+def _centre(card: int) -> tuple[float, float]:
+    """Image coordinates of a card's centre: x = column, y = row, pixel (c, r) spans [c, c+1]."""
+    return card_col(card) + 0.5, card_row(card) + 0.5
+
+
+def _boxes(mask: int, colour, *, half: float, radius: float, label: str | None = None) -> rr.Boxes2D:
+    cards = [c for c in range(N_CARDS) if mask >> c & 1]
+    return rr.Boxes2D(centers=[_centre(c) for c in cards], half_sizes=[(half, half)] * len(cards),
+                      colors=[colour] * len(cards), radii=radius,
+                      labels=[label] * len(cards) if label else None)
+
+
+class QThrottle:
+    """Log the Q-table at most once per interval of session time while it changes."""
+
+    def __init__(self, interval_ns: int):
+        self.interval_ns = interval_ns
+        self.last_ns: int | None = None
+        self.dirty = False
+
+    def due(self, now_ns: int, force: bool) -> bool:
+        if not self.dirty:
+            return False
+        return force or self.last_ns is None or now_ns - self.last_ns >= self.interval_ns
+
+    def logged(self, now_ns: int) -> None:
+        self.last_ns, self.dirty = now_ns, False
+
+
+class RerunView:
+    """Fold events into a ViewModel and log what changed to a RecordingStream."""
+
+    def __init__(self, rec: rr.RecordingStream, *, q_interval_s: float = 0.25):
+        self.rec = rec
+        self.model = ViewModel()
+        self.q_throttle = QThrottle(int(q_interval_s * 1e9))
+        self.q_logged = 0
+        self._now_ns = 0
+        rec.log("board", rr.AnnotationContext([(int(i), label, colour) for i, label, colour in CELL_CLASSES]),
+                static=True)
+        rec.log("board/cells", rr.SegmentationImage(self.model.cells()))  # before any event: all covered
+
+    def handle(self, event) -> None:
+        """Fold one event and log what it changed."""
+        changes, note = self.model.apply(event)
+        m = self.model
+        self._now_ns = event.time_ns or self._now_ns + 1_000_000  # unstamped events: 1 ms apart
+        self.rec.set_time("event", sequence=m.events)
+        if m.round >= 0:
+            self.rec.set_time("round", sequence=m.round)
+        if event.time_ns:
+            self.rec.set_time("session_time", timestamp=np.datetime64(event.time_ns, "ns"))
+        if Change.BOARD in changes:
+            self._log_board()
+        if Change.HIGHLIGHT in changes:
+            self._log_highlights()
+        if Change.SUGGESTION in changes:
+            self.rec.log("suggestion", rr.TextDocument(m.suggestion_text(), media_type="text/markdown"))
+        if Change.SCHEDULE in changes:
+            for name in ("epsilon", "alpha", "psi"):
+                value = getattr(m, name)
+                if value is not None:
+                    self.rec.log(f"learning/schedule/{name}", rr.Scalars([value]))
+        if Change.REWARD in changes and m.reward is not None:
+            self.rec.log("learning/reward", rr.Scalars([m.reward]))
+        if Change.ROUND_END in changes:
+            self.rec.log("learning/picks_per_round", rr.Scalars([m.picks_per_round[m.round]]))
+        if Change.SESSION in changes:
+            self.rec.log("session", rr.TextDocument(self._session_text(), media_type="text/markdown"))
+        if Change.Q in changes:
+            self.q_throttle.dirty = True
+        self._maybe_log_q(force=bool(changes & {Change.ROUND_END, Change.SESSION}))
+        if note:
+            self.rec.log("events", rr.TextLog(note, level=rr.TextLogLevel.INFO))
+
+    def note(self, text: str, level: str = rr.TextLogLevel.WARN) -> None:
+        """A line in the event log from outside the fold (a malformed bus message, a gap)."""
+        self.rec.log("events", rr.TextLog(text, level=level))
+
+    def close(self) -> None:
+        """Log the Q-table if it changed since it was last logged, then flush."""
+        self._maybe_log_q(force=True)
+        self.rec.flush()
+
+    def _maybe_log_q(self, force: bool) -> None:
+        if self.q_throttle.due(self._now_ns, force):
+            self.rec.log("q/table", rr.Tensor(self.model.q.copy(), dim_names=["state", "action"], value_range=Q_RANGE))
+            self.q_throttle.logged(self._now_ns)
+            self.q_logged += 1
+
+    def _log_board(self) -> None:
+        m = self.model
+        self.rec.log("board/cells", rr.SegmentationImage(m.cells()))
+        visible = [c for c in range(N_CARDS) if (m.face_up | m.matched) >> c & 1]
+        labels = [FACE_LETTERS[m.faces[c]] if 0 <= m.faces[c] < len(FACE_LETTERS) else "?" for c in visible]
+        self.rec.log("board/faces", rr.Boxes2D(centers=[_centre(c) for c in visible],
+                                               half_sizes=[(0.42, 0.42)] * len(visible),
+                                               labels=labels, colors=[(30, 30, 30)] * len(visible),
+                                               show_labels=True))
+
+    def _log_highlights(self) -> None:
+        m = self.model
+        for path, card, colour, label in (("board/observed", m.observed, OBSERVED_COLOUR, "observed"),
+                                          ("board/match", m.match, MATCH_COLOUR, "match")):
+            if 0 <= card < N_CARDS:
+                self.rec.log(path, _boxes(1 << card, colour, half=0.47, radius=0.04, label=label))
+            else:
+                self.rec.log(path, rr.Clear(recursive=False))
+        if m.candidates:
+            self.rec.log("board/candidates", _boxes(m.candidates, CANDIDATE_COLOUR, half=0.34, radius=0.025))
+        else:
+            self.rec.log("board/candidates", rr.Clear(recursive=False))
+
+    def _session_text(self) -> str:
+        m = self.model
+        text = f"**{m.session}** - {m.participant}, {m.algorithm}, {m.rounds} rounds"
+        return text + (f" - ended: {m.ended}" if m.ended else "")

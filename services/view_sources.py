@@ -1,0 +1,130 @@
+"""Where the view's events come from: the live bus or a recording.
+
+Rule: both sources yield `(event, None)` for an event to fold and
+`(None, note)` for something the view should say instead (a malformed bus
+message, a gap in a source's sequence numbers, a corrupt or truncated
+recording); nothing raises on bad content and nothing is published: the view
+never changes a session.
+
+Live: samples wait in Zenoh's own ring buffer (RingChannel) until the view's
+thread takes them, so no Python runs on Zenoh's receive path and a slow view
+never holds the session's BLOCK publishers back. If the view falls more than
+`capacity` samples behind, the oldest are overwritten; the view notices the gap
+in the senders' sequence numbers and says so (a view, unlike the recorder, may
+lose frames; the recording is the truth).
+
+Recording: read with replay's truncation-tolerant reader. `speed` 0 replays as
+fast as the view can draw; otherwise the envelope times are followed, `speed`
+times real time.
+"""
+
+from __future__ import annotations
+
+import threading
+import time
+from pathlib import Path
+from typing import Iterator
+
+import msgspec
+import zenoh
+
+from pairplay.replay.reader import read_log
+from pairplay.schemas.events import decode_event
+from pairplay.schemas.keys import parse_event_key, session_keys
+
+Item = tuple[object | None, str | None]
+
+
+class SequenceGaps:
+    """Notice missing events per (session, source) from the envelope's seq numbers."""
+
+    def __init__(self) -> None:
+        self.last: dict[tuple[str, str], int] = {}
+
+    def check(self, event) -> str | None:
+        key = (event.session, event.source)
+        last = self.last.get(key)
+        self.last[key] = max(event.seq, last or 0)
+        if last is not None and event.seq > last + 1:
+            return f"{event.seq - last - 1} event(s) from {event.source} missing before seq {event.seq}"
+        return None
+
+
+def recording_items(path: str | Path, *, speed: float = 0.0, session: str | None = None,
+                    sleep=time.sleep, clock=time.monotonic) -> Iterator[Item]:
+    """Events of one session of a recording, paced by `speed` (0: as fast as possible)."""
+    log = read_log(path)
+    chosen = session
+    t0_event = t0_wall = None
+    for bad in log.bad:
+        yield None, f"recording message on {bad.key or '?'} does not decode: {bad.reason}"
+    for record in log.events:
+        event = record.event
+        if chosen is None and event.session:
+            chosen = event.session
+        if event.session != chosen:
+            continue
+        if speed > 0 and event.time_ns:
+            if t0_event is None:
+                t0_event, t0_wall = event.time_ns, clock()
+            wait = t0_wall + (event.time_ns - t0_event) / 1e9 / speed - clock()
+            if wait > 0:
+                sleep(wait)
+        yield event, None
+    if log.truncated:
+        yield None, f"recording ends early ({log.error}); everything before the cut is shown"
+
+
+class LiveSource:
+    """Subscribe to one session on the bus; the view's thread pulls from Zenoh's ring buffer."""
+
+    def __init__(self, bus, session: str, *, capacity: int = 100_000):
+        self.session = session
+        self.gaps = SequenceGaps()
+        self.ended = False
+        # A RingChannel keeps the newest `capacity` samples inside Zenoh (no Python, no GIL on
+        # the receive path) and never pushes back on the publishers; what it overwrites shows
+        # up as a gap in the senders' sequence numbers.
+        self.subscriber = bus.session.declare_subscriber(session_keys(session), zenoh.handlers.RingChannel(capacity))
+
+    def items(self, stop: threading.Event, *, poll_s: float = 0.002, grace_s: float = 0.5) -> Iterator[Item]:
+        """Decoded events until `stop` is set, or the session has ended and nothing more
+        arrived for `grace_s` (other services may still publish their last events)."""
+        idle_since = None
+        try:
+            while not stop.is_set():
+                sample = self.subscriber.try_recv()
+                if sample is None:
+                    now = time.monotonic()
+                    idle_since = idle_since or now
+                    if self.ended and now - idle_since >= grace_s:
+                        return
+                    time.sleep(poll_s)
+                    continue
+                idle_since = None
+                yield from self._decode(str(sample.key_expr), sample.payload.to_bytes())
+        finally:
+            self.close()
+
+    def close(self) -> None:
+        try:
+            self.subscriber.undeclare()
+        except Exception:  # already gone with its session
+            pass
+
+    def _decode(self, key: str, payload: bytes) -> Iterator[Item]:
+        try:
+            parsed = parse_event_key(key)
+            event = decode_event(payload)
+        except (ValueError, msgspec.DecodeError, msgspec.ValidationError) as err:
+            yield None, f"malformed message on {key}: {err} ({payload[:80]!r})"
+            return
+        if (event.session, event.source, type(event).__name__) != (parsed.session, parsed.source, parsed.tag):
+            yield None, f"message on {key} says it is {type(event).__name__} from {event.source} in {event.session}"
+            return
+        gap = self.gaps.check(event)
+        if gap:
+            yield None, gap
+        if type(event).__name__ == "SessionEnded":
+            self.ended = True
+        yield event, None

@@ -1,0 +1,154 @@
+"""`pairplay view` end to end: a recording or the live bus in, an .rrd out, read back by rerun."""
+
+import os
+import subprocess
+import sys
+import threading
+import time
+from pathlib import Path
+
+import msgspec
+import numpy as np
+
+from pairplay.schemas import events as ev
+from pairplay.schemas.envelope import tag_of
+from pairplay.schemas.keys import event_key
+from pairplay.services.bus import BusOptions, open_bus
+from pairplay.services.cli import main
+from pairplay.services.view_bench import scripted_events, write_recording
+from pairplay.services.view_cli import drive
+from pairplay.services.view_model import Cell
+from pairplay.services.view_output import ViewOutput, analytics_off_for_children, finish, open_stream
+from pairplay.services.view_readback import has_blueprint, read_rrd, segmentation, tensor
+from pairplay.services.view_rerun import RerunView
+from pairplay.services.view_sources import LiveSource
+
+ENTITIES = {"board/cells", "board/faces", "board/observed", "board/match", "board/candidates", "suggestion",
+            "q/table", "learning/reward", "learning/schedule/epsilon", "learning/schedule/alpha",
+            "learning/schedule/psi", "learning/picks_per_round", "session", "events"}
+
+
+def cells_at(rows, event_index):
+    """The board image logged last at or before the view's event number `event_index`."""
+    row = [r for r in rows["board/cells"] if r.get("event") is not None and r["event"] <= event_index][-1]
+    return segmentation(row["SegmentationImage:buffer"], row["SegmentationImage:format"])
+
+
+def test_a_recording_viewed_saves_an_rrd_that_rerun_reads_back_with_board_suggestion_and_q(tmp_path):
+    events, q = scripted_events(rounds=2, seed=5, session="rec1")
+    mcap = write_recording(events, tmp_path / "rec1.mcap")
+    assert main(["view", "--recording", str(mcap)]) == 0
+    rrd = tmp_path / "rec1.rrd"  # the default: next to the recording
+    rows = read_rrd(rrd)
+    assert ENTITIES <= set(rows) and has_blueprint(rrd)
+    # the board: view event n is events[n - 1]; after the first reveal that card is face up
+    first = next(i for i, e in enumerate(events) if isinstance(e, ev.CardRevealed))
+    assert cells_at(rows, first + 1).flat[events[first].card] == Cell.FACE_UP
+    assert (cells_at(rows, len(events)) == Cell.MATCHED).all()
+    # a suggestion in words
+    made = next(e for e in events if isinstance(e, ev.SuggestionMade))
+    texts = [r["TextDocument:text"][0] for r in rows["suggestion"]]
+    assert any(f"action {made.action}:" in t and "speech:" in t and "head:" in t for t in texts)
+    # the Q-table: rate-limited, and the last one equals the learner's
+    n_updates = sum(isinstance(e, ev.QUpdated) for e in events)
+    assert 1 <= len(rows["q/table"]) < n_updates
+    assert np.array_equal(tensor(rows["q/table"][-1]["Tensor:data"]), q)
+    assert [r["Scalars:scalars"][0] for r in rows["learning/picks_per_round"]] == [
+        2 * e.turns for e in events if isinstance(e, ev.RoundEnded)]
+
+
+def test_a_corrupt_recording_is_shown_up_to_the_cut_and_said_so(tmp_path):
+    events, _ = scripted_events(rounds=1, seed=6, session="cut")
+    mcap = write_recording(events, tmp_path / "cut.mcap")
+    data = mcap.read_bytes()
+    mcap.write_bytes(data[: len(data) // 2])
+    out = tmp_path / "cut.rrd"
+    assert main(["view", "--recording", str(mcap), "--out", str(out)]) == 0
+    rows = read_rrd(out)
+    notes = [r["TextLog:text"][0] for r in rows["events"]]
+    assert any("recording ends early" in n for n in notes)
+
+
+def _publish(bus, events):
+    encode = msgspec.json.Encoder().encode
+    for e in events:
+        bus.put(event_key(e.session, e.source, tag_of(type(e))), encode(e))
+
+
+def _wait_matching(bus, key, timeout=10.0):
+    publisher = bus.publisher(key)
+    deadline = time.monotonic() + timeout
+    while not publisher.matching_status.matching:
+        assert time.monotonic() < deadline, "the view never subscribed"
+        time.sleep(0.02)
+
+
+def test_a_live_session_on_the_bus_is_viewed_to_the_end_and_bad_messages_are_noted(tmp_path):
+    events, q = scripted_events(rounds=1, seed=7, session="live1")
+    rrd = tmp_path / "live1.rrd"
+    with open_bus() as session_bus:
+        endpoint = session_bus.locators()[0]
+        with open_bus(BusOptions(listen=[], connect=[endpoint])) as view_bus:
+            rec, _ = open_stream(ViewOutput(rrd=rrd))
+            view = RerunView(rec)
+            source = LiveSource(view_bus, "live1")
+            stop = threading.Event()
+            result = {}
+            viewer = threading.Thread(target=lambda: result.update(s=drive(view, source.items(stop, grace_s=0.3))))
+            viewer.start()
+            first_key = event_key("live1", events[0].source, tag_of(type(events[0])))
+            _wait_matching(session_bus, first_key)
+            _publish(session_bus, events[:5])
+            session_bus.put("pairplay/live1/game/CardRevealed", b'{"type": "CardRevealed", "card": "nine"}')
+            _publish(session_bus, events[5:])
+            viewer.join(timeout=30)
+            stop.set()
+            assert not viewer.is_alive()
+            finish(rec)
+    assert result["s"].events == len(events) and result["s"].notes == 1
+    rows = read_rrd(rrd)
+    assert np.array_equal(tensor(rows["q/table"][-1]["Tensor:data"]), q)
+    assert any("malformed message on pairplay/live1/game/CardRevealed" in r["TextLog:text"][0] for r in rows["events"])
+
+
+def test_serving_binds_the_data_port_to_loopback(tmp_path):
+    import socket
+
+    ports = []
+    for _ in range(2):
+        s = socket.socket()
+        s.bind(("127.0.0.1", 0))
+        ports.append(s.getsockname()[1])
+        s.close()
+    rec, where = open_stream(ViewOutput(rrd=tmp_path / "s.rrd", serve=True, grpc_port=ports[0], web_port=ports[1]))
+    try:
+        listening = Path("/proc/net/tcp").read_text().splitlines()[1:]
+        local = {line.split()[1] for line in listening if line.split()[3] == "0A"}  # state LISTEN
+        assert f"0100007F:{ports[0]:04X}" in local  # 127.0.0.1:grpc
+        assert f"00000000:{ports[0]:04X}" not in local
+        assert any(f"127.0.0.1:{ports[1]}" in w for w in where)
+    finally:
+        finish(rec)
+
+
+def test_rerun_analytics_stay_off(tmp_path):
+    # viewers started by the view get rerun's off switch, and the environment is restored after
+    os.environ.pop("CI", None)
+    os.environ["FORCE_RERUN_ANALYTICS"] = "1"
+    try:
+        with analytics_off_for_children():
+            assert os.environ["CI"] and "FORCE_RERUN_ANALYTICS" not in os.environ
+        assert "CI" not in os.environ and os.environ["FORCE_RERUN_ANALYTICS"] == "1"
+    finally:
+        os.environ.pop("FORCE_RERUN_ANALYTICS", None)
+    # the view process itself never loads rerun's analytics: nothing appears under a fresh HOME
+    events, _ = scripted_events(rounds=1, seed=8, session="quiet")
+    mcap = write_recording(events, tmp_path / "quiet.mcap")
+    home = tmp_path / "home"
+    home.mkdir()
+    env = {k: v for k, v in os.environ.items() if k not in ("XDG_CONFIG_HOME", "XDG_DATA_HOME")}
+    env["HOME"] = str(home)
+    subprocess.run([sys.executable, "-m", "pairplay", "view", "--recording", str(mcap)], env=env, check=True,
+                   capture_output=True, timeout=120)
+    assert (tmp_path / "quiet.rrd").is_file()
+    assert not list(home.rglob("*"))
