@@ -1,0 +1,139 @@
+"""The robot bridge's contract: the RobotActed event and the robot's config files.
+
+Rule: RobotActed is published once per suggestion, when its fate is known: what
+was written on the wire (each message exactly as sent), to which backend, when
+the robot acknowledged it, or why it failed. Outcomes:
+  "done"           every command sent and every reply the protocol promises came
+  "sent"           every command sent; the commands promise no reply (gaze only)
+  "aborted"        a newer suggestion cut it short (its speech or head turn)
+  "unacknowledged" sent, but the robot never confirmed within the ack timeout
+  "failed"         not delivered (robot unreachable, bridge closed); see `error`
+  "nothing"        the "do nothing" action: nothing to send
+
+The calibration and the robot config are files a researcher edits, so they are
+strict: an unknown field is an error, not a silently ignored typo. New fields of
+RobotActed get defaults and go at the end (envelope.py rule).
+"""
+
+from __future__ import annotations
+
+import msgspec
+
+from .envelope import Event
+
+OUTCOMES = ("done", "sent", "aborted", "unacknowledged", "failed", "nothing")
+
+
+class RobotActed(Event, tag="RobotActed"):
+    round: int
+    turn: int
+    attempt: int
+    action: int  # composite action code 0..87
+    backend: str  # "virtual", "iristk://host:1932", "furhat://host:9000"
+    outcome: str  # one of OUTCOMES
+    commands: list[str] = []  # the wire messages, in the order written
+    replies: list[str] = []  # the robot's replies about this suggestion, in order
+    suggestion_seq: int = 0  # seq of the SuggestionMade it performs
+    received_ns: int = 0  # the bridge received the suggestion
+    sent_ns: int = 0  # its first command was written on the wire (0: never)
+    acked_ns: int = 0  # the robot's first reply about it (0: none)
+    done_ns: int = 0  # the robot's last promised reply (0: not all came)
+    error: str = ""
+    reconnects: int = 0  # connections re-opened while it was pending
+
+
+class Point(msgspec.Struct, frozen=True, array_like=True):
+    """A point in the robot's frame, metres: x to the robot's left, y up, z forward."""
+
+    x: float
+    y: float
+    z: float
+
+
+class BoardCalibration(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
+    """Where the 18 cards and the participant are, seen from the robot.
+
+    `cards[i]` is the centre of card i = row * 6 + col (rows top to bottom and
+    columns left to right as the participant sees the board). `rest` is where
+    the robot looks between suggestions (the participant's face).
+    """
+
+    cards: list[Point]
+    rest: Point = Point(0.0, 0.0, 1.0)
+    description: str = ""
+
+
+class GestureNames(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
+    """The robot's names for the two gestures of the action table."""
+
+    smile: str
+    nod: str
+
+
+# Gesture name sets: the thesis's robot, IrisTK's shipped gestures, today's Furhat.
+GESTURE_PRESETS: dict[str, GestureNames] = {
+    "thesis": GestureNames(smile="smile_open", nod="nod"),
+    "iristk": GestureNames(smile="smile", nod="nod"),
+    "furhat": GestureNames(smile="BigSmile", nod="Nod"),
+}
+
+
+class SpeechTexts(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
+    """What the robot says for speech codes 1..6 (thesis table 4.1).
+
+    `exact` is formatted with the matching card's 1-based {row} and {column}.
+    """
+
+    right_card: str = "It is the right card"
+    exact: str = "Try at row {row} and column {column}"
+    up: str = "Maybe up"
+    down: str = "Maybe down"
+    left: str = "Maybe left"
+    right: str = "Maybe right"
+
+
+class RobotConfig(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
+    """How the bridge renders and delivers suggestions; every field has a default.
+
+    gestures: None means the backend's own preset ("iristk" over the broker,
+    "furhat" over the Realtime API).
+    """
+
+    gestures: GestureNames | None = None
+    speech: SpeechTexts = SpeechTexts()
+    gaze_mode: str = "default"  # IrisTK action.gaze mode for looking at a card
+    head_mode: str = "headpose"  # IrisTK action.gaze mode for a head turn
+    gaze_speed: str = "medium"
+    head_turn_offset_m: float = 0.2  # how far past the observed card the head turns
+    head_turn_lead_s: float = 0.3  # look at the observed card, then turn after this
+    head_turn_hold_s: float = 0.8  # hold the turn, then look back at the participant
+    ack_timeout_s: float = 10.0  # a promised reply later than this: "unacknowledged"
+    give_up_s: float = 30.0  # undelivered this long with the robot unreachable: "failed"
+    reconnect_min_s: float = 0.05
+    reconnect_max_s: float = 2.0
+    iristk_ticket: str = "furhat"
+    iristk_name: str = "pairplay"
+    iristk_subscribe: str = "monitor.**"
+    iristk_agent: str = ""  # sent as "agent" when set (multi-agent IrisTK systems)
+    iristk_gesture_replies: bool = True  # await monitor.gesture.end for gestures
+    iristk_wait_for_subscriber: bool = True  # hold events nobody on the broker subscribes to
+    realtime_key: str = ""  # Realtime API auth key, if the robot requires one
+    yaw_sign: float = 1.0  # Realtime headpose: + yaw turns towards +x (the robot's left)
+    pitch_sign: float = 1.0  # Realtime headpose: + pitch turns towards +y (up)
+
+    def validate(self) -> None:
+        """Raise ValueError with a clear reason if the config cannot work."""
+        for name in ("head_turn_offset_m", "ack_timeout_s", "give_up_s", "reconnect_min_s", "reconnect_max_s"):
+            if not getattr(self, name) > 0:
+                raise ValueError(f"robot config: {name} must be > 0, got {getattr(self, name)}")
+        for name in ("head_turn_lead_s", "head_turn_hold_s"):
+            if not getattr(self, name) >= 0:
+                raise ValueError(f"robot config: {name} must be >= 0, got {getattr(self, name)}")
+        if self.reconnect_max_s < self.reconnect_min_s:
+            raise ValueError("robot config: reconnect_max_s must be >= reconnect_min_s")
+        for name in ("iristk_ticket", "iristk_name", "iristk_subscribe"):
+            value = getattr(self, name)
+            if not value or any(c.isspace() for c in value):
+                raise ValueError(f"robot config: {name} must be one word without spaces, got {value!r}")
+        if "{row}" not in self.speech.exact or "{column}" not in self.speech.exact:
+            raise ValueError("robot config: speech.exact must contain {row} and {column}")

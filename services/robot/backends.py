@@ -1,0 +1,118 @@
+"""Choosing a robot backend from a URL: `--robot virtual|iristk://host:1932|furhat://host:9000`.
+
+Rule: the URL names the protocol and the robot; everything else comes from the
+RobotConfig (file or defaults), and a few query parameters override it for one
+run: iristk://host:port?ticket=furhat&name=pairplay&gestures=thesis,
+furhat://host:port?key=SECRET&gestures=furhat, virtual?time_scale=0.1.
+Gesture names default to the backend's own set (GESTURE_PRESETS): "iristk" over
+the broker, "furhat" over the Realtime API and for the virtual robot.
+An unknown scheme, port or parameter is refused with the accepted forms.
+"""
+
+from __future__ import annotations
+
+from typing import Callable
+from urllib.parse import parse_qs, urlsplit
+
+import msgspec
+
+from pairplay.schemas.robot import GESTURE_PRESETS, BoardCalibration, RobotActed, RobotConfig
+
+from . import iristk_protocol
+from .calibration import Board, load_calibration
+from .driver import RobotDriver
+from .iristk import IrisTKTransport
+from .realtime import DEFAULT_PORT as REALTIME_PORT
+from .realtime import RealtimeTransport
+from .render import Renderer
+from .transport import Transport
+from .virtual import VirtualTransport
+
+FORMS = "virtual, iristk://HOST[:1932], furhat://HOST[:9000]"
+DEFAULT_GESTURES = {"virtual": "furhat", "iristk": "iristk", "furhat": "furhat"}
+# query parameter -> RobotConfig field, per scheme
+OVERRIDES = {
+    "virtual": {},
+    "iristk": {"ticket": "iristk_ticket", "name": "iristk_name", "agent": "iristk_agent"},
+    "furhat": {"key": "realtime_key"},
+}
+
+
+def parse_robot_url(url: str, config: RobotConfig | None = None) -> tuple[str, str, int, RobotConfig, dict]:
+    """(scheme, host, port, effective config, extra params) of a --robot URL; ValueError if wrong."""
+    config = config or RobotConfig()
+    parts = urlsplit(url if "://" in url else url.replace("virtual", "virtual://", 1))
+    scheme = parts.scheme
+    if scheme not in OVERRIDES:
+        raise ValueError(f"--robot {url!r}: unknown backend {scheme!r}; use one of {FORMS}")
+    try:
+        port = parts.port
+    except ValueError as exc:
+        raise ValueError(f"--robot {url!r}: bad port ({exc})") from None
+    host = parts.hostname or ""
+    if scheme != "virtual" and not host:
+        raise ValueError(f"--robot {url!r}: needs a host, e.g. {scheme}://192.0.2.10")
+    default_port = iristk_protocol.DEFAULT_PORT if scheme == "iristk" else REALTIME_PORT
+    params = {k: v[-1] for k, v in parse_qs(parts.query, keep_blank_values=True).items()}
+    changes: dict = {}
+    extra: dict = {}
+    for key, value in params.items():
+        if key in OVERRIDES[scheme]:
+            changes[OVERRIDES[scheme][key]] = value
+        elif key == "gestures":
+            if value not in GESTURE_PRESETS:
+                raise ValueError(f"--robot {url!r}: gestures must be one of {sorted(GESTURE_PRESETS)}")
+            changes["gestures"] = GESTURE_PRESETS[value]
+        elif key == "time_scale" and scheme == "virtual":
+            try:
+                extra["time_scale"] = float(value)
+            except ValueError:
+                raise ValueError(f"--robot {url!r}: time_scale must be a number") from None
+        else:
+            raise ValueError(f"--robot {url!r}: unknown parameter {key!r}")
+    if config.gestures is None and "gestures" not in changes:
+        changes["gestures"] = GESTURE_PRESETS[DEFAULT_GESTURES[scheme]]
+    config = msgspec.structs.replace(config, **changes)
+    config.validate()
+    return scheme, host, port or default_port, config, extra
+
+
+def make_transport(url: str, config: RobotConfig | None = None) -> tuple[Transport, RobotConfig]:
+    scheme, host, port, config, extra = parse_robot_url(url, config)
+    if scheme == "iristk":
+        return IrisTKTransport(host, port, config), config
+    if scheme == "furhat":
+        return RealtimeTransport(host, port, config), config
+    return VirtualTransport(extra.get("time_scale", 1.0)), config
+
+
+def load_robot_config(path: str | None) -> RobotConfig:
+    """A RobotConfig JSON file (strict), or the defaults for None."""
+    if path is None:
+        return RobotConfig()
+    try:
+        with open(path, "rb") as f:
+            config = msgspec.json.decode(f.read(), type=RobotConfig)
+    except OSError as exc:
+        raise ValueError(f"cannot read robot config {path}: {exc}") from exc
+    except msgspec.DecodeError as exc:
+        raise ValueError(f"robot config {path} is not valid: {exc}") from exc
+    config.validate()
+    return config
+
+
+def open_robot(url: str, on_acted: Callable[[RobotActed], None], *,
+               config: RobotConfig | None = None,
+               calibration: BoardCalibration | str | None = None,
+               on_rejected: Callable[[str, str], None] | None = None) -> RobotDriver:
+    """A started driver for the robot at `url`; it connects (and reconnects) on its own.
+
+    calibration: a BoardCalibration, a path to a calibration file, or None for
+    the packaged default. Call `.perform(Suggestion)` and finally `.close()`.
+    """
+    transport, config = make_transport(url, config)
+    if not isinstance(calibration, BoardCalibration):
+        calibration = load_calibration(calibration)
+    assert config.gestures is not None  # parse_robot_url always fills it
+    renderer = Renderer(Board(calibration), config.gestures, config)
+    return RobotDriver(transport, renderer, config, on_acted, on_rejected).start()

@@ -1,0 +1,340 @@
+"""The robot driver: performs suggestions through one transport, reconnecting, and reports each.
+
+Rule: one worker thread owns the connection and writes every command exactly
+once, in arrival order, at its due time; a command counts as sent when the write
+returned, and is never written again (each carries a unique id). When the robot
+is unreachable, due commands wait and the worker reconnects with exponential
+backoff (reconnect_min_s doubling up to reconnect_max_s); once connected the
+backlog goes out in order. A new suggestion supersedes the previous ones: their
+later steps (the rest of a head turn) are cancelled, their first steps are still
+delivered (nothing the learner decided is lost), and if the new one says nothing
+while earlier speech may still play, a StopSpeech goes first.
+
+Every suggestion ends in exactly one RobotActed (schemas/robot.py lists the
+outcomes). Replies are matched by the id the protocol echoes; a protocol reply
+without an id goes to the oldest suggestion still waiting for that kind of reply.
+"""
+
+from __future__ import annotations
+
+import itertools
+import logging
+import queue
+import threading
+import time
+import uuid
+from dataclasses import dataclass, field
+from typing import Callable
+
+from pairplay.schemas.robot import RobotActed, RobotConfig
+
+from .render import Renderer, Say, Step, StopSpeech
+from .transport import SPEECH_END, SPEECH_START, Changed, Disconnected, Rejected, Reply, Transport, Wire
+
+log = logging.getLogger("pairplay.robot")
+
+
+@dataclass(frozen=True)
+class Suggestion:
+    """What the bridge asks the robot to perform (from a SuggestionMade)."""
+
+    session: str
+    round: int
+    turn: int
+    attempt: int
+    action: int
+    observed: int
+    target: int
+    suggestion_seq: int = 0
+
+
+@dataclass
+class _Step:
+    at_s: float
+    step: Step
+    command_id: str
+    wire: Wire | None = None
+    sent: bool = False
+    cancelled: bool = False
+
+
+@dataclass
+class _Performance:
+    suggestion: Suggestion
+    steps: list[_Step]
+    received_ns: int
+    start: float  # monotonic seconds: the steps' time zero
+    superseded: bool = False
+    outstanding: list[tuple[str, str]] = field(default_factory=list)  # (command id, reply kind)
+    promised: bool = False
+    sent_ns: int = 0
+    acked_ns: int = 0
+    done_ns: int = 0
+    last_send: float = 0.0
+    replies: list[str] = field(default_factory=list)
+    reconnects: int = 0
+
+    def unsent(self) -> list[_Step]:
+        return [s for s in self.steps if not s.sent and not s.cancelled]
+
+    def speech_may_play(self) -> bool:
+        says = [s for s in self.steps if isinstance(s.step.command, Say) and not s.cancelled]
+        return any(not s.sent or (s.command_id, SPEECH_END) in self.outstanding for s in says)
+
+
+class RobotDriver:
+    def __init__(self, transport: Transport, renderer: Renderer, config: RobotConfig,
+                 on_acted: Callable[[RobotActed], None],
+                 on_rejected: Callable[[str, str], None] | None = None,
+                 clock_ns: Callable[[], int] = time.time_ns) -> None:
+        self.transport = transport
+        self.renderer = renderer
+        self.config = config
+        self._on_acted = on_acted
+        self._on_rejected = on_rejected or (lambda reason, excerpt: None)
+        self._clock_ns = clock_ns
+        self._inbox: queue.Queue = queue.Queue()
+        self._active: list[_Performance] = []
+        prefix = uuid.uuid4().hex[:8]  # unique per driver: ids never repeat across restarts
+        self._ids = (f"pairplay.{prefix}.{n}" for n in itertools.count(1))
+        self._generation = 0
+        self._connected = False
+        self._ever_connected = False
+        self._backoff = config.reconnect_min_s
+        self._next_attempt = 0.0
+        self._last_error = "not connected yet"
+        self._held = ""  # why the next due command waits although connected ("" = it does not)
+        self._closing = False
+        self._pending = 0
+        self._idle = threading.Condition()
+        self.reconnects = 0
+        self.rejected = 0
+        self._thread = threading.Thread(target=self._run, name=f"robot {transport.url}", daemon=True)
+
+    # -- called from other threads ------------------------------------------------------
+    def start(self) -> "RobotDriver":
+        self._thread.start()
+        return self
+
+    def perform(self, suggestion: Suggestion) -> None:
+        """Queue a suggestion; ValueError (bad action code or card) before anything is queued."""
+        steps = self.renderer.render(suggestion.action, suggestion.observed, suggestion.target)
+        with self._idle:
+            self._pending += 1
+        self._inbox.put(("suggest", suggestion, steps, self._clock_ns(), time.monotonic()))
+
+    def wait_idle(self, timeout: float) -> bool:
+        """Block until every queued suggestion has its RobotActed; False on timeout."""
+        with self._idle:
+            return self._idle.wait_for(lambda: self._pending == 0, timeout)
+
+    @property
+    def connected(self) -> bool:
+        return self._connected
+
+    def close(self, timeout: float = 5.0) -> None:
+        """Send what is due, report every open suggestion, close the connection."""
+        self._inbox.put(("close",))
+        if self._thread.is_alive():
+            self._thread.join(timeout)
+
+    def _deliver(self, report) -> None:
+        self._inbox.put(("report", report, self._clock_ns()))
+
+    # -- the worker thread --------------------------------------------------------------
+    def _run(self) -> None:
+        while True:
+            wake = self._next_wakeup()
+            try:
+                item = self._inbox.get(timeout=None if wake is None else max(0.0, wake - time.monotonic()))
+            except queue.Empty:
+                item = None
+            try:
+                while item is not None:
+                    self._handle(item)
+                    item = self._inbox.get_nowait()
+            except queue.Empty:
+                pass
+            try:
+                self._tick()
+            except Exception:  # a bug must cost one tick, not the robot: log it and go on
+                log.exception("robot %s: driver tick failed", self.transport.url)
+            if self._closing:
+                self._shutdown()
+                return
+
+    def _handle(self, item: tuple) -> None:
+        if item[0] == "suggest":
+            _, suggestion, steps, received_ns, start = item
+            self._add(suggestion, steps, received_ns, start)
+        elif item[0] == "report":
+            self._report(item[1], item[2])
+        elif item[0] == "close":
+            self._closing = True
+
+    def _add(self, suggestion: Suggestion, steps: list[Step], received_ns: int, start: float) -> None:
+        speech_playing = any(p.speech_may_play() for p in self._active)
+        for earlier in self._active:
+            earlier.superseded = True
+            for s in earlier.steps:
+                if not s.sent and s.at_s > 0:
+                    s.cancelled = True
+        if speech_playing and not any(isinstance(s.command, Say) for s in steps):
+            steps = [Step(0.0, StopSpeech()), *steps]
+        ordered = sorted(steps, key=lambda s: s.at_s)  # stable: same-time steps keep their order
+        self._active.append(_Performance(
+            suggestion, [_Step(s.at_s, s, next(self._ids)) for s in ordered], received_ns, start))
+
+    def _report(self, report, time_ns: int) -> None:
+        if report.generation != self._generation:
+            return  # from a connection already replaced
+        if isinstance(report, Disconnected):
+            if self._connected:
+                log.warning("robot %s disconnected: %s", self.transport.url, report.reason)
+                self._drop(report.reason)
+        elif isinstance(report, Rejected):
+            self.rejected += 1
+            log.warning("robot %s sent an unreadable frame: %s", self.transport.url, report.reason)
+            self._on_rejected(report.reason, report.excerpt)
+        elif isinstance(report, Reply):
+            self._match(report, time_ns)
+        elif isinstance(report, Changed):
+            pass  # the tick after this report asks ready() again
+
+    def _match(self, reply: Reply, time_ns: int) -> None:
+        for perf in self._active:
+            candidates = [o for o in perf.outstanding
+                          if o[1] == reply.kind and (reply.ref is None or o[0] == reply.ref)]
+            if not candidates:
+                continue
+            command_id = candidates[0][0]
+            cleared = {(command_id, reply.kind)}
+            if reply.kind == SPEECH_END:  # an end implies the start, even if that reply was lost
+                cleared.add((command_id, SPEECH_START))
+            perf.outstanding = [o for o in perf.outstanding if o not in cleared]
+            perf.replies.append(reply.wire_name)
+            perf.acked_ns = perf.acked_ns or time_ns
+            if not perf.outstanding:
+                perf.done_ns = time_ns
+            return
+        log.debug("robot reply %s (%s) matches no open suggestion", reply.wire_name, reply.ref)
+
+    def _drop(self, reason: str) -> None:
+        self._connected = False
+        self._held = ""
+        self._last_error = reason
+        self.transport.close()
+        self._next_attempt = time.monotonic() + self._backoff
+
+    def _connect(self) -> None:
+        self._generation += 1
+        try:
+            self.transport.connect(self._deliver, self._generation)
+        except (OSError, ValueError) as exc:  # ConnectionError, timeouts, refused auth
+            self._last_error = f"{type(exc).__name__}: {exc}"
+            log.info("robot %s: cannot connect (%s); retry in %.2f s", self.transport.url, self._last_error, self._backoff)
+            self._next_attempt = time.monotonic() + self._backoff
+            self._backoff = min(self._backoff * 2, self.config.reconnect_max_s)
+            return
+        self._connected = True
+        self._backoff = self.config.reconnect_min_s
+        if self._ever_connected:
+            self.reconnects += 1
+            for perf in self._active:
+                perf.reconnects += 1
+        self._ever_connected = True
+
+    def _tick(self) -> None:
+        now = time.monotonic()
+        if not self._connected and now >= self._next_attempt:
+            self._connect()
+        if self._connected:
+            self._send_due(now)
+        self._finalize_ready(time.monotonic())
+
+    def _send_due(self, now: float) -> None:
+        self._held = ""
+        for perf in list(self._active):
+            for step in perf.unsent():
+                if perf.start + step.at_s > now:
+                    break  # steps are in time order; the rest wait for their time
+                time_ns = self._clock_ns()
+                if step.wire is None:
+                    try:
+                        step.wire = self.transport.encode(step.step.command, step.command_id, time_ns)
+                    except (TypeError, ValueError) as exc:
+                        self._finish(perf, "failed", f"cannot encode {step.step.command!r}: {exc}")
+                        break
+                self._held = self.transport.ready(step.wire)
+                if self._held:
+                    return  # hold this and everything after it: order is kept
+                try:
+                    self.transport.send(step.wire)
+                except OSError as exc:
+                    log.warning("robot %s: write failed (%s); reconnecting", self.transport.url, exc)
+                    self._drop(f"write failed: {exc}")
+                    return
+                step.sent = True
+                perf.sent_ns = perf.sent_ns or self._clock_ns()
+                perf.last_send = time.monotonic()
+                perf.outstanding.extend((step.command_id, kind) for kind in step.wire.replies)
+                perf.promised = perf.promised or bool(step.wire.replies)
+
+    def _finalize_ready(self, now: float) -> None:
+        for perf in list(self._active):
+            if perf.unsent():
+                stuck = self._held or (not self._connected and f"robot unreachable: {self._last_error}")
+                if stuck and now - perf.start > self.config.give_up_s:
+                    self._finish(perf, "failed", f"not delivered within {self.config.give_up_s:g} s: {stuck}")
+                continue
+            cut = any(s.cancelled for s in perf.steps)
+            if perf.superseded and (cut or perf.outstanding):
+                self._finish(perf, "aborted")
+            elif not perf.outstanding:
+                self._finish(perf, "done" if perf.promised else "sent" if perf.steps else "nothing")
+            elif now - perf.last_send > self.config.ack_timeout_s:
+                self._finish(perf, "unacknowledged", f"no {perf.outstanding[0][1]} within {self.config.ack_timeout_s:g} s")
+
+    def _finish(self, perf: _Performance, outcome: str, error: str = "") -> None:
+        self._active.remove(perf)
+        s = perf.suggestion
+        acted = RobotActed(
+            session=s.session, round=s.round, turn=s.turn, attempt=s.attempt, action=s.action,
+            backend=self.transport.url, outcome=outcome,
+            commands=[st.wire.text for st in perf.steps if st.sent and st.wire is not None],
+            replies=perf.replies, suggestion_seq=s.suggestion_seq, received_ns=perf.received_ns,
+            sent_ns=perf.sent_ns, acked_ns=perf.acked_ns, done_ns=perf.done_ns, error=error,
+            reconnects=perf.reconnects)
+        try:
+            self._on_acted(acted)
+        except Exception:  # a failing consumer must not stop the robot
+            log.exception("robot %s: RobotActed consumer failed", self.transport.url)
+        with self._idle:
+            self._pending -= 1
+            self._idle.notify_all()
+
+    def _next_wakeup(self) -> float | None:
+        times = []
+        if not self._connected:
+            times.append(self._next_attempt)
+        for perf in self._active:
+            unsent = perf.unsent()
+            if unsent and self._connected and not self._held:
+                times.append(perf.start + unsent[0].at_s)
+            elif unsent:
+                times.append(perf.start + self.config.give_up_s)
+            elif perf.outstanding:
+                times.append(perf.last_send + self.config.ack_timeout_s)
+        return min(times) if times else None
+
+    def _shutdown(self) -> None:
+        for perf in list(self._active):
+            if perf.unsent():
+                self._finish(perf, "failed", "bridge closed before delivery")
+            elif perf.outstanding:
+                self._finish(perf, "unacknowledged", "bridge closed while waiting for the robot")
+            else:
+                self._finish(perf, "done" if perf.promised else "sent" if perf.steps else "nothing")
+        if self._connected:
+            self._connected = False
+            self.transport.close()

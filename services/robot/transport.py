@@ -1,0 +1,79 @@
+"""What a robot backend is to the driver: a connection that writes commands and hears replies.
+
+Rule: a Transport turns neutral commands into its protocol's wire messages,
+opens a connection (raising ConnectionError with the reason when it cannot), and
+reports what the robot says through one callback, from its own reader thread:
+  Reply        the robot confirms a command (speech start/end, gesture end);
+               `ref` is the id we gave the command, or None if the protocol has none
+  Rejected     a frame from the robot that could not be read (kept for the record)
+  Disconnected the connection is gone (the driver reconnects with backoff)
+  Changed      the robot side changed who listens (IrisTK: a broker SUBSCRIBE);
+               the driver asks `ready(wire)` again for commands it holds back
+Only the driver's worker thread calls connect, send and close, so writes never
+interleave. `generation` tells a stale reader's reports from the live one's.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Callable, Protocol
+
+from .render import Command
+
+SPEECH_START, SPEECH_END, GESTURE_END = "speech.start", "speech.end", "gesture.end"
+
+
+@dataclass(frozen=True)
+class Reply:
+    generation: int
+    kind: str  # SPEECH_START | SPEECH_END | GESTURE_END
+    ref: str | None
+    wire_name: str  # the protocol's own name, for the record
+
+
+@dataclass(frozen=True)
+class Rejected:
+    generation: int
+    reason: str
+    excerpt: str
+
+
+@dataclass(frozen=True)
+class Disconnected:
+    generation: int
+    reason: str
+
+
+@dataclass(frozen=True)
+class Changed:
+    generation: int
+
+
+Report = Reply | Rejected | Disconnected | Changed
+Deliver = Callable[[Report], None]
+
+
+@dataclass(frozen=True)
+class Wire:
+    """One encoded command: what to write, its text for the record, promised replies."""
+
+    data: bytes | str
+    text: str
+    replies: tuple[str, ...] = ()
+    name: str = ""  # the protocol's name for the message (IrisTK event name)
+
+
+class Transport(Protocol):
+    url: str  # the backend as RobotActed names it
+
+    def encode(self, command: Command, command_id: str, time_ns: int) -> Wire: ...
+
+    def connect(self, deliver: Deliver, generation: int) -> None: ...
+
+    def ready(self, wire: Wire) -> str:
+        """"" if the wire can go now, else why it must wait (nobody listens for it yet)."""
+        ...
+
+    def send(self, wire: Wire) -> None: ...
+
+    def close(self) -> None: ...

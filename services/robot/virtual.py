@@ -1,0 +1,111 @@
+"""The virtual robot, the default backend: a session runs with no hardware.
+
+Rule: it behaves as a robot does on the wire, in-process: it "performs" each
+command at once (logged and kept in `performed`), confirms speech with a start
+and an end (the end after SPEECH_S_PER_WORD per word, times `time_scale`), a
+gesture with an end after GESTURE_S, and a newer speech or a stop ends the
+current speech early. Its wire messages are the neutral commands as JSON with
+their id, so a recording shows what a robot would have been asked to do.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import threading
+import time
+
+import msgspec
+
+from .render import Command, Gesture, Say, StopSpeech
+from .transport import GESTURE_END, SPEECH_END, SPEECH_START, Deliver, Reply, Wire
+
+log = logging.getLogger("pairplay.robot.virtual")
+
+SPEECH_S_PER_WORD = 0.3
+GESTURE_S = 0.8
+_encode = msgspec.json.Encoder().encode
+
+
+class VirtualTransport:
+    url = "virtual"
+
+    def __init__(self, time_scale: float = 1.0) -> None:
+        if time_scale < 0:
+            raise ValueError(f"virtual robot time_scale must be >= 0, got {time_scale}")
+        self.time_scale = time_scale
+        self.performed: list[tuple[int, str]] = []  # (time ns, wire text)
+        self._deliver: Deliver | None = None
+        self._generation = 0
+        self._timers: list[threading.Timer] = []
+        self._speaking: str | None = None  # id of the speech playing now
+        self._lock = threading.Lock()
+
+    def encode(self, command: Command, command_id: str, time_ns: int) -> Wire:
+        text = json.dumps({"id": command_id, **json.loads(_encode(command))}, separators=(",", ":"))
+        replies = (SPEECH_START, SPEECH_END) if isinstance(command, Say) else \
+            (GESTURE_END,) if isinstance(command, Gesture) else ()
+        return Wire(text, text, replies)
+
+    def connect(self, deliver: Deliver, generation: int) -> None:
+        self._deliver, self._generation = deliver, generation
+
+    def ready(self, wire: Wire) -> str:
+        return ""
+
+    def send(self, wire: Wire) -> None:
+        if self._deliver is None:
+            raise ConnectionError("virtual robot not connected")
+        message = json.loads(wire.data)
+        self.performed.append((time.time_ns(), wire.text))
+        log.info("virtual robot performs %s", wire.text)
+        kind, command_id = message["type"], message["id"]
+        if kind in ("say", StopSpeech.__struct_config__.tag):
+            self._end_current_speech()
+        if kind == "say":
+            with self._lock:
+                self._speaking = command_id
+            self._reply(SPEECH_START, command_id, "speech.start", 0.0)
+            words = max(1, len(message["text"].split()))
+            self._reply(SPEECH_END, command_id, "speech.end", words * SPEECH_S_PER_WORD, speech=True)
+        elif kind == "gesture":
+            self._reply(GESTURE_END, command_id, "gesture.end", GESTURE_S)
+
+    def _end_current_speech(self) -> None:
+        with self._lock:
+            current, self._speaking = self._speaking, None
+        if current is not None:
+            self._emit(SPEECH_END, current, "speech.end (aborted)")
+
+    def _reply(self, kind: str, command_id: str, name: str, after_s: float, speech: bool = False) -> None:
+        delay = after_s * self.time_scale
+
+        def fire() -> None:
+            if speech:
+                with self._lock:
+                    if self._speaking != command_id:
+                        return  # aborted: its end was already reported
+                    self._speaking = None
+            self._emit(kind, command_id, name)
+
+        if delay <= 0:
+            fire()
+            return
+        timer = threading.Timer(delay, fire)
+        timer.daemon = True
+        with self._lock:
+            self._timers = [t for t in self._timers if t.is_alive()] + [timer]
+        timer.start()
+
+    def _emit(self, kind: str, command_id: str, name: str) -> None:
+        deliver = self._deliver
+        if deliver is not None:
+            deliver(Reply(self._generation, kind, command_id, name))
+
+    def close(self) -> None:
+        with self._lock:
+            timers, self._timers = self._timers, []
+            self._speaking = None
+        for timer in timers:
+            timer.cancel()
+        self._deliver = None
