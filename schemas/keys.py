@@ -5,7 +5,9 @@ tag, so a subscriber to `pairplay/<session>/**` sees the whole session and the
 recorder keeps one MCAP channel per key. Session ids and source names are single
 key chunks: no `/`, no zenoh wildcards or verbatim markers (`* $ # ?`), no `@`.
 Requests that need an answer (the recorder's log, for a restarting service) use
-queryables on `pairplay/<session>/_query/<service>/<name>`, outside the event space.
+queryables on `pairplay/<session>/_query/<service>/<name>`, and running services
+hold liveliness tokens on `pairplay/<session>/_alive/<service>`: both outside
+the event space.
 """
 
 from __future__ import annotations
@@ -14,6 +16,7 @@ from typing import NamedTuple
 
 ROOT = "pairplay"
 QUERY_CHUNK = "_query"
+ALIVE_CHUNK = "_alive"
 _FORBIDDEN = set("/*$#?@ ")
 
 
@@ -43,9 +46,14 @@ def query_key(session: str, service: str, name: str) -> str:
     return f"{ROOT}/{check_chunk('session', session)}/{QUERY_CHUNK}/{service}/{name}"
 
 
+def alive_key(session: str, service: str) -> str:
+    """Liveliness token of a running service (`*` for all of a session's)."""
+    return f"{ROOT}/{check_chunk('session', session)}/{ALIVE_CHUNK}/{service}"
+
+
 def parse_event_key(key: str) -> EventKey:
     """Split an event key; ValueError if it is not `pairplay/<session>/<source>/<tag>`."""
     parts = str(key).split("/")
-    if len(parts) != 4 or parts[0] != ROOT or parts[1] == QUERY_CHUNK or parts[2] == QUERY_CHUNK:
+    if len(parts) != 4 or parts[0] != ROOT or parts[2] in (QUERY_CHUNK, ALIVE_CHUNK):
         raise ValueError(f"key {key!r} is not {ROOT}/<session>/<source>/<event>")
     return EventKey(parts[1], parts[2], parts[3])

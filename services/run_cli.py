@@ -1,0 +1,99 @@
+"""`pairplay run SERVICE`: one service alone in this process, on the bus.
+
+Rule: the service joins the session given by --session, catches up from the
+recorder's log if the session is under way (a restarted learner resumes where
+the crashed one stopped), runs until the session ends for it, and exits 0; on
+SIGINT/SIGTERM it closes its Zenoh session cleanly. The game needs the session
+config (the same options as `pairplay session`); the others read it from the
+bus. The first line printed is `listening <endpoints>` so an orchestrator can
+connect further processes to this one.
+"""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import threading
+import time
+from pathlib import Path
+
+from .bus import Bus, add_bus_arguments, options_from_args, stop_on_signals
+from .runner import Node
+
+SERVICES = ("game", "learner", "participant", "recorder", "combiner")
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("service", choices=SERVICES)
+    p.add_argument("--session", help="session id (required except for the game, which can make one)")
+    p.add_argument("--out", default="recordings", help="recorder: directory of the recording")
+    p.add_argument("--participant", help="game: sim:<persona> or human:<id>")
+    p.add_argument("--wait-for", action="append", default=[], help="game: services to wait for before starting")
+    add_bus_arguments(p)
+    known = {a.dest for a in p._actions}
+    from .session_cli import add_config_arguments
+    extra = argparse.ArgumentParser(add_help=False)
+    add_config_arguments(extra)
+    for action in extra._actions:
+        if action.dest not in known and action.option_strings:
+            p._add_action(action)
+
+
+def run(args: argparse.Namespace) -> int:
+    logging.basicConfig(level=logging.INFO, format=f"%(levelname)s {args.service}: %(message)s")
+    stop = threading.Event()
+    stop_on_signals(stop)
+    if args.service == "game":
+        from .session_cli import config_from_args
+        if not args.participant:
+            print("pairplay run game: --participant is required")
+            return 2
+        config = config_from_args(args)
+        args.session = config.session
+    elif not args.session:
+        print(f"pairplay run {args.service}: --session is required")
+        return 2
+    bus = Bus(options_from_args(args))
+    try:
+        print(f"listening {' '.join(bus.locators())}", flush=True)
+        if args.service == "recorder":
+            from .recorder import Recorder
+            recorder = Recorder(bus, args.session, Path(args.out) / f"{args.session}.mcap")
+            recorder.start()
+            checked = 0.0
+            try:
+                # after SessionEnded the learner still settles the last reward: stay while others are on the bus
+                while not stop.is_set():
+                    recorder.step()
+                    if recorder.ended and time.monotonic() - checked > 0.3:
+                        checked = time.monotonic()
+                        if not _others_alive(bus, args.session):
+                            break
+            finally:
+                recorder.close()
+            return 0
+        if args.service == "combiner":
+            from .combiner import CombinerLogic
+            logic = CombinerLogic()
+        elif args.service == "game":
+            from .game import GameLogic
+            logic = GameLogic(config)
+        elif args.service == "learner":
+            from .learner import LearnerLogic
+            logic = LearnerLogic()
+        else:
+            from .participant import ParticipantLogic
+            logic = ParticipantLogic()
+        node = Node(bus, logic, args.session, resume=args.service != "game")
+        node.start(wait_for=tuple(args.wait_for))
+        print(f"{args.service} running in session {args.session}", flush=True)
+        node.run(stop)
+        return 0
+    finally:
+        bus.close()
+
+
+def _others_alive(bus: Bus, session: str) -> bool:
+    from pairplay.schemas.keys import alive_key
+    alive = bus.alive_now(alive_key(session, "*"), timeout_s=0.3)
+    return any(not k.endswith("/recorder") for k in alive)

@@ -1,0 +1,173 @@
+"""`pairplay session`: one whole session over the bus, recorded to recordings/<session>.mcap.
+
+Rule: the recorder starts first, then the learner and the participant (each a
+Node with its liveliness token), and the game last: it waits until every
+service the session needs is on the bus, then announces the session. By
+default all run in this process on one Zenoh session (peer, loopback, a free
+port); `--external learner` (or participant) leaves that service to another
+process (`pairplay run learner --session ID --connect <endpoint printed here>`),
+which the game then waits for. The session is over when the game has ended it
+and every service has settled (in-process threads finished, external services'
+tokens gone); then the recorder finishes its file.
+
+Choices: a simulated participant's ignore rule is "perceived" (it reports what
+it perceived) and a human's is "time" (thesis 7.1.2), unless given; the learner
+schedule presets are the thesis's: "virtual" (6.2), "human-phase1" and
+"human-phase2" (7.2).
+"""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import threading
+import time
+from datetime import datetime, timezone
+from pathlib import Path
+
+from pairplay import __version__
+from pairplay.schemas.config import LearnerConfig
+from pairplay.schemas.keys import alive_key, check_chunk
+from pairplay.schemas.policy import PolicyFileError, read_policy
+from pairplay.schemas.session import SessionConfig, learner_overrides
+
+from .bus import Bus, BusOptions, add_bus_arguments, options_from_args, stop_on_signals
+from .game import GameLogic
+from .learner import LearnerLogic
+from .participant import ParticipantLogic
+from .recorder import Recorder
+from .runner import Node
+
+log = logging.getLogger("pairplay.session")
+PRESETS = {"virtual": LearnerConfig, "human-phase1": LearnerConfig.human_phase1,
+           "human-phase2": LearnerConfig.human_phase2}
+
+
+def add_config_arguments(p: argparse.ArgumentParser) -> None:
+    g = p.add_argument_group("session")
+    g.add_argument("--participant", required=True, help="sim:<persona> (a simulated user) or human:<id>")
+    g.add_argument("--session", help="session id (default: <participant>-seed<seed>-game<i>-<UTC time>)")
+    g.add_argument("--seed", type=int, default=0)
+    g.add_argument("--rounds", type=int, default=20)
+    g.add_argument("--game-index", type=int, default=0)
+    g.add_argument("--algorithm", choices=("q-learning", "pi-reuse", "fixed"), default="q-learning")
+    g.add_argument("--policy", help="policy file: the bias policy (pi-reuse) or the fixed policy")
+    g.add_argument("--observed-source", choices=("intended", "first-pick"),
+                   help="default: intended for sim:, first-pick for human:")
+    g.add_argument("--ignore-rule", choices=("perceived", "time"), help="default: perceived for sim:, time for human:")
+    g.add_argument("--preset", choices=sorted(PRESETS), default="virtual", help="learner schedule (thesis 6.2, 7.2)")
+
+
+def config_from_args(args: argparse.Namespace) -> SessionConfig:
+    sim = args.participant.startswith("sim:")
+    if not sim and not args.participant.startswith("human:"):
+        raise ValueError(f"--participant {args.participant!r}: use sim:<persona> or human:<id>")
+    who = args.participant.split(":", 1)[1]
+    check_chunk("participant", who)
+    session = args.session or f"{who}-seed{args.seed}-game{args.game_index}-" \
+                              f"{datetime.now(timezone.utc).strftime('%Y%m%dT%H%M%S')}"
+    preset = PRESETS[args.preset]
+    schedule = preset(args.rounds) if args.preset != "virtual" else preset()
+    actions = []
+    if args.policy:
+        actions = list(read_policy(args.policy).greedy)
+    config = SessionConfig(
+        session=session, participant=args.participant, persona=who if sim else "", seed=args.seed,
+        rounds=args.rounds, game_index=args.game_index, algorithm=args.algorithm,
+        observed_source=args.observed_source or ("intended" if sim else "first-pick"),
+        ignore_rule=args.ignore_rule or ("perceived" if sim else "time"), policy_actions=actions,
+        learner=learner_overrides(schedule), software_version=__version__)
+    config.validate()
+    return config
+
+
+def run_session(config: SessionConfig, path: str | Path, *, bus: Bus | None = None,
+                bus_options: BusOptions | None = None, external: tuple[str, ...] = (),
+                stop: threading.Event | None = None, settle_timeout_s: float = 30.0,
+                on_bus=None) -> Path:
+    """Run one session to its end (or `stop`); return the recording's path."""
+    own_bus = bus is None
+    bus = bus if bus is not None else Bus(bus_options)
+    stop = stop or threading.Event()
+    if on_bus is not None:
+        on_bus(bus)
+    recorder = Recorder(bus, config.session, path)
+    recorder_stop = threading.Event()
+    recorder.start()
+    recorder_thread = threading.Thread(target=recorder.run, args=(recorder_stop,), name="pairplay-recorder",
+                                       daemon=True)
+    recorder_thread.start()
+    needed = ["recorder", "learner"] + (["participant"] if config.participant.startswith("sim:") else [])
+    nodes = []
+    try:
+        if "learner" not in external:
+            nodes.append(Node(bus, LearnerLogic(), config.session))
+        if "participant" not in external and config.participant.startswith("sim:"):
+            nodes.append(Node(bus, ParticipantLogic(), config.session))
+        for node in nodes:
+            node.start()
+            node.run_in_thread(stop)
+        game = Node(bus, GameLogic(config), config.session, resume=False)
+        game.start(wait_for=tuple(needed))
+        nodes.append(game)
+        game.run_in_thread(stop)
+        for node in nodes:
+            while node.thread.is_alive() and not stop.is_set():
+                node.thread.join(0.1)
+        wait_external_exit(bus, config.session, [s for s in external if s in needed], stop, settle_timeout_s)
+    finally:
+        stop.set()
+        for node in nodes:
+            if node.thread is not None:
+                node.thread.join(5.0)
+        recorder_stop.set()
+        recorder_thread.join(5.0)
+        recorder.close()
+        if own_bus:
+            bus.close()
+    return Path(path)
+
+
+def wait_external_exit(bus: Bus, session: str, services: list[str], stop: threading.Event, timeout_s: float) -> None:
+    """Wait until the external services settled and left the bus (they exit when done)."""
+    deadline = time.monotonic() + timeout_s
+    while services and not stop.is_set() and time.monotonic() < deadline:
+        alive = bus.alive_now(alive_key(session, "*"), timeout_s=0.5)
+        if not any(alive_key(session, s) in alive for s in services):
+            return
+        time.sleep(0.05)
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    add_config_arguments(p)
+    p.add_argument("--out", default="recordings", help="directory of the recording (default recordings/)")
+    p.add_argument("--external", action="append", default=[], choices=("learner", "participant"),
+                   help="leave this service to another process (`pairplay run`)")
+    add_bus_arguments(p)
+
+
+def run(args: argparse.Namespace) -> int:
+    logging.basicConfig(level=logging.INFO, format="%(levelname)s %(name)s: %(message)s")
+    try:
+        config = config_from_args(args)
+    except (ValueError, PolicyFileError) as err:
+        print(f"pairplay session: {err}")
+        return 2
+    path = Path(args.out) / f"{config.session}.mcap"
+    stop = threading.Event()
+    stop_on_signals(stop)
+
+    def announce(bus: Bus) -> None:
+        print(f"session {config.session}: bus listening on {' '.join(bus.locators()) or '(no listener)'}", flush=True)
+
+    run_session(config, path, bus_options=options_from_args(args), external=tuple(args.external), stop=stop,
+                on_bus=announce)
+    from pairplay.replay.fold import fold_events
+    from pairplay.replay.reader import read_log
+    recorded = read_log(path)
+    fold = fold_events(r.event for r in recorded.events)
+    turns = fold.turns_per_round()
+    print(f"recorded {len(recorded.events)} events to {path}")
+    print(f"rounds played: {len(turns)}; turns per round: {turns[:10]}{' ...' if len(turns) > 10 else ''}")
+    print(f"rejections: {len(fold.rejections)}; Q updates: {fold.counts.get('QUpdated', 0)}")
+    return 0 if fold.ended is not None else 1
