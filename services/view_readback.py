@@ -1,8 +1,8 @@
 """Read a saved view (.rrd) back with rerun's own reader, for checks and tests.
 
 Rule: nothing here knows how the view was drawn beyond the entity paths and
-rerun's component columns: `read_rrd` returns, per entity, the rows in file
-order as {"event": sequence or None, component column: value}, decoded by
+rerun's component columns: `read_rrd` returns, per entity, the rows in event
+order as {"event": sequence or None, "session_time": ns, component column: value}, decoded by
 rerun's RrdReader into plain Python; `tensor` and `segmentation` rebuild numpy
 arrays from a Tensor or SegmentationImage cell. A file that rerun cannot read
 raises ValueError with rerun's reason.
@@ -14,6 +14,7 @@ from collections import defaultdict
 from pathlib import Path
 
 import numpy as np
+import pyarrow as pa
 from rerun.chunk import RrdReader
 
 _CONTROL_COLUMNS = {"rerun.controls.RowId", "log_time"}
@@ -29,13 +30,20 @@ def read_rrd(path: str | Path) -> dict[str, list[dict]]:
     for chunk in chunks:
         batch = chunk.to_record_batch()
         names = [n for n in batch.schema.names if n not in _CONTROL_COLUMNS]
-        columns = {n: batch.column(n).to_pylist() for n in names}
+        columns = {n: _plain(batch.column(n)) for n in names}
         for i in range(batch.num_rows):
             row = {n: columns[n][i] for n in names}
             rows[chunk.entity_path.lstrip("/")].append(row)
     for entity_rows in rows.values():
         entity_rows.sort(key=lambda r: -1 if r.get("event") is None else r["event"])
     return dict(rows)
+
+
+def _plain(column: pa.Array) -> list:
+    """Python values of a column; timestamps as int ns (datetime would lose the ns)."""
+    if pa.types.is_timestamp(column.type):
+        column = column.cast(pa.int64())
+    return column.to_pylist()
 
 
 def has_blueprint(path: str | Path) -> bool:

@@ -152,3 +152,46 @@ def test_rerun_analytics_stay_off(tmp_path):
                    capture_output=True, timeout=120)
     assert (tmp_path / "quiet.rrd").is_file()
     assert not list(home.rglob("*"))
+
+
+def test_a_real_session_on_the_bus_with_the_view_attached_gives_the_learners_q_table(tmp_path):
+    """Game, learner and simulated participant run as bus nodes; the view watches from its own session."""
+    from pairplay.schemas.session import SessionConfig
+    from pairplay.services.game import GameLogic
+    from pairplay.services.learner import LearnerLogic
+    from pairplay.services.participant import ParticipantLogic
+    from pairplay.services.runner import Node
+
+    config = SessionConfig(session="real1", participant="sim:ashley", persona="ashley", seed=11, rounds=3)
+    rrd = tmp_path / "real1.rrd"
+    stop = threading.Event()
+    with open_bus() as services_bus:
+        endpoint = services_bus.locators()[0]
+        with open_bus(BusOptions(listen=[], connect=[endpoint])) as view_bus:
+            rec, _ = open_stream(ViewOutput(rrd=rrd))
+            source = LiveSource(view_bus, "real1")
+            result = {}
+            viewer = threading.Thread(target=lambda: result.update(
+                s=drive(RerunView(rec), source.items(stop, grace_s=0.5))))
+            viewer.start()
+            learner, participant = (Node(services_bus, LearnerLogic(), "real1", resume=False),
+                                    Node(services_bus, ParticipantLogic(), "real1", resume=False))
+            game = Node(services_bus, GameLogic(config), "real1", resume=False)
+            for node in (learner, participant):
+                node.start()
+                node.run_in_thread(stop)
+            _wait_matching(services_bus, event_key("real1", "game", "SessionStarted"))
+            game.start()
+            game.run_in_thread(stop)
+            game.thread.join(timeout=60)
+            viewer.join(timeout=60)
+            stop.set()
+            finish(rec)
+    assert game.logic.done and not viewer.is_alive()
+    rows = read_rrd(rrd)
+    learner_q = learner.logic.learner.q[0]
+    assert learner_q.any()
+    assert np.array_equal(tensor(rows["q/table"][-1]["Tensor:data"]), learner_q)
+    assert (cells_at(rows, result["s"].events) == Cell.MATCHED).all()
+    assert len(rows["learning/picks_per_round"]) == 3
+    assert any("speech:" in r["TextDocument:text"][0] for r in rows["suggestion"])
