@@ -19,9 +19,16 @@ import numpy as np
 from pairplay.core.actions import N_ACTIONS
 from pairplay.core.geometry import N_STATES
 from pairplay.core.learning import q_update
+from pairplay.core.rng import game_seed
 from pairplay.schemas import events as ev
 from pairplay.schemas.envelope import Event
 from pairplay.schemas.session import SessionConfig
+
+
+def stream_seed(config: SessionConfig) -> int:
+    """The seed of a session's per-role streams (core.rng), named as in the study:
+    the persona's key (or the human participant's id) and the game index."""
+    return game_seed(config.seed, config.persona or config.participant, config.game_index)
 
 
 @dataclass

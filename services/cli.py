@@ -18,6 +18,9 @@ VERBS: dict[str, tuple[str, str]] = {
     "view": ("pairplay.services.view_cli", "watch a session live or a recording in rerun: board, suggestion, Q-table"),
     "run": ("pairplay.services.run_cli", "run one service (game, learner, participant, recorder, combiner) on the bus"),
     "session": ("pairplay.services.session_cli", "run a whole session over the bus, recorded to recordings/<session>.mcap"),
+    "rebuild": ("pairplay.services.rebuild_cli", "fold recordings into policy files and learning curves"),
+    "replay": ("pairplay.services.replay_cli", "re-publish a recording on the bus, or --verify it against fresh services"),
+    "recover": ("pairplay.services.recover_cli", "complete a recording cut short by a crash"),
 }
 
 

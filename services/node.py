@@ -27,11 +27,10 @@ from typing import Callable, Iterable, Protocol
 
 import msgspec
 
-from pairplay.core.rng import game_seed
+from pairplay.replay.fold import stream_seed  # noqa: F401  (re-exported for the services)
 from pairplay.schemas.envelope import Event, stamped
 from pairplay.schemas.events import MessageRejected, ServiceStarted, decode_event
 from pairplay.schemas.keys import parse_event_key
-from pairplay.schemas.session import SessionConfig
 
 log = logging.getLogger("pairplay.node")
 SHELL_TAGS = frozenset({"ServiceStarted", "MessageRejected"})  # published by the shell, not the logic
@@ -54,11 +53,6 @@ class Logic(Protocol):
     def start(self) -> list[Event]: ...
 
     def handle(self, event: Event) -> list[Event]: ...
-
-
-def stream_seed(config: SessionConfig) -> int:
-    """The seed of this session's per-role streams (core.rng), named as in the study."""
-    return game_seed(config.seed, config.persona or config.participant, config.game_index)
 
 
 def content(event: Event) -> Event:
@@ -172,7 +166,7 @@ class Driver:
             return self.reject(f"internal error {type(err).__name__}: {err}", key, event.source, event.seq, payload)
 
     # -- restart and verify ------------------------------------------------
-    def resume(self, recorded: list[Event], start: bool = True) -> list[Event]:
+    def resume(self, recorded: list[Event], start: bool = True, announce: Event | None = None) -> list[Event]:
         """Re-feed a recorded session (file order); return the outputs it still owes.
 
         The service's own recorded outputs are held back: the first outputs the
@@ -181,9 +175,10 @@ class Driver:
         own = [e for e in recorded if e.source == self.logic.name and e.session == self.session]
         self.held_back = deque(e for e in own if type(e).__name__ not in SHELL_TAGS)
         self.seq = max([self.seq] + [e.seq for e in own])  # new outputs continue the numbering
+        out = self._stamp([announce]) if announce is not None else []
         self.replaying = True
         try:
-            out = self.start() if start else []
+            out += self.start() if start else []
             for e in recorded:
                 if e.source == self.logic.name or e.session != self.session:
                     continue

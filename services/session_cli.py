@@ -63,6 +63,9 @@ def config_from_args(args: argparse.Namespace) -> SessionConfig:
     if not sim and not args.participant.startswith("human:"):
         raise ValueError(f"--participant {args.participant!r}: use sim:<persona> or human:<id>")
     who = args.participant.split(":", 1)[1]
+    if sim:  # the persona's key names the RNG streams, as in the study (core.study)
+        from pairplay.core.personas import persona
+        who = persona(who).key
     check_chunk("participant", who)
     session = args.session or f"{who}-seed{args.seed}-game{args.game_index}-" \
                               f"{datetime.now(timezone.utc).strftime('%Y%m%dT%H%M%S')}"
@@ -84,8 +87,11 @@ def config_from_args(args: argparse.Namespace) -> SessionConfig:
 def run_session(config: SessionConfig, path: str | Path, *, bus: Bus | None = None,
                 bus_options: BusOptions | None = None, external: tuple[str, ...] = (),
                 stop: threading.Event | None = None, settle_timeout_s: float = 30.0,
-                on_bus=None) -> Path:
-    """Run one session to its end (or `stop`); return the recording's path."""
+                on_bus=None, nodes_out: dict | None = None) -> Path:
+    """Run one session to its end (or `stop`); return the recording's path.
+
+    `nodes_out`, if given, receives the in-process Nodes by service name (tests
+    read the live learner's final Q-table from it)."""
     own_bus = bus is None
     bus = bus if bus is not None else Bus(bus_options)
     stop = stop or threading.Event()
@@ -107,9 +113,13 @@ def run_session(config: SessionConfig, path: str | Path, *, bus: Bus | None = No
         for node in nodes:
             node.start()
             node.run_in_thread(stop)
+            if nodes_out is not None:
+                nodes_out[node.logic.name] = node
         game = Node(bus, GameLogic(config), config.session, resume=False)
         game.start(wait_for=tuple(needed))
         nodes.append(game)
+        if nodes_out is not None:
+            nodes_out["game"] = game
         game.run_in_thread(stop)
         for node in nodes:
             while node.thread.is_alive() and not stop.is_set():
@@ -150,7 +160,7 @@ def run(args: argparse.Namespace) -> int:
     logging.basicConfig(level=logging.INFO, format="%(levelname)s %(name)s: %(message)s")
     try:
         config = config_from_args(args)
-    except (ValueError, PolicyFileError) as err:
+    except (ValueError, KeyError, PolicyFileError) as err:
         print(f"pairplay session: {err}")
         return 2
     path = Path(args.out) / f"{config.session}.mcap"
