@@ -108,6 +108,7 @@ class RobotConfig(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
     head_turn_lead_s: float = 0.3  # look at the observed card, then turn after this
     head_turn_hold_s: float = 0.8  # hold the turn, then look back at the participant
     ack_timeout_s: float = 10.0  # a promised reply later than this: "unacknowledged"
+    abort_grace_s: float = 1.0  # a superseded suggestion's replies in flight are awaited this long
     give_up_s: float = 30.0  # undelivered this long with the robot unreachable: "failed"
     reconnect_min_s: float = 0.05
     reconnect_max_s: float = 2.0
@@ -123,7 +124,7 @@ class RobotConfig(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
 
     def validate(self) -> None:
         """Raise ValueError with a clear reason if the config cannot work."""
-        for name in ("head_turn_offset_m", "ack_timeout_s", "give_up_s", "reconnect_min_s", "reconnect_max_s"):
+        for name in ("head_turn_offset_m", "ack_timeout_s", "abort_grace_s", "give_up_s", "reconnect_min_s", "reconnect_max_s"):
             if not getattr(self, name) > 0:
                 raise ValueError(f"robot config: {name} must be > 0, got {getattr(self, name)}")
         for name in ("head_turn_lead_s", "head_turn_hold_s"):

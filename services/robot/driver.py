@@ -13,6 +13,9 @@ while earlier speech may still play, a StopSpeech goes first.
 Every suggestion ends in exactly one RobotActed (schemas/robot.py lists the
 outcomes). Replies are matched by the id the protocol echoes; a protocol reply
 without an id goes to the oldest suggestion still waiting for that kind of reply.
+A superseded suggestion still waiting for replies is reported once the robot
+replies about a later one (replies arrive in order, so its own are all in) or
+after abort_grace_s, so replies in flight when it was cut are still recorded.
 """
 
 from __future__ import annotations
@@ -65,6 +68,8 @@ class _Performance:
     received_ns: int
     start: float  # monotonic seconds: the steps' time zero
     superseded: bool = False
+    superseded_at: float = 0.0
+    overtaken: bool = False  # the robot already replied about a later suggestion
     outstanding: list[tuple[str, str]] = field(default_factory=list)  # (command id, reply kind)
     promised: bool = False
     sent_ns: int = 0
@@ -175,7 +180,8 @@ class RobotDriver:
     def _add(self, suggestion: Suggestion, steps: list[Step], received_ns: int, start: float) -> None:
         speech_playing = any(p.speech_may_play() for p in self._active)
         for earlier in self._active:
-            earlier.superseded = True
+            if not earlier.superseded:
+                earlier.superseded, earlier.superseded_at = True, start
             for s in earlier.steps:
                 if not s.sent and s.at_s > 0:
                     s.cancelled = True
@@ -202,7 +208,7 @@ class RobotDriver:
             pass  # the tick after this report asks ready() again
 
     def _match(self, reply: Reply, time_ns: int) -> None:
-        for perf in self._active:
+        for index, perf in enumerate(self._active):
             candidates = [o for o in perf.outstanding
                           if o[1] == reply.kind and (reply.ref is None or o[0] == reply.ref)]
             if not candidates:
@@ -216,6 +222,8 @@ class RobotDriver:
             perf.acked_ns = perf.acked_ns or time_ns
             if not perf.outstanding:
                 perf.done_ns = time_ns
+            for earlier in self._active[:index]:  # replies come in order: theirs are all in
+                earlier.overtaken = True
             return
         log.debug("robot reply %s (%s) matches no open suggestion", reply.wire_name, reply.ref)
 
@@ -288,7 +296,11 @@ class RobotDriver:
                     self._finish(perf, "failed", f"not delivered within {self.config.give_up_s:g} s: {stuck}")
                 continue
             cut = any(s.cancelled for s in perf.steps)
-            if perf.superseded and (cut or perf.outstanding):
+            if perf.superseded and perf.outstanding:
+                # replies still in flight are recorded until the robot has moved on
+                if perf.overtaken or now - perf.superseded_at > self.config.abort_grace_s:
+                    self._finish(perf, "aborted")
+            elif perf.superseded and cut:
                 self._finish(perf, "aborted")
             elif not perf.outstanding:
                 self._finish(perf, "done" if perf.promised else "sent" if perf.steps else "nothing")
@@ -325,6 +337,8 @@ class RobotDriver:
                 times.append(perf.start + self.config.give_up_s)
             elif perf.outstanding:
                 times.append(perf.last_send + self.config.ack_timeout_s)
+                if perf.superseded:
+                    times.append(perf.superseded_at + self.config.abort_grace_s)
         return min(times) if times else None
 
     def _shutdown(self) -> None:

@@ -154,6 +154,8 @@ class IrisTKTransport:
             sock = self._sock
         if sock is None:
             raise ConnectionError("not connected")
+        if _peer_closed(sock):  # the broker left and our reader has not said so yet
+            raise ConnectionError("broker closed the connection")
         sock.sendall(wire.data if isinstance(wire.data, bytes) else wire.data.encode())
 
     def close(self) -> None:
@@ -169,3 +171,18 @@ class IrisTKTransport:
             pass  # already gone: nothing more to say
         sock.close()
 
+
+
+def _peer_closed(sock: socket.socket) -> bool:
+    """True if the broker's end is closed (EOF waiting), without consuming any data.
+
+    A write to a connection the broker already closed still "succeeds" locally
+    and is lost; checking first leaves only the in-flight window, which no TCP
+    client can close (IrisTK has no acknowledgement for most events).
+    """
+    try:
+        return sock.recv(1, socket.MSG_PEEK | socket.MSG_DONTWAIT) == b""
+    except BlockingIOError:
+        return False
+    except OSError:
+        return True

@@ -127,7 +127,7 @@ class FurhatRealtimeServer:
             with self._lock:
                 self._speaking[connection] = message
             self._respond(connection, message, "response.speak.start", text=message["text"])
-            threading.Timer(self.speech_s, self._speech_done, args=(connection, message)).start()
+            _later(self.speech_s, self._speech_done, connection, message)
         elif kind == "request.gesture.start":
             self._respond(connection, message, "response.gesture.start", name=message["name"])
             if message.get("monitor"):
@@ -154,3 +154,10 @@ class FurhatRealtimeServer:
             connection.send(json.dumps(reply))
         except ConnectionClosed:
             pass
+
+
+def _later(delay: float, function, *args) -> None:
+    """Run function(*args) after delay on a daemon timer (a test never waits for it at exit)."""
+    timer = threading.Timer(delay, function, args=args)
+    timer.daemon = True
+    timer.start()

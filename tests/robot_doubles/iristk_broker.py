@@ -82,6 +82,8 @@ class IrisTKBroker:
         self.events: list[Relayed] = []  # every event a client sent, in arrival order
         self.illegal: list[tuple[str, str]] = []  # (client name or address, what was wrong)
         self.connects: list[tuple[str, str]] = []  # (ticket, name) of every CONNECT accepted
+        self.subscribes: list[tuple[str, str]] = []  # (name, filter) of every SUBSCRIBE
+        self.closes: list[str] = []  # names of the clients that said CLOSE
         self._lock = threading.Lock()
         self._server: socket.socket | None = None
         self._changed = threading.Condition(self._lock)
@@ -101,6 +103,10 @@ class IrisTKBroker:
         """Stop accepting and drop every client (the broker process died)."""
         server, self._server = self._server, None
         if server is not None:
+            try:
+                server.shutdown(socket.SHUT_RDWR)  # wakes the blocked accept() and frees the port
+            except OSError:
+                pass
             server.close()
         self.drop_all()
 
@@ -158,10 +164,14 @@ class IrisTKBroker:
         if words[0] == "SUBSCRIBE" and len(words) == 2:
             with self._changed:
                 client.filters.append(words[1])
+                self.subscribes.append((client.name, words[1]))
                 self._changed.notify_all()
             self._announce(client.ticket)
             return True
         if line == "CLOSE":
+            with self._changed:
+                self.closes.append(client.name)
+                self._changed.notify_all()
             return False
         if words[0] == "EVENT" and len(words) == 3 and words[2].isdigit():
             payload = stream.read(int(words[2]))

@@ -135,7 +135,7 @@ class IrisTKFurhat:
             with self._lock:
                 self._speaking = event_id  # abort or not, the newest speech is what plays here
             self._send("monitor.speech.start", action=event_id, text=event.get("text", ""))
-            threading.Timer(self.speech_s, self._speech_done, args=(event_id,)).start()
+            _later(self.speech_s, self._speech_done, event_id)
         elif name == "action.speech.stop":
             with self._lock:
                 self._speaking = None
@@ -167,3 +167,10 @@ class IrisTKFurhat:
             self._sock.sendall(f"EVENT {event_name} {len(body)}\n".encode() + body)
         except OSError:
             pass  # the broker went away
+
+
+def _later(delay: float, function, *args) -> None:
+    """Run function(*args) after delay on a daemon timer (a test never waits for it at exit)."""
+    timer = threading.Timer(delay, function, args=args)
+    timer.daemon = True
+    timer.start()
