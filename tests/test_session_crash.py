@@ -1,0 +1,116 @@
+"""Crashes: a learner killed mid-session resumes from the log with no reward
+lost or counted twice; a recorder killed with SIGKILL leaves a readable file
+holding everything older than its flush interval, and `recover` completes it."""
+
+import os
+import signal
+import subprocess
+import sys
+import threading
+from collections import Counter
+
+import numpy as np
+from mcap.reader import make_reader
+
+from pairplay.core.personas import persona
+from pairplay.core.simulate import run_games
+from pairplay.replay.fold import stream_seed
+from pairplay.replay.reader import read_log
+from pairplay.replay.recover import recover
+from pairplay.schemas import events as ev
+from pairplay.schemas.envelope import stamped
+from pairplay.schemas.events import encode_event
+from pairplay.schemas.keys import alive_key, event_key
+from pairplay.schemas.session import SessionConfig
+from pairplay.services.runner import fetch_log
+from pairplay.services.session_cli import run_session
+from pairplay.services.verify import verify_recording
+
+from busutil import collect, listener, wait_until
+
+
+def spawn(*args):
+    env = dict(os.environ, PYTHONUNBUFFERED="1")
+    return subprocess.Popen([sys.executable, "-m", "pairplay", "run", *args], stdout=subprocess.PIPE,
+                            stderr=subprocess.STDOUT, env=env)
+
+
+def test_a_killed_learner_resumes_from_the_log_and_nothing_is_lost_or_doubled(tmp_path):
+    config = SessionConfig(session="crash1", participant="sim:helmut", persona="helmut", seed=5, rounds=25)
+    ready, box = threading.Event(), {}
+
+    def on_bus(bus):
+        box["bus"], box["rewards"] = bus, collect(bus, "pairplay/crash1/learner/RewardGiven")
+        ready.set()
+
+    session = threading.Thread(target=lambda: box.setdefault("path", run_session(
+        config, tmp_path / "crash1.mcap", external=("learner",), on_bus=on_bus, settle_timeout_s=60)))
+    session.start()
+    assert ready.wait(10)
+    bus = box["bus"]
+    endpoint = bus.locators()[0]
+    first = spawn("learner", "--session", "crash1", "--connect", endpoint)
+    try:
+        assert wait_until(lambda: box["rewards"].qsize() >= 40, 60), first.stdout.read1().decode()
+        first.send_signal(signal.SIGKILL)
+        first.wait(10)
+        assert wait_until(lambda: alive_key("crash1", "learner") not in bus.alive_now(alive_key("crash1", "*")), 15)
+        second = spawn("learner", "--session", "crash1", "--connect", endpoint)
+        session.join(90)
+        assert not session.is_alive()
+        assert second.wait(30) == 0
+    finally:
+        for p in (first, locals().get("second")):
+            if p is not None and p.poll() is None:
+                p.kill()
+                p.wait()
+    log = read_log(box["path"])
+    events = [r.event for r in log.events]
+    made = [(e.round, e.turn, e.attempt) for e in events if isinstance(e, ev.SuggestionMade)]
+    rewarded = [(e.round, e.turn, e.attempt) for e in events if isinstance(e, ev.RewardGiven)]
+    assert Counter(rewarded) == Counter(made) and max(Counter(rewarded).values()) == 1  # none lost, none twice
+    learner_seqs = [e.seq for e in events if e.source == "learner"]
+    assert learner_seqs == sorted(set(learner_seqs))
+    starts = [e for e in events if isinstance(e, ev.ServiceStarted) and e.service == "learner"]
+    assert len(starts) == 2 and starts[0].resumed_events == 0 and starts[1].resumed_events > 0
+    from pairplay.replay.fold import fold_events
+    fold = fold_events(events)
+    study = run_games([persona("helmut")], [stream_seed(config)], config.rounds)
+    assert fold.q_mismatches == 0 and np.array_equal(fold.q, study.q[0])  # as if it had never crashed
+    assert fold.ended is not None and verify_recording(box["path"]).ok
+
+
+def test_a_recorder_killed_with_sigkill_keeps_all_but_its_last_flush_and_recovers(tmp_path):
+    with listener() as bus:
+        rec = spawn("recorder", "--session", "rk", "--out", str(tmp_path), "--connect", bus.locators()[0])
+        try:
+            assert wait_until(lambda: alive_key("rk", "recorder") in bus.alive_now(alive_key("rk", "*")), 30)
+            key = event_key("rk", "participant", "CardPicked")
+            assert wait_until(lambda: bus.publisher(key).matching_status.matching)
+
+            def burst(first, n):
+                for seq in range(first, first + n):
+                    e = stamped(ev.CardPicked(round=0, turn=seq, card=seq % 18), session="rk",
+                                source="participant", seq=seq, time_ns=seq)
+                    bus.put(key, encode_event(e))
+
+            burst(1, 3000)
+            assert wait_until(lambda: len(fetch_log(bus, "rk")) == 3000)  # all 3000 reached the recorder
+            threading.Event().wait(0.3)  # quiet for longer than the 0.1 s flush interval
+            burst(3001, 2000)
+            rec.send_signal(signal.SIGKILL)
+            rec.wait(10)
+        finally:
+            if rec.poll() is None:
+                rec.kill()
+                rec.wait()
+    path = tmp_path / "rk.mcap"
+    log = read_log(path)
+    assert log.truncated  # never finished: no summary, no footer
+    seqs = [r.event.seq for r in log.events]
+    assert seqs[:3000] == list(range(1, 3001))  # nothing older than the last flush is lost
+    assert seqs == list(range(1, len(seqs) + 1))  # what survived is a prefix, in order
+    done = recover(path)
+    with open(done.output, "rb") as f:
+        assert sum(1 for _ in make_reader(f).iter_messages()) == len(seqs)
+    assert not read_log(done.output).truncated
