@@ -70,6 +70,7 @@ class _Performance:
     superseded: bool = False
     superseded_at: float = 0.0
     overtaken: bool = False  # the robot already replied about a later suggestion
+    cut_by_robot: bool = False  # the robot reported one of its commands aborted
     outstanding: list[tuple[str, str]] = field(default_factory=list)  # (command id, reply kind)
     promised: bool = False
     sent_ns: int = 0
@@ -218,7 +219,8 @@ class RobotDriver:
             if reply.kind == SPEECH_END:  # an end implies the start, even if that reply was lost
                 cleared.add((command_id, SPEECH_START))
             perf.outstanding = [o for o in perf.outstanding if o not in cleared]
-            perf.replies.append(reply.wire_name)
+            perf.replies.append(reply.wire_name + (" (aborted)" if reply.aborted else ""))
+            perf.cut_by_robot = perf.cut_by_robot or reply.aborted
             perf.acked_ns = perf.acked_ns or time_ns
             if not perf.outstanding:
                 perf.done_ns = time_ns
@@ -300,7 +302,7 @@ class RobotDriver:
                 # replies still in flight are recorded until the robot has moved on
                 if perf.overtaken or now - perf.superseded_at > self.config.abort_grace_s:
                     self._finish(perf, "aborted")
-            elif perf.superseded and cut:
+            elif (perf.superseded and cut) or perf.cut_by_robot:
                 self._finish(perf, "aborted")
             elif not perf.outstanding:
                 self._finish(perf, "done" if perf.promised else "sent" if perf.steps else "nothing")

@@ -147,7 +147,8 @@ class IrisTKTransport:
             kind = REPLIES.get(frame.name)
             if kind is not None:
                 ref = event.get("action")
-                deliver(Reply(generation, kind, ref if isinstance(ref, str) else None, frame.name))
+                deliver(Reply(generation, kind, ref if isinstance(ref, str) else None, frame.name,
+                              aborted=event.get("aborted") is True))
 
     def send(self, wire: Wire) -> None:
         with self._lock:

@@ -9,7 +9,8 @@ configured) and wait for response.auth with "access": true; then commands become
   Look(head) request.face.headpose {yaw, pitch, roll, relative: false}   (head turn)
 Each request carries a "request_id" (as the robot's own Python client does); the
 robot echoes it on response.speak.start / response.speak.end /
-response.gesture.end, which is how replies find their suggestion. Headpose
+response.gesture.end, which is how replies find their suggestion; a
+response.speak.end with "aborted": true marks the suggestion aborted. Headpose
 angles are degrees from the robot's straight-ahead: yaw towards +x (its left),
 pitch towards +y (up), each times a configurable sign (RobotConfig.yaw_sign,
 pitch_sign) because the robot's convention could not be checked here.
@@ -82,7 +83,7 @@ class RealtimeTransport:
 
     def connect(self, deliver: Deliver, generation: int) -> None:
         try:
-            ws = connect(self.ws_url, open_timeout=OPEN_TIMEOUT_S, close_timeout=1.0)
+            ws = _open(self.ws_url)
         except (InvalidHandshake, InvalidURI) as exc:
             raise ConnectionError(f"{self.ws_url}: {exc}") from exc
         try:
@@ -126,7 +127,8 @@ class RealtimeTransport:
                 kind = REPLIES.get(message["type"])
                 if kind is not None:
                     ref = message.get("request_id")
-                    deliver(Reply(generation, kind, ref if isinstance(ref, str) else None, message["type"]))
+                    deliver(Reply(generation, kind, ref if isinstance(ref, str) else None, message["type"],
+                                  aborted=message.get("aborted") is True))
         except ConnectionClosed as exc:
             reason = f"connection lost: {exc}"
         deliver(Disconnected(generation, reason))
@@ -149,6 +151,14 @@ class RealtimeTransport:
             ws, self._ws = self._ws, None
         if ws is not None:
             ws.close()
+
+
+def _open(url: str) -> ClientConnection:
+    """A plain connection we close ourselves (websockets >= 17 wants that said: legacy=True)."""
+    try:
+        return connect(url, open_timeout=OPEN_TIMEOUT_S, close_timeout=1.0, legacy=True)
+    except TypeError:  # websockets < 17: no such flag, and this is its only behaviour
+        return connect(url, open_timeout=OPEN_TIMEOUT_S, close_timeout=1.0)
 
 
 def _object(raw: str | bytes) -> dict | None:

@@ -29,6 +29,7 @@ class Reply:
     kind: str  # SPEECH_START | SPEECH_END | GESTURE_END
     ref: str | None
     wire_name: str  # the protocol's own name, for the record
+    aborted: bool = False  # the robot says it cut this command short (speech end, aborted)
 
 
 @dataclass(frozen=True)

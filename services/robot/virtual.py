@@ -75,7 +75,7 @@ class VirtualTransport:
         with self._lock:
             current, self._speaking = self._speaking, None
         if current is not None:
-            self._emit(SPEECH_END, current, "speech.end (aborted)")
+            self._emit(SPEECH_END, current, "speech.end", aborted=True)
 
     def _reply(self, kind: str, command_id: str, name: str, after_s: float, speech: bool = False) -> None:
         delay = after_s * self.time_scale
@@ -97,10 +97,10 @@ class VirtualTransport:
             self._timers = [t for t in self._timers if t.is_alive()] + [timer]
         timer.start()
 
-    def _emit(self, kind: str, command_id: str, name: str) -> None:
+    def _emit(self, kind: str, command_id: str, name: str, aborted: bool = False) -> None:
         deliver = self._deliver
         if deliver is not None:
-            deliver(Reply(self._generation, kind, command_id, name))
+            deliver(Reply(self._generation, kind, command_id, name, aborted))
 
     def close(self) -> None:
         with self._lock:

@@ -1,0 +1,167 @@
+"""The Furhat Realtime API client, against a Realtime API server double."""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import math
+
+import msgspec
+import pytest
+from robot_doubles.furhat_realtime import FurhatRealtimeServer
+from robot_doubles.harness import FAMILIES, FAST, OBSERVED, TARGET, Collector, suggestion
+
+from pairplay.core.actions import code_of_parts
+from pairplay.services.robot import open_robot
+from pairplay.services.robot.calibration import load_calibration
+
+CALIBRATION = load_calibration()
+EXACT = code_of_parts(2, 0, 0, 0)
+
+
+@pytest.fixture
+def stage():
+    servers, drivers = [], []
+    collector = Collector()
+
+    def robot(key: str = "", server_key: str = "", config=FAST):
+        server = FurhatRealtimeServer(key=server_key).start()
+        servers.append(server)
+        if key:
+            config = msgspec.structs.replace(config, realtime_key=key)
+        driver = open_robot(f"furhat://127.0.0.1:{server.port}", collector.on_acted, config=config,
+                            calibration=CALIBRATION, on_rejected=collector.on_rejected)
+        drivers.append(driver)
+        return server, driver
+
+    yield collector, robot
+    for driver in drivers:
+        driver.close()
+    for server in servers:
+        server.stop()
+
+
+def requests(server, kind=None):
+    return [r for r in server.requests if kind is None or r["type"] == kind]
+
+
+def test_auth_with_the_robots_key_then_requests(stage):
+    collector, robot = stage
+    server, driver = robot(key="s3cret", server_key="s3cret")
+    driver.perform(suggestion(EXACT))
+    assert driver.wait_idle(5)
+    assert server.auths == [True] and collector.acted[0].outcome == "done"
+    assert driver.transport.scope == "all"
+
+
+def test_a_refused_key_fails_the_suggestion_with_the_reason(stage):
+    collector, robot = stage
+    server, driver = robot(key="wrong", server_key="s3cret", config=msgspec.structs.replace(FAST, give_up_s=0.3))
+    driver.perform(suggestion(EXACT))
+    assert driver.wait_idle(5)
+    (acted,) = collector.acted
+    assert acted.outcome == "failed" and "refused access" in acted.error and acted.commands == []
+    assert server.requests == []  # nothing reached the robot without access
+
+
+@pytest.mark.parametrize("family", list(FAMILIES))
+def test_each_family_reaches_the_robot_as_realtime_requests(stage, family):
+    collector, robot = stage
+    server, driver = robot()
+    driver.perform(suggestion(FAMILIES[family], seq=3))
+    assert driver.wait_idle(5)
+    (acted,) = collector.acted
+    assert server.wait_for(lambda s: len(s.requests) == len(acted.commands))
+    sent = server.requests
+    assert [json.loads(c) for c in acted.commands] == sent  # the record is the wire
+    card, target = CALIBRATION.cards[OBSERVED], CALIBRATION.cards[TARGET]
+    if family == "exact speech":
+        assert [(r["type"], r["text"], r["abort"]) for r in sent] == [
+            ("request.speak.text", "Try at row 2 and column 5", True)]
+        assert acted.replies == ["response.speak.start", "response.speak.end"] and acted.outcome == "done"
+    elif family == "direction speech":
+        assert [r["text"] for r in sent] == ["Maybe right"]
+    elif family == "smile":
+        assert [(r["type"], r["name"], r["monitor"]) for r in sent] == [("request.gesture.start", "BigSmile", True)]
+        assert acted.replies == ["response.gesture.end"]
+    elif family == "nod":
+        look, nod = sent
+        assert (look["type"], look["x"], look["y"], look["z"]) == ("request.attend.location", card.x, card.y, card.z)
+        assert nod["name"] == "Nod"
+    elif family == "head turn":
+        assert [r["type"] for r in sent] == ["request.face.headpose"] * 3
+        start, turn, back = sent
+        assert start["yaw"] == round(math.degrees(math.atan2(card.x, card.z)), 2)
+        assert turn["yaw"] > start["yaw"]  # turn right: towards column 5, +x, positive yaw here
+        assert (back["yaw"], back["pitch"], back["relative"]) == (0.0, 0.0, False)
+        assert acted.outcome == "sent"
+    elif family == "gaze":
+        (look,) = sent
+        assert (look["x"], look["z"]) == (target.x, target.z)
+    assert server.bad == []
+
+
+def test_replies_find_their_suggestion_by_request_id(stage):
+    collector, robot = stage
+    server, driver = robot()
+    driver.perform(suggestion(code_of_parts(2, 0, 1, 0)))  # speech + nod
+    assert driver.wait_idle(5)
+    (acted,) = collector.acted
+    assert sorted(acted.replies) == ["response.gesture.end", "response.speak.end", "response.speak.start"]
+    assert 0 < acted.sent_ns <= acted.acked_ns <= acted.done_ns
+
+
+def test_a_new_suggestion_stops_or_aborts_the_speech(stage):
+    collector, robot = stage
+    server, driver = robot()
+    server.speech_s = 5.0
+    driver.perform(suggestion(EXACT, seq=1))
+    assert server.wait_for(lambda s: len(s.requests) == 1)
+    driver.perform(suggestion(code_of_parts(0, 0, 0, 1), seq=2))  # gaze only: stop the speech first
+    driver.perform(suggestion(code_of_parts(4, 0, 0, 0), seq=3))  # "Maybe down" aborts by itself
+    assert server.wait_for(lambda s: len(s.requests) == 4)
+    assert [r["type"] for r in server.requests] == [
+        "request.speak.text", "request.speak.stop", "request.attend.location", "request.speak.text"]
+    assert server.requests[3]["abort"] is True
+    assert collector.wait_for(lambda c: 1 in c.by_seq())
+    assert collector.by_seq()[1].outcome == "aborted"
+
+
+def test_a_dropped_connection_loses_and_repeats_nothing(stage):
+    collector, robot = stage
+    server, driver = robot()
+    targets = [c for c in range(18) if c != OBSERVED][:8]
+    for i, target in enumerate(targets):
+        if i == 4:
+            server.drop_all()
+        driver.perform(dataclasses.replace(suggestion(EXACT, seq=i), target=target))
+        assert collector.wait_for(lambda c: len(c.acted) == i + 1)
+    texts = [r["text"] for r in requests(server, "request.speak.text")]
+    assert len(texts) == len(targets) == len(set(texts))
+    ids = [r["request_id"] for r in server.requests]
+    assert len(ids) == len(set(ids))
+    assert driver.reconnects == 1 and server.auths == [True, True]
+    assert all(a.outcome == "done" for a in collector.acted)
+
+
+def test_malformed_frames_from_the_robot_are_reported_and_skipped(stage):
+    collector, robot = stage
+    server, driver = robot()
+    assert server.wait_for(lambda s: s.auths == [True])
+    assert _until_connected(driver)
+    for frame in (b"\x00\x01binary", "not json", '{"no_type": 1}', "[1, 2]", '{"type": 5}'):
+        server.inject(frame)
+    assert collector.wait_for(lambda c: len(c.rejected) == 5)
+    driver.perform(suggestion(EXACT))
+    assert driver.wait_idle(5)
+    assert collector.acted[0].outcome == "done" and driver.reconnects == 0
+
+
+def _until_connected(driver, timeout: float = 5.0) -> bool:
+    import time
+    deadline = time.monotonic() + timeout
+    while not driver.connected:
+        if time.monotonic() > deadline:
+            return False
+        time.sleep(0.005)
+    return True

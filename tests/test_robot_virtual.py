@@ -1,0 +1,56 @@
+"""The virtual robot: the default backend, so a session runs with no hardware."""
+
+from __future__ import annotations
+
+import json
+
+from robot_doubles.harness import FAMILIES, FAST, Collector, suggestion
+
+from pairplay.core.actions import code_of_parts
+from pairplay.services.robot import open_robot
+
+
+def robot(collector: Collector, url: str = "virtual?time_scale=0"):
+    return open_robot(url, collector.on_acted, config=FAST, on_rejected=collector.on_rejected)
+
+
+def test_every_family_is_performed_and_reported():
+    collector = Collector()
+    driver = robot(collector)
+    try:
+        for seq, code in enumerate(FAMILIES.values()):
+            driver.perform(suggestion(code, seq=seq))
+            assert driver.wait_idle(5)
+    finally:
+        driver.close()
+    outcomes = {a.suggestion_seq: a.outcome for a in collector.acted}
+    assert outcomes == {0: "done", 1: "done", 2: "done", 3: "done", 4: "sent", 5: "sent"}
+    assert all(a.backend == "virtual" for a in collector.acted)
+    performed = [json.loads(text) for _, text in driver.transport.performed]
+    assert [p["type"] for p in performed][:3] == ["say", "say", "gesture"]
+    assert performed[0]["text"] == "Try at row 2 and column 5"
+
+
+def test_a_newer_suggestion_cuts_the_virtual_speech_short():
+    collector = Collector()
+    driver = robot(collector, "virtual")  # real speech durations: still speaking at the next one
+    try:
+        driver.perform(suggestion(code_of_parts(2, 0, 0, 0), seq=1))
+        driver.perform(suggestion(code_of_parts(0, 1, 0, 0), seq=2))
+        assert collector.wait_for(lambda c: 1 in c.by_seq())
+    finally:
+        driver.close()
+    first = collector.by_seq()[1]
+    assert first.outcome == "aborted" and first.replies[-1] == "speech.end (aborted)"
+    assert [json.loads(t)["type"] for _, t in driver.transport.performed] == ["say", "stop_speech", "gesture"]
+
+
+def test_do_nothing_sends_nothing():
+    collector = Collector()
+    driver = robot(collector)
+    try:
+        driver.perform(suggestion(0))
+        assert driver.wait_idle(5)
+    finally:
+        driver.close()
+    assert collector.acted[0].outcome == "nothing" and collector.acted[0].commands == []
