@@ -12,6 +12,7 @@ whatever the replay speed.
 
 Entity paths (the readback test and docs/view.md rely on them):
   board/cells      SegmentationImage 3x6 of view_model.Cell (covered/face up/matched)
+  board/grid       Boxes2D outlining the 18 cards (static)
   board/faces      Boxes2D of the visible cards, labelled with their face (A..I)
   board/observed, board/match, board/candidates   Boxes2D highlights (Clear when none)
   suggestion       TextDocument: state and the suggestion's four parts in words
@@ -57,7 +58,7 @@ def blueprint() -> rrb.Blueprint:
             rrb.Vertical(
                 rrb.TensorView(name="Q-table (state x action)", origin="q/table",
                                slice_selection=rrb.TensorSliceSelection(width=1, height=0),  # dims: 0 state, 1 action
-                               scalar_mapping=rrb.TensorScalarMapping(colormap="viridis")),
+                               scalar_mapping=rrb.TensorScalarMapping(colormap="viridis"), view_fit="fill"),
                 rrb.Horizontal(
                     rrb.TimeSeriesView(name="Reward", origin="learning/reward"),
                     rrb.TimeSeriesView(name="epsilon, alpha, psi", origin="learning/schedule"),
@@ -113,6 +114,9 @@ class RerunView:
         self._now_ns = 0
         rec.log("board", rr.AnnotationContext([(int(i), label, colour) for i, label, colour in CELL_CLASSES]),
                 static=True)
+        rec.log("board/grid", rr.Boxes2D(centers=[_centre(c) for c in range(N_CARDS)],
+                                         half_sizes=[(0.5, 0.5)] * N_CARDS, colors=[(25, 28, 35)] * N_CARDS,
+                                         radii=0.015), static=True)
         rec.log("board/cells", rr.SegmentationImage(self.model.cells()))  # before any event: all covered
 
     def handle(self, event) -> None:
@@ -175,14 +179,15 @@ class RerunView:
 
     def _log_highlights(self) -> None:
         m = self.model
-        for path, card, colour, label in (("board/observed", m.observed, OBSERVED_COLOUR, "observed"),
-                                          ("board/match", m.match, MATCH_COLOUR, "match")):
+        # the match sits inside the observed card's frame, so both show when they are the same card
+        for path, card, colour, label, half in (("board/observed", m.observed, OBSERVED_COLOUR, "observed", 0.47),
+                                                ("board/match", m.match, MATCH_COLOUR, "match", 0.41)):
             if 0 <= card < N_CARDS:
-                self.rec.log(path, _boxes(1 << card, colour, half=0.47, radius=0.04, label=label))
+                self.rec.log(path, _boxes(1 << card, colour, half=half, radius=0.04, label=label))
             else:
                 self.rec.log(path, rr.Clear(recursive=False))
         if m.candidates:
-            self.rec.log("board/candidates", _boxes(m.candidates, CANDIDATE_COLOUR, half=0.34, radius=0.025))
+            self.rec.log("board/candidates", _boxes(m.candidates, CANDIDATE_COLOUR, half=0.32, radius=0.025))
         else:
             self.rec.log("board/candidates", rr.Clear(recursive=False))
 
