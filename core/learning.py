@@ -66,16 +66,16 @@ def greedy(q: np.ndarray, u_tie: np.ndarray) -> np.ndarray:
     """argmax over the last axis, ties broken by the draw: the floor(u*n)-th tied action."""
     best = np.argmax(q, axis=-1)
     ties = q == np.take_along_axis(q, best[..., None], -1)
-    n = ties.sum(-1)
+    n = np.count_nonzero(ties, axis=-1)
     several = n > 1
-    if several.any():  # only tied rows pay for the cumulative count
-        k = np.minimum((u_tie[several] * n[several]).astype(np.int64), n[several] - 1)
-        best[several] = np.argmax(np.cumsum(ties[several], -1) > k[..., None], -1)
+    if several.any():  # only tied rows pay for the cumulative count (int16: n <= 88)
+        k = np.minimum((u_tie[several] * n[several]).astype(np.int16), n[several] - 1)
+        best[several] = np.argmax(np.cumsum(ties[several], -1, dtype=np.int16) > k[..., None], -1)
     return best
 
 
 def greedy_policy(q: np.ndarray, rng: np.random.Generator) -> np.ndarray:
-    """The greedy action of every state of a Q-table (..., S, A), seeded tie-break."""
+    """The policy a Q-table stands for: the greedy action of every state (..., S, A), ties by `rng`."""
     return greedy(q, rng.random(q.shape[:-1]))
 
 
@@ -98,7 +98,7 @@ class Learner:
             raise ValueError("a fixed learner needs a policy")
         self.stream, self.config, self.mode = stream, config, mode
         self.q = np.zeros((n_games, N_STATES, N_ACTIONS))
-        self.visits = np.zeros((n_games, N_STATES), dtype=np.int64)  # updates per state
+        self.counts = np.zeros((n_games, N_STATES, N_ACTIONS), dtype=np.int32)  # updates per (s, a)
         self.bias = None if bias is None else _policy_table(bias, n_games)
         self.policy = None if policy is None else _policy_table(policy, n_games)
         self.psi = np.zeros(n_games)
@@ -115,8 +115,9 @@ class Learner:
         if self.mode == "fixed":
             return self.policy[rows, states], np.full(rows.size, How.FIXED, dtype=np.int8)
         explore = u[:, 1] < epsilon_at(self.config, round_index)
-        random_action = np.minimum((u[:, 2] * N_ACTIONS).astype(np.int64), N_ACTIONS - 1)
-        actions = np.where(explore, random_action, greedy(self.q[rows, states], u[:, 3]))
+        actions = np.minimum((u[:, 2] * N_ACTIONS).astype(np.int64), N_ACTIONS - 1)
+        exploit = rows[~explore]  # only the exploiting games need their Q row
+        actions[exploit] = greedy(self.q[exploit, states[exploit]], u[exploit, 3])
         how = np.where(explore, How.EXPLORE, How.GREEDY).astype(np.int8)
         if self.mode == "reuse":
             follow = u[:, 0] < self.psi
@@ -130,11 +131,13 @@ class Learner:
         """Eq. 5.2 where `mask`; a fixed policy never learns."""
         if self.mode == "fixed" or not mask.any():
             return
-        g, s, a = self._rows[mask], states[mask], actions[mask]
+        # Flat indices: one gather and one scatter instead of three index arrays.
+        cell = (self._rows[mask] * N_STATES + states[mask]) * N_ACTIONS + actions[mask]
         alpha = alpha_at(self.config, round_index)
         alpha = alpha[mask] if np.ndim(alpha) else alpha
-        self.q[g, s, a] = q_update(self.q[g, s, a], rewards[mask], alpha)
-        self.visits[g, s] += 1
+        q, counts = self.q.reshape(-1), self.counts.reshape(-1)
+        q[cell] = q_update(q[cell], rewards[mask], alpha)
+        counts[cell] += 1  # one update per game and step: no repeated index
 
 
 def _policy_table(policy: np.ndarray, n_games: int) -> np.ndarray:

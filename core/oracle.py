@@ -56,29 +56,40 @@ def expected_rewards(persona: Persona, observed: np.ndarray, match: np.ndarray, 
     return p_heard * heard + (1 - p_heard) * unheard
 
 
-def situations(persona: Persona, seeds, rounds: int, policy: np.ndarray):
-    """States and (observed, match, NIS) of the considerable turns of fixed-policy play."""
+def situations(personas, seeds, rounds: int, policies: np.ndarray):
+    """Per game of fixed-policy play, its considerable turns: (game, state, observed, match, NIS)."""
     rows = []
 
     def keep(turn):
         m = turn.active & ~turn.from_memory
-        rows.append((turn.states[m], turn.observed[m], turn.match[m], turn.nis[m]))
+        rows.append((np.nonzero(m)[0], turn.states[m], turn.observed[m], turn.match[m], turn.nis[m]))
 
-    run_games([persona] * len(seeds), seeds, rounds, mode="fixed", policy=policy, on_turn=keep)
+    run_games(personas, seeds, rounds, mode="fixed", policy=policies, on_turn=keep)
     return tuple(np.concatenate(col) for col in zip(*rows))
 
 
-def oracle_policy(persona: Persona, seeds, rounds: int = 200, iterations: int = 2) -> tuple[np.ndarray, np.ndarray]:
-    """(policy (24,), mean expected reward table (24, 88)) of the oracle."""
-    policy = USER_ALONE
-    table = np.zeros((N_STATES, N_ACTIONS))
+def oracle_policies(personas, seeds_per_persona: int, seed: int, rounds: int = 200,
+                    iterations: int = 2, seed_of=None) -> tuple[np.ndarray, np.ndarray]:
+    """(policies (P, 24), expected reward tables (P, 24, 88)) for every persona, in one batch.
+
+    `seed_of(persona_key, i)` names the seed of the i-th situation game.
+    """
+    from .rng import game_seed
+    seed_of = seed_of or (lambda key, i: game_seed(seed, "oracle:" + key, i))
+    games = [p for p in personas for _ in range(seeds_per_persona)]
+    seeds = [seed_of(p.key, i) for p in personas for i in range(seeds_per_persona)]
+    owner = np.repeat(np.arange(len(personas)), seeds_per_persona)
+    policies = np.tile(USER_ALONE, (len(personas), 1))
+    tables = np.zeros((len(personas), N_STATES, N_ACTIONS))
     for _ in range(iterations):
-        states, observed, match, nis = situations(persona, seeds, rounds, policy)
-        values = expected_rewards(persona, observed, match, nis)
-        sums = np.zeros((N_STATES, N_ACTIONS))
-        np.add.at(sums, states, values)
-        counts = np.bincount(states, minlength=N_STATES)
-        visited = counts > 0
-        table = np.where(visited[:, None], sums / np.maximum(counts, 1)[:, None], table)
-        policy = np.where(visited, np.argmax(table, axis=1), policy)
-    return policy, table
+        game, states, observed, match, nis = situations(games, seeds, rounds, policies[owner])
+        for i, persona in enumerate(personas):
+            mine = owner[game] == i
+            values = expected_rewards(persona, observed[mine], match[mine], nis[mine])
+            sums = np.zeros((N_STATES, N_ACTIONS))
+            np.add.at(sums, states[mine], values)
+            counts = np.bincount(states[mine], minlength=N_STATES)
+            visited = counts > 0
+            tables[i] = np.where(visited[:, None], sums / np.maximum(counts, 1)[:, None], tables[i])
+            policies[i] = np.where(visited, np.argmax(tables[i], axis=1), policies[i])
+    return policies, tables

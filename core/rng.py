@@ -35,7 +35,7 @@ def game_seed(seed: int, persona: str, game: int) -> int:
 class UniformStream:
     """Uniform [0, 1) draws for a batch of games, one PCG64 per game and role."""
 
-    def __init__(self, seeds: Sequence[int], role: str, block: int = 4096):
+    def __init__(self, seeds: Sequence[int], role: str, block: int = 1024):
         if role not in _ROLE_KEY:
             raise ValueError(f"unknown role {role!r}; roles are {ROLES}")
         self.role = role

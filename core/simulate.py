@@ -51,7 +51,7 @@ class Turn(NamedTuple):
 
 class SimResult(NamedTuple):
     q: np.ndarray  # (B, 24, 88) final Q-tables
-    visits: np.ndarray  # (B, 24) Q updates per state
+    counts: np.ndarray  # (B, 24, 88) Q updates per state and action
     picks: np.ndarray  # (B, rounds) picks per round
     inconsistent: np.ndarray  # (B, rounds) inconsistent suggestions per round
     turns: int  # lockstep steps taken
@@ -123,4 +123,4 @@ def run_games(personas: Sequence[Persona], seeds: Sequence[int], rounds: int,
             learner.start_round(round_index, g)
             if progress is not None:
                 progress(int(np.minimum(round_index, rounds).sum()))
-    return SimResult(learner.q, learner.visits, picks_log, inconsistent_log, steps)
+    return SimResult(learner.q, learner.counts, picks_log, inconsistent_log, steps)

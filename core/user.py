@@ -139,3 +139,19 @@ class SimulatedUsers:
         self.stamp[g, second[g]] = clock + 1
         self.memory[g] |= _BIT[first[g]] | _BIT[second[g]]
         self.clock[g] = clock + 2
+
+
+UNKNOWN_PARTNER = N_CARDS  # a shift past the 18 card bits: "no remembered partner"
+
+
+def known_partners(seen_faces: np.ndarray) -> np.ndarray:
+    """The partner table a user can know: from the faces it has seen (-1 = unseen).
+
+    The simulated user only ever asks for the partner of a card it remembers,
+    and only to see whether that partner is remembered too; so the ground-truth
+    table of the in-process study and this one (built on the bus from the faces
+    the participant has seen) give the same choices. Unknown -> UNKNOWN_PARTNER.
+    """
+    faces = np.atleast_2d(seen_faces)
+    same = (faces[:, :, None] == faces[:, None, :]) & (faces[:, :, None] >= 0) & ~np.eye(N_CARDS, dtype=bool)
+    return np.where(same.any(-1), np.argmax(same, -1), UNKNOWN_PARTNER)

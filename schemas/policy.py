@@ -1,0 +1,112 @@
+"""The policy file: one learned (or combined) policy, documented and versioned.
+
+Rule: a policy file is JSON (UTF-8, keys in a fixed order, floats in shortest
+round-trip form, so the same seed gives the same bytes) holding the Q-table
+(24 states x 88 actions), the greedy action of every state, the persona or
+participant it was learned with, the learner config, the seed and game, the
+updates per state, and for merged policies the rule that decided each state.
+`format` and `version` say what the file is; a reader refuses anything else
+with a clear error (PolicyFileError), never a half-read policy.
+
+Version 1 fields are below; later versions add fields with defaults at the end.
+"""
+
+from __future__ import annotations
+
+import msgspec
+
+from .config import LearnerConfig, Persona
+
+FORMAT = "pairplay.policy"
+VERSION = 1
+N_STATES, N_ACTIONS = 24, 88  # pinned here so the contract does not import core
+
+
+class PolicyFileError(ValueError):
+    """A policy file that cannot be used; the message says why."""
+
+
+class UserInfo(msgspec.Struct, frozen=True):
+    """User information of algorithm 3 (thesis figure 5.1): error shares 0..1."""
+
+    speech: float
+    head: float
+    facial: bool
+    gaze: bool
+    compared_states: int = 0
+
+
+class PolicyFile(msgspec.Struct, frozen=True, kw_only=True):
+    format: str = FORMAT
+    version: int = VERSION
+    algorithm: str  # "q-learning", "pi-reuse", "combined", "oracle"
+    participant: str  # persona key, or a study participant's id
+    persona: Persona | None = None
+    seed: int | None = None
+    game: int | None = None
+    rounds: int = 0
+    config: LearnerConfig | None = None
+    states: list[str]
+    greedy: list[int]
+    q: list[list[float]]
+    visits: list[int]
+    info: UserInfo | None = None
+    merged_from: list[str] = []
+    rules: list[str] = []  # per state: which rule of algorithm 4 decided it
+    software: str = ""
+
+    def __post_init__(self) -> None:
+        if self.format != FORMAT:
+            raise PolicyFileError(f"not a pairplay policy file (format {self.format!r})")
+        if self.version > VERSION:
+            raise PolicyFileError(f"policy file version {self.version} is newer than this pairplay "
+                                  f"(reads up to {VERSION}); upgrade pairplay")
+        if len(self.states) != N_STATES or len(self.greedy) != N_STATES or len(self.visits) != N_STATES:
+            raise PolicyFileError(f"a policy has {N_STATES} states; this file has "
+                                  f"{len(self.states)} names, {len(self.greedy)} actions, {len(self.visits)} visit counts")
+        if len(self.q) != N_STATES or any(len(row) != N_ACTIONS for row in self.q):
+            raise PolicyFileError(f"the Q-table must be {N_STATES} x {N_ACTIONS}")
+        bad = [a for a in self.greedy if not 0 <= a < N_ACTIONS]
+        if bad:
+            raise PolicyFileError(f"greedy actions outside 0..{N_ACTIONS - 1}: {bad}")
+        if self.rules and len(self.rules) != N_STATES:
+            raise PolicyFileError(f"a merged policy names one rule per state ({N_STATES})")
+
+
+_encoder = msgspec.json.Encoder()
+_decoder = msgspec.json.Decoder(PolicyFile)
+
+
+def encode_policy(policy: PolicyFile) -> bytes:
+    return msgspec.json.format(_encoder.encode(policy), indent=1) + b"\n"
+
+
+def decode_policy(data: bytes, source: str = "policy file") -> PolicyFile:
+    """Parse and check a policy file; PolicyFileError with the reason otherwise."""
+    try:
+        return _decoder.decode(data)
+    except PolicyFileError as exc:
+        raise PolicyFileError(f"{source}: {exc}") from None
+    except (msgspec.ValidationError, msgspec.DecodeError) as exc:
+        raise PolicyFileError(f"{source}: corrupt or not a policy file: {exc}") from None
+
+
+def write_policy(path, policy: PolicyFile) -> None:
+    """Write a policy file atomically (a crash never leaves half a policy)."""
+    from pathlib import Path
+
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_suffix(path.suffix + ".tmp")
+    tmp.write_bytes(encode_policy(policy))
+    tmp.replace(path)
+
+
+def read_policy(path) -> PolicyFile:
+    from pathlib import Path
+
+    try:
+        data = Path(path).read_bytes()
+    except OSError as exc:
+        raise PolicyFileError(f"{path}: cannot read: {exc.strerror}") from None
+    return decode_policy(data, str(path))

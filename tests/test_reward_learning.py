@@ -1,0 +1,102 @@
+"""Rewards (4.3, 6.1.3, 7.1.2), the one-step update (5.2), schedules (6.2, 7.2), tie-breaking."""
+
+import numpy as np
+import pytest
+
+from pairplay.core.learning import (DRAWS_PER_SUGGESTION, How, Learner, alpha_at, epsilon_at, greedy,
+                                    greedy_policy, psi_round_start, q_update)
+from pairplay.core.reward import human_reward, simulated_reward
+from pairplay.core.rng import UniformStream
+from pairplay.schemas.config import LearnerConfig
+
+T, F = True, False
+
+
+@pytest.mark.parametrize("matched, considered, consistent, size, reward, learn", [
+    (T, T, T, 1, 2.0, T),  # match with an exact suggestion: +1 + 1/1
+    (T, T, T, 4, 1.25, T),  # match among four candidates
+    (F, T, T, 3, -1 + 1 / 3, T),  # miss
+    (F, T, T, 1, 0.0, T),  # a precise wrong suggestion
+    (T, T, F, 0, -3.0, T),  # inconsistent: -3 alone, whatever the pick
+    (F, T, F, 0, -3.0, T),
+    (T, F, T, 2, 0.0, F),  # ignored (by focus or picked from memory): no update
+])
+def test_simulated_reward(matched, considered, consistent, size, reward, learn):
+    r, ok = simulated_reward(np.array([matched]), np.array([considered]), np.array([consistent]), np.array([size]))
+    assert r[0] == pytest.approx(reward) and ok[0] == learn
+
+
+def test_human_reward_ignores_picks_closer_than_1_5_s():
+    assert human_reward(True, 2.0) == (1.0, True)
+    assert human_reward(False, 1.5) == (-1.0, True)
+    assert human_reward(True, 1.49) == (0.0, False)
+
+
+def test_the_one_step_update():
+    assert q_update(0.0, 2.0, 0.5) == 1.0
+    assert q_update(1.0, -3.0, 0.25) == 0.0
+
+
+def test_virtual_study_schedules():
+    c = LearnerConfig()
+    eps = epsilon_at(c, np.arange(500))
+    alpha = alpha_at(c, np.arange(500))
+    assert eps[0] == 0.9 and eps[49] == 0.9 and eps[50] == 0.8 and eps[399] == pytest.approx(0.2)
+    assert eps[400] == pytest.approx(0.1) and eps[499] == pytest.approx(0.1)
+    assert eps.min() == pytest.approx(0.1) and epsilon_at(c, 10_000) == pytest.approx(0.1)
+    assert alpha[0] == 0.5 and alpha[50] == 0.45 and alpha[449] == pytest.approx(0.1)
+    assert alpha[450] == pytest.approx(0.05) and alpha_at(c, 10_000) == pytest.approx(0.05)
+
+
+def test_human_study_schedule_loses_a_fifth_of_0_9_each_round():
+    c = LearnerConfig.human_phase1(5)
+    assert epsilon_at(c, np.arange(5)) == pytest.approx([0.9, 0.72, 0.54, 0.36, 0.18])
+    reuse = LearnerConfig.human_phase2(5)
+    assert psi_round_start(reuse, 4) == 0.0 and psi_round_start(reuse, 0) == 1.0
+
+
+def test_ties_are_broken_uniformly_by_the_draw_not_by_index():
+    q = np.zeros((1, 88))
+    q[0, [5, 40, 77]] = 1.0
+    picks = [greedy(q, np.array([u]))[0] for u in (0.0, 0.34, 0.67, 0.999)]
+    assert picks == [5, 40, 77, 77]
+    many = greedy(np.repeat(q, 3000, 0), np.random.default_rng(0).random(3000))
+    counts = np.bincount(many, minlength=88)[[5, 40, 77]]
+    assert counts.min() > 900 and counts.sum() == 3000
+
+
+def test_greedy_policy_is_seeded():
+    q = np.zeros((24, 88))
+    a = greedy_policy(q, np.random.default_rng(1))
+    assert (a == greedy_policy(q, np.random.default_rng(1))).all()
+    assert (a != greedy_policy(q, np.random.default_rng(2))).any()
+
+
+def test_learner_explores_with_epsilon_and_learns_with_alpha():
+    stream = UniformStream(range(2000), "agent", block=64)
+    learner = Learner(2000, stream, LearnerConfig())
+    learner.q[:, 3, 10] = 1.0
+    actions, how = learner.suggest(np.full(2000, 3), np.zeros(2000, dtype=int))  # epsilon 0.9
+    greedy_share = np.mean(how == How.GREEDY)
+    assert 0.05 < greedy_share < 0.15 and (actions[how == How.GREEDY] == 10).all()
+    assert stream.drawn[0] == DRAWS_PER_SUGGESTION
+    states, acts = np.full(2000, 3), np.full(2000, 10)
+    learner.learn(states, acts, np.full(2000, 2.0), np.arange(2000) < 1000, np.full(2000, 50))
+    assert (learner.q[:1000, 3, 10] == 1.0 + 0.45 * (2.0 - 1.0)).all() and (learner.q[1000:, 3, 10] == 1.0).all()
+    assert learner.counts[0, 3, 10] == 1 and learner.counts[1500].sum() == 0
+
+
+def test_a_fixed_policy_acts_and_never_learns():
+    policy = np.arange(24) % 88
+    learner = Learner(3, UniformStream([1, 2, 3], "agent"), mode="fixed", policy=policy)
+    actions, how = learner.suggest(np.array([0, 5, 23]), np.zeros(3, dtype=int))
+    assert actions.tolist() == [0, 5, 23] and (how == How.FIXED).all()
+    learner.learn(np.array([0, 5, 23]), actions, np.ones(3), np.ones(3, bool), np.zeros(3, dtype=int))
+    assert not learner.q.any()
+
+
+def test_learner_refuses_a_bad_policy():
+    with pytest.raises(ValueError, match="policy"):
+        Learner(1, UniformStream([1], "agent"), mode="fixed", policy=np.full(24, 88))
+    with pytest.raises(ValueError, match="agent"):
+        Learner(1, UniformStream([1], "user"))
