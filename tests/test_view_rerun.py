@@ -155,43 +155,47 @@ def test_rerun_analytics_stay_off(tmp_path):
 
 
 def test_a_real_session_on_the_bus_with_the_view_attached_gives_the_learners_q_table(tmp_path):
-    """Game, learner and simulated participant run as bus nodes; the view watches from its own session."""
+    """`pairplay session`'s own runner (game, learner, simulated participant, recorder) with the
+    view watching from its own Zenoh session; then the recording viewed gives the same view."""
     from pairplay.schemas.session import SessionConfig
-    from pairplay.services.game import GameLogic
-    from pairplay.services.learner import LearnerLogic
-    from pairplay.services.participant import ParticipantLogic
-    from pairplay.services.runner import Node
+    from pairplay.services.session_cli import run_session
 
-    config = SessionConfig(session="real1", participant="sim:ashley", persona="ashley", seed=11, rounds=3)
-    rrd = tmp_path / "real1.rrd"
+    config = SessionConfig(session="real1", participant="sim:tatiana", persona="tatiana", seed=11, rounds=3)
+    live_rrd = tmp_path / "live.rrd"
     stop = threading.Event()
-    with open_bus() as services_bus:
-        endpoint = services_bus.locators()[0]
-        with open_bus(BusOptions(listen=[], connect=[endpoint])) as view_bus:
-            rec, _ = open_stream(ViewOutput(rrd=rrd))
-            source = LiveSource(view_bus, "real1")
-            result = {}
-            viewer = threading.Thread(target=lambda: result.update(
-                s=drive(RerunView(rec), source.items(stop, grace_s=0.5))))
-            viewer.start()
-            learner, participant = (Node(services_bus, LearnerLogic(), "real1", resume=False),
-                                    Node(services_bus, ParticipantLogic(), "real1", resume=False))
-            game = Node(services_bus, GameLogic(config), "real1", resume=False)
-            for node in (learner, participant):
-                node.start()
-                node.run_in_thread(stop)
-            _wait_matching(services_bus, event_key("real1", "game", "SessionStarted"))
-            game.start()
-            game.run_in_thread(stop)
-            game.thread.join(timeout=60)
-            viewer.join(timeout=60)
-            stop.set()
-            finish(rec)
-    assert game.logic.done and not viewer.is_alive()
-    rows = read_rrd(rrd)
-    learner_q = learner.logic.learner.q[0]
+    attached = {}
+
+    def attach_view(services_bus):
+        view_bus = open_bus(BusOptions(listen=[], connect=[services_bus.locators()[0]]))
+        rec, _ = open_stream(ViewOutput(rrd=live_rrd))
+        source = LiveSource(view_bus, "real1")
+        summary = {}
+        viewer = threading.Thread(target=lambda: summary.update(s=drive(RerunView(rec), source.items(stop))))
+        viewer.start()
+        probe = services_bus.session.declare_publisher(event_key("real1", "game", "SessionStarted"))
+        deadline = time.monotonic() + 10
+        while not probe.matching_status.matching:  # the view's subscription has reached the session
+            assert time.monotonic() < deadline
+            time.sleep(0.02)
+        probe.undeclare()
+        attached.update(bus=view_bus, rec=rec, viewer=viewer, summary=summary)
+
+    nodes = {}
+    mcap = run_session(config, tmp_path / "real1.mcap", on_bus=attach_view, nodes_out=nodes)
+    attached["viewer"].join(timeout=60)
+    assert not attached["viewer"].is_alive()
+    finish(attached["rec"])
+    attached["bus"].close()
+    learner_q = nodes["learner"].logic.learner.q[0]
     assert learner_q.any()
-    assert np.array_equal(tensor(rows["q/table"][-1]["Tensor:data"]), learner_q)
-    assert (cells_at(rows, result["s"].events) == Cell.MATCHED).all()
-    assert len(rows["learning/picks_per_round"]) == 3
-    assert any("speech:" in r["TextDocument:text"][0] for r in rows["suggestion"])
+    live = read_rrd(live_rrd)
+    assert np.array_equal(tensor(live["q/table"][-1]["Tensor:data"]), learner_q)
+    assert (cells_at(live, attached["summary"]["s"].events) == Cell.MATCHED).all()
+    assert len(live["learning/picks_per_round"]) == 3
+    assert any("speech:" in r["TextDocument:text"][0] for r in live["suggestion"])
+    # the same session from its recording: the same Q-table and the same boards, event by event
+    assert main(["view", "--recording", str(mcap)]) == 0
+    replayed = read_rrd(mcap.with_suffix(".rrd"))
+    assert np.array_equal(tensor(replayed["q/table"][-1]["Tensor:data"]), learner_q)
+    boards = lambda rows: [r["SegmentationImage:buffer"] for r in rows["board/cells"]]  # noqa: E731
+    assert boards(replayed) == boards(live)

@@ -30,10 +30,11 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--grpc-port", type=int, default=19876)
     p.add_argument("--wait-s", type=float, default=20.0, help="time for the wasm viewer to load and draw")
     p.add_argument("--size", default="1600x1000")
+    p.add_argument("--query", default="", help="more web-viewer URL parameters, e.g. '&notebook=true'")
     args = p.parse_args(argv)
     width, height = (int(x) for x in args.size.split("x"))
     data = f"rerun+http://127.0.0.1:{args.grpc_port}/proxy"
-    url = f"http://127.0.0.1:{args.web_port}/?url={quote(data, safe='')}"
+    url = f"http://127.0.0.1:{args.web_port}/?url={quote(data, safe='')}{args.query}"
     blocked: list[str] = []
     with tempfile.TemporaryDirectory() as profile, sync_playwright() as pw:
         browser = pw.chromium.launch_persistent_context(profile, executable_path="/usr/bin/chromium", headless=True,
