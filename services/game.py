@@ -31,6 +31,9 @@ from .node import Rejected, stream_seed
 class GameLogic:
     name = "game"
     consumes = frozenset({"CardPicked", "CardObserved", "WrongSuggestionPressed"})
+    # the participant's inputs: a simulated participant, or the touch-screen board of the human study
+    PLAYERS = frozenset({"participant", "board"})
+    sources = dict.fromkeys(consumes, PLAYERS)
 
     def __init__(self, config: SessionConfig):
         config.validate()

@@ -35,6 +35,9 @@ class LearnerLogic:
     name = "learner"
     consumes = frozenset({"SessionStarted", "SuggestionRequested", "SuggestionPerceived", "TurnResolved",
                           "SessionEnded"})
+    sources = {"SessionStarted": frozenset({"game"}), "SuggestionRequested": frozenset({"game"}),
+               "TurnResolved": frozenset({"game"}), "SessionEnded": frozenset({"game"}),
+               "SuggestionPerceived": frozenset({"participant"})}
 
     def __init__(self):
         self.config = None

@@ -48,6 +48,7 @@ class NotYet(Exception):
 class Logic(Protocol):
     name: str
     consumes: frozenset[str]
+    sources: dict[str, frozenset[str]]  # tag -> the only sources it is taken from (missing: any)
     done: bool
 
     def start(self) -> list[Event]: ...
@@ -131,8 +132,13 @@ class Driver:
 
     def feed(self, event: Event, key: str = "", payload: bytes = b"") -> list[Event]:
         """Hand an accepted event to the logic, then retry what waits on it."""
-        if type(event).__name__ not in self.logic.consumes:
+        tag = type(event).__name__
+        if tag not in self.logic.consumes:
             return []
+        allowed = self.logic.sources.get(tag)
+        if allowed is not None and event.source not in allowed:
+            return self.reject(f"{tag} is taken only from {', '.join(sorted(allowed))}, not from {event.source!r}",
+                               key, event.source, event.seq, payload)
         out = self._handle(event, key, payload)
         progress = True
         while progress and self.deferred:

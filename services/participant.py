@@ -29,6 +29,7 @@ class ParticipantLogic:
     name = "participant"
     consumes = frozenset({"SessionStarted", "RoundStarted", "CardRevealed", "PickRejected", "SuggestionMade",
                           "TurnResolved", "SessionEnded"})
+    sources = {tag: frozenset({"game"}) for tag in consumes} | {"SuggestionMade": frozenset({"learner"})}
 
     def __init__(self, persona_key: str | None = None):
         self.persona_key = persona_key  # None: whatever the session config names

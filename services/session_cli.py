@@ -87,11 +87,12 @@ def config_from_args(args: argparse.Namespace) -> SessionConfig:
 def run_session(config: SessionConfig, path: str | Path, *, bus: Bus | None = None,
                 bus_options: BusOptions | None = None, external: tuple[str, ...] = (),
                 stop: threading.Event | None = None, settle_timeout_s: float = 30.0,
-                on_bus=None, nodes_out: dict | None = None) -> Path:
+                on_bus=None, nodes_out: dict | None = None, wait_also: tuple[str, ...] = ()) -> Path:
     """Run one session to its end (or `stop`); return the recording's path.
 
     `nodes_out`, if given, receives the in-process Nodes by service name (tests
-    read the live learner's final Q-table from it)."""
+    read the live learner's final Q-table from it). `wait_also`: more services
+    (liveliness names) the game waits for before it starts the session."""
     own_bus = bus is None
     bus = bus if bus is not None else Bus(bus_options)
     stop = stop or threading.Event()
@@ -116,7 +117,7 @@ def run_session(config: SessionConfig, path: str | Path, *, bus: Bus | None = No
             if nodes_out is not None:
                 nodes_out[node.logic.name] = node
         game = Node(bus, GameLogic(config), config.session, resume=False)
-        game.start(wait_for=tuple(needed))
+        game.start(wait_for=tuple(needed) + tuple(wait_also))
         nodes.append(game)
         if nodes_out is not None:
             nodes_out["game"] = game
