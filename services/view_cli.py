@@ -13,6 +13,7 @@ Rerun's usage analytics stay off for anything the view starts (view_output).
 from __future__ import annotations
 
 import argparse
+import signal
 import sys
 import threading
 from dataclasses import dataclass
@@ -98,6 +99,7 @@ def run(args: argparse.Namespace) -> int:
     for line in where:
         print(f"pairplay view: {line}", file=sys.stderr)
     stop = threading.Event()
+    saved_handlers = {sig: signal.getsignal(sig) for sig in (signal.SIGINT, signal.SIGTERM)}
     stop_on_signals(stop)
     view = RerunView(rec, q_interval_s=args.q_interval)
     echo = lambda line: print(line, file=sys.stderr)  # noqa: E731
@@ -118,4 +120,6 @@ def run(args: argparse.Namespace) -> int:
                 pass
     finally:
         finish(rec)
+        for sig, handler in saved_handlers.items():  # run() may be called in-process (tests, tools)
+            signal.signal(sig, handler)
     return 0

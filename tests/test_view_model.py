@@ -93,3 +93,22 @@ def test_a_view_that_joins_late_says_its_q_table_is_partial():
     model.apply(ev.QUpdated(round=3, turn=2, attempt=0, state=5, action=40, alpha=0.5, reward=1.0,
                             q_before=0.4, q_after=0.7))
     assert model.q_partial and model.q[5, 40] == 0.7
+
+
+def test_a_paced_recording_follows_the_envelope_times_scaled_by_speed(tmp_path):
+    from pairplay.services.view_bench import write_recording
+    from pairplay.services.view_sources import recording_items
+
+    events, _ = scripted_events(rounds=1, seed=9, step_ns=10_000_000)  # 10 ms apart
+    mcap = write_recording(events, tmp_path / "paced.mcap")
+    now = [0.0]
+    waits = []
+
+    def sleep(s):
+        waits.append(s)
+        now[0] += s
+
+    items = list(recording_items(mcap, speed=2.0, sleep=sleep, clock=lambda: now[0]))
+    assert [e for e, _ in items] == events
+    assert len(waits) == len(events) - 1 and np.allclose(waits, 0.005)  # 10 ms at twice the speed
+    assert list(recording_items(mcap, speed=0.0, sleep=sleep.__call__)) and len(waits) == len(events) - 1
