@@ -173,9 +173,14 @@ class RoundEnded(Event, tag="RoundEnded"):
 
 
 class CombineRequested(Event, tag="CombineRequested"):
+    """Profile and merge users' policies (thesis 5.2, algorithms 3 and 4)."""
+
     request_id: str
     policies: list[str] = []  # policy file paths
     recordings: list[str] = []  # recordings to rebuild policies from
+    seed: int = 0  # picks each user's representative policy, as the study does
+    output_path: str = ""  # where to write the combined policy file ("" = nowhere)
+    exclude: list[str] = []  # users left out (e.g. the participant the bias policy is for)
 
 
 class PolicyCombined(Event, tag="PolicyCombined"):
@@ -186,6 +191,11 @@ class PolicyCombined(Event, tag="PolicyCombined"):
     ok: bool = True
     error: str = ""
     output_path: str = ""
+    users: list[str] = []  # the users combined, in order
+    speech_error: float = 0.0  # merged user information (min of the errors, AND of the booleans)
+    head_error: float = 0.0
+    facial: bool = False
+    gaze: bool = False
 
 
 class QuestionnaireAnswered(Event, tag="QuestionnaireAnswered"):
