@@ -3,7 +3,8 @@
 Rule: every game owns three independent streams, one per role that decides
 something at random: "deal" (the game: 18 draws per round, the shuffle), "agent"
 (the learner: DRAWS_PER_SUGGESTION per suggestion) and "user" (the simulated
-participant: DRAWS_PER_TURN per turn). A role draws the same count for every
+participant: DRAWS_PER_TURN per turn); a fourth, "snapshot", breaks the ties of
+greedy policies read off a learner during a study, outside the game. A role draws the same count for every
 event whatever branch it then takes, so a game's outcome depends only on its
 seed: alone on the bus (a batch of one, each role in its own process) or stepped
 together with thousands of games in the in-process study, it is the same game.
@@ -21,7 +22,7 @@ from typing import Sequence
 
 import numpy as np
 
-ROLES = ("deal", "agent", "user")
+ROLES = ("deal", "agent", "user", "snapshot")
 _ROLE_KEY = {role: i for i, role in enumerate(ROLES)}
 
 

@@ -21,7 +21,7 @@ from pairplay.schemas.config import LearnerConfig, Persona
 
 from .board import deal
 from .geometry import ALL_CARDS, N_CARDS, states_of
-from .learning import Learner
+from .learning import Learner, greedy
 from .reward import simulated_reward
 from .rng import UniformStream
 from .user import SimulatedUsers
@@ -55,12 +55,14 @@ class SimResult(NamedTuple):
     picks: np.ndarray  # (B, rounds) picks per round
     inconsistent: np.ndarray  # (B, rounds) inconsistent suggestions per round
     turns: int  # lockstep steps taken
+    snapshots: np.ndarray | None  # (B, rounds // k, 24) greedy policy after every k rounds
 
 
 def run_games(personas: Sequence[Persona], seeds: Sequence[int], rounds: int,
               config: LearnerConfig = LearnerConfig(), mode: str = "q",
               bias: np.ndarray | None = None, policy: np.ndarray | None = None,
-              observed_source: str = "intended", progress=None, on_turn=None) -> SimResult:
+              observed_source: str = "intended", progress=None, on_turn=None,
+              snapshot_every: int | None = None) -> SimResult:
     """Play one game per (persona, seed) pair; see the module rule.
 
     `progress(done_rounds)` is called with the rounds completed so far (summed
@@ -85,6 +87,10 @@ def run_games(personas: Sequence[Persona], seeds: Sequence[int], rounds: int,
     _, partner = deal(deals.take(N_CARDS))
     matched = np.zeros(n, dtype=np.int64)
     learner.start_round(round_index)
+    snapshots = snap_stream = None
+    if snapshot_every:
+        snapshots = np.zeros((n, rounds // snapshot_every, learner.q.shape[1]), dtype=np.int64)
+        snap_stream = UniformStream(seeds, "snapshot")
     steps = 0
     while not done.all():
         steps += 1
@@ -116,6 +122,11 @@ def run_games(personas: Sequence[Persona], seeds: Sequence[int], rounds: int,
             picks[over] = 0
             inconsistent[over] = 0
             done |= round_index >= rounds
+            if snapshots is not None:
+                due = g[(round_index[g] % snapshot_every == 0) & (round_index[g] <= snapshots.shape[1] * snapshot_every)]
+                if due.size:
+                    u = snap_stream.take(learner.q.shape[1], due)
+                    snapshots[due, round_index[due] // snapshot_every - 1] = greedy(learner.q[due], u)
             g = rows[over]
             partner[g] = deal(deals.take(N_CARDS, g))[1]
             matched[g] = 0
@@ -123,4 +134,4 @@ def run_games(personas: Sequence[Persona], seeds: Sequence[int], rounds: int,
             learner.start_round(round_index, g)
             if progress is not None:
                 progress(int(np.minimum(round_index, rounds).sum()))
-    return SimResult(learner.q, learner.counts, picks_log, inconsistent_log, steps)
+    return SimResult(learner.q, learner.counts, picks_log, inconsistent_log, steps, snapshots)

@@ -83,3 +83,96 @@ def compare(personas: Sequence[Persona], training: Training, eval_rounds: int, s
     learned, oracle_picks, alone = picks.reshape(3, n_p, games)
     return Comparison([p.key for p in personas], alone.mean(1), learned.mean(1), learned.std(1),
                       oracle_picks.mean(1), oracle, learned)
+
+
+# --- Chapter 6.3-6.4: profiles, merged policies, policy reuse -------------------------------
+
+
+class UserSet(NamedTuple):
+    """Per persona: its profile over all its policies and the one policy that represents it."""
+
+    profiles: dict  # key -> combine.Profile
+    users: dict  # key -> combine.User (the policy chosen for combinations)
+    updates: dict  # key -> (games, 24) Q updates per state, for explaining incompatibilities
+
+
+def user_set(personas: Sequence[Persona], training: Training, seed: int) -> UserSet:
+    """Algorithm 3 on each persona's policies; one policy per persona picked at random (thesis 6.2)."""
+    from .combine import User, extract_info
+    profiles, users, updates = {}, {}, {}
+    for p in personas:
+        rows = np.array([i for i, q in enumerate(training.personas) if q.key == p.key])
+        profile = extract_info(training.greedy[rows])
+        pick = rows[np.random.default_rng(game_seed(seed, "combine:" + p.key, 0)).integers(rows.size)]
+        profiles[p.key] = profile
+        users[p.key] = User(p.key, training.greedy[pick], training.result.q[pick], profile.info)
+        updates[p.key] = training.result.counts[rows].sum(-1)
+    return UserSet(profiles, users, updates)
+
+
+def evaluate_on_personas(personas: Sequence[Persona], policies: dict, games: int, rounds: int,
+                         seed: int, progress=None) -> dict:
+    """Mean picks per round of every named policy on every persona: {(policy, persona): picks}.
+
+    A policy is (24,) for everyone or a dict persona -> (n, 24) (e.g. each persona's own
+    learned policies, played in turn). Every (policy, persona) pair plays the same
+    `games` evaluation games of that persona.
+    """
+    rows, table, index, keys = [], [], [], []
+    for name, policy in policies.items():
+        for p in personas:
+            own = policy[p.key] if isinstance(policy, dict) else np.asarray(policy)[None]
+            for g in range(games):
+                rows.append(p)
+                table.append(own[g % len(own)])
+                index.append(g)
+                keys.append((name, p.key))
+    picks = evaluate(rows, np.array(table), rounds, seed, index, progress)
+    out: dict = {}
+    for k, v in zip(keys, picks):
+        out.setdefault(k, []).append(v)
+    return {k: float(np.mean(v)) for k, v in out.items()}
+
+
+class ReuseResult(NamedTuple):
+    persona: list[str]
+    seeds: int
+    first50: np.ndarray  # (P, 2, seeds): mean online picks over the first 50 rounds; arm 0 scratch, 1 reuse
+    rounds_to_target: np.ndarray  # (P, 2, seeds): first snapshot round within `target` x oracle, nan if never
+    curves: np.ndarray  # (P, 2, rounds) online picks per round, mean over seeds
+    biases: dict  # held-out key -> combine.Combined of the others
+
+
+def reuse_experiment(personas: Sequence[Persona], users: UserSet, oracle_picks: dict, seeds: int, rounds: int,
+                     seed: int, config: LearnerConfig, snapshot_every: int = 10, snapshot_rounds: int = 20,
+                     target: float = 1.10, progress=None) -> ReuseResult:
+    """Thesis 6.4 / 7: for each persona held out, Q-learning from scratch vs pi-reuse on the merge of the others."""
+    from .combine import combine
+    biases = {p.key: combine([users.users[q.key] for q in personas if q.key != p.key]) for p in personas}
+    flat, seed_list, bias_rows = [], [], []
+    for p in personas:
+        for s in range(seeds):
+            flat.append(p)
+            seed_list.append(game_seed(seed, "reuse:" + p.key, s))
+            bias_rows.append(biases[p.key].policy)
+    bias = np.array(bias_rows)
+    n = len(flat)
+    scratch = run_games(flat, seed_list, rounds, config, mode="q", progress=progress, snapshot_every=snapshot_every)
+    reuse = run_games(flat, seed_list, rounds, config, mode="reuse", bias=bias, progress=progress,
+                      snapshot_every=snapshot_every)
+    # How good is the learner's own greedy policy after every `snapshot_every` rounds?
+    snaps = np.concatenate([scratch.snapshots, reuse.snapshots])  # (2n, k, 24)
+    k = snaps.shape[1]
+    snap_personas = [flat[i % n] for i in range(2 * n) for _ in range(k)]
+    snap_picks = evaluate(snap_personas, snaps.reshape(-1, snaps.shape[-1]), snapshot_rounds, seed,
+                          [j for _ in range(2 * n) for j in range(k)]).reshape(2, n, k)
+    P = len(personas)
+    limit = np.array([oracle_picks[p.key] * target for p in flat])
+    reached = snap_picks <= limit[None, :, None]
+    first = np.where(reached.any(-1), (np.argmax(reached, -1) + 1) * snapshot_every, np.nan)  # (2, n)
+    first50 = np.stack([scratch.picks[:, :50].mean(1), reuse.picks[:, :50].mean(1)])  # (2, n)
+    curves = np.stack([scratch.picks, reuse.picks]).reshape(2, P, seeds, rounds).mean(2)
+    return ReuseResult([p.key for p in personas], seeds,
+                       first50.reshape(2, P, seeds).transpose(1, 0, 2),
+                       first.reshape(2, P, seeds).transpose(1, 0, 2),
+                       curves.transpose(1, 0, 2), biases)

@@ -78,3 +78,74 @@ def comparison_bars(labels: list[str], series: dict[str, np.ndarray], path: Path
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)
+
+
+def profiles(keys: list[str], names: dict[str, str], infos: list, features: list[tuple[int, int, int, int]],
+             path: Path) -> None:
+    """Figure 6.5: extracted user information beside the persona's features."""
+    fig, (left, right) = plt.subplots(1, 2, figsize=(12, 4.2))
+    x = np.arange(len(keys))
+    left.bar(x - 0.2, [100 * i.speech for i in infos], 0.4, label="speech incompatibility %")
+    left.bar(x + 0.2, [100 * i.head for i in infos], 0.4, label="head incompatibility %")
+    for xi, info in zip(x, infos):
+        left.text(xi, 103, ("S" if info.facial else "-") + ("G" if info.gaze else "-"), ha="center", fontsize=9)
+    left.set_ylim(0, 112)
+    left.set_xticks(x, [names.get(k, k) for k in keys], rotation=25, ha="right")
+    left.set_title("extracted user information (S: smile used, G: gaze used)")
+    left.legend(frameon=False, fontsize=8, loc="upper left", bbox_to_anchor=(0, 0.97))
+    feats = np.array(features)
+    for j, label in enumerate(("focus", "memory", "hearing", "sight")):
+        right.bar(x + (j - 1.5) * 0.2, feats[:, j], 0.2, label=label)
+    right.set_xticks(x, [names.get(k, k) for k in keys], rotation=25, ha="right")
+    right.set_ylim(0, 6.5)
+    right.set_title("persona features (appendix A, 1..6)")
+    right.legend(frameon=False, fontsize=8, ncol=4, loc="upper left")
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def merged_policies(panels: list[tuple[str, dict[str, np.ndarray], np.ndarray]], state_count: int,
+                    path: Path) -> None:
+    """Figure 6.6: state code vs action code of the input policies and their merge (blue x)."""
+    fig, axes = plt.subplots(1, len(panels), figsize=(5.2 * len(panels), 4.2), squeeze=False)
+    markers = ["o", "s", "^", "v", "D", "P", "*", "h"]
+    states = np.arange(state_count)
+    for ax, (title, inputs, merged) in zip(axes[0], panels):
+        for (name, policy), marker in zip(inputs.items(), markers):
+            ax.scatter(states, policy[:state_count], marker=marker, facecolors="none",
+                       edgecolors="0.45", s=28, label=name, lw=0.8)
+        ax.scatter(states, merged[:state_count], marker="x", color="tab:blue", s=40, label="merged", lw=1.4)
+        ax.axhspan(32.5, 43.5, color="tab:blue", alpha=0.07, lw=0)  # "exact position" speech codes
+        ax.set_xlabel("state code")
+        ax.set_ylabel("action code")
+        ax.set_ylim(-2, 90)
+        ax.set_title(title)
+        ax.grid(alpha=0.3)
+        if len(inputs) <= 3:
+            ax.legend(frameon=False, fontsize=8, loc="upper right")
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def reuse_curves(keys: list[str], names: dict[str, str], curves: np.ndarray, oracle: list[float],
+                 path: Path, smooth: int = 10) -> None:
+    """Online picks per round, Q-learning from scratch vs pi-reuse, one small panel per held-out persona."""
+    cols = 4
+    rows = (len(keys) + cols - 1) // cols
+    fig, axes = plt.subplots(rows, cols, figsize=(3.4 * cols, 2.6 * rows), squeeze=False, sharex=True)
+    for ax, key, c, o in zip(axes.flat, keys, curves, oracle):
+        ax.plot(_smooth(c[0], smooth), label="from scratch", lw=1.1)
+        ax.plot(_smooth(c[1], smooth), label="pi-reuse", lw=1.1)
+        ax.axhline(o, color="0.3", lw=0.8, ls="--", label="oracle")
+        ax.set_title(names.get(key, key), fontsize=9)
+        ax.grid(alpha=0.3)
+    for ax in axes.flat[len(keys):]:
+        ax.axis("off")
+    axes.flat[0].legend(frameon=False, fontsize=7)
+    fig.supxlabel("round")
+    fig.supylabel("picks per round")
+    fig.tight_layout()
+    fig.savefig(path, dpi=100)
+    plt.close(fig)

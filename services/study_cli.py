@@ -5,6 +5,10 @@ Rule: one command, reproducible by seed, writes a report folder:
   curves.csv, curves_summary.csv    picks per round per game; mean/sd/min/max per round
   learning_curves.png               figure 6.4 (memory, focus, impairment)
   evaluation.csv, evaluation.png    user alone vs learned vs oracle, picks per round
+  profiles.csv, profiles.png        algorithm 3 per persona beside its features (figure 6.5)
+  merged/<name>.json, merged.png    merged policies (algorithm 4) and figure 6.6
+  merged_evaluation.csv             every merged policy on every persona
+  reuse.csv, reuse.png              held-out persona: Q-learning from scratch vs pi-reuse
   report.md                         the tables and figures, with the run's settings
 """
 
@@ -37,6 +41,12 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--rounds", type=int, default=500, help="rounds per game (thesis: 500)")
     p.add_argument("--eval-rounds", type=int, default=200,
                    help="rounds each greedy policy is evaluated with epsilon 0 (default 200)")
+    p.add_argument("--reuse-seeds", type=int, default=10,
+                   help="games per held-out persona in the speed-up experiment (default 10)")
+    p.add_argument("--psi", type=float, default=1.0, help="pi-reuse: psi at the start of each round (default 1)")
+    p.add_argument("--psi-decay", type=float, default=0.95, help="pi-reuse: v, psi's decay per suggestion (default 0.95)")
+    p.add_argument("--reuse-last", type=int, default=50,
+                   help="pi-reuse: the last N rounds use the new policy alone (default 50)")
     p.add_argument("--out", type=Path, default=Path("out/study"), help="report folder (default out/study)")
     p.add_argument("--quiet", action="store_true", help="no progress bars")
 
@@ -110,19 +120,62 @@ def text_table(rows: list[list[str]]) -> str:
                      for r in rows)
 
 
+def profile_rows(personas, users: study.UserSet) -> list[list[str]]:
+    from pairplay.core.geometry import STATE_NAMES
+    rows = [["persona", "focus", "memory", "hearing", "sight", "speech %", "head %", "smile", "gaze",
+             "incompatible states (mean Q updates in them)"]]
+    for p in personas:
+        prof, upd = users.profiles[p.key], users.updates[p.key].mean(0)
+        states = sorted(set(prof.speech_states) | set(prof.head_states))
+        where = ", ".join(f"{STATE_NAMES[s]}{'(S)' if s in prof.speech_states else ''}"
+                          f"{'(H)' if s in prof.head_states else ''} {upd[s]:.0f}" for s in states)
+        rows.append([p.key, str(p.focus), str(p.memory), str(p.hearing), str(p.sight),
+                     f"{100 * prof.info.speech:.1f}", f"{100 * prof.info.head:.1f}",
+                     "yes" if prof.info.facial else "no", "yes" if prof.info.gaze else "no", where or "-"])
+    return rows
+
+
+MERGES = (("blind+deaf", ("blind", "deaf")), ("vincent+tatiana", ("vincent", "tatiana")), ("all", None))
+
+
+def write_merges(out: Path, personas, users: study.UserSet, args) -> dict:
+    from pairplay.core.combine import combine
+    from pairplay.core.geometry import N_STATES
+    keys = [p.key for p in personas]
+    merges, panels = {}, []
+    for name, members in MERGES:
+        members = keys if members is None else [m for m in members if m in keys]
+        if len(members) < 2:
+            continue
+        merged = combine([users.users[k] for k in members])
+        merges[name] = merged
+        write_policy(out / "merged" / f"{name}.json", to_policy_file(
+            merged.q, np.zeros((N_STATES, 1)), merged.policy, algorithm="combined", participant=name,
+            seed=args.seed, info=merged.info, merged_from=members, rules=merged.rules,
+            software=f"pairplay {__version__}"))
+        inputs = {k: users.users[k].policy for k in members} if len(members) <= 3 else {}
+        panels.append((name, inputs, merged.policy))
+    if panels:
+        plots.merged_policies(panels, N_STATES - 1, out / "merged.png")
+    return merges
+
+
 def run(args) -> int:
     try:
         personas = [persona(k.strip()) for k in args.personas.split(",") if k.strip()]
     except KeyError as exc:
         print(f"pairplay study: {exc.args[0]}", file=sys.stderr)
         return 2
-    if args.games < 1 or args.rounds < 1 or args.eval_rounds < 1:
-        print("pairplay study: --games, --rounds and --eval-rounds must be at least 1", file=sys.stderr)
+    if args.games < 1 or args.rounds < 1 or args.eval_rounds < 1 or args.reuse_seeds < 1:
+        print("pairplay study: --games, --rounds, --eval-rounds and --reuse-seeds must be at least 1",
+              file=sys.stderr)
         return 2
     out: Path = args.out
     out.mkdir(parents=True, exist_ok=True)
     config = LearnerConfig()
+    names = {p.key: p.name for p in personas}
     timings: dict[str, float] = {}
+    start = time.perf_counter()
 
     t0 = time.perf_counter()
     with _bar(args, len(personas) * args.games * args.rounds, "training") as bar:
@@ -131,11 +184,11 @@ def run(args) -> int:
 
     write_policies(out, training, args, config)
     curves = write_curves(out, training)
-    plots.learning_curves(curves, {p.key: p.name for p in personas}, out / "learning_curves.png")
+    plots.learning_curves(curves, names, out / "learning_curves.png")
 
     t0 = time.perf_counter()
     n_eval = 3 * len(personas) * args.games * args.eval_rounds
-    with _bar(args, n_eval, "evaluation") as bar:
+    with _bar(args, n_eval, "oracle + evaluation") as bar:
         cmp = study.compare(personas, training, args.eval_rounds, args.seed, progress=_progress(bar))
     timings["evaluation"] = time.perf_counter() - t0
     table = evaluation_table(cmp)
@@ -143,6 +196,60 @@ def run(args) -> int:
         csv.writer(f).writerows(table)
     plots.comparison_bars(cmp.persona, {"user alone": cmp.alone, "learned": cmp.learned, "oracle": cmp.oracle},
                           out / "evaluation.png", "picks per round (epsilon 0)")
+    oracle = dict(zip(cmp.persona, cmp.oracle))
+
+    # Profiles (algorithm 3, figure 6.5) and merged policies (algorithm 4, figure 6.6).
+    t0 = time.perf_counter()
+    users = study.user_set(personas, training, args.seed)
+    prof_rows = profile_rows(personas, users)
+    with open(out / "profiles.csv", "w", newline="") as f:
+        csv.writer(f).writerows(prof_rows)
+    plots.profiles([p.key for p in personas], names, [users.profiles[p.key].info for p in personas],
+                   [(p.focus, p.memory, p.hearing, p.sight) for p in personas], out / "profiles.png")
+    merges = write_merges(out, personas, users, args)
+    own = {p.key: training.greedy[[i for i, q in enumerate(training.personas) if q.key == p.key]]
+           for p in personas}
+    alone = dict(zip(cmp.persona, cmp.alone))
+    with _bar(args, len(personas) * args.games * args.eval_rounds * (1 + len(merges)), "merged policies") as bar:
+        merged_eval = study.evaluate_on_personas(
+            personas, {"own": own, **{k: m.policy for k, m in merges.items()}}, args.games, args.eval_rounds,
+            args.seed, progress=_progress(bar))
+    merge_rows = [["persona", "user alone", "own policies", *merges, "oracle"]]
+    for p in personas:
+        merge_rows.append([p.key, f"{alone[p.key]:.2f}", f"{merged_eval[('own', p.key)]:.2f}",
+                           *[f"{merged_eval[(k, p.key)]:.2f}" for k in merges], f"{oracle[p.key]:.2f}"])
+    with open(out / "merged_evaluation.csv", "w", newline="") as f:
+        csv.writer(f).writerows(merge_rows)
+    timings["profiles and merges"] = time.perf_counter() - t0
+
+    # Speed-up (thesis 3.3, 5.3): each persona held out, pi-reuse on the merge of the others.
+    t0 = time.perf_counter()
+    reuse_config = LearnerConfig(psi_start=args.psi, psi_decay=args.psi_decay,
+                                 reuse_rounds=max(0, args.rounds - args.reuse_last))
+    reuse_rows = [["held-out persona", "first 50 rounds: scratch", "first 50 rounds: pi-reuse", "gain",
+                   f"rounds to {1.10:.2f}x oracle: scratch", "pi-reuse"]]
+    reuse = None
+    if len(personas) >= 2:
+        with _bar(args, 2 * len(personas) * args.reuse_seeds * args.rounds, "speed-up") as bar:
+            reuse = study.reuse_experiment(personas, users, oracle, args.reuse_seeds, args.rounds, args.seed,
+                                           reuse_config, progress=_progress(bar))
+        for i, key in enumerate(reuse.persona):
+            f50, r2t = reuse.first50[i], reuse.rounds_to_target[i]
+
+            def fmt_rounds(x):
+                hit = x[~np.isnan(x)]
+                never = int(np.isnan(x).sum())
+                base = f"{hit.mean():.0f} \u00b1 {hit.std():.0f}" if hit.size else "-"
+                return base + (f" ({never} never)" if never else "")
+            reuse_rows.append([key, f"{f50[0].mean():.2f} \u00b1 {f50[0].std():.2f}",
+                               f"{f50[1].mean():.2f} \u00b1 {f50[1].std():.2f}",
+                               f"{f50[0].mean() - f50[1].mean():+.2f}", fmt_rounds(r2t[0]), fmt_rounds(r2t[1])])
+        with open(out / "reuse.csv", "w", newline="") as f:
+            csv.writer(f).writerows(reuse_rows)
+        plots.reuse_curves(reuse.persona, names, reuse.curves, [oracle[k] for k in reuse.persona],
+                           out / "reuse.png")
+    timings["speed-up"] = time.perf_counter() - t0
+    timings["total"] = time.perf_counter() - start
 
     first50 = {k: c[:, :50].mean() for k, c in curves.items()}
     last50 = {k: c[:, -50:].mean() for k, c in curves.items()}
@@ -150,7 +257,8 @@ def run(args) -> int:
         "# pairplay study report", "",
         f"pairplay {__version__}, seed {args.seed}, {len(personas)} personas x {args.games} games x "
         f"{args.rounds} rounds, Q-learning with the thesis's schedules (epsilon 0.9 - 0.1/50 rounds, "
-        f"floor 0.1; alpha 0.5 - 0.05/50 rounds).", "",
+        f"floor 0.1; alpha 0.5 - 0.05/50 rounds). Re-run: `pairplay study --seed {args.seed} "
+        f"--games {args.games} --rounds {args.rounds}`.", "",
         "## Learned policies against the references", "",
         f"Picks per round, each greedy policy played {args.eval_rounds} rounds with epsilon 0; the oracle "
         "and the user alone play the same games (core/oracle.py documents the oracle).", "",
@@ -159,14 +267,46 @@ def run(args) -> int:
         markdown_table([["persona", "first 50 rounds", "last 50 rounds"]] +
                        [[k, f"{first50[k]:.2f}", f"{last50[k]:.2f}"] for k in curves]), "",
         "![learning curves](learning_curves.png)", "",
-        "## Timings", "",
-        markdown_table([["phase", "seconds"]] + [[k, f"{v:.2f}"] for k, v in timings.items()]), "",
+        "## User information (algorithm 3, figure 6.5)", "",
+        f"Over each persona's {args.games} policies, shares of the 23 spatial states; (S)/(H) mark speech/head "
+        "incompatibilities, with the mean number of Q updates the state got in a game.", "",
+        markdown_table(prof_rows), "", "![profiles](profiles.png)", "",
+        "## Merged policies (algorithm 4, figure 6.6)", "",
+        "Each persona is represented by one of its policies, picked at random by the seed (thesis 6.2); "
+        "picks per round with epsilon 0.", "",
+        markdown_table(merge_rows), "", "![merged](merged.png)", "",
     ]
+    for name, merged in merges.items():
+        rules: dict[str, int] = {}
+        for r in merged.rules:
+            rules[r] = rules.get(r, 0) + 1
+        report += [f"- {name}: merged info speech {100 * merged.info.speech:.1f}%, head "
+                   f"{100 * merged.info.head:.1f}%, smile {merged.info.facial}, gaze {merged.info.gaze}; rules: "
+                   + "; ".join(f"{k} x{v}" for k, v in sorted(rules.items(), key=lambda kv: -kv[1]))]
+    if reuse is not None:
+        gains = reuse.first50[:, 0].mean(1) - reuse.first50[:, 1].mean(1)
+        report += ["", "## Policy reuse speed-up (algorithm 5)", "",
+                   f"Each persona held out; bias = merge of the other personas. {args.reuse_seeds} games each, "
+                   f"psi {args.psi} decaying by {args.psi_decay} per suggestion, reset every round, the last "
+                   f"{args.reuse_last} rounds on the new policy alone. 'Rounds to 1.10x oracle': the first "
+                   "multiple of 10 rounds after which the learner's greedy policy, played 20 rounds with "
+                   "epsilon 0, needs at most 1.10x the oracle's picks.", "",
+                   markdown_table(reuse_rows), "",
+                   f"pi-reuse beats scratch on the first 50 rounds for {(gains > 0).sum()} of {len(gains)} "
+                   f"held-out personas; median gain {np.median(gains):.2f} picks per round.", "",
+                   "![reuse](reuse.png)", ""]
+    report += ["## Timings", "", markdown_table([["phase", "seconds"]] + [[k, f"{v:.2f}"] for k, v in timings.items()]), ""]
     (out / "report.md").write_text("\n".join(report))
 
     print(text_table(table))
     print()
-    print(f"training: {timings['training']:.2f} s for {len(training.personas)} games x {args.rounds} rounds "
-          f"({training.result.turns} lockstep turns); evaluation: {timings['evaluation']:.2f} s")
+    print(text_table([r[:9] for r in prof_rows]))
+    print()
+    print(text_table(merge_rows))
+    if reuse is not None:
+        print()
+        print(text_table(reuse_rows))
+    print()
+    print("  ".join(f"{k}: {v:.2f} s" for k, v in timings.items()))
     print(f"report: {out / 'report.md'}")
     return 0
