@@ -179,7 +179,7 @@ class RobotDriver:
             self._closing = True
 
     def _add(self, suggestion: Suggestion, steps: list[Step], received_ns: int, start: float) -> None:
-        speech_playing = any(p.speech_may_play() for p in self._active)
+        speech_playing = self._speech_may_play()
         for earlier in self._active:
             if not earlier.superseded:
                 earlier.superseded, earlier.superseded_at = True, start
@@ -191,6 +191,13 @@ class RobotDriver:
         ordered = sorted(steps, key=lambda s: s.at_s)  # stable: same-time steps keep their order
         self._active.append(_Performance(
             suggestion, [_Step(s.at_s, s, next(self._ids)) for s in ordered], received_ns, start))
+
+    def _speech_may_play(self) -> bool:
+        """Whether the robot may still be speaking: the newest speech command decides."""
+        for perf in reversed(self._active):
+            if any(isinstance(s.step.command, (Say, StopSpeech)) and not s.cancelled for s in perf.steps):
+                return perf.speech_may_play()
+        return False
 
     def _report(self, report, time_ns: int) -> None:
         if report.generation != self._generation:

@@ -1,0 +1,141 @@
+"""The robot bridge as a bus service: SuggestionMade in, the robot acts, RobotActed out.
+
+Rule: the bridge ("robot" on the bus) takes SuggestionMade from the learner and
+hands each to the robot driver (virtual, IrisTK or Realtime API); the driver
+reports each suggestion's fate once, from its own thread, as a RobotActed
+event that the bridge stamps and publishes (the recorder keeps it like any
+other event). Input goes through the same shell as every service (node.Driver):
+a message that does not decode, belongs to another session, repeats a
+sequence number or carries an impossible action or card becomes a
+MessageRejected, and the bridge goes on; so does a frame from the robot that
+cannot be read (key `robot:<backend>`). One lock serialises the two threads
+that stamp, so sequence numbers stay strictly increasing.
+After SessionEnded the bridge waits (up to `settle_s`) for the robot to report
+every open suggestion, then leaves the bus.
+
+RobotActed is an observation of the world, not a function of the log: a
+replay or verify never recomputes it (the bridge is not a replayable logic).
+A restarted bridge does not perform old suggestions again: it takes
+suggestions from the moment it joins.
+"""
+
+from __future__ import annotations
+
+import logging
+import queue
+import threading
+import time
+from typing import Callable
+
+from pairplay import __version__
+from pairplay.schemas import events as ev
+from pairplay.schemas.envelope import Event
+from pairplay.schemas.keys import alive_key, event_key, session_keys
+from pairplay.schemas.robot import BoardCalibration, RobotActed, RobotConfig
+
+from ..bus import Bus
+from ..node import Driver, Rejected
+from .backends import open_robot
+from .driver import RobotDriver, Suggestion
+
+log = logging.getLogger("pairplay.robot.bridge")
+NAME = "robot"
+
+
+class BridgeLogic:
+    """The bridge's input side, in the shape node.Driver feeds (see node.Logic)."""
+
+    name = NAME
+    consumes = frozenset({"SuggestionMade", "SessionEnded"})
+    sources = {"SuggestionMade": frozenset({"learner"}), "SessionEnded": frozenset({"game"})}
+
+    def __init__(self, perform: Callable[[Suggestion], None]) -> None:
+        self.perform = perform
+        self.done = False
+
+    def start(self) -> list[Event]:
+        return []
+
+    def handle(self, event: Event) -> list[Event]:
+        if isinstance(event, ev.SessionEnded):
+            self.done = True
+        elif isinstance(event, ev.SuggestionMade):
+            try:
+                self.perform(Suggestion(event.session, event.round, event.turn, event.attempt, event.action,
+                                        event.observed, event.target, suggestion_seq=event.seq))
+            except ValueError as exc:  # an action code or a card the robot cannot show
+                raise Rejected(f"cannot perform suggestion: {exc}") from None
+        return []
+
+
+class RobotBridge:
+    def __init__(self, bus: Bus, session: str, robot_url: str = "virtual", *,
+                 config: RobotConfig | None = None, calibration: BoardCalibration | str | None = None,
+                 clock: Callable[[], int] = time.time_ns, settle_s: float = 15.0) -> None:
+        self.bus, self.session, self.robot_url, self.settle_s = bus, session, robot_url, settle_s
+        self._config, self._calibration = config, calibration
+        self._lock = threading.Lock()
+        self._queue: queue.Queue = queue.Queue()
+        self.robot: RobotDriver | None = None
+        self.logic = BridgeLogic(self._perform)
+        self.shell = Driver(self.logic, session, clock)
+        self.thread: threading.Thread | None = None
+
+    def _perform(self, suggestion: Suggestion) -> None:
+        assert self.robot is not None, "start() opens the robot before any input is handled"
+        self.robot.perform(suggestion)
+
+    # -- publishing (two threads: the bridge's and the robot driver's) --------------------
+    def _publish(self, events: list[Event]) -> None:
+        for e in events:
+            self.bus.put(event_key(self.session, e.source, type(e).__name__), ev.encode_event(e))
+
+    def _on_acted(self, acted: RobotActed) -> None:
+        with self._lock:
+            self._publish(self.shell._stamp([acted]))
+
+    def _on_robot_rejected(self, reason: str, excerpt: str) -> None:
+        with self._lock:
+            self._publish(self.shell.reject(f"robot sent an unreadable frame: {reason}",
+                                            f"robot:{self.robot_url}", payload=excerpt.encode()))
+
+    # -- lifecycle ---------------------------------------------------------------------------
+    def start(self) -> "RobotBridge":
+        """Open the robot, subscribe, announce: the game may start once our token is seen."""
+        self.robot = open_robot(self.robot_url, self._on_acted, config=self._config,
+                                calibration=self._calibration, on_rejected=self._on_robot_rejected)
+        self.bus.subscribe(session_keys(self.session), lambda key, payload: self._queue.put((key, payload)))
+        self.bus.alive(alive_key(self.session, NAME))
+        announce = ev.ServiceStarted(service=f"{NAME} {self.robot.transport.url}", version=__version__)
+        with self._lock:
+            self._publish(self.shell._stamp([announce]))
+        return self
+
+    def step(self, timeout_s: float = 0.1) -> bool:
+        try:
+            key, payload = self._queue.get(timeout=timeout_s)
+        except queue.Empty:
+            return False
+        with self._lock:
+            self._publish(self.shell.receive(key, payload))
+        return True
+
+    def run(self, stop: threading.Event) -> None:
+        while not stop.is_set() and not self.logic.done:
+            self.step()
+        self.close()
+
+    def run_in_thread(self, stop: threading.Event) -> threading.Thread:
+        self.thread = threading.Thread(target=self.run, args=(stop,), name="pairplay-robot", daemon=True)
+        self.thread.start()
+        return self.thread
+
+    def close(self) -> None:
+        """Let the robot report what is open (bounded), then close its connection."""
+        robot, self.robot = self.robot, None
+        if robot is None:
+            return
+        if not robot.wait_idle(self.settle_s):
+            log.warning("robot %s: suggestions still open after %.0f s; reporting them as they are",
+                        robot.transport.url, self.settle_s)
+        robot.close()

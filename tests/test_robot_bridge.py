@@ -1,0 +1,77 @@
+"""The bridge on a real Zenoh bus: suggestions in, the robot acts, RobotActed recorded to MCAP."""
+
+from __future__ import annotations
+
+import threading
+
+from busutil import listener, wait_until
+from robot_doubles.harness import FAST
+from robot_doubles.iristk_broker import IrisTKBroker
+from robot_doubles.iristk_furhat import IrisTKFurhat
+
+from pairplay.core.actions import code_of_parts
+from pairplay.replay.reader import read_log
+from pairplay.schemas import events as ev
+from pairplay.schemas.envelope import stamped
+from pairplay.schemas.keys import event_key
+from pairplay.services.recorder import Recorder
+from pairplay.services.robot.bridge import RobotBridge
+
+SESSION = "robot1"
+
+
+def made(seq: int, action: int, turn: int, target: int = 10, observed: int = 3) -> tuple[str, bytes]:
+    event = ev.SuggestionMade(round=0, turn=turn, attempt=0, state=5, action=action, chosen_by="explore",
+                              epsilon=0.9, alpha=0.5, psi=0.0, observed=observed, target=target)
+    event = stamped(event, session=SESSION, source="learner", seq=seq, time_ns=seq)
+    return event_key(SESSION, "learner", "SuggestionMade"), ev.encode_event(event)
+
+
+def test_suggestions_become_robot_acts_recorded_with_every_rejection(tmp_path):
+    broker = IrisTKBroker().start()
+    furhat = IrisTKFurhat(broker.port, speech_s=5.0).start()  # still speaking when the smile comes
+    bus = listener()
+    path = tmp_path / "robot1.mcap"
+    recorder = Recorder(bus, SESSION, path)
+    recorder.start()
+    stop, recorder_stop = threading.Event(), threading.Event()
+    recorder_thread = threading.Thread(target=recorder.run, args=(recorder_stop,), daemon=True)
+    recorder_thread.start()
+    bridge = RobotBridge(bus, SESSION, f"iristk://127.0.0.1:{broker.port}", config=FAST).start()
+    thread = bridge.run_in_thread(stop)
+    try:
+        speech, smile, gaze = code_of_parts(2, 0, 0, 0), code_of_parts(0, 1, 0, 0), code_of_parts(0, 0, 0, 1)
+        for key, payload in (made(1, speech, 0), made(2, smile, 1), made(3, gaze, 2)):
+            bus.put(key, payload)
+        assert furhat.wait_for(lambda f: len(f.performed) == 4), furhat.performed  # speech, stop, smile, gaze
+        bus.put(made(4, 88, 3)[0], made(4, 88, 3)[1])  # no such action
+        bus.put(made(5, speech, 4, target=18)[0], made(5, speech, 4, target=18)[1])  # off the board
+        bus.put(event_key(SESSION, "learner", "SuggestionMade"), b'{"type": "SuggestionMade", "round": "x"}')
+        broker.inject("pairplay", b"EVENT monitor.speech.end 5\n[1,2]\n")
+        ended = stamped(ev.SessionEnded(), session=SESSION, source="game", seq=1, time_ns=9)
+        bus.put(event_key(SESSION, "game", "SessionEnded"), ev.encode_event(ended))
+        thread.join(10)
+        assert not thread.is_alive()  # the bridge left after SessionEnded, its suggestions settled
+        assert wait_until(lambda: recorder.queue.empty(), 5)
+    finally:
+        stop.set()
+        bridge.close()
+        recorder_stop.set()
+        recorder_thread.join(5)
+        recorder.close()
+        bus.close()
+        furhat.close()
+        broker.stop()
+    events = [r.event for r in read_log(path).events]
+    acted = [e for e in events if isinstance(e, ev.EVENT_BY_TAG["RobotActed"])]
+    # one RobotActed per suggestion, published when its fate is known (the gaze needs no reply)
+    assert sorted((a.suggestion_seq, a.outcome) for a in acted) == [(1, "aborted"), (2, "done"), (3, "sent")]
+    assert all(a.source == "robot" and a.backend.startswith("iristk://") for a in acted)
+    assert [a.seq for a in acted] == sorted(a.seq for a in acted)
+    speech_act = next(a for a in acted if a.suggestion_seq == 1)
+    assert '"text":"Try at row 2 and column 5"' in speech_act.commands[0]
+    rejected = [e for e in events if isinstance(e, ev.MessageRejected) and e.source == "robot"]
+    reasons = " | ".join(r.reason for r in rejected)
+    assert "outside 0..87" in reasons and "off the board" in reasons and "malformed" in reasons
+    assert "robot sent an unreadable frame" in reasons
+    assert any(isinstance(e, ev.ServiceStarted) and e.service.startswith("robot iristk://") for e in events)
