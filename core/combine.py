@@ -21,7 +21,7 @@ visual), or, when the errors are equal, the algebraic sum of the parts:
             says gaze), else X;
     any other pair is an Error, which the thesis leaves open: pairplay gives it
     to the part whose actions the users value most, the sum over the users of
-    Q_user(s, own action with that part), ties to the first user.
+    Q_user(s, own action with that part), exact ties to the lowest part code.
 Merged information: min of the errors, AND of the booleans.
 
 Several users: the thesis folds pairwise. pairplay combines N users at once:
@@ -145,11 +145,7 @@ def _resolve_error(users: list[User], state: int, candidates: list[int], hearing
             code = code_of(part, int(v)) if hearing else code_of(int(h), part)
             total += float(u.q[state, code])
         return total
-    best = candidates[0]
-    for c in candidates[1:]:
-        if score(c) > score(best):
-            best = c
-    return best
+    return max(sorted(candidates), key=score)  # exact ties: the lowest part code
 
 
 def _half(users: Sequence[User], state: int, hearing: bool) -> tuple[int, str]:
@@ -159,7 +155,7 @@ def _half(users: Sequence[User], state: int, hearing: bool) -> tuple[int, str]:
     own = [int(parts(u.policy[state])[0 if hearing else 1]) for u in chosen]
     name = "hearing" if hearing else "visual"
     if len(chosen) < len(users):
-        prefix = f"{name}=fewer-errors({'+'.join(u.name for u in chosen)})"
+        prefix = f"{name}=fewer-errors({'+'.join(sorted(u.name for u in chosen))})"
     else:
         prefix = f"{name}=sum"
     if len(set(own)) == 1:
@@ -184,3 +180,13 @@ def combine(users: Sequence[User]) -> Combined:
         rules.append(f"{rule_h}; {rule_v}")
     q = np.mean([u.q for u in users], axis=0)
     return Combined(policy, q, merge_info([u.info for u in users]), rules)
+
+
+def represent(name: str, policies: np.ndarray, q_tables: np.ndarray, seed: int) -> tuple[User, Profile]:
+    """One user's input to a combination: algorithm 3 over all its policies, and
+    one of them, picked at random by `seed` (thesis 6.2: "randomly selects a
+    policy from each user"), with its Q-table for resolving Errors."""
+    from .rng import game_seed
+    profile = extract_info(policies)
+    pick = int(np.random.default_rng(game_seed(seed, "combine:" + name, 0)).integers(len(policies)))
+    return User(name, np.asarray(policies[pick]), np.asarray(q_tables[pick]), profile.info), profile

@@ -12,6 +12,7 @@ import numpy as np
 from pairplay.schemas.config import LearnerConfig, Persona
 from pairplay.schemas.policy import PolicyFile, UserInfo
 
+from .combine import Combined, Profile, User, combine, represent
 from .geometry import STATE_NAMES
 
 
@@ -34,3 +35,25 @@ def greedy_of(policy: PolicyFile) -> np.ndarray:
 
 def q_of(policy: PolicyFile) -> np.ndarray:
     return np.asarray(policy.q, dtype=np.float64)
+
+
+def users_from_policies(policies: list[PolicyFile], seed: int, exclude=()) -> tuple[list[User], dict[str, Profile]]:
+    """Group policy files by participant; each group becomes one combination input."""
+    groups: dict[str, list[PolicyFile]] = {}
+    for p in policies:
+        if p.participant not in exclude:
+            groups.setdefault(p.participant, []).append(p)
+    users, profiles = [], {}
+    for name, own in groups.items():
+        user, profile = represent(name, np.stack([greedy_of(p) for p in own]), np.stack([q_of(p) for p in own]), seed)
+        users.append(user)
+        profiles[name] = profile
+    return users, profiles
+
+
+def combined_policy_file(merged: Combined, users: list[User], merged_from: list[str], seed: int | None,
+                         software: str = "") -> PolicyFile:
+    return to_policy_file(merged.q, np.zeros(len(merged.policy), dtype=np.int64), merged.policy,
+                          algorithm="combined", participant="+".join(sorted(u.name for u in users)),
+                          seed=seed, info=merged.info, merged_from=merged_from, rules=merged.rules,
+                          software=software)

@@ -98,14 +98,11 @@ class UserSet(NamedTuple):
 
 def user_set(personas: Sequence[Persona], training: Training, seed: int) -> UserSet:
     """Algorithm 3 on each persona's policies; one policy per persona picked at random (thesis 6.2)."""
-    from .combine import User, extract_info
+    from .combine import represent
     profiles, users, updates = {}, {}, {}
     for p in personas:
         rows = np.array([i for i, q in enumerate(training.personas) if q.key == p.key])
-        profile = extract_info(training.greedy[rows])
-        pick = rows[np.random.default_rng(game_seed(seed, "combine:" + p.key, 0)).integers(rows.size)]
-        profiles[p.key] = profile
-        users[p.key] = User(p.key, training.greedy[pick], training.result.q[pick], profile.info)
+        users[p.key], profiles[p.key] = represent(p.key, training.greedy[rows], training.result.q[rows], seed)
         updates[p.key] = training.result.counts[rows].sum(-1)
     return UserSet(profiles, users, updates)
 

@@ -15,6 +15,8 @@ import sys
 VERBS: dict[str, tuple[str, str]] = {
     "study": ("pairplay.services.study_cli", "run the simulated study of thesis chapter 6"),
     "bench": ("pairplay.services.bench_cli", "measure speed beside raw references, print a table"),
+    "profile": ("pairplay.services.profile_cli", "user information (algorithm 3) of policy files, per participant"),
+    "combine": ("pairplay.services.combine_cli", "merge policy files into one policy (algorithm 4)"),
     "view": ("pairplay.services.view_cli", "watch a session live or a recording in rerun: board, suggestion, Q-table"),
     "run": ("pairplay.services.run_cli", "run one service (game, learner, participant, recorder, combiner) on the bus"),
     "session": ("pairplay.services.session_cli", "run a whole session over the bus, recorded to recordings/<session>.mcap"),

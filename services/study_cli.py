@@ -48,6 +48,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--reuse-last", type=int, default=50,
                    help="pi-reuse: the last N rounds use the new policy alone (default 50)")
     p.add_argument("--out", type=Path, default=Path("out/study"), help="report folder (default out/study)")
+    p.add_argument("--train-only", action="store_true",
+                   help="stop after training: policy files, curves and figure 6.4 only (for sweeps)")
     p.add_argument("--quiet", action="store_true", help="no progress bars")
 
 
@@ -141,18 +143,18 @@ MERGES = (("blind+deaf", ("blind", "deaf")), ("vincent+tatiana", ("vincent", "ta
 def write_merges(out: Path, personas, users: study.UserSet, args) -> dict:
     from pairplay.core.combine import combine
     from pairplay.core.geometry import N_STATES
+    from pairplay.core.policies import combined_policy_file
     keys = [p.key for p in personas]
     merges, panels = {}, []
     for name, members in MERGES:
         members = keys if members is None else [m for m in members if m in keys]
         if len(members) < 2:
             continue
-        merged = combine([users.users[k] for k in members])
+        chosen = [users.users[k] for k in members]
+        merged = combine(chosen)
         merges[name] = merged
-        write_policy(out / "merged" / f"{name}.json", to_policy_file(
-            merged.q, np.zeros((N_STATES, 1)), merged.policy, algorithm="combined", participant=name,
-            seed=args.seed, info=merged.info, merged_from=members, rules=merged.rules,
-            software=f"pairplay {__version__}"))
+        write_policy(out / "merged" / f"{name}.json", combined_policy_file(
+            merged, chosen, members, args.seed, software=f"pairplay {__version__}"))
         inputs = {k: users.users[k].policy for k in members} if len(members) <= 3 else {}
         panels.append((name, inputs, merged.policy))
     if panels:
@@ -185,6 +187,9 @@ def run(args) -> int:
     write_policies(out, training, args, config)
     curves = write_curves(out, training)
     plots.learning_curves(curves, names, out / "learning_curves.png")
+    if args.train_only:
+        print(f"training: {timings['training']:.2f} s; policies and curves in {out}")
+        return 0
 
     t0 = time.perf_counter()
     n_eval = 3 * len(personas) * args.games * args.eval_rounds

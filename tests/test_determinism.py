@@ -53,7 +53,7 @@ def test_a_game_alone_equals_the_same_game_in_a_batch():
 
 def _study_digest(out, seed):
     assert main(["study", "--quiet", "--seed", str(seed), "--personas", "deaf,vincent", "--games", "2",
-                 "--rounds", "40", "--eval-rounds", "5", "--out", str(out)]) == 0
+                 "--rounds", "40", "--train-only", "--out", str(out)]) == 0
     files = sorted((out / "policies").rglob("*.json"))
     assert len(files) == 4
     return {f.relative_to(out).as_posix(): hashlib.sha256(f.read_bytes()).hexdigest() for f in files}

@@ -1,0 +1,103 @@
+"""`pairplay profile POLICY...` and `pairplay combine POLICY...` on policy files.
+
+Rule: policy files are grouped by their participant; each participant's user
+information comes from all of its files (algorithm 3), and one file per
+participant, picked by the seed, enters the combination (algorithm 4). A file
+that cannot be read stops the command with its reason before anything is
+written.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+from pairplay import __version__
+from pairplay.core.actions import ACTIONS
+from pairplay.core.combine import combine
+from pairplay.core.geometry import STATE_NAMES
+from pairplay.core.policies import combined_policy_file, users_from_policies
+from pairplay.schemas.policy import PolicyFileError, read_policy, write_policy
+
+
+def _policy_paths(paths: list[Path]) -> list[Path]:
+    """Files as given; a folder stands for every *.json below it (a study's policies/)."""
+    out = []
+    for p in paths:
+        out += sorted(p.rglob("*.json")) if p.is_dir() else [p]
+    return out
+
+
+def _common(p: argparse.ArgumentParser) -> None:
+    p.add_argument("policies", nargs="+", type=Path, help="policy files, or folders of them")
+    p.add_argument("--seed", type=int, default=0, help="picks each participant's representative policy")
+
+
+def add_profile_arguments(p: argparse.ArgumentParser) -> None:
+    _common(p)
+
+
+def add_combine_arguments(p: argparse.ArgumentParser) -> None:
+    _common(p)
+    p.add_argument("--out", "-o", type=Path, help="write the merged policy file here")
+    p.add_argument("--exclude", default="", help="comma-separated participants to leave out")
+
+
+def _load(args):
+    files = _policy_paths(args.policies)
+    if not files:
+        raise PolicyFileError("no policy files given")
+    return [read_policy(f) for f in files], [str(f) for f in files]
+
+
+def _profile_lines(profiles) -> list[str]:
+    lines = [f"{'participant':16s} {'policies':>8s} {'speech %':>9s} {'head %':>7s} {'smile':>6s} {'gaze':>5s}  incompatible states"]
+    for name, prof in profiles.items():
+        states = ", ".join([f"{STATE_NAMES[s]}(S)" for s in prof.speech_states] + [f"{STATE_NAMES[s]}(H)" for s in prof.head_states])
+        lines.append(f"{name:16s} {'':>8s} {100 * prof.info.speech:9.1f} {100 * prof.info.head:7.1f} "
+                     f"{'yes' if prof.info.facial else 'no':>6s} {'yes' if prof.info.gaze else 'no':>5s}  {states or '-'}")
+    return lines
+
+
+def run_profile(args) -> int:
+    try:
+        policies, _ = _load(args)
+    except PolicyFileError as exc:
+        print(f"pairplay profile: {exc}", file=sys.stderr)
+        return 2
+    _, profiles = users_from_policies(policies, args.seed)
+    counts = {}
+    for p in policies:
+        counts[p.participant] = counts.get(p.participant, 0) + 1
+    lines = _profile_lines(profiles)
+    print(lines[0])
+    for line, name in zip(lines[1:], profiles):
+        print(line[:17] + f"{counts[name]:>8d}" + line[25:])
+    return 0
+
+
+def run_combine(args) -> int:
+    try:
+        policies, files = _load(args)
+    except PolicyFileError as exc:
+        print(f"pairplay combine: {exc}", file=sys.stderr)
+        return 2
+    exclude = {x.strip() for x in args.exclude.split(",") if x.strip()}
+    users, profiles = users_from_policies(policies, args.seed, exclude)
+    if not users:
+        print("pairplay combine: no policies left to combine", file=sys.stderr)
+        return 2
+    merged = combine(users)
+    print("\n".join(_profile_lines(profiles)))
+    print(f"\nmerged: speech {100 * merged.info.speech:.1f}%, head {100 * merged.info.head:.1f}%, "
+          f"smile {merged.info.facial}, gaze {merged.info.gaze}\n")
+    for s, (a, rule) in enumerate(zip(merged.policy, merged.rules)):
+        print(f"{s:2d} {STATE_NAMES[s]:16s} {int(a):2d} {ACTIONS[int(a)].name:55s} {rule}")
+    if args.out:
+        write_policy(args.out, combined_policy_file(merged, users, files, args.seed, f"pairplay {__version__}"))
+        print(f"\nwrote {args.out}")
+    return 0
+
+
+add_arguments, run = add_combine_arguments, run_combine

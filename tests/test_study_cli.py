@@ -1,0 +1,70 @@
+"""`pairplay study`, `profile` and `combine` from the command line, on real files."""
+
+import json
+
+import pytest
+
+from pairplay.schemas.policy import read_policy
+from pairplay.services.cli import main
+
+
+@pytest.fixture(scope="module")
+def study_dir(tmp_path_factory):
+    out = tmp_path_factory.mktemp("study")
+    assert main(["study", "--quiet", "--personas", "blind,deaf,tatiana", "--games", "2", "--rounds", "60",
+                 "--eval-rounds", "5", "--reuse-seeds", "2", "--reuse-last", "10", "--out", str(out)]) == 0
+    return out
+
+
+def test_the_study_writes_its_report_folder(study_dir):
+    for name in ("report.md", "curves.csv", "curves_summary.csv", "evaluation.csv", "profiles.csv",
+                 "merged_evaluation.csv", "reuse.csv", "learning_curves.png", "evaluation.png", "profiles.png",
+                 "merged.png", "reuse.png", "merged/blind+deaf.json", "merged/all.json"):
+        assert (study_dir / name).stat().st_size > 0, name
+    report = (study_dir / "report.md").read_text()
+    for section in ("User information", "Merged policies", "Policy reuse speed-up", "Learning curves"):
+        assert section in report
+    rows = (study_dir / "curves.csv").read_text().splitlines()
+    assert rows[0] == "persona,game,round,picks,inconsistent" and len(rows) == 1 + 3 * 2 * 60
+
+
+def test_policy_files_hold_what_the_study_learned(study_dir):
+    policy = read_policy(study_dir / "policies" / "deaf" / "game-01.json")
+    assert policy.participant == "deaf" and policy.game == 1 and policy.rounds == 60
+    assert policy.persona.hearing == 1 and len(policy.q) == 24 and len(policy.q[0]) == 88
+    assert policy.config.epsilon_start == 0.9 and policy.algorithm == "q-learning"
+    merged = read_policy(study_dir / "merged" / "blind+deaf.json")
+    assert merged.algorithm == "combined" and merged.merged_from == ["blind", "deaf"] and len(merged.rules) == 24
+
+
+def test_profile_and_combine_verbs(study_dir, tmp_path, capsys):
+    assert main(["profile", str(study_dir / "policies")]) == 0
+    out = capsys.readouterr().out
+    assert "blind" in out and "deaf" in out and "tatiana" in out
+    target = tmp_path / "bd.json"
+    assert main(["combine", str(study_dir / "policies" / "blind"), str(study_dir / "policies" / "deaf"),
+                 "-o", str(target)]) == 0
+    merged = read_policy(target)
+    assert merged.participant == "blind+deaf" and len(merged.greedy) == 24
+    again = tmp_path / "again.json"
+    assert main(["combine", str(study_dir / "policies" / "deaf"), str(study_dir / "policies" / "blind"),
+                 "-o", str(again)]) == 0
+    assert read_policy(again).greedy == merged.greedy  # the order of the inputs does not matter
+
+
+def test_a_corrupt_policy_file_is_refused_with_its_reason(study_dir, tmp_path, capsys):
+    bad = tmp_path / "bad.json"
+    good = json.loads((study_dir / "policies" / "blind" / "game-00.json").read_text())
+    good["greedy"][3] = 99
+    bad.write_text(json.dumps(good))
+    out = tmp_path / "merged.json"
+    assert main(["combine", str(bad), str(study_dir / "policies" / "deaf"), "-o", str(out)]) == 2
+    assert "greedy actions outside 0..87" in capsys.readouterr().err and not out.exists()
+    bad.write_text('{"format": "pairplay.policy", "q": [')
+    assert main(["profile", str(bad)]) == 2
+    assert "corrupt" in capsys.readouterr().err
+
+
+def test_unknown_personas_are_refused(capsys):
+    assert main(["study", "--personas", "nobody"]) == 2
+    assert "unknown persona" in capsys.readouterr().err
