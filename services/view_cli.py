@@ -95,7 +95,11 @@ def run(args: argparse.Namespace) -> int:
     out = ViewOutput(rrd=None if args.no_save else (args.out or _default_rrd(args)), serve=args.serve,
                      spawn=args.spawn, grpc_port=args.grpc_port, web_port=args.web_port,
                      rerun_analytics=args.rerun_analytics)
-    rec, where = open_stream(out, recording_name=args.session or args.recording.stem)
+    try:
+        rec, where = open_stream(out, recording_name=args.session or args.recording.stem)
+    except (RuntimeError, ValueError, OSError) as err:  # a viewer that cannot start, a port in use
+        print(f"pairplay view: {err}", file=sys.stderr)
+        return 1
     for line in where:
         print(f"pairplay view: {line}", file=sys.stderr)
     stop = threading.Event()

@@ -9,22 +9,30 @@ the native viewer show the same data with the same blueprint.
   viewer's HTML/JS/wasm; the data stays on the loopback gRPC port, so a remote
   browser gets an empty viewer. To watch from another machine, forward both
   ports over SSH.
-- `--spawn`: rerun's native viewer as a child process (needs a display).
+- `--spawn`: rerun's native viewer as its own process (needs a display),
+  started with `--bind 127.0.0.1` so its data port is loopback only too.
 
 Usage analytics: the SDK calls in this process never load rerun's analytics
 (measured: no analytics config or data appears under $HOME). The native viewer
 does; rerun's pipeline (re_analytics, native/pipeline.rs) sends nothing when
 the environment variable CI is set and FORCE_RERUN_ANALYTICS is not, so the
-viewer we spawn gets that environment unless `--rerun-analytics` is given. The
-user's own rerun settings (`rerun analytics disable`) are never rewritten.
+viewer we start gets that environment unless `--rerun-analytics` is given
+(measured under Xvfb: with it, the viewer wrote no analytics file under $HOME;
+without it, it printed rerun's analytics notice and wrote its analytics config
+and an event file). The user's own rerun settings (`rerun analytics disable`)
+are never rewritten.
 The web viewer runs in the browser; what it sends is up to the browser's
 network (see docs/view.md).
 """
 
 from __future__ import annotations
 
-import contextlib
 import os
+import shutil
+import socket
+import subprocess
+import sys
+import time
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -34,6 +42,7 @@ from .view_rerun import APP_ID, blueprint
 
 DEFAULT_GRPC_PORT = 9876  # rerun's defaults
 DEFAULT_WEB_PORT = 9090
+SPAWN_TIMEOUT_S = 15.0  # the native viewer takes a few seconds to start
 
 
 @dataclass
@@ -46,23 +55,47 @@ class ViewOutput:
     rerun_analytics: bool = False  # True: leave rerun's analytics to the user's own settings
 
 
-@contextlib.contextmanager
-def analytics_off_for_children(enabled: bool = True):
-    """Environment for processes started inside: rerun analytics off (see module rule)."""
-    if not enabled:
-        yield
-        return
-    saved = {k: os.environ.get(k) for k in ("CI", "FORCE_RERUN_ANALYTICS")}
-    os.environ["CI"] = os.environ.get("CI") or "1"
-    os.environ.pop("FORCE_RERUN_ANALYTICS", None)
-    try:
-        yield
-    finally:
-        for key, value in saved.items():
-            if value is None:
-                os.environ.pop(key, None)
-            else:
-                os.environ[key] = value
+def rerun_executable() -> str:
+    """The `rerun` viewer of the rerun-sdk wheel: on PATH, or beside this Python (an unactivated venv)."""
+    beside = Path(sys.executable).with_name("rerun")
+    return shutil.which("rerun") or str(beside)
+
+
+def _port_open(port: int, timeout_s: float) -> bool:
+    """Wait until something accepts connections on 127.0.0.1:port (a stream to nobody blocks)."""
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        with socket.socket() as probe:
+            probe.settimeout(0.2)
+            if probe.connect_ex(("127.0.0.1", port)) == 0:
+                return True
+        time.sleep(0.1)
+    return False
+
+
+def viewer_environment(env: dict[str, str], analytics_off: bool = True) -> dict[str, str]:
+    """The environment for a rerun viewer we start: rerun's analytics off (see module rule)."""
+    env = dict(env)
+    if analytics_off:
+        env["CI"] = env.get("CI") or "1"
+        env.pop("FORCE_RERUN_ANALYTICS", None)
+    return env
+
+
+def spawn_viewer(port: int, analytics_off: bool = True) -> subprocess.Popen:
+    """rerun's native viewer, its data port bound to 127.0.0.1, in its own process group
+    (Ctrl-C on the view leaves the window open); raises if it does not come up."""
+    command = [rerun_executable(), "--bind", "127.0.0.1", "--port", str(port), "--hide-welcome-screen",
+               "--expect-data-soon"]
+    viewer = subprocess.Popen(command, env=viewer_environment(dict(os.environ), analytics_off),
+                              stdin=subprocess.DEVNULL, start_new_session=True)
+    deadline = time.monotonic() + SPAWN_TIMEOUT_S
+    while not _port_open(port, 0.5):
+        if viewer.poll() is not None or time.monotonic() > deadline:
+            raise RuntimeError(f"rerun's native viewer did not start on 127.0.0.1:{port} (exit code "
+                               f"{viewer.poll()}; it needs a display and a GPU driver that can draw R32Float; "
+                               "its reason is printed above). Use the saved .rrd or --serve instead.")
+    return viewer
 
 
 def open_stream(out: ViewOutput, recording_name: str = "") -> tuple[rr.RecordingStream, list[str]]:
@@ -75,10 +108,9 @@ def open_stream(out: ViewOutput, recording_name: str = "") -> tuple[rr.Recording
         sinks.append(rr.FileSink(str(out.rrd)))
         where.append(f"saving {out.rrd}")
     if out.spawn:
-        with analytics_off_for_children(not out.rerun_analytics):
-            rr.spawn(port=out.grpc_port, connect=False, hide_welcome_screen=True)
+        spawn_viewer(out.grpc_port, analytics_off=not out.rerun_analytics)
         sinks.append(rr.GrpcSink(f"rerun+http://127.0.0.1:{out.grpc_port}/proxy"))
-        where.append(f"native viewer on port {out.grpc_port}")
+        where.append(f"native viewer on 127.0.0.1:{out.grpc_port}")
     if out.serve:
         server = rr.GrpcServerSink(bind_ip="127.0.0.1", port=out.grpc_port)
         sinks.append(server)

@@ -18,7 +18,7 @@ from pairplay.services.cli import main
 from pairplay.services.view_bench import scripted_events, write_recording
 from pairplay.services.view_cli import drive
 from pairplay.services.view_model import Cell
-from pairplay.services.view_output import ViewOutput, analytics_off_for_children, finish, open_stream
+from pairplay.services.view_output import ViewOutput, finish, open_stream, viewer_environment
 from pairplay.services.view_readback import has_blueprint, read_rrd, segmentation, tensor
 from pairplay.services.view_rerun import RerunView
 from pairplay.services.view_sources import LiveSource
@@ -132,15 +132,10 @@ def test_serving_binds_the_data_port_to_loopback(tmp_path):
 
 
 def test_rerun_analytics_stay_off(tmp_path):
-    # viewers started by the view get rerun's off switch, and the environment is restored after
-    os.environ.pop("CI", None)
-    os.environ["FORCE_RERUN_ANALYTICS"] = "1"
-    try:
-        with analytics_off_for_children():
-            assert os.environ["CI"] and "FORCE_RERUN_ANALYTICS" not in os.environ
-        assert "CI" not in os.environ and os.environ["FORCE_RERUN_ANALYTICS"] == "1"
-    finally:
-        os.environ.pop("FORCE_RERUN_ANALYTICS", None)
+    # a viewer the view starts gets rerun's off switch; --rerun-analytics leaves the environment alone
+    env = {"HOME": "/h", "FORCE_RERUN_ANALYTICS": "1"}
+    assert viewer_environment(env) == {"HOME": "/h", "CI": "1"}
+    assert viewer_environment(env, analytics_off=False) == env
     # the view process itself never loads rerun's analytics: nothing appears under a fresh HOME
     events, _ = scripted_events(rounds=1, seed=8, session="quiet")
     mcap = write_recording(events, tmp_path / "quiet.mcap")
