@@ -23,6 +23,7 @@ VERBS: dict[str, tuple[str, str]] = {
     "rebuild": ("pairplay.services.rebuild_cli", "fold recordings into policy files and learning curves"),
     "replay": ("pairplay.services.replay_cli", "re-publish a recording on the bus, or --verify it against fresh services"),
     "recover": ("pairplay.services.recover_cli", "complete a recording cut short by a crash"),
+    "robot": ("pairplay.services.robot.cli", "perform a session's suggestions on a robot (virtual, IrisTK, Furhat), or --try one"),
 }
 
 

@@ -54,3 +54,15 @@ def test_do_nothing_sends_nothing():
     finally:
         driver.close()
     assert collector.acted[0].outcome == "nothing" and collector.acted[0].commands == []
+
+
+def test_pairplay_robot_try_performs_codes_and_refuses_bad_options(capsys):
+    from pairplay.services.cli import main
+
+    assert main(["robot", "--robot", "virtual?time_scale=0", "--try", "35,0"]) == 0
+    out = capsys.readouterr().out
+    assert "action 35: done" in out and '"text":"Try at row 2 and column 5"' in out and "action 0: nothing" in out
+    assert main(["robot", "--robot", "ros://x", "--try", "1"]) == 2
+    assert "unknown backend" in capsys.readouterr().out
+    assert main(["robot", "--try", "1", "--calibration", "/nonexistent.json"]) == 2
+    assert "cannot read calibration" in capsys.readouterr().out

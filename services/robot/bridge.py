@@ -77,6 +77,7 @@ class RobotBridge:
         self._lock = threading.Lock()
         self._queue: queue.Queue = queue.Queue()
         self.robot: RobotDriver | None = None
+        self.backend = ""  # the robot's URL without its query (a Realtime key must not be recorded)
         self.logic = BridgeLogic(self._perform)
         self.shell = Driver(self.logic, session, clock)
         self.thread: threading.Thread | None = None
@@ -97,7 +98,7 @@ class RobotBridge:
     def _on_robot_rejected(self, reason: str, excerpt: str) -> None:
         with self._lock:
             self._publish(self.shell.reject(f"robot sent an unreadable frame: {reason}",
-                                            f"robot:{self.robot_url}", payload=excerpt.encode()))
+                                            f"robot:{self.backend}", payload=excerpt.encode()))
 
     # -- lifecycle ---------------------------------------------------------------------------
     def start(self) -> "RobotBridge":
@@ -106,7 +107,8 @@ class RobotBridge:
                                 calibration=self._calibration, on_rejected=self._on_robot_rejected)
         self.bus.subscribe(session_keys(self.session), lambda key, payload: self._queue.put((key, payload)))
         self.bus.alive(alive_key(self.session, NAME))
-        announce = ev.ServiceStarted(service=f"{NAME} {self.robot.transport.url}", version=__version__)
+        self.backend = self.robot.transport.url
+        announce = ev.ServiceStarted(service=f"{NAME} {self.backend}", version=__version__)
         with self._lock:
             self._publish(self.shell._stamp([announce]))
         return self

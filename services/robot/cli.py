@@ -1,0 +1,97 @@
+"""`pairplay robot`: the robot bridge as its own process, or a quick try of a robot.
+
+Rule: `pairplay robot --session ID --robot URL --connect ENDPOINT` joins a
+running session's bus (e.g. on the PC next to the robot) and performs its
+suggestions until the session ends. `pairplay robot --robot URL --try 35,46`
+performs those action codes once each (observed and target cards from
+--observed/--target) and prints what happened: a check of the connection,
+the gesture names and the calibration before a study. The same three robot
+options (--robot, --robot-config, --calibration) are what `pairplay session`
+takes (add_robot_arguments / bridge_from_args).
+"""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import threading
+
+from ..bus import Bus, add_bus_arguments, options_from_args, stop_on_signals
+from .backends import FORMS, load_robot_config, open_robot
+from .bridge import RobotBridge
+from .calibration import CalibrationError, load_calibration
+from .driver import Suggestion
+
+
+def add_robot_arguments(p: argparse.ArgumentParser) -> None:
+    g = p.add_argument_group("robot")
+    g.add_argument("--robot", default="virtual", metavar="URL",
+                   help=f"robot backend: {FORMS} (default: virtual, no hardware)")
+    g.add_argument("--robot-config", metavar="FILE", help="RobotConfig JSON: gesture names, texts, timings")
+    g.add_argument("--calibration", metavar="FILE", help="board calibration JSON (default: the packaged one)")
+
+
+def bridge_from_args(bus: Bus, session: str, args: argparse.Namespace) -> RobotBridge:
+    """A started RobotBridge for a session; ValueError (with the reason) on a bad option or file."""
+    config = load_robot_config(args.robot_config)
+    calibration = load_calibration(args.calibration)
+    return RobotBridge(bus, session, args.robot, config=config, calibration=calibration).start()
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--session", help="the session whose suggestions to perform")
+    p.add_argument("--try", dest="try_codes", metavar="CODES", help="comma-separated action codes to perform once")
+    p.add_argument("--observed", type=int, default=7, help="observed card for --try (default 7: row 2, column 2)")
+    p.add_argument("--target", type=int, default=10, help="matching card for --try (default 10: row 2, column 5)")
+    add_robot_arguments(p)
+    add_bus_arguments(p)
+
+
+def run(args: argparse.Namespace) -> int:
+    logging.basicConfig(level=logging.INFO, format="%(levelname)s %(name)s: %(message)s")
+    if bool(args.session) == bool(args.try_codes):
+        print("pairplay robot: give either --session ID (serve a session) or --try CODES (try the robot)")
+        return 2
+    try:
+        return _try(args) if args.try_codes else _serve(args)
+    except (ValueError, CalibrationError) as exc:
+        print(f"pairplay robot: {exc}")
+        return 2
+
+
+def _try(args: argparse.Namespace) -> int:
+    codes = [int(c) for c in args.try_codes.split(",") if c.strip()]
+    done = threading.Event()
+    acted = []
+
+    def on_acted(event) -> None:
+        acted.append(event)
+        print(f"action {event.action}: {event.outcome}{' (' + event.error + ')' if event.error else ''}")
+        for command in event.commands:
+            print(f"  sent    {command.strip()}")
+        for reply in event.replies:
+            print(f"  replied {reply}")
+        if len(acted) == len(codes):
+            done.set()
+
+    robot = open_robot(args.robot, on_acted, config=load_robot_config(args.robot_config),
+                       calibration=load_calibration(args.calibration),
+                       on_rejected=lambda reason, excerpt: print(f"  unreadable frame from the robot: {reason}"))
+    try:
+        for code in codes:
+            robot.perform(Suggestion("try", 0, 0, 0, code, args.observed, args.target))
+            robot.wait_idle(robot.config.ack_timeout_s + robot.config.give_up_s)
+    finally:
+        robot.close()
+    return 0 if all(a.outcome in ("done", "sent", "nothing") for a in acted) and len(acted) == len(codes) else 1
+
+
+def _serve(args: argparse.Namespace) -> int:
+    stop = threading.Event()
+    stop_on_signals(stop)
+    with Bus(options_from_args(args)) as bus:
+        bridge = bridge_from_args(bus, args.session, args)
+        print(f"robot bridge for session {args.session} on {bridge.backend}; bus {' '.join(bus.locators())}",
+              flush=True)
+        bridge.run(stop)
+    return 0
