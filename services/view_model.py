@@ -103,6 +103,7 @@ class ViewModel:
     q_updates: int = 0
     q_partial: bool = False
     picks_per_round: dict[int, int] = field(default_factory=dict)
+    last_round_ended: int = -1
     events: int = 0
     ended: str = ""
 
@@ -264,6 +265,7 @@ def _q_updated(m: ViewModel, e) -> tuple[set[Change], str]:
 
 def _round_ended(m: ViewModel, e) -> tuple[set[Change], str]:
     m.picks_per_round[e.round] = 2 * e.turns
+    m.last_round_ended = e.round
     return {Change.ROUND_END, Change.NOTE}, f"round {e.round + 1} over: {2 * e.turns} picks"
 
 

@@ -143,7 +143,7 @@ class RerunView:
         if Change.REWARD in changes and m.reward is not None:
             self.rec.log("learning/reward", rr.Scalars([m.reward]))
         if Change.ROUND_END in changes:
-            self.rec.log("learning/picks_per_round", rr.Scalars([m.picks_per_round[m.round]]))
+            self.rec.log("learning/picks_per_round", rr.Scalars([m.picks_per_round[m.last_round_ended]]))
         if Change.SESSION in changes:
             self.rec.log("session", rr.TextDocument(self._session_text(), media_type="text/markdown"))
         if Change.Q in changes:

@@ -112,3 +112,49 @@ def test_a_paced_recording_follows_the_envelope_times_scaled_by_speed(tmp_path):
     assert [e for e, _ in items] == events
     assert len(waits) == len(events) - 1 and np.allclose(waits, 0.005)  # 10 ms at twice the speed
     assert list(recording_items(mcap, speed=0.0, sleep=sleep.__call__)) and len(waits) == len(events) - 1
+
+
+def test_no_event_content_makes_the_fold_or_its_drawing_raise():
+    from hypothesis import given, settings, strategies as st
+
+    any_int = st.integers(min_value=-2**40, max_value=2**40)
+    event = st.one_of(
+        st.builds(ev.CardRevealed, round=any_int, turn=any_int, card=any_int, face=any_int, pick=any_int),
+        st.builds(ev.CardObserved, round=any_int, turn=any_int, card=any_int, observed_source=st.text(max_size=5)),
+        st.builds(ev.SuggestionRequested, round=any_int, turn=any_int, attempt=any_int, state=any_int,
+                  observed=any_int, match=any_int, covered_mask=any_int),
+        st.builds(ev.SuggestionMade, round=any_int, turn=any_int, attempt=any_int, state=any_int, action=any_int,
+                  chosen_by=st.text(max_size=5), epsilon=st.floats(), alpha=st.floats(), psi=st.floats(),
+                  observed=any_int, target=any_int),
+        st.builds(ev.SuggestionPerceived, round=any_int, turn=any_int, attempt=any_int, considered=st.booleans(),
+                  consistent=st.booleans(), candidate_size=any_int, candidate_mask=any_int),
+        st.builds(ev.TurnResolved, round=any_int, turn=any_int, first=any_int, second=any_int,
+                  matched=st.booleans(), round_over=st.booleans()),
+        st.builds(ev.QUpdated, round=any_int, turn=any_int, attempt=any_int, state=any_int, action=any_int,
+                  alpha=st.floats(), reward=st.floats(), q_before=st.floats(), q_after=st.floats()),
+        st.builds(ev.RoundStarted, round=any_int, faces=st.lists(any_int, max_size=20)),
+        st.builds(ev.RoundEnded, round=any_int, turns=any_int, matches=any_int),
+    )
+
+    import rerun as rr
+
+    from pairplay.services.view_rerun import RerunView
+
+    rec = rr.RecordingStream("pairplay-test")
+    rec.memory_recording()  # nothing leaves the process
+
+    any_time = st.integers(min_value=-2**63, max_value=2**63 - 1)
+    stamped_event = st.tuples(event, any_time, any_int).map(
+        lambda t: msgspec.structs.replace(t[0], time_ns=t[1], seq=t[2]))
+
+    @settings(max_examples=300, deadline=None)
+    @given(st.lists(stamped_event, max_size=12))
+    def fold_never_raises(events):
+        view = RerunView(rec)  # the fold and the drawing of it
+        for e in events:
+            view.handle(e)
+        view.close()
+        view.model.cells()
+        view.model.suggestion_text()
+
+    fold_never_raises()
