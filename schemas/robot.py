@@ -117,7 +117,7 @@ class RobotConfig(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
     iristk_subscribe: str = "monitor.**"
     iristk_agent: str = ""  # sent as "agent" when set (multi-agent IrisTK systems)
     iristk_gesture_replies: bool = True  # await monitor.gesture.end for gestures
-    iristk_wait_for_subscriber: bool = True  # hold events nobody on the broker subscribes to
+    iristk_subscriber_wait_s: float = 5.0  # hold events nobody on the broker subscribes to, this long
     realtime_key: str = ""  # Realtime API auth key, if the robot requires one
     yaw_sign: float = 1.0  # Realtime headpose: + yaw turns towards +x (the robot's left)
     pitch_sign: float = 1.0  # Realtime headpose: + pitch turns towards +y (up)
@@ -127,7 +127,7 @@ class RobotConfig(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
         for name in ("head_turn_offset_m", "ack_timeout_s", "abort_grace_s", "give_up_s", "reconnect_min_s", "reconnect_max_s"):
             if not getattr(self, name) > 0:
                 raise ValueError(f"robot config: {name} must be > 0, got {getattr(self, name)}")
-        for name in ("head_turn_lead_s", "head_turn_hold_s"):
+        for name in ("head_turn_lead_s", "head_turn_hold_s", "iristk_subscriber_wait_s"):
             if not getattr(self, name) >= 0:
                 raise ValueError(f"robot config: {name} must be >= 0, got {getattr(self, name)}")
         if self.reconnect_max_s < self.reconnect_min_s:

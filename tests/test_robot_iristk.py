@@ -268,3 +268,15 @@ def test_an_unreachable_broker_fails_the_suggestion_with_the_reason(stage):
     driver.perform(suggestion(EXACT))
     assert driver.wait_idle(5)
     assert collector.acted[0].outcome == "failed" and "unreachable" in collector.acted[0].error
+
+
+def test_the_brokers_word_is_information_events_go_after_the_wait(stage):
+    broker, furhat, collector, robot = stage
+    furhat.close()
+    assert broker.wait_for(lambda b: len(b.clients) == 0)
+    config = msgspec.structs.replace(FAST, iristk_subscriber_wait_s=0.1, ack_timeout_s=0.3)
+    driver = robot(config=config)
+    driver.perform(suggestion(EXACT))
+    assert broker.wait_for(lambda b: [e.name for e in b.events] == ["action.speech"])
+    assert driver.wait_idle(5)
+    assert collector.acted[0].outcome == "unacknowledged" and collector.acted[0].commands

@@ -35,6 +35,7 @@ from .render import Renderer, Say, Step, StopSpeech
 from .transport import SPEECH_END, SPEECH_START, Changed, Disconnected, Rejected, Reply, Transport, Wire
 
 log = logging.getLogger("pairplay.robot")
+HELD_POLL_S = 0.05  # how often a command the transport holds back is offered again
 
 
 @dataclass(frozen=True)
@@ -342,6 +343,8 @@ class RobotDriver:
             unsent = perf.unsent()
             if unsent and self._connected and not self._held:
                 times.append(perf.start + unsent[0].at_s)
+            elif unsent and self._held:  # held by the transport: ask it again soon
+                times.append(min(time.monotonic() + HELD_POLL_S, perf.start + self.config.give_up_s))
             elif unsent:
                 times.append(perf.start + self.config.give_up_s)
             elif perf.outstanding:

@@ -11,8 +11,10 @@ gestures with monitor.gesture.end, each carrying "action" = our event's id.
 Leaving writes `CLOSE`. The broker relays an event only to clients subscribed
 at that moment and keeps nothing, so while its latest SUBSCRIBE line says that
 no other client wants an event (the robot has not joined yet, or not again after
-a broker restart), that event is held back, in order, until one does
-(RobotConfig.iristk_wait_for_subscriber; before any SUBSCRIBE line, we send). Every frame from the broker that cannot be read is
+a broker restart), that event is held back, in order, until one does, for at
+most RobotConfig.iristk_subscriber_wait_s (then it goes anyway: the broker's
+word is information, and a broker whose SUBSCRIBE lines mean something else
+must not silence the robot); before any SUBSCRIBE line, we send. Every frame from the broker that cannot be read is
 reported (Rejected) and skipped; the connection goes on.
 """
 
@@ -21,6 +23,7 @@ from __future__ import annotations
 import logging
 import socket
 import threading
+import time
 
 from pairplay.schemas.robot import RobotConfig
 
@@ -48,6 +51,7 @@ class IrisTKTransport:
         self.broker_filter: str | None = None  # the latest SUBSCRIBE line of this connection
         self._sock: socket.socket | None = None
         self._lock = threading.Lock()
+        self._holding: tuple[Wire, float] | None = None  # the wire held back, since when
 
     # -- encoding -------------------------------------------------------------------------
     def encode(self, command: Command, command_id: str, time_ns: int) -> Wire:
@@ -75,7 +79,16 @@ class IrisTKTransport:
 
     def ready(self, wire: Wire) -> str:
         spec = self.broker_filter
-        if not self.config.iristk_wait_for_subscriber or spec is None or NameFilter(spec).matches(wire.name):
+        if spec is None or NameFilter(spec).matches(wire.name):
+            self._holding = None
+            return ""
+        now = time.monotonic()
+        if self._holding is None or self._holding[0] is not wire:
+            self._holding = (wire, now)
+        if now - self._holding[1] >= self.config.iristk_subscriber_wait_s:
+            log.warning("broker %s: still no subscriber for %s after %.1f s (filter %r); sending anyway",
+                        self.url, wire.name, self.config.iristk_subscriber_wait_s, spec)
+            self._holding = None
             return ""
         return f"no client of the broker subscribes to {wire.name} (broker's filter {spec!r})"
 
