@@ -225,7 +225,10 @@ def bench_live_not_slowed(rounds: int = 300, repeats: int = 3) -> dict:
                 "ratio >= 0.8")
 
 
-def bench_rows() -> list[dict]:
+def bench_rows(quick: bool = False) -> list[dict]:
+    """`pairplay bench` rows of the view (about 9 s; `quick`: smaller runs, about 3 s)."""
+    if quick:
+        return [bench_view_from_recording(rounds=20), bench_live_not_slowed(rounds=100, repeats=1)]
     return [bench_view_from_recording(), bench_live_not_slowed()]
 
 

@@ -112,6 +112,7 @@ class RerunView:
         self.q_throttle = QThrottle(int(q_interval_s * 1e9))
         self.q_logged = 0
         self._now_ns = 0
+        self._shown: dict[str, int] = {}  # highlight entity -> card mask last logged
         rec.log("board", rr.AnnotationContext([(int(i), label, colour) for i, label, colour in CELL_CLASSES]),
                 static=True)
         rec.log("board/grid", rr.Boxes2D(centers=[_centre(c) for c in range(N_CARDS)],
@@ -182,14 +183,15 @@ class RerunView:
         # the match sits inside the observed card's frame, so both show when they are the same card
         for path, card, colour, label, half in (("board/observed", m.observed, OBSERVED_COLOUR, "observed", 0.47),
                                                 ("board/match", m.match, MATCH_COLOUR, "match", 0.41)):
-            if 0 <= card < N_CARDS:
-                self.rec.log(path, _boxes(1 << card, colour, half=half, radius=0.04, label=label))
-            else:
-                self.rec.log(path, rr.Clear(recursive=False))
-        if m.candidates:
-            self.rec.log("board/candidates", _boxes(m.candidates, CANDIDATE_COLOUR, half=0.32, radius=0.025))
-        else:
-            self.rec.log("board/candidates", rr.Clear(recursive=False))
+            mask = 1 << card if 0 <= card < N_CARDS else 0
+            if self._shown.get(path) != mask:  # unchanged highlights are not logged again
+                self._shown[path] = mask
+                self.rec.log(path, _boxes(mask, colour, half=half, radius=0.04, label=label) if mask
+                             else rr.Clear(recursive=False))
+        if self._shown.get("board/candidates") != m.candidates:
+            self._shown["board/candidates"] = m.candidates
+            self.rec.log("board/candidates", _boxes(m.candidates, CANDIDATE_COLOUR, half=0.32, radius=0.025)
+                         if m.candidates else rr.Clear(recursive=False))
 
     def _session_text(self) -> str:
         m = self.model
