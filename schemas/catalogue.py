@@ -1,0 +1,78 @@
+"""The event catalogue as data: who publishes each event and what it means.
+
+Rule: every event type in `events.EVENT_TYPES` has one row here; the README's
+catalogue is generated from these rows and the Structs' own fields
+(`python -m pairplay.schemas.catalogue --write README.md`), and a test keeps
+the two in step.
+"""
+
+from __future__ import annotations
+
+import msgspec
+
+from .envelope import Event, tag_of
+from .events import EVENT_TYPES
+
+# tag -> (published by, meaning)
+CATALOGUE: dict[str, tuple[str, str]] = {
+    "ServiceStarted": ("any service", "a service is up; `resumed_events` > 0 when it rebuilt its state from the log"),
+    "SessionStarted": ("game", "the session's full config: participant, seed, rounds, learner, observed-card source, version"),
+    "RoundStarted": ("game", "a new deal: the face of each of the 18 cards (the outcome of the deal stream)"),
+    "CardPicked": ("participant / board", "an input: a card was touched; the game may reject it"),
+    "CardRevealed": ("game", "the game accepted a pick and turned the card face up"),
+    "PickRejected": ("game", "an illegal pick (off the board, face up, matched, third card), with the reason"),
+    "CardObserved": ("participant (intended) / game (first pick)", "the card the user looks at before the second pick"),
+    "SuggestionRequested": ("game", "the state (thesis 4.1), observed and matching card, covered cards: the learner must act"),
+    "SuggestionMade": ("learner", "the composite action (0..87), how it was chosen, epsilon/alpha/psi, its target card"),
+    "RobotActed": ("robot", "what the robot bridge sent to which backend, and the robot's acknowledgement or failure"),
+    "SuggestionPerceived": ("participant (simulated)", "what the simulated user made of it: considered, consistent, candidate set"),
+    "WrongSuggestionPressed": ("board (human study)", "the participant pressed the wrong-suggestion button: -3 and a new suggestion"),
+    "TurnResolved": ("game", "the two cards of a turn, match or miss, the time between the picks"),
+    "RewardGiven": ("learner", "the reward of a suggestion and whether it was learned from (ignored: no update)"),
+    "QUpdated": ("learner", "one Q-learning update (eq. 5.2): state, action, alpha, reward, Q before and after"),
+    "RoundEnded": ("game", "the board is clear: turns and matches of the round"),
+    "CombineRequested": ("experimenter / any client", "profile and merge these policies or recordings (algorithms 3, 4)"),
+    "PolicyCombined": ("combiner", "the merged policy, the rule that decided each state, the merged user information"),
+    "QuestionnaireAnswered": ("board / experimenter", "a participant's answers to a questionnaire (thesis 7.2)"),
+    "MessageRejected": ("any service", "a bus message a service refused (malformed, unknown tag, wrong session, out of order), with the reason"),
+    "SessionEnded": ("game", "the session is over, with the reason and the rounds played"),
+}
+
+_ENVELOPE = {f.name for f in msgspec.structs.fields(Event)}
+
+
+def rows() -> list[tuple[str, str, str, str]]:
+    out = []
+    for t in EVENT_TYPES:
+        tag = tag_of(t)
+        publisher, meaning = CATALOGUE[tag]
+        fields = ", ".join(f.name for f in msgspec.structs.fields(t) if f.name not in _ENVELOPE)
+        out.append((tag, publisher, meaning, fields))
+    return out
+
+
+def markdown() -> str:
+    lines = ["| event | published by | meaning | fields (besides the envelope) |", "|---|---|---|---|"]
+    lines += [f"| `{tag}` | {pub} | {meaning} | {fields} |" for tag, pub, meaning, fields in rows()]
+    return "\n".join(lines)
+
+
+START, END = "<!-- catalogue:start -->", "<!-- catalogue:end -->"
+
+
+def inject(text: str) -> str:
+    """`text` (the README) with the catalogue between its markers replaced."""
+    head, rest = text.split(START, 1)
+    _, tail = rest.split(END, 1)
+    return f"{head}{START}\n{markdown()}\n{END}{tail}"
+
+
+if __name__ == "__main__":
+    import sys
+    from pathlib import Path
+
+    if sys.argv[1:2] == ["--write"]:
+        path = Path(sys.argv[2] if len(sys.argv) > 2 else "README.md")
+        path.write_text(inject(path.read_text()))
+    else:
+        print(markdown())

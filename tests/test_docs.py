@@ -1,0 +1,23 @@
+"""The README's promises: its event catalogue matches the schemas, its commands exist."""
+
+import re
+from pathlib import Path
+
+from pairplay.schemas import catalogue
+from pairplay.schemas.events import EVENT_TYPES
+from pairplay.services.cli import VERBS
+
+README = Path(__file__).resolve().parents[1] / "README.md"
+
+
+def test_every_event_is_catalogued_and_the_readme_is_current():
+    assert {t.__struct_config__.tag for t in EVENT_TYPES} == set(catalogue.CATALOGUE)
+    text = README.read_text()
+    assert catalogue.inject(text) == text, "run: python -m pairplay.schemas.catalogue --write README.md"
+
+
+def test_every_verb_the_readme_uses_exists():
+    text = README.read_text()
+    code = re.findall(r"```.*?```", text, re.DOTALL) + re.findall(r"`[^`\n]+`", text)
+    used = {verb for block in code for verb in re.findall(r"pairplay ([a-z]+)", block)}
+    assert "study" in used and used <= set(VERBS), used - set(VERBS)
