@@ -11,7 +11,9 @@ thread takes them, so no Python runs on Zenoh's receive path and a slow view
 never holds the session's BLOCK publishers back. If the view falls more than
 `capacity` samples behind, the oldest are overwritten; the view notices the gap
 in the senders' sequence numbers and says so (a view, unlike the recorder, may
-lose frames; the recording is the truth).
+lose frames; the recording is the truth). A view that joins a running session
+first asks the recorder for the log so far (the query restarting services
+use; a read, it changes nothing), so it still shows the whole session.
 
 Recording: read with replay's truncation-tolerant reader. `speed` 0 replays as
 fast as the view can draw; otherwise the envelope times are followed, `speed`
@@ -31,6 +33,8 @@ import zenoh
 from pairplay.replay.reader import read_log
 from pairplay.schemas.events import decode_event
 from pairplay.schemas.keys import parse_event_key, session_keys
+
+from .runner import fetch_log
 
 Item = tuple[object | None, str | None]
 
@@ -78,7 +82,7 @@ def recording_items(path: str | Path, *, speed: float = 0.0, session: str | None
 class LiveSource:
     """Subscribe to one session on the bus; the view's thread pulls from Zenoh's ring buffer."""
 
-    def __init__(self, bus, session: str, *, capacity: int = 100_000):
+    def __init__(self, bus, session: str, *, capacity: int = 100_000, catch_up: bool = True):
         self.session = session
         self.gaps = SequenceGaps()
         self.ended = False
@@ -86,11 +90,27 @@ class LiveSource:
         # the receive path) and never pushes back on the publishers; what it overwrites shows
         # up as a gap in the senders' sequence numbers.
         self.subscriber = bus.session.declare_subscriber(session_keys(session), zenoh.handlers.RingChannel(capacity))
+        # Subscribed first, then the recorder's log so far: a view that joins late starts
+        # from the whole session; live samples already in the log are skipped by their seq.
+        self.backlog: list = []
+        self.backlog_error = ""
+        if catch_up:
+            try:
+                self.backlog = fetch_log(bus, session, timeout_s=5.0)
+            except (msgspec.DecodeError, msgspec.ValidationError) as err:
+                self.backlog_error = f"the recorder's log of {session} does not decode ({err}); showing live events only"
 
     def items(self, stop: threading.Event, *, poll_s: float = 0.002, grace_s: float = 0.5) -> Iterator[Item]:
         """Decoded events until `stop` is set, or the session has ended and nothing more
         arrived for `grace_s` (other services may still publish their last events)."""
         idle_since = None
+        if self.backlog_error:
+            yield None, self.backlog_error
+        if self.backlog:
+            yield None, f"caught up from the recorder: {len(self.backlog)} events published before the view joined"
+        for event in self.backlog:
+            yield from self._accept(event)
+        self.backlog = []
         try:
             while not stop.is_set():
                 sample = self.subscriber.try_recv()
@@ -122,6 +142,11 @@ class LiveSource:
         if (event.session, event.source, type(event).__name__) != (parsed.session, parsed.source, parsed.tag):
             yield None, f"message on {key} says it is {type(event).__name__} from {event.source} in {event.session}"
             return
+        yield from self._accept(event)
+
+    def _accept(self, event) -> Iterator[Item]:
+        if event.seq <= self.gaps.last.get((event.session, event.source), 0):
+            return  # already shown (from the recorder's log), or a duplicate
         gap = self.gaps.check(event)
         if gap:
             yield None, gap

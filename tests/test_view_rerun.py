@@ -194,3 +194,37 @@ def test_a_real_session_on_the_bus_with_the_view_attached_gives_the_learners_q_t
     assert np.array_equal(tensor(replayed["q/table"][-1]["Tensor:data"]), learner_q)
     boards = lambda rows: [r["SegmentationImage:buffer"] for r in rows["board/cells"]]  # noqa: E731
     assert boards(replayed) == boards(live)
+
+
+def test_a_view_that_joins_a_running_session_catches_up_from_the_recorder(tmp_path):
+    from pairplay.services.recorder import Recorder
+
+    events, q = scripted_events(rounds=2, seed=12, session="late1")
+    half = len(events) // 2
+    stop = threading.Event()
+    with open_bus() as session_bus:
+        recorder = Recorder(session_bus, "late1", tmp_path / "late1.mcap")
+        recorder.start()
+        recorder_thread = threading.Thread(target=recorder.run, args=(stop,))
+        recorder_thread.start()
+        _publish(session_bus, events[:half])
+        deadline = time.monotonic() + 10
+        while recorder.writer.count < half:  # the first half is in the recorder's log
+            assert time.monotonic() < deadline
+            time.sleep(0.02)
+        with open_bus(BusOptions(listen=[], connect=[session_bus.locators()[0]])) as view_bus:
+            view = RerunView(open_stream(ViewOutput(rrd=tmp_path / "late1.rrd"))[0])
+            source = LiveSource(view_bus, "late1")
+            assert len(source.backlog) == half
+            result = {}
+            viewer = threading.Thread(target=lambda: result.update(s=drive(view, source.items(stop, grace_s=0.3))))
+            viewer.start()
+            _wait_matching(session_bus, event_key("late1", events[half].source, tag_of(type(events[half]))))
+            _publish(session_bus, events[half:])
+            viewer.join(timeout=30)
+            stop.set()
+            finish(view.rec)
+        recorder_thread.join(timeout=10)
+        recorder.close()
+    assert result["s"].events == len(events)  # each event once: the log, then live, no repeats
+    assert np.array_equal(view.model.q, q) and not view.model.q_partial
