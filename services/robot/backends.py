@@ -113,6 +113,6 @@ def open_robot(url: str, on_acted: Callable[[RobotActed], None], *,
     transport, config = make_transport(url, config)
     if not isinstance(calibration, BoardCalibration):
         calibration = load_calibration(calibration)
-    assert config.gestures is not None  # parse_robot_url always fills it
-    renderer = Renderer(Board(calibration), config.gestures, config)
+    gestures = config.gestures or GESTURE_PRESETS["furhat"]  # parse_robot_url always fills it
+    renderer = Renderer(Board(calibration), gestures, config)
     return RobotDriver(transport, renderer, config, on_acted, on_rejected).start()

@@ -83,7 +83,8 @@ class RobotBridge:
         self.thread: threading.Thread | None = None
 
     def _perform(self, suggestion: Suggestion) -> None:
-        assert self.robot is not None, "start() opens the robot before any input is handled"
+        if self.robot is None:
+            raise ValueError("the robot bridge is not running (not started, or closed)")
         self.robot.perform(suggestion)
 
     # -- publishing (two threads: the bridge's and the robot driver's) --------------------

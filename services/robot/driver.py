@@ -111,7 +111,8 @@ class RobotDriver:
         self._next_attempt = 0.0
         self._last_error = "not connected yet"
         self._held = ""  # why the next due command waits although connected ("" = it does not)
-        self._closing = False
+        self._closing = False  # the worker saw the close request
+        self._close_requested = False
         self._pending = 0
         self._idle = threading.Condition()
         self.reconnects = 0
@@ -124,7 +125,9 @@ class RobotDriver:
         return self
 
     def perform(self, suggestion: Suggestion) -> None:
-        """Queue a suggestion; ValueError (bad action code or card) before anything is queued."""
+        """Queue a suggestion; ValueError (bad action code or card, or closed) before anything is queued."""
+        if self._close_requested:
+            raise ValueError("the robot driver is closed")
         steps = self.renderer.render(suggestion.action, suggestion.observed, suggestion.target)
         with self._idle:
             self._pending += 1
@@ -141,6 +144,7 @@ class RobotDriver:
 
     def close(self, timeout: float = 5.0) -> None:
         """Send what is due, report every open suggestion, close the connection."""
+        self._close_requested = True
         self._inbox.put(("close",))
         if self._thread.is_alive():
             self._thread.join(timeout)
