@@ -35,6 +35,7 @@ import sys
 import time
 from dataclasses import dataclass
 from pathlib import Path
+from urllib.parse import quote
 
 import rerun as rr
 
@@ -115,7 +116,7 @@ def open_stream(out: ViewOutput, recording_name: str = "") -> tuple[rr.Recording
         server = rr.GrpcServerSink(bind_ip="127.0.0.1", port=out.grpc_port)
         sinks.append(server)
         rr.serve_web_viewer(web_port=out.web_port, open_browser=False, connect_to=server.uri)
-        where.append(f"web viewer: http://127.0.0.1:{out.web_port}/?url={server.uri}"
+        where.append(f"web viewer: http://127.0.0.1:{out.web_port}/?url={quote(server.uri, safe='')}"
                      f" (data on 127.0.0.1:{out.grpc_port} only; the page server listens on all interfaces)")
     if not sinks:
         raise ValueError("the view needs an output: an .rrd path, --serve or --spawn")
