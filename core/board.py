@@ -36,11 +36,12 @@ def deal(u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     if u.shape[-1] != N_CARDS:
         raise ValueError(f"a deal needs {N_CARDS} draws per game, got {u.shape[-1]}")
     order = np.argsort(u, axis=-1, kind="stable")
+    rows = np.arange(order.shape[0])[:, None]
     faces = np.empty(order.shape, dtype=np.int8)
-    np.put_along_axis(faces, order, np.broadcast_to(_FACE_OF_PLACE, order.shape), axis=-1)
+    faces[rows, order] = _FACE_OF_PLACE
     partner = np.empty(order.shape, dtype=np.int64)
-    np.put_along_axis(partner, order[:, 0::2], order[:, 1::2], axis=-1)
-    np.put_along_axis(partner, order[:, 1::2], order[:, 0::2], axis=-1)
+    partner[rows, order[:, 0::2]] = order[:, 1::2]
+    partner[rows, order[:, 1::2]] = order[:, 0::2]
     return faces, partner
 
 

@@ -65,7 +65,7 @@ def psi_round_start(config: LearnerConfig, round_index):
 def greedy(q: np.ndarray, u_tie: np.ndarray) -> np.ndarray:
     """argmax over the last axis, ties broken by the draw: the floor(u*n)-th tied action."""
     best = np.argmax(q, axis=-1)
-    ties = q == np.take_along_axis(q, best[..., None], -1)
+    ties = q == q.max(axis=-1, keepdims=True)
     n = np.count_nonzero(ties, axis=-1)
     several = n > 1
     if several.any():  # only tied rows pay for the cumulative count (int16: n <= 88)

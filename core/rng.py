@@ -1,18 +1,22 @@
 """Per-game, per-role streams of uniform numbers (the only randomness in core/).
 
-Rule: every game owns three independent streams, one per role that decides
-something at random: "deal" (the game: 18 draws per round, the shuffle), "agent"
-(the learner: DRAWS_PER_SUGGESTION per suggestion) and "user" (the simulated
-participant: DRAWS_PER_TURN per turn); a fourth, "snapshot", breaks the ties of
-greedy policies read off a learner during a study, outside the game. A role draws the same count for every
-event whatever branch it then takes, so a game's outcome depends only on its
-seed: alone on the bus (a batch of one, each role in its own process) or stepped
-together with thousands of games in the in-process study, it is the same game.
+Rule: every game owns independent streams, one per role that decides something
+at random: "deal" (the game: 18 draws per round, the shuffle), "agent" (the
+learner: DRAWS_PER_SUGGESTION per suggestion), "user" (the simulated
+participant: DRAWS_PER_TURN per turn) and "snapshot" (ties of greedy policies
+read off a learner during a study, outside the game). A role draws the same
+count for every event whatever branch it then takes, so a game's outcome
+depends only on its seed: alone on the bus (a batch of one, each role in its own
+process) or stepped together with thousands of games in the in-process study,
+it is the same game.
 
-Seeds: `game_seed(seed, persona, game)` hashes the study seed, the persona's name
-and the game's index through numpy's SeedSequence; each role spawns its child by
-a fixed key. Draws come from PCG64 in blocks, so stepping a batch costs one
-array index per draw, not one Python call per game.
+Generator: SplitMix64 (Steele, Lea and Flood, OOPSLA 2014), the generator that
+seeds Java's SplittableRandom and xoshiro: draw n of a stream is
+mix(key + (n + 1) * 0x9E3779B97F4A7C15), a pure function of the stream's key
+and the draw's index. So a batch of streams is a few uint64 array operations
+per draw (no per-game Python loop, no buffers), and skipping ahead is adding
+to a counter (a restarted service catches up with its log in O(1)). Keys come
+from numpy's SeedSequence hashing of (game seed, role), 64 bits each.
 """
 
 from __future__ import annotations
@@ -24,6 +28,10 @@ import numpy as np
 
 ROLES = ("deal", "agent", "user", "snapshot")
 _ROLE_KEY = {role: i for i, role in enumerate(ROLES)}
+_GAMMA = np.uint64(0x9E3779B97F4A7C15)
+_M1, _M2 = np.uint64(0xBF58476D1CE4E5B9), np.uint64(0x94D049BB133111EB)
+_S30, _S27, _S31, _S11 = (np.uint64(x) for x in (30, 27, 31, 11))
+_TO_UNIT = 2.0 ** -53
 
 
 def game_seed(seed: int, persona: str, game: int) -> int:
@@ -33,73 +41,58 @@ def game_seed(seed: int, persona: str, game: int) -> int:
     return int(state[0]) << 32 | int(state[1])
 
 
-class UniformStream:
-    """Uniform [0, 1) draws for a batch of games, one PCG64 per game and role."""
+def stream_key(seed: int, role: str) -> int:
+    """The 64-bit SplitMix64 key of one game's stream for one role."""
+    if role not in _ROLE_KEY:
+        raise ValueError(f"unknown role {role!r}; roles are {ROLES}")
+    s = int(seed) & 0xFFFFFFFFFFFFFFFF
+    return int(np.random.SeedSequence([s >> 32, s & 0xFFFFFFFF, _ROLE_KEY[role]]).generate_state(1, np.uint64)[0])
 
-    def __init__(self, seeds: Sequence[int], role: str, block: int = 1024):
-        if role not in _ROLE_KEY:
-            raise ValueError(f"unknown role {role!r}; roles are {ROLES}")
+
+def splitmix64(key: np.ndarray, index: np.ndarray) -> np.ndarray:
+    """Uniform [0, 1) draw number `index` (0, 1, ...) of the stream with `key` (uint64 arrays)."""
+    z = key + (index + np.uint64(1)) * _GAMMA
+    z = (z ^ (z >> _S30)) * _M1
+    z = (z ^ (z >> _S27)) * _M2
+    z = z ^ (z >> _S31)
+    return (z >> _S11).astype(np.float64) * _TO_UNIT
+
+
+class UniformStream:
+    """Uniform [0, 1) draws for a batch of games, one SplitMix64 stream per game and role."""
+
+    def __init__(self, seeds: Sequence[int], role: str):
         self.role = role
-        self._gens = [
-            np.random.Generator(np.random.PCG64(np.random.SeedSequence(
-                [int(s) >> 32, int(s) & 0xFFFFFFFF, _ROLE_KEY[role]])))
-            for s in seeds
-        ]
-        self._block = int(block)
-        self._buf = np.empty((len(self._gens), self._block))
-        for i, g in enumerate(self._gens):
-            self._buf[i] = g.random(self._block)
-        self._pos = np.zeros(len(self._gens), dtype=np.int64)
-        self._consumed = np.zeros(len(self._gens), dtype=np.int64)
-        # While every game has drawn the same count (the lockstep case), draws
-        # are one slice of the buffer instead of a gather.
-        self._aligned = True
+        self._key = np.array([stream_key(s, role) for s in seeds], dtype=np.uint64)
+        self._pos = np.zeros(len(self._key), dtype=np.uint64)
 
     @property
     def n_games(self) -> int:
-        return len(self._gens)
+        return len(self._key)
 
     @property
     def drawn(self) -> np.ndarray:
-        """Draws consumed so far, per game (kept for restarts and checks)."""
-        return self._consumed + self._pos
-
-    def _refill(self, games: np.ndarray) -> None:
-        for i in games:
-            rest = self._buf[i, self._pos[i]:].copy()
-            self._buf[i, :rest.size] = rest
-            self._buf[i, rest.size:] = self._gens[i].random(self._block - rest.size)
-            self._consumed[i] += self._pos[i]
-            self._pos[i] = 0
+        """Draws consumed so far, per game."""
+        return self._pos.astype(np.int64)
 
     def take(self, k: int, games: np.ndarray | None = None) -> np.ndarray:
         """The next `k` draws of each game (or of `games`, an index array): shape (n, k)."""
-        if k > self._block:
-            raise ValueError(f"cannot take {k} draws at once (block is {self._block})")
-        if games is None and self._aligned:
-            pos = int(self._pos[0])
-            if pos + k > self._block:
-                self._refill(np.arange(self.n_games))
-                pos = 0
-            self._pos += k
-            return self._buf[:, pos:pos + k].copy()
-        idx = np.arange(self.n_games) if games is None else np.asarray(games)
-        if idx.size != self.n_games:
-            self._aligned = False
-        short = idx[self._pos[idx] + k > self._block]
-        if short.size:
-            self._refill(short)
-        out = self._buf[idx[:, None], self._pos[idx, None] + np.arange(k)]
-        self._pos[idx] += k
+        offsets = np.arange(k, dtype=np.uint64)
+        if games is None:
+            out = splitmix64(self._key[:, None], self._pos[:, None] + offsets)
+            self._pos += np.uint64(k)
+            return out
+        idx = np.asarray(games)
+        out = splitmix64(self._key[idx, None], self._pos[idx, None] + offsets)
+        self._pos[idx] += np.uint64(k)
         return out
 
     def skip(self, n_draws: int, games: np.ndarray | None = None) -> None:
         """Fast-forward by `n_draws` (a restarted service catches up with its log)."""
-        left = int(n_draws)
-        while left > 0:
-            step = min(left, self._block)
-            self.take(step, games)
-            left -= step
+        if games is None:
+            self._pos += np.uint64(n_draws)
+        else:
+            self._pos[np.asarray(games)] += np.uint64(n_draws)
 
 
 def _select_table() -> np.ndarray:

@@ -20,9 +20,9 @@ def test_streams_are_independent_per_role_and_skip_is_take():
     b.skip(10_000)
     for _ in range(10):
         a.take(1000)  # a has drawn 10,007 too
-    assert (a.take(3) == b.take(3)).all() and (a.drawn == 10_010).all() and (b.drawn == 10_010).all()
     with pytest.raises(ValueError, match="role"):
         UniformStream([1], "dealer")
+    assert (a.take(3) == b.take(3)).all() and (a.drawn == 10_010).all() and (b.drawn == 10_010).all()
 
 
 def test_streams_give_each_game_its_own_numbers_whatever_the_batch():

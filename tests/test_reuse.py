@@ -12,7 +12,7 @@ N = 20_000
 
 def reuse_learner(**config):
     bias = np.full(24, 7)
-    return Learner(N, UniformStream(range(N), "agent", block=64), LearnerConfig(**config), mode="reuse", bias=bias)
+    return Learner(N, UniformStream(range(N), "agent"), LearnerConfig(**config), mode="reuse", bias=bias)
 
 
 def bias_share(learner, round_index=0):
@@ -50,7 +50,7 @@ def test_the_last_rounds_use_the_new_policy_alone():
 
 def test_psi_can_also_fall_round_after_round_as_in_the_human_study():
     config = LearnerConfig.human_phase2(5)
-    learner = Learner(N, UniformStream(range(N), "agent", block=64), config, mode="reuse", bias=np.full(24, 7))
+    learner = Learner(N, UniformStream(range(N), "agent"), config, mode="reuse", bias=np.full(24, 7))
     starts = []
     for r in range(5):
         learner.start_round(np.full(N, r))

@@ -73,7 +73,7 @@ def test_greedy_policy_is_seeded():
 
 
 def test_learner_explores_with_epsilon_and_learns_with_alpha():
-    stream = UniformStream(range(2000), "agent", block=64)
+    stream = UniformStream(range(2000), "agent")
     learner = Learner(2000, stream, LearnerConfig())
     learner.q[:, 3, 10] = 1.0
     actions, how = learner.suggest(np.full(2000, 3), np.zeros(2000, dtype=int))  # epsilon 0.9
