@@ -15,6 +15,7 @@ import sys
 # name -> module providing bench_rows(quick)
 SOURCES: dict[str, str] = {
     "core": "pairplay.services.bench_core",
+    "view": "pairplay.services.view_bench",
 }
 
 
