@@ -126,6 +126,8 @@ class RobotBridge:
     def run(self, stop: threading.Event) -> None:
         while not stop.is_set() and not self.logic.done:
             self.step()
+        while not self.logic.done and self.step(timeout_s=0.0):
+            pass  # stopped from outside: what already arrived is still performed and reported
         self.close()
 
     def run_in_thread(self, stop: threading.Event) -> threading.Thread:

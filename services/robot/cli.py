@@ -7,7 +7,7 @@ performs those action codes once each (observed and target cards from
 --observed/--target) and prints what happened: a check of the connection,
 the gesture names and the calibration before a study. The same three robot
 options (--robot, --robot-config, --calibration) are what `pairplay session`
-takes (add_robot_arguments / bridge_from_args).
+takes (add_robot_arguments, check_robot_args, bridge_from_args).
 """
 
 from __future__ import annotations
@@ -17,7 +17,7 @@ import logging
 import threading
 
 from ..bus import Bus, add_bus_arguments, options_from_args, stop_on_signals
-from .backends import FORMS, load_robot_config, open_robot
+from .backends import FORMS, load_robot_config, open_robot, parse_robot_url
 from .bridge import RobotBridge
 from .calibration import CalibrationError, load_calibration
 from .driver import Suggestion
@@ -29,6 +29,12 @@ def add_robot_arguments(p: argparse.ArgumentParser) -> None:
                    help=f"robot backend: {FORMS} (default: virtual, no hardware)")
     g.add_argument("--robot-config", metavar="FILE", help="RobotConfig JSON: gesture names, texts, timings")
     g.add_argument("--calibration", metavar="FILE", help="board calibration JSON (default: the packaged one)")
+
+
+def check_robot_args(args: argparse.Namespace) -> None:
+    """Refuse a bad --robot URL, robot config or calibration before a session starts (ValueError)."""
+    parse_robot_url(args.robot, load_robot_config(args.robot_config))
+    load_calibration(args.calibration)
 
 
 def bridge_from_args(bus: Bus, session: str, args: argparse.Namespace) -> RobotBridge:
