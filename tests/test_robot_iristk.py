@@ -16,6 +16,7 @@ from pairplay.core.actions import code_of_parts
 from pairplay.core.geometry import card_col, card_row
 from pairplay.services.robot import open_robot
 from pairplay.services.robot.calibration import load_calibration
+from pairplay.services.robot.transport import Wire
 from pairplay.services.robot.iristk_protocol import (
     BadFrame, EventFrame, FrameReader, Line, NameFilter, event_frame, event_time, make_event,
 )
@@ -280,3 +281,17 @@ def test_the_brokers_word_is_information_events_go_after_the_wait(stage):
     assert broker.wait_for(lambda b: [e.name for e in b.events] == ["action.speech"])
     assert driver.wait_idle(5)
     assert collector.acted[0].outcome == "unacknowledged" and collector.acted[0].commands
+
+
+def test_a_broker_filter_that_proved_wrong_holds_nothing_again(stage):
+    broker, furhat, collector, robot = stage
+    furhat.close()
+    assert broker.wait_for(lambda b: len(b.clients) == 0)
+    config = msgspec.structs.replace(FAST, iristk_subscriber_wait_s=0.2, ack_timeout_s=0.3)
+    driver = robot(config=config)
+    gaze = Wire(b"", "", (), "action.gaze")
+    assert broker.wait_for(lambda b: ("pairplay", "monitor.**") in b.subscribes)
+    assert driver.transport.ready(gaze)  # the broker says nobody listens: it would be held
+    driver.perform(suggestion(EXACT, seq=1))
+    assert driver.wait_idle(5)  # held for the wait, then sent anyway
+    assert driver.transport.ready(gaze) == ""  # that filter is not trusted again

@@ -12,9 +12,10 @@ Leaving writes `CLOSE`. The broker relays an event only to clients subscribed
 at that moment and keeps nothing, so while its latest SUBSCRIBE line says that
 no other client wants an event (the robot has not joined yet, or not again after
 a broker restart), that event is held back, in order, until one does, for at
-most RobotConfig.iristk_subscriber_wait_s (then it goes anyway: the broker's
-word is information, and a broker whose SUBSCRIBE lines mean something else
-must not silence the robot); before any SUBSCRIBE line, we send. Every frame from the broker that cannot be read is
+most RobotConfig.iristk_subscriber_wait_s (then it goes anyway, and that filter
+is not trusted again until the broker sends another: the broker's word is
+information, and a broker whose SUBSCRIBE lines mean something else must not
+silence or slow the robot); before any SUBSCRIBE line, we send. Every frame from the broker that cannot be read is
 reported (Rejected) and skipped; the connection goes on.
 """
 
@@ -52,6 +53,7 @@ class IrisTKTransport:
         self._sock: socket.socket | None = None
         self._lock = threading.Lock()
         self._holding: tuple[Wire, float] | None = None  # the wire held back, since when
+        self._distrusted: str | None = None  # a broker filter that proved wrong once: no more holding
 
     # -- encoding -------------------------------------------------------------------------
     def encode(self, command: Command, command_id: str, time_ns: int) -> Wire:
@@ -79,16 +81,18 @@ class IrisTKTransport:
 
     def ready(self, wire: Wire) -> str:
         spec = self.broker_filter
-        if spec is None or NameFilter(spec).matches(wire.name):
+        if spec is None or spec == self._distrusted or NameFilter(spec).matches(wire.name):
             self._holding = None
             return ""
         now = time.monotonic()
         if self._holding is None or self._holding[0] is not wire:
             self._holding = (wire, now)
         if now - self._holding[1] >= self.config.iristk_subscriber_wait_s:
-            log.warning("broker %s: still no subscriber for %s after %.1f s (filter %r); sending anyway",
+            log.warning("broker %s: still no subscriber for %s after %.1f s (filter %r); sending anyway,"
+                        " and not holding again until the broker's filter changes",
                         self.url, wire.name, self.config.iristk_subscriber_wait_s, spec)
             self._holding = None
+            self._distrusted = spec
             return ""
         return f"no client of the broker subscribes to {wire.name} (broker's filter {spec!r})"
 

@@ -14,8 +14,9 @@ events without one), never a JSON null (omit the field instead), and
 
 NameFilter (iristk.util.NameFilter, as this project reads it): event names are
 dot-separated; `*` matches within one segment, `**` any run of characters
-including dots; alternatives are separated by `;`; a term starting with `!`
-excludes. A name passes if it matches no excluding term and some including term, or
+including dots; alternatives are separated by `;` (whitespace is taken as a
+separator too, to be lenient with a broker that lists them so); a term
+starting with `!` excludes. A name passes if it matches no excluding term and some including term, or
 there are only excluding terms; an empty filter passes nothing (the broker's
 SUBSCRIBE with no subscribers).
 """
@@ -150,7 +151,7 @@ class NameFilter:
 
     def __init__(self, spec: str) -> None:
         self.spec = spec
-        terms = [t.strip() for t in spec.split(";") if t.strip()]
+        terms = [t for t in re.split(r"[;\s]+", spec) if t]
         self._include = [_compile(t) for t in terms if not t.startswith("!")]
         self._exclude = [_compile(t[1:]) for t in terms if t.startswith("!")]
 
