@@ -89,15 +89,15 @@ def profiles(keys: list[str], names: dict[str, str], infos: list, features: list
     left.bar(x + 0.2, [100 * i.head for i in infos], 0.4, label="head incompatibility %")
     for xi, info in zip(x, infos):
         left.text(xi, 103, ("S" if info.facial else "-") + ("G" if info.gaze else "-"), ha="center", fontsize=9)
-    left.set_ylim(0, 112)
+    left.set_ylim(0, 128)
     left.set_xticks(x, [names.get(k, k) for k in keys], rotation=25, ha="right")
     left.set_title("extracted user information (S: smile used, G: gaze used)")
-    left.legend(frameon=False, fontsize=8, loc="upper left", bbox_to_anchor=(0, 0.97))
+    left.legend(frameon=False, fontsize=8, loc="upper left", ncol=2)
     feats = np.array(features)
     for j, label in enumerate(("focus", "memory", "hearing", "sight")):
         right.bar(x + (j - 1.5) * 0.2, feats[:, j], 0.2, label=label)
     right.set_xticks(x, [names.get(k, k) for k in keys], rotation=25, ha="right")
-    right.set_ylim(0, 6.5)
+    right.set_ylim(0, 7.2)
     right.set_title("persona features (appendix A, 1..6)")
     right.legend(frameon=False, fontsize=8, ncol=4, loc="upper left")
     fig.tight_layout()
