@@ -24,8 +24,8 @@ def stage():
     servers, drivers = [], []
     collector = Collector()
 
-    def robot(key: str = "", server_key: str = "", config=FAST):
-        server = FurhatRealtimeServer(key=server_key).start()
+    def robot(key: str = "", server_key: str = "", config=FAST, answers_auth: bool = True):
+        server = FurhatRealtimeServer(key=server_key, answers_auth=answers_auth).start()
         servers.append(server)
         if key:
             config = msgspec.structs.replace(config, realtime_key=key)
@@ -62,6 +62,24 @@ def test_a_refused_key_fails_the_suggestion_with_the_reason(stage):
     (acted,) = collector.acted
     assert acted.outcome == "failed" and "refused access" in acted.error and acted.commands == []
     assert server.requests == []  # nothing reached the robot without access
+
+
+def test_without_a_key_the_client_does_not_wait_for_the_auth_answer(stage):
+    collector, robot = stage
+    server, driver = robot(answers_auth=False)
+    driver.perform(suggestion(EXACT))
+    assert driver.wait_idle(5)
+    assert server.auths == [True] and collector.acted[0].outcome == "done"
+
+
+def test_a_robot_that_wants_a_key_we_lack_is_recorded_with_the_reason(stage):
+    collector, robot = stage
+    server, driver = robot(server_key="s3cret", config=msgspec.structs.replace(FAST, ack_timeout_s=0.3))
+    driver.perform(suggestion(EXACT))
+    assert driver.wait_idle(5)
+    (acted,) = collector.acted
+    assert acted.outcome in ("unacknowledged", "failed") and "refused access" in acted.error
+    assert server.requests == []
 
 
 @pytest.mark.parametrize("family", list(FAMILIES))

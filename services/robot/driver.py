@@ -4,7 +4,9 @@ Rule: one worker thread owns the connection and writes every command exactly
 once, in arrival order, at its due time; a command counts as sent when the write
 returned, and is never written again (each carries a unique id). When the robot
 is unreachable, due commands wait and the worker reconnects with exponential
-backoff (reconnect_min_s doubling up to reconnect_max_s); once connected the
+backoff (reconnect_min_s doubling up to reconnect_max_s; it starts again from
+the minimum only after a connection that lasted longer than the maximum, so a
+robot that accepts and drops at once is not hammered); once connected the
 backlog goes out in order. A new suggestion supersedes the previous ones: their
 later steps (the rest of a head turn) are cancelled, their first steps are still
 delivered (nothing the learner decided is lost), and if the new one says nothing
@@ -109,6 +111,7 @@ class RobotDriver:
         self._ever_connected = False
         self._backoff = config.reconnect_min_s
         self._next_attempt = 0.0
+        self._connected_at = 0.0
         self._last_error = "not connected yet"
         self._held = ""  # why the next due command waits although connected ("" = it does not)
         self._closing = False  # the worker saw the close request
@@ -242,11 +245,15 @@ class RobotDriver:
         log.debug("robot reply %s (%s) matches no open suggestion", reply.wire_name, reply.ref)
 
     def _drop(self, reason: str) -> None:
+        now = time.monotonic()
         self._connected = False
         self._held = ""
         self._last_error = reason
         self.transport.close()
-        self._next_attempt = time.monotonic() + self._backoff
+        if now - self._connected_at > self.config.reconnect_max_s:
+            self._backoff = self.config.reconnect_min_s  # it was a good connection: start again
+        self._next_attempt = now + self._backoff
+        self._backoff = min(self._backoff * 2, self.config.reconnect_max_s)
 
     def _connect(self) -> None:
         self._generation += 1
@@ -259,7 +266,7 @@ class RobotDriver:
             self._backoff = min(self._backoff * 2, self.config.reconnect_max_s)
             return
         self._connected = True
-        self._backoff = self.config.reconnect_min_s
+        self._connected_at = time.monotonic()  # the backoff restarts only if this connection lasts
         if self._ever_connected:
             self.reconnects += 1
             for perf in self._active:
@@ -319,7 +326,9 @@ class RobotDriver:
             elif not perf.outstanding:
                 self._finish(perf, "done" if perf.promised else "sent" if perf.steps else "nothing")
             elif now - perf.last_send > self.config.ack_timeout_s:
-                self._finish(perf, "unacknowledged", f"no {perf.outstanding[0][1]} within {self.config.ack_timeout_s:g} s")
+                lost = "" if self._connected else f" (connection lost: {self._last_error})"
+                self._finish(perf, "unacknowledged",
+                             f"no {perf.outstanding[0][1]} within {self.config.ack_timeout_s:g} s{lost}")
 
     def _finish(self, perf: _Performance, outcome: str, error: str = "") -> None:
         self._active.remove(perf)

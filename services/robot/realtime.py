@@ -1,7 +1,9 @@
 """Furhat Realtime API client: today's Furhat robots (WebSocket, JSON with a "type").
 
-Rule: open ws://<robot>:9000/v1/events, send request.auth (with "key" when one is
-configured) and wait for response.auth with "access": true; then commands become
+Rule: open ws://<robot>:9000/v1/events and send request.auth, as the robot
+maker's own client does; with a configured key, wait for response.auth with
+"access": true (false is an error), without one go on at once (a later
+refusal ends the connection with the reason). Then commands become
   Say        request.speak.text {text, abort}
   StopSpeech request.speak.stop
   Gesture    request.gesture.start {name, intensity, duration, monitor: true}
@@ -102,6 +104,8 @@ class RealtimeTransport:
             request["key"] = self.config.realtime_key
         try:
             ws.send(json.dumps(request))
+            if not self.config.realtime_key:
+                return  # as the maker's client does, ask; without a key, do not wait (a refusal ends the link)
             while True:
                 raw = ws.recv(timeout=OPEN_TIMEOUT_S)
                 message = _object(raw)
@@ -124,6 +128,10 @@ class RealtimeTransport:
                     excerpt = raw[:200] if isinstance(raw, str) else repr(raw[:60])
                     deliver(Rejected(generation, "frame is not a JSON object with a string \"type\"", excerpt))
                     continue
+                if message["type"] == "response.auth" and message.get("access") is not True:
+                    reason = f"robot refused access (response.auth {json.dumps(message)[:200]})"
+                    ws.close()
+                    break
                 kind = REPLIES.get(message["type"])
                 if kind is not None:
                     ref = message.get("request_id")

@@ -2,8 +2,9 @@
 
 Rule: a WebSocket server on /v1/events (other paths: HTTP 404). JSON text frames
 with a "type". request.auth is answered with response.auth {access, scope}
-(access only with the right "key" when the robot has one); before access, any
-other request is ignored. Then:
+(access only with the right "key" when the robot has one; `answers_auth=False`
+stands for a robot that grants access silently); before access, any other
+request is ignored. Then:
   request.speak.text    response.speak.start, and after speech_s response.speak.end
                         {aborted: false}; "abort": true ends the current speech
                         at once with response.speak.end {aborted: true}
@@ -30,8 +31,8 @@ NUMBERS = {"request.attend.location": ("x", "y", "z"), "request.face.headpose": 
 
 
 class FurhatRealtimeServer:
-    def __init__(self, key: str = "", speech_s: float = 0.05) -> None:
-        self.key, self.speech_s = key, speech_s
+    def __init__(self, key: str = "", speech_s: float = 0.05, answers_auth: bool = True) -> None:
+        self.key, self.speech_s, self.answers_auth = key, speech_s, answers_auth
         self.requests: list[dict] = []  # every well-formed request after auth, in order
         self.bad: list[str] = []
         self.auths: list[bool] = []
@@ -93,8 +94,9 @@ class FurhatRealtimeServer:
                 if message["type"] == "request.auth":
                     authorised = not self.key or message.get("key") == self.key
                     self._note("auths", authorised)
-                    self._respond(connection, message, "response.auth", access=authorised,
-                                  scope="all" if authorised else "none")
+                    if self.answers_auth:
+                        self._respond(connection, message, "response.auth", access=authorised,
+                                      scope="all" if authorised else "none")
                 elif not authorised:
                     self._note("bad", f"{message['type']} before access")
                 else:
