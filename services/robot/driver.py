@@ -112,6 +112,7 @@ class RobotDriver:
         self._backoff = config.reconnect_min_s
         self._next_attempt = 0.0
         self._connected_at = 0.0
+        self._dropped_at = 0.0
         self._last_error = "not connected yet"
         self._held = ""  # why the next due command waits although connected ("" = it does not)
         self._closing = False  # the worker saw the close request
@@ -247,6 +248,7 @@ class RobotDriver:
     def _drop(self, reason: str) -> None:
         now = time.monotonic()
         self._connected = False
+        self._dropped_at = now
         self._held = ""
         self._last_error = reason
         self.transport.close()
@@ -326,7 +328,7 @@ class RobotDriver:
             elif not perf.outstanding:
                 self._finish(perf, "done" if perf.promised else "sent" if perf.steps else "nothing")
             elif now - perf.last_send > self.config.ack_timeout_s:
-                lost = "" if self._connected else f" (connection lost: {self._last_error})"
+                lost = f" (connection lost since: {self._last_error})" if self._dropped_at > perf.last_send else ""
                 self._finish(perf, "unacknowledged",
                              f"no {perf.outstanding[0][1]} within {self.config.ack_timeout_s:g} s{lost}")
 
