@@ -66,3 +66,16 @@ def test_pairplay_robot_try_performs_codes_and_refuses_bad_options(capsys):
     assert "unknown backend" in capsys.readouterr().out
     assert main(["robot", "--try", "1", "--calibration", "/nonexistent.json"]) == 2
     assert "cannot read calibration" in capsys.readouterr().out
+
+
+def test_robot_none_means_no_bridge():
+    import argparse
+
+    from pairplay.services.robot.cli import add_robot_arguments, bridge_from_args, check_robot_args
+
+    parser = argparse.ArgumentParser()
+    add_robot_arguments(parser)
+    args = parser.parse_args(["--robot", "none"])
+    check_robot_args(args)
+    assert bridge_from_args(None, "s", args) is None
+    assert parser.parse_args([]).robot == "virtual"

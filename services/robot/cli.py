@@ -22,23 +22,29 @@ from .bridge import RobotBridge
 from .calibration import CalibrationError, load_calibration
 from .driver import Suggestion
 
+NO_ROBOT = "none"  # --robot none: a session without a robot bridge (simulated participants need none)
+
 
 def add_robot_arguments(p: argparse.ArgumentParser) -> None:
     g = p.add_argument_group("robot")
     g.add_argument("--robot", default="virtual", metavar="URL",
-                   help=f"robot backend: {FORMS} (default: virtual, no hardware)")
+                   help=f"robot backend: {FORMS}, or none (default: virtual, no hardware)")
     g.add_argument("--robot-config", metavar="FILE", help="RobotConfig JSON: gesture names, texts, timings")
     g.add_argument("--calibration", metavar="FILE", help="board calibration JSON (default: the packaged one)")
 
 
 def check_robot_args(args: argparse.Namespace) -> None:
     """Refuse a bad --robot URL, robot config or calibration before a session starts (ValueError)."""
+    if args.robot == NO_ROBOT:
+        return
     parse_robot_url(args.robot, load_robot_config(args.robot_config))
     load_calibration(args.calibration)
 
 
-def bridge_from_args(bus: Bus, session: str, args: argparse.Namespace) -> RobotBridge:
-    """A started RobotBridge for a session; ValueError (with the reason) on a bad option or file."""
+def bridge_from_args(bus: Bus, session: str, args: argparse.Namespace) -> RobotBridge | None:
+    """A started RobotBridge for a session (None for --robot none); ValueError on a bad option or file."""
+    if args.robot == NO_ROBOT:
+        return None
     config = load_robot_config(args.robot_config)
     calibration = load_calibration(args.calibration)
     return RobotBridge(bus, session, args.robot, config=config, calibration=calibration).start()
@@ -57,6 +63,9 @@ def run(args: argparse.Namespace) -> int:
     logging.basicConfig(level=logging.INFO, format="%(levelname)s %(name)s: %(message)s")
     if bool(args.session) == bool(args.try_codes):
         print("pairplay robot: give either --session ID (serve a session) or --try CODES (try the robot)")
+        return 2
+    if args.robot == NO_ROBOT:
+        print("pairplay robot: --robot none leaves nothing to do")
         return 2
     try:
         return _try(args) if args.try_codes else _serve(args)
