@@ -55,7 +55,7 @@ class BoardCalibration(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
 
     `cards[i]` is the centre of card i = row * 6 + col (rows top to bottom and
     columns left to right as the participant sees the board). `rest` is where
-    the robot looks between suggestions (the participant's face).
+    a head turn ends (the participant's face).
     """
 
     cards: list[Point]
