@@ -35,6 +35,7 @@ class LearnerLogic:
     name = "learner"
     consumes = frozenset({"SessionStarted", "SuggestionRequested", "SuggestionPerceived", "TurnResolved",
                           "SessionEnded"})
+    by_tag = True  # every ordering between keys is handled (NotYet), so subscribe to just these
     sources = {"SessionStarted": frozenset({"game"}), "SuggestionRequested": frozenset({"game"}),
                "TurnResolved": frozenset({"game"}), "SessionEnded": frozenset({"game"}),
                "SuggestionPerceived": frozenset({"participant"})}
@@ -99,14 +100,15 @@ class LearnerLogic:
         if r.round != self.round_started:
             self.learner.start_round(np.array([r.round]))
             self.round_started = r.round
+            # per-round schedule values, for the record (computed once a round: latency)
+            self.epsilon, self.alpha = float(epsilon_at(self.schedule, r.round)), float(alpha_at(self.schedule, r.round))
         rounds = np.array([r.round])
         psi = float(self.learner.psi[0])
         actions, how = self.learner.suggest(np.array([r.state]), rounds)
         action = int(actions[0])
         self.open = ev.SuggestionMade(
             round=r.round, turn=r.turn, attempt=r.attempt, state=r.state, action=action,
-            chosen_by=HOW_NAMES[How(int(how[0]))], epsilon=float(epsilon_at(self.schedule, r.round)),
-            alpha=float(alpha_at(self.schedule, r.round)), psi=psi if self.mode == "reuse" else 0.0,
+            chosen_by=HOW_NAMES[How(int(how[0]))], epsilon=self.epsilon, alpha=self.alpha, psi=psi if self.mode == "reuse" else 0.0,
             observed=r.observed, target=r.match, action_name=ACTION_NAMES[action], request_seq=r.seq)
         return out + [self.open]
 
@@ -144,6 +146,6 @@ class LearnerLogic:
             self.learner.learn(np.array([o.state]), np.array([o.action]), np.array([float(reward)]),
                                np.array([True]), np.array([o.round]))
             out.append(ev.QUpdated(round=o.round, turn=o.turn, attempt=o.attempt, state=o.state, action=o.action,
-                                   alpha=float(alpha_at(self.schedule, o.round)), reward=float(reward),
+                                   alpha=o.alpha, reward=float(reward),
                                    q_before=before, q_after=float(self.learner.q[0, o.state, o.action])))
         return out

@@ -5,7 +5,9 @@ ParticipantLogic) that turns input events into output events and knows
 nothing of Zenoh or clocks. The `Driver` around it never trusts input: a
 payload that does not decode, a key that disagrees with its payload, another
 session, a sequence number not above the last one seen from that source (a
-duplicate or out-of-order message) or an input the logic refuses (`Rejected`)
+duplicate or out-of-order message; sequence numbers rise per
+source, so they are checked per key, which holds whatever order Zenoh keeps
+between keys) or an input the logic refuses (`Rejected`)
 becomes a MessageRejected event with the reason; the service goes on. An input
 that arrives before what it depends on (messages from different sources may
 overtake each other on different links) raises `NotYet`: it is kept and
@@ -30,7 +32,7 @@ import msgspec
 from pairplay.replay.fold import stream_seed  # noqa: F401  (re-exported for the services)
 from pairplay.schemas.envelope import Event, stamped
 from pairplay.schemas.events import MessageRejected, ServiceStarted, decode_event
-from pairplay.schemas.keys import parse_event_key
+from pairplay.schemas.keys import event_key, parse_event_key
 
 log = logging.getLogger("pairplay.node")
 SHELL_TAGS = frozenset({"ServiceStarted", "MessageRejected"})  # published by the shell, not the logic
@@ -50,6 +52,9 @@ class Logic(Protocol):
     consumes: frozenset[str]
     sources: dict[str, frozenset[str]]  # tag -> the only sources it is taken from (missing: any)
     done: bool
+    # optional `by_tag = True`: the logic copes with any order between keys, so its Node may
+    # subscribe to just the tags it reads (less traffic, lower latency); otherwise one
+    # subscription to the whole session keeps each source's order.
 
     def start(self) -> list[Event]: ...
 
@@ -121,13 +126,13 @@ class Driver:
                                event.source, event.seq, payload)
         if event.source == self.logic.name:
             return []  # our own publication, delivered back to us
-        last = self.last_seq.get(event.source, 0)
+        last = self.last_seq.get(key, 0)
         if event.seq <= last:
             if overlap:
                 return []
             return self.reject(f"sequence number {event.seq} from {event.source} is not above the last one seen "
-                               f"({last}): duplicate or out of order", key, event.source, event.seq, payload)
-        self.last_seq[event.source] = event.seq
+                               f"on {key} ({last}): duplicate or out of order", key, event.source, event.seq, payload)
+        self.last_seq[key] = event.seq
         return self.feed(event, key, payload)
 
     def feed(self, event: Event, key: str = "", payload: bytes = b"") -> list[Event]:
@@ -188,9 +193,10 @@ class Driver:
             for e in recorded:
                 if e.source == self.logic.name or e.session != self.session:
                     continue
-                if e.seq <= self.last_seq.get(e.source, 0):
+                key = event_key(e.session, e.source, type(e).__name__)
+                if e.seq <= self.last_seq.get(key, 0):
                     continue  # a duplicate the live service rejected then
-                self.last_seq[e.source] = e.seq
+                self.last_seq[key] = e.seq
                 out += self.feed(e)
         finally:
             self.replaying = False

@@ -1,6 +1,7 @@
 """A service on the bus: a Driver fed from a Zenoh subscription, in its own thread.
 
-Rule: a Node subscribes to its session's keys before anything else, declares
+Rule: a Node subscribes to its session's keys (or, for a logic that copes with
+any order between keys, just those of the events it reads) before anything else, declares
 its liveliness token, then asks the recorder for the session's log so far. An
 empty log is a fresh start (ServiceStarted, then the logic's first outputs);
 a non-empty one is a restart: the Driver re-feeds it (node.py) and the service
@@ -51,7 +52,7 @@ def fetch_log(bus: Bus, session: str, timeout_s: float = 5.0) -> list[Event]:
 
 class Node:
     def __init__(self, bus: Bus, logic: Logic, session: str, *, clock: Callable[[], int] = time.time_ns,
-                 resume: bool = True):
+                 resume: bool = True, inline: bool = True):
         self.bus, self.logic, self.session = bus, logic, session
         self.driver = Driver(logic, session, clock)
         self.clock = clock
@@ -60,6 +61,23 @@ class Node:
         self._overlap = 0
         self.resumed_events = 0
         self.thread: threading.Thread | None = None
+        # inline: handle each message in Zenoh's callback (under a lock), saving a thread
+        # hand-off per message (pick -> suggestion latency); before the catch-up is done,
+        # messages wait in the queue either way.
+        self.inline = inline
+        self._lock = threading.Lock()
+        self._live = False
+        self._wake = threading.Event()
+
+    def _on_message(self, key: str, payload: bytes) -> None:
+        if self.inline:
+            with self._lock:
+                if self._live:
+                    self.publish(self.driver.receive(key, payload))
+                    if self.logic.done:
+                        self._wake.set()
+                    return
+        self.queue.put((key, payload))
 
     def publish(self, events: list[Event]) -> None:
         for e in events:
@@ -67,7 +85,12 @@ class Node:
 
     def start(self, wait_for: tuple[str, ...] = (), wait_timeout_s: float = 30.0) -> None:
         """Subscribe, announce, catch up; with `wait_for`, first wait for those services' tokens."""
-        self.bus.subscribe(session_keys(self.session), lambda key, payload: self.queue.put((key, payload)))
+        if getattr(self.logic, "by_tag", False):
+            # only the tags the logic reads: Zenoh then does not even send the others here
+            for tag in sorted(self.logic.consumes):
+                self.bus.subscribe(f"{session_keys(self.session)[:-2]}*/{tag}", self._on_message)
+        else:
+            self.bus.subscribe(session_keys(self.session), self._on_message)
         self.bus.alive(alive_key(self.session, self.logic.name))
         if wait_for:
             self.wait_for(wait_for, wait_timeout_s)
@@ -84,6 +107,11 @@ class Node:
                 log.error("%s: the log and the recomputation disagree: %s", self.logic.name, m)
         else:
             self.publish(self.driver._stamp([announce]) + self.driver.start())
+        if self.inline:
+            with self._lock:
+                while self.step(0):
+                    pass
+                self._live = True
 
     def wait_for(self, services: tuple[str, ...], timeout_s: float) -> None:
         deadline = time.monotonic() + timeout_s
@@ -100,7 +128,7 @@ class Node:
     def step(self, timeout_s: float = 0.1) -> bool:
         """Handle one message (False if none came)."""
         try:
-            key, payload = self.queue.get(timeout=timeout_s)
+            key, payload = self.queue.get(timeout=timeout_s) if timeout_s > 0 else self.queue.get_nowait()
         except queue.Empty:
             return False
         overlap = self._overlap > 0
@@ -111,7 +139,10 @@ class Node:
 
     def run(self, stop: threading.Event) -> None:
         while not stop.is_set() and not self.logic.done:
-            self.step()
+            if self.inline and self._live:
+                self._wake.wait(0.1)
+            else:
+                self.step()
 
     def run_in_thread(self, stop: threading.Event) -> threading.Thread:
         self.thread = threading.Thread(target=self.run, args=(stop,), name=f"pairplay-{self.logic.name}", daemon=True)

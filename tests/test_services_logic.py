@@ -97,7 +97,8 @@ def test_pi_reuse_and_fixed_policies_run_and_match_the_study():
 
 
 def feed(driver, event, source="participant", seq=None):
-    seq = seq if seq is not None else driver.last_seq.get(source, 0) + 1
+    seen = [n for k, n in driver.last_seq.items() if k.split("/")[2] == source]
+    seq = seq if seq is not None else max(seen, default=0) + 1
     e = stamped(event, session="t1", source=source, seq=seq, time_ns=seq * 10**9)
     return driver.receive(event_key("t1", source, type(event).__name__), encode_event(e))
 
