@@ -295,3 +295,23 @@ def test_a_broker_filter_that_proved_wrong_holds_nothing_again(stage):
     driver.perform(suggestion(EXACT, seq=1))
     assert driver.wait_idle(5)  # held for the wait, then sent anyway
     assert driver.transport.ready(gaze) == ""  # that filter is not trusted again
+
+
+def test_a_distrusted_filter_is_believed_again_once_the_broker_changes_it(stage):
+    broker, furhat, collector, robot = stage
+    furhat.close()
+    assert broker.wait_for(lambda b: len(b.clients) == 0)
+    driver = robot(config=msgspec.structs.replace(FAST, iristk_subscriber_wait_s=0.1, ack_timeout_s=0.3))
+    gaze = Wire(b"", "", (), "action.gaze")
+    driver.perform(suggestion(EXACT, seq=1))
+    assert driver.wait_idle(5)
+    assert driver.transport.ready(gaze) == ""  # "" (nobody) proved wrong once
+    late = IrisTKFurhat(broker.port).start()  # the robot joins: the broker's filter changes ...
+    try:
+        assert broker.wait_for(lambda b: ("furhat", "action.**") in b.subscribes)
+        late.close()  # ... and it leaves again: "nobody" is believed again
+        assert broker.wait_for(lambda b: len(b.clients) == 1)
+        assert until(lambda: driver.transport.broker_filter == "")
+        assert driver.transport.ready(gaze)
+    finally:
+        late.close()

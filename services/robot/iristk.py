@@ -151,6 +151,8 @@ class IrisTKTransport:
         if isinstance(frame, Line):
             if frame.text == "SUBSCRIBE" or frame.text.startswith("SUBSCRIBE "):
                 self.broker_filter = frame.text[len("SUBSCRIBE "):]
+                if self.broker_filter != self._distrusted:
+                    self._distrusted = None  # the broker's word changed: worth believing again
                 deliver(Changed(generation))
             elif frame.text != "CONNECTED":
                 deliver(Rejected(generation, f"unknown line from the broker: {frame.text[:60]!r}", frame.text[:200]))
