@@ -10,8 +10,10 @@ sequence number or carries an impossible action or card becomes a
 MessageRejected, and the bridge goes on; so does a frame from the robot that
 cannot be read (key `robot:<backend>`). One lock serialises the two threads
 that stamp, so sequence numbers stay strictly increasing.
-After SessionEnded the bridge waits (up to `settle_s`) for the robot to report
-every open suggestion, then leaves the bus.
+After SessionEnded the bridge still takes what arrives until the bus has been
+quiet for END_QUIET_S (another service's message may overtake a learner's),
+waits (up to `settle_s`) for the robot to report every open suggestion, then
+leaves the bus.
 
 RobotActed is an observation of the world, not a function of the log: a
 replay or verify never recomputes it (the bridge is not a replayable logic).
@@ -40,6 +42,7 @@ from .driver import RobotDriver, Suggestion
 
 log = logging.getLogger("pairplay.robot.bridge")
 NAME = "robot"
+END_QUIET_S = 0.25  # after SessionEnded, stop once no message came for this long
 
 
 class BridgeLogic:
@@ -126,8 +129,10 @@ class RobotBridge:
     def run(self, stop: threading.Event) -> None:
         while not stop.is_set() and not self.logic.done:
             self.step()
-        while not self.logic.done and self.step(timeout_s=0.0):
-            pass  # stopped from outside: what already arrived is still performed and reported
+        # Messages from different services may overtake each other on their way here (a
+        # SessionEnded before the last SuggestionMade): go on until the bus is quiet.
+        while self.step(timeout_s=0.0 if stop.is_set() else END_QUIET_S):
+            pass
         self.close()
 
     def run_in_thread(self, stop: threading.Event) -> threading.Thread:
