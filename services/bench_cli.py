@@ -16,6 +16,7 @@ import sys
 SOURCES: dict[str, str] = {
     "core": "pairplay.services.bench_core",
     "view": "pairplay.services.view_bench",
+    "robot": "pairplay.services.robot.bench",
 }
 
 
