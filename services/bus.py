@@ -82,8 +82,12 @@ def options_from_args(args: argparse.Namespace) -> BusOptions:
 class Bus:
     """One Zenoh session with cached BLOCK publishers."""
 
-    def __init__(self, options: BusOptions | None = None, session: zenoh.Session | None = None):
+    def __init__(self, options: BusOptions | None = None, session: zenoh.Session | None = None,
+                 express: bool = True):
         self.options = options or BusOptions()
+        # express: each event leaves at once instead of waiting to be batched with others
+        # (an event is a decision someone waits for; throughput stays BLOCK-safe either way)
+        self.express = express
         self.session = session if session is not None else zenoh.open(self.options.to_zenoh())
         self._publishers: dict[str, zenoh.Publisher] = {}
         self._lock = threading.Lock()
@@ -96,7 +100,8 @@ class Bus:
             with self._lock:
                 pub = self._publishers.get(key)
                 if pub is None:
-                    pub = self.session.declare_publisher(key, congestion_control=zenoh.CongestionControl.BLOCK)
+                    pub = self.session.declare_publisher(key, congestion_control=zenoh.CongestionControl.BLOCK,
+                                                         express=self.express)
                     self._publishers[key] = pub
         return pub
 

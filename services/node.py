@@ -109,6 +109,8 @@ class Driver:
         `overlap`: the message may also have been folded from the log during a
         resume; an old sequence number then means "already seen", not an error.
         """
+        if key.count("/") == 3 and key.split("/", 3)[2] == self.logic.name:
+            return []  # our own publication, delivered back to us: not even decoded
         try:
             event = decode_event(payload)
         except (msgspec.DecodeError, msgspec.ValidationError) as err:

@@ -65,7 +65,7 @@ class Node:
         # hand-off per message (pick -> suggestion latency); before the catch-up is done,
         # messages wait in the queue either way.
         self.inline = inline
-        self._lock = threading.Lock()
+        self._lock = threading.RLock()  # Zenoh may deliver our own publications back on this thread
         self._live = False
         self._wake = threading.Event()
 

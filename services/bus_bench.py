@@ -1,0 +1,265 @@
+"""Bench rows of the bus, the recorder and the rebuild, each beside its raw reference.
+
+Rule: every figure is measured in this run next to the raw path it is built on,
+on the same machine, so the ratio is what to compare between machines:
+- pick -> suggestion latency across processes: the game here, the learner in
+  its own process (`pairplay run learner`); from the board's CardPicked put to
+  the SuggestionMade received (CardRevealed, CardObserved, SuggestionRequested,
+  the learner's decision, its answer), each pick made once the learner has
+  settled the previous turn (as with a person, who takes seconds a turn), vs a
+  raw Zenoh ping-pong of a 200-byte
+  payload with an echo process. Goal: p99 < 1 ms and <= 3x the raw round trip.
+- recorder events/s, 0 lost: a burst of events published here, recorded by
+  `pairplay run recorder` in its own process (decode, checks, MCAP, flush every
+  0.1 s) vs a raw subscriber process writing the payloads to MCAP. Goal >= 70k/s.
+- rebuild events/s: `rebuild_recording` on a recorded session vs a bare
+  StreamReader pass over the same file. Goal >= 200k/s.
+`python -m pairplay.services.bus_bench echo|rawrec ...` are the reference processes.
+"""
+
+from __future__ import annotations
+
+import os
+import queue
+import subprocess
+import sys
+import tempfile
+import threading
+import time
+from pathlib import Path
+
+import numpy as np
+
+from pairplay.schemas import events as ev
+from pairplay.schemas.envelope import stamped
+from pairplay.schemas.events import decode_event, encode_event
+from pairplay.schemas.keys import alive_key, event_key
+from pairplay.schemas.session import SessionConfig
+
+from .bus import Bus, BusOptions
+
+
+def _spawn(*args: str) -> subprocess.Popen:
+    return subprocess.Popen([sys.executable, "-m", *args], stdout=subprocess.PIPE, stderr=subprocess.DEVNULL,
+                            env=dict(os.environ, PYTHONUNBUFFERED="1"))
+
+
+def _wait(predicate, timeout_s: float = 30.0) -> bool:
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        if predicate():
+            return True
+        time.sleep(0.01)
+    return False
+
+
+def _stop(proc: subprocess.Popen) -> None:
+    if proc.poll() is None:
+        proc.terminate()
+        try:
+            proc.wait(5)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            proc.wait()
+
+
+def _pct(samples_s: list[float]) -> tuple[float, float]:
+    us = np.array(samples_s) * 1e6
+    return float(np.percentile(us, 50)), float(np.percentile(us, 99))
+
+
+# -- the reference processes ----------------------------------------------------------
+def echo(connect: str) -> None:
+    """Answer every bench/ping with the same payload on bench/pong."""
+    bus = Bus(BusOptions(listen=[], connect=[connect]))
+    pong = bus.publisher("bench/pong")
+    bus.subscribe("bench/ping", lambda _k, p: pong.put(p))
+    bus.alive("bench/alive/echo")
+    threading.Event().wait()
+
+
+def raw_recorder(connect: str, out: str, n: int) -> None:
+    """Write every payload under bench/raw/** to MCAP, no checks; exit after n."""
+    from mcap.writer import CompressionType, Writer
+    q: queue.Queue = queue.Queue()
+    bus = Bus(BusOptions(listen=[], connect=[connect]))
+    bus.subscribe("bench/raw/**", lambda k, p: q.put((k, p, time.time_ns())))
+    bus.alive("bench/alive/rawrec")
+    with open(out, "wb") as f:
+        w = Writer(f, compression=CompressionType.ZSTD)
+        w.start()
+        schema = w.register_schema("raw", "jsonschema", b"{}")
+        channel = w.register_channel("bench/raw", "json", schema)
+        for _ in range(n):
+            _k, p, t = q.get()
+            w.add_message(channel, t, p, t)
+        w.finish()
+    bus.close()
+
+
+# -- rows -------------------------------------------------------------------------------
+def latency_rows(turns: int) -> list[dict]:
+    from .game import GameLogic
+    from .runner import Node
+
+    session = "bench-latency"
+    config = SessionConfig(session=session, participant="human:bench", seed=1, rounds=10_000,
+                           observed_source="first-pick", ignore_rule="time", software_version="bench")
+    with Bus() as bus:
+        endpoint = bus.locators()[0]
+        echo_proc = _spawn("pairplay.services.bus_bench", "echo", endpoint)
+        learner = _spawn("pairplay", "run", "learner", "--session", session, "--connect", endpoint, "--listen",
+                         "tcp/127.0.0.1:0")
+        try:
+            pongs: queue.Queue = queue.Queue()
+            bus.subscribe("bench/pong", lambda _k, p: pongs.put(time.perf_counter()))
+            assert _wait(lambda: "bench/alive/echo" in bus.alive_now("bench/alive/*")), "echo process did not start"
+            ping = bus.publisher("bench/ping")
+            payload = b"x" * 200
+            raw = []
+            for i in range(turns + 50):
+                t = time.perf_counter()
+                ping.put(payload)
+                got = pongs.get(timeout=5)
+                if i >= 50:
+                    raw.append(got - t)
+            suggestions: queue.Queue = queue.Queue()
+            resolved: queue.Queue = queue.Queue()
+            bus.subscribe(f"pairplay/{session}/learner/SuggestionMade", lambda _k, p: suggestions.put(time.perf_counter()))
+            bus.subscribe(f"pairplay/{session}/game/TurnResolved", lambda _k, p: resolved.put(decode_event(p)))
+            rewarded: queue.Queue = queue.Queue()
+            bus.subscribe(f"pairplay/{session}/learner/RewardGiven", lambda _k, p: rewarded.put(1))
+            faces: list = []
+            bus.subscribe(f"pairplay/{session}/game/RoundStarted", lambda _k, p: faces.append(decode_event(p).faces))
+            game = Node(bus, GameLogic(config), session, resume=False)
+            stop = threading.Event()
+            game.start(wait_for=("learner",))
+            game.run_in_thread(stop)
+            ours, seq, matched, rnd, turn = [], 0, 0, 0, 0
+            pick_key = event_key(session, "board", "CardPicked")
+            clock_ns = 10**18
+            for i in range(turns + 20):
+                covered = [c for c in range(18) if not matched >> c & 1]
+                first, second = covered[0], covered[1]
+                seq += 1
+                clock_ns += 2 * 10**9  # picks 2 s apart on the board's clock: never ignored
+                t = time.perf_counter()
+                bus.put(pick_key, encode_event(stamped(ev.CardPicked(round=rnd, turn=turn, card=first),
+                                                       session=session, source="board", seq=seq, time_ns=clock_ns)))
+                got = suggestions.get(timeout=10)
+                if i >= 20:
+                    ours.append(got - t)
+                seq += 1
+                clock_ns += 2 * 10**9
+                bus.put(pick_key, encode_event(stamped(ev.CardPicked(round=rnd, turn=turn, card=second),
+                                                       session=session, source="board", seq=seq, time_ns=clock_ns)))
+                r = resolved.get(timeout=10)
+                rewarded.get(timeout=10)  # the learner has settled this turn: the next pick finds it idle
+                turn += 1
+                if r.matched:
+                    matched |= (1 << r.first) | (1 << r.second)
+                if r.round_over:
+                    rnd, turn, matched = rnd + 1, 0, 0
+            stop.set()
+        finally:
+            _stop(learner)
+            _stop(echo_proc)
+    p50, p99 = _pct(ours)
+    r50, r99 = _pct(raw)
+    return [dict(row="pick -> suggestion latency across processes, p50", value=p50, unit="us",
+                 reference="raw zenoh ping-pong between two processes (200 B), p50", reference_value=r50,
+                 ratio=p50 / r50, goal="<= 3x raw"),
+            dict(row="pick -> suggestion latency across processes, p99", value=p99, unit="us",
+                 reference="raw zenoh ping-pong between two processes (200 B), p99", reference_value=r99,
+                 ratio=p99 / r99, goal="< 1000 us and <= 3x raw")]
+
+
+def _burst(bus: Bus, key_of, n: int, session: str) -> int:
+    """Publish n valid CardPicked events; return the wall time (ns) of the first put."""
+    t0 = time.time_ns()
+    for seq in range(1, n + 1):
+        e = stamped(ev.CardPicked(round=0, turn=seq, card=seq % 18), session=session, source="participant",
+                    seq=seq, time_ns=seq)
+        bus.put(key_of(seq), encode_event(e))
+    return t0
+
+
+def recorder_rows(n: int) -> list[dict]:
+    from mcap.stream_reader import StreamReader
+    from mcap.records import Message
+
+    from pairplay.replay.reader import read_log
+
+    session = "bench-rec"
+    # a burst publisher batches (express off), for the raw path and ours alike
+    with tempfile.TemporaryDirectory() as tmp, Bus(express=False) as bus:
+        endpoint = bus.locators()[0]
+        # raw reference: a subscriber process writing payloads to MCAP
+        raw = _spawn("pairplay.services.bus_bench", "rawrec", endpoint, f"{tmp}/raw.mcap", str(n))
+        assert _wait(lambda: "bench/alive/rawrec" in bus.alive_now("bench/alive/*")), "raw recorder did not start"
+        key = "bench/raw/participant/CardPicked"
+        assert _wait(lambda: bus.publisher(key).matching_status.matching)
+        t0 = _burst(bus, lambda s: key, n, session)
+        raw.wait(60)
+        with open(f"{tmp}/raw.mcap", "rb") as f:
+            times = [r.log_time for r in StreamReader(f).records if isinstance(r, Message)]
+        raw_rate = len(times) / ((times[-1] - t0) / 1e9)
+        # ours: pairplay run recorder
+        rec = _spawn("pairplay", "run", "recorder", "--session", session, "--out", tmp, "--connect", endpoint)
+        try:
+            assert _wait(lambda: alive_key(session, "recorder") in bus.alive_now(alive_key(session, "*")))
+            key = event_key(session, "participant", "CardPicked")
+            assert _wait(lambda: bus.publisher(key).matching_status.matching)
+            t0 = _burst(bus, lambda s: key, n, session)
+            end = stamped(ev.SessionEnded(), session=session, source="game", seq=1, time_ns=0)
+            bus.put(event_key(session, "game", "SessionEnded"), encode_event(end))
+            rec.wait(60)
+        finally:
+            _stop(rec)
+        log = read_log(f"{tmp}/{session}.mcap")
+        picks = [r for r in log.events if isinstance(r.event, ev.CardPicked)]
+        lost = n - len(picks)
+        rate = len(picks) / ((picks[-1].log_time_ns - t0) / 1e9)
+    return [dict(row=f"recorder events/s sustained ({n:,} events, {lost} lost)", value=rate, unit="events/s",
+                 reference="raw subscriber process -> MCAP, no checks", reference_value=raw_rate,
+                 ratio=rate / raw_rate, goal=">= 70,000 events/s, 0 lost")]
+
+
+def rebuild_rows(rounds: int) -> list[dict]:
+    from mcap.stream_reader import StreamReader
+
+    from pairplay.replay.rebuild import rebuild_recording
+
+    from .session_cli import run_session
+
+    with tempfile.TemporaryDirectory() as tmp:
+        config = SessionConfig(session="bench-rebuild", participant="sim:ashley", persona="ashley", seed=0,
+                               rounds=rounds)
+        path = run_session(config, Path(tmp) / "bench-rebuild.mcap")
+        best_raw = best = float("inf")
+        for _ in range(3):
+            t = time.perf_counter()
+            with open(path, "rb") as f:
+                n_raw = sum(1 for _ in StreamReader(f).records)
+            best_raw = min(best_raw, time.perf_counter() - t)
+            t = time.perf_counter()
+            rebuilt = rebuild_recording(path)
+            best = min(best, time.perf_counter() - t)
+        n = rebuilt.fold.events
+    return [dict(row=f"rebuild events/s from MCAP ({n:,} events: fold + policy)", value=n / best, unit="events/s",
+                 reference=f"bare StreamReader pass over the same file ({n_raw:,} records)",
+                 reference_value=n / best_raw, ratio=best_raw / best, goal=">= 200,000 events/s")]
+
+
+def bench_rows(quick: bool = False) -> list[dict]:
+    return (latency_rows(200 if quick else 1000) + recorder_rows(20_000 if quick else 100_000)
+            + rebuild_rows(60 if quick else 300))
+
+
+if __name__ == "__main__":
+    if sys.argv[1] == "echo":
+        echo(sys.argv[2])
+    elif sys.argv[1] == "rawrec":
+        raw_recorder(sys.argv[2], sys.argv[3], int(sys.argv[4]))
+    else:
+        raise SystemExit(f"unknown reference process {sys.argv[1]!r}")
