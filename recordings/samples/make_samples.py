@@ -1,0 +1,152 @@
+"""Make the committed sample recordings (run once; the files are then frozen).
+
+Rule: samples are evidence that later versions still read old recordings
+(tests/test_replay_samples.py decodes and verifies them); never regenerate them
+to make a test pass. Three files:
+- sim-ashley.mcap: a real bus session (`pairplay session`), simulated persona
+  Ashley, seed 7, 4 rounds, with an intruder's bad input rejected on the way;
+- human-board.mcap: a human-study session (first-pick observation, the 1.5 s
+  ignore rule, a wrong-suggestion press) played by a scripted touch screen
+  through the real game and learner logics, written by the recorder's writer;
+- catalogue.mcap: one event of every type of the catalogue, RobotActed,
+  PolicyCombined and QuestionnaireAnswered included.
+
+    .venv/bin/python recordings/samples/make_samples.py recordings/samples
+"""
+
+from __future__ import annotations
+
+import sys
+import threading
+from pathlib import Path
+
+from pairplay.replay.writer import EventLogWriter
+from pairplay.schemas import events as ev
+from pairplay.schemas.envelope import stamped
+from pairplay.schemas.events import encode_event
+from pairplay.schemas.keys import alive_key, event_key
+from pairplay.schemas.robot import RobotActed
+from pairplay.schemas.session import SessionConfig
+from pairplay.services.bus import Bus, BusOptions
+from pairplay.services.game import GameLogic
+from pairplay.services.learner import LearnerLogic
+from pairplay.services.node import Driver
+from pairplay.services.session_cli import run_session
+
+
+def sim_sample(out: Path) -> None:
+    config = SessionConfig(session="sample-sim-ashley", participant="sim:ashley", persona="ashley", seed=7, rounds=4,
+                           software_version="0.1.0")
+    ready, box = threading.Event(), {}
+
+    def on_bus(bus):
+        box["bus"] = bus
+        ready.set()
+
+    t = threading.Thread(target=lambda: run_session(config, out / "sim-ashley.mcap", on_bus=on_bus,
+                                                    wait_also=("intruder",)))
+    t.start()
+    ready.wait()
+    with Bus(BusOptions(listen=[], connect=box["bus"].locators())) as intruder:
+        s = config.session
+        want = {alive_key(s, n) for n in ("recorder", "learner", "participant", "game")}
+        while not want <= intruder.alive_now(alive_key(s, "*")):
+            pass
+        intruder.put(event_key(s, "participant", "CardPicked"), b"{not json")
+        bad_pick = stamped(ev.CardPicked(round=0, turn=0, card=42), session=s, source="board", seq=1, time_ns=1)
+        intruder.put(event_key(s, "board", "CardPicked"), encode_event(bad_pick))
+        intruder.alive(alive_key(s, "intruder"))
+        t.join()
+
+
+def human_sample(out: Path) -> None:
+    config = SessionConfig(session="sample-human-board", participant="human:p01", seed=3, rounds=1,
+                           observed_source="first-pick", ignore_rule="time", software_version="0.1.0")
+    clock = iter(range(10**18, 10**19, 10**6)).__next__
+    game, learner = Driver(GameLogic(config), config.session, clock), Driver(LearnerLogic(), config.session, clock)
+    writer = EventLogWriter(out / "human-board.mcap")
+    writer.add_metadata("pairplay.session", {"session": config.session, "seed": str(config.seed),
+                                             "software_version": "0.1.0"})
+
+    def record(events):
+        for e in events:
+            key = event_key(e.session, e.source, type(e).__name__)
+            writer.write(key, encode_event(e), log_time_ns=e.time_ns or 1, sequence=e.seq)
+            if e.source == "game":
+                record(learner.receive(key, encode_event(e)))
+
+    record(game.start())
+    faces = list(game.logic.board.faces)
+    board_seq, t_s, matched, turn = 0, 100.0, 0, 0
+
+    def press(event, at_s):
+        nonlocal board_seq
+        board_seq += 1
+        e = stamped(event, session=config.session, source="board", seq=board_seq, time_ns=int(at_s * 1e9))
+        key = event_key(config.session, "board", type(event).__name__)
+        writer.write(key, encode_event(e), log_time_ns=e.time_ns, sequence=e.seq)
+        record(game.receive(key, encode_event(e)))
+
+    while not game.logic.done:
+        covered = [c for c in range(18) if not matched >> c & 1]
+        first = covered[0]
+        partner = next(c for c in covered if c != first and faces[c] == faces[first])
+        others = [c for c in covered if c not in (first, partner)]
+        second = partner if turn % 2 or not others else others[0]
+        press(ev.CardPicked(round=0, turn=turn, card=first), t_s)
+        if turn == 1:
+            press(ev.WrongSuggestionPressed(round=0, turn=turn), t_s + 1.0)
+        press(ev.CardPicked(round=0, turn=turn, card=second), t_s + (0.8 if turn == 2 else 2.5))  # turn 2: too fast
+        if faces[first] == faces[second]:
+            matched |= (1 << first) | (1 << second)
+        turn += 1
+        t_s += 10
+    writer.close()
+
+
+def catalogue_sample(out: Path) -> None:
+    s = "sample-catalogue"
+    cfg = SessionConfig(session=s, participant="sim:deaf", persona="deaf", seed=1, rounds=1, software_version="0.1.0")
+    events = [
+        ev.ServiceStarted(service="game", version="0.1.0"), ev.SessionStarted(config=cfg),
+        ev.RoundStarted(round=0, faces=[i // 2 for i in range(18)]), ev.CardPicked(round=0, turn=0, card=0),
+        ev.CardRevealed(round=0, turn=0, card=0, face=0, pick=0, pick_seq=1),
+        ev.PickRejected(round=0, turn=0, card=0, reason="card 0 is already face up", pick_source="participant"),
+        ev.CardObserved(round=0, turn=0, card=1, observed_source="intended"),
+        ev.SuggestionRequested(round=0, turn=0, attempt=0, state=12, observed=1, match=1, covered_mask=262142, first=0),
+        ev.SuggestionMade(round=0, turn=0, attempt=0, state=12, action=35, chosen_by="explore", epsilon=0.9, alpha=0.5,
+                          psi=0.0, observed=1, target=1, action_name="x"),
+        RobotActed(round=0, turn=0, attempt=0, action=35, backend="virtual", outcome="done", commands=["say"]),
+        ev.SuggestionPerceived(round=0, turn=0, attempt=0, considered=True, consistent=True, candidate_size=1,
+                               candidate_mask=2, second=1),
+        ev.WrongSuggestionPressed(round=0, turn=0),
+        ev.TurnResolved(round=0, turn=0, first=0, second=1, matched=True, round_over=False, interval_ms=2000.0),
+        ev.RewardGiven(round=0, turn=0, attempt=0, state=12, action=35, reward=2.0, learned=True, reason="match"),
+        ev.QUpdated(round=0, turn=0, attempt=0, state=12, action=35, alpha=0.5, reward=2.0, q_before=0.0, q_after=1.0),
+        ev.RoundEnded(round=0, turns=9, matches=9),
+        ev.CombineRequested(request_id="r1", recordings=["a.mcap"], seed=1),
+        ev.PolicyCombined(request_id="r1", inputs=["a.mcap"], actions=[35] * 24, decided_by=["equal; equal"] * 24),
+        ev.QuestionnaireAnswered(questionnaire="phase1", answers={"q1": "4"}),
+        ev.MessageRejected(reason="malformed payload", key=f"pairplay/{s}/participant/CardPicked", excerpt="{not"),
+        ev.SessionEnded(reason="completed", rounds_played=1),
+    ]
+    writer = EventLogWriter(out / "catalogue.mcap")
+    seqs: dict[str, int] = {}
+    for i, e in enumerate(events):
+        source = {"CardPicked": "participant", "CardObserved": "participant", "SuggestionPerceived": "participant",
+                  "WrongSuggestionPressed": "board", "QuestionnaireAnswered": "board", "SuggestionMade": "learner",
+                  "RewardGiven": "learner", "QUpdated": "learner", "RobotActed": "robot", "CombineRequested": "console",
+                  "PolicyCombined": "combiner", "MessageRejected": "recorder"}.get(type(e).__name__, "game")
+        seqs[source] = seqs.get(source, 0) + 1
+        e = stamped(e, session=s, source=source, seq=seqs[source], time_ns=10**18 + i)
+        writer.write(event_key(s, source, type(e).__name__), encode_event(e), log_time_ns=e.time_ns, sequence=e.seq)
+    writer.close()
+
+
+if __name__ == "__main__":
+    out = Path(sys.argv[1] if len(sys.argv) > 1 else "recordings/samples")
+    sim_sample(out)
+    human_sample(out)
+    catalogue_sample(out)
+    for p in sorted(out.glob("*.mcap")):
+        print(p, p.stat().st_size)
