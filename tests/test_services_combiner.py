@@ -1,0 +1,60 @@
+"""The combiner answers a CombineRequested on the bus with the merge of
+algorithm 4 over policies rebuilt from recordings, and a bad request with a
+reason, without stopping."""
+
+import queue
+
+import numpy as np
+
+from pairplay.core.combine import User, combine, extract_info
+from pairplay.core.policies import greedy_of, q_of
+from pairplay.replay.rebuild import rebuild_recording
+from pairplay.schemas import events as ev
+from pairplay.schemas.envelope import stamped
+from pairplay.schemas.events import decode_event, encode_event
+from pairplay.schemas.keys import event_key
+from pairplay.schemas.policy import read_policy
+from pairplay.schemas.session import SessionConfig
+from pairplay.services.combiner import CombinerLogic
+from pairplay.services.runner import Node
+from pairplay.services.session_cli import run_session
+
+from busutil import collect, connector, listener, wait_until
+
+
+def test_combine_requests_over_the_bus(tmp_path):
+    recs = []
+    for who in ("ashley", "vincent"):
+        cfg = SessionConfig(session=f"c-{who}", participant=f"sim:{who}", persona=who, seed=1, rounds=6)
+        recs.append(str(run_session(cfg, tmp_path / f"{cfg.session}.mcap")))
+    with listener() as server, connector(server) as client:
+        node = Node(server, CombinerLogic(), "lab", resume=False)
+        node.start()
+        answers = collect(client, "pairplay/lab/combiner/PolicyCombined")
+        key = event_key("lab", "console", "CombineRequested")
+        assert wait_until(lambda: client.publisher(key).matching_status.matching)
+        requests = [ev.CombineRequested(request_id="r1", recordings=recs, output_path=str(tmp_path / "bias.json")),
+                    ev.CombineRequested(request_id="r2", policies=[str(tmp_path / "missing.json")])]
+        for seq, r in enumerate(requests, 1):
+            client.put(key, encode_event(stamped(r, session="lab", source="console", seq=seq, time_ns=seq)))
+        client.put(key, b"garbage")
+        got = []
+        while len(got) < 2:
+            node.step(0.5)
+            try:
+                got.append(decode_event(answers.get(timeout=0.01)[1]))
+            except queue.Empty:
+                pass
+        assert wait_until(lambda: node.step(0.05) or node.driver.rejections == 1, 10)
+    ok, bad = sorted(got, key=lambda e: e.request_id)
+    users = []
+    for rec in recs:
+        policy = rebuild_recording(rec).policy
+        users.append(User(policy.participant, greedy_of(policy), q_of(policy),
+                          extract_info(greedy_of(policy)[None]).info))
+    expected = combine(users)
+    assert ok.ok and ok.actions == [int(a) for a in expected.policy] and ok.decided_by == expected.rules
+    assert ok.users == ["ashley", "vincent"]
+    assert read_policy(tmp_path / "bias.json").greedy == ok.actions
+    assert not bad.ok and "missing.json" in bad.error
+    assert node.driver.rejections == 1  # the garbage, with a reason; the combiner went on
