@@ -3,9 +3,10 @@
 Rule: the service joins the session given by --session, catches up from the
 recorder's log if the session is under way (a restarted learner resumes where
 the crashed one stopped), runs until the session ends for it, and exits 0; on
-SIGINT/SIGTERM it closes its Zenoh session cleanly. The game needs the session
-config (the same options as `pairplay session`); the others read it from the
-bus. The first line printed is `listening <endpoints>` so an orchestrator can
+SIGINT/SIGTERM it closes its Zenoh session cleanly. A game started with
+--participant (and the options of `pairplay session`) starts the session; a game
+given only --session restarts a crashed one from the recorder's log. The other
+services read the config from the bus. The first line printed is `listening <endpoints>` so an orchestrator can
 connect further processes to this one.
 """
 
@@ -43,12 +44,14 @@ def run(args: argparse.Namespace) -> int:
     logging.basicConfig(level=logging.INFO, format=f"%(levelname)s {args.service}: %(message)s")
     stop = threading.Event()
     stop_on_signals(stop)
-    if args.service == "game":
+    config = None
+    if args.service == "game" and args.participant:
         from .session_cli import config_from_args
-        if not args.participant:
-            print("pairplay run game: --participant is required")
+        try:
+            config = config_from_args(args)
+        except (ValueError, KeyError) as err:
+            print(f"pairplay run game: {err}")
             return 2
-        config = config_from_args(args)
         args.session = config.session
     elif not args.session:
         print(f"pairplay run {args.service}: --session is required")
@@ -77,6 +80,12 @@ def run(args: argparse.Namespace) -> int:
             logic = CombinerLogic()
         elif args.service == "game":
             from .game import GameLogic
+            if config is None:  # a restart: the session's config is in its log
+                config = _recorded_config(bus, args.session)
+                if config is None:
+                    print(f"pairplay run game: session {args.session} has no SessionStarted on the bus; "
+                          "give --participant (and the session options) to start it")
+                    return 2
             logic = GameLogic(config)
         elif args.service == "learner":
             from .learner import LearnerLogic
@@ -84,13 +93,23 @@ def run(args: argparse.Namespace) -> int:
         else:
             from .participant import ParticipantLogic
             logic = ParticipantLogic()
-        node = Node(bus, logic, args.session, resume=args.service != "game")
+        # a game given its config starts the session; every other service, and a game
+        # restarted by session id alone, catches up from the recorder's log
+        node = Node(bus, logic, args.session, resume=not (args.service == "game" and args.participant))
         node.start(wait_for=tuple(args.wait_for))
         print(f"{args.service} running in session {args.session}", flush=True)
         node.run(stop)
         return 0
     finally:
         bus.close()
+
+
+def _recorded_config(bus: Bus, session: str):
+    from .runner import fetch_log
+    for e in fetch_log(bus, session):
+        if type(e).__name__ == "SessionStarted":
+            return e.config
+    return None
 
 
 def _others_alive(bus: Bus, session: str) -> bool:

@@ -4,9 +4,10 @@ Rule: the recorder starts first, then the learner and the participant (each a
 Node with its liveliness token), and the game last: it waits until every
 service the session needs is on the bus, then announces the session. By
 default all run in this process on one Zenoh session (peer, loopback, a free
-port); `--external learner` (or participant) leaves that service to another
+port); `--external learner` (or participant, or game) leaves that service to another
 process (`pairplay run learner --session ID --connect <endpoint printed here>`),
-which the game then waits for. The session is over when the game has ended it
+which the game then waits for (an external game is started with the session's
+options and `--wait-for` the others). The session is over when the game has ended it
 and every service has settled (in-process threads finished, external services'
 tokens gone); then the recorder finishes its file.
 
@@ -116,12 +117,15 @@ def run_session(config: SessionConfig, path: str | Path, *, bus: Bus | None = No
             node.run_in_thread(stop)
             if nodes_out is not None:
                 nodes_out[node.logic.name] = node
-        game = Node(bus, GameLogic(config), config.session, resume=False)
-        game.start(wait_for=tuple(needed) + tuple(wait_also))
-        nodes.append(game)
-        if nodes_out is not None:
-            nodes_out["game"] = game
-        game.run_in_thread(stop)
+        if "game" not in external:
+            game = Node(bus, GameLogic(config), config.session, resume=False)
+            game.start(wait_for=tuple(needed) + tuple(wait_also))
+            nodes.append(game)
+            if nodes_out is not None:
+                nodes_out["game"] = game
+            game.run_in_thread(stop)
+        else:
+            needed.append("game")
         for node in nodes:
             while node.thread.is_alive() and not stop.is_set():
                 node.thread.join(0.1)
@@ -152,7 +156,7 @@ def wait_external_exit(bus: Bus, session: str, services: list[str], stop: thread
 def add_arguments(p: argparse.ArgumentParser) -> None:
     add_config_arguments(p)
     p.add_argument("--out", default="recordings", help="directory of the recording (default recordings/)")
-    p.add_argument("--external", action="append", default=[], choices=("learner", "participant"),
+    p.add_argument("--external", action="append", default=[], choices=("learner", "participant", "game"),
                    help="leave this service to another process (`pairplay run`)")
     add_bus_arguments(p)
 

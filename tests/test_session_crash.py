@@ -1,5 +1,5 @@
-"""Crashes: a learner killed mid-session resumes from the log with no reward
-lost or counted twice; a recorder killed with SIGKILL leaves a readable file
+"""Crashes: a learner, participant or game killed mid-session resumes from the
+log with no reward lost or counted twice, as if it had never crashed; a recorder killed with SIGKILL leaves a readable file
 holding everything older than its flush interval, and `recover` completes it."""
 
 import os
@@ -10,11 +10,12 @@ import threading
 from collections import Counter
 
 import numpy as np
+import pytest
 from mcap.reader import make_reader
 
 from pairplay.core.personas import persona
 from pairplay.core.simulate import run_games
-from pairplay.replay.fold import stream_seed
+from pairplay.replay.fold import fold_events, stream_seed
 from pairplay.replay.reader import read_log
 from pairplay.replay.recover import recover
 from pairplay.schemas import events as ev
@@ -35,32 +36,41 @@ def spawn(*args):
                             stderr=subprocess.STDOUT, env=env)
 
 
-def test_a_killed_learner_resumes_from_the_log_and_nothing_is_lost_or_doubled(tmp_path):
-    config = SessionConfig(session="crash1", participant="sim:helmut", persona="helmut", seed=5, rounds=25)
+@pytest.mark.parametrize("victim", ["learner", "participant", "game"])
+def test_a_killed_service_resumes_from_the_log_and_nothing_is_lost_or_doubled(tmp_path, victim):
+    session_id = f"crash-{victim}"
+    config = SessionConfig(session=session_id, participant="sim:helmut", persona="helmut", seed=5, rounds=25)
     ready, box = threading.Event(), {}
 
     def on_bus(bus):
-        box["bus"], box["rewards"] = bus, collect(bus, "pairplay/crash1/learner/RewardGiven")
+        box["bus"], box["rewards"] = bus, collect(bus, f"pairplay/{session_id}/learner/RewardGiven")
         ready.set()
 
     session = threading.Thread(target=lambda: box.setdefault("path", run_session(
-        config, tmp_path / "crash1.mcap", external=("learner",), on_bus=on_bus, settle_timeout_s=60)))
+        config, tmp_path / f"{session_id}.mcap", external=(victim,), on_bus=on_bus, settle_timeout_s=60)))
     session.start()
     assert ready.wait(10)
     bus = box["bus"]
     endpoint = bus.locators()[0]
-    first = spawn("learner", "--session", "crash1", "--connect", endpoint)
+    join = ["--session", session_id, "--connect", endpoint]
+    if victim == "game":  # the first game starts the session; the restarted one finds it in the log
+        first = spawn("game", *join, "--participant", "sim:helmut", "--seed", "5", "--rounds", "25",
+                      *[a for other in ("recorder", "learner", "participant") for a in ("--wait-for", other)])
+    else:
+        first = spawn(victim, *join)
+    second = None
     try:
         assert wait_until(lambda: box["rewards"].qsize() >= 40, 60), first.stdout.read1().decode()
         first.send_signal(signal.SIGKILL)
         first.wait(10)
-        assert wait_until(lambda: alive_key("crash1", "learner") not in bus.alive_now(alive_key("crash1", "*")), 15)
-        second = spawn("learner", "--session", "crash1", "--connect", endpoint)
+        gone = alive_key(session_id, victim)
+        assert wait_until(lambda: gone not in bus.alive_now(alive_key(session_id, "*")), 15)
+        second = spawn(victim, *join)
         session.join(90)
         assert not session.is_alive()
         assert second.wait(30) == 0
     finally:
-        for p in (first, locals().get("second")):
+        for p in (first, second):
             if p is not None and p.poll() is None:
                 p.kill()
                 p.wait()
@@ -69,14 +79,14 @@ def test_a_killed_learner_resumes_from_the_log_and_nothing_is_lost_or_doubled(tm
     made = [(e.round, e.turn, e.attempt) for e in events if isinstance(e, ev.SuggestionMade)]
     rewarded = [(e.round, e.turn, e.attempt) for e in events if isinstance(e, ev.RewardGiven)]
     assert Counter(rewarded) == Counter(made) and max(Counter(rewarded).values()) == 1  # none lost, none twice
-    learner_seqs = [e.seq for e in events if e.source == "learner"]
-    assert learner_seqs == sorted(set(learner_seqs))
-    starts = [e for e in events if isinstance(e, ev.ServiceStarted) and e.service == "learner"]
+    seqs = [e.seq for e in events if e.source == victim]
+    assert seqs == sorted(set(seqs))  # the restarted service went on numbering where the log stopped
+    starts = [e for e in events if isinstance(e, ev.ServiceStarted) and e.service == victim]
     assert len(starts) == 2 and starts[0].resumed_events == 0 and starts[1].resumed_events > 0
-    from pairplay.replay.fold import fold_events
     fold = fold_events(events)
     study = run_games([persona("helmut")], [stream_seed(config)], config.rounds)
     assert fold.q_mismatches == 0 and np.array_equal(fold.q, study.q[0])  # as if it had never crashed
+    assert [2 * t for t in fold.turns_per_round()] == list(study.picks[0])
     assert fold.ended is not None and verify_recording(box["path"]).ok
 
 
