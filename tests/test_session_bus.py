@@ -9,6 +9,7 @@ from mcap.reader import make_reader
 
 from pairplay.core.personas import persona
 from pairplay.core.simulate import run_games
+from pairplay.core.study import train
 from pairplay.replay.fold import stream_seed
 from pairplay.replay.reader import EventDecoderFactory, read_log
 from pairplay.replay.rebuild import rebuild_recording, write_outputs
@@ -34,6 +35,8 @@ def test_a_bus_session_rebuilds_to_the_live_learner_and_the_study(tmp_path):
     study = run_games([persona("tatiana")], [stream_seed(CONFIG)], CONFIG.rounds)
     assert np.array_equal(study.q[0], live_q)  # one code path: the bus plays the study's game
     assert [2 * t for t in rebuilt.fold.turns_per_round()] == list(study.picks[0])
+    trained = train([persona("tatiana")], games=1, rounds=CONFIG.rounds, seed=CONFIG.seed)
+    assert rebuilt.policy.greedy == list(trained.greedy[0])  # the same policy file as the study's
     assert rebuilt.fold.ended is not None and not rebuilt.fold.rejections
     policy_path, curve_path = write_outputs(rebuilt, tmp_path / "out")
     assert read_policy(policy_path).q == [list(map(float, row)) for row in live_q]
