@@ -38,12 +38,23 @@ BATCH = 2000
 _MARK = object()
 
 
+def free_path(path: Path) -> Path:
+    """`path`, or `<stem>.<n>.mcap` if it exists: a recording is never overwritten
+    (a recorder restarted after a crash must not destroy what the crash left)."""
+    n = 1
+    candidate = path
+    while candidate.exists():
+        candidate = path.with_name(f"{path.stem}.{n}{path.suffix}")
+        n += 1
+    return candidate
+
+
 class Recorder:
     name = "recorder"
 
     def __init__(self, bus: Bus | None, session: str, path: str | Path, *, clock: Callable[[], int] = time.time_ns,
                  flush_interval_ns: int = FLUSH_INTERVAL_NS):
-        self.bus, self.session, self.path, self.clock = bus, session, Path(path), clock
+        self.bus, self.session, self.path, self.clock = bus, session, free_path(Path(path)), clock
         self.path.parent.mkdir(parents=True, exist_ok=True)
         self.writer = EventLogWriter(self.path, flush_interval_ns=flush_interval_ns)
         self.writer.add_metadata("pairplay.recorder", {"session": session, "software_version": __version__,

@@ -140,7 +140,7 @@ def run_session(config: SessionConfig, path: str | Path, *, bus: Bus | None = No
         recorder.close()
         if own_bus:
             bus.close()
-    return Path(path)
+    return recorder.path
 
 
 def wait_external_exit(bus: Bus, session: str, services: list[str], stop: threading.Event, timeout_s: float) -> None:
@@ -168,15 +168,14 @@ def run(args: argparse.Namespace) -> int:
     except (ValueError, KeyError, PolicyFileError) as err:
         print(f"pairplay session: {err}")
         return 2
-    path = Path(args.out) / f"{config.session}.mcap"
     stop = threading.Event()
     stop_on_signals(stop)
 
     def announce(bus: Bus) -> None:
         print(f"session {config.session}: bus listening on {' '.join(bus.locators()) or '(no listener)'}", flush=True)
 
-    run_session(config, path, bus_options=options_from_args(args), external=tuple(args.external), stop=stop,
-                on_bus=announce)
+    path = run_session(config, Path(args.out) / f"{config.session}.mcap", bus_options=options_from_args(args),
+                       external=tuple(args.external), stop=stop, on_bus=announce)
     from pairplay.replay.fold import fold_events
     from pairplay.replay.reader import read_log
     recorded = read_log(path)

@@ -1,0 +1,43 @@
+"""The recorder's own rules, without a network: it writes what passes the
+checks, refuses the rest with a reason, never overwrites a recording, and puts
+the session config into the file's metadata."""
+
+from pairplay.replay.reader import read_log
+from pairplay.schemas import events as ev
+from pairplay.schemas.envelope import stamped
+from pairplay.schemas.events import encode_event
+from pairplay.schemas.keys import event_key
+from pairplay.schemas.session import SessionConfig
+from pairplay.services.recorder import Recorder
+
+
+def message(event, source="game", seq=1, session="r1"):
+    e = stamped(event, session=session, source=source, seq=seq, time_ns=seq)
+    return event_key("r1", source, type(event).__name__), encode_event(e)
+
+
+def test_the_recorder_keeps_good_messages_and_refuses_bad_ones(tmp_path):
+    rec = Recorder(None, "r1", tmp_path / "r1.mcap", clock=iter(range(10**9, 10**10)).__next__)
+    cfg = SessionConfig(session="r1", participant="sim:ashley", persona="ashley", seed=9, rounds=1,
+                        software_version="9.9")
+    assert rec.record(*message(ev.SessionStarted(config=cfg)), 1)
+    assert rec.record(*message(ev.RoundStarted(round=0, faces=[i // 2 for i in range(18)]), seq=2), 2)
+    assert not rec.record(*message(ev.RoundStarted(round=0, faces=[]), seq=2), 3)  # duplicate seq
+    assert not rec.record(event_key("r1", "game", "RoundStarted"), b"{oops", 4)  # malformed
+    key, payload = message(ev.RoundEnded(round=0, turns=9, matches=9), seq=3)
+    assert not rec.record(key.replace("RoundEnded", "RoundStarted"), payload, 5)  # key disagrees
+    assert not rec.record(*message(ev.SessionEnded(), seq=4, session="r2"), 6)  # wrong session
+    assert rec.rejected == 4
+    rec.close()
+    log = read_log(tmp_path / "r1.mcap")
+    assert [type(r.event).__name__ for r in log.events] == ["SessionStarted", "RoundStarted"]
+    assert log.metadata["pairplay.session"]["seed"] == "9"
+    assert log.metadata["pairplay.session"]["software_version"] == "9.9"
+
+
+def test_a_recording_is_never_overwritten(tmp_path):
+    first = Recorder(None, "r1", tmp_path / "r1.mcap")
+    first.close()
+    second = Recorder(None, "r1", tmp_path / "r1.mcap")
+    second.close()
+    assert first.path.name == "r1.mcap" and second.path.name == "r1.1.mcap"
