@@ -89,8 +89,8 @@ def read_log(path: str | Path) -> EventLog:
                 log.metadata[record.name] = dict(record.metadata)
             elif isinstance(record, Footer):
                 break
-    except FileNotFoundError:
-        raise
+    except OSError:
+        raise  # a file that cannot be opened is not a cut recording
     except Exception as err:  # a cut or corrupt tail: keep what came before it
         log.truncated = True
         log.error = f"{type(err).__name__}: {err}" if str(err) else type(err).__name__

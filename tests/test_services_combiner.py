@@ -4,8 +4,6 @@ reason, without stopping."""
 
 import queue
 
-import numpy as np
-
 from pairplay.core.combine import User, combine, extract_info
 from pairplay.core.policies import greedy_of, q_of
 from pairplay.replay.rebuild import rebuild_recording
