@@ -5,8 +5,11 @@ The embedded default needs no server and no network: peer mode, listening on
 `tcp/127.0.0.1:0` (the OS picks a free port, so two runs never clash; the real
 port is read back from Zenoh's admin space, `Bus.locators()`), multicast
 scouting and gossip off (nothing leaves loopback), scouting delay 100 ms.
-Several hosts: run one process with `--mode router --listen tcp/0.0.0.0:7447`
-and the others with `--mode client --connect tcp/<host>:7447`; TLS, access
+Several processes or hosts: one process is the router (`pairplay session` is
+one: it listens on loopback, or `--listen tcp/0.0.0.0:7447` for other hosts),
+the others are its clients (`--connect tcp/<host>:<port>` makes a process a
+client): Zenoh forwards between a router's clients, not between peers that
+only share a third peer (measured: not forwarded). TLS, access
 control and anything else Zenoh knows come from a Zenoh config file
 (`--zenoh-config`), passed through untouched except for the options given on
 the command line. Every publisher is declared with congestion control BLOCK:
@@ -66,7 +69,9 @@ class BusOptions:
 
 def add_bus_arguments(parser: argparse.ArgumentParser) -> None:
     g = parser.add_argument_group("bus (Zenoh)")
-    g.add_argument("--mode", choices=MODES, default="peer", help="Zenoh mode (default: peer on loopback)")
+    g.add_argument("--mode", choices=MODES, default=None,
+                   help="Zenoh mode (default: client with --connect, else the verb's own: a session is a router, "
+                        "anything else a peer)")
     g.add_argument("--listen", action="append", metavar="ENDPOINT",
                    help=f"endpoint to listen on, repeatable (default {LOOPBACK_ANY_PORT}: a free port)")
     g.add_argument("--connect", action="append", default=[], metavar="ENDPOINT",
@@ -74,9 +79,12 @@ def add_bus_arguments(parser: argparse.ArgumentParser) -> None:
     g.add_argument("--zenoh-config", metavar="FILE", help="Zenoh JSON5 config (TLS, access control), passed through")
 
 
-def options_from_args(args: argparse.Namespace) -> BusOptions:
-    return BusOptions(mode=args.mode, listen=args.listen, connect=list(args.connect or []),
-                      zenoh_config=args.zenoh_config)
+def options_from_args(args: argparse.Namespace, default_mode: str = "peer") -> BusOptions:
+    """Bus options of a command line. Without --mode, a process that connects somewhere
+    is a client (Zenoh forwards between the clients of a router, not between peers
+    that only share a third peer), and one that does not is `default_mode`."""
+    mode = args.mode or ("client" if args.connect else default_mode)
+    return BusOptions(mode=mode, listen=args.listen, connect=list(args.connect or []), zenoh_config=args.zenoh_config)
 
 
 class Bus:

@@ -108,8 +108,8 @@ def latency_rows(turns: int) -> list[dict]:
     with Bus() as bus:
         endpoint = bus.locators()[0]
         echo_proc = _spawn("pairplay.services.bus_bench", "echo", endpoint)
-        learner = _spawn("pairplay", "run", "learner", "--session", session, "--connect", endpoint, "--listen",
-                         "tcp/127.0.0.1:0")
+        # two peers linked directly: the raw reference's topology
+        learner = _spawn("pairplay", "run", "learner", "--session", session, "--connect", endpoint, "--mode", "peer")
         try:
             pongs: queue.Queue = queue.Queue()
             bus.subscribe("bench/pong", lambda _k, p: pongs.put(time.perf_counter()))

@@ -95,7 +95,8 @@ def run_session(config: SessionConfig, path: str | Path, *, bus: Bus | None = No
     read the live learner's final Q-table from it). `wait_also`: more services
     (liveliness names) the game waits for before it starts the session."""
     own_bus = bus is None
-    bus = bus if bus is not None else Bus(bus_options)
+    # the session's process is the router its external services connect to as clients
+    bus = bus if bus is not None else Bus(bus_options or BusOptions(mode="router"))
     stop = stop or threading.Event()
     if on_bus is not None:
         on_bus(bus)
@@ -174,7 +175,8 @@ def run(args: argparse.Namespace) -> int:
     def announce(bus: Bus) -> None:
         print(f"session {config.session}: bus listening on {' '.join(bus.locators()) or '(no listener)'}", flush=True)
 
-    path = run_session(config, Path(args.out) / f"{config.session}.mcap", bus_options=options_from_args(args),
+    path = run_session(config, Path(args.out) / f"{config.session}.mcap",
+                       bus_options=options_from_args(args, default_mode="router"),
                        external=tuple(args.external), stop=stop, on_bus=announce)
     from pairplay.replay.fold import fold_events
     from pairplay.replay.reader import read_log

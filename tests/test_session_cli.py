@@ -49,18 +49,24 @@ def test_bad_command_lines_get_a_clear_error(tmp_path):
     assert r.returncode == 1 and "no SessionStarted" in r.stdout
 
 
-def test_a_learner_run_alone_joins_a_session(tmp_path):
+def test_services_run_alone_in_their_own_processes_join_a_session(tmp_path):
+    """The session's process is the router; a learner and a participant, each in
+    its own process, connect to it as clients and reach each other through it."""
     session = subprocess.Popen([sys.executable, "-m", "pairplay", "session", "--participant", "sim:blind", "--seed",
                                 "2", "--rounds", "3", "--session", "cli2", "--out", str(tmp_path), "--external",
-                                "learner"], stdout=subprocess.PIPE, text=True)
+                                "learner", "--external", "participant"], stdout=subprocess.PIPE, text=True)
+    procs = []
     try:
-        first = session.stdout.readline()
-        endpoint = first.split("listening on ")[1].split()[0]
-        learner = pairplay("run", "learner", "--session", "cli2", "--connect", endpoint, timeout=60)
-        assert learner.returncode == 0, learner.stdout + learner.stderr
+        endpoint = session.stdout.readline().split("listening on ")[1].split()[0]
+        procs = [subprocess.Popen([sys.executable, "-m", "pairplay", "run", service, "--session", "cli2",
+                                   "--connect", endpoint], stdout=subprocess.PIPE, text=True)
+                 for service in ("learner", "participant")]
+        assert [p.wait(60) for p in procs] == [0, 0]
         assert session.wait(60) == 0
     finally:
-        if session.poll() is None:
-            session.kill()
+        for p in procs + [session]:
+            if p.poll() is None:
+                p.kill()
+                p.wait()
     r = pairplay("replay", str(Path(tmp_path) / "cli2.mcap"), "--verify")
     assert "verify: PASS" in r.stdout, r.stdout
