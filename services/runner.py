@@ -70,14 +70,16 @@ class Node:
         self._wake = threading.Event()
 
     def _on_message(self, key: str, payload: bytes) -> None:
-        if self.inline:
-            with self._lock:
-                if self._live:
-                    self.publish(self.driver.receive(key, payload))
-                    if self.logic.done:
-                        self._wake.set()
-                    return
-        self.queue.put((key, payload))
+        if not self.inline:
+            self.queue.put((key, payload))
+            return
+        with self._lock:  # queued or handled under the lock: none can slip between the catch-up and going live
+            if not self._live:
+                self.queue.put((key, payload))
+                return
+            self.publish(self.driver.receive(key, payload))
+            if self.logic.done:
+                self._wake.set()
 
     def publish(self, events: list[Event]) -> None:
         for e in events:
