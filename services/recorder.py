@@ -3,7 +3,7 @@
 Rule: the recorder subscribes to `pairplay/<session>/**` and writes each
 message's exact bytes to the channel of its key (replay/writer.py), after the
 checks every service makes (it decodes, its key agrees with its envelope, right
-session, sequence number above the last one from that source). What fails a
+session, sequence number above the last one on that key). What fails a
 check is not written on a typed channel: the recorder publishes a
 MessageRejected with the reason and an excerpt of the payload, and records that.
 The file flushes at least every 0.1 s (the most a SIGKILL can lose; `pairplay
@@ -60,7 +60,8 @@ class Recorder:
         self.writer.add_metadata("pairplay.recorder", {"session": session, "software_version": __version__,
                                                        "started_ns": str(clock())})
         self.queue: queue.Queue = queue.Queue()
-        self.last_seq: dict[str, int] = {}
+        self.last_seq: dict[str, int] = {}  # per key
+        self.top_seq: dict[str, int] = {}  # per source: the highest sequence number recorded
         self.kept: list[tuple[str, bytes]] = []
         self.seq = 0
         self.rejected = 0
@@ -114,11 +115,12 @@ class Recorder:
                                 f"{event.source!r}, event {tag}", key, payload, event)
         if event.session != self.session:
             return self._reject(f"wrong session {event.session!r}", key, payload, event)
-        last = self.last_seq.get(event.source, 0)
+        last = self.last_seq.get(key, 0)  # per key, as the services check (node.py)
         if event.seq <= last:
             return self._reject(f"sequence number {event.seq} from {event.source} is not above the last one "
-                                f"({last}): duplicate or out of order", key, payload, event)
-        self.last_seq[event.source] = event.seq
+                                f"on {key} ({last}): duplicate or out of order", key, payload, event)
+        self.last_seq[key] = event.seq
+        self.top_seq[event.source] = max(self.top_seq.get(event.source, 0), event.seq)
         self.writer.write(key, payload, log_time_ns=received_ns, publish_time_ns=event.time_ns, sequence=event.seq)
         with self._lock:
             self.kept.append((key, payload))

@@ -131,6 +131,7 @@ def run_session(config: SessionConfig, path: str | Path, *, bus: Bus | None = No
             while node.thread.is_alive() and not stop.is_set():
                 node.thread.join(0.1)
         wait_external_exit(bus, config.session, [s for s in external if s in needed], stop, settle_timeout_s)
+        wait_recorded(recorder, nodes, quiet_s=0.2 if external else 0.0)
     finally:
         stop.set()
         for node in nodes:
@@ -142,6 +143,21 @@ def run_session(config: SessionConfig, path: str | Path, *, bus: Bus | None = No
         if own_bus:
             bus.close()
     return recorder.path
+
+
+def wait_recorded(recorder: Recorder, nodes: list[Node], quiet_s: float, timeout_s: float = 5.0) -> None:
+    """Wait until the recorder holds every event our nodes published (Zenoh delivers
+    to local subscribers on its own threads, so the last ones may still be on their
+    way), and, with external services, until it has been quiet for `quiet_s`."""
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        if all(recorder.top_seq.get(n.logic.name, 0) >= n.driver.seq for n in nodes) and recorder.queue.empty():
+            break
+        time.sleep(0.005)
+    count = -1
+    while quiet_s and time.monotonic() < deadline and count != recorder.writer.count:
+        count = recorder.writer.count
+        time.sleep(quiet_s)
 
 
 def wait_external_exit(bus: Bus, session: str, services: list[str], stop: threading.Event, timeout_s: float) -> None:
