@@ -9,11 +9,15 @@ seeded by the request's seed and the user (as core.study does). The users'
 representatives are merged by algorithm 4 (core.combine.combine), and the
 answer is a PolicyCombined with the greedy actions, the rule that decided each
 state and the merged information; with `output_path` the combined policy file
-is written too. Anything wrong with the request (a missing or corrupt file, no
+is written too. Paths are taken relative to, and must stay inside, the
+combiner's directory (`--out` of `pairplay run combiner`, default the current
+one). Anything wrong with the request (a missing or corrupt file, no
 users left) is answered with ok=false and the reason: the combiner keeps running.
 """
 
 from __future__ import annotations
+
+from pathlib import Path
 
 import numpy as np
 
@@ -32,14 +36,25 @@ class CombinerLogic:
     sources: dict = {}
     done = False  # serves until stopped
 
+    def __init__(self, root: str | Path | None = None):
+        # every path a request names must lie under this directory: a bus message
+        # must not make the combiner read or write anywhere on the machine
+        self.root = Path(root or Path.cwd()).resolve()
+
+    def _inside(self, path: str) -> str:
+        resolved = (self.root / path).resolve()
+        if not resolved.is_relative_to(self.root):
+            raise ValueError(f"{path!r} is outside the combiner's directory {self.root}")
+        return str(resolved)
+
     def start(self) -> list[ev.Event]:
         return []
 
     def handle(self, r: ev.CombineRequested) -> list[ev.Event]:
         inputs = list(r.policies) + list(r.recordings)
         try:
-            policies = [read_policy(p) for p in r.policies]
-            policies += [rebuild_recording(p).policy for p in r.recordings]
+            policies = [read_policy(self._inside(p)) for p in r.policies]
+            policies += [rebuild_recording(self._inside(p)).policy for p in r.recordings]
             return [self._combine(r, inputs, policies)]
         except (OSError, PolicyFileError, RebuildError, ValueError) as err:
             return [ev.PolicyCombined(request_id=r.request_id, inputs=inputs, actions=[], ok=False,
@@ -60,7 +75,7 @@ class CombinerLogic:
         merged = combine(users)
         out = ""
         if r.output_path:
-            write_policy(r.output_path, to_policy_file(
+            write_policy(self._inside(r.output_path), to_policy_file(
                 merged.q, np.zeros(len(merged.policy), dtype=np.int64), merged.policy, algorithm="combined",
                 participant="+".join(u.name for u in users), info=merged.info, merged_from=inputs,
                 rules=merged.rules, software=__version__))

@@ -27,7 +27,8 @@ SERVICES = ("game", "learner", "participant", "recorder", "combiner")
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("service", choices=SERVICES)
     p.add_argument("--session", help="session id (required except for the game, which can make one)")
-    p.add_argument("--out", default="recordings", help="recorder: directory of the recording")
+    p.add_argument("--out", default="recordings",
+                   help="recorder: directory of the recording; combiner: the directory its requests' paths lie in")
     p.add_argument("--participant", help="game: sim:<persona> or human:<id>")
     p.add_argument("--wait-for", action="append", default=[], help="game: services to wait for before starting")
     add_bus_arguments(p)
@@ -77,7 +78,7 @@ def run(args: argparse.Namespace) -> int:
             return 0
         if args.service == "combiner":
             from .combiner import CombinerLogic
-            logic = CombinerLogic()
+            logic = CombinerLogic(args.out)
         elif args.service == "game":
             from .game import GameLogic
             if config is None:  # a restart: the session's config is in its log

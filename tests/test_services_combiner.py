@@ -26,25 +26,27 @@ def test_combine_requests_over_the_bus(tmp_path):
         cfg = SessionConfig(session=f"c-{who}", participant=f"sim:{who}", persona=who, seed=1, rounds=6)
         recs.append(str(run_session(cfg, tmp_path / f"{cfg.session}.mcap")))
     with listener() as server, connector(server) as client:
-        node = Node(server, CombinerLogic(), "lab", resume=False)
+        node = Node(server, CombinerLogic(tmp_path), "lab", resume=False)
         node.start()
         answers = collect(client, "pairplay/lab/combiner/PolicyCombined")
         key = event_key("lab", "console", "CombineRequested")
         assert wait_until(lambda: client.publisher(key).matching_status.matching)
         requests = [ev.CombineRequested(request_id="r1", recordings=recs, output_path=str(tmp_path / "bias.json")),
-                    ev.CombineRequested(request_id="r2", policies=[str(tmp_path / "missing.json")])]
+                    ev.CombineRequested(request_id="r2", policies=[str(tmp_path / "missing.json")]),
+                    ev.CombineRequested(request_id="r3", recordings=recs, output_path="/etc/evil.json")]
         for seq, r in enumerate(requests, 1):
             client.put(key, encode_event(stamped(r, session="lab", source="console", seq=seq, time_ns=seq)))
         client.put(key, b"garbage")
         got = []
-        while len(got) < 2:
+        while len(got) < 3:
             node.step(0.5)
             try:
                 got.append(decode_event(answers.get(timeout=0.01)[1]))
             except queue.Empty:
                 pass
         assert wait_until(lambda: node.step(0.05) or node.driver.rejections == 1, 10)
-    ok, bad = sorted(got, key=lambda e: e.request_id)
+    ok, bad, outside = sorted(got, key=lambda e: e.request_id)
+    assert not outside.ok and "outside the combiner's directory" in outside.error
     users = []
     for rec in recs:
         policy = rebuild_recording(rec).policy
