@@ -3,9 +3,9 @@
 Rule: a CombineRequested names policy files and/or recordings; recordings are
 rebuilt into policies first (replay/rebuild.py, the learner's own fold). The
 policies are grouped by user (the policy's participant); each user's profile
-is algorithm 3 over all of that user's policies (core.combine.extract_info),
-and one policy per user represents it, picked at random with a generator
-seeded by the request's seed and the user (as core.study does). The users'
+is algorithm 3 over all of that user's policies, and one policy per user
+represents it, picked at random by the request's seed
+(core.policies.users_from_policies, as the study and `pairplay combine` do). The users'
 representatives are merged by algorithm 4 (core.combine.combine), and the
 answer is a PolicyCombined with the greedy actions, the rule that decided each
 state and the merged information; with `output_path` the combined policy file
@@ -19,12 +19,9 @@ from __future__ import annotations
 
 from pathlib import Path
 
-import numpy as np
-
 from pairplay import __version__
-from pairplay.core.combine import User, combine, extract_info
-from pairplay.core.policies import greedy_of, q_of, to_policy_file
-from pairplay.core.rng import game_seed
+from pairplay.core.combine import combine
+from pairplay.core.policies import combined_policy_file, users_from_policies
 from pairplay.replay.rebuild import RebuildError, rebuild_recording
 from pairplay.schemas import events as ev
 from pairplay.schemas.policy import PolicyFile, PolicyFileError, read_policy, write_policy
@@ -61,24 +58,13 @@ class CombinerLogic:
                                       error=f"{type(err).__name__}: {err}")]
 
     def _combine(self, r: ev.CombineRequested, inputs: list[str], policies: list[PolicyFile]) -> ev.PolicyCombined:
-        by_user: dict[str, list[PolicyFile]] = {}
-        for p in policies:
-            if p.participant not in r.exclude:
-                by_user.setdefault(p.participant, []).append(p)
-        if not by_user:
+        users, _ = users_from_policies(policies, r.seed, exclude=set(r.exclude))
+        if not users:
             raise ValueError("no policies left to combine")
-        users = []
-        for name, own in by_user.items():
-            profile = extract_info(np.stack([greedy_of(p) for p in own]))
-            pick = own[np.random.default_rng(game_seed(r.seed, "combine:" + name, 0)).integers(len(own))]
-            users.append(User(name, greedy_of(pick), q_of(pick), profile.info))
         merged = combine(users)
         out = ""
         if r.output_path:
-            write_policy(self._inside(r.output_path), to_policy_file(
-                merged.q, np.zeros(len(merged.policy), dtype=np.int64), merged.policy, algorithm="combined",
-                participant="+".join(u.name for u in users), info=merged.info, merged_from=inputs,
-                rules=merged.rules, software=__version__))
+            write_policy(self._inside(r.output_path), combined_policy_file(merged, users, inputs, r.seed, software=__version__))
             out = r.output_path
         return ev.PolicyCombined(request_id=r.request_id, inputs=inputs, actions=[int(a) for a in merged.policy],
                                  decided_by=list(merged.rules), output_path=out, users=[u.name for u in users],

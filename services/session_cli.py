@@ -37,6 +37,7 @@ from .game import GameLogic
 from .learner import LearnerLogic
 from .participant import ParticipantLogic
 from .recorder import Recorder
+from .robot.cli import add_robot_arguments, bridge_from_args, check_robot_args
 from .runner import Node
 
 log = logging.getLogger("pairplay.session")
@@ -88,12 +89,14 @@ def config_from_args(args: argparse.Namespace) -> SessionConfig:
 def run_session(config: SessionConfig, path: str | Path, *, bus: Bus | None = None,
                 bus_options: BusOptions | None = None, external: tuple[str, ...] = (),
                 stop: threading.Event | None = None, settle_timeout_s: float = 30.0,
-                on_bus=None, nodes_out: dict | None = None, wait_also: tuple[str, ...] = ()) -> Path:
+                on_bus=None, nodes_out: dict | None = None, wait_also: tuple[str, ...] = (),
+                robot_args: argparse.Namespace | None = None) -> Path:
     """Run one session to its end (or `stop`); return the recording's path.
 
     `nodes_out`, if given, receives the in-process Nodes by service name (tests
     read the live learner's final Q-table from it). `wait_also`: more services
-    (liveliness names) the game waits for before it starts the session."""
+    (liveliness names) the game waits for before it starts the session.
+    `robot_args` (the --robot options) adds the robot bridge (services/robot)."""
     own_bus = bus is None
     # the session's process is the router its external services connect to as clients
     bus = bus if bus is not None else Bus(bus_options or BusOptions(mode="router"))
@@ -108,7 +111,13 @@ def run_session(config: SessionConfig, path: str | Path, *, bus: Bus | None = No
     recorder_thread.start()
     needed = ["recorder", "learner"] + (["participant"] if config.participant.startswith("sim:") else [])
     nodes = []
+    bridge = None
     try:
+        if robot_args is not None:
+            bridge = bridge_from_args(bus, config.session, robot_args)
+        if bridge is not None:
+            bridge.run_in_thread(stop)
+            needed.append("robot")
         if "learner" not in external:
             nodes.append(Node(bus, LearnerLogic(), config.session))
         if "participant" not in external and config.participant.startswith("sim:"):
@@ -137,6 +146,9 @@ def run_session(config: SessionConfig, path: str | Path, *, bus: Bus | None = No
         for node in nodes:
             if node.thread is not None:
                 node.thread.join(5.0)
+        if bridge is not None and bridge.thread is not None:
+            # the bridge reports the robot's last acknowledgements before the recorder closes
+            bridge.thread.join(bridge.settle_s + 5)
         recorder_stop.set()
         recorder_thread.join(5.0)
         recorder.close()
@@ -173,6 +185,7 @@ def wait_external_exit(bus: Bus, session: str, services: list[str], stop: thread
 def add_arguments(p: argparse.ArgumentParser) -> None:
     add_config_arguments(p)
     p.add_argument("--out", default="recordings", help="directory of the recording (default recordings/)")
+    add_robot_arguments(p)
     p.add_argument("--external", action="append", default=[], choices=("learner", "participant", "game"),
                    help="leave this service to another process (`pairplay run`)")
     add_bus_arguments(p)
@@ -182,6 +195,7 @@ def run(args: argparse.Namespace) -> int:
     logging.basicConfig(level=logging.INFO, format="%(levelname)s %(name)s: %(message)s")
     try:
         config = config_from_args(args)
+        check_robot_args(args)
     except (ValueError, KeyError, PolicyFileError) as err:
         print(f"pairplay session: {err}")
         return 2
@@ -193,7 +207,7 @@ def run(args: argparse.Namespace) -> int:
 
     path = run_session(config, Path(args.out) / f"{config.session}.mcap",
                        bus_options=options_from_args(args, default_mode="router"),
-                       external=tuple(args.external), stop=stop, on_bus=announce)
+                       external=tuple(args.external), stop=stop, on_bus=announce, robot_args=args)
     from pairplay.replay.fold import fold_events
     from pairplay.replay.reader import read_log
     recorded = read_log(path)
