@@ -58,7 +58,7 @@ class VirtualTransport:
             raise ConnectionError("virtual robot not connected")
         message = json.loads(wire.data)
         self.performed.append((time.time_ns(), wire.text))
-        log.info("virtual robot performs %s", wire.text)
+        log.debug("virtual robot performs %s", wire.text)  # RobotActed records it; a session stays readable
         kind, command_id = message["type"], message["id"]
         if kind in ("say", StopSpeech.__struct_config__.tag):
             self._end_current_speech()
