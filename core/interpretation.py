@@ -20,7 +20,7 @@ from __future__ import annotations
 import numpy as np
 
 from .actions import FACIAL, GAZE, HEAD, HEARING_PARTS, SPEECH, VISUAL_PARTS
-from .geometry import ALL_CARDS, CELL_INDEX, CELL_MASK, N_CARDS, cell_of, neighbours_mask
+from .geometry import ALL_CARDS, CELL_INDEX, CELL_MASK, N_CARDS, neighbours_mask
 
 # Appendix B, tables B.1-B.4: what each suggestion code points at.
 # "observed": the observed card; "match": the matching card; "cross": the
@@ -131,5 +131,3 @@ def candidate_set(nis: int, observed: int, match: int, hearing_part: int, visual
         cand &= int(VIS_SET[observed, match, visual_part])
     return cand
 
-
-__all__ = ["cell_of", "candidate_set", "cards_meant", "sees", "HEAR_SET", "VIS_SET"]

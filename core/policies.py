@@ -12,7 +12,7 @@ import numpy as np
 from pairplay.schemas.config import LearnerConfig, Persona
 from pairplay.schemas.policy import PolicyFile, UserInfo
 
-from .combine import Combined, Profile, User, combine, represent
+from .combine import Combined, Profile, User, represent
 from .geometry import STATE_NAMES
 
 

@@ -34,12 +34,11 @@ class Training(NamedTuple):
 
 
 def train(personas: Sequence[Persona], games: int, rounds: int, seed: int,
-          config: LearnerConfig = LearnerConfig(), progress=None, mode: str = "q",
-          bias: np.ndarray | None = None) -> Training:
+          config: LearnerConfig = LearnerConfig(), progress=None) -> Training:
     flat = [p for p in personas for _ in range(games)]
     index = np.tile(np.arange(games), len(personas))
     seeds = [game_seed(seed, p.key, int(g)) for p, g in zip(flat, index)]
-    result = run_games(flat, seeds, rounds, config, mode=mode, bias=bias, progress=progress)
+    result = run_games(flat, seeds, rounds, config, progress=progress)
     greedy = np.stack([greedy_policy(q, np.random.default_rng(s)) for q, s in zip(result.q, seeds)])
     return Training(flat, index, seeds, result, greedy)
 

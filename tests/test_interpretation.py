@@ -1,6 +1,5 @@
 """Appendix B row by row, and perception by sight (table 6.1) and hearing (eq. 6.3)."""
 
-import numpy as np
 import pytest
 
 from pairplay.core import interpretation as I
