@@ -44,52 +44,52 @@ def add_combine_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--exclude", default="", help="comma-separated participants to leave out")
 
 
-def _load(args):
+def _load(args, verb: str):
+    """(policies, file names), or None after saying why nothing could be read."""
     files = _policy_paths(args.policies)
-    if not files:
-        raise PolicyFileError("no policy files given")
-    return [read_policy(f) for f in files], [str(f) for f in files]
+    try:
+        if not files:
+            raise PolicyFileError("no policy files given")
+        return [read_policy(f) for f in files], [str(f) for f in files]
+    except PolicyFileError as exc:
+        print(f"pairplay {verb}: {exc}", file=sys.stderr)
+        return None
 
 
-def _profile_lines(profiles) -> list[str]:
+def _profile_lines(profiles, policies) -> list[str]:
+    counts: dict[str, int] = {}
+    for p in policies:
+        counts[p.participant] = counts.get(p.participant, 0) + 1
     lines = [f"{'participant':16s} {'policies':>8s} {'speech %':>9s} {'head %':>7s} {'smile':>6s} {'gaze':>5s}  incompatible states"]
     for name, prof in profiles.items():
         states = ", ".join([f"{STATE_NAMES[s]}(S)" for s in prof.speech_states] + [f"{STATE_NAMES[s]}(H)" for s in prof.head_states])
-        lines.append(f"{name:16s} {'':>8s} {100 * prof.info.speech:9.1f} {100 * prof.info.head:7.1f} "
+        lines.append(f"{name:16s} {counts[name]:>8d} {100 * prof.info.speech:9.1f} {100 * prof.info.head:7.1f} "
                      f"{'yes' if prof.info.facial else 'no':>6s} {'yes' if prof.info.gaze else 'no':>5s}  {states or '-'}")
     return lines
 
 
 def run_profile(args) -> int:
-    try:
-        policies, _ = _load(args)
-    except PolicyFileError as exc:
-        print(f"pairplay profile: {exc}", file=sys.stderr)
+    loaded = _load(args, "profile")
+    if loaded is None:
         return 2
+    policies, _ = loaded
     _, profiles = users_from_policies(policies, args.seed)
-    counts = {}
-    for p in policies:
-        counts[p.participant] = counts.get(p.participant, 0) + 1
-    lines = _profile_lines(profiles)
-    print(lines[0])
-    for line, name in zip(lines[1:], profiles):
-        print(line[:17] + f"{counts[name]:>8d}" + line[25:])
+    print("\n".join(_profile_lines(profiles, policies)))
     return 0
 
 
 def run_combine(args) -> int:
-    try:
-        policies, files = _load(args)
-    except PolicyFileError as exc:
-        print(f"pairplay combine: {exc}", file=sys.stderr)
+    loaded = _load(args, "combine")
+    if loaded is None:
         return 2
+    policies, files = loaded
     exclude = {x.strip() for x in args.exclude.split(",") if x.strip()}
     users, profiles = users_from_policies(policies, args.seed, exclude)
     if not users:
         print("pairplay combine: no policies left to combine", file=sys.stderr)
         return 2
     merged = combine(users)
-    print("\n".join(_profile_lines(profiles)))
+    print("\n".join(_profile_lines(profiles, policies)))
     print(f"\nmerged: speech {100 * merged.info.speech:.1f}%, head {100 * merged.info.head:.1f}%, "
           f"smile {merged.info.facial}, gaze {merged.info.gaze}\n")
     for s, (a, rule) in enumerate(zip(merged.policy, merged.rules)):
