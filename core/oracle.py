@@ -13,7 +13,8 @@ estimates, thesis 5.1: ignored turns are not learned from). Method:
 2. Exact expectation per situation and action: the user's candidate set is
    deterministic given whether the speech is heard (probability q) and what the
    sight level shows, and the pick is uniform in it, so
-   E[r] = sum over heard/unheard of P * (-3 if empty else 2/|C| [match in C] - 1 + 1/|C|).
+   E[r] = sum over heard/unheard of P * (-3 if empty else 2/|C| [match in C] - 1 + 1/|C|)
+   (with the "match" bonus rule the last term is paid on a hit only).
 3. Average per state and take the best action (lowest code among exact ties).
 Iterate once: situations first from the user alone, then from the first
 oracle's own play (the states it visits are those it will be judged on).
@@ -28,20 +29,26 @@ from pairplay.schemas.config import Persona
 from .actions import ACTION_HEARING, ACTION_VISUAL, HEARING_SMILE, N_ACTIONS, VISUAL_GAZE
 from .geometry import N_STATES
 from .interpretation import HEAR_SET, VIS_SET, hear_probability, sees
-from .reward import INCONSISTENT
+from .reward import BONUS_RULES, INCONSISTENT
 from .simulate import run_games
 
 USER_ALONE = np.zeros(N_STATES, dtype=np.int64)
 
 
-def _value(cand: np.ndarray, match: np.ndarray) -> np.ndarray:
+def _value(cand: np.ndarray, match: np.ndarray, bonus: str) -> np.ndarray:
+    """Expected reward of a uniform pick in each candidate set (core/reward.py's rule)."""
     size = np.bitwise_count(cand)
     hit = (cand >> match[:, None]) & 1
     safe = np.maximum(size, 1)
-    return np.where(size == 0, INCONSISTENT, 2.0 * hit / safe - 1.0 + 1.0 / safe)
+    p_hit = hit / safe
+    if bonus not in BONUS_RULES:
+        raise ValueError(f"reward bonus rule {bonus!r} is not one of {BONUS_RULES}")
+    value = 2.0 * p_hit - 1.0 + (1.0 / safe if bonus == "consistent" else p_hit / safe)
+    return np.where(size == 0, INCONSISTENT, value)
 
 
-def expected_rewards(persona: Persona, observed: np.ndarray, match: np.ndarray, nis: np.ndarray) -> np.ndarray:
+def expected_rewards(persona: Persona, observed: np.ndarray, match: np.ndarray, nis: np.ndarray,
+                     bonus: str = "consistent") -> np.ndarray:
     """E[reward | considered] of every action in every situation: (n, 88)."""
     seen = sees(persona.sight)
     q = hear_probability(persona.hearing)
@@ -49,10 +56,10 @@ def expected_rewards(persona: Persona, observed: np.ndarray, match: np.ndarray, 
     vis_seen = np.where(v == VISUAL_GAZE, seen[3], (v > VISUAL_GAZE) & seen[2])
     vis = np.where(vis_seen[None], VIS_SET[observed[:, None], match[:, None], v[None]], -1)
     base = nis[:, None] & vis
-    unheard = _value(base, match)
+    unheard = _value(base, match, bonus)
     heard_mask = base & HEAR_SET[observed[:, None], match[:, None], h[None]]
     p_heard = np.where(h == HEARING_SMILE, float(seen[1]), np.where(h > HEARING_SMILE, q, 0.0))
-    heard = _value(heard_mask, match)
+    heard = _value(heard_mask, match, bonus)
     return p_heard * heard + (1 - p_heard) * unheard
 
 
@@ -69,7 +76,7 @@ def situations(personas, seeds, rounds: int, policies: np.ndarray):
 
 
 def oracle_policies(personas, seeds_per_persona: int, seed: int, rounds: int = 200,
-                    iterations: int = 2, seed_of=None) -> tuple[np.ndarray, np.ndarray]:
+                    iterations: int = 2, seed_of=None, bonus: str = "consistent") -> tuple[np.ndarray, np.ndarray]:
     """(policies (P, 24), expected reward tables (P, 24, 88)) for every persona, in one batch.
 
     `seed_of(persona_key, i)` names the seed of the i-th situation game.
@@ -85,7 +92,7 @@ def oracle_policies(personas, seeds_per_persona: int, seed: int, rounds: int = 2
         game, states, observed, match, nis = situations(games, seeds, rounds, policies[owner])
         for i, persona in enumerate(personas):
             mine = owner[game] == i
-            values = expected_rewards(persona, observed[mine], match[mine], nis[mine])
+            values = expected_rewards(persona, observed[mine], match[mine], nis[mine], bonus)
             sums = np.zeros((N_STATES, N_ACTIONS))
             np.add.at(sums, states[mine], values)
             counts = np.bincount(states[mine], minlength=N_STATES)

@@ -62,11 +62,15 @@ def run_games(personas: Sequence[Persona], seeds: Sequence[int], rounds: int,
               config: LearnerConfig = LearnerConfig(), mode: str = "q",
               bias: np.ndarray | None = None, policy: np.ndarray | None = None,
               observed_source: str = "intended", progress=None, on_turn=None,
-              snapshot_every: int | None = None) -> SimResult:
+              snapshot_every: int | None = None, reward_bonus: str = "consistent") -> SimResult:
     """Play one game per (persona, seed) pair; see the module rule.
 
     `progress(done_rounds)` is called with the rounds completed so far (summed
-    over games) whenever some game finishes a round.
+    over games) whenever some game finishes a round; `on_turn(Turn)` after every
+    lockstep step. With `snapshot_every=k` the greedy policy of every learner is
+    kept after rounds k, 2k, ... (ties broken by the game's "snapshot" stream),
+    to measure how fast a policy becomes good. `reward_bonus` chooses when the
+    1/|candidate set| bonus is paid (core/reward.py).
     """
     if observed_source not in OBSERVED_SOURCES:
         raise ValueError(f"observed source must be one of {OBSERVED_SOURCES}")
@@ -105,7 +109,8 @@ def run_games(personas: Sequence[Persona], seeds: Sequence[int], rounds: int,
         resp = users.respond(actions, observed, match, intended, from_memory, covered)
         hit = resp.second == match
         users.end_turn(first, resp.second, hit)
-        rewards, learn = simulated_reward(hit, resp.considered, resp.consistent, np.bitwise_count(resp.candidates))
+        rewards, learn = simulated_reward(hit, resp.considered, resp.consistent, np.bitwise_count(resp.candidates),
+                                          reward_bonus)
         learner.learn(states, actions, rewards, learn & ~done, round_index)
         if on_turn is not None:
             on_turn(Turn(~done, round_index.copy(), first, observed, match, covered, users.nis(covered),

@@ -34,11 +34,11 @@ class Training(NamedTuple):
 
 
 def train(personas: Sequence[Persona], games: int, rounds: int, seed: int,
-          config: LearnerConfig = LearnerConfig(), progress=None) -> Training:
+          config: LearnerConfig = LearnerConfig(), progress=None, reward_bonus: str = "consistent") -> Training:
     flat = [p for p in personas for _ in range(games)]
     index = np.tile(np.arange(games), len(personas))
     seeds = [game_seed(seed, p.key, int(g)) for p, g in zip(flat, index)]
-    result = run_games(flat, seeds, rounds, config, progress=progress)
+    result = run_games(flat, seeds, rounds, config, progress=progress, reward_bonus=reward_bonus)
     greedy = np.stack([greedy_policy(q, np.random.default_rng(s)) for q, s in zip(result.q, seeds)])
     return Training(flat, index, seeds, result, greedy)
 
@@ -67,13 +67,14 @@ class Comparison(NamedTuple):
 
 
 def compare(personas: Sequence[Persona], training: Training, eval_rounds: int, seed: int,
-            oracle_rounds: int = 200, oracle_games: int = 20, progress=None) -> Comparison:
+            oracle_rounds: int = 200, oracle_games: int = 20, progress=None,
+            reward_bonus: str = "consistent") -> Comparison:
     """User alone, learned greedy policies and the oracle, per persona, on the same games.
 
     Each learned policy plays `eval_rounds` rounds; the oracle and the user alone
     play the very same evaluation games beside it (one lockstep batch).
     """
-    oracle, _ = oracle_policies(personas, oracle_games, seed, oracle_rounds)
+    oracle, _ = oracle_policies(personas, oracle_games, seed, oracle_rounds, bonus=reward_bonus)
     n_p, games = len(personas), len(training.personas) // len(personas)
     owner = np.repeat(np.arange(n_p), games)
     policies = np.concatenate([training.greedy, oracle[owner], np.tile(USER_ALONE, (n_p * games, 1))])
@@ -141,7 +142,7 @@ class ReuseResult(NamedTuple):
 
 def reuse_experiment(personas: Sequence[Persona], users: UserSet, oracle_picks: dict, seeds: int, rounds: int,
                      seed: int, config: LearnerConfig, snapshot_every: int = 10, snapshot_rounds: int = 20,
-                     target: float = 1.10, progress=None) -> ReuseResult:
+                     target: float = 1.10, progress=None, reward_bonus: str = "consistent") -> ReuseResult:
     """Thesis 6.4 / 7: for each persona held out, Q-learning from scratch vs pi-reuse on the merge of the others."""
     from .combine import combine
     biases = {p.key: combine([users.users[q.key] for q in personas if q.key != p.key]) for p in personas}
@@ -153,9 +154,10 @@ def reuse_experiment(personas: Sequence[Persona], users: UserSet, oracle_picks: 
             bias_rows.append(biases[p.key].policy)
     bias = np.array(bias_rows)
     n = len(flat)
-    scratch = run_games(flat, seed_list, rounds, config, mode="q", progress=progress, snapshot_every=snapshot_every)
+    scratch = run_games(flat, seed_list, rounds, config, mode="q", progress=progress, snapshot_every=snapshot_every,
+                        reward_bonus=reward_bonus)
     reuse = run_games(flat, seed_list, rounds, config, mode="reuse", bias=bias, progress=progress,
-                      snapshot_every=snapshot_every)
+                      snapshot_every=snapshot_every, reward_bonus=reward_bonus)
     # How good is the learner's own greedy policy after every `snapshot_every` rounds?
     snaps = np.concatenate([scratch.snapshots, reuse.snapshots])  # (2n, k, 24)
     k = snaps.shape[1]

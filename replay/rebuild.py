@@ -58,7 +58,8 @@ def rebuild_events(events, source: str = "", truncated: bool = False, note: str 
             who = None
     policy = to_policy_file(q, np.array(fold.visits), greedy, algorithm=c.algorithm,
                             participant=c.persona or c.participant, persona=who, seed=c.seed, game=c.game_index,
-                            rounds=len(fold.rounds), config=c.learner_config(), software=__version__)
+                            rounds=len(fold.rounds), config=c.learner_config(), software=__version__,
+                            reward_bonus=c.reward_bonus)
     return Rebuilt(source, c, fold, policy, truncated, note)
 
 

@@ -54,6 +54,7 @@ class PolicyFile(msgspec.Struct, frozen=True, kw_only=True):
     merged_from: list[str] = []
     rules: list[str] = []  # per state: which rule of algorithm 4 decided it
     software: str = ""
+    reward_bonus: str = "consistent"  # when the learning reward paid its 1/|C| bonus (core/reward.py)
 
     def __post_init__(self) -> None:
         if self.format != FORMAT:

@@ -21,6 +21,7 @@ OBSERVED_SOURCES = ("intended", "first-pick")
 # "perceived": the simulated participant reports it (SuggestionPerceived);
 # "time": the two picks of a turn came less than `ignore_window_ms` apart (thesis 7.1.2).
 IGNORE_RULES = ("perceived", "time")
+REWARD_BONUS_RULES = ("consistent", "match")  # = core.reward.BONUS_RULES (schemas do not import core)
 
 
 class SessionConfig(msgspec.Struct, frozen=True, kw_only=True):
@@ -41,6 +42,8 @@ class SessionConfig(msgspec.Struct, frozen=True, kw_only=True):
     # field never makes an old reader reject this event).
     learner: dict[str, Union[float, int, None]] = {}
     software_version: str = ""
+    # When the simulated reward pays its 1/|candidate set| bonus (core/reward.py).
+    reward_bonus: str = "consistent"
 
     def learner_config(self) -> LearnerConfig:
         """The learner's schedule as the strict config Struct (ValueError if unknown keys)."""
@@ -63,6 +66,8 @@ class SessionConfig(msgspec.Struct, frozen=True, kw_only=True):
             raise ValueError(f"ignore_rule {self.ignore_rule!r} is not one of {IGNORE_RULES}")
         if self.algorithm in ("pi-reuse", "fixed") and not self.policy_actions:
             raise ValueError(f"algorithm {self.algorithm!r} needs policy_actions (a bias or fixed policy)")
+        if self.reward_bonus not in REWARD_BONUS_RULES:
+            raise ValueError(f"reward_bonus {self.reward_bonus!r} is not one of {REWARD_BONUS_RULES}")
         if self.participant.startswith("sim:") and not self.persona:
             raise ValueError("a simulated participant needs a persona")
         self.learner_config()

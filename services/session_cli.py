@@ -58,6 +58,9 @@ def add_config_arguments(p: argparse.ArgumentParser) -> None:
                    help="default: intended for sim:, first-pick for human:")
     g.add_argument("--ignore-rule", choices=("perceived", "time"), help="default: perceived for sim:, time for human:")
     g.add_argument("--preset", choices=sorted(PRESETS), default="virtual", help="learner schedule (thesis 6.2, 7.2)")
+    g.add_argument("--reward-bonus", choices=("consistent", "match"), default="consistent",
+                   help="simulated reward: the 1/|candidate set| bonus on every consistent suggestion (default) "
+                        "or on a match only")
 
 
 def config_from_args(args: argparse.Namespace) -> SessionConfig:
@@ -81,7 +84,8 @@ def config_from_args(args: argparse.Namespace) -> SessionConfig:
         rounds=args.rounds, game_index=args.game_index, algorithm=args.algorithm,
         observed_source=args.observed_source or ("intended" if sim else "first-pick"),
         ignore_rule=args.ignore_rule or ("perceived" if sim else "time"), policy_actions=actions,
-        learner=learner_overrides(schedule), software_version=__version__)
+        learner=learner_overrides(schedule), software_version=__version__,
+        reward_bonus=args.reward_bonus)
     config.validate()
     return config
 

@@ -27,6 +27,7 @@ from pairplay import __version__
 from pairplay.core import study
 from pairplay.core.personas import PERSONAS, persona
 from pairplay.core.policies import to_policy_file
+from pairplay.core.reward import BONUS_RULES
 from pairplay.schemas.config import LearnerConfig
 from pairplay.schemas.policy import write_policy
 
@@ -41,6 +42,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--rounds", type=int, default=500, help="rounds per game (thesis: 500)")
     p.add_argument("--eval-rounds", type=int, default=200,
                    help="rounds each greedy policy is evaluated with epsilon 0 (default 200)")
+    p.add_argument("--reward-bonus", choices=BONUS_RULES, default="consistent",
+                   help="when the 1/|candidate set| bonus is paid: on every consistent suggestion "
+                        "(SPEC, default) or only on a match (see README: where Q-learning stays above the oracle)")
     p.add_argument("--reuse-seeds", type=int, default=10,
                    help="games per held-out persona in the speed-up experiment (default 10)")
     p.add_argument("--psi", type=float, default=1.0, help="pi-reuse: psi at the start of each round (default 1)")
@@ -95,7 +99,7 @@ def write_policies(out: Path, training: study.Training, args, config: LearnerCon
         write_policy(path, to_policy_file(
             training.result.q[row], training.result.counts[row], training.greedy[row],
             algorithm="q-learning", participant=p.key, persona=p, seed=training.seeds[row], game=int(g),
-            rounds=args.rounds, config=config, software=f"pairplay {__version__}"))
+            rounds=args.rounds, config=config, software=f"pairplay {__version__}", reward_bonus=args.reward_bonus))
         paths.append(path)
     return paths
 
@@ -181,7 +185,8 @@ def run(args) -> int:
 
     t0 = time.perf_counter()
     with _bar(args, len(personas) * args.games * args.rounds, "training") as bar:
-        training = study.train(personas, args.games, args.rounds, args.seed, config, progress=_progress(bar))
+        training = study.train(personas, args.games, args.rounds, args.seed, config, progress=_progress(bar),
+                               reward_bonus=args.reward_bonus)
     timings["training"] = time.perf_counter() - t0
 
     write_policies(out, training, args, config)
@@ -194,7 +199,8 @@ def run(args) -> int:
     t0 = time.perf_counter()
     n_eval = 3 * len(personas) * args.games * args.eval_rounds
     with _bar(args, n_eval, "oracle + evaluation") as bar:
-        cmp = study.compare(personas, training, args.eval_rounds, args.seed, progress=_progress(bar))
+        cmp = study.compare(personas, training, args.eval_rounds, args.seed, progress=_progress(bar),
+                            reward_bonus=args.reward_bonus)
     timings["evaluation"] = time.perf_counter() - t0
     table = evaluation_table(cmp)
     with open(out / "evaluation.csv", "w", newline="") as f:
@@ -237,7 +243,7 @@ def run(args) -> int:
     if len(personas) >= 2:
         with _bar(args, 2 * len(personas) * args.reuse_seeds * args.rounds, "speed-up") as bar:
             reuse = study.reuse_experiment(personas, users, oracle, args.reuse_seeds, args.rounds, args.seed,
-                                           reuse_config, progress=_progress(bar))
+                                           reuse_config, progress=_progress(bar), reward_bonus=args.reward_bonus)
         for i, key in enumerate(reuse.persona):
             f50, r2t = reuse.first50[i], reuse.rounds_to_target[i]
 
@@ -262,8 +268,10 @@ def run(args) -> int:
         "# pairplay study report", "",
         f"pairplay {__version__}, seed {args.seed}, {len(personas)} personas x {args.games} games x "
         f"{args.rounds} rounds, Q-learning with the thesis's schedules (epsilon 0.9 - 0.1/50 rounds, "
-        f"floor 0.1; alpha 0.5 - 0.05/50 rounds). Re-run: `pairplay study --seed {args.seed} "
-        f"--games {args.games} --rounds {args.rounds}`.", "",
+        f"floor 0.1; alpha 0.5 - 0.05/50 rounds); the 1/|candidate set| bonus paid "
+        f"{'on every consistent suggestion' if args.reward_bonus == 'consistent' else 'on a match only'}. "
+        f"Re-run: `pairplay study --seed {args.seed} --games {args.games} --rounds {args.rounds}"
+        f"{'' if args.reward_bonus == 'consistent' else ' --reward-bonus ' + args.reward_bonus}`.", "",
         "## Learned policies against the references", "",
         f"Picks per round, each greedy policy played {args.eval_rounds} rounds with epsilon 0; the oracle "
         "and the user alone play the same games (core/oracle.py documents the oracle).", "",

@@ -60,3 +60,12 @@ def test_the_oracle_of_a_user_who_hears_is_worth_a_sure_match_everywhere():
     # Blind and deaf: nothing can be perceived, every action is worth the NIS.
     row = tables[1][tables[1].any(axis=1)]
     assert np.allclose(row, row[:, :1])
+
+
+def test_with_the_match_only_bonus_a_sure_miss_is_worth_minus_one():
+    wrong_card = code_of_parts(1, 0, 0, 0)  # "It is the right card" while the match is elsewhere
+    assert e(persona(), wrong_card) == pytest.approx(0.0)
+    values = expected_rewards(persona(), np.array([OBS]), np.array([MATCH]), np.array([NIS]), bonus="match")[0]
+    assert values[wrong_card] == pytest.approx(-1.0)
+    assert values[EXACT] == pytest.approx(2.0)
+    assert values[RIGHT_CELL] == pytest.approx(2 / 3 - 1 + (1 / 3) / 3)

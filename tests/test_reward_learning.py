@@ -100,3 +100,13 @@ def test_learner_refuses_a_bad_policy():
         Learner(1, UniformStream([1], "agent"), mode="fixed", policy=np.full(24, 88))
     with pytest.raises(ValueError, match="agent"):
         Learner(1, UniformStream([1], "user"))
+
+
+@pytest.mark.parametrize("matched, size, reward", [(T, 1, 2.0), (T, 4, 1.25), (F, 1, -1.0), (F, 3, -1.0)])
+def test_the_other_reading_pays_the_bonus_on_a_match_only(matched, size, reward):
+    r, ok = simulated_reward(np.array([matched]), np.array([T]), np.array([T]), np.array([size]), bonus="match")
+    assert r[0] == pytest.approx(reward) and ok[0]
+    r, _ = simulated_reward(np.array([matched]), np.array([T]), np.array([F]), np.array([0]), bonus="match")
+    assert r[0] == -3.0
+    with pytest.raises(ValueError, match="bonus"):
+        simulated_reward(np.array([T]), np.array([T]), np.array([T]), np.array([1]), bonus="always")

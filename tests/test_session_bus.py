@@ -75,3 +75,17 @@ def test_replay_republishes_every_event_in_order(tmp_path):
         assert wait_until(lambda: got.qsize() == len(events))
     keys = [got.get()[0] for _ in range(len(events))]
     assert keys == [r.key.replace("/bus1/", "/again/") for r in events]
+
+
+def test_the_other_reward_reading_travels_over_the_bus_too(tmp_path):
+    import msgspec
+    config = msgspec.structs.replace(CONFIG, session="bus2", persona="deaf", participant="sim:deaf",
+                                     reward_bonus="match")
+    nodes = {}
+    path = run_session(config, tmp_path / "bus2.mcap", nodes_out=nodes)
+    study = run_games([persona("deaf")], [stream_seed(config)], config.rounds, reward_bonus="match")
+    assert np.array_equal(study.q[0], nodes["learner"].logic.learner.q[0])
+    other = run_games([persona("deaf")], [stream_seed(config)], config.rounds)
+    assert not np.array_equal(other.q[0], study.q[0])
+    rebuilt = rebuild_recording(path)
+    assert rebuilt.policy.reward_bonus == "match" and np.array_equal(rebuilt.fold.q, study.q[0])
