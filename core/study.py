@@ -64,6 +64,7 @@ class Comparison(NamedTuple):
     oracle: np.ndarray
     oracle_policy: np.ndarray  # (P, 24)
     learned_per_policy: np.ndarray  # (P, games)
+    oracle_values: np.ndarray  # (P, 24, 88) expected reward of every action (core/oracle.py)
 
 
 def compare(personas: Sequence[Persona], training: Training, eval_rounds: int, seed: int,
@@ -74,7 +75,7 @@ def compare(personas: Sequence[Persona], training: Training, eval_rounds: int, s
     Each learned policy plays `eval_rounds` rounds; the oracle and the user alone
     play the very same evaluation games beside it (one lockstep batch).
     """
-    oracle, _ = oracle_policies(personas, oracle_games, seed, oracle_rounds, bonus=reward_bonus)
+    oracle, values = oracle_policies(personas, oracle_games, seed, oracle_rounds, bonus=reward_bonus)
     n_p, games = len(personas), len(training.personas) // len(personas)
     owner = np.repeat(np.arange(n_p), games)
     policies = np.concatenate([training.greedy, oracle[owner], np.tile(USER_ALONE, (n_p * games, 1))])
@@ -82,7 +83,7 @@ def compare(personas: Sequence[Persona], training: Training, eval_rounds: int, s
                      np.tile(training.game_index, 3), progress)
     learned, oracle_picks, alone = picks.reshape(3, n_p, games)
     return Comparison([p.key for p in personas], alone.mean(1), learned.mean(1), learned.std(1),
-                      oracle_picks.mean(1), oracle, learned)
+                      oracle_picks.mean(1), oracle, learned, values)
 
 
 # --- Chapter 6.3-6.4: profiles, merged policies, policy reuse -------------------------------
@@ -174,3 +175,24 @@ def reuse_experiment(personas: Sequence[Persona], users: UserSet, oracle_picks: 
                        first50.reshape(2, P, seeds).transpose(1, 0, 2),
                        first.reshape(2, P, seeds).transpose(1, 0, 2),
                        curves.transpose(1, 0, 2), biases)
+
+
+def policy_gaps(cmp: Comparison, training: Training, index: int, top: int = 5) -> list[tuple[int, int, float, int, float, float]]:
+    """Where a persona's learned policies lose expected reward against the oracle.
+
+    Per state: (state, the learned policies' most common action, its expected
+    reward, the oracle's action, its expected reward, the mean loss over the
+    persona's policies), the `top` states with the largest loss.
+    """
+    key = cmp.persona[index]
+    rows = [i for i, p in enumerate(training.personas) if p.key == key]
+    values = cmp.oracle_values[index]
+    visited = values.any(axis=1)
+    out = []
+    for s in np.nonzero(visited)[0]:
+        chosen = training.greedy[rows, s]
+        loss = float(np.mean(values[s].max() - values[s, chosen]))
+        modal = int(np.bincount(chosen, minlength=values.shape[1]).argmax())
+        best = int(cmp.oracle_policy[index, s])
+        out.append((int(s), modal, float(values[s, modal]), best, float(values[s, best]), loss))
+    return sorted(out, key=lambda r: -r[-1])[:top]

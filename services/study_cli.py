@@ -113,6 +113,26 @@ def evaluation_table(cmp: study.Comparison) -> list[list[str]]:
     return rows
 
 
+def gap_section(cmp: study.Comparison, training: study.Training, threshold: float = 1.05) -> list[str]:
+    """Report lines: for each persona above `threshold` x the oracle, the states that lose most."""
+    from pairplay.core.actions import ACTION_NAMES
+    from pairplay.core.geometry import STATE_NAMES
+    lines = []
+    for i, key in enumerate(cmp.persona):
+        if cmp.learned[i] <= threshold * cmp.oracle[i]:
+            continue
+        rows = [["state", "learned (most policies)", "E[r]", "oracle", "E[r]", "mean loss"]]
+        for s, modal, v_modal, best, v_best, loss in study.policy_gaps(cmp, training, i):
+            rows.append([STATE_NAMES[s], f"{modal}: {ACTION_NAMES[modal]}", f"{v_modal:+.2f}",
+                         f"{best}: {ACTION_NAMES[best]}", f"{v_best:+.2f}", f"{loss:.2f}"])
+        lines += [f"**{key}** ({cmp.learned[i] / cmp.oracle[i]:.3f} x the oracle): the states where its learned "
+                  "policies lose most expected reward (given the suggestion is considered).", "",
+                  markdown_table(rows), ""]
+    if lines:
+        lines = ["### Where learned policies stay above the oracle", ""] + lines
+    return lines
+
+
 def markdown_table(rows: list[list[str]]) -> str:
     head, *body = rows
     lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
@@ -276,6 +296,7 @@ def run(args) -> int:
         f"Picks per round, each greedy policy played {args.eval_rounds} rounds with epsilon 0; the oracle "
         "and the user alone play the same games (core/oracle.py documents the oracle).", "",
         markdown_table(table), "", "![evaluation](evaluation.png)", "",
+        *gap_section(cmp, training),
         "## Learning curves (figure 6.4)", "",
         markdown_table([["persona", "first 50 rounds", "last 50 rounds"]] +
                        [[k, f"{first50[k]:.2f}", f"{last50[k]:.2f}"] for k in curves]), "",
