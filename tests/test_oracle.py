@@ -69,3 +69,15 @@ def test_with_the_match_only_bonus_a_sure_miss_is_worth_minus_one():
     assert values[wrong_card] == pytest.approx(-1.0)
     assert values[EXACT] == pytest.approx(2.0)
     assert values[RIGHT_CELL] == pytest.approx(2 / 3 - 1 + (1 / 3) / 3)
+
+
+def test_policy_gaps_name_the_states_where_learned_policies_lose_expected_reward():
+    from pairplay.core import study
+    from pairplay.core.personas import PERSONAS
+    deaf = PERSONAS["deaf"]
+    training = study.train([deaf], games=2, rounds=20, seed=3)
+    cmp = study.compare([deaf], training, eval_rounds=2, seed=3, oracle_rounds=20, oracle_games=4)
+    gaps = study.policy_gaps(cmp, training, 0, top=4)
+    assert 0 < len(gaps) <= 4 and [g[-1] for g in gaps] == sorted((g[-1] for g in gaps), reverse=True)
+    for state, modal, v_modal, best, v_best, loss in gaps:
+        assert v_best == cmp.oracle_values[0, state].max() >= v_modal and loss >= 0
