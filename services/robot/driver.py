@@ -299,6 +299,7 @@ class RobotDriver:
                 self._held = self.transport.ready(step.wire)
                 if self._held:
                     return  # hold this and everything after it: order is kept
+                sent_ns = self._clock_ns()  # the write starts now; a fast robot may answer inside it
                 try:
                     self.transport.send(step.wire)
                 except OSError as exc:
@@ -306,7 +307,7 @@ class RobotDriver:
                     self._drop(f"write failed: {exc}")
                     return
                 step.sent = True
-                perf.sent_ns = perf.sent_ns or self._clock_ns()
+                perf.sent_ns = perf.sent_ns or sent_ns
                 perf.last_send = time.monotonic()
                 perf.outstanding.extend((step.command_id, kind) for kind in step.wire.replies)
                 perf.promised = perf.promised or bool(step.wire.replies)
