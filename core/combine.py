@@ -154,17 +154,14 @@ def _half(users: Sequence[User], state: int, hearing: bool) -> tuple[int, str]:
     chosen = [u for u, e in zip(users, errors) if e == low]
     own = [int(parts(u.policy[state])[0 if hearing else 1]) for u in chosen]
     name = "hearing" if hearing else "visual"
-    if len(chosen) < len(users):
-        prefix = f"{name}=fewer-errors({'+'.join(sorted(u.name for u in chosen))})"
-    else:
-        prefix = f"{name}=sum"
+    fewer = len(chosen) < len(users)
+    prefix = f"{name}=fewer-errors({'+'.join(sorted(u.name for u in chosen))})" if fewer else f"{name}=sum"
     if len(set(own)) == 1:
-        return own[0], prefix if len(chosen) < len(users) else f"{name}=equal" if len(users) > 1 else prefix
+        return own[0], prefix if fewer else f"{name}=equal"
     result = _sum_hearing(own) if hearing else _sum_visual(own, all(u.info.gaze for u in chosen))
     if result is not None:
         return result, prefix
-    candidates = list(dict.fromkeys(own))
-    return _resolve_error(chosen, state, candidates, hearing), f"{prefix}:error->Q"
+    return _resolve_error(chosen, state, list(set(own)), hearing), f"{prefix}:error->Q"
 
 
 def combine(users: Sequence[User]) -> Combined:

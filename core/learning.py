@@ -106,7 +106,7 @@ class Learner:
 
     def start_round(self, round_index, games=slice(None)) -> None:
         """Reset psi for the games starting a round (algorithm 5, line 4)."""
-        self.psi[games] = psi_round_start(self.config, np.asarray(round_index)[games] if np.ndim(round_index) else round_index)
+        self.psi[games] = psi_round_start(self.config, np.asarray(round_index)[games])
 
     def suggest(self, states: np.ndarray, round_index: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(actions, how) for every game, drawing DRAWS_PER_SUGGESTION uniforms."""
