@@ -106,6 +106,7 @@ def run_games(personas: Sequence[Persona], seeds: Sequence[int], rounds: int,
         observed = intended if observed_source == "intended" else first
         states = states_of(observed, match, covered)
         actions, _ = learner.suggest(states, round_index)
+        nis = users.nis(covered) if on_turn is not None else None  # before the turn changes memory
         resp = users.respond(actions, observed, match, intended, from_memory, covered)
         hit = resp.second == match
         users.end_turn(first, resp.second, hit)
@@ -113,7 +114,7 @@ def run_games(personas: Sequence[Persona], seeds: Sequence[int], rounds: int,
                                           reward_bonus)
         learner.learn(states, actions, rewards, learn & ~done, round_index)
         if on_turn is not None:
-            on_turn(Turn(~done, round_index.copy(), first, observed, match, covered, users.nis(covered),
+            on_turn(Turn(~done, round_index.copy(), first, observed, match, covered, nis,
                          from_memory, states, actions, resp.second, resp.considered, resp.consistent, rewards))
         matched |= np.where(hit, _BIT[first] | _BIT[resp.second], 0)
         picks += 2
