@@ -13,8 +13,9 @@ estimates, thesis 5.1: ignored turns are not learned from). Method:
 2. Exact expectation per situation and action: the user's candidate set is
    deterministic given whether the speech is heard (probability q) and what the
    sight level shows, and the pick is uniform in it, so
-   E[r] = sum over heard/unheard of P * (-3 if empty else 2/|C| [match in C] - 1 + 1/|C|)
-   (with the "match" bonus rule the last term is paid on a hit only).
+   E[r] = sum over heard/unheard of P * (-3 if empty else 2/|C| [match in C] - 1 + bonus),
+   the bonus 1/|C| times [match in C] (rule "correct"), 1 ("consistent") or
+   1/|C| [match in C] (the hit probability, "match"); core/reward.py.
 3. Average per state and take the best action (lowest code among exact ties).
 Iterate once: situations first from the user alone, then from the first
 oracle's own play (the states it visits are those it will be judged on).
@@ -29,7 +30,9 @@ from pairplay.schemas.config import Persona
 from .actions import ACTION_HEARING, ACTION_VISUAL, HEARING_SMILE, N_ACTIONS, VISUAL_GAZE
 from .geometry import N_STATES
 from .interpretation import HEAR_SET, VIS_SET, hear_probability, sees
-from .reward import BONUS_RULES, INCONSISTENT
+from pairplay.schemas.config import DEFAULT_REWARD_BONUS
+
+from .reward import INCONSISTENT, check_bonus_rule
 from .simulate import run_games
 
 USER_ALONE = np.zeros(N_STATES, dtype=np.int64)
@@ -41,14 +44,13 @@ def _value(cand: np.ndarray, match: np.ndarray, bonus: str) -> np.ndarray:
     hit = (cand >> match[:, None]) & 1
     safe = np.maximum(size, 1)
     p_hit = hit / safe
-    if bonus not in BONUS_RULES:
-        raise ValueError(f"reward bonus rule {bonus!r} is not one of {BONUS_RULES}")
-    value = 2.0 * p_hit - 1.0 + (1.0 / safe if bonus == "consistent" else p_hit / safe)
+    paid = {"correct": hit, "consistent": 1.0, "match": p_hit}[check_bonus_rule(bonus)]
+    value = 2.0 * p_hit - 1.0 + paid / safe
     return np.where(size == 0, INCONSISTENT, value)
 
 
 def expected_rewards(persona: Persona, observed: np.ndarray, match: np.ndarray, nis: np.ndarray,
-                     bonus: str = "consistent") -> np.ndarray:
+                     bonus: str = DEFAULT_REWARD_BONUS) -> np.ndarray:
     """E[reward | considered] of every action in every situation: (n, 88)."""
     seen = sees(persona.sight)
     q = hear_probability(persona.hearing)
@@ -76,7 +78,7 @@ def situations(personas, seeds, rounds: int, policies: np.ndarray):
 
 
 def oracle_policies(personas, seeds_per_persona: int, seed: int, rounds: int = 200,
-                    iterations: int = 2, seed_of=None, bonus: str = "consistent") -> tuple[np.ndarray, np.ndarray]:
+                    iterations: int = 2, seed_of=None, bonus: str = DEFAULT_REWARD_BONUS) -> tuple[np.ndarray, np.ndarray]:
     """(policies (P, 24), expected reward tables (P, 24, 88)) for every persona, in one batch.
 
     `seed_of(persona_key, i)` names the seed of the i-th situation game.

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from pairplay.schemas.config import LearnerConfig, Persona
+from pairplay.schemas.config import DEFAULT_REWARD_BONUS, LearnerConfig, Persona
 from pairplay.schemas.policy import PolicyFile, UserInfo
 
 from .combine import Combined, Profile, User, represent
@@ -21,7 +21,7 @@ def to_policy_file(q: np.ndarray, counts: np.ndarray, greedy: np.ndarray, *, alg
                    game: int | None = None, rounds: int = 0, config: LearnerConfig | None = None,
                    info: UserInfo | None = None, merged_from: list[str] | None = None,
                    rules: list[str] | None = None, software: str = "",
-                   reward_bonus: str = "consistent") -> PolicyFile:
+                   reward_bonus: str = DEFAULT_REWARD_BONUS) -> PolicyFile:
     return PolicyFile(
         algorithm=algorithm, participant=participant, persona=persona, seed=seed, game=game,
         rounds=rounds, config=config, states=list(STATE_NAMES),

@@ -1,39 +1,68 @@
 """The reward of a suggestion (thesis 4.3, 6.1.3, 7.1.2; SPEC "Reward").
 
-Rule: +1 for a match, -1 for a miss, plus 1/|candidate set| when the suggestion
-was considered and consistent (bonus "consistent", SPEC's reading); -3 (alone)
-for an inconsistent suggestion; no
-reward and no update when the suggestion was ignored (by focus, or because the
-match was picked from memory). The human study has no candidate set: +-1, and
--3 when the participant presses the "wrong suggestion" button; a turn whose two
-picks are less than 1.5 s apart counts as ignored.
+Rule: +1 for a match, -1 for a miss, plus a bonus of 1/|candidate set| for a
+considered suggestion (thesis 6.1.3: "to incentivize the use of specific
+suggestions"); -3 (alone) for an inconsistent suggestion; no reward and no
+update when the suggestion was ignored (by focus, or because the match was
+picked from memory). The human study has no candidate set: +-1, and -3 when
+the participant presses the "wrong suggestion" button; a turn whose two picks
+are less than 1.5 s apart counts as ignored.
+
+When the bonus is paid (schemas.config.REWARD_BONUS_RULES):
+- "correct" (default): when the candidate set holds the matching card. A
+  suggestion that points away from the match is not a specific suggestion of
+  it: it earns the plain -1 of the miss it causes.
+- "consistent" (SPEC.md's literal reading): on every consistent suggestion. A
+  smile at the card the user already looks at, when it is not the match, then
+  pays -1 + 1/1 = 0, more than any honest hint over three or more cards; the
+  reward-optimal policy misleads on purpose and the learner locks onto such
+  certain misses (README, "The reward bonus").
+- "match": only when the pick matched.
+The three agree on every suggestion whose candidate set holds the match except
+"match", which also withholds the bonus from honest misses.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
+from pairplay.schemas.config import DEFAULT_REWARD_BONUS, REWARD_BONUS_RULES
+
 INCONSISTENT = -3.0
 WRONG_SUGGESTION = -3.0
 IGNORE_BELOW_S = 1.5  # thesis 7.1.2: picks closer than this ignored the suggestion
-# When the 1/|candidate set| bonus is paid (thesis 6.1.3: "to incentivize the use
-# of specific suggestions"). "consistent": on every considered, consistent
-# suggestion (SPEC). "match": only when the pick matched, so a precise suggestion
-# of the wrong card earns -1, not -1 + 1/1 = 0 (the other reading; see README,
-# "Where Q-learning stays above the oracle").
-BONUS_RULES = ("consistent", "match")
+BONUS_RULES = REWARD_BONUS_RULES
+# How each rule reads in a report.
+BONUS_RULE_TEXT = {
+    "correct": "paid when the candidate set holds the matching card",
+    "consistent": "paid on every consistent suggestion (SPEC's literal reading)",
+    "match": "paid on a match only",
+}
+
+
+def check_bonus_rule(bonus: str) -> str:
+    if bonus not in BONUS_RULES:
+        raise ValueError(f"reward bonus rule {bonus!r} is not one of {BONUS_RULES}")
+    return bonus
+
+
+def bonus_paid(bonus: str, matched, holds_match) -> np.ndarray:
+    """Whether a considered, consistent suggestion earns its 1/|C| bonus."""
+    check_bonus_rule(bonus)
+    if bonus == "consistent":
+        return np.ones(np.shape(matched), dtype=bool)
+    return np.asarray(matched if bonus == "match" else holds_match, dtype=bool)
 
 
 def simulated_reward(matched: np.ndarray, considered: np.ndarray, consistent: np.ndarray,
-                     candidate_size: np.ndarray, bonus: str = "consistent") -> tuple[np.ndarray, np.ndarray]:
-    """(reward, learn) per game; `learn` is False where the turn gives no update."""
+                     candidate_size: np.ndarray, holds_match: np.ndarray,
+                     bonus: str = DEFAULT_REWARD_BONUS) -> tuple[np.ndarray, np.ndarray]:
+    """(reward, learn) per game; `learn` is False where the turn gives no update.
+
+    `holds_match`: the candidate set contains the matching card.
+    """
     size = np.maximum(np.asarray(candidate_size), 1)
-    if bonus == "consistent":
-        base = np.where(matched, 1.0, -1.0) + 1.0 / size
-    elif bonus == "match":
-        base = np.where(matched, 1.0 + 1.0 / size, -1.0)
-    else:
-        raise ValueError(f"reward bonus rule {bonus!r} is not one of {BONUS_RULES}")
+    base = np.where(matched, 1.0, -1.0) + np.where(bonus_paid(bonus, matched, holds_match), 1.0 / size, 0.0)
     reward = np.where(consistent, base, INCONSISTENT)
     return np.where(considered, reward, 0.0), np.asarray(considered, dtype=bool)
 

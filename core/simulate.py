@@ -17,7 +17,7 @@ from typing import NamedTuple, Sequence
 
 import numpy as np
 
-from pairplay.schemas.config import LearnerConfig, Persona
+from pairplay.schemas.config import DEFAULT_REWARD_BONUS, LearnerConfig, Persona
 
 from .board import deal
 from .geometry import ALL_CARDS, N_CARDS, states_of
@@ -62,7 +62,7 @@ def run_games(personas: Sequence[Persona], seeds: Sequence[int], rounds: int,
               config: LearnerConfig = LearnerConfig(), mode: str = "q",
               bias: np.ndarray | None = None, policy: np.ndarray | None = None,
               observed_source: str = "intended", progress=None, on_turn=None,
-              snapshot_every: int | None = None, reward_bonus: str = "consistent") -> SimResult:
+              snapshot_every: int | None = None, reward_bonus: str = DEFAULT_REWARD_BONUS) -> SimResult:
     """Play one game per (persona, seed) pair; see the module rule.
 
     `progress(done_rounds)` is called with the rounds completed so far (summed
@@ -111,7 +111,7 @@ def run_games(personas: Sequence[Persona], seeds: Sequence[int], rounds: int,
         hit = resp.second == match
         users.end_turn(first, resp.second, hit)
         rewards, learn = simulated_reward(hit, resp.considered, resp.consistent, np.bitwise_count(resp.candidates),
-                                          reward_bonus)
+                                          (resp.candidates >> match) & 1 == 1, reward_bonus)
         learner.learn(states, actions, rewards, learn & ~done, round_index)
         if on_turn is not None:
             on_turn(Turn(~done, round_index.copy(), first, observed, match, covered, nis,

@@ -15,7 +15,7 @@ from typing import NamedTuple, Sequence
 
 import numpy as np
 
-from pairplay.schemas.config import LearnerConfig, Persona
+from pairplay.schemas.config import DEFAULT_REWARD_BONUS, LearnerConfig, Persona
 
 from .learning import greedy_policy
 from .oracle import USER_ALONE, oracle_policies
@@ -34,7 +34,7 @@ class Training(NamedTuple):
 
 
 def train(personas: Sequence[Persona], games: int, rounds: int, seed: int,
-          config: LearnerConfig = LearnerConfig(), progress=None, reward_bonus: str = "consistent") -> Training:
+          config: LearnerConfig = LearnerConfig(), progress=None, reward_bonus: str = DEFAULT_REWARD_BONUS) -> Training:
     flat = [p for p in personas for _ in range(games)]
     index = np.tile(np.arange(games), len(personas))
     seeds = [game_seed(seed, p.key, int(g)) for p, g in zip(flat, index)]
@@ -69,7 +69,7 @@ class Comparison(NamedTuple):
 
 def compare(personas: Sequence[Persona], training: Training, eval_rounds: int, seed: int,
             oracle_rounds: int = 200, oracle_games: int = 20, progress=None,
-            reward_bonus: str = "consistent") -> Comparison:
+            reward_bonus: str = DEFAULT_REWARD_BONUS) -> Comparison:
     """User alone, learned greedy policies and the oracle, per persona, on the same games.
 
     Each learned policy plays `eval_rounds` rounds; the oracle and the user alone
@@ -143,7 +143,7 @@ class ReuseResult(NamedTuple):
 
 def reuse_experiment(personas: Sequence[Persona], users: UserSet, oracle_picks: dict, seeds: int, rounds: int,
                      seed: int, config: LearnerConfig, snapshot_every: int = 10, snapshot_rounds: int = 20,
-                     target: float = 1.10, progress=None, reward_bonus: str = "consistent") -> ReuseResult:
+                     target: float = 1.10, progress=None, reward_bonus: str = DEFAULT_REWARD_BONUS) -> ReuseResult:
     """Thesis 6.4 / 7: for each persona held out, Q-learning from scratch vs pi-reuse on the merge of the others."""
     from .combine import combine
     biases = {p.key: combine([users.users[q.key] for q in personas if q.key != p.key]) for p in personas}

@@ -10,6 +10,17 @@ from __future__ import annotations
 
 import msgspec
 
+# When the simulated reward pays its 1/|candidate set| bonus (thesis 6.1.3; core/reward.py):
+# "correct": on a considered suggestion whose candidate set holds the matching card
+#   (pairplay's default; SPEC's reading pays a certain miss, see README "The reward bonus");
+# "consistent": on every considered, consistent suggestion (SPEC.md's literal reading);
+# "match": only when the pick matched.
+REWARD_BONUS_RULES = ("correct", "consistent", "match")
+DEFAULT_REWARD_BONUS = "correct"
+# A recording or policy file that does not state its rule predates the choice
+# (pairplay 0.1.0): it was made with SPEC's reading.
+UNSTATED_REWARD_BONUS = "consistent"
+
 
 class LearnerConfig(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
     """Online Q-learning (thesis 5.1, algorithm 1) with optional pi-reuse (5.3).

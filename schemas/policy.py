@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import msgspec
 
-from .config import LearnerConfig, Persona
+from .config import REWARD_BONUS_RULES, UNSTATED_REWARD_BONUS, LearnerConfig, Persona
 
 FORMAT = "pairplay.policy"
 VERSION = 1
@@ -54,7 +54,9 @@ class PolicyFile(msgspec.Struct, frozen=True, kw_only=True):
     merged_from: list[str] = []
     rules: list[str] = []  # per state: which rule of algorithm 4 decided it
     software: str = ""
-    reward_bonus: str = "consistent"  # when the learning reward paid its 1/|C| bonus (core/reward.py)
+    # When the learning reward paid its 1/|C| bonus (core/reward.py); files that do
+    # not state it were written by pairplay 0.1.0, under SPEC's rule.
+    reward_bonus: str = UNSTATED_REWARD_BONUS
 
     def __post_init__(self) -> None:
         if self.format != FORMAT:
@@ -70,6 +72,8 @@ class PolicyFile(msgspec.Struct, frozen=True, kw_only=True):
         bad = [a for a in self.greedy if not 0 <= a < N_ACTIONS]
         if bad:
             raise PolicyFileError(f"greedy actions outside 0..{N_ACTIONS - 1}: {bad}")
+        if self.reward_bonus not in REWARD_BONUS_RULES:
+            raise PolicyFileError(f"reward_bonus {self.reward_bonus!r} is not one of {REWARD_BONUS_RULES}")
         if self.rules and len(self.rules) != N_STATES:
             raise PolicyFileError(f"a merged policy names one rule per state ({N_STATES})")
 

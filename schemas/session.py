@@ -13,7 +13,7 @@ from typing import Union
 
 import msgspec
 
-from .config import LearnerConfig
+from .config import REWARD_BONUS_RULES, UNSTATED_REWARD_BONUS, LearnerConfig
 
 ALGORITHMS = ("q-learning", "pi-reuse", "fixed")
 OBSERVED_SOURCES = ("intended", "first-pick")
@@ -21,7 +21,6 @@ OBSERVED_SOURCES = ("intended", "first-pick")
 # "perceived": the simulated participant reports it (SuggestionPerceived);
 # "time": the two picks of a turn came less than `ignore_window_ms` apart (thesis 7.1.2).
 IGNORE_RULES = ("perceived", "time")
-REWARD_BONUS_RULES = ("consistent", "match")  # = core.reward.BONUS_RULES (schemas do not import core)
 
 
 class SessionConfig(msgspec.Struct, frozen=True, kw_only=True):
@@ -43,7 +42,8 @@ class SessionConfig(msgspec.Struct, frozen=True, kw_only=True):
     learner: dict[str, Union[float, int, None]] = {}
     software_version: str = ""
     # When the simulated reward pays its 1/|candidate set| bonus (core/reward.py).
-    reward_bonus: str = "consistent"
+    # New sessions state it (DEFAULT_REWARD_BONUS); absent = a pairplay 0.1.0 recording.
+    reward_bonus: str = UNSTATED_REWARD_BONUS
 
     def learner_config(self) -> LearnerConfig:
         """The learner's schedule as the strict config Struct (ValueError if unknown keys)."""

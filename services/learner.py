@@ -126,9 +126,10 @@ class LearnerLogic:
             p = self.perceived.get((o.round, o.turn, o.attempt))
             if p is None:
                 return []  # the participant has not said yet what it perceived
+            holds_match = (p.candidate_mask >> o.target) & 1 == 1
             rewards, learns = simulated_reward(np.array([turn.matched]), np.array([p.considered]),
                                                np.array([p.consistent]), np.array([p.candidate_size]),
-                                               self.config.reward_bonus)
+                                               np.array([holds_match]), self.config.reward_bonus)
             reward, learn = float(rewards[0]), bool(learns[0])
             why = ("ignored: match from memory" if p.from_memory else "ignored: not considered") if not learn else (
                 "inconsistent" if not p.consistent else ("match" if turn.matched else "miss"))

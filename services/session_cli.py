@@ -27,7 +27,7 @@ from datetime import datetime, timezone
 from pathlib import Path
 
 from pairplay import __version__
-from pairplay.schemas.config import LearnerConfig
+from pairplay.schemas.config import DEFAULT_REWARD_BONUS, REWARD_BONUS_RULES, LearnerConfig
 from pairplay.schemas.keys import alive_key, check_chunk
 from pairplay.schemas.policy import PolicyFileError, read_policy
 from pairplay.schemas.session import SessionConfig, learner_overrides
@@ -58,9 +58,10 @@ def add_config_arguments(p: argparse.ArgumentParser) -> None:
                    help="default: intended for sim:, first-pick for human:")
     g.add_argument("--ignore-rule", choices=("perceived", "time"), help="default: perceived for sim:, time for human:")
     g.add_argument("--preset", choices=sorted(PRESETS), default="virtual", help="learner schedule (thesis 6.2, 7.2)")
-    g.add_argument("--reward-bonus", choices=("consistent", "match"), default="consistent",
-                   help="simulated reward: the 1/|candidate set| bonus on every consistent suggestion (default) "
-                        "or on a match only")
+    g.add_argument("--reward-bonus", choices=REWARD_BONUS_RULES, default=DEFAULT_REWARD_BONUS,
+                   help="simulated reward: when the 1/|candidate set| bonus is paid: when the candidate set holds "
+                        "the match (correct, default), on every consistent suggestion (consistent, SPEC's literal "
+                        "reading) or on a match only (core/reward.py)")
 
 
 def config_from_args(args: argparse.Namespace) -> SessionConfig:

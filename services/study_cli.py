@@ -27,8 +27,8 @@ from pairplay import __version__
 from pairplay.core import study
 from pairplay.core.personas import PERSONAS, persona
 from pairplay.core.policies import to_policy_file
-from pairplay.core.reward import BONUS_RULES
-from pairplay.schemas.config import LearnerConfig
+from pairplay.core.reward import BONUS_RULE_TEXT, BONUS_RULES
+from pairplay.schemas.config import DEFAULT_REWARD_BONUS, LearnerConfig
 from pairplay.schemas.policy import write_policy
 
 from . import plots
@@ -42,9 +42,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--rounds", type=int, default=500, help="rounds per game (thesis: 500)")
     p.add_argument("--eval-rounds", type=int, default=200,
                    help="rounds each greedy policy is evaluated with epsilon 0 (default 200)")
-    p.add_argument("--reward-bonus", choices=BONUS_RULES, default="consistent",
-                   help="when the 1/|candidate set| bonus is paid: on every consistent suggestion "
-                        "(SPEC, default) or only on a match (see README: where Q-learning stays above the oracle)")
+    p.add_argument("--reward-bonus", choices=BONUS_RULES, default=DEFAULT_REWARD_BONUS,
+                   help="when the 1/|candidate set| bonus is paid: when the candidate set holds the match "
+                        "(correct, default), on every consistent suggestion (consistent, SPEC's literal reading) "
+                        "or on a match only (see README: the reward bonus)")
     p.add_argument("--reuse-seeds", type=int, default=10,
                    help="games per held-out persona in the speed-up experiment (default 10)")
     p.add_argument("--psi", type=float, default=1.0, help="pi-reuse: psi at the start of each round (default 1)")
@@ -288,10 +289,10 @@ def run(args) -> int:
         "# pairplay study report", "",
         f"pairplay {__version__}, seed {args.seed}, {len(personas)} personas x {args.games} games x "
         f"{args.rounds} rounds, Q-learning with the thesis's schedules (epsilon 0.9 - 0.1/50 rounds, "
-        f"floor 0.1; alpha 0.5 - 0.05/50 rounds); the 1/|candidate set| bonus paid "
-        f"{'on every consistent suggestion' if args.reward_bonus == 'consistent' else 'on a match only'}. "
+        f"floor 0.1; alpha 0.5 - 0.05/50 rounds); the 1/|candidate set| bonus "
+        f"{BONUS_RULE_TEXT[args.reward_bonus]} (rule `{args.reward_bonus}`). "
         f"Re-run: `pairplay study --seed {args.seed} --games {args.games} --rounds {args.rounds}"
-        f"{'' if args.reward_bonus == 'consistent' else ' --reward-bonus ' + args.reward_bonus}`.", "",
+        f" --reward-bonus {args.reward_bonus}`.", "",
         "## Learned policies against the references", "",
         f"Picks per round, each greedy policy played {args.eval_rounds} rounds with epsilon 0; the oracle "
         "and the user alone play the same games (core/oracle.py documents the oracle).", "",

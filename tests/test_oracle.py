@@ -22,11 +22,12 @@ RIGHT_CELL = code_of_parts(6, 0, 0, 0)  # "Maybe right": (1,3) (1,4) (1,5)
 
 
 def value(size, hit):
-    return 2.0 * hit / size - 1 + 1 / size
+    """A uniform pick in `size` cards, `hit` of them the match; the default bonus rule ("correct")."""
+    return 2.0 * hit / size - 1 + hit / size
 
 
-def e(p, action):
-    return expected_rewards(p, np.array([OBS]), np.array([MATCH]), np.array([NIS]))[0, action]
+def e(p, action, bonus="correct"):
+    return expected_rewards(p, np.array([OBS]), np.array([MATCH]), np.array([NIS]), bonus)[0, action]
 
 
 def test_a_user_who_hears_gets_the_exact_position_for_sure():
@@ -62,13 +63,17 @@ def test_the_oracle_of_a_user_who_hears_is_worth_a_sure_match_everywhere():
     assert np.allclose(row, row[:, :1])
 
 
-def test_with_the_match_only_bonus_a_sure_miss_is_worth_minus_one():
+def test_each_bonus_rule_values_a_sure_miss_and_an_honest_hint():
     wrong_card = code_of_parts(1, 0, 0, 0)  # "It is the right card" while the match is elsewhere
-    assert e(persona(), wrong_card) == pytest.approx(0.0)
-    values = expected_rewards(persona(), np.array([OBS]), np.array([MATCH]), np.array([NIS]), bonus="match")[0]
-    assert values[wrong_card] == pytest.approx(-1.0)
-    assert values[EXACT] == pytest.approx(2.0)
-    assert values[RIGHT_CELL] == pytest.approx(2 / 3 - 1 + (1 / 3) / 3)
+    assert e(persona(), wrong_card) == pytest.approx(-1.0)  # correct: no bonus for pointing away
+    assert e(persona(), wrong_card, "consistent") == pytest.approx(0.0)  # SPEC: -1 + 1/1
+    assert e(persona(), wrong_card, "match") == pytest.approx(-1.0)
+    assert e(persona(), RIGHT_CELL) == e(persona(), RIGHT_CELL, "consistent") == pytest.approx(2 / 3 - 1 + 1 / 3)
+    assert e(persona(), RIGHT_CELL, "match") == pytest.approx(2 / 3 - 1 + (1 / 3) / 3)
+    for bonus in ("correct", "consistent", "match"):
+        assert e(persona(), EXACT, bonus) == pytest.approx(2.0)
+    with pytest.raises(ValueError, match="bonus"):
+        e(persona(), EXACT, "always")
 
 
 def test_policy_gaps_name_the_states_where_learned_policies_lose_expected_reward():

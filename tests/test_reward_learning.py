@@ -12,18 +12,28 @@ from pairplay.schemas.config import LearnerConfig
 T, F = True, False
 
 
-@pytest.mark.parametrize("matched, considered, consistent, size, reward, learn", [
-    (T, T, T, 1, 2.0, T),  # match with an exact suggestion: +1 + 1/1
-    (T, T, T, 4, 1.25, T),  # match among four candidates
-    (F, T, T, 3, -1 + 1 / 3, T),  # miss
-    (F, T, T, 1, 0.0, T),  # a precise wrong suggestion
-    (T, T, F, 0, -3.0, T),  # inconsistent: -3 alone, whatever the pick
-    (F, T, F, 0, -3.0, T),
-    (T, F, T, 2, 0.0, F),  # ignored (by focus or picked from memory): no update
+@pytest.mark.parametrize("matched, considered, consistent, size, holds, reward, learn", [
+    (T, T, T, 1, T, 2.0, T),  # match with an exact suggestion: +1 + 1/1
+    (T, T, T, 4, T, 1.25, T),  # match among four candidates
+    (F, T, T, 3, T, -1 + 1 / 3, T),  # miss in a candidate set that held the match
+    (F, T, T, 1, F, -1.0, T),  # a precise wrong suggestion: no bonus for pointing away
+    (F, T, T, 3, F, -1.0, T),
+    (T, T, F, 0, F, -3.0, T),  # inconsistent: -3 alone, whatever the pick
+    (F, T, F, 0, F, -3.0, T),
+    (T, F, T, 2, T, 0.0, F),  # ignored (by focus or picked from memory): no update
 ])
-def test_simulated_reward(matched, considered, consistent, size, reward, learn):
-    r, ok = simulated_reward(np.array([matched]), np.array([considered]), np.array([consistent]), np.array([size]))
+def test_simulated_reward(matched, considered, consistent, size, holds, reward, learn):
+    r, ok = simulated_reward(np.array([matched]), np.array([considered]), np.array([consistent]), np.array([size]),
+                             np.array([holds]))
     assert r[0] == pytest.approx(reward) and ok[0] == learn
+
+
+@pytest.mark.parametrize("matched, size, holds, reward", [(T, 1, T, 2.0), (F, 3, T, -1 + 1 / 3), (F, 1, F, 0.0),
+                                                          (F, 4, F, -0.75)])
+def test_spec_literal_reading_pays_the_bonus_on_every_consistent_suggestion(matched, size, holds, reward):
+    r, ok = simulated_reward(np.array([matched]), np.array([T]), np.array([T]), np.array([size]), np.array([holds]),
+                             bonus="consistent")
+    assert r[0] == pytest.approx(reward) and ok[0]
 
 
 def test_human_reward_ignores_picks_closer_than_1_5_s():
@@ -104,9 +114,11 @@ def test_learner_refuses_a_bad_policy():
 
 @pytest.mark.parametrize("matched, size, reward", [(T, 1, 2.0), (T, 4, 1.25), (F, 1, -1.0), (F, 3, -1.0)])
 def test_the_other_reading_pays_the_bonus_on_a_match_only(matched, size, reward):
-    r, ok = simulated_reward(np.array([matched]), np.array([T]), np.array([T]), np.array([size]), bonus="match")
+    r, ok = simulated_reward(np.array([matched]), np.array([T]), np.array([T]), np.array([size]), np.array([T]),
+                             bonus="match")
     assert r[0] == pytest.approx(reward) and ok[0]
-    r, _ = simulated_reward(np.array([matched]), np.array([T]), np.array([F]), np.array([0]), bonus="match")
+    r, _ = simulated_reward(np.array([matched]), np.array([T]), np.array([F]), np.array([0]), np.array([F]),
+                            bonus="match")
     assert r[0] == -3.0
     with pytest.raises(ValueError, match="bonus"):
-        simulated_reward(np.array([T]), np.array([T]), np.array([T]), np.array([1]), bonus="always")
+        simulated_reward(np.array([T]), np.array([T]), np.array([T]), np.array([1]), np.array([T]), bonus="always")

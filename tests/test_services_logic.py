@@ -14,6 +14,7 @@ from pairplay.schemas import events as ev
 from pairplay.schemas.envelope import stamped
 from pairplay.schemas.events import encode_event
 from pairplay.schemas.keys import event_key
+from pairplay.schemas.config import DEFAULT_REWARD_BONUS
 from pairplay.schemas.session import SessionConfig
 from pairplay.services.game import GameLogic
 from pairplay.services.learner import LearnerLogic
@@ -51,7 +52,8 @@ def play(config, shuffle_seed=None):
 
 
 def config(**kw):
-    base = dict(session="t1", participant="sim:ashley", persona="ashley", seed=3, rounds=12)
+    base = dict(session="t1", participant="sim:ashley", persona="ashley", seed=3, rounds=12,
+                reward_bonus=DEFAULT_REWARD_BONUS)
     return SessionConfig(**{**base, **kw})
 
 
@@ -59,7 +61,8 @@ def config(**kw):
 def test_the_bus_logics_learn_exactly_what_the_study_learns(observed):
     cfg = config(observed_source=observed)
     drivers, log = play(cfg)
-    study = run_games([persona("ashley")], [stream_seed(cfg)], cfg.rounds, observed_source=observed)
+    study = run_games([persona("ashley")], [stream_seed(cfg)], cfg.rounds, observed_source=observed,
+                      reward_bonus=cfg.reward_bonus)
     folded = fold_events(log)
     assert np.array_equal(drivers[1].logic.learner.q[0], study.q[0])
     assert np.array_equal(folded.q, study.q[0]) and folded.q_mismatches == 0
@@ -90,7 +93,8 @@ def test_pi_reuse_and_fixed_policies_run_and_match_the_study():
                                 ("fixed", "fixed", {"policy": np.array(bias)})):
         cfg = config(algorithm=algorithm, policy_actions=bias, rounds=4)
         drivers, log = play(cfg)
-        study = run_games([persona("ashley")], [stream_seed(cfg)], cfg.rounds, mode=mode, **kw)
+        study = run_games([persona("ashley")], [stream_seed(cfg)], cfg.rounds, mode=mode, reward_bonus=cfg.reward_bonus,
+                          **kw)
         assert np.array_equal(drivers[1].logic.learner.q[0], study.q[0])
         if algorithm == "fixed":
             assert all(e.action == bias[e.state] for e in log if isinstance(e, ev.SuggestionMade))

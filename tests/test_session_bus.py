@@ -5,6 +5,7 @@ import json
 
 import jsonschema
 import numpy as np
+import pytest
 from mcap.reader import make_reader
 
 from pairplay.core.personas import persona
@@ -14,6 +15,7 @@ from pairplay.replay.fold import stream_seed
 from pairplay.replay.reader import EventDecoderFactory, read_log
 from pairplay.replay.rebuild import rebuild_recording, write_outputs
 from pairplay.schemas.policy import read_policy
+from pairplay.schemas.config import DEFAULT_REWARD_BONUS
 from pairplay.schemas.session import SessionConfig
 from pairplay.services.replay_pub import republish
 from pairplay.services.session_cli import run_session
@@ -22,7 +24,7 @@ from pairplay.services.verify import verify_recording
 from busutil import collect, connector, listener, wait_until
 
 CONFIG = SessionConfig(session="bus1", participant="sim:tatiana", persona="tatiana", seed=11, rounds=8,
-                       software_version="test")
+                       software_version="test", reward_bonus=DEFAULT_REWARD_BONUS)
 
 
 def test_a_bus_session_rebuilds_to_the_live_learner_and_the_study(tmp_path):
@@ -32,7 +34,7 @@ def test_a_bus_session_rebuilds_to_the_live_learner_and_the_study(tmp_path):
     rebuilt = rebuild_recording(path)
     assert not rebuilt.truncated and rebuilt.fold.q_mismatches == 0
     assert np.array_equal(rebuilt.fold.q, live_q)  # bit for bit
-    study = run_games([persona("tatiana")], [stream_seed(CONFIG)], CONFIG.rounds)
+    study = run_games([persona("tatiana")], [stream_seed(CONFIG)], CONFIG.rounds, reward_bonus=CONFIG.reward_bonus)
     assert np.array_equal(study.q[0], live_q)  # one code path: the bus plays the study's game
     assert [2 * t for t in rebuilt.fold.turns_per_round()] == list(study.picks[0])
     trained = train([persona("tatiana")], games=1, rounds=CONFIG.rounds, seed=CONFIG.seed)
@@ -77,15 +79,16 @@ def test_replay_republishes_every_event_in_order(tmp_path):
     assert keys == [r.key.replace("/bus1/", "/again/") for r in events]
 
 
-def test_the_other_reward_reading_travels_over_the_bus_too(tmp_path):
+@pytest.mark.parametrize("rule", ["consistent", "match"])
+def test_the_other_reward_readings_travel_over_the_bus_too(tmp_path, rule):
     import msgspec
-    config = msgspec.structs.replace(CONFIG, session="bus2", persona="deaf", participant="sim:deaf",
-                                     reward_bonus="match")
+    config = msgspec.structs.replace(CONFIG, session=f"bus-{rule}", persona="deaf", participant="sim:deaf",
+                                     reward_bonus=rule)
     nodes = {}
     path = run_session(config, tmp_path / "bus2.mcap", nodes_out=nodes)
-    study = run_games([persona("deaf")], [stream_seed(config)], config.rounds, reward_bonus="match")
+    study = run_games([persona("deaf")], [stream_seed(config)], config.rounds, reward_bonus=rule)
     assert np.array_equal(study.q[0], nodes["learner"].logic.learner.q[0])
-    other = run_games([persona("deaf")], [stream_seed(config)], config.rounds)
+    other = run_games([persona("deaf")], [stream_seed(config)], config.rounds, reward_bonus=DEFAULT_REWARD_BONUS)
     assert not np.array_equal(other.q[0], study.q[0])
     rebuilt = rebuild_recording(path)
-    assert rebuilt.policy.reward_bonus == "match" and np.array_equal(rebuilt.fold.q, study.q[0])
+    assert rebuilt.policy.reward_bonus == rule and np.array_equal(rebuilt.fold.q, study.q[0])

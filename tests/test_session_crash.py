@@ -22,6 +22,7 @@ from pairplay.schemas import events as ev
 from pairplay.schemas.envelope import stamped
 from pairplay.schemas.events import encode_event
 from pairplay.schemas.keys import alive_key, event_key
+from pairplay.schemas.config import DEFAULT_REWARD_BONUS
 from pairplay.schemas.session import SessionConfig
 from pairplay.services.runner import fetch_log
 from pairplay.services.session_cli import run_session
@@ -39,7 +40,8 @@ def spawn(*args):
 @pytest.mark.parametrize("victim", ["learner", "participant", "game"])
 def test_a_killed_service_resumes_from_the_log_and_nothing_is_lost_or_doubled(tmp_path, victim):
     session_id = f"crash-{victim}"
-    config = SessionConfig(session=session_id, participant="sim:helmut", persona="helmut", seed=5, rounds=25)
+    config = SessionConfig(session=session_id, participant="sim:helmut", persona="helmut", seed=5, rounds=25,
+                           reward_bonus=DEFAULT_REWARD_BONUS)
     ready, box = threading.Event(), {}
 
     def on_bus(bus):
@@ -84,7 +86,7 @@ def test_a_killed_service_resumes_from_the_log_and_nothing_is_lost_or_doubled(tm
     starts = [e for e in events if isinstance(e, ev.ServiceStarted) and e.service == victim]
     assert len(starts) == 2 and starts[0].resumed_events == 0 and starts[1].resumed_events > 0
     fold = fold_events(events)
-    study = run_games([persona("helmut")], [stream_seed(config)], config.rounds)
+    study = run_games([persona("helmut")], [stream_seed(config)], config.rounds, reward_bonus=config.reward_bonus)
     assert fold.q_mismatches == 0 and np.array_equal(fold.q, study.q[0])  # as if it had never crashed
     assert [2 * t for t in fold.turns_per_round()] == list(study.picks[0])
     assert fold.ended is not None and verify_recording(box["path"]).ok

@@ -154,3 +154,21 @@ def test_candidates_exclude_cards_the_user_remembers():
     right = code_of_parts(6, 0, 0, 0)  # "Maybe right" from (1, 2): (1,3) (1,4) (1,5)
     r = _respond(u, right, card_of(1, 2), card_of(1, 3), covered)
     assert r.candidates[0] == mask(card_of(1, 3)) and r.second[0] == card_of(1, 3)
+
+
+def test_observers_see_the_nis_and_rewards_of_the_suggestion_moment():
+    """Turn.nis is the NIS the user read the suggestion against (before the turn's
+    memory update), and a suggestion pointing away from the match earns no bonus."""
+    from pairplay.core.personas import PERSONAS
+    from pairplay.core.simulate import run_games
+    wrong_card = code_of_parts(1, 0, 0, 0)  # "It is the right card": the observed card
+    seen = []
+    run_games([PERSONAS["tatiana"]] * 3, [1, 2, 3], 5, mode="fixed", policy=np.full((3, 24), wrong_card),
+              on_turn=seen.append)
+    for t in seen:
+        unaided = t.active & ~t.from_memory
+        assert ((t.nis[unaided] >> t.observed[unaided]) & 1).all()  # the observed card was in the NIS
+        read = t.active & t.considered
+        away = read & (t.observed != t.match)  # a certain miss
+        assert (t.rewards[away] == -1.0).all()
+        assert (t.rewards[read & (t.observed == t.match)] == 2.0).all()
