@@ -33,6 +33,7 @@ def test_policy_files_hold_what_the_study_learned(study_dir):
     assert policy.participant == "deaf" and policy.game == 1 and policy.rounds == 60
     assert policy.persona.hearing == 1 and len(policy.q) == 24 and len(policy.q[0]) == 88
     assert policy.config.epsilon_start == 0.9 and policy.algorithm == "q-learning"
+    assert policy.reward_bonus == "correct"  # the default rule, stated in every file
     merged = read_policy(study_dir / "merged" / "blind+deaf.json")
     assert merged.algorithm == "combined" and merged.merged_from == ["blind", "deaf"] and len(merged.rules) == 24
 
@@ -60,6 +61,14 @@ def test_a_corrupt_policy_file_is_refused_with_its_reason(study_dir, tmp_path, c
     out = tmp_path / "merged.json"
     assert main(["combine", str(bad), str(study_dir / "policies" / "deaf"), "-o", str(out)]) == 2
     assert "greedy actions outside 0..87" in capsys.readouterr().err and not out.exists()
+    good["greedy"][3] = 1
+    good["reward_bonus"] = "always"
+    bad.write_text(json.dumps(good))
+    assert main(["profile", str(bad)]) == 2
+    assert "reward_bonus 'always'" in capsys.readouterr().err
+    del good["reward_bonus"]  # a pairplay 0.1.0 file: SPEC's rule
+    bad.write_text(json.dumps(good))
+    assert read_policy(bad).reward_bonus == "consistent"
     bad.write_text('{"format": "pairplay.policy", "q": [')
     assert main(["profile", str(bad)]) == 2
     assert "corrupt" in capsys.readouterr().err
