@@ -148,9 +148,10 @@ def text_table(rows: list[list[str]]) -> str:
 
 
 def profile_rows(personas, users: study.UserSet) -> list[list[str]]:
+    from pairplay.core.combine import COMPARED_STATES
     from pairplay.core.geometry import STATE_NAMES
     rows = [["persona", "focus", "memory", "hearing", "sight", "speech %", "head %", "smile", "gaze",
-             "incompatible states (mean Q updates in them)"]]
+             "Q updates per state (median)", "incompatible states (mean Q updates in them)"]]
     for p in personas:
         prof, upd = users.profiles[p.key], users.updates[p.key].mean(0)
         states = sorted(set(prof.speech_states) | set(prof.head_states))
@@ -158,7 +159,8 @@ def profile_rows(personas, users: study.UserSet) -> list[list[str]]:
                           f"{'(H)' if s in prof.head_states else ''} {upd[s]:.0f}" for s in states)
         rows.append([p.key, str(p.focus), str(p.memory), str(p.hearing), str(p.sight),
                      f"{100 * prof.info.speech:.1f}", f"{100 * prof.info.head:.1f}",
-                     "yes" if prof.info.facial else "no", "yes" if prof.info.gaze else "no", where or "-"])
+                     "yes" if prof.info.facial else "no", "yes" if prof.info.gaze else "no",
+                     f"{np.median(upd[COMPARED_STATES]):.0f}", where or "-"])
     return rows
 
 
@@ -304,7 +306,8 @@ def run(args) -> int:
         "![learning curves](learning_curves.png)", "",
         "## User information (algorithm 3, figure 6.5)", "",
         f"Over each persona's {args.games} policies, shares of the 23 spatial states; (S)/(H) mark speech/head "
-        "incompatibilities, with the mean number of Q updates the state got in a game.", "",
+        "incompatibilities, with the mean number of Q updates the state got in a game. Policies disagree "
+        "where states are seldom trained (thesis 6.4: untrained states), hence the median updates per state.", "",
         markdown_table(prof_rows), "", "![profiles](profiles.png)", "",
         "## Merged policies (algorithm 4, figure 6.6)", "",
         "Each persona is represented by one of its policies, picked at random by the seed (thesis 6.2); "
