@@ -78,18 +78,35 @@ class Profile(NamedTuple):
     head_states: list[int]
 
 
-def extract_info(policies: np.ndarray) -> Profile:
-    """Algorithm 3 over one user's policies: (n_policies, 24) greedy action codes."""
+def extract_info(policies: np.ndarray, states: Sequence[int] = COMPARED_STATES) -> Profile:
+    """Algorithm 3 over one user's policies: (n_policies, 24) greedy action codes.
+
+    `states` narrows the comparison (default: the 23 spatial states, as the thesis);
+    shares are then of the states compared.
+    """
     policies = np.atleast_2d(np.asarray(policies))
+    states = np.asarray(states, dtype=np.int64)
+    if states.size == 0:
+        raise ValueError("no states to compare")
     h, v = parts(policies)
     speech, facial, head, gaze = _SPEECH[h], _FACIAL[h], _HEAD[v], _GAZE[v]
-    speech_states = [int(s) for s in COMPARED_STATES if incompatible(speech[:, s], s, _exempt_speech)]
-    head_states = [int(s) for s in COMPARED_STATES if incompatible(head[:, s], s, _exempt_head)]
-    n = len(COMPARED_STATES)
+    speech_states = [int(s) for s in states if incompatible(speech[:, s], s, _exempt_speech)]
+    head_states = [int(s) for s in states if incompatible(head[:, s], s, _exempt_head)]
+    n = len(states)
     info = UserInfo(speech=len(speech_states) / n, head=len(head_states) / n,
-                    facial=bool(facial[:, COMPARED_STATES].any()), gaze=bool(gaze[:, COMPARED_STATES].any()),
+                    facial=bool(facial[:, states].any()), gaze=bool(gaze[:, states].any()),
                     compared_states=n)
     return Profile(info, speech_states, head_states)
+
+
+def trained_states(updates: np.ndarray, min_updates: int) -> np.ndarray:
+    """The spatial states every policy updated at least `min_updates` times: (n_policies, 24) counts.
+
+    Thesis 6.4 traced its stray incompatibilities to untrained states; comparing
+    only trained ones tells those apart from a user's real inconsistencies.
+    """
+    counts = np.atleast_2d(np.asarray(updates))[:, COMPARED_STATES]
+    return COMPARED_STATES[(counts >= min_updates).all(axis=0)]
 
 
 def merge_info(infos: Sequence[UserInfo]) -> UserInfo:

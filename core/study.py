@@ -95,17 +95,25 @@ class UserSet(NamedTuple):
     profiles: dict  # key -> combine.Profile
     users: dict  # key -> combine.User (the policy chosen for combinations)
     updates: dict  # key -> (games, 24) Q updates per state, for explaining incompatibilities
+    trained: dict  # key -> combine.Profile over the states every policy updated >= min_updates times, or None
 
 
-def user_set(personas: Sequence[Persona], training: Training, seed: int) -> UserSet:
-    """Algorithm 3 on each persona's policies; one policy per persona picked at random (thesis 6.2)."""
-    from .combine import represent
-    profiles, users, updates = {}, {}, {}
+def user_set(personas: Sequence[Persona], training: Training, seed: int, min_updates: int = 50) -> UserSet:
+    """Algorithm 3 on each persona's policies; one policy per persona picked at random (thesis 6.2).
+
+    Beside it, the same comparison over the states all of the persona's policies
+    trained at least `min_updates` times (thesis 6.4: untrained states explain
+    stray incompatibilities).
+    """
+    from .combine import extract_info, represent, trained_states
+    profiles, users, updates, trained = {}, {}, {}, {}
     for p in personas:
         rows = np.array([i for i, q in enumerate(training.personas) if q.key == p.key])
         users[p.key], profiles[p.key] = represent(p.key, training.greedy[rows], training.result.q[rows], seed)
         updates[p.key] = training.result.counts[rows].sum(-1)
-    return UserSet(profiles, users, updates)
+        states = trained_states(updates[p.key], min_updates)
+        trained[p.key] = extract_info(training.greedy[rows], states) if states.size else None
+    return UserSet(profiles, users, updates, trained)
 
 
 def evaluate_on_personas(personas: Sequence[Persona], policies: dict, games: int, rounds: int,

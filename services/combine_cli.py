@@ -13,9 +13,11 @@ import argparse
 import sys
 from pathlib import Path
 
+import numpy as np
+
 from pairplay import __version__
 from pairplay.core.actions import ACTIONS
-from pairplay.core.combine import combine
+from pairplay.core.combine import combine, extract_info, trained_states
 from pairplay.core.geometry import STATE_NAMES
 from pairplay.core.policies import combined_policy_file, users_from_policies
 from pairplay.schemas.policy import PolicyFileError, read_policy, write_policy
@@ -36,6 +38,9 @@ def _common(p: argparse.ArgumentParser) -> None:
 
 def add_profile_arguments(p: argparse.ArgumentParser) -> None:
     _common(p)
+    p.add_argument("--min-updates", type=int, default=0,
+                   help="compare only the states every policy of a participant updated at least this many "
+                        "times (default 0: the 23 spatial states, algorithm 3; thesis 6.4: untrained states)")
 
 
 def add_combine_arguments(p: argparse.ArgumentParser) -> None:
@@ -60,12 +65,29 @@ def _profile_lines(profiles, policies) -> list[str]:
     counts: dict[str, int] = {}
     for p in policies:
         counts[p.participant] = counts.get(p.participant, 0) + 1
-    lines = [f"{'participant':16s} {'policies':>8s} {'speech %':>9s} {'head %':>7s} {'smile':>6s} {'gaze':>5s}  incompatible states"]
+    lines = [f"{'participant':16s} {'policies':>8s} {'states':>6s} {'speech %':>9s} {'head %':>7s} {'smile':>6s} "
+             f"{'gaze':>5s}  incompatible states"]
     for name, prof in profiles.items():
+        if prof is None:
+            lines.append(f"{name:16s} {counts[name]:>8d} {0:>6d}  no state trained that often")
+            continue
         states = ", ".join([f"{STATE_NAMES[s]}(S)" for s in prof.speech_states] + [f"{STATE_NAMES[s]}(H)" for s in prof.head_states])
-        lines.append(f"{name:16s} {counts[name]:>8d} {100 * prof.info.speech:9.1f} {100 * prof.info.head:7.1f} "
-                     f"{'yes' if prof.info.facial else 'no':>6s} {'yes' if prof.info.gaze else 'no':>5s}  {states or '-'}")
+        lines.append(f"{name:16s} {counts[name]:>8d} {prof.info.compared_states:>6d} {100 * prof.info.speech:9.1f} "
+                     f"{100 * prof.info.head:7.1f} {'yes' if prof.info.facial else 'no':>6s} "
+                     f"{'yes' if prof.info.gaze else 'no':>5s}  {states or '-'}")
     return lines
+
+
+def _trained_profiles(policies, min_updates: int) -> dict:
+    """Per participant, algorithm 3 over the states all its policies updated >= min_updates times (or None)."""
+    groups: dict[str, list] = {}
+    for p in policies:
+        groups.setdefault(p.participant, []).append(p)
+    out = {}
+    for name, own in groups.items():
+        states = trained_states(np.array([p.visits for p in own]), min_updates)
+        out[name] = extract_info(np.array([p.greedy for p in own]), states) if states.size else None
+    return out
 
 
 def run_profile(args) -> int:
@@ -73,7 +95,11 @@ def run_profile(args) -> int:
     if loaded is None:
         return 2
     policies, _ = loaded
-    _, profiles = users_from_policies(policies, args.seed)
+    if args.min_updates > 0:
+        profiles = _trained_profiles(policies, args.min_updates)
+        print(f"states every policy of a participant updated at least {args.min_updates} times")
+    else:
+        _, profiles = users_from_policies(policies, args.seed)
     print("\n".join(_profile_lines(profiles, policies)))
     return 0
 

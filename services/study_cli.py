@@ -46,6 +46,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="when the 1/|candidate set| bonus is paid: when the candidate set holds the match "
                         "(correct, default), on every consistent suggestion (consistent, SPEC's literal reading) "
                         "or on a match only (see README: the reward bonus)")
+    p.add_argument("--trained-updates", type=int, default=50,
+                   help="profiles are also given over the states every policy of a persona updated at least "
+                        "this many times (default 50; thesis 6.4: untrained states)")
     p.add_argument("--reuse-seeds", type=int, default=10,
                    help="games per held-out persona in the speed-up experiment (default 10)")
     p.add_argument("--psi", type=float, default=1.0, help="pi-reuse: psi at the start of each round (default 1)")
@@ -151,16 +154,19 @@ def profile_rows(personas, users: study.UserSet) -> list[list[str]]:
     from pairplay.core.combine import COMPARED_STATES
     from pairplay.core.geometry import STATE_NAMES
     rows = [["persona", "focus", "memory", "hearing", "sight", "speech %", "head %", "smile", "gaze",
-             "Q updates per state (median)", "incompatible states (mean Q updates in them)"]]
+             "Q updates per state (median)", "trained states: speech % / head % (of n)",
+             "incompatible states (mean Q updates in them)"]]
     for p in personas:
-        prof, upd = users.profiles[p.key], users.updates[p.key].mean(0)
+        prof, upd, trained = users.profiles[p.key], users.updates[p.key].mean(0), users.trained[p.key]
+        on_trained = "-" if trained is None else \
+            f"{100 * trained.info.speech:.1f} / {100 * trained.info.head:.1f} ({trained.info.compared_states})"
         states = sorted(set(prof.speech_states) | set(prof.head_states))
         where = ", ".join(f"{STATE_NAMES[s]}{'(S)' if s in prof.speech_states else ''}"
                           f"{'(H)' if s in prof.head_states else ''} {upd[s]:.0f}" for s in states)
         rows.append([p.key, str(p.focus), str(p.memory), str(p.hearing), str(p.sight),
                      f"{100 * prof.info.speech:.1f}", f"{100 * prof.info.head:.1f}",
                      "yes" if prof.info.facial else "no", "yes" if prof.info.gaze else "no",
-                     f"{np.median(upd[COMPARED_STATES]):.0f}", where or "-"])
+                     f"{np.median(upd[COMPARED_STATES]):.0f}", on_trained, where or "-"])
     return rows
 
 
@@ -234,7 +240,7 @@ def run(args) -> int:
 
     # Profiles (algorithm 3, figure 6.5) and merged policies (algorithm 4, figure 6.6).
     t0 = time.perf_counter()
-    users = study.user_set(personas, training, args.seed)
+    users = study.user_set(personas, training, args.seed, args.trained_updates)
     prof_rows = profile_rows(personas, users)
     with open(out / "profiles.csv", "w", newline="") as f:
         csv.writer(f).writerows(prof_rows)
@@ -307,7 +313,9 @@ def run(args) -> int:
         "## User information (algorithm 3, figure 6.5)", "",
         f"Over each persona's {args.games} policies, shares of the 23 spatial states; (S)/(H) mark speech/head "
         "incompatibilities, with the mean number of Q updates the state got in a game. Policies disagree "
-        "where states are seldom trained (thesis 6.4: untrained states), hence the median updates per state.", "",
+        "where states are seldom trained (thesis 6.4: untrained states), hence the median updates per state, "
+        f"and the same comparison over the n states every one of the persona's policies updated at least "
+        f"{args.trained_updates} times (`--trained-updates`).", "",
         markdown_table(prof_rows), "", "![profiles](profiles.png)", "",
         "## Merged policies (algorithm 4, figure 6.6)", "",
         "Each persona is represented by one of its policies, picked at random by the seed (thesis 6.2); "

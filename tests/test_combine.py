@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from pairplay.core.actions import code_of_parts
-from pairplay.core.combine import MATCH_STATE, User, combine, extract_info, merge_info
+from pairplay.core.combine import MATCH_STATE, User, combine, extract_info, merge_info, trained_states
 from pairplay.core.geometry import N_STATES
 from pairplay.schemas.policy import UserInfo
 
@@ -118,6 +118,20 @@ def test_algorithm_3_smile_and_gaze_are_present_in_any_policy():
     assert prof.info.compared_states == 23
     # The extra state (cards turned != 1) is never compared.
     assert extract_info(_policies(act(speech=5), act(speech=6), state=N_STATES - 1)).speech_states == []
+
+
+def test_profiles_over_trained_states_leave_out_what_some_policy_seldom_updated():
+    policies = _policies(act(speech=5), act(speech=6))  # disagree in state S only
+    updates = np.full((2, N_STATES), 80)
+    updates[1, S] = 12  # the second policy hardly trained S
+    states = trained_states(updates, 50)
+    assert S not in states and len(states) == 22 and N_STATES - 1 not in states
+    prof = extract_info(policies, states)
+    assert prof.speech_states == [] and prof.info.compared_states == 22
+    assert extract_info(policies, trained_states(updates, 10)).info.speech == pytest.approx(1 / 23)
+    assert trained_states(updates, 81).size == 0
+    with pytest.raises(ValueError, match="no states"):
+        extract_info(policies, [])
 
 
 def test_combining_many_users_does_not_depend_on_their_order():

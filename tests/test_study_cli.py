@@ -22,6 +22,7 @@ def test_the_study_writes_its_report_folder(study_dir):
                  "merged.png", "reuse.png", "merged/blind+deaf.json", "merged/all.json"):
         assert (study_dir / name).stat().st_size > 0, name
     report = (study_dir / "report.md").read_text()
+    assert "trained states: speech % / head %" in report
     for section in ("User information", "Merged policies", "Policy reuse speed-up", "Learning curves"):
         assert section in report
     rows = (study_dir / "curves.csv").read_text().splitlines()
@@ -42,6 +43,9 @@ def test_profile_and_combine_verbs(study_dir, tmp_path, capsys):
     assert main(["profile", str(study_dir / "policies")]) == 0
     out = capsys.readouterr().out
     assert "blind" in out and "deaf" in out and "tatiana" in out
+    assert main(["profile", str(study_dir / "policies"), "--min-updates", "5"]) == 0
+    out = capsys.readouterr().out
+    assert "at least 5 times" in out and "blind" in out
     target = tmp_path / "bd.json"
     assert main(["combine", str(study_dir / "policies" / "blind"), str(study_dir / "policies" / "deaf"),
                  "-o", str(target)]) == 0
