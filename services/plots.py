@@ -81,15 +81,25 @@ def comparison_bars(labels: list[str], series: dict[str, np.ndarray], path: Path
 
 
 def profiles(keys: list[str], names: dict[str, str], infos: list, features: list[tuple[int, int, int, int]],
-             path: Path) -> None:
-    """Figure 6.5: extracted user information beside the persona's features."""
+             path: Path, trained: list | None = None, min_updates: int = 0) -> None:
+    """Figure 6.5: extracted user information beside the persona's features.
+
+    `trained` (optional, one UserInfo or None per persona): the same shares over
+    the well-trained states only, drawn as black ticks on the bars.
+    """
     fig, (left, right) = plt.subplots(1, 2, figsize=(12, 4.2))
     x = np.arange(len(keys))
     left.bar(x - 0.2, [100 * i.speech for i in infos], 0.4, label="speech incompatibility %")
     left.bar(x + 0.2, [100 * i.head for i in infos], 0.4, label="head incompatibility %")
+    if trained is not None:
+        for offset, field in ((-0.2, "speech"), (0.2, "head")):
+            shown = [(xi + offset, 100 * getattr(t, field)) for xi, t in zip(x, trained) if t is not None]
+            if shown:
+                left.scatter(*zip(*shown), marker="_", s=300, color="black", lw=2, zorder=3,
+                             label=f"over states updated >= {min_updates}x" if field == "speech" else None)
     for xi, info in zip(x, infos):
         left.text(xi, 103, ("S" if info.facial else "-") + ("G" if info.gaze else "-"), ha="center", fontsize=9)
-    left.set_ylim(0, 128)
+    left.set_ylim(0, 140)
     left.set_xticks(x, [names.get(k, k) for k in keys], rotation=25, ha="right")
     left.set_title("extracted user information (S: smile used, G: gaze used)")
     left.legend(frameon=False, fontsize=8, loc="upper left", ncol=2)

@@ -245,7 +245,9 @@ def run(args) -> int:
     with open(out / "profiles.csv", "w", newline="") as f:
         csv.writer(f).writerows(prof_rows)
     plots.profiles([p.key for p in personas], names, [users.profiles[p.key].info for p in personas],
-                   [(p.focus, p.memory, p.hearing, p.sight) for p in personas], out / "profiles.png")
+                   [(p.focus, p.memory, p.hearing, p.sight) for p in personas], out / "profiles.png",
+                   [None if users.trained[p.key] is None else users.trained[p.key].info for p in personas],
+                   args.trained_updates)
     merges = write_merges(out, personas, users, args)
     own = {p.key: training.greedy[[i for i, q in enumerate(training.personas) if q.key == p.key]]
            for p in personas}
