@@ -6,4 +6,4 @@ science, pure numpy), ``pairplay.replay`` (the MCAP event log) and
 ``pairplay.services`` (processes on the Zenoh bus and the CLI).
 """
 
-__version__ = "0.1.0"
+__version__ = "0.2.0"
