@@ -115,13 +115,14 @@ def run_combine(args) -> int:
         print("pairplay combine: no policies left to combine", file=sys.stderr)
         return 2
     merged = combine(users)
+    if args.out:  # written before the listing, so a reader that stops early loses nothing
+        write_policy(args.out, combined_policy_file(merged, users, files, args.seed, f"pairplay {__version__}"))
     print("\n".join(_profile_lines(profiles, policies)))
     print(f"\nmerged: speech {100 * merged.info.speech:.1f}%, head {100 * merged.info.head:.1f}%, "
           f"smile {merged.info.facial}, gaze {merged.info.gaze}\n")
     for s, (a, rule) in enumerate(zip(merged.policy, merged.rules)):
         print(f"{s:2d} {STATE_NAMES[s]:16s} {int(a):2d} {ACTIONS[int(a)].name:55s} {rule}")
     if args.out:
-        write_policy(args.out, combined_policy_file(merged, users, files, args.seed, f"pairplay {__version__}"))
         print(f"\nwrote {args.out}")
     return 0
 

@@ -81,3 +81,25 @@ def test_a_corrupt_policy_file_is_refused_with_its_reason(study_dir, tmp_path, c
 def test_unknown_personas_are_refused(capsys):
     assert main(["study", "--personas", "nobody"]) == 2
     assert "unknown persona" in capsys.readouterr().err
+
+
+def test_a_reader_that_stops_early_loses_no_merged_policy(study_dir, tmp_path, monkeypatch):
+    """`pairplay combine ... -o merged.json | head`: the file is written, no traceback."""
+    sink = open(tmp_path / "sink", "w")
+
+    class ClosedPipe:
+        def write(self, text):
+            raise BrokenPipeError(32, "Broken pipe")
+
+        def flush(self):
+            pass
+
+        def fileno(self):
+            return sink.fileno()
+
+    monkeypatch.setattr("sys.stdout", ClosedPipe())
+    out = tmp_path / "merged.json"
+    assert main(["combine", str(study_dir / "policies" / "blind"), str(study_dir / "policies" / "deaf"),
+                 "-o", str(out)]) == 0
+    assert read_policy(out).merged_from
+    sink.close()
