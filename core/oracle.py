@@ -25,13 +25,11 @@ from __future__ import annotations
 
 import numpy as np
 
-from pairplay.schemas.config import Persona
+from pairplay.schemas.config import DEFAULT_REWARD_BONUS, Persona
 
 from .actions import ACTION_HEARING, ACTION_VISUAL, HEARING_SMILE, N_ACTIONS, VISUAL_GAZE
 from .geometry import N_STATES
 from .interpretation import HEAR_SET, VIS_SET, hear_probability, sees
-from pairplay.schemas.config import DEFAULT_REWARD_BONUS
-
 from .reward import INCONSISTENT, check_bonus_rule
 from .simulate import run_games
 

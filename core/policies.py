@@ -53,9 +53,22 @@ def users_from_policies(policies: list[PolicyFile], seed: int, exclude=()) -> tu
     return users, profiles
 
 
+def common_reward_bonus(policies: list[PolicyFile]) -> str:
+    """The reward rule all the policies were learned under; ValueError if they differ.
+
+    Algorithm 4 settles "Error" states by summing the users' Q-values, which are
+    comparable only under one reward.
+    """
+    rules = sorted({p.reward_bonus for p in policies})
+    if len(rules) != 1:
+        raise ValueError(f"the policies were learned under different reward rules ({', '.join(rules)}): "
+                         "their Q-values cannot be compared")
+    return rules[0]
+
+
 def combined_policy_file(merged: Combined, users: list[User], merged_from: list[str], seed: int | None,
-                         software: str = "") -> PolicyFile:
+                         software: str = "", reward_bonus: str = DEFAULT_REWARD_BONUS) -> PolicyFile:
     return to_policy_file(merged.q, np.zeros(len(merged.policy), dtype=np.int64), merged.policy,
                           algorithm="combined", participant="+".join(sorted(u.name for u in users)),
                           seed=seed, info=merged.info, merged_from=merged_from, rules=merged.rules,
-                          software=software)
+                          software=software, reward_bonus=reward_bonus)

@@ -17,9 +17,9 @@ When the bonus is paid (schemas.config.REWARD_BONUS_RULES):
   pays -1 + 1/1 = 0, more than any honest hint over three or more cards; the
   reward-optimal policy misleads on purpose and the learner locks onto such
   certain misses (README, "The reward bonus").
-- "match": only when the pick matched.
-The three agree on every suggestion whose candidate set holds the match except
-"match", which also withholds the bonus from honest misses.
+- "match": only when the pick matched, so honest misses earn no bonus either.
+"correct" and "consistent" differ only on suggestions that point away from the
+match.
 """
 
 from __future__ import annotations

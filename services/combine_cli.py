@@ -19,7 +19,7 @@ from pairplay import __version__
 from pairplay.core.actions import ACTIONS
 from pairplay.core.combine import combine, extract_info, trained_states
 from pairplay.core.geometry import STATE_NAMES
-from pairplay.core.policies import combined_policy_file, users_from_policies
+from pairplay.core.policies import combined_policy_file, common_reward_bonus, users_from_policies
 from pairplay.schemas.policy import PolicyFileError, read_policy, write_policy
 
 
@@ -114,9 +114,15 @@ def run_combine(args) -> int:
     if not users:
         print("pairplay combine: no policies left to combine", file=sys.stderr)
         return 2
+    try:
+        reward_rule = common_reward_bonus([p for p in policies if p.participant not in exclude])
+    except ValueError as exc:
+        print(f"pairplay combine: {exc}", file=sys.stderr)
+        return 2
     merged = combine(users)
     if args.out:  # written before the listing, so a reader that stops early loses nothing
-        write_policy(args.out, combined_policy_file(merged, users, files, args.seed, f"pairplay {__version__}"))
+        write_policy(args.out, combined_policy_file(merged, users, files, args.seed, f"pairplay {__version__}",
+                                                    reward_rule))
     print("\n".join(_profile_lines(profiles, policies)))
     print(f"\nmerged: speech {100 * merged.info.speech:.1f}%, head {100 * merged.info.head:.1f}%, "
           f"smile {merged.info.facial}, gaze {merged.info.gaze}\n")

@@ -21,7 +21,7 @@ from pathlib import Path
 
 from pairplay import __version__
 from pairplay.core.combine import combine
-from pairplay.core.policies import combined_policy_file, users_from_policies
+from pairplay.core.policies import combined_policy_file, common_reward_bonus, users_from_policies
 from pairplay.replay.rebuild import RebuildError, rebuild_recording
 from pairplay.schemas import events as ev
 from pairplay.schemas.policy import PolicyFile, PolicyFileError, read_policy, write_policy
@@ -61,10 +61,12 @@ class CombinerLogic:
         users, _ = users_from_policies(policies, r.seed, exclude=set(r.exclude))
         if not users:
             raise ValueError("no policies left to combine")
+        rule = common_reward_bonus([p for p in policies if p.participant not in set(r.exclude)])
         merged = combine(users)
         out = ""
         if r.output_path:
-            write_policy(self._inside(r.output_path), combined_policy_file(merged, users, inputs, r.seed, software=__version__))
+            write_policy(self._inside(r.output_path),
+                         combined_policy_file(merged, users, inputs, r.seed, software=__version__, reward_bonus=rule))
             out = r.output_path
         return ev.PolicyCombined(request_id=r.request_id, inputs=inputs, actions=[int(a) for a in merged.policy],
                                  decided_by=list(merged.rules), output_path=out, users=[u.name for u in users],

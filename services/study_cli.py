@@ -187,7 +187,7 @@ def write_merges(out: Path, personas, users: study.UserSet, args) -> dict:
         merged = combine(chosen)
         merges[name] = merged
         write_policy(out / "merged" / f"{name}.json", combined_policy_file(
-            merged, chosen, members, args.seed, software=f"pairplay {__version__}"))
+            merged, chosen, members, args.seed, software=f"pairplay {__version__}", reward_bonus=args.reward_bonus))
         inputs = {k: users.users[k].policy for k in members} if len(members) <= 3 else {}
         panels.append((name, inputs, merged.policy))
     if panels:

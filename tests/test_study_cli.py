@@ -103,3 +103,16 @@ def test_a_reader_that_stops_early_loses_no_merged_policy(study_dir, tmp_path, m
                  "-o", str(out)]) == 0
     assert read_policy(out).merged_from
     sink.close()
+
+
+def test_policies_learned_under_different_rewards_are_not_combined(study_dir, tmp_path, capsys):
+    other = json.loads((study_dir / "policies" / "blind" / "game-00.json").read_text())
+    other["reward_bonus"] = "consistent"
+    path = tmp_path / "blind-spec.json"
+    path.write_text(json.dumps(other))
+    out = tmp_path / "merged.json"
+    assert main(["combine", str(path), str(study_dir / "policies" / "deaf"), "-o", str(out)]) == 2
+    assert "different reward rules (consistent, correct)" in capsys.readouterr().err and not out.exists()
+    assert main(["combine", str(study_dir / "policies" / "blind"), str(study_dir / "policies" / "deaf"),
+                 "-o", str(out)]) == 0
+    assert read_policy(out).reward_bonus == "correct"
