@@ -39,14 +39,19 @@ def q_of(policy: PolicyFile) -> np.ndarray:
     return np.asarray(policy.q, dtype=np.float64)
 
 
-def users_from_policies(policies: list[PolicyFile], seed: int, exclude=()) -> tuple[list[User], dict[str, Profile]]:
-    """Group policy files by participant; each group becomes one combination input."""
+def by_participant(policies: list[PolicyFile], exclude=()) -> dict[str, list[PolicyFile]]:
+    """Policy files grouped by their participant, in the order first seen."""
     groups: dict[str, list[PolicyFile]] = {}
     for p in policies:
         if p.participant not in exclude:
             groups.setdefault(p.participant, []).append(p)
+    return groups
+
+
+def users_from_policies(policies: list[PolicyFile], seed: int, exclude=()) -> tuple[list[User], dict[str, Profile]]:
+    """Group policy files by participant; each group becomes one combination input."""
     users, profiles = [], {}
-    for name, own in groups.items():
+    for name, own in by_participant(policies, exclude).items():
         user, profile = represent(name, np.stack([greedy_of(p) for p in own]), np.stack([q_of(p) for p in own]), seed)
         users.append(user)
         profiles[name] = profile

@@ -19,7 +19,7 @@ from pairplay import __version__
 from pairplay.core.actions import ACTIONS
 from pairplay.core.combine import combine, extract_info, trained_states
 from pairplay.core.geometry import STATE_NAMES
-from pairplay.core.policies import combined_policy_file, common_reward_bonus, users_from_policies
+from pairplay.core.policies import by_participant, combined_policy_file, common_reward_bonus, users_from_policies
 from pairplay.schemas.policy import PolicyFileError, read_policy, write_policy
 
 
@@ -80,11 +80,8 @@ def _profile_lines(profiles, policies) -> list[str]:
 
 def _trained_profiles(policies, min_updates: int) -> dict:
     """Per participant, algorithm 3 over the states all its policies updated >= min_updates times (or None)."""
-    groups: dict[str, list] = {}
-    for p in policies:
-        groups.setdefault(p.participant, []).append(p)
     out = {}
-    for name, own in groups.items():
+    for name, own in by_participant(policies).items():
         states = trained_states(np.array([p.visits for p in own]), min_updates)
         out[name] = extract_info(np.array([p.greedy for p in own]), states) if states.size else None
     return out
