@@ -9,6 +9,7 @@ they match the code.
 
 from __future__ import annotations
 
+import inspect
 import json
 import sys
 from pathlib import Path
@@ -20,6 +21,24 @@ from .events import EVENT_TYPES
 from .envelope import Event
 
 JSON_DIR = Path(__file__).parent / "json"
+
+
+def _clean_docs(node: Any) -> Any:
+    """Docstring text as Python 3.13 and msgspec 0.23 give it, whatever made it.
+
+    msgspec copies a Struct's docstring into `description`; whether its
+    indentation survives depends on the Python (3.13 strips it at compile time)
+    and on msgspec (0.23 strips it too). `inspect.cleandoc` is idempotent, so
+    cleaning here makes the schema bytes the same under every combination.
+    """
+    if isinstance(node, dict):
+        return {
+            k: inspect.cleandoc(v) if k in ("description", "title") and isinstance(v, str) else _clean_docs(v)
+            for k, v in node.items()
+        }
+    if isinstance(node, list):
+        return [_clean_docs(v) for v in node]
+    return node
 
 
 def _inline(node: Any, defs: dict[str, Any], seen: tuple[str, ...]) -> Any:
@@ -41,7 +60,7 @@ def flat_schema(event_type: type[Event]) -> dict[str, Any]:
     """The JSON Schema of one event class with no `$ref` left."""
     raw = msgspec.json.schema(event_type)
     defs = raw.pop("$defs", {})
-    flat = _inline(raw, defs, ())
+    flat = _clean_docs(_inline(raw, defs, ()))
     flat["$schema"] = "https://json-schema.org/draft/2020-12/schema"
     return flat
 
