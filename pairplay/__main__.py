@@ -1,5 +1,5 @@
 import sys
 
-from pairplay.services.cli import main
+from pairplay.cli.main import main
 
 sys.exit(main())

@@ -25,7 +25,7 @@ from pairplay.core.rng import UniformStream
 from pairplay.schemas import events as ev
 from pairplay.schemas.session import SessionConfig
 
-from .node import Rejected, stream_seed
+from pairplay.services.node import Rejected, stream_seed
 
 
 class GameLogic:

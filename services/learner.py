@@ -25,7 +25,7 @@ from pairplay.core.reward import WRONG_SUGGESTION, human_reward, simulated_rewar
 from pairplay.core.rng import UniformStream
 from pairplay.schemas import events as ev
 
-from .node import NotYet, Rejected, stream_seed
+from pairplay.services.node import NotYet, Rejected, stream_seed
 
 MODE_OF_ALGORITHM = {"q-learning": "q", "pi-reuse": "reuse", "fixed": "fixed"}
 HOW_NAMES = {How.GREEDY: "greedy", How.EXPLORE: "explore", How.BIAS: "bias", How.FIXED: "fixed"}

@@ -22,7 +22,7 @@ from pairplay.core.rng import UniformStream
 from pairplay.core.user import SimulatedUsers
 from pairplay.schemas import events as ev
 
-from .node import NotYet, Rejected, stream_seed
+from pairplay.services.node import NotYet, Rejected, stream_seed
 
 
 class ParticipantLogic:

@@ -30,8 +30,8 @@ from pairplay.schemas.events import MessageRejected, SessionStarted, decode_even
 from pairplay.schemas.envelope import stamped
 from pairplay.schemas.keys import alive_key, event_key, parse_event_key, query_key, session_keys
 
-from .bus import Bus
-from .runner import LOG_QUERY
+from pairplay.services.bus import Bus
+from pairplay.services.runner import LOG_QUERY
 
 log = logging.getLogger("pairplay.recorder")
 BATCH = 2000

@@ -27,8 +27,8 @@ from pairplay.schemas.envelope import Event
 from pairplay.schemas.events import ServiceStarted, decode_event, encode_event
 from pairplay.schemas.keys import alive_key, event_key, query_key, session_keys
 
-from .bus import Bus
-from .node import Driver, Logic
+from pairplay.services.bus import Bus
+from pairplay.services.node import Driver, Logic
 
 log = logging.getLogger("pairplay.runner")
 LOG_QUERY = "log"

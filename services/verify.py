@@ -18,10 +18,10 @@ from dataclasses import dataclass, field
 from pairplay.replay.reader import read_log
 from pairplay.schemas.events import SessionStarted
 
-from .game import GameLogic
-from .learner import LearnerLogic
-from .node import SHELL_TAGS, Driver
-from .participant import ParticipantLogic
+from pairplay.services.game import GameLogic
+from pairplay.services.learner import LearnerLogic
+from pairplay.services.node import SHELL_TAGS, Driver
+from pairplay.services.participant import ParticipantLogic
 
 
 @dataclass

@@ -21,7 +21,7 @@ from pairplay.services.game import GameLogic
 from pairplay.services.learner import LearnerLogic
 from pairplay.services.node import Driver
 from pairplay.services.participant import ParticipantLogic
-from pairplay.services.session_cli import run_session
+from pairplay.services.session import run_session
 
 from busutil import connector, wait_until
 

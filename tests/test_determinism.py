@@ -8,7 +8,7 @@ import pytest
 from pairplay.core.personas import PERSONAS
 from pairplay.core.rng import UniformStream, game_seed, pick_from_mask
 from pairplay.core.simulate import run_games
-from pairplay.services.cli import main
+from pairplay.cli.main import main
 
 
 def test_streams_are_independent_per_role_and_skip_is_take():

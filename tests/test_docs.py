@@ -5,7 +5,7 @@ from pathlib import Path
 
 from pairplay.schemas import catalogue
 from pairplay.schemas.events import EVENT_TYPES
-from pairplay.services.cli import VERBS
+from pairplay.cli.main import VERBS
 
 README = Path(__file__).resolve().parents[1] / "README.md"
 

@@ -5,7 +5,7 @@ from pairplay.replay.reader import RecordedEvent
 from pairplay.schemas import events as ev
 from pairplay.schemas.envelope import stamped
 from pairplay.schemas.events import decode_event, encode_event
-from pairplay.services.replay_pub import republish
+from pairplay.services.replayer import republish
 
 
 class FakeBus:

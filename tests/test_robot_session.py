@@ -13,7 +13,7 @@ from pairplay.schemas.robot import RobotActed
 from pairplay.schemas.session import SessionConfig
 from pairplay.services.recorder import Recorder
 from pairplay.services.robot.bridge import RobotBridge
-from pairplay.services.session_cli import run_session
+from pairplay.services.session import run_session
 
 SESSION = "robot-session"
 

@@ -57,7 +57,7 @@ def test_do_nothing_sends_nothing():
 
 
 def test_pairplay_robot_try_performs_codes_and_refuses_bad_options(capsys):
-    from pairplay.services.cli import main
+    from pairplay.cli.main import main
 
     assert main(["robot", "--robot", "virtual?time_scale=0", "--try", "35,0"]) == 0
     out = capsys.readouterr().out
@@ -71,7 +71,7 @@ def test_pairplay_robot_try_performs_codes_and_refuses_bad_options(capsys):
 def test_robot_none_means_no_bridge():
     import argparse
 
-    from pairplay.services.robot.cli import add_robot_arguments, bridge_from_args, check_robot_args
+    from pairplay.cli.robot import add_robot_arguments, bridge_from_args, check_robot_args
 
     parser = argparse.ArgumentParser()
     add_robot_arguments(parser)

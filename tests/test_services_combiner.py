@@ -15,7 +15,7 @@ from pairplay.schemas.policy import read_policy
 from pairplay.schemas.session import SessionConfig
 from pairplay.services.combiner import CombinerLogic
 from pairplay.services.runner import Node
-from pairplay.services.session_cli import run_session
+from pairplay.services.session import run_session
 
 from busutil import collect, connector, listener, wait_until
 

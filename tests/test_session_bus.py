@@ -17,8 +17,8 @@ from pairplay.replay.rebuild import rebuild_recording, write_outputs
 from pairplay.schemas.policy import read_policy
 from pairplay.schemas.config import DEFAULT_REWARD_BONUS
 from pairplay.schemas.session import SessionConfig
-from pairplay.services.replay_pub import republish
-from pairplay.services.session_cli import run_session
+from pairplay.services.replayer import republish
+from pairplay.services.session import run_session
 from pairplay.services.verify import verify_recording
 
 from busutil import collect, connector, listener, wait_until

@@ -25,7 +25,7 @@ from pairplay.schemas.keys import alive_key, event_key
 from pairplay.schemas.config import DEFAULT_REWARD_BONUS
 from pairplay.schemas.session import SessionConfig
 from pairplay.services.runner import fetch_log
-from pairplay.services.session_cli import run_session
+from pairplay.services.session import run_session
 from pairplay.services.verify import verify_recording
 
 from busutil import collect, listener, wait_until

@@ -3,7 +3,7 @@
 from collections import Counter
 
 from pairplay.replay.reader import read_log
-from pairplay.services.cli import main
+from pairplay.cli.main import main
 
 
 def _tags(path):

@@ -5,7 +5,7 @@ import json
 import pytest
 
 from pairplay.schemas.policy import read_policy
-from pairplay.services.cli import main
+from pairplay.cli.main import main
 
 
 @pytest.fixture(scope="module")

@@ -5,8 +5,8 @@ import numpy as np
 
 from pairplay.core.geometry import card_of
 from pairplay.schemas import events as ev
-from pairplay.services.view_bench import scripted_events
-from pairplay.services.view_model import Cell, Change, ViewModel, suggestion_parts
+from pairplay.bench.view import scripted_events
+from pairplay.services.view.model import Cell, Change, ViewModel, suggestion_parts
 
 
 def fold(events):
@@ -96,8 +96,8 @@ def test_a_view_that_joins_late_says_its_q_table_is_partial():
 
 
 def test_a_paced_recording_follows_the_envelope_times_scaled_by_speed(tmp_path):
-    from pairplay.services.view_bench import write_recording
-    from pairplay.services.view_sources import recording_items
+    from pairplay.bench.view import write_recording
+    from pairplay.services.view.sources import recording_items
 
     events, _ = scripted_events(rounds=1, seed=9, step_ns=10_000_000)  # 10 ms apart
     mcap = write_recording(events, tmp_path / "paced.mcap")
@@ -138,7 +138,7 @@ def test_no_event_content_makes_the_fold_or_its_drawing_raise():
 
     import rerun as rr
 
-    from pairplay.services.view_rerun import RerunView
+    from pairplay.services.view.rerun_logger import RerunView
 
     rec = rr.RecordingStream("pairplay-test")
     rec.memory_recording()  # nothing leaves the process

@@ -14,14 +14,14 @@ from pairplay.schemas import events as ev
 from pairplay.schemas.envelope import tag_of
 from pairplay.schemas.keys import event_key
 from pairplay.services.bus import BusOptions, open_bus
-from pairplay.services.cli import main
-from pairplay.services.view_bench import scripted_events, write_recording
-from pairplay.services.view_cli import drive
-from pairplay.services.view_model import Cell
-from pairplay.services.view_output import ViewOutput, finish, open_stream, viewer_environment
-from pairplay.services.view_readback import has_blueprint, read_rrd, segmentation, tensor
-from pairplay.services.view_rerun import RerunView
-from pairplay.services.view_sources import LiveSource
+from pairplay.cli.main import main
+from pairplay.bench.view import scripted_events, write_recording
+from pairplay.services.view.drive import drive
+from pairplay.services.view.model import Cell
+from pairplay.services.view.output import ViewOutput, finish, open_stream, viewer_environment
+from pairplay.services.view.readback import has_blueprint, read_rrd, segmentation, tensor
+from pairplay.services.view.rerun_logger import RerunView
+from pairplay.services.view.sources import LiveSource
 
 ENTITIES = {"board/cells", "board/faces", "board/observed", "board/match", "board/candidates", "suggestion",
             "q/table", "learning/reward", "learning/schedule/epsilon", "learning/schedule/alpha",
@@ -153,7 +153,7 @@ def test_a_real_session_on_the_bus_with_the_view_attached_gives_the_learners_q_t
     """`pairplay session`'s own runner (game, learner, simulated participant, recorder) with the
     view watching from its own Zenoh session; then the recording viewed gives the same view."""
     from pairplay.schemas.session import SessionConfig
-    from pairplay.services.session_cli import run_session
+    from pairplay.services.session import run_session
 
     config = SessionConfig(session="real1", participant="sim:tatiana", persona="tatiana", seed=11, rounds=3)
     live_rrd = tmp_path / "live.rrd"

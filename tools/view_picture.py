@@ -19,8 +19,8 @@ from pathlib import Path
 from pairplay.replay.reader import read_log
 from pairplay.schemas import events as ev
 from pairplay.services.bus import stop_on_signals
-from pairplay.services.view_output import ViewOutput, finish, open_stream
-from pairplay.services.view_rerun import RerunView
+from pairplay.services.view.output import ViewOutput, finish, open_stream
+from pairplay.services.view.rerun_logger import RerunView
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -31,7 +31,7 @@ from pairplay.services.bus import Bus, BusOptions
 from pairplay.services.game import GameLogic
 from pairplay.services.learner import LearnerLogic
 from pairplay.services.node import Driver
-from pairplay.services.session_cli import run_session
+from pairplay.services.session import run_session
 
 
 def sim_sample(out: Path) -> None:

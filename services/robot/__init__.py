@@ -6,7 +6,7 @@ iristk://host:1932, furhat://host:9000) and returns a started driver;
 publishes one RobotActed per suggestion. See docs/robot.md.
 """
 
-from .backends import make_transport, open_robot, parse_robot_url
-from .driver import RobotDriver, Suggestion
+from pairplay.services.robot.backends import make_transport, open_robot, parse_robot_url
+from pairplay.services.robot.driver import RobotDriver, Suggestion
 
 __all__ = ["RobotDriver", "Suggestion", "make_transport", "open_robot", "parse_robot_url"]

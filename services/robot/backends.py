@@ -18,15 +18,15 @@ import msgspec
 
 from pairplay.schemas.robot import GESTURE_PRESETS, BoardCalibration, RobotActed, RobotConfig
 
-from . import iristk_protocol
-from .calibration import Board, load_calibration
-from .driver import RobotDriver
-from .iristk import IrisTKTransport
-from .realtime import DEFAULT_PORT as REALTIME_PORT
-from .realtime import RealtimeTransport
-from .render import Renderer
-from .transport import Transport
-from .virtual import VirtualTransport
+from pairplay.services.robot import iristk_protocol
+from pairplay.services.robot.calibration import Board, load_calibration
+from pairplay.services.robot.driver import RobotDriver
+from pairplay.services.robot.iristk import IrisTKTransport
+from pairplay.services.robot.realtime import DEFAULT_PORT as REALTIME_PORT
+from pairplay.services.robot.realtime import RealtimeTransport
+from pairplay.services.robot.render import Renderer
+from pairplay.services.robot.transport import Transport
+from pairplay.services.robot.virtual import VirtualTransport
 
 FORMS = "virtual, iristk://HOST[:1932], furhat://HOST[:9000]"
 DEFAULT_GESTURES = {"virtual": "furhat", "iristk": "iristk", "furhat": "furhat"}

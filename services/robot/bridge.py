@@ -35,10 +35,10 @@ from pairplay.schemas.envelope import Event
 from pairplay.schemas.keys import alive_key, event_key, session_keys
 from pairplay.schemas.robot import BoardCalibration, RobotActed, RobotConfig
 
-from ..bus import Bus
-from ..node import Driver, Rejected
-from .backends import open_robot
-from .driver import RobotDriver, Suggestion
+from pairplay.services.bus import Bus
+from pairplay.services.node import Driver, Rejected
+from pairplay.services.robot.backends import open_robot
+from pairplay.services.robot.driver import RobotDriver, Suggestion
 
 log = logging.getLogger("pairplay.robot.bridge")
 NAME = "robot"

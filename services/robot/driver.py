@@ -33,8 +33,8 @@ from typing import Callable
 
 from pairplay.schemas.robot import RobotActed, RobotConfig
 
-from .render import Renderer, Say, Step, StopSpeech
-from .transport import SPEECH_END, SPEECH_START, Changed, Disconnected, Rejected, Reply, Transport, Wire
+from pairplay.services.robot.render import Renderer, Say, Step, StopSpeech
+from pairplay.services.robot.transport import SPEECH_END, SPEECH_START, Changed, Disconnected, Rejected, Reply, Transport, Wire
 
 log = logging.getLogger("pairplay.robot")
 HELD_POLL_S = 0.05  # how often a command the transport holds back is offered again

@@ -28,12 +28,12 @@ import time
 
 from pairplay.schemas.robot import RobotConfig
 
-from .iristk_protocol import (
+from pairplay.services.robot.iristk_protocol import (
     LOCATION_CLASS, BadFrame, EventFrame, FrameReader, Line, NameFilter, decode_event, event_frame,
     make_event,
 )
-from .render import Command, Gesture, Look, Say, StopSpeech
-from .transport import (
+from pairplay.services.robot.render import Command, Gesture, Look, Say, StopSpeech
+from pairplay.services.robot.transport import (
     GESTURE_END, SPEECH_END, SPEECH_START, Changed, Deliver, Disconnected, Rejected, Reply, Wire,
 )
 

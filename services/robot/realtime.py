@@ -31,8 +31,8 @@ from websockets.sync.client import ClientConnection, connect
 
 from pairplay.schemas.robot import RobotConfig
 
-from .render import Command, Gesture, Look, Say, StopSpeech
-from .transport import GESTURE_END, SPEECH_END, SPEECH_START, Deliver, Disconnected, Rejected, Reply, Wire
+from pairplay.services.robot.render import Command, Gesture, Look, Say, StopSpeech
+from pairplay.services.robot.transport import GESTURE_END, SPEECH_END, SPEECH_START, Deliver, Disconnected, Rejected, Reply, Wire
 
 log = logging.getLogger("pairplay.robot.realtime")
 

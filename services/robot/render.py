@@ -27,7 +27,7 @@ from pairplay.core.actions import action
 from pairplay.core.geometry import card_col, card_row
 from pairplay.schemas.robot import GestureNames, RobotConfig, SpeechTexts
 
-from .calibration import Board
+from pairplay.services.robot.calibration import Board
 
 
 class Say(msgspec.Struct, frozen=True, tag="say"):

@@ -18,7 +18,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Callable, Protocol
 
-from .render import Command
+from pairplay.services.robot.render import Command
 
 SPEECH_START, SPEECH_END, GESTURE_END = "speech.start", "speech.end", "gesture.end"
 

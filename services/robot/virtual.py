@@ -17,8 +17,8 @@ import time
 
 import msgspec
 
-from .render import Command, Gesture, Say, StopSpeech
-from .transport import GESTURE_END, SPEECH_END, SPEECH_START, Deliver, Reply, Wire
+from pairplay.services.robot.render import Command, Gesture, Say, StopSpeech
+from pairplay.services.robot.transport import GESTURE_END, SPEECH_END, SPEECH_START, Deliver, Reply, Wire
 
 log = logging.getLogger("pairplay.robot.virtual")
 

@@ -1,6 +1,7 @@
-"""`pairplay study`: the virtual study of thesis chapter 6, end to end.
+"""The simulated study's report: policy files, CSV tables, figures and report.md.
 
-Rule: one command, reproducible by seed, writes a report folder:
+Rule: `run_study(settings, out)` runs the study of thesis chapter 6 through
+`pairplay.core.study` and writes, reproducibly by seed, one report folder:
   policies/<persona>/game-NN.json   one policy file per game (schemas/policy.py)
   curves.csv, curves_summary.csv    picks per round per game; mean/sd/min/max per round
   learning_curves.png               figure 6.4 (memory, focus, impairment)
@@ -10,60 +11,70 @@ Rule: one command, reproducible by seed, writes a report folder:
   merged_evaluation.csv             every merged policy on every persona
   reuse.csv, reuse.png              held-out persona: Q-learning from scratch vs pi-reuse
   report.md                         the tables and figures, with the run's settings
+It returns the tables it wrote, so a caller (the CLI, a notebook) can print them.
 """
 
 from __future__ import annotations
 
-import argparse
+import contextlib
 import csv
-import sys
 import time
+from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Callable
 
 import numpy as np
-from tqdm import tqdm
 
 from pairplay import __version__
 from pairplay.core import study
 from pairplay.core.personas import PERSONAS, persona
 from pairplay.core.policies import to_policy_file
-from pairplay.core.reward import BONUS_RULE_TEXT, BONUS_RULES
+from pairplay.core.reward import BONUS_RULE_TEXT
 from pairplay.schemas.config import DEFAULT_REWARD_BONUS, LearnerConfig
 from pairplay.schemas.policy import write_policy
 
-from . import plots
+from pairplay.report import plots
 
 
-def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--seed", type=int, default=0, help="study seed (default 0)")
-    p.add_argument("--personas", default=",".join(PERSONAS),
-                   help="comma-separated persona keys (default: all of appendix A)")
-    p.add_argument("--games", type=int, default=10, help="games per persona (thesis: 10)")
-    p.add_argument("--rounds", type=int, default=500, help="rounds per game (thesis: 500)")
-    p.add_argument("--eval-rounds", type=int, default=200,
-                   help="rounds each greedy policy is evaluated with epsilon 0 (default 200)")
-    p.add_argument("--reward-bonus", choices=BONUS_RULES, default=DEFAULT_REWARD_BONUS,
-                   help="when the 1/|candidate set| bonus is paid: when the candidate set holds the match "
-                        "(correct, default), on every consistent suggestion (consistent, SPEC's literal reading) "
-                        "or on a match only (see README: the reward bonus)")
-    p.add_argument("--trained-updates", type=int, default=50,
-                   help="profiles are also given over the states every policy of a persona updated at least "
-                        "this many times (default 50; thesis 6.4: untrained states)")
-    p.add_argument("--reuse-seeds", type=int, default=10,
-                   help="games per held-out persona in the speed-up experiment (default 10)")
-    p.add_argument("--psi", type=float, default=1.0, help="pi-reuse: psi at the start of each round (default 1)")
-    p.add_argument("--psi-decay", type=float, default=0.95, help="pi-reuse: v, psi's decay per suggestion (default 0.95)")
-    p.add_argument("--reuse-last", type=int, default=50,
-                   help="pi-reuse: the last N rounds use the new policy alone (default 50)")
-    p.add_argument("--out", type=Path, default=Path("out/study"), help="report folder (default out/study)")
-    p.add_argument("--train-only", action="store_true",
-                   help="stop after training: policy files, curves and figure 6.4 only (for sweeps)")
-    p.add_argument("--quiet", action="store_true", help="no progress bars")
+@dataclass
+class StudySettings:
+    """Everything that decides a study's results (the `pairplay study` options)."""
+    seed: int = 0
+    personas: str = ",".join(PERSONAS)  # comma-separated persona keys
+    games: int = 10
+    rounds: int = 500
+    eval_rounds: int = 200
+    reward_bonus: str = DEFAULT_REWARD_BONUS
+    trained_updates: int = 50
+    reuse_seeds: int = 10
+    psi: float = 1.0
+    psi_decay: float = 0.95
+    reuse_last: int = 50
+    train_only: bool = False
+
+    def persona_list(self):
+        """The personas named (KeyError naming an unknown one)."""
+        return [persona(k.strip()) for k in self.personas.split(",") if k.strip()]
 
 
-def _bar(args, total: int, desc: str):
-    return tqdm(total=total, desc=desc, unit="round", disable=args.quiet, file=sys.stderr,
-                dynamic_ncols=True, leave=False)
+@dataclass
+class StudyReport:
+    """What run_study wrote: the folder, the phases' timings (s) and the tables (rows of strings)."""
+    out: Path
+    timings: dict[str, float]
+    evaluation: list[list[str]] = field(default_factory=list)
+    profiles: list[list[str]] = field(default_factory=list)
+    merges: list[list[str]] = field(default_factory=list)
+    reuse: list[list[str]] | None = None
+
+
+def _no_bar(total: int, desc: str):
+    return contextlib.nullcontext(_NullBar())
+
+
+class _NullBar:
+    def update(self, n: int) -> None:
+        pass
 
 
 def _progress(bar):
@@ -195,17 +206,14 @@ def write_merges(out: Path, personas, users: study.UserSet, args) -> dict:
     return merges
 
 
-def run(args) -> int:
-    try:
-        personas = [persona(k.strip()) for k in args.personas.split(",") if k.strip()]
-    except KeyError as exc:
-        print(f"pairplay study: {exc.args[0]}", file=sys.stderr)
-        return 2
-    if args.games < 1 or args.rounds < 1 or args.eval_rounds < 1 or args.reuse_seeds < 1:
-        print("pairplay study: --games, --rounds, --eval-rounds and --reuse-seeds must be at least 1",
-              file=sys.stderr)
-        return 2
-    out: Path = args.out
+def run_study(args: StudySettings, out: Path, progress_bar: Callable = _no_bar) -> StudyReport:
+    """Run the study with `args` and write its report folder `out` (created).
+
+    `progress_bar(total, desc)` returns a context manager whose value has `update(n)`
+    (a tqdm bar, say): one per phase, counted in simulated rounds.
+    Raises KeyError for an unknown persona."""
+    personas = args.persona_list()
+    out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     config = LearnerConfig()
     names = {p.key: p.name for p in personas}
@@ -213,7 +221,7 @@ def run(args) -> int:
     start = time.perf_counter()
 
     t0 = time.perf_counter()
-    with _bar(args, len(personas) * args.games * args.rounds, "training") as bar:
+    with progress_bar(len(personas) * args.games * args.rounds, "training") as bar:
         training = study.train(personas, args.games, args.rounds, args.seed, config, progress=_progress(bar),
                                reward_bonus=args.reward_bonus)
     timings["training"] = time.perf_counter() - t0
@@ -222,12 +230,11 @@ def run(args) -> int:
     curves = write_curves(out, training)
     plots.learning_curves(curves, names, out / "learning_curves.png")
     if args.train_only:
-        print(f"training: {timings['training']:.2f} s; policies and curves in {out}")
-        return 0
+        return StudyReport(out, timings)
 
     t0 = time.perf_counter()
     n_eval = 3 * len(personas) * args.games * args.eval_rounds
-    with _bar(args, n_eval, "oracle + evaluation") as bar:
+    with progress_bar(n_eval, "oracle + evaluation") as bar:
         cmp = study.compare(personas, training, args.eval_rounds, args.seed, progress=_progress(bar),
                             reward_bonus=args.reward_bonus)
     timings["evaluation"] = time.perf_counter() - t0
@@ -252,7 +259,7 @@ def run(args) -> int:
     own = {p.key: training.greedy[[i for i, q in enumerate(training.personas) if q.key == p.key]]
            for p in personas}
     alone = dict(zip(cmp.persona, cmp.alone))
-    with _bar(args, len(personas) * args.games * args.eval_rounds * (1 + len(merges)), "merged policies") as bar:
+    with progress_bar(len(personas) * args.games * args.eval_rounds * (1 + len(merges)), "merged policies") as bar:
         merged_eval = study.evaluate_on_personas(
             personas, {"own": own, **{k: m.policy for k, m in merges.items()}}, args.games, args.eval_rounds,
             args.seed, progress=_progress(bar))
@@ -272,7 +279,7 @@ def run(args) -> int:
                    f"rounds to {1.10:.2f}x oracle: scratch", "pi-reuse"]]
     reuse = None
     if len(personas) >= 2:
-        with _bar(args, 2 * len(personas) * args.reuse_seeds * args.rounds, "speed-up") as bar:
+        with progress_bar(2 * len(personas) * args.reuse_seeds * args.rounds, "speed-up") as bar:
             reuse = study.reuse_experiment(personas, users, oracle, args.reuse_seeds, args.rounds, args.seed,
                                            reuse_config, progress=_progress(bar), reward_bonus=args.reward_bonus)
         for i, key in enumerate(reuse.persona):
@@ -346,15 +353,4 @@ def run(args) -> int:
     report += ["## Timings", "", markdown_table([["phase", "seconds"]] + [[k, f"{v:.2f}"] for k, v in timings.items()]), ""]
     (out / "report.md").write_text("\n".join(report))
 
-    print(text_table(table))
-    print()
-    print(text_table([r[:9] for r in prof_rows]))
-    print()
-    print(text_table(merge_rows))
-    if reuse is not None:
-        print()
-        print(text_table(reuse_rows))
-    print()
-    print("  ".join(f"{k}: {v:.2f} s" for k, v in timings.items()))
-    print(f"report: {out / 'report.md'}")
-    return 0
+    return StudyReport(out, timings, table, prof_rows, merge_rows, reuse_rows if reuse is not None else None)

@@ -133,16 +133,16 @@ def _row(row, value, unit, reference, reference_value, goal) -> dict:
 def real_recording(path: Path, rounds: int = 60) -> Path:
     """A simulated session recorded by `pairplay session`'s own runner (tatiana: she considers
     most suggestions, so the Q-table keeps changing)."""
-    from .session_cli import run_session
+    from pairplay.services.session import run_session
 
     config = SessionConfig(session="bench-rec", participant="sim:tatiana", persona="tatiana", seed=1, rounds=rounds)
     return run_session(config, path)
 
 
 def bench_view_from_recording(rounds: int = 60) -> dict:
-    from .view_cli import drive
-    from .view_rerun import RerunView
-    from .view_sources import recording_items
+    from pairplay.services.view.drive import drive
+    from pairplay.services.view.rerun_logger import RerunView
+    from pairplay.services.view.sources import recording_items
 
     with tempfile.TemporaryDirectory() as tmp:
         mcap = real_recording(Path(tmp) / "bench.mcap", rounds)
@@ -205,7 +205,7 @@ def _publish_to(bus, payloads, command: list[str]) -> float:
 def bench_live_not_slowed(rounds: int = 300, repeats: int = 3) -> dict:
     """The view and the reference subscriber run as their own processes, as in a study;
     medians of `repeats` alternating runs (the machine is noisy)."""
-    from .bus import open_bus
+    from pairplay.services.bus import open_bus
 
     events, _ = scripted_events(rounds, session="bench-live")
     encode = msgspec.json.Encoder().encode

@@ -31,7 +31,7 @@ import rerun.blueprint as rrb
 
 from pairplay.core.geometry import COLS, N_CARDS, ROWS, card_col, card_row
 
-from .view_model import Cell, Change, ViewModel
+from pairplay.services.view.model import Cell, Change, ViewModel
 
 APP_ID = "pairplay"
 FACE_LETTERS = string.ascii_uppercase

@@ -14,17 +14,17 @@ import sys
 
 # verb -> (module, one-line help)
 VERBS: dict[str, tuple[str, str]] = {
-    "study": ("pairplay.services.study_cli", "run the simulated study of thesis chapter 6"),
-    "bench": ("pairplay.services.bench_cli", "measure speed beside raw references, print a table"),
-    "profile": ("pairplay.services.profile_cli", "user information (algorithm 3) of policy files, per participant"),
-    "combine": ("pairplay.services.combine_cli", "merge policy files into one policy (algorithm 4)"),
-    "view": ("pairplay.services.view_cli", "watch a session live or a recording in rerun: board, suggestion, Q-table"),
-    "run": ("pairplay.services.run_cli", "run one service (game, learner, participant, recorder, combiner) on the bus"),
-    "session": ("pairplay.services.session_cli", "run a whole session over the bus, recorded to recordings/<session>.mcap"),
-    "rebuild": ("pairplay.services.rebuild_cli", "fold recordings into policy files and learning curves"),
-    "replay": ("pairplay.services.replay_cli", "re-publish a recording on the bus, or --verify it against fresh services"),
-    "recover": ("pairplay.services.recover_cli", "complete a recording cut short by a crash"),
-    "robot": ("pairplay.services.robot.cli", "perform a session's suggestions on a robot (virtual, IrisTK, Furhat), or --try one"),
+    "study": ("pairplay.cli.study", "run the simulated study of thesis chapter 6"),
+    "bench": ("pairplay.cli.bench", "measure speed beside raw references, print a table"),
+    "profile": ("pairplay.cli.profile", "user information (algorithm 3) of policy files, per participant"),
+    "combine": ("pairplay.cli.combine", "merge policy files into one policy (algorithm 4)"),
+    "view": ("pairplay.cli.view", "watch a session live or a recording in rerun: board, suggestion, Q-table"),
+    "run": ("pairplay.cli.run", "run one service (game, learner, participant, recorder, combiner) on the bus"),
+    "session": ("pairplay.cli.session", "run a whole session over the bus, recorded to recordings/<session>.mcap"),
+    "rebuild": ("pairplay.cli.rebuild", "fold recordings into policy files and learning curves"),
+    "replay": ("pairplay.cli.replay", "re-publish a recording on the bus, or --verify it against fresh services"),
+    "recover": ("pairplay.cli.recover", "complete a recording cut short by a crash"),
+    "robot": ("pairplay.cli.robot", "perform a session's suggestions on a robot (virtual, IrisTK, Furhat), or --try one"),
 }
 
 

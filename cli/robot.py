@@ -16,13 +16,14 @@ import argparse
 import logging
 import threading
 
-from ..bus import Bus, add_bus_arguments, options_from_args, stop_on_signals
-from .backends import FORMS, load_robot_config, open_robot, parse_robot_url
-from .bridge import RobotBridge
-from .calibration import CalibrationError, load_calibration
-from .driver import Suggestion
+from pairplay.services.bus import Bus, add_bus_arguments, options_from_args, stop_on_signals
+from pairplay.services.robot.backends import FORMS, load_robot_config, open_robot
+from pairplay.services.robot.bridge import RobotBridge
+from pairplay.services.robot.choice import RobotChoice, check_choice, start_bridge
+from pairplay.services.robot.calibration import CalibrationError, load_calibration
+from pairplay.services.robot.driver import Suggestion
 
-NO_ROBOT = "none"  # --robot none: a session without a robot bridge (simulated participants need none)
+from pairplay.services.robot.choice import NO_ROBOT
 
 
 def add_robot_arguments(p: argparse.ArgumentParser) -> None:
@@ -33,21 +34,24 @@ def add_robot_arguments(p: argparse.ArgumentParser) -> None:
     g.add_argument("--calibration", metavar="FILE", help="board calibration JSON (default: the packaged one)")
 
 
+def robot_choice(args: argparse.Namespace) -> RobotChoice | None:
+    """The --robot options as a RobotChoice (None for --robot none)."""
+    if args.robot == NO_ROBOT:
+        return None
+    return RobotChoice(args.robot, args.robot_config, args.calibration)
+
+
 def check_robot_args(args: argparse.Namespace) -> None:
     """Refuse a bad --robot URL, robot config or calibration before a session starts (ValueError)."""
-    if args.robot == NO_ROBOT:
-        return
-    parse_robot_url(args.robot, load_robot_config(args.robot_config))
-    load_calibration(args.calibration)
+    choice = robot_choice(args)
+    if choice is not None:
+        check_choice(choice)
 
 
 def bridge_from_args(bus: Bus, session: str, args: argparse.Namespace) -> RobotBridge | None:
     """A started RobotBridge for a session (None for --robot none); ValueError on a bad option or file."""
-    if args.robot == NO_ROBOT:
-        return None
-    config = load_robot_config(args.robot_config)
-    calibration = load_calibration(args.calibration)
-    return RobotBridge(bus, session, args.robot, config=config, calibration=calibration).start()
+    choice = robot_choice(args)
+    return None if choice is None else start_bridge(bus, session, choice)
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:

@@ -18,8 +18,8 @@ import threading
 import time
 from pathlib import Path
 
-from .bus import Bus, add_bus_arguments, options_from_args, stop_on_signals
-from .runner import Node
+from pairplay.services.bus import Bus, add_bus_arguments, options_from_args, stop_on_signals
+from pairplay.services.runner import Node
 
 SERVICES = ("game", "learner", "participant", "recorder", "combiner")
 
@@ -33,7 +33,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--wait-for", action="append", default=[], help="game: services to wait for before starting")
     add_bus_arguments(p)
     known = {a.dest for a in p._actions}
-    from .session_cli import add_config_arguments
+    from pairplay.cli.session import add_config_arguments
     extra = argparse.ArgumentParser(add_help=False)
     add_config_arguments(extra)
     for action in extra._actions:
@@ -47,7 +47,7 @@ def run(args: argparse.Namespace) -> int:
     stop_on_signals(stop)
     config = None
     if args.service == "game" and args.participant:
-        from .session_cli import config_from_args
+        from pairplay.cli.session import config_from_args
         try:
             config = config_from_args(args)
         except (ValueError, KeyError) as err:
@@ -61,7 +61,7 @@ def run(args: argparse.Namespace) -> int:
     try:
         print(f"listening {' '.join(bus.locators())}", flush=True)
         if args.service == "recorder":
-            from .recorder import Recorder
+            from pairplay.services.recorder import Recorder
             recorder = Recorder(bus, args.session, Path(args.out) / f"{args.session}.mcap")
             recorder.start()
             checked = 0.0
@@ -77,10 +77,10 @@ def run(args: argparse.Namespace) -> int:
                 recorder.close()
             return 0
         if args.service == "combiner":
-            from .combiner import CombinerLogic
+            from pairplay.services.combiner import CombinerLogic
             logic = CombinerLogic(args.out)
         elif args.service == "game":
-            from .game import GameLogic
+            from pairplay.services.game import GameLogic
             if config is None:  # a restart: the session's config is in its log
                 config = _recorded_config(bus, args.session)
                 if config is None:
@@ -89,10 +89,10 @@ def run(args: argparse.Namespace) -> int:
                     return 2
             logic = GameLogic(config)
         elif args.service == "learner":
-            from .learner import LearnerLogic
+            from pairplay.services.learner import LearnerLogic
             logic = LearnerLogic()
         else:
-            from .participant import ParticipantLogic
+            from pairplay.services.participant import ParticipantLogic
             logic = ParticipantLogic()
         # a game given its config starts the session; every other service, and a game
         # restarted by session id alone, catches up from the recorder's log
@@ -106,7 +106,7 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _recorded_config(bus: Bus, session: str):
-    from .runner import fetch_log
+    from pairplay.services.runner import fetch_log
     for e in fetch_log(bus, session):
         if type(e).__name__ == "SessionStarted":
             return e.config

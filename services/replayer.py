@@ -17,7 +17,7 @@ from pairplay.replay.reader import RecordedEvent
 from pairplay.schemas.events import encode_event
 from pairplay.schemas.keys import event_key
 
-from .bus import Bus
+from pairplay.services.bus import Bus
 
 
 def republish(bus: Bus, events: list[RecordedEvent], speed: float, stop: threading.Event | None = None,

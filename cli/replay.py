@@ -26,7 +26,7 @@ def speed(text: str) -> float:
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    from .bus import add_bus_arguments
+    from pairplay.services.bus import add_bus_arguments
 
     p.add_argument("recording", metavar="REC")
     p.add_argument("--speed", type=speed, default=1.0, help="N times real time, or max (default 1)")
@@ -37,7 +37,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     if args.verify:
-        from .verify import verify_recording
+        from pairplay.services.verify import verify_recording
 
         v = verify_recording(args.recording)
         for c in v.checks:
@@ -57,8 +57,8 @@ def run(args: argparse.Namespace) -> int:
 
     from pairplay.replay.reader import read_log
 
-    from .bus import Bus, options_from_args, stop_on_signals
-    from .replay_pub import republish
+    from pairplay.services.bus import Bus, options_from_args, stop_on_signals
+    from pairplay.services.replayer import republish
 
     log = read_log(args.recording)
     if log.truncated:

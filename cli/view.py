@@ -16,21 +16,13 @@ import argparse
 import signal
 import sys
 import threading
-from dataclasses import dataclass
 from pathlib import Path
-from typing import Iterable
 
-from .bus import add_bus_arguments, open_bus, options_from_args, stop_on_signals
-from .view_output import DEFAULT_GRPC_PORT, DEFAULT_WEB_PORT, ViewOutput, finish, open_stream
-from .view_rerun import RerunView
-from .view_sources import LiveSource, recording_items
-
-
-@dataclass
-class ViewSummary:
-    events: int = 0
-    notes: int = 0
-    q_logged: int = 0
+from pairplay.services.bus import add_bus_arguments, open_bus, options_from_args, stop_on_signals
+from pairplay.services.view.output import DEFAULT_GRPC_PORT, DEFAULT_WEB_PORT, ViewOutput, finish, open_stream
+from pairplay.services.view.rerun_logger import RerunView
+from pairplay.services.view.sources import LiveSource, recording_items
+from pairplay.services.view.drive import drive
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -55,25 +47,6 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     out.add_argument("--rerun-analytics", action="store_true",
                      help="leave rerun's usage analytics to your rerun settings (default: off for viewers started here)")
     add_bus_arguments(parser)
-
-
-def drive(view: RerunView, items: Iterable, *, stop: threading.Event | None = None, echo=None) -> ViewSummary:
-    """Fold every item of a source into the view; notes go to the event log (and `echo`)."""
-    summary = ViewSummary()
-    for event, note in items:
-        if stop is not None and stop.is_set():
-            break
-        if note is not None:
-            view.note(note)
-            summary.notes += 1
-            if echo:
-                echo(f"view: {note}")
-        else:
-            view.handle(event)
-            summary.events += 1
-    view.close()
-    summary.q_logged = view.q_logged
-    return summary
 
 
 def _default_rrd(args: argparse.Namespace) -> Path:

@@ -24,9 +24,9 @@ from pairplay.schemas.envelope import stamped
 from pairplay.schemas.keys import event_key
 from pairplay.schemas.robot import RobotConfig
 
-from ..bus import Bus, BusOptions
-from .bridge import RobotBridge
-from .iristk_protocol import EventFrame, FrameReader, event_frame, make_event
+from pairplay.services.bus import Bus, BusOptions
+from pairplay.services.robot.bridge import RobotBridge
+from pairplay.services.robot.iristk_protocol import EventFrame, FrameReader, event_frame, make_event
 
 SESSION = "bench-robot"
 SPEECH = code_of_parts(2, 0, 0, 0)

@@ -14,10 +14,10 @@ import sys
 
 # name -> module providing bench_rows(quick)
 SOURCES: dict[str, str] = {
-    "core": "pairplay.services.bench_core",
-    "bus": "pairplay.services.bus_bench",
-    "view": "pairplay.services.view_bench",
-    "robot": "pairplay.services.robot.bench",
+    "core": "pairplay.bench.core",
+    "bus": "pairplay.bench.bus",
+    "view": "pairplay.bench.view",
+    "robot": "pairplay.bench.robot",
 }
 
 

@@ -39,7 +39,7 @@ from urllib.parse import quote
 
 import rerun as rr
 
-from .view_rerun import APP_ID, blueprint
+from pairplay.services.view.rerun_logger import APP_ID, blueprint
 
 DEFAULT_GRPC_PORT = 9876  # rerun's defaults
 DEFAULT_WEB_PORT = 9090

@@ -17,7 +17,7 @@ on the same machine, so the ratio is what to compare between machines:
   0.1 s) vs a raw subscriber process writing the payloads to MCAP. Goal >= 70k/s.
 - rebuild events/s: `rebuild_recording` on a recorded session vs a bare
   StreamReader pass over the same file. Goal >= 200k/s.
-`python -m pairplay.services.bus_bench echo|rawrec ...` are the reference processes.
+`python -m pairplay.bench.bus echo|rawrec ...` are the reference processes.
 """
 
 from __future__ import annotations
@@ -39,7 +39,7 @@ from pairplay.schemas.events import decode_event, encode_event
 from pairplay.schemas.keys import alive_key, event_key
 from pairplay.schemas.session import SessionConfig
 
-from .bus import Bus, BusOptions
+from pairplay.services.bus import Bus, BusOptions
 
 
 def _spawn(*args: str) -> subprocess.Popen:
@@ -102,15 +102,15 @@ def raw_recorder(connect: str, out: str, n: int) -> None:
 
 # -- rows -------------------------------------------------------------------------------
 def latency_rows(turns: int) -> list[dict]:
-    from .game import GameLogic
-    from .runner import Node
+    from pairplay.services.game import GameLogic
+    from pairplay.services.runner import Node
 
     session = "bench-latency"
     config = SessionConfig(session=session, participant="human:bench", seed=1, rounds=10_000,
                            observed_source="first-pick", ignore_rule="time", software_version="bench")
     with Bus() as bus:
         endpoint = bus.locators()[0]
-        echo_proc = _spawn("pairplay.services.bus_bench", "echo", endpoint)
+        echo_proc = _spawn("pairplay.bench.bus", "echo", endpoint)
         # two peers linked directly: the raw reference's topology
         learner = _spawn("pairplay", "run", "learner", "--session", session, "--connect", endpoint, "--mode", "peer")
         try:
@@ -209,7 +209,7 @@ def recorder_rows(n: int) -> list[dict]:
     with tempfile.TemporaryDirectory() as tmp, Bus(express=False) as bus:
         endpoint = bus.locators()[0]
         # raw reference: a subscriber process writing payloads to MCAP
-        raw = _spawn("pairplay.services.bus_bench", "rawrec", endpoint, f"{tmp}/raw.mcap", str(n))
+        raw = _spawn("pairplay.bench.bus", "rawrec", endpoint, f"{tmp}/raw.mcap", str(n))
         assert _wait(lambda: "bench/alive/rawrec" in bus.alive_now("bench/alive/*")), "raw recorder did not start"
         key = "bench/raw/participant/CardPicked"
         assert _wait(lambda: bus.publisher(key).matching_status.matching)
@@ -244,7 +244,7 @@ def rebuild_rows(rounds: int) -> list[dict]:
 
     from pairplay.replay.rebuild import rebuild_recording
 
-    from .session_cli import run_session
+    from pairplay.services.session import run_session
 
     with tempfile.TemporaryDirectory() as tmp:
         config = SessionConfig(session="bench-rebuild", participant="sim:ashley", persona="ashley", seed=0,

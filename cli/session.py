@@ -22,23 +22,18 @@ from __future__ import annotations
 import argparse
 import logging
 import threading
-import time
 from datetime import datetime, timezone
 from pathlib import Path
 
 from pairplay import __version__
 from pairplay.schemas.config import DEFAULT_REWARD_BONUS, REWARD_BONUS_RULES, LearnerConfig
-from pairplay.schemas.keys import alive_key, check_chunk
+from pairplay.schemas.keys import check_chunk
 from pairplay.schemas.policy import PolicyFileError, read_policy
 from pairplay.schemas.session import SessionConfig, learner_overrides
 
-from .bus import Bus, BusOptions, add_bus_arguments, options_from_args, stop_on_signals
-from .game import GameLogic
-from .learner import LearnerLogic
-from .participant import ParticipantLogic
-from .recorder import Recorder
-from .robot.cli import add_robot_arguments, bridge_from_args, check_robot_args
-from .runner import Node
+from pairplay.cli.robot import add_robot_arguments, check_robot_args, robot_choice
+from pairplay.services.bus import add_bus_arguments, options_from_args, stop_on_signals
+from pairplay.services.session import run_session
 
 log = logging.getLogger("pairplay.session")
 PRESETS = {"virtual": LearnerConfig, "human-phase1": LearnerConfig.human_phase1,
@@ -91,102 +86,6 @@ def config_from_args(args: argparse.Namespace) -> SessionConfig:
     return config
 
 
-def run_session(config: SessionConfig, path: str | Path, *, bus: Bus | None = None,
-                bus_options: BusOptions | None = None, external: tuple[str, ...] = (),
-                stop: threading.Event | None = None, settle_timeout_s: float = 30.0,
-                on_bus=None, nodes_out: dict | None = None, wait_also: tuple[str, ...] = (),
-                robot_args: argparse.Namespace | None = None) -> Path:
-    """Run one session to its end (or `stop`); return the recording's path.
-
-    `nodes_out`, if given, receives the in-process Nodes by service name (tests
-    read the live learner's final Q-table from it). `wait_also`: more services
-    (liveliness names) the game waits for before it starts the session.
-    `robot_args` (the --robot options) adds the robot bridge (services/robot)."""
-    own_bus = bus is None
-    # the session's process is the router its external services connect to as clients
-    bus = bus if bus is not None else Bus(bus_options or BusOptions(mode="router"))
-    stop = stop or threading.Event()
-    if on_bus is not None:
-        on_bus(bus)
-    recorder = Recorder(bus, config.session, path)
-    recorder_stop = threading.Event()
-    recorder.start()
-    recorder_thread = threading.Thread(target=recorder.run, args=(recorder_stop,), name="pairplay-recorder",
-                                       daemon=True)
-    recorder_thread.start()
-    needed = ["recorder", "learner"] + (["participant"] if config.participant.startswith("sim:") else [])
-    nodes = []
-    bridge = None
-    try:
-        if robot_args is not None:
-            bridge = bridge_from_args(bus, config.session, robot_args)
-        if bridge is not None:
-            bridge.run_in_thread(stop)
-            needed.append("robot")
-        if "learner" not in external:
-            nodes.append(Node(bus, LearnerLogic(), config.session))
-        if "participant" not in external and config.participant.startswith("sim:"):
-            nodes.append(Node(bus, ParticipantLogic(), config.session))
-        for node in nodes:
-            node.start()
-            node.run_in_thread(stop)
-            if nodes_out is not None:
-                nodes_out[node.logic.name] = node
-        if "game" not in external:
-            game = Node(bus, GameLogic(config), config.session, resume=False)
-            game.start(wait_for=tuple(needed) + tuple(wait_also))
-            nodes.append(game)
-            if nodes_out is not None:
-                nodes_out["game"] = game
-            game.run_in_thread(stop)
-        else:
-            needed.append("game")
-        for node in nodes:
-            while node.thread.is_alive() and not stop.is_set():
-                node.thread.join(0.1)
-        wait_external_exit(bus, config.session, [s for s in external if s in needed], stop, settle_timeout_s)
-        wait_recorded(recorder, nodes, quiet_s=0.2 if external else 0.0)
-    finally:
-        stop.set()
-        for node in nodes:
-            if node.thread is not None:
-                node.thread.join(5.0)
-        if bridge is not None and bridge.thread is not None:
-            # the bridge reports the robot's last acknowledgements before the recorder closes
-            bridge.thread.join(bridge.settle_s + 5)
-        recorder_stop.set()
-        recorder_thread.join(5.0)
-        recorder.close()
-        if own_bus:
-            bus.close()
-    return recorder.path
-
-
-def wait_recorded(recorder: Recorder, nodes: list[Node], quiet_s: float, timeout_s: float = 5.0) -> None:
-    """Wait until the recorder holds every event our nodes published (Zenoh delivers
-    to local subscribers on its own threads, so the last ones may still be on their
-    way), and, with external services, until it has been quiet for `quiet_s`."""
-    deadline = time.monotonic() + timeout_s
-    while time.monotonic() < deadline:
-        if all(recorder.top_seq.get(n.logic.name, 0) >= n.driver.seq for n in nodes) and recorder.queue.empty():
-            break
-        time.sleep(0.005)
-    count = -1
-    while quiet_s and time.monotonic() < deadline and count != recorder.writer.count:
-        count = recorder.writer.count
-        time.sleep(quiet_s)
-
-
-def wait_external_exit(bus: Bus, session: str, services: list[str], stop: threading.Event, timeout_s: float) -> None:
-    """Wait until the external services settled and left the bus (they exit when done)."""
-    deadline = time.monotonic() + timeout_s
-    while services and not stop.is_set() and time.monotonic() < deadline:
-        alive = bus.alive_now(alive_key(session, "*"), timeout_s=0.5)
-        if not any(alive_key(session, s) in alive for s in services):
-            return
-        time.sleep(0.05)
-
-
 def add_arguments(p: argparse.ArgumentParser) -> None:
     add_config_arguments(p)
     p.add_argument("--out", default="recordings", help="directory of the recording (default recordings/)")
@@ -207,12 +106,12 @@ def run(args: argparse.Namespace) -> int:
     stop = threading.Event()
     stop_on_signals(stop)
 
-    def announce(bus: Bus) -> None:
+    def announce(bus) -> None:
         print(f"session {config.session}: bus listening on {' '.join(bus.locators()) or '(no listener)'}", flush=True)
 
     path = run_session(config, Path(args.out) / f"{config.session}.mcap",
                        bus_options=options_from_args(args, default_mode="router"),
-                       external=tuple(args.external), stop=stop, on_bus=announce, robot_args=args)
+                       external=tuple(args.external), stop=stop, on_bus=announce, robot=robot_choice(args))
     from pairplay.replay.fold import fold_events
     from pairplay.replay.reader import read_log
     recorded = read_log(path)

@@ -34,7 +34,7 @@ from pairplay.replay.reader import read_log
 from pairplay.schemas.events import decode_event
 from pairplay.schemas.keys import parse_event_key, session_keys
 
-from .runner import fetch_log
+from pairplay.services.runner import fetch_log
 
 Item = tuple[object | None, str | None]
 

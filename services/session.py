@@ -1,0 +1,122 @@
+"""One whole session over the bus, recorded: the work behind `pairplay session`.
+
+Rule: the recorder starts first, then the learner and the participant (each a
+Node with its liveliness token), and the game last: it waits until every
+service the session needs is on the bus, then announces the session. All run
+in this process on one Zenoh session unless `external` leaves a service to
+another process, which the game then waits for. The session is over when the
+game has ended it and every service has settled (in-process threads finished,
+external services' tokens gone); then the recorder finishes its file.
+"""
+
+from __future__ import annotations
+
+import threading
+import time
+from pathlib import Path
+
+from pairplay.schemas.keys import alive_key
+from pairplay.schemas.session import SessionConfig
+from pairplay.services.bus import Bus, BusOptions
+from pairplay.services.game import GameLogic
+from pairplay.services.learner import LearnerLogic
+from pairplay.services.participant import ParticipantLogic
+from pairplay.services.recorder import Recorder
+from pairplay.services.robot.choice import RobotChoice, start_bridge
+from pairplay.services.runner import Node
+
+
+def run_session(config: SessionConfig, path: str | Path, *, bus: Bus | None = None,
+                bus_options: BusOptions | None = None, external: tuple[str, ...] = (),
+                stop: threading.Event | None = None, settle_timeout_s: float = 30.0,
+                on_bus=None, nodes_out: dict | None = None, wait_also: tuple[str, ...] = (),
+                robot: RobotChoice | None = None) -> Path:
+    """Run one session to its end (or `stop`); return the recording's path.
+
+    `nodes_out`, if given, receives the in-process Nodes by service name (tests
+    read the live learner's final Q-table from it). `wait_also`: more services
+    (liveliness names) the game waits for before it starts the session.
+    `robot` (the --robot options) adds the robot bridge (services/robot)."""
+    own_bus = bus is None
+    # the session's process is the router its external services connect to as clients
+    bus = bus if bus is not None else Bus(bus_options or BusOptions(mode="router"))
+    stop = stop or threading.Event()
+    if on_bus is not None:
+        on_bus(bus)
+    recorder = Recorder(bus, config.session, path)
+    recorder_stop = threading.Event()
+    recorder.start()
+    recorder_thread = threading.Thread(target=recorder.run, args=(recorder_stop,), name="pairplay-recorder",
+                                       daemon=True)
+    recorder_thread.start()
+    needed = ["recorder", "learner"] + (["participant"] if config.participant.startswith("sim:") else [])
+    nodes = []
+    bridge = None
+    try:
+        if robot is not None:
+            bridge = start_bridge(bus, config.session, robot)
+        if bridge is not None:
+            bridge.run_in_thread(stop)
+            needed.append("robot")
+        if "learner" not in external:
+            nodes.append(Node(bus, LearnerLogic(), config.session))
+        if "participant" not in external and config.participant.startswith("sim:"):
+            nodes.append(Node(bus, ParticipantLogic(), config.session))
+        for node in nodes:
+            node.start()
+            node.run_in_thread(stop)
+            if nodes_out is not None:
+                nodes_out[node.logic.name] = node
+        if "game" not in external:
+            game = Node(bus, GameLogic(config), config.session, resume=False)
+            game.start(wait_for=tuple(needed) + tuple(wait_also))
+            nodes.append(game)
+            if nodes_out is not None:
+                nodes_out["game"] = game
+            game.run_in_thread(stop)
+        else:
+            needed.append("game")
+        for node in nodes:
+            while node.thread.is_alive() and not stop.is_set():
+                node.thread.join(0.1)
+        wait_external_exit(bus, config.session, [s for s in external if s in needed], stop, settle_timeout_s)
+        wait_recorded(recorder, nodes, quiet_s=0.2 if external else 0.0)
+    finally:
+        stop.set()
+        for node in nodes:
+            if node.thread is not None:
+                node.thread.join(5.0)
+        if bridge is not None and bridge.thread is not None:
+            # the bridge reports the robot's last acknowledgements before the recorder closes
+            bridge.thread.join(bridge.settle_s + 5)
+        recorder_stop.set()
+        recorder_thread.join(5.0)
+        recorder.close()
+        if own_bus:
+            bus.close()
+    return recorder.path
+
+
+def wait_recorded(recorder: Recorder, nodes: list[Node], quiet_s: float, timeout_s: float = 5.0) -> None:
+    """Wait until the recorder holds every event our nodes published (Zenoh delivers
+    to local subscribers on its own threads, so the last ones may still be on their
+    way), and, with external services, until it has been quiet for `quiet_s`."""
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        if all(recorder.top_seq.get(n.logic.name, 0) >= n.driver.seq for n in nodes) and recorder.queue.empty():
+            break
+        time.sleep(0.005)
+    count = -1
+    while quiet_s and time.monotonic() < deadline and count != recorder.writer.count:
+        count = recorder.writer.count
+        time.sleep(quiet_s)
+
+
+def wait_external_exit(bus: Bus, session: str, services: list[str], stop: threading.Event, timeout_s: float) -> None:
+    """Wait until the external services settled and left the bus (they exit when done)."""
+    deadline = time.monotonic() + timeout_s
+    while services and not stop.is_set() and time.monotonic() < deadline:
+        alive = bus.alive_now(alive_key(session, "*"), timeout_s=0.5)
+        if not any(alive_key(session, s) in alive for s in services):
+            return
+        time.sleep(0.05)

@@ -1,0 +1,8 @@
+"""The live view: the board, the suggestion and the Q-table in rerun.
+
+Belongs here: the fold of events into what is drawn (`model`), the rerun
+logging (`rerun_logger`), where the drawing goes (`output`: a file, a spawned
+viewer, a served one), where events come from (`sources`: a recording or the
+bus) and reading an `.rrd` back (`readback`). The view only subscribes; it
+never publishes.
+"""
