@@ -2,8 +2,10 @@
 
 Rule: for every service whose logic is deterministic (game, learner, simulated
 participant), a fresh logic in a Driver is fed the recording's events from the
-other sources, in file order (node.py's deferral restores the causal order the
-bus may have shuffled), and every event it derives is compared, field by field
+other sources, each source's in its own sequence order (whatever order the
+recorder wrote them in), and the Driver holds an input until what it depends on
+has been handled (node.py's `NotYet`, a source's later events waiting behind its
+earlier ones), so every order a recorder can hold gives the same verdict; and every event it derives is compared, field by field
 without the envelope's wall time and sequence number, with the event the live
 service recorded, one by one in order. A recomputed event the recording lacks
 or a recorded one never recomputed is a failure too, unless the recording was
@@ -47,8 +49,21 @@ class Verification:
         return not self.error and all(c.ok(self.truncated) for c in self.checks)
 
 
+def in_source_order(events: list) -> list:
+    """The events with each source's own in its sequence order, in the slots that source has in the file.
+
+    A recorder writes what it receives when it receives it, and may hold a source's
+    later event before an earlier one (different keys, different links); the
+    sources' order among each other is left to the logics (NotYet, node.py)."""
+    by_source: dict[str, list] = {}
+    for e in events:
+        by_source.setdefault(e.source, []).append(e)
+    ordered = {s: iter(sorted(es, key=lambda e: e.seq)) for s, es in by_source.items()}
+    return [next(ordered[e.source]) for e in events]
+
+
 def verify_events(events, source: str = "", truncated: bool = False) -> Verification:
-    events = list(events)
+    events = in_source_order(list(events))
     started = [e for e in events if isinstance(e, SessionStarted)]
     if not started:
         return Verification(source, [], truncated, "no SessionStarted: nothing to verify")
