@@ -65,7 +65,7 @@ def rebuild_events(events, source: str = "", truncated: bool = False, note: str 
 
 def rebuild_recording(path: str | Path) -> Rebuilt:
     log = read_log(path)
-    note = f"truncated: {log.error}" if log.truncated else ""
+    note = "" if log.whole else f"{'damaged' if log.damage else 'truncated'}: {log.error}"
     return rebuild_events((r.event for r in log.events), str(path), log.truncated, note)
 
 

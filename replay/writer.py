@@ -34,7 +34,9 @@ class EventLogWriter:
                  chunk_size: int = CHUNK_SIZE, library: str = "pairplay"):
         self._own = isinstance(output, (str, Path))
         self._stream = open(output, "wb") if self._own else output
-        self._writer = Writer(self._stream, chunk_size=chunk_size, compression=CompressionType.ZSTD)
+        # data CRCs on: the Data End record then carries the CRC of the whole data section (mcapscan checks it)
+        self._writer = Writer(self._stream, chunk_size=chunk_size, compression=CompressionType.ZSTD,
+                              enable_data_crcs=True)
         self._writer.start(profile=PROFILE, library=library)
         self._schemas: dict[str, int] = {}
         self._channels: dict[str, int] = {}

@@ -10,11 +10,16 @@ without the envelope's wall time and sequence number, with the event the live
 service recorded, one by one in order. A recomputed event the recording lacks
 or a recorded one never recomputed is a failure too, unless the recording was
 cut short, or recovered from a cut (then the tail is excused and reported). The robot's RobotActed
-comes from hardware and is not recomputed.
+comes from hardware and is not recomputed. Events of types this version does
+not know (a newer pairplay's) are counted and named, and the verdict is about
+the events this version derives. A file with a damaged part (a chunk that fails
+its CRC, chunks out of order, a bad data-section or summary CRC: replay/mcapscan.py)
+or a file recovered from one is never verified as whole: FAIL, naming the part.
 """
 
 from __future__ import annotations
 
+import json
 from dataclasses import dataclass, field
 
 from pairplay.replay.reader import read_log
@@ -43,6 +48,7 @@ class Verification:
     checks: list[ServiceCheck]
     truncated: bool = False
     error: str = ""
+    unknown: dict[str, int] = field(default_factory=dict)  # events of types this version does not know
 
     @property
     def ok(self) -> bool:
@@ -85,8 +91,17 @@ def verify_events(events, source: str = "", truncated: bool = False) -> Verifica
 def verify_recording(path) -> Verification:
     log = read_log(path)
     # a file completed by `pairplay recover` still lacks the tail its crash lost
-    recovered_cut = log.metadata.get("pairplay.recovered", {}).get("truncated") == "true"
+    recovered = log.metadata.get("pairplay.recovered", {})
+    recovered_cut = recovered.get("truncated") == "true"
     result = verify_events((r.event for r in log.events), str(path), log.truncated or recovered_cut)
+    result.unknown = log.unknown_types()
+    errors = []
+    if log.damage:
+        errors.append(f"damaged, not read: {'; '.join(str(d) for d in log.damage)}")
+    lost = json.loads(recovered.get("damaged", "[]") or "[]")
+    if lost:
+        errors.append(f"recovered from a damaged file, parts lost: {'; '.join(lost)}")
     if log.bad:
-        result.error = f"{len(log.bad)} messages do not decode: {log.bad[0].reason}"
+        errors.append(f"{len(log.bad)} messages do not decode: {log.bad[0].reason}")
+    result.error = "; ".join(errors) or result.error
     return result

@@ -66,7 +66,7 @@ def test_a_corrupt_recording_is_shown_up_to_the_cut_and_said_so(tmp_path):
     assert main(["view", "--recording", str(mcap), "--out", str(out)]) == 0
     rows = read_rrd(out)
     notes = [r["TextLog:text"][0] for r in rows["events"]]
-    assert any("recording ends early" in n for n in notes)
+    assert any("recording not whole" in n for n in notes)
 
 
 def _publish(bus, events):
