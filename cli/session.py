@@ -120,4 +120,10 @@ def run(args: argparse.Namespace) -> int:
     print(f"recorded {len(recorded.events)} events to {path}")
     print(f"rounds played: {len(turns)}; turns per round: {turns[:10]}{' ...' if len(turns) > 10 else ''}")
     print(f"rejections: {len(fold.rejections)}; Q updates: {fold.counts.get('QUpdated', 0)}")
-    return 0 if fold.ended is not None else 1
+    e = fold.ended
+    if e is None:
+        print("ended: no SessionEnded recorded")
+    elif e.reason != "completed":
+        print(f"ended: {e.reason}{f' ({e.detail})' if e.detail else ''} after {e.rounds_played} of "
+              f"{config.rounds} rounds")
+    return 0 if e is not None and e.reason in ("completed", "interrupted", "aborted") else 1

@@ -9,6 +9,8 @@ the robot acknowledged it, or why it failed. Outcomes:
   "unacknowledged" sent, but the robot never confirmed within the ack timeout
   "failed"         not delivered (robot unreachable, bridge closed); see `error`
   "nothing"        the "do nothing" action: nothing to send
+  "in-flight"      sent, and the session ended while the robot's acknowledgement was
+                   still awaited (it may have come after the recording closed)
 
 The calibration and the robot config are files a researcher edits, so they are
 strict: an unknown field is an error, not a silently ignored typo. New fields of
@@ -21,7 +23,7 @@ import msgspec
 
 from .envelope import Event
 
-OUTCOMES = ("done", "sent", "aborted", "unacknowledged", "failed", "nothing")
+OUTCOMES = ("done", "sent", "aborted", "unacknowledged", "failed", "nothing", "in-flight")
 
 
 class RobotActed(Event, tag="RobotActed"):
