@@ -129,7 +129,8 @@ class Recorder:
             self.writer.add_metadata("pairplay.session", {
                 "config": msgspec.json.encode(c).decode(), "session": c.session, "participant": c.participant,
                 "persona": c.persona, "seed": str(c.seed), "game_index": str(c.game_index),
-                "algorithm": c.algorithm, "software_version": c.software_version or __version__})
+                "algorithm": c.algorithm, "software_version": c.software_version or __version__,
+                "streams": str(c.streams)})
         elif tag == "SessionEnded":
             self.ended = True
         return True

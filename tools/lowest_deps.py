@@ -5,8 +5,10 @@ to the lower bound of its range (`name>=X` becomes `name==X` in a constraints
 file: uv's "lowest-direct" resolution, done with plain pip); what those need
 comes at whatever version pip resolves. A fresh venv on the lowest declared
 Python (python3.11) installs the project with those constraints and runs
-`python -m pytest` (the README's command; extra pytest arguments pass through).
-The venv lives in a temporary folder removed at the end (--keep keeps it).
+`python -m pytest` (the README's command; extra pytest arguments pass through)
+on a copy of the committed tree (`git archive HEAD`: edits under way in the
+work tree do not leak into the run). The venv and the copy live in a temporary
+folder removed at the end (--keep keeps it).
 
     python tools/lowest_deps.py [--python python3.11] [--keep] [-- PYTEST ARGS]
 
@@ -59,16 +61,20 @@ def main(argv: list[str] | None = None) -> int:
         constraints = tmp / "constraints.txt"
         constraints.write_text("".join(f"{name}=={version}\n" for name, version in sorted(bounds.items())))
         print("pinned to the lower bounds:", ", ".join(f"{n}=={v}" for n, v in sorted(bounds.items())), flush=True)
+        src = tmp / "src"
+        src.mkdir()
+        archive = subprocess.run(["git", "-C", str(ROOT), "archive", "HEAD"], check=True, capture_output=True).stdout
+        subprocess.run(["tar", "-x", "-C", str(src)], input=archive, check=True)
         venv = tmp / "venv"
         subprocess.run([args.python, "-m", "venv", str(venv)], check=True)
         py = venv / "bin" / "python"
-        install = subprocess.run([str(py), "-m", "pip", "install", "-q", "-q", "-c", str(constraints), "-e", f"{ROOT}[test]"])
+        install = subprocess.run([str(py), "-m", "pip", "install", "-q", "-q", "-c", str(constraints), "-e", f"{src}[test]"])
         if install.returncode != 0:
             print("the lowest declared versions do not install together (see pip's message above)", file=sys.stderr)
             return 2
         subprocess.run([str(py), "-m", "pip", "list", "--format=freeze"], check=False)
         installed_at = time.monotonic()
-        test = subprocess.run([str(py), "-m", "pytest", *args.pytest_args], cwd=ROOT)
+        test = subprocess.run([str(py), "-m", "pytest", *args.pytest_args], cwd=src)
         done = time.monotonic()
         print(f"lowest-deps: install {installed_at - started:.0f} s, tests {done - installed_at:.0f} s, "
               f"pytest exit {test.returncode}", flush=True)
