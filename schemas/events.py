@@ -26,7 +26,7 @@ from typing import Union
 
 import msgspec
 
-from .envelope import Event
+from .envelope import Event, dec_hook, enc_hook
 from .session import SessionConfig
 
 
@@ -247,8 +247,8 @@ EVENT_TYPES: tuple[type[Event], ...] = (
 EVENT_BY_TAG: dict[str, type[Event]] = {t.__struct_config__.tag: t for t in EVENT_TYPES}
 AnyEvent = Union[EVENT_TYPES]  # type: ignore[valid-type]
 
-_decoder = msgspec.json.Decoder(AnyEvent)
-_encoder = msgspec.json.Encoder()
+_decoder = msgspec.json.Decoder(AnyEvent, dec_hook=dec_hook)
+_encoder = msgspec.json.Encoder(enc_hook=enc_hook)
 
 
 def decode_event(payload: bytes) -> Event:
