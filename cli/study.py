@@ -20,7 +20,9 @@ from pathlib import Path
 
 from tqdm import tqdm
 
+from pairplay.cli.args import add_force, count, fraction, non_negative
 from pairplay.core.personas import PERSONAS
+from pairplay.errors import OptionError
 from pairplay.core.reward import BONUS_RULES
 from pairplay.report.study import StudySettings, run_study, text_table
 from pairplay.schemas.config import DEFAULT_REWARD_BONUS
@@ -30,24 +32,26 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--seed", type=int, default=0, help="study seed (default 0)")
     p.add_argument("--personas", default=",".join(PERSONAS),
                    help="comma-separated persona keys (default: all of appendix A)")
-    p.add_argument("--games", type=int, default=10, help="games per persona (thesis: 10)")
-    p.add_argument("--rounds", type=int, default=500, help="rounds per game (thesis: 500)")
-    p.add_argument("--eval-rounds", type=int, default=200,
+    p.add_argument("--games", type=count, default=10, help="games per persona (thesis: 10)")
+    p.add_argument("--rounds", type=count, default=500, help="rounds per game (thesis: 500)")
+    p.add_argument("--eval-rounds", type=count, default=200,
                    help="rounds each greedy policy is evaluated with epsilon 0 (default 200)")
     p.add_argument("--reward-bonus", choices=BONUS_RULES, default=DEFAULT_REWARD_BONUS,
                    help="when the 1/|candidate set| bonus is paid: when the candidate set holds the match "
                         "(correct, default), on every consistent suggestion (consistent, SPEC's literal reading) "
                         "or on a match only (see README: the reward bonus)")
-    p.add_argument("--trained-updates", type=int, default=50,
+    p.add_argument("--trained-updates", type=non_negative, default=50,
                    help="profiles are also given over the states every policy of a persona updated at least "
                         "this many times (default 50; thesis 6.4: untrained states)")
-    p.add_argument("--reuse-seeds", type=int, default=10,
+    p.add_argument("--reuse-seeds", type=count, default=10,
                    help="games per held-out persona in the speed-up experiment (default 10)")
-    p.add_argument("--psi", type=float, default=1.0, help="pi-reuse: psi at the start of each round (default 1)")
-    p.add_argument("--psi-decay", type=float, default=0.95, help="pi-reuse: v, psi's decay per suggestion (default 0.95)")
-    p.add_argument("--reuse-last", type=int, default=50,
+    p.add_argument("--psi", type=fraction, default=1.0, help="pi-reuse: psi at the start of each round (default 1)")
+    p.add_argument("--psi-decay", type=fraction, default=0.95, help="pi-reuse: v, psi's decay per suggestion (default 0.95)")
+    p.add_argument("--reuse-last", type=non_negative, default=50,
                    help="pi-reuse: the last N rounds use the new policy alone (default 50)")
-    p.add_argument("--out", type=Path, default=Path("out/study"), help="report folder (default out/study)")
+    p.add_argument("--out", type=Path, default=Path("out/study"),
+                   help="report folder (default out/study); refused if it holds files, unless --force")
+    add_force(p, "the files of an existing report folder")
     p.add_argument("--train-only", action="store_true",
                    help="stop after training: policy files, curves and figure 6.4 only (for sweeps)")
     p.add_argument("--quiet", action="store_true", help="no progress bars")
@@ -68,13 +72,8 @@ def run(args) -> int:
     try:
         settings.persona_list()
     except KeyError as exc:
-        print(f"pairplay study: {exc.args[0]}", file=sys.stderr)
-        return 2
-    if args.games < 1 or args.rounds < 1 or args.eval_rounds < 1 or args.reuse_seeds < 1:
-        print("pairplay study: --games, --rounds, --eval-rounds and --reuse-seeds must be at least 1",
-              file=sys.stderr)
-        return 2
-    report = run_study(settings, args.out, _bar(args.quiet))
+        raise OptionError(exc.args[0], f"--personas {args.personas}") from None
+    report = run_study(settings, args.out, _bar(args.quiet), force=args.force)
     if settings.train_only:
         print(f"training: {report.timings['training']:.2f} s; policies and curves in {report.out}")
         return 0

@@ -31,6 +31,7 @@ from pairplay.core.personas import PERSONAS, persona
 from pairplay.core.policies import to_policy_file
 from pairplay.core.reward import BONUS_RULE_TEXT
 from pairplay.schemas.config import DEFAULT_REWARD_BONUS, LearnerConfig
+from pairplay.outputs import output_folder
 from pairplay.schemas.policy import write_policy
 
 from pairplay.report import plots
@@ -206,15 +207,22 @@ def write_merges(out: Path, personas, users: study.UserSet, args) -> dict:
     return merges
 
 
-def run_study(args: StudySettings, out: Path, progress_bar: Callable = _no_bar) -> StudyReport:
-    """Run the study with `args` and write its report folder `out` (created).
+def run_study(args: StudySettings, out: Path, progress_bar: Callable = _no_bar, force: bool = False) -> StudyReport:
+    """Run the study with `args` and write its report folder `out`.
 
     `progress_bar(total, desc)` returns a context manager whose value has `update(n)`
     (a tqdm bar, say): one per phase, counted in simulated rounds.
-    Raises KeyError for an unknown persona."""
+    The folder is built beside `out` and renamed when complete (pairplay.outputs.output_folder):
+    OutputError, before any work, if `out` exists with files in it and not `force`; an
+    interrupted study leaves nothing. Raises KeyError for an unknown persona."""
     personas = args.persona_list()
-    out = Path(out)
-    out.mkdir(parents=True, exist_ok=True)
+    with output_folder(out, force) as tmp:
+        report = _run_study(args, personas, tmp, progress_bar)
+    report.out = Path(out)
+    return report
+
+
+def _run_study(args: StudySettings, personas, out: Path, progress_bar: Callable) -> StudyReport:
     config = LearnerConfig()
     names = {p.key: p.name for p in personas}
     timings: dict[str, float] = {}

@@ -38,15 +38,16 @@ def test_session_then_rebuild_then_verify_then_recover(tmp_path):
 
 def test_bad_command_lines_get_a_clear_error(tmp_path):
     r = pairplay("session", "--participant", "sim:nobody", "--out", str(tmp_path))
-    assert r.returncode == 2 and "unknown persona" in r.stdout
+    assert r.returncode == 2 and "unknown persona" in r.stderr
     r = pairplay("session", "--participant", "robot:x", "--out", str(tmp_path))
-    assert r.returncode == 2 and "sim:<persona> or human:<id>" in r.stdout
+    assert r.returncode == 2 and "sim:<persona> or human:<id>" in r.stderr
     r = pairplay("rebuild", str(tmp_path / "missing.mcap"), "--out", str(tmp_path))
-    assert r.returncode == 1 and "cannot rebuild" in r.stdout
+    assert r.returncode == 2 and "no such recording" in r.stderr
     junk = tmp_path / "junk.mcap"
     junk.write_bytes(b"junk")
     r = pairplay("rebuild", str(junk), "--out", str(tmp_path))
-    assert r.returncode == 1 and "no SessionStarted" in r.stdout
+    assert r.returncode == 2 and "not an MCAP recording" in r.stderr
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["junk.mcap"]  # nothing written
 
 
 def test_services_run_alone_in_their_own_processes_join_a_session(tmp_path):
