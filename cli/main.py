@@ -73,6 +73,15 @@ def build_parser(argv: list[str]) -> tuple[argparse.ArgumentParser, argparse.Arg
 
 def main(argv: list[str] | None = None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
+    try:
+        return _main(argv)
+    except KeyboardInterrupt:  # Ctrl-C before the verb ran (while its modules load)
+        verb = argv[0] if argv and argv[0] in VERBS else ""
+        print(f"pairplay{' ' + verb if verb else ''}: interrupted (Ctrl-C); nothing more was written", file=sys.stderr)
+        return 130
+
+
+def _main(argv: list[str]) -> int:
     parser, _ = build_parser(argv)
     args = parser.parse_args(argv)
     if not args.verb:

@@ -18,14 +18,13 @@ import argparse
 import sys
 from pathlib import Path
 
-from tqdm import tqdm
-
 from pairplay.cli.args import add_force, count, fraction, non_negative
+from pairplay.core.geometry import PICKS_UNIT
 from pairplay.core.personas import PERSONAS
 from pairplay.errors import OptionError
-from pairplay.core.reward import BONUS_RULES
-from pairplay.report.study import StudySettings, run_study, text_table
-from pairplay.schemas.config import DEFAULT_REWARD_BONUS
+from pairplay.schemas.config import DEFAULT_REWARD_BONUS, REWARD_BONUS_RULES as BONUS_RULES
+
+# the study's modules (numpy kernels, matplotlib) load in run(): a mistyped option is refused at once
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -58,17 +57,18 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def _bar(quiet: bool):
+    from tqdm import tqdm
+
     def bar(total: int, desc: str):
         return tqdm(total=total, desc=desc, unit="round", disable=quiet, file=sys.stderr,
                     dynamic_ncols=True, leave=False)
     return bar
 
 
-SETTINGS = [f for f in StudySettings.__dataclass_fields__]
-
-
 def run(args) -> int:
-    settings = StudySettings(**{k: getattr(args, k) for k in SETTINGS})
+    from pairplay.report.study import StudySettings, run_study, text_table
+
+    settings = StudySettings(**{k: getattr(args, k) for k in StudySettings.__dataclass_fields__})
     try:
         settings.persona_list()
     except KeyError as exc:
@@ -77,13 +77,18 @@ def run(args) -> int:
     if settings.train_only:
         print(f"training: {report.timings['training']:.2f} s; policies and curves in {report.out}")
         return 0
+    print(f"learned policies against the references: {PICKS_UNIT}, epsilon 0")
     print(text_table(report.evaluation))
     print()
+    print("user information (algorithm 3): incompatible states, % of the 23 spatial states")
     print(text_table([r[:9] for r in report.profiles]))
     print()
+    print(f"merged policies (algorithm 4) on each persona: {PICKS_UNIT}, epsilon 0")
     print(text_table(report.merges))
     if report.reuse is not None:
         print()
+        print(f"policy reuse (algorithm 5), each persona held out: first 50 rounds in {PICKS_UNIT}; "
+              "rounds until the greedy policy is within 1.10x the oracle")
         print(text_table(report.reuse))
     print()
     print("  ".join(f"{k}: {v:.2f} s" for k, v in report.timings.items()))

@@ -27,11 +27,8 @@ from pairplay.cli.args import add_force, float_at_least, port_or_any
 from pairplay.errors import InputError, OptionError, UserError
 from pairplay.outputs import check_output, output_path
 from pairplay.replay.check import check_recording
-from pairplay.services.bus import add_bus_arguments, open_bus, options_from_args, stop_on_signals
-from pairplay.services.view.output import DEFAULT_GRPC_PORT, DEFAULT_WEB_PORT, ViewOutput, finish, open_stream
-from pairplay.services.view.rerun_logger import RerunView
-from pairplay.services.view.sources import LiveSource, recording_items
-from pairplay.services.view.drive import drive
+from pairplay.services.bus import add_bus_arguments
+from pairplay.services.view import DEFAULT_GRPC_PORT, DEFAULT_WEB_PORT  # without loading rerun (slow)
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -52,7 +49,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     out.add_argument("--spawn", action="store_true", help="open rerun's native viewer (needs a display)")
     out.add_argument("--exit-when-done", action="store_true",
                      help="with --serve: exit when the source ends instead of serving until Ctrl-C")
-    out.add_argument("--q-interval", type=float, default=0.25, metavar="S",
+    out.add_argument("--q-interval", type=float_at_least(0), default=0.25, metavar="S",
                      help="log the Q-table at most every S seconds of session time (default 0.25)")
     out.add_argument("--rerun-analytics", action="store_true",
                      help="leave rerun's usage analytics to your rerun settings (default: off for viewers started here)")
@@ -76,12 +73,21 @@ def run(args: argparse.Namespace) -> int:
     if rrd is not None:
         check_output(rrd, args.force)  # before any work: an existing .rrd stays unless --force
     with output_path(rrd, args.force) if rrd is not None else contextlib.nullcontext() as tmp:
-        return _view(args, tmp, rrd)
+        _view(args, tmp)
+    if rrd is not None:
+        print(f"pairplay view: saved {rrd}", file=sys.stderr)
+    return 0
 
 
-def _view(args: argparse.Namespace, tmp_rrd: Path | None, rrd: Path | None) -> int:
-    """Draw into the temporary .rrd (renamed to `rrd` by the caller when this returns)."""
-    out = ViewOutput(rrd=tmp_rrd, rrd_name=rrd, serve=args.serve, spawn=args.spawn, grpc_port=args.grpc_port,
+def _view(args: argparse.Namespace, tmp_rrd: Path | None) -> None:
+    """Draw into the temporary .rrd (renamed by the caller when this returns)."""
+    from pairplay.services.bus import open_bus, options_from_args, stop_on_signals
+    from pairplay.services.view.drive import drive
+    from pairplay.services.view.output import ViewOutput, finish, open_stream
+    from pairplay.services.view.rerun_logger import RerunView
+    from pairplay.services.view.sources import LiveSource, recording_items
+
+    out = ViewOutput(rrd=tmp_rrd, serve=args.serve, spawn=args.spawn, grpc_port=args.grpc_port,
                      web_port=args.web_port, rerun_analytics=args.rerun_analytics)
     try:
         rec, where = open_stream(out, recording_name=args.session or args.recording.stem)
@@ -120,4 +126,3 @@ def _view(args: argparse.Namespace, tmp_rrd: Path | None, rrd: Path | None) -> i
         finish(rec)
         for sig, handler in saved_handlers.items():  # run() may be called in-process (tests, tools)
             signal.signal(sig, handler)
-    return 0

@@ -26,6 +26,8 @@ class UserError(Exception):
         text = " ".join(self.what.split())
         return f"{text} ({self.where})" if self.where and self.where not in text else text
 
+    __str__ = line  # wherever it is shown (a log, an event's error field), it says where
+
 
 class InputError(UserError, ValueError):
     """An input is missing, empty or not what the verb needs."""

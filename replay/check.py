@@ -23,14 +23,14 @@ def check_recording(path: str | Path) -> Path:
     if not path.exists():
         raise InputError("no such recording", path)
     if path.is_dir():
-        raise InputError("is a folder, not a recording (give the .mcap files)", path)
+        raise InputError("a folder, not a recording (give the .mcap files)", path)
     try:
         with open(path, "rb") as f:
             head = f.read(len(MCAP_MAGIC))
     except OSError as err:
         raise InputError(f"cannot read the recording: {err.strerror}", path) from None
     if not head:
-        raise InputError("is empty (0 bytes), not a recording", path)
+        raise InputError("empty file (0 bytes), not a recording", path)
     if head != MCAP_MAGIC:
-        raise InputError("is not an MCAP recording (it does not start with MCAP's magic bytes)", path)
+        raise InputError("not an MCAP recording: it does not start with MCAP's magic bytes", path)
     return path

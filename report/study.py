@@ -27,6 +27,7 @@ import numpy as np
 
 from pairplay import __version__
 from pairplay.core import study
+from pairplay.core.geometry import PICKS_UNIT
 from pairplay.core.personas import PERSONAS, persona
 from pairplay.core.policies import to_policy_file
 from pairplay.core.reward import BONUS_RULE_TEXT
@@ -137,9 +138,11 @@ def gap_section(cmp: study.Comparison, training: study.Training, threshold: floa
     for i, key in enumerate(cmp.persona):
         if cmp.learned[i] <= threshold * cmp.oracle[i]:
             continue
-        rows = [["state", "learned (most policies)", "E[r]", "oracle", "E[r]", "mean loss"]]
+        rows = [["state", "learned: the plurality action (k of n policies)", "E[r]", "oracle", "E[r]", "mean loss"]]
+        own = training.greedy[[j for j, p in enumerate(training.personas) if p.key == key]]
         for s, modal, v_modal, best, v_best, loss in study.policy_gaps(cmp, training, i):
-            rows.append([STATE_NAMES[s], f"{modal}: {ACTION_NAMES[modal]}", f"{v_modal:+.2f}",
+            k = int((own[:, s] == modal).sum())
+            rows.append([STATE_NAMES[s], f"{modal}: {ACTION_NAMES[modal]} ({k} of {len(own)})", f"{v_modal:+.2f}",
                          f"{best}: {ACTION_NAMES[best]}", f"{v_best:+.2f}", f"{loss:.2f}"])
         lines += [f"**{key}** ({cmp.learned[i] / cmp.oracle[i]:.3f} x the oracle): the states where its learned "
                   "policies lose most expected reward (given the suggestion is considered).", "",
@@ -250,7 +253,7 @@ def _run_study(args: StudySettings, personas, out: Path, progress_bar: Callable)
     with open(out / "evaluation.csv", "w", newline="") as f:
         csv.writer(f).writerows(table)
     plots.comparison_bars(cmp.persona, {"user alone": cmp.alone, "learned": cmp.learned, "oracle": cmp.oracle},
-                          out / "evaluation.png", "picks per round (epsilon 0)")
+                          out / "evaluation.png", f"{PICKS_UNIT}, epsilon 0")
     oracle = dict(zip(cmp.persona, cmp.oracle))
 
     # Profiles (algorithm 3, figure 6.5) and merged policies (algorithm 4, figure 6.6).

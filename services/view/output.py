@@ -41,10 +41,9 @@ import rerun as rr
 
 from pairplay.errors import OptionError
 
+from pairplay.services.view import DEFAULT_GRPC_PORT, DEFAULT_WEB_PORT  # noqa: F401 (re-exported)
 from pairplay.services.view.rerun_logger import APP_ID, blueprint
 
-DEFAULT_GRPC_PORT = 9876  # rerun's defaults
-DEFAULT_WEB_PORT = 9090
 SPAWN_TIMEOUT_S = 15.0  # the native viewer takes a few seconds to start
 
 
@@ -56,7 +55,6 @@ class ViewOutput:
     grpc_port: int = DEFAULT_GRPC_PORT
     web_port: int = DEFAULT_WEB_PORT
     rerun_analytics: bool = False  # True: leave rerun's analytics to the user's own settings
-    rrd_name: Path | None = None  # the name `rrd` (a temporary file) gets when the view is complete
 
 
 def rerun_executable() -> str:
@@ -129,8 +127,7 @@ def open_stream(out: ViewOutput, recording_name: str = "") -> tuple[rr.Recording
     where: list[str] = []
     if out.rrd is not None:
         out.rrd.parent.mkdir(parents=True, exist_ok=True)
-        sinks.append(rr.FileSink(str(out.rrd)))
-        where.append(f"saving {out.rrd_name or out.rrd}")
+        sinks.append(rr.FileSink(str(out.rrd)))  # the caller says where it was saved once it is complete
     if out.spawn:
         spawn_viewer(out.grpc_port, analytics_off=not out.rerun_analytics)
         sinks.append(rr.GrpcSink(f"rerun+http://127.0.0.1:{out.grpc_port}/proxy"))
