@@ -45,7 +45,8 @@ class HelpFormatter(argparse.HelpFormatter):
     def _get_help_string(self, action: argparse.Action) -> str:
         text = action.help or ""
         default = action.default
-        if (not action.option_strings or default in (None, False, argparse.SUPPRESS) or default == []
+        if (not action.option_strings or default is None or default is False or default is argparse.SUPPRESS
+                or default == []
                 or "default" in text.lower() or "%(default)" in text):
             return text
         return text + " (default: %(default)s)"

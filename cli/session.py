@@ -51,7 +51,9 @@ def add_config_arguments(p: argparse.ArgumentParser) -> None:
     g.add_argument("--seed", type=int, default=0, help="the session's seed")
     g.add_argument("--rounds", type=count, default=20, help="rounds to play")
     g.add_argument("--game-index", type=non_negative, default=0, help="which game of the seed (0, 1, ...)")
-    g.add_argument("--algorithm", choices=("q-learning", "pi-reuse", "fixed"), default="q-learning")
+    g.add_argument("--algorithm", choices=("q-learning", "pi-reuse", "fixed"), default="q-learning",
+                   help="the learner: Q-learning from scratch (thesis 5.1), pi-reuse of --policy (algorithm 5), "
+                        "or --policy played as it is")
     g.add_argument("--policy", help="policy file: the bias policy (pi-reuse) or the fixed policy; "
                                     "refused with q-learning, which uses none")
     g.add_argument("--observed-source", choices=("intended", "first-pick"),

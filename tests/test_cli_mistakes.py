@@ -227,17 +227,24 @@ def test_ctrl_c_during_a_study_is_one_line_exit_130_and_leaves_nothing(tmp_path)
     assert list(tmp_path.iterdir()) == []  # no half report, no temporary folder
 
 
-def test_help_shows_every_default_and_version_is_printed(capsys):
+def test_help_shows_every_default_and_version_is_printed(capsys, monkeypatch):
+    monkeypatch.setenv("COLUMNS", "1000")  # one line per option
     with pytest.raises(SystemExit) as done:
         main(["--version"])
     assert done.value.code == 0
     from pairplay import __version__
     assert capsys.readouterr().out.strip() == f"pairplay {__version__}"
     for verb, flag, shown in (("session", "--rounds", "20"), ("session", "--seed", "0"), ("replay", "--speed", "1"),
+                              ("session", "--game-index", "0"), ("session", "--algorithm", "q-learning"),
                               ("view", "--grpc-port", "9876"), ("study", "--games", "10"),
                               ("run", "--out", "recordings"), ("bench", "--only", "core")):
         with pytest.raises(SystemExit):
             main([verb, "--help"])
-        text = " ".join(capsys.readouterr().out.split())
-        after = text[text.rindex(f"{flag} "):]  # the option's own line, not the usage
-        assert "default" in after[:400] and shown in after[:400], (verb, flag, after[:400])
+        lines = capsys.readouterr().out.splitlines()
+        at = max(i for i, line in enumerate(lines) if line.lstrip().startswith(f"{flag} "))
+        own = lines[at]  # the option's entry: its line and the help below it, up to the next option
+        for line in lines[at + 1:]:
+            if not line.startswith(" " * 8) or line.lstrip().startswith("-"):
+                break
+            own += " " + line.strip()
+        assert "default" in own and shown in own, (verb, flag, own)
