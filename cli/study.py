@@ -10,6 +10,10 @@ Rule: one command, reproducible by seed, writes a report folder:
   merged_evaluation.csv             every merged policy on every persona
   reuse.csv, reuse.png              held-out persona: Q-learning from scratch vs pi-reuse
   report.md                         the tables and figures, with the run's settings
+The folder is built beside --out and renamed when complete: an --out that holds
+files is refused unless --force, and Ctrl-C leaves nothing (exit 130). Every
+option's range is checked before any work; the printed tables say their unit
+(picks per round, 18 = perfect).
 """
 
 from __future__ import annotations

@@ -178,7 +178,7 @@ def _run(case: Case, template: Path, base: Path) -> Case:
     root = base / case.name.replace(" ", "_").replace("'", "").replace("/", "_")
     shutil.copytree(template, root)
     case.before = _snapshot(root)
-    env = dict(os.environ, PYTHONPATH="", COLUMNS="200")
+    env = dict(os.environ, COLUMNS="200")
     case.result = subprocess.run(_command(case, root), cwd=root, capture_output=True, text=True, timeout=120, env=env)
     case.after = _snapshot(root)
     return case
