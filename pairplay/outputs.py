@@ -3,8 +3,8 @@
 Rule: an existing output is never replaced unless the caller says `force`
 (the verbs' `--force`); a write goes to a temporary file beside its target
 (same folder, so the rename is atomic) and is renamed onto the target only
-when it is complete; on any error, or Ctrl-C, the temporary file is removed
-and the target is untouched. Without `force` the final step is a hard link
+when it is complete; on any error, or Ctrl-C, the temporary file (and any
+folder made for it) is removed and the target is untouched. Without `force` the final step is a hard link
 (`os.link` fails if the target appeared meanwhile), so even a file created
 while we worked is not replaced. A folder of outputs (a study's report) is
 built in a temporary folder and renamed as a whole. Refusals are
@@ -90,6 +90,25 @@ def _temp_name(path: Path) -> Path:
     return path.with_name(f".{path.name}.{os.getpid()}.{os.urandom(3).hex()}.tmp")
 
 
+def _missing_folders(path: Path) -> list[Path]:
+    """The folders of `path` (itself included) that do not exist yet, deepest first."""
+    missing = []
+    p = path.absolute()
+    while not p.exists() and p != p.parent:
+        missing.append(p)
+        p = p.parent
+    return missing
+
+
+def _remove_empty(folders: list[Path]) -> None:
+    """Undo _mkdir after a failure: the folders it created, if still empty (nothing written)."""
+    for folder in folders:
+        try:
+            folder.rmdir()
+        except OSError:
+            break
+
+
 def _mkdir(path: Path) -> None:
     try:
         path.mkdir(parents=True, exist_ok=True)
@@ -124,15 +143,20 @@ def output_path(path: str | Path, force: bool = False) -> Iterator[Path]:
     """A temporary path beside `path` to write to (for writers that take a name: matplotlib,
     rerun's FileSink, MCAP); it becomes `path` when the block ends without error."""
     path = check_output(path, force)
+    created = _missing_folders(path.parent)
     _mkdir(path.parent)
     tmp = _temp_name(path)
+    done = False
     try:
         yield tmp
         if not tmp.exists():
             raise OutputError("nothing was written", path)
         _commit(tmp, path, force)
+        done = True
     finally:
         tmp.unlink(missing_ok=True)
+        if not done:
+            _remove_empty(created)
 
 
 @contextlib.contextmanager
@@ -169,9 +193,11 @@ def output_folder(path: str | Path, force: bool = False) -> Iterator[Path]:
     path = check_folder(path)
     if path.exists() and not _is_empty_dir(path) and not force:
         raise OutputError("exists and is not empty; --force replaces the files written there", path)
+    created = _missing_folders(path.absolute().parent)
     _mkdir(path.absolute().parent)
     tmp = _temp_name(path)
     tmp.mkdir()
+    done = False
     try:
         yield tmp
         if not path.exists() or _is_empty_dir(path):
@@ -182,6 +208,9 @@ def output_folder(path: str | Path, force: bool = False) -> Iterator[Path]:
                     dst = path / src.relative_to(tmp)
                     _mkdir(dst.parent)
                     os.replace(src, dst)
+        done = True
     finally:
         if tmp.exists():
             shutil.rmtree(tmp, ignore_errors=True)
+        if not done:
+            _remove_empty(created)

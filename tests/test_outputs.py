@@ -90,6 +90,10 @@ def test_a_folder_of_outputs_appears_whole_and_is_merged_only_with_force(tmp_pat
             (tmp / "half.txt").write_text("x")
             raise RuntimeError
     assert sorted(p.name for p in tmp_path.iterdir()) == ["report"]
+    with pytest.raises(RuntimeError):
+        with output_path(tmp_path / "new" / "deeper" / "x.rrd"):
+            raise RuntimeError  # a failure leaves no folder made for the output either
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["report"]
 
 
 def test_rebuild_names_outputs_by_file_so_a_recovered_copy_keeps_its_own(tmp_path):
