@@ -187,7 +187,11 @@ def _run(case: Case, template: Path, base: Path) -> Case:
     shutil.copytree(template, root)
     case.before = _snapshot(root)
     env = dict(os.environ, COLUMNS="200")
-    case.result = subprocess.run(_command(case, root), cwd=root, capture_output=True, text=True, timeout=120, env=env)
+    try:
+        case.result = subprocess.run(_command(case, root), cwd=root, capture_output=True, text=True, timeout=120,
+                                     env=env)
+    except subprocess.TimeoutExpired as hung:  # a verb that hangs on a mistake fails its row, not the table
+        case.result = subprocess.CompletedProcess(hung.cmd, None, str(hung.stdout), f"hung: {hung}")
     case.after = _snapshot(root)
     return case
 
