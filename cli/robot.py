@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import argparse
 import logging
+import sys
 import threading
 
 from pairplay.services.bus import Bus, add_bus_arguments, options_from_args, stop_on_signals
@@ -63,43 +64,58 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     add_bus_arguments(p)
 
 
+def _fail(message: str) -> int:
+    """A user's mistake or a refusal: one line on stderr, a non-zero exit."""
+    print(f"pairplay robot: {message}", file=sys.stderr)
+    return 2
+
+
 def run(args: argparse.Namespace) -> int:
-    logging.basicConfig(level=logging.INFO, format="%(levelname)s %(name)s: %(message)s")
+    # --try prints its own lines; a session's bridge logs what it does
+    level = logging.WARNING if args.try_codes else logging.INFO
+    logging.basicConfig(level=level, format="%(levelname)s %(name)s: %(message)s")
     if bool(args.session) == bool(args.try_codes):
-        print("pairplay robot: give either --session ID (serve a session) or --try CODES (try the robot)")
-        return 2
+        return _fail("give either --session ID (serve a session) or --try CODES (try the robot)")
     if args.robot == NO_ROBOT:
-        print("pairplay robot: --robot none leaves nothing to do")
-        return 2
+        return _fail("--robot none leaves nothing to do")
     try:
         return _try(args) if args.try_codes else _serve(args)
     except (ValueError, CalibrationError) as exc:
-        print(f"pairplay robot: {exc}")
-        return 2
+        return _fail(str(exc))
+
+
+def _codes(text: str) -> list[int]:
+    try:
+        return [int(c) for c in text.split(",") if c.strip()]
+    except ValueError:
+        raise ValueError(f"--try {text!r}: action codes are integers 0-87, comma-separated") from None
 
 
 def _try(args: argparse.Namespace) -> int:
-    codes = [int(c) for c in args.try_codes.split(",") if c.strip()]
-    done = threading.Event()
+    codes = _codes(args.try_codes)
     acted = []
+    robots = []
 
     def on_acted(event) -> None:
         acted.append(event)
+        if robots and robots[0].refused:
+            return  # said once, on stderr, below
         print(f"action {event.action}: {event.outcome}{' (' + event.error + ')' if event.error else ''}")
-        for command in event.commands:
-            print(f"  sent    {command.strip()}")
-        for reply in event.replies:
-            print(f"  replied {reply}")
-        if len(acted) == len(codes):
-            done.set()
+        for label, lines in (("sent   ", event.commands), ("replied", event.replies), ("unsent ", event.unsent),
+                             ("unconfirmed", event.unconfirmed)):
+            for line in lines:
+                print(f"  {label} {line.strip()}")
 
     robot = open_robot(args.robot, on_acted, config=load_robot_config(args.robot_config),
                        calibration=load_calibration(args.calibration),
                        on_rejected=lambda reason, excerpt: print(f"  unreadable frame from the robot: {reason}"))
+    robots.append(robot)
     try:
         for code in codes:
             robot.perform(Suggestion("try", 0, 0, 0, code, args.observed, args.target))
             robot.wait_idle(robot.config.ack_timeout_s + robot.config.give_up_s)
+            if robot.refused:  # asking again cannot help: say it once and stop
+                return _fail(robot.refused)
     finally:
         robot.close()
     return 0 if all(a.outcome in ("done", "sent", "nothing") for a in acted) and len(acted) == len(codes) else 1

@@ -229,3 +229,19 @@ def _until_connected(driver, timeout: float = 5.0) -> bool:
             return False
         time.sleep(0.005)
     return True
+
+
+def test_pairplay_robot_try_with_a_refused_key_says_so_in_one_line(capsys):
+    from pairplay.cli.main import main
+
+    server = FurhatRealtimeServer(key="s3cret").start()
+    try:
+        started = time.monotonic()
+        code = main(["robot", "--robot", f"furhat://127.0.0.1:{server.port}?key=wrong", "--try", "35"])
+        elapsed = time.monotonic() - started
+    finally:
+        server.stop()
+    out, err = capsys.readouterr()
+    assert code != 0 and elapsed < 5.0 and server.auths == [False]
+    assert len(err.strip().splitlines()) == 1 and "refused access" in err and "Traceback" not in err
+    assert "s3cret" not in err and "wrong" not in err  # the key never appears

@@ -30,7 +30,8 @@ closed its end before the broker acted on its CLOSE is kept in `early_closes`
 (the real broker then writes into a dead socket: "broken pipe").
 Controls: `drop_all()` cuts every connection (the broker crashed), `stop()` /
 `start()` on the same port, `inject(name, raw)` writes raw bytes to a client,
-`close_linger_s` how long the broker takes to act on a CLOSE.
+`close_linger_s` how long the broker takes to act on a CLOSE, `read_lag_s` a busy
+broker's pause after each command (bytes then wait unread in its socket).
 """
 
 from __future__ import annotations
@@ -107,9 +108,10 @@ class _Lines:
 
 
 class IrisTKBroker:
-    def __init__(self, port: int = 0, close_linger_s: float = 0.05) -> None:
+    def __init__(self, port: int = 0, close_linger_s: float = 0.05, read_lag_s: float = 0.0) -> None:
         self.port = port
         self.close_linger_s = close_linger_s
+        self.read_lag_s = read_lag_s  # a busy broker: this long per command before it reads the next
         self.systems: dict[str, list[BrokerClient]] = {}
         self.events: list[Relayed] = []  # every event a connected client sent, in arrival order
         self.illegal: list[tuple[str, str]] = []  # (client name or "unconnected", the logged message)
@@ -121,6 +123,7 @@ class IrisTKBroker:
         self.write_errors: list[tuple[str, str]] = []  # (client name, error) of failed writes
         self._server: socket.socket | None = None
         self._sockets: list[socket.socket] = []
+        self._epoch = 0  # drop_all starts a new one: what an old connection still holds is lost
         self._changed = threading.Condition(threading.RLock())
 
     @property
@@ -155,6 +158,7 @@ class IrisTKBroker:
         with self._changed:
             sockets, self._sockets = self._sockets, []
             self.systems = {}
+            self._epoch += 1
             self._changed.notify_all()
         for sock in sockets:
             try:
@@ -185,9 +189,12 @@ class IrisTKBroker:
 
     def _serve(self, client: BrokerClient) -> None:
         lines = _Lines(client.sock)
+        epoch = self._epoch
         try:
             while True:
                 line = lines.line()
+                if epoch != self._epoch:
+                    return  # the process died: bytes it had not acted on are gone
                 if line is None:  # Java: "" for ever; the client is never removed
                     with self._changed:
                         client.zombie = True
@@ -195,6 +202,8 @@ class IrisTKBroker:
                     return
                 if not self._command(client, line, lines):
                     return
+                if self.read_lag_s:
+                    time.sleep(self.read_lag_s)
         except OSError:  # connection reset: removeClient (286-288)
             if client.ticket is not None:
                 self._remove(client)
