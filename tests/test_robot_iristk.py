@@ -75,8 +75,17 @@ BROKER_LINES = st.one_of(
 )
 
 
-@settings(max_examples=120, deadline=None, suppress_health_check=[HealthCheck.too_slow])
-@given(st.lists(BROKER_LINES, max_size=8), st.binary(max_size=200), st.lists(st.integers(1, 40), max_size=30))
+NOISE = st.lists(st.one_of(
+    st.binary(max_size=60),
+    st.builds(lambda name, count: f"EVENT {name} {count}\n".encode(),  # digits of every Unicode kind
+              st.from_regex(r"[a-z.]{1,8}", fullmatch=True),
+              st.text(st.characters(categories=["Nd", "No", "Nl"]), min_size=1, max_size=4)),
+    st.builds(lambda count: f"EVENT x {count}\n".encode(), st.integers(-5, 2 ** 40).map(str)),
+), max_size=4).map(b"".join)
+
+
+@settings(max_examples=100, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(st.lists(BROKER_LINES, max_size=8), NOISE, st.lists(st.integers(1, 40), max_size=30))
 def test_fuzz_the_frame_reader_never_raises_and_chunking_never_changes_the_frames(good, noise, cuts):
     data = b"".join(good) + noise
     whole = FrameReader().feed(data)
