@@ -106,7 +106,7 @@ class RealtimeTransport:
         except TimeoutError as exc:
             raise ConnectionError(f"{self.ws_url}: no WebSocket handshake within {OPEN_TIMEOUT_S:g} s") from exc
         try:
-            self._authenticate(ws)
+            self._authenticate(ws, deliver, generation)
         except BaseException:
             ws.close()
             raise
@@ -115,7 +115,7 @@ class RealtimeTransport:
         threading.Thread(target=self._read, args=(ws, deliver, generation),
                          name=f"realtime reader {self.url}", daemon=True).start()
 
-    def _authenticate(self, ws: ClientConnection) -> None:
+    def _authenticate(self, ws: ClientConnection, deliver: Deliver, generation: int) -> None:
         request_id = str(uuid.uuid4())
         request = {"type": "request.auth", "request_id": request_id}
         if self.config.realtime_key:
@@ -126,6 +126,10 @@ class RealtimeTransport:
             while True:  # frames before our response.auth are not ours to judge yet
                 raw = ws.recv(timeout=max(0.0, deadline - time.monotonic()))
                 message = _object(raw)
+                if message is None or not isinstance(message.get("type"), str):
+                    excerpt = raw[:200] if isinstance(raw, str) else repr(raw[:60])
+                    deliver(Rejected(generation, "frame is not a JSON object with a string \"type\"", excerpt))
+                    continue
                 if (message is not None and message.get("type") == "response.auth"
                         and message.get("request_id", request_id) == request_id):
                     break
