@@ -161,6 +161,8 @@ class RobotConfig(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
     max_commands_per_s: float = 10.0  # robot-side rate limit (token bucket), so no module's
     command_burst: int = 20  # 1000-event queue (IrisModule.java 24) can be flooded by us
     inflight_window_s: float = 0.25  # commands written this soon before a drop: unconfirmed
+    realtime_proxy: str = ""  # an HTTP/SOCKS proxy URL for the Realtime connection; "" = direct,
+    # whatever http_proxy/https_proxy say (the robot is on the lab network)
 
     def validate(self) -> None:
         """Raise ValueError with a clear reason if the config cannot work."""

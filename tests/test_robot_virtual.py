@@ -82,3 +82,26 @@ def test_robot_none_means_no_bridge():
     check_robot_args(args)
     assert bridge_from_args(None, "s", args) is None
     assert parser.parse_args([]).robot == "virtual"
+
+
+def test_a_bug_on_one_report_costs_that_report_not_the_robot(monkeypatch):
+    collector = Collector()
+    driver = robot(collector)
+    calls = []
+    original = driver._match
+
+    def flaky(reply, time_ns):
+        calls.append(reply)
+        if len(calls) == 1:
+            raise RuntimeError("a bug while matching a reply")
+        return original(reply, time_ns)
+
+    monkeypatch.setattr(driver, "_match", flaky)
+    try:
+        driver.perform(suggestion(code_of_parts(2, 0, 0, 0)))
+        assert driver.wait_idle(5)  # the speech start was lost to the bug; the end still matches
+        driver.perform(suggestion(code_of_parts(2, 0, 0, 0), seq=1))
+        assert driver.wait_idle(5)
+    finally:
+        driver.close()
+    assert [a.outcome for a in collector.acted] == ["done", "done"]

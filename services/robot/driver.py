@@ -185,7 +185,10 @@ class RobotDriver:
                 item = None
             try:
                 while item is not None:
-                    self._handle(item)
+                    try:
+                        self._handle(item)
+                    except Exception:  # a bug must cost one message, not the robot: log it and go on
+                        log.exception("robot %s: driver failed on %s", self.transport.url, item[0])
                     item = self._inbox.get_nowait()
             except queue.Empty:
                 pass

@@ -6,7 +6,7 @@ cites the lines.
 
 Rule: open ws://<robot>:9000/v1/events, never through an HTTP proxy
 (websockets would follow http_proxy/https_proxy by default; the robot is on
-the lab network), and send request.auth (with "key" if configured) carrying a
+the lab network; RobotConfig.realtime_proxy names one if wanted), and send request.auth (with "key" if configured) carrying a
 fresh request_id, then wait for the response.auth with that id: "access": true
 goes on, anything else is a refusal, which the driver does not retry (the
 maker's client: connect() awaits send_event_and_wait(request.auth) and raises
@@ -100,7 +100,7 @@ class RealtimeTransport:
 
     def connect(self, deliver: Deliver, generation: int) -> None:
         try:
-            ws = _open(self.ws_url)
+            ws = _open(self.ws_url, self.config.realtime_proxy or None)
         except (InvalidHandshake, InvalidURI) as exc:
             raise ConnectionError(f"{self.ws_url}: {exc}") from exc
         except TimeoutError as exc:
@@ -189,13 +189,15 @@ class RealtimeTransport:
             ws.close()
 
 
-def _open(url: str) -> ClientConnection:
-    """A direct connection (proxy=None: never through http_proxy/https_proxy), closed by us.
+def _open(url: str, proxy: str | None) -> ClientConnection:
+    """A connection through `proxy` only if configured (never from http_proxy/https_proxy), closed by us.
 
     websockets >= 17 wants a plain connection said (legacy=True); before 15 there
     was no proxy support at all, so no flag is needed there.
     """
-    for flags in ({"legacy": True, "proxy": None}, {"proxy": None}, {}):  # >= 17, 15-16, < 15
+    for flags in ({"legacy": True, "proxy": proxy}, {"proxy": proxy}, {}):  # >= 17, 15-16, < 15
+        if not flags and proxy:
+            raise ConnectionError(f"{url}: realtime_proxy needs websockets >= 15")
         try:
             return connect(url, open_timeout=OPEN_TIMEOUT_S, close_timeout=1.0, **flags)
         except TypeError:  # this websockets does not know one of the flags
