@@ -43,7 +43,9 @@ from typing import Callable
 from pairplay.schemas.robot import RobotActed, RobotConfig
 
 from pairplay.services.robot.render import Renderer, Say, Step, StopSpeech
-from pairplay.services.robot.transport import SPEECH_END, SPEECH_START, Changed, Disconnected, Rejected, Reply, Transport, Wire
+from pairplay.services.robot.transport import (
+    SPEECH_END, SPEECH_START, AccessRefused, Changed, Disconnected, Rejected, Reply, Transport, Wire,
+)
 
 log = logging.getLogger("pairplay.robot")
 HELD_POLL_S = 0.05  # how often a command the transport holds back is offered again
@@ -315,7 +317,7 @@ class RobotDriver:
         self._generation += 1
         try:
             self.transport.connect(self._deliver, self._generation)
-        except PermissionError as exc:  # the robot refused access: asking again cannot help
+        except AccessRefused as exc:  # the robot refused access: asking again cannot help
             self._refuse(str(exc))
             return
         except (OSError, ValueError) as exc:  # ConnectionError, timeouts

@@ -46,7 +46,9 @@ from websockets.sync.client import ClientConnection, connect
 from pairplay.schemas.robot import RobotConfig
 
 from pairplay.services.robot.render import Command, Gesture, Look, Say, StopSpeech
-from pairplay.services.robot.transport import GESTURE_END, SPEECH_END, SPEECH_START, Deliver, Disconnected, Rejected, Reply, Wire
+from pairplay.services.robot.transport import (
+    GESTURE_END, SPEECH_END, SPEECH_START, AccessRefused, Deliver, Disconnected, Rejected, Reply, Wire,
+)
 
 log = logging.getLogger("pairplay.robot.realtime")
 
@@ -139,7 +141,7 @@ class RealtimeTransport:
             raise ConnectionError(f"robot closed the connection during auth: {exc}") from None
         if message.get("access") is not True:
             key = "with the configured key" if self.config.realtime_key else "without a key (set realtime_key or ?key=)"
-            raise PermissionError(f"{self.url} refused access {key}: response.auth {json.dumps(message)[:160]}")
+            raise AccessRefused(f"{self.url} refused access {key}: response.auth {json.dumps(message)[:160]}")
         self.scope = str(message.get("scope", ""))
 
     def _read(self, ws: ClientConnection, deliver: Deliver, generation: int) -> None:

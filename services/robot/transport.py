@@ -50,6 +50,10 @@ class Disconnected:
     permanent: bool = False  # e.g. access refused: retrying cannot help
 
 
+class AccessRefused(PermissionError):
+    """The robot refused us (Realtime response.auth without access): retrying cannot help."""
+
+
 @dataclass(frozen=True)
 class Changed:
     generation: int
