@@ -143,8 +143,11 @@ def stage():
     drivers = []
 
     def furhat(**kwargs):
+        before = len(broker.subscribes)
         robot = IrisTKFurhat(broker.port, **kwargs).start()
         furhats.append(robot)
+        # the broker keeps nothing: an event it relays before it has read the robot's SUBSCRIBE is lost
+        assert broker.wait_for(lambda b: any(n == robot.name for n, _ in b.subscribes[before:]))
         return robot
 
     def robot(url=None, config=FAST):
