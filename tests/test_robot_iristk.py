@@ -494,14 +494,15 @@ def test_an_unreachable_broker_fails_the_suggestion_with_the_reason(stage):
 # -- the robot side's limits -------------------------------------------------------------------
 def test_the_rate_limit_never_floods_a_module_queue(stage):
     broker, furhat, collector, robot = stage
-    robot_side = furhat(queue_limit=10, process_s=0.02)  # a module taking 50 events/s, 10 queued at most
-    config = msgspec.structs.replace(FAST, max_commands_per_s=30.0, command_burst=8)
+    # a module taking up to 100 events/s, 10 queued at most; we write at most 5 + 20 t in t seconds
+    robot_side = furhat(queue_limit=10, process_s=0.01)
+    config = msgspec.structs.replace(FAST, max_commands_per_s=20.0, command_burst=5)
     driver = robot(config=config)
     assert until(lambda: driver.connected) and until(lambda: driver.transport.broker_filter is not None)
-    for seq in range(40):  # a backlog of 40 gazes arriving at once
+    for seq in range(30):  # a backlog of 30 gazes arriving at once (all at once, 10 would fill the queue)
         driver.perform(suggestion(GAZE, seq=seq))
     assert driver.wait_idle(10)
-    assert robot_side.wait_for(lambda f: len(performed(f, "action.gaze")) == 40, timeout=5)
+    assert robot_side.wait_for(lambda f: len(performed(f, "action.gaze")) == 30, timeout=5)
     assert robot_side.disabled == []
 
 
