@@ -16,6 +16,8 @@ the robot acknowledged it, or why it failed. Outcomes:
                    `unsent`), or the robot reports it failed (Realtime
                    response.speak.end "failed": true)
   "nothing"        the "do nothing" action: nothing to send
+  "in-flight"      sent, and the session ended while the robot's acknowledgement was
+                   still awaited (it may have come after the recording closed)
 
 The calibration and the robot config are files a researcher edits, so they are
 strict: an unknown field is an error, not a silently ignored typo. New fields of
@@ -28,7 +30,7 @@ import re
 
 import msgspec
 
-from .envelope import Event
+from .envelope import Event, Nanos
 
 # IrisTK's speeds for action.gaze / action.attend (IrisTK doc/markdown/events.md line 301).
 IRISTK_SPEEDS = ("x-slow", "slow", "medium", "fast", "x-fast")
@@ -44,7 +46,7 @@ def check_name_filter(spec: str) -> None:
         raise ValueError(f"name filter {spec!r} has characters IrisTK refuses: {bad!r}"
                          " (allowed: A-Z a-z 0-9 _ ! . * ; and space)")
 
-OUTCOMES = ("done", "sent", "aborted", "stopped", "unacknowledged", "failed", "nothing")
+OUTCOMES = ("done", "sent", "aborted", "stopped", "unacknowledged", "failed", "nothing", "in-flight")
 
 
 class RobotActed(Event, tag="RobotActed"):
@@ -57,15 +59,22 @@ class RobotActed(Event, tag="RobotActed"):
     commands: list[str] = []  # the wire messages, in the order written
     replies: list[str] = []  # the robot's replies about this suggestion, in order
     suggestion_seq: int = 0  # seq of the SuggestionMade it performs
-    received_ns: int = 0  # the bridge received the suggestion
-    sent_ns: int = 0  # its first command was written on the wire (0: never)
-    acked_ns: int = 0  # the robot's first reply about it (0: none)
-    done_ns: int = 0  # the robot's last promised reply (0: not all came)
+    received_ns: Nanos = 0  # the bridge received the suggestion
+    sent_ns: Nanos = 0  # its first command was written on the wire (0: never)
+    acked_ns: Nanos = 0  # the robot's first reply about it (0: none)
+    done_ns: Nanos = 0  # the robot's last promised reply (0: not all came)
     error: str = ""
     reconnects: int = 0  # connections re-opened while it was pending
     unsent: list[str] = []  # wire messages never written (held, unreachable, refused), in order
     unconfirmed: list[str] = []  # written, but nothing shows they reached the robot: a promised
     # reply never came, or written within inflight_window_s before the connection died
+
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        for name in ("received_ns", "sent_ns", "acked_ns", "done_ns"):
+            value = getattr(self, name)
+            if type(value) is int and value:
+                msgspec.structs.force_setattr(self, name, Nanos(value))
 
 
 class Point(msgspec.Struct, frozen=True, array_like=True):

@@ -526,3 +526,16 @@ def test_commands_written_just_before_the_broker_died_are_unconfirmed_and_counte
     unconfirmed = sum(len(a.unconfirmed) for a in collector.acted)
     assert driver.inflight_marked == unconfirmed
     assert robot_side.dropped == []
+
+
+def test_an_acknowledgement_still_awaited_when_the_session_ends_is_recorded_in_flight(stage):
+    """Issue 10 item 6: the bridge closing (end of session, a signal) with a reply still due says so."""
+    broker, furhat, collector, robot = stage
+    robot_side = furhat()  # its synthesizer has no agent name: it ignores an event for agent "other"
+    driver = robot(config=msgspec.structs.replace(FAST, iristk_agent="other", ack_timeout_s=30.0))
+    driver.perform(suggestion(EXACT))
+    assert broker.wait_for(lambda b: [e.name for e in b.events if e.sender == "pairplay"] == ["action.speech"])
+    driver.close()
+    acted = collector.acted[0]
+    assert acted.outcome == "in-flight" and acted.commands and "acknowledgement was awaited" in acted.error
+    assert acted.unconfirmed == acted.commands and robot_side.performed == []

@@ -424,7 +424,7 @@ class RobotDriver:
         s = perf.suggestion
         waiting = {command_id for command_id, _ in perf.outstanding}
         unconfirmed = [st.wire.text for st in perf.steps if st.sent and st.wire is not None and not st.confirmed
-                       and (st.inflight or (outcome == "unacknowledged" and st.command_id in waiting))]
+                       and (st.inflight or (outcome in ("unacknowledged", "in-flight") and st.command_id in waiting))]
         acted = RobotActed(
             session=s.session, round=s.round, turn=s.turn, attempt=s.attempt, action=s.action,
             backend=self.transport.url, outcome=outcome,
@@ -477,7 +477,7 @@ class RobotDriver:
             if perf.unsent():
                 self._finish(perf, "failed", "bridge closed before delivery")
             elif perf.outstanding:
-                self._finish(perf, "unacknowledged", "bridge closed while waiting for the robot")
+                self._finish(perf, "in-flight", "the session ended while the robot's acknowledgement was awaited")
             elif any(s.inflight for s in perf.steps):
                 self._finish(perf, "unacknowledged", "written just before the connection died")
             else:
