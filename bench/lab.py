@@ -95,16 +95,22 @@ def bench_rows(quick: bool = False) -> list[dict]:
     for e in events:  # the first pick of each turn: the touch the suggestion answers
         if type(e).__name__ == "CardPicked" and e.source == "board":
             first.setdefault((e.round, e.turn), e.page_time_ms + offset_ms)
+    took = {}
+    for e in events:
+        if type(e).__name__ == "CardPicked" and e.source == "board":
+            took.setdefault((e.round, e.turn), e.time_ns / 1e6)
     made = {(e.round, e.turn): e.time_ns / 1e6 for e in events if type(e).__name__ == "SuggestionMade"}
     acted = {(e.round, e.turn): e.sent_ns / 1e6 for e in events if type(e).__name__ == "RobotActed" and e.sent_ns}
     keys = sorted(k for k in made if k in first and k in acted)[10:]  # past the warm-up turns
+    to_server = np.array([took[k] - first[k] for k in keys])
     to_made = np.array([made[k] - first[k] for k in keys])
     to_robot = np.array([acted[k] - first[k] for k in keys])
     rtt = np.array([p["rtt"] for p in pings])
     rows = []
     for q in (50, 99):
         reference = float(np.percentile(rtt, q))
-        for name, values in (("SuggestionMade", to_made), ("robot command sent (virtual robot)", to_robot)):
+        for name, values in (("the server took it (context)", to_server), ("SuggestionMade", to_made),
+                             ("robot command sent (virtual robot)", to_robot)):
             value = float(np.percentile(values, q))
             rows.append({"row": f"lab: touch on the page -> {name}, p{q} ({len(values)} turns)", "value": value,
                          "unit": "ms", "reference": f"raw WebSocket round trip page -> server -> page, p{q}",

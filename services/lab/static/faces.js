@@ -11,16 +11,16 @@
     ["#2f8572", "#175447"], ["#43967f", "#1f5f50"],
     ["#d9a928", "#8f6c12"],
   ];
-  function lobed(n, deep, r0) {  // a palmate outline with n lobes, the stem at the bottom
+  function lobed(n, deep, r0, span) {  // a palmate blade of n pointed lobes over the stem's base
     const pts = [];
-    const span = 1.55 * Math.PI;  // radians covered by the blade
-    for (let i = 0; i <= 120; i++) {
-      const a = -Math.PI / 2 - span / 2 + (span * i) / 120;  // from lower left round the top
-      const lobe = Math.abs(Math.cos((n * (a + Math.PI / 2)) / (span / Math.PI)));
-      const r = r0 * (1 - deep + deep * Math.pow(lobe, 0.7));
-      pts.push([50 + r * Math.cos(a + Math.PI), 56 + r * Math.sin(a + Math.PI)]);
+    for (let i = 0; i <= 160; i++) {
+      const a = -span / 2 + (span * i) / 160;  // 0 = straight up
+      const phase = (2 * Math.PI * n * (a + span / 2)) / span;
+      const lobe = Math.pow((1 - Math.cos(phase)) / 2, 0.55);
+      const r = r0 * (1 - deep + deep * lobe);
+      pts.push([50 + r * Math.sin(a), 58 - r * Math.cos(a)]);
     }
-    return "M50,60 L" + pts.map(p => p[0].toFixed(1) + "," + p[1].toFixed(1)).join(" L") + " Z";
+    return "M50,62 L" + pts.map(p => p[0].toFixed(1) + "," + p[1].toFixed(1)).join(" L") + " Z";
   }
   function pinnate(pairs) {
     let s = "";
@@ -47,10 +47,10 @@
     () => `<path d="M50,14 C76,14 88,34 86,52 C84,72 64,82 54,76 L50,70 L46,76 C36,82 16,72 14,52 C12,34 24,14 50,14 Z"/>` +
           `<g class="vein"><path d="M50,18 L50,70 M50,40 L72,32 M50,40 L28,32 M50,56 L74,58 M50,56 L26,58"/></g>` + stem(70, 95),
     // 4 five-lobed (maple-like), 5 three-lobed
-    () => `<path d="${lobed(5, 0.5, 42)}"/>` +
-          `<g class="vein"><path d="M50,60 L50,16 M50,60 L18,38 M50,60 L82,38 M50,60 L24,74 M50,60 L76,74"/></g>` + stem(60, 96),
-    () => `<path d="${lobed(3, 0.45, 42)}"/>` +
-          `<g class="vein"><path d="M50,60 L50,16 M50,60 L16,48 M50,60 L84,48"/></g>` + stem(60, 96),
+    () => `<path d="${lobed(5, 0.55, 44, 1.5 * Math.PI)}"/>` +
+          `<g class="vein"><path d="M50,60 L50,20 M50,60 L20,36 M50,60 L80,36 M50,60 L16,69 M50,60 L84,69"/></g>` + stem(60, 97),
+    () => `<path d="${lobed(3, 0.5, 44, 1.3 * Math.PI)}"/>` +
+          `<g class="vein"><path d="M50,60 L50,18 M50,60 L18,52 M50,60 L82,52"/></g>` + stem(60, 97),
     // 6 pinnate with seven leaflets, 7 with five
     () => `<g>${pinnate(3)}</g>` + `<path d="M50,14 L50,96" class="stem"/>`,
     () => `<g>${pinnate(2)}</g>` + `<path d="M50,14 L50,96" class="stem"/>`,
