@@ -95,6 +95,9 @@ def run(args: argparse.Namespace) -> int:
         path = run_lab(config, out, host=host, port=port, bus_options=bus_options, robot=robot_choice(args),
                        stop=stop, on_ready=ready, linger_s=args.linger, ssl_certfile=args.certfile,
                        ssl_keyfile=args.keyfile)
+    except TimeoutError as err:  # a service the game waits for never came (the eye tracker, say)
+        print(f"pairplay lab: the session did not start: {err}", file=sys.stderr)
+        return 1
     except OSError as err:
         print(f"pairplay lab: cannot serve on {args.listen}: {err}", file=sys.stderr)
         return 1

@@ -124,6 +124,9 @@ def run(args: argparse.Namespace) -> int:
 
     def announce(bus) -> None:
         print(f"session {config.session}: bus listening on {' '.join(bus.locators()) or '(no listener)'}", flush=True)
+        if config.participant.startswith("human:"):
+            print("a person plays on a board: `pairplay lab` serves one (this session waits for picks from "
+                  "source 'board' on the bus)", flush=True)
 
     path = run_session(config, Path(args.out) / f"{config.session}.mcap",
                        bus_options=options_from_args(args, default_mode="router"),

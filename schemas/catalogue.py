@@ -40,7 +40,8 @@ CATALOGUE: dict[str, tuple[str, str]] = {
 }
 
 # tag -> (publishing services, consuming services), as the services' code reads them; the
-# recorder and the view subscribe to every event (`pairplay/<session>/**`) and are not listed.
+# recorder, the view and the lab's board (which draws its pages from the log) subscribe to
+# every event (`pairplay/<session>/**`) and are not listed as consumers.
 # docs/architecture.md draws this table (mermaid()); a test keeps both in step with CATALOGUE.
 FLOW: dict[str, tuple[tuple[str, ...], tuple[str, ...]]] = {
     "ServiceStarted": (("any service",), ()),
@@ -50,6 +51,7 @@ FLOW: dict[str, tuple[tuple[str, ...], tuple[str, ...]]] = {
     "CardRevealed": (("game",), ("participant",)),
     "PickRejected": (("game",), ("participant",)),
     "CardObserved": (("participant",), ("game",)),
+    "GazeFixated": (("tracker",), ("game",)),
     "SuggestionRequested": (("game",), ("learner",)),
     "SuggestionMade": (("learner",), ("participant", "robot")),
     "RobotActed": (("robot",), ()),

@@ -96,7 +96,7 @@ def test_a_whole_game_played_by_clicks_verifies_and_rebuilds(browser, tmp_path):
 
 
 def test_wrong_suggestion_reload_two_tabs_and_bad_messages(browser, tmp_path, monkeypatch):
-    monkeypatch.setattr(LabHub, "SEAT_KEPT_S", 0.3)
+    monkeypatch.setattr(LabHub, "SEAT_KEPT_S", 1.0)
     config = human_config("lab-ui", rounds=1)  # the 1.5 s window, on the page's clock
     with running_lab(tmp_path, config) as lab:
         page = open_page(browser, lab.urls.board)
@@ -136,7 +136,11 @@ def test_wrong_suggestion_reload_two_tabs_and_bad_messages(browser, tmp_path, mo
         assert "malformed" in reasons[0] and "malformed" in reasons[1] and "malformed" in reasons[2]
         assert "stale" in reasons[3] and "stale" in reasons[4] and "not on the board" in reasons[5]
         assert "not above" in reasons[6] and "binary" in reasons[7]
-        # the game goes on: the second pick, then the turn resolves (fast: ignored by the page's clock)
+        # a lost connection: the page reconnects by itself and gets the whole view again
+        page.evaluate("window.pairplay.link.ws.close()")
+        page.wait_for_function("window.pairplay.link.connects === 2 && window.pairplay.link.open")
+        page.wait_for_function("window.pairplay.role === 'player' && window.pairplay.state.attempt === 1")
+        # the game goes on: the second pick, then the turn resolves
         second = page.evaluate("window.pairplay.state.cards.findIndex((c, i) => i > 0 && c.state === 'down')")
         click_when_ready(page, second)
         page.wait_for_function("window.pairplay.state.turn === 1")
