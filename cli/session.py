@@ -23,6 +23,7 @@ of 5 rounds by default; settings a person cannot satisfy are refused
 from __future__ import annotations
 
 import argparse
+import sys
 import logging
 import threading
 from datetime import datetime, timezone
@@ -117,7 +118,7 @@ def run(args: argparse.Namespace) -> int:
         config = config_from_args(args)
         check_robot_args(args)
     except (ValueError, KeyError, PolicyFileError) as err:
-        print(f"pairplay session: {err}")
+        print(f"pairplay session: {err}", file=sys.stderr)
         return 2
     stop = threading.Event()
     stop_on_signals(stop)

@@ -14,7 +14,6 @@ import subprocess
 import sys
 
 import msgspec
-import pytest
 
 from labutil import human_config, open_page, running_lab, wait_phase
 from pairplay.replay.reader import read_log
@@ -128,14 +127,14 @@ def test_wrong_suggestion_reload_two_tabs_and_bad_messages(browser, tmp_path, mo
               s({type: "pick", id: id(), round: 0, turn: 7, card: 3, page_ms: 1}),
               s({type: "wrong", id: id(), round: 0, turn: 0, attempt: 0, page_ms: 1}),
               s({type: "pick", id: id(), round: 0, turn: 0, card: 99, page_ms: 1}),
-              s({type: "pick", id: 1, round: 0, turn: 0, card: 3, page_ms: 1})];
+              s({type: "pick", id: 1, round: 0, turn: 0, card: 3, page_ms: 1}), "x".repeat(5000)];
             msgs.forEach(m => window.pairplay.link.ws.send(m)); return msgs; }""")
         page.evaluate("window.pairplay.link.ws.send(new Uint8Array([1, 2, 3]))")
         page.wait_for_function(f"window.pairplay.rejected.length >= {len(bad) + 1}")
         reasons = [r["reason"] for r in page.evaluate("window.pairplay.rejected")]
         assert "malformed" in reasons[0] and "malformed" in reasons[1] and "malformed" in reasons[2]
         assert "stale" in reasons[3] and "stale" in reasons[4] and "not on the board" in reasons[5]
-        assert "not above" in reasons[6] and "binary" in reasons[7]
+        assert "not above" in reasons[6] and "at most 4096" in reasons[7] and "binary" in reasons[8]
         # a lost connection: the page reconnects by itself and gets the whole view again
         page.evaluate("window.pairplay.link.ws.close()")
         page.wait_for_function("window.pairplay.link.connects === 2 && window.pairplay.link.open")

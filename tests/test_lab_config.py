@@ -78,7 +78,7 @@ def test_the_lab_is_for_people_and_session_refuses_the_same(tmp_path):
     r = pairplay("lab", "--participant", "sim:blind", "--out", str(tmp_path))
     assert r.returncode == 2 and "the lab is for a person" in r.stderr
     r = pairplay("session", "--participant", "human:p1", "--ignore-rule", "perceived", "--out", str(tmp_path))
-    assert r.returncode == 2 and "ignore rule 'perceived'" in r.stdout
+    assert r.returncode == 2 and "ignore rule 'perceived'" in r.stderr and r.stderr.count("\n") == 1
 
 
 def test_pairplay_lab_says_where_the_board_is_and_stops_on_sigterm(tmp_path):

@@ -63,14 +63,14 @@ def sim_sample(out: Path) -> None:
         t.join()
 
 
-def human_sample(out: Path) -> None:
-    config = SessionConfig(session="sample-human-board", participant="human:p01", seed=3, rounds=1,
-                           observed_source="first-pick", ignore_rule="time", software_version="0.1.0")
+def scripted_session(config: SessionConfig, path: Path):
+    """A game and a learner logic wired to one MCAP writer (no bus): returns the writer, the
+    game's Driver and `inject(source, event, at_s)`, which records an input and its consequences."""
     clock = iter(range(10**18, 10**19, 10**6)).__next__
     game, learner = Driver(GameLogic(config), config.session, clock), Driver(LearnerLogic(), config.session, clock)
-    writer = EventLogWriter(out / "human-board.mcap")
+    writer = EventLogWriter(path)
     writer.add_metadata("pairplay.session", {"session": config.session, "seed": str(config.seed),
-                                             "software_version": "0.1.0"})
+                                             "software_version": config.software_version})
 
     def record(events):
         for e in events:
@@ -79,24 +79,41 @@ def human_sample(out: Path) -> None:
             if e.source == "game":
                 record(learner.receive(key, encode_event(e)))
 
-    record(game.start())
-    faces = list(game.logic.board.faces)
-    board_seq, t_s, matched, turn = 0, 100.0, 0, 0
+    seqs: dict[str, int] = {}
 
-    def press(event, at_s):
-        nonlocal board_seq
-        board_seq += 1
-        e = stamped(event, session=config.session, source="board", seq=board_seq, time_ns=int(at_s * 1e9))
-        key = event_key(config.session, "board", type(event).__name__)
+    def inject(source, event, at_s):
+        seqs[source] = seqs.get(source, 0) + 1
+        e = stamped(event, session=config.session, source=source, seq=seqs[source], time_ns=int(at_s * 1e9))
+        key = event_key(config.session, source, type(event).__name__)
         writer.write(key, encode_event(e), log_time_ns=e.time_ns, sequence=e.seq)
         record(game.receive(key, encode_event(e)))
 
+    record(game.start())
+    return writer, game, inject
+
+
+def scripted_turn(faces: list[int], matched: int, turn: int) -> tuple[int, int, list[int], int]:
+    """The scripted touch screen's cards: the first covered card, then a miss on even turns
+    (while one is possible) and its partner on odd ones."""
+    covered = [c for c in range(18) if not matched >> c & 1]
+    first = covered[0]
+    partner = next(c for c in covered if c != first and faces[c] == faces[first])
+    others = [c for c in covered if c not in (first, partner)]
+    return first, partner, others, partner if turn % 2 or not others else others[0]
+
+
+def human_sample(out: Path) -> None:
+    config = SessionConfig(session="sample-human-board", participant="human:p01", seed=3, rounds=1,
+                           observed_source="first-pick", ignore_rule="time", software_version="0.1.0")
+    writer, game, inject = scripted_session(config, out / "human-board.mcap")
+    faces = list(game.logic.board.faces)
+    t_s, matched, turn = 100.0, 0, 0
+
+    def press(event, at_s):
+        inject("board", event, at_s)
+
     while not game.logic.done:
-        covered = [c for c in range(18) if not matched >> c & 1]
-        first = covered[0]
-        partner = next(c for c in covered if c != first and faces[c] == faces[first])
-        others = [c for c in covered if c not in (first, partner)]
-        second = partner if turn % 2 or not others else others[0]
+        first, partner, others, second = scripted_turn(faces, matched, turn)
         press(ev.CardPicked(round=0, turn=turn, card=first), t_s)
         if turn == 1:
             press(ev.WrongSuggestionPressed(round=0, turn=turn), t_s + 1.0)
@@ -111,37 +128,12 @@ def human_sample(out: Path) -> None:
 def gaze_sample(out: Path) -> None:
     config = SessionConfig(session="sample-human-gaze", participant="human:p02", seed=5, rounds=1,
                            observed_source="gaze", ignore_rule="time", ignore_clock="page", software_version="0.3.0")
-    clock = iter(range(10**18, 10**19, 10**6)).__next__
-    game, learner = Driver(GameLogic(config), config.session, clock), Driver(LearnerLogic(), config.session, clock)
-    writer = EventLogWriter(out / "human-gaze.mcap")
-    writer.add_metadata("pairplay.session", {"session": config.session, "seed": str(config.seed),
-                                             "software_version": "0.3.0"})
-
-    def record(events):
-        for e in events:
-            key = event_key(e.session, e.source, type(e).__name__)
-            writer.write(key, encode_event(e), log_time_ns=e.time_ns or 1, sequence=e.seq)
-            if e.source == "game":
-                record(learner.receive(key, encode_event(e)))
-
-    record(game.start())
+    writer, game, press = scripted_session(config, out / "human-gaze.mcap")
     faces = list(game.logic.board.faces)
-    seqs = {"board": 0, "tracker": 0}
-
-    def press(source, event, at_s):
-        seqs[source] += 1
-        e = stamped(event, session=config.session, source=source, seq=seqs[source], time_ns=int(at_s * 1e9))
-        key = event_key(config.session, source, type(event).__name__)
-        writer.write(key, encode_event(e), log_time_ns=e.time_ns, sequence=e.seq)
-        record(game.receive(key, encode_event(e)))
 
     t_s, matched, turn = 100.0, 0, 0
     while not game.logic.done:
-        covered = [c for c in range(18) if not matched >> c & 1]
-        first = covered[0]
-        partner = next(c for c in covered if c != first and faces[c] == faces[first])
-        others = [c for c in covered if c not in (first, partner)]
-        second = partner if turn % 2 or not others else others[0]
+        first, partner, others, second = scripted_turn(faces, matched, turn)
         page_ms = t_s * 1000 + 0.25  # the page's clock runs 250 us off the server's
         press("board", ev.CardPicked(round=0, turn=turn, card=first, page_time_ms=page_ms), t_s)
         if turn != 3:  # turn 3: the tracker saw nothing, the turn goes without a suggestion

@@ -43,7 +43,8 @@ from pairplay.services.lab.model import LabModel
 from pairplay.services.runner import Node
 
 log = logging.getLogger("pairplay.lab")
-MAX_MESSAGE = 4096  # bytes: a page's messages are small; uvicorn refuses bigger frames
+MAX_MESSAGE = 4096  # bytes: a page's messages are small; longer ones are refused and recorded
+MAX_FRAME = 65536  # bytes: uvicorn closes the connection on a bigger frame (nothing to record but the close)
 
 
 # -- what a page may send (JSON, tagged by "type") ----------------------------------------
@@ -246,6 +247,9 @@ class LabHub:
     # -- a page's input -----------------------------------------------------------------
     def _take(self, c: Client, text: str) -> None:
         raw = text.encode()
+        if len(raw) > MAX_MESSAGE:
+            self._refuse(c, f"message of {len(raw)} bytes: a page's messages are at most {MAX_MESSAGE}", raw)
+            return
         try:
             msg = _decode(raw)
         except (msgspec.DecodeError, msgspec.ValidationError) as err:
