@@ -32,7 +32,8 @@ class WebServer:
                  ssl_keyfile: str | None = None):
         config = uvicorn.Config(app, host=host, port=port, log_level="warning", lifespan="off",
                                 ws_max_size=MAX_FRAME, ws_ping_interval=5.0, ws_ping_timeout=10.0,
-                                ssl_certfile=ssl_certfile, ssl_keyfile=ssl_keyfile, access_log=False)
+                                ssl_certfile=ssl_certfile, ssl_keyfile=ssl_keyfile, access_log=False,
+                                timeout_graceful_shutdown=2)  # open pages must not hold up a SIGTERM
         self.server = uvicorn.Server(config)
         self.scheme = "https" if ssl_certfile else "http"
         self.thread: threading.Thread | None = None
