@@ -174,12 +174,17 @@ class LabHub:
             c.outbox.put_nowait(None)  # None: the latest view, computed when it is sent
 
     async def _send_loop(self, c: Client) -> None:
-        while True:
-            item = await c.outbox.get()
-            if item is None:
-                c.state_pending = False
-                item = self.view(c)
-            await c.ws.send_text(_encode(item).decode())
+        try:
+            while True:
+                item = await c.outbox.get()
+                if item is None:
+                    c.state_pending = False
+                    item = self.view(c)
+                await c.ws.send_text(_encode(item).decode())
+        except asyncio.CancelledError:
+            raise
+        except Exception as err:  # the page went away mid-send: its receive loop ends the client
+            log.info("lab %s: a %s page stopped listening: %s", self.session, c.page, err)
 
     def _role_for(self, page: str, client_id: str) -> str:
         if page != "board":
