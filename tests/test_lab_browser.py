@@ -213,7 +213,7 @@ def test_the_mirror_shows_the_suggestion_and_the_robot(browser, tmp_path):
         s = mirror.evaluate("window.pairplay.state")
         sug = s["suggestion"]
         assert sug["observed"] == 7 and "target" not in sug and s["robot"][0]["backend"] == "virtual"
-        assert mirror.inner_text("#speech").strip() != "…" and "turn" in mirror.inner_text("#robot")
+        assert mirror.inner_text("#speech").strip() != "…" and "virtual" in mirror.inner_text("#robot")
         # the visual part's region is highlighted (and an arrow drawn) when there is one
         highlighted = mirror.locator(".card.region").count()
         visual = not (sug["parts"]["head"] == "head still" and sug["parts"]["gaze"] == "no gaze")
