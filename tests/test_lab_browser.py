@@ -21,7 +21,6 @@ from pairplay.schemas import events as ev
 from pairplay.schemas.envelope import stamped
 from pairplay.schemas.events import decode_event, encode_event
 from pairplay.schemas.keys import alive_key, event_key, session_keys
-from pairplay.services.lab.hub import LabHub
 from pairplay.services.node import Driver
 from pairplay.services.participant import ParticipantLogic
 
@@ -94,8 +93,7 @@ def test_a_whole_game_played_by_clicks_verifies_and_rebuilds(browser, tmp_path):
     assert json.loads((tmp_path / "rebuilt" / "lab-game.policy.json").read_text())["participant"] == "human:p01"
 
 
-def test_wrong_suggestion_reload_two_tabs_and_bad_messages(browser, tmp_path, monkeypatch):
-    monkeypatch.setattr(LabHub, "SEAT_KEPT_S", 1.0)
+def test_wrong_suggestion_reload_two_tabs_and_bad_messages(browser, tmp_path):
     config = human_config("lab-ui", rounds=1)  # the 1.5 s window, on the page's clock
     with running_lab(tmp_path, config) as lab:
         page = open_page(browser, lab.urls.board)
@@ -145,7 +143,7 @@ def test_wrong_suggestion_reload_two_tabs_and_bad_messages(browser, tmp_path, mo
         page.wait_for_function("window.pairplay.state.turn === 1")
         # the player's tab goes away: the read-only one takes over
         page.context.close()
-        other.wait_for_function("window.pairplay.role === 'player'", timeout=5000)
+        other.wait_for_function("window.pairplay.role === 'player'", timeout=15000)  # after LabHub.SEAT_KEPT_S
         assert other.errors == []
         lab.stop.set()
         path = lab.wait()
