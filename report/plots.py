@@ -159,3 +159,27 @@ def reuse_curves(keys: list[str], names: dict[str, str], curves: np.ndarray, ora
     fig.tight_layout()
     fig.savefig(path, dpi=100)
     plt.close(fig)
+
+
+def grouped_bars_with_spread(labels: list[str], series: dict[str, np.ndarray], reference: list[float],
+                             path: Path, title: str) -> None:
+    """Bars per label and series: the mean over replicates with a 1-sd error bar; a tick marks the reference.
+
+    `series[name]` is (replicates, labels) in picks per round."""
+    n = len(series)
+    width = 0.8 / n
+    x = np.arange(len(labels))
+    fig, ax = plt.subplots(figsize=(max(6.0, 1.1 * len(labels) + 2), 4.2))
+    for i, (name, values) in enumerate(series.items()):
+        values = np.asarray(values)
+        ax.bar(x + (i - (n - 1) / 2) * width, values.mean(axis=0), width, yerr=values.std(axis=0),
+               capsize=2, label=name)
+    ax.scatter(x, reference, marker="_", s=400, color="black", zorder=3, label="oracle")
+    ax.set_xticks(x, labels, rotation=20)
+    ax.set_ylabel("picks per round (18 = perfect; lower is better)")
+    ax.set_ylim(16, max(float(np.max([np.asarray(v).max() for v in series.values()])), max(reference)) + 2)
+    ax.set_title(title, fontsize=10)
+    ax.legend(fontsize=8, ncol=2)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
