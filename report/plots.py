@@ -183,3 +183,20 @@ def grouped_bars_with_spread(labels: list[str], series: dict[str, np.ndarray], r
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)
+
+
+def sweep_measure(labels: list[str], mean: list[float], low: list[float], high: list[float], path: Path,
+                  measure: str, seeds: int) -> None:
+    """One sweep measure across the grid: the mean over seeds with its 95% confidence interval."""
+    mean, low, high = map(np.asarray, (mean, low, high))
+    x = np.arange(len(labels))
+    fig, ax = plt.subplots(figsize=(max(6.0, 0.28 * len(labels) + 3), 4.2))
+    ax.errorbar(x, mean, yerr=[mean - low, high - mean], fmt="o", capsize=3, markersize=4)
+    ax.set_xticks(x, labels, rotation=60, ha="right", fontsize=7)
+    unit = {"ratio": "learned / oracle (1 = the oracle)", "reuse_gain": "picks per round saved by pi-reuse"}
+    ax.set_ylabel(unit.get(measure.split("/")[-1], "picks per round (18 = perfect)"))
+    ax.set_title(f"{measure}: mean over {seeds} seeds, 95% confidence interval", fontsize=10)
+    ax.grid(axis="y", alpha=0.3)
+    fig.tight_layout()
+    fig.savefig(path, dpi=100)
+    plt.close(fig)
