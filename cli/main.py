@@ -25,6 +25,7 @@ from pairplay.errors import UserError
 # verb -> (module, one-line help)
 VERBS: dict[str, tuple[str, str]] = {
     "study": ("pairplay.cli.study", "run the simulated study of thesis chapter 6"),
+    "sweep": ("pairplay.cli.sweep", "run the simulated study over a grid of settings x seeds, locally or on Dask"),
     "bench": ("pairplay.cli.bench", "measure speed beside raw references, print a table"),
     "profile": ("pairplay.cli.profile", "user information (algorithm 3) of policy files, per participant"),
     "combine": ("pairplay.cli.combine", "merge policy files into one policy (algorithm 4)"),

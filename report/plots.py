@@ -179,3 +179,44 @@ def _save(fig, path: Path, dpi: int) -> None:
     with output_path(path) as tmp:
         fig.savefig(tmp, dpi=dpi, format="png")
     plt.close(fig)
+
+
+def grouped_bars_with_spread(labels: list[str], series: dict[str, np.ndarray], reference: list[float],
+                             path: Path, title: str) -> None:
+    """Bars per label and series: the mean over replicates with a 1-sd error bar; a tick marks the reference.
+
+    `series[name]` is (replicates, labels) in picks per round."""
+    n = len(series)
+    width = 0.8 / n
+    x = np.arange(len(labels))
+    fig, ax = plt.subplots(figsize=(max(6.0, 1.1 * len(labels) + 2), 4.2))
+    for i, (name, values) in enumerate(series.items()):
+        values = np.asarray(values)
+        ax.bar(x + (i - (n - 1) / 2) * width, values.mean(axis=0), width, yerr=values.std(axis=0),
+               capsize=2, label=name)
+    ax.scatter(x, reference, marker="_", s=400, color="black", zorder=3, label="oracle")
+    ax.set_xticks(x, labels, rotation=20)
+    ax.set_ylabel("picks per round (18 = perfect; lower is better)")
+    ax.set_ylim(16, max(float(np.max([np.asarray(v).max() for v in series.values()])), max(reference)) + 2)
+    ax.set_title(title, fontsize=10)
+    ax.legend(fontsize=8, ncol=2)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def sweep_measure(labels: list[str], mean: list[float], low: list[float], high: list[float], path: Path,
+                  measure: str, seeds: int) -> None:
+    """One sweep measure across the grid: the mean over seeds with its 95% confidence interval."""
+    mean, low, high = map(np.asarray, (mean, low, high))
+    x = np.arange(len(labels))
+    fig, ax = plt.subplots(figsize=(max(6.0, 0.28 * len(labels) + 3), 4.2))
+    ax.errorbar(x, mean, yerr=[mean - low, high - mean], fmt="o", capsize=3, markersize=4)
+    ax.set_xticks(x, labels, rotation=60, ha="right", fontsize=7)
+    unit = {"ratio": "learned / oracle (1 = the oracle)", "reuse_gain": "picks per round saved by pi-reuse"}
+    ax.set_ylabel(unit.get(measure.split("/")[-1], "picks per round (18 = perfect)"))
+    ax.set_title(f"{measure}: mean over {seeds} seeds, 95% confidence interval", fontsize=10)
+    ax.grid(axis="y", alpha=0.3)
+    fig.tight_layout()
+    fig.savefig(path, dpi=100)
+    plt.close(fig)

@@ -35,7 +35,8 @@ from pairplay.schemas.config import DEFAULT_REWARD_BONUS, LearnerConfig
 from pairplay.outputs import output_folder
 from pairplay.schemas.policy import write_policy
 
-from pairplay.report import plots
+from pairplay.core.precombine import combination_experiment
+from pairplay.report import future, plots
 
 
 @dataclass
@@ -309,6 +310,12 @@ def _run_study(args: StudySettings, personas, out: Path, progress_bar: Callable)
         plots.reuse_curves(reuse.persona, names, reuse.curves, [oracle[k] for k in reuse.persona],
                            out / "reuse.png")
     timings["speed-up"] = time.perf_counter() - t0
+    future_lines = []
+    if args.games >= 5 and len(personas) >= 2:  # future work 3 needs disjoint replicates of each persona's games
+        t0 = time.perf_counter()
+        experiment = combination_experiment(personas, training, args.seed)
+        future_lines += future.precombination_section(out, experiment, names, oracle, markdown_table)
+        timings["future work"] = time.perf_counter() - t0
     timings["total"] = time.perf_counter() - start
 
     first50 = {k: c[:, :50].mean() for k, c in curves.items()}
@@ -361,6 +368,7 @@ def _run_study(args: StudySettings, personas, out: Path, progress_bar: Callable)
                    f"pi-reuse beats scratch on the first 50 rounds for {(gains > 0).sum()} of {len(gains)} "
                    f"held-out personas; median gain {np.median(gains):.2f} picks per round.", "",
                    "![reuse](reuse.png)", ""]
+    report += future_lines
     report += ["## Timings", "", markdown_table([["phase", "seconds"]] + [[k, f"{v:.2f}"] for k, v in timings.items()]), ""]
     (out / "report.md").write_text("\n".join(report))
 
