@@ -70,13 +70,17 @@ def _bar(quiet: bool):
 
 
 def run(args) -> int:
+    from pairplay.core.personas import persona
+    from pairplay.outputs import check_output_folder
+
+    try:  # the options first, before the study's modules load: a mistake is refused at once
+        [persona(k.strip()) for k in args.personas.split(",") if k.strip()]
+    except KeyError as exc:
+        raise OptionError(exc.args[0], f"--personas {args.personas}") from None
+    check_output_folder(args.out, args.force)
     from pairplay.report.study import StudySettings, run_study, text_table
 
     settings = StudySettings(**{k: getattr(args, k) for k in StudySettings.__dataclass_fields__})
-    try:
-        settings.persona_list()
-    except KeyError as exc:
-        raise OptionError(exc.args[0], f"--personas {args.personas}") from None
     report = run_study(settings, args.out, _bar(args.quiet), force=args.force)
     if settings.train_only:
         print(f"training: {report.timings['training']:.2f} s; policies and curves in {report.out}")
