@@ -66,6 +66,8 @@ def run(args: argparse.Namespace) -> int:
               f"{f.counts.get('QUpdated', 0)} Q updates"
               f"{'; ' + rebuilt.note if rebuilt.note else ''}"
               f"{'; %d q_before mismatches' % f.q_mismatches if f.q_mismatches else ''}")
+        if rebuilt.partial:
+            print(f"  PARTIAL session: {rebuilt.partial}")
         print("  " + ", ".join(str(p) for p in paths))
     if done and not args.no_plot:
         print(f"  {plot_curves(done, figure, args.force)}")

@@ -25,6 +25,7 @@ from pathlib import Path
 from pairplay.cli.args import add_force, count, fraction, non_negative
 from pairplay.core.geometry import PICKS_UNIT
 from pairplay.core.personas import PERSONAS
+from pairplay.core.rng import SEED_RANGE
 from pairplay.errors import OptionError
 from pairplay.schemas.config import DEFAULT_REWARD_BONUS, REWARD_BONUS_RULES as BONUS_RULES
 
@@ -77,6 +78,8 @@ def run(args) -> int:
         [persona(k.strip()) for k in args.personas.split(",") if k.strip()]
     except KeyError as exc:
         raise OptionError(exc.args[0], f"--personas {args.personas}") from None
+    if not SEED_RANGE[0] <= args.seed <= SEED_RANGE[1]:  # every seed in range has its own streams (core.rng)
+        raise OptionError(f"outside the accepted range {SEED_RANGE[0]}..{SEED_RANGE[1]}", f"--seed {args.seed}")
     check_output_folder(args.out, args.force)
     from pairplay.report.study import StudySettings, run_study, text_table
 
