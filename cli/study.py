@@ -25,6 +25,7 @@ from pathlib import Path
 from pairplay.cli.args import add_force, count, fraction, non_negative
 from pairplay.core.geometry import PICKS_UNIT
 from pairplay.core.personas import PERSONAS
+from pairplay.core.rng import SEED_RANGE
 from pairplay.errors import OptionError
 from pairplay.schemas.config import DEFAULT_REWARD_BONUS, REWARD_BONUS_RULES as BONUS_RULES
 
@@ -70,16 +71,19 @@ def _bar(quiet: bool):
 
 
 def run(args) -> int:
-    from pairplay.core.rng import SEED_RANGE
-    from pairplay.report.study import StudySettings, run_study, text_table
+    from pairplay.core.personas import persona
+    from pairplay.outputs import check_output_folder
 
-    settings = StudySettings(**{k: getattr(args, k) for k in StudySettings.__dataclass_fields__})
-    try:
-        settings.persona_list()
+    try:  # the options first, before the study's modules load: a mistake is refused at once
+        [persona(k.strip()) for k in args.personas.split(",") if k.strip()]
     except KeyError as exc:
         raise OptionError(exc.args[0], f"--personas {args.personas}") from None
     if not SEED_RANGE[0] <= args.seed <= SEED_RANGE[1]:  # every seed in range has its own streams (core.rng)
         raise OptionError(f"outside the accepted range {SEED_RANGE[0]}..{SEED_RANGE[1]}", f"--seed {args.seed}")
+    check_output_folder(args.out, args.force)
+    from pairplay.report.study import StudySettings, run_study, text_table
+
+    settings = StudySettings(**{k: getattr(args, k) for k in StudySettings.__dataclass_fields__})
     report = run_study(settings, args.out, _bar(args.quiet), force=args.force)
     if settings.train_only:
         print(f"training: {report.timings['training']:.2f} s; policies and curves in {report.out}")

@@ -188,7 +188,7 @@ def _run(case: Case, template: Path, base: Path) -> Case:
     case.before = _snapshot(root)
     env = dict(os.environ, COLUMNS="200")
     try:
-        case.result = subprocess.run(_command(case, root), cwd=root, capture_output=True, text=True, timeout=120,
+        case.result = subprocess.run(_command(case, root), cwd=root, capture_output=True, text=True, timeout=300,
                                      env=env)
     except subprocess.TimeoutExpired as hung:  # a verb that hangs on a mistake fails its row, not the table
         case.result = subprocess.CompletedProcess(hung.cmd, None, str(hung.stdout), f"hung: {hung}")
@@ -202,7 +202,7 @@ def ran(tmp_path_factory):
     _fixtures(template)
     base = tmp_path_factory.mktemp("cases")
     todo = [c for c in CASES if CAN_UNSHARE or not c.readonly]
-    with ThreadPoolExecutor(max_workers=8) as pool:
+    with ThreadPoolExecutor(max_workers=4) as pool:
         done = list(pool.map(lambda c: _run(c, template, base), todo))
     TAKEN.close()
     return {c.name: c for c in done}
