@@ -23,6 +23,12 @@ def run(args: argparse.Namespace) -> int:
     except (OSError, ValueError) as err:
         print(f"pairplay recover: {err}")
         return 2
-    state = f"cut short ({done.reason})" if done.truncated else "complete already"
-    print(f"{args.recording}: {state}; {done.messages} messages kept in {done.output}")
+    if done.damaged:
+        state = f"damaged ({done.reason}); every intact part kept"
+    elif done.truncated:
+        state = f"cut short ({done.reason})"
+    else:
+        state = "complete already"
+    ended = "" if done.ended else "; the session's end was not recorded (partial session)"
+    print(f"{args.recording}: {state}; {done.messages} messages kept in {done.output}{ended}")
     return 0
