@@ -7,16 +7,26 @@ every pick with core.board.Board and answers it with CardRevealed or
 PickRejected (the reason from IllegalPick; the board is unchanged). The
 observed card comes from the configured source: "first-pick" (the human study:
 the game itself observes the first card) or "intended" (the simulated
-participant reports the card it would pick unaided, CardObserved). Once the
+participant reports the card it would pick unaided, CardObserved) or "gaze"
+(an eye tracker's GazeFixated: the first fixation, on the bus's clock at or
+after the first pick, of a covered card other than the first; the game
+publishes it as CardObserved). Once the
 observed card is known it asks for a suggestion (SuggestionRequested with the
 state of thesis 4.1); a WrongSuggestionPressed asks again (attempt + 1). The
 second pick resolves the turn (TurnResolved); `end` stops the session early with its
 reason (interrupted, aborted, a service failed) and how far it got. Under the "time" ignore rule a
 turn whose picks are closer than the window (1.5 s, thesis 7.1.2) is marked
-ignored, timed by the picks' own envelope times so a replay decides the same.
+ignored, timed by the picks' own times so a replay decides the same: their
+envelope times (the server's clock) or, with `ignore_clock` "page", the board
+page's performance clock (CardPicked.page_time_ms); both are recorded.
+
+Under "gaze", a second pick that comes before any fixation resolves the turn
+without a suggestion (a silent tracker must not stall a person's game).
 """
 
 from __future__ import annotations
+
+from collections import deque
 
 import numpy as np
 
@@ -31,11 +41,11 @@ from pairplay.services.node import Rejected, stream_seed
 
 class GameLogic:
     name = "game"
-    consumes = frozenset({"CardPicked", "CardObserved", "WrongSuggestionPressed"})
+    consumes = frozenset({"CardPicked", "CardObserved", "WrongSuggestionPressed", "GazeFixated"})
     # the participant's inputs: a simulated participant, or the touch-screen board of the human study
     PLAYERS = frozenset({"participant", "board"})
-    sources = dict.fromkeys(consumes, PLAYERS)
-
+    sources = dict.fromkeys(consumes, PLAYERS) | {"GazeFixated": frozenset({"tracker"})}
+    GAZE_KEPT = 64  # fixations kept for a first pick that arrives after them
     def __init__(self, config: SessionConfig):
         config.validate()
         self.config = config
@@ -43,12 +53,14 @@ class GameLogic:
         self.round = 0
         self.done = False
         self.board: Board | None = None
+        self.fixations: deque[ev.GazeFixated] = deque(maxlen=self.GAZE_KEPT)
         self._new_turn(0)
 
     def _new_turn(self, turn: int) -> None:
         self.turn = turn
         self.first = -1
         self.first_time_ns = 0
+        self.first_page_ms = 0.0
         self.observed = -1
         self.attempt = -1  # no suggestion asked yet this turn
 
@@ -76,6 +88,8 @@ class GameLogic:
             raise Rejected(f"the session is over; {type(e).__name__} ignored")
         if isinstance(e, ev.CardPicked):
             return self._pick(e)
+        if isinstance(e, ev.GazeFixated):
+            return self._gaze(e)
         if (e.round, e.turn) != (self.round, self.turn):
             raise Rejected(f"{type(e).__name__} for round {e.round} turn {e.turn}, but the game is at "
                            f"round {self.round} turn {self.turn}")
@@ -90,7 +104,7 @@ class GameLogic:
         if (e.round, e.turn) != (self.round, self.turn):
             return refuse(f"pick for round {e.round} turn {e.turn}, but the game is at round {self.round} "
                           f"turn {self.turn}")
-        if self.first >= 0 and self.attempt < 0:
+        if self.first >= 0 and self.attempt < 0 and self.config.observed_source != "gaze":
             return refuse("the second card comes after the suggestion: the observed card is not known yet")
         try:
             board, outcome = self.board.pick(e.card)
@@ -101,11 +115,15 @@ class GameLogic:
                                                face=board.faces[e.card], pick=int(outcome is Outcome.SECOND),
                                                pick_seq=e.seq)]
         if outcome is Outcome.FIRST:
-            self.first, self.first_time_ns = e.card, e.time_ns
+            self.first, self.first_time_ns, self.first_page_ms = e.card, e.time_ns, e.page_time_ms
             if self.config.observed_source == "first-pick":
                 out.append(ev.CardObserved(round=self.round, turn=self.turn, card=e.card,
                                            observed_source="first-pick"))
                 out.append(self._request(e.card))
+            elif self.config.observed_source == "gaze":
+                seen = next((f for f in self.fixations if self._looks_for_second(f)), None)
+                if seen is not None:
+                    out += self._observed_by_gaze(seen)
             return out
         return out + self._resolve(e)
 
@@ -118,9 +136,32 @@ class GameLogic:
             raise Rejected(f"observed card {e.card} is not a covered card of the board")
         return [self._request(e.card)]
 
+    def _gaze(self, e: ev.GazeFixated) -> list[ev.Event]:
+        if self.config.observed_source != "gaze":
+            return []  # a tracker may run in any session; only a gaze session reads it
+        if not (isinstance(e.card, int) and 0 <= e.card < N_CARDS):
+            raise Rejected(f"fixation on card {e.card!r}: off the board")
+        if self.first >= 0 and self.attempt < 0 and self._looks_for_second(e):
+            return self._observed_by_gaze(e)
+        self.fixations.append(e)
+        return []
+
+    def _looks_for_second(self, f: ev.GazeFixated) -> bool:
+        """A fixation that tells the observed card: after the first pick, on a covered card."""
+        return (f.time_ns >= self.first_time_ns and f.card != self.first and 0 <= f.card < N_CARDS
+                and bool(self.board.covered >> f.card & 1))
+
+    def _observed_by_gaze(self, f: ev.GazeFixated) -> list[ev.Event]:
+        self.fixations.clear()
+        return [ev.CardObserved(round=self.round, turn=self.turn, card=f.card, observed_source="gaze"),
+                self._request(f.card)]
+
     def _wrong_suggestion(self, e: ev.WrongSuggestionPressed) -> list[ev.Event]:
         if self.attempt < 0 or len(self.board.up) != 1:
             raise Rejected("'wrong suggestion' is pressed between a suggestion and the second pick")
+        if e.attempt >= 0 and e.attempt != self.attempt:
+            raise Rejected(f"'wrong suggestion' for attempt {e.attempt}, but the open suggestion is attempt "
+                           f"{self.attempt}: stale (pressed twice?)")
         return [self._request(self.observed)]
 
     def _request(self, observed: int) -> ev.SuggestionRequested:
@@ -135,11 +176,14 @@ class GameLogic:
     def _resolve(self, e: ev.CardPicked) -> list[ev.Event]:
         self.board, res = self.board.resolve()
         interval_ms = (e.time_ns - self.first_time_ns) / 1e6
-        ignored = self.config.ignore_rule == "time" and interval_ms < self.config.ignore_window_ms
+        page_ms = e.page_time_ms - self.first_page_ms if e.page_time_ms > 0 and self.first_page_ms > 0 else -1.0
+        timed = page_ms if self.config.ignore_clock == "page" and page_ms >= 0 else interval_ms
+        ignored = self.config.ignore_rule == "time" and timed < self.config.ignore_window_ms
         self.matches += res.matched
         out: list[ev.Event] = [ev.TurnResolved(round=self.round, turn=self.turn, first=res.first,
                                                second=res.second, matched=res.matched, round_over=res.round_over,
-                                               interval_ms=interval_ms, ignored_by_time=ignored)]
+                                               interval_ms=interval_ms, ignored_by_time=ignored,
+                                               page_interval_ms=page_ms)]
         if not res.round_over:
             self._new_turn(self.turn + 1)
             return out
