@@ -14,12 +14,13 @@ from __future__ import annotations
 
 import argparse
 import logging
+import sys
 import threading
 import time
 from pathlib import Path
 
-from pairplay.services.bus import Bus, add_bus_arguments, options_from_args, stop_on_signals
-from pairplay.services.runner import Node
+from pairplay.services.bus import Bus, ConfigFileError, add_bus_arguments, options_from_args, stop_on_signals
+from pairplay.services.runner import Node, Stopped
 
 SERVICES = ("game", "learner", "participant", "recorder", "combiner")
 
@@ -57,12 +58,18 @@ def run(args: argparse.Namespace) -> int:
     elif not args.session:
         print(f"pairplay run {args.service}: --session is required")
         return 2
-    bus = Bus(options_from_args(args))
+    try:
+        bus = Bus(options_from_args(args))
+    except ConfigFileError as err:
+        print(f"pairplay run {args.service}: {err}", file=sys.stderr)
+        return 2
+    node = None
     try:
         print(f"listening {' '.join(bus.locators())}", flush=True)
         if args.service == "recorder":
             from pairplay.services.recorder import Recorder
-            recorder = Recorder(bus, args.session, Path(args.out) / f"{args.session}.mcap")
+            recorder = Recorder(bus, args.session, Path(args.out) / f"{args.session}.mcap",
+                                on_failure=lambda _why: stop.set())
             recorder.start()
             checked = 0.0
             try:
@@ -74,7 +81,11 @@ def run(args: argparse.Namespace) -> int:
                         if not _others_alive(bus, args.session):
                             break
             finally:
-                recorder.close()
+                failure = recorder.close()
+            if failure is not None:
+                print(f"pairplay run recorder: writing {recorder.path} failed ({failure}); the file is readable "
+                      f"up to the failure: pairplay recover {recorder.path}", file=sys.stderr)
+                return 1
             return 0
         if args.service == "combiner":
             from pairplay.services.combiner import CombinerLogic
@@ -82,7 +93,7 @@ def run(args: argparse.Namespace) -> int:
         elif args.service == "game":
             from pairplay.services.game import GameLogic
             if config is None:  # a restart: the session's config is in its log
-                config = _recorded_config(bus, args.session)
+                config = _recorded_config(bus, args.session, stop)
                 if config is None:
                     print(f"pairplay run game: session {args.session} has no SessionStarted on the bus; "
                           "give --participant (and the session options) to start it")
@@ -96,18 +107,23 @@ def run(args: argparse.Namespace) -> int:
             logic = ParticipantLogic()
         # a game given its config starts the session; every other service, and a game
         # restarted by session id alone, catches up from the recorder's log
-        node = Node(bus, logic, args.session, resume=not (args.service == "game" and args.participant))
-        node.start(wait_for=tuple(args.wait_for))
+        node = Node(bus, logic, args.session, resume=not (args.service == "game" and args.participant), stop=stop)
+        try:
+            node.start(wait_for=tuple(args.wait_for))
+        except Stopped:
+            return 0
         print(f"{args.service} running in session {args.session}", flush=True)
         node.run(stop)
         return 0
     finally:
+        if node is not None:
+            node.close(0.5)
         bus.close()
 
 
-def _recorded_config(bus: Bus, session: str):
+def _recorded_config(bus: Bus, session: str, stop: threading.Event):
     from pairplay.services.runner import fetch_log
-    for e in fetch_log(bus, session):
+    for e in fetch_log(bus, session, stop=stop):
         if type(e).__name__ == "SessionStarted":
             return e.config
     return None

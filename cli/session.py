@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import argparse
 import logging
+import sys
 import threading
 from datetime import datetime, timezone
 from pathlib import Path
@@ -32,7 +33,8 @@ from pairplay.schemas.policy import PolicyFileError, read_policy
 from pairplay.schemas.session import SessionConfig, learner_overrides
 
 from pairplay.cli.robot import add_robot_arguments, check_robot_args, robot_choice
-from pairplay.services.bus import add_bus_arguments, options_from_args, stop_on_signals
+from pairplay.services.bus import ConfigFileError, add_bus_arguments, options_from_args, stop_on_signals
+from pairplay.services.recorder import RecordingFailed
 from pairplay.services.session import run_session
 
 log = logging.getLogger("pairplay.session")
@@ -109,9 +111,18 @@ def run(args: argparse.Namespace) -> int:
     def announce(bus) -> None:
         print(f"session {config.session}: bus listening on {' '.join(bus.locators()) or '(no listener)'}", flush=True)
 
-    path = run_session(config, Path(args.out) / f"{config.session}.mcap",
-                       bus_options=options_from_args(args, default_mode="router"),
-                       external=tuple(args.external), stop=stop, on_bus=announce, robot=robot_choice(args))
+    try:
+        bus_options = options_from_args(args, default_mode="router")
+        bus_options.to_dict()  # a bad --zenoh-config is the user's mistake: one line, before anything starts
+        path = run_session(config, Path(args.out) / f"{config.session}.mcap", bus_options=bus_options,
+                           external=tuple(args.external), stop=stop, on_bus=announce, robot=robot_choice(args))
+    except ConfigFileError as err:
+        print(f"pairplay session: {err}", file=sys.stderr)
+        return 2
+    except RecordingFailed as err:
+        print(f"pairplay session: writing {err.path} failed ({err.reason}); the session stopped; the file is "
+              f"readable up to the failure: pairplay recover {err.path}", file=sys.stderr)
+        return 1
     from pairplay.replay.fold import fold_events
     from pairplay.replay.reader import read_log
     recorded = read_log(path)

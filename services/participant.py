@@ -77,6 +77,10 @@ class ParticipantLogic:
         return []
 
     def _round(self, e: ev.RoundStarted) -> list[ev.Event]:
+        if self.stage != "idle":
+            # the new deal overtook the end of our last turn (the suggestion, then TurnResolved,
+            # are still on their way: a recorder behind a flood writes them after it)
+            raise NotYet
         self.round = e.round
         self.partner = partner_of(e.faces)
         self.matched = 0

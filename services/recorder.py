@@ -16,7 +16,6 @@ the log so far (`pairplay/<session>/_query/recorder/log`, msgpack batches).
 from __future__ import annotations
 
 import logging
-import queue
 import threading
 import time
 from pathlib import Path
@@ -26,16 +25,16 @@ import msgspec
 
 from pairplay import __version__
 from pairplay.replay.writer import FLUSH_INTERVAL_NS, EventLogWriter
-from pairplay.schemas.events import MessageRejected, SessionStarted, decode_event, encode_event
+from pairplay.schemas.events import SessionStarted, encode_event
 from pairplay.schemas.envelope import stamped
-from pairplay.schemas.keys import alive_key, event_key, parse_event_key, query_key, session_keys
+from pairplay.schemas.keys import alive_key, event_key, query_key, session_keys
 
-from pairplay.services.bus import Bus
+from pairplay.services.bus import Bus, Inbox, Outbox
+from pairplay.services.guard import Guard, Refusals
 from pairplay.services.runner import LOG_QUERY
 
 log = logging.getLogger("pairplay.recorder")
 BATCH = 2000
-_MARK = object()
 
 
 def free_path(path: Path) -> Path:
@@ -49,119 +48,192 @@ def free_path(path: Path) -> Path:
     return candidate
 
 
+class RecordingFailed(Exception):
+    """The recorder could not write its file (disk full, file size limit, a writer error)."""
+
+    def __init__(self, reason: str, path: Path | None = None):
+        super().__init__(reason)
+        self.reason, self.path = reason, path
+
+
 class Recorder:
     name = "recorder"
 
     def __init__(self, bus: Bus | None, session: str, path: str | Path, *, clock: Callable[[], int] = time.time_ns,
-                 flush_interval_ns: int = FLUSH_INTERVAL_NS):
+                 flush_interval_ns: int = FLUSH_INTERVAL_NS, on_failure: Callable[[str], None] | None = None):
         self.bus, self.session, self.path, self.clock = bus, session, free_path(Path(path)), clock
         self.path.parent.mkdir(parents=True, exist_ok=True)
+        self.on_failure = on_failure
+        self.failure: str | None = None  # why the file stopped being written
         self.writer = EventLogWriter(self.path, flush_interval_ns=flush_interval_ns)
-        self.writer.add_metadata("pairplay.recorder", {"session": session, "software_version": __version__,
-                                                       "started_ns": str(clock())})
-        self.queue: queue.Queue = queue.Queue()
-        self.last_seq: dict[str, int] = {}  # per key
-        self.top_seq: dict[str, int] = {}  # per source: the highest sequence number recorded
+        self._guarded(self.writer.add_metadata, "pairplay.recorder",
+                      {"session": session, "software_version": __version__, "started_ns": str(clock())})
+        self.inbox = Inbox(clock=clock)
+        self.outbox = Outbox(bus, self.name) if bus is not None else None
+        self.guard = Guard(session, own=self.name)  # its own refusals are written directly (_publish)
+        self.refusals = Refusals()
         self.kept: list[tuple[str, bytes]] = []
         self.seq = 0
-        self.rejected = 0
         self.ended = False
         self._lock = threading.Lock()
 
-    # -- bus side (Zenoh threads) -----------------------------------------
+    @property
+    def top_seq(self) -> dict[str, int]:
+        return self.guard.top_seq
+
+    @property
+    def rejected(self) -> int:
+        return self.refusals.total
+
+    # -- bus side (Zenoh threads: hand over, never wait) --------------------
     def start(self) -> None:
         self.bus.subscribe(session_keys(self.session), self.enqueue)
-        self.bus.queryable(query_key(self.session, self.name, LOG_QUERY), self._answer_log)
+        self.bus.queryable(query_key(self.session, self.name, LOG_QUERY), self.inbox.control)
         self.bus.alive(alive_key(self.session, self.name))
 
     def enqueue(self, key: str, payload: bytes) -> None:
-        self.queue.put((key, payload, self.clock()))
+        self.inbox.put(key, payload)
 
-    def _answer_log(self, _params: str) -> list[bytes]:
-        """Everything recorded so far, including what was queued when the query came."""
-        reached = threading.Event()
-        self.queue.put((_MARK, reached, 0))
-        reached.wait(5.0)
+    def _answer_log(self, query) -> None:
+        """Everything recorded so far, including what was queued when the query came
+        (the query waited its turn in the inbox); answered from the outbox thread."""
         with self._lock:
             items = list(self.kept)
-        return [msgspec.msgpack.encode((i // BATCH, items[i:i + BATCH])) for i in range(0, len(items), BATCH)] or []
+        batches = [msgspec.msgpack.encode((i // BATCH, items[i:i + BATCH])) for i in range(0, len(items), BATCH)]
+        if self.outbox is not None:
+            self.outbox.call(lambda: Bus.answer(query, batches))
 
     # -- writer side (one thread) -----------------------------------------
+    def _guarded(self, fn, *args, **kwargs):
+        """Call a writer method; any error ends the recording (RecordingFailed), never silently."""
+        if self.failure is not None:
+            raise RecordingFailed(self.failure)
+        try:
+            return fn(*args, **kwargs)
+        except Exception as err:
+            self._fail(f"{type(err).__name__}: {err}" if str(err) else type(err).__name__)
+            raise RecordingFailed(self.failure) from err
+
+    def _fail(self, why: str) -> None:
+        if self.failure is None:
+            self.failure = why
+            log.error("recorder: cannot write %s: %s", self.path, why)
+            if self.on_failure is not None:
+                self.on_failure(why)
+
     def step(self, timeout_s: float = 0.05) -> bool:
+        """Take one item from the inbox (or wait for one until the next flush is due)."""
         due = self.writer.due_in_ns(self.clock())
         wait = timeout_s if due is None else min(timeout_s, due / 1e9)
+        item = self.inbox.get(max(wait, 0.0005))
         try:
-            key, payload, received_ns = self.queue.get(timeout=max(wait, 0.0005))
-        except queue.Empty:
-            self.writer.maybe_flush(self.clock())
+            self._publish(self.refusals.tick(self.clock()) if self.refusals.pending() else [])
+            shed = self.inbox.take_shed()
+            if shed:
+                self.refusals.shed(shed)
+            if item is not None:
+                self._take(item)
+            self._guarded(self.writer.maybe_flush, self.clock())
+        except RecordingFailed:
             return False
-        if key is _MARK:
-            payload.set()
-            return True
-        self.record(key, payload, received_ns)
-        self.writer.maybe_flush(self.clock())
-        return True
+        return item is not None
+
+    def _take(self, item) -> None:
+        key, payload, received_ns = item
+        if key is None:  # a query for the log
+            self._answer_log(payload)
+        else:
+            self.record(key, payload, received_ns)
 
     def record(self, key: str, payload: bytes, received_ns: int) -> bool:
-        """Check and write one message; False (and a published rejection) if it fails a check."""
-        try:
-            event = decode_event(payload)
-            k = parse_event_key(key)
-        except (msgspec.DecodeError, msgspec.ValidationError, ValueError) as err:
-            return self._reject(f"malformed: {err}", key, payload)
-        tag = type(event).__name__
-        if (k.session, k.source, k.tag) != (event.session, event.source, tag):
-            return self._reject(f"key {key} does not match the payload's session {event.session!r}, source "
-                                f"{event.source!r}, event {tag}", key, payload, event)
-        if event.session != self.session:
-            return self._reject(f"wrong session {event.session!r}", key, payload, event)
-        last = self.last_seq.get(key, 0)  # per key, as the services check (node.py)
-        if event.seq <= last:
-            return self._reject(f"sequence number {event.seq} from {event.source} is not above the last one "
-                                f"on {key} ({last}): duplicate or out of order", key, payload, event)
-        self.last_seq[key] = event.seq
-        self.top_seq[event.source] = max(self.top_seq.get(event.source, 0), event.seq)
-        self.writer.write(key, payload, log_time_ns=received_ns, publish_time_ns=event.time_ns, sequence=event.seq)
+        """Check and write one message; False (and a recorded rejection) if it fails a check.
+        Raises RecordingFailed if the file cannot be written."""
+        verdict = self.guard.check(key, payload)
+        if verdict.quiet:
+            return False  # our own refusal coming back: written already
+        event = verdict.event
+        if verdict.reason is not None:
+            return self._reject(verdict.reason, key, payload, event)
+        self._guarded(self.writer.write, key, payload, log_time_ns=received_ns, publish_time_ns=event.time_ns,
+                      sequence=event.seq)
         with self._lock:
             self.kept.append((key, payload))
         if isinstance(event, SessionStarted):
             c = event.config
-            self.writer.add_metadata("pairplay.session", {
+            self._guarded(self.writer.add_metadata, "pairplay.session", {
                 "config": msgspec.json.encode(c).decode(), "session": c.session, "participant": c.participant,
                 "persona": c.persona, "seed": str(c.seed), "game_index": str(c.game_index),
                 "algorithm": c.algorithm, "software_version": c.software_version or __version__})
-        elif tag == "SessionEnded":
+        elif type(event).__name__ == "SessionEnded":
             self.ended = True
         return True
 
     def _reject(self, reason: str, key: str, payload: bytes, event=None) -> bool:
-        self.rejected += 1
-        log.warning("recorder rejected %s: %s", key, reason)
-        if self.bus is not None:
-            self.seq += 1
-            r = stamped(MessageRejected(reason=reason, key=str(key), offending_source=getattr(event, "source", ""),
-                                        offending_seq=getattr(event, "seq", 0),
-                                        excerpt=payload[:200].decode("utf-8", "replace")),
-                        session=self.session, source=self.name, seq=self.seq, time_ns=self.clock())
-            self.bus.put(event_key(self.session, self.name, "MessageRejected"), encode_event(r))
+        out = self.refusals.refuse(self.clock(), reason, key, getattr(event, "source", ""),
+                                   getattr(event, "seq", 0), payload)
+        if any(e.reason == reason for e in out):
+            log.warning("recorder rejected %s: %s", key, reason[:300])
+        self._publish(out)
         return False
 
-    def drain(self) -> None:
-        """Write everything already queued."""
-        while True:
-            try:
-                key, payload, received_ns = self.queue.get_nowait()
-            except queue.Empty:
+    def _publish(self, rejections: list) -> None:
+        """Write our own refusals into the file and tell the bus (the echo is ignored)."""
+        for r in rejections:
+            self.seq += 1
+            now = self.clock()
+            r = stamped(r, session=self.session, source=self.name, seq=self.seq, time_ns=now)
+            key, payload = event_key(self.session, self.name, "MessageRejected"), encode_event(r)
+            if self.failure is None:
+                self._guarded(self.writer.write, key, payload, log_time_ns=now, publish_time_ns=now, sequence=self.seq)
+                self.guard.note(key, r)
+                with self._lock:
+                    self.kept.append((key, payload))
+            if self.outbox is not None:
+                self.outbox.send(key, payload)
+
+    def drain(self, timeout_s: float = 1.0) -> None:
+        """Write what is already queued (at most `timeout_s`: a flood must not hold up the exit)."""
+        deadline = time.monotonic() + timeout_s
+        while self.failure is None and time.monotonic() < deadline:
+            item = self.inbox.get(0)
+            if item is None:
                 return
-            if key is _MARK:
-                payload.set()
-            else:
-                self.record(key, payload, received_ns)
+            try:
+                self._take(item)
+            except RecordingFailed:
+                return
+        if len(self.inbox):
+            log.warning("recorder: %d messages still queued at the exit are not recorded", len(self.inbox))
 
     def run(self, stop: threading.Event) -> None:
-        while not stop.is_set():
-            self.step()
+        """Record until `stop`; a failure of any kind ends the recording loudly (on_failure)."""
+        try:
+            while not stop.is_set() and self.failure is None:
+                self.step()
+        except Exception as err:  # a bug: the file stops here, the session is told, nothing goes on unrecorded
+            log.exception("recorder failed")
+            self._fail(f"recorder error {type(err).__name__}: {err}")
 
-    def close(self) -> None:
-        self.drain()
-        self.writer.close()
+    def close(self) -> str | None:
+        """Write what is queued, finish the file; never raises. The failure, if the
+        file could not be written (it is then readable up to it: `pairplay recover`)."""
+        try:
+            self.drain()
+        except Exception as err:
+            log.exception("recorder failed")
+            self._fail(f"recorder error {type(err).__name__}: {err}")
+        if self.refusals.pending() and self.failure is None:
+            try:
+                self._publish(self.refusals.tick(self.clock(), force=True))
+            except RecordingFailed:
+                pass
+        if self.failure is None:
+            try:
+                self._guarded(self.writer.close)
+            except RecordingFailed:
+                pass
+        else:
+            self.writer.abandon()
+        if self.outbox is not None:
+            self.outbox.close(0.5)
+        return self.failure

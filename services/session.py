@@ -21,9 +21,9 @@ from pairplay.services.bus import Bus, BusOptions
 from pairplay.services.game import GameLogic
 from pairplay.services.learner import LearnerLogic
 from pairplay.services.participant import ParticipantLogic
-from pairplay.services.recorder import Recorder
+from pairplay.services.recorder import Recorder, RecordingFailed
 from pairplay.services.robot.choice import RobotChoice, start_bridge
-from pairplay.services.runner import Node
+from pairplay.services.runner import Node, Stopped
 
 
 def run_session(config: SessionConfig, path: str | Path, *, bus: Bus | None = None,
@@ -36,14 +36,16 @@ def run_session(config: SessionConfig, path: str | Path, *, bus: Bus | None = No
     `nodes_out`, if given, receives the in-process Nodes by service name (tests
     read the live learner's final Q-table from it). `wait_also`: more services
     (liveliness names) the game waits for before it starts the session.
-    `robot` (the --robot options) adds the robot bridge (services/robot)."""
+    `robot` (the --robot options) adds the robot bridge (services/robot).
+    Raises RecordingFailed (after closing everything) if the recording could
+    not be written: the session stops at the first write error."""
     own_bus = bus is None
     # the session's process is the router its external services connect to as clients
     bus = bus if bus is not None else Bus(bus_options or BusOptions(mode="router"))
     stop = stop or threading.Event()
     if on_bus is not None:
         on_bus(bus)
-    recorder = Recorder(bus, config.session, path)
+    recorder = Recorder(bus, config.session, path, on_failure=lambda _why: stop.set())
     recorder_stop = threading.Event()
     recorder.start()
     recorder_thread = threading.Thread(target=recorder.run, args=(recorder_stop,), name="pairplay-recorder",
@@ -59,55 +61,63 @@ def run_session(config: SessionConfig, path: str | Path, *, bus: Bus | None = No
             bridge.run_in_thread(stop)
             needed.append("robot")
         if "learner" not in external:
-            nodes.append(Node(bus, LearnerLogic(), config.session))
+            nodes.append(Node(bus, LearnerLogic(), config.session, stop=stop))
         if "participant" not in external and config.participant.startswith("sim:"):
-            nodes.append(Node(bus, ParticipantLogic(), config.session))
+            nodes.append(Node(bus, ParticipantLogic(), config.session, stop=stop))
         for node in nodes:
             node.start()
             node.run_in_thread(stop)
             if nodes_out is not None:
                 nodes_out[node.logic.name] = node
         if "game" not in external:
-            game = Node(bus, GameLogic(config), config.session, resume=False)
-            game.start(wait_for=tuple(needed) + tuple(wait_also))
+            game = Node(bus, GameLogic(config), config.session, resume=False, stop=stop)
             nodes.append(game)
             if nodes_out is not None:
                 nodes_out["game"] = game
+            game.start(wait_for=tuple(needed) + tuple(wait_also))
             game.run_in_thread(stop)
         else:
             needed.append("game")
         for node in nodes:
-            while node.thread.is_alive() and not stop.is_set():
+            while node.thread is not None and node.thread.is_alive() and not stop.is_set():
                 node.thread.join(0.1)
         wait_external_exit(bus, config.session, [s for s in external if s in needed], stop, settle_timeout_s)
-        wait_recorded(recorder, nodes, quiet_s=0.2 if external else 0.0)
+        wait_recorded(recorder, nodes, quiet_s=0.2 if external else 0.0, stop=stop)
+    except Stopped:
+        pass  # SIGINT/SIGTERM (or a recording failure) while a service waited
     finally:
+        interrupted = stop.is_set()
         stop.set()
         for node in nodes:
             if node.thread is not None:
-                node.thread.join(5.0)
+                node.thread.join(1.0)
+            node.close(0.3)
         if bridge is not None and bridge.thread is not None:
             # the bridge reports the robot's last acknowledgements before the recorder closes
-            bridge.thread.join(bridge.settle_s + 5)
+            bridge.thread.join(bridge.settle_s + 5 if not interrupted else 1.5)
         recorder_stop.set()
-        recorder_thread.join(5.0)
-        recorder.close()
+        recorder_thread.join(1.0)
+        failure = recorder.close()
         if own_bus:
             bus.close()
+    if failure is not None:
+        raise RecordingFailed(failure, recorder.path)
     return recorder.path
 
 
-def wait_recorded(recorder: Recorder, nodes: list[Node], quiet_s: float, timeout_s: float = 5.0) -> None:
+def wait_recorded(recorder: Recorder, nodes: list[Node], quiet_s: float, timeout_s: float = 5.0,
+                  stop: threading.Event | None = None) -> None:
     """Wait until the recorder holds every event our nodes published (Zenoh delivers
     to local subscribers on its own threads, so the last ones may still be on their
     way), and, with external services, until it has been quiet for `quiet_s`."""
     deadline = time.monotonic() + timeout_s
-    while time.monotonic() < deadline:
-        if all(recorder.top_seq.get(n.logic.name, 0) >= n.driver.seq for n in nodes) and recorder.queue.empty():
+    while time.monotonic() < deadline and not (stop is not None and stop.is_set()):
+        if all(recorder.top_seq.get(n.logic.name, 0) >= n.driver.seq for n in nodes) and not len(recorder.inbox):
             break
         time.sleep(0.005)
     count = -1
-    while quiet_s and time.monotonic() < deadline and count != recorder.writer.count:
+    while quiet_s and time.monotonic() < deadline and count != recorder.writer.count and \
+            not (stop is not None and stop.is_set()):
         count = recorder.writer.count
         time.sleep(quiet_s)
 
