@@ -92,7 +92,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     add_config_arguments(p)
     p.add_argument("--out", default="recordings", help="directory of the recording (default recordings/)")
     add_robot_arguments(p)
-    p.add_argument("--external", action="append", default=[], choices=("learner", "participant", "game"),
+    p.add_argument("--external", action="append", default=[], choices=("learner", "participant", "game", "recorder"),
                    help="leave this service to another process (`pairplay run`)")
     add_bus_arguments(p)
 
@@ -123,6 +123,9 @@ def run(args: argparse.Namespace) -> int:
         print(f"pairplay session: writing {err.path} failed ({err.reason}); the session stopped; the file is "
               f"readable up to the failure: pairplay recover {err.path}", file=sys.stderr)
         return 1
+    if "recorder" in args.external:
+        print(f"session {config.session} over; the external recorder writes its file")
+        return 0
     from pairplay.replay.fold import fold_events
     from pairplay.replay.reader import read_log
     recorded = read_log(path)

@@ -36,6 +36,7 @@ CATALOGUE: dict[str, tuple[str, str]] = {
     "QuestionnaireAnswered": ("board / experimenter", "a participant's answers to a questionnaire (thesis 7.2)"),
     "MessageRejected": ("any service", "a bus message a service refused (malformed, unknown tag, wrong session, out of order), with the reason"),
     "SessionEnded": ("game", "the session is over, with the reason and the rounds played"),
+    "RecordingGap": ("recorder", "a restarted recorder continues the session's file: events copied, refilled from the services, the gap's bounds"),
 }
 
 _ENVELOPE = {f.name for f in msgspec.structs.fields(Event)}

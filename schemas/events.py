@@ -17,6 +17,7 @@ Who publishes what (source = the service name):
   learner:     SuggestionMade, RewardGiven, QUpdated
   combiner:    PolicyCombined (answering CombineRequested)
   robot:       RobotActed (schemas/robot.py)
+  recorder:    RecordingGap (a restarted recorder continues the session's file)
   any service: ServiceStarted, MessageRejected
 """
 
@@ -26,7 +27,7 @@ from typing import Annotated, Union
 
 import msgspec
 
-from .envelope import Event, Seq
+from .envelope import Event, Seq, TimeNs
 from .session import SessionConfig
 
 
@@ -224,6 +225,19 @@ class MessageRejected(Event, tag="MessageRejected"):
     excerpt: str = ""  # the first bytes of the payload, for the record
 
 
+class RecordingGap(Event, tag="RecordingGap"):
+    """A restarted recorder continues an earlier file of the session: what it copied, what
+    it refilled from the services' own records of what they published, and the gap."""
+
+    earlier_file: str  # the file this one continues (its readable events are copied first)
+    copied: Count  # events copied from it
+    last_copied_ns: TimeNs  # log time of the last event the earlier file kept: the gap starts after it
+    resumed_ns: TimeNs  # when this recorder started listening: the gap ends there
+    refilled: Count = 0  # events of the gap the services re-sent (written with their publish time)
+    refilled_from: list[str] = []  # the services that answered
+    unanswered: list[str] = []  # sources seen before the gap that did not answer: their gap events may be lost
+
+
 class SessionEnded(Event, tag="SessionEnded"):
     reason: str = "completed"
     rounds_played: Count = 0
@@ -244,7 +258,7 @@ EVENT_TYPES: tuple[type[Event], ...] = (
     ServiceStarted, SessionStarted, RoundStarted, CardPicked, CardRevealed, PickRejected,
     CardObserved, SuggestionRequested, SuggestionMade, SuggestionPerceived,
     WrongSuggestionPressed, TurnResolved, RewardGiven, QUpdated, RoundEnded,
-    CombineRequested, PolicyCombined, QuestionnaireAnswered, MessageRejected, SessionEnded,
+    CombineRequested, PolicyCombined, QuestionnaireAnswered, MessageRejected, SessionEnded, RecordingGap,
 ) + _robot_events()
 EVENT_BY_TAG: dict[str, type[Event]] = {t.__struct_config__.tag: t for t in EVENT_TYPES}
 AnyEvent = Union[EVENT_TYPES]  # type: ignore[valid-type]

@@ -55,6 +55,7 @@ PUBLISHERS: dict[str, frozenset[str]] = {
     "RobotActed": frozenset({"robot"}),
     "CombineRequested": CLIENTS,
     "PolicyCombined": frozenset({"combiner"}),
+    "RecordingGap": frozenset({"recorder"}),
 }
 ONCE_PER_SESSION = frozenset({"SessionStarted", "SessionEnded"})
 

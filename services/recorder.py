@@ -25,16 +25,26 @@ import msgspec
 
 from pairplay import __version__
 from pairplay.replay.writer import FLUSH_INTERVAL_NS, EventLogWriter
-from pairplay.schemas.events import SessionStarted, encode_event
+from pairplay.schemas.events import RecordingGap, SessionStarted, decode_event, encode_event
 from pairplay.schemas.envelope import stamped
 from pairplay.schemas.keys import alive_key, event_key, query_key, session_keys
 
 from pairplay.services.bus import Bus, Inbox, Outbox
 from pairplay.services.guard import Guard, Refusals
-from pairplay.services.runner import LOG_QUERY
+from pairplay.services.runner import LOG_QUERY, SENT_QUERY
 
 log = logging.getLogger("pairplay.recorder")
 BATCH = 2000
+
+
+def latest_file(path: Path) -> Path | None:
+    """The newest existing file of a session: `path` or its highest `<stem>.<n>.mcap`."""
+    latest, n = (path if path.exists() else None), 1
+    while True:
+        candidate = path.with_name(f"{path.stem}.{n}{path.suffix}")
+        if not candidate.exists():
+            return latest
+        latest, n = candidate, n + 1
 
 
 def free_path(path: Path) -> Path:
@@ -61,6 +71,7 @@ class Recorder:
 
     def __init__(self, bus: Bus | None, session: str, path: str | Path, *, clock: Callable[[], int] = time.time_ns,
                  flush_interval_ns: int = FLUSH_INTERVAL_NS, on_failure: Callable[[str], None] | None = None):
+        earlier = latest_file(Path(path))
         self.bus, self.session, self.path, self.clock = bus, session, free_path(Path(path)), clock
         self.path.parent.mkdir(parents=True, exist_ok=True)
         self.on_failure = on_failure
@@ -76,6 +87,91 @@ class Recorder:
         self.seq = 0
         self.ended = False
         self._lock = threading.Lock()
+        self._overlap = 0
+        self.continued: dict | None = None
+        if earlier is not None:
+            self._continue(earlier)
+
+    # -- a restarted recorder: continue the session's record ----------------
+    def _continue(self, earlier: Path) -> None:
+        """Copy every readable event of the session's newest earlier file (a crash may have
+        cut it) into this one, so this file alone holds the whole session."""
+        from mcap.records import Channel, Message
+        from pairplay.replay.reader import iter_records
+        topics: dict[int, str] = {}
+        copied, last_ns = 0, 0
+        try:
+            for record in iter_records(earlier):
+                if isinstance(record, Channel):
+                    topics[record.id] = record.topic
+                elif isinstance(record, Message) and record.channel_id in topics:
+                    if self._copy(topics[record.channel_id], record.data, record.log_time):
+                        copied += 1
+                        last_ns = max(last_ns, record.log_time)
+        except Exception as err:  # the cut of a crashed file: everything before it is kept
+            log.info("recorder: %s ends early (%s); %d events copied", earlier, err, copied)
+        self.continued = {"earlier_file": earlier.name, "copied": copied, "last_copied_ns": last_ns}
+        log.info("recorder: continuing %s (%d events) in %s", earlier, copied, self.path)
+
+    def _copy(self, key: str, payload: bytes, log_time_ns: int) -> bool:
+        source = key.split("/")[2] if key.count("/") == 3 else ""
+        if source != self.name:
+            return self.record(key, payload, log_time_ns, quiet=True)
+        event = decode_event(payload)  # our own earlier refusals and gaps: kept as they are
+        self._guarded(self.writer.write, key, payload, log_time_ns=log_time_ns, publish_time_ns=event.time_ns,
+                      sequence=event.seq)
+        self.guard.note(key, event)
+        self.seq = max(self.seq, event.seq)
+        with self._lock:
+            self.kept.append((key, payload))
+        return True
+
+    def _contiguous(self) -> dict[str, int]:
+        """Per source, the last sequence number up to which the file has every event (a source's
+        events published before any recorder listened are asked for too)."""
+        seen: dict[str, set[int]] = {}
+        with self._lock:
+            for key, _ in self.kept:
+                source = key.split("/")[2]
+                if source != self.name:
+                    seen.setdefault(source, set()).add(decode_event(_).seq)
+        out = {}
+        for source, seqs in seen.items():
+            n = 0
+            while n + 1 in seqs:
+                n += 1
+            out[source] = n
+        return out
+
+    def refill(self, timeout_s: float = 3.0) -> None:
+        """Ask every service for what it published after the earlier file's last event of it,
+        write that (log time = its publish time), then record the gap (RecordingGap)."""
+        if self.continued is None or self.bus is None:
+            return
+        resumed_ns = self.clock()
+        sources = self._contiguous()
+        after = ",".join(f"{s}:{n}" for s, n in sorted(sources.items()))
+        answered, refilled = [], 0
+        for payload in self.bus.query(f"{query_key(self.session, '*', SENT_QUERY)}?after={after}", timeout_s):
+            try:
+                name, items = msgspec.msgpack.decode(payload, type=tuple[str, list[tuple[str, bytes]]])
+            except msgspec.DecodeError as err:
+                log.warning("recorder: unreadable refill: %s", err)
+                continue
+            answered.append(name)
+            for key, data in items:
+                try:
+                    event = decode_event(data)
+                except (msgspec.DecodeError, msgspec.ValidationError):
+                    continue
+                refilled += self.record(key, data, event.time_ns, quiet=True)
+        self._overlap = len(self.inbox)  # what came meanwhile may repeat the refill: no rejections for that
+        gap = RecordingGap(earlier_file=self.continued["earlier_file"], copied=self.continued["copied"],
+                           last_copied_ns=self.continued["last_copied_ns"], resumed_ns=resumed_ns,
+                           refilled=refilled, refilled_from=sorted(answered),
+                           unanswered=sorted(set(sources) - set(answered)))
+        self._publish([gap])
+        log.info("recorder: gap recorded: %d events refilled from %s", refilled, ", ".join(answered) or "nobody")
 
     @property
     def top_seq(self) -> dict[str, int]:
@@ -90,6 +186,7 @@ class Recorder:
         self.bus.subscribe(session_keys(self.session), self.enqueue)
         self.bus.queryable(query_key(self.session, self.name, LOG_QUERY), self.inbox.control)
         self.bus.alive(alive_key(self.session, self.name))
+        self.refill()
 
     def enqueue(self, key: str, payload: bytes) -> None:
         self.inbox.put(key, payload)
@@ -142,13 +239,17 @@ class Recorder:
         key, payload, received_ns = item
         if key is None:  # a query for the log
             self._answer_log(payload)
-        else:
-            self.record(key, payload, received_ns)
+            return
+        overlap = self._overlap > 0
+        if overlap:
+            self._overlap -= 1
+        self.record(key, payload, received_ns, quiet=overlap)
 
-    def record(self, key: str, payload: bytes, received_ns: int) -> bool:
+    def record(self, key: str, payload: bytes, received_ns: int, quiet: bool = False) -> bool:
         """Check and write one message; False (and a recorded rejection) if it fails a check.
+        `quiet`: it may repeat what was copied or refilled; a repeat is skipped, not refused.
         Raises RecordingFailed if the file cannot be written."""
-        verdict = self.guard.check(key, payload)
+        verdict = self.guard.check(key, payload, overlap=quiet)
         if verdict.quiet:
             return False  # our own refusal coming back: written already
         event = verdict.event
@@ -177,12 +278,12 @@ class Recorder:
         return False
 
     def _publish(self, rejections: list) -> None:
-        """Write our own refusals into the file and tell the bus (the echo is ignored)."""
+        """Write our own events (refusals, gaps) into the file and tell the bus (the echo is ignored)."""
         for r in rejections:
             self.seq += 1
             now = self.clock()
             r = stamped(r, session=self.session, source=self.name, seq=self.seq, time_ns=now)
-            key, payload = event_key(self.session, self.name, "MessageRejected"), encode_event(r)
+            key, payload = event_key(self.session, self.name, type(r).__name__), encode_event(r)
             if self.failure is None:
                 self._guarded(self.writer.write, key, payload, log_time_ns=now, publish_time_ns=now, sequence=self.seq)
                 self.guard.note(key, r)

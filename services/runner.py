@@ -33,6 +33,7 @@ from pairplay.services.node import Driver, Logic
 
 log = logging.getLogger("pairplay.runner")
 LOG_QUERY = "log"
+SENT_QUERY = "sent"
 
 
 def fetch_log(bus: Bus, session: str, timeout_s: float = 5.0, stop: threading.Event | None = None) -> list[Event]:
@@ -52,6 +53,22 @@ def fetch_log(bus: Bus, session: str, timeout_s: float = 5.0, stop: threading.Ev
     return events
 
 
+def answer_sent(outbox: Outbox, name: str, query) -> None:
+    """Answer `.../_query/<name>/sent?after=<source>:<seq>,...` with what we published after
+    that sequence number: msgpack (name, [(key, payload), ...]); from the outbox thread,
+    after everything queued before it."""
+    after = 0
+    for part in str(query.parameters).replace("after=", "").split(","):
+        source, _, seq = part.partition(":")
+        if source == name and seq.isascii() and seq.isdigit():
+            after = int(seq)
+
+    def reply() -> None:
+        items = [(k, p) for k, p in outbox.sent if decode_event(p).seq > after]
+        Bus.answer(query, [msgspec.msgpack.encode((name, items))])
+    outbox.call(reply)
+
+
 class Stopped(Exception):
     """The stop flag was set while the service waited."""
 
@@ -65,7 +82,7 @@ class Node:
         self.resume = resume
         self.stop = stop if stop is not None else threading.Event()
         self.inbox = Inbox()
-        self.outbox = Outbox(bus, logic.name)
+        self.outbox = Outbox(bus, logic.name, keep=True)  # a restarted recorder may ask what we sent
         self._overlap = 0
         self.resumed_events = 0
         self.thread: threading.Thread | None = None
@@ -86,6 +103,7 @@ class Node:
                 self.bus.subscribe(f"{session_keys(self.session)[:-2]}*/{tag}", self._on_message)
         else:
             self.bus.subscribe(session_keys(self.session), self._on_message)
+        self.bus.queryable(query_key(self.session, self.logic.name, SENT_QUERY), self.inbox.control)
         self.bus.alive(alive_key(self.session, self.logic.name))
         if wait_for:
             self.wait_for(wait_for, wait_timeout_s)
@@ -132,6 +150,9 @@ class Node:
         if item is None:
             return False
         key, payload, _ = item
+        if key is None:  # a restarted recorder asks what we sent
+            answer_sent(self.outbox, self.logic.name, payload)
+            return True
         overlap = self._overlap > 0
         if overlap:
             self._overlap -= 1

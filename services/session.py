@@ -45,12 +45,14 @@ def run_session(config: SessionConfig, path: str | Path, *, bus: Bus | None = No
     stop = stop or threading.Event()
     if on_bus is not None:
         on_bus(bus)
-    recorder = Recorder(bus, config.session, path, on_failure=lambda _why: stop.set())
+    recorder = recorder_thread = None
     recorder_stop = threading.Event()
-    recorder.start()
-    recorder_thread = threading.Thread(target=recorder.run, args=(recorder_stop,), name="pairplay-recorder",
-                                       daemon=True)
-    recorder_thread.start()
+    if "recorder" not in external:
+        recorder = Recorder(bus, config.session, path, on_failure=lambda _why: stop.set())
+        recorder.start()
+        recorder_thread = threading.Thread(target=recorder.run, args=(recorder_stop,), name="pairplay-recorder",
+                                           daemon=True)
+        recorder_thread.start()
     needed = ["recorder", "learner"] + (["participant"] if config.participant.startswith("sim:") else [])
     nodes = []
     bridge = None
@@ -81,8 +83,11 @@ def run_session(config: SessionConfig, path: str | Path, *, bus: Bus | None = No
         for node in nodes:
             while node.thread is not None and node.thread.is_alive() and not stop.is_set():
                 node.thread.join(0.1)
-        wait_external_exit(bus, config.session, [s for s in external if s in needed], stop, settle_timeout_s)
-        wait_recorded(recorder, nodes, quiet_s=0.2 if external else 0.0, stop=stop)
+        # an external recorder stays until everyone else left: do not wait for it
+        wait_external_exit(bus, config.session, [s for s in external if s in needed and s != "recorder"], stop,
+                           settle_timeout_s)
+        if recorder is not None:
+            wait_recorded(recorder, nodes, quiet_s=0.2 if external else 0.0, stop=stop)
     except Stopped:
         pass  # SIGINT/SIGTERM (or a recording failure) while a service waited
     finally:
@@ -96,13 +101,15 @@ def run_session(config: SessionConfig, path: str | Path, *, bus: Bus | None = No
             # the bridge reports the robot's last acknowledgements before the recorder closes
             bridge.thread.join(bridge.settle_s + 5 if not interrupted else 1.5)
         recorder_stop.set()
-        recorder_thread.join(1.0)
-        failure = recorder.close()
+        failure = None
+        if recorder is not None:
+            recorder_thread.join(1.0)
+            failure = recorder.close()
         if own_bus:
             bus.close()
     if failure is not None:
         raise RecordingFailed(failure, recorder.path)
-    return recorder.path
+    return recorder.path if recorder is not None else Path(path)
 
 
 def wait_recorded(recorder: Recorder, nodes: list[Node], quiet_s: float, timeout_s: float = 5.0,

@@ -271,3 +271,41 @@ def test_a_bad_zenoh_config_file_is_one_line_and_exit_2(tmp_path):
     p = session_proc(tmp_path, "--participant", "sim:ashley", "--zenoh-config", str(path))
     out, err = p.communicate(timeout=30)
     assert p.returncode == 2 and len(err.strip().splitlines()) == 1 and "bad.json5" in err
+
+
+def test_a_restarted_recorder_continues_the_sessions_record_and_marks_the_gap(tmp_path):
+    # before: the new recorder wrote <session>.1.mcap without the session's start; verify refused
+    # it and the events of the gap were in neither file
+    env = dict(os.environ, PYTHONUNBUFFERED="1")
+    p = session_proc(tmp_path, "--participant", "sim:ashley", "--rounds", "60", "--session", "rr1",
+                     "--external", "recorder")
+
+    def recorder(endpoint):
+        return subprocess.Popen([sys.executable, "-m", "pairplay", "run", "recorder", "--session", "rr1", "--out",
+                                 str(tmp_path), "--connect", endpoint], stdout=subprocess.DEVNULL,
+                                stderr=subprocess.DEVNULL, env=env)
+    try:
+        endpoint = endpoint_of(first_line(p))
+        first = recorder(endpoint)
+        # the game starts once the recorder is on the bus; let the session run a little
+        assert wait_until(lambda: (tmp_path / "rr1.mcap").exists() and (tmp_path / "rr1.mcap").stat().st_size
+                          > 20_000, 60)
+        first.kill()
+        first.wait()
+        time.sleep(1.0)  # the gap: the session goes on unrecorded
+        second = recorder(endpoint)
+        p.communicate(timeout=120)
+        second.wait(timeout=60)
+    finally:
+        p.kill()
+    assert p.returncode == 0 and second.returncode == 0
+    log = read_log(tmp_path / "rr1.1.mcap")
+    assert not log.truncated and not log.bad
+    gaps = [r.event for r in log.events if isinstance(r.event, ev.RecordingGap)]
+    assert len(gaps) == 1 and gaps[0].earlier_file == "rr1.mcap" and gaps[0].copied > 0
+    assert gaps[0].refilled > 0 and {"game", "learner", "participant"} <= set(gaps[0].refilled_from)
+    assert any(isinstance(r.event, ev.SessionStarted) for r in log.events)
+    for source in ("game", "learner", "participant"):  # nothing lost, nothing doubled
+        seqs = sorted(r.event.seq for r in log.events if r.event.source == source)
+        assert seqs == list(range(1, len(seqs) + 1)), source
+    assert verify_recording(tmp_path / "rr1.1.mcap").ok
