@@ -19,7 +19,7 @@ import threading
 import time
 from pathlib import Path
 
-from pairplay.services.bus import Bus, ConfigFileError, add_bus_arguments, options_from_args, stop_on_signals
+from pairplay.services.bus import Bus, BusOpenError, ConfigFileError, add_bus_arguments, options_from_args, stop_on_signals
 from pairplay.services.runner import Node, Stopped
 
 SERVICES = ("game", "learner", "participant", "recorder", "combiner")
@@ -60,7 +60,7 @@ def run(args: argparse.Namespace) -> int:
         return 2
     try:
         bus = Bus(options_from_args(args))
-    except ConfigFileError as err:
+    except (ConfigFileError, BusOpenError) as err:
         print(f"pairplay run {args.service}: {err}", file=sys.stderr)
         return 2
     node = None

@@ -33,7 +33,7 @@ from pairplay.schemas.policy import PolicyFileError, read_policy
 from pairplay.schemas.session import SessionConfig, learner_overrides
 
 from pairplay.cli.robot import add_robot_arguments, check_robot_args, robot_choice
-from pairplay.services.bus import ConfigFileError, add_bus_arguments, options_from_args, stop_on_signals
+from pairplay.services.bus import BusOpenError, ConfigFileError, add_bus_arguments, options_from_args, stop_on_signals
 from pairplay.services.recorder import RecordingFailed
 from pairplay.services.session import run_session
 
@@ -116,7 +116,7 @@ def run(args: argparse.Namespace) -> int:
         bus_options.to_dict()  # a bad --zenoh-config is the user's mistake: one line, before anything starts
         path = run_session(config, Path(args.out) / f"{config.session}.mcap", bus_options=bus_options,
                            external=tuple(args.external), stop=stop, on_bus=announce, robot=robot_choice(args))
-    except ConfigFileError as err:
+    except (ConfigFileError, BusOpenError) as err:
         print(f"pairplay session: {err}", file=sys.stderr)
         return 2
     except RecordingFailed as err:

@@ -68,6 +68,25 @@ def overlay(base: dict, top: dict) -> dict:
     return out
 
 
+class BusOpenError(ConnectionError):
+    """Zenoh refused to open the session (the message says which endpoint and why)."""
+
+
+_log_ready = False
+
+
+def _init_zenoh_log() -> None:
+    """Zenoh's own log follows RUST_LOG (e.g. RUST_LOG=zenoh::net::routing::interceptor::
+    access_control=trace shows each access-control decision), else only its errors."""
+    global _log_ready
+    if not _log_ready:
+        _log_ready = True
+        try:
+            zenoh.init_log_from_env_or("error")
+        except Exception:  # already set up by the host program
+            pass
+
+
 class ConfigFileError(ValueError):
     """A --zenoh-config file that cannot be read (the message names the file and why)."""
 
@@ -309,7 +328,16 @@ class Bus:
         # express: each event leaves at once instead of waiting to be batched with others
         # (an event is a decision someone waits for)
         self.express = express
-        self.session = session if session is not None else zenoh.open(self.options.to_zenoh())
+        if session is None:
+            _init_zenoh_log()
+            config = self.options.to_zenoh()
+            try:
+                session = zenoh.open(config)
+            except Exception as err:  # e.g. a TLS handshake refused, nothing listening (client mode)
+                raise BusOpenError(f"cannot open the bus ({self.options.mode}"
+                                   f"{', connect ' + ' '.join(self.options.connect) if self.options.connect else ''}): "
+                                   f"{str(err).split('  at ')[0]}") from None
+        self.session = session
         self._publishers: dict[str, zenoh.Publisher] = {}
         self._lock = threading.Lock()
         self._declared: list = []
