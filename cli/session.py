@@ -92,7 +92,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     add_config_arguments(p)
     p.add_argument("--out", default="recordings", help="directory of the recording (default recordings/)")
     add_robot_arguments(p)
-    p.add_argument("--external", action="append", default=[], choices=("learner", "participant", "game", "recorder"),
+    p.add_argument("--external", action="append", default=[], choices=("learner", "participant", "game", "recorder", "robot"),
                    help="leave this service to another process (`pairplay run`)")
     add_bus_arguments(p)
 
@@ -115,7 +115,8 @@ def run(args: argparse.Namespace) -> int:
         bus_options = options_from_args(args, default_mode="router")
         bus_options.to_dict()  # a bad --zenoh-config is the user's mistake: one line, before anything starts
         path = run_session(config, Path(args.out) / f"{config.session}.mcap", bus_options=bus_options,
-                           external=tuple(args.external), stop=stop, on_bus=announce, robot=robot_choice(args))
+                           external=tuple(args.external), stop=stop, on_bus=announce,
+                           robot=None if "robot" in args.external else robot_choice(args))
     except (ConfigFileError, BusOpenError) as err:
         print(f"pairplay session: {err}", file=sys.stderr)
         return 2

@@ -61,6 +61,7 @@ def run_session(config: SessionConfig, path: str | Path, *, bus: Bus | None = No
             bridge = start_bridge(bus, config.session, robot)
         if bridge is not None:
             bridge.run_in_thread(stop)
+        if bridge is not None or "robot" in external:  # a bridge on the robot's own host: `pairplay robot`
             needed.append("robot")
         if "learner" not in external:
             nodes.append(Node(bus, LearnerLogic(), config.session, stop=stop))
