@@ -5,15 +5,18 @@ channel named by its key, with the flattened JSON Schema of its event class
 (schemas/jsonschema.py), so `mcap` tools and Foxglove read the file as it is.
 Loss on a crash is bounded by age: `maybe_flush(now_ns)` closes the open chunk
 and flushes the file once the oldest message not yet flushed is
-`flush_interval_ns` old (default 50 ms, measured from its log time, the moment
-it reached the recorder), so a writer killed with SIGKILL loses only messages
-younger than that; the other half of the 0.1 s bound (`LOSS_BOUND_NS`) is the
+`flush_interval_ns` old (default 50 ms, from its log time, the moment the
+recorder took it), so a writer killed with SIGKILL loses only messages younger
+than that; the other half of the 0.1 s bound (`LOSS_BOUND_NS`) is the
 recorder's margin for its own backlog. `max_flush_age_ns` is the oldest any
-message got before its flush (what the bound is measured by). Times must fit
-MCAP's unsigned 64-bit fields: anything else raises ValueError before the file
-is touched. Metadata records (session config, seed, software
+message got before its flush. Times must fit MCAP's unsigned 64-bit fields:
+anything else raises ValueError before the file is touched. Metadata records (session config, seed, software
 version) can be added at any point of the file. The caller owns the clock: every
-time is an argument.
+time is an argument. Log times are the writer's own record of when it took each
+message and never go backwards in a file (a time before the last one written is
+written as the last one: Zenoh threads hand messages over slightly out of order,
+and wall clocks step back); the publish time is the log time unless the caller
+has a time of its own it trusts, never a time read from the message itself.
 """
 
 from __future__ import annotations
@@ -41,12 +44,15 @@ class EventLogWriter:
                  chunk_size: int = CHUNK_SIZE, library: str = "pairplay"):
         self._own = isinstance(output, (str, Path))
         self._stream = open(output, "wb") if self._own else output
-        self._writer = Writer(self._stream, chunk_size=chunk_size, compression=CompressionType.ZSTD)
+        # data CRCs on: the Data End record then carries the CRC of the whole data section (mcapscan checks it)
+        self._writer = Writer(self._stream, chunk_size=chunk_size, compression=CompressionType.ZSTD,
+                              enable_data_crcs=True)
         self._writer.start(profile=PROFILE, library=library)
         self._schemas: dict[str, int] = {}
         self._channels: dict[str, int] = {}
         self.flush_interval_ns = int(flush_interval_ns)
         self._oldest_ns: int | None = None  # log time of the oldest message not flushed yet
+        self._last_log_ns = 0
         self._unflushed = 0
         self.max_flush_age_ns = 0
         self.flushes = 0
@@ -72,6 +78,8 @@ class EventLogWriter:
         """Append one message (already validated JSON of the key's event type)."""
         if not (0 <= log_time_ns < U64 and 0 <= publish_time_ns < U64):
             raise ValueError(f"times out of MCAP's range: log {log_time_ns}, publish {publish_time_ns}")
+        log_time_ns = max(int(log_time_ns), self._last_log_ns)  # monotonic per file (see rule)
+        self._last_log_ns = log_time_ns
         self._writer.add_message(self.channel_for(key), log_time_ns, payload, publish_time_ns or log_time_ns,
                                  sequence & 0xFFFFFFFF)
         self.count += 1

@@ -27,7 +27,7 @@ from typing import Annotated, Union
 
 import msgspec
 
-from .envelope import Event, Seq, TimeNs
+from .envelope import Event, Nanos, Seq, dec_hook, enc_hook
 from .session import SessionConfig
 
 
@@ -231,16 +231,25 @@ class RecordingGap(Event, tag="RecordingGap"):
 
     earlier_file: str  # the file this one continues (its readable events are copied first)
     copied: Count  # events copied from it
-    last_copied_ns: TimeNs  # log time of the last event the earlier file kept: the gap starts after it
-    resumed_ns: TimeNs  # when this recorder started listening: the gap ends there
+    last_copied_ns: Nanos  # log time of the last event the earlier file kept: the gap starts after it
+    resumed_ns: Nanos  # when this recorder started listening: the gap ends there
     refilled: Count = 0  # events of the gap the services re-sent (written with their publish time)
     refilled_from: list[str] = []  # the services that answered
     unanswered: list[str] = []  # sources seen before the gap that did not answer: their gap events may be lost
 
 
+END_REASONS = ("completed", "interrupted", "aborted", "failed")
+
+
 class SessionEnded(Event, tag="SessionEnded"):
+    """Why the session ended (END_REASONS: completed; interrupted by SIGINT/SIGTERM; aborted by the
+    experimenter; a service failed) and how far it got."""
+
     reason: str = "completed"
-    rounds_played: Count = 0
+    rounds_played: Count = 0  # rounds finished
+    detail: str = ""  # e.g. "SIGTERM", "learner left the bus and did not come back within 30 s"
+    round: Annotated[int, msgspec.Meta(ge=-1, le=2**31 - 1)] = -1  # the round under way when it ended (-1: none)
+    turns_in_round: Count = 0  # turns of that round resolved when it ended
 
 
 def _robot_events() -> tuple[type[Event], ...]:
@@ -263,8 +272,8 @@ EVENT_TYPES: tuple[type[Event], ...] = (
 EVENT_BY_TAG: dict[str, type[Event]] = {t.__struct_config__.tag: t for t in EVENT_TYPES}
 AnyEvent = Union[EVENT_TYPES]  # type: ignore[valid-type]
 
-_decoder = msgspec.json.Decoder(AnyEvent)
-_encoder = msgspec.json.Encoder()
+_decoder = msgspec.json.Decoder(AnyEvent, dec_hook=dec_hook)
+_encoder = msgspec.json.Encoder(enc_hook=enc_hook)
 
 
 def decode_event(payload: bytes) -> Event:

@@ -36,6 +36,7 @@ class ParticipantLogic:
         self.users: SimulatedUsers | None = None
         self.done = False
         self.stage = "idle"  # idle -> first -> observed -> second -> idle
+        self.round, self.turn = -1, -1
 
     def start(self) -> list[ev.Event]:
         return []
@@ -78,9 +79,7 @@ class ParticipantLogic:
 
     def _round(self, e: ev.RoundStarted) -> list[ev.Event]:
         if self.stage != "idle":
-            # the new deal overtook the end of our last turn (the suggestion, then TurnResolved,
-            # are still on their way: a recorder behind a flood writes them after it)
-            raise NotYet
+            raise NotYet  # the last turn of the round before is not over for us yet
         self.round = e.round
         self.partner = partner_of(e.faces)
         self.matched = 0

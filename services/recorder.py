@@ -26,7 +26,7 @@ import msgspec
 from pairplay import __version__
 from pairplay.replay.writer import FLUSH_INTERVAL_NS, EventLogWriter
 from pairplay.schemas.events import RecordingGap, SessionStarted, decode_event, encode_event
-from pairplay.schemas.envelope import stamped
+from pairplay.schemas.envelope import Nanos, stamped
 from pairplay.schemas.keys import alive_key, event_key, query_key, session_keys
 
 from pairplay.services.bus import Bus, Inbox, Outbox
@@ -118,8 +118,7 @@ class Recorder:
         if source != self.name:
             return self.record(key, payload, log_time_ns, quiet=True)
         event = decode_event(payload)  # our own earlier refusals and gaps: kept as they are
-        self._guarded(self.writer.write, key, payload, log_time_ns=log_time_ns, publish_time_ns=event.time_ns,
-                      sequence=event.seq)
+        self._guarded(self.writer.write, key, payload, log_time_ns=log_time_ns, sequence=event.seq)
         self.guard.note(key, event)
         self.seq = max(self.seq, event.seq)
         with self._lock:
@@ -164,10 +163,10 @@ class Recorder:
                     event = decode_event(data)
                 except (msgspec.DecodeError, msgspec.ValidationError):
                     continue
-                refilled += self.record(key, data, event.time_ns, quiet=True)
+                refilled += self.record(key, data, self.clock(), quiet=True)
         self._overlap = len(self.inbox)  # what came meanwhile may repeat the refill: no rejections for that
         gap = RecordingGap(earlier_file=self.continued["earlier_file"], copied=self.continued["copied"],
-                           last_copied_ns=self.continued["last_copied_ns"], resumed_ns=resumed_ns,
+                           last_copied_ns=Nanos(self.continued["last_copied_ns"]), resumed_ns=Nanos(resumed_ns),
                            refilled=refilled, refilled_from=sorted(answered),
                            unanswered=sorted(set(sources) - set(answered)))
         self._publish([gap])
@@ -255,8 +254,9 @@ class Recorder:
         event = verdict.event
         if verdict.reason is not None:
             return self._reject(verdict.reason, key, payload, event)
-        self._guarded(self.writer.write, key, payload, log_time_ns=received_ns, publish_time_ns=event.time_ns,
-                      sequence=event.seq)
+        # the recorder's own times: log time = when it took the message (its clock, monotonic in the file),
+        # publish time = the same; the envelope's time_ns is the publisher's claim and stays in the payload
+        self._guarded(self.writer.write, key, payload, log_time_ns=received_ns, sequence=event.seq)
         with self._lock:
             self.kept.append((key, payload))
         if isinstance(event, SessionStarted):
@@ -264,7 +264,8 @@ class Recorder:
             self._guarded(self.writer.add_metadata, "pairplay.session", {
                 "config": msgspec.json.encode(c).decode(), "session": c.session, "participant": c.participant,
                 "persona": c.persona, "seed": str(c.seed), "game_index": str(c.game_index),
-                "algorithm": c.algorithm, "software_version": c.software_version or __version__})
+                "algorithm": c.algorithm, "software_version": c.software_version or __version__,
+                "streams": str(c.streams)})
         elif type(event).__name__ == "SessionEnded":
             self.ended = True
         return True
@@ -285,7 +286,7 @@ class Recorder:
             r = stamped(r, session=self.session, source=self.name, seq=self.seq, time_ns=now)
             key, payload = event_key(self.session, self.name, type(r).__name__), encode_event(r)
             if self.failure is None:
-                self._guarded(self.writer.write, key, payload, log_time_ns=now, publish_time_ns=now, sequence=self.seq)
+                self._guarded(self.writer.write, key, payload, log_time_ns=now, sequence=self.seq)
                 self.guard.note(key, r)
                 with self._lock:
                     self.kept.append((key, payload))

@@ -86,7 +86,7 @@ class Node:
         self._overlap = 0
         self.resumed_events = 0
         self.thread: threading.Thread | None = None
-
+        self._lock = threading.RLock()  # the Node's thread, or the session ending it from outside
     def _on_message(self, key: str, payload: bytes) -> None:
         self.inbox.put(key, payload)  # Zenoh's thread: hand over, never wait
 
@@ -156,7 +156,8 @@ class Node:
         overlap = self._overlap > 0
         if overlap:
             self._overlap -= 1
-        self.publish(self.driver.receive(key, payload, overlap=overlap))
+        with self._lock:
+            self.publish(self.driver.receive(key, payload, overlap=overlap))
         return True
 
     def run(self, stop: threading.Event | None = None) -> None:
