@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import argparse
 import logging
+import sys
 import threading
 from datetime import datetime, timezone
 from pathlib import Path
@@ -40,7 +41,8 @@ from pairplay.schemas.session import IGNORE_CLOCKS, OBSERVED_SOURCES, SessionCon
 from pairplay.cli.args import count, non_negative
 from pairplay.core.geometry import PICKS_UNIT
 from pairplay.cli.robot import add_robot_arguments, check_robot_args, robot_choice
-from pairplay.services.bus import add_bus_arguments, options_from_args, stop_on_signals
+from pairplay.services.bus import BusOpenError, ConfigFileError, add_bus_arguments, options_from_args, stop_on_signals
+from pairplay.services.recorder import RecordingFailed
 from pairplay.services.session import run_session
 
 log = logging.getLogger("pairplay.session")
@@ -132,7 +134,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--out", default="recordings", help="folder of the recording (default recordings/; a "
                    "recording is never replaced: an existing <session>.mcap gets a .1, .2 ... beside it)")
     add_robot_arguments(p)
-    p.add_argument("--external", action="append", default=[], choices=("learner", "participant", "game"),
+    p.add_argument("--external", action="append", default=[], choices=("learner", "participant", "game", "recorder", "robot"),
                    help="leave this service to another process (`pairplay run`)")
     add_bus_arguments(p)
 
@@ -154,9 +156,22 @@ def run(args: argparse.Namespace) -> int:
             print("a person plays on a board: `pairplay lab` serves one (this session waits for picks from "
                   "source 'board' on the bus)", flush=True)
 
-    path = run_session(config, Path(args.out) / f"{config.session}.mcap",
-                       bus_options=options_from_args(args, default_mode="router"),
-                       external=tuple(args.external), stop=stop, on_bus=announce, robot=robot_choice(args))
+    try:
+        bus_options = options_from_args(args, default_mode="router")
+        bus_options.to_dict()  # a bad --zenoh-config is the user's mistake: one line, before anything starts
+        path = run_session(config, Path(args.out) / f"{config.session}.mcap", bus_options=bus_options,
+                           external=tuple(args.external), stop=stop, on_bus=announce,
+                           robot=None if "robot" in args.external else robot_choice(args))
+    except (ConfigFileError, BusOpenError) as err:
+        print(f"pairplay session: {err}", file=sys.stderr)
+        return 2
+    except RecordingFailed as err:
+        print(f"pairplay session: writing {err.path} failed ({err.reason}); the session stopped; the file is "
+              f"readable up to the failure: pairplay recover {err.path}", file=sys.stderr)
+        return 1
+    if "recorder" in args.external:
+        print(f"session {config.session} over; the external recorder writes its file")
+        return 0
     from pairplay.replay.fold import fold_events
     from pairplay.replay.reader import read_log
     recorded = read_log(path)

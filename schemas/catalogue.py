@@ -37,6 +37,7 @@ CATALOGUE: dict[str, tuple[str, str]] = {
     "GazeFixated": ("tracker (eye tracker)", "the participant fixated a card: the observed card of a 'gaze' session"),
     "MessageRejected": ("any service", "a bus message a service refused (malformed, unknown tag, wrong session, out of order), with the reason"),
     "SessionEnded": ("game", "the session is over: why (completed, interrupted by a signal, aborted by the experimenter, a service failed) and how far it got"),
+    "RecordingGap": ("recorder", "a restarted recorder continues the session's file: events copied, refilled from the services, the gap's bounds"),
 }
 
 # tag -> (publishing services, consuming services), as the services' code reads them; the
@@ -66,6 +67,7 @@ FLOW: dict[str, tuple[tuple[str, ...], tuple[str, ...]]] = {
     "QuestionnaireAnswered": (("board",), ()),
     "MessageRejected": (("any service",), ()),
     "SessionEnded": (("game",), ("learner", "participant", "robot")),
+    "RecordingGap": (("recorder",), ()),
 }
 
 _ENVELOPE = {f.name for f in msgspec.structs.fields(Event)}

@@ -31,6 +31,7 @@ from pairplay import __version__
 from pairplay.core.rng import STREAMS_VERSION
 from pairplay.replay.writer import EventLogWriter
 from pairplay.schemas import events as ev
+from pairplay.schemas.envelope import Nanos
 from pairplay.schemas.envelope import stamped
 from pairplay.schemas.events import encode_event
 from pairplay.schemas.keys import alive_key, event_key
@@ -186,6 +187,9 @@ def catalogue_sample(out: Path) -> None:
         ev.PolicyCombined(request_id="r1", inputs=["a.mcap"], actions=[35] * 24, decided_by=["equal; equal"] * 24),
         ev.QuestionnaireAnswered(questionnaire="phase1", answers={"q1": "4"}),
         ev.MessageRejected(reason="malformed payload", key=f"pairplay/{s}/participant/CardPicked", excerpt="{not"),
+        ev.RecordingGap(earlier_file=f"{s}.mcap", copied=20, last_copied_ns=Nanos(1_796_000_000_123_456_789),
+                        resumed_ns=Nanos(1_796_000_001_123_456_789),
+                        refilled=1, refilled_from=["game"]),
         ev.SessionEnded(reason="completed", rounds_played=1),
     ]
     writer = EventLogWriter(out / f"catalogue-{FORMAT}.mcap")
@@ -197,7 +201,8 @@ def catalogue_sample(out: Path) -> None:
         source = {"CardPicked": "participant", "CardObserved": "participant", "SuggestionPerceived": "participant",
                   "WrongSuggestionPressed": "board", "QuestionnaireAnswered": "board", "SuggestionMade": "learner",
                   "RewardGiven": "learner", "QUpdated": "learner", "RobotActed": "robot", "CombineRequested": "console",
-                  "PolicyCombined": "combiner", "MessageRejected": "recorder"}.get(type(e).__name__, "game")
+                  "PolicyCombined": "combiner", "MessageRejected": "recorder",
+                  "RecordingGap": "recorder"}.get(type(e).__name__, "game")
         seqs[source] = seqs.get(source, 0) + 1
         e = stamped(e, session=s, source=source, seq=seqs[source], time_ns=1_796_000_000_123_456_789 + i * 1_000_003)
         writer.write(event_key(s, source, type(e).__name__), encode_event(e), log_time_ns=e.time_ns, sequence=e.seq)
