@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import contextlib
 import csv
+import hashlib
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -206,6 +207,27 @@ def write_merges(out: Path, personas, users: study.UserSet, args) -> dict:
     return merges
 
 
+TIMINGS_HEADING = "## Timings"
+
+
+def output_digests(out: Path) -> dict[str, str]:
+    """sha256 (hex) of every file a study wrote under `out` that its seed decides, by relative path.
+
+    Figures (*.png: matplotlib's bytes are not ours to pin) are left out, and
+    report.md is hashed up to its timings section (wall clock, not results).
+    The study's equality contract (tests/test_study_digests.py) compares these.
+    """
+    digests = {}
+    for path in sorted(Path(out).rglob("*")):
+        if not path.is_file() or path.suffix == ".png":
+            continue
+        data = path.read_bytes()
+        if path.name == "report.md":
+            data = data.split(TIMINGS_HEADING.encode(), 1)[0]
+        digests[path.relative_to(out).as_posix()] = hashlib.sha256(data).hexdigest()
+    return digests
+
+
 def run_study(args: StudySettings, out: Path, progress_bar: Callable = _no_bar) -> StudyReport:
     """Run the study with `args` and write its report folder `out` (created).
 
@@ -350,7 +372,7 @@ def run_study(args: StudySettings, out: Path, progress_bar: Callable = _no_bar) 
                    f"pi-reuse beats scratch on the first 50 rounds for {(gains > 0).sum()} of {len(gains)} "
                    f"held-out personas; median gain {np.median(gains):.2f} picks per round.", "",
                    "![reuse](reuse.png)", ""]
-    report += ["## Timings", "", markdown_table([["phase", "seconds"]] + [[k, f"{v:.2f}"] for k, v in timings.items()]), ""]
+    report += [TIMINGS_HEADING, "", markdown_table([["phase", "seconds"]] + [[k, f"{v:.2f}"] for k, v in timings.items()]), ""]
     (out / "report.md").write_text("\n".join(report))
 
     return StudyReport(out, timings, table, prof_rows, merge_rows, reuse_rows if reuse is not None else None)
