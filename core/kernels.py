@@ -97,17 +97,22 @@ def _popcount(x):
     return ((x * 0x01010101) & 0xFFFFFFFF) >> 24
 
 
+@njit(cache=True, inline="always")
+def _bit_index(single):
+    """Index of the one set bit of `single`."""
+    return _popcount(single - 1)
+
+
 @njit(cache=True)
 def _pick(mask, u):
     """The floor(u*n)-th set bit (ascending) of a card mask; -1 for an empty mask."""
     n = _popcount(mask)
+    if n == 0:
+        return -1
     k = min(np.int64(u * n), n - 1)
-    for card in range(N_CARDS):
-        if (mask >> card) & 1:
-            if k == 0:
-                return card
-            k -= 1
-    return -1
+    for _ in range(k):  # strip the k lowest set bits
+        mask &= mask - 1
+    return _bit_index(mask & -mask)
 
 
 @njit(cache=True)
@@ -146,10 +151,12 @@ def _user_nis(memory, covered):
 def _user_first_pick(memory, partner, covered, u):
     """A card of a wholly remembered pair, else a covered card not remembered (core/user.py)."""
     known = 0
-    for card in range(N_CARDS):
-        if (memory >> partner[card]) & 1:
-            known |= 1 << card
-    known &= memory
+    rest = memory
+    while rest:  # the remembered cards whose partner is remembered too
+        bit = rest & -rest
+        rest ^= bit
+        if (memory >> partner[_bit_index(bit)]) & 1:
+            known |= bit
     return _pick(known if known != 0 else covered & ~memory, u)
 
 
@@ -183,8 +190,13 @@ def _user_end_turn(g, first, second, matched, memory, stamp, clock, capacity):
         return
     evict = _popcount(memory[g]) + 2 - capacity[g]
     for nth in range(1, 3):
-        if evict >= nth:
-            oldest = np.argmin(stamp[g])
+        if evict >= nth:  # the oldest remembered card leaves (stamps are distinct; others are NEVER)
+            oldest, rest = -1, memory[g]
+            while rest:
+                card = _bit_index(rest & -rest)
+                rest &= rest - 1
+                if oldest < 0 or stamp[g, card] < stamp[g, oldest]:
+                    oldest = card
             stamp[g, oldest] = NEVER
             memory[g] &= ~(1 << oldest)
     stamp[g, first] = clock[g]
@@ -193,27 +205,26 @@ def _user_end_turn(g, first, second, matched, memory, stamp, clock, capacity):
     clock[g] += 2
 
 
-@njit(cache=True)
+@njit(cache=True, fastmath={"nnan", "ninf", "nsz"})
 def _greedy(q_row, u_tie):
-    """argmax of a Q row, ties broken by the draw: the floor(u*n)-th tied action (core/learning.py)."""
+    """argmax of a Q row, ties broken by the draw: the floor(u*n)-th tied action (core/learning.py).
+
+    Q-values are finite, so the no-NaN/no-inf/signed-zero flags change no
+    comparison; they let the max and the tie count vectorise.
+    """
     best = q_row[0]
-    first = 0
-    n = 1
     for a in range(1, q_row.size):
-        x = q_row[a]
-        if x > best:
-            best, first, n = x, a, 1
-        elif x == best:
-            n += 1
-    if n == 1:
-        return first
-    k = min(np.int64(u_tie * n), n - 1)
-    for a in range(first, q_row.size):
+        best = max(best, q_row[a])
+    n = 0
+    for a in range(q_row.size):
+        n += q_row[a] == best
+    k = 0 if n == 1 else min(np.int64(u_tie * n), n - 1)
+    for a in range(q_row.size):
         if q_row[a] == best:
             if k == 0:
                 return a
             k -= 1
-    return first
+    return 0
 
 
 @njit(cache=True)
@@ -471,20 +482,31 @@ def _value(cand, match, bonus):
 
 @njit(cache=True)
 def _expected(t, observed, match, nis, q_hear, sees_smile, sees_head, sees_gaze, bonus, out):
-    """E[reward | considered] of each of the 88 actions in one situation, into out (88,)."""
+    """E[reward | considered] of each of the 88 actions in one situation, into out (88,).
+
+    The visual part decides the unheard candidate set, so its 11 values are
+    computed once and shared by the 8 hearing parts (same operations per action).
+    """
+    n_visual = t.vis_set.shape[2]
+    base = np.empty(n_visual, dtype=np.int64)
+    unheard = np.empty(n_visual)
+    for v in range(n_visual):
+        vis_seen = sees_gaze if v == VISUAL_GAZE else (v > VISUAL_GAZE and sees_head)
+        base[v] = nis & (t.vis_set[observed, match, v] if vis_seen else -1)
+        unheard[v] = _value(base[v], match, bonus)
     for a in range(N_ACTIONS):
         h, v = t.action_hearing[a], t.action_visual[a]
-        vis_seen = sees_gaze if v == VISUAL_GAZE else (v > VISUAL_GAZE and sees_head)
-        base = nis & (t.vis_set[observed, match, v] if vis_seen else -1)
-        unheard = _value(base, match, bonus)
-        heard = _value(base & t.hear_set[observed, match, h], match, bonus)
         if h == HEARING_SMILE:
             p_heard = 1.0 if sees_smile else 0.0
         elif h > HEARING_SMILE:
             p_heard = q_hear
         else:
             p_heard = 0.0
-        out[a] = p_heard * heard + (1 - p_heard) * unheard
+        if p_heard == 0.0:  # 0 * heard + 1 * unheard, exactly, for finite values
+            out[a] = unheard[v]
+            continue
+        heard = _value(base[v] & t.hear_set[observed, match, h], match, bonus)
+        out[a] = p_heard * heard + (1 - p_heard) * unheard[v]
 
 
 @njit(cache=True)

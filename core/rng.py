@@ -24,6 +24,7 @@ uses inline.
 from __future__ import annotations
 
 import zlib
+from functools import lru_cache
 from typing import Sequence
 
 import numpy as np
@@ -35,6 +36,7 @@ _ROLE_KEY = {role: i for i, role in enumerate(ROLES)}
 assert (kernels.DEAL, kernels.AGENT, kernels.USER, kernels.SNAPSHOT) == tuple(_ROLE_KEY[r] for r in ROLES)
 
 
+@lru_cache(maxsize=1 << 16)
 def game_seed(seed: int, persona: str, game: int) -> int:
     """A 64-bit seed for one game of one persona in a study seeded with `seed`."""
     key = zlib.crc32(persona.encode("utf-8"))
@@ -46,13 +48,21 @@ def stream_key(seed: int, role: str) -> int:
     """The 64-bit SplitMix64 key of one game's stream for one role."""
     if role not in _ROLE_KEY:
         raise ValueError(f"unknown role {role!r}; roles are {ROLES}")
-    s = int(seed) & 0xFFFFFFFFFFFFFFFF
-    return int(np.random.SeedSequence([s >> 32, s & 0xFFFFFFFF, _ROLE_KEY[role]]).generate_state(1, np.uint64)[0])
+    return _stream_key(int(seed) & 0xFFFFFFFFFFFFFFFF, _ROLE_KEY[role])
 
 
-def stream_keys(seeds: Sequence[int]) -> np.ndarray:
-    """(n, 4) uint64: every role's key of every game, columns in ROLES order (the simulator's streams)."""
-    return np.array([[stream_key(s, role) for role in ROLES] for s in seeds], dtype=np.uint64).reshape(-1, len(ROLES))
+@lru_cache(maxsize=1 << 16)
+def _stream_key(s: int, role: int) -> int:
+    # SeedSequence hashing costs ~20 us; a study asks for the same evaluation games many times.
+    return int(np.random.SeedSequence([s >> 32, s & 0xFFFFFFFF, role]).generate_state(1, np.uint64)[0])
+
+
+def stream_keys(seeds: Sequence[int], roles: Sequence[str] = ROLES) -> np.ndarray:
+    """(n, 4) uint64: the keys of `roles` (default all) of every game, columns in ROLES order, 0 elsewhere."""
+    keys = np.zeros((len(seeds), len(ROLES)), dtype=np.uint64)
+    for role in roles:
+        keys[:, _ROLE_KEY[role]] = [stream_key(s, role) for s in seeds]
+    return keys
 
 
 class UniformStream:

@@ -27,7 +27,7 @@ from .geometry import N_CARDS, N_STATES
 from .actions import N_ACTIONS
 from .learning import MODES, _policy_table, schedule_tables
 from .reward import BONUS_CODES, simulated_reward
-from .rng import stream_keys
+from .rng import ROLES, stream_keys
 from .user import persona_arrays
 
 OBSERVED_SOURCES = ("intended", "first-pick")
@@ -107,7 +107,8 @@ def run_games(personas: Sequence[Persona], seeds: Sequence[int], rounds: int | S
             table[rows] = _policy_table(source, n)[rows]
     p_consider, q_hear, capacity, sees = persona_arrays(personas)
 
-    keys = np.ascontiguousarray(stream_keys(seeds))
+    # a fixed policy draws nothing: its games need only the deal and user streams
+    keys = stream_keys(seeds, ("deal", "user") if set(modes) == {"fixed"} else ROLES)
     pos = np.zeros_like(keys)
     q = np.zeros((n, N_STATES, N_ACTIONS))
     counts = np.zeros((n, N_STATES, N_ACTIONS), dtype=np.int32)

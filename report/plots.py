@@ -8,11 +8,15 @@ from __future__ import annotations
 
 from pathlib import Path
 
-import matplotlib
+import numpy as np
 
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
+
+def _pyplot():
+    """matplotlib's pyplot on the headless Agg backend, imported on first use (the study draws in a child)."""
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    return plt
 
 # Figure 6.4: which feature each panel isolates, and the two personas compared.
 FIGURE_6_4 = (
@@ -37,6 +41,7 @@ def learning_curves(curves: dict[str, np.ndarray], names: dict[str, str], path: 
     `curves[persona]` is (games, rounds). Panels whose personas are missing are
     left out; returns the panel titles drawn.
     """
+    plt = _pyplot()
     panels = [(f, a, b) for f, a, b in FIGURE_6_4 if a in curves and b in curves]
     if not panels:
         panels = [("all", *list(curves)[:2])] if len(curves) >= 2 else [("all", next(iter(curves)), None)]
@@ -64,6 +69,7 @@ def learning_curves(curves: dict[str, np.ndarray], names: dict[str, str], path: 
 def comparison_bars(labels: list[str], series: dict[str, np.ndarray], path: Path, ylabel: str,
                     title: str = "") -> None:
     """Grouped bars: one group per label, one bar per series (e.g. alone/learned/oracle)."""
+    plt = _pyplot()
     fig, ax = plt.subplots(figsize=(max(6, 1.1 * len(labels) + 2), 3.8))
     width = 0.8 / len(series)
     x = np.arange(len(labels))
@@ -87,6 +93,7 @@ def profiles(keys: list[str], names: dict[str, str], infos: list, features: list
     `trained` (optional, one UserInfo or None per persona): the same shares over
     the well-trained states only, drawn as black ticks on the bars.
     """
+    plt = _pyplot()
     fig, (left, right) = plt.subplots(1, 2, figsize=(12, 4.2))
     x = np.arange(len(keys))
     left.bar(x - 0.2, [100 * i.speech for i in infos], 0.4, label="speech incompatibility %")
@@ -118,6 +125,7 @@ def profiles(keys: list[str], names: dict[str, str], infos: list, features: list
 def merged_policies(panels: list[tuple[str, dict[str, np.ndarray], np.ndarray]], state_count: int,
                     path: Path) -> None:
     """Figure 6.6: state code vs action code of the input policies and their merge (blue x)."""
+    plt = _pyplot()
     fig, axes = plt.subplots(1, len(panels), figsize=(5.2 * len(panels), 4.2), squeeze=False)
     markers = ["o", "s", "^", "v", "D", "P", "*", "h"]
     states = np.arange(state_count)
@@ -142,6 +150,7 @@ def merged_policies(panels: list[tuple[str, dict[str, np.ndarray], np.ndarray]],
 def reuse_curves(keys: list[str], names: dict[str, str], curves: np.ndarray, oracle: list[float],
                  path: Path, smooth: int = 10) -> None:
     """Online picks per round, Q-learning from scratch vs pi-reuse, one small panel per held-out persona."""
+    plt = _pyplot()
     cols = 4
     rows = (len(keys) + cols - 1) // cols
     fig, axes = plt.subplots(rows, cols, figsize=(3.4 * cols, 2.6 * rows), squeeze=False, sharex=True)
@@ -159,3 +168,19 @@ def reuse_curves(keys: list[str], names: dict[str, str], curves: np.ndarray, ora
     fig.tight_layout()
     fig.savefig(path, dpi=100)
     plt.close(fig)
+
+
+FIGURES = ("learning_curves", "comparison_bars", "profiles", "merged_policies", "reuse_curves")
+
+
+def draw(name: str | None, *args) -> None:
+    """Draw figure `name` (one of FIGURES) with `args`; None draws nothing (a child process warming up).
+
+    The study calls this in a child process: arguments are plain data, so the
+    child imports matplotlib and numpy only.
+    """
+    if name is None:
+        return
+    if name not in FIGURES:
+        raise ValueError(f"unknown figure {name!r}")
+    globals()[name](*args)
