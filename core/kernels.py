@@ -76,6 +76,18 @@ TABLES = Tables(*(np.ascontiguousarray(t, dtype=np.int64) for t in (
     HEAR_SET, VIS_SET, ACTION_HEARING, ACTION_VISUAL, CELL_OF, CELL_MASK, STATE_INDEX, LEVEL_OF_COUNT)))
 
 
+def as_batch(x, n: int, dtype) -> np.ndarray:
+    """`x` as a C-contiguous (n,) array of `dtype` for a batch kernel (a scalar or (1,) is broadcast).
+
+    The cheap path first: a live service passes arrays that already fit, and
+    numpy's broadcasting costs more than the kernel call itself in a batch of one.
+    """
+    a = np.asarray(x, dtype=dtype)
+    if a.shape == (n,) and a.flags.c_contiguous:
+        return a
+    return np.ascontiguousarray(np.broadcast_to(a, (n,)))
+
+
 # --- scalar rules -----------------------------------------------------------------------------
 
 @njit(cache=True, inline="always")

@@ -121,7 +121,7 @@ class Learner:
 
     def _per_round(self, fn, round_index) -> np.ndarray:
         """A schedule's value for each game's round, computed once per round (a live learner asks every turn)."""
-        r = np.broadcast_to(np.asarray(round_index, dtype=np.int64), (self._n,))
+        r = kernels.as_batch(round_index, self._n, np.int64)
         if self._n == 1:
             key = (fn, int(r[0]))
             value = self._memo.get(key)
@@ -130,14 +130,14 @@ class Learner:
                 if len(self._memo) > 64:
                     self._memo.pop(next(iter(self._memo)))
             return value
-        return np.ascontiguousarray(np.broadcast_to(np.asarray(fn(self.config, r), dtype=np.float64), (self._n,)))
+        return kernels.as_batch(fn(self.config, r), self._n, np.float64)
 
     def suggest(self, states: np.ndarray, round_index: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(actions, how) for every game, drawing DRAWS_PER_SUGGESTION uniforms."""
         u = self.stream.take(DRAWS_PER_SUGGESTION)
         n = self._n
         actions, how = np.empty(n, dtype=np.int64), np.empty(n, dtype=np.int8)
-        states = np.ascontiguousarray(np.broadcast_to(np.asarray(states, dtype=np.int64), (n,)))
+        states = kernels.as_batch(states, n, np.int64)
         table = self._table if self._table is not None else self._no_table
         kernels.learners_suggest(self.q, states, u, self._per_round(epsilon_at, round_index), MODES[self.mode],
                                  self.psi, float(self.config.psi_decay), table, actions, how)
@@ -148,10 +148,9 @@ class Learner:
         """Eq. 5.2 where `mask`; a fixed policy never learns."""
         if self.mode == "fixed":
             return
-        n = self._n
-        b = lambda x, dt: np.ascontiguousarray(np.broadcast_to(np.asarray(x, dtype=dt), (n,)))  # noqa: E731
-        kernels.learners_learn(self.q, self.counts, b(states, np.int64), b(actions, np.int64), b(rewards, np.float64),
-                               b(mask, bool), self._per_round(alpha_at, round_index))
+        n, b = self._n, kernels.as_batch
+        kernels.learners_learn(self.q, self.counts, b(states, n, np.int64), b(actions, n, np.int64),
+                               b(rewards, n, np.float64), b(mask, n, bool), self._per_round(alpha_at, round_index))
 
 
 def _policy_table(policy: np.ndarray, n_games: int) -> np.ndarray:

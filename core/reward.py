@@ -24,6 +24,8 @@ match.
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from pairplay.schemas.config import DEFAULT_REWARD_BONUS, REWARD_BONUS_RULES
@@ -59,10 +61,14 @@ def simulated_reward(matched: np.ndarray, considered: np.ndarray, consistent: np
     `holds_match`: the candidate set contains the matching card (core/kernels.py `_reward`).
     """
     check_bonus_rule(bonus)
-    arrays = np.broadcast_arrays(*(np.asarray(x) for x in (matched, considered, consistent, candidate_size, holds_match)))
-    shape = arrays[0].shape
-    hit, cons, consist, size, holds = (np.ascontiguousarray(a, dtype=dt).reshape(-1) for a, dt in
-                                       zip(arrays, (bool, bool, bool, np.int64, bool)))
+    inputs = (matched, considered, consistent, candidate_size, holds_match)
+    shape = np.shape(matched)
+    if any(np.shape(x) != shape for x in inputs):
+        shape = np.broadcast_shapes(*(np.shape(x) for x in inputs))
+    n = math.prod(shape)
+    hit, cons, consist, size, holds = (
+        kernels.as_batch(x if len(shape) == 1 else np.reshape(np.broadcast_to(x, shape), -1), n, dt)
+        for x, dt in zip(inputs, (bool, bool, bool, np.int64, bool)))
     reward, learn = np.empty(hit.size), np.empty(hit.size, dtype=bool)
     kernels.rewards_batch(hit, cons, consist, size, holds, BONUS_CODES[bonus], reward, learn)
     return reward.reshape(shape), learn.reshape(shape)

@@ -58,7 +58,7 @@ def persona_arrays(personas: Sequence[Persona]) -> tuple[np.ndarray, np.ndarray,
 
 
 def _ints(x, n: int) -> np.ndarray:
-    return np.ascontiguousarray(np.broadcast_to(np.asarray(x, dtype=np.int64), (n,)))
+    return kernels.as_batch(x, n, np.int64)
 
 
 class SimulatedUsers:
@@ -113,7 +113,7 @@ class SimulatedUsers:
         second, candidates = np.empty(n, dtype=np.int64), np.empty(n, dtype=np.int64)
         considered, consistent = np.empty(n, dtype=bool), np.empty(n, dtype=bool)
         kernels.users_respond(kernels.TABLES, self.memory, _ints(actions, n), _ints(observed, n), _ints(match, n),
-                              _ints(intended, n), np.ascontiguousarray(np.broadcast_to(np.asarray(from_memory, dtype=bool), (n,))),
+                              _ints(intended, n), kernels.as_batch(from_memory, n, bool),
                               _ints(covered, n), self._u, self.p_consider, self.q_hear, self.sees_smile,
                               self.sees_head, self.sees_gaze, second, considered, consistent, candidates)
         return Response(second, considered, consistent, candidates)
@@ -126,7 +126,7 @@ class SimulatedUsers:
         """
         n = self._n
         kernels.users_end_turn(_ints(first, n), _ints(second, n),
-                               np.ascontiguousarray(np.broadcast_to(np.asarray(matched, dtype=bool), (n,))),
+                               kernels.as_batch(matched, n, bool),
                                self.memory, self.stamp, self.clock, self.capacity)
 
 
