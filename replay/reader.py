@@ -6,6 +6,10 @@ tail ends the read with `truncated=True` and the reason, never an exception,
 and loses nothing before it. Each message is decoded with msgspec into its
 event class; a message that does not decode is kept as a `BadMessage` with the
 reason (a recording is evidence: nothing is dropped silently).
+Hot path: `read_log` takes the chunks whole from StreamReader and splits them
+itself (`_chunk_records`: one struct call per message, no record object), the
+records and their order exactly those of mcap's `breakup_chunk`; a chunk whose
+records overrun it ends the read as a corrupt tail does.
 `EventDecoderFactory` plugs the same decoding into mcap's own readers.
 """
 
@@ -15,10 +19,15 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Callable, Iterator, NamedTuple, Optional
 
+import struct
+from io import BytesIO
+
 import msgspec
+from mcap.data_stream import ReadDataStream
 from mcap.decoder import DecoderFactory
-from mcap.records import Channel, Footer, Message, Metadata, Schema
-from mcap.stream_reader import StreamReader
+from mcap.opcode import Opcode
+from mcap.records import Channel, Chunk, Footer, Message, Metadata, Schema
+from mcap.stream_reader import StreamReader, breakup_chunk
 
 from pairplay.schemas.envelope import Event
 from pairplay.schemas.events import decode_event
@@ -62,33 +71,86 @@ def iter_records(path: str | Path) -> Iterator[Any]:
         yield from StreamReader(f, record_size_limit=1 << 30).records
 
 
+_RECORD = struct.Struct("<BQ")  # opcode, length
+_MESSAGE = struct.Struct("<HIQQ")  # channel id, sequence, log time, publish time
+_MESSAGE_OP, _CHANNEL_OP, _SCHEMA_OP = int(Opcode.MESSAGE), int(Opcode.CHANNEL), int(Opcode.SCHEMA)
+
+
+class ChunkOverrun(ValueError):
+    """A record inside a chunk claims more bytes than the chunk holds."""
+
+
+def _chunk_records(chunk: Chunk) -> Iterator[tuple]:
+    """A chunk's records in order: (channel id, log time, data) per message, else the mcap record object."""
+    if chunk.compression == "zstd":
+        import zstandard
+        data = zstandard.decompress(chunk.data, chunk.uncompressed_size)
+    elif chunk.compression == "":
+        data = chunk.data
+    else:  # lz4 and anything newer: mcap's own split
+        for record in breakup_chunk(chunk):
+            yield (record.channel_id, record.log_time, record.data) if isinstance(record, Message) else record
+        return
+    pos, size = 0, len(data)
+    record_head, message_head = _RECORD.unpack_from, _MESSAGE.unpack_from
+    while pos < size:
+        opcode, length = record_head(data, pos)
+        pos += 9
+        end = pos + length
+        if end > size:
+            raise ChunkOverrun(f"a record of {length} bytes overruns its chunk at byte {pos}")
+        if opcode == _MESSAGE_OP:
+            channel_id, _, log_time, _ = message_head(data, pos)
+            yield channel_id, log_time, data[pos + 22:end]
+        elif opcode == _CHANNEL_OP:
+            yield Channel.read(ReadDataStream(BytesIO(data[pos:end])))
+        elif opcode == _SCHEMA_OP:
+            yield Schema.read(ReadDataStream(BytesIO(data[pos:end])))
+        pos = end
+
+
 def read_log(path: str | Path) -> EventLog:
     """Read a recording (complete or truncated); see the module rule."""
     log = EventLog(str(path))
     channels: dict[int, str] = {}
     decode = decode_event
     append = log.events.append
+    new = tuple.__new__  # a RecordedEvent without NamedTuple's keyword handling
+
+    def other(record) -> None:
+        if isinstance(record, Channel):
+            channels[record.id] = record.topic
+            log.channels[record.id] = (record.topic, str(record.schema_id))
+        elif isinstance(record, Schema):
+            log.schemas[record.id] = (record.name, record.encoding, record.data)
+        elif isinstance(record, Metadata):
+            log.metadata[record.name] = dict(record.metadata)
+
+    def message(channel_id: int, log_time: int, data: bytes) -> None:
+        key = channels.get(channel_id)
+        if key is None:
+            log.bad.append(BadMessage("", f"message on unknown channel {channel_id}", log_time, data))
+            return
+        try:
+            append(new(RecordedEvent, (key, decode(data), log_time, data)))
+        except (msgspec.DecodeError, msgspec.ValidationError) as err:
+            log.bad.append(BadMessage(key, str(err), log_time, data))
+
     try:
-        for record in iter_records(path):
-            if isinstance(record, Message):
-                key = channels.get(record.channel_id)
-                if key is None:
-                    log.bad.append(BadMessage("", f"message on unknown channel {record.channel_id}",
-                                              record.log_time, record.data))
-                    continue
-                try:
-                    append(RecordedEvent(key, decode(record.data), record.log_time, record.data))
-                except (msgspec.DecodeError, msgspec.ValidationError) as err:
-                    log.bad.append(BadMessage(key, str(err), record.log_time, record.data))
-            elif isinstance(record, Channel):
-                channels[record.id] = record.topic
-                log.channels[record.id] = (record.topic, str(record.schema_id))
-            elif isinstance(record, Schema):
-                log.schemas[record.id] = (record.name, record.encoding, record.data)
-            elif isinstance(record, Metadata):
-                log.metadata[record.name] = dict(record.metadata)
-            elif isinstance(record, Footer):
-                break
+        with open(path, "rb") as f:
+            for record in StreamReader(f, emit_chunks=True, record_size_limit=1 << 30).records:
+                if type(record) is Chunk:
+                    for item in _chunk_records(record):
+                        if type(item) is tuple:
+                            message(*item)
+                        else:
+                            other(item)
+                elif isinstance(record, Message):
+                    message(record.channel_id, record.log_time, record.data)
+                elif isinstance(record, Footer):
+                    break
+                else:
+                    other(record)
     except OSError:
         raise  # a file that cannot be opened is not a cut recording
     except Exception as err:  # a cut or corrupt tail: keep what came before it
