@@ -139,9 +139,10 @@ def run_games(personas: Sequence[Persona], seeds: Sequence[int], rounds: int | S
 
 def _trace(rows: np.ndarray, reward_bonus: str) -> dict:
     """The recorded turns as named columns, in lockstep order (step, then game), with their rewards."""
-    rows = rows[np.lexsort((rows[:, kernels.T_GAME], rows[:, kernels.T_STEP]))]
-    out = {name: rows[:, i] for i, name in enumerate(kernels.TRACE_FIELDS)}
-    out["candidates"] = rows[:, kernels.T_CANDIDATES]
+    order = np.lexsort((rows[:, kernels.T_GAME], rows[:, kernels.T_STEP]))
+    # column by column: a sorted copy of the whole table would double the oracle's peak memory
+    out = {name: rows[order, i] for i, name in enumerate(kernels.TRACE_FIELDS)}
+    out["candidates"] = rows[order, kernels.T_CANDIDATES]
     size = np.bitwise_count(out["candidates"])
     holds = (out["candidates"] >> out["match"]) & 1 == 1
     out["reward"], _ = simulated_reward(out["second"] == out["match"], out["considered"] == 1,
