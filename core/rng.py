@@ -19,10 +19,23 @@ to a counter (a restarted service catches up with its log in O(1)). Keys come
 from numpy's SeedSequence hashing of (game seed, role), 64 bits each. The
 draws themselves are core/kernels.py's `_draw`, the one the compiled simulator
 uses inline.
+
+Game seeds (`game_seed`, derivation STREAMS_VERSION = 2): every seed 0..2**64-1
+and every label (a persona key, a participant id) gives its own streams. The
+study's own labels (the persona keys of appendix A, bare or as "reuse:",
+"combine:", "oracle:" + key) with seeds below 2**32 keep derivation 1 (numpy's
+SeedSequence of the seed, the label's CRC-32 and the game index), so the study's
+results stay what they were; those labels are a fixed table whose CRC-32s
+differ (tested). Everything else, where derivation 1 aliased (it cut seeds to
+32 bits: 5 and 4294967301, -1 and 4294967295 were one game; two participant ids
+with one CRC-32 shared their streams), goes through BLAKE2b of the seed, the
+label and the game index. Derivation 1 stays available, exactly, for the
+recordings made with it (SessionConfig.streams).
 """
 
 from __future__ import annotations
 
+import hashlib
 import zlib
 from functools import lru_cache
 from typing import Sequence
@@ -36,11 +49,47 @@ _ROLE_KEY = {role: i for i, role in enumerate(ROLES)}
 assert (kernels.DEAL, kernels.AGENT, kernels.USER, kernels.SNAPSHOT) == tuple(_ROLE_KEY[r] for r in ROLES)
 
 
-@lru_cache(maxsize=1 << 16)
-def game_seed(seed: int, persona: str, game: int) -> int:
-    """A 64-bit seed for one game of one persona in a study seeded with `seed`."""
+STREAMS_VERSION = 2  # the derivation new sessions record (SessionConfig.streams)
+SEED_RANGE = (0, 2**64 - 1)
+_STUDY_ROLES = ("reuse:", "combine:", "oracle:")
+
+
+def _study_label(label: str) -> bool:
+    from .personas import PERSONAS  # the fixed table of appendix A
+
+    for role in _STUDY_ROLES:
+        if label.startswith(role):
+            label = label[len(role):]
+            break
+    return label in PERSONAS
+
+
+def game_seed(seed: int, persona: str, game: int, version: int = STREAMS_VERSION) -> int:
+    """A 64-bit seed for game `game` (>= 0) of `persona` (a persona key or a participant id) under
+    study seed `seed` (0..2**64-1), by stream derivation `version` (see the module rule).
+    Raises ValueError for a seed or game index out of range (version 1 takes what it always took)."""
+    seed, game = int(seed), int(game)
+    if version == 1:
+        return _derivation_1(seed, persona, game)
+    if version != 2:
+        raise ValueError(f"unknown stream derivation {version} (this pairplay knows 1 and {STREAMS_VERSION})")
+    if not SEED_RANGE[0] <= seed <= SEED_RANGE[1]:
+        raise ValueError(f"seed {seed} is outside {SEED_RANGE[0]}..{SEED_RANGE[1]}")
+    if not 0 <= game < 2**63:
+        raise ValueError(f"game index {game} is outside 0..{2**63 - 1}")
+    if seed < 2**32 and _study_label(persona):
+        return _derivation_1(seed, persona, game)
+    digest = hashlib.blake2b(f"{seed}\x00{game}".encode(), digest_size=8, key=b"pairplay streams 2",
+                             person=b"game seed", salt=hashlib.blake2b(persona.encode("utf-8"),
+                                                                        digest_size=16).digest())
+    return int.from_bytes(digest.digest(), "little")
+
+
+@lru_cache(maxsize=1 << 16)  # SeedSequence costs ~20 us; a study asks for the same evaluation games many times
+def _derivation_1(seed: int, persona: str, game: int) -> int:
+    """pairplay <= 0.2's game seed (the seed cut to 32 bits, the label's CRC-32): the study's streams."""
     key = zlib.crc32(persona.encode("utf-8"))
-    state = np.random.SeedSequence([int(seed) & 0xFFFFFFFF, key, int(game)]).generate_state(2, np.uint32)
+    state = np.random.SeedSequence([seed & 0xFFFFFFFF, key, game]).generate_state(2, np.uint32)
     return int(state[0]) << 32 | int(state[1])
 
 

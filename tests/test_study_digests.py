@@ -3,8 +3,11 @@
 tests/data/study_digests.json holds the sha256 of every policy file, CSV and
 report (up to its timings) of a reduced study (run here) and of the full
 default study (run by the slow suite, `pytest -m slow`, and by `pairplay
-bench`), as main wrote them before the compiled core. tools/study_digests.py
-rewrites it; only do that when a result is meant to change, and say why.
+bench`), pinned from main's numpy simulator before the compiled core and
+re-pinned once since, when main's policy files gained their `partial` field
+(every policy JSON changed by that one line; the CSVs and the report did not).
+tools/study_digests.py rewrites it; only do that when a result is meant to
+change, and say why.
 """
 
 import json
