@@ -4,8 +4,9 @@ tests/data/study_digests.json holds the sha256 of every policy file, CSV and
 report (up to its timings) of a reduced study (run here) and of the full
 default study (run by the slow suite, `pytest -m slow`, and by `pairplay
 bench`), pinned from main's numpy simulator before the compiled core and
-re-pinned once since, when main's policy files gained their `partial` field
-(every policy JSON changed by that one line; the CSVs and the report did not).
+re-pinned twice since for main's format changes: policy files gained their
+`partial` field (every policy JSON changed by that one line), and the report
+names its unit of picks per round (report.md); no CSV changed.
 tools/study_digests.py rewrites it; only do that when a result is meant to
 change, and say why.
 """
