@@ -12,11 +12,15 @@ from __future__ import annotations
 
 from pathlib import Path
 
-import matplotlib
+import numpy as np
 
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
+
+def _pyplot():
+    """matplotlib's pyplot on the headless Agg backend, imported on first use (the study draws in a child)."""
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    return plt
 
 from pairplay.core.geometry import PERFECT_PICKS, PICKS_UNIT  # noqa: E402
 
@@ -43,6 +47,7 @@ def learning_curves(curves: dict[str, np.ndarray], names: dict[str, str], path: 
     `curves[persona]` is (games, rounds). Panels whose personas are missing are
     left out; returns the panel titles drawn.
     """
+    plt = _pyplot()
     panels = [(f, a, b) for f, a, b in FIGURE_6_4 if a in curves and b in curves]
     if not panels:
         panels = [("all", *list(curves)[:2])] if len(curves) >= 2 else [("all", next(iter(curves)), None)]
@@ -69,6 +74,7 @@ def learning_curves(curves: dict[str, np.ndarray], names: dict[str, str], path: 
 def comparison_bars(labels: list[str], series: dict[str, np.ndarray], path: Path, ylabel: str,
                     title: str = "") -> None:
     """Grouped bars: one group per label, one bar per series (e.g. alone/learned/oracle)."""
+    plt = _pyplot()
     fig, ax = plt.subplots(figsize=(max(6, 1.1 * len(labels) + 2), 3.8))
     width = 0.8 / len(series)
     x = np.arange(len(labels))
@@ -91,6 +97,7 @@ def profiles(keys: list[str], names: dict[str, str], infos: list, features: list
     `trained` (optional, one UserInfo or None per persona): the same shares over
     the well-trained states only, drawn as black ticks on the bars.
     """
+    plt = _pyplot()
     fig, (left, right) = plt.subplots(1, 2, figsize=(12, 4.2))
     x = np.arange(len(keys))
     left.bar(x - 0.2, [100 * i.speech for i in infos], 0.4, label="speech incompatibility %")
@@ -125,6 +132,7 @@ def profiles(keys: list[str], names: dict[str, str], infos: list, features: list
 def merged_policies(panels: list[tuple[str, dict[str, np.ndarray], np.ndarray]], state_count: int,
                     path: Path) -> None:
     """Figure 6.6: state code vs action code of the input policies and their merge (blue x)."""
+    plt = _pyplot()
     fig, axes = plt.subplots(1, len(panels), figsize=(5.2 * len(panels), 4.2), squeeze=False)
     markers = ["o", "s", "^", "v", "D", "P", "*", "h"]
     states = np.arange(state_count)
@@ -148,6 +156,7 @@ def merged_policies(panels: list[tuple[str, dict[str, np.ndarray], np.ndarray]],
 def reuse_curves(keys: list[str], names: dict[str, str], curves: np.ndarray, oracle: list[float],
                  path: Path, smooth: int = 10) -> None:
     """Online picks per round, Q-learning from scratch vs pi-reuse, one small panel per held-out persona."""
+    plt = _pyplot()
     cols = 4
     rows = (len(keys) + cols - 1) // cols
     fig, axes = plt.subplots(rows, cols, figsize=(3.4 * cols, 2.6 * rows), squeeze=False, sharex=True, sharey=True)
@@ -178,7 +187,23 @@ def _save(fig, path: Path, dpi: int) -> None:
 
     with output_path(path) as tmp:
         fig.savefig(tmp, dpi=dpi, format="png")
-    plt.close(fig)
+    _pyplot().close(fig)
+
+
+FIGURES = ("learning_curves", "comparison_bars", "profiles", "merged_policies", "reuse_curves")
+
+
+def draw(name: str | None, *args) -> None:
+    """Draw figure `name` (one of FIGURES) with `args`; None draws nothing (a child process warming up).
+
+    The study calls this in a child process: arguments are plain data, so the
+    child imports matplotlib and numpy only.
+    """
+    if name is None:
+        return
+    if name not in FIGURES:
+        raise ValueError(f"unknown figure {name!r}")
+    globals()[name](*args)
 
 
 def grouped_bars_with_spread(labels: list[str], series: dict[str, np.ndarray], reference: list[float],
@@ -186,6 +211,7 @@ def grouped_bars_with_spread(labels: list[str], series: dict[str, np.ndarray], r
     """Bars per label and series: the mean over replicates with a 1-sd error bar; a tick marks the reference.
 
     `series[name]` is (replicates, labels) in picks per round."""
+    plt = _pyplot()
     n = len(series)
     width = 0.8 / n
     x = np.arange(len(labels))
@@ -208,6 +234,7 @@ def grouped_bars_with_spread(labels: list[str], series: dict[str, np.ndarray], r
 def sweep_measure(labels: list[str], mean: list[float], low: list[float], high: list[float], path: Path,
                   measure: str, seeds: int) -> None:
     """One sweep measure across the grid: the mean over seeds with its 95% confidence interval."""
+    plt = _pyplot()
     mean, low, high = map(np.asarray, (mean, low, high))
     x = np.arange(len(labels))
     fig, ax = plt.subplots(figsize=(max(6.0, 0.28 * len(labels) + 3), 4.2))
