@@ -34,6 +34,9 @@ CATALOGUE: dict[str, tuple[str, str]] = {
     "CombineRequested": ("experimenter / any client", "profile and merge these policies or recordings (algorithms 3, 4)"),
     "PolicyCombined": ("combiner", "the merged policy, the rule that decided each state, the merged user information"),
     "QuestionnaireAnswered": ("board / experimenter", "a participant's answers to a questionnaire (thesis 7.2)"),
+    "SessionPaused": ("experimenter", "the console paused the game: the game refuses touches until it resumes"),
+    "SessionResumed": ("experimenter", "the console resumed a paused game"),
+    "SessionAborted": ("experimenter", "the console stopped the game, with the reason: the game ends the session"),
     "MessageRejected": ("any service", "a bus message a service refused (malformed, unknown tag, wrong session, out of order), with the reason"),
     "SessionEnded": ("game", "the session is over, with the reason and the rounds played"),
 }

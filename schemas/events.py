@@ -16,6 +16,7 @@ Who publishes what (source = the service name):
                WrongSuggestionPressed, QuestionnaireAnswered
   learner:     SuggestionMade, RewardGiven, QUpdated
   combiner:    PolicyCombined (answering CombineRequested)
+  experimenter: SessionPaused, SessionResumed, SessionAborted (the console; the game obeys them)
   robot:       RobotActed (schemas/robot.py)
   any service: ServiceStarted, MessageRejected
 """
@@ -203,6 +204,22 @@ class QuestionnaireAnswered(Event, tag="QuestionnaireAnswered"):
     answers: dict[str, str]
 
 
+class SessionPaused(Event, tag="SessionPaused"):
+    """The experimenter paused the game: the game refuses touches until SessionResumed."""
+
+    reason: str = ""
+
+
+class SessionResumed(Event, tag="SessionResumed"):
+    """The experimenter resumed a paused game."""
+
+
+class SessionAborted(Event, tag="SessionAborted"):
+    """The experimenter stopped the game; the game ends it (SessionEnded "aborted: <reason>")."""
+
+    reason: str
+
+
 class MessageRejected(Event, tag="MessageRejected"):
     """A service refused a bus message; it keeps running."""
 
@@ -234,6 +251,7 @@ EVENT_TYPES: tuple[type[Event], ...] = (
     CardObserved, SuggestionRequested, SuggestionMade, SuggestionPerceived,
     WrongSuggestionPressed, TurnResolved, RewardGiven, QUpdated, RoundEnded,
     CombineRequested, PolicyCombined, QuestionnaireAnswered, MessageRejected, SessionEnded,
+    SessionPaused, SessionResumed, SessionAborted,
 ) + _robot_events()
 EVENT_BY_TAG: dict[str, type[Event]] = {t.__struct_config__.tag: t for t in EVENT_TYPES}
 AnyEvent = Union[EVENT_TYPES]  # type: ignore[valid-type]

@@ -13,6 +13,9 @@ state of thesis 4.1); a WrongSuggestionPressed asks again (attempt + 1). The
 second pick resolves the turn (TurnResolved); under the "time" ignore rule a
 turn whose picks are closer than the window (1.5 s, thesis 7.1.2) is marked
 ignored, timed by the picks' own envelope times so a replay decides the same.
+The experimenter's SessionPaused / SessionResumed / SessionAborted (the console)
+are inputs like any other: while paused every touch is refused with the
+reason; an abort ends the session at once (SessionEnded "aborted: <reason>").
 """
 
 from __future__ import annotations
@@ -28,12 +31,19 @@ from pairplay.schemas.session import SessionConfig
 from pairplay.services.node import Rejected, stream_seed
 
 
+# the participant's inputs: a simulated participant, or the touch-screen board of the human study
+PLAYERS = frozenset({"participant", "board"})
+# the experimenter's console
+CONTROL = frozenset({"SessionPaused", "SessionResumed", "SessionAborted"})
+
+
 class GameLogic:
     name = "game"
-    consumes = frozenset({"CardPicked", "CardObserved", "WrongSuggestionPressed"})
-    # the participant's inputs: a simulated participant, or the touch-screen board of the human study
-    PLAYERS = frozenset({"participant", "board"})
-    sources = dict.fromkeys(consumes, PLAYERS)
+    consumes = frozenset({"CardPicked", "CardObserved", "WrongSuggestionPressed", "SessionPaused",
+                          "SessionResumed", "SessionAborted"})
+    PLAYERS = PLAYERS
+    CONTROL = CONTROL
+    sources = {tag: (frozenset({"experimenter"}) if tag in CONTROL else PLAYERS) for tag in consumes}
 
     def __init__(self, config: SessionConfig):
         config.validate()
@@ -42,6 +52,7 @@ class GameLogic:
         self.round = 0
         self.done = False
         self.board: Board | None = None
+        self.paused = False
         self._new_turn(0)
 
     def _new_turn(self, turn: int) -> None:
@@ -65,6 +76,10 @@ class GameLogic:
     def handle(self, e: ev.Event) -> list[ev.Event]:
         if self.done:
             raise Rejected(f"the session is over; {type(e).__name__} ignored")
+        if type(e).__name__ in self.CONTROL:
+            return self._control(e)
+        if self.paused and not isinstance(e, ev.CardPicked):
+            raise Rejected(f"the session is paused; {type(e).__name__} ignored")
         if isinstance(e, ev.CardPicked):
             return self._pick(e)
         if (e.round, e.turn) != (self.round, self.turn):
@@ -78,6 +93,8 @@ class GameLogic:
         def refuse(reason: str) -> list[ev.Event]:
             return [ev.PickRejected(round=e.round, turn=e.turn, card=e.card, reason=reason,
                                     pick_source=e.source, pick_seq=e.seq)]
+        if self.paused:
+            return refuse("the session is paused")
         if (e.round, e.turn) != (self.round, self.turn):
             return refuse(f"pick for round {e.round} turn {e.turn}, but the game is at round {self.round} "
                           f"turn {self.turn}")
@@ -99,6 +116,17 @@ class GameLogic:
                 out.append(self._request(e.card))
             return out
         return out + self._resolve(e)
+
+    def _control(self, e: ev.Event) -> list[ev.Event]:
+        """The experimenter's console (services/protocol.py): pause, resume, abort."""
+        if isinstance(e, ev.SessionAborted):
+            self.done = True
+            return [ev.SessionEnded(reason=f"aborted: {e.reason}", rounds_played=self.round)]
+        pause = isinstance(e, ev.SessionPaused)
+        if pause == self.paused:
+            raise Rejected("the session is already " + ("paused" if pause else "running"))
+        self.paused = pause
+        return []
 
     def _observed(self, e: ev.CardObserved) -> list[ev.Event]:
         if self.config.observed_source != "intended" or e.observed_source != "intended":

@@ -30,13 +30,16 @@ def run_session(config: SessionConfig, path: str | Path, *, bus: Bus | None = No
                 bus_options: BusOptions | None = None, external: tuple[str, ...] = (),
                 stop: threading.Event | None = None, settle_timeout_s: float = 30.0,
                 on_bus=None, nodes_out: dict | None = None, wait_also: tuple[str, ...] = (),
-                robot: RobotChoice | None = None) -> Path:
+                robot: RobotChoice | None = None, hold=None) -> Path:
     """Run one session to its end (or `stop`); return the recording's path.
 
     `nodes_out`, if given, receives the in-process Nodes by service name (tests
     read the live learner's final Q-table from it). `wait_also`: more services
     (liveliness names) the game waits for before it starts the session.
-    `robot` (the --robot options) adds the robot bridge (services/robot)."""
+    `robot` (the --robot options) adds the robot bridge (services/robot).
+    `hold(recorder)`, if given, is called once the game has ended, before the
+    recording is finished: the human study keeps a game's recording open for
+    the questionnaire that follows it (services/protocol.py)."""
     own_bus = bus is None
     # the session's process is the router its external services connect to as clients
     bus = bus if bus is not None else Bus(bus_options or BusOptions(mode="router"))
@@ -80,6 +83,8 @@ def run_session(config: SessionConfig, path: str | Path, *, bus: Bus | None = No
             while node.thread.is_alive() and not stop.is_set():
                 node.thread.join(0.1)
         wait_external_exit(bus, config.session, [s for s in external if s in needed], stop, settle_timeout_s)
+        if hold is not None:
+            hold(recorder)
         wait_recorded(recorder, nodes, quiet_s=0.2 if external else 0.0)
     finally:
         stop.set()

@@ -35,12 +35,20 @@ def test_every_sample_decodes_whole_and_validates_against_todays_schemas(path):
             current[type(event).__name__].validate(data)  # and today's
 
 
-def test_the_catalogue_holds_every_event_type():
-    tags = {type(r.event).__name__ for r in read_log(SAMPLES / "catalogue.mcap").events}
+def test_the_samples_hold_every_event_type():
+    tags = {type(r.event).__name__ for name in ("catalogue.mcap", "console.mcap")
+            for r in read_log(SAMPLES / name).events}
     assert tags == {t.__name__ for t in EVENT_TYPES}
 
 
-@pytest.mark.parametrize("name", ["sim-ashley.mcap", "human-board.mcap"])
+def test_the_console_sample_was_paused_refused_a_touch_and_aborted():
+    log = read_log(SAMPLES / "console.mcap")
+    assert [e.reason for e in log.of("PickRejected")] == ["the session is paused"]
+    assert log.of("SessionEnded")[0].reason == "aborted: the participant had to leave"
+    assert log.of("RewardGiven")[-1].reason.startswith("unsettled")
+
+
+@pytest.mark.parametrize("name", ["sim-ashley.mcap", "human-board.mcap", "console.mcap"])
 def test_session_samples_verify_and_rebuild(name):
     assert verify_recording(SAMPLES / name).ok
     rebuilt = rebuild_recording(SAMPLES / name)

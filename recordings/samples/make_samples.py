@@ -9,7 +9,12 @@ to make a test pass. Three files:
   ignore rule, a wrong-suggestion press) played by a scripted touch screen
   through the real game and learner logics, written by the recorder's writer;
 - catalogue.mcap: one event of every type of the catalogue, RobotActed,
-  PolicyCombined and QuestionnaireAnswered included.
+  PolicyCombined and QuestionnaireAnswered included (pairplay 0.2.0's types);
+- console.mcap (added with the experimenter's console): a human-study session
+  the experimenter pauses (a touch refused meanwhile), resumes and aborts with
+  a suggestion still open, through the real game and learner logics.
+A new sample is added for new event types; the old ones stay as they were:
+    .venv/bin/python recordings/samples/make_samples.py recordings/samples console
 
     .venv/bin/python recordings/samples/make_samples.py recordings/samples
 """
@@ -143,10 +148,53 @@ def catalogue_sample(out: Path) -> None:
     writer.close()
 
 
+def console_sample(out: Path) -> None:
+    config = SessionConfig(session="sample-console", participant="human:p01", seed=5, rounds=2,
+                           observed_source="first-pick", ignore_rule="time", software_version="0.2.0")
+    clock = iter(range(10**18, 10**19, 10**6)).__next__
+    game, learner = Driver(GameLogic(config), config.session, clock), Driver(LearnerLogic(), config.session, clock)
+    writer = EventLogWriter(out / "console.mcap")
+    seqs = {"board": 0, "experimenter": 0}
+
+    def record(events):
+        for e in events:
+            key = event_key(e.session, e.source, type(e).__name__)
+            writer.write(key, encode_event(e), log_time_ns=e.time_ns or 1, sequence=e.seq)
+            if e.source == "game":
+                record(learner.receive(key, encode_event(e)))
+
+    def send(event, source, at_s):
+        seqs[source] += 1
+        e = stamped(event, session=config.session, source=source, seq=seqs[source], time_ns=int(at_s * 1e9))
+        key = event_key(config.session, source, type(event).__name__)
+        writer.write(key, encode_event(e), log_time_ns=e.time_ns, sequence=e.seq)
+        record(game.receive(key, encode_event(e)))
+
+    record(game.start())
+    faces = list(game.logic.board.faces)
+    t_s = 100.0
+    for turn in range(4):
+        covered = [c for c in range(18) if c not in game.logic.board.up and game.logic.board.covered >> c & 1]
+        first = covered[0]
+        partner = next(c for c in covered if c != first and faces[c] == faces[first])
+        send(ev.CardPicked(round=0, turn=turn, card=first), "board", t_s)
+        if turn == 1:
+            send(ev.SessionPaused(reason="the participant asked a question"), "experimenter", t_s + 1)
+            send(ev.CardPicked(round=0, turn=turn, card=partner), "board", t_s + 2)  # refused: paused
+            send(ev.SessionResumed(), "experimenter", t_s + 5)
+        if turn == 3:  # the last suggestion is open when the experimenter stops the game
+            send(ev.SessionAborted(reason="the participant had to leave"), "experimenter", t_s + 1)
+            break
+        send(ev.CardPicked(round=0, turn=turn, card=partner), "board", t_s + 6)
+        t_s += 10
+    writer.close()
+
+
+SAMPLES = {"sim": sim_sample, "human": human_sample, "catalogue": catalogue_sample, "console": console_sample}
+
 if __name__ == "__main__":
     out = Path(sys.argv[1] if len(sys.argv) > 1 else "recordings/samples")
-    sim_sample(out)
-    human_sample(out)
-    catalogue_sample(out)
+    for name in sys.argv[2:] or list(SAMPLES):
+        SAMPLES[name](out)
     for p in sorted(out.glob("*.mcap")):
         print(p, p.stat().st_size)
