@@ -47,6 +47,12 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     pl.add_argument("--personas", required=True,
                     help="comma-separated personas, one per registered participant in order (e.g. tatiana,blind)")
     pl.add_argument("--robot", help="override the study's robot (virtual, none, iristk://..., furhat://...)")
+    sv = sub.add_parser("serve", help="serve the experimenter's console for a study folder (prints its URL and token)")
+    sv.add_argument("folder", type=Path)
+    sv.add_argument("--listen", default="127.0.0.1:0",
+                    help="HOST:PORT of the web server (default loopback, a free port; beyond loopback use TLS, "
+                         "see README)")
+    sv.add_argument("--robot", help="override the study's robot (virtual, none, iristk://..., furhat://...)")
     m = sub.add_parser("mark-invalid", help="keep a game out of the plan, the combination and the report")
     m.add_argument("folder", type=Path)
     m.add_argument("session")
@@ -147,7 +153,63 @@ def _run(args) -> int:
         return 0
     if args.action == "pilot":
         return _pilot(data, args)
+    if args.action == "serve":
+        return _serve(data, args)
     raise AssertionError(args.action)
+
+
+def _robot(args):
+    """(RobotChoice or None, overridden?) from --robot; StudyDataError if it is wrong."""
+    from pairplay.services.robot.choice import NO_ROBOT, RobotChoice, check_choice
+    if not args.robot:
+        return None, False
+    if args.robot == NO_ROBOT:
+        return None, True
+    choice = RobotChoice(args.robot)
+    try:
+        check_choice(choice)
+    except ValueError as err:
+        raise StudyDataError(str(err)) from None
+    return choice, True
+
+
+def _serve(data: StudyData, args) -> int:
+    import threading
+
+    from pairplay.services.bus import Bus, BusOptions, stop_on_signals
+    from pairplay.services.console.server import ConsoleServer
+    from pairplay.services.protocol import StudyRunner
+
+    host, _, port = args.listen.rpartition(":")
+    if not host or not port.isdigit():
+        raise StudyDataError(f"--listen {args.listen!r}: use HOST:PORT")
+    robot, overridden = _robot(args)
+    logging.basicConfig(level=logging.WARNING, format="%(levelname)s %(name)s: %(message)s")
+    stop = threading.Event()
+    stop_on_signals(stop)
+    with Bus(BusOptions(mode="router")) as bus:
+        runner = StudyRunner(data, bus, robot=robot)
+        if overridden and robot is None:
+            runner.robot = None
+        try:
+            server = ConsoleServer(runner, host=host.strip("[]"), port=int(port)).start()
+        except OSError as err:
+            raise StudyDataError(f"--listen {args.listen}: {err.strerror or err}") from None
+        print(f"experimenter console: {server.console_url}", flush=True)
+        print(f"bus (boards and scripted players connect here): {' '.join(bus.locators())}", flush=True)
+        try:
+            while not stop.wait(0.2):
+                pass
+        finally:
+            if runner.live.state in ("playing", "questionnaire"):
+                try:
+                    runner.abort("the console was stopped")
+                except StudyDataError:
+                    pass
+                if server.console.thread is not None:
+                    server.console.thread.join(10)
+            server.close()
+    return 0
 
 
 def _pilot(data: StudyData, args) -> int:

@@ -69,6 +69,8 @@ class Live:
     robot: str = ""
     paused: bool = False
     state: str = "idle"  # idle | playing | questionnaire | combining
+    board: bool = False  # a board (page or scripted player) is on the game's bus
+    questionnaire_token: str = ""  # the per-game token of the questionnaire page
 
     def see(self, e: ev.Event) -> None:
         name = type(e).__name__
@@ -84,6 +86,8 @@ class Live:
             self.picks_per_round.append(2 * e.turns)
         elif name == "SessionEnded":
             self.state = "questionnaire"
+        elif name == "ServiceStarted" and e.service == "board":
+            self.board = True
 
 
 class StudyRunner:
@@ -154,7 +158,8 @@ class StudyRunner:
             self.data.append(j.GameStarted(participant=pid, phase=phase_id, game=game, session=config.session,
                                            recording=recording, bias=combined.output if combined else ""))
             self.live = Live(session=config.session, participant=pid, phase=phase_id, game=game,
-                             rounds=config.rounds, state="playing")
+                             rounds=config.rounds, state="playing", board=player is not None,
+                             questionnaire_token=secrets.token_urlsafe(16) if phase.questionnaires else "")
             self._stop, self._abort_reason, self._control_seq = threading.Event(), "", 0
             self._skip.clear()
             answered = threading.Event()
@@ -174,8 +179,9 @@ class StudyRunner:
                         time.sleep(0.02)
                     time.sleep(0.05)  # the answer reaches the recorder on its own thread
 
+            # without a scripted player the game waits for the board page's service ("board" liveliness)
             path = run_session(config, self.data.folder / recording, bus=self.bus, stop=self._stop,
-                               robot=self.robot, hold=hold)
+                               robot=self.robot, hold=hold, wait_also=() if player is not None else ("board",))
             self._stop.set()
             if node is not None and node.thread is not None:
                 node.thread.join(5.0)
@@ -245,7 +251,25 @@ class StudyRunner:
         threading.Timer(grace_s, stop.set).start()
 
     def skip_questionnaire(self) -> None:
+        if self.live.state != "questionnaire":
+            raise StudyDataError("no questionnaire is awaited")
         self._skip.set()
+
+    def answer_questionnaire(self, session: str, token: str, answers: dict) -> ev.QuestionnaireAnswered:
+        """Check a questionnaire page's answers against the phase's items and publish them on the game's bus
+        (QuestionnaireAnswered, source "board"); StudyDataError saying what is wrong otherwise."""
+        live = self.live
+        if not token or token != live.questionnaire_token or session != live.session:
+            raise StudyDataError("this questionnaire link is not the current game's")
+        if live.state != "questionnaire":
+            raise StudyDataError("the game is not over yet" if live.state == "playing" else "no questionnaire is awaited")
+        name, items = self.questions_for(live.participant, live.phase)
+        clean = check_answers(items, answers)
+        live.questionnaire_token = ""  # one answer per game
+        e = stamped(ev.QuestionnaireAnswered(questionnaire=name, answers=clean), session=session, source="board",
+                    seq=1, time_ns=time.time_ns())
+        self.bus.put(event_key(session, "board", "QuestionnaireAnswered"), ev.encode_event(e))
+        return e
 
     def pause(self, reason: str = "") -> None:
         if self.live.state != "playing":
@@ -347,6 +371,35 @@ class StudyRunner:
             if on_step is not None:
                 on_step(step, done[-1])
         return done
+
+
+def check_answers(items, answers) -> dict[str, str]:
+    """Answers (item id -> value) checked against the items: Likert 1..scale, a choice among its options,
+    text up to max_chars; required items present; nothing else. Returns them as strings."""
+    if not isinstance(answers, dict):
+        raise StudyDataError("answers must be an object of item id -> answer")
+    known = {i.id: i for i in items}
+    extra = sorted(set(answers) - set(known))
+    if extra:
+        raise StudyDataError(f"no question {extra[0]!r} in this questionnaire")
+    out: dict[str, str] = {}
+    for item in items:
+        value = answers.get(item.id)
+        if value is None or (isinstance(value, str) and not value.strip()):
+            if item.required:
+                raise StudyDataError(f"question {item.id!r} needs an answer")
+            continue
+        if not isinstance(value, (str, int)) or isinstance(value, bool):
+            raise StudyDataError(f"question {item.id!r}: the answer must be text or a number")
+        text = str(value).strip()
+        if item.kind == "likert" and not (text.isdigit() and 1 <= int(text) <= item.scale):
+            raise StudyDataError(f"question {item.id!r}: a Likert answer is 1..{item.scale}")
+        if item.kind == "choice" and text not in item.options:
+            raise StudyDataError(f"question {item.id!r}: {text[:40]!r} is not one of its options")
+        if len(text) > item.max_chars:
+            raise StudyDataError(f"question {item.id!r}: at most {item.max_chars} characters")
+        out[item.id] = text
+    return out
 
 
 def _undeclare(sub) -> None:
