@@ -18,6 +18,7 @@ SOURCES: dict[str, str] = {
     "bus": "pairplay.bench.bus",
     "view": "pairplay.bench.view",
     "robot": "pairplay.bench.robot",
+    "lab": "pairplay.bench.lab",
 }
 
 

@@ -21,6 +21,7 @@ VERBS: dict[str, tuple[str, str]] = {
     "view": ("pairplay.cli.view", "watch a session live or a recording in rerun: board, suggestion, Q-table"),
     "run": ("pairplay.cli.run", "run one service (game, learner, participant, recorder, combiner) on the bus"),
     "session": ("pairplay.cli.session", "run a whole session over the bus, recorded to recordings/<session>.mcap"),
+    "lab": ("pairplay.cli.lab", "a live session for a person: the touch-screen board, the robot, recorded"),
     "rebuild": ("pairplay.cli.rebuild", "fold recordings into policy files and learning curves"),
     "replay": ("pairplay.cli.replay", "re-publish a recording on the bus, or --verify it against fresh services"),
     "recover": ("pairplay.cli.recover", "complete a recording cut short by a crash"),

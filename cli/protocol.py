@@ -1,12 +1,15 @@
-"""`pairplay protocol`: a study with people (thesis 7.2) from the command line: check, init, register, status, pilot.
+"""`pairplay protocol`: a study with people (thesis 7.2): check, example, init, register, status, serve, pilot.
 
 Rule: every subcommand works on a study folder (replay/studydata.py) and
 prints what it did; a mistake (a bad study file, an unknown participant, a step
 the plan refuses) is one line on stderr and exit 2. `pilot` runs the open
 steps of the plan with scripted participants (core personas touching the board
 through services/scripted.py), the whole protocol without people: a dress
-rehearsal, and how the tests drive it. With people, `pairplay lab --study
-FOLDER` serves the experimenter's console and the board.
+rehearsal. With people, `serve` runs the study's lab server (the lab of
+services/lab with the console's routes, services/console/server.py): the
+experimenter's console behind a token printed at start, each game's board
+page (the console links it), the questionnaire the board becomes after each
+game; `--pilot p02=blind` lets personas play some participants' games.
 """
 
 from __future__ import annotations
@@ -53,6 +56,11 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                     help="HOST:PORT of the web server (default loopback, a free port; beyond loopback use TLS, "
                          "see README)")
     sv.add_argument("--robot", help="override the study's robot (virtual, none, iristk://..., furhat://...)")
+    sv.add_argument("--certfile", help="TLS certificate (PEM): serve https/wss (as `pairplay lab`)")
+    sv.add_argument("--keyfile", help="TLS private key (PEM) of --certfile")
+    sv.add_argument("--pilot", default="",
+                    help="ID=PERSONA,...: these participants are played by core personas on the bus (a dress "
+                         "rehearsal from the console; the others play on the board page)")
     m = sub.add_parser("mark-invalid", help="keep a game out of the plan, the combination and the report")
     m.add_argument("folder", type=Path)
     m.add_argument("session")
@@ -177,22 +185,31 @@ def _serve(data: StudyData, args) -> int:
     import threading
 
     from pairplay.services.bus import Bus, BusOptions, stop_on_signals
-    from pairplay.services.console.server import ConsoleServer
+    from pairplay.services.console.server import StudyLabServer
     from pairplay.services.protocol import StudyRunner
 
     host, _, port = args.listen.rpartition(":")
     if not host or not port.isdigit():
         raise StudyDataError(f"--listen {args.listen!r}: use HOST:PORT")
     robot, overridden = _robot(args)
+    if bool(args.certfile) != bool(args.keyfile):
+        raise StudyDataError("--certfile and --keyfile go together")
+    pilot = {}
+    for pair in filter(None, (x.strip() for x in args.pilot.split(","))):
+        pid, _, key = pair.partition("=")
+        data.participant(pid)
+        pilot[pid] = persona(key).key
     logging.basicConfig(level=logging.WARNING, format="%(levelname)s %(name)s: %(message)s")
     stop = threading.Event()
     stop_on_signals(stop)
     with Bus(BusOptions(mode="router")) as bus:
         runner = StudyRunner(data, bus, robot=robot)
+        runner.scripted = pilot
         if overridden and robot is None:
             runner.robot = None
         try:
-            server = ConsoleServer(runner, host=host.strip("[]"), port=int(port)).start()
+            server = StudyLabServer(runner, host=host.strip("[]"), port=int(port), ssl_certfile=args.certfile,
+                                    ssl_keyfile=args.keyfile).start()
         except OSError as err:
             raise StudyDataError(f"--listen {args.listen}: {err.strerror or err}") from None
         print(f"experimenter console: {server.console_url}", flush=True)

@@ -12,9 +12,12 @@ and every service has settled (in-process threads finished, external services'
 tokens gone); then the recorder finishes its file.
 
 Choices: a simulated participant's ignore rule is "perceived" (it reports what
-it perceived) and a human's is "time" (thesis 7.1.2), unless given; the learner
-schedule presets are the thesis's: "virtual" (6.2), "human-phase1" and
-"human-phase2" (7.2).
+it perceived) and a human's is "time" (thesis 7.1.2), timed on the board page's
+clock, unless given; the learner schedule presets are the thesis's: "virtual"
+(6.2), "human-phase1" and "human-phase2" (7.2). A person gets the human-phase
+schedule of their algorithm (phase 1: Q-learning, phase 2: pi-reuse) and games
+of 5 rounds by default; settings a person cannot satisfy are refused
+(SessionConfig.validate). A person plays on the board of `pairplay lab`.
 """
 
 from __future__ import annotations
@@ -29,7 +32,7 @@ from pairplay import __version__
 from pairplay.schemas.config import DEFAULT_REWARD_BONUS, REWARD_BONUS_RULES, LearnerConfig
 from pairplay.schemas.keys import check_chunk
 from pairplay.schemas.policy import PolicyFileError, read_policy
-from pairplay.schemas.session import SessionConfig, learner_overrides
+from pairplay.schemas.session import IGNORE_CLOCKS, OBSERVED_SOURCES, SessionConfig, learner_overrides
 
 from pairplay.cli.robot import add_robot_arguments, check_robot_args, robot_choice
 from pairplay.services.bus import add_bus_arguments, options_from_args, stop_on_signals
@@ -45,14 +48,23 @@ def add_config_arguments(p: argparse.ArgumentParser) -> None:
     g.add_argument("--participant", required=True, help="sim:<persona> (a simulated user) or human:<id>")
     g.add_argument("--session", help="session id (default: <participant>-seed<seed>-game<i>-<UTC time>)")
     g.add_argument("--seed", type=int, default=0)
-    g.add_argument("--rounds", type=int, default=20)
+    g.add_argument("--rounds", type=int, help="default: 20 for sim:, 5 for human: (thesis 7.2)")
     g.add_argument("--game-index", type=int, default=0)
     g.add_argument("--algorithm", choices=("q-learning", "pi-reuse", "fixed"), default="q-learning")
     g.add_argument("--policy", help="policy file: the bias policy (pi-reuse) or the fixed policy")
-    g.add_argument("--observed-source", choices=("intended", "first-pick"),
-                   help="default: intended for sim:, first-pick for human:")
+    g.add_argument("--observed-source", choices=OBSERVED_SOURCES,
+                   help="default: intended for sim:, first-pick for human: (gaze: an eye tracker's GazeFixated events)")
     g.add_argument("--ignore-rule", choices=("perceived", "time"), help="default: perceived for sim:, time for human:")
-    g.add_argument("--preset", choices=sorted(PRESETS), default="virtual", help="learner schedule (thesis 6.2, 7.2)")
+    g.add_argument("--ignore-window-ms", type=float, default=1500.0,
+                   help="'time' rule: picks closer than this ignored the suggestion (thesis 7.1.2; default 1500)")
+    g.add_argument("--ignore-clock", choices=IGNORE_CLOCKS,
+                   help="'time' rule: time the picks on the board page's clock (page, default for human:) or the "
+                        "server's (server)")
+    g.add_argument("--turn-back-ms", type=float, default=1500.0,
+                   help="the board page shows a missed pair this long before turning it back (default 1500)")
+    g.add_argument("--preset", choices=sorted(PRESETS),
+                   help="learner schedule (thesis 6.2, 7.2); default: virtual for sim:, human-phase1 for a human "
+                        "with q-learning, human-phase2 with pi-reuse")
     g.add_argument("--reward-bonus", choices=REWARD_BONUS_RULES, default=DEFAULT_REWARD_BONUS,
                    help="simulated reward: when the 1/|candidate set| bonus is paid: when the candidate set holds "
                         "the match (correct, default), on every consistent suggestion (consistent, SPEC's literal "
@@ -70,18 +82,22 @@ def config_from_args(args: argparse.Namespace) -> SessionConfig:
     check_chunk("participant", who)
     session = args.session or f"{who}-seed{args.seed}-game{args.game_index}-" \
                               f"{datetime.now(timezone.utc).strftime('%Y%m%dT%H%M%S')}"
-    preset = PRESETS[args.preset]
-    schedule = preset(args.rounds) if args.preset != "virtual" else preset()
+    rounds = args.rounds if args.rounds is not None else (20 if sim else 5)
+    preset_name = args.preset or ("virtual" if sim else "human-phase2" if args.algorithm == "pi-reuse"
+                                  else "human-phase1")
+    preset = PRESETS[preset_name]
+    schedule = preset(rounds) if preset_name != "virtual" else preset()
     actions = []
     if args.policy:
         actions = list(read_policy(args.policy).greedy)
     config = SessionConfig(
         session=session, participant=args.participant, persona=who if sim else "", seed=args.seed,
-        rounds=args.rounds, game_index=args.game_index, algorithm=args.algorithm,
+        rounds=rounds, game_index=args.game_index, algorithm=args.algorithm,
         observed_source=args.observed_source or ("intended" if sim else "first-pick"),
         ignore_rule=args.ignore_rule or ("perceived" if sim else "time"), policy_actions=actions,
         learner=learner_overrides(schedule), software_version=__version__,
-        reward_bonus=args.reward_bonus)
+        reward_bonus=args.reward_bonus, ignore_window_ms=args.ignore_window_ms,
+        ignore_clock=args.ignore_clock or ("server" if sim else "page"), turn_back_ms=args.turn_back_ms)
     config.validate()
     return config
 
@@ -108,6 +124,9 @@ def run(args: argparse.Namespace) -> int:
 
     def announce(bus) -> None:
         print(f"session {config.session}: bus listening on {' '.join(bus.locators()) or '(no listener)'}", flush=True)
+        if config.participant.startswith("human:"):
+            print("a person plays on a board: `pairplay lab` serves one (this session waits for picks from "
+                  "source 'board' on the bus)", flush=True)
 
     path = run_session(config, Path(args.out) / f"{config.session}.mcap",
                        bus_options=options_from_args(args, default_mode="router"),

@@ -67,8 +67,12 @@ def simulated_reward(matched: np.ndarray, considered: np.ndarray, consistent: np
     return np.where(considered, reward, 0.0), np.asarray(considered, dtype=bool)
 
 
-def human_reward(matched: bool, pick_gap_s: float, ignore_below_s: float = IGNORE_BELOW_S) -> tuple[float, bool]:
-    """(reward, learn) of a human-study turn: +-1, ignored when picked too fast."""
-    if pick_gap_s < ignore_below_s:
+def human_reward(matched: bool, pick_gap_s: float = float("inf"), ignore_below_s: float = IGNORE_BELOW_S,
+                 ignored: bool | None = None) -> tuple[float, bool]:
+    """(reward, learn) of a human-study turn: +-1, ignored when picked too fast.
+
+    `ignored`, when given, is the game's decision (it timed the picks on the
+    session's clock) and takes the place of comparing `pick_gap_s`."""
+    if ignored if ignored is not None else pick_gap_s < ignore_below_s:
         return 0.0, False
     return (1.0 if matched else -1.0), True

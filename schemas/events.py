@@ -12,8 +12,9 @@ Who publishes what (source = the service name):
   game:        SessionStarted, RoundStarted, CardRevealed, PickRejected,
                CardObserved (first-pick source), SuggestionRequested,
                TurnResolved, RoundEnded, SessionEnded
-  participant: CardPicked, CardObserved (intended source), SuggestionPerceived,
-               WrongSuggestionPressed, QuestionnaireAnswered
+  participant: CardPicked, CardObserved (intended source), SuggestionPerceived
+  board:       CardPicked, WrongSuggestionPressed, QuestionnaireAnswered (the lab's pages)
+  tracker:     GazeFixated (an eye tracker)
   learner:     SuggestionMade, RewardGiven, QUpdated
   combiner:    PolicyCombined (answering CombineRequested)
   experimenter: SessionPaused, SessionResumed, SessionAborted (the console; the game obeys them)
@@ -52,6 +53,9 @@ class CardPicked(Event, tag="CardPicked"):
     round: int
     turn: int
     card: int
+    # The board page's clock at the touch: performance.timeOrigin + performance.now(), ms
+    # (0: not from a page). The envelope's time_ns is the server's clock when it took the touch.
+    page_time_ms: float = 0.0
 
 
 class CardRevealed(Event, tag="CardRevealed"):
@@ -131,6 +135,8 @@ class SuggestionPerceived(Event, tag="SuggestionPerceived"):
 class WrongSuggestionPressed(Event, tag="WrongSuggestionPressed"):
     round: int
     turn: int
+    attempt: int = -1  # the suggestion judged wrong (-1: the open one, as in recordings before 0.3)
+    page_time_ms: float = 0.0  # the board page's clock at the press (see CardPicked)
 
 
 class TurnResolved(Event, tag="TurnResolved"):
@@ -142,6 +148,7 @@ class TurnResolved(Event, tag="TurnResolved"):
     round_over: bool
     interval_ms: float = 0.0  # between the two picks, from their envelope times
     ignored_by_time: bool = False  # interval under the session's ignore window
+    page_interval_ms: float = -1.0  # between the picks on the page's clock (-1: no page times)
 
 
 class RewardGiven(Event, tag="RewardGiven"):
@@ -220,6 +227,16 @@ class SessionAborted(Event, tag="SessionAborted"):
     reason: str
 
 
+class GazeFixated(Event, tag="GazeFixated"):
+    """An eye tracker saw the participant fixate a card (observed source "gaze", docs/lab.md).
+
+    Published by source "tracker" when the fixation has lasted `duration_ms`; the
+    envelope's time_ns is the tracker's clock then (the bus's wall clock)."""
+
+    card: int
+    duration_ms: float = 0.0
+
+
 class MessageRejected(Event, tag="MessageRejected"):
     """A service refused a bus message; it keeps running."""
 
@@ -252,7 +269,7 @@ EVENT_TYPES: tuple[type[Event], ...] = (
     WrongSuggestionPressed, TurnResolved, RewardGiven, QUpdated, RoundEnded,
     CombineRequested, PolicyCombined, QuestionnaireAnswered, MessageRejected, SessionEnded,
     SessionPaused, SessionResumed, SessionAborted,
-) + _robot_events()
+) + _robot_events() + (GazeFixated,)
 EVENT_BY_TAG: dict[str, type[Event]] = {t.__struct_config__.tag: t for t in EVENT_TYPES}
 AnyEvent = Union[EVENT_TYPES]  # type: ignore[valid-type]
 

@@ -94,6 +94,9 @@ class StudyHead(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
     title: str = ""
     seed: int = 0
     ignore_window_ms: float = 1500.0
+    # which clock times the two picks: the board page's ("page", the thesis's touch screen) or the server's
+    ignore_clock: Literal["page", "server"] = "page"
+    turn_back_ms: float = 1500.0  # a missed pair stays face up this long on the board
     wrong_suggestion_button: bool = True
     robot: str = "virtual"
 
@@ -128,8 +131,9 @@ def _check(study: Study) -> None:
             raise StudyFileError(f"{where}: {value!r} must be 1-40 characters of a-z 0-9 - _ (it names files)")
 
     need_id("study.id", study.study.id)
-    if study.study.ignore_window_ms < 0:
-        raise StudyFileError(f"study.ignore_window_ms: must be >= 0, got {study.study.ignore_window_ms}")
+    for key in ("ignore_window_ms", "turn_back_ms"):
+        if getattr(study.study, key) < 0:
+            raise StudyFileError(f"study.{key}: must be >= 0, got {getattr(study.study, key)}")
     robot = study.study.robot
     if not any(robot == s or (s.endswith("://") and robot.startswith(s) and len(robot) > len(s))
                for s in ROBOT_SCHEMES):

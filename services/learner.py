@@ -123,7 +123,8 @@ class LearnerLogic:
         if turn is None:
             return []
         if self.config.ignore_rule == "time":
-            reward, learn = human_reward(turn.matched, turn.interval_ms / 1000.0, self.config.ignore_window_ms / 1000.0)
+            # the game timed the picks on the session's clock (server or page) and decided
+            reward, learn = human_reward(turn.matched, ignored=turn.ignored_by_time)
             why = "ignored: picked too fast" if not learn else ("match" if turn.matched else "miss")
         else:
             p = self.perceived.get((o.round, o.turn, o.attempt))

@@ -71,6 +71,7 @@ class Live:
     state: str = "idle"  # idle | playing | questionnaire | combining
     board: bool = False  # a board (page or scripted player) is on the game's bus
     questionnaire_token: str = ""  # the per-game token of the questionnaire page
+    board_token: str = ""  # the board page's token (the same, when there is a questionnaire)
 
     def see(self, e: ev.Event) -> None:
         name = type(e).__name__
@@ -92,8 +93,12 @@ class Live:
 
 class StudyRunner:
     def __init__(self, data: StudyData, bus: Bus, robot: RobotChoice | None = None,
-                 questionnaire_timeout_s: float = 3600.0):
+                 questionnaire_timeout_s: float = 3600.0, lab=None):
         self.data, self.bus = data, bus
+        # the lab server's sessions (services/lab/app.Lab): each game's board is served there
+        self.lab = lab
+        # a dress rehearsal: participant id -> core persona that plays instead of a person (services/scripted.py)
+        self.scripted: dict[str, str] = {}
         url = data.study.study.robot
         self.robot = robot if robot is not None else (None if url == NO_ROBOT else RobotChoice(url))
         self.questionnaire_timeout_s = questionnaire_timeout_s
@@ -117,6 +122,7 @@ class StudyRunner:
             session=self.data.session_id(pid, phase_id, game), participant=f"human:{pid}", seed=study.study.seed,
             rounds=phase.rounds, game_index=self.data.game_index(pid, phase_id, game), algorithm=phase.algorithm,
             observed_source="first-pick", ignore_rule="time", ignore_window_ms=float(study.study.ignore_window_ms),
+            ignore_clock=study.study.ignore_clock, turn_back_ms=float(study.study.turn_back_ms),
             policy_actions=actions, learner=learner_overrides(study.learner_config(phase)),
             software_version=__version__)
         config.validate()
@@ -151,15 +157,22 @@ class StudyRunner:
             raise StudyDataError(f"a step is already running ({self.live.session or self.live.state})")
         try:
             self.check_step(pid, phase_id, game)
+            if player is None and pid in self.scripted:
+                player = scripted_players(self, self.scripted)(pid, phase_id, game)
             config = self.config_for(pid, phase_id, game)
             phase = self.data.study.phase_by_id(phase_id)
             recording = f"recordings/{config.session}.mcap"
             combined = self.data.state.combined.get(phase_id)
             self.data.append(j.GameStarted(participant=pid, phase=phase_id, game=game, session=config.session,
                                            recording=recording, bias=combined.output if combined else ""))
+            token = secrets.token_urlsafe(18)
             self.live = Live(session=config.session, participant=pid, phase=phase_id, game=game,
                              rounds=config.rounds, state="playing", board=player is not None,
-                             questionnaire_token=secrets.token_urlsafe(16) if phase.questionnaires else "")
+                             questionnaire_token=token if phase.questionnaires else "", board_token=token)
+            hub = None
+            if player is None and self.lab is not None:
+                from pairplay.services.lab.hub import LabHub
+                hub = self.lab.add(LabHub(config, token=token))  # the board page: /s/<session>/board?t=<token>
             self._stop, self._abort_reason, self._control_seq = threading.Event(), "", 0
             self._skip.clear()
             answered = threading.Event()
@@ -179,9 +192,16 @@ class StudyRunner:
                         time.sleep(0.02)
                     time.sleep(0.05)  # the answer reaches the recorder on its own thread
 
-            # without a scripted player the game waits for the board page's service ("board" liveliness)
-            path = run_session(config, self.data.folder / recording, bus=self.bus, stop=self._stop,
-                               robot=self.robot, hold=hold, wait_also=() if player is not None else ("board",))
+            # the game waits for the board: the lab's hub, a scripted player, or a board elsewhere on the bus
+            try:
+                path = run_session(config, self.data.folder / recording, bus=self.bus, stop=self._stop,
+                                   robot=self.robot, hold=hold,
+                                   wait_also=() if player is not None or hub is not None else ("board",),
+                                   extra_nodes=(lambda bus: [hub.make_node(bus)]) if hub is not None else None)
+            finally:
+                if hub is not None:
+                    self.lab.hubs.pop(config.session, None)
+                    hub.close()
             self._stop.set()
             if node is not None and node.thread is not None:
                 node.thread.join(5.0)

@@ -82,6 +82,17 @@ class Node:
             if self.logic.done:
                 self._wake.set()
 
+    def stamp(self, events: list[Event]) -> list[Event]:
+        """Number and time this service's own new events (an input a web page gave, say);
+        the caller publishes them (`publish`), outside any bus callback."""
+        with self._lock:
+            return self.driver._stamp(events)
+
+    def refuse(self, reason: str, key: str, source: str = "", seq: int = 0, payload: bytes = b"") -> list[Event]:
+        """A MessageRejected for an input that did not come over the bus (a WebSocket message)."""
+        with self._lock:
+            return self.driver.reject(reason, key, source, seq, payload)
+
     def publish(self, events: list[Event]) -> None:
         for e in events:
             self.bus.put(event_key(self.session, e.source, type(e).__name__), encode_event(e))

@@ -130,7 +130,7 @@ class ScriptedPlayer:
         if self.press_wrong and considered and not consistent and self.pressed == 0:
             self.pressed += 1
             self.presses += 1
-            return [ev.WrongSuggestionPressed(round=self.round, turn=self.turn)]
+            return [ev.WrongSuggestionPressed(round=self.round, turn=self.turn, attempt=s.attempt)]
         self.offset_ns += self.think_ns if considered else self.glance_ns
         self.stage = "second"
         self.picks += 1

@@ -30,13 +30,15 @@ def run_session(config: SessionConfig, path: str | Path, *, bus: Bus | None = No
                 bus_options: BusOptions | None = None, external: tuple[str, ...] = (),
                 stop: threading.Event | None = None, settle_timeout_s: float = 30.0,
                 on_bus=None, nodes_out: dict | None = None, wait_also: tuple[str, ...] = (),
-                robot: RobotChoice | None = None, hold=None) -> Path:
+                robot: RobotChoice | None = None, extra_nodes=None, hold=None) -> Path:
     """Run one session to its end (or `stop`); return the recording's path.
 
     `nodes_out`, if given, receives the in-process Nodes by service name (tests
     read the live learner's final Q-table from it). `wait_also`: more services
     (liveliness names) the game waits for before it starts the session.
     `robot` (the --robot options) adds the robot bridge (services/robot).
+    `extra_nodes(bus) -> [Node]`: more in-process services (the lab's board),
+    started after the recorder and before the game, which waits for them.
     `hold(recorder)`, if given, is called once the game has ended, before the
     recording is finished: the human study keeps a game's recording open for
     the questionnaire that follows it (services/protocol.py)."""
@@ -53,6 +55,8 @@ def run_session(config: SessionConfig, path: str | Path, *, bus: Bus | None = No
                                        daemon=True)
     recorder_thread.start()
     needed = ["recorder", "learner"] + (["participant"] if config.participant.startswith("sim:") else [])
+    if config.observed_source == "gaze":
+        needed.append("tracker")  # the eye tracker: without it no turn gets a suggestion
     nodes = []
     bridge = None
     try:
@@ -61,6 +65,10 @@ def run_session(config: SessionConfig, path: str | Path, *, bus: Bus | None = No
         if bridge is not None:
             bridge.run_in_thread(stop)
             needed.append("robot")
+        if extra_nodes is not None:
+            for node in extra_nodes(bus):
+                nodes.append(node)
+                needed.append(node.logic.name)
         if "learner" not in external:
             nodes.append(Node(bus, LearnerLogic(), config.session))
         if "participant" not in external and config.participant.startswith("sim:"):

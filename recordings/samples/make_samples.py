@@ -9,12 +9,17 @@ to make a test pass. Three files:
   ignore rule, a wrong-suggestion press) played by a scripted touch screen
   through the real game and learner logics, written by the recorder's writer;
 - catalogue.mcap: one event of every type of the catalogue, RobotActed,
-  PolicyCombined and QuestionnaireAnswered included (pairplay 0.2.0's types);
-- console.mcap (added with the experimenter's console): a human-study session
-  the experimenter pauses (a touch refused meanwhile), resumes and aborts with
-  a suggestion still open, through the real game and learner logics.
-A new sample is added for new event types; the old ones stay as they were:
-    .venv/bin/python recordings/samples/make_samples.py recordings/samples console
+  PolicyCombined and QuestionnaireAnswered included (pairplay 0.1.0);
+- human-gaze.mcap (pairplay 0.3.0, `gaze_sample` alone): a human-study session
+  whose observed card comes from an eye tracker (GazeFixated), picks timed on
+  the board page's clock (page_time_ms), a wrong-suggestion press naming its
+  attempt, a stale second press rejected, a turn without a fixation;
+- console.mcap (`console_sample` alone, with the experimenter's console): a
+  human-study session the experimenter pauses (a touch refused meanwhile),
+  resumes and aborts with a suggestion still open, through the real game and
+  learner logics.
+A new sample is added for new event types; the old ones stay as they were
+(`--gaze`, `--console` make just that one).
 
     .venv/bin/python recordings/samples/make_samples.py recordings/samples
 """
@@ -109,6 +114,56 @@ def human_sample(out: Path) -> None:
     writer.close()
 
 
+def gaze_sample(out: Path) -> None:
+    config = SessionConfig(session="sample-human-gaze", participant="human:p02", seed=5, rounds=1,
+                           observed_source="gaze", ignore_rule="time", ignore_clock="page", software_version="0.3.0")
+    clock = iter(range(10**18, 10**19, 10**6)).__next__
+    game, learner = Driver(GameLogic(config), config.session, clock), Driver(LearnerLogic(), config.session, clock)
+    writer = EventLogWriter(out / "human-gaze.mcap")
+    writer.add_metadata("pairplay.session", {"session": config.session, "seed": str(config.seed),
+                                             "software_version": "0.3.0"})
+
+    def record(events):
+        for e in events:
+            key = event_key(e.session, e.source, type(e).__name__)
+            writer.write(key, encode_event(e), log_time_ns=e.time_ns or 1, sequence=e.seq)
+            if e.source == "game":
+                record(learner.receive(key, encode_event(e)))
+
+    record(game.start())
+    faces = list(game.logic.board.faces)
+    seqs = {"board": 0, "tracker": 0}
+
+    def press(source, event, at_s):
+        seqs[source] += 1
+        e = stamped(event, session=config.session, source=source, seq=seqs[source], time_ns=int(at_s * 1e9))
+        key = event_key(config.session, source, type(event).__name__)
+        writer.write(key, encode_event(e), log_time_ns=e.time_ns, sequence=e.seq)
+        record(game.receive(key, encode_event(e)))
+
+    t_s, matched, turn = 100.0, 0, 0
+    while not game.logic.done:
+        covered = [c for c in range(18) if not matched >> c & 1]
+        first = covered[0]
+        partner = next(c for c in covered if c != first and faces[c] == faces[first])
+        others = [c for c in covered if c not in (first, partner)]
+        second = partner if turn % 2 or not others else others[0]
+        page_ms = t_s * 1000 + 0.25  # the page's clock runs 250 us off the server's
+        press("board", ev.CardPicked(round=0, turn=turn, card=first, page_time_ms=page_ms), t_s)
+        if turn != 3:  # turn 3: the tracker saw nothing, the turn goes without a suggestion
+            press("tracker", ev.GazeFixated(card=others[-1] if others else partner, duration_ms=240.0), t_s + 0.4)
+        if turn == 1:
+            press("board", ev.WrongSuggestionPressed(round=0, turn=turn, attempt=0, page_time_ms=page_ms + 900), t_s + 0.9)
+            press("board", ev.WrongSuggestionPressed(round=0, turn=turn, attempt=0, page_time_ms=page_ms + 950), t_s + 0.95)
+        gap = 0.8 if turn == 2 else 2.5  # turn 2: too fast
+        press("board", ev.CardPicked(round=0, turn=turn, card=second, page_time_ms=page_ms + gap * 1000), t_s + gap + 0.1)
+        if faces[first] == faces[second]:
+            matched |= (1 << first) | (1 << second)
+        turn += 1
+        t_s += 10
+    writer.close()
+
+
 def catalogue_sample(out: Path) -> None:
     s = "sample-catalogue"
     cfg = SessionConfig(session=s, participant="sim:deaf", persona="deaf", seed=1, rounds=1, software_version="0.1.0")
@@ -190,11 +245,16 @@ def console_sample(out: Path) -> None:
     writer.close()
 
 
-SAMPLES = {"sim": sim_sample, "human": human_sample, "catalogue": catalogue_sample, "console": console_sample}
-
 if __name__ == "__main__":
     out = Path(sys.argv[1] if len(sys.argv) > 1 else "recordings/samples")
-    for name in sys.argv[2:] or list(SAMPLES):
-        SAMPLES[name](out)
+    if sys.argv[2:3] == ["--gaze"]:  # 0.3.0: only the new sample; the older ones stay frozen
+        gaze_sample(out)
+        sys.exit(0)
+    if sys.argv[2:3] == ["--console"]:  # likewise
+        console_sample(out)
+        sys.exit(0)
+    sim_sample(out)
+    human_sample(out)
+    catalogue_sample(out)
     for p in sorted(out.glob("*.mcap")):
         print(p, p.stat().st_size)

@@ -1,62 +1,55 @@
-"""Serving the console on its own: a Starlette app under uvicorn, on loopback unless told otherwise.
+"""The lab server of a study: the experimenter's console, each game's board and mirror, the questionnaire.
 
-Rule: `ConsoleServer(runner, token)` serves the console and questionnaire routes
-(app.py) on HOST:PORT (port 0: the OS picks one; `url` says which) in a thread
-of this process, beside the study's bus. It stops with `close()`. The lab
-server of the board (`pairplay lab`) mounts the same routes in its own app;
-this server is for running a study's console where no board page is served
-from this process (a pilot with scripted participants, or a board run elsewhere).
+Rule: `StudyLabServer(runner)` serves, in one Starlette app of the lab
+(services/lab/app.create_app: its security headers, its board and mirror
+routes), the console and questionnaire routes (app.py) on HOST:PORT (port 0:
+the OS picks one), in a thread of this process beside the study's bus. The
+runner adds each game's LabHub to the app's `Lab` while the game runs, so the
+board page of the game that is on is `/s/<session>/board?t=<token>`, and the
+console links to it. On loopback unless the caller gives another host; TLS
+with a certificate and key, as `pairplay lab`.
 """
 
 from __future__ import annotations
 
 import secrets
-import socket
-import threading
-import time
-
-import uvicorn
-from starlette.applications import Starlette
+from types import SimpleNamespace
 
 from pairplay.services.console.app import Console, console_routes
+from pairplay.services.lab.app import PAGES, Lab, create_app
+from pairplay.services.lab.server import WebServer
 from pairplay.services.protocol import StudyRunner
 
 
-class ConsoleServer:
+class StudyLabServer:
     def __init__(self, runner: StudyRunner, token: str | None = None, host: str = "127.0.0.1", port: int = 0,
-                 board_url=None):
+                 ssl_certfile: str | None = None, ssl_keyfile: str | None = None):
         self.token = token or secrets.token_urlsafe(18)
+        self.lab = runner.lab if runner.lab is not None else Lab()
+        runner.lab = self.lab
+
+        def board_url(session: str) -> str | None:
+            hub = self.lab.hubs.get(session)
+            return None if hub is None else f"/s/{session}/board?t={hub.token}"
         self.console = Console(runner, self.token, board_url=board_url)
-        self.app = Starlette(routes=console_routes(self.console))
-        self.sock = socket.socket(socket.AF_INET6 if ":" in host else socket.AF_INET)
-        self.sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
-        self.sock.bind((host, port))
-        self.host, self.port = host, self.sock.getsockname()[1]
-        self.server = uvicorn.Server(uvicorn.Config(self.app, log_level="warning", lifespan="off"))
-        self.thread: threading.Thread | None = None
+        page = SimpleNamespace(routes=lambda: console_routes(self.console))
+        self.app = create_app(self.lab, pages=PAGES + (page,))
+        self.web = WebServer(self.app, host, port, ssl_certfile, ssl_keyfile)
+
+    def start(self) -> "StudyLabServer":
+        self.web.start()
+        return self
 
     @property
     def url(self) -> str:
-        host = f"[{self.host}]" if ":" in self.host else self.host
-        return f"http://{host}:{self.port}"
+        return self.web.base_url()
 
     @property
     def console_url(self) -> str:
         return f"{self.url}/console?token={self.token}"
 
-    def start(self) -> "ConsoleServer":
-        self.thread = threading.Thread(target=self.server.run, kwargs={"sockets": [self.sock]},
-                                       name="pairplay-console-http", daemon=True)
-        self.thread.start()
-        deadline = time.monotonic() + 10
-        while not self.server.started and time.monotonic() < deadline:
-            time.sleep(0.02)
-        if not self.server.started:
-            raise RuntimeError("the console's web server did not start")
-        return self
-
     def close(self) -> None:
-        self.server.should_exit = True
-        if self.thread is not None:
-            self.thread.join(5)
-        self.sock.close()
+        self.web.stop()
+
+
+ConsoleServer = StudyLabServer  # the name the console had before it joined the lab server
