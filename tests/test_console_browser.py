@@ -64,7 +64,7 @@ def play_on_the_board(page, inbox: queue.Queue, session: str, persona_key: str) 
     return clicks
 
 
-def answer_questionnaire(page, persona_key: str, slow_clicks: bool = False) -> None:
+def answer_questionnaire(page, persona_key: str, slow_clicks: bool = False, shot: Path | None = None) -> None:
     """Answer every item of the questionnaire page by clicks, as the persona would."""
     from pairplay.core.personas import persona
     from pairplay.schemas.study import Item
@@ -87,6 +87,8 @@ def answer_questionnaire(page, persona_key: str, slow_clicks: bool = False) -> N
             const ta = document.querySelector(`#item-${id} textarea`);
             if (ta) { ta.value = v; continue; }
             document.querySelector(`#item-${id} input[value="${v}"]`).closest("label").click(); } }""", answers)
+    if shot is not None:
+        page.screenshot(path=str(shot))
     page.click("#q-send")
     page.wait_for_selector("text=Your answers are recorded", timeout=10000)
 
@@ -161,9 +163,8 @@ def test_the_whole_protocol_from_the_console(browser, tmp_path, robot, rounds, o
                                            timeout=30000)
                     page.screenshot(path=str(shots / "console.png"), full_page=False)
                 # the board page becomes the questionnaire once the game is over
-                answer_questionnaire(board, PERSONAS[who], slow_clicks=steps == 1)
-                if steps == 1:
-                    board.screenshot(path=str(shots / "questionnaire.png"))
+                answer_questionnaire(board, PERSONAS[who], slow_clicks=steps == 1,
+                                     shot=shots / "questionnaire.png" if steps == 1 else None)
                 assert board.errors == []
                 board.context.close()
             assert steps == 9, steps
