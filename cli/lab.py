@@ -107,6 +107,8 @@ def run(args: argparse.Namespace) -> int:
     recorded = read_log(path)
     fold = fold_events(r.event for r in recorded.events)
     print(f"recorded {len(recorded.events)} events to {path}")
-    print(f"rounds played: {len(fold.turns_per_round())}; rejections: {len(fold.rejections)}; "
-          f"ended: {fold.ended.reason if fold.ended else 'no (stopped)'}")
-    return 0 if fold.ended is not None else 1
+    e = fold.ended
+    ended = "no SessionEnded recorded" if e is None else e.reason + (f" ({e.detail})" if e.detail else "")
+    print(f"rounds played: {len(fold.turns_per_round())}; rejections: {len(fold.rejections)}; ended: {ended}")
+    # as `pairplay session`: a session stopped by a signal or the experimenter ended as it should
+    return 0 if e is not None and e.reason in ("completed", "interrupted", "aborted") else 1

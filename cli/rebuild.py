@@ -34,7 +34,9 @@ def run(args: argparse.Namespace) -> int:
         f = rebuilt.fold
         turns = f.turns_per_round()
         print(f"{rec}: {f.events} events, {len(turns)} rounds, {f.counts.get('QUpdated', 0)} Q updates"
-              f"{'; ' + rebuilt.note if rebuilt.note else ''}{'; %d q_before mismatches' % f.q_mismatches if f.q_mismatches else ''}")
+              f"{'; %d q_before mismatches' % f.q_mismatches if f.q_mismatches else ''}")
+        if rebuilt.partial:
+            print(f"  PARTIAL session: {rebuilt.partial}")
         print("  " + ", ".join(str(p) for p in paths))
         done.append(rebuilt)
     if done and not args.no_plot:

@@ -29,6 +29,7 @@ from datetime import datetime, timezone
 from pathlib import Path
 
 from pairplay import __version__
+from pairplay.core.rng import STREAMS_VERSION
 from pairplay.schemas.config import DEFAULT_REWARD_BONUS, REWARD_BONUS_RULES, LearnerConfig
 from pairplay.schemas.keys import check_chunk
 from pairplay.schemas.policy import PolicyFileError, read_policy
@@ -97,7 +98,8 @@ def config_from_args(args: argparse.Namespace) -> SessionConfig:
         ignore_rule=args.ignore_rule or ("perceived" if sim else "time"), policy_actions=actions,
         learner=learner_overrides(schedule), software_version=__version__,
         reward_bonus=args.reward_bonus, ignore_window_ms=args.ignore_window_ms,
-        ignore_clock=args.ignore_clock or ("server" if sim else "page"), turn_back_ms=args.turn_back_ms)
+        ignore_clock=args.ignore_clock or ("server" if sim else "page"), turn_back_ms=args.turn_back_ms,
+        streams=STREAMS_VERSION)
     config.validate()
     return config
 
@@ -139,4 +141,10 @@ def run(args: argparse.Namespace) -> int:
     print(f"recorded {len(recorded.events)} events to {path}")
     print(f"rounds played: {len(turns)}; turns per round: {turns[:10]}{' ...' if len(turns) > 10 else ''}")
     print(f"rejections: {len(fold.rejections)}; Q updates: {fold.counts.get('QUpdated', 0)}")
-    return 0 if fold.ended is not None else 1
+    e = fold.ended
+    if e is None:
+        print("ended: no SessionEnded recorded")
+    elif e.reason != "completed":
+        print(f"ended: {e.reason}{f' ({e.detail})' if e.detail else ''} after {e.rounds_played} of "
+              f"{config.rounds} rounds")
+    return 0 if e is not None and e.reason in ("completed", "interrupted", "aborted") else 1

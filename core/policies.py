@@ -21,14 +21,14 @@ def to_policy_file(q: np.ndarray, counts: np.ndarray, greedy: np.ndarray, *, alg
                    game: int | None = None, rounds: int = 0, config: LearnerConfig | None = None,
                    info: UserInfo | None = None, merged_from: list[str] | None = None,
                    rules: list[str] | None = None, software: str = "",
-                   reward_bonus: str = DEFAULT_REWARD_BONUS) -> PolicyFile:
+                   reward_bonus: str = DEFAULT_REWARD_BONUS, partial: str = "") -> PolicyFile:
     return PolicyFile(
         algorithm=algorithm, participant=participant, persona=persona, seed=seed, game=game,
         rounds=rounds, config=config, states=list(STATE_NAMES),
         greedy=[int(a) for a in greedy], q=[[float(v) for v in row] for row in q],
         visits=[int(v) for v in np.asarray(counts).reshape(len(STATE_NAMES), -1).sum(-1)],
         info=info, merged_from=list(merged_from or []), rules=list(rules or []), software=software,
-        reward_bonus=reward_bonus)
+        reward_bonus=reward_bonus, partial=partial)
 
 
 def greedy_of(policy: PolicyFile) -> np.ndarray:

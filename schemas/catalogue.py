@@ -39,7 +39,7 @@ CATALOGUE: dict[str, tuple[str, str]] = {
     "SessionAborted": ("experimenter", "the console stopped the game, with the reason: the game ends the session"),
     "GazeFixated": ("tracker (eye tracker)", "the participant fixated a card: the observed card of a 'gaze' session"),
     "MessageRejected": ("any service", "a bus message a service refused (malformed, unknown tag, wrong session, out of order), with the reason"),
-    "SessionEnded": ("game", "the session is over, with the reason and the rounds played"),
+    "SessionEnded": ("game", "the session is over: why (completed, interrupted by a signal, aborted by the experimenter, a service failed) and how far it got"),
 }
 
 # tag -> (publishing services, consuming services), as the services' code reads them; the

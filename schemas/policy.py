@@ -57,6 +57,9 @@ class PolicyFile(msgspec.Struct, frozen=True, kw_only=True):
     # When the learning reward paid its 1/|C| bonus (core/reward.py); files that do
     # not state it were written by pairplay 0.1.0, under SPEC's rule.
     reward_bonus: str = UNSTATED_REWARD_BONUS
+    # Why the session this policy was rebuilt from is not complete ("" = it completed every round):
+    # interrupted, aborted, failed, cut short, damaged or recovered (replay/rebuild.py).
+    partial: str = ""
 
     def __post_init__(self) -> None:
         if self.format != FORMAT:

@@ -13,7 +13,8 @@ after the first pick, of a covered card other than the first; the game
 publishes it as CardObserved). Once the
 observed card is known it asks for a suggestion (SuggestionRequested with the
 state of thesis 4.1); a WrongSuggestionPressed asks again (attempt + 1). The
-second pick resolves the turn (TurnResolved); under the "time" ignore rule a
+second pick resolves the turn (TurnResolved); `end` stops the session early with its
+reason (interrupted, aborted, a service failed) and how far it got. Under the "time" ignore rule a
 turn whose picks are closer than the window (1.5 s, thesis 7.1.2) is marked
 ignored, timed by the picks' own times so a replay decides the same: their
 envelope times (the server's clock) or, with `ignore_clock` "page", the board
@@ -23,7 +24,7 @@ Under "gaze", a second pick that comes before any fixation resolves the turn
 without a suggestion (a silent tracker must not stall a person's game).
 The experimenter's SessionPaused / SessionResumed / SessionAborted (the console)
 are inputs like any other: while paused every touch is refused with the
-reason; an abort ends the session at once (SessionEnded "aborted: <reason>").
+reason; an abort ends the session at once (SessionEnded "aborted", the reason as its detail).
 """
 
 from __future__ import annotations
@@ -77,6 +78,14 @@ class GameLogic:
 
     def start(self) -> list[ev.Event]:
         return [ev.SessionStarted(config=self.config), *self._deal()]
+
+    def end(self, reason: str, detail: str = "") -> list[ev.Event]:
+        """End the session early (interrupted, aborted or failed), saying how far it got; [] if it is over."""
+        if self.done:
+            return []
+        self.done = True
+        return [ev.SessionEnded(reason=reason, rounds_played=self.round, detail=detail, round=self.round,
+                                turns_in_round=self.turn)]
 
     def _deal(self) -> list[ev.Event]:
         faces, _ = deal(self.deals.take(N_CARDS))
@@ -139,8 +148,7 @@ class GameLogic:
     def _control(self, e: ev.Event) -> list[ev.Event]:
         """The experimenter's console (services/protocol.py): pause, resume, abort."""
         if isinstance(e, ev.SessionAborted):
-            self.done = True
-            return [ev.SessionEnded(reason=f"aborted: {e.reason}", rounds_played=self.round)]
+            return self.end("aborted", e.reason)
         pause = isinstance(e, ev.SessionPaused)
         if pause == self.paused:
             raise Rejected("the session is already " + ("paused" if pause else "running"))

@@ -237,8 +237,10 @@ class StudyRunner:
             written = write_outputs(rebuild_recording(path), self.data.folder / "policies")
             written[1].unlink()  # the learning curve is in the recording and the report
             policy = written[0].relative_to(self.data.folder).as_posix()
-        reason = "" if completed else (fold.ended.reason if fold.ended is not None else
-                                       self._abort_reason or "the game did not end")
+        ended = fold.ended
+        reason = "" if completed else (f"{ended.reason}: {ended.detail}" if ended is not None and ended.detail else
+                                       ended.reason if ended is not None else self._abort_reason or
+                                       "the game did not end")
         self.data.append(j.GameEnded(session=config.session, participant=config.participant.split(":", 1)[1],
                                      outcome="completed" if completed else "aborted", reason=reason,
                                      rounds_played=len(fold.rounds), policy=policy, questionnaire=answered))
@@ -256,7 +258,7 @@ class StudyRunner:
         self.bus.put(event_key(self.live.session, "experimenter", type(event).__name__), ev.encode_event(e))
 
     def abort(self, reason: str, grace_s: float = 5.0) -> None:
-        """End the running game: the game records SessionEnded "aborted: <reason>"; if it does not
+        """End the running game: the game records SessionEnded "aborted" with the reason; if it does not
         within `grace_s` (a crashed game), the session is stopped anyway."""
         if not reason.strip():
             raise StudyDataError("an abort needs a reason")

@@ -18,8 +18,12 @@ SAMPLES = Path(__file__).resolve().parent.parent / "recordings" / "samples"
 ALL = sorted(SAMPLES.glob("*.mcap"))
 
 
+FORMATS = ("", "-fmt2")  # format 1 (pairplay 0.1.0, kept as made) and format 2 (make_samples.py today)
+
+
 def test_the_samples_are_there():
-    assert {p.name for p in ALL} >= {"sim-ashley.mcap", "human-board.mcap", "catalogue.mcap", "human-gaze.mcap"}
+    assert {p.name for p in ALL} >= {f"{n}{f}.mcap" for n in ("sim-ashley", "human-board", "catalogue")
+                                     for f in FORMATS} | {"human-gaze.mcap", "console.mcap"}
 
 
 @pytest.mark.parametrize("path", ALL, ids=lambda p: p.name)
@@ -35,8 +39,15 @@ def test_every_sample_decodes_whole_and_validates_against_todays_schemas(path):
             current[type(event).__name__].validate(data)  # and today's
 
 
+@pytest.mark.parametrize("fmt", FORMATS)
+def test_the_catalogue_holds_the_event_types_of_its_day(fmt):
+    tags = {type(r.event).__name__ for r in read_log(SAMPLES / f"catalogue{fmt}.mcap").events}
+    assert tags <= {t.__name__ for t in EVENT_TYPES}
+    assert {"ServiceStarted", "RobotActed", "PolicyCombined", "QuestionnaireAnswered", "SessionEnded"} <= tags
+
+
 def test_the_samples_hold_every_event_type():
-    """catalogue.mcap (0.1.0) holds every type of its day; newer types are in newer samples."""
+    """The catalogues hold every type of their day; newer types are in newer samples."""
     tags = {type(r.event).__name__ for p in ALL for r in read_log(p).events}
     assert tags == {t.__name__ for t in EVENT_TYPES}
 
@@ -44,16 +55,19 @@ def test_the_samples_hold_every_event_type():
 def test_the_console_sample_was_paused_refused_a_touch_and_aborted():
     log = read_log(SAMPLES / "console.mcap")
     assert [e.reason for e in log.of("PickRejected")] == ["the session is paused"]
-    assert log.of("SessionEnded")[0].reason == "aborted: the participant had to leave"
+    ended = log.of("SessionEnded")[0]
+    assert (ended.reason, ended.detail) == ("aborted", "the participant had to leave")
     assert log.of("RewardGiven")[-1].reason.startswith("unsettled")
 
 
-@pytest.mark.parametrize("name", ["sim-ashley.mcap", "human-board.mcap", "human-gaze.mcap", "console.mcap"])
+@pytest.mark.parametrize("name", [f"{n}{f}.mcap" for n in ("sim-ashley", "human-board") for f in FORMATS]
+                         + ["human-gaze.mcap", "console.mcap"])
 def test_session_samples_verify_and_rebuild(name):
     assert verify_recording(SAMPLES / name).ok
     rebuilt = rebuild_recording(SAMPLES / name)
     assert rebuilt.fold.q_mismatches == 0 and rebuilt.fold.ended is not None
 
 
-def test_verify_catches_a_recording_the_services_would_not_have_made():
-    assert not verify_recording(SAMPLES / "catalogue.mcap").ok
+@pytest.mark.parametrize("fmt", FORMATS)
+def test_verify_catches_a_recording_the_services_would_not_have_made(fmt):
+    assert not verify_recording(SAMPLES / f"catalogue{fmt}.mcap").ok
