@@ -109,6 +109,6 @@ def run(args: argparse.Namespace) -> int:
     print(f"recorded {len(recorded.events)} events to {path}")
     e = fold.ended
     ended = "no SessionEnded recorded" if e is None else e.reason + (f" ({e.detail})" if e.detail else "")
-    print(f"rounds played: {len(fold.turns_per_round())}; rejections: {len(fold.rejections)}; ended: {ended}")
-    # as `pairplay session`: a session stopped by a signal or the experimenter ended as it should
-    return 0 if e is not None and e.reason in ("completed", "interrupted", "aborted") else 1
+    print(f"rounds played: {len(fold.turns_per_round())} of {config.rounds}; rejections: {len(fold.rejections)}; "
+          f"ended: {ended}")
+    return 0 if e is not None and e.reason in ("completed", "interrupted", "aborted") else 1  # as `pairplay session`

@@ -8,6 +8,7 @@ when the output is complete, 2 when the input cannot be read at all.
 from __future__ import annotations
 
 import argparse
+import sys
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -21,7 +22,7 @@ def run(args: argparse.Namespace) -> int:
     try:
         done = recover(args.recording, args.output)
     except (OSError, ValueError) as err:
-        print(f"pairplay recover: {err}")
+        print(f"pairplay recover: {err}", file=sys.stderr)
         return 2
     state = f"cut short ({done.reason})" if done.truncated else "complete already"
     print(f"{args.recording}: {state}; {done.messages} messages kept in {done.output}")

@@ -13,6 +13,7 @@ takes (add_robot_arguments, check_robot_args, bridge_from_args).
 from __future__ import annotations
 
 import argparse
+import sys
 import logging
 import threading
 
@@ -69,12 +70,12 @@ def run(args: argparse.Namespace) -> int:
         print("pairplay robot: give either --session ID (serve a session) or --try CODES (try the robot)")
         return 2
     if args.robot == NO_ROBOT:
-        print("pairplay robot: --robot none leaves nothing to do")
+        print("pairplay robot: --robot none leaves nothing to do", file=sys.stderr)
         return 2
     try:
         return _try(args) if args.try_codes else _serve(args)
     except (ValueError, CalibrationError) as exc:
-        print(f"pairplay robot: {exc}")
+        print(f"pairplay robot: {exc}", file=sys.stderr)
         return 2
 
 

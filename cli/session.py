@@ -23,6 +23,7 @@ of 5 rounds by default; settings a person cannot satisfy are refused
 from __future__ import annotations
 
 import argparse
+import sys
 import logging
 import threading
 from datetime import datetime, timezone
@@ -97,9 +98,8 @@ def config_from_args(args: argparse.Namespace) -> SessionConfig:
         observed_source=args.observed_source or ("intended" if sim else "first-pick"),
         ignore_rule=args.ignore_rule or ("perceived" if sim else "time"), policy_actions=actions,
         learner=learner_overrides(schedule), software_version=__version__,
-        reward_bonus=args.reward_bonus, ignore_window_ms=args.ignore_window_ms,
-        ignore_clock=args.ignore_clock or ("server" if sim else "page"), turn_back_ms=args.turn_back_ms,
-        streams=STREAMS_VERSION)
+        reward_bonus=args.reward_bonus, streams=STREAMS_VERSION, ignore_window_ms=args.ignore_window_ms,
+        ignore_clock=args.ignore_clock or ("server" if sim else "page"), turn_back_ms=args.turn_back_ms)
     config.validate()
     return config
 
@@ -119,7 +119,7 @@ def run(args: argparse.Namespace) -> int:
         config = config_from_args(args)
         check_robot_args(args)
     except (ValueError, KeyError, PolicyFileError) as err:
-        print(f"pairplay session: {err}")
+        print(f"pairplay session: {err}", file=sys.stderr)
         return 2
     stop = threading.Event()
     stop_on_signals(stop)

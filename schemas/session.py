@@ -52,14 +52,14 @@ class SessionConfig(msgspec.Struct, frozen=True, kw_only=True):
     # When the simulated reward pays its 1/|candidate set| bonus (core/reward.py).
     # New sessions state it (DEFAULT_REWARD_BONUS); absent = a pairplay 0.1.0 recording.
     reward_bonus: str = UNSTATED_REWARD_BONUS
-    ignore_clock: str = "server"
-    # How long the board page leaves a missed pair face up before turning it back (ms).
-    turn_back_ms: float = 1500.0
     # How the seed, the participant and the game index name the RNG streams (core.rng.game_seed):
     # 1 = pairplay <= 0.2 (the seed cut to 32 bits, ids by CRC-32; what a recording without the field
     # was made with), 2 = every seed 0..2**64-1 and every participant id its own streams. New sessions
     # state 2 (core.rng.STREAMS_VERSION).
     streams: int = 1
+    ignore_clock: str = "server"
+    # How long the board page leaves a missed pair face up before turning it back (ms).
+    turn_back_ms: float = 1500.0
 
     def learner_config(self) -> LearnerConfig:
         """The learner's schedule as the strict config Struct (ValueError if unknown keys)."""
@@ -88,11 +88,6 @@ class SessionConfig(msgspec.Struct, frozen=True, kw_only=True):
             raise ValueError(f"ignore_clock {self.ignore_clock!r} is not one of {IGNORE_CLOCKS}")
         if self.participant.startswith("sim:") and not self.persona:
             raise ValueError("a simulated participant needs a persona")
-        if self.participant.startswith("sim:") and self.observed_source == "gaze":
-            raise ValueError("a simulated participant reports its intended card: observed source 'gaze' is for "
-                             "a person with an eye tracker")
-        if self.participant.startswith("human:"):
-            self._check_human()
         if self.streams not in (1, 2):
             raise ValueError(f"stream derivation {self.streams} is not one this pairplay knows (1, 2)")
         if self.streams >= 2 and not 0 <= self.seed <= 2**64 - 1:
@@ -102,6 +97,11 @@ class SessionConfig(msgspec.Struct, frozen=True, kw_only=True):
                              "only (it cut them to 32 bits); use streams=2")
         if self.game_index < 0:
             raise ValueError(f"game index {self.game_index} must be >= 0")
+        if self.participant.startswith("sim:") and self.observed_source == "gaze":
+            raise ValueError("a simulated participant reports its intended card: observed source 'gaze' is for "
+                             "a person with an eye tracker")
+        if self.participant.startswith("human:"):
+            self._check_human()
         self.learner_config()
 
     def _check_human(self) -> None:

@@ -78,27 +78,43 @@ def test_the_lab_is_for_people_and_session_refuses_the_same(tmp_path):
     r = pairplay("lab", "--participant", "sim:blind", "--out", str(tmp_path))
     assert r.returncode == 2 and "the lab is for a person" in r.stderr
     r = pairplay("session", "--participant", "human:p1", "--ignore-rule", "perceived", "--out", str(tmp_path))
-    assert r.returncode == 2 and "ignore rule 'perceived'" in r.stdout
+    assert r.returncode == 2 and "ignore rule 'perceived'" in r.stderr and r.stderr.count("\n") == 1
 
 
-def test_pairplay_lab_says_where_the_board_is_and_stops_on_sigterm(tmp_path):
+@pytest.mark.parametrize("tls", [False, True], ids=["http", "https"])
+def test_pairplay_lab_says_where_the_board_is_and_stops_on_sigterm(tmp_path, tls):
+    import shutil
     import signal
+    import ssl
     import urllib.request
 
+    extra = []
+    context = None
+    if tls:
+        if shutil.which("openssl") is None:
+            pytest.skip("no openssl to make a test certificate")
+        cert, key = tmp_path / "lab.pem", tmp_path / "lab-key.pem"
+        subprocess.run(["openssl", "req", "-x509", "-newkey", "rsa:2048", "-nodes", "-days", "1", "-subj",
+                        "/CN=127.0.0.1", "-keyout", str(key), "-out", str(cert)], check=True, capture_output=True)
+        extra = ["--certfile", str(cert), "--keyfile", str(key)]
+        context = ssl.create_default_context(cafile=str(cert))
+        context.check_hostname = False  # the certificate names 127.0.0.1 as CN only
     proc = subprocess.Popen([sys.executable, "-m", "pairplay", "lab", "--participant", "human:p9", "--session",
-                             "sig", "--out", str(tmp_path)], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                             "sig", "--out", str(tmp_path), *extra], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
                             text=True)
     try:
         lines = [proc.stdout.readline() for _ in range(3)]
         board = lines[1].split()[1]
-        assert lines[1].startswith("board:  http://127.0.0.1:") and "/s/sig/board?t=" in board
+        scheme = "https" if tls else "http"
+        assert lines[1].startswith(f"board:  {scheme}://127.0.0.1:") and "/s/sig/board?t=" in board
         assert lines[2].startswith("mirror: ")
-        direct = urllib.request.build_opener(urllib.request.ProxyHandler({}))  # loopback: never a proxy
+        handlers = [urllib.request.ProxyHandler({})] + ([urllib.request.HTTPSHandler(context=context)] if tls else [])
+        direct = urllib.request.build_opener(*handlers)  # loopback: never a proxy
         assert b"Wrong suggestion" in direct.open(board, timeout=10).read()
         proc.send_signal(signal.SIGTERM)
         out, err = proc.communicate(timeout=20)
     finally:
         if proc.poll() is None:
             proc.kill()
-    assert proc.returncode == 0 and "ended: interrupted (SIGTERM)" in out and "Traceback" not in err
+    assert proc.returncode == 0 and "ended: interrupted (SIGTERM" in out and "Traceback" not in err, out + err
     assert (tmp_path / "sig.mcap").stat().st_size > 0

@@ -84,8 +84,11 @@ def main(out: Path) -> None:
                     board.click("#wrong")
                     mirror.wait_for_function(f"window.pairplay.state.suggestion && "
                                              f"window.pairplay.state.suggestion.attempt > {attempt}")
+                # the robot finished this suggestion: the mirror's table shows when
+                mirror.wait_for_function("""(() => { const s = window.pairplay.state, g = s.suggestion;
+                    return s.robot.some(r => r.turn === s.turn && r.attempt === g.attempt && r.outcome === 'done'); })()""",
+                                         timeout=10000)
                 board.wait_for_timeout(300)
-                mirror.wait_for_timeout(300)
                 board.screenshot(path=str(out / "lab-board.png"))
                 mirror.screenshot(path=str(out / "lab-mirror.png"))
                 browser.close()

@@ -43,7 +43,8 @@ from pairplay.services.lab.model import LabModel
 from pairplay.services.runner import Node
 
 log = logging.getLogger("pairplay.lab")
-MAX_MESSAGE = 4096  # bytes: a page's messages are small; uvicorn refuses bigger frames
+MAX_MESSAGE = 4096  # bytes: a page's messages are small; longer ones are refused and recorded
+MAX_FRAME = 65536  # bytes: uvicorn closes the connection on a bigger frame (nothing to record but the close)
 
 
 # -- what a page may send (JSON, tagged by "type") ----------------------------------------
@@ -173,12 +174,17 @@ class LabHub:
             c.outbox.put_nowait(None)  # None: the latest view, computed when it is sent
 
     async def _send_loop(self, c: Client) -> None:
-        while True:
-            item = await c.outbox.get()
-            if item is None:
-                c.state_pending = False
-                item = self.view(c)
-            await c.ws.send_text(_encode(item).decode())
+        try:
+            while True:
+                item = await c.outbox.get()
+                if item is None:
+                    c.state_pending = False
+                    item = self.view(c)
+                await c.ws.send_text(_encode(item).decode())
+        except asyncio.CancelledError:
+            raise
+        except Exception as err:  # the page went away mid-send: its receive loop ends the client
+            log.info("lab %s: a %s page stopped listening: %s", self.session, c.page, err)
 
     def _role_for(self, page: str, client_id: str) -> str:
         if page != "board":
@@ -246,6 +252,9 @@ class LabHub:
     # -- a page's input -----------------------------------------------------------------
     def _take(self, c: Client, text: str) -> None:
         raw = text.encode()
+        if len(raw) > MAX_MESSAGE:
+            self._refuse(c, f"message of {len(raw)} bytes: a page's messages are at most {MAX_MESSAGE}", raw)
+            return
         try:
             msg = _decode(raw)
         except (msgspec.DecodeError, msgspec.ValidationError) as err:

@@ -115,7 +115,7 @@ class LabModel:
             # the cards each part points at, among the covered ones (what a user who perceives it all considers)
             "heard": cards_of(covered & int(HEAR_SET[e.observed, e.target, act.hearing])),
             "seen": cards_of(covered & int(VIS_SET[e.observed, e.target, act.visual])),
-            "time_ns": int(e.time_ns),  # Nanos (an int subclass) is not JSON for the pages' encoder
+            "time_ns": int(e.time_ns),
         }
 
     def _TurnResolved(self, e) -> None:
@@ -142,6 +142,7 @@ class LabModel:
         self.robot = (self.robot + [{
             "round": e.round, "turn": e.turn, "attempt": e.attempt, "action": e.action, "backend": e.backend,
             "outcome": e.outcome, "commands": list(e.commands)[:8], "error": e.error,
+            # plain ints for the page (the bus's Nanos would be {sec, nsec} objects in its JSON)
             "received_ns": int(e.received_ns), "sent_ns": int(e.sent_ns), "acked_ns": int(e.acked_ns),
             "done_ns": int(e.done_ns),
         }])[-5:]

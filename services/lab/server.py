@@ -22,7 +22,7 @@ import uvicorn
 from pairplay.schemas.session import SessionConfig
 from pairplay.services.bus import BusOptions
 from pairplay.services.lab.app import Lab, create_app
-from pairplay.services.lab.hub import MAX_MESSAGE, LabHub
+from pairplay.services.lab.hub import MAX_FRAME, LabHub
 from pairplay.services.robot.choice import RobotChoice
 from pairplay.services.session import run_session
 
@@ -31,8 +31,9 @@ class WebServer:
     def __init__(self, app, host: str = "127.0.0.1", port: int = 0, ssl_certfile: str | None = None,
                  ssl_keyfile: str | None = None):
         config = uvicorn.Config(app, host=host, port=port, log_level="warning", lifespan="off",
-                                ws_max_size=MAX_MESSAGE, ws_ping_interval=5.0, ws_ping_timeout=10.0,
-                                ssl_certfile=ssl_certfile, ssl_keyfile=ssl_keyfile, access_log=False)
+                                ws_max_size=MAX_FRAME, ws_ping_interval=5.0, ws_ping_timeout=10.0,
+                                ssl_certfile=ssl_certfile, ssl_keyfile=ssl_keyfile, access_log=False,
+                                timeout_graceful_shutdown=2)  # open pages must not hold up a SIGTERM
         self.server = uvicorn.Server(config)
         self.scheme = "https" if ssl_certfile else "http"
         self.thread: threading.Thread | None = None

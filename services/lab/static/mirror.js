@@ -78,7 +78,7 @@
     if (s.robot && s.robot.length) {
       const t = el("table");
       const h = t.insertRow();
-      for (const k of ["turn", "action", "robot", "outcome", "sent after", "done after"]) h.append(el("th", "", k));
+      for (const k of ["round.turn.try", "action", "robot", "outcome", "sent after", "done after"]) h.append(el("th", "", k));
       for (const r of s.robot.slice().reverse()) {
         const row = t.insertRow();
         for (const v of [`${r.round + 1}.${r.turn + 1}.${r.attempt + 1}`, r.action, r.backend,
