@@ -446,7 +446,7 @@ def _redact_policy_file(path: Path, pid: str) -> None:
         return
     policy = read_policy(path)
     write_policy(path, msgspec.structs.replace(
-        policy, participant=_redact(policy.participant, pid), merged_from=[_redact(m, pid) for m in policy.merged_from]))
+        policy, participant=_redact(policy.participant, pid), merged_from=[_redact(m, pid) for m in policy.merged_from]), force=True)  # the redaction replaces it
 
 
 def _utc(ns: int) -> str:
