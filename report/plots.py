@@ -247,3 +247,48 @@ def sweep_measure(labels: list[str], mean: list[float], low: list[float], high: 
     fig.tight_layout()
     fig.savefig(path, dpi=100)
     plt.close(fig)
+
+
+def human_curves(curves: dict[str, np.ndarray], path: Path, title: str, dashed: tuple[str, ...] = ()) -> None:
+    """Figures 7.3 and 7.6: mean picks per round, one line per game, phase or group.
+
+    As in the thesis, Q-learning curves are drawn with circles and pi-reuse ones
+    with diamonds: a label naming a reuse phase or a phase-2 group gets diamonds
+    when it is in `dashed` or contains "phase2"; 18 (perfect play) is marked."""
+    fig, ax = plt.subplots(figsize=(5.6, 3.8))
+    for label, c in curves.items():
+        rounds = np.arange(1, len(c) + 1)
+        marker = "D" if (label in dashed or "phase2" in label or "users" in label) else "o"
+        ax.plot(rounds, c, marker=marker, ls="--" if label in dashed else "-", label=label, lw=1.4, ms=5)
+    ax.axhline(18, color="0.5", lw=0.8, ls=":", label="perfect play (18)")
+    ax.set_xlabel("round")
+    ax.set_ylabel("picks per round (mean)")
+    if curves:
+        ax.set_xticks(np.arange(1, max(len(c) for c in curves.values()) + 1))
+    ax.set_title(title, fontsize=10)
+    ax.grid(alpha=0.3)
+    ax.legend(frameon=False, fontsize=8)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def human_merged(panels: list[tuple[str, np.ndarray]], reference: tuple[str, np.ndarray] | None,
+                 state_count: int, path: Path) -> None:
+    """Figure 7.5: state code vs action code of each merged policy (blue x), a reference (green +)."""
+    fig, axes = plt.subplots(1, len(panels), figsize=(5.6 * len(panels), 4.2), squeeze=False)
+    states = np.arange(state_count)
+    for ax, (title, merged) in zip(axes[0], panels):
+        if reference is not None:
+            ax.scatter(states, reference[1][:state_count], marker="+", color="tab:green", s=70, lw=1.4,
+                       label=reference[0])
+        ax.scatter(states, merged[:state_count], marker="x", color="tab:blue", s=40, lw=1.4, label=title)
+        ax.axhspan(32.5, 44.5, color="tab:blue", alpha=0.07, lw=0)  # "exact position" speech, codes 33-44
+        ax.set_xlabel("state code")
+        ax.set_ylabel("action code")
+        ax.set_ylim(-2, 90)
+        ax.grid(alpha=0.3)
+        ax.legend(frameon=False, fontsize=8, loc="upper right")
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)

@@ -17,6 +17,7 @@ Who publishes what (source = the service name):
   tracker:     GazeFixated (an eye tracker)
   learner:     SuggestionMade, RewardGiven, QUpdated
   combiner:    PolicyCombined (answering CombineRequested)
+  experimenter: SessionPaused, SessionResumed, SessionAborted (the console; the game obeys them)
   robot:       RobotActed (schemas/robot.py)
   recorder:    RecordingGap (a restarted recorder continues the session's file)
   any service: ServiceStarted, MessageRejected
@@ -222,6 +223,22 @@ class QuestionnaireAnswered(Event, tag="QuestionnaireAnswered"):
     answers: dict[str, str]
 
 
+class SessionPaused(Event, tag="SessionPaused"):
+    """The experimenter paused the game: the game refuses touches until SessionResumed."""
+
+    reason: str = ""
+
+
+class SessionResumed(Event, tag="SessionResumed"):
+    """The experimenter resumed a paused game."""
+
+
+class SessionAborted(Event, tag="SessionAborted"):
+    """The experimenter stopped the game; the game ends it (SessionEnded "aborted", the reason as detail)."""
+
+    reason: str
+
+
 class GazeFixated(Event, tag="GazeFixated"):
     """An eye tracker saw the participant fixate a card (observed source "gaze", docs/lab.md).
 
@@ -285,6 +302,7 @@ EVENT_TYPES: tuple[type[Event], ...] = (
     CardObserved, SuggestionRequested, SuggestionMade, SuggestionPerceived,
     WrongSuggestionPressed, TurnResolved, RewardGiven, QUpdated, RoundEnded,
     CombineRequested, PolicyCombined, QuestionnaireAnswered, MessageRejected, SessionEnded, RecordingGap,
+    SessionPaused, SessionResumed, SessionAborted,
 ) + _robot_events() + (GazeFixated,)
 EVENT_BY_TAG: dict[str, type[Event]] = {t.__struct_config__.tag: t for t in EVENT_TYPES}
 AnyEvent = Union[EVENT_TYPES]  # type: ignore[valid-type]

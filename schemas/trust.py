@@ -56,7 +56,10 @@ PUBLISHERS: dict[str, frozenset[str]] = {
     "CombineRequested": CLIENTS,
     "PolicyCombined": frozenset({"combiner"}),
     "RecordingGap": frozenset({"recorder"}),
-    "GazeFixated": frozenset({"tracker"}),  # an eye tracker (observed source "gaze", issue 14)
+    "GazeFixated": frozenset({"tracker"}),
+    "SessionPaused": CLIENTS,  # the experimenter's console (issue 15)
+    "SessionResumed": CLIENTS,
+    "SessionAborted": CLIENTS,  # an eye tracker (observed source "gaze", issue 14)
 }
 ONCE_PER_SESSION = frozenset({"SessionStarted", "SessionEnded"})
 

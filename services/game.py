@@ -22,6 +22,9 @@ page's performance clock (CardPicked.page_time_ms); both are recorded.
 
 Under "gaze", a second pick that comes before any fixation resolves the turn
 without a suggestion (a silent tracker must not stall a person's game).
+The experimenter's SessionPaused / SessionResumed / SessionAborted (the console)
+are inputs like any other: while paused every touch is refused with the
+reason; an abort ends the session at once (SessionEnded "aborted", the reason as its detail).
 """
 
 from __future__ import annotations
@@ -39,13 +42,21 @@ from pairplay.schemas.session import SessionConfig
 from pairplay.services.node import Rejected, stream_seed
 
 
+# the participant's inputs: a simulated participant, or the touch-screen board of the human study
+PLAYERS = frozenset({"participant", "board"})
+# the experimenter's console
+CONTROL = frozenset({"SessionPaused", "SessionResumed", "SessionAborted"})
+
+
 class GameLogic:
     name = "game"
-    consumes = frozenset({"CardPicked", "CardObserved", "WrongSuggestionPressed", "GazeFixated"})
-    # the participant's inputs: a simulated participant, or the touch-screen board of the human study
-    PLAYERS = frozenset({"participant", "board"})
-    sources = dict.fromkeys(consumes, PLAYERS) | {"GazeFixated": frozenset({"tracker"})}
+    consumes = frozenset({"CardPicked", "CardObserved", "WrongSuggestionPressed", "GazeFixated"}) | CONTROL
+    PLAYERS = PLAYERS
+    CONTROL = CONTROL
+    sources = {tag: (frozenset({"experimenter"}) if tag in CONTROL else PLAYERS) for tag in consumes} \
+        | {"GazeFixated": frozenset({"tracker"})}
     GAZE_KEPT = 64  # fixations kept for a first pick that arrives after them
+
     def __init__(self, config: SessionConfig):
         config.validate()
         self.config = config
@@ -53,6 +64,7 @@ class GameLogic:
         self.round = 0
         self.done = False
         self.board: Board | None = None
+        self.paused = False
         self.fixations: deque[ev.GazeFixated] = deque(maxlen=self.GAZE_KEPT)
         self._new_turn(0)
 
@@ -86,6 +98,10 @@ class GameLogic:
     def handle(self, e: ev.Event) -> list[ev.Event]:
         if self.done:
             raise Rejected(f"the session is over; {type(e).__name__} ignored")
+        if type(e).__name__ in self.CONTROL:
+            return self._control(e)
+        if self.paused and not isinstance(e, (ev.CardPicked, ev.GazeFixated)):
+            raise Rejected(f"the session is paused; {type(e).__name__} ignored")
         if isinstance(e, ev.CardPicked):
             return self._pick(e)
         if isinstance(e, ev.GazeFixated):
@@ -101,6 +117,8 @@ class GameLogic:
         def refuse(reason: str) -> list[ev.Event]:
             return [ev.PickRejected(round=e.round, turn=e.turn, card=e.card, reason=reason,
                                     pick_source=e.source, pick_seq=e.seq)]
+        if self.paused:
+            return refuse("the session is paused")
         if (e.round, e.turn) != (self.round, self.turn):
             return refuse(f"pick for round {e.round} turn {e.turn}, but the game is at round {self.round} "
                           f"turn {self.turn}")
@@ -126,6 +144,16 @@ class GameLogic:
                     out += self._observed_by_gaze(seen)
             return out
         return out + self._resolve(e)
+
+    def _control(self, e: ev.Event) -> list[ev.Event]:
+        """The experimenter's console (services/protocol.py): pause, resume, abort."""
+        if isinstance(e, ev.SessionAborted):
+            return self.end("aborted", e.reason)
+        pause = isinstance(e, ev.SessionPaused)
+        if pause == self.paused:
+            raise Rejected("the session is already " + ("paused" if pause else "running"))
+        self.paused = pause
+        return []
 
     def _observed(self, e: ev.CardObserved) -> list[ev.Event]:
         if self.config.observed_source != "intended" or e.observed_source != "intended":

@@ -69,6 +69,9 @@ class LearnerLogic:
             self.resolved[(e.round, e.turn)] = e
         elif isinstance(e, ev.SessionEnded):
             self.ended = True
+            if e.reason != "completed" and self.open is not None:
+                # an aborted game leaves its last suggestion unsettled: recorded, not learned from
+                return self._reward(self.open, 0.0, False, f"unsettled: the session ended ({e.reason})")
         return self._settle()
 
     def _configure(self, e: ev.SessionStarted) -> list[ev.Event]:

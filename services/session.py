@@ -36,7 +36,7 @@ def run_session(config: SessionConfig, path: str | Path, *, bus: Bus | None = No
                 bus_options: BusOptions | None = None, external: tuple[str, ...] = (),
                 stop: threading.Event | None = None, settle_timeout_s: float = 30.0,
                 on_bus=None, nodes_out: dict | None = None, wait_also: tuple[str, ...] = (),
-                robot: RobotChoice | None = None, extra_nodes=None) -> Path:
+                robot: RobotChoice | None = None, extra_nodes=None, hold=None) -> Path:
     """Run one session to its end (or `stop`); return the recording's path.
 
     `nodes_out`, if given, receives the in-process Nodes by service name (tests
@@ -46,7 +46,10 @@ def run_session(config: SessionConfig, path: str | Path, *, bus: Bus | None = No
     `extra_nodes(bus) -> [Node]`: more in-process services (the lab's board),
     started after the recorder and before the game, which waits for them.
     Raises RecordingFailed (after closing everything) if the recording could
-    not be written: the session stops at the first write error."""
+    not be written: the session stops at the first write error.
+    `hold(recorder)`, if given, is called once the game has ended, before the
+    recording is finished: the human study keeps a game's recording open for
+    the questionnaire that follows it (services/protocol.py)."""
     own_bus = bus is None
     # the session's process is the router its external services connect to as clients
     bus = bus if bus is not None else Bus(bus_options or BusOptions(mode="router"))
@@ -102,6 +105,8 @@ def run_session(config: SessionConfig, path: str | Path, *, bus: Bus | None = No
             # an external recorder stays until everyone else left: do not wait for it
             wait_external_exit(bus, config.session, [s for s in external if s in needed and s != "recorder"], stop,
                                settle_timeout_s)
+        if hold is not None and not failure and recorder is not None:
+            hold(recorder)
         if recorder is not None:
             # stopped: the end event gets 1 s to reach the file (the process is gone within 2 s)
             wait_recorded(recorder, nodes, quiet_s=0.2 if external and not stop.is_set() else 0.0,

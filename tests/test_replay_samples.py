@@ -40,7 +40,8 @@ def test_every_sample_decodes_whole_and_validates_against_todays_schemas(path):
 
 
 # event types newer than the catalogue samples, and the sample that holds each
-LATER = {"GazeFixated": "human-gaze-fmt2.mcap"}
+LATER = {"GazeFixated": "human-gaze-fmt2.mcap", "SessionPaused": "console-fmt2.mcap",
+         "SessionResumed": "console-fmt2.mcap", "SessionAborted": "console-fmt2.mcap"}
 
 
 @pytest.mark.parametrize("fmt", FORMATS)
@@ -52,11 +53,19 @@ def test_the_catalogue_holds_every_event_type(fmt):
 
 
 @pytest.mark.parametrize("name", [f"{n}{f}.mcap" for n in ("sim-ashley", "human-board") for f in FORMATS]
-                         + ["human-gaze-fmt2.mcap"])
+                         + ["human-gaze-fmt2.mcap", "console-fmt2.mcap"])
 def test_session_samples_verify_and_rebuild(name):
     assert verify_recording(SAMPLES / name).ok
     rebuilt = rebuild_recording(SAMPLES / name)
     assert rebuilt.fold.q_mismatches == 0 and rebuilt.fold.ended is not None
+
+
+def test_the_console_sample_was_paused_refused_a_touch_and_aborted():
+    log = read_log(SAMPLES / "console-fmt2.mcap")
+    assert [e.reason for e in log.of("PickRejected")] == ["the session is paused"]
+    ended = log.of("SessionEnded")[0]
+    assert (ended.reason, ended.detail) == ("aborted", "the participant had to leave")
+    assert log.of("RewardGiven")[-1].reason.startswith("unsettled")
 
 
 @pytest.mark.parametrize("fmt", FORMATS)

@@ -160,6 +160,32 @@ def gaze_sample(out: Path) -> None:
     writer.close()
 
 
+def console_sample(out: Path) -> None:
+    """The experimenter's console on a person's game: a pause (a touch refused meanwhile), a resume,
+    and an abort with a suggestion still open (SessionPaused, SessionResumed, SessionAborted)."""
+    config = SessionConfig(session="sample-console", participant="human:p01", seed=5, rounds=2,
+                           observed_source="first-pick", ignore_rule="time", software_version=__version__,
+                           streams=STREAMS_VERSION)
+    writer, game, inject = scripted_session(config, out / f"console-{FORMAT}.mcap")
+    faces = list(game.logic.board.faces)
+    t_s, matched = 100.0, 0
+    for turn in range(4):
+        first, partner, others, second = scripted_turn(faces, matched, turn)
+        inject("board", ev.CardPicked(round=0, turn=turn, card=first), t_s)
+        if turn == 1:
+            inject("experimenter", ev.SessionPaused(reason="the participant asked a question"), t_s + 1)
+            inject("board", ev.CardPicked(round=0, turn=turn, card=second), t_s + 2)  # refused: paused
+            inject("experimenter", ev.SessionResumed(), t_s + 5)
+        if turn == 3:  # the last suggestion is open when the experimenter stops the game
+            inject("experimenter", ev.SessionAborted(reason="the participant had to leave"), t_s + 1)
+            break
+        inject("board", ev.CardPicked(round=0, turn=turn, card=second), t_s + 6)
+        if faces[first] == faces[second]:
+            matched |= (1 << first) | (1 << second)
+        t_s += 10
+    writer.close()
+
+
 def catalogue_sample(out: Path) -> None:
     s = "sample-catalogue"
     cfg = SessionConfig(session=s, participant="sim:deaf", persona="deaf", seed=1, rounds=1,
@@ -214,9 +240,13 @@ if __name__ == "__main__":
     if sys.argv[2:3] == ["--gaze"]:  # the eye-tracker sample alone (added after the others were made)
         gaze_sample(out)
         sys.exit(0)
+    if sys.argv[2:3] == ["--console"]:  # the console's sample alone (added after the others were made)
+        console_sample(out)
+        sys.exit(0)
     sim_sample(out)
     human_sample(out)
     gaze_sample(out)
+    console_sample(out)
     catalogue_sample(out)
     for p in sorted(out.glob(f"*-{FORMAT}.mcap")):
         print(p, p.stat().st_size)

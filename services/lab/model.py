@@ -80,7 +80,10 @@ class LabModel:
         if not _card_ok(e.card):
             return
         if e.pick == 0:
+            # a request or suggestion of this turn that overtook its first card stays
+            early = (self.requested, self.suggestion) if (e.round, e.turn) == (self.round, self.turn) else (-1, None)
             self._new_turn()
+            self.requested, self.suggestion = early
             self.first = e.card
         self.round, self.turn = e.round, e.turn
         self.face_up |= 1 << e.card
@@ -92,8 +95,12 @@ class LabModel:
             self.observed = e.card
 
     def _SuggestionRequested(self, e) -> None:
-        if (e.round, e.turn) == (self.round, self.turn):
-            self.requested, self.suggestion = e.attempt, None
+        # the learner's answer may overtake the game's request (different keys): a suggestion
+        # already here for this attempt or a later one stays
+        if (e.round, e.turn) == (self.round, self.turn) and e.attempt > self.requested:
+            self.requested = e.attempt
+            if self.suggestion is not None and self.suggestion["attempt"] < e.attempt:
+                self.suggestion = None
 
     def _SuggestionMade(self, e) -> None:
         if (e.round, e.turn) != (self.round, self.turn) or not (0 <= e.action < N_ACTIONS) \

@@ -109,9 +109,20 @@
     if (pending >= 0 && s.notice && s.notice.card === pending) pending = -1;
     api.state = s;
     api.role = role;
+    if (s.phase === "over" && role === "player" && !api.askedQuestionnaire) askQuestionnaire();
     banner.classList.toggle("hidden", role === "player");
     if (role === "viewer") banner.textContent = "Read-only: another screen is playing this session";
     render();
+  }
+  // In a study (services/console), a questionnaire follows the game: the board becomes it.
+  async function askQuestionnaire() {
+    api.askedQuestionnaire = true;
+    const { session, token } = window.pairplayLab;
+    const q = `session=${encodeURIComponent(session)}&token=${encodeURIComponent(token)}`;
+    try {
+      const r = await fetch(`/api/questionnaire?${q}`);
+      if (r.ok) location.assign(`/questionnaire?${q}`);
+    } catch (e) { /* no questionnaire: the board shows the end */ }
   }
   const link = connect("board", {
     onState,
