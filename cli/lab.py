@@ -108,6 +108,10 @@ def run(args: argparse.Namespace) -> int:
     fold = fold_events(r.event for r in recorded.events)
     print(f"recorded {len(recorded.events)} events to {path}")
     e = fold.ended
+    if e is None and fold.config is None and getattr(stop, "why", ""):
+        # a signal before the game started the session: nothing was played, so nothing is ended
+        print(f"interrupted ({stop.why}) before the session started; {len(recorded.events)} events in {path}")
+        return 0
     ended = "no SessionEnded recorded" if e is None else e.reason + (f" ({e.detail})" if e.detail else "")
     print(f"rounds played: {len(fold.turns_per_round())} of {config.rounds}; rejections: {len(fold.rejections)}; "
           f"ended: {ended}")

@@ -181,6 +181,10 @@ def run(args: argparse.Namespace) -> int:
     print(f"rounds played: {len(picks)}; {PICKS_UNIT}: {picks[:10]}{' ...' if len(picks) > 10 else ''}")
     print(f"rejections: {len(fold.rejections)}; Q updates: {fold.counts.get('QUpdated', 0)}")
     e = fold.ended
+    if e is None and fold.config is None and getattr(stop, "why", ""):
+        # a signal before the game started the session: nothing was played, so nothing is ended
+        print(f"interrupted ({stop.why}) before the session started")
+        return 0
     if e is None:
         print("ended: no SessionEnded recorded")
     elif e.reason != "completed":

@@ -255,6 +255,7 @@ def human_curves(curves: dict[str, np.ndarray], path: Path, title: str, dashed: 
     As in the thesis, Q-learning curves are drawn with circles and pi-reuse ones
     with diamonds: a label naming a reuse phase or a phase-2 group gets diamonds
     when it is in `dashed` or contains "phase2"; 18 (perfect play) is marked."""
+    plt = _pyplot()
     fig, ax = plt.subplots(figsize=(5.6, 3.8))
     for label, c in curves.items():
         rounds = np.arange(1, len(c) + 1)
@@ -276,6 +277,7 @@ def human_curves(curves: dict[str, np.ndarray], path: Path, title: str, dashed: 
 def human_merged(panels: list[tuple[str, np.ndarray]], reference: tuple[str, np.ndarray] | None,
                  state_count: int, path: Path) -> None:
     """Figure 7.5: state code vs action code of each merged policy (blue x), a reference (green +)."""
+    plt = _pyplot()
     fig, axes = plt.subplots(1, len(panels), figsize=(5.6 * len(panels), 4.2), squeeze=False)
     states = np.arange(state_count)
     for ax, (title, merged) in zip(axes[0], panels):
