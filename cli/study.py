@@ -1,15 +1,7 @@
 """`pairplay study`: the virtual study of thesis chapter 6, end to end (report/study.py does the work).
 
-Rule: one command, reproducible by seed, writes a report folder:
-  policies/<persona>/game-NN.json   one policy file per game (schemas/policy.py)
-  curves.csv, curves_summary.csv    picks per round per game; mean/sd/min/max per round
-  learning_curves.png               figure 6.4 (memory, focus, impairment)
-  evaluation.csv, evaluation.png    user alone vs learned vs oracle, picks per round
-  profiles.csv, profiles.png        algorithm 3 per persona beside its features (figure 6.5)
-  merged/<name>.json, merged.png    merged policies (algorithm 4) and figure 6.6
-  merged_evaluation.csv             every merged policy on every persona
-  reuse.csv, reuse.png              held-out persona: Q-learning from scratch vs pi-reuse
-  report.md                         the tables and figures, with the run's settings
+Rule: one command, reproducible by seed, writes the report folder that report/study.py
+describes (policy files, CSV tables, figures 6.4-6.6, report.md).
 The folder is built beside --out and renamed when complete: an --out that holds
 files is refused unless --force, and Ctrl-C leaves nothing (exit 130). Every
 option's range is checked before any work; the printed tables say their unit
