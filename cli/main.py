@@ -102,6 +102,11 @@ def _main(argv: list[str]) -> int:
     except KeyboardInterrupt:
         print(f"pairplay {args.verb}: interrupted (Ctrl-C); nothing more was written", file=sys.stderr)
         return 130
+    except SystemError as err:  # Ctrl-C inside a compiled kernel: numba reports it as a SystemError around it
+        if not isinstance(err.__cause__ or err.__context__, KeyboardInterrupt):
+            raise
+        print(f"pairplay {args.verb}: interrupted (Ctrl-C); nothing more was written", file=sys.stderr)
+        return 130
     except UserError as err:
         print(f"pairplay {args.verb}: {err.line()}", file=sys.stderr)
         return 2

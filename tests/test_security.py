@@ -23,7 +23,6 @@ from pairplay.schemas.keys import event_key
 from pairplay.schemas.robot import RobotActed
 from pairplay.services.bus import Bus, BusOpenError, BusOptions
 
-from busutil import wait_until
 
 EXAMPLES = Path(__file__).resolve().parents[1] / "docs" / "examples"
 ACL_LOG = "zenoh::net::routing::interceptor::access_control=trace"
@@ -89,9 +88,14 @@ def test_tls_and_access_control_refuse_visibly_and_let_the_rights_through(tmp_pa
                                 session="sec1", source="robot", seq=1, time_ns=time.time_ns())
                 forged = stamped(ev.SessionEnded(reason="forged"), session="sec1", source="game", seq=2,
                                  time_ns=time.time_ns())
-                robot.put(event_key("sec1", "robot", "RobotActed"), encode_event(acted))
+                # a subscription takes a moment to reach the router: put until the board sees it (pub/sub keeps
+                # no history), then the forged end, which the router must drop
+                deadline = time.monotonic() + 30
+                while "pairplay/sec1/robot/RobotActed" not in seen and time.monotonic() < deadline:
+                    robot.put(event_key("sec1", "robot", "RobotActed"), encode_event(acted))
+                    time.sleep(0.5)
+                assert "pairplay/sec1/robot/RobotActed" in seen
                 robot.put(event_key("sec1", "game", "SessionEnded"), encode_event(forged))
-                assert wait_until(lambda: "pairplay/sec1/robot/RobotActed" in seen, 10)
                 time.sleep(0.5)
         p.send_signal(signal.SIGTERM)
         out, err = p.communicate(timeout=30)
