@@ -15,6 +15,8 @@ verb's start-up stay fast. To add a verb, add one line to VERBS.
 from __future__ import annotations
 
 import argparse
+import atexit
+import contextlib
 import importlib
 import os
 import sys
@@ -87,6 +89,26 @@ def main(argv: list[str] | None = None) -> int:
         return 130
 
 
+def entry() -> None:
+    """The `pairplay` command (and `python -m pairplay`): `main()`, then exit with its code.
+
+    After an interruption (exit 130) the exit handlers run and the process ends
+    with os._exit, skipping only the interpreter's teardown of its objects: a
+    Ctrl-C that lands while numba compiles leaves llvmlite's native objects
+    half-built, and freeing them at exit aborted the process ("double free
+    detected", SIGABRT) after the one line was printed (seen in CI). Every output
+    is already closed or removed by then (the verbs' context managers ran while
+    KeyboardInterrupt unwound the stack)."""
+    code = main()
+    if code == 130:
+        atexit._run_exitfuncs()  # what was registered to run at exit still runs (multiprocessing's clean-up)
+        for stream in (sys.stdout, sys.stderr):
+            with contextlib.suppress(Exception):
+                stream.flush()
+        os._exit(code)
+    sys.exit(code)
+
+
 def _main(argv: list[str]) -> int:
     parser, _ = build_parser(argv)
     args = parser.parse_args(argv)
@@ -125,4 +147,4 @@ def os_error_line(err: OSError) -> str:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    entry()

@@ -36,6 +36,7 @@ from pairplay.core.policies import to_policy_file
 from pairplay.core.reward import BONUS_RULE_TEXT
 from pairplay.schemas.config import DEFAULT_REWARD_BONUS, LearnerConfig
 from pairplay.outputs import output_folder
+from pairplay.processes import process_pool, stop_pool
 from pairplay.schemas.policy import write_policy
 
 from pairplay.core.precombine import combination_experiment
@@ -244,9 +245,7 @@ class _Figures:
         self._jobs: list = []
         if background:
             try:
-                import multiprocessing
-                from concurrent.futures import ProcessPoolExecutor
-                self._pool = ProcessPoolExecutor(1, mp_context=multiprocessing.get_context("spawn"))
+                self._pool = process_pool(1)
                 self._jobs.append(self._pool.submit(plots.draw, None))  # the child imports matplotlib now
             except (OSError, ImportError):
                 self._pool = None
@@ -257,14 +256,17 @@ class _Figures:
         else:
             self._jobs.append(self._pool.submit(plots.draw, name, *args))
 
-    def finish(self) -> None:
-        """Wait for every figure; a figure's error is raised here."""
+    def finish(self, abandon: bool = False) -> None:
+        """Wait for every figure (a figure's error is raised here), or, when `abandon` (the study
+        failed or was interrupted), stop the child without waiting for its figures."""
         try:
-            for job in self._jobs:
-                job.result()
+            if not abandon:
+                for job in self._jobs:
+                    job.result()
         finally:
             if self._pool is not None:
-                self._pool.shutdown()
+                stop_pool(self._pool, abandon)
+                self._pool = None
             self._jobs = []
 
 
@@ -300,9 +302,12 @@ def _run_study(args: StudySettings, personas, out: Path, progress_bar: Callable,
     start = time.perf_counter()
     figures = _Figures(figures_in_background)
     try:
-        return _run(args, out, progress_bar, personas, config, names, timings, start, figures)
-    finally:
-        figures.finish()
+        report = _run(args, out, progress_bar, personas, config, names, timings, start, figures)
+    except BaseException:
+        figures.finish(abandon=True)
+        raise
+    figures.finish()
+    return report
 
 
 def _run(args, out, progress_bar, personas, config, names, timings, start, figures) -> StudyReport:

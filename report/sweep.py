@@ -41,6 +41,7 @@ from typing import Callable, Iterable
 
 import numpy as np
 
+from pairplay.processes import worker_pool
 from pairplay.report.study import StudySettings
 
 SWEEPABLE = {f.name: f.type for f in fields(StudySettings) if f.name not in ("seed", "train_only")}
@@ -234,8 +235,8 @@ def run_sweep(grid: Grid, out: str | Path, *, scheduler: str | None = None, work
                 store(*future.result())
         where = f"dask {scheduler}"
     elif workers > 1:
-        from concurrent.futures import ProcessPoolExecutor, as_completed as done_first
-        with ProcessPoolExecutor(workers) as pool:
+        from concurrent.futures import as_completed as done_first
+        with worker_pool(workers) as pool:
             for future in done_first([pool.submit(_run_cell, grid, c) for c in todo]):
                 store(*future.result())
         where = f"{workers} local processes"
