@@ -17,11 +17,12 @@ from typing import NamedTuple, Sequence
 
 import numpy as np
 
-from pairplay.schemas.config import DEFAULT_REWARD_BONUS, LearnerConfig, Persona
+from pairplay.schemas.config import DEFAULT_REWARD_BONUS, LearnerConfig, LSPIConfig, Persona
 
 from .board import deal
 from .geometry import ALL_CARDS, N_CARDS, states_of
 from .learning import Learner, greedy
+from .lspi import LSPILearner
 from .reward import simulated_reward
 from .rng import UniformStream
 from .user import SimulatedUsers
@@ -62,7 +63,8 @@ def run_games(personas: Sequence[Persona], seeds: Sequence[int], rounds: int,
               config: LearnerConfig = LearnerConfig(), mode: str = "q",
               bias: np.ndarray | None = None, policy: np.ndarray | None = None,
               observed_source: str = "intended", progress=None, on_turn=None,
-              snapshot_every: int | None = None, reward_bonus: str = DEFAULT_REWARD_BONUS) -> SimResult:
+              snapshot_every: int | None = None, reward_bonus: str = DEFAULT_REWARD_BONUS,
+              lspi: LSPIConfig | None = None) -> SimResult:
     """Play one game per (persona, seed) pair; see the module rule.
 
     `progress(done_rounds)` is called with the rounds completed so far (summed
@@ -70,7 +72,8 @@ def run_games(personas: Sequence[Persona], seeds: Sequence[int], rounds: int,
     lockstep step. With `snapshot_every=k` the greedy policy of every learner is
     kept after rounds k, 2k, ... (ties broken by the game's "snapshot" stream),
     to measure how fast a policy becomes good. `reward_bonus` chooses when the
-    1/|candidate set| bonus is paid (core/reward.py).
+    1/|candidate set| bonus is paid (core/reward.py). `mode="lspi"` learns by
+    online LSPI (core/lspi.py, configured by `lspi`) instead of Q-learning.
     """
     if observed_source not in OBSERVED_SOURCES:
         raise ValueError(f"observed source must be one of {OBSERVED_SOURCES}")
@@ -79,7 +82,10 @@ def run_games(personas: Sequence[Persona], seeds: Sequence[int], rounds: int,
         raise ValueError("one seed per game")
     deals = UniformStream(seeds, "deal")
     users = SimulatedUsers(personas, UniformStream(seeds, "user"))
-    learner = Learner(n, UniformStream(seeds, "agent"), config, mode, bias=bias, policy=policy)
+    if mode == "lspi":
+        learner = LSPILearner(n, UniformStream(seeds, "agent"), config, lspi or LSPIConfig())
+    else:
+        learner = Learner(n, UniformStream(seeds, "agent"), config, mode, bias=bias, policy=policy)
     rows = np.arange(n)
 
     picks_log = np.zeros((n, rounds), dtype=np.int32)

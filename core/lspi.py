@@ -1,0 +1,207 @@
+"""Online LSPI with tile-coded state x action features (thesis 3.1.3, 5.1.2, algorithm 2).
+
+Rule: Q(s, a) = phi(s, a)^T theta (eq. 3.3) with phi(s, a) = the tile features of
+state s placed in action a's block (one block of F features per action, zero
+elsewhere: "state x action" as the thesis builds it, n = 88 F). Algorithm 2 keeps
+Gamma = delta I + sum phi phi^T, Lambda = sum phi phi'^T and z = sum phi r, and every
+K samples solves (Gamma - gamma Lambda) theta = z and acts greedily on the new theta.
+After a suggestion the next state is the user's, where the agent never acts (thesis
+eq. 5.1), so phi' = 0, Lambda = 0 whatever gamma is, and line 12 is the ridge
+regression Gamma theta = z. Because phi(s, a) lives in block a, Gamma is block
+diagonal: 88 blocks of F x F. We keep each block's inverse B_a = Gamma_a^-1 by
+Sherman-Morrison restricted to the sample's block (B_a phi is the sum of the T
+columns of B_a at the active features, O(F T); the rank-one update O(F^2)), and a
+policy improvement recomputes theta_a = B_a z_a only for the blocks that got samples
+since the last one. Exploration is the Q-learner's epsilon-greedy with its schedule
+and its seeded tie-break (core/learning.py), so the two learners differ only in how
+they estimate Q. Every operation is elementwise or a reduction along a contiguous
+last axis, so a game's weights are the same bits alone (a session) or batched (the
+study), and a fold over the recorded samples rebuilds them exactly.
+
+Features (Sutton and Barto 2018, 9.5.4, "tile coding"): a spatial state is the grid
+point (row sign + 1, column sign + 1, level) of its cell (core/geometry.py); each of
+`tilings` grids of tiles `tile_width` grid steps wide is displaced by
+t * (1, 3, 5) * width / tilings, Sutton's asymmetric offsets; `exact` adds a grid
+of one tile per state. "Not one card turned" has a tile of its own in every tiling.
+Only tiles some state lands in become features (what an index-hash table does).
+No maintained package fits: tiles3 is one public file not on PyPI, mushroom-rl's
+Tiles needs torch and the whole library, and neither is block-aware.
+
+Why the thesis's LSPI never converged (6.4), measured here (tests/test_lspi.py,
+`pairplay bench --only lspi`):
+1. Speed. It solved the dense n x n system with n = 32 x 88 = 2816; a dense
+   Sherman-Morrison update of that size costs ~10-40 ms per sample on this machine
+   (bench row), ~1,000x the block update here, and a dense solve ~0.2-0.3 s. 500
+   rounds x 14 samples x 10 games x 8 personas at that rate is days.
+2. Representation. 32 tilings of a 4 x 4 grid over (cell, level), written into 32
+   features per action as tiles3 does when its index table is that small, give
+   the 24 states feature vectors of rank `THESIS_RANK` (< 24): most states share
+   their whole feature vector, so no weights can give them different greedy
+   actions, and solving faster cannot fix it. With 3 features per action (its
+   second try) the rank is at most 3. Its K = 0 and small delta also made early
+   solves nearly singular. Here the features separate all 24 states (rank 24), so
+   with gamma = 0 the greedy policy tends to that of the per-state mean reward.
+"""
+
+from __future__ import annotations
+
+import zlib
+from typing import NamedTuple
+
+import numpy as np
+
+from pairplay.schemas.config import LearnerConfig, LSPIConfig
+
+from .actions import N_ACTIONS
+from .geometry import CELLS, N_STATES, NOT_ONE_CARD_STATE, SPATIAL_STATES
+from .learning import Learner
+from .rng import UniformStream
+
+
+class Features(NamedTuple):
+    """Tile features of every state: `active[s]` are the T indices (0..size-1) of its tiles."""
+
+    active: np.ndarray  # (N_STATES, T) int64; a repeated index counts twice (phi entry 2)
+    size: int  # F, features per action block
+
+
+def state_points() -> np.ndarray:
+    """(23, 3) grid point (row sign + 1, column sign + 1, level) of every spatial state."""
+    return np.array([(CELLS[c][1] + 1, CELLS[c][2] + 1, lv) for c, lv in SPATIAL_STATES], dtype=np.float64)
+
+
+def tile_features(tilings: int = 4, tile_width: float = 2.0, exact: bool = True) -> Features:
+    """Grid tile coding of the states (module rule); tiles no state uses are dropped."""
+    points = state_points()
+    dims = points.shape[1]
+    keys: list[list[tuple]] = [[] for _ in range(N_STATES)]
+    grids = [(float(tile_width), t * np.arange(1, 2 * dims, 2) * tile_width / tilings) for t in range(tilings)]
+    if exact:
+        grids.append((1.0, np.zeros(dims)))
+    for g, (width, offset) in enumerate(grids):
+        coords = np.floor((points + offset) / width).astype(np.int64)
+        for s in range(len(points)):
+            keys[s].append((g, *coords[s].tolist()))
+        keys[NOT_ONE_CARD_STATE].append((g, "not one card"))
+    index: dict[tuple, int] = {}
+    active = np.array([[index.setdefault(k, len(index)) for k in row] for row in keys], dtype=np.int64)
+    return Features(active, len(index))
+
+
+def thesis_features(tilings: int = 32, grid: int = 4, size: int = 32) -> Features:
+    """The thesis's features (5.1.2): `tilings` grids of grid x grid tiles over (cell/8, level/2)
+    in [0, 1]^2, written into `size` indices the way tiles3's index table does (new tiles
+    take the next free index; once it is full, tiles share indices by a hash)."""
+    points = np.array([(c / 8, lv / 2) for c, lv in SPATIAL_STATES] + [(1.0, 1.0)])
+    width = 1.0 / grid
+    index: dict[tuple, int] = {}
+    rows = []
+    for p in points:
+        row = []
+        for t in range(tilings):
+            key = (t, *np.floor((p + t * np.array([1, 3]) * width / tilings) / width).astype(int).tolist())
+            if key not in index:
+                index[key] = len(index) if len(index) < size else zlib.crc32(repr(key).encode()) % size
+            row.append(index[key])
+        rows.append(row)
+    return Features(np.array(rows, dtype=np.int64), size)
+
+
+def feature_matrix(features: Features) -> np.ndarray:
+    """(N_STATES, F) phi of every state within one action block."""
+    phi = np.zeros((N_STATES, features.size))
+    np.add.at(phi, (np.arange(N_STATES)[:, None], features.active), 1.0)
+    return phi
+
+
+def features_of(config: LSPIConfig) -> Features:
+    return tile_features(config.tilings, config.tile_width, config.exact)
+
+
+THESIS_RANK = int(np.linalg.matrix_rank(feature_matrix(thesis_features())))
+
+
+def _sum_columns(x: np.ndarray, idx: np.ndarray) -> np.ndarray:
+    """sum_t x[m, ..., idx[m, t]] in tiling order (a fixed order: same bits in any batch)."""
+    rows = np.arange(x.shape[0])
+    total = x[rows, ..., idx[:, 0]]
+    for t in range(1, idx.shape[1]):
+        total = total + x[rows, ..., idx[:, t]]
+    return total
+
+
+class LSPILearner(Learner):
+    """A batch of online LSPI learners (algorithm 2), one per game, with the Learner's interface.
+
+    `q` (B, 24, 88) is the value table of the current weights, refreshed at every
+    policy improvement (so the behaviour policy pi_l stays fixed for K samples);
+    `inverse` (B, 88, F, F) holds each block's Gamma_a^-1, `z` (B, 88, F) the reward
+    sums, `theta` (B, 88, F) the weights, `samples` (B,) the samples learned.
+    """
+
+    def __init__(self, n_games: int, stream: UniformStream, config: LearnerConfig = LearnerConfig(),
+                 lspi: LSPIConfig = LSPIConfig(), features: Features | None = None):
+        super().__init__(n_games, stream, config, "q")
+        self.mode = "lspi"
+        self.lspi = lspi
+        self.features = features or features_of(lspi)
+        f = self.features.size
+        self.inverse = np.zeros((n_games, N_ACTIONS, f, f))
+        self.inverse[..., np.arange(f), np.arange(f)] = 1.0 / lspi.ridge  # Gamma_0 = delta I (line 3)
+        self.z = np.zeros((n_games, N_ACTIONS, f))
+        self.theta = np.zeros((n_games, N_ACTIONS, f))
+        self.samples = np.zeros(n_games, dtype=np.int64)
+        self.improvements = np.zeros(n_games, dtype=np.int64)
+        self._dirty = np.zeros((n_games, N_ACTIONS), dtype=bool)
+
+    def learn(self, states: np.ndarray, actions: np.ndarray, rewards: np.ndarray, mask: np.ndarray,
+              round_index: np.ndarray | None = None) -> np.ndarray:
+        """Lines 8-15 for the games in `mask`; returns the games that improved their policy."""
+        mask = np.asarray(mask, dtype=bool)
+        if not mask.any():
+            return np.zeros(0, dtype=np.int64)
+        g, s, a = self._rows[mask], np.asarray(states)[mask], np.asarray(actions)[mask]
+        r = np.asarray(rewards, dtype=np.float64)[mask]
+        idx = self.features.active[s]  # (m, T)
+        block = self.inverse[g, a]  # (m, F, F), a copy
+        u = _sum_columns(block, idx)  # B phi (B is symmetric: also phi^T B)
+        denom = 1.0 + _sum_columns(u[:, None, :], idx)[:, 0]  # 1 + phi^T B phi
+        block -= (u / denom[:, None])[:, :, None] * u[:, None, :]
+        self.inverse[g, a] = block
+        for t in range(idx.shape[1]):  # z += phi r (line 10), one tiling at a time: repeats add up
+            self.z[g, a, idx[:, t]] += r
+        self._dirty[g, a] = True
+        self.counts[g, s, a] += 1
+        self.samples[g] += 1
+        due = g[self.samples[g] % self.lspi.improve_every == 0]
+        if due.size:
+            self.improve(due)
+        return due
+
+    def improve(self, games: np.ndarray) -> None:
+        """Lines 12-14 for `games`: theta_a = B_a z_a for the blocks sampled since the last improvement."""
+        sel = np.zeros(self._rows.size, dtype=bool)
+        sel[games] = True
+        g, a = np.nonzero(self._dirty & sel[:, None])
+        self.theta[g, a] = (self.inverse[g, a] * self.z[g, a][:, None, :]).sum(-1)
+        theta = self.theta[g, a]  # (m, F)
+        active = self.features.active
+        q = theta[:, active[:, 0]]
+        for t in range(1, active.shape[1]):
+            q = q + theta[:, active[:, t]]
+        self.q[g, :, a] = q
+        self._dirty[g, a] = False
+        self.improvements[games] += 1
+
+
+def weights_digest(theta: np.ndarray) -> str:
+    """A short fingerprint of one learner's weights (hex), recorded so a rebuild can prove it matched."""
+    import hashlib
+    return hashlib.sha256(np.ascontiguousarray(theta, dtype=np.float64).tobytes()).hexdigest()[:16]
+
+
+def dense_sherman_morrison(inverse: np.ndarray, u: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """(A + u v^T)^-1 from A^-1 (n x n): the update the thesis's dense LSPI pays per sample (reference)."""
+    au = inverse @ u
+    va = v @ inverse
+    return inverse - np.outer(au, va) / (1.0 + v @ au)
