@@ -26,10 +26,12 @@ from datetime import datetime, timezone
 from pathlib import Path
 
 from pairplay import __version__
-from pairplay.schemas.config import DEFAULT_REWARD_BONUS, REWARD_BONUS_RULES, LearnerConfig
+import msgspec
+
+from pairplay.schemas.config import DEFAULT_REWARD_BONUS, REWARD_BONUS_RULES, LearnerConfig, LSPIConfig
 from pairplay.schemas.keys import check_chunk
 from pairplay.schemas.policy import PolicyFileError, read_policy
-from pairplay.schemas.session import SessionConfig, learner_overrides
+from pairplay.schemas.session import SessionConfig, learner_overrides, lspi_overrides
 
 from pairplay.cli.robot import add_robot_arguments, check_robot_args, robot_choice
 from pairplay.services.bus import add_bus_arguments, options_from_args, stop_on_signals
@@ -47,7 +49,10 @@ def add_config_arguments(p: argparse.ArgumentParser) -> None:
     g.add_argument("--seed", type=int, default=0)
     g.add_argument("--rounds", type=int, default=20)
     g.add_argument("--game-index", type=int, default=0)
-    g.add_argument("--algorithm", choices=("q-learning", "pi-reuse", "fixed"), default="q-learning")
+    g.add_argument("--algorithm", choices=("q-learning", "pi-reuse", "fixed", "lspi"), default="q-learning",
+                   help="the learner (lspi: online LSPI, algorithm 2, core/lspi.py)")
+    g.add_argument("--lspi-ridge", type=float, help="lspi: delta, the ridge penalty (default 1)")
+    g.add_argument("--lspi-every", type=int, help="lspi: K, samples between policy improvements (default 10)")
     g.add_argument("--policy", help="policy file: the bias policy (pi-reuse) or the fixed policy")
     g.add_argument("--observed-source", choices=("intended", "first-pick"),
                    help="default: intended for sim:, first-pick for human:")
@@ -72,6 +77,16 @@ def config_from_args(args: argparse.Namespace) -> SessionConfig:
                               f"{datetime.now(timezone.utc).strftime('%Y%m%dT%H%M%S')}"
     preset = PRESETS[args.preset]
     schedule = preset(args.rounds) if args.preset != "virtual" else preset()
+    lspi = msgspec.UNSET
+    given = {k: v for k, v in (("ridge", getattr(args, "lspi_ridge", None)),
+                               ("improve_every", getattr(args, "lspi_every", None))) if v is not None}
+    if args.algorithm == "lspi":
+        try:
+            lspi = lspi_overrides(LSPIConfig(**given))
+        except ValueError as err:
+            raise ValueError(f"--lspi-*: {err}") from None
+    elif given:
+        raise ValueError(f"--lspi-ridge/--lspi-every need --algorithm lspi, not {args.algorithm}")
     actions = []
     if args.policy:
         actions = list(read_policy(args.policy).greedy)
@@ -81,7 +96,7 @@ def config_from_args(args: argparse.Namespace) -> SessionConfig:
         observed_source=args.observed_source or ("intended" if sim else "first-pick"),
         ignore_rule=args.ignore_rule or ("perceived" if sim else "time"), policy_actions=actions,
         learner=learner_overrides(schedule), software_version=__version__,
-        reward_bonus=args.reward_bonus)
+        reward_bonus=args.reward_bonus, lspi=lspi)
     config.validate()
     return config
 
@@ -119,5 +134,6 @@ def run(args: argparse.Namespace) -> int:
     turns = fold.turns_per_round()
     print(f"recorded {len(recorded.events)} events to {path}")
     print(f"rounds played: {len(turns)}; turns per round: {turns[:10]}{' ...' if len(turns) > 10 else ''}")
-    print(f"rejections: {len(fold.rejections)}; Q updates: {fold.counts.get('QUpdated', 0)}")
+    print(f"rejections: {len(fold.rejections)}; Q updates: {fold.counts.get('QUpdated', 0)}"
+          + (f"; LSPI samples: {fold.counts.get('LSPIUpdated', 0)}" if config.algorithm == "lspi" else ""))
     return 0 if fold.ended is not None else 1

@@ -9,6 +9,7 @@ Rule: one command, reproducible by seed, writes a report folder:
   merged/<name>.json, merged.png    merged policies (algorithm 4) and figure 6.6
   merged_evaluation.csv             every merged policy on every persona
   reuse.csv, reuse.png              held-out persona: Q-learning from scratch vs pi-reuse
+  speed.csv, speed.png              (--algorithm lspi) LSPI beside Q-learning on the same games
   report.md                         the tables and figures, with the run's settings
 """
 
@@ -47,6 +48,12 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--psi-decay", type=float, default=0.95, help="pi-reuse: v, psi's decay per suggestion (default 0.95)")
     p.add_argument("--reuse-last", type=int, default=50,
                    help="pi-reuse: the last N rounds use the new policy alone (default 50)")
+    p.add_argument("--algorithm", choices=("q-learning", "lspi"), default="q-learning",
+                   help="the learner: Q-learning (thesis 5.1.1, default) or online LSPI (algorithm 2, core/lspi.py); "
+                        "with lspi, Q-learning also trains on the same games for the side-by-side comparison")
+    p.add_argument("--lspi-ridge", type=float, default=1.0, help="lspi: delta, the ridge penalty (default 1)")
+    p.add_argument("--lspi-every", type=int, default=10,
+                   help="lspi: K, samples between policy improvements (default 10)")
     p.add_argument("--out", type=Path, default=Path("out/study"), help="report folder (default out/study)")
     p.add_argument("--train-only", action="store_true",
                    help="stop after training: policy files, curves and figure 6.4 only (for sweeps)")
@@ -74,6 +81,11 @@ def run(args) -> int:
         print("pairplay study: --games, --rounds, --eval-rounds and --reuse-seeds must be at least 1",
               file=sys.stderr)
         return 2
+    try:
+        settings.lspi()
+    except ValueError as exc:
+        print(f"pairplay study: {exc}", file=sys.stderr)
+        return 2
     report = run_study(settings, args.out, _bar(args.quiet))
     if settings.train_only:
         print(f"training: {report.timings['training']:.2f} s; policies and curves in {report.out}")
@@ -83,6 +95,9 @@ def run(args) -> int:
     print(text_table([r[:9] for r in report.profiles]))
     print()
     print(text_table(report.merges))
+    if report.speed is not None:
+        print()
+        print(text_table(report.speed))
     if report.reuse is not None:
         print()
         print(text_table(report.reuse))

@@ -10,6 +10,8 @@ Rule: `run_study(settings, out)` runs the study of thesis chapter 6 through
   merged/<name>.json, merged.png    merged policies (algorithm 4) and figure 6.6
   merged_evaluation.csv             every merged policy on every persona
   reuse.csv, reuse.png              held-out persona: Q-learning from scratch vs pi-reuse
+  speed.csv, speed.png              (--algorithm lspi) LSPI beside Q-learning on the same games:
+                                    learning curves and rounds to 1.10x the oracle
   report.md                         the tables and figures, with the run's settings
 It returns the tables it wrote, so a caller (the CLI, a notebook) can print them.
 """
@@ -30,7 +32,7 @@ from pairplay.core import study
 from pairplay.core.personas import PERSONAS, persona
 from pairplay.core.policies import to_policy_file
 from pairplay.core.reward import BONUS_RULE_TEXT
-from pairplay.schemas.config import DEFAULT_REWARD_BONUS, LearnerConfig
+from pairplay.schemas.config import DEFAULT_REWARD_BONUS, LearnerConfig, LSPIConfig
 from pairplay.schemas.policy import write_policy
 
 from pairplay.report import plots
@@ -51,6 +53,15 @@ class StudySettings:
     psi_decay: float = 0.95
     reuse_last: int = 50
     train_only: bool = False
+    algorithm: str = "q-learning"  # or "lspi" (core/lspi.py)
+    lspi_ridge: float = LSPIConfig().ridge
+    lspi_every: int = LSPIConfig().improve_every
+
+    def lspi(self) -> LSPIConfig | None:
+        """LSPI's settings when the study learns by LSPI (ValueError if they cannot run)."""
+        if self.algorithm != "lspi":
+            return None
+        return LSPIConfig(ridge=self.lspi_ridge, improve_every=self.lspi_every)
 
     def persona_list(self):
         """The personas named (KeyError naming an unknown one)."""
@@ -66,6 +77,7 @@ class StudyReport:
     profiles: list[list[str]] = field(default_factory=list)
     merges: list[list[str]] = field(default_factory=list)
     reuse: list[list[str]] | None = None
+    speed: list[list[str]] | None = None
 
 
 def _no_bar(total: int, desc: str):
@@ -108,13 +120,14 @@ def write_curves(out: Path, training: study.Training) -> dict[str, np.ndarray]:
 
 
 def write_policies(out: Path, training: study.Training, args, config: LearnerConfig) -> list[Path]:
-    paths = []
+    paths, lspi = [], args.lspi()
     for row, (p, g) in enumerate(zip(training.personas, training.game_index)):
         path = out / "policies" / p.key / f"game-{int(g):02d}.json"
         write_policy(path, to_policy_file(
             training.result.q[row], training.result.counts[row], training.greedy[row],
-            algorithm="q-learning", participant=p.key, persona=p, seed=training.seeds[row], game=int(g),
-            rounds=args.rounds, config=config, software=f"pairplay {__version__}", reward_bonus=args.reward_bonus))
+            algorithm=args.algorithm, participant=p.key, persona=p, seed=training.seeds[row], game=int(g),
+            rounds=args.rounds, config=config, software=f"pairplay {__version__}", reward_bonus=args.reward_bonus,
+            lspi=lspi))
         paths.append(path)
     return paths
 
@@ -221,9 +234,12 @@ def run_study(args: StudySettings, out: Path, progress_bar: Callable = _no_bar) 
     start = time.perf_counter()
 
     t0 = time.perf_counter()
+    lspi = args.lspi()
+    snapshot_every = SPEED_EVERY if lspi is not None and args.rounds >= SPEED_EVERY else None
     with progress_bar(len(personas) * args.games * args.rounds, "training") as bar:
         training = study.train(personas, args.games, args.rounds, args.seed, config, progress=_progress(bar),
-                               reward_bonus=args.reward_bonus)
+                               reward_bonus=args.reward_bonus, algorithm=args.algorithm, lspi=lspi,
+                               snapshot_every=snapshot_every)
     timings["training"] = time.perf_counter() - t0
 
     write_policies(out, training, args, config)
@@ -244,6 +260,15 @@ def run_study(args: StudySettings, out: Path, progress_bar: Callable = _no_bar) 
     plots.comparison_bars(cmp.persona, {"user alone": cmp.alone, "learned": cmp.learned, "oracle": cmp.oracle},
                           out / "evaluation.png", "picks per round (epsilon 0)")
     oracle = dict(zip(cmp.persona, cmp.oracle))
+    speed_rows = speed_lines = None
+    if snapshot_every:
+        t0 = time.perf_counter()
+        with progress_bar(len(personas) * args.games * args.rounds, "q-learning beside lspi") as bar:
+            q_training = study.train(personas, args.games, args.rounds, args.seed, config, progress=_progress(bar),
+                                     reward_bonus=args.reward_bonus, snapshot_every=snapshot_every)
+        speed = study.learning_speed(personas, {"q-learning": q_training, "lspi": training}, oracle, args.seed)
+        speed_rows, speed_lines = speed_section(speed, cmp, out, names, args)
+        timings["lspi vs q-learning"] = time.perf_counter() - t0
 
     # Profiles (algorithm 3, figure 6.5) and merged policies (algorithm 4, figure 6.6).
     t0 = time.perf_counter()
@@ -302,19 +327,25 @@ def run_study(args: StudySettings, out: Path, progress_bar: Callable = _no_bar) 
 
     first50 = {k: c[:, :50].mean() for k, c in curves.items()}
     last50 = {k: c[:, -50:].mean() for k, c in curves.items()}
+    learner_text = "Q-learning with the thesis's schedules (epsilon 0.9 - 0.1/50 rounds, floor 0.1; alpha 0.5 - " \
+        "0.05/50 rounds)" if lspi is None else \
+        f"online LSPI (algorithm 2, core/lspi.py: {lspi.tilings} tilings {lspi.tile_width:g} grid steps wide" \
+        f"{' + one tile per state' if lspi.exact else ''}, ridge {lspi.ridge:g}, policy improvement every " \
+        f"{lspi.improve_every} samples, gamma {lspi.gamma:g}) with Q-learning's epsilon schedule"
+    rerun = "" if lspi is None else f" --algorithm lspi --lspi-ridge {lspi.ridge:g} --lspi-every {lspi.improve_every}"
     report = [
         "# pairplay study report", "",
         f"pairplay {__version__}, seed {args.seed}, {len(personas)} personas x {args.games} games x "
-        f"{args.rounds} rounds, Q-learning with the thesis's schedules (epsilon 0.9 - 0.1/50 rounds, "
-        f"floor 0.1; alpha 0.5 - 0.05/50 rounds); the 1/|candidate set| bonus "
+        f"{args.rounds} rounds, {learner_text}; the 1/|candidate set| bonus "
         f"{BONUS_RULE_TEXT[args.reward_bonus]} (rule `{args.reward_bonus}`). "
         f"Re-run: `pairplay study --seed {args.seed} --games {args.games} --rounds {args.rounds}"
-        f" --reward-bonus {args.reward_bonus}`.", "",
+        f" --reward-bonus {args.reward_bonus}{rerun}`.", "",
         "## Learned policies against the references", "",
         f"Picks per round, each greedy policy played {args.eval_rounds} rounds with epsilon 0; the oracle "
         "and the user alone play the same games (core/oracle.py documents the oracle).", "",
         markdown_table(table), "", "![evaluation](evaluation.png)", "",
         *gap_section(cmp, training),
+        *(speed_lines or []),
         "## Learning curves (figure 6.4)", "",
         markdown_table([["persona", "first 50 rounds", "last 50 rounds"]] +
                        [[k, f"{first50[k]:.2f}", f"{last50[k]:.2f}"] for k in curves]), "",
@@ -353,4 +384,39 @@ def run_study(args: StudySettings, out: Path, progress_bar: Callable = _no_bar) 
     report += ["## Timings", "", markdown_table([["phase", "seconds"]] + [[k, f"{v:.2f}"] for k, v in timings.items()]), ""]
     (out / "report.md").write_text("\n".join(report))
 
-    return StudyReport(out, timings, table, prof_rows, merge_rows, reuse_rows if reuse is not None else None)
+    return StudyReport(out, timings, table, prof_rows, merge_rows, reuse_rows if reuse is not None else None,
+                       speed_rows)
+
+
+SPEED_EVERY = 10  # rounds between greedy snapshots when two learners are compared
+
+
+def speed_section(speed: study.Speed, cmp: study.Comparison, out: Path, names: dict, args) -> tuple[list, list]:
+    """speed.csv, speed.png and the report's lines: the learners side by side on the same games."""
+    oracle = dict(zip(cmp.persona, cmp.oracle))
+    rows = [["persona", "focus", *[f"rounds to {speed.target:.2f}x oracle: {a}" for a in speed.algorithms],
+             *[f"first 50 rounds: {a}" for a in speed.algorithms],
+             *[f"last snapshot / oracle: {a}" for a in speed.algorithms]]]
+
+    def fmt_rounds(x):
+        hit = x[~np.isnan(x)]
+        never = int(np.isnan(x).sum())
+        return (f"{hit.mean():.0f} \u00b1 {hit.std():.0f}" if hit.size else "-") + (f" ({never} never)" if never else "")
+    for i, key in enumerate(speed.persona):
+        rows.append([key, str(PERSONAS[key].focus),
+                     *[fmt_rounds(speed.rounds_to_target[a, i]) for a in range(len(speed.algorithms))],
+                     *[f"{speed.curves[a, i, :, :50].mean():.2f} \u00b1 {speed.curves[a, i, :, :50].mean(1).std():.2f}"
+                       for a in range(len(speed.algorithms))],
+                     *[f"{speed.snapshot_picks[a, i, :, -1].mean() / oracle[key]:.3f}"
+                       for a in range(len(speed.algorithms))]])
+    with open(out / "speed.csv", "w", newline="") as f:
+        csv.writer(f).writerows(rows)
+    plots.algorithm_curves(speed.curves, speed.algorithms, speed.persona, names,
+                           [oracle[k] for k in speed.persona], out / "speed.png")
+    lines = ["## LSPI beside Q-learning (same games, same exploration schedule)", "",
+             f"Both learners train on the same {args.games} games per persona (same deals and users); every "
+             f"{speed.every} rounds each learner's greedy policy plays 20 rounds with epsilon 0 on the same "
+             f"evaluation games. 'Rounds to {speed.target:.2f}x oracle': the first such snapshot within "
+             f"{speed.target:.2f}x the oracle's picks per round, mean \u00b1 sd over games.", "",
+             markdown_table(rows), "", "![LSPI beside Q-learning](speed.png)", ""]
+    return rows, lines

@@ -30,6 +30,7 @@ CATALOGUE: dict[str, tuple[str, str]] = {
     "TurnResolved": ("game", "the two cards of a turn, match or miss, the time between the picks"),
     "RewardGiven": ("learner", "the reward of a suggestion and whether it was learned from (ignored: no update)"),
     "QUpdated": ("learner", "one Q-learning update (eq. 5.2): state, action, alpha, reward, Q before and after"),
+    "LSPIUpdated": ("learner", "one sample learned by online LSPI (algorithm 2): state, action, reward, samples so far, whether the policy was improved, Q before and after, a digest of the weights"),
     "RoundEnded": ("game", "the board is clear: turns and matches of the round"),
     "CombineRequested": ("experimenter / any client", "profile and merge these policies or recordings (algorithms 3, 4)"),
     "PolicyCombined": ("combiner", "the merged policy, the rule that decided each state, the merged user information"),

@@ -14,7 +14,7 @@ Who publishes what (source = the service name):
                TurnResolved, RoundEnded, SessionEnded
   participant: CardPicked, CardObserved (intended source), SuggestionPerceived,
                WrongSuggestionPressed, QuestionnaireAnswered
-  learner:     SuggestionMade, RewardGiven, QUpdated
+  learner:     SuggestionMade, RewardGiven, QUpdated (Q-learning), LSPIUpdated (LSPI)
   combiner:    PolicyCombined (answering CombineRequested)
   robot:       RobotActed (schemas/robot.py)
   any service: ServiceStarted, MessageRejected
@@ -166,6 +166,27 @@ class QUpdated(Event, tag="QUpdated"):
     q_after: float
 
 
+class LSPIUpdated(Event, tag="LSPIUpdated"):
+    """One sample learned by online LSPI (algorithm 2 lines 8-15, core/lspi.py).
+
+    A fold replays the samples in order through the same code and gets the
+    learner's weights bit for bit; `weights` (a digest of them, after a policy
+    improvement) and q_before let it prove so.
+    """
+
+    round: int
+    turn: int
+    attempt: int
+    state: int
+    action: int
+    reward: float
+    samples: int  # samples learned so far, this one included
+    improved: bool  # this sample ended a batch of K: the policy was improved
+    q_before: float  # Q(state, action) of the policy in force before the sample
+    q_after: float  # ... after it (differs only when improved)
+    weights: str = ""  # core.lspi.weights_digest of the weights after an improvement
+
+
 class RoundEnded(Event, tag="RoundEnded"):
     round: int
     turns: int
@@ -232,7 +253,7 @@ def _robot_events() -> tuple[type[Event], ...]:
 EVENT_TYPES: tuple[type[Event], ...] = (
     ServiceStarted, SessionStarted, RoundStarted, CardPicked, CardRevealed, PickRejected,
     CardObserved, SuggestionRequested, SuggestionMade, SuggestionPerceived,
-    WrongSuggestionPressed, TurnResolved, RewardGiven, QUpdated, RoundEnded,
+    WrongSuggestionPressed, TurnResolved, RewardGiven, QUpdated, LSPIUpdated, RoundEnded,
     CombineRequested, PolicyCombined, QuestionnaireAnswered, MessageRejected, SessionEnded,
 ) + _robot_events()
 EVENT_BY_TAG: dict[str, type[Event]] = {t.__struct_config__.tag: t for t in EVENT_TYPES}

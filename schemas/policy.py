@@ -5,6 +5,10 @@ round-trip form, so the same seed gives the same bytes) holding the Q-table
 (24 states x 88 actions), the greedy action of every state, the persona or
 participant it was learned with, the learner config, the seed and game, the
 updates per state, and for merged policies the rule that decided each state.
+What Q means depends on `algorithm`: "q-learning" (and "pi-reuse") files hold the
+running average of eq. 5.2; "lspi" files hold phi(s, a)^T theta of online LSPI
+(core/lspi.py), say so in `q_meaning` and carry the LSPI settings in `lspi`. Both
+estimate the expected reward of a considered suggestion (gamma 0), on one scale.
 `format` and `version` say what the file is; a reader refuses anything else
 with a clear error (PolicyFileError), never a half-read policy.
 
@@ -15,7 +19,7 @@ from __future__ import annotations
 
 import msgspec
 
-from .config import REWARD_BONUS_RULES, UNSTATED_REWARD_BONUS, LearnerConfig, Persona
+from .config import REWARD_BONUS_RULES, UNSTATED_REWARD_BONUS, LearnerConfig, LSPIConfig, Persona
 
 FORMAT = "pairplay.policy"
 VERSION = 1
@@ -39,7 +43,7 @@ class UserInfo(msgspec.Struct, frozen=True):
 class PolicyFile(msgspec.Struct, frozen=True, kw_only=True):
     format: str = FORMAT
     version: int = VERSION
-    algorithm: str  # "q-learning", "pi-reuse", "combined", "oracle"
+    algorithm: str  # "q-learning", "lspi", "pi-reuse", "combined", "oracle"
     participant: str  # persona key, or a study participant's id
     persona: Persona | None = None
     seed: int | None = None
@@ -57,6 +61,10 @@ class PolicyFile(msgspec.Struct, frozen=True, kw_only=True):
     # When the learning reward paid its 1/|C| bonus (core/reward.py); files that do
     # not state it were written by pairplay 0.1.0, under SPEC's rule.
     reward_bonus: str = UNSTATED_REWARD_BONUS
+    # Written only by learners other than Q-learning (UNSET fields are left out of the
+    # file, so Q-learning files keep their bytes): what the Q-table is, and LSPI's settings.
+    q_meaning: str | msgspec.UnsetType = msgspec.UNSET
+    lspi: LSPIConfig | msgspec.UnsetType = msgspec.UNSET
 
     def __post_init__(self) -> None:
         if self.format != FORMAT:

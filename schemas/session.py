@@ -13,9 +13,9 @@ from typing import Union
 
 import msgspec
 
-from .config import REWARD_BONUS_RULES, UNSTATED_REWARD_BONUS, LearnerConfig
+from .config import REWARD_BONUS_RULES, UNSTATED_REWARD_BONUS, LearnerConfig, LSPIConfig
 
-ALGORITHMS = ("q-learning", "pi-reuse", "fixed")
+ALGORITHMS = ("q-learning", "pi-reuse", "fixed", "lspi")
 OBSERVED_SOURCES = ("intended", "first-pick")
 # How the learner decides that a suggestion was ignored (no reward, no update):
 # "perceived": the simulated participant reports it (SuggestionPerceived);
@@ -44,6 +44,16 @@ class SessionConfig(msgspec.Struct, frozen=True, kw_only=True):
     # When the simulated reward pays its 1/|candidate set| bonus (core/reward.py).
     # New sessions state it (DEFAULT_REWARD_BONUS); absent = a pairplay 0.1.0 recording.
     reward_bonus: str = UNSTATED_REWARD_BONUS
+    # LSPI's settings (schemas.config.LSPIConfig fields that differ from its defaults),
+    # for algorithm "lspi"; left out of other sessions' events (UNSET).
+    lspi: Union[dict[str, Union[float, int, bool]], msgspec.UnsetType] = msgspec.UNSET
+
+    def lspi_config(self) -> LSPIConfig:
+        """LSPI's settings as the strict Struct (ValueError if unknown keys or values that cannot run)."""
+        try:
+            return msgspec.convert({} if self.lspi is msgspec.UNSET else self.lspi, LSPIConfig)
+        except (msgspec.ValidationError, ValueError) as err:
+            raise ValueError(f"lspi settings {self.lspi!r}: {err}") from None
 
     def learner_config(self) -> LearnerConfig:
         """The learner's schedule as the strict config Struct (ValueError if unknown keys)."""
@@ -71,9 +81,21 @@ class SessionConfig(msgspec.Struct, frozen=True, kw_only=True):
         if self.participant.startswith("sim:") and not self.persona:
             raise ValueError("a simulated participant needs a persona")
         self.learner_config()
+        if self.algorithm == "lspi":
+            self.lspi_config()
+        elif self.lspi is not msgspec.UNSET:
+            raise ValueError(f"lspi settings given for algorithm {self.algorithm!r}")
 
 
 def learner_overrides(config: LearnerConfig) -> dict[str, Union[float, int, None]]:
     """The fields of `config` that differ from LearnerConfig's defaults."""
-    default = LearnerConfig()
+    return _overrides(config, LearnerConfig())
+
+
+def lspi_overrides(config: LSPIConfig) -> dict[str, Union[float, int, bool]]:
+    """The fields of `config` that differ from LSPIConfig's defaults."""
+    return _overrides(config, LSPIConfig())
+
+
+def _overrides(config, default) -> dict:
     return {f: getattr(config, f) for f in config.__struct_fields__ if getattr(config, f) != getattr(default, f)}
