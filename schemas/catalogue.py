@@ -2,8 +2,8 @@
 
 Rule: every event type in `events.EVENT_TYPES` has one row here; the README's
 catalogue is generated from these rows and the Structs' own fields
-(`python -m pairplay.schemas.catalogue --write README.md`), and a test keeps
-the two in step.
+(`python -m pairplay.schemas.catalogue --write README.md`, which also redraws
+the event flow of docs/architecture.md from FLOW), and a test keeps them in step.
 """
 
 from __future__ import annotations
@@ -39,6 +39,33 @@ CATALOGUE: dict[str, tuple[str, str]] = {
     "SessionEnded": ("game", "the session is over, with the reason and the rounds played"),
 }
 
+# tag -> (publishing services, consuming services), as the services' code reads them; the
+# recorder and the view subscribe to every event (`pairplay/<session>/**`) and are not listed.
+# docs/architecture.md draws this table (mermaid()); a test keeps both in step with CATALOGUE.
+FLOW: dict[str, tuple[tuple[str, ...], tuple[str, ...]]] = {
+    "ServiceStarted": (("any service",), ()),
+    "SessionStarted": (("game",), ("learner", "participant")),
+    "RoundStarted": (("game",), ("participant",)),
+    "CardPicked": (("participant", "board"), ("game",)),
+    "CardRevealed": (("game",), ("participant",)),
+    "PickRejected": (("game",), ("participant",)),
+    "CardObserved": (("participant",), ("game",)),
+    "SuggestionRequested": (("game",), ("learner",)),
+    "SuggestionMade": (("learner",), ("participant", "robot")),
+    "RobotActed": (("robot",), ()),
+    "SuggestionPerceived": (("participant",), ("learner",)),
+    "WrongSuggestionPressed": (("board",), ("game",)),
+    "TurnResolved": (("game",), ("learner", "participant")),
+    "RewardGiven": (("learner",), ()),
+    "QUpdated": (("learner",), ()),
+    "RoundEnded": (("game",), ()),
+    "CombineRequested": (("experimenter",), ("combiner",)),
+    "PolicyCombined": (("combiner",), ("experimenter",)),
+    "QuestionnaireAnswered": (("board",), ()),
+    "MessageRejected": (("any service",), ()),
+    "SessionEnded": (("game",), ("learner", "participant", "robot")),
+}
+
 _ENVELOPE = {f.name for f in msgspec.structs.fields(Event)}
 
 
@@ -58,7 +85,22 @@ def markdown() -> str:
     return "\n".join(lines)
 
 
+def mermaid() -> str:
+    """The event flow as a Mermaid flowchart: one edge per (publisher, event, consumer) of FLOW;
+    an event nobody but the recorder consumes goes to the node `log`."""
+    def node(name: str) -> str:
+        return name.replace(" ", "_")
+    lines = ["flowchart LR"]
+    for tag, (publishers, consumers) in FLOW.items():
+        for pub in publishers:
+            for con in consumers or ("log",):
+                lines.append(f"    {node(pub)} -- {tag} --> {node(con)}")
+    lines.append('    log[("recorder (every event to MCAP) and view")]')
+    return "\n".join(lines)
+
+
 START, END = "<!-- catalogue:start -->", "<!-- catalogue:end -->"
+FLOW_START, FLOW_END = "<!-- flow:start -->", "<!-- flow:end -->"
 
 
 def inject(text: str) -> str:
@@ -68,6 +110,13 @@ def inject(text: str) -> str:
     return f"{head}{START}\n{markdown()}\n{END}{tail}"
 
 
+def inject_flow(text: str) -> str:
+    """`text` (docs/architecture.md) with the Mermaid diagram between its markers replaced."""
+    head, rest = text.split(FLOW_START, 1)
+    _, tail = rest.split(FLOW_END, 1)
+    return f"{head}{FLOW_START}\n```mermaid\n{mermaid()}\n```\n{FLOW_END}{tail}"
+
+
 if __name__ == "__main__":
     import sys
     from pathlib import Path
@@ -75,5 +124,8 @@ if __name__ == "__main__":
     if sys.argv[1:2] == ["--write"]:
         path = Path(sys.argv[2] if len(sys.argv) > 2 else "README.md")
         path.write_text(inject(path.read_text()))
+        arch = path.parent / "docs" / "architecture.md"
+        if arch.exists():
+            arch.write_text(inject_flow(arch.read_text()))
     else:
         print(markdown())

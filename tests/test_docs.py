@@ -21,3 +21,14 @@ def test_every_verb_the_readme_uses_exists():
     code = re.findall(r"```.*?```", text, re.DOTALL) + re.findall(r"`[^`\n]+`", text)
     used = {verb for block in code for verb in re.findall(r"pairplay ([a-z]+)", block)}
     assert "study" in used and used <= set(VERBS), used - set(VERBS)
+
+
+ARCHITECTURE = README.parent / "docs" / "architecture.md"
+
+
+def test_the_architecture_diagram_is_drawn_from_the_catalogue_and_current():
+    assert set(catalogue.FLOW) == set(catalogue.CATALOGUE), "every event needs a FLOW row in schemas/catalogue.py"
+    text = ARCHITECTURE.read_text()
+    assert catalogue.inject_flow(text) == text, "run: python -m pairplay.schemas.catalogue --write README.md"
+    for tag in catalogue.CATALOGUE:
+        assert f"-- {tag} -->" in text, f"{tag} is missing from docs/architecture.md's diagram"
