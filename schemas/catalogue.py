@@ -58,6 +58,7 @@ FLOW: dict[str, tuple[tuple[str, ...], tuple[str, ...]]] = {
     "TurnResolved": (("game",), ("learner", "participant")),
     "RewardGiven": (("learner",), ()),
     "QUpdated": (("learner",), ()),
+    "LSPIUpdated": (("learner",), ()),
     "RoundEnded": (("game",), ()),
     "CombineRequested": (("experimenter",), ("combiner",)),
     "PolicyCombined": (("combiner",), ("experimenter",)),
