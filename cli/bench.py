@@ -15,6 +15,7 @@ import sys
 # name -> module providing bench_rows(quick)
 SOURCES: dict[str, str] = {
     "core": "pairplay.bench.core",
+    "lspi": "pairplay.bench.lspi",
     "bus": "pairplay.bench.bus",
     "view": "pairplay.bench.view",
     "robot": "pairplay.bench.robot",
@@ -39,11 +40,17 @@ def _fmt(value, unit: str) -> str:
     return f"{value:.3g} {unit}"
 
 
+def _ratio(ratio) -> str:
+    if ratio is None:
+        return "-"
+    return f"{ratio:.2f}x" if abs(ratio) >= 0.01 else f"{ratio:.2g}x"  # 1e-4 is not 0.00
+
+
 def table(rows: list[dict]) -> str:
     head = ["row", "value", "reference", "reference value", "ratio", "goal"]
     body = [[r["row"], _fmt(r["value"], r["unit"]), r.get("reference", ""),
              _fmt(r.get("reference_value"), r.get("reference_unit", r["unit"])),
-             "-" if r.get("ratio") is None else f"{r['ratio']:.2f}x", r.get("goal", "")] for r in rows]
+             _ratio(r.get("ratio")), r.get("goal", "")] for r in rows]
     widths = [max(len(str(x[i])) for x in [head] + body) for i in range(len(head))]
     line = lambda cells: " | ".join(str(c).ljust(w) for c, w in zip(cells, widths))  # noqa: E731
     return "\n".join([line(head), "-+-".join("-" * w for w in widths)] + [line(b) for b in body])

@@ -11,8 +11,9 @@ regression Gamma theta = z. Because phi(s, a) lives in block a, Gamma is block
 diagonal: 88 blocks of F x F. We keep each block's inverse B_a = Gamma_a^-1 by
 Sherman-Morrison restricted to the sample's block (B_a phi is the sum of the T
 columns of B_a at the active features, O(F T); the rank-one update O(F^2)), and a
-policy improvement recomputes theta_a = B_a z_a only for the blocks that got samples
-since the last one. Exploration is the Q-learner's epsilon-greedy with its schedule
+policy improvement sets theta_a = B_a z_a only for the blocks that got samples
+since the last one (B_a z_a itself is kept current by the recursive-least-squares
+form of the same rank-one step, w += B_new phi (r - phi^T w), O(F) a sample). Exploration is the Q-learner's epsilon-greedy with its schedule
 and its seeded tie-break (core/learning.py), so the two learners differ only in how
 they estimate Q. Every operation is elementwise or a reduction along a contiguous
 last axis, so a game's weights are the same bits alone (a session) or batched (the
@@ -135,8 +136,9 @@ class LSPILearner(Learner):
 
     `q` (B, 24, 88) is the value table of the current weights, refreshed at every
     policy improvement (so the behaviour policy pi_l stays fixed for K samples);
-    `inverse` (B, 88, F, F) holds each block's Gamma_a^-1, `z` (B, 88, F) the reward
-    sums, `theta` (B, 88, F) the weights, `samples` (B,) the samples learned.
+    `inverse` (B, 88, F, F) holds each block's Gamma_a^-1, `w` (B, 88, F) the solution
+    B_a z_a of the samples so far (z, line 10, lives only in it), `theta` (B, 88, F) the weights
+    of the policy in force (w at the last improvement), `samples` (B,) the samples learned.
     """
 
     def __init__(self, n_games: int, stream: UniformStream, config: LearnerConfig = LearnerConfig(),
@@ -148,8 +150,8 @@ class LSPILearner(Learner):
         f = self.features.size
         self.inverse = np.zeros((n_games, N_ACTIONS, f, f))
         self.inverse[..., np.arange(f), np.arange(f)] = 1.0 / lspi.ridge  # Gamma_0 = delta I (line 3)
-        self.z = np.zeros((n_games, N_ACTIONS, f))
         self.theta = np.zeros((n_games, N_ACTIONS, f))
+        self.w = np.zeros((n_games, N_ACTIONS, f))  # B z, kept current sample by sample
         self.samples = np.zeros(n_games, dtype=np.int64)
         self.improvements = np.zeros(n_games, dtype=np.int64)
         self._dirty = np.zeros((n_games, N_ACTIONS), dtype=bool)
@@ -166,10 +168,14 @@ class LSPILearner(Learner):
         block = self.inverse[g, a]  # (m, F, F), a copy
         u = _sum_columns(block, idx)  # B phi (B is symmetric: also phi^T B)
         denom = 1.0 + _sum_columns(u[:, None, :], idx)[:, 0]  # 1 + phi^T B phi
-        block -= (u / denom[:, None])[:, :, None] * u[:, None, :]
+        gain = u / denom[:, None]  # the new B phi (Sherman-Morrison)
+        block -= gain[:, :, None] * u[:, None, :]
         self.inverse[g, a] = block
-        for t in range(idx.shape[1]):  # z += phi r (line 10), one tiling at a time: repeats add up
-            self.z[g, a, idx[:, t]] += r
+        # The running solution w_a = B_a z_a, kept by the same rank-one step (recursive least
+        # squares: w += B_new phi (r - phi^T w)), so an improvement only copies it (lines 12-13).
+        w = self.w[g, a]
+        w += gain * (r - _sum_columns(w[:, None, :], idx)[:, 0])[:, None]
+        self.w[g, a] = w
         self._dirty[g, a] = True
         self.counts[g, s, a] += 1
         self.samples[g] += 1
@@ -180,11 +186,10 @@ class LSPILearner(Learner):
 
     def improve(self, games: np.ndarray) -> None:
         """Lines 12-14 for `games`: theta_a = B_a z_a for the blocks sampled since the last improvement."""
-        sel = np.zeros(self._rows.size, dtype=bool)
-        sel[games] = True
-        g, a = np.nonzero(self._dirty & sel[:, None])
-        self.theta[g, a] = (self.inverse[g, a] * self.z[g, a][:, None, :]).sum(-1)
-        theta = self.theta[g, a]  # (m, F)
+        rows, a = np.nonzero(self._dirty[games])
+        g = np.asarray(games)[rows]
+        theta = self.w[g, a]  # (m, F): B_a z_a, kept current by learn()
+        self.theta[g, a] = theta
         active = self.features.active
         q = theta[:, active[:, 0]]
         for t in range(1, active.shape[1]):
