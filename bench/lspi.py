@@ -61,6 +61,18 @@ def dense_per_sample(n_features: int, samples: int = 5, seed: int = 0) -> float:
     return 1e6 * (time.process_time() - t) / samples
 
 
+def dense_solve(n_features: int, repeats: int = 2, seed: int = 0) -> float:
+    """us per dense solve of line 12 (an n x n SPD system): the thesis's K = 0 paid one per sample."""
+    rng = np.random.default_rng(seed)
+    x = rng.normal(size=(n_features, n_features))
+    a = x @ x.T + np.eye(n_features)
+    b = rng.normal(size=n_features)
+    t = time.process_time()
+    for _ in range(repeats):
+        np.linalg.solve(a, b)
+    return 1e6 * (time.process_time() - t) / repeats
+
+
 def env_and_core_rates(games: int = 2048, rounds: int = 3) -> tuple[float, float]:
     """(vector env steps/s, core simulator steps/s): the same fixed policy on the same 2,048 games."""
     from pairplay.gym import MemoryVectorEnv
@@ -98,6 +110,10 @@ def bench_rows(quick: bool = False) -> list[dict]:
     rows.append(dict(row="online LSPI, amortised per sample (one game: a live session)", value=one, unit="us",
                      reference="dense Sherman-Morrison update, n = 2816 (the thesis's)", reference_value=thesis,
                      ratio=one / thesis, goal="(context)"))
+    solve = dense_solve(2816, 1 if quick else 3)
+    rows.append(dict(row="algorithm 2 as the thesis ran it: one dense solve of line 12 per sample (K=0, n=2816)",
+                     value=solve, unit="us", reference="online LSPI here, amortised per sample (80 games)",
+                     reference_value=per, ratio=solve / per, goal="(context: why it took days)"))
     env_rate, core_rate = env_and_core_rates(2048, 1 if quick else 3)
     rows.append(dict(row="pairplay.gym vector env, 2,048 games (fixed policy)", value=env_rate, unit="steps/s",
                      reference="core simulator, same games and policy", reference_value=core_rate,

@@ -33,7 +33,9 @@ def run(args: argparse.Namespace) -> int:
         paths = write_outputs(rebuilt, args.out)
         f = rebuilt.fold
         turns = f.turns_per_round()
-        print(f"{rec}: {f.events} events, {len(turns)} rounds, {f.counts.get('QUpdated', 0)} Q updates"
+        updates = f"{f.counts.get('LSPIUpdated', 0)} LSPI samples" if f.lspi is not None else \
+            f"{f.counts.get('QUpdated', 0)} Q updates"
+        print(f"{rec}: {f.events} events, {len(turns)} rounds, {updates}"
               f"{'; ' + rebuilt.note if rebuilt.note else ''}{'; %d q_before mismatches' % f.q_mismatches if f.q_mismatches else ''}")
         print("  " + ", ".join(str(p) for p in paths))
         done.append(rebuilt)

@@ -28,20 +28,23 @@ Only tiles some state lands in become features (what an index-hash table does).
 No maintained package fits: tiles3 is one public file not on PyPI, mushroom-rl's
 Tiles needs torch and the whole library, and neither is block-aware.
 
-Why the thesis's LSPI never converged (6.4), measured here (tests/test_lspi.py,
-`pairplay bench --only lspi`):
-1. Speed. It solved the dense n x n system with n = 32 x 88 = 2816; a dense
-   Sherman-Morrison update of that size costs ~10-40 ms per sample on this machine
-   (bench row), ~1,000x the block update here, and a dense solve ~0.2-0.3 s. 500
-   rounds x 14 samples x 10 games x 8 personas at that rate is days.
-2. Representation. 32 tilings of a 4 x 4 grid over (cell, level), written into 32
-   features per action as tiles3 does when its index table is that small, give
-   the 24 states feature vectors of rank `THESIS_RANK` (< 24): most states share
-   their whole feature vector, so no weights can give them different greedy
-   actions, and solving faster cannot fix it. With 3 features per action (its
-   second try) the rank is at most 3. Its K = 0 and small delta also made early
-   solves nearly singular. Here the features separate all 24 states (rank 24), so
-   with gamma = 0 the greedy policy tends to that of the per-state mean reward.
+Why the thesis's LSPI never converged (6.4), measured here (`pairplay bench --only lspi`,
+tests/test_lspi.py, README "Online LSPI"):
+1. Cost, first of all. It solved line 12 densely with n = 32 x 88 = 2816 unknowns;
+   with K_theta = 0 that is one dense solve per sample: 0.2-0.3 s each (LIBRARY-NOTES;
+   the bench row's dense solve), and even a dense Sherman-Morrison update of that
+   size costs tens of ms. 80 games x 500 rounds x ~15 samples at 0.25 s is about
+   40 hours of solving: "days". Here a sample costs ~20 us of CPU (bench row, 80
+   games at once, K = 10), 10^3-10^4 x less, because gamma = 0 makes A block
+   diagonal and only the sampled block is touched.
+2. Representation, second. 32 tilings of a 4 x 4 grid over (cell code, level),
+   written into 32 indices per action the way tiles3 does when its index table is
+   that small (`thesis_features`), leave the 24 states rank `THESIS_RANK` (11):
+   most states cannot get their own greedy action. Run through this learner (5
+   games x 300 rounds per persona with focus >= 5), those features still reach
+   1.00-1.09x the oracle, because one action ("try row x column y") is near-best in
+   most states for a hearing user; its second try, 3 features per action (n = 264),
+   gives Deaf and Frances 1.11-1.12x. Our features (rank 24) give 0.98-1.05x.
 """
 
 from __future__ import annotations

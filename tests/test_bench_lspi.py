@@ -7,7 +7,7 @@ from pairplay.cli.bench import _ratio
 def test_the_lspi_and_gym_measurements_run_on_small_sizes():
     cpu, wall, n = lspi.lspi_per_sample(4, 3)
     assert cpu > 0 and wall > 0 and n > 20
-    assert lspi.dense_per_sample(50, 2) > 0
+    assert lspi.dense_per_sample(50, 2) > 0 and lspi.dense_solve(40, 1) > 0
     env_rate, core_rate = lspi.env_and_core_rates(16, 1)
     assert env_rate > 0 and core_rate > 0
 

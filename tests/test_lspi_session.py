@@ -65,3 +65,22 @@ def test_lspi_settings_are_checked_before_a_session_starts():
         msgspec.structs.replace(CONFIG, lspi={"bogus": 1}).validate()
     with pytest.raises(ValueError, match="lspi"):
         msgspec.structs.replace(CONFIG, algorithm="q-learning").validate()
+
+
+def test_pairplay_session_and_rebuild_with_lspi_from_the_command_line(tmp_path):
+    import subprocess
+    import sys
+
+    def pairplay(*args):
+        return subprocess.run([sys.executable, "-m", "pairplay", *args], capture_output=True, text=True, timeout=120)
+    r = pairplay("session", "--participant", "sim:deaf", "--seed", "2", "--rounds", "3", "--session", "lspicli",
+                 "--algorithm", "lspi", "--lspi-every", "5", "--out", str(tmp_path))
+    assert r.returncode == 0 and "LSPI samples:" in r.stdout, r.stdout + r.stderr
+    r = pairplay("rebuild", str(tmp_path / "lspicli.mcap"), "--out", str(tmp_path / "rebuilt"))
+    assert r.returncode == 0 and " LSPI samples" in r.stdout and "mismatch" not in r.stdout, r.stdout + r.stderr
+    policy = read_policy(tmp_path / "rebuilt" / "lspicli.policy.json")
+    assert policy.algorithm == "lspi" and policy.lspi.improve_every == 5 and sum(policy.visits) > 10
+    r = pairplay("session", "--participant", "sim:deaf", "--lspi-every", "5", "--out", str(tmp_path))
+    assert r.returncode == 2 and "--algorithm lspi" in r.stdout  # this verb reports on stdout (as its other errors)
+    r = pairplay("session", "--participant", "sim:deaf", "--algorithm", "lspi", "--lspi-ridge", "0", "--out", str(tmp_path))
+    assert r.returncode == 2 and "ridge" in r.stdout
