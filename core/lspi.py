@@ -31,8 +31,8 @@ Tiles needs torch and the whole library, and neither is block-aware.
 Why the thesis's LSPI never converged (6.4), measured here (`pairplay bench --only lspi`,
 tests/test_lspi.py, README "Online LSPI"):
 1. Cost, first of all. It solved line 12 densely with n = 32 x 88 = 2816 unknowns;
-   with K_theta = 0 that is one dense solve per sample: 0.2-0.3 s each (LIBRARY-NOTES;
-   the bench row's dense solve), and even a dense Sherman-Morrison update of that
+   with K_theta = 0 that is one dense solve per sample: 0.2-0.3 s of wall time each
+   (LIBRARY-NOTES; 0.77 s of CPU over two BLAS threads in the bench row), and even a dense Sherman-Morrison update of that
    size costs tens of ms. 80 games x 500 rounds x ~15 samples at 0.25 s is about
    40 hours of solving: "days". Here a sample costs ~20 us of CPU (bench row, 80
    games at once, K = 10), 10^3-10^4 x less, because gamma = 0 makes A block
