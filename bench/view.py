@@ -29,7 +29,7 @@ import time
 from pathlib import Path
 from typing import Iterator
 
-import msgspec
+
 import numpy as np
 import rerun as rr
 
@@ -39,6 +39,7 @@ from pairplay.core.actions import N_ACTIONS
 from pairplay.replay.reader import read_log
 from pairplay.replay.writer import EventLogWriter
 from pairplay.schemas import events as ev
+from pairplay.schemas.events import encode_event
 from pairplay.schemas.envelope import stamped, tag_of
 from pairplay.schemas.keys import event_key
 from pairplay.schemas.session import SessionConfig
@@ -117,7 +118,7 @@ def _turn(emit, rng, q, board: Board, faces, r: int, turn: int) -> tuple[int, in
 def write_recording(events: list, path: Path) -> Path:
     """The events as a pairplay MCAP recording (replay's writer, one channel per key)."""
     writer = EventLogWriter(path)
-    encode = msgspec.json.Encoder().encode
+    encode = encode_event
     for e in events:
         writer.write(event_key(e.session, e.source, tag_of(type(e))), encode(e), log_time_ns=e.time_ns)
     writer.close()
@@ -208,7 +209,7 @@ def bench_live_not_slowed(rounds: int = 300, repeats: int = 3) -> dict:
     from pairplay.services.bus import open_bus
 
     events, _ = scripted_events(rounds, session="bench-live")
-    encode = msgspec.json.Encoder().encode
+    encode = encode_event
     payloads = [(event_key(e.session, e.source, tag_of(type(e))), encode(e)) for e in events]
     bare, viewed = [], []
     with open_bus() as session_bus, tempfile.TemporaryDirectory() as tmp:

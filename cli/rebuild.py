@@ -36,7 +36,9 @@ def run(args: argparse.Namespace) -> int:
         updates = f"{f.counts.get('LSPIUpdated', 0)} LSPI samples" if f.lspi is not None else \
             f"{f.counts.get('QUpdated', 0)} Q updates"
         print(f"{rec}: {f.events} events, {len(turns)} rounds, {updates}"
-              f"{'; ' + rebuilt.note if rebuilt.note else ''}{'; %d q_before mismatches' % f.q_mismatches if f.q_mismatches else ''}")
+              f"{'; %d q_before mismatches' % f.q_mismatches if f.q_mismatches else ''}")
+        if rebuilt.partial:
+            print(f"  PARTIAL session: {rebuilt.partial}")
         print("  " + ", ".join(str(p) for p in paths))
         done.append(rebuilt)
     if done and not args.no_plot:

@@ -46,6 +46,9 @@ def run(args: argparse.Namespace) -> int:
                   f"{'' if not c.extra else f' ({c.extra} recomputed beyond the recording)'}")
             for m in c.mismatches[:5]:
                 print(f"    {m}")
+        if v.unknown:
+            print(f"{sum(v.unknown.values())} events of types this version does not know, not compared: "
+                  + ", ".join(f"{tag} ({n})" for tag, n in sorted(v.unknown.items())))
         if v.truncated:
             print("the recording is cut short: its tail was not compared")
         if v.error:
@@ -61,8 +64,8 @@ def run(args: argparse.Namespace) -> int:
     from pairplay.services.replayer import republish
 
     log = read_log(args.recording)
-    if log.truncated:
-        print(f"{args.recording}: cut short ({log.error}); replaying the {len(log.events)} events before the cut")
+    if not log.whole:
+        print(f"{args.recording}: not whole ({log.error}); replaying the {len(log.events)} events of its intact parts")
     stop = threading.Event()
     stop_on_signals(stop)
     with Bus(options_from_args(args)) as bus:

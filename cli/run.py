@@ -100,6 +100,12 @@ def run(args: argparse.Namespace) -> int:
         node.start(wait_for=tuple(args.wait_for))
         print(f"{args.service} running in session {args.session}", flush=True)
         node.run(stop)
+        if args.service == "game" and not logic.done:  # stopped: the session's end says why and how far
+            from pairplay.services.session import end_reason
+            reason, detail = end_reason(stop, "")
+            with node._lock:
+                node.publish(node.driver._stamp(logic.end(reason, detail)))
+            time.sleep(0.2)  # let the recorder take it before the bus closes
         return 0
     finally:
         bus.close()

@@ -28,6 +28,7 @@ from pathlib import Path
 from pairplay import __version__
 import msgspec
 
+from pairplay.core.rng import STREAMS_VERSION
 from pairplay.schemas.config import DEFAULT_REWARD_BONUS, REWARD_BONUS_RULES, LearnerConfig, LSPIConfig
 from pairplay.schemas.keys import check_chunk
 from pairplay.schemas.policy import PolicyFileError, read_policy
@@ -96,7 +97,7 @@ def config_from_args(args: argparse.Namespace) -> SessionConfig:
         observed_source=args.observed_source or ("intended" if sim else "first-pick"),
         ignore_rule=args.ignore_rule or ("perceived" if sim else "time"), policy_actions=actions,
         learner=learner_overrides(schedule), software_version=__version__,
-        reward_bonus=args.reward_bonus, lspi=lspi)
+        reward_bonus=args.reward_bonus, streams=STREAMS_VERSION, lspi=lspi)
     config.validate()
     return config
 
@@ -136,4 +137,10 @@ def run(args: argparse.Namespace) -> int:
     print(f"rounds played: {len(turns)}; turns per round: {turns[:10]}{' ...' if len(turns) > 10 else ''}")
     print(f"rejections: {len(fold.rejections)}; Q updates: {fold.counts.get('QUpdated', 0)}"
           + (f"; LSPI samples: {fold.counts.get('LSPIUpdated', 0)}" if config.algorithm == "lspi" else ""))
-    return 0 if fold.ended is not None else 1
+    e = fold.ended
+    if e is None:
+        print("ended: no SessionEnded recorded")
+    elif e.reason != "completed":
+        print(f"ended: {e.reason}{f' ({e.detail})' if e.detail else ''} after {e.rounds_played} of "
+              f"{config.rounds} rounds")
+    return 0 if e is not None and e.reason in ("completed", "interrupted", "aborted") else 1

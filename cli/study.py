@@ -22,6 +22,7 @@ from pathlib import Path
 from tqdm import tqdm
 
 from pairplay.core.personas import PERSONAS
+from pairplay.core.rng import SEED_RANGE
 from pairplay.core.reward import BONUS_RULES
 from pairplay.report.study import StudySettings, run_study, text_table
 from pairplay.schemas.config import DEFAULT_REWARD_BONUS
@@ -79,6 +80,10 @@ def run(args) -> int:
         return 2
     if args.games < 1 or args.rounds < 1 or args.eval_rounds < 1 or args.reuse_seeds < 1:
         print("pairplay study: --games, --rounds, --eval-rounds and --reuse-seeds must be at least 1",
+              file=sys.stderr)
+        return 2
+    if not SEED_RANGE[0] <= args.seed <= SEED_RANGE[1]:  # every seed in range has its own streams (core.rng)
+        print(f"pairplay study: --seed {args.seed} is outside the accepted range {SEED_RANGE[0]}..{SEED_RANGE[1]}",
               file=sys.stderr)
         return 2
     try:

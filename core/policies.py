@@ -23,7 +23,8 @@ def to_policy_file(q: np.ndarray, counts: np.ndarray, greedy: np.ndarray, *, alg
                    game: int | None = None, rounds: int = 0, config: LearnerConfig | None = None,
                    info: UserInfo | None = None, merged_from: list[str] | None = None,
                    rules: list[str] | None = None, software: str = "",
-                   reward_bonus: str = DEFAULT_REWARD_BONUS, lspi: LSPIConfig | None = None) -> PolicyFile:
+                   reward_bonus: str = DEFAULT_REWARD_BONUS, partial: str = "",
+                   lspi: LSPIConfig | None = None) -> PolicyFile:
     """`lspi` (the learner's settings) marks an LSPI policy: the file says what its Q is."""
     return PolicyFile(
         algorithm=algorithm, participant=participant, persona=persona, seed=seed, game=game,
@@ -31,7 +32,7 @@ def to_policy_file(q: np.ndarray, counts: np.ndarray, greedy: np.ndarray, *, alg
         greedy=[int(a) for a in greedy], q=[[float(v) for v in row] for row in q],
         visits=[int(v) for v in np.asarray(counts).reshape(len(STATE_NAMES), -1).sum(-1)],
         info=info, merged_from=list(merged_from or []), rules=list(rules or []), software=software,
-        reward_bonus=reward_bonus, lspi=msgspec.UNSET if lspi is None else lspi,
+        reward_bonus=reward_bonus, partial=partial, lspi=msgspec.UNSET if lspi is None else lspi,
         q_meaning=msgspec.UNSET if lspi is None else LSPI_Q_MEANING)
 
 

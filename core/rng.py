@@ -17,10 +17,23 @@ and the draw's index. So a batch of streams is a few uint64 array operations
 per draw (no per-game Python loop, no buffers), and skipping ahead is adding
 to a counter (a restarted service catches up with its log in O(1)). Keys come
 from numpy's SeedSequence hashing of (game seed, role), 64 bits each.
+
+Game seeds (`game_seed`, derivation STREAMS_VERSION = 2): every seed 0..2**64-1
+and every label (a persona key, a participant id) gives its own streams. The
+study's own labels (the persona keys of appendix A, bare or as "reuse:",
+"combine:", "oracle:" + key) with seeds below 2**32 keep derivation 1 (numpy's
+SeedSequence of the seed, the label's CRC-32 and the game index), so the study's
+results stay what they were; those labels are a fixed table whose CRC-32s
+differ (tested). Everything else, where derivation 1 aliased (it cut seeds to
+32 bits: 5 and 4294967301, -1 and 4294967295 were one game; two participant ids
+with one CRC-32 shared their streams), goes through BLAKE2b of the seed, the
+label and the game index. Derivation 1 stays available, exactly, for the
+recordings made with it (SessionConfig.streams).
 """
 
 from __future__ import annotations
 
+import hashlib
 import zlib
 from typing import Sequence
 
@@ -34,10 +47,46 @@ _S30, _S27, _S31, _S11 = (np.uint64(x) for x in (30, 27, 31, 11))
 _TO_UNIT = 2.0 ** -53
 
 
-def game_seed(seed: int, persona: str, game: int) -> int:
-    """A 64-bit seed for one game of one persona in a study seeded with `seed`."""
+STREAMS_VERSION = 2  # the derivation new sessions record (SessionConfig.streams)
+SEED_RANGE = (0, 2**64 - 1)
+_STUDY_ROLES = ("reuse:", "combine:", "oracle:")
+
+
+def _study_label(label: str) -> bool:
+    from .personas import PERSONAS  # the fixed table of appendix A
+
+    for role in _STUDY_ROLES:
+        if label.startswith(role):
+            label = label[len(role):]
+            break
+    return label in PERSONAS
+
+
+def game_seed(seed: int, persona: str, game: int, version: int = STREAMS_VERSION) -> int:
+    """A 64-bit seed for game `game` (>= 0) of `persona` (a persona key or a participant id) under
+    study seed `seed` (0..2**64-1), by stream derivation `version` (see the module rule).
+    Raises ValueError for a seed or game index out of range (version 1 takes what it always took)."""
+    seed, game = int(seed), int(game)
+    if version == 1:
+        return _derivation_1(seed, persona, game)
+    if version != 2:
+        raise ValueError(f"unknown stream derivation {version} (this pairplay knows 1 and {STREAMS_VERSION})")
+    if not SEED_RANGE[0] <= seed <= SEED_RANGE[1]:
+        raise ValueError(f"seed {seed} is outside {SEED_RANGE[0]}..{SEED_RANGE[1]}")
+    if not 0 <= game < 2**63:
+        raise ValueError(f"game index {game} is outside 0..{2**63 - 1}")
+    if seed < 2**32 and _study_label(persona):
+        return _derivation_1(seed, persona, game)
+    digest = hashlib.blake2b(f"{seed}\x00{game}".encode(), digest_size=8, key=b"pairplay streams 2",
+                             person=b"game seed", salt=hashlib.blake2b(persona.encode("utf-8"),
+                                                                        digest_size=16).digest())
+    return int.from_bytes(digest.digest(), "little")
+
+
+def _derivation_1(seed: int, persona: str, game: int) -> int:
+    """pairplay <= 0.2's game seed (the seed cut to 32 bits, the label's CRC-32): the study's streams."""
     key = zlib.crc32(persona.encode("utf-8"))
-    state = np.random.SeedSequence([int(seed) & 0xFFFFFFFF, key, int(game)]).generate_state(2, np.uint32)
+    state = np.random.SeedSequence([seed & 0xFFFFFFFF, key, game]).generate_state(2, np.uint32)
     return int(state[0]) << 32 | int(state[1])
 
 

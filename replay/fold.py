@@ -32,8 +32,9 @@ from pairplay.schemas.session import SessionConfig
 
 def stream_seed(config: SessionConfig) -> int:
     """The seed of a session's per-role streams (core.rng), named as in the study:
-    the persona's key (or the human participant's id) and the game index."""
-    return game_seed(config.seed, config.persona or config.participant, config.game_index)
+    the persona's key (or the human participant's id) and the game index, by the
+    stream derivation the session records (1 for recordings of pairplay <= 0.2)."""
+    return game_seed(config.seed, config.persona or config.participant, config.game_index, config.streams)
 
 
 @dataclass

@@ -1,11 +1,17 @@
 """Reading the event log, also when the file was cut short by a crash.
 
-Rule: records are read in file order with mcap's StreamReader, the one reader
-that yields every complete record of a truncated file; a truncated or corrupt
-tail ends the read with `truncated=True` and the reason, never an exception,
-and loses nothing before it. Each message is decoded with msgspec into its
-event class; a message that does not decode is kept as a `BadMessage` with the
-reason (a recording is evidence: nothing is dropped silently).
+Rule: records are read in file order by `mcapscan.scan`, which checks
+everything the MCAP format lets a reader check (magic, record lengths, chunk
+CRCs and sizes, message indexes, the data-section and summary CRCs, chunk
+order) and reads only the parts that pass: a damaged chunk gives no records,
+every intact part around it does. What is wrong is in `damage` (which part, why);
+a file that stops early is `truncated` (the reason in `error`); `whole` is true
+only for a file with neither. Nothing raises but an unreadable path. Each
+message is decoded with msgspec into its event class; a message of an event
+type this version does not know (a newer pairplay's) is counted and kept as an
+`UnknownEvent` by its tag; any other message that does not decode is kept as a
+`BadMessage` with the reason (a recording is evidence: nothing is dropped
+silently).
 `EventDecoderFactory` plugs the same decoding into mcap's own readers.
 """
 
@@ -17,11 +23,12 @@ from typing import Any, Callable, Iterator, NamedTuple, Optional
 
 import msgspec
 from mcap.decoder import DecoderFactory
-from mcap.records import Channel, Footer, Message, Metadata, Schema
-from mcap.stream_reader import StreamReader
+from mcap.records import Channel, Message, Metadata, Schema
 
 from pairplay.schemas.envelope import Event
-from pairplay.schemas.events import decode_event
+from pairplay.schemas.events import EVENT_BY_TAG, decode_event
+
+from .mcapscan import Damage, scan
 
 
 class RecordedEvent(NamedTuple):
@@ -29,6 +36,34 @@ class RecordedEvent(NamedTuple):
     event: Event
     log_time_ns: int
     payload: bytes
+
+
+class UnknownEvent(NamedTuple):
+    """A well-formed event of a type this version does not know (from a newer pairplay)."""
+
+    key: str
+    tag: str
+    log_time_ns: int
+    payload: bytes
+
+
+class _Tagged(msgspec.Struct):
+    type: str
+    session: str = ""
+    source: str = ""
+    seq: int = 0
+
+
+_tagged = msgspec.json.Decoder(_Tagged)
+
+
+def unknown_tag(payload: bytes) -> str | None:
+    """The tag of a payload that is a well-formed event of a type this version does not know, else None."""
+    try:
+        head = _tagged.decode(payload)
+    except (msgspec.DecodeError, msgspec.ValidationError):
+        return None
+    return head.type if head.type and head.type not in EVENT_BY_TAG else None
 
 
 class BadMessage(NamedTuple):
@@ -47,9 +82,23 @@ class EventLog:
     metadata: dict[str, dict[str, str]] = field(default_factory=dict)
     bad: list[BadMessage] = field(default_factory=list)
     truncated: bool = False
-    error: str = ""  # why reading stopped early
+    error: str = ""  # what is wrong with the file: every damaged part and the cut ("" if whole)
+    damage: list[Damage] = field(default_factory=list)  # the parts that failed a check (not read)
+    unknown: list[UnknownEvent] = field(default_factory=list)
     channels: dict[int, tuple[str, str]] = field(default_factory=dict)  # id -> (topic, schema name)
     schemas: dict[int, tuple[str, str, bytes]] = field(default_factory=dict)  # id -> (name, encoding, data)
+
+    @property
+    def whole(self) -> bool:
+        """Every byte of the file checked out and nothing is missing at its end."""
+        return not self.truncated and not self.damage
+
+    def unknown_types(self) -> dict[str, int]:
+        """How many events of each type this version does not know, by tag."""
+        counts: dict[str, int] = {}
+        for u in self.unknown:
+            counts[u.tag] = counts.get(u.tag, 0) + 1
+        return counts
 
     def of(self, *tags: str) -> list[Event]:
         """The events with one of these tags, in order."""
@@ -57,43 +106,41 @@ class EventLog:
 
 
 def iter_records(path: str | Path) -> Iterator[Any]:
-    """Every complete record of the file; raises at a truncated or corrupt tail."""
-    with open(path, "rb") as f:
-        yield from StreamReader(f, record_size_limit=1 << 30).records
+    """Every record of the file's intact parts, in file order (see `mcapscan`)."""
+    yield from scan(path).records
 
 
 def read_log(path: str | Path) -> EventLog:
-    """Read a recording (complete or truncated); see the module rule."""
+    """Read a recording (whole, cut or damaged); see the module rule."""
     log = EventLog(str(path))
+    checked = scan(path)
     channels: dict[int, str] = {}
     decode = decode_event
     append = log.events.append
-    try:
-        for record in iter_records(path):
-            if isinstance(record, Message):
-                key = channels.get(record.channel_id)
-                if key is None:
-                    log.bad.append(BadMessage("", f"message on unknown channel {record.channel_id}",
-                                              record.log_time, record.data))
-                    continue
-                try:
-                    append(RecordedEvent(key, decode(record.data), record.log_time, record.data))
-                except (msgspec.DecodeError, msgspec.ValidationError) as err:
+    for record in checked.summary_records + checked.records:
+        if isinstance(record, Message):
+            key = channels.get(record.channel_id)
+            if key is None:
+                log.bad.append(BadMessage("", f"message on unknown channel {record.channel_id}",
+                                          record.log_time, record.data))
+                continue
+            try:
+                append(RecordedEvent(key, decode(record.data), record.log_time, record.data))
+            except (msgspec.DecodeError, msgspec.ValidationError) as err:
+                tag = unknown_tag(record.data)
+                if tag is not None:
+                    log.unknown.append(UnknownEvent(key, tag, record.log_time, record.data))
+                else:
                     log.bad.append(BadMessage(key, str(err), record.log_time, record.data))
-            elif isinstance(record, Channel):
-                channels[record.id] = record.topic
-                log.channels[record.id] = (record.topic, str(record.schema_id))
-            elif isinstance(record, Schema):
-                log.schemas[record.id] = (record.name, record.encoding, record.data)
-            elif isinstance(record, Metadata):
-                log.metadata[record.name] = dict(record.metadata)
-            elif isinstance(record, Footer):
-                break
-    except OSError:
-        raise  # a file that cannot be opened is not a cut recording
-    except Exception as err:  # a cut or corrupt tail: keep what came before it
-        log.truncated = True
-        log.error = f"{type(err).__name__}: {err}" if str(err) else type(err).__name__
+        elif isinstance(record, Channel):
+            channels[record.id] = record.topic
+            log.channels[record.id] = (record.topic, str(record.schema_id))
+        elif isinstance(record, Schema):
+            log.schemas[record.id] = (record.name, record.encoding, record.data)
+        elif isinstance(record, Metadata):
+            log.metadata[record.name] = dict(record.metadata)
+    log.truncated, log.damage = checked.truncated, checked.damage
+    log.error = "" if checked.whole else checked.describe()
     return log
 
 

@@ -7,7 +7,10 @@ seed, as core.study does), so a rebuilt policy file equals the one the
 in-process study writes for the same seed and persona. Learning curves are per
 round: turns (9 is perfect play), picks, total reward, learned updates and
 inconsistent suggestions. A truncated recording rebuilds what it holds and
-says so; a recording without SessionStarted is refused with the reason.
+says so; a recording without SessionStarted is refused with the reason. A
+policy from a partial session (interrupted, aborted, failed, cut short,
+damaged or completed by `pairplay recover`) says why in its file's `partial`
+field and in `Rebuilt.partial`.
 """
 
 from __future__ import annotations
@@ -41,13 +44,35 @@ class Rebuilt:
     policy: PolicyFile
     truncated: bool
     note: str = ""
+    partial: str = ""  # why the session is not complete ("" if it is)
 
 
-def rebuild_events(events, source: str = "", truncated: bool = False, note: str = "") -> Rebuilt:
+def partial_reason(fold: SessionFold, note: str = "", recovered: dict[str, str] | None = None) -> str:
+    """Why a session's recording does not hold a completed session ("" if it does)."""
+    why = []
+    e = fold.ended
+    if e is None:
+        why.append(f"no SessionEnded: the recording stops after {len(fold.rounds)} rounds")
+    elif e.reason != "completed":
+        where = f" in round {e.round}, turn {e.turns_in_round}" if e.round >= 0 else ""
+        why.append(f"{e.reason}{f' ({e.detail})' if e.detail else ''} after {e.rounds_played} of "
+                   f"{fold.config.rounds} rounds{where}")
+    if note:
+        why.append(note)
+    if recovered:
+        lost = recovered.get("damaged", "[]") not in ("", "[]")
+        why.append("completed by pairplay recover" + (" from a damaged file" if lost else
+                                                       " after a cut" if recovered.get("truncated") == "true" else ""))
+    return "; ".join(why)
+
+
+def rebuild_events(events, source: str = "", truncated: bool = False, note: str = "",
+                   recovered: dict[str, str] | None = None) -> Rebuilt:
     fold = fold_events(events)
     if fold.config is None:
         raise RebuildError(f"{source or 'events'}: no SessionStarted: not a pairplay session recording")
     c = fold.config
+    partial = partial_reason(fold, note, recovered)
     q = fold.q
     greedy = greedy_policy(q, np.random.default_rng(stream_seed(c)))
     who = None
@@ -59,14 +84,16 @@ def rebuild_events(events, source: str = "", truncated: bool = False, note: str 
     policy = to_policy_file(q, np.array(fold.visits), greedy, algorithm=c.algorithm,
                             participant=c.persona or c.participant, persona=who, seed=c.seed, game=c.game_index,
                             rounds=len(fold.rounds), config=c.learner_config(), software=__version__,
-                            reward_bonus=c.reward_bonus, lspi=c.lspi_config() if fold.lspi is not None else None)
-    return Rebuilt(source, c, fold, policy, truncated, note)
+                            reward_bonus=c.reward_bonus, partial=partial,
+                            lspi=c.lspi_config() if fold.lspi is not None else None)
+    return Rebuilt(source, c, fold, policy, truncated, note, partial)
 
 
 def rebuild_recording(path: str | Path) -> Rebuilt:
     log = read_log(path)
-    note = f"truncated: {log.error}" if log.truncated else ""
-    return rebuild_events((r.event for r in log.events), str(path), log.truncated, note)
+    note = "" if log.whole else f"{'damaged' if log.damage else 'truncated'}: {log.error}"
+    return rebuild_events((r.event for r in log.events), str(path), log.truncated, note,
+                          log.metadata.get("pairplay.recovered"))
 
 
 CURVE_COLUMNS = ("round", "turns", "picks", "matches", "reward", "learned", "inconsistent")

@@ -1,21 +1,26 @@
-"""Completing a recording cut short by a crash (`pairplay recover`).
+"""Completing a recording cut short by a crash or damaged on disk (`pairplay recover`).
 
-Rule: every complete record before the cut is copied, in order, into a new
-file that is then finished with a summary and index, so any MCAP reader opens
-it. Nothing is invented: the lost tail stays lost, and a "pairplay.recovered"
-metadata record says what was read, from where, and why the original stopped.
-A complete file recovers to an equivalent complete file.
+Rule: every record of every intact part of the file (`mcapscan.scan`: the
+parts that pass the MCAP format's checks, including the chunks after a damaged
+one) is copied, in order, into a new file that is then finished with a summary,
+an index and CRCs, so any MCAP reader opens it. Nothing is invented: a lost
+tail or a damaged chunk stays lost, and a "pairplay.recovered" metadata record
+says what recover completed (the summary and index it wrote), what it read,
+from where, what was wrong (every damaged part, the cut) and how far the
+session got (whether its SessionEnded survived, the last round). A whole file
+recovers to an equivalent whole file. The original is never modified.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+import json
+from dataclasses import dataclass, field
 from pathlib import Path
 
-from mcap.records import Channel, Footer, Message, Metadata, Schema
+from mcap.records import Channel, Message, Metadata, Schema
 from mcap.writer import CompressionType, Writer
 
-from .reader import iter_records
+from .mcapscan import scan
 from .writer import CHUNK_SIZE, PROFILE
 
 
@@ -24,7 +29,10 @@ class Recovered:
     output: Path
     messages: int
     truncated: bool
-    reason: str
+    reason: str  # "" when the input was whole
+    damaged: list[str] = field(default_factory=list)  # the parts not copied, and why
+    ended: bool = False  # the session's SessionEnded was among the records kept
+    last_round: int = -1
 
 
 def default_output(path: Path) -> Path:
@@ -32,39 +40,55 @@ def default_output(path: Path) -> Path:
 
 
 def recover(path: str | Path, output: str | Path | None = None) -> Recovered:
-    """Copy the readable records of `path` into a complete file (see rule)."""
+    """Copy the intact records of `path` into a complete file (see rule)."""
     path = Path(path)
     output = Path(output) if output is not None else default_output(path)
     if output.resolve() == path.resolve():
         raise ValueError("recover writes a new file; give an output path other than the input")
-    messages, truncated, reason = 0, False, ""
+    checked = scan(path)
+    messages, ended, last_round = 0, False, -1
     schema_ids: dict[int, int] = {}
     channel_ids: dict[int, int] = {}
+    topics: dict[int, str] = {}
     with open(output, "wb") as out:
-        writer = Writer(out, chunk_size=CHUNK_SIZE, compression=CompressionType.ZSTD)
+        writer = Writer(out, chunk_size=CHUNK_SIZE, compression=CompressionType.ZSTD, enable_data_crcs=True)
         writer.start(profile=PROFILE, library="pairplay recover")
-        try:
-            for record in iter_records(path):
-                if isinstance(record, Schema):
-                    if record.id not in schema_ids:
-                        schema_ids[record.id] = writer.register_schema(record.name, record.encoding, record.data)
-                elif isinstance(record, Channel):
-                    if record.id not in channel_ids:
-                        channel_ids[record.id] = writer.register_channel(
-                            record.topic, record.message_encoding, schema_ids.get(record.schema_id, 0),
-                            dict(record.metadata))
-                elif isinstance(record, Message):
-                    if record.channel_id in channel_ids:
-                        writer.add_message(channel_ids[record.channel_id], record.log_time, record.data,
-                                           record.publish_time, record.sequence)
-                        messages += 1
-                elif isinstance(record, Metadata):
-                    writer.add_metadata(record.name, dict(record.metadata))
-                elif isinstance(record, Footer):
-                    break
-        except Exception as err:  # the cut: everything before it is kept
-            truncated, reason = True, f"{type(err).__name__}: {err}" if str(err) else type(err).__name__
+        # the summary's Schemas and Channels first: they name the channels of messages whose own
+        # records were in a lost chunk
+        for record in checked.summary_records + checked.records:
+            if isinstance(record, Schema):
+                if record.id not in schema_ids:
+                    schema_ids[record.id] = writer.register_schema(record.name, record.encoding, record.data)
+            elif isinstance(record, Channel):
+                if record.id not in channel_ids:
+                    channel_ids[record.id] = writer.register_channel(
+                        record.topic, record.message_encoding, schema_ids.get(record.schema_id, 0),
+                        dict(record.metadata))
+                    topics[record.id] = record.topic
+            elif isinstance(record, Message):
+                if record.channel_id in channel_ids:
+                    writer.add_message(channel_ids[record.channel_id], record.log_time, record.data,
+                                       record.publish_time, record.sequence)
+                    messages += 1
+                    tag = topics[record.channel_id].rsplit("/", 1)[-1]
+                    ended |= tag == "SessionEnded"
+                    if tag == "RoundStarted":
+                        last_round = max(last_round, _round_of(record.data))
+            elif isinstance(record, Metadata):
+                writer.add_metadata(record.name, dict(record.metadata))
+        damaged = [str(d) for d in checked.damage]
+        reason = "" if checked.whole else checked.describe()
         writer.add_metadata("pairplay.recovered", {
-            "source": str(path), "messages": str(messages), "truncated": str(truncated).lower(), "reason": reason})
+            "source": str(path), "messages": str(messages), "truncated": str(checked.truncated).lower(),
+            "reason": reason, "damaged": json.dumps(damaged), "lost_chunks": str(len(checked.lost_chunks)),
+            "completed": "summary, indexes and CRCs written by pairplay recover",
+            "session_ended": str(ended).lower(), "last_round": str(last_round)})
         writer.finish()
-    return Recovered(output, messages, truncated, reason)
+    return Recovered(output, messages, checked.truncated, reason, damaged, ended, last_round)
+
+
+def _round_of(payload: bytes) -> int:
+    try:
+        return int(json.loads(payload).get("round", -1))
+    except (ValueError, AttributeError):
+        return -1

@@ -8,7 +8,11 @@ and flushes the file once `flush_interval_ns` (default 0.1 s) has passed since
 the last flush, so a writer killed with SIGKILL loses at most that long a tail
 (plus what never reached it). Metadata records (session config, seed, software
 version) can be added at any point of the file. The caller owns the clock: every
-time is an argument.
+time is an argument. Log times are the writer's own record of when it took each
+message and never go backwards in a file (a time before the last one written is
+written as the last one: Zenoh threads hand messages over slightly out of order,
+and wall clocks step back); the publish time is the log time unless the caller
+has a time of its own it trusts, never a time read from the message itself.
 """
 
 from __future__ import annotations
@@ -34,12 +38,15 @@ class EventLogWriter:
                  chunk_size: int = CHUNK_SIZE, library: str = "pairplay"):
         self._own = isinstance(output, (str, Path))
         self._stream = open(output, "wb") if self._own else output
-        self._writer = Writer(self._stream, chunk_size=chunk_size, compression=CompressionType.ZSTD)
+        # data CRCs on: the Data End record then carries the CRC of the whole data section (mcapscan checks it)
+        self._writer = Writer(self._stream, chunk_size=chunk_size, compression=CompressionType.ZSTD,
+                              enable_data_crcs=True)
         self._writer.start(profile=PROFILE, library=library)
         self._schemas: dict[str, int] = {}
         self._channels: dict[str, int] = {}
         self.flush_interval_ns = int(flush_interval_ns)
         self._last_flush_ns: int | None = None
+        self._last_log_ns = 0
         self._unflushed = 0
         self.count = 0
         self.closed = False
@@ -61,6 +68,8 @@ class EventLogWriter:
 
     def write(self, key: str, payload: bytes, *, log_time_ns: int, publish_time_ns: int = 0, sequence: int = 0) -> None:
         """Append one message (already validated JSON of the key's event type)."""
+        log_time_ns = max(int(log_time_ns), self._last_log_ns)  # monotonic per file (see rule)
+        self._last_log_ns = log_time_ns
         self._writer.add_message(self.channel_for(key), log_time_ns, payload, publish_time_ns or log_time_ns,
                                  sequence & 0xFFFFFFFF)
         self.count += 1

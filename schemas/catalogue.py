@@ -36,7 +36,7 @@ CATALOGUE: dict[str, tuple[str, str]] = {
     "PolicyCombined": ("combiner", "the merged policy, the rule that decided each state, the merged user information"),
     "QuestionnaireAnswered": ("board / experimenter", "a participant's answers to a questionnaire (thesis 7.2)"),
     "MessageRejected": ("any service", "a bus message a service refused (malformed, unknown tag, wrong session, out of order), with the reason"),
-    "SessionEnded": ("game", "the session is over, with the reason and the rounds played"),
+    "SessionEnded": ("game", "the session is over: why (completed, interrupted by a signal, aborted by the experimenter, a service failed) and how far it got"),
 }
 
 # tag -> (publishing services, consuming services), as the services' code reads them; the

@@ -11,6 +11,14 @@ the end of their class; never rename or retag.
 
 Unknown fields are ignored on decode (no `forbid_unknown_fields`), so an old
 reader can read a newer recording.
+
+Times in ns (`time_ns` and RobotActed's `*_ns`) are `Nanos`: a Python int that
+the JSON encoding writes as the MCAP/Foxglove time object {"sec": S, "nsec": N}
+(N < 10**9), because JSON numbers above 2**53 are rounded by JavaScript readers
+(by up to 128 ns for today's epoch times). The decoder reads both that object
+and a plain integer (recordings of pairplay <= 0.2), so old files stay readable.
+Encode and decode events only with `events.encode_event` / `decode_event`
+(they carry the hooks); the JSON Schema of a Nanos field accepts both forms.
 """
 
 from __future__ import annotations
@@ -18,6 +26,57 @@ from __future__ import annotations
 import msgspec
 
 TAG_FIELD = "type"
+NS_PER_S = 1_000_000_000
+
+
+class Nanos(int):
+    """A time or duration in ns; JSON: {"sec": S, "nsec": N} (the MCAP/Foxglove time), or an int from old files."""
+
+    __slots__ = ()
+
+    def __repr__(self) -> str:
+        return int.__repr__(self)
+
+
+def nanos_to_json(value: "Nanos") -> dict[str, int]:
+    sec, nsec = divmod(int(value), NS_PER_S)
+    return {"sec": sec, "nsec": nsec}
+
+
+def nanos_from_json(obj) -> Nanos:
+    """A Nanos from its JSON: the {sec, nsec} object or a plain integer; TypeError/ValueError otherwise."""
+    if isinstance(obj, int) and not isinstance(obj, bool):
+        return Nanos(obj)
+    if isinstance(obj, dict) and set(obj) == {"sec", "nsec"} and all(
+            isinstance(obj[k], int) and not isinstance(obj[k], bool) for k in obj) and 0 <= obj["nsec"] < NS_PER_S:
+        return Nanos(obj["sec"] * NS_PER_S + obj["nsec"])
+    raise ValueError(f"a time is {{sec, nsec}} (nsec 0..{NS_PER_S - 1}) or an integer of ns, not {obj!r}")
+
+
+def enc_hook(obj):
+    if isinstance(obj, Nanos):
+        return nanos_to_json(obj)
+    raise NotImplementedError(f"cannot encode {type(obj).__name__}")
+
+
+def dec_hook(tp, obj):
+    if tp is Nanos:
+        return nanos_from_json(obj)
+    raise NotImplementedError(f"cannot decode {tp}")
+
+
+NANOS_SCHEMA = {"anyOf": [
+    {"title": "time", "type": "object", "properties": {"sec": {"type": "integer"},
+                                                        "nsec": {"type": "integer", "minimum": 0,
+                                                                 "maximum": NS_PER_S - 1}},
+     "required": ["sec", "nsec"], "additionalProperties": False},
+    {"type": "integer", "description": "ns (recordings of pairplay <= 0.2)"}]}
+
+
+def schema_hook(tp):
+    if tp is Nanos:
+        return dict(NANOS_SCHEMA)
+    raise NotImplementedError(f"no JSON Schema for {tp}")
 
 
 class Event(msgspec.Struct, frozen=True, kw_only=True, tag_field=TAG_FIELD):
@@ -26,12 +85,17 @@ class Event(msgspec.Struct, frozen=True, kw_only=True, tag_field=TAG_FIELD):
     session: str = ""
     source: str = ""
     seq: int = 0
-    time_ns: int = 0
+    time_ns: Nanos = 0
+
+    def __post_init__(self) -> None:
+        # a time given as a plain int (a clock's value) is still a time: JSON {sec, nsec}
+        if type(self.time_ns) is int and self.time_ns:
+            msgspec.structs.force_setattr(self, "time_ns", Nanos(self.time_ns))
 
 
 def stamped(event: Event, *, session: str, source: str, seq: int, time_ns: int) -> Event:
     """A copy of `event` with its envelope filled in (events are frozen)."""
-    return msgspec.structs.replace(event, session=session, source=source, seq=seq, time_ns=time_ns)
+    return msgspec.structs.replace(event, session=session, source=source, seq=seq, time_ns=Nanos(time_ns))
 
 
 def tag_of(event_type: type[Event]) -> str:

@@ -26,7 +26,7 @@ from typing import Union
 
 import msgspec
 
-from .envelope import Event
+from .envelope import Event, dec_hook, enc_hook
 from .session import SessionConfig
 
 
@@ -234,9 +234,18 @@ class MessageRejected(Event, tag="MessageRejected"):
     excerpt: str = ""  # the first bytes of the payload, for the record
 
 
+END_REASONS = ("completed", "interrupted", "aborted", "failed")
+
+
 class SessionEnded(Event, tag="SessionEnded"):
+    """Why the session ended (END_REASONS: completed; interrupted by SIGINT/SIGTERM; aborted by the
+    experimenter; a service failed) and how far it got."""
+
     reason: str = "completed"
-    rounds_played: int = 0
+    rounds_played: int = 0  # rounds finished
+    detail: str = ""  # e.g. "SIGTERM", "learner left the bus and did not come back within 30 s"
+    round: int = -1  # the round under way when it ended (-1: none; a completed session ends between rounds)
+    turns_in_round: int = 0  # turns of that round resolved when it ended
 
 
 def _robot_events() -> tuple[type[Event], ...]:
@@ -259,8 +268,8 @@ EVENT_TYPES: tuple[type[Event], ...] = (
 EVENT_BY_TAG: dict[str, type[Event]] = {t.__struct_config__.tag: t for t in EVENT_TYPES}
 AnyEvent = Union[EVENT_TYPES]  # type: ignore[valid-type]
 
-_decoder = msgspec.json.Decoder(AnyEvent)
-_encoder = msgspec.json.Encoder()
+_decoder = msgspec.json.Decoder(AnyEvent, dec_hook=dec_hook)
+_encoder = msgspec.json.Encoder(enc_hook=enc_hook)
 
 
 def decode_event(payload: bytes) -> Event:

@@ -18,7 +18,7 @@ from typing import Any
 import msgspec
 
 from .events import EVENT_TYPES
-from .envelope import Event
+from .envelope import Event, schema_hook
 
 JSON_DIR = Path(__file__).parent / "json"
 
@@ -58,7 +58,7 @@ def _inline(node: Any, defs: dict[str, Any], seen: tuple[str, ...]) -> Any:
 
 def flat_schema(event_type: type[Event]) -> dict[str, Any]:
     """The JSON Schema of one event class with no `$ref` left."""
-    raw = msgspec.json.schema(event_type)
+    raw = msgspec.json.schema(event_type, schema_hook=schema_hook)
     defs = raw.pop("$defs", {})
     flat = _clean_docs(_inline(raw, defs, ()))
     flat["$schema"] = "https://json-schema.org/draft/2020-12/schema"

@@ -61,6 +61,9 @@ class PolicyFile(msgspec.Struct, frozen=True, kw_only=True):
     # When the learning reward paid its 1/|C| bonus (core/reward.py); files that do
     # not state it were written by pairplay 0.1.0, under SPEC's rule.
     reward_bonus: str = UNSTATED_REWARD_BONUS
+    # Why the session this policy was rebuilt from is not complete ("" = it completed every round):
+    # interrupted, aborted, failed, cut short, damaged or recovered (replay/rebuild.py).
+    partial: str = ""
     # Written only by learners other than Q-learning (UNSET fields are left out of the
     # file, so Q-learning files keep their bytes): what the Q-table is, and LSPI's settings.
     q_meaning: str | msgspec.UnsetType = msgspec.UNSET

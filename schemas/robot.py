@@ -9,6 +9,8 @@ the robot acknowledged it, or why it failed. Outcomes:
   "unacknowledged" sent, but the robot never confirmed within the ack timeout
   "failed"         not delivered (robot unreachable, bridge closed); see `error`
   "nothing"        the "do nothing" action: nothing to send
+  "in-flight"      sent, and the session ended while the robot's acknowledgement was
+                   still awaited (it may have come after the recording closed)
 
 The calibration and the robot config are files a researcher edits, so they are
 strict: an unknown field is an error, not a silently ignored typo. New fields of
@@ -19,9 +21,9 @@ from __future__ import annotations
 
 import msgspec
 
-from .envelope import Event
+from .envelope import Event, Nanos
 
-OUTCOMES = ("done", "sent", "aborted", "unacknowledged", "failed", "nothing")
+OUTCOMES = ("done", "sent", "aborted", "unacknowledged", "failed", "nothing", "in-flight")
 
 
 class RobotActed(Event, tag="RobotActed"):
@@ -34,12 +36,19 @@ class RobotActed(Event, tag="RobotActed"):
     commands: list[str] = []  # the wire messages, in the order written
     replies: list[str] = []  # the robot's replies about this suggestion, in order
     suggestion_seq: int = 0  # seq of the SuggestionMade it performs
-    received_ns: int = 0  # the bridge received the suggestion
-    sent_ns: int = 0  # its first command was written on the wire (0: never)
-    acked_ns: int = 0  # the robot's first reply about it (0: none)
-    done_ns: int = 0  # the robot's last promised reply (0: not all came)
+    received_ns: Nanos = 0  # the bridge received the suggestion
+    sent_ns: Nanos = 0  # its first command was written on the wire (0: never)
+    acked_ns: Nanos = 0  # the robot's first reply about it (0: none)
+    done_ns: Nanos = 0  # the robot's last promised reply (0: not all came)
     error: str = ""
     reconnects: int = 0  # connections re-opened while it was pending
+
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        for name in ("received_ns", "sent_ns", "acked_ns", "done_ns"):
+            value = getattr(self, name)
+            if type(value) is int and value:
+                msgspec.structs.force_setattr(self, name, Nanos(value))
 
 
 class Point(msgspec.Struct, frozen=True, array_like=True):

@@ -44,6 +44,11 @@ class SessionConfig(msgspec.Struct, frozen=True, kw_only=True):
     # When the simulated reward pays its 1/|candidate set| bonus (core/reward.py).
     # New sessions state it (DEFAULT_REWARD_BONUS); absent = a pairplay 0.1.0 recording.
     reward_bonus: str = UNSTATED_REWARD_BONUS
+    # How the seed, the participant and the game index name the RNG streams (core.rng.game_seed):
+    # 1 = pairplay <= 0.2 (the seed cut to 32 bits, ids by CRC-32; what a recording without the field
+    # was made with), 2 = every seed 0..2**64-1 and every participant id its own streams. New sessions
+    # state 2 (core.rng.STREAMS_VERSION).
+    streams: int = 1
     # LSPI's settings (schemas.config.LSPIConfig fields that differ from its defaults),
     # for algorithm "lspi"; left out of other sessions' events (UNSET).
     lspi: Union[dict[str, Union[float, int, bool]], msgspec.UnsetType] = msgspec.UNSET
@@ -80,6 +85,15 @@ class SessionConfig(msgspec.Struct, frozen=True, kw_only=True):
             raise ValueError(f"reward_bonus {self.reward_bonus!r} is not one of {REWARD_BONUS_RULES}")
         if self.participant.startswith("sim:") and not self.persona:
             raise ValueError("a simulated participant needs a persona")
+        if self.streams not in (1, 2):
+            raise ValueError(f"stream derivation {self.streams} is not one this pairplay knows (1, 2)")
+        if self.streams >= 2 and not 0 <= self.seed <= 2**64 - 1:
+            raise ValueError(f"seed {self.seed} is outside the accepted range 0..{2**64 - 1}")
+        if self.streams == 1 and not 0 <= self.seed <= 2**32 - 1:
+            raise ValueError(f"seed {self.seed}: stream derivation 1 (pairplay <= 0.2) takes seeds 0..{2**32 - 1} "
+                             "only (it cut them to 32 bits); use streams=2")
+        if self.game_index < 0:
+            raise ValueError(f"game index {self.game_index} must be >= 0")
         self.learner_config()
         if self.algorithm == "lspi":
             self.lspi_config()

@@ -204,11 +204,14 @@ def open_bus(options: BusOptions | None = None) -> Bus:
 
 
 def stop_on_signals(stop: threading.Event) -> None:
-    """SIGINT/SIGTERM set `stop` (a second SIGINT still interrupts). Main thread only."""
+    """SIGINT/SIGTERM set `stop` and name the signal in `stop.why` (a second SIGINT still interrupts).
+    Main thread only."""
     def handler(signum, frame):
         if stop.is_set() and signum == signal.SIGINT:
             raise KeyboardInterrupt
         log.info("signal %s: stopping", signal.Signals(signum).name)
+        if not stop.is_set():
+            stop.why = signal.Signals(signum).name  # what ended the session, for its SessionEnded
         stop.set()
     signal.signal(signal.SIGINT, handler)
     signal.signal(signal.SIGTERM, handler)

@@ -10,7 +10,8 @@ the game itself observes the first card) or "intended" (the simulated
 participant reports the card it would pick unaided, CardObserved). Once the
 observed card is known it asks for a suggestion (SuggestionRequested with the
 state of thesis 4.1); a WrongSuggestionPressed asks again (attempt + 1). The
-second pick resolves the turn (TurnResolved); under the "time" ignore rule a
+second pick resolves the turn (TurnResolved); `end` stops the session early with its
+reason (interrupted, aborted, a service failed) and how far it got. Under the "time" ignore rule a
 turn whose picks are closer than the window (1.5 s, thesis 7.1.2) is marked
 ignored, timed by the picks' own envelope times so a replay decides the same.
 """
@@ -53,6 +54,14 @@ class GameLogic:
 
     def start(self) -> list[ev.Event]:
         return [ev.SessionStarted(config=self.config), *self._deal()]
+
+    def end(self, reason: str, detail: str = "") -> list[ev.Event]:
+        """End the session early (interrupted, aborted or failed), saying how far it got; [] if it is over."""
+        if self.done:
+            return []
+        self.done = True
+        return [ev.SessionEnded(reason=reason, rounds_played=self.round, detail=detail, round=self.round,
+                                turns_in_round=self.turn)]
 
     def _deal(self) -> list[ev.Event]:
         faces, _ = deal(self.deals.take(N_CARDS))

@@ -24,6 +24,7 @@ three things rely on:
 from __future__ import annotations
 
 import logging
+from bisect import insort
 from collections import deque
 from typing import Callable, Iterable, Protocol
 
@@ -61,6 +62,10 @@ class Logic(Protocol):
     def handle(self, event: Event) -> list[Event]: ...
 
 
+def _seq(event: Event) -> int:
+    return event.seq
+
+
 def content(event: Event) -> Event:
     """The event without its envelope: what verify and resume compare."""
     return msgspec.structs.replace(event, session="", source="", seq=0, time_ns=0)
@@ -71,7 +76,7 @@ class Driver:
         self.logic, self.session, self.clock = logic, session, clock
         self.last_seq: dict[str, int] = {}
         self.seq = 0
-        self.deferred: list[Event] = []
+        self.deferred: dict[str, list[Event]] = {}  # per source, in its sequence order
         self.held_back: deque[Event] = deque()  # recorded outputs a resume must not repeat
         self.mismatches: list[str] = []
         self.rejections = 0
@@ -138,7 +143,14 @@ class Driver:
         return self.feed(event, key, payload)
 
     def feed(self, event: Event, key: str = "", payload: bytes = b"") -> list[Event]:
-        """Hand an accepted event to the logic, then retry what waits on it."""
+        """Hand an accepted event to the logic, then retry what waits on it.
+
+        A source's events reach the logic in that source's order (its sequence
+        numbers): while an earlier event of a source waits (`NotYet`), a later
+        one of the same source waits behind it, so a held TurnResolved is never
+        overtaken by the next RoundStarted. Only events of different sources
+        may pass each other, and each logic orders those by their references.
+        """
         tag = type(event).__name__
         if tag not in self.logic.consumes:
             return []
@@ -146,37 +158,53 @@ class Driver:
         if allowed is not None and event.source not in allowed:
             return self.reject(f"{tag} is taken only from {', '.join(sorted(allowed))}, not from {event.source!r}",
                                key, event.source, event.seq, payload)
-        out = self._handle(event, key, payload)
+        waiting = self.deferred.get(event.source)
+        if waiting and waiting[0].seq < event.seq:
+            insort(waiting, event, key=_seq)
+            return []
+        return self._handle(event, key, payload) + self._retry()
+
+    def _retry(self) -> list[Event]:
+        """Hand the logic the first waiting event of each source until none can go on."""
+        out: list[Event] = []
         progress = True
-        while progress and self.deferred:
+        while progress:
             progress = False
-            for waiting in list(self.deferred):
-                try:
-                    produced = self.logic.handle(waiting)
-                except NotYet:
-                    continue
-                except Rejected as err:
-                    self.deferred.remove(waiting)
-                    out += self.reject(str(err), "", waiting.source, waiting.seq)
+            for waiting in self.deferred.values():
+                while waiting:
+                    head = waiting[0]
+                    try:
+                        produced = self.logic.handle(head)
+                    except NotYet:
+                        break
+                    except Rejected as err:
+                        produced = None
+                        out += self.reject(str(err), "", head.source, head.seq)
+                    except Exception as err:  # a bug must not stop the service: record it and go on
+                        log.exception("%s failed on %s", self.logic.name, type(head).__name__)
+                        produced = None
+                        out += self.reject(f"internal error {type(err).__name__}: {err}", "", head.source, head.seq)
+                    waiting.pop(0)
+                    out += self._stamp(produced) if produced is not None else []
                     progress = True
-                    break
-                self.deferred.remove(waiting)
-                out += self._stamp(produced)
-                progress = True
-                break
         return out
 
     def _handle(self, event: Event, key: str, payload: bytes) -> list[Event]:
         try:
             return self._stamp(self.logic.handle(event))
         except NotYet:
-            self.deferred.append(event)
+            insort(self.deferred.setdefault(event.source, []), event, key=_seq)
             return []
         except Rejected as err:
             return self.reject(str(err), key, event.source, event.seq, payload)
         except Exception as err:  # a bug must not stop the service: record it and go on
             log.exception("%s failed on %s", self.logic.name, type(event).__name__)
             return self.reject(f"internal error {type(err).__name__}: {err}", key, event.source, event.seq, payload)
+
+    @property
+    def waiting(self) -> int:
+        """Inputs held until what they depend on arrives."""
+        return sum(len(q) for q in self.deferred.values())
 
     # -- restart and verify ------------------------------------------------
     def resume(self, recorded: list[Event], start: bool = True, announce: Event | None = None) -> list[Event]:

@@ -36,6 +36,7 @@ class ParticipantLogic:
         self.users: SimulatedUsers | None = None
         self.done = False
         self.stage = "idle"  # idle -> first -> observed -> second -> idle
+        self.round, self.turn = -1, -1
 
     def start(self) -> list[ev.Event]:
         return []
@@ -77,6 +78,8 @@ class ParticipantLogic:
         return []
 
     def _round(self, e: ev.RoundStarted) -> list[ev.Event]:
+        if self.stage != "idle":
+            raise NotYet  # the last turn of the round before is not over for us yet
         self.round = e.round
         self.partner = partner_of(e.faces)
         self.matched = 0

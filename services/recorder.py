@@ -121,7 +121,9 @@ class Recorder:
                                 f"on {key} ({last}): duplicate or out of order", key, payload, event)
         self.last_seq[key] = event.seq
         self.top_seq[event.source] = max(self.top_seq.get(event.source, 0), event.seq)
-        self.writer.write(key, payload, log_time_ns=received_ns, publish_time_ns=event.time_ns, sequence=event.seq)
+        # the recorder's own times: log time = when it took the message (its clock, monotonic in the file),
+        # publish time = the same; the envelope's time_ns is the publisher's claim and stays in the payload
+        self.writer.write(key, payload, log_time_ns=received_ns, sequence=event.seq)
         with self._lock:
             self.kept.append((key, payload))
         if isinstance(event, SessionStarted):
@@ -129,7 +131,8 @@ class Recorder:
             self.writer.add_metadata("pairplay.session", {
                 "config": msgspec.json.encode(c).decode(), "session": c.session, "participant": c.participant,
                 "persona": c.persona, "seed": str(c.seed), "game_index": str(c.game_index),
-                "algorithm": c.algorithm, "software_version": c.software_version or __version__})
+                "algorithm": c.algorithm, "software_version": c.software_version or __version__,
+                "streams": str(c.streams)})
         elif tag == "SessionEnded":
             self.ended = True
         return True

@@ -7,6 +7,12 @@ in this process on one Zenoh session unless `external` leaves a service to
 another process, which the game then waits for. The session is over when the
 game has ended it and every service has settled (in-process threads finished,
 external services' tokens gone); then the recorder finishes its file.
+Every session ends with a SessionEnded that says why: "completed" (the game
+played every round), "interrupted" (SIGINT/SIGTERM: `stop.why` names the
+signal), "aborted" (the caller's `stop` without a signal: the experimenter) or
+"failed" (a service the session needs left the bus and did not come back within
+`settle_timeout_s`), with how far it got; the robot's suggestions still awaiting
+an acknowledgement are recorded as "in-flight" (schemas/robot.py).
 """
 
 from __future__ import annotations
@@ -76,10 +82,14 @@ def run_session(config: SessionConfig, path: str | Path, *, bus: Bus | None = No
             game.run_in_thread(stop)
         else:
             needed.append("game")
-        for node in nodes:
-            while node.thread.is_alive() and not stop.is_set():
-                node.thread.join(0.1)
-        wait_external_exit(bus, config.session, [s for s in external if s in needed], stop, settle_timeout_s)
+        failure = watch_services(bus, config.session, nodes, [s for s in needed if s in external or s == "robot"],
+                                 stop, settle_timeout_s)
+        if "game" not in external and not game.logic.done:
+            reason, detail = end_reason(stop, failure)
+            with game._lock:
+                game.publish(game.driver._stamp(game.logic.end(reason, detail)))
+        if not failure and not stop.is_set():
+            wait_external_exit(bus, config.session, [s for s in external if s in needed], stop, settle_timeout_s)
         wait_recorded(recorder, nodes, quiet_s=0.2 if external else 0.0)
     finally:
         stop.set()
@@ -95,6 +105,43 @@ def run_session(config: SessionConfig, path: str | Path, *, bus: Bus | None = No
         if own_bus:
             bus.close()
     return recorder.path
+
+
+def end_reason(stop: threading.Event, failure: str) -> tuple[str, str]:
+    """(reason, detail) of a session that did not complete (SessionEnded.reason: END_REASONS)."""
+    if failure:
+        return "failed", failure
+    why = getattr(stop, "why", "")
+    if why:
+        return "interrupted", why
+    return "aborted", "stopped by the experimenter"
+
+
+def watch_services(bus: Bus, session: str, nodes: list[Node], external: list[str], stop: threading.Event,
+                   grace_s: float) -> str:
+    """Wait until the in-process nodes are done or `stop`; return why a needed service failed ("" if none):
+    an in-process node's thread died, or an external service's token was gone for `grace_s` (a crashed
+    service restarted within that time resumes from the log, services/runner.py)."""
+    missing_since: dict[str, float] = {}
+    checked = 0.0
+    while not stop.is_set():
+        running = [n for n in nodes if n.thread is not None and n.thread.is_alive()]
+        dead = [n.logic.name for n in nodes if n.thread is not None and not n.thread.is_alive() and not n.logic.done]
+        if dead:
+            return f"{', '.join(dead)} stopped before the session ended"
+        if not running:
+            return ""
+        now = time.monotonic()
+        if external and now - checked > 0.5:
+            checked = now
+            alive = bus.alive_now(alive_key(session, "*"), timeout_s=0.5)
+            for name in external:
+                if alive_key(session, name) in alive:
+                    missing_since.pop(name, None)
+                elif now - missing_since.setdefault(name, now) > grace_s:
+                    return f"{name} left the bus and did not come back within {grace_s:g} s"
+        running[0].thread.join(0.1)
+    return ""
 
 
 def wait_recorded(recorder: Recorder, nodes: list[Node], quiet_s: float, timeout_s: float = 5.0) -> None:

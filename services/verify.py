@@ -2,17 +2,24 @@
 
 Rule: for every service whose logic is deterministic (game, learner, simulated
 participant), a fresh logic in a Driver is fed the recording's events from the
-other sources, in file order (node.py's deferral restores the causal order the
-bus may have shuffled), and every event it derives is compared, field by field
+other sources, each source's in its own sequence order (whatever order the
+recorder wrote them in), and the Driver holds an input until what it depends on
+has been handled (node.py's `NotYet`, a source's later events waiting behind its
+earlier ones), so every order a recorder can hold gives the same verdict; and every event it derives is compared, field by field
 without the envelope's wall time and sequence number, with the event the live
 service recorded, one by one in order. A recomputed event the recording lacks
 or a recorded one never recomputed is a failure too, unless the recording was
 cut short, or recovered from a cut (then the tail is excused and reported). The robot's RobotActed
-comes from hardware and is not recomputed.
+comes from hardware and is not recomputed. Events of types this version does
+not know (a newer pairplay's) are counted and named, and the verdict is about
+the events this version derives. A file with a damaged part (a chunk that fails
+its CRC, chunks out of order, a bad data-section or summary CRC: replay/mcapscan.py)
+or a file recovered from one is never verified as whole: FAIL, naming the part.
 """
 
 from __future__ import annotations
 
+import json
 from dataclasses import dataclass, field
 
 from pairplay.replay.reader import read_log
@@ -41,14 +48,28 @@ class Verification:
     checks: list[ServiceCheck]
     truncated: bool = False
     error: str = ""
+    unknown: dict[str, int] = field(default_factory=dict)  # events of types this version does not know
 
     @property
     def ok(self) -> bool:
         return not self.error and all(c.ok(self.truncated) for c in self.checks)
 
 
+def in_source_order(events: list) -> list:
+    """The events with each source's own in its sequence order, in the slots that source has in the file.
+
+    A recorder writes what it receives when it receives it, and may hold a source's
+    later event before an earlier one (different keys, different links); the
+    sources' order among each other is left to the logics (NotYet, node.py)."""
+    by_source: dict[str, list] = {}
+    for e in events:
+        by_source.setdefault(e.source, []).append(e)
+    ordered = {s: iter(sorted(es, key=lambda e: e.seq)) for s, es in by_source.items()}
+    return [next(ordered[e.source]) for e in events]
+
+
 def verify_events(events, source: str = "", truncated: bool = False) -> Verification:
-    events = list(events)
+    events = in_source_order(list(events))
     started = [e for e in events if isinstance(e, SessionStarted)]
     if not started:
         return Verification(source, [], truncated, "no SessionStarted: nothing to verify")
@@ -70,8 +91,17 @@ def verify_events(events, source: str = "", truncated: bool = False) -> Verifica
 def verify_recording(path) -> Verification:
     log = read_log(path)
     # a file completed by `pairplay recover` still lacks the tail its crash lost
-    recovered_cut = log.metadata.get("pairplay.recovered", {}).get("truncated") == "true"
+    recovered = log.metadata.get("pairplay.recovered", {})
+    recovered_cut = recovered.get("truncated") == "true"
     result = verify_events((r.event for r in log.events), str(path), log.truncated or recovered_cut)
+    result.unknown = log.unknown_types()
+    errors = []
+    if log.damage:
+        errors.append(f"damaged, not read: {'; '.join(str(d) for d in log.damage)}")
+    lost = json.loads(recovered.get("damaged", "[]") or "[]")
+    if lost:
+        errors.append(f"recovered from a damaged file, parts lost: {'; '.join(lost)}")
     if log.bad:
-        result.error = f"{len(log.bad)} messages do not decode: {log.bad[0].reason}"
+        errors.append(f"{len(log.bad)} messages do not decode: {log.bad[0].reason}")
+    result.error = "; ".join(errors) or result.error
     return result

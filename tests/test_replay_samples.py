@@ -18,8 +18,12 @@ SAMPLES = Path(__file__).resolve().parent.parent / "recordings" / "samples"
 ALL = sorted(SAMPLES.glob("*.mcap"))
 
 
+FORMATS = ("", "-fmt2")  # format 1 (pairplay 0.1.0, kept as made) and format 2 (make_samples.py today)
+
+
 def test_the_samples_are_there():
-    assert {p.name for p in ALL} >= {"sim-ashley.mcap", "human-board.mcap", "catalogue.mcap"}
+    assert {p.name for p in ALL} >= {f"{n}{f}.mcap" for n in ("sim-ashley", "human-board", "catalogue")
+                                     for f in FORMATS}
 
 
 @pytest.mark.parametrize("path", ALL, ids=lambda p: p.name)
@@ -35,17 +39,19 @@ def test_every_sample_decodes_whole_and_validates_against_todays_schemas(path):
             current[type(event).__name__].validate(data)  # and today's
 
 
-def test_the_catalogue_holds_every_event_type():
-    tags = {type(r.event).__name__ for r in read_log(SAMPLES / "catalogue.mcap").events}
+@pytest.mark.parametrize("fmt", FORMATS)
+def test_the_catalogue_holds_every_event_type(fmt):
+    tags = {type(r.event).__name__ for r in read_log(SAMPLES / f"catalogue{fmt}.mcap").events}
     assert tags == {t.__name__ for t in EVENT_TYPES}
 
 
-@pytest.mark.parametrize("name", ["sim-ashley.mcap", "human-board.mcap"])
+@pytest.mark.parametrize("name", [f"{n}{f}.mcap" for n in ("sim-ashley", "human-board") for f in FORMATS])
 def test_session_samples_verify_and_rebuild(name):
     assert verify_recording(SAMPLES / name).ok
     rebuilt = rebuild_recording(SAMPLES / name)
     assert rebuilt.fold.q_mismatches == 0 and rebuilt.fold.ended is not None
 
 
-def test_verify_catches_a_recording_the_services_would_not_have_made():
-    assert not verify_recording(SAMPLES / "catalogue.mcap").ok
+@pytest.mark.parametrize("fmt", FORMATS)
+def test_verify_catches_a_recording_the_services_would_not_have_made(fmt):
+    assert not verify_recording(SAMPLES / f"catalogue{fmt}.mcap").ok

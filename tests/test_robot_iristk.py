@@ -315,3 +315,16 @@ def test_a_distrusted_filter_is_believed_again_once_the_broker_changes_it(stage)
         assert driver.transport.ready(gaze)
     finally:
         late.close()
+
+
+def test_an_acknowledgement_still_awaited_when_the_session_ends_is_recorded_in_flight(stage):
+    """Issue 10 item 6: the bridge closing (end of session, a signal) with a reply still due says so."""
+    broker, furhat, collector, robot = stage
+    furhat.close()  # nobody will acknowledge
+    assert broker.wait_for(lambda b: len(b.clients) == 0)
+    driver = robot(config=msgspec.structs.replace(FAST, iristk_subscriber_wait_s=0.1, ack_timeout_s=30.0))
+    driver.perform(suggestion(EXACT))
+    assert broker.wait_for(lambda b: [e.name for e in b.events] == ["action.speech"])
+    driver.close()
+    acted = collector.acted[0]
+    assert acted.outcome == "in-flight" and acted.commands and "acknowledgement was awaited" in acted.error

@@ -1,8 +1,11 @@
-"""Make the committed sample recordings (run once; the files are then frozen).
+"""Make the committed sample recordings (run once per recording format; the files are then frozen).
 
 Rule: samples are evidence that later versions still read old recordings
 (tests/test_replay_samples.py decodes and verifies them); never regenerate them
-to make a test pass. Three files:
+to make a test pass. Each format gets its own three files, named with
+FORMAT (format 1: pairplay 0.1.0, `sim-ashley.mcap` ...; format 2: times as
+{sec, nsec}, stream derivation 2, SessionEnded with how far it got, the
+recorder's own log and publish times, `sim-ashley-fmt2.mcap` ...):
 - sim-ashley.mcap: a real bus session (`pairplay session`), simulated persona
   Ashley, seed 7, 4 rounds, with an intruder's bad input rejected on the way;
 - human-board.mcap: a human-study session (first-pick observation, the 1.5 s
@@ -12,6 +15,10 @@ to make a test pass. Three files:
   PolicyCombined and QuestionnaireAnswered included.
 
     .venv/bin/python recordings/samples/make_samples.py recordings/samples
+
+The recorder's times are its own: log time is when the recorder took a message,
+from one clock, monotonic in the file (the human sample's board times stay in
+the events' envelopes); publish time is the log time.
 """
 
 from __future__ import annotations
@@ -20,6 +27,8 @@ import sys
 import threading
 from pathlib import Path
 
+from pairplay import __version__
+from pairplay.core.rng import STREAMS_VERSION
 from pairplay.replay.writer import EventLogWriter
 from pairplay.schemas import events as ev
 from pairplay.schemas.envelope import stamped
@@ -34,16 +43,19 @@ from pairplay.services.node import Driver
 from pairplay.services.session import run_session
 
 
+FORMAT = "fmt2"
+
+
 def sim_sample(out: Path) -> None:
     config = SessionConfig(session="sample-sim-ashley", participant="sim:ashley", persona="ashley", seed=7, rounds=4,
-                           software_version="0.1.0")
+                           software_version=__version__, streams=STREAMS_VERSION)
     ready, box = threading.Event(), {}
 
     def on_bus(bus):
         box["bus"] = bus
         ready.set()
 
-    t = threading.Thread(target=lambda: run_session(config, out / "sim-ashley.mcap", on_bus=on_bus,
+    t = threading.Thread(target=lambda: run_session(config, out / f"sim-ashley-{FORMAT}.mcap", on_bus=on_bus,
                                                     wait_also=("intruder",)))
     t.start()
     ready.wait()
@@ -61,17 +73,19 @@ def sim_sample(out: Path) -> None:
 
 def human_sample(out: Path) -> None:
     config = SessionConfig(session="sample-human-board", participant="human:p01", seed=3, rounds=1,
-                           observed_source="first-pick", ignore_rule="time", software_version="0.1.0")
+                           observed_source="first-pick", ignore_rule="time", software_version=__version__,
+                           streams=STREAMS_VERSION)
     clock = iter(range(10**18, 10**19, 10**6)).__next__
+    recorder_clock = iter(range(2 * 10**18, 3 * 10**18, 10**5)).__next__  # the recorder's own, one clock
     game, learner = Driver(GameLogic(config), config.session, clock), Driver(LearnerLogic(), config.session, clock)
-    writer = EventLogWriter(out / "human-board.mcap")
+    writer = EventLogWriter(out / f"human-board-{FORMAT}.mcap")
     writer.add_metadata("pairplay.session", {"session": config.session, "seed": str(config.seed),
-                                             "software_version": "0.1.0"})
+                                             "software_version": __version__, "streams": str(config.streams)})
 
     def record(events):
         for e in events:
             key = event_key(e.session, e.source, type(e).__name__)
-            writer.write(key, encode_event(e), log_time_ns=e.time_ns or 1, sequence=e.seq)
+            writer.write(key, encode_event(e), log_time_ns=recorder_clock(), sequence=e.seq)
             if e.source == "game":
                 record(learner.receive(key, encode_event(e)))
 
@@ -84,7 +98,7 @@ def human_sample(out: Path) -> None:
         board_seq += 1
         e = stamped(event, session=config.session, source="board", seq=board_seq, time_ns=int(at_s * 1e9))
         key = event_key(config.session, "board", type(event).__name__)
-        writer.write(key, encode_event(e), log_time_ns=e.time_ns, sequence=e.seq)
+        writer.write(key, encode_event(e), log_time_ns=recorder_clock(), sequence=e.seq)
         record(game.receive(key, encode_event(e)))
 
     while not game.logic.done:
@@ -106,9 +120,10 @@ def human_sample(out: Path) -> None:
 
 def catalogue_sample(out: Path) -> None:
     s = "sample-catalogue"
-    cfg = SessionConfig(session=s, participant="sim:deaf", persona="deaf", seed=1, rounds=1, software_version="0.1.0")
+    cfg = SessionConfig(session=s, participant="sim:deaf", persona="deaf", seed=1, rounds=1,
+                        software_version=__version__, streams=STREAMS_VERSION)
     events = [
-        ev.ServiceStarted(service="game", version="0.1.0"), ev.SessionStarted(config=cfg),
+        ev.ServiceStarted(service="game", version=__version__), ev.SessionStarted(config=cfg),
         ev.RoundStarted(round=0, faces=[i // 2 for i in range(18)]), ev.CardPicked(round=0, turn=0, card=0),
         ev.CardRevealed(round=0, turn=0, card=0, face=0, pick=0, pick_seq=1),
         ev.PickRejected(round=0, turn=0, card=0, reason="card 0 is already face up", pick_source="participant"),
@@ -116,7 +131,9 @@ def catalogue_sample(out: Path) -> None:
         ev.SuggestionRequested(round=0, turn=0, attempt=0, state=12, observed=1, match=1, covered_mask=262142, first=0),
         ev.SuggestionMade(round=0, turn=0, attempt=0, state=12, action=35, chosen_by="explore", epsilon=0.9, alpha=0.5,
                           psi=0.0, observed=1, target=1, action_name="x"),
-        RobotActed(round=0, turn=0, attempt=0, action=35, backend="virtual", outcome="done", commands=["say"]),
+        RobotActed(round=0, turn=0, attempt=0, action=35, backend="virtual", outcome="done", commands=["say"],
+                   received_ns=10**18 + 123_456_789, sent_ns=10**18 + 123_456_999, acked_ns=10**18 + 223_456_789,
+                   done_ns=10**18 + 923_456_789),
         ev.SuggestionPerceived(round=0, turn=0, attempt=0, considered=True, consistent=True, candidate_size=1,
                                candidate_mask=2, second=1),
         ev.WrongSuggestionPressed(round=0, turn=0),
@@ -132,7 +149,10 @@ def catalogue_sample(out: Path) -> None:
         ev.MessageRejected(reason="malformed payload", key=f"pairplay/{s}/participant/CardPicked", excerpt="{not"),
         ev.SessionEnded(reason="completed", rounds_played=1),
     ]
-    writer = EventLogWriter(out / "catalogue.mcap")
+    writer = EventLogWriter(out / f"catalogue-{FORMAT}.mcap")
+    writer.add_metadata("pairplay.session", {"session": s, "participant": cfg.participant, "persona": cfg.persona,
+                                             "seed": str(cfg.seed), "software_version": __version__,
+                                             "streams": str(cfg.streams), "note": "hand-made: one event of each type"})
     seqs: dict[str, int] = {}
     for i, e in enumerate(events):
         source = {"CardPicked": "participant", "CardObserved": "participant", "SuggestionPerceived": "participant",
@@ -140,7 +160,7 @@ def catalogue_sample(out: Path) -> None:
                   "RewardGiven": "learner", "QUpdated": "learner", "LSPIUpdated": "learner", "RobotActed": "robot", "CombineRequested": "console",
                   "PolicyCombined": "combiner", "MessageRejected": "recorder"}.get(type(e).__name__, "game")
         seqs[source] = seqs.get(source, 0) + 1
-        e = stamped(e, session=s, source=source, seq=seqs[source], time_ns=10**18 + i)
+        e = stamped(e, session=s, source=source, seq=seqs[source], time_ns=1_796_000_000_123_456_789 + i * 1_000_003)
         writer.write(event_key(s, source, type(e).__name__), encode_event(e), log_time_ns=e.time_ns, sequence=e.seq)
     writer.close()
 
@@ -150,5 +170,5 @@ if __name__ == "__main__":
     sim_sample(out)
     human_sample(out)
     catalogue_sample(out)
-    for p in sorted(out.glob("*.mcap")):
+    for p in sorted(out.glob(f"*-{FORMAT}.mcap")):
         print(p, p.stat().st_size)

@@ -43,6 +43,7 @@ from pairplay.services.robot.driver import RobotDriver, Suggestion
 log = logging.getLogger("pairplay.robot.bridge")
 NAME = "robot"
 END_QUIET_S = 0.25  # after SessionEnded, stop once no message came for this long
+STOPPED_SETTLE_S = 1.0  # stopped by a signal or the experimenter: wait this long for the robot's replies
 
 
 class BridgeLogic:
@@ -133,19 +134,22 @@ class RobotBridge:
         # SessionEnded before the last SuggestionMade): go on until the bus is quiet.
         while self.step(timeout_s=0.0 if stop.is_set() else END_QUIET_S):
             pass
-        self.close()
+        # stopped (a signal, the experimenter): what the robot has not acknowledged within a second is
+        # recorded as in flight, and the process exits promptly
+        self.close(min(self.settle_s, STOPPED_SETTLE_S) if stop.is_set() else self.settle_s)
 
     def run_in_thread(self, stop: threading.Event) -> threading.Thread:
         self.thread = threading.Thread(target=self.run, args=(stop,), name="pairplay-robot", daemon=True)
         self.thread.start()
         return self.thread
 
-    def close(self) -> None:
-        """Let the robot report what is open (bounded), then close its connection."""
+    def close(self, settle_s: float | None = None) -> None:
+        """Let the robot report what is open (for at most `settle_s`), then close its connection."""
         robot, self.robot = self.robot, None
         if robot is None:
             return
-        if not robot.wait_idle(self.settle_s):
-            log.warning("robot %s: suggestions still open after %.0f s; reporting them as they are",
-                        robot.transport.url, self.settle_s)
+        settle_s = self.settle_s if settle_s is None else settle_s
+        if not robot.wait_idle(settle_s):
+            log.warning("robot %s: suggestions still open after %.1f s; reporting them as they are",
+                        robot.transport.url, settle_s)
         robot.close()

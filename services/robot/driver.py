@@ -374,7 +374,7 @@ class RobotDriver:
             if perf.unsent():
                 self._finish(perf, "failed", "bridge closed before delivery")
             elif perf.outstanding:
-                self._finish(perf, "unacknowledged", "bridge closed while waiting for the robot")
+                self._finish(perf, "in-flight", "the session ended while the robot's acknowledgement was awaited")
             else:
                 self._finish(perf, "done" if perf.promised else "sent" if perf.steps else "nothing")
         if self._connected:

@@ -75,8 +75,8 @@ def recording_items(path: str | Path, *, speed: float = 0.0, session: str | None
             if wait > 0:
                 sleep(wait)
         yield event, None
-    if log.truncated:
-        yield None, f"recording ends early ({log.error}); everything before the cut is shown"
+    if not log.whole:
+        yield None, f"recording not whole ({log.error}); its intact parts are shown"
 
 
 class LiveSource:

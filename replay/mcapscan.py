@@ -1,0 +1,458 @@
+"""Reading an MCAP file record by record and checking everything the MCAP format lets a reader check.
+
+Rule (the MCAP specification, mcap.dev/spec): a file is the magic, a Header,
+the data section (Schema, Channel, Message and Metadata records, or Chunks of
+them each followed by its Message Index records), a Data End record with the
+CRC-32 of every byte before it, an optional summary section (Schemas,
+Channels, Chunk Indexes, Statistics, Metadata Indexes, Summary Offsets), a
+Footer with the CRC-32 of the summary and the magic again. `scan` walks the
+records in file order and checks each one it can: the magic at both ends,
+every record's opcode and length against the bytes left, each chunk's
+compression, uncompressed size and CRC and the bounds of the records inside,
+every Message Index against the chunk before it (offsets, channels, log
+times), each chunk's time range against its messages, each channel's message
+sequence numbers rising in file order (a pairplay recorder writes them so:
+chunks out of order break it), the data section CRC, the summary CRC, the
+Chunk Indexes against the chunks actually found (offsets, lengths, times) and
+the Statistics' counts. Each finding is a `Damage` naming the part (which
+chunk, the data end, the summary, the footer, the file's end) and its bytes.
+
+A damaged part is never read as if it were whole: a chunk whose bytes fail a
+check gives none of its records. The rest is kept: after unreadable bytes the
+scan looks for the next record that proves itself (a chunk whose CRC matches,
+or a Data End / Metadata record that parses exactly), so every intact chunk
+after a damaged one is still read. A file that simply stops (a crash) is
+`truncated`, with the offset where it stops.
+"""
+
+from __future__ import annotations
+
+import struct
+import zlib
+from dataclasses import dataclass, field
+from io import BytesIO
+from pathlib import Path
+from typing import Any, Callable
+
+from mcap.data_stream import ReadDataStream
+from mcap.records import (Attachment, AttachmentIndex, Channel, Chunk, ChunkIndex, DataEnd, Footer, Header,
+                          Message, MessageIndex, Metadata, MetadataIndex, Schema, Statistics, SummaryOffset)
+
+MAGIC = b"\x89MCAP0\r\n"
+_HEAD = struct.Struct("<BQ")
+_CHUNK_HEAD = struct.Struct("<QQQI")
+_READERS: dict[int, Callable[[ReadDataStream, int], Any]] = {
+    0x01: lambda s, n: Header.read(s), 0x02: lambda s, n: Footer.read(s), 0x03: lambda s, n: Schema.read(s),
+    0x04: lambda s, n: Channel.read(s), 0x05: Message.read, 0x06: lambda s, n: Chunk.read(s),
+    0x07: lambda s, n: MessageIndex.read(s), 0x08: lambda s, n: ChunkIndex.read(s),
+    0x09: lambda s, n: Attachment.read(s), 0x0A: lambda s, n: AttachmentIndex.read(s),
+    0x0B: lambda s, n: Statistics.read(s), 0x0C: lambda s, n: Metadata.read(s),
+    0x0D: lambda s, n: MetadataIndex.read(s), 0x0E: lambda s, n: SummaryOffset.read(s),
+    0x0F: lambda s, n: DataEnd.read(s),
+}
+_IN_CHUNK = (Schema, Channel, Message)
+_SUMMARY = (Schema, Channel, ChunkIndex, AttachmentIndex, Statistics, MetadataIndex, SummaryOffset)
+
+
+class Unreadable(ValueError):
+    """Bytes that are not the record they claim to be."""
+
+
+@dataclass(frozen=True)
+class Damage:
+    offset: int  # the first byte of the affected part
+    part: str  # "chunk 3 (bytes 120-4096)", "data end", "summary", "footer", "file end", ...
+    what: str
+
+    def __str__(self) -> str:
+        return f"{self.part}: {self.what}"
+
+
+@dataclass
+class ChunkSeen:
+    number: int
+    offset: int
+    length: int  # the whole record, opcode and length field included
+    start: int
+    end: int
+    intact: bool
+    messages: list[tuple[int, int, int]] = field(default_factory=list)  # (offset in chunk, channel, log time)
+
+
+@dataclass
+class Scan:
+    """What a file holds and what is wrong with it (see the module rule)."""
+
+    path: str
+    records: list[Any] = field(default_factory=list)  # data-section records in file order, chunks opened
+    damage: list[Damage] = field(default_factory=list)
+    truncated: bool = False  # the file stops before its end
+    cut_at: int = -1  # where it stops
+    cut_what: str = ""  # what the cut took, when known
+    chunks: list[ChunkSeen] = field(default_factory=list)
+    summary: bool = False  # a summary section was found and checked
+    # the summary's Schema and Channel records (when its CRC holds): they name the channels of messages
+    # whose own Schema/Channel records were in a lost chunk
+    summary_records: list[Any] = field(default_factory=list)
+    size: int = 0
+
+    @property
+    def whole(self) -> bool:
+        return not self.damage and not self.truncated
+
+    @property
+    def lost_chunks(self) -> list[ChunkSeen]:
+        return [c for c in self.chunks if not c.intact]
+
+    def describe(self) -> str:
+        """One line: what is wrong, or 'whole'."""
+        parts = [str(d) for d in self.damage]
+        if self.truncated:
+            parts.append(f"file end: cut at byte {self.cut_at} of {self.size}"
+                         + (f" ({self.cut_what})" if self.cut_what else ""))
+        return "; ".join(parts) if parts else "whole"
+
+
+_MESSAGE_HEAD = struct.Struct("<HIQQ")
+_INDEX_HEAD = struct.Struct("<HI")
+
+
+def _parse(opcode: int, content: bytes) -> Any:
+    """One record's content, which must be consumed exactly (Message: wholly)."""
+    if opcode == 0x05:  # the common records, without a stream object per record (speed)
+        if len(content) < _MESSAGE_HEAD.size:
+            raise Unreadable("Message content does not parse (too short)")
+        channel_id, sequence, log_time, publish_time = _MESSAGE_HEAD.unpack_from(content)
+        return Message(channel_id=channel_id, sequence=sequence, log_time=log_time, publish_time=publish_time,
+                       data=content[_MESSAGE_HEAD.size:])
+    if opcode == 0x07:
+        if len(content) < _INDEX_HEAD.size:
+            raise Unreadable("MessageIndex content does not parse (too short)")
+        channel_id, n = _INDEX_HEAD.unpack_from(content)
+        if n % 16 or _INDEX_HEAD.size + n != len(content):
+            raise Unreadable(f"MessageIndex declares {len(content)} bytes but its fields take {_INDEX_HEAD.size + n}")
+        flat = struct.unpack_from(f"<{n // 8}Q", content, _INDEX_HEAD.size)
+        return MessageIndex(channel_id=channel_id, records=list(zip(flat[::2], flat[1::2])))
+    reader = _READERS.get(opcode)
+    if reader is None:
+        raise Unreadable(f"unknown opcode 0x{opcode:02x}")
+    stream = ReadDataStream(BytesIO(content))
+    try:
+        record = reader(stream, len(content))
+    except Exception as err:  # EndOfFile, struct.error, UnicodeDecodeError: not what the opcode says
+        raise Unreadable(f"{_name(opcode)} content does not parse ({type(err).__name__})") from None
+    if opcode != 0x05 and stream.count != len(content):
+        raise Unreadable(f"{_name(opcode)} declares {len(content)} bytes but its fields take {stream.count}")
+    return record
+
+
+def _name(opcode: int) -> str:
+    reader = {0x01: "Header", 0x02: "Footer", 0x03: "Schema", 0x04: "Channel", 0x05: "Message", 0x06: "Chunk",
+              0x07: "MessageIndex", 0x08: "ChunkIndex", 0x09: "Attachment", 0x0A: "AttachmentIndex",
+              0x0B: "Statistics", 0x0C: "Metadata", 0x0D: "MetadataIndex", 0x0E: "SummaryOffset",
+              0x0F: "DataEnd"}
+    return reader.get(opcode, f"opcode 0x{opcode:02x}")
+
+
+def _decompress(chunk: Chunk) -> bytes:
+    if chunk.compression == "":
+        return chunk.data
+    if chunk.compression == "zstd":
+        import zstandard
+
+        return zstandard.ZstdDecompressor().decompress(chunk.data, max_output_size=chunk.uncompressed_size)
+    if chunk.compression == "lz4":
+        import lz4.frame
+
+        return lz4.frame.decompress(chunk.data)
+    raise Unreadable(f"unknown compression {chunk.compression!r}")
+
+
+def _open_chunk(chunk: Chunk) -> tuple[list[Any], list[tuple[int, int, int]]]:
+    """The records inside a chunk, after every check the chunk allows (Unreadable if one fails)."""
+    try:
+        data = _decompress(chunk)
+    except Unreadable:
+        raise
+    except Exception as err:
+        raise Unreadable(f"{chunk.compression} data does not decompress ({type(err).__name__})") from None
+    if len(data) != chunk.uncompressed_size:
+        raise Unreadable(f"decompresses to {len(data)} bytes, the chunk says {chunk.uncompressed_size}")
+    if chunk.uncompressed_crc and zlib.crc32(data) != chunk.uncompressed_crc:
+        raise Unreadable(f"CRC mismatch (recorded {chunk.uncompressed_crc:#010x}, computed {zlib.crc32(data):#010x})")
+    records, messages, pos = [], [], 0
+    while pos < len(data):
+        if len(data) - pos < 9:
+            raise Unreadable(f"a record header is cut at byte {pos} of the chunk's data")
+        opcode, length = _HEAD.unpack_from(data, pos)
+        if pos + 9 + length > len(data):
+            raise Unreadable(f"a {_name(opcode)} at byte {pos} of the chunk's data runs past its end")
+        record = _parse(opcode, data[pos + 9:pos + 9 + length])
+        if not isinstance(record, _IN_CHUNK):
+            raise Unreadable(f"a {type(record).__name__} record inside a chunk")
+        if isinstance(record, Message):
+            if not chunk.message_start_time <= record.log_time <= chunk.message_end_time:
+                raise Unreadable(f"a message logged at {record.log_time} lies outside the chunk's time range "
+                                 f"{chunk.message_start_time}-{chunk.message_end_time}")
+            messages.append((pos, record.channel_id, record.log_time))
+        records.append(record)
+        pos += 9 + length
+    return records, messages
+
+
+class _Walker:
+    def __init__(self, path: str, data: bytes):
+        self.data = data
+        self.scan = Scan(path, size=len(data))
+        self.last_seq: dict[int, tuple[int, int]] = {}  # channel -> (sequence, chunk number)
+        self.data_end_at = -1
+        self.chunk_indexes: list[ChunkIndex] = []
+        self.statistics: Statistics | None = None
+        self.summary_records: list[Any] = []
+
+    def damage(self, offset: int, part: str, what: str) -> None:
+        self.scan.damage.append(Damage(offset, part, what))
+
+    def record_at(self, pos: int) -> tuple[int, int, Any]:
+        """(opcode, end, record) of the record at `pos` (Unreadable if it is not one)."""
+        data = self.data
+        if len(data) - pos < 9:
+            raise EOFError
+        opcode, length = _HEAD.unpack_from(data, pos)
+        if opcode not in _READERS:
+            raise Unreadable(f"byte {pos} holds no record (opcode 0x{opcode:02x})")
+        end = pos + 9 + length
+        if end > len(data):
+            raise EOFError
+        return opcode, end, _parse(opcode, data[pos + 9:end])
+
+    def proven_at(self, pos: int) -> bool:
+        """Does a record that proves itself start at `pos` (a chunk with a matching CRC, a Data End
+        followed by a record, a Metadata record that parses exactly)?"""
+        try:
+            opcode, end, record = self.record_at(pos)
+        except (Unreadable, EOFError):
+            return False
+        if opcode == 0x06:
+            if not record.uncompressed_crc:
+                return False
+            try:
+                _open_chunk(record)
+            except Unreadable:
+                return False
+            return True
+        if opcode == 0x0F:
+            try:
+                self.record_at(end)
+            except (Unreadable, EOFError):
+                return self.data[end:end + 8] == MAGIC
+            return True
+        return opcode == 0x0C
+
+    def resync(self, pos: int) -> int:
+        """The next offset after `pos` where a record proves itself, or -1."""
+        data = self.data
+        candidates = [p for p in (data.find(b, pos + 1) for b in (b"\x06", b"\x0c", b"\x0f")) if p >= 0]
+        while candidates:
+            p = min(candidates)
+            if self.proven_at(p):
+                return p
+            opcode = data[p:p + 1]
+            candidates.remove(p)
+            q = data.find(opcode, p + 1)
+            if q >= 0:
+                candidates.append(q)
+        return -1
+
+    def walk(self) -> Scan:
+        data, scan = self.data, self.scan
+        if len(data) < 8:
+            scan.truncated, scan.cut_at = True, 0
+            if data:
+                self.damage(0, "header", f"{len(data)} bytes: too short for the MCAP magic")
+            return scan
+        if data[:8] != MAGIC:
+            self.damage(0, "header", "the file does not start with the MCAP magic")
+        pos = 8
+        chunk = None
+        while pos < len(data):
+            try:
+                opcode, end, record = self.record_at(pos)
+            except EOFError:
+                nxt = self.resync(pos)
+                if nxt < 0:
+                    scan.truncated, scan.cut_at = True, pos
+                    return scan
+                self.damage(pos, f"bytes {pos}-{nxt}", "a record runs past the end of the file: its length is "
+                            "damaged")
+                pos = nxt
+                continue
+            except Unreadable as err:
+                nxt = self.resync(pos)
+                self.damage(pos, f"bytes {pos}-{nxt if nxt >= 0 else len(data)}", f"unreadable: {err}")
+                if nxt < 0:
+                    scan.truncated, scan.cut_at = True, pos
+                    return scan
+                pos = nxt
+                continue
+            if opcode == 0x01:
+                if pos != 8:
+                    self.damage(pos, f"header (byte {pos})", "a second Header record")
+            elif opcode == 0x06:
+                chunk = self.chunk(pos, end, record)
+            elif opcode == 0x07:
+                self.message_index(pos, record, chunk)
+            elif opcode == 0x0F:
+                self.data_end(pos, record)
+                return self.summary(end)
+            elif opcode == 0x02:
+                self.damage(pos, "data end", "the Footer comes without a Data End record")
+                self.footer(pos, end, record, summary_start=pos)
+                return scan
+            elif isinstance(record, (Schema, Channel, Metadata)):
+                scan.records.append(record)
+            elif isinstance(record, Message):
+                self.sequence(pos, record, "message", -1)
+                scan.records.append(record)
+            pos = end
+        scan.truncated, scan.cut_at = True, pos
+        return scan
+
+    def chunk(self, pos: int, end: int, chunk: Chunk) -> ChunkSeen:
+        n = len(self.scan.chunks)
+        seen = ChunkSeen(n, pos, end - pos, chunk.message_start_time, chunk.message_end_time, False)
+        self.scan.chunks.append(seen)
+        part = f"chunk {n} (bytes {pos}-{end})"
+        try:
+            records, seen.messages = _open_chunk(chunk)
+        except Unreadable as err:
+            self.damage(pos, part, f"{err}: its records are not read")
+            return seen
+        previous = [c for c in self.scan.chunks[:-1] if c.intact]
+        if previous and chunk.message_start_time < previous[-1].start:
+            self.damage(pos, part, f"starts at log time {chunk.message_start_time}, before chunk {previous[-1].number}"
+                        f" ({previous[-1].start}): chunks out of order")
+        seen.intact = True
+        for record in records:
+            if isinstance(record, Message):
+                self.sequence(pos, record, part, n)
+        self.scan.records.extend(records)
+        return seen
+
+    def sequence(self, pos: int, message: Message, part: str, n: int) -> None:
+        if not message.sequence:
+            return
+        last = self.last_seq.get(message.channel_id)
+        if last is not None and message.sequence <= last[0]:
+            where = f"chunk {last[1]}" if last[1] >= 0 else "an earlier message"
+            self.damage(pos, part, f"channel {message.channel_id}'s sequence goes back from {last[0]} ({where}) to "
+                        f"{message.sequence}: records out of order")
+        self.last_seq[message.channel_id] = (message.sequence, n)
+
+    def message_index(self, pos: int, index: MessageIndex, chunk: ChunkSeen | None) -> None:
+        if chunk is None:
+            self.damage(pos, f"message index (byte {pos})", "a Message Index with no chunk before it")
+            return
+        if not chunk.intact:
+            return
+        mine = {(off, t) for off, ch, t in chunk.messages if ch == index.channel_id}
+        listed = {(off, t) for t, off in index.records}
+        if listed != mine:
+            self.damage(pos, f"message index of chunk {chunk.number} (byte {pos})",
+                        f"lists {len(listed)} messages of channel {index.channel_id}, the chunk holds {len(mine)} "
+                        f"({len(listed - mine)} entries point at no such message)")
+        times = [t for t, _ in index.records]
+        if times != sorted(times):
+            self.damage(pos, f"message index of chunk {chunk.number} (byte {pos})", "log times not in order")
+
+    def data_end(self, pos: int, record: DataEnd) -> None:
+        self.data_end_at = pos
+        if record.data_section_crc:
+            crc = zlib.crc32(self.data[:pos])
+            if crc != record.data_section_crc:
+                self.damage(pos, "data section", f"CRC mismatch over bytes 0-{pos} (recorded "
+                            f"{record.data_section_crc:#010x}, computed {crc:#010x}): some byte before the Data End "
+                            "changed")
+
+    def summary(self, pos: int) -> Scan:
+        data, scan = self.data, self.scan
+        start = pos
+        while pos < len(data):
+            try:
+                opcode, end, record = self.record_at(pos)
+            except EOFError:
+                scan.truncated, scan.cut_at = True, pos
+                scan.cut_what = "inside the summary; the data section is complete"
+                return scan
+            except Unreadable as err:
+                self.damage(pos, "summary", f"unreadable at byte {pos}: {err}")
+                return scan
+            if opcode == 0x02:
+                self.footer(pos, end, record, summary_start=start)
+                return scan
+            if not isinstance(record, (*_SUMMARY, Metadata)):
+                self.damage(pos, "summary", f"a {type(record).__name__} record after the Data End")
+            elif isinstance(record, ChunkIndex):
+                self.chunk_indexes.append(record)
+            elif isinstance(record, (Schema, Channel)):
+                self.summary_records.append(record)
+            elif isinstance(record, Statistics):
+                self.statistics = record
+            pos = end
+        scan.truncated, scan.cut_at = True, pos
+        scan.cut_what = "after the summary: the footer is missing; the data section is complete"
+        return scan
+
+    def footer(self, pos: int, end: int, footer: Footer, summary_start: int) -> None:
+        data, scan = self.data, self.scan
+        tail = data[end:]
+        if len(tail) < len(MAGIC) and MAGIC.startswith(tail):
+            scan.truncated, scan.cut_at = True, len(data)  # cut inside the closing magic
+        elif tail != MAGIC:
+            self.damage(end, "file end", "the closing MCAP magic is missing or followed by other bytes")
+        if footer.summary_start and footer.summary_start != summary_start:
+            self.damage(pos, "footer", f"says the summary starts at byte {footer.summary_start}, it starts at "
+                        f"{summary_start}")
+        if footer.summary_start and footer.summary_crc:
+            crc = zlib.crc32(data[footer.summary_start:pos + 9 + 16])
+            if crc != footer.summary_crc:
+                self.damage(footer.summary_start, "summary", f"CRC mismatch (recorded {footer.summary_crc:#010x}, "
+                            f"computed {crc:#010x})")
+        scan.summary = bool(footer.summary_start)
+        if not any(d.part == "summary" for d in scan.damage):
+            scan.summary_records = self.summary_records
+        self.check_summary()
+
+    def check_summary(self) -> None:
+        if not self.scan.summary:
+            return
+        found = {c.offset: c for c in self.scan.chunks}
+        if len(self.chunk_indexes) != len(self.scan.chunks):
+            self.damage(self.data_end_at, "summary", f"indexes {len(self.chunk_indexes)} chunks, the data section "
+                        f"holds {len(self.scan.chunks)}")
+        for i, ci in enumerate(self.chunk_indexes):
+            c = found.get(ci.chunk_start_offset)
+            if c is None or c.length != ci.chunk_length or (c.start, c.end) != (ci.message_start_time,
+                                                                             ci.message_end_time):
+                self.damage(ci.chunk_start_offset, f"chunk index {i}", f"no chunk of {ci.chunk_length} bytes, log "
+                            f"times {ci.message_start_time}-{ci.message_end_time} at byte {ci.chunk_start_offset}: "
+                            "chunks moved or changed")
+            elif c.number != i:
+                self.damage(c.offset, f"chunk {c.number} (bytes {c.offset}-{c.offset + c.length})",
+                            f"indexed as chunk {i}: chunks out of order")
+        if self.statistics is not None:
+            messages = sum(1 for r in self.scan.records if isinstance(r, Message))
+            lost = any(not c.intact for c in self.scan.chunks)
+            if self.statistics.message_count != messages and not lost:
+                self.damage(self.data_end_at, "summary", f"statistics count {self.statistics.message_count} "
+                            f"messages, the data section holds {messages}")
+
+
+def scan(path: str | Path) -> Scan:
+    """Check a whole file (see the module rule); OSError if it cannot be read."""
+    data = Path(path).read_bytes()
+    return _Walker(str(path), data).walk()
+
+
+def scan_bytes(data: bytes, path: str = "") -> Scan:
+    return _Walker(path, data).walk()

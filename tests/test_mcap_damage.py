@@ -1,0 +1,188 @@
+"""Damaged, cut and reordered recordings, made from a real one by what the MCAP specification lets a reader check
+(issue 10, item 10; mcap.dev/spec: magic, record opcode + uint64 length, Chunk with uncompressed size and CRC-32,
+Message Index records after each chunk, Data End with the data-section CRC, summary with Chunk Indexes and
+Statistics, Footer with the summary CRC, closing magic).
+
+Every reader path (read_log behind rebuild, replay, verify and view; recover) must say the file is not whole and
+which part is affected, never return an event that was not in the file, and keep every intact part.
+"""
+
+import json
+import struct
+
+import pytest
+
+from pairplay.replay.mcapscan import MAGIC, scan
+from pairplay.replay.reader import read_log
+from pairplay.replay.rebuild import rebuild_recording
+from pairplay.replay.recover import recover
+from pairplay.replay.writer import EventLogWriter
+from pairplay.schemas.events import encode_event
+from pairplay.schemas.keys import event_key
+from pairplay.schemas.session import SessionConfig
+from pairplay.services.verify import verify_recording
+from pairplay.services.view.sources import recording_items
+
+from loopback_session import loopback_events
+
+
+@pytest.fixture(scope="module")
+def whole(tmp_path_factory):
+    """A real recording of a 3-round session, written by the recorder's writer in small chunks (about 20)."""
+    config = SessionConfig(session="dmg", participant="sim:deaf", persona="deaf", seed=4, rounds=3)
+    path = tmp_path_factory.mktemp("dmg") / "whole.mcap"
+    w = EventLogWriter(path, chunk_size=4096)
+    w.add_metadata("pairplay.session", {"session": config.session})
+    for i, e in enumerate(loopback_events(config)):
+        w.write(event_key(e.session, e.source, type(e).__name__), encode_event(e), log_time_ns=10**18 + i,
+                sequence=e.seq)
+    w.close()
+    return path
+
+
+def payloads(path):
+    return [r.payload for r in read_log(path).events]
+
+
+def variant(tmp_path, data, name="damaged.mcap"):
+    p = tmp_path / name
+    p.write_bytes(data)
+    return p
+
+
+def test_the_whole_recording_checks_out(whole):
+    s = scan(whole)
+    assert s.whole and s.summary and len(s.chunks) >= 8 and all(c.intact for c in s.chunks)
+    assert read_log(whole).whole and verify_recording(whole).ok
+
+
+def test_a_cut_at_any_offset_keeps_exactly_the_chunks_before_it(whole, tmp_path):
+    data = whole.read_bytes()
+    full = payloads(whole)
+    chunks = scan(whole).chunks
+    per_chunk = [len(c.messages) for c in chunks]
+    offsets = sorted(set(range(0, len(data), max(1, len(data) // 150))) | {c.offset for c in chunks}
+                     | {c.offset + c.length for c in chunks} | {len(data) - 1, len(data) - 8, len(data) - 9, 5, 8, 9})
+    for cut in offsets:
+        p = variant(tmp_path, data[:cut])
+        log = read_log(p)
+        assert not log.whole and log.truncated and log.error, cut
+        kept = sum(n for c, n in zip(chunks, per_chunk) if c.offset + c.length <= cut)
+        got = [r.payload for r in log.events]
+        assert got == full[:len(got)], cut  # nothing invented, nothing reordered
+        assert len(got) == kept, cut  # every chunk wholly before the cut is read
+        done = recover(p, tmp_path / "out.mcap")
+        assert done.messages == kept and done.truncated and scan(done.output).whole
+        (tmp_path / "out.mcap").unlink()
+
+
+@pytest.mark.parametrize("where", ["data", "start", "end"])
+def test_a_flipped_byte_in_a_chunk_loses_that_chunk_only_and_is_named(whole, tmp_path, where):
+    data = whole.read_bytes()
+    full = payloads(whole)
+    chunks = scan(whole).chunks
+    for k in (0, len(chunks) // 2, len(chunks) - 1):
+        c = chunks[k]
+        at = {"data": c.offset + c.length - 7, "start": c.offset + 9, "end": c.offset + 17}[where]
+        bad = bytearray(data)
+        bad[at] ^= 0x5A
+        p = variant(tmp_path, bytes(bad))
+        log = read_log(p)
+        assert not log.whole and log.damage, (k, where)
+        assert any(f"chunk {k} " in str(d) or "data section" in str(d) for d in log.damage), log.error
+        got = [r.payload for r in log.events]
+        assert set(got) <= set(full)
+        if where == "data":  # the chunk's CRC fails: only its messages are lost, every other chunk is read
+            assert len(got) == len(full) - len(c.messages)
+            assert f"chunk {k} (bytes {c.offset}-{c.offset + c.length}): CRC mismatch" in log.error or \
+                   "does not decompress" in log.error
+        v = verify_recording(p)
+        assert not v.ok and "damaged" in v.error
+        done = recover(p, tmp_path / "out.mcap")
+        assert done.messages == len(got) and done.damaged
+        rv = verify_recording(done.output)
+        assert not rv.ok and "recovered from a damaged file" in rv.error
+        (tmp_path / "out.mcap").unlink()
+
+
+def test_a_damaged_record_length_is_skipped_and_the_chunks_after_it_are_read(whole, tmp_path):
+    data = whole.read_bytes()
+    chunks = scan(whole).chunks
+    c = chunks[3]
+    bad = bytearray(data)
+    bad[c.offset + 1:c.offset + 9] = struct.pack("<Q", 2**40)  # chunk 3's length now runs past the end
+    log = read_log(variant(tmp_path, bytes(bad)))
+    assert not log.whole and any(f"bytes {c.offset}-" in str(d) for d in log.damage)
+    assert len(log.events) == sum(len(x.messages) for x in chunks) - len(c.messages)
+
+
+def test_swapped_chunks_are_reported_out_of_order(whole, tmp_path):
+    data = whole.read_bytes()
+    chunks = scan(whole).chunks
+    a, b = chunks[2], chunks[3]
+    # each chunk with the Message Index records that follow it, up to the next chunk
+    block_a, block_b = data[a.offset:b.offset], data[b.offset:chunks[4].offset]
+    swapped = data[:a.offset] + block_b + block_a + data[chunks[4].offset:]
+    for p in (variant(tmp_path, swapped), variant(tmp_path, swapped[:chunks[-1].offset + chunks[-1].length], "cut.mcap")):
+        log = read_log(p)
+        assert not log.whole and "out of order" in log.error, log.error
+        assert not verify_recording(p).ok
+
+
+def test_footer_summary_and_index_damage_is_found(whole, tmp_path):
+    data = whole.read_bytes()
+    footer_at = len(data) - 8 - 29
+    summary_start = struct.unpack_from("<Q", data, footer_at + 9)[0]
+    no_footer = variant(tmp_path, data[:footer_at], "nofooter.mcap")
+    assert "footer" in read_log(no_footer).error and read_log(no_footer).truncated
+    bad = bytearray(data)
+    bad[summary_start + 20] ^= 1
+    log = read_log(variant(tmp_path, bytes(bad), "summary.mcap"))
+    assert any(d.part.startswith("summary") or d.part.startswith("chunk index") for d in log.damage), log.error
+    no_magic = variant(tmp_path, data[:-8] + b"\x00" * 8, "magic.mcap")
+    assert "magic" in read_log(no_magic).error
+    head = bytearray(data)
+    head[0] = 0
+    log = read_log(variant(tmp_path, bytes(head), "head.mcap"))
+    assert "header" in log.error and len(log.events) == len(payloads(whole))  # every chunk still read
+    # a Message Index that points at the wrong offset
+    chunks = scan(whole).chunks
+    c = chunks[1]
+    idx = c.offset + c.length  # the first Message Index after chunk 1
+    assert data[idx] == 0x07
+    mi = bytearray(data)
+    mi[idx + 9 + 2 + 4 + 8] ^= 0x10  # the first entry's offset
+    log = read_log(variant(tmp_path, bytes(mi), "index.mcap"))
+    assert any("message index of chunk 1" in str(d) for d in log.damage), log.error
+
+
+def test_every_reader_path_says_which_part(whole, tmp_path):
+    data = whole.read_bytes()
+    c = scan(whole).chunks[2]
+    bad = bytearray(data)
+    bad[c.offset + c.length - 3] ^= 0xFF
+    p = variant(tmp_path, bytes(bad))
+    part = f"chunk 2 (bytes {c.offset}-{c.offset + c.length})"
+    assert part in rebuild_recording(p).note
+    assert part in verify_recording(p).error
+    notes = [note for _, note in recording_items(p) if note]
+    assert any(part in n for n in notes)
+    done = recover(p, tmp_path / "r.mcap")
+    meta = read_log(done.output).metadata["pairplay.recovered"]
+    assert any(part in d for d in json.loads(meta["damaged"])) and meta["lost_chunks"] == "1"
+
+
+def test_random_damage_never_raises_and_never_invents(whole, tmp_path):
+    import random
+
+    data = whole.read_bytes()
+    full = set(payloads(whole))
+    rng = random.Random(7)
+    for _ in range(40):
+        bad = bytearray(data)
+        for _ in range(rng.randint(1, 4)):
+            bad[rng.randrange(len(bad))] = rng.randrange(256)
+        log = read_log(variant(tmp_path, bytes(bad)))
+        assert {r.payload for r in log.events} <= full
+        if bytes(bad) != data:
+            assert not log.whole or log.events == read_log(whole).events

@@ -1,0 +1,117 @@
+"""Every session end says why and how far it got (issue 10, item 6): completed, interrupted by SIGINT or
+SIGTERM, aborted by the experimenter, a service failed; `recover` marks what it completed; `rebuild` flags
+policies from partial sessions in the policy file and in its output. Old recordings stay readable."""
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import threading
+import time
+from pathlib import Path
+
+import pytest
+
+from pairplay.replay.reader import read_log
+from pairplay.replay.rebuild import rebuild_recording, write_outputs
+from pairplay.replay.recover import recover
+from pairplay.schemas import events as ev
+from pairplay.schemas.policy import read_policy
+from pairplay.schemas.session import SessionConfig
+from pairplay.services.session import run_session
+
+SAMPLES = Path(__file__).resolve().parent.parent / "recordings" / "samples"
+
+
+def ended(path):
+    return [r.event for r in read_log(path).events if isinstance(r.event, ev.SessionEnded)]
+
+
+@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM])
+def test_a_signalled_session_records_it_was_interrupted_and_how_far_it_got(tmp_path, sig):
+    p = subprocess.Popen([sys.executable, "-m", "pairplay", "session", "--participant", "sim:wasim", "--rounds",
+                          "100000", "--session", "sig", "--out", str(tmp_path)], stdout=subprocess.PIPE,
+                         stderr=subprocess.STDOUT, text=True, env=dict(os.environ, PYTHONUNBUFFERED="1"))
+    try:
+        assert "bus listening" in p.stdout.readline()
+        time.sleep(2.0)  # a few rounds
+        p.send_signal(sig)
+        out, _ = p.communicate(timeout=30)
+    finally:
+        if p.poll() is None:
+            p.kill()
+    path = tmp_path / "sig.mcap"
+    assert read_log(path).whole, out
+    [end] = ended(path)
+    assert end.reason == "interrupted" and end.detail == sig.name and 0 < end.rounds_played < 100000
+    assert end.round == end.rounds_played and end.turns_in_round >= 0
+    rebuilt = rebuild_recording(path)
+    assert rebuilt.partial.startswith(f"interrupted ({sig.name}) after {end.rounds_played} of 100000 rounds")
+    r = subprocess.run([sys.executable, "-m", "pairplay", "rebuild", str(path), "--out", str(tmp_path / "rb"),
+                        "--no-plot"], capture_output=True, text=True)
+    assert "PARTIAL session: interrupted" in r.stdout, r.stdout
+    assert read_policy(tmp_path / "rb" / "sig.policy.json").partial.startswith("interrupted")
+
+
+def test_an_experimenter_stop_is_recorded_as_aborted(tmp_path):
+    config = SessionConfig(session="abort", participant="sim:blind", persona="blind", seed=1, rounds=100000)
+    stop = threading.Event()
+    threading.Timer(1.5, stop.set).start()
+    path = run_session(config, tmp_path / "abort.mcap", stop=stop)
+    [end] = ended(path)
+    assert end.reason == "aborted" and end.detail == "stopped by the experimenter" and end.rounds_played > 0
+    assert "aborted" in rebuild_recording(path).partial
+
+
+def test_a_service_that_leaves_and_does_not_come_back_fails_the_session(tmp_path):
+    config = SessionConfig(session="svcfail", participant="sim:deaf", persona="deaf", seed=2, rounds=100000)
+    box = {}
+
+    def on_bus(bus):
+        box["bus"] = bus
+
+    t = threading.Thread(target=lambda: box.setdefault("path", run_session(
+        config, tmp_path / "svcfail.mcap", external=("learner",), on_bus=on_bus, settle_timeout_s=1.0)))
+    t.start()
+    while "bus" not in box:
+        time.sleep(0.05)
+    learner = subprocess.Popen([sys.executable, "-m", "pairplay", "run", "learner", "--session", "svcfail",
+                                "--connect", box["bus"].locators()[0]], stdout=subprocess.DEVNULL,
+                               stderr=subprocess.DEVNULL)
+    try:
+        time.sleep(3.0)
+        learner.send_signal(signal.SIGKILL)
+        learner.wait(10)
+        t.join(60)
+        assert not t.is_alive()
+    finally:
+        if learner.poll() is None:
+            learner.kill()
+    [end] = ended(box["path"])
+    assert end.reason == "failed" and "learner left the bus" in end.detail
+
+
+def test_recover_marks_what_it_completed_and_rebuild_flags_the_policy(tmp_path):
+    config = SessionConfig(session="cut", participant="sim:blind", persona="blind", seed=3, rounds=6)
+    path = run_session(config, tmp_path / "cut.mcap")
+    data = path.read_bytes()
+    cut = tmp_path / "cut-short.mcap"
+    cut.write_bytes(data[:len(data) // 2])
+    done = recover(cut)
+    meta = read_log(done.output).metadata["pairplay.recovered"]
+    assert meta["truncated"] == "true" and meta["session_ended"] == "false" and "pairplay recover" in meta["completed"]
+    assert int(meta["last_round"]) == done.last_round >= 0 and not done.ended
+    rebuilt = rebuild_recording(done.output)
+    assert "no SessionEnded" in rebuilt.partial and "completed by pairplay recover after a cut" in rebuilt.partial
+    [policy] = [p for p in write_outputs(rebuilt, tmp_path / "rb") if p.name.endswith(".policy.json")]
+    assert "pairplay recover" in read_policy(policy).partial
+    whole = rebuild_recording(path)
+    assert whole.partial == "" and json.loads(Path(write_outputs(whole, tmp_path / "rb2")[0]).read_text()
+                                              )["partial"] == ""
+
+
+def test_old_recordings_end_without_the_new_fields_and_read_as_before():
+    [end] = ended(SAMPLES / "sim-ashley.mcap")
+    assert end.reason == "completed" and end.round == -1 and end.detail == ""
+    assert rebuild_recording(SAMPLES / "sim-ashley.mcap").partial == ""
