@@ -2,15 +2,18 @@
 
 Rule: policy files are grouped by their participant; each participant's user
 information comes from all of its files (algorithm 3), and one file per
-participant, picked by the seed, enters the combination (algorithm 4). A file
-that cannot be read stops the command with its reason before anything is
-written.
+participant, picked by the seed, enters the combination (algorithm 4). Refused
+before anything is written (one line, exit 2): a file that cannot be read, a
+policy given twice (the same file, a folder named twice, or two files holding
+the same learning: it would weigh double), a profile of a participant with a
+single policy (algorithm 3 compares policies: it would say 0% / 0%), an
+--exclude naming no participant, policies of different reward rules (the
+files of each rule are named), and an existing --out without --force.
 """
 
 from __future__ import annotations
 
 import argparse
-import sys
 from pathlib import Path
 
 import numpy as np
@@ -19,16 +22,29 @@ from pairplay import __version__
 from pairplay.core.actions import ACTIONS
 from pairplay.core.combine import combine, extract_info, trained_states
 from pairplay.core.geometry import STATE_NAMES
-from pairplay.core.policies import by_participant, combined_policy_file, common_reward_bonus, users_from_policies
-from pairplay.schemas.policy import PolicyFileError, read_policy, write_policy
+from pairplay.core.policies import (by_participant, check_distinct, check_exclude, check_profiles_computable,
+                                    combined_policy_file, common_reward_bonus, users_from_policies)
+from pairplay.errors import InputError, OptionError
+from pairplay.outputs import check_output
+from pairplay.schemas.policy import read_policy, write_policy
+from pairplay.cli.args import add_force, non_negative
 
 
 def _policy_paths(paths: list[Path]) -> list[Path]:
-    """Files as given; a folder stands for every *.json below it (a study's policies/)."""
-    out = []
+    """Files as given; a folder stands for every *.json below it (a study's policies/).
+    InputError for a path that does not exist, a folder without policy files, a file given twice."""
+    out: dict[Path, Path] = {}
     for p in paths:
-        out += sorted(p.rglob("*.json")) if p.is_dir() else [p]
-    return out
+        if not p.exists():
+            raise InputError("no such policy file or folder", p)
+        found = sorted(p.rglob("*.json")) if p.is_dir() else [p]
+        if not found:
+            raise InputError("holds no policy files (*.json)", p)
+        for f in found:
+            if f.resolve() in out:
+                raise InputError(f"given twice (also as {out[f.resolve()]}): each policy may count once", f)
+            out[f.resolve()] = f
+    return list(out.values())
 
 
 def _common(p: argparse.ArgumentParser) -> None:
@@ -38,7 +54,7 @@ def _common(p: argparse.ArgumentParser) -> None:
 
 def add_profile_arguments(p: argparse.ArgumentParser) -> None:
     _common(p)
-    p.add_argument("--min-updates", type=int, default=0,
+    p.add_argument("--min-updates", type=non_negative, default=0,
                    help="compare only the states every policy of a participant updated at least this many "
                         "times (default 0: the 23 spatial states, algorithm 3; thesis 6.4: untrained states)")
 
@@ -47,18 +63,16 @@ def add_combine_arguments(p: argparse.ArgumentParser) -> None:
     _common(p)
     p.add_argument("--out", "-o", type=Path, help="write the merged policy file here")
     p.add_argument("--exclude", default="", help="comma-separated participants to leave out")
+    add_force(p, "an existing --out file")
 
 
-def _load(args, verb: str):
-    """(policies, file names), or None after saying why nothing could be read."""
+def _load(args) -> tuple[list, list[str]]:
+    """(policies, file names): every file read and checked, no policy counted twice (InputError otherwise)."""
     files = _policy_paths(args.policies)
-    try:
-        if not files:
-            raise PolicyFileError("no policy files given")
-        return [read_policy(f) for f in files], [str(f) for f in files]
-    except PolicyFileError as exc:
-        print(f"pairplay {verb}: {exc}", file=sys.stderr)
-        return None
+    policies = [read_policy(f) for f in files]
+    names = [str(f) for f in files]
+    check_distinct(policies, names)
+    return policies, names
 
 
 def _profile_lines(profiles, policies) -> list[str]:
@@ -88,10 +102,8 @@ def _trained_profiles(policies, min_updates: int) -> dict:
 
 
 def run_profile(args) -> int:
-    loaded = _load(args, "profile")
-    if loaded is None:
-        return 2
-    policies, _ = loaded
+    policies, names = _load(args)
+    check_profiles_computable(policies, names)
     if args.min_updates > 0:
         profiles = _trained_profiles(policies, args.min_updates)
         print(f"states every policy of a participant updated at least {args.min_updates} times")
@@ -102,24 +114,20 @@ def run_profile(args) -> int:
 
 
 def run_combine(args) -> int:
-    loaded = _load(args, "combine")
-    if loaded is None:
-        return 2
-    policies, files = loaded
+    if args.out is not None:
+        check_output(args.out, args.force)  # before any work
+    policies, files = _load(args)
     exclude = {x.strip() for x in args.exclude.split(",") if x.strip()}
+    check_exclude(policies, exclude)
+    kept = [(p, f) for p, f in zip(policies, files) if p.participant not in exclude]
+    if not kept:
+        raise OptionError("no policies left to combine", f"--exclude {args.exclude}")
+    reward_rule = common_reward_bonus([p for p, _ in kept], [f for _, f in kept])
     users, profiles = users_from_policies(policies, args.seed, exclude)
-    if not users:
-        print("pairplay combine: no policies left to combine", file=sys.stderr)
-        return 2
-    try:
-        reward_rule = common_reward_bonus([p for p in policies if p.participant not in exclude])
-    except ValueError as exc:
-        print(f"pairplay combine: {exc}", file=sys.stderr)
-        return 2
     merged = combine(users)
     if args.out:  # written before the listing, so a reader that stops early loses nothing
         write_policy(args.out, combined_policy_file(merged, users, files, args.seed, f"pairplay {__version__}",
-                                                    reward_rule))
+                                                    reward_rule), args.force)
     print("\n".join(_profile_lines(profiles, policies)))
     print(f"\nmerged: speech {100 * merged.info.speech:.1f}%, head {100 * merged.info.head:.1f}%, "
           f"smile {merged.info.facial}, gaze {merged.info.gaze}\n")

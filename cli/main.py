@@ -1,5 +1,12 @@
 """`pairplay <verb>`: one command line whose verbs match what a researcher does.
 
+Rule: a user's mistake is ONE line on stderr, `pairplay <verb>: <what>
+(<where>)`, and exit 2: argparse's own refusals (Parser.error), any
+`pairplay.errors.UserError` a verb raises, and an OSError (a file or port the
+system refused); Ctrl-C is one line and exit 130. Anything else is a bug of
+ours and keeps its traceback. Every option's help shows its default
+(HelpFormatter, applied to every verb here).
+
 Each verb lives in its own module with `add_arguments(parser)` and
 `run(args) -> int`; it is imported only when used, so `pairplay --help` and a
 verb's start-up stay fast. To add a verb, add one line to VERBS.
@@ -11,6 +18,9 @@ import argparse
 import importlib
 import os
 import sys
+
+from pairplay import __version__
+from pairplay.errors import UserError
 
 # verb -> (module, one-line help)
 VERBS: dict[str, tuple[str, str]] = {
@@ -28,12 +38,34 @@ VERBS: dict[str, tuple[str, str]] = {
 }
 
 
+class HelpFormatter(argparse.HelpFormatter):
+    """Every option's help ends with its default, unless the help already states it
+    (or there is none to state: no value, a flag that is off)."""
+
+    def _get_help_string(self, action: argparse.Action) -> str:
+        text = action.help or ""
+        default = action.default
+        if (not action.option_strings or default is None or default is False or default is argparse.SUPPRESS
+                or default == []
+                or "default" in text.lower() or "%(default)" in text):
+            return text
+        return text + " (default: %(default)s)"
+
+
+class Parser(argparse.ArgumentParser):
+    """argparse, with a usage mistake on ONE line: `pairplay <verb>: <what>`, exit 2."""
+
+    def error(self, message: str):
+        self.exit(2, f"{self.prog}: {message} (see {self.prog} --help)\n")
+
+
 def build_parser(argv: list[str]) -> tuple[argparse.ArgumentParser, argparse.ArgumentParser | None]:
-    parser = argparse.ArgumentParser(prog="pairplay", description=__doc__.splitlines()[0])
+    parser = Parser(prog="pairplay", description=__doc__.splitlines()[0], formatter_class=HelpFormatter)
+    parser.add_argument("--version", action="version", version=f"pairplay {__version__}")
     sub = parser.add_subparsers(dest="verb", metavar="VERB")
     chosen = None
     for verb, (module, help_text) in VERBS.items():
-        p = sub.add_parser(verb, help=help_text, description=help_text)
+        p = sub.add_parser(verb, help=help_text, description=help_text, formatter_class=HelpFormatter)
         if verb in argv[:1]:
             importlib.import_module(module).add_arguments(p)
             chosen = p
@@ -42,6 +74,15 @@ def build_parser(argv: list[str]) -> tuple[argparse.ArgumentParser, argparse.Arg
 
 def main(argv: list[str] | None = None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
+    try:
+        return _main(argv)
+    except KeyboardInterrupt:  # Ctrl-C before the verb ran (while its modules load)
+        verb = argv[0] if argv and argv[0] in VERBS else ""
+        print(f"pairplay{' ' + verb if verb else ''}: interrupted (Ctrl-C); nothing more was written", file=sys.stderr)
+        return 130
+
+
+def _main(argv: list[str]) -> int:
     parser, _ = build_parser(argv)
     args = parser.parse_args(argv)
     if not args.verb:
@@ -53,6 +94,24 @@ def main(argv: list[str] | None = None) -> int:
     except BrokenPipeError:  # the reader went away (`pairplay combine ... | head`): not an error of ours
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())  # no second error at exit's flush
         return 0
+    except KeyboardInterrupt:
+        print(f"pairplay {args.verb}: interrupted (Ctrl-C); nothing more was written", file=sys.stderr)
+        return 130
+    except UserError as err:
+        print(f"pairplay {args.verb}: {err.line()}", file=sys.stderr)
+        return 2
+    except OSError as err:  # the file system or network refused: the user's setup, not our bug
+        print(f"pairplay {args.verb}: {os_error_line(err)}", file=sys.stderr)
+        return 2
+
+
+def os_error_line(err: OSError) -> str:
+    """`<what> (<where>)` of an OSError: its strerror and the file or address it is about."""
+    what = err.strerror or str(err) or type(err).__name__
+    where = err.filename if err.filename is not None else ""
+    if err.filename2 is not None:
+        where = f"{where} -> {err.filename2}"
+    return f"{what} ({where})" if where else what
 
 
 if __name__ == "__main__":

@@ -1,28 +1,29 @@
 """`pairplay recover REC`: complete a recording a crash cut short (replay/recover.py).
 
 Rule: writes REC's readable records into a complete, indexed file (default
-<stem>.recovered.mcap beside it, or -o); the original is never modified. Exit 0
-when the output is complete, 2 when the input cannot be read at all.
+<stem>.recovered.mcap beside it, or -o); the original is never modified, an
+existing output is replaced only with --force, and the output appears only
+when complete. Exit 0 when the output is complete, 2 (one line, nothing
+written) when REC is missing, empty or not MCAP, or the output exists.
 """
 
 from __future__ import annotations
 
 import argparse
 
+from pairplay.cli.args import add_force
+
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("recording", metavar="REC")
-    p.add_argument("-o", "--output", help="output file (default <stem>.recovered.mcap)")
+    p.add_argument("-o", "--output", help="output file (default <stem>.recovered.mcap beside REC)")
+    add_force(p, "an existing output file")
 
 
 def run(args: argparse.Namespace) -> int:
     from pairplay.replay.recover import recover
 
-    try:
-        done = recover(args.recording, args.output)
-    except (OSError, ValueError) as err:
-        print(f"pairplay recover: {err}")
-        return 2
+    done = recover(args.recording, args.output, force=args.force)
     state = f"cut short ({done.reason})" if done.truncated else "complete already"
     print(f"{args.recording}: {state}; {done.messages} messages kept in {done.output}")
     return 0

@@ -7,13 +7,18 @@ dropped), so the viewer shows it as if live. `--as SESSION` re-publishes under
 another session id (the envelope's session is rewritten), so a replay never
 collides with a live session of the same id. `--verify` does not touch the bus:
 fresh services are fed the recorded inputs and every derived event must equal
-the recorded one (services/verify.py); exit 1 if any differs.
+the recorded one (services/verify.py); exit 1 if any differs. Replay's first
+line names its bus endpoint, so a view can attach (`pairplay view --session S
+--connect ENDPOINT`). A REC that is missing, empty, not MCAP or without events
+is refused (one line, exit 2).
 """
 
 from __future__ import annotations
 
 import argparse
 import time
+
+from pairplay.errors import InputError
 
 
 def speed(text: str) -> float:
@@ -25,17 +30,29 @@ def speed(text: str) -> float:
     return value
 
 
+def session_id(text: str) -> str:
+    from pairplay.schemas.keys import check_chunk
+    try:
+        return check_chunk("session id", text)
+    except ValueError as err:
+        raise argparse.ArgumentTypeError(str(err)) from None
+
+
 def add_arguments(p: argparse.ArgumentParser) -> None:
     from pairplay.services.bus import add_bus_arguments
 
     p.add_argument("recording", metavar="REC")
     p.add_argument("--speed", type=speed, default=1.0, help="N times real time, or max (default 1)")
-    p.add_argument("--as", dest="as_session", metavar="SESSION", help="re-publish under this session id")
+    p.add_argument("--as", dest="as_session", metavar="SESSION", type=session_id,
+                   help="re-publish under this session id")
     p.add_argument("--verify", action="store_true", help="re-run fresh services on the recorded inputs and compare")
     add_bus_arguments(p)
 
 
 def run(args: argparse.Namespace) -> int:
+    from pairplay.replay.check import check_recording
+
+    check_recording(args.recording)
     if args.verify:
         from pairplay.services.verify import verify_recording
 
@@ -64,11 +81,17 @@ def run(args: argparse.Namespace) -> int:
     from pairplay.services.replayer import republish
 
     log = read_log(args.recording)
+    if not log.events:
+        raise InputError(f"holds no events to replay{' (' + log.error + ')' if log.error else ''}", args.recording)
     if not log.whole:
         print(f"{args.recording}: not whole ({log.error}); replaying the {len(log.events)} events of its intact parts")
     stop = threading.Event()
     stop_on_signals(stop)
     with Bus(options_from_args(args)) as bus:
+        # a view attaches here: pairplay view --session S --connect <this endpoint>
+        sessions = {args.as_session} if args.as_session else {r.event.session for r in log.events}
+        print(f"replaying session {', '.join(sorted(sessions))}; bus listening on "
+              f"{' '.join(bus.locators()) or '(no listener)'}", flush=True)
         t0 = time.perf_counter()
         n = republish(bus, log.events, args.speed, stop, args.as_session)
         took = time.perf_counter() - t0

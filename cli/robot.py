@@ -14,16 +14,23 @@ from __future__ import annotations
 
 import argparse
 import logging
+import socket
 import threading
 
+from pairplay.core.geometry import N_CARDS
+from pairplay.errors import OptionError, UserError
+from pairplay.schemas.policy import N_ACTIONS
+
 from pairplay.services.bus import Bus, add_bus_arguments, options_from_args, stop_on_signals
-from pairplay.services.robot.backends import FORMS, load_robot_config, open_robot
+from pairplay.services.robot.backends import FORMS, load_robot_config, open_robot, parse_robot_url
 from pairplay.services.robot.bridge import RobotBridge
 from pairplay.services.robot.choice import RobotChoice, check_choice, start_bridge
 from pairplay.services.robot.calibration import CalibrationError, load_calibration
 from pairplay.services.robot.driver import Suggestion
 
 from pairplay.services.robot.choice import NO_ROBOT
+
+CONNECT_PROBE_S = 1.0  # --try: a robot that does not answer a TCP connect in this time is reported
 
 
 def add_robot_arguments(p: argparse.ArgumentParser) -> None:
@@ -56,9 +63,10 @@ def bridge_from_args(bus: Bus, session: str, args: argparse.Namespace) -> RobotB
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--session", help="the session whose suggestions to perform")
-    p.add_argument("--try", dest="try_codes", metavar="CODES", help="comma-separated action codes to perform once")
-    p.add_argument("--observed", type=int, default=7, help="observed card for --try (default 7: row 2, column 2)")
-    p.add_argument("--target", type=int, default=10, help="matching card for --try (default 10: row 2, column 5)")
+    p.add_argument("--try", dest="try_codes", metavar="CODES", type=action_codes,
+                   help="comma-separated action codes (0..87) to perform once")
+    p.add_argument("--observed", type=card, default=7, help="observed card for --try (default 7: row 2, column 2)")
+    p.add_argument("--target", type=card, default=10, help="matching card for --try (default 10: row 2, column 5)")
     add_robot_arguments(p)
     add_bus_arguments(p)
 
@@ -66,20 +74,55 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     logging.basicConfig(level=logging.INFO, format="%(levelname)s %(name)s: %(message)s")
     if bool(args.session) == bool(args.try_codes):
-        print("pairplay robot: give either --session ID (serve a session) or --try CODES (try the robot)")
-        return 2
+        raise OptionError("give either --session ID (serve a session) or --try CODES (try the robot)", "pairplay robot")
     if args.robot == NO_ROBOT:
-        print("pairplay robot: --robot none leaves nothing to do")
-        return 2
+        raise OptionError("--robot none leaves nothing to do", "--robot none")
     try:
         return _try(args) if args.try_codes else _serve(args)
     except (ValueError, CalibrationError) as exc:
-        print(f"pairplay robot: {exc}")
-        return 2
+        if isinstance(exc, UserError):
+            raise
+        raise OptionError(str(exc), "robot options") from None
+
+
+def action_codes(text: str) -> list[int]:
+    """--try's comma-separated action codes, each 0..87 (argparse type)."""
+    try:
+        codes = [int(c) for c in text.split(",") if c.strip()]
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"action codes are integers 0..{N_ACTIONS - 1}, got {text!r}") from None
+    if not codes or any(not 0 <= c < N_ACTIONS for c in codes):
+        raise argparse.ArgumentTypeError(f"action codes are integers 0..{N_ACTIONS - 1}, got {text!r}")
+    return codes
+
+
+def card(text: str) -> int:
+    """A card index 0..17 (argparse type)."""
+    try:
+        value = int(text)
+    except ValueError:
+        value = -1
+    if not 0 <= value < N_CARDS:
+        raise argparse.ArgumentTypeError(f"a card is 0..{N_CARDS - 1}, got {text!r}")
+    return value
+
+
+def probe_robot(url: str, timeout_s: float = CONNECT_PROBE_S) -> None:
+    """OptionError at once if a networked robot does not accept a TCP connection: `--try` is a
+    check before a study, so say so in about a second instead of retrying with backoff."""
+    scheme, host, port, _, _ = parse_robot_url(url)
+    if scheme == "virtual":
+        return
+    try:
+        socket.create_connection((host, port), timeout=timeout_s).close()
+    except OSError as err:
+        reason = err.strerror or ("no answer within %g s" % timeout_s if isinstance(err, TimeoutError) else str(err))
+        raise OptionError(f"the robot does not accept a connection: {reason}", f"--robot {url}") from None
 
 
 def _try(args: argparse.Namespace) -> int:
-    codes = [int(c) for c in args.try_codes.split(",") if c.strip()]
+    codes = args.try_codes
+    probe_robot(args.robot)
     done = threading.Event()
     acted = []
 

@@ -18,6 +18,8 @@ import threading
 import time
 from pathlib import Path
 
+from pairplay.errors import OptionError
+from pairplay.outputs import check_folder
 from pairplay.services.bus import Bus, add_bus_arguments, options_from_args, stop_on_signals
 from pairplay.services.runner import Node
 
@@ -48,15 +50,12 @@ def run(args: argparse.Namespace) -> int:
     config = None
     if args.service == "game" and args.participant:
         from pairplay.cli.session import config_from_args
-        try:
-            config = config_from_args(args)
-        except (ValueError, KeyError) as err:
-            print(f"pairplay run game: {err}")
-            return 2
+        config = config_from_args(args)
         args.session = config.session
     elif not args.session:
-        print(f"pairplay run {args.service}: --session is required")
-        return 2
+        raise OptionError(f"--session is required for the {args.service}", "--session")
+    if args.service == "recorder":
+        check_folder(args.out)
     bus = Bus(options_from_args(args))
     try:
         print(f"listening {' '.join(bus.locators())}", flush=True)
@@ -84,9 +83,8 @@ def run(args: argparse.Namespace) -> int:
             if config is None:  # a restart: the session's config is in its log
                 config = _recorded_config(bus, args.session)
                 if config is None:
-                    print(f"pairplay run game: session {args.session} has no SessionStarted on the bus; "
-                          "give --participant (and the session options) to start it")
-                    return 2
+                    raise OptionError("the session has no SessionStarted on the bus; give --participant (and "
+                                      "the session options) to start it", f"--session {args.session}")
             logic = GameLogic(config)
         elif args.service == "learner":
             from pairplay.services.learner import LearnerLogic

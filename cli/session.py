@@ -31,9 +31,13 @@ import msgspec
 from pairplay.core.rng import STREAMS_VERSION
 from pairplay.schemas.config import DEFAULT_REWARD_BONUS, REWARD_BONUS_RULES, LearnerConfig, LSPIConfig
 from pairplay.schemas.keys import check_chunk
-from pairplay.schemas.policy import PolicyFileError, read_policy
+from pairplay.errors import OptionError, UserError
+from pairplay.outputs import check_folder
+from pairplay.schemas.policy import read_policy
 from pairplay.schemas.session import SessionConfig, learner_overrides, lspi_overrides
 
+from pairplay.cli.args import count, non_negative
+from pairplay.core.geometry import PICKS_UNIT
 from pairplay.cli.robot import add_robot_arguments, check_robot_args, robot_choice
 from pairplay.services.bus import add_bus_arguments, options_from_args, stop_on_signals
 from pairplay.services.session import run_session
@@ -47,14 +51,16 @@ def add_config_arguments(p: argparse.ArgumentParser) -> None:
     g = p.add_argument_group("session")
     g.add_argument("--participant", required=True, help="sim:<persona> (a simulated user) or human:<id>")
     g.add_argument("--session", help="session id (default: <participant>-seed<seed>-game<i>-<UTC time>)")
-    g.add_argument("--seed", type=int, default=0)
-    g.add_argument("--rounds", type=int, default=20)
-    g.add_argument("--game-index", type=int, default=0)
+    g.add_argument("--seed", type=int, default=0, help="the session's seed")
+    g.add_argument("--rounds", type=count, default=20, help="rounds to play")
+    g.add_argument("--game-index", type=non_negative, default=0, help="which game of the seed (0, 1, ...)")
     g.add_argument("--algorithm", choices=("q-learning", "pi-reuse", "fixed", "lspi"), default="q-learning",
-                   help="the learner (lspi: online LSPI, algorithm 2, core/lspi.py)")
+                   help="the learner: Q-learning from scratch (thesis 5.1), pi-reuse of --policy (algorithm 5), "
+                        "--policy played as it is, or online LSPI from scratch (algorithm 2, core/lspi.py)")
     g.add_argument("--lspi-ridge", type=float, help="lspi: delta, the ridge penalty (default 1)")
     g.add_argument("--lspi-every", type=int, help="lspi: K, samples between policy improvements (default 10)")
-    g.add_argument("--policy", help="policy file: the bias policy (pi-reuse) or the fixed policy")
+    g.add_argument("--policy", help="policy file: the bias policy (pi-reuse) or the fixed policy; "
+                                    "refused with q-learning, which uses none")
     g.add_argument("--observed-source", choices=("intended", "first-pick"),
                    help="default: intended for sim:, first-pick for human:")
     g.add_argument("--ignore-rule", choices=("perceived", "time"), help="default: perceived for sim:, time for human:")
@@ -66,9 +72,26 @@ def add_config_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def config_from_args(args: argparse.Namespace) -> SessionConfig:
+    """The session's config from its options; OptionError (a UserError) naming the option if they cannot run."""
+    try:
+        return _config_from_args(args)
+    except KeyError as err:  # an unknown persona
+        raise OptionError(str(err.args[0]), f"--participant {args.participant}") from None
+    except ValueError as err:
+        if isinstance(err, UserError):
+            raise
+        raise OptionError(str(err), "session options") from None
+
+
+def _config_from_args(args: argparse.Namespace) -> SessionConfig:
     sim = args.participant.startswith("sim:")
     if not sim and not args.participant.startswith("human:"):
-        raise ValueError(f"--participant {args.participant!r}: use sim:<persona> or human:<id>")
+        raise OptionError("use sim:<persona> or human:<id>", f"--participant {args.participant}")
+    if args.policy and args.algorithm in ("q-learning", "lspi"):
+        raise OptionError(f"--policy is used only by --algorithm pi-reuse or fixed; {args.algorithm} would ignore it",
+                          f"--policy {args.policy}")
+    if args.algorithm in ("pi-reuse", "fixed") and not args.policy:
+        raise OptionError(f"--algorithm {args.algorithm} needs --policy FILE", f"--algorithm {args.algorithm}")
     who = args.participant.split(":", 1)[1]
     if sim:  # the persona's key names the RNG streams, as in the study (core.study)
         from pairplay.core.personas import persona
@@ -88,6 +111,16 @@ def config_from_args(args: argparse.Namespace) -> SessionConfig:
             raise ValueError(f"--lspi-*: {err}") from None
     elif given:
         raise ValueError(f"--lspi-ridge/--lspi-every need --algorithm lspi, not {args.algorithm}")
+    lspi = msgspec.UNSET
+    given = {k: v for k, v in (("ridge", getattr(args, "lspi_ridge", None)),
+                               ("improve_every", getattr(args, "lspi_every", None))) if v is not None}
+    if args.algorithm == "lspi":
+        try:
+            lspi = lspi_overrides(LSPIConfig(**given))
+        except ValueError as err:
+            raise OptionError(str(err), "--lspi-ridge/--lspi-every") from None
+    elif given:
+        raise OptionError(f"--lspi-ridge/--lspi-every need --algorithm lspi, not {args.algorithm}", "--algorithm")
     actions = []
     if args.policy:
         actions = list(read_policy(args.policy).greedy)
@@ -104,7 +137,8 @@ def config_from_args(args: argparse.Namespace) -> SessionConfig:
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     add_config_arguments(p)
-    p.add_argument("--out", default="recordings", help="directory of the recording (default recordings/)")
+    p.add_argument("--out", default="recordings", help="folder of the recording (default recordings/; a "
+                   "recording is never replaced: an existing <session>.mcap gets a .1, .2 ... beside it)")
     add_robot_arguments(p)
     p.add_argument("--external", action="append", default=[], choices=("learner", "participant", "game"),
                    help="leave this service to another process (`pairplay run`)")
@@ -113,12 +147,12 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     logging.basicConfig(level=logging.INFO, format="%(levelname)s %(name)s: %(message)s")
+    config = config_from_args(args)
     try:
-        config = config_from_args(args)
         check_robot_args(args)
-    except (ValueError, KeyError, PolicyFileError) as err:
-        print(f"pairplay session: {err}")
-        return 2
+    except ValueError as err:
+        raise OptionError(str(err), "robot options") from None
+    check_folder(args.out)
     stop = threading.Event()
     stop_on_signals(stop)
 
@@ -132,9 +166,9 @@ def run(args: argparse.Namespace) -> int:
     from pairplay.replay.reader import read_log
     recorded = read_log(path)
     fold = fold_events(r.event for r in recorded.events)
-    turns = fold.turns_per_round()
+    picks = fold.picks_per_round()
     print(f"recorded {len(recorded.events)} events to {path}")
-    print(f"rounds played: {len(turns)}; turns per round: {turns[:10]}{' ...' if len(turns) > 10 else ''}")
+    print(f"rounds played: {len(picks)}; {PICKS_UNIT}: {picks[:10]}{' ...' if len(picks) > 10 else ''}")
     print(f"rejections: {len(fold.rejections)}; Q updates: {fold.counts.get('QUpdated', 0)}"
           + (f"; LSPI samples: {fold.counts.get('LSPIUpdated', 0)}" if config.algorithm == "lspi" else ""))
     e = fold.ended

@@ -11,6 +11,10 @@ Rule: one command, reproducible by seed, writes a report folder:
   reuse.csv, reuse.png              held-out persona: Q-learning from scratch vs pi-reuse
   speed.csv, speed.png              (--algorithm lspi) LSPI beside Q-learning on the same games
   report.md                         the tables and figures, with the run's settings
+The folder is built beside --out and renamed when complete: an --out that holds
+files is refused unless --force, and Ctrl-C leaves nothing (exit 130). Every
+option's range is checked before any work; the printed tables say their unit
+(picks per round, 18 = perfect).
 """
 
 from __future__ import annotations
@@ -19,35 +23,35 @@ import argparse
 import sys
 from pathlib import Path
 
-from tqdm import tqdm
-
+from pairplay.cli.args import add_force, count, fraction, non_negative
+from pairplay.core.geometry import PICKS_UNIT
 from pairplay.core.personas import PERSONAS
-from pairplay.core.rng import SEED_RANGE
-from pairplay.core.reward import BONUS_RULES
-from pairplay.report.study import StudySettings, run_study, text_table
-from pairplay.schemas.config import DEFAULT_REWARD_BONUS
+from pairplay.errors import OptionError
+from pairplay.schemas.config import DEFAULT_REWARD_BONUS, REWARD_BONUS_RULES as BONUS_RULES
+
+# the study's modules (numpy kernels, matplotlib) load in run(): a mistyped option is refused at once
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--seed", type=int, default=0, help="study seed (default 0)")
     p.add_argument("--personas", default=",".join(PERSONAS),
                    help="comma-separated persona keys (default: all of appendix A)")
-    p.add_argument("--games", type=int, default=10, help="games per persona (thesis: 10)")
-    p.add_argument("--rounds", type=int, default=500, help="rounds per game (thesis: 500)")
-    p.add_argument("--eval-rounds", type=int, default=200,
+    p.add_argument("--games", type=count, default=10, help="games per persona (thesis: 10)")
+    p.add_argument("--rounds", type=count, default=500, help="rounds per game (thesis: 500)")
+    p.add_argument("--eval-rounds", type=count, default=200,
                    help="rounds each greedy policy is evaluated with epsilon 0 (default 200)")
     p.add_argument("--reward-bonus", choices=BONUS_RULES, default=DEFAULT_REWARD_BONUS,
                    help="when the 1/|candidate set| bonus is paid: when the candidate set holds the match "
                         "(correct, default), on every consistent suggestion (consistent, SPEC's literal reading) "
                         "or on a match only (see README: the reward bonus)")
-    p.add_argument("--trained-updates", type=int, default=50,
+    p.add_argument("--trained-updates", type=non_negative, default=50,
                    help="profiles are also given over the states every policy of a persona updated at least "
                         "this many times (default 50; thesis 6.4: untrained states)")
-    p.add_argument("--reuse-seeds", type=int, default=10,
+    p.add_argument("--reuse-seeds", type=count, default=10,
                    help="games per held-out persona in the speed-up experiment (default 10)")
-    p.add_argument("--psi", type=float, default=1.0, help="pi-reuse: psi at the start of each round (default 1)")
-    p.add_argument("--psi-decay", type=float, default=0.95, help="pi-reuse: v, psi's decay per suggestion (default 0.95)")
-    p.add_argument("--reuse-last", type=int, default=50,
+    p.add_argument("--psi", type=fraction, default=1.0, help="pi-reuse: psi at the start of each round (default 1)")
+    p.add_argument("--psi-decay", type=fraction, default=0.95, help="pi-reuse: v, psi's decay per suggestion (default 0.95)")
+    p.add_argument("--reuse-last", type=non_negative, default=50,
                    help="pi-reuse: the last N rounds use the new policy alone (default 50)")
     p.add_argument("--algorithm", choices=("q-learning", "lspi"), default="q-learning",
                    help="the learner: Q-learning (thesis 5.1.1, default) or online LSPI (algorithm 2, core/lspi.py); "
@@ -55,56 +59,57 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--lspi-ridge", type=float, default=1.0, help="lspi: delta, the ridge penalty (default 1)")
     p.add_argument("--lspi-every", type=int, default=10,
                    help="lspi: K, samples between policy improvements (default 10)")
-    p.add_argument("--out", type=Path, default=Path("out/study"), help="report folder (default out/study)")
+    p.add_argument("--out", type=Path, default=Path("out/study"),
+                   help="report folder (default out/study); refused if it holds files, unless --force")
+    add_force(p, "the files of an existing report folder")
     p.add_argument("--train-only", action="store_true",
                    help="stop after training: policy files, curves and figure 6.4 only (for sweeps)")
     p.add_argument("--quiet", action="store_true", help="no progress bars")
 
 
 def _bar(quiet: bool):
+    from tqdm import tqdm
+
     def bar(total: int, desc: str):
         return tqdm(total=total, desc=desc, unit="round", disable=quiet, file=sys.stderr,
                     dynamic_ncols=True, leave=False)
     return bar
 
 
-SETTINGS = [f for f in StudySettings.__dataclass_fields__]
-
-
 def run(args) -> int:
-    settings = StudySettings(**{k: getattr(args, k) for k in SETTINGS})
+    from pairplay.core.rng import SEED_RANGE
+    from pairplay.report.study import StudySettings, run_study, text_table
+
+    settings = StudySettings(**{k: getattr(args, k) for k in StudySettings.__dataclass_fields__})
     try:
         settings.persona_list()
     except KeyError as exc:
-        print(f"pairplay study: {exc.args[0]}", file=sys.stderr)
-        return 2
-    if args.games < 1 or args.rounds < 1 or args.eval_rounds < 1 or args.reuse_seeds < 1:
-        print("pairplay study: --games, --rounds, --eval-rounds and --reuse-seeds must be at least 1",
-              file=sys.stderr)
-        return 2
+        raise OptionError(exc.args[0], f"--personas {args.personas}") from None
     if not SEED_RANGE[0] <= args.seed <= SEED_RANGE[1]:  # every seed in range has its own streams (core.rng)
-        print(f"pairplay study: --seed {args.seed} is outside the accepted range {SEED_RANGE[0]}..{SEED_RANGE[1]}",
-              file=sys.stderr)
-        return 2
+        raise OptionError(f"outside the accepted range {SEED_RANGE[0]}..{SEED_RANGE[1]}", f"--seed {args.seed}")
     try:
         settings.lspi()
     except ValueError as exc:
-        print(f"pairplay study: {exc}", file=sys.stderr)
-        return 2
-    report = run_study(settings, args.out, _bar(args.quiet))
+        raise OptionError(str(exc), "--lspi-ridge/--lspi-every") from None
+    report = run_study(settings, args.out, _bar(args.quiet), force=args.force)
     if settings.train_only:
         print(f"training: {report.timings['training']:.2f} s; policies and curves in {report.out}")
         return 0
+    print(f"learned policies against the references: {PICKS_UNIT}, epsilon 0")
     print(text_table(report.evaluation))
     print()
+    print("user information (algorithm 3): incompatible states, % of the 23 spatial states")
     print(text_table([r[:9] for r in report.profiles]))
     print()
+    print(f"merged policies (algorithm 4) on each persona: {PICKS_UNIT}, epsilon 0")
     print(text_table(report.merges))
     if report.speed is not None:
         print()
         print(text_table(report.speed))
     if report.reuse is not None:
         print()
+        print(f"policy reuse (algorithm 5), each persona held out: first 50 rounds in {PICKS_UNIT}; "
+              "rounds until the greedy policy is within 1.10x the oracle")
         print(text_table(report.reuse))
     print()
     print("  ".join(f"{k}: {v:.2f} s" for k, v in report.timings.items()))

@@ -1,8 +1,12 @@
 """`pairplay view`: watch a session live on the bus, or a recording, in rerun.
 
 Rule: the view only subscribes and draws; it never publishes, so it cannot
-change a session. It saves an .rrd by default (headless, nothing listens on the
-network); `--serve` adds rerun's web viewer, `--spawn` the native viewer.
+change a session. It saves an .rrd by default (headless, nothing listens on
+the network); `--serve` adds rerun's web viewer, `--spawn` the native viewer.
+An existing .rrd is replaced only with --force and the .rrd appears only when
+the view is complete; a recording without events (of the --session asked for)
+is refused and nothing is saved; a taken --grpc-port/--web-port is refused
+before anything starts.
 Rerun's usage analytics stay off for anything the view starts (view_output).
 
   pairplay view --recording recordings/s1.mcap              # -> recordings/s1.rrd
@@ -13,36 +17,39 @@ Rerun's usage analytics stay off for anything the view starts (view_output).
 from __future__ import annotations
 
 import argparse
+import contextlib
 import signal
 import sys
 import threading
 from pathlib import Path
 
-from pairplay.services.bus import add_bus_arguments, open_bus, options_from_args, stop_on_signals
-from pairplay.services.view.output import DEFAULT_GRPC_PORT, DEFAULT_WEB_PORT, ViewOutput, finish, open_stream
-from pairplay.services.view.rerun_logger import RerunView
-from pairplay.services.view.sources import LiveSource, recording_items
-from pairplay.services.view.drive import drive
+from pairplay.cli.args import add_force, float_at_least, port_or_any
+from pairplay.errors import InputError, OptionError, UserError
+from pairplay.outputs import check_output, output_path
+from pairplay.replay.check import check_recording
+from pairplay.services.bus import add_bus_arguments
+from pairplay.services.view import DEFAULT_GRPC_PORT, DEFAULT_WEB_PORT  # without loading rerun (slow)
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     src = parser.add_argument_group("what to view")
     src.add_argument("--session", help="session id: view it live on the bus (or pick it from a recording)")
     src.add_argument("--recording", type=Path, metavar="REC", help="an MCAP recording to view instead of the bus")
-    src.add_argument("--speed", type=float, default=0.0,
+    src.add_argument("--speed", type=float_at_least(0), default=0.0,
                      help="recording pace: 1 = as recorded, 10 = ten times faster, 0 = as fast as possible (default)")
     out = parser.add_argument_group("where the view goes")
     out.add_argument("--out", type=Path, metavar="RRD",
                      help="the .rrd to save (default: next to the recording, or recordings/<session>.rrd)")
+    add_force(out, "an existing .rrd")
     out.add_argument("--no-save", action="store_true", help="do not save an .rrd (needs --serve or --spawn)")
     out.add_argument("--serve", action="store_true",
                      help="serve rerun's web viewer (data on 127.0.0.1 only; see docs/view.md)")
-    out.add_argument("--grpc-port", type=int, default=DEFAULT_GRPC_PORT, help="rerun data port for --serve/--spawn")
-    out.add_argument("--web-port", type=int, default=DEFAULT_WEB_PORT, help="web viewer page port for --serve")
+    out.add_argument("--grpc-port", type=port_or_any, default=DEFAULT_GRPC_PORT, help="rerun data port for --serve/--spawn")
+    out.add_argument("--web-port", type=port_or_any, default=DEFAULT_WEB_PORT, help="web viewer page port for --serve")
     out.add_argument("--spawn", action="store_true", help="open rerun's native viewer (needs a display)")
     out.add_argument("--exit-when-done", action="store_true",
                      help="with --serve: exit when the source ends instead of serving until Ctrl-C")
-    out.add_argument("--q-interval", type=float, default=0.25, metavar="S",
+    out.add_argument("--q-interval", type=float_at_least(0), default=0.25, metavar="S",
                      help="log the Q-table at most every S seconds of session time (default 0.25)")
     out.add_argument("--rerun-analytics", action="store_true",
                      help="leave rerun's usage analytics to your rerun settings (default: off for viewers started here)")
@@ -57,22 +64,37 @@ def _default_rrd(args: argparse.Namespace) -> Path:
 
 def run(args: argparse.Namespace) -> int:
     if not args.recording and not args.session:
-        print("pairplay view: give --session ID (live) or --recording REC", file=sys.stderr)
-        return 2
-    if args.recording and not args.recording.is_file():
-        print(f"pairplay view: no recording at {args.recording}", file=sys.stderr)
-        return 2
+        raise OptionError("give --session ID (live) or --recording REC", "what to view")
+    if args.recording:
+        check_recording(args.recording)
     if args.no_save and not (args.serve or args.spawn):
-        print("pairplay view: --no-save leaves no output; add --serve or --spawn", file=sys.stderr)
-        return 2
-    out = ViewOutput(rrd=None if args.no_save else (args.out or _default_rrd(args)), serve=args.serve,
-                     spawn=args.spawn, grpc_port=args.grpc_port, web_port=args.web_port,
-                     rerun_analytics=args.rerun_analytics)
+        raise OptionError("--no-save leaves no output; add --serve or --spawn", "--no-save")
+    rrd = None if args.no_save else (args.out or _default_rrd(args))
+    if rrd is not None:
+        check_output(rrd, args.force)  # before any work: an existing .rrd stays unless --force
+    with output_path(rrd, args.force) if rrd is not None else contextlib.nullcontext() as tmp:
+        _view(args, tmp)
+    if rrd is not None:
+        print(f"pairplay view: saved {rrd}", file=sys.stderr)
+    return 0
+
+
+def _view(args: argparse.Namespace, tmp_rrd: Path | None) -> None:
+    """Draw into the temporary .rrd (renamed by the caller when this returns)."""
+    from pairplay.services.bus import open_bus, options_from_args, stop_on_signals
+    from pairplay.services.view.drive import drive
+    from pairplay.services.view.output import ViewOutput, finish, open_stream
+    from pairplay.services.view.rerun_logger import RerunView
+    from pairplay.services.view.sources import LiveSource, recording_items
+
+    out = ViewOutput(rrd=tmp_rrd, serve=args.serve, spawn=args.spawn, grpc_port=args.grpc_port,
+                     web_port=args.web_port, rerun_analytics=args.rerun_analytics)
     try:
         rec, where = open_stream(out, recording_name=args.session or args.recording.stem)
-    except (RuntimeError, ValueError, OSError) as err:  # a viewer that cannot start, a port in use
-        print(f"pairplay view: {err}", file=sys.stderr)
-        return 1
+    except (RuntimeError, ValueError) as err:  # a viewer that cannot start
+        if isinstance(err, UserError):
+            raise
+        raise OptionError(str(err), "--spawn" if args.spawn else "the view's output") from None
     for line in where:
         print(f"pairplay view: {line}", file=sys.stderr)
     stop = threading.Event()
@@ -84,11 +106,16 @@ def run(args: argparse.Namespace) -> int:
         if args.recording:
             summary = drive(view, recording_items(args.recording, speed=args.speed, session=args.session),
                             stop=stop, echo=echo)
+            if summary.events == 0:
+                which = f"of session {args.session}" if args.session else "to view"
+                raise InputError(f"holds no events {which}; nothing saved", args.recording)
         else:
             with open_bus(options_from_args(args)) as bus:
                 source = LiveSource(bus, args.session)
                 print(f"pairplay view: listening to session {args.session}; Ctrl-C to stop", file=sys.stderr)
                 summary = drive(view, source.items(stop), stop=stop, echo=echo)
+            if summary.events == 0:
+                raise InputError("no event of this session arrived; nothing saved", f"--session {args.session}")
         print(f"pairplay view: {summary.events} events, {summary.notes} notes, "
               f"Q-table logged {summary.q_logged} times", file=sys.stderr)
         if args.serve and not args.exit_when_done and not stop.is_set():
@@ -99,4 +126,3 @@ def run(args: argparse.Namespace) -> int:
         finish(rec)
         for sig, handler in saved_handlers.items():  # run() may be called in-process (tests, tools)
             signal.signal(sig, handler)
-    return 0

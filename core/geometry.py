@@ -25,6 +25,10 @@ ROWS, COLS = 3, 6
 N_CARDS = ROWS * COLS
 N_PAIRS = N_CARDS // 2
 ALL_CARDS = (1 << N_CARDS) - 1  # bit mask of the whole board
+# The one unit of performance everywhere (study, session, rebuild): cards picked to
+# clear the board, 2 per turn; perfect play finds each pair with its first 2 picks.
+PERFECT_PICKS = N_CARDS
+PICKS_UNIT = f"picks per round ({PERFECT_PICKS} = perfect)"
 
 # The nine cells of figure 4.4, read row by row. (row sign, column sign) of the
 # matching card relative to the observed card: -1 up/left, 0 same, +1 down/right.

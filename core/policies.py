@@ -11,6 +11,7 @@ import numpy as np
 
 import msgspec
 
+from pairplay.errors import InputError, OptionError
 from pairplay.schemas.config import DEFAULT_REWARD_BONUS, LearnerConfig, LSPIConfig, Persona
 from pairplay.schemas.policy import PolicyFile, UserInfo
 
@@ -68,17 +69,57 @@ def users_from_policies(policies: list[PolicyFile], seed: int, exclude=()) -> tu
     return users, profiles
 
 
-def common_reward_bonus(policies: list[PolicyFile]) -> str:
-    """The reward rule all the policies were learned under; ValueError if they differ.
+def _some(names: list[str], shown: int = 3) -> str:
+    return ", ".join(names[:shown]) + (f" and {len(names) - shown} more" if len(names) > shown else "")
+
+
+def common_reward_bonus(policies: list[PolicyFile], names: list[str] | None = None) -> str:
+    """The reward rule all the policies were learned under; InputError naming the files of each rule if they differ.
 
     Algorithm 4 settles "Error" states by summing the users' Q-values, which are
-    comparable only under one reward.
+    comparable only under one reward. `names[i]` is where policies[i] came from.
     """
-    rules = sorted({p.reward_bonus for p in policies})
-    if len(rules) != 1:
-        raise ValueError(f"the policies were learned under different reward rules ({', '.join(rules)}): "
-                         "their Q-values cannot be compared")
-    return rules[0]
+    names = names or [p.participant for p in policies]
+    by_rule: dict[str, list[str]] = {}
+    for p, name in zip(policies, names):
+        by_rule.setdefault(p.reward_bonus, []).append(name)
+    if len(by_rule) != 1:
+        rules = sorted(by_rule)
+        raise InputError(f"the policies were learned under different reward rules ({', '.join(rules)}): "
+                         "their Q-values cannot be compared; "
+                         + "; ".join(f"{rule}: {_some(by_rule[rule])}" for rule in rules))
+    return next(iter(by_rule))
+
+
+def check_distinct(policies: list[PolicyFile], names: list[str]) -> None:
+    """InputError naming both files if two policies are the same learning (equal Q-table, update
+    counts and greedy actions): given twice, one would weigh double in a profile and a merge."""
+    seen: dict[bytes, str] = {}
+    for p, name in zip(policies, names):
+        key = q_of(p).tobytes() + np.asarray(p.visits, dtype=np.int64).tobytes() + greedy_of(p).tobytes()
+        if key in seen:
+            same = "given twice" if seen[key] == name else f"the same policy as {seen[key]}"
+            raise InputError(f"{same}: each policy may count once", name)
+        seen[key] = name
+
+
+def check_exclude(policies: list[PolicyFile], exclude) -> None:
+    """OptionError if --exclude names a participant no policy has (a typo would be ignored)."""
+    known = sorted({p.participant for p in policies})
+    unknown = sorted(set(exclude) - set(known))
+    if unknown:
+        raise OptionError(f"no policy of {', '.join(map(repr, unknown))}; participants: {', '.join(known)}",
+                          f"--exclude {','.join(sorted(exclude))}")
+
+
+def check_profiles_computable(policies: list[PolicyFile], names: list[str]) -> None:
+    """InputError if a participant has one policy: algorithm 3 finds incompatibilities between a
+    user's policies, so one policy always gives 0% / 0%, a result it did not compute."""
+    alone = [(p.participant, name) for (p, name) in zip(policies, names)
+             if sum(q.participant == p.participant for q in policies) == 1]
+    if alone:
+        raise InputError("a profile (algorithm 3) compares two or more policies of a participant; only one of "
+                         + _some([f"{who} ({name})" for who, name in alone]))
 
 
 def combined_policy_file(merged: Combined, users: list[User], merged_from: list[str], seed: int | None,

@@ -210,7 +210,9 @@ def reuse_experiment(personas: Sequence[Persona], users: UserSet, oracle_picks: 
     n = len(flat)
     scratch = run_games(flat, seed_list, rounds, config, mode="q", progress=progress, snapshot_every=snapshot_every,
                         reward_bonus=reward_bonus)
-    reuse = run_games(flat, seed_list, rounds, config, mode="reuse", bias=bias, progress=progress,
+    # one progress count over both runs: the second continues where the first ended
+    after_scratch = None if progress is None else (lambda done: progress(n * rounds + done))
+    reuse = run_games(flat, seed_list, rounds, config, mode="reuse", bias=bias, progress=after_scratch,
                       snapshot_every=snapshot_every, reward_bonus=reward_bonus)
     # How good is the learner's own greedy policy after every `snapshot_every` rounds?
     snaps = np.concatenate([scratch.snapshots, reuse.snapshots])  # (2n, k, 24)

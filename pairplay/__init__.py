@@ -6,7 +6,10 @@ science, pure numpy), ``pairplay.gym`` (the task as a Gymnasium
 environment), ``pairplay.replay`` (the MCAP event log),
 ``pairplay.report`` (the study's report), ``pairplay.services`` (processes on
 the Zenoh bus), ``pairplay.bench`` (benchmarks) and ``pairplay.cli`` (the
-command line).
+command line). Two small modules of the root serve every layer:
+``pairplay.errors`` (the kinds of user mistake, each shown as one line) and
+``pairplay.outputs`` (the one way a user's file is written: never replaced
+without ``force``, a temporary file renamed when complete).
 
 The public API a researcher scripts against is the names below, importable
 from ``pairplay`` itself (loaded on first use, so ``import pairplay`` stays

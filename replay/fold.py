@@ -87,6 +87,10 @@ class SessionFold:
     def turns_per_round(self) -> list[int]:
         return [self.rounds[r].turns for r in sorted(self.rounds)]
 
+    def picks_per_round(self) -> list[int]:
+        """Cards picked per round, the study's unit (2 per turn; 18 = perfect play)."""
+        return [2 * self.rounds[r].turns for r in sorted(self.rounds)]
+
     def reward_per_round(self) -> list[float]:
         return [self.rounds[r].reward for r in sorted(self.rounds)]
 

@@ -22,17 +22,20 @@ from pathlib import Path
 import numpy as np
 
 from pairplay import __version__
+from pairplay.errors import InputError
+from pairplay.outputs import output_file
 from pairplay.core.learning import greedy_policy
 from pairplay.core.personas import persona
 from pairplay.core.policies import to_policy_file
 from pairplay.schemas.policy import PolicyFile, write_policy
 from pairplay.schemas.session import SessionConfig
 
+from .check import check_recording
 from .fold import SessionFold, fold_events, stream_seed
 from .reader import read_log
 
 
-class RebuildError(ValueError):
+class RebuildError(InputError):
     """A recording that cannot be rebuilt; the message says why."""
 
 
@@ -90,6 +93,8 @@ def rebuild_events(events, source: str = "", truncated: bool = False, note: str 
 
 
 def rebuild_recording(path: str | Path) -> Rebuilt:
+    """The recording at `path` rebuilt; InputError (RebuildError) if it is not a session recording."""
+    check_recording(path)
     log = read_log(path)
     note = "" if log.whole else f"{'damaged' if log.damage else 'truncated'}: {log.error}"
     return rebuild_events((r.event for r in log.events), str(path), log.truncated, note,
@@ -104,15 +109,25 @@ def curve_rows(fold: SessionFold) -> list[dict]:
              "learned": s.learned, "inconsistent": s.inconsistent} for r, s in sorted(fold.rounds.items())]
 
 
-def write_outputs(rebuilt: Rebuilt, out_dir: str | Path) -> list[Path]:
-    """<session>.policy.json and <session>.curve.csv in `out_dir`."""
-    out_dir = Path(out_dir)
-    out_dir.mkdir(parents=True, exist_ok=True)
-    stem = rebuilt.config.session
-    policy_path = out_dir / f"{stem}.policy.json"
-    write_policy(policy_path, rebuilt.policy)
-    curve_path = out_dir / f"{stem}.curve.csv"
-    with open(curve_path, "w", newline="") as f:
+def output_stem(source: str | Path) -> str:
+    """The name a recording's outputs share: its file name without `.mcap`, so the
+    outputs of different files never collide (X.mcap -> X, X.recovered.mcap -> X.recovered)."""
+    name = Path(source).name
+    return name[: -len(".mcap")] if name.endswith(".mcap") else name
+
+
+def output_paths(rebuilt: Rebuilt, out_dir: str | Path) -> list[Path]:
+    """Where write_outputs puts a recording's policy file and learning curve."""
+    stem = output_stem(rebuilt.source) if rebuilt.source else rebuilt.config.session
+    return [Path(out_dir) / f"{stem}.policy.json", Path(out_dir) / f"{stem}.curve.csv"]
+
+
+def write_outputs(rebuilt: Rebuilt, out_dir: str | Path, force: bool = False) -> list[Path]:
+    """<stem>.policy.json and <stem>.curve.csv in `out_dir` (output_paths), each written
+    whole or not at all; an existing one is replaced only with `force` (OutputError)."""
+    policy_path, curve_path = output_paths(rebuilt, out_dir)
+    write_policy(policy_path, rebuilt.policy, force)
+    with output_file(curve_path, "w", force, newline="") as f:
         w = csv.DictWriter(f, fieldnames=CURVE_COLUMNS)
         w.writeheader()
         w.writerows(curve_rows(rebuilt.fold))

@@ -20,6 +20,10 @@ from pathlib import Path
 from mcap.records import Channel, Message, Metadata, Schema
 from mcap.writer import CompressionType, Writer
 
+from pairplay.errors import OutputError
+from pairplay.outputs import check_output, output_file
+
+from .check import check_recording
 from .mcapscan import scan
 from .writer import CHUNK_SIZE, PROFILE
 
@@ -39,18 +43,23 @@ def default_output(path: Path) -> Path:
     return path.with_name(path.stem + ".recovered.mcap")
 
 
-def recover(path: str | Path, output: str | Path | None = None) -> Recovered:
-    """Copy the intact records of `path` into a complete file (see rule)."""
-    path = Path(path)
+def recover(path: str | Path, output: str | Path | None = None, force: bool = False) -> Recovered:
+    """Copy the intact records of `path` into a complete file (see rule).
+
+    InputError if `path` is not an MCAP file at all; OutputError if `output` exists
+    (unless `force`) or is the input; the output appears only when complete
+    (pairplay.outputs)."""
+    path = check_recording(path)
     output = Path(output) if output is not None else default_output(path)
     if output.resolve() == path.resolve():
-        raise ValueError("recover writes a new file; give an output path other than the input")
+        raise OutputError("recover writes a new file; give an output path other than the input", output)
+    check_output(output, force)
     checked = scan(path)
     messages, ended, last_round = 0, False, -1
     schema_ids: dict[int, int] = {}
     channel_ids: dict[int, int] = {}
     topics: dict[int, str] = {}
-    with open(output, "wb") as out:
+    with output_file(output, "wb", force) as out:
         writer = Writer(out, chunk_size=CHUNK_SIZE, compression=CompressionType.ZSTD, enable_data_crcs=True)
         writer.start(profile=PROFILE, library="pairplay recover")
         # the summary's Schemas and Channels first: they name the channels of messages whose own

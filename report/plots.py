@@ -1,7 +1,11 @@
 """Figures of the study report (matplotlib, headless Agg backend).
 
 Rule: one function per figure, each takes plain arrays and a path and writes a
-PNG; nothing here computes results.
+PNG; nothing here computes results. Every figure explains itself: each axis
+says its quantity and unit (performance is always picks per round, 18 =
+perfect), each shaded band and reference line is in a legend, and panels that
+are compared share their y-range. A figure is written through a temporary file
+(pairplay.outputs), so a reader never sees half a PNG.
 """
 
 from __future__ import annotations
@@ -13,6 +17,8 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
+
+from pairplay.core.geometry import PERFECT_PICKS, PICKS_UNIT  # noqa: E402
 
 # Figure 6.4: which feature each panel isolates, and the two personas compared.
 FIGURE_6_4 = (
@@ -53,11 +59,10 @@ def learning_curves(curves: dict[str, np.ndarray], names: dict[str, str], path: 
         ax.set_xlabel("round")
         ax.grid(alpha=0.3)
         ax.legend(frameon=False)
-    axes[0][0].set_ylabel("picks per round")
-    fig.suptitle(f"mean over games, {smooth}-round moving window; band: \u00b11 sd over games", fontsize=9)
+    axes[0][0].set_ylabel(PICKS_UNIT)
+    fig.suptitle(f"mean over games, {smooth}-round moving window; shaded band: \u00b11 sd over games", fontsize=9)
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    _save(fig, path, dpi=110)
     return [p[0] for p in panels]
 
 
@@ -76,8 +81,7 @@ def comparison_bars(labels: list[str], series: dict[str, np.ndarray], path: Path
     ax.grid(axis="y", alpha=0.3)
     ax.legend(frameon=False, ncol=len(series))
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    _save(fig, path, dpi=110)
 
 
 def profiles(keys: list[str], names: dict[str, str], infos: list, features: list[tuple[int, int, int, int]],
@@ -100,6 +104,8 @@ def profiles(keys: list[str], names: dict[str, str], infos: list, features: list
     for xi, info in zip(x, infos):
         left.text(xi, 103, ("S" if info.facial else "-") + ("G" if info.gaze else "-"), ha="center", fontsize=9)
     left.set_ylim(0, 140)
+    left.set_yticks(range(0, 101, 20))
+    left.set_ylabel("incompatible states, % of the 23 spatial states")
     left.set_xticks(x, [names.get(k, k) for k in keys], rotation=25, ha="right")
     left.set_title("extracted user information (S: smile used, G: gaze used)")
     left.legend(frameon=False, fontsize=8, loc="upper left", ncol=2)
@@ -108,11 +114,12 @@ def profiles(keys: list[str], names: dict[str, str], infos: list, features: list
         right.bar(x + (j - 1.5) * 0.2, feats[:, j], 0.2, label=label)
     right.set_xticks(x, [names.get(k, k) for k in keys], rotation=25, ha="right")
     right.set_ylim(0, 7.2)
+    right.set_yticks(range(0, 7))
+    right.set_ylabel("feature level (1 = weakest, 6 = best)")
     right.set_title("persona features (appendix A, 1..6)")
     right.legend(frameon=False, fontsize=8, ncol=4, loc="upper left")
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    _save(fig, path, dpi=110)
 
 
 def merged_policies(panels: list[tuple[str, dict[str, np.ndarray], np.ndarray]], state_count: int,
@@ -126,17 +133,16 @@ def merged_policies(panels: list[tuple[str, dict[str, np.ndarray], np.ndarray]],
             ax.scatter(states, policy[:state_count], marker=marker, facecolors="none",
                        edgecolors="0.45", s=28, label=name, lw=0.8)
         ax.scatter(states, merged[:state_count], marker="x", color="tab:blue", s=40, label="merged", lw=1.4)
-        ax.axhspan(32.5, 43.5, color="tab:blue", alpha=0.07, lw=0)  # "exact position" speech codes
-        ax.set_xlabel("state code")
-        ax.set_ylabel("action code")
+        ax.axhspan(32.5, 43.5, color="tab:blue", alpha=0.07, lw=0,
+                   label='codes 33-43: "exact position" speech')
+        ax.set_xlabel(f"state code (0..{state_count - 1}, core/geometry.py)")
+        ax.set_ylabel("action code (0..87, core/actions.py)")
         ax.set_ylim(-2, 90)
         ax.set_title(title)
         ax.grid(alpha=0.3)
-        if len(inputs) <= 3:
-            ax.legend(frameon=False, fontsize=8, loc="upper right")
+        ax.legend(frameon=False, fontsize=8, loc="upper right")
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    _save(fig, path, dpi=110)
 
 
 def reuse_curves(keys: list[str], names: dict[str, str], curves: np.ndarray, oracle: list[float],
@@ -144,20 +150,34 @@ def reuse_curves(keys: list[str], names: dict[str, str], curves: np.ndarray, ora
     """Online picks per round, Q-learning from scratch vs pi-reuse, one small panel per held-out persona."""
     cols = 4
     rows = (len(keys) + cols - 1) // cols
-    fig, axes = plt.subplots(rows, cols, figsize=(3.4 * cols, 2.6 * rows), squeeze=False, sharex=True)
+    fig, axes = plt.subplots(rows, cols, figsize=(3.4 * cols, 2.6 * rows), squeeze=False, sharex=True, sharey=True)
+    drawn = []
     for ax, key, c, o in zip(axes.flat, keys, curves, oracle):
-        ax.plot(_smooth(c[0], smooth), label="from scratch", lw=1.1)
-        ax.plot(_smooth(c[1], smooth), label="pi-reuse", lw=1.1)
+        drawn += [_smooth(c[0], smooth), _smooth(c[1], smooth)]
+        ax.plot(drawn[-2], label="from scratch", lw=1.1)
+        ax.plot(drawn[-1], label="pi-reuse", lw=1.1)
         ax.axhline(o, color="0.3", lw=0.8, ls="--", label="oracle")
         ax.set_title(names.get(key, key), fontsize=9)
         ax.grid(alpha=0.3)
+    # one y-range for every panel, holding every curve and every oracle line
+    low = min([PERFECT_PICKS, *oracle, *(float(d.min()) for d in drawn)])
+    high = max([*oracle, *(float(d.max()) for d in drawn)])
+    axes.flat[0].set_ylim(low - 0.03 * (high - low) - 0.5, high + 0.03 * (high - low) + 0.5)
     for ax in axes.flat[len(keys):]:
         ax.axis("off")
     axes.flat[0].legend(frameon=False, fontsize=7)
     fig.supxlabel("round")
-    fig.supylabel("picks per round")
+    fig.supylabel(f"{PICKS_UNIT}, {smooth}-round mean")
     fig.tight_layout()
-    fig.savefig(path, dpi=100)
+    _save(fig, path, dpi=100)
+
+
+def _save(fig, path: Path, dpi: int) -> None:
+    """Write the figure whole or not at all (a temporary file renamed; pairplay.outputs)."""
+    from pairplay.outputs import output_path
+
+    with output_path(path) as tmp:
+        fig.savefig(tmp, dpi=dpi, format="png")
     plt.close(fig)
 
 

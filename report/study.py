@@ -29,10 +29,12 @@ import numpy as np
 
 from pairplay import __version__
 from pairplay.core import study
+from pairplay.core.geometry import PICKS_UNIT
 from pairplay.core.personas import PERSONAS, persona
 from pairplay.core.policies import to_policy_file
 from pairplay.core.reward import BONUS_RULE_TEXT
 from pairplay.schemas.config import DEFAULT_REWARD_BONUS, LearnerConfig, LSPIConfig
+from pairplay.outputs import output_folder
 from pairplay.schemas.policy import write_policy
 
 from pairplay.report import plots
@@ -149,9 +151,11 @@ def gap_section(cmp: study.Comparison, training: study.Training, threshold: floa
     for i, key in enumerate(cmp.persona):
         if cmp.learned[i] <= threshold * cmp.oracle[i]:
             continue
-        rows = [["state", "learned (most policies)", "E[r]", "oracle", "E[r]", "mean loss"]]
+        rows = [["state", "learned: the plurality action (k of n policies)", "E[r]", "oracle", "E[r]", "mean loss"]]
+        own = training.greedy[[j for j, p in enumerate(training.personas) if p.key == key]]
         for s, modal, v_modal, best, v_best, loss in study.policy_gaps(cmp, training, i):
-            rows.append([STATE_NAMES[s], f"{modal}: {ACTION_NAMES[modal]}", f"{v_modal:+.2f}",
+            k = int((own[:, s] == modal).sum())
+            rows.append([STATE_NAMES[s], f"{modal}: {ACTION_NAMES[modal]} ({k} of {len(own)})", f"{v_modal:+.2f}",
                          f"{best}: {ACTION_NAMES[best]}", f"{v_best:+.2f}", f"{loss:.2f}"])
         lines += [f"**{key}** ({cmp.learned[i] / cmp.oracle[i]:.3f} x the oracle): the states where its learned "
                   "policies lose most expected reward (given the suggestion is considered).", "",
@@ -219,15 +223,22 @@ def write_merges(out: Path, personas, users: study.UserSet, args) -> dict:
     return merges
 
 
-def run_study(args: StudySettings, out: Path, progress_bar: Callable = _no_bar) -> StudyReport:
-    """Run the study with `args` and write its report folder `out` (created).
+def run_study(args: StudySettings, out: Path, progress_bar: Callable = _no_bar, force: bool = False) -> StudyReport:
+    """Run the study with `args` and write its report folder `out`.
 
     `progress_bar(total, desc)` returns a context manager whose value has `update(n)`
     (a tqdm bar, say): one per phase, counted in simulated rounds.
-    Raises KeyError for an unknown persona."""
+    The folder is built beside `out` and renamed when complete (pairplay.outputs.output_folder):
+    OutputError, before any work, if `out` exists with files in it and not `force`; an
+    interrupted study leaves nothing. Raises KeyError for an unknown persona."""
     personas = args.persona_list()
-    out = Path(out)
-    out.mkdir(parents=True, exist_ok=True)
+    with output_folder(out, force) as tmp:
+        report = _run_study(args, personas, tmp, progress_bar)
+    report.out = Path(out)
+    return report
+
+
+def _run_study(args: StudySettings, personas, out: Path, progress_bar: Callable) -> StudyReport:
     config = LearnerConfig()
     names = {p.key: p.name for p in personas}
     timings: dict[str, float] = {}
@@ -258,7 +269,7 @@ def run_study(args: StudySettings, out: Path, progress_bar: Callable = _no_bar) 
     with open(out / "evaluation.csv", "w", newline="") as f:
         csv.writer(f).writerows(table)
     plots.comparison_bars(cmp.persona, {"user alone": cmp.alone, "learned": cmp.learned, "oracle": cmp.oracle},
-                          out / "evaluation.png", "picks per round (epsilon 0)")
+                          out / "evaluation.png", f"{PICKS_UNIT}, epsilon 0")
     oracle = dict(zip(cmp.persona, cmp.oracle))
     speed_rows = speed_lines = None
     if snapshot_every:

@@ -19,6 +19,8 @@ from __future__ import annotations
 
 import msgspec
 
+from pairplay.errors import InputError
+
 from .config import REWARD_BONUS_RULES, UNSTATED_REWARD_BONUS, LearnerConfig, LSPIConfig, Persona
 
 FORMAT = "pairplay.policy"
@@ -26,7 +28,7 @@ VERSION = 1
 N_STATES, N_ACTIONS = 24, 88  # pinned here so the contract does not import core
 
 
-class PolicyFileError(ValueError):
+class PolicyFileError(InputError):
     """A policy file that cannot be used; the message says why."""
 
 
@@ -107,15 +109,12 @@ def decode_policy(data: bytes, source: str = "policy file") -> PolicyFile:
         raise PolicyFileError(f"{source}: corrupt or not a policy file: {exc}") from None
 
 
-def write_policy(path, policy: PolicyFile) -> None:
-    """Write a policy file atomically (a crash never leaves half a policy)."""
-    from pathlib import Path
+def write_policy(path, policy: PolicyFile, force: bool = False) -> None:
+    """Write a policy file atomically (a crash never leaves half a policy); an existing
+    file is replaced only with `force` (OutputError otherwise; pairplay.outputs)."""
+    from pairplay.outputs import write_bytes
 
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_suffix(path.suffix + ".tmp")
-    tmp.write_bytes(encode_policy(policy))
-    tmp.replace(path)
+    write_bytes(path, encode_policy(policy), force)
 
 
 def read_policy(path) -> PolicyFile:

@@ -73,6 +73,8 @@ class SessionConfig(msgspec.Struct, frozen=True, kw_only=True):
             raise ValueError(f"session id {self.session!r} must be non-empty, without / * $ # ? @ or spaces")
         if self.rounds < 1:
             raise ValueError(f"rounds must be >= 1, got {self.rounds}")
+        if self.game_index < 0:
+            raise ValueError(f"game_index must be >= 0, got {self.game_index}")
         if self.algorithm not in ALGORITHMS:
             raise ValueError(f"algorithm {self.algorithm!r} is not one of {ALGORITHMS}")
         if self.observed_source not in OBSERVED_SOURCES:

@@ -30,9 +30,23 @@ from typing import Callable
 
 import zenoh
 
+from pairplay.errors import UserError
+
 log = logging.getLogger("pairplay.bus")
 LOOPBACK_ANY_PORT = "tcp/127.0.0.1:0"
 MODES = ("peer", "client", "router")
+
+
+class BusError(UserError):
+    """The bus cannot be opened as configured: a malformed or unusable --listen/--connect
+    endpoint, a port in use, a peer that refuses, a missing or invalid --zenoh-config."""
+
+
+def _zenoh_reason(err: Exception) -> str:
+    """Zenoh's message without the Rust source location it ends with."""
+    text = " ".join(str(err).split())
+    cut = text.find(" at /")
+    return (text[:cut] if cut > 0 else text).rstrip(" .!") or type(err).__name__
 
 
 @dataclass
@@ -43,12 +57,31 @@ class BusOptions:
     zenoh_config: str | None = None  # a Zenoh JSON5 config file: TLS, access control, ...
     scouting_delay_ms: int = 100
 
+    def where(self) -> str:
+        """The options a failure to open the bus is about, as given on the command line."""
+        parts = [f"--zenoh-config {self.zenoh_config}"] if self.zenoh_config else []
+        parts += [f"--listen {e}" for e in self.listen or []] + [f"--connect {e}" for e in self.connect]
+        return ", ".join(parts) or f"mode {self.mode}, listening on {LOOPBACK_ANY_PORT}"
+
     def to_zenoh(self) -> zenoh.Config:
-        """The Zenoh config: the file (if any) with our options laid over it."""
+        """The Zenoh config: the file (if any) with our options laid over it; BusError if it cannot be made."""
         if self.mode not in MODES:
-            raise ValueError(f"bus mode {self.mode!r} is not one of {MODES}")
+            raise BusError(f"bus mode {self.mode!r} is not one of {MODES}", "--mode")
         if self.zenoh_config:
-            config = zenoh.Config.from_file(self.zenoh_config)
+            try:
+                config = zenoh.Config.from_file(self.zenoh_config)
+            except zenoh.ZError as err:
+                raise BusError(f"cannot use the Zenoh config: {_zenoh_reason(err)}",
+                               f"--zenoh-config {self.zenoh_config}") from None
+        else:
+            config = None
+        try:
+            return self._zenoh_config(config)
+        except zenoh.ZError as err:
+            raise BusError(f"bad bus endpoint: {_zenoh_reason(err)}", self.where()) from None
+
+    def _zenoh_config(self, config: zenoh.Config | None) -> zenoh.Config:
+        if config is not None:
             config.insert_json5("mode", json.dumps(self.mode))
             if self.listen is not None:
                 config.insert_json5("listen/endpoints", json.dumps(self.listen))
@@ -96,7 +129,7 @@ class Bus:
         # express: each event leaves at once instead of waiting to be batched with others
         # (an event is a decision someone waits for; throughput stays BLOCK-safe either way)
         self.express = express
-        self.session = session if session is not None else zenoh.open(self.options.to_zenoh())
+        self.session = session if session is not None else _open(self.options)
         self._publishers: dict[str, zenoh.Publisher] = {}
         self._lock = threading.Lock()
         self._declared: list = []
@@ -197,6 +230,15 @@ class Bus:
 
     def __exit__(self, *exc) -> None:
         self.close()
+
+
+def _open(options: BusOptions) -> zenoh.Session:
+    """zenoh.open, its refusals as a BusError naming the options (one line for the user)."""
+    config = options.to_zenoh()
+    try:
+        return zenoh.open(config)
+    except zenoh.ZError as err:
+        raise BusError(f"cannot open the bus: {_zenoh_reason(err)}", options.where()) from None
 
 
 def open_bus(options: BusOptions | None = None) -> Bus:

@@ -12,7 +12,8 @@ state and the merged information; with `output_path` the combined policy file
 is written too. Paths are taken relative to, and must stay inside, the
 combiner's directory (`--out` of `pairplay run combiner`, default the current
 one). Anything wrong with the request (a missing or corrupt file, no
-users left) is answered with ok=false and the reason: the combiner keeps running.
+users left, a policy given twice, mixed reward rules, an output_path that
+exists: it is never replaced) is answered with ok=false and the reason: the combiner keeps running.
 """
 
 from __future__ import annotations
@@ -21,7 +22,8 @@ from pathlib import Path
 
 from pairplay import __version__
 from pairplay.core.combine import combine
-from pairplay.core.policies import combined_policy_file, common_reward_bonus, users_from_policies
+from pairplay.core.policies import check_distinct, combined_policy_file, common_reward_bonus, users_from_policies
+from pairplay.errors import UserError
 from pairplay.replay.rebuild import RebuildError, rebuild_recording
 from pairplay.schemas import events as ev
 from pairplay.schemas.policy import PolicyFile, PolicyFileError, read_policy, write_policy
@@ -53,7 +55,7 @@ class CombinerLogic:
             policies = [read_policy(self._inside(p)) for p in r.policies]
             policies += [rebuild_recording(self._inside(p)).policy for p in r.recordings]
             return [self._combine(r, inputs, policies)]
-        except (OSError, PolicyFileError, RebuildError, ValueError) as err:
+        except (OSError, PolicyFileError, RebuildError, ValueError, UserError) as err:
             return [ev.PolicyCombined(request_id=r.request_id, inputs=inputs, actions=[], ok=False,
                                       error=f"{type(err).__name__}: {err}")]
 
@@ -61,7 +63,9 @@ class CombinerLogic:
         users, _ = users_from_policies(policies, r.seed, exclude=set(r.exclude))
         if not users:
             raise ValueError("no policies left to combine")
-        rule = common_reward_bonus([p for p in policies if p.participant not in set(r.exclude)])
+        check_distinct(policies, inputs)
+        kept = [(p, name) for p, name in zip(policies, inputs) if p.participant not in set(r.exclude)]
+        rule = common_reward_bonus([p for p, _ in kept], [name for _, name in kept])
         merged = combine(users)
         out = ""
         if r.output_path:

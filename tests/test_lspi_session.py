@@ -81,6 +81,6 @@ def test_pairplay_session_and_rebuild_with_lspi_from_the_command_line(tmp_path):
     policy = read_policy(tmp_path / "rebuilt" / "lspicli.policy.json")
     assert policy.algorithm == "lspi" and policy.lspi.improve_every == 5 and sum(policy.visits) > 10
     r = pairplay("session", "--participant", "sim:deaf", "--lspi-every", "5", "--out", str(tmp_path))
-    assert r.returncode == 2 and "--algorithm lspi" in r.stdout  # this verb reports on stdout (as its other errors)
+    assert r.returncode == 2 and "--algorithm lspi" in r.stderr and r.stderr.count("\n") == 1
     r = pairplay("session", "--participant", "sim:deaf", "--algorithm", "lspi", "--lspi-ridge", "0", "--out", str(tmp_path))
-    assert r.returncode == 2 and "ridge" in r.stdout
+    assert r.returncode == 2 and "ridge" in r.stderr and r.stderr.count("\n") == 1

@@ -12,6 +12,9 @@ import struct
 
 import pytest
 
+from pairplay.errors import InputError
+from pairplay.replay.check import MCAP_MAGIC
+
 from pairplay.replay.mcapscan import MAGIC, scan
 from pairplay.replay.reader import read_log
 from pairplay.replay.rebuild import rebuild_recording
@@ -71,6 +74,10 @@ def test_a_cut_at_any_offset_keeps_exactly_the_chunks_before_it(whole, tmp_path)
         got = [r.payload for r in log.events]
         assert got == full[:len(got)], cut  # nothing invented, nothing reordered
         assert len(got) == kept, cut  # every chunk wholly before the cut is read
+        if cut < len(MCAP_MAGIC):  # not even the magic: not a recording, and recover says so (issue 10, item 4)
+            with pytest.raises(InputError):
+                recover(p, tmp_path / "out.mcap")
+            continue
         done = recover(p, tmp_path / "out.mcap")
         assert done.messages == kept and done.truncated and scan(done.output).whole
         (tmp_path / "out.mcap").unlink()

@@ -6,6 +6,8 @@ import json
 import jsonschema
 import numpy as np
 import pytest
+
+from pairplay.errors import OutputError
 from mcap.reader import make_reader
 
 from pairplay.core.learning import q_update
@@ -98,7 +100,7 @@ def test_unflushed_writer_file_holds_every_flushed_chunk(tmp_path):
 def test_recover_refuses_to_overwrite_its_input(tmp_path):
     path = tmp_path / "a.mcap"
     write(path, 3)
-    with pytest.raises(ValueError):
+    with pytest.raises(OutputError):
         recover(path, path)
 
 

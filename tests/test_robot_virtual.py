@@ -63,9 +63,9 @@ def test_pairplay_robot_try_performs_codes_and_refuses_bad_options(capsys):
     out = capsys.readouterr().out
     assert "action 35: done" in out and '"text":"Try at row 2 and column 5"' in out and "action 0: nothing" in out
     assert main(["robot", "--robot", "ros://x", "--try", "1"]) == 2
-    assert "unknown backend" in capsys.readouterr().out
+    assert "unknown backend" in capsys.readouterr().err
     assert main(["robot", "--try", "1", "--calibration", "/nonexistent.json"]) == 2
-    assert "cannot read calibration" in capsys.readouterr().out
+    assert "cannot read calibration" in capsys.readouterr().err
 
 
 def test_robot_none_means_no_bridge():

@@ -18,7 +18,9 @@ def test_session_then_rebuild_then_verify_then_recover(tmp_path):
                  "--out", str(tmp_path))
     assert r.returncode == 0, r.stdout + r.stderr
     rec = tmp_path / "cli1.mcap"
-    assert rec.exists() and "rounds played: 5" in r.stdout
+    assert rec.exists() and "rounds played: 5; picks per round (18 = perfect): [" in r.stdout
+    picks = [int(x) for x in r.stdout.split("picks per round (18 = perfect): [")[1].split("]")[0].split(",")]
+    assert len(picks) == 5 and all(n >= 18 and n % 2 == 0 for n in picks)  # picks, not turns
     r = pairplay("rebuild", str(rec), "--out", str(tmp_path / "rebuilt"))
     assert r.returncode == 0, r.stdout + r.stderr
     policy = read_policy(tmp_path / "rebuilt" / "cli1.policy.json")
@@ -34,19 +36,22 @@ def test_session_then_rebuild_then_verify_then_recover(tmp_path):
     assert "verify: PASS" in r.stdout, r.stdout  # recovered whole
     r = pairplay("replay", str(rec), "--speed", "max")
     assert r.returncode == 0 and "replayed" in r.stdout
+    first = r.stdout.splitlines()[0]  # where a view attaches: pairplay view --session cli1 --connect ENDPOINT
+    assert first.startswith("replaying session cli1; bus listening on tcp/127.0.0.1:"), first
 
 
 def test_bad_command_lines_get_a_clear_error(tmp_path):
     r = pairplay("session", "--participant", "sim:nobody", "--out", str(tmp_path))
-    assert r.returncode == 2 and "unknown persona" in r.stdout
+    assert r.returncode == 2 and "unknown persona" in r.stderr
     r = pairplay("session", "--participant", "robot:x", "--out", str(tmp_path))
-    assert r.returncode == 2 and "sim:<persona> or human:<id>" in r.stdout
+    assert r.returncode == 2 and "sim:<persona> or human:<id>" in r.stderr
     r = pairplay("rebuild", str(tmp_path / "missing.mcap"), "--out", str(tmp_path))
-    assert r.returncode == 1 and "cannot rebuild" in r.stdout
+    assert r.returncode == 2 and "no such recording" in r.stderr
     junk = tmp_path / "junk.mcap"
     junk.write_bytes(b"junk")
     r = pairplay("rebuild", str(junk), "--out", str(tmp_path))
-    assert r.returncode == 1 and "no SessionStarted" in r.stdout
+    assert r.returncode == 2 and "not an MCAP recording" in r.stderr
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["junk.mcap"]  # nothing written
 
 
 def test_services_run_alone_in_their_own_processes_join_a_session(tmp_path):

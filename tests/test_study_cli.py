@@ -116,3 +116,16 @@ def test_policies_learned_under_different_rewards_are_not_combined(study_dir, tm
     assert main(["combine", str(study_dir / "policies" / "blind"), str(study_dir / "policies" / "deaf"),
                  "-o", str(out)]) == 0
     assert read_policy(out).reward_bonus == "correct"
+
+
+def test_the_combiner_service_refuses_what_combine_refuses(study_dir):
+    from pairplay.schemas import events as ev
+    from pairplay.services.combiner import CombinerLogic
+
+    logic = CombinerLogic(study_dir)
+    same, deaf = "policies/blind/game-00.json", "policies/deaf/game-00.json"
+    [twice] = logic.handle(ev.CombineRequested(request_id="twice", policies=[same, same, deaf]))
+    assert not twice.ok and "given twice" in twice.error and same in twice.error
+    before = (study_dir / "report.md").read_bytes()
+    [over] = logic.handle(ev.CombineRequested(request_id="over", policies=[same, deaf], output_path="report.md"))
+    assert not over.ok and "exists" in over.error and (study_dir / "report.md").read_bytes() == before

@@ -6,3 +6,7 @@ viewer, a served one), where events come from (`sources`: a recording or the
 bus) and reading an `.rrd` back (`readback`). The view only subscribes; it
 never publishes.
 """
+
+# rerun's default ports, here so the command line can show them without loading rerun
+DEFAULT_GRPC_PORT = 9876
+DEFAULT_WEB_PORT = 9090

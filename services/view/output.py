@@ -39,10 +39,11 @@ from urllib.parse import quote
 
 import rerun as rr
 
+from pairplay.errors import OptionError
+
+from pairplay.services.view import DEFAULT_GRPC_PORT, DEFAULT_WEB_PORT  # noqa: F401 (re-exported)
 from pairplay.services.view.rerun_logger import APP_ID, blueprint
 
-DEFAULT_GRPC_PORT = 9876  # rerun's defaults
-DEFAULT_WEB_PORT = 9090
 SPAWN_TIMEOUT_S = 15.0  # the native viewer takes a few seconds to start
 
 
@@ -99,15 +100,34 @@ def spawn_viewer(port: int, analytics_off: bool = True) -> subprocess.Popen:
     return viewer
 
 
+def require_free_port(host: str, port: int, option: str) -> None:
+    """OptionError if `host:port` cannot be bound now. rerun's servers bind in a thread of
+    their own and only log a failure (then the first flush raises), so we ask first."""
+    if port == 0:
+        return
+    with socket.socket() as probe:
+        probe.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)  # as rerun's listener: TIME_WAIT is fine
+        try:
+            probe.bind((host, port))
+        except OSError as err:
+            raise OptionError(f"port {port} on {host} is taken ({err.strerror}); choose another",
+                              f"{option} {port}") from None
+
+
 def open_stream(out: ViewOutput, recording_name: str = "") -> tuple[rr.RecordingStream, list[str]]:
-    """A RecordingStream with the requested sinks; returns it and lines saying where it goes."""
+    """A RecordingStream with the requested sinks; returns it and lines saying where it goes.
+    OptionError (before anything starts) if a port it needs is taken."""
+    if out.serve:
+        require_free_port("127.0.0.1", out.grpc_port, "--grpc-port")
+        require_free_port("0.0.0.0", out.web_port, "--web-port")
+    elif out.spawn:
+        require_free_port("127.0.0.1", out.grpc_port, "--grpc-port")
     rec = rr.RecordingStream(APP_ID)
     sinks: list = []
     where: list[str] = []
     if out.rrd is not None:
         out.rrd.parent.mkdir(parents=True, exist_ok=True)
-        sinks.append(rr.FileSink(str(out.rrd)))
-        where.append(f"saving {out.rrd}")
+        sinks.append(rr.FileSink(str(out.rrd)))  # the caller says where it was saved once it is complete
     if out.spawn:
         spawn_viewer(out.grpc_port, analytics_off=not out.rerun_analytics)
         sinks.append(rr.GrpcSink(f"rerun+http://127.0.0.1:{out.grpc_port}/proxy"))

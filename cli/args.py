@@ -1,0 +1,63 @@
+"""Option types shared by the verbs: numbers with their range, ports, the --force flag.
+
+Rule: a value out of range is refused by argparse itself, before any work, with
+the range in the message (`argument --rounds: must be at least 1, got -1`);
+main's Parser prints it on one line. A verb states its ranges where it declares
+its options, never later in its run().
+"""
+
+from __future__ import annotations
+
+import argparse
+
+
+def int_at_least(low: int):
+    """An argparse type: an integer >= low."""
+    def parse(text: str) -> int:
+        try:
+            value = int(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"not an integer: {text!r}") from None
+        if value < low:
+            raise argparse.ArgumentTypeError(f"must be at least {low}, got {value}")
+        return value
+    parse.__name__ = f"integer >= {low}"
+    return parse
+
+
+def float_at_least(low: float, above: bool = False):
+    """An argparse type: a number >= low (> low with `above`)."""
+    def parse(text: str) -> float:
+        try:
+            value = float(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"not a number: {text!r}") from None
+        if value != value or (value <= low if above else value < low):
+            raise argparse.ArgumentTypeError(f"must be {'above' if above else 'at least'} {low:g}, got {text}")
+        return value
+    parse.__name__ = f"number {'>' if above else '>='} {low:g}"
+    return parse
+
+
+def port_or_any(text: str) -> int:
+    """A TCP port, or 0 for one the system picks."""
+    value = int_at_least(0)(text)
+    if value > 65535:
+        raise argparse.ArgumentTypeError(f"a port is 0..65535, got {value}")
+    return value
+
+
+def fraction(text: str) -> float:
+    """A number in 0..1 (a probability, a decay factor)."""
+    value = float_at_least(0)(text)
+    if value > 1:
+        raise argparse.ArgumentTypeError(f"must be between 0 and 1, got {text}")
+    return value
+
+
+count = int_at_least(1)  # rounds, games, seeds: at least one
+non_negative = int_at_least(0)
+
+
+def add_force(p: argparse.ArgumentParser, what: str = "existing outputs") -> None:
+    p.add_argument("--force", action="store_true", help=f"replace {what} (never replaced without it)")

@@ -1,0 +1,41 @@
+"""The mistakes a user can make, as exception kinds the command line knows.
+
+Rule: code anywhere in pairplay raises a `UserError` (or a subclass) for a
+mistake the user can fix: a missing or unreadable input, an output that
+already exists, an option out of range, a bus endpoint that cannot be used.
+Its message says what is wrong and `where` says which file, option or
+endpoint. `pairplay.cli.main` turns it into ONE line on stderr,
+`pairplay <verb>: <what> (<where>)`, and exit status 2; anything else is a
+bug of ours and keeps its traceback. Standard library only (every layer
+imports this).
+"""
+
+from __future__ import annotations
+
+
+class UserError(Exception):
+    """A mistake the user can fix. `str(err)` says what, `err.where` says where ('' if nowhere)."""
+
+    def __init__(self, what: str, where: str | object = ""):
+        super().__init__(what)
+        self.what = what
+        self.where = str(where) if where not in (None, "") else ""
+
+    def line(self) -> str:
+        """What and where, on one line."""
+        text = " ".join(self.what.split())
+        return f"{text} ({self.where})" if self.where and self.where not in text else text
+
+    __str__ = line  # wherever it is shown (a log, an event's error field), it says where
+
+
+class InputError(UserError, ValueError):
+    """An input is missing, empty or not what the verb needs."""
+
+
+class OutputError(UserError):
+    """An output cannot be written where asked (exists, is a folder, read-only, collides)."""
+
+
+class OptionError(UserError, ValueError):
+    """An option's value is out of its range or meaningless with the others."""

@@ -1,0 +1,216 @@
+"""Every file pairplay writes for a user goes through here: no clobber, atomic.
+
+Rule: an existing output is never replaced unless the caller says `force`
+(the verbs' `--force`); a write goes to a temporary file beside its target
+(same folder, so the rename is atomic) and is renamed onto the target only
+when it is complete; on any error, or Ctrl-C, the temporary file (and any
+folder made for it) is removed and the target is untouched. Without `force` the final step is a hard link
+(`os.link` fails if the target appeared meanwhile), so even a file created
+while we worked is not replaced. A folder of outputs (a study's report) is
+built in a temporary folder and renamed as a whole. Refusals are
+`OutputError`s naming the path, raised before any work where the caller
+checks first (`check_output`, `check_outputs`, `check_folder`).
+
+The one exception is a live recording (services/recorder.py): it streams to
+its final name so that a crash loses at most its last 0.1 s (`pairplay
+recover` completes it), and it never replaces a file (`free_path`).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import errno
+import os
+import shutil
+from pathlib import Path
+from typing import IO, Iterable, Iterator
+
+from pairplay.errors import OutputError
+
+FORCE_HINT = "exists; --force replaces it"
+
+
+def _existing_ancestor(path: Path) -> Path:
+    p = path.absolute().parent
+    while not p.exists() and p != p.parent:
+        p = p.parent
+    return p
+
+
+def _check_parent(path: Path) -> None:
+    parent = _existing_ancestor(path)
+    if not parent.is_dir():
+        raise OutputError("cannot write there: a file stands where a folder is needed", parent)
+    if not os.access(parent, os.W_OK | os.X_OK):
+        raise OutputError("cannot write there: the folder is read-only", parent)
+
+
+def check_output(path: str | Path, force: bool = False) -> Path:
+    """`path` as a Path if a file may be written there; OutputError otherwise.
+
+    Refused: a folder, an existing file (unless `force`), a place whose nearest
+    existing folder is a file or read-only."""
+    path = Path(path)
+    if path.is_dir():
+        raise OutputError("is a folder; give a file name", path)
+    if (path.exists() or path.is_symlink()) and not force:
+        raise OutputError(FORCE_HINT, path)
+    _check_parent(path)
+    return path
+
+
+def check_outputs(paths: Iterable[str | Path], force: bool = False) -> list[Path]:
+    """check_output for each, and no two the same file (outputs of different inputs never collide)."""
+    seen: dict[Path, Path] = {}
+    out = []
+    for p in paths:
+        p = check_output(p, force)
+        key = p.absolute()
+        if key in seen:
+            raise OutputError("two outputs would be written to the same file", p)
+        seen[key] = p
+        out.append(p)
+    return out
+
+
+def check_folder(path: str | Path) -> Path:
+    """`path` as a Path if it is, or can become, a folder we write into; OutputError otherwise."""
+    path = Path(path)
+    if path.exists() and not path.is_dir():
+        raise OutputError("is a file, not a folder", path)
+    if path.is_dir():
+        if not os.access(path, os.W_OK | os.X_OK):
+            raise OutputError("cannot write there: the folder is read-only", path)
+    else:
+        _check_parent(path)
+    return path
+
+
+def _temp_name(path: Path) -> Path:
+    return path.with_name(f".{path.name}.{os.getpid()}.{os.urandom(3).hex()}.tmp")
+
+
+def _missing_folders(path: Path) -> list[Path]:
+    """The folders of `path` (itself included) that do not exist yet, deepest first."""
+    missing = []
+    p = path.absolute()
+    while not p.exists() and p != p.parent:
+        missing.append(p)
+        p = p.parent
+    return missing
+
+
+def _remove_empty(folders: list[Path]) -> None:
+    """Undo _mkdir after a failure: the folders it created, if still empty (nothing written)."""
+    for folder in folders:
+        try:
+            folder.rmdir()
+        except OSError:
+            break
+
+
+def _mkdir(path: Path) -> None:
+    try:
+        path.mkdir(parents=True, exist_ok=True)
+    except FileExistsError:
+        raise OutputError("cannot write there: a file stands where a folder is needed", path) from None
+    except PermissionError:
+        raise OutputError("cannot write there: the folder is read-only", _existing_ancestor(path / "x")) from None
+
+
+def _commit(tmp: Path, path: Path, force: bool) -> None:
+    if force:
+        os.replace(tmp, path)
+        return
+    try:
+        os.link(tmp, path)
+    except FileExistsError:
+        tmp.unlink(missing_ok=True)
+        raise OutputError("appeared while it was being written; not replaced", path) from None
+    except OSError as err:  # a file system without hard links: check, then rename
+        if err.errno not in (errno.EPERM, errno.ENOTSUP, errno.EOPNOTSUPP, errno.EXDEV, errno.EMLINK):
+            raise
+        if path.exists():
+            tmp.unlink(missing_ok=True)
+            raise OutputError("appeared while it was being written; not replaced", path) from None
+        os.replace(tmp, path)
+        return
+    tmp.unlink()
+
+
+@contextlib.contextmanager
+def output_path(path: str | Path, force: bool = False) -> Iterator[Path]:
+    """A temporary path beside `path` to write to (for writers that take a name: matplotlib,
+    rerun's FileSink, MCAP); it becomes `path` when the block ends without error."""
+    path = check_output(path, force)
+    created = _missing_folders(path.parent)
+    _mkdir(path.parent)
+    tmp = _temp_name(path)
+    done = False
+    try:
+        yield tmp
+        if not tmp.exists():
+            raise OutputError("nothing was written", path)
+        _commit(tmp, path, force)
+        done = True
+    finally:
+        tmp.unlink(missing_ok=True)
+        if not done:
+            _remove_empty(created)
+
+
+@contextlib.contextmanager
+def output_file(path: str | Path, mode: str = "wb", force: bool = False, **open_kw) -> Iterator[IO]:
+    """`open(path, mode)` for writing, through a temporary file (see output_path)."""
+    if not mode.startswith("w"):
+        raise ValueError(f"output_file writes a new file; mode {mode!r}")
+    with output_path(path, force) as tmp:
+        with open(tmp, mode, **open_kw) as f:
+            yield f
+
+
+def write_bytes(path: str | Path, data: bytes, force: bool = False) -> Path:
+    with output_file(path, "wb", force) as f:
+        f.write(data)
+    return Path(path)
+
+
+def write_text(path: str | Path, text: str, force: bool = False) -> Path:
+    with output_file(path, "w", force, encoding="utf-8") as f:
+        f.write(text)
+    return Path(path)
+
+
+def _is_empty_dir(path: Path) -> bool:
+    return path.is_dir() and not any(path.iterdir())
+
+
+@contextlib.contextmanager
+def output_folder(path: str | Path, force: bool = False) -> Iterator[Path]:
+    """A new temporary folder beside `path` to fill; when the block ends without error it
+    becomes `path`. A non-empty `path` is refused unless `force`; with `force` each file
+    written replaces its namesake there and the folder's other files stay."""
+    path = check_folder(path)
+    if path.exists() and not _is_empty_dir(path) and not force:
+        raise OutputError("exists and is not empty; --force replaces the files written there", path)
+    created = _missing_folders(path.absolute().parent)
+    _mkdir(path.absolute().parent)
+    tmp = _temp_name(path)
+    tmp.mkdir()
+    done = False
+    try:
+        yield tmp
+        if not path.exists() or _is_empty_dir(path):
+            os.replace(tmp, path)  # rename(2) onto an empty folder is atomic
+        else:
+            for src in sorted(tmp.rglob("*")):
+                if src.is_file():
+                    dst = path / src.relative_to(tmp)
+                    _mkdir(dst.parent)
+                    os.replace(src, dst)
+        done = True
+    finally:
+        if tmp.exists():
+            shutil.rmtree(tmp, ignore_errors=True)
+        if not done:
+            _remove_empty(created)

@@ -1,0 +1,262 @@
+"""Every ordinary mistake, typed as a user would: one line, non-zero exit, nothing written.
+
+Each case runs `python -m pairplay ...` as a subprocess in a folder of its own
+(a copy of the same fixtures: a real recording, an empty and a random file,
+policy files, existing outputs) and must give: a non-zero exit, exactly one
+line on stderr naming the problem, no traceback, and every file of the folder
+as it was (nothing replaced, nothing added, no temporary file left). The cases
+run in parallel threads (each is its own process), so the table takes seconds.
+Read-only cases mount a read-only tmpfs in a mount namespace of their own
+(`unshare`, as root); without it they are skipped.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+import shutil
+import socket
+import subprocess
+import sys
+from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import pytest
+
+from pairplay.cli.main import main
+
+SAMPLE = Path(__file__).resolve().parents[1] / "recordings" / "samples" / "sim-ashley.mcap"
+CAN_UNSHARE = os.geteuid() == 0 and shutil.which("unshare") is not None
+
+
+def _closed_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+@dataclass
+class Case:
+    name: str
+    args: list[str]
+    expect: str  # a piece of the one stderr line
+    readonly: bool = False  # run with ./ro a read-only file system
+    code: int = 2
+    result: subprocess.CompletedProcess | None = field(default=None, repr=False)
+    before: dict = field(default_factory=dict, repr=False)
+    after: dict = field(default_factory=dict, repr=False)
+
+
+TAKEN = socket.socket()  # held open for the whole module: a port in use
+TAKEN.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+TAKEN.bind(("127.0.0.1", 0))
+TAKEN.listen()
+TAKEN_PORT = TAKEN.getsockname()[1]
+CLOSED = _closed_port()
+SIM = ["session", "--participant", "sim:blind", "--rounds", "2"]
+
+CASES = [
+    # item 4: input that is not what the verb needs
+    Case("recover a missing file", ["recover", "missing.mcap"], "no such recording (missing.mcap)"),
+    Case("recover a zero-byte file", ["recover", "empty.mcap"], "empty file (0 bytes)"),
+    Case("recover random bytes", ["recover", "random.mcap"], "not an MCAP recording: it does not start with MCAP's magic bytes (random.mcap)"),
+    Case("recover a folder", ["recover", "policies"], "a folder, not a recording"),
+    Case("replay a missing file", ["replay", "missing.mcap"], "no such recording"),
+    Case("replay a zero-byte file", ["replay", "empty.mcap", "--speed", "max"], "empty file"),
+    Case("replay random bytes", ["replay", "random.mcap", "--speed", "max"], "not an MCAP recording"),
+    Case("verify random bytes", ["replay", "random.mcap", "--verify"], "not an MCAP recording"),
+    Case("view a zero-byte file", ["view", "--recording", "empty.mcap"], "empty file"),
+    Case("view random bytes", ["view", "--recording", "random.mcap"], "not an MCAP recording"),
+    Case("view a session the recording does not hold",
+         ["view", "--recording", "rec.mcap", "--session", "wrong", "--out", "new.rrd"], "holds no events of session wrong"),
+    Case("rebuild random bytes", ["rebuild", "random.mcap", "--out", "out"], "not an MCAP recording"),
+    Case("rebuild a missing file", ["rebuild", "rec.mcap", "missing.mcap", "--out", "out"], "no such recording"),
+    Case("profile a missing file", ["profile", "missing.json"], "no such policy file"),
+    # item 3: an existing output is never replaced without --force; outputs never collide
+    Case("recover -o an existing file", ["recover", "rec.mcap", "-o", "existing.mcap"], "exists; --force"),
+    Case("recover beside its existing output", ["recover", "old.mcap"], "old.recovered.mcap"),
+    Case("view --out an existing .rrd", ["view", "--recording", "rec.mcap", "--out", "existing.rrd"], "exists; --force"),
+    Case("view's default .rrd exists", ["view", "--recording", "rec.mcap"], "rec.rrd"),
+    Case("combine -o an existing file", ["combine", "policies", "-o", "existing.json"], "exists; --force"),
+    Case("combine -o a folder", ["combine", "policies", "-o", "policies"], "is a folder"),
+    Case("rebuild over existing outputs", ["rebuild", "rec.mcap", "--out", "rebuilt"], "exists; --force"),
+    Case("rebuild the same file twice", ["rebuild", "rec.mcap", "rec.mcap", "--out", "out"], "given twice"),
+    Case("rebuild two files of one name", ["rebuild", "rec.mcap", "other/rec.mcap", "--out", "out"],
+         "would write the same output"),
+    Case("study into a folder with files", ["study", "--quiet", "--out", "policies"], "not empty; --force"),
+    # item 5: every option validated, the bus's refusals are one line
+    Case("study --out an existing file", ["study", "--quiet", "--out", "existing.json"], "is a file"),
+    Case("study --rounds -1", ["study", "--rounds", "-1"], "--rounds: must be at least 1, got -1"),
+    Case("study --reuse-seeds 0", ["study", "--reuse-seeds", "0"], "--reuse-seeds: must be at least 1"),
+    Case("study --games 0", ["study", "--games", "0"], "--games: must be at least 1"),
+    Case("study --psi 2", ["study", "--psi", "2"], "--psi: must be between 0 and 1"),
+    Case("study unknown persona", ["study", "--personas", "blind,nobody"], "unknown persona 'nobody'"),
+    Case("session --game-index -1", SIM + ["--game-index", "-1"], "--game-index: must be at least 0"),
+    Case("session --rounds 0", SIM[:3] + ["--rounds", "0"], "--rounds: must be at least 1"),
+    Case("session --policy with q-learning", SIM + ["--policy", "existing.json"], "--policy is used only by"),
+    Case("session pi-reuse without --policy", SIM + ["--algorithm", "pi-reuse"], "needs --policy"),
+    Case("session --policy not a policy", SIM + ["--algorithm", "pi-reuse", "--policy", "random.mcap"], "random.mcap"),
+    Case("session unknown persona", ["session", "--participant", "sim:nobody"], "unknown persona"),
+    Case("session --out an existing file", SIM + ["--out", "existing.json"], "is a file, not a folder"),
+    Case("session bad --listen", SIM + ["--listen", "bogus"], "bad bus endpoint"),
+    Case("session --listen a port in use", SIM + ["--listen", f"tcp/127.0.0.1:{TAKEN_PORT}"],
+         f"--listen tcp/127.0.0.1:{TAKEN_PORT}"),
+    Case("session unreachable --connect", SIM + ["--connect", f"tcp/127.0.0.1:{CLOSED}"], "cannot open the bus"),
+    Case("session missing --zenoh-config", SIM + ["--zenoh-config", "missing.json5"], "--zenoh-config missing.json5"),
+    Case("session invalid --zenoh-config", SIM + ["--zenoh-config", "random.mcap"], "cannot use the Zenoh config"),
+    Case("run a learner without --session", ["run", "learner"], "--session is required"),
+    Case("replay --as 'bad id'", ["replay", "rec.mcap", "--as", "bad id"], "--as: session id 'bad id'"),
+    Case("replay --speed -1", ["replay", "rec.mcap", "--speed", "-1"], "speed must be > 0"),
+    Case("view --speed -1", ["view", "--recording", "rec.mcap", "--speed", "-1", "--out", "new.rrd"],
+         "--speed: must be at least 0"),
+    Case("view --serve with its data port taken",
+         ["view", "--recording", "rec.mcap", "--serve", "--no-save", "--grpc-port", str(TAKEN_PORT), "--web-port", "0"],
+         f"--grpc-port {TAKEN_PORT}"),
+    Case("view without a source", ["view"], "give --session ID"),
+    Case("view live with an unreachable --connect", ["view", "--session", "s1", "--connect", f"tcp/127.0.0.1:{CLOSED}"],
+         "cannot open the bus"),
+    Case("replay to an unreachable --connect", ["replay", "rec.mcap", "--connect", f"tcp/127.0.0.1:{CLOSED}"],
+         "cannot open the bus"),
+    Case("study --eval-rounds 0", ["study", "--eval-rounds", "0"], "--eval-rounds: must be at least 1"),
+    Case("session with a bad session id", SIM + ["--session", "a/b"], "session id 'a/b'"),
+    Case("combine nothing left after --exclude", ["combine", "policies", "--exclude", "blind,deaf"],
+         "no policies left to combine"),
+    Case("profile --min-updates -1", ["profile", "policies", "--min-updates", "-1"], "must be at least 0"),
+    Case("robot --try against a refused connection", ["robot", "--try", "35", "--robot", f"iristk://127.0.0.1:{CLOSED}"],
+         "does not accept a connection"),
+    Case("robot --try a code out of range", ["robot", "--try", "88"], "action codes are integers 0..87"),
+    # item 7: meaningless input to combine and profile
+    Case("combine the same file twice", ["combine", "policies/blind/game-00.json", "policies/blind/game-00.json",
+                                         "policies/deaf"], "given twice"),
+    Case("combine a folder twice", ["combine", "policies", "policies"], "given twice"),
+    Case("combine a copy of a policy", ["combine", "policies", "copy.json"], "the same policy as"),
+    Case("profile a single policy", ["profile", "policies/blind/game-00.json"], "compares two or more policies"),
+    Case("combine --exclude a typo", ["combine", "policies", "--exclude", "blnd"], "no policy of 'blnd'"),
+    Case("combine mixed reward rules names the files", ["combine", "policies/deaf", "spec/blind.json"],
+         "consistent: spec/blind.json"),
+    # read-only places (a read-only tmpfs mounted at ./ro)
+    Case("study --out on a read-only file system", ["study", "--quiet", "--out", "ro/study"], "read-only", readonly=True),
+    Case("session --out on a read-only file system", SIM + ["--out", "ro/rec"], "read-only", readonly=True),
+    Case("combine -o on a read-only file system", ["combine", "policies", "-o", "ro/m.json"], "read-only", readonly=True),
+    Case("recover -o on a read-only file system", ["recover", "rec.mcap", "-o", "ro/r.mcap"], "read-only", readonly=True),
+    Case("rebuild --out on a read-only file system", ["rebuild", "rec.mcap", "--out", "ro"], "read-only", readonly=True),
+]
+
+
+def _snapshot(root: Path) -> dict[str, str]:
+    return {str(p.relative_to(root)): hashlib.sha256(p.read_bytes()).hexdigest() if p.is_file() else "dir"
+            for p in sorted(root.rglob("*"))}
+
+
+def _fixtures(root: Path) -> None:
+    shutil.copy(SAMPLE, root / "rec.mcap")
+    shutil.copy(SAMPLE, root / "old.mcap")
+    (root / "other").mkdir()
+    shutil.copy(SAMPLE, root / "other" / "rec.mcap")
+    (root / "old.recovered.mcap").write_bytes(b"the user's file")
+    (root / "empty.mcap").write_bytes(b"")
+    (root / "random.mcap").write_bytes(os.urandom(2000))
+    for name in ("existing.mcap", "existing.rrd", "existing.json", "rec.rrd"):
+        (root / name).write_bytes(b"the user's file " + name.encode())
+    assert main(["study", "--quiet", "--train-only", "--personas", "blind,deaf", "--games", "2", "--rounds", "20",
+                 "--out", str(root / "study")]) == 0
+    shutil.move(root / "study" / "policies", root / "policies")
+    shutil.rmtree(root / "study")
+    shutil.copy(root / "policies" / "blind" / "game-01.json", root / "copy.json")
+    spec = json.loads((root / "policies" / "blind" / "game-00.json").read_text())
+    spec["reward_bonus"] = "consistent"
+    (root / "spec").mkdir()
+    (root / "spec" / "blind.json").write_text(json.dumps(spec))
+    (root / "rebuilt").mkdir()
+    (root / "rebuilt" / "rec.policy.json").write_bytes(b"the user's rebuilt policy")
+    (root / "ro").mkdir()
+
+
+def _command(case: Case, root: Path) -> list[str]:
+    command = [sys.executable, "-m", "pairplay", *case.args]
+    if case.readonly:  # a private mount namespace: the read-only tmpfs is seen by this process alone
+        command = ["unshare", "--mount", "--propagation", "private", "sh", "-c",
+                   'mount -t tmpfs -o ro tmpfs "$0" && exec "$@"', str(root / "ro"), *command]
+    return command
+
+
+def _run(case: Case, template: Path, base: Path) -> Case:
+    root = base / case.name.replace(" ", "_").replace("'", "").replace("/", "_")
+    shutil.copytree(template, root)
+    case.before = _snapshot(root)
+    env = dict(os.environ, COLUMNS="200")
+    try:
+        case.result = subprocess.run(_command(case, root), cwd=root, capture_output=True, text=True, timeout=120,
+                                     env=env)
+    except subprocess.TimeoutExpired as hung:  # a verb that hangs on a mistake fails its row, not the table
+        case.result = subprocess.CompletedProcess(hung.cmd, None, str(hung.stdout), f"hung: {hung}")
+    case.after = _snapshot(root)
+    return case
+
+
+@pytest.fixture(scope="module")
+def ran(tmp_path_factory):
+    template = tmp_path_factory.mktemp("template")
+    _fixtures(template)
+    base = tmp_path_factory.mktemp("cases")
+    todo = [c for c in CASES if CAN_UNSHARE or not c.readonly]
+    with ThreadPoolExecutor(max_workers=8) as pool:
+        done = list(pool.map(lambda c: _run(c, template, base), todo))
+    TAKEN.close()
+    return {c.name: c for c in done}
+
+
+@pytest.mark.parametrize("case", CASES, ids=[c.name for c in CASES])
+def test_a_mistake_gets_one_line_and_changes_nothing(case, ran):
+    if case.readonly and not CAN_UNSHARE:
+        pytest.skip("needs root and unshare for a read-only mount")
+    got = ran[case.name]
+    r = got.result
+    lines = r.stderr.strip().splitlines()
+    assert r.returncode == case.code, (r.returncode, r.stdout, r.stderr)
+    assert "Traceback" not in r.stderr + r.stdout, r.stderr
+    assert len(lines) == 1, r.stderr
+    verb = case.args[0]
+    assert lines[0].startswith(f"pairplay {verb}: ") and case.expect in lines[0], lines[0]
+    assert got.after == got.before, "files changed: " + str(set(got.after.items()) ^ set(got.before.items()))
+
+
+def test_ctrl_c_during_a_study_is_one_line_exit_130_and_leaves_nothing(tmp_path):
+    import signal
+    import time
+    study = subprocess.Popen([sys.executable, "-m", "pairplay", "study", "--quiet", "--out", "report"], cwd=tmp_path,
+                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    deadline = time.monotonic() + 60
+    while not list(tmp_path.glob(".report.*.tmp")) and time.monotonic() < deadline:  # the study is under way
+        time.sleep(0.05)
+    time.sleep(0.3)
+    study.send_signal(signal.SIGINT)
+    out, err = study.communicate(timeout=30)
+    assert study.returncode == 130, (out, err)
+    assert err.strip().splitlines() == ["pairplay study: interrupted (Ctrl-C); nothing more was written"], err
+    assert list(tmp_path.iterdir()) == []  # no half report, no temporary folder
+
+
+def test_help_shows_every_default_and_version_is_printed(capsys, monkeypatch):
+    monkeypatch.setenv("COLUMNS", "1000")  # one line per option
+    with pytest.raises(SystemExit) as done:
+        main(["--version"])
+    assert done.value.code == 0
+    from pairplay import __version__
+    assert capsys.readouterr().out.strip() == f"pairplay {__version__}"
+    for verb, flag, shown in (("session", "--rounds", "20"), ("session", "--seed", "0"), ("replay", "--speed", "1"),
+                              ("session", "--game-index", "0"), ("session", "--algorithm", "q-learning"),
+                              ("view", "--grpc-port", "9876"), ("study", "--games", "10"),
+                              ("run", "--out", "recordings"), ("bench", "--only", "core")):
+        with pytest.raises(SystemExit):
+            main([verb, "--help"])
+        lines = capsys.readouterr().out.splitlines()
+        at = max(i for i, line in enumerate(lines) if line.lstrip().startswith(f"{flag} "))
+        own = lines[at]  # the option's entry: its line and the help below it, up to the next option
+        for line in lines[at + 1:]:
+            if not line.startswith(" " * 8) or line.lstrip().startswith("-"):
+                break
+            own += " " + line.strip()
+        assert "default" in own and shown in own, (verb, flag, own)

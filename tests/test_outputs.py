@@ -1,0 +1,128 @@
+"""No file is ever lost: the one writer every verb uses (pairplay.outputs), and the verbs that use it.
+
+An existing output is replaced only when asked (`force`), a write appears whole
+or not at all (a temporary file renamed at the end, removed on any error), and
+outputs of different inputs never collide (rebuild names outputs by file).
+"""
+
+from __future__ import annotations
+
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from pairplay.errors import OutputError
+from pairplay.outputs import check_outputs, output_file, output_folder, output_path, write_bytes, write_text
+from pairplay.schemas.policy import read_policy
+
+SAMPLE = Path(__file__).resolve().parents[1] / "recordings" / "samples" / "sim-ashley.mcap"
+
+
+def pairplay(*args, cwd=None):
+    return subprocess.run([sys.executable, "-m", "pairplay", *map(str, args)], capture_output=True, text=True,
+                          cwd=cwd, timeout=180)
+
+
+def test_an_existing_file_is_replaced_only_with_force(tmp_path):
+    target = tmp_path / "a.json"
+    write_text(target, "first")
+    with pytest.raises(OutputError, match="exists; --force"):
+        write_text(target, "second")
+    assert target.read_text() == "first"
+    write_text(target, "third", force=True)
+    assert target.read_text() == "third"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["a.json"]  # no temporary file left
+
+
+def test_a_failed_write_leaves_nothing_and_the_old_file_intact(tmp_path):
+    target = tmp_path / "out.bin"
+    with pytest.raises(RuntimeError):
+        with output_file(target) as f:
+            f.write(b"half")
+            raise RuntimeError("crash in the middle")
+    assert list(tmp_path.iterdir()) == []
+    write_bytes(target, b"whole")
+    with pytest.raises(KeyboardInterrupt):
+        with output_file(target, force=True) as f:
+            f.write(b"half")
+            raise KeyboardInterrupt
+    assert target.read_bytes() == b"whole" and list(tmp_path.iterdir()) == [target]
+
+
+def test_a_file_that_appears_while_we_write_is_not_replaced(tmp_path):
+    target = tmp_path / "race.txt"
+    with pytest.raises(OutputError, match="appeared while"):
+        with output_path(target) as tmp:
+            tmp.write_text("ours")
+            target.write_text("someone else's")
+    assert target.read_text() == "someone else's" and list(tmp_path.iterdir()) == [target]
+
+
+def test_places_that_cannot_take_a_file_are_refused_before_any_work(tmp_path):
+    (tmp_path / "folder").mkdir()
+    (tmp_path / "file").write_text("x")
+    with pytest.raises(OutputError, match="is a folder"):
+        write_text(tmp_path / "folder", "x")
+    with pytest.raises(OutputError, match="a file stands where a folder is needed"):
+        write_text(tmp_path / "file" / "below.txt", "x")
+    with pytest.raises(OutputError, match="same file"):
+        check_outputs([tmp_path / "x.json", tmp_path / "." / "x.json"])
+
+
+def test_a_folder_of_outputs_appears_whole_and_is_merged_only_with_force(tmp_path):
+    out = tmp_path / "report"
+    with output_folder(out) as tmp:
+        (tmp / "a.txt").write_text("a")
+        assert not out.exists()  # nothing visible until it is complete
+    assert (out / "a.txt").read_text() == "a"
+    with pytest.raises(OutputError, match="not empty"):
+        with output_folder(out):
+            pass
+    (out / "mine.txt").write_text("the user's")
+    with output_folder(out, force=True) as tmp:
+        (tmp / "a.txt").write_text("new")
+    assert (out / "a.txt").read_text() == "new" and (out / "mine.txt").read_text() == "the user's"
+    with pytest.raises(RuntimeError):
+        with output_folder(tmp_path / "never") as tmp:
+            (tmp / "half.txt").write_text("x")
+            raise RuntimeError
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["report"]
+    with pytest.raises(RuntimeError):
+        with output_path(tmp_path / "new" / "deeper" / "x.rrd"):
+            raise RuntimeError  # a failure leaves no folder made for the output either
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["report"]
+
+
+def test_rebuild_names_outputs_by_file_so_a_recovered_copy_keeps_its_own(tmp_path):
+    shutil.copy(SAMPLE, tmp_path / "X.mcap")
+    r = pairplay("recover", "X.mcap", cwd=tmp_path)
+    assert r.returncode == 0, r.stderr
+    r = pairplay("rebuild", "X.mcap", "X.recovered.mcap", "--out", "rebuilt", cwd=tmp_path)
+    assert r.returncode == 0, r.stderr
+    names = sorted(p.name for p in (tmp_path / "rebuilt").iterdir())
+    assert names == ["X.curve.csv", "X.policy.json", "X.recovered.curve.csv", "X.recovered.policy.json",
+                     "learning-curves.png"]
+    assert read_policy(tmp_path / "rebuilt" / "X.policy.json").q == \
+        read_policy(tmp_path / "rebuilt" / "X.recovered.policy.json").q
+    assert "picks per round (18 = perfect)" in r.stdout
+    before = (tmp_path / "rebuilt" / "X.policy.json").read_bytes()
+    r = pairplay("rebuild", "X.mcap", "--out", "rebuilt", cwd=tmp_path)
+    assert r.returncode == 2 and "exists; --force" in r.stderr
+    r = pairplay("rebuild", "X.mcap", "--out", "rebuilt", "--force", cwd=tmp_path)
+    assert r.returncode == 0 and (tmp_path / "rebuilt" / "X.policy.json").read_bytes() == before
+    assert not list((tmp_path / "rebuilt").glob(".*"))  # no temporary file left
+
+
+def test_recover_and_view_never_replace_what_exists(tmp_path):
+    shutil.copy(SAMPLE, tmp_path / "R.mcap")
+    (tmp_path / "R.rrd").write_bytes(b"a saved view")
+    r = pairplay("view", "--recording", "R.mcap", "--session", "wrong", cwd=tmp_path)
+    assert r.returncode == 2 and (tmp_path / "R.rrd").read_bytes() == b"a saved view"
+    r = pairplay("view", "--recording", "R.mcap", "--force", cwd=tmp_path)
+    assert r.returncode == 0 and (tmp_path / "R.rrd").stat().st_size > 1000 and "saved R.rrd" in r.stderr
+    r = pairplay("recover", "R.mcap", "-o", "R.mcap", cwd=tmp_path)
+    assert r.returncode == 2 and (tmp_path / "R.mcap").read_bytes() == SAMPLE.read_bytes()
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["R.mcap", "R.rrd"]
