@@ -1,16 +1,27 @@
-"""`pairplay bench`: speed and latency goals, each beside its raw reference.
+"""`pairplay bench`: every speed, latency and memory goal, each beside its raw reference, with a verdict.
 
 Rule: every row is measured in this run next to a reference measured in the
-same run (ratios are what travel between machines); goals are printed, never
-asserted. Sources are modules with `bench_rows(quick) -> list[dict]`.
+same run (ratios are what travel between machines) and judged against its goal
+in bench/goals.py (one table): met, missed, or context for a row without a
+goal. `--runs N` repeats everything and gives each figure as a range, the
+verdict on the median. `--check` exits 1 when a goal is missed.
+`--readme README.md` rewrites the README's benchmark table (between
+`<!-- bench:start -->` and `<!-- bench:end -->`) from this run, with the date,
+the machine and its load. Sources are modules with `bench_rows(quick) -> list[dict]`.
 """
 
 from __future__ import annotations
 
 import argparse
+import datetime
 import importlib
 import json
+import os
+import platform
 import sys
+from pathlib import Path
+
+from pairplay.bench.goals import MISSED, goal_text, verdict
 
 # name -> module providing bench_rows(quick)
 SOURCES: dict[str, str] = {
@@ -19,41 +30,123 @@ SOURCES: dict[str, str] = {
     "bus": "pairplay.bench.bus",
     "view": "pairplay.bench.view",
     "robot": "pairplay.bench.robot",
+    "lab": "pairplay.bench.lab",
 }
+README_START, README_END = "<!-- bench:start -->", "<!-- bench:end -->"
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--only", default=",".join(SOURCES), help=f"comma-separated sources (default: {','.join(SOURCES)})")
     p.add_argument("--quick", action="store_true", help="smaller runs (a smoke test, noisier numbers)")
+    p.add_argument("--runs", type=int, default=1, help="measure everything N times; figures as ranges (default 1)")
     p.add_argument("--json", action="store_true", help="print the rows as JSON")
+    p.add_argument("--check", action="store_true", help="exit 1 when a goal is missed")
+    p.add_argument("--readme", type=Path, metavar="README",
+                   help="rewrite the benchmark table of this README from this run")
 
 
 def _fmt(value, unit: str) -> str:
     if value is None:
         return "-"
-    if unit in ("steps/s", "events/s", "msg/s") or abs(value) >= 1000:
+    if unit == "steps/s":
+        return f"{value / 1e6:.2f} M/s"
+    if unit in ("events/s", "msg/s") or abs(value) >= 1000:
         return f"{value:,.0f} {unit}"
     if unit == "s":
         return f"{value:.2f} s"
     if unit in ("us", "ms"):
         return f"{value:.1f} {unit}"
+    if unit == "MiB":
+        return f"{value:.0f} MiB"
+    if unit == "":
+        return "yes" if value == 1.0 else ("no" if value == 0.0 else f"{value:.3g}")
     return f"{value:.3g} {unit}"
 
 
-def _ratio(ratio) -> str:
-    if ratio is None:
+def _span(values: list, unit: str, fmt=_fmt) -> str:
+    values = [v for v in values if v is not None]
+    if not values:
         return "-"
-    return f"{ratio:.2f}x" if abs(ratio) >= 0.01 else f"{ratio:.2g}x"  # 1e-4 is not 0.00
+    lo, hi = fmt(min(values), unit), fmt(max(values), unit)
+    return lo if lo == hi else f"{lo} - {hi}"
+
+
+def _ratio(x) -> str:
+    return f"{x:.2f}x" if abs(x) >= 0.01 else f"{x:.2g}x"  # 1e-4 is not 0.00
+
+
+def merge_runs(runs: list[list[dict]]) -> list[dict]:
+    """One row per row of the first run: its values over the runs, the verdict on the median run."""
+    merged = []
+    for i, row in enumerate(runs[0]):
+        same = [r[i] for r in runs if i < len(r)]
+        out = dict(row)
+        for key in ("value", "reference_value", "ratio"):
+            out[key + "s"] = [r.get(key) for r in same]
+        ordered = sorted(same, key=lambda r: (r.get("value") is None, r.get("value") or 0))
+        median = ordered[len(ordered) // 2]
+        out.update(value=median.get("value"), reference_value=median.get("reference_value"),
+                   ratio=median.get("ratio"), failed=any(r.get("failed") for r in same))
+        out["verdict"] = MISSED if any(r.get("failed") for r in same) else verdict(median)
+        merged.append(out)
+    return merged
+
+
+def _cells(r: dict) -> list[str]:
+    unit = r["unit"]
+    ref_unit = r.get("reference_unit", unit)
+    ratios = r.get("ratios", [r.get("ratio")])
+    return [r["row"], _span(r.get("values", [r.get("value")]), unit), r.get("reference", ""),
+            _span(r.get("reference_values", [r.get("reference_value")]), ref_unit),
+            _span(ratios, "", lambda x, _u: _ratio(x)), goal_text(r), r.get("verdict") or verdict(r)]
+
+
+HEAD = ["row", "measured", "reference (same run)", "reference value", "ratio", "goal", "verdict"]
 
 
 def table(rows: list[dict]) -> str:
-    head = ["row", "value", "reference", "reference value", "ratio", "goal"]
-    body = [[r["row"], _fmt(r["value"], r["unit"]), r.get("reference", ""),
-             _fmt(r.get("reference_value"), r.get("reference_unit", r["unit"])),
-             _ratio(r.get("ratio")), r.get("goal", "")] for r in rows]
-    widths = [max(len(str(x[i])) for x in [head] + body) for i in range(len(head))]
+    body = [_cells(r) for r in rows]
+    widths = [max(len(str(x[i])) for x in [HEAD] + body) for i in range(len(HEAD))]
     line = lambda cells: " | ".join(str(c).ljust(w) for c, w in zip(cells, widths))  # noqa: E731
-    return "\n".join([line(head), "-+-".join("-" * w for w in widths)] + [line(b) for b in body])
+    return "\n".join([line(HEAD), "-+-".join("-" * w for w in widths)] + [line(b) for b in body])
+
+
+def machine() -> str:
+    """What ran the bench: CPU model, cores, Python, OS."""
+    model = ""
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                model = line.split(":", 1)[1].strip()
+                break
+    except OSError:
+        pass
+    return (f"{model or platform.processor() or platform.machine()}, {os.cpu_count()} cores, "
+            f"Python {platform.python_version()}, {platform.system()} {platform.release()}")
+
+
+def markdown(rows: list[dict], runs: int, started: datetime.datetime, loads: list[tuple[float, float, float]]) -> str:
+    lo = min(l[0] for l in loads)
+    hi = max(l[0] for l in loads)
+    lines = [f"Generated by `pairplay bench --runs {runs} --readme README.md` on "
+             f"{started:%Y-%m-%d %H:%M} UTC; {machine()}; 1-minute load average {lo:.1f}-{hi:.1f} during the run "
+             f"(a shared machine: every figure is a range over {runs} run{'s' if runs > 1 else ''}, the verdict "
+             "is on the median run).", "",
+             "| " + " | ".join(HEAD) + " |", "|" + "---|" * len(HEAD)]
+    lines += ["| " + " | ".join(c.replace("|", "/") for c in _cells(r)) + " |" for r in rows]
+    return "\n".join(lines)
+
+
+def write_readme(path: Path, text: str) -> None:
+    """Replace the README's table between the bench markers (written to a temp file, then renamed)."""
+    old = path.read_text()
+    if README_START not in old or README_END not in old:
+        raise ValueError(f"{path} has no {README_START} ... {README_END} section")
+    head, rest = old.split(README_START, 1)
+    _, tail = rest.split(README_END, 1)
+    tmp = path.with_name(path.name + ".tmp")
+    tmp.write_text(f"{head}{README_START}\n{text}\n{README_END}{tail}")
+    tmp.replace(path)
 
 
 def run(args) -> int:
@@ -62,9 +155,32 @@ def run(args) -> int:
     if unknown:
         print(f"pairplay bench: unknown source(s) {unknown}; known: {', '.join(SOURCES)}", file=sys.stderr)
         return 2
-    rows = []
-    for name in names:
-        print(f"measuring {name} ...", file=sys.stderr, flush=True)
-        rows += importlib.import_module(SOURCES[name]).bench_rows(quick=args.quick)
+    if args.runs < 1:
+        print("pairplay bench: --runs must be at least 1", file=sys.stderr)
+        return 2
+    if args.readme is not None and not args.readme.is_file():
+        print(f"pairplay bench: no README at {args.readme}", file=sys.stderr)
+        return 2
+    started = datetime.datetime.now(datetime.timezone.utc)
+    loads = [os.getloadavg()]
+    runs = []
+    for i in range(args.runs):
+        rows = []
+        for name in names:
+            print(f"measuring {name} (run {i + 1} of {args.runs}) ...", file=sys.stderr, flush=True)
+            rows += importlib.import_module(SOURCES[name]).bench_rows(quick=args.quick)
+            loads.append(os.getloadavg())
+        runs.append(rows)
+    rows = merge_runs(runs)
     print(json.dumps(rows, indent=1) if args.json else table(rows))
-    return 0
+    print(f"load average (1 min) {min(l[0] for l in loads):.1f}-{max(l[0] for l in loads):.1f}", file=sys.stderr)
+    if args.readme is not None:
+        try:
+            write_readme(args.readme, markdown(rows, args.runs, started, loads))
+        except ValueError as err:
+            print(f"pairplay bench: {err}", file=sys.stderr)
+            return 2
+    missed = [r["row"] for r in rows if r["verdict"] == MISSED]
+    if missed:
+        print(f"{len(missed)} goal(s) missed: " + "; ".join(missed), file=sys.stderr)
+    return 1 if args.check and missed else 0

@@ -15,6 +15,8 @@ verb's start-up stay fast. To add a verb, add one line to VERBS.
 from __future__ import annotations
 
 import argparse
+import atexit
+import contextlib
 import importlib
 import os
 import sys
@@ -25,15 +27,20 @@ from pairplay.errors import UserError
 # verb -> (module, one-line help)
 VERBS: dict[str, tuple[str, str]] = {
     "study": ("pairplay.cli.study", "run the simulated study of thesis chapter 6"),
+    "sweep": ("pairplay.cli.sweep", "run the simulated study over a grid of settings x seeds, locally or on Dask"),
     "bench": ("pairplay.cli.bench", "measure speed beside raw references, print a table"),
     "profile": ("pairplay.cli.profile", "user information (algorithm 3) of policy files, per participant"),
     "combine": ("pairplay.cli.combine", "merge policy files into one policy (algorithm 4)"),
     "view": ("pairplay.cli.view", "watch a session live or a recording in rerun: board, suggestion, Q-table"),
     "run": ("pairplay.cli.run", "run one service (game, learner, participant, recorder, combiner) on the bus"),
     "session": ("pairplay.cli.session", "run a whole session over the bus, recorded to recordings/<session>.mcap"),
+    "lab": ("pairplay.cli.lab", "a live session for a person: the touch-screen board, the robot, recorded"),
     "rebuild": ("pairplay.cli.rebuild", "fold recordings into policy files and learning curves"),
     "replay": ("pairplay.cli.replay", "re-publish a recording on the bus, or --verify it against fresh services"),
     "recover": ("pairplay.cli.recover", "complete a recording cut short by a crash"),
+    "protocol": ("pairplay.cli.protocol", "a study with people (thesis ch. 7): check its TOML, make its folder, register, plan, pilot"),
+    "participant": ("pairplay.cli.participant", "export or delete one participant's data (recordings, policies, answers)"),
+    "report": ("pairplay.cli.report", "the human-world report (thesis 7.3) of a study folder"),
     "robot": ("pairplay.cli.robot", "perform a session's suggestions on a robot (virtual, IrisTK, Furhat), or --try one"),
 }
 
@@ -82,6 +89,26 @@ def main(argv: list[str] | None = None) -> int:
         return 130
 
 
+def entry() -> None:
+    """The `pairplay` command (and `python -m pairplay`): `main()`, then exit with its code.
+
+    After an interruption (exit 130) the exit handlers run and the process ends
+    with os._exit, skipping only the interpreter's teardown of its objects: a
+    Ctrl-C that lands while numba compiles leaves llvmlite's native objects
+    half-built, and freeing them at exit aborted the process ("double free
+    detected", SIGABRT) after the one line was printed (seen in CI). Every output
+    is already closed or removed by then (the verbs' context managers ran while
+    KeyboardInterrupt unwound the stack)."""
+    code = main()
+    if code == 130:
+        atexit._run_exitfuncs()  # what was registered to run at exit still runs (multiprocessing's clean-up)
+        for stream in (sys.stdout, sys.stderr):
+            with contextlib.suppress(Exception):
+                stream.flush()
+        os._exit(code)
+    sys.exit(code)
+
+
 def _main(argv: list[str]) -> int:
     parser, _ = build_parser(argv)
     args = parser.parse_args(argv)
@@ -95,6 +122,11 @@ def _main(argv: list[str]) -> int:
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())  # no second error at exit's flush
         return 0
     except KeyboardInterrupt:
+        print(f"pairplay {args.verb}: interrupted (Ctrl-C); nothing more was written", file=sys.stderr)
+        return 130
+    except SystemError as err:  # Ctrl-C inside a compiled kernel: numba reports it as a SystemError around it
+        if not isinstance(err.__cause__ or err.__context__, KeyboardInterrupt):
+            raise
         print(f"pairplay {args.verb}: interrupted (Ctrl-C); nothing more was written", file=sys.stderr)
         return 130
     except UserError as err:
@@ -115,4 +147,4 @@ def os_error_line(err: OSError) -> str:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    entry()

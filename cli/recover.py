@@ -24,6 +24,12 @@ def run(args: argparse.Namespace) -> int:
     from pairplay.replay.recover import recover
 
     done = recover(args.recording, args.output, force=args.force)
-    state = f"cut short ({done.reason})" if done.truncated else "complete already"
-    print(f"{args.recording}: {state}; {done.messages} messages kept in {done.output}")
+    if done.damaged:
+        state = f"damaged ({done.reason}); every intact part kept"
+    elif done.truncated:
+        state = f"cut short ({done.reason})"
+    else:
+        state = "complete already"
+    ended = "" if done.ended else "; the session's end was not recorded (partial session)"
+    print(f"{args.recording}: {state}; {done.messages} messages kept in {done.output}{ended}")
     return 0

@@ -72,7 +72,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    logging.basicConfig(level=logging.INFO, format="%(levelname)s %(name)s: %(message)s")
+    # --try prints its own lines; a session's bridge logs what it does
+    level = logging.WARNING if args.try_codes else logging.INFO
+    logging.basicConfig(level=level, format="%(levelname)s %(name)s: %(message)s")
     if bool(args.session) == bool(args.try_codes):
         raise OptionError("give either --session ID (serve a session) or --try CODES (try the robot)", "pairplay robot")
     if args.robot == NO_ROBOT:
@@ -123,26 +125,29 @@ def probe_robot(url: str, timeout_s: float = CONNECT_PROBE_S) -> None:
 def _try(args: argparse.Namespace) -> int:
     codes = args.try_codes
     probe_robot(args.robot)
-    done = threading.Event()
     acted = []
+    robots = []
 
     def on_acted(event) -> None:
         acted.append(event)
+        if robots and robots[0].refused:
+            return  # said once, on stderr, by the OptionError below
         print(f"action {event.action}: {event.outcome}{' (' + event.error + ')' if event.error else ''}")
-        for command in event.commands:
-            print(f"  sent    {command.strip()}")
-        for reply in event.replies:
-            print(f"  replied {reply}")
-        if len(acted) == len(codes):
-            done.set()
+        for label, lines in (("sent   ", event.commands), ("replied", event.replies), ("unsent ", event.unsent),
+                             ("unconfirmed", event.unconfirmed)):
+            for line in lines:
+                print(f"  {label} {line.strip()}")
 
     robot = open_robot(args.robot, on_acted, config=load_robot_config(args.robot_config),
                        calibration=load_calibration(args.calibration),
                        on_rejected=lambda reason, excerpt: print(f"  unreadable frame from the robot: {reason}"))
+    robots.append(robot)
     try:
         for code in codes:
             robot.perform(Suggestion("try", 0, 0, 0, code, args.observed, args.target))
             robot.wait_idle(robot.config.ack_timeout_s + robot.config.give_up_s)
+            if robot.refused:  # asking again cannot help: say it once and stop
+                raise OptionError(robot.refused, f"--robot {args.robot.split('?')[0]}")  # never echo a key
     finally:
         robot.close()
     return 0 if all(a.outcome in ("done", "sent", "nothing") for a in acted) and len(acted) == len(codes) else 1

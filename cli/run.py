@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import argparse
 import logging
+import sys
 import threading
 import time
 from pathlib import Path
@@ -21,7 +22,7 @@ from pathlib import Path
 from pairplay.errors import OptionError
 from pairplay.outputs import check_folder
 from pairplay.services.bus import Bus, add_bus_arguments, options_from_args, stop_on_signals
-from pairplay.services.runner import Node
+from pairplay.services.runner import Node, Stopped
 
 SERVICES = ("game", "learner", "participant", "recorder", "combiner")
 
@@ -56,12 +57,14 @@ def run(args: argparse.Namespace) -> int:
         raise OptionError(f"--session is required for the {args.service}", "--session")
     if args.service == "recorder":
         check_folder(args.out)
-    bus = Bus(options_from_args(args))
+    bus = Bus(options_from_args(args))  # a BusError (one line, exit 2) if it cannot open
+    node = None
     try:
         print(f"listening {' '.join(bus.locators())}", flush=True)
         if args.service == "recorder":
             from pairplay.services.recorder import Recorder
-            recorder = Recorder(bus, args.session, Path(args.out) / f"{args.session}.mcap")
+            recorder = Recorder(bus, args.session, Path(args.out) / f"{args.session}.mcap",
+                                on_failure=lambda _why: stop.set())
             recorder.start()
             checked = 0.0
             try:
@@ -73,7 +76,11 @@ def run(args: argparse.Namespace) -> int:
                         if not _others_alive(bus, args.session):
                             break
             finally:
-                recorder.close()
+                failure = recorder.close()
+            if failure is not None:
+                print(f"pairplay run recorder: writing {recorder.path} failed ({failure}); the file is readable "
+                      f"up to the failure: pairplay recover {recorder.path}", file=sys.stderr)
+                return 1
             return 0
         if args.service == "combiner":
             from pairplay.services.combiner import CombinerLogic
@@ -81,7 +88,7 @@ def run(args: argparse.Namespace) -> int:
         elif args.service == "game":
             from pairplay.services.game import GameLogic
             if config is None:  # a restart: the session's config is in its log
-                config = _recorded_config(bus, args.session)
+                config = _recorded_config(bus, args.session, stop)
                 if config is None:
                     raise OptionError("the session has no SessionStarted on the bus; give --participant (and "
                                       "the session options) to start it", f"--session {args.session}")
@@ -94,8 +101,11 @@ def run(args: argparse.Namespace) -> int:
             logic = ParticipantLogic()
         # a game given its config starts the session; every other service, and a game
         # restarted by session id alone, catches up from the recorder's log
-        node = Node(bus, logic, args.session, resume=not (args.service == "game" and args.participant))
-        node.start(wait_for=tuple(args.wait_for))
+        node = Node(bus, logic, args.session, resume=not (args.service == "game" and args.participant), stop=stop)
+        try:
+            node.start(wait_for=tuple(args.wait_for))
+        except Stopped:
+            return 0
         print(f"{args.service} running in session {args.session}", flush=True)
         node.run(stop)
         if args.service == "game" and not logic.done:  # stopped: the session's end says why and how far
@@ -106,12 +116,14 @@ def run(args: argparse.Namespace) -> int:
             time.sleep(0.2)  # let the recorder take it before the bus closes
         return 0
     finally:
+        if node is not None:
+            node.close(0.5)
         bus.close()
 
 
-def _recorded_config(bus: Bus, session: str):
+def _recorded_config(bus: Bus, session: str, stop: threading.Event):
     from pairplay.services.runner import fetch_log
-    for e in fetch_log(bus, session):
+    for e in fetch_log(bus, session, stop=stop):
         if type(e).__name__ == "SessionStarted":
             return e.config
     return None

@@ -12,34 +12,39 @@ and every service has settled (in-process threads finished, external services'
 tokens gone); then the recorder finishes its file.
 
 Choices: a simulated participant's ignore rule is "perceived" (it reports what
-it perceived) and a human's is "time" (thesis 7.1.2), unless given; the learner
-schedule presets are the thesis's: "virtual" (6.2), "human-phase1" and
-"human-phase2" (7.2).
+it perceived) and a human's is "time" (thesis 7.1.2), timed on the board page's
+clock, unless given; the learner schedule presets are the thesis's: "virtual"
+(6.2), "human-phase1" and "human-phase2" (7.2). A person gets the human-phase
+schedule of their algorithm (phase 1: Q-learning, phase 2: pi-reuse) and games
+of 5 rounds by default; settings a person cannot satisfy are refused
+(SessionConfig.validate). A person plays on the board of `pairplay lab`.
 """
 
 from __future__ import annotations
 
 import argparse
 import logging
+import sys
 import threading
 from datetime import datetime, timezone
 from pathlib import Path
 
-from pairplay import __version__
 import msgspec
 
+from pairplay import __version__
 from pairplay.core.rng import STREAMS_VERSION
 from pairplay.schemas.config import DEFAULT_REWARD_BONUS, REWARD_BONUS_RULES, LearnerConfig, LSPIConfig
 from pairplay.schemas.keys import check_chunk
 from pairplay.errors import OptionError, UserError
 from pairplay.outputs import check_folder
 from pairplay.schemas.policy import read_policy
-from pairplay.schemas.session import SessionConfig, learner_overrides, lspi_overrides
+from pairplay.schemas.session import IGNORE_CLOCKS, OBSERVED_SOURCES, SessionConfig, learner_overrides, lspi_overrides
 
 from pairplay.cli.args import count, non_negative
 from pairplay.core.geometry import PICKS_UNIT
 from pairplay.cli.robot import add_robot_arguments, check_robot_args, robot_choice
-from pairplay.services.bus import add_bus_arguments, options_from_args, stop_on_signals
+from pairplay.services.bus import BusOpenError, ConfigFileError, add_bus_arguments, options_from_args, stop_on_signals
+from pairplay.services.recorder import RecordingFailed
 from pairplay.services.session import run_session
 
 log = logging.getLogger("pairplay.session")
@@ -52,7 +57,7 @@ def add_config_arguments(p: argparse.ArgumentParser) -> None:
     g.add_argument("--participant", required=True, help="sim:<persona> (a simulated user) or human:<id>")
     g.add_argument("--session", help="session id (default: <participant>-seed<seed>-game<i>-<UTC time>)")
     g.add_argument("--seed", type=int, default=0, help="the session's seed")
-    g.add_argument("--rounds", type=count, default=20, help="rounds to play")
+    g.add_argument("--rounds", type=count, help="rounds to play (default: 20 for sim:, 5 for human:, thesis 7.2)")
     g.add_argument("--game-index", type=non_negative, default=0, help="which game of the seed (0, 1, ...)")
     g.add_argument("--algorithm", choices=("q-learning", "pi-reuse", "fixed", "lspi"), default="q-learning",
                    help="the learner: Q-learning from scratch (thesis 5.1), pi-reuse of --policy (algorithm 5), "
@@ -61,10 +66,19 @@ def add_config_arguments(p: argparse.ArgumentParser) -> None:
     g.add_argument("--lspi-every", type=int, help="lspi: K, samples between policy improvements (default 10)")
     g.add_argument("--policy", help="policy file: the bias policy (pi-reuse) or the fixed policy; "
                                     "refused with q-learning, which uses none")
-    g.add_argument("--observed-source", choices=("intended", "first-pick"),
-                   help="default: intended for sim:, first-pick for human:")
+    g.add_argument("--observed-source", choices=OBSERVED_SOURCES,
+                   help="default: intended for sim:, first-pick for human: (gaze: an eye tracker's GazeFixated events)")
     g.add_argument("--ignore-rule", choices=("perceived", "time"), help="default: perceived for sim:, time for human:")
-    g.add_argument("--preset", choices=sorted(PRESETS), default="virtual", help="learner schedule (thesis 6.2, 7.2)")
+    g.add_argument("--ignore-window-ms", type=float, default=1500.0,
+                   help="'time' rule: picks closer than this ignored the suggestion (thesis 7.1.2; default 1500)")
+    g.add_argument("--ignore-clock", choices=IGNORE_CLOCKS,
+                   help="'time' rule: time the picks on the board page's clock (page, default for human:) or the "
+                        "server's (server)")
+    g.add_argument("--turn-back-ms", type=float, default=1500.0,
+                   help="the board page shows a missed pair this long before turning it back (default 1500)")
+    g.add_argument("--preset", choices=sorted(PRESETS),
+                   help="learner schedule (thesis 6.2, 7.2); default: virtual for sim:, human-phase1 for a human "
+                        "with q-learning, human-phase2 with pi-reuse")
     g.add_argument("--reward-bonus", choices=REWARD_BONUS_RULES, default=DEFAULT_REWARD_BONUS,
                    help="simulated reward: when the 1/|candidate set| bonus is paid: when the candidate set holds "
                         "the match (correct, default), on every consistent suggestion (consistent, SPEC's literal "
@@ -99,18 +113,11 @@ def _config_from_args(args: argparse.Namespace) -> SessionConfig:
     check_chunk("participant", who)
     session = args.session or f"{who}-seed{args.seed}-game{args.game_index}-" \
                               f"{datetime.now(timezone.utc).strftime('%Y%m%dT%H%M%S')}"
-    preset = PRESETS[args.preset]
-    schedule = preset(args.rounds) if args.preset != "virtual" else preset()
-    lspi = msgspec.UNSET
-    given = {k: v for k, v in (("ridge", getattr(args, "lspi_ridge", None)),
-                               ("improve_every", getattr(args, "lspi_every", None))) if v is not None}
-    if args.algorithm == "lspi":
-        try:
-            lspi = lspi_overrides(LSPIConfig(**given))
-        except ValueError as err:
-            raise ValueError(f"--lspi-*: {err}") from None
-    elif given:
-        raise ValueError(f"--lspi-ridge/--lspi-every need --algorithm lspi, not {args.algorithm}")
+    rounds = args.rounds if args.rounds is not None else (20 if sim else 5)
+    preset_name = args.preset or ("virtual" if sim else "human-phase2" if args.algorithm == "pi-reuse"
+                                  else "human-phase1")
+    preset = PRESETS[preset_name]
+    schedule = preset(rounds) if preset_name != "virtual" else preset()
     lspi = msgspec.UNSET
     given = {k: v for k, v in (("ridge", getattr(args, "lspi_ridge", None)),
                                ("improve_every", getattr(args, "lspi_every", None))) if v is not None}
@@ -126,11 +133,12 @@ def _config_from_args(args: argparse.Namespace) -> SessionConfig:
         actions = list(read_policy(args.policy).greedy)
     config = SessionConfig(
         session=session, participant=args.participant, persona=who if sim else "", seed=args.seed,
-        rounds=args.rounds, game_index=args.game_index, algorithm=args.algorithm,
+        rounds=rounds, game_index=args.game_index, algorithm=args.algorithm,
         observed_source=args.observed_source or ("intended" if sim else "first-pick"),
         ignore_rule=args.ignore_rule or ("perceived" if sim else "time"), policy_actions=actions,
         learner=learner_overrides(schedule), software_version=__version__,
-        reward_bonus=args.reward_bonus, streams=STREAMS_VERSION, lspi=lspi)
+        reward_bonus=args.reward_bonus, streams=STREAMS_VERSION, ignore_window_ms=args.ignore_window_ms,
+        ignore_clock=args.ignore_clock or ("server" if sim else "page"), turn_back_ms=args.turn_back_ms, lspi=lspi)
     config.validate()
     return config
 
@@ -140,7 +148,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--out", default="recordings", help="folder of the recording (default recordings/; a "
                    "recording is never replaced: an existing <session>.mcap gets a .1, .2 ... beside it)")
     add_robot_arguments(p)
-    p.add_argument("--external", action="append", default=[], choices=("learner", "participant", "game"),
+    p.add_argument("--external", action="append", default=[], choices=("learner", "participant", "game", "recorder", "robot"),
                    help="leave this service to another process (`pairplay run`)")
     add_bus_arguments(p)
 
@@ -158,10 +166,26 @@ def run(args: argparse.Namespace) -> int:
 
     def announce(bus) -> None:
         print(f"session {config.session}: bus listening on {' '.join(bus.locators()) or '(no listener)'}", flush=True)
+        if config.participant.startswith("human:"):
+            print("a person plays on a board: `pairplay lab` serves one (this session waits for picks from "
+                  "source 'board' on the bus)", flush=True)
 
-    path = run_session(config, Path(args.out) / f"{config.session}.mcap",
-                       bus_options=options_from_args(args, default_mode="router"),
-                       external=tuple(args.external), stop=stop, on_bus=announce, robot=robot_choice(args))
+    try:
+        bus_options = options_from_args(args, default_mode="router")
+        bus_options.to_dict()  # a bad --zenoh-config is the user's mistake: one line, before anything starts
+        path = run_session(config, Path(args.out) / f"{config.session}.mcap", bus_options=bus_options,
+                           external=tuple(args.external), stop=stop, on_bus=announce,
+                           robot=None if "robot" in args.external else robot_choice(args))
+    except (ConfigFileError, BusOpenError) as err:
+        print(f"pairplay session: {err}", file=sys.stderr)
+        return 2
+    except RecordingFailed as err:
+        print(f"pairplay session: writing {err.path} failed ({err.reason}); the session stopped; the file is "
+              f"readable up to the failure: pairplay recover {err.path}", file=sys.stderr)
+        return 1
+    if "recorder" in args.external:
+        print(f"session {config.session} over; the external recorder writes its file")
+        return 0
     from pairplay.replay.fold import fold_events
     from pairplay.replay.reader import read_log
     recorded = read_log(path)
@@ -172,6 +196,10 @@ def run(args: argparse.Namespace) -> int:
     print(f"rejections: {len(fold.rejections)}; Q updates: {fold.counts.get('QUpdated', 0)}"
           + (f"; LSPI samples: {fold.counts.get('LSPIUpdated', 0)}" if config.algorithm == "lspi" else ""))
     e = fold.ended
+    if e is None and fold.config is None and getattr(stop, "why", ""):
+        # a signal before the game started the session: nothing was played, so nothing is ended
+        print(f"interrupted ({stop.why}) before the session started")
+        return 0
     if e is None:
         print("ended: no SessionEnded recorded")
     elif e.reason != "completed":

@@ -1,16 +1,7 @@
 """`pairplay study`: the virtual study of thesis chapter 6, end to end (report/study.py does the work).
 
-Rule: one command, reproducible by seed, writes a report folder:
-  policies/<persona>/game-NN.json   one policy file per game (schemas/policy.py)
-  curves.csv, curves_summary.csv    picks per round per game; mean/sd/min/max per round
-  learning_curves.png               figure 6.4 (memory, focus, impairment)
-  evaluation.csv, evaluation.png    user alone vs learned vs oracle, picks per round
-  profiles.csv, profiles.png        algorithm 3 per persona beside its features (figure 6.5)
-  merged/<name>.json, merged.png    merged policies (algorithm 4) and figure 6.6
-  merged_evaluation.csv             every merged policy on every persona
-  reuse.csv, reuse.png              held-out persona: Q-learning from scratch vs pi-reuse
-  speed.csv, speed.png              (--algorithm lspi) LSPI beside Q-learning on the same games
-  report.md                         the tables and figures, with the run's settings
+Rule: one command, reproducible by seed, writes the report folder that report/study.py
+describes (policy files, CSV tables, figures 6.4-6.6, report.md).
 The folder is built beside --out and renamed when complete: an --out that holds
 files is refused unless --force, and Ctrl-C leaves nothing (exit 130). Every
 option's range is checked before any work; the printed tables say their unit
@@ -26,8 +17,9 @@ from pathlib import Path
 from pairplay.cli.args import add_force, count, fraction, non_negative
 from pairplay.core.geometry import PICKS_UNIT
 from pairplay.core.personas import PERSONAS
+from pairplay.core.rng import SEED_RANGE
 from pairplay.errors import OptionError
-from pairplay.schemas.config import DEFAULT_REWARD_BONUS, REWARD_BONUS_RULES as BONUS_RULES
+from pairplay.schemas.config import DEFAULT_REWARD_BONUS, LSPIConfig, REWARD_BONUS_RULES as BONUS_RULES
 
 # the study's modules (numpy kernels, matplotlib) load in run(): a mistyped option is refused at once
 
@@ -77,20 +69,24 @@ def _bar(quiet: bool):
 
 
 def run(args) -> int:
-    from pairplay.core.rng import SEED_RANGE
-    from pairplay.report.study import StudySettings, run_study, text_table
+    from pairplay.core.personas import persona
+    from pairplay.outputs import check_output_folder
 
-    settings = StudySettings(**{k: getattr(args, k) for k in StudySettings.__dataclass_fields__})
-    try:
-        settings.persona_list()
+    try:  # the options first, before the study's modules load: a mistake is refused at once
+        [persona(k.strip()) for k in args.personas.split(",") if k.strip()]
     except KeyError as exc:
         raise OptionError(exc.args[0], f"--personas {args.personas}") from None
     if not SEED_RANGE[0] <= args.seed <= SEED_RANGE[1]:  # every seed in range has its own streams (core.rng)
         raise OptionError(f"outside the accepted range {SEED_RANGE[0]}..{SEED_RANGE[1]}", f"--seed {args.seed}")
-    try:
-        settings.lspi()
-    except ValueError as exc:
-        raise OptionError(str(exc), "--lspi-ridge/--lspi-every") from None
+    if args.algorithm == "lspi":
+        try:
+            LSPIConfig(ridge=args.lspi_ridge, improve_every=args.lspi_every)
+        except ValueError as exc:
+            raise OptionError(str(exc), f"--lspi-ridge {args.lspi_ridge} --lspi-every {args.lspi_every}") from None
+    check_output_folder(args.out, args.force)
+    from pairplay.report.study import StudySettings, run_study, text_table
+
+    settings = StudySettings(**{k: getattr(args, k) for k in StudySettings.__dataclass_fields__})
     report = run_study(settings, args.out, _bar(args.quiet), force=args.force)
     if settings.train_only:
         print(f"training: {report.timings['training']:.2f} s; policies and curves in {report.out}")

@@ -67,6 +67,10 @@ def run(args: argparse.Namespace) -> int:
         raise OptionError("give --session ID (live) or --recording REC", "what to view")
     if args.recording:
         check_recording(args.recording)
+        if args.session:  # before rerun loads and anything is drawn
+            from pairplay.replay.reader import read_log
+            if not any(r.event.session == args.session for r in read_log(args.recording).events):
+                raise InputError(f"holds no events of session {args.session}; nothing saved", args.recording)
     if args.no_save and not (args.serve or args.spawn):
         raise OptionError("--no-save leaves no output; add --serve or --spawn", "--no-save")
     rrd = None if args.no_save else (args.out or _default_rrd(args))

@@ -16,10 +16,8 @@ from typing import NamedTuple
 
 import numpy as np
 
+from . import kernels
 from .geometry import ALL_CARDS, COLS, N_CARDS, N_PAIRS, ROWS
-
-
-_FACE_OF_PLACE = (np.arange(N_CARDS) // 2).astype(np.int8)
 
 
 class IllegalPick(ValueError):
@@ -29,19 +27,16 @@ class IllegalPick(ValueError):
 def deal(u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """A new round from 18 uniform draws per game: (faces, partner), each (B, 18).
 
-    The order of the draws is a uniformly random permutation of the 18 places;
-    places 2k and 2k+1 of it get face k, so they are each other's partner.
+    The order of the draws is a uniformly random permutation of the 18 places
+    (a stable sort); places 2k and 2k+1 of it get face k, so they are each
+    other's partner (core/kernels.py `_deal`, which the simulator runs inline).
     """
-    u = np.atleast_2d(u)
+    u = np.atleast_2d(np.asarray(u, dtype=np.float64))
     if u.shape[-1] != N_CARDS:
         raise ValueError(f"a deal needs {N_CARDS} draws per game, got {u.shape[-1]}")
-    order = np.argsort(u, axis=-1, kind="stable")
-    rows = np.arange(order.shape[0])[:, None]
-    faces = np.empty(order.shape, dtype=np.int8)
-    faces[rows, order] = _FACE_OF_PLACE
-    partner = np.empty(order.shape, dtype=np.int64)
-    partner[rows, order[:, 0::2]] = order[:, 1::2]
-    partner[rows, order[:, 1::2]] = order[:, 0::2]
+    faces = np.empty(u.shape, dtype=np.int8)
+    partner = np.empty(u.shape, dtype=np.int64)
+    kernels.deal_batch(np.ascontiguousarray(u), faces, partner)
     return faces, partner
 
 

@@ -22,20 +22,22 @@ import numpy as np
 
 from pairplay.schemas.config import LearnerConfig
 
+from . import kernels
 from .actions import N_ACTIONS
 from .geometry import N_STATES
 from .rng import UniformStream
 
-DRAWS_PER_SUGGESTION = 4
+DRAWS_PER_SUGGESTION = kernels.DRAWS_PER_SUGGESTION
+MODES = {"q": kernels.MODE_Q, "reuse": kernels.MODE_REUSE, "fixed": kernels.MODE_FIXED}
 
 
 class How(IntEnum):
     """How an action was chosen (recorded with every suggestion)."""
 
-    GREEDY = 0
-    EXPLORE = 1
-    BIAS = 2
-    FIXED = 3
+    GREEDY = kernels.HOW_GREEDY
+    EXPLORE = kernels.HOW_EXPLORE
+    BIAS = kernels.HOW_BIAS
+    FIXED = kernels.HOW_FIXED
 
 
 def q_update(q: np.ndarray | float, reward: np.ndarray | float, alpha: np.ndarray | float):
@@ -64,14 +66,19 @@ def psi_round_start(config: LearnerConfig, round_index):
 
 def greedy(q: np.ndarray, u_tie: np.ndarray) -> np.ndarray:
     """argmax over the last axis, ties broken by the draw: the floor(u*n)-th tied action."""
-    best = np.argmax(q, axis=-1)
-    ties = q == q.max(axis=-1, keepdims=True)
-    n = np.count_nonzero(ties, axis=-1)
-    several = n > 1
-    if several.any():  # only tied rows pay for the cumulative count (int16: n <= 88)
-        k = np.minimum((u_tie[several] * n[several]).astype(np.int16), n[several] - 1)
-        best[several] = np.argmax(np.cumsum(ties[several], -1, dtype=np.int16) > k[..., None], -1)
-    return best
+    q = np.asarray(q, dtype=np.float64)
+    rows = np.ascontiguousarray(q.reshape(-1, q.shape[-1]))
+    u = np.ascontiguousarray(np.broadcast_to(np.asarray(u_tie, dtype=np.float64), q.shape[:-1])).reshape(-1)
+    out = np.empty(rows.shape[0], dtype=np.int64)
+    kernels.greedy_batch(rows, u, out)
+    return out.reshape(q.shape[:-1])
+
+
+def schedule_tables(config: LearnerConfig, rounds: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(epsilon, alpha, psi at a round's start) for rounds 0..rounds-1: the schedules, computed once."""
+    r = np.arange(max(rounds, 1))
+    return (np.asarray(epsilon_at(config, r), dtype=np.float64), np.asarray(alpha_at(config, r), dtype=np.float64),
+            np.asarray(psi_round_start(config, r), dtype=np.float64))
 
 
 def greedy_policy(q: np.ndarray, rng: np.random.Generator) -> np.ndarray:
@@ -102,42 +109,48 @@ class Learner:
         self.bias = None if bias is None else _policy_table(bias, n_games)
         self.policy = None if policy is None else _policy_table(policy, n_games)
         self.psi = np.zeros(n_games)
-        self._rows = np.arange(n_games)
+        self._n = n_games
+        self._table = self.bias if mode == "reuse" else self.policy  # the action a bias or fixed policy takes
+        self._table = None if self._table is None else np.ascontiguousarray(self._table)
+        self._no_table = np.zeros((n_games, N_STATES), dtype=np.int64)
+        self._memo: dict = {}
 
     def start_round(self, round_index, games=slice(None)) -> None:
         """Reset psi for the games starting a round (algorithm 5, line 4)."""
         self.psi[games] = psi_round_start(self.config, np.asarray(round_index)[games])
 
+    def _per_round(self, fn, round_index) -> np.ndarray:
+        """A schedule's value for each game's round, computed once per round (a live learner asks every turn)."""
+        r = kernels.as_batch(round_index, self._n, np.int64)
+        if self._n == 1:
+            key = (fn, int(r[0]))
+            value = self._memo.get(key)
+            if value is None:
+                value = self._memo[key] = np.array([float(fn(self.config, key[1]))])
+                if len(self._memo) > 64:
+                    self._memo.pop(next(iter(self._memo)))
+            return value
+        return kernels.as_batch(fn(self.config, r), self._n, np.float64)
+
     def suggest(self, states: np.ndarray, round_index: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(actions, how) for every game, drawing DRAWS_PER_SUGGESTION uniforms."""
         u = self.stream.take(DRAWS_PER_SUGGESTION)
-        rows = self._rows
-        if self.mode == "fixed":
-            return self.policy[rows, states], np.full(rows.size, How.FIXED, dtype=np.int8)
-        explore = u[:, 1] < epsilon_at(self.config, round_index)
-        actions = np.minimum((u[:, 2] * N_ACTIONS).astype(np.int64), N_ACTIONS - 1)
-        exploit = rows[~explore]  # only the exploiting games need their Q row
-        actions[exploit] = greedy(self.q[exploit, states[exploit]], u[exploit, 3])
-        how = np.where(explore, How.EXPLORE, How.GREEDY).astype(np.int8)
-        if self.mode == "reuse":
-            follow = u[:, 0] < self.psi
-            actions = np.where(follow, self.bias[rows, states], actions)
-            how = np.where(follow, np.int8(How.BIAS), how)
-            self.psi = self.psi * self.config.psi_decay  # algorithm 5, line 9
+        n = self._n
+        actions, how = np.empty(n, dtype=np.int64), np.empty(n, dtype=np.int8)
+        states = kernels.as_batch(states, n, np.int64)
+        table = self._table if self._table is not None else self._no_table
+        kernels.learners_suggest(self.q, states, u, self._per_round(epsilon_at, round_index), MODES[self.mode],
+                                 self.psi, float(self.config.psi_decay), table, actions, how)
         return actions, how
 
     def learn(self, states: np.ndarray, actions: np.ndarray, rewards: np.ndarray, mask: np.ndarray,
               round_index: np.ndarray) -> None:
         """Eq. 5.2 where `mask`; a fixed policy never learns."""
-        if self.mode == "fixed" or not mask.any():
+        if self.mode == "fixed":
             return
-        # Flat indices: one gather and one scatter instead of three index arrays.
-        cell = (self._rows[mask] * N_STATES + states[mask]) * N_ACTIONS + actions[mask]
-        alpha = alpha_at(self.config, round_index)
-        alpha = alpha[mask] if np.ndim(alpha) else alpha
-        q, counts = self.q.reshape(-1), self.counts.reshape(-1)
-        q[cell] = q_update(q[cell], rewards[mask], alpha)
-        counts[cell] += 1  # one update per game and step: no repeated index
+        n, b = self._n, kernels.as_batch
+        kernels.learners_learn(self.q, self.counts, b(states, n, np.int64), b(actions, n, np.int64),
+                               b(rewards, n, np.float64), b(mask, n, bool), self._per_round(alpha_at, round_index))
 
 
 def _policy_table(policy: np.ndarray, n_games: int) -> np.ndarray:

@@ -57,8 +57,9 @@ import numpy as np
 from pairplay.schemas.config import LearnerConfig, LSPIConfig
 
 from .actions import N_ACTIONS
+from .games import MemoryGames
 from .geometry import CELLS, N_STATES, NOT_ONE_CARD_STATE, SPATIAL_STATES
-from .learning import Learner
+from .learning import Learner, greedy
 from .rng import UniformStream
 
 
@@ -146,8 +147,8 @@ class LSPILearner(Learner):
 
     def __init__(self, n_games: int, stream: UniformStream, config: LearnerConfig = LearnerConfig(),
                  lspi: LSPIConfig = LSPIConfig(), features: Features | None = None):
-        super().__init__(n_games, stream, config, "q")
-        self.mode = "lspi"
+        super().__init__(n_games, stream, config, "q")  # acts as the Q-learner does (epsilon-greedy on q)
+        self._rows = np.arange(n_games)
         self.lspi = lspi
         self.features = features or features_of(lspi)
         f = self.features.size
@@ -213,3 +214,60 @@ def dense_sherman_morrison(inverse: np.ndarray, u: np.ndarray, v: np.ndarray) ->
     au = inverse @ u
     va = v @ inverse
     return inverse - np.outer(au, va) / (1.0 + v @ au)
+
+
+def play_lspi(personas, seeds, rounds: int, config: LearnerConfig, lspi: LSPIConfig, observed_source: str,
+              progress, snapshot_every: int | None, reward_bonus: str) -> tuple:
+    """run_games(mode="lspi"): every game learns by LSPILearner, all stepped in lockstep.
+
+    The games are core/games.py's (the study's per-game "deal" and "user"
+    streams), the learner draws from the "agent" stream as the Q-learner does
+    and greedy snapshots from "snapshot", so a game here is the same game as a
+    session's learner service plays. A game that finished its rounds keeps
+    stepping with its results frozen and learns nothing. Returns core/simulate.py
+    SimResult's fields: (q, counts, picks, inconsistent, turns, snapshots).
+    Errors: ValueError for a rounds count that is not one int >= 0.
+    """
+    n = len(personas)
+    if len(seeds) != n:
+        raise ValueError("one seed per game")
+    if not isinstance(rounds, (int, np.integer)) or rounds < 0:
+        raise ValueError("an LSPI batch plays one rounds count >= 0 for all its games")
+    games = MemoryGames(personas, seeds, observed_source, reward_bonus)
+    learner = LSPILearner(n, UniformStream(seeds, "agent"), config, lspi)
+    rows = np.arange(n)
+    picks = np.zeros((n, rounds), dtype=np.int32)
+    inconsistent = np.zeros((n, rounds), dtype=np.int32)
+    open_inconsistent = np.zeros(n, dtype=np.int32)
+    done = games.round_index >= rounds
+    learner.start_round(games.round_index)
+    every = int(snapshot_every or 0)
+    snapshots = np.zeros((n, rounds // every if every else 0, N_STATES), dtype=np.int64)
+    snap_stream = UniformStream(seeds, "snapshot") if every else None
+    steps = 0
+    while not done.all():
+        steps += 1
+        states = games.observe()
+        actions, _ = learner.suggest(states, games.round_index)
+        out = games.act(actions)
+        learner.learn(states, actions, out.rewards, out.learned & ~done)
+        open_inconsistent += out.considered & ~out.consistent
+        if not out.round_over.any():
+            continue
+        g = rows[out.round_over & ~done]
+        r = games.round_index[g]  # rounds now complete
+        picks[g, r - 1] = out.picks[g]
+        inconsistent[g, r - 1] = open_inconsistent[g]
+        done |= games.round_index >= rounds
+        if every:
+            due = g[(r % every == 0) & (r <= snapshots.shape[1] * every)]
+            if due.size:
+                snapshots[due, games.round_index[due] // every - 1] = greedy(learner.q[due],
+                                                                              snap_stream.take(N_STATES, due))
+        over = rows[out.round_over]
+        open_inconsistent[over] = 0
+        games.new_round(over)
+        learner.start_round(games.round_index, over)
+        if progress is not None:
+            progress(int(np.minimum(games.round_index, rounds).sum()))
+    return learner.q, learner.counts, picks, inconsistent, steps, snapshots if every else None

@@ -24,14 +24,21 @@ match.
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from pairplay.schemas.config import DEFAULT_REWARD_BONUS, REWARD_BONUS_RULES
+
+from . import kernels
 
 INCONSISTENT = -3.0
 WRONG_SUGGESTION = -3.0
 IGNORE_BELOW_S = 1.5  # thesis 7.1.2: picks closer than this ignored the suggestion
 BONUS_RULES = REWARD_BONUS_RULES
+BONUS_CODES = {"correct": kernels.BONUS_CORRECT, "consistent": kernels.BONUS_CONSISTENT, "match": kernels.BONUS_MATCH}
+assert set(BONUS_CODES) == set(BONUS_RULES)
+assert kernels.INCONSISTENT == INCONSISTENT
 # How each rule reads in a report.
 BONUS_RULE_TEXT = {
     "correct": "paid when the candidate set holds the matching card",
@@ -46,29 +53,33 @@ def check_bonus_rule(bonus: str) -> str:
     return bonus
 
 
-def bonus_paid(bonus: str, matched, holds_match) -> np.ndarray:
-    """Whether a considered, consistent suggestion earns its 1/|C| bonus."""
-    check_bonus_rule(bonus)
-    if bonus == "consistent":
-        return np.ones(np.shape(matched), dtype=bool)
-    return np.asarray(matched if bonus == "match" else holds_match, dtype=bool)
-
-
 def simulated_reward(matched: np.ndarray, considered: np.ndarray, consistent: np.ndarray,
                      candidate_size: np.ndarray, holds_match: np.ndarray,
                      bonus: str = DEFAULT_REWARD_BONUS) -> tuple[np.ndarray, np.ndarray]:
     """(reward, learn) per game; `learn` is False where the turn gives no update.
 
-    `holds_match`: the candidate set contains the matching card.
+    `holds_match`: the candidate set contains the matching card (core/kernels.py `_reward`).
     """
-    size = np.maximum(np.asarray(candidate_size), 1)
-    base = np.where(matched, 1.0, -1.0) + np.where(bonus_paid(bonus, matched, holds_match), 1.0 / size, 0.0)
-    reward = np.where(consistent, base, INCONSISTENT)
-    return np.where(considered, reward, 0.0), np.asarray(considered, dtype=bool)
+    check_bonus_rule(bonus)
+    inputs = (matched, considered, consistent, candidate_size, holds_match)
+    shape = np.shape(matched)
+    if any(np.shape(x) != shape for x in inputs):
+        shape = np.broadcast_shapes(*(np.shape(x) for x in inputs))
+    n = math.prod(shape)
+    hit, cons, consist, size, holds = (
+        kernels.as_batch(x if len(shape) == 1 else np.reshape(np.broadcast_to(x, shape), -1), n, dt)
+        for x, dt in zip(inputs, (bool, bool, bool, np.int64, bool)))
+    reward, learn = np.empty(hit.size), np.empty(hit.size, dtype=bool)
+    kernels.rewards_batch(hit, cons, consist, size, holds, BONUS_CODES[bonus], reward, learn)
+    return reward.reshape(shape), learn.reshape(shape)
 
 
-def human_reward(matched: bool, pick_gap_s: float, ignore_below_s: float = IGNORE_BELOW_S) -> tuple[float, bool]:
-    """(reward, learn) of a human-study turn: +-1, ignored when picked too fast."""
-    if pick_gap_s < ignore_below_s:
+def human_reward(matched: bool, pick_gap_s: float = float("inf"), ignore_below_s: float = IGNORE_BELOW_S,
+                 ignored: bool | None = None) -> tuple[float, bool]:
+    """(reward, learn) of a human-study turn: +-1, ignored when picked too fast.
+
+    `ignored`, when given, is the game's decision (it timed the picks on the
+    session's clock) and takes the place of comparing `pick_gap_s`."""
+    if ignored if ignored is not None else pick_gap_s < ignore_below_s:
         return 0.0, False
     return (1.0 if matched else -1.0), True

@@ -16,7 +16,9 @@ mix(key + (n + 1) * 0x9E3779B97F4A7C15), a pure function of the stream's key
 and the draw's index. So a batch of streams is a few uint64 array operations
 per draw (no per-game Python loop, no buffers), and skipping ahead is adding
 to a counter (a restarted service catches up with its log in O(1)). Keys come
-from numpy's SeedSequence hashing of (game seed, role), 64 bits each.
+from numpy's SeedSequence hashing of (game seed, role), 64 bits each. The
+draws themselves are core/kernels.py's `_draw`, the one the compiled simulator
+uses inline.
 
 Game seeds (`game_seed`, derivation STREAMS_VERSION = 2): every seed 0..2**64-1
 and every label (a persona key, a participant id) gives its own streams. The
@@ -35,16 +37,16 @@ from __future__ import annotations
 
 import hashlib
 import zlib
+from functools import lru_cache
 from typing import Sequence
 
 import numpy as np
 
+from . import kernels
+
 ROLES = ("deal", "agent", "user", "snapshot")
 _ROLE_KEY = {role: i for i, role in enumerate(ROLES)}
-_GAMMA = np.uint64(0x9E3779B97F4A7C15)
-_M1, _M2 = np.uint64(0xBF58476D1CE4E5B9), np.uint64(0x94D049BB133111EB)
-_S30, _S27, _S31, _S11 = (np.uint64(x) for x in (30, 27, 31, 11))
-_TO_UNIT = 2.0 ** -53
+assert (kernels.DEAL, kernels.AGENT, kernels.USER, kernels.SNAPSHOT) == tuple(_ROLE_KEY[r] for r in ROLES)
 
 
 STREAMS_VERSION = 2  # the derivation new sessions record (SessionConfig.streams)
@@ -83,6 +85,7 @@ def game_seed(seed: int, persona: str, game: int, version: int = STREAMS_VERSION
     return int.from_bytes(digest.digest(), "little")
 
 
+@lru_cache(maxsize=1 << 16)  # SeedSequence costs ~20 us; a study asks for the same evaluation games many times
 def _derivation_1(seed: int, persona: str, game: int) -> int:
     """pairplay <= 0.2's game seed (the seed cut to 32 bits, the label's CRC-32): the study's streams."""
     key = zlib.crc32(persona.encode("utf-8"))
@@ -94,17 +97,21 @@ def stream_key(seed: int, role: str) -> int:
     """The 64-bit SplitMix64 key of one game's stream for one role."""
     if role not in _ROLE_KEY:
         raise ValueError(f"unknown role {role!r}; roles are {ROLES}")
-    s = int(seed) & 0xFFFFFFFFFFFFFFFF
-    return int(np.random.SeedSequence([s >> 32, s & 0xFFFFFFFF, _ROLE_KEY[role]]).generate_state(1, np.uint64)[0])
+    return _stream_key(int(seed) & 0xFFFFFFFFFFFFFFFF, _ROLE_KEY[role])
 
 
-def splitmix64(key: np.ndarray, index: np.ndarray) -> np.ndarray:
-    """Uniform [0, 1) draw number `index` (0, 1, ...) of the stream with `key` (uint64 arrays)."""
-    z = key + (index + np.uint64(1)) * _GAMMA
-    z = (z ^ (z >> _S30)) * _M1
-    z = (z ^ (z >> _S27)) * _M2
-    z = z ^ (z >> _S31)
-    return (z >> _S11).astype(np.float64) * _TO_UNIT
+@lru_cache(maxsize=1 << 16)
+def _stream_key(s: int, role: int) -> int:
+    # SeedSequence hashing costs ~20 us; a study asks for the same evaluation games many times.
+    return int(np.random.SeedSequence([s >> 32, s & 0xFFFFFFFF, role]).generate_state(1, np.uint64)[0])
+
+
+def stream_keys(seeds: Sequence[int], roles: Sequence[str] = ROLES) -> np.ndarray:
+    """(n, 4) uint64: the keys of `roles` (default all) of every game, columns in ROLES order, 0 elsewhere."""
+    keys = np.zeros((len(seeds), len(ROLES)), dtype=np.uint64)
+    for role in roles:
+        keys[:, _ROLE_KEY[role]] = [stream_key(s, role) for s in seeds]
+    return keys
 
 
 class UniformStream:
@@ -114,6 +121,7 @@ class UniformStream:
         self.role = role
         self._key = np.array([stream_key(s, role) for s in seeds], dtype=np.uint64)
         self._pos = np.zeros(len(self._key), dtype=np.uint64)
+        self._all = np.arange(len(self._key))
 
     @property
     def n_games(self) -> int:
@@ -126,14 +134,9 @@ class UniformStream:
 
     def take(self, k: int, games: np.ndarray | None = None) -> np.ndarray:
         """The next `k` draws of each game (or of `games`, an index array): shape (n, k)."""
-        offsets = np.arange(k, dtype=np.uint64)
-        if games is None:
-            out = splitmix64(self._key[:, None], self._pos[:, None] + offsets)
-            self._pos += np.uint64(k)
-            return out
-        idx = np.asarray(games)
-        out = splitmix64(self._key[idx, None], self._pos[idx, None] + offsets)
-        self._pos[idx] += np.uint64(k)
+        idx = self._all if games is None else np.asarray(games, dtype=np.int64)
+        out = np.empty((idx.size, k))
+        kernels.draw_block(self._key, self._pos, k, idx, out)
         return out
 
     def skip(self, n_draws: int, games: np.ndarray | None = None) -> None:
@@ -144,27 +147,14 @@ class UniformStream:
             self._pos[np.asarray(games)] += np.uint64(n_draws)
 
 
-def _select_table() -> np.ndarray:
-    """SELECT[mask, k]: the k-th set bit (ascending) of an 18-bit mask; -1 past the end."""
-    masks = np.arange(1 << 18, dtype=np.int64)
-    table = np.full((1 << 18, 18), -1, dtype=np.int8)
-    for k in range(18):  # strip the lowest set bit k times
-        lowest = masks & -masks
-        table[:, k] = np.where(masks != 0, np.bitwise_count(lowest - 1), -1)
-        masks &= masks - 1
-    return table
-
-
-_SELECT = _select_table()
-
-
 def pick_from_mask(masks: np.ndarray, u: np.ndarray) -> np.ndarray:
     """Uniformly pick one set bit of each mask with draw `u`: the floor(u*n)-th bit.
 
-    Masks (18-bit card sets) must be non-empty. Returns card indices (int64).
-    Every random choice of a card is made this way, with exactly one draw.
+    Masks (18-bit card sets) must be non-empty (an empty one gives -1). Returns
+    card indices (int64). Every random choice of a card is made this way, with
+    exactly one draw.
     """
-    masks = np.asarray(masks, dtype=np.int64)
-    n = np.bitwise_count(masks)
-    k = np.minimum((u * n).astype(np.int64), n - 1)
-    return _SELECT[masks, k].astype(np.int64)
+    masks, u = np.broadcast_arrays(np.asarray(masks, dtype=np.int64), np.asarray(u, dtype=np.float64))
+    out = np.empty(masks.shape, dtype=np.int64)
+    kernels.pick_batch(np.ascontiguousarray(masks).reshape(-1), np.ascontiguousarray(u).reshape(-1), out.reshape(-1))
+    return out

@@ -5,10 +5,13 @@ clear, each round on a new deal. A turn: the user's first pick; the card the
 user observes (its intended card, thesis 6.1.3, or the first pick as in the human
 study); the state (4.1); the learner's suggestion; the user's second pick; the
 reward (4.3, 6.1.3) and the Q update (5.2); the user's memory. Games are
-independent, so they are stepped in lockstep as arrays: a game that finishes
-its rounds early keeps stepping with its results frozen. Each role (deal,
-agent, user) draws from its own per-game stream, so a game run here equals the
-same game run alone over the bus.
+independent: the compiled kernel (core/kernels.py `play`) plays each game whole,
+one after the other, and a batch may mix learners (Q-learning, pi-reuse, fixed
+policies), schedules and lengths. Each role (deal, agent, user, snapshot) draws
+from its own per-game stream, so a game run here equals the same game run alone
+over the bus, and a batch's results do not depend on what else is in it. A
+recorded trace is given in lockstep order (turn number, then game), the order
+of the numpy simulator this replaced, so sums over it add up the same way.
 """
 
 from __future__ import annotations
@@ -19,131 +22,138 @@ import numpy as np
 
 from pairplay.schemas.config import DEFAULT_REWARD_BONUS, LearnerConfig, LSPIConfig, Persona
 
-from .board import deal
-from .geometry import ALL_CARDS, N_CARDS, states_of
-from .learning import Learner, greedy
-from .lspi import LSPILearner
-from .reward import simulated_reward
-from .rng import UniformStream
-from .user import SimulatedUsers
+from . import kernels
+from .geometry import N_CARDS, N_STATES
+from .actions import N_ACTIONS
+from .games import OBSERVED_SOURCES
+from .learning import MODES, _policy_table, schedule_tables
+from .lspi import play_lspi
+from .reward import BONUS_CODES, simulated_reward
+from .rng import ROLES, stream_keys
+from .user import persona_arrays
 
-_BIT = np.int64(1) << np.arange(N_CARDS, dtype=np.int64)
-OBSERVED_SOURCES = ("intended", "first-pick")
-
-
-class Turn(NamedTuple):
-    """What one lockstep step decided, for observers (`on_turn`)."""
-
-    active: np.ndarray  # games still inside their rounds
-    round_index: np.ndarray
-    first: np.ndarray
-    observed: np.ndarray
-    match: np.ndarray
-    covered: np.ndarray  # face-down cards at the suggestion (first card excluded)
-    nis: np.ndarray  # the user's no-information set at the suggestion
-    from_memory: np.ndarray
-    states: np.ndarray
-    actions: np.ndarray
-    second: np.ndarray
-    considered: np.ndarray
-    consistent: np.ndarray
-    rewards: np.ndarray
+RECORDS = {None: kernels.RECORD_NONE, "all": kernels.RECORD_ALL, "considerable": kernels.RECORD_CONSIDERABLE}
+PROGRESS_SLICES = 20  # a batch with a progress callback is played in this many slices of rounds
 
 
 class SimResult(NamedTuple):
     q: np.ndarray  # (B, 24, 88) final Q-tables
     counts: np.ndarray  # (B, 24, 88) Q updates per state and action
-    picks: np.ndarray  # (B, rounds) picks per round
+    picks: np.ndarray  # (B, rounds) picks per round (0 past a game's own rounds)
     inconsistent: np.ndarray  # (B, rounds) inconsistent suggestions per round
-    turns: int  # lockstep steps taken
+    turns: int  # lockstep steps: the most turns any game took
     snapshots: np.ndarray | None  # (B, rounds // k, 24) greedy policy after every k rounds
+    trace: dict | None = None  # `record`: one entry per turn, lockstep order (step, then game); see run_games
 
 
-def run_games(personas: Sequence[Persona], seeds: Sequence[int], rounds: int,
-              config: LearnerConfig = LearnerConfig(), mode: str = "q",
+def _per_game(value, n: int, what: str) -> list:
+    if isinstance(value, (str, int, np.integer, LearnerConfig)):
+        return [value] * n
+    value = list(value)
+    if len(value) != n:
+        raise ValueError(f"one {what} per game")
+    return value
+
+
+def run_games(personas: Sequence[Persona], seeds: Sequence[int], rounds: int | Sequence[int],
+              config: LearnerConfig | Sequence[LearnerConfig] = LearnerConfig(), mode: str | Sequence[str] = "q",
               bias: np.ndarray | None = None, policy: np.ndarray | None = None,
-              observed_source: str = "intended", progress=None, on_turn=None,
+              observed_source: str = "intended", progress=None,
               snapshot_every: int | None = None, reward_bonus: str = DEFAULT_REWARD_BONUS,
-              lspi: LSPIConfig | None = None) -> SimResult:
+              record: str | None = None, lspi: LSPIConfig | None = None) -> SimResult:
     """Play one game per (persona, seed) pair; see the module rule.
 
-    `progress(done_rounds)` is called with the rounds completed so far (summed
-    over games) whenever some game finishes a round; `on_turn(Turn)` after every
-    lockstep step. With `snapshot_every=k` the greedy policy of every learner is
-    kept after rounds k, 2k, ... (ties broken by the game's "snapshot" stream),
-    to measure how fast a policy becomes good. `reward_bonus` chooses when the
-    1/|candidate set| bonus is paid (core/reward.py). `mode="lspi"` learns by
-    online LSPI (core/lspi.py, configured by `lspi`) instead of Q-learning.
+    `rounds`, `config` and `mode` ("q", "reuse" on `bias`, "fixed" by `policy`)
+    are one for all games or one per game, so independent experiments share a
+    batch. `progress(done_rounds)` is called with the rounds completed so far
+    (summed over games) after every slice of rounds. With `snapshot_every=k`
+    the greedy policy of every learner is kept after rounds k, 2k, ... (ties
+    broken by the game's "snapshot" stream), to measure how fast a policy
+    becomes good. `reward_bonus` chooses when the 1/|candidate set| bonus is
+    paid (core/reward.py). `record="all"` keeps every turn in `trace` (name ->
+    array: kernels.TRACE_FIELDS, then "candidates" and "reward"), "considerable"
+    only the turns whose match the user did not remember (the oracle's situations).
+    `mode="lspi"` (for every game) learns by online LSPI configured by `lspi`:
+    its own lockstep runner (core/lspi.py `play_lspi`; one `rounds` and
+    `config` for all games, no `record`), on the same per-game streams.
     """
     if observed_source not in OBSERVED_SOURCES:
         raise ValueError(f"observed source must be one of {OBSERVED_SOURCES}")
+    if record not in RECORDS:
+        raise ValueError(f"record must be one of {list(RECORDS)}")
     n = len(personas)
     if len(seeds) != n:
         raise ValueError("one seed per game")
-    deals = UniformStream(seeds, "deal")
-    users = SimulatedUsers(personas, UniformStream(seeds, "user"))
     if mode == "lspi":
-        learner = LSPILearner(n, UniformStream(seeds, "agent"), config, lspi or LSPIConfig())
-    else:
-        learner = Learner(n, UniformStream(seeds, "agent"), config, mode, bias=bias, policy=policy)
-    rows = np.arange(n)
+        if record is not None:
+            raise ValueError("an LSPI batch records no trace")
+        return SimResult(*play_lspi(personas, seeds, rounds, config, lspi or LSPIConfig(), observed_source,
+                                    progress, snapshot_every, reward_bonus))
+    modes = _per_game(mode, n, "mode")
+    unknown = set(modes) - set(MODES)
+    if unknown:
+        raise ValueError(f"unknown learner mode {sorted(unknown)[0]!r}")
+    if "reuse" in modes and bias is None:
+        raise ValueError("pi-reuse needs a bias policy")
+    if "fixed" in modes and policy is None:
+        raise ValueError("a fixed learner needs a policy")
+    game_rounds = np.array(_per_game(rounds, n, "rounds count"), dtype=np.int64)
+    if n and game_rounds.min() < 0:
+        raise ValueError("rounds must be >= 0")
+    horizon = int(game_rounds.max()) if n else 0
+    configs = _per_game(config, n, "learner config")
+    distinct = list(dict.fromkeys(configs))
+    cfg = np.array([distinct.index(c) for c in configs], dtype=np.int64)
+    tabs = [schedule_tables(c, horizon) for c in distinct]
+    eps_tab, alpha_tab, psi0_tab = (np.ascontiguousarray(np.stack([t[i] for t in tabs]) if tabs else
+                                                         np.zeros((1, 1))) for i in range(3))
+    psi_decay = np.array([c.psi_decay for c in distinct] or [1.0], dtype=np.float64)
+    table = np.zeros((n, N_STATES), dtype=np.int64)
+    mode_code = np.array([MODES[m] for m in modes], dtype=np.int8)
+    for name, source in (("reuse", bias), ("fixed", policy)):
+        rows = mode_code == MODES[name]
+        if rows.any():
+            table[rows] = _policy_table(source, n)[rows]
+    p_consider, q_hear, capacity, sees = persona_arrays(personas)
 
-    picks_log = np.zeros((n, rounds), dtype=np.int32)
-    inconsistent_log = np.zeros((n, rounds), dtype=np.int32)
+    # a fixed policy draws nothing: its games need only the deal and user streams
+    keys = stream_keys(seeds, ("deal", "user") if set(modes) == {"fixed"} else ROLES)
+    pos = np.zeros_like(keys)
+    q = np.zeros((n, N_STATES, N_ACTIONS))
+    counts = np.zeros((n, N_STATES, N_ACTIONS), dtype=np.int32)
+    picks = np.zeros((n, horizon), dtype=np.int32)
+    inconsistent = np.zeros((n, horizon), dtype=np.int32)
+    steps = np.zeros(n, dtype=np.int64)
     round_index = np.zeros(n, dtype=np.int64)
-    picks = np.zeros(n, dtype=np.int32)
-    inconsistent = np.zeros(n, dtype=np.int32)
-    done = np.zeros(n, dtype=bool)
-    _, partner = deal(deals.take(N_CARDS))
-    matched = np.zeros(n, dtype=np.int64)
-    learner.start_round(round_index)
-    snapshots = snap_stream = None
-    if snapshot_every:
-        snapshots = np.zeros((n, rounds // snapshot_every, learner.q.shape[1]), dtype=np.int64)
-        snap_stream = UniformStream(seeds, "snapshot")
-    steps = 0
-    while not done.all():
-        steps += 1
-        covered = ALL_CARDS & ~matched
-        first = users.first_pick(covered, partner)
-        covered = covered & ~_BIT[first]
-        match = partner[rows, first]
-        intended, from_memory = users.intend(first, match, covered)
-        observed = intended if observed_source == "intended" else first
-        states = states_of(observed, match, covered)
-        actions, _ = learner.suggest(states, round_index)
-        nis = users.nis(covered) if on_turn is not None else None  # before the turn changes memory
-        resp = users.respond(actions, observed, match, intended, from_memory, covered)
-        hit = resp.second == match
-        users.end_turn(first, resp.second, hit)
-        rewards, learn = simulated_reward(hit, resp.considered, resp.consistent, np.bitwise_count(resp.candidates),
-                                          (resp.candidates >> match) & 1 == 1, reward_bonus)
-        learner.learn(states, actions, rewards, learn & ~done, round_index)
-        if on_turn is not None:
-            on_turn(Turn(~done, round_index.copy(), first, observed, match, covered, nis,
-                         from_memory, states, actions, resp.second, resp.considered, resp.consistent, rewards))
-        matched |= np.where(hit, _BIT[first] | _BIT[resp.second], 0)
-        picks += 2
-        inconsistent += resp.considered & ~resp.consistent
-        over = matched == ALL_CARDS
-        if over.any():
-            g = rows[over & ~done]
-            picks_log[g, round_index[g]] = picks[g]
-            inconsistent_log[g, round_index[g]] = inconsistent[g]
-            round_index[over] += 1
-            picks[over] = 0
-            inconsistent[over] = 0
-            done |= round_index >= rounds
-            if snapshots is not None:
-                due = g[(round_index[g] % snapshot_every == 0) & (round_index[g] <= snapshots.shape[1] * snapshot_every)]
-                if due.size:
-                    u = snap_stream.take(learner.q.shape[1], due)
-                    snapshots[due, round_index[due] // snapshot_every - 1] = greedy(learner.q[due], u)
-            g = rows[over]
-            partner[g] = deal(deals.take(N_CARDS, g))[1]
-            matched[g] = 0
-            users.new_round(g)
-            learner.start_round(round_index, g)
-            if progress is not None:
-                progress(int(np.minimum(round_index, rounds).sum()))
-    return SimResult(learner.q, learner.counts, picks_log, inconsistent_log, steps, snapshots)
+    memory = np.zeros(n, dtype=np.int64)
+    stamp = np.full((n, N_CARDS), kernels.NEVER, dtype=np.int64)
+    clock = np.zeros(n, dtype=np.int64)
+    every = int(snapshot_every or 0)
+    snapshots = np.zeros((n, horizon // every if every else 0, N_STATES), dtype=np.int64)
+    trace = np.empty((n * horizon * 16 if record else 0, len(kernels.TRACE_FIELDS) + 1), dtype=np.int32)
+    n_trace = 0
+    games = np.arange(n)
+    slice_rounds = max(1, -(-horizon // PROGRESS_SLICES)) if progress is not None else max(horizon, 1)
+    for until in range(slice_rounds, horizon + slice_rounds, slice_rounds):
+        trace, n_trace = kernels.play(
+            kernels.TABLES, games, until, game_rounds, keys, pos, mode_code, cfg, table, p_consider, q_hear,
+            capacity, sees, eps_tab, alpha_tab, psi0_tab, psi_decay, BONUS_CODES[reward_bonus],
+            observed_source == "first-pick", q, counts, picks, inconsistent, steps, round_index, memory, stamp,
+            clock, every, snapshots, RECORDS[record], trace, n_trace)
+        if progress is not None:
+            progress(int(round_index.sum()))
+    return SimResult(q, counts, picks, inconsistent, int(steps.max()) if n else 0,
+                     snapshots if every else None, _trace(trace[:n_trace], reward_bonus) if record else None)
+
+
+def _trace(rows: np.ndarray, reward_bonus: str) -> dict:
+    """The recorded turns as named columns, in lockstep order (step, then game), with their rewards."""
+    order = np.lexsort((rows[:, kernels.T_GAME], rows[:, kernels.T_STEP]))
+    # column by column: a sorted copy of the whole table would double the oracle's peak memory
+    out = {name: rows[order, i] for i, name in enumerate(kernels.TRACE_FIELDS)}
+    out["candidates"] = rows[order, kernels.T_CANDIDATES]
+    size = np.bitwise_count(out["candidates"])
+    holds = (out["candidates"] >> out["match"]) & 1 == 1
+    out["reward"], _ = simulated_reward(out["second"] == out["match"], out["considered"] == 1,
+                                        out["consistent"] == 1, size, holds, reward_bonus)
+    return out

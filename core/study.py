@@ -6,7 +6,10 @@ persona or a game never changes the others. Each game yields one policy: the
 greedy action of its final Q-table, ties broken by a generator seeded from the
 game's seed. Evaluation plays every policy with epsilon 0 (a fixed policy) on
 games seeded apart from training, beside the two references (user alone,
-oracle); all of it batched into as few lockstep runs as possible.
+oracle). Games are independent (core/simulate.py), so independent phases share
+one batch: `Evaluations` collects the evaluation games of several experiments
+(the comparison, the merged policies, the speed-up's snapshots) and plays them
+together, and both arms of the speed-up experiment are one batch.
 """
 
 from __future__ import annotations
@@ -51,17 +54,53 @@ def train(personas: Sequence[Persona], games: int, rounds: int, seed: int,
     return Training(flat, index, seeds, result, greedy)
 
 
+class Evaluations:
+    """Evaluation games of several experiments, played in one batch (epsilon 0, fixed policies).
+
+    `add` returns the slice of rows a request gets; after `play`, `picks[slice]`
+    is each row's mean picks per round. Row i of a request plays evaluation
+    game `game_index[i]` (default i) of its persona: rows with the same persona
+    and index play the very same deals and user draws, whatever else is in the batch.
+    """
+
+    def __init__(self, seed: int):
+        self.seed = seed
+        self._personas: list[Persona] = []
+        self._policies: list[np.ndarray] = []
+        self._rounds: list[int] = []
+        self._index: list[int] = []
+        self.picks: np.ndarray | None = None
+
+    def add(self, personas: Sequence[Persona], policies: np.ndarray, rounds: int,
+            game_index: Sequence[int] | None = None) -> slice:
+        start = len(self._personas)
+        policies = np.asarray(policies).reshape(len(personas), -1)
+        self._personas += list(personas)
+        self._policies.append(policies)
+        self._rounds += [rounds] * len(personas)
+        self._index += [int(i) for i in (range(len(personas)) if game_index is None else game_index)]
+        return slice(start, len(self._personas))
+
+    @property
+    def total_rounds(self) -> int:
+        return sum(self._rounds)
+
+    def play(self, progress=None) -> np.ndarray:
+        seeds = [game_seed(self.seed, p.key, EVAL_GAME_OFFSET + i) for p, i in zip(self._personas, self._index)]
+        result = run_games(self._personas, seeds, self._rounds, mode="fixed", policy=np.concatenate(self._policies),
+                           progress=progress)
+        rounds = np.array(self._rounds)
+        # integer picks: a row's sum is exact, so its mean does not depend on the batch's width
+        self.picks = result.picks.sum(axis=1, dtype=np.float64) / rounds
+        return self.picks
+
+
 def evaluate(personas: Sequence[Persona], policies: np.ndarray, rounds: int, seed: int,
              game_index: Sequence[int] | None = None, progress=None) -> np.ndarray:
-    """Mean picks per round of each (persona, policy) row, epsilon 0, `rounds` rounds each.
-
-    Row i plays evaluation game `game_index[i]` (default i) of its persona: rows
-    with the same persona and index play the very same deals and user draws.
-    """
-    index = range(len(personas)) if game_index is None else game_index
-    seeds = [game_seed(seed, p.key, EVAL_GAME_OFFSET + int(i)) for p, i in zip(personas, index)]
-    return run_games(list(personas), seeds, rounds, mode="fixed", policy=policies,
-                     progress=progress).picks.mean(axis=1)
+    """Mean picks per round of each (persona, policy) row, epsilon 0, `rounds` rounds each (see Evaluations)."""
+    batch = Evaluations(seed)
+    batch.add(personas, policies, rounds, game_index)
+    return batch.play(progress)
 
 
 class Comparison(NamedTuple):
@@ -81,17 +120,31 @@ def compare(personas: Sequence[Persona], training: Training, eval_rounds: int, s
     """User alone, learned greedy policies and the oracle, per persona, on the same games.
 
     Each learned policy plays `eval_rounds` rounds; the oracle and the user alone
-    play the very same evaluation games beside it (one lockstep batch).
+    play the very same evaluation games beside it (one batch).
     """
-    oracle, values = oracle_policies(personas, oracle_games, seed, oracle_rounds, bonus=reward_bonus)
+    oracle = oracle_policies(personas, oracle_games, seed, oracle_rounds, bonus=reward_bonus)
+    batch = Evaluations(seed)
+    rows = add_comparison(batch, personas, training, eval_rounds, oracle)
+    batch.play(progress)
+    return comparison(personas, training, oracle, batch.picks[rows])
+
+
+def add_comparison(batch: Evaluations, personas: Sequence[Persona], training: Training, eval_rounds: int,
+                   oracle: tuple[np.ndarray, np.ndarray]) -> slice:
+    """Queue the comparison's games: every learned policy, the oracle and the user alone on the same games."""
     n_p, games = len(personas), len(training.personas) // len(personas)
     owner = np.repeat(np.arange(n_p), games)
-    policies = np.concatenate([training.greedy, oracle[owner], np.tile(USER_ALONE, (n_p * games, 1))])
-    picks = evaluate(list(training.personas) * 3, policies, eval_rounds, seed,
-                     np.tile(training.game_index, 3), progress)
+    policies = np.concatenate([training.greedy, oracle[0][owner], np.tile(USER_ALONE, (n_p * games, 1))])
+    return batch.add(list(training.personas) * 3, policies, eval_rounds, np.tile(training.game_index, 3))
+
+
+def comparison(personas: Sequence[Persona], training: Training, oracle: tuple[np.ndarray, np.ndarray],
+               picks: np.ndarray) -> Comparison:
+    """The Comparison from the picks of `add_comparison`'s rows."""
+    n_p, games = len(personas), len(training.personas) // len(personas)
     learned, oracle_picks, alone = picks.reshape(3, n_p, games)
     return Comparison([p.key for p in personas], alone.mean(1), learned.mean(1), learned.std(1),
-                      oracle_picks.mean(1), oracle, learned, values)
+                      oracle_picks.mean(1), oracle[0], learned, oracle[1])
 
 
 class Speed(NamedTuple):
@@ -169,6 +222,14 @@ def evaluate_on_personas(personas: Sequence[Persona], policies: dict, games: int
     learned policies, played in turn). Every (policy, persona) pair plays the same
     `games` evaluation games of that persona.
     """
+    batch = Evaluations(seed)
+    pending = add_on_personas(batch, personas, policies, games, rounds)
+    batch.play(progress)
+    return pending(batch)
+
+
+def add_on_personas(batch: Evaluations, personas: Sequence[Persona], policies: dict, games: int, rounds: int):
+    """Queue `evaluate_on_personas`'s games; returns a function of the played batch giving its dict."""
     rows, table, index, keys = [], [], [], []
     for name, policy in policies.items():
         for p in personas:
@@ -178,11 +239,14 @@ def evaluate_on_personas(personas: Sequence[Persona], policies: dict, games: int
                 table.append(own[g % len(own)])
                 index.append(g)
                 keys.append((name, p.key))
-    picks = evaluate(rows, np.array(table), rounds, seed, index, progress)
-    out: dict = {}
-    for k, v in zip(keys, picks):
-        out.setdefault(k, []).append(v)
-    return {k: float(np.mean(v)) for k, v in out.items()}
+    where = batch.add(rows, np.array(table), rounds, index)
+
+    def result(played: Evaluations) -> dict:
+        out: dict = {}
+        for k, v in zip(keys, played.picks[where]):
+            out.setdefault(k, []).append(v)
+        return {k: float(np.mean(v)) for k, v in out.items()}
+    return result
 
 
 class ReuseResult(NamedTuple):
@@ -198,6 +262,28 @@ def reuse_experiment(personas: Sequence[Persona], users: UserSet, oracle_picks: 
                      seed: int, config: LearnerConfig, snapshot_every: int = 10, snapshot_rounds: int = 20,
                      target: float = 1.10, progress=None, reward_bonus: str = DEFAULT_REWARD_BONUS) -> ReuseResult:
     """Thesis 6.4 / 7: for each persona held out, Q-learning from scratch vs pi-reuse on the merge of the others."""
+    runs = reuse_runs(personas, users, seeds, rounds, seed, config, snapshot_every, progress, reward_bonus)
+    batch = Evaluations(seed)
+    rows = add_snapshots(batch, runs, snapshot_rounds)
+    batch.play()
+    return reuse_result(runs, oracle_picks, batch.picks[rows], target)
+
+
+class ReuseRuns(NamedTuple):
+    """Both arms of the speed-up experiment, played as one batch: rows [0, n) scratch, [n, 2n) pi-reuse."""
+
+    personas: list[Persona]  # the held-out personas
+    flat: list[Persona]  # one per game of an arm, persona-major
+    seeds: int
+    snapshot_every: int
+    result: SimResult
+    biases: dict  # held-out key -> combine.Combined of the others
+
+
+def reuse_runs(personas: Sequence[Persona], users: UserSet, seeds: int, rounds: int, seed: int,
+               config: LearnerConfig, snapshot_every: int = 10, progress=None,
+               reward_bonus: str = DEFAULT_REWARD_BONUS) -> ReuseRuns:
+    """Each persona held out: `seeds` games from scratch and the same games with pi-reuse on the merge of the others."""
     from .combine import combine
     biases = {p.key: combine([users.users[q.key] for q in personas if q.key != p.key]) for p in personas}
     flat, seed_list, bias_rows = [], [], []
@@ -208,28 +294,37 @@ def reuse_experiment(personas: Sequence[Persona], users: UserSet, oracle_picks: 
             bias_rows.append(biases[p.key].policy)
     bias = np.array(bias_rows)
     n = len(flat)
-    scratch = run_games(flat, seed_list, rounds, config, mode="q", progress=progress, snapshot_every=snapshot_every,
-                        reward_bonus=reward_bonus)
-    # one progress count over both runs: the second continues where the first ended
-    after_scratch = None if progress is None else (lambda done: progress(n * rounds + done))
-    reuse = run_games(flat, seed_list, rounds, config, mode="reuse", bias=bias, progress=after_scratch,
-                      snapshot_every=snapshot_every, reward_bonus=reward_bonus)
-    # How good is the learner's own greedy policy after every `snapshot_every` rounds?
-    snaps = np.concatenate([scratch.snapshots, reuse.snapshots])  # (2n, k, 24)
+    result = run_games(flat * 2, seed_list * 2, rounds, config, mode=["q"] * n + ["reuse"] * n,
+                       bias=np.concatenate([bias, bias]), progress=progress, snapshot_every=snapshot_every,
+                       reward_bonus=reward_bonus)
+    return ReuseRuns(list(personas), flat, seeds, snapshot_every, result, biases)
+
+
+def add_snapshots(batch: Evaluations, runs: ReuseRuns, snapshot_rounds: int = 20) -> slice:
+    """Queue the games that say how good each learner's greedy policy was after every `snapshot_every` rounds."""
+    snaps = runs.result.snapshots  # (2n, k, 24)
     k = snaps.shape[1]
-    snap_personas = [flat[i % n] for i in range(2 * n) for _ in range(k)]
-    snap_picks = evaluate(snap_personas, snaps.reshape(-1, snaps.shape[-1]), snapshot_rounds, seed,
-                          [j for _ in range(2 * n) for j in range(k)]).reshape(2, n, k)
-    P = len(personas)
-    limit = np.array([oracle_picks[p.key] * target for p in flat])
+    n2 = snaps.shape[0]
+    return batch.add([runs.flat[i % len(runs.flat)] for i in range(n2) for _ in range(k)],
+                     snaps.reshape(-1, snaps.shape[-1]), snapshot_rounds, [j for _ in range(n2) for j in range(k)])
+
+
+def reuse_result(runs: ReuseRuns, oracle_picks: dict, snap_picks: np.ndarray, target: float = 1.10) -> ReuseResult:
+    """The speed-up's tables from the runs and their snapshots' picks (`add_snapshots`' rows)."""
+    n, P, seeds = len(runs.flat), len(runs.personas), runs.seeds
+    picks = runs.result.picks
+    scratch, reuse = picks[:n], picks[n:]
+    rounds = picks.shape[1]
+    snap_picks = snap_picks.reshape(2, n, -1)
+    limit = np.array([oracle_picks[p.key] * target for p in runs.flat])
     reached = snap_picks <= limit[None, :, None]
-    first = np.where(reached.any(-1), (np.argmax(reached, -1) + 1) * snapshot_every, np.nan)  # (2, n)
-    first50 = np.stack([scratch.picks[:, :50].mean(1), reuse.picks[:, :50].mean(1)])  # (2, n)
-    curves = np.stack([scratch.picks, reuse.picks]).reshape(2, P, seeds, rounds).mean(2)
-    return ReuseResult([p.key for p in personas], seeds,
+    first = np.where(reached.any(-1), (np.argmax(reached, -1) + 1) * runs.snapshot_every, np.nan)  # (2, n)
+    first50 = np.stack([scratch[:, :50].mean(1), reuse[:, :50].mean(1)])  # (2, n)
+    curves = np.stack([scratch, reuse]).reshape(2, P, seeds, rounds).mean(2)
+    return ReuseResult([p.key for p in runs.personas], seeds,
                        first50.reshape(2, P, seeds).transpose(1, 0, 2),
                        first.reshape(2, P, seeds).transpose(1, 0, 2),
-                       curves.transpose(1, 0, 2), biases)
+                       curves.transpose(1, 0, 2), runs.biases)
 
 
 def policy_gaps(cmp: Comparison, training: Training, index: int, top: int = 5) -> list[tuple[int, int, float, int, float, float]]:

@@ -31,17 +31,14 @@ import numpy as np
 
 from pairplay.schemas.config import Persona
 
-from .actions import ACTION_HEARING, ACTION_VISUAL, HEARING_SMILE, VISUAL_GAZE
+from . import kernels
 from .geometry import N_CARDS
-from .interpretation import (HEAR_SET, VIS_SET, consider_probability, hear_probability,
-                             memory_capacity, sees)
-from .rng import UniformStream, pick_from_mask
+from .interpretation import consider_probability, hear_probability, memory_capacity, sees
+from .rng import UniformStream
 
-DRAWS_PER_TURN = 5
-_BIT = np.int64(1) << np.arange(N_CARDS, dtype=np.int64)
-_SHIFT = np.arange(N_CARDS, dtype=np.int64)
+DRAWS_PER_TURN = kernels.DRAWS_PER_TURN
 _ALL_GAMES = slice(None)
-_NEVER = np.iinfo(np.int64).max  # stamp of a card not in memory
+_NEVER = kernels.NEVER  # stamp of a card not in memory
 
 
 class Response(NamedTuple):
@@ -51,24 +48,34 @@ class Response(NamedTuple):
     candidates: np.ndarray  # the candidate set (bit mask; 0 when inconsistent)
 
 
+def persona_arrays(personas: Sequence[Persona]) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """(p_consider, q_hear, capacity, sees (n, 3): smile, head, gaze) of each game's persona."""
+    p_consider = np.array([consider_probability(p.focus) for p in personas], dtype=np.float64)
+    q_hear = np.array([hear_probability(p.hearing) for p in personas], dtype=np.float64)
+    capacity = np.array([memory_capacity(p.memory) for p in personas], dtype=np.int64)
+    seen = np.array([sees(p.sight) for p in personas], dtype=bool).reshape(-1, 4)[:, 1:]
+    return p_consider, q_hear, capacity, np.ascontiguousarray(seen)
+
+
+def _ints(x, n: int) -> np.ndarray:
+    return kernels.as_batch(x, n, np.int64)
+
+
 class SimulatedUsers:
-    """One simulated user per game; arrays indexed by game."""
+    """One simulated user per game; arrays indexed by game (core/kernels.py `_user_*` per game)."""
 
     def __init__(self, personas: Sequence[Persona], stream: UniformStream):
         if stream.role != "user" or stream.n_games != len(personas):
             raise ValueError("SimulatedUsers needs a 'user' stream with one game per persona")
         self.stream = stream
         n = len(personas)
-        self.p_consider = np.array([consider_probability(p.focus) for p in personas])
-        self.q_hear = np.array([hear_probability(p.hearing) for p in personas])
-        self.capacity = np.array([memory_capacity(p.memory) for p in personas], dtype=np.int64)
-        seen = np.array([sees(p.sight) for p in personas])  # (n, channels)
-        self.sees_smile, self.sees_head, self.sees_gaze = seen[:, 1], seen[:, 2], seen[:, 3]
+        self.p_consider, self.q_hear, self.capacity, seen = persona_arrays(personas)
+        self.sees_smile, self.sees_head, self.sees_gaze = (np.ascontiguousarray(seen[:, i]) for i in range(3))
         self.stamp = np.full((n, N_CARDS), _NEVER, dtype=np.int64)  # when a card entered memory
         self.memory = np.zeros(n, dtype=np.int64)  # bit mask of remembered cards
         self.clock = np.zeros(n, dtype=np.int64)
         self._u = np.zeros((n, DRAWS_PER_TURN))
-        self._rows = np.arange(n)
+        self._n = n
 
     def new_round(self, games=_ALL_GAMES) -> None:
         self.stamp[games] = _NEVER
@@ -76,69 +83,51 @@ class SimulatedUsers:
 
     def first_pick(self, covered: np.ndarray, partner: np.ndarray) -> np.ndarray:
         """Draw this turn's uniforms and choose the first card of every game."""
-        self._u = self.stream.take(DRAWS_PER_TURN)
-        # A remembered card whose partner is remembered too: a whole pair.
-        partner_remembered = ((self.memory[:, None] >> partner) & 1) << _SHIFT
-        known = self.memory & partner_remembered.sum(1)
-        pool = np.where(known != 0, known, covered & ~self.memory)
-        return pick_from_mask(pool, self._u[:, 0])
+        self._u = np.ascontiguousarray(self.stream.take(DRAWS_PER_TURN), dtype=np.float64)
+        partner = np.ascontiguousarray(np.broadcast_to(np.asarray(partner, dtype=np.int64), (self._n, N_CARDS)))
+        out = np.empty(self._n, dtype=np.int64)
+        kernels.users_first_pick(self.memory, partner, _ints(covered, self._n), self._u, out)
+        return out
 
     def intend(self, first: np.ndarray, match: np.ndarray, covered: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """The card the user would pick unaided, and whether it is the remembered match.
 
         `covered` excludes the first card (it is face up).
         """
-        from_memory = (self.memory >> match & 1) == 1
-        unaided = pick_from_mask(self.nis(covered), self._u[:, 1])
-        return np.where(from_memory, match, unaided), from_memory
+        n = self._n
+        intended, from_memory = np.empty(n, dtype=np.int64), np.empty(n, dtype=bool)
+        kernels.users_intend(self.memory, _ints(first, n), _ints(match, n), _ints(covered, n), self._u,
+                             intended, from_memory)
+        return intended, from_memory
 
     def nis(self, covered: np.ndarray) -> np.ndarray:
         """No-information set: covered cards the user does not remember."""
-        nis = covered & ~self.memory
-        return np.where(nis != 0, nis, covered)  # never empty while a card is covered
+        out = np.empty(self._n, dtype=np.int64)
+        kernels.users_nis(self.memory, _ints(covered, self._n), out)
+        return out
 
     def respond(self, actions: np.ndarray, observed: np.ndarray, match: np.ndarray,
                 intended: np.ndarray, from_memory: np.ndarray, covered: np.ndarray) -> Response:
         """The second pick after a suggestion (see the module rule)."""
-        u = self._u
-        considered = ~from_memory & (u[:, 2] < self.p_consider)
-        heard = u[:, 3] < self.q_hear
-        h, v = ACTION_HEARING[actions], ACTION_VISUAL[actions]
-        hear_seen = np.where(h == HEARING_SMILE, self.sees_smile, (h > HEARING_SMILE) & heard)
-        vis_seen = np.where(v == VISUAL_GAZE, self.sees_gaze, (v > VISUAL_GAZE) & self.sees_head)
-        nis = self.nis(covered)
-        cand = nis & np.where(hear_seen, HEAR_SET[observed, match, h], -1) \
-            & np.where(vis_seen, VIS_SET[observed, match, v], -1)
-        consistent = cand != 0
-        chosen = pick_from_mask(np.where(consistent, cand, nis), u[:, 4])
-        second = np.where(from_memory, match, np.where(considered, chosen, intended))
-        return Response(second, considered, consistent, np.where(consistent, cand, 0))
+        n = self._n
+        second, candidates = np.empty(n, dtype=np.int64), np.empty(n, dtype=np.int64)
+        considered, consistent = np.empty(n, dtype=bool), np.empty(n, dtype=bool)
+        kernels.users_respond(kernels.TABLES, self.memory, _ints(actions, n), _ints(observed, n), _ints(match, n),
+                              _ints(intended, n), kernels.as_batch(from_memory, n, bool),
+                              _ints(covered, n), self._u, self.p_consider, self.q_hear, self.sees_smile,
+                              self.sees_head, self.sees_gaze, second, considered, consistent, candidates)
+        return Response(second, considered, consistent, candidates)
 
     def end_turn(self, first: np.ndarray, second: np.ndarray, matched: np.ndarray) -> None:
-        """Memory after the turn: a miss adds both cards (first, then second), a match removes them."""
-        if matched.any():
-            g = self._rows[matched]
-            self.stamp[g, first[matched]] = _NEVER
-            self.stamp[g, second[matched]] = _NEVER
-            self.memory[g] &= ~(_BIT[first[matched]] | _BIT[second[matched]])
-        missed = ~matched
-        if not missed.any():
-            return
-        g = self._rows[missed]
-        # Both cards are new to memory (see the module rule), and newer than any
-        # card in it: adding them one by one evicts the (count + 2 - m) oldest.
-        evict = np.bitwise_count(self.memory[g]) + 2 - self.capacity[g]
-        for nth in (1, 2):
-            e = g[evict >= nth]
-            if e.size:
-                oldest = np.argmin(self.stamp[e], axis=1)
-                self.stamp[e, oldest] = _NEVER
-                self.memory[e] &= ~_BIT[oldest]
-        clock = self.clock[g]
-        self.stamp[g, first[g]] = clock
-        self.stamp[g, second[g]] = clock + 1
-        self.memory[g] |= _BIT[first[g]] | _BIT[second[g]]
-        self.clock[g] = clock + 2
+        """Memory after the turn: a miss adds both cards (first, then second), a match removes them.
+
+        Both cards of a miss are new to memory (see the module rule), and newer
+        than any card in it: adding them one by one evicts the (count + 2 - m) oldest.
+        """
+        n = self._n
+        kernels.users_end_turn(_ints(first, n), _ints(second, n),
+                               kernels.as_batch(matched, n, bool),
+                               self.memory, self.stamp, self.clock, self.capacity)
 
 
 UNKNOWN_PARTNER = N_CARDS  # a shift past the 18 card bits: "no remembered partner"

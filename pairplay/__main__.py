@@ -1,5 +1,3 @@
-import sys
+from pairplay.cli.main import entry
 
-from pairplay.cli.main import main
-
-sys.exit(main())
+entry()

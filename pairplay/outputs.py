@@ -185,14 +185,21 @@ def _is_empty_dir(path: Path) -> bool:
     return path.is_dir() and not any(path.iterdir())
 
 
+def check_output_folder(path: str | Path, force: bool = False) -> Path:
+    """`path` as a Path if output_folder may fill it: a folder that is, or can become, ours and
+    holds no files unless `force`; OutputError otherwise (call it before the work)."""
+    path = check_folder(path)
+    if path.exists() and not _is_empty_dir(path) and not force:
+        raise OutputError("exists and is not empty; --force replaces the files written there", path)
+    return path
+
+
 @contextlib.contextmanager
 def output_folder(path: str | Path, force: bool = False) -> Iterator[Path]:
     """A new temporary folder beside `path` to fill; when the block ends without error it
     becomes `path`. A non-empty `path` is refused unless `force`; with `force` each file
     written replaces its namesake there and the folder's other files stay."""
-    path = check_folder(path)
-    if path.exists() and not _is_empty_dir(path) and not force:
-        raise OutputError("exists and is not empty; --force replaces the files written there", path)
+    path = check_output_folder(path, force)
     created = _missing_folders(path.absolute().parent)
     _mkdir(path.absolute().parent)
     tmp = _temp_name(path)

@@ -46,9 +46,9 @@ def default_output(path: Path) -> Path:
 def recover(path: str | Path, output: str | Path | None = None, force: bool = False) -> Recovered:
     """Copy the intact records of `path` into a complete file (see rule).
 
-    InputError if `path` is not an MCAP file at all; OutputError if `output` exists
-    (unless `force`) or is the input; the output appears only when complete
-    (pairplay.outputs)."""
+    InputError if `path` is not an MCAP file at all (missing, empty, no MCAP magic);
+    OutputError if `output` exists (unless `force`) or is the input; the output
+    appears only when complete (pairplay.outputs)."""
     path = check_recording(path)
     output = Path(output) if output is not None else default_output(path)
     if output.resolve() == path.resolve():

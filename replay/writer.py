@@ -3,10 +3,14 @@
 Rule: a message is written as the exact JSON bytes seen on the bus, on the
 channel named by its key, with the flattened JSON Schema of its event class
 (schemas/jsonschema.py), so `mcap` tools and Foxglove read the file as it is.
-Loss on a crash is bounded by time: `maybe_flush(now_ns)` closes the open chunk
-and flushes the file once `flush_interval_ns` (default 0.1 s) has passed since
-the last flush, so a writer killed with SIGKILL loses at most that long a tail
-(plus what never reached it). Metadata records (session config, seed, software
+Loss on a crash is bounded by age: `maybe_flush(now_ns)` closes the open chunk
+and flushes the file once the oldest message not yet flushed is
+`flush_interval_ns` old (default 50 ms, from its log time, the moment the
+recorder took it), so a writer killed with SIGKILL loses only messages younger
+than that; the other half of the 0.1 s bound (`LOSS_BOUND_NS`) is the
+recorder's margin for its own backlog. `max_flush_age_ns` is the oldest any
+message got before its flush. Times must fit MCAP's unsigned 64-bit fields:
+anything else raises ValueError before the file is touched. Metadata records (session config, seed, software
 version) can be added at any point of the file. The caller owns the clock: every
 time is an argument. Log times are the writer's own record of when it took each
 message and never go backwards in a file (a time before the last one written is
@@ -27,7 +31,9 @@ from pairplay.schemas.jsonschema import schema_text
 from pairplay.schemas.keys import parse_event_key
 
 PROFILE = "pairplay"
-FLUSH_INTERVAL_NS = 100_000_000  # 0.1 s: the most a crash may lose
+LOSS_BOUND_NS = 100_000_000  # 0.1 s: the most a crash may lose (README)
+FLUSH_INTERVAL_NS = LOSS_BOUND_NS // 2  # flush once the oldest unflushed message is this old
+U64 = 2**64
 CHUNK_SIZE = 256 * 1024  # a chunk also closes when this full, whatever the time
 
 
@@ -45,9 +51,11 @@ class EventLogWriter:
         self._schemas: dict[str, int] = {}
         self._channels: dict[str, int] = {}
         self.flush_interval_ns = int(flush_interval_ns)
-        self._last_flush_ns: int | None = None
+        self._oldest_ns: int | None = None  # log time of the oldest message not flushed yet
         self._last_log_ns = 0
         self._unflushed = 0
+        self.max_flush_age_ns = 0
+        self.flushes = 0
         self.count = 0
         self.closed = False
 
@@ -68,26 +76,28 @@ class EventLogWriter:
 
     def write(self, key: str, payload: bytes, *, log_time_ns: int, publish_time_ns: int = 0, sequence: int = 0) -> None:
         """Append one message (already validated JSON of the key's event type)."""
+        if not (0 <= log_time_ns < U64 and 0 <= publish_time_ns < U64):
+            raise ValueError(f"times out of MCAP's range: log {log_time_ns}, publish {publish_time_ns}")
         log_time_ns = max(int(log_time_ns), self._last_log_ns)  # monotonic per file (see rule)
         self._last_log_ns = log_time_ns
         self._writer.add_message(self.channel_for(key), log_time_ns, payload, publish_time_ns or log_time_ns,
                                  sequence & 0xFFFFFFFF)
         self.count += 1
         self._unflushed += 1
-        if self._last_flush_ns is None:
-            self._last_flush_ns = log_time_ns
+        if self._oldest_ns is None:
+            self._oldest_ns = log_time_ns
 
     def add_metadata(self, name: str, data: dict[str, str]) -> None:
         self._writer.add_metadata(name, {str(k): str(v) for k, v in data.items()})
 
     def due_in_ns(self, now_ns: int) -> int | None:
         """How long until the next flush is due (None: nothing waits to be flushed)."""
-        if not self._unflushed or self._last_flush_ns is None:
+        if not self._unflushed or self._oldest_ns is None:
             return None
-        return max(0, self._last_flush_ns + self.flush_interval_ns - now_ns)
+        return max(0, self._oldest_ns + self.flush_interval_ns - now_ns)
 
     def maybe_flush(self, now_ns: int) -> bool:
-        """Flush if the interval has passed since the last flush; True if it did."""
+        """Flush if the oldest unflushed message is `flush_interval_ns` old; True if it did."""
         due = self.due_in_ns(now_ns)
         if due is None or due > 0:
             return False
@@ -95,9 +105,23 @@ class EventLogWriter:
         return True
 
     def flush(self, now_ns: int) -> None:
+        """Close the open chunk and push everything to the OS."""
+        if self._oldest_ns is not None:
+            self.max_flush_age_ns = max(self.max_flush_age_ns, now_ns - self._oldest_ns)
         self._writer.flush()
-        self._last_flush_ns = now_ns
+        self._oldest_ns = None
         self._unflushed = 0
+        self.flushes += 1
+
+    def abandon(self) -> None:
+        """After a write error: close the stream as it is (readable up to the error:
+        `pairplay recover`), never raising."""
+        self.closed = True
+        if self._own:
+            try:
+                self._stream.close()
+            except OSError:
+                pass
 
     def close(self) -> None:
         """Write the summary and close: the file is then complete and indexed."""

@@ -12,11 +12,15 @@ from __future__ import annotations
 
 from pathlib import Path
 
-import matplotlib
+import numpy as np
 
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
+
+def _pyplot():
+    """matplotlib's pyplot on the headless Agg backend, imported on first use (the study draws in a child)."""
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    return plt
 
 from pairplay.core.geometry import PERFECT_PICKS, PICKS_UNIT  # noqa: E402
 
@@ -43,6 +47,7 @@ def learning_curves(curves: dict[str, np.ndarray], names: dict[str, str], path: 
     `curves[persona]` is (games, rounds). Panels whose personas are missing are
     left out; returns the panel titles drawn.
     """
+    plt = _pyplot()
     panels = [(f, a, b) for f, a, b in FIGURE_6_4 if a in curves and b in curves]
     if not panels:
         panels = [("all", *list(curves)[:2])] if len(curves) >= 2 else [("all", next(iter(curves)), None)]
@@ -69,6 +74,7 @@ def learning_curves(curves: dict[str, np.ndarray], names: dict[str, str], path: 
 def comparison_bars(labels: list[str], series: dict[str, np.ndarray], path: Path, ylabel: str,
                     title: str = "") -> None:
     """Grouped bars: one group per label, one bar per series (e.g. alone/learned/oracle)."""
+    plt = _pyplot()
     fig, ax = plt.subplots(figsize=(max(6, 1.1 * len(labels) + 2), 3.8))
     width = 0.8 / len(series)
     x = np.arange(len(labels))
@@ -91,6 +97,7 @@ def profiles(keys: list[str], names: dict[str, str], infos: list, features: list
     `trained` (optional, one UserInfo or None per persona): the same shares over
     the well-trained states only, drawn as black ticks on the bars.
     """
+    plt = _pyplot()
     fig, (left, right) = plt.subplots(1, 2, figsize=(12, 4.2))
     x = np.arange(len(keys))
     left.bar(x - 0.2, [100 * i.speech for i in infos], 0.4, label="speech incompatibility %")
@@ -125,6 +132,7 @@ def profiles(keys: list[str], names: dict[str, str], infos: list, features: list
 def merged_policies(panels: list[tuple[str, dict[str, np.ndarray], np.ndarray]], state_count: int,
                     path: Path) -> None:
     """Figure 6.6: state code vs action code of the input policies and their merge (blue x)."""
+    plt = _pyplot()
     fig, axes = plt.subplots(1, len(panels), figsize=(5.2 * len(panels), 4.2), squeeze=False)
     markers = ["o", "s", "^", "v", "D", "P", "*", "h"]
     states = np.arange(state_count)
@@ -148,6 +156,7 @@ def merged_policies(panels: list[tuple[str, dict[str, np.ndarray], np.ndarray]],
 def reuse_curves(keys: list[str], names: dict[str, str], curves: np.ndarray, oracle: list[float],
                  path: Path, smooth: int = 10) -> None:
     """Online picks per round, Q-learning from scratch vs pi-reuse, one small panel per held-out persona."""
+    plt = _pyplot()
     cols = 4
     rows = (len(keys) + cols - 1) // cols
     fig, axes = plt.subplots(rows, cols, figsize=(3.4 * cols, 2.6 * rows), squeeze=False, sharex=True, sharey=True)
@@ -178,6 +187,112 @@ def _save(fig, path: Path, dpi: int) -> None:
 
     with output_path(path) as tmp:
         fig.savefig(tmp, dpi=dpi, format="png")
+    _pyplot().close(fig)
+
+
+FIGURES = ("learning_curves", "comparison_bars", "profiles", "merged_policies", "reuse_curves", "algorithm_curves")
+
+
+def draw(name: str | None, *args) -> None:
+    """Draw figure `name` (one of FIGURES) with `args`; None draws nothing (a child process warming up).
+
+    The study calls this in a child process: arguments are plain data, so the
+    child imports matplotlib and numpy only.
+    """
+    if name is None:
+        return
+    if name not in FIGURES:
+        raise ValueError(f"unknown figure {name!r}")
+    globals()[name](*args)
+
+
+def grouped_bars_with_spread(labels: list[str], series: dict[str, np.ndarray], reference: list[float],
+                             path: Path, title: str) -> None:
+    """Bars per label and series: the mean over replicates with a 1-sd error bar; a tick marks the reference.
+
+    `series[name]` is (replicates, labels) in picks per round."""
+    plt = _pyplot()
+    n = len(series)
+    width = 0.8 / n
+    x = np.arange(len(labels))
+    fig, ax = plt.subplots(figsize=(max(6.0, 1.1 * len(labels) + 2), 4.2))
+    for i, (name, values) in enumerate(series.items()):
+        values = np.asarray(values)
+        ax.bar(x + (i - (n - 1) / 2) * width, values.mean(axis=0), width, yerr=values.std(axis=0),
+               capsize=2, label=name)
+    ax.scatter(x, reference, marker="_", s=400, color="black", zorder=3, label="oracle")
+    ax.set_xticks(x, labels, rotation=20)
+    ax.set_ylabel("picks per round (18 = perfect; lower is better)")
+    ax.set_ylim(16, max(float(np.max([np.asarray(v).max() for v in series.values()])), max(reference)) + 2)
+    ax.set_title(title, fontsize=10)
+    ax.legend(fontsize=8, ncol=2)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def sweep_measure(labels: list[str], mean: list[float], low: list[float], high: list[float], path: Path,
+                  measure: str, seeds: int) -> None:
+    """One sweep measure across the grid: the mean over seeds with its 95% confidence interval."""
+    plt = _pyplot()
+    mean, low, high = map(np.asarray, (mean, low, high))
+    x = np.arange(len(labels))
+    fig, ax = plt.subplots(figsize=(max(6.0, 0.28 * len(labels) + 3), 4.2))
+    ax.errorbar(x, mean, yerr=[mean - low, high - mean], fmt="o", capsize=3, markersize=4)
+    ax.set_xticks(x, labels, rotation=60, ha="right", fontsize=7)
+    unit = {"ratio": "learned / oracle (1 = the oracle)", "reuse_gain": "picks per round saved by pi-reuse"}
+    ax.set_ylabel(unit.get(measure.split("/")[-1], "picks per round (18 = perfect)"))
+    ax.set_title(f"{measure}: mean over {seeds} seeds, 95% confidence interval", fontsize=10)
+    ax.grid(axis="y", alpha=0.3)
+    fig.tight_layout()
+    fig.savefig(path, dpi=100)
+    plt.close(fig)
+
+
+def human_curves(curves: dict[str, np.ndarray], path: Path, title: str, dashed: tuple[str, ...] = ()) -> None:
+    """Figures 7.3 and 7.6: mean picks per round, one line per game, phase or group.
+
+    As in the thesis, Q-learning curves are drawn with circles and pi-reuse ones
+    with diamonds: a label naming a reuse phase or a phase-2 group gets diamonds
+    when it is in `dashed` or contains "phase2"; 18 (perfect play) is marked."""
+    plt = _pyplot()
+    fig, ax = plt.subplots(figsize=(5.6, 3.8))
+    for label, c in curves.items():
+        rounds = np.arange(1, len(c) + 1)
+        marker = "D" if (label in dashed or "phase2" in label or "users" in label) else "o"
+        ax.plot(rounds, c, marker=marker, ls="--" if label in dashed else "-", label=label, lw=1.4, ms=5)
+    ax.axhline(18, color="0.5", lw=0.8, ls=":", label="perfect play (18)")
+    ax.set_xlabel("round")
+    ax.set_ylabel("picks per round (mean)")
+    if curves:
+        ax.set_xticks(np.arange(1, max(len(c) for c in curves.values()) + 1))
+    ax.set_title(title, fontsize=10)
+    ax.grid(alpha=0.3)
+    ax.legend(frameon=False, fontsize=8)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def human_merged(panels: list[tuple[str, np.ndarray]], reference: tuple[str, np.ndarray] | None,
+                 state_count: int, path: Path) -> None:
+    """Figure 7.5: state code vs action code of each merged policy (blue x), a reference (green +)."""
+    plt = _pyplot()
+    fig, axes = plt.subplots(1, len(panels), figsize=(5.6 * len(panels), 4.2), squeeze=False)
+    states = np.arange(state_count)
+    for ax, (title, merged) in zip(axes[0], panels):
+        if reference is not None:
+            ax.scatter(states, reference[1][:state_count], marker="+", color="tab:green", s=70, lw=1.4,
+                       label=reference[0])
+        ax.scatter(states, merged[:state_count], marker="x", color="tab:blue", s=40, lw=1.4, label=title)
+        ax.axhspan(32.5, 44.5, color="tab:blue", alpha=0.07, lw=0)  # "exact position" speech, codes 33-44
+        ax.set_xlabel("state code")
+        ax.set_ylabel("action code")
+        ax.set_ylim(-2, 90)
+        ax.grid(alpha=0.3)
+        ax.legend(frameon=False, fontsize=8, loc="upper right")
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
     plt.close(fig)
 
 
@@ -187,6 +302,7 @@ def algorithm_curves(curves: np.ndarray, algorithms: list[str], personas: list[s
 
     `curves` is (n_alg, P, games, rounds); the oracle's picks per round are a dashed line.
     """
+    plt = _pyplot()
     n = len(personas)
     cols = min(4, n)
     rows_ = -(-n // cols)
@@ -212,5 +328,4 @@ def algorithm_curves(curves: np.ndarray, algorithms: list[str], personas: list[s
     fig.suptitle(f"online picks per round, mean over games ({smooth}-round window); band: \u00b11 sd over games",
                  fontsize=9)
     fig.tight_layout()
-    fig.savefig(path, dpi=100)
-    plt.close(fig)
+    _save(fig, path, dpi=100)

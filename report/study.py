@@ -20,24 +20,29 @@ from __future__ import annotations
 
 import contextlib
 import csv
+import hashlib
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
+from types import SimpleNamespace
 from typing import Callable
 
 import numpy as np
 
 from pairplay import __version__
-from pairplay.core import study
+from pairplay.core import kernels, study
 from pairplay.core.geometry import PICKS_UNIT
+from pairplay.core.oracle import oracle_policies
 from pairplay.core.personas import PERSONAS, persona
 from pairplay.core.policies import to_policy_file
 from pairplay.core.reward import BONUS_RULE_TEXT
 from pairplay.schemas.config import DEFAULT_REWARD_BONUS, LearnerConfig, LSPIConfig
 from pairplay.outputs import output_folder
+from pairplay.processes import process_pool, stop_pool
 from pairplay.schemas.policy import write_policy
 
-from pairplay.report import plots
+from pairplay.core.precombine import combination_experiment
+from pairplay.report import future, plots
 
 
 @dataclass
@@ -201,7 +206,7 @@ def profile_rows(personas, users: study.UserSet) -> list[list[str]]:
 MERGES = (("blind+deaf", ("blind", "deaf")), ("vincent+tatiana", ("vincent", "tatiana")), ("all", None))
 
 
-def write_merges(out: Path, personas, users: study.UserSet, args) -> dict:
+def write_merges(out: Path, personas, users: study.UserSet, args, figures=None) -> dict:
     from pairplay.core.combine import combine
     from pairplay.core.geometry import N_STATES
     from pairplay.core.policies import combined_policy_file
@@ -219,30 +224,108 @@ def write_merges(out: Path, personas, users: study.UserSet, args) -> dict:
         inputs = {k: users.users[k].policy for k in members} if len(members) <= 3 else {}
         panels.append((name, inputs, merged.policy))
     if panels:
-        plots.merged_policies(panels, N_STATES - 1, out / "merged.png")
+        (figures.draw if figures is not None else plots.draw)("merged_policies", panels, N_STATES - 1, out / "merged.png")
     return merges
 
 
-def run_study(args: StudySettings, out: Path, progress_bar: Callable = _no_bar, force: bool = False) -> StudyReport:
+TIMINGS_HEADING = "## Timings"
+
+
+def output_digests(out: Path) -> dict[str, str]:
+    """sha256 (hex) of every file a study wrote under `out` that its seed decides, by relative path.
+
+    Figures (*.png: matplotlib's bytes are not ours to pin) are left out, and
+    report.md is hashed up to its timings section (wall clock, not results).
+    The study's equality contract (tests/test_study_digests.py) compares these.
+    """
+    digests = {}
+    for path in sorted(Path(out).rglob("*")):
+        if not path.is_file() or path.suffix == ".png":
+            continue
+        data = path.read_bytes()
+        if path.name == "report.md":
+            data = data.split(TIMINGS_HEADING.encode(), 1)[0]
+        digests[path.relative_to(out).as_posix()] = hashlib.sha256(data).hexdigest()
+    return digests
+
+
+class _Figures:
+    """Draws the figures in one child process while the study computes (matplotlib costs as much CPU
+    as the whole compiled study); inline when `background` is False or no child can be started."""
+
+    def __init__(self, background: bool):
+        self._pool = None
+        self._jobs: list = []
+        if background:
+            try:
+                self._pool = process_pool(1)
+                self._jobs.append(self._pool.submit(plots.draw, None))  # the child imports matplotlib now
+            except (OSError, ImportError):
+                self._pool = None
+
+    def draw(self, name: str, *args) -> None:
+        if self._pool is None:
+            plots.draw(name, *args)
+        else:
+            self._jobs.append(self._pool.submit(plots.draw, name, *args))
+
+    def finish(self, abandon: bool = False) -> None:
+        """Wait for every figure (a figure's error is raised here), or, when `abandon` (the study
+        failed or was interrupted), stop the child without waiting for its figures."""
+        try:
+            if not abandon:
+                for job in self._jobs:
+                    job.result()
+        finally:
+            if self._pool is not None:
+                stop_pool(self._pool, abandon)
+                self._pool = None
+            self._jobs = []
+
+
+def _info(i) -> SimpleNamespace:
+    """A profile's user information as plain data (the figure process does not import core)."""
+    return SimpleNamespace(speech=float(i.speech), head=float(i.head), facial=bool(i.facial), gaze=bool(i.gaze))
+
+
+def run_study(args: StudySettings, out: Path, progress_bar: Callable = _no_bar, force: bool = False,
+              figures_in_background: bool = True) -> StudyReport:
     """Run the study with `args` and write its report folder `out`.
 
     `progress_bar(total, desc)` returns a context manager whose value has `update(n)`
-    (a tqdm bar, say): one per phase, counted in simulated rounds.
+    (a tqdm bar, say): one per phase, counted in simulated rounds. Independent
+    phases share a batch (core/study.py): the speed-up's two arms, and every
+    evaluation (learned, oracle and user alone; merged policies; the speed-up's
+    snapshots). Figures are drawn in a child process meanwhile.
     The folder is built beside `out` and renamed when complete (pairplay.outputs.output_folder):
     OutputError, before any work, if `out` exists with files in it and not `force`; an
     interrupted study leaves nothing. Raises KeyError for an unknown persona."""
     personas = args.persona_list()
     with output_folder(out, force) as tmp:
-        report = _run_study(args, personas, tmp, progress_bar)
+        report = _run_study(args, personas, tmp, progress_bar, figures_in_background)
     report.out = Path(out)
     return report
 
 
-def _run_study(args: StudySettings, personas, out: Path, progress_bar: Callable) -> StudyReport:
+def _run_study(args: StudySettings, personas, out: Path, progress_bar: Callable,
+               figures_in_background: bool = True) -> StudyReport:
     config = LearnerConfig()
     names = {p.key: p.name for p in personas}
     timings: dict[str, float] = {}
     start = time.perf_counter()
+    figures = _Figures(figures_in_background)
+    try:
+        report = _run(args, out, progress_bar, personas, config, names, timings, start, figures)
+    except BaseException:
+        figures.finish(abandon=True)
+        raise
+    figures.finish()
+    return report
+
+
+def _run(args, out, progress_bar, personas, config, names, timings, start, figures) -> StudyReport:
+    seconds, compiled, _ = kernels.warm_up()
+    timings["kernels compiled (first run)" if compiled else "kernels loaded from cache"] = seconds
 
     t0 = time.perf_counter()
     lspi = args.lspi()
@@ -255,31 +338,22 @@ def _run_study(args: StudySettings, personas, out: Path, progress_bar: Callable)
 
     write_policies(out, training, args, config)
     curves = write_curves(out, training)
-    plots.learning_curves(curves, names, out / "learning_curves.png")
+    figures.draw("learning_curves", curves, names, out / "learning_curves.png")
     if args.train_only:
+        figures.finish()
+        timings["total"] = time.perf_counter() - start
         return StudyReport(out, timings)
 
     t0 = time.perf_counter()
-    n_eval = 3 * len(personas) * args.games * args.eval_rounds
-    with progress_bar(n_eval, "oracle + evaluation") as bar:
-        cmp = study.compare(personas, training, args.eval_rounds, args.seed, progress=_progress(bar),
-                            reward_bonus=args.reward_bonus)
-    timings["evaluation"] = time.perf_counter() - t0
-    table = evaluation_table(cmp)
-    with open(out / "evaluation.csv", "w", newline="") as f:
-        csv.writer(f).writerows(table)
-    plots.comparison_bars(cmp.persona, {"user alone": cmp.alone, "learned": cmp.learned, "oracle": cmp.oracle},
-                          out / "evaluation.png", f"{PICKS_UNIT}, epsilon 0")
-    oracle = dict(zip(cmp.persona, cmp.oracle))
-    speed_rows = speed_lines = None
-    if snapshot_every:
+    oracle = oracle_policies(personas, 20, args.seed, 200, bonus=args.reward_bonus)
+    timings["oracle"] = time.perf_counter() - t0
+    q_training = None
+    if snapshot_every:  # LSPI is compared with Q-learning trained with snapshots on the same games
         t0 = time.perf_counter()
         with progress_bar(len(personas) * args.games * args.rounds, "q-learning beside lspi") as bar:
             q_training = study.train(personas, args.games, args.rounds, args.seed, config, progress=_progress(bar),
                                      reward_bonus=args.reward_bonus, snapshot_every=snapshot_every)
-        speed = study.learning_speed(personas, {"q-learning": q_training, "lspi": training}, oracle, args.seed)
-        speed_rows, speed_lines = speed_section(speed, cmp, out, names, args)
-        timings["lspi vs q-learning"] = time.perf_counter() - t0
+        timings["q-learning beside lspi"] = time.perf_counter() - t0
 
     # Profiles (algorithm 3, figure 6.5) and merged policies (algorithm 4, figure 6.6).
     t0 = time.perf_counter()
@@ -287,53 +361,82 @@ def _run_study(args: StudySettings, personas, out: Path, progress_bar: Callable)
     prof_rows = profile_rows(personas, users)
     with open(out / "profiles.csv", "w", newline="") as f:
         csv.writer(f).writerows(prof_rows)
-    plots.profiles([p.key for p in personas], names, [users.profiles[p.key].info for p in personas],
-                   [(p.focus, p.memory, p.hearing, p.sight) for p in personas], out / "profiles.png",
-                   [None if users.trained[p.key] is None else users.trained[p.key].info for p in personas],
-                   args.trained_updates)
-    merges = write_merges(out, personas, users, args)
+    figures.draw("profiles", [p.key for p in personas], names, [_info(users.profiles[p.key].info) for p in personas],
+                 [(p.focus, p.memory, p.hearing, p.sight) for p in personas], out / "profiles.png",
+                 [None if users.trained[p.key] is None else _info(users.trained[p.key].info) for p in personas],
+                 args.trained_updates)
+    merges = write_merges(out, personas, users, args, figures)
     own = {p.key: training.greedy[[i for i, q in enumerate(training.personas) if q.key == p.key]]
            for p in personas}
+    timings["profiles and merges"] = time.perf_counter() - t0
+
+    # Speed-up (thesis 3.3, 5.3): each persona held out, pi-reuse on the merge of the others (both arms, one batch).
+    t0 = time.perf_counter()
+    reuse_config = LearnerConfig(psi_start=args.psi, psi_decay=args.psi_decay,
+                                 reuse_rounds=max(0, args.rounds - args.reuse_last))
+    runs = None
+    if len(personas) >= 2:
+        with progress_bar(2 * len(personas) * args.reuse_seeds * args.rounds, "speed-up") as bar:
+            runs = study.reuse_runs(personas, users, args.reuse_seeds, args.rounds, args.seed, reuse_config,
+                                    progress=_progress(bar), reward_bonus=args.reward_bonus)
+    timings["speed-up"] = time.perf_counter() - t0
+
+    # Every evaluation in one batch: learned vs oracle vs alone, merged policies, the speed-up's snapshots.
+    t0 = time.perf_counter()
+    batch = study.Evaluations(args.seed)
+    compared = study.add_comparison(batch, personas, training, args.eval_rounds, oracle)
+    merged_pending = study.add_on_personas(batch, personas, {"own": own, **{k: m.policy for k, m in merges.items()}},
+                                           args.games, args.eval_rounds)
+    snapshots = study.add_snapshots(batch, runs) if runs is not None else None
+    with progress_bar(batch.total_rounds, "evaluations") as bar:
+        batch.play(progress=_progress(bar))
+    cmp = study.comparison(personas, training, oracle, batch.picks[compared])
+    merged_eval = merged_pending(batch)
+    timings["evaluations"] = time.perf_counter() - t0
+
+    table = evaluation_table(cmp)
+    with open(out / "evaluation.csv", "w", newline="") as f:
+        csv.writer(f).writerows(table)
+    figures.draw("comparison_bars", cmp.persona, {"user alone": cmp.alone, "learned": cmp.learned, "oracle": cmp.oracle},
+                 out / "evaluation.png", f"{PICKS_UNIT}, epsilon 0")
+    oracle = dict(zip(cmp.persona, cmp.oracle))
     alone = dict(zip(cmp.persona, cmp.alone))
-    with progress_bar(len(personas) * args.games * args.eval_rounds * (1 + len(merges)), "merged policies") as bar:
-        merged_eval = study.evaluate_on_personas(
-            personas, {"own": own, **{k: m.policy for k, m in merges.items()}}, args.games, args.eval_rounds,
-            args.seed, progress=_progress(bar))
+    speed_rows = speed_lines = None
+    if q_training is not None:
+        t0 = time.perf_counter()
+        speed = study.learning_speed(personas, {"q-learning": q_training, "lspi": training}, oracle, args.seed)
+        speed_rows, speed_lines = speed_section(speed, oracle, out, names, args, figures)
+        timings["lspi beside q-learning: snapshots"] = time.perf_counter() - t0
     merge_rows = [["persona", "user alone", "own policies", *merges, "oracle"]]
     for p in personas:
         merge_rows.append([p.key, f"{alone[p.key]:.2f}", f"{merged_eval[('own', p.key)]:.2f}",
                            *[f"{merged_eval[(k, p.key)]:.2f}" for k in merges], f"{oracle[p.key]:.2f}"])
     with open(out / "merged_evaluation.csv", "w", newline="") as f:
         csv.writer(f).writerows(merge_rows)
-    timings["profiles and merges"] = time.perf_counter() - t0
 
-    # Speed-up (thesis 3.3, 5.3): each persona held out, pi-reuse on the merge of the others.
-    t0 = time.perf_counter()
-    reuse_config = LearnerConfig(psi_start=args.psi, psi_decay=args.psi_decay,
-                                 reuse_rounds=max(0, args.rounds - args.reuse_last))
     reuse_rows = [["held-out persona", "first 50 rounds: scratch", "first 50 rounds: pi-reuse", "gain",
                    f"rounds to {1.10:.2f}x oracle: scratch", "pi-reuse"]]
     reuse = None
-    if len(personas) >= 2:
-        with progress_bar(2 * len(personas) * args.reuse_seeds * args.rounds, "speed-up") as bar:
-            reuse = study.reuse_experiment(personas, users, oracle, args.reuse_seeds, args.rounds, args.seed,
-                                           reuse_config, progress=_progress(bar), reward_bonus=args.reward_bonus)
+    if runs is not None:
+        reuse = study.reuse_result(runs, oracle, batch.picks[snapshots])
         for i, key in enumerate(reuse.persona):
             f50, r2t = reuse.first50[i], reuse.rounds_to_target[i]
-
-            def fmt_rounds(x):
-                hit = x[~np.isnan(x)]
-                never = int(np.isnan(x).sum())
-                base = f"{hit.mean():.0f} \u00b1 {hit.std():.0f}" if hit.size else "-"
-                return base + (f" ({never} never)" if never else "")
             reuse_rows.append([key, f"{f50[0].mean():.2f} \u00b1 {f50[0].std():.2f}",
                                f"{f50[1].mean():.2f} \u00b1 {f50[1].std():.2f}",
-                               f"{f50[0].mean() - f50[1].mean():+.2f}", fmt_rounds(r2t[0]), fmt_rounds(r2t[1])])
+                               f"{f50[0].mean() - f50[1].mean():+.2f}", _rounds_text(r2t[0]), _rounds_text(r2t[1])])
         with open(out / "reuse.csv", "w", newline="") as f:
             csv.writer(f).writerows(reuse_rows)
-        plots.reuse_curves(reuse.persona, names, reuse.curves, [oracle[k] for k in reuse.persona],
-                           out / "reuse.png")
-    timings["speed-up"] = time.perf_counter() - t0
+        figures.draw("reuse_curves", reuse.persona, names, reuse.curves, [oracle[k] for k in reuse.persona],
+                     out / "reuse.png")
+    future_lines = []
+    if args.games >= 5 and len(personas) >= 2:  # future work 3 needs disjoint replicates of each persona's games
+        t0 = time.perf_counter()
+        experiment = combination_experiment(personas, training, args.seed)
+        future_lines += future.precombination_section(out, experiment, names, oracle, markdown_table)
+        timings["future work"] = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    figures.finish()
+    timings["waiting for figures"] = time.perf_counter() - t0
     timings["total"] = time.perf_counter() - start
 
     first50 = {k: c[:, :50].mean() for k, c in curves.items()}
@@ -392,7 +495,10 @@ def _run_study(args: StudySettings, personas, out: Path, progress_bar: Callable)
                    f"pi-reuse beats scratch on the first 50 rounds for {(gains > 0).sum()} of {len(gains)} "
                    f"held-out personas; median gain {np.median(gains):.2f} picks per round.", "",
                    "![reuse](reuse.png)", ""]
-    report += ["## Timings", "", markdown_table([["phase", "seconds"]] + [[k, f"{v:.2f}"] for k, v in timings.items()]), ""]
+    report += [TIMINGS_HEADING, "", markdown_table([["phase", "seconds"]] + [[k, f"{v:.2f}"] for k, v in timings.items()]), ""]
+    # the future-work sections come after the timings, so that report.md up to its timings stays the
+    # thesis's study, whose bytes tests/test_study_digests.py pins
+    report += future_lines
     (out / "report.md").write_text("\n".join(report))
 
     return StudyReport(out, timings, table, prof_rows, merge_rows, reuse_rows if reuse is not None else None,
@@ -402,28 +508,33 @@ def _run_study(args: StudySettings, personas, out: Path, progress_bar: Callable)
 SPEED_EVERY = 10  # rounds between greedy snapshots when two learners are compared
 
 
-def speed_section(speed: study.Speed, cmp: study.Comparison, out: Path, names: dict, args) -> tuple[list, list]:
-    """speed.csv, speed.png and the report's lines: the learners side by side on the same games."""
-    oracle = dict(zip(cmp.persona, cmp.oracle))
+def _rounds_text(x: np.ndarray) -> str:
+    """Rounds to a target over games (nan: never reached) as 'mean \u00b1 sd (k never)'."""
+    hit = x[~np.isnan(x)]
+    never = int(np.isnan(x).sum())
+    base = f"{hit.mean():.0f} \u00b1 {hit.std():.0f}" if hit.size else "-"
+    return base + (f" ({never} never)" if never else "")
+
+
+def speed_section(speed: study.Speed, oracle: dict[str, float], out: Path, names: dict, args,
+                  figures: _Figures) -> tuple[list, list]:
+    """speed.csv, speed.png and the report's lines: the learners side by side on the same games.
+
+    `oracle` is the oracle's picks per round by persona key."""
     rows = [["persona", "focus", *[f"rounds to {speed.target:.2f}x oracle: {a}" for a in speed.algorithms],
              *[f"first 50 rounds: {a}" for a in speed.algorithms],
              *[f"last snapshot / oracle: {a}" for a in speed.algorithms]]]
-
-    def fmt_rounds(x):
-        hit = x[~np.isnan(x)]
-        never = int(np.isnan(x).sum())
-        return (f"{hit.mean():.0f} \u00b1 {hit.std():.0f}" if hit.size else "-") + (f" ({never} never)" if never else "")
     for i, key in enumerate(speed.persona):
         rows.append([key, str(PERSONAS[key].focus),
-                     *[fmt_rounds(speed.rounds_to_target[a, i]) for a in range(len(speed.algorithms))],
+                     *[_rounds_text(speed.rounds_to_target[a, i]) for a in range(len(speed.algorithms))],
                      *[f"{speed.curves[a, i, :, :50].mean():.2f} \u00b1 {speed.curves[a, i, :, :50].mean(1).std():.2f}"
                        for a in range(len(speed.algorithms))],
                      *[f"{speed.snapshot_picks[a, i, :, -1].mean() / oracle[key]:.3f}"
                        for a in range(len(speed.algorithms))]])
     with open(out / "speed.csv", "w", newline="") as f:
         csv.writer(f).writerows(rows)
-    plots.algorithm_curves(speed.curves, speed.algorithms, speed.persona, names,
-                           [oracle[k] for k in speed.persona], out / "speed.png")
+    figures.draw("algorithm_curves", speed.curves, speed.algorithms, speed.persona, names,
+                 [oracle[k] for k in speed.persona], out / "speed.png")
     lines = ["## LSPI beside Q-learning (same games, same exploration schedule)", "",
              f"Both learners train on the same {args.games} games per persona (same deals and users); every "
              f"{speed.every} rounds each learner's greedy policy plays 20 rounds with epsilon 0 on the same "

@@ -21,7 +21,7 @@ CATALOGUE: dict[str, tuple[str, str]] = {
     "CardPicked": ("participant / board", "an input: a card was touched; the game may reject it"),
     "CardRevealed": ("game", "the game accepted a pick and turned the card face up"),
     "PickRejected": ("game", "an illegal pick (off the board, face up, matched, third card), with the reason"),
-    "CardObserved": ("participant (intended) / game (first pick)", "the card the user looks at before the second pick"),
+    "CardObserved": ("participant (intended) / game (first pick, gaze)", "the card the user looks at before the second pick"),
     "SuggestionRequested": ("game", "the state (thesis 4.1), observed and matching card, covered cards: the learner must act"),
     "SuggestionMade": ("learner", "the composite action (0..87), how it was chosen, epsilon/alpha/psi, its target card"),
     "RobotActed": ("robot", "what the robot bridge sent to which backend, and the robot's acknowledgement or failure"),
@@ -35,12 +35,18 @@ CATALOGUE: dict[str, tuple[str, str]] = {
     "CombineRequested": ("experimenter / any client", "profile and merge these policies or recordings (algorithms 3, 4)"),
     "PolicyCombined": ("combiner", "the merged policy, the rule that decided each state, the merged user information"),
     "QuestionnaireAnswered": ("board / experimenter", "a participant's answers to a questionnaire (thesis 7.2)"),
+    "SessionPaused": ("experimenter", "the console paused the game: the game refuses touches until it resumes"),
+    "SessionResumed": ("experimenter", "the console resumed a paused game"),
+    "SessionAborted": ("experimenter", "the console stopped the game, with the reason: the game ends the session"),
+    "GazeFixated": ("tracker (eye tracker)", "the participant fixated a card: the observed card of a 'gaze' session"),
     "MessageRejected": ("any service", "a bus message a service refused (malformed, unknown tag, wrong session, out of order), with the reason"),
     "SessionEnded": ("game", "the session is over: why (completed, interrupted by a signal, aborted by the experimenter, a service failed) and how far it got"),
+    "RecordingGap": ("recorder", "a restarted recorder continues the session's file: events copied, refilled from the services, the gap's bounds"),
 }
 
 # tag -> (publishing services, consuming services), as the services' code reads them; the
-# recorder and the view subscribe to every event (`pairplay/<session>/**`) and are not listed.
+# recorder, the view and the lab's board (which draws its pages from the log) subscribe to
+# every event (`pairplay/<session>/**`) and are not listed as consumers.
 # docs/architecture.md draws this table (mermaid()); a test keeps both in step with CATALOGUE.
 FLOW: dict[str, tuple[tuple[str, ...], tuple[str, ...]]] = {
     "ServiceStarted": (("any service",), ()),
@@ -50,6 +56,7 @@ FLOW: dict[str, tuple[tuple[str, ...], tuple[str, ...]]] = {
     "CardRevealed": (("game",), ("participant",)),
     "PickRejected": (("game",), ("participant",)),
     "CardObserved": (("participant",), ("game",)),
+    "GazeFixated": (("tracker",), ("game",)),
     "SuggestionRequested": (("game",), ("learner",)),
     "SuggestionMade": (("learner",), ("participant", "robot")),
     "RobotActed": (("robot",), ()),
@@ -63,8 +70,12 @@ FLOW: dict[str, tuple[tuple[str, ...], tuple[str, ...]]] = {
     "CombineRequested": (("experimenter",), ("combiner",)),
     "PolicyCombined": (("combiner",), ("experimenter",)),
     "QuestionnaireAnswered": (("board",), ()),
+    "SessionPaused": (("experimenter",), ("game",)),
+    "SessionResumed": (("experimenter",), ("game",)),
+    "SessionAborted": (("experimenter",), ("game",)),
     "MessageRejected": (("any service",), ()),
     "SessionEnded": (("game",), ("learner", "participant", "robot")),
+    "RecordingGap": (("recorder",), ()),
 }
 
 _ENVELOPE = {f.name for f in msgspec.structs.fields(Event)}

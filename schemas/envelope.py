@@ -23,10 +23,17 @@ Encode and decode events only with `events.encode_event` / `decode_event`
 
 from __future__ import annotations
 
+from typing import Annotated
+
 import msgspec
 
 TAG_FIELD = "type"
 NS_PER_S = 1_000_000_000
+MAX_NS = 2**63 - 1  # fits MCAP's unsigned 64-bit times (and every int64 reader)
+# Ranges, checked on decode (schemas/trust.py): a sequence number stays exact in a
+# JavaScript reader (2^53); a time lies in 0..MAX_NS (a time_ns of -1 passed every check
+# once, then killed the recorder inside the MCAP writer).
+Seq = Annotated[int, msgspec.Meta(ge=0, le=2**53)]
 
 
 class Nanos(int):
@@ -46,10 +53,15 @@ def nanos_to_json(value: "Nanos") -> dict[str, int]:
 def nanos_from_json(obj) -> Nanos:
     """A Nanos from its JSON: the {sec, nsec} object or a plain integer; TypeError/ValueError otherwise."""
     if isinstance(obj, int) and not isinstance(obj, bool):
+        if not 0 <= obj <= MAX_NS:
+            raise ValueError(f"a time of {obj} ns is outside 0..{MAX_NS}")
         return Nanos(obj)
     if isinstance(obj, dict) and set(obj) == {"sec", "nsec"} and all(
             isinstance(obj[k], int) and not isinstance(obj[k], bool) for k in obj) and 0 <= obj["nsec"] < NS_PER_S:
-        return Nanos(obj["sec"] * NS_PER_S + obj["nsec"])
+        value = obj["sec"] * NS_PER_S + obj["nsec"]
+        if not 0 <= value <= MAX_NS:
+            raise ValueError(f"a time of {obj['sec']} s is outside 0..{MAX_NS} ns")
+        return Nanos(value)
     raise ValueError(f"a time is {{sec, nsec}} (nsec 0..{NS_PER_S - 1}) or an integer of ns, not {obj!r}")
 
 
@@ -84,7 +96,7 @@ class Event(msgspec.Struct, frozen=True, kw_only=True, tag_field=TAG_FIELD):
 
     session: str = ""
     source: str = ""
-    seq: int = 0
+    seq: Seq = 0
     time_ns: Nanos = 0
 
     def __post_init__(self) -> None:

@@ -12,28 +12,42 @@ Who publishes what (source = the service name):
   game:        SessionStarted, RoundStarted, CardRevealed, PickRejected,
                CardObserved (first-pick source), SuggestionRequested,
                TurnResolved, RoundEnded, SessionEnded
-  participant: CardPicked, CardObserved (intended source), SuggestionPerceived,
-               WrongSuggestionPressed, QuestionnaireAnswered
+  participant: CardPicked, CardObserved (intended source), SuggestionPerceived
+  board:       CardPicked, WrongSuggestionPressed, QuestionnaireAnswered (the lab's pages)
+  tracker:     GazeFixated (an eye tracker)
   learner:     SuggestionMade, RewardGiven, QUpdated (Q-learning), LSPIUpdated (LSPI)
   combiner:    PolicyCombined (answering CombineRequested)
+  experimenter: SessionPaused, SessionResumed, SessionAborted (the console; the game obeys them)
   robot:       RobotActed (schemas/robot.py)
+  recorder:    RecordingGap (a restarted recorder continues the session's file)
   any service: ServiceStarted, MessageRejected
 """
 
 from __future__ import annotations
 
-from typing import Union
+from typing import Annotated, Union
 
 import msgspec
 
-from .envelope import Event, dec_hook, enc_hook
+from .envelope import Event, Nanos, Seq, dec_hook, enc_hook
 from .session import SessionConfig
+
+
+# Ranges of the fields, checked on decode (where a message enters; schemas/trust.py)
+Count = Annotated[int, msgspec.Meta(ge=0, le=2**31 - 1)]  # rounds, turns, attempts, sizes
+Card = Annotated[int, msgspec.Meta(ge=0, le=17)]  # board index row * 6 + col
+CardOrNone = Annotated[int, msgspec.Meta(ge=-1, le=17)]  # -1: no card
+Face = Annotated[int, msgspec.Meta(ge=0, le=8)]
+State = Annotated[int, msgspec.Meta(ge=0, le=23)]  # thesis 4.1: 23 spatial states + Error
+Action = Annotated[int, msgspec.Meta(ge=0, le=87)]  # core.actions
+Mask = Annotated[int, msgspec.Meta(ge=0, le=2**18 - 1)]  # a set of cards
+Int64 = Annotated[int, msgspec.Meta(ge=-2**63, le=2**63 - 1)]
 
 
 class ServiceStarted(Event, tag="ServiceStarted"):
     service: str
     version: str = ""
-    resumed_events: int = 0  # events folded from the log when it restarted
+    resumed_events: Count = 0  # events folded from the log when it restarted
 
 
 class SessionStarted(Event, tag="SessionStarted"):
@@ -41,72 +55,75 @@ class SessionStarted(Event, tag="SessionStarted"):
 
 
 class RoundStarted(Event, tag="RoundStarted"):
-    round: int
-    faces: list[int]  # the deal: face (pair id 0..8) of each of the 18 cards
+    round: Count
+    faces: Annotated[list[Face], msgspec.Meta(min_length=18, max_length=18)]  # the deal: face (pair id 0..8) of each of the 18 cards
 
 
 class CardPicked(Event, tag="CardPicked"):
     """The participant touched a card (an input: the game may reject it)."""
 
-    round: int
-    turn: int
-    card: int
+    round: Count
+    turn: Count
+    card: Int64  # any number: an off-board pick is answered with PickRejected
+    # The board page's clock at the touch: performance.timeOrigin + performance.now(), ms
+    # (0: not from a page). The envelope's time_ns is the server's clock when it took the touch.
+    page_time_ms: float = 0.0
 
 
 class CardRevealed(Event, tag="CardRevealed"):
     """The game accepted a pick and turned the card face up."""
 
-    round: int
-    turn: int
-    card: int
-    face: int
-    pick: int  # 0 = first card of the turn, 1 = second
-    pick_seq: int = 0  # seq of the CardPicked it accepts
+    round: Count
+    turn: Count
+    card: Card
+    face: Face
+    pick: Annotated[int, msgspec.Meta(ge=0, le=1)]  # 0 = first card of the turn, 1 = second
+    pick_seq: Seq = 0  # seq of the CardPicked it accepts
 
 
 class PickRejected(Event, tag="PickRejected"):
-    round: int
-    turn: int
-    card: int
+    round: Count
+    turn: Count
+    card: Int64  # any number: an off-board pick is answered with PickRejected
     reason: str
     pick_source: str = ""
-    pick_seq: int = 0
+    pick_seq: Seq = 0
 
 
 class CardObserved(Event, tag="CardObserved"):
     """The card the user looks at before the second pick (SPEC "Observed card")."""
 
-    round: int
-    turn: int
-    card: int
+    round: Count
+    turn: Count
+    card: Card
     observed_source: str  # "intended" | "first-pick"
 
 
 class SuggestionRequested(Event, tag="SuggestionRequested"):
-    round: int
-    turn: int
-    attempt: int
-    state: int
-    observed: int
-    match: int  # the card matching the first pick: the target of a suggestion
-    covered_mask: int
-    first: int = -1  # the first card of the turn
+    round: Count
+    turn: Count
+    attempt: Count
+    state: State
+    observed: Card
+    match: Card  # the card matching the first pick: the target of a suggestion
+    covered_mask: Mask
+    first: CardOrNone = -1  # the first card of the turn
 
 
 class SuggestionMade(Event, tag="SuggestionMade"):
-    round: int
-    turn: int
-    attempt: int
-    state: int
-    action: int  # composite action code 0..87 (core.actions)
+    round: Count
+    turn: Count
+    attempt: Count
+    state: State
+    action: Action  # composite action code 0..87 (core.actions)
     chosen_by: str  # "greedy" | "explore" | "bias" | "fixed"
     epsilon: float
     alpha: float
     psi: float
-    observed: int
-    target: int  # the matching card: what "row x column y" and the gaze point at
+    observed: Card
+    target: Card  # the matching card: what "row x column y" and the gaze point at
     action_name: str = ""
-    request_seq: int = 0
+    request_seq: Seq = 0
 
 
 class SuggestionPerceived(Event, tag="SuggestionPerceived"):
@@ -116,50 +133,53 @@ class SuggestionPerceived(Event, tag="SuggestionPerceived"):
     timing (thesis 7.1.2) and the wrong-suggestion button.
     """
 
-    round: int
-    turn: int
-    attempt: int
+    round: Count
+    turn: Count
+    attempt: Count
     considered: bool
     consistent: bool
-    candidate_size: int
+    candidate_size: Count
     from_memory: bool = False  # the match was known: the suggestion is not learned from
-    candidate_mask: int = 0  # the candidate set (0 when inconsistent or not considered)
-    second: int = -1  # the card the user will pick second
+    candidate_mask: Mask = 0  # the candidate set (0 when inconsistent or not considered)
+    second: CardOrNone = -1  # the card the user will pick second
 
 
 class WrongSuggestionPressed(Event, tag="WrongSuggestionPressed"):
-    round: int
-    turn: int
+    round: Count
+    turn: Count
+    attempt: int = -1  # the suggestion judged wrong (-1: the open one, as in recordings before 0.3)
+    page_time_ms: float = 0.0  # the board page's clock at the press (see CardPicked)
 
 
 class TurnResolved(Event, tag="TurnResolved"):
-    round: int
-    turn: int
-    first: int
-    second: int
+    round: Count
+    turn: Count
+    first: Card
+    second: Card
     matched: bool
     round_over: bool
     interval_ms: float = 0.0  # between the two picks, from their envelope times
     ignored_by_time: bool = False  # interval under the session's ignore window
+    page_interval_ms: float = -1.0  # between the picks on the page's clock (-1: no page times)
 
 
 class RewardGiven(Event, tag="RewardGiven"):
-    round: int
-    turn: int
-    attempt: int
-    state: int
-    action: int
+    round: Count
+    turn: Count
+    attempt: Count
+    state: State
+    action: Action
     reward: float
     learned: bool  # False: ignored suggestion, no update (thesis 6.1.3, 7.1.2)
     reason: str = ""
 
 
 class QUpdated(Event, tag="QUpdated"):
-    round: int
-    turn: int
-    attempt: int
-    state: int
-    action: int
+    round: Count
+    turn: Count
+    attempt: Count
+    state: State
+    action: Action
     alpha: float
     reward: float
     q_before: float
@@ -174,13 +194,13 @@ class LSPIUpdated(Event, tag="LSPIUpdated"):
     improvement) and q_before let it prove so.
     """
 
-    round: int
-    turn: int
-    attempt: int
-    state: int
-    action: int
+    round: Count
+    turn: Count
+    attempt: Count
+    state: State
+    action: Action
     reward: float
-    samples: int  # samples learned so far, this one included
+    samples: Count  # samples learned so far, this one included
     improved: bool  # this sample ended a batch of K: the policy was improved
     q_before: float  # Q(state, action) of the policy in force before the sample
     q_after: float  # ... after it (differs only when improved)
@@ -188,9 +208,9 @@ class LSPIUpdated(Event, tag="LSPIUpdated"):
 
 
 class RoundEnded(Event, tag="RoundEnded"):
-    round: int
-    turns: int
-    matches: int
+    round: Count
+    turns: Count
+    matches: Count
 
 
 class CombineRequested(Event, tag="CombineRequested"):
@@ -199,7 +219,7 @@ class CombineRequested(Event, tag="CombineRequested"):
     request_id: str
     policies: list[str] = []  # policy file paths
     recordings: list[str] = []  # recordings to rebuild policies from
-    seed: int = 0  # picks each user's representative policy, as the study does
+    seed: Int64 = 0  # picks each user's representative policy, as the study does
     output_path: str = ""  # where to write the combined policy file ("" = nowhere)
     exclude: list[str] = []  # users left out (e.g. the participant the bias policy is for)
 
@@ -207,7 +227,7 @@ class CombineRequested(Event, tag="CombineRequested"):
 class PolicyCombined(Event, tag="PolicyCombined"):
     request_id: str
     inputs: list[str]
-    actions: list[int]  # greedy action per state of the combined policy
+    actions: list[Action]  # greedy action per state of the combined policy
     decided_by: list[str] = []  # per state: which rule of the algebra decided
     ok: bool = True
     error: str = ""
@@ -224,14 +244,53 @@ class QuestionnaireAnswered(Event, tag="QuestionnaireAnswered"):
     answers: dict[str, str]
 
 
+class SessionPaused(Event, tag="SessionPaused"):
+    """The experimenter paused the game: the game refuses touches until SessionResumed."""
+
+    reason: str = ""
+
+
+class SessionResumed(Event, tag="SessionResumed"):
+    """The experimenter resumed a paused game."""
+
+
+class SessionAborted(Event, tag="SessionAborted"):
+    """The experimenter stopped the game; the game ends it (SessionEnded "aborted", the reason as detail)."""
+
+    reason: str
+
+
+class GazeFixated(Event, tag="GazeFixated"):
+    """An eye tracker saw the participant fixate a card (observed source "gaze", docs/lab.md).
+
+    Published by source "tracker" when the fixation has lasted `duration_ms`; the
+    envelope's time_ns is the tracker's clock then (the bus's wall clock)."""
+
+    card: Card
+    duration_ms: float = 0.0
+
+
 class MessageRejected(Event, tag="MessageRejected"):
     """A service refused a bus message; it keeps running."""
 
     reason: str
     key: str
     offending_source: str = ""
-    offending_seq: int = 0
+    offending_seq: Seq = 0
     excerpt: str = ""  # the first bytes of the payload, for the record
+
+
+class RecordingGap(Event, tag="RecordingGap"):
+    """A restarted recorder continues an earlier file of the session: what it copied, what
+    it refilled from the services' own records of what they published, and the gap."""
+
+    earlier_file: str  # the file this one continues (its readable events are copied first)
+    copied: Count  # events copied from it
+    last_copied_ns: Nanos  # log time of the last event the earlier file kept: the gap starts after it
+    resumed_ns: Nanos  # when this recorder started listening: the gap ends there
+    refilled: Count = 0  # events of the gap the services re-sent (written with their publish time)
+    refilled_from: list[str] = []  # the services that answered
+    unanswered: list[str] = []  # sources seen before the gap that did not answer: their gap events may be lost
 
 
 END_REASONS = ("completed", "interrupted", "aborted", "failed")
@@ -242,10 +301,10 @@ class SessionEnded(Event, tag="SessionEnded"):
     experimenter; a service failed) and how far it got."""
 
     reason: str = "completed"
-    rounds_played: int = 0  # rounds finished
+    rounds_played: Count = 0  # rounds finished
     detail: str = ""  # e.g. "SIGTERM", "learner left the bus and did not come back within 30 s"
-    round: int = -1  # the round under way when it ended (-1: none; a completed session ends between rounds)
-    turns_in_round: int = 0  # turns of that round resolved when it ended
+    round: Annotated[int, msgspec.Meta(ge=-1, le=2**31 - 1)] = -1  # the round under way when it ended (-1: none)
+    turns_in_round: Count = 0  # turns of that round resolved when it ended
 
 
 def _robot_events() -> tuple[type[Event], ...]:
@@ -263,8 +322,9 @@ EVENT_TYPES: tuple[type[Event], ...] = (
     ServiceStarted, SessionStarted, RoundStarted, CardPicked, CardRevealed, PickRejected,
     CardObserved, SuggestionRequested, SuggestionMade, SuggestionPerceived,
     WrongSuggestionPressed, TurnResolved, RewardGiven, QUpdated, LSPIUpdated, RoundEnded,
-    CombineRequested, PolicyCombined, QuestionnaireAnswered, MessageRejected, SessionEnded,
-) + _robot_events()
+    CombineRequested, PolicyCombined, QuestionnaireAnswered, MessageRejected, SessionEnded, RecordingGap,
+    SessionPaused, SessionResumed, SessionAborted,
+) + _robot_events() + (GazeFixated,)
 EVENT_BY_TAG: dict[str, type[Event]] = {t.__struct_config__.tag: t for t in EVENT_TYPES}
 AnyEvent = Union[EVENT_TYPES]  # type: ignore[valid-type]
 

@@ -6,8 +6,15 @@ the robot acknowledged it, or why it failed. Outcomes:
   "done"           every command sent and every reply the protocol promises came
   "sent"           every command sent; the commands promise no reply (gaze only)
   "aborted"        a newer suggestion cut it short (its speech or head turn)
-  "unacknowledged" sent, but the robot never confirmed within the ack timeout
-  "failed"         not delivered (robot unreachable, bridge closed); see `error`
+  "stopped"        the robot reports its speech stopped early, and not by us
+                   (IrisTK monitor.speech.end with "stopped": another client cut it)
+  "unacknowledged" sent, but the robot never confirmed within the ack timeout, or
+                   a command was written just before the connection died (see
+                   `unconfirmed`)
+  "failed"         not delivered (robot unreachable, nobody subscribed on the
+                   broker, access refused, bridge closed; see `error` and
+                   `unsent`), or the robot reports it failed (Realtime
+                   response.speak.end "failed": true)
   "nothing"        the "do nothing" action: nothing to send
   "in-flight"      sent, and the session ended while the robot's acknowledgement was
                    still awaited (it may have come after the recording closed)
@@ -19,11 +26,27 @@ RobotActed get defaults and go at the end (envelope.py rule).
 
 from __future__ import annotations
 
+import re
+
 import msgspec
 
 from .envelope import Event, Nanos
 
-OUTCOMES = ("done", "sent", "aborted", "unacknowledged", "failed", "nothing", "in-flight")
+# IrisTK's speeds for action.gaze / action.attend (IrisTK doc/markdown/events.md line 301).
+IRISTK_SPEEDS = ("x-slow", "slow", "medium", "fast", "x-fast")
+# The characters IrisTK's NameFilter.compile accepts (core/src/iristk/util/NameFilter.java line 77);
+# the broker refuses a SUBSCRIBE with anything else and the client then receives nothing.
+_FILTER_CHARS = re.compile(r"[A-Za-z0-9_!.*; ]*")
+
+
+def check_name_filter(spec: str) -> None:
+    """ValueError unless IrisTK's broker would compile `spec` as a NameFilter."""
+    if not _FILTER_CHARS.fullmatch(spec):
+        bad = "".join(sorted({c for c in spec if not _FILTER_CHARS.fullmatch(c)}))
+        raise ValueError(f"name filter {spec!r} has characters IrisTK refuses: {bad!r}"
+                         " (allowed: A-Z a-z 0-9 _ ! . * ; and space)")
+
+OUTCOMES = ("done", "sent", "aborted", "stopped", "unacknowledged", "failed", "nothing", "in-flight")
 
 
 class RobotActed(Event, tag="RobotActed"):
@@ -42,6 +65,9 @@ class RobotActed(Event, tag="RobotActed"):
     done_ns: Nanos = 0  # the robot's last promised reply (0: not all came)
     error: str = ""
     reconnects: int = 0  # connections re-opened while it was pending
+    unsent: list[str] = []  # wire messages never written (held, unreachable, refused), in order
+    unconfirmed: list[str] = []  # written, but nothing shows they reached the robot: a promised
+    # reply never came, or written within inflight_window_s before the connection died
 
     def __post_init__(self) -> None:
         super().__post_init__()
@@ -80,10 +106,19 @@ class GestureNames(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
 
 
 # Gesture name sets: the thesis's robot, IrisTK's shipped gestures, today's Furhat.
+# "thesis": smile_open is the thesis's name (appendix D, figure D.4); it is NOT among
+# IrisTK's stock gestures (addon/Face/gestures.xml: nod, shake, smile, brow_*, blink,
+# smile_on, smile_off, ...), so a robot without it never confirms it: the suggestion
+# is then recorded "unacknowledged", the gesture listed in RobotActed.unconfirmed.
 GESTURE_PRESETS: dict[str, GestureNames] = {
     "thesis": GestureNames(smile="smile_open", nod="nod"),
     "iristk": GestureNames(smile="smile", nod="nod"),
     "furhat": GestureNames(smile="BigSmile", nod="Nod"),
+}
+PRESET_NOTES: dict[str, str] = {
+    "thesis": "gesture 'smile_open' is the thesis's (appendix D); IrisTK's stock gestures.xml has no such"
+              " gesture (it has smile, smile_on, smile_off): install it on the robot, or a smile is never"
+              " confirmed (recorded unacknowledged)",
 }
 
 
@@ -112,7 +147,7 @@ class RobotConfig(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
     speech: SpeechTexts = SpeechTexts()
     gaze_mode: str = "default"  # IrisTK action.gaze mode for looking at a card
     head_mode: str = "headpose"  # IrisTK action.gaze mode for a head turn
-    gaze_speed: str = "medium"
+    gaze_speed: str = "medium"  # card gazes (thesis figure D.3); one of iristk_protocol.SPEEDS
     head_turn_offset_m: float = 0.2  # how far past the observed card the head turns
     head_turn_lead_s: float = 0.3  # look at the observed card, then turn after this
     head_turn_hold_s: float = 0.8  # hold the turn, then look back at the participant
@@ -126,24 +161,49 @@ class RobotConfig(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
     iristk_subscribe: str = "monitor.**"
     iristk_agent: str = ""  # sent as "agent" when set (multi-agent IrisTK systems)
     iristk_gesture_replies: bool = True  # await monitor.gesture.end for gestures
-    iristk_subscriber_wait_s: float = 5.0  # hold events nobody on the broker subscribes to, this long
     realtime_key: str = ""  # Realtime API auth key, if the robot requires one
     yaw_sign: float = 1.0  # Realtime headpose: + yaw turns towards +x (the robot's left)
     pitch_sign: float = 1.0  # Realtime headpose: + pitch turns towards +y (up)
+    head_speed: str = "x-fast"  # head turns: the thesis's action.attend speed (figure D.5)
+    iristk_head_event: str = "gaze"  # head turns as "gaze" (action.gaze, any Furhat) or "attend"
+    # (action.attend, as the thesis: needs an IrisTK SystemAgentFlow and iristk_agent)
+    max_commands_per_s: float = 10.0  # robot-side rate limit (token bucket), so no module's
+    command_burst: int = 20  # 1000-event queue (IrisModule.java 24) can be flooded by us
+    inflight_window_s: float = 0.25  # commands written this soon before a drop: unconfirmed
+    realtime_proxy: str = ""  # an HTTP/SOCKS proxy URL for the Realtime connection; "" = direct,
+    # whatever http_proxy/https_proxy say (the robot is on the lab network)
 
     def validate(self) -> None:
         """Raise ValueError with a clear reason if the config cannot work."""
         for name in ("head_turn_offset_m", "ack_timeout_s", "abort_grace_s", "give_up_s", "reconnect_min_s", "reconnect_max_s"):
             if not getattr(self, name) > 0:
                 raise ValueError(f"robot config: {name} must be > 0, got {getattr(self, name)}")
-        for name in ("head_turn_lead_s", "head_turn_hold_s", "iristk_subscriber_wait_s"):
+        for name in ("head_turn_lead_s", "head_turn_hold_s", "inflight_window_s"):
             if not getattr(self, name) >= 0:
                 raise ValueError(f"robot config: {name} must be >= 0, got {getattr(self, name)}")
         if self.reconnect_max_s < self.reconnect_min_s:
             raise ValueError("robot config: reconnect_max_s must be >= reconnect_min_s")
-        for name in ("iristk_ticket", "iristk_name", "iristk_subscribe"):
+        for name in ("iristk_ticket", "iristk_name"):
             value = getattr(self, name)
-            if not value or any(c.isspace() for c in value):
+            if not value or any(c.isspace() or not c.isprintable() for c in value):
                 raise ValueError(f"robot config: {name} must be one word without spaces, got {value!r}")
+        try:
+            check_name_filter(self.iristk_subscribe)  # as the broker compiles it (NameFilter.java 77)
+        except ValueError as exc:
+            raise ValueError(f"robot config: iristk_subscribe: {exc}") from None
+        for name in ("gaze_speed", "head_speed"):
+            if getattr(self, name) not in IRISTK_SPEEDS:
+                raise ValueError(f"robot config: {name} must be one of {', '.join(IRISTK_SPEEDS)},"
+                                 f" got {getattr(self, name)!r}")
+        if self.iristk_head_event not in ("gaze", "attend"):
+            raise ValueError(f"robot config: iristk_head_event must be gaze or attend, got {self.iristk_head_event!r}")
+        if self.iristk_head_event == "attend" and not self.iristk_agent:
+            raise ValueError("robot config: iristk_head_event attend needs iristk_agent (SystemAgentFlow only"
+                             " takes an action.attend location whose agent is its own)")
+        if not self.max_commands_per_s > 0:
+            raise ValueError(f"robot config: max_commands_per_s must be > 0, got {self.max_commands_per_s}")
+        if not 1 <= self.command_burst <= 500:
+            raise ValueError(f"robot config: command_burst must be 1..500 (an IrisTK module queue holds 1000),"
+                             f" got {self.command_burst}")
         if "{row}" not in self.speech.exact or "{column}" not in self.speech.exact:
             raise ValueError("robot config: speech.exact must contain {row} and {column}")

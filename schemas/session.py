@@ -16,11 +16,19 @@ import msgspec
 from .config import REWARD_BONUS_RULES, UNSTATED_REWARD_BONUS, LearnerConfig, LSPIConfig
 
 ALGORITHMS = ("q-learning", "pi-reuse", "fixed", "lspi")
-OBSERVED_SOURCES = ("intended", "first-pick")
+# Where the observed card (the one the user looks at before the second pick) comes from:
+# "intended": the simulated participant reports the card it would pick unaided;
+# "first-pick": the first card of the turn (the thesis's human study, 7.1.3);
+# "gaze": an eye tracker's GazeFixated events (source "tracker"; docs/lab.md).
+OBSERVED_SOURCES = ("intended", "first-pick", "gaze")
 # How the learner decides that a suggestion was ignored (no reward, no update):
 # "perceived": the simulated participant reports it (SuggestionPerceived);
 # "time": the two picks of a turn came less than `ignore_window_ms` apart (thesis 7.1.2).
 IGNORE_RULES = ("perceived", "time")
+# Which clock times the two picks for the "time" rule: "server" (the picks' envelope
+# times) or "page" (the board page's performance clock, CardPicked.page_time_ms;
+# turns whose picks lack it fall back to the server's).
+IGNORE_CLOCKS = ("server", "page")
 
 
 class SessionConfig(msgspec.Struct, frozen=True, kw_only=True):
@@ -49,6 +57,9 @@ class SessionConfig(msgspec.Struct, frozen=True, kw_only=True):
     # was made with), 2 = every seed 0..2**64-1 and every participant id its own streams. New sessions
     # state 2 (core.rng.STREAMS_VERSION).
     streams: int = 1
+    ignore_clock: str = "server"
+    # How long the board page leaves a missed pair face up before turning it back (ms).
+    turn_back_ms: float = 1500.0
     # LSPI's settings (schemas.config.LSPIConfig fields that differ from its defaults),
     # for algorithm "lspi"; left out of other sessions' events (UNSET).
     lspi: Union[dict[str, Union[float, int, bool]], msgspec.UnsetType] = msgspec.UNSET
@@ -85,6 +96,8 @@ class SessionConfig(msgspec.Struct, frozen=True, kw_only=True):
             raise ValueError(f"algorithm {self.algorithm!r} needs policy_actions (a bias or fixed policy)")
         if self.reward_bonus not in REWARD_BONUS_RULES:
             raise ValueError(f"reward_bonus {self.reward_bonus!r} is not one of {REWARD_BONUS_RULES}")
+        if self.ignore_clock not in IGNORE_CLOCKS:
+            raise ValueError(f"ignore_clock {self.ignore_clock!r} is not one of {IGNORE_CLOCKS}")
         if self.participant.startswith("sim:") and not self.persona:
             raise ValueError("a simulated participant needs a persona")
         if self.streams not in (1, 2):
@@ -96,11 +109,28 @@ class SessionConfig(msgspec.Struct, frozen=True, kw_only=True):
                              "only (it cut them to 32 bits); use streams=2")
         if self.game_index < 0:
             raise ValueError(f"game index {self.game_index} must be >= 0")
+        if self.participant.startswith("sim:") and self.observed_source == "gaze":
+            raise ValueError("a simulated participant reports its intended card: observed source 'gaze' is for "
+                             "a person with an eye tracker")
+        if self.participant.startswith("human:"):
+            self._check_human()
         self.learner_config()
         if self.algorithm == "lspi":
             self.lspi_config()
         elif self.lspi is not msgspec.UNSET:
             raise ValueError(f"lspi settings given for algorithm {self.algorithm!r}")
+
+    def _check_human(self) -> None:
+        """Refuse what a person cannot do: a person reports no perception, and looks at
+        cards only through an eye tracker (otherwise the session would wait for ever)."""
+        if self.ignore_rule == "perceived":
+            raise ValueError("ignore rule 'perceived' needs a simulated participant to report what it perceived; "
+                             "a person's session uses 'time' (thesis 7.1.2)")
+        if self.observed_source == "intended":
+            raise ValueError("observed source 'intended' needs a simulated participant; a person's observed card "
+                             "is the first pick ('first-pick', thesis 7.1.3) or an eye tracker's gaze ('gaze')")
+        if self.ignore_window_ms < 0 or self.turn_back_ms < 0:
+            raise ValueError("ignore_window_ms and turn_back_ms must be >= 0")
 
 
 def learner_overrides(config: LearnerConfig) -> dict[str, Union[float, int, None]]:

@@ -1,33 +1,47 @@
-"""The bus: Zenoh sessions configured from one place, BLOCK publishers, clean exit.
+"""The bus: Zenoh sessions configured from one place; nothing on a Zenoh thread ever blocks.
 
 Rule: every pairplay process opens its Zenoh session through `open_bus(options)`.
-The embedded default needs no server and no network: peer mode, listening on
-`tcp/127.0.0.1:0` (the OS picks a free port, so two runs never clash; the real
-port is read back from Zenoh's admin space, `Bus.locators()`), multicast
-scouting and gossip off (nothing leaves loopback), scouting delay 100 ms.
-Several processes or hosts: one process is the router (`pairplay session` is
-one: it listens on loopback, or `--listen tcp/0.0.0.0:7447` for other hosts),
-the others are its clients (`--connect tcp/<host>:<port>` makes a process a
-client): Zenoh forwards between a router's clients, not between peers that
-only share a third peer (measured: not forwarded). TLS, access
-control and anything else Zenoh knows come from a Zenoh config file
-(`--zenoh-config`), passed through untouched except for the options given on
-the command line. Every publisher is declared with congestion control BLOCK:
-Zenoh's default, DROP, silently lost 72-95% of events between processes under
-load (LIBRARY-NOTES). SIGINT and SIGTERM set a stop flag; services then close
-their session and the recorder finishes its file.
+Our defaults (`SAFE_DEFAULTS`) need no server and no network: listening on
+`tcp/127.0.0.1:0` (the OS picks a free port; the real one is read back from
+Zenoh's admin space, `Bus.locators()`), multicast scouting and gossip off
+(nothing leaves loopback), scouting delay 100 ms. A Zenoh config file
+(`--zenoh-config`: TLS, access control, ...) is laid over these defaults key
+by key, so a key the file does not set keeps our value, never Zenoh's own
+(Zenoh's would turn multicast on and listen on every interface); the options
+given on the command line are laid over both. Several processes or hosts: one
+process is the router (`pairplay session`), the others its clients (Zenoh
+forwards between a router's clients, not between peers that only share a
+third peer: measured).
+
+No bus callback ever blocks (a callback that waits on a publish can wait on a
+peer that waits on it: the whole process froze, LIBRARY-NOTES). A callback only
+hands its sample to an `Inbox`: bounded per source and in bytes, it never
+waits; what does not fit is shed and counted, and the service records the
+count. Each service publishes from one place it owns, its `Outbox` thread; its
+publishers use congestion control BLOCK (Zenoh's default, DROP, silently lost
+72-95% of events between processes under load), which is safe there because
+no consumer's callback can hold it up. SIGINT and SIGTERM set a stop flag;
+every wait in a service checks it, and `Bus.close` gives Zenoh a bounded time
+(a session closing under a blocked publish takes ~5.5 s: measured), so a
+process exits within 2 s, its recording finished.
 """
 
 from __future__ import annotations
 
 import argparse
+import copy
 import json
 import logging
+import queue
 import signal
 import threading
+import time
+from collections import Counter, deque
 from dataclasses import dataclass, field
-from typing import Callable
+from pathlib import Path
+from typing import Any, Callable
 
+import json5
 import zenoh
 
 from pairplay.errors import UserError
@@ -35,11 +49,65 @@ from pairplay.errors import UserError
 log = logging.getLogger("pairplay.bus")
 LOOPBACK_ANY_PORT = "tcp/127.0.0.1:0"
 MODES = ("peer", "client", "router")
+CLOSE_TIMEOUT_S = 0.5  # Bus.close waits this long for Zenoh, then leaves it to the process exit
+
+
+def safe_defaults(scouting_delay_ms: int = 100) -> dict[str, Any]:
+    """Our defaults for every key a config file leaves out (see rule)."""
+    return {
+        "listen": {"endpoints": [LOOPBACK_ANY_PORT]},
+        "connect": {"endpoints": []},
+        "scouting": {"multicast": {"enabled": False}, "gossip": {"enabled": False}, "delay": scouting_delay_ms},
+        "adminspace": {"enabled": True},
+    }
+
+
+def overlay(base: dict, top: dict) -> dict:
+    """`base` with `top` laid over it, key by key (nested objects merge; anything else replaces)."""
+    out = copy.deepcopy(base)
+    for k, v in top.items():
+        out[k] = overlay(out[k], v) if isinstance(v, dict) and isinstance(out.get(k), dict) else copy.deepcopy(v)
+    return out
 
 
 class BusError(UserError):
     """The bus cannot be opened as configured: a malformed or unusable --listen/--connect
     endpoint, a port in use, a peer that refuses, a missing or invalid --zenoh-config."""
+
+
+class BusOpenError(BusError, ConnectionError):
+    """Zenoh refused to open the session (the message says which endpoint and why)."""
+
+
+_log_ready = False
+
+
+def _init_zenoh_log() -> None:
+    """Zenoh's own log follows RUST_LOG (e.g. RUST_LOG=zenoh::net::routing::interceptor::
+    access_control=trace shows each access-control decision), else only its errors."""
+    global _log_ready
+    if not _log_ready:
+        _log_ready = True
+        try:
+            zenoh.init_log_from_env_or("error")
+        except Exception:  # already set up by the host program
+            pass
+
+
+class ConfigFileError(BusError, ValueError):
+    """A --zenoh-config file that cannot be read (the message names the file and why)."""
+
+
+def read_config_file(path: str) -> dict[str, Any]:
+    try:
+        data = json5.loads(Path(path).read_text())
+    except OSError as err:
+        raise ConfigFileError(f"cannot use the Zenoh config: {err.strerror or err}", f"--zenoh-config {path}") from None
+    except ValueError as err:
+        raise ConfigFileError(f"cannot use the Zenoh config: not JSON5: {err}", f"--zenoh-config {path}") from None
+    if not isinstance(data, dict):
+        raise ConfigFileError("cannot use the Zenoh config: the top level must be an object", f"--zenoh-config {path}")
+    return data
 
 
 def _zenoh_reason(err: Exception) -> str:
@@ -52,7 +120,7 @@ def _zenoh_reason(err: Exception) -> str:
 @dataclass
 class BusOptions:
     mode: str = "peer"
-    listen: list[str] | None = None  # None: the mode's default (peer/router: loopback, any port)
+    listen: list[str] | None = None  # None: the file's, else (peer/router) loopback on a free port
     connect: list[str] = field(default_factory=list)
     zenoh_config: str | None = None  # a Zenoh JSON5 config file: TLS, access control, ...
     scouting_delay_ms: int = 100
@@ -63,41 +131,31 @@ class BusOptions:
         parts += [f"--listen {e}" for e in self.listen or []] + [f"--connect {e}" for e in self.connect]
         return ", ".join(parts) or f"mode {self.mode}, listening on {LOOPBACK_ANY_PORT}"
 
-    def to_zenoh(self) -> zenoh.Config:
-        """The Zenoh config: the file (if any) with our options laid over it; BusError if it cannot be made."""
+    def to_dict(self) -> dict[str, Any]:
+        """The whole config: our defaults, the file over them, the command line over both."""
         if self.mode not in MODES:
             raise BusError(f"bus mode {self.mode!r} is not one of {MODES}", "--mode")
+        cfg = safe_defaults(self.scouting_delay_ms)
+        if self.mode == "client":
+            cfg["listen"]["endpoints"] = []  # a client listens nowhere unless told
         if self.zenoh_config:
-            try:
-                config = zenoh.Config.from_file(self.zenoh_config)
-            except zenoh.ZError as err:
-                raise BusError(f"cannot use the Zenoh config: {_zenoh_reason(err)}",
-                               f"--zenoh-config {self.zenoh_config}") from None
-        else:
-            config = None
-        try:
-            return self._zenoh_config(config)
-        except zenoh.ZError as err:
-            raise BusError(f"bad bus endpoint: {_zenoh_reason(err)}", self.where()) from None
+            cfg = overlay(cfg, read_config_file(self.zenoh_config))
+        cfg["mode"] = self.mode
+        if self.listen is not None:
+            cfg.setdefault("listen", {})["endpoints"] = list(self.listen)
+        if self.connect:
+            cfg.setdefault("connect", {})["endpoints"] = list(self.connect)
+        cfg.setdefault("adminspace", {})["enabled"] = True  # locators() reads the real endpoints there
+        return cfg
 
-    def _zenoh_config(self, config: zenoh.Config | None) -> zenoh.Config:
-        if config is not None:
-            config.insert_json5("mode", json.dumps(self.mode))
-            if self.listen is not None:
-                config.insert_json5("listen/endpoints", json.dumps(self.listen))
-            if self.connect:
-                config.insert_json5("connect/endpoints", json.dumps(self.connect))
-            config.insert_json5("adminspace/enabled", "true")
-            return config
-        listen = self.listen if self.listen is not None else ([] if self.mode == "client" else [LOOPBACK_ANY_PORT])
-        return zenoh.Config.from_json5(json.dumps({
-            "mode": self.mode,
-            "listen": {"endpoints": listen},
-            "connect": {"endpoints": list(self.connect)},
-            "scouting": {"multicast": {"enabled": False}, "gossip": {"enabled": False},
-                         "delay": self.scouting_delay_ms},
-            "adminspace": {"enabled": True},
-        }))
+    def to_zenoh(self) -> zenoh.Config:
+        """The Zenoh config (to_dict); BusError naming the options if Zenoh refuses it."""
+        cfg = self.to_dict()
+        try:
+            return zenoh.Config.from_json5(json.dumps(cfg))
+        except Exception as err:  # Zenoh's own check of the keys and values
+            what = "cannot use the Zenoh config" if self.zenoh_config else "bad bus endpoint"
+            raise ConfigFileError(f"{what}: {_zenoh_reason(err)}", self.where()) from None
 
 
 def add_bus_arguments(parser: argparse.ArgumentParser) -> None:
@@ -109,7 +167,8 @@ def add_bus_arguments(parser: argparse.ArgumentParser) -> None:
                    help=f"endpoint to listen on, repeatable (default {LOOPBACK_ANY_PORT}: a free port)")
     g.add_argument("--connect", action="append", default=[], metavar="ENDPOINT",
                    help="endpoint to connect to, e.g. tcp/127.0.0.1:7447 (repeatable)")
-    g.add_argument("--zenoh-config", metavar="FILE", help="Zenoh JSON5 config (TLS, access control), passed through")
+    g.add_argument("--zenoh-config", metavar="FILE",
+                   help="Zenoh JSON5 config (TLS, access control); laid over pairplay's safe defaults key by key")
 
 
 def options_from_args(args: argparse.Namespace, default_mode: str = "peer") -> BusOptions:
@@ -120,6 +179,167 @@ def options_from_args(args: argparse.Namespace, default_mode: str = "peer") -> B
     return BusOptions(mode=mode, listen=args.listen, connect=list(args.connect or []), zenoh_config=args.zenoh_config)
 
 
+def source_of(key: str) -> str:
+    """The source chunk of `pairplay/<session>/<source>/<tag>` ('' if the key is not one)."""
+    parts = key.split("/", 3)
+    return parts[2] if len(parts) == 4 else ""
+
+
+class Inbox:
+    """Zenoh's callback threads -> one service thread; `put` never waits (see module rule).
+
+    Arrival order is kept. What does not fit is shed and counted by source:
+    a message over `max_payload` bytes; a message from a source outside
+    `sources` once `per_unknown` of those wait (they share one allowance, so
+    made-up names cannot fill the inbox); a known source's message once
+    `per_source` of its own wait; anything once `max_bytes` wait in all.
+    Items are (key, payload, received_ns); `control` items (a query to answer)
+    are never shed.
+    """
+
+    def __init__(self, sources: frozenset[str] | None = None, *, per_source: int = 20_000,
+                 per_unknown: int = 1_000, max_bytes: int = 64 << 20, max_payload: int | None = None,
+                 clock: Callable[[], int] = time.time_ns):
+        from pairplay.schemas.trust import MAX_PAYLOAD, SOURCES
+        self.sources = SOURCES if sources is None else sources
+        self.per_source, self.per_unknown, self.max_bytes = per_source, per_unknown, max_bytes
+        self.max_payload = MAX_PAYLOAD if max_payload is None else max_payload
+        self.clock = clock
+        self._items: deque = deque()
+        self._count: Counter = Counter()  # waiting, by source ('' for every unknown one)
+        self._bytes = 0
+        self._cond = threading.Condition(threading.Lock())
+        self.shed: Counter = Counter()  # (source, why) -> messages shed, since the last take_shed
+        self.shed_total = 0
+
+    def put(self, key: str, payload: bytes) -> bool:
+        """Queue one sample; False if it was shed. Never waits beyond a short lock."""
+        source = source_of(key)
+        bucket = source if source in self.sources else ""
+        cap = self.per_source if bucket else self.per_unknown
+        size = len(payload)
+        with self._cond:
+            why = ("larger than %d bytes" % self.max_payload if size > self.max_payload else
+                   "inbox full for this source" if self._count[bucket] >= cap else
+                   "inbox full" if self._bytes + size > self.max_bytes else None)
+            if why is not None:
+                self.shed[(source, why)] += 1
+                self.shed_total += 1
+                return False
+            self._items.append((key, payload, self.clock()))
+            self._count[bucket] += 1
+            self._bytes += size
+            self._cond.notify()
+        return True
+
+    def control(self, item: Any) -> None:
+        """Queue an item for the service thread that is never shed (a query to answer)."""
+        with self._cond:
+            self._items.append((None, item, self.clock()))
+            self._cond.notify()
+
+    def get(self, timeout_s: float = 0.1):
+        """The oldest item, or None after `timeout_s`."""
+        with self._cond:
+            if not self._items and (timeout_s <= 0 or not self._cond.wait(timeout_s)) and not self._items:
+                return None
+            if not self._items:
+                return None
+            item = self._items.popleft()
+            key, payload, _ = item
+            if key is not None:
+                source = source_of(key)
+                self._count[source if source in self.sources else ""] -= 1
+                self._bytes -= len(payload)
+            return item
+
+    def __len__(self) -> int:
+        return len(self._items)
+
+    def oldest_ns(self) -> int | None:
+        with self._cond:
+            return self._items[0][2] if self._items else None
+
+    def take_shed(self) -> Counter:
+        """What was shed since the last call, by (source, why)."""
+        with self._cond:
+            out, self.shed = self.shed, Counter()
+        return out
+
+
+class Outbox:
+    """The one place a service publishes from: a thread of its own (see module rule).
+
+    `send` and `call` never wait. The thread publishes in order with BLOCK
+    publishers; `call(fn)` runs `fn` there in turn (a query's answer).
+    `keep`: remember what was sent (a restarted recorder asks for it)."""
+
+    def __init__(self, bus: "Bus", name: str, keep: bool = False):
+        self.bus, self.name = bus, name
+        self._queue: queue.SimpleQueue = queue.SimpleQueue()
+        self._pending = 0
+        self._lock = threading.Lock()
+        self._idle = threading.Condition(self._lock)
+        self.sent: list[tuple[str, bytes]] | None = [] if keep else None
+        self.failed = 0
+        self._thread = threading.Thread(target=self._run, name=f"pairplay-{name}-outbox", daemon=True)
+        self._thread.start()
+
+    def send(self, key: str, payload: bytes) -> None:
+        with self._lock:
+            self._pending += 1
+        self._queue.put((key, payload))
+
+    def call(self, fn: Callable[[], None]) -> None:
+        with self._lock:
+            self._pending += 1
+        self._queue.put((None, fn))
+
+    def _run(self) -> None:
+        while True:
+            key, item = self._queue.get()
+            if key is _STOP:
+                return
+            try:
+                if key is None:
+                    item()
+                else:
+                    self.bus.put(key, item)
+                    if self.sent is not None:
+                        self.sent.append((key, item))
+            except Exception as err:  # a closed session, a refused key: counted, the thread goes on
+                self.failed += 1
+                log.warning("%s could not publish %s: %s", self.name, key, err)
+            finally:
+                with self._lock:
+                    self._pending -= 1
+                    if not self._pending:
+                        self._idle.notify_all()
+
+    def pending(self) -> int:
+        return self._pending
+
+    def flush(self, timeout_s: float) -> bool:
+        """Wait (bounded) until everything sent so far is published; False on timeout."""
+        deadline = time.monotonic() + timeout_s
+        with self._lock:
+            while self._pending:
+                left = deadline - time.monotonic()
+                if left <= 0:
+                    return False
+                self._idle.wait(left)
+        return True
+
+    def close(self, timeout_s: float = 1.0) -> bool:
+        """Publish what is queued (bounded by `timeout_s`), then stop the thread."""
+        done = self.flush(timeout_s)
+        self._queue.put((_STOP, None))
+        return done
+
+
+_STOP = object()
+
+
 class Bus:
     """One Zenoh session with cached BLOCK publishers."""
 
@@ -127,7 +347,7 @@ class Bus:
                  express: bool = True):
         self.options = options or BusOptions()
         # express: each event leaves at once instead of waiting to be batched with others
-        # (an event is a decision someone waits for; throughput stays BLOCK-safe either way)
+        # (an event is a decision someone waits for)
         self.express = express
         self.session = session if session is not None else _open(self.options)
         self._publishers: dict[str, zenoh.Publisher] = {}
@@ -147,10 +367,12 @@ class Bus:
         return pub
 
     def put(self, key: str, payload: bytes) -> None:
+        """Publish (may wait under congestion: call it from an Outbox or a test thread, never a callback)."""
         self.publisher(key).put(payload)
 
     def subscribe(self, key_expr: str, callback: Callable[[str, bytes], None]):
-        """Call `callback(key, payload)` for every sample (callbacks must not raise)."""
+        """Call `callback(key, payload)` for every sample. The callback runs on a Zenoh
+        thread: it must not raise and must not wait (hand the sample to an Inbox)."""
         def on_sample(sample: zenoh.Sample) -> None:
             try:
                 callback(str(sample.key_expr), sample.payload.to_bytes())
@@ -160,25 +382,44 @@ class Bus:
         self._declared.append(sub)
         return sub
 
-    def queryable(self, key_expr: str, answer: Callable[[str], list[bytes]]):
-        """Answer each query on `key_expr` with the payloads `answer(selector_params)` returns."""
-        def on_query(query: zenoh.Query) -> None:
+    def queryable(self, key_expr: str, on_query: Callable[[zenoh.Query], None]):
+        """Hand each query on `key_expr` to `on_query`, which must not wait: it passes the
+        query on (an Inbox's `control`), and the service answers it later with `answer`."""
+        def handler(query: zenoh.Query) -> None:
             try:
-                for payload in answer(str(query.parameters)):
-                    query.reply(query.key_expr, payload)
-            except Exception as err:
+                on_query(query)
+            except Exception:
                 log.exception("queryable %s failed", key_expr)
-                query.reply_err(f"{type(err).__name__}: {err}")
-        q = self.session.declare_queryable(key_expr, on_query)
+        q = self.session.declare_queryable(key_expr, handler)
         self._declared.append(q)
         return q
 
-    def query(self, selector: str, timeout_s: float = 2.0) -> list[bytes]:
-        """Payloads of every ok reply to a query (errors are logged, not raised)."""
+    @staticmethod
+    def answer(query: zenoh.Query, payloads: list[bytes]) -> None:
+        try:
+            for payload in payloads:
+                query.reply(query.key_expr, payload)
+        finally:
+            query.drop()
+
+    def query(self, selector: str, timeout_s: float = 2.0, stop: threading.Event | None = None) -> list[bytes]:
+        """Payloads of every ok reply to a query (errors are logged, not raised); returns
+        early, with what came, once `stop` is set."""
         out = []
         # no consolidation: a queryable may answer with many replies on one key
-        for reply in self.session.get(selector, timeout=timeout_s,
-                                      consolidation=zenoh.QueryConsolidation(zenoh.ConsolidationMode.NONE)):
+        replies = self.session.get(selector, timeout=timeout_s,
+                                   consolidation=zenoh.QueryConsolidation(zenoh.ConsolidationMode.NONE))
+        deadline = time.monotonic() + timeout_s + 1.0
+        while time.monotonic() < deadline:
+            if stop is not None and stop.is_set():
+                break
+            try:
+                reply = replies.try_recv()
+            except Exception:  # the channel closed: every reply came
+                break
+            if reply is None:
+                time.sleep(0.002)
+                continue
             if reply.ok is not None:
                 out.append(reply.ok.payload.to_bytes())
             else:
@@ -209,21 +450,35 @@ class Bus:
                 return [str(x) for x in info["locators"]]
         return []
 
-    def close(self) -> None:
+    def close(self, timeout_s: float = CLOSE_TIMEOUT_S) -> bool:
+        """Close the session; if Zenoh takes longer than `timeout_s` (a publish blocked
+        on a peer that went away), leave the rest to the process exit. True if closed."""
         if self._closed:
-            return
+            return True
         self._closed = True
-        for d in reversed(self._declared):
+
+        def close_all() -> None:
+            for d in reversed(self._declared):
+                try:
+                    d.undeclare()
+                except Exception:  # already gone with its session
+                    pass
+            for p in list(self._publishers.values()):
+                try:
+                    p.undeclare()
+                except Exception:
+                    pass
             try:
-                d.undeclare()
-            except Exception:  # already gone with its session
-                pass
-        for p in self._publishers.values():
-            try:
-                p.undeclare()
-            except Exception:
-                pass
-        self.session.close()
+                self.session.close()
+            except Exception as err:
+                log.warning("closing the Zenoh session: %s", err)
+        closer = threading.Thread(target=close_all, name="pairplay-bus-close", daemon=True)
+        closer.start()
+        closer.join(timeout_s)
+        if closer.is_alive():
+            log.warning("the Zenoh session did not close within %.1f s; leaving it to the exit", timeout_s)
+            return False
+        return True
 
     def __enter__(self) -> "Bus":
         return self
@@ -233,12 +488,14 @@ class Bus:
 
 
 def _open(options: BusOptions) -> zenoh.Session:
-    """zenoh.open, its refusals as a BusError naming the options (one line for the user)."""
+    """zenoh.open, its refusals (a port in use, a TLS handshake refused, nothing listening in client
+    mode) as a BusOpenError naming the options (one line for the user)."""
+    _init_zenoh_log()
     config = options.to_zenoh()
     try:
         return zenoh.open(config)
-    except zenoh.ZError as err:
-        raise BusError(f"cannot open the bus: {_zenoh_reason(err)}", options.where()) from None
+    except Exception as err:
+        raise BusOpenError(f"cannot open the bus: {_zenoh_reason(err)}", options.where()) from None
 
 
 def open_bus(options: BusOptions | None = None) -> Bus:

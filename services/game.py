@@ -7,16 +7,29 @@ every pick with core.board.Board and answers it with CardRevealed or
 PickRejected (the reason from IllegalPick; the board is unchanged). The
 observed card comes from the configured source: "first-pick" (the human study:
 the game itself observes the first card) or "intended" (the simulated
-participant reports the card it would pick unaided, CardObserved). Once the
+participant reports the card it would pick unaided, CardObserved) or "gaze"
+(an eye tracker's GazeFixated: the first fixation, on the bus's clock at or
+after the first pick, of a covered card other than the first; the game
+publishes it as CardObserved). Once the
 observed card is known it asks for a suggestion (SuggestionRequested with the
 state of thesis 4.1); a WrongSuggestionPressed asks again (attempt + 1). The
 second pick resolves the turn (TurnResolved); `end` stops the session early with its
 reason (interrupted, aborted, a service failed) and how far it got. Under the "time" ignore rule a
 turn whose picks are closer than the window (1.5 s, thesis 7.1.2) is marked
-ignored, timed by the picks' own envelope times so a replay decides the same.
+ignored, timed by the picks' own times so a replay decides the same: their
+envelope times (the server's clock) or, with `ignore_clock` "page", the board
+page's performance clock (CardPicked.page_time_ms); both are recorded.
+
+Under "gaze", a second pick that comes before any fixation resolves the turn
+without a suggestion (a silent tracker must not stall a person's game).
+The experimenter's SessionPaused / SessionResumed / SessionAborted (the console)
+are inputs like any other: while paused every touch is refused with the
+reason; an abort ends the session at once (SessionEnded "aborted", the reason as its detail).
 """
 
 from __future__ import annotations
+
+from collections import deque
 
 import numpy as np
 
@@ -29,12 +42,20 @@ from pairplay.schemas.session import SessionConfig
 from pairplay.services.node import Rejected, stream_seed
 
 
+# the participant's inputs: a simulated participant, or the touch-screen board of the human study
+PLAYERS = frozenset({"participant", "board"})
+# the experimenter's console
+CONTROL = frozenset({"SessionPaused", "SessionResumed", "SessionAborted"})
+
+
 class GameLogic:
     name = "game"
-    consumes = frozenset({"CardPicked", "CardObserved", "WrongSuggestionPressed"})
-    # the participant's inputs: a simulated participant, or the touch-screen board of the human study
-    PLAYERS = frozenset({"participant", "board"})
-    sources = dict.fromkeys(consumes, PLAYERS)
+    consumes = frozenset({"CardPicked", "CardObserved", "WrongSuggestionPressed", "GazeFixated"}) | CONTROL
+    PLAYERS = PLAYERS
+    CONTROL = CONTROL
+    sources = {tag: (frozenset({"experimenter"}) if tag in CONTROL else PLAYERS) for tag in consumes} \
+        | {"GazeFixated": frozenset({"tracker"})}
+    GAZE_KEPT = 64  # fixations kept for a first pick that arrives after them
 
     def __init__(self, config: SessionConfig):
         config.validate()
@@ -43,12 +64,15 @@ class GameLogic:
         self.round = 0
         self.done = False
         self.board: Board | None = None
+        self.paused = False
+        self.fixations: deque[ev.GazeFixated] = deque(maxlen=self.GAZE_KEPT)
         self._new_turn(0)
 
     def _new_turn(self, turn: int) -> None:
         self.turn = turn
         self.first = -1
         self.first_time_ns = 0
+        self.first_page_ms = 0.0
         self.observed = -1
         self.attempt = -1  # no suggestion asked yet this turn
 
@@ -74,8 +98,14 @@ class GameLogic:
     def handle(self, e: ev.Event) -> list[ev.Event]:
         if self.done:
             raise Rejected(f"the session is over; {type(e).__name__} ignored")
+        if type(e).__name__ in self.CONTROL:
+            return self._control(e)
+        if self.paused and not isinstance(e, (ev.CardPicked, ev.GazeFixated)):
+            raise Rejected(f"the session is paused; {type(e).__name__} ignored")
         if isinstance(e, ev.CardPicked):
             return self._pick(e)
+        if isinstance(e, ev.GazeFixated):
+            return self._gaze(e)
         if (e.round, e.turn) != (self.round, self.turn):
             raise Rejected(f"{type(e).__name__} for round {e.round} turn {e.turn}, but the game is at "
                            f"round {self.round} turn {self.turn}")
@@ -87,10 +117,12 @@ class GameLogic:
         def refuse(reason: str) -> list[ev.Event]:
             return [ev.PickRejected(round=e.round, turn=e.turn, card=e.card, reason=reason,
                                     pick_source=e.source, pick_seq=e.seq)]
+        if self.paused:
+            return refuse("the session is paused")
         if (e.round, e.turn) != (self.round, self.turn):
             return refuse(f"pick for round {e.round} turn {e.turn}, but the game is at round {self.round} "
                           f"turn {self.turn}")
-        if self.first >= 0 and self.attempt < 0:
+        if self.first >= 0 and self.attempt < 0 and self.config.observed_source != "gaze":
             return refuse("the second card comes after the suggestion: the observed card is not known yet")
         try:
             board, outcome = self.board.pick(e.card)
@@ -101,13 +133,27 @@ class GameLogic:
                                                face=board.faces[e.card], pick=int(outcome is Outcome.SECOND),
                                                pick_seq=e.seq)]
         if outcome is Outcome.FIRST:
-            self.first, self.first_time_ns = e.card, e.time_ns
+            self.first, self.first_time_ns, self.first_page_ms = e.card, e.time_ns, e.page_time_ms
             if self.config.observed_source == "first-pick":
                 out.append(ev.CardObserved(round=self.round, turn=self.turn, card=e.card,
                                            observed_source="first-pick"))
                 out.append(self._request(e.card))
+            elif self.config.observed_source == "gaze":
+                seen = next((f for f in self.fixations if self._looks_for_second(f)), None)
+                if seen is not None:
+                    out += self._observed_by_gaze(seen)
             return out
         return out + self._resolve(e)
+
+    def _control(self, e: ev.Event) -> list[ev.Event]:
+        """The experimenter's console (services/protocol.py): pause, resume, abort."""
+        if isinstance(e, ev.SessionAborted):
+            return self.end("aborted", e.reason)
+        pause = isinstance(e, ev.SessionPaused)
+        if pause == self.paused:
+            raise Rejected("the session is already " + ("paused" if pause else "running"))
+        self.paused = pause
+        return []
 
     def _observed(self, e: ev.CardObserved) -> list[ev.Event]:
         if self.config.observed_source != "intended" or e.observed_source != "intended":
@@ -118,9 +164,32 @@ class GameLogic:
             raise Rejected(f"observed card {e.card} is not a covered card of the board")
         return [self._request(e.card)]
 
+    def _gaze(self, e: ev.GazeFixated) -> list[ev.Event]:
+        if self.config.observed_source != "gaze":
+            return []  # a tracker may run in any session; only a gaze session reads it
+        if not (isinstance(e.card, int) and 0 <= e.card < N_CARDS):
+            raise Rejected(f"fixation on card {e.card!r}: off the board")
+        if self.first >= 0 and self.attempt < 0 and self._looks_for_second(e):
+            return self._observed_by_gaze(e)
+        self.fixations.append(e)
+        return []
+
+    def _looks_for_second(self, f: ev.GazeFixated) -> bool:
+        """A fixation that tells the observed card: after the first pick, on a covered card."""
+        return (f.time_ns >= self.first_time_ns and f.card != self.first and 0 <= f.card < N_CARDS
+                and bool(self.board.covered >> f.card & 1))
+
+    def _observed_by_gaze(self, f: ev.GazeFixated) -> list[ev.Event]:
+        self.fixations.clear()
+        return [ev.CardObserved(round=self.round, turn=self.turn, card=f.card, observed_source="gaze"),
+                self._request(f.card)]
+
     def _wrong_suggestion(self, e: ev.WrongSuggestionPressed) -> list[ev.Event]:
         if self.attempt < 0 or len(self.board.up) != 1:
             raise Rejected("'wrong suggestion' is pressed between a suggestion and the second pick")
+        if e.attempt >= 0 and e.attempt != self.attempt:
+            raise Rejected(f"'wrong suggestion' for attempt {e.attempt}, but the open suggestion is attempt "
+                           f"{self.attempt}: stale (pressed twice?)")
         return [self._request(self.observed)]
 
     def _request(self, observed: int) -> ev.SuggestionRequested:
@@ -135,11 +204,14 @@ class GameLogic:
     def _resolve(self, e: ev.CardPicked) -> list[ev.Event]:
         self.board, res = self.board.resolve()
         interval_ms = (e.time_ns - self.first_time_ns) / 1e6
-        ignored = self.config.ignore_rule == "time" and interval_ms < self.config.ignore_window_ms
+        page_ms = e.page_time_ms - self.first_page_ms if e.page_time_ms > 0 and self.first_page_ms > 0 else -1.0
+        timed = page_ms if self.config.ignore_clock == "page" and page_ms >= 0 else interval_ms
+        ignored = self.config.ignore_rule == "time" and timed < self.config.ignore_window_ms
         self.matches += res.matched
         out: list[ev.Event] = [ev.TurnResolved(round=self.round, turn=self.turn, first=res.first,
                                                second=res.second, matched=res.matched, round_over=res.round_over,
-                                               interval_ms=interval_ms, ignored_by_time=ignored)]
+                                               interval_ms=interval_ms, ignored_by_time=ignored,
+                                               page_interval_ms=page_ms)]
         if not res.round_over:
             self._new_turn(self.turn + 1)
             return out

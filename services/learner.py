@@ -72,6 +72,9 @@ class LearnerLogic:
             self.resolved[(e.round, e.turn)] = e
         elif isinstance(e, ev.SessionEnded):
             self.ended = True
+            if e.reason != "completed" and self.open is not None:
+                # an aborted game leaves its last suggestion unsettled: recorded, not learned from
+                return self._reward(self.open, 0.0, False, f"unsettled: the session ended ({e.reason})")
         return self._settle()
 
     def _configure(self, e: ev.SessionStarted) -> list[ev.Event]:
@@ -127,7 +130,8 @@ class LearnerLogic:
         if turn is None:
             return []
         if self.config.ignore_rule == "time":
-            reward, learn = human_reward(turn.matched, turn.interval_ms / 1000.0, self.config.ignore_window_ms / 1000.0)
+            # the game timed the picks on the session's clock (server or page) and decided
+            reward, learn = human_reward(turn.matched, ignored=turn.ignored_by_time)
             why = "ignored: picked too fast" if not learn else ("match" if turn.matched else "miss")
         else:
             p = self.perceived.get((o.round, o.turn, o.attempt))

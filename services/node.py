@@ -2,13 +2,12 @@
 
 Rule: a service's decisions live in a *logic* object (GameLogic, LearnerLogic,
 ParticipantLogic) that turns input events into output events and knows
-nothing of Zenoh or clocks. The `Driver` around it never trusts input: a
-payload that does not decode, a key that disagrees with its payload, another
-session, a sequence number not above the last one seen from that source (a
-duplicate or out-of-order message; sequence numbers rise per
-source, so they are checked per key, which holds whatever order Zenoh keeps
-between keys) or an input the logic refuses (`Rejected`)
-becomes a MessageRejected event with the reason; the service goes on. An input
+nothing of Zenoh or clocks. The `Driver` around it never trusts input: what
+fails the checks of services/guard.py (decoding and field ranges, key against
+envelope, session, who may publish the event, sequence numbers per key and
+their jumps per source, one start and one end) or what the logic refuses
+(`Rejected`) becomes a MessageRejected event with the reason (rate-limited,
+with counts beyond the limit); the service goes on. An input
 that arrives before what it depends on (messages from different sources may
 overtake each other on different links) raises `NotYet`: it is kept and
 retried after every later input, so the logic sees a causal order whatever the
@@ -32,12 +31,13 @@ import msgspec
 
 from pairplay.replay.fold import stream_seed  # noqa: F401  (re-exported for the services)
 from pairplay.schemas.envelope import Event, stamped
-from pairplay.schemas.events import MessageRejected, ServiceStarted, decode_event
-from pairplay.schemas.keys import event_key, parse_event_key
+from pairplay.schemas.events import MessageRejected, ServiceStarted
+from pairplay.schemas.keys import event_key
+
+from pairplay.services.guard import Guard, Refusals
 
 log = logging.getLogger("pairplay.node")
 SHELL_TAGS = frozenset({"ServiceStarted", "MessageRejected"})  # published by the shell, not the logic
-EXCERPT = 200
 
 
 class Rejected(Exception):
@@ -74,13 +74,21 @@ def content(event: Event) -> Event:
 class Driver:
     def __init__(self, logic: Logic, session: str, clock: Callable[[], int]):
         self.logic, self.session, self.clock = logic, session, clock
-        self.last_seq: dict[str, int] = {}
+        self.guard = Guard(session, own=logic.name)
+        self.refusals = Refusals()
         self.seq = 0
         self.deferred: dict[str, list[Event]] = {}  # per source, in its sequence order
         self.held_back: deque[Event] = deque()  # recorded outputs a resume must not repeat
         self.mismatches: list[str] = []
-        self.rejections = 0
         self.replaying = False  # during resume/verify: rejections were already recorded live
+
+    @property
+    def last_seq(self) -> dict[str, int]:
+        return self.guard.last_seq
+
+    @property
+    def rejections(self) -> int:
+        return self.refusals.total
 
     # -- output -------------------------------------------------------------
     def _stamp(self, events: Iterable[Event]) -> list[Event]:
@@ -97,49 +105,40 @@ class Driver:
         return out
 
     def reject(self, reason: str, key: str, source: str = "", seq: int = 0, payload: bytes = b"") -> list[Event]:
-        self.rejections += 1
+        """Record a refusal (rate-limited: guard.Refusals); the events to publish."""
         if self.replaying:
+            self.refusals.total += 1
             return []
-        log.warning("%s rejected %s from %r seq %s: %s", self.logic.name, key, source, seq, reason)
-        return self._stamp([MessageRejected(reason=reason, key=key, offending_source=source, offending_seq=seq,
-                                            excerpt=payload[:EXCERPT].decode("utf-8", "replace"))])
+        out = self.refusals.refuse(self.clock(), reason, key, source, seq, payload)
+        if any(e.reason == reason for e in out):  # logged as recorded: one by one up to the rate, then counted
+            log.warning("%s rejected %s from %r seq %s: %s", self.logic.name, key, source, seq, reason[:300])
+        return self._stamp(out)
+
+    def tick(self, shed=None, force: bool = False) -> list[Event]:
+        """Once in a while (the Node's loop): the counts of refusals not recorded one by one,
+        and of what the service's Inbox shed."""
+        if shed:
+            self.refusals.shed(shed)
+        if not self.refusals.pending() or self.replaying:
+            return []
+        return self._stamp(self.refusals.tick(self.clock(), force))
 
     def start(self) -> list[Event]:
         return self._stamp(self.logic.start())
 
     # -- input --------------------------------------------------------------
     def receive(self, key: str, payload: bytes, overlap: bool = False) -> list[Event]:
-        """One bus message in, the stamped events to publish out (see rule).
+        """One bus message in, the stamped events to publish out (see rule and guard.py).
 
         `overlap`: the message may also have been folded from the log during a
         resume; an old sequence number then means "already seen", not an error.
         """
-        if key.count("/") == 3 and key.split("/", 3)[2] == self.logic.name:
-            return []  # our own publication, delivered back to us: not even decoded
-        try:
-            event = decode_event(payload)
-        except (msgspec.DecodeError, msgspec.ValidationError) as err:
-            return self.reject(f"malformed payload: {err}", key, payload=payload)
-        try:
-            k = parse_event_key(key)
-        except ValueError as err:
-            return self.reject(str(err), key, event.source, event.seq, payload)
-        tag = type(event).__name__
-        if (k.session, k.source, k.tag) != (event.session, event.source, tag):
-            return self.reject(f"key {key} does not match the payload's session {event.session!r}, source "
-                               f"{event.source!r}, event {tag}", key, event.source, event.seq, payload)
-        if event.session != self.session:
-            return self.reject(f"wrong session {event.session!r} (this is {self.session!r})", key,
-                               event.source, event.seq, payload)
-        if event.source == self.logic.name:
-            return []  # our own publication, delivered back to us
-        last = self.last_seq.get(key, 0)
-        if event.seq <= last:
-            if overlap:
-                return []
-            return self.reject(f"sequence number {event.seq} from {event.source} is not above the last one seen "
-                               f"on {key} ({last}): duplicate or out of order", key, event.source, event.seq, payload)
-        self.last_seq[key] = event.seq
+        verdict = self.guard.check(key, payload, overlap)
+        if verdict.quiet:
+            return []
+        event = verdict.event
+        if verdict.reason is not None:
+            return self.reject(verdict.reason, key, getattr(event, "source", ""), getattr(event, "seq", 0), payload)
         return self.feed(event, key, payload)
 
     def feed(self, event: Event, key: str = "", payload: bytes = b"") -> list[Event]:
@@ -224,9 +223,9 @@ class Driver:
                 if e.source == self.logic.name or e.session != self.session:
                     continue
                 key = event_key(e.session, e.source, type(e).__name__)
-                if e.seq <= self.last_seq.get(key, 0):
+                if e.seq <= self.guard.last_seq.get(key, 0):
                     continue  # a duplicate the live service rejected then
-                self.last_seq[key] = e.seq
+                self.guard.note(key, e)
                 out += self.feed(e)
         finally:
             self.replaying = False

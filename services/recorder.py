@@ -16,7 +16,6 @@ the log so far (`pairplay/<session>/_query/recorder/log`, msgpack batches).
 from __future__ import annotations
 
 import logging
-import queue
 import threading
 import time
 from pathlib import Path
@@ -26,16 +25,26 @@ import msgspec
 
 from pairplay import __version__
 from pairplay.replay.writer import FLUSH_INTERVAL_NS, EventLogWriter
-from pairplay.schemas.events import MessageRejected, SessionStarted, decode_event, encode_event
-from pairplay.schemas.envelope import stamped
-from pairplay.schemas.keys import alive_key, event_key, parse_event_key, query_key, session_keys
+from pairplay.schemas.events import RecordingGap, SessionStarted, decode_event, encode_event
+from pairplay.schemas.envelope import Nanos, stamped
+from pairplay.schemas.keys import alive_key, event_key, query_key, session_keys
 
-from pairplay.services.bus import Bus
-from pairplay.services.runner import LOG_QUERY
+from pairplay.services.bus import Bus, Inbox, Outbox
+from pairplay.services.guard import Guard, Refusals
+from pairplay.services.runner import LOG_QUERY, SENT_QUERY
 
 log = logging.getLogger("pairplay.recorder")
 BATCH = 2000
-_MARK = object()
+
+
+def latest_file(path: Path) -> Path | None:
+    """The newest existing file of a session: `path` or its highest `<stem>.<n>.mcap`."""
+    latest, n = (path if path.exists() else None), 1
+    while True:
+        candidate = path.with_name(f"{path.stem}.{n}{path.suffix}")
+        if not candidate.exists():
+            return latest
+        latest, n = candidate, n + 1
 
 
 def free_path(path: Path) -> Path:
@@ -49,122 +58,284 @@ def free_path(path: Path) -> Path:
     return candidate
 
 
+class RecordingFailed(Exception):
+    """The recorder could not write its file (disk full, file size limit, a writer error)."""
+
+    def __init__(self, reason: str, path: Path | None = None):
+        super().__init__(reason)
+        self.reason, self.path = reason, path
+
+
 class Recorder:
     name = "recorder"
 
     def __init__(self, bus: Bus | None, session: str, path: str | Path, *, clock: Callable[[], int] = time.time_ns,
-                 flush_interval_ns: int = FLUSH_INTERVAL_NS):
+                 flush_interval_ns: int = FLUSH_INTERVAL_NS, on_failure: Callable[[str], None] | None = None):
+        earlier = latest_file(Path(path))
         self.bus, self.session, self.path, self.clock = bus, session, free_path(Path(path)), clock
         self.path.parent.mkdir(parents=True, exist_ok=True)
+        self.on_failure = on_failure
+        self.failure: str | None = None  # why the file stopped being written
         self.writer = EventLogWriter(self.path, flush_interval_ns=flush_interval_ns)
-        self.writer.add_metadata("pairplay.recorder", {"session": session, "software_version": __version__,
-                                                       "started_ns": str(clock())})
-        self.queue: queue.Queue = queue.Queue()
-        self.last_seq: dict[str, int] = {}  # per key
-        self.top_seq: dict[str, int] = {}  # per source: the highest sequence number recorded
+        self._guarded(self.writer.add_metadata, "pairplay.recorder",
+                      {"session": session, "software_version": __version__, "started_ns": str(clock())})
+        self.inbox = Inbox(clock=clock)
+        self.outbox = Outbox(bus, self.name) if bus is not None else None
+        self.guard = Guard(session, own=self.name)  # its own refusals are written directly (_publish)
+        self.refusals = Refusals()
         self.kept: list[tuple[str, bytes]] = []
         self.seq = 0
-        self.rejected = 0
         self.ended = False
         self._lock = threading.Lock()
+        self._overlap = 0
+        self.continued: dict | None = None
+        if earlier is not None:
+            self._continue(earlier)
 
-    # -- bus side (Zenoh threads) -----------------------------------------
-    def start(self) -> None:
-        self.bus.subscribe(session_keys(self.session), self.enqueue)
-        self.bus.queryable(query_key(self.session, self.name, LOG_QUERY), self._answer_log)
-        self.bus.alive(alive_key(self.session, self.name))
-
-    def enqueue(self, key: str, payload: bytes) -> None:
-        self.queue.put((key, payload, self.clock()))
-
-    def _answer_log(self, _params: str) -> list[bytes]:
-        """Everything recorded so far, including what was queued when the query came."""
-        reached = threading.Event()
-        self.queue.put((_MARK, reached, 0))
-        reached.wait(5.0)
-        with self._lock:
-            items = list(self.kept)
-        return [msgspec.msgpack.encode((i // BATCH, items[i:i + BATCH])) for i in range(0, len(items), BATCH)] or []
-
-    # -- writer side (one thread) -----------------------------------------
-    def step(self, timeout_s: float = 0.05) -> bool:
-        due = self.writer.due_in_ns(self.clock())
-        wait = timeout_s if due is None else min(timeout_s, due / 1e9)
+    # -- a restarted recorder: continue the session's record ----------------
+    def _continue(self, earlier: Path) -> None:
+        """Copy every readable event of the session's newest earlier file (a crash may have
+        cut it) into this one, so this file alone holds the whole session."""
+        from mcap.records import Channel, Message
+        from pairplay.replay.reader import iter_records
+        topics: dict[int, str] = {}
+        copied, last_ns = 0, 0
         try:
-            key, payload, received_ns = self.queue.get(timeout=max(wait, 0.0005))
-        except queue.Empty:
-            self.writer.maybe_flush(self.clock())
-            return False
-        if key is _MARK:
-            payload.set()
-            return True
-        self.record(key, payload, received_ns)
-        self.writer.maybe_flush(self.clock())
+            for record in iter_records(earlier):
+                if isinstance(record, Channel):
+                    topics[record.id] = record.topic
+                elif isinstance(record, Message) and record.channel_id in topics:
+                    if self._copy(topics[record.channel_id], record.data, record.log_time):
+                        copied += 1
+                        last_ns = max(last_ns, record.log_time)
+        except Exception as err:  # the cut of a crashed file: everything before it is kept
+            log.info("recorder: %s ends early (%s); %d events copied", earlier, err, copied)
+        self.continued = {"earlier_file": earlier.name, "copied": copied, "last_copied_ns": last_ns}
+        log.info("recorder: continuing %s (%d events) in %s", earlier, copied, self.path)
+
+    def _copy(self, key: str, payload: bytes, log_time_ns: int) -> bool:
+        source = key.split("/")[2] if key.count("/") == 3 else ""
+        if source != self.name:
+            return self.record(key, payload, log_time_ns, quiet=True)
+        event = decode_event(payload)  # our own earlier refusals and gaps: kept as they are
+        self._guarded(self.writer.write, key, payload, log_time_ns=log_time_ns, sequence=event.seq)
+        self.guard.note(key, event)
+        self.seq = max(self.seq, event.seq)
+        with self._lock:
+            self.kept.append((key, payload))
         return True
 
-    def record(self, key: str, payload: bytes, received_ns: int) -> bool:
-        """Check and write one message; False (and a published rejection) if it fails a check."""
+    def _contiguous(self) -> dict[str, int]:
+        """Per source, the last sequence number up to which the file has every event (a source's
+        events published before any recorder listened are asked for too)."""
+        seen: dict[str, set[int]] = {}
+        with self._lock:
+            for key, _ in self.kept:
+                source = key.split("/")[2]
+                if source != self.name:
+                    seen.setdefault(source, set()).add(decode_event(_).seq)
+        out = {}
+        for source, seqs in seen.items():
+            n = 0
+            while n + 1 in seqs:
+                n += 1
+            out[source] = n
+        return out
+
+    def refill(self, timeout_s: float = 3.0) -> None:
+        """Ask every service for what it published after the earlier file's last event of it,
+        write that (log time = its publish time), then record the gap (RecordingGap)."""
+        if self.continued is None or self.bus is None:
+            return
+        resumed_ns = self.clock()
+        sources = self._contiguous()
+        after = ",".join(f"{s}:{n}" for s, n in sorted(sources.items()))
+        answered, refilled = [], 0
+        for payload in self.bus.query(f"{query_key(self.session, '*', SENT_QUERY)}?after={after}", timeout_s):
+            try:
+                name, items = msgspec.msgpack.decode(payload, type=tuple[str, list[tuple[str, bytes]]])
+            except msgspec.DecodeError as err:
+                log.warning("recorder: unreadable refill: %s", err)
+                continue
+            answered.append(name)
+            for key, data in items:
+                try:
+                    event = decode_event(data)
+                except (msgspec.DecodeError, msgspec.ValidationError):
+                    continue
+                refilled += self.record(key, data, self.clock(), quiet=True)
+        self._overlap = len(self.inbox)  # what came meanwhile may repeat the refill: no rejections for that
+        gap = RecordingGap(earlier_file=self.continued["earlier_file"], copied=self.continued["copied"],
+                           last_copied_ns=Nanos(self.continued["last_copied_ns"]), resumed_ns=Nanos(resumed_ns),
+                           refilled=refilled, refilled_from=sorted(answered),
+                           unanswered=sorted(set(sources) - set(answered)))
+        self._publish([gap])
+        log.info("recorder: gap recorded: %d events refilled from %s", refilled, ", ".join(answered) or "nobody")
+
+    @property
+    def top_seq(self) -> dict[str, int]:
+        return self.guard.top_seq
+
+    @property
+    def rejected(self) -> int:
+        return self.refusals.total
+
+    # -- bus side (Zenoh threads: hand over, never wait) --------------------
+    def start(self) -> None:
+        self.bus.subscribe(session_keys(self.session), self.enqueue)
+        self.bus.queryable(query_key(self.session, self.name, LOG_QUERY), self.inbox.control)
+        self.bus.alive(alive_key(self.session, self.name))
+        self.refill()
+
+    def enqueue(self, key: str, payload: bytes) -> None:
+        self.inbox.put(key, payload)
+
+    def _answer_log(self, query) -> None:
+        """Everything recorded so far, including what was queued when the query came
+        (the query waited its turn in the inbox); answered from the outbox thread."""
+        with self._lock:
+            items = list(self.kept)
+        batches = [msgspec.msgpack.encode((i // BATCH, items[i:i + BATCH])) for i in range(0, len(items), BATCH)]
+        if self.outbox is not None:
+            self.outbox.call(lambda: Bus.answer(query, batches))
+
+    # -- writer side (one thread) -----------------------------------------
+    def _guarded(self, fn, *args, **kwargs):
+        """Call a writer method; any error ends the recording (RecordingFailed), never silently."""
+        if self.failure is not None:
+            raise RecordingFailed(self.failure)
         try:
-            event = decode_event(payload)
-            k = parse_event_key(key)
-        except (msgspec.DecodeError, msgspec.ValidationError, ValueError) as err:
-            return self._reject(f"malformed: {err}", key, payload)
-        tag = type(event).__name__
-        if (k.session, k.source, k.tag) != (event.session, event.source, tag):
-            return self._reject(f"key {key} does not match the payload's session {event.session!r}, source "
-                                f"{event.source!r}, event {tag}", key, payload, event)
-        if event.session != self.session:
-            return self._reject(f"wrong session {event.session!r}", key, payload, event)
-        last = self.last_seq.get(key, 0)  # per key, as the services check (node.py)
-        if event.seq <= last:
-            return self._reject(f"sequence number {event.seq} from {event.source} is not above the last one "
-                                f"on {key} ({last}): duplicate or out of order", key, payload, event)
-        self.last_seq[key] = event.seq
-        self.top_seq[event.source] = max(self.top_seq.get(event.source, 0), event.seq)
+            return fn(*args, **kwargs)
+        except Exception as err:
+            self._fail(f"{type(err).__name__}: {err}" if str(err) else type(err).__name__)
+            raise RecordingFailed(self.failure) from err
+
+    def _fail(self, why: str) -> None:
+        if self.failure is None:
+            self.failure = why
+            log.error("recorder: cannot write %s: %s", self.path, why)
+            if self.on_failure is not None:
+                self.on_failure(why)
+
+    def step(self, timeout_s: float = 0.05) -> bool:
+        """Take one item from the inbox (or wait for one until the next flush is due)."""
+        due = self.writer.due_in_ns(self.clock())
+        wait = timeout_s if due is None else min(timeout_s, due / 1e9)
+        item = self.inbox.get(max(wait, 0.0005))
+        try:
+            self._publish(self.refusals.tick(self.clock()) if self.refusals.pending() else [])
+            shed = self.inbox.take_shed()
+            if shed:
+                self.refusals.shed(shed)
+            if item is not None:
+                self._take(item)
+            self._guarded(self.writer.maybe_flush, self.clock())
+        except RecordingFailed:
+            return False
+        return item is not None
+
+    def _take(self, item) -> None:
+        key, payload, received_ns = item
+        if key is None:  # a query for the log
+            self._answer_log(payload)
+            return
+        overlap = self._overlap > 0
+        if overlap:
+            self._overlap -= 1
+        self.record(key, payload, received_ns, quiet=overlap)
+
+    def record(self, key: str, payload: bytes, received_ns: int, quiet: bool = False) -> bool:
+        """Check and write one message; False (and a recorded rejection) if it fails a check.
+        `quiet`: it may repeat what was copied or refilled; a repeat is skipped, not refused.
+        Raises RecordingFailed if the file cannot be written."""
+        verdict = self.guard.check(key, payload, overlap=quiet)
+        if verdict.quiet:
+            return False  # our own refusal coming back: written already
+        event = verdict.event
+        if verdict.reason is not None:
+            return self._reject(verdict.reason, key, payload, event)
         # the recorder's own times: log time = when it took the message (its clock, monotonic in the file),
         # publish time = the same; the envelope's time_ns is the publisher's claim and stays in the payload
-        self.writer.write(key, payload, log_time_ns=received_ns, sequence=event.seq)
+        self._guarded(self.writer.write, key, payload, log_time_ns=received_ns, sequence=event.seq)
         with self._lock:
             self.kept.append((key, payload))
         if isinstance(event, SessionStarted):
             c = event.config
-            self.writer.add_metadata("pairplay.session", {
+            self._guarded(self.writer.add_metadata, "pairplay.session", {
                 "config": msgspec.json.encode(c).decode(), "session": c.session, "participant": c.participant,
                 "persona": c.persona, "seed": str(c.seed), "game_index": str(c.game_index),
                 "algorithm": c.algorithm, "software_version": c.software_version or __version__,
                 "streams": str(c.streams)})
-        elif tag == "SessionEnded":
+        elif type(event).__name__ == "SessionEnded":
             self.ended = True
         return True
 
     def _reject(self, reason: str, key: str, payload: bytes, event=None) -> bool:
-        self.rejected += 1
-        log.warning("recorder rejected %s: %s", key, reason)
-        if self.bus is not None:
-            self.seq += 1
-            r = stamped(MessageRejected(reason=reason, key=str(key), offending_source=getattr(event, "source", ""),
-                                        offending_seq=getattr(event, "seq", 0),
-                                        excerpt=payload[:200].decode("utf-8", "replace")),
-                        session=self.session, source=self.name, seq=self.seq, time_ns=self.clock())
-            self.bus.put(event_key(self.session, self.name, "MessageRejected"), encode_event(r))
+        out = self.refusals.refuse(self.clock(), reason, key, getattr(event, "source", ""),
+                                   getattr(event, "seq", 0), payload)
+        if any(e.reason == reason for e in out):
+            log.warning("recorder rejected %s: %s", key, reason[:300])
+        self._publish(out)
         return False
 
-    def drain(self) -> None:
-        """Write everything already queued."""
-        while True:
-            try:
-                key, payload, received_ns = self.queue.get_nowait()
-            except queue.Empty:
+    def _publish(self, rejections: list) -> None:
+        """Write our own events (refusals, gaps) into the file and tell the bus (the echo is ignored)."""
+        for r in rejections:
+            self.seq += 1
+            now = self.clock()
+            r = stamped(r, session=self.session, source=self.name, seq=self.seq, time_ns=now)
+            key, payload = event_key(self.session, self.name, type(r).__name__), encode_event(r)
+            if self.failure is None:
+                self._guarded(self.writer.write, key, payload, log_time_ns=now, sequence=self.seq)
+                self.guard.note(key, r)
+                with self._lock:
+                    self.kept.append((key, payload))
+            if self.outbox is not None:
+                self.outbox.send(key, payload)
+
+    def drain(self, timeout_s: float = 1.0) -> None:
+        """Write what is already queued (at most `timeout_s`: a flood must not hold up the exit)."""
+        deadline = time.monotonic() + timeout_s
+        while self.failure is None and time.monotonic() < deadline:
+            item = self.inbox.get(0)
+            if item is None:
                 return
-            if key is _MARK:
-                payload.set()
-            else:
-                self.record(key, payload, received_ns)
+            try:
+                self._take(item)
+            except RecordingFailed:
+                return
+        if len(self.inbox):
+            log.warning("recorder: %d messages still queued at the exit are not recorded", len(self.inbox))
 
     def run(self, stop: threading.Event) -> None:
-        while not stop.is_set():
-            self.step()
+        """Record until `stop`; a failure of any kind ends the recording loudly (on_failure)."""
+        try:
+            while not stop.is_set() and self.failure is None:
+                self.step()
+        except Exception as err:  # a bug: the file stops here, the session is told, nothing goes on unrecorded
+            log.exception("recorder failed")
+            self._fail(f"recorder error {type(err).__name__}: {err}")
 
-    def close(self) -> None:
-        self.drain()
-        self.writer.close()
+    def close(self) -> str | None:
+        """Write what is queued, finish the file; never raises. The failure, if the
+        file could not be written (it is then readable up to it: `pairplay recover`)."""
+        try:
+            self.drain()
+        except Exception as err:
+            log.exception("recorder failed")
+            self._fail(f"recorder error {type(err).__name__}: {err}")
+        if self.refusals.pending() and self.failure is None:
+            try:
+                self._publish(self.refusals.tick(self.clock(), force=True))
+            except RecordingFailed:
+                pass
+        if self.failure is None:
+            try:
+                self._guarded(self.writer.close)
+            except RecordingFailed:
+                pass
+        else:
+            self.writer.abandon()
+        if self.outbox is not None:
+            self.outbox.close(0.5)
+        return self.failure

@@ -7,15 +7,16 @@ empty log is a fresh start (ServiceStarted, then the logic's first outputs);
 a non-empty one is a restart: the Driver re-feeds it (node.py) and the service
 publishes only what it still owes. Messages that arrived on the subscription
 while the log was being read may repeat the log: they are skipped quietly.
-One thread per Node handles its queue in arrival order; Zenoh's callback
-threads only enqueue.
+Zenoh's callback threads only put samples into the Node's Inbox (never
+waiting; a flood is shed there and the count recorded); one thread per Node
+handles them in arrival order, and the Node's Outbox thread publishes what it
+decides (services/bus.py). Every wait checks the stop flag.
 """
 
 from __future__ import annotations
 
 import gc
 import logging
-import queue
 import threading
 import time
 from typing import Callable
@@ -27,17 +28,18 @@ from pairplay.schemas.envelope import Event
 from pairplay.schemas.events import ServiceStarted, decode_event, encode_event
 from pairplay.schemas.keys import alive_key, event_key, query_key, session_keys
 
-from pairplay.services.bus import Bus
+from pairplay.services.bus import Bus, Inbox, Outbox
 from pairplay.services.node import Driver, Logic
 
 log = logging.getLogger("pairplay.runner")
 LOG_QUERY = "log"
+SENT_QUERY = "sent"
 
 
-def fetch_log(bus: Bus, session: str, timeout_s: float = 5.0) -> list[Event]:
+def fetch_log(bus: Bus, session: str, timeout_s: float = 5.0, stop: threading.Event | None = None) -> list[Event]:
     """The session's events the recorder holds, in its order ([] if no recorder answers)."""
     batches = []
-    for payload in bus.query(query_key(session, "recorder", LOG_QUERY), timeout_s):
+    for payload in bus.query(query_key(session, "recorder", LOG_QUERY), timeout_s, stop=stop):
         try:
             index, items = msgspec.msgpack.decode(payload, type=tuple[int, list[tuple[str, bytes]]])
         except msgspec.DecodeError as err:
@@ -51,56 +53,77 @@ def fetch_log(bus: Bus, session: str, timeout_s: float = 5.0) -> list[Event]:
     return events
 
 
+def answer_sent(outbox: Outbox, name: str, query) -> None:
+    """Answer `.../_query/<name>/sent?after=<source>:<seq>,...` with what we published after
+    that sequence number: msgpack (name, [(key, payload), ...]); from the outbox thread,
+    after everything queued before it."""
+    after = 0
+    for part in str(query.parameters).replace("after=", "").split(","):
+        source, _, seq = part.partition(":")
+        if source == name and seq.isascii() and seq.isdigit():
+            after = int(seq)
+
+    def reply() -> None:
+        items = [(k, p) for k, p in outbox.sent if decode_event(p).seq > after]
+        Bus.answer(query, [msgspec.msgpack.encode((name, items))])
+    outbox.call(reply)
+
+
+class Stopped(Exception):
+    """The stop flag was set while the service waited."""
+
+
 class Node:
     def __init__(self, bus: Bus, logic: Logic, session: str, *, clock: Callable[[], int] = time.time_ns,
-                 resume: bool = True, inline: bool = True):
+                 resume: bool = True, stop: threading.Event | None = None):
         self.bus, self.logic, self.session = bus, logic, session
         self.driver = Driver(logic, session, clock)
         self.clock = clock
         self.resume = resume
-        self.queue: queue.Queue = queue.Queue()
+        self.stop = stop if stop is not None else threading.Event()
+        self.inbox = Inbox()
+        self.outbox = Outbox(bus, logic.name, keep=True)  # a restarted recorder may ask what we sent
         self._overlap = 0
         self.resumed_events = 0
         self.thread: threading.Thread | None = None
-        # inline: handle each message in Zenoh's callback (under a lock), saving a thread
-        # hand-off per message (pick -> suggestion latency); before the catch-up is done,
-        # messages wait in the queue either way.
-        self.inline = inline
-        self._lock = threading.RLock()  # Zenoh may deliver our own publications back on this thread
-        self._live = False
-        self._wake = threading.Event()
-
+        self._lock = threading.RLock()  # the Node's thread, or the session ending it from outside
     def _on_message(self, key: str, payload: bytes) -> None:
-        if not self.inline:
-            self.queue.put((key, payload))
-            return
-        with self._lock:  # queued or handled under the lock: none can slip between the catch-up and going live
-            if not self._live:
-                self.queue.put((key, payload))
-                return
-            self.publish(self.driver.receive(key, payload))
-            if self.logic.done:
-                self._wake.set()
+        self.inbox.put(key, payload)  # Zenoh's thread: hand over, never wait
+
+    def stamp(self, events: list[Event]) -> list[Event]:
+        """Number and time this service's own new events (an input a web page gave, say);
+        the caller publishes them (`publish`), outside any bus callback."""
+        with self._lock:
+            return self.driver._stamp(events)
+
+    def refuse(self, reason: str, key: str, source: str = "", seq: int = 0, payload: bytes = b"") -> list[Event]:
+        """A MessageRejected for an input that did not come over the bus (a WebSocket message)."""
+        with self._lock:
+            return self.driver.reject(reason, key, source, seq, payload)
 
     def publish(self, events: list[Event]) -> None:
         for e in events:
-            self.bus.put(event_key(self.session, e.source, type(e).__name__), encode_event(e))
+            self.outbox.send(event_key(self.session, e.source, type(e).__name__), encode_event(e))
 
     def start(self, wait_for: tuple[str, ...] = (), wait_timeout_s: float = 30.0) -> None:
-        """Subscribe, announce, catch up; with `wait_for`, first wait for those services' tokens."""
+        """Subscribe, announce, catch up; with `wait_for`, first wait for those services' tokens.
+        Raises Stopped if the stop flag is set meanwhile."""
         if getattr(self.logic, "by_tag", False):
             # only the tags the logic reads: Zenoh then does not even send the others here
             for tag in sorted(self.logic.consumes):
                 self.bus.subscribe(f"{session_keys(self.session)[:-2]}*/{tag}", self._on_message)
         else:
             self.bus.subscribe(session_keys(self.session), self._on_message)
+        self.bus.queryable(query_key(self.session, self.logic.name, SENT_QUERY), self.inbox.control)
         self.bus.alive(alive_key(self.session, self.logic.name))
         if wait_for:
             self.wait_for(wait_for, wait_timeout_s)
-        recorded = fetch_log(self.bus, self.session) if self.resume else []
+        recorded = fetch_log(self.bus, self.session, stop=self.stop) if self.resume else []
+        if self.stop.is_set():
+            raise Stopped(self.logic.name)
         if not any(type(e).__name__ == "SessionStarted" for e in recorded):
             recorded = []  # the session has not started: nothing to catch up with
-        self._overlap = self.queue.qsize()
+        self._overlap = len(self.inbox)
         announce = ServiceStarted(service=self.logic.name, version=__version__, resumed_events=len(recorded))
         if recorded:
             log.info("%s resumes from %d recorded events", self.logic.name, len(recorded))
@@ -110,11 +133,6 @@ class Node:
                 log.error("%s: the log and the recomputation disagree: %s", self.logic.name, m)
         else:
             self.publish(self.driver._stamp([announce]) + self.driver.start())
-        if self.inline:
-            with self._lock:
-                while self.step(0):
-                    pass
-                self._live = True
         # Everything built so far (modules, the log folded at start) lives for the
         # whole session: keep it out of the collector's scans, which otherwise
         # show up as the slowest suggestions (pick -> suggestion p99).
@@ -124,34 +142,49 @@ class Node:
         deadline = time.monotonic() + timeout_s
         wanted = {alive_key(self.session, s) for s in services}
         while True:
+            if self.stop.is_set():
+                raise Stopped(self.logic.name)
             alive = self.bus.alive_now(alive_key(self.session, "*"), timeout_s=0.5)
             if wanted <= alive:
                 return
             if time.monotonic() > deadline:
                 missing = sorted(k.rsplit("/", 1)[1] for k in wanted - alive)
                 raise TimeoutError(f"{self.logic.name}: no {', '.join(missing)} on the bus after {timeout_s:.0f} s")
-            time.sleep(0.05)
+            self.stop.wait(0.05)
 
     def step(self, timeout_s: float = 0.1) -> bool:
         """Handle one message (False if none came)."""
-        try:
-            key, payload = self.queue.get(timeout=timeout_s) if timeout_s > 0 else self.queue.get_nowait()
-        except queue.Empty:
+        item = self.inbox.get(timeout_s)
+        shed = self.inbox.take_shed()
+        if shed or self.driver.refusals.pending():
+            self.publish(self.driver.tick(shed))
+        if item is None:
             return False
+        key, payload, _ = item
+        if key is None:  # a restarted recorder asks what we sent
+            answer_sent(self.outbox, self.logic.name, payload)
+            return True
         overlap = self._overlap > 0
         if overlap:
             self._overlap -= 1
-        self.publish(self.driver.receive(key, payload, overlap=overlap))
+        with self._lock:
+            self.publish(self.driver.receive(key, payload, overlap=overlap))
         return True
 
-    def run(self, stop: threading.Event) -> None:
+    def run(self, stop: threading.Event | None = None) -> None:
+        stop = stop or self.stop
         while not stop.is_set() and not self.logic.done:
-            if self.inline and self._live:
-                self._wake.wait(0.1)
-            else:
+            try:
                 self.step()
+            except Exception:  # a bug must not kill the service's only thread (the Driver records logic errors)
+                log.exception("%s: unexpected error; going on", self.logic.name)
+        self.publish(self.driver.tick(self.inbox.take_shed(), force=True))
 
-    def run_in_thread(self, stop: threading.Event) -> threading.Thread:
+    def run_in_thread(self, stop: threading.Event | None = None) -> threading.Thread:
         self.thread = threading.Thread(target=self.run, args=(stop,), name=f"pairplay-{self.logic.name}", daemon=True)
         self.thread.start()
         return self.thread
+
+    def close(self, timeout_s: float = 1.0) -> bool:
+        """Publish what is still queued (bounded); True if everything went out."""
+        return self.outbox.close(timeout_s)

@@ -27,84 +27,125 @@ from pairplay.services.bus import Bus, BusOptions
 from pairplay.services.game import GameLogic
 from pairplay.services.learner import LearnerLogic
 from pairplay.services.participant import ParticipantLogic
-from pairplay.services.recorder import Recorder
+from pairplay.services.recorder import Recorder, RecordingFailed
 from pairplay.services.robot.choice import RobotChoice, start_bridge
-from pairplay.services.runner import Node
+from pairplay.services.runner import Node, Stopped
 
 
 def run_session(config: SessionConfig, path: str | Path, *, bus: Bus | None = None,
                 bus_options: BusOptions | None = None, external: tuple[str, ...] = (),
                 stop: threading.Event | None = None, settle_timeout_s: float = 30.0,
                 on_bus=None, nodes_out: dict | None = None, wait_also: tuple[str, ...] = (),
-                robot: RobotChoice | None = None) -> Path:
+                robot: RobotChoice | None = None, extra_nodes=None, hold=None) -> Path:
     """Run one session to its end (or `stop`); return the recording's path.
 
     `nodes_out`, if given, receives the in-process Nodes by service name (tests
     read the live learner's final Q-table from it). `wait_also`: more services
     (liveliness names) the game waits for before it starts the session.
-    `robot` (the --robot options) adds the robot bridge (services/robot)."""
+    `robot` (the --robot options) adds the robot bridge (services/robot).
+    `extra_nodes(bus) -> [Node]`: more in-process services (the lab's board),
+    started after the recorder and before the game, which waits for them.
+    Raises RecordingFailed (after closing everything) if the recording could
+    not be written: the session stops at the first write error.
+    `hold(recorder)`, if given, is called once the game has ended, before the
+    recording is finished: the human study keeps a game's recording open for
+    the questionnaire that follows it (services/protocol.py)."""
     own_bus = bus is None
     # the session's process is the router its external services connect to as clients
     bus = bus if bus is not None else Bus(bus_options or BusOptions(mode="router"))
     stop = stop or threading.Event()
     if on_bus is not None:
         on_bus(bus)
-    recorder = Recorder(bus, config.session, path)
+    recorder = recorder_thread = None
     recorder_stop = threading.Event()
-    recorder.start()
-    recorder_thread = threading.Thread(target=recorder.run, args=(recorder_stop,), name="pairplay-recorder",
-                                       daemon=True)
-    recorder_thread.start()
+    if "recorder" not in external:
+        recorder = Recorder(bus, config.session, path, on_failure=lambda _why: stop.set())
+        recorder.start()
+        recorder_thread = threading.Thread(target=recorder.run, args=(recorder_stop,), name="pairplay-recorder",
+                                           daemon=True)
+        recorder_thread.start()
     needed = ["recorder", "learner"] + (["participant"] if config.participant.startswith("sim:") else [])
+    if config.observed_source == "gaze":
+        needed.append("tracker")  # the eye tracker: without it no turn gets a suggestion
     nodes = []
-    bridge = None
+    bridge = game = None
     try:
         if robot is not None:
             bridge = start_bridge(bus, config.session, robot)
         if bridge is not None:
             bridge.run_in_thread(stop)
+        if bridge is not None or "robot" in external:  # a bridge on the robot's own host: `pairplay robot`
             needed.append("robot")
+        if extra_nodes is not None:
+            for node in extra_nodes(bus):
+                nodes.append(node)
+                needed.append(node.logic.name)
         if "learner" not in external:
-            nodes.append(Node(bus, LearnerLogic(), config.session))
+            nodes.append(Node(bus, LearnerLogic(), config.session, stop=stop))
         if "participant" not in external and config.participant.startswith("sim:"):
-            nodes.append(Node(bus, ParticipantLogic(), config.session))
+            nodes.append(Node(bus, ParticipantLogic(), config.session, stop=stop))
         for node in nodes:
             node.start()
             node.run_in_thread(stop)
             if nodes_out is not None:
                 nodes_out[node.logic.name] = node
         if "game" not in external:
-            game = Node(bus, GameLogic(config), config.session, resume=False)
-            game.start(wait_for=tuple(needed) + tuple(wait_also))
+            game = Node(bus, GameLogic(config), config.session, resume=False, stop=stop)
             nodes.append(game)
             if nodes_out is not None:
                 nodes_out["game"] = game
+            game.start(wait_for=tuple(needed) + tuple(wait_also))
             game.run_in_thread(stop)
         else:
             needed.append("game")
         failure = watch_services(bus, config.session, nodes, [s for s in needed if s in external or s == "robot"],
                                  stop, settle_timeout_s)
-        if "game" not in external and not game.logic.done:
-            reason, detail = end_reason(stop, failure)
-            with game._lock:
-                game.publish(game.driver._stamp(game.logic.end(reason, detail)))
+        end_game(game, stop, failure, recorder)
         if not failure and not stop.is_set():
-            wait_external_exit(bus, config.session, [s for s in external if s in needed], stop, settle_timeout_s)
-        wait_recorded(recorder, nodes, quiet_s=0.2 if external else 0.0)
+            # an external recorder stays until everyone else left: do not wait for it
+            wait_external_exit(bus, config.session, [s for s in external if s in needed and s != "recorder"], stop,
+                               settle_timeout_s)
+        if hold is not None and not failure and recorder is not None:
+            hold(recorder)
+        if recorder is not None:
+            # stopped: the end event gets 1 s to reach the file (the process is gone within 2 s)
+            wait_recorded(recorder, nodes, quiet_s=0.2 if external and not stop.is_set() else 0.0,
+                          timeout_s=1.0 if stop.is_set() else 5.0)
+    except Stopped:  # SIGINT/SIGTERM (or a recording failure) while the game waited for its services
+        end_game(game, stop, "", recorder)
+        if recorder is not None:
+            wait_recorded(recorder, nodes, quiet_s=0.0, timeout_s=1.0)
     finally:
+        interrupted = stop.is_set()
         stop.set()
         for node in nodes:
             if node.thread is not None:
-                node.thread.join(5.0)
+                node.thread.join(1.0)
+            node.close(0.3)
         if bridge is not None and bridge.thread is not None:
             # the bridge reports the robot's last acknowledgements before the recorder closes
-            bridge.thread.join(bridge.settle_s + 5)
+            bridge.thread.join(bridge.settle_s + 5 if not interrupted else 1.5)
         recorder_stop.set()
-        recorder_thread.join(5.0)
-        recorder.close()
+        failure = None
+        if recorder is not None:
+            recorder_thread.join(1.0)
+            failure = recorder.close()
         if own_bus:
             bus.close()
-    return recorder.path
+    if failure is not None:
+        raise RecordingFailed(failure, recorder.path)
+    return recorder.path if recorder is not None else Path(path)
+
+
+def end_game(game: Node | None, stop: threading.Event, failure: str, recorder: Recorder | None) -> None:
+    """A game that has not ended the session ends it now, saying why (SessionEnded)."""
+    if game is None or game.logic.done or game.driver.seq == 0:
+        return  # not started: nothing to end
+    if recorder is not None and recorder.failure and not failure:
+        failure = f"recording failed: {recorder.failure}"
+    reason, detail = end_reason(stop, failure)
+    with game._lock:
+        game.publish(game.driver._stamp(game.logic.end(reason, detail)))
 
 
 def end_reason(stop: threading.Event, failure: str) -> tuple[str, str]:
@@ -150,7 +191,7 @@ def wait_recorded(recorder: Recorder, nodes: list[Node], quiet_s: float, timeout
     way), and, with external services, until it has been quiet for `quiet_s`."""
     deadline = time.monotonic() + timeout_s
     while time.monotonic() < deadline:
-        if all(recorder.top_seq.get(n.logic.name, 0) >= n.driver.seq for n in nodes) and recorder.queue.empty():
+        if all(recorder.top_seq.get(n.logic.name, 0) >= n.driver.seq for n in nodes) and not len(recorder.inbox):
             break
         time.sleep(0.005)
     count = -1

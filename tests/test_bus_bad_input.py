@@ -40,6 +40,8 @@ live_noise_item = st.one_of(
     st.tuples(st.just("session"), st.sampled_from(["other", "bad2", "x"])),
     st.tuples(st.just("impostor"), st.sampled_from(["SuggestionPerceived", "TurnResolved", "SuggestionMade"])),
     st.tuples(st.just("pick"), st.one_of(st.integers(18, 99), st.integers(-9, -1), st.just(10**9))),
+    # a real source's key with a forged sequence number: refused, and the real messages after it still count
+    st.tuples(st.just("forged_seq"), st.sampled_from(["SuggestionPerceived", "TurnResolved", "SessionEnded"])),
 )
 noise_item = st.one_of(
     live_noise_item,
@@ -59,6 +61,15 @@ def make_noise(kind, data, history, board_seq):
     if kind == "session":
         e = stamped(ev.CardPicked(round=0, turn=0, card=1), session=data, source="participant", seq=10**6, time_ns=1)
         return KEYS[0], encode_event(e)
+    if kind == "forged_seq":
+        fake, source = {"SuggestionPerceived": (ev.SuggestionPerceived(round=0, turn=0, attempt=0, considered=True,
+                                                                       consistent=True, candidate_size=1),
+                                                "participant"),
+                        "TurnResolved": (ev.TurnResolved(round=0, turn=0, first=0, second=1, matched=True,
+                                                         round_over=False), "game"),
+                        "SessionEnded": (ev.SessionEnded(reason="forged"), "game")}[data]
+        e = stamped(fake, session=SESSION, source=source, seq=10**9, time_ns=1)
+        return event_key(SESSION, source, data), encode_event(e)
     if kind in ("repeat", "late"):
         return history[data % len(history)] if history else (KEYS[0], b"{}")
     if kind == "impostor":

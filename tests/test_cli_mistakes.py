@@ -188,7 +188,7 @@ def _run(case: Case, template: Path, base: Path) -> Case:
     case.before = _snapshot(root)
     env = dict(os.environ, COLUMNS="200")
     try:
-        case.result = subprocess.run(_command(case, root), cwd=root, capture_output=True, text=True, timeout=120,
+        case.result = subprocess.run(_command(case, root), cwd=root, capture_output=True, text=True, timeout=300,
                                      env=env)
     except subprocess.TimeoutExpired as hung:  # a verb that hangs on a mistake fails its row, not the table
         case.result = subprocess.CompletedProcess(hung.cmd, None, str(hung.stdout), f"hung: {hung}")
@@ -202,7 +202,7 @@ def ran(tmp_path_factory):
     _fixtures(template)
     base = tmp_path_factory.mktemp("cases")
     todo = [c for c in CASES if CAN_UNSHARE or not c.readonly]
-    with ThreadPoolExecutor(max_workers=8) as pool:
+    with ThreadPoolExecutor(max_workers=4) as pool:
         done = list(pool.map(lambda c: _run(c, template, base), todo))
     TAKEN.close()
     return {c.name: c for c in done}
@@ -260,3 +260,44 @@ def test_help_shows_every_default_and_version_is_printed(capsys, monkeypatch):
                 break
             own += " " + line.strip()
         assert "default" in own and shown in own, (verb, flag, own)
+
+
+def _group_members(pgid: int) -> list[int]:
+    """Live pids in process group `pgid` (from /proc; zombies excluded)."""
+    members = []
+    for stat in Path("/proc").glob("[0-9]*/stat"):
+        try:
+            fields = stat.read_text().rsplit(")", 1)[1].split()
+        except OSError:
+            continue
+        if int(fields[2]) == pgid and fields[0] != "Z":
+            members.append(int(stat.parent.name))
+    return members
+
+
+@pytest.mark.parametrize("verb", ["study", "sweep"])
+def test_ctrl_c_at_a_terminal_reaches_every_worker_yet_prints_one_line_and_leaves_no_process(tmp_path, verb):
+    """A terminal's Ctrl-C goes to the whole process group, the study's figure process and the
+    sweep's workers included: they ignore it, the parent stops them, one line, exit 130."""
+    import signal
+    import time
+    grid = tmp_path / "grid.toml"
+    grid.write_text('seeds = 4\n[study]\npersonas = "blind,deaf"\ngames = 2\nrounds = 400\neval_rounds = 50\n'
+                    '[grid]\npsi_decay = [0.9, 0.95]\n')
+    args = {"study": ["study", "--quiet", "--out", "report"],
+            "sweep": ["sweep", str(grid), "--workers", "2", "--quiet", "--out", "swept"]}[verb]
+    proc = subprocess.Popen([sys.executable, "-m", "pairplay", *args], cwd=tmp_path, start_new_session=True,
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    deadline = time.monotonic() + 60
+    while len(_group_members(proc.pid)) < 2 and time.monotonic() < deadline:  # its children have started
+        time.sleep(0.05)
+    time.sleep(0.5)
+    os.killpg(proc.pid, signal.SIGINT)
+    out, err = proc.communicate(timeout=30)
+    assert proc.returncode == 130, (out, err)
+    assert "Traceback" not in err, err
+    assert err.strip().splitlines() == [f"pairplay {verb}: interrupted (Ctrl-C); nothing more was written"], err
+    deadline = time.monotonic() + 10
+    while _group_members(proc.pid) and time.monotonic() < deadline:
+        time.sleep(0.05)
+    assert _group_members(proc.pid) == []

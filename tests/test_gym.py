@@ -36,9 +36,9 @@ def _policy():
 def test_a_fixed_policy_through_the_env_picks_what_the_study_picks(source, rule):
     policy, wasim, rounds = _policy(), PERSONAS["wasim"], 6
     seed = game_seed(0, "wasim", 3)
-    rewards = []
     study = run_games([wasim], [seed], rounds, mode="fixed", policy=policy, observed_source=source,
-                      reward_bonus=rule, on_turn=lambda t: rewards.append(float(t.rewards[0])) if t.active[0] else None)
+                      reward_bonus=rule, record="all")
+    rewards = [float(r) for r in study.trace["reward"]]  # one game: its turns in order
     env = gymnasium.make(ENV_ID, persona="wasim", observed_source=source, reward_bonus=rule)
     picks, got = [], []
     obs, _ = env.reset(seed=seed)

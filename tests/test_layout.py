@@ -3,8 +3,8 @@
 schemas <- core <- gym <- replay <- report <- services <- bench <- cli: a module may
 import its own package and the packages before it, never one after it. Only
 `services` (and `bench`, which measures it) may import the bus, the robot
-clients, the web stack or rerun; `core` imports numpy and the standard
-library and nothing that does I/O.
+clients, the web stack or rerun; `core` imports numpy, numba (its compiled
+kernels) and the standard library and nothing that does I/O.
 """
 
 from __future__ import annotations

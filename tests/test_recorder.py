@@ -30,7 +30,10 @@ def test_the_recorder_keeps_good_messages_and_refuses_bad_ones(tmp_path):
     assert rec.rejected == 4
     rec.close()
     log = read_log(tmp_path / "r1.mcap")
-    assert [type(r.event).__name__ for r in log.events] == ["SessionStarted", "RoundStarted"]
+    kept = [type(r.event).__name__ for r in log.events if r.event.source != "recorder"]
+    assert kept == ["SessionStarted", "RoundStarted"]
+    refusals = [r.event for r in log.events if r.event.source == "recorder"]
+    assert len(refusals) == 4 and all(isinstance(e, ev.MessageRejected) and e.reason for e in refusals)
     assert log.metadata["pairplay.session"]["seed"] == "9"
     assert log.metadata["pairplay.session"]["software_version"] == "9.9"
 

@@ -23,7 +23,7 @@ FORMATS = ("", "-fmt2")  # format 1 (pairplay 0.1.0, kept as made) and format 2 
 
 def test_the_samples_are_there():
     assert {p.name for p in ALL} >= {f"{n}{f}.mcap" for n in ("sim-ashley", "human-board", "catalogue")
-                                     for f in FORMATS}
+                                     for f in FORMATS} | {"human-gaze-fmt2.mcap"}
 
 
 @pytest.mark.parametrize("path", ALL, ids=lambda p: p.name)
@@ -39,17 +39,34 @@ def test_every_sample_decodes_whole_and_validates_against_todays_schemas(path):
             current[type(event).__name__].validate(data)  # and today's
 
 
+# event types newer than the catalogue samples (LSPIUpdated: than the format-1 one), and the sample that holds each
+LATER = {"GazeFixated": "human-gaze-fmt2.mcap", "SessionPaused": "console-fmt2.mcap",
+         "SessionResumed": "console-fmt2.mcap", "SessionAborted": "console-fmt2.mcap",
+         "LSPIUpdated": "catalogue-fmt2.mcap"}
+
+
 @pytest.mark.parametrize("fmt", FORMATS)
 def test_the_catalogue_holds_every_event_type(fmt):
     tags = {type(r.event).__name__ for r in read_log(SAMPLES / f"catalogue{fmt}.mcap").events}
-    assert tags == {t.__name__ for t in EVENT_TYPES}
+    assert tags | set(LATER) == {t.__name__ for t in EVENT_TYPES}
+    for tag, name in LATER.items():
+        assert tag in {type(r.event).__name__ for r in read_log(SAMPLES / name).events}
 
 
-@pytest.mark.parametrize("name", [f"{n}{f}.mcap" for n in ("sim-ashley", "human-board") for f in FORMATS])
+@pytest.mark.parametrize("name", [f"{n}{f}.mcap" for n in ("sim-ashley", "human-board") for f in FORMATS]
+                         + ["human-gaze-fmt2.mcap", "console-fmt2.mcap"])
 def test_session_samples_verify_and_rebuild(name):
     assert verify_recording(SAMPLES / name).ok
     rebuilt = rebuild_recording(SAMPLES / name)
     assert rebuilt.fold.q_mismatches == 0 and rebuilt.fold.ended is not None
+
+
+def test_the_console_sample_was_paused_refused_a_touch_and_aborted():
+    log = read_log(SAMPLES / "console-fmt2.mcap")
+    assert [e.reason for e in log.of("PickRejected")] == ["the session is paused"]
+    ended = log.of("SessionEnded")[0]
+    assert (ended.reason, ended.detail) == ("aborted", "the participant had to leave")
+    assert log.of("RewardGiven")[-1].reason.startswith("unsettled")
 
 
 @pytest.mark.parametrize("fmt", FORMATS)

@@ -5,6 +5,8 @@ from __future__ import annotations
 import dataclasses
 import json
 import math
+import socket
+import time
 
 import msgspec
 import pytest
@@ -12,7 +14,7 @@ from robot_doubles.furhat_realtime import FurhatRealtimeServer
 from robot_doubles.harness import FAMILIES, FAST, OBSERVED, TARGET, Collector, suggestion
 
 from pairplay.core.actions import code_of_parts
-from pairplay.services.robot import open_robot
+from pairplay.services.robot import open_robot, realtime
 from pairplay.services.robot.calibration import load_calibration
 
 CALIBRATION = load_calibration()
@@ -54,32 +56,76 @@ def test_auth_with_the_robots_key_then_requests(stage):
     assert driver.transport.scope == "all"
 
 
-def test_a_refused_key_fails_the_suggestion_with_the_reason(stage):
+@pytest.mark.parametrize("key", ["wrong", ""])
+def test_a_refused_key_fails_at_once_and_is_not_retried(stage, key):
     collector, robot = stage
-    server, driver = robot(key="wrong", server_key="s3cret", config=msgspec.structs.replace(FAST, give_up_s=0.3))
-    driver.perform(suggestion(EXACT))
+    server, driver = robot(key=key, server_key="s3cret", config=msgspec.structs.replace(FAST, give_up_s=30.0))
+    started = time.monotonic()
+    driver.perform(suggestion(EXACT, seq=1))
     assert driver.wait_idle(5)
-    (acted,) = collector.acted
-    assert acted.outcome == "failed" and "refused access" in acted.error and acted.commands == []
+    assert time.monotonic() - started < 3.0  # not after give_up_s of retries
+    driver.perform(suggestion(EXACT, seq=2))  # later suggestions fail at once too
+    assert driver.wait_idle(1)
+    assert [a.outcome for a in collector.acted] == ["failed", "failed"]
+    assert all("refused access" in a.error and a.commands == [] and a.unsent for a in collector.acted)
+    assert server.auths == [False]  # asked once
     assert server.requests == []  # nothing reached the robot without access
 
 
-def test_without_a_key_the_client_does_not_wait_for_the_auth_answer(stage):
+def test_the_client_waits_for_response_auth_with_access_even_without_a_key(stage, monkeypatch):
+    monkeypatch.setattr(realtime, "OPEN_TIMEOUT_S", 0.3)  # the maker's client waits 5 s; the rule is the same
     collector, robot = stage
-    server, driver = robot(answers_auth=False)
+    server, driver = robot(answers_auth=False, config=msgspec.structs.replace(FAST, give_up_s=0.5))
     driver.perform(suggestion(EXACT))
-    assert driver.wait_idle(5)
-    assert server.auths == [True] and collector.acted[0].outcome == "done"
+    assert driver.wait_idle(10)
+    assert collector.acted[0].outcome == "failed" and server.requests == []
+    assert "request.auth" in collector.acted[0].error
 
 
-def test_a_robot_that_wants_a_key_we_lack_is_recorded_with_the_reason(stage):
+def test_each_auth_has_its_own_request_id_and_only_awaited_requests_carry_one(stage):
     collector, robot = stage
-    server, driver = robot(server_key="s3cret", config=msgspec.structs.replace(FAST, ack_timeout_s=0.3))
+    server, driver = robot()
+    driver.perform(suggestion(code_of_parts(2, 0, 1, 0)))  # speech, nod (a look and a gesture)
+    assert driver.wait_idle(5)
+    driver.perform(suggestion(code_of_parts(0, 1, 3, 0), seq=1))  # smile, head turn
+    assert driver.wait_idle(5)
+    server.drop_all()
+    driver.perform(suggestion(code_of_parts(0, 0, 0, 1), seq=2))
+    assert driver.wait_idle(5)
+    assert {r["type"] for r in server.requests} >= {"request.face.headpose", "request.attend.location"}
+    assert len(server.auth_ids) == 2 and len(set(server.auth_ids)) == 2
+    with_id = {r["type"] for r in server.requests if "request_id" in r}
+    assert with_id == {"request.speak.text", "request.gesture.start"}  # as send_event_and_wait does
+
+
+def test_a_failed_speech_is_recorded_failed(stage):
+    collector, robot = stage
+    server, driver = robot()
+    server.fail_texts = frozenset({"Try at row 2 and column 5"})
     driver.perform(suggestion(EXACT))
     assert driver.wait_idle(5)
     (acted,) = collector.acted
-    assert acted.outcome in ("unacknowledged", "failed") and "refused access" in acted.error
-    assert server.requests == []
+    assert acted.outcome == "failed" and "failed" in acted.error and acted.replies == ["response.speak.end (failed)"]
+
+
+def test_the_robot_is_never_reached_through_an_environment_proxy(stage, monkeypatch):
+    proxy = socket.create_server(("127.0.0.1", 0))
+    proxy.settimeout(0.0)
+    url = f"http://127.0.0.1:{proxy.getsockname()[1]}"
+    for name in ("http_proxy", "https_proxy", "all_proxy", "HTTP_PROXY", "HTTPS_PROXY", "ALL_PROXY"):
+        monkeypatch.setenv(name, url)
+    for name in ("no_proxy", "NO_PROXY"):
+        monkeypatch.delenv(name, raising=False)
+    collector, robot = stage
+    try:
+        server, driver = robot(config=msgspec.structs.replace(FAST, give_up_s=2.0))
+        driver.perform(suggestion(EXACT))
+        assert driver.wait_idle(5)
+        assert collector.acted[0].outcome == "done"
+        with pytest.raises(BlockingIOError):
+            proxy.accept()  # nobody came through the proxy
+    finally:
+        proxy.close()
 
 
 @pytest.mark.parametrize("family", list(FAMILIES))
@@ -183,3 +229,19 @@ def _until_connected(driver, timeout: float = 5.0) -> bool:
             return False
         time.sleep(0.005)
     return True
+
+
+def test_pairplay_robot_try_with_a_refused_key_says_so_in_one_line(capsys):
+    from pairplay.cli.main import main
+
+    server = FurhatRealtimeServer(key="s3cret").start()
+    try:
+        started = time.monotonic()
+        code = main(["robot", "--robot", f"furhat://127.0.0.1:{server.port}?key=wrong", "--try", "35"])
+        elapsed = time.monotonic() - started
+    finally:
+        server.stop()
+    out, err = capsys.readouterr()
+    assert code != 0 and elapsed < 5.0 and server.auths == [False]
+    assert len(err.strip().splitlines()) == 1 and "refused access" in err and "Traceback" not in err
+    assert "s3cret" not in err and "wrong" not in err  # the key never appears

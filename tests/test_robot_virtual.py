@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import json
 
+import pytest
+
 from robot_doubles.harness import FAMILIES, FAST, Collector, suggestion
 
 from pairplay.core.actions import code_of_parts
@@ -63,9 +65,13 @@ def test_pairplay_robot_try_performs_codes_and_refuses_bad_options(capsys):
     out = capsys.readouterr().out
     assert "action 35: done" in out and '"text":"Try at row 2 and column 5"' in out and "action 0: nothing" in out
     assert main(["robot", "--robot", "ros://x", "--try", "1"]) == 2
-    assert "unknown backend" in capsys.readouterr().err
+    err = capsys.readouterr().err  # a user's mistake: one line on stderr
+    assert "unknown backend" in err and len(err.strip().splitlines()) == 1
     assert main(["robot", "--try", "1", "--calibration", "/nonexistent.json"]) == 2
     assert "cannot read calibration" in capsys.readouterr().err
+    with pytest.raises(SystemExit) as refused:  # argparse refuses it, in one line
+        main(["robot", "--try", "1,x"])
+    assert refused.value.code == 2 and "action codes are integers" in capsys.readouterr().err
 
 
 def test_robot_none_means_no_bridge():
@@ -79,3 +85,26 @@ def test_robot_none_means_no_bridge():
     check_robot_args(args)
     assert bridge_from_args(None, "s", args) is None
     assert parser.parse_args([]).robot == "virtual"
+
+
+def test_a_bug_on_one_report_costs_that_report_not_the_robot(monkeypatch):
+    collector = Collector()
+    driver = robot(collector)
+    calls = []
+    original = driver._match
+
+    def flaky(reply, time_ns):
+        calls.append(reply)
+        if len(calls) == 1:
+            raise RuntimeError("a bug while matching a reply")
+        return original(reply, time_ns)
+
+    monkeypatch.setattr(driver, "_match", flaky)
+    try:
+        driver.perform(suggestion(code_of_parts(2, 0, 0, 0)))
+        assert driver.wait_idle(5)  # the speech start was lost to the bug; the end still matches
+        driver.perform(suggestion(code_of_parts(2, 0, 0, 0), seq=1))
+        assert driver.wait_idle(5)
+    finally:
+        driver.close()
+    assert [a.outcome for a in collector.acted] == ["done", "done"]

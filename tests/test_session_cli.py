@@ -42,7 +42,7 @@ def test_session_then_rebuild_then_verify_then_recover(tmp_path):
 
 def test_bad_command_lines_get_a_clear_error(tmp_path):
     r = pairplay("session", "--participant", "sim:nobody", "--out", str(tmp_path))
-    assert r.returncode == 2 and "unknown persona" in r.stderr
+    assert r.returncode == 2 and "unknown persona" in r.stderr and r.stdout == ""  # one line, on stderr
     r = pairplay("session", "--participant", "robot:x", "--out", str(tmp_path))
     assert r.returncode == 2 and "sim:<persona> or human:<id>" in r.stderr
     r = pairplay("rebuild", str(tmp_path / "missing.mcap"), "--out", str(tmp_path))

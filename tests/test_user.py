@@ -156,19 +156,18 @@ def test_candidates_exclude_cards_the_user_remembers():
     assert r.candidates[0] == mask(card_of(1, 3)) and r.second[0] == card_of(1, 3)
 
 
-def test_observers_see_the_nis_and_rewards_of_the_suggestion_moment():
-    """Turn.nis is the NIS the user read the suggestion against (before the turn's
+def test_traces_show_the_nis_and_rewards_of_the_suggestion_moment():
+    """trace["nis"] is the NIS the user read the suggestion against (before the turn's
     memory update), and a suggestion pointing away from the match earns no bonus."""
     from pairplay.core.personas import PERSONAS
     from pairplay.core.simulate import run_games
     wrong_card = code_of_parts(1, 0, 0, 0)  # "It is the right card": the observed card
-    seen = []
-    run_games([PERSONAS["tatiana"]] * 3, [1, 2, 3], 5, mode="fixed", policy=np.full((3, 24), wrong_card),
-              on_turn=seen.append)
-    for t in seen:
-        unaided = t.active & ~t.from_memory
-        assert ((t.nis[unaided] >> t.observed[unaided]) & 1).all()  # the observed card was in the NIS
-        read = t.active & t.considered
-        away = read & (t.observed != t.match)  # a certain miss
-        assert (t.rewards[away] == -1.0).all()
-        assert (t.rewards[read & (t.observed == t.match)] == 2.0).all()
+    t = run_games([PERSONAS["tatiana"]] * 3, [1, 2, 3], 5, mode="fixed", policy=np.full((3, 24), wrong_card),
+                  record="all").trace
+    assert (np.diff(t["step"]) >= 0).all() and t["step"].size > 3 * 5 * 9  # lockstep order, every turn
+    unaided = t["from_memory"] == 0
+    assert unaided.any() and ((t["nis"][unaided] >> t["observed"][unaided]) & 1 == 1).all()
+    read = t["considered"] == 1
+    away = read & (t["observed"] != t["match"])  # a certain miss
+    assert away.any() and (t["reward"][away] == -1.0).all()
+    assert (t["reward"][read & (t["observed"] == t["match"])] == 2.0).all()

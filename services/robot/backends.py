@@ -11,12 +11,13 @@ An unknown scheme, port or parameter is refused with the accepted forms.
 
 from __future__ import annotations
 
+import logging
 from typing import Callable
 from urllib.parse import parse_qs, urlsplit
 
 import msgspec
 
-from pairplay.schemas.robot import GESTURE_PRESETS, BoardCalibration, RobotActed, RobotConfig
+from pairplay.schemas.robot import GESTURE_PRESETS, PRESET_NOTES, BoardCalibration, RobotActed, RobotConfig
 
 from pairplay.services.robot import iristk_protocol
 from pairplay.services.robot.calibration import Board, load_calibration
@@ -114,5 +115,8 @@ def open_robot(url: str, on_acted: Callable[[RobotActed], None], *,
     if not isinstance(calibration, BoardCalibration):
         calibration = load_calibration(calibration)
     gestures = config.gestures or GESTURE_PRESETS["furhat"]  # parse_robot_url always fills it
+    for preset, note in PRESET_NOTES.items():
+        if gestures == GESTURE_PRESETS[preset]:
+            logging.getLogger("pairplay.robot").warning("gestures %s: %s", preset, note)
     renderer = Renderer(Board(calibration), gestures, config)
     return RobotDriver(transport, renderer, config, on_acted, on_rejected).start()

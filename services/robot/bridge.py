@@ -24,7 +24,6 @@ suggestions from the moment it joins.
 from __future__ import annotations
 
 import logging
-import queue
 import threading
 import time
 from typing import Callable
@@ -35,7 +34,7 @@ from pairplay.schemas.envelope import Event
 from pairplay.schemas.keys import alive_key, event_key, session_keys
 from pairplay.schemas.robot import BoardCalibration, RobotActed, RobotConfig
 
-from pairplay.services.bus import Bus
+from pairplay.services.bus import Bus, Inbox, Outbox
 from pairplay.services.node import Driver, Rejected
 from pairplay.services.robot.backends import open_robot
 from pairplay.services.robot.driver import RobotDriver, Suggestion
@@ -79,7 +78,8 @@ class RobotBridge:
         self.bus, self.session, self.robot_url, self.settle_s = bus, session, robot_url, settle_s
         self._config, self._calibration = config, calibration
         self._lock = threading.Lock()
-        self._queue: queue.Queue = queue.Queue()
+        self._inbox = Inbox()  # Zenoh's callback threads only hand over (services/bus.py)
+        self._outbox = Outbox(bus, NAME)  # the one place the bridge publishes from
         self.robot: RobotDriver | None = None
         self.backend = ""  # the robot's URL without its query (a Realtime key must not be recorded)
         self.logic = BridgeLogic(self._perform)
@@ -91,10 +91,10 @@ class RobotBridge:
             raise ValueError("the robot bridge is not running (not started, or closed)")
         self.robot.perform(suggestion)
 
-    # -- publishing (two threads: the bridge's and the robot driver's) --------------------
+    # -- publishing (two threads stamp, the bridge's and the robot driver's; the outbox publishes)
     def _publish(self, events: list[Event]) -> None:
         for e in events:
-            self.bus.put(event_key(self.session, e.source, type(e).__name__), ev.encode_event(e))
+            self._outbox.send(event_key(self.session, e.source, type(e).__name__), ev.encode_event(e))
 
     def _on_acted(self, acted: RobotActed) -> None:
         with self._lock:
@@ -110,7 +110,7 @@ class RobotBridge:
         """Open the robot, subscribe, announce: the game may start once our token is seen."""
         self.robot = open_robot(self.robot_url, self._on_acted, config=self._config,
                                 calibration=self._calibration, on_rejected=self._on_robot_rejected)
-        self.bus.subscribe(session_keys(self.session), lambda key, payload: self._queue.put((key, payload)))
+        self.bus.subscribe(session_keys(self.session), self._inbox.put)
         self.bus.alive(alive_key(self.session, NAME))
         self.backend = self.robot.transport.url
         announce = ev.ServiceStarted(service=f"{NAME} {self.backend}", version=__version__)
@@ -119,10 +119,14 @@ class RobotBridge:
         return self
 
     def step(self, timeout_s: float = 0.1) -> bool:
-        try:
-            key, payload = self._queue.get(timeout=timeout_s)
-        except queue.Empty:
+        item = self._inbox.get(timeout_s)
+        shed = self._inbox.take_shed()
+        if shed or self.shell.refusals.pending():
+            with self._lock:
+                self._publish(self.shell.tick(shed))
+        if item is None:
             return False
+        key, payload, _ = item
         with self._lock:
             self._publish(self.shell.receive(key, payload))
         return True
@@ -153,3 +157,6 @@ class RobotBridge:
             log.warning("robot %s: suggestions still open after %.1f s; reporting them as they are",
                         robot.transport.url, settle_s)
         robot.close()
+        with self._lock:
+            self._publish(self.shell.tick(self._inbox.take_shed(), force=True))
+        self._outbox.close(1.0)

@@ -12,6 +12,15 @@ later steps (the rest of a head turn) are cancelled, their first steps are still
 delivered (nothing the learner decided is lost), and if the new one says nothing
 while earlier speech may still play, a StopSpeech goes first.
 
+Writes are rate-limited robot-side (a token bucket: max_commands_per_s, bursts
+of command_burst), so a backlog never floods the robot: an IrisTK module whose
+1000-event queue overflows turns itself off for good (IrisModule.java 24,
+135-142). A robot that refuses us (access denied) is not retried: every open
+and later suggestion fails at once with that reason. Commands written within
+inflight_window_s before the connection died, and not confirmed by a reply,
+are recorded as unconfirmed (a TCP write that returned proves nothing once the
+peer is gone); commands never written are recorded as unsent.
+
 Every suggestion ends in exactly one RobotActed (schemas/robot.py lists the
 outcomes). Replies are matched by the id the protocol echoes; a protocol reply
 without an id goes to the oldest suggestion still waiting for that kind of reply.
@@ -34,7 +43,9 @@ from typing import Callable
 from pairplay.schemas.robot import RobotActed, RobotConfig
 
 from pairplay.services.robot.render import Renderer, Say, Step, StopSpeech
-from pairplay.services.robot.transport import SPEECH_END, SPEECH_START, Changed, Disconnected, Rejected, Reply, Transport, Wire
+from pairplay.services.robot.transport import (
+    SPEECH_END, SPEECH_START, AccessRefused, Changed, Disconnected, Rejected, Reply, Transport, Wire,
+)
 
 log = logging.getLogger("pairplay.robot")
 HELD_POLL_S = 0.05  # how often a command the transport holds back is offered again
@@ -62,6 +73,9 @@ class _Step:
     wire: Wire | None = None
     sent: bool = False
     cancelled: bool = False
+    sent_at: float = 0.0  # monotonic time of the write
+    confirmed: bool = False  # a reply about it came
+    inflight: bool = False  # written just before the connection died, never confirmed
 
 
 @dataclass
@@ -74,6 +88,8 @@ class _Performance:
     superseded_at: float = 0.0
     overtaken: bool = False  # the robot already replied about a later suggestion
     cut_by_robot: bool = False  # the robot reported one of its commands aborted
+    stopped_by_robot: str = ""  # the robot reported its speech stopped early (what it said)
+    failed_by_robot: str = ""  # the robot reported a command failed (what it said)
     outstanding: list[tuple[str, str]] = field(default_factory=list)  # (command id, reply kind)
     promised: bool = False
     sent_ns: int = 0
@@ -119,6 +135,11 @@ class RobotDriver:
         self._close_requested = False
         self._pending = 0
         self._idle = threading.Condition()
+        self._tokens = float(config.command_burst)  # the rate limit's bucket
+        self._tokens_at = time.monotonic()
+        self._rate_next = 0.0  # when the next token is due, while writes wait for one (0: they do not)
+        self.refused = ""  # the robot refused us: not retried, every suggestion fails at once
+        self.inflight_marked = 0  # commands recorded unconfirmed because the connection died just after
         self.reconnects = 0
         self.rejected = 0
         self._thread = threading.Thread(target=self._run, name=f"robot {transport.url}", daemon=True)
@@ -154,7 +175,7 @@ class RobotDriver:
             self._thread.join(timeout)
 
     def _deliver(self, report) -> None:
-        self._inbox.put(("report", report, self._clock_ns()))
+        self._inbox.put(("report", report, self._clock_ns(), time.monotonic()))
 
     # -- the worker thread --------------------------------------------------------------
     def _run(self) -> None:
@@ -166,7 +187,10 @@ class RobotDriver:
                 item = None
             try:
                 while item is not None:
-                    self._handle(item)
+                    try:
+                        self._handle(item)
+                    except Exception:  # a bug must cost one message, not the robot: log it and go on
+                        log.exception("robot %s: driver failed on %s", self.transport.url, item[0])
                     item = self._inbox.get_nowait()
             except queue.Empty:
                 pass
@@ -183,7 +207,7 @@ class RobotDriver:
             _, suggestion, steps, received_ns, start = item
             self._add(suggestion, steps, received_ns, start)
         elif item[0] == "report":
-            self._report(item[1], item[2])
+            self._report(item[1], item[2], item[3])
         elif item[0] == "close":
             self._closing = True
 
@@ -198,8 +222,10 @@ class RobotDriver:
         if speech_playing and not any(isinstance(s.command, Say) for s in steps):
             steps = [Step(0.0, StopSpeech()), *steps]
         ordered = sorted(steps, key=lambda s: s.at_s)  # stable: same-time steps keep their order
-        self._active.append(_Performance(
-            suggestion, [_Step(s.at_s, s, next(self._ids)) for s in ordered], received_ns, start))
+        perf = _Performance(suggestion, [_Step(s.at_s, s, next(self._ids)) for s in ordered], received_ns, start)
+        self._active.append(perf)
+        if self.refused:
+            self._finish(perf, "failed", self.refused)
 
     def _speech_may_play(self) -> bool:
         """Whether the robot may still be speaking: the newest speech command decides."""
@@ -208,13 +234,15 @@ class RobotDriver:
                 return perf.speech_may_play()
         return False
 
-    def _report(self, report, time_ns: int) -> None:
+    def _report(self, report, time_ns: int, seen: float) -> None:
         if report.generation != self._generation:
             return  # from a connection already replaced
         if isinstance(report, Disconnected):
-            if self._connected:
+            if report.permanent:
+                self._refuse(report.reason)
+            elif self._connected:
                 log.warning("robot %s disconnected: %s", self.transport.url, report.reason)
-                self._drop(report.reason)
+                self._drop(report.reason, seen)
         elif isinstance(report, Rejected):
             self.rejected += 1
             log.warning("robot %s sent an unreadable frame: %s", self.transport.url, report.reason)
@@ -235,8 +263,16 @@ class RobotDriver:
             if reply.kind == SPEECH_END:  # an end implies the start, even if that reply was lost
                 cleared.add((command_id, SPEECH_START))
             perf.outstanding = [o for o in perf.outstanding if o not in cleared]
-            perf.replies.append(reply.wire_name + (" (aborted)" if reply.aborted else ""))
+            for step in perf.steps:
+                if step.command_id == command_id:
+                    step.confirmed, step.inflight = True, False
+            said = reply.detail or ("aborted" if reply.aborted else "failed" if reply.failed else "")
+            perf.replies.append(reply.wire_name + (f" ({said})" if said else ""))
             perf.cut_by_robot = perf.cut_by_robot or reply.aborted
+            if reply.stopped and not perf.stopped_by_robot:
+                perf.stopped_by_robot = f"{reply.wire_name}: {reply.detail or 'stopped'}"
+            if reply.failed and not perf.failed_by_robot:
+                perf.failed_by_robot = f"the robot reported {reply.wire_name} failed"
             perf.acked_ns = perf.acked_ns or time_ns
             if not perf.outstanding:
                 perf.done_ns = time_ns
@@ -245,8 +281,19 @@ class RobotDriver:
             return
         log.debug("robot reply %s (%s) matches no open suggestion", reply.wire_name, reply.ref)
 
-    def _drop(self, reason: str) -> None:
+    def _refuse(self, reason: str) -> None:
+        """The robot refused us: no retries; every open suggestion fails now with the reason."""
+        self.refused = reason
+        self._connected = False
+        self._last_error = reason
+        self.transport.close()
+        for perf in list(self._active):
+            if perf.unsent():
+                self._finish(perf, "failed", reason)
+
+    def _drop(self, reason: str, seen: float | None = None) -> None:
         now = time.monotonic()
+        self._mark_inflight(now if seen is None else seen)
         self._connected = False
         self._dropped_at = now
         self._held = ""
@@ -257,11 +304,23 @@ class RobotDriver:
         self._next_attempt = now + self._backoff
         self._backoff = min(self._backoff * 2, self.config.reconnect_max_s)
 
+    def _mark_inflight(self, dropped_at: float) -> None:
+        """Commands written within inflight_window_s before the drop, unconfirmed: maybe lost."""
+        since = dropped_at - self.config.inflight_window_s
+        for perf in self._active:
+            for step in perf.steps:
+                if step.sent and not step.confirmed and not step.inflight and step.sent_at >= since:
+                    step.inflight = True
+                    self.inflight_marked += 1
+
     def _connect(self) -> None:
         self._generation += 1
         try:
             self.transport.connect(self._deliver, self._generation)
-        except (OSError, ValueError) as exc:  # ConnectionError, timeouts, refused auth
+        except AccessRefused as exc:  # the robot refused access: asking again cannot help
+            self._refuse(str(exc))
+            return
+        except (OSError, ValueError) as exc:  # ConnectionError, timeouts
             self._last_error = f"{type(exc).__name__}: {exc}"
             log.info("robot %s: cannot connect (%s); retry in %.2f s", self.transport.url, self._last_error, self._backoff)
             self._next_attempt = time.monotonic() + self._backoff
@@ -277,14 +336,27 @@ class RobotDriver:
 
     def _tick(self) -> None:
         now = time.monotonic()
-        if not self._connected and now >= self._next_attempt:
+        if not self._connected and not self.refused and now >= self._next_attempt:
             self._connect()
         if self._connected:
             self._send_due(now)
         self._finalize_ready(time.monotonic())
 
+    def _take_token(self, now: float) -> bool:
+        """The rate limit: True if a command may be written now (and count it)."""
+        rate, burst = self.config.max_commands_per_s, float(self.config.command_burst)
+        self._tokens = min(burst, self._tokens + (now - self._tokens_at) * rate)
+        self._tokens_at = now
+        if self._tokens >= 1.0:
+            self._tokens -= 1.0
+            self._rate_next = 0.0
+            return True
+        self._rate_next = now + (1.0 - self._tokens) / rate
+        return False
+
     def _send_due(self, now: float) -> None:
         self._held = ""
+        self._rate_next = 0.0
         for perf in list(self._active):
             for step in perf.unsent():
                 if perf.start + step.at_s > now:
@@ -299,6 +371,8 @@ class RobotDriver:
                 self._held = self.transport.ready(step.wire)
                 if self._held:
                     return  # hold this and everything after it: order is kept
+                if not self._take_token(time.monotonic()):
+                    return  # the rate limit: this and everything after it wait for a token
                 sent_ns = self._clock_ns()  # the write starts now; a fast robot may answer inside it
                 try:
                     self.transport.send(step.wire)
@@ -307,8 +381,8 @@ class RobotDriver:
                     self._drop(f"write failed: {exc}")
                     return
                 step.sent = True
+                step.sent_at = perf.last_send = time.monotonic()
                 perf.sent_ns = perf.sent_ns or sent_ns
-                perf.last_send = time.monotonic()
                 perf.outstanding.extend((step.command_id, kind) for kind in step.wire.replies)
                 perf.promised = perf.promised or bool(step.wire.replies)
 
@@ -320,12 +394,24 @@ class RobotDriver:
                     self._finish(perf, "failed", f"not delivered within {self.config.give_up_s:g} s: {stuck}")
                 continue
             cut = any(s.cancelled for s in perf.steps)
-            if perf.superseded and perf.outstanding:
+            inflight = [s for s in perf.steps if s.inflight]
+            if perf.failed_by_robot:
+                self._finish(perf, "failed", perf.failed_by_robot)
+            elif perf.superseded and perf.outstanding:
                 # replies still in flight are recorded until the robot has moved on
                 if perf.overtaken or now - perf.superseded_at > self.config.abort_grace_s:
                     self._finish(perf, "aborted")
             elif (perf.superseded and cut) or perf.cut_by_robot:
                 self._finish(perf, "aborted")
+            elif perf.stopped_by_robot and not perf.outstanding:
+                self._finish(perf, "aborted" if perf.superseded else "stopped", perf.stopped_by_robot)
+            elif inflight and not perf.outstanding:
+                self._finish(perf, "unacknowledged",
+                             f"{len(inflight)} command(s) written within {self.config.inflight_window_s:g} s before"
+                             f" the connection died ({self._last_error}): they may not have reached the robot")
+            elif not perf.outstanding and perf.steps and not perf.promised and self._connected \
+                    and now - perf.last_send < self.config.inflight_window_s:
+                continue  # nothing will confirm these: wait out the in-flight window before saying "sent"
             elif not perf.outstanding:
                 self._finish(perf, "done" if perf.promised else "sent" if perf.steps else "nothing")
             elif now - perf.last_send > self.config.ack_timeout_s:
@@ -336,13 +422,17 @@ class RobotDriver:
     def _finish(self, perf: _Performance, outcome: str, error: str = "") -> None:
         self._active.remove(perf)
         s = perf.suggestion
+        waiting = {command_id for command_id, _ in perf.outstanding}
+        unconfirmed = [st.wire.text for st in perf.steps if st.sent and st.wire is not None and not st.confirmed
+                       and (st.inflight or (outcome in ("unacknowledged", "in-flight") and st.command_id in waiting))]
         acted = RobotActed(
             session=s.session, round=s.round, turn=s.turn, attempt=s.attempt, action=s.action,
             backend=self.transport.url, outcome=outcome,
             commands=[st.wire.text for st in perf.steps if st.sent and st.wire is not None],
             replies=perf.replies, suggestion_seq=s.suggestion_seq, received_ns=perf.received_ns,
             sent_ns=perf.sent_ns, acked_ns=perf.acked_ns, done_ns=perf.done_ns, error=error,
-            reconnects=perf.reconnects)
+            reconnects=perf.reconnects, unsent=[self._text(st) for st in perf.unsent()],
+            unconfirmed=unconfirmed)
         try:
             self._on_acted(acted)
         except Exception:  # a failing consumer must not stop the robot
@@ -351,14 +441,25 @@ class RobotDriver:
             self._pending -= 1
             self._idle.notify_all()
 
+    def _text(self, step: _Step) -> str:
+        """A never-written command as it would have gone on the wire (or as the renderer gave it)."""
+        if step.wire is None:
+            try:
+                step.wire = self.transport.encode(step.step.command, step.command_id, self._clock_ns())
+            except (TypeError, ValueError):
+                return repr(step.step.command)
+        return step.wire.text
+
     def _next_wakeup(self) -> float | None:
         times = []
-        if not self._connected:
+        if self._rate_next:
+            times.append(self._rate_next)
+        if not self._connected and not self.refused:
             times.append(self._next_attempt)
         for perf in self._active:
             unsent = perf.unsent()
             if unsent and self._connected and not self._held:
-                times.append(perf.start + unsent[0].at_s)
+                times.append(max(perf.start + unsent[0].at_s, self._rate_next))
             elif unsent and self._held:  # held by the transport: ask it again soon
                 times.append(min(time.monotonic() + HELD_POLL_S, perf.start + self.config.give_up_s))
             elif unsent:
@@ -367,6 +468,8 @@ class RobotDriver:
                 times.append(perf.last_send + self.config.ack_timeout_s)
                 if perf.superseded:
                     times.append(perf.superseded_at + self.config.abort_grace_s)
+            else:
+                times.append(perf.last_send + self.config.inflight_window_s)
         return min(times) if times else None
 
     def _shutdown(self) -> None:
@@ -375,6 +478,8 @@ class RobotDriver:
                 self._finish(perf, "failed", "bridge closed before delivery")
             elif perf.outstanding:
                 self._finish(perf, "in-flight", "the session ended while the robot's acknowledgement was awaited")
+            elif any(s.inflight for s in perf.steps):
+                self._finish(perf, "unacknowledged", "written just before the connection died")
             else:
                 self._finish(perf, "done" if perf.promised else "sent" if perf.steps else "nothing")
         if self._connected:

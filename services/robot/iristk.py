@@ -1,22 +1,27 @@
-"""IrisTK broker client (thesis appendix D): Furhat as the thesis drove it.
+"""IrisTK broker client (thesis appendix D): Furhat as the thesis drove it, as IrisTK's BrokerClient does.
 
 Rule: connect over TCP (default port 1932), write `CONNECT <ticket> <name>`, read
-until `CONNECTED` (the broker first sends `SUBSCRIBE <filter>` lines: what the
-other clients want; taken as information, here and at any later time), then
-`SUBSCRIBE monitor.**` for the robot's replies. Commands become events
-(iristk_protocol): action.speech {text, abort}, action.speech.stop,
-action.gesture {name}, action.gaze {location {class iristk.util.Location, x, y, z},
-mode, speed}. The robot confirms speech with monitor.speech.start / .end and
-gestures with monitor.gesture.end, each carrying "action" = our event's id.
-Leaving writes `CLOSE`. The broker relays an event only to clients subscribed
-at that moment and keeps nothing, so while its latest SUBSCRIBE line says that
-no other client wants an event (the robot has not joined yet, or not again after
-a broker restart), that event is held back, in order, until one does, for at
-most RobotConfig.iristk_subscriber_wait_s (then it goes anyway, and that filter
-is not trusted again until the broker sends another: the broker's word is
-information, and a broker whose SUBSCRIBE lines mean something else must not
-silence or slow the robot); before any SUBSCRIBE line, we send. Every frame from the broker that cannot be read is
-reported (Rejected) and skipped; the connection goes on.
+until `CONNECTED` (the broker first sends `SUBSCRIBE <filter>`: what the other
+clients of the ticket want), then `SUBSCRIBE monitor.**` for the robot's replies.
+Commands become events (iristk_protocol): action.speech {text, abort},
+action.speech.stop, action.gesture {name}, action.gaze {location, mode, speed}
+(or, with iristk_head_event "attend", head turns as action.attend {location,
+mode, speed, agent} for an IrisTK SystemAgentFlow). The robot confirms speech
+with monitor.speech.start / .end and gestures with monitor.gesture.end, each
+carrying "action" = our event's id; a monitor.speech.end with "stopped" (ms)
+means the speech was cut short.
+
+The broker's latest SUBSCRIBE line is the truth about who listens: the broker
+relays an event only to clients subscribed at that moment and keeps nothing, and
+IrisTK's own BrokerClient sends nothing its filter rejects, starting from NONE
+(BrokerClient.java 37, 124-130). So an event that no other client subscribes to
+is held, in order, never written into the void; the driver gives it up as
+unsent after give_up_s. A reader that ends for any reason (EOF, a read error,
+an unreadable EVENT header, the broker's CLOSE, a bug) reports Disconnected
+with the reason and the driver re-makes the connection. Leaving writes `CLOSE`
+and then reads on until the broker closes its end (Broker.java 264-267 closes
+the socket after removing the client), so the broker never writes into a socket
+we already closed.
 """
 
 from __future__ import annotations
@@ -24,13 +29,12 @@ from __future__ import annotations
 import logging
 import socket
 import threading
-import time
 
 from pairplay.schemas.robot import RobotConfig
 
 from pairplay.services.robot.iristk_protocol import (
     LOCATION_CLASS, BadFrame, EventFrame, FrameReader, Line, NameFilter, decode_event, event_frame,
-    make_event,
+    make_event, subscribe_filter,
 )
 from pairplay.services.robot.render import Command, Gesture, Look, Say, StopSpeech
 from pairplay.services.robot.transport import (
@@ -43,17 +47,18 @@ log = logging.getLogger("pairplay.robot.iristk")
 REPLIES = {"monitor.speech.start": SPEECH_START, "monitor.speech.end": SPEECH_END,
            "monitor.gesture.end": GESTURE_END}
 HANDSHAKE_TIMEOUT_S = 5.0
+CLOSE_WAIT_S = 1.0  # after CLOSE, how long we read on for the broker to close its end
 
 
 class IrisTKTransport:
     def __init__(self, host: str, port: int, config: RobotConfig) -> None:
         self.host, self.port, self.config = host, port, config
         self.url = f"iristk://{host}:{port}"
-        self.broker_filter: str | None = None  # the latest SUBSCRIBE line of this connection
+        self.broker_filter: str | None = None  # the latest SUBSCRIBE of this connection (None: none yet)
+        self._filter: NameFilter | None = None
         self._sock: socket.socket | None = None
+        self._reader_done: threading.Event | None = None
         self._lock = threading.Lock()
-        self._holding: tuple[Wire, float] | None = None  # the wire held back, since when
-        self._distrusted: str | None = None  # a broker filter that proved wrong once: no more holding
 
     # -- encoding -------------------------------------------------------------------------
     def encode(self, command: Command, command_id: str, time_ns: int) -> Wire:
@@ -71,28 +76,21 @@ class IrisTKTransport:
             replies = (GESTURE_END,) if cfg.iristk_gesture_replies else ()
         elif isinstance(command, Look):
             location = {"class": LOCATION_CLASS, "x": command.x, "y": command.y, "z": command.z}
-            event = make_event("action.gaze", command_id, cfg.iristk_name, time_ns, location=location,
+            name = "action.attend" if command.head and cfg.iristk_head_event == "attend" else "action.gaze"
+            event = make_event(name, command_id, cfg.iristk_name, time_ns, location=location,
                                mode=cfg.head_mode if command.head else cfg.gaze_mode,
-                               speed=cfg.gaze_speed, agent=agent)
+                               speed=cfg.head_speed if command.head else cfg.gaze_speed, agent=agent)
         else:
             raise TypeError(f"no IrisTK event for {command!r}")
         frame = event_frame(event)
         return Wire(frame, frame.decode(), replies, event["event_name"])
 
     def ready(self, wire: Wire) -> str:
-        spec = self.broker_filter
-        if spec is None or spec == self._distrusted or NameFilter(spec).matches(wire.name):
-            self._holding = None
-            return ""
-        now = time.monotonic()
-        if self._holding is None or self._holding[0] is not wire:
-            self._holding = (wire, now)
-        if now - self._holding[1] >= self.config.iristk_subscriber_wait_s:
-            log.warning("broker %s: still no subscriber for %s after %.1f s (filter %r); sending anyway,"
-                        " and not holding again until the broker's filter changes",
-                        self.url, wire.name, self.config.iristk_subscriber_wait_s, spec)
-            self._holding = None
-            self._distrusted = spec
+        """"" if some other client of the broker subscribes to this event, else why it waits."""
+        spec, compiled = self.broker_filter, self._filter
+        if spec is None or compiled is None:
+            return "the broker has not said yet who subscribes (no SUBSCRIBE line)"
+        if compiled.matches(wire.name):
             return ""
         return f"no client of the broker subscribes to {wire.name} (broker's filter {spec!r})"
 
@@ -104,16 +102,17 @@ class IrisTKTransport:
             _keepalive(sock)
             sock.sendall(f"CONNECT {self.config.iristk_ticket} {self.config.iristk_name}\n".encode())
             reader = FrameReader()
-            self.broker_filter = None
+            self.broker_filter, self._filter = None, None
             early = self._handshake(sock, reader, deliver, generation)
             sock.sendall(f"SUBSCRIBE {self.config.iristk_subscribe}\n".encode())
             sock.settimeout(None)
         except (OSError, ConnectionError):
             sock.close()
             raise
+        done = threading.Event()
         with self._lock:
-            self._sock = sock
-        threading.Thread(target=self._read, args=(sock, reader, early, deliver, generation),
+            self._sock, self._reader_done = sock, done
+        threading.Thread(target=self._read, args=(sock, reader, early, deliver, generation, done),
                          name=f"iristk reader {self.url}", daemon=True).start()
 
     def _handshake(self, sock: socket.socket, reader: FrameReader, deliver: Deliver, generation: int) -> list:
@@ -124,51 +123,75 @@ class IrisTKTransport:
             except socket.timeout:
                 raise ConnectionError(f"broker did not answer CONNECT with CONNECTED within {HANDSHAKE_TIMEOUT_S:g} s") from None
             if not data:
-                raise ConnectionError("broker closed the connection during CONNECT (wrong ticket?)")
+                raise ConnectionError("broker closed the connection during CONNECT")
             frames = reader.feed(data)
             for i, frame in enumerate(frames):
                 if isinstance(frame, Line) and frame.text == "CONNECTED":
                     return frames[i + 1:]
-                self._on_frame(frame, deliver, generation)
+                ended = self._on_frame(frame, deliver, generation)
+                if ended:
+                    raise ConnectionError(f"during CONNECT: {ended}")
 
-    def _read(self, sock: socket.socket, reader: FrameReader, early: list, deliver: Deliver, generation: int) -> None:
-        for frame in early:
-            self._on_frame(frame, deliver, generation)
-        reason = "broker closed the connection"
-        while True:
-            try:
-                data = sock.recv(65536)
-            except OSError as exc:
-                reason = f"read failed: {exc}"
-                break
-            if not data:
-                break
-            for frame in reader.feed(data):
-                self._on_frame(frame, deliver, generation)
-        deliver(Disconnected(generation, reason))
+    def _read(self, sock: socket.socket, reader: FrameReader, early: list, deliver: Deliver, generation: int,
+              done: threading.Event) -> None:
+        reason = ""
+        try:
+            for frame in early:
+                reason = reason or self._on_frame(frame, deliver, generation)
+            while not reason:
+                try:
+                    data = sock.recv(65536)
+                except OSError as exc:
+                    reason = f"read failed: {exc}"
+                    break
+                if not data:
+                    reason = "broker closed the connection"
+                    break
+                for frame in reader.feed(data):
+                    reason = reason or self._on_frame(frame, deliver, generation)
+        except BaseException as exc:  # noqa: BLE001 - whatever kills the reader is reported, never silent
+            reason = f"reader failed: {type(exc).__name__}: {exc}"
+            log.exception("broker %s: reader failed", self.url)
+        finally:
+            done.set()
+            deliver(Disconnected(generation, reason or "reader ended"))
 
-    def _on_frame(self, frame, deliver: Deliver, generation: int) -> None:
+    def _on_frame(self, frame, deliver: Deliver, generation: int) -> str:
+        """Handle one frame; a non-empty return ends the connection (with that reason)."""
         if isinstance(frame, Line):
-            if frame.text == "SUBSCRIBE" or frame.text.startswith("SUBSCRIBE "):
-                self.broker_filter = frame.text[len("SUBSCRIBE "):]
-                if self.broker_filter != self._distrusted:
-                    self._distrusted = None  # the broker's word changed: worth believing again
+            spec = subscribe_filter(frame.text)
+            if spec is not None:
+                try:
+                    compiled = NameFilter(spec)
+                except ValueError as exc:
+                    deliver(Rejected(generation, f"SUBSCRIBE from the broker refused: {exc}", frame.text[:200]))
+                    return ""
+                self.broker_filter, self._filter = spec, compiled
                 deliver(Changed(generation))
+            elif frame.text == "CLOSE":
+                return "the broker sent CLOSE"
             elif frame.text != "CONNECTED":
                 deliver(Rejected(generation, f"unknown line from the broker: {frame.text[:60]!r}", frame.text[:200]))
         elif isinstance(frame, BadFrame):
             deliver(Rejected(generation, frame.reason, frame.excerpt.decode("utf-8", "replace")))
+            if frame.fatal:
+                return f"unreadable stream from the broker: {frame.reason}"
         elif isinstance(frame, EventFrame):
             try:
                 event = decode_event(frame)
             except ValueError as exc:
                 deliver(Rejected(generation, str(exc), frame.payload[:200].decode("utf-8", "replace")))
-                return
+                return ""
             kind = REPLIES.get(frame.name)
-            if kind is not None:
-                ref = event.get("action")
-                deliver(Reply(generation, kind, ref if isinstance(ref, str) else None, frame.name,
-                              aborted=event.get("aborted") is True))
+            ref = event.get("action")
+            if kind is not None and isinstance(ref, str):  # no "action": not about one of our events
+                stopped = event.get("stopped") if kind == SPEECH_END else None
+                detail = ""
+                if stopped is not None:
+                    detail = (f"stopped at {stopped} ms" if isinstance(stopped, (int, float)) and not isinstance(stopped, bool)
+                              else f"stopped ({str(stopped)[:40]!r})")
+                deliver(Reply(generation, kind, ref, frame.name, stopped=stopped is not None, detail=detail))
+        return ""
 
     def send(self, wire: Wire) -> None:
         with self._lock:
@@ -180,18 +203,31 @@ class IrisTKTransport:
         sock.sendall(wire.data if isinstance(wire.data, bytes) else wire.data.encode())
 
     def close(self) -> None:
-        """Say CLOSE if the line is still up, then release the socket."""
+        """Say CLOSE if the line is still up, read on until the broker closes its end, release the socket."""
         with self._lock:
             sock, self._sock = self._sock, None
+            done = self._reader_done
         if sock is None:
             return
         try:
             sock.sendall(b"CLOSE\n")
-            sock.shutdown(socket.SHUT_RDWR)  # sends what is buffered, then wakes our reader
+            if done is not None and not done.is_set():
+                done.wait(CLOSE_WAIT_S)  # our reader sees the broker's EOF (and records late replies)
+            else:
+                _drain(sock, CLOSE_WAIT_S)
         except OSError:
             pass  # already gone: nothing more to say
         sock.close()
 
+
+def _drain(sock: socket.socket, timeout: float) -> None:
+    """Read and discard until EOF or timeout (the reader is gone, the broker may still write)."""
+    sock.settimeout(timeout)
+    try:
+        while sock.recv(65536):
+            pass
+    except OSError:
+        pass
 
 
 def _keepalive(sock: socket.socket) -> None:
@@ -206,8 +242,8 @@ def _peer_closed(sock: socket.socket) -> bool:
     """True if the broker's end is closed (EOF waiting), without consuming any data.
 
     A write to a connection the broker already closed still "succeeds" locally
-    and is lost; checking first leaves only the in-flight window, which no TCP
-    client can close (IrisTK has no acknowledgement for most events).
+    and is lost; checking first leaves only the in-flight window (the driver
+    records commands written in it as unconfirmed).
     """
     try:
         return sock.recv(1, socket.MSG_PEEK | socket.MSG_DONTWAIT) == b""

@@ -6,7 +6,8 @@ reports what the robot says through one callback, from its own reader thread:
   Reply        the robot confirms a command (speech start/end, gesture end);
                `ref` is the id we gave the command, or None if the protocol has none
   Rejected     a frame from the robot that could not be read (kept for the record)
-  Disconnected the connection is gone (the driver reconnects with backoff)
+  Disconnected the connection is gone (the driver reconnects with backoff;
+               `permanent`: the robot refused us, do not retry: fail at once)
   Changed      the robot side changed who listens (IrisTK: a broker SUBSCRIBE);
                the driver asks `ready(wire)` again for commands it holds back
 Only the driver's worker thread calls connect, send and close, so writes never
@@ -30,6 +31,9 @@ class Reply:
     ref: str | None
     wire_name: str  # the protocol's own name, for the record
     aborted: bool = False  # the robot says it cut this command short (speech end, aborted)
+    stopped: bool = False  # the robot says the speech was stopped early (IrisTK "stopped": ms)
+    failed: bool = False  # the robot says the command failed (Realtime "failed": true)
+    detail: str = ""  # what the robot said about it, for the record ("stopped at 840 ms")
 
 
 @dataclass(frozen=True)
@@ -43,6 +47,11 @@ class Rejected:
 class Disconnected:
     generation: int
     reason: str
+    permanent: bool = False  # e.g. access refused: retrying cannot help
+
+
+class AccessRefused(PermissionError):
+    """The robot refused us (Realtime response.auth without access): retrying cannot help."""
 
 
 @dataclass(frozen=True)
@@ -56,7 +65,10 @@ Deliver = Callable[[Report], None]
 
 @dataclass(frozen=True)
 class Wire:
-    """One encoded command: what to write, its text for the record, promised replies."""
+    """One encoded command: what to write, its text for the record, promised replies.
+
+    `replies` are the reply kinds whose absence makes the command unconfirmed.
+    """
 
     data: bytes | str
     text: str

@@ -1,13 +1,23 @@
-"""A test double of the Furhat Realtime API server, written from its documented messages.
+"""A test double of the Furhat Realtime API server, written from the maker's client.
 
-Rule: a WebSocket server on /v1/events (other paths: HTTP 404). JSON text frames
-with a "type". request.auth is answered with response.auth {access, scope}
-(access only with the right "key" when the robot has one; `answers_auth=False`
-stands for a robot that grants access silently); before access, any other
-request is ignored. Then:
+Source: furhat-realtime-api 0.1.3 (`pip download --no-deps`, read, not copied),
+furhat_realtime_api/async_furhat_client.py and events.py:
+  - ws://HOST:9000/v1/events (line 21); other paths: HTTP 404.
+  - request.auth {key?, request_id} is answered by response.auth {access, scope}
+    echoing request_id (the client waits for exactly that, lines 39-49, 163-175);
+    access only with the right "key" when the robot has one. `answers_auth=False`
+    stands for a robot that never answers (the maker's client then fails after
+    5 s). Before access any other request is ignored.
+  - a response echoes "request_id" only when the request carried one (the client
+    adds it only in send_event_and_wait, line 165; fire-and-forget requests have
+    none, lines 244-246, 318-325, 352-360).
+  - the fields "aborted" and "failed" of response.speak.end are not read by the
+    0.1.3 client; they are as issue 13 reports the server sending them.
+Then:
   request.speak.text    response.speak.start, and after speech_s response.speak.end
-                        {aborted: false}; "abort": true ends the current speech
-                        at once with response.speak.end {aborted: true}
+                        {aborted: false, failed: false}; a text in `fail_texts`
+                        ends at once with failed: true; "abort": true ends the
+                        current speech at once with response.speak.end {aborted: true}
   request.speak.stop    ends the current speech (aborted)
   request.gesture.start response.gesture.start, response.gesture.end if "monitor"
   request.attend.location  needs numbers x, y, z
@@ -31,11 +41,13 @@ NUMBERS = {"request.attend.location": ("x", "y", "z"), "request.face.headpose": 
 
 
 class FurhatRealtimeServer:
-    def __init__(self, key: str = "", speech_s: float = 0.05, answers_auth: bool = True) -> None:
-        self.key, self.speech_s, self.answers_auth = key, speech_s, answers_auth
+    def __init__(self, key: str = "", speech_s: float = 0.05, answers_auth: bool = True,
+                 fail_texts: frozenset[str] = frozenset()) -> None:
+        self.key, self.speech_s, self.answers_auth, self.fail_texts = key, speech_s, answers_auth, fail_texts
         self.requests: list[dict] = []  # every well-formed request after auth, in order
         self.bad: list[str] = []
         self.auths: list[bool] = []
+        self.auth_ids: list[str] = []
         self._connections: list[ServerConnection] = []
         self._speaking: dict[ServerConnection, dict] = {}
         self._lock = threading.Lock()
@@ -93,6 +105,7 @@ class FurhatRealtimeServer:
                     continue
                 if message["type"] == "request.auth":
                     authorised = not self.key or message.get("key") == self.key
+                    self.auth_ids.append(str(message.get("request_id")))
                     self._note("auths", authorised)
                     if self.answers_auth:
                         self._respond(connection, message, "response.auth", access=authorised,
@@ -125,7 +138,9 @@ class FurhatRealtimeServer:
         self._note("requests", message)
         if kind in ("request.speak.stop",) or (kind == "request.speak.text" and message.get("abort")):
             self._end_speech(connection, aborted=True)
-        if kind == "request.speak.text":
+        if kind == "request.speak.text" and message["text"] in self.fail_texts:
+            self._respond(connection, message, "response.speak.end", text=message["text"], aborted=False, failed=True)
+        elif kind == "request.speak.text":
             with self._lock:
                 self._speaking[connection] = message
             self._respond(connection, message, "response.speak.start", text=message["text"])
@@ -139,7 +154,8 @@ class FurhatRealtimeServer:
         with self._lock:
             current = self._speaking.pop(connection, None)
         if current is not None:
-            self._respond(connection, current, "response.speak.end", text=current["text"], aborted=aborted)
+            self._respond(connection, current, "response.speak.end", text=current["text"], aborted=aborted,
+                          failed=False)
 
     def _speech_done(self, connection: ServerConnection, message: dict) -> None:
         with self._lock:

@@ -1,0 +1,118 @@
+"""`pairplay lab`: a live, recorded session for one person on the touch-screen board.
+
+Rule: one command starts everything a human session needs on its embedded
+defaults: the bus, recorder, game, learner, robot bridge (virtual unless
+`--robot`) and the lab's web server (services/lab), which serves the board
+and the mirror page and publishes the person's touches as events. It prints
+the board's and the mirror's URLs, each with the session's token, and writes
+recordings/<session>.mcap. The web server listens on 127.0.0.1 (a free port)
+unless `--listen HOST:PORT` says otherwise; `--certfile/--keyfile` serve it
+over TLS (README, "Serving the board beyond loopback"). The session options
+are `pairplay session`'s; a person's session refuses what a person cannot do
+and defaults to the human-phase schedules of thesis 7.2 (cli/session.py).
+"""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import sys
+import threading
+from pathlib import Path
+
+from pairplay.schemas.policy import PolicyFileError
+from pairplay.services.bus import LOOPBACK_ANY_PORT, MODES, BusOptions, stop_on_signals
+
+from pairplay.cli.robot import add_robot_arguments, check_robot_args, robot_choice
+from pairplay.cli.session import add_config_arguments, config_from_args
+
+LOOPBACK = "127.0.0.1"
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    add_config_arguments(p)
+    p.add_argument("--out", default="recordings", help="directory of the recording (default recordings/)")
+    w = p.add_argument_group("web server")
+    w.add_argument("--listen", default=f"{LOOPBACK}:0", metavar="HOST:PORT",
+                   help="where the pages are served (default 127.0.0.1:0: loopback, a free port)")
+    w.add_argument("--certfile", help="TLS certificate (PEM): serve https/wss")
+    w.add_argument("--keyfile", help="TLS private key (PEM) of --certfile")
+    w.add_argument("--linger", type=float, default=3.0, help="seconds the pages show the end before the server stops")
+    add_robot_arguments(p)
+    g = p.add_argument_group("bus (Zenoh)")
+    g.add_argument("--bus-listen", action="append", metavar="ENDPOINT",
+                   help=f"Zenoh endpoint to listen on, repeatable (default {LOOPBACK_ANY_PORT})")
+    g.add_argument("--connect", action="append", default=[], metavar="ENDPOINT", help="Zenoh endpoint to connect to")
+    g.add_argument("--mode", choices=MODES, default=None, help="Zenoh mode (default: router)")
+    g.add_argument("--zenoh-config", metavar="FILE", help="Zenoh JSON5 config (TLS, access control), passed through")
+
+
+def parse_listen(text: str) -> tuple[str, int]:
+    host, sep, port = text.rpartition(":")
+    if not sep or not host or not port.isascii() or not port.isdigit() or int(port) > 65535:
+        raise ValueError(f"--listen {text!r}: use HOST:PORT, e.g. 127.0.0.1:8080 (port 0: a free one)")
+    return host.strip("[]"), int(port)
+
+
+def run(args: argparse.Namespace) -> int:
+    logging.basicConfig(level=logging.WARNING, format="%(levelname)s %(name)s: %(message)s")
+    try:
+        if not args.participant.startswith("human:"):
+            raise ValueError(f"--participant {args.participant!r}: the lab is for a person (human:<id>); "
+                             "simulated participants play with `pairplay session`")
+        config = config_from_args(args)
+        check_robot_args(args)
+        host, port = parse_listen(args.listen)
+        if bool(args.certfile) != bool(args.keyfile):
+            raise ValueError("--certfile and --keyfile go together")
+        for f in (args.certfile, args.keyfile):
+            if f and not Path(f).is_file():
+                raise ValueError(f"{f}: no such file")
+        out = Path(args.out) / f"{config.session}.mcap"
+        if out.exists():
+            raise ValueError(f"{out} exists: choose another --session (recordings are never replaced)")
+    except (ValueError, KeyError, PolicyFileError) as err:
+        print(f"pairplay lab: {err}", file=sys.stderr)
+        return 2
+    from pairplay.services.lab.server import run_lab
+
+    stop = threading.Event()
+    stop_on_signals(stop)
+    bus_options = BusOptions(mode=args.mode or ("client" if args.connect else "router"), listen=args.bus_listen,
+                             connect=list(args.connect or []), zenoh_config=args.zenoh_config)
+
+    def ready(urls, bus) -> None:
+        if host not in (LOOPBACK, "localhost", "::1") and not args.certfile:
+            print("pairplay lab: warning: serving beyond loopback without TLS (README: serving the board "
+                  "beyond loopback)", file=sys.stderr)
+        print(f"session {config.session}: {config.participant}, {config.rounds} rounds, {config.algorithm}, "
+              f"observed card: {config.observed_source}", flush=True)
+        print(f"board:  {urls.board}", flush=True)
+        print(f"mirror: {urls.mirror}", flush=True)
+        print(f"bus listening on {' '.join(bus.locators()) or '(no listener)'}", flush=True)
+
+    try:
+        path = run_lab(config, out, host=host, port=port, bus_options=bus_options, robot=robot_choice(args),
+                       stop=stop, on_ready=ready, linger_s=args.linger, ssl_certfile=args.certfile,
+                       ssl_keyfile=args.keyfile)
+    except TimeoutError as err:  # a service the game waits for never came (the eye tracker, say)
+        print(f"pairplay lab: the session did not start: {err}", file=sys.stderr)
+        return 1
+    except OSError as err:
+        print(f"pairplay lab: cannot serve on {args.listen}: {err}", file=sys.stderr)
+        return 1
+    from pairplay.replay.fold import fold_events
+    from pairplay.replay.reader import read_log
+
+    recorded = read_log(path)
+    fold = fold_events(r.event for r in recorded.events)
+    print(f"recorded {len(recorded.events)} events to {path}")
+    e = fold.ended
+    if e is None and fold.config is None and getattr(stop, "why", ""):
+        # a signal before the game started the session: nothing was played, so nothing is ended
+        print(f"interrupted ({stop.why}) before the session started; {len(recorded.events)} events in {path}")
+        return 0
+    ended = "no SessionEnded recorded" if e is None else e.reason + (f" ({e.detail})" if e.detail else "")
+    print(f"rounds played: {len(fold.turns_per_round())} of {config.rounds}; rejections: {len(fold.rejections)}; "
+          f"ended: {ended}")
+    return 0 if e is not None and e.reason in ("completed", "interrupted", "aborted") else 1  # as `pairplay session`

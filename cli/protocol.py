@@ -1,0 +1,264 @@
+"""`pairplay protocol`: a study with people (thesis 7.2): check, example, init, register, status, serve, pilot.
+
+Rule: every subcommand works on a study folder (replay/studydata.py) and
+prints what it did; a mistake (a bad study file, an unknown participant, a step
+the plan refuses) is one line on stderr and exit 2. `pilot` runs the open
+steps of the plan with scripted participants (core personas touching the board
+through services/scripted.py), the whole protocol without people: a dress
+rehearsal. With people, `serve` runs the study's lab server (the lab of
+services/lab with the console's routes, services/console/server.py): the
+experimenter's console behind a token printed at start, each game's board
+page (the console links it), the questionnaire the board becomes after each
+game; `--pilot p02=blind` lets personas play some participants' games.
+"""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import sys
+import time
+from pathlib import Path
+
+from pairplay.core.personas import persona
+from pairplay.replay.studydata import StudyData, StudyDataError
+from pairplay.schemas.study import StudyFileError, example_text, load_study, parse_study
+
+EXAMPLE_NAME = "thesis-ch7"
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    sub = p.add_subparsers(dest="action", metavar="ACTION", required=True)
+    c = sub.add_parser("check", help="check a study file and print its protocol")
+    c.add_argument("study_file", help=f"a study TOML file, or {EXAMPLE_NAME} for the shipped example")
+    e = sub.add_parser("example", help="print the shipped example study file (the thesis's chapter 7)")
+    e.set_defaults(study_file=EXAMPLE_NAME)
+    i = sub.add_parser("init", help="make a study folder from a study file")
+    i.add_argument("folder", type=Path)
+    i.add_argument("--study", required=True, help=f"the study TOML file, or {EXAMPLE_NAME} for the shipped example")
+    i.add_argument("--key-file", type=Path,
+                   help="a CSV of id,name kept OUTSIDE the study folder (optional; without it no name is accepted)")
+    r = sub.add_parser("register", help="register a participant: prints their pseudonymous id")
+    r.add_argument("folder", type=Path)
+    r.add_argument("--phase", help="the phase they first play (default: the first)")
+    r.add_argument("--name", default="", help="written to the key file only (refused without one)")
+    r.add_argument("--count", type=int, default=1, help="register this many (default 1)")
+    s = sub.add_parser("status", help="the plan: every step, done or next, and why a step is blocked")
+    s.add_argument("folder", type=Path)
+    pl = sub.add_parser("pilot", help="run the open steps of the plan with scripted participants (core personas)")
+    pl.add_argument("folder", type=Path)
+    pl.add_argument("--personas", required=True,
+                    help="comma-separated personas, one per registered participant in order (e.g. tatiana,blind)")
+    pl.add_argument("--robot", help="override the study's robot (virtual, none, iristk://..., furhat://...)")
+    sv = sub.add_parser("serve", help="serve the experimenter's console for a study folder (prints its URL and token)")
+    sv.add_argument("folder", type=Path)
+    sv.add_argument("--listen", default="127.0.0.1:0",
+                    help="HOST:PORT of the web server (default loopback, a free port; beyond loopback use TLS, "
+                         "see README)")
+    sv.add_argument("--robot", help="override the study's robot (virtual, none, iristk://..., furhat://...)")
+    sv.add_argument("--certfile", help="TLS certificate (PEM): serve https/wss (as `pairplay lab`)")
+    sv.add_argument("--keyfile", help="TLS private key (PEM) of --certfile")
+    sv.add_argument("--pilot", default="",
+                    help="ID=PERSONA,...: these participants are played by core personas on the bus (a dress "
+                         "rehearsal from the console; the others play on the board page)")
+    m = sub.add_parser("mark-invalid", help="keep a game out of the plan, the combination and the report")
+    m.add_argument("folder", type=Path)
+    m.add_argument("session")
+    m.add_argument("--reason", required=True)
+
+
+def _study_file(name: str) -> tuple[str, str]:
+    """(text, source) of a study file argument."""
+    if name == EXAMPLE_NAME and not Path(name).exists():
+        return example_text(), f"{EXAMPLE_NAME} (shipped example)"
+    return Path(name).read_text(encoding="utf-8"), name
+
+
+def describe(study) -> list[str]:
+    lines = [f"study {study.study.id}: {study.study.title}",
+             f"  seed {study.study.seed}, ignore window {study.study.ignore_window_ms:g} ms, robot {study.study.robot}, "
+             f"wrong-suggestion button {'on' if study.study.wrong_suggestion_button else 'off'}"]
+    for p in study.phase:
+        cfg = study.learner_config(p)
+        lines.append(f"  {p.id}: {p.players} players, {p.games} game(s) x {p.rounds} rounds, {p.algorithm} "
+                     f"({p.preset}: epsilon {cfg.epsilon_start:g} - {cfg.epsilon_step:g}/round"
+                     + (f", psi x{cfg.psi_round_decay:g}/round, new policy alone from round {cfg.reuse_rounds + 1}"
+                        if p.algorithm == "pi-reuse" and cfg.reuse_rounds is not None else "")
+                     + ")" + (f", bias = combination of {p.bias}" if p.bias else "")
+                     + (f", questionnaire {', '.join(p.questionnaires)} after each game" if p.questionnaires else ""))
+    for name, q in study.questionnaire.items():
+        kinds = {}
+        for item in q.item:
+            kinds[item.kind] = kinds.get(item.kind, 0) + 1
+        lines.append(f"  questionnaire {name}: {len(q.item)} items ("
+                     + ", ".join(f"{v} {k}" for k, v in kinds.items()) + ")")
+    return lines
+
+
+def run(args) -> int:
+    try:
+        return _run(args)
+    except (StudyFileError, StudyDataError, KeyError) as err:
+        print(f"pairplay protocol {args.action}: {err.args[0] if isinstance(err, KeyError) else err}",
+              file=sys.stderr)
+        return 2
+    except OSError as err:
+        print(f"pairplay protocol {args.action}: {getattr(err, 'filename', '') or ''}: {err.strerror or err}",
+              file=sys.stderr)
+        return 2
+
+
+def _run(args) -> int:
+    if args.action == "example":
+        sys.stdout.write(example_text())
+        return 0
+    if args.action == "check":
+        text, source = _study_file(args.study_file)
+        print("\n".join(describe(parse_study(text, source))))
+        return 0
+    if args.action == "init":
+        study_path = args.study
+        if args.study == EXAMPLE_NAME and not Path(args.study).exists():
+            tmp = args.folder.resolve().parent / f".{EXAMPLE_NAME}.toml"
+            tmp.parent.mkdir(parents=True, exist_ok=True)
+            tmp.write_text(example_text(), encoding="utf-8")
+            study_path = tmp
+        else:
+            load_study(study_path)
+        try:
+            data = StudyData.create(args.folder, study_path, args.key_file)
+        finally:
+            if study_path != args.study:
+                Path(study_path).unlink()
+        print(f"study folder {data.folder} ({data.study.study.id}); key file: {data.key_file or 'none'}")
+        print("\n".join(describe(data.study)))
+        return 0
+    data = StudyData(args.folder)
+    if args.action == "register":
+        if args.count < 1:
+            raise StudyDataError("--count must be at least 1")
+        if args.name and args.count != 1:
+            raise StudyDataError("--name registers one participant: leave out --count")
+        phase = args.phase or data.study.phase[0].id
+        for _ in range(args.count):
+            print(data.register(phase, args.name))
+        data.write_tables()
+        return 0
+    if args.action == "status":
+        for step in data.plan():
+            mark = "done" if step.done else ("blocked" if step.blocked else "open")
+            print(f"[{mark:7}] {step.label}" + (f"  ({step.blocked})" if step.blocked and not step.done else ""))
+        return 0
+    if args.action == "mark-invalid":
+        from pairplay.services.bus import Bus, BusOptions  # noqa: F401  (the runner lives with the services)
+        from pairplay.schemas import journal as j
+        game = data.state.games.get(args.session)
+        if game is None:
+            raise StudyDataError(f"no session {args.session!r} in this study")
+        data.append(j.SessionMarkedInvalid(session=args.session, participant=game.participant, reason=args.reason))
+        data.write_tables()
+        print(f"{args.session} marked invalid: {args.reason}")
+        return 0
+    if args.action == "pilot":
+        return _pilot(data, args)
+    if args.action == "serve":
+        return _serve(data, args)
+    raise AssertionError(args.action)
+
+
+def _robot(args):
+    """(RobotChoice or None, overridden?) from --robot; StudyDataError if it is wrong."""
+    from pairplay.services.robot.choice import NO_ROBOT, RobotChoice, check_choice
+    if not args.robot:
+        return None, False
+    if args.robot == NO_ROBOT:
+        return None, True
+    choice = RobotChoice(args.robot)
+    try:
+        check_choice(choice)
+    except ValueError as err:
+        raise StudyDataError(str(err)) from None
+    return choice, True
+
+
+def _serve(data: StudyData, args) -> int:
+    import threading
+
+    from pairplay.services.bus import Bus, BusOptions, stop_on_signals
+    from pairplay.services.console.server import StudyLabServer
+    from pairplay.services.protocol import StudyRunner
+
+    host, _, port = args.listen.rpartition(":")
+    if not host or not port.isdigit():
+        raise StudyDataError(f"--listen {args.listen!r}: use HOST:PORT")
+    robot, overridden = _robot(args)
+    if bool(args.certfile) != bool(args.keyfile):
+        raise StudyDataError("--certfile and --keyfile go together")
+    pilot = {}
+    for pair in filter(None, (x.strip() for x in args.pilot.split(","))):
+        pid, _, key = pair.partition("=")
+        data.participant(pid)
+        pilot[pid] = persona(key).key
+    logging.basicConfig(level=logging.WARNING, format="%(levelname)s %(name)s: %(message)s")
+    stop = threading.Event()
+    stop_on_signals(stop)
+    with Bus(BusOptions(mode="router")) as bus:
+        runner = StudyRunner(data, bus, robot=robot)
+        runner.scripted = pilot
+        if overridden and robot is None:
+            runner.robot = None
+        try:
+            server = StudyLabServer(runner, host=host.strip("[]"), port=int(port), ssl_certfile=args.certfile,
+                                    ssl_keyfile=args.keyfile).start()
+        except OSError as err:
+            raise StudyDataError(f"--listen {args.listen}: {err.strerror or err}") from None
+        print(f"experimenter console: {server.console_url}", flush=True)
+        print(f"bus (boards and scripted players connect here): {' '.join(bus.locators())}", flush=True)
+        try:
+            while not stop.wait(0.2):
+                pass
+        finally:
+            if runner.live.state in ("playing", "questionnaire"):
+                try:
+                    runner.abort("the console was stopped")
+                except StudyDataError:
+                    pass
+                if server.console.thread is not None:
+                    server.console.thread.join(10)
+            server.close()
+    return 0
+
+
+def _pilot(data: StudyData, args) -> int:
+    from pairplay.services.bus import Bus, BusOptions, stop_on_signals  # noqa: F401
+    from pairplay.services.protocol import StudyRunner, scripted_players
+    from pairplay.services.robot.choice import NO_ROBOT, RobotChoice, check_choice
+
+    keys = [k.strip() for k in args.personas.split(",") if k.strip()]
+    ids = list(data.state.participants)
+    if len(keys) != len(ids):
+        raise StudyDataError(f"--personas names {len(keys)} personas for {len(ids)} registered participants "
+                             f"({', '.join(ids) or 'none'})")
+    personas = {pid: persona(k).key for pid, k in zip(ids, keys)}
+    robot = None
+    if args.robot:
+        robot = RobotChoice(args.robot) if args.robot != NO_ROBOT else None
+        if robot is not None:
+            try:
+                check_choice(robot)
+            except ValueError as err:
+                raise StudyDataError(str(err)) from None
+    logging.basicConfig(level=logging.WARNING, format="%(levelname)s %(name)s: %(message)s")
+    t0 = time.perf_counter()
+    with Bus(BusOptions()) as bus:
+        runner = StudyRunner(data, bus, robot=robot)
+        if args.robot == NO_ROBOT:
+            runner.robot = None
+
+        def said(step, result) -> None:
+            what = f"{len(result.users)} users combined" if step.kind == "combine" else \
+                f"{result.ended.outcome}, {result.ended.rounds_played} rounds"
+            print(f"{time.perf_counter() - t0:7.1f} s  {step.label}: {what}", flush=True)
+        runner.run_plan(scripted_players(runner, personas), on_step=said)
+    print(f"plan complete; `pairplay report {data.folder}` writes the report")
+    return 0

@@ -1,0 +1,57 @@
+"""Child processes that never outlive an interruption: the parent owns Ctrl-C.
+
+Rule: a pool's workers ignore SIGINT. A terminal's Ctrl-C reaches the whole
+foreground process group; if each worker also raised KeyboardInterrupt, every
+one would print its own traceback and the user would see a screenful instead
+of the verb's one line. The parent alone is interrupted, and on the way out
+(`worker_pool`'s exit with an exception) it cancels what has not started and
+terminates what is running instead of waiting for it, so the verb exits
+promptly. Workers are started with "spawn": a forked child would inherit the
+parent's threads' locks (zenoh, numba's compiler) in whatever state they were.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import multiprocessing
+import signal
+from concurrent.futures import ProcessPoolExecutor
+from typing import Iterator
+
+
+def _ignore_interrupt() -> None:
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+
+
+def process_pool(workers: int) -> ProcessPoolExecutor:
+    """A pool of `workers` (>= 1) spawned processes that ignore SIGINT. Stop it with `stop_pool`."""
+    return ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("spawn"), initializer=_ignore_interrupt)
+
+
+def stop_pool(pool: ProcessPoolExecutor, abandon: bool) -> None:
+    """Shut `pool` down: wait for its work, or, when `abandon` (an error or an interruption is on its
+    way out), cancel what has not started and terminate the workers now."""
+    if not abandon:
+        pool.shutdown(wait=True)
+        return
+    # ProcessPoolExecutor.terminate_workers() is Python 3.14+; before it, the pool's own process table.
+    workers = list((getattr(pool, "_processes", None) or {}).values())
+    pool.shutdown(wait=False, cancel_futures=True)
+    for worker in workers:
+        if worker.is_alive():
+            worker.terminate()
+    for worker in workers:
+        worker.join(timeout=5)
+    pool.shutdown(wait=True)  # the pool's manager thread sees the workers gone and closes its queues
+
+
+@contextlib.contextmanager
+def worker_pool(workers: int) -> Iterator[ProcessPoolExecutor]:
+    """`process_pool(workers)` for a `with` block: waited for on a normal exit, abandoned on any exception."""
+    pool = process_pool(workers)
+    try:
+        yield pool
+    except BaseException:
+        stop_pool(pool, abandon=True)
+        raise
+    stop_pool(pool, abandon=False)

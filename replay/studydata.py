@@ -1,0 +1,478 @@
+"""A study's data folder: the plan, the journal, participants, export and deletion.
+
+Rule: one folder per study, readable without pairplay:
+  study.toml                   the study definition (schemas/study.py), as given
+  journal.jsonl                the study's events, one JSON object a line (schemas/journal.py)
+  recordings/<session>.mcap    one MCAP file per game: every event, questionnaire answers included
+  policies/<session>.policy.json   the policy each game learned (rebuilt from its recording)
+  merged/<phase>-bias.policy.json  the bias policy of a pi-reuse phase, with the rule of each state
+  participants.csv, sessions.csv, answers.csv   tables derived from the above (`write_tables`)
+  exports/<id>.zip             a participant's data, on request (`export_participant`)
+The state (who is registered, which game is next, what is done) is the fold of
+the journal (`StudyState`); the plan (`plan`) follows from the study file and
+that state. Participants are pseudonymous ids (p01, p02, ...): a name given at
+registration goes only to the key file, which must lie outside the study folder,
+and is refused when the study has no key file.
+"""
+
+from __future__ import annotations
+
+import csv
+import hashlib
+import io
+import os
+import re
+import secrets
+import threading
+import time
+import zipfile
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import msgspec
+
+from pairplay import __version__
+from pairplay.schemas import journal as j
+from pairplay.schemas.policy import read_policy, write_policy
+from pairplay.schemas.study import Study, StudyFileError, load_study
+
+from .reader import read_log
+
+STUDY_FILE, JOURNAL, SETTINGS = "study.toml", "journal.jsonl", "settings.json"
+
+
+class StudyDataError(ValueError):
+    """A request the study folder cannot satisfy; the message says what and where (one line)."""
+
+
+def atomic_write(path: Path, data: bytes) -> None:
+    """Write `data` to `path` through a temporary file renamed when complete."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
+    with open(tmp, "wb") as f:
+        f.write(data)
+        f.flush()
+        os.fsync(f.fileno())
+    os.replace(tmp, path)
+
+
+@dataclass
+class Game:
+    session: str
+    participant: str
+    phase: str
+    game: int
+    recording: str
+    bias: str = ""
+    ended: j.GameEnded | None = None
+    invalid: str = ""
+    paused: bool = False
+
+    @property
+    def valid_complete(self) -> bool:
+        return self.ended is not None and self.ended.outcome == "completed" and not self.invalid
+
+
+@dataclass
+class StudyState:
+    """The fold of a journal."""
+    created: j.StudyCreated | None = None
+    participants: dict[str, j.ParticipantRegistered] = field(default_factory=dict)
+    games: dict[str, Game] = field(default_factory=dict)
+    combined: dict[str, j.BiasCombined] = field(default_factory=dict)  # phase -> its bias
+    deletions: list[j.ParticipantDeleted] = field(default_factory=list)
+    next_number: int = 1
+
+    def evolve(self, e: j.JournalEvent) -> None:
+        if isinstance(e, j.StudyCreated):
+            self.created = e
+        elif isinstance(e, j.ParticipantRegistered):
+            self.participants[e.participant] = e
+            number = int(e.participant[1:]) if e.participant[1:].isdigit() else 0
+            self.next_number = max(self.next_number, number + 1)
+        elif isinstance(e, j.GameStarted):
+            self.games[e.session] = Game(e.session, e.participant, e.phase, e.game, e.recording, e.bias)
+        elif isinstance(e, j.GameEnded) and e.session in self.games:
+            self.games[e.session].ended = e
+            self.games[e.session].paused = False
+        elif isinstance(e, (j.GamePaused, j.GameResumed)) and e.session in self.games:
+            self.games[e.session].paused = isinstance(e, j.GamePaused)
+        elif isinstance(e, j.SessionMarkedInvalid) and e.session in self.games:
+            self.games[e.session].invalid = e.reason
+        elif isinstance(e, j.BiasCombined):
+            self.combined[e.phase] = e
+        elif isinstance(e, j.ParticipantDeleted):
+            self.deletions.append(e)
+            # ids are never reused, even after a deletion took the highest one
+            self.next_number += 1
+
+
+@dataclass(frozen=True)
+class Step:
+    """One step of the guided plan: play a game, or combine a phase's policies."""
+    kind: str  # "play" | "combine"
+    phase: str
+    participant: str = ""
+    game: int = 0
+    done: bool = False
+    blocked: str = ""  # why it cannot run yet ("" = it can)
+
+    @property
+    def label(self) -> str:
+        if self.kind == "combine":
+            return f"combine the policies of the players before {self.phase} into its bias policy"
+        return f"{self.participant}: {self.phase} game {self.game + 1}"
+
+
+class StudyData:
+    """A study folder (see the module rule). Thread-safe: the console and the game runner share it."""
+
+    def __init__(self, folder: str | Path):
+        self.folder = Path(folder).resolve()
+        if not (self.folder / JOURNAL).is_file():
+            raise StudyDataError(f"{self.folder}: not a study folder (no {JOURNAL}; `pairplay protocol init` makes one)")
+        try:
+            self.study: Study = load_study(self.folder / STUDY_FILE)
+        except StudyFileError as err:
+            raise StudyDataError(str(err)) from None
+        self.settings = msgspec.json.decode((self.folder / SETTINGS).read_bytes()) \
+            if (self.folder / SETTINGS).is_file() else {}
+        self._lock = threading.RLock()
+        self.state = StudyState()
+        for e in self.read_journal():
+            self.state.evolve(e)
+
+    # -- creating ------------------------------------------------------------
+    @classmethod
+    def create(cls, folder: str | Path, study_file: str | Path, key_file: str | Path | None = None) -> "StudyData":
+        """A new study folder from a study file; StudyFileError / StudyDataError if it cannot be."""
+        folder = Path(folder).resolve()
+        load_study(study_file)  # refuse a bad file before making anything
+        if (folder / JOURNAL).exists():
+            raise StudyDataError(f"{folder}: already a study folder")
+        if key_file is not None:
+            key = Path(key_file).resolve()
+            if key.is_relative_to(folder):
+                raise StudyDataError(f"--key-file {key}: must be outside the study folder {folder} "
+                                     "(names never sit beside the recordings)")
+        text = Path(study_file).read_bytes()
+        folder.mkdir(parents=True, exist_ok=True)
+        for sub in ("recordings", "policies", "merged"):
+            (folder / sub).mkdir(exist_ok=True)
+        atomic_write(folder / STUDY_FILE, text)
+        atomic_write(folder / SETTINGS, msgspec.json.encode(
+            {"key_file": str(Path(key_file).resolve()) if key_file else ""}))
+        study = load_study(folder / STUDY_FILE)
+        created = j.StudyCreated(study=study.study.id, study_file_sha256=hashlib.sha256(text).hexdigest(),
+                                 software_version=__version__, time_ns=time.time_ns())
+        atomic_write(folder / JOURNAL, j.encode_line(created))
+        return cls(folder)
+
+    # -- the journal ---------------------------------------------------------
+    def read_journal(self) -> list[j.JournalEvent]:
+        events = []
+        with open(self.folder / JOURNAL, "rb") as f:
+            for n, line in enumerate(f, 1):
+                if not line.strip():
+                    continue
+                try:
+                    events.append(j.decode_line(line))
+                except (msgspec.DecodeError, msgspec.ValidationError) as err:
+                    raise StudyDataError(f"{self.folder / JOURNAL}:{n}: {err}") from None
+        return events
+
+    def append(self, event: j.JournalEvent) -> j.JournalEvent:
+        with self._lock:
+            if not event.time_ns:
+                event = msgspec.structs.replace(event, time_ns=time.time_ns())
+            with open(self.folder / JOURNAL, "ab") as f:
+                f.write(j.encode_line(event))
+                f.flush()
+                os.fsync(f.fileno())
+            self.state.evolve(event)
+            return event
+
+    # -- participants --------------------------------------------------------
+    @property
+    def key_file(self) -> Path | None:
+        return Path(self.settings["key_file"]) if self.settings.get("key_file") else None
+
+    def register(self, joins: str, label: str = "") -> str:
+        """Register a participant for phase `joins`; returns the new pseudonymous id.
+
+        `label` (a name, an e-mail...) goes only to the key file; refused without one."""
+        with self._lock:
+            try:
+                self.study.phase_by_id(joins)
+            except KeyError as err:
+                raise StudyDataError(err.args[0]) from None
+            if label and self.key_file is None:
+                raise StudyDataError("this study has no key file: register by pseudonymous id only "
+                                     "(or create the study with --key-file PATH outside its folder)")
+            pid = f"p{self.state.next_number:02d}"
+            if label:
+                self.key_file.parent.mkdir(parents=True, exist_ok=True)
+                with open(self.key_file, "a", encoding="utf-8", newline="") as f:
+                    csv.writer(f).writerow([pid, label.replace("\n", " ")])
+            self.append(j.ParticipantRegistered(participant=pid, joins=joins))
+            return pid
+
+    def participant(self, pid: str) -> j.ParticipantRegistered:
+        p = self.state.participants.get(pid)
+        if p is None:
+            raise StudyDataError(f"no participant {pid!r} in study {self.study.study.id!r} "
+                                 f"(registered: {', '.join(self.state.participants) or 'none'})")
+        return p
+
+    def returning(self, pid: str, phase: str) -> bool:
+        """Did `pid` play a phase before `phase`?"""
+        ids = [p.id for p in self.study.phase]
+        return ids.index(self.participant(pid).joins) < ids.index(phase)
+
+    def players(self, phase_id: str) -> list[str]:
+        """Who plays `phase_id`, in registration order (thesis 7.2: phase 2 takes everyone)."""
+        ids = [p.id for p in self.study.phase]
+        phase = self.study.phase_by_id(phase_id)
+        upto = ids.index(phase_id)
+        return [pid for pid, r in self.state.participants.items()
+                if r.joins == phase_id or (phase.players == "all" and ids.index(r.joins) < upto)]
+
+    # -- the plan ------------------------------------------------------------
+    def games_of(self, pid: str, phase: str | None = None) -> list[Game]:
+        return [g for g in self.state.games.values() if g.participant == pid and (phase is None or g.phase == phase)]
+
+    def plan(self) -> list[Step]:
+        """Every step of the protocol, in order, with what is done and what is blocked."""
+        steps: list[Step] = []
+        for phase in self.study.phase:
+            blocked = ""
+            if phase.bias:
+                earlier = [s for s in steps if s.phase == phase.bias and s.kind == "play"]
+                players = {s.participant for s in earlier}
+                waiting = not earlier or not all(s.done for s in earlier)
+                done = phase.id in self.state.combined
+                why = ("the games of " + phase.bias + " are not all played") if waiting else \
+                    ("it needs at least 2 players" if len(players) < 2 else "")
+                steps.append(Step("combine", phase.id, done=done, blocked="" if done else why))
+                if not done:
+                    blocked = f"the bias policy of {phase.id} is not combined yet"
+            for pid in self.players(phase.id):
+                done_games = sorted(g.game for g in self.games_of(pid, phase.id) if g.valid_complete)
+                for game in range(phase.games):
+                    steps.append(Step("play", phase.id, pid, game, done=game in done_games, blocked=blocked))
+        return steps
+
+    def next_step(self) -> Step | None:
+        for s in self.plan():
+            if not s.done:
+                return s
+        return None
+
+    def session_id(self, pid: str, phase: str, game: int) -> str:
+        """A fresh session id: <study>-<pid>-<phase>-g<game>[-r<n> for a retry]."""
+        base = f"{self.study.study.id}-{pid}-{phase}-g{game + 1}"
+        tries = sum(1 for g in self.state.games.values() if g.session.startswith(base))
+        return base if tries == 0 else f"{base}-r{tries}"
+
+    def game_index(self, pid: str, phase: str, game: int) -> int:
+        """The game's index across the participant's games (it names the deal stream)."""
+        index = 0
+        for p in self.study.phase:
+            if p.id == phase:
+                return index + game
+            index += p.games if pid in self.players(p.id) else 0
+        raise StudyDataError(f"no phase {phase!r}")
+
+    # -- derived tables ------------------------------------------------------
+    def answers(self) -> list[dict]:
+        """Every questionnaire answer of every recorded game, one row per item."""
+        rows = []
+        for g in self.state.games.values():
+            path = self.folder / g.recording
+            if not path.is_file():
+                continue
+            for e in read_log(path).of("QuestionnaireAnswered"):
+                for item, answer in e.answers.items():
+                    rows.append({"participant": g.participant, "phase": g.phase, "game": g.game + 1,
+                                 "session": g.session, "questionnaire": e.questionnaire, "item": item,
+                                 "answer": answer, "returning": int(self.returning(g.participant, g.phase)),
+                                 "valid": int(not g.invalid)})
+        return rows
+
+    def write_tables(self) -> list[Path]:
+        """participants.csv, sessions.csv and answers.csv, rewritten from the journal and recordings."""
+        with self._lock:
+            tables = {
+                "participants.csv": (["participant", "joins", "registered_utc"],
+                                     [[pid, r.joins, _utc(r.time_ns)] for pid, r in self.state.participants.items()]),
+                "sessions.csv": (["session", "participant", "phase", "game", "outcome", "reason", "rounds_played",
+                                  "invalid", "recording", "policy", "bias"],
+                                 [[g.session, g.participant, g.phase, g.game + 1,
+                                   g.ended.outcome if g.ended else "running", g.ended.reason if g.ended else "",
+                                   g.ended.rounds_played if g.ended else 0, g.invalid, g.recording,
+                                   g.ended.policy if g.ended else "", g.bias] for g in self.state.games.values()]),
+            }
+            answers = self.answers()
+            cols = ["participant", "phase", "game", "session", "questionnaire", "item", "answer", "returning", "valid"]
+            tables["answers.csv"] = (cols, [[r[c] for c in cols] for r in answers])
+            paths = []
+            for name, (head, rows) in tables.items():
+                buf = io.StringIO()
+                w = csv.writer(buf)
+                w.writerow(head)
+                w.writerows(rows)
+                atomic_write(self.folder / name, buf.getvalue().encode())
+                paths.append(self.folder / name)
+            return paths
+
+    # -- export and deletion -------------------------------------------------
+    def files_of(self, pid: str) -> list[Path]:
+        """Every file of the folder that holds `pid`'s data (recordings, policies, exports)."""
+        self.participant(pid)
+        files = []
+        for g in self.games_of(pid):
+            files.append(self.folder / g.recording)
+            if g.ended is not None and g.ended.policy:
+                files.append(self.folder / g.ended.policy)
+        files += list((self.folder / "exports").glob(f"{pid}.zip"))
+        return [f for f in files if f.is_file()]
+
+    def merged_using(self, pid: str) -> list[str]:
+        """The merged policies combined from `pid`'s games."""
+        mine = {g.ended.policy for g in self.games_of(pid) if g.ended is not None and g.ended.policy}
+        return [c.output for c in self.state.combined.values() if mine & set(c.inputs)]
+
+    def export_participant(self, pid: str, out: str | Path | None = None, force: bool = False) -> Path:
+        """One zip of `pid`'s recordings, policies, answers and journal lines, with a README."""
+        with self._lock:
+            self.participant(pid)
+            out = Path(out) if out else self.folder / "exports" / f"{pid}.zip"
+            if out.exists() and not force:
+                raise StudyDataError(f"{out} exists (use --force to replace it)")
+            games = self.games_of(pid)
+            answers = [r for r in self.answers() if r["participant"] == pid]
+            lines = [e for e in self.read_journal() if getattr(e, "participant", None) == pid]
+            files = [f for f in self.files_of(pid) if f.parent.name != "exports"]
+            buf = io.BytesIO()
+            with zipfile.ZipFile(buf, "w", zipfile.ZIP_DEFLATED) as z:
+                for f in files:
+                    z.write(f, f.relative_to(self.folder).as_posix())
+                cols = ["participant", "phase", "game", "session", "questionnaire", "item", "answer"]
+                text = io.StringIO()
+                w = csv.writer(text)
+                w.writerow(cols)
+                w.writerows([[r[c] for c in cols] for r in answers])
+                z.writestr("answers.csv", text.getvalue())
+                z.writestr("journal.jsonl", b"".join(j.encode_line(e) for e in lines))
+                z.writestr("README.txt", _export_readme(pid, self.study.study.id, games, files, len(answers),
+                                                        self.merged_using(pid), self.folder))
+            atomic_write(out, buf.getvalue())
+            return out
+
+    def delete_participant(self, pid: str) -> j.ParticipantDeleted:
+        """Erase `pid` everywhere pairplay put their data (see the module rule); the deletion is journaled
+        without their id. Refused while one of their games is running."""
+        with self._lock:
+            self.participant(pid)
+            running = [g.session for g in self.games_of(pid) if g.ended is None]
+            if running:
+                raise StudyDataError(f"{pid} has a game running ({running[0]}): abort it first")
+            merged = self.merged_using(pid)
+            files = self.files_of(pid)
+            sessions = {g.session for g in self.games_of(pid)}
+            for f in files:
+                f.unlink()
+            for g in sessions:  # anything else a tool wrote next to the recording (e.g. a view's .rrd)
+                for extra in (self.folder / "recordings").glob(f"{g}.*"):
+                    extra.unlink()
+                    files.append(extra)
+            kept, removed = [], 0
+            for e in self.read_journal():
+                if getattr(e, "participant", None) == pid or getattr(e, "session", None) in sessions:
+                    removed += 1
+                elif isinstance(e, j.BiasCombined):
+                    kept.append(_redacted_combination(e, pid))
+                else:
+                    kept.append(e)
+            for m in merged:
+                _redact_policy_file(self.folder / m, pid)
+            key_removed = self._drop_from_key_file(pid)
+            atomic_write(self.folder / JOURNAL, b"".join(j.encode_line(e) for e in kept))
+            state = StudyState()
+            for e in kept:
+                state.evolve(e)
+            self.state = state
+            # derived files that held their rows: the tables are rewritten, a report is removed
+            report = self.folder / "report"
+            if report.is_dir():
+                for f in sorted(report.rglob("*"), reverse=True):
+                    f.unlink() if f.is_file() else f.rmdir()
+                report.rmdir()
+            deleted = self.append(j.ParticipantDeleted(
+                deletion=secrets.token_hex(6), sessions_removed=len(sessions), files_removed=len(files),
+                journal_lines_removed=removed, merged_policies_using_them=merged, key_file_line_removed=key_removed))
+            self.write_tables()
+            return deleted
+
+    def _drop_from_key_file(self, pid: str) -> bool:
+        key = self.key_file
+        if key is None or not key.is_file():
+            return False
+        rows = list(csv.reader(key.read_text(encoding="utf-8").splitlines()))
+        kept = [r for r in rows if not r or r[0] != pid]
+        if len(kept) == len(rows):
+            return False
+        buf = io.StringIO()
+        csv.writer(buf).writerows(kept)
+        atomic_write(key, buf.getvalue().encode("utf-8"))
+        return True
+
+
+def _redact(text: str, pid: str) -> str:
+    """`text` with the pseudonym `pid` (as an id, in `human:<id>` and in session names) replaced by "deleted"."""
+    return re.sub(rf"(?<![A-Za-z0-9]){re.escape(pid)}(?![0-9])", "deleted", text)
+
+
+def _redacted_combination(e: j.BiasCombined, pid: str) -> j.BiasCombined:
+    """A combination that used `pid`'s games, kept (others' phase-2 games were played on it) without the id."""
+    return msgspec.structs.replace(e, users=[_redact(u, pid) for u in e.users],
+                                   inputs=[_redact(i, pid) for i in e.inputs],
+                                   profiles={_redact(k, pid): v for k, v in e.profiles.items()})
+
+
+def _redact_policy_file(path: Path, pid: str) -> None:
+    """A merged policy file keeps its actions but no longer names `pid` (participant, merged_from)."""
+    if not path.is_file():
+        return
+    policy = read_policy(path)
+    write_policy(path, msgspec.structs.replace(
+        policy, participant=_redact(policy.participant, pid), merged_from=[_redact(m, pid) for m in policy.merged_from]), force=True)  # the redaction replaces it
+
+
+def _utc(ns: int) -> str:
+    return time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime(ns / 1e9)) if ns else ""
+
+
+def _export_readme(pid: str, study: str, games: list[Game], files: list[Path], answers: int, merged: list[str],
+                   folder: Path) -> str:
+    lines = [f"Data of participant {pid} in study {study} (pairplay {__version__})", "",
+             "Everything pairplay holds about this pseudonymous participant:", ""]
+    for g in games:
+        status = g.ended.outcome if g.ended else "running"
+        lines.append(f"- game {g.session}: phase {g.phase}, game {g.game + 1}, {status}"
+                     + (f", marked invalid: {g.invalid}" if g.invalid else ""))
+    lines += ["", "Files:", ""]
+    for f in files:
+        rel = f.relative_to(folder).as_posix()
+        what = ("MCAP recording of every event of the game (JSON messages, JSON Schemas inside; "
+                "open with any MCAP reader, e.g. `mcap cat`, Foxglove, or Python's mcap package)"
+                if rel.endswith(".mcap") else
+                "the policy learned in that game (JSON: Q-table 24 states x 88 actions, greedy action per state)")
+        lines.append(f"- {rel}: {what}")
+    lines += [f"- answers.csv: {answers} questionnaire answers (one row per item)",
+              "- journal.jsonl: the study journal's lines about this participant (registration, games, marks)", ""]
+    if merged:
+        lines += ["Merged policies combined from this participant's games (kept in the study; not included): "
+                  + ", ".join(merged), ""]
+    lines += ["Names are never stored with the data: the participant is known only by the id above."]
+    return "\n".join(lines) + "\n"

@@ -1,0 +1,278 @@
+"""The human-world report (thesis 7.3) of a study folder: tables, figures and report.md.
+
+Rule: `human_report(folder, out)` reads only the study folder (replay/studydata.py):
+the journal says which recording is which game of which participant in which
+phase, the recordings say what happened. Games marked invalid or aborted are
+listed and left out of every figure and table. It writes:
+  picks.csv                       picks per round of every valid game (18 is perfect play)
+  games.png   (figure 7.3a)       phase 1: mean picks per round of game 1, game 2, ...
+  phases.png  (figure 7.3b)       mean picks per round: phase 1 (its games averaged) vs phase 2 ...
+  users.png   (figure 7.6)        a reuse phase: returning users (who played before) vs new users
+  merged.png  (figure 7.5)        each bias policy: state code vs action code, with a reference policy if given
+  attention.csv                   per participant and phase: suggestions, ignored (pick interval under the
+                                  window, 7.1.2), wrong-suggestion presses (7.1.3), bias share (pi-reuse)
+  questionnaire.csv               per item, phase and group: n, mean/median (Likert), counts (choice)
+  report.md                       all of it, with the study's settings
+"""
+
+from __future__ import annotations
+
+import csv
+import statistics
+from collections import defaultdict
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from pairplay import __version__
+from pairplay.core.actions import ACTION_NAMES
+from pairplay.core.geometry import N_STATES, STATE_NAMES
+from pairplay.replay.reader import read_log
+from pairplay.replay.studydata import StudyData
+from pairplay.schemas.policy import read_policy
+
+from pairplay.report import plots
+from pairplay.report.study import markdown_table
+
+
+@dataclass
+class GameStats:
+    session: str
+    participant: str
+    phase: str
+    game: int
+    returning: bool
+    picks: list[int] = field(default_factory=list)  # per round
+    suggestions: int = 0
+    ignored: int = 0  # turns resolved under the ignore window
+    turns: int = 0
+    presses: int = 0
+    from_bias: list[int] = field(default_factory=list)  # per round: suggestions chosen from the bias policy
+    per_round_suggestions: list[int] = field(default_factory=list)
+
+
+def game_stats(path: Path, g, returning: bool, rounds: int) -> GameStats:
+    s = GameStats(g.session, g.participant, g.phase, g.game, returning,
+                  from_bias=[0] * rounds, per_round_suggestions=[0] * rounds)
+    for e in read_log(path).of("RoundEnded", "SuggestionMade", "TurnResolved", "WrongSuggestionPressed"):
+        name = type(e).__name__
+        if name == "RoundEnded":
+            s.picks.append(2 * e.turns)
+        elif name == "SuggestionMade":
+            s.suggestions += 1
+            if e.round < rounds:
+                s.per_round_suggestions[e.round] += 1
+                s.from_bias[e.round] += e.chosen_by == "bias"
+        elif name == "TurnResolved":
+            s.turns += 1
+            s.ignored += e.ignored_by_time
+        else:
+            s.presses += 1
+    return s
+
+
+def _mean_curve(curves: list[list[int]], rounds: int) -> np.ndarray:
+    """Mean per round over games (rounds a game did not play are left out)."""
+    out = np.full(rounds, np.nan)
+    for r in range(rounds):
+        vals = [c[r] for c in curves if len(c) > r]
+        if vals:
+            out[r] = float(np.mean(vals))
+    return out
+
+
+def _fmt(x: float) -> str:
+    return "-" if x != x else f"{x:.1f}"
+
+
+@dataclass
+class HumanReport:
+    out: Path
+    games: list[GameStats]
+    excluded: list[str]
+    curves: dict[str, np.ndarray]  # label -> mean picks per round
+    questionnaire: list[list[str]]
+    attention: list[list[str]]
+
+
+def human_report(folder: str | Path, out: str | Path | None = None, reference: str | Path | None = None) -> HumanReport:
+    """Write the report of the study in `folder` to `out` (default <folder>/report); see the module rule.
+
+    `reference`: a policy file drawn beside each bias policy (figure 7.5 compares the
+    human merge with the virtual Blind+Deaf one: `pairplay study`'s merged/blind+deaf.json).
+    Raises StudyDataError for a folder that is not a study, ValueError if it has no valid game."""
+    data = StudyData(folder)
+    study = data.study
+    out = Path(out) if out else data.folder / "report"
+    out.mkdir(parents=True, exist_ok=True)
+    games, excluded = [], []
+    for g in data.state.games.values():
+        if not g.valid_complete:
+            excluded.append(f"{g.session} ({g.invalid and 'invalid: ' + g.invalid or (g.ended.reason if g.ended else 'running')})")
+            continue
+        path = data.folder / g.recording
+        if not path.is_file():
+            excluded.append(f"{g.session} (recording missing)")
+            continue
+        games.append(game_stats(path, g, data.returning(g.participant, g.phase), study.phase_by_id(g.phase).rounds))
+    if not games:
+        raise ValueError(f"{data.folder}: no completed, valid game to report on")
+
+    # picks per round, per game and phase (figures 7.3a, 7.3b, 7.6)
+    with open(out / "picks.csv", "w", newline="") as f:
+        w = csv.writer(f)
+        w.writerow(["participant", "phase", "game", "returning", "round", "picks"])
+        for s in games:
+            for r, p in enumerate(s.picks):
+                w.writerow([s.participant, s.phase, s.game + 1, int(s.returning), r + 1, p])
+    curves: dict[str, np.ndarray] = {}
+    sections: list[str] = []
+    first = study.phase[0]
+    by_game = {f"{first.id} game {k + 1}": _mean_curve([s.picks for s in games if s.phase == first.id and s.game == k],
+                                                       first.rounds) for k in range(first.games)}
+    by_game = {k: v for k, v in by_game.items() if not np.isnan(v).all()}
+    curves.update(by_game)
+    plots.human_curves(by_game, out / "games.png", f"figure 7.3a: the games of {first.id}")
+    by_phase = {p.id: _mean_curve([s.picks for s in games if s.phase == p.id], p.rounds) for p in study.phase}
+    by_phase = {k: v for k, v in by_phase.items() if not np.isnan(v).all()}
+    curves.update({f"{k} (all games)": v for k, v in by_phase.items()})
+    plots.human_curves(by_phase, out / "phases.png", "figure 7.3b: phase against phase")
+    rows = [["curve", *[f"round {r + 1}" for r in range(max(len(v) for v in curves.values()))], "n games"]]
+    for label, c in curves.items():
+        phase_id = label.split(" ")[0]
+        n = sum(1 for s in games if s.phase == phase_id and (label.endswith("(all games)") or
+                                                              label == f"{phase_id} game {s.game + 1}"))
+        rows.append([label, *[_fmt(x) for x in c], *[""] * (len(rows[0]) - 2 - len(c)), str(n)])
+    sections += ["## Picks per round (figures 7.3a and 7.3b)", "",
+                 "Mean picks per round over the valid games (18 is perfect play: every turn a match).", "",
+                 markdown_table(rows), "", "![games](games.png) ![phases](phases.png)", ""]
+
+    reuse_phases = [p for p in study.phase if p.bias]
+    for p in reuse_phases:
+        groups = {"returning users": [s.picks for s in games if s.phase == p.id and s.returning],
+                  "new users": [s.picks for s in games if s.phase == p.id and not s.returning]}
+        group_curves = {k: _mean_curve(v, p.rounds) for k, v in groups.items() if v}
+        if not group_curves:
+            continue
+        plots.human_curves(group_curves, out / f"users-{p.id}.png", f"figure 7.6: {p.id}, returning vs new users",
+                           dashed=("returning users",))
+        bias = [s for s in games if s.phase == p.id]
+        share = [sum(s.from_bias[r] for s in bias) / max(1, sum(s.per_round_suggestions[r] for s in bias))
+                 for r in range(p.rounds)]
+        rows = [["group", *[f"round {r + 1}" for r in range(p.rounds)], "n games"]]
+        rows += [[k, *[_fmt(x) for x in v], str(len(groups[k]))] for k, v in group_curves.items()]
+        rows.append(["suggestions from the bias policy", *[f"{100 * x:.0f}%" for x in share], str(len(bias))])
+        sections += [f"## {p.id}: returning against new users (figure 7.6)", "",
+                     f"Returning users played {', '.join(q.id for q in study.phase[:study.phase.index(p)])} before; "
+                     "the last row is the share of suggestions pi-reuse took from the bias policy (figure 7.4's "
+                     "bars).", "", markdown_table(rows), "", f"![users](users-{p.id}.png)", ""]
+
+    # the merged policies (figure 7.5)
+    ref = read_policy(reference) if reference else None
+    panels = []
+    for phase_id, c in data.state.combined.items():
+        merged_path = data.folder / c.output
+        rules: dict[str, int] = defaultdict(int)
+        for r in c.decided_by:
+            rules[r] += 1
+        prof_rows = [["user", "speech incompatible %", "head incompatible %", "smile", "gaze"]]
+        for user, prof in c.profiles.items():
+            prof_rows.append([user, f"{100 * prof['speech']:.1f}", f"{100 * prof['head']:.1f}",
+                              "yes" if prof["facial"] else "no", "yes" if prof["gaze"] else "no"])
+        state_rows = [["state", "action", "decided by"]]
+        for s_, (a, rule) in enumerate(zip(c.actions, c.decided_by)):
+            if s_ < N_STATES - 1:
+                state_rows.append([f"{s_} {STATE_NAMES[s_]}", f"{a}: {ACTION_NAMES[a]}", rule])
+        exact = sum(1 for a in c.actions[:N_STATES - 1] if 33 <= a <= 44)
+        panels.append((f"{phase_id} bias ({len(c.users)} users)", np.asarray(c.actions)))
+        sections += [f"## The bias policy of {phase_id} (algorithm 4, figure 7.5)", "",
+                     f"Combined by the combiner service from {len(c.inputs)} policy files of {', '.join(c.users)} "
+                     f"(`{c.output}`{'' if merged_path.is_file() else ', file since removed'}); "
+                     f"{exact} of {N_STATES - 1} states say the exact position (codes 33-44); rules: "
+                     + "; ".join(f"{k} x{v}" for k, v in sorted(rules.items(), key=lambda kv: -kv[1])) + ".", "",
+                     "Profiles (algorithm 3) of the users combined:", "", markdown_table(prof_rows), "",
+                     "<details><summary>every state</summary>", "", markdown_table(state_rows), "", "</details>", ""]
+    if panels:
+        plots.human_merged(panels, None if ref is None else ("reference: " + ref.participant, np.asarray(ref.greedy)),
+                           N_STATES - 1, out / "merged.png")
+        sections += ["![merged](merged.png)", ""]
+
+    # attention: ignored suggestions and wrong-suggestion presses
+    att = [["participant", "phase", "games", "returning", "suggestions", "turns", "ignored turns",
+            "ignored share", "wrong-suggestion presses", "presses per suggestion"]]
+    by_pp: dict[tuple[str, str], list[GameStats]] = defaultdict(list)
+    for s in games:
+        by_pp[(s.participant, s.phase)].append(s)
+    totals: dict[str, list[int]] = defaultdict(lambda: [0, 0, 0, 0])
+    for (pid, phase_id), ss in sorted(by_pp.items(), key=lambda kv: ([p.id for p in study.phase].index(kv[0][1]), kv[0][0])):
+        sug, turns = sum(s.suggestions for s in ss), sum(s.turns for s in ss)
+        ign, pr = sum(s.ignored for s in ss), sum(s.presses for s in ss)
+        t = totals[phase_id]
+        t[0] += sug; t[1] += turns; t[2] += ign; t[3] += pr  # noqa: E702
+        att.append([pid, phase_id, str(len(ss)), "yes" if ss[0].returning else "no", str(sug), str(turns), str(ign),
+                    f"{100 * ign / max(1, turns):.0f}%", str(pr), f"{100 * pr / max(1, sug):.0f}%"])
+    for phase_id, (sug, turns, ign, pr) in totals.items():
+        att.append([f"all ({phase_id})", phase_id, "", "", str(sug), str(turns), str(ign),
+                    f"{100 * ign / max(1, turns):.0f}%", str(pr), f"{100 * pr / max(1, sug):.0f}%"])
+    with open(out / "attention.csv", "w", newline="") as f:
+        csv.writer(f).writerows(att)
+    sections += ["## Ignored suggestions and wrong-suggestion presses", "",
+                 f"A turn whose two picks came less than {study.study.ignore_window_ms:g} ms apart ignored its "
+                 "suggestion (thesis 7.1.2: no reward, no update); a press of the wrong-suggestion button gave -3 "
+                 "and asked for a new suggestion (7.1.3).", "", markdown_table(att), ""]
+
+    # questionnaires
+    q_rows = questionnaire_rows(data, {s.session for s in games})
+    with open(out / "questionnaire.csv", "w", newline="") as f:
+        csv.writer(f).writerows(q_rows)
+    sections += ["## Questionnaires", "",
+                 "Likert items: n, mean and median (1 = the low label); choices: counts; free text: every answer, "
+                 "quoted. Groups: new users and returning users (who played an earlier phase).", "",
+                 markdown_table(q_rows), ""]
+
+    head = [f"# {study.study.title or study.study.id}: the human-world report", "",
+            f"pairplay {__version__}; study `{study.study.id}` (seed {study.study.seed}); "
+            f"{len({s.participant for s in games})} participants, {len(games)} valid games"
+            + (f"; left out: {', '.join(excluded)}" if excluded else "") + ". Phases: "
+            + "; ".join(f"{p.id}: {p.games} game(s) x {p.rounds} rounds, {p.algorithm} ({p.preset})"
+                        + (f" on the bias of {p.bias}" if p.bias else "") for p in study.phase)
+            + f". Re-run: `pairplay report {data.folder}`.", ""]
+    (out / "report.md").write_text("\n".join(head + sections))
+    return HumanReport(out, games, excluded, curves, q_rows, att)
+
+
+def questionnaire_rows(data: StudyData, sessions: set[str]) -> list[list[str]]:
+    """One row per questionnaire item, phase and group (new / returning)."""
+    answers = [a for a in data.answers() if a["session"] in sessions]
+    grouped: dict[tuple, list[str]] = defaultdict(list)
+    for a in answers:
+        grouped[(a["questionnaire"], a["item"], a["phase"], "returning" if a["returning"] else "new")].append(a["answer"])
+    rows = [["questionnaire", "item", "phase", "group", "n", "summary"]]
+    phases = [p.id for p in data.study.phase]
+    for (qname, item_id, phase_id, group), values in sorted(
+            grouped.items(), key=lambda kv: (kv[0][0], _item_order(data, kv[0][0], kv[0][1]), phases.index(kv[0][2]),
+                                             kv[0][3])):
+        item = next((i for i in data.study.questionnaire.get(qname, None).item if i.id == item_id), None) \
+            if qname in data.study.questionnaire else None
+        kind = item.kind if item else "text"
+        if kind == "likert":
+            nums = [int(v) for v in values if v.strip().isdigit()]
+            summary = (f"mean {statistics.mean(nums):.2f}, median {statistics.median(nums):g} "
+                       f"(1 = {item.low or 'low'}, {item.scale} = {item.high or 'high'})") if nums else "-"
+        elif kind == "choice":
+            counts: dict[str, int] = defaultdict(int)
+            for v in values:
+                counts[v] += 1
+            summary = "; ".join(f"{k}: {v}" for k, v in sorted(counts.items(), key=lambda kv: -kv[1]))
+        else:
+            texts = [v.replace("|", "/").replace("\n", " ") for v in values if v.strip()]
+            summary = " / ".join(f"\"{t[:200]}\"" for t in texts) or "-"
+        rows.append([qname, item_id, phase_id, group, str(len(values)), summary])
+    return rows
+
+
+def _item_order(data: StudyData, qname: str, item_id: str) -> int:
+    q = data.study.questionnaire.get(qname)
+    ids = [i.id for i in q.item] if q else []
+    return ids.index(item_id) if item_id in ids else len(ids)

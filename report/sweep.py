@@ -1,0 +1,317 @@
+"""Sweeps of the simulated study: a grid of settings x seeds, each cell reproducible by its seed.
+
+Rule: a sweep is read from a TOML file (`read_grid`): fixed study settings in
+[study], lists of values in [grid] (the sweep is their product), and the
+seeds (`seeds = 5` for 0..4, or a list). Each (setting, seed) is one cell:
+`cell_measures` runs the study's training, evaluation (and, with
+`reuse = true`, the policy-reuse experiment) through `pairplay.core.study` and
+returns plain numbers, so a cell's result depends on its settings and seed
+only, wherever it runs. `run_sweep` runs the cells that have no result yet:
+in this process (or `workers` local processes), or on a Dask distributed
+cluster (`scheduler` = its address); each finished cell is written at once to
+cells/<id>.json (atomically), so an interrupted sweep resumes without
+recomputing finished cells. Then `summarise` folds the cells into one row per
+(setting, measure): n, mean, sd and the 95% confidence interval of the mean
+(Student's t), and the report writes sweep.csv, cells.csv, one figure per
+measure and sweep.md.
+
+Measures (picks per round: 18 is perfect play, lower is better):
+  <persona>/learned        mean picks per round of the persona's greedy policies, epsilon 0
+  <persona>/oracle         the oracle on the same evaluation games
+  <persona>/ratio          learned / oracle
+  <persona>/first50        online picks per round over the first 50 training rounds
+  <persona>/last50         ... over the last 50 training rounds
+  <persona>/reuse_gain     (reuse = true) scratch minus pi-reuse, first 50 rounds, held out
+  all/ratio                mean of the personas' ratios
+"""
+
+from __future__ import annotations
+
+import csv
+import hashlib
+import itertools
+import json
+import math
+import os
+import time
+import tomllib
+from dataclasses import asdict, dataclass, fields
+from pathlib import Path
+from typing import Callable, Iterable
+
+import numpy as np
+
+from pairplay.processes import worker_pool
+from pairplay.report.study import StudySettings
+
+SWEEPABLE = {f.name: f.type for f in fields(StudySettings) if f.name not in ("seed", "train_only")}
+
+# Student's t, 97.5% quantile, by degrees of freedom (1..30); above 30 the normal 1.96 is within 2%.
+T975 = (12.706, 4.303, 3.182, 2.776, 2.571, 2.447, 2.365, 2.306, 2.262, 2.228, 2.201, 2.179, 2.160, 2.145,
+        2.131, 2.120, 2.110, 2.101, 2.093, 2.086, 2.080, 2.074, 2.069, 2.064, 2.060, 2.056, 2.052, 2.048,
+        2.045, 2.042)
+
+
+class GridError(ValueError):
+    """A sweep file that cannot be run; the message names the file and the key."""
+
+
+@dataclass(frozen=True)
+class Cell:
+    setting: tuple[tuple[str, object], ...]  # the grid's values for this cell, in the grid's key order
+    seed: int
+
+    @property
+    def id(self) -> str:
+        """A digest of the settings and the seed: the cell's file name and its identity across runs."""
+        text = json.dumps({"setting": list(self.setting), "seed": self.seed}, sort_keys=True)
+        return hashlib.blake2b(text.encode(), digest_size=10).hexdigest()
+
+
+@dataclass(frozen=True)
+class Grid:
+    base: dict  # fixed StudySettings fields
+    axes: dict  # key -> list of values
+    seeds: tuple[int, ...]
+    reuse: bool = False
+
+    def settings(self) -> list[tuple[tuple[str, object], ...]]:
+        keys = list(self.axes)
+        return [tuple(zip(keys, values)) for values in itertools.product(*(self.axes[k] for k in keys))]
+
+    def cells(self) -> list[Cell]:
+        return [Cell(s, seed) for s in self.settings() for seed in self.seeds]
+
+    def study_settings(self, cell: Cell) -> StudySettings:
+        return StudySettings(**{**self.base, **dict(cell.setting), "seed": cell.seed})
+
+
+def _typed(path: str, key: str, value):
+    want = SWEEPABLE.get(key)
+    if want is None:
+        raise GridError(f"{path}: unknown study setting {key!r} (known: {', '.join(sorted(SWEEPABLE))})")
+    kind = {"int": int, "float": (int, float), "str": str, "bool": bool}[want if isinstance(want, str) else want.__name__]
+    if isinstance(value, bool) and kind is not bool or not isinstance(value, kind):
+        raise GridError(f"{path}: {key} = {value!r} is not a {want}")
+    return float(value) if want in ("float", float) else value
+
+
+def read_grid(path: str | Path) -> Grid:
+    """The sweep described by a TOML file (GridError naming the file and the key)."""
+    path = str(path)
+    try:
+        with open(path, "rb") as f:
+            data = tomllib.load(f)
+    except FileNotFoundError:
+        raise GridError(f"{path}: no such file") from None
+    except tomllib.TOMLDecodeError as exc:
+        raise GridError(f"{path}: not TOML ({exc})") from None
+    unknown = set(data) - {"study", "grid", "seeds", "reuse"}
+    if unknown:
+        raise GridError(f"{path}: unknown key(s) {', '.join(sorted(unknown))}: use [study], [grid], seeds, reuse")
+    base = {k: _typed(path, k, v) for k, v in data.get("study", {}).items()}
+    axes = {}
+    for k, values in data.get("grid", {}).items():
+        if not isinstance(values, list) or not values:
+            raise GridError(f"{path}: [grid] {k} must be a non-empty list of values")
+        axes[k] = [_typed(path, k, v) for v in values]
+        if len(set(map(repr, axes[k]))) != len(axes[k]):
+            raise GridError(f"{path}: [grid] {k} repeats a value")
+    clash = set(base) & set(axes)
+    if clash:
+        raise GridError(f"{path}: {', '.join(sorted(clash))} both fixed in [study] and swept in [grid]")
+    seeds = data.get("seeds", 5)
+    if isinstance(seeds, int) and not isinstance(seeds, bool):
+        if seeds < 1:
+            raise GridError(f"{path}: seeds = {seeds}: give a count of at least 1 or a list of seeds")
+        seeds = list(range(seeds))
+    if not isinstance(seeds, list) or not seeds or not all(isinstance(s, int) and s >= 0 for s in seeds):
+        raise GridError(f"{path}: seeds must be a count or a list of seeds >= 0")
+    grid = Grid(base, axes, tuple(seeds), bool(data.get("reuse", False)))
+    for s in grid.settings():  # every cell's settings must make a study
+        settings = grid.study_settings(Cell(s, grid.seeds[0]))
+        try:
+            personas = settings.persona_list()
+        except KeyError as exc:
+            raise GridError(f"{path}: {exc.args[0]}") from None
+        if min(settings.games, settings.rounds, settings.eval_rounds) < 1:
+            raise GridError(f"{path}: games, rounds and eval_rounds must be at least 1 ({dict(s)})")
+        if grid.reuse and len(personas) < 2:
+            raise GridError(f"{path}: reuse = true needs at least 2 personas (one is held out)")
+    return grid
+
+
+def cell_measures(settings: StudySettings, reuse: bool = False) -> dict[str, float]:
+    """The measures of one cell (see the module rule): a pure function of `settings`."""
+    from pairplay.core import study
+    from pairplay.schemas.config import LearnerConfig
+
+    personas = settings.persona_list()
+    config = LearnerConfig()
+    training = study.train(personas, settings.games, settings.rounds, settings.seed, config,
+                           reward_bonus=settings.reward_bonus)
+    cmp = study.compare(personas, training, settings.eval_rounds, settings.seed, reward_bonus=settings.reward_bonus)
+    out: dict[str, float] = {}
+    picks = training.result.picks
+    for i, p in enumerate(personas):
+        rows = [j for j, q in enumerate(training.personas) if q.key == p.key]
+        out[f"{p.key}/learned"] = float(cmp.learned[i])
+        out[f"{p.key}/oracle"] = float(cmp.oracle[i])
+        out[f"{p.key}/ratio"] = float(cmp.learned[i] / cmp.oracle[i])
+        out[f"{p.key}/first50"] = float(picks[rows, :50].mean())
+        out[f"{p.key}/last50"] = float(picks[rows, -50:].mean())
+    out["all/ratio"] = float(np.mean([out[f"{p.key}/ratio"] for p in personas]))
+    if reuse:
+        users = study.user_set(personas, training, settings.seed, settings.trained_updates)
+        reuse_config = LearnerConfig(psi_start=settings.psi, psi_decay=settings.psi_decay,
+                                     reuse_rounds=max(0, settings.rounds - settings.reuse_last))
+        result = study.reuse_experiment(personas, users, dict(zip(cmp.persona, cmp.oracle)), settings.reuse_seeds,
+                                        settings.rounds, settings.seed, reuse_config,
+                                        reward_bonus=settings.reward_bonus)
+        for i, key in enumerate(result.persona):
+            out[f"{key}/reuse_gain"] = float(result.first50[i, 0].mean() - result.first50[i, 1].mean())
+    return out
+
+
+def _run_cell(grid: Grid, cell: Cell) -> tuple[str, dict]:
+    return cell.id, cell_measures(grid.study_settings(cell), grid.reuse)
+
+
+def _write_json_atomic(path: Path, data: dict) -> None:
+    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
+    tmp.write_text(json.dumps(data, sort_keys=True, indent=1))
+    os.replace(tmp, path)
+
+
+def finished_cells(out: Path, grid: Grid) -> dict[str, dict]:
+    """Results already on disk for this grid's cells: id -> measures (others are ignored)."""
+    done = {}
+    wanted = {c.id: c for c in grid.cells()}
+    for path in sorted((out / "cells").glob("*.json")):
+        try:
+            data = json.loads(path.read_text())
+        except (OSError, ValueError):
+            continue  # a damaged cell file is recomputed
+        cid = path.stem
+        if cid in wanted and data.get("seed") == wanted[cid].seed and isinstance(data.get("measures"), dict):
+            done[cid] = data["measures"]
+    return done
+
+
+@dataclass
+class SweepRun:
+    cells: int
+    computed: int  # cells computed in this run (the others were on disk)
+    wall_s: float
+    where: str
+
+
+def run_sweep(grid: Grid, out: str | Path, *, scheduler: str | None = None, workers: int = 1,
+              progress: Callable[[int], None] | None = None) -> SweepRun:
+    """Compute every cell of `grid` that `out`/cells/ does not hold yet; see the module rule.
+
+    `scheduler`: a Dask distributed scheduler address (tcp://host:port), or None to
+    run here (`workers` > 1: that many local processes)."""
+    out = Path(out)
+    (out / "cells").mkdir(parents=True, exist_ok=True)
+    cells = grid.cells()
+    done = finished_cells(out, grid)
+    todo = [c for c in cells if c.id not in done]
+    by_id = {c.id: c for c in cells}
+    start = time.perf_counter()
+
+    def store(cid: str, measures: dict) -> None:
+        cell = by_id[cid]
+        _write_json_atomic(out / "cells" / f"{cid}.json",
+                           {"setting": [list(kv) for kv in cell.setting], "seed": cell.seed, "measures": measures})
+        if progress:
+            progress(1)
+
+    if scheduler:
+        from dask.distributed import Client, as_completed
+        with Client(scheduler, timeout="10s") as client:
+            futures = [client.submit(_run_cell, grid, c, key=f"pairplay-cell-{c.id}", pure=True) for c in todo]
+            for future in as_completed(futures):
+                store(*future.result())
+        where = f"dask {scheduler}"
+    elif workers > 1:
+        from concurrent.futures import as_completed as done_first
+        with worker_pool(workers) as pool:
+            for future in done_first([pool.submit(_run_cell, grid, c) for c in todo]):
+                store(*future.result())
+        where = f"{workers} local processes"
+    else:
+        for c in todo:
+            store(*_run_cell(grid, c))
+        where = "this process"
+    return SweepRun(len(cells), len(todo), time.perf_counter() - start, where)
+
+
+def _t975(n: int) -> float:
+    return T975[n - 2] if 2 <= n <= len(T975) + 1 else 1.96
+
+
+def summarise(grid: Grid, results: dict[str, dict]) -> list[dict]:
+    """One row per (setting, measure): the setting's values, measure, n, mean, sd, ci95_low, ci95_high.
+
+    Rows are in the grid's order, measures sorted; sd is the sample sd (n - 1)."""
+    rows = []
+    for setting in grid.settings():
+        per_seed = [results[Cell(setting, s).id] for s in grid.seeds]
+        for measure in sorted(set().union(*per_seed)):
+            values = np.array([m[measure] for m in per_seed if measure in m], dtype=float)
+            n = len(values)
+            mean = float(values.mean())
+            sd = float(values.std(ddof=1)) if n > 1 else 0.0
+            half = _t975(n) * sd / math.sqrt(n) if n > 1 else 0.0
+            rows.append({**dict(setting), "measure": measure, "n": n, "mean": mean, "sd": sd,
+                         "ci95_low": mean - half, "ci95_high": mean + half})
+    return rows
+
+
+def setting_label(setting: Iterable[tuple[str, object]]) -> str:
+    return ", ".join(f"{k}={v}" for k, v in setting) or "(no grid)"
+
+
+def write_sweep(out: str | Path, grid: Grid, results: dict[str, dict], run: SweepRun) -> list[Path]:
+    """sweep.csv (the summary), cells.csv (every cell and seed), one figure per measure, sweep.md."""
+    from pairplay.report import plots
+
+    out = Path(out)
+    rows = summarise(grid, results)
+    keys = list(grid.axes)
+    written = [out / "sweep.csv", out / "cells.csv", out / "sweep.md"]
+    with open(out / "sweep.csv", "w", newline="") as f:
+        w = csv.writer(f)
+        w.writerow([*keys, "measure", "n", "mean", "sd", "ci95_low", "ci95_high"])
+        for r in rows:
+            w.writerow([*(r[k] for k in keys), r["measure"], r["n"], f"{r['mean']:.6f}", f"{r['sd']:.6f}",
+                        f"{r['ci95_low']:.6f}", f"{r['ci95_high']:.6f}"])
+    with open(out / "cells.csv", "w", newline="") as f:
+        w = csv.writer(f)
+        w.writerow(["cell", *keys, "seed", "measure", "value"])
+        for cell in grid.cells():
+            for measure, value in sorted(results[cell.id].items()):
+                w.writerow([cell.id, *(dict(cell.setting)[k] for k in keys), cell.seed, measure, f"{value:.6f}"])
+    measures = sorted({r["measure"] for r in rows})
+    labels = [setting_label(s) for s in grid.settings()]
+    figures = []
+    for measure in measures:
+        mine = [r for r in rows if r["measure"] == measure]
+        path = out / "figures" / (measure.replace("/", "-") + ".png")
+        path.parent.mkdir(exist_ok=True)
+        plots.sweep_measure(labels, [r["mean"] for r in mine], [r["ci95_low"] for r in mine],
+                            [r["ci95_high"] for r in mine], path, measure, len(grid.seeds))
+        figures.append(path)
+    md = ["# pairplay sweep", "",
+          f"{len(grid.settings())} settings x {len(grid.seeds)} seeds = {run.cells} cells; computed {run.computed} "
+          f"in {run.wall_s:.1f} s ({run.where}); fixed settings: "
+          + (", ".join(f"{k}={v}" for k, v in grid.base.items()) or "the study's defaults") + ".", "",
+          "Each row: the mean over seeds, the sample sd, and the 95% confidence interval of the mean "
+          "(Student's t). Picks per round: 18 is perfect play, lower is better; ratio: learned / oracle.", "",
+          "| setting | measure | n | mean | sd | 95% CI |", "|---|---|---|---|---|---|"]
+    md += [f"| {setting_label((k, r[k]) for k in keys)} | {r['measure']} | {r['n']} | {r['mean']:.3f} | "
+           f"{r['sd']:.3f} | {r['ci95_low']:.3f} to {r['ci95_high']:.3f} |" for r in rows]
+    md += ["", *[f"![{p.stem}](figures/{p.name})" for p in figures], ""]
+    (out / "sweep.md").write_text("\n".join(md))
+    return written + figures

@@ -1,0 +1,114 @@
+"""The study journal: what the experimenter did, one JSON object a line (journal.jsonl).
+
+Rule: the games themselves are recorded by the bus recorder (one MCAP file per
+game); the journal records the study around them: who was registered (a
+pseudonymous id, never a name), which game of which phase a session was, how it
+ended, what the experimenter paused, aborted or marked invalid and why, the
+bias policies combined, the participants deleted. A study's state is the fold
+of its journal (replay/studydata.py). Each line is a tagged Struct (field
+"event"), readable by any JSON tool; unknown fields are ignored on read, so
+an older pairplay reads a newer journal.
+
+One exception to append-only, by design: deleting a participant (the right to
+erasure) rewrites the journal without that participant's lines and appends a
+ParticipantDeleted that holds no id, only counts and the merged policies
+that had used their data.
+"""
+
+from __future__ import annotations
+
+import msgspec
+
+
+class JournalEvent(msgspec.Struct, frozen=True, kw_only=True, tag_field="event"):
+    time_ns: int = 0
+    by: str = "experimenter"
+
+
+class StudyCreated(JournalEvent, tag="StudyCreated"):
+    study: str
+    study_file_sha256: str
+    software_version: str = ""
+
+
+class ParticipantRegistered(JournalEvent, tag="ParticipantRegistered"):
+    participant: str  # pseudonymous id, e.g. p01
+    joins: str  # the phase they first play
+
+
+class GameStarted(JournalEvent, tag="GameStarted"):
+    participant: str
+    phase: str
+    game: int  # within the phase
+    session: str
+    recording: str  # path relative to the study folder
+    bias: str = ""  # the merged policy file a pi-reuse game starts from
+
+
+class GamePaused(JournalEvent, tag="GamePaused"):
+    session: str
+    participant: str
+
+
+class GameResumed(JournalEvent, tag="GameResumed"):
+    session: str
+    participant: str
+
+
+class GameEnded(JournalEvent, tag="GameEnded"):
+    session: str
+    participant: str
+    outcome: str  # "completed" | "aborted"
+    reason: str = ""
+    rounds_played: int = 0
+    policy: str = ""  # the rebuilt policy file, relative to the study folder
+    questionnaire: bool = False  # answers recorded in the game's recording
+
+
+class SessionMarkedInvalid(JournalEvent, tag="SessionMarkedInvalid"):
+    session: str
+    participant: str
+    reason: str
+
+
+class BiasCombined(JournalEvent, tag="BiasCombined"):
+    """The phase's bias policy: the combiner's answer (algorithm 4) and each user's profile (algorithm 3)."""
+
+    phase: str  # the phase that reuses it
+    from_phase: str
+    request_id: str
+    inputs: list[str]  # policy files, relative to the study folder
+    users: list[str]
+    output: str  # the merged policy file
+    actions: list[int]
+    decided_by: list[str]
+    profiles: dict[str, dict[str, float]] = {}  # user -> speech, head (shares), facial, gaze (0/1), compared_states
+
+
+class ParticipantDeleted(JournalEvent, tag="ParticipantDeleted"):
+    """A participant was erased; no id is kept, only what the deletion touched."""
+
+    deletion: str  # a random id of this deletion
+    sessions_removed: int
+    files_removed: int
+    journal_lines_removed: int
+    merged_policies_using_them: list[str] = []
+    key_file_line_removed: bool = False
+
+
+JOURNAL_TYPES = (StudyCreated, ParticipantRegistered, GameStarted, GamePaused, GameResumed, GameEnded,
+                 SessionMarkedInvalid, BiasCombined, ParticipantDeleted)
+AnyJournal = JOURNAL_TYPES[0]
+for _t in JOURNAL_TYPES[1:]:
+    AnyJournal = AnyJournal | _t  # type: ignore[assignment]
+
+_decoder = msgspec.json.Decoder(AnyJournal)
+_encoder = msgspec.json.Encoder()
+
+
+def decode_line(line: bytes | str) -> JournalEvent:
+    return _decoder.decode(line)
+
+
+def encode_line(event: JournalEvent) -> bytes:
+    return _encoder.encode(event) + b"\n"

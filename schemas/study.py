@@ -1,0 +1,232 @@
+"""A study with people, defined in one TOML file (thesis 7.2): phases, games, rounds, questionnaires.
+
+Rule: `load_study(path)` reads the file with tomllib, converts it strictly (an
+unknown key is an error) and checks what a type cannot say (a phase's bias
+names an earlier phase, a questionnaire named by a phase exists, a Likert
+scale has 2..11 points...). Every problem is a `StudyFileError` whose message
+is ONE line naming the file and the place (`phase[1].bias`, `questionnaire.
+after-game.item[3].kind`): the CLI prints it as it is. Nothing else in the
+file is trusted: ids become file and bus key chunks, so they are restricted
+to [a-z0-9-_].
+
+The shipped example, `studies/thesis-ch7.toml` (package data), is the
+thesis's own protocol: phase 1, 2 games x 5 rounds of Q-learning with epsilon
+0.9 falling by a fifth of 0.9 a round; the phase-1 policies combined into the
+bias policy; phase 2, 1 game x 5 rounds of pi-reuse with the last round on the
+new policy alone; a questionnaire after every game built from what sections
+7.2-7.3 report of the thesis's questionnaires.
+"""
+
+from __future__ import annotations
+
+import re
+import tomllib
+from importlib import resources
+from pathlib import Path
+from typing import Literal, Union
+
+import msgspec
+
+from .config import LearnerConfig
+
+ID = re.compile(r"^[a-z0-9][a-z0-9_-]{0,39}$")
+PRESETS = ("virtual", "human-phase1", "human-phase2")
+ALGORITHMS = ("q-learning", "pi-reuse")
+ROBOT_SCHEMES = ("virtual", "none", "iristk://", "furhat://")
+EXAMPLE = "thesis-ch7.toml"
+
+
+class StudyFileError(ValueError):
+    """A study file that cannot be used; the message is one line saying what and where."""
+
+
+class Item(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
+    """One question. kind: "likert" (1..scale, `low`/`high` label the ends), "text" (free),
+    "choice" (one of `options`). `ask`: who gets it: everyone, or only participants
+    who played an earlier phase ("returning", thesis 7.2: phase-1 users get more
+    questions in phase 2), or only those who did not ("new")."""
+
+    id: str
+    text: str
+    kind: Literal["likert", "text", "choice"]
+    scale: int = 5
+    low: str = ""
+    high: str = ""
+    options: list[str] = []
+    required: bool = True
+    ask: Literal["all", "returning", "new"] = "all"
+    max_chars: int = 2000
+
+
+class Questionnaire(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
+    title: str
+    item: list[Item]
+    intro: str = ""
+
+
+class Phase(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
+    """One phase of the protocol: who plays, how many games of how many rounds, how the robot learns.
+
+    `players`: "new" (those registered for this phase) or "all" (also everyone
+    of the earlier phases: the thesis's phase 2). `bias`: the phase whose
+    policies are combined (algorithm 4, through the combiner service) into this
+    phase's bias policy (pi-reuse). `learner`: fields of LearnerConfig that
+    override the preset's. `questionnaires`: answered after every game.
+    """
+
+    id: str
+    games: int
+    rounds: int
+    algorithm: Literal["q-learning", "pi-reuse"] = "q-learning"
+    preset: Literal["virtual", "human-phase1", "human-phase2"] = "human-phase1"
+    players: Literal["new", "all"] = "new"
+    bias: str = ""
+    learner: dict[str, Union[float, int, None]] = {}
+    questionnaires: list[str] = []
+    title: str = ""
+
+
+class StudyHead(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
+    """[study]: the name, the seed of every session's deal and agent streams, the
+    touch-screen settings of 7.1.2-7.1.3 and the robot (--robot forms)."""
+
+    id: str
+    title: str = ""
+    seed: int = 0
+    ignore_window_ms: float = 1500.0
+    # which clock times the two picks: the board page's ("page", the thesis's touch screen) or the server's
+    ignore_clock: Literal["page", "server"] = "page"
+    turn_back_ms: float = 1500.0  # a missed pair stays face up this long on the board
+    wrong_suggestion_button: bool = True
+    robot: str = "virtual"
+
+
+class Study(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
+    study: StudyHead
+    phase: list[Phase]
+    questionnaire: dict[str, Questionnaire] = {}
+
+    def phase_by_id(self, phase_id: str) -> Phase:
+        for p in self.phase:
+            if p.id == phase_id:
+                return p
+        raise KeyError(f"no phase {phase_id!r} in study {self.study.id!r}")
+
+    def learner_config(self, phase: Phase) -> LearnerConfig:
+        """The phase's schedule: its preset for its rounds, with its overrides."""
+        base = {"virtual": lambda r: LearnerConfig(), "human-phase1": LearnerConfig.human_phase1,
+                "human-phase2": LearnerConfig.human_phase2}[phase.preset](phase.rounds)
+        return msgspec.structs.replace(base, **phase.learner)
+
+    def questions(self, name: str, returning: bool) -> list[Item]:
+        """The items of questionnaire `name` a (returning or new) participant is asked."""
+        wanted = ("all", "returning" if returning else "new")
+        return [i for i in self.questionnaire[name].item if i.ask in wanted]
+
+
+def _check(study: Study) -> None:
+    """Every rule a type cannot state; raises StudyFileError('<where>: <what>')."""
+    def need_id(where: str, value: str) -> None:
+        if not ID.match(value):
+            raise StudyFileError(f"{where}: {value!r} must be 1-40 characters of a-z 0-9 - _ (it names files)")
+
+    need_id("study.id", study.study.id)
+    for key in ("ignore_window_ms", "turn_back_ms"):
+        if getattr(study.study, key) < 0:
+            raise StudyFileError(f"study.{key}: must be >= 0, got {getattr(study.study, key)}")
+    robot = study.study.robot
+    if not any(robot == s or (s.endswith("://") and robot.startswith(s) and len(robot) > len(s))
+               for s in ROBOT_SCHEMES):
+        raise StudyFileError(f"study.robot: {robot!r} is not virtual, none, iristk://HOST[:PORT] or furhat://HOST[:PORT]")
+    if not study.phase:
+        raise StudyFileError("phase: a study needs at least one [[phase]]")
+    seen: list[str] = []
+    for n, p in enumerate(study.phase):
+        where = f"phase[{n}]"
+        need_id(f"{where}.id", p.id)
+        if p.id in seen:
+            raise StudyFileError(f"{where}.id: {p.id!r} is used twice")
+        if not 1 <= p.games <= 20:
+            raise StudyFileError(f"{where}.games: must be 1..20, got {p.games}")
+        if not 1 <= p.rounds <= 100:
+            raise StudyFileError(f"{where}.rounds: must be 1..100, got {p.rounds}")
+        if p.algorithm == "pi-reuse" and not p.bias:
+            raise StudyFileError(f"{where}.bias: pi-reuse needs the phase whose policies make the bias policy")
+        if p.bias and p.bias not in seen:
+            raise StudyFileError(f"{where}.bias: {p.bias!r} is not an earlier phase (earlier: {seen or 'none'})")
+        if p.bias and p.algorithm != "pi-reuse":
+            raise StudyFileError(f"{where}.bias: only a pi-reuse phase uses a bias policy")
+        if p.bias and study.phase_by_id(p.bias).games < 1:
+            raise StudyFileError(f"{where}.bias: phase {p.bias!r} plays no games")
+        for name in p.questionnaires:
+            if name not in study.questionnaire:
+                raise StudyFileError(f"{where}.questionnaires: no [questionnaire.{name}] in the file")
+        try:
+            study.learner_config(p)
+        except (TypeError, ValueError) as err:
+            raise StudyFileError(f"{where}.learner: {err}") from None
+        seen.append(p.id)
+    if study.phase[0].players == "all":
+        raise StudyFileError("phase[0].players: the first phase has no earlier players; use \"new\"")
+    for name, q in study.questionnaire.items():
+        need_id(f"questionnaire.{name}", name)
+        if not q.item:
+            raise StudyFileError(f"questionnaire.{name}: needs at least one [[questionnaire.{name}.item]]")
+        ids: set[str] = set()
+        for n, item in enumerate(q.item):
+            where = f"questionnaire.{name}.item[{n}]"
+            need_id(f"{where}.id", item.id)
+            if item.id in ids:
+                raise StudyFileError(f"{where}.id: {item.id!r} is used twice in questionnaire {name!r}")
+            ids.add(item.id)
+            if not item.text.strip():
+                raise StudyFileError(f"{where}.text: the question is empty")
+            if item.kind == "likert" and not 2 <= item.scale <= 11:
+                raise StudyFileError(f"{where}.scale: a Likert scale has 2..11 points, got {item.scale}")
+            if item.kind == "choice" and len(item.options) < 2:
+                raise StudyFileError(f"{where}.options: a choice needs at least 2 options")
+            if item.kind != "choice" and item.options:
+                raise StudyFileError(f"{where}.options: only a choice item has options")
+            if not 1 <= item.max_chars <= 20000:
+                raise StudyFileError(f"{where}.max_chars: must be 1..20000")
+
+
+def parse_study(text: str, source: str = "study") -> Study:
+    """A Study from TOML text; StudyFileError('<source>: <where>: <what>') if anything is wrong."""
+    try:
+        raw = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as err:
+        raise StudyFileError(f"{source}: not valid TOML: {err}") from None
+    try:
+        study = msgspec.convert(raw, Study)
+    except msgspec.ValidationError as err:
+        raise StudyFileError(f"{source}: {_where(str(err))}") from None
+    try:
+        _check(study)
+    except StudyFileError as err:
+        raise StudyFileError(f"{source}: {err}") from None
+    return study
+
+
+def _where(message: str) -> str:
+    """msgspec's 'Expected `int`, got `str` - at `$.phase[0].rounds`' as 'phase[0].rounds: Expected ...'."""
+    m = re.match(r"^(.*) - at `\$\.?(.*)`$", message)
+    if not m:
+        return message
+    what, where = m.groups()
+    return f"{where or 'top level'}: {what}"
+
+
+def load_study(path: str | Path) -> Study:
+    """Read and check a study file (StudyFileError, one line, if it cannot be used)."""
+    path = Path(path)
+    try:
+        text = path.read_text(encoding="utf-8")
+    except (OSError, UnicodeDecodeError) as err:
+        raise StudyFileError(f"{path}: cannot read: {getattr(err, 'strerror', None) or err}") from None
+    return parse_study(text, str(path))
+
+
+def example_text() -> str:
+    """The shipped example study (the thesis's chapter 7 protocol), as TOML text."""
+    return resources.files("pairplay.schemas").joinpath("studies", EXAMPLE).read_text(encoding="utf-8")

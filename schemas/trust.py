@@ -1,0 +1,75 @@
+"""What a service trusts on the bus: who may publish which event, sequence numbers, sizes.
+
+Rule: a message is taken only if
+- its payload is at most `MAX_PAYLOAD` bytes (the largest event pairplay
+  writes, a SessionStarted with a fixed policy, is ~2 KiB; a 10 MB "pick" is
+  refused before it is even decoded);
+- its source may publish its event (`PUBLISHERS`: only the game announces
+  or ends a session, only a player source picks, only the learner suggests,
+  only the robot reports RobotActed; ServiceStarted and MessageRejected from
+  any known service; every source name outside `SOURCES` is refused);
+- its sequence number rises on its key and lies at most `MAX_SEQ_JUMP` above
+  the highest one seen from its source (a forged seq 1e9 is refused instead
+  of making every later real message look like a duplicate). A source's
+  numbers rise by one per event; a listener sees them with gaps (it does not
+  subscribe to every key), but no service publishes `MAX_SEQ_JUMP` events
+  a listener cannot see between two it can: rejections are rate-limited
+  (`REJECTIONS_PER_S`);
+- its envelope is in range (schemas/envelope.py: seq 1..2^53, time_ns 0..2^63).
+One session has one SessionStarted and one SessionEnded: a second is refused.
+Everything refused is recorded (MessageRejected, rate-limited with counts).
+Who can put a message on a key at all is Zenoh's access control
+(docs/bus.md "Security"): these rules hold whatever the network lets through.
+"""
+
+from __future__ import annotations
+
+MAX_PAYLOAD = 64 * 1024  # bytes
+MAX_SEQ_JUMP = 10_000
+REJECTIONS_PER_S = 20  # recorded one by one per service and second; beyond that, counted
+PLAYERS = frozenset({"participant", "board"})
+SERVICES = frozenset({"game", "learner", "participant", "board", "robot", "combiner", "recorder", "tracker"})
+CLIENTS = frozenset({"console", "experimenter"})  # people's tools: requests and questionnaires
+SOURCES = SERVICES | CLIENTS
+
+GAME = frozenset({"game"})
+PUBLISHERS: dict[str, frozenset[str]] = {
+    "ServiceStarted": SERVICES,
+    "MessageRejected": SERVICES,
+    "SessionStarted": GAME,
+    "RoundStarted": GAME,
+    "CardRevealed": GAME,
+    "PickRejected": GAME,
+    "SuggestionRequested": GAME,
+    "TurnResolved": GAME,
+    "RoundEnded": GAME,
+    "SessionEnded": GAME,
+    "CardObserved": GAME | PLAYERS,  # first-pick (game) or intended (the player)
+    "CardPicked": PLAYERS,
+    "SuggestionPerceived": frozenset({"participant"}),
+    "WrongSuggestionPressed": PLAYERS,
+    "QuestionnaireAnswered": PLAYERS | CLIENTS,
+    "SuggestionMade": frozenset({"learner"}),
+    "RewardGiven": frozenset({"learner"}),
+    "QUpdated": frozenset({"learner"}),
+    "LSPIUpdated": frozenset({"learner"}),
+    "RobotActed": frozenset({"robot"}),
+    "CombineRequested": CLIENTS,
+    "PolicyCombined": frozenset({"combiner"}),
+    "RecordingGap": frozenset({"recorder"}),
+    "GazeFixated": frozenset({"tracker"}),
+    "SessionPaused": CLIENTS,  # the experimenter's console (issue 15)
+    "SessionResumed": CLIENTS,
+    "SessionAborted": CLIENTS,  # an eye tracker (observed source "gaze", issue 14)
+}
+ONCE_PER_SESSION = frozenset({"SessionStarted", "SessionEnded"})
+
+
+def publisher_refusal(tag: str, source: str) -> str | None:
+    """Why `source` may not publish `tag` (None: it may)."""
+    allowed = PUBLISHERS.get(tag)
+    if allowed is None:
+        return f"no event type {tag!r}"
+    if source not in allowed:
+        return f"{tag} is published only by {', '.join(sorted(allowed))}, not by {source!r}"
+    return None

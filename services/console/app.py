@@ -1,0 +1,290 @@
+"""The console's routes: the experimenter's page and API, and the participant's questionnaire page.
+
+Rule: every console route needs the experimenter token (`?token=` or the
+`X-Pairplay-Token` header), compared in constant time; a wrong one gets 403 and
+nothing else. The questionnaire routes need the running game's own
+questionnaire token instead, which is useless once the answers are in. A
+request the study refuses (a step out of order, a bad answer, an abort without
+a reason) is answered 400 with `{"error": "<one line>"}`; nothing a request
+sends can raise out of a route. Steps (a game, a combination, a report) run in
+a background thread, one at a time (the runner refuses a second), and the page
+follows them by polling `/api/console/state` (what it shows: the plan, the
+running game's round, picks, last suggestion and robot action, the learning
+curve so far, the combination's profiles and per-state rules).
+"""
+
+from __future__ import annotations
+
+import hmac
+import logging
+import threading
+import time
+from dataclasses import asdict
+from pathlib import Path
+
+import msgspec
+from starlette.requests import Request
+from starlette.responses import FileResponse, JSONResponse, Response
+from starlette.routing import Mount, Route
+from starlette.staticfiles import StaticFiles
+
+from pairplay.core.actions import ACTION_NAMES
+from pairplay.core.geometry import N_STATES, STATE_NAMES
+from pairplay.replay.studydata import StudyDataError
+
+from pairplay.services.protocol import StudyRunner
+
+log = logging.getLogger("pairplay.console")
+STATIC = Path(__file__).parent / "static"
+MAX_BODY = 64 * 1024
+
+
+class Console:
+    """The console's state around a StudyRunner: the step running in the background and its outcome."""
+
+    def __init__(self, runner: StudyRunner, token: str, board_url=None):
+        self.runner, self.token = runner, token
+        self.data = runner.data
+        self.thread: threading.Thread | None = None
+        self.last = {"step": "", "ok": True, "message": ""}
+        # board_url(session) -> the board page's URL for the running game (the lab server's), or None
+        self.board_url = board_url
+
+    # -- background steps ----------------------------------------------------
+    def busy(self) -> bool:
+        return self.thread is not None and self.thread.is_alive()
+
+    def start(self, label: str, work) -> None:
+        if self.busy():
+            raise StudyDataError(f"a step is already running ({self.last['step']})")
+
+        def run() -> None:
+            try:
+                result = work()
+                self.last = {"step": label, "ok": True, "message": _describe(result)}
+            except StudyDataError as err:
+                self.last = {"step": label, "ok": False, "message": str(err)}
+            except Exception as err:  # a step must never take the console down with it
+                log.exception("step %s failed", label)
+                self.last = {"step": label, "ok": False, "message": f"{type(err).__name__}: {err}"}
+        self.last = {"step": label, "ok": True, "message": "running"}
+        self.thread = threading.Thread(target=run, name="pairplay-console-step", daemon=True)
+        self.thread.start()
+
+    # -- what the page shows -------------------------------------------------
+    def state(self) -> dict:
+        data, live = self.data, self.runner.live
+        plan = [{"kind": s.kind, "phase": s.phase, "participant": s.participant, "game": s.game, "done": s.done,
+                 "blocked": s.blocked, "label": s.label} for s in data.plan()]
+        nxt = next((p for p in plan if not p["done"]), None)
+        games = [{"session": g.session, "participant": g.participant, "phase": g.phase, "game": g.game + 1,
+                  "outcome": g.ended.outcome if g.ended else "running", "reason": g.ended.reason if g.ended else "",
+                  "rounds": g.ended.rounds_played if g.ended else 0, "invalid": g.invalid,
+                  "questionnaire": bool(g.ended and g.ended.questionnaire)} for g in data.state.games.values()]
+        combined = {}
+        for phase, c in data.state.combined.items():
+            combined[phase] = {
+                "users": c.users, "output": c.output, "profiles": c.profiles,
+                "states": [{"state": f"{s} {STATE_NAMES[s]}", "action": f"{a}: {ACTION_NAMES[a]}", "rule": r}
+                           for s, (a, r) in enumerate(zip(c.actions, c.decided_by)) if s < N_STATES - 1]}
+        live_d = asdict(live)
+        live_d.pop("questionnaire_token")
+        if live.session and live.questionnaire_token and live.state in ("playing", "questionnaire"):
+            live_d["questionnaire_url"] = f"/questionnaire?session={live.session}&token={live.questionnaire_token}"
+        if live.session and self.board_url is not None and live.state == "playing":
+            live_d["board_url"] = self.board_url(live.session)
+        return {
+            "study": {"id": data.study.study.id, "title": data.study.study.title, "folder": str(data.folder),
+                      "phases": [p.id for p in data.study.phase], "key_file": bool(data.key_file)},
+            "participants": [{"id": pid, "joins": r.joins,
+                              "games": sum(1 for g in data.games_of(pid) if g.valid_complete)}
+                             for pid, r in data.state.participants.items()],
+            "plan": plan, "next": nxt, "games": games, "combined": combined, "live": live_d,
+            "busy": self.busy(), "last": self.last, "deletions": len(data.state.deletions),
+            "report": (data.folder / "report" / "report.md").is_file(),
+        }
+
+
+def _describe(result) -> str:
+    if result is None:
+        return "done"
+    if hasattr(result, "ended") and getattr(result, "ended", None) is not None:
+        e = result.ended
+        return f"{result.session}: {e.outcome}" + (f" ({e.reason})" if e.reason else "") + f", {e.rounds_played} rounds"
+    if hasattr(result, "users"):
+        return f"bias policy of {result.phase}: {len(result.users)} users combined into {result.output}"
+    return str(result)
+
+
+async def _body(request: Request) -> dict:
+    raw = await request.body()
+    if len(raw) > MAX_BODY:
+        raise StudyDataError("request too large")
+    if not raw:
+        return {}
+    try:
+        body = msgspec.json.decode(raw)
+    except msgspec.DecodeError:
+        raise StudyDataError("the request is not JSON") from None
+    if not isinstance(body, dict):
+        raise StudyDataError("the request must be a JSON object")
+    return body
+
+
+def _str(body: dict, key: str, default: str | None = None) -> str:
+    value = body.get(key, default)
+    if not isinstance(value, str):
+        raise StudyDataError(f"{key!r} must be a string")
+    return value
+
+
+def console_routes(console: Console) -> list:
+    """The routes of the console and the questionnaire page, to mount in the lab server's Starlette app."""
+    runner, data = console.runner, console.data
+
+    def authorised(request: Request) -> bool:
+        given = request.query_params.get("token") or request.headers.get("x-pairplay-token", "")
+        return hmac.compare_digest(given.encode(), console.token.encode())
+
+    def guarded(handler):
+        async def route(request: Request) -> Response:
+            if not authorised(request):
+                return JSONResponse({"error": "wrong or missing experimenter token"}, status_code=403)
+            try:
+                return await handler(request)
+            except StudyDataError as err:
+                return JSONResponse({"error": str(err)}, status_code=400)
+            except Exception as err:  # malformed input must not take the lab down
+                log.exception("console request failed")
+                return JSONResponse({"error": f"{type(err).__name__}: {err}"}, status_code=400)
+        return route
+
+    async def page(request: Request) -> Response:
+        return FileResponse(STATIC / "console.html")
+
+    async def state(request: Request) -> Response:
+        return JSONResponse(console.state())
+
+    async def register(request: Request) -> Response:
+        body = await _body(request)
+        phase = _str(body, "phase", data.study.phase[0].id)
+        count = body.get("count", 1)
+        if not isinstance(count, int) or not 1 <= count <= 50:
+            raise StudyDataError("count must be 1..50")
+        label = _str(body, "label", "")
+        ids = [data.register(phase, label) for _ in range(count)]
+        data.write_tables()
+        return JSONResponse({"registered": ids})
+
+    async def start_next(request: Request) -> Response:
+        step = data.next_step()
+        if step is None:
+            raise StudyDataError("the plan is complete")
+        if step.blocked:
+            raise StudyDataError(f"{step.label}: {step.blocked}")
+        if step.kind == "combine":
+            console.start(step.label, lambda: runner.combine(step.phase))
+        else:
+            runner.check_step(step.participant, step.phase, step.game)
+            console.start(step.label, lambda: runner.run_game(step.participant, step.phase, step.game))
+        return JSONResponse({"started": step.label})
+
+    async def control(request: Request) -> Response:
+        body = await _body(request)
+        action = request.path_params["action"]
+        if action == "pause":
+            runner.pause(_str(body, "reason", ""))
+        elif action == "resume":
+            runner.resume()
+        elif action == "abort":
+            runner.abort(_str(body, "reason", ""))
+        elif action == "skip-questionnaire":
+            runner.skip_questionnaire()
+        elif action == "invalid":
+            runner.mark_invalid(_str(body, "session", ""), _str(body, "reason", ""))
+        else:
+            raise StudyDataError(f"no action {action!r}")
+        return JSONResponse({"ok": action})
+
+    async def export(request: Request) -> Response:
+        body = await _body(request)
+        path = data.export_participant(_str(body, "participant", ""), force=True)
+        return JSONResponse({"export": f"/api/console/exports/{path.name}"})
+
+    async def download(request: Request) -> Response:
+        name = request.path_params["name"]
+        path = data.folder / "exports" / name
+        if not name.endswith(".zip") or "/" in name or not path.is_file():
+            return JSONResponse({"error": "no such export"}, status_code=404)
+        return FileResponse(path, filename=name, media_type="application/zip")
+
+    async def delete(request: Request) -> Response:
+        body = await _body(request)
+        pid = _str(body, "participant", "")
+        if _str(body, "confirm", "") != pid:
+            raise StudyDataError("type the participant's id to confirm the deletion")
+        gone = data.delete_participant(pid)
+        return JSONResponse({"deleted": msgspec.to_builtins(gone)})
+
+    async def report(request: Request) -> Response:
+        from pairplay.report.human import human_report
+
+        def work():
+            tmp = data.folder / f".report.{time.time_ns()}.tmp"
+            human_report(data.folder, tmp)
+            out = data.folder / "report"
+            if out.exists():
+                import shutil
+                shutil.rmtree(out)
+            tmp.rename(out)
+            return f"report written: {out / 'report.md'}"
+        console.start("report", work)
+        return JSONResponse({"started": "report"})
+
+    async def report_file(request: Request) -> Response:
+        name = request.path_params["name"]
+        path = (data.folder / "report" / name).resolve()
+        if not path.is_relative_to((data.folder / "report").resolve()) or not path.is_file():
+            return JSONResponse({"error": "no such report file"}, status_code=404)
+        return FileResponse(path)
+
+    # -- the participant's questionnaire -------------------------------------
+    async def q_page(request: Request) -> Response:
+        return FileResponse(STATIC / "questionnaire.html")
+
+    async def q_items(request: Request) -> Response:
+        live = runner.live
+        token = request.query_params.get("token", "")
+        if not live.questionnaire_token or not hmac.compare_digest(token.encode(), live.questionnaire_token.encode()) \
+                or request.query_params.get("session") != live.session:
+            return JSONResponse({"error": "this questionnaire link is not the current game's"}, status_code=403)
+        name, items = runner.questions_for(live.participant, live.phase)
+        q = data.study.questionnaire[name]
+        return JSONResponse({"title": q.title, "intro": q.intro, "ready": live.state == "questionnaire",
+                             "items": [msgspec.to_builtins(i) for i in items]})
+
+    async def q_answer(request: Request) -> Response:
+        try:
+            body = await _body(request)
+            answers = body.get("answers")
+            runner.answer_questionnaire(_str(body, "session", ""), _str(body, "token", ""), answers)
+        except StudyDataError as err:
+            return JSONResponse({"error": str(err)}, status_code=400)
+        return JSONResponse({"ok": True})
+
+    return [
+        Route("/console", page),  # the page holds nothing: its API needs the token
+        Route("/api/console/state", guarded(state)),
+        Route("/api/console/register", guarded(register), methods=["POST"]),
+        Route("/api/console/next", guarded(start_next), methods=["POST"]),
+        Route("/api/console/control/{action}", guarded(control), methods=["POST"]),
+        Route("/api/console/export", guarded(export), methods=["POST"]),
+        Route("/api/console/exports/{name}", guarded(download)),
+        Route("/api/console/delete", guarded(delete), methods=["POST"]),
+        Route("/api/console/report", guarded(report), methods=["POST"]),
+        Route("/api/console/report/{name:path}", guarded(report_file)),
+        Route("/questionnaire", q_page),
+        Route("/api/questionnaire", q_items),
+        Route("/api/questionnaire/answer", q_answer, methods=["POST"]),
+        Mount("/console-static", StaticFiles(directory=STATIC), name="console-static"),
+    ]

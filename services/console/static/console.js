@@ -1,0 +1,139 @@
+// The experimenter's console: polls /api/console/state and renders it; every button is one POST.
+"use strict";
+const token = new URLSearchParams(location.search).get("token") || "";
+const $ = (id) => document.getElementById(id);
+let last = null;
+
+async function api(path, body) {
+  const r = await fetch(path + (path.includes("?") ? "&" : "?") + "token=" + encodeURIComponent(token),
+                        body === undefined ? {} : {method: "POST", headers: {"content-type": "application/json"},
+                                                   body: JSON.stringify(body)});
+  const data = await r.json().catch(() => ({error: "bad answer from the lab server"}));
+  if (!r.ok) { say(data.error || ("HTTP " + r.status), true); throw new Error(data.error); }
+  return data;
+}
+function say(text, error) { const m = $("message"); m.textContent = text; m.className = error ? "error" : ""; }
+function el(tag, text, cls) { const e = document.createElement(tag); if (text !== undefined) e.textContent = text; if (cls) e.className = cls; return e; }
+
+function renderCurve(picks) {
+  const svg = $("curve"); svg.innerHTML = "";
+  const ns = "http://www.w3.org/2000/svg";
+  const max = Math.max(40, ...picks), w = 320, h = 140, pad = 22;
+  const y = (v) => h - pad - (v / max) * (h - 2 * pad);
+  const x = (i) => pad + (picks.length > 1 ? i * (w - 2 * pad) / (picks.length - 1) : 0);
+  const perfect = document.createElementNS(ns, "line");
+  perfect.setAttribute("x1", pad); perfect.setAttribute("x2", w - pad); perfect.setAttribute("y1", y(18)); perfect.setAttribute("y2", y(18));
+  perfect.setAttribute("stroke", "#aab"); perfect.setAttribute("stroke-dasharray", "3 3"); svg.appendChild(perfect);
+  if (!picks.length) return;
+  const line = document.createElementNS(ns, "polyline");
+  line.setAttribute("points", picks.map((v, i) => x(i) + "," + y(v)).join(" "));
+  line.setAttribute("fill", "none"); line.setAttribute("stroke", "#2b6de0"); line.setAttribute("stroke-width", "2");
+  svg.appendChild(line);
+  picks.forEach((v, i) => {
+    const c = document.createElementNS(ns, "circle"); c.setAttribute("cx", x(i)); c.setAttribute("cy", y(v)); c.setAttribute("r", 3.5);
+    c.setAttribute("fill", "#2b6de0"); svg.appendChild(c);
+    const t = document.createElementNS(ns, "text"); t.setAttribute("x", x(i) - 6); t.setAttribute("y", y(v) - 6);
+    t.setAttribute("font-size", "10"); t.textContent = v; svg.appendChild(t);
+  });
+}
+
+function render(s) {
+  last = s;
+  $("title").textContent = s.study.title || s.study.id;
+  $("study-line").textContent = `study ${s.study.id}, folder ${s.study.folder}; key file: ${s.study.key_file ? "yes (outside the folder)" : "none (ids only)"}`;
+  $("label-wrap").style.display = s.study.key_file ? "" : "none";
+  const phases = $("register-phase");
+  if (phases.options.length !== s.study.phases.length) {
+    phases.innerHTML = ""; s.study.phases.forEach((p) => phases.appendChild(el("option", p)));
+  }
+  const ul = $("participants"); ul.innerHTML = "";
+  s.participants.forEach((p) => ul.appendChild(el("li", `${p.id} (joins ${p.joins}; ${p.games} valid game(s))`)));
+  const sel = $("data-participant"), keep = sel.value; sel.innerHTML = "";
+  s.participants.forEach((p) => sel.appendChild(el("option", p.id)));
+  if ([...sel.options].some((o) => o.value === keep)) sel.value = keep;
+
+  const plan = $("plan"); plan.innerHTML = "";
+  s.plan.forEach((p) => {
+    const li = el("li", p.label + (p.blocked && !p.done ? ` (${p.blocked})` : ""));
+    li.className = p.done ? "done" : (p.blocked ? "blocked" : "");
+    if (s.next && p.label === s.next.label) li.classList.add("next");
+    plan.appendChild(li);
+  });
+  $("next-step").textContent = s.next ? `next: ${s.next.label}` : "the plan is complete";
+  $("run-next").disabled = s.busy || !s.next || !!s.next.blocked;
+
+  const L = s.live;
+  $("live-session").textContent = L.session ? `${L.session} (${L.participant}, ${L.phase} game ${L.game + 1})` : "none";
+  $("live-state").textContent = L.state + (L.paused ? " (paused)" : "");
+  $("live-board").textContent = L.session ? (L.board ? "connected" : "waiting for the board page") : "";
+  const bu = $("live-board");
+  if (L.board_url) { const a = el("a", " open the board"); a.href = L.board_url; a.target = "_blank"; a.id = "board-link"; bu.appendChild(a); }
+  $("live-round").textContent = L.session ? `${L.round + 1} of ${L.rounds}` : "";
+  $("live-picks").textContent = L.session ? L.picks : "";
+  $("live-suggestion").textContent = L.suggestion;
+  $("live-robot").textContent = L.robot;
+  const q = $("live-questionnaire"); q.innerHTML = "";
+  if (L.questionnaire_url) { const a = el("a", L.state === "questionnaire" ? "awaiting answers: open the questionnaire" : "after the game"); a.href = L.questionnaire_url; a.id = "questionnaire-link"; a.target = "_blank"; q.appendChild(a); }
+  $("pause").disabled = L.state !== "playing" || L.paused;
+  $("resume").disabled = !L.paused;
+  $("abort").disabled = !(L.state === "playing" || L.state === "questionnaire");
+  $("skip-questionnaire").disabled = L.state !== "questionnaire";
+  renderCurve(L.picks_per_round);
+
+  const comb = $("combined"); comb.innerHTML = "";
+  for (const [phase, c] of Object.entries(s.combined)) {
+    comb.appendChild(el("h3", `${phase}: ${c.users.join(", ")} -> ${c.output}`));
+    const t = el("table"); const hd = t.insertRow(); ["user", "speech incompatible", "head incompatible", "smile", "gaze"].forEach((h) => hd.appendChild(el("th", h)));
+    for (const [u, p] of Object.entries(c.profiles)) {
+      const r = t.insertRow(); [u, (100 * p.speech).toFixed(1) + "%", (100 * p.head).toFixed(1) + "%", p.facial ? "yes" : "no", p.gaze ? "yes" : "no"].forEach((v) => r.insertCell().textContent = v);
+    }
+    comb.appendChild(t);
+    const rules = el("table", undefined, "rules"); rules.id = "rules-" + phase;
+    const rh = rules.insertRow(); ["state", "action", "rule that decided it"].forEach((h) => rh.appendChild(el("th", h)));
+    c.states.forEach((st) => { const r = rules.insertRow(); [st.state, st.action, st.rule].forEach((v) => r.insertCell().textContent = v); });
+    comb.appendChild(rules);
+  }
+  if (!Object.keys(s.combined).length) comb.textContent = "not combined yet";
+
+  const tb = $("games").tBodies[0]; tb.innerHTML = "";
+  s.games.forEach((g) => {
+    const r = tb.insertRow(); if (g.invalid) r.className = "invalid";
+    [g.session, g.participant, g.phase, g.game, g.outcome + (g.reason ? ` (${g.reason})` : "") + (g.invalid ? ` invalid: ${g.invalid}` : ""),
+     g.questionnaire ? "answered" : "-"].forEach((v) => r.insertCell().textContent = v);
+    const b = el("button", "mark invalid"); b.disabled = !!g.invalid || g.outcome === "running";
+    b.onclick = () => { const why = prompt(`Why is ${g.session} invalid?`); if (why) api("/api/console/control/invalid", {session: g.session, reason: why}).then(() => say(`${g.session} marked invalid`)); };
+    r.insertCell().appendChild(b);
+  });
+  if (s.last.step) say(`${s.last.step}: ${s.last.message}`, !s.last.ok);
+  $("report-link").innerHTML = "";
+  if (s.report) { const a = el("a", "report.md"); a.href = "/api/console/report/report.md?token=" + encodeURIComponent(token); a.id = "report-md"; $("report-link").appendChild(a); }
+}
+
+async function poll() {
+  try { render(await api("/api/console/state")); } catch (e) { /* said */ }
+  setTimeout(poll, 250);
+}
+
+$("register-form").onsubmit = async (ev) => {
+  ev.preventDefault();
+  const r = await api("/api/console/register", {phase: $("register-phase").value, count: parseInt($("register-count").value, 10) || 1, label: $("register-label").value});
+  $("register-label").value = ""; say("registered " + r.registered.join(", "));
+};
+$("run-next").onclick = async () => { const r = await api("/api/console/next", {}); say("started: " + r.started); };
+$("pause").onclick = () => api("/api/console/control/pause", {});
+$("resume").onclick = () => api("/api/console/control/resume", {});
+$("abort").onclick = () => api("/api/console/control/abort", {reason: $("abort-reason").value});
+$("skip-questionnaire").onclick = () => api("/api/console/control/skip-questionnaire", {});
+$("export").onclick = async () => {
+  const r = await api("/api/console/export", {participant: $("data-participant").value});
+  const res = $("data-result"); res.innerHTML = ""; const a = el("a", "download " + r.export.split("/").pop()); a.href = r.export + "?token=" + encodeURIComponent(token); a.id = "export-link"; res.appendChild(a);
+};
+$("delete").onclick = async () => {
+  const pid = $("data-participant").value;
+  const r = await api("/api/console/delete", {participant: pid, confirm: $("delete-confirm").value});
+  $("delete-confirm").value = "";
+  $("data-result").textContent = `deleted ${pid}: ${r.deleted.sessions_removed} games, ${r.deleted.files_removed} files` +
+    (r.deleted.merged_policies_using_them.length ? `; merged policies that used them: ${r.deleted.merged_policies_using_them.join(", ")}` : "");
+};
+$("report").onclick = () => api("/api/console/report", {});
+poll();

@@ -1,0 +1,56 @@
+// The questionnaire after a game: items from the lab server, answers posted back (QuestionnaireAnswered).
+"use strict";
+const params = new URLSearchParams(location.search);
+const session = params.get("session") || "", token = params.get("token") || "";
+const $ = (id) => document.getElementById(id);
+function el(tag, text, cls) { const e = document.createElement(tag); if (text !== undefined) e.textContent = text; if (cls) e.className = cls; return e; }
+function status(text, error) { $("q-status").textContent = text; $("q-status").className = error ? "error" : ""; }
+
+function build(q) {
+  $("q-title").textContent = q.title; $("q-intro").textContent = q.intro;
+  const form = $("q-form"); form.innerHTML = "";
+  q.items.forEach((item) => {
+    const fs = el("fieldset"); fs.id = "item-" + item.id; fs.dataset.kind = item.kind;
+    fs.appendChild(el("legend", item.text + (item.required ? "" : " (optional)")));
+    if (item.kind === "likert" || item.kind === "choice") {
+      const row = el("div", undefined, item.kind === "likert" ? "scale" : "choices");
+      if (item.kind === "likert" && item.low) row.appendChild(el("span", item.low, "end"));
+      const values = item.kind === "likert" ? Array.from({length: item.scale}, (_, i) => String(i + 1)) : item.options;
+      values.forEach((v, i) => {
+        const lab = el("label"); const inp = el("input"); inp.type = "radio"; inp.name = item.id; inp.value = v;
+        inp.id = `${item.id}-${i}`; lab.appendChild(inp); lab.appendChild(document.createTextNode(v)); row.appendChild(lab);
+      });
+      if (item.kind === "likert" && item.high) row.appendChild(el("span", item.high, "end"));
+      fs.appendChild(row);
+    } else {
+      const ta = el("textarea"); ta.name = item.id; ta.maxLength = item.max_chars; fs.appendChild(ta);
+    }
+    form.appendChild(fs);
+  });
+  const send = el("button", "Send my answers"); send.type = "submit"; send.id = "q-send"; form.appendChild(send);
+  form.onsubmit = submit;
+}
+
+async function submit(ev) {
+  ev.preventDefault();
+  const answers = {};
+  document.querySelectorAll("#q-form fieldset").forEach((fs) => {
+    const id = fs.id.slice(5);
+    if (fs.dataset.kind === "text") { const v = fs.querySelector("textarea").value.trim(); if (v) answers[id] = v; }
+    else { const c = fs.querySelector("input:checked"); if (c) answers[id] = c.value; }
+  });
+  const r = await fetch("/api/questionnaire/answer", {method: "POST", headers: {"content-type": "application/json"},
+                                                     body: JSON.stringify({session, token, answers})});
+  const data = await r.json().catch(() => ({}));
+  if (!r.ok) { status(data.error || "could not send", true); return; }
+  $("q-form").innerHTML = ""; status("Thank you! Your answers are recorded.");
+}
+
+async function load() {
+  const r = await fetch(`/api/questionnaire?session=${encodeURIComponent(session)}&token=${encodeURIComponent(token)}`);
+  const q = await r.json().catch(() => ({}));
+  if (!r.ok) { status(q.error || "this link does not work", true); return; }
+  if (!q.ready) { $("q-wait").hidden = false; setTimeout(load, 300); return; }
+  $("q-wait").hidden = true; build(q);
+}
+load();

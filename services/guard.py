@@ -1,0 +1,147 @@
+"""The checks every message passes before a service (node.Driver) or the recorder takes it.
+
+Rule (schemas/trust.py states what is trusted): a `Guard` decodes a message
+(field ranges are checked there), then refuses it with a reason if its key
+disagrees with its envelope, it belongs to another session, its source may
+not publish its event, its sequence number is not above the last one on its
+key (a duplicate or out of order) or jumps more than MAX_SEQ_JUMP above the
+highest seen from its source (a refused jump is not remembered, so a forged
+seq 1e9 cannot make the real messages after it look like duplicates), or it
+is a second SessionStarted/SessionEnded. A service ignores its own messages
+delivered back to it, before decoding them.
+
+`Refusals` turns refusals into MessageRejected events, at most
+REJECTIONS_PER_S one by one per second; beyond that, and for what an Inbox
+shed, it counts and records the counts once a second (`tick`). Every refusal
+is recorded, one way or the other; none stops the service.
+"""
+
+from __future__ import annotations
+
+import re
+from collections import Counter
+from typing import Callable, NamedTuple
+
+import msgspec
+
+from pairplay.schemas.envelope import Event
+from pairplay.schemas.events import MessageRejected, decode_event
+from pairplay.schemas.keys import parse_event_key
+from pairplay.schemas.trust import MAX_PAYLOAD, MAX_SEQ_JUMP, ONCE_PER_SESSION, REJECTIONS_PER_S, publisher_refusal
+
+EXCERPT = 200
+MAX_KINDS = 20
+SECOND_NS = 1_000_000_000
+
+
+class Verdict(NamedTuple):
+    event: Event | None  # decoded (None if it did not decode)
+    reason: str | None  # why it is refused (None: taken)
+    quiet: bool = False  # nothing to take and nothing to record (our own, or a resume's overlap)
+
+
+class Guard:
+    def __init__(self, session: str, own: str | None = None):
+        self.session, self.own = session, own
+        self.last_seq: dict[str, int] = {}  # per key
+        self.top_seq: dict[str, int] = {}  # per source: the highest taken
+        self.once: set[str] = set()  # ONCE_PER_SESSION tags taken
+
+    def check(self, key: str, payload: bytes, overlap: bool = False) -> Verdict:
+        """Decide on one message (see rule). `overlap`: it may repeat what a resume
+        already folded from the log; an old sequence number is then quietly skipped."""
+        if self.own is not None and key.count("/") == 3 and key.split("/", 3)[2] == self.own:
+            return Verdict(None, None, quiet=True)  # our own publication, delivered back to us
+        if len(payload) > MAX_PAYLOAD:
+            return Verdict(None, f"payload of {len(payload)} bytes is over the limit of {MAX_PAYLOAD}")
+        try:
+            event = decode_event(payload)
+        except (msgspec.DecodeError, msgspec.ValidationError) as err:
+            return Verdict(None, f"malformed payload: {err}")
+        try:
+            k = parse_event_key(key)
+        except ValueError as err:
+            return Verdict(event, str(err))
+        tag = type(event).__name__
+        if (k.session, k.source, k.tag) != (event.session, event.source, tag):
+            return Verdict(event, f"key {key} does not match the payload's session {event.session!r}, source "
+                                  f"{event.source!r}, event {tag}")
+        if event.session != self.session:
+            return Verdict(event, f"wrong session {event.session!r} (this is {self.session!r})")
+        if event.source == self.own:
+            return Verdict(event, None, quiet=True)
+        refusal = publisher_refusal(tag, event.source)
+        if refusal is not None:
+            return Verdict(event, refusal)
+        last = self.last_seq.get(key, 0)
+        if event.seq <= last:
+            if overlap:
+                return Verdict(event, None, quiet=True)
+            return Verdict(event, f"sequence number {event.seq} from {event.source} is not above the last one seen "
+                                  f"on {key} ({last}): duplicate or out of order")
+        top = self.top_seq.get(event.source, 0)
+        if event.seq > top + MAX_SEQ_JUMP:
+            return Verdict(event, f"sequence number {event.seq} from {event.source} jumps more than {MAX_SEQ_JUMP} "
+                                  f"above the highest seen from it ({top})")
+        if tag in ONCE_PER_SESSION and tag in self.once:
+            return Verdict(event, f"a second {tag} in session {self.session}")
+        self.note(key, event)
+        return Verdict(event, None)
+
+    def note(self, key: str, event: Event) -> None:
+        """Remember a taken event (also: one folded from the log by a resume)."""
+        self.last_seq[key] = max(self.last_seq.get(key, 0), event.seq)
+        self.top_seq[event.source] = max(self.top_seq.get(event.source, 0), event.seq)
+        tag = type(event).__name__
+        if tag in ONCE_PER_SESSION:
+            self.once.add(tag)
+
+
+class Refusals:
+    """Refusals -> MessageRejected events, rate-limited with counts (see rule)."""
+
+    def __init__(self, per_s: int = REJECTIONS_PER_S):
+        self.per_s = per_s
+        self.window_ns: int | None = None
+        self.in_window = 0
+        self.held: Counter = Counter()  # (source, kind) -> refusals not recorded one by one yet
+        self.total = 0
+
+    def refuse(self, now_ns: int, reason: str, key: str, source: str = "", seq: int = 0,
+               payload: bytes = b"") -> list[MessageRejected]:
+        self.total += 1
+        out = self.tick(now_ns)
+        if self.in_window < self.per_s:
+            self.in_window += 1
+            out.append(MessageRejected(reason=reason, key=str(key), offending_source=source, offending_seq=seq,
+                                       excerpt=payload[:EXCERPT].decode("utf-8", "replace")))
+        else:
+            self._hold(source, reason)
+        return out
+
+    def _hold(self, source: str, reason: str, n: int = 1) -> None:
+        """Count a refusal under its kind: the reason without its numbers and details; at most
+        MAX_KINDS kinds a second (made-up sources or keys cannot make the summary a flood)."""
+        kind = (source[:40], re.sub(r"\d+", "N", reason.split(":", 1)[0])[:100])
+        if kind not in self.held and len(self.held) >= MAX_KINDS:
+            kind = ("*", "other refusals")
+        self.held[kind] += n
+
+    def shed(self, counts: Counter) -> None:
+        """Messages an Inbox shed, by (source, why): recorded as counts at the next tick."""
+        self.total += sum(counts.values())
+        for (source, why), n in counts.items():
+            self._hold(source, f"shed unread ({why})", n)
+
+    def tick(self, now_ns: int, force: bool = False) -> list[MessageRejected]:
+        """A new second (or `force`: the end): the counts of what was not recorded one by one."""
+        if not force and self.window_ns is not None and now_ns - self.window_ns < SECOND_NS:
+            return []
+        self.window_ns, self.in_window = now_ns, 0
+        held, self.held = self.held, Counter()
+        return [MessageRejected(reason=f"{n} messages refused and not recorded one by one (limit {self.per_s}/s): "
+                                       f"{kind}", key="", offending_source=source, excerpt="")
+                for (source, kind), n in sorted(held.items())]
+
+    def pending(self) -> bool:
+        return bool(self.held)

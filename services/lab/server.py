@@ -1,0 +1,107 @@
+"""Run the lab: uvicorn in a thread, and one whole live session with its board.
+
+Rule: `WebServer` serves an ASGI app on (host, port) from its own thread
+(port 0: the OS picks one, read back once uvicorn is up) and stops when
+asked. `run_lab` is `pairplay lab`: the web server first (so the URLs can be
+printed), then the session of services/session.py with the hub's Node among
+its services (the game waits for the board to be on the bus), recorded like
+any session. When the game ends the session, the pages keep the final view
+for `linger_s`, then the server stops. Nothing listens beyond loopback unless
+the caller gives another host.
+"""
+
+from __future__ import annotations
+
+import threading
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import uvicorn
+
+from pairplay.schemas.session import SessionConfig
+from pairplay.services.bus import BusOptions
+from pairplay.services.lab.app import Lab, create_app
+from pairplay.services.lab.hub import MAX_FRAME, LabHub
+from pairplay.services.robot.choice import RobotChoice
+from pairplay.services.session import run_session
+
+
+class WebServer:
+    def __init__(self, app, host: str = "127.0.0.1", port: int = 0, ssl_certfile: str | None = None,
+                 ssl_keyfile: str | None = None):
+        config = uvicorn.Config(app, host=host, port=port, log_level="warning", lifespan="off",
+                                ws_max_size=MAX_FRAME, ws_ping_interval=5.0, ws_ping_timeout=10.0,
+                                ssl_certfile=ssl_certfile, ssl_keyfile=ssl_keyfile, access_log=False,
+                                timeout_graceful_shutdown=2)  # open pages must not hold up a SIGTERM
+        self.server = uvicorn.Server(config)
+        self.scheme = "https" if ssl_certfile else "http"
+        self.thread: threading.Thread | None = None
+
+    def start(self, timeout_s: float = 10.0) -> "WebServer":
+        self.thread = threading.Thread(target=self.server.run, name="pairplay-lab-web", daemon=True)
+        self.thread.start()
+        deadline = time.monotonic() + timeout_s
+        while not self.server.started:
+            if not self.thread.is_alive() or time.monotonic() > deadline:
+                raise OSError(f"the lab's web server did not start on {self.server.config.host}:"
+                              f"{self.server.config.port}")
+            time.sleep(0.01)
+        return self
+
+    @property
+    def address(self) -> tuple[str, int]:
+        sock = self.server.servers[0].sockets[0]
+        host, port = sock.getsockname()[:2]
+        return host, port
+
+    def base_url(self) -> str:
+        host, port = self.address
+        host = "127.0.0.1" if host in ("0.0.0.0", "") else f"[{host}]" if ":" in host else host
+        return f"{self.scheme}://{host}:{port}"
+
+    def stop(self) -> None:
+        self.server.should_exit = True
+        if self.thread is not None:
+            self.thread.join(10.0)
+
+
+@dataclass(frozen=True)
+class LabUrls:
+    board: str
+    mirror: str
+
+
+def urls_of(base: str, hub: LabHub) -> LabUrls:
+    return LabUrls(f"{base}/s/{hub.session}/board?t={hub.token}", f"{base}/s/{hub.session}/mirror?t={hub.token}")
+
+
+def run_lab(config: SessionConfig, path: str | Path, *, host: str = "127.0.0.1", port: int = 0,
+            bus_options: BusOptions | None = None, robot: RobotChoice | None = RobotChoice(),
+            stop: threading.Event | None = None, on_ready=None, linger_s: float = 3.0,
+            ssl_certfile: str | None = None, ssl_keyfile: str | None = None, token: str | None = None,
+            nodes_out: dict | None = None) -> Path:
+    """One live session with its board; return the recording's path.
+
+    `on_ready(urls, bus)` is called once the pages can be opened (the bus is
+    up; the game starts when the board's Node is on it)."""
+    config.validate()
+    stop = stop or threading.Event()
+    hub = LabHub(config, token=token)
+    lab = Lab()
+    lab.add(hub)
+    web = WebServer(create_app(lab), host, port, ssl_certfile, ssl_keyfile).start()
+    urls = urls_of(web.base_url(), hub)
+
+    def on_bus(bus) -> None:
+        if on_ready is not None:
+            on_ready(urls, bus)
+
+    try:
+        out = run_session(config, path, bus_options=bus_options, stop=stop, on_bus=on_bus, robot=robot,
+                          extra_nodes=lambda bus: [hub.make_node(bus)], nodes_out=nodes_out)
+        stop.wait(linger_s)  # the pages show the end before the server goes
+        return out
+    finally:
+        web.stop()
+        hub.close()

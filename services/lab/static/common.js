@@ -1,0 +1,60 @@
+// What every lab page shares: the session and token from the URL, the tab's client id,
+// and a WebSocket that reconnects and asks for the whole view again (hub.py).
+"use strict";
+(function () {
+  const parts = location.pathname.split("/");  // /s/<session>/<page>
+  const session = decodeURIComponent(parts[2] || "");
+  const token = new URLSearchParams(location.search).get("t") || "";
+  let client = sessionStorage.getItem("pairplay-client");  // one per tab, kept across reloads
+  if (!client) {
+    client = Array.from(crypto.getRandomValues(new Uint8Array(12)), b => b.toString(16).padStart(2, "0")).join("");
+    sessionStorage.setItem("pairplay-client", client);
+  }
+  const now = () => performance.timeOrigin + performance.now();  // the page's clock, ms
+
+  function connect(page, handlers) {
+    const proto = location.protocol === "https:" ? "wss:" : "ws:";
+    const url = `${proto}//${location.host}/s/${encodeURIComponent(session)}/ws?t=${encodeURIComponent(token)}` +
+      `&page=${page}&client=${client}`;
+    const link = { ws: null, open: false, connects: 0, pings: new Map() };
+    let delay = 200;
+    function open() {
+      const ws = new WebSocket(url);
+      link.ws = ws;
+      ws.onopen = () => { link.open = true; link.connects += 1; delay = 200; handlers.onLink(true); };
+      ws.onmessage = (m) => {
+        let msg;
+        try { msg = JSON.parse(m.data); } catch (e) { return; }
+        if (msg.type === "state") handlers.onState(msg.state, msg.role);
+        else if (msg.type === "rejected") handlers.onRejected && handlers.onRejected(msg);
+        else if (msg.type === "pong") {
+          const done = link.pings.get(msg.t);
+          if (done) { link.pings.delete(msg.t); done({ rtt: performance.now() - msg.t, sent: msg.t, server_ns: msg.server_ns }); }
+        }
+      };
+      ws.onclose = (ev) => {
+        link.open = false;
+        handlers.onLink(false, ev.code);
+        if (ev.code === 4403) return;  // refused: wrong token; retrying will not help
+        setTimeout(open, delay);
+        delay = Math.min(delay * 2, 2000);
+      };
+    }
+    link.send = (obj) => { if (link.open) { link.ws.send(JSON.stringify(obj)); return true; } return false; };
+    // the raw WebSocket round trip: {rtt (ms), sent (performance.now()), server_ns (the server's clock)}
+    link.ping = () => new Promise((resolve) => {
+      const t = performance.now();
+      link.pings.set(t, resolve);
+      link.send({ type: "ping", t });
+    });
+    open();
+    return link;
+  }
+  function el(tag, cls, text) {
+    const e = document.createElement(tag);
+    if (cls) e.className = cls;
+    if (text !== undefined) e.textContent = text;
+    return e;
+  }
+  window.pairplayLab = { session, token, client, now, connect, el };
+})();

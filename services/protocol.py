@@ -1,0 +1,442 @@
+"""The protocol of a study with people (thesis 7.2), step by step, on the bus.
+
+Rule: `StudyRunner` runs the steps of a study folder's plan (replay/studydata.py):
+- a game: one recorded session (services/session.py) of a registered participant,
+  configured by its phase: `human:<id>`, the observed card is the first pick, the
+  ignore rule is the pick interval with the study's window (7.1.2), the phase's
+  learner preset, for pi-reuse the phase's bias policy; the recording stays open
+  after the game for the phase's questionnaire (QuestionnaireAnswered from the
+  board), then the game's policy is rebuilt from the recording and the journal
+  says how it ended. Who touches the cards is not this module's business: the
+  board page of the lab server, or a `ScriptedPlayer` (services/scripted.py) for
+  pilots and tests.
+- a combination: a CombineRequested to the combiner service (services/combiner.py)
+  naming the policy files of the earlier phase's valid games; its PolicyCombined
+  (the merged greedy policy and the rule that decided each state) and every
+  user's profile (algorithm 3, over the same files) are journaled.
+Steps run one at a time. Pause, resume and abort are the experimenter's events
+on the game's bus (SessionPaused, SessionResumed, SessionAborted, source
+"experimenter"): the game obeys them (it refuses touches while paused, ends the
+session on an abort) and the recording holds them, so a replay decides the
+same; the journal says it too. `mark_invalid` keeps a game out of the plan's
+done steps, the combination and the report.
+"""
+
+from __future__ import annotations
+
+import logging
+import secrets
+import threading
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Callable
+
+from pairplay import __version__
+from pairplay.core.policies import users_from_policies
+from pairplay.replay.fold import fold_events
+from pairplay.replay.reader import read_log
+from pairplay.replay.rebuild import rebuild_recording, write_outputs
+from pairplay.replay.studydata import Game, StudyData, StudyDataError
+from pairplay.schemas import events as ev
+from pairplay.schemas import journal as j
+from pairplay.schemas.envelope import stamped
+from pairplay.schemas.keys import event_key
+from pairplay.schemas.policy import read_policy
+from pairplay.schemas.session import SessionConfig, learner_overrides
+
+from pairplay.services.bus import Bus
+from pairplay.services.combiner import CombinerLogic
+from pairplay.services.robot.choice import NO_ROBOT, RobotChoice
+from pairplay.services.runner import Node
+from pairplay.services.session import run_session
+
+log = logging.getLogger("pairplay.protocol")
+
+
+@dataclass
+class Live:
+    """What the console shows of the running game, folded from its events as they pass."""
+    session: str = ""
+    participant: str = ""
+    phase: str = ""
+    game: int = 0
+    rounds: int = 0
+    round: int = 0
+    picks: int = 0
+    picks_per_round: list[int] = field(default_factory=list)
+    suggestion: str = ""
+    robot: str = ""
+    paused: bool = False
+    state: str = "idle"  # idle | playing | questionnaire | combining
+    board: bool = False  # a board (page or scripted player) is on the game's bus
+    questionnaire_token: str = ""  # the per-game token of the questionnaire page
+    board_token: str = ""  # the board page's token (the same, when there is a questionnaire)
+
+    def see(self, e: ev.Event) -> None:
+        name = type(e).__name__
+        if name == "RoundStarted":
+            self.round, self.picks = e.round, 0
+        elif name == "CardRevealed":
+            self.picks += 1
+        elif name == "SuggestionMade":
+            self.suggestion = f"{e.action}: {e.action_name} ({e.chosen_by}, epsilon {e.epsilon:.2f})"
+        elif name == "RobotActed":
+            self.robot = f"{e.backend}: {e.outcome} {', '.join(e.commands)[:120]}"
+        elif name == "RoundEnded":
+            self.picks_per_round.append(2 * e.turns)
+        elif name == "SessionEnded":
+            self.state = "questionnaire"
+        elif name == "ServiceStarted" and e.service == "board":
+            self.board = True
+
+
+class StudyRunner:
+    def __init__(self, data: StudyData, bus: Bus, robot: RobotChoice | None = None,
+                 questionnaire_timeout_s: float = 3600.0, lab=None):
+        self.data, self.bus = data, bus
+        # the lab server's sessions (services/lab/app.Lab): each game's board is served there
+        self.lab = lab
+        # a dress rehearsal: participant id -> core persona that plays instead of a person (services/scripted.py)
+        self.scripted: dict[str, str] = {}
+        url = data.study.study.robot
+        self.robot = robot if robot is not None else (None if url == NO_ROBOT else RobotChoice(url))
+        self.questionnaire_timeout_s = questionnaire_timeout_s
+        self.live = Live()
+        self._stop: threading.Event | None = None
+        self._skip = threading.Event()
+        self._abort_reason = ""
+        self._busy = threading.Lock()
+        self._control_seq = 0
+
+    # -- a game --------------------------------------------------------------
+    def config_for(self, pid: str, phase_id: str, game: int) -> SessionConfig:
+        study, phase = self.data.study, self.data.study.phase_by_id(phase_id)
+        actions: list[int] = []
+        if phase.bias:
+            combined = self.data.state.combined.get(phase.id)
+            if combined is None:
+                raise StudyDataError(f"{phase.id} reuses the bias policy of {phase.bias}: combine it first")
+            actions = list(combined.actions)
+        config = SessionConfig(
+            session=self.data.session_id(pid, phase_id, game), participant=f"human:{pid}", seed=study.study.seed,
+            rounds=phase.rounds, game_index=self.data.game_index(pid, phase_id, game), algorithm=phase.algorithm,
+            observed_source="first-pick", ignore_rule="time", ignore_window_ms=float(study.study.ignore_window_ms),
+            ignore_clock=study.study.ignore_clock, turn_back_ms=float(study.study.turn_back_ms),
+            policy_actions=actions, learner=learner_overrides(study.learner_config(phase)),
+            software_version=__version__)
+        config.validate()
+        return config
+
+    def check_step(self, pid: str, phase_id: str, game: int) -> None:
+        """Refuse a game the plan does not allow now (StudyDataError)."""
+        for step in self.data.plan():
+            if step.kind == "play" and (step.participant, step.phase, step.game) == (pid, phase_id, game):
+                if step.done:
+                    raise StudyDataError(f"{step.label} is already played")
+                if step.blocked:
+                    raise StudyDataError(f"{step.label}: {step.blocked}")
+                return
+        self.data.participant(pid)
+        raise StudyDataError(f"{pid} does not play game {game + 1} of {phase_id}")
+
+    def questions_for(self, pid: str, phase_id: str) -> tuple[str, list]:
+        phase = self.data.study.phase_by_id(phase_id)
+        if not phase.questionnaires:
+            return "", []
+        name = phase.questionnaires[0]
+        return name, self.data.study.questions(name, self.data.returning(pid, phase_id))
+
+    def run_game(self, pid: str, phase_id: str, game: int, player=None,
+                 on_event: Callable[[ev.Event], None] | None = None) -> Game:
+        """Play one game to its end (or abort); return its journaled state.
+
+        `player`: a logic that plays as the board (ScriptedPlayer); None: the
+        board page of the lab server does. StudyDataError if the plan refuses."""
+        if not self._busy.acquire(blocking=False):
+            raise StudyDataError(f"a step is already running ({self.live.session or self.live.state})")
+        try:
+            self.check_step(pid, phase_id, game)
+            if player is None and pid in self.scripted:
+                player = scripted_players(self, self.scripted)(pid, phase_id, game)
+            config = self.config_for(pid, phase_id, game)
+            phase = self.data.study.phase_by_id(phase_id)
+            recording = f"recordings/{config.session}.mcap"
+            combined = self.data.state.combined.get(phase_id)
+            self.data.append(j.GameStarted(participant=pid, phase=phase_id, game=game, session=config.session,
+                                           recording=recording, bias=combined.output if combined else ""))
+            token = secrets.token_urlsafe(18)
+            self.live = Live(session=config.session, participant=pid, phase=phase_id, game=game,
+                             rounds=config.rounds, state="playing", board=player is not None,
+                             questionnaire_token=token if phase.questionnaires else "", board_token=token)
+            hub = None
+            if player is None and self.lab is not None:
+                from pairplay.services.lab.hub import LabHub
+                hub = self.lab.add(LabHub(config, token=token))  # the board page: /s/<session>/board?t=<token>
+            self._stop, self._abort_reason, self._control_seq = threading.Event(), "", 0
+            self._skip.clear()
+            answered = threading.Event()
+            watch = [self.bus.subscribe(f"pairplay/{config.session}/**", self._watcher(on_event, answered))]
+            node = None
+            if player is not None:
+                node = Node(self.bus, player, config.session, clock=getattr(player, "clock", time.time_ns),
+                            resume=False)
+                node.start()
+                node.run_in_thread(self._stop)
+
+            def hold(_recorder) -> None:
+                if phase.questionnaires and not self._stop.is_set() and not self._abort_reason:
+                    deadline = time.monotonic() + self.questionnaire_timeout_s
+                    while not (answered.is_set() or self._skip.is_set() or self._stop.is_set()) \
+                            and time.monotonic() < deadline:
+                        time.sleep(0.02)
+                    time.sleep(0.05)  # the answer reaches the recorder on its own thread
+
+            # the game waits for the board: the lab's hub, a scripted player, or a board elsewhere on the bus
+            try:
+                path = run_session(config, self.data.folder / recording, bus=self.bus, stop=self._stop,
+                                   robot=self.robot, hold=hold,
+                                   wait_also=() if player is not None or hub is not None else ("board",),
+                                   extra_nodes=(lambda bus: [hub.make_node(bus)]) if hub is not None else None)
+            finally:
+                if hub is not None:
+                    self.lab.hubs.pop(config.session, None)
+                    hub.close()
+            self._stop.set()
+            if node is not None and node.thread is not None:
+                node.thread.join(5.0)
+            for sub in watch:
+                _undeclare(sub)
+            return self._finish(config, path, answered.is_set())
+        finally:
+            self.live.state = "idle"
+            self._busy.release()
+
+    def _watcher(self, on_event, answered: threading.Event):
+        from pairplay.schemas.events import decode_event
+
+        def see(_key: str, payload: bytes) -> None:
+            try:
+                e = decode_event(payload)
+            except Exception:  # the recorder rejects and records it; the console just does not show it
+                return
+            self.live.see(e)
+            if type(e).__name__ == "QuestionnaireAnswered":
+                answered.set()
+            if on_event is not None:
+                on_event(e)
+        return see
+
+    def _finish(self, config: SessionConfig, path: Path, answered: bool) -> Game:
+        rel = path.relative_to(self.data.folder).as_posix()
+        recorded = read_log(path)
+        fold = fold_events(r.event for r in recorded.events)
+        completed = fold.ended is not None and fold.ended.reason == "completed"
+        policy = ""
+        if fold.config is not None:
+            written = write_outputs(rebuild_recording(path), self.data.folder / "policies")
+            written[1].unlink()  # the learning curve is in the recording and the report
+            policy = written[0].relative_to(self.data.folder).as_posix()
+        ended = fold.ended
+        reason = "" if completed else (f"{ended.reason}: {ended.detail}" if ended is not None and ended.detail else
+                                       ended.reason if ended is not None else self._abort_reason or
+                                       "the game did not end")
+        self.data.append(j.GameEnded(session=config.session, participant=config.participant.split(":", 1)[1],
+                                     outcome="completed" if completed else "aborted", reason=reason,
+                                     rounds_played=len(fold.rounds), policy=policy, questionnaire=answered))
+        if rel != self.data.state.games[config.session].recording:  # a free_path() rename
+            log.warning("recording written to %s", rel)
+        self.data.write_tables()
+        return self.data.state.games[config.session]
+
+    # -- control -------------------------------------------------------------
+    def _control(self, event: ev.Event) -> None:
+        """Publish one of the experimenter's events on the running game's bus."""
+        self._control_seq += 1
+        e = stamped(event, session=self.live.session, source="experimenter", seq=self._control_seq,
+                    time_ns=time.time_ns())
+        self.bus.put(event_key(self.live.session, "experimenter", type(event).__name__), ev.encode_event(e))
+
+    def abort(self, reason: str, grace_s: float = 5.0) -> None:
+        """End the running game: the game records SessionEnded "aborted" with the reason; if it does not
+        within `grace_s` (a crashed game), the session is stopped anyway."""
+        if not reason.strip():
+            raise StudyDataError("an abort needs a reason")
+        stop = self._stop
+        if stop is None or self.live.state not in ("playing", "questionnaire"):
+            raise StudyDataError("no game is running")
+        self._abort_reason = f"aborted: {reason.strip()}"
+        if self.live.state == "questionnaire":  # the game is over: just stop waiting for the answers
+            self._skip.set()
+            return
+        self._control(ev.SessionAborted(reason=reason.strip()))
+        threading.Timer(grace_s, stop.set).start()
+
+    def skip_questionnaire(self) -> None:
+        if self.live.state != "questionnaire":
+            raise StudyDataError("no questionnaire is awaited")
+        self._skip.set()
+
+    def answer_questionnaire(self, session: str, token: str, answers: dict) -> ev.QuestionnaireAnswered:
+        """Check a questionnaire page's answers against the phase's items and publish them on the game's bus
+        (QuestionnaireAnswered, source "board"); StudyDataError saying what is wrong otherwise."""
+        live = self.live
+        if not token or token != live.questionnaire_token or session != live.session:
+            raise StudyDataError("this questionnaire link is not the current game's")
+        if live.state != "questionnaire":
+            raise StudyDataError("the game is not over yet" if live.state == "playing" else "no questionnaire is awaited")
+        name, items = self.questions_for(live.participant, live.phase)
+        clean = check_answers(items, answers)
+        live.questionnaire_token = ""  # one answer per game
+        e = stamped(ev.QuestionnaireAnswered(questionnaire=name, answers=clean), session=session, source="board",
+                    seq=1, time_ns=time.time_ns())
+        self.bus.put(event_key(session, "board", "QuestionnaireAnswered"), ev.encode_event(e))
+        return e
+
+    def pause(self, reason: str = "") -> None:
+        if self.live.state != "playing":
+            raise StudyDataError("no game is being played")
+        if self.live.paused:
+            raise StudyDataError("the game is already paused")
+        self.live.paused = True
+        self._control(ev.SessionPaused(reason=reason.strip()))
+        self.data.append(j.GamePaused(session=self.live.session, participant=self.live.participant))
+
+    def resume(self) -> None:
+        if not self.live.paused or self.live.state != "playing":
+            raise StudyDataError("the game is not paused")
+        self.live.paused = False
+        self._control(ev.SessionResumed())
+        self.data.append(j.GameResumed(session=self.live.session, participant=self.live.participant))
+
+    def mark_invalid(self, session: str, reason: str) -> None:
+        game = self.data.state.games.get(session)
+        if game is None:
+            raise StudyDataError(f"no session {session!r} in this study")
+        if not reason.strip():
+            raise StudyDataError("marking a session invalid needs a reason")
+        self.data.append(j.SessionMarkedInvalid(session=session, participant=game.participant, reason=reason.strip()))
+        self.data.write_tables()
+
+    # -- the combination -----------------------------------------------------
+    def combine(self, phase_id: str, timeout_s: float = 60.0) -> j.BiasCombined:
+        """The bias policy of `phase_id` from its bias phase's valid games, through the combiner service."""
+        phase = self.data.study.phase_by_id(phase_id)
+        step = next((s for s in self.data.plan() if s.kind == "combine" and s.phase == phase_id), None)
+        if step is None:
+            raise StudyDataError(f"{phase_id} has no bias policy to combine")
+        if step.blocked:
+            raise StudyDataError(f"combining for {phase_id}: {step.blocked}")
+        if not self._busy.acquire(blocking=False):
+            raise StudyDataError("a step is already running")
+        try:
+            self.live = Live(phase=phase_id, state="combining")
+            inputs = [g.ended.policy for g in self.data.state.games.values()
+                      if g.phase == phase.bias and g.valid_complete and g.ended.policy]
+            session = f"{self.data.study.study.id}-combine-{phase_id}"
+            request_id = secrets.token_hex(6)
+            output = f"merged/{phase_id}-bias.policy.json"
+            answer: list[ev.PolicyCombined] = []
+            got = threading.Event()
+
+            def on_answer(_key, payload):
+                try:
+                    e = ev.decode_event(payload)
+                except Exception:
+                    return
+                if isinstance(e, ev.PolicyCombined) and e.request_id == request_id:
+                    answer.append(e)
+                    got.set()
+            sub = self.bus.subscribe(event_key(session, "combiner", "PolicyCombined"), on_answer)
+            stop = threading.Event()
+            node = Node(self.bus, CombinerLogic(self.data.folder), session, resume=False)
+            node.start()
+            node.run_in_thread(stop)
+            try:
+                request = stamped(ev.CombineRequested(request_id=request_id, policies=inputs, seed=self.data.study.study.seed,
+                                                      output_path=output),
+                                  session=session, source="experimenter", seq=1, time_ns=time.time_ns())
+                self.bus.put(event_key(session, "experimenter", "CombineRequested"), ev.encode_event(request))
+                if not got.wait(timeout_s):
+                    raise StudyDataError(f"the combiner did not answer within {timeout_s:.0f} s")
+            finally:
+                stop.set()
+                _undeclare(sub)
+            result = answer[0]
+            if not result.ok:
+                raise StudyDataError(f"the combiner refused: {result.error}")
+            policies = [read_policy(self.data.folder / p) for p in inputs]
+            _, profiles = users_from_policies(policies, self.data.study.study.seed)
+            event = j.BiasCombined(
+                phase=phase_id, from_phase=phase.bias, request_id=request_id, inputs=inputs, users=result.users,
+                output=output, actions=result.actions, decided_by=result.decided_by,
+                profiles={u: {"speech": p.info.speech, "head": p.info.head, "facial": float(p.info.facial),
+                              "gaze": float(p.info.gaze), "compared_states": float(p.info.compared_states)}
+                          for u, p in profiles.items()})
+            return self.data.append(event)
+        finally:
+            self.live.state = "idle"
+            self._busy.release()
+
+    # -- the whole protocol, for pilots and tests ----------------------------
+    def run_plan(self, players: Callable[[str, str, int], object], on_step: Callable | None = None) -> list:
+        """Run every open step of the plan in order; `players(pid, phase, game)` gives each game's player."""
+        done = []
+        while (step := self.data.next_step()) is not None:
+            if step.blocked:
+                raise StudyDataError(f"{step.label}: {step.blocked}")
+            if step.kind == "combine":
+                done.append(self.combine(step.phase))
+            else:
+                done.append(self.run_game(step.participant, step.phase, step.game,
+                                          players(step.participant, step.phase, step.game)))
+            if on_step is not None:
+                on_step(step, done[-1])
+        return done
+
+
+def check_answers(items, answers) -> dict[str, str]:
+    """Answers (item id -> value) checked against the items: Likert 1..scale, a choice among its options,
+    text up to max_chars; required items present; nothing else. Returns them as strings."""
+    if not isinstance(answers, dict):
+        raise StudyDataError("answers must be an object of item id -> answer")
+    known = {i.id: i for i in items}
+    extra = sorted(set(answers) - set(known))
+    if extra:
+        raise StudyDataError(f"no question {extra[0]!r} in this questionnaire")
+    out: dict[str, str] = {}
+    for item in items:
+        value = answers.get(item.id)
+        if value is None or (isinstance(value, str) and not value.strip()):
+            if item.required:
+                raise StudyDataError(f"question {item.id!r} needs an answer")
+            continue
+        if not isinstance(value, (str, int)) or isinstance(value, bool):
+            raise StudyDataError(f"question {item.id!r}: the answer must be text or a number")
+        text = str(value).strip()
+        if item.kind == "likert" and not (text.isdigit() and 1 <= int(text) <= item.scale):
+            raise StudyDataError(f"question {item.id!r}: a Likert answer is 1..{item.scale}")
+        if item.kind == "choice" and text not in item.options:
+            raise StudyDataError(f"question {item.id!r}: {text[:40]!r} is not one of its options")
+        if len(text) > item.max_chars:
+            raise StudyDataError(f"question {item.id!r}: at most {item.max_chars} characters")
+        out[item.id] = text
+    return out
+
+
+def _undeclare(sub) -> None:
+    try:
+        sub.undeclare()
+    except Exception:  # already closed with its session
+        pass
+
+
+def scripted_players(runner: StudyRunner, personas: dict[str, str], press_wrong: dict[str, bool] | None = None):
+    """A `players` function for run_plan: participant id -> a ScriptedPlayer of its persona."""
+    from pairplay.services.scripted import ScriptedPlayer
+
+    def make(pid: str, phase: str, game: int):
+        name, items = runner.questions_for(pid, phase)
+        wrong = (press_wrong or {}).get(phase, runner.data.study.study.wrong_suggestion_button)
+        return ScriptedPlayer(personas[pid], press_wrong=wrong, questions=items, questionnaire=name)
+    return make

@@ -1,0 +1,64 @@
+"""`pairplay bench`'s verdicts: one goals table, met / missed / context, --check, the README table."""
+
+import datetime
+
+import pytest
+
+from pairplay.bench.goals import GOALS, verdict
+from pairplay.cli import bench
+
+
+def row(goal=None, value=1.0, ratio=None, **kw):
+    return dict(row="r", value=value, unit="s", reference="ref", reference_value=1.0, ratio=ratio, goal=goal, **kw)
+
+
+def test_a_row_is_judged_on_its_value_or_its_ratio():
+    assert verdict(row("study_warm", value=4.9)) == "met" and verdict(row("study_warm", value=5.1)) == "missed"
+    assert verdict(row("recorder", ratio=0.95)) == "met" and verdict(row("recorder", ratio=0.85)) == "missed"
+    assert verdict(row("recorder", ratio=0.95, failed=True)) == "missed"  # e.g. events lost
+    assert verdict(row(None)) == "context"
+    assert verdict(row("latency_p50", ratio=None)) == "missed"  # nothing measured is no success
+
+
+def test_every_bench_source_names_goals_from_the_table():
+    import ast
+    from pathlib import Path
+    root = Path(bench.__file__).resolve().parents[1] / "bench"
+    named = set()
+    for path in root.glob("*.py"):
+        for node in ast.walk(ast.parse(path.read_text())):
+            if isinstance(node, ast.keyword) and node.arg == "goal" and isinstance(node.value, ast.Constant):
+                named.add(node.value.value)
+    assert named and named <= set(GOALS)
+
+
+def test_runs_merge_into_ranges_with_the_verdict_of_the_median(capsys):
+    runs = [[row("study_warm", value=v)] for v in (4.0, 6.0, 4.5)]
+    merged = bench.merge_runs(runs)
+    assert merged[0]["verdict"] == "met" and merged[0]["value"] == 4.5
+    assert "4.00 s - 6.00 s" in bench.table(merged)
+
+
+def test_check_exits_non_zero_on_a_missed_goal(monkeypatch, tmp_path, capsys):
+    import types
+    fake = types.SimpleNamespace(bench_rows=lambda quick: [row("oracle", value=0.7), row(None)])
+    monkeypatch.setitem(bench.SOURCES, "fake", "fake_bench_source")
+    monkeypatch.setitem(__import__("sys").modules, "fake_bench_source", fake)
+    args = types.SimpleNamespace(only="fake", quick=True, runs=1, json=False, check=True, readme=None)
+    assert bench.run(args) == 1
+    assert "missed" in capsys.readouterr().out
+    args.check = False
+    assert bench.run(args) == 0
+
+
+def test_the_readme_table_is_rewritten_between_its_markers(tmp_path):
+    readme = tmp_path / "README.md"
+    readme.write_text(f"# x\n\n{bench.README_START}\nold\n{bench.README_END}\n\nafter\n")
+    text = bench.markdown([row("oracle", value=0.4)], 3, datetime.datetime(2026, 1, 2, 3, 4), [(1.5, 1, 1), (2.5, 1, 1)])
+    bench.write_readme(readme, text)
+    out = readme.read_text()
+    assert "old" not in out and out.endswith("after\n") and "2026-01-02 03:04 UTC" in out
+    assert "load average 1.5-2.5" in out and "| met |" in out
+    (tmp_path / "NO.md").write_text("no markers")
+    with pytest.raises(ValueError):
+        bench.write_readme(tmp_path / "NO.md", text)

@@ -1,0 +1,106 @@
+"""The console's web API over real HTTP: the token, malformed requests, refused steps, questionnaire answers."""
+
+from __future__ import annotations
+
+import json
+import urllib.error
+import urllib.request
+from pathlib import Path
+
+import pytest
+
+from pairplay.replay.studydata import StudyData, StudyDataError
+from pairplay.schemas.study import parse_study
+from pairplay.services.bus import Bus, BusOptions
+from pairplay.services.console.server import ConsoleServer
+from pairplay.services.protocol import StudyRunner, check_answers
+
+STUDY = Path(__file__).parent / "data" / "pilot-study.toml"
+
+
+def call(url: str, body=None, raw: bytes | None = None) -> tuple[int, dict]:
+    data = raw if raw is not None else (None if body is None else json.dumps(body).encode())
+    req = urllib.request.Request(url, data=data, method="POST" if data is not None else "GET",
+                                 headers={"content-type": "application/json"})
+    try:
+        with urllib.request.urlopen(req, timeout=10) as r:
+            return r.status, json.loads(r.read())
+    except urllib.error.HTTPError as err:
+        text = err.read()
+        try:
+            return err.code, json.loads(text)
+        except ValueError:
+            raise AssertionError(f"{url}: HTTP {err.code} {text[:200]!r}") from None
+
+
+@pytest.fixture
+def lab(tmp_path):
+    data = StudyData.create(tmp_path / "study", STUDY)
+    with Bus(BusOptions()) as bus:
+        server = ConsoleServer(StudyRunner(data, bus)).start()
+        try:
+            yield server, data
+        finally:
+            server.close()
+
+
+def test_the_api_needs_the_experimenter_token(lab):
+    server, _ = lab
+    assert server.url.startswith("http://127.0.0.1:")  # loopback unless told otherwise
+    for token in ("", "wrong", server.token[:-1]):
+        status, body = call(f"{server.url}/api/console/state?token={token}")
+        assert status == 403 and "token" in body["error"]
+    status, body = call(f"{server.url}/api/console/register?token=nope", {"phase": "phase1"})
+    assert status == 403
+    status, body = call(f"{server.url}/api/console/state?token={server.token}")
+    assert status == 200 and body["study"]["id"] == "pilot" and body["next"]["blocked"]
+
+
+def test_malformed_and_refused_requests_get_one_line(lab):
+    server, data = lab
+    t = server.token
+    cases = [
+        ("register", None, b"{not json"),
+        ("register", ["phase1"], None),
+        ("register", {"phase": "phase9"}, None),
+        ("register", {"phase": "phase1", "count": "many"}, None),
+        ("register", {"phase": "phase1", "label": "A Name"}, None),  # no key file: no names
+        ("next", {}, None),
+        ("control/abort", {"reason": "x"}, None),
+        ("control/pause", {}, None),
+        ("control/invalid", {"session": "nope", "reason": "x"}, None),
+        ("control/explode", {}, None),
+        ("delete", {"participant": "p01", "confirm": "p01"}, None),
+        ("export", {"participant": 7}, None),
+        ("register", None, b"x" * 70000),
+    ]
+    for path, body, raw in cases:
+        status, answer = call(f"{server.url}/api/console/{path}?token={t}", body, raw)
+        assert status == 400 and "\n" not in answer["error"] and answer["error"], (path, answer)
+    assert data.state.participants == {}
+    status, answer = call(f"{server.url}/api/console/register?token={t}", {"phase": "phase1", "count": 2})
+    assert status == 200 and answer["registered"] == ["p01", "p02"]
+    status, answer = call(f"{server.url}/api/console/delete?token={t}", {"participant": "p01", "confirm": "p02"})
+    assert status == 400 and "confirm" in answer["error"]
+    status, answer = call(f"{server.url}/api/questionnaire?session=x&token=y")
+    assert status == 403
+    status, answer = call(f"{server.url}/api/questionnaire/answer", {"session": "x", "token": "", "answers": {}})
+    assert status == 400 and "not the current game" in answer["error"]
+    for name in ("..%2Fjournal.jsonl", "journal.jsonl", "p01.zip"):
+        with pytest.raises(urllib.error.HTTPError) as err:
+            urllib.request.urlopen(f"{server.url}/api/console/exports/{name}?token={t}", timeout=10)
+        assert err.value.code == 404
+
+
+def test_answers_are_checked_against_the_items():
+    study = parse_study(STUDY.read_text())
+    items = study.questions("after-game", returning=False)
+    good = {"followed": "4", "avoided-wrong": 5, "speech": "3", "visual": "2", "gaze": "1",
+            "contradictory": "followed the speech", "robots-before": "no"}
+    assert check_answers(items, good)["avoided-wrong"] == "5"
+    for bad, why in [({**good, "followed": "6"}, "1..5"), ({**good, "followed": True}, "text or a number"),
+                     ({**good, "contradictory": "shrugged"}, "not one of"), ({**good, "best-round": "1"}, "no question"),
+                     ({k: v for k, v in good.items() if k != "gaze"}, "needs an answer"),
+                     ({**good, "comments": "x" * 2001}, "at most"), ([1, 2], "object")]:
+        with pytest.raises(StudyDataError, match=why):
+            check_answers(items, bad)

@@ -1,0 +1,121 @@
+"""Several hosts for real: the server (game, learner), the robot PC (`pairplay robot`),
+the touch screen (the participant) and the recorder's host as network namespaces the test
+makes itself (`ip netns add` + veth pairs, private addresses inside them only; nothing
+reaches any other network). The robot host's link to the server is cut for 5 s
+mid-session and restored, then the recorder host's: the session finishes and verifies,
+nothing recorded is lost or doubled, every suggestion gets its one RobotActed.
+(A restart of the router is not covered here: the router is the session's process.)
+Slow-marked; needs root (CAP_NET_ADMIN): skipped without it."""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+import time
+
+import pytest
+
+from pairplay.replay.reader import read_log
+from pairplay.schemas import events as ev
+from pairplay.services.verify import verify_recording
+
+pytestmark = pytest.mark.slow
+TAG = f"pp{os.getpid() % 100000}"
+NS = {"server": f"{TAG}s", "robot": f"{TAG}o", "board": f"{TAG}b", "recorder": f"{TAG}c"}
+# host -> (server address, host address) of its link to the server, a /24 of its own
+LINKS = {"robot": ("10.212.1.1", "10.212.1.2"), "board": ("10.212.2.1", "10.212.2.2"),
+         "recorder": ("10.212.3.1", "10.212.3.2")}
+
+
+def sh(*cmd: str) -> None:
+    subprocess.run(cmd, check=True, capture_output=True)
+
+
+def in_ns(host: str, *cmd: str) -> list[str]:
+    return ["ip", "netns", "exec", NS[host], *cmd]
+
+
+@pytest.fixture
+def hosts():
+    if os.geteuid() != 0 or subprocess.run(["ip", "netns", "add", NS["server"]], capture_output=True).returncode:
+        pytest.skip("network namespaces need root (CAP_NET_ADMIN)")
+    try:
+        for host in LINKS:
+            sh("ip", "netns", "add", NS[host])
+        for ns in NS.values():
+            sh("ip", "-n", ns, "link", "set", "lo", "up")
+        for host, (server_ip, host_ip) in LINKS.items():
+            a, b = f"{NS[host]}0", f"{NS[host]}1"
+            sh("ip", "link", "add", a, "netns", NS["server"], "type", "veth", "peer", "name", b, "netns", NS[host])
+            sh("ip", "-n", NS["server"], "addr", "add", f"{server_ip}/24", "dev", a)
+            sh("ip", "-n", NS[host], "addr", "add", f"{host_ip}/24", "dev", b)
+            sh("ip", "-n", NS["server"], "link", "set", a, "up")
+            sh("ip", "-n", NS[host], "link", "set", b, "up")
+        yield
+    finally:
+        for ns in NS.values():
+            subprocess.run(["ip", "netns", "del", ns], capture_output=True)
+
+
+def link(host: str, up: bool) -> None:
+    sh("ip", "-n", NS[host], "link", "set", f"{NS[host]}1", "up" if up else "down")
+
+
+def test_four_hosts_and_5_s_cuts_of_the_robot_and_the_recorder_links(hosts, tmp_path):
+    env = dict(os.environ, PYTHONUNBUFFERED="1")
+    py = [sys.executable, "-m", "pairplay"]
+    server = subprocess.Popen(in_ns("server", *py, "session", "--participant", "sim:ashley", "--rounds", "60",
+                                    "--session", "ns1", "--out", str(tmp_path / "server"), "--external", "robot",
+                                    "--external", "participant", "--external", "recorder",
+                                    *[a for server_ip, _ in LINKS.values() for a in ("--listen", f"tcp/{server_ip}:7447")]),
+                              stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
+    first = server.stdout.readline()
+    recorder = subprocess.Popen(in_ns("recorder", *py, "run", "recorder", "--session", "ns1", "--out", str(tmp_path),
+                                      "--connect", f"tcp/{LINKS['recorder'][0]}:7447"),
+                                stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, env=env)
+    robot = subprocess.Popen(in_ns("robot", *py, "robot", "--session", "ns1", "--robot", "virtual",
+                                   "--connect", f"tcp/{LINKS['robot'][0]}:7447"),
+                             stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, env=env)
+    time.sleep(2.0)  # the bridge joins before the game starts: every suggestion reaches it
+    board = subprocess.Popen(in_ns("board", *py, "run", "participant", "--session", "ns1",
+                                   "--connect", f"tcp/{LINKS['board'][0]}:7447"),
+                             stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, env=env)
+    t0 = time.monotonic()
+    try:
+        time.sleep(2.0)
+        link("robot", False)  # the robot PC's cable is pulled ...
+        time.sleep(5.0)
+        link("robot", True)  # ... and put back
+        time.sleep(1.0)
+        link("recorder", False)  # the recorder's host is cut off for 5 s
+        time.sleep(5.0)
+        link("recorder", True)
+        out, err = server.communicate(timeout=180)
+        robot.wait(timeout=60)
+        board.wait(timeout=60)
+        recorder.wait(timeout=60)
+    finally:
+        for p in (server, robot, board, recorder):
+            p.kill()
+    took = time.monotonic() - t0
+    assert "10.212." in first  # the real endpoints, on the namespaces' addresses only
+    assert server.returncode == 0, err[-1500:]
+    path = tmp_path / "ns1.mcap"
+    log = read_log(path)
+    assert not log.truncated and not log.bad
+    events = [r.event for r in log.events]
+    for source in ("game", "learner", "participant"):  # nothing lost, nothing doubled
+        seqs = sorted(e.seq for e in events if e.source == source)
+        assert seqs == list(range(seqs[0], seqs[0] + len(seqs))) and len(set(seqs)) == len(seqs), source
+    made = [e for e in events if isinstance(e, ev.SuggestionMade)]
+    acted = [e for e in events if type(e).__name__ == "RobotActed"]
+    assert sorted(a.suggestion_seq for a in acted) == sorted(m.seq for m in made)
+    assert verify_recording(path).ok
+    figures = {"test": "netns_robot_and_recorder_cuts_5s", "rounds": 60, "seconds": round(took, 1), "suggestions": len(made),
+               "robot_acted": len(acted), "events": len(events)}
+    print(json.dumps(figures))
+    if os.environ.get("SOAK_OUT"):
+        with open(os.environ["SOAK_OUT"], "a") as f:
+            f.write(json.dumps(figures) + "\n")

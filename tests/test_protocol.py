@@ -1,0 +1,236 @@
+"""The study with people, without a browser: plan, scripted participants on a real bus, export, delete, report.
+
+The whole two-phase protocol (2 phase-1 participants x 2 games, the combination
+through the combiner service, 4 participants in phase 2) runs with 2-round games
+on a loopback Zenoh bus; every recording is then verified (fresh services, same
+inputs) and the report, export and deletion are checked on the files.
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+import shutil
+import threading
+import zipfile
+from pathlib import Path
+
+import pytest
+
+from pairplay.replay.reader import read_log
+from pairplay.replay.studydata import StudyData, StudyDataError
+from pairplay.report.human import human_report
+from pairplay.schemas import journal as j
+from pairplay.services.bus import Bus, BusOptions
+from pairplay.services.protocol import StudyRunner, scripted_players
+from pairplay.services.scripted import ScriptedPlayer
+from pairplay.services.verify import verify_recording
+
+STUDY = Path(__file__).parent / "data" / "pilot-study.toml"
+PERSONAS = ["tatiana", "blind", "deaf", "vincent"]
+
+
+@pytest.fixture(scope="module")
+def played(tmp_path_factory):
+    root = tmp_path_factory.mktemp("protocol")
+    data = StudyData.create(root / "study", STUDY, key_file=root / "keys.csv")
+    ids = [data.register("phase1", "First Person"), data.register("phase1"), data.register("phase2"),
+           data.register("phase2")]
+    with Bus(BusOptions()) as bus:
+        runner = StudyRunner(data, bus)
+        runner.run_plan(scripted_players(runner, dict(zip(ids, PERSONAS))))
+    return root, ids
+
+
+def copy_study(played, tmp_path) -> StudyData:
+    root, _ = played
+    shutil.copytree(root / "study", tmp_path / "study")
+    settings = tmp_path / "study" / "settings.json"
+    shutil.copy(root / "keys.csv", tmp_path / "keys.csv")
+    settings.write_text(json.dumps({"key_file": str(tmp_path / "keys.csv")}))
+    return StudyData(tmp_path / "study")
+
+
+def test_the_plan_runs_to_the_end_and_every_recording_verifies(played):
+    root, ids = played
+    data = StudyData(root / "study")
+    assert data.next_step() is None
+    games = list(data.state.games.values())
+    assert len(games) == 2 * 2 + 4 and all(g.valid_complete for g in games)
+    bias = data.state.combined["phase2"]
+    assert bias.users == ["human:p01", "human:p02"] and len(bias.actions) == 24 and len(bias.decided_by) == 24
+    assert set(bias.profiles) == {"human:p01", "human:p02"}
+    assert (data.folder / bias.output).is_file()
+    for g in games:
+        log = read_log(data.folder / g.recording)
+        config = log.of("SessionStarted")[0].config
+        assert config.participant == f"human:{g.participant}" and config.observed_source == "first-pick"
+        assert config.ignore_rule == "time"
+        if g.phase == "phase2":
+            assert config.algorithm == "pi-reuse" and config.policy_actions == bias.actions
+        answered = log.of("QuestionnaireAnswered")
+        assert len(answered) == 1 and answered[0].source == "board"
+        assert ("best-round" in answered[0].answers) == (g.phase == "phase2" and g.participant in ids[:2])
+        result = verify_recording(data.folder / g.recording)
+        assert result.ok, (g.session, result.error, [c.mismatches[:2] for c in result.checks])
+        assert (data.folder / g.ended.policy).is_file()
+    chosen = [e.chosen_by for g in games if g.phase == "phase2" for e in read_log(data.folder / g.recording).of("SuggestionMade")]
+    assert "bias" in chosen  # pi-reuse took suggestions from the combined policy
+    # the data folder is plain files: CSV tables beside the MCAP and JSON
+    with open(data.folder / "sessions.csv") as f:
+        assert len(list(csv.DictReader(f))) == 8
+    with open(data.folder / "participants.csv") as f:
+        rows = list(csv.DictReader(f))
+    assert [r["participant"] for r in rows] == ids and "First Person" not in (data.folder / "participants.csv").read_text()
+
+
+def test_names_stay_in_the_key_file_outside_the_study(played, tmp_path):
+    root, ids = played
+    assert (root / "keys.csv").read_text().strip() == "p01,First Person"
+    for f in (root / "study").rglob("*"):
+        if f.is_file():
+            assert b"First Person" not in f.read_bytes(), f
+    plain = StudyData.create(tmp_path / "s", STUDY)
+    with pytest.raises(StudyDataError, match="no key file"):
+        plain.register("phase1", "Somebody")
+    with pytest.raises(StudyDataError, match="outside the study folder"):
+        StudyData.create(tmp_path / "t", STUDY, key_file=tmp_path / "t" / "keys.csv")
+
+
+def test_the_plan_refuses_steps_out_of_order(tmp_path):
+    data = StudyData.create(tmp_path / "s", STUDY)
+    a, _b = data.register("phase1"), data.register("phase1")
+    with Bus(BusOptions()) as bus:
+        runner = StudyRunner(data, bus)
+        with pytest.raises(StudyDataError, match="not all played"):
+            runner.combine("phase2")
+        with pytest.raises(StudyDataError, match="not combined yet"):
+            runner.run_game(a, "phase2", 0)
+        with pytest.raises(StudyDataError, match="does not play game 3"):
+            runner.run_game(a, "phase1", 2)
+        with pytest.raises(StudyDataError, match="no participant"):
+            runner.run_game("p09", "phase1", 0)
+
+
+class Stopping(ScriptedPlayer):
+    """Plays round 1 only. (An abort that crosses a touch in flight may be recorded before the touch the
+    game took first: the recording cannot order two sources' messages the way the game saw them.)"""
+
+    def handle(self, e):
+        if getattr(e, "round", 0) >= 1:
+            return []
+        return super().handle(e)
+
+
+def test_an_aborted_game_is_journaled_with_its_reason_and_stays_open(tmp_path):
+    data = StudyData.create(tmp_path / "s", STUDY)
+    pid = data.register("phase1")
+    with Bus(BusOptions()) as bus:
+        runner = StudyRunner(data, bus)
+        player = Stopping("tatiana")  # leaves the board after round 1, as a person who feels unwell
+
+        def watch(e):
+            if type(e).__name__ == "RoundStarted" and e.round == 1:
+                threading.Thread(target=runner.abort, args=("participant felt unwell",)).start()
+        game = runner.run_game(pid, "phase1", 0, player, on_event=watch)
+        with pytest.raises(StudyDataError, match="needs a reason"):
+            runner.abort(" ")
+    assert game.ended.outcome == "aborted" and game.ended.reason == "aborted: participant felt unwell"
+    assert not game.valid_complete
+    step = data.next_step()
+    assert (step.participant, step.phase, step.game, step.done) == (pid, "phase1", 0, False)
+    assert data.session_id(pid, "phase1", 0).endswith("-r1")  # a retry gets a new recording
+    result = verify_recording(data.folder / game.recording)
+    assert result.ok, result
+
+
+def test_export_holds_everything_of_one_participant_with_a_readme(played, tmp_path):
+    data = copy_study(played, tmp_path)
+    path = data.export_participant("p02")
+    with zipfile.ZipFile(path) as z:
+        names = set(z.namelist())
+        readme = z.read("README.txt").decode()
+        answers = list(csv.DictReader(z.read("answers.csv").decode().splitlines()))
+        lines = [json.loads(x) for x in z.read("journal.jsonl").decode().splitlines()]
+    sessions = [g.session for g in data.games_of("p02")]
+    assert {f"recordings/{s}.mcap" for s in sessions} | {f"policies/{s}.policy.json" for s in sessions} <= names
+    assert not any("p01" in n or "p03" in n for n in names)
+    assert {a["participant"] for a in answers} == {"p02"} and len(answers) > 10
+    assert all(x["participant"] == "p02" for x in lines if "participant" in x)
+    assert all(s in readme for s in sessions) and "answers.csv" in readme and "merged/phase2-bias" in readme
+    with pytest.raises(StudyDataError, match="exists"):
+        data.export_participant("p02")
+
+
+def test_delete_erases_a_participant_everywhere_and_keeps_an_anonymous_event(played, tmp_path):
+    data = copy_study(played, tmp_path)
+    human_report(data.folder)
+    data.export_participant("p01")
+    before = [g.session for g in data.games_of("p01")]
+    gone = data.delete_participant("p01")
+    folder = data.folder
+    for f in folder.rglob("*"):
+        if f.is_file():
+            assert b"p01" not in f.read_bytes(), f
+    assert not any((folder / "recordings" / f"{s}.mcap").exists() for s in before)
+    assert not (folder / "exports" / "p01.zip").exists() and not (folder / "report").exists()
+    assert "First Person" not in (tmp_path / "keys.csv").read_text()
+    assert gone.merged_policies_using_them == ["merged/phase2-bias.policy.json"]
+    assert gone.sessions_removed == 3 and gone.key_file_line_removed
+    last = (folder / "journal.jsonl").read_text().splitlines()[-1]
+    assert json.loads(last)["event"] == "ParticipantDeleted" and "p01" not in last
+    fresh = StudyData(folder)  # the journal still folds, and ids are never reused
+    assert "p01" not in fresh.state.participants and fresh.register("phase2") == "p06"
+    with pytest.raises(StudyDataError, match="no participant"):
+        fresh.export_participant("p01")
+
+
+def test_the_human_world_report(played, tmp_path):
+    data = copy_study(played, tmp_path)
+    StudyData(data.folder).append(j.SessionMarkedInvalid(session="pilot-p04-phase2-g1", participant="p04",
+                                                         reason="played with the sound off"))
+    report = human_report(data.folder, tmp_path / "report")
+    text = (report.out / "report.md").read_text()
+    for name in ("games.png", "phases.png", "users-phase2.png", "merged.png", "picks.csv", "attention.csv",
+                 "questionnaire.csv"):
+        assert (report.out / name).stat().st_size > 0, name
+    assert "pilot-p04-phase2-g1 (invalid: played with the sound off)" in text
+    assert {"phase1 game 1", "phase1 game 2", "phase1 (all games)", "phase2 (all games)"} <= set(report.curves)
+    assert all(18 <= x <= 200 for c in report.curves.values() for x in c)
+    with open(report.out / "picks.csv") as f:
+        rows = list(csv.DictReader(f))
+    assert len(rows) == 7 * 2 and "p04" not in {r["participant"] for r in rows}
+    q = {(r[1], r[2], r[3]): r for r in report.questionnaire[1:]}
+    assert q[("best-round", "phase2", "returning")][4] == "2"
+    assert "mean" in q[("followed", "phase1", "new")][5]
+    att = {(r[0], r[1]): r for r in report.attention[1:]}
+    assert int(att[("p01", "phase1")][8]) >= 0 and att[("all (phase1)", "phase1")][4] != "0"
+    assert "ignored" in text and "wrong-suggestion presses" in text and "Profiles (algorithm 3)" in text
+
+
+def test_the_game_obeys_the_experimenter_and_only_the_experimenter():
+    from pairplay.schemas import events as ev
+    from pairplay.schemas.session import SessionConfig
+    from pairplay.services.game import GameLogic
+    from pairplay.services.node import Driver
+
+    config = SessionConfig(session="s", participant="human:p01", seed=0, rounds=2, observed_source="first-pick",
+                           ignore_rule="time")
+    game = Driver(GameLogic(config), "s", clock=lambda: 0)
+    game.start()
+    seq = {"board": 0, "experimenter": 0}
+
+    def send(e, source):
+        seq[source] += 1
+        e = __import__("msgspec").structs.replace(e, session="s", source=source, seq=seq[source], time_ns=1)
+        return [type(x).__name__ + ":" + getattr(x, "reason", "") for x in
+                game.receive(f"pairplay/s/{source}/{type(e).__name__}", ev.encode_event(e))]
+
+    assert send(ev.SessionPaused(reason="fire alarm"), "board")[0].startswith("MessageRejected")  # not the board's
+    assert send(ev.SessionPaused(reason="fire alarm"), "experimenter") == []
+    assert send(ev.CardPicked(round=0, turn=0, card=3), "board") == ["PickRejected:the session is paused"]
+    assert send(ev.SessionResumed(), "experimenter") == []
+    assert send(ev.CardPicked(round=0, turn=0, card=3), "board")[0] == "CardRevealed:"
+    assert send(ev.SessionAborted(reason="tired"), "experimenter") == ["SessionEnded:aborted"]
+    assert game.logic.done
+    assert send(ev.CardPicked(round=0, turn=0, card=4), "board")[0].startswith("MessageRejected")

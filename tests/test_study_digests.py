@@ -1,0 +1,50 @@
+"""The study's output is a contract: every result file byte for byte, at seeds 0 and 3.
+
+tests/data/study_digests.json holds the sha256 of every policy file, CSV and
+report (up to its timings) of a reduced study (run here) and of the full
+default study (run by the slow suite, `pytest -m slow`, and by `pairplay
+bench`), pinned from main's numpy simulator before the compiled core and
+re-pinned twice since for main's format changes: policy files gained their
+`partial` field (every policy JSON changed by that one line), and the report
+names its unit of picks per round (report.md); no CSV changed.
+tools/study_digests.py rewrites it; only do that when a result is meant to
+change, and say why.
+"""
+
+import json
+from pathlib import Path
+
+import pytest
+
+from pairplay.report.study import StudySettings, output_digests, run_study
+
+PINNED = json.loads((Path(__file__).parent / "data" / "study_digests.json").read_text())
+
+
+def _check(name: str, seed: str, tmp_path: Path) -> None:
+    pinned = PINNED[name]
+    run_study(StudySettings(seed=int(seed), **pinned["settings"]), tmp_path)
+    got = output_digests(tmp_path)
+    want = pinned["seeds"][seed]
+    assert sorted(got) == sorted(want), "the study wrote a different set of files"
+    changed = [path for path in want if got[path] != want[path]]
+    assert not changed, f"{len(changed)} of {len(want)} files differ, e.g. {changed[:5]}"
+
+
+@pytest.mark.parametrize("seed", sorted(PINNED["reduced"]["seeds"]))
+def test_a_reduced_study_writes_the_pinned_bytes(seed, tmp_path):
+    _check("reduced", seed, tmp_path)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("seed", sorted(PINNED["full"]["seeds"]))
+def test_the_full_study_writes_the_pinned_bytes(seed, tmp_path):
+    _check("full", seed, tmp_path)
+
+
+def test_digests_leave_out_figures_and_timings(tmp_path):
+    (tmp_path / "a.png").write_bytes(b"\x89PNG")
+    (tmp_path / "report.md").write_text("# r\n\nresults\n\n## Timings\n\n| total | 1.00 |\n")
+    first = output_digests(tmp_path)
+    (tmp_path / "report.md").write_text("# r\n\nresults\n\n## Timings\n\n| total | 9.99 |\n")
+    assert output_digests(tmp_path) == first and list(first) == ["report.md"]

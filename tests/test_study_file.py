@@ -1,0 +1,79 @@
+"""The study TOML (schemas/study.py): the shipped example is the thesis's protocol; mistakes are one line."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+
+import pytest
+
+from pairplay.schemas.config import LearnerConfig
+from pairplay.schemas.study import StudyFileError, example_text, load_study, parse_study
+
+
+def test_the_shipped_example_is_the_thesis_protocol():
+    s = parse_study(example_text())
+    p1, p2 = s.phase
+    assert (p1.games, p1.rounds, p1.algorithm, p1.players) == (2, 5, "q-learning", "new")
+    assert (p2.games, p2.rounds, p2.algorithm, p2.players, p2.bias) == (1, 5, "pi-reuse", "all", "phase1")
+    c1, c2 = s.learner_config(p1), s.learner_config(p2)
+    assert c1 == LearnerConfig.human_phase1(5)
+    # epsilon 0.9 falling by a fifth of 0.9 each round (7.2)
+    assert [round(max(c1.epsilon_min, c1.epsilon_start - c1.epsilon_step * r), 9) for r in range(5)] == \
+        [0.9, 0.72, 0.54, 0.36, 0.18]
+    assert c2.reuse_rounds == 4  # the last round on the new policy alone
+    assert s.study.ignore_window_ms == 1500
+    kinds = {i.kind for i in s.questionnaire["after-game"].item}
+    assert kinds == {"likert", "text", "choice"}
+    returning = {i.id for i in s.questions("after-game", True)}
+    new = {i.id for i in s.questions("after-game", False)}
+    assert "best-round" in returning - new and "robots-before" in new - returning
+
+
+BASE = example_text()
+
+
+@pytest.mark.parametrize("change,where", [
+    (("rounds = 5", "rounds = \"five\"", 1), "phase[0].rounds"),
+    (("rounds = 5", "rounds = 0", 1), "phase[0].rounds"),
+    (("games = 2", "games = 2\ncolour = 3", 1), "colour"),
+    (("bias = \"phase1\"", "bias = \"phase3\"", 1), "phase[1].bias"),
+    (("questionnaires = [\"after-game\"]", "questionnaires = [\"exit\"]", 1), "phase[0].questionnaires"),
+    (("scale = 5", "scale = 40", 1), "questionnaire.after-game.item[0].scale"),
+    (("id = \"avoided-wrong\"", "id = \"followed\"", 1), "questionnaire.after-game.item[1].id"),
+    (("id = \"thesis-ch7\"", "id = \"My Study\"", 1), "study.id"),
+    (("robot = \"virtual\"", "robot = \"telepathy\"", 1), "study.robot"),
+    (("kind = \"likert\"", "kind = \"slider\"", 1), "item[0].kind"),
+    (("preset = \"human-phase1\"", "preset = \"human-phase1\"\nlearner = { epsilon_jump = 1 }", 1),
+     "phase[0].learner"),
+    (("algorithm = \"pi-reuse\"", "algorithm = \"q-learning\"", 1), "phase[1].bias"),
+    (("[study]", "[study", 1), "not valid TOML"),
+])
+def test_a_mistake_is_one_line_naming_the_place(change, where):
+    old, new, count = change
+    assert old in BASE
+    with pytest.raises(StudyFileError) as err:
+        parse_study(BASE.replace(old, new, count), "s.toml")
+    msg = str(err.value)
+    assert "\n" not in msg and msg.startswith("s.toml: ") and where in msg, msg
+
+
+def test_the_cli_check_prints_the_protocol_or_one_line(tmp_path):
+    ok = subprocess.run([sys.executable, "-m", "pairplay.cli.main", "protocol", "check", "thesis-ch7"],
+                        capture_output=True, text=True)
+    assert ok.returncode == 0 and "phase2" in ok.stdout and "pi-reuse" in ok.stdout
+    bad = tmp_path / "bad.toml"
+    bad.write_text(BASE.replace("games = 2", "games = -1"))
+    out = subprocess.run([sys.executable, "-m", "pairplay.cli.main", "protocol", "check", str(bad)],
+                         capture_output=True, text=True)
+    assert out.returncode == 2 and out.stdout == ""
+    assert out.stderr.count("\n") == 1 and "phase[0].games" in out.stderr and "Traceback" not in out.stderr
+    missing = subprocess.run([sys.executable, "-m", "pairplay.cli.main", "protocol", "check", str(tmp_path / "no")],
+                             capture_output=True, text=True)
+    assert missing.returncode == 2 and missing.stderr.count("\n") == 1
+
+
+def test_load_study_reports_an_unreadable_file(tmp_path):
+    (tmp_path / "s.toml").write_bytes(b"\xff\xfe bad")
+    with pytest.raises(StudyFileError, match="cannot read"):
+        load_study(tmp_path / "s.toml")

@@ -1,0 +1,89 @@
+"""`pairplay sweep`: a grid of study settings x seeds, resumable, the same tables locally and on Dask."""
+
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from pairplay.report.sweep import Cell, GridError, finished_cells, read_grid, run_sweep, summarise, write_sweep
+
+GRID = """
+seeds = 2
+[study]
+personas = "blind"
+games = 1
+rounds = 20
+eval_rounds = 5
+[grid]
+reward_bonus = ["correct", "consistent"]
+"""
+
+
+def _grid(tmp_path: Path, text: str = GRID) -> Path:
+    path = tmp_path / "grid.toml"
+    path.write_text(text)
+    return path
+
+
+def _tables(out: Path) -> tuple[str, str]:
+    return (out / "sweep.csv").read_text(), (out / "cells.csv").read_text()
+
+
+def test_a_sweep_writes_every_cell_and_resumes_without_recomputing(tmp_path):
+    grid = read_grid(_grid(tmp_path))
+    assert len(grid.cells()) == 4 and len({c.id for c in grid.cells()}) == 4
+    first = run_sweep(grid, tmp_path / "out")
+    assert (first.cells, first.computed) == (4, 4)
+    write_sweep(tmp_path / "out", grid, finished_cells(tmp_path / "out", grid), first)
+    before = _tables(tmp_path / "out")
+    victim = grid.cells()[1]
+    (tmp_path / "out" / "cells" / f"{victim.id}.json").unlink()  # as if interrupted before that cell
+    again = run_sweep(grid, tmp_path / "out")
+    assert again.computed == 1
+    write_sweep(tmp_path / "out", grid, finished_cells(tmp_path / "out", grid), again)
+    assert _tables(tmp_path / "out") == before  # each cell is reproducible by its seed
+    rows = summarise(grid, finished_cells(tmp_path / "out", grid))
+    ratio = [r for r in rows if r["measure"] == "all/ratio"]
+    assert len(ratio) == 2 and all(r["n"] == 2 and r["ci95_low"] <= r["mean"] <= r["ci95_high"] for r in ratio)
+    assert (tmp_path / "out" / "figures" / "all-ratio.png").stat().st_size > 0
+
+
+def test_a_dask_cluster_of_two_workers_gives_the_same_tables(tmp_path):
+    distributed = pytest.importorskip("dask.distributed")
+    grid = read_grid(_grid(tmp_path))
+    local = run_sweep(grid, tmp_path / "local")
+    write_sweep(tmp_path / "local", grid, finished_cells(tmp_path / "local", grid), local)
+    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, host="127.0.0.1",
+                                  dashboard_address=None) as cluster:
+        remote = run_sweep(grid, tmp_path / "dask", scheduler=cluster.scheduler_address)
+    assert remote.computed == 4 and remote.where.startswith("dask tcp://127.0.0.1:")
+    write_sweep(tmp_path / "dask", grid, finished_cells(tmp_path / "dask", grid), remote)
+    assert _tables(tmp_path / "dask") == _tables(tmp_path / "local")
+
+
+@pytest.mark.parametrize("text,needle", [
+    ("seeds = 0", "seeds = 0"),
+    ("[grid]\npsi = 0.5", "must be a non-empty list"),
+    ("[grid]\nwobble = [1, 2]", "unknown study setting 'wobble'"),
+    ("[grid]\ngames = [1, 1]", "repeats a value"),
+    ("[grid]\ngames = ['two']", "is not a int"),
+    ("[study]\npersonas = 'nobody'", "nobody"),
+    ("reuse = true\n[study]\npersonas = 'blind'", "at least 2 personas"),
+    ("[study]\ngames = 2\n[grid]\ngames = [1, 2]", "both fixed"),
+    ("grid = [", "not TOML"),
+])
+def test_a_grid_that_cannot_run_is_refused_naming_the_file_and_key(tmp_path, text, needle):
+    with pytest.raises(GridError, match=needle) as info:
+        read_grid(_grid(tmp_path, text))
+    assert str(tmp_path / "grid.toml") in str(info.value)
+
+
+def test_the_verb_refuses_another_grids_folder_in_one_line(tmp_path):
+    out = tmp_path / "out"
+    out.mkdir()
+    (out / "grid.toml").write_text("seeds = 1\n")
+    run = subprocess.run([sys.executable, "-m", "pairplay", "sweep", str(_grid(tmp_path)), "--out", str(out),
+                          "--quiet"], capture_output=True, text=True, timeout=120)
+    assert run.returncode == 2 and "another grid" in run.stderr and len(run.stderr.strip().splitlines()) == 1
+    assert Cell((), 0).id != Cell((), 1).id
