@@ -105,3 +105,13 @@ def test_lspi_greedy_policies_reach_the_oracle_within_1_10x_in_80_rounds():
     best = evaluate(personas, oracle, 60, 0)
     assert (learned.mean(1) <= 1.10 * best).all(), (learned, best)
     assert res.q.shape == (6, N_STATES, N_ACTIONS)
+
+
+def test_an_lspi_batch_refuses_what_only_the_compiled_runner_does():
+    deaf = PERSONAS["deaf"]
+    with pytest.raises(ValueError, match="trace"):
+        run_games([deaf], [1], 2, mode="lspi", record="all")
+    with pytest.raises(ValueError, match="one rounds count"):
+        run_games([deaf, deaf], [1, 2], [2, 3], mode="lspi")
+    empty = run_games([deaf], [1], 0, mode="lspi")
+    assert empty.picks.shape == (1, 0) and empty.turns == 0

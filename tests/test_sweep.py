@@ -87,3 +87,15 @@ def test_the_verb_refuses_another_grids_folder_in_one_line(tmp_path):
                           "--quiet"], capture_output=True, text=True, timeout=120)
     assert run.returncode == 2 and "another grid" in run.stderr and len(run.stderr.strip().splitlines()) == 1
     assert Cell((), 0).id != Cell((), 1).id
+
+
+def test_a_sweep_over_the_learner_runs_lspi_and_refuses_lspi_settings_that_cannot_run(tmp_path):
+    from pairplay.report.sweep import cell_measures
+
+    grid = read_grid(_grid(tmp_path, GRID.replace('reward_bonus = ["correct", "consistent"]',
+                                                   'algorithm = ["q-learning", "lspi"]').replace("seeds = 2", "seeds = 1")))
+    q, lspi = (cell_measures(grid.study_settings(c)) for c in grid.cells())
+    assert q["blind/first50"] != lspi["blind/first50"]  # the learner is not silently Q-learning
+    for bad in ('algorithm = ["sarsa"]', 'algorithm = ["lspi"]\nlspi_every = [0]'):
+        with pytest.raises(GridError, match="algorithm|improve_every"):
+            read_grid(_grid(tmp_path, GRID.replace('reward_bonus = ["correct", "consistent"]', bad)))
