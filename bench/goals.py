@@ -4,7 +4,7 @@ Rule: a bench row names its goal by key (`row["goal"]`); the goal says what is
 compared (the row's value, or its ratio to the reference measured in the same
 run), how (">=" or "<=") and with what. A row met its goal or missed it; a row
 without a goal is context (a reference shown for itself). Sources of the
-figures: issue 16 (the compiled core), docs/bus.md (latency), docs/view.md.
+figures: issue 16 (the compiled core), issue 17 (LSPI, the gym env), docs/bus.md (latency), docs/view.md.
 """
 
 from __future__ import annotations
@@ -29,6 +29,9 @@ GOALS: dict[str, Goal] = {
     "oracle": Goal("<= 0.5 s", "value", "<=", 0.5),
     "scaling": Goal("<= 1.0x proportional", "ratio", "<=", 1.0),
     "learner_work": Goal("<= 20 us", "value", "<=", 20.0),
+    # online LSPI and pairplay.gym (issue 17)
+    "lspi_sample": Goal("<= 50 us", "value", "<=", 50.0),
+    "gym_vector": Goal(">= 0.5x the core (within 2x)", "ratio", ">=", 0.5),
     # bus
     "latency_p50": Goal("<= 2x paced raw", "ratio", "<=", 2.0),
     "latency_p99": Goal("<= 3x paced raw", "ratio", "<=", 3.0),

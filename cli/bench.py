@@ -26,6 +26,7 @@ from pairplay.bench.goals import MISSED, goal_text, verdict
 # name -> module providing bench_rows(quick)
 SOURCES: dict[str, str] = {
     "core": "pairplay.bench.core",
+    "lspi": "pairplay.bench.lspi",
     "bus": "pairplay.bench.bus",
     "view": "pairplay.bench.view",
     "robot": "pairplay.bench.robot",
@@ -71,7 +72,7 @@ def _span(values: list, unit: str, fmt=_fmt) -> str:
 
 
 def _ratio(x) -> str:
-    return f"{x:.2f}x"
+    return f"{x:.2f}x" if abs(x) >= 0.01 else f"{x:.2g}x"  # 1e-4 is not 0.00
 
 
 def merge_runs(runs: list[list[dict]]) -> list[dict]:

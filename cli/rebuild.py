@@ -62,8 +62,10 @@ def run(args: argparse.Namespace) -> int:
         f = rebuilt.fold
         picks = f.picks_per_round()
         mean = f"{sum(picks) / len(picks):.1f}" if picks else "-"
+        updates = f"{f.counts.get('LSPIUpdated', 0)} LSPI samples" if f.lspi is not None else \
+            f"{f.counts.get('QUpdated', 0)} Q updates"
         print(f"{rebuilt.source}: {f.events} events, {len(picks)} rounds, mean {mean} {PICKS_UNIT}, "
-              f"{f.counts.get('QUpdated', 0)} Q updates"
+              f"{updates}"
               f"{'; ' + rebuilt.note if rebuilt.note else ''}"
               f"{'; %d q_before mismatches' % f.q_mismatches if f.q_mismatches else ''}")
         if rebuilt.partial:

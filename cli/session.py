@@ -29,14 +29,16 @@ import threading
 from datetime import datetime, timezone
 from pathlib import Path
 
+import msgspec
+
 from pairplay import __version__
 from pairplay.core.rng import STREAMS_VERSION
-from pairplay.schemas.config import DEFAULT_REWARD_BONUS, REWARD_BONUS_RULES, LearnerConfig
+from pairplay.schemas.config import DEFAULT_REWARD_BONUS, REWARD_BONUS_RULES, LearnerConfig, LSPIConfig
 from pairplay.schemas.keys import check_chunk
 from pairplay.errors import OptionError, UserError
 from pairplay.outputs import check_folder
 from pairplay.schemas.policy import read_policy
-from pairplay.schemas.session import IGNORE_CLOCKS, OBSERVED_SOURCES, SessionConfig, learner_overrides
+from pairplay.schemas.session import IGNORE_CLOCKS, OBSERVED_SOURCES, SessionConfig, learner_overrides, lspi_overrides
 
 from pairplay.cli.args import count, non_negative
 from pairplay.core.geometry import PICKS_UNIT
@@ -57,9 +59,11 @@ def add_config_arguments(p: argparse.ArgumentParser) -> None:
     g.add_argument("--seed", type=int, default=0, help="the session's seed")
     g.add_argument("--rounds", type=count, help="rounds to play (default: 20 for sim:, 5 for human:, thesis 7.2)")
     g.add_argument("--game-index", type=non_negative, default=0, help="which game of the seed (0, 1, ...)")
-    g.add_argument("--algorithm", choices=("q-learning", "pi-reuse", "fixed"), default="q-learning",
+    g.add_argument("--algorithm", choices=("q-learning", "pi-reuse", "fixed", "lspi"), default="q-learning",
                    help="the learner: Q-learning from scratch (thesis 5.1), pi-reuse of --policy (algorithm 5), "
-                        "or --policy played as it is")
+                        "--policy played as it is, or online LSPI from scratch (algorithm 2, core/lspi.py)")
+    g.add_argument("--lspi-ridge", type=float, help="lspi: delta, the ridge penalty (default 1)")
+    g.add_argument("--lspi-every", type=int, help="lspi: K, samples between policy improvements (default 10)")
     g.add_argument("--policy", help="policy file: the bias policy (pi-reuse) or the fixed policy; "
                                     "refused with q-learning, which uses none")
     g.add_argument("--observed-source", choices=OBSERVED_SOURCES,
@@ -97,10 +101,10 @@ def _config_from_args(args: argparse.Namespace) -> SessionConfig:
     sim = args.participant.startswith("sim:")
     if not sim and not args.participant.startswith("human:"):
         raise OptionError("use sim:<persona> or human:<id>", f"--participant {args.participant}")
-    if args.policy and args.algorithm == "q-learning":
-        raise OptionError("--policy is used only by --algorithm pi-reuse or fixed; q-learning would ignore it",
+    if args.policy and args.algorithm in ("q-learning", "lspi"):
+        raise OptionError(f"--policy is used only by --algorithm pi-reuse or fixed; {args.algorithm} would ignore it",
                           f"--policy {args.policy}")
-    if args.algorithm != "q-learning" and not args.policy:
+    if args.algorithm in ("pi-reuse", "fixed") and not args.policy:
         raise OptionError(f"--algorithm {args.algorithm} needs --policy FILE", f"--algorithm {args.algorithm}")
     who = args.participant.split(":", 1)[1]
     if sim:  # the persona's key names the RNG streams, as in the study (core.study)
@@ -114,6 +118,16 @@ def _config_from_args(args: argparse.Namespace) -> SessionConfig:
                                   else "human-phase1")
     preset = PRESETS[preset_name]
     schedule = preset(rounds) if preset_name != "virtual" else preset()
+    lspi = msgspec.UNSET
+    given = {k: v for k, v in (("ridge", getattr(args, "lspi_ridge", None)),
+                               ("improve_every", getattr(args, "lspi_every", None))) if v is not None}
+    if args.algorithm == "lspi":
+        try:
+            lspi = lspi_overrides(LSPIConfig(**given))
+        except ValueError as err:
+            raise OptionError(str(err), "--lspi-ridge/--lspi-every") from None
+    elif given:
+        raise OptionError(f"--lspi-ridge/--lspi-every need --algorithm lspi, not {args.algorithm}", "--algorithm")
     actions = []
     if args.policy:
         actions = list(read_policy(args.policy).greedy)
@@ -124,7 +138,7 @@ def _config_from_args(args: argparse.Namespace) -> SessionConfig:
         ignore_rule=args.ignore_rule or ("perceived" if sim else "time"), policy_actions=actions,
         learner=learner_overrides(schedule), software_version=__version__,
         reward_bonus=args.reward_bonus, streams=STREAMS_VERSION, ignore_window_ms=args.ignore_window_ms,
-        ignore_clock=args.ignore_clock or ("server" if sim else "page"), turn_back_ms=args.turn_back_ms)
+        ignore_clock=args.ignore_clock or ("server" if sim else "page"), turn_back_ms=args.turn_back_ms, lspi=lspi)
     config.validate()
     return config
 
@@ -179,7 +193,8 @@ def run(args: argparse.Namespace) -> int:
     picks = fold.picks_per_round()
     print(f"recorded {len(recorded.events)} events to {path}")
     print(f"rounds played: {len(picks)}; {PICKS_UNIT}: {picks[:10]}{' ...' if len(picks) > 10 else ''}")
-    print(f"rejections: {len(fold.rejections)}; Q updates: {fold.counts.get('QUpdated', 0)}")
+    print(f"rejections: {len(fold.rejections)}; Q updates: {fold.counts.get('QUpdated', 0)}"
+          + (f"; LSPI samples: {fold.counts.get('LSPIUpdated', 0)}" if config.algorithm == "lspi" else ""))
     e = fold.ended
     if e is None and fold.config is None and getattr(stop, "why", ""):
         # a signal before the game started the session: nothing was played, so nothing is ended

@@ -19,7 +19,7 @@ from pairplay.core.geometry import PICKS_UNIT
 from pairplay.core.personas import PERSONAS
 from pairplay.core.rng import SEED_RANGE
 from pairplay.errors import OptionError
-from pairplay.schemas.config import DEFAULT_REWARD_BONUS, REWARD_BONUS_RULES as BONUS_RULES
+from pairplay.schemas.config import DEFAULT_REWARD_BONUS, LSPIConfig, REWARD_BONUS_RULES as BONUS_RULES
 
 # the study's modules (numpy kernels, matplotlib) load in run(): a mistyped option is refused at once
 
@@ -45,6 +45,12 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--psi-decay", type=fraction, default=0.95, help="pi-reuse: v, psi's decay per suggestion (default 0.95)")
     p.add_argument("--reuse-last", type=non_negative, default=50,
                    help="pi-reuse: the last N rounds use the new policy alone (default 50)")
+    p.add_argument("--algorithm", choices=("q-learning", "lspi"), default="q-learning",
+                   help="the learner: Q-learning (thesis 5.1.1, default) or online LSPI (algorithm 2, core/lspi.py); "
+                        "with lspi, Q-learning also trains on the same games for the side-by-side comparison")
+    p.add_argument("--lspi-ridge", type=float, default=1.0, help="lspi: delta, the ridge penalty (default 1)")
+    p.add_argument("--lspi-every", type=int, default=10,
+                   help="lspi: K, samples between policy improvements (default 10)")
     p.add_argument("--out", type=Path, default=Path("out/study"),
                    help="report folder (default out/study); refused if it holds files, unless --force")
     add_force(p, "the files of an existing report folder")
@@ -72,6 +78,11 @@ def run(args) -> int:
         raise OptionError(exc.args[0], f"--personas {args.personas}") from None
     if not SEED_RANGE[0] <= args.seed <= SEED_RANGE[1]:  # every seed in range has its own streams (core.rng)
         raise OptionError(f"outside the accepted range {SEED_RANGE[0]}..{SEED_RANGE[1]}", f"--seed {args.seed}")
+    if args.algorithm == "lspi":
+        try:
+            LSPIConfig(ridge=args.lspi_ridge, improve_every=args.lspi_every)
+        except ValueError as exc:
+            raise OptionError(str(exc), f"--lspi-ridge {args.lspi_ridge} --lspi-every {args.lspi_every}") from None
     check_output_folder(args.out, args.force)
     from pairplay.report.study import StudySettings, run_study, text_table
 
@@ -88,6 +99,9 @@ def run(args) -> int:
     print()
     print(f"merged policies (algorithm 4) on each persona: {PICKS_UNIT}, epsilon 0")
     print(text_table(report.merges))
+    if report.speed is not None:
+        print()
+        print(text_table(report.speed))
     if report.reuse is not None:
         print()
         print(f"policy reuse (algorithm 5), each persona held out: first 50 rounds in {PICKS_UNIT}; "

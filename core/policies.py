@@ -9,8 +9,10 @@ from __future__ import annotations
 
 import numpy as np
 
+import msgspec
+
 from pairplay.errors import InputError, OptionError
-from pairplay.schemas.config import DEFAULT_REWARD_BONUS, LearnerConfig, Persona
+from pairplay.schemas.config import DEFAULT_REWARD_BONUS, LearnerConfig, LSPIConfig, Persona
 from pairplay.schemas.policy import PolicyFile, UserInfo
 
 from .combine import Combined, Profile, User, represent
@@ -22,14 +24,22 @@ def to_policy_file(q: np.ndarray, counts: np.ndarray, greedy: np.ndarray, *, alg
                    game: int | None = None, rounds: int = 0, config: LearnerConfig | None = None,
                    info: UserInfo | None = None, merged_from: list[str] | None = None,
                    rules: list[str] | None = None, software: str = "",
-                   reward_bonus: str = DEFAULT_REWARD_BONUS, partial: str = "") -> PolicyFile:
+                   reward_bonus: str = DEFAULT_REWARD_BONUS, partial: str = "",
+                   lspi: LSPIConfig | None = None) -> PolicyFile:
+    """`lspi` (the learner's settings) marks an LSPI policy: the file says what its Q is."""
     return PolicyFile(
         algorithm=algorithm, participant=participant, persona=persona, seed=seed, game=game,
         rounds=rounds, config=config, states=list(STATE_NAMES),
         greedy=[int(a) for a in greedy], q=[[float(v) for v in row] for row in q],
         visits=[int(v) for v in np.asarray(counts).reshape(len(STATE_NAMES), -1).sum(-1)],
         info=info, merged_from=list(merged_from or []), rules=list(rules or []), software=software,
-        reward_bonus=reward_bonus, partial=partial)
+        reward_bonus=reward_bonus, partial=partial, lspi=msgspec.UNSET if lspi is None else lspi,
+        q_meaning=msgspec.UNSET if lspi is None else LSPI_Q_MEANING)
+
+
+LSPI_Q_MEANING = ("Q(s, a) = phi(s, a)^T theta, online LSPI (thesis algorithm 2, core/lspi.py): the ridge-"
+                  "regularised least-squares fit of the reward of suggestion a in state s when considered "
+                  "(gamma 0), on tile features of the state in action a's block; the scale of Q-learning's Q")
 
 
 def greedy_of(policy: PolicyFile) -> np.ndarray:

@@ -20,17 +20,18 @@ from typing import NamedTuple, Sequence
 
 import numpy as np
 
-from pairplay.schemas.config import DEFAULT_REWARD_BONUS, LearnerConfig, Persona
+from pairplay.schemas.config import DEFAULT_REWARD_BONUS, LearnerConfig, LSPIConfig, Persona
 
 from . import kernels
 from .geometry import N_CARDS, N_STATES
 from .actions import N_ACTIONS
+from .games import OBSERVED_SOURCES
 from .learning import MODES, _policy_table, schedule_tables
+from .lspi import play_lspi
 from .reward import BONUS_CODES, simulated_reward
 from .rng import ROLES, stream_keys
 from .user import persona_arrays
 
-OBSERVED_SOURCES = ("intended", "first-pick")
 RECORDS = {None: kernels.RECORD_NONE, "all": kernels.RECORD_ALL, "considerable": kernels.RECORD_CONSIDERABLE}
 PROGRESS_SLICES = 20  # a batch with a progress callback is played in this many slices of rounds
 
@@ -59,7 +60,7 @@ def run_games(personas: Sequence[Persona], seeds: Sequence[int], rounds: int | S
               bias: np.ndarray | None = None, policy: np.ndarray | None = None,
               observed_source: str = "intended", progress=None,
               snapshot_every: int | None = None, reward_bonus: str = DEFAULT_REWARD_BONUS,
-              record: str | None = None) -> SimResult:
+              record: str | None = None, lspi: LSPIConfig | None = None) -> SimResult:
     """Play one game per (persona, seed) pair; see the module rule.
 
     `rounds`, `config` and `mode` ("q", "reuse" on `bias`, "fixed" by `policy`)
@@ -72,6 +73,9 @@ def run_games(personas: Sequence[Persona], seeds: Sequence[int], rounds: int | S
     paid (core/reward.py). `record="all"` keeps every turn in `trace` (name ->
     array: kernels.TRACE_FIELDS, then "candidates" and "reward"), "considerable"
     only the turns whose match the user did not remember (the oracle's situations).
+    `mode="lspi"` (for every game) learns by online LSPI configured by `lspi`:
+    its own lockstep runner (core/lspi.py `play_lspi`; one `rounds` and
+    `config` for all games, no `record`), on the same per-game streams.
     """
     if observed_source not in OBSERVED_SOURCES:
         raise ValueError(f"observed source must be one of {OBSERVED_SOURCES}")
@@ -80,6 +84,11 @@ def run_games(personas: Sequence[Persona], seeds: Sequence[int], rounds: int | S
     n = len(personas)
     if len(seeds) != n:
         raise ValueError("one seed per game")
+    if mode == "lspi":
+        if record is not None:
+            raise ValueError("an LSPI batch records no trace")
+        return SimResult(*play_lspi(personas, seeds, rounds, config, lspi or LSPIConfig(), observed_source,
+                                    progress, snapshot_every, reward_bonus))
     modes = _per_game(mode, n, "mode")
     unknown = set(modes) - set(MODES)
     if unknown:

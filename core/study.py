@@ -1,7 +1,7 @@
 """The virtual study of thesis 6.2, as pure functions over arrays.
 
 Rule: every persona plays `games` games of `rounds` rounds with online
-Q-learning; game g of persona P is seeded by game_seed(seed, P, g), so adding a
+Q-learning (or online LSPI, `algorithm="lspi"`, core/lspi.py); game g of persona P is seeded by game_seed(seed, P, g), so adding a
 persona or a game never changes the others. Each game yields one policy: the
 greedy action of its final Q-table, ties broken by a generator seeded from the
 game's seed. Evaluation plays every policy with epsilon 0 (a fixed policy) on
@@ -18,7 +18,7 @@ from typing import NamedTuple, Sequence
 
 import numpy as np
 
-from pairplay.schemas.config import DEFAULT_REWARD_BONUS, LearnerConfig, Persona
+from pairplay.schemas.config import DEFAULT_REWARD_BONUS, LearnerConfig, LSPIConfig, Persona
 
 from .learning import greedy_policy
 from .oracle import USER_ALONE, oracle_policies
@@ -26,6 +26,7 @@ from .rng import game_seed
 from .simulate import SimResult, run_games
 
 EVAL_GAME_OFFSET = 1_000_000  # evaluation games are seeded apart from training games
+LEARNING_ALGORITHMS = {"q-learning": "q", "lspi": "lspi"}  # the study's learners -> run_games mode
 
 
 class Training(NamedTuple):
@@ -37,11 +38,18 @@ class Training(NamedTuple):
 
 
 def train(personas: Sequence[Persona], games: int, rounds: int, seed: int,
-          config: LearnerConfig = LearnerConfig(), progress=None, reward_bonus: str = DEFAULT_REWARD_BONUS) -> Training:
+          config: LearnerConfig = LearnerConfig(), progress=None, reward_bonus: str = DEFAULT_REWARD_BONUS,
+          algorithm: str = "q-learning", lspi: LSPIConfig | None = None,
+          snapshot_every: int | None = None) -> Training:
+    """Train every game with `algorithm` ("q-learning" or "lspi"); the same seeds for either,
+    so both learners meet the same deals and users. `snapshot_every` keeps greedy snapshots."""
+    if algorithm not in LEARNING_ALGORITHMS:
+        raise ValueError(f"algorithm {algorithm!r} is not one of {tuple(LEARNING_ALGORITHMS)}")
     flat = [p for p in personas for _ in range(games)]
     index = np.tile(np.arange(games), len(personas))
     seeds = [game_seed(seed, p.key, int(g)) for p, g in zip(flat, index)]
-    result = run_games(flat, seeds, rounds, config, progress=progress, reward_bonus=reward_bonus)
+    result = run_games(flat, seeds, rounds, config, mode=LEARNING_ALGORITHMS[algorithm], progress=progress,
+                       reward_bonus=reward_bonus, lspi=lspi, snapshot_every=snapshot_every)
     greedy = np.stack([greedy_policy(q, np.random.default_rng(s)) for q, s in zip(result.q, seeds)])
     return Training(flat, index, seeds, result, greedy)
 
@@ -137,6 +145,43 @@ def comparison(personas: Sequence[Persona], training: Training, oracle: tuple[np
     learned, oracle_picks, alone = picks.reshape(3, n_p, games)
     return Comparison([p.key for p in personas], alone.mean(1), learned.mean(1), learned.std(1),
                       oracle_picks.mean(1), oracle[0], learned, oracle[1])
+
+
+class Speed(NamedTuple):
+    """How fast each learner's greedy policy gets within `target` x the oracle (per persona and game)."""
+
+    algorithms: list[str]
+    persona: list[str]
+    curves: np.ndarray  # (n_alg, P, games, rounds) online picks per round
+    snapshot_picks: np.ndarray  # (n_alg, P, games, k) greedy snapshot after every `every` rounds, epsilon 0
+    rounds_to_target: np.ndarray  # (n_alg, P, games) first snapshot round within target x oracle; nan if never
+    every: int
+    target: float
+
+
+def learning_speed(personas: Sequence[Persona], trainings: dict, oracle_picks: dict, seed: int,
+                   snapshot_rounds: int = 20, target: float = 1.10) -> Speed:
+    """Compare learners trained with snapshots on the same games (`trainings`: algorithm -> Training).
+
+    Every snapshot plays `snapshot_rounds` rounds with epsilon 0 on evaluation game
+    j (the j-th snapshot) of its persona: all learners are judged on the same games.
+    """
+    names = list(trainings)
+    first = trainings[names[0]]
+    every = first.result.picks.shape[1] // first.result.snapshots.shape[1]
+    snaps = np.stack([trainings[a].result.snapshots for a in names])  # (n_alg, B, k, 24)
+    n_alg, n, k = snaps.shape[:3]
+    flat = [first.personas[i] for _ in range(n_alg) for i in range(n) for _ in range(k)]
+    picks = evaluate(flat, snaps.reshape(-1, snaps.shape[-1]), snapshot_rounds, seed,
+                     [j for _ in range(n_alg * n) for j in range(k)]).reshape(n_alg, n, k)
+    limit = np.array([oracle_picks[p.key] * target for p in first.personas])
+    reached = picks <= limit[None, :, None]
+    to_target = np.where(reached.any(-1), (np.argmax(reached, -1) + 1) * every, np.nan)
+    P = len(personas)
+    games = n // P
+    curves = np.stack([trainings[a].result.picks for a in names]).reshape(n_alg, P, games, -1)
+    return Speed(names, [p.key for p in personas], curves, picks.reshape(n_alg, P, games, k),
+                 to_target.reshape(n_alg, P, games), every, target)
 
 
 # --- Chapter 6.3-6.4: profiles, merged policies, policy reuse -------------------------------

@@ -2,7 +2,8 @@
 
 The code lives in the repository's top-level folders, installed as subpackages
 of this one: ``pairplay.schemas`` (the bus contract), ``pairplay.core`` (the
-science, pure numpy), ``pairplay.replay`` (the MCAP event log),
+science, pure numpy), ``pairplay.gym`` (the task as a Gymnasium
+environment), ``pairplay.replay`` (the MCAP event log),
 ``pairplay.report`` (the study's report), ``pairplay.services`` (processes on
 the Zenoh bus), ``pairplay.bench`` (benchmarks) and ``pairplay.cli`` (the
 command line). Two small modules of the root serve every layer:

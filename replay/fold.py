@@ -6,6 +6,10 @@ fold of its log in order. The Q-table is rebuilt from QUpdated events with
 5.2), on the recorded reward and alpha, so the rebuilt table equals the live
 learner's bit for bit. Each QUpdated also carries the learner's q_before: a
 disagreement (a lost or reordered update) is counted, not hidden.
+An LSPI session (core/lspi.py) is rebuilt from its LSPIUpdated events: the
+samples go, in order, through the live learner's own code (a batch of one), so
+the weights are the live learner's bit for bit; each event's q_before and, after
+a policy improvement, the digest of the weights are checked the same way.
 Learning curves come from RoundEnded (turns per round: 9 is perfect play) and
 RewardGiven (reward per round).
 """
@@ -19,7 +23,8 @@ import numpy as np
 from pairplay.core.actions import N_ACTIONS
 from pairplay.core.geometry import N_STATES
 from pairplay.core.learning import q_update
-from pairplay.core.rng import game_seed
+from pairplay.core.lspi import LSPILearner, weights_digest
+from pairplay.core.rng import UniformStream, game_seed
 from pairplay.schemas import events as ev
 from pairplay.schemas.envelope import Event
 from pairplay.schemas.session import SessionConfig
@@ -52,9 +57,12 @@ class SessionFold:
     rejections: list[str] = field(default_factory=list)
     ended: ev.SessionEnded | None = None
     events: int = 0
+    lspi: LSPILearner | None = None  # an LSPI session's learner, rebuilt sample by sample
 
     @property
     def q(self) -> np.ndarray:
+        if self.lspi is not None:
+            return self.lspi.q[0].copy()
         return np.array(self.q_rows, dtype=np.float64)
 
     def round(self, index: int) -> RoundStats:
@@ -89,6 +97,27 @@ class SessionFold:
 
 def _session_started(s: SessionFold, e: ev.SessionStarted) -> None:
     s.config = e.config
+    if e.config.algorithm == "lspi":
+        try:
+            s.lspi = LSPILearner(1, UniformStream([stream_seed(e.config)], "agent"), e.config.learner_config(),
+                                 e.config.lspi_config())
+        except ValueError as err:
+            s.rejections.append(f"SessionStarted: cannot rebuild its LSPI learner: {err}")
+
+
+def _lspi_updated(s: SessionFold, e: ev.LSPIUpdated) -> None:
+    learner = s.lspi
+    if learner is None or not (0 <= e.state < N_STATES and 0 <= e.action < N_ACTIONS):
+        s.q_mismatches += 1  # an LSPI sample in a session that has no LSPI learner, or off the table
+        return
+    if learner.q[0, e.state, e.action] != e.q_before:
+        s.q_mismatches += 1
+    improved = learner.learn(np.array([e.state]), np.array([e.action]), np.array([e.reward]),
+                             np.array([True])).size > 0
+    if improved != e.improved or int(learner.samples[0]) != e.samples or \
+            (improved and weights_digest(learner.theta[0]) != e.weights):
+        s.q_mismatches += 1
+    s.visits[e.state] += 1
 
 
 def _q_updated(s: SessionFold, e: ev.QUpdated) -> None:
@@ -124,7 +153,7 @@ def _ended(s: SessionFold, e: ev.SessionEnded) -> None:
 
 
 _HANDLERS = {
-    "SessionStarted": _session_started, "QUpdated": _q_updated, "RewardGiven": _reward,
+    "SessionStarted": _session_started, "QUpdated": _q_updated, "LSPIUpdated": _lspi_updated, "RewardGiven": _reward,
     "SuggestionPerceived": _perceived, "RoundEnded": _round_ended, "MessageRejected": _rejected,
     "PickRejected": _rejected, "SessionEnded": _ended,
 }

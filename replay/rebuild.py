@@ -1,7 +1,7 @@
 """Rebuild: recordings folded into policy files and learning curves.
 
 Rule: a recording's policy is the fold of its QUpdated events (fold.py: the
-learner's own update, bit for bit) and its greedy actions use the study's
+learner's own update, bit for bit; an LSPI session's, of its LSPIUpdated samples) and its greedy actions use the study's
 seeded tie-break (core.learning.greedy_policy seeded by the session's stream
 seed, as core.study does), so a rebuilt policy file equals the one the
 in-process study writes for the same seed and persona. Learning curves are per
@@ -92,7 +92,8 @@ def rebuild_events(events, source: str = "", truncated: bool = False, note: str 
     policy = to_policy_file(q, np.array(fold.visits), greedy, algorithm=c.algorithm,
                             participant=c.persona or c.participant, persona=who, seed=c.seed, game=c.game_index,
                             rounds=len(fold.rounds), config=c.learner_config(), software=__version__,
-                            reward_bonus=c.reward_bonus, partial=partial)
+                            reward_bonus=c.reward_bonus, partial=partial,
+                            lspi=c.lspi_config() if fold.lspi is not None else None)
     return Rebuilt(source, c, fold, policy, truncated, note, partial)
 
 

@@ -190,7 +190,7 @@ def _save(fig, path: Path, dpi: int) -> None:
     _pyplot().close(fig)
 
 
-FIGURES = ("learning_curves", "comparison_bars", "profiles", "merged_policies", "reuse_curves")
+FIGURES = ("learning_curves", "comparison_bars", "profiles", "merged_policies", "reuse_curves", "algorithm_curves")
 
 
 def draw(name: str | None, *args) -> None:
@@ -294,3 +294,38 @@ def human_merged(panels: list[tuple[str, np.ndarray]], reference: tuple[str, np.
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)
+
+
+def algorithm_curves(curves: np.ndarray, algorithms: list[str], personas: list[str], names: dict[str, str],
+                     oracle: list[float], path: Path, smooth: int = 10) -> None:
+    """Learners side by side: one panel per persona, picks per round (mean over games, +-1 sd band).
+
+    `curves` is (n_alg, P, games, rounds); the oracle's picks per round are a dashed line.
+    """
+    plt = _pyplot()
+    n = len(personas)
+    cols = min(4, n)
+    rows_ = -(-n // cols)
+    fig, axes = plt.subplots(rows_, cols, figsize=(4.2 * cols, 3.2 * rows_), squeeze=False, sharey=True)
+    for i, key in enumerate(personas):
+        ax = axes[i // cols][i % cols]
+        for a, alg in enumerate(algorithms):
+            picks = curves[a, i]
+            mean, std = picks.mean(0), picks.std(0)
+            rounds = np.arange(1, picks.shape[1] + 1)
+            line, = ax.plot(rounds, _smooth(mean, smooth), label=alg, lw=1.3)
+            ax.fill_between(rounds, _smooth(mean - std, smooth), _smooth(mean + std, smooth),
+                            color=line.get_color(), alpha=0.18, lw=0)
+        ax.axhline(oracle[i], color="k", ls="--", lw=0.8, label="oracle")
+        ax.set_title(names.get(key, key), fontsize=10)
+        ax.grid(alpha=0.3)
+        if i == 0:
+            ax.legend(frameon=False, fontsize=8)
+    for j in range(n, rows_ * cols):
+        axes[j // cols][j % cols].axis("off")
+    for r in range(rows_):
+        axes[r][0].set_ylabel("picks per round")
+    fig.suptitle(f"online picks per round, mean over games ({smooth}-round window); band: \u00b11 sd over games",
+                 fontsize=9)
+    fig.tight_layout()
+    _save(fig, path, dpi=100)

@@ -10,6 +10,8 @@ Rule: `run_study(settings, out)` runs the study of thesis chapter 6 through
   merged/<name>.json, merged.png    merged policies (algorithm 4) and figure 6.6
   merged_evaluation.csv             every merged policy on every persona
   reuse.csv, reuse.png              held-out persona: Q-learning from scratch vs pi-reuse
+  speed.csv, speed.png              (--algorithm lspi) LSPI beside Q-learning on the same games:
+                                    learning curves and rounds to 1.10x the oracle
   report.md                         the tables and figures, with the run's settings
 It returns the tables it wrote, so a caller (the CLI, a notebook) can print them.
 """
@@ -34,7 +36,7 @@ from pairplay.core.oracle import oracle_policies
 from pairplay.core.personas import PERSONAS, persona
 from pairplay.core.policies import to_policy_file
 from pairplay.core.reward import BONUS_RULE_TEXT
-from pairplay.schemas.config import DEFAULT_REWARD_BONUS, LearnerConfig
+from pairplay.schemas.config import DEFAULT_REWARD_BONUS, LearnerConfig, LSPIConfig
 from pairplay.outputs import output_folder
 from pairplay.processes import process_pool, stop_pool
 from pairplay.schemas.policy import write_policy
@@ -58,6 +60,15 @@ class StudySettings:
     psi_decay: float = 0.95
     reuse_last: int = 50
     train_only: bool = False
+    algorithm: str = "q-learning"  # or "lspi" (core/lspi.py)
+    lspi_ridge: float = LSPIConfig().ridge
+    lspi_every: int = LSPIConfig().improve_every
+
+    def lspi(self) -> LSPIConfig | None:
+        """LSPI's settings when the study learns by LSPI (ValueError if they cannot run)."""
+        if self.algorithm != "lspi":
+            return None
+        return LSPIConfig(ridge=self.lspi_ridge, improve_every=self.lspi_every)
 
     def persona_list(self):
         """The personas named (KeyError naming an unknown one)."""
@@ -73,6 +84,7 @@ class StudyReport:
     profiles: list[list[str]] = field(default_factory=list)
     merges: list[list[str]] = field(default_factory=list)
     reuse: list[list[str]] | None = None
+    speed: list[list[str]] | None = None
 
 
 def _no_bar(total: int, desc: str):
@@ -115,13 +127,14 @@ def write_curves(out: Path, training: study.Training) -> dict[str, np.ndarray]:
 
 
 def write_policies(out: Path, training: study.Training, args, config: LearnerConfig) -> list[Path]:
-    paths = []
+    paths, lspi = [], args.lspi()
     for row, (p, g) in enumerate(zip(training.personas, training.game_index)):
         path = out / "policies" / p.key / f"game-{int(g):02d}.json"
         write_policy(path, to_policy_file(
             training.result.q[row], training.result.counts[row], training.greedy[row],
-            algorithm="q-learning", participant=p.key, persona=p, seed=training.seeds[row], game=int(g),
-            rounds=args.rounds, config=config, software=f"pairplay {__version__}", reward_bonus=args.reward_bonus))
+            algorithm=args.algorithm, participant=p.key, persona=p, seed=training.seeds[row], game=int(g),
+            rounds=args.rounds, config=config, software=f"pairplay {__version__}", reward_bonus=args.reward_bonus,
+            lspi=lspi))
         paths.append(path)
     return paths
 
@@ -315,9 +328,12 @@ def _run(args, out, progress_bar, personas, config, names, timings, start, figur
     timings["kernels compiled (first run)" if compiled else "kernels loaded from cache"] = seconds
 
     t0 = time.perf_counter()
+    lspi = args.lspi()
+    snapshot_every = SPEED_EVERY if lspi is not None and args.rounds >= SPEED_EVERY else None
     with progress_bar(len(personas) * args.games * args.rounds, "training") as bar:
         training = study.train(personas, args.games, args.rounds, args.seed, config, progress=_progress(bar),
-                               reward_bonus=args.reward_bonus)
+                               reward_bonus=args.reward_bonus, algorithm=args.algorithm, lspi=lspi,
+                               snapshot_every=snapshot_every)
     timings["training"] = time.perf_counter() - t0
 
     write_policies(out, training, args, config)
@@ -331,6 +347,13 @@ def _run(args, out, progress_bar, personas, config, names, timings, start, figur
     t0 = time.perf_counter()
     oracle = oracle_policies(personas, 20, args.seed, 200, bonus=args.reward_bonus)
     timings["oracle"] = time.perf_counter() - t0
+    q_training = None
+    if snapshot_every:  # LSPI is compared with Q-learning trained with snapshots on the same games
+        t0 = time.perf_counter()
+        with progress_bar(len(personas) * args.games * args.rounds, "q-learning beside lspi") as bar:
+            q_training = study.train(personas, args.games, args.rounds, args.seed, config, progress=_progress(bar),
+                                     reward_bonus=args.reward_bonus, snapshot_every=snapshot_every)
+        timings["q-learning beside lspi"] = time.perf_counter() - t0
 
     # Profiles (algorithm 3, figure 6.5) and merged policies (algorithm 4, figure 6.6).
     t0 = time.perf_counter()
@@ -378,6 +401,12 @@ def _run(args, out, progress_bar, personas, config, names, timings, start, figur
                  out / "evaluation.png", f"{PICKS_UNIT}, epsilon 0")
     oracle = dict(zip(cmp.persona, cmp.oracle))
     alone = dict(zip(cmp.persona, cmp.alone))
+    speed_rows = speed_lines = None
+    if q_training is not None:
+        t0 = time.perf_counter()
+        speed = study.learning_speed(personas, {"q-learning": q_training, "lspi": training}, oracle, args.seed)
+        speed_rows, speed_lines = speed_section(speed, oracle, out, names, args, figures)
+        timings["lspi beside q-learning: snapshots"] = time.perf_counter() - t0
     merge_rows = [["persona", "user alone", "own policies", *merges, "oracle"]]
     for p in personas:
         merge_rows.append([p.key, f"{alone[p.key]:.2f}", f"{merged_eval[('own', p.key)]:.2f}",
@@ -392,15 +421,9 @@ def _run(args, out, progress_bar, personas, config, names, timings, start, figur
         reuse = study.reuse_result(runs, oracle, batch.picks[snapshots])
         for i, key in enumerate(reuse.persona):
             f50, r2t = reuse.first50[i], reuse.rounds_to_target[i]
-
-            def fmt_rounds(x):
-                hit = x[~np.isnan(x)]
-                never = int(np.isnan(x).sum())
-                base = f"{hit.mean():.0f} \u00b1 {hit.std():.0f}" if hit.size else "-"
-                return base + (f" ({never} never)" if never else "")
             reuse_rows.append([key, f"{f50[0].mean():.2f} \u00b1 {f50[0].std():.2f}",
                                f"{f50[1].mean():.2f} \u00b1 {f50[1].std():.2f}",
-                               f"{f50[0].mean() - f50[1].mean():+.2f}", fmt_rounds(r2t[0]), fmt_rounds(r2t[1])])
+                               f"{f50[0].mean() - f50[1].mean():+.2f}", _rounds_text(r2t[0]), _rounds_text(r2t[1])])
         with open(out / "reuse.csv", "w", newline="") as f:
             csv.writer(f).writerows(reuse_rows)
         figures.draw("reuse_curves", reuse.persona, names, reuse.curves, [oracle[k] for k in reuse.persona],
@@ -418,19 +441,25 @@ def _run(args, out, progress_bar, personas, config, names, timings, start, figur
 
     first50 = {k: c[:, :50].mean() for k, c in curves.items()}
     last50 = {k: c[:, -50:].mean() for k, c in curves.items()}
+    learner_text = "Q-learning with the thesis's schedules (epsilon 0.9 - 0.1/50 rounds, floor 0.1; alpha 0.5 - " \
+        "0.05/50 rounds)" if lspi is None else \
+        f"online LSPI (algorithm 2, core/lspi.py: {lspi.tilings} tilings {lspi.tile_width:g} grid steps wide" \
+        f"{' + one tile per state' if lspi.exact else ''}, ridge {lspi.ridge:g}, policy improvement every " \
+        f"{lspi.improve_every} samples, gamma {lspi.gamma:g}) with Q-learning's epsilon schedule"
+    rerun = "" if lspi is None else f" --algorithm lspi --lspi-ridge {lspi.ridge:g} --lspi-every {lspi.improve_every}"
     report = [
         "# pairplay study report", "",
         f"pairplay {__version__}, seed {args.seed}, {len(personas)} personas x {args.games} games x "
-        f"{args.rounds} rounds, Q-learning with the thesis's schedules (epsilon 0.9 - 0.1/50 rounds, "
-        f"floor 0.1; alpha 0.5 - 0.05/50 rounds); the 1/|candidate set| bonus "
+        f"{args.rounds} rounds, {learner_text}; the 1/|candidate set| bonus "
         f"{BONUS_RULE_TEXT[args.reward_bonus]} (rule `{args.reward_bonus}`). "
         f"Re-run: `pairplay study --seed {args.seed} --games {args.games} --rounds {args.rounds}"
-        f" --reward-bonus {args.reward_bonus}`.", "",
+        f" --reward-bonus {args.reward_bonus}{rerun}`.", "",
         "## Learned policies against the references", "",
         f"Picks per round, each greedy policy played {args.eval_rounds} rounds with epsilon 0; the oracle "
         "and the user alone play the same games (core/oracle.py documents the oracle).", "",
         markdown_table(table), "", "![evaluation](evaluation.png)", "",
         *gap_section(cmp, training),
+        *(speed_lines or []),
         "## Learning curves (figure 6.4)", "",
         markdown_table([["persona", "first 50 rounds", "last 50 rounds"]] +
                        [[k, f"{first50[k]:.2f}", f"{last50[k]:.2f}"] for k in curves]), "",
@@ -472,4 +501,44 @@ def _run(args, out, progress_bar, personas, config, names, timings, start, figur
     report += future_lines
     (out / "report.md").write_text("\n".join(report))
 
-    return StudyReport(out, timings, table, prof_rows, merge_rows, reuse_rows if reuse is not None else None)
+    return StudyReport(out, timings, table, prof_rows, merge_rows, reuse_rows if reuse is not None else None,
+                       speed_rows)
+
+
+SPEED_EVERY = 10  # rounds between greedy snapshots when two learners are compared
+
+
+def _rounds_text(x: np.ndarray) -> str:
+    """Rounds to a target over games (nan: never reached) as 'mean \u00b1 sd (k never)'."""
+    hit = x[~np.isnan(x)]
+    never = int(np.isnan(x).sum())
+    base = f"{hit.mean():.0f} \u00b1 {hit.std():.0f}" if hit.size else "-"
+    return base + (f" ({never} never)" if never else "")
+
+
+def speed_section(speed: study.Speed, oracle: dict[str, float], out: Path, names: dict, args,
+                  figures: _Figures) -> tuple[list, list]:
+    """speed.csv, speed.png and the report's lines: the learners side by side on the same games.
+
+    `oracle` is the oracle's picks per round by persona key."""
+    rows = [["persona", "focus", *[f"rounds to {speed.target:.2f}x oracle: {a}" for a in speed.algorithms],
+             *[f"first 50 rounds: {a}" for a in speed.algorithms],
+             *[f"last snapshot / oracle: {a}" for a in speed.algorithms]]]
+    for i, key in enumerate(speed.persona):
+        rows.append([key, str(PERSONAS[key].focus),
+                     *[_rounds_text(speed.rounds_to_target[a, i]) for a in range(len(speed.algorithms))],
+                     *[f"{speed.curves[a, i, :, :50].mean():.2f} \u00b1 {speed.curves[a, i, :, :50].mean(1).std():.2f}"
+                       for a in range(len(speed.algorithms))],
+                     *[f"{speed.snapshot_picks[a, i, :, -1].mean() / oracle[key]:.3f}"
+                       for a in range(len(speed.algorithms))]])
+    with open(out / "speed.csv", "w", newline="") as f:
+        csv.writer(f).writerows(rows)
+    figures.draw("algorithm_curves", speed.curves, speed.algorithms, speed.persona, names,
+                 [oracle[k] for k in speed.persona], out / "speed.png")
+    lines = ["## LSPI beside Q-learning (same games, same exploration schedule)", "",
+             f"Both learners train on the same {args.games} games per persona (same deals and users); every "
+             f"{speed.every} rounds each learner's greedy policy plays 20 rounds with epsilon 0 on the same "
+             f"evaluation games. 'Rounds to {speed.target:.2f}x oracle': the first such snapshot within "
+             f"{speed.target:.2f}x the oracle's picks per round, mean \u00b1 sd over games.", "",
+             markdown_table(rows), "", "![LSPI beside Q-learning](speed.png)", ""]
+    return rows, lines

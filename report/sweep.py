@@ -42,6 +42,7 @@ from typing import Callable, Iterable
 import numpy as np
 
 from pairplay.processes import worker_pool
+from pairplay.core.study import LEARNING_ALGORITHMS
 from pairplay.report.study import StudySettings
 
 SWEEPABLE = {f.name: f.type for f in fields(StudySettings) if f.name not in ("seed", "train_only")}
@@ -136,6 +137,12 @@ def read_grid(path: str | Path) -> Grid:
             raise GridError(f"{path}: {exc.args[0]}") from None
         if min(settings.games, settings.rounds, settings.eval_rounds) < 1:
             raise GridError(f"{path}: games, rounds and eval_rounds must be at least 1 ({dict(s)})")
+        if settings.algorithm not in LEARNING_ALGORITHMS:
+            raise GridError(f"{path}: algorithm = {settings.algorithm!r} is not one of {', '.join(LEARNING_ALGORITHMS)}")
+        try:
+            settings.lspi()
+        except ValueError as exc:
+            raise GridError(f"{path}: {exc} ({dict(s)})") from None
         if grid.reuse and len(personas) < 2:
             raise GridError(f"{path}: reuse = true needs at least 2 personas (one is held out)")
     return grid
@@ -149,7 +156,7 @@ def cell_measures(settings: StudySettings, reuse: bool = False) -> dict[str, flo
     personas = settings.persona_list()
     config = LearnerConfig()
     training = study.train(personas, settings.games, settings.rounds, settings.seed, config,
-                           reward_bonus=settings.reward_bonus)
+                           reward_bonus=settings.reward_bonus, algorithm=settings.algorithm, lspi=settings.lspi())
     cmp = study.compare(personas, training, settings.eval_rounds, settings.seed, reward_bonus=settings.reward_bonus)
     out: dict[str, float] = {}
     picks = training.result.picks

@@ -66,6 +66,42 @@ class LearnerConfig(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
                    reuse_rounds=rounds - 1)
 
 
+class LSPIConfig(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
+    """Online LSPI (thesis 5.1.2, algorithm 2) with tile-coded state x action features (core/lspi.py).
+
+    ridge: delta of algorithm 2 line 3 (Gamma_0 = delta I): the ridge penalty that
+      keeps every block of A invertible before its states are seen.
+    improve_every: K_theta, samples between two policy improvements (line 11).
+    gamma: the discount of line 12. After a suggestion the next state is always the
+      user's, where the agent does not act (thesis eq. 5.1), so phi(s', pi(s')) = 0,
+      Lambda stays 0 and gamma does not change the solution here (SPEC "Learning").
+    tilings, tile_width: the coarse tile coding of a state's (row sign, column sign,
+      level) grid point: `tilings` grids of tiles `tile_width` grid steps wide, each
+      displaced as Sutton and Barto (2018, 9.5.4) describe.
+    exact: add one tiling of one tile per state, so every state can take its own value.
+    The exploration schedule (epsilon) is the Q-learner's, from LearnerConfig.
+    """
+
+    ridge: float = 1.0
+    improve_every: int = 10
+    gamma: float = 0.0
+    tilings: int = 4
+    tile_width: float = 2.0
+    exact: bool = True
+
+    def __post_init__(self) -> None:
+        if not self.ridge > 0:
+            raise ValueError(f"lspi ridge must be > 0, got {self.ridge}")
+        if self.improve_every < 1:
+            raise ValueError(f"lspi improve_every must be >= 1, got {self.improve_every}")
+        if not 0 <= self.gamma < 1:
+            raise ValueError(f"lspi gamma must be in [0, 1), got {self.gamma}")
+        if self.tilings < 0 or (self.tilings and not self.tile_width >= 1):
+            raise ValueError("lspi needs tilings >= 0 and tile_width >= 1 (grid steps)")
+        if not self.tilings and not self.exact:
+            raise ValueError("lspi needs some features: tilings > 0 or exact")
+
+
 class Persona(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
     """A simulated user of appendix A: features on the thesis's 1..6 scale."""
 

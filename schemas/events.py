@@ -15,7 +15,7 @@ Who publishes what (source = the service name):
   participant: CardPicked, CardObserved (intended source), SuggestionPerceived
   board:       CardPicked, WrongSuggestionPressed, QuestionnaireAnswered (the lab's pages)
   tracker:     GazeFixated (an eye tracker)
-  learner:     SuggestionMade, RewardGiven, QUpdated
+  learner:     SuggestionMade, RewardGiven, QUpdated (Q-learning), LSPIUpdated (LSPI)
   combiner:    PolicyCombined (answering CombineRequested)
   experimenter: SessionPaused, SessionResumed, SessionAborted (the console; the game obeys them)
   robot:       RobotActed (schemas/robot.py)
@@ -186,6 +186,27 @@ class QUpdated(Event, tag="QUpdated"):
     q_after: float
 
 
+class LSPIUpdated(Event, tag="LSPIUpdated"):
+    """One sample learned by online LSPI (algorithm 2 lines 8-15, core/lspi.py).
+
+    A fold replays the samples in order through the same code and gets the
+    learner's weights bit for bit; `weights` (a digest of them, after a policy
+    improvement) and q_before let it prove so.
+    """
+
+    round: Count
+    turn: Count
+    attempt: Count
+    state: State
+    action: Action
+    reward: float
+    samples: Count  # samples learned so far, this one included
+    improved: bool  # this sample ended a batch of K: the policy was improved
+    q_before: float  # Q(state, action) of the policy in force before the sample
+    q_after: float  # ... after it (differs only when improved)
+    weights: str = ""  # core.lspi.weights_digest of the weights after an improvement
+
+
 class RoundEnded(Event, tag="RoundEnded"):
     round: Count
     turns: Count
@@ -300,7 +321,7 @@ def _robot_events() -> tuple[type[Event], ...]:
 EVENT_TYPES: tuple[type[Event], ...] = (
     ServiceStarted, SessionStarted, RoundStarted, CardPicked, CardRevealed, PickRejected,
     CardObserved, SuggestionRequested, SuggestionMade, SuggestionPerceived,
-    WrongSuggestionPressed, TurnResolved, RewardGiven, QUpdated, RoundEnded,
+    WrongSuggestionPressed, TurnResolved, RewardGiven, QUpdated, LSPIUpdated, RoundEnded,
     CombineRequested, PolicyCombined, QuestionnaireAnswered, MessageRejected, SessionEnded, RecordingGap,
     SessionPaused, SessionResumed, SessionAborted,
 ) + _robot_events() + (GazeFixated,)

@@ -5,6 +5,10 @@ round-trip form, so the same seed gives the same bytes) holding the Q-table
 (24 states x 88 actions), the greedy action of every state, the persona or
 participant it was learned with, the learner config, the seed and game, the
 updates per state, and for merged policies the rule that decided each state.
+What Q means depends on `algorithm`: "q-learning" (and "pi-reuse") files hold the
+running average of eq. 5.2; "lspi" files hold phi(s, a)^T theta of online LSPI
+(core/lspi.py), say so in `q_meaning` and carry the LSPI settings in `lspi`. Both
+estimate the expected reward of a considered suggestion (gamma 0), on one scale.
 `format` and `version` say what the file is; a reader refuses anything else
 with a clear error (PolicyFileError), never a half-read policy.
 
@@ -17,7 +21,7 @@ import msgspec
 
 from pairplay.errors import InputError
 
-from .config import REWARD_BONUS_RULES, UNSTATED_REWARD_BONUS, LearnerConfig, Persona
+from .config import REWARD_BONUS_RULES, UNSTATED_REWARD_BONUS, LearnerConfig, LSPIConfig, Persona
 
 FORMAT = "pairplay.policy"
 VERSION = 1
@@ -41,7 +45,7 @@ class UserInfo(msgspec.Struct, frozen=True):
 class PolicyFile(msgspec.Struct, frozen=True, kw_only=True):
     format: str = FORMAT
     version: int = VERSION
-    algorithm: str  # "q-learning", "pi-reuse", "combined", "oracle"
+    algorithm: str  # "q-learning", "lspi", "pi-reuse", "combined", "oracle"
     participant: str  # persona key, or a study participant's id
     persona: Persona | None = None
     seed: int | None = None
@@ -62,6 +66,10 @@ class PolicyFile(msgspec.Struct, frozen=True, kw_only=True):
     # Why the session this policy was rebuilt from is not complete ("" = it completed every round):
     # interrupted, aborted, failed, cut short, damaged or recovered (replay/rebuild.py).
     partial: str = ""
+    # Written only by learners other than Q-learning (UNSET fields are left out of the
+    # file, so Q-learning files keep their bytes): what the Q-table is, and LSPI's settings.
+    q_meaning: str | msgspec.UnsetType = msgspec.UNSET
+    lspi: LSPIConfig | msgspec.UnsetType = msgspec.UNSET
 
     def __post_init__(self) -> None:
         if self.format != FORMAT:

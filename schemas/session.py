@@ -13,9 +13,9 @@ from typing import Union
 
 import msgspec
 
-from .config import REWARD_BONUS_RULES, UNSTATED_REWARD_BONUS, LearnerConfig
+from .config import REWARD_BONUS_RULES, UNSTATED_REWARD_BONUS, LearnerConfig, LSPIConfig
 
-ALGORITHMS = ("q-learning", "pi-reuse", "fixed")
+ALGORITHMS = ("q-learning", "pi-reuse", "fixed", "lspi")
 # Where the observed card (the one the user looks at before the second pick) comes from:
 # "intended": the simulated participant reports the card it would pick unaided;
 # "first-pick": the first card of the turn (the thesis's human study, 7.1.3);
@@ -60,6 +60,16 @@ class SessionConfig(msgspec.Struct, frozen=True, kw_only=True):
     ignore_clock: str = "server"
     # How long the board page leaves a missed pair face up before turning it back (ms).
     turn_back_ms: float = 1500.0
+    # LSPI's settings (schemas.config.LSPIConfig fields that differ from its defaults),
+    # for algorithm "lspi"; left out of other sessions' events (UNSET).
+    lspi: Union[dict[str, Union[float, int, bool]], msgspec.UnsetType] = msgspec.UNSET
+
+    def lspi_config(self) -> LSPIConfig:
+        """LSPI's settings as the strict Struct (ValueError if unknown keys or values that cannot run)."""
+        try:
+            return msgspec.convert({} if self.lspi is msgspec.UNSET else self.lspi, LSPIConfig)
+        except (msgspec.ValidationError, ValueError) as err:
+            raise ValueError(f"lspi settings {self.lspi!r}: {err}") from None
 
     def learner_config(self) -> LearnerConfig:
         """The learner's schedule as the strict config Struct (ValueError if unknown keys)."""
@@ -105,6 +115,10 @@ class SessionConfig(msgspec.Struct, frozen=True, kw_only=True):
         if self.participant.startswith("human:"):
             self._check_human()
         self.learner_config()
+        if self.algorithm == "lspi":
+            self.lspi_config()
+        elif self.lspi is not msgspec.UNSET:
+            raise ValueError(f"lspi settings given for algorithm {self.algorithm!r}")
 
     def _check_human(self) -> None:
         """Refuse what a person cannot do: a person reports no perception, and looks at
@@ -121,5 +135,13 @@ class SessionConfig(msgspec.Struct, frozen=True, kw_only=True):
 
 def learner_overrides(config: LearnerConfig) -> dict[str, Union[float, int, None]]:
     """The fields of `config` that differ from LearnerConfig's defaults."""
-    default = LearnerConfig()
+    return _overrides(config, LearnerConfig())
+
+
+def lspi_overrides(config: LSPIConfig) -> dict[str, Union[float, int, bool]]:
+    """The fields of `config` that differ from LSPIConfig's defaults."""
+    return _overrides(config, LSPIConfig())
+
+
+def _overrides(config, default) -> dict:
     return {f: getattr(config, f) for f in config.__struct_fields__ if getattr(config, f) != getattr(default, f)}

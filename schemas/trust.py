@@ -52,6 +52,7 @@ PUBLISHERS: dict[str, frozenset[str]] = {
     "SuggestionMade": frozenset({"learner"}),
     "RewardGiven": frozenset({"learner"}),
     "QUpdated": frozenset({"learner"}),
+    "LSPIUpdated": frozenset({"learner"}),
     "RobotActed": frozenset({"robot"}),
     "CombineRequested": CLIENTS,
     "PolicyCombined": frozenset({"combiner"}),

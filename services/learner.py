@@ -1,8 +1,10 @@
 """The learner service: suggestions, rewards and Q updates for one session.
 
 Rule (thesis 5.1, 5.3, 6.1.3, 7.1.2): the session config picks the algorithm:
-Q-learning ("q-learning"), pi-reuse of the bias policy ("pi-reuse") or a fixed
-policy ("fixed"); the learner is core.learning.Learner with a batch of one and
+Q-learning ("q-learning"), pi-reuse of the bias policy ("pi-reuse"), a fixed
+policy ("fixed") or online LSPI ("lspi", core.lspi.LSPILearner, which records
+an LSPIUpdated per learned sample instead of QUpdated); the learner is
+core.learning.Learner (or its LSPI subclass) with a batch of one and
 the session's "agent" stream, so a session on the bus learns exactly what the
 in-process study (core.simulate) learns for the same seed and persona.
 Each SuggestionRequested gets one SuggestionMade. A suggestion is settled once
@@ -21,13 +23,14 @@ import numpy as np
 from pairplay.core.actions import ACTION_NAMES, N_ACTIONS
 from pairplay.core.geometry import N_STATES
 from pairplay.core.learning import How, Learner, alpha_at, epsilon_at
+from pairplay.core.lspi import LSPILearner, weights_digest
 from pairplay.core.reward import WRONG_SUGGESTION, human_reward, simulated_reward
 from pairplay.core.rng import UniformStream
 from pairplay.schemas import events as ev
 
 from pairplay.services.node import NotYet, Rejected, stream_seed
 
-MODE_OF_ALGORITHM = {"q-learning": "q", "pi-reuse": "reuse", "fixed": "fixed"}
+MODE_OF_ALGORITHM = {"q-learning": "q", "pi-reuse": "reuse", "fixed": "fixed", "lspi": "lspi"}
 HOW_NAMES = {How.GREEDY: "greedy", How.EXPLORE: "explore", How.BIAS: "bias", How.FIXED: "fixed"}
 
 
@@ -86,8 +89,12 @@ class LearnerLogic:
         if policy is not None and (policy.shape != (N_STATES,) or policy.min() < 0 or policy.max() >= N_ACTIONS):
             raise Rejected(f"policy_actions must be {N_STATES} action codes 0..{N_ACTIONS - 1}")
         mode = MODE_OF_ALGORITHM[e.config.algorithm]
-        self.learner = Learner(1, UniformStream([stream_seed(e.config)], "agent"), schedule, mode,
-                               bias=policy if mode == "reuse" else None, policy=policy if mode == "fixed" else None)
+        stream = UniformStream([stream_seed(e.config)], "agent")
+        if mode == "lspi":
+            self.learner = LSPILearner(1, stream, schedule, e.config.lspi_config())
+        else:
+            self.learner = Learner(1, stream, schedule, mode, bias=policy if mode == "reuse" else None,
+                                   policy=policy if mode == "fixed" else None)
         self.schedule, self.mode, self.config = schedule, mode, e.config
         return []
 
@@ -147,7 +154,16 @@ class LearnerLogic:
         learned = learn and self.mode != "fixed"
         out: list[ev.Event] = [ev.RewardGiven(round=o.round, turn=o.turn, attempt=o.attempt, state=o.state,
                                               action=o.action, reward=float(reward), learned=learned, reason=why)]
-        if learned:
+        if learned and self.mode == "lspi":
+            before = float(self.learner.q[0, o.state, o.action])
+            improved = self.learner.learn(np.array([o.state]), np.array([o.action]), np.array([float(reward)]),
+                                          np.array([True]), np.array([o.round])).size > 0
+            out.append(ev.LSPIUpdated(
+                round=o.round, turn=o.turn, attempt=o.attempt, state=o.state, action=o.action, reward=float(reward),
+                samples=int(self.learner.samples[0]), improved=improved, q_before=before,
+                q_after=float(self.learner.q[0, o.state, o.action]),
+                weights=weights_digest(self.learner.theta[0]) if improved else ""))
+        elif learned:
             before = float(self.learner.q[0, o.state, o.action])
             self.learner.learn(np.array([o.state]), np.array([o.action]), np.array([float(reward)]),
                                np.array([True]), np.array([o.round]))

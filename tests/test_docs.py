@@ -32,3 +32,14 @@ def test_the_architecture_diagram_is_drawn_from_the_catalogue_and_current():
     assert catalogue.inject_flow(text) == text, "run: python -m pairplay.schemas.catalogue --write README.md"
     for tag in catalogue.CATALOGUE:
         assert f"-- {tag} -->" in text, f"{tag} is missing from docs/architecture.md's diagram"
+
+
+def test_every_event_type_has_a_trust_rule_agreeing_with_its_publishers():
+    """A new event type without a PUBLISHERS row is refused by every guard ("no event type"): LSPIUpdated was."""
+    from pairplay.schemas.trust import PUBLISHERS, publisher_refusal
+
+    assert set(PUBLISHERS) == set(catalogue.CATALOGUE)
+    for tag, (publishers, _) in catalogue.FLOW.items():
+        for source in publishers:
+            if source != "any service":
+                assert publisher_refusal(tag, source) is None, (tag, source)

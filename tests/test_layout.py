@@ -1,6 +1,6 @@
 """The house rule: imports point one way, read from the code itself.
 
-schemas <- core <- replay <- report <- services <- bench <- cli: a module may
+schemas <- core <- gym <- replay <- report <- services <- bench <- cli: a module may
 import its own package and the packages before it, never one after it. Only
 `services` (and `bench`, which measures it) may import the bus, the robot
 clients, the web stack or rerun; `core` imports numpy, numba (its compiled
@@ -15,7 +15,7 @@ from pathlib import Path
 import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
-ORDER = ["schemas", "core", "replay", "report", "services", "bench", "cli"]
+ORDER = ["schemas", "core", "gym", "replay", "report", "services", "bench", "cli"]
 WIRE = {"zenoh", "rerun", "websockets", "starlette", "uvicorn"}
 
 
@@ -55,6 +55,8 @@ def test_imports_point_one_way(package, path):
                 f"{path.relative_to(ROOT)}:{line} imports {name}: {package} may import only {ORDER[:rank + 1]}")
         if parts[0] in WIRE:
             assert package in ("services", "bench", "cli"), f"{path.relative_to(ROOT)}:{line} imports {name}"
+        if parts[0] == "gymnasium":  # RL interop stays in its room: core is numpy only
+            assert package == "gym", f"{path.relative_to(ROOT)}:{line} imports {name}"
 
 
 def test_the_public_api_resolves_every_name_it_lists():

@@ -101,3 +101,15 @@ def test_a_personas_axis_draws_each_personas_measures_over_the_settings_that_tra
     assert blind and set(blind) == {"blind", "blind,deaf"}
     assert all(p.stat().st_size > 0 for p in written)
     assert any(p.name.startswith("blind-") for p in written)
+
+
+def test_a_sweep_over_the_learner_runs_lspi_and_refuses_lspi_settings_that_cannot_run(tmp_path):
+    from pairplay.report.sweep import cell_measures
+
+    grid = read_grid(_grid(tmp_path, GRID.replace('reward_bonus = ["correct", "consistent"]',
+                                                   'algorithm = ["q-learning", "lspi"]').replace("seeds = 2", "seeds = 1")))
+    q, lspi = (cell_measures(grid.study_settings(c)) for c in grid.cells())
+    assert q["blind/first50"] != lspi["blind/first50"]  # the learner is not silently Q-learning
+    for bad in ('algorithm = ["sarsa"]', 'algorithm = ["lspi"]\nlspi_every = [0]'):
+        with pytest.raises(GridError, match="algorithm|improve_every"):
+            read_grid(_grid(tmp_path, GRID.replace('reward_bonus = ["correct", "consistent"]', bad)))

@@ -158,3 +158,14 @@ def test_no_event_content_makes_the_fold_or_its_drawing_raise():
         view.model.suggestion_text()
 
     fold_never_raises()
+
+
+def test_an_lspi_sample_shows_its_entry_and_an_out_of_range_one_is_a_note():
+    model = ViewModel()
+    changes, _ = model.apply(ev.LSPIUpdated(round=0, turn=1, attempt=0, state=5, action=40, reward=1.0, samples=10,
+                                            improved=True, q_before=0.0, q_after=0.8, weights="ab"))
+    assert changes == {Change.Q} and model.q[5, 40] == 0.8 and model.q_updates == 1
+    bad = msgspec.structs.replace(ev.LSPIUpdated(round=0, turn=1, attempt=0, state=5, action=40, reward=1.0,
+                                                 samples=11, improved=False, q_before=0.8, q_after=0.8), state=24)
+    changes, note = model.apply(bad)
+    assert changes == {Change.NOTE} and note.startswith("ignored LSPIUpdated") and model.q_updates == 1

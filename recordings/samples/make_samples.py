@@ -208,6 +208,8 @@ def catalogue_sample(out: Path) -> None:
         ev.TurnResolved(round=0, turn=0, first=0, second=1, matched=True, round_over=False, interval_ms=2000.0),
         ev.RewardGiven(round=0, turn=0, attempt=0, state=12, action=35, reward=2.0, learned=True, reason="match"),
         ev.QUpdated(round=0, turn=0, attempt=0, state=12, action=35, alpha=0.5, reward=2.0, q_before=0.0, q_after=1.0),
+        ev.LSPIUpdated(round=0, turn=0, attempt=0, state=12, action=35, reward=2.0, samples=1, improved=False,
+                       q_before=0.0, q_after=0.0),
         ev.RoundEnded(round=0, turns=9, matches=9),
         ev.CombineRequested(request_id="r1", recordings=["a.mcap"], seed=1),
         ev.PolicyCombined(request_id="r1", inputs=["a.mcap"], actions=[35] * 24, decided_by=["equal; equal"] * 24),
@@ -226,8 +228,8 @@ def catalogue_sample(out: Path) -> None:
     for i, e in enumerate(events):
         source = {"CardPicked": "participant", "CardObserved": "participant", "SuggestionPerceived": "participant",
                   "WrongSuggestionPressed": "board", "QuestionnaireAnswered": "board", "SuggestionMade": "learner",
-                  "RewardGiven": "learner", "QUpdated": "learner", "RobotActed": "robot", "CombineRequested": "console",
-                  "PolicyCombined": "combiner", "MessageRejected": "recorder",
+                  "RewardGiven": "learner", "QUpdated": "learner", "LSPIUpdated": "learner", "RobotActed": "robot",
+                  "CombineRequested": "console", "PolicyCombined": "combiner", "MessageRejected": "recorder",
                   "RecordingGap": "recorder"}.get(type(e).__name__, "game")
         seqs[source] = seqs.get(source, 0) + 1
         e = stamped(e, session=s, source=source, seq=seqs[source], time_ns=1_796_000_000_123_456_789 + i * 1_000_003)
@@ -242,6 +244,9 @@ if __name__ == "__main__":
         sys.exit(0)
     if sys.argv[2:3] == ["--console"]:  # the console's sample alone (added after the others were made)
         console_sample(out)
+        sys.exit(0)
+    if sys.argv[2:3] == ["--catalogue"]:  # the catalogue alone (remade when an event type is added)
+        catalogue_sample(out)
         sys.exit(0)
     sim_sample(out)
     human_sample(out)

@@ -263,6 +263,16 @@ def _q_updated(m: ViewModel, e) -> tuple[set[Change], str]:
     return {Change.Q}, ""
 
 
+def _lspi_updated(m: ViewModel, e) -> tuple[set[Change], str]:
+    """LSPI changes every entry of the sampled actions at a policy improvement; the event carries
+    only this sample's entry, so the table shows the entries as they were last sampled."""
+    if not (0 <= e.state < N_STATES and 0 <= e.action < N_ACTIONS):
+        return {Change.NOTE}, f"ignored LSPIUpdated of Q[{e.state!r}, {e.action!r}]: out of the table"
+    m.q[e.state, e.action] = e.q_after
+    m.q_updates += 1
+    return {Change.Q}, ""
+
+
 def _round_ended(m: ViewModel, e) -> tuple[set[Change], str]:
     m.picks_per_round[e.round] = 2 * e.turns
     m.last_round_ended = e.round
@@ -289,6 +299,7 @@ _HANDLERS = {
     "TurnResolved": _turn_resolved,
     "RewardGiven": _reward_given,
     "QUpdated": _q_updated,
+    "LSPIUpdated": _lspi_updated,
     "RoundEnded": _round_ended,
     "SessionEnded": _session_ended,
     "PickRejected": _rejected,

@@ -1,0 +1,24 @@
+"""pairplay.gym: the robot-assisted Memory task as a Gymnasium environment, for any RL library.
+
+What belongs here: Gymnasium wrappers around `pairplay.core` and nothing else
+(no bus, no files): `MemoryEnv` (one game; an episode is one round, a step is
+one suggestion) and `MemoryVectorEnv` (many games stepped at once as arrays on
+the same core). Importing this package registers the ids below with Gymnasium::
+
+    import gymnasium, pairplay.gym
+    env = gymnasium.make("pairplay/Memory-v0", persona="deaf")
+    envs = gymnasium.make_vec("pairplay/Memory-v0", num_envs=2048, vectorization_mode="vector_entry_point")
+"""
+
+from __future__ import annotations
+
+import gymnasium
+
+from .env import ENV_ID, MemoryEnv
+from .vector import MemoryVectorEnv
+
+__all__ = ["ENV_ID", "MemoryEnv", "MemoryVectorEnv"]
+
+if ENV_ID not in gymnasium.registry:
+    gymnasium.register(id=ENV_ID, entry_point="pairplay.gym.env:MemoryEnv",
+                       vector_entry_point="pairplay.gym.vector:MemoryVectorEnv")

@@ -1,0 +1,111 @@
+"""One Memory game as a Gymnasium environment (core/games.py underneath).
+
+Rule: an episode is one round (thesis 6.1: every turn until the board is
+clear, on a new deal); a step is one suggestion. The observation is the state
+the learner sees (thesis 4.1: Discrete(24)), or with `observation="rich"` a
+Box of 78 values in [0, 1]: the state one-hot (24), the observed card (18),
+the matching card (18) and the covered cards (18). The action is one of the
+88 composite codes (thesis 4.2). The reward is the study's (4.3, 6.1.3) under
+`reward_bonus`; an ignored suggestion pays 0 and says so in info["learned"].
+A round ends with `terminated` and the terminal state NOT_ONE_CARD (no card is
+turned). Seeding: `reset(seed=s)` starts a new game whose deal and user streams
+are those of the study's game seeded s (core.rng.game_seed gives the study's
+seeds), so a fixed policy played here for R episodes picks what the study's
+run_games picks for that seed; `reset()` deals the next round of the same game.
+The persona (appendix A) is a constructor option or `reset(options={"persona": key})`
+(which starts a new game).
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import gymnasium
+import numpy as np
+from gymnasium import spaces
+
+from pairplay.core.actions import N_ACTIONS
+from pairplay.core.games import MemoryGames
+from pairplay.core.geometry import N_CARDS, N_STATES, NOT_ONE_CARD_STATE
+from pairplay.core.personas import persona as find_persona
+from pairplay.core.reward import check_bonus_rule
+from pairplay.schemas.config import DEFAULT_REWARD_BONUS
+
+ENV_ID = "pairplay/Memory-v0"
+OBSERVATIONS = ("state", "rich")
+RICH_SIZE = N_STATES + 3 * N_CARDS
+
+
+def observation_space(kind: str) -> spaces.Space:
+    if kind not in OBSERVATIONS:
+        raise ValueError(f"observation must be one of {OBSERVATIONS}, got {kind!r}")
+    if kind == "state":
+        return spaces.Discrete(N_STATES)
+    return spaces.Box(0.0, 1.0, (RICH_SIZE,), dtype=np.float32)
+
+
+def rich_observations(states: np.ndarray, turn: dict | None) -> np.ndarray:
+    """(B, 78) float32: state one-hot, observed card, matching card, covered cards; the terminal
+    state alone where `turn` is None."""
+    out = np.zeros((states.size, RICH_SIZE), dtype=np.float32)
+    rows = np.arange(states.size)
+    out[rows, states] = 1.0
+    if turn is not None:
+        out[rows, N_STATES + turn["observed"]] = 1.0
+        out[rows, N_STATES + N_CARDS + turn["match"]] = 1.0
+        bits = (turn["covered"][:, None] >> np.arange(N_CARDS)) & 1
+        out[:, N_STATES + 2 * N_CARDS:] = bits
+    return out
+
+
+class MemoryEnv(gymnasium.Env):
+    """The task for one simulated user; see the module rule."""
+
+    metadata = {"render_modes": []}
+
+    def __init__(self, persona: str = "tatiana", reward_bonus: str = DEFAULT_REWARD_BONUS,
+                 observation: str = "state", observed_source: str = "intended"):
+        self.persona = find_persona(persona)
+        self.reward_bonus = check_bonus_rule(reward_bonus)
+        self.observation = observation
+        self.observed_source = observed_source
+        self.observation_space = observation_space(observation)
+        self.action_space = spaces.Discrete(N_ACTIONS)
+        self._games: MemoryGames | None = None
+        self._open = False
+
+    def _obs(self, state: int, terminal: bool = False):
+        if self.observation == "state":
+            return int(state)
+        turn = None if terminal else self._games.turn
+        return rich_observations(np.array([state]), turn)[0]
+
+    def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
+        super().reset(seed=seed)
+        options = options or {}
+        if "persona" in options:
+            self.persona = find_persona(str(options["persona"]))
+        if seed is not None or self._games is None or "persona" in options:
+            game_seed = int(seed) if seed is not None else int(self.np_random.integers(2 ** 63))
+            self._games = MemoryGames([self.persona], [game_seed], self.observed_source, self.reward_bonus)
+        else:
+            self._games.new_round(np.array([0]))
+        state = int(self._games.observe()[0])
+        self._open = True
+        return self._obs(state), {"round": int(self._games.round_index[0])}
+
+    def step(self, action):
+        if not self._open:
+            raise RuntimeError("the round is over (or never started): call reset()")
+        if not self.action_space.contains(action):
+            raise ValueError(f"action {action!r} is not one of the {N_ACTIONS} composite codes")
+        out = self._games.act(np.array([int(action)]))
+        info = {"picks": int(out.picks[0]), "learned": bool(out.learned[0]), "matched": bool(out.matched[0]),
+                "considered": bool(out.considered[0]), "consistent": bool(out.consistent[0])}
+        terminated = bool(out.round_over[0])
+        if terminated:
+            self._open = False
+            obs = self._obs(NOT_ONE_CARD_STATE, terminal=True)
+        else:
+            obs = self._obs(int(self._games.observe()[0]))
+        return obs, float(out.rewards[0]), terminated, False, info

@@ -1,0 +1,118 @@
+"""pairplay.gym: Gymnasium's checks, the study reproduced through the env, the vector env against one env per game."""
+
+import warnings
+
+import gymnasium
+import numpy as np
+import pytest
+from gymnasium.utils.env_checker import check_env
+from gymnasium.vector import AutoresetMode, SyncVectorEnv
+from gymnasium.vector.utils import batch_space
+
+import pairplay.gym  # noqa: F401  (registers the id)
+from pairplay.core.geometry import NOT_ONE_CARD_STATE
+from pairplay.core.oracle import oracle_policies
+from pairplay.core.personas import PERSONAS
+from pairplay.core.rng import game_seed
+from pairplay.core.simulate import run_games
+from pairplay.gym import ENV_ID, MemoryEnv, MemoryVectorEnv
+
+
+@pytest.mark.parametrize("observation", ["state", "rich"])
+def test_gymnasium_check_env_passes_without_a_warning(observation):
+    env = gymnasium.make(ENV_ID, persona="deaf", observation=observation, reward_bonus="consistent")
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        check_env(env.unwrapped)
+    env.close()
+
+
+def _policy():
+    oracle, _ = oracle_policies([PERSONAS["wasim"]], 4, 0, 40)
+    return oracle[0]
+
+
+@pytest.mark.parametrize("source,rule", [("intended", "correct"), ("first-pick", "match")])
+def test_a_fixed_policy_through_the_env_picks_what_the_study_picks(source, rule):
+    policy, wasim, rounds = _policy(), PERSONAS["wasim"], 6
+    seed = game_seed(0, "wasim", 3)
+    study = run_games([wasim], [seed], rounds, mode="fixed", policy=policy, observed_source=source,
+                      reward_bonus=rule, record="all")
+    rewards = [float(r) for r in study.trace["reward"]]  # one game: its turns in order
+    env = gymnasium.make(ENV_ID, persona="wasim", observed_source=source, reward_bonus=rule)
+    picks, got = [], []
+    obs, _ = env.reset(seed=seed)
+    for _ in range(rounds):
+        done = False
+        while not done:
+            obs, reward, done, truncated, info = env.step(int(policy[obs]))
+            got.append(reward)
+            assert not truncated
+        assert obs == NOT_ONE_CARD_STATE
+        picks.append(info["picks"])
+        obs, _ = env.reset()
+    assert picks == list(study.picks[0]) and got == rewards[:len(got)] and len(got) == len(rewards)
+
+
+def test_the_vector_env_is_one_env_per_game_stepped_together():
+    n, seed = 6, 42
+    ours = gymnasium.make_vec(ENV_ID, num_envs=n, vectorization_mode="vector_entry_point", persona="blind",
+                              observation="rich")
+    assert isinstance(ours.unwrapped, MemoryVectorEnv)
+    assert ours.observation_space == batch_space(ours.single_observation_space, n)
+    assert ours.action_space == batch_space(ours.single_action_space, n)
+    assert ours.metadata["autoreset_mode"] == AutoresetMode.SAME_STEP
+    sync = SyncVectorEnv([lambda: MemoryEnv(persona="blind", observation="rich") for _ in range(n)],
+                         autoreset_mode=AutoresetMode.SAME_STEP)
+    a, _ = ours.reset(seed=seed)
+    b, _ = sync.reset(seed=seed)
+    assert np.array_equal(a, b) and a in ours.observation_space
+    rng = np.random.default_rng(0)
+    ended = 0
+    for _ in range(60):
+        actions = rng.integers(0, 88, n)
+        a, ra, ta, ua, ia = ours.step(actions)
+        b, rb, tb, ub, ib = sync.step(actions)
+        assert np.array_equal(a, b) and np.array_equal(ra, rb) and np.array_equal(ta, tb) and not ua.any()
+        assert a in ours.observation_space and ra.dtype == np.float64
+        if ta.any():
+            ended += int(ta.sum())
+            assert np.array_equal(ia["_final_obs"], ib["_final_obs"])
+            assert np.array_equal(ia["final_obs"][ta], np.stack(ib["final_obs"][ib["_final_obs"]]))
+    assert ended >= n  # every game finished a round and went on
+    ours.close()
+    sync.close()
+
+
+def test_the_vector_env_reproduces_the_study_for_many_games():
+    policy, n, rounds = _policy(), 40, 3
+    personas = [list(PERSONAS)[i % len(PERSONAS)] for i in range(n)]
+    seeds = [game_seed(1, k, i) for i, k in enumerate(personas)]
+    study = run_games([PERSONAS[k] for k in personas], seeds, rounds, mode="fixed", policy=policy)
+    env = MemoryVectorEnv(n, persona=personas)
+    obs, _ = env.reset(seed=seeds)
+    picks = [[] for _ in range(n)]
+    while min(len(p) for p in picks) < rounds:
+        obs, _, over, _, info = env.step(policy[obs])
+        for g in np.nonzero(over)[0]:
+            picks[g].append(int(info["picks"][g]))
+    assert [p[:rounds] for p in picks] == study.picks.tolist()
+
+
+def test_bad_options_and_actions_are_refused():
+    with pytest.raises(KeyError, match="unknown persona"):
+        MemoryEnv(persona="nobody")
+    with pytest.raises(ValueError, match="observation"):
+        MemoryEnv(observation="pixels")
+    env = MemoryEnv()
+    with pytest.raises(RuntimeError, match="reset"):
+        env.step(0)
+    env.reset(seed=1)
+    with pytest.raises(ValueError, match="composite"):
+        env.step(88)
+    vec = MemoryVectorEnv(2)
+    vec.reset(seed=[1, 2])
+    with pytest.raises(ValueError, match="composite"):
+        vec.step(np.array([0, 99]))
+    obs, info = env.reset(options={"persona": "deaf"})
+    assert env.persona.key == "deaf" and obs in env.observation_space
