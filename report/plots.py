@@ -222,7 +222,7 @@ def grouped_bars_with_spread(labels: list[str], series: dict[str, np.ndarray], r
         ax.bar(x + (i - (n - 1) / 2) * width, values.mean(axis=0), width, yerr=values.std(axis=0),
                capsize=2, label=name)
     ax.scatter(x, reference, marker="_", s=400, color="black", zorder=3, label=reference_label)
-    ax.set_xticks(x, labels, rotation=20)
+    ax.set_xticks(x, labels, rotation=20, ha="right", rotation_mode="anchor")  # each label ends at its bars
     ax.set_ylabel("picks per round (18 = perfect; lower is better)")
     ax.set_ylim(16, max(float(np.max([np.asarray(v).max() for v in series.values()])), max(reference)) + 2)
     ax.set_title(title, fontsize=10)
