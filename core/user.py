@@ -18,6 +18,10 @@ Rule (SPEC "Interpretation and user perception", "Memory"):
   missed turn is never already remembered (first picks from memory always match,
   other picks come from the NIS), so "re-seeing" needs no rule.
 
+Whole readings (future work 1, core/interpretation.py READINGS): a persona of
+core/personas.py READING_PERSONAS may read speech and head only together, or a
+word and a head turn as one compound direction; the thesis's personas read as above.
+
 Draws: DRAWS_PER_TURN uniforms from the "user" stream at the start of every turn,
 used or not, in this order: first pick, intended card, focus, hearing, choice in
 the candidate set.

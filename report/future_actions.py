@@ -82,6 +82,7 @@ def action_level_section(out: Path, exp, markdown_table, draw=plots.draw) -> lis
     al = {k: exp.profiles[k].info for k in exp.persona}
     dropped = [f"{k} ({_pct(a3[k].speech)}/{_pct(a3[k].head)} -> {_pct(al[k].speech)}/{_pct(al[k].head)})"
                for k in exp.persona if (a3[k].speech, a3[k].head) != (al[k].speech, al[k].head)]
+    differ = int((exp.replicate_info[..., :2] != exp.replicate_info[..., 2:]).any(-1).sum())
     return [
         "## Action-level profiles (future work 1)", "",
         "The thesis's algorithm 3 compares a user's policies suggestion by suggestion (5.2.1), so two composite "
@@ -105,8 +106,9 @@ def action_level_section(out: Path, exp, markdown_table, draw=plots.draw) -> lis
         "Profiles over each persona's 10 policies, and over 5 replicates of 2 policies (as in the human study, "
         "7.2); shares of the 23 spatial states:", "",
         markdown_table(profiles), "",
-        "Action level lowers the counts of " + (", ".join(dropped) if dropped else "no persona") +
-        "; with 2 policies a user, disagreements are rarer and the two extractions mostly agree.", "",
+        "Over 10 policies, action level lowers the counts of " + (", ".join(dropped) if dropped else "no persona")
+        + f"; with 2 policies a user, disagreements are rarer and the two extractions differ in {differ} of "
+        f"{exp.replicate_info.shape[0] * exp.replicate_info.shape[1]} replicate profiles.", "",
         f"Merges: in each of {R} replicates every member is represented by one of its two policies (the same "
         "one for every strategy) and each merged policy plays the same 4 evaluation games x 50 rounds of each "
         "member, epsilon 0. Picks per round, lower is better:", "",
