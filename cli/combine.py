@@ -20,7 +20,8 @@ import numpy as np
 
 from pairplay import __version__
 from pairplay.core.actions import ACTIONS
-from pairplay.core.combine import combine, extract_info, trained_states
+from pairplay.core.actionlevel import combine_actions, extract_action_info
+from pairplay.core.combine import COMPARED_STATES, combine, extract_info, trained_states
 from pairplay.core.geometry import STATE_NAMES
 from pairplay.core.policies import (by_participant, check_distinct, check_exclude, check_profiles_computable,
                                     combined_policy_file, common_reward_bonus, users_from_policies)
@@ -57,12 +58,18 @@ def add_profile_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--min-updates", type=non_negative, default=0,
                    help="compare only the states every policy of a participant updated at least this many "
                         "times (default 0: the 23 spatial states, algorithm 3; thesis 6.4: untrained states)")
+    p.add_argument("--actions", action="store_true",
+                   help="also the action-level information (thesis chapter 8, future work 1; core/actionlevel.py): "
+                        "disagreements between wholes the participant recognises are not counted")
 
 
 def add_combine_arguments(p: argparse.ArgumentParser) -> None:
     _common(p)
     p.add_argument("--out", "-o", type=Path, help="write the merged policy file here")
     p.add_argument("--exclude", default="", help="comma-separated participants to leave out")
+    p.add_argument("--actions", action="store_true",
+                   help="action-level information and wholes kept (thesis chapter 8, future work 1; "
+                        "core/actionlevel.py) instead of algorithms 3 and 4 alone")
     add_force(p, "an existing --out file")
 
 
@@ -110,7 +117,28 @@ def run_profile(args) -> int:
     else:
         _, profiles = users_from_policies(policies, args.seed)
     print("\n".join(_profile_lines(profiles, policies)))
+    if args.actions:
+        print("\naction level (core/actionlevel.py): algorithm 3's shares without the states where the policies' "
+              "differing actions are wholes the participant recognises")
+        print("\n".join(_action_lines(policies, args.min_updates)))
     return 0
+
+
+def _action_lines(policies, min_updates: int) -> list[str]:
+    """Per participant: algorithm 3 -> action level (speech %, head %), synonym states and wholes."""
+    lines = [f"{'participant':16s} {'states':>6s} {'speech %':>15s} {'head %':>15s}  synonym states; wholes"]
+    for name, own in by_participant(policies).items():
+        states = trained_states(np.array([p.visits for p in own]), min_updates) if min_updates else COMPARED_STATES
+        if not states.size:
+            lines.append(f"{name:16s} {0:>6d}  no state trained that often")
+            continue
+        prof = extract_action_info(np.array([p.greedy for p in own]), np.array([p.q for p in own]), states)
+        a3, al = prof.algorithm3, prof.info
+        wholes = ", ".join(f"{STATE_NAMES[s]}: {ACTIONS[a].name}" for s, a in prof.wholes)
+        lines.append(f"{name:16s} {al.compared_states:>6d} {f'{100 * a3.speech:.1f} -> {100 * al.speech:.1f}':>15s} "
+                     f"{f'{100 * a3.head:.1f} -> {100 * al.head:.1f}':>15s}  "
+                     f"{', '.join(STATE_NAMES[s] for s in prof.synonym_states) or '-'}; {wholes or '-'}")
+    return lines
 
 
 def run_combine(args) -> int:
@@ -124,7 +152,14 @@ def run_combine(args) -> int:
         raise OptionError("no policies left to combine", f"--exclude {args.exclude}")
     reward_rule = common_reward_bonus([p for p, _ in kept], [f for _, f in kept])
     users, profiles = users_from_policies(policies, args.seed, exclude)
-    merged = combine(users)
+    if args.actions:  # the same representative policies, with action-level information, then wholes kept
+        groups = by_participant(policies, exclude)
+        action = [extract_action_info(np.array([p.greedy for p in groups[u.name]]),
+                                      np.array([p.q for p in groups[u.name]])) for u in users]
+        users = [u._replace(info=a.info) for u, a in zip(users, action)]
+        merged = combine_actions(users, [a.values for a in action])
+    else:
+        merged = combine(users)
     if args.out:  # written before the listing, so a reader that stops early loses nothing
         write_policy(args.out, combined_policy_file(merged, users, files, args.seed, f"pairplay {__version__}",
                                                     reward_rule), args.force)

@@ -13,6 +13,16 @@ intersection makes the action inconsistent (the user falls back to the NIS).
 Perception (thesis 6.1.3): speech is heard with q = (hearing - 1) * 0.2; sight
 decides which visual families are seen (table 6.1): 5-6 head, smile and gaze;
 3-4 head and smile; 2 head; 1 nothing.
+
+Whole readings (beyond the thesis: its chapter 8 and 7.4 saw users read a
+suggestion as one whole): a persona may read speech and head together
+(READINGS). "together": a spoken word is understood only while the head moves
+with it, and a head movement only while words come with it; alone, each is
+ignored (not perceived). "compound": a spoken straight direction and a
+perpendicular head turn mean the diagonal between them ("Maybe up" + turn left
+= the TOP_LEFT cell, COMPOUND), where the plain reading intersects them to
+nothing. Every other pair is read as above; a persona without readings is the
+thesis's user, bit for bit.
 """
 
 from __future__ import annotations
@@ -112,6 +122,40 @@ def _tables() -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
 # HEAR_SET[observed, match, hearing part] and VIS_SET[observed, match, visual
 # part]: the card masks of appendix B, precomputed for the batched user.
 HEAR_SET, VIS_SET, HEAR_CHANNEL, VIS_CHANNEL = _tables()
+
+
+# Whole readings, as bits of a persona's reading code (core/kernels.py `_user_respond`).
+READ_TOGETHER, READ_COMPOUND = 1, 2
+READINGS = {"together": READ_TOGETHER, "compound": READ_COMPOUND}
+
+
+def reading_code(readings) -> int:
+    """The bit code of a persona's whole readings (names of READINGS); ValueError for an unknown one."""
+    code = 0
+    for name in readings:
+        if name not in READINGS:
+            raise ValueError(f"unknown reading {name!r}; known: {', '.join(READINGS)}")
+        code |= READINGS[name]
+    return code
+
+
+def compound_part(hearing_part: int, visual_part: int) -> int:
+    """The diagonal head part a (straight speech, perpendicular head) pair means to a "compound"
+    reader, or -1 when the pair has no compound meaning."""
+    spoken, _ = hearing_meaning(hearing_part)
+    turned, channel = visual_meaning(visual_part)
+    if channel != "head":
+        return -1
+    for vertical, horizontal in ((spoken, turned), (turned, spoken)):
+        if vertical in ("TOP", "BOTTOM") and horizontal in ("LEFT", "RIGHT"):
+            head = HEAD_MEANS.index(f"{vertical}_{horizontal}")
+            return VISUAL_PARTS.index((head, 0))
+    return -1
+
+
+# COMPOUND[hearing part, visual part]: compound_part, for the batched user.
+COMPOUND = np.array([[compound_part(h, v) for v in range(len(VISUAL_PARTS))] for h in range(len(HEARING_PARTS))],
+                    dtype=np.int64)
 
 
 def sees(sight: int) -> np.ndarray:

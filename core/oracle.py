@@ -64,7 +64,11 @@ def oracle_policies(personas, seeds_per_persona: int, seed: int, rounds: int = 2
     situations' lockstep order, without an (n, 88) table in memory.
     """
     from .rng import game_seed
+    from .user import reading_codes
     check_bonus_rule(bonus)
+    if reading_codes(personas).any():  # core/kernels.py `_expected` models the thesis's reading only
+        raise ValueError("the oracle models the thesis's reading of suggestions, not whole readings "
+                         f"({', '.join(p.key for p, r in zip(personas, reading_codes(personas)) if r)})")
     seed_of = seed_of or (lambda key, i: game_seed(seed, "oracle:" + key, i))
     games = [p for p in personas for _ in range(seeds_per_persona)]
     seeds = [seed_of(p.key, i) for p in personas for i in range(seeds_per_persona)]

@@ -3,6 +3,10 @@
 Rule: one data file holds every persona; features the thesis's text does not
 state are listed per persona under "inferred" with the story they come from.
 The file ships with the package and is read once at import, like a table.
+`data/reading_personas.json` holds the personas of future work 1 (core/actionlevel.py),
+who read some suggestion pairs as one whole (`reads`, core/interpretation.py
+READINGS); they are kept apart, in READING_PERSONAS, so that the default study's
+list (and its pinned results) never includes them.
 """
 
 from __future__ import annotations
@@ -13,6 +17,8 @@ import msgspec
 
 from pairplay.schemas.config import Persona
 
+from .interpretation import reading_code
+
 
 class _PersonaFile(msgspec.Struct, forbid_unknown_fields=True):
     scale: str
@@ -20,14 +26,32 @@ class _PersonaFile(msgspec.Struct, forbid_unknown_fields=True):
     personas: list[Persona]
 
 
-def parse_personas(data: bytes) -> dict[str, Persona]:
+class ReadingPersona(Persona, frozen=True, forbid_unknown_fields=True):
+    """A persona who reads some suggestion pairs as one whole (core/interpretation.py READINGS)."""
+
+    reads: tuple[str, ...] = ()
+
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        reading_code(self.reads)  # ValueError naming an unknown reading
+
+
+class _ReadingPersonaFile(msgspec.Struct, forbid_unknown_fields=True):
+    scale: str
+    note: str
+    personas: list[ReadingPersona]
+
+
+def parse_personas(data: bytes, kind=_PersonaFile) -> dict[str, Persona]:
     """Personas by key from the JSON text of a persona file."""
-    personas = msgspec.json.decode(data, type=_PersonaFile).personas
+    personas = msgspec.json.decode(data, type=kind).personas
     return {p.key: p for p in personas}
 
 
 PERSONAS: dict[str, Persona] = parse_personas(
     resources.files("pairplay.core").joinpath("data/personas.json").read_bytes())
+READING_PERSONAS: dict[str, ReadingPersona] = parse_personas(
+    resources.files("pairplay.core").joinpath("data/reading_personas.json").read_bytes(), _ReadingPersonaFile)
 
 
 def persona(key: str) -> Persona:

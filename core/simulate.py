@@ -30,7 +30,7 @@ from .learning import MODES, _policy_table, schedule_tables
 from .lspi import play_lspi
 from .reward import BONUS_CODES, simulated_reward
 from .rng import ROLES, stream_keys
-from .user import persona_arrays
+from .user import persona_arrays, reading_codes
 
 RECORDS = {None: kernels.RECORD_NONE, "all": kernels.RECORD_ALL, "considerable": kernels.RECORD_CONSIDERABLE}
 PROGRESS_SLICES = 20  # a batch with a progress callback is played in this many slices of rounds
@@ -115,6 +115,7 @@ def run_games(personas: Sequence[Persona], seeds: Sequence[int], rounds: int | S
         if rows.any():
             table[rows] = _policy_table(source, n)[rows]
     p_consider, q_hear, capacity, sees = persona_arrays(personas)
+    reading = reading_codes(personas)
 
     # a fixed policy draws nothing: its games need only the deal and user streams
     keys = stream_keys(seeds, ("deal", "user") if set(modes) == {"fixed"} else ROLES)
@@ -137,7 +138,7 @@ def run_games(personas: Sequence[Persona], seeds: Sequence[int], rounds: int | S
     for until in range(slice_rounds, horizon + slice_rounds, slice_rounds):
         trace, n_trace = kernels.play(
             kernels.TABLES, games, until, game_rounds, keys, pos, mode_code, cfg, table, p_consider, q_hear,
-            capacity, sees, eps_tab, alpha_tab, psi0_tab, psi_decay, BONUS_CODES[reward_bonus],
+            capacity, sees, reading, eps_tab, alpha_tab, psi0_tab, psi_decay, BONUS_CODES[reward_bonus],
             observed_source == "first-pick", q, counts, picks, inconsistent, steps, round_index, memory, stamp,
             clock, every, snapshots, RECORDS[record], trace, n_trace)
         if progress is not None:

@@ -18,6 +18,10 @@ Rule (SPEC "Interpretation and user perception", "Memory"):
   missed turn is never already remembered (first picks from memory always match,
   other picks come from the NIS), so "re-seeing" needs no rule.
 
+Whole readings (future work 1, core/interpretation.py READINGS): a persona of
+core/personas.py READING_PERSONAS may read speech and head only together, or a
+word and a head turn as one compound direction; the thesis's personas read as above.
+
 Draws: DRAWS_PER_TURN uniforms from the "user" stream at the start of every turn,
 used or not, in this order: first pick, intended card, focus, hearing, choice in
 the candidate set.
@@ -33,7 +37,7 @@ from pairplay.schemas.config import Persona
 
 from . import kernels
 from .geometry import N_CARDS
-from .interpretation import consider_probability, hear_probability, memory_capacity, sees
+from .interpretation import consider_probability, hear_probability, memory_capacity, reading_code, sees
 from .rng import UniformStream
 
 DRAWS_PER_TURN = kernels.DRAWS_PER_TURN
@@ -57,6 +61,12 @@ def persona_arrays(personas: Sequence[Persona]) -> tuple[np.ndarray, np.ndarray,
     return p_consider, q_hear, capacity, np.ascontiguousarray(seen)
 
 
+def reading_codes(personas: Sequence[Persona]) -> np.ndarray:
+    """(n,) int64: each persona's whole readings (core/interpretation.py READINGS; 0 for the thesis's
+    personas, which have no `reads`: core/personas.py ReadingPersona has)."""
+    return np.array([reading_code(getattr(p, "reads", ())) for p in personas], dtype=np.int64).reshape(-1)
+
+
 def _ints(x, n: int) -> np.ndarray:
     return kernels.as_batch(x, n, np.int64)
 
@@ -71,6 +81,7 @@ class SimulatedUsers:
         n = len(personas)
         self.p_consider, self.q_hear, self.capacity, seen = persona_arrays(personas)
         self.sees_smile, self.sees_head, self.sees_gaze = (np.ascontiguousarray(seen[:, i]) for i in range(3))
+        self.reading = reading_codes(personas)
         self.stamp = np.full((n, N_CARDS), _NEVER, dtype=np.int64)  # when a card entered memory
         self.memory = np.zeros(n, dtype=np.int64)  # bit mask of remembered cards
         self.clock = np.zeros(n, dtype=np.int64)
@@ -115,7 +126,8 @@ class SimulatedUsers:
         kernels.users_respond(kernels.TABLES, self.memory, _ints(actions, n), _ints(observed, n), _ints(match, n),
                               _ints(intended, n), kernels.as_batch(from_memory, n, bool),
                               _ints(covered, n), self._u, self.p_consider, self.q_hear, self.sees_smile,
-                              self.sees_head, self.sees_gaze, second, considered, consistent, candidates)
+                              self.sees_head, self.sees_gaze, self.reading, second, considered, consistent,
+                              candidates)
         return Response(second, considered, consistent, candidates)
 
     def end_turn(self, first: np.ndarray, second: np.ndarray, matched: np.ndarray) -> None:

@@ -190,7 +190,8 @@ def _save(fig, path: Path, dpi: int) -> None:
     _pyplot().close(fig)
 
 
-FIGURES = ("learning_curves", "comparison_bars", "profiles", "merged_policies", "reuse_curves", "algorithm_curves")
+FIGURES = ("learning_curves", "comparison_bars", "profiles", "merged_policies", "reuse_curves", "algorithm_curves",
+           "grouped_bars_with_spread")
 
 
 def draw(name: str | None, *args) -> None:
@@ -207,7 +208,7 @@ def draw(name: str | None, *args) -> None:
 
 
 def grouped_bars_with_spread(labels: list[str], series: dict[str, np.ndarray], reference: list[float],
-                             path: Path, title: str) -> None:
+                             path: Path, title: str, reference_label: str = "oracle") -> None:
     """Bars per label and series: the mean over replicates with a 1-sd error bar; a tick marks the reference.
 
     `series[name]` is (replicates, labels) in picks per round."""
@@ -220,8 +221,8 @@ def grouped_bars_with_spread(labels: list[str], series: dict[str, np.ndarray], r
         values = np.asarray(values)
         ax.bar(x + (i - (n - 1) / 2) * width, values.mean(axis=0), width, yerr=values.std(axis=0),
                capsize=2, label=name)
-    ax.scatter(x, reference, marker="_", s=400, color="black", zorder=3, label="oracle")
-    ax.set_xticks(x, labels, rotation=20)
+    ax.scatter(x, reference, marker="_", s=400, color="black", zorder=3, label=reference_label)
+    ax.set_xticks(x, labels, rotation=20, ha="right", rotation_mode="anchor")  # each label ends at its bars
     ax.set_ylabel("picks per round (18 = perfect; lower is better)")
     ax.set_ylim(16, max(float(np.max([np.asarray(v).max() for v in series.values()])), max(reference)) + 2)
     ax.set_title(title, fontsize=10)

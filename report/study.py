@@ -12,6 +12,7 @@ Rule: `run_study(settings, out)` runs the study of thesis chapter 6 through
   reuse.csv, reuse.png              held-out persona: Q-learning from scratch vs pi-reuse
   speed.csv, speed.png              (--algorithm lspi) LSPI beside Q-learning on the same games:
                                     learning curves and rounds to 1.10x the oracle
+  action_profiles.csv, action_merges.csv/.png   future work 1 (report/future_actions.py)
   report.md                         the tables and figures, with the run's settings
 It returns the tables it wrote, so a caller (the CLI, a notebook) can print them.
 """
@@ -41,8 +42,9 @@ from pairplay.outputs import output_folder
 from pairplay.processes import off_main_thread, process_pool, stop_pool
 from pairplay.schemas.policy import write_policy
 
+from pairplay.core.actionlevel import action_level_experiment
 from pairplay.core.precombine import combination_experiment
-from pairplay.report import future, plots
+from pairplay.report import future, future_actions, plots
 
 
 @dataclass
@@ -435,6 +437,10 @@ def _run(args, out, progress_bar, personas, config, names, timings, start, figur
         experiment = combination_experiment(personas, training, args.seed)
         future_lines += future.precombination_section(out, experiment, names, oracle, markdown_table)
         timings["future work"] = time.perf_counter() - t0
+        t0 = time.perf_counter()  # future work 1: its own personas, the partners' games reused from `training`
+        actions = action_level_experiment(args.seed, args.rounds, training, reward_bonus=args.reward_bonus)
+        future_lines += future_actions.action_level_section(out, actions, markdown_table, figures.draw)
+        timings["future work 1 (action level)"] = time.perf_counter() - t0
     t0 = time.perf_counter()
     figures.finish()
     timings["waiting for figures"] = time.perf_counter() - t0
