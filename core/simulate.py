@@ -28,7 +28,7 @@ from .actions import N_ACTIONS
 from .learning import MODES, _policy_table, schedule_tables
 from .reward import BONUS_CODES, simulated_reward
 from .rng import ROLES, stream_keys
-from .user import persona_arrays
+from .user import frames_of, persona_arrays
 
 OBSERVED_SOURCES = ("intended", "first-pick")
 RECORDS = {None: kernels.RECORD_NONE, "all": kernels.RECORD_ALL, "considerable": kernels.RECORD_CONSIDERABLE}
@@ -59,7 +59,7 @@ def run_games(personas: Sequence[Persona], seeds: Sequence[int], rounds: int | S
               bias: np.ndarray | None = None, policy: np.ndarray | None = None,
               observed_source: str = "intended", progress=None,
               snapshot_every: int | None = None, reward_bonus: str = DEFAULT_REWARD_BONUS,
-              record: str | None = None) -> SimResult:
+              record: str | None = None, frames=0) -> SimResult:
     """Play one game per (persona, seed) pair; see the module rule.
 
     `rounds`, `config` and `mode` ("q", "reuse" on `bias`, "fixed" by `policy`)
@@ -72,6 +72,9 @@ def run_games(personas: Sequence[Persona], seeds: Sequence[int], rounds: int | S
     paid (core/reward.py). `record="all"` keeps every turn in `trace` (name ->
     array: kernels.TRACE_FIELDS, then "candidates" and "reward"), "considerable"
     only the turns whose match the user did not remember (the oracle's situations).
+    `frames`: the frame each game's user reads suggestions in, relative to how
+    the robot renders them (core/frames.py; 0, the thesis's user, by default),
+    one for all games or one per game.
     """
     if observed_source not in OBSERVED_SOURCES:
         raise ValueError(f"observed source must be one of {OBSERVED_SOURCES}")
@@ -106,6 +109,7 @@ def run_games(personas: Sequence[Persona], seeds: Sequence[int], rounds: int | S
         if rows.any():
             table[rows] = _policy_table(source, n)[rows]
     p_consider, q_hear, capacity, sees = persona_arrays(personas)
+    frame = frames_of(frames, n)
 
     # a fixed policy draws nothing: its games need only the deal and user streams
     keys = stream_keys(seeds, ("deal", "user") if set(modes) == {"fixed"} else ROLES)
@@ -128,7 +132,7 @@ def run_games(personas: Sequence[Persona], seeds: Sequence[int], rounds: int | S
     for until in range(slice_rounds, horizon + slice_rounds, slice_rounds):
         trace, n_trace = kernels.play(
             kernels.TABLES, games, until, game_rounds, keys, pos, mode_code, cfg, table, p_consider, q_hear,
-            capacity, sees, eps_tab, alpha_tab, psi0_tab, psi_decay, BONUS_CODES[reward_bonus],
+            capacity, sees, frame, eps_tab, alpha_tab, psi0_tab, psi_decay, BONUS_CODES[reward_bonus],
             observed_source == "first-pick", q, counts, picks, inconsistent, steps, round_index, memory, stamp,
             clock, every, snapshots, RECORDS[record], trace, n_trace)
         if progress is not None:

@@ -32,6 +32,7 @@ import numpy as np
 from pairplay.schemas.config import Persona
 
 from . import kernels
+from .frames import N_FRAMES
 from .geometry import N_CARDS
 from .interpretation import consider_probability, hear_probability, memory_capacity, sees
 from .rng import UniformStream
@@ -61,14 +62,25 @@ def _ints(x, n: int) -> np.ndarray:
     return kernels.as_batch(x, n, np.int64)
 
 
+def frames_of(frames, n: int) -> np.ndarray:
+    """(n,) frame indices (core/frames.py) from one frame or one per user; ValueError when out of range."""
+    out = _ints(frames, n)
+    if n and not ((out >= 0) & (out < N_FRAMES)).all():
+        raise ValueError(f"a frame is 0..{N_FRAMES - 1} (core/frames.py FRAMES)")
+    return out.copy()
+
+
 class SimulatedUsers:
     """One simulated user per game; arrays indexed by game (core/kernels.py `_user_*` per game)."""
 
-    def __init__(self, personas: Sequence[Persona], stream: UniformStream):
+    def __init__(self, personas: Sequence[Persona], stream: UniformStream, frames=0):
+        """`frames`: the frame each user reads suggestions in (core/frames.py; 0 = the robot's, as
+        the thesis's users), one for all or one per persona."""
         if stream.role != "user" or stream.n_games != len(personas):
             raise ValueError("SimulatedUsers needs a 'user' stream with one game per persona")
         self.stream = stream
         n = len(personas)
+        self.frames = frames_of(frames, n)
         self.p_consider, self.q_hear, self.capacity, seen = persona_arrays(personas)
         self.sees_smile, self.sees_head, self.sees_gaze = (np.ascontiguousarray(seen[:, i]) for i in range(3))
         self.stamp = np.full((n, N_CARDS), _NEVER, dtype=np.int64)  # when a card entered memory
@@ -115,7 +127,8 @@ class SimulatedUsers:
         kernels.users_respond(kernels.TABLES, self.memory, _ints(actions, n), _ints(observed, n), _ints(match, n),
                               _ints(intended, n), kernels.as_batch(from_memory, n, bool),
                               _ints(covered, n), self._u, self.p_consider, self.q_hear, self.sees_smile,
-                              self.sees_head, self.sees_gaze, second, considered, consistent, candidates)
+                              self.sees_head, self.sees_gaze, self.frames, second, considered, consistent,
+                              candidates)
         return Response(second, considered, consistent, candidates)
 
     def end_turn(self, first: np.ndarray, second: np.ndarray, matched: np.ndarray) -> None:

@@ -10,6 +10,7 @@ Rule: `run_study(settings, out)` runs the study of thesis chapter 6 through
   merged/<name>.json, merged.png    merged policies (algorithm 4) and figure 6.6
   merged_evaluation.csv             every merged policy on every persona
   reuse.csv, reuse.png              held-out persona: Q-learning from scratch vs pi-reuse
+  frames.csv, frames.png            future work 2: merging across mirrored users, with and without calibration
   report.md                         the tables and figures, with the run's settings
 It returns the tables it wrote, so a caller (the CLI, a notebook) can print them.
 """
@@ -41,6 +42,7 @@ from pairplay.schemas.policy import write_policy
 
 from pairplay.core.precombine import combination_experiment
 from pairplay.report import future, plots
+from pairplay.report.future_frames import frames_lines
 
 
 @dataclass
@@ -411,6 +413,9 @@ def _run(args, out, progress_bar, personas, config, names, timings, start, figur
         experiment = combination_experiment(personas, training, args.seed)
         future_lines += future.precombination_section(out, experiment, names, oracle, markdown_table)
         timings["future work"] = time.perf_counter() - t0
+    t0 = time.perf_counter()  # future work 2: its own personas, whatever the study's
+    future_lines += frames_lines(out, args.seed, args.rounds, args.reward_bonus, markdown_table, figures.draw)
+    timings["frame calibration (future work 2)"] = time.perf_counter() - t0
     t0 = time.perf_counter()
     figures.finish()
     timings["waiting for figures"] = time.perf_counter() - t0
