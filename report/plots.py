@@ -317,8 +317,10 @@ def frame_calibration(labels: list[str], series: dict[str, np.ndarray], lengths:
                  fontsize=9)
     ax.grid(axis="y", alpha=0.3)
     ax.legend(fontsize=8, ncol=3, frameon=False, loc="upper left")
-    for label, acc in zip(labels, accuracy):
-        ax2.plot(lengths, 100 * np.asarray(acc), marker="o", lw=1.2, label=label)
+    markers = "osD^v<>"
+    for i, (label, acc) in enumerate(zip(labels, accuracy)):  # markers and dashes: lines at 100% overlap
+        ax2.plot(lengths, 100 * np.asarray(acc), marker=markers[i % len(markers)], ls=("-", "--", ":")[i % 3],
+                 lw=1.2, ms=7 - i, label=label)
     ax2.set_xlabel("suggestions in the calibration round")
     ax2.set_ylabel("frame inferred right (% of rounds)")
     ax2.set_xticks(lengths)
