@@ -10,7 +10,8 @@ Rule (SPEC "Interpretation and user perception", "Memory"):
   learned from); otherwise the suggestion is considered with p = (focus-1)*0.2,
   else ignored and the intended card is picked; a considered suggestion is read
   part by part (speech heard with q = (hearing-1)*0.2, visual parts as sight
-  allows) and the user picks at random in the candidate set, or in the NIS when
+  allows; directions and the exact position read in the user's frame,
+  core/frames.py, the robot's own unless given) and the user picks at random in the candidate set, or in the NIS when
   the action is inconsistent (empty candidate set).
 - Memory holds m = memory + 1 cards: the two cards of a missed turn enter it at
   the end of the turn (first pick, then second), the oldest leaving when it is
