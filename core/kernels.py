@@ -33,6 +33,7 @@ from numba import njit
 
 from .actions import ACTION_HEARING, ACTION_VISUAL, HEARING_SMILE, N_ACTIONS, VISUAL_GAZE
 from .geometry import ALL_CARDS, CELL_MASK, CELL_OF, LEVEL_OF_COUNT, N_CARDS, N_STATES, STATE_INDEX
+from .frames import FRAME_HEAR, FRAME_VIS
 from .interpretation import COMPOUND, HEAR_SET, READ_COMPOUND, READ_TOGETHER, VIS_SET
 
 # Stream roles, in the column order of a batch's `keys` and `pos` (core/rng.py ROLES).
@@ -71,10 +72,13 @@ class Tables(NamedTuple):
     state_index: np.ndarray  # (9, 3) int64
     level_of_count: np.ndarray  # (19,) int64
     compound: np.ndarray  # (8, 11) int64: a "compound" reader's diagonal part of a pair, or -1
+    frame_hear: np.ndarray  # (4, 18, 18, 8) int64: hear_set as a user in each frame reads it (core/frames.py)
+    frame_vis: np.ndarray  # (4, 18, 18, 11) int64
 
 
 TABLES = Tables(*(np.ascontiguousarray(t, dtype=np.int64) for t in (
-    HEAR_SET, VIS_SET, ACTION_HEARING, ACTION_VISUAL, CELL_OF, CELL_MASK, STATE_INDEX, LEVEL_OF_COUNT, COMPOUND)))
+    HEAR_SET, VIS_SET, ACTION_HEARING, ACTION_VISUAL, CELL_OF, CELL_MASK, STATE_INDEX, LEVEL_OF_COUNT, COMPOUND,
+    FRAME_HEAR, FRAME_VIS)))
 
 
 def as_batch(x, n: int, dtype) -> np.ndarray:
@@ -175,9 +179,10 @@ def _user_first_pick(memory, partner, covered, u):
 
 @njit(cache=True)
 def _user_respond(t, action, observed, match, intended, from_memory, nis, u_focus, u_hear, u_choice,
-                  p_consider, q_hear, sees_smile, sees_head, sees_gaze, reading):
+                  p_consider, q_hear, sees_smile, sees_head, sees_gaze, reading, frame):
     """(second, considered, consistent, candidates) after a suggestion (core/user.py); `reading`: the
-    persona's whole readings (core/interpretation.py READINGS, 0 = the thesis's user)."""
+    persona's whole readings (core/interpretation.py READINGS, 0 = the thesis's user); read in `frame`
+    (core/frames.py; frame 0's tables are appendix B's)."""
     considered = (not from_memory) and u_focus < p_consider
     heard = u_hear < q_hear
     h, v = t.action_hearing[action], t.action_visual[action]
@@ -189,12 +194,12 @@ def _user_respond(t, action, observed, match, intended, from_memory, nis, u_focu
         vis_seen = vis_seen and (spoken or not turned)
     cand = nis
     if reading & READ_COMPOUND and hear_seen and vis_seen and t.compound[h, v] >= 0:
-        cand &= t.vis_set[observed, match, t.compound[h, v]]  # the pair means the diagonal between them
+        cand &= t.frame_vis[frame, observed, match, t.compound[h, v]]  # the pair means the diagonal between them
     else:
         if hear_seen:
-            cand &= t.hear_set[observed, match, h]
+            cand &= t.frame_hear[frame, observed, match, h]
         if vis_seen:
-            cand &= t.vis_set[observed, match, v]
+            cand &= t.frame_vis[frame, observed, match, v]
     consistent = cand != 0
     chosen = _pick(cand if consistent else nis, u_choice)
     second = match if from_memory else (chosen if considered else intended)
@@ -338,12 +343,12 @@ def users_intend(memory, first, match, covered, u, intended, from_memory):
 
 @njit(cache=True)
 def users_respond(t, memory, actions, observed, match, intended, from_memory, covered, u, p_consider, q_hear,
-                  sees_smile, sees_head, sees_gaze, reading, second, considered, consistent, candidates):
+                  sees_smile, sees_head, sees_gaze, reading, frames, second, considered, consistent, candidates):
     for g in range(actions.size):
         second[g], considered[g], consistent[g], candidates[g] = _user_respond(
             t, actions[g], observed[g], match[g], intended[g], from_memory[g], _user_nis(memory[g], covered[g]),
             u[g, 2], u[g, 3], u[g, 4], p_consider[g], q_hear[g], sees_smile[g], sees_head[g], sees_gaze[g],
-            reading[g])
+            reading[g], frames[g])
 
 
 @njit(cache=True)
@@ -386,7 +391,7 @@ def rewards_batch(hit, considered, consistent, size, holds_match, bonus, reward,
 # --- a whole game per call ----------------------------------------------------------------------
 
 @njit(cache=True)
-def play(t, games, until, rounds, keys, pos, mode, cfg, table, p_consider, q_hear, capacity, sees, reading,
+def play(t, games, until, rounds, keys, pos, mode, cfg, table, p_consider, q_hear, capacity, sees, reading, frames,
          eps_tab, alpha_tab, psi0_tab, psi_decay, bonus, first_pick_observed,
          q, counts, picks_log, inconsistent_log, steps, round_index, memory, stamp, clock,
          snapshot_every, snapshots, record, trace, n_trace):
@@ -445,7 +450,7 @@ def play(t, games, until, rounds, keys, pos, mode, cfg, table, p_consider, q_hea
                 second, considered, consistent, cand = _user_respond(
                     t, action, observed, match, intended, from_memory, nis, _draw(ku, pu + np.uint64(2)),
                     _draw(ku, pu + np.uint64(3)), _draw(ku, pu + np.uint64(4)), p_consider[g], q_hear[g],
-                    sees[g, 0], sees[g, 1], sees[g, 2], reading[g])
+                    sees[g, 0], sees[g, 1], sees[g, 2], reading[g], frames[g])
                 hit = second == match
                 _user_end_turn(g, first, second, hit, memory, stamp, clock, capacity)
                 reward, learn = _reward(hit, considered, consistent, _popcount(cand), (cand >> match) & 1 == 1,

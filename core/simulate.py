@@ -30,7 +30,7 @@ from .learning import MODES, _policy_table, schedule_tables
 from .lspi import play_lspi
 from .reward import BONUS_CODES, simulated_reward
 from .rng import ROLES, stream_keys
-from .user import persona_arrays, reading_codes
+from .user import frames_of, persona_arrays, reading_codes
 
 RECORDS = {None: kernels.RECORD_NONE, "all": kernels.RECORD_ALL, "considerable": kernels.RECORD_CONSIDERABLE}
 PROGRESS_SLICES = 20  # a batch with a progress callback is played in this many slices of rounds
@@ -60,7 +60,7 @@ def run_games(personas: Sequence[Persona], seeds: Sequence[int], rounds: int | S
               bias: np.ndarray | None = None, policy: np.ndarray | None = None,
               observed_source: str = "intended", progress=None,
               snapshot_every: int | None = None, reward_bonus: str = DEFAULT_REWARD_BONUS,
-              record: str | None = None, lspi: LSPIConfig | None = None) -> SimResult:
+              record: str | None = None, lspi: LSPIConfig | None = None, frames=0) -> SimResult:
     """Play one game per (persona, seed) pair; see the module rule.
 
     `rounds`, `config` and `mode` ("q", "reuse" on `bias`, "fixed" by `policy`)
@@ -76,6 +76,9 @@ def run_games(personas: Sequence[Persona], seeds: Sequence[int], rounds: int | S
     `mode="lspi"` (for every game) learns by online LSPI configured by `lspi`:
     its own lockstep runner (core/lspi.py `play_lspi`; one `rounds` and
     `config` for all games, no `record`), on the same per-game streams.
+    `frames`: the frame each game's user reads suggestions in, relative to how
+    the robot renders them (core/frames.py; 0, the thesis's user, by default),
+    one for all games or one per game.
     """
     if observed_source not in OBSERVED_SOURCES:
         raise ValueError(f"observed source must be one of {OBSERVED_SOURCES}")
@@ -87,6 +90,8 @@ def run_games(personas: Sequence[Persona], seeds: Sequence[int], rounds: int | S
     if mode == "lspi":
         if record is not None:
             raise ValueError("an LSPI batch records no trace")
+        if np.any(frames_of(frames, n)):
+            raise ValueError("an LSPI batch plays users in the robot's frame only (frames=0)")
         return SimResult(*play_lspi(personas, seeds, rounds, config, lspi or LSPIConfig(), observed_source,
                                     progress, snapshot_every, reward_bonus))
     modes = _per_game(mode, n, "mode")
@@ -116,6 +121,7 @@ def run_games(personas: Sequence[Persona], seeds: Sequence[int], rounds: int | S
             table[rows] = _policy_table(source, n)[rows]
     p_consider, q_hear, capacity, sees = persona_arrays(personas)
     reading = reading_codes(personas)
+    frame = frames_of(frames, n)
 
     # a fixed policy draws nothing: its games need only the deal and user streams
     keys = stream_keys(seeds, ("deal", "user") if set(modes) == {"fixed"} else ROLES)
@@ -138,7 +144,7 @@ def run_games(personas: Sequence[Persona], seeds: Sequence[int], rounds: int | S
     for until in range(slice_rounds, horizon + slice_rounds, slice_rounds):
         trace, n_trace = kernels.play(
             kernels.TABLES, games, until, game_rounds, keys, pos, mode_code, cfg, table, p_consider, q_hear,
-            capacity, sees, reading, eps_tab, alpha_tab, psi0_tab, psi_decay, BONUS_CODES[reward_bonus],
+            capacity, sees, reading, frame, eps_tab, alpha_tab, psi0_tab, psi_decay, BONUS_CODES[reward_bonus],
             observed_source == "first-pick", q, counts, picks, inconsistent, steps, round_index, memory, stamp,
             clock, every, snapshots, RECORDS[record], trace, n_trace)
         if progress is not None:

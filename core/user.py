@@ -10,7 +10,8 @@ Rule (SPEC "Interpretation and user perception", "Memory"):
   learned from); otherwise the suggestion is considered with p = (focus-1)*0.2,
   else ignored and the intended card is picked; a considered suggestion is read
   part by part (speech heard with q = (hearing-1)*0.2, visual parts as sight
-  allows) and the user picks at random in the candidate set, or in the NIS when
+  allows; directions and the exact position read in the user's frame,
+  core/frames.py, the robot's own unless given) and the user picks at random in the candidate set, or in the NIS when
   the action is inconsistent (empty candidate set).
 - Memory holds m = memory + 1 cards: the two cards of a missed turn enter it at
   the end of the turn (first pick, then second), the oldest leaving when it is
@@ -36,6 +37,7 @@ import numpy as np
 from pairplay.schemas.config import Persona
 
 from . import kernels
+from .frames import N_FRAMES
 from .geometry import N_CARDS
 from .interpretation import consider_probability, hear_probability, memory_capacity, reading_code, sees
 from .rng import UniformStream
@@ -71,14 +73,25 @@ def _ints(x, n: int) -> np.ndarray:
     return kernels.as_batch(x, n, np.int64)
 
 
+def frames_of(frames, n: int) -> np.ndarray:
+    """(n,) frame indices (core/frames.py) from one frame or one per user; ValueError when out of range."""
+    out = _ints(frames, n)
+    if n and not ((out >= 0) & (out < N_FRAMES)).all():
+        raise ValueError(f"a frame is 0..{N_FRAMES - 1} (core/frames.py FRAMES)")
+    return out.copy()
+
+
 class SimulatedUsers:
     """One simulated user per game; arrays indexed by game (core/kernels.py `_user_*` per game)."""
 
-    def __init__(self, personas: Sequence[Persona], stream: UniformStream):
+    def __init__(self, personas: Sequence[Persona], stream: UniformStream, frames=0):
+        """`frames`: the frame each user reads suggestions in (core/frames.py; 0 = the robot's, as
+        the thesis's users), one for all or one per persona."""
         if stream.role != "user" or stream.n_games != len(personas):
             raise ValueError("SimulatedUsers needs a 'user' stream with one game per persona")
         self.stream = stream
         n = len(personas)
+        self.frames = frames_of(frames, n)
         self.p_consider, self.q_hear, self.capacity, seen = persona_arrays(personas)
         self.sees_smile, self.sees_head, self.sees_gaze = (np.ascontiguousarray(seen[:, i]) for i in range(3))
         self.reading = reading_codes(personas)
@@ -126,7 +139,7 @@ class SimulatedUsers:
         kernels.users_respond(kernels.TABLES, self.memory, _ints(actions, n), _ints(observed, n), _ints(match, n),
                               _ints(intended, n), kernels.as_batch(from_memory, n, bool),
                               _ints(covered, n), self._u, self.p_consider, self.q_hear, self.sees_smile,
-                              self.sees_head, self.sees_gaze, self.reading, second, considered, consistent,
+                              self.sees_head, self.sees_gaze, self.reading, self.frames, second, considered, consistent,
                               candidates)
         return Response(second, considered, consistent, candidates)
 

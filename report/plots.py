@@ -191,7 +191,7 @@ def _save(fig, path: Path, dpi: int) -> None:
 
 
 FIGURES = ("learning_curves", "comparison_bars", "profiles", "merged_policies", "reuse_curves", "algorithm_curves",
-           "grouped_bars_with_spread")
+           "grouped_bars_with_spread", "frame_calibration")
 
 
 def draw(name: str | None, *args) -> None:
@@ -328,5 +328,37 @@ def algorithm_curves(curves: np.ndarray, algorithms: list[str], personas: list[s
         axes[r][0].set_ylabel("picks per round")
     fig.suptitle(f"online picks per round, mean over games ({smooth}-round window); band: \u00b11 sd over games",
                  fontsize=9)
+def frame_calibration(labels: list[str], series: dict[str, np.ndarray], lengths: list[int], accuracy: np.ndarray,
+                      path: Path, replicates: int, sessions: int) -> None:
+    """Future work 2: merged policies across mirrored users (left) and the calibration round's accuracy (right).
+
+    `series[arm]` is (replicates, personas) picks per round; `accuracy` is (personas, lengths), shares 0..1."""
+    plt = _pyplot()
+    fig, (ax, ax2) = plt.subplots(1, 2, figsize=(12.5, 4.4), gridspec_kw={"width_ratios": [2.2, 1]})
+    width = 0.8 / len(series)
+    x = np.arange(len(labels))
+    for i, (name, values) in enumerate(series.items()):
+        values = np.asarray(values)
+        ax.bar(x + (i - (len(series) - 1) / 2) * width, values.mean(axis=0), width, yerr=values.std(axis=0),
+               capsize=2, label=name)
+    ax.axhline(PERFECT_PICKS, color="0.3", lw=0.8, ls="--", label=f"perfect play ({PERFECT_PICKS})")
+    ax.set_xticks(x, labels, rotation=12, fontsize=8)
+    ax.set_ylabel("picks per round (18 = perfect; lower is better)")
+    ax.set_ylim(PERFECT_PICKS - 1, max(float(np.asarray(v).max()) for v in series.values()) + 3)
+    ax.set_title(f"one merged policy for all the users, played to each (mean \u00b1 sd over {replicates} replicates)",
+                 fontsize=9)
+    ax.grid(axis="y", alpha=0.3)
+    ax.legend(fontsize=8, ncol=3, frameon=False, loc="upper left")
+    markers = "osD^v<>"
+    for i, (label, acc) in enumerate(zip(labels, accuracy)):  # markers and dashes: lines at 100% overlap
+        ax2.plot(lengths, 100 * np.asarray(acc), marker=markers[i % len(markers)], ls=("-", "--", ":")[i % 3],
+                 lw=1.2, ms=7 - i, label=label)
+    ax2.set_xlabel("suggestions in the calibration round")
+    ax2.set_ylabel("frame inferred right (% of rounds)")
+    ax2.set_xticks(lengths)
+    ax2.set_ylim(min(50.0, 100 * float(np.min(accuracy)) - 5), 101)
+    ax2.set_title(f"calibration round, {sessions} rounds per user and length", fontsize=9)
+    ax2.grid(alpha=0.3)
+    ax2.legend(fontsize=7, frameon=False, loc="lower right")
     fig.tight_layout()
     _save(fig, path, dpi=100)

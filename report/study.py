@@ -13,6 +13,7 @@ Rule: `run_study(settings, out)` runs the study of thesis chapter 6 through
   speed.csv, speed.png              (--algorithm lspi) LSPI beside Q-learning on the same games:
                                     learning curves and rounds to 1.10x the oracle
   action_profiles.csv, action_merges.csv/.png   future work 1 (report/future_actions.py)
+  frames.csv, frames.png            future work 2: merging across mirrored users, with and without calibration
   report.md                         the tables and figures, with the run's settings
 It returns the tables it wrote, so a caller (the CLI, a notebook) can print them.
 """
@@ -45,6 +46,7 @@ from pairplay.schemas.policy import write_policy
 from pairplay.core.actionlevel import action_level_experiment
 from pairplay.core.precombine import combination_experiment
 from pairplay.report import future, future_actions, plots
+from pairplay.report.future_frames import frames_lines
 
 
 @dataclass
@@ -436,11 +438,14 @@ def _run(args, out, progress_bar, personas, config, names, timings, start, figur
         t0 = time.perf_counter()
         experiment = combination_experiment(personas, training, args.seed)
         future_lines += future.precombination_section(out, experiment, names, oracle, markdown_table)
-        timings["future work"] = time.perf_counter() - t0
+        timings["future work 3 (pre-combination)"] = time.perf_counter() - t0
         t0 = time.perf_counter()  # future work 1: its own personas, the partners' games reused from `training`
         actions = action_level_experiment(args.seed, args.rounds, training, reward_bonus=args.reward_bonus)
         future_lines += future_actions.action_level_section(out, actions, markdown_table, figures.draw)
         timings["future work 1 (action level)"] = time.perf_counter() - t0
+    t0 = time.perf_counter()  # future work 2: its own personas, whatever the study's
+    future_lines += frames_lines(out, args.seed, args.rounds, args.reward_bonus, markdown_table, figures.draw)
+    timings["frame calibration (future work 2)"] = time.perf_counter() - t0
     t0 = time.perf_counter()
     figures.finish()
     timings["waiting for figures"] = time.perf_counter() - t0

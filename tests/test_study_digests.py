@@ -6,7 +6,9 @@ default study (run by the slow suite, `pytest -m slow`, and by `pairplay
 bench`), pinned from main's numpy simulator before the compiled core and
 re-pinned twice since for main's format changes: policy files gained their
 `partial` field (every policy JSON changed by that one line), and the report
-names its unit of picks per round (report.md); no CSV changed.
+names its unit of picks per round (report.md); no CSV changed. The future-work sections' CSVs were
+added later without changing any file: frames.csv (future work 2) in both studies, and the full study's
+precombination.csv (future work 3), which its pin had lacked.
 tools/study_digests.py rewrites it; only do that when a result is meant to
 change, and say why.
 """
