@@ -35,7 +35,7 @@ from . import kernels
 from .actions import HEARING_EXACT, HEARING_NOTHING, VISUAL_NOTHING, VISUAL_PARTS, code_of
 from .frames import FRAME_HEAR, FRAME_VIS, N_FRAMES
 from .geometry import ALL_CARDS, CELL_INDEX, CELL_MASK, COLS, ROWS, card_of
-from .user import frames_of, persona_arrays
+from .user import frames_of, persona_arrays, reading_codes
 
 KINDS = ("exact", "head")
 EXACT_ACTION = code_of(HEARING_EXACT, VISUAL_NOTHING)
@@ -152,8 +152,8 @@ def respond(personas: Sequence[Persona], frames, trials: Trials, rng: np.random.
         considered, consistent = np.empty(s, dtype=bool), np.empty(s, dtype=bool)
         kernels.users_respond(kernels.TABLES, memory, np.ascontiguousarray(trials.action[:, t]),
                               np.ascontiguousarray(trials.observed[:, t]), np.ascontiguousarray(trials.match[:, t]),
-                              intended, no, covered, u, p_consider, q_hear, *sees, frame, second, considered,
-                              consistent, cand)
+                              intended, no, covered, u, p_consider, q_hear, *sees, reading_codes(personas), frame,
+                              second, considered, consistent, cand)
         picks[:, t] = second
     return picks
 
