@@ -8,6 +8,13 @@ of the verb's one line. The parent alone is interrupted, and on the way out
 terminates what is running instead of waiting for it, so the verb exits
 promptly. Workers are started with "spawn": a forked child would inherit the
 parent's threads' locks (zenoh, numba's compiler) in whatever state they were.
+A worker is started with SIGINT blocked (the mask survives fork and exec), as
+CPython's own resource tracker is (multiprocessing/resource_tracker.py,
+ensure_running): a Ctrl-C that reaches the group while the worker still
+imports waits, and its initializer's SIG_IGN discards it (without this, a
+worker interrupted before its initializer printed a traceback). The parent's
+own Ctrl-C is held the same short while and raised once the pool has recorded
+the new worker, so `stop_pool` can stop it.
 """
 
 from __future__ import annotations
@@ -20,12 +27,22 @@ from typing import Iterator
 
 
 def _ignore_interrupt() -> None:
-    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    signal.signal(signal.SIGINT, signal.SIG_IGN)  # discards a Ctrl-C held while the worker started
+    signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})
+
+
+class _Pool(ProcessPoolExecutor):
+    def _spawn_process(self) -> None:  # ProcessPoolExecutor's own hook (3.9+): start one worker, record it
+        held = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
+        try:
+            super()._spawn_process()
+        finally:
+            signal.pthread_sigmask(signal.SIG_SETMASK, held)
 
 
 def process_pool(workers: int) -> ProcessPoolExecutor:
     """A pool of `workers` (>= 1) spawned processes that ignore SIGINT. Stop it with `stop_pool`."""
-    return ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("spawn"), initializer=_ignore_interrupt)
+    return _Pool(workers, mp_context=multiprocessing.get_context("spawn"), initializer=_ignore_interrupt)
 
 
 def stop_pool(pool: ProcessPoolExecutor, abandon: bool) -> None:
