@@ -99,3 +99,17 @@ def test_a_sweep_over_the_learner_runs_lspi_and_refuses_lspi_settings_that_canno
     for bad in ('algorithm = ["sarsa"]', 'algorithm = ["lspi"]\nlspi_every = [0]'):
         with pytest.raises(GridError, match="algorithm|improve_every"):
             read_grid(_grid(tmp_path, GRID.replace('reward_bonus = ["correct", "consistent"]', bad)))
+
+
+def test_a_personas_axis_draws_each_personas_measures_over_the_settings_that_train_it(tmp_path):
+    """A persona's measures exist only where it is trained: the figure of `learned/blind` has the
+    settings with blind in them, not every setting of the grid (examples/sweep-50.toml's shape)."""
+    grid = read_grid(_grid(tmp_path, GRID.replace('personas = "blind"\n', "").replace(
+        'reward_bonus = ["correct", "consistent"]', 'personas = ["blind", "deaf", "blind,deaf"]')))
+    run = run_sweep(grid, tmp_path / "out")
+    written = write_sweep(tmp_path / "out", grid, finished_cells(tmp_path / "out", grid), run)
+    rows = summarise(grid, finished_cells(tmp_path / "out", grid))
+    blind = [r["personas"] for r in rows if r["measure"].startswith("blind/")]
+    assert blind and set(blind) == {"blind", "blind,deaf"}
+    assert all(p.stat().st_size > 0 for p in written)
+    assert any(p.name.startswith("blind-") for p in written)
