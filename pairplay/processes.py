@@ -9,6 +9,13 @@ of the verb's one line. The parent alone is interrupted, and on the way out
 terminates what is running instead of waiting for it, so the verb exits
 promptly. Workers are started with "spawn": a forked child would inherit the
 parent's threads' locks (zenoh, numba's compiler) in whatever state they were.
+A worker is started with SIGINT blocked (the mask survives fork and exec), as
+CPython's own resource tracker is (multiprocessing/resource_tracker.py,
+ensure_running): a Ctrl-C that reaches the group while the worker still
+imports waits, and its initializer's SIG_IGN discards it (without this, a
+worker interrupted before its initializer printed a traceback). The parent's
+own Ctrl-C is held the same short while and raised once the pool has recorded
+the new worker, so `stop_pool` can stop it.
 
 `off_main_thread` runs a call that Python cannot safely interrupt (numba's
 compiler: see cli/interrupts.py) in a thread while the main thread waits for

@@ -264,8 +264,12 @@ class _Figures:
             try:
                 self._pool = process_pool(1)
                 self._jobs.append(self._pool.submit(plots.draw, None))  # the child imports matplotlib now
-            except (OSError, ImportError):
-                self._pool = None
+            except BaseException as exc:  # a Ctrl-C while the child starts stops it too (the caller has no
+                if self._pool is not None:  # _Figures to stop yet)
+                    stop_pool(self._pool, abandon=True)
+                    self._pool = None
+                if not isinstance(exc, (OSError, ImportError)):
+                    raise
 
     def draw(self, name: str, *args) -> None:
         if self._pool is None:

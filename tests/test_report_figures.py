@@ -87,3 +87,23 @@ def test_every_progress_bar_only_moves_forward_and_ends_full(tmp_path):
     md = (report.out / "report.md").read_text()
     if "Where learned policies stay above the oracle" in md:  # the plurality says how many policies chose it
         assert "the plurality action (k of n policies)" in md and " of 2)" in md
+
+
+def test_a_ctrl_c_while_the_figure_process_starts_leaves_no_process(monkeypatch):
+    """The study's figure process is started before the study's try block: an interruption in
+    that window used to leave the child running (and a leaked semaphore reported at exit)."""
+    import multiprocessing
+    from concurrent.futures import ProcessPoolExecutor
+
+    from pairplay.report import study as report_study
+
+    real = ProcessPoolExecutor.submit
+
+    def submit(self, *args, **kwargs):
+        real(self, *args, **kwargs)  # the child has been started
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(ProcessPoolExecutor, "submit", submit)
+    with pytest.raises(KeyboardInterrupt):
+        report_study._Figures(True)
+    assert not multiprocessing.active_children()
