@@ -328,6 +328,10 @@ def algorithm_curves(curves: np.ndarray, algorithms: list[str], personas: list[s
         axes[r][0].set_ylabel("picks per round")
     fig.suptitle(f"online picks per round, mean over games ({smooth}-round window); band: \u00b11 sd over games",
                  fontsize=9)
+    fig.tight_layout()
+    _save(fig, path, dpi=100)
+
+
 def frame_calibration(labels: list[str], series: dict[str, np.ndarray], lengths: list[int], accuracy: np.ndarray,
                       path: Path, replicates: int, sessions: int) -> None:
     """Future work 2: merged policies across mirrored users (left) and the calibration round's accuracy (right).
