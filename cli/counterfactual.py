@@ -36,6 +36,9 @@ EPILOG = ("The fitted user is the persona (focus, hearing, sight, memory on the 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.epilog = EPILOG
     p.add_argument("recording", metavar="REC", help="MCAP recording of one session (a simulated user or a person)")
+    p.add_argument("--fit-also", nargs="+", default=[], metavar="REC",
+                   help="more recordings of the same participant (same observed-card source) whose turns join the "
+                        "fit; the arms are still compared with REC")
     p.add_argument("--policy", default="same,final,oracle", help=ARMS_HELP)
     p.add_argument("--seeds", type=int_at_least(2), default=10, help="seeds per arm (the same deals in every arm)")
     p.add_argument("--seed", type=non_negative, default=0, help="names the arms' seeds")
@@ -73,12 +76,12 @@ def run(args: argparse.Namespace) -> int:
     from pairplay import __version__
     from pairplay.core import counterfactual as cf
     from pairplay.core.rng import game_seed
-    from pairplay.core.userfit import fit_user
+    from pairplay.core.userfit import fit_user, pooled
     from pairplay.errors import InputError
     from pairplay.outputs import check_output_folder
     from pairplay.replay.check import check_recording
     from pairplay.replay.rebuild import output_stem, rebuild_events
-    from pairplay.replay.turns import turns_from_events
+    from pairplay.replay.turns import read_turns, turns_from_events
     from pairplay.replay.reader import read_log
     from pairplay.report.counterfactual import ARM_TEXT, Recorded, console_text, write_counterfactual
     from pairplay.schemas.policy import read_policy
@@ -99,8 +102,21 @@ def run(args: argparse.Namespace) -> int:
         print(f"{rec}: turn left out of the fit: {why}")
     if note:
         print(f"{rec}: not whole ({note}); fitting the {len(turns.observations.first)} turns of its intact parts")
-    fit = fit_user(turns.observations, config.observed_source)
-    model = cf.to_user_model(fit, recording=rec.name, session=config.session, participant=config.participant,
+    others = [read_turns(path) for path in args.fit_also]
+    for other in others:
+        if other.config.participant != config.participant or other.config.observed_source != config.observed_source:
+            raise InputError(f"participant {other.config.participant} ({other.config.observed_source}) is not "
+                             f"{config.participant} ({config.observed_source}) of {rec.name}: fit one participant "
+                             "at a time", other.source)
+        for why in other.skipped:
+            print(f"{other.source}: turn left out of the fit: {why}")
+    seen = {rec.resolve()}
+    for path in args.fit_also:
+        if Path(path).resolve() in seen:
+            raise InputError("given twice", path)
+        seen.add(Path(path).resolve())
+    fit = fit_user(pooled([turns.observations] + [o.observations for o in others]), config.observed_source)
+    model = cf.to_user_model(fit, recording=rec.name, fitted_on=[rec.name] + [Path(p).name for p in args.fit_also], session=config.session, participant=config.participant,
                              observed_source=config.observed_source, software=__version__)
     obs = turns.observations
     shown = obs.action >= 0

@@ -94,7 +94,7 @@ def wilson(count: int, of: int, z: float = 1.959964) -> tuple[float, float]:
 
 
 def to_user_model(fit: Fit, *, recording: str, session: str, participant: str, observed_source: str,
-                  software: str = "") -> UserModelFile:
+                  software: str = "", fitted_on: Sequence[str] = ()) -> UserModelFile:
     """The fit as the versioned user-model file (schemas/usermodel.py)."""
     feats = {f: FeatureFit(level=fit.levels[f], means=_means(f, fit.levels[f]), set95=fit.set95[f],
                            profile=[round(float(v), 6) for v in fit.profile[f]],
@@ -109,7 +109,7 @@ def to_user_model(fit: Fit, *, recording: str, session: str, participant: str, o
                          observed_source=observed_source, persona=fitted_persona(fit, participant, session),
                          **feats, **rates, lapse=fit.lapse, loglik=round(fit.loglik, 6), picks=fit.picks,
                          evidence=dict(fit.evidence), considered_counted=counted, assumptions=list(ASSUMPTIONS),
-                         software=software)
+                         software=software, fitted_on=list(fitted_on) or [recording])
 
 
 def oracle_policy(persona: Persona, seed: int, bonus: str = DEFAULT_REWARD_BONUS) -> np.ndarray:

@@ -310,6 +310,14 @@ def fit_user(obs: Observations, source: str, lapses: np.ndarray = LAPSES) -> Fit
     return Fit(levels, float(lapses[e]), float(grid[idx]), n_picks, grid, profile, set95, fine, evidence, counted)
 
 
+def pooled(parts: list[Observations]) -> Observations:
+    """Several sessions' observations as one, each its own game (memory starts empty in each)."""
+    games = [np.full(len(o.first), i, dtype=np.int64) for i, o in enumerate(parts)]
+    fields = {name: np.concatenate([getattr(o, name) for o in parts]) for name in Observations._fields}
+    fields["game"] = np.concatenate(games)
+    return Observations(**fields)
+
+
 def partners_from_matches(game: np.ndarray, round_: np.ndarray, first: np.ndarray, match: np.ndarray) -> np.ndarray:
     """(T, 18) partner table of each turn's deal, from the (first, match) pairs of its round.
 

@@ -151,7 +151,8 @@ def write_counterfactual(out: str | Path, stem: str, model: UserModelFile, recor
         written.append(f"{stem}.usermodel.json")
         lines = [f"# Counterfactual replay of {model.recording}", "",
                  f"Session {model.session}, participant {model.participant}, observed card: "
-                 f"{model.observed_source}. The simulated user fitted to the recorded picks "
+                 f"{model.observed_source}. The simulated user fitted to the recorded picks"
+                 f"{' of ' + ', '.join(model.fitted_on) if len(model.fitted_on) > 1 else ''} "
                  f"(maximum likelihood over {model.picks} picks, log L = {model.loglik:.1f}; "
                  f"evidence: {', '.join(f'{k} {v}' for k, v in model.evidence.items())}):", "",
                  markdown_table(model_rows(model)), ""]

@@ -61,7 +61,7 @@ class CountedRate(msgspec.Struct, frozen=True, kw_only=True):
 class UserModelFile(msgspec.Struct, frozen=True, kw_only=True):
     format: str = FORMAT
     version: int = VERSION
-    recording: str  # the recording's file name
+    recording: str  # the recording's file name (the one the arms are compared with)
     session: str
     participant: str
     observed_source: str  # how the recording's observed card was chosen (it decides the unaided pick)
@@ -79,6 +79,7 @@ class UserModelFile(msgspec.Struct, frozen=True, kw_only=True):
     considered_counted: CountedRate | None = None  # a simulated participant's own report of considering
     assumptions: list[str] = []
     software: str = ""
+    fitted_on: list[str] = []  # every recording whose turns the fit used (file names; REC first)
 
     def __post_init__(self) -> None:
         if self.format != FORMAT:

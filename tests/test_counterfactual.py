@@ -17,7 +17,7 @@ from pairplay.core.counterfactual import Arm, run_arms, to_user_model
 from pairplay.core.interpretation import memory_capacity, sees
 from pairplay.core.personas import PERSONAS, persona
 from pairplay.core.simulate import run_games
-from pairplay.core.userfit import fit_user, memory_before, observations_from_trace
+from pairplay.core.userfit import fit_user, memory_before, observations_from_trace, pooled
 from pairplay.errors import OutputError
 from pairplay.replay.turns import read_turns
 from pairplay.replay.writer import EventLogWriter
@@ -81,6 +81,14 @@ def test_fit_from_first_pick_observations_keeps_the_truth_in_its_95_sets(key):
         assert getattr(p, f) in fit.set95[f], (f, fit.levels, fit.set95)
     assert fit.levels["memory"] == p.memory and (sees(fit.levels["sight"]) == sees(p.sight)).all()
     assert abs(fit.levels["focus"] - p.focus) <= 1 and abs(fit.levels["hearing"] - p.hearing) <= 1
+
+
+def test_sessions_pooled_are_each_their_own_game():
+    # two sessions fitted together = the two games of one batch (memory starts empty in each)
+    p, both = _simulated("wasim", "intended", seeds=(7, 8), rounds=10)
+    parts = [observations_from_trace(_simulated("wasim", "intended", seeds=(s,), rounds=10)[1]) for s in (7, 8)]
+    assert np.array_equal(fit_user(pooled(parts), "intended").grid,
+                          fit_user(observations_from_trace(both), "intended").grid)
 
 
 def test_the_committed_sample_recording_gives_helmut_back():
@@ -203,7 +211,10 @@ def test_cli_mistakes_are_one_line_and_write_nothing(tmp_path, capsys):
              ((SAMPLE, "--policy", "same,same"), "given twice"),
              ((SAMPLE, "--policy", f"reuse:{tmp_path / 'nope.json'}"), "cannot read"),
              ((SAMPLE, "--policy", f"fixed:{text}"), "not a policy file"),
-             ((SAMPLE, "--seeds", "1"), "must be at least 2")]
+             ((SAMPLE, "--seeds", "1"), "must be at least 2"),
+             ((SAMPLE, "--fit-also", SAMPLE.parent / "sim-ashley-fmt2.mcap"), "fit one participant at a time"),
+             ((SAMPLE, "--fit-also", SAMPLE), "given twice"),
+             ((SAMPLE, "--fit-also", empty), "empty file")]
     for args, words in cases:
         try:
             code, err = _main(capsys, *args, "--out", out)
