@@ -39,6 +39,8 @@ VERBS: dict[str, tuple[str, str]] = {
     "rebuild": ("pairplay.cli.rebuild", "fold recordings into policy files and learning curves"),
     "replay": ("pairplay.cli.replay", "re-publish a recording on the bus, or --verify it against fresh services"),
     "recover": ("pairplay.cli.recover", "complete a recording cut short by a crash"),
+    "counterfactual": ("pairplay.cli.counterfactual",
+                       "fit a simulated user to a recorded participant, then play other learners or policies against it"),
     "protocol": ("pairplay.cli.protocol", "a study with people (thesis ch. 7): check its TOML, make its folder, register, plan, pilot"),
     "participant": ("pairplay.cli.participant", "export or delete one participant's data (recordings, policies, answers)"),
     "report": ("pairplay.cli.report", "the human-world report (thesis 7.3) of a study folder"),

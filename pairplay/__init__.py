@@ -22,6 +22,8 @@ cheap). Everything else may change between versions::
     policies = [pairplay.read_policy(p) for p in paths]
     users, profiles = pairplay.users_from_policies(policies, seed=0)   # algorithm 3
     merged = pairplay.combine(users)                                  # algorithm 4
+    turns = pairplay.read_turns("recordings/samples/sim-helmut-fmt2.mcap")
+    fit = pairplay.fit_user(turns.observations, turns.config.observed_source)   # fit.levels, fit.set95
 """
 
 from __future__ import annotations
@@ -51,6 +53,11 @@ API: dict[str, str] = {
     "extract_info": "pairplay.core.combine",
     "combine": "pairplay.core.combine",
     "combined_policy_file": "pairplay.core.policies",
+    # counterfactual replay: a simulated user fitted to a recorded participant
+    "read_turns": "pairplay.replay.turns",
+    "fit_user": "pairplay.core.userfit",
+    "run_arms": "pairplay.core.counterfactual",
+    "read_user_model": "pairplay.schemas.usermodel",
 }
 
 __all__ = ["__version__", *API]

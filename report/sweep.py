@@ -254,7 +254,8 @@ def run_sweep(grid: Grid, out: str | Path, *, scheduler: str | None = None, work
     return SweepRun(len(cells), len(todo), time.perf_counter() - start, where)
 
 
-def _t975(n: int) -> float:
+def t975(n: int) -> float:
+    """Student t quantile 0.975 for a mean of n values (n - 1 degrees of freedom; 1.96 beyond the table)."""
     return T975[n - 2] if 2 <= n <= len(T975) + 1 else 1.96
 
 
@@ -270,7 +271,7 @@ def summarise(grid: Grid, results: dict[str, dict]) -> list[dict]:
             n = len(values)
             mean = float(values.mean())
             sd = float(values.std(ddof=1)) if n > 1 else 0.0
-            half = _t975(n) * sd / math.sqrt(n) if n > 1 else 0.0
+            half = t975(n) * sd / math.sqrt(n) if n > 1 else 0.0
             rows.append({**dict(setting), "measure": measure, "n": n, "mean": mean, "sd": sd,
                          "ci95_low": mean - half, "ci95_high": mean + half})
     return rows

@@ -1,0 +1,156 @@
+"""`pairplay counterfactual REC`: fit a simulated user to a recorded participant, then play other learners against it.
+
+Rule: the recording's turns (replay/turns.py) give the fitted user
+(core/userfit.py: maximum likelihood over the thesis's persona scale, with
+95% sets); each arm of --policy (core/counterfactual.py) plays that user for
+the recording's rounds on --seeds seeds; the recording and the arms are
+compared on picks per round and the share of suggestions followed by a
+match. Everything goes into the --out folder, written whole or not at all
+(report/counterfactual.py); a non-empty folder is replaced only with --force,
+checked before any work. A REC that is missing, empty, not MCAP, without a
+session or without a resolved turn, an unknown arm, a policy file that cannot
+be read: one line, exit 2, nothing written.
+"""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+from pairplay.cli.args import add_force, count, int_at_least, non_negative
+
+ARMS_HELP = ("comma-separated arms: same (the recorded learner, replayed: checks the fit), q (Q-learning from "
+             "scratch), final (the recorded learner's final policy, fixed), oracle (the best policy for the fitted "
+             "user), alone (no suggestion), reuse:FILE (pi-reuse of a policy file), fixed:FILE (a policy file "
+             "played as it is)")
+
+
+EPILOG = ("The fitted user is the persona (focus, hearing, sight, memory on the thesis's 1..6 scale) of maximum "
+          "likelihood for the recorded picks, each feature with its 95% profile-likelihood set; it is saved as "
+          "OUT/<REC name>.usermodel.json. Each arm plays it on the same seeds (the same deals); OUT/counterfactual.md "
+          "compares them with the recording (picks per round, suggestions followed by a match), with "
+          "counterfactual.csv (every simulated round) and counterfactual.png. README: 'Walkthrough: "
+          "counterfactual replay of a recorded participant'.")
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    p.epilog = EPILOG
+    p.add_argument("recording", metavar="REC", help="MCAP recording of one session (a simulated user or a person)")
+    p.add_argument("--fit-also", nargs="+", default=[], metavar="REC",
+                   help="more recordings of the same participant (same observed-card source) whose turns join the "
+                        "fit; the arms are still compared with REC")
+    p.add_argument("--policy", default="same,final,oracle", help=ARMS_HELP)
+    p.add_argument("--seeds", type=int_at_least(2), default=10, help="seeds per arm (the same deals in every arm)")
+    p.add_argument("--seed", type=non_negative, default=0, help="names the arms' seeds")
+    p.add_argument("--rounds", type=count, default=None,
+                   help="rounds each arm plays (default: as many as the recording completed)")
+    p.add_argument("--out", default=None, help="output folder (default: out/counterfactual/<recording name>)")
+    p.add_argument("--fit-only", action="store_true", help="write the fitted user alone, play no arm")
+    add_force(p, "the files of a non-empty --out folder")
+
+
+def parse_arms(text: str) -> list[tuple[str, str]]:
+    """[(name, policy file or '')] of a --policy list; OptionError for an unknown or repeated arm."""
+    from pairplay.errors import OptionError
+    from pairplay.report.counterfactual import ARM_TEXT
+
+    arms: list[tuple[str, str]] = []
+    for item in (s.strip() for s in text.split(",")):
+        kind, _, path = item.partition(":")
+        if kind in ARM_TEXT and not path:
+            arms.append((kind, ""))
+        elif kind in ("reuse", "fixed") and path:
+            arms.append((item, path))
+        else:
+            raise OptionError(f"unknown arm {item!r}: give same, q, final, oracle, alone, reuse:FILE or fixed:FILE",
+                              "--policy")
+    names = [a[0] for a in arms]
+    if len(set(names)) != len(names):
+        raise OptionError("an arm is given twice", "--policy")
+    return arms
+
+
+def run(args: argparse.Namespace) -> int:
+    import numpy as np
+
+    from pairplay import __version__
+    from pairplay.core import counterfactual as cf
+    from pairplay.core.rng import game_seed
+    from pairplay.core.userfit import fit_user, pooled
+    from pairplay.errors import InputError
+    from pairplay.outputs import check_output_folder
+    from pairplay.replay.check import check_recording
+    from pairplay.replay.rebuild import output_stem, rebuild_events
+    from pairplay.replay.turns import read_turns, turns_from_events
+    from pairplay.replay.reader import read_log
+    from pairplay.report.counterfactual import ARM_TEXT, Recorded, console_text, write_counterfactual
+    from pairplay.schemas.policy import read_policy
+
+    arms_wanted = parse_arms(args.policy)
+    rec = check_recording(args.recording)
+    stem = output_stem(rec)
+    out = Path(args.out) if args.out else Path("out") / "counterfactual" / stem
+    check_output_folder(out, args.force)
+    files = {path: read_policy(path) for _, path in arms_wanted if path}
+
+    log = read_log(rec)
+    note = "" if log.whole else f"{'damaged' if log.damage else 'truncated'}: {log.error}"
+    events = [r.event for r in log.events]
+    turns = turns_from_events(events, str(rec), note)
+    config = turns.config
+    for why in turns.skipped:
+        print(f"{rec}: turn left out of the fit: {why}")
+    if note:
+        print(f"{rec}: not whole ({note}); fitting the {len(turns.observations.first)} turns of its intact parts")
+    others = [read_turns(path) for path in args.fit_also]
+    for other in others:
+        if other.config.participant != config.participant or other.config.observed_source != config.observed_source:
+            raise InputError(f"participant {other.config.participant} ({other.config.observed_source}) is not "
+                             f"{config.participant} ({config.observed_source}) of {rec.name}: fit one participant "
+                             "at a time", other.source)
+        for why in other.skipped:
+            print(f"{other.source}: turn left out of the fit: {why}")
+    seen = {rec.resolve()}
+    for path in args.fit_also:
+        if Path(path).resolve() in seen:
+            raise InputError("given twice", path)
+        seen.add(Path(path).resolve())
+    fit = fit_user(pooled([turns.observations] + [o.observations for o in others]), config.observed_source)
+    model = cf.to_user_model(fit, recording=rec.name, fitted_on=[rec.name] + [Path(p).name for p in args.fit_also], session=config.session, participant=config.participant,
+                             observed_source=config.observed_source, software=__version__)
+    obs = turns.observations
+    shown = obs.action >= 0
+    recorded = Recorded(turns.picks_per_round, float((obs.second[shown] == obs.match[shown]).mean()) if shown.any()
+                        else 0.0, int(shown.sum()))
+    runs, texts = None, dict(ARM_TEXT)
+    if not args.fit_only:
+        rounds = args.rounds or len(turns.picks_per_round)
+        if rounds < 1:
+            raise InputError("completed no round: give --rounds for the arms to play", rec)
+        learner = config.learner_config()
+        persona = model.persona
+        arms = []
+        for name, path in arms_wanted:
+            if name == "same":
+                mode = {"q-learning": "q", "pi-reuse": "reuse", "fixed": "fixed"}[config.algorithm]
+                arms.append(cf.Arm(name, mode, learner, np.asarray(config.policy_actions) if mode != "q" else None))
+            elif name == "q":
+                arms.append(cf.Arm(name, "q", learner))
+            elif name == "final":
+                final = rebuild_events(events, str(rec)).policy.greedy
+                arms.append(cf.Arm(name, "fixed", learner, np.asarray(final)))
+            elif name == "oracle":
+                arms.append(cf.Arm(name, "fixed", learner,
+                                   cf.oracle_policy(persona, args.seed, config.reward_bonus)))
+            elif name == "alone":
+                arms.append(cf.Arm(name, "fixed", learner, cf.user_alone()))
+            else:
+                kind = name.partition(":")[0]
+                arms.append(cf.Arm(name, kind, learner, np.asarray(files[path].greedy)))
+                texts[name] = f"{'pi-reuse of' if kind == 'reuse' else 'fixed'} {Path(path).name}"
+        seeds = [game_seed(args.seed, f"counterfactual:{config.session}", i) for i in range(args.seeds)]
+        runs = cf.run_arms(persona, arms, seeds, rounds, config.observed_source, config.reward_bonus)
+    paths = write_counterfactual(out, stem, model, recorded, runs, texts, args.force)
+    print(console_text(model, recorded, runs, texts))
+    print("wrote " + ", ".join(str(p) for p in paths))
+    return 0

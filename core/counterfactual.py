@@ -1,0 +1,144 @@
+"""Counterfactual replay: other learners or policies played against a user fitted to a recording.
+
+Rule: the fitted persona (core/userfit.py) is the existing simulated user
+(core/simulate.py run_games, the compiled kernels); each arm is a learner or a
+policy playing it for the recording's number of rounds, once per seed. Every
+arm plays the same seeds, so seed i deals the same boards in every arm and the
+arms compare pairwise (a difference per seed, then its mean). Arms:
+- "same": the recorded session's own learner (its algorithm, schedule and
+  bias or fixed policy): a check of the fit, it should give what the
+  recording gave, within the spread of the seeds;
+- "q": Q-learning from scratch, on the recorded session's schedule;
+- "final": the recorded learner's final greedy policy, played fixed;
+- "oracle": the best policy for the fitted user (core/oracle.py);
+- "alone": no suggestion (the user alone);
+- any other name: a given policy, pi-reused ("reuse") or played fixed ("fixed").
+Measures, the same for the recording and every arm: picks per round (18 is
+perfect play) and the share of suggestions after which the second card matched.
+
+Pure: numpy in, numpy out; randomness from the seeds given.
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple, Sequence
+
+import numpy as np
+
+from pairplay.schemas.config import DEFAULT_REWARD_BONUS, LearnerConfig, Persona
+from pairplay.schemas.usermodel import CountedRate, FeatureFit, RateFit, UserModelFile
+
+from .geometry import N_STATES
+from .interpretation import SIGHT_SEES, consider_probability, hear_probability, memory_capacity
+from .oracle import USER_ALONE, oracle_policies
+from .simulate import run_games
+from .userfit import FEATURES, Fit
+
+# Observed sources of a recording -> the simulation's (a gaze is taken as the card the user intends)
+SIM_SOURCE = {"intended": "intended", "first-pick": "first-pick", "gaze": "intended"}
+ASSUMPTIONS = (
+    "The participant is the simulated user of thesis 6.1.3 with one set of features for the whole session "
+    "(no learning, no fatigue); the features are fitted on the thesis's 1..6 scale.",
+    "Suggestions are read as appendix B says (each part names a set of cards, the candidate set is their "
+    "intersection with the cards not remembered), in the canonical frame of reference (columns from the left).",
+    "Memory is the simulated user's: the cards of a missed turn enter it, the oldest leave when it holds "
+    "memory + 1 cards, matched cards leave it, a new deal empties it; it is replayed on the recorded picks.",
+    "Every choice in a set of cards is uniform.",
+    "The lapse (a uniform covered card instead of the model's pick) exists only in the fit; the simulated "
+    "user replays the fitted persona without it.",
+    "The observed card of a gaze recording is taken as the card the participant would pick unaided.",
+    "Features the session cannot tell apart (a 95% set of every level) are set to the lowest level of the set "
+    "with the highest likelihood; sight is identified only up to the groups of table 6.1.",
+)
+
+
+class Arm(NamedTuple):
+    name: str
+    mode: str  # run_games mode: "q", "reuse" or "fixed"
+    config: LearnerConfig
+    table: np.ndarray | None = None  # (24,) the bias (reuse) or fixed policy
+
+
+class ArmRuns(NamedTuple):
+    picks: np.ndarray  # (seeds, rounds) picks per round
+    hits: np.ndarray  # (seeds,) share of suggestions followed by a match
+
+
+def fitted_persona(fit: Fit, participant: str, session: str) -> Persona:
+    """The fitted user as a persona of appendix A (key "fit:<participant>")."""
+    lv = fit.levels
+    return Persona(key=f"fit:{participant}", name=f"fitted to {session}", focus=lv["focus"], memory=lv["memory"],
+                   hearing=lv["hearing"], sight=lv["sight"], inferred=FEATURES,
+                   basis="maximum likelihood over the recorded picks (core/userfit.py)")
+
+
+def _means(feature: str, level: int) -> str:
+    if feature == "focus":
+        return f"considers a suggestion with p = {consider_probability(level):.1f}"
+    if feature == "hearing":
+        return f"hears speech with q = {hear_probability(level):.1f}"
+    if feature == "memory":
+        return f"remembers {memory_capacity(level)} cards"
+    seen = sorted(SIGHT_SEES[level])
+    return "sees " + (", ".join(seen) if seen else "no visual part")
+
+
+def wilson(count: int, of: int, z: float = 1.959964) -> tuple[float, float]:
+    """Wilson score interval of a proportion (0..1)."""
+    if of == 0:
+        return 0.0, 1.0
+    p = count / of
+    centre = (p + z * z / (2 * of)) / (1 + z * z / of)
+    half = z * np.sqrt(p * (1 - p) / of + z * z / (4 * of * of)) / (1 + z * z / of)
+    return float(max(0.0, centre - half)), float(min(1.0, centre + half))
+
+
+def to_user_model(fit: Fit, *, recording: str, session: str, participant: str, observed_source: str,
+                  software: str = "", fitted_on: Sequence[str] = ()) -> UserModelFile:
+    """The fit as the versioned user-model file (schemas/usermodel.py)."""
+    feats = {f: FeatureFit(level=fit.levels[f], means=_means(f, fit.levels[f]), set95=fit.set95[f],
+                           profile=[round(float(v), 6) for v in fit.profile[f]],
+                           identified=len(fit.set95[f]) < 6) for f in FEATURES}
+    rates = {k: RateFit(estimate=v[0], low95=v[1], high95=v[2]) for k, v in fit.fine.items()}
+    counted = None
+    if fit.counted is not None and fit.counted[1] > 0:
+        k, n = fit.counted
+        lo, hi = wilson(k, n)
+        counted = CountedRate(count=k, of=n, rate=round(k / n, 6), low95=round(lo, 6), high95=round(hi, 6))
+    return UserModelFile(recording=recording, session=session, participant=participant,
+                         observed_source=observed_source, persona=fitted_persona(fit, participant, session),
+                         **feats, **rates, lapse=fit.lapse, loglik=round(fit.loglik, 6), picks=fit.picks,
+                         evidence=dict(fit.evidence), considered_counted=counted, assumptions=list(ASSUMPTIONS),
+                         software=software, fitted_on=list(fitted_on) or [recording])
+
+
+def oracle_policy(persona: Persona, seed: int, bonus: str = DEFAULT_REWARD_BONUS) -> np.ndarray:
+    """(24,) the oracle's policy for one persona (core/oracle.py; 10 situation games of 100 rounds)."""
+    policies, _ = oracle_policies([persona], 10, seed, 100, bonus=bonus)
+    return policies[0]
+
+
+def user_alone() -> np.ndarray:
+    return USER_ALONE.copy()
+
+
+def run_arms(persona: Persona, arms: Sequence[Arm], seeds: Sequence[int], rounds: int,
+             observed_source: str = "intended", reward_bonus: str = DEFAULT_REWARD_BONUS) -> dict[str, ArmRuns]:
+    """Every arm against `persona`, once per seed, all in one batch of the compiled simulator."""
+    n_seeds = len(seeds)
+    games = len(arms) * n_seeds
+    tables = np.zeros((games, N_STATES), dtype=np.int64)
+    for i, arm in enumerate(arms):
+        if arm.mode != "q":
+            tables[i * n_seeds:(i + 1) * n_seeds] = np.asarray(arm.table, dtype=np.int64)
+    result = run_games([persona] * games, list(seeds) * len(arms), rounds,
+                       config=[a.config for a in arms for _ in range(n_seeds)],
+                       mode=[a.mode for a in arms for _ in range(n_seeds)], bias=tables, policy=tables,
+                       observed_source=SIM_SOURCE[observed_source], reward_bonus=reward_bonus, record="all")
+    t = result.trace
+    hit = np.bincount(t["game"], weights=(t["second"] == t["match"]), minlength=games)
+    turns = np.bincount(t["game"], minlength=games)
+    hits = hit / np.maximum(turns, 1)
+    return {arm.name: ArmRuns(result.picks[i * n_seeds:(i + 1) * n_seeds].astype(np.float64),
+                              hits[i * n_seeds:(i + 1) * n_seeds])
+            for i, arm in enumerate(arms)}
