@@ -373,6 +373,20 @@ def rewards_batch(hit, considered, consistent, size, holds_match, bonus, reward,
         reward[g], learn[g] = _reward(hit[g], considered[g], consistent[g], size[g], holds_match[g], bonus)
 
 
+@njit(cache=True)
+def _grown(trace, rows):
+    """`trace` in a twice bigger array, its first `rows` rows copied.
+
+    An element loop, not `bigger[:rows] = trace[:rows]`: numba's array-to-slice
+    assignment compiles a formatted shape-mismatch error (string joins) that
+    tripled the first run's compile time of `play`."""
+    bigger = np.empty((2 * trace.shape[0] + 1024, trace.shape[1]), dtype=trace.dtype)
+    for i in range(rows):
+        for j in range(trace.shape[1]):
+            bigger[i, j] = trace[i, j]
+    return bigger
+
+
 # --- a whole game per call ----------------------------------------------------------------------
 
 @njit(cache=True)
@@ -444,9 +458,7 @@ def play(t, games, until, rounds, keys, pos, mode, cfg, table, p_consider, q_hea
                     _learn(q, counts, g, state, action, reward, alpha)
                 if record == RECORD_ALL or (record == RECORD_CONSIDERABLE and not from_memory):
                     if n_trace == trace.shape[0]:
-                        bigger = np.empty((2 * trace.shape[0] + 1024, trace.shape[1]), dtype=trace.dtype)
-                        bigger[:n_trace] = trace[:n_trace]
-                        trace = bigger
+                        trace = _grown(trace, n_trace)
                     row = trace[n_trace]
                     row[T_GAME], row[T_STEP], row[T_ROUND] = g, steps[g] - 1, r
                     row[T_FIRST], row[T_OBSERVED], row[T_MATCH] = first, observed, match
