@@ -39,7 +39,6 @@ from pairplay.outputs import output_folder
 from pairplay.processes import process_pool, stop_pool
 from pairplay.schemas.policy import write_policy
 
-from pairplay.core.precombine import combination_experiment
 from pairplay.report import future, plots
 
 
@@ -365,11 +364,18 @@ def _run(args, out, progress_bar, personas, config, names, timings, start, figur
     merged_pending = study.add_on_personas(batch, personas, {"own": own, **{k: m.policy for k, m in merges.items()}},
                                            args.games, args.eval_rounds)
     snapshots = study.add_snapshots(batch, runs) if runs is not None else None
+    timings["evaluations"] = time.perf_counter() - t0
+    # the future-work sections queue theirs in the same batch (report/future.py says how)
+    t0 = time.perf_counter()
+    state = future.Study(args, out, personas, names, training, users, figures, markdown_table)
+    finishers = [f for f in (section(state, batch) for section in future.SECTIONS) if f is not None]
+    future_seconds = time.perf_counter() - t0
+    t0 = time.perf_counter()
     with progress_bar(batch.total_rounds, "evaluations") as bar:
         batch.play(progress=_progress(bar))
     cmp = study.comparison(personas, training, oracle, batch.picks[compared])
     merged_eval = merged_pending(batch)
-    timings["evaluations"] = time.perf_counter() - t0
+    timings["evaluations"] += time.perf_counter() - t0
 
     table = evaluation_table(cmp)
     with open(out / "evaluation.csv", "w", newline="") as f:
@@ -405,12 +411,11 @@ def _run(args, out, progress_bar, personas, config, names, timings, start, figur
             csv.writer(f).writerows(reuse_rows)
         figures.draw("reuse_curves", reuse.persona, names, reuse.curves, [oracle[k] for k in reuse.persona],
                      out / "reuse.png")
-    future_lines = []
-    if args.games >= 5 and len(personas) >= 2:  # future work 3 needs disjoint replicates of each persona's games
-        t0 = time.perf_counter()
-        experiment = combination_experiment(personas, training, args.seed)
-        future_lines += future.precombination_section(out, experiment, names, oracle, markdown_table)
-        timings["future work"] = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    state.oracle, state.alone = oracle, alone
+    future_lines = [line for finish in finishers for line in finish(state)]
+    if finishers:
+        timings["future work"] = future_seconds + time.perf_counter() - t0
     t0 = time.perf_counter()
     figures.finish()
     timings["waiting for figures"] = time.perf_counter() - t0
