@@ -76,7 +76,7 @@ def run(args: argparse.Namespace) -> int:
                         if not _others_alive(bus, args.session):
                             break
             finally:
-                failure = recorder.close()
+                failure = recorder.close(stopped_by=getattr(stop, "why", "") if stop.is_set() else "")
             if failure is not None:
                 print(f"pairplay run recorder: writing {recorder.path} failed ({failure}); the file is readable "
                       f"up to the failure: pairplay recover {recorder.path}", file=sys.stderr)

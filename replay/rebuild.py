@@ -70,9 +70,14 @@ def partial_reason(fold: SessionFold, note: str = "", recovered: dict[str, str] 
 
 
 def rebuild_events(events, source: str = "", truncated: bool = False, note: str = "",
-                   recovered: dict[str, str] | None = None) -> Rebuilt:
+                   recovered: dict[str, str] | None = None, ended: dict[str, str] | None = None) -> Rebuilt:
+    """`events` folded and the learner's policy rebuilt; RebuildError without a SessionStarted.
+    `ended` is the recorder's "pairplay.recorder.end" metadata, if the file has it."""
     fold = fold_events(events)
     if fold.config is None:
+        if ended and ended.get("stopped_by"):
+            raise RebuildError(f"{source or 'events'}: no SessionStarted: the recording was stopped "
+                               f"({ended['stopped_by']}) before its game started")
         raise RebuildError(f"{source or 'events'}: no SessionStarted: not a pairplay session recording")
     c = fold.config
     partial = partial_reason(fold, note, recovered)
@@ -97,7 +102,7 @@ def rebuild_recording(path: str | Path) -> Rebuilt:
     log = read_log(path)
     note = "" if log.whole else f"{'damaged' if log.damage else 'truncated'}: {log.error}"
     return rebuild_events((r.event for r in log.events), str(path), log.truncated, note,
-                          log.metadata.get("pairplay.recovered"))
+                          log.metadata.get("pairplay.recovered"), log.metadata.get("pairplay.recorder.end"))
 
 
 CURVE_COLUMNS = ("round", "turns", "picks", "matches", "reward", "learned", "inconsistent")

@@ -103,11 +103,8 @@ class ParticipantLogic:
     def _revealed(self, e: ev.CardRevealed) -> list[ev.Event]:
         if not self._here(e) or e.pick != 0 or self.stage != "first":
             return []
-        self.match = int(self.partner[0, self.first])
-        self.covered_now = self.covered & ~(1 << self.first)
-        intended, from_memory = self.users.intend(np.array([self.first]), np.array([self.match]),
-                                                  np.array([self.covered_now]))
-        self.intended, self.from_memory = int(intended[0]), bool(from_memory[0])
+        self.match, self.covered_now, self.intended, self.from_memory = intend_second(
+            self.users, self.partner, self.first, self.covered)
         self.stage = "observed"
         if self.config.observed_source == "intended":
             return [ev.CardObserved(round=self.round, turn=self.turn, card=self.intended, observed_source="intended")]
@@ -137,13 +134,30 @@ class ParticipantLogic:
             return []
         if self.stage != "second":
             raise NotYet
-        self.users.end_turn(np.array([e.first]), np.array([e.second]), np.array([e.matched]))
-        if e.matched:
-            self.matched |= (1 << e.first) | (1 << e.second)
+        self.matched = end_turn(self.users, self.matched, e)
         self.stage = "idle"
         if e.round_over:
             return []
         return self._first_pick(self.turn + 1)
+
+
+def intend_second(users: SimulatedUsers, partner: np.ndarray, first: int, covered: int) -> tuple[int, int, int, bool]:
+    """The one simulated user's second-pick intention once its first card `first` is face up (thesis 6.1.3).
+
+    `partner` is `partner_of`'s (1, 18) table, `covered` the covered cards' bitmask before the
+    first pick. Returns (the first card's partner, the covered mask without `first`, the
+    intended card, whether it comes from memory)."""
+    match = int(partner[0, first])
+    covered_now = covered & ~(1 << first)
+    intended, from_memory = users.intend(np.array([first]), np.array([match]), np.array([covered_now]))
+    return match, covered_now, int(intended[0]), bool(from_memory[0])
+
+
+def end_turn(users: SimulatedUsers, matched: int, e: ev.TurnResolved) -> int:
+    """Tell the one simulated user how the turn `e` ended (it remembers both cards); returns the
+    matched cards' bitmask with this turn's pair added when it matched."""
+    users.end_turn(np.array([e.first]), np.array([e.second]), np.array([e.matched]))
+    return matched | (1 << e.first) | (1 << e.second) if e.matched else matched
 
 
 def partner_of(faces: list[int]) -> np.ndarray:

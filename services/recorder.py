@@ -34,6 +34,7 @@ from pairplay.services.guard import Guard, Refusals
 from pairplay.services.runner import LOG_QUERY, SENT_QUERY
 
 log = logging.getLogger("pairplay.recorder")
+END_METADATA = "pairplay.recorder.end"  # how the recording ended (Recorder.close)
 BATCH = 2000
 
 
@@ -316,9 +317,15 @@ class Recorder:
             log.exception("recorder failed")
             self._fail(f"recorder error {type(err).__name__}: {err}")
 
-    def close(self) -> str | None:
+    def close(self, stopped_by: str = "") -> str | None:
         """Write what is queued, finish the file; never raises. The failure, if the
-        file could not be written (it is then readable up to it: `pairplay recover`)."""
+        file could not be written (it is then readable up to it: `pairplay recover`).
+
+        The file's last record says how the recording ended (metadata
+        "pairplay.recorder.end": `session_ended` "true" when the session's
+        SessionEnded is in it; `stopped_by` the signal or stop that ended the
+        recording, "" when the session ended by itself), so even a recording
+        stopped before its game started says why it holds no session."""
         try:
             self.drain()
         except Exception as err:
@@ -331,6 +338,8 @@ class Recorder:
                 pass
         if self.failure is None:
             try:
+                self._guarded(self.writer.add_metadata, END_METADATA, {
+                    "ended_ns": str(self.clock()), "session_ended": str(self.ended).lower(), "stopped_by": stopped_by})
                 self._guarded(self.writer.close)
             except RecordingFailed:
                 pass

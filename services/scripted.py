@@ -36,7 +36,7 @@ from pairplay.schemas import events as ev
 from pairplay.schemas.study import Item
 
 from pairplay.services.node import NotYet
-from pairplay.services.participant import partner_of
+from pairplay.services.participant import end_turn, intend_second, partner_of
 
 
 class ScriptedPlayer:
@@ -83,11 +83,8 @@ class ScriptedPlayer:
             return self._first(0)
         if isinstance(e, ev.CardRevealed):
             if (e.round, e.turn) == (self.round, self.turn) and e.pick == 0 and self.stage == "first":
-                self.match = int(self.partner[0, self.first])
-                self.covered_now = self.covered & ~(1 << self.first)
-                intended, mem = self.users.intend(np.array([self.first]), np.array([self.match]),
-                                                  np.array([self.covered_now]))
-                self.intended, self.from_memory = int(intended[0]), bool(mem[0])
+                self.match, self.covered_now, self.intended, self.from_memory = intend_second(
+                    self.users, self.partner, self.first, self.covered)
                 self.stage = "suggested"
             return []
         if isinstance(e, ev.SuggestionMade):
@@ -101,9 +98,7 @@ class ScriptedPlayer:
                 return []
             if self.stage != "second":
                 raise NotYet
-            self.users.end_turn(np.array([e.first]), np.array([e.second]), np.array([e.matched]))
-            if e.matched:
-                self.matched |= (1 << e.first) | (1 << e.second)
+            self.matched = end_turn(self.users, self.matched, e)
             self.stage = "idle"
             return [] if e.round_over else self._first(self.turn + 1)
         if isinstance(e, ev.SessionEnded):

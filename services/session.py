@@ -129,7 +129,7 @@ def run_session(config: SessionConfig, path: str | Path, *, bus: Bus | None = No
         failure = None
         if recorder is not None:
             recorder_thread.join(1.0)
-            failure = recorder.close()
+            failure = recorder.close(stopped_by=stopped_by(stop) if interrupted else "")
         if own_bus:
             bus.close()
     if failure is not None:
@@ -148,14 +148,17 @@ def end_game(game: Node | None, stop: threading.Event, failure: str, recorder: R
         game.publish(game.driver._stamp(game.logic.end(reason, detail)))
 
 
+def stopped_by(stop: threading.Event) -> str:
+    """Who stopped a session: the signal's name (`stop.why`), else the caller (the experimenter)."""
+    return getattr(stop, "why", "") or "stopped by the experimenter"
+
+
 def end_reason(stop: threading.Event, failure: str) -> tuple[str, str]:
     """(reason, detail) of a session that did not complete (SessionEnded.reason: END_REASONS)."""
     if failure:
         return "failed", failure
-    why = getattr(stop, "why", "")
-    if why:
-        return "interrupted", why
-    return "aborted", "stopped by the experimenter"
+    why = stopped_by(stop)
+    return ("aborted", why) if why == "stopped by the experimenter" else ("interrupted", why)
 
 
 def watch_services(bus: Bus, session: str, nodes: list[Node], external: list[str], stop: threading.Event,

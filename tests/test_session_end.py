@@ -121,3 +121,38 @@ def test_old_recordings_end_without_the_new_fields_and_read_as_before():
     [end] = ended(SAMPLES / "sim-ashley.mcap")
     assert end.reason == "completed" and end.round == -1 and end.detail == ""
     assert rebuild_recording(SAMPLES / "sim-ashley.mcap").partial == ""
+
+
+@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM])
+def test_a_session_stopped_before_its_game_started_records_why_it_holds_no_session(tmp_path, sig):
+    """The game waits for an external learner that never comes; the signal ends the wait. No
+    SessionEnded can be recorded for a session never started, so the recorder's last record says it."""
+    p = subprocess.Popen([sys.executable, "-m", "pairplay", "session", "--participant", "sim:wasim", "--session",
+                          "early", "--external", "learner", "--out", str(tmp_path)], stdout=subprocess.PIPE,
+                         stderr=subprocess.STDOUT, text=True, env=dict(os.environ, PYTHONUNBUFFERED="1"))
+    try:
+        while "bus listening" not in p.stdout.readline():
+            assert p.poll() is None
+        time.sleep(0.5)
+        p.send_signal(sig)
+        out, _ = p.communicate(timeout=30)
+    finally:
+        if p.poll() is None:
+            p.kill()
+    assert sig.name in out, out
+    path = tmp_path / "early.mcap"
+    log = read_log(path)
+    assert log.whole and ended(path) == []
+    assert log.metadata["pairplay.recorder.end"]["stopped_by"] == sig.name
+    assert log.metadata["pairplay.recorder.end"]["session_ended"] == "false"
+    r = subprocess.run([sys.executable, "-m", "pairplay", "rebuild", str(path), "--out", str(tmp_path / "rb")],
+                       capture_output=True, text=True)
+    assert r.returncode == 1 and r.stderr.strip().splitlines() == [
+        f"pairplay rebuild: skipped: {path}: no SessionStarted: the recording was stopped ({sig.name}) before its "
+        "game started"], r.stderr
+
+
+def test_every_recording_ends_with_how_it_ended(tmp_path):
+    config = SessionConfig(session="done", participant="sim:blind", persona="blind", seed=1, rounds=2)
+    end = read_log(run_session(config, tmp_path / "done.mcap")).metadata["pairplay.recorder.end"]
+    assert end["session_ended"] == "true" and end["stopped_by"] == "" and int(end["ended_ns"]) > 0
