@@ -77,6 +77,7 @@ def oracle_policies(personas, seeds_per_persona: int, seed: int, rounds: int = 2
         counts = np.zeros((len(personas), N_STATES), dtype=np.int64)
         kernels.expected_sums(kernels.TABLES, owner, turns.rows, turns.order, q_hear, seen, BONUS_CODES[bonus],
                               sums, counts)
+        del turns  # before the next iteration's: two recorded tables at once were the study's peak memory
         visited = counts > 0
         tables = np.where(visited[..., None], sums / np.maximum(counts, 1)[..., None], tables)
         policies = np.where(visited, np.argmax(tables, axis=-1), policies)

@@ -116,8 +116,9 @@ class Evaluations:
         result = run_games(personas, seeds, rounds, mode="fixed", policy=policies[lead], progress=progress)
         # integer picks: a row's sum over its own rounds is exact, so its mean depends neither on the
         # batch's width nor on a longer row sharing its game
-        totals = np.zeros((len(lead), result.picks.shape[1] + 1), dtype=np.int64)
+        totals = np.zeros((len(lead), result.picks.shape[1] + 1), dtype=result.picks.dtype)  # < 2**31 picks a game
         np.cumsum(result.picks, axis=1, out=totals[:, 1:])
+        del result
         own = np.array(self._rounds, dtype=np.int64)
         self.picks = totals[game_of, own].astype(np.float64) / own
         return self.picks
