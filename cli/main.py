@@ -22,6 +22,7 @@ import os
 import sys
 
 from pairplay import __version__
+from pairplay.cli.interrupts import DeferredInterrupt
 from pairplay.errors import UserError
 
 # verb -> (module, one-line help)
@@ -93,12 +94,13 @@ def entry() -> None:
     """The `pairplay` command (and `python -m pairplay`): `main()`, then exit with its code.
 
     After an interruption (exit 130) the exit handlers run and the process ends
-    with os._exit, skipping only the interpreter's teardown of its objects: a
-    Ctrl-C that lands while numba compiles leaves llvmlite's native objects
-    half-built, and freeing them at exit aborted the process ("double free
-    detected", SIGABRT) after the one line was printed (seen in CI). Every output
-    is already closed or removed by then (the verbs' context managers ran while
+    with os._exit, skipping only the interpreter's teardown of its objects (a
+    second guard besides cli/interrupts.py, which keeps Ctrl-C out of numba's
+    compiler: native objects half-built by an interrupted compile aborted the
+    process at exit with "double free detected" in CI). Every output is already
+    closed or removed by then (the verbs' context managers ran while
     KeyboardInterrupt unwound the stack)."""
+    DeferredInterrupt().install()
     code = main()
     if code == 130:
         atexit._run_exitfuncs()  # what was registered to run at exit still runs (multiprocessing's clean-up)

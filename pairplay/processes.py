@@ -1,4 +1,5 @@
-"""Child processes that never outlive an interruption: the parent owns Ctrl-C.
+"""Child processes that never outlive an interruption: the parent owns Ctrl-C; work that
+must not be interrupted half-way runs off the main thread.
 
 Rule: a pool's workers ignore SIGINT. A terminal's Ctrl-C reaches the whole
 foreground process group; if each worker also raised KeyboardInterrupt, every
@@ -8,6 +9,12 @@ of the verb's one line. The parent alone is interrupted, and on the way out
 terminates what is running instead of waiting for it, so the verb exits
 promptly. Workers are started with "spawn": a forked child would inherit the
 parent's threads' locks (zenoh, numba's compiler) in whatever state they were.
+
+`off_main_thread` runs a call that Python cannot safely interrupt (numba's
+compiler: see cli/interrupts.py) in a thread while the main thread waits for
+it. Ctrl-C interrupts the wait at once; the call is abandoned, still running,
+and dies with the process (the command ends with os._exit after an
+interruption, cli/main.py `entry`).
 """
 
 from __future__ import annotations
@@ -15,17 +22,50 @@ from __future__ import annotations
 import contextlib
 import multiprocessing
 import signal
-from concurrent.futures import ProcessPoolExecutor
-from typing import Iterator
+import threading
+from concurrent.futures import Future, ProcessPoolExecutor
+from typing import Callable, Iterator, TypeVar
+
+T = TypeVar("T")
+
+
+def off_main_thread(fn: Callable[..., T], *args) -> T:
+    """`fn(*args)` in a daemon thread, the caller waiting: its result, or its exception raised here."""
+    done: Future = Future()
+
+    def work():
+        try:
+            done.set_result(fn(*args))
+        except BaseException as err:  # handed to the waiting caller
+            done.set_exception(err)
+
+    threading.Thread(target=work, name=f"pairplay-{getattr(fn, '__name__', 'work')}", daemon=True).start()
+    return done.result()
 
 
 def _ignore_interrupt() -> None:
-    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    signal.signal(signal.SIGINT, signal.SIG_IGN)  # a Ctrl-C that came while starting up is discarded with it
+    signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})
+
+
+class _ParentInterruptedPool(ProcessPoolExecutor):
+    """Workers are started (lazily, by `submit`) with SIGINT blocked: a child inherits its parent
+    thread's signal mask, so a Ctrl-C while the child's Python is still starting, before its
+    initializer could ignore SIGINT, waits blocked and is discarded by `_ignore_interrupt`
+    instead of printing a traceback from the child's start-up."""
+
+    def submit(self, fn, /, *args, **kwargs):
+        blocked = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
+        try:
+            return super().submit(fn, *args, **kwargs)
+        finally:
+            signal.pthread_sigmask(signal.SIG_SETMASK, blocked)  # a Ctrl-C that came meanwhile is raised now
 
 
 def process_pool(workers: int) -> ProcessPoolExecutor:
     """A pool of `workers` (>= 1) spawned processes that ignore SIGINT. Stop it with `stop_pool`."""
-    return ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("spawn"), initializer=_ignore_interrupt)
+    return _ParentInterruptedPool(workers, mp_context=multiprocessing.get_context("spawn"),
+                                  initializer=_ignore_interrupt)
 
 
 def stop_pool(pool: ProcessPoolExecutor, abandon: bool) -> None:

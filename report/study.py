@@ -36,7 +36,7 @@ from pairplay.core.policies import to_policy_file
 from pairplay.core.reward import BONUS_RULE_TEXT
 from pairplay.schemas.config import DEFAULT_REWARD_BONUS, LearnerConfig
 from pairplay.outputs import output_folder
-from pairplay.processes import process_pool, stop_pool
+from pairplay.processes import off_main_thread, process_pool, stop_pool
 from pairplay.schemas.policy import write_policy
 
 from pairplay.report import future, plots
@@ -311,7 +311,8 @@ def _run_study(args: StudySettings, personas, out: Path, progress_bar: Callable,
 
 
 def _run(args, out, progress_bar, personas, config, names, timings, start, figures) -> StudyReport:
-    seconds, compiled, _ = kernels.warm_up()
+    # compiled off the main thread: a Ctrl-C must not land inside numba's compiler (pairplay/processes.py)
+    seconds, compiled, _ = off_main_thread(kernels.warm_up)
     timings["kernels compiled (first run)" if compiled else "kernels loaded from cache"] = seconds
 
     t0 = time.perf_counter()

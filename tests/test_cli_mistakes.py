@@ -286,12 +286,14 @@ def test_ctrl_c_at_a_terminal_reaches_every_worker_yet_prints_one_line_and_leave
                     '[grid]\npsi_decay = [0.9, 0.95]\n')
     args = {"study": ["study", "--quiet", "--out", "report"],
             "sweep": ["sweep", str(grid), "--workers", "2", "--quiet", "--out", "swept"]}[verb]
+    # the study with an empty numba cache: the Ctrl-C comes while its kernels compile
+    env = dict(os.environ, NUMBA_CACHE_DIR=str(tmp_path / "numba-cache"))
     proc = subprocess.Popen([sys.executable, "-m", "pairplay", *args], cwd=tmp_path, start_new_session=True,
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
     deadline = time.monotonic() + 60
     while len(_group_members(proc.pid)) < 2 and time.monotonic() < deadline:  # its children have started
         time.sleep(0.05)
-    time.sleep(0.5)
+    time.sleep(1.0)
     os.killpg(proc.pid, signal.SIGINT)
     out, err = proc.communicate(timeout=30)
     assert proc.returncode == 130, (out, err)
@@ -301,3 +303,28 @@ def test_ctrl_c_at_a_terminal_reaches_every_worker_yet_prints_one_line_and_leave
     while _group_members(proc.pid) and time.monotonic() < deadline:
         time.sleep(0.05)
     assert _group_members(proc.pid) == []
+    # no half report; a sweep keeps the cells it finished (it resumes from them)
+    assert {p.name for p in tmp_path.iterdir()} - {"grid.toml", "numba-cache", "swept"} == set()
+
+
+def test_a_ctrl_c_inside_numbas_compiler_waits_for_the_compile_then_interrupts(tmp_path):
+    """llvmlite calls back into Python while it compiles: a KeyboardInterrupt there is swallowed
+    (the run went on and exited 0) or leaves native objects half-built. The command's handler holds
+    a Ctrl-C that comes while the main thread holds numba's compiler lock and delivers it after."""
+    script = tmp_path / "hold.py"
+    script.write_text(
+        "import os, signal, time\n"
+        "from numba.core.compiler_lock import global_compiler_lock\n"
+        "from pairplay.cli.interrupts import DeferredInterrupt\n"
+        "DeferredInterrupt().install()\n"
+        "try:\n"
+        "    with global_compiler_lock:\n"
+        "        os.kill(os.getpid(), signal.SIGINT)\n"
+        "        time.sleep(0.3)\n"
+        "        print('compile finished', flush=True)\n"
+        "    time.sleep(5)\n"
+        "    print('not interrupted')\n"
+        "except KeyboardInterrupt:\n"
+        "    print('interrupted after the compile')\n")
+    r = subprocess.run([sys.executable, str(script)], capture_output=True, text=True, timeout=60)
+    assert r.stdout.splitlines() == ["compile finished", "interrupted after the compile"], (r.stdout, r.stderr)
