@@ -44,7 +44,7 @@ replaced by parts fewer users understand. Pure numpy; no randomness.
 
 from __future__ import annotations
 
-from typing import NamedTuple, Sequence
+from typing import Callable, NamedTuple, Sequence
 
 import numpy as np
 
@@ -179,7 +179,21 @@ class ActionLevelExperiment(NamedTuple):
 def action_level_experiment(seed: int, rounds: int, training=None, replicates: int = 5, eval_games: int = 4,
                             eval_rounds: int = 50, reward_bonus: str = DEFAULT_REWARD_BONUS,
                             progress=None) -> ActionLevelExperiment:
-    """Profile the reading personas and their partners both ways, and merge them three ways per replicate.
+    """`add_action_level` on a batch of its own, played at once (the study shares its batch instead)."""
+    from .study import Evaluations
+    batch = Evaluations(seed)
+    pending = add_action_level(batch, seed, rounds, training, replicates, eval_games, eval_rounds, reward_bonus,
+                               progress)
+    batch.play()
+    return pending()
+
+
+def add_action_level(batch, seed: int, rounds: int, training=None, replicates: int = 5, eval_games: int = 4,
+                     eval_rounds: int = 50, reward_bonus: str = DEFAULT_REWARD_BONUS,
+                     progress=None) -> Callable[[], ActionLevelExperiment]:
+    """Profile the reading personas and their partners both ways, and merge them three ways per replicate;
+    the evaluation games are queued in `batch` (a core.study.Evaluations seeded `seed`), and the returned
+    `pending()` reads the experiment from it once it has played.
 
     Training: GAMES games of `rounds` rounds per persona (core/study.py train, so
     game g of persona P is the default study's game g of P); rows of `training`
@@ -189,7 +203,7 @@ def action_level_experiment(seed: int, rounds: int, training=None, replicates: i
     at random, 6.2; here all strategies see the same one). Every merged policy
     plays the same `eval_games` evaluation games of each member, epsilon 0, one batch."""
     from .personas import PERSONAS, READING_PERSONAS
-    from .study import Evaluations, train
+    from .study import train
     keys = list(dict.fromkeys(k for m in MERGES for k in m))
     readers = [k for k in keys if k in READING_PERSONAS]
     partners = [k for k in keys if k not in READING_PERSONAS]
@@ -227,10 +241,12 @@ def action_level_experiment(seed: int, rounds: int, training=None, replicates: i
     order = [(k, named[(s, r, j)].tobytes(), g) for s in range(len(STRATEGIES)) for r in range(replicates)
              for j, k in members for g in range(eval_games)]
     unique = list(dict.fromkeys(order))
-    batch = Evaluations(seed)
     rows = batch.add([everyone[k] for k, _, _ in unique], np.array([np.frombuffer(b, np.int64) for _, b, _ in unique]),
                      eval_rounds, [g for *_, g in unique])
-    batch.play()
-    played = dict(zip(unique, batch.picks[rows]))
-    picks = np.array([played[o] for o in order]).reshape(len(STRATEGIES), replicates, len(members), eval_games).mean(-1)
-    return ActionLevelExperiment(keys, profiles, info, MERGES, STRATEGIES, picks, members, replaced, info_changed)
+
+    def pending() -> ActionLevelExperiment:
+        played = dict(zip(unique, batch.picks[rows]))
+        picks = np.array([played[o] for o in order]).reshape(len(STRATEGIES), replicates, len(members),
+                                                             eval_games).mean(-1)
+        return ActionLevelExperiment(keys, profiles, info, MERGES, STRATEGIES, picks, members, replaced, info_changed)
+    return pending

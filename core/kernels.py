@@ -388,6 +388,20 @@ def rewards_batch(hit, considered, consistent, size, holds_match, bonus, reward,
         reward[g], learn[g] = _reward(hit[g], considered[g], consistent[g], size[g], holds_match[g], bonus)
 
 
+@njit(cache=True)
+def _grown(trace, rows):
+    """`trace` in a twice bigger array, its first `rows` rows copied.
+
+    An element loop, not `bigger[:rows] = trace[:rows]`: numba's array-to-slice
+    assignment compiles a formatted shape-mismatch error (string joins) that
+    tripled the first run's compile time of `play`."""
+    bigger = np.empty((2 * trace.shape[0] + 1024, trace.shape[1]), dtype=trace.dtype)
+    for i in range(rows):
+        for j in range(trace.shape[1]):
+            bigger[i, j] = trace[i, j]
+    return bigger
+
+
 # --- a whole game per call ----------------------------------------------------------------------
 
 @njit(cache=True)
@@ -459,9 +473,7 @@ def play(t, games, until, rounds, keys, pos, mode, cfg, table, p_consider, q_hea
                     _learn(q, counts, g, state, action, reward, alpha)
                 if record == RECORD_ALL or (record == RECORD_CONSIDERABLE and not from_memory):
                     if n_trace == trace.shape[0]:
-                        bigger = np.empty((2 * trace.shape[0] + 1024, trace.shape[1]), dtype=trace.dtype)
-                        bigger[:n_trace] = trace[:n_trace]
-                        trace = bigger
+                        trace = _grown(trace, n_trace)
                     row = trace[n_trace]
                     row[T_GAME], row[T_STEP], row[T_ROUND] = g, steps[g] - 1, r
                     row[T_FIRST], row[T_OBSERVED], row[T_MATCH] = first, observed, match
@@ -490,37 +502,38 @@ def play(t, games, until, rounds, keys, pos, mode, cfg, table, p_consider, q_hea
 # --- the oracle's expectation (core/oracle.py) --------------------------------------------------
 
 @njit(cache=True)
-def _value(cand, match, bonus):
-    """Expected reward of a uniform pick in a candidate set (core/oracle.py)."""
-    size = _popcount(cand)
-    if size == 0:
-        return INCONSISTENT
-    hit = (cand >> match) & 1
-    safe = max(size, 1)
-    p_hit = hit / safe
-    if bonus == BONUS_CORRECT:
-        paid = np.float64(hit)
-    elif bonus == BONUS_CONSISTENT:
-        paid = 1.0
-    else:
-        paid = p_hit
-    return 2.0 * p_hit - 1.0 + paid / safe
+def _value_table(bonus):
+    """Expected reward of a uniform pick in a candidate set, by its size (0-18) and whether it holds
+    the match (core/oracle.py): (19, 2). A table, so the 88 actions of a situation cost a popcount each."""
+    out = np.empty((N_CARDS + 1, 2))
+    for size in range(N_CARDS + 1):
+        for hit in range(2):
+            if size == 0:
+                out[size, hit] = INCONSISTENT
+                continue
+            p_hit = hit / size
+            if bonus == BONUS_CORRECT:
+                paid = np.float64(hit)
+            elif bonus == BONUS_CONSISTENT:
+                paid = 1.0
+            else:
+                paid = p_hit
+            out[size, hit] = 2.0 * p_hit - 1.0 + paid / size
+    return out
 
 
 @njit(cache=True)
-def _expected(t, observed, match, nis, q_hear, sees_smile, sees_head, sees_gaze, bonus, out):
+def _expected(t, observed, match, nis, q_hear, sees_smile, sees_head, sees_gaze, value, out, base, unheard):
     """E[reward | considered] of each of the 88 actions in one situation, into out (88,).
 
     The visual part decides the unheard candidate set, so its 11 values are
-    computed once and shared by the 8 hearing parts (same operations per action).
+    computed once (into the scratch arrays `base`, `unheard`: (11,)) and shared
+    by the 8 hearing parts (same operations per action); `value` is `_value_table`'s.
     """
-    n_visual = t.vis_set.shape[2]
-    base = np.empty(n_visual, dtype=np.int64)
-    unheard = np.empty(n_visual)
-    for v in range(n_visual):
+    for v in range(base.size):
         vis_seen = sees_gaze if v == VISUAL_GAZE else (v > VISUAL_GAZE and sees_head)
         base[v] = nis & (t.vis_set[observed, match, v] if vis_seen else -1)
-        unheard[v] = _value(base[v], match, bonus)
+        unheard[v] = value[_popcount(base[v]), (base[v] >> match) & 1]
     for a in range(N_ACTIONS):
         h, v = t.action_hearing[a], t.action_visual[a]
         if h == HEARING_SMILE:
@@ -532,27 +545,41 @@ def _expected(t, observed, match, nis, q_hear, sees_smile, sees_head, sees_gaze,
         if p_heard == 0.0:  # 0 * heard + 1 * unheard, exactly, for finite values
             out[a] = unheard[v]
             continue
-        heard = _value(base[v] & t.hear_set[observed, match, h], match, bonus)
+        cand = base[v] & t.hear_set[observed, match, h]
+        heard = value[_popcount(cand), (cand >> match) & 1]
         out[a] = p_heard * heard + (1 - p_heard) * unheard[v]
 
 
 @njit(cache=True)
 def expected_batch(t, observed, match, nis, q_hear, sees_smile, sees_head, sees_gaze, bonus, out):
     """`_expected` for n situations of one persona: out (n, 88)."""
+    base = np.empty(t.vis_set.shape[2], dtype=np.int64)
+    unheard = np.empty(t.vis_set.shape[2])
+    value = _value_table(bonus)
     for i in range(observed.size):
-        _expected(t, observed[i], match[i], nis[i], q_hear, sees_smile, sees_head, sees_gaze, bonus, out[i])
+        _expected(t, observed[i], match[i], nis[i], q_hear, sees_smile, sees_head, sees_gaze, value, out[i],
+                  base, unheard)
 
 
 @njit(cache=True)
-def expected_sums(t, owner, state, observed, match, nis, q_hear, sees, bonus, sums, counts):
-    """Add each situation's 88 expected rewards to sums[owner, state] in the given order (np.add.at's)."""
+def expected_sums(t, owner, rows, order, q_hear, sees, bonus, sums, counts):
+    """Add the 88 expected rewards of each recorded situation to sums[owner[game], state], in `order`.
+
+    `rows` are recorded turns (TRACE_FIELDS columns, core/simulate.py Trace.rows), `order` the
+    lockstep order they are summed in (np.add.at's order before; floats add up the same way)."""
     values = np.empty(N_ACTIONS)
-    for i in range(observed.size):
-        o = owner[i]
-        _expected(t, observed[i], match[i], nis[i], q_hear[o], sees[o, 0], sees[o, 1], sees[o, 2], bonus, values)
+    base = np.empty(t.vis_set.shape[2], dtype=np.int64)
+    unheard = np.empty(t.vis_set.shape[2])
+    value = _value_table(bonus)
+    for i in range(order.size):
+        row = rows[order[i]]
+        o = owner[row[T_GAME]]
+        state = np.int64(row[T_STATE])
+        _expected(t, np.int64(row[T_OBSERVED]), np.int64(row[T_MATCH]), np.int64(row[T_NIS]), q_hear[o],
+                  sees[o, 0], sees[o, 1], sees[o, 2], value, values, base, unheard)
         for a in range(N_ACTIONS):
-            sums[o, state[i], a] += values[a]
-        counts[o, state[i]] += 1
+            sums[o, state, a] += values[a]
+        counts[o, state] += 1
 
 
 def warm_up() -> tuple[float, int, int]:

@@ -50,9 +50,8 @@ def expected_rewards(persona: Persona, observed: np.ndarray, match: np.ndarray, 
 
 
 def situations(personas, seeds, rounds: int, policies: np.ndarray):
-    """Per game of fixed-policy play, its considerable turns: (game, state, observed, match, NIS), lockstep order."""
-    t = run_games(personas, seeds, rounds, mode="fixed", policy=policies, record="considerable").trace
-    return tuple(t[k].astype(np.int64) for k in ("game", "state", "observed", "match", "nis"))
+    """The considerable turns of fixed-policy play: a simulate.Trace (`.rows`, in lockstep `.order`)."""
+    return run_games(personas, seeds, rounds, mode="fixed", policy=policies, record="considerable").trace
 
 
 def oracle_policies(personas, seeds_per_persona: int, seed: int, rounds: int = 200,
@@ -77,11 +76,12 @@ def oracle_policies(personas, seeds_per_persona: int, seed: int, rounds: int = 2
     tables = np.zeros((len(personas), N_STATES, N_ACTIONS))
     _, q_hear, _, seen = persona_arrays(personas)
     for _ in range(iterations):
-        game, states, observed, match, nis = situations(games, seeds, rounds, policies[owner])
+        turns = situations(games, seeds, rounds, policies[owner])
         sums = np.zeros((len(personas), N_STATES, N_ACTIONS))
         counts = np.zeros((len(personas), N_STATES), dtype=np.int64)
-        kernels.expected_sums(kernels.TABLES, owner[game], states, observed, match, nis, q_hear, seen,
-                              BONUS_CODES[bonus], sums, counts)
+        kernels.expected_sums(kernels.TABLES, owner, turns.rows, turns.order, q_hear, seen, BONUS_CODES[bonus],
+                              sums, counts)
+        del turns  # before the next iteration's: two recorded tables at once were the study's peak memory
         visited = counts > 0
         tables = np.where(visited[..., None], sums / np.maximum(counts, 1)[..., None], tables)
         policies = np.where(visited, np.argmax(tables, axis=-1), policies)

@@ -74,8 +74,21 @@ def combination_experiment(personas: Sequence[Persona], training, seed: int, rep
     """Merge all `personas` three ways per replicate and play each merge on every persona.
 
     `training` is a core.study.Training with the same number of games per persona,
-    at least `replicates`; replicate r takes games r, r + R, r + 2R, ... of each persona."""
-    from .study import evaluate_on_personas
+    at least `replicates`; replicate r takes games r, r + R, r + 2R, ... of each persona.
+    The evaluation games are a batch of their own; the study queues them in its
+    single batch instead (`add_combination`)."""
+    from .study import Evaluations
+    batch = Evaluations(seed)
+    pending = add_combination(batch, personas, training, seed, replicates, eval_games, eval_rounds)
+    batch.play(progress)
+    return pending(batch)
+
+
+def add_combination(batch, personas: Sequence[Persona], training, seed: int, replicates: int = 5,
+                    eval_games: int = 4, eval_rounds: int = 100):
+    """Merge (see `combination_experiment`) and queue the merges' evaluation games in `batch`
+    (a core.study.Evaluations); returns a function of the played batch giving the CombinationExperiment."""
+    from .study import add_on_personas
     games = len(training.personas) // len(personas)
     if games < replicates:
         raise ValueError(f"{games} games per persona cannot make {replicates} disjoint replicates")
@@ -92,8 +105,12 @@ def combination_experiment(personas: Sequence[Persona], training, seed: int, rep
             m = combine(users[strategy])
             merged[k].append(m)
             named[f"{k}:{r}"] = m.policy
-    scores = evaluate_on_personas(personas, named, eval_games, eval_rounds, seed, progress)
-    picks = np.array([[[scores[(f"{k}:{r}", p.key)] for p in personas] for r in range(replicates)]
-                      for k in range(len(STRATEGIES))])
-    errors = np.array([[sum(":error->Q" in rule for rule in m.rules) for m in row] for row in merged])
-    return CombinationExperiment([p.key for p in personas], STRATEGIES, picks, merged, errors)
+    pending = add_on_personas(batch, personas, named, eval_games, eval_rounds)
+
+    def result(played) -> CombinationExperiment:
+        scores = pending(played)
+        picks = np.array([[[scores[(f"{k}:{r}", p.key)] for p in personas] for r in range(replicates)]
+                          for k in range(len(STRATEGIES))])
+        errors = np.array([[sum(":error->Q" in rule for rule in m.rules) for m in row] for row in merged])
+        return CombinationExperiment([p.key for p in personas], STRATEGIES, picks, merged, errors)
+    return result

@@ -16,6 +16,7 @@ of the numpy simulator this replaced, so sums over it add up the same way.
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from typing import NamedTuple, Sequence
 
 import numpy as np
@@ -43,7 +44,7 @@ class SimResult(NamedTuple):
     inconsistent: np.ndarray  # (B, rounds) inconsistent suggestions per round
     turns: int  # lockstep steps: the most turns any game took
     snapshots: np.ndarray | None  # (B, rounds // k, 24) greedy policy after every k rounds
-    trace: dict | None = None  # `record`: one entry per turn, lockstep order (step, then game); see run_games
+    trace: Trace | None = None  # `record`: one entry per turn, lockstep order (step, then game); see run_games
 
 
 def _per_game(value, n: int, what: str) -> list:
@@ -150,17 +151,44 @@ def run_games(personas: Sequence[Persona], seeds: Sequence[int], rounds: int | S
         if progress is not None:
             progress(int(round_index.sum()))
     return SimResult(q, counts, picks, inconsistent, int(steps.max()) if n else 0,
-                     snapshots if every else None, _trace(trace[:n_trace], reward_bonus) if record else None)
+                     snapshots if every else None, Trace(trace[:n_trace], reward_bonus) if record else None)
 
 
-def _trace(rows: np.ndarray, reward_bonus: str) -> dict:
-    """The recorded turns as named columns, in lockstep order (step, then game), with their rewards."""
-    order = np.lexsort((rows[:, kernels.T_GAME], rows[:, kernels.T_STEP]))
-    # column by column: a sorted copy of the whole table would double the oracle's peak memory
-    out = {name: rows[order, i] for i, name in enumerate(kernels.TRACE_FIELDS)}
-    out["candidates"] = rows[order, kernels.T_CANDIDATES]
-    size = np.bitwise_count(out["candidates"])
-    holds = (out["candidates"] >> out["match"]) & 1 == 1
-    out["reward"], _ = simulated_reward(out["second"] == out["match"], out["considered"] == 1,
-                                        out["consistent"] == 1, size, holds, reward_bonus)
-    return out
+class Trace(Mapping):
+    """The recorded turns of `run_games(record=...)`: name -> column, in lockstep order (step, then game).
+
+    Names: kernels.TRACE_FIELDS, then "candidates" and "reward". A column is
+    gathered (and the rewards computed) on first use; `rows` (one int32 row
+    per turn, in the order the kernel played them) and `order` (the lockstep
+    order of those rows) serve a caller that reads a few fields of every row
+    (core/oracle.py) without copying the table.
+    """
+
+    NAMES = (*kernels.TRACE_FIELDS, "candidates", "reward")
+
+    def __init__(self, rows: np.ndarray, reward_bonus: str):
+        self.rows = rows
+        self.order = np.lexsort((rows[:, kernels.T_GAME], rows[:, kernels.T_STEP]))
+        self._bonus = reward_bonus
+        self._columns: dict[str, np.ndarray] = {}
+
+    def __getitem__(self, name: str) -> np.ndarray:
+        if name not in self._columns:
+            if name == "reward":
+                size = np.bitwise_count(self["candidates"])
+                holds = (self["candidates"] >> self["match"]) & 1 == 1
+                self._columns[name], _ = simulated_reward(self["second"] == self["match"], self["considered"] == 1,
+                                                          self["consistent"] == 1, size, holds, self._bonus)
+            elif name == "candidates":
+                self._columns[name] = self.rows[self.order, kernels.T_CANDIDATES]
+            elif name in kernels.TRACE_FIELDS:
+                self._columns[name] = self.rows[self.order, kernels.TRACE_FIELDS.index(name)]
+            else:
+                raise KeyError(name)
+        return self._columns[name]
+
+    def __iter__(self):
+        return iter(self.NAMES)
+
+    def __len__(self) -> int:
+        return len(self.NAMES)

@@ -61,6 +61,13 @@ class Evaluations:
     is each row's mean picks per round. Row i of a request plays evaluation
     game `game_index[i]` (default i) of its persona: rows with the same persona
     and index play the very same deals and user draws, whatever else is in the batch.
+
+    Rows that repeat a game are played once: rows with the same persona, game
+    index and policy share one game of the most rounds any of them asks for,
+    and each reads the sum of its own first rounds (a fixed policy's game does
+    not depend on how many rounds follow, and integer picks sum exactly), so a
+    row's result is the same whether it plays alone or shares. How to join the
+    study's batch: report/future.py.
     """
 
     def __init__(self, seed: int):
@@ -69,12 +76,16 @@ class Evaluations:
         self._policies: list[np.ndarray] = []
         self._rounds: list[int] = []
         self._index: list[int] = []
+        self._planned = None
         self.picks: np.ndarray | None = None
 
     def add(self, personas: Sequence[Persona], policies: np.ndarray, rounds: int,
             game_index: Sequence[int] | None = None) -> slice:
+        if self.picks is not None:
+            raise RuntimeError("the batch has been played: queue every request before play()")
         start = len(self._personas)
         policies = np.asarray(policies).reshape(len(personas), -1)
+        self._planned = None
         self._personas += list(personas)
         self._policies.append(policies)
         self._rounds += [rounds] * len(personas)
@@ -83,15 +94,41 @@ class Evaluations:
 
     @property
     def total_rounds(self) -> int:
-        return sum(self._rounds)
+        """Rounds the batch plays (repeated games once)."""
+        return int(self._plan()[2].sum())
+
+    def _plan(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """(the distinct game each row reads, each game's first row, each game's rounds, every row's policy)."""
+        if self._planned is not None:
+            return self._planned
+        policies = np.concatenate(self._policies) if self._policies else np.zeros((0, 24), dtype=np.int64)
+        first: dict = {}
+        game_of = np.empty(len(self._personas), dtype=np.int64)
+        lead: list[int] = []  # per distinct game: the first row that asked for it
+        rounds: list[int] = []
+        for i, (p, g, policy) in enumerate(zip(self._personas, self._index, policies)):
+            j = first.setdefault((p, g, policy.tobytes()), len(lead))
+            if j == len(lead):
+                lead.append(i)
+                rounds.append(self._rounds[i])
+            elif self._rounds[i] > rounds[j]:
+                rounds[j] = self._rounds[i]
+            game_of[i] = j
+        self._planned = game_of, np.array(lead, dtype=np.int64), np.array(rounds, dtype=np.int64), policies
+        return self._planned
 
     def play(self, progress=None) -> np.ndarray:
-        seeds = [game_seed(self.seed, p.key, EVAL_GAME_OFFSET + i) for p, i in zip(self._personas, self._index)]
-        result = run_games(self._personas, seeds, self._rounds, mode="fixed", policy=np.concatenate(self._policies),
-                           progress=progress)
-        rounds = np.array(self._rounds)
-        # integer picks: a row's sum is exact, so its mean does not depend on the batch's width
-        self.picks = result.picks.sum(axis=1, dtype=np.float64) / rounds
+        game_of, lead, rounds, policies = self._plan()
+        personas = [self._personas[i] for i in lead]
+        seeds = [game_seed(self.seed, p.key, EVAL_GAME_OFFSET + self._index[i]) for p, i in zip(personas, lead)]
+        result = run_games(personas, seeds, rounds, mode="fixed", policy=policies[lead], progress=progress)
+        # integer picks: a row's sum over its own rounds is exact, so its mean depends neither on the
+        # batch's width nor on a longer row sharing its game
+        totals = np.zeros((len(lead), result.picks.shape[1] + 1), dtype=result.picks.dtype)  # < 2**31 picks a game
+        np.cumsum(result.picks, axis=1, out=totals[:, 1:])
+        del result
+        own = np.array(self._rounds, dtype=np.int64)
+        self.picks = totals[game_of, own].astype(np.float64) / own
         return self.picks
 
 

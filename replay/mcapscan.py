@@ -77,6 +77,7 @@ class ChunkSeen:
     end: int
     intact: bool
     messages: list[tuple[int, int, int]] = field(default_factory=list)  # (offset in chunk, channel, log time)
+    by_channel: dict[int, set[tuple[int, int]]] | None = field(default=None, repr=False)  # channel -> (offset, time)
 
 
 @dataclass
@@ -114,6 +115,7 @@ class Scan:
 
 
 _MESSAGE_HEAD = struct.Struct("<HIQQ")
+_MESSAGE_IN_CHUNK = struct.Struct("<BQHIQQ")  # a Message record's opcode, length and fixed fields
 _INDEX_HEAD = struct.Struct("<HI")
 
 
@@ -180,23 +182,36 @@ def _open_chunk(chunk: Chunk) -> tuple[list[Any], list[tuple[int, int, int]]]:
         raise Unreadable(f"decompresses to {len(data)} bytes, the chunk says {chunk.uncompressed_size}")
     if chunk.uncompressed_crc and zlib.crc32(data) != chunk.uncompressed_crc:
         raise Unreadable(f"CRC mismatch (recorded {chunk.uncompressed_crc:#010x}, computed {zlib.crc32(data):#010x})")
-    records, messages, pos = [], [], 0
-    while pos < len(data):
-        if len(data) - pos < 9:
+    records, messages, pos, size = [], [], 0, len(data)
+    start, end = chunk.message_start_time, chunk.message_end_time
+    head, message_head = _HEAD.unpack_from, _MESSAGE_IN_CHUNK.unpack_from
+    while pos < size:
+        if size - pos < 9:
             raise Unreadable(f"a record header is cut at byte {pos} of the chunk's data")
-        opcode, length = _HEAD.unpack_from(data, pos)
-        if pos + 9 + length > len(data):
+        opcode, length = head(data, pos)
+        stop = pos + 9 + length
+        if stop > size:
             raise Unreadable(f"a {_name(opcode)} at byte {pos} of the chunk's data runs past its end")
-        record = _parse(opcode, data[pos + 9:pos + 9 + length])
+        if opcode == 0x05 and length >= _MESSAGE_HEAD.size:  # most records: parsed here, as _parse does (speed)
+            _, _, channel_id, sequence, log_time, publish_time = message_head(data, pos)
+            if not start <= log_time <= end:
+                raise Unreadable(f"a message logged at {log_time} lies outside the chunk's time range "
+                                 f"{start}-{end}")
+            records.append(Message(channel_id=channel_id, sequence=sequence, log_time=log_time,
+                                   publish_time=publish_time, data=data[pos + 9 + _MESSAGE_HEAD.size:stop]))
+            messages.append((pos, channel_id, log_time))
+            pos = stop
+            continue
+        record = _parse(opcode, data[pos + 9:stop])
         if not isinstance(record, _IN_CHUNK):
             raise Unreadable(f"a {type(record).__name__} record inside a chunk")
         if isinstance(record, Message):
-            if not chunk.message_start_time <= record.log_time <= chunk.message_end_time:
+            if not start <= record.log_time <= end:
                 raise Unreadable(f"a message logged at {record.log_time} lies outside the chunk's time range "
-                                 f"{chunk.message_start_time}-{chunk.message_end_time}")
+                                 f"{start}-{end}")
             messages.append((pos, record.channel_id, record.log_time))
         records.append(record)
-        pos += 9 + length
+        pos = stop
     return records, messages
 
 
@@ -205,6 +220,8 @@ class _Walker:
         self.data = data
         self.scan = Scan(path, size=len(data))
         self.last_seq: dict[int, tuple[int, int]] = {}  # channel -> (sequence, chunk number)
+        self.last_intact: ChunkSeen | None = None  # the last chunk whose records were read
+        self.messages = 0  # Message records read (the Statistics' count is checked against it)
         self.data_end_at = -1
         self.chunk_indexes: list[ChunkIndex] = []
         self.statistics: Statistics | None = None
@@ -314,6 +331,7 @@ class _Walker:
             elif isinstance(record, Message):
                 self.sequence(pos, record, "message", -1)
                 scan.records.append(record)
+                self.messages += 1
             pos = end
         scan.truncated, scan.cut_at = True, pos
         return scan
@@ -328,14 +346,21 @@ class _Walker:
         except Unreadable as err:
             self.damage(pos, part, f"{err}: its records are not read")
             return seen
-        previous = [c for c in self.scan.chunks[:-1] if c.intact]
-        if previous and chunk.message_start_time < previous[-1].start:
-            self.damage(pos, part, f"starts at log time {chunk.message_start_time}, before chunk {previous[-1].number}"
-                        f" ({previous[-1].start}): chunks out of order")
+        previous = self.last_intact
+        if previous is not None and chunk.message_start_time < previous.start:
+            self.damage(pos, part, f"starts at log time {chunk.message_start_time}, before chunk {previous.number}"
+                        f" ({previous.start}): chunks out of order")
         seen.intact = True
+        self.last_intact = seen
+        self.messages += len(seen.messages)
+        last_seq = self.last_seq
         for record in records:
-            if isinstance(record, Message):
-                self.sequence(pos, record, part, n)
+            if type(record) is Message and record.sequence:
+                last = last_seq.get(record.channel_id)
+                if last is not None and record.sequence <= last[0]:
+                    self.sequence(pos, record, part, n)  # says what is wrong
+                else:
+                    last_seq[record.channel_id] = (record.sequence, n)
         self.scan.records.extend(records)
         return seen
 
@@ -355,7 +380,11 @@ class _Walker:
             return
         if not chunk.intact:
             return
-        mine = {(off, t) for off, ch, t in chunk.messages if ch == index.channel_id}
+        if chunk.by_channel is None:  # once per chunk, not once per index
+            chunk.by_channel = {}
+            for off, ch, t in chunk.messages:
+                chunk.by_channel.setdefault(ch, set()).add((off, t))
+        mine = chunk.by_channel.get(index.channel_id, set())
         listed = {(off, t) for t, off in index.records}
         if listed != mine:
             self.damage(pos, f"message index of chunk {chunk.number} (byte {pos})",
@@ -441,7 +470,7 @@ class _Walker:
                 self.damage(c.offset, f"chunk {c.number} (bytes {c.offset}-{c.offset + c.length})",
                             f"indexed as chunk {i}: chunks out of order")
         if self.statistics is not None:
-            messages = sum(1 for r in self.scan.records if isinstance(r, Message))
+            messages = self.messages
             lost = any(not c.intact for c in self.scan.chunks)
             if self.statistics.message_count != messages and not lost:
                 self.damage(self.data_end_at, "summary", f"statistics count {self.statistics.message_count} "

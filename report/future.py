@@ -1,26 +1,97 @@
 """The study report's sections on the thesis's future work (chapter 8).
 
-Rule: one function per section; each takes the result of a `core` experiment,
-writes its CSV and figure into the report folder, and returns the section's
-markdown lines. Numbers are picks per round (18 = perfect play; lower is
-better), mean and standard deviation over the experiment's replicates.
+Rule: each section takes the result of a `core` experiment, writes its CSV and
+figure into the report folder, and returns the section's markdown lines.
+Numbers are picks per round (18 = perfect play; lower is better), mean and
+standard deviation over the experiment's replicates.
+
+How a section joins the study (report/study.py runs `SECTIONS` in order):
+a section is a function `section(state: Study, batch) -> finish | None`.
+Before the study's evaluations play, it computes what it needs from `state`
+(the training, the users, the settings) and queues its evaluation games in
+`batch`, the study's single core.study.Evaluations (`batch.add(personas,
+policies, rounds, game_index)`, or a core helper that calls it, such as
+`core.study.add_on_personas`), keeping the slices `add` returns. It returns
+None if it does not apply to these settings, else `finish(state) -> lines`,
+which the study calls after the batch has played (`batch.picks[slice]`; the
+comparison's `state.oracle` and `state.alone` are set by then): it writes the
+section's CSV, hands its figure to `state.figures.draw(name, *plain data)` (a
+function of report/plots.py listed in `plots.FIGURES`, drawn in the figure
+process) and returns its markdown lines. Sections come after the report's
+timings, so the thesis's study above them keeps its pinned bytes; a section
+never changes another's numbers (a row of the batch plays the same game
+whatever else is queued). Learning games of a section's own (new personas,
+other learners) go through one `core.simulate.run_games` call of its own in
+the queueing step. Keep a section cheap: `pairplay study` has a 5 s budget
+(bench/goals.py).
 """
 
 from __future__ import annotations
 
 import csv
+from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any, Callable
 
 import numpy as np
 
-from pairplay.report import plots
+from pairplay.core.precombine import add_combination
+
+
+@dataclass
+class Study:
+    """What a future-work section may read (see the module rule)."""
+
+    args: Any  # report.study.StudySettings
+    out: Path  # the report folder being written
+    personas: list  # the study's personas (core Persona)
+    names: dict[str, str]  # persona key -> display name
+    training: Any  # core.study.Training
+    users: Any  # core.study.UserSet
+    figures: Any  # report.study._Figures: .draw(name, *args)
+    markdown_table: Callable[[list[list[str]]], str]
+    oracle: dict[str, float] = field(default_factory=dict)  # persona key -> the oracle's picks per round (after play)
+    alone: dict[str, float] = field(default_factory=dict)  # persona key -> the user alone's (after play)
+
+
+def precombination(state: Study, batch):
+    """Future work 3 (core/precombine.py): needs 5 disjoint replicates of each persona's games, 2+ personas."""
+    if state.args.games < 5 or len(state.personas) < 2:
+        return None
+    pending = add_combination(batch, state.personas, state.training, state.args.seed)
+
+    def finish(played: Study) -> list[str]:
+        return precombination_section(played.out, pending(batch), played.names, played.oracle,
+                                      played.markdown_table, played.figures.draw)
+    return finish
+
+
+def action_level(state: Study, batch):
+    """Future work 1 (core/actionlevel.py): on the same studies as future work 3; its reading personas
+    learn in games of their own, the partners' games are the study's."""
+    if state.args.games < 5 or len(state.personas) < 2:
+        return None
+    from pairplay.core.actionlevel import add_action_level
+    from pairplay.report.future_actions import action_level_section
+    a = state.args
+    pending = add_action_level(batch, a.seed, a.rounds, state.training, reward_bonus=a.reward_bonus)
+
+    def finish(played: Study) -> list[str]:
+        return action_level_section(played.out, pending(), played.markdown_table, played.figures.draw)
+    return finish
+
+
+SECTIONS = (precombination, action_level)
 
 
 def precombination_section(out: Path, exp, names: dict[str, str], oracle: dict[str, float],
-                           markdown_table) -> list[str]:
+                           markdown_table, draw=None) -> list[str]:
     """Future work 3: a user represented by one random policy, by all its policies, or pre-combined.
 
-    `exp` is a core.precombine.CombinationExperiment; writes precombination.csv and .png."""
+    `exp` is a core.precombine.CombinationExperiment; writes precombination.csv and, through
+    `draw` (report/plots.py `draw` by default), precombination.png."""
+    if draw is None:
+        from pairplay.report.plots import draw
     picks = exp.picks  # (strategies, replicates, personas)
     R = picks.shape[1]
     header = ["representation of each user", "mean over personas", *exp.persona, "states settled by Q (Error)"]
@@ -34,10 +105,10 @@ def precombination_section(out: Path, exp, names: dict[str, str], oracle: dict[s
                  *[f"{oracle[p]:.2f}" for p in exp.persona], ""])
     with open(out / "precombination.csv", "w", newline="") as f:
         csv.writer(f).writerows(rows)
-    plots.grouped_bars_with_spread(
-        [names.get(p, p) for p in exp.persona], {s: picks[k] for k, s in enumerate(exp.strategies)},
-        [oracle[p] for p in exp.persona], out / "precombination.png",
-        f"merge of all personas, picks per round (epsilon 0; mean \u00b1 sd over {R} replicates)")
+    draw("grouped_bars_with_spread",
+         [names.get(p, p) for p in exp.persona], {s: picks[k] for k, s in enumerate(exp.strategies)},
+         [float(oracle[p]) for p in exp.persona], out / "precombination.png",
+         f"merge of all personas, picks per round (epsilon 0; mean \u00b1 sd over {R} replicates)")
     base, pre = picks[0].mean(axis=1), picks[2].mean(axis=1)
     diff = pre - base
     verdict = ("better" if diff.mean() < 0 else "worse") if abs(diff.mean()) > diff.std() else "no clearer"

@@ -228,8 +228,7 @@ def grouped_bars_with_spread(labels: list[str], series: dict[str, np.ndarray], r
     ax.set_title(title, fontsize=10)
     ax.legend(fontsize=8, ncol=2)
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    _save(fig, path, dpi=110)
 
 
 def sweep_measure(labels: list[str], mean: list[float], low: list[float], high: list[float], path: Path,

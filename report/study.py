@@ -43,9 +43,7 @@ from pairplay.outputs import output_folder
 from pairplay.processes import off_main_thread, process_pool, stop_pool
 from pairplay.schemas.policy import write_policy
 
-from pairplay.core.actionlevel import action_level_experiment
-from pairplay.core.precombine import combination_experiment
-from pairplay.report import future, future_actions, plots
+from pairplay.report import future, plots
 from pairplay.report.future_frames import frames_lines
 
 
@@ -117,8 +115,9 @@ def write_curves(out: Path, training: study.Training) -> dict[str, np.ndarray]:
         w.writerow(["persona", "game", "round", "picks", "inconsistent"])
         for row, (p, g) in enumerate(zip(training.personas, training.game_index)):
             curves.setdefault(p.key, []).append(picks[row])
-            for r, (n, inc) in enumerate(zip(picks[row], training.result.inconsistent[row])):
-                w.writerow([p.key, int(g), r, int(n), int(inc)])
+            key, game = p.key, int(g)  # Python ints: the same text as before, without a conversion per cell
+            w.writerows([key, game, r, n, inc] for r, (n, inc) in
+                        enumerate(zip(picks[row].tolist(), training.result.inconsistent[row].tolist())))
     stacked = {k: np.stack(v) for k, v in curves.items()}
     with open(out / "curves_summary.csv", "w", newline="") as f:
         w = csv.writer(f)
@@ -397,11 +396,18 @@ def _run(args, out, progress_bar, personas, config, names, timings, start, figur
     merged_pending = study.add_on_personas(batch, personas, {"own": own, **{k: m.policy for k, m in merges.items()}},
                                            args.games, args.eval_rounds)
     snapshots = study.add_snapshots(batch, runs) if runs is not None else None
+    timings["evaluations"] = time.perf_counter() - t0
+    # the future-work sections queue theirs in the same batch (report/future.py says how)
+    t0 = time.perf_counter()
+    state = future.Study(args, out, personas, names, training, users, figures, markdown_table)
+    finishers = [f for f in (section(state, batch) for section in future.SECTIONS) if f is not None]
+    future_seconds = time.perf_counter() - t0
+    t0 = time.perf_counter()
     with progress_bar(batch.total_rounds, "evaluations") as bar:
         batch.play(progress=_progress(bar))
     cmp = study.comparison(personas, training, oracle, batch.picks[compared])
     merged_eval = merged_pending(batch)
-    timings["evaluations"] = time.perf_counter() - t0
+    timings["evaluations"] += time.perf_counter() - t0
 
     table = evaluation_table(cmp)
     with open(out / "evaluation.csv", "w", newline="") as f:
@@ -437,19 +443,14 @@ def _run(args, out, progress_bar, personas, config, names, timings, start, figur
             csv.writer(f).writerows(reuse_rows)
         figures.draw("reuse_curves", reuse.persona, names, reuse.curves, [oracle[k] for k in reuse.persona],
                      out / "reuse.png")
-    future_lines = []
-    if args.games >= 5 and len(personas) >= 2:  # future work 3 needs disjoint replicates of each persona's games
-        t0 = time.perf_counter()
-        experiment = combination_experiment(personas, training, args.seed)
-        future_lines += future.precombination_section(out, experiment, names, oracle, markdown_table)
-        timings["future work 3 (pre-combination)"] = time.perf_counter() - t0
-        t0 = time.perf_counter()  # future work 1: its own personas, the partners' games reused from `training`
-        actions = action_level_experiment(args.seed, args.rounds, training, reward_bonus=args.reward_bonus)
-        future_lines += future_actions.action_level_section(out, actions, markdown_table, figures.draw)
-        timings["future work 1 (action level)"] = time.perf_counter() - t0
-    t0 = time.perf_counter()  # future work 2: its own personas, whatever the study's
+    t0 = time.perf_counter()
+    state.oracle, state.alone = oracle, alone
+    future_lines = [line for finish in finishers for line in finish(state)]
+    if finishers:
+        timings["future work"] = future_seconds + time.perf_counter() - t0
+    t0 = time.perf_counter()  # future work 2: its own personas and games, whatever the study's
     future_lines += frames_lines(out, args.seed, args.rounds, args.reward_bonus, markdown_table, figures.draw)
-    timings["frame calibration (future work 2)"] = time.perf_counter() - t0
+    timings["future work 2 (frame calibration)"] = time.perf_counter() - t0
     t0 = time.perf_counter()
     figures.finish()
     timings["waiting for figures"] = time.perf_counter() - t0
