@@ -22,7 +22,7 @@ from pathlib import Path
 from pairplay.errors import OptionError
 from pairplay.outputs import check_folder
 from pairplay.services.bus import Bus, Deadline, add_bus_arguments, deadline_of, options_from_args, stop_on_signals
-from pairplay.services.runner import Node, Stopped
+from pairplay.services.runner import Node, Stopped, start_unless_stopped
 
 SERVICES = ("game", "learner", "participant", "recorder", "combiner")
 
@@ -105,7 +105,7 @@ def run(args: argparse.Namespace) -> int:
         # restarted by session id alone, catches up from the recorder's log
         node = Node(bus, logic, args.session, resume=not (args.service == "game" and args.participant), stop=stop)
         try:
-            node.start(wait_for=tuple(args.wait_for))
+            start_unless_stopped(lambda: node.start(wait_for=tuple(args.wait_for)), stop, args.service)
         except Stopped:
             return 0
         print(f"{args.service} running in session {args.session}", flush=True)

@@ -55,7 +55,7 @@ LOOPBACK_ANY_PORT = "tcp/127.0.0.1:0"
 MODES = ("peer", "client", "router")
 CLOSE_TIMEOUT_S = 0.5  # Bus.close waits this long for Zenoh, then leaves it to the process exit
 EXIT_BUDGET_S = 2.0  # a process is gone this long after SIGINT/SIGTERM (issue 12)
-SHUTDOWN_S = 1.4  # its services stopped and its recording finished within this; the rest is the exit's
+SHUTDOWN_S = 1.1  # its services stopped and its recording finished within this; the rest is the exit's
 
 
 def safe_defaults(scouting_delay_ms: int = 100) -> dict[str, Any]:
@@ -479,9 +479,22 @@ class Bus:
         self._declared.append(token)
         return token
 
-    def alive_now(self, key_expr: str, timeout_s: float = 1.0) -> set[str]:
-        return {str(r.ok.key_expr) for r in self.session.liveliness().get(key_expr, timeout=timeout_s)
-                if r.ok is not None}
+    def alive_now(self, key_expr: str, timeout_s: float = 1.0, stop: threading.Event | None = None) -> set[str]:
+        """The liveliness tokens on `key_expr` now; returns early, with what came, once `stop` is set
+        (a shutdown does not wait out the query)."""
+        replies = self.session.liveliness().get(key_expr, timeout=timeout_s)
+        out: set[str] = set()
+        deadline = time.monotonic() + timeout_s + 0.5
+        while time.monotonic() < deadline and not (stop is not None and stop.is_set()):
+            try:
+                reply = replies.try_recv()
+            except Exception:  # the channel closed: every reply came
+                break
+            if reply is None:
+                time.sleep(0.002)
+            elif reply.ok is not None:
+                out.add(str(reply.ok.key_expr))
+        return out
 
     def locators(self) -> list[str]:
         """The endpoints this session really listens on (ports chosen by the OS)."""

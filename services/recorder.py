@@ -6,8 +6,12 @@ checks every service makes (it decodes, its key agrees with its envelope, right
 session, sequence number above the last one on that key). What fails a
 check is not written on a typed channel: the recorder publishes a
 MessageRejected with the reason and an excerpt of the payload, and records that.
-The file flushes at least every 0.1 s (the most a SIGKILL can lose; `pairplay
-recover` completes such a file). The session config, seed and software version
+The file is flushed once its oldest unflushed message is 50 ms old (replay/writer.py),
+and what waits in the inbox is written in batches flushed once, so a SIGKILL loses
+at most 0.1 s while the recorder keeps up with what arrives (`pairplay recover`
+completes such a file); when it cannot, the file records how far behind a flush
+was (BACKLOG_METADATA, and `max_flush_age_ms` at the end). A close is done by its
+deadline; what is still queued then is counted and recorded, not waited for. The session config, seed and software version
 go into MCAP metadata ("pairplay.session") when SessionStarted passes, the
 recorder's own into "pairplay.recorder". It answers restarting services with
 the log so far (`pairplay/<session>/_query/recorder/log`, msgpack batches).

@@ -31,7 +31,7 @@ from pairplay.services.learner import LearnerLogic
 from pairplay.services.participant import ParticipantLogic
 from pairplay.services.recorder import Recorder, RecordingFailed
 from pairplay.services.robot.choice import RobotChoice, start_bridge
-from pairplay.services.runner import Node, Stopped
+from pairplay.services.runner import Node, Stopped, start_unless_stopped
 
 log = logging.getLogger("pairplay.session")
 
@@ -83,7 +83,7 @@ def run_session(config: SessionConfig, path: str | Path, *, bus: Bus | None = No
     bridge = game = None
     try:
         if robot is not None:
-            bridge = start_bridge(bus, config.session, robot)
+            bridge = start_unless_stopped(lambda: start_bridge(bus, config.session, robot), stop, "robot")
         if bridge is not None:
             bridge.run_in_thread(stop)
         if bridge is not None or "robot" in external:  # a bridge on the robot's own host: `pairplay robot`
@@ -97,7 +97,7 @@ def run_session(config: SessionConfig, path: str | Path, *, bus: Bus | None = No
         if "participant" not in external and config.participant.startswith("sim:"):
             nodes.append(Node(bus, ParticipantLogic(), config.session, stop=stop))
         for node in nodes:
-            node.start()
+            start_unless_stopped(node.start, stop, node.logic.name)
             node.run_in_thread(stop)
             if nodes_out is not None:
                 nodes_out[node.logic.name] = node
@@ -106,7 +106,7 @@ def run_session(config: SessionConfig, path: str | Path, *, bus: Bus | None = No
             nodes.append(game)
             if nodes_out is not None:
                 nodes_out["game"] = game
-            game.start(wait_for=tuple(needed) + tuple(wait_also))
+            start_unless_stopped(lambda: game.start(wait_for=tuple(needed) + tuple(wait_also)), stop, "game")
             game.run_in_thread(stop)
         else:
             needed.append("game")
@@ -211,7 +211,9 @@ def watch_services(bus: Bus, session: str, nodes: list[Node], external: list[str
         now = time.monotonic()
         if external and now - checked > 0.5:
             checked = now
-            alive = bus.alive_now(alive_key(session, "*"), timeout_s=0.5)
+            alive = bus.alive_now(alive_key(session, "*"), timeout_s=0.5, stop=stop)
+            if stop.is_set():
+                break
             for name in external:
                 if alive_key(session, name) in alive:
                     missing_since.pop(name, None)

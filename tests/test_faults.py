@@ -383,3 +383,36 @@ def test_a_restarted_recorder_continues_the_sessions_record_and_marks_the_gap(tm
         seqs = sorted(r.event.seq for r in log.events if r.event.source == source)
         assert seqs == list(range(1, len(seqs) + 1)), source
     assert verify_recording(tmp_path / "rr1.1.mcap").ok
+
+
+def test_a_signal_while_the_game_is_still_starting_is_not_held_up_by_its_start(tmp_path, monkeypatch):
+    # before: the game's start ran in the main thread; its first deal loads compiled kernels (1-3 s on
+    # the loaded VM), and SIGTERM then waited for it: exits took 2.4-4.9 s
+    import threading
+    import pairplay.services.session as session_module
+    from pairplay.services.bus import Deadline
+    release = threading.Event()
+    started = threading.Event()
+    real_start = session_module.GameLogic.start
+
+    def slow_start(self):
+        started.set()
+        release.wait(60)  # a start that takes as long as the test wants
+        return real_start(self)
+    monkeypatch.setattr(session_module.GameLogic, "start", slow_start)
+    stop = threading.Event()
+    config = SessionConfig(session="slow1", participant="sim:ashley", persona="ashley", seed=1, rounds=5)
+    box = {}
+    t = threading.Thread(target=lambda: box.setdefault("path", session_module.run_session(
+        config, tmp_path / "slow1.mcap", stop=stop)), daemon=True)
+    t.start()
+    try:
+        assert started.wait(60)
+        stop.why, stop.deadline = "SIGTERM", Deadline(1.1)
+        stop.set()
+        t.join(30)  # a hang guard: before the fix it waited for the start, here held for 60 s
+        assert not t.is_alive()
+    finally:
+        release.set()
+    log = read_log(box["path"])
+    assert not log.truncated and log.metadata["pairplay.recorder.end"]["stopped_by"] == "SIGTERM"
