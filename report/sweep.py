@@ -294,10 +294,11 @@ def write_sweep(out: str | Path, grid: Grid, results: dict[str, dict], run: Swee
             for measure, value in sorted(results[cell.id].items()):
                 w.writerow([cell.id, *(dict(cell.setting)[k] for k in keys), cell.seed, measure, f"{value:.6f}"])
     measures = sorted({r["measure"] for r in rows})
-    labels = [setting_label(s) for s in grid.settings()]
     figures = []
     for measure in measures:
+        # a measure of one persona exists only in the settings that train it (a `personas` axis)
         mine = [r for r in rows if r["measure"] == measure]
+        labels = [setting_label((k, r[k]) for k in keys) for r in mine]
         path = out / "figures" / (measure.replace("/", "-") + ".png")
         path.parent.mkdir(exist_ok=True)
         plots.sweep_measure(labels, [r["mean"] for r in mine], [r["ci95_low"] for r in mine],

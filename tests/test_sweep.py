@@ -87,3 +87,17 @@ def test_the_verb_refuses_another_grids_folder_in_one_line(tmp_path):
                           "--quiet"], capture_output=True, text=True, timeout=120)
     assert run.returncode == 2 and "another grid" in run.stderr and len(run.stderr.strip().splitlines()) == 1
     assert Cell((), 0).id != Cell((), 1).id
+
+
+def test_a_personas_axis_draws_each_personas_measures_over_the_settings_that_train_it(tmp_path):
+    """A persona's measures exist only where it is trained: the figure of `learned/blind` has the
+    settings with blind in them, not every setting of the grid (examples/sweep-50.toml's shape)."""
+    grid = read_grid(_grid(tmp_path, GRID.replace('personas = "blind"\n', "").replace(
+        'reward_bonus = ["correct", "consistent"]', 'personas = ["blind", "deaf", "blind,deaf"]')))
+    run = run_sweep(grid, tmp_path / "out")
+    written = write_sweep(tmp_path / "out", grid, finished_cells(tmp_path / "out", grid), run)
+    rows = summarise(grid, finished_cells(tmp_path / "out", grid))
+    blind = [r["personas"] for r in rows if r["measure"].startswith("blind/")]
+    assert blind and set(blind) == {"blind", "blind,deaf"}
+    assert all(p.stat().st_size > 0 for p in written)
+    assert any(p.name.startswith("blind-") for p in written)
