@@ -20,6 +20,7 @@ import contextlib
 import importlib
 import os
 import sys
+import threading
 
 from pairplay import __version__
 from pairplay.cli.interrupts import DeferredInterrupt
@@ -101,16 +102,27 @@ def entry() -> None:
     compiler: native objects half-built by an interrupted compile aborted the
     process at exit with "double free detected" in CI). Every output is already
     closed or removed by then (the verbs' context managers ran while
-    KeyboardInterrupt unwound the stack)."""
+    KeyboardInterrupt unwound the stack). The same when a thread of ours is still
+    running once the verb returned (a start a signal did not wait for, loading
+    compiled kernels; a Zenoh close or publish left to the exit by a shutdown's
+    deadline): the teardown would end it inside native code, and the process
+    aborted ("FATAL: exception not rethrown", SIGABRT) after its recording was
+    finished."""
     DeferredInterrupt().install()
     code = main()
-    if code == 130:
+    if code == 130 or _threads_left():
         atexit._run_exitfuncs()  # what was registered to run at exit still runs (multiprocessing's clean-up)
         for stream in (sys.stdout, sys.stderr):
             with contextlib.suppress(Exception):
                 stream.flush()
         os._exit(code)
     sys.exit(code)
+
+
+def _threads_left() -> bool:
+    """Whether a thread besides the main one is still running (all of ours are daemons)."""
+    main_thread = threading.main_thread()
+    return any(t is not main_thread and t.is_alive() for t in threading.enumerate())
 
 
 def _main(argv: list[str]) -> int:

@@ -21,8 +21,8 @@ from pathlib import Path
 
 from pairplay.errors import OptionError
 from pairplay.outputs import check_folder
-from pairplay.services.bus import Bus, add_bus_arguments, options_from_args, stop_on_signals
-from pairplay.services.runner import Node, Stopped
+from pairplay.services.bus import Bus, Deadline, add_bus_arguments, deadline_of, options_from_args, stop_on_signals
+from pairplay.services.runner import Node, Stopped, start_unless_stopped
 
 SERVICES = ("game", "learner", "participant", "recorder", "combiner")
 
@@ -76,7 +76,9 @@ def run(args: argparse.Namespace) -> int:
                         if not _others_alive(bus, args.session):
                             break
             finally:
-                failure = recorder.close(stopped_by=getattr(stop, "why", "") if stop.is_set() else "")
+                # stopped: done by the shutdown's deadline (started by the signal), less the bus's close
+                failure = recorder.close(stopped_by=getattr(stop, "why", "") if stop.is_set() else "",
+                                         deadline=Deadline(deadline_of(stop).left(0.1)) if stop.is_set() else None)
             if failure is not None:
                 print(f"pairplay run recorder: writing {recorder.path} failed ({failure}); the file is readable "
                       f"up to the failure: pairplay recover {recorder.path}", file=sys.stderr)
@@ -103,7 +105,7 @@ def run(args: argparse.Namespace) -> int:
         # restarted by session id alone, catches up from the recorder's log
         node = Node(bus, logic, args.session, resume=not (args.service == "game" and args.participant), stop=stop)
         try:
-            node.start(wait_for=tuple(args.wait_for))
+            start_unless_stopped(lambda: node.start(wait_for=tuple(args.wait_for)), stop, args.service)
         except Stopped:
             return 0
         print(f"{args.service} running in session {args.session}", flush=True)
@@ -113,12 +115,14 @@ def run(args: argparse.Namespace) -> int:
             reason, detail = end_reason(stop, "")
             with node._lock:
                 node.publish(node.driver._stamp(logic.end(reason, detail)))
-            time.sleep(0.2)  # let the recorder take it before the bus closes
+            node.close(deadline_of(stop).left(0.3, 0.5))  # let the recorder take it before the bus closes
+            time.sleep(deadline_of(stop).left(0.3, 0.2))
         return 0
     finally:
+        deadline = deadline_of(stop) if stop.is_set() else Deadline(1.0)
         if node is not None:
-            node.close(0.5)
-        bus.close()
+            node.close(deadline.left(0.1, 0.5))
+        bus.close(deadline.left(cap=0.5))
 
 
 def _recorded_config(bus: Bus, session: str, stop: threading.Event):

@@ -173,8 +173,9 @@ def run(args: argparse.Namespace) -> int:
     try:
         bus_options = options_from_args(args, default_mode="router")
         bus_options.to_dict()  # a bad --zenoh-config is the user's mistake: one line, before anything starts
+        summary: dict = {}
         path = run_session(config, Path(args.out) / f"{config.session}.mcap", bus_options=bus_options,
-                           external=tuple(args.external), stop=stop, on_bus=announce,
+                           external=tuple(args.external), stop=stop, on_bus=announce, summary=summary,
                            robot=None if "robot" in args.external else robot_choice(args))
     except (ConfigFileError, BusOpenError) as err:
         print(f"pairplay session: {err}", file=sys.stderr)
@@ -185,6 +186,15 @@ def run(args: argparse.Namespace) -> int:
         return 1
     if "recorder" in args.external:
         print(f"session {config.session} over; the external recorder writes its file")
+        return 0
+    if getattr(stop, "why", ""):
+        # a signal: the process must be gone within 2 s of it, so no reading the file back
+        print(f"recorded {summary['events']} events to {path}"
+              + (f" ({summary['unrecorded']} messages shed or unrecorded, counted in it)" if summary['unrecorded'] else ""))
+        if not summary["started"]:
+            print(f"interrupted ({stop.why}) before the session started")
+        else:
+            print(f"ended: interrupted ({stop.why}) after {summary['rounds_played']} of {config.rounds} rounds")
         return 0
     from pairplay.replay.fold import fold_events
     from pairplay.replay.reader import read_log

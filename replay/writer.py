@@ -55,6 +55,7 @@ class EventLogWriter:
         self._last_log_ns = 0
         self._unflushed = 0
         self.max_flush_age_ns = 0
+        self.last_flush_age_ns = 0  # age of the oldest message of the last flush
         self.flushes = 0
         self.count = 0
         self.closed = False
@@ -106,8 +107,8 @@ class EventLogWriter:
 
     def flush(self, now_ns: int) -> None:
         """Close the open chunk and push everything to the OS."""
-        if self._oldest_ns is not None:
-            self.max_flush_age_ns = max(self.max_flush_age_ns, now_ns - self._oldest_ns)
+        self.last_flush_age_ns = 0 if self._oldest_ns is None else now_ns - self._oldest_ns
+        self.max_flush_age_ns = max(self.max_flush_age_ns, self.last_flush_age_ns)
         self._writer.flush()
         self._oldest_ns = None
         self._unflushed = 0

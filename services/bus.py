@@ -23,7 +23,11 @@ publishers use congestion control BLOCK (Zenoh's default, DROP, silently lost
 no consumer's callback can hold it up. SIGINT and SIGTERM set a stop flag;
 every wait in a service checks it, and `Bus.close` gives Zenoh a bounded time
 (a session closing under a blocked publish takes ~5.5 s: measured), so a
-process exits within 2 s, its recording finished.
+process exits within 2 s, its recording finished. That bound holds by construction:
+the signal starts one `Deadline` (`SHUTDOWN_S` after it) shared by every step of
+the shutdown; each wait takes what is left of it minus what the steps after it
+reserve, so the waits add up to at most the budget however each one fares, and
+what a step could not finish by then is counted and recorded, not waited for.
 """
 
 from __future__ import annotations
@@ -50,6 +54,8 @@ log = logging.getLogger("pairplay.bus")
 LOOPBACK_ANY_PORT = "tcp/127.0.0.1:0"
 MODES = ("peer", "client", "router")
 CLOSE_TIMEOUT_S = 0.5  # Bus.close waits this long for Zenoh, then leaves it to the process exit
+EXIT_BUDGET_S = 2.0  # a process is gone this long after SIGINT/SIGTERM (issue 12)
+SHUTDOWN_S = 1.1  # its services stopped and its recording finished within this; the rest is the exit's
 
 
 def safe_defaults(scouting_delay_ms: int = 100) -> dict[str, Any]:
@@ -185,6 +191,32 @@ def source_of(key: str) -> str:
     return parts[2] if len(parts) == 4 else ""
 
 
+class Deadline:
+    """One time limit shared by every step of a shutdown (see module rule).
+
+    `left(reserve, cap)`: the seconds a step may still wait, keeping `reserve`
+    seconds for the steps after it, at most `cap`; never negative."""
+
+    def __init__(self, seconds: float, clock: Callable[[], float] = time.monotonic):
+        self.clock = clock
+        self.at = clock() + seconds
+
+    def left(self, reserve: float = 0.0, cap: float | None = None) -> float:
+        x = max(0.0, self.at - reserve - self.clock())
+        return x if cap is None else min(cap, x)
+
+    def passed(self, reserve: float = 0.0) -> bool:
+        return self.left(reserve) <= 0.0
+
+
+def deadline_of(stop: threading.Event, seconds: float = SHUTDOWN_S) -> Deadline:
+    """The shutdown deadline of a stop flag: started by the signal (`stop_on_signals`), else now."""
+    deadline = getattr(stop, "deadline", None)
+    if deadline is None:
+        deadline = stop.deadline = Deadline(seconds)
+    return deadline
+
+
 class Inbox:
     """Zenoh's callback threads -> one service thread; `put` never waits (see module rule).
 
@@ -255,6 +287,21 @@ class Inbox:
 
     def __len__(self) -> int:
         return len(self._items)
+
+    def discard(self, why: str) -> int:
+        """Shed everything still waiting (counted under `why`, like any shed message; control
+        items are dropped); how many messages. For a shutdown that cannot wait for them."""
+        with self._cond:
+            n = 0
+            for key, payload, _ in self._items:
+                if key is not None:
+                    self.shed[(source_of(key), why)] += 1
+                    n += 1
+            self.shed_total += n
+            self._items.clear()
+            self._count.clear()
+            self._bytes = 0
+        return n
 
     def oldest_ns(self) -> int | None:
         with self._cond:
@@ -432,9 +479,22 @@ class Bus:
         self._declared.append(token)
         return token
 
-    def alive_now(self, key_expr: str, timeout_s: float = 1.0) -> set[str]:
-        return {str(r.ok.key_expr) for r in self.session.liveliness().get(key_expr, timeout=timeout_s)
-                if r.ok is not None}
+    def alive_now(self, key_expr: str, timeout_s: float = 1.0, stop: threading.Event | None = None) -> set[str]:
+        """The liveliness tokens on `key_expr` now; returns early, with what came, once `stop` is set
+        (a shutdown does not wait out the query)."""
+        replies = self.session.liveliness().get(key_expr, timeout=timeout_s)
+        out: set[str] = set()
+        deadline = time.monotonic() + timeout_s + 0.5
+        while time.monotonic() < deadline and not (stop is not None and stop.is_set()):
+            try:
+                reply = replies.try_recv()
+            except Exception:  # the channel closed: every reply came
+                break
+            if reply is None:
+                time.sleep(0.002)
+            elif reply.ok is not None:
+                out.add(str(reply.ok.key_expr))
+        return out
 
     def locators(self) -> list[str]:
         """The endpoints this session really listens on (ports chosen by the OS)."""
@@ -503,14 +563,15 @@ def open_bus(options: BusOptions | None = None) -> Bus:
 
 
 def stop_on_signals(stop: threading.Event) -> None:
-    """SIGINT/SIGTERM set `stop` and name the signal in `stop.why` (a second SIGINT still interrupts).
-    Main thread only."""
+    """SIGINT/SIGTERM set `stop`, name the signal in `stop.why` and start the shutdown's
+    `stop.deadline` (a second SIGINT still interrupts). Main thread only."""
     def handler(signum, frame):
         if stop.is_set() and signum == signal.SIGINT:
             raise KeyboardInterrupt
         log.info("signal %s: stopping", signal.Signals(signum).name)
         if not stop.is_set():
             stop.why = signal.Signals(signum).name  # what ended the session, for its SessionEnded
+            deadline_of(stop)  # the shutdown's time starts now, not when a thread notices
         stop.set()
     signal.signal(signal.SIGINT, handler)
     signal.signal(signal.SIGTERM, handler)

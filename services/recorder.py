@@ -6,8 +6,12 @@ checks every service makes (it decodes, its key agrees with its envelope, right
 session, sequence number above the last one on that key). What fails a
 check is not written on a typed channel: the recorder publishes a
 MessageRejected with the reason and an excerpt of the payload, and records that.
-The file flushes at least every 0.1 s (the most a SIGKILL can lose; `pairplay
-recover` completes such a file). The session config, seed and software version
+The file is flushed once its oldest unflushed message is 50 ms old (replay/writer.py),
+and what waits in the inbox is written in batches flushed once, so a SIGKILL loses
+at most 0.1 s while the recorder keeps up with what arrives (`pairplay recover`
+completes such a file); when it cannot, the file records how far behind a flush
+was (BACKLOG_METADATA, and `max_flush_age_ms` at the end). A close is done by its
+deadline; what is still queued then is counted and recorded, not waited for. The session config, seed and software version
 go into MCAP metadata ("pairplay.session") when SessionStarted passes, the
 recorder's own into "pairplay.recorder". It answers restarting services with
 the log so far (`pairplay/<session>/_query/recorder/log`, msgpack batches).
@@ -24,18 +28,23 @@ from typing import Callable
 import msgspec
 
 from pairplay import __version__
-from pairplay.replay.writer import FLUSH_INTERVAL_NS, EventLogWriter
+from pairplay.replay.writer import FLUSH_INTERVAL_NS, LOSS_BOUND_NS, EventLogWriter
 from pairplay.schemas.events import RecordingGap, SessionStarted, decode_event, encode_event
 from pairplay.schemas.envelope import Nanos, stamped
 from pairplay.schemas.keys import alive_key, event_key, query_key, session_keys
 
-from pairplay.services.bus import Bus, Inbox, Outbox
+from pairplay.services.bus import Bus, Deadline, Inbox, Outbox
 from pairplay.services.guard import Guard, Refusals
 from pairplay.services.runner import LOG_QUERY, SENT_QUERY
 
 log = logging.getLogger("pairplay.recorder")
 END_METADATA = "pairplay.recorder.end"  # how the recording ended (Recorder.close)
 BATCH = 2000
+CLOSE_S = 1.5  # Recorder.close finishes within this unless given a deadline
+FINISH_S = 0.25  # of a close's time, kept to finish the file (end metadata, summary, index)
+UNRECORDED_AT_EXIT = "still queued when the recording stopped"
+BATCH_S = 0.02  # a backlog is written in batches of at most this long, each flushed once (step)
+BACKLOG_METADATA = "pairplay.recorder.backlog"  # a flush older than the loss bound (_note_backlog)
 
 
 def latest_file(path: Path) -> Path | None:
@@ -89,6 +98,7 @@ class Recorder:
         self.ended = False
         self._lock = threading.Lock()
         self._overlap = 0
+        self._backlog_noted_ns = -10**18
         self.continued: dict | None = None
         if earlier is not None:
             self._continue(earlier)
@@ -219,7 +229,12 @@ class Recorder:
                 self.on_failure(why)
 
     def step(self, timeout_s: float = 0.05) -> bool:
-        """Take one item from the inbox (or wait for one until the next flush is due)."""
+        """Take what waits in the inbox (or wait for it until the next flush is due), then flush if due.
+
+        What waits is taken as one batch (for at most `BATCH_S`) and flushed once:
+        flushing by age, a recorder that had fallen `flush_interval` behind
+        flushed after every message, a chunk each, and fell further behind
+        (20,000 one-message chunks for 20,000 events: 300 events/s)."""
         due = self.writer.due_in_ns(self.clock())
         wait = timeout_s if due is None else min(timeout_s, due / 1e9)
         item = self.inbox.get(max(wait, 0.0005))
@@ -230,10 +245,32 @@ class Recorder:
                 self.refusals.shed(shed)
             if item is not None:
                 self._take(item)
-            self._guarded(self.writer.maybe_flush, self.clock())
+                batch_end = time.monotonic() + BATCH_S
+                while time.monotonic() < batch_end:
+                    item = self.inbox.get(0)
+                    if item is None:
+                        break
+                    self._take(item)
+                item = True
+            if self._guarded(self.writer.maybe_flush, self.clock()):
+                self._note_backlog()
         except RecordingFailed:
             return False
         return item is not None
+
+    def _note_backlog(self) -> None:
+        """A flush whose oldest message waited longer than the loss bound (the recorder fell
+        behind its inbox) is recorded in the file (metadata BACKLOG_METADATA, at most once a
+        second): a SIGKILL then could have lost messages that old, and the file says so."""
+        age = self.writer.last_flush_age_ns
+        now = self.clock()
+        if age <= LOSS_BOUND_NS or now - self._backlog_noted_ns < 1_000_000_000:
+            return
+        self._backlog_noted_ns = now
+        log.warning("recorder: behind its inbox: flushed messages %.0f ms old, %d waiting", age / 1e6, len(self.inbox))
+        self._guarded(self.writer.add_metadata, BACKLOG_METADATA, {
+            "at_ns": str(now), "flush_age_ms": f"{age / 1e6:.1f}", "waiting": str(len(self.inbox)),
+            "max_flush_age_ms": f"{self.writer.max_flush_age_ns / 1e6:.1f}"})
 
     def _take(self, item) -> None:
         key, payload, received_ns = item
@@ -294,19 +331,22 @@ class Recorder:
             if self.outbox is not None:
                 self.outbox.send(key, payload)
 
-    def drain(self, timeout_s: float = 1.0) -> None:
-        """Write what is already queued (at most `timeout_s`: a flood must not hold up the exit)."""
-        deadline = time.monotonic() + timeout_s
-        while self.failure is None and time.monotonic() < deadline:
+    def drain(self, deadline: Deadline) -> int:
+        """Write what is queued until `deadline` (keeping `FINISH_S` of it to finish the file: a
+        flood must not hold up the exit); what still waits then is shed, counted under
+        UNRECORDED_AT_EXIT and recorded as a MessageRejected count. Returns how many were shed."""
+        while self.failure is None and not deadline.passed(FINISH_S):
             item = self.inbox.get(0)
             if item is None:
-                return
+                return 0
             try:
                 self._take(item)
             except RecordingFailed:
-                return
-        if len(self.inbox):
-            log.warning("recorder: %d messages still queued at the exit are not recorded", len(self.inbox))
+                return 0
+        n = self.inbox.discard(UNRECORDED_AT_EXIT)
+        if n:
+            log.warning("recorder: %d messages still queued at the exit are not recorded (counted)", n)
+        return n
 
     def run(self, stop: threading.Event) -> None:
         """Record until `stop`; a failure of any kind ends the recording loudly (on_failure)."""
@@ -317,7 +357,7 @@ class Recorder:
             log.exception("recorder failed")
             self._fail(f"recorder error {type(err).__name__}: {err}")
 
-    def close(self, stopped_by: str = "") -> str | None:
+    def close(self, stopped_by: str = "", deadline: Deadline | None = None) -> str | None:
         """Write what is queued, finish the file; never raises. The failure, if the
         file could not be written (it is then readable up to it: `pairplay recover`).
 
@@ -325,12 +365,21 @@ class Recorder:
         "pairplay.recorder.end": `session_ended` "true" when the session's
         SessionEnded is in it; `stopped_by` the signal or stop that ended the
         recording, "" when the session ended by itself), so even a recording
-        stopped before its game started says why it holds no session."""
+        stopped before its game started says why it holds no session, and how many messages
+        were still queued when it stopped (`unrecorded_at_exit`, also recorded as a count).
+
+        Done by `deadline` (default `CLOSE_S` from now): the queue is written while
+        `FINISH_S` of it is left, the rest counted (`drain`)."""
+        deadline = deadline or Deadline(CLOSE_S)
+        unrecorded = 0
         try:
-            self.drain()
+            unrecorded = self.drain(deadline)
         except Exception as err:
             log.exception("recorder failed")
             self._fail(f"recorder error {type(err).__name__}: {err}")
+        shed = self.inbox.take_shed()
+        if shed:
+            self.refusals.shed(shed)
         if self.refusals.pending() and self.failure is None:
             try:
                 self._publish(self.refusals.tick(self.clock(), force=True))
@@ -339,12 +388,14 @@ class Recorder:
         if self.failure is None:
             try:
                 self._guarded(self.writer.add_metadata, END_METADATA, {
-                    "ended_ns": str(self.clock()), "session_ended": str(self.ended).lower(), "stopped_by": stopped_by})
+                    "ended_ns": str(self.clock()), "session_ended": str(self.ended).lower(), "stopped_by": stopped_by,
+                    "unrecorded_at_exit": str(unrecorded),
+                    "max_flush_age_ms": f"{self.writer.max_flush_age_ns / 1e6:.1f}"})
                 self._guarded(self.writer.close)
             except RecordingFailed:
                 pass
         else:
             self.writer.abandon()
         if self.outbox is not None:
-            self.outbox.close(0.5)
+            self.outbox.close(deadline.left(cap=0.5))
         return self.failure

@@ -19,7 +19,7 @@ import gc
 import logging
 import threading
 import time
-from typing import Callable
+from typing import Any, Callable
 
 import msgspec
 
@@ -71,6 +71,31 @@ def answer_sent(outbox: Outbox, name: str, query) -> None:
 
 class Stopped(Exception):
     """The stop flag was set while the service waited."""
+
+
+def start_unless_stopped(start: Callable[[], Any], stop: threading.Event, name: str) -> Any:
+    """Run a service's start in a thread of its own and wait for it, or for `stop`: a start may
+    take seconds on a loaded machine (the game's first deal loads compiled kernels, a service asks
+    for the log, waits for others), and a signal must not wait for it. Raises Stopped if `stop`
+    is set first (the start is left to finish or not in its daemon thread), or the start's error;
+    else what the start returned."""
+    failed: list[BaseException] = []
+    result: list = []
+
+    def run() -> None:
+        try:
+            result.append(start())
+        except BaseException as err:  # re-raised in the caller's thread
+            failed.append(err)
+    thread = threading.Thread(target=run, name=f"pairplay-{name}-start", daemon=True)
+    thread.start()
+    while thread.is_alive():
+        if stop.is_set():
+            raise Stopped(name)
+        thread.join(0.02)
+    if failed:
+        raise failed[0]
+    return result[0]
 
 
 class Node:
@@ -144,7 +169,7 @@ class Node:
         while True:
             if self.stop.is_set():
                 raise Stopped(self.logic.name)
-            alive = self.bus.alive_now(alive_key(self.session, "*"), timeout_s=0.5)
+            alive = self.bus.alive_now(alive_key(self.session, "*"), timeout_s=0.5, stop=self.stop)
             if wanted <= alive:
                 return
             if time.monotonic() > deadline:

@@ -21,22 +21,26 @@ import threading
 import time
 from pathlib import Path
 
+import logging
+
 from pairplay.schemas.keys import alive_key
 from pairplay.schemas.session import SessionConfig
-from pairplay.services.bus import Bus, BusOptions
+from pairplay.services.bus import CLOSE_TIMEOUT_S, Bus, BusOptions, Deadline, deadline_of
 from pairplay.services.game import GameLogic
 from pairplay.services.learner import LearnerLogic
 from pairplay.services.participant import ParticipantLogic
 from pairplay.services.recorder import Recorder, RecordingFailed
 from pairplay.services.robot.choice import RobotChoice, start_bridge
-from pairplay.services.runner import Node, Stopped
+from pairplay.services.runner import Node, Stopped, start_unless_stopped
+
+log = logging.getLogger("pairplay.session")
 
 
 def run_session(config: SessionConfig, path: str | Path, *, bus: Bus | None = None,
                 bus_options: BusOptions | None = None, external: tuple[str, ...] = (),
                 stop: threading.Event | None = None, settle_timeout_s: float = 30.0,
                 on_bus=None, nodes_out: dict | None = None, wait_also: tuple[str, ...] = (),
-                robot: RobotChoice | None = None, extra_nodes=None, hold=None) -> Path:
+                robot: RobotChoice | None = None, extra_nodes=None, hold=None, summary: dict | None = None) -> Path:
     """Run one session to its end (or `stop`); return the recording's path.
 
     `nodes_out`, if given, receives the in-process Nodes by service name (tests
@@ -49,7 +53,15 @@ def run_session(config: SessionConfig, path: str | Path, *, bus: Bus | None = No
     not be written: the session stops at the first write error.
     `hold(recorder)`, if given, is called once the game has ended, before the
     recording is finished: the human study keeps a game's recording open for
-    the questionnaire that follows it (services/protocol.py)."""
+    the questionnaire that follows it (services/protocol.py).
+    `summary`, if given, receives what the caller may print without reading the
+    file back (an interrupted process has no time for that): `events` written,
+    `unrecorded` messages the recorder shed (floods, and what was still queued
+    at the exit), `started` whether the game started the session, `rounds_played`.
+
+    Stopped (SIGINT/SIGTERM, the caller's `stop`, a recording failure), every step
+    of the shutdown shares one deadline (`stop.deadline`, services/bus.py), so
+    the process is done within `SHUTDOWN_S` of the signal, its recording finished."""
     own_bus = bus is None
     # the session's process is the router its external services connect to as clients
     bus = bus if bus is not None else Bus(bus_options or BusOptions(mode="router"))
@@ -71,7 +83,7 @@ def run_session(config: SessionConfig, path: str | Path, *, bus: Bus | None = No
     bridge = game = None
     try:
         if robot is not None:
-            bridge = start_bridge(bus, config.session, robot)
+            bridge = start_unless_stopped(lambda: start_bridge(bus, config.session, robot), stop, "robot")
         if bridge is not None:
             bridge.run_in_thread(stop)
         if bridge is not None or "robot" in external:  # a bridge on the robot's own host: `pairplay robot`
@@ -85,7 +97,7 @@ def run_session(config: SessionConfig, path: str | Path, *, bus: Bus | None = No
         if "participant" not in external and config.participant.startswith("sim:"):
             nodes.append(Node(bus, ParticipantLogic(), config.session, stop=stop))
         for node in nodes:
-            node.start()
+            start_unless_stopped(node.start, stop, node.logic.name)
             node.run_in_thread(stop)
             if nodes_out is not None:
                 nodes_out[node.logic.name] = node
@@ -94,7 +106,7 @@ def run_session(config: SessionConfig, path: str | Path, *, bus: Bus | None = No
             nodes.append(game)
             if nodes_out is not None:
                 nodes_out["game"] = game
-            game.start(wait_for=tuple(needed) + tuple(wait_also))
+            start_unless_stopped(lambda: game.start(wait_for=tuple(needed) + tuple(wait_also)), stop, "game")
             game.run_in_thread(stop)
         else:
             needed.append("game")
@@ -108,33 +120,54 @@ def run_session(config: SessionConfig, path: str | Path, *, bus: Bus | None = No
         if hold is not None and not failure and recorder is not None:
             hold(recorder)
         if recorder is not None:
-            # stopped: the end event gets 1 s to reach the file (the process is gone within 2 s)
+            # stopped: the end event gets what the shutdown's deadline leaves (see `close_all`)
             wait_recorded(recorder, nodes, quiet_s=0.2 if external and not stop.is_set() else 0.0,
-                          timeout_s=1.0 if stop.is_set() else 5.0)
+                          timeout_s=deadline_of(stop).left(RESERVE["recorded"], 1.0) if stop.is_set() else 5.0)
     except Stopped:  # SIGINT/SIGTERM (or a recording failure) while the game waited for its services
         end_game(game, stop, "", recorder)
         if recorder is not None:
-            wait_recorded(recorder, nodes, quiet_s=0.0, timeout_s=1.0)
+            wait_recorded(recorder, nodes, quiet_s=0.0, timeout_s=deadline_of(stop).left(RESERVE["recorded"], 1.0))
     finally:
         interrupted = stop.is_set()
+        deadline = deadline_of(stop) if interrupted else Deadline(SETTLE_S)
         stop.set()
-        for node in nodes:
-            if node.thread is not None:
-                node.thread.join(1.0)
-            node.close(0.3)
-        if bridge is not None and bridge.thread is not None:
-            # the bridge reports the robot's last acknowledgements before the recorder closes
-            bridge.thread.join(bridge.settle_s + 5 if not interrupted else 1.5)
-        recorder_stop.set()
-        failure = None
-        if recorder is not None:
-            recorder_thread.join(1.0)
-            failure = recorder.close(stopped_by=stopped_by(stop) if interrupted else "")
+        failure = close_all(nodes, bridge, recorder, recorder_thread, recorder_stop, deadline, interrupted,
+                            stopped_by(stop) if interrupted else "")
         if own_bus:
-            bus.close()
+            bus.close(deadline.left(cap=CLOSE_TIMEOUT_S))
+        if interrupted:
+            log.info("stopped: services and recording closed %.2f s before the shutdown's deadline", deadline.left())
+        if summary is not None and recorder is not None:
+            summary.update(events=recorder.writer.count, unrecorded=recorder.inbox.shed_total,
+                           started=game is not None and game.driver.seq > 0,
+                           rounds_played=game.logic.round if game is not None else 0)
     if failure is not None:
         raise RecordingFailed(failure, recorder.path)
     return recorder.path if recorder is not None else Path(path)
+
+
+# Seconds of the shutdown's deadline each step leaves to the steps after it (services/bus.py
+# Deadline): the waits add up to at most the deadline, whatever each one meets.
+RESERVE = {"recorded": 0.8, "nodes": 0.6, "bridge": 0.55, "recorder_thread": 0.5, "recorder": 0.1}
+SETTLE_S = 30.0  # a session that ended by itself: the same steps, with their usual caps
+
+
+def close_all(nodes: list[Node], bridge, recorder: Recorder | None, recorder_thread, recorder_stop: threading.Event,
+              deadline: Deadline, interrupted: bool, stopped: str) -> str | None:
+    """Stop the services, then finish the recording, all by `deadline`; the recording's failure, if any."""
+    for node in nodes:
+        if node.thread is not None:
+            node.thread.join(deadline.left(RESERVE["nodes"], 1.0))
+        node.close(deadline.left(RESERVE["nodes"], 0.3))
+    if bridge is not None and bridge.thread is not None:
+        # the bridge reports the robot's last acknowledgements before the recorder closes
+        bridge.thread.join(deadline.left(RESERVE["bridge"], 1.5 if interrupted else bridge.settle_s + 5))
+    recorder_stop.set()
+    if recorder is None:
+        return None
+    recorder_thread.join(deadline.left(RESERVE["recorder_thread"], 1.0))
+    # the recorder's own deadline: the shutdown's, less what closing the bus keeps
+    return recorder.close(stopped_by=stopped, deadline=Deadline(deadline.left(RESERVE["recorder"])))
 
 
 def end_game(game: Node | None, stop: threading.Event, failure: str, recorder: Recorder | None) -> None:
@@ -178,7 +211,9 @@ def watch_services(bus: Bus, session: str, nodes: list[Node], external: list[str
         now = time.monotonic()
         if external and now - checked > 0.5:
             checked = now
-            alive = bus.alive_now(alive_key(session, "*"), timeout_s=0.5)
+            alive = bus.alive_now(alive_key(session, "*"), timeout_s=0.5, stop=stop)
+            if stop.is_set():
+                break
             for name in external:
                 if alive_key(session, name) in alive:
                     missing_since.pop(name, None)

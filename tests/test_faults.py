@@ -32,7 +32,7 @@ from pairplay.schemas.envelope import stamped
 from pairplay.schemas.events import encode_event
 from pairplay.schemas.keys import event_key
 from pairplay.schemas.session import SessionConfig
-from pairplay.services.bus import Bus, BusOptions, Inbox
+from pairplay.services.bus import Bus, BusOptions, Deadline, Inbox
 from pairplay.services.guard import Refusals
 from pairplay.services.learner import LearnerLogic
 from pairplay.services.node import Driver
@@ -132,6 +132,68 @@ def test_sigterm_ends_a_session_whose_game_waits_for_its_services_and_the_file_i
     assert took < 10  # the 2 s goal is measured by `pairplay bench` (faults rows)
     log = read_log(tmp_path / "wait1.mcap")
     assert not log.truncated
+
+
+def test_a_shutdown_deadline_bounds_the_recorders_drain_and_what_it_leaves_is_counted_in_the_file(tmp_path):
+    # before: close() drained for a fixed 1 s whatever time the shutdown had left (SIGTERM mid-flood took
+    # 3.1 s to exit), and what was still queued then was only logged, never recorded
+    now = [0.0]
+    rec = Recorder(None, "t1", tmp_path / "t1.mcap")
+    assert rec.record(*message(ev.SessionStarted(config=CFG)), 1)
+    key = event_key("t1", "console", "QuestionnaireAnswered")
+    for seq in range(1, 5001):
+        rec.inbox.put(key, encode_event(stamped(ev.QuestionnaireAnswered(questionnaire="q", answers={}), session="t1",
+                                                source="console", seq=seq, time_ns=seq)))
+    take = rec._take
+
+    def slow_take(item):  # each message costs 1 ms of the deadline's clock
+        now[0] += 0.001
+        take(item)
+    rec._take = slow_take
+    assert rec.close(stopped_by="SIGTERM", deadline=Deadline(1.0, clock=lambda: now[0])) is None
+    assert now[0] <= 1.0 - 0.2  # the drain stopped while the file's finishing time was left
+    log = read_log(tmp_path / "t1.mcap")
+    assert not log.truncated
+    written = sum(isinstance(r.event, ev.QuestionnaireAnswered) for r in log.events)
+    counts = [r.event for r in log.events if isinstance(r.event, ev.MessageRejected)
+              and "still queued when the recording stopped" in r.event.reason]
+    assert 0 < written < 5000 and len(counts) == 1 and counts[0].reason.startswith(f"{5000 - written} messages")
+    assert log.metadata["pairplay.recorder.end"]["unrecorded_at_exit"] == str(5000 - written)
+    assert len(rec.inbox) == 0
+
+
+def test_a_recorder_behind_its_inbox_writes_the_backlog_in_batches_and_records_how_far_behind_it_was(tmp_path,
+                                                                                                     monkeypatch):
+    # before: once the oldest waiting message was older than the flush interval, the recorder flushed
+    # after every message (a chunk each), fell further behind and lost events ~0.9 s old to a SIGKILL
+    import pairplay.services.recorder as recorder_module
+    monkeypatch.setattr(recorder_module, "BATCH_S", 60.0)  # the whole backlog is one batch, whatever the load
+    now = [10**18]
+    rec = Recorder(None, "t1", tmp_path / "t1.mcap", clock=lambda: now[0])
+    key = event_key("t1", "console", "QuestionnaireAnswered")
+    for seq in range(1, 2001):
+        rec.inbox.put(key, encode_event(stamped(ev.QuestionnaireAnswered(questionnaire="q", answers={}), session="t1",
+                                                source="console", seq=seq, time_ns=seq)))
+    now[0] += 300_000_000  # the backlog waited 0.3 s: three times the loss bound
+    flushes = rec.writer.flushes
+    while len(rec.inbox):
+        rec.step(0)
+    assert rec.writer.flushes - flushes == 1 and rec.writer.count == 2000
+    assert rec.writer.max_flush_age_ns == 300_000_000
+    assert rec.close() is None
+    log = read_log(tmp_path / "t1.mcap")
+    assert log.metadata["pairplay.recorder.backlog"]["flush_age_ms"] == "300.0"
+    assert log.metadata["pairplay.recorder.end"]["max_flush_age_ms"] == "300.0"
+
+
+def test_every_wait_of_a_shutdown_takes_what_its_deadline_leaves():
+    now = [10.0]
+    d = Deadline(1.4, clock=lambda: now[0])
+    assert d.left() == pytest.approx(1.4) and d.left(0.5) == pytest.approx(0.9) and d.left(0.5, 0.3) == 0.3
+    now[0] += 1.2
+    assert d.left(0.5) == 0.0 and d.passed(0.5) and not d.passed()
+    now[0] += 5
+    assert d.left() == 0.0 and d.left(cap=0.5) == 0.0
 
 
 def test_a_write_error_ends_the_session_at_once_with_one_line_naming_it_and_recover(tmp_path):
@@ -321,3 +383,36 @@ def test_a_restarted_recorder_continues_the_sessions_record_and_marks_the_gap(tm
         seqs = sorted(r.event.seq for r in log.events if r.event.source == source)
         assert seqs == list(range(1, len(seqs) + 1)), source
     assert verify_recording(tmp_path / "rr1.1.mcap").ok
+
+
+def test_a_signal_while_the_game_is_still_starting_is_not_held_up_by_its_start(tmp_path, monkeypatch):
+    # before: the game's start ran in the main thread; its first deal loads compiled kernels (1-3 s on
+    # the loaded VM), and SIGTERM then waited for it: exits took 2.4-4.9 s
+    import threading
+    import pairplay.services.session as session_module
+    from pairplay.services.bus import Deadline
+    release = threading.Event()
+    started = threading.Event()
+    real_start = session_module.GameLogic.start
+
+    def slow_start(self):
+        started.set()
+        release.wait(60)  # a start that takes as long as the test wants
+        return real_start(self)
+    monkeypatch.setattr(session_module.GameLogic, "start", slow_start)
+    stop = threading.Event()
+    config = SessionConfig(session="slow1", participant="sim:ashley", persona="ashley", seed=1, rounds=5)
+    box = {}
+    t = threading.Thread(target=lambda: box.setdefault("path", session_module.run_session(
+        config, tmp_path / "slow1.mcap", stop=stop)), daemon=True)
+    t.start()
+    try:
+        assert started.wait(60)
+        stop.why, stop.deadline = "SIGTERM", Deadline(1.1)
+        stop.set()
+        t.join(30)  # a hang guard: before the fix it waited for the start, here held for 60 s
+        assert not t.is_alive()
+    finally:
+        release.set()
+    log = read_log(box["path"])
+    assert not log.truncated and log.metadata["pairplay.recorder.end"]["stopped_by"] == "SIGTERM"

@@ -34,7 +34,7 @@ from pairplay.schemas.envelope import Event
 from pairplay.schemas.keys import alive_key, event_key, session_keys
 from pairplay.schemas.robot import BoardCalibration, RobotActed, RobotConfig
 
-from pairplay.services.bus import Bus, Inbox, Outbox
+from pairplay.services.bus import Bus, Deadline, Inbox, Outbox, deadline_of
 from pairplay.services.node import Driver, Rejected
 from pairplay.services.robot.backends import open_robot
 from pairplay.services.robot.driver import RobotDriver, Suggestion
@@ -43,6 +43,7 @@ log = logging.getLogger("pairplay.robot.bridge")
 NAME = "robot"
 END_QUIET_S = 0.25  # after SessionEnded, stop once no message came for this long
 STOPPED_SETTLE_S = 1.0  # stopped by a signal or the experimenter: wait this long for the robot's replies
+STOPPED_RESERVE_S = 0.6  # stopped: done this long before the shutdown's deadline (the session waits until 0.55)
 
 
 class BridgeLogic:
@@ -138,17 +139,22 @@ class RobotBridge:
         # SessionEnded before the last SuggestionMade): go on until the bus is quiet.
         while self.step(timeout_s=0.0 if stop.is_set() else END_QUIET_S):
             pass
-        # stopped (a signal, the experimenter): what the robot has not acknowledged within a second is
-        # recorded as in flight, and the process exits promptly
-        self.close(min(self.settle_s, STOPPED_SETTLE_S) if stop.is_set() else self.settle_s)
+        # stopped (a signal, the experimenter): what the robot has not acknowledged within a second, or
+        # what the shutdown's deadline leaves, is recorded as in flight, and the process exits promptly
+        if stop.is_set():
+            deadline = deadline_of(stop)
+            self.close(deadline.left(STOPPED_RESERVE_S + 0.1, min(self.settle_s, STOPPED_SETTLE_S)), deadline)
+        else:
+            self.close(self.settle_s)
 
     def run_in_thread(self, stop: threading.Event) -> threading.Thread:
         self.thread = threading.Thread(target=self.run, args=(stop,), name="pairplay-robot", daemon=True)
         self.thread.start()
         return self.thread
 
-    def close(self, settle_s: float | None = None) -> None:
-        """Let the robot report what is open (for at most `settle_s`), then close its connection."""
+    def close(self, settle_s: float | None = None, deadline: Deadline | None = None) -> None:
+        """Let the robot report what is open (for at most `settle_s`), then close its connection;
+        all of it `STOPPED_RESERVE_S` before `deadline`, if given (a stopped session's shutdown)."""
         robot, self.robot = self.robot, None
         if robot is None:
             return
@@ -156,7 +162,10 @@ class RobotBridge:
         if not robot.wait_idle(settle_s):
             log.warning("robot %s: suggestions still open after %.1f s; reporting them as they are",
                         robot.transport.url, settle_s)
-        robot.close()
+        if deadline is None:
+            robot.close()
+        else:
+            robot.close(deadline.left(STOPPED_RESERVE_S + 0.05, 5.0))
         with self._lock:
             self._publish(self.shell.tick(self._inbox.take_shed(), force=True))
-        self._outbox.close(1.0)
+        self._outbox.close(1.0 if deadline is None else deadline.left(STOPPED_RESERVE_S, 1.0))
