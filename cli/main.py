@@ -93,6 +93,9 @@ def main(argv: list[str] | None = None) -> int:
         return 130
 
 
+QUIET_TRACKER = "ignore::UserWarning:multiprocessing.resource_tracker"
+
+
 def entry() -> None:
     """The `pairplay` command (and `python -m pairplay`): `main()`, then exit with its code.
 
@@ -109,6 +112,10 @@ def entry() -> None:
     aborted ("FATAL: exception not rethrown", SIGABRT) after its recording was
     finished."""
     DeferredInterrupt().install()
+    # The pools' semaphores are unlinked by multiprocessing's resource tracker when we end with os._exit
+    # (below): its report of them ("leaked semaphore objects") is that clean-up, not a fault, and would
+    # add lines to an interruption's one line. The tracker is a child process: it reads this variable.
+    os.environ["PYTHONWARNINGS"] = ",".join(filter(None, (os.environ.get("PYTHONWARNINGS"), QUIET_TRACKER)))
     code = main()
     if code == 130 or _threads_left():
         atexit._run_exitfuncs()  # what was registered to run at exit still runs (multiprocessing's clean-up)
