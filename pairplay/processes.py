@@ -82,14 +82,18 @@ def stop_pool(pool: ProcessPoolExecutor, abandon: bool) -> None:
         pool.shutdown(wait=True)
         return
     # ProcessPoolExecutor.terminate_workers() is Python 3.14+; before it, the pool's own process table.
-    workers = list((getattr(pool, "_processes", None) or {}).values())
+    processes = getattr(pool, "_processes", None) or {}
+    workers = list(processes.values())
+    manager = getattr(pool, "_executor_manager_thread", None)
     pool.shutdown(wait=False, cancel_futures=True)
-    for worker in workers:
-        if worker.is_alive():
-            worker.terminate()
-    for worker in workers:
-        worker.join(timeout=5)
-    pool.shutdown(wait=True)  # the pool's manager thread sees the workers gone and closes its queues
+    for stop in ("terminate", "kill"):  # SIGTERM; a worker that outlives it (still starting up) gets SIGKILL
+        alive = [w for w in workers + list(processes.values()) if w.is_alive()]
+        for worker in alive:
+            getattr(worker, stop)()
+        for worker in alive:
+            worker.join(timeout=2)
+    if manager is not None:  # it sees the workers gone and closes the pool's queues
+        manager.join(timeout=2)
 
 
 @contextlib.contextmanager
