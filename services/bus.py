@@ -456,17 +456,7 @@ class Bus:
         # no consolidation: a queryable may answer with many replies on one key
         replies = self.session.get(selector, timeout=timeout_s,
                                    consolidation=zenoh.QueryConsolidation(zenoh.ConsolidationMode.NONE))
-        deadline = time.monotonic() + timeout_s + 1.0
-        while time.monotonic() < deadline:
-            if stop is not None and stop.is_set():
-                break
-            try:
-                reply = replies.try_recv()
-            except Exception:  # the channel closed: every reply came
-                break
-            if reply is None:
-                time.sleep(0.002)
-                continue
+        for reply in _replies(replies, timeout_s + 1.0, stop):
             if reply.ok is not None:
                 out.append(reply.ok.payload.to_bytes())
             else:
@@ -484,15 +474,8 @@ class Bus:
         (a shutdown does not wait out the query)."""
         replies = self.session.liveliness().get(key_expr, timeout=timeout_s)
         out: set[str] = set()
-        deadline = time.monotonic() + timeout_s + 0.5
-        while time.monotonic() < deadline and not (stop is not None and stop.is_set()):
-            try:
-                reply = replies.try_recv()
-            except Exception:  # the channel closed: every reply came
-                break
-            if reply is None:
-                time.sleep(0.002)
-            elif reply.ok is not None:
+        for reply in _replies(replies, timeout_s + 0.5, stop):
+            if reply.ok is not None:
                 out.add(str(reply.ok.key_expr))
         return out
 
@@ -560,6 +543,21 @@ def _open(options: BusOptions) -> zenoh.Session:
 
 def open_bus(options: BusOptions | None = None) -> Bus:
     return Bus(options)
+
+
+def _replies(replies, wait_s: float, stop: threading.Event | None):
+    """The replies of a zenoh get as they come, for at most `wait_s` seconds, until the channel closes
+    (every reply came) or `stop` is set (a shutdown does not wait out a query)."""
+    deadline = time.monotonic() + wait_s
+    while time.monotonic() < deadline and not (stop is not None and stop.is_set()):
+        try:
+            reply = replies.try_recv()
+        except Exception:  # the channel closed: every reply came
+            return
+        if reply is None:
+            time.sleep(0.002)
+        else:
+            yield reply
 
 
 def stop_on_signals(stop: threading.Event) -> None:
