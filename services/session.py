@@ -121,15 +121,17 @@ def run_session(config: SessionConfig, path: str | Path, *, bus: Bus | None = No
             hold(recorder)
         if recorder is not None:
             # stopped: the end event gets what the shutdown's deadline leaves (see `close_all`)
-            wait_recorded(recorder, nodes, quiet_s=0.2 if external and not stop.is_set() else 0.0,
+            wait_recorded(recorder, published(nodes, bridge), quiet_s=0.2 if external and not stop.is_set() else 0.0,
                           timeout_s=deadline_of(stop).left(RESERVE["recorded"], 1.0) if stop.is_set() else 5.0)
     except Stopped:  # SIGINT/SIGTERM (or a recording failure) while the game waited for its services
         end_game(game, stop, "", recorder)
         if recorder is not None:
-            wait_recorded(recorder, nodes, quiet_s=0.0, timeout_s=deadline_of(stop).left(RESERVE["recorded"], 1.0))
+            wait_recorded(recorder, published(nodes, bridge), quiet_s=0.0, timeout_s=deadline_of(stop).left(RESERVE["recorded"], 1.0))
     finally:
         interrupted = stop.is_set()
         deadline = deadline_of(stop) if interrupted else Deadline(SETTLE_S)
+        if not interrupted:  # the services' own shutdown steps (deadline_of) share this one, not a signal's
+            stop.deadline = deadline
         stop.set()
         failure = close_all(nodes, bridge, recorder, recorder_thread, recorder_stop, deadline, interrupted,
                             stopped_by(stop) if interrupted else "")
@@ -162,6 +164,9 @@ def close_all(nodes: list[Node], bridge, recorder: Recorder | None, recorder_thr
     if bridge is not None and bridge.thread is not None:
         # the bridge reports the robot's last acknowledgements before the recorder closes
         bridge.thread.join(deadline.left(RESERVE["bridge"], 1.5 if interrupted else bridge.settle_s + 5))
+    if recorder is not None:  # and the recorder holds them (Zenoh hands them over on its own threads)
+        wait_recorded(recorder, published(nodes, bridge), quiet_s=0.0,
+                      timeout_s=deadline.left(RESERVE["recorder_thread"], 1.0))
     recorder_stop.set()
     if recorder is None:
         return None
@@ -223,13 +228,20 @@ def watch_services(bus: Bus, session: str, nodes: list[Node], external: list[str
     return ""
 
 
-def wait_recorded(recorder: Recorder, nodes: list[Node], quiet_s: float, timeout_s: float = 5.0) -> None:
-    """Wait until the recorder holds every event our nodes published (Zenoh delivers
-    to local subscribers on its own threads, so the last ones may still be on their
+def published(nodes: list[Node], bridge) -> list[tuple[str, object]]:
+    """(source, stamping shell) of every in-process service: the nodes and the robot bridge, if any."""
+    shells = [(n.logic.name, n.driver) for n in nodes]
+    return shells + ([(bridge.logic.name, bridge.shell)] if bridge is not None else [])
+
+
+def wait_recorded(recorder: Recorder, shells: list[tuple[str, object]], quiet_s: float,
+                  timeout_s: float = 5.0) -> None:
+    """Wait until the recorder holds every event our services published (`published`: Zenoh
+    delivers to local subscribers on its own threads, so the last ones may still be on their
     way), and, with external services, until it has been quiet for `quiet_s`."""
     deadline = time.monotonic() + timeout_s
     while time.monotonic() < deadline:
-        if all(recorder.top_seq.get(n.logic.name, 0) >= n.driver.seq for n in nodes) and not len(recorder.inbox):
+        if all(recorder.top_seq.get(name, 0) >= shell.seq for name, shell in shells) and not len(recorder.inbox):
             break
         time.sleep(0.005)
     count = -1
