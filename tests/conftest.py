@@ -1,5 +1,11 @@
-"""Shared fixtures: one headless Chromium per test module (Debian's /usr/bin/chromium,
-driven by Playwright; never `playwright install`)."""
+"""Shared fixtures: one headless Chromium per test process (Debian's /usr/bin/chromium,
+driven by Playwright; never `playwright install`).
+
+Rule: what is expensive and read-only is made once per test process (session
+scope) and shared; each test still gets its own pages in its own browser
+context, so no test sees another's state. Under pytest-xdist each worker is
+its own process with its own browser, ports (port 0) and tmp_path.
+"""
 
 from __future__ import annotations
 
@@ -13,10 +19,11 @@ CHROMIUM_ARGS = ["--no-sandbox", "--disable-gpu", "--disable-dev-shm-usage", "--
                  "--disable-component-update", "--disable-sync", "--no-first-run", "--disable-extensions"]
 
 
-@pytest.fixture(scope="module")
+@pytest.fixture(scope="session")
 def browser():
-    """A headless Chromium for the whole module. Locally it is skipped, with the reason,
-    only when Debian's chromium is absent; in CI (CI=true) that is a failure."""
+    """A headless Chromium for the whole test process (a launch costs 1-3 s on a loaded 2-core
+    machine). Locally it is skipped, with the reason, only when Debian's chromium is absent;
+    in CI (CI=true) that is a failure."""
     if not CHROMIUM.exists():
         message = f"{CHROMIUM} is absent: `apt-get install chromium` (Debian's; browsers are not downloaded)"
         if os.environ.get("CI"):

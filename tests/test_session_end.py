@@ -12,13 +12,16 @@ import time
 from pathlib import Path
 
 import pytest
+from busutil import collect, wait_until
 
 from pairplay.replay.reader import read_log
 from pairplay.replay.rebuild import rebuild_recording, write_outputs
 from pairplay.replay.recover import recover
 from pairplay.schemas import events as ev
 from pairplay.schemas.policy import read_policy
+from pairplay.schemas.keys import event_key
 from pairplay.schemas.session import SessionConfig
+from pairplay.services.bus import Bus, BusOptions
 from pairplay.services.session import run_session
 
 SAMPLES = Path(__file__).resolve().parent.parent / "recordings" / "samples"
@@ -33,19 +36,25 @@ def test_a_signalled_session_records_it_was_interrupted_and_how_far_it_got(tmp_p
     p = subprocess.Popen([sys.executable, "-m", "pairplay", "session", "--participant", "sim:wasim", "--rounds",
                           "100000", "--session", "sig", "--out", str(tmp_path)], stdout=subprocess.PIPE,
                          stderr=subprocess.STDOUT, text=True, env=dict(os.environ, PYTHONUNBUFFERED="1"))
+    watcher = None
     try:
-        while "bus listening" not in p.stdout.readline():  # log lines may come first
+        while "bus listening" not in (line := p.stdout.readline()):  # log lines may come first
             assert p.poll() is None
-        time.sleep(2.0)  # a few rounds (none on a very loaded machine: still a valid interruption)
+        # the session's router: wait (as `pairplay view` would) until it has played a round
+        watcher = Bus(BusOptions(mode="client", connect=[line.split()[-1]]))
+        rounds = collect(watcher, event_key("sig", "game", "RoundEnded"))
+        rounds.get(timeout=60)
         p.send_signal(sig)
         out, _ = p.communicate(timeout=30)
     finally:
         if p.poll() is None:
             p.kill()
+        if watcher is not None:
+            watcher.close()
     path = tmp_path / "sig.mcap"
     assert read_log(path).whole, out
     [end] = ended(path)
-    assert end.reason == "interrupted" and end.detail == sig.name and 0 <= end.rounds_played < 100000
+    assert end.reason == "interrupted" and end.detail == sig.name and 1 <= end.rounds_played < 100000
     assert end.round == end.rounds_played and end.turns_in_round >= 0
     rebuilt = rebuild_recording(path)
     assert rebuilt.partial.startswith(f"interrupted ({sig.name}) after {end.rounds_played} of 100000 rounds")
@@ -57,9 +66,13 @@ def test_a_signalled_session_records_it_was_interrupted_and_how_far_it_got(tmp_p
 
 def test_an_experimenter_stop_is_recorded_as_aborted(tmp_path):
     config = SessionConfig(session="abort", participant="sim:blind", persona="blind", seed=1, rounds=100000)
-    stop = threading.Event()
-    threading.Timer(1.5, stop.set).start()
-    path = run_session(config, tmp_path / "abort.mcap", stop=stop)
+    stop, nodes = threading.Event(), {}
+
+    def experimenter():  # stops it once the learner has learned something: mid-session, not at a fixed time
+        wait_until(lambda: "learner" in nodes and nodes["learner"].driver.seq > 10, 30)
+        stop.set()
+    threading.Thread(target=experimenter, daemon=True).start()
+    path = run_session(config, tmp_path / "abort.mcap", stop=stop, nodes_out=nodes)
     [end] = ended(path)
     assert end.reason == "aborted" and end.detail == "stopped by the experimenter" and end.rounds_played >= 0
     assert "aborted" in rebuild_recording(path).partial
@@ -67,7 +80,6 @@ def test_an_experimenter_stop_is_recorded_as_aborted(tmp_path):
 
 def test_a_service_that_leaves_and_does_not_come_back_fails_the_session(tmp_path):
     """The learner runs on its own Zenoh session (as another process would) and vanishes mid-session."""
-    from pairplay.services.bus import Bus, BusOptions
     from pairplay.services.learner import LearnerLogic
     from pairplay.services.runner import Node
 
@@ -88,7 +100,7 @@ def test_a_service_that_leaves_and_does_not_come_back_fails_the_session(tmp_path
         node = Node(learner_bus, LearnerLogic(), "svcfail")
         node.start()
         node.run_in_thread(learner_stop)
-        time.sleep(2.0)
+        assert wait_until(lambda: node.driver.seq > 10, 30)  # mid-session: it has learned something
     finally:
         learner_stop.set()
         learner_bus.close()  # its token goes with it: the learner is gone for good
