@@ -404,7 +404,7 @@ def _grown(trace, rows):
 
 # --- a whole game per call ----------------------------------------------------------------------
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def play(t, games, until, rounds, keys, pos, mode, cfg, table, p_consider, q_hear, capacity, sees, reading, frames,
          eps_tab, alpha_tab, psi0_tab, psi_decay, bonus, first_pick_observed,
          q, counts, picks_log, inconsistent_log, steps, round_index, memory, stamp, clock,
