@@ -561,7 +561,7 @@ def expected_batch(t, observed, match, nis, q_hear, sees_smile, sees_head, sees_
                   base, unheard)
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def expected_sums(t, owner, rows, order, q_hear, sees, bonus, sums, counts):
     """Add the 88 expected rewards of each recorded situation to sums[owner[game], state], in `order`.
 
