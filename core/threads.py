@@ -15,6 +15,7 @@ are daemons, so an interrupted caller does not wait for them at exit.
 
 from __future__ import annotations
 
+import contextlib
 import os
 import threading
 from typing import Callable
@@ -28,6 +29,18 @@ def _cores() -> int:
 
 
 WORKERS = min(_cores(), int(os.environ.get("PAIRPLAY_THREADS", "0")) or _cores())
+
+
+@contextlib.contextmanager
+def at_most(workers: int):
+    """Within the block, `each` uses at most `workers` threads (a one-core measurement: bench/core.py)."""
+    global WORKERS
+    before = WORKERS
+    WORKERS = max(1, min(before, workers))
+    try:
+        yield
+    finally:
+        WORKERS = before
 
 
 def each(work: Callable[[int], object], n: int, workers: int | None = None) -> None:
