@@ -172,11 +172,23 @@ def run_games(personas: Sequence[Persona], seeds: Sequence[int], rounds: int | S
             progress(int(round_index.sum()))
     trace = None
     if record:
-        trace = Trace(recorded[0] if len(recorded) == 1 else
-                      np.concatenate(recorded) if recorded else np.empty((0, width), dtype=np.int32), reward_bonus)
-        del recorded
+        trace = Trace(_gathered(recorded, width), reward_bonus)
     return SimResult(q, counts, picks, inconsistent, int(steps.max()) if n else 0,
                      snapshots if every else None, trace)
+
+
+def _gathered(blocks: list[np.ndarray], width: int) -> np.ndarray:
+    """The blocks' rows in order, in one array; each block is dropped once copied (`blocks` ends empty),
+    so the recorded turns are in memory about once, not twice."""
+    rows = np.empty((sum(len(b) for b in blocks), width), dtype=np.int32)
+    at = 0
+    blocks.reverse()
+    while blocks:
+        block = blocks.pop()
+        rows[at:at + len(block)] = block
+        at += len(block)
+        del block
+    return rows
 
 
 class Trace(Mapping):

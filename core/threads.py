@@ -11,6 +11,8 @@ the compiled kernels (core/kernels.py, `nogil=True`), which run without the GIL.
 A piece's exception is raised in the caller (the first by index) once every
 thread has stopped; after an exception no new piece starts. The helper threads
 are daemons, so an interrupted caller does not wait for them at exit.
+PAIRPLAY_THREADS=n caps the threads (e.g. 1 when several studies share the
+machine); `pairplay sweep`'s local processes run one thread each.
 """
 
 from __future__ import annotations
@@ -28,7 +30,13 @@ def _cores() -> int:
         return max(1, os.cpu_count() or 1)
 
 
-WORKERS = min(_cores(), int(os.environ.get("PAIRPLAY_THREADS", "0")) or _cores())
+def _workers() -> int:
+    """The cores this process may use, or fewer by PAIRPLAY_THREADS (a positive integer; anything else is ignored)."""
+    asked = os.environ.get("PAIRPLAY_THREADS", "")
+    return min(_cores(), int(asked)) if asked.isdigit() and int(asked) > 0 else _cores()
+
+
+WORKERS = _workers()
 
 
 @contextlib.contextmanager
