@@ -404,7 +404,7 @@ def _grown(trace, rows):
 
 # --- a whole game per call ----------------------------------------------------------------------
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def play(t, games, until, rounds, keys, pos, mode, cfg, table, p_consider, q_hear, capacity, sees, reading, frames,
          eps_tab, alpha_tab, psi0_tab, psi_decay, bonus, first_pick_observed,
          q, counts, picks_log, inconsistent_log, steps, round_index, memory, stamp, clock,
@@ -561,7 +561,7 @@ def expected_batch(t, observed, match, nis, q_hear, sees_smile, sees_head, sees_
                   base, unheard)
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def expected_sums(t, owner, rows, order, q_hear, sees, bonus, sums, counts):
     """Add the 88 expected rewards of each recorded situation to sums[owner[game], state], in `order`.
 

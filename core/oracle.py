@@ -27,7 +27,7 @@ import numpy as np
 
 from pairplay.schemas.config import DEFAULT_REWARD_BONUS, Persona
 
-from . import kernels
+from . import kernels, threads
 from .actions import N_ACTIONS
 from .geometry import N_STATES
 from .interpretation import hear_probability, sees
@@ -60,7 +60,8 @@ def oracle_policies(personas, seeds_per_persona: int, seed: int, rounds: int = 2
 
     `seed_of(persona_key, i)` names the seed of the i-th situation game. Each
     situation's 88 expected rewards are summed per persona and state in the
-    situations' lockstep order, without an (n, 88) table in memory.
+    situations' lockstep order, without an (n, 88) table in memory; the personas are summed
+    apart, on the machine's cores (core/threads.py), each in the same order as alone.
     """
     from .rng import game_seed
     from .user import reading_codes
@@ -79,8 +80,14 @@ def oracle_policies(personas, seeds_per_persona: int, seed: int, rounds: int = 2
         turns = situations(games, seeds, rounds, policies[owner])
         sums = np.zeros((len(personas), N_STATES, N_ACTIONS))
         counts = np.zeros((len(personas), N_STATES), dtype=np.int64)
-        kernels.expected_sums(kernels.TABLES, owner, turns.rows, turns.order, q_hear, seen, BONUS_CODES[bonus],
-                              sums, counts)
+        # each persona's sums on its own, in lockstep order: the personas on the machine's cores
+        own = owner[turns.rows[turns.order, kernels.T_GAME]]
+        by_persona = np.argsort(own, kind="stable")
+        pieces = np.split(turns.order[by_persona], np.cumsum(np.bincount(own, minlength=len(personas)))[:-1])
+        del own, by_persona
+        threads.each(lambda k: kernels.expected_sums(kernels.TABLES, owner, turns.rows, pieces[k], q_hear, seen,
+                                                     BONUS_CODES[bonus], sums, counts), len(personas))
+        del pieces
         del turns  # before the next iteration's: two recorded tables at once were the study's peak memory
         visited = counts > 0
         tables = np.where(visited[..., None], sums / np.maximum(counts, 1)[..., None], tables)

@@ -6,7 +6,9 @@ user observes (its intended card, thesis 6.1.3, or the first pick as in the huma
 study); the state (4.1); the learner's suggestion; the user's second pick; the
 reward (4.3, 6.1.3) and the Q update (5.2); the user's memory. Games are
 independent: the compiled kernel (core/kernels.py `play`) plays each game whole,
-one after the other, and a batch may mix learners (Q-learning, pi-reuse, fixed
+a batch's games in contiguous pieces on the machine's cores (core/threads.py;
+each game's state and streams are its own, so the bytes are those of one
+thread, and a recorded trace is gathered piece by piece in game order), and a batch may mix learners (Q-learning, pi-reuse, fixed
 policies), schedules and lengths. Each role (deal, agent, user, snapshot) draws
 from its own per-game stream, so a game run here equals the same game run alone
 over the bus, and a batch's results do not depend on what else is in it. A
@@ -23,7 +25,7 @@ import numpy as np
 
 from pairplay.schemas.config import DEFAULT_REWARD_BONUS, LearnerConfig, LSPIConfig, Persona
 
-from . import kernels
+from . import kernels, threads
 from .geometry import N_CARDS, N_STATES
 from .actions import N_ACTIONS
 from .games import OBSERVED_SOURCES
@@ -35,6 +37,14 @@ from .user import frames_of, persona_arrays, reading_codes
 
 RECORDS = {None: kernels.RECORD_NONE, "all": kernels.RECORD_ALL, "considerable": kernels.RECORD_CONSIDERABLE}
 PROGRESS_SLICES = 20  # a batch with a progress callback is played in this many slices of rounds
+PIECE_GAMES = 8  # the fewest games in a piece a thread plays (core/threads.py); smaller batches play inline
+PIECES_PER_WORKER = 6  # pieces of unequal cost (personas, lengths) balance over the threads
+
+
+def _pieces(n: int) -> list[np.ndarray]:
+    """The batch's games in contiguous pieces, in order (one piece below 2 * PIECE_GAMES games)."""
+    count = max(1, min(n // PIECE_GAMES, PIECES_PER_WORKER * threads.WORKERS if threads.WORKERS > 1 else 1))
+    return np.array_split(np.arange(n, dtype=np.int64), count)
 
 
 class SimResult(NamedTuple):
@@ -138,20 +148,47 @@ def run_games(personas: Sequence[Persona], seeds: Sequence[int], rounds: int | S
     clock = np.zeros(n, dtype=np.int64)
     every = int(snapshot_every or 0)
     snapshots = np.zeros((n, horizon // every if every else 0, N_STATES), dtype=np.int64)
-    trace = np.empty((n * horizon * 16 if record else 0, len(kernels.TRACE_FIELDS) + 1), dtype=np.int32)
-    n_trace = 0
-    games = np.arange(n)
+    pieces = _pieces(n)
+    width = len(kernels.TRACE_FIELDS) + 1
+    recorded: list[np.ndarray] = []  # the trace's rows: slice by slice, piece by piece (the order of one call)
     slice_rounds = max(1, -(-horizon // PROGRESS_SLICES)) if progress is not None else max(horizon, 1)
+    previous = 0
     for until in range(slice_rounds, horizon + slice_rounds, slice_rounds):
-        trace, n_trace = kernels.play(
-            kernels.TABLES, games, until, game_rounds, keys, pos, mode_code, cfg, table, p_consider, q_hear,
-            capacity, sees, reading, frame, eps_tab, alpha_tab, psi0_tab, psi_decay, BONUS_CODES[reward_bonus],
-            observed_source == "first-pick", q, counts, picks, inconsistent, steps, round_index, memory, stamp,
-            clock, every, snapshots, RECORDS[record], trace, n_trace)
+        played: list = [None] * len(pieces)
+
+        def work(i: int, until=until, span=min(until, horizon) - previous) -> None:
+            games = pieces[i]
+            buffer = np.empty((games.size * span * 16 if record else 0, width), dtype=np.int32)
+            played[i] = kernels.play(
+                kernels.TABLES, games, until, game_rounds, keys, pos, mode_code, cfg, table, p_consider, q_hear,
+                capacity, sees, reading, frame, eps_tab, alpha_tab, psi0_tab, psi_decay, BONUS_CODES[reward_bonus],
+                observed_source == "first-pick", q, counts, picks, inconsistent, steps, round_index, memory, stamp,
+                clock, every, snapshots, RECORDS[record], buffer, 0)
+        threads.each(work, len(pieces))
+        if record:
+            recorded += [rows[:k] for rows, k in played]
+        previous = until
         if progress is not None:
             progress(int(round_index.sum()))
+    trace = None
+    if record:
+        trace = Trace(_gathered(recorded, width), reward_bonus)
     return SimResult(q, counts, picks, inconsistent, int(steps.max()) if n else 0,
-                     snapshots if every else None, Trace(trace[:n_trace], reward_bonus) if record else None)
+                     snapshots if every else None, trace)
+
+
+def _gathered(blocks: list[np.ndarray], width: int) -> np.ndarray:
+    """The blocks' rows in order, in one array; each block is dropped once copied (`blocks` ends empty),
+    so the recorded turns are in memory about once, not twice."""
+    rows = np.empty((sum(len(b) for b in blocks), width), dtype=np.int32)
+    at = 0
+    blocks.reverse()
+    while blocks:
+        block = blocks.pop()
+        rows[at:at + len(block)] = block
+        at += len(block)
+        del block
+    return rows
 
 
 class Trace(Mapping):

@@ -184,6 +184,13 @@ def _run_cell(grid: Grid, cell: Cell) -> tuple[str, dict]:
     return cell.id, cell_measures(grid.study_settings(cell), grid.reuse)
 
 
+def _run_cell_alone(grid: Grid, cell: Cell) -> tuple[str, dict]:
+    """`_run_cell` on one thread: the local processes already use every core (core/threads.py)."""
+    from pairplay.core import threads
+    with threads.at_most(1):
+        return _run_cell(grid, cell)
+
+
 def _write_json_atomic(path: Path, data: dict) -> None:
     tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
     tmp.write_text(json.dumps(data, sort_keys=True, indent=1))
@@ -244,7 +251,7 @@ def run_sweep(grid: Grid, out: str | Path, *, scheduler: str | None = None, work
     elif workers > 1:
         from concurrent.futures import as_completed as done_first
         with worker_pool(workers) as pool:
-            for future in done_first([pool.submit(_run_cell, grid, c) for c in todo]):
+            for future in done_first([pool.submit(_run_cell_alone, grid, c) for c in todo]):
                 store(*future.result())
         where = f"{workers} local processes"
     else:

@@ -1,0 +1,86 @@
+"""Independent pieces of one computation on the machine's cores, results as if run in turn.
+
+Rule: `each(work, n)` calls `work(i)` once for every i in range(n), on up to
+`WORKERS` threads (the calling one among them), pulling the next piece as each
+finishes (pieces of unequal cost balance themselves). The pieces must be
+independent: each writes only its own rows of shared arrays, so the results are
+the same bytes whatever thread ran a piece and in what order; a caller that
+gathers per-piece outputs gathers them by index. The work that makes this pay is
+the compiled kernels (core/kernels.py, `nogil=True`), which run without the GIL.
+
+A piece's exception is raised in the caller (the first by index) once every
+thread has stopped; after an exception no new piece starts. The helper threads
+are daemons, so an interrupted caller does not wait for them at exit.
+PAIRPLAY_THREADS=n caps the threads (e.g. 1 when several studies share the
+machine); `pairplay sweep`'s local processes run one thread each.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import threading
+from typing import Callable
+
+
+def _cores() -> int:
+    try:
+        return max(1, len(os.sched_getaffinity(0)))
+    except (AttributeError, OSError):  # not Linux
+        return max(1, os.cpu_count() or 1)
+
+
+def _workers() -> int:
+    """The cores this process may use, or fewer by PAIRPLAY_THREADS (a positive integer; anything else is ignored)."""
+    asked = os.environ.get("PAIRPLAY_THREADS", "")
+    return min(_cores(), int(asked)) if asked.isdigit() and int(asked) > 0 else _cores()
+
+
+WORKERS = _workers()
+
+
+@contextlib.contextmanager
+def at_most(workers: int):
+    """Within the block, `each` uses at most `workers` threads (a one-core measurement: bench/core.py)."""
+    global WORKERS
+    before = WORKERS
+    WORKERS = max(1, min(before, workers))
+    try:
+        yield
+    finally:
+        WORKERS = before
+
+
+def each(work: Callable[[int], object], n: int, workers: int | None = None) -> None:
+    """`work(i)` for i in range(n) on up to `workers` (default WORKERS) threads, the caller's included."""
+    workers = max(1, min(n, WORKERS if workers is None else workers))
+    if workers == 1:
+        for i in range(n):
+            work(i)
+        return
+    lock = threading.Lock()
+    state = {"next": 0}
+    errors: dict[int, BaseException] = {}
+
+    def run() -> None:
+        while True:
+            with lock:
+                i = state["next"]
+                if i >= n or errors:
+                    return
+                state["next"] = i + 1
+            try:
+                work(i)
+            except BaseException as err:  # handed to the caller below
+                with lock:
+                    errors[i] = err
+                return
+
+    helpers = [threading.Thread(target=run, name="pairplay-piece", daemon=True) for _ in range(workers - 1)]
+    for t in helpers:
+        t.start()
+    run()
+    for t in helpers:
+        t.join()
+    if errors:
+        raise errors[min(errors)]

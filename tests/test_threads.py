@@ -1,0 +1,40 @@
+"""Independent games on two threads give the bytes of one thread (core/threads.py, core/simulate.py)."""
+
+import numpy as np
+import pytest
+
+from pairplay.core import simulate, threads
+from pairplay.core.personas import PERSONAS
+from pairplay.schemas.config import LearnerConfig
+
+
+def test_each_runs_every_piece_once_and_raises_the_first_error():
+    seen = []
+    threads.each(seen.append, 50, workers=2)
+    assert sorted(seen) == list(range(50))
+    threads.each(seen.append, 0, workers=2)
+
+    def fail(i):
+        if i in (3, 7):
+            raise ValueError(i)
+    with pytest.raises(ValueError, match="3"):
+        threads.each(fail, 10, workers=1)
+    with pytest.raises(ValueError):
+        threads.each(fail, 10, workers=2)
+
+
+def _run(monkeypatch, workers, **kw):
+    monkeypatch.setattr(threads, "WORKERS", workers)
+    personas = [p for p in list(PERSONAS.values())[:3] for _ in range(12)]
+    seeds = list(range(len(personas)))
+    return simulate.run_games(personas, seeds, 7, LearnerConfig(), progress=lambda done: None, **kw)
+
+
+@pytest.mark.parametrize("kw", [dict(record="all", snapshot_every=2), dict(mode="fixed", policy=np.arange(24) % 88,
+                                                                            record="considerable")])
+def test_a_batch_on_two_threads_equals_one_thread(monkeypatch, kw):
+    one, two = _run(monkeypatch, 1, **kw), _run(monkeypatch, 2, **kw)
+    assert len(simulate._pieces(36)) > 1  # the two-thread run really was in pieces
+    for a, b in zip(one[:6], two[:6]):
+        assert np.array_equal(a, b) if isinstance(a, np.ndarray) else a == b
+    assert np.array_equal(one.trace.rows, two.trace.rows) and np.array_equal(one.trace.order, two.trace.order)
