@@ -24,7 +24,7 @@ from pairplay.schemas.policy import PolicyFileError
 from pairplay.services.bus import LOOPBACK_ANY_PORT, MODES, BusOptions, stop_on_signals
 
 from pairplay.cli.robot import add_robot_arguments, check_robot_args, robot_choice
-from pairplay.cli.session import add_config_arguments, config_from_args
+from pairplay.cli.session import add_config_arguments, config_from_args, print_interrupted
 
 LOOPBACK = "127.0.0.1"
 
@@ -91,16 +91,19 @@ def run(args: argparse.Namespace) -> int:
         print(f"mirror: {urls.mirror}", flush=True)
         print(f"bus listening on {' '.join(bus.locators()) or '(no listener)'}", flush=True)
 
+    summary: dict = {}
     try:
         path = run_lab(config, out, host=host, port=port, bus_options=bus_options, robot=robot_choice(args),
                        stop=stop, on_ready=ready, linger_s=args.linger, ssl_certfile=args.certfile,
-                       ssl_keyfile=args.keyfile)
+                       ssl_keyfile=args.keyfile, summary=summary)
     except TimeoutError as err:  # a service the game waits for never came (the eye tracker, say)
         print(f"pairplay lab: the session did not start: {err}", file=sys.stderr)
         return 1
     except OSError as err:
         print(f"pairplay lab: cannot serve on {args.listen}: {err}", file=sys.stderr)
         return 1
+    if getattr(stop, "why", "") and summary:
+        return print_interrupted(summary, path, stop.why, config.rounds)  # no reading the file back: 2 s
     from pairplay.replay.fold import fold_events
     from pairplay.replay.reader import read_log
 

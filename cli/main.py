@@ -117,13 +117,22 @@ def entry() -> None:
     # add lines to an interruption's one line. The tracker is a child process: it reads this variable.
     os.environ["PYTHONWARNINGS"] = ",".join(filter(None, (os.environ.get("PYTHONWARNINGS"), QUIET_TRACKER)))
     code = main()
-    if code == 130 or _threads_left():
+    if code == 130 or _threads_left() or _signalled():
         atexit._run_exitfuncs()  # what was registered to run at exit still runs (multiprocessing's clean-up)
         for stream in (sys.stdout, sys.stderr):
             with contextlib.suppress(Exception):
                 stream.flush()
         os._exit(code)
     sys.exit(code)
+
+
+def _signalled() -> bool:
+    """Whether a verb was stopped by SIGINT/SIGTERM (services/bus.py `stop_on_signals`): its outputs are
+    finished, and the interpreter's teardown is skipped, as after an interruption: it took 6-15 s after
+    `protocol serve` had returned (Zenoh's and uvicorn's native objects torn down; measured at load 40-60),
+    past the 2 s a signalled process has (issue 12)."""
+    bus = sys.modules.get("pairplay.services.bus")
+    return bool(getattr(bus, "signalled", None))
 
 
 def _threads_left() -> bool:

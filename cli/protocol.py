@@ -184,7 +184,7 @@ def _robot(args):
 def _serve(data: StudyData, args) -> int:
     import threading
 
-    from pairplay.services.bus import Bus, BusOptions, stop_on_signals
+    from pairplay.services.bus import Bus, BusOptions, shutdown_wait, stop_on_signals
     from pairplay.services.console.server import StudyLabServer
     from pairplay.services.protocol import StudyRunner
 
@@ -201,9 +201,12 @@ def _serve(data: StudyData, args) -> int:
         pilot[pid] = persona(key).key
     logging.basicConfig(level=logging.WARNING, format="%(levelname)s %(name)s: %(message)s")
     stop = threading.Event()
-    stop_on_signals(stop)
-    with Bus(BusOptions(mode="router")) as bus:
+    runners = []
+    # a signal stops the running game at once, with its name and the shutdown's deadline (its recording finished)
+    stop_on_signals(stop, then=lambda: [r.interrupt(stop) for r in runners])
+    with Bus(BusOptions(mode="router"), stop=stop) as bus:
         runner = StudyRunner(data, bus, robot=robot)
+        runners.append(runner)
         runner.scripted = pilot
         if overridden and robot is None:
             runner.robot = None
@@ -218,19 +221,18 @@ def _serve(data: StudyData, args) -> int:
             while not stop.wait(0.2):
                 pass
         finally:
-            if runner.live.state in ("playing", "questionnaire"):
-                try:
-                    runner.abort("the console was stopped")
-                except StudyDataError:
-                    pass
-                if server.console.thread is not None:
-                    server.console.thread.join(10)
-            server.close()
+            runner.interrupt(stop)  # a game still running stops now (stop.why, stop.deadline)
+            if server.console.thread is not None:
+                server.console.thread.join(shutdown_wait(stop, 10.0, reserve=0.3))
+            server.close(shutdown_wait(stop, 10.0, reserve=0.2))
+    print(f"pairplay protocol serve: stopped ({getattr(stop, 'why', '') or 'done'})")
     return 0
 
 
 def _pilot(data: StudyData, args) -> int:
-    from pairplay.services.bus import Bus, BusOptions, stop_on_signals  # noqa: F401
+    import threading
+
+    from pairplay.services.bus import Bus, BusOptions, stop_on_signals
     from pairplay.services.protocol import StudyRunner, scripted_players
     from pairplay.services.robot.choice import NO_ROBOT, RobotChoice, check_choice
 
@@ -250,8 +252,12 @@ def _pilot(data: StudyData, args) -> int:
                 raise StudyDataError(str(err)) from None
     logging.basicConfig(level=logging.WARNING, format="%(levelname)s %(name)s: %(message)s")
     t0 = time.perf_counter()
-    with Bus(BusOptions()) as bus:
+    stop, runners = threading.Event(), []
+    # a signal stops the running game at once, with its name and the shutdown's deadline; no step after it
+    stop_on_signals(stop, then=lambda: [r.interrupt(stop) for r in runners])
+    with Bus(BusOptions(), stop=stop) as bus:
         runner = StudyRunner(data, bus, robot=robot)
+        runners.append(runner)
         if args.robot == NO_ROBOT:
             runner.robot = None
 
@@ -259,6 +265,13 @@ def _pilot(data: StudyData, args) -> int:
             what = f"{len(result.users)} users combined" if step.kind == "combine" else \
                 f"{result.ended.outcome}, {result.ended.rounds_played} rounds"
             print(f"{time.perf_counter() - t0:7.1f} s  {step.label}: {what}", flush=True)
-        runner.run_plan(scripted_players(runner, personas), on_step=said)
+        try:
+            runner.run_plan(scripted_players(runner, personas), on_step=said)
+        except StudyDataError:
+            if not stop.is_set():
+                raise
+    if stop.is_set():
+        print(f"interrupted ({stop.why}); `pairplay protocol status {data.folder}` shows what is left")
+        return 0
     print(f"plan complete; `pairplay report {data.folder}` writes the report")
     return 0

@@ -77,7 +77,7 @@ def run(args: argparse.Namespace) -> int:
 
     from pairplay.replay.reader import read_log
 
-    from pairplay.services.bus import Bus, options_from_args, stop_on_signals
+    from pairplay.services.bus import Bus, Outbox, options_from_args, shutdown_wait, stop_on_signals
     from pairplay.services.replayer import republish
 
     log = read_log(args.recording)
@@ -87,13 +87,17 @@ def run(args: argparse.Namespace) -> int:
         print(f"{args.recording}: not whole ({log.error}); replaying the {len(log.events)} events of its intact parts")
     stop = threading.Event()
     stop_on_signals(stop)
-    with Bus(options_from_args(args)) as bus:
+    with Bus(options_from_args(args), stop=stop) as bus:
         # a view attaches here: pairplay view --session S --connect <this endpoint>
         sessions = {args.as_session} if args.as_session else {r.event.session for r in log.events}
         print(f"replaying session {', '.join(sorted(sessions))}; bus listening on "
               f"{' '.join(bus.locators()) or '(no listener)'}", flush=True)
         t0 = time.perf_counter()
-        n = republish(bus, log.events, args.speed, stop, args.as_session)
+        outbox = Outbox(bus, "replay")  # a publish that waits on a slow subscriber never holds up a signal
+        n = republish(outbox, log.events, args.speed, stop, args.as_session)
+        if not outbox.close(shutdown_wait(stop, 30.0, reserve=0.2)):
+            n -= outbox.pending()
         took = time.perf_counter() - t0
-    print(f"replayed {n} events in {took:.2f} s ({n / max(took, 1e-9):.0f}/s)")
+    stopped = f"; stopped by {stop.why} after {n} of {len(log.events)}" if getattr(stop, "why", "") else ""
+    print(f"replayed {n} events in {took:.2f} s ({n / max(took, 1e-9):.0f}/s){stopped}")
     return 0

@@ -156,7 +156,7 @@ def _try(args: argparse.Namespace) -> int:
 def _serve(args: argparse.Namespace) -> int:
     stop = threading.Event()
     stop_on_signals(stop)
-    with Bus(options_from_args(args)) as bus:
+    with Bus(options_from_args(args), stop=stop) as bus:
         bridge = bridge_from_args(bus, args.session, args)
         print(f"robot bridge for session {args.session} on {bridge.backend}; bus {' '.join(bus.locators())}",
               flush=True)

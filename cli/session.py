@@ -153,6 +153,18 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     add_bus_arguments(p)
 
 
+def print_interrupted(summary: dict, path: Path, why: str, rounds: int) -> int:
+    """What a session stopped by a signal says, from `summary` (run_session's): the process must be
+    gone within 2 s of the signal, so the file is not read back. Exit code 0 (as asked)."""
+    print(f"recorded {summary['events']} events to {path}"
+          + (f" ({summary['unrecorded']} messages shed or unrecorded, counted in it)" if summary['unrecorded'] else ""))
+    if not summary["started"]:
+        print(f"interrupted ({why}) before the session started")
+    else:
+        print(f"ended: interrupted ({why}) after {summary['rounds_played']} of {rounds} rounds")
+    return 0
+
+
 def run(args: argparse.Namespace) -> int:
     logging.basicConfig(level=logging.INFO, format="%(levelname)s %(name)s: %(message)s")
     config = config_from_args(args)
@@ -188,14 +200,7 @@ def run(args: argparse.Namespace) -> int:
         print(f"session {config.session} over; the external recorder writes its file")
         return 0
     if getattr(stop, "why", ""):
-        # a signal: the process must be gone within 2 s of it, so no reading the file back
-        print(f"recorded {summary['events']} events to {path}"
-              + (f" ({summary['unrecorded']} messages shed or unrecorded, counted in it)" if summary['unrecorded'] else ""))
-        if not summary["started"]:
-            print(f"interrupted ({stop.why}) before the session started")
-        else:
-            print(f"ended: interrupted ({stop.why}) after {summary['rounds_played']} of {config.rounds} rounds")
-        return 0
+        return print_interrupted(summary, path, stop.why, config.rounds)
     from pairplay.replay.fold import fold_events
     from pairplay.replay.reader import read_log
     recorded = read_log(path)

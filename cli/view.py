@@ -76,16 +76,24 @@ def run(args: argparse.Namespace) -> int:
     rrd = None if args.no_save else (args.out or _default_rrd(args))
     if rrd is not None:
         check_output(rrd, args.force)  # before any work: an existing .rrd stays unless --force
-    with output_path(rrd, args.force) if rrd is not None else contextlib.nullcontext() as tmp:
-        _view(args, tmp)
+    try:
+        with output_path(rrd, args.force) if rrd is not None else contextlib.nullcontext() as tmp:
+            _view(args, tmp)
+    except NothingDrawn as stopped:  # a signal before the first event: nothing to save, and no mistake
+        print(f"pairplay view: interrupted ({stopped}) before any event was drawn; nothing saved", file=sys.stderr)
+        return 0
     if rrd is not None:
         print(f"pairplay view: saved {rrd}", file=sys.stderr)
     return 0
 
 
+class NothingDrawn(Exception):
+    """A signal stopped the view before its first event (the signal's name): the .rrd is discarded."""
+
+
 def _view(args: argparse.Namespace, tmp_rrd: Path | None) -> None:
     """Draw into the temporary .rrd (renamed by the caller when this returns)."""
-    from pairplay.services.bus import open_bus, options_from_args, stop_on_signals
+    from pairplay.services.bus import open_bus, options_from_args, shutdown_wait, stop_on_signals
     from pairplay.services.view.drive import drive
     from pairplay.services.view.output import ViewOutput, finish, open_stream
     from pairplay.services.view.rerun_logger import RerunView
@@ -108,16 +116,22 @@ def _view(args: argparse.Namespace, tmp_rrd: Path | None) -> None:
     echo = lambda line: print(line, file=sys.stderr)  # noqa: E731
     try:
         if args.recording:
-            summary = drive(view, recording_items(args.recording, speed=args.speed, session=args.session),
+            print(f"pairplay view: drawing {args.recording}" + (f" at {args.speed:g}x" if args.speed else "")
+                  + "; Ctrl-C to stop", file=sys.stderr)
+            summary = drive(view, recording_items(args.recording, speed=args.speed, session=args.session, stop=stop),
                             stop=stop, echo=echo)
+            if summary.events == 0 and stop.is_set():
+                raise NothingDrawn(stop.why)
             if summary.events == 0:
                 which = f"of session {args.session}" if args.session else "to view"
                 raise InputError(f"holds no events {which}; nothing saved", args.recording)
         else:
-            with open_bus(options_from_args(args)) as bus:
-                source = LiveSource(bus, args.session)
+            with open_bus(options_from_args(args), stop=stop) as bus:
+                source = LiveSource(bus, args.session, stop=stop)
                 print(f"pairplay view: listening to session {args.session}; Ctrl-C to stop", file=sys.stderr)
                 summary = drive(view, source.items(stop), stop=stop, echo=echo)
+            if summary.events == 0 and stop.is_set():
+                raise NothingDrawn(stop.why)
             if summary.events == 0:
                 raise InputError("no event of this session arrived; nothing saved", f"--session {args.session}")
         print(f"pairplay view: {summary.events} events, {summary.notes} notes, "
@@ -127,6 +141,6 @@ def _view(args: argparse.Namespace, tmp_rrd: Path | None) -> None:
             while not stop.wait(0.5):
                 pass
     finally:
-        finish(rec)
+        finish(rec, shutdown_wait(stop, 1e9, reserve=0.2))  # stopped: the .rrd's footer within the deadline
         for sig, handler in saved_handlers.items():  # run() may be called in-process (tests, tools)
             signal.signal(sig, handler)

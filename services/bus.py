@@ -56,6 +56,7 @@ MODES = ("peer", "client", "router")
 CLOSE_TIMEOUT_S = 0.5  # Bus.close waits this long for Zenoh, then leaves it to the process exit
 EXIT_BUDGET_S = 2.0  # a process is gone this long after SIGINT/SIGTERM (issue 12)
 SHUTDOWN_S = 1.1  # its services stopped and its recording finished within this; the rest is the exit's
+signalled = ""  # the signal that stopped this process, if one did (stop_on_signals)
 
 
 def safe_defaults(scouting_delay_ms: int = 100) -> dict[str, Any]:
@@ -217,6 +218,24 @@ def deadline_of(stop: threading.Event, seconds: float = SHUTDOWN_S) -> Deadline:
     return deadline
 
 
+def shutdown_wait(stop: threading.Event | None, cap: float, reserve: float = 0.0) -> float:
+    """Seconds a wait on a shutdown path may take (a join, a flush, a close, a linger): `cap`
+    while running; once `stop` is set, what the shutdown's deadline leaves after `reserve`
+    seconds kept for the steps after it, at most `cap`. Every such wait of every verb takes
+    its time from here, so however each fares they add up to the deadline (module rule)."""
+    if stop is None or not stop.is_set():
+        return cap
+    return deadline_of(stop).left(reserve, cap)
+
+
+def pass_stop(source: threading.Event, target: threading.Event) -> None:
+    """Stop `target` as `source` was stopped: the same reason (`why`) and the same deadline (a
+    verb's signal stopping a session it runs with its own stop flag)."""
+    target.why = getattr(source, "why", "") or getattr(target, "why", "")
+    target.deadline = deadline_of(source)
+    target.set()
+
+
 class Inbox:
     """Zenoh's callback threads -> one service thread; `put` never waits (see module rule).
 
@@ -337,6 +356,16 @@ class Outbox:
             self._pending += 1
         self._queue.put((key, payload))
 
+    def send_within(self, key: str, payload: bytes, stop: threading.Event, most: int = 1_000) -> bool:
+        """`send`, once fewer than `most` wait (a producer faster than the bus: `pairplay replay` at
+        full speed); the wait checks `stop`, so a signal never waits on a blocked publish. False
+        if stopped first (not sent)."""
+        while self._pending >= most:
+            if stop.wait(0.001):
+                return False
+        self.send(key, payload)
+        return True
+
     def call(self, fn: Callable[[], None]) -> None:
         with self._lock:
             self._pending += 1
@@ -391,8 +420,9 @@ class Bus:
     """One Zenoh session with cached BLOCK publishers."""
 
     def __init__(self, options: BusOptions | None = None, session: zenoh.Session | None = None,
-                 express: bool = True):
+                 express: bool = True, stop: threading.Event | None = None):
         self.options = options or BusOptions()
+        self.stop = stop  # the process's stop flag: once set, closing takes what its deadline leaves
         # express: each event leaves at once instead of waiting to be batched with others
         # (an event is a decision someone waits for)
         self.express = express
@@ -493,9 +523,12 @@ class Bus:
                 return [str(x) for x in info["locators"]]
         return []
 
-    def close(self, timeout_s: float = CLOSE_TIMEOUT_S) -> bool:
-        """Close the session; if Zenoh takes longer than `timeout_s` (a publish blocked
-        on a peer that went away), leave the rest to the process exit. True if closed."""
+    def close(self, timeout_s: float | None = None) -> bool:
+        """Close the session; if Zenoh takes longer than `timeout_s` (default: CLOSE_TIMEOUT_S, or
+        what the shutdown's deadline leaves once `stop` is set; a publish blocked on a peer that
+        went away), leave the rest to the process exit. True if closed."""
+        if timeout_s is None:
+            timeout_s = shutdown_wait(self.stop, CLOSE_TIMEOUT_S)
         if self._closed:
             return True
         self._closed = True
@@ -541,8 +574,8 @@ def _open(options: BusOptions) -> zenoh.Session:
         raise BusOpenError(f"cannot open the bus: {_zenoh_reason(err)}", options.where()) from None
 
 
-def open_bus(options: BusOptions | None = None) -> Bus:
-    return Bus(options)
+def open_bus(options: BusOptions | None = None, stop: threading.Event | None = None) -> Bus:
+    return Bus(options, stop=stop)
 
 
 def _replies(replies, wait_s: float, stop: threading.Event | None):
@@ -560,16 +593,21 @@ def _replies(replies, wait_s: float, stop: threading.Event | None):
             yield reply
 
 
-def stop_on_signals(stop: threading.Event) -> None:
+def stop_on_signals(stop: threading.Event, then: Callable[[], object] | None = None) -> None:
     """SIGINT/SIGTERM set `stop`, name the signal in `stop.why` and start the shutdown's
-    `stop.deadline` (a second SIGINT still interrupts). Main thread only."""
+    `stop.deadline` (a second SIGINT still interrupts); then call `then()` (it must only set
+    flags: it runs in the signal handler). Main thread only."""
     def handler(signum, frame):
         if stop.is_set() and signum == signal.SIGINT:
             raise KeyboardInterrupt
         log.info("signal %s: stopping", signal.Signals(signum).name)
+        global signalled
+        signalled = signal.Signals(signum).name  # the exit skips the interpreter's teardown (cli/main.py)
         if not stop.is_set():
             stop.why = signal.Signals(signum).name  # what ended the session, for its SessionEnded
             deadline_of(stop)  # the shutdown's time starts now, not when a thread notices
         stop.set()
+        if then is not None:
+            then()
     signal.signal(signal.SIGINT, handler)
     signal.signal(signal.SIGTERM, handler)

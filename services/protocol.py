@@ -45,7 +45,7 @@ from pairplay.schemas.keys import event_key
 from pairplay.schemas.policy import read_policy
 from pairplay.schemas.session import SessionConfig, learner_overrides
 
-from pairplay.services.bus import Bus
+from pairplay.services.bus import Bus, pass_stop, shutdown_wait
 from pairplay.services.combiner import CombinerLogic
 from pairplay.services.robot.choice import NO_ROBOT, RobotChoice
 from pairplay.services.runner import Node
@@ -104,6 +104,7 @@ class StudyRunner:
         self.questionnaire_timeout_s = questionnaire_timeout_s
         self.live = Live()
         self._stop: threading.Event | None = None
+        self.interrupted: threading.Event | None = None  # the process's signal (interrupt): no more steps
         self._skip = threading.Event()
         self._abort_reason = ""
         self._busy = threading.Lock()
@@ -174,6 +175,8 @@ class StudyRunner:
                 from pairplay.services.lab.hub import LabHub
                 hub = self.lab.add(LabHub(config, token=token))  # the board page: /s/<session>/board?t=<token>
             self._stop, self._abort_reason, self._control_seq = threading.Event(), "", 0
+            if self.interrupted is not None:  # a signal came while this game was being set up
+                pass_stop(self.interrupted, self._stop)
             self._skip.clear()
             answered = threading.Event()
             watch = [self.bus.subscribe(f"pairplay/{config.session}/**", self._watcher(on_event, answered))]
@@ -193,20 +196,24 @@ class StudyRunner:
                     time.sleep(0.05)  # the answer reaches the recorder on its own thread
 
             # the game waits for the board: the lab's hub, a scripted player, or a board elsewhere on the bus
+            summary: dict = {}
+            stop = self._stop
             try:
-                path = run_session(config, self.data.folder / recording, bus=self.bus, stop=self._stop,
-                                   robot=self.robot, hold=hold,
+                path = run_session(config, self.data.folder / recording, bus=self.bus, stop=stop,
+                                   robot=self.robot, hold=hold, summary=summary,
                                    wait_also=() if player is not None or hub is not None else ("board",),
                                    extra_nodes=(lambda bus: [hub.make_node(bus)]) if hub is not None else None)
             finally:
                 if hub is not None:
                     self.lab.hubs.pop(config.session, None)
-                    hub.close()
-            self._stop.set()
+                    hub.close(shutdown_wait(stop, 5.0, reserve=0.3))
+            stop.set()
             if node is not None and node.thread is not None:
-                node.thread.join(5.0)
+                node.thread.join(shutdown_wait(stop, 5.0, reserve=0.3))
             for sub in watch:
                 _undeclare(sub)
+            if self.interrupted is not None:  # a signal: no reading back, the process is gone within 2 s
+                return self._finish_interrupted(config, summary, answered.is_set())
             return self._finish(config, path, answered.is_set())
         finally:
             self.live.state = "idle"
@@ -226,6 +233,25 @@ class StudyRunner:
             if on_event is not None:
                 on_event(e)
         return see
+
+    def interrupt(self, stop: threading.Event) -> None:
+        """The process got a signal (`stop`, services/bus.py stop_on_signals): the running game stops with
+        the signal's name and deadline, its recording finished; no step starts after it. Only sets flags
+        (called from the signal handler)."""
+        self.interrupted = stop
+        if self._stop is not None and not self._stop.is_set():
+            pass_stop(stop, self._stop)
+        self._skip.set()
+
+    def _finish_interrupted(self, config: SessionConfig, summary: dict, answered: bool) -> Game:
+        """The journal's GameEnded of a game stopped by a signal, from what the session counted (its
+        recording is finished; `pairplay rebuild` makes its policy later, flagged partial)."""
+        why = getattr(self.interrupted, "why", "") or "a signal"
+        self.data.append(j.GameEnded(session=config.session, participant=config.participant.split(":", 1)[1],
+                                     outcome="aborted", reason=f"interrupted ({why})",
+                                     rounds_played=int(summary.get("rounds_played", 0)), policy="",
+                                     questionnaire=answered))
+        return self.data.state.games[config.session]
 
     def _finish(self, config: SessionConfig, path: Path, answered: bool) -> Game:
         rel = path.relative_to(self.data.folder).as_posix()
@@ -357,8 +383,12 @@ class StudyRunner:
                                                       output_path=output),
                                   session=session, source="experimenter", seq=1, time_ns=time.time_ns())
                 self.bus.put(event_key(session, "experimenter", "CombineRequested"), ev.encode_event(request))
-                if not got.wait(timeout_s):
-                    raise StudyDataError(f"the combiner did not answer within {timeout_s:.0f} s")
+                waited = time.monotonic() + timeout_s
+                while not got.wait(0.05):  # a signal does not wait for the combiner (interrupt)
+                    if self.interrupted is not None:
+                        raise StudyDataError(f"interrupted ({getattr(self.interrupted, 'why', '')}) while combining")
+                    if time.monotonic() > waited:
+                        raise StudyDataError(f"the combiner did not answer within {timeout_s:.0f} s")
             finally:
                 stop.set()
                 _undeclare(sub)
@@ -382,7 +412,7 @@ class StudyRunner:
     def run_plan(self, players: Callable[[str, str, int], object], on_step: Callable | None = None) -> list:
         """Run every open step of the plan in order; `players(pid, phase, game)` gives each game's player."""
         done = []
-        while (step := self.data.next_step()) is not None:
+        while self.interrupted is None and (step := self.data.next_step()) is not None:
             if step.blocked:
                 raise StudyDataError(f"{step.label}: {step.blocked}")
             if step.kind == "combine":

@@ -3,7 +3,9 @@
 Rule: the recorded bytes go out unchanged on their recorded key, in file
 order; pacing follows the recorded log times divided by the speed (0: no
 pacing). With `as_session`, each event is re-stamped into that session and
-published on the matching key; nothing else changes.
+published on the matching key; nothing else changes. Every wait (pacing, a
+full outbox) ends when `stop` is set: a signal never waits for the next
+recorded event (a paced replay slept through the gap, 30 s and more).
 """
 
 from __future__ import annotations
@@ -17,27 +19,35 @@ from pairplay.replay.reader import RecordedEvent
 from pairplay.schemas.events import encode_event
 from pairplay.schemas.keys import event_key
 
-from pairplay.services.bus import Bus
+from pairplay.services.bus import Outbox
 
 
-def republish(bus: Bus, events: list[RecordedEvent], speed: float, stop: threading.Event | None = None,
-              as_session: str | None = None, clock=time.perf_counter, sleep=time.sleep) -> int:
+def republish(bus, events: list[RecordedEvent], speed: float, stop: threading.Event | None = None,
+              as_session: str | None = None, clock=time.perf_counter, sleep=None) -> int:
+    """Publish `events` (see module rule) through `bus.put`, or an Outbox's `send_within`; how
+    many were handed over. `sleep(s)` defaults to `stop.wait` (interrupted by the stop)."""
     if not events:
         return 0
+    stop = stop if stop is not None else threading.Event()
+    sleep = sleep or stop.wait
+    put = (lambda key, payload: bus.send_within(key, payload, stop)) if isinstance(bus, Outbox) else \
+        (lambda key, payload: bus.put(key, payload) or True)
     start_wall, start_log = clock(), events[0].log_time_ns
     n = 0
     for r in events:
-        if stop is not None and stop.is_set():
+        if stop.is_set():
             break
         if speed > 0:
             due = start_wall + (r.log_time_ns - start_log) / 1e9 / speed
             wait = due - clock()
             if wait > 0:
                 sleep(wait)
+                if stop.is_set():
+                    break
         if as_session:
             e = msgspec.structs.replace(r.event, session=as_session)
-            bus.put(event_key(as_session, e.source, type(e).__name__), encode_event(e))
+            sent = put(event_key(as_session, e.source, type(e).__name__), encode_event(e))
         else:
-            bus.put(r.key, r.payload)
-        n += 1
+            sent = put(r.key, r.payload)
+        n += bool(sent)
     return n

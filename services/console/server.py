@@ -48,8 +48,9 @@ class StudyLabServer:
     def console_url(self) -> str:
         return f"{self.url}/console?token={self.token}"
 
-    def close(self) -> None:
-        self.web.stop()
+    def close(self, timeout_s: float = 10.0) -> None:
+        """Stop the web server, waiting for it at most `timeout_s`."""
+        self.web.stop(timeout_s)
 
 
 ConsoleServer = StudyLabServer  # the name the console had before it joined the lab server

@@ -151,9 +151,10 @@ class LabHub:
             except Exception:  # the bus is closing: nothing more can be recorded
                 log.exception("lab %s: publish failed", self.session)
 
-    def close(self) -> None:
+    def close(self, timeout_s: float = 5.0) -> None:
+        """Stop the publishing thread after what it holds (waiting at most `timeout_s`)."""
         self._out.put(None)
-        self._publisher.join(5.0)
+        self._publisher.join(timeout_s)
 
     def token_ok(self, token: str) -> bool:
         return secrets.compare_digest(str(token).encode(), self.token.encode())

@@ -20,7 +20,7 @@ from pathlib import Path
 import uvicorn
 
 from pairplay.schemas.session import SessionConfig
-from pairplay.services.bus import BusOptions
+from pairplay.services.bus import BusOptions, shutdown_wait
 from pairplay.services.lab.app import Lab, create_app
 from pairplay.services.lab.hub import MAX_FRAME, LabHub
 from pairplay.services.robot.choice import RobotChoice
@@ -60,10 +60,12 @@ class WebServer:
         host = "127.0.0.1" if host in ("0.0.0.0", "") else f"[{host}]" if ":" in host else host
         return f"{self.scheme}://{host}:{port}"
 
-    def stop(self) -> None:
+    def stop(self, timeout_s: float = 10.0) -> None:
+        """Ask uvicorn to stop; wait for its thread at most `timeout_s` (a stopped process takes what
+        its shutdown's deadline leaves: `shutdown_wait`; the daemon thread is left to the exit)."""
         self.server.should_exit = True
         if self.thread is not None:
-            self.thread.join(10.0)
+            self.thread.join(timeout_s)
 
 
 @dataclass(frozen=True)
@@ -80,11 +82,12 @@ def run_lab(config: SessionConfig, path: str | Path, *, host: str = "127.0.0.1",
             bus_options: BusOptions | None = None, robot: RobotChoice | None = RobotChoice(),
             stop: threading.Event | None = None, on_ready=None, linger_s: float = 3.0,
             ssl_certfile: str | None = None, ssl_keyfile: str | None = None, token: str | None = None,
-            nodes_out: dict | None = None) -> Path:
+            nodes_out: dict | None = None, summary: dict | None = None) -> Path:
     """One live session with its board; return the recording's path.
 
     `on_ready(urls, bus)` is called once the pages can be opened (the bus is
-    up; the game starts when the board's Node is on it)."""
+    up; the game starts when the board's Node is on it). `summary`: as
+    run_session's (what an interrupted caller prints without reading the file)."""
     config.validate()
     stop = stop or threading.Event()
     hub = LabHub(config, token=token)
@@ -99,9 +102,10 @@ def run_lab(config: SessionConfig, path: str | Path, *, host: str = "127.0.0.1",
 
     try:
         out = run_session(config, path, bus_options=bus_options, stop=stop, on_bus=on_bus, robot=robot,
-                          extra_nodes=lambda bus: [hub.make_node(bus)], nodes_out=nodes_out)
+                          extra_nodes=lambda bus: [hub.make_node(bus)], nodes_out=nodes_out, summary=summary)
         stop.wait(linger_s)  # the pages show the end before the server goes
         return out
     finally:
-        web.stop()
-        hub.close()
+        # stopped: the recording is finished; the web server and the hub get what the deadline leaves
+        web.stop(shutdown_wait(stop, 10.0, reserve=0.3))
+        hub.close(shutdown_wait(stop, 5.0, reserve=0.3))

@@ -11,6 +11,7 @@ import threading
 from dataclasses import dataclass
 from typing import Iterable
 
+from pairplay.services.bus import shutdown_wait
 from pairplay.services.view.rerun_logger import RerunView
 
 
@@ -35,6 +36,6 @@ def drive(view: RerunView, items: Iterable, *, stop: threading.Event | None = No
         else:
             view.handle(event)
             summary.events += 1
-    view.close()
+    view.close(shutdown_wait(stop, 1e9, reserve=0.4))  # stopped: within the shutdown's deadline
     summary.q_logged = view.q_logged
     return summary

@@ -146,7 +146,8 @@ def open_stream(out: ViewOutput, recording_name: str = "") -> tuple[rr.Recording
     return rec, where
 
 
-def finish(rec: rr.RecordingStream) -> None:
-    """Flush and drop the sinks, so a saved .rrd gets its footer (rerun's index)."""
-    rec.flush()
+def finish(rec: rr.RecordingStream, timeout_s: float = 1e9) -> None:
+    """Flush (for at most `timeout_s`: a stopped view takes what its shutdown's deadline leaves) and
+    drop the sinks, so a saved .rrd gets its footer (rerun's index)."""
+    rec.flush(timeout_sec=max(timeout_s, 0.0))
     rec.disconnect()

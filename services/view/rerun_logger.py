@@ -157,10 +157,10 @@ class RerunView:
         """A line in the event log from outside the fold (a malformed bus message, a gap)."""
         self.rec.log("events", rr.TextLog(text, level=level))
 
-    def close(self) -> None:
-        """Log the Q-table if it changed since it was last logged, then flush."""
+    def close(self, timeout_s: float = 1e9) -> None:
+        """Log the Q-table if it changed since it was last logged, then flush (for at most `timeout_s`)."""
         self._maybe_log_q(force=True)
-        self.rec.flush()
+        self.rec.flush(timeout_sec=max(timeout_s, 0.0))
 
     def _maybe_log_q(self, force: bool) -> None:
         if self.q_throttle.due(self._now_ns, force):

@@ -55,8 +55,11 @@ class SequenceGaps:
 
 
 def recording_items(path: str | Path, *, speed: float = 0.0, session: str | None = None,
-                    sleep=time.sleep, clock=time.monotonic) -> Iterator[Item]:
-    """Events of one session of a recording, paced by `speed` (0: as fast as possible)."""
+                    sleep=None, clock=time.monotonic, stop: threading.Event | None = None) -> Iterator[Item]:
+    """Events of one session of a recording, paced by `speed` (0: as fast as possible). The pacing
+    waits on `stop` (`sleep` defaults to `stop.wait`): a signal never waits for the next event."""
+    stop = stop if stop is not None else threading.Event()
+    sleep = sleep or stop.wait
     log = read_log(path)
     chosen = session
     t0_event = t0_wall = None
@@ -74,6 +77,8 @@ def recording_items(path: str | Path, *, speed: float = 0.0, session: str | None
             wait = t0_wall + (event.time_ns - t0_event) / 1e9 / speed - clock()
             if wait > 0:
                 sleep(wait)
+        if stop.is_set():
+            return
         yield event, None
     if not log.whole:
         yield None, f"recording not whole ({log.error}); its intact parts are shown"
@@ -82,7 +87,8 @@ def recording_items(path: str | Path, *, speed: float = 0.0, session: str | None
 class LiveSource:
     """Subscribe to one session on the bus; the view's thread pulls from Zenoh's ring buffer."""
 
-    def __init__(self, bus, session: str, *, capacity: int = 100_000, catch_up: bool = True):
+    def __init__(self, bus, session: str, *, capacity: int = 100_000, catch_up: bool = True,
+                 stop: threading.Event | None = None):
         self.session = session
         self.gaps = SequenceGaps()
         self.ended = False
@@ -96,7 +102,7 @@ class LiveSource:
         self.backlog_error = ""
         if catch_up:
             try:
-                self.backlog = fetch_log(bus, session, timeout_s=5.0)
+                self.backlog = fetch_log(bus, session, timeout_s=5.0, stop=stop)
             except (msgspec.DecodeError, msgspec.ValidationError) as err:
                 self.backlog_error = f"the recorder's log of {session} does not decode ({err}); showing live events only"
 
