@@ -3,10 +3,25 @@
 How many runs and rounds come from the environment (the issue's figures are the
 defaults): SOAK_FLOODS=50 floods of 10,000 messages into SOAK_ROUNDS=300-round
 sessions at a random moment, SOAK_RESTARTS=30 IrisTK broker restarts at random
-moments, SOAK_CLEAN=100 clean sessions, SOAK_KILLS=10 recorder kills under load.
-Each test prints its figures and, with SOAK_OUT=FILE, appends them as JSON lines.
-A run "freezes" if it has not finished within SOAK_TIMEOUT_S (default 180 s,
-~7x a 300-round session here).
+moments of SOAK_ROUNDS-round sessions (the moment is uniform in 0.5 s to
+SOAK_RESTART_WINDOW_S, default 4 s; whether the session was still playing is reported), SOAK_CLEAN=100 clean sessions,
+SOAK_KILLS=10 recorder kills under load. Each test prints its figures and, with
+SOAK_OUT=FILE, appends them as JSON lines (one per run, one per soak).
+
+SOAK_JOBS=N (default 1) runs N sessions at once. Each session is its own
+`pairplay session` process with its own ports (port 0), session name and files,
+so runs share nothing but the machine: running several at once is more stress
+(they compete for the CPU, every hand-off waits longer), not less, and each run
+is still checked whole: exit 0, the file verifies, and every suggestion has
+exactly one RobotActed in it or is counted as not reported, so none is lost
+silently (`verify` does not check that).
+
+A run "freezes" if its recording stops growing for SOAK_STALL_S (default 60 s;
+a playing session's file grows several times a second) or it has not finished
+within SOAK_TIMEOUT_S (default 180 s, ~7x a 300-round session on a quiet
+machine; raise it with SOAK_JOBS on a loaded one). A frozen run's stacks are dumped (py-spy, if installed) to
+<name>.stacks.txt beside its file, then it gets SIGTERM (its exit time is
+reported) and, 5 s later, SIGKILL; its stderr is kept in <name>.stderr.txt.
 """
 
 from __future__ import annotations
@@ -14,11 +29,14 @@ from __future__ import annotations
 import json
 import os
 import random
+import shutil
 import signal
 import subprocess
 import sys
 import threading
 import time
+from collections import Counter
+from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
 import pytest
@@ -29,10 +47,8 @@ from pairplay.schemas import events as ev
 from pairplay.schemas.envelope import stamped
 from pairplay.schemas.events import encode_event
 from pairplay.schemas.keys import event_key
-from pairplay.schemas.session import SessionConfig
+from pairplay.schemas.robot import RobotActed
 from pairplay.services.bus import Bus, BusOptions
-from pairplay.services.robot.choice import RobotChoice
-from pairplay.services.session import run_session
 from pairplay.services.verify import verify_recording
 
 from test_faults import endpoint_of, flood, session_proc
@@ -40,91 +56,206 @@ from test_faults import endpoint_of, flood, session_proc
 pytestmark = pytest.mark.slow
 ROUNDS = int(os.environ.get("SOAK_ROUNDS", 300))
 TIMEOUT_S = float(os.environ.get("SOAK_TIMEOUT_S", 180))
+STALL_S = float(os.environ.get("SOAK_STALL_S", 60))
+JOBS = int(os.environ.get("SOAK_JOBS", 1))
+_out_lock = threading.Lock()
 
 
 def report(name: str, figures: dict) -> None:
     line = json.dumps({"test": name, **figures})
-    print(line)
-    if os.environ.get("SOAK_OUT"):
-        with open(os.environ["SOAK_OUT"], "a") as f:
-            f.write(line + "\n")
+    with _out_lock:  # runs report from several threads with SOAK_JOBS > 1
+        print(line, flush=True)
+        if os.environ.get("SOAK_OUT"):
+            with open(os.environ["SOAK_OUT"], "a") as f:
+                f.write(line + "\n")
 
 
-def one_session(tmp_path: Path, name: str, seed: int, flood_n: int = 0):
-    """(finished, verified, seconds, flood_at_s) of one `pairplay session` process."""
-    p = session_proc(tmp_path, "--participant", "sim:ashley", "--rounds", str(ROUNDS), "--session", name,
-                     "--seed", str(seed))
-    t0 = time.monotonic()
-    at = None
+def load() -> float:
+    return round(os.getloadavg()[0], 1)
+
+
+def in_parallel(fn, n: int) -> list:
+    """fn(0..n-1), JOBS at a time, results in index order."""
+    with ThreadPoolExecutor(max_workers=max(1, JOBS)) as pool:
+        return list(pool.map(fn, range(n)))
+
+
+def _dump_stacks(pid: int, path: Path) -> None:
+    spy = shutil.which("py-spy") or str(Path(sys.executable).with_name("py-spy"))
+    if not Path(spy).exists():
+        return
     try:
-        endpoint = endpoint_of(p.stdout.readline())
+        done = subprocess.run([spy, "dump", "--pid", str(pid), "--locals"], capture_output=True, text=True,
+                              timeout=60)
+        path.write_text(done.stdout + done.stderr)
+    except (OSError, subprocess.TimeoutExpired) as err:
+        path.write_text(f"py-spy failed: {err}\n")
+
+
+def watch(p: subprocess.Popen, path: Path, t0: float) -> bool:
+    """Wait for p's end; True if it froze: its recording has not grown for STALL_S (the recorder
+    flushes by age, so a playing session's file grows several times a second), or it is still
+    running after TIMEOUT_S."""
+    size, grew = -1, time.monotonic()
+    while True:
+        try:
+            p.wait(timeout=2.0)
+            return False
+        except subprocess.TimeoutExpired:
+            pass
+        now = time.monotonic()
+        try:
+            new = path.stat().st_size
+        except FileNotFoundError:
+            new = -1
+        if new != size:
+            size, grew = new, now
+        if now - grew > STALL_S or now - t0 > TIMEOUT_S:
+            return True
+
+
+def one_session(tmp_path: Path, name: str, seed: int, flood_n: int = 0, robot_url: str | None = None,
+                during=None) -> dict:
+    """Run one `pairplay session` process to its end; `during(proc, endpoint)` runs while it plays.
+
+    Returns (and reports) {name, finished, verified, seconds, load_start, load_end, ...}.
+    """
+    extra = ("--robot", robot_url) if robot_url else ()
+    p = session_proc(tmp_path, "--participant", "sim:ashley", "--rounds", str(ROUNDS), "--session", name,
+                     "--seed", str(seed), *extra)
+    t0 = time.monotonic()
+    row = {"name": name, "load_start": load()}
+    first = p.stdout.readline()
+    output = {}  # both pipes drained all along: a full pipe must not pass for a freeze
+    readers = [threading.Thread(target=lambda f=f: output.setdefault(f, f.read()), daemon=True)
+               for f in (p.stdout, p.stderr)]
+    for r in readers:
+        r.start()
+    try:
+        endpoint = endpoint_of(first)
         if flood_n:
-            at = random.uniform(0.5, 10.0)
+            row["flood_at_s"] = at = round(random.Random(seed).uniform(0.5, 10.0), 2)
             time.sleep(at)
-            flood(endpoint, name, flood_n)  # a session ~30 s long here: the flood lands mid-session
-        p.communicate(timeout=TIMEOUT_S)
-    except subprocess.TimeoutExpired:
+            row["flood_mid_session"] = p.poll() is None  # a flood after the end tests nothing: say so
+            if row["flood_mid_session"]:
+                flood(endpoint, name, flood_n)  # a session takes 30-100 s here: the flood lands mid-session
+        if during:
+            row.update(during(p, endpoint) or {})
+        frozen = watch(p, tmp_path / f"{name}.mcap", t0)
+    except Exception:
         p.kill()
-        p.communicate()
-        return False, False, time.monotonic() - t0, at
+        raise
+    if frozen:
+        _dump_stacks(p.pid, tmp_path / f"{name}.stacks.txt")
+        t_term = time.monotonic()
+        p.send_signal(signal.SIGTERM)
+        try:
+            p.wait(timeout=5)
+            row["exit_after_sigterm_s"] = round(time.monotonic() - t_term, 2)
+        except subprocess.TimeoutExpired:
+            p.kill()
+            row["exit_after_sigterm_s"] = None
+        p.wait()
+    for r in readers:
+        r.join()
+    out, err = first + output[p.stdout], output[p.stderr]
     took = time.monotonic() - t0
     path = tmp_path / f"{name}.mcap"
-    ok = p.returncode == 0 and verify_recording(path).ok
+    finished = not frozen and p.returncode == 0
+    verdict = verify_recording(path) if finished else None
+    ok = bool(verdict and verdict.ok)
+    if finished:
+        row.update(robot_acts(path))
+        # nothing lost silently: every suggestion without its RobotActed is counted in the file
+        ok = ok and row["robot_acts_missing"] == row["robot_acts_counted"] and not row["robot_acts_doubled"]
     if ok:
         path.unlink(missing_ok=True)  # a failed run's file stays for a look
-    report("run", {"name": name, "finished": p.returncode == 0, "verified": ok, "seconds": round(took, 1),
-                   "flood_at_s": at})
-    return p.returncode == 0, ok, took, at
+    else:
+        (tmp_path / f"{name}.stderr.txt").write_text(f"exit {p.returncode}\n{out}\n{err}")
+        if verdict is not None:
+            row["verify"] = (verdict.error or "; ".join(str(c) for c in verdict.checks
+                                                        if not c.ok(verdict.truncated)))[:500]
+    row.update(finished=finished, frozen=frozen, verified=ok, returncode=p.returncode, seconds=round(took, 1),
+               load_end=load())
+    report("run", row)
+    return row
+
+
+def robot_acts(path: Path) -> dict:
+    """Every suggestion gets exactly one RobotActed in the file (docs/robot.md), which
+    `verify` does not check, or is counted as not reported (a MessageRejected count from
+    the robot bridge or the session): the suggestions without one, those counted, and
+    those with more than one."""
+    events = [r.event for r in read_log(path).events]
+    made = {e.seq for e in events if isinstance(e, ev.SuggestionMade)}
+    acted = Counter(e.suggestion_seq for e in events if isinstance(e, RobotActed))
+    counted = sum(int(e.reason.split()[0]) for e in events  # "<n> messages refused ...: shed unread (why)"
+                  if isinstance(e, ev.MessageRejected) and e.offending_source == "robot"
+                  and ("not reported" in e.reason or "not received" in e.reason))
+    return {"suggestions": len(made), "robot_acts_missing": len(made - set(acted)), "robot_acts_counted": counted,
+            "robot_acts_doubled": sum(1 for n in acted.values() if n > 1)}
+
+
+def summary(name: str, runs: list[dict], **more) -> None:
+    times = sorted(r["seconds"] for r in runs)
+    loads = [r[k] for r in runs for k in ("load_start", "load_end")]
+    report(name, {"runs": len(runs), "rounds": ROUNDS, "jobs": JOBS, "finished": sum(r["finished"] for r in runs),
+                  "verified": sum(r["verified"] for r in runs), "frozen": sum(r["frozen"] for r in runs),
+                  "robot_acts_missing": sum(r.get("robot_acts_missing", 0) for r in runs),
+                  "robot_acts_counted": sum(r.get("robot_acts_counted", 0) for r in runs),
+                  "seconds_min": times[0], "seconds_median": times[len(times) // 2], "seconds_max": times[-1],
+                  "load_min": min(loads), "load_max": max(loads), **more})
 
 
 def test_floods_of_10000_messages_into_long_sessions(tmp_path):
     n = int(os.environ.get("SOAK_FLOODS", 50))
-    runs = [one_session(tmp_path, f"flood{i}", i, flood_n=10_000) for i in range(n)]
-    times = sorted(r[2] for r in runs)
-    report("floods", {"runs": n, "rounds": ROUNDS, "finished": sum(r[0] for r in runs),
-                      "verified": sum(r[1] for r in runs), "seconds_min": times[0], "seconds_max": times[-1]})
-    assert all(r[0] and r[1] for r in runs)
+    runs = in_parallel(lambda i: one_session(tmp_path, f"flood{i}", i, flood_n=10_000), n)
+    summary("floods", runs, mid_session=sum(r["flood_mid_session"] for r in runs))
+    assert all(r["finished"] and r["verified"] for r in runs)
 
 
 def test_clean_long_sessions_never_freeze(tmp_path):
     n = int(os.environ.get("SOAK_CLEAN", 100))
-    runs = [one_session(tmp_path, f"clean{i}", i) for i in range(n)]
-    times = sorted(r[2] for r in runs)
-    report("clean", {"runs": n, "rounds": ROUNDS, "finished": sum(r[0] for r in runs),
-                     "verified": sum(r[1] for r in runs), "seconds_min": times[0], "seconds_max": times[-1]})
-    assert all(r[0] and r[1] for r in runs)
+    runs = in_parallel(lambda i: one_session(tmp_path, f"clean{i}", i), n)
+    summary("clean", runs)
+    assert all(r["finished"] and r["verified"] for r in runs)
 
 
 def test_iristk_broker_restarts_at_random_moments(tmp_path):
+    """A `pairplay session --robot iristk://...` whose IrisTK broker (test double) drops every
+    client, goes away for 0.1-2 s and comes back, at a random moment of the session."""
     sys.path.insert(0, str(Path(__file__).parent))
     from robot_doubles.iristk_broker import IrisTKBroker
     from robot_doubles.iristk_furhat import IrisTKFurhat
     n = int(os.environ.get("SOAK_RESTARTS", 30))
-    rounds = int(os.environ.get("SOAK_RESTART_ROUNDS", 100))
-    finished = verified = 0
-    for i in range(n):
+    window_s = float(os.environ.get("SOAK_RESTART_WINDOW_S", 4.0))
+
+    def run(i: int) -> dict:
+        rng = random.Random(i)
         broker = IrisTKBroker().start()
         furhat = IrisTKFurhat(broker.port, speech_s=0.05).start()
-        config = SessionConfig(session=f"restart{i}", participant="sim:ashley", persona="ashley", seed=i,
-                               rounds=rounds)
-        box = {}
-        t = threading.Thread(target=lambda: box.setdefault("path", run_session(
-            config, tmp_path / f"restart{i}.mcap", robot=RobotChoice(url=f"iristk://127.0.0.1:{broker.port}"))),
-            daemon=True)
-        t.start()
-        time.sleep(random.uniform(0.5, 4.0))
-        broker.drop_all()
-        broker.stop()
-        time.sleep(random.uniform(0.1, 2.0))
-        broker.start()
-        t.join(TIMEOUT_S)
-        if not t.is_alive():
-            finished += 1
-            verified += verify_recording(box["path"]).ok
-        furhat.close()
-        broker.stop()
-    report("broker_restarts", {"runs": n, "rounds": rounds, "finished": finished, "verified": verified})
-    assert finished == verified == n
+
+        def restart(proc, _endpoint) -> dict:
+            at, gone = rng.uniform(0.5, window_s), rng.uniform(0.1, 2.0)
+            time.sleep(at)
+            playing = proc.poll() is None  # a restart after the session's end tests nothing: say so
+            broker.drop_all()
+            broker.stop()
+            time.sleep(gone)
+            broker.start()
+            furhat.wait_for(lambda f: f.joins >= 2, timeout=10.0)
+            return {"furhat_joins": furhat.joins, "restart_at_s": round(at, 2), "broker_gone_s": round(gone, 2), "restart_mid_session": playing}
+
+        try:
+            return one_session(tmp_path, f"restart{i}", i, robot_url=f"iristk://127.0.0.1:{broker.port}",
+                               during=restart)
+        finally:
+            furhat.close()
+            broker.stop()
+
+    runs = in_parallel(run, n)
+    summary("broker_restarts", runs, mid_session=sum(r["restart_mid_session"] for r in runs))
+    assert all(r["finished"] and r["verified"] for r in runs)
 
 
 def test_sigterm_exit_times_in_every_state(tmp_path):
