@@ -15,12 +15,12 @@ and defaults to the human-phase schedules of thesis 7.2 (cli/session.py).
 from __future__ import annotations
 
 import argparse
-import logging
 import sys
 import threading
 from pathlib import Path
 
 from pairplay.schemas.policy import PolicyFileError
+from pairplay.services.recorder import check_new_recording
 from pairplay.services.bus import LOOPBACK_ANY_PORT, MODES, BusOptions, stop_on_signals
 
 from pairplay.cli.robot import add_robot_arguments, check_robot_args, robot_choice
@@ -31,7 +31,8 @@ LOOPBACK = "127.0.0.1"
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     add_config_arguments(p)
-    p.add_argument("--out", default="recordings", help="directory of the recording (default recordings/)")
+    p.add_argument("--out", default="recordings", help="directory of the recording (default recordings/); a session whose recording "
+                   "(<session>.mcap or <session>.<k>.mcap) exists there is refused")
     w = p.add_argument_group("web server")
     w.add_argument("--listen", default=f"{LOOPBACK}:0", metavar="HOST:PORT",
                    help="where the pages are served (default 127.0.0.1:0: loopback, a free port)")
@@ -55,7 +56,6 @@ def parse_listen(text: str) -> tuple[str, int]:
 
 
 def run(args: argparse.Namespace) -> int:
-    logging.basicConfig(level=logging.WARNING, format="%(levelname)s %(name)s: %(message)s")
     try:
         if not args.participant.startswith("human:"):
             raise ValueError(f"--participant {args.participant!r}: the lab is for a person (human:<id>); "
@@ -69,8 +69,8 @@ def run(args: argparse.Namespace) -> int:
             if f and not Path(f).is_file():
                 raise ValueError(f"{f}: no such file")
         out = Path(args.out) / f"{config.session}.mcap"
-        if out.exists():
-            raise ValueError(f"{out} exists: choose another --session (recordings are never replaced)")
+        # a person's recording is never replaced: no --force here
+        check_new_recording(out, hint="choose another --session (a person's recording is never replaced)")
     except (ValueError, KeyError, PolicyFileError) as err:
         print(f"pairplay lab: {err}", file=sys.stderr)
         return 2
@@ -109,12 +109,13 @@ def run(args: argparse.Namespace) -> int:
 
     recorded = read_log(path)
     fold = fold_events(r.event for r in recorded.events)
-    print(f"recorded {len(recorded.events)} events to {path}")
     e = fold.ended
-    if e is None and fold.config is None and getattr(stop, "why", ""):
-        # a signal before the game started the session: nothing was played, so nothing is ended
-        print(f"interrupted ({stop.why}) before the session started; {len(recorded.events)} events in {path}")
+    if getattr(stop, "why", ""):  # a signal: ONE line, as `pairplay session`
+        when = "before the session started" if fold.config is None else \
+            f"after {len(fold.rounds)} of {config.rounds} rounds"
+        print(f"interrupted ({stop.why}) {when}; recorded {len(recorded.events)} events to {path}")
         return 0
+    print(f"recorded {len(recorded.events)} events to {path}")
     ended = "no SessionEnded recorded" if e is None else e.reason + (f" ({e.detail})" if e.detail else "")
     print(f"rounds played: {len(fold.turns_per_round())} of {config.rounds}; rejections: {len(fold.rejections)}; "
           f"ended: {ended}")

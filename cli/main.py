@@ -7,6 +7,12 @@ system refused); Ctrl-C is one line and exit 130. Anything else is a bug of
 ours and keeps its traceback. Every option's help shows its default
 (HelpFormatter, applied to every verb here).
 
+Logging, the same for every verb: warnings and errors only by default, `-v/--verbose`
+adds the INFO lines (what the services do), `-q/--quiet` leaves nothing but
+errors (and no progress bars); a verb's results go to stdout either way. The
+options stand after the verb or after its action (`pairplay protocol check
+FILE -v`); `configure_logging` sets them for the run.
+
 Each verb lives in its own module with `add_arguments(parser)` and
 `run(args) -> int`; it is imported only when used, so `pairplay --help` and a
 verb's start-up stay fast. To add a verb, add one line to VERBS.
@@ -18,6 +24,7 @@ import argparse
 import atexit
 import contextlib
 import importlib
+import logging
 import os
 import sys
 import threading
@@ -64,7 +71,16 @@ class HelpFormatter(argparse.HelpFormatter):
 
 
 class Parser(argparse.ArgumentParser):
-    """argparse, with a usage mistake on ONE line: `pairplay <verb>: <what>`, exit 2."""
+    """argparse, with a usage mistake on ONE line: `pairplay <verb>: <what>`, exit 2.
+
+    An unrecognized argument is reported by the innermost parser that met it (`pairplay protocol
+    check: unrecognized arguments: --bogus`), not by the top one, which is where argparse says it."""
+
+    def parse_known_args(self, args=None, namespace=None):
+        namespace, extra = super().parse_known_args(args, namespace)
+        if extra and not hasattr(namespace, "_usage_parser"):  # the innermost parser returns first
+            namespace._usage_parser = self
+        return namespace, extra
 
     def error(self, message: str):
         self.exit(2, f"{self.prog}: {message} (see {self.prog} --help)\n")
@@ -78,9 +94,45 @@ def build_parser(argv: list[str]) -> tuple[argparse.ArgumentParser, argparse.Arg
     for verb, (module, help_text) in VERBS.items():
         p = sub.add_parser(verb, help=help_text, description=help_text, formatter_class=HelpFormatter)
         if verb in argv[:1]:
+            add_log_options(p)
             importlib.import_module(module).add_arguments(p)
+            for action in p._actions:  # a verb's actions (protocol check, participant export) take them too
+                if isinstance(action, argparse._SubParsersAction):
+                    for nested in action.choices.values():
+                        add_log_options(nested, argparse.SUPPRESS)
             chosen = p
     return parser, chosen
+
+
+def add_log_options(p: argparse.ArgumentParser, default=False) -> None:
+    """-v/--verbose and -q/--quiet (module rule); `default` SUPPRESS on a verb's action, so an
+    option given before the action is not reset by it."""
+    g = p.add_argument_group("output").add_mutually_exclusive_group()
+    g.add_argument("-v", "--verbose", action="store_true", default=default,
+                   help="also log what the services do (INFO)")
+    g.add_argument("-q", "--quiet", action="store_true", default=default,
+                   help="log nothing but errors; no progress bars")
+
+
+LOG_FORMAT = "%(levelname)s %(name)s: %(message)s"
+_handler: logging.Handler | None = None
+
+
+def configure_logging(verbose: bool, quiet: bool) -> int:
+    """Send log records of the chosen level and above to stderr (module rule); return the level.
+    One handler of ours on the root logger, replaced on each call (tests call `main` many times)."""
+    global _handler
+    level = logging.INFO if verbose else logging.ERROR if quiet else logging.WARNING
+    root = logging.getLogger()
+    if _handler is not None:
+        root.removeHandler(_handler)
+    _handler = logging.StreamHandler(sys.stderr)
+    _handler.setLevel(level)
+    _handler.setFormatter(logging.Formatter(LOG_FORMAT))
+    root.addHandler(_handler)
+    if root.getEffectiveLevel() > level:
+        root.setLevel(level)
+    return level
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -143,10 +195,13 @@ def _threads_left() -> bool:
 
 def _main(argv: list[str]) -> int:
     parser, _ = build_parser(argv)
-    args = parser.parse_args(argv)
+    args, extra = parser.parse_known_args(argv)
+    if extra:  # said by the parser of the verb (or its action) that met them, naming it
+        args._usage_parser.error(f"unrecognized arguments: {' '.join(extra)}")
     if not args.verb:
         parser.print_help()
         return 2
+    configure_logging(args.verbose, args.quiet)
     module = importlib.import_module(VERBS[args.verb][0])
     try:
         return int(module.run(args) or 0)

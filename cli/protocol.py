@@ -15,7 +15,6 @@ game; `--pilot p02=blind` lets personas play some participants' games.
 from __future__ import annotations
 
 import argparse
-import logging
 import sys
 import time
 from pathlib import Path
@@ -199,7 +198,6 @@ def _serve(data: StudyData, args) -> int:
         pid, _, key = pair.partition("=")
         data.participant(pid)
         pilot[pid] = persona(key).key
-    logging.basicConfig(level=logging.WARNING, format="%(levelname)s %(name)s: %(message)s")
     stop = threading.Event()
     runners = []
     # a signal stops the running game at once, with its name and the shutdown's deadline (its recording finished)
@@ -250,7 +248,6 @@ def _pilot(data: StudyData, args) -> int:
                 check_choice(robot)
             except ValueError as err:
                 raise StudyDataError(str(err)) from None
-    logging.basicConfig(level=logging.WARNING, format="%(levelname)s %(name)s: %(message)s")
     t0 = time.perf_counter()
     stop, runners = threading.Event(), []
     # a signal stops the running game at once, with its name and the shutdown's deadline; no step after it

@@ -13,7 +13,6 @@ takes (add_robot_arguments, check_robot_args, bridge_from_args).
 from __future__ import annotations
 
 import argparse
-import logging
 import socket
 import threading
 
@@ -72,9 +71,6 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    # --try prints its own lines; a session's bridge logs what it does
-    level = logging.WARNING if args.try_codes else logging.INFO
-    logging.basicConfig(level=level, format="%(levelname)s %(name)s: %(message)s")
     if bool(args.session) == bool(args.try_codes):
         raise OptionError("give either --session ID (serve a session) or --try CODES (try the robot)", "pairplay robot")
     if args.robot == NO_ROBOT:

@@ -13,7 +13,6 @@ connect further processes to this one.
 from __future__ import annotations
 
 import argparse
-import logging
 import sys
 import threading
 import time
@@ -45,7 +44,6 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    logging.basicConfig(level=logging.INFO, format=f"%(levelname)s {args.service}: %(message)s")
     stop = threading.Event()
     stop_on_signals(stop)
     config = None
@@ -62,9 +60,15 @@ def run(args: argparse.Namespace) -> int:
     try:
         print(f"listening {' '.join(bus.locators())}", flush=True)
         if args.service == "recorder":
-            from pairplay.services.recorder import Recorder
-            recorder = Recorder(bus, args.session, Path(args.out) / f"{args.session}.mcap",
-                                on_failure=lambda _why: stop.set())
+            from pairplay.services.recorder import Recorder, RecordingExists, latest_file, same_live_session
+            path = Path(args.out) / f"{args.session}.mcap"
+            earlier = latest_file(path)
+            # a recorder restarted within the live session continues its file; a new session's is refused
+            restart = earlier is not None and same_live_session(bus, args.session, earlier)
+            if earlier is not None and not restart:
+                raise RecordingExists(earlier, args.session, "no live session on the bus sent what it holds; "
+                                      "choose another --session (a recording is never replaced)")
+            recorder = Recorder(bus, args.session, path, on_failure=lambda _why: stop.set(), restart=restart)
             recorder.start()
             checked = 0.0
             try:

@@ -23,7 +23,6 @@ of 5 rounds by default; settings a person cannot satisfy are refused
 from __future__ import annotations
 
 import argparse
-import logging
 import sys
 import threading
 from datetime import datetime, timezone
@@ -40,14 +39,13 @@ from pairplay.outputs import check_folder
 from pairplay.schemas.policy import read_policy
 from pairplay.schemas.session import IGNORE_CLOCKS, OBSERVED_SOURCES, SessionConfig, learner_overrides, lspi_overrides
 
-from pairplay.cli.args import count, non_negative
+from pairplay.cli.args import add_force, count, non_negative
 from pairplay.core.geometry import PICKS_UNIT
 from pairplay.cli.robot import add_robot_arguments, check_robot_args, robot_choice
 from pairplay.services.bus import BusOpenError, ConfigFileError, add_bus_arguments, options_from_args, stop_on_signals
-from pairplay.services.recorder import RecordingFailed
+from pairplay.services.recorder import RecordingFailed, check_new_recording
 from pairplay.services.session import run_session
 
-log = logging.getLogger("pairplay.session")
 PRESETS = {"virtual": LearnerConfig, "human-phase1": LearnerConfig.human_phase1,
            "human-phase2": LearnerConfig.human_phase2}
 
@@ -145,8 +143,9 @@ def _config_from_args(args: argparse.Namespace) -> SessionConfig:
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     add_config_arguments(p)
-    p.add_argument("--out", default="recordings", help="folder of the recording (default recordings/; a "
-                   "recording is never replaced: an existing <session>.mcap gets a .1, .2 ... beside it)")
+    p.add_argument("--out", default="recordings", help="folder of the recording (default recordings/); a session "
+                   "whose recording (<session>.mcap or <session>.<k>.mcap) exists there is refused unless --force")
+    add_force(p, "the session's existing recordings (<session>.mcap and <session>.<k>.mcap)")
     add_robot_arguments(p)
     p.add_argument("--external", action="append", default=[], choices=("learner", "participant", "game", "recorder", "robot"),
                    help="leave this service to another process (`pairplay run`)")
@@ -154,25 +153,25 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def print_interrupted(summary: dict, path: Path, why: str, rounds: int) -> int:
-    """What a session stopped by a signal says, from `summary` (run_session's): the process must be
-    gone within 2 s of the signal, so the file is not read back. Exit code 0 (as asked)."""
-    print(f"recorded {summary['events']} events to {path}"
+    """What a session stopped by a signal says, in ONE line, from `summary` (run_session's): the
+    process must be gone within 2 s of the signal, so the file is not read back. Exit code 0 (as asked)."""
+    when = (f"after {summary['rounds_played']} of {rounds} rounds" if summary["started"]
+            else "before the session started")
+    print(f"interrupted ({why}) {when}; recorded {summary['events']} events to {path}"
           + (f" ({summary['unrecorded']} messages shed or unrecorded, counted in it)" if summary['unrecorded'] else ""))
-    if not summary["started"]:
-        print(f"interrupted ({why}) before the session started")
-    else:
-        print(f"ended: interrupted ({why}) after {summary['rounds_played']} of {rounds} rounds")
     return 0
 
 
 def run(args: argparse.Namespace) -> int:
-    logging.basicConfig(level=logging.INFO, format="%(levelname)s %(name)s: %(message)s")
     config = config_from_args(args)
     try:
         check_robot_args(args)
     except ValueError as err:
         raise OptionError(str(err), "robot options") from None
     check_folder(args.out)
+    path = Path(args.out) / f"{config.session}.mcap"
+    if "recorder" not in args.external:  # an external recorder checks its own folder
+        check_new_recording(path, args.force)
     stop = threading.Event()
     stop_on_signals(stop)
 
@@ -186,7 +185,7 @@ def run(args: argparse.Namespace) -> int:
         bus_options = options_from_args(args, default_mode="router")
         bus_options.to_dict()  # a bad --zenoh-config is the user's mistake: one line, before anything starts
         summary: dict = {}
-        path = run_session(config, Path(args.out) / f"{config.session}.mcap", bus_options=bus_options,
+        path = run_session(config, path, bus_options=bus_options,
                            external=tuple(args.external), stop=stop, on_bus=announce, summary=summary,
                            robot=None if "robot" in args.external else robot_choice(args))
     except (ConfigFileError, BusOpenError) as err:
@@ -211,10 +210,6 @@ def run(args: argparse.Namespace) -> int:
     print(f"rejections: {len(fold.rejections)}; Q updates: {fold.counts.get('QUpdated', 0)}"
           + (f"; LSPI samples: {fold.counts.get('LSPIUpdated', 0)}" if config.algorithm == "lspi" else ""))
     e = fold.ended
-    if e is None and fold.config is None and getattr(stop, "why", ""):
-        # a signal before the game started the session: nothing was played, so nothing is ended
-        print(f"interrupted ({stop.why}) before the session started")
-        return 0
     if e is None:
         print("ended: no SessionEnded recorded")
     elif e.reason != "completed":

@@ -56,7 +56,6 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     add_force(p, "the files of an existing report folder")
     p.add_argument("--train-only", action="store_true",
                    help="stop after training: policy files, curves and figure 6.4 only (for sweeps)")
-    p.add_argument("--quiet", action="store_true", help="no progress bars")
 
 
 def _bar(quiet: bool):

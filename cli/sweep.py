@@ -4,7 +4,8 @@ Rule: the grid file says what is fixed ([study]), what is swept ([grid]) and
 the seeds; results land in --out (default out/sweep-<grid name>): cells/ (one
 JSON per finished cell), sweep.csv, cells.csv, figures/, sweep.md. Running
 the same grid into the same folder resumes: finished cells are not computed
-again. A folder that holds another grid's sweep is refused unless --force.
+again. A folder that holds another grid's sweep, or files but no sweep, is
+refused unless --force; an --out that is a file is refused before any work.
 `--scheduler tcp://HOST:PORT` runs the cells on a Dask distributed cluster.
 """
 
@@ -16,6 +17,8 @@ from pathlib import Path
 
 from tqdm import tqdm
 
+from pairplay.errors import OutputError
+from pairplay.outputs import check_folder
 from pairplay.report.sweep import GridError, finished_cells, read_grid, run_sweep, write_sweep
 
 
@@ -24,8 +27,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--out", type=Path, help="result folder (default out/sweep-<grid file name>)")
     p.add_argument("--scheduler", metavar="ADDRESS", help="a Dask distributed scheduler (tcp://host:port)")
     p.add_argument("--workers", type=int, default=1, help="local processes when no --scheduler (default 1)")
-    p.add_argument("--force", action="store_true", help="replace a folder that holds another grid's sweep")
-    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    p.add_argument("--force", action="store_true", help="replace a folder that holds another grid's sweep, or write into one that holds other files")
 
 
 def run(args) -> int:
@@ -37,9 +39,12 @@ def run(args) -> int:
     if args.workers < 1:
         print(f"pairplay sweep: --workers {args.workers}: give at least 1", file=sys.stderr)
         return 2
-    out = args.out or Path("out") / f"sweep-{args.grid.stem}"
+    out = check_folder(args.out or Path("out") / f"sweep-{args.grid.stem}")
     copy = out / "grid.toml"
     text = args.grid.read_text()
+    if out.is_dir() and any(out.iterdir()) and not copy.exists() and not args.force:  # not a sweep's folder
+        raise OutputError("holds files but no sweep (no grid.toml); give another --out, or --force to write "
+                          "the sweep's files there", out)
     if copy.exists() and copy.read_text() != text and not args.force:
         print(f"pairplay sweep: {out} holds the sweep of another grid ({copy}); give another --out or --force",
               file=sys.stderr)

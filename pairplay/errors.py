@@ -12,6 +12,8 @@ imports this).
 
 from __future__ import annotations
 
+import re
+
 
 class UserError(Exception):
     """A mistake the user can fix. `str(err)` says what, `err.where` says where ('' if nowhere)."""
@@ -22,9 +24,10 @@ class UserError(Exception):
         self.where = str(where) if where not in (None, "") else ""
 
     def line(self) -> str:
-        """What and where, on one line."""
+        """What and where, on one line: `where` is added unless the text names it already, as a
+        whole name (a folder `here` is not named by "there", nor `out` by "out/study")."""
         text = " ".join(self.what.split())
-        return f"{text} ({self.where})" if self.where and self.where not in text else text
+        return f"{text} ({self.where})" if self.where and not names(text, self.where) else text
 
     __str__ = line  # wherever it is shown (a log, an event's error field), it says where
 
@@ -39,3 +42,8 @@ class OutputError(UserError):
 
 class OptionError(UserError, ValueError):
     """An option's value is out of its range or meaningless with the others."""
+
+
+def names(text: str, where: str) -> bool:
+    """Whether `text` holds `where` as a whole name: not inside a longer word, path or option."""
+    return re.search(rf"(?<![\w./-]){re.escape(where)}(?![\w/-]|\.\w)", text) is not None

@@ -22,6 +22,7 @@ import msgspec
 from pairplay.errors import InputError
 
 from .config import REWARD_BONUS_RULES, UNSTATED_REWARD_BONUS, LearnerConfig, LSPIConfig, Persona
+from .jsonfile import JsonFileKind
 
 FORMAT = "pairplay.policy"
 VERSION = 1
@@ -91,37 +92,6 @@ class PolicyFile(msgspec.Struct, frozen=True, kw_only=True):
             raise PolicyFileError(f"a merged policy names one rule per state ({N_STATES})")
 
 
-_encoder = msgspec.json.Encoder()
-_decoder = msgspec.json.Decoder(PolicyFile)
-
-
-def encode_policy(policy: PolicyFile) -> bytes:
-    return msgspec.json.format(_encoder.encode(policy), indent=1) + b"\n"
-
-
-def decode_policy(data: bytes, source: str = "policy file") -> PolicyFile:
-    """Parse and check a policy file; PolicyFileError with the reason otherwise."""
-    try:
-        return _decoder.decode(data)
-    except PolicyFileError as exc:
-        raise PolicyFileError(f"{source}: {exc}") from None
-    except (msgspec.ValidationError, msgspec.DecodeError) as exc:
-        raise PolicyFileError(f"{source}: corrupt or not a policy file: {exc}") from None
-
-
-def write_policy(path, policy: PolicyFile, force: bool = False) -> None:
-    """Write a policy file atomically (a crash never leaves half a policy); an existing
-    file is replaced only with `force` (OutputError otherwise; pairplay.outputs)."""
-    from pairplay.outputs import write_bytes
-
-    write_bytes(path, encode_policy(policy), force)
-
-
-def read_policy(path) -> PolicyFile:
-    from pathlib import Path
-
-    try:
-        data = Path(path).read_bytes()
-    except OSError as exc:
-        raise PolicyFileError(f"{path}: cannot read: {exc.strerror}") from None
-    return decode_policy(data, str(path))
+FILE = JsonFileKind(PolicyFile, PolicyFileError, "policy file")  # schemas/jsonfile.py
+# decode (data, source), write (path, value, force=False), read (path): the codec, by the names callers know
+encode_policy, decode_policy, write_policy, read_policy = FILE.encode, FILE.decode, FILE.write, FILE.read

@@ -21,6 +21,7 @@ import msgspec
 from pairplay.errors import InputError
 
 from .config import Persona
+from .jsonfile import JsonFileKind
 
 FORMAT = "pairplay.usermodel"
 VERSION = 1
@@ -93,37 +94,6 @@ class UserModelFile(msgspec.Struct, frozen=True, kw_only=True):
                 raise UserModelFileError(f"{name}: a feature has a level 1..6 and a profile of 6 values")
 
 
-_encoder = msgspec.json.Encoder()
-_decoder = msgspec.json.Decoder(UserModelFile)
-
-
-def encode_user_model(model: UserModelFile) -> bytes:
-    return msgspec.json.format(_encoder.encode(model), indent=1) + b"\n"
-
-
-def decode_user_model(data: bytes, source: str = "user-model file") -> UserModelFile:
-    """Parse and check a user-model file; UserModelFileError with the reason otherwise."""
-    try:
-        return _decoder.decode(data)
-    except UserModelFileError as exc:
-        raise UserModelFileError(f"{source}: {exc}") from None
-    except (msgspec.ValidationError, msgspec.DecodeError, ValueError) as exc:
-        raise UserModelFileError(f"{source}: corrupt or not a user-model file: {exc}") from None
-
-
-def write_user_model(path, model: UserModelFile, force: bool = False) -> None:
-    """Write a user-model file atomically; an existing file is replaced only with `force`
-    (OutputError otherwise; pairplay.outputs)."""
-    from pairplay.outputs import write_bytes
-
-    write_bytes(path, encode_user_model(model), force)
-
-
-def read_user_model(path) -> UserModelFile:
-    from pathlib import Path
-
-    try:
-        data = Path(path).read_bytes()
-    except OSError as exc:
-        raise UserModelFileError(f"{path}: cannot read: {exc.strerror}") from None
-    return decode_user_model(data, str(path))
+FILE = JsonFileKind(UserModelFile, UserModelFileError, "user-model file")  # schemas/jsonfile.py
+# decode (data, source), write (path, value, force=False), read (path): the codec, by the names callers know
+encode_user_model, decode_user_model, write_user_model, read_user_model = FILE.encode, FILE.decode, FILE.write, FILE.read

@@ -24,7 +24,6 @@ done steps, the combination and the report.
 
 from __future__ import annotations
 
-import logging
 import secrets
 import threading
 import time
@@ -47,11 +46,10 @@ from pairplay.schemas.session import SessionConfig, learner_overrides
 
 from pairplay.services.bus import Bus, pass_stop, shutdown_wait
 from pairplay.services.combiner import CombinerLogic
+from pairplay.services.recorder import RecordingExists, check_new_recording
 from pairplay.services.robot.choice import NO_ROBOT, RobotChoice
 from pairplay.services.runner import Node
 from pairplay.services.session import run_session
-
-log = logging.getLogger("pairplay.protocol")
 
 
 @dataclass
@@ -163,6 +161,10 @@ class StudyRunner:
             config = self.config_for(pid, phase_id, game)
             phase = self.data.study.phase_by_id(phase_id)
             recording = f"recordings/{config.session}.mcap"
+            try:  # a recording the journal does not know (a copied folder, a game cut before its journal line)
+                check_new_recording(self.data.folder / recording, hint="the journal does not list it; move it away")
+            except RecordingExists as err:
+                raise StudyDataError(err.line()) from None
             combined = self.data.state.combined.get(phase_id)
             self.data.append(j.GameStarted(participant=pid, phase=phase_id, game=game, session=config.session,
                                            recording=recording, bias=combined.output if combined else ""))
@@ -254,7 +256,6 @@ class StudyRunner:
         return self.data.state.games[config.session]
 
     def _finish(self, config: SessionConfig, path: Path, answered: bool) -> Game:
-        rel = path.relative_to(self.data.folder).as_posix()
         recorded = read_log(path)
         fold = fold_events(r.event for r in recorded.events)
         completed = fold.ended is not None and fold.ended.reason == "completed"
@@ -270,8 +271,6 @@ class StudyRunner:
         self.data.append(j.GameEnded(session=config.session, participant=config.participant.split(":", 1)[1],
                                      outcome="completed" if completed else "aborted", reason=reason,
                                      rounds_played=len(fold.rounds), policy=policy, questionnaire=answered))
-        if rel != self.data.state.games[config.session].recording:  # a free_path() rename
-            log.warning("recording written to %s", rel)
         self.data.write_tables()
         return self.data.state.games[config.session]
 

@@ -15,11 +15,18 @@ deadline; what is still queued then is counted and recorded, not waited for. The
 go into MCAP metadata ("pairplay.session") when SessionStarted passes, the
 recorder's own into "pairplay.recorder". It answers restarting services with
 the log so far (`pairplay/<session>/_query/recorder/log`, msgpack batches).
+
+A session id is taken once it has a recording: a NEW session whose recording
+(`<session>.mcap` or any `<session>.<k>.mcap`) exists is refused before anything
+starts (RecordingExists, `check_new_recording`); only a recorder restarted
+within the same live session (`same_live_session`: the services on the bus now
+sent the very events the earlier file holds) continues it.
 """
 
 from __future__ import annotations
 
 import logging
+import re
 import threading
 import time
 from pathlib import Path
@@ -28,6 +35,7 @@ from typing import Callable
 import msgspec
 
 from pairplay import __version__
+from pairplay.errors import OutputError
 from pairplay.replay.writer import FLUSH_INTERVAL_NS, LOSS_BOUND_NS, EventLogWriter
 from pairplay.schemas.events import RecordingGap, SessionStarted, decode_event, encode_event
 from pairplay.schemas.envelope import Nanos, stamped
@@ -45,27 +53,103 @@ FINISH_S = 0.25  # of a close's time, kept to finish the file (end metadata, sum
 UNRECORDED_AT_EXIT = "still queued when the recording stopped"
 BATCH_S = 0.02  # a backlog is written in batches of at most this long, each flushed once (step)
 BACKLOG_METADATA = "pairplay.recorder.backlog"  # a flush older than the loss bound (_note_backlog)
+FORCE_SESSION_HINT = "choose another --session, or --force to replace its recordings"
+
+
+def recordings_of(path: Path) -> list[Path]:
+    """A session's existing recordings: `path` and every `<stem>.<k>.mcap` beside it (k = 1, 2 ...),
+    in that order (gaps in k allowed: any of them makes the session id taken)."""
+    path = Path(path)
+    numbered = []
+    if path.parent.is_dir():
+        for p in path.parent.glob(f"{glob_escape(path.stem)}.*{glob_escape(path.suffix)}"):
+            k = p.name[len(path.stem) + 1:len(p.name) - len(path.suffix)]
+            if k.isascii() and k.isdigit():
+                numbered.append((int(k), p))
+    return ([path] if path.exists() else []) + [p for _, p in sorted(numbered)]
+
+
+def glob_escape(text: str) -> str:
+    return re.sub(r"([*?\[])", r"[\1]", text)
 
 
 def latest_file(path: Path) -> Path | None:
     """The newest existing file of a session: `path` or its highest `<stem>.<n>.mcap`."""
-    latest, n = (path if path.exists() else None), 1
-    while True:
-        candidate = path.with_name(f"{path.stem}.{n}{path.suffix}")
-        if not candidate.exists():
-            return latest
-        latest, n = candidate, n + 1
+    found = recordings_of(path)
+    return found[-1] if found else None
 
 
 def free_path(path: Path) -> Path:
-    """`path`, or `<stem>.<n>.mcap` if it exists: a recording is never overwritten
+    """`path`, or `<stem>.<n>.mcap` past every existing one: a recording is never overwritten
     (a recorder restarted after a crash must not destroy what the crash left)."""
-    n = 1
-    candidate = path
-    while candidate.exists():
-        candidate = path.with_name(f"{path.stem}.{n}{path.suffix}")
-        n += 1
-    return candidate
+    latest = latest_file(path)
+    if latest is None:
+        return path
+    n = 1 if latest == path else int(latest.name[len(path.stem) + 1:len(latest.name) - len(path.suffix)]) + 1
+    return path.with_name(f"{path.stem}.{n}{path.suffix}")
+
+
+class RecordingExists(OutputError):
+    """A NEW session's recording (`<session>.mcap` or a `<session>.<k>.mcap`) is there already: the
+    session id is taken. Only a recorder restarted within the same live session continues a file
+    (Recorder's `restart`); a new session with that id would be recorded into the old session's file,
+    its start refused as a repeat (the hang of the new-user trial)."""
+
+    def __init__(self, existing: Path, session: str, hint: str = FORCE_SESSION_HINT):
+        super().__init__(f"session {session} has a recording already; {hint}", existing)
+        self.existing = existing
+
+
+def check_new_recording(path: str | Path, force: bool = False, hint: str = FORCE_SESSION_HINT) -> Path:
+    """`path` for a new session's recording, refused (RecordingExists, naming the file) if the session
+    has a recording already; with `force` the session's old recordings are removed first (call it
+    before anything starts, after every other check of the options)."""
+    path = Path(path)
+    existing = recordings_of(path)
+    if existing and not force:
+        raise RecordingExists(existing[0], path.stem, hint)
+    for p in existing:
+        p.unlink()
+    return path
+
+
+def same_live_session(bus: Bus, session: str, earlier: Path, timeout_s: float = 3.0) -> bool:
+    """Whether the services of `session` on the bus now are the ones `earlier` recorded: each one that
+    answers (SENT_QUERY) sent, under the sequence number of its first event in the file, the very bytes
+    the file holds (a ServiceStarted carries its service's start time, so a new session that reuses the
+    id differs). False if the file holds no event of another service, or nobody answers."""
+    from mcap.records import Channel, Message
+    from pairplay.replay.reader import iter_records
+    topics: dict[int, str] = {}
+    first: dict[str, tuple[int, bytes]] = {}
+    try:
+        for record in iter_records(earlier):
+            if isinstance(record, Channel):
+                topics[record.id] = record.topic
+            elif isinstance(record, Message) and record.channel_id in topics:
+                source = topics[record.channel_id].split("/")[2] if topics[record.channel_id].count("/") == 3 else ""
+                if source and source != Recorder.name:
+                    seq = decode_event(record.data).seq
+                    if source not in first or seq < first[source][0]:
+                        first[source] = (seq, record.data)
+    except Exception as err:  # a crash's cut: what was read before it is enough to compare
+        log.info("recorder: %s ends early (%s)", earlier, err)
+    if not first:
+        return False
+    after = ",".join(f"{s}:{seq - 1}" for s, (seq, _) in sorted(first.items()))
+    answered = 0
+    for payload in bus.query(f"{query_key(session, '*', SENT_QUERY)}?after={after}", timeout_s):
+        try:
+            name, items = msgspec.msgpack.decode(payload, type=tuple[str, list[tuple[str, bytes]]])
+        except msgspec.DecodeError:
+            continue
+        if name not in first:
+            continue  # a service that joined after the earlier file stopped: nothing to compare
+        seq, data = first[name]
+        if not any(p == data for _, p in items[:1]):
+            return False
+        answered += 1
+    return answered > 0
 
 
 class RecordingFailed(Exception):
@@ -80,8 +164,14 @@ class Recorder:
     name = "recorder"
 
     def __init__(self, bus: Bus | None, session: str, path: str | Path, *, clock: Callable[[], int] = time.time_ns,
-                 flush_interval_ns: int = FLUSH_INTERVAL_NS, on_failure: Callable[[str], None] | None = None):
-        earlier = latest_file(Path(path))
+                 flush_interval_ns: int = FLUSH_INTERVAL_NS, on_failure: Callable[[str], None] | None = None,
+                 restart: bool = False):
+        """A recorder of a NEW session refuses (RecordingExists) a `path` the session has recordings at
+        (`check_new_recording`); one `restart`ed within the same live session (`same_live_session`)
+        continues the newest of them in a file of its own (`free_path`)."""
+        earlier = latest_file(Path(path)) if restart else None
+        if not restart:
+            check_new_recording(path)
         self.bus, self.session, self.path, self.clock = bus, session, free_path(Path(path)), clock
         self.path.parent.mkdir(parents=True, exist_ok=True)
         self.on_failure = on_failure

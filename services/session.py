@@ -23,7 +23,9 @@ from pathlib import Path
 
 import logging
 
-from pairplay.schemas.keys import alive_key
+from pairplay.errors import UserError
+from pairplay.schemas.events import MessageRejected, decode_event
+from pairplay.schemas.keys import alive_key, event_key
 from pairplay.schemas.session import SessionConfig
 from pairplay.services.bus import CLOSE_TIMEOUT_S, Bus, BusOptions, Deadline, deadline_of
 from pairplay.services.game import GameLogic
@@ -34,6 +36,29 @@ from pairplay.services.robot.choice import RobotChoice, start_bridge
 from pairplay.services.runner import Node, Stopped, start_unless_stopped
 
 log = logging.getLogger("pairplay.session")
+
+
+class StartRefused(UserError):
+    """The recorder refused the game's SessionStarted (`reason`): nothing of the session can be recorded,
+    and the services that read the log would never see it start. The session is ended at once instead of
+    waiting for picks that cannot come (the new-user trial's 10-minute hang). `where`: the recording."""
+
+
+def watch_start_refused(bus: Bus, session: str, on_refused) -> object:
+    """Call `on_refused(reason)` (once, on a Zenoh thread: it must not wait) when a recorder publishes a
+    MessageRejected of the game's SessionStarted in `session`; returns the subscriber."""
+    started_key = event_key(session, "game", "SessionStarted")
+    told = []
+
+    def seen(_key: str, payload: bytes) -> None:
+        try:
+            e = decode_event(payload)
+        except Exception:  # the recorder's own events; a stray payload is not ours to judge here
+            return
+        if isinstance(e, MessageRejected) and e.key == started_key and not told:
+            told.append(e.reason)
+            on_refused(e.reason)
+    return bus.subscribe(event_key(session, "recorder", "MessageRejected"), seen)
 
 
 def run_session(config: SessionConfig, path: str | Path, *, bus: Bus | None = None,
@@ -81,6 +106,8 @@ def run_session(config: SessionConfig, path: str | Path, *, bus: Bus | None = No
         needed.append("tracker")  # the eye tracker: without it no turn gets a suggestion
     nodes = []
     bridge = game = None
+    refused: list[str] = []  # the recorder refused the session's start: it ends at once (StartRefused)
+    watch_start_refused(bus, config.session, lambda reason: (refused.append(reason), stop.set()))
     try:
         if robot is not None:
             bridge = start_unless_stopped(lambda: start_bridge(bus, config.session, robot), stop, "robot")
@@ -145,6 +172,9 @@ def run_session(config: SessionConfig, path: str | Path, *, bus: Bus | None = No
                            rounds_played=game.logic.round if game is not None else 0)
     if failure is not None:
         raise RecordingFailed(failure, recorder.path)
+    if refused:
+        raise StartRefused(f"the recorder refused the session's start ({refused[0][:200]}); the session was "
+                           "stopped", recorder.path if recorder is not None else f"session {config.session}")
     return recorder.path if recorder is not None else Path(path)
 
 

@@ -2,13 +2,15 @@
 checks, refuses the rest with a reason, never overwrites a recording, and puts
 the session config into the file's metadata."""
 
+import pytest
+
 from pairplay.replay.reader import read_log
 from pairplay.schemas import events as ev
 from pairplay.schemas.envelope import stamped
 from pairplay.schemas.events import encode_event
 from pairplay.schemas.keys import event_key
 from pairplay.schemas.session import SessionConfig
-from pairplay.services.recorder import Recorder
+from pairplay.services.recorder import Recorder, RecordingExists
 
 
 def message(event, source="game", seq=1, session="r1"):
@@ -41,6 +43,8 @@ def test_the_recorder_keeps_good_messages_and_refuses_bad_ones(tmp_path):
 def test_a_recording_is_never_overwritten(tmp_path):
     first = Recorder(None, "r1", tmp_path / "r1.mcap")
     first.close()
-    second = Recorder(None, "r1", tmp_path / "r1.mcap")
+    with pytest.raises(RecordingExists):  # a new session: the id is taken
+        Recorder(None, "r1", tmp_path / "r1.mcap")
+    second = Recorder(None, "r1", tmp_path / "r1.mcap", restart=True)  # restarted within the live session
     second.close()
     assert first.path.name == "r1.mcap" and second.path.name == "r1.1.mcap"

@@ -1,0 +1,57 @@
+"""A versioned JSON file kind of ours (a policy file, a fitted-user file): one codec for all of them.
+
+Rule: a file is one msgspec Struct encoded as JSON with one-space indents and a
+final newline (keys in the Struct's order, floats in shortest round-trip form,
+so the same value gives the same bytes); it is written only through
+pairplay.outputs (atomic, no clobber without `force`); reading it either gives
+the whole checked value or raises the kind's own error (an InputError
+subclass) whose message starts with the file's name and says why, never a
+half-read value. The Struct's `__post_init__` checks `format` and `version`.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Generic, TypeVar
+
+import msgspec
+
+T = TypeVar("T")
+
+
+class JsonFileKind(Generic[T]):
+    """encode/decode/write/read of one file kind: `struct` (a msgspec Struct type), the `error` it
+    raises (InputError subclass), `what` names it in messages ("policy file")."""
+
+    def __init__(self, struct: type[T], error: type[Exception], what: str):
+        self.error, self.what = error, what
+        self._encoder = msgspec.json.Encoder()
+        self._decoder = msgspec.json.Decoder(struct)
+
+    def encode(self, value: T) -> bytes:
+        return msgspec.json.format(self._encoder.encode(value), indent=1) + b"\n"
+
+    def decode(self, data: bytes, source: str | None = None) -> T:
+        """Parse and check; the kind's error, starting with `source` (default: `what`), otherwise."""
+        source = source or self.what
+        try:
+            return self._decoder.decode(data)
+        except self.error as exc:
+            raise self.error(f"{source}: {exc}") from None
+        except (msgspec.ValidationError, msgspec.DecodeError, ValueError) as exc:
+            raise self.error(f"{source}: corrupt or not a {self.what}: {exc}") from None
+
+    def write(self, path, value: T, force: bool = False) -> None:
+        """Write atomically (a crash never leaves half a file); an existing file is replaced only
+        with `force` (OutputError otherwise; pairplay.outputs)."""
+        from pairplay.outputs import write_bytes
+
+        write_bytes(path, self.encode(value), force)
+
+    def read(self, path) -> T:
+        """The checked value of the file at `path`; the kind's error if it cannot be read or used."""
+        try:
+            data = Path(path).read_bytes()
+        except OSError as exc:
+            raise self.error(f"{path}: cannot read: {exc.strerror}") from None
+        return self.decode(data, str(path))

@@ -1,0 +1,42 @@
+"""Every usage mistake names its verb (and action): `pairplay session: unrecognized arguments: --bogus`.
+
+Before: argparse reported arguments no parser took from the top parser, as `pairplay: unrecognized
+arguments: --bogus`, whatever the verb."""
+
+from __future__ import annotations
+
+import pytest
+
+from pairplay.cli.main import VERBS, main
+
+# the least each verb (and action) parses without complaint, before --bogus
+MINIMAL = {
+    "study": [], "sweep": ["g.toml"], "bench": [], "profile": ["p.json"], "combine": ["p.json"], "view": [],
+    "run": ["learner"], "session": ["--participant", "sim:ashley"], "lab": ["--participant", "human:p1"],
+    "rebuild": ["r.mcap"], "replay": ["r.mcap"], "recover": ["r.mcap"], "counterfactual": ["r.mcap"],
+    "protocol": ["check", "s.toml"], "participant": ["delete", "folder", "p1"], "report": ["folder"], "robot": [],
+}
+
+
+def test_every_verb_has_its_case():
+    assert set(MINIMAL) == set(VERBS)
+
+
+@pytest.mark.parametrize("verb", list(VERBS))
+def test_an_unknown_option_is_refused_in_one_line_naming_the_verb(verb, capsys):
+    with pytest.raises(SystemExit) as end:
+        main([verb, *MINIMAL[verb], "--bogus", "1"])
+    assert end.value.code == 2
+    out, err = capsys.readouterr()
+    prog = " ".join(["pairplay", verb] + MINIMAL[verb][:1] * (verb in ("protocol", "participant")))
+    assert out == "" and err.strip().splitlines() == [
+        f"{prog}: unrecognized arguments: --bogus 1 (see {prog} --help)"], err
+
+
+def test_a_missing_argument_and_a_stray_one_at_the_top_still_say_who(capsys):
+    with pytest.raises(SystemExit):
+        main(["session"])
+    assert capsys.readouterr().err.startswith("pairplay session: the following arguments are required: --participant")
+    with pytest.raises(SystemExit):
+        main(["--bogus"])
+    assert capsys.readouterr().err.startswith("pairplay: unrecognized arguments: --bogus")

@@ -1,0 +1,118 @@
+"""A session id is taken once it has a recording: every verb that starts a new session refuses,
+before anything starts, an id whose `<id>.mcap` or any `<id>.<k>.mcap` exists (one line naming the
+file and the way out); only a recorder restarted within the same live session continues the file.
+Before: `pairplay session --session NAME` over an interrupted NAME's recording continued it into
+NAME.1.mcap, the recorder refused the new game's SessionStarted as a repeat and the process hung
+for ten minutes."""
+
+import threading
+
+import pytest
+
+from pairplay.cli.main import main
+from pairplay.replay.reader import read_log
+from pairplay.schemas import events as ev
+from pairplay.schemas.session import SessionConfig
+from pairplay.services.bus import Bus, BusOptions
+from pairplay.services.recorder import Recorder, RecordingExists, check_new_recording, recordings_of
+from pairplay.services.session import StartRefused, run_session
+
+from test_recorder import message
+
+
+def earlier_recording(path, session="dup"):
+    """A real (short) recording of an earlier `session`: the recorder's own file, a game's start in it."""
+    rec = Recorder(None, session, path)
+    cfg = SessionConfig(session=session, participant="sim:ashley", persona="ashley", seed=1, rounds=1)
+    key, payload = message(ev.SessionStarted(config=cfg), session=session)
+    assert rec.record(key.replace("/r1/", f"/{session}/"), payload, 1)
+    rec.close()
+    return path
+
+
+@pytest.mark.parametrize("name", ["dup.mcap", "dup.3.mcap"])
+@pytest.mark.parametrize("verb", ["session", "lab"])
+def test_a_new_session_over_an_existing_recording_is_refused_before_anything_starts(tmp_path, capsys, name, verb):
+    old = earlier_recording(tmp_path / name)
+    before = old.read_bytes()
+    who = "sim:ashley" if verb == "session" else "human:p1"
+    assert main([verb, "--participant", who, "--session", "dup", "--out", str(tmp_path)]) == 2
+    out, err = capsys.readouterr()
+    assert out == "" and len(err.strip().splitlines()) == 1, err
+    assert err.startswith(f"pairplay {verb}: ") and str(old) in err and "--session" in err
+    assert ("--force" in err) == (verb == "session")  # a person's recording is never replaced
+    assert sorted(p.name for p in tmp_path.iterdir()) == [name] and old.read_bytes() == before
+
+
+def test_force_replaces_every_earlier_recording_of_the_session(tmp_path, capsys):
+    earlier_recording(tmp_path / "dup.mcap")
+    earlier_recording(tmp_path / "dup.2.mcap")
+    assert main(["session", "--participant", "sim:ashley", "--rounds", "1", "--session", "dup", "--out",
+                 str(tmp_path), "--force"]) == 0
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["dup.mcap"]
+    log = read_log(tmp_path / "dup.mcap")
+    assert log.whole and log.metadata["pairplay.recorder.end"]["session_ended"] == "true"
+    assert not any(isinstance(r.event, (ev.RecordingGap, ev.MessageRejected)) for r in log.events)
+
+
+def test_every_numbered_recording_counts_and_is_found_past_gaps(tmp_path):
+    for name in ("s.mcap", "s.2.mcap", "s.10.mcap", "s.x.mcap", "s.1.mcap.tmp", "s2.mcap"):
+        (tmp_path / name).write_bytes(b"x")
+    assert [p.name for p in recordings_of(tmp_path / "s.mcap")] == ["s.mcap", "s.2.mcap", "s.10.mcap"]
+    (tmp_path / "s.mcap").unlink()
+    with pytest.raises(RecordingExists) as err:
+        check_new_recording(tmp_path / "s.mcap")
+    assert str(tmp_path / "s.2.mcap") in err.value.line()
+    # a recorder of a new session refuses too (whatever path its caller checked)
+    with pytest.raises(RecordingExists):
+        Recorder(None, "s", tmp_path / "s.mcap")
+
+
+def test_a_recorder_run_alone_over_a_recording_of_no_live_session_is_refused(tmp_path, capsys):
+    old = earlier_recording(tmp_path / "dup.mcap")
+    assert main(["run", "recorder", "--session", "dup", "--out", str(tmp_path)]) == 2
+    err = capsys.readouterr().err
+    assert len(err.strip().splitlines()) == 1 and str(old) in err and "no live session" in err, err
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["dup.mcap"]
+
+
+def test_a_refused_session_start_ends_the_session_at_once_instead_of_waiting_for_ever(tmp_path):
+    # the old bug's path, on purpose: a recorder that continues an earlier session's file refuses the
+    # new game's SessionStarted as a repeat; the game must not wait for picks that cannot come
+    earlier_recording(tmp_path / "dup.mcap")
+    config = SessionConfig(session="dup", participant="sim:ashley", persona="ashley", seed=1, rounds=20)
+    with Bus(BusOptions(mode="peer")) as bus:
+        recorder = Recorder(bus, "dup", tmp_path / "dup.mcap", restart=True)
+        recorder.start()
+        stop = threading.Event()
+        thread = threading.Thread(target=recorder.run, args=(stop,), daemon=True)
+        thread.start()
+        try:
+            with pytest.raises(StartRefused) as err:
+                run_session(config, tmp_path / "unused.mcap", bus=bus, external=("recorder",), settle_timeout_s=5)
+        finally:
+            stop.set()
+            thread.join(5)
+            recorder.close()
+    line = err.value.line()
+    assert "refused the session's start (a second SessionStarted" in line and "session dup" in line, line
+
+
+def test_a_study_game_over_a_recording_the_journal_does_not_know_is_refused(tmp_path):
+    from pairplay.replay.studydata import StudyData, StudyDataError
+    from pairplay.services.protocol import StudyRunner
+    from pairplay.services.scripted import ScriptedPlayer
+
+    from test_protocol import STUDY
+
+    data = StudyData.create(tmp_path / "s", STUDY)
+    pid = data.register("phase1")
+    stray = data.folder / "recordings" / f"{data.session_id(pid, 'phase1', 0)}.2.mcap"
+    stray.parent.mkdir(parents=True, exist_ok=True)
+    stray.write_bytes(b"a copied folder's file")
+    journal = (data.folder / "journal.jsonl").read_bytes()
+    with Bus(BusOptions()) as bus:
+        with pytest.raises(StudyDataError, match="has a recording already") as err:
+            StudyRunner(data, bus).run_game(pid, "phase1", 0, ScriptedPlayer("tatiana"))
+    assert str(stray) in str(err.value) and stray.read_bytes() == b"a copied folder's file"
+    assert (data.folder / "journal.jsonl").read_bytes() == journal  # nothing journaled: the game never started
