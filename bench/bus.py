@@ -212,7 +212,7 @@ def recorder_rows(n: int) -> list[dict]:
         raw = _spawn("pairplay.bench.bus", "rawrec", endpoint, f"{tmp}/raw.mcap", str(n))
         assert _wait(lambda: "bench/alive/rawrec" in bus.alive_now("bench/alive/*")), "raw recorder did not start"
         key = "bench/raw/participant/CardPicked"
-        assert _wait(lambda: bus.publisher(key).matching_status.matching)
+        assert _wait(lambda: bus.matching(key))
         t0 = _burst(bus, lambda s: key, n, session)
         raw.wait(60)
         with open(f"{tmp}/raw.mcap", "rb") as f:
@@ -223,7 +223,7 @@ def recorder_rows(n: int) -> list[dict]:
         try:
             assert _wait(lambda: alive_key(session, "recorder") in bus.alive_now(alive_key(session, "*")))
             key = event_key(session, "participant", "CardPicked")
-            assert _wait(lambda: bus.publisher(key).matching_status.matching)
+            assert _wait(lambda: bus.matching(key))
             t0 = _burst(bus, lambda s: key, n, session)
             end = stamped(ev.SessionEnded(), session=session, source="game", seq=1, time_ns=0)
             bus.put(event_key(session, "game", "SessionEnded"), encode_event(end))

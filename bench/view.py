@@ -187,9 +187,8 @@ def _publish_to(bus, payloads, command: list[str]) -> float:
     """Publish rate while `command` (a subscriber process) is attached; waits for it to match first."""
     proc = subprocess.Popen(command, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     try:
-        publisher = bus.publisher(payloads[0][0])
         deadline = time.monotonic() + 30
-        while not publisher.matching_status.matching:
+        while not bus.matching(payloads[0][0]):
             if time.monotonic() > deadline or proc.poll() is not None:
                 raise RuntimeError(f"subscriber {command[:3]} never matched the publisher")
             time.sleep(0.05)

@@ -42,6 +42,7 @@ VERBS: dict[str, tuple[str, str]] = {
     "combine": ("pairplay.cli.combine", "merge policy files into one policy (algorithm 4)"),
     "view": ("pairplay.cli.view", "watch a session live or a recording in rerun: board, suggestion, Q-table"),
     "run": ("pairplay.cli.run", "run one service (game, learner, participant, recorder, combiner) on the bus"),
+    "router": ("pairplay.cli.router", "a Zenoh router alone (the server host's hub); services connect as clients"),
     "session": ("pairplay.cli.session", "run a whole session over the bus, recorded to recordings/<session>.mcap"),
     "lab": ("pairplay.cli.lab", "a live session for a person: the touch-screen board, the robot, recorded"),
     "rebuild": ("pairplay.cli.rebuild", "fold recordings into policy files and learning curves"),

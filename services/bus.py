@@ -11,7 +11,27 @@ by key, so a key the file does not set keeps our value, never Zenoh's own
 given on the command line are laid over both. Several processes or hosts: one
 process is the router (`pairplay session`), the others its clients (Zenoh
 forwards between a router's clients, not between peers that only share a
-third peer: measured).
+third peer: measured). The router can be a process of its own (`pairplay router`,
+services/router.py) that every service reaches as a client.
+
+Surviving a restart of the router: Zenoh pub/sub keeps no history, so what is in
+flight when a client's router goes is lost. A recovering bus (`--recover`,
+`BusOptions.recovery`: the clients of a `pairplay router`) therefore publishes with Zenoh's advanced publishers (a
+cache of the last `cache_samples` messages per key, sequence numbers, a heartbeat
+with the last one every `HEARTBEAT_S`) and subscribes with advanced subscribers
+that ask a publisher's cache for what they did not get (on a gap, or on a
+heartbeat ahead of what came: a lost tail). The clients reconnect to the restarted
+router by themselves (retrying every 0.25-1 s) and the messages of the outage
+arrive then, in order per key, once each. What a cache no longer holds Zenoh
+reports as a miss (`subscribe(on_miss=...)`): each service records the count,
+and the recorder refills it from the publishers' own records (services/recorder.py).
+Measured choices: periodic heartbeats, because sporadic ones (sent only when the
+number changed) are lost with the outage and a lost tail then never came back;
+not periodic queries, which held deliveries up by seconds in a live session. A
+subscriber that joins late is sent what the caches hold (Zenoh's recovery of a
+publisher it has not heard from): a restarted service then got thousands of old
+messages again and a session stalled (measured), so recovery is not the default
+of every client, only of those behind a router of their own.
 
 No bus callback ever blocks (a callback that waits on a publish can wait on a
 peer that waits on it: the whole process froze, LIBRARY-NOTES). A callback only
@@ -47,6 +67,7 @@ from typing import Any, Callable
 
 import json5
 import zenoh
+import zenoh.ext
 
 from pairplay.errors import UserError
 
@@ -57,6 +78,9 @@ CLOSE_TIMEOUT_S = 0.5  # Bus.close waits this long for Zenoh, then leaves it to 
 EXIT_BUDGET_S = 2.0  # a process is gone this long after SIGINT/SIGTERM (issue 12)
 SHUTDOWN_S = 1.1  # its services stopped and its recording finished within this; the rest is the exit's
 signalled = ""  # the signal that stopped this process, if one did (stop_on_signals)
+CACHE_SAMPLES = 10_000  # per key, kept by a recovering publisher for subscribers that missed them (see rule)
+MISSED = "lost on the bus, no longer in the publisher's cache when the link came back"  # Inbox.lost's why
+HEARTBEAT_S = 0.25  # a recovering publisher tells its last sequence number this often (see rule)
 
 
 def safe_defaults(scouting_delay_ms: int = 100) -> dict[str, Any]:
@@ -131,6 +155,13 @@ class BusOptions:
     connect: list[str] = field(default_factory=list)
     zenoh_config: str | None = None  # a Zenoh JSON5 config file: TLS, access control, ...
     scouting_delay_ms: int = 100
+    recovery: bool = False  # advanced pub/sub (see rule): clients of a router that may restart (--recover)
+    cache_samples: int = CACHE_SAMPLES  # per key, with recovery
+
+    @property
+    def recovers(self) -> bool:
+        """Whether this bus publishes and subscribes so that a router's restart loses nothing."""
+        return self.recovery
 
     def where(self) -> str:
         """The options a failure to open the bus is about, as given on the command line."""
@@ -145,6 +176,8 @@ class BusOptions:
         cfg = safe_defaults(self.scouting_delay_ms)
         if self.mode == "client":
             cfg["listen"]["endpoints"] = []  # a client listens nowhere unless told
+        if self.recovers:  # back soon after a restarted router (Zenoh's own: 1 s, doubling up to 4 s)
+            cfg["connect"]["retry"] = {"period_init_ms": 250, "period_max_ms": 1000, "period_increase_factor": 1.5}
         if self.zenoh_config:
             cfg = overlay(cfg, read_config_file(self.zenoh_config))
         cfg["mode"] = self.mode
@@ -153,6 +186,8 @@ class BusOptions:
         if self.connect:
             cfg.setdefault("connect", {})["endpoints"] = list(self.connect)
         cfg.setdefault("adminspace", {})["enabled"] = True  # locators() reads the real endpoints there
+        if self.recovers:  # Zenoh's advanced publishers need timestamps on their samples
+            cfg.setdefault("timestamping", {})["enabled"] = True
         return cfg
 
     def to_zenoh(self) -> zenoh.Config:
@@ -174,6 +209,9 @@ def add_bus_arguments(parser: argparse.ArgumentParser) -> None:
                    help=f"endpoint to listen on, repeatable (default {LOOPBACK_ANY_PORT}: a free port)")
     g.add_argument("--connect", action="append", default=[], metavar="ENDPOINT",
                    help="endpoint to connect to, e.g. tcp/127.0.0.1:7447 (repeatable)")
+    g.add_argument("--recover", action="store_true",
+                   help="behind a `pairplay router` that may restart: Zenoh's advanced pub/sub (publisher caches, "
+                        "recovery of what an outage held up); every process of the session needs it")
     g.add_argument("--zenoh-config", metavar="FILE",
                    help="Zenoh JSON5 config (TLS, access control); laid over pairplay's safe defaults key by key")
 
@@ -183,7 +221,8 @@ def options_from_args(args: argparse.Namespace, default_mode: str = "peer") -> B
     is a client (Zenoh forwards between the clients of a router, not between peers
     that only share a third peer), and one that does not is `default_mode`."""
     mode = args.mode or ("client" if args.connect else default_mode)
-    return BusOptions(mode=mode, listen=args.listen, connect=list(args.connect or []), zenoh_config=args.zenoh_config)
+    return BusOptions(mode=mode, listen=args.listen, connect=list(args.connect or []), zenoh_config=args.zenoh_config,
+                      recovery=bool(getattr(args, "recover", False)))
 
 
 def source_of(key: str) -> str:
@@ -322,6 +361,13 @@ class Inbox:
             self._bytes = 0
         return n
 
+    def lost(self, source: str, why: str, n: int) -> None:
+        """Count `n` messages that never reached this inbox (lost on the bus: `Bus.subscribe`'s
+        `on_miss`) with what it shed, so the service records them the same way. Never waits."""
+        with self._cond:
+            self.shed[(source, why)] += n
+            self.shed_total += n
+
     def oldest_ns(self) -> int | None:
         with self._cond:
             return self._items[0][2] if self._items else None
@@ -428,9 +474,11 @@ class Bus:
         self.express = express
         self.session = session if session is not None else _open(self.options)
         self._publishers: dict[str, zenoh.Publisher] = {}
+        self._probes: dict[str, zenoh.Publisher] = {}  # matching() of a recovering bus
         self._lock = threading.Lock()
         self._declared: list = []
         self._closed = False
+        self.missed: Counter = Counter()  # publisher -> messages Zenoh reported lost for good (recovering bus)
 
     def publisher(self, key: str) -> zenoh.Publisher:
         pub = self._publishers.get(key)
@@ -438,26 +486,79 @@ class Bus:
             with self._lock:
                 pub = self._publishers.get(key)
                 if pub is None:
-                    pub = self.session.declare_publisher(key, congestion_control=zenoh.CongestionControl.BLOCK,
-                                                         express=self.express)
+                    if self.options.recovers:
+                        pub = zenoh.ext.declare_advanced_publisher(
+                            self.session, key, congestion_control=zenoh.CongestionControl.BLOCK, express=self.express,
+                            cache=zenoh.ext.CacheConfig(self.options.cache_samples),
+                            sample_miss_detection=zenoh.ext.MissDetectionConfig(heartbeat=HEARTBEAT_S, sporadic_heartbeat=None))
+                    else:
+                        pub = self.session.declare_publisher(key, congestion_control=zenoh.CongestionControl.BLOCK,
+                                                             express=self.express)
                     self._publishers[key] = pub
         return pub
+
+    def matching(self, key: str) -> bool:
+        """Whether a subscriber anywhere matches `key` now (Zenoh's matching status; a recovering
+        bus's advanced publishers have none, so a plain probe publisher on the key answers)."""
+        if not self.options.recovers:
+            return self.publisher(key).matching_status.matching
+        probe = self._probes.get(key)
+        if probe is None:
+            with self._lock:
+                probe = self._probes.get(key) or self.session.declare_publisher(key)
+                self._probes[key] = probe
+        return probe.matching_status.matching
 
     def put(self, key: str, payload: bytes) -> None:
         """Publish (may wait under congestion: call it from an Outbox or a test thread, never a callback)."""
         self.publisher(key).put(payload)
 
-    def subscribe(self, key_expr: str, callback: Callable[[str, bytes], None]):
+    def subscribe(self, key_expr: str, callback: Callable[[str, bytes], None],
+                  on_miss: Callable[[str, int], None] | None = None):
         """Call `callback(key, payload)` for every sample. The callback runs on a Zenoh
-        thread: it must not raise and must not wait (hand the sample to an Inbox)."""
+        thread: it must not raise and must not wait (hand the sample to an Inbox).
+        A recovering bus (see rule) calls `on_miss(publisher, n)` when Zenoh reports `n`
+        messages of a publisher (its Zenoh id) lost for good; the same rules apply to it.
+        Misses are also counted in `self.missed`."""
         def on_sample(sample: zenoh.Sample) -> None:
             try:
                 callback(str(sample.key_expr), sample.payload.to_bytes())
             except Exception:  # Zenoh only logs callback errors; say where it came from
                 log.exception("subscriber callback on %s failed", sample.key_expr)
-        sub = self.session.declare_subscriber(key_expr, on_sample)
+        if not self.options.recovers:
+            sub = self.session.declare_subscriber(key_expr, on_sample)
+            self._declared.append(sub)
+            return sub
+
+        def on_lost(miss) -> None:
+            try:
+                publisher = str(miss.source)
+                with self._lock:
+                    self.missed[publisher] += miss.nb
+                log.warning("%d messages on %s from %s lost on the bus", miss.nb, key_expr, publisher)
+                if on_miss is not None:
+                    on_miss(publisher, miss.nb)
+            except Exception:
+                log.exception("miss listener on %s failed", key_expr)
+        sub = zenoh.ext.declare_advanced_subscriber(
+            self.session, key_expr, on_sample,
+            recovery=zenoh.ext.RecoveryConfig(periodic_queries=None, heartbeat=True))
         self._declared.append(sub)
+        self._declared.append(sub.sample_miss_listener(on_lost))
         return sub
+
+    def on_router_link(self, callback: Callable[[bool, str], None]):
+        """Call `callback(up, router_zid)` when this session's link to a router opens or closes
+        (a restarted router: closed, then opened again). Runs on a Zenoh thread: must not wait."""
+        def on_event(event) -> None:
+            try:
+                if str(event.transport.whatami).lower().endswith("router"):
+                    callback(event.kind == zenoh.SampleKind.PUT, str(event.transport.zid))
+            except Exception:
+                log.exception("router link listener failed")
+        listener = self.session.info.declare_transport_events_listener(on_event)
+        self._declared.append(listener)
+        return listener
 
     def queryable(self, key_expr: str, on_query: Callable[[zenoh.Query], None]):
         """Hand each query on `key_expr` to `on_query`, which must not wait: it passes the
@@ -539,7 +640,7 @@ class Bus:
                     d.undeclare()
                 except Exception:  # already gone with its session
                     pass
-            for p in list(self._publishers.values()):
+            for p in list(self._publishers.values()) + list(self._probes.values()):
                 try:
                     p.undeclare()
                 except Exception:

@@ -21,12 +21,19 @@ A session id is taken once it has a recording: a NEW session whose recording
 starts (RecordingExists, `check_new_recording`); only a recorder restarted
 within the same live session (`same_live_session`: the services on the bus now
 sent the very events the earlier file holds) continues it.
+Behind a router that restarts (services/bus.py: Zenoh's advanced pub/sub recovers
+what the outage held up) the recorder records each outage of its link (metadata
+LINK_METADATA) and, once the link is back and Zenoh's recovery has had
+`RELINK_SETTLE_S`, or at once when Zenoh reports messages lost for good, asks the
+services for what they published after the last event of theirs it holds without
+a gap (the restarted recorder's refill): what Zenoh could not bring back is
+written then, and a RecordingGap (`earlier_file` "": this file) records it.
 """
 
 from __future__ import annotations
 
+import glob
 import logging
-import re
 import threading
 import time
 from pathlib import Path
@@ -41,7 +48,7 @@ from pairplay.schemas.events import RecordingGap, SessionStarted, decode_event, 
 from pairplay.schemas.envelope import Nanos, stamped
 from pairplay.schemas.keys import alive_key, event_key, query_key, session_keys
 
-from pairplay.services.bus import Bus, Deadline, Inbox, Outbox
+from pairplay.services.bus import MISSED, HEARTBEAT_S, Bus, Deadline, Inbox, Outbox
 from pairplay.services.guard import Guard, Refusals
 from pairplay.services.runner import LOG_QUERY, SENT_QUERY
 
@@ -62,15 +69,11 @@ def recordings_of(path: Path) -> list[Path]:
     path = Path(path)
     numbered = []
     if path.parent.is_dir():
-        for p in path.parent.glob(f"{glob_escape(path.stem)}.*{glob_escape(path.suffix)}"):
+        for p in path.parent.glob(f"{glob.escape(path.stem)}.*{glob.escape(path.suffix)}"):
             k = p.name[len(path.stem) + 1:len(p.name) - len(path.suffix)]
             if k.isascii() and k.isdigit():
                 numbered.append((int(k), p))
     return ([path] if path.exists() else []) + [p for _, p in sorted(numbered)]
-
-
-def glob_escape(text: str) -> str:
-    return re.sub(r"([*?\[])", r"[\1]", text)
 
 
 def latest_file(path: Path) -> Path | None:
@@ -190,6 +193,12 @@ class Recorder:
         self._overlap = 0
         self._backlog_noted_ns = -10**18
         self.continued: dict | None = None
+        self._link_lost_ns: int | None = None  # when the link to the router went, until the refill after it
+        self._refill_at: float | None = None  # monotonic time of the next refill (relink), if one is due
+        self._quiet_until_ns = 0
+        self._link_down = False
+        self._refills_left = REFILLS
+        self.links: list[dict] = []  # the outages recorded (LINK_METADATA)
         if earlier is not None:
             self._continue(earlier)
 
@@ -226,15 +235,20 @@ class Recorder:
             self.kept.append((key, payload))
         return True
 
-    def _contiguous(self) -> dict[str, int]:
-        """Per source, the last sequence number up to which the file has every event (a source's
-        events published before any recorder listened are asked for too)."""
+    def _seen(self) -> dict[str, set[int]]:
+        """Per source, the sequence numbers the file holds."""
         seen: dict[str, set[int]] = {}
         with self._lock:
             for key, _ in self.kept:
                 source = key.split("/")[2]
                 if source != self.name:
                     seen.setdefault(source, set()).add(decode_event(_).seq)
+        return seen
+
+    def _contiguous(self, seen: dict[str, set[int]] | None = None) -> dict[str, int]:
+        """Per source, the last sequence number up to which the file has every event (a source's
+        events published before any recorder listened are asked for too)."""
+        seen = self._seen() if seen is None else seen
         out = {}
         for source, seqs in seen.items():
             n = 0
@@ -243,13 +257,16 @@ class Recorder:
             out[source] = n
         return out
 
-    def refill(self, timeout_s: float = 3.0) -> None:
-        """Ask every service for what it published after the earlier file's last event of it,
-        write that (log time = its publish time), then record the gap (RecordingGap)."""
-        if self.continued is None or self.bus is None:
+    def refill(self, timeout_s: float = 3.0, since_ns: int | None = None) -> None:
+        """Ask every service for what it published after the file's last event of it without a gap
+        (a restarted recorder: the earlier file's), write that, then record the gap (RecordingGap).
+        `since_ns`: a gap in this file's own stream (the link to the router was down from then, or
+        Zenoh reported messages lost): recorded only if something had to be refilled."""
+        if (self.continued is None and since_ns is None) or self.bus is None:
             return
         resumed_ns = self.clock()
-        sources = self._contiguous()
+        seen = self._seen()
+        sources = self._contiguous(seen)
         after = ",".join(f"{s}:{n}" for s, n in sorted(sources.items()))
         answered, refilled = [], 0
         for payload in self.bus.query(f"{query_key(self.session, '*', SENT_QUERY)}?after={after}", timeout_s):
@@ -264,14 +281,46 @@ class Recorder:
                     event = decode_event(data)
                 except (msgspec.DecodeError, msgspec.ValidationError):
                     continue
-                refilled += self.record(key, data, self.clock(), quiet=True)
+                if self.record(key, data, self.clock(), quiet=True):
+                    refilled += 1
+                elif event.seq not in seen.get(event.source, ()) and self._fill_hole(key, data):
+                    refilled += 1  # below what came live on its key since: a hole Zenoh did not close
+                seen.setdefault(event.source, set()).add(event.seq)
         self._overlap = len(self.inbox)  # what came meanwhile may repeat the refill: no rejections for that
+        self._quiet_until_ns = self.clock() + int(REFILL_QUIET_S * 1e9)  # nor for what was still on its way
+        if since_ns is not None:
+            log.info("recorder: after the gap from %d, %d events refilled from %s", since_ns, refilled,
+                     ", ".join(answered) or "nobody")
+            holes = [src for src, n in self._contiguous(seen).items() if src in answered and n < max(seen[src])]
+            if holes and self._refills_left > 0:  # what was still on its way when they answered: ask again
+                self._refills_left -= 1
+                self._refill_at, self._link_lost_ns = time.monotonic() + RELINK_SETTLE_S, since_ns
+            else:
+                self._refills_left = REFILLS
+            if not refilled:
+                return  # Zenoh brought everything back: the outage is in LINK_METADATA
+            gap = RecordingGap(earlier_file="", copied=0, last_copied_ns=Nanos(since_ns), resumed_ns=Nanos(resumed_ns),
+                               refilled=refilled, refilled_from=sorted(answered),
+                               unanswered=sorted(set(sources) - set(answered)))
+            self._publish([gap])
+            return
         gap = RecordingGap(earlier_file=self.continued["earlier_file"], copied=self.continued["copied"],
                            last_copied_ns=Nanos(self.continued["last_copied_ns"]), resumed_ns=Nanos(resumed_ns),
                            refilled=refilled, refilled_from=sorted(answered),
                            unanswered=sorted(set(sources) - set(answered)))
         self._publish([gap])
         log.info("recorder: gap recorded: %d events refilled from %s", refilled, ", ".join(answered) or "nobody")
+
+    def _fill_hole(self, key: str, payload: bytes) -> bool:
+        """Write a refilled event older than the last one of its key in the file (every check but
+        the order; MCAP sequence 0, "not given", as the file's per-channel order cannot hold it)."""
+        verdict = self.guard.check(key, payload, overlap=True)
+        if verdict.event is None or verdict.reason is not None or verdict.event.source == self.name:
+            return False
+        self._guarded(self.writer.write, key, payload, log_time_ns=self.clock(), sequence=0)
+        with self._lock:
+            self.kept.append((key, payload))
+        return True
 
     @property
     def top_seq(self) -> dict[str, int]:
@@ -283,13 +332,22 @@ class Recorder:
 
     # -- bus side (Zenoh threads: hand over, never wait) --------------------
     def start(self) -> None:
-        self.bus.subscribe(session_keys(self.session), self.enqueue)
+        self.bus.subscribe(session_keys(self.session), self.enqueue, self._on_miss)
         self.bus.queryable(query_key(self.session, self.name, LOG_QUERY), self.inbox.control)
+        if self.bus.options.recovers:
+            self.bus.on_router_link(self._on_link)
         self.bus.alive(alive_key(self.session, self.name))
         self.refill()
 
     def enqueue(self, key: str, payload: bytes) -> None:
         self.inbox.put(key, payload)
+
+    def _on_miss(self, publisher: str, n: int) -> None:
+        self.inbox.lost(f"publisher {publisher}", MISSED, n)  # recorded as a count, then refilled
+        self.inbox.control(_REFILL)
+
+    def _on_link(self, up: bool, router: str) -> None:
+        self.inbox.control(("link", up, router, self.clock()))
 
     def _answer_log(self, query) -> None:
         """Everything recorded so far, including what was queued when the query came
@@ -344,6 +402,7 @@ class Recorder:
                 item = True
             if self._guarded(self.writer.maybe_flush, self.clock()):
                 self._note_backlog()
+            self._maybe_refill()
         except RecordingFailed:
             return False
         return item is not None
@@ -364,13 +423,43 @@ class Recorder:
 
     def _take(self, item) -> None:
         key, payload, received_ns = item
-        if key is None:  # a query for the log
-            self._answer_log(payload)
+        if key is None:
+            if payload is _REFILL:  # Zenoh lost messages for good: refill now
+                self._refill_at = time.monotonic()
+            elif isinstance(payload, tuple):
+                self._link(*payload[1:])
+            else:  # a query for the log
+                self._answer_log(payload)
             return
         overlap = self._overlap > 0
         if overlap:
             self._overlap -= 1
-        self.record(key, payload, received_ns, quiet=overlap)
+        self.record(key, payload, received_ns, quiet=overlap or received_ns < self._quiet_until_ns)
+
+    def _link(self, up: bool, router: str, at_ns: int) -> None:
+        """The link to the router went (note when) or came back (record the outage, refill after
+        Zenoh's own recovery has had its time)."""
+        self._link_down = not up
+        if not up:
+            if self._link_lost_ns is None:
+                self._link_lost_ns = at_ns
+                log.warning("recorder: lost the link to router %s", router)
+            return
+        if self._link_lost_ns is None:
+            return  # the first connection, not a return
+        outage = {"lost_ns": str(self._link_lost_ns), "back_ns": str(at_ns), "router": router,
+                  "outage_ms": f"{(at_ns - self._link_lost_ns) / 1e6:.0f}"}
+        self.links.append(outage)
+        log.warning("recorder: the link to router %s is back after %s ms", router, outage["outage_ms"])
+        self._guarded(self.writer.add_metadata, LINK_METADATA, outage)
+        self._refill_at = time.monotonic() + RELINK_SETTLE_S
+
+    def _maybe_refill(self) -> None:
+        if self._refill_at is None or time.monotonic() < self._refill_at or self._link_down:
+            return  # (the link's return schedules one anyway)
+        since = self._link_lost_ns if self._link_lost_ns is not None else self.clock()
+        self._refill_at = self._link_lost_ns = None
+        self.refill(since_ns=since)
 
     def record(self, key: str, payload: bytes, received_ns: int, quiet: bool = False) -> bool:
         """Check and write one message; False (and a recorded rejection) if it fails a check.

@@ -28,7 +28,7 @@ from pairplay.schemas.envelope import Event
 from pairplay.schemas.events import ServiceStarted, decode_event, encode_event
 from pairplay.schemas.keys import alive_key, event_key, query_key, session_keys
 
-from pairplay.services.bus import Bus, Inbox, Outbox
+from pairplay.services.bus import MISSED, Bus, Inbox, Outbox
 from pairplay.services.node import Driver, Logic
 
 log = logging.getLogger("pairplay.runner")
@@ -115,6 +115,9 @@ class Node:
     def _on_message(self, key: str, payload: bytes) -> None:
         self.inbox.put(key, payload)  # Zenoh's thread: hand over, never wait
 
+    def _on_miss(self, publisher: str, n: int) -> None:
+        self.inbox.lost(f"publisher {publisher}", MISSED, n)  # recorded as a count, like a shed message
+
     def stamp(self, events: list[Event]) -> list[Event]:
         """Number and time this service's own new events (an input a web page gave, say);
         the caller publishes them (`publish`), outside any bus callback."""
@@ -136,9 +139,9 @@ class Node:
         if getattr(self.logic, "by_tag", False):
             # only the tags the logic reads: Zenoh then does not even send the others here
             for tag in sorted(self.logic.consumes):
-                self.bus.subscribe(f"{session_keys(self.session)[:-2]}*/{tag}", self._on_message)
+                self.bus.subscribe(f"{session_keys(self.session)[:-2]}*/{tag}", self._on_message, self._on_miss)
         else:
-            self.bus.subscribe(session_keys(self.session), self._on_message)
+            self.bus.subscribe(session_keys(self.session), self._on_message, self._on_miss)
         self.bus.queryable(query_key(self.session, self.logic.name, SENT_QUERY), self.inbox.control)
         self.bus.alive(alive_key(self.session, self.logic.name))
         if wait_for:

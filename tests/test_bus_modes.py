@@ -41,7 +41,7 @@ def test_services_on_several_hosts_meet_through_a_router():
         with Bus(BusOptions(mode="client", connect=[endpoint])) as a, \
                 Bus(BusOptions(mode="client", connect=[endpoint])) as b:
             got = collect(b, "pairplay/x/**")
-            assert wait_until(lambda: a.publisher("pairplay/x/game/Ping").matching_status.matching)
+            assert wait_until(lambda: a.matching("pairplay/x/game/Ping"))
             for i in range(100):
                 a.put("pairplay/x/game/Ping", str(i).encode())
             assert wait_until(lambda: got.qsize() == 100)

@@ -4,13 +4,18 @@ makes itself (`ip netns add` + veth pairs, private addresses inside them only; n
 reaches any other network). The robot host's link to the server is cut for 5 s
 mid-session and restored, then the recorder host's: the session finishes and verifies,
 nothing recorded is lost or doubled, every suggestion gets its one RobotActed.
-(A restart of the router is not covered here: the router is the session's process.)
+Then the same four hosts with the router as a process of its own on the server host
+(`pairplay router`; the session, the recorder, the robot bridge and the participant are
+its clients): the router is SIGKILLed mid-session and restarted 1-5 s later (ROUTER_OUTAGE_S,
+else random): the session finishes and verifies, nothing recorded is lost or doubled, the
+outage is recorded, and so is any gap the recorder had to refill.
 Slow-marked; needs root (CAP_NET_ADMIN): skipped without it."""
 
 from __future__ import annotations
 
 import json
 import os
+import random
 import subprocess
 import sys
 import time
@@ -19,6 +24,7 @@ import pytest
 
 from pairplay.replay.reader import read_log
 from pairplay.schemas import events as ev
+from pairplay.services.recorder import LINK_METADATA
 from pairplay.services.verify import verify_recording
 
 pytestmark = pytest.mark.slow
@@ -103,6 +109,14 @@ def test_four_hosts_and_5_s_cuts_of_the_robot_and_the_recorder_links(hosts, tmp_
     assert "10.212." in first  # the real endpoints, on the namespaces' addresses only
     assert server.returncode == 0, err[-1500:]
     path = tmp_path / "ns1.mcap"
+    log, events, made, acted = check_record(path)
+    figures = {"test": "netns_robot_and_recorder_cuts_5s", "rounds": 60, "seconds": round(took, 1), "suggestions": len(made),
+               "robot_acted": len(acted), "events": len(events)}
+    report(figures)
+
+
+def check_record(path):
+    """Nothing lost or doubled, one RobotActed per suggestion, verified."""
     log = read_log(path)
     assert not log.truncated and not log.bad
     events = [r.event for r in log.events]
@@ -113,9 +127,77 @@ def test_four_hosts_and_5_s_cuts_of_the_robot_and_the_recorder_links(hosts, tmp_
     acted = [e for e in events if type(e).__name__ == "RobotActed"]
     assert sorted(a.suggestion_seq for a in acted) == sorted(m.seq for m in made)
     assert verify_recording(path).ok
-    figures = {"test": "netns_robot_and_recorder_cuts_5s", "rounds": 60, "seconds": round(took, 1), "suggestions": len(made),
-               "robot_acted": len(acted), "events": len(events)}
+    return log, events, made, acted
+
+
+def report(figures: dict) -> None:
     print(json.dumps(figures))
     if os.environ.get("SOAK_OUT"):
         with open(os.environ["SOAK_OUT"], "a") as f:
             f.write(json.dumps(figures) + "\n")
+
+
+def test_the_router_killed_mid_session_and_restarted_1_to_5_s_later(hosts, tmp_path):
+    """The server host runs `pairplay router` on fixed endpoints (a restarted router must listen where
+    its clients connect); every service is its client and survives its SIGKILL and restart."""
+    env = dict(os.environ, PYTHONUNBUFFERED="1")
+    py = [sys.executable, "-m", "pairplay"]
+    outage = float(os.environ.get("ROUTER_OUTAGE_S") or random.uniform(1.0, 5.0))
+    listen = [a for server_ip, _ in LINKS.values() for a in ("--listen", f"tcp/{server_ip}:7447")]
+    listen += ["--listen", "tcp/127.0.0.1:7447"]  # the session's own link, on the server host
+
+    def start_router() -> subprocess.Popen:
+        router = subprocess.Popen(in_ns("server", *py, "router", *listen), stdout=subprocess.PIPE,
+                                  stderr=subprocess.PIPE, text=True, env=env)
+        assert router.stdout.readline().startswith("listening ")
+        return router
+    router = start_router()
+    server = subprocess.Popen(in_ns("server", *py, "session", "--participant", "sim:ashley", "--rounds", "60",
+                                    "--session", "ns2", "--out", str(tmp_path / "server"), "--external", "robot",
+                                    "--external", "participant", "--external", "recorder",
+                                    "--connect", "tcp/127.0.0.1:7447", "--recover"),
+                              stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
+    recorder = subprocess.Popen(in_ns("recorder", *py, "run", "recorder", "--session", "ns2", "--out", str(tmp_path),
+                                      "--connect", f"tcp/{LINKS['recorder'][0]}:7447", "--recover"),
+                                stdout=subprocess.DEVNULL, stderr=open(tmp_path / "recorder.log", "w"), env=env)
+    robot = subprocess.Popen(in_ns("robot", *py, "robot", "--session", "ns2", "--robot", "virtual",
+                                   "--connect", f"tcp/{LINKS['robot'][0]}:7447", "--recover"),
+                             stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, env=env)
+    time.sleep(2.0)  # the bridge joins before the game starts: every suggestion reaches it
+    board = subprocess.Popen(in_ns("board", *py, "run", "participant", "--session", "ns2",
+                                   "--connect", f"tcp/{LINKS['board'][0]}:7447", "--recover"),
+                             stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, env=env)
+    t0 = time.monotonic()
+    try:
+        under_way = time.monotonic() + 120
+        while time.monotonic() < under_way and not (tmp_path / "ns2.mcap").exists() or \
+                (tmp_path / "ns2.mcap").stat().st_size < 30_000:  # the recorder is writing the game's events
+            assert server.poll() is None and time.monotonic() < under_way
+            time.sleep(0.05)
+        router.kill()  # the router crashes mid-session ...
+        router.wait()
+        time.sleep(outage)
+        router = start_router()  # ... and is back 1-5 s later
+        restarted = time.monotonic()
+        out, err = server.communicate(timeout=240)
+        finished = time.monotonic()
+        robot.wait(timeout=60)
+        board.wait(timeout=60)
+        recorder.wait(timeout=60)
+    finally:
+        for p in (server, robot, board, recorder, router):
+            p.kill()
+    assert server.returncode == 0, err[-1500:]
+    path = tmp_path / "ns2.mcap"
+    log, events, made, acted = check_record(path)
+    link = log.metadata.get(LINK_METADATA)
+    assert link is not None, (tmp_path / "recorder.log").read_text()[-3000:]
+    assert link is not None and int(link["back_ns"]) > int(link["lost_ns"])  # the outage is recorded
+    gaps = [e for e in events if isinstance(e, ev.RecordingGap)]
+    # what Zenoh lost was refilled from the services and recorded (the robot bridge keeps no record to ask)
+    assert all(g.refilled > 0 and set(g.unanswered) <= {"robot"} for g in gaps), gaps
+    report({"test": "netns_router_restart", "rounds": 60, "outage_s": round(outage, 2),
+            "recorder_link_outage_ms": int(link["outage_ms"]), "refilled": sum(g.refilled for g in gaps),
+            "gaps": len(gaps), "restart_to_session_end_s": round(finished - restarted, 1),
+            "seconds": round(time.monotonic() - t0, 1), "suggestions": len(made), "robot_acted": len(acted),
+            "events": len(events), "rejections": sum(isinstance(e, ev.MessageRejected) for e in events)})

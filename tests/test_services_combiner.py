@@ -30,7 +30,7 @@ def test_combine_requests_over_the_bus(tmp_path):
         node.start()
         answers = collect(client, "pairplay/lab/combiner/PolicyCombined")
         key = event_key("lab", "console", "CombineRequested")
-        assert wait_until(lambda: client.publisher(key).matching_status.matching)
+        assert wait_until(lambda: client.matching(key))
         requests = [ev.CombineRequested(request_id="r1", recordings=recs, output_path=str(tmp_path / "bias.json")),
                     ev.CombineRequested(request_id="r2", policies=[str(tmp_path / "missing.json")]),
                     ev.CombineRequested(request_id="r3", recordings=recs, output_path="/etc/evil.json")]

@@ -98,7 +98,7 @@ def test_a_recorder_killed_with_sigkill_keeps_all_but_its_last_flush_and_recover
         try:
             assert wait_until(lambda: alive_key("rk", "recorder") in bus.alive_now(alive_key("rk", "*")), 30)
             key = event_key("rk", "participant", "CardPicked")
-            assert wait_until(lambda: bus.publisher(key).matching_status.matching)
+            assert wait_until(lambda: bus.matching(key))
 
             def burst(first, n):
                 for seq in range(first, first + n):

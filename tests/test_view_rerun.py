@@ -77,9 +77,8 @@ def _publish(bus, events):
 
 
 def _wait_matching(bus, key, timeout=10.0):
-    publisher = bus.publisher(key)
     deadline = time.monotonic() + timeout
-    while not publisher.matching_status.matching:
+    while not bus.matching(key):
         assert time.monotonic() < deadline, "the view never subscribed"
         time.sleep(0.02)
 

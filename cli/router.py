@@ -1,0 +1,37 @@
+"""`pairplay router`: a Zenoh router alone in this process (services/router.py).
+
+Rule: the server host runs it; the session, the recorder and the other hosts' services
+connect to it (`--connect`, client mode) and survive its restart. The first line is
+`listening <endpoints>`. Exit 0 on SIGINT/SIGTERM; a bus that cannot open (a port
+in use, a bad --zenoh-config) is one line on stderr and exit 2.
+"""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import sys
+import threading
+
+from pairplay.services.bus import BusError, add_bus_arguments, options_from_args, stop_on_signals
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    add_bus_arguments(p)
+
+
+def run(args: argparse.Namespace) -> int:
+    from pairplay.services.router import run_router
+    logging.basicConfig(level=logging.WARNING, format="%(levelname)s router: %(message)s")
+    if args.mode not in (None, "router"):
+        print(f"pairplay router: --mode {args.mode}: a router's mode is router", file=sys.stderr)
+        return 2
+    stop = threading.Event()
+    stop_on_signals(stop)
+    options = options_from_args(args, default_mode="router")
+    try:
+        run_router(options, stop, on_ready=lambda bus: print(f"listening {' '.join(bus.locators())}", flush=True))
+    except BusError as err:
+        print(f"pairplay router: {err}", file=sys.stderr)
+        return 2
+    return 0
