@@ -156,11 +156,23 @@ class Node:
         if recorded:
             log.info("%s resumes from %d recorded events", self.logic.name, len(recorded))
             self.resumed_events = len(recorded)
-            self.publish(self.driver.resume(recorded, announce=announce))
+            with self._lock:
+                if self.stop.is_set():
+                    raise Stopped(self.logic.name)
+                self.publish(self.driver.resume(recorded, announce=announce))
             for m in self.driver.mismatches:
                 log.error("%s: the log and the recomputation disagree: %s", self.logic.name, m)
         else:
-            self.publish(self.driver._stamp([announce]) + self.driver.start())
+            # The logic's start (the game's first deal: 1-3 s on a loaded VM) runs before anything is
+            # numbered; numbering and publishing happen at once under the lock, and not once stopped. A
+            # session stopped meanwhile ends the game only if it started (session.end_game, same lock):
+            # before, the announcement was numbered first, the stop saw a started game and recorded its
+            # SessionEnded, and its SessionStarted came after the recording had closed (or never).
+            started = self.logic.start()
+            with self._lock:
+                if self.stop.is_set():
+                    raise Stopped(self.logic.name)
+                self.publish(self.driver._stamp([announce]) + self.driver._stamp(started))
         # Everything built so far (modules, the log folded at start) lives for the
         # whole session: keep it out of the collector's scans, which otherwise
         # show up as the slowest suggestions (pick -> suggestion p99).

@@ -206,13 +206,16 @@ def close_all(nodes: list[Node], bridge, recorder: Recorder | None, recorder_thr
 
 
 def end_game(game: Node | None, stop: threading.Event, failure: str, recorder: Recorder | None) -> None:
-    """A game that has not ended the session ends it now, saying why (SessionEnded)."""
-    if game is None or game.logic.done or game.driver.seq == 0:
-        return  # not started: nothing to end
+    """A game that has not ended the session ends it now, saying why (SessionEnded); one whose start has
+    not published its SessionStarted is not ended (its start, under the same lock, then sees the stop)."""
+    if game is None:
+        return
     if recorder is not None and recorder.failure and not failure:
         failure = f"recording failed: {recorder.failure}"
     reason, detail = end_reason(stop, failure)
     with game._lock:
+        if game.logic.done or game.driver.seq == 0:
+            return  # not started: nothing to end
         game.publish(game.driver._stamp(game.logic.end(reason, detail)))
 
 
