@@ -7,7 +7,10 @@ SIGINT/SIGTERM it closes its Zenoh session cleanly. A game started with
 --participant (and the options of `pairplay session`) starts the session; a game
 given only --session restarts a crashed one from the recorder's log. The other
 services read the config from the bus. The first line printed is `listening <endpoints>` so an orchestrator can
-connect further processes to this one.
+connect further processes to this one. A recorder whose session has a
+recording in --out continues it only if the services of the session on the bus
+sent the very events it holds (a recorder restarted within the live session,
+services/recorder.py `same_live_session`); otherwise it refuses in one line.
 """
 
 from __future__ import annotations

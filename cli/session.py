@@ -18,6 +18,9 @@ clock, unless given; the learner schedule presets are the thesis's: "virtual"
 schedule of their algorithm (phase 1: Q-learning, phase 2: pi-reuse) and games
 of 5 rounds by default; settings a person cannot satisfy are refused
 (SessionConfig.validate). A person plays on the board of `pairplay lab`.
+A session id whose recording exists (<session>.mcap or any <session>.<k>.mcap
+in --out) is refused before anything starts, unless --force, which removes
+those recordings; there is no resume of an ended or interrupted session.
 """
 
 from __future__ import annotations
