@@ -61,6 +61,11 @@ UNRECORDED_AT_EXIT = "still queued when the recording stopped"
 BATCH_S = 0.02  # a backlog is written in batches of at most this long, each flushed once (step)
 BACKLOG_METADATA = "pairplay.recorder.backlog"  # a flush older than the loss bound (_note_backlog)
 FORCE_SESSION_HINT = "choose another --session, or --force to replace its recordings"
+LINK_METADATA = "pairplay.recorder.link"  # an outage of the recorder's link to its router (_link)
+RELINK_SETTLE_S = 4 * HEARTBEAT_S  # after the link is back: Zenoh's recovery first, then the refill
+REFILL_QUIET_S = 3.0  # after a refill, a message repeating one refilled is skipped quietly (it was in flight)
+REFILLS = 5  # a gap's refill is asked again this often while the file still has a hole below a source's last event
+_REFILL = object()  # inbox control item: Zenoh reported messages lost for good
 
 
 def recordings_of(path: Path) -> list[Path]:
