@@ -14,7 +14,7 @@ MINIMAL = {
     "study": [], "sweep": ["g.toml"], "bench": [], "profile": ["p.json"], "combine": ["p.json"], "view": [],
     "run": ["learner"], "session": ["--participant", "sim:ashley"], "lab": ["--participant", "human:p1"],
     "rebuild": ["r.mcap"], "replay": ["r.mcap"], "recover": ["r.mcap"], "counterfactual": ["r.mcap"],
-    "protocol": ["check", "s.toml"], "participant": ["delete", "folder", "p1"], "report": ["folder"], "robot": [],
+    "protocol": ["check", "s.toml"], "participant": ["delete", "folder", "p1"], "report": ["folder"], "robot": [], "router": [],
 }
 
 
