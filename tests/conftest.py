@@ -37,3 +37,14 @@ def browser():
             yield b
         finally:
             b.close()
+
+
+def pytest_xdist_auto_num_workers(config) -> int:
+    """`-n auto` (pyproject's addopts): two workers, as CI has two cores and many tests wait on
+    sockets, child processes and the browser. None for a run that selects the slow tests (soaks and
+    fault runs time themselves and make machine-wide network namespaces). PAIRPLAY_TEST_WORKERS=N
+    sets the number (0: everything in the main process, as `-n 0` does)."""
+    if os.environ.get("PAIRPLAY_TEST_WORKERS", "").isdecimal():
+        return int(os.environ["PAIRPLAY_TEST_WORKERS"])
+    marks = config.getoption("markexpr", "") or ""
+    return 0 if "slow" in marks.replace("not slow", "") else 2
