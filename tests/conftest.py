@@ -37,3 +37,29 @@ def browser():
             yield b
         finally:
             b.close()
+
+
+def pytest_xdist_auto_num_workers(config) -> int:
+    """`-n auto` (pyproject's addopts): two workers, as CI has two cores and many tests wait on
+    sockets, child processes and the browser. None for a run that selects the slow tests (soaks and
+    fault runs time themselves and make machine-wide network namespaces). PAIRPLAY_TEST_WORKERS=N
+    sets the number (0: everything in the main process, as `-n 0` does)."""
+    if os.environ.get("PAIRPLAY_TEST_WORKERS", "").isdecimal():
+        return int(os.environ["PAIRPLAY_TEST_WORKERS"])
+    marks = config.getoption("markexpr", "") or ""
+    return 0 if "slow" in marks.replace("not slow", "") else 2
+
+
+# Files whose tests take the longest (durations of a full run, 2026-11-30): run first, so that
+# with whole files per worker (--dist loadfile) neither worker is left alone with one at the end.
+LONGEST_FIRST = ("test_study_batch.py", "test_lspi_session.py", "test_outputs.py", "test_study_digests.py",
+                 "test_lspi_study.py", "test_lab_browser.py", "test_session_cli.py", "test_session_crash.py",
+                 "test_session_end.py", "test_faults.py", "test_report_figures.py", "test_console_browser.py",
+                 "test_replay_samples.py", "test_sweep.py", "test_cli_mistakes.py", "test_study_cli.py")
+
+
+def pytest_collection_modifyitems(items) -> None:
+    """The files in LONGEST_FIRST first, in that order; the rest after, in their own order
+    (a stable sort: the order within each file is kept; every worker collects the same)."""
+    rank = {name: i for i, name in enumerate(LONGEST_FIRST)}
+    items.sort(key=lambda item: rank.get(item.path.name, len(rank)))
