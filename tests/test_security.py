@@ -57,8 +57,10 @@ def certs(tmp_path_factory):
 
 def test_tls_and_access_control_refuse_visibly_and_let_the_rights_through(tmp_path, certs):
     server = render("zenoh-tls-server.json5", certs, tmp_path)
+    # rounds enough to outlast the test on a loaded machine: the session must still be running (and
+    # recording) when the robot host puts; a 300-round session could end first under xdist (seen twice)
     p = subprocess.Popen([sys.executable, "-m", "pairplay", "session", "--participant", "sim:ashley", "--rounds",
-                          "300", "--session", "sec1", "--out", str(tmp_path), "--listen", "tls/127.0.0.1:0",
+                          "5000", "--session", "sec1", "--out", str(tmp_path), "--listen", "tls/127.0.0.1:0",
                           "--zenoh-config", str(server)], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
                          env=dict(os.environ, PYTHONUNBUFFERED="1", RUST_LOG=ACL_LOG))
     try:
