@@ -52,8 +52,8 @@ def _play(page, turns: int) -> list[dict]:
 
 def bench_rows(quick: bool = False) -> list[dict]:
     if not CHROMIUM.exists():
-        return [{"row": "lab: touch -> SuggestionMade -> robot command", "value": None, "unit": "ms",
-                 "goal": f"not measured: {CHROMIUM} is absent (apt-get install chromium)"}]
+        return [{"row": f"lab: touch -> SuggestionMade -> robot command: not measured, {CHROMIUM} is absent "
+                        "(apt-get install chromium)", "value": None, "unit": "ms"}]
     from playwright.sync_api import sync_playwright
 
     from pairplay.services.lab.server import run_lab
@@ -112,9 +112,9 @@ def bench_rows(quick: bool = False) -> list[dict]:
                              ("robot command sent (virtual robot)", to_robot)):
             value = float(np.percentile(values, q))
             rows.append({"row": f"lab: touch on the page -> {name}, p{q} ({len(values)} turns)", "value": value,
-                         "unit": "ms", "reference": f"raw WebSocket round trip page -> server -> page, p{q}",
-                         "reference_value": reference, "ratio": value / reference,
-                         "goal": f"clock offset {offset_ms:+.2f} ms taken out (+-{best['rtt'] / 2:.2f})"})
+                         "unit": "ms", "reference": f"raw WebSocket round trip page -> server -> page, p{q} "
+                                                    f"(clock offset {offset_ms:+.2f} ms taken out, +-{best['rtt'] / 2:.2f})",
+                         "reference_value": reference, "ratio": value / reference})  # no goal set yet: context
     return rows
 
 
