@@ -9,7 +9,6 @@ in use, a bad --zenoh-config) is one line on stderr and exit 2.
 from __future__ import annotations
 
 import argparse
-import logging
 import sys
 import threading
 
@@ -22,7 +21,6 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from pairplay.services.router import run_router
-    logging.basicConfig(level=logging.WARNING, format="%(levelname)s router: %(message)s")
     if args.mode not in (None, "router"):
         print(f"pairplay router: --mode {args.mode}: a router's mode is router", file=sys.stderr)
         return 2
