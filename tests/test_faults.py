@@ -30,7 +30,7 @@ from pairplay.replay.writer import FLUSH_INTERVAL_NS, LOSS_BOUND_NS, EventLogWri
 from pairplay.schemas import events as ev
 from pairplay.schemas.envelope import stamped
 from pairplay.schemas.events import encode_event
-from pairplay.schemas.keys import event_key
+from pairplay.schemas.keys import alive_key, event_key
 from pairplay.schemas.session import SessionConfig
 from pairplay.services.bus import Bus, BusOptions, Deadline, Inbox
 from pairplay.services.guard import Refusals
@@ -63,6 +63,13 @@ def flood(endpoint: str, session: str, n: int, bus: Bus | None = None) -> None:
     own = bus is None
     bus = bus or Bus(BusOptions(mode="client", connect=[endpoint]))
     try:
+        # pub/sub keeps no history: a message put before the session's recorder subscribed reaches no
+        # one, not even a count (CI at load: the flood's first 104 messages, 26 of each kind, went so).
+        # The recorder declares its liveliness token after its subscription: flood once it is there.
+        deadline = time.monotonic() + 60
+        while alive_key(session, "recorder") not in bus.alive_now(alive_key(session, "*"), timeout_s=0.5):
+            assert time.monotonic() < deadline, "the session's recorder never came up"
+            time.sleep(0.05)
         seq = itertools.count(1)
         for i in range(n):
             kind = i % 4
