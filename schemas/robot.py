@@ -5,7 +5,12 @@ was written on the wire (each message exactly as sent), to which backend, when
 the robot acknowledged it, or why it failed. Outcomes:
   "done"           every command sent and every reply the protocol promises came
   "sent"           every command sent; the commands promise no reply (gaze only)
-  "aborted"        a newer suggestion cut it short (its speech or head turn)
+  "superseded"     a newer suggestion came before all its commands were written:
+                   it is stale (the participant has picked since), so those not
+                   written were dropped, never written (`unsent`); `commands`
+                   has what was (often nothing), `error` says by which suggestion
+  "aborted"        every command was written, and a newer suggestion cut its
+                   speech short (or the robot reports it aborted)
   "stopped"        the robot reports its speech stopped early, and not by us
                    (IrisTK monitor.speech.end with "stopped": another client cut it)
   "unacknowledged" sent, but the robot never confirmed within the ack timeout, or
@@ -46,7 +51,7 @@ def check_name_filter(spec: str) -> None:
         raise ValueError(f"name filter {spec!r} has characters IrisTK refuses: {bad!r}"
                          " (allowed: A-Z a-z 0-9 _ ! . * ; and space)")
 
-OUTCOMES = ("done", "sent", "aborted", "stopped", "unacknowledged", "failed", "nothing", "in-flight")
+OUTCOMES = ("done", "sent", "superseded", "aborted", "stopped", "unacknowledged", "failed", "nothing", "in-flight")
 
 
 class RobotActed(Event, tag="RobotActed"):
@@ -65,7 +70,7 @@ class RobotActed(Event, tag="RobotActed"):
     done_ns: Nanos = 0  # the robot's last promised reply (0: not all came)
     error: str = ""
     reconnects: int = 0  # connections re-opened while it was pending
-    unsent: list[str] = []  # wire messages never written (held, unreachable, refused), in order
+    unsent: list[str] = []  # wire messages never written (superseded, held, unreachable, refused), in order
     unconfirmed: list[str] = []  # written, but nothing shows they reached the robot: a promised
     # reply never came, or written within inflight_window_s before the connection died
 

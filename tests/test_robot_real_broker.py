@@ -18,7 +18,7 @@ from pathlib import Path
 
 import msgspec
 import pytest
-from robot_doubles.harness import FAMILIES, FAST, Collector, suggestion
+from robot_doubles.harness import FAMILIES, FAST, PATIENCE_S, Collector, suggestion
 from robot_doubles.iristk_furhat import IrisTKFurhat
 
 from pairplay.core.actions import code_of_parts
@@ -74,14 +74,14 @@ def test_against_irisTKs_own_broker(tmp_path, classes):
         try:
             for seq, code in enumerate(FAMILIES.values()):
                 driver.perform(suggestion(code, seq=seq))
-                assert driver.wait_idle(5)
+                assert driver.wait_idle(PATIENCE_S)
             assert [a.outcome for a in collector.acted] == ["done", "done", "done", "done", "sent", "sent"]
             other.sendall(b"CONNECT furhat other\n")
             furhat.speech_s = 3.0
             driver.perform(suggestion(code_of_parts(2, 0, 0, 0), seq=10))
             assert furhat.wait_for(lambda f: f.replies and f.replies[-1]["event_name"] == "monitor.speech.start")
             other.sendall(event_frame(make_event("action.speech.stop", "other.1", "other", time.time_ns())))
-            assert driver.wait_idle(5)
+            assert driver.wait_idle(PATIENCE_S)
             assert collector.acted[-1].outcome == "stopped"
             other.sendall("EVENT monitor.speech.end \u0663\n".encode() + b"{}x")  # Java's parseInt reads 3
             assert collector.wait_for(lambda c: len(c.rejected) == 1)

@@ -11,7 +11,7 @@ import time
 import msgspec
 import pytest
 from robot_doubles.furhat_realtime import FurhatRealtimeServer
-from robot_doubles.harness import FAMILIES, FAST, OBSERVED, TARGET, Collector, suggestion
+from robot_doubles.harness import FAMILIES, FAST, PATIENCE_S, OBSERVED, TARGET, Collector, suggestion
 
 from pairplay.core.actions import code_of_parts
 from pairplay.services.robot import open_robot, realtime
@@ -51,7 +51,7 @@ def test_auth_with_the_robots_key_then_requests(stage):
     collector, robot = stage
     server, driver = robot(key="s3cret", server_key="s3cret")
     driver.perform(suggestion(EXACT))
-    assert driver.wait_idle(5)
+    assert driver.wait_idle(PATIENCE_S)
     assert server.auths == [True] and collector.acted[0].outcome == "done"
     assert driver.transport.scope == "all"
 
@@ -60,24 +60,27 @@ def test_auth_with_the_robots_key_then_requests(stage):
 def test_a_refused_key_fails_at_once_and_is_not_retried(stage, key):
     collector, robot = stage
     server, driver = robot(key=key, server_key="s3cret", config=msgspec.structs.replace(FAST, give_up_s=30.0))
-    started = time.monotonic()
     driver.perform(suggestion(EXACT, seq=1))
-    assert driver.wait_idle(5)
-    assert time.monotonic() - started < 3.0  # not after give_up_s of retries
+    assert driver.wait_idle(25)  # a bound, not a measure: retrying until give_up_s would fail otherwise
     driver.perform(suggestion(EXACT, seq=2))  # later suggestions fail at once too
-    assert driver.wait_idle(1)
+    assert driver.wait_idle(25)
     assert [a.outcome for a in collector.acted] == ["failed", "failed"]
+    # "at once", told apart by what happened rather than by a clock: the reason is the refusal (after
+    # give_up_s it would read "not delivered within 30 s"), and the robot was asked exactly once
     assert all("refused access" in a.error and a.commands == [] and a.unsent for a in collector.acted)
+    assert not any("not delivered within" in a.error for a in collector.acted)
     assert server.auths == [False]  # asked once
     assert server.requests == []  # nothing reached the robot without access
 
 
 def test_the_client_waits_for_response_auth_with_access_even_without_a_key(stage, monkeypatch):
-    monkeypatch.setattr(realtime, "OPEN_TIMEOUT_S", 0.3)  # the maker's client waits 5 s; the rule is the same
+    # only the wait for response.auth is shortened (the maker's client waits 5 s; the rule is the same): the
+    # WebSocket opening handshake keeps its 5 s, so a loaded machine still gets to the auth and fails there
+    monkeypatch.setattr(realtime, "AUTH_TIMEOUT_S", 0.3)
     collector, robot = stage
     server, driver = robot(answers_auth=False, config=msgspec.structs.replace(FAST, give_up_s=0.5))
     driver.perform(suggestion(EXACT))
-    assert driver.wait_idle(10)
+    assert driver.wait_idle(PATIENCE_S)
     assert collector.acted[0].outcome == "failed" and server.requests == []
     assert "request.auth" in collector.acted[0].error
 
@@ -86,12 +89,12 @@ def test_each_auth_has_its_own_request_id_and_only_awaited_requests_carry_one(st
     collector, robot = stage
     server, driver = robot()
     driver.perform(suggestion(code_of_parts(2, 0, 1, 0)))  # speech, nod (a look and a gesture)
-    assert driver.wait_idle(5)
+    assert driver.wait_idle(PATIENCE_S)
     driver.perform(suggestion(code_of_parts(0, 1, 3, 0), seq=1))  # smile, head turn
-    assert driver.wait_idle(5)
+    assert driver.wait_idle(PATIENCE_S)
     server.drop_all()
     driver.perform(suggestion(code_of_parts(0, 0, 0, 1), seq=2))
-    assert driver.wait_idle(5)
+    assert driver.wait_idle(PATIENCE_S)
     assert {r["type"] for r in server.requests} >= {"request.face.headpose", "request.attend.location"}
     assert len(server.auth_ids) == 2 and len(set(server.auth_ids)) == 2
     with_id = {r["type"] for r in server.requests if "request_id" in r}
@@ -103,7 +106,7 @@ def test_a_failed_speech_is_recorded_failed(stage):
     server, driver = robot()
     server.fail_texts = frozenset({"Try at row 2 and column 5"})
     driver.perform(suggestion(EXACT))
-    assert driver.wait_idle(5)
+    assert driver.wait_idle(PATIENCE_S)
     (acted,) = collector.acted
     assert acted.outcome == "failed" and "failed" in acted.error and acted.replies == ["response.speak.end (failed)"]
 
@@ -120,7 +123,7 @@ def test_the_robot_is_never_reached_through_an_environment_proxy(stage, monkeypa
     try:
         server, driver = robot(config=msgspec.structs.replace(FAST, give_up_s=2.0))
         driver.perform(suggestion(EXACT))
-        assert driver.wait_idle(5)
+        assert driver.wait_idle(PATIENCE_S)
         assert collector.acted[0].outcome == "done"
         with pytest.raises(BlockingIOError):
             proxy.accept()  # nobody came through the proxy
@@ -133,7 +136,7 @@ def test_each_family_reaches_the_robot_as_realtime_requests(stage, family):
     collector, robot = stage
     server, driver = robot()
     driver.perform(suggestion(FAMILIES[family], seq=3))
-    assert driver.wait_idle(5)
+    assert driver.wait_idle(PATIENCE_S)
     (acted,) = collector.acted
     assert server.wait_for(lambda s: len(s.requests) == len(acted.commands))
     sent = server.requests
@@ -169,7 +172,7 @@ def test_replies_find_their_suggestion_by_request_id(stage):
     collector, robot = stage
     server, driver = robot()
     driver.perform(suggestion(code_of_parts(2, 0, 1, 0)))  # speech + nod
-    assert driver.wait_idle(5)
+    assert driver.wait_idle(PATIENCE_S)
     (acted,) = collector.acted
     assert sorted(acted.replies) == ["response.gesture.end", "response.speak.end", "response.speak.start"]
     assert 0 < acted.sent_ns <= acted.acked_ns <= acted.done_ns
@@ -182,6 +185,7 @@ def test_a_new_suggestion_stops_or_aborts_the_speech(stage):
     driver.perform(suggestion(EXACT, seq=1))
     assert server.wait_for(lambda s: len(s.requests) == 1)
     driver.perform(suggestion(code_of_parts(0, 0, 0, 1), seq=2))  # gaze only: stop the speech first
+    assert server.wait_for(lambda s: len(s.requests) == 3)  # written before the next comes
     driver.perform(suggestion(code_of_parts(4, 0, 0, 0), seq=3))  # "Maybe down" aborts by itself
     assert server.wait_for(lambda s: len(s.requests) == 4)
     assert [r["type"] for r in server.requests] == [
@@ -217,11 +221,11 @@ def test_malformed_frames_from_the_robot_are_reported_and_skipped(stage):
         server.inject(frame)
     assert collector.wait_for(lambda c: len(c.rejected) == 5)
     driver.perform(suggestion(EXACT))
-    assert driver.wait_idle(5)
+    assert driver.wait_idle(PATIENCE_S)
     assert collector.acted[0].outcome == "done" and driver.reconnects == 0
 
 
-def _until_connected(driver, timeout: float = 5.0) -> bool:
+def _until_connected(driver, timeout: float = PATIENCE_S) -> bool:
     import time
     deadline = time.monotonic() + timeout
     while not driver.connected:
@@ -236,12 +240,11 @@ def test_pairplay_robot_try_with_a_refused_key_says_so_in_one_line(capsys):
 
     server = FurhatRealtimeServer(key="s3cret").start()
     try:
-        started = time.monotonic()
         code = main(["robot", "--robot", f"furhat://127.0.0.1:{server.port}?key=wrong", "--try", "35"])
-        elapsed = time.monotonic() - started
     finally:
         server.stop()
     out, err = capsys.readouterr()
-    assert code != 0 and elapsed < 5.0 and server.auths == [False]
+    # at once, not after give_up_s of retries: the robot was asked once and the line names the refusal
+    assert code != 0 and server.auths == [False]
     assert len(err.strip().splitlines()) == 1 and "refused access" in err and "Traceback" not in err
     assert "s3cret" not in err and "wrong" not in err  # the key never appears

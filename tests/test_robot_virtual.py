@@ -4,12 +4,15 @@ from __future__ import annotations
 
 import json
 
+import msgspec
 import pytest
-
-from robot_doubles.harness import FAMILIES, FAST, Collector, suggestion
+from busutil import wait_until
+from robot_doubles.harness import FAMILIES, FAST, PATIENCE_S, Collector, suggestion
 
 from pairplay.core.actions import code_of_parts
-from pairplay.services.robot import open_robot
+from pairplay.services.robot import RobotDriver, make_transport, open_robot
+from pairplay.services.robot.calibration import Board, load_calibration
+from pairplay.services.robot.render import Renderer
 
 
 def robot(collector: Collector, url: str = "virtual?time_scale=0"):
@@ -22,7 +25,7 @@ def test_every_family_is_performed_and_reported():
     try:
         for seq, code in enumerate(FAMILIES.values()):
             driver.perform(suggestion(code, seq=seq))
-            assert driver.wait_idle(5)
+            assert driver.wait_idle(PATIENCE_S)
     finally:
         driver.close()
     outcomes = {a.suggestion_seq: a.outcome for a in collector.acted}
@@ -38,6 +41,7 @@ def test_a_newer_suggestion_cuts_the_virtual_speech_short():
     driver = robot(collector, "virtual")  # real speech durations: still speaking at the next one
     try:
         driver.perform(suggestion(code_of_parts(2, 0, 0, 0), seq=1))
+        assert wait_until(lambda: driver.transport.performed)  # its speech was written, and plays
         driver.perform(suggestion(code_of_parts(0, 1, 0, 0), seq=2))
         assert collector.wait_for(lambda c: 1 in c.by_seq())
     finally:
@@ -47,12 +51,67 @@ def test_a_newer_suggestion_cuts_the_virtual_speech_short():
     assert [json.loads(t)["type"] for _, t in driver.transport.performed] == ["say", "stop_speech", "gesture"]
 
 
+def unstarted(collector: Collector, url: str = "virtual?time_scale=0") -> RobotDriver:
+    """What open_robot returns, before its worker starts."""
+    transport, config = make_transport(url, FAST)
+    return RobotDriver(transport, Renderer(Board(load_calibration()), config.gestures, config), config,
+                       collector.on_acted, collector.on_rejected)
+
+
+def wire_types(texts) -> list[str]:
+    return [json.loads(t)["type"] for t in texts]
+
+
+def test_a_suggestion_superseded_before_its_commands_were_written_sends_none_of_them():
+    """Stale: the participant picked since; telling them where a card WAS is wrong (docstring of driver.py)."""
+    collector = Collector()
+    driver = unstarted(collector)
+    try:
+        for seq, code in enumerate([code_of_parts(2, 0, 3, 0), code_of_parts(3, 0, 1, 0), code_of_parts(0, 0, 0, 1)]):
+            driver.perform(suggestion(code, seq=seq))
+        driver.start()  # the worker takes the three at once, as when suggestions come faster than it runs
+        assert driver.wait_idle(PATIENCE_S)
+    finally:
+        driver.close()
+    by_seq = collector.by_seq()
+    assert len(collector.acted) == 3  # exactly one RobotActed each
+    for seq, parts in ((0, 4), (1, 3)):  # speech, three head looks; speech, look, nod
+        stale = by_seq[seq]
+        assert stale.outcome == "superseded" and stale.commands == [] and len(stale.unsent) == parts
+        assert f"superseded by suggestion {seq + 1} before {parts} of its {parts}" in stale.error
+    assert by_seq[2].outcome == "sent" and wire_types(by_seq[2].commands) == ["look"]
+    assert wire_types(t for _, t in driver.transport.performed) == ["look"]  # nothing stale reached the robot
+
+
+def test_a_head_turn_cut_short_turns_back_and_stale_speech_is_stopped():
+    collector = Collector()
+    config = msgspec.structs.replace(FAST, head_turn_lead_s=0.0, head_turn_hold_s=60.0)  # cut while turned
+    driver = open_robot("virtual", collector.on_acted, config=config)
+    try:
+        driver.perform(suggestion(code_of_parts(2, 0, 3, 0), seq=1))  # speech + head turn right
+        assert wait_until(lambda: len(driver.transport.performed) == 3)  # say, look at the card, look beside
+        driver.perform(suggestion(code_of_parts(0, 1, 0, 0), seq=2))  # a smile: no speech, looks nowhere
+        assert collector.wait_for(lambda c: {1, 2} <= set(c.by_seq()))
+        driver.perform(suggestion(code_of_parts(0, 1, 0, 0), seq=3))  # nothing left to undo
+        assert collector.wait_for(lambda c: 3 in c.by_seq())
+    finally:
+        driver.close()
+    first, second, third = (collector.by_seq()[n] for n in (1, 2, 3))
+    assert first.outcome == "superseded" and wire_types(first.commands) == ["say", "look", "look"]
+    assert wire_types(first.unsent) == ["look"] and json.loads(first.unsent[0])["z"] == 1.0  # the return to rest
+    assert first.replies[-1] == "speech.end (aborted)"
+    assert wire_types(second.commands) == ["stop_speech", "look", "gesture"]
+    back = json.loads(second.commands[1])
+    assert back["head"] is True and (back["x"], back["y"], back["z"]) == (0.0, 0.0, 1.0)  # rest: the participant
+    assert wire_types(third.commands) == ["gesture"]
+
+
 def test_do_nothing_sends_nothing():
     collector = Collector()
     driver = robot(collector)
     try:
         driver.perform(suggestion(0))
-        assert driver.wait_idle(5)
+        assert driver.wait_idle(PATIENCE_S)
     finally:
         driver.close()
     assert collector.acted[0].outcome == "nothing" and collector.acted[0].commands == []
@@ -102,9 +161,9 @@ def test_a_bug_on_one_report_costs_that_report_not_the_robot(monkeypatch):
     monkeypatch.setattr(driver, "_match", flaky)
     try:
         driver.perform(suggestion(code_of_parts(2, 0, 0, 0)))
-        assert driver.wait_idle(5)  # the speech start was lost to the bug; the end still matches
+        assert driver.wait_idle(PATIENCE_S)  # the speech start was lost to the bug; the end still matches
         driver.perform(suggestion(code_of_parts(2, 0, 0, 0), seq=1))
-        assert driver.wait_idle(5)
+        assert driver.wait_idle(PATIENCE_S)
     finally:
         driver.close()
     assert [a.outcome for a in collector.acted] == ["done", "done"]

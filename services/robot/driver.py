@@ -1,19 +1,36 @@
 """The robot driver: performs suggestions through one transport, reconnecting, and reports each.
 
-Rule: one worker thread owns the connection and writes every command exactly
+Rule: one worker thread owns the connection and writes every command at most
 once, in arrival order, at its due time; a command counts as sent when the write
 returned, and is never written again (each carries a unique id). When the robot
 is unreachable, due commands wait and the worker reconnects with exponential
 backoff (reconnect_min_s doubling up to reconnect_max_s; it starts again from
 the minimum only after a connection that lasted longer than the maximum, so a
-robot that accepts and drops at once is not hammered); once connected the
-backlog goes out in order. A new suggestion supersedes the previous ones: their
-later steps (the rest of a head turn) are cancelled, their first steps are still
-delivered (nothing the learner decided is lost), and if the new one says nothing
-while earlier speech may still play, a StopSpeech goes first.
+robot that accepts and drops at once is not hammered).
+
+A new suggestion supersedes the previous one, and a superseded suggestion is
+stale: the participant has picked since, so telling them where a card WAS is
+wrong. Its commands not yet written (held by the rate limit, waiting for a
+head turn's later step, or for the robot to come back) are dropped, never
+written, and its RobotActed is "superseded", `commands` what was written and
+`unsent` what was dropped. So only the newest suggestion ever has commands to
+write, and the robot is never behind by more than one suggestion. What goes out
+instead is what undoes the stale one's effect on the robot, as the first steps
+of the new suggestion (recorded in its RobotActed):
+  - a StopSpeech, if the last speech written may still be playing (no
+    speech end came for it) and the new suggestion says nothing itself (a Say
+    aborts the current speech by itself: IrisTK action.speech `abort`,
+    doc/markdown/events.md 43-56; Realtime request.speak.text `abort`);
+  - a head Look back at the rest point (the participant), if the last Look
+    written turned the head away from it (a head turn cut before its return)
+    and the new suggestion looks nowhere itself (any gaze moves the head:
+    IrisTK action.gaze mode "default" uses eyes and neck, "headpose" the neck,
+    events.md 284-301; the robot holds a gaze until told otherwise).
+A gesture (smile, nod) ends by itself and is not undone; a card gaze written
+in full is the suggestion as given and stays until the next Look.
 
 Writes are rate-limited robot-side (a token bucket: max_commands_per_s, bursts
-of command_burst), so a backlog never floods the robot: an IrisTK module whose
+of command_burst), so a burst never floods the robot: an IrisTK module whose
 1000-event queue overflows turns itself off for good (IrisModule.java 24,
 135-142). A robot that refuses us (access denied) is not retried: every open
 and later suggestion fails at once with that reason. Commands written within
@@ -27,28 +44,38 @@ without an id goes to the oldest suggestion still waiting for that kind of reply
 A superseded suggestion still waiting for replies is reported once the robot
 replies about a later one (replies arrive in order, so its own are all in) or
 after abort_grace_s, so replies in flight when it was cut are still recorded.
+
+Cost: nothing the worker does per message or per wake-up grows with the number
+of open suggestions. Replies find their suggestion by id (a dict), time limits
+wait in a heap, only the newest suggestion is scanned for due commands, and the
+worker sleeps until the earliest of: a message, a due command, a token, a
+reconnect, a time limit. A command the transport holds back waits for the
+transport's Changed report (or its give-up time), never a poll.
 """
 
 from __future__ import annotations
 
+import heapq
 import itertools
 import logging
 import queue
 import threading
 import time
 import uuid
+from collections import deque
 from dataclasses import dataclass, field
 from typing import Callable
 
 from pairplay.schemas.robot import RobotActed, RobotConfig
 
-from pairplay.services.robot.render import Renderer, Say, Step, StopSpeech
+from pairplay.services.robot.render import Look, Renderer, Say, Step, StopSpeech
 from pairplay.services.robot.transport import (
     SPEECH_END, SPEECH_START, AccessRefused, Changed, Disconnected, Rejected, Reply, Transport, Wire,
 )
 
 log = logging.getLogger("pairplay.robot")
-HELD_POLL_S = 0.05  # how often a command the transport holds back is offered again
+# outcomes whose commands still awaiting a promised reply are recorded as unconfirmed
+UNCONFIRMED_IF_WAITING = ("unacknowledged", "in-flight", "superseded", "aborted")
 
 
 @dataclass(frozen=True)
@@ -72,7 +99,7 @@ class _Step:
     command_id: str
     wire: Wire | None = None
     sent: bool = False
-    cancelled: bool = False
+    dropped: bool = False  # its suggestion was superseded before it was written: never written
     sent_at: float = 0.0  # monotonic time of the write
     confirmed: bool = False  # a reply about it came
     inflight: bool = False  # written just before the connection died, never confirmed
@@ -80,13 +107,16 @@ class _Step:
 
 @dataclass
 class _Performance:
+    index: int  # arrival order: a later suggestion has a larger index
     suggestion: Suggestion
     steps: list[_Step]
     received_ns: int
     start: float  # monotonic seconds: the steps' time zero
+    next_step: int = 0  # steps before it are sent or dropped
+    finished: bool = False
     superseded: bool = False
     superseded_at: float = 0.0
-    overtaken: bool = False  # the robot already replied about a later suggestion
+    superseded_by: int = 0  # the newer suggestion's seq
     cut_by_robot: bool = False  # the robot reported one of its commands aborted
     stopped_by_robot: str = ""  # the robot reported its speech stopped early (what it said)
     failed_by_robot: str = ""  # the robot reported a command failed (what it said)
@@ -99,12 +129,11 @@ class _Performance:
     replies: list[str] = field(default_factory=list)
     reconnects: int = 0
 
-    def unsent(self) -> list[_Step]:
-        return [s for s in self.steps if not s.sent and not s.cancelled]
+    def has_unsent(self) -> bool:
+        return self.next_step < len(self.steps)
 
-    def speech_may_play(self) -> bool:
-        says = [s for s in self.steps if isinstance(s.step.command, Say) and not s.cancelled]
-        return any(not s.sent or (s.command_id, SPEECH_END) in self.outstanding for s in says)
+    def unsent(self) -> list[_Step]:
+        return [s for s in self.steps if not s.sent]
 
 
 class RobotDriver:
@@ -119,7 +148,16 @@ class RobotDriver:
         self._on_rejected = on_rejected or (lambda reason, excerpt: None)
         self._clock_ns = clock_ns
         self._inbox: queue.Queue = queue.Queue()
-        self._active: list[_Performance] = []
+        self._active: dict[int, _Performance] = {}  # open suggestions by index, oldest first
+        self._current: _Performance | None = None  # the newest suggestion: the only one that writes
+        self._by_command: dict[str, _Performance] = {}  # command id -> its open suggestion (replies)
+        self._timers: list[tuple[float, int]] = []  # heap of (monotonic time, index): time limits
+        self._recent: deque[tuple[float, _Step]] = deque()  # writes of the last inflight_window_s
+        self._indexes = itertools.count(1)
+        self._replied_upto = 0  # the robot replied about the suggestion with this index
+        self._speaking = ""  # id of the last Say written while it may still play ("" = none)
+        self._head_away = False  # the last Look written turned the head away from rest
+        self._rest = renderer.rest_look()
         prefix = uuid.uuid4().hex[:8]  # unique per driver: ids never repeat across restarts
         self._ids = (f"pairplay.{prefix}.{n}" for n in itertools.count(1))
         self._generation = 0
@@ -212,27 +250,36 @@ class RobotDriver:
             self._closing = True
 
     def _add(self, suggestion: Suggestion, steps: list[Step], received_ns: int, start: float) -> None:
-        speech_playing = self._speech_may_play()
-        for earlier in self._active:
-            if not earlier.superseded:
-                earlier.superseded, earlier.superseded_at = True, start
-            for s in earlier.steps:
-                if not s.sent and s.at_s > 0:
-                    s.cancelled = True
-        if speech_playing and not any(isinstance(s.command, Say) for s in steps):
-            steps = [Step(0.0, StopSpeech()), *steps]
-        ordered = sorted(steps, key=lambda s: s.at_s)  # stable: same-time steps keep their order
-        perf = _Performance(suggestion, [_Step(s.at_s, s, next(self._ids)) for s in ordered], received_ns, start)
-        self._active.append(perf)
+        previous, self._current = self._current, None
+        if previous is not None and not previous.finished:
+            self._supersede(previous, suggestion, start)
+        prefix = []  # undo what a stale suggestion left on the robot (module docstring)
+        if self._speaking and not any(isinstance(s.command, Say) for s in steps):
+            prefix.append(Step(0.0, StopSpeech()))
+        if self._head_away and not any(isinstance(s.command, Look) for s in steps):
+            prefix.append(Step(0.0, self._rest))
+        ordered = sorted([*prefix, *steps], key=lambda s: s.at_s)  # stable: same-time steps keep their order
+        perf = _Performance(next(self._indexes), suggestion,
+                            [_Step(s.at_s, s, next(self._ids)) for s in ordered], received_ns, start)
+        self._active[perf.index] = perf
         if self.refused:
             self._finish(perf, "failed", self.refused)
+            return
+        self._current = perf
+        self._check(perf, time.monotonic())
 
-    def _speech_may_play(self) -> bool:
-        """Whether the robot may still be speaking: the newest speech command decides."""
-        for perf in reversed(self._active):
-            if any(isinstance(s.step.command, (Say, StopSpeech)) and not s.cancelled for s in perf.steps):
-                return perf.speech_may_play()
-        return False
+    def _supersede(self, perf: _Performance, newer: Suggestion, at: float) -> None:
+        """A newer suggestion came: what this one has not written is stale, dropped."""
+        perf.superseded, perf.superseded_at, perf.superseded_by = True, at, newer.suggestion_seq
+        for step in perf.steps[perf.next_step:]:
+            step.dropped = True
+        perf.next_step = len(perf.steps)
+        self._at(perf.superseded_at + self.config.abort_grace_s, perf)
+        self._check(perf, time.monotonic())
+
+    def _at(self, when: float, perf: _Performance) -> None:
+        """Check `perf` again at `when` (a time limit of one of its states)."""
+        heapq.heappush(self._timers, (when, perf.index))
 
     def _report(self, report, time_ns: int, seen: float) -> None:
         if report.generation != self._generation:
@@ -252,34 +299,50 @@ class RobotDriver:
         elif isinstance(report, Changed):
             pass  # the tick after this report asks ready() again
 
+    def _waiting_for(self, reply: Reply) -> tuple[_Performance, str] | None:
+        """The open suggestion and command a reply is about: by the echoed id, else the oldest waiting."""
+        if reply.ref is not None:
+            perf = self._by_command.get(reply.ref)
+            if perf is not None and (reply.ref, reply.kind) in perf.outstanding:
+                return perf, reply.ref
+            return None
+        for perf in self._active.values():  # a protocol without ids: rare, and replies come in order
+            for command_id, kind in perf.outstanding:
+                if kind == reply.kind:
+                    return perf, command_id
+        return None
+
     def _match(self, reply: Reply, time_ns: int) -> None:
-        for index, perf in enumerate(self._active):
-            candidates = [o for o in perf.outstanding
-                          if o[1] == reply.kind and (reply.ref is None or o[0] == reply.ref)]
-            if not candidates:
-                continue
-            command_id = candidates[0][0]
-            cleared = {(command_id, reply.kind)}
-            if reply.kind == SPEECH_END:  # an end implies the start, even if that reply was lost
-                cleared.add((command_id, SPEECH_START))
-            perf.outstanding = [o for o in perf.outstanding if o not in cleared]
-            for step in perf.steps:
-                if step.command_id == command_id:
-                    step.confirmed, step.inflight = True, False
-            said = reply.detail or ("aborted" if reply.aborted else "failed" if reply.failed else "")
-            perf.replies.append(reply.wire_name + (f" ({said})" if said else ""))
-            perf.cut_by_robot = perf.cut_by_robot or reply.aborted
-            if reply.stopped and not perf.stopped_by_robot:
-                perf.stopped_by_robot = f"{reply.wire_name}: {reply.detail or 'stopped'}"
-            if reply.failed and not perf.failed_by_robot:
-                perf.failed_by_robot = f"the robot reported {reply.wire_name} failed"
-            perf.acked_ns = perf.acked_ns or time_ns
-            if not perf.outstanding:
-                perf.done_ns = time_ns
-            for earlier in self._active[:index]:  # replies come in order: theirs are all in
-                earlier.overtaken = True
+        found = self._waiting_for(reply)
+        if found is None:
+            log.debug("robot reply %s (%s) matches no open suggestion", reply.wire_name, reply.ref)
             return
-        log.debug("robot reply %s (%s) matches no open suggestion", reply.wire_name, reply.ref)
+        perf, command_id = found
+        cleared = {(command_id, reply.kind)}
+        if reply.kind == SPEECH_END:  # an end implies the start, even if that reply was lost
+            cleared.add((command_id, SPEECH_START))
+            if self._speaking == command_id:
+                self._speaking = ""
+        perf.outstanding = [o for o in perf.outstanding if o not in cleared]
+        for step in perf.steps:
+            if step.command_id == command_id:
+                step.confirmed, step.inflight = True, False
+        said = reply.detail or ("aborted" if reply.aborted else "failed" if reply.failed else "")
+        perf.replies.append(reply.wire_name + (f" ({said})" if said else ""))
+        perf.cut_by_robot = perf.cut_by_robot or reply.aborted
+        if reply.stopped and not perf.stopped_by_robot:
+            perf.stopped_by_robot = f"{reply.wire_name}: {reply.detail or 'stopped'}"
+        if reply.failed and not perf.failed_by_robot:
+            perf.failed_by_robot = f"the robot reported {reply.wire_name} failed"
+        perf.acked_ns = perf.acked_ns or time_ns
+        if not perf.outstanding:
+            perf.done_ns = time_ns
+        now = time.monotonic()
+        if perf.index > self._replied_upto:  # replies come in order: the earlier ones' are all in
+            self._replied_upto = perf.index
+            for earlier in [p for p in itertools.takewhile(lambda p: p.index < perf.index, self._active.values())]:
+                self._check(earlier, now)
+        self._check(perf, now)
 
     def _refuse(self, reason: str) -> None:
         """The robot refused us: no retries; every open suggestion fails now with the reason."""
@@ -287,13 +350,13 @@ class RobotDriver:
         self._connected = False
         self._last_error = reason
         self.transport.close()
-        for perf in list(self._active):
-            if perf.unsent():
+        for perf in list(self._active.values()):
+            if perf.has_unsent():
                 self._finish(perf, "failed", reason)
 
     def _drop(self, reason: str, seen: float | None = None) -> None:
         now = time.monotonic()
-        self._mark_inflight(now if seen is None else seen)
+        affected = self._mark_inflight(now if seen is None else seen)
         self._connected = False
         self._dropped_at = now
         self._held = ""
@@ -303,15 +366,24 @@ class RobotDriver:
             self._backoff = self.config.reconnect_min_s  # it was a good connection: start again
         self._next_attempt = now + self._backoff
         self._backoff = min(self._backoff * 2, self.config.reconnect_max_s)
+        for perf in affected:
+            self._check(perf, now)
 
-    def _mark_inflight(self, dropped_at: float) -> None:
-        """Commands written within inflight_window_s before the drop, unconfirmed: maybe lost."""
+    def _mark_inflight(self, dropped_at: float) -> list[_Performance]:
+        """Commands written within inflight_window_s before the drop, unconfirmed: maybe lost.
+        Returns their open suggestions (looked up among the last window's writes only)."""
         since = dropped_at - self.config.inflight_window_s
-        for perf in self._active:
-            for step in perf.steps:
-                if step.sent and not step.confirmed and not step.inflight and step.sent_at >= since:
-                    step.inflight = True
-                    self.inflight_marked += 1
+        affected = []
+        for sent_at, step in self._recent:
+            if sent_at >= since and not step.confirmed and not step.inflight:
+                perf = self._by_command.get(step.command_id)
+                if perf is None:
+                    continue  # its suggestion is already reported
+                step.inflight = True
+                self.inflight_marked += 1
+                affected.append(perf)
+        self._recent.clear()
+        return affected
 
     def _connect(self) -> None:
         self._generation += 1
@@ -330,7 +402,7 @@ class RobotDriver:
         self._connected_at = time.monotonic()  # the backoff restarts only if this connection lasts
         if self._ever_connected:
             self.reconnects += 1
-            for perf in self._active:
+            for perf in self._active.values():
                 perf.reconnects += 1
         self._ever_connected = True
 
@@ -338,9 +410,17 @@ class RobotDriver:
         now = time.monotonic()
         if not self._connected and not self.refused and now >= self._next_attempt:
             self._connect()
-        if self._connected:
-            self._send_due(now)
-        self._finalize_ready(time.monotonic())
+        perf = self._current
+        if perf is not None and self._connected:
+            self._send_due(perf, now)
+        now = time.monotonic()
+        if perf is not None and not perf.finished and perf.has_unsent():
+            self._check(perf, now)  # held or unreachable: give up after give_up_s
+        while self._timers and self._timers[0][0] <= now:
+            _, index = heapq.heappop(self._timers)
+            timed = self._active.get(index)
+            if timed is not None:
+                self._check(timed, now)
 
     def _take_token(self, now: float) -> bool:
         """The rate limit: True if a command may be written now (and count it)."""
@@ -354,77 +434,114 @@ class RobotDriver:
         self._rate_next = now + (1.0 - self._tokens) / rate
         return False
 
-    def _send_due(self, now: float) -> None:
+    def _send_due(self, perf: _Performance, now: float) -> None:
+        """Write the newest suggestion's due commands, in order, as the rate limit allows."""
         self._held = ""
         self._rate_next = 0.0
-        for perf in list(self._active):
-            for step in perf.unsent():
-                if perf.start + step.at_s > now:
-                    break  # steps are in time order; the rest wait for their time
-                time_ns = self._clock_ns()
-                if step.wire is None:
-                    try:
-                        step.wire = self.transport.encode(step.step.command, step.command_id, time_ns)
-                    except (TypeError, ValueError) as exc:
-                        self._finish(perf, "failed", f"cannot encode {step.step.command!r}: {exc}")
-                        break
-                self._held = self.transport.ready(step.wire)
-                if self._held:
-                    return  # hold this and everything after it: order is kept
-                if not self._take_token(time.monotonic()):
-                    return  # the rate limit: this and everything after it wait for a token
-                sent_ns = self._clock_ns()  # the write starts now; a fast robot may answer inside it
+        while perf.has_unsent() and not perf.finished:
+            step = perf.steps[perf.next_step]
+            if perf.start + step.at_s > now:
+                return  # steps are in time order; the rest wait for their time
+            if step.wire is None:
                 try:
-                    self.transport.send(step.wire)
-                except OSError as exc:
-                    log.warning("robot %s: write failed (%s); reconnecting", self.transport.url, exc)
-                    self._drop(f"write failed: {exc}")
+                    step.wire = self.transport.encode(step.step.command, step.command_id, self._clock_ns())
+                except (TypeError, ValueError) as exc:
+                    self._finish(perf, "failed", f"cannot encode {step.step.command!r}: {exc}")
                     return
-                step.sent = True
-                step.sent_at = perf.last_send = time.monotonic()
-                perf.sent_ns = perf.sent_ns or sent_ns
-                perf.outstanding.extend((step.command_id, kind) for kind in step.wire.replies)
-                perf.promised = perf.promised or bool(step.wire.replies)
+            self._held = self.transport.ready(step.wire)
+            if self._held:
+                return  # hold this and everything after it: order is kept
+            if not self._take_token(time.monotonic()):
+                return  # the rate limit: this and everything after it wait for a token
+            sent_ns = self._clock_ns()  # the write starts now; a fast robot may answer inside it
+            try:
+                self.transport.send(step.wire)
+            except OSError as exc:
+                log.warning("robot %s: write failed (%s); reconnecting", self.transport.url, exc)
+                self._drop(f"write failed: {exc}")
+                return
+            self._sent(perf, step, sent_ns)
 
-    def _finalize_ready(self, now: float) -> None:
-        for perf in list(self._active):
-            if perf.unsent():
-                stuck = self._held or (not self._connected and f"robot unreachable: {self._last_error}")
-                if stuck and now - perf.start > self.config.give_up_s:
-                    self._finish(perf, "failed", f"not delivered within {self.config.give_up_s:g} s: {stuck}")
-                continue
-            cut = any(s.cancelled for s in perf.steps)
-            inflight = [s for s in perf.steps if s.inflight]
-            if perf.failed_by_robot:
-                self._finish(perf, "failed", perf.failed_by_robot)
-            elif perf.superseded and perf.outstanding:
-                # replies still in flight are recorded until the robot has moved on
-                if perf.overtaken or now - perf.superseded_at > self.config.abort_grace_s:
-                    self._finish(perf, "aborted")
-            elif (perf.superseded and cut) or perf.cut_by_robot:
-                self._finish(perf, "aborted")
-            elif perf.stopped_by_robot and not perf.outstanding:
-                self._finish(perf, "aborted" if perf.superseded else "stopped", perf.stopped_by_robot)
-            elif inflight and not perf.outstanding:
-                self._finish(perf, "unacknowledged",
-                             f"{len(inflight)} command(s) written within {self.config.inflight_window_s:g} s before"
-                             f" the connection died ({self._last_error}): they may not have reached the robot")
-            elif not perf.outstanding and perf.steps and not perf.promised and self._connected \
-                    and now - perf.last_send < self.config.inflight_window_s:
-                continue  # nothing will confirm these: wait out the in-flight window before saying "sent"
-            elif not perf.outstanding:
-                self._finish(perf, "done" if perf.promised else "sent" if perf.steps else "nothing")
-            elif now - perf.last_send > self.config.ack_timeout_s:
-                lost = f" (connection lost since: {self._last_error})" if self._dropped_at > perf.last_send else ""
-                self._finish(perf, "unacknowledged",
-                             f"no {perf.outstanding[0][1]} within {self.config.ack_timeout_s:g} s{lost}")
+    def _sent(self, perf: _Performance, step: _Step, sent_ns: int) -> None:
+        step.sent = True
+        perf.next_step += 1
+        step.sent_at = perf.last_send = time.monotonic()
+        perf.sent_ns = perf.sent_ns or sent_ns
+        self._by_command[step.command_id] = perf
+        self._recent.append((step.sent_at, step))
+        while self._recent and self._recent[0][0] < step.sent_at - self.config.inflight_window_s:
+            self._recent.popleft()
+        command = step.step.command
+        if isinstance(command, Say):
+            self._speaking = step.command_id
+        elif isinstance(command, StopSpeech):
+            self._speaking = ""
+        elif isinstance(command, Look):
+            self._head_away = command.head and command != self._rest
+        if step.wire.replies:
+            perf.outstanding.extend((step.command_id, kind) for kind in step.wire.replies)
+            perf.promised = True
+            self._at(perf.last_send + self.config.ack_timeout_s, perf)
+        self._at(perf.last_send + self.config.inflight_window_s, perf)
+
+    def _check(self, perf: _Performance, now: float) -> None:
+        """Report `perf` if its fate is known now; otherwise a message or a timer calls this again."""
+        if perf.finished:
+            return
+        if perf.has_unsent():
+            stuck = self._held or (not self._connected and f"robot unreachable: {self._last_error}")
+            if stuck and now >= perf.start + self.config.give_up_s:
+                self._finish(perf, "failed", f"not delivered within {self.config.give_up_s:g} s: {stuck}")
+            return
+        dropped = [s for s in perf.steps if s.dropped]
+        inflight = [s for s in perf.steps if s.inflight]
+        overtaken = perf.index < self._replied_upto
+        if perf.failed_by_robot:
+            self._finish(perf, "failed", perf.failed_by_robot)
+        elif perf.superseded and perf.outstanding:
+            # replies still in flight are recorded until the robot has moved on
+            if overtaken or now >= perf.superseded_at + self.config.abort_grace_s:
+                self._finish(perf, "superseded" if dropped else "aborted", self._why_superseded(perf, dropped))
+        elif dropped:
+            self._finish(perf, "superseded", self._why_superseded(perf, dropped))
+        elif perf.cut_by_robot:
+            self._finish(perf, "aborted")
+        elif perf.stopped_by_robot and not perf.outstanding:
+            self._finish(perf, "aborted" if perf.superseded else "stopped", perf.stopped_by_robot)
+        elif inflight and not perf.outstanding:
+            self._finish(perf, "unacknowledged",
+                         f"{len(inflight)} command(s) written within {self.config.inflight_window_s:g} s before"
+                         f" the connection died ({self._last_error}): they may not have reached the robot")
+        elif not perf.outstanding and perf.steps and not perf.promised and self._connected \
+                and now < perf.last_send + self.config.inflight_window_s:
+            return  # nothing will confirm these: wait out the in-flight window (a timer) before saying "sent"
+        elif not perf.outstanding:
+            self._finish(perf, "done" if perf.promised else "sent" if perf.steps else "nothing")
+        elif now >= perf.last_send + self.config.ack_timeout_s:
+            lost = f" (connection lost since: {self._last_error})" if self._dropped_at > perf.last_send else ""
+            self._finish(perf, "unacknowledged",
+                         f"no {perf.outstanding[0][1]} within {self.config.ack_timeout_s:g} s{lost}")
+
+    @staticmethod
+    def _why_superseded(perf: _Performance, dropped: list[_Step]) -> str:
+        return (f"superseded by suggestion {perf.superseded_by} before {len(dropped)} of its {len(perf.steps)}"
+                " command(s) were written: dropped as stale") if dropped else ""
 
     def _finish(self, perf: _Performance, outcome: str, error: str = "") -> None:
-        self._active.remove(perf)
+        perf.finished = True
+        del self._active[perf.index]
+        if self._current is perf:
+            self._current = None
         s = perf.suggestion
         waiting = {command_id for command_id, _ in perf.outstanding}
-        unconfirmed = [st.wire.text for st in perf.steps if st.sent and st.wire is not None and not st.confirmed
-                       and (st.inflight or (outcome in ("unacknowledged", "in-flight") and st.command_id in waiting))]
+        unconfirmed = []
+        for st in perf.steps:
+            self._by_command.pop(st.command_id, None)
+            if st.sent and st.wire is not None and not st.confirmed and (
+                    st.inflight or (outcome in UNCONFIRMED_IF_WAITING and st.command_id in waiting)):
+                unconfirmed.append(st.wire.text)
+        if outcome in ("unacknowledged", "in-flight") and self._speaking in waiting:
+            self._speaking = ""  # we stopped waiting for its end: assume it is over
         acted = RobotActed(
             session=s.session, round=s.round, turn=s.turn, attempt=s.attempt, action=s.action,
             backend=self.transport.url, outcome=outcome,
@@ -451,31 +568,27 @@ class RobotDriver:
         return step.wire.text
 
     def _next_wakeup(self) -> float | None:
+        """The earliest moment something can change without a message: O(1), whatever is open."""
         times = []
-        if self._rate_next:
-            times.append(self._rate_next)
+        if self._timers:
+            times.append(self._timers[0][0])
         if not self._connected and not self.refused:
             times.append(self._next_attempt)
-        for perf in self._active:
-            unsent = perf.unsent()
-            if unsent and self._connected and not self._held:
-                times.append(max(perf.start + unsent[0].at_s, self._rate_next))
-            elif unsent and self._held:  # held by the transport: ask it again soon
-                times.append(min(time.monotonic() + HELD_POLL_S, perf.start + self.config.give_up_s))
-            elif unsent:
+        perf = self._current
+        if perf is not None and not perf.finished and perf.has_unsent():
+            if self._connected and not self._held:
+                times.append(max(perf.start + perf.steps[perf.next_step].at_s, self._rate_next))
+            else:  # unreachable, or held until the transport reports a Changed: the give-up time
                 times.append(perf.start + self.config.give_up_s)
-            elif perf.outstanding:
-                times.append(perf.last_send + self.config.ack_timeout_s)
-                if perf.superseded:
-                    times.append(perf.superseded_at + self.config.abort_grace_s)
-            else:
-                times.append(perf.last_send + self.config.inflight_window_s)
         return min(times) if times else None
 
     def _shutdown(self) -> None:
-        for perf in list(self._active):
-            if perf.unsent():
+        for perf in list(self._active.values()):
+            dropped = [s for s in perf.steps if s.dropped]
+            if perf.has_unsent():
                 self._finish(perf, "failed", "bridge closed before delivery")
+            elif dropped:
+                self._finish(perf, "superseded", self._why_superseded(perf, dropped))
             elif perf.outstanding:
                 self._finish(perf, "in-flight", "the session ended while the robot's acknowledgement was awaited")
             elif any(s.inflight for s in perf.steps):

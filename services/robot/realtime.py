@@ -56,7 +56,8 @@ DEFAULT_PORT = 9000
 PATH = "/v1/events"
 REPLIES = {"response.speak.start": SPEECH_START, "response.speak.end": SPEECH_END,
            "response.gesture.end": GESTURE_END}
-OPEN_TIMEOUT_S = 5.0
+OPEN_TIMEOUT_S = 5.0  # the WebSocket opening handshake
+AUTH_TIMEOUT_S = 5.0  # then the response.auth to our request.auth
 
 
 def headpose_angles(x: float, y: float, z: float, config: RobotConfig) -> tuple[float, float]:
@@ -122,7 +123,7 @@ class RealtimeTransport:
         request = {"type": "request.auth", "request_id": request_id}
         if self.config.realtime_key:
             request["key"] = self.config.realtime_key
-        deadline = time.monotonic() + OPEN_TIMEOUT_S
+        deadline = time.monotonic() + AUTH_TIMEOUT_S
         try:
             ws.send(json.dumps(request))
             while True:  # frames before our response.auth are not ours to judge yet
@@ -136,7 +137,7 @@ class RealtimeTransport:
                         and message.get("request_id", request_id) == request_id):
                     break
         except TimeoutError:
-            raise ConnectionError(f"robot did not answer request.auth within {OPEN_TIMEOUT_S:g} s") from None
+            raise ConnectionError(f"robot did not answer request.auth within {AUTH_TIMEOUT_S:g} s") from None
         except ConnectionClosed as exc:
             raise ConnectionError(f"robot closed the connection during auth: {exc}") from None
         if message.get("access") is not True:

@@ -12,8 +12,9 @@ all due at once (t = 0) except the later steps of a head turn:
                   movement".)
   gaze         -> Look at the matching card
 Speech goes first: it is what the participant waits for. Every Say aborts the
-robot's current speech; a suggestion without speech that follows one with speech
-gets a StopSpeech (added by the driver, which knows what is still playing).
+robot's current speech; what a superseded suggestion left playing or turned is
+undone by the driver, which knows what was written (StopSpeech, the head back
+to rest: services/robot/driver.py).
 Texts and gesture names are data (RobotConfig), the table below is the only logic.
 """
 
@@ -101,10 +102,14 @@ class Renderer:
             beside = self.board.beside(observed, rows, cols, self.config.head_turn_offset_m)
             steps.append(Step(0.0, self._look(self.board.card(observed), head=True)))
             steps.append(Step(lead, self._look(beside, head=True)))
-            steps.append(Step(lead + hold, self._look(self.board.rest, head=True)))
+            steps.append(Step(lead + hold, self.rest_look()))
         if parts.gaze:
             steps.append(Step(0.0, self._look(self.board.card(target))))
         return steps
+
+    def rest_look(self) -> Look:
+        """The head turned back to the rest point (the participant): the last step of a head turn."""
+        return self._look(self.board.rest, head=True)
 
     @staticmethod
     def _look(p, head: bool = False) -> Look:

@@ -6,10 +6,14 @@ and an end (the end after SPEECH_S_PER_WORD per word, times `time_scale`), a
 gesture with an end after GESTURE_S, and a newer speech or a stop ends the
 current speech early. Its wire messages are the neutral commands as JSON with
 their id, so a recording shows what a robot would have been asked to do.
+Its delayed replies wait in one heap served by one thread (not a thread per
+reply: a simulated session asks for thousands), which sleeps until the earliest.
 """
 
 from __future__ import annotations
 
+import heapq
+import itertools
 import json
 import logging
 import threading
@@ -37,12 +41,16 @@ class VirtualTransport:
         self.performed: list[tuple[int, str]] = []  # (time ns, wire text)
         self._deliver: Deliver | None = None
         self._generation = 0
-        self._timers: list[threading.Timer] = []
+        self._due: list[tuple[float, int, str, str, str, bool]] = []  # heap: (when, n, kind, id, name, speech)
+        self._order = itertools.count()
+        self._timer: threading.Thread | None = None
         self._speaking: str | None = None  # id of the speech playing now
         self._lock = threading.Lock()
+        self._wake = threading.Condition(self._lock)
 
     def encode(self, command: Command, command_id: str, time_ns: int) -> Wire:
-        text = json.dumps({"id": command_id, **json.loads(_encode(command))}, separators=(",", ":"))
+        body = _encode(command).decode()  # '{"type":...}': the id goes first, as a field of the same object
+        text = _encode({"id": command_id}).decode()[:-1] + "," + body[1:]
         replies = (SPEECH_START, SPEECH_END) if isinstance(command, Say) else \
             (GESTURE_END,) if isinstance(command, Gesture) else ()
         return Wire(text, text, replies)
@@ -79,23 +87,38 @@ class VirtualTransport:
 
     def _reply(self, kind: str, command_id: str, name: str, after_s: float, speech: bool = False) -> None:
         delay = after_s * self.time_scale
-
-        def fire() -> None:
-            if speech:
-                with self._lock:
-                    if self._speaking != command_id:
-                        return  # aborted: its end was already reported
-                    self._speaking = None
-            self._emit(kind, command_id, name)
-
         if delay <= 0:
-            fire()
+            self._fire(kind, command_id, name, speech)
             return
-        timer = threading.Timer(delay, fire)
-        timer.daemon = True
-        with self._lock:
-            self._timers = [t for t in self._timers if t.is_alive()] + [timer]
-        timer.start()
+        with self._wake:
+            heapq.heappush(self._due, (time.monotonic() + delay, next(self._order), kind, command_id, name, speech))
+            if self._timer is None:
+                self._timer = threading.Thread(target=self._serve, name="virtual robot replies", daemon=True)
+                self._timer.start()
+            self._wake.notify()
+
+    def _serve(self) -> None:
+        """The reply thread: sleeps until the earliest due reply, fires what is due, until closed."""
+        me = threading.current_thread()
+        while True:
+            with self._wake:
+                while self._timer is me and (not self._due or self._due[0][0] > time.monotonic()):
+                    self._wake.wait(None if not self._due else self._due[0][0] - time.monotonic())
+                if self._timer is not me:
+                    return
+                due = []
+                while self._due and self._due[0][0] <= time.monotonic():
+                    due.append(heapq.heappop(self._due))
+            for _, _, kind, command_id, name, speech in due:
+                self._fire(kind, command_id, name, speech)
+
+    def _fire(self, kind: str, command_id: str, name: str, speech: bool) -> None:
+        if speech:
+            with self._lock:
+                if self._speaking != command_id:
+                    return  # aborted: its end was already reported
+                self._speaking = None
+        self._emit(kind, command_id, name)
 
     def _emit(self, kind: str, command_id: str, name: str, aborted: bool = False) -> None:
         deliver = self._deliver
@@ -103,9 +126,9 @@ class VirtualTransport:
             deliver(Reply(self._generation, kind, command_id, name, aborted))
 
     def close(self) -> None:
-        with self._lock:
-            timers, self._timers = self._timers, []
+        with self._wake:
+            self._due.clear()
+            self._timer = None  # the reply thread sees it is no longer the one and ends
             self._speaking = None
-        for timer in timers:
-            timer.cancel()
+            self._wake.notify_all()
         self._deliver = None

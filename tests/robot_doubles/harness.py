@@ -9,9 +9,14 @@ from pairplay.core.geometry import card_of
 from pairplay.schemas.robot import RobotActed, RobotConfig
 from pairplay.services.robot import Suggestion
 
-# Short holds and timeouts so a test takes milliseconds; the protocol is unchanged.
-FAST = RobotConfig(head_turn_lead_s=0.01, head_turn_hold_s=0.01, ack_timeout_s=2.0, give_up_s=3.0,
+# Short holds and backoff so a test takes milliseconds; the protocol is unchanged. The time limits that
+# decide an outcome stay long (a reply or a reconnect can take seconds on a loaded VM): a test about a
+# limit sets its own short one, and every other test ends by the robot's replies, never by a limit.
+FAST = RobotConfig(head_turn_lead_s=0.01, head_turn_hold_s=0.01, ack_timeout_s=10.0, give_up_s=10.0,
                    reconnect_min_s=0.01, reconnect_max_s=0.1)
+# How long a test waits for what must happen: a bound, never a measure (it costs nothing when things
+# go right, and a loaded 2-core VM has been seen 20x slower than a quiet one).
+PATIENCE_S = 30.0
 
 OBSERVED, TARGET = card_of(1, 1), card_of(1, 4)
 # One action per suggestion family (thesis tables 4.1-4.4).
@@ -47,7 +52,7 @@ class Collector:
             self.rejected.append((reason, excerpt))
             self._changed.notify_all()
 
-    def wait_for(self, predicate, timeout: float = 5.0) -> bool:
+    def wait_for(self, predicate, timeout: float = PATIENCE_S) -> bool:
         with self._changed:
             return self._changed.wait_for(lambda: predicate(self), timeout)
 

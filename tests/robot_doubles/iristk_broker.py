@@ -171,7 +171,7 @@ class IrisTKBroker:
         for client in [c for c in self.clients if c.name == name]:
             self._write(client, raw)
 
-    def wait_for(self, predicate, timeout: float = 5.0) -> bool:
+    def wait_for(self, predicate, timeout: float = 30.0) -> bool:  # a bound, not a measure
         """Wait until predicate(self) holds (checked whenever the broker's state changes)."""
         with self._changed:
             return self._changed.wait_for(lambda: predicate(self), timeout)

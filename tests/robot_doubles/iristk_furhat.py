@@ -185,7 +185,7 @@ class IrisTKFurhat:
                 pass
             self._sock.close()
 
-    def wait_for(self, predicate, timeout: float = 5.0) -> bool:
+    def wait_for(self, predicate, timeout: float = 30.0) -> bool:  # a bound, not a measure
         with self._changed:
             return self._changed.wait_for(lambda: predicate(self), timeout)
 
