@@ -67,7 +67,7 @@ def psi_round_start(config: LearnerConfig, round_index):
 def greedy(q: np.ndarray, u_tie: np.ndarray) -> np.ndarray:
     """argmax over the last axis, ties broken by the draw: the floor(u*n)-th tied action."""
     q = np.asarray(q, dtype=np.float64)
-    rows = np.ascontiguousarray(q.reshape(-1, q.shape[-1]))
+    rows = np.ascontiguousarray(q.reshape(-1, 1, q.shape[-1]))
     u = np.ascontiguousarray(np.broadcast_to(np.asarray(u_tie, dtype=np.float64), q.shape[:-1])).reshape(-1)
     out = np.empty(rows.shape[0], dtype=np.int64)
     kernels.greedy_batch(rows, u, out)
