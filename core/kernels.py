@@ -87,12 +87,19 @@ def as_batch(x, n: int, dtype) -> np.ndarray:
     """`x` as a C-contiguous (n,) array of `dtype` for a batch kernel (a scalar or (1,) is broadcast).
 
     The cheap path first: a live service passes arrays that already fit, and
-    numpy's broadcasting costs more than the kernel call itself in a batch of one.
+    numpy's conversions cost more than the kernel call itself in a batch of one
+    (the test is attribute reads only: `np.asarray(x, dtype)` alone costs more).
     """
+    if type(x) is np.ndarray and x.shape == (n,) and x.dtype is _DTYPES.get(dtype) and (
+            n < 2 or x.strides[0] == x.itemsize):
+        return x
     a = np.asarray(x, dtype=dtype)
     if a.shape == (n,) and a.flags.c_contiguous:
         return a
     return np.ascontiguousarray(np.broadcast_to(a, (n,)))
+
+
+_DTYPES = {t: np.dtype(t) for t in (bool, np.bool_, np.int8, np.int32, np.int64, np.float64, np.uint64)}
 
 
 # --- scalar rules -----------------------------------------------------------------------------
@@ -386,12 +393,17 @@ def users_end_turn(first, second, matched, memory, stamp, clock, capacity):
 
 
 @njit(cache=True)
-def learners_suggest(q, states, u, epsilon, mode, psi, psi_decay, table, actions, how):
-    """One suggestion per game; psi *= psi_decay after each pi-reuse suggestion (algorithm 5, line 9)."""
+def learners_suggest(q, states, keys, pos, epsilon, mode, psi, psi_decay, table, actions, how):
+    """One suggestion per game from the next DRAWS_PER_SUGGESTION draws of its agent stream (keys, pos:
+    core/rng.py UniformStream; pos += 4, whatever the mode); psi *= psi_decay after each pi-reuse
+    suggestion (algorithm 5, line 9). One call draws and chooses: a live learner (a batch of one) pays
+    one kernel dispatch per suggestion."""
     for g in range(states.size):
         s = states[g]
-        actions[g], how[g] = _suggest(q, g, s, u[g, 0], u[g, 1], u[g, 2], u[g, 3], epsilon[g], mode,
-                                      psi[g], table[g, s])
+        k, p = keys[g], pos[g]
+        actions[g], how[g] = _suggest(q, g, s, _draw(k, p), _draw(k, p + np.uint64(1)), _draw(k, p + np.uint64(2)),
+                                      _draw(k, p + np.uint64(3)), epsilon[g], mode, psi[g], table[g, s])
+        pos[g] = p + np.uint64(DRAWS_PER_SUGGESTION)
         if mode == MODE_REUSE:
             psi[g] = psi[g] * psi_decay
 
@@ -408,6 +420,12 @@ def greedy_batch(q, u, out):
     """Greedy action of every row q[i, 0] of q (n, 1, A) with tie draws u (n,)."""
     for i in range(q.shape[0]):
         out[i] = _greedy(q, i, 0, u[i])
+
+
+@njit(cache=True)
+def reward_one(hit, considered, consistent, size, holds_match, bonus):
+    """`_reward` of one turn: (reward, learn); a live learner's batch of one without array boxing."""
+    return _reward(hit, considered, consistent, size, holds_match, bonus)
 
 
 @njit(cache=True)
