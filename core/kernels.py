@@ -29,7 +29,9 @@ import time
 from typing import NamedTuple
 
 import numpy as np
-from numba import njit
+from llvmlite import ir
+from numba import njit, types
+from numba.extending import intrinsic
 
 from .actions import ACTION_HEARING, ACTION_VISUAL, HEARING_SMILE, N_ACTIONS, VISUAL_GAZE
 from .geometry import ALL_CARDS, CELL_MASK, CELL_OF, LEVEL_OF_COUNT, N_CARDS, N_STATES, STATE_INDEX
@@ -85,12 +87,19 @@ def as_batch(x, n: int, dtype) -> np.ndarray:
     """`x` as a C-contiguous (n,) array of `dtype` for a batch kernel (a scalar or (1,) is broadcast).
 
     The cheap path first: a live service passes arrays that already fit, and
-    numpy's broadcasting costs more than the kernel call itself in a batch of one.
+    numpy's conversions cost more than the kernel call itself in a batch of one
+    (the test is attribute reads only: `np.asarray(x, dtype)` alone costs more).
     """
+    if type(x) is np.ndarray and x.shape == (n,) and x.dtype is _DTYPES.get(dtype) and (
+            n < 2 or x.strides[0] == x.itemsize):
+        return x
     a = np.asarray(x, dtype=dtype)
     if a.shape == (n,) and a.flags.c_contiguous:
         return a
     return np.ascontiguousarray(np.broadcast_to(a, (n,)))
+
+
+_DTYPES = {t: np.dtype(t) for t in (bool, np.bool_, np.int8, np.int32, np.int64, np.float64, np.uint64)}
 
 
 # --- scalar rules -----------------------------------------------------------------------------
@@ -105,22 +114,30 @@ def _draw(key, index):
     return np.float64(z >> _S11) * _TO_UNIT
 
 
-@njit(cache=True, inline="always")
-def _popcount(x):
-    """Set bits of a card mask (< 2**32)."""
-    x = x - ((x >> 1) & 0x55555555)
-    x = (x & 0x33333333) + ((x >> 2) & 0x33333333)
-    x = (x + (x >> 4)) & 0x0F0F0F0F
-    return ((x * 0x01010101) & 0xFFFFFFFF) >> 24
+@intrinsic
+def _popcount(typingctx, x):
+    """Set bits of a card mask (int64): LLVM's ctpop, one instruction where the CPU has it."""
+    if not isinstance(x, types.Integer):
+        return None
+
+    def codegen(context, builder, signature, args):
+        return builder.ctpop(context.cast(builder, args[0], x, types.int64))
+    return types.int64(x), codegen
 
 
-@njit(cache=True, inline="always")
-def _bit_index(single):
-    """Index of the one set bit of `single`."""
-    return _popcount(single - 1)
+@intrinsic
+def _bit_index(typingctx, single):
+    """Index of the lowest set bit of `single` (int64, not 0): LLVM's cttz."""
+    if not isinstance(single, types.Integer):
+        return None
+
+    def codegen(context, builder, signature, args):
+        value = context.cast(builder, args[0], single, types.int64)
+        return builder.cttz(value, ir.Constant(ir.IntType(1), 1))
+    return types.int64(single), codegen
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def _pick(mask, u):
     """The floor(u*n)-th set bit (ascending) of a card mask; -1 for an empty mask."""
     n = _popcount(mask)
@@ -132,12 +149,13 @@ def _pick(mask, u):
     return _bit_index(mask & -mask)
 
 
-@njit(cache=True)
-def _deal(u, partner):
+@njit(cache=True, _nrt=False)
+def _deal(u, partner, order):
     """A deal from 18 draws (core/board.py): stable argsort; places 2k, 2k+1 of it are a pair.
 
-    Writes `partner` (18,) and returns the order (18,) of the places."""
-    order = np.arange(N_CARDS)
+    Writes `partner` (18,) and the order (18,) of the places into `order`."""
+    for i in range(N_CARDS):
+        order[i] = i
     for i in range(1, N_CARDS):  # insertion sort: stable, 18 items
         j = i
         while j > 0 and u[order[j - 1]] > u[order[j]]:
@@ -146,10 +164,9 @@ def _deal(u, partner):
     for k in range(0, N_CARDS, 2):
         partner[order[k]] = order[k + 1]
         partner[order[k + 1]] = order[k]
-    return order
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def _state(t, observed, match, covered):
     """Thesis 4.1 (core/geometry.py state_of): the cell of the match and its covered count's level."""
     cell = t.cell_of[observed, match]
@@ -157,14 +174,14 @@ def _state(t, observed, match, covered):
     return t.state_index[cell, t.level_of_count[n]]
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def _user_nis(memory, covered):
     """No-information set: covered cards not remembered (never empty while a card is covered)."""
     nis = covered & ~memory
     return nis if nis != 0 else covered
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def _user_first_pick(memory, partner, covered, u):
     """A card of a wholly remembered pair, else a covered card not remembered (core/user.py)."""
     known = 0
@@ -177,7 +194,7 @@ def _user_first_pick(memory, partner, covered, u):
     return _pick(known if known != 0 else covered & ~memory, u)
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def _user_respond(t, action, observed, match, intended, from_memory, nis, u_focus, u_hear, u_choice,
                   p_consider, q_hear, sees_smile, sees_head, sees_gaze, reading, frame):
     """(second, considered, consistent, candidates) after a suggestion (core/user.py); `reading`: the
@@ -206,7 +223,7 @@ def _user_respond(t, action, observed, match, intended, from_memory, nis, u_focu
     return second, considered, consistent, (cand if consistent else 0)
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def _user_end_turn(g, first, second, matched, memory, stamp, clock, capacity):
     """Memory after a turn: a miss adds both cards (oldest leave), a match removes them."""
     if matched:
@@ -231,43 +248,60 @@ def _user_end_turn(g, first, second, matched, memory, stamp, clock, capacity):
     clock[g] += 2
 
 
-@njit(cache=True, fastmath={"nnan", "ninf", "nsz"})
-def _greedy(q_row, u_tie):
-    """argmax of a Q row, ties broken by the draw: the floor(u*n)-th tied action (core/learning.py).
+@njit(cache=True, _nrt=False)
+def _greedy(q, g, s, u_tie):
+    """argmax of the Q row q[g, s], ties broken by the draw: the floor(u*n)-th tied action (core/learning.py).
 
-    Q-values are finite, so the no-NaN/no-inf/signed-zero flags change no
-    comparison; they let the max and the tie count vectorise.
+    The row is indexed in place (a view of it would cost two atomic reference
+    counts per call). The max runs in four independent lanes: a max is exact,
+    so any order gives the same value, and four chains hide the compare's
+    latency that one 88-long chain would pay in full.
     """
-    best = q_row[0]
-    for a in range(1, q_row.size):
-        best = max(best, q_row[a])
+    size = q.shape[2]
+    m0 = q[g, s, 0]
+    m1, m2, m3 = m0, m0, m0
+    a = 0
+    while a + 4 <= size:
+        x0, x1, x2, x3 = q[g, s, a], q[g, s, a + 1], q[g, s, a + 2], q[g, s, a + 3]
+        m0 = x0 if x0 > m0 else m0
+        m1 = x1 if x1 > m1 else m1
+        m2 = x2 if x2 > m2 else m2
+        m3 = x3 if x3 > m3 else m3
+        a += 4
+    while a < size:
+        x0 = q[g, s, a]
+        m0 = x0 if x0 > m0 else m0
+        a += 1
+    m0 = m1 if m1 > m0 else m0
+    m2 = m3 if m3 > m2 else m2
+    best = m2 if m2 > m0 else m0
     n = 0
-    for a in range(q_row.size):
-        n += q_row[a] == best
+    for a in range(size):
+        n += q[g, s, a] == best
     k = 0 if n == 1 else min(np.int64(u_tie * n), n - 1)
-    for a in range(q_row.size):
-        if q_row[a] == best:
+    for a in range(size):
+        if q[g, s, a] == best:
             if k == 0:
                 return a
             k -= 1
     return 0
 
 
-@njit(cache=True)
-def _suggest(q_row, u_psi, u_eps, u_action, u_tie, epsilon, mode, psi, bias_action):
-    """(action, how, explore) of one suggestion (algorithms 1 and 5); psi's decay is the caller's."""
+@njit(cache=True, _nrt=False)
+def _suggest(q, g, s, u_psi, u_eps, u_action, u_tie, epsilon, mode, psi, bias_action):
+    """(action, how) of one suggestion in state s of game g (algorithms 1 and 5); psi's decay is the caller's."""
     if mode == MODE_FIXED:
         return bias_action, HOW_FIXED
     if u_eps < epsilon:
         action, how = min(np.int64(u_action * N_ACTIONS), N_ACTIONS - 1), HOW_EXPLORE
     else:
-        action, how = _greedy(q_row, u_tie), HOW_GREEDY
+        action, how = _greedy(q, g, s, u_tie), HOW_GREEDY
     if mode == MODE_REUSE and u_psi < psi:
         action, how = bias_action, HOW_BIAS
     return action, how
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def _learn(q, counts, g, state, action, reward, alpha):
     """Eq. 5.2, Q + alpha * (r - Q) (core/learning.py q_update), and one more update counted."""
     old = q[g, state, action]
@@ -275,7 +309,7 @@ def _learn(q, counts, g, state, action, reward, alpha):
     counts[g, state, action] += 1
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def _reward(hit, considered, consistent, size, holds_match, bonus):
     """(reward, learn) of a simulated turn (core/reward.py simulated_reward)."""
     if not considered:
@@ -308,8 +342,9 @@ def pick_batch(masks, u, out):
 @njit(cache=True)
 def deal_batch(u, faces, partner):
     """Faces (B, 18) and partners (B, 18) of a deal per row of 18 draws."""
+    order = np.empty(N_CARDS, dtype=np.int64)
     for g in range(u.shape[0]):
-        order = _deal(u[g], partner[g])
+        _deal(u[g], partner[g], order)
         for k in range(N_CARDS):
             faces[g, order[k]] = k // 2
 
@@ -358,12 +393,17 @@ def users_end_turn(first, second, matched, memory, stamp, clock, capacity):
 
 
 @njit(cache=True)
-def learners_suggest(q, states, u, epsilon, mode, psi, psi_decay, table, actions, how):
-    """One suggestion per game; psi *= psi_decay after each pi-reuse suggestion (algorithm 5, line 9)."""
+def learners_suggest(q, states, keys, pos, epsilon, mode, psi, psi_decay, table, actions, how):
+    """One suggestion per game from the next DRAWS_PER_SUGGESTION draws of its agent stream (keys, pos:
+    core/rng.py UniformStream; pos += 4, whatever the mode); psi *= psi_decay after each pi-reuse
+    suggestion (algorithm 5, line 9). One call draws and chooses: a live learner (a batch of one) pays
+    one kernel dispatch per suggestion."""
     for g in range(states.size):
         s = states[g]
-        actions[g], how[g] = _suggest(q[g, s], u[g, 0], u[g, 1], u[g, 2], u[g, 3], epsilon[g], mode,
-                                      psi[g], table[g, s])
+        k, p = keys[g], pos[g]
+        actions[g], how[g] = _suggest(q, g, s, _draw(k, p), _draw(k, p + np.uint64(1)), _draw(k, p + np.uint64(2)),
+                                      _draw(k, p + np.uint64(3)), epsilon[g], mode, psi[g], table[g, s])
+        pos[g] = p + np.uint64(DRAWS_PER_SUGGESTION)
         if mode == MODE_REUSE:
             psi[g] = psi[g] * psi_decay
 
@@ -377,9 +417,15 @@ def learners_learn(q, counts, states, actions, rewards, mask, alpha):
 
 @njit(cache=True)
 def greedy_batch(q, u, out):
-    """Greedy action of every row of q (n, A) with tie draws u (n,)."""
+    """Greedy action of every row q[i, 0] of q (n, 1, A) with tie draws u (n,)."""
     for i in range(q.shape[0]):
-        out[i] = _greedy(q[i], u[i])
+        out[i] = _greedy(q, i, 0, u[i])
+
+
+@njit(cache=True)
+def reward_one(hit, considered, consistent, size, holds_match, bonus):
+    """`_reward` of one turn: (reward, learn); a live learner's batch of one without array boxing."""
+    return _reward(hit, considered, consistent, size, holds_match, bonus)
 
 
 @njit(cache=True)
@@ -417,6 +463,7 @@ def play(t, games, until, rounds, keys, pos, mode, cfg, table, p_consider, q_hea
     from row `n_trace`, the array doubled when full; returns (trace, rows).
     """
     partner = np.empty(N_CARDS, dtype=np.int64)
+    order = np.empty(N_CARDS, dtype=np.int64)
     u_deal = np.empty(N_CARDS)
     u_snap = np.empty(N_STATES)
     for i in range(games.size):
@@ -429,7 +476,7 @@ def play(t, games, until, rounds, keys, pos, mode, cfg, table, p_consider, q_hea
             for j in range(N_CARDS):
                 u_deal[j] = _draw(keys[g, DEAL], pos[g, DEAL] + np.uint64(j))
             pos[g, DEAL] += np.uint64(N_CARDS)
-            _deal(u_deal, partner)
+            _deal(u_deal, partner, order)
             memory[g] = 0
             stamp[g, :] = NEVER
             psi = psi0_tab[c, r]
@@ -456,7 +503,7 @@ def play(t, games, until, rounds, keys, pos, mode, cfg, table, p_consider, q_hea
                 else:
                     ka, pa = keys[g, AGENT], pos[g, AGENT]
                     pos[g, AGENT] += np.uint64(DRAWS_PER_SUGGESTION)
-                    action, _ = _suggest(q[g, state], _draw(ka, pa), _draw(ka, pa + np.uint64(1)),
+                    action, _ = _suggest(q, g, state, _draw(ka, pa), _draw(ka, pa + np.uint64(1)),
                                          _draw(ka, pa + np.uint64(2)), _draw(ka, pa + np.uint64(3)),
                                          epsilon, m, psi, table[g, state])
                     if m == MODE_REUSE:
@@ -495,7 +542,7 @@ def play(t, games, until, rounds, keys, pos, mode, cfg, table, p_consider, q_hea
                     u_snap[s] = _draw(keys[g, SNAPSHOT], pos[g, SNAPSHOT] + np.uint64(s))
                 pos[g, SNAPSHOT] += np.uint64(N_STATES)
                 for s in range(N_STATES):
-                    snapshots[g, r // snapshot_every - 1, s] = _greedy(q[g, s], u_snap[s])
+                    snapshots[g, r // snapshot_every - 1, s] = _greedy(q, g, s, u_snap[s])
     return trace, n_trace
 
 
@@ -522,9 +569,9 @@ def _value_table(bonus):
     return out
 
 
-@njit(cache=True)
-def _expected(t, observed, match, nis, q_hear, sees_smile, sees_head, sees_gaze, value, out, base, unheard):
-    """E[reward | considered] of each of the 88 actions in one situation, into out (88,).
+@njit(cache=True, _nrt=False)
+def _expected(t, observed, match, nis, q_hear, sees_smile, sees_head, sees_gaze, value, out, row, base, unheard):
+    """E[reward | considered] of each of the 88 actions in one situation, into out[row] (out: (n, 88)).
 
     The visual part decides the unheard candidate set, so its 11 values are
     computed once (into the scratch arrays `base`, `unheard`: (11,)) and shared
@@ -543,11 +590,11 @@ def _expected(t, observed, match, nis, q_hear, sees_smile, sees_head, sees_gaze,
         else:
             p_heard = 0.0
         if p_heard == 0.0:  # 0 * heard + 1 * unheard, exactly, for finite values
-            out[a] = unheard[v]
+            out[row, a] = unheard[v]
             continue
         cand = base[v] & t.hear_set[observed, match, h]
         heard = value[_popcount(cand), (cand >> match) & 1]
-        out[a] = p_heard * heard + (1 - p_heard) * unheard[v]
+        out[row, a] = p_heard * heard + (1 - p_heard) * unheard[v]
 
 
 @njit(cache=True)
@@ -557,7 +604,7 @@ def expected_batch(t, observed, match, nis, q_hear, sees_smile, sees_head, sees_
     unheard = np.empty(t.vis_set.shape[2])
     value = _value_table(bonus)
     for i in range(observed.size):
-        _expected(t, observed[i], match[i], nis[i], q_hear, sees_smile, sees_head, sees_gaze, value, out[i],
+        _expected(t, observed[i], match[i], nis[i], q_hear, sees_smile, sees_head, sees_gaze, value, out, i,
                   base, unheard)
 
 
@@ -567,18 +614,18 @@ def expected_sums(t, owner, rows, order, q_hear, sees, bonus, sums, counts):
 
     `rows` are recorded turns (TRACE_FIELDS columns, core/simulate.py Trace.rows), `order` the
     lockstep order they are summed in (np.add.at's order before; floats add up the same way)."""
-    values = np.empty(N_ACTIONS)
+    values = np.empty((1, N_ACTIONS))
     base = np.empty(t.vis_set.shape[2], dtype=np.int64)
     unheard = np.empty(t.vis_set.shape[2])
     value = _value_table(bonus)
     for i in range(order.size):
-        row = rows[order[i]]
-        o = owner[row[T_GAME]]
-        state = np.int64(row[T_STATE])
-        _expected(t, np.int64(row[T_OBSERVED]), np.int64(row[T_MATCH]), np.int64(row[T_NIS]), q_hear[o],
-                  sees[o, 0], sees[o, 1], sees[o, 2], value, values, base, unheard)
+        r = order[i]  # rows are indexed in place: a view per row costs two atomic reference counts
+        o = owner[rows[r, T_GAME]]
+        state = np.int64(rows[r, T_STATE])
+        _expected(t, np.int64(rows[r, T_OBSERVED]), np.int64(rows[r, T_MATCH]), np.int64(rows[r, T_NIS]), q_hear[o],
+                  sees[o, 0], sees[o, 1], sees[o, 2], value, values, 0, base, unheard)
         for a in range(N_ACTIONS):
-            sums[o, state, a] += values[a]
+            sums[o, state, a] += values[0, a]
         counts[o, state] += 1
 
 

@@ -28,6 +28,8 @@ from .geometry import N_STATES
 from .rng import UniformStream
 
 DRAWS_PER_SUGGESTION = kernels.DRAWS_PER_SUGGESTION
+_INT64, _INT8 = np.dtype(np.int64), np.dtype(np.int8)  # dtype objects: np.empty converts a type each call
+EPSILON, ALPHA, PSI = 0, 1, 2  # the order of schedule_tables' tables
 MODES = {"q": kernels.MODE_Q, "reuse": kernels.MODE_REUSE, "fixed": kernels.MODE_FIXED}
 
 
@@ -67,7 +69,7 @@ def psi_round_start(config: LearnerConfig, round_index):
 def greedy(q: np.ndarray, u_tie: np.ndarray) -> np.ndarray:
     """argmax over the last axis, ties broken by the draw: the floor(u*n)-th tied action."""
     q = np.asarray(q, dtype=np.float64)
-    rows = np.ascontiguousarray(q.reshape(-1, q.shape[-1]))
+    rows = np.ascontiguousarray(q.reshape(-1, 1, q.shape[-1]))
     u = np.ascontiguousarray(np.broadcast_to(np.asarray(u_tie, dtype=np.float64), q.shape[:-1])).reshape(-1)
     out = np.empty(rows.shape[0], dtype=np.int64)
     kernels.greedy_batch(rows, u, out)
@@ -110,37 +112,57 @@ class Learner:
         self.policy = None if policy is None else _policy_table(policy, n_games)
         self.psi = np.zeros(n_games)
         self._n = n_games
-        self._table = self.bias if mode == "reuse" else self.policy  # the action a bias or fixed policy takes
-        self._table = None if self._table is None else np.ascontiguousarray(self._table)
-        self._no_table = np.zeros((n_games, N_STATES), dtype=np.int64)
-        self._memo: dict = {}
+        table = self.bias if mode == "reuse" else self.policy  # the action a bias or fixed policy takes
+        self._table = np.zeros((n_games, N_STATES), dtype=np.int64) if table is None else np.ascontiguousarray(table)
+        self._mode, self._psi_decay = MODES[mode], float(config.psi_decay)
+        self._schedule = schedule_tables(config, 64)  # (epsilon, alpha, psi at a round's start): _per_round
+        self._round_of_views, self._views = -1, ()
 
     def start_round(self, round_index, games=slice(None)) -> None:
         """Reset psi for the games starting a round (algorithm 5, line 4)."""
-        self.psi[games] = psi_round_start(self.config, np.asarray(round_index)[games])
+        if isinstance(games, slice) and games == slice(None):
+            self.psi[:] = self._per_round(PSI, round_index)
+        else:
+            self.psi[games] = psi_round_start(self.config, np.asarray(round_index)[games])
 
-    def _per_round(self, fn, round_index) -> np.ndarray:
-        """A schedule's value for each game's round, computed once per round (a live learner asks every turn)."""
+    def schedule(self, round_index: int) -> tuple[float, float]:
+        """(epsilon, alpha) of round `round_index` (0-based), from the learner's tables (see `_per_round`)."""
+        eps, alpha, _ = self._schedule
+        r = int(round_index)
+        if not 0 <= r < len(eps):
+            return float(epsilon_at(self.config, r)), float(alpha_at(self.config, r))
+        return float(eps[r]), float(alpha[r])
+
+    def _per_round(self, which: int, round_index) -> np.ndarray:
+        """Schedule `which` (EPSILON, ALPHA, PSI: psi at the round's start) at each game's round.
+
+        The tables are computed once for rounds 0..R-1 (R doubling when a later
+        round comes): a live learner asks every turn, and computing a schedule
+        costs more than the suggestion itself (the values are the same floats).
+        """
+        if self._n == 1 and type(round_index) is np.ndarray and round_index.shape == (1,):
+            r = round_index.item()  # a batch of one: views of the tables at its round, made once a round
+            if r != self._round_of_views and 0 <= r < len(self._schedule[0]):
+                self._round_of_views, self._views = r, tuple(t[r:r + 1] for t in self._schedule)
+            if r == self._round_of_views:
+                return self._views[which]
+        table = self._schedule[which]
         r = kernels.as_batch(round_index, self._n, np.int64)
-        if self._n == 1:
-            key = (fn, int(r[0]))
-            value = self._memo.get(key)
-            if value is None:
-                value = self._memo[key] = np.array([float(fn(self.config, key[1]))])
-                if len(self._memo) > 64:
-                    self._memo.pop(next(iter(self._memo)))
-            return value
-        return kernels.as_batch(fn(self.config, r), self._n, np.float64)
+        if r.size and r.min() < 0:  # not a round of a game: the schedule's own formula
+            return kernels.as_batch((epsilon_at, alpha_at, psi_round_start)[which](self.config, r), self._n,
+                                    np.float64)
+        if r.size and r.max() >= len(table):
+            self._schedule = schedule_tables(self.config, max(2 * len(table), int(r.max()) + 1))
+            table = self._schedule[which]
+        return table[r]
 
     def suggest(self, states: np.ndarray, round_index: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """(actions, how) for every game, drawing DRAWS_PER_SUGGESTION uniforms."""
-        u = self.stream.take(DRAWS_PER_SUGGESTION)
+        """(actions, how) for every game, drawing DRAWS_PER_SUGGESTION uniforms of its stream."""
         n = self._n
-        actions, how = np.empty(n, dtype=np.int64), np.empty(n, dtype=np.int8)
-        states = kernels.as_batch(states, n, np.int64)
-        table = self._table if self._table is not None else self._no_table
-        kernels.learners_suggest(self.q, states, u, self._per_round(epsilon_at, round_index), MODES[self.mode],
-                                 self.psi, float(self.config.psi_decay), table, actions, how)
+        actions, how = np.empty(n, _INT64), np.empty(n, _INT8)
+        kernels.learners_suggest(self.q, kernels.as_batch(states, n, np.int64), self.stream.keys,
+                                 self.stream.positions, self._per_round(EPSILON, round_index), self._mode,
+                                 self.psi, self._psi_decay, self._table, actions, how)
         return actions, how
 
     def learn(self, states: np.ndarray, actions: np.ndarray, rewards: np.ndarray, mask: np.ndarray,
@@ -150,7 +172,7 @@ class Learner:
             return
         n, b = self._n, kernels.as_batch
         kernels.learners_learn(self.q, self.counts, b(states, n, np.int64), b(actions, n, np.int64),
-                               b(rewards, n, np.float64), b(mask, n, bool), self._per_round(alpha_at, round_index))
+                               b(rewards, n, np.float64), b(mask, n, bool), self._per_round(ALPHA, round_index))
 
 
 def _policy_table(policy: np.ndarray, n_games: int) -> np.ndarray:

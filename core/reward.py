@@ -74,6 +74,14 @@ def simulated_reward(matched: np.ndarray, considered: np.ndarray, consistent: np
     return reward.reshape(shape), learn.reshape(shape)
 
 
+def simulated_reward_one(matched: bool, considered: bool, consistent: bool, candidate_size: int,
+                         holds_match: bool, bonus: str = DEFAULT_REWARD_BONUS) -> tuple[float, bool]:
+    """`simulated_reward` of one turn as (reward, learn) Python scalars: the same compiled rule
+    (core/kernels.py `_reward`) without a batch's arrays, for a live learner (services/learner.py)."""
+    return kernels.reward_one(bool(matched), bool(considered), bool(consistent), int(candidate_size),
+                              bool(holds_match), BONUS_CODES[check_bonus_rule(bonus)])
+
+
 def human_reward(matched: bool, pick_gap_s: float = float("inf"), ignore_below_s: float = IGNORE_BELOW_S,
                  ignored: bool | None = None) -> tuple[float, bool]:
     """(reward, learn) of a human-study turn: +-1, ignored when picked too fast.

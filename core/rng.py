@@ -128,6 +128,16 @@ class UniformStream:
         return len(self._key)
 
     @property
+    def keys(self) -> np.ndarray:
+        """(n,) uint64: each game's key, for a kernel that draws from this stream in place."""
+        return self._key
+
+    @property
+    def positions(self) -> np.ndarray:
+        """(n,) uint64: each game's next draw index; a kernel that draws in place advances it."""
+        return self._pos
+
+    @property
     def drawn(self) -> np.ndarray:
         """Draws consumed so far, per game."""
         return self._pos.astype(np.int64)

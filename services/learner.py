@@ -22,9 +22,9 @@ import numpy as np
 
 from pairplay.core.actions import ACTION_NAMES, N_ACTIONS
 from pairplay.core.geometry import N_STATES
-from pairplay.core.learning import How, Learner, alpha_at, epsilon_at
+from pairplay.core.learning import How, Learner
 from pairplay.core.lspi import LSPILearner, weights_digest
-from pairplay.core.reward import WRONG_SUGGESTION, human_reward, simulated_reward
+from pairplay.core.reward import WRONG_SUGGESTION, human_reward, simulated_reward_one
 from pairplay.core.rng import UniformStream
 from pairplay.schemas import events as ev
 
@@ -51,6 +51,10 @@ class LearnerLogic:
         self.resolved: dict[tuple[int, int], ev.TurnResolved] = {}
         self.round_started = -1
         self.ended = False
+        # the batch of one the core learner reads and writes, filled in place per event: the kernels
+        # take these as they are (core/kernels.py as_batch), so no array is built per suggestion
+        self._state, self._action, self._round = (np.zeros(1, dtype=np.int64) for _ in range(3))
+        self._reward_one, self._learn_one = np.zeros(1), np.ones(1, dtype=bool)
 
     @property
     def done(self) -> bool:
@@ -107,18 +111,19 @@ class LearnerLogic:
             if (r.round, r.turn, r.attempt) != (o.round, o.turn, o.attempt + 1):
                 raise NotYet  # the previous suggestion is not settled yet
             out += self._reward(o, WRONG_SUGGESTION, True, "wrong suggestion pressed")
+        self._round[0] = r.round
         if r.round != self.round_started:
-            self.learner.start_round(np.array([r.round]))
+            self.learner.start_round(self._round)
             self.round_started = r.round
             # per-round schedule values, for the record (computed once a round: latency)
-            self.epsilon, self.alpha = float(epsilon_at(self.schedule, r.round)), float(alpha_at(self.schedule, r.round))
-        rounds = np.array([r.round])
+            self.epsilon, self.alpha = self.learner.schedule(r.round)
         psi = float(self.learner.psi[0])
-        actions, how = self.learner.suggest(np.array([r.state]), rounds)
+        self._state[0] = r.state
+        actions, how = self.learner.suggest(self._state, self._round)
         action = int(actions[0])
         self.open = ev.SuggestionMade(
             round=r.round, turn=r.turn, attempt=r.attempt, state=r.state, action=action,
-            chosen_by=HOW_NAMES[How(int(how[0]))], epsilon=self.epsilon, alpha=self.alpha, psi=psi if self.mode == "reuse" else 0.0,
+            chosen_by=HOW_NAMES[int(how[0])], epsilon=self.epsilon, alpha=self.alpha, psi=psi if self.mode == "reuse" else 0.0,
             observed=r.observed, target=r.match, action_name=ACTION_NAMES[action], request_seq=r.seq)
         return out + [self.open]
 
@@ -138,10 +143,8 @@ class LearnerLogic:
             if p is None:
                 return []  # the participant has not said yet what it perceived
             holds_match = (p.candidate_mask >> o.target) & 1 == 1
-            rewards, learns = simulated_reward(np.array([turn.matched]), np.array([p.considered]),
-                                               np.array([p.consistent]), np.array([p.candidate_size]),
-                                               np.array([holds_match]), self.config.reward_bonus)
-            reward, learn = float(rewards[0]), bool(learns[0])
+            reward, learn = simulated_reward_one(turn.matched, p.considered, p.consistent, p.candidate_size,
+                                                 holds_match, self.config.reward_bonus)
             why = ("ignored: match from memory" if p.from_memory else "ignored: not considered") if not learn else (
                 "inconsistent" if not p.consistent else ("match" if turn.matched else "miss"))
         self.perceived.pop((o.round, o.turn, o.attempt), None)
@@ -154,19 +157,19 @@ class LearnerLogic:
         learned = learn and self.mode != "fixed"
         out: list[ev.Event] = [ev.RewardGiven(round=o.round, turn=o.turn, attempt=o.attempt, state=o.state,
                                               action=o.action, reward=float(reward), learned=learned, reason=why)]
-        if learned and self.mode == "lspi":
+        if learned:
+            self._state[0], self._action[0], self._reward_one[0], self._round[0] = o.state, o.action, reward, o.round
             before = float(self.learner.q[0, o.state, o.action])
-            improved = self.learner.learn(np.array([o.state]), np.array([o.action]), np.array([float(reward)]),
-                                          np.array([True]), np.array([o.round])).size > 0
+        if learned and self.mode == "lspi":
+            improved = self.learner.learn(self._state, self._action, self._reward_one, self._learn_one,
+                                          self._round).size > 0
             out.append(ev.LSPIUpdated(
                 round=o.round, turn=o.turn, attempt=o.attempt, state=o.state, action=o.action, reward=float(reward),
                 samples=int(self.learner.samples[0]), improved=improved, q_before=before,
                 q_after=float(self.learner.q[0, o.state, o.action]),
                 weights=weights_digest(self.learner.theta[0]) if improved else ""))
         elif learned:
-            before = float(self.learner.q[0, o.state, o.action])
-            self.learner.learn(np.array([o.state]), np.array([o.action]), np.array([float(reward)]),
-                               np.array([True]), np.array([o.round]))
+            self.learner.learn(self._state, self._action, self._reward_one, self._learn_one, self._round)
             out.append(ev.QUpdated(round=o.round, turn=o.turn, attempt=o.attempt, state=o.state, action=o.action,
                                    alpha=o.alpha, reward=float(reward),
                                    q_before=before, q_after=float(self.learner.q[0, o.state, o.action])))
