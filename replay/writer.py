@@ -79,10 +79,14 @@ class EventLogWriter:
         """Append one message (already validated JSON of the key's event type)."""
         if not (0 <= log_time_ns < U64 and 0 <= publish_time_ns < U64):
             raise ValueError(f"times out of MCAP's range: log {log_time_ns}, publish {publish_time_ns}")
-        log_time_ns = max(int(log_time_ns), self._last_log_ns)  # monotonic per file (see rule)
+        log_time_ns = int(log_time_ns)
+        if log_time_ns < self._last_log_ns:  # monotonic per file (see rule)
+            log_time_ns = self._last_log_ns
         self._last_log_ns = log_time_ns
-        self._writer.add_message(self.channel_for(key), log_time_ns, payload, publish_time_ns or log_time_ns,
-                                 sequence & 0xFFFFFFFF)
+        channel = self._channels.get(key)
+        if channel is None:
+            channel = self.channel_for(key)
+        self._writer.add_message(channel, log_time_ns, payload, publish_time_ns or log_time_ns, sequence & 0xFFFFFFFF)
         self.count += 1
         self._unflushed += 1
         if self._oldest_ns is None:
