@@ -428,3 +428,21 @@ def test_a_signal_while_the_game_is_still_starting_is_not_held_up_by_its_start(t
     # (test_session_end failed so at load 60: "no SessionStarted ... stopped (SIGINT) before its game started")
     kinds = [type(r.event).__name__ for r in log.events if r.event.source == "game"]
     assert "SessionStarted" not in kinds and "SessionEnded" not in kinds, kinds
+
+
+def test_an_inbox_taken_in_batches_keeps_order_and_frees_each_sources_allowance():
+    """Inbox.get_many (the recorder takes its inbox in batches): arrival order kept, control items
+    in place, and every message taken frees its source's allowance, so nothing is shed later."""
+    box = Inbox(per_source=100, per_unknown=10)
+    key, stranger = event_key("t1", "participant", "CardPicked"), event_key("t1", "nobody", "CardPicked")
+    for round_ in range(5):  # 5 x 100 messages through an allowance of 100
+        for i in range(100):
+            assert box.put(key, b"%d" % i)
+        box.control("query")
+        for i in range(10):
+            assert box.put(stranger, b"s")
+        got = box.get_many(0, 1000)
+        assert [p for k, p, _ in got if k == key] == [b"%d" % i for i in range(100)]
+        assert got[100][:2] == (None, "query") and len(got) == 111
+    assert box.get_many(0) == [] and box.get_many(0.01) == [] and not box.take_shed()
+    assert box.put(key, b"x") and box.get_many(0, 1)[0][1] == b"x"
