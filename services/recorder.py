@@ -7,7 +7,8 @@ session, sequence number above the last one on that key). What fails a
 check is not written on a typed channel: the recorder publishes a
 MessageRejected with the reason and an excerpt of the payload, and records that.
 The file is flushed once its oldest unflushed message is 50 ms old (replay/writer.py),
-and what waits in the inbox is written in batches flushed once, so a SIGKILL loses
+and what waits in the inbox is taken in pieces (one lock each) and flushed at most
+once per piece (a due flush is never held to a batch's end), so a SIGKILL loses
 at most 0.1 s while the recorder keeps up with what arrives (`pairplay recover`
 completes such a file); when it cannot, the file records how far behind a flush
 was (BACKLOG_METADATA, and `max_flush_age_ms` at the end). A close is done by its
@@ -58,8 +59,8 @@ BATCH = 2000
 CLOSE_S = 1.5  # Recorder.close finishes within this unless given a deadline
 FINISH_S = 0.25  # of a close's time, kept to finish the file (end metadata, summary, index)
 UNRECORDED_AT_EXIT = "still queued when the recording stopped"
-TAKE = 256  # inbox items taken per lock (Inbox.get_many): ~5 ms of writing, well inside BATCH_S
-BATCH_S = 0.02  # a backlog is written in batches of at most this long, each flushed once (step)
+TAKE = 256  # inbox items taken per lock (Inbox.get_many): ~3-10 ms of writing; a due flush waits at most that
+BATCH_S = 0.02  # a backlog is written in batches of at most this long, flushed at most once per TAKE (step)
 BACKLOG_METADATA = "pairplay.recorder.backlog"  # a flush older than the loss bound (_note_backlog)
 FORCE_SESSION_HINT = "choose another --session, or --force to replace its recordings"
 LINK_METADATA = "pairplay.recorder.link"  # an outage of the recorder's link to its router (_link)
@@ -385,10 +386,11 @@ class Recorder:
     def step(self, timeout_s: float = 0.05) -> bool:
         """Take what waits in the inbox (or wait for it until the next flush is due), then flush if due.
 
-        What waits is taken as one batch (for at most `BATCH_S`) and flushed once:
-        flushing by age, a recorder that had fallen `flush_interval` behind
-        flushed after every message, a chunk each, and fell further behind
-        (20,000 one-message chunks for 20,000 events: 300 events/s)."""
+        What waits is taken in pieces of `TAKE` (one lock each) for at most `BATCH_S`; a flush
+        due by age is done between pieces, so at most once per piece: flushing by age, a
+        recorder that had fallen `flush_interval` behind flushed after every message, a chunk
+        each, and fell further behind (20,000 one-message chunks for 20,000 events: 300
+        events/s); flushing only at a batch's end let a due flush wait up to `BATCH_S` more."""
         due = self.writer.due_in_ns(self.clock())
         wait = timeout_s if due is None else min(timeout_s, due / 1e9)
         items = self.inbox.get_many(max(wait, 0.0005), TAKE)
@@ -404,6 +406,9 @@ class Recorder:
                 while items:
                     for item in items:
                         take(item)
+                    # due by age: flushed now, not at the batch's end (a kill then loses <= TAKE more)
+                    if self._guarded(self.writer.maybe_flush, self.clock()):
+                        self._note_backlog()
                     if time.monotonic() >= batch_end:
                         break
                     items = self.inbox.get_many(0, TAKE)

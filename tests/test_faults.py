@@ -185,7 +185,8 @@ def test_a_recorder_behind_its_inbox_writes_the_backlog_in_batches_and_records_h
     flushes = rec.writer.flushes
     while len(rec.inbox):
         rec.step(0)
-    assert rec.writer.flushes - flushes == 1 and rec.writer.count == 2000
+    # flushed at most once per piece taken from the inbox, never per message
+    assert 1 <= rec.writer.flushes - flushes <= -(-2000 // recorder_module.TAKE) and rec.writer.count == 2000
     assert rec.writer.max_flush_age_ns == 300_000_000
     assert rec.close() is None
     log = read_log(tmp_path / "t1.mcap")
