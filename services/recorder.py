@@ -6,7 +6,7 @@ checks every service makes (it decodes, its key agrees with its envelope, right
 session, sequence number above the last one on that key). What fails a
 check is not written on a typed channel: the recorder publishes a
 MessageRejected with the reason and an excerpt of the payload, and records that.
-The file is flushed once its oldest unflushed message is 50 ms old (replay/writer.py),
+The file is flushed once its oldest unflushed message is 25 ms old (replay/writer.py),
 and what waits in the inbox is taken in pieces (one lock each) and flushed at most
 once per piece (a due flush is never held to a batch's end), so a SIGKILL loses
 at most 0.1 s while the recorder keeps up with what arrives (`pairplay recover`
