@@ -79,6 +79,13 @@ class SessionFold:
         if handler is not None:
             handler(self, event)
 
+    def count(self, skipped: dict[str, int]) -> "SessionFold":
+        """Count events not decoded because no handler reads them (read_log's `only=READS`), by tag."""
+        for name, n in skipped.items():
+            self.events += n
+            self.counts[name] = self.counts.get(name, 0) + n
+        return self
+
     def fold(self, events) -> "SessionFold":
         for e in events:
             self.evolve(e)
@@ -157,6 +164,8 @@ _HANDLERS = {
     "SuggestionPerceived": _perceived, "RoundEnded": _round_ended, "MessageRejected": _rejected,
     "PickRejected": _rejected, "SessionEnded": _ended,
 }
+
+READS = frozenset(_HANDLERS)  # the event tags a fold reads; any other it only counts
 
 
 def fold_events(events) -> SessionFold:

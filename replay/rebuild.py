@@ -31,7 +31,7 @@ from pairplay.schemas.policy import PolicyFile, write_policy
 from pairplay.schemas.session import SessionConfig
 
 from .check import check_recording
-from .fold import SessionFold, fold_events, stream_seed
+from .fold import READS, SessionFold, fold_events, stream_seed
 from .reader import read_log
 
 
@@ -70,10 +70,12 @@ def partial_reason(fold: SessionFold, note: str = "", recovered: dict[str, str] 
 
 
 def rebuild_events(events, source: str = "", truncated: bool = False, note: str = "",
-                   recovered: dict[str, str] | None = None, ended: dict[str, str] | None = None) -> Rebuilt:
+                   recovered: dict[str, str] | None = None, ended: dict[str, str] | None = None,
+                   skipped: dict[str, int] | None = None) -> Rebuilt:
     """`events` folded and the learner's policy rebuilt; RebuildError without a SessionStarted.
-    `ended` is the recorder's "pairplay.recorder.end" metadata, if the file has it."""
-    fold = fold_events(events)
+    `ended` is the recorder's "pairplay.recorder.end" metadata, if the file has it; `skipped`, by
+    tag, the events read_log did not decode because the fold only counts them."""
+    fold = fold_events(events).count(skipped or {})
     if fold.config is None:
         if ended and ended.get("stopped_by"):
             raise RebuildError(f"{source or 'events'}: no SessionStarted: the recording was stopped "
@@ -100,10 +102,11 @@ def rebuild_events(events, source: str = "", truncated: bool = False, note: str 
 def rebuild_recording(path: str | Path) -> Rebuilt:
     """The recording at `path` rebuilt; InputError (RebuildError) if it is not a session recording."""
     check_recording(path)
-    log = read_log(path)
+    log = read_log(path, only=READS)  # the events the fold only counts are not decoded (speed)
     note = "" if log.whole else f"{'damaged' if log.damage else 'truncated'}: {log.error}"
     return rebuild_events((r.event for r in log.events), str(path), log.truncated, note,
-                          log.metadata.get("pairplay.recovered"), log.metadata.get("pairplay.recorder.end"))
+                          log.metadata.get("pairplay.recovered"), log.metadata.get("pairplay.recorder.end"),
+                          skipped=log.skipped)
 
 
 CURVE_COLUMNS = ("round", "turns", "picks", "matches", "reward", "learned", "inconsistent")

@@ -32,6 +32,7 @@ from pairplay.schemas.trust import MAX_PAYLOAD, MAX_SEQ_JUMP, ONCE_PER_SESSION, 
 EXCERPT = 200
 MAX_KINDS = 20
 SECOND_NS = 1_000_000_000
+KEYS_CACHED = 4096
 
 
 class Verdict(NamedTuple):
@@ -40,52 +41,78 @@ class Verdict(NamedTuple):
     quiet: bool = False  # nothing to take and nothing to record (our own, or a resume's overlap)
 
 
+QUIET = Verdict(None, None, quiet=True)
+
+
 class Guard:
     def __init__(self, session: str, own: str | None = None):
         self.session, self.own = session, own
         self.last_seq: dict[str, int] = {}  # per key
         self.top_seq: dict[str, int] = {}  # per source: the highest taken
         self.once: set[str] = set()  # ONCE_PER_SESSION tags taken
+        self._keys: dict[str, tuple] = {}  # key -> what the key alone decides (_key)
+
+    def _key(self, key: str) -> tuple[bool, object, str | None]:
+        """What the key alone decides, once per key: (our own key, its parts, why it is not an
+        event key or its publisher may not publish its event). Cached for at most KEYS_CACHED
+        keys (made-up keys cannot grow the cache); the recorder checks every message of a
+        session on a handful of keys."""
+        info = self._keys.get(key)
+        if info is None:
+            own = self.own is not None and key.count("/") == 3 and key.split("/", 3)[2] == self.own
+            try:
+                k = parse_event_key(key)
+                info = (own, k, None)
+            except ValueError as err:
+                info = (own, None, str(err))
+            if len(self._keys) < KEYS_CACHED:
+                self._keys[key] = info
+        return info
 
     def check(self, key: str, payload: bytes, overlap: bool = False) -> Verdict:
         """Decide on one message (see rule). `overlap`: it may repeat what a resume
         already folded from the log; an old sequence number is then quietly skipped."""
-        if self.own is not None and key.count("/") == 3 and key.split("/", 3)[2] == self.own:
-            return Verdict(None, None, quiet=True)  # our own publication, delivered back to us
+        own, k, key_error = self._key(key)
+        if own:
+            return QUIET  # our own publication, delivered back to us
         if len(payload) > MAX_PAYLOAD:
             return Verdict(None, f"payload of {len(payload)} bytes is over the limit of {MAX_PAYLOAD}")
         try:
             event = decode_event(payload)
         except (msgspec.DecodeError, msgspec.ValidationError) as err:
             return Verdict(None, f"malformed payload: {err}")
-        try:
-            k = parse_event_key(key)
-        except ValueError as err:
-            return Verdict(event, str(err))
+        if k is None:
+            return Verdict(event, key_error)
         tag = type(event).__name__
-        if (k.session, k.source, k.tag) != (event.session, event.source, tag):
+        source = event.source
+        if k.session != event.session or k.source != source or k.tag != tag:
             return Verdict(event, f"key {key} does not match the payload's session {event.session!r}, source "
-                                  f"{event.source!r}, event {tag}")
+                                  f"{source!r}, event {tag}")
         if event.session != self.session:
             return Verdict(event, f"wrong session {event.session!r} (this is {self.session!r})")
-        if event.source == self.own:
+        if source == self.own:
             return Verdict(event, None, quiet=True)
-        refusal = publisher_refusal(tag, event.source)
+        refusal = publisher_refusal(tag, source)
         if refusal is not None:
             return Verdict(event, refusal)
+        seq = event.seq
         last = self.last_seq.get(key, 0)
-        if event.seq <= last:
+        if seq <= last:
             if overlap:
                 return Verdict(event, None, quiet=True)
-            return Verdict(event, f"sequence number {event.seq} from {event.source} is not above the last one seen "
+            return Verdict(event, f"sequence number {seq} from {source} is not above the last one seen "
                                   f"on {key} ({last}): duplicate or out of order")
-        top = self.top_seq.get(event.source, 0)
-        if event.seq > top + MAX_SEQ_JUMP:
-            return Verdict(event, f"sequence number {event.seq} from {event.source} jumps more than {MAX_SEQ_JUMP} "
+        top = self.top_seq.get(source, 0)
+        if seq > top + MAX_SEQ_JUMP:
+            return Verdict(event, f"sequence number {seq} from {source} jumps more than {MAX_SEQ_JUMP} "
                                   f"above the highest seen from it ({top})")
-        if tag in ONCE_PER_SESSION and tag in self.once:
-            return Verdict(event, f"a second {tag} in session {self.session}")
-        self.note(key, event)
+        if tag in ONCE_PER_SESSION:
+            if tag in self.once:
+                return Verdict(event, f"a second {tag} in session {self.session}")
+            self.once.add(tag)
+        self.last_seq[key] = seq  # note(), inlined: seq is above both already or equal to top
+        if seq > top:
+            self.top_seq[source] = seq
         return Verdict(event, None)
 
     def note(self, key: str, event: Event) -> None:

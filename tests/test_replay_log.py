@@ -127,3 +127,33 @@ def test_fold_rebuilds_q_with_the_learners_update_and_flags_gaps():
     second = QUpdated(round=0, turn=1, attempt=0, state=3, action=4, alpha=0.5, reward=1.0, q_before=0.5, q_after=0.75)
     assert fold_events([first, second]).q_mismatches == 0
     assert fold_events([second]).q_mismatches == 1  # a lost update shows
+
+
+def test_reading_only_what_the_fold_reads_gives_the_same_fold_and_keeps_bad_messages(tmp_path):
+    """read_log(only=READS), rebuild's read: events the fold only counts are checked by their
+    envelope and counted, not decoded; the fold is the same; a message whose envelope does not
+    check out is still decoded wholly and kept as a BadMessage, never counted as an event."""
+    from pairplay.replay.fold import READS
+
+    path = tmp_path / "r.mcap"
+    w = EventLogWriter(path)
+    pick_key = keys.event_key(SESSION, "participant", "CardPicked")
+    q_key = keys.event_key(SESSION, "learner", "QUpdated")
+    for i, (key, payload, e) in enumerate(picks(30)):
+        w.write(key, payload, log_time_ns=e.time_ns, sequence=e.seq)
+        q = stamped(QUpdated(round=0, turn=i, attempt=0, state=1, action=i % 88, reward=1.0, alpha=0.5,
+                             q_before=0.0, q_after=0.5),
+                    session=SESSION, source="learner", seq=i + 1, time_ns=e.time_ns)
+        w.write(q_key, encode_event(q), log_time_ns=e.time_ns, sequence=i + 1)
+    w.write(pick_key, b'{"type":"QUpdated"', log_time_ns=5_000, sequence=40)  # not JSON: bad
+    w.write(pick_key, b'{"type":"RoundEnded","round":0,"turns":1,"matches":1,"session":"s1","source":"game",'
+                      b'"seq":1,"time_ns":1}', log_time_ns=5_001, sequence=41)  # another event on its channel
+    w.close()
+    whole, some = read_log(path), read_log(path, only=READS)
+    assert some.skipped == {"CardPicked": 30} and not whole.skipped
+    assert {type(r.event).__name__ for r in some.events} == {"QUpdated", "RoundEnded"}
+    assert len(some.bad) == len(whole.bad) == 1
+    a = fold_events(r.event for r in whole.events)
+    b = fold_events(r.event for r in some.events).count(some.skipped)
+    assert (a.q == b.q).all() and a.counts == b.counts and a.events == b.events == 61
+    assert a.turns_per_round() == b.turns_per_round() == [1]
