@@ -1,14 +1,19 @@
-"""Option types shared by the verbs: numbers with their range, ports, the --force flag.
+"""Option types shared by the verbs: numbers with their range, seeds, ports, the --force flag.
 
 Rule: a value out of range is refused by argparse itself, before any work, with
 the range in the message (`argument --rounds: must be at least 1, got -1`);
 main's Parser prints it on one line. A verb states its ranges where it declares
-its options, never later in its run().
+its options, never later in its run(). Every number option has a type from here
+(tests/test_cli_options.py checks every verb): a bare `type=int` let `--seed -5`
+reach core/rng.py as a traceback, and a bare `type=float` let `nan` and `inf`
+into a session's config, which JSON writes as null (the recorder refused the
+session after its bus had started).
 """
 
 from __future__ import annotations
 
 import argparse
+import math
 
 
 def int_at_least(low: int):
@@ -26,17 +31,30 @@ def int_at_least(low: int):
 
 
 def float_at_least(low: float, above: bool = False):
-    """An argparse type: a number >= low (> low with `above`)."""
+    """An argparse type: a finite number >= low (> low with `above`)."""
     def parse(text: str) -> float:
         try:
             value = float(text)
         except ValueError:
             raise argparse.ArgumentTypeError(f"not a number: {text!r}") from None
-        if value != value or (value <= low if above else value < low):
+        if not math.isfinite(value):
+            raise argparse.ArgumentTypeError(f"not a finite number: {text!r}")
+        if value <= low if above else value < low:
             raise argparse.ArgumentTypeError(f"must be {'above' if above else 'at least'} {low:g}, got {text}")
         return value
     parse.__name__ = f"number {'>' if above else '>='} {low:g}"
     return parse
+
+
+SEED_MAX = 2**64 - 1  # core/rng.py SEED_RANGE (not imported: it loads the compiled kernels; a test pins it)
+
+
+def seed_number(text: str) -> int:
+    """A seed: an integer 0..SEED_MAX (every seed there has its own streams, core/rng.py)."""
+    value = int_at_least(0)(text)
+    if value > SEED_MAX:
+        raise argparse.ArgumentTypeError(f"a seed is 0..{SEED_MAX}, got {value}")
+    return value
 
 
 def port_or_any(text: str) -> int:
@@ -57,6 +75,8 @@ def fraction(text: str) -> float:
 
 count = int_at_least(1)  # rounds, games, seeds: at least one
 non_negative = int_at_least(0)
+positive_number = float_at_least(0, above=True)  # a ridge penalty
+duration = float_at_least(0)  # milliseconds or seconds to wait
 
 
 def add_force(p: argparse.ArgumentParser, what: str = "existing outputs") -> None:

@@ -22,6 +22,7 @@ import sys
 from pathlib import Path
 
 from pairplay.bench.goals import MISSED, goal_text, verdict
+from pairplay.cli.args import count
 
 # name -> module providing bench_rows(quick)
 SOURCES: dict[str, str] = {
@@ -38,7 +39,7 @@ README_START, README_END = "<!-- bench:start -->", "<!-- bench:end -->"
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--only", default=",".join(SOURCES), help=f"comma-separated sources (default: {','.join(SOURCES)})")
     p.add_argument("--quick", action="store_true", help="smaller runs (a smoke test, noisier numbers)")
-    p.add_argument("--runs", type=int, default=1, help="measure everything N times; figures as ranges (default 1)")
+    p.add_argument("--runs", type=count, default=1, help="measure everything N times; figures as ranges (default 1)")
     p.add_argument("--json", action="store_true", help="print the rows as JSON")
     p.add_argument("--check", action="store_true", help="exit 1 when a goal is missed")
     p.add_argument("--readme", type=Path, metavar="README",
@@ -154,9 +155,6 @@ def run(args) -> int:
     unknown = [n for n in names if n not in SOURCES]
     if unknown:
         print(f"pairplay bench: unknown source(s) {unknown}; known: {', '.join(SOURCES)}", file=sys.stderr)
-        return 2
-    if args.runs < 1:
-        print("pairplay bench: --runs must be at least 1", file=sys.stderr)
         return 2
     if args.readme is not None and not args.readme.is_file():
         print(f"pairplay bench: no README at {args.readme}", file=sys.stderr)

@@ -28,7 +28,7 @@ from pairplay.core.policies import (by_participant, check_distinct, check_exclud
 from pairplay.errors import InputError, OptionError
 from pairplay.outputs import check_output
 from pairplay.schemas.policy import read_policy, write_policy
-from pairplay.cli.args import add_force, non_negative
+from pairplay.cli.args import add_force, non_negative, seed_number
 
 
 def _policy_paths(paths: list[Path]) -> list[Path]:
@@ -50,7 +50,7 @@ def _policy_paths(paths: list[Path]) -> list[Path]:
 
 def _common(p: argparse.ArgumentParser) -> None:
     p.add_argument("policies", nargs="+", type=Path, help="policy files, or folders of them")
-    p.add_argument("--seed", type=int, default=0, help="picks each participant's representative policy")
+    p.add_argument("--seed", type=seed_number, default=0, help="picks each participant's representative policy")
 
 
 def add_profile_arguments(p: argparse.ArgumentParser) -> None:

@@ -17,7 +17,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from pairplay.cli.args import add_force, count, int_at_least, non_negative
+from pairplay.cli.args import add_force, count, int_at_least, seed_number
 
 ARMS_HELP = ("comma-separated arms: same (the recorded learner, replayed: checks the fit), q (Q-learning from "
              "scratch), final (the recorded learner's final policy, fixed), oracle (the best policy for the fitted "
@@ -41,7 +41,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                         "fit; the arms are still compared with REC")
     p.add_argument("--policy", default="same,final,oracle", help=ARMS_HELP)
     p.add_argument("--seeds", type=int_at_least(2), default=10, help="seeds per arm (the same deals in every arm)")
-    p.add_argument("--seed", type=non_negative, default=0, help="names the arms' seeds")
+    p.add_argument("--seed", type=seed_number, default=0, help="names the arms' seeds")
     p.add_argument("--rounds", type=count, default=None,
                    help="rounds each arm plays (default: as many as the recording completed)")
     p.add_argument("--out", default=None, help="output folder (default: out/counterfactual/<recording name>)")

@@ -23,6 +23,7 @@ from pairplay.schemas.policy import PolicyFileError
 from pairplay.services.recorder import check_new_recording
 from pairplay.services.bus import LOOPBACK_ANY_PORT, MODES, BusOptions, stop_on_signals
 
+from pairplay.cli.args import duration
 from pairplay.cli.robot import add_robot_arguments, check_robot_args, robot_choice
 from pairplay.cli.session import add_config_arguments, config_from_args, print_interrupted
 
@@ -38,7 +39,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="where the pages are served (default 127.0.0.1:0: loopback, a free port)")
     w.add_argument("--certfile", help="TLS certificate (PEM): serve https/wss")
     w.add_argument("--keyfile", help="TLS private key (PEM) of --certfile")
-    w.add_argument("--linger", type=float, default=3.0, help="seconds the pages show the end before the server stops")
+    w.add_argument("--linger", type=duration, default=3.0, help="seconds the pages show the end before the server stops")
     add_robot_arguments(p)
     g = p.add_argument_group("bus (Zenoh)")
     g.add_argument("--bus-listen", action="append", metavar="ENDPOINT",

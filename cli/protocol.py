@@ -19,6 +19,7 @@ import sys
 import time
 from pathlib import Path
 
+from pairplay.cli.args import count
 from pairplay.core.personas import persona
 from pairplay.replay.studydata import StudyData, StudyDataError
 from pairplay.schemas.study import StudyFileError, example_text, load_study, parse_study
@@ -41,7 +42,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     r.add_argument("folder", type=Path)
     r.add_argument("--phase", help="the phase they first play (default: the first)")
     r.add_argument("--name", default="", help="written to the key file only (refused without one)")
-    r.add_argument("--count", type=int, default=1, help="register this many (default 1)")
+    r.add_argument("--count", type=count, default=1, help="register this many (default 1)")
     s = sub.add_parser("status", help="the plan: every step, done or next, and why a step is blocked")
     s.add_argument("folder", type=Path)
     pl = sub.add_parser("pilot", help="run the open steps of the plan with scripted participants (core personas)")
@@ -134,8 +135,6 @@ def _run(args) -> int:
         return 0
     data = StudyData(args.folder)
     if args.action == "register":
-        if args.count < 1:
-            raise StudyDataError("--count must be at least 1")
         if args.name and args.count != 1:
             raise StudyDataError("--name registers one participant: leave out --count")
         phase = args.phase or data.study.phase[0].id

@@ -42,7 +42,7 @@ from pairplay.outputs import check_folder
 from pairplay.schemas.policy import read_policy
 from pairplay.schemas.session import IGNORE_CLOCKS, OBSERVED_SOURCES, SessionConfig, learner_overrides, lspi_overrides
 
-from pairplay.cli.args import add_force, count, non_negative
+from pairplay.cli.args import add_force, count, duration, non_negative, positive_number, seed_number
 from pairplay.core.geometry import PICKS_UNIT
 from pairplay.cli.robot import add_robot_arguments, check_robot_args, robot_choice
 from pairplay.services.bus import BusOpenError, ConfigFileError, add_bus_arguments, options_from_args, stop_on_signals
@@ -57,25 +57,25 @@ def add_config_arguments(p: argparse.ArgumentParser) -> None:
     g = p.add_argument_group("session")
     g.add_argument("--participant", required=True, help="sim:<persona> (a simulated user) or human:<id>")
     g.add_argument("--session", help="session id (default: <participant>-seed<seed>-game<i>-<UTC time>)")
-    g.add_argument("--seed", type=int, default=0, help="the session's seed")
+    g.add_argument("--seed", type=seed_number, default=0, help="the session's seed")
     g.add_argument("--rounds", type=count, help="rounds to play (default: 20 for sim:, 5 for human:, thesis 7.2)")
     g.add_argument("--game-index", type=non_negative, default=0, help="which game of the seed (0, 1, ...)")
     g.add_argument("--algorithm", choices=("q-learning", "pi-reuse", "fixed", "lspi"), default="q-learning",
                    help="the learner: Q-learning from scratch (thesis 5.1), pi-reuse of --policy (algorithm 5), "
                         "--policy played as it is, or online LSPI from scratch (algorithm 2, core/lspi.py)")
-    g.add_argument("--lspi-ridge", type=float, help="lspi: delta, the ridge penalty (default 1)")
-    g.add_argument("--lspi-every", type=int, help="lspi: K, samples between policy improvements (default 10)")
+    g.add_argument("--lspi-ridge", type=positive_number, help="lspi: delta, the ridge penalty (default 1)")
+    g.add_argument("--lspi-every", type=count, help="lspi: K, samples between policy improvements (default 10)")
     g.add_argument("--policy", help="policy file: the bias policy (pi-reuse) or the fixed policy; "
                                     "refused with q-learning, which uses none")
     g.add_argument("--observed-source", choices=OBSERVED_SOURCES,
                    help="default: intended for sim:, first-pick for human: (gaze: an eye tracker's GazeFixated events)")
     g.add_argument("--ignore-rule", choices=("perceived", "time"), help="default: perceived for sim:, time for human:")
-    g.add_argument("--ignore-window-ms", type=float, default=1500.0,
+    g.add_argument("--ignore-window-ms", type=duration, default=1500.0,
                    help="'time' rule: picks closer than this ignored the suggestion (thesis 7.1.2; default 1500)")
     g.add_argument("--ignore-clock", choices=IGNORE_CLOCKS,
                    help="'time' rule: time the picks on the board page's clock (page, default for human:) or the "
                         "server's (server)")
-    g.add_argument("--turn-back-ms", type=float, default=1500.0,
+    g.add_argument("--turn-back-ms", type=duration, default=1500.0,
                    help="the board page shows a missed pair this long before turning it back (default 1500)")
     g.add_argument("--preset", choices=sorted(PRESETS),
                    help="learner schedule (thesis 6.2, 7.2); default: virtual for sim:, human-phase1 for a human "

@@ -14,10 +14,9 @@ import argparse
 import sys
 from pathlib import Path
 
-from pairplay.cli.args import add_force, count, fraction, non_negative
+from pairplay.cli.args import add_force, count, fraction, non_negative, positive_number, seed_number
 from pairplay.core.geometry import PICKS_UNIT
 from pairplay.core.personas import PERSONAS
-from pairplay.core.rng import SEED_RANGE
 from pairplay.errors import OptionError
 from pairplay.schemas.config import DEFAULT_REWARD_BONUS, LSPIConfig, REWARD_BONUS_RULES as BONUS_RULES
 
@@ -25,7 +24,7 @@ from pairplay.schemas.config import DEFAULT_REWARD_BONUS, LSPIConfig, REWARD_BON
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--seed", type=int, default=0, help="study seed (default 0)")
+    p.add_argument("--seed", type=seed_number, default=0, help="study seed (default 0)")
     p.add_argument("--personas", default=",".join(PERSONAS),
                    help="comma-separated persona keys (default: all of appendix A)")
     p.add_argument("--games", type=count, default=10, help="games per persona (thesis: 10)")
@@ -48,8 +47,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--algorithm", choices=("q-learning", "lspi"), default="q-learning",
                    help="the learner: Q-learning (thesis 5.1.1, default) or online LSPI (algorithm 2, core/lspi.py); "
                         "with lspi, Q-learning also trains on the same games for the side-by-side comparison")
-    p.add_argument("--lspi-ridge", type=float, default=1.0, help="lspi: delta, the ridge penalty (default 1)")
-    p.add_argument("--lspi-every", type=int, default=10,
+    p.add_argument("--lspi-ridge", type=positive_number, default=1.0, help="lspi: delta, the ridge penalty (default 1)")
+    p.add_argument("--lspi-every", type=count, default=10,
                    help="lspi: K, samples between policy improvements (default 10)")
     p.add_argument("--out", type=Path, default=Path("out/study"),
                    help="report folder (default out/study); refused if it holds files, unless --force")
@@ -75,8 +74,6 @@ def run(args) -> int:
         [persona(k.strip()) for k in args.personas.split(",") if k.strip()]
     except KeyError as exc:
         raise OptionError(exc.args[0], f"--personas {args.personas}") from None
-    if not SEED_RANGE[0] <= args.seed <= SEED_RANGE[1]:  # every seed in range has its own streams (core.rng)
-        raise OptionError(f"outside the accepted range {SEED_RANGE[0]}..{SEED_RANGE[1]}", f"--seed {args.seed}")
     if args.algorithm == "lspi":
         try:
             LSPIConfig(ridge=args.lspi_ridge, improve_every=args.lspi_every)

@@ -17,6 +17,7 @@ from pathlib import Path
 
 from tqdm import tqdm
 
+from pairplay.cli.args import count
 from pairplay.errors import OutputError
 from pairplay.outputs import check_folder
 from pairplay.report.sweep import GridError, finished_cells, read_grid, run_sweep, write_sweep
@@ -26,7 +27,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("grid", type=Path, help="the sweep's TOML file ([study], [grid], seeds, reuse)")
     p.add_argument("--out", type=Path, help="result folder (default out/sweep-<grid file name>)")
     p.add_argument("--scheduler", metavar="ADDRESS", help="a Dask distributed scheduler (tcp://host:port)")
-    p.add_argument("--workers", type=int, default=1, help="local processes when no --scheduler (default 1)")
+    p.add_argument("--workers", type=count, default=1, help="local processes when no --scheduler (default 1)")
     p.add_argument("--force", action="store_true", help="replace a folder that holds another grid's sweep, or write into one that holds other files")
 
 
@@ -35,9 +36,6 @@ def run(args) -> int:
         grid = read_grid(args.grid)
     except GridError as exc:
         print(f"pairplay sweep: {exc}", file=sys.stderr)
-        return 2
-    if args.workers < 1:
-        print(f"pairplay sweep: --workers {args.workers}: give at least 1", file=sys.stderr)
         return 2
     out = check_folder(args.out or Path("out") / f"sweep-{args.grid.stem}")
     copy = out / "grid.toml"

@@ -1,0 +1,82 @@
+"""Every number option of every verb (and action) has a type from cli/args.py that states its range.
+
+Before: a bare `type=int` or `type=float` let a value no verb can use through argparse:
+`pairplay combine POLICIES --seed -5` (and `profile`) ended in core/rng.py's ValueError, a traceback
+and exit 1; `pairplay session --ignore-window-ms nan` started the bus, the session's config went out
+with the window as JSON null, the recorder refused SessionStarted (two WARNING lines and a stub
+recording that took the session id); `--turn-back-ms -5`, `--ignore-window-ms -3` and
+`lab --linger nan` were taken as given."""
+
+from __future__ import annotations
+
+import argparse
+
+import pytest
+
+from pairplay.cli import args as options
+from pairplay.cli.main import VERBS, build_parser, main
+
+from test_cli_usage import MINIMAL
+
+
+def _parsers(parser: argparse.ArgumentParser):
+    yield parser
+    for action in parser._actions:
+        if isinstance(action, argparse._SubParsersAction):
+            for nested in action.choices.values():
+                yield from _parsers(nested)
+
+
+@pytest.mark.parametrize("verb", list(VERBS))
+def test_no_number_option_is_a_bare_int_or_float(verb):
+    _, chosen = build_parser([verb])
+    bare = [f"{p.prog} {'/'.join(a.option_strings) or a.dest}" for p in _parsers(chosen) for a in p._actions
+            if a.type in (int, float)]
+    assert not bare, f"give these a type from cli/args.py (a range): {bare}"
+
+
+def test_the_seed_range_is_core_rngs():
+    from pairplay.core.rng import SEED_RANGE
+    assert (0, options.SEED_MAX) == SEED_RANGE
+
+
+@pytest.mark.parametrize("text", ["nan", "inf", "-inf", "-1"])
+def test_a_duration_is_a_finite_number_at_least_0(text):
+    with pytest.raises(argparse.ArgumentTypeError):
+        options.duration(text)
+
+
+# verb's arguments -> a piece of the one line; each is refused by argparse, before any work
+REFUSED = {
+    "combine --seed -5": (["combine", "p.json", "--seed", "-5"], "--seed: must be at least 0, got -5"),
+    "profile --seed -5": (["profile", "p.json", "--seed", "-5"], "--seed: must be at least 0, got -5"),
+    "session --seed 2**64": (["session", *MINIMAL["session"]] + ["--seed", str(2**64)], "--seed: a seed is 0.."),
+    "study --seed -1": (["study", "--seed", "-1"], "--seed: must be at least 0, got -1"),
+    "counterfactual --seed 2**64": (["counterfactual", "r.mcap", "--seed", str(2**64)], "a seed is 0.."),
+    "session --ignore-window-ms nan": (["session", *MINIMAL["session"]] + ["--ignore-window-ms", "nan"], "not a finite number"),
+    "session --ignore-window-ms -3": (["session", *MINIMAL["session"]] + ["--ignore-window-ms", "-3"], "must be at least 0"),
+    "session --turn-back-ms -5": (["session", *MINIMAL["session"]] + ["--turn-back-ms", "-5"], "must be at least 0"),
+    "session --lspi-ridge nan": (["session", *MINIMAL["session"]] + ["--lspi-ridge", "nan"], "--lspi-ridge: not a finite number"),
+    "session --lspi-every 0": (["session", *MINIMAL["session"]] + ["--lspi-every", "0"], "--lspi-every: must be at least 1"),
+    "run game --turn-back-ms inf": (["run", "game", "--participant", "sim:blind", "--turn-back-ms", "inf"],
+                                    "not a finite number"),
+    "lab --linger nan": (["lab", *MINIMAL["lab"]] + ["--linger", "nan"], "--linger: not a finite number"),
+    "study --lspi-ridge 0": (["study", "--lspi-ridge", "0"], "--lspi-ridge: must be above 0"),
+    "sweep --workers 0": (["sweep", "g.toml", "--workers", "0"], "--workers: must be at least 1"),
+    "bench --runs 0": (["bench", "--runs", "0"], "--runs: must be at least 1"),
+    "protocol register --count 0": (["protocol", "register", "folder", "--count", "0"], "--count: must be at least 1"),
+    "view --speed inf": (["view", "--recording", "r.mcap", "--speed", "inf"], "--speed: not a finite number"),
+}
+
+
+@pytest.mark.parametrize("case", list(REFUSED))
+def test_a_number_out_of_range_is_one_line_and_exit_2_before_any_work(case, capsys, tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)  # nothing may be written: the folder stays empty
+    argv, expected = REFUSED[case]
+    with pytest.raises(SystemExit) as stopped:
+        main(argv)
+    assert stopped.value.code == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "Traceback" not in err, err
+    assert expected in err, err
+    assert not any(tmp_path.iterdir())
