@@ -81,6 +81,7 @@ signalled = ""  # the signal that stopped this process, if one did (stop_on_sign
 CACHE_SAMPLES = 10_000  # per key, kept by a recovering publisher for subscribers that missed them (see rule)
 MISSED = "lost on the bus, no longer in the publisher's cache when the link came back"  # Inbox.lost's why
 HEARTBEAT_S = 0.25  # a recovering publisher tells its last sequence number this often (see rule)
+BUCKETS_CACHED = 4096  # keys whose Inbox allowance is remembered (made-up keys cannot grow it past this)
 
 
 def safe_defaults(scouting_delay_ms: int = 100) -> dict[str, Any]:
@@ -330,7 +331,7 @@ class Inbox:
         if bucket is None:
             source = source_of(key)
             bucket = source if source in self.sources else ""
-            if len(self._buckets) < 4096:
+            if len(self._buckets) < BUCKETS_CACHED:
                 self._buckets[key] = bucket
         return bucket
 

@@ -54,7 +54,7 @@ class Guard:
 
     def _key(self, key: str) -> tuple[bool, object, str | None]:
         """What the key alone decides, once per key: (our own key, its parts, why it is not an
-        event key or its publisher may not publish its event). Cached for at most KEYS_CACHED
+        event key). Cached for at most KEYS_CACHED
         keys (made-up keys cannot grow the cache); the recorder checks every message of a
         session on a handful of keys."""
         info = self._keys.get(key)
