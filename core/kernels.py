@@ -18,6 +18,12 @@ to any rule invalidates them all. Lookup tables (appendix B, the state
 geometry) are arguments (`TABLES`), never globals, for the same reason: numba
 freezes globals into the cached code.
 
+Why `_nrt=False` on the scalar rules and `_play_round`: numba counts references
+to arrays atomically, and a call that passes arrays (the 11 of `Tables`) or a
+row view (`q[g, s]`) increfs and decrefs each one; in the step loop that was
+60% of the time (perf). Functions that never allocate compile without it; so
+rows are indexed in place (`_greedy(q, g, s, u)`), never viewed, in the loops.
+
 Pure: no I/O, no clock; randomness is the SplitMix64 streams (keys, positions)
 passed in. The cache lives in __pycache__ beside this file, or, where that is
 not writable, in numba's user-wide cache dir (NUMBA_CACHE_DIR overrides both).
