@@ -235,22 +235,27 @@ def learner_rows(turns: int) -> list[dict]:
         logic.handle(requests[i])
         logic.handle(perceived[i])
         logic.handle(resolved[i])
-    t = time.perf_counter()
-    for i in range(20, turns):
-        logic.handle(requests[i])
-        logic.handle(perceived[i])
-        logic.handle(resolved[i])
-    ours = (time.perf_counter() - t) / (turns - 20) * 1e6
+    chunk = max(1, (turns - 20) // 10)  # the best of 10 chunks of turns (the module rule: the least disturbed)
+    ours = float("inf")
+    for start in range(20, turns - chunk + 1, chunk):
+        t = time.perf_counter()
+        for i in range(start, start + chunk):
+            logic.handle(requests[i])
+            logic.handle(perceived[i])
+            logic.handle(resolved[i])
+        ours = min(ours, (time.perf_counter() - t) / chunk * 1e6)
     learner = Learner(1, UniformStream([stream_seed(config)], "agent"))
     one = np.ones(1, dtype=bool)
-    t = time.perf_counter()
-    for i in range(20, turns):
-        r = np.array([i // 12])
-        s = states[i:i + 1]
-        actions, _ = learner.suggest(s, r)
-        reward, learn = simulated_reward(one, one, one, np.array([3]), one)
-        learner.learn(s, actions, reward, learn, r)
-    bare = (time.perf_counter() - t) / (turns - 20) * 1e6
+    bare = float("inf")
+    for start in range(20, turns - chunk + 1, chunk):
+        t = time.perf_counter()
+        for i in range(start, start + chunk):
+            r = np.array([i // 12])
+            s = states[i:i + 1]
+            actions, _ = learner.suggest(s, r)
+            reward, learn = simulated_reward(one, one, one, np.array([3]), one)
+            learner.learn(s, actions, reward, learn, r)
+        bare = min(bare, (time.perf_counter() - t) / chunk * 1e6)
     return [dict(row="learner service's own work per live suggestion (request, perception, turn: events out)",
                  value=ours, unit="us", goal="learner_work",
                  reference="core Learner.suggest + reward + learn alone, batch of one", reference_value=bare,

@@ -18,6 +18,12 @@ to any rule invalidates them all. Lookup tables (appendix B, the state
 geometry) are arguments (`TABLES`), never globals, for the same reason: numba
 freezes globals into the cached code.
 
+Why `_nrt=False` on the scalar rules and `_play_round`: numba counts references
+to arrays atomically, and a call that passes arrays (the 11 of `Tables`) or a
+row view (`q[g, s]`) increfs and decrefs each one; in the step loop that was
+60% of the time (perf). Functions that never allocate compile without it; so
+rows are indexed in place (`_greedy(q, g, s, u)`), never viewed, in the loops.
+
 Pure: no I/O, no clock; randomness is the SplitMix64 streams (keys, positions)
 passed in. The cache lives in __pycache__ beside this file, or, where that is
 not writable, in numba's user-wide cache dir (NUMBA_CACHE_DIR overrides both).
@@ -450,6 +456,68 @@ def _grown(trace, rows):
 
 # --- a whole game per call ----------------------------------------------------------------------
 
+@njit(cache=True, _nrt=False)
+def _play_round(t, g, r, keys, pos, m, table, p_consider, q_hear, capacity, sees, reading, frame, epsilon, alpha,
+                psi_decay, bonus, first_pick_observed, partner, q, counts, steps, memory, stamp, clock, turn, psi,
+                record, trace, n_trace):
+    """The turns of game g's round r from where `turn` ([matched, picks, inconsistent]) and psi[0] left
+    them, until the board is clear or, when recording, `trace` is full; returns the rows recorded.
+
+    Compiled without reference counting (nothing here allocates), so a turn costs no atomic
+    operation: `play` grows a full trace and calls again, which resumes the round where it stopped.
+    """
+    matched, picks, inconsistent, p = turn[0], turn[1], turn[2], psi[0]
+    while matched != ALL_CARDS:
+        if record != RECORD_NONE and n_trace == trace.shape[0]:
+            break
+        steps[g] += 1
+        ku, pu = keys[g, USER], pos[g, USER]
+        pos[g, USER] += np.uint64(DRAWS_PER_TURN)
+        covered = ALL_CARDS & ~matched
+        first = _user_first_pick(memory[g], partner, covered, _draw(ku, pu))
+        covered &= ~(1 << first)
+        match = partner[first]
+        from_memory = (memory[g] >> match) & 1 == 1
+        nis = _user_nis(memory[g], covered)
+        intended = match if from_memory else _pick(nis, _draw(ku, pu + np.uint64(1)))
+        observed = first if first_pick_observed else intended
+        state = _state(t, observed, match, covered)
+        if m == MODE_FIXED:
+            action = table[g, state]
+        else:
+            ka, pa = keys[g, AGENT], pos[g, AGENT]
+            pos[g, AGENT] += np.uint64(DRAWS_PER_SUGGESTION)
+            action, _ = _suggest(q, g, state, _draw(ka, pa), _draw(ka, pa + np.uint64(1)),
+                                 _draw(ka, pa + np.uint64(2)), _draw(ka, pa + np.uint64(3)),
+                                 epsilon, m, p, table[g, state])
+            if m == MODE_REUSE:
+                p = p * psi_decay
+        second, considered, consistent, cand = _user_respond(
+            t, action, observed, match, intended, from_memory, nis, _draw(ku, pu + np.uint64(2)),
+            _draw(ku, pu + np.uint64(3)), _draw(ku, pu + np.uint64(4)), p_consider[g], q_hear[g],
+            sees[g, 0], sees[g, 1], sees[g, 2], reading[g], frame)
+        hit = second == match
+        _user_end_turn(g, first, second, hit, memory, stamp, clock, capacity)
+        reward, learn = _reward(hit, considered, consistent, _popcount(cand), (cand >> match) & 1 == 1, bonus)
+        if learn and m != MODE_FIXED:
+            _learn(q, counts, g, state, action, reward, alpha)
+        if record == RECORD_ALL or (record == RECORD_CONSIDERABLE and not from_memory):
+            k = n_trace
+            trace[k, T_GAME], trace[k, T_STEP], trace[k, T_ROUND] = g, steps[g] - 1, r
+            trace[k, T_FIRST], trace[k, T_OBSERVED], trace[k, T_MATCH] = first, observed, match
+            trace[k, T_COVERED], trace[k, T_NIS], trace[k, T_FROM_MEMORY] = covered, nis, from_memory
+            trace[k, T_STATE], trace[k, T_ACTION], trace[k, T_SECOND] = state, action, second
+            trace[k, T_CONSIDERED], trace[k, T_CONSISTENT], trace[k, T_CANDIDATES] = considered, consistent, cand
+            n_trace += 1
+        if hit:
+            matched |= (1 << first) | (1 << second)
+        picks += 2
+        if considered and not consistent:
+            inconsistent += 1
+    turn[0], turn[1], turn[2], psi[0] = matched, picks, inconsistent, p
+    return n_trace
+
+
 @njit(cache=True, nogil=True)
 def play(t, games, until, rounds, keys, pos, mode, cfg, table, p_consider, q_hear, capacity, sees, reading, frames,
          eps_tab, alpha_tab, psi0_tab, psi_decay, bonus, first_pick_observed,
@@ -461,11 +529,14 @@ def play(t, games, until, rounds, keys, pos, mode, cfg, table, p_consider, q_hea
     updated in place, so a caller may play a batch in slices of rounds. With
     `record`, one int32 row per turn (TRACE_FIELDS) is appended to `trace`
     from row `n_trace`, the array doubled when full; returns (trace, rows).
+    The turns are `_play_round`'s; this loop deals, keeps the logs and snapshots.
     """
     partner = np.empty(N_CARDS, dtype=np.int64)
     order = np.empty(N_CARDS, dtype=np.int64)
     u_deal = np.empty(N_CARDS)
     u_snap = np.empty(N_STATES)
+    turn = np.zeros(3, dtype=np.int64)
+    psi = np.zeros(1)
     for i in range(games.size):
         g = games[i]
         c = cfg[g]
@@ -478,63 +549,19 @@ def play(t, games, until, rounds, keys, pos, mode, cfg, table, p_consider, q_hea
             pos[g, DEAL] += np.uint64(N_CARDS)
             _deal(u_deal, partner, order)
             memory[g] = 0
-            stamp[g, :] = NEVER
-            psi = psi0_tab[c, r]
-            epsilon = eps_tab[c, r]
-            alpha = alpha_tab[c, r]
-            matched = 0
-            picks = 0
-            inconsistent = 0
-            while matched != ALL_CARDS:
-                steps[g] += 1
-                ku, pu = keys[g, USER], pos[g, USER]
-                pos[g, USER] += np.uint64(DRAWS_PER_TURN)
-                covered = ALL_CARDS & ~matched
-                first = _user_first_pick(memory[g], partner, covered, _draw(ku, pu))
-                covered &= ~(1 << first)
-                match = partner[first]
-                from_memory = (memory[g] >> match) & 1 == 1
-                nis = _user_nis(memory[g], covered)
-                intended = match if from_memory else _pick(nis, _draw(ku, pu + np.uint64(1)))
-                observed = first if first_pick_observed else intended
-                state = _state(t, observed, match, covered)
-                if m == MODE_FIXED:
-                    action = table[g, state]
-                else:
-                    ka, pa = keys[g, AGENT], pos[g, AGENT]
-                    pos[g, AGENT] += np.uint64(DRAWS_PER_SUGGESTION)
-                    action, _ = _suggest(q, g, state, _draw(ka, pa), _draw(ka, pa + np.uint64(1)),
-                                         _draw(ka, pa + np.uint64(2)), _draw(ka, pa + np.uint64(3)),
-                                         epsilon, m, psi, table[g, state])
-                    if m == MODE_REUSE:
-                        psi = psi * psi_decay[c]
-                second, considered, consistent, cand = _user_respond(
-                    t, action, observed, match, intended, from_memory, nis, _draw(ku, pu + np.uint64(2)),
-                    _draw(ku, pu + np.uint64(3)), _draw(ku, pu + np.uint64(4)), p_consider[g], q_hear[g],
-                    sees[g, 0], sees[g, 1], sees[g, 2], reading[g], frames[g])
-                hit = second == match
-                _user_end_turn(g, first, second, hit, memory, stamp, clock, capacity)
-                reward, learn = _reward(hit, considered, consistent, _popcount(cand), (cand >> match) & 1 == 1,
-                                        bonus)
-                if learn and m != MODE_FIXED:
-                    _learn(q, counts, g, state, action, reward, alpha)
-                if record == RECORD_ALL or (record == RECORD_CONSIDERABLE and not from_memory):
-                    if n_trace == trace.shape[0]:
-                        trace = _grown(trace, n_trace)
-                    row = trace[n_trace]
-                    row[T_GAME], row[T_STEP], row[T_ROUND] = g, steps[g] - 1, r
-                    row[T_FIRST], row[T_OBSERVED], row[T_MATCH] = first, observed, match
-                    row[T_COVERED], row[T_NIS], row[T_FROM_MEMORY] = covered, nis, from_memory
-                    row[T_STATE], row[T_ACTION], row[T_SECOND] = state, action, second
-                    row[T_CONSIDERED], row[T_CONSISTENT], row[T_CANDIDATES] = considered, consistent, cand
-                    n_trace += 1
-                if hit:
-                    matched |= (1 << first) | (1 << second)
-                picks += 2
-                if considered and not consistent:
-                    inconsistent += 1
-            picks_log[g, r] = picks
-            inconsistent_log[g, r] = inconsistent
+            for j in range(N_CARDS):
+                stamp[g, j] = NEVER
+            turn[0], turn[1], turn[2], psi[0] = 0, 0, 0, psi0_tab[c, r]
+            while True:
+                n_trace = _play_round(t, g, r, keys, pos, m, table, p_consider, q_hear, capacity, sees, reading,
+                                      frames[g], eps_tab[c, r], alpha_tab[c, r], psi_decay[c], bonus,
+                                      first_pick_observed, partner, q, counts, steps, memory, stamp, clock, turn,
+                                      psi, record, trace, n_trace)
+                if turn[0] == ALL_CARDS:
+                    break
+                trace = _grown(trace, n_trace)  # full: twice the rows, and the round goes on
+            picks_log[g, r] = turn[1]
+            inconsistent_log[g, r] = turn[2]
             r += 1
             round_index[g] = r
             if snapshot_every > 0 and r % snapshot_every == 0 and r <= snapshots.shape[1] * snapshot_every:

@@ -39,6 +39,7 @@ RECORDS = {None: kernels.RECORD_NONE, "all": kernels.RECORD_ALL, "considerable":
 PROGRESS_SLICES = 20  # a batch with a progress callback is played in this many slices of rounds
 PIECE_GAMES = 8  # the fewest games in a piece a thread plays (core/threads.py); smaller batches play inline
 PIECES_PER_WORKER = 6  # pieces of unequal cost (personas, lengths) balance over the threads
+TRACE_ROWS = 16  # a recorded trace's first rows per game and round; the kernel grows it when full
 
 
 def _pieces(n: int) -> list[np.ndarray]:
@@ -158,7 +159,7 @@ def run_games(personas: Sequence[Persona], seeds: Sequence[int], rounds: int | S
 
         def work(i: int, until=until, span=min(until, horizon) - previous) -> None:
             games = pieces[i]
-            buffer = np.empty((games.size * span * 16 if record else 0, width), dtype=np.int32)
+            buffer = np.empty((games.size * span * TRACE_ROWS if record else 0, width), dtype=np.int32)
             played[i] = kernels.play(
                 kernels.TABLES, games, until, game_rounds, keys, pos, mode_code, cfg, table, p_consider, q_hear,
                 capacity, sees, reading, frame, eps_tab, alpha_tab, psi0_tab, psi_decay, BONUS_CODES[reward_bonus],

@@ -122,3 +122,43 @@ def test_the_other_reading_pays_the_bonus_on_a_match_only(matched, size, reward)
     assert r[0] == -3.0
     with pytest.raises(ValueError, match="bonus"):
         simulated_reward(np.array([T]), np.array([T]), np.array([T]), np.array([1]), np.array([T]), bonus="always")
+
+
+@pytest.mark.parametrize("bonus", ["correct", "consistent", "match"])
+def test_a_turns_reward_alone_is_the_batch_rule(bonus):
+    """simulated_reward_one (a live learner's turn) is simulated_reward's rule on every input."""
+    from pairplay.core.reward import simulated_reward_one
+    for matched, considered, consistent, holds in np.ndindex(2, 2, 2, 2):
+        for size in (0, 1, 3, 18):
+            r, ok = simulated_reward(np.array([matched]), np.array([considered]), np.array([consistent]),
+                                     np.array([size]), np.array([holds]), bonus)
+            one = simulated_reward_one(bool(matched), bool(considered), bool(consistent), size, bool(holds), bonus)
+            assert one == (float(r[0]), bool(ok[0])) and type(one[0]) is float and type(one[1]) is bool
+    with pytest.raises(ValueError):
+        simulated_reward_one(True, True, True, 1, True, "nonsense")
+
+
+@pytest.mark.parametrize("mode", ["q", "reuse"])
+def test_a_learner_of_one_game_is_that_game_of_a_batch_across_its_schedule_tables(mode):
+    """Learner(1) (the live path: views of its schedule tables, grown past 64 and 128 rounds) and the
+    same game in a batch of three (fancy-indexed tables) suggest, learn and decay psi alike, and
+    the tables hold the schedules' own values."""
+    config = LearnerConfig(psi_start=0.9, psi_decay=0.95)
+    bias = np.arange(24) % 88
+    one = Learner(1, UniformStream([7], "agent"), config, mode, bias=bias if mode == "reuse" else None)
+    three = Learner(3, UniformStream([5, 7, 9], "agent"), config, mode, bias=bias if mode == "reuse" else None)
+    rng = np.random.default_rng(0)
+    for r in range(0, 300, 3):
+        one.start_round(np.array([r]))
+        three.start_round(np.array([r, r, r]))
+        assert one.psi[0] == three.psi[1] == psi_round_start(config, r)
+        assert one.schedule(r) == (float(epsilon_at(config, r)), float(alpha_at(config, r)))
+        for _ in range(4):
+            s = rng.integers(0, 24, 3)
+            a1, h1 = one.suggest(s[1:2], np.array([r]))
+            a3, h3 = three.suggest(s, np.array([r, r, r]))
+            assert (a1[0], h1[0]) == (a3[1], h3[1])
+            reward = rng.normal(size=3)
+            one.learn(s[1:2], a1, reward[1:2], np.ones(1, dtype=bool), np.array([r]))
+            three.learn(s, a3, reward, np.ones(3, dtype=bool), np.array([r, r, r]))
+    assert np.array_equal(one.q[0], three.q[1]) and one.psi[0] == three.psi[1]

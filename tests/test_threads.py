@@ -38,3 +38,22 @@ def test_a_batch_on_two_threads_equals_one_thread(monkeypatch, kw):
     for a, b in zip(one[:6], two[:6]):
         assert np.array_equal(a, b) if isinstance(a, np.ndarray) else a == b
     assert np.array_equal(one.trace.rows, two.trace.rows) and np.array_equal(one.trace.order, two.trace.order)
+
+
+def test_a_trace_that_fills_up_mid_round_is_grown_and_the_round_resumed(monkeypatch):
+    """core/kernels.py `_play_round` stops when the trace is full and `play` resumes the round in a
+    bigger one: from an empty buffer (0 rows per game and round), grown at 0, 1,024 and 3,072 rows
+    (mid-round), the trace and the games are those of a roomy buffer."""
+    monkeypatch.setattr(threads, "WORKERS", 1)
+    personas = [p for p in list(PERSONAS.values())[:3] for _ in range(12)]
+
+    def run():
+        return simulate.run_games(personas, list(range(len(personas))), 7, LearnerConfig(), record="all",
+                                  snapshot_every=2)
+    roomy = run()
+    monkeypatch.setattr(simulate, "TRACE_ROWS", 0)
+    grown = run()
+    assert len(grown.trace.rows) > 3072
+    for a, b in zip(roomy[:6], grown[:6]):
+        assert np.array_equal(a, b) if isinstance(a, np.ndarray) else a == b
+    assert np.array_equal(roomy.trace.rows, grown.trace.rows)
