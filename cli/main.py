@@ -224,11 +224,17 @@ def _main(argv: list[str]) -> int:
         print(f"pairplay {args.verb}: interrupted (Ctrl-C); nothing more was written", file=sys.stderr)
         return 130
     except UserError as err:
-        print(f"pairplay {args.verb}: {err.line()}", file=sys.stderr)
+        print(f"pairplay {_who(args)}: {err.line()}", file=sys.stderr)
         return 2
     except OSError as err:  # the file system or network refused: the user's setup, not our bug
-        print(f"pairplay {args.verb}: {os_error_line(err)}", file=sys.stderr)
+        print(f"pairplay {_who(args)}: {os_error_line(err)}", file=sys.stderr)
         return 2
+
+
+def _who(args: argparse.Namespace) -> str:
+    """The verb, and its action where it has one (`participant export`), as its usage errors say it."""
+    action = getattr(args, "action", None)
+    return f"{args.verb} {action}" if isinstance(action, str) else args.verb
 
 
 def _options_before_the_verb(argv: list[str]) -> list[str]:

@@ -51,3 +51,15 @@ def test_an_option_before_the_verb_is_one_line_saying_it_goes_after_it(argv, cap
     verb = next(a for a in argv if not a.startswith("-"))
     assert err.count("\n") == 1 and err.startswith("pairplay: ") and f"after the verb: pairplay {verb} " in err, err
     assert "unrecognized" not in err and "--participant" not in err
+
+
+def test_the_system_refusing_an_actions_output_names_the_action(tmp_path, capsys):
+    """Before: an OSError of `participant export` said "pairplay participant: ...", without its action."""
+    folder = tmp_path / "study"
+    assert main(["protocol", "init", str(folder), "--study", "thesis-ch7", "-q"]) == 0
+    assert main(["protocol", "register", str(folder), "-q"]) == 0
+    (tmp_path / "afile").write_text("a file")
+    capsys.readouterr()
+    assert main(["participant", "export", str(folder), "p01", "-o", str(tmp_path / "afile" / "p01.zip")]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and err.startswith("pairplay participant export: "), err
