@@ -51,8 +51,11 @@ SEED_MAX = 2**64 - 1  # core/rng.py SEED_RANGE (not imported: it loads the compi
 
 def seed_number(text: str) -> int:
     """A seed: an integer 0..SEED_MAX (every seed there has its own streams, core/rng.py)."""
-    value = int_at_least(0)(text)
-    if value > SEED_MAX:
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not an integer: {text!r}") from None
+    if not 0 <= value <= SEED_MAX:
         raise argparse.ArgumentTypeError(f"a seed is 0..{SEED_MAX}, got {value}")
     return value
 

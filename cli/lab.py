@@ -100,9 +100,10 @@ def run(args: argparse.Namespace) -> int:
     except TimeoutError as err:  # a service the game waits for never came (the eye tracker, say)
         print(f"pairplay lab: the session did not start: {err}", file=sys.stderr)
         return 1
-    except OSError as err:
-        print(f"pairplay lab: cannot serve on {args.listen}: {err}", file=sys.stderr)
-        return 1
+    except OSError as err:  # the system refused the address (a port in use): the user's setup, exit 2
+        print(f"pairplay lab: cannot serve the pages: {err.strerror or err} (--listen {args.listen})",
+              file=sys.stderr)
+        return 2
     if getattr(stop, "why", "") and summary:
         return print_interrupted(summary, path, stop.why, config.rounds)  # no reading the file back: 2 s
     from pairplay.replay.fold import fold_events

@@ -195,6 +195,12 @@ def _threads_left() -> bool:
 
 
 def _main(argv: list[str]) -> int:
+    misplaced = _options_before_the_verb(argv)
+    if misplaced:
+        print(f"pairplay: {' '.join(misplaced[1:])} go{'es' if len(misplaced) == 2 else ''} after the verb: "
+              f"pairplay {misplaced[0]} {' '.join(misplaced[1:])} ... (see pairplay {misplaced[0]} --help)",
+              file=sys.stderr)
+        return 2
     parser, _ = build_parser(argv)
     args, extra = parser.parse_known_args(argv)
     if extra:  # said by the parser of the verb (or its action) that met them, naming it
@@ -218,11 +224,32 @@ def _main(argv: list[str]) -> int:
         print(f"pairplay {args.verb}: interrupted (Ctrl-C); nothing more was written", file=sys.stderr)
         return 130
     except UserError as err:
-        print(f"pairplay {args.verb}: {err.line()}", file=sys.stderr)
+        print(f"pairplay {_who(args)}: {err.line()}", file=sys.stderr)
         return 2
     except OSError as err:  # the file system or network refused: the user's setup, not our bug
-        print(f"pairplay {args.verb}: {os_error_line(err)}", file=sys.stderr)
+        print(f"pairplay {_who(args)}: {os_error_line(err)}", file=sys.stderr)
         return 2
+
+
+def _who(args: argparse.Namespace) -> str:
+    """The verb, and its action where it has one (`participant export`), as its usage errors say it."""
+    action = getattr(args, "action", None)
+    return f"{args.verb} {action}" if isinstance(action, str) else args.verb
+
+
+def _options_before_the_verb(argv: list[str]) -> list[str]:
+    """[verb, option, ...] when options stand before a verb (`pairplay -v session ...`), else [].
+    The verb's options are parsed by the verb's parser only (build_parser adds them when the verb comes
+    first): before, `pairplay -v session --participant X` said every option of the verb was unrecognized."""
+    leading = []
+    for arg in argv:
+        if not arg.startswith("-"):
+            break
+        leading.append(arg)
+    rest = argv[len(leading):]
+    if not leading or not rest or rest[0] not in VERBS or {"-h", "--help", "--version"} & set(leading):
+        return []
+    return [rest[0], *leading]
 
 
 def os_error_line(err: OSError) -> str:

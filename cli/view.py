@@ -24,7 +24,7 @@ import threading
 from pathlib import Path
 
 from pairplay.cli.args import add_force, float_at_least, port_or_any
-from pairplay.errors import InputError, OptionError, UserError
+from pairplay.errors import InputError, OptionError, OutputError, UserError
 from pairplay.outputs import check_output, output_path
 from pairplay.replay.check import check_recording
 from pairplay.services.bus import add_bus_arguments
@@ -82,9 +82,16 @@ def run(args: argparse.Namespace) -> int:
     except NothingDrawn as stopped:  # a signal before the first event: nothing to save, and no mistake
         print(f"pairplay view: interrupted ({stopped}) before any event was drawn; nothing saved", file=sys.stderr)
         return 0
+    except RerunWriteFailed as err:  # the temporary .rrd is gone (output_path); nothing saved
+        raise OutputError(f"writing the .rrd failed ({err}); nothing saved", rrd or "the view's output") from None
     if rrd is not None:
         print(f"pairplay view: saved {rrd}", file=sys.stderr)
     return 0
+
+
+class RerunWriteFailed(Exception):
+    """rerun could not write the .rrd (a full disk, `ulimit -f`): its file writer stopped, and the flush
+    raised RuntimeError("File-writer thread shut down prematurely"), before a traceback."""
 
 
 class NothingDrawn(Exception):
@@ -141,6 +148,9 @@ def _view(args: argparse.Namespace, tmp_rrd: Path | None) -> None:
             while not stop.wait(0.5):
                 pass
     finally:
-        finish(rec, shutdown_wait(stop, 1e9, reserve=0.2))  # stopped: the .rrd's footer within the deadline
+        try:
+            finish(rec, shutdown_wait(stop, 1e9, reserve=0.2))  # stopped: the .rrd's footer within the deadline
+        except RuntimeError as err:
+            raise RerunWriteFailed(str(err)) from None
         for sig, handler in saved_handlers.items():  # run() may be called in-process (tests, tools)
             signal.signal(sig, handler)

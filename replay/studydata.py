@@ -46,14 +46,17 @@ class StudyDataError(ValueError):
 
 
 def atomic_write(path: Path, data: bytes) -> None:
-    """Write `data` to `path` through a temporary file renamed when complete."""
+    """Write `data` to `path` through a temporary file renamed when complete (removed on any failure)."""
     path.parent.mkdir(parents=True, exist_ok=True)
     tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
-    with open(tmp, "wb") as f:
-        f.write(data)
-        f.flush()
-        os.fsync(f.fileno())
-    os.replace(tmp, path)
+    try:
+        with open(tmp, "wb") as f:
+            f.write(data)
+            f.flush()
+            os.fsync(f.fileno())
+        os.replace(tmp, path)
+    finally:  # a full disk or Ctrl-C: no temporary file left beside the target
+        tmp.unlink(missing_ok=True)
 
 
 @dataclass

@@ -136,6 +136,12 @@ CASES = [
     Case("combine --exclude a typo", ["combine", "policies", "--exclude", "blnd"], "no policy of 'blnd'"),
     Case("combine mixed reward rules names the files", ["combine", "policies/deaf", "spec/blind.json"],
          "consistent: spec/blind.json"),
+    # found by the trial (2026-11-30): the lab's pages on a port in use printed uvicorn's own ERROR line
+    # beside ours (two lines; the lab exited 1)
+    Case("lab --listen a port in use", ["lab", "--participant", "human:p1", "--listen", f"127.0.0.1:{TAKEN_PORT}"],
+         f"Address already in use (--listen 127.0.0.1:{TAKEN_PORT})"),
+    Case("protocol serve --listen a port in use", ["protocol", "serve", "study", "--listen", f"127.0.0.1:{TAKEN_PORT}"],
+         f"--listen 127.0.0.1:{TAKEN_PORT}: Address already in use"),
     # read-only places (a read-only tmpfs mounted at ./ro)
     Case("study --out on a read-only file system", ["study", "--quiet", "--out", "ro/study"], "read-only", readonly=True),
     Case("session --out on a read-only file system", SIM + ["--out", "ro/rec"], "read-only", readonly=True),
@@ -172,6 +178,7 @@ def _fixtures(root: Path) -> None:
     (root / "rebuilt").mkdir()
     (root / "rebuilt" / "rec.policy.json").write_bytes(b"the user's rebuilt policy")
     (root / "ro").mkdir()
+    assert main(["protocol", "init", str(root / "study"), "--study", "thesis-ch7", "--quiet"]) == 0
 
 
 def _command(case: Case, root: Path) -> list[str]:
@@ -218,7 +225,7 @@ def test_a_mistake_gets_one_line_and_changes_nothing(case, ran):
     assert r.returncode == case.code, (r.returncode, r.stdout, r.stderr)
     assert "Traceback" not in r.stderr + r.stdout, r.stderr
     assert len(lines) == 1, r.stderr
-    verb = case.args[0]
+    verb = " ".join(case.args[:2] if case.args[0] in ("protocol", "participant") else case.args[:1])  # its action too
     assert lines[0].startswith(f"pairplay {verb}: ") and case.expect in lines[0], lines[0]
     assert got.after == got.before, "files changed: " + str(set(got.after.items()) ^ set(got.before.items()))
 

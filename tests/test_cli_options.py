@@ -48,10 +48,10 @@ def test_a_duration_is_a_finite_number_at_least_0(text):
 
 # verb's arguments -> a piece of the one line; each is refused by argparse, before any work
 REFUSED = {
-    "combine --seed -5": (["combine", "p.json", "--seed", "-5"], "--seed: must be at least 0, got -5"),
-    "profile --seed -5": (["profile", "p.json", "--seed", "-5"], "--seed: must be at least 0, got -5"),
+    "combine --seed -5": (["combine", "p.json", "--seed", "-5"], "--seed: a seed is 0..18446744073709551615, got -5"),
+    "profile --seed -5": (["profile", "p.json", "--seed", "-5"], "--seed: a seed is 0..18446744073709551615, got -5"),
     "session --seed 2**64": (["session", *MINIMAL["session"]] + ["--seed", str(2**64)], "--seed: a seed is 0.."),
-    "study --seed -1": (["study", "--seed", "-1"], "--seed: must be at least 0, got -1"),
+    "study --seed -1": (["study", "--seed", "-1"], "--seed: a seed is 0..18446744073709551615, got -1"),
     "counterfactual --seed 2**64": (["counterfactual", "r.mcap", "--seed", str(2**64)], "a seed is 0.."),
     "session --ignore-window-ms nan": (["session", *MINIMAL["session"]] + ["--ignore-window-ms", "nan"], "not a finite number"),
     "session --ignore-window-ms -3": (["session", *MINIMAL["session"]] + ["--ignore-window-ms", "-3"], "must be at least 0"),

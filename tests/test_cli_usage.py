@@ -40,3 +40,26 @@ def test_a_missing_argument_and_a_stray_one_at_the_top_still_say_who(capsys):
     with pytest.raises(SystemExit):
         main(["--bogus"])
     assert capsys.readouterr().err.startswith("pairplay: unrecognized arguments: --bogus")
+
+
+@pytest.mark.parametrize("argv", [["-v", "session", "--participant", "sim:blind"], ["-q", "--verbose", "study"]])
+def test_an_option_before_the_verb_is_one_line_saying_it_goes_after_it(argv, capsys):
+    """Before: `pairplay -v session --participant sim:blind` said "pairplay session: unrecognized
+    arguments: -v --participant sim:blind": the verb's own options were never added to its parser."""
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    verb = next(a for a in argv if not a.startswith("-"))
+    assert err.count("\n") == 1 and err.startswith("pairplay: ") and f"after the verb: pairplay {verb} " in err, err
+    assert "unrecognized" not in err and "--participant" not in err
+
+
+def test_the_system_refusing_an_actions_output_names_the_action(tmp_path, capsys):
+    """Before: an OSError of `participant export` said "pairplay participant: ...", without its action."""
+    folder = tmp_path / "study"
+    assert main(["protocol", "init", str(folder), "--study", "thesis-ch7", "-q"]) == 0
+    assert main(["protocol", "register", str(folder), "-q"]) == 0
+    (tmp_path / "afile").write_text("a file")
+    capsys.readouterr()
+    assert main(["participant", "export", str(folder), "p01", "-o", str(tmp_path / "afile" / "p01.zip")]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and err.startswith("pairplay participant export: "), err

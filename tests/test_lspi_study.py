@@ -45,6 +45,8 @@ def test_profiles_and_merges_take_lspi_policies(lspi_dir, tmp_path, capsys):
 
 
 def test_bad_lspi_settings_are_one_line_on_stderr(tmp_path, capsys):
-    assert main(["study", "--quiet", "--algorithm", "lspi", "--lspi-every", "0", "--out", str(tmp_path / "x")]) == 2
+    with pytest.raises(SystemExit) as stopped:  # refused by the option's parser (cli/args.py), before any work
+        main(["study", "--quiet", "--algorithm", "lspi", "--lspi-every", "0", "--out", str(tmp_path / "x")])
+    assert stopped.value.code == 2
     err = capsys.readouterr().err
-    assert err.count("\n") == 1 and "improve_every" in err and not (tmp_path / "x").exists()
+    assert err.count("\n") == 1 and "--lspi-every" in err and not (tmp_path / "x").exists()

@@ -234,3 +234,34 @@ def test_the_game_obeys_the_experimenter_and_only_the_experimenter():
     assert send(ev.SessionAborted(reason="tired"), "experimenter") == ["SessionEnded:aborted"]
     assert game.logic.done
     assert send(ev.CardPicked(round=0, turn=0, card=4), "board")[0].startswith("MessageRejected")
+
+
+def test_report_force_keeps_the_folders_other_files_and_a_failure_leaves_no_temporary_folder(played, tmp_path, capsys):
+    """Before: `pairplay report STUDY --out DIR --force` removed DIR whole (a user's notes in it
+    included) before renaming its temporary folder there; `--out FILE --force` failed with "Not a
+    directory" and left `.FILE.<pid>.tmp` beside it (found by the trial of issue-free main)."""
+    from pairplay.cli.main import main
+
+    data = copy_study(played, tmp_path)
+    mine = tmp_path / "mine"
+    mine.mkdir()
+    (mine / "notes.txt").write_text("the user's notes")
+    assert main(["report", str(data.folder), "--out", str(mine)]) == 2  # not empty: refused without --force
+    assert "--force" in capsys.readouterr().err
+    assert main(["report", str(data.folder), "--out", str(mine), "--force"]) == 0
+    assert (mine / "notes.txt").read_text() == "the user's notes" and (mine / "report.md").is_file()
+    (tmp_path / "afile").write_text("a file")
+    assert main(["report", str(data.folder), "--out", str(tmp_path / "afile"), "--force"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "afile" in err, err
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["afile", "keys.csv", "mine", "study"]
+
+
+def test_atomic_write_leaves_no_temporary_file_when_the_write_fails(tmp_path):
+    """Before: a write that failed (a full disk: `participant export -o` on a full tmpfs) left
+    `.NAME.<pid>.tmp` beside the target."""
+    from pairplay.replay.studydata import atomic_write
+
+    with pytest.raises(TypeError):
+        atomic_write(tmp_path / "t.csv", "not bytes")  # the write itself fails, as on a full disk
+    assert list(tmp_path.iterdir()) == []

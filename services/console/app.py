@@ -18,7 +18,6 @@ from __future__ import annotations
 import hmac
 import logging
 import threading
-import time
 from dataclasses import asdict
 from pathlib import Path
 
@@ -30,6 +29,7 @@ from starlette.staticfiles import StaticFiles
 
 from pairplay.core.actions import ACTION_NAMES
 from pairplay.core.geometry import N_STATES, STATE_NAMES
+from pairplay.outputs import output_folder
 from pairplay.replay.studydata import StudyDataError
 
 from pairplay.services.protocol import StudyRunner
@@ -230,13 +230,9 @@ def console_routes(console: Console) -> list:
         from pairplay.report.human import human_report
 
         def work():
-            tmp = data.folder / f".report.{time.time_ns()}.tmp"
-            human_report(data.folder, tmp)
             out = data.folder / "report"
-            if out.exists():
-                import shutil
-                shutil.rmtree(out)
-            tmp.rename(out)
+            with output_folder(out, force=True) as tmp:  # a failure leaves the old report and no temporary folder
+                human_report(data.folder, tmp)
             return f"report written: {out / 'report.md'}"
         console.start("report", work)
         return JSONResponse({"started": "report"})

@@ -12,6 +12,7 @@ the caller gives another host.
 
 from __future__ import annotations
 
+import socket
 import threading
 import time
 from dataclasses import dataclass
@@ -39,7 +40,12 @@ class WebServer:
         self.thread: threading.Thread | None = None
 
     def start(self, timeout_s: float = 10.0) -> "WebServer":
-        self.thread = threading.Thread(target=self.server.run, name="pairplay-lab-web", daemon=True)
+        """Serve from a thread; OSError (its strerror says why: "Address already in use") when the address
+        cannot be bound. We bind the socket here and hand it to uvicorn: uvicorn binding it itself in its
+        thread printed its own "ERROR: [Errno 98] ..." line beside the verb's one line."""
+        sock = _bind(self.server.config.host, self.server.config.port)
+        self.thread = threading.Thread(target=self.server.run, kwargs={"sockets": [sock]}, name="pairplay-lab-web",
+                                       daemon=True)
         self.thread.start()
         deadline = time.monotonic() + timeout_s
         while not self.server.started:
@@ -66,6 +72,20 @@ class WebServer:
         self.server.should_exit = True
         if self.thread is not None:
             self.thread.join(timeout_s)
+
+
+def _bind(host: str, port: int) -> socket.socket:
+    """A TCP socket bound to (host, port) as uvicorn binds one (SO_REUSEADDR; an IPv6 host on AF_INET6)."""
+    family, _, _, _, address = socket.getaddrinfo(host or None, port, type=socket.SOCK_STREAM,
+                                                  flags=socket.AI_PASSIVE)[0]
+    sock = socket.socket(family, socket.SOCK_STREAM)
+    sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+    try:
+        sock.bind(address)
+    except OSError:
+        sock.close()
+        raise
+    return sock
 
 
 @dataclass(frozen=True)
