@@ -23,6 +23,48 @@ def test_each_runs_every_piece_once_and_raises_the_first_error():
         threads.each(fail, 10, workers=2)
 
 
+def test_the_main_thread_runs_no_piece_and_a_signal_stops_its_wait_at_once():
+    """A piece is compiled code holding no GIL for seconds; on the main thread it held off Ctrl-C until it
+    returned (`pairplay study`: 2.7-9.9 s to exit). The main thread now only waits, and its wait is interrupted."""
+    import signal
+    import threading
+
+    ran_on = []
+    threads.each(lambda i: ran_on.append(threading.current_thread()), 8, workers=2)
+    threads.each(lambda i: ran_on.append(threading.current_thread()), 3, workers=1)
+    assert len(ran_on) == 11 and threading.main_thread() not in ran_on
+
+    class Stop(Exception):
+        pass
+
+    def handler(signum, frame):
+        raise Stop()
+
+    release, started, released = threading.Event(), threading.Semaphore(0), []
+
+    def piece(i):
+        started.release()
+        released.append(release.wait(30))  # True: let go by the test; False: waited out its 30 s
+
+    def interrupt():
+        started.acquire()
+        started.acquire()  # both pieces are running
+        signal.pthread_kill(threading.main_thread().ident, signal.SIGUSR1)
+
+    before = signal.signal(signal.SIGUSR1, handler)
+    try:
+        threading.Thread(target=interrupt, daemon=True).start()
+        with pytest.raises(Stop):
+            threads.each(piece, 4, workers=2)
+    finally:
+        signal.signal(signal.SIGUSR1, before)
+        release.set()
+    deadline = threading.Event()
+    while len(released) < 2 and not deadline.wait(0.01):
+        pass
+    assert released == [True, True]  # interrupted while both pieces still ran; no piece started after
+
+
 def _run(monkeypatch, workers, **kw):
     monkeypatch.setattr(threads, "WORKERS", workers)
     personas = [p for p in list(PERSONAS.values())[:3] for _ in range(12)]
