@@ -274,8 +274,9 @@ class RobotDriver:
         for step in perf.steps[perf.next_step:]:
             step.dropped = True
         perf.next_step = len(perf.steps)
-        self._at(perf.superseded_at + self.config.abort_grace_s, perf)
         self._check(perf, time.monotonic())
+        if not perf.finished:  # replies still awaited: until the robot moves on, or abort_grace_s
+            self._at(perf.superseded_at + self.config.abort_grace_s, perf)
 
     def _at(self, when: float, perf: _Performance) -> None:
         """Check `perf` again at `when` (a time limit of one of its states)."""
