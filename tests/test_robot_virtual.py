@@ -94,6 +94,10 @@ def test_a_head_turn_cut_short_turns_back_and_stale_speech_is_stopped():
         assert collector.wait_for(lambda c: {1, 2} <= set(c.by_seq()))
         driver.perform(suggestion(code_of_parts(0, 1, 0, 0), seq=3))  # nothing left to undo
         assert collector.wait_for(lambda c: 3 in c.by_seq())
+        driver.perform(suggestion(code_of_parts(0, 0, 2, 0), seq=4))  # a head turn left, cut while turned ...
+        assert wait_until(lambda: len(driver.transport.performed) == 9)  # say, 2 looks; stop, look, smile; smile; 2
+        driver.perform(suggestion(code_of_parts(4, 0, 0, 0), seq=5))  # ... by speech: it goes first
+        assert collector.wait_for(lambda c: 5 in c.by_seq())
     finally:
         driver.close()
     first, second, third = (collector.by_seq()[n] for n in (1, 2, 3))
@@ -104,6 +108,7 @@ def test_a_head_turn_cut_short_turns_back_and_stale_speech_is_stopped():
     back = json.loads(second.commands[1])
     assert back["head"] is True and (back["x"], back["y"], back["z"]) == (0.0, 0.0, 1.0)  # rest: the participant
     assert wire_types(third.commands) == ["gesture"]
+    assert wire_types(collector.by_seq()[5].commands) == ["say", "look"]  # no stop: a say aborts by itself
 
 
 def test_suggestions_faster_than_the_robot_never_build_a_backlog(monkeypatch):
