@@ -8,6 +8,10 @@ SOAK_RESTART_WINDOW_S, default 4 s; whether the session was still playing is rep
 SOAK_KILLS=10 recorder kills under load. Each test prints its figures and, with
 SOAK_OUT=FILE, appends them as JSON lines (one per run, one per soak).
 
+SOAK_FIRST=K numbers the runs from K (names, seeds and the random moments follow
+the number); by default K is the count of runs already in SOAK_OUT, so batches
+appended to one file each get fresh sessions instead of repeating runs 0, 1, ...
+
 SOAK_JOBS=N (default 1) runs N sessions at once. Each session is its own
 `pairplay session` process with its own ports (port 0), session name and files,
 so runs share nothing but the machine: running several at once is more stress
@@ -59,6 +63,17 @@ TIMEOUT_S = float(os.environ.get("SOAK_TIMEOUT_S", 180))
 STALL_S = float(os.environ.get("SOAK_STALL_S", 60))
 JOBS = int(os.environ.get("SOAK_JOBS", 1))
 _out_lock = threading.Lock()
+
+
+def first_run() -> int:
+    """SOAK_FIRST, or the number of runs SOAK_OUT already holds (see the module docstring)."""
+    if os.environ.get("SOAK_FIRST"):
+        return int(os.environ["SOAK_FIRST"])
+    try:
+        with open(os.environ.get("SOAK_OUT", "")) as f:
+            return sum(1 for line in f if line.startswith('{"test": "run"'))
+    except OSError:
+        return 0
 
 
 def report(name: str, figures: dict) -> None:
@@ -208,15 +223,15 @@ def summary(name: str, runs: list[dict], **more) -> None:
 
 
 def test_floods_of_10000_messages_into_long_sessions(tmp_path):
-    n = int(os.environ.get("SOAK_FLOODS", 50))
-    runs = in_parallel(lambda i: one_session(tmp_path, f"flood{i}", i, flood_n=10_000), n)
+    n, first = int(os.environ.get("SOAK_FLOODS", 50)), first_run()
+    runs = in_parallel(lambda i: one_session(tmp_path, f"flood{first + i}", first + i, flood_n=10_000), n)
     summary("floods", runs, mid_session=sum(r["flood_mid_session"] for r in runs))
     assert all(r["finished"] and r["verified"] for r in runs)
 
 
 def test_clean_long_sessions_never_freeze(tmp_path):
-    n = int(os.environ.get("SOAK_CLEAN", 100))
-    runs = in_parallel(lambda i: one_session(tmp_path, f"clean{i}", i), n)
+    n, first = int(os.environ.get("SOAK_CLEAN", 100)), first_run()
+    runs = in_parallel(lambda i: one_session(tmp_path, f"clean{first + i}", first + i), n)
     summary("clean", runs)
     assert all(r["finished"] and r["verified"] for r in runs)
 
@@ -227,10 +242,11 @@ def test_iristk_broker_restarts_at_random_moments(tmp_path):
     sys.path.insert(0, str(Path(__file__).parent))
     from robot_doubles.iristk_broker import IrisTKBroker
     from robot_doubles.iristk_furhat import IrisTKFurhat
-    n = int(os.environ.get("SOAK_RESTARTS", 30))
+    n, first = int(os.environ.get("SOAK_RESTARTS", 30)), first_run()
     window_s = float(os.environ.get("SOAK_RESTART_WINDOW_S", 4.0))
 
     def run(i: int) -> dict:
+        i += first
         rng = random.Random(i)
         broker = IrisTKBroker().start()
         furhat = IrisTKFurhat(broker.port, speech_s=0.05).start()

@@ -94,6 +94,10 @@ def test_a_head_turn_cut_short_turns_back_and_stale_speech_is_stopped():
         assert collector.wait_for(lambda c: {1, 2} <= set(c.by_seq()))
         driver.perform(suggestion(code_of_parts(0, 1, 0, 0), seq=3))  # nothing left to undo
         assert collector.wait_for(lambda c: 3 in c.by_seq())
+        driver.perform(suggestion(code_of_parts(0, 0, 2, 0), seq=4))  # a head turn left, cut while turned ...
+        assert wait_until(lambda: len(driver.transport.performed) == 9)  # say, 2 looks; stop, look, smile; smile; 2
+        driver.perform(suggestion(code_of_parts(4, 0, 0, 0), seq=5))  # ... by speech: it goes first
+        assert collector.wait_for(lambda c: 5 in c.by_seq())
     finally:
         driver.close()
     first, second, third = (collector.by_seq()[n] for n in (1, 2, 3))
@@ -104,6 +108,34 @@ def test_a_head_turn_cut_short_turns_back_and_stale_speech_is_stopped():
     back = json.loads(second.commands[1])
     assert back["head"] is True and (back["x"], back["y"], back["z"]) == (0.0, 0.0, 1.0)  # rest: the participant
     assert wire_types(third.commands) == ["gesture"]
+    assert wire_types(collector.by_seq()[5].commands) == ["say", "look"]  # no stop: a say aborts by itself
+
+
+def test_suggestions_faster_than_the_robot_never_build_a_backlog(monkeypatch):
+    """A simulated session's pace (thousands of suggestions, a robot that takes 10 commands/s): before,
+    every suggestion's first commands were kept for the rate limit, 742 suggestions were open by round
+    75 of 80 and each wake-up scanned them all. Now only the newest waits; the rest are reported."""
+    collector, open_at_add = Collector(), []
+    add = RobotDriver._add
+
+    def counting(self, *args):
+        open_at_add.append(len(self._active))  # noqa: SLF001 - what the worker would scan
+        add(self, *args)
+
+    monkeypatch.setattr(RobotDriver, "_add", counting)
+    driver = robot(collector, "virtual?time_scale=0.1")  # replies in flight while the next ones come
+    codes = [code_of_parts(2, 0, 3, 0), code_of_parts(0, 1, 1, 0), code_of_parts(5, 0, 0, 1)]
+    try:
+        for seq in range(2000):
+            driver.perform(suggestion(codes[seq % 3], seq=seq))
+        assert driver.wait_idle(PATIENCE_S)
+    finally:
+        driver.close()
+    assert sorted(a.suggestion_seq for a in collector.acted) == list(range(2000))  # one RobotActed each
+    assert max(open_at_add) <= 100  # bounded by what the rate limit lets out in abort_grace_s, not by 2,000
+    written = sum(len(a.commands) for a in collector.acted)
+    assert written == len(driver.transport.performed) < 2000  # nothing stale written, nothing twice
+    assert collector.by_seq()[1999].outcome == "done"
 
 
 def test_do_nothing_sends_nothing():

@@ -15,8 +15,9 @@ head turn's later step, or for the robot to come back) are dropped, never
 written, and its RobotActed is "superseded", `commands` what was written and
 `unsent` what was dropped. So only the newest suggestion ever has commands to
 write, and the robot is never behind by more than one suggestion. What goes out
-instead is what undoes the stale one's effect on the robot, as the first steps
-of the new suggestion (recorded in its RobotActed):
+instead is what undoes the stale one's effect on the robot, as steps of the new
+suggestion (recorded in its RobotActed; the stop first, the head after the new
+speech, if any):
   - a StopSpeech, if the last speech written may still be playing (no
     speech end came for it) and the new suggestion says nothing itself (a Say
     aborts the current speech by itself: IrisTK action.speech `abort`,
@@ -253,12 +254,13 @@ class RobotDriver:
         previous, self._current = self._current, None
         if previous is not None and not previous.finished:
             self._supersede(previous, suggestion, start)
-        prefix = []  # undo what a stale suggestion left on the robot (module docstring)
-        if self._speaking and not any(isinstance(s.command, Say) for s in steps):
-            prefix.append(Step(0.0, StopSpeech()))
-        if self._head_away and not any(isinstance(s.command, Look) for s in steps):
-            prefix.append(Step(0.0, self._rest))
-        ordered = sorted([*prefix, *steps], key=lambda s: s.at_s)  # stable: same-time steps keep their order
+        # undo what a stale suggestion left on the robot (module docstring): a stop before anything, the
+        # head back after the new speech (speech goes first: it is what the participant waits for)
+        says = [s for s in steps if isinstance(s.command, Say)]
+        stop = [Step(0.0, StopSpeech())] if self._speaking and not says else []
+        back = [Step(0.0, self._rest)] if self._head_away and not any(isinstance(s.command, Look) for s in steps) else []
+        ordered = sorted([*stop, *says, *back, *(s for s in steps if not isinstance(s.command, Say))],
+                         key=lambda s: s.at_s)  # stable: same-time steps keep this order
         perf = _Performance(next(self._indexes), suggestion,
                             [_Step(s.at_s, s, next(self._ids)) for s in ordered], received_ns, start)
         self._active[perf.index] = perf
@@ -274,8 +276,9 @@ class RobotDriver:
         for step in perf.steps[perf.next_step:]:
             step.dropped = True
         perf.next_step = len(perf.steps)
-        self._at(perf.superseded_at + self.config.abort_grace_s, perf)
         self._check(perf, time.monotonic())
+        if not perf.finished:  # replies still awaited: until the robot moves on, or abort_grace_s
+            self._at(perf.superseded_at + self.config.abort_grace_s, perf)
 
     def _at(self, when: float, perf: _Performance) -> None:
         """Check `perf` again at `when` (a time limit of one of its states)."""
