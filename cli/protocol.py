@@ -71,7 +71,10 @@ def _study_file(name: str) -> tuple[str, str]:
     """(text, source) of a study file argument."""
     if name == EXAMPLE_NAME and not Path(name).exists():
         return example_text(), f"{EXAMPLE_NAME} (shipped example)"
-    return Path(name).read_text(encoding="utf-8"), name
+    try:
+        return Path(name).read_text(encoding="utf-8"), name
+    except UnicodeDecodeError:  # as load_study says it (a random or binary file was a traceback)
+        raise StudyFileError(f"{name}: cannot read: not UTF-8 text") from None
 
 
 def describe(study) -> list[str]:

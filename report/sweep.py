@@ -107,6 +107,8 @@ def read_grid(path: str | Path) -> Grid:
         raise GridError(f"{path}: no such file") from None
     except tomllib.TOMLDecodeError as exc:
         raise GridError(f"{path}: not TOML ({exc})") from None
+    except UnicodeDecodeError:  # tomllib decodes bytes itself: a binary file was a traceback
+        raise GridError(f"{path}: not TOML (not UTF-8 text)") from None
     unknown = set(data) - {"study", "grid", "seeds", "reuse"}
     if unknown:
         raise GridError(f"{path}: unknown key(s) {', '.join(sorted(unknown))}: use [study], [grid], seeds, reuse")

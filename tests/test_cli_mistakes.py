@@ -62,6 +62,10 @@ CASES = [
     Case("recover a missing file", ["recover", "missing.mcap"], "no such recording (missing.mcap)"),
     Case("recover a zero-byte file", ["recover", "empty.mcap"], "empty file (0 bytes)"),
     Case("recover random bytes", ["recover", "random.mcap"], "not an MCAP recording: it does not start with MCAP's magic bytes (random.mcap)"),
+    # a binary file where a text file is wanted (a traceback before: UnicodeDecodeError, the new-user trial 2026-11-30)
+    Case("sweep a binary grid file", ["sweep", "random.mcap"], "random.mcap: not TOML (not UTF-8 text)"),
+    Case("protocol check a binary study file", ["protocol", "check", "random.mcap"],
+         "random.mcap: cannot read: not UTF-8 text"),
     Case("recover a folder", ["recover", "policies"], "a folder, not a recording"),
     Case("replay a missing file", ["replay", "missing.mcap"], "no such recording"),
     Case("replay a zero-byte file", ["replay", "empty.mcap", "--speed", "max"], "empty file"),
