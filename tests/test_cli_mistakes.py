@@ -1,13 +1,16 @@
 """Every ordinary mistake, typed as a user would: one line, non-zero exit, nothing written.
 
-Each case runs `python -m pairplay ...` as a subprocess in a folder of its own
-(a copy of the same fixtures: a real recording, an empty and a random file,
+Each case runs `python -m pairplay ...` as a process of its own in a folder of its
+own (a copy of the same fixtures: a real recording, an empty and a random file,
 policy files, existing outputs) and must give: a non-zero exit, exactly one
 line on stderr naming the problem, no traceback, and every file of the folder
 as it was (nothing replaced, nothing added, no temporary file left). The cases
-run in parallel threads (each is its own process), so the table takes seconds.
-Read-only cases mount a read-only tmpfs in a mount namespace of their own
-(`unshare`, as root); without it they are skipped.
+run in parallel threads, each process forked from one that imported pairplay
+once (tests/cli_zygote.py: the import cost 0.2-1.6 s of CPU per case, ~60 s for
+the table; what an import prints is checked once, on that process's stderr), so
+the table takes seconds. Read-only cases mount a read-only tmpfs in a mount
+namespace of their own (`unshare`, as root) around a whole `python -m pairplay`
+start-up; without it they are skipped.
 """
 
 from __future__ import annotations
@@ -26,6 +29,8 @@ from pathlib import Path
 import pytest
 
 from pairplay.cli.main import main
+
+from cli_zygote import Zygote
 
 SAMPLE = Path(__file__).resolve().parents[1] / "recordings" / "samples" / "sim-ashley.mcap"
 CAN_UNSHARE = os.geteuid() == 0 and shutil.which("unshare") is not None
@@ -185,22 +190,26 @@ def _fixtures(root: Path) -> None:
     assert main(["protocol", "init", str(root / "study"), "--study", "thesis-ch7", "--quiet"]) == 0
 
 
-def _command(case: Case, root: Path) -> list[str]:
-    command = [sys.executable, "-m", "pairplay", *case.args]
-    if case.readonly:  # a private mount namespace: the read-only tmpfs is seen by this process alone
-        command = ["unshare", "--mount", "--propagation", "private", "sh", "-c",
-                   'mount -t tmpfs -o ro tmpfs "$0" && exec "$@"', str(root / "ro"), *command]
-    return command
+ENV = dict(os.environ, COLUMNS="200")
 
 
-def _run(case: Case, template: Path, base: Path) -> Case:
+def _readonly_command(case: Case, root: Path) -> list[str]:
+    """A whole `python -m pairplay` in a private mount namespace: the read-only tmpfs is seen by it alone."""
+    return ["unshare", "--mount", "--propagation", "private", "sh", "-c",
+            'mount -t tmpfs -o ro tmpfs "$0" && exec "$@"', str(root / "ro"), sys.executable, "-m", "pairplay",
+            *case.args]
+
+
+def _run(case: Case, template: Path, base: Path, zygote: Zygote) -> Case:
     root = base / case.name.replace(" ", "_").replace("'", "").replace("/", "_")
     shutil.copytree(template, root)
     case.before = _snapshot(root)
-    env = dict(os.environ, COLUMNS="200")
     try:
-        case.result = subprocess.run(_command(case, root), cwd=root, capture_output=True, text=True, timeout=300,
-                                     env=env)
+        if case.readonly:
+            case.result = subprocess.run(_readonly_command(case, root), cwd=root, capture_output=True, text=True,
+                                         timeout=300, env=ENV)
+        else:
+            case.result = zygote.run(case.args, root, timeout=300)
     except subprocess.TimeoutExpired as hung:  # a verb that hangs on a mistake fails its row, not the table
         case.result = subprocess.CompletedProcess(hung.cmd, None, str(hung.stdout), f"hung: {hung}")
     case.after = _snapshot(root)
@@ -213,8 +222,10 @@ def ran(tmp_path_factory):
     _fixtures(template)
     base = tmp_path_factory.mktemp("cases")
     todo = [c for c in CASES if CAN_UNSHARE or not c.readonly]
-    with ThreadPoolExecutor(max_workers=4) as pool:
-        done = list(pool.map(lambda c: _run(c, template, base), todo))
+    with Zygote(env=ENV, scratch=tmp_path_factory.mktemp("zygote")) as zygote, ThreadPoolExecutor(4) as pool:
+        # what pairplay's import printed would have been a line more on every case's stderr
+        assert zygote.import_output == "" and zygote.threads == 1, (zygote.import_output, zygote.threads)
+        done = list(pool.map(lambda c: _run(c, template, base, zygote), todo))
     TAKEN.close()
     return {c.name: c for c in done}
 

@@ -1,0 +1,172 @@
+"""Many `python -m pairplay ARGS` processes without paying pairplay's import in each.
+
+Rule: a zygote process imports every module of pairplay once (and nothing else: no thread, no
+socket, no file), then forks one child per command. A child is a whole process of its own, as
+`python -m pairplay ARGS` is: its own working folder, stdin from /dev/null, stdout and stderr
+to files, `pairplay.__main__` run as __main__ (runpy, as `-m` does), and the interpreter's own
+exit (atexit handlers, teardown) unless the verb ends with os._exit. Only the import is shared:
+what an import prints is checked once, on the zygote's own stderr (`Zygote.import_output`),
+where a real start-up would print it before every command.
+
+Why: the command-line mistakes table runs ~70 commands; each paid 0.2-1.6 s of CPU (Python's
+start and pairplay's import: numba, zenoh, numpy) for a few milliseconds of work, about 60 s of
+CPU of a suite that must finish in minutes on two cores.
+
+Protocol (JSON lines): request {"id", "args", "cwd", "out", "err"} on the zygote's stdin;
+replies {"id", "pid"} when forked and {"id", "code", "cpu"} (os.waitstatus_to_exitcode; its CPU
+seconds) when it ended.
+The zygote is single-threaded (fork is safe), reaps children by polling, and ends at EOF.
+"""
+
+from __future__ import annotations
+
+import gc
+import importlib
+import json
+import os
+import pkgutil
+import queue
+import selectors
+import subprocess
+import sys
+import threading
+from pathlib import Path
+
+
+def _preload() -> None:
+    """Import every module of pairplay (the CLI's verbs and what they import when they run)."""
+    import pairplay
+    import pairplay.cli.main as cli
+    for verb_module, _ in cli.VERBS.values():
+        importlib.import_module(verb_module)
+    for info in pkgutil.walk_packages(pairplay.__path__, "pairplay."):
+        if info.name != "pairplay.__main__":  # run per command, as `-m` runs it
+            importlib.import_module(info.name)
+
+
+def _child(request: dict) -> None:
+    """In the forked child: become `python -m pairplay ARGS` in its folder; never returns."""
+    import runpy
+    os.chdir(request["cwd"])
+    null = os.open(os.devnull, os.O_RDONLY)
+    out = os.open(request["out"], os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o644)
+    err = os.open(request["err"], os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o644)
+    for fd, target in ((null, 0), (out, 1), (err, 2)):
+        os.dup2(fd, target)
+        os.close(fd)
+    sys.stdin = open(0, closefd=False)
+    sys.argv = ["pairplay", *request["args"]]
+    # the interpreter's own exit from here: SystemExit (entry's sys.exit) ends the child as it ends a real one
+    runpy.run_module("pairplay", run_name="__main__", alter_sys=True)
+    sys.exit(0)
+
+
+def serve() -> None:
+    _preload()
+    gc.freeze()  # the children share the imports' pages: their exit's collection would copy and walk them all
+    threads = threading.active_count()
+    print(json.dumps({"ready": True, "threads": threads}), flush=True)
+    running: dict[int, str] = {}
+    selector = selectors.DefaultSelector()
+    selector.register(sys.stdin, selectors.EVENT_READ)
+    stdin_open = True
+    while stdin_open or running:
+        if stdin_open and selector.select(timeout=0.02):
+            line = sys.stdin.readline()
+            if not line:
+                stdin_open = False
+                continue
+            request = json.loads(line)
+            sys.stdout.flush()
+            pid = os.fork()
+            if pid == 0:
+                selector.close()
+                _child(request)
+            running[pid] = request["id"]
+            print(json.dumps({"id": request["id"], "pid": pid}), flush=True)
+        elif not stdin_open:
+            threading.Event().wait(0.02)
+        while running:
+            pid, status, usage = os.wait4(-1, os.WNOHANG)
+            if pid == 0:
+                break
+            print(json.dumps({"id": running.pop(pid), "code": os.waitstatus_to_exitcode(status),
+                              "cpu": usage.ru_utime + usage.ru_stime}), flush=True)
+
+
+class Zygote:
+    """The test side: start the zygote, run commands (from any thread), close it.
+
+    `run(args, cwd, timeout)` returns a subprocess.CompletedProcess (args, returncode, stdout,
+    stderr as text); a command still running after `timeout` seconds is killed (SIGKILL) and
+    raises subprocess.TimeoutExpired, as subprocess.run does."""
+
+    def __init__(self, env: dict | None = None, scratch: Path | None = None):
+        self.scratch = Path(scratch or os.environ.get("TMPDIR", "/tmp"))
+        self._err_path = self.scratch / "zygote.stderr"
+        self._err = open(self._err_path, "w+")
+        here = str(Path(__file__).resolve())
+        self.proc = subprocess.Popen([sys.executable, here], stdin=subprocess.PIPE, stdout=subprocess.PIPE,
+                                     stderr=self._err, text=True, env=env)
+        ready = json.loads(self.proc.stdout.readline() or "{}")
+        if not ready.get("ready"):
+            raise RuntimeError(f"the zygote did not start: {self._err_path.read_text()[-2000:]}")
+        self.threads = ready["threads"]
+        self.cpu = 0.0  # the commands' CPU seconds, children's included
+        self.import_output = self._err_path.read_text()
+        self._lock = threading.Lock()
+        self._next = 0
+        self._waiting: dict[str, queue.Queue] = {}
+        self._reader = threading.Thread(target=self._read, daemon=True)
+        self._reader.start()
+
+    def _read(self) -> None:
+        for line in self.proc.stdout:
+            reply = json.loads(line)
+            with self._lock:
+                box = self._waiting.get(reply["id"])
+            if box is not None:
+                box.put(reply)
+
+    def run(self, args: list[str], cwd: Path, timeout: float = 300) -> subprocess.CompletedProcess:
+        with self._lock:
+            self._next += 1
+            rid = str(self._next)
+            box = self._waiting[rid] = queue.Queue()
+        out, err = self.scratch / f"cmd-{rid}.out", self.scratch / f"cmd-{rid}.err"
+        request = {"id": rid, "args": list(args), "cwd": str(cwd), "out": str(out), "err": str(err)}
+        with self._lock:
+            self.proc.stdin.write(json.dumps(request) + "\n")
+            self.proc.stdin.flush()
+        pid = box.get(timeout=60)["pid"]
+        try:
+            ended = box.get(timeout=timeout)
+        except queue.Empty:
+            os.kill(pid, 9)
+            box.get(timeout=60)
+            raise subprocess.TimeoutExpired(["pairplay", *args], timeout, out.read_text(), err.read_text()) from None
+        finally:
+            with self._lock:
+                self._waiting.pop(rid, None)
+        result = subprocess.CompletedProcess(["pairplay", *args], ended["code"], out.read_text(), err.read_text())
+        self.cpu += ended["cpu"]
+        out.unlink()
+        err.unlink()
+        return result
+
+    def close(self) -> None:
+        self.proc.stdin.close()
+        self.proc.wait(timeout=60)
+        self._reader.join(timeout=10)
+        self._err.close()
+        self._err_path.unlink(missing_ok=True)
+
+    def __enter__(self) -> "Zygote":
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+
+if __name__ == "__main__":
+    serve()
