@@ -117,6 +117,9 @@ class Learner:
         self._mode, self._psi_decay = MODES[mode], float(config.psi_decay)
         self._schedule = schedule_tables(config, 64)  # (epsilon, alpha, psi at a round's start): _per_round
         self._round_of_views, self._views = -1, ()
+        # a batch of one's arguments and results (suggest_one, learn_one), filled in place per call
+        self._one_state, self._one_action, self._one_round = (np.zeros(1, dtype=np.int64) for _ in range(3))
+        self._one_how, self._one_reward, self._one_learn = np.zeros(1, _INT8), np.zeros(1), np.ones(1, dtype=bool)
 
     def start_round(self, round_index, games=slice(None)) -> None:
         """Reset psi for the games starting a round (algorithm 5, line 4)."""
@@ -164,6 +167,30 @@ class Learner:
                                  self.stream.positions, self._per_round(EPSILON, round_index), self._mode,
                                  self.psi, self._psi_decay, self._table, actions, how)
         return actions, how
+
+    def suggest_one(self, state: int, round_index: int) -> tuple[int, int]:
+        """`suggest` of a batch of one (a live session): (action, how) of state `state` (0..23) in round
+        `round_index`, as Python ints. The same kernel on arrays the learner keeps, so a live suggestion
+        builds no array (an array built or checked per call cost more than the kernel)."""
+        if self._n != 1:
+            raise ValueError("suggest_one is for a learner of one game")
+        self._one_state[0], self._one_round[0] = state, round_index
+        kernels.learners_suggest(self.q, self._one_state, self.stream.keys, self.stream.positions,
+                                 self._per_round(EPSILON, self._one_round), self._mode, self.psi, self._psi_decay,
+                                 self._table, self._one_action, self._one_how)
+        return int(self._one_action[0]), int(self._one_how[0])
+
+    def learn_one(self, state: int, action: int, reward: float, round_index: int) -> None:
+        """`learn` of a batch of one (see `suggest_one`): eq. 5.2 for (state, action) with `reward`."""
+        if self._n != 1:
+            raise ValueError("learn_one is for a learner of one game")
+        s, a, r = self._one_state, self._one_action, self._one_round
+        s[0], a[0], self._one_reward[0], r[0] = state, action, reward, round_index
+        if type(self).learn is not Learner.learn:  # another rule (core/lspi.py): its own learn
+            self.learn(s, a, self._one_reward, self._one_learn, r)
+        elif self.mode != "fixed":
+            kernels.learners_learn(self.q, self.counts, s, a, self._one_reward, self._one_learn,
+                                   self._per_round(ALPHA, r))
 
     def learn(self, states: np.ndarray, actions: np.ndarray, rewards: np.ndarray, mask: np.ndarray,
               round_index: np.ndarray) -> None:

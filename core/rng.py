@@ -108,10 +108,18 @@ def _stream_key(s: int, role: int) -> int:
 
 def stream_keys(seeds: Sequence[int], roles: Sequence[str] = ROLES) -> np.ndarray:
     """(n, 4) uint64: the keys of `roles` (default all) of every game, columns in ROLES order, 0 elsewhere."""
-    keys = np.zeros((len(seeds), len(ROLES)), dtype=np.uint64)
     for role in roles:
-        keys[:, _ROLE_KEY[role]] = [stream_key(s, role) for s in seeds]
-    return keys
+        if role not in _ROLE_KEY:
+            raise ValueError(f"unknown role {role!r}; roles are {ROLES}")
+    wanted = tuple(role in roles for role in ROLES)
+    keys = np.array([_key_row(int(s) & 0xFFFFFFFFFFFFFFFF, wanted) for s in seeds], dtype=np.uint64)
+    return keys.reshape(len(seeds), len(ROLES))
+
+
+@lru_cache(maxsize=1 << 16)
+def _key_row(s: int, wanted: tuple[bool, ...]) -> tuple[int, ...]:
+    # one cached row per game: a batch of 2,048 games looked up 8,192 keys one by one (~5% of its run)
+    return tuple(_stream_key(s, i) if w else 0 for i, w in enumerate(wanted))
 
 
 class UniformStream:

@@ -54,19 +54,36 @@ class Response(NamedTuple):
     candidates: np.ndarray  # the candidate set (bit mask; 0 when inconsistent)
 
 
+def _distinct(personas: Sequence[Persona]) -> tuple[list[Persona], np.ndarray]:
+    """(the distinct persona objects, each game's index among them): a batch of thousands of games has a
+    handful of personas, whose figures are computed once each."""
+    first: dict[int, int] = {}
+    distinct: list[Persona] = []
+    rows = np.empty(len(personas), dtype=np.int64)
+    for g, p in enumerate(personas):
+        i = first.get(id(p))
+        if i is None:
+            i = first[id(p)] = len(distinct)
+            distinct.append(p)
+        rows[g] = i
+    return distinct, rows
+
+
 def persona_arrays(personas: Sequence[Persona]) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """(p_consider, q_hear, capacity, sees (n, 3): smile, head, gaze) of each game's persona."""
-    p_consider = np.array([consider_probability(p.focus) for p in personas], dtype=np.float64)
-    q_hear = np.array([hear_probability(p.hearing) for p in personas], dtype=np.float64)
-    capacity = np.array([memory_capacity(p.memory) for p in personas], dtype=np.int64)
-    seen = np.array([sees(p.sight) for p in personas], dtype=bool).reshape(-1, 4)[:, 1:]
+    distinct, rows = _distinct(personas)
+    p_consider = np.array([consider_probability(p.focus) for p in distinct], dtype=np.float64)[rows]
+    q_hear = np.array([hear_probability(p.hearing) for p in distinct], dtype=np.float64)[rows]
+    capacity = np.array([memory_capacity(p.memory) for p in distinct], dtype=np.int64)[rows]
+    seen = np.array([sees(p.sight) for p in distinct], dtype=bool).reshape(-1, 4)[:, 1:][rows]
     return p_consider, q_hear, capacity, np.ascontiguousarray(seen)
 
 
 def reading_codes(personas: Sequence[Persona]) -> np.ndarray:
     """(n,) int64: each persona's whole readings (core/interpretation.py READINGS; 0 for the thesis's
     personas, which have no `reads`: core/personas.py ReadingPersona has)."""
-    return np.array([reading_code(getattr(p, "reads", ())) for p in personas], dtype=np.int64).reshape(-1)
+    distinct, rows = _distinct(personas)
+    return np.array([reading_code(getattr(p, "reads", ())) for p in distinct], dtype=np.int64).reshape(-1)[rows]
 
 
 def _ints(x, n: int) -> np.ndarray:

@@ -51,8 +51,8 @@ class LearnerLogic:
         self.resolved: dict[tuple[int, int], ev.TurnResolved] = {}
         self.round_started = -1
         self.ended = False
-        # the batch of one the core learner reads and writes, filled in place per event: the kernels
-        # take these as they are (core/kernels.py as_batch), so no array is built per suggestion
+        # the batch of one an LSPI learner reads, filled in place per update (the Q-learner's live path is
+        # core/learning.py suggest_one / learn_one, which keep their own), and the round for start_round
         self._state, self._action, self._round = (np.zeros(1, dtype=np.int64) for _ in range(3))
         self._reward_one, self._learn_one = np.zeros(1), np.ones(1, dtype=bool)
 
@@ -118,12 +118,10 @@ class LearnerLogic:
             # per-round schedule values, for the record (computed once a round: latency)
             self.epsilon, self.alpha = self.learner.schedule(r.round)
         psi = float(self.learner.psi[0])
-        self._state[0] = r.state
-        actions, how = self.learner.suggest(self._state, self._round)
-        action = int(actions[0])
+        action, how = self.learner.suggest_one(r.state, r.round)
         self.open = ev.SuggestionMade(
             round=r.round, turn=r.turn, attempt=r.attempt, state=r.state, action=action,
-            chosen_by=HOW_NAMES[int(how[0])], epsilon=self.epsilon, alpha=self.alpha, psi=psi if self.mode == "reuse" else 0.0,
+            chosen_by=HOW_NAMES[how], epsilon=self.epsilon, alpha=self.alpha, psi=psi if self.mode == "reuse" else 0.0,
             observed=r.observed, target=r.match, action_name=ACTION_NAMES[action], request_seq=r.seq)
         return out + [self.open]
 
@@ -158,9 +156,9 @@ class LearnerLogic:
         out: list[ev.Event] = [ev.RewardGiven(round=o.round, turn=o.turn, attempt=o.attempt, state=o.state,
                                               action=o.action, reward=float(reward), learned=learned, reason=why)]
         if learned:
-            self._state[0], self._action[0], self._reward_one[0], self._round[0] = o.state, o.action, reward, o.round
             before = float(self.learner.q[0, o.state, o.action])
         if learned and self.mode == "lspi":
+            self._state[0], self._action[0], self._reward_one[0], self._round[0] = o.state, o.action, reward, o.round
             improved = self.learner.learn(self._state, self._action, self._reward_one, self._learn_one,
                                           self._round).size > 0
             out.append(ev.LSPIUpdated(
@@ -169,7 +167,7 @@ class LearnerLogic:
                 q_after=float(self.learner.q[0, o.state, o.action]),
                 weights=weights_digest(self.learner.theta[0]) if improved else ""))
         elif learned:
-            self.learner.learn(self._state, self._action, self._reward_one, self._learn_one, self._round)
+            self.learner.learn_one(o.state, o.action, reward, o.round)
             out.append(ev.QUpdated(round=o.round, turn=o.turn, attempt=o.attempt, state=o.state, action=o.action,
                                    alpha=o.alpha, reward=float(reward),
                                    q_before=before, q_after=float(self.learner.q[0, o.state, o.action])))

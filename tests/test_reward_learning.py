@@ -162,3 +162,36 @@ def test_a_learner_of_one_game_is_that_game_of_a_batch_across_its_schedule_table
             one.learn(s[1:2], a1, reward[1:2], np.ones(1, dtype=bool), np.array([r]))
             three.learn(s, a3, reward, np.ones(3, dtype=bool), np.array([r, r, r]))
     assert np.array_equal(one.q[0], three.q[1]) and one.psi[0] == three.psi[1]
+
+
+@pytest.mark.parametrize("mode", ["q", "reuse", "fixed"])
+def test_a_batch_of_one_suggests_and_learns_as_the_batch_does(mode):
+    """suggest_one / learn_one (the live learner's path) draw, choose and update exactly as suggest / learn."""
+    rng = np.random.default_rng(3)
+    table = rng.integers(0, 88, 24)
+    kw = dict(bias=table if mode == "reuse" else None, policy=table if mode == "fixed" else None)
+    config = LearnerConfig()
+    batch, one = (Learner(1, UniformStream([77], "agent"), config, mode, **kw) for _ in range(2))
+    for step in range(600):
+        r = step // 12
+        if step % 12 == 0:
+            batch.start_round(np.array([r]))
+            one.start_round(np.array([r]))
+        s = int(rng.integers(0, 24))
+        actions, how = batch.suggest(np.array([s]), np.array([r]))
+        assert one.suggest_one(s, r) == (int(actions[0]), int(how[0]))
+        reward = float(rng.choice([-3.0, -1.0, 0.5, 2.0]))
+        batch.learn(np.array([s]), actions, np.array([reward]), np.array([True]), np.array([r]))
+        one.learn_one(s, int(actions[0]), reward, r)
+    assert np.array_equal(batch.q, one.q) and np.array_equal(batch.counts, one.counts)
+    assert np.array_equal(batch.psi, one.psi) and np.array_equal(batch.stream.positions, one.stream.positions)
+    if mode != "fixed":
+        assert batch.counts.sum() == 600
+
+
+def test_batch_of_one_paths_refuse_a_bigger_batch():
+    learner = Learner(2, UniformStream([1, 2], "agent"))
+    with pytest.raises(ValueError, match="one game"):
+        learner.suggest_one(0, 0)
+    with pytest.raises(ValueError, match="one game"):
+        learner.learn_one(0, 0, 1.0, 0)

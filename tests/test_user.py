@@ -171,3 +171,32 @@ def test_traces_show_the_nis_and_rewards_of_the_suggestion_moment():
     away = read & (t["observed"] != t["match"])  # a certain miss
     assert away.any() and (t["reward"][away] == -1.0).all()
     assert (t["reward"][read & (t["observed"] == t["match"])] == 2.0).all()
+
+
+def test_a_batchs_persona_figures_are_each_personas_own():
+    """persona_arrays / reading_codes compute each distinct persona once: a mixed, repeated batch gets
+    exactly the rows each persona gets alone, in the batch's order."""
+    from pairplay.core.personas import PERSONAS, READING_PERSONAS
+    from pairplay.core.user import persona_arrays, reading_codes
+    pool = list(PERSONAS.values()) + list(READING_PERSONAS.values())
+    batch = [pool[i * 7 % len(pool)] for i in range(50)] + [Persona(key="copy", name="Copy", memory=3, focus=2, hearing=1, sight=4)]
+    got = persona_arrays(batch)
+    for g, p in enumerate(batch):
+        alone = persona_arrays([p])
+        assert all(np.array_equal(a[g], b[0]) for a, b in zip(got, alone))
+        assert reading_codes(batch)[g] == reading_codes([p])[0]
+    assert got[3].shape == (len(batch), 3) and got[3].flags.c_contiguous
+    assert all(a.shape[0] == 0 for a in persona_arrays([])) and reading_codes([]).shape == (0,)
+
+
+def test_stream_keys_are_each_games_keys():
+    from pairplay.core.rng import ROLES, stream_key, stream_keys
+    seeds = [0, 5, 2**64 - 1, -1, 5]
+    for roles in (ROLES, ("deal", "user")):
+        keys = stream_keys(seeds, roles)
+        assert keys.shape == (5, 4) and keys.dtype == np.uint64
+        for g, s in enumerate(seeds):
+            assert [int(k) for k in keys[g]] == [stream_key(s, r) if r in roles else 0 for r in ROLES]
+    with pytest.raises(ValueError, match="unknown role"):
+        stream_keys(seeds, ("dealer",))
+    assert stream_keys([]).shape == (0, 4)
