@@ -195,12 +195,13 @@ FIGURES = ("learning_curves", "comparison_bars", "profiles", "merged_policies", 
 
 
 def draw(name: str | None, *args) -> None:
-    """Draw figure `name` (one of FIGURES) with `args`; None draws nothing (a child process warming up).
+    """Draw figure `name` (one of FIGURES) with `args`; None imports matplotlib only (a child process warming up).
 
     The study calls this in a child process: arguments are plain data, so the
     child imports matplotlib and numpy only.
     """
-    if name is None:
+    if name is None:  # the study's figure process starts with this: matplotlib loads while the study computes
+        _pyplot()
         return
     if name not in FIGURES:
         raise ValueError(f"unknown figure {name!r}")
