@@ -112,3 +112,43 @@ def test_a_ctrl_c_while_the_figure_process_starts_leaves_no_process(monkeypatch)
         report_study._Figures(True)
     assert started and not [p for p in started if p.is_alive()]
     assert not set(started) & set(multiprocessing.active_children())
+
+
+def _drawn_tick_labels(ax) -> list:
+    """The tick labels matplotlib draws: those of ticks inside the view limits."""
+    out = []
+    for axis in (ax.xaxis, ax.yaxis):
+        low, high = sorted(axis.get_view_interval())
+        out += [t.label1 for t in axis.get_major_ticks() if low - 1e-9 <= t.get_loc() <= high + 1e-9]
+    return out
+
+
+@pytest.mark.parametrize("labels", [["Deaf", "Blind"], ["Vincent Cornaros", "Frances Miller", "Tatiana Modric"],
+                                    ["duo+compass+deaf+blind: compass", "Carla (columns from the right)"]])
+def test_fixed_margins_keep_every_label_and_title_inside_the_figure(figures, labels):
+    """The study's figures place their axes with margins in inches, not tight_layout (its cost: issue 16);
+    rotated tick labels as long as the study's (its merges' labels, the frame personas' names), titles and
+    axis labels must still lie inside the figure. Figure 6.5 is drawn with every persona's name."""
+    from types import SimpleNamespace
+
+    from pairplay.core.personas import PERSONAS
+    n = len(labels)
+    keys = list(PERSONAS)
+    info = SimpleNamespace(speech=0.5, head=0.25, facial=True, gaze=False)
+    plots.profiles(keys, {k: p.name for k, p in PERSONAS.items()}, [info] * len(keys), [(1, 2, 3, 4)] * len(keys),
+                   plots.Path("profiles.png"), [info] * len(keys), 50)
+    plots.comparison_bars(labels, {"a": np.full(n, 20.0), "b": np.full(n, 25.0)}, plots.Path("evaluation.png"),
+                          PICKS_UNIT, "a title")
+    plots.grouped_bars_with_spread(labels, {"x": np.full((3, n), 20.0)}, [18.0] * n, plots.Path("merges.png"), "t")
+    plots.frame_calibration(labels, {"x": np.full((3, n), 20.0)}, [1, 2], np.full((n, 2), 0.9),
+                            plots.Path("frames.png"), 3, 200)
+    for name, fig in figures.items():
+        fig.canvas.draw()  # places the axis labels beside the tick labels
+        renderer = fig.canvas.get_renderer()
+        box = fig.bbox
+        texts = [t for ax in fig.axes for t in (*_drawn_tick_labels(ax), ax.title, ax.xaxis.label, ax.yaxis.label)
+                 if t.get_text() and t.get_visible()]
+        for t in texts:
+            extent = t.get_window_extent(renderer)
+            assert extent.x0 >= box.x0 - 1 and extent.y0 >= box.y0 - 1, (name, t.get_text())
+            assert extent.x1 <= box.x1 + 1 and extent.y1 <= box.y1 + 1, (name, t.get_text())
