@@ -39,6 +39,27 @@ def browser():
             b.close()
 
 
+@pytest.fixture(scope="session")
+def pairplay_cli(tmp_path_factory):
+    """`pairplay_cli(*args, cwd=None, timeout=120)` -> subprocess.CompletedProcess of `python -m pairplay
+    ARGS` (text stdout and stderr), each a process of its own forked from one that imported pairplay
+    once per test process (tests/cli_zygote.py): for tests of what a command does, not of how a process
+    starts or stops (signals, Ctrl-C, start-up and exit timing keep their own `python -m pairplay`).
+    pairplay's import printing anything fails the first test that uses it."""
+    from cli_zygote import Zygote
+
+    zygote = Zygote(scratch=tmp_path_factory.mktemp("zygote"))
+    assert zygote.import_output == "" and zygote.threads == 1, (zygote.import_output, zygote.threads)
+
+    def run(*args, cwd=None, timeout=120):
+        return zygote.run([str(a) for a in args], Path(cwd or os.getcwd()), timeout=timeout)
+
+    try:
+        yield run
+    finally:
+        zygote.close()
+
+
 def pytest_xdist_auto_num_workers(config) -> int:
     """`-n auto` (pyproject's addopts): two workers, as CI has two cores and many tests wait on
     sockets, child processes and the browser. None for a run that selects the slow tests (soaks and
