@@ -34,12 +34,17 @@ from pathlib import Path
 
 
 def _preload() -> None:
-    """Import every module of pairplay (the CLI's verbs and what they import when they run)."""
-    import pairplay
+    """Import every module of pairplay: the CLI's verbs and what they import when they run. The
+    subpackages are walked one by one: they live in folders of their own (pyproject's package-dir),
+    not under pairplay/."""
     import pairplay.cli.main as cli
     for verb_module, _ in cli.VERBS.values():
         importlib.import_module(verb_module)
-    for info in pkgutil.walk_packages(pairplay.__path__, "pairplay."):
+    for sub in ("schemas", "core", "replay", "report", "services", "bench", "cli", "gym"):
+        package = importlib.import_module(f"pairplay.{sub}")
+        for info in pkgutil.walk_packages(package.__path__, f"{package.__name__}."):
+            importlib.import_module(info.name)
+    for info in pkgutil.iter_modules(importlib.import_module("pairplay").__path__, "pairplay."):
         if info.name != "pairplay.__main__":  # run per command, as `-m` runs it
             importlib.import_module(info.name)
 

@@ -39,6 +39,27 @@ def browser():
             b.close()
 
 
+@pytest.fixture(scope="session")
+def pairplay_cli(tmp_path_factory):
+    """`pairplay_cli(*args, cwd=None, timeout=120)` -> subprocess.CompletedProcess of `python -m pairplay
+    ARGS` (text stdout and stderr), each a process of its own forked from one that imported pairplay
+    once per test process (tests/cli_zygote.py): for tests of what a command does, not of how a process
+    starts or stops (signals, Ctrl-C, start-up and exit timing keep their own `python -m pairplay`).
+    pairplay's import printing anything fails the first test that uses it."""
+    from cli_zygote import Zygote
+
+    zygote = Zygote(scratch=tmp_path_factory.mktemp("zygote"))
+    assert zygote.import_output == "" and zygote.threads == 1, (zygote.import_output, zygote.threads)
+
+    def run(*args, cwd=None, timeout=120):
+        return zygote.run([str(a) for a in args], Path(cwd or os.getcwd()), timeout=timeout)
+
+    try:
+        yield run
+    finally:
+        zygote.close()
+
+
 def pytest_xdist_auto_num_workers(config) -> int:
     """`-n auto` (pyproject's addopts): two workers, as CI has two cores and many tests wait on
     sockets, child processes and the browser. None for a run that selects the slow tests (soaks and
@@ -50,12 +71,15 @@ def pytest_xdist_auto_num_workers(config) -> int:
     return 0 if "slow" in marks.replace("not slow", "") else 2
 
 
-# Files whose tests take the longest (durations of a full run, 2026-11-30): run first, so that
-# with whole files per worker (--dist loadfile) neither worker is left alone with one at the end.
-LONGEST_FIRST = ("test_study_batch.py", "test_lspi_session.py", "test_outputs.py", "test_study_digests.py",
-                 "test_lspi_study.py", "test_lab_browser.py", "test_session_cli.py", "test_session_crash.py",
-                 "test_session_end.py", "test_faults.py", "test_report_figures.py", "test_console_browser.py",
-                 "test_replay_samples.py", "test_sweep.py", "test_cli_mistakes.py", "test_study_cli.py")
+# Files whose tests take the longest (wall time of a full run on 2 workers, 2026-11-30 17:00 UTC, after the
+# mistakes table and the run-to-completion commands went to pairplay_cli): run first, so that with whole files
+# per worker (--dist loadfile) neither worker is left alone with one at the end. test_study_batch stays first:
+# it is short and compiles the numba kernels into their cache before the files that start many processes.
+LONGEST_FIRST = ("test_study_batch.py", "test_console_browser.py", "test_study_digests.py", "test_lab_browser.py",
+                 "test_session_cli.py", "test_sweep.py", "test_faults.py", "test_session_crash.py", "test_router.py",
+                 "test_replay_samples.py", "test_faults_signals.py", "test_cli_mistakes.py", "test_session_end.py",
+                 "test_lab_config.py", "test_outputs.py", "test_lspi_session.py", "test_lspi_study.py",
+                 "test_security.py", "test_determinism.py", "test_report_figures.py", "test_study_cli.py")
 
 
 def pytest_collection_modifyitems(items) -> None:

@@ -58,8 +58,10 @@ def test_a_person_gets_the_human_phase_schedules_and_five_rounds():
     assert sim.rounds == 20 and sim.learner == {} and sim.ignore_clock == "server"
 
 
-def pairplay(*args):
-    return subprocess.run([sys.executable, "-m", "pairplay", *args], capture_output=True, text=True, timeout=60)
+@pytest.fixture
+def pairplay(pairplay_cli):
+    """`python -m pairplay ARGS`, each its own process (conftest's pairplay_cli)."""
+    return lambda *args: pairplay_cli(*args, timeout=60)
 
 
 @pytest.mark.parametrize("args, words", [
@@ -68,13 +70,13 @@ def pairplay(*args):
     (["--listen", "nowhere"], "--listen 'nowhere'"),
     (["--certfile", "cert.pem"], "--certfile and --keyfile go together"),
 ])
-def test_pairplay_lab_refuses_with_one_line(tmp_path, args, words):
+def test_pairplay_lab_refuses_with_one_line(tmp_path, args, words, pairplay):
     r = pairplay("lab", "--participant", "human:p1", "--out", str(tmp_path), *args)
     assert r.returncode == 2 and r.stdout == "" and words in r.stderr
     assert r.stderr.count("\n") == 1 and "Traceback" not in r.stderr
 
 
-def test_the_lab_is_for_people_and_session_refuses_the_same(tmp_path):
+def test_the_lab_is_for_people_and_session_refuses_the_same(tmp_path, pairplay):
     r = pairplay("lab", "--participant", "sim:blind", "--out", str(tmp_path))
     assert r.returncode == 2 and "the lab is for a person" in r.stderr
     r = pairplay("session", "--participant", "human:p1", "--ignore-rule", "perceived", "--out", str(tmp_path))

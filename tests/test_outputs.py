@@ -8,8 +8,6 @@ outputs of different inputs never collide (rebuild names outputs by file).
 from __future__ import annotations
 
 import shutil
-import subprocess
-import sys
 from pathlib import Path
 
 import pytest
@@ -21,9 +19,10 @@ from pairplay.schemas.policy import read_policy
 SAMPLE = Path(__file__).resolve().parents[1] / "recordings" / "samples" / "sim-ashley.mcap"
 
 
-def pairplay(*args, cwd=None):
-    return subprocess.run([sys.executable, "-m", "pairplay", *map(str, args)], capture_output=True, text=True,
-                          cwd=cwd, timeout=180)
+@pytest.fixture
+def pairplay(pairplay_cli):
+    """`python -m pairplay ARGS` in `cwd`, each its own process (conftest's pairplay_cli)."""
+    return lambda *args, cwd=None: pairplay_cli(*args, cwd=cwd, timeout=180)
 
 
 def test_an_existing_file_is_replaced_only_with_force(tmp_path):
@@ -96,7 +95,7 @@ def test_a_folder_of_outputs_appears_whole_and_is_merged_only_with_force(tmp_pat
     assert sorted(p.name for p in tmp_path.iterdir()) == ["report"]
 
 
-def test_rebuild_names_outputs_by_file_so_a_recovered_copy_keeps_its_own(tmp_path):
+def test_rebuild_names_outputs_by_file_so_a_recovered_copy_keeps_its_own(tmp_path, pairplay):
     shutil.copy(SAMPLE, tmp_path / "X.mcap")
     r = pairplay("recover", "X.mcap", cwd=tmp_path)
     assert r.returncode == 0, r.stderr
@@ -116,7 +115,7 @@ def test_rebuild_names_outputs_by_file_so_a_recovered_copy_keeps_its_own(tmp_pat
     assert not list((tmp_path / "rebuilt").glob(".*"))  # no temporary file left
 
 
-def test_recover_and_view_never_replace_what_exists(tmp_path):
+def test_recover_and_view_never_replace_what_exists(tmp_path, pairplay):
     shutil.copy(SAMPLE, tmp_path / "R.mcap")
     (tmp_path / "R.rrd").write_bytes(b"a saved view")
     r = pairplay("view", "--recording", "R.mcap", "--session", "wrong", cwd=tmp_path)

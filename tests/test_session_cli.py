@@ -5,15 +5,18 @@ import subprocess
 import sys
 from pathlib import Path
 
+import pytest
+
 from pairplay.schemas.policy import read_policy
 
 
-def pairplay(*args, cwd=None, timeout=120):
-    return subprocess.run([sys.executable, "-m", "pairplay", *args], capture_output=True, text=True, cwd=cwd,
-                          timeout=timeout)
+@pytest.fixture
+def pairplay(pairplay_cli):
+    """`python -m pairplay ARGS` as a researcher types it (each its own process; conftest's pairplay_cli)."""
+    return pairplay_cli
 
 
-def test_session_then_rebuild_then_verify_then_recover(tmp_path):
+def test_session_then_rebuild_then_verify_then_recover(tmp_path, pairplay):
     r = pairplay("session", "--participant", "sim:frances", "--seed", "4", "--rounds", "5", "--session", "cli1",
                  "--out", str(tmp_path))
     assert r.returncode == 0, r.stdout + r.stderr
@@ -40,7 +43,7 @@ def test_session_then_rebuild_then_verify_then_recover(tmp_path):
     assert first.startswith("replaying session cli1; bus listening on tcp/127.0.0.1:"), first
 
 
-def test_bad_command_lines_get_a_clear_error(tmp_path):
+def test_bad_command_lines_get_a_clear_error(tmp_path, pairplay):
     r = pairplay("session", "--participant", "sim:nobody", "--out", str(tmp_path))
     assert r.returncode == 2 and "unknown persona" in r.stderr and r.stdout == ""  # one line, on stderr
     r = pairplay("session", "--participant", "robot:x", "--out", str(tmp_path))
@@ -54,7 +57,7 @@ def test_bad_command_lines_get_a_clear_error(tmp_path):
     assert sorted(p.name for p in tmp_path.iterdir()) == ["junk.mcap"]  # nothing written
 
 
-def test_services_run_alone_in_their_own_processes_join_a_session(tmp_path):
+def test_services_run_alone_in_their_own_processes_join_a_session(tmp_path, pairplay):
     """The session's process is the router; a learner and a participant, each in
     its own process, connect to it as clients and reach each other through it."""
     session = subprocess.Popen([sys.executable, "-m", "pairplay", "session", "--participant", "sim:blind", "--seed",
