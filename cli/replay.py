@@ -57,10 +57,11 @@ def run(args: argparse.Namespace) -> int:
         from pairplay.services.verify import verify_recording
 
         v = verify_recording(args.recording)
+        beyond = "where the session stopped, not compared" if v.excused else "the recording"
         for c in v.checks:
-            state = "ok" if c.ok(v.truncated) else "DIFFERS"
+            state = "ok" if c.ok(v.excused) else "DIFFERS"
             print(f"{c.service:12s} {c.compared:7d} derived events compared: {state}"
-                  f"{'' if not c.extra else f' ({c.extra} recomputed beyond the recording)'}")
+                  f"{'' if not c.extra else f' ({c.extra} recomputed beyond {beyond})'}")
             for m in c.mismatches[:5]:
                 print(f"    {m}")
         if v.unknown:
@@ -70,6 +71,7 @@ def run(args: argparse.Namespace) -> int:
             print("the recording is cut short: its tail was not compared")
         if v.error:
             print(f"error: {v.error}")
+        print(f"verified {v.reach}")
         print("verify: PASS" if v.ok else "verify: FAIL")
         return 0 if v.ok else 1
 

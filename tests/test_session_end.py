@@ -23,6 +23,7 @@ from pairplay.schemas.keys import event_key
 from pairplay.schemas.session import SessionConfig
 from pairplay.services.bus import Bus, BusOptions
 from pairplay.services.session import run_session
+from pairplay.services.verify import verify_recording
 
 SAMPLES = Path(__file__).resolve().parent.parent / "recordings" / "samples"
 
@@ -62,6 +63,8 @@ def test_a_signalled_session_records_it_was_interrupted_and_how_far_it_got(tmp_p
                         "--no-plot"], capture_output=True, text=True)
     assert "PARTIAL session: interrupted" in r.stdout, r.stdout
     assert read_policy(tmp_path / "rb" / "sig.policy.json").partial.startswith("interrupted")
+    verified = verify_recording(path)  # up to where the signal stopped it (was a false FAIL at that round)
+    assert verified.ok and verified.stopped == f"interrupted ({sig.name})", [c.mismatches[:2] for c in verified.checks]
 
 
 def test_an_experimenter_stop_is_recorded_as_aborted(tmp_path):
