@@ -20,11 +20,12 @@ from pathlib import Path
 from mcap.records import Channel, Message, Metadata, Schema
 from mcap.writer import CompressionType, Writer
 
-from pairplay.errors import OutputError
+from pairplay.errors import InputError, OutputError
 from pairplay.outputs import check_output, output_file
 
-from .check import check_recording
+from .check import check_recording, no_session
 from .mcapscan import scan
+from .reader import read_log
 from .writer import CHUNK_SIZE, PROFILE
 
 
@@ -46,10 +47,15 @@ def default_output(path: Path) -> Path:
 def recover(path: str | Path, output: str | Path | None = None, force: bool = False) -> Recovered:
     """Copy the intact records of `path` into a complete file (see rule).
 
-    InputError if `path` is not an MCAP file at all (missing, empty, no MCAP magic);
+    InputError if `path` is not an MCAP file at all (missing, empty, no MCAP magic) or holds no
+    session (check.py `no_session`; unless a damaged part may have held its start);
     OutputError if `output` exists (unless `force`) or is the input; the output
     appears only when complete (pairplay.outputs)."""
     path = check_recording(path)
+    log = read_log(path)
+    why = no_session(log)
+    if why and not (log.damage and log.events):  # a damaged part may have held the SessionStarted: keep the rest
+        raise InputError(f"{why}; nothing to recover", path)
     output = Path(output) if output is not None else default_output(path)
     if output.resolve() == path.resolve():
         raise OutputError("recover writes a new file; give an output path other than the input", output)

@@ -162,9 +162,10 @@ def test_a_session_stopped_before_its_game_started_records_why_it_holds_no_sessi
     assert log.metadata["pairplay.recorder.end"]["session_ended"] == "false"
     r = subprocess.run([sys.executable, "-m", "pairplay", "rebuild", str(path), "--out", str(tmp_path / "rb")],
                        capture_output=True, text=True)
-    assert r.returncode == 1 and r.stderr.strip().splitlines() == [
-        f"pairplay rebuild: skipped: {path}: no SessionStarted: the recording was stopped ({sig.name}) before its "
-        "game started"], r.stderr
+    assert r.returncode == 2 and len(r.stderr.strip().splitlines()) == 1, r.stderr
+    assert r.stderr.startswith("pairplay rebuild: holds no session: ") and \
+        f"no SessionStarted (stopped ({sig.name}) before its game started) ({path})" in r.stderr, r.stderr
+    assert not (tmp_path / "rb").exists()
 
 
 def test_every_recording_ends_with_how_it_ended(tmp_path):
