@@ -33,5 +33,7 @@ def run(args: argparse.Namespace) -> int:
     else:
         state = "complete already"
     ended = "" if done.ended else "; the session's end was not recorded (partial session)"
+    if not done.started:
+        ended = "; its SessionStarted is not in it (lost, or never recorded): no session to rebuild or verify"
     print(f"{args.recording}: {state}; {done.messages} messages kept in {done.output}{ended}")
     return 0

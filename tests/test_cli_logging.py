@@ -63,5 +63,7 @@ def test_an_interrupted_session_prints_one_summary_line_and_nothing_on_stderr(tm
     finally:
         p.kill()
     assert p.returncode == 130 and err == "", err  # 128 + SIGINT, whatever the moment (cli/main.py)
-    (line,) = out.strip().splitlines()
+    lines = out.strip().splitlines()
+    assert len(lines) == 1, out
+    (line,) = lines
     assert line.startswith("interrupted (SIGINT) ") and f"events to {tmp_path / 'int1.mcap'}" in line, line
