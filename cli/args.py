@@ -82,5 +82,22 @@ positive_number = float_at_least(0, above=True)  # a ridge penalty
 duration = float_at_least(0)  # milliseconds or seconds to wait
 
 
+def key_chunk(what: str):
+    """An argparse type: an id that names a key chunk (a session id, a participant id): non-empty,
+    no space of any kind, none of / * $ # ? @ (schemas/keys.py `check_chunk`). An empty `--session ''`
+    used to fall back to a made-up id, and a blank one was taken as it was."""
+    def parse(text: str) -> str:
+        from pairplay.schemas.keys import check_chunk
+        try:
+            return check_chunk(what, text)
+        except ValueError as err:
+            raise argparse.ArgumentTypeError(str(err)) from None
+    parse.__name__ = what
+    return parse
+
+
+session_id = key_chunk("session id")
+
+
 def add_force(p: argparse.ArgumentParser, what: str = "existing outputs") -> None:
     p.add_argument("--force", action="store_true", help=f"replace {what} (never replaced without it)")

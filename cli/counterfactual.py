@@ -79,10 +79,9 @@ def run(args: argparse.Namespace) -> int:
     from pairplay.core.userfit import fit_user, pooled
     from pairplay.errors import InputError
     from pairplay.outputs import check_output_folder
-    from pairplay.replay.check import check_recording
+    from pairplay.replay.check import check_recording, read_session
     from pairplay.replay.rebuild import output_stem, rebuild_events
     from pairplay.replay.turns import read_turns, turns_from_events
-    from pairplay.replay.reader import read_log
     from pairplay.report.counterfactual import ARM_TEXT, Recorded, console_text, write_counterfactual
     from pairplay.schemas.policy import read_policy
 
@@ -93,7 +92,7 @@ def run(args: argparse.Namespace) -> int:
     check_output_folder(out, args.force)
     files = {path: read_policy(path) for _, path in arms_wanted if path}
 
-    log = read_log(rec)
+    log = read_session(rec)
     note = "" if log.whole else f"{'damaged' if log.damage else 'truncated'}: {log.error}"
     events = [r.event for r in log.events]
     turns = turns_from_events(events, str(rec), note)

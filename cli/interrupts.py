@@ -17,6 +17,12 @@ aborted the process with "double free detected" (seen in CI). numba is not
 imported here (it costs seconds): if it is not loaded, nothing is compiling.
 Verbs that stop on signals themselves (services/bus.py `stop_on_signals`)
 replace this handler with theirs, which only sets an event.
+
+SIGTERM is handled as SIGINT (the same deferral; KeyboardInterrupt unwinds
+the verb, its temporary outputs removed); `received` keeps which signal came,
+so the exit status says it (cli/main.py `exit_code_of`: 130 SIGINT, 143
+SIGTERM). Before, SIGTERM killed a verb without its own handler outright (no
+line, a temporary file left) while one with a handler exited 0.
 """
 
 from __future__ import annotations
@@ -33,8 +39,11 @@ def _compiler_lock():
     return getattr(module, "global_compiler_lock", None)
 
 
+received = 0  # the number of the signal that interrupted the verb (0: none yet)
+
+
 class DeferredInterrupt:
-    """The SIGINT handler of the module rule; `install()` it in the main thread."""
+    """The SIGINT and SIGTERM handler of the module rule; `install()` it in the main thread."""
 
     def __init__(self):
         self.held = False  # an interrupt waits for the compiler
@@ -42,9 +51,13 @@ class DeferredInterrupt:
 
     def install(self) -> None:
         signal.signal(signal.SIGINT, self.handler)
+        signal.signal(signal.SIGTERM, self.handler)
 
     def handler(self, signum, frame) -> None:
+        global received
         redelivered, self._redelivered = self._redelivered, False
+        if not redelivered:  # a held interrupt comes back as SIGINT: keep the signal that caused it
+            received = signum
         if self.held and not redelivered:  # a second Ctrl-C: the user insists
             raise KeyboardInterrupt
         lock = _compiler_lock()

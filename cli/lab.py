@@ -97,6 +97,12 @@ def run(args: argparse.Namespace) -> int:
         path = run_lab(config, out, host=host, port=port, bus_options=bus_options, robot=robot_choice(args),
                        stop=stop, on_ready=ready, linger_s=args.linger, ssl_certfile=args.certfile,
                        ssl_keyfile=args.keyfile, summary=summary)
+    except KeyboardInterrupt:  # a second Ctrl-C: the shutdown of the first was cut short
+        if not stop.is_set():
+            raise
+        print(f"pairplay lab: interrupted again (Ctrl-C) while stopping; {out} holds what was recorded up to now "
+              f"and may lack its end: pairplay recover {out} completes it", file=sys.stderr)
+        return 130
     except TimeoutError as err:  # a service the game waits for never came (the eye tracker, say)
         print(f"pairplay lab: the session did not start: {err}", file=sys.stderr)
         return 1
@@ -116,7 +122,7 @@ def run(args: argparse.Namespace) -> int:
         when = "before the session started" if fold.config is None else \
             f"after {len(fold.rounds)} of {config.rounds} rounds"
         print(f"interrupted ({stop.why}) {when}; recorded {len(recorded.events)} events to {path}")
-        return 0
+        return 0  # the status is the signal's (cli/main.py)
     print(f"recorded {len(recorded.events)} events to {path}")
     ended = "no SessionEnded recorded" if e is None else e.reason + (f" ({e.detail})" if e.detail else "")
     print(f"rounds played: {len(fold.turns_per_round())} of {config.rounds}; rejections: {len(fold.rejections)}; "

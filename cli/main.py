@@ -3,8 +3,17 @@
 Rule: a user's mistake is ONE line on stderr, `pairplay <verb>: <what>
 (<where>)`, and exit 2: argparse's own refusals (Parser.error), any
 `pairplay.errors.UserError` a verb raises, and an OSError (a file or port the
-system refused); Ctrl-C is one line and exit 130. Anything else is a bug of
-ours and keeps its traceback. Every option's help shows its default
+system refused). Anything else is a bug of ours and keeps its traceback.
+
+A signal, at any moment (while the verb loads, waits, works or shuts down),
+ends the verb with 128 + its number: 130 for SIGINT (Ctrl-C), 143 for
+SIGTERM (`exit_code_of`), after it finished what it can (a recording closed,
+temporary outputs removed), with one line saying what it left. Verbs that
+stop on signals themselves (services/bus.py `stop_on_signals`: session, lab,
+router, replay, view, run, robot, protocol serve/pilot) print their own
+summary line and return; the status is still the signal's. Before, the same
+Ctrl-C gave 0 or 130 by the moment it came, and SIGTERM 0 or death by the
+signal, by the verb. Every option's help shows its default
 (HelpFormatter, applied to every verb here).
 
 Logging, the same for every verb: warnings and errors only by default, `-v/--verbose`
@@ -26,10 +35,12 @@ import contextlib
 import importlib
 import logging
 import os
+import signal
 import sys
 import threading
 
 from pairplay import __version__
+from pairplay.cli import interrupts
 from pairplay.cli.interrupts import DeferredInterrupt
 from pairplay.errors import UserError
 
@@ -140,19 +151,41 @@ def main(argv: list[str] | None = None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
     try:
         return _main(argv)
-    except KeyboardInterrupt:  # Ctrl-C before the verb ran (while its modules load)
+    except KeyboardInterrupt:  # a signal before the verb ran (while its modules load)
         verb = argv[0] if argv and argv[0] in VERBS else ""
-        print(f"pairplay{' ' + verb if verb else ''}: interrupted (Ctrl-C); nothing more was written", file=sys.stderr)
-        return 130
+        print(f"pairplay{' ' + verb if verb else ''}: {interrupted_what()}; nothing more was written", file=sys.stderr)
+        return exit_code_of(signal_received() or signal.SIGINT)
+
+
+def signal_received() -> int:
+    """The number of the signal that stopped the verb (SIGINT, SIGTERM), 0 if none came: the one
+    stop_on_signals saw (services/bus.py `signalled`), else the one cli/interrupts.py raised for."""
+    bus = sys.modules.get("pairplay.services.bus")
+    name = getattr(bus, "signalled", None)
+    if name:
+        return int(signal.Signals[name])
+    return interrupts.received
+
+
+def exit_code_of(signum: int) -> int:
+    """The exit status of a verb stopped by signal `signum` (module rule): 128 + its number."""
+    return 128 + signum
+
+
+def interrupted_what() -> str:
+    """`interrupted (Ctrl-C)` or `interrupted (SIGTERM)`: the start of a stopped verb's line."""
+    signum = signal_received()
+    return "interrupted (Ctrl-C)" if signum in (0, signal.SIGINT) else f"interrupted ({signal.Signals(signum).name})"
 
 
 QUIET_TRACKER = "ignore::UserWarning:multiprocessing.resource_tracker"
+INTERRUPTED = (130, 143)  # exit_code_of SIGINT, SIGTERM
 
 
 def entry() -> None:
     """The `pairplay` command (and `python -m pairplay`): `main()`, then exit with its code.
 
-    After an interruption (exit 130) the exit handlers run and the process ends
+    After an interruption (exit 130 or 143) the exit handlers run and the process ends
     with os._exit, skipping only the interpreter's teardown of its objects (a
     second guard besides cli/interrupts.py, which keeps Ctrl-C out of numba's
     compiler: native objects half-built by an interrupted compile aborted the
@@ -170,7 +203,7 @@ def entry() -> None:
     # add lines to an interruption's one line. The tracker is a child process: it reads this variable.
     os.environ["PYTHONWARNINGS"] = ",".join(filter(None, (os.environ.get("PYTHONWARNINGS"), QUIET_TRACKER)))
     code = main()
-    if code == 130 or _threads_left() or _signalled():
+    if code in INTERRUPTED or _threads_left() or _signalled():
         atexit._run_exitfuncs()  # what was registered to run at exit still runs (multiprocessing's clean-up)
         for stream in (sys.stdout, sys.stderr):
             with contextlib.suppress(Exception):
@@ -197,8 +230,8 @@ def _threads_left() -> bool:
 def _main(argv: list[str]) -> int:
     misplaced = _options_before_the_verb(argv)
     if misplaced:
-        print(f"pairplay: {' '.join(misplaced[1:])} go{'es' if len(misplaced) == 2 else ''} after the verb: "
-              f"pairplay {misplaced[0]} {' '.join(misplaced[1:])} ... (see pairplay {misplaced[0]} --help)",
+        print(f"pairplay: options go after the verb: pairplay {misplaced[0]} {' '.join(misplaced[1:])} ... "
+              f"(see pairplay {misplaced[0]} --help)",
               file=sys.stderr)
         return 2
     parser, _ = build_parser(argv)
@@ -211,18 +244,20 @@ def _main(argv: list[str]) -> int:
     configure_logging(args.verbose, args.quiet)
     module = importlib.import_module(VERBS[args.verb][0])
     try:
-        return int(module.run(args) or 0)
+        code = int(module.run(args) or 0)
+        signum = signal_received()
+        return exit_code_of(signum) if signum else code  # stopped by a signal: its status (module rule)
     except BrokenPipeError:  # the reader went away (`pairplay combine ... | head`): not an error of ours
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())  # no second error at exit's flush
         return 0
     except KeyboardInterrupt:
-        print(f"pairplay {args.verb}: interrupted (Ctrl-C); nothing more was written", file=sys.stderr)
-        return 130
+        print(f"pairplay {args.verb}: {interrupted_what()}; nothing more was written", file=sys.stderr)
+        return exit_code_of(signal_received() or signal.SIGINT)
     except SystemError as err:  # Ctrl-C inside a compiled kernel: numba reports it as a SystemError around it
         if not isinstance(err.__cause__ or err.__context__, KeyboardInterrupt):
             raise
-        print(f"pairplay {args.verb}: interrupted (Ctrl-C); nothing more was written", file=sys.stderr)
-        return 130
+        print(f"pairplay {args.verb}: {interrupted_what()}; nothing more was written", file=sys.stderr)
+        return exit_code_of(signal_received() or signal.SIGINT)
     except UserError as err:
         print(f"pairplay {_who(args)}: {err.line()}", file=sys.stderr)
         return 2
@@ -238,18 +273,16 @@ def _who(args: argparse.Namespace) -> str:
 
 
 def _options_before_the_verb(argv: list[str]) -> list[str]:
-    """[verb, option, ...] when options stand before a verb (`pairplay -v session ...`), else [].
-    The verb's options are parsed by the verb's parser only (build_parser adds them when the verb comes
-    first): before, `pairplay -v session --participant X` said every option of the verb was unrecognized."""
-    leading = []
-    for arg in argv:
-        if not arg.startswith("-"):
-            break
-        leading.append(arg)
-    rest = argv[len(leading):]
-    if not leading or not rest or rest[0] not in VERBS or {"-h", "--help", "--version"} & set(leading):
+    """[verb, option, ...] when options (with their values) stand before a verb (`pairplay -v session
+    ...`, `pairplay --out x study`), else []. The verb's options are parsed by the verb's parser only
+    (build_parser adds them when the verb comes first): before, `pairplay -v session --participant X`
+    said every option of the verb was unrecognized, and `pairplay --out x study` "invalid choice: 'x'"."""
+    if not argv or not argv[0].startswith("-") or {"-h", "--help", "--version"} & set(argv):
         return []
-    return [rest[0], *leading]
+    verb = next((i for i, arg in enumerate(argv) if arg in VERBS), None)
+    if verb is None:
+        return []
+    return [argv[verb], *argv[:verb]]
 
 
 def os_error_line(err: OSError) -> str:

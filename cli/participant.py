@@ -14,6 +14,7 @@ import argparse
 import sys
 from pathlib import Path
 
+from pairplay.cli.args import key_chunk
 from pairplay.replay.studydata import StudyData, StudyDataError
 
 
@@ -21,12 +22,12 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     sub = p.add_subparsers(dest="action", metavar="ACTION", required=True)
     e = sub.add_parser("export", help="one zip of a participant's recordings, policies and answers, with a README")
     e.add_argument("folder", type=Path)
-    e.add_argument("participant")
+    e.add_argument("participant", type=key_chunk("participant id"))
     e.add_argument("-o", "--out", type=Path, help="the zip (default <folder>/exports/<id>.zip)")
     e.add_argument("--force", action="store_true", help="replace an existing zip")
     d = sub.add_parser("delete", help="erase a participant's data from the study (cannot be undone)")
     d.add_argument("folder", type=Path)
-    d.add_argument("participant")
+    d.add_argument("participant", type=key_chunk("participant id"))
     d.add_argument("--yes", action="store_true", help="confirm the deletion")
 
 

@@ -19,7 +19,7 @@ import sys
 import time
 from pathlib import Path
 
-from pairplay.cli.args import count
+from pairplay.cli.args import count, session_id
 from pairplay.core.personas import persona
 from pairplay.replay.studydata import StudyData, StudyDataError
 from pairplay.schemas.study import StudyFileError, example_text, load_study, parse_study
@@ -63,7 +63,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                          "rehearsal from the console; the others play on the board page)")
     m = sub.add_parser("mark-invalid", help="keep a game out of the plan, the combination and the report")
     m.add_argument("folder", type=Path)
-    m.add_argument("session")
+    m.add_argument("session", type=session_id)
     m.add_argument("--reason", required=True)
 
 

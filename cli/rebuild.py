@@ -6,15 +6,18 @@ never collide: X.mcap and X.recovered.mcap keep theirs apart), and, unless
 --no-plot, one figure of every recording's picks per round (learning curves;
 18 picks is perfect play). Before anything is written: every REC must be an
 MCAP file, none given twice, no two giving the same output names, and no
-output may exist unless --force (one line, exit 2, nothing written). An MCAP
-recording that holds no session (a stub left by a failed start) is reported
-on stderr and skipped, the others are still rebuilt, and the exit status is 1.
+output may exist unless --force, and every REC must hold a session (a
+SessionStarted: replay/check.py `read_session`; a stub left by an old
+version's failed start, another program's MCAP) (one line, exit 2, nothing
+written: the others are not rebuilt either, so a rerun after removing it
+writes them all). Writing is all or nothing (`all_or_nothing`): a full disk or
+Ctrl-C part way removes the outputs this run had made, and the error says so.
 """
 
 from __future__ import annotations
 
 import argparse
-import sys
+import contextlib
 from pathlib import Path
 
 from pairplay.cli.args import add_force
@@ -32,7 +35,7 @@ def run(args: argparse.Namespace) -> int:
     from pairplay.errors import InputError, OutputError
     from pairplay.outputs import check_folder, check_outputs
     from pairplay.replay.check import check_recording
-    from pairplay.replay.rebuild import RebuildError, output_paths, rebuild_recording, write_outputs
+    from pairplay.replay.rebuild import output_paths, rebuild_recording
 
     out = check_folder(args.out)
     seen: dict[Path, str] = {}
@@ -41,13 +44,7 @@ def run(args: argparse.Namespace) -> int:
         if key in seen:
             raise InputError(f"given twice (also as {seen[key]})", rec)
         seen[key] = rec
-    done, failed = [], 0
-    for rec in args.recordings:
-        try:
-            done.append(rebuild_recording(rec))
-        except RebuildError as err:
-            print(f"pairplay rebuild: skipped: {err.line()}", file=sys.stderr)
-            failed += 1
+    done = [rebuild_recording(rec) for rec in args.recordings]  # one holding no session: refused, nothing written
     planned: dict[Path, str] = {}
     for rebuilt in done:
         for path in output_paths(rebuilt, out):
@@ -56,7 +53,42 @@ def run(args: argparse.Namespace) -> int:
                                   "rename one", path)
             planned[path.resolve()] = rebuilt.source
     figure = out / "learning-curves.png"
-    check_outputs(list(planned) + ([figure] if done and not args.no_plot else []), args.force)
+    outputs = list(planned) + ([figure] if done and not args.no_plot else [])
+    check_outputs(outputs, args.force)
+    with all_or_nothing(outputs):
+        report(done, out, figure, args)
+    return 0
+
+
+@contextlib.contextmanager
+def all_or_nothing(outputs: list[Path]):
+    """The outputs are written all, or none of those that did not exist before: an error (a full disk)
+    or Ctrl-C part way removes the ones this run had made; an OSError then says so, and names, with
+    --force, the files it had already replaced (each complete: pairplay.outputs), which stay."""
+    def stamp(p: Path):
+        st = p.stat()
+        return st.st_ino, st.st_mtime_ns
+    before = {p: stamp(p) for p in outputs if p.exists()}
+    try:
+        yield
+    except BaseException as err:
+        made = [p for p in outputs if p not in before and p.exists()]
+        for p in made:
+            p.unlink(missing_ok=True)
+        replaced = [str(p) for p in before if p.exists() and stamp(p) != before[p]]
+        if isinstance(err, OSError):
+            note = f"removed the {len(made)} outputs written before it" if made else "nothing written"
+            if replaced:
+                note += f"; already replaced (complete, kept): {', '.join(replaced)}"
+            raise OSError(err.errno, f"{err.strerror or err}; {note}", err.filename) from err
+        raise
+
+
+def report(done, out: Path, figure: Path, args: argparse.Namespace) -> None:
+    """Write each rebuilt recording's outputs and the figure, then say what was written (only once
+    all of it is: `all_or_nothing` may remove it)."""
+    from pairplay.replay.rebuild import write_outputs
+    lines = []
     for rebuilt in done:
         paths = write_outputs(rebuilt, out, args.force)
         f = rebuilt.fold
@@ -64,16 +96,16 @@ def run(args: argparse.Namespace) -> int:
         mean = f"{sum(picks) / len(picks):.1f}" if picks else "-"
         updates = f"{f.counts.get('LSPIUpdated', 0)} LSPI samples" if f.lspi is not None else \
             f"{f.counts.get('QUpdated', 0)} Q updates"
-        print(f"{rebuilt.source}: {f.events} events, {len(picks)} rounds, mean {mean} {PICKS_UNIT}, "
-              f"{updates}"
-              f"{'; ' + rebuilt.note if rebuilt.note else ''}"
-              f"{'; %d q_before mismatches' % f.q_mismatches if f.q_mismatches else ''}")
+        lines.append(f"{rebuilt.source}: {f.events} events, {len(picks)} rounds, mean {mean} {PICKS_UNIT}, "
+                     f"{updates}"
+                     f"{'; ' + rebuilt.note if rebuilt.note else ''}"
+                     f"{'; %d q_before mismatches' % f.q_mismatches if f.q_mismatches else ''}")
         if rebuilt.partial:
-            print(f"  PARTIAL session: {rebuilt.partial}")
-        print("  " + ", ".join(str(p) for p in paths))
+            lines.append(f"  PARTIAL session: {rebuilt.partial}")
+        lines.append("  " + ", ".join(str(p) for p in paths))
     if done and not args.no_plot:
-        print(f"  {plot_curves(done, figure, args.force)}")
-    return 1 if failed else 0
+        lines.append(f"  {plot_curves(done, figure, args.force)}")
+    print("\n".join(lines))
 
 
 def plot_curves(rebuilt, path: Path, force: bool = False) -> Path:

@@ -3,8 +3,10 @@
 Rule: writes REC's readable records into a complete, indexed file (default
 <stem>.recovered.mcap beside it, or -o); the original is never modified, an
 existing output is replaced only with --force, and the output appears only
-when complete. Exit 0 when the output is complete, 2 (one line, nothing
-written) when REC is missing, empty or not MCAP, or the output exists.
+when complete. Exit 0 when the output is complete, 2 (one line on stderr,
+nothing written) when REC is missing, empty or not MCAP, holds no session
+(only MCAP's magic or header, another program's MCAP, no SessionStarted:
+replay/check.py `no_session`), or the output exists.
 """
 
 from __future__ import annotations
@@ -31,5 +33,7 @@ def run(args: argparse.Namespace) -> int:
     else:
         state = "complete already"
     ended = "" if done.ended else "; the session's end was not recorded (partial session)"
+    if not done.started:
+        ended = "; its SessionStarted is not in it (lost, or never recorded): no session to rebuild or verify"
     print(f"{args.recording}: {state}; {done.messages} messages kept in {done.output}{ended}")
     return 0

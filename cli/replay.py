@@ -10,7 +10,8 @@ fresh services are fed the recorded inputs and every derived event must equal
 the recorded one (services/verify.py); exit 1 if any differs. Replay's first
 line names its bus endpoint, so a view can attach (`pairplay view --session S
 --connect ENDPOINT`). A REC that is missing, empty, not MCAP or without events
-is refused (one line, exit 2).
+or holding no session (no SessionStarted: replay/check.py `read_session`) is
+refused (one line on stderr, exit 2), in both modes.
 """
 
 from __future__ import annotations
@@ -18,6 +19,7 @@ from __future__ import annotations
 import argparse
 import time
 
+from pairplay.cli.args import session_id
 from pairplay.errors import InputError
 
 
@@ -28,14 +30,6 @@ def speed(text: str) -> float:
     if value <= 0:
         raise argparse.ArgumentTypeError("speed must be > 0 or 'max'")
     return value
-
-
-def session_id(text: str) -> str:
-    from pairplay.schemas.keys import check_chunk
-    try:
-        return check_chunk("session id", text)
-    except ValueError as err:
-        raise argparse.ArgumentTypeError(str(err)) from None
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -50,17 +44,18 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from pairplay.replay.check import check_recording
+    from pairplay.replay.check import read_session
 
-    check_recording(args.recording)
+    log = read_session(args.recording)  # a file holding no session is one line on stderr, exit 2
     if args.verify:
         from pairplay.services.verify import verify_recording
 
         v = verify_recording(args.recording)
+        beyond = "where the session stopped, not compared" if v.excused else "the recording"
         for c in v.checks:
-            state = "ok" if c.ok(v.truncated) else "DIFFERS"
+            state = "ok" if c.ok(v.excused) else "DIFFERS"
             print(f"{c.service:12s} {c.compared:7d} derived events compared: {state}"
-                  f"{'' if not c.extra else f' ({c.extra} recomputed beyond the recording)'}")
+                  f"{'' if not c.extra else f' ({c.extra} recomputed beyond {beyond})'}")
             for m in c.mismatches[:5]:
                 print(f"    {m}")
         if v.unknown:
@@ -70,17 +65,15 @@ def run(args: argparse.Namespace) -> int:
             print("the recording is cut short: its tail was not compared")
         if v.error:
             print(f"error: {v.error}")
+        print(f"verified {v.reach}")
         print("verify: PASS" if v.ok else "verify: FAIL")
         return 0 if v.ok else 1
 
     import threading
 
-    from pairplay.replay.reader import read_log
-
     from pairplay.services.bus import Bus, Outbox, options_from_args, shutdown_wait, stop_on_signals
     from pairplay.services.replayer import republish
 
-    log = read_log(args.recording)
     if not log.events:
         raise InputError(f"holds no events to replay{' (' + log.error + ')' if log.error else ''}", args.recording)
     if not log.whole:

@@ -16,6 +16,7 @@ import argparse
 import socket
 import threading
 
+from pairplay.cli.args import session_id
 from pairplay.core.geometry import N_CARDS
 from pairplay.errors import OptionError, UserError
 from pairplay.schemas.policy import N_ACTIONS
@@ -61,7 +62,7 @@ def bridge_from_args(bus: Bus, session: str, args: argparse.Namespace) -> RobotB
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--session", help="the session whose suggestions to perform")
+    p.add_argument("--session", type=session_id, help="the session whose suggestions to perform")
     p.add_argument("--try", dest="try_codes", metavar="CODES", type=action_codes,
                    help="comma-separated action codes (0..87) to perform once")
     p.add_argument("--observed", type=card, default=7, help="observed card for --try (default 7: row 2, column 2)")

@@ -32,4 +32,6 @@ def run(args: argparse.Namespace) -> int:
     except BusError as err:
         print(f"pairplay router: {err}", file=sys.stderr)
         return 2
+    if getattr(stop, "why", ""):  # the status is the signal's (cli/main.py: 130, 143)
+        print(f"stopped ({stop.why})", flush=True)
     return 0

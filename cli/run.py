@@ -21,6 +21,7 @@ import threading
 import time
 from pathlib import Path
 
+from pairplay.cli.args import session_id
 from pairplay.errors import OptionError
 from pairplay.outputs import check_folder
 from pairplay.services.bus import Bus, Deadline, add_bus_arguments, deadline_of, options_from_args, stop_on_signals
@@ -31,7 +32,7 @@ SERVICES = ("game", "learner", "participant", "recorder", "combiner")
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("service", choices=SERVICES)
-    p.add_argument("--session", help="session id (required except for the game, which can make one)")
+    p.add_argument("--session", type=session_id, help="session id (required except for the game, which can make one)")
     p.add_argument("--out", default="recordings",
                    help="recorder: directory of the recording; combiner: the directory its requests' paths lie in")
     p.add_argument("--participant", help="game: sim:<persona> or human:<id>")

@@ -42,7 +42,7 @@ from pairplay.outputs import check_folder
 from pairplay.schemas.policy import read_policy
 from pairplay.schemas.session import IGNORE_CLOCKS, OBSERVED_SOURCES, SessionConfig, learner_overrides, lspi_overrides
 
-from pairplay.cli.args import add_force, count, duration, non_negative, positive_number, seed_number
+from pairplay.cli.args import add_force, count, duration, non_negative, positive_number, seed_number, session_id
 from pairplay.core.geometry import PICKS_UNIT
 from pairplay.cli.robot import add_robot_arguments, check_robot_args, robot_choice
 from pairplay.services.bus import BusOpenError, ConfigFileError, add_bus_arguments, options_from_args, stop_on_signals
@@ -56,7 +56,7 @@ PRESETS = {"virtual": LearnerConfig, "human-phase1": LearnerConfig.human_phase1,
 def add_config_arguments(p: argparse.ArgumentParser) -> None:
     g = p.add_argument_group("session")
     g.add_argument("--participant", required=True, help="sim:<persona> (a simulated user) or human:<id>")
-    g.add_argument("--session", help="session id (default: <participant>-seed<seed>-game<i>-<UTC time>)")
+    g.add_argument("--session", type=session_id, help="session id (default: <participant>-seed<seed>-game<i>-<UTC time>)")
     g.add_argument("--seed", type=seed_number, default=0, help="the session's seed")
     g.add_argument("--rounds", type=count, help="rounds to play (default: 20 for sim:, 5 for human:, thesis 7.2)")
     g.add_argument("--game-index", type=non_negative, default=0, help="which game of the seed (0, 1, ...)")
@@ -157,11 +157,18 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 def print_interrupted(summary: dict, path: Path, why: str, rounds: int) -> int:
     """What a session stopped by a signal says, in ONE line, from `summary` (run_session's): the
-    process must be gone within 2 s of the signal, so the file is not read back. Exit code 0 (as asked)."""
-    when = (f"after {summary['rounds_played']} of {rounds} rounds" if summary["started"]
-            else "before the session started")
-    print(f"interrupted ({why}) {when}; recorded {summary['events']} events to {path}"
-          + (f" ({summary['unrecorded']} messages shed or unrecorded, counted in it)" if summary['unrecorded'] else ""))
+    process must be gone within 2 s of the signal, so the file is not read back. The exit status is
+    the signal's (cli/main.py: 130 SIGINT, 143 SIGTERM). A session stopped before its game started
+    keeps its file (what came up, and that the signal stopped it: the recorder's end record): a
+    session id is taken once it has a recording, and the stop stays on record; every verb then says
+    the file holds no session (replay/check.py), and `--force` reuses the id."""
+    if summary["started"]:
+        print(f"interrupted ({why}) after {summary['rounds_played']} of {rounds} rounds; recorded "
+              f"{summary['events']} events to {path}"
+              + (f" ({summary['unrecorded']} messages shed or unrecorded, counted in it)" if summary['unrecorded'] else ""))
+    else:
+        print(f"interrupted ({why}) before the session started; recorded {summary['events']} events to {path}, "
+              "no session in it (the id stays taken: --force reuses it)")
     return 0
 
 
@@ -191,6 +198,12 @@ def run(args: argparse.Namespace) -> int:
         path = run_session(config, path, bus_options=bus_options,
                            external=tuple(args.external), stop=stop, on_bus=announce, summary=summary,
                            robot=None if "robot" in args.external else robot_choice(args))
+    except KeyboardInterrupt:  # a second Ctrl-C: the shutdown of the first was cut short
+        if stop.is_set() and "recorder" not in args.external:
+            print(f"pairplay session: interrupted again (Ctrl-C) while stopping; {path} holds what was recorded "
+                  f"up to now and may lack its end: pairplay recover {path} completes it", file=sys.stderr)
+            return 130
+        raise
     except (ConfigFileError, BusOpenError) as err:
         print(f"pairplay session: {err}", file=sys.stderr)
         return 2

@@ -23,17 +23,17 @@ import sys
 import threading
 from pathlib import Path
 
-from pairplay.cli.args import add_force, float_at_least, port_or_any
+from pairplay.cli.args import add_force, float_at_least, port_or_any, session_id
 from pairplay.errors import InputError, OptionError, OutputError, UserError
 from pairplay.outputs import check_output, output_path
-from pairplay.replay.check import check_recording
+from pairplay.replay.check import read_session
 from pairplay.services.bus import add_bus_arguments
 from pairplay.services.view import DEFAULT_GRPC_PORT, DEFAULT_WEB_PORT  # without loading rerun (slow)
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     src = parser.add_argument_group("what to view")
-    src.add_argument("--session", help="session id: view it live on the bus (or pick it from a recording)")
+    src.add_argument("--session", type=session_id, help="session id: view it live on the bus (or pick it from a recording)")
     src.add_argument("--recording", type=Path, metavar="REC", help="an MCAP recording to view instead of the bus")
     src.add_argument("--speed", type=float_at_least(0), default=0.0,
                      help="recording pace: 1 = as recorded, 10 = ten times faster, 0 = as fast as possible (default)")
@@ -66,10 +66,9 @@ def run(args: argparse.Namespace) -> int:
     if not args.recording and not args.session:
         raise OptionError("give --session ID (live) or --recording REC", "what to view")
     if args.recording:
-        check_recording(args.recording)
+        log = read_session(args.recording)  # a file holding no session is refused before rerun loads
         if args.session:  # before rerun loads and anything is drawn
-            from pairplay.replay.reader import read_log
-            if not any(r.event.session == args.session for r in read_log(args.recording).events):
+            if not any(r.event.session == args.session for r in log.events):
                 raise InputError(f"holds no events of session {args.session}; nothing saved", args.recording)
     if args.no_save and not (args.serve or args.spawn):
         raise OptionError("--no-save leaves no output; add --serve or --spawn", "--no-save")

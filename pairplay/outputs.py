@@ -9,7 +9,11 @@ folder made for it) is removed and the target is untouched. Without `force` the 
 while we worked is not replaced. A folder of outputs (a study's report) is
 built in a temporary folder and renamed as a whole. Refusals are
 `OutputError`s naming the path, raised before any work where the caller
-checks first (`check_output`, `check_outputs`, `check_folder`).
+checks first (`check_output`, `check_outputs`, `check_folder`). A refusal by
+the system while writing (a full disk, a folder one may not write in) is an
+OSError naming the user's path, never our temporary one (`_named_for_user`):
+`study --out /proc/x` named /proc/.x.<pid>.<hex>.tmp, and a full disk's
+"No space left on device" named no file at all.
 
 The one exception is a live recording (services/recorder.py): it streams to
 its final name so that a crash loses at most its last 0.1 s (`pairplay
@@ -138,6 +142,21 @@ def _commit(tmp: Path, path: Path, force: bool) -> None:
     tmp.unlink()
 
 
+def _named_for_user(err: OSError, tmp: Path, path: Path) -> OSError:
+    """`err` naming `path` (or the file under it) where it named the temporary `tmp` or nothing."""
+    name = err.filename
+    try:
+        inside = name is not None and Path(os.fsdecode(name)).absolute().is_relative_to(tmp.absolute())
+    except (TypeError, ValueError):
+        inside = False
+    if name is not None and not inside:
+        return err
+    target = path / Path(os.fsdecode(name)).absolute().relative_to(tmp.absolute()) if inside else path
+    named = OSError(err.errno, err.strerror or str(err), str(target))
+    named.__cause__ = err
+    return named
+
+
 @contextlib.contextmanager
 def output_path(path: str | Path, force: bool = False) -> Iterator[Path]:
     """A temporary path beside `path` to write to (for writers that take a name: matplotlib,
@@ -148,10 +167,13 @@ def output_path(path: str | Path, force: bool = False) -> Iterator[Path]:
     tmp = _temp_name(path)
     done = False
     try:
-        yield tmp
-        if not tmp.exists():
-            raise OutputError("nothing was written", path)
-        _commit(tmp, path, force)
+        try:
+            yield tmp
+            if not tmp.exists():
+                raise OutputError("nothing was written", path)
+            _commit(tmp, path, force)
+        except OSError as err:
+            raise _named_for_user(err, tmp, path) from err
         done = True
     finally:
         tmp.unlink(missing_ok=True)
@@ -203,10 +225,16 @@ def output_folder(path: str | Path, force: bool = False) -> Iterator[Path]:
     created = _missing_folders(path.absolute().parent)
     _mkdir(path.absolute().parent)
     tmp = _temp_name(path)
-    tmp.mkdir()
+    try:
+        tmp.mkdir()
+    except OSError as err:
+        raise _named_for_user(err, tmp, path) from err
     done = False
     try:
-        yield tmp
+        try:
+            yield tmp
+        except OSError as err:
+            raise _named_for_user(err, tmp, path) from err
         if not path.exists() or _is_empty_dir(path):
             os.replace(tmp, path)  # rename(2) onto an empty folder is atomic
         else:

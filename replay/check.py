@@ -5,7 +5,11 @@ starts with MCAP's magic bytes (MCAP specification: the file begins with
 0x89 "MCAP0" CR LF); anything else is an `InputError` naming the path, raised
 before anything is written. How much of a real MCAP file is intact is the
 reader's business (reader.py); this only keeps what is not MCAP at all from
-being read as an empty recording.
+being read as an empty recording. A recording a verb folds, verifies,
+replays, views, fits or recovers must also hold a session (its
+SessionStarted): `read_session` refuses one that does not, saying what the
+file is (only the magic, a header, another program's MCAP, a session that
+never started), for every such verb alike.
 """
 
 from __future__ import annotations
@@ -34,3 +38,40 @@ def check_recording(path: str | Path) -> Path:
     if head != MCAP_MAGIC:
         raise InputError("not an MCAP recording: it does not start with MCAP's magic bytes", path)
     return path
+
+
+def no_session(log) -> str:
+    """Why a read recording (reader.EventLog) holds no session, in words; "" if it holds one.
+
+    A session starts with its SessionStarted (the config every verb folds with), so a file without
+    one holds no session, whatever else it holds: only MCAP's magic or header (a recorder that died
+    at once), another program's MCAP, or pairplay events of a session that never started."""
+    if any(type(r.event).__name__ == "SessionStarted" for r in log.events):
+        return ""
+    size = Path(log.path).stat().st_size if Path(log.path).exists() else 0
+    foreign = len(log.bad) + len(log.unknown)
+    if not log.events and not foreign and not log.skipped:
+        if size <= len(MCAP_MAGIC) + 2:
+            return f"holds no session: only MCAP's magic bytes ({size} bytes), no messages"
+        return f"holds no session: an MCAP file of {size} bytes with no messages{' (cut short)' if log.truncated else ''}"
+    if not log.events and not log.skipped:
+        topics = sorted({topic for topic, _ in log.channels.values()})[:2]
+        return (f"holds no session: not a pairplay recording ({foreign} messages, none a pairplay event; "
+                f"channels {', '.join(repr(t) for t in topics)})")
+    lost = f", and parts of it are damaged ({log.error})" if log.damage else ""
+    n = len(log.events) + sum(log.skipped.values())
+    stopped = log.metadata.get("pairplay.recorder.end", {}).get("stopped_by", "")
+    why = f"stopped ({stopped}) before its game started" if stopped else "a session that never started"
+    return f"holds no session: {n} pairplay events but no SessionStarted ({why}{lost})"
+
+
+def read_session(path: str | Path, only: frozenset[str] | None = None):
+    """The recording at `path` read (reader.read_log, `only` as there) if it holds a session;
+    InputError naming the path and saying what the file is if not (`no_session`)."""
+    from .reader import read_log
+    path = check_recording(path)
+    log = read_log(path, only)
+    why = no_session(log)
+    if why:
+        raise InputError(why, path)
+    return log

@@ -30,9 +30,8 @@ from pairplay.core.policies import to_policy_file
 from pairplay.schemas.policy import PolicyFile, write_policy
 from pairplay.schemas.session import SessionConfig
 
-from .check import check_recording
+from .check import read_session
 from .fold import READS, SessionFold, fold_events, stream_seed
-from .reader import read_log
 
 
 class RebuildError(InputError):
@@ -101,8 +100,7 @@ def rebuild_events(events, source: str = "", truncated: bool = False, note: str 
 
 def rebuild_recording(path: str | Path) -> Rebuilt:
     """The recording at `path` rebuilt; InputError (RebuildError) if it is not a session recording."""
-    check_recording(path)
-    log = read_log(path, only=READS)  # the events the fold only counts are not decoded (speed)
+    log = read_session(path, only=READS)  # the events the fold only counts are not decoded (speed)
     note = "" if log.whole else f"{'damaged' if log.damage else 'truncated'}: {log.error}"
     return rebuild_events((r.event for r in log.events), str(path), log.truncated, note,
                           log.metadata.get("pairplay.recovered"), log.metadata.get("pairplay.recorder.end"),

@@ -20,11 +20,12 @@ from pathlib import Path
 from mcap.records import Channel, Message, Metadata, Schema
 from mcap.writer import CompressionType, Writer
 
-from pairplay.errors import OutputError
+from pairplay.errors import InputError, OutputError
 from pairplay.outputs import check_output, output_file
 
-from .check import check_recording
+from .check import check_recording, no_session
 from .mcapscan import scan
+from .reader import read_log
 from .writer import CHUNK_SIZE, PROFILE
 
 
@@ -37,6 +38,7 @@ class Recovered:
     damaged: list[str] = field(default_factory=list)  # the parts not copied, and why
     ended: bool = False  # the session's SessionEnded was among the records kept
     last_round: int = -1
+    started: bool = True  # the session's SessionStarted was among the records kept
 
 
 def default_output(path: Path) -> Path:
@@ -46,7 +48,8 @@ def default_output(path: Path) -> Path:
 def recover(path: str | Path, output: str | Path | None = None, force: bool = False) -> Recovered:
     """Copy the intact records of `path` into a complete file (see rule).
 
-    InputError if `path` is not an MCAP file at all (missing, empty, no MCAP magic);
+    InputError if `path` is not an MCAP file at all (missing, empty, no MCAP magic) or holds no
+    session (check.py `no_session`), unless it is cut or damaged and holds pairplay events;
     OutputError if `output` exists (unless `force`) or is the input; the output
     appears only when complete (pairplay.outputs)."""
     path = check_recording(path)
@@ -54,6 +57,12 @@ def recover(path: str | Path, output: str | Path | None = None, force: bool = Fa
     if output.resolve() == path.resolve():
         raise OutputError("recover writes a new file; give an output path other than the input", output)
     check_output(output, force)
+    log = read_log(path)
+    why = no_session(log)
+    # a cut or damaged file of a session's events is kept whatever it lost (its start may be in the lost
+    # part, or before a recorder that joined late); one with nothing of a session, or whole, has nothing
+    if why and not (log.events and not log.whole):
+        raise InputError(f"{why}; nothing to recover", path)
     checked = scan(path)
     messages, ended, last_round = 0, False, -1
     schema_ids: dict[int, int] = {}
@@ -93,7 +102,7 @@ def recover(path: str | Path, output: str | Path | None = None, force: bool = Fa
             "completed": "summary, indexes and CRCs written by pairplay recover",
             "session_ended": str(ended).lower(), "last_round": str(last_round)})
         writer.finish()
-    return Recovered(output, messages, checked.truncated, reason, damaged, ended, last_round)
+    return Recovered(output, messages, checked.truncated, reason, damaged, ended, last_round, started=not why)
 
 
 def _round_of(payload: bytes) -> int:

@@ -25,8 +25,7 @@ from pairplay.errors import InputError
 from pairplay.schemas import events as ev
 from pairplay.schemas.session import SessionConfig
 
-from .check import check_recording
-from .reader import read_log
+from .check import read_session
 
 
 @dataclass
@@ -99,7 +98,6 @@ def turns_from_events(events, source: str = "", note: str = "") -> RecordedTurns
 
 def read_turns(path) -> RecordedTurns:
     """A recording's turns (see the module rule); InputError naming the file if it has none to fit."""
-    check_recording(path)
-    log = read_log(path)
+    log = read_session(path)
     note = "" if log.whole else f"{'damaged' if log.damage else 'truncated'}: {log.error}"
     return turns_from_events((r.event for r in log.events), str(path), note)

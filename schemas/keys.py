@@ -28,7 +28,7 @@ class EventKey(NamedTuple):
 
 def check_chunk(what: str, value: str) -> str:
     """Return `value` if it is a legal single key chunk, else raise ValueError."""
-    if not value or _FORBIDDEN & set(value):
+    if not value or _FORBIDDEN & set(value) or any(c.isspace() for c in value):  # a tab, a newline: spaces too
         raise ValueError(f"{what} {value!r} must be non-empty and free of / * $ # ? @ and spaces")
     return value
 

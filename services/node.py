@@ -200,17 +200,27 @@ class Driver:
             log.exception("%s failed on %s", self.logic.name, type(event).__name__)
             return self.reject(f"internal error {type(err).__name__}: {err}", key, event.source, event.seq, payload)
 
+    def _only_left(self, event: Event) -> bool:
+        """Whether `event` is the one recorded output left to recompute."""
+        return len(self.held_back) == 1 and self.held_back[0] is event
+
     @property
     def waiting(self) -> int:
         """Inputs held until what they depend on arrives."""
         return sum(len(q) for q in self.deferred.values())
 
     # -- restart and verify ------------------------------------------------
-    def resume(self, recorded: list[Event], start: bool = True, announce: Event | None = None) -> list[Event]:
+    def resume(self, recorded: list[Event], start: bool = True, announce: Event | None = None,
+               stopped: Event | None = None) -> list[Event]:
         """Re-feed a recorded session (file order); return the outputs it still owes.
 
         The service's own recorded outputs are held back: the first outputs the
         logic recomputes are compared with them instead of being published.
+        `stopped`: the recorded SessionEnded a stopped session's shell made its game
+        publish (services/session.py `end_game`: interrupted, aborted, failed). The
+        live game handled no input after it, so inputs stop being fed once it is the
+        only output left to recompute, and the logic is ended as the shell ended it
+        (`logic.end(reason, detail)`): its round and turn counts are compared too.
         """
         own = [e for e in recorded if e.source == self.logic.name and e.session == self.session]
         self.held_back = deque(e for e in own if type(e).__name__ not in SHELL_TAGS)
@@ -220,6 +230,8 @@ class Driver:
         try:
             out += self.start() if start else []
             for e in recorded:
+                if stopped is not None and self._only_left(stopped):
+                    break
                 if e.source == self.logic.name or e.session != self.session:
                     continue
                 key = event_key(e.session, e.source, type(e).__name__)
@@ -227,6 +239,8 @@ class Driver:
                     continue  # a duplicate the live service rejected then
                 self.guard.note(key, e)
                 out += self.feed(e)
+            if stopped is not None and self._only_left(stopped) and not self.logic.done:
+                out += self._stamp(self.logic.end(stopped.reason, stopped.detail))
         finally:
             self.replaying = False
         # anything still held back was recorded but not recomputed: a divergence

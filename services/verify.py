@@ -9,7 +9,15 @@ earlier ones), so every order a recorder can hold gives the same verdict; and ev
 without the envelope's wall time and sequence number, with the event the live
 service recorded, one by one in order. A recomputed event the recording lacks
 or a recorded one never recomputed is a failure too, unless the recording was
-cut short, or recovered from a cut (then the tail is excused and reported). The robot's RobotActed
+cut short, or recovered from a cut (then the tail is excused and reported).
+A session that stopped before its end (SessionEnded interrupted, aborted or
+failed: a signal, the experimenter, a service lost; or no SessionEnded at all)
+is verified up to where it stopped, whatever the moment: the game is fed the
+inputs it handled before its shell ended it and is then ended the same way
+(node.py `resume(stopped=...)`), and what the other services would have
+derived from inputs they got after the stop is counted, not failed (they were
+stopped). A tampered or missing event before the stop still fails. The
+verdict says how far it verified (`Verification.reach`). The robot's RobotActed
 comes from hardware and is not recomputed. Events of types this version does
 not know (a newer pairplay's) are counted and named, and the verdict is about
 the events this version derives. A file with a damaged part (a chunk that fails
@@ -23,7 +31,7 @@ import json
 from dataclasses import dataclass, field
 
 from pairplay.replay.reader import read_log
-from pairplay.schemas.events import SessionStarted
+from pairplay.schemas.events import SessionEnded, SessionStarted
 
 from pairplay.services.game import GameLogic
 from pairplay.services.learner import LearnerLogic
@@ -46,13 +54,20 @@ class ServiceCheck:
 class Verification:
     source: str
     checks: list[ServiceCheck]
-    truncated: bool = False
+    truncated: bool = False  # cut short (or recovered from a cut): a tail of every stream may be missing
     error: str = ""
     unknown: dict[str, int] = field(default_factory=dict)  # events of types this version does not know
+    stopped: str = ""  # how a session that did not complete stopped ("" if it completed)
+    reach: str = ""  # how far it was verified, in words
+
+    @property
+    def excused(self) -> bool:
+        """Whether recomputed events beyond the recording are excused: the session did not run to its end."""
+        return self.truncated or bool(self.stopped)
 
     @property
     def ok(self) -> bool:
-        return not self.error and all(c.ok(self.truncated) for c in self.checks)
+        return not self.error and all(c.ok(self.excused) for c in self.checks)
 
 
 def in_source_order(events: list) -> list:
@@ -74,6 +89,9 @@ def verify_events(events, source: str = "", truncated: bool = False) -> Verifica
     if not started:
         return Verification(source, [], truncated, "no SessionStarted: nothing to verify")
     config = started[0].config
+    ends = [e for e in events if isinstance(e, SessionEnded) and e.source == "game"]
+    end = ends[-1] if ends else None
+    stopped = None if end is None or end.reason == "completed" else end  # ended by the shell (module rule)
     logics = [GameLogic(config), LearnerLogic()]
     if config.participant.startswith("sim:"):
         logics.append(ParticipantLogic())
@@ -81,11 +99,31 @@ def verify_events(events, source: str = "", truncated: bool = False) -> Verifica
     for logic in logics:
         driver = Driver(logic, config.session, clock=lambda: 0)
         recorded = sum(1 for e in events if e.source == logic.name and type(e).__name__ not in SHELL_TAGS)
-        owed = driver.resume(events)
+        owed = driver.resume(events, stopped=stopped if logic.name == "game" else None)
         if truncated:  # the cut may fall between an input and its outputs
             driver.mismatches = [m for m in driver.mismatches if "was not recomputed" not in m]
         checks.append(ServiceCheck(logic.name, recorded, driver.mismatches, len(owed)))
-    return Verification(source, checks, truncated)
+    how = stopped_how(end, config.rounds, truncated)
+    return Verification(source, checks, truncated, stopped=how, reach=reach_of(end, config.rounds, how))
+
+
+def stopped_how(end, rounds: int, truncated: bool) -> str:
+    """How a session that did not run to its end stopped, in words ("" if it completed, whole)."""
+    if end is None:
+        return "cut short before its end was recorded" if truncated else "no SessionEnded recorded"
+    if end.reason == "completed":
+        return ""
+    return f"{end.reason}{f' ({end.detail})' if end.detail else ''}"
+
+
+def reach_of(end, rounds: int, how: str) -> str:
+    """How far a verification went: the whole session, or up to where it stopped."""
+    if not how:
+        return f"the whole session ({rounds} rounds)"
+    if end is None:
+        return f"up to where the recording stops ({how})"
+    where = f"in round {end.round} after {end.turns_in_round} turns" if end.round >= 0 else "before its first round"
+    return f"up to where the session stopped: {how} after {end.rounds_played} of {rounds} rounds, {where}"
 
 
 def verify_recording(path) -> Verification:

@@ -157,6 +157,31 @@ CASES = [
     Case("combine -o on a read-only file system", ["combine", "policies", "-o", "ro/m.json"], "read-only", readonly=True),
     Case("recover -o on a read-only file system", ["recover", "rec.mcap", "-o", "ro/r.mcap"], "read-only", readonly=True),
     Case("rebuild --out on a read-only file system", ["rebuild", "rec.mcap", "--out", "ro"], "read-only", readonly=True),
+    # a file holding no session (a new user's trial, 2026-11-30): recover wrote an empty file and exit 0,
+    # verify said it on stdout with exit 1, rebuild of such files exit 1, view printed 3 lines
+    Case("recover MCAP's magic alone", ["recover", "magic.mcap"], "holds no session: only MCAP's magic bytes (8 bytes)"),
+    Case("recover 10 bytes", ["recover", "ten.mcap"], "holds no session: only MCAP's magic bytes (10 bytes)"),
+    Case("recover a header alone", ["recover", "header.mcap"], "holds no session: an MCAP file of"),
+    Case("recover another program's MCAP", ["recover", "foreign.mcap"], "not a pairplay recording"),
+    Case("recover a session never started", ["recover", "nostart.mcap"], "no SessionStarted (a session that never"),
+    Case("verify a session never started", ["replay", "nostart.mcap", "--verify"], "holds no session"),
+    Case("verify MCAP's magic alone", ["replay", "magic.mcap", "--verify"], "holds no session"),
+    Case("replay another program's MCAP", ["replay", "foreign.mcap", "--speed", "max"], "not a pairplay recording"),
+    Case("rebuild a file holding no session beside a good one", ["rebuild", "rec.mcap", "nostart.mcap", "--out", "out"],
+         "holds no session"),
+    Case("rebuild only files holding no session", ["rebuild", "magic.mcap", "header.mcap", "--out", "out"],
+         "holds no session"),
+    Case("view a header alone", ["view", "--recording", "header.mcap", "--out", "new.rrd"], "holds no session"),
+    Case("counterfactual of 10 bytes", ["counterfactual", "ten.mcap", "--out", "cf"], "holds no session"),
+    # an empty or blank id was taken (`--session ''` fell back to a made-up id); a refused atomic write
+    # named the temporary file beside the user's
+    Case("session --session ''", SIM + ["--session", ""], "session id '' must be non-empty"),
+    Case("session --session blank", SIM + ["--session", " \t"], "session id ' \\t' must be non-empty"),
+    Case("run learner --session ''", ["run", "learner", "--session", ""], "session id '' must be non-empty"),
+    Case("replay --as blank", ["replay", "rec.mcap", "--as", " "], "session id ' ' must be non-empty"),
+    Case("participant export an empty id", ["participant", "export", "study", ""], "participant id '' must be"),
+    Case("study --out where no folder can be made", ["study", "--quiet", "--train-only", "--out", "/proc/forbidden"],
+         "(/proc/forbidden)"),
 ]
 
 
@@ -173,6 +198,7 @@ def _fixtures(root: Path) -> None:
     (root / "old.recovered.mcap").write_bytes(b"the user's file")
     (root / "empty.mcap").write_bytes(b"")
     (root / "random.mcap").write_bytes(os.urandom(2000))
+    _no_session_files(root)
     for name in ("existing.mcap", "existing.rrd", "existing.json", "rec.rrd"):
         (root / name).write_bytes(b"the user's file " + name.encode())
     assert main(["study", "--quiet", "--train-only", "--personas", "blind,deaf", "--games", "2", "--rounds", "20",
@@ -191,6 +217,33 @@ def _fixtures(root: Path) -> None:
 
 
 ENV = dict(os.environ, COLUMNS="200")
+
+
+def _no_session_files(root: Path) -> None:
+    """MCAP files holding no session: the magic alone, 10 bytes, a header alone, another program's
+    MCAP, a pairplay recording of a session that never started (one ServiceStarted)."""
+    from mcap.writer import Writer
+
+    from pairplay.replay.writer import EventLogWriter
+    from pairplay.schemas.envelope import stamped
+    from pairplay.schemas.events import ServiceStarted, encode_event
+    from pairplay.schemas.keys import event_key
+
+    magic = b"\x89MCAP0\r\n"
+    (root / "magic.mcap").write_bytes(magic)
+    (root / "ten.mcap").write_bytes(magic + b"\x01\x02")
+    with open(root / "header.mcap", "wb") as f:
+        Writer(f).start(profile="", library="a recorder that died at once")
+    with open(root / "foreign.mcap", "wb") as f:
+        w = Writer(f)
+        w.start(profile="ros2", library="another program")
+        w.add_message(w.register_channel("/chatter", "json", w.register_schema("s", "jsonschema", b"{}")), 1, b"{}", 1)
+        w.finish()
+    w = EventLogWriter(root / "nostart.mcap")
+    e = stamped(ServiceStarted(service="learner", version="x"), session="s1", source="learner", seq=1, time_ns=10)
+    w.write(event_key("s1", "learner", "ServiceStarted"), encode_event(e), log_time_ns=10)
+    w.close()
+
 
 
 def _readonly_command(case: Case, root: Path) -> list[str]:

@@ -42,13 +42,16 @@ def test_a_missing_argument_and_a_stray_one_at_the_top_still_say_who(capsys):
     assert capsys.readouterr().err.startswith("pairplay: unrecognized arguments: --bogus")
 
 
-@pytest.mark.parametrize("argv", [["-v", "session", "--participant", "sim:blind"], ["-q", "--verbose", "study"]])
+@pytest.mark.parametrize("argv", [["-v", "session", "--participant", "sim:blind"], ["-q", "--verbose", "study"],
+                                  ["--out", "x", "study"], ["--seed", "3", "-v", "session", "--participant", "sim:b"]])
 def test_an_option_before_the_verb_is_one_line_saying_it_goes_after_it(argv, capsys):
     """Before: `pairplay -v session --participant sim:blind` said "pairplay session: unrecognized
-    arguments: -v --participant sim:blind": the verb's own options were never added to its parser."""
+    arguments: -v --participant sim:blind": the verb's own options were never added to its parser;
+    an option with a value (`pairplay --out x study`) said "invalid choice: 'x'"."""
+    from pairplay.cli.main import VERBS
     assert main(argv) == 2
     err = capsys.readouterr().err
-    verb = next(a for a in argv if not a.startswith("-"))
+    verb = next(a for a in argv if a in VERBS)
     assert err.count("\n") == 1 and err.startswith("pairplay: ") and f"after the verb: pairplay {verb} " in err, err
     assert "unrecognized" not in err and "--participant" not in err
 

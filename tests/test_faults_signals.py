@@ -165,6 +165,7 @@ def test_a_long_running_verb_exits_soon_after_a_signal_its_recording_finished_an
     out = v.output()
     assert v.proc.returncode is not None, f"{name}: still running {seconds:.1f} s after {sig.name}"
     assert v.proc.returncode >= 0, f"{name}: killed by the signal itself (no handler): {out}"
+    assert v.proc.returncode == 128 + sig, f"{name}: exit {v.proc.returncode} after {sig.name}: {out}"  # cli/main.py
     assert "Traceback" not in out, out
     assert seconds < EXIT_BUDGET_S + SLACK_S, f"{name}: {seconds:.2f} s after {sig.name} (load {os.getloadavg()}): {out}"
     recording = v.recording

@@ -23,6 +23,7 @@ from pairplay.schemas.keys import event_key
 from pairplay.schemas.session import SessionConfig
 from pairplay.services.bus import Bus, BusOptions
 from pairplay.services.session import run_session
+from pairplay.services.verify import verify_recording
 
 SAMPLES = Path(__file__).resolve().parent.parent / "recordings" / "samples"
 
@@ -62,6 +63,8 @@ def test_a_signalled_session_records_it_was_interrupted_and_how_far_it_got(tmp_p
                         "--no-plot"], capture_output=True, text=True)
     assert "PARTIAL session: interrupted" in r.stdout, r.stdout
     assert read_policy(tmp_path / "rb" / "sig.policy.json").partial.startswith("interrupted")
+    verified = verify_recording(path)  # up to where the signal stopped it (was a false FAIL at that round)
+    assert verified.ok and verified.stopped == f"interrupted ({sig.name})", [c.mismatches[:2] for c in verified.checks]
 
 
 def test_an_experimenter_stop_is_recorded_as_aborted(tmp_path):
@@ -159,9 +162,10 @@ def test_a_session_stopped_before_its_game_started_records_why_it_holds_no_sessi
     assert log.metadata["pairplay.recorder.end"]["session_ended"] == "false"
     r = subprocess.run([sys.executable, "-m", "pairplay", "rebuild", str(path), "--out", str(tmp_path / "rb")],
                        capture_output=True, text=True)
-    assert r.returncode == 1 and r.stderr.strip().splitlines() == [
-        f"pairplay rebuild: skipped: {path}: no SessionStarted: the recording was stopped ({sig.name}) before its "
-        "game started"], r.stderr
+    assert r.returncode == 2 and len(r.stderr.strip().splitlines()) == 1, r.stderr
+    assert r.stderr.startswith("pairplay rebuild: holds no session: ") and \
+        f"no SessionStarted (stopped ({sig.name}) before its game started) ({path})" in r.stderr, r.stderr
+    assert not (tmp_path / "rb").exists()
 
 
 def test_every_recording_ends_with_how_it_ended(tmp_path):

@@ -196,8 +196,8 @@ class RobotBridge:
         if robot is None:
             return
         settle_s = self.settle_s if settle_s is None else settle_s
-        if not robot.wait_idle(settle_s):
-            log.warning("robot %s: suggestions still open after %.1f s; reporting them as they are",
+        if not robot.wait_idle(settle_s):  # INFO: nothing is lost, the file records them as cut (README, logging)
+            log.info("robot %s: suggestions still open after %.1f s; reporting them as they are",
                         robot.transport.url, settle_s)
         if deadline is None:
             robot.close(ROBOT_CLOSE_S)

@@ -1,0 +1,116 @@
+"""One exit rule for a signal, every verb, every moment: 128 + its number (130 SIGINT, 143 SIGTERM).
+
+Before (a new user's trial, 2026-11-30): a session, lab, replay or view
+interrupted once running exited 0 ("as asked") and 130 before its bus; the
+router exited 130 on SIGINT and 0 on SIGTERM; a verb without its own handler
+(study) was killed by SIGTERM outright. Each verb here is started and
+signalled early (while it loads, before its first line) or while it runs
+(after its first line); tests/test_faults_signals.py signals the bus verbs in
+their running states and checks the same status. The processes run side by
+side (each its own), so the table takes the time of its slowest rows.
+"""
+
+from __future__ import annotations
+
+import os
+import shutil
+import signal
+import subprocess
+import sys
+import threading
+import time
+from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass
+from pathlib import Path
+
+import pytest
+
+from pairplay.cli.main import main
+
+SAMPLE = Path(__file__).resolve().parents[1] / "recordings" / "samples" / "sim-ashley.mcap"
+
+
+@dataclass
+class Row:
+    name: str
+    args: list[str]
+    sig: signal.Signals
+    early: bool  # signalled as soon as the command's handlers exist (it then loads its verb), else after its first line
+    first: str = ""  # a piece of the first stdout line (running rows)
+
+
+ROWS = [
+    Row("session early", ["session", "--participant", "sim:blind", "--rounds", "1000", "--session", "e1", "--out", "rec"],
+        signal.SIGINT, True),
+    Row("lab early", ["lab", "--participant", "human:p1", "--session", "e2", "--out", "rec"], signal.SIGTERM, True),
+    Row("router early", ["router", "--listen", "tcp/127.0.0.1:0"], signal.SIGTERM, True),
+    Row("replay early", ["replay", "rec.mcap", "--speed", "0.01"], signal.SIGINT, True),
+    Row("study early", ["study", "--quiet", "--out", "st"], signal.SIGTERM, True),
+    Row("protocol serve early", ["protocol", "serve", "study"], signal.SIGINT, True),
+    Row("run learner early", ["run", "learner", "--session", "e3"], signal.SIGTERM, True),
+    Row("router running SIGINT", ["router", "--listen", "tcp/127.0.0.1:0"], signal.SIGINT, False, "listening"),
+    Row("router running SIGTERM", ["router", "--listen", "tcp/127.0.0.1:0"], signal.SIGTERM, False, "listening"),
+    Row("replay running SIGTERM", ["replay", "rec.mcap", "--speed", "0.01"], signal.SIGTERM, False, "replaying"),
+]
+
+
+def _handlers_installed(pid: int, timeout_s: float = 60.0) -> bool:
+    """Wait until the process catches SIGTERM (pairplay/__main__.py installs its handlers first of all):
+    a signal before that meets the interpreter's own start-up, which no code of ours can answer."""
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        try:
+            status = Path(f"/proc/{pid}/status").read_text()
+        except OSError:
+            return False
+        caught = int(next(line.split()[1] for line in status.splitlines() if line.startswith("SigCgt:")), 16)
+        if caught >> (signal.SIGTERM - 1) & 1:
+            return True
+        time.sleep(0.005)
+    return False
+
+
+def _run(row: Row, template: Path, base: Path) -> tuple[Row, subprocess.CompletedProcess, float]:
+    root = base / row.name.replace(" ", "_")
+    shutil.copytree(template, root)
+    p = subprocess.Popen([sys.executable, "-m", "pairplay", *row.args], cwd=root, stdout=subprocess.PIPE,
+                         stderr=subprocess.PIPE, text=True, env=dict(os.environ, PYTHONUNBUFFERED="1"))
+    out = []
+    try:
+        if row.early:
+            assert _handlers_installed(p.pid), row.name
+        else:
+            reader = threading.Thread(target=lambda: out.append(p.stdout.readline()), daemon=True)
+            reader.start()
+            reader.join(120)
+            assert out and row.first in out[0], (row.name, out)
+        p.send_signal(row.sig)
+        t0 = time.monotonic()
+        rest, err = p.communicate(timeout=60)
+        took = time.monotonic() - t0
+    finally:
+        if p.poll() is None:
+            p.kill()
+            p.wait()
+    return row, subprocess.CompletedProcess(p.args, p.returncode, "".join(out) + rest, err), took
+
+
+@pytest.fixture(scope="module")
+def ran(tmp_path_factory):
+    template = tmp_path_factory.mktemp("template")
+    shutil.copy(SAMPLE, template / "rec.mcap")
+    assert main(["protocol", "init", str(template / "study"), "--study", "thesis-ch7", "--quiet"]) == 0
+    base = tmp_path_factory.mktemp("rows")
+    with ThreadPoolExecutor(max_workers=4) as pool:
+        return {row.name: (r, took) for row, r, took in pool.map(lambda row: _run(row, template, base), ROWS)}
+
+
+@pytest.mark.parametrize("row", ROWS, ids=[r.name for r in ROWS])
+def test_a_signal_ends_a_verb_with_128_plus_its_number_at_any_moment(row, ran):
+    r, took = ran[row.name]
+    assert r.returncode == 128 + row.sig, (row.name, r.returncode, r.stdout[-800:], r.stderr[-800:])
+    assert "Traceback" not in r.stderr + r.stdout, r.stderr
+    ours = [line for line in r.stderr.splitlines() if line.startswith("pairplay")]
+    assert len(ours) <= 1, r.stderr  # one line of ours at most (a bus verb says it on stdout)
+    said = r.stdout + r.stderr
+    assert row.sig.name in said or "Ctrl-C" in said, (row.name, said[-800:])
