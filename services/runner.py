@@ -5,8 +5,10 @@ any order between keys, just those of the events it reads) before anything else,
 its liveliness token, then asks the recorder for the session's log so far. An
 empty log is a fresh start (ServiceStarted, then the logic's first outputs);
 a non-empty one is a restart: the Driver re-feeds it (node.py) and the service
-publishes only what it still owes. Messages that arrived on the subscription
-while the log was being read may repeat the log: they are skipped quietly.
+publishes only what it still owes. Messages that arrive on the subscription
+and repeat the log (on their way while it was read; or, on a recovering bus,
+the history the publishers' caches send a subscriber that joins late) are
+skipped quietly: the log is the restarted service's cut point (services/guard.py).
 Zenoh's callback threads only put samples into the Node's Inbox (never
 waiting; a flood is shed there and the count recorded); one thread per Node
 handles them in arrival order, and the Node's Outbox thread publishes what it
@@ -108,7 +110,6 @@ class Node:
         self.stop = stop if stop is not None else threading.Event()
         self.inbox = Inbox()
         self.outbox = Outbox(bus, logic.name, keep=True)  # a restarted recorder may ask what we sent
-        self._overlap = 0
         self.resumed_events = 0
         self.thread: threading.Thread | None = None
         self._lock = threading.RLock()  # the Node's thread, or the session ending it from outside
@@ -151,7 +152,6 @@ class Node:
             raise Stopped(self.logic.name)
         if not any(type(e).__name__ == "SessionStarted" for e in recorded):
             recorded = []  # the session has not started: nothing to catch up with
-        self._overlap = len(self.inbox)
         announce = ServiceStarted(service=self.logic.name, version=__version__, resumed_events=len(recorded))
         if recorded:
             log.info("%s resumes from %d recorded events", self.logic.name, len(recorded))
@@ -204,11 +204,8 @@ class Node:
         if key is None:  # a restarted recorder asks what we sent
             answer_sent(self.outbox, self.logic.name, payload)
             return True
-        overlap = self._overlap > 0
-        if overlap:
-            self._overlap -= 1
         with self._lock:
-            self.publish(self.driver.receive(key, payload, overlap=overlap))
+            self.publish(self.driver.receive(key, payload))
         return True
 
     def run(self, stop: threading.Event | None = None) -> None:
@@ -219,6 +216,8 @@ class Node:
             except Exception:  # a bug must not kill the service's only thread (the Driver records logic errors)
                 log.exception("%s: unexpected error; going on", self.logic.name)
         self.publish(self.driver.tick(self.inbox.take_shed(), force=True))
+        if self.driver.guard.skipped:
+            log.info("%s skipped %d deliveries its log already held", self.logic.name, self.driver.guard.skipped)
 
     def run_in_thread(self, stop: threading.Event | None = None) -> threading.Thread:
         self.thread = threading.Thread(target=self.run, args=(stop,), name=f"pairplay-{self.logic.name}", daemon=True)
