@@ -24,7 +24,7 @@ from pathlib import Path
 from pairplay.errors import OptionError
 from pairplay.outputs import check_folder
 from pairplay.services.bus import Bus, Deadline, add_bus_arguments, deadline_of, options_from_args, stop_on_signals
-from pairplay.services.runner import Node, Stopped, start_unless_stopped
+from pairplay.services.runner import Node, Stopped, start_unless_stopped, waiting_for
 
 SERVICES = ("game", "learner", "participant", "recorder", "combiner")
 
@@ -61,7 +61,9 @@ def run(args: argparse.Namespace) -> int:
     bus = Bus(options_from_args(args))  # a BusError (one line, exit 2) if it cannot open
     node = None
     try:
-        print(f"listening {' '.join(bus.locators())}", flush=True)
+        # the first line: where we listen (an orchestrator connects there), and what a game waits for
+        waits = waiting_for(args.wait_for) if args.service == "game" else ""
+        print(f"listening {' '.join(bus.locators()) or '(no listener)'}{' - ' + waits if waits else ''}", flush=True)
         if args.service == "recorder":
             from pairplay.services.recorder import Recorder, RecordingExists, latest_file, same_live_session
             path = Path(args.out) / f"{args.session}.mcap"

@@ -34,6 +34,7 @@ from pairplay.services.bus import MISSED, Bus, Inbox, Outbox
 from pairplay.services.node import Driver, Logic
 
 log = logging.getLogger("pairplay.runner")
+WAIT_FOR_S = 30.0  # a game waits this long for the services it needs (Node.start), then one line, exit 2
 LOG_QUERY = "log"
 SENT_QUERY = "sent"
 
@@ -69,6 +70,11 @@ def answer_sent(outbox: Outbox, name: str, query) -> None:
         items = [(k, p) for k, p in outbox.sent if decode_event(p).seq > after]
         Bus.answer(query, [msgspec.msgpack.encode((name, items))])
     outbox.call(reply)
+
+
+def waiting_for(services, timeout_s: float = WAIT_FOR_S) -> str:
+    """What a process's first line says it waits for (issue 12: a wait is announced and has a deadline)."""
+    return f"waiting up to {timeout_s:g} s for: {', '.join(services)}" if services else ""
 
 
 class Stopped(Exception):
@@ -134,7 +140,7 @@ class Node:
         for e in events:
             self.outbox.send(event_key(self.session, e.source, type(e).__name__), encode_event(e))
 
-    def start(self, wait_for: tuple[str, ...] = (), wait_timeout_s: float = 30.0) -> None:
+    def start(self, wait_for: tuple[str, ...] = (), wait_timeout_s: float = WAIT_FOR_S) -> None:
         """Subscribe, announce, catch up; with `wait_for`, first wait for those services' tokens.
         Raises Stopped if the stop flag is set meanwhile."""
         if getattr(self.logic, "by_tag", False):
