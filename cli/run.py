@@ -24,7 +24,7 @@ from pathlib import Path
 from pairplay.errors import OptionError
 from pairplay.outputs import check_folder
 from pairplay.services.bus import Bus, Deadline, add_bus_arguments, deadline_of, options_from_args, stop_on_signals
-from pairplay.services.runner import Node, Stopped, start_unless_stopped, waiting_for
+from pairplay.services.runner import GameWatch, Node, Stopped, start_unless_stopped, waiting_for
 
 SERVICES = ("game", "learner", "participant", "recorder", "combiner")
 
@@ -75,10 +75,11 @@ def run(args: argparse.Namespace) -> int:
                                       "choose another --session (a recording is never replaced)")
             recorder = Recorder(bus, args.session, path, on_failure=lambda _why: stop.set(), restart=restart)
             recorder.start()
+            game = GameWatch(bus, args.session)  # a session whose end never reached us: its game is gone
             checked = 0.0
             try:
                 # after SessionEnded the learner still settles the last reward: stay while others are on the bus
-                while not stop.is_set():
+                while not stop.is_set() and not game.gone():
                     recorder.step()
                     if recorder.ended and time.monotonic() - checked > 0.3:
                         checked = time.monotonic()

@@ -77,6 +77,37 @@ def waiting_for(services, timeout_s: float = WAIT_FOR_S) -> str:
     return f"waiting up to {timeout_s:g} s for: {', '.join(services)}" if services else ""
 
 
+GAME_GONE_S = 30.0  # a service whose session's game left the bus this long ago ends (GameWatch)
+
+
+class GameWatch:
+    """Whether the session's game left the bus for good: its liveliness token was seen, then gone
+    for `gone_s` (the session's settle time: a crashed game restarted sooner is back in time).
+
+    A service ends when the game ends the session (SessionEnded). One that missed it (its link
+    was cut when it came, the session's process ended meanwhile) waited for ever: in the
+    four-host test the robot bridge or the participant was still running 60 s after the
+    session's end. The token is Zenoh's liveliness, dropped with a dead process's or a cut
+    link's session, so this holds whatever the link did. The watcher runs on Zenoh's thread
+    and only notes a time."""
+
+    def __init__(self, bus: Bus, session: str, gone_s: float = GAME_GONE_S, clock=time.monotonic):
+        from pairplay.schemas.keys import alive_key
+        self.gone_s, self.clock = gone_s, clock
+        self.seen = False
+        self.gone_since: float | None = None
+        bus.watch_alive(alive_key(session, "game"), self._on_token)
+
+    def _on_token(self, _key: str, up: bool) -> None:
+        if up:
+            self.seen, self.gone_since = True, None
+        elif self.seen and self.gone_since is None:
+            self.gone_since = self.clock()
+
+    def gone(self) -> bool:
+        return self.gone_since is not None and self.clock() - self.gone_since >= self.gone_s
+
+
 class Stopped(Exception):
     """The stop flag was set while the service waited."""
 
@@ -119,6 +150,8 @@ class Node:
         self.resumed_events = 0
         self.thread: threading.Thread | None = None
         self._lock = threading.RLock()  # the Node's thread, or the session ending it from outside
+        self.game_gone_s = GAME_GONE_S  # see GameWatch
+        self.game_watch: GameWatch | None = None
     def _on_message(self, key: str, payload: bytes) -> None:
         self.inbox.put(key, payload)  # Zenoh's thread: hand over, never wait
 
@@ -151,6 +184,8 @@ class Node:
             self.bus.subscribe(session_keys(self.session), self._on_message, self._on_miss)
         self.bus.queryable(query_key(self.session, self.logic.name, SENT_QUERY), self.inbox.control)
         self.bus.alive(alive_key(self.session, self.logic.name))
+        if self.logic.name != "game":
+            self.game_watch = GameWatch(self.bus, self.session, self.game_gone_s)
         if wait_for:
             self.wait_for(wait_for, wait_timeout_s)
         recorded = fetch_log(self.bus, self.session, stop=self.stop) if self.resume else []
@@ -221,6 +256,10 @@ class Node:
                 self.step()
             except Exception:  # a bug must not kill the service's only thread (the Driver records logic errors)
                 log.exception("%s: unexpected error; going on", self.logic.name)
+            if self.game_watch is not None and self.game_watch.gone():
+                log.warning("%s: the session's game left the bus %.0f s ago without this service seeing the "
+                            "session's end (a cut link?); stopping", self.logic.name, self.game_watch.gone_s)
+                break
         self.publish(self.driver.tick(self.inbox.take_shed(), force=True))
         if self.driver.guard.skipped:
             log.info("%s skipped %d deliveries its log already held", self.logic.name, self.driver.guard.skipped)

@@ -46,7 +46,7 @@ from pairplay.schemas.robot import BoardCalibration, RobotActed, RobotConfig
 
 from pairplay.services.bus import Bus, Deadline, Inbox, Outbox, deadline_of
 from pairplay.services.node import Driver, Rejected
-from pairplay.services.runner import fetch_log
+from pairplay.services.runner import GAME_GONE_S, GameWatch, fetch_log
 from pairplay.services.robot.backends import open_robot
 from pairplay.services.robot.driver import RobotDriver, Suggestion
 
@@ -107,6 +107,8 @@ class RobotBridge:
         self.logic = BridgeLogic(self._perform)
         self.shell = Driver(self.logic, session, clock)
         self.thread: threading.Thread | None = None
+        self.game_gone_s = GAME_GONE_S  # see runner.GameWatch
+        self.game_watch: GameWatch | None = None
 
     def _perform(self, suggestion: Suggestion) -> None:
         if self.robot is None:
@@ -161,6 +163,7 @@ class RobotBridge:
         for tag in self.logic.listens:  # Zenoh then does not even send the others here
             self.bus.subscribe(f"{session_keys(self.session)[:-2]}*/{tag}", self._inbox.put)
         self.bus.alive(alive_key(self.session, NAME))
+        self.game_watch = GameWatch(self.bus, self.session, self.game_gone_s)
         self.backend = self.robot.transport.url
         recorded = fetch_log(self.bus, self.session, stop=stop)
         if not any(isinstance(e, ev.SessionStarted) for e in recorded):
@@ -211,8 +214,14 @@ class RobotBridge:
         return True
 
     def run(self, stop: threading.Event) -> None:
+        orphaned = False
         while not stop.is_set() and not self.logic.done:
             self.step()
+            if self.game_watch is not None and self.game_watch.gone():
+                log.warning("robot: the session's game left the bus %.0f s ago without the bridge seeing the "
+                            "session's end (a cut link?); stopping", self.game_watch.gone_s)
+                orphaned = True
+                break
         # Messages from different services may overtake each other on their way here (a
         # SessionEnded before the last SuggestionMade): go on until the bus is quiet.
         while self.step(timeout_s=0.0 if stop.is_set() else END_QUIET_S):
@@ -222,6 +231,8 @@ class RobotBridge:
         if stop.is_set():
             deadline = deadline_of(stop)
             self.close(deadline.left(STOPPED_RESERVE_S + 0.1, min(self.settle_s, STOPPED_SETTLE_S)), deadline)
+        elif orphaned:  # nobody records what the robot still reports: do not wait for it
+            self.close(min(self.settle_s, STOPPED_SETTLE_S))
         else:
             self.close(self.settle_s)
 
