@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import gc
 import logging
+import os
 import threading
 import time
 from typing import Any, Callable
@@ -34,7 +35,9 @@ from pairplay.services.bus import MISSED, Bus, Inbox, Outbox
 from pairplay.services.node import Driver, Logic
 
 log = logging.getLogger("pairplay.runner")
-WAIT_FOR_S = 30.0  # a game waits this long for the services it needs (Node.start), then one line, exit 2
+# a game waits this long for the services it needs (Node.start), then one line, exit 2; a slow or
+# loaded lab machine (services started by hand, or at nice 19 under load 30: over 30 s) sets more
+WAIT_FOR_S = float(os.environ.get("PAIRPLAY_WAIT_FOR_S", "30"))
 LOG_QUERY = "log"
 SENT_QUERY = "sent"
 
