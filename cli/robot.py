@@ -55,10 +55,11 @@ def check_robot_args(args: argparse.Namespace) -> None:
         check_choice(choice)
 
 
-def bridge_from_args(bus: Bus, session: str, args: argparse.Namespace) -> RobotBridge | None:
-    """A started RobotBridge for a session (None for --robot none); ValueError on a bad option or file."""
+def bridge_from_args(bus: Bus, session: str, args: argparse.Namespace, stop=None) -> RobotBridge | None:
+    """A started RobotBridge for a session (None for --robot none); ValueError on a bad option or file.
+    `stop` ends its wait for the log of a session under way."""
     choice = robot_choice(args)
-    return None if choice is None else start_bridge(bus, session, choice)
+    return None if choice is None else start_bridge(bus, session, choice, stop)
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -154,7 +155,7 @@ def _serve(args: argparse.Namespace) -> int:
     stop = threading.Event()
     stop_on_signals(stop)
     with Bus(options_from_args(args), stop=stop) as bus:
-        bridge = bridge_from_args(bus, args.session, args)
+        bridge = bridge_from_args(bus, args.session, args, stop)
         print(f"robot bridge for session {args.session} on {bridge.backend}; bus {' '.join(bus.locators())}",
               flush=True)
         bridge.run(stop)

@@ -25,7 +25,7 @@ from pairplay.cli.args import session_id
 from pairplay.errors import OptionError
 from pairplay.outputs import check_folder
 from pairplay.services.bus import Bus, Deadline, add_bus_arguments, deadline_of, options_from_args, stop_on_signals
-from pairplay.services.runner import Node, Stopped, start_unless_stopped
+from pairplay.services.runner import GameWatch, Node, Stopped, start_unless_stopped, waiting_for
 
 SERVICES = ("game", "learner", "participant", "recorder", "combiner")
 
@@ -62,7 +62,9 @@ def run(args: argparse.Namespace) -> int:
     bus = Bus(options_from_args(args))  # a BusError (one line, exit 2) if it cannot open
     node = None
     try:
-        print(f"listening {' '.join(bus.locators())}", flush=True)
+        # the first line: where we listen (an orchestrator connects there), and what a game waits for
+        waits = waiting_for(args.wait_for) if args.service == "game" else ""
+        print(f"listening {' '.join(bus.locators()) or '(no listener)'}{' - ' + waits if waits else ''}", flush=True)
         if args.service == "recorder":
             from pairplay.services.recorder import Recorder, RecordingExists, latest_file, same_live_session
             path = Path(args.out) / f"{args.session}.mcap"
@@ -74,10 +76,11 @@ def run(args: argparse.Namespace) -> int:
                                       "choose another --session (a recording is never replaced)")
             recorder = Recorder(bus, args.session, path, on_failure=lambda _why: stop.set(), restart=restart)
             recorder.start()
+            game = GameWatch(bus, args.session)  # a session whose end never reached us: its game is gone
             checked = 0.0
             try:
                 # after SessionEnded the learner still settles the last reward: stay while others are on the bus
-                while not stop.is_set():
+                while not stop.is_set() and not game.gone():
                     recorder.step()
                     if recorder.ended and time.monotonic() - checked > 0.3:
                         checked = time.monotonic()

@@ -47,6 +47,7 @@ from pairplay.core.geometry import PICKS_UNIT
 from pairplay.cli.robot import add_robot_arguments, check_robot_args, robot_choice
 from pairplay.services.bus import BusOpenError, ConfigFileError, add_bus_arguments, options_from_args, stop_on_signals
 from pairplay.services.recorder import RecordingFailed, check_new_recording
+from pairplay.services.runner import waiting_for
 from pairplay.services.session import run_session
 
 PRESETS = {"virtual": LearnerConfig, "human-phase1": LearnerConfig.human_phase1,
@@ -186,7 +187,11 @@ def run(args: argparse.Namespace) -> int:
     stop_on_signals(stop)
 
     def announce(bus) -> None:
-        print(f"session {config.session}: bus listening on {' '.join(bus.locators()) or '(no listener)'}", flush=True)
+        # the first line says where we listen and what the game waits for (started elsewhere: --external)
+        waits = waiting_for([f"{x} (started elsewhere)" for x in args.external if x != "game"])
+        client = f" - client of {' '.join(args.connect)}" if args.connect else ""
+        print(f"session {config.session}: bus listening on {' '.join(bus.locators()) or '(no listener)'}{client}"
+              f"{' - ' + waits if waits else ''}", flush=True)
         if config.participant.startswith("human:"):
             print("a person plays on a board: `pairplay lab` serves one (this session waits for picks from "
                   "source 'board' on the bus)", flush=True)

@@ -638,6 +638,19 @@ class Bus:
         self._declared.append(token)
         return token
 
+    def watch_alive(self, key_expr: str, callback: Callable[[str, bool], None]):
+        """Call `callback(key, up)` when a liveliness token on `key_expr` appears (up) or goes (a
+        service left the bus, or crashed: Zenoh drops a dead session's tokens with its link);
+        tokens there already come first as appearing. Runs on a Zenoh thread: must not wait."""
+        def on_token(sample: zenoh.Sample) -> None:
+            try:
+                callback(str(sample.key_expr), sample.kind == zenoh.SampleKind.PUT)
+            except Exception:
+                log.exception("liveliness watcher on %s failed", key_expr)
+        sub = self.session.liveliness().declare_subscriber(key_expr, on_token, history=True)
+        self._declared.append(sub)
+        return sub
+
     def alive_now(self, key_expr: str, timeout_s: float = 1.0, stop: threading.Event | None = None) -> set[str]:
         """The liveliness tokens on `key_expr` now; returns early, with what came, once `stop` is set
         (a shutdown does not wait out the query)."""

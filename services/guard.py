@@ -10,6 +10,17 @@ seq 1e9 cannot make the real messages after it look like duplicates), or it
 is a second SessionStarted/SessionEnded. A service ignores its own messages
 delivered back to it, before decoding them.
 
+A service restarted after a crash takes its state from the recorder's log
+(node.Driver.resume) up to a cut point: per key, the last sequence number the
+log held (`cut`). A delivery at or below it is what the log already gave, so it
+is skipped quietly and counted (`skipped`), never taken again and never a
+refusal: the publishers' caches of a recovering bus (services/bus.py) replay
+their whole history to a subscriber that joins late, and a plain bus delivers
+what was on its way while the log was read. Only what lies above the cut (the
+log lagged behind the bus) is new. A forged repeat below the cut is then
+skipped by that service too; the recorder, which never restarts into a live
+session this way, still refuses and records it.
+
 `Refusals` turns refusals into MessageRejected events, at most
 REJECTIONS_PER_S one by one per second; beyond that, and for what an Inbox
 shed, it counts and records the counts once a second (`tick`). Every refusal
@@ -50,6 +61,8 @@ class Guard:
         self.last_seq: dict[str, int] = {}  # per key
         self.top_seq: dict[str, int] = {}  # per source: the highest taken
         self.once: set[str] = set()  # ONCE_PER_SESSION tags taken
+        self.cut: dict[str, int] = {}  # per key: the last seq a resume took from the log (see rule)
+        self.skipped = 0  # deliveries at or below the cut, skipped quietly
         self._keys: dict[str, tuple] = {}  # key -> what the key alone decides (_key)
 
     def _key(self, key: str) -> tuple[bool, object, str | None]:
@@ -99,6 +112,9 @@ class Guard:
         last = self.last_seq.get(key, 0)
         if seq <= last:
             if overlap:
+                return Verdict(event, None, quiet=True)
+            if seq <= self.cut.get(key, 0):  # the log gave it already (see rule)
+                self.skipped += 1
                 return Verdict(event, None, quiet=True)
             return Verdict(event, f"sequence number {seq} from {source} is not above the last one seen "
                                   f"on {key} ({last}): duplicate or out of order")

@@ -16,7 +16,9 @@ three things rely on:
 - live: `Node` runs a Driver on the bus;
 - restart: `Driver.resume(log)` re-feeds a crashed service's recorded inputs,
   holds back the outputs the log already has (the first N outputs are the N
-  recorded ones) and publishes only what the crash left undone;
+  recorded ones) and publishes only what the crash left undone; the log is its
+  cut point: later deliveries of what the log held (a recovering bus replays the
+  publishers' caches to a late joiner) are skipped quietly (services/guard.py);
 - verify: the same re-feeding on a whole recording, every output compared.
 """
 
@@ -127,13 +129,10 @@ class Driver:
         return self._stamp(self.logic.start())
 
     # -- input --------------------------------------------------------------
-    def receive(self, key: str, payload: bytes, overlap: bool = False) -> list[Event]:
+    def receive(self, key: str, payload: bytes) -> list[Event]:
         """One bus message in, the stamped events to publish out (see rule and guard.py).
-
-        `overlap`: the message may also have been folded from the log during a
-        resume; an old sequence number then means "already seen", not an error.
-        """
-        verdict = self.guard.check(key, payload, overlap)
+        What a resume already took from the log is skipped quietly (the guard's cut)."""
+        verdict = self.guard.check(key, payload)
         if verdict.quiet:
             return []
         event = verdict.event
@@ -243,6 +242,7 @@ class Driver:
                 out += self._stamp(self.logic.end(stopped.reason, stopped.detail))
         finally:
             self.replaying = False
+            self.guard.cut = dict(self.guard.last_seq)  # deliveries up to here repeat the log (guard.py)
         # anything still held back was recorded but not recomputed: a divergence
         self.mismatches += [f"recorded {type(e).__name__} seq {e.seq} was not recomputed" for e in self.held_back]
         self.held_back.clear()

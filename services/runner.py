@@ -5,8 +5,10 @@ any order between keys, just those of the events it reads) before anything else,
 its liveliness token, then asks the recorder for the session's log so far. An
 empty log is a fresh start (ServiceStarted, then the logic's first outputs);
 a non-empty one is a restart: the Driver re-feeds it (node.py) and the service
-publishes only what it still owes. Messages that arrived on the subscription
-while the log was being read may repeat the log: they are skipped quietly.
+publishes only what it still owes. Messages that arrive on the subscription
+and repeat the log (on their way while it was read; or, on a recovering bus,
+the history the publishers' caches send a subscriber that joins late) are
+skipped quietly: the log is the restarted service's cut point (services/guard.py).
 Zenoh's callback threads only put samples into the Node's Inbox (never
 waiting; a flood is shed there and the count recorded); one thread per Node
 handles them in arrival order, and the Node's Outbox thread publishes what it
@@ -17,6 +19,7 @@ from __future__ import annotations
 
 import gc
 import logging
+import os
 import threading
 import time
 from typing import Any, Callable
@@ -32,6 +35,9 @@ from pairplay.services.bus import MISSED, Bus, Inbox, Outbox
 from pairplay.services.node import Driver, Logic
 
 log = logging.getLogger("pairplay.runner")
+# a game waits this long for the services it needs (Node.start), then one line, exit 2; a slow or
+# loaded lab machine (services started by hand, or at nice 19 under load 30: over 30 s) sets more
+WAIT_FOR_S = float(os.environ.get("PAIRPLAY_WAIT_FOR_S", "30"))
 LOG_QUERY = "log"
 SENT_QUERY = "sent"
 
@@ -67,6 +73,42 @@ def answer_sent(outbox: Outbox, name: str, query) -> None:
         items = [(k, p) for k, p in outbox.sent if decode_event(p).seq > after]
         Bus.answer(query, [msgspec.msgpack.encode((name, items))])
     outbox.call(reply)
+
+
+def waiting_for(services, timeout_s: float = WAIT_FOR_S) -> str:
+    """What a process's first line says it waits for (issue 12: a wait is announced and has a deadline)."""
+    return f"waiting up to {timeout_s:g} s for: {', '.join(services)}" if services else ""
+
+
+GAME_GONE_S = 30.0  # a service whose session's game left the bus this long ago ends (GameWatch)
+
+
+class GameWatch:
+    """Whether the session's game left the bus for good: its liveliness token was seen, then gone
+    for `gone_s` (the session's settle time: a crashed game restarted sooner is back in time).
+
+    A service ends when the game ends the session (SessionEnded). One that missed it (its link
+    was cut when it came, the session's process ended meanwhile) waited for ever: in the
+    four-host test the robot bridge or the participant was still running 60 s after the
+    session's end. The token is Zenoh's liveliness, dropped with a dead process's or a cut
+    link's session, so this holds whatever the link did. The watcher runs on Zenoh's thread
+    and only notes a time."""
+
+    def __init__(self, bus: Bus, session: str, gone_s: float = GAME_GONE_S, clock=time.monotonic):
+        from pairplay.schemas.keys import alive_key
+        self.gone_s, self.clock = gone_s, clock
+        self.seen = False
+        self.gone_since: float | None = None
+        bus.watch_alive(alive_key(session, "game"), self._on_token)
+
+    def _on_token(self, _key: str, up: bool) -> None:
+        if up:
+            self.seen, self.gone_since = True, None
+        elif self.seen and self.gone_since is None:
+            self.gone_since = self.clock()
+
+    def gone(self) -> bool:
+        return self.gone_since is not None and self.clock() - self.gone_since >= self.gone_s
 
 
 class Stopped(Exception):
@@ -108,10 +150,11 @@ class Node:
         self.stop = stop if stop is not None else threading.Event()
         self.inbox = Inbox()
         self.outbox = Outbox(bus, logic.name, keep=True)  # a restarted recorder may ask what we sent
-        self._overlap = 0
         self.resumed_events = 0
         self.thread: threading.Thread | None = None
         self._lock = threading.RLock()  # the Node's thread, or the session ending it from outside
+        self.game_gone_s = GAME_GONE_S  # see GameWatch
+        self.game_watch: GameWatch | None = None
     def _on_message(self, key: str, payload: bytes) -> None:
         self.inbox.put(key, payload)  # Zenoh's thread: hand over, never wait
 
@@ -133,7 +176,7 @@ class Node:
         for e in events:
             self.outbox.send(event_key(self.session, e.source, type(e).__name__), encode_event(e))
 
-    def start(self, wait_for: tuple[str, ...] = (), wait_timeout_s: float = 30.0) -> None:
+    def start(self, wait_for: tuple[str, ...] = (), wait_timeout_s: float = WAIT_FOR_S) -> None:
         """Subscribe, announce, catch up; with `wait_for`, first wait for those services' tokens.
         Raises Stopped if the stop flag is set meanwhile."""
         if getattr(self.logic, "by_tag", False):
@@ -144,6 +187,8 @@ class Node:
             self.bus.subscribe(session_keys(self.session), self._on_message, self._on_miss)
         self.bus.queryable(query_key(self.session, self.logic.name, SENT_QUERY), self.inbox.control)
         self.bus.alive(alive_key(self.session, self.logic.name))
+        if self.logic.name != "game":
+            self.game_watch = GameWatch(self.bus, self.session, self.game_gone_s)
         if wait_for:
             self.wait_for(wait_for, wait_timeout_s)
         recorded = fetch_log(self.bus, self.session, stop=self.stop) if self.resume else []
@@ -151,7 +196,6 @@ class Node:
             raise Stopped(self.logic.name)
         if not any(type(e).__name__ == "SessionStarted" for e in recorded):
             recorded = []  # the session has not started: nothing to catch up with
-        self._overlap = len(self.inbox)
         announce = ServiceStarted(service=self.logic.name, version=__version__, resumed_events=len(recorded))
         if recorded:
             log.info("%s resumes from %d recorded events", self.logic.name, len(recorded))
@@ -204,11 +248,8 @@ class Node:
         if key is None:  # a restarted recorder asks what we sent
             answer_sent(self.outbox, self.logic.name, payload)
             return True
-        overlap = self._overlap > 0
-        if overlap:
-            self._overlap -= 1
         with self._lock:
-            self.publish(self.driver.receive(key, payload, overlap=overlap))
+            self.publish(self.driver.receive(key, payload))
         return True
 
     def run(self, stop: threading.Event | None = None) -> None:
@@ -218,7 +259,13 @@ class Node:
                 self.step()
             except Exception:  # a bug must not kill the service's only thread (the Driver records logic errors)
                 log.exception("%s: unexpected error; going on", self.logic.name)
+            if self.game_watch is not None and self.game_watch.gone():
+                log.warning("%s: the session's game left the bus %.0f s ago without this service seeing the "
+                            "session's end (a cut link?); stopping", self.logic.name, self.game_watch.gone_s)
+                break
         self.publish(self.driver.tick(self.inbox.take_shed(), force=True))
+        if self.driver.guard.skipped:
+            log.info("%s skipped %d deliveries its log already held", self.logic.name, self.driver.guard.skipped)
 
     def run_in_thread(self, stop: threading.Event | None = None) -> threading.Thread:
         self.thread = threading.Thread(target=self.run, args=(stop,), name=f"pairplay-{self.logic.name}", daemon=True)

@@ -301,6 +301,14 @@ def test_sigterm_exit_times_in_every_state(tmp_path):
     assert max(times.values()) < 2.0
 
 
+def recorder_priority() -> None:
+    """SOAK_RECORDER_NICE=N: the killed recorder runs at niceness N whatever the test's own (the
+    README's bound is about a recorder at normal priority on a machine loaded by others: run the
+    test under `nice -n 19` with SOAK_RECORDER_NICE=0; lowering niceness needs root)."""
+    if "SOAK_RECORDER_NICE" in os.environ:
+        os.setpriority(os.PRIO_PROCESS, 0, int(os.environ["SOAK_RECORDER_NICE"]))
+
+
 def test_recorder_killed_under_load_loses_at_most_the_last_tenth_of_a_second(tmp_path):
     """A recorder process under a steady 20,000 events/s is SIGKILLed at a random moment;
     the oldest event missing from its recovered file, by its publish time, against the kill."""
@@ -311,7 +319,7 @@ def test_recorder_killed_under_load_loses_at_most_the_last_tenth_of_a_second(tmp
             endpoint = bus.locators()[0]
             p = subprocess.Popen([sys.executable, "-m", "pairplay", "run", "recorder", "--session", session,
                                   "--out", str(tmp_path), "--connect", endpoint],
-                                 stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+                                 stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, preexec_fn=recorder_priority)
             key = event_key(session, "console", "QuestionnaireAnswered")
             while not bus.alive_now(f"pairplay/{session}/_alive/recorder"):
                 time.sleep(0.05)
@@ -339,6 +347,8 @@ def test_recorder_killed_under_load_loses_at_most_the_last_tenth_of_a_second(tmp
             ages.append(round(age_ms, 1))
             worst_ms = max(worst_ms, age_ms)
     report("recorder_kill_under_load", {"kills": len(ages) or 0, "events_per_s": 20_000, "lost_events": lost_total,
+                                        "recorder_nice": os.environ.get("SOAK_RECORDER_NICE", "inherited"),
+                                        "load": os.getloadavg()[0],
                                         "oldest_lost_ms_max": round(worst_ms, 1), "oldest_lost_ms": ages,
                                         "recorded_behind_ms": behind})
     assert worst_ms <= 100

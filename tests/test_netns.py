@@ -70,7 +70,8 @@ def link(host: str, up: bool) -> None:
 
 
 def test_four_hosts_and_5_s_cuts_of_the_robot_and_the_recorder_links(hosts, tmp_path):
-    env = dict(os.environ, PYTHONUNBUFFERED="1")
+    # the game waits for the other hosts' services as long as they may take to start on a loaded VM
+    env = dict(os.environ, PYTHONUNBUFFERED="1", PAIRPLAY_WAIT_FOR_S="240")
     py = [sys.executable, "-m", "pairplay"]
     server = subprocess.Popen(in_ns("server", *py, "session", "--participant", "sim:ashley", "--rounds", "60",
                                     "--session", "ns1", "--out", str(tmp_path / "server"), "--external", "robot",
@@ -90,7 +91,10 @@ def test_four_hosts_and_5_s_cuts_of_the_robot_and_the_recorder_links(hosts, tmp_
                              stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, env=env)
     t0 = time.monotonic()
     try:
-        time.sleep(2.0)
+        # the cuts come once the game is under way (its events are being recorded): at load 20-40 the
+        # processes took longer to start than the fixed 2 s this waited, the recorder's host was cut
+        # before it had joined, and the game gave up waiting for it
+        wait_recording(tmp_path / "ns1.mcap", server)
         link("robot", False)  # the robot PC's cable is pulled ...
         time.sleep(5.0)
         link("robot", True)  # ... and put back
@@ -109,14 +113,34 @@ def test_four_hosts_and_5_s_cuts_of_the_robot_and_the_recorder_links(hosts, tmp_
     assert "10.212." in first  # the real endpoints, on the namespaces' addresses only
     assert server.returncode == 0, err[-1500:]
     path = tmp_path / "ns1.mcap"
-    log, events, made, acted = check_record(path)
+    # without --recover what was on the robot's cut link is lost (Zenoh keeps no history): every
+    # suggestion has its one RobotActed or is counted as not reported, none doubled, none silently missing
+    log, events, made, acted = check_record(path, counted_ok=True)
     figures = {"test": "netns_robot_and_recorder_cuts_5s", "rounds": 60, "seconds": round(took, 1), "suggestions": len(made),
-               "robot_acted": len(acted), "events": len(events)}
+               "robot_acted": len(acted), "robot_not_reported": not_reported(events), "events": len(events),
+               "load": os.getloadavg()[0]}
     report(figures)
 
 
-def check_record(path):
-    """Nothing lost or doubled, one RobotActed per suggestion, verified."""
+def wait_recording(path, server, timeout_s: float = 240.0) -> None:
+    """Until the recording holds more than its start (the game is playing), or the server ended."""
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline and server.poll() is None:
+        if path.exists() and path.stat().st_size > 50_000:
+            return
+        time.sleep(0.1)
+
+
+def not_reported(events) -> int:
+    """Suggestions counted in the file as without a RobotActed (the bridge's, the session's or the
+    recorder's MessageRejected counts: "<n> messages refused ...: shed unread (... not reported ...)")."""
+    return sum(int(e.reason.split()[0]) for e in events if isinstance(e, ev.MessageRejected)
+               and e.offending_source == "robot" and ("not reported" in e.reason or "not received" in e.reason))
+
+
+def check_record(path, counted_ok: bool = False):
+    """Nothing lost or doubled, one RobotActed per suggestion (`counted_ok`: or counted as not
+    reported), verified."""
     log = read_log(path)
     assert not log.truncated and not log.bad
     events = [r.event for r in log.events]
@@ -125,7 +149,14 @@ def check_record(path):
         assert seqs == list(range(seqs[0], seqs[0] + len(seqs))) and len(set(seqs)) == len(seqs), source
     made = [e for e in events if isinstance(e, ev.SuggestionMade)]
     acted = [e for e in events if type(e).__name__ == "RobotActed"]
-    assert sorted(a.suggestion_seq for a in acted) == sorted(m.seq for m in made)
+    if counted_ok:
+        by = {}
+        for a in acted:
+            by[a.suggestion_seq] = by.get(a.suggestion_seq, 0) + 1
+        assert max(by.values()) == 1 and set(by) <= {m.seq for m in made}
+        assert len(made) - len(by) == not_reported(events)
+    else:
+        assert sorted(a.suggestion_seq for a in acted) == sorted(m.seq for m in made)
     assert verify_recording(path).ok
     return log, events, made, acted
 

@@ -18,8 +18,16 @@ leaves the bus.
 
 RobotActed is an observation of the world, not a function of the log: a
 replay or verify never recomputes it (the bridge is not a replayable logic).
-A restarted bridge does not perform old suggestions again: it takes
-suggestions from the moment it joins.
+A bridge that joins a session under way (restarted after a crash: `pairplay
+robot ... --session S` again) does not perform old suggestions again. It reads
+the recorder's log first (services/runner.py `fetch_log`): its numbering
+continues the log's last RobotActed (a bridge starting again from 1 had every
+report refused as a repeat), the log is its cut point (services/guard.py: what
+a recovering bus's caches replay to a late joiner is skipped, not performed),
+every SuggestionMade of the log without its RobotActed is counted as not
+reported ("made before this robot bridge joined"), and a log that holds the
+session's end ends the bridge at once (it waited for ever for an end that had
+passed). It then takes suggestions from the moment it joins.
 """
 
 from __future__ import annotations
@@ -27,6 +35,7 @@ from __future__ import annotations
 import logging
 import threading
 import time
+from collections import Counter
 from typing import Callable
 
 from pairplay import __version__
@@ -37,6 +46,7 @@ from pairplay.schemas.robot import BoardCalibration, RobotActed, RobotConfig
 
 from pairplay.services.bus import Bus, Deadline, Inbox, Outbox, deadline_of
 from pairplay.services.node import Driver, Rejected
+from pairplay.services.runner import GAME_GONE_S, GameWatch, fetch_log
 from pairplay.services.robot.backends import open_robot
 from pairplay.services.robot.driver import RobotDriver, Suggestion
 
@@ -97,6 +107,8 @@ class RobotBridge:
         self.logic = BridgeLogic(self._perform)
         self.shell = Driver(self.logic, session, clock)
         self.thread: threading.Thread | None = None
+        self.game_gone_s = GAME_GONE_S  # see runner.GameWatch
+        self.game_watch: GameWatch | None = None
 
     def _perform(self, suggestion: Suggestion) -> None:
         if self.robot is None:
@@ -143,18 +155,50 @@ class RobotBridge:
                                             f"robot:{self.backend}", payload=excerpt.encode()))
 
     # -- lifecycle ---------------------------------------------------------------------------
-    def start(self) -> "RobotBridge":
-        """Open the robot, subscribe, announce: the game may start once our token is seen."""
+    def start(self, stop: threading.Event | None = None) -> "RobotBridge":
+        """Open the robot, subscribe, catch up with a session under way (see rule), announce:
+        the game may start once our token is seen. `stop` ends the wait for the log."""
         self.robot = open_robot(self.robot_url, self._on_acted, config=self._config,
                                 calibration=self._calibration, on_rejected=self._on_robot_rejected)
         for tag in self.logic.listens:  # Zenoh then does not even send the others here
             self.bus.subscribe(f"{session_keys(self.session)[:-2]}*/{tag}", self._inbox.put)
         self.bus.alive(alive_key(self.session, NAME))
+        self.game_watch = GameWatch(self.bus, self.session, self.game_gone_s)
         self.backend = self.robot.transport.url
-        announce = ev.ServiceStarted(service=f"{NAME} {self.backend}", version=__version__)
+        recorded = fetch_log(self.bus, self.session, stop=stop)
+        if not any(isinstance(e, ev.SessionStarted) for e in recorded):
+            recorded = []  # the session has not started: nothing to catch up with
+        announce = ev.ServiceStarted(service=f"{NAME} {self.backend}", version=__version__,
+                                     resumed_events=len(recorded))
         with self._lock:
+            unreported = self._resume(recorded)
             self._publish(self.shell._stamp([announce]))
+            if unreported:
+                why = "made before this robot bridge joined (the one before it crashed, or none was on the bus)"
+                log.warning("robot: %d suggestion(s) of the log were never reported: %s", unreported, why)
+                shed = Counter({(NAME, f"suggestion not reported, {why}"): unreported})
+                self._publish(self.shell.tick(shed, force=True))
         return self
+
+    def _resume(self, recorded: list[Event]) -> int:
+        """Take a session under way from its log (see rule): continue the numbering, note the
+        log's inputs as the cut point, end if the session has; how many suggestions of the log
+        no RobotActed reported."""
+        own = [e for e in recorded if e.source == NAME]
+        self.shell.seq = max([self.shell.seq] + [e.seq for e in own])
+        acted = {e.suggestion_seq for e in own if isinstance(e, RobotActed)}
+        unreported = 0
+        for e in recorded:
+            tag = type(e).__name__
+            if e.source == NAME or tag not in self.logic.listens or e.session != self.session:
+                continue
+            self.shell.guard.note(event_key(e.session, e.source, tag), e)
+            if isinstance(e, ev.SuggestionMade) and e.seq not in acted:
+                unreported += 1
+            elif isinstance(e, ev.SessionEnded):
+                self.logic.done = True
+        self.shell.guard.cut = dict(self.shell.guard.last_seq)
+        return unreported
 
     def step(self, timeout_s: float = 0.1) -> bool:
         item = self._inbox.get(timeout_s)
@@ -170,8 +214,14 @@ class RobotBridge:
         return True
 
     def run(self, stop: threading.Event) -> None:
+        orphaned = False
         while not stop.is_set() and not self.logic.done:
             self.step()
+            if self.game_watch is not None and self.game_watch.gone():
+                log.warning("robot: the session's game left the bus %.0f s ago without the bridge seeing the "
+                            "session's end (a cut link?); stopping", self.game_watch.gone_s)
+                orphaned = True
+                break
         # Messages from different services may overtake each other on their way here (a
         # SessionEnded before the last SuggestionMade): go on until the bus is quiet.
         while self.step(timeout_s=0.0 if stop.is_set() else END_QUIET_S):
@@ -181,6 +231,8 @@ class RobotBridge:
         if stop.is_set():
             deadline = deadline_of(stop)
             self.close(deadline.left(STOPPED_RESERVE_S + 0.1, min(self.settle_s, STOPPED_SETTLE_S)), deadline)
+        elif orphaned:  # nobody records what the robot still reports: do not wait for it
+            self.close(min(self.settle_s, STOPPED_SETTLE_S))
         else:
             self.close(self.settle_s)
 

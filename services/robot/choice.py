@@ -32,8 +32,9 @@ def check_choice(choice: RobotChoice) -> None:
     load_calibration(choice.calibration)
 
 
-def start_bridge(bus: Bus, session: str, choice: RobotChoice) -> RobotBridge:
-    """A started RobotBridge for `session` on `bus`; ValueError on a bad option or file."""
+def start_bridge(bus: Bus, session: str, choice: RobotChoice, stop=None) -> RobotBridge:
+    """A started RobotBridge for `session` on `bus`; ValueError on a bad option or file.
+    `stop` ends its wait for the log of a session under way (RobotBridge.start)."""
     config = load_robot_config(choice.config)
     calibration = load_calibration(choice.calibration)
-    return RobotBridge(bus, session, choice.url, config=config, calibration=calibration).start()
+    return RobotBridge(bus, session, choice.url, config=config, calibration=calibration).start(stop)
