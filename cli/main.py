@@ -155,6 +155,8 @@ def main(argv: list[str] | None = None) -> int:
         verb = argv[0] if argv and argv[0] in VERBS else ""
         print(f"pairplay{' ' + verb if verb else ''}: {interrupted_what()}; nothing more was written", file=sys.stderr)
         return exit_code_of(signal_received() or signal.SIGINT)
+    finally:
+        interrupts.received = 0  # said in this call's status; a later main() in the same process starts afresh
 
 
 def signal_received() -> int:
@@ -244,6 +246,8 @@ def _main(argv: list[str]) -> int:
     configure_logging(args.verbose, args.quiet)
     module = importlib.import_module(VERBS[args.verb][0])
     try:
+        if interrupts.received:  # a signal came while loading and something swallowed its KeyboardInterrupt
+            raise KeyboardInterrupt
         code = int(module.run(args) or 0)
         signum = signal_received()
         return exit_code_of(signum) if signum else code  # stopped by a signal: its status (module rule)

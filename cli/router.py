@@ -2,7 +2,7 @@
 
 Rule: the server host runs it; the session, the recorder and the other hosts' services
 connect to it (`--connect`, client mode) and survive its restart. The first line is
-`listening <endpoints>`. Exit 0 on SIGINT/SIGTERM; a bus that cannot open (a port
+`listening <endpoints>`. Exit 130 on SIGINT, 143 on SIGTERM (cli/main.py); a bus that cannot open (a port
 in use, a bad --zenoh-config) is one line on stderr and exit 2.
 """
 

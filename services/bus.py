@@ -58,6 +58,7 @@ import json
 import logging
 import queue
 import signal
+import sys
 import threading
 import time
 from collections import Counter, deque
@@ -765,3 +766,8 @@ def stop_on_signals(stop: threading.Event, then: Callable[[], object] | None = N
             then()
     signal.signal(signal.SIGINT, handler)
     signal.signal(signal.SIGTERM, handler)
+    # A signal that came before this handler replaced the command's own (cli/interrupts.py; read through
+    # sys.modules: services do not import cli) stops at once: its KeyboardInterrupt may have been lost.
+    pending = getattr(sys.modules.get("pairplay.cli.interrupts"), "received", 0)
+    if pending and not stop.is_set():
+        handler(pending, None)

@@ -41,5 +41,6 @@ def test_a_freed_phase_array_leaves_the_process():
     if not fixed:
         pytest.skip("not glibc: mallopt is not there")
     assert kept < 5  # MiB still resident after the 15 MiB array was freed
-    _, kept_unfixed = _run("default")
-    assert kept_unfixed >= 12  # the case the fix is for: glibc's default kept it
+    # Without the fix glibc kept the 15 MiB resident in 2 of 2 runs alone (the case the fix is for), but
+    # not in one run inside the whole suite: its dynamic threshold depends on what the process freed
+    # before, so the unfixed case is not asserted; the fix's own bound is.
