@@ -96,7 +96,16 @@ def key_chunk(what: str):
     return parse
 
 
-session_id = key_chunk("session id")
+def session_id(text: str) -> str:
+    """An argparse type: a session id. A key chunk (key_chunk) that is also a safe file name: it names
+    the session's recordings (`<id>.mcap`, a restarted recorder's parts `<id>.<k>.mcap`,
+    `<id>.recovered.mcap`), so no `.` (session `x.1`'s file was part 1 of session `x`, and `--force`
+    on `x` deleted it; `.` and `..` made hidden files) and no `\\`."""
+    text = key_chunk("session id")(text)
+    if "." in text or "\\" in text:
+        raise argparse.ArgumentTypeError(
+            f"session id {text!r} must be free of . and \\: it names its recording files (<id>.mcap, <id>.<k>.mcap)")
+    return text
 
 
 def add_force(p: argparse.ArgumentParser, what: str = "existing outputs") -> None:

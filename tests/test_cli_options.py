@@ -80,3 +80,16 @@ def test_a_number_out_of_range_is_one_line_and_exit_2_before_any_work(case, caps
     assert err.count("\n") == 1 and "Traceback" not in err, err
     assert expected in err, err
     assert not any(tmp_path.iterdir())
+
+
+@pytest.mark.parametrize("sid", ["x.1", ".", "..", "a\\b", "x.recovered"])
+def test_a_session_id_that_could_name_another_sessions_file_is_refused(sid, capsys):
+    """A new user's trial (2026-11-30): `--session x.1` was taken, its file was part 1 of session x,
+    and `session --session x --force` deleted it; `.` and `..` made hidden recordings."""
+    from pairplay.cli.main import main
+
+    with pytest.raises(SystemExit) as done:
+        main(["session", "--participant", "sim:blind", "--rounds", "1", "--session", sid])
+    assert done.value.code == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "session id" in err[0] and "recording files" in err[0], err
