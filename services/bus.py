@@ -470,7 +470,10 @@ class Outbox:
                         self.sent.append((key, item))
             except Exception as err:  # a closed session, a refused key: counted, the thread goes on
                 self.failed += 1
-                log.warning("%s could not publish %s: %s", self.name, key, err)
+                # the bus closed under a stopping process (a signal at start-up): counted, INFO (README's logging
+                # rule: a WARNING is for data a running session lost or refused)
+                closing = getattr(self.bus, "_closed", False)
+                log.log(logging.INFO if closing else logging.WARNING, "%s could not publish %s: %s", self.name, key, err)
             finally:
                 with self._lock:
                     self._pending -= 1
