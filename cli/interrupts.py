@@ -23,6 +23,14 @@ the verb, its temporary outputs removed); `received` keeps which signal came,
 so the exit status says it (cli/main.py `exit_code_of`: 130 SIGINT, 143
 SIGTERM). Before, SIGTERM killed a verb without its own handler outright (no
 line, a temporary file left) while one with a handler exited 0.
+
+Once a verb's work is done (its outputs complete; `work_done`, called by a
+verb before it prints its result, and by cli/main.py when the verb returns),
+a signal stops nothing: it is recorded in `late`, and the command still
+exits 128 + its number, saying on one line that the work was done (cli/main.py).
+Before, a signal just after `rebuild` wrote its outputs exited 130 with no
+line at all (the interpreter's teardown met it), or said "nothing more was
+written" for outputs that were all there.
 """
 
 from __future__ import annotations
@@ -40,6 +48,20 @@ def _compiler_lock():
 
 
 received = 0  # the number of the signal that interrupted the verb (0: none yet)
+late = 0  # the number of a signal that came once the verb's work was done (work_done)
+
+
+def work_done() -> None:
+    """The verb's work is complete (module rule): from now on SIGINT/SIGTERM are recorded in `late`
+    and raise nothing. Main thread only (elsewhere: nothing to do; signals reach the main thread)."""
+    if threading.current_thread() is threading.main_thread():
+        signal.signal(signal.SIGINT, _record_late)
+        signal.signal(signal.SIGTERM, _record_late)
+
+
+def _record_late(signum, frame) -> None:
+    global late
+    late = late or signum
 
 
 class DeferredInterrupt:

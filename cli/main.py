@@ -147,16 +147,37 @@ def configure_logging(verbose: bool, quiet: bool) -> int:
     return level
 
 
-def main(argv: list[str] | None = None) -> int:
+def main(argv: list[str] | None = None, exiting: bool = False) -> int:
+    """Run one verb (module rule); its exit status. `exiting`: the process ends with this status
+    (entry): a signal after the status is decided is ignored, not left to the interpreter's teardown
+    (where Python's default handler killed the process: 130 with no line)."""
     argv = list(sys.argv[1:] if argv is None else argv)
+    in_main = threading.current_thread() is threading.main_thread()
+    saved = {s: signal.getsignal(s) for s in (signal.SIGINT, signal.SIGTERM)} if in_main else {}
     try:
-        return _main(argv)
+        code = _main(argv)
     except KeyboardInterrupt:  # a signal before the verb ran (while its modules load)
         verb = argv[0] if argv and argv[0] in VERBS else ""
         print(f"pairplay{' ' + verb if verb else ''}: {interrupted_what()}; nothing more was written", file=sys.stderr)
-        return exit_code_of(signal_received() or signal.SIGINT)
+        code = exit_code_of(signal_received() or signal.SIGINT)
+    try:
+        if in_main and code not in INTERRUPTED:
+            interrupts.work_done()  # the work is over (done, or refused): a signal now stops nothing
+            if exiting:
+                for s in saved:
+                    signal.signal(s, signal.SIG_IGN)
+            if interrupts.late:  # a signal after the work was done: its status, and one line saying so
+                verb = argv[0] if argv and argv[0] in VERBS else ""
+                done = "" if code == 0 else f" with status {code}"
+                print(f"pairplay{' ' + verb if verb else ''}: {interrupted_what(interrupts.late)} after it had "
+                      f"finished{done}; nothing was undone", file=sys.stderr)
+                code = exit_code_of(interrupts.late)
+        return code
     finally:
-        interrupts.received = 0  # said in this call's status; a later main() in the same process starts afresh
+        interrupts.received = interrupts.late = 0  # said in this call's status; a later main() starts afresh
+        if not exiting:
+            for s, handler in saved.items():
+                signal.signal(s, handler)
 
 
 def signal_received() -> int:
@@ -174,9 +195,10 @@ def exit_code_of(signum: int) -> int:
     return 128 + signum
 
 
-def interrupted_what() -> str:
-    """`interrupted (Ctrl-C)` or `interrupted (SIGTERM)`: the start of a stopped verb's line."""
-    signum = signal_received()
+def interrupted_what(signum: int = 0) -> str:
+    """`interrupted (Ctrl-C)` or `interrupted (SIGTERM)`: the start of a stopped verb's line
+    (`signum`, else the signal that stopped the verb)."""
+    signum = signum or signal_received()
     return "interrupted (Ctrl-C)" if signum in (0, signal.SIGINT) else f"interrupted ({signal.Signals(signum).name})"
 
 
@@ -204,7 +226,7 @@ def entry() -> None:
     # (below): its report of them ("leaked semaphore objects") is that clean-up, not a fault, and would
     # add lines to an interruption's one line. The tracker is a child process: it reads this variable.
     os.environ["PYTHONWARNINGS"] = ",".join(filter(None, (os.environ.get("PYTHONWARNINGS"), QUIET_TRACKER)))
-    code = main()
+    code = main(exiting=True)
     if code in INTERRUPTED or _threads_left() or _signalled():
         atexit._run_exitfuncs()  # what was registered to run at exit still runs (multiprocessing's clean-up)
         for stream in (sys.stdout, sys.stderr):
@@ -245,16 +267,25 @@ def _main(argv: list[str]) -> int:
         return 2
     configure_logging(args.verbose, args.quiet)
     module = importlib.import_module(VERBS[args.verb][0])
+    running = code = None
     try:
         if interrupts.received:  # a signal came while loading and something swallowed its KeyboardInterrupt
             raise KeyboardInterrupt
+        running = True
         code = int(module.run(args) or 0)
-        signum = signal_received()
-        return exit_code_of(signum) if signum else code  # stopped by a signal: its status (module rule)
+        stopped = signal_received()  # at once: a signal the verb's own handler (a bus verb's) met while it ran
+        interrupts.work_done()
+        if stopped:
+            return exit_code_of(stopped)  # stopped by a signal: its status (module rule); the verb said so
+        interrupts.late = interrupts.late or signal_received()  # came once it had returned: main() says so
+        return code
     except BrokenPipeError:  # the reader went away (`pairplay combine ... | head`): not an error of ours
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())  # no second error at exit's flush
         return 0
-    except KeyboardInterrupt:
+    except KeyboardInterrupt as err:
+        if code is not None or (running and err.__traceback__.tb_next is None):  # raised here: run had returned
+            interrupts.late = interrupts.late or interrupts.received or signal.SIGINT
+            return code or 0
         print(f"pairplay {args.verb}: {interrupted_what()}; nothing more was written", file=sys.stderr)
         return exit_code_of(signal_received() or signal.SIGINT)
     except SystemError as err:  # Ctrl-C inside a compiled kernel: numba reports it as a SystemError around it

@@ -10,14 +10,15 @@ output may exist unless --force, and every REC must hold a session (a
 SessionStarted: replay/check.py `read_session`; a stub left by an old
 version's failed start, another program's MCAP) (one line, exit 2, nothing
 written: the others are not rebuilt either, so a rerun after removing it
-writes them all). Writing is all or nothing (`all_or_nothing`): a full disk or
-Ctrl-C part way removes the outputs this run had made, and the error says so.
+writes them all). Writing is all or nothing (pairplay/outputs.py `all_or_nothing`): a full disk
+or a signal part way removes the outputs and folders this run had made, and
+the error says so. The result lines are printed once everything is written
+(cli/interrupts.py `work_done`: a signal after that is reported, nothing undone).
 """
 
 from __future__ import annotations
 
 import argparse
-import contextlib
 from pathlib import Path
 
 from pairplay.cli.args import add_force
@@ -32,8 +33,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from pairplay.cli.interrupts import work_done
     from pairplay.errors import InputError, OutputError
-    from pairplay.outputs import check_folder, check_outputs
+    from pairplay.outputs import all_or_nothing, check_folder, check_outputs
     from pairplay.replay.check import check_recording
     from pairplay.replay.rebuild import output_paths, rebuild_recording
 
@@ -56,37 +58,15 @@ def run(args: argparse.Namespace) -> int:
     outputs = list(planned) + ([figure] if done and not args.no_plot else [])
     check_outputs(outputs, args.force)
     with all_or_nothing(outputs):
-        report(done, out, figure, args)
+        lines = write_all(done, out, figure, args)
+    work_done()  # everything is written: a signal from now on is reported, and undoes nothing
+    print("\n".join(lines))
     return 0
 
 
-@contextlib.contextmanager
-def all_or_nothing(outputs: list[Path]):
-    """The outputs are written all, or none of those that did not exist before: an error (a full disk)
-    or Ctrl-C part way removes the ones this run had made; an OSError then says so, and names, with
-    --force, the files it had already replaced (each complete: pairplay.outputs), which stay."""
-    def stamp(p: Path):
-        st = p.stat()
-        return st.st_ino, st.st_mtime_ns
-    before = {p: stamp(p) for p in outputs if p.exists()}
-    try:
-        yield
-    except BaseException as err:
-        made = [p for p in outputs if p not in before and p.exists()]
-        for p in made:
-            p.unlink(missing_ok=True)
-        replaced = [str(p) for p in before if p.exists() and stamp(p) != before[p]]
-        if isinstance(err, OSError):
-            note = f"removed the {len(made)} outputs written before it" if made else "nothing written"
-            if replaced:
-                note += f"; already replaced (complete, kept): {', '.join(replaced)}"
-            raise OSError(err.errno, f"{err.strerror or err}; {note}", err.filename) from err
-        raise
-
-
-def report(done, out: Path, figure: Path, args: argparse.Namespace) -> None:
-    """Write each rebuilt recording's outputs and the figure, then say what was written (only once
-    all of it is: `all_or_nothing` may remove it)."""
+def write_all(done, out: Path, figure: Path, args: argparse.Namespace) -> list[str]:
+    """Write each rebuilt recording's outputs and the figure; the lines saying what was written
+    (printed by the caller only once all of it is: `all_or_nothing` may remove it)."""
     from pairplay.replay.rebuild import write_outputs
     lines = []
     for rebuilt in done:
@@ -105,7 +85,7 @@ def report(done, out: Path, figure: Path, args: argparse.Namespace) -> None:
         lines.append("  " + ", ".join(str(p) for p in paths))
     if done and not args.no_plot:
         lines.append(f"  {plot_curves(done, figure, args.force)}")
-    print("\n".join(lines))
+    return lines
 
 
 def plot_curves(rebuilt, path: Path, force: bool = False) -> Path:

@@ -249,3 +249,35 @@ def output_folder(path: str | Path, force: bool = False) -> Iterator[Path]:
             shutil.rmtree(tmp, ignore_errors=True)
         if not done:
             _remove_empty(created)
+
+
+@contextlib.contextmanager
+def all_or_nothing(outputs: list[Path]) -> Iterator[None]:
+    """The files `outputs` (each written by output_file/output_path in the block) are written all, or
+    none of those that did not exist before: an error (a full disk) or a signal part way removes the
+    ones this run had made, and the folders it had made for them (an interrupted `rebuild --out new/`
+    left new/ behind, empty). An OSError then says so, and names, with --force, the files it had
+    already replaced (each complete: output_path), which stay."""
+    outputs = [Path(p) for p in outputs]
+
+    def stamp(p: Path):
+        st = p.stat()
+        return st.st_ino, st.st_mtime_ns
+    before = {p: stamp(p) for p in outputs if p.exists()}
+    folders = sorted({f for p in outputs for f in _missing_folders(p.parent)}, key=lambda f: -len(f.parts))
+    try:
+        yield
+    except BaseException as err:
+        made = [p for p in outputs if p not in before and p.exists()]
+        for p in made:
+            p.unlink(missing_ok=True)
+        for folder in folders:  # deepest first; a folder someone else filled meanwhile stays
+            with contextlib.suppress(OSError):
+                folder.rmdir()
+        replaced = [str(p) for p in before if p.exists() and stamp(p) != before[p]]
+        if isinstance(err, OSError):
+            note = f"removed the {len(made)} outputs written before it" if made else "nothing written"
+            if replaced:
+                note += f"; already replaced (complete, kept): {', '.join(replaced)}"
+            raise OSError(err.errno, f"{err.strerror or err}; {note}", err.filename) from err
+        raise

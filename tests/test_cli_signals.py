@@ -114,3 +114,96 @@ def test_a_signal_ends_a_verb_with_128_plus_its_number_at_any_moment(row, ran):
     assert len(ours) <= 1, r.stderr  # one line of ours at most (a bus verb says it on stdout)
     said = r.stdout + r.stderr
     assert row.sig.name in said or "Ctrl-C" in said, (row.name, said[-800:])
+
+
+@pytest.fixture
+def command_handlers():
+    """The pairplay command's own SIGINT/SIGTERM handlers (pairplay/__main__.py installs them), for an
+    in-process main(); pytest's come back after (main restores what it found)."""
+    from pairplay.cli.interrupts import DeferredInterrupt
+    saved = {s: signal.getsignal(s) for s in (signal.SIGINT, signal.SIGTERM)}
+    DeferredInterrupt().install()
+    yield
+    for s, handler in saved.items():
+        signal.signal(s, handler)
+
+
+def _signal_after(monkeypatch, module, name: str, sig: signal.Signals) -> None:
+    """`module.name` runs, then the process gets `sig` (a real signal, to this process)."""
+    original = getattr(module, name)
+
+    def then_signal(*args, **kwargs):
+        result = original(*args, **kwargs)
+        os.kill(os.getpid(), sig)
+        return result
+    monkeypatch.setattr(module, name, then_signal)
+
+
+def _files(root: Path) -> set[str]:
+    return {str(p.relative_to(root)) for p in root.rglob("*")}
+
+
+@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM], ids=["SIGINT", "SIGTERM"])
+def test_rebuild_interrupted_part_way_leaves_nothing_it_created_not_even_its_folder(
+        sig, tmp_path, monkeypatch, capsys, command_handlers):
+    """Before: the outputs were removed but the --out folder rebuild had made stayed, empty."""
+    import pairplay.replay.rebuild as rebuild
+    shutil.copy(SAMPLE, tmp_path / "a.mcap")
+    before = _files(tmp_path)
+    _signal_after(monkeypatch, rebuild, "write_outputs", sig)  # one recording's outputs are written
+    assert main(["rebuild", str(tmp_path / "a.mcap"), "--out", str(tmp_path / "new" / "deeper")]) == 128 + sig
+    out, err = capsys.readouterr()
+    assert _files(tmp_path) == before
+    assert out == ""  # no result line for outputs that were removed
+    said = "Ctrl-C" if sig == signal.SIGINT else "SIGTERM"
+    assert err.splitlines() == [f"pairplay rebuild: interrupted ({said}); nothing more was written"]
+
+
+def test_rebuild_interrupted_keeps_a_folder_that_was_there(tmp_path, monkeypatch, capsys, command_handlers):
+    import pairplay.cli.rebuild as cli_rebuild
+    shutil.copy(SAMPLE, tmp_path / "a.mcap")
+    (tmp_path / "out").mkdir()
+    _signal_after(monkeypatch, cli_rebuild, "plot_curves", signal.SIGINT)  # everything but the result line
+    assert main(["rebuild", str(tmp_path / "a.mcap"), "--out", str(tmp_path / "out")]) == 130
+    assert list((tmp_path / "out").iterdir()) == []
+
+
+@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM], ids=["SIGINT", "SIGTERM"])
+def test_a_signal_after_the_work_is_done_exits_128_plus_n_saying_the_work_is_complete(
+        sig, tmp_path, monkeypatch, capsys, command_handlers):
+    """Before: 130 with no line at all (a signal just after rebuild had written everything), or "nothing
+    more was written" said of outputs that were all there. Now: the results stand, are printed, and one
+    line says the signal came after the verb had finished; the status is still the signal's."""
+    import builtins
+
+    import pairplay.cli.rebuild as cli_rebuild
+    shutil.copy(SAMPLE, tmp_path / "a.mcap")
+    _signal_after(monkeypatch, builtins, "print", sig)  # while it prints its result: the work is done
+    assert main(["rebuild", str(tmp_path / "a.mcap"), "--out", str(tmp_path / "out")]) == 128 + sig
+    monkeypatch.undo()
+    out, err = capsys.readouterr()
+    assert "a.mcap: " in out and "learning-curves.png" in out
+    assert {p.name for p in (tmp_path / "out").iterdir()} == {"a.policy.json", "a.curve.csv", "learning-curves.png"}
+    said = "Ctrl-C" if sig == signal.SIGINT else "SIGTERM"
+    assert err.splitlines() == [f"pairplay rebuild: interrupted ({said}) after it had finished; nothing was undone"]
+    assert cli_rebuild  # the verb's module was the one run
+
+
+@pytest.mark.parametrize("verb", ["rebuild", "recover", "combine"])
+def test_every_verb_a_signal_after_its_run_returned_is_one_line_and_its_status(
+        verb, tmp_path, monkeypatch, capsys, command_handlers):
+    """The same rule for every verb: the signal arrives once the verb's run() returned."""
+    shutil.copy(SAMPLE, tmp_path / "a.mcap")
+    assert main(["rebuild", str(tmp_path / "a.mcap"), "--out", str(tmp_path / "rb"), "--no-plot"]) == 0
+    policy = str(tmp_path / "rb" / "a.policy.json")
+    args = {"rebuild": ["rebuild", str(tmp_path / "a.mcap"), "--out", str(tmp_path / "rb2"), "--no-plot"],
+            "recover": ["recover", str(tmp_path / "a.mcap"), "--out", str(tmp_path / "r.mcap")],
+            "combine": ["combine", policy, "-o", str(tmp_path / "m.json")]}[verb]
+    capsys.readouterr()
+    import pairplay.cli.main as cli_main
+    _signal_after(monkeypatch, cli_main, "signal_received", signal.SIGTERM)  # asked as soon as run() returned
+    code = main(args)
+    out, err = capsys.readouterr()
+    lines = err.splitlines()
+    assert code == 143, (out, err)
+    assert len(lines) == 1 and lines[0].startswith(f"pairplay {verb}: interrupted (SIGTERM) after it had finished"), err
