@@ -56,7 +56,7 @@ def partial_reason(fold: SessionFold, note: str = "", recovered: dict[str, str] 
     if e is None:
         why.append(f"no SessionEnded: the recording stops after {len(fold.rounds)} rounds")
     elif e.reason != "completed":
-        where = f" in round {e.round}, turn {e.turns_in_round}" if e.round >= 0 else ""
+        where = f" in round {e.round + 1} after {e.turns_in_round} turns" if e.round >= 0 else ""  # from 1, as the board
         why.append(f"{e.reason}{f' ({e.detail})' if e.detail else ''} after {e.rounds_played} of "
                    f"{fold.config.rounds} rounds{where}")
     if note:

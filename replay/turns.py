@@ -73,10 +73,10 @@ def turns_from_events(events, source: str = "", note: str = "") -> RecordedTurns
             picks.append(2 * e.turns)
         elif isinstance(e, ev.TurnResolved):
             if partner is None:
-                skipped.append(f"round {e.round} turn {e.turn}: no RoundStarted before it")
+                skipped.append(f"round {e.round + 1} turn {e.turn + 1}: no RoundStarted before it")
                 continue
             if partner[e.first] >= N_CARDS:  # a malformed deal: the first card's face appears once
-                skipped.append(f"round {e.round} turn {e.turn}: card {e.first} has no partner in the deal")
+                skipped.append(f"round {e.round + 1} turn {e.turn + 1}: card {e.first} has no partner in the deal")
                 continue
             s = made.get((e.round, e.turn))
             p = perceived.get((e.round, e.turn))

@@ -23,6 +23,17 @@ not know (a newer pairplay's) are counted and named, and the verdict is about
 the events this version derives. A file with a damaged part (a chunk that fails
 its CRC, chunks out of order, a bad data-section or summary CRC: replay/mcapscan.py)
 or a file recovered from one is never verified as whole: FAIL, naming the part.
+
+The last line (`Verification.verdict`) says in one line whether the events
+verified and how far: `verify: PASS` for a whole session; for a session
+stopped early `verify: PASS up to where the session stopped (...)`; for a file
+cut by a crash (or recovered from one) without its session's end `verify: PASS
+as far as the file goes: the file is cut, the session's end is missing
+(verified N events, rounds 1-K of R recorded ...)`, and a cut file whose end
+is in it (only its index was lost) says that too. Rounds are counted from 1, as
+the board shows them. A verdict about what is there, so the exit status is 0
+for all of these (as for a stopped session), 1 for FAIL (cli/replay.py).
+Before, a cut file said a plain `verify: PASS`.
 """
 
 from __future__ import annotations
@@ -31,7 +42,7 @@ import json
 from dataclasses import dataclass, field
 
 from pairplay.replay.reader import read_log
-from pairplay.schemas.events import SessionEnded, SessionStarted
+from pairplay.schemas.events import RoundEnded, SessionEnded, SessionStarted
 
 from pairplay.services.game import GameLogic
 from pairplay.services.learner import LearnerLogic
@@ -59,6 +70,26 @@ class Verification:
     unknown: dict[str, int] = field(default_factory=dict)  # events of types this version does not know
     stopped: str = ""  # how a session that did not complete stopped ("" if it completed)
     reach: str = ""  # how far it was verified, in words
+    events: int = 0  # events of the session in the file
+    rounds: int = 0  # rounds the session was configured for
+    rounds_recorded: int = 0  # rounds whose RoundEnded is in the file
+    ended: bool = False  # the game's SessionEnded is in the file
+
+    @property
+    def verdict(self) -> str:
+        """The last line of `replay --verify` (module rule)."""
+        if not self.ok:
+            return "verify: FAIL"
+        if self.truncated and not self.ended:
+            return (f"verify: PASS as far as the file goes: the file is cut, the session's end is missing "
+                    f"(verified {self.events} events, {_rounds_words(self.rounds_recorded, self.rounds)}; "
+                    f"what came after the cut is lost)")
+        if self.truncated:
+            return (f"verify: PASS; the file is cut, after its session's end was recorded ({self.events} "
+                    f"events verified; what the cut lost came after it)")
+        if self.stopped:
+            return f"verify: PASS up to where the session stopped ({self.stopped})"
+        return "verify: PASS"
 
     @property
     def excused(self) -> bool:
@@ -104,7 +135,17 @@ def verify_events(events, source: str = "", truncated: bool = False) -> Verifica
             driver.mismatches = [m for m in driver.mismatches if "was not recomputed" not in m]
         checks.append(ServiceCheck(logic.name, recorded, driver.mismatches, len(owed)))
     how = stopped_how(end, config.rounds, truncated)
-    return Verification(source, checks, truncated, stopped=how, reach=reach_of(end, config.rounds, how))
+    rounds_recorded = sum(1 for e in events if isinstance(e, RoundEnded) and e.source == "game")
+    return Verification(source, checks, truncated, stopped=how, reach=reach_of(end, config.rounds, how),
+                        events=len(events), rounds=config.rounds, rounds_recorded=rounds_recorded,
+                        ended=end is not None)
+
+
+def _rounds_words(done: int, rounds: int) -> str:
+    """`rounds 1-3 of 15 recorded whole` (counted from 1, as the board shows them)."""
+    if done == 0:
+        return f"no round of {rounds} recorded whole"
+    return f"round{'s 1-%d' % done if done > 1 else ' 1'} of {rounds} recorded whole"
 
 
 def stopped_how(end, rounds: int, truncated: bool) -> str:
@@ -122,7 +163,8 @@ def reach_of(end, rounds: int, how: str) -> str:
         return f"the whole session ({rounds} rounds)"
     if end is None:
         return f"up to where the recording stops ({how})"
-    where = f"in round {end.round} after {end.turns_in_round} turns" if end.round >= 0 else "before its first round"
+    # counted from 1, as the board shows them (SessionEnded.round counts from 0)
+    where = f"in round {end.round + 1} after {end.turns_in_round} turns" if end.round >= 0 else "before its first round"
     return f"up to where the session stopped: {how} after {end.rounds_played} of {rounds} rounds, {where}"
 
 

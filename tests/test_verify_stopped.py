@@ -128,3 +128,54 @@ def test_a_stop_relabelled_completed_fails():
     i = next(i for i, e in enumerate(events) if isinstance(e, ev.SessionEnded))
     events[i] = msgspec.structs.replace(events[i], reason="completed", detail="")
     assert not verify_events(events).ok
+
+
+SAMPLE = __import__("pathlib").Path(__file__).resolve().parents[1] / "recordings" / "samples" / "sim-helmut-fmt2.mcap"
+
+
+@pytest.mark.parametrize("fraction", [0.3, 0.6])
+def test_a_file_cut_by_a_crash_says_so_in_its_verdict_whole_and_after_recover(fraction, tmp_path, capsys):
+    """Before: a file cut by a crash (and the same after `pairplay recover`) said a plain `verify: PASS`.
+    Now the verdict says the file is cut, the session's end is missing, how far it verified; exit 0
+    (what it holds is right), as a session stopped by Ctrl-C."""
+    from pairplay.cli.main import main
+    data = SAMPLE.read_bytes()
+    cut = tmp_path / "cut.mcap"
+    cut.write_bytes(data[:int(len(data) * fraction)])
+    assert main(["recover", str(cut), "--out", str(tmp_path / "mended.mcap")]) == 0
+    capsys.readouterr()
+    for path in (cut, tmp_path / "mended.mcap"):
+        assert main(["replay", "--verify", str(path)]) == 0
+        last = capsys.readouterr().out.strip().splitlines()[-1]
+        assert last.startswith("verify: PASS as far as the file goes: the file is cut, the session's end is "
+                               "missing (verified "), last
+        assert " of 15 recorded whole" in last, last
+
+
+def test_a_file_cut_only_in_its_index_says_its_end_is_in_it(tmp_path, capsys):
+    from pairplay.cli.main import main
+    data = SAMPLE.read_bytes()
+    cut = tmp_path / "cut.mcap"
+    cut.write_bytes(data[:len(data) - 200])
+    assert main(["replay", "--verify", str(cut)]) == 0
+    last = capsys.readouterr().out.strip().splitlines()[-1]
+    assert last.startswith("verify: PASS; the file is cut, after its session's end was recorded"), last
+
+
+def test_a_cut_file_with_a_tampered_event_still_fails(tmp_path, capsys):
+    from pairplay.cli.main import main
+    from pairplay.services.verify import verify_events
+    events = stopped_events(CONFIG, 40)
+    moved = next(i for i, e in enumerate(events) if isinstance(e, ev.SuggestionMade))
+    events[moved] = msgspec.structs.replace(events[moved], action=(events[moved].action + 1) % 88)
+    result = verify_events(events[:60], truncated=True)
+    assert not result.ok and result.verdict == "verify: FAIL"
+    assert main  # the CLI prints result.verdict (cli/replay.py)
+
+
+def test_rounds_are_counted_from_1_in_the_verdict():
+    """The board shows round 1 first; the verdict said `in round 0` for the first round."""
+    events = stopped_events(CONFIG, 25)
+    [end] = [e for e in events if isinstance(e, ev.SessionEnded)]
+    assert end.round == 0
+    assert "in round 1 after" in verify_events(events).reach
