@@ -20,6 +20,7 @@ import threading
 from pathlib import Path
 
 from pairplay.schemas.policy import PolicyFileError
+from pairplay.outputs import check_folder
 from pairplay.services.recorder import check_new_recording
 from pairplay.services.bus import LOOPBACK_ANY_PORT, MODES, BusOptions, stop_on_signals
 
@@ -69,7 +70,7 @@ def run(args: argparse.Namespace) -> int:
         for f in (args.certfile, args.keyfile):
             if f and not Path(f).is_file():
                 raise ValueError(f"{f}: no such file")
-        out = Path(args.out) / f"{config.session}.mcap"
+        out = check_folder(args.out) / f"{config.session}.mcap"  # before the bus and the pages start
         # a person's recording is never replaced: no --force here
         check_new_recording(out, hint="choose another --session (a person's recording is never replaced)")
     except (ValueError, KeyError, PolicyFileError) as err:
@@ -107,6 +108,8 @@ def run(args: argparse.Namespace) -> int:
         print(f"pairplay lab: the session did not start: {err}", file=sys.stderr)
         return 1
     except OSError as err:  # the system refused the address (a port in use): the user's setup, exit 2
+        if err.filename is not None:  # a file, not the address: said by cli/main.py, naming it
+            raise
         print(f"pairplay lab: cannot serve the pages: {err.strerror or err} (--listen {args.listen})",
               file=sys.stderr)
         return 2

@@ -9,7 +9,9 @@ folder made for it) is removed and the target is untouched. Without `force` the 
 while we worked is not replaced. A folder of outputs (a study's report) is
 built in a temporary folder and renamed as a whole. Refusals are
 `OutputError`s naming the path, raised before any work where the caller
-checks first (`check_output`, `check_outputs`, `check_folder`). A refusal by
+checks first (`check_output`, `check_outputs`, `check_folder`: each makes the
+folders it needs and a file there, then removes them, so a place the system
+refuses is refused before the work, not after it). A refusal by
 the system while writing (a full disk, a folder one may not write in) is an
 OSError naming the user's path, never our temporary one (`_named_for_user`):
 `study --out /proc/x` named /proc/.x.<pid>.<hex>.tmp, and a full disk's
@@ -41,12 +43,32 @@ def _existing_ancestor(path: Path) -> Path:
     return p
 
 
-def _check_parent(path: Path) -> None:
+def _check_parent(path: Path, probe: bool = True) -> None:
     parent = _existing_ancestor(path)
     if not parent.is_dir():
         raise OutputError("cannot write there: a file stands where a folder is needed", parent)
     if not os.access(parent, os.W_OK | os.X_OK):
         raise OutputError("cannot write there: the folder is read-only", parent)
+    if probe:
+        _try_writing(path.absolute().parent)
+
+
+def _try_writing(folder: Path) -> None:
+    """Make `folder` (and the folders above it that are missing) and a file in it, then remove them
+    all: OutputError naming `folder` if the system refuses. os.access alone says yes where a write
+    fails (root in /proc: `session --out /proc/x` opened its bus and printed its first line, then
+    failed), so a verb's check before its work is a real one; nothing stays."""
+    created = _missing_folders(folder)
+    try:
+        try:
+            folder.mkdir(parents=True, exist_ok=True)
+            probe = _temp_name(folder / "probe")
+            probe.touch(exist_ok=False)
+            probe.unlink()
+        except OSError as err:
+            raise OutputError(f"cannot write there: {err.strerror or err}", folder) from None
+    finally:
+        _remove_empty(created)
 
 
 def check_output(path: str | Path, force: bool = False) -> Path:
@@ -85,8 +107,10 @@ def check_folder(path: str | Path) -> Path:
     if path.is_dir():
         if not os.access(path, os.W_OK | os.X_OK):
             raise OutputError("cannot write there: the folder is read-only", path)
+        _try_writing(path)
     else:
-        _check_parent(path)
+        _check_parent(path, probe=False)
+        _try_writing(path)
     return path
 
 

@@ -36,7 +36,7 @@ def check_recording(path: str | Path) -> Path:
     if not head:
         raise InputError("empty file (0 bytes), not a recording", path)
     if head != MCAP_MAGIC:
-        raise InputError("not an MCAP recording: it does not start with MCAP's magic bytes", path)
+        raise InputError("not a recording: not an MCAP file (it does not begin as one)", path)
     return path
 
 
@@ -51,9 +51,11 @@ def no_session(log) -> str:
     size = Path(log.path).stat().st_size if Path(log.path).exists() else 0
     foreign = len(log.bad) + len(log.unknown)
     if not log.events and not foreign and not log.skipped:
+        # in words a user has (not "MCAP's magic"): the recorder died before it wrote anything
         if size <= len(MCAP_MAGIC) + 2:
-            return f"holds no session: only MCAP's magic bytes ({size} bytes), no messages"
-        return f"holds no session: an MCAP file of {size} bytes with no messages{' (cut short)' if log.truncated else ''}"
+            return f"holds no session: an MCAP file with no records ({size} bytes): the recording holds nothing"
+        cut = ", cut short" if log.truncated else ""
+        return f"holds no session: an MCAP file with no messages ({size} bytes{cut}): the recording holds nothing"
     if not log.events and not log.skipped:
         topics = sorted({topic for topic, _ in log.channels.values()})[:2]
         return (f"holds no session: not a pairplay recording ({foreign} messages, none a pairplay event; "

@@ -66,7 +66,7 @@ CASES = [
     # item 4: input that is not what the verb needs
     Case("recover a missing file", ["recover", "missing.mcap"], "no such recording (missing.mcap)"),
     Case("recover a zero-byte file", ["recover", "empty.mcap"], "empty file (0 bytes)"),
-    Case("recover random bytes", ["recover", "random.mcap"], "not an MCAP recording: it does not start with MCAP's magic bytes (random.mcap)"),
+    Case("recover random bytes", ["recover", "random.mcap"], "not a recording: not an MCAP file (it does not begin as one) (random.mcap)"),
     # a binary file where a text file is wanted (a traceback before: UnicodeDecodeError, the new-user trial 2026-11-30)
     Case("sweep a binary grid file", ["sweep", "random.mcap"], "random.mcap: not TOML (not UTF-8 text)"),
     Case("protocol check a binary study file", ["protocol", "check", "random.mcap"],
@@ -74,13 +74,13 @@ CASES = [
     Case("recover a folder", ["recover", "policies"], "a folder, not a recording"),
     Case("replay a missing file", ["replay", "missing.mcap"], "no such recording"),
     Case("replay a zero-byte file", ["replay", "empty.mcap", "--speed", "max"], "empty file"),
-    Case("replay random bytes", ["replay", "random.mcap", "--speed", "max"], "not an MCAP recording"),
-    Case("verify random bytes", ["replay", "random.mcap", "--verify"], "not an MCAP recording"),
+    Case("replay random bytes", ["replay", "random.mcap", "--speed", "max"], "not a recording: not an MCAP file"),
+    Case("verify random bytes", ["replay", "random.mcap", "--verify"], "not a recording: not an MCAP file"),
     Case("view a zero-byte file", ["view", "--recording", "empty.mcap"], "empty file"),
-    Case("view random bytes", ["view", "--recording", "random.mcap"], "not an MCAP recording"),
+    Case("view random bytes", ["view", "--recording", "random.mcap"], "not a recording: not an MCAP file"),
     Case("view a session the recording does not hold",
          ["view", "--recording", "rec.mcap", "--session", "wrong", "--out", "new.rrd"], "holds no events of session wrong"),
-    Case("rebuild random bytes", ["rebuild", "random.mcap", "--out", "out"], "not an MCAP recording"),
+    Case("rebuild random bytes", ["rebuild", "random.mcap", "--out", "out"], "not a recording: not an MCAP file"),
     Case("rebuild a missing file", ["rebuild", "rec.mcap", "missing.mcap", "--out", "out"], "no such recording"),
     Case("profile a missing file", ["profile", "missing.json"], "no such policy file"),
     # item 3: an existing output is never replaced without --force; outputs never collide
@@ -159,9 +159,12 @@ CASES = [
     Case("rebuild --out on a read-only file system", ["rebuild", "rec.mcap", "--out", "ro"], "read-only", readonly=True),
     # a file holding no session (a new user's trial, 2026-11-30): recover wrote an empty file and exit 0,
     # verify said it on stdout with exit 1, rebuild of such files exit 1, view printed 3 lines
-    Case("recover MCAP's magic alone", ["recover", "magic.mcap"], "holds no session: only MCAP's magic bytes (8 bytes)"),
-    Case("recover 10 bytes", ["recover", "ten.mcap"], "holds no session: only MCAP's magic bytes (10 bytes)"),
-    Case("recover a header alone", ["recover", "header.mcap"], "holds no session: an MCAP file of"),
+    # said in a user's words (not "only MCAP's magic")
+    Case("recover MCAP's magic alone", ["recover", "magic.mcap"],
+         "holds no session: an MCAP file with no records (8 bytes): the recording holds nothing"),
+    Case("recover 10 bytes", ["recover", "ten.mcap"],
+         "holds no session: an MCAP file with no records (10 bytes): the recording holds nothing"),
+    Case("recover a header alone", ["recover", "header.mcap"], "holds no session: an MCAP file with no messages ("),
     Case("recover another program's MCAP", ["recover", "foreign.mcap"], "not a pairplay recording"),
     Case("recover a session never started", ["recover", "nostart.mcap"], "no SessionStarted (a session that never"),
     Case("verify a session never started", ["replay", "nostart.mcap", "--verify"], "holds no session"),
@@ -182,6 +185,21 @@ CASES = [
     Case("participant export an empty id", ["participant", "export", "study", ""], "participant id '' must be"),
     Case("study --out where no folder can be made", ["study", "--quiet", "--train-only", "--out", "/proc/forbidden"],
          "(/proc/forbidden)"),
+    # an output the system refuses although os.access says yes (root in /proc): refused before the bus
+    # opens and before any line (session printed "bus listening ..." first; lab served its pages and blamed
+    # --listen; run recorder printed "listening")
+    Case("session --out where no folder can be made", SIM + ["--out", "/proc/x"],
+         "cannot write there: No such file or directory (/proc/x)"),
+    Case("lab --out where no folder can be made", ["lab", "--participant", "human:p1", "--out", "/proc/x"],
+         "cannot write there: No such file or directory (/proc/x)"),
+    Case("run recorder --out where no folder can be made", ["run", "recorder", "--session", "s", "--out", "/proc/x"],
+         "cannot write there: No such file or directory (/proc/x)"),
+    Case("rebuild --out where no folder can be made", ["rebuild", "rec.mcap", "--out", "/proc/x"], "(/proc/x)"),
+    Case("recover -o where no file can be made", ["recover", "rec.mcap", "-o", "/proc/x.mcap"], "(/proc)"),
+    Case("combine -o where no file can be made", ["combine", "policies", "-o", "/proc/m.json"], "(/proc)"),
+    Case("counterfactual --out where no folder can be made", ["counterfactual", "rec.mcap", "--out", "/proc/x"],
+         "(/proc/x)"),
+    Case("sweep --out where no folder can be made", ["sweep", "grid.toml", "--out", "/proc/x"], "(/proc/x)"),
 ]
 
 
@@ -213,6 +231,8 @@ def _fixtures(root: Path) -> None:
     (root / "rebuilt").mkdir()
     (root / "rebuilt" / "rec.policy.json").write_bytes(b"the user's rebuilt policy")
     (root / "ro").mkdir()
+    (root / "grid.toml").write_text('seeds = 1\n[study]\npersonas = "blind"\ngames = 1\nrounds = 20\n'
+                                    '[grid]\npsi_decay = [0.9]\n')
     assert main(["protocol", "init", str(root / "study"), "--study", "thesis-ch7", "--quiet"]) == 0
 
 
@@ -295,6 +315,7 @@ def test_a_mistake_gets_one_line_and_changes_nothing(case, ran):
     assert len(lines) == 1, r.stderr
     verb = " ".join(case.args[:2] if case.args[0] in ("protocol", "participant") else case.args[:1])  # its action too
     assert lines[0].startswith(f"pairplay {verb}: ") and case.expect in lines[0], lines[0]
+    assert r.stdout == "", r.stdout  # refused before any work: no line before the refusal
     assert got.after == got.before, "files changed: " + str(set(got.after.items()) ^ set(got.before.items()))
 
 

@@ -205,7 +205,7 @@ def test_cli_mistakes_are_one_line_and_write_nothing(tmp_path, capsys):
     _no_turn_recording(no_turn)
     out = tmp_path / "out"
     cases = [((tmp_path / "missing.mcap",), "no such recording"), ((empty,), "empty file"),
-             ((text,), "not an MCAP recording"), ((tmp_path,), "a folder"),
+             ((text,), "not an MCAP file"), ((tmp_path,), "a folder"),
              ((no_turn,), "no resolved turn"),
              ((SAMPLE, "--policy", "same,best"), "unknown arm 'best'"),
              ((SAMPLE, "--policy", "same,same"), "given twice"),

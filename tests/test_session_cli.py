@@ -53,7 +53,7 @@ def test_bad_command_lines_get_a_clear_error(tmp_path, pairplay):
     junk = tmp_path / "junk.mcap"
     junk.write_bytes(b"junk")
     r = pairplay("rebuild", str(junk), "--out", str(tmp_path))
-    assert r.returncode == 2 and "not an MCAP recording" in r.stderr
+    assert r.returncode == 2 and "not an MCAP file" in r.stderr
     assert sorted(p.name for p in tmp_path.iterdir()) == ["junk.mcap"]  # nothing written
 
 
