@@ -207,3 +207,37 @@ def test_every_verb_a_signal_after_its_run_returned_is_one_line_and_its_status(
     lines = err.splitlines()
     assert code == 143, (out, err)
     assert len(lines) == 1 and lines[0].startswith(f"pairplay {verb}: interrupted (SIGTERM) after it had finished"), err
+
+
+GRID = 'seeds = 2\n[study]\npersonas = "blind"\ngames = 1\nrounds = 20\neval_rounds = 10\n[grid]\npsi_decay = [0.9]\n'
+
+
+def test_a_sweep_interrupted_before_any_cell_leaves_nothing(tmp_path, monkeypatch, capsys, command_handlers):
+    """Before: its folder stayed with grid.toml and an empty cells/."""
+    import pairplay.cli.sweep as cli_sweep
+    (tmp_path / "grid.toml").write_text(GRID)
+    before = _files(tmp_path)
+
+    def stopped(grid, out, **kw):
+        (Path(out) / "cells").mkdir(parents=True, exist_ok=True)
+        os.kill(os.getpid(), signal.SIGTERM)
+        time.sleep(5)  # the signal lands here
+    monkeypatch.setattr(cli_sweep, "run_sweep", stopped)
+    assert main(["sweep", str(tmp_path / "grid.toml"), "--out", str(tmp_path / "sw" / "deep"), "--quiet"]) == 143
+    assert _files(tmp_path) == before
+    assert capsys.readouterr().err.splitlines() == ["pairplay sweep: interrupted (SIGTERM); nothing more was written"]
+
+
+def test_a_sweep_interrupted_after_its_cells_keeps_them_and_says_so(tmp_path, monkeypatch, capsys, command_handlers):
+    import pairplay.cli.sweep as cli_sweep
+    (tmp_path / "grid.toml").write_text(GRID)
+    out = tmp_path / "sw"
+    _signal_after(monkeypatch, cli_sweep, "run_sweep", signal.SIGINT)  # the cells are done, the tables not
+    assert main(["sweep", str(tmp_path / "grid.toml"), "--out", str(out), "--quiet"]) == 130
+    err = capsys.readouterr().err.splitlines()
+    assert err == [f"pairplay sweep: interrupted (Ctrl-C); 2 of 2 cells finished, kept in {out / 'cells'}: "
+                   "the same command resumes from them"], err
+    assert len(list((out / "cells").glob("*.json"))) == 2
+    monkeypatch.undo()
+    assert main(["sweep", str(tmp_path / "grid.toml"), "--out", str(out), "--quiet"]) == 0  # resumes: 0 computed
+    assert "0 computed" in capsys.readouterr().out
