@@ -113,8 +113,10 @@ def _config_from_args(args: argparse.Namespace) -> SessionConfig:
         from pairplay.core.personas import persona
         who = persona(who).key
     check_chunk("participant", who)
-    session = args.session or f"{who}-seed{args.seed}-game{args.game_index}-" \
-                              f"{datetime.now(timezone.utc).strftime('%Y%m%dT%H%M%S')}"
+    # a made-up id obeys the rule of a given one (cli/args.py session_id: no . or \, they name its files):
+    # `--participant human:p.1` made session p.1-seed0-..., whose recording read as part of another
+    session = args.session or session_id(f"{who.replace('.', '_').replace(chr(92), '_')}-seed{args.seed}-"
+                                         f"game{args.game_index}-{datetime.now(timezone.utc).strftime('%Y%m%dT%H%M%S')}")
     rounds = args.rounds if args.rounds is not None else (20 if sim else 5)
     preset_name = args.preset or ("virtual" if sim else "human-phase2" if args.algorithm == "pi-reuse"
                                   else "human-phase1")

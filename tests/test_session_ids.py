@@ -116,3 +116,17 @@ def test_a_study_game_over_a_recording_the_journal_does_not_know_is_refused(tmp_
             StudyRunner(data, bus).run_game(pid, "phase1", 0, ScriptedPlayer("tatiana"))
     assert str(stray) in str(err.value) and stray.read_bytes() == b"a copied folder's file"
     assert (data.folder / "journal.jsonl").read_bytes() == journal  # nothing journaled: the game never started
+
+
+@pytest.mark.parametrize("verb", ["session", "lab"])
+def test_a_made_up_session_id_obeys_the_id_rule_too(verb):
+    """`lab --participant human:p.1` (no --session) recorded `p.1-seed0-...mcap`: a made-up id with a `.`,
+    which `--session` refuses (it names the recording's files)."""
+    from pairplay.cli.args import session_id
+    from pairplay.cli.main import build_parser
+    from pairplay.cli.session import config_from_args
+    argv = [verb, "--participant", "human:p.1"]
+    parser, _ = build_parser(argv)
+    config = config_from_args(parser.parse_args(argv))
+    assert "." not in config.session and config.session.startswith("p_1-seed0-game0-")
+    assert session_id(config.session) == config.session
