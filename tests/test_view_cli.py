@@ -22,6 +22,7 @@ import sys
 import threading
 from pathlib import Path
 
+import msgspec
 import numpy as np
 import pytest
 
@@ -145,3 +146,14 @@ def test_a_coalescing_view_keeps_every_line_and_point_and_ends_on_the_same_state
     once, view = _viewed(tmp_path / "once.rrd", events, draw_interval_s=10.0, clock=lambda: 0.0)
     assert view.draws == 1 and len(once["events"]) == len(every["events"])
     assert np.array_equal(tensor(once["q/table"][-1]["Tensor:data"]), q)
+
+
+def test_a_hostile_stamp_loses_no_line_of_the_batch_it_is_sent_in(tmp_path):
+    """Lines and points go in columns: one NaT stamp (INT64_MIN) among them must not make rerun refuse
+    the whole batch (it said "Time columns had nulls" and dropped every row of the call)."""
+    events, _ = scripted_events(rounds=1, seed=10, session="nat")
+    events[5] = msgspec.structs.replace(events[5], time_ns=-2**63)
+    rows, _ = _viewed(tmp_path / "nat.rrd", events, draw_interval_s=10.0, clock=lambda: 0.0)
+    assert len(rows["events"]) > len(events) / 2  # QUpdated has no line
+    every, _ = _viewed(tmp_path / "every.rrd", events)
+    assert [r["TextLog:text"] for r in rows["events"]] == [r["TextLog:text"] for r in every["events"]]

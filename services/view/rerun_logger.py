@@ -1,6 +1,7 @@
 """Draw a ViewModel in rerun: the board, the suggestion, the Q-table, the curves.
 
 Rule: the drawing layer logs only what an event changed (view_model.Change),
+the state at once or coalesced (RerunView), the lines and points in columns,
 on three timelines: `event` (the view's event count), `round` and
 `session_time` (the publisher's envelope time, so a recording replays on the
 time it was made). The 24 x 88 Q-table is the costly entity (a Tensor costs
@@ -104,6 +105,11 @@ class QThrottle:
         self.last_ns, self.dirty = now_ns, False
 
 
+_FORCE_Q = frozenset({Change.ROUND_END, Change.SESSION})  # the Q-table is logged at these, due or not
+_STATE = frozenset({Change.BOARD, Change.HIGHLIGHT, Change.SUGGESTION, Change.SESSION})
+ROWS_MAX, ROWS_INTERVAL_S = 1024, 0.1  # event-log lines and curve points wait at most this many / this long
+
+
 class Rows:
     """Rows of one entity waiting to be sent in columns (`rr.send_columns`): each row its own
     event / round / session_time index, so batching changes no row of the file, only the calls."""
@@ -136,15 +142,28 @@ class Rows:
         self.index, self.values = [], []
 
 
+def _stamp(time_ns) -> int:
+    """An envelope time as a timeline value: 0 (unstamped) unless an int64 that is not NaT (INT64_MIN):
+    one hostile stamp must not make rerun refuse a whole batch of rows."""
+    return time_ns if isinstance(time_ns, int) and -2**63 < time_ns < 2**63 else 0
+
+
+def _round(value) -> int:
+    """A round as a timeline value: -1 (no round timeline) unless 0 <= round < 2**63."""
+    return value if isinstance(value, int) and 0 <= value < 2**63 else -1
+
+
 class RerunView:
     """Fold events into a ViewModel and log what changed to a RecordingStream.
 
-    `draw_interval_s` 0 draws every event's change as it is folded (a recording: the file holds
-    the board after every event). Above 0 (the live view) it coalesces: every event is folded at
-    once, but the state (board, highlights, suggestion, session, Q-table) is drawn at most once per
-    `draw_interval_s` of the wall clock (`clock`), as it is then; the event log's lines and the curves'
-    points are kept, every one with its own event/round/session_time, and sent in columns at each
-    draw. `idle()` (the source has nothing waiting) and `close()` draw what is pending."""
+    The event log's lines and the curves' points are kept, every one with its own event / round /
+    session_time, and sent in columns (`rr.send_columns`: one call per entity instead of one per
+    row) at most ROWS_INTERVAL_S (wall clock) or ROWS_MAX rows apart, when the source is idle, at
+    a note and at the end. `draw_interval_s` 0 draws the state (board, highlights, suggestion,
+    session, Q-table) every event that changes it, as it is folded (a recording: the file holds the
+    board after every event). Above 0 (the live view) it coalesces: every event is folded at once,
+    but the state is drawn at most once per `draw_interval_s` of the wall clock (`clock`), as it is
+    then. `idle()` (the source has nothing waiting) and `close()` draw what is pending."""
 
     def __init__(self, rec: rr.RecordingStream, *, q_interval_s: float = 0.25, draw_interval_s: float = 0.0,
                  clock=time.monotonic):
@@ -155,7 +174,7 @@ class RerunView:
         self.draws = 0  # state drawings (coalesced: far fewer than events)
         self.draw_interval_s = draw_interval_s
         self._clock = clock
-        self._last_draw = clock()
+        self._last_draw = self._rows_sent = clock()
         self._pending: set[Change] = set()
         self._force_q = False
         self._now_ns = 0
@@ -180,22 +199,21 @@ class RerunView:
         """Fold one event and log what it changed (now, or at the next draw when coalescing)."""
         changes, note = self.model.apply(event)
         m = self.model
-        self._now_ns = event.time_ns or self._now_ns + 1_000_000  # unstamped events: 1 ms apart
-        self._stamp_ns = event.time_ns or self._stamp_ns
+        stamp = _stamp(event.time_ns)
+        self._now_ns = stamp or self._now_ns + 1_000_000  # unstamped events: 1 ms apart
+        self._stamp_ns = stamp or self._stamp_ns
         if Change.Q in changes:
             self.q_throttle.dirty = True
-        force_q = bool(changes & {Change.ROUND_END, Change.SESSION})
-        if not self.coalescing:
-            self._set_time(event.time_ns)
-            self._draw_state(changes, force_q)
-            self._log_points(changes)
-            if note:
-                self.rec.log("events", rr.TextLog(note, level=rr.TextLogLevel.INFO))
-            return
-        index = (m.events, m.round, event.time_ns or 0)
+        force_q = bool(changes & _FORCE_Q)
+        index = (m.events, _round(m.round), stamp)
         self._add_points(changes, index)
         if note:
             self._lines.add(index, (note, rr.TextLogLevel.INFO))
+        if not self.coalescing:
+            self._draw_state(changes, force_q)
+            if len(self._lines.index) >= ROWS_MAX or self._clock() - self._rows_sent >= ROWS_INTERVAL_S:
+                self._send_rows()
+            return
         self._pending |= changes
         self._force_q |= force_q
         if self._clock() - self._last_draw >= self.draw_interval_s:
@@ -205,47 +223,56 @@ class RerunView:
         """The source has nothing waiting: draw what is pending, if the interval allows."""
         if self.coalescing and self._clock() - self._last_draw >= self.draw_interval_s:
             self.draw()
+        elif not self.coalescing and self._lines.index:
+            self._send_rows()
 
     def draw(self) -> None:
         """Coalescing: draw the state as it is now and send the waiting lines and points."""
         self._last_draw = self._clock()
-        if not (self._pending or self._lines.index or any(r.index for r in self._scalars.values())
-                or self.q_throttle.dirty):
-            return
-        self._set_time(self._stamp_ns)
         self._draw_state(self._pending, self._force_q)
         self._pending, self._force_q = set(), False
-        self._lines.send(self.rec, lambda v: rr.TextLog.columns(text=[t for t, _ in v], level=[lv for _, lv in v]))
-        for rows in self._scalars.values():
-            rows.send(self.rec, lambda v: rr.Scalars.columns(scalars=v))
+        self._send_rows()
 
     def note(self, text: str, level: str = rr.TextLogLevel.WARN) -> None:
         """A line in the event log from outside the fold (a malformed bus message, a gap)."""
-        if self.coalescing:
-            self._lines.add((self.model.events, self.model.round, self._stamp_ns), (text, level))
-        else:
-            self.rec.log("events", rr.TextLog(text, level=level))
+        self._lines.add((self.model.events, _round(self.model.round), self._stamp_ns), (text, level))
+        if not self.coalescing:
+            self._send_rows()  # a note is rare and news: at once
 
     def close(self, timeout_s: float = 1e9) -> None:
         """Draw what is pending, log the Q-table if it changed since it was last logged, then flush
         (for at most `timeout_s`)."""
         if self.coalescing:
             self.draw()
+        self._send_rows()
         self._maybe_log_q(force=True)
         self.rec.flush(timeout_sec=max(timeout_s, 0.0))
 
-    def _set_time(self, time_ns: int) -> None:
+    def _send_rows(self) -> None:
+        """The waiting event-log lines and curve points, in columns (each row its own indexes)."""
+        self._rows_sent = self._clock()
+        self._lines.send(self.rec, lambda v: rr.TextLog.columns(text=[t for t, _ in v], level=[lv for _, lv in v]))
+        for rows in self._scalars.values():
+            rows.send(self.rec, lambda v: rr.Scalars.columns(scalars=v))
+
+    def _set_time(self) -> None:
         m = self.model
         self.rec.set_time("event", sequence=m.events)
-        if m.round >= 0:
+        if _round(m.round) >= 0:
             self.rec.set_time("round", sequence=m.round)
-        if time_ns:
-            self.rec.set_time("session_time", timestamp=np.datetime64(time_ns, "ns"))
+        if self._stamp_ns:
+            self.rec.set_time("session_time", timestamp=np.datetime64(self._stamp_ns, "ns"))
 
     def _draw_state(self, changes: set[Change], force_q: bool) -> None:
-        """The board, highlights, suggestion and session text as they are now (whatever `changes` holds)."""
+        """The board, highlights, suggestion, session text and Q-table as they are now (what `changes`
+        names, and the Q-table if due), on the timelines of the last event folded."""
         m = self.model
-        if changes & {Change.BOARD, Change.HIGHLIGHT, Change.SUGGESTION, Change.SESSION}:
+        drawn = changes & _STATE
+        q_due = self.q_throttle.due(self._now_ns, force_q)
+        if not (drawn or q_due):
+            return
+        self._set_time()
+        if drawn:
             self.draws += 1
         if Change.BOARD in changes:
             self._log_board()
@@ -269,10 +296,6 @@ class RerunView:
         if Change.ROUND_END in changes:
             points.append(("learning/picks_per_round", m.picks_per_round[m.last_round_ended]))
         return points
-
-    def _log_points(self, changes: set[Change]) -> None:
-        for path, value in self._points(changes):
-            self.rec.log(path, rr.Scalars([value]))
 
     def _add_points(self, changes: set[Change], index: tuple[int, int, int]) -> None:
         for path, value in self._points(changes):
