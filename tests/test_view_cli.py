@@ -157,3 +157,23 @@ def test_a_hostile_stamp_loses_no_line_of_the_batch_it_is_sent_in(tmp_path):
     assert len(rows["events"]) > len(events) / 2  # QUpdated has no line
     every, _ = _viewed(tmp_path / "every.rrd", events)
     assert [r["TextLog:text"] for r in rows["events"]] == [r["TextLog:text"] for r in every["events"]]
+
+
+def test_the_live_views_drawing_thread_yields_the_cpu_and_gets_its_priority_back():
+    from pairplay.services.view.drive import lowered_priority
+
+    tid = threading.get_native_id()
+    before = os.getpriority(os.PRIO_PROCESS, tid)
+    release = threading.Event()
+    started_before = threading.Thread(target=lambda: release.wait(5))
+    started_before.start()  # as the bus's receive threads: started before, they keep their priority
+    with lowered_priority(5):
+        inside = os.getpriority(os.PRIO_PROCESS, tid)
+        assert os.getpriority(os.PRIO_PROCESS, started_before.native_id) == before
+    release.set()
+    started_before.join()
+    assert inside == min(19, before + 5)
+    if os.geteuid() == 0:  # raising it back needs CAP_SYS_NICE
+        assert os.getpriority(os.PRIO_PROCESS, tid) == before
+        with lowered_priority(0):
+            assert os.getpriority(os.PRIO_PROCESS, tid) == before
