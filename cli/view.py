@@ -86,9 +86,9 @@ def run(args: argparse.Namespace) -> int:
     if not args.recording and not args.session:
         raise OptionError("give --session ID (live) or --recording REC", "what to view")
     if args.recording:
-        log = read_session(args.recording)  # a file holding no session is refused before rerun loads
+        held = read_session(args.recording)  # a file holding no session is refused before rerun loads
         if args.session:  # before rerun loads and anything is drawn
-            if not any(r.event.session == args.session for r in log.events):
+            if not any(r.event.session == args.session for r in held.events):
                 raise InputError(f"holds no events of session {args.session}; nothing saved", args.recording)
     if args.no_save and not (args.serve or args.spawn):
         raise OptionError("--no-save leaves no output; add --serve or --spawn", "--no-save")
