@@ -16,7 +16,9 @@ Rows:
 - live session with the view attached: events/s a BLOCK publisher reaches on
   the bus while the view subscribes and draws, reference = the same publisher
   with a bare counting subscriber. Goal: ratio >= 0.8 (the view's Zenoh
-  callback only queues, so it must not hold the session back).
+  receive path only queues, its drawing coalesces and its drawing thread runs
+  at a lower priority, so it must not hold the session back). A context row
+  gives the view with `--nice 0` in the same runs (coalescing alone).
 """
 
 from __future__ import annotations
@@ -202,34 +204,41 @@ def _publish_to(bus, payloads, command: list[str]) -> float:
             proc.wait()
 
 
-def bench_live_not_slowed(rounds: int = 300, repeats: int = 3) -> dict:
+def bench_live_not_slowed(rounds: int = 300, repeats: int = 3) -> list[dict]:
     """The view and the reference subscriber run as their own processes, as in a study;
-    medians of `repeats` alternating runs (the machine is noisy)."""
+    medians of `repeats` alternating runs (the machine is noisy). A context row: the view with
+    `--nice 0` (coalesced drawing alone, its thread at the session's priority), same runs."""
     from pairplay.services.bus import open_bus
 
     events, _ = scripted_events(rounds, session="bench-live")
     encode = encode_event
     payloads = [(event_key(e.session, e.source, tag_of(type(e))), encode(e)) for e in events]
-    bare, viewed = [], []
+    bare, viewed, not_niced = [], [], []
     with open_bus() as session_bus, tempfile.TemporaryDirectory() as tmp:
         endpoint = session_bus.locators()[0]
+
+        def view(i: int, *extra: str) -> list[str]:
+            return [sys.executable, "-m", "pairplay", "view", "--session", "bench-live", "--connect", endpoint,
+                    "--listen", "tcp/127.0.0.1:0", "--out", str(Path(tmp) / f"live{i}{len(extra)}.rrd"), *extra]
+
         for i in range(repeats):
             bare.append(_publish_to(session_bus, payloads,
                                     [sys.executable, "-c", _BARE_SUBSCRIBER, endpoint, str(len(payloads))]))
-            viewed.append(_publish_to(session_bus, payloads,
-                                      [sys.executable, "-m", "pairplay", "view", "--session", "bench-live",
-                                       "--connect", endpoint, "--listen", "tcp/127.0.0.1:0",
-                                       "--out", str(Path(tmp) / f"live{i}.rrd")]))
-    return _row(f"live session publishing {len(payloads)} events, view process attached", float(np.median(viewed)),
-                "events/s", "same publisher, bare counting subscriber process", float(np.median(bare)),
-                "view_live")
+            viewed.append(_publish_to(session_bus, payloads, view(i)))
+            not_niced.append(_publish_to(session_bus, payloads, view(i, "--nice", "0")))
+    reference = "same publisher, bare counting subscriber process"
+    return [_row(f"live session publishing {len(payloads)} events, view process attached", float(np.median(viewed)),
+                 "events/s", reference, float(np.median(bare)), "view_live"),
+            _row(f"live session publishing {len(payloads)} events, view process attached with --nice 0 "
+                 "(coalesced drawing alone)", float(np.median(not_niced)), "events/s", reference,
+                 float(np.median(bare)), None)]
 
 
 def bench_rows(quick: bool = False) -> list[dict]:
     """`pairplay bench` rows of the view (about 9 s; `quick`: smaller runs, about 3 s)."""
     if quick:
-        return [bench_view_from_recording(rounds=20), bench_live_not_slowed(rounds=100, repeats=1)]
-    return [bench_view_from_recording(), bench_live_not_slowed()]
+        return [bench_view_from_recording(rounds=20), *bench_live_not_slowed(rounds=100, repeats=1)]
+    return [bench_view_from_recording(), *bench_live_not_slowed()]
 
 
 def events_iter(events: list) -> Iterator[tuple[object, None]]:

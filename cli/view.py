@@ -3,10 +3,17 @@
 Rule: the view only subscribes and draws; it never publishes, so it cannot
 change a session. It saves an .rrd by default (headless, nothing listens on
 the network); `--serve` adds rerun's web viewer, `--spawn` the native viewer.
-An existing .rrd is replaced only with --force and the .rrd appears only when
-the view is complete; a recording without events (of the --session asked for)
-is refused and nothing is saved; a taken --grpc-port/--web-port is refused
-before anything starts.
+An existing .rrd is replaced only with --force and the .rrd appears under its
+name only when the view is complete (its source ended); a recording without
+events (of the --session asked for) is refused and nothing is saved; a taken
+--grpc-port/--web-port is refused before anything starts; an .rrd that cannot
+be written is one line naming the user's path, never our temporary one.
+A signal (exit 130/143, cli/main.py) before the source ended keeps what was
+drawn as `<stem>.partial.rrd` (a partial view of a live session may be
+wanted; it never takes the complete view's name, and its event log says it is
+partial); before the first event nothing is saved. Output: one line of result
+on stdout (saved / interrupted); what the view does is INFO (-v); what it
+noticed (a malformed message, a gap) is a WARNING.
 Rerun's usage analytics stay off for anything the view starts (view_output).
 
   pairplay view --recording recordings/s1.mcap              # -> recordings/s1.rrd
@@ -18,9 +25,13 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import errno
+import itertools
+import logging
+import os
 import signal
-import sys
 import threading
+from dataclasses import dataclass
 from pathlib import Path
 
 from pairplay.cli.args import add_force, float_at_least, port_or_any, session_id
@@ -28,7 +39,9 @@ from pairplay.errors import InputError, OptionError, OutputError, UserError
 from pairplay.outputs import check_output, output_path
 from pairplay.replay.check import read_session
 from pairplay.services.bus import add_bus_arguments
-from pairplay.services.view import DEFAULT_GRPC_PORT, DEFAULT_WEB_PORT  # without loading rerun (slow)
+from pairplay.services.view import DEFAULT_GRPC_PORT, DEFAULT_WEB_PORT, RrdWriteFailed  # without loading rerun (slow)
+
+log = logging.getLogger("pairplay.view")
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -51,6 +64,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                      help="with --serve: exit when the source ends instead of serving until Ctrl-C")
     out.add_argument("--q-interval", type=float_at_least(0), default=0.25, metavar="S",
                      help="log the Q-table at most every S seconds of session time (default 0.25)")
+    out.add_argument("--draw-interval", type=float_at_least(0), default=None, metavar="S",
+                     help="draw the board, suggestion and Q-table at most every S seconds (wall clock); every "
+                          "event's line and every curve point is kept (default: 0.1 live, 0 = every event "
+                          "for a recording)")
+    out.add_argument("--nice", type=int, choices=range(0, 20), default=10, metavar="N",
+                     help="live: lower the view's drawing thread by N nice levels (0-19), so the session it "
+                          "watches gets the CPU first; the bus's receive threads keep their priority")
     out.add_argument("--rerun-analytics", action="store_true",
                      help="leave rerun's usage analytics to your rerun settings (default: off for viewers started here)")
     add_bus_arguments(parser)
@@ -66,9 +86,9 @@ def run(args: argparse.Namespace) -> int:
     if not args.recording and not args.session:
         raise OptionError("give --session ID (live) or --recording REC", "what to view")
     if args.recording:
-        log = read_session(args.recording)  # a file holding no session is refused before rerun loads
+        held = read_session(args.recording)  # a file holding no session is refused before rerun loads
         if args.session:  # before rerun loads and anything is drawn
-            if not any(r.event.session == args.session for r in log.events):
+            if not any(r.event.session == args.session for r in held.events):
                 raise InputError(f"holds no events of session {args.session}; nothing saved", args.recording)
     if args.no_save and not (args.serve or args.spawn):
         raise OptionError("--no-save leaves no output; add --serve or --spawn", "--no-save")
@@ -77,30 +97,83 @@ def run(args: argparse.Namespace) -> int:
         check_output(rrd, args.force)  # before any work: an existing .rrd stays unless --force
     try:
         with output_path(rrd, args.force) if rrd is not None else contextlib.nullcontext() as tmp:
-            _view(args, tmp)
-    except NothingDrawn as stopped:  # a signal before the first event: nothing to save, and no mistake
-        print(f"pairplay view: interrupted ({stopped}) before any event was drawn; nothing saved", file=sys.stderr)
+            done = _view(args, tmp)
+            if done.partial and rrd is not None:  # never under the name of a complete view (module rule)
+                raise KeptPartial(keep_partial(tmp, rrd, args.force))
+    except KeptPartial as kept:
+        print(f"interrupted ({done.why}) after {_counts(done)}, before the source ended; "
+              f"the partial view is in {kept.path}")
         return 0
-    except RerunWriteFailed as err:  # the temporary .rrd is gone (output_path); nothing saved
+    except NothingDrawn as stopped:  # a signal before the first event: nothing to save (exit 128 + signal)
+        print(f"interrupted ({stopped}) before any event was drawn; nothing saved")
+        return 0
+    except RrdWriteFailed as err:  # the temporary .rrd is gone (output_path); nothing saved
         raise OutputError(f"writing the .rrd failed ({err}); nothing saved", rrd or "the view's output") from None
-    if rrd is not None:
-        print(f"pairplay view: saved {rrd}", file=sys.stderr)
+    if done.partial:
+        print(f"interrupted ({done.why}) after {_counts(done)}, before the source ended; nothing saved")
+    else:
+        print(f"saved {rrd}: {_counts(done)}" if rrd is not None else f"viewed {_counts(done)}")
     return 0
 
 
-class RerunWriteFailed(Exception):
-    """rerun could not write the .rrd (a full disk, `ulimit -f`): its file writer stopped, and the flush
-    raised RuntimeError("File-writer thread shut down prematurely"), before a traceback."""
+def _counts(done: "Viewed") -> str:
+    return f"{done.events} events, {done.notes} notes, Q-table logged {done.q_logged} times"
 
 
 class NothingDrawn(Exception):
     """A signal stopped the view before its first event (the signal's name): the .rrd is discarded."""
 
 
-def _view(args: argparse.Namespace, tmp_rrd: Path | None) -> None:
+class KeptPartial(Exception):
+    """A signal stopped the view before its source ended: its .rrd was kept as `path` (keep_partial)."""
+
+    def __init__(self, path: Path):
+        super().__init__(str(path))
+        self.path = path
+
+
+@dataclass
+class Viewed:
+    """What `_view` drew: counts, and whether a signal (`why`) stopped it before its source ended."""
+
+    events: int
+    notes: int
+    q_logged: int
+    partial: bool = False
+    why: str = ""
+
+
+def partial_name(rrd: Path, n: int = 1) -> Path:
+    """`<stem>.partial.rrd` beside `rrd`, `<stem>.partial.<n>.rrd` for n > 1."""
+    return rrd.with_name(f"{rrd.stem}.partial{'' if n == 1 else f'.{n}'}{rrd.suffix or '.rrd'}")
+
+
+def keep_partial(tmp: Path, rrd: Path, force: bool) -> Path:
+    """Give the finished temporary .rrd of an interrupted view its partial name (module rule):
+    `--force` replaces `<stem>.partial.rrd`; without it an existing one stays and the next free
+    `<stem>.partial.<n>.rrd` is taken (a hard link: a file that appears meanwhile is not replaced)."""
+    if force:
+        os.replace(tmp, partial_name(rrd))
+        return partial_name(rrd)
+    for n in itertools.count(1):
+        try:
+            os.link(tmp, partial_name(rrd, n))
+        except FileExistsError:
+            continue
+        except OSError as err:  # a file system without hard links
+            if err.errno not in (errno.EPERM, errno.ENOTSUP, errno.EOPNOTSUPP, errno.EXDEV, errno.EMLINK):
+                raise
+            if partial_name(rrd, n).exists():
+                continue
+            os.replace(tmp, partial_name(rrd, n))
+        return partial_name(rrd, n)
+    raise AssertionError("unreachable")
+
+
+def _view(args: argparse.Namespace, tmp_rrd: Path | None) -> Viewed:
     """Draw into the temporary .rrd (renamed by the caller when this returns)."""
     from pairplay.services.bus import open_bus, options_from_args, shutdown_wait, stop_on_signals
-    from pairplay.services.view.drive import drive
+    from pairplay.services.view.drive import drive, lowered_priority
     from pairplay.services.view.output import ViewOutput, finish, open_stream
     from pairplay.services.view.rerun_logger import RerunView
     from pairplay.services.view.sources import LiveSource, recording_items
@@ -113,19 +186,19 @@ def _view(args: argparse.Namespace, tmp_rrd: Path | None) -> None:
         if isinstance(err, UserError):
             raise
         raise OptionError(str(err), "--spawn" if args.spawn else "the view's output") from None
-    for line in where:
-        print(f"pairplay view: {line}", file=sys.stderr)
+    for line in where:  # where to watch it: a result of --serve/--spawn, said at once
+        print(line, flush=True)
     stop = threading.Event()
     saved_handlers = {sig: signal.getsignal(sig) for sig in (signal.SIGINT, signal.SIGTERM)}
     stop_on_signals(stop)
-    view = RerunView(rec, q_interval_s=args.q_interval)
-    echo = lambda line: print(line, file=sys.stderr)  # noqa: E731
+    live = not args.recording
+    view = RerunView(rec, q_interval_s=args.q_interval,
+                     draw_interval_s=args.draw_interval if args.draw_interval is not None else (0.1 if live else 0.0))
     try:
         if args.recording:
-            print(f"pairplay view: drawing {args.recording}" + (f" at {args.speed:g}x" if args.speed else "")
-                  + "; Ctrl-C to stop", file=sys.stderr)
+            log.info("drawing %s%s; Ctrl-C to stop", args.recording, f" at {args.speed:g}x" if args.speed else "")
             summary = drive(view, recording_items(args.recording, speed=args.speed, session=args.session, stop=stop),
-                            stop=stop, echo=echo)
+                            stop=stop, echo=_echo)
             if summary.events == 0 and stop.is_set():
                 raise NothingDrawn(stop.why)
             if summary.events == 0:
@@ -134,22 +207,29 @@ def _view(args: argparse.Namespace, tmp_rrd: Path | None) -> None:
         else:
             with open_bus(options_from_args(args), stop=stop) as bus:
                 source = LiveSource(bus, args.session, stop=stop)
-                print(f"pairplay view: listening to session {args.session}; Ctrl-C to stop", file=sys.stderr)
-                summary = drive(view, source.items(stop), stop=stop, echo=echo)
+                log.info("listening to session %s; Ctrl-C to stop", args.session)
+                with lowered_priority(args.nice):  # after the bus's threads started: they keep theirs
+                    summary = drive(view, source.items(stop), stop=stop, echo=_echo)
             if summary.events == 0 and stop.is_set():
                 raise NothingDrawn(stop.why)
             if summary.events == 0:
                 raise InputError("no event of this session arrived; nothing saved", f"--session {args.session}")
-        print(f"pairplay view: {summary.events} events, {summary.notes} notes, "
-              f"Q-table logged {summary.q_logged} times", file=sys.stderr)
+        viewed = Viewed(summary.events, summary.notes, summary.q_logged, partial=summary.stopped,
+                        why=stop.why if summary.stopped else "")
         if args.serve and not args.exit_when_done and not stop.is_set():
-            print("pairplay view: still serving; Ctrl-C to stop", file=sys.stderr)
+            log.info("%d events drawn; still serving; Ctrl-C to stop", summary.events)
             while not stop.wait(0.5):
                 pass
     finally:
         try:
             finish(rec, shutdown_wait(stop, 1e9, reserve=0.2))  # stopped: the .rrd's footer within the deadline
         except RuntimeError as err:
-            raise RerunWriteFailed(str(err)) from None
+            raise RrdWriteFailed(str(err)) from None
         for sig, handler in saved_handlers.items():  # run() may be called in-process (tests, tools)
             signal.signal(sig, handler)
+    return viewed
+
+
+def _echo(note: str, level: int) -> None:
+    """What the view noticed, on stderr through logging: a loss or a refusal is a WARNING, the rest INFO."""
+    log.log(level, "%s", note)

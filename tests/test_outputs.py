@@ -121,7 +121,7 @@ def test_recover_and_view_never_replace_what_exists(tmp_path, pairplay):
     r = pairplay("view", "--recording", "R.mcap", "--session", "wrong", cwd=tmp_path)
     assert r.returncode == 2 and (tmp_path / "R.rrd").read_bytes() == b"a saved view"
     r = pairplay("view", "--recording", "R.mcap", "--force", cwd=tmp_path)
-    assert r.returncode == 0 and (tmp_path / "R.rrd").stat().st_size > 1000 and "saved R.rrd" in r.stderr
+    assert r.returncode == 0 and (tmp_path / "R.rrd").stat().st_size > 1000 and "saved R.rrd" in r.stdout
     r = pairplay("recover", "R.mcap", "-o", "R.mcap", cwd=tmp_path)
     assert r.returncode == 2 and (tmp_path / "R.mcap").read_bytes() == SAMPLE.read_bytes()
     assert sorted(p.name for p in tmp_path.iterdir()) == ["R.mcap", "R.rrd"]

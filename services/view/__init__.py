@@ -10,3 +10,8 @@ never publishes.
 # rerun's default ports, here so the command line can show them without loading rerun
 DEFAULT_GRPC_PORT = 9876
 DEFAULT_WEB_PORT = 9090
+
+
+class RrdWriteFailed(RuntimeError):
+    """rerun could not write the .rrd: its file could not be made, or its writer stopped (a full disk,
+    `ulimit -f`; the flush raised RuntimeError("File-writer thread shut down prematurely"))."""

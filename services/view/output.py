@@ -116,17 +116,21 @@ def require_free_port(host: str, port: int, option: str) -> None:
 
 def open_stream(out: ViewOutput, recording_name: str = "") -> tuple[rr.RecordingStream, list[str]]:
     """A RecordingStream with the requested sinks; returns it and lines saying where it goes.
-    OptionError (before anything starts) if a port it needs is taken."""
+    OptionError (before anything starts) if a port it needs is taken; OSError naming `out.rrd`
+    if the system refuses that file (callers writing through pairplay.outputs.output_path get
+    it named with the user's path, not the temporary one)."""
     if out.serve:
         require_free_port("127.0.0.1", out.grpc_port, "--grpc-port")
         require_free_port("0.0.0.0", out.web_port, "--web-port")
     elif out.spawn:
         require_free_port("127.0.0.1", out.grpc_port, "--grpc-port")
+    if out.rrd is not None:  # made here first: the system's refusal is an OSError naming the file, and no
+        out.rrd.parent.mkdir(parents=True, exist_ok=True)  # stream exists yet to print rerun's own warning
+        out.rrd.open("wb").close()
     rec = rr.RecordingStream(APP_ID)
     sinks: list = []
     where: list[str] = []
     if out.rrd is not None:
-        out.rrd.parent.mkdir(parents=True, exist_ok=True)
         sinks.append(rr.FileSink(str(out.rrd)))  # the caller says where it was saved once it is complete
     if out.spawn:
         spawn_viewer(out.grpc_port, analytics_off=not out.rerun_analytics)

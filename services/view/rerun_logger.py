@@ -1,6 +1,7 @@
 """Draw a ViewModel in rerun: the board, the suggestion, the Q-table, the curves.
 
 Rule: the drawing layer logs only what an event changed (view_model.Change),
+the state at once or coalesced (RerunView), the lines and points in columns,
 on three timelines: `event` (the view's event count), `round` and
 `session_time` (the publisher's envelope time, so a recording replays on the
 time it was made). The 24 x 88 Q-table is the costly entity (a Tensor costs
@@ -24,6 +25,7 @@ Entity paths (the readback test and docs/view.md rely on them):
 from __future__ import annotations
 
 import string
+import time
 
 import numpy as np
 import rerun as rr
@@ -103,16 +105,85 @@ class QThrottle:
         self.last_ns, self.dirty = now_ns, False
 
 
-class RerunView:
-    """Fold events into a ViewModel and log what changed to a RecordingStream."""
+_FORCE_Q = frozenset({Change.ROUND_END, Change.SESSION})  # the Q-table is logged at these, due or not
+_STATE = frozenset({Change.BOARD, Change.HIGHLIGHT, Change.SUGGESTION, Change.SESSION})
+ROWS_MAX, ROWS_INTERVAL_S = 1024, 0.1  # event-log lines and curve points wait at most this many / this long
 
-    def __init__(self, rec: rr.RecordingStream, *, q_interval_s: float = 0.25):
+
+class Rows:
+    """Rows of one entity waiting to be sent in columns (`rr.send_columns`): each row its own
+    event / round / session_time index, so batching changes no row of the file, only the calls."""
+
+    def __init__(self, path: str):
+        self.path = path
+        self.index: list[tuple[int, int, int]] = []  # (event, round or -1, session_time ns or 0)
+        self.values: list = []
+
+    def add(self, index: tuple[int, int, int], value) -> None:
+        self.index.append(index)
+        self.values.append(value)
+
+    def send(self, rec: rr.RecordingStream, columns) -> None:
+        """Send the rows, one call per run of rows with the same timelines (a row before the first
+        round has no `round`, an unstamped event no `session_time`), then forget them."""
+        if not self.index:
+            return
+        index = np.array(self.index, dtype=np.int64)  # (n, 3): event, round, session_time
+        kind = (index[:, 1] >= 0) * 2 + (index[:, 2] != 0)
+        starts = [0, *(np.flatnonzero(np.diff(kind)) + 1).tolist(), len(index)]
+        for start, end in zip(starts, starts[1:]):
+            run = index[start:end]
+            indexes = [rr.TimeColumn("event", sequence=run[:, 0])]
+            if run[0, 1] >= 0:
+                indexes.append(rr.TimeColumn("round", sequence=run[:, 1]))
+            if run[0, 2]:
+                indexes.append(rr.TimeColumn("session_time", timestamp=run[:, 2].astype("datetime64[ns]")))
+            rec.send_columns(self.path, indexes=indexes, columns=columns(self.values[start:end]))
+        self.index, self.values = [], []
+
+
+def _stamp(time_ns) -> int:
+    """An envelope time as a timeline value: 0 (unstamped) unless an int64 that is not NaT (INT64_MIN):
+    one hostile stamp must not make rerun refuse a whole batch of rows."""
+    return time_ns if isinstance(time_ns, int) and -2**63 < time_ns < 2**63 else 0
+
+
+def _round(value) -> int:
+    """A round as a timeline value: -1 (no round timeline) unless 0 <= round < 2**63."""
+    return value if isinstance(value, int) and 0 <= value < 2**63 else -1
+
+
+class RerunView:
+    """Fold events into a ViewModel and log what changed to a RecordingStream.
+
+    The event log's lines and the curves' points are kept, every one with its own event / round /
+    session_time, and sent in columns (`rr.send_columns`: one call per entity instead of one per
+    row) at most ROWS_INTERVAL_S (wall clock) or ROWS_MAX rows apart, when the source is idle, at
+    a note and at the end. `draw_interval_s` 0 draws the state (board, highlights, suggestion,
+    session, Q-table) every event that changes it, as it is folded (a recording: the file holds the
+    board after every event). Above 0 (the live view) it coalesces: every event is folded at once,
+    but the state is drawn at most once per `draw_interval_s` of the wall clock (`clock`), as it is
+    then. `idle()` (the source has nothing waiting) and `close()` draw what is pending."""
+
+    def __init__(self, rec: rr.RecordingStream, *, q_interval_s: float = 0.25, draw_interval_s: float = 0.0,
+                 clock=time.monotonic):
         self.rec = rec
         self.model = ViewModel()
         self.q_throttle = QThrottle(int(q_interval_s * 1e9))
         self.q_logged = 0
+        self.draws = 0  # state drawings (coalesced: far fewer than events)
+        self.draw_interval_s = draw_interval_s
+        self._clock = clock
+        self._last_draw = self._rows_sent = clock()
+        self._pending: set[Change] = set()
+        self._force_q = False
         self._now_ns = 0
+        self._stamp_ns = 0  # the last event's envelope time (0: none stamped yet)
         self._shown: dict[str, int] = {}  # highlight entity -> card mask last logged
+        self._lines = Rows("events")
+        self._scalars = {name: Rows(name) for name in (
+            "learning/reward", "learning/picks_per_round",
+            *(f"learning/schedule/{n}" for n in ("epsilon", "alpha", "psi")))}
         rec.log("board", rr.AnnotationContext([(int(i), label, colour) for i, label, colour in CELL_CLASSES]),
                 static=True)
         rec.log("board/grid", rr.Boxes2D(centers=[_centre(c) for c in range(N_CARDS)],
@@ -120,47 +191,115 @@ class RerunView:
                                          radii=0.015), static=True)
         rec.log("board/cells", rr.SegmentationImage(self.model.cells()))  # before any event: all covered
 
+    @property
+    def coalescing(self) -> bool:
+        return self.draw_interval_s > 0
+
     def handle(self, event) -> None:
-        """Fold one event and log what it changed."""
+        """Fold one event and log what it changed (now, or at the next draw when coalescing)."""
         changes, note = self.model.apply(event)
         m = self.model
-        self._now_ns = event.time_ns or self._now_ns + 1_000_000  # unstamped events: 1 ms apart
+        stamp = _stamp(event.time_ns)
+        self._now_ns = stamp or self._now_ns + 1_000_000  # unstamped events: 1 ms apart
+        self._stamp_ns = stamp or self._stamp_ns
+        if Change.Q in changes:
+            self.q_throttle.dirty = True
+        force_q = bool(changes & _FORCE_Q)
+        index = (m.events, _round(m.round), stamp)
+        self._add_points(changes, index)
+        if note:
+            self._lines.add(index, (note, rr.TextLogLevel.INFO))
+        if not self.coalescing:
+            self._draw_state(changes, force_q)
+            if len(self._lines.index) >= ROWS_MAX or self._clock() - self._rows_sent >= ROWS_INTERVAL_S:
+                self._send_rows()
+            return
+        self._pending |= changes
+        self._force_q |= force_q
+        if self._clock() - self._last_draw >= self.draw_interval_s:
+            self.draw()
+
+    def idle(self) -> None:
+        """The source has nothing waiting: draw what is pending, if the interval allows."""
+        if self.coalescing and self._clock() - self._last_draw >= self.draw_interval_s:
+            self.draw()
+        elif not self.coalescing and self._lines.index:
+            self._send_rows()
+
+    def draw(self) -> None:
+        """Coalescing: draw the state as it is now and send the waiting lines and points."""
+        self._last_draw = self._clock()
+        self._draw_state(self._pending, self._force_q)
+        self._pending, self._force_q = set(), False
+        self._send_rows()
+
+    def note(self, text: str, level: str = rr.TextLogLevel.WARN) -> None:
+        """A line in the event log from outside the fold (a malformed bus message, a gap)."""
+        self._lines.add((self.model.events, _round(self.model.round), self._stamp_ns), (text, level))
+        if not self.coalescing:
+            self._send_rows()  # a note is rare and news: at once
+
+    def close(self, timeout_s: float = 1e9) -> None:
+        """Draw what is pending, log the Q-table if it changed since it was last logged, then flush
+        (for at most `timeout_s`)."""
+        if self.coalescing:
+            self.draw()
+        self._send_rows()
+        self._maybe_log_q(force=True)
+        self.rec.flush(timeout_sec=max(timeout_s, 0.0))
+
+    def _send_rows(self) -> None:
+        """The waiting event-log lines and curve points, in columns (each row its own indexes)."""
+        self._rows_sent = self._clock()
+        self._lines.send(self.rec, lambda v: rr.TextLog.columns(text=[t for t, _ in v], level=[lv for _, lv in v]))
+        for rows in self._scalars.values():
+            rows.send(self.rec, lambda v: rr.Scalars.columns(scalars=v))
+
+    def _set_time(self) -> None:
+        m = self.model
         self.rec.set_time("event", sequence=m.events)
-        if m.round >= 0:
+        if _round(m.round) >= 0:
             self.rec.set_time("round", sequence=m.round)
-        if event.time_ns:
-            self.rec.set_time("session_time", timestamp=np.datetime64(event.time_ns, "ns"))
+        if self._stamp_ns:
+            self.rec.set_time("session_time", timestamp=np.datetime64(self._stamp_ns, "ns"))
+
+    def _draw_state(self, changes: set[Change], force_q: bool) -> None:
+        """The board, highlights, suggestion, session text and Q-table as they are now (what `changes`
+        names, and the Q-table if due), on the timelines of the last event folded."""
+        m = self.model
+        drawn = changes & _STATE
+        q_due = self.q_throttle.due(self._now_ns, force_q)
+        if not (drawn or q_due):
+            return
+        self._set_time()
+        if drawn:
+            self.draws += 1
         if Change.BOARD in changes:
             self._log_board()
         if Change.HIGHLIGHT in changes:
             self._log_highlights()
         if Change.SUGGESTION in changes:
             self.rec.log("suggestion", rr.TextDocument(m.suggestion_text(), media_type="text/markdown"))
-        if Change.SCHEDULE in changes:
-            for name in ("epsilon", "alpha", "psi"):
-                value = getattr(m, name)
-                if value is not None:
-                    self.rec.log(f"learning/schedule/{name}", rr.Scalars([value]))
-        if Change.REWARD in changes and m.reward is not None:
-            self.rec.log("learning/reward", rr.Scalars([m.reward]))
-        if Change.ROUND_END in changes:
-            self.rec.log("learning/picks_per_round", rr.Scalars([m.picks_per_round[m.last_round_ended]]))
         if Change.SESSION in changes:
             self.rec.log("session", rr.TextDocument(self._session_text(), media_type="text/markdown"))
-        if Change.Q in changes:
-            self.q_throttle.dirty = True
-        self._maybe_log_q(force=bool(changes & {Change.ROUND_END, Change.SESSION}))
-        if note:
-            self.rec.log("events", rr.TextLog(note, level=rr.TextLogLevel.INFO))
+        self._maybe_log_q(force=force_q)
 
-    def note(self, text: str, level: str = rr.TextLogLevel.WARN) -> None:
-        """A line in the event log from outside the fold (a malformed bus message, a gap)."""
-        self.rec.log("events", rr.TextLog(text, level=level))
+    def _points(self, changes: set[Change]) -> list[tuple[str, float]]:
+        """The curves' points an event's changes give: (entity, value)."""
+        m = self.model
+        points = []
+        if Change.SCHEDULE in changes:
+            points += [(f"learning/schedule/{n}", getattr(m, n)) for n in ("epsilon", "alpha", "psi")
+                       if getattr(m, n) is not None]
+        if Change.REWARD in changes and m.reward is not None:
+            points.append(("learning/reward", m.reward))
+        if Change.ROUND_END in changes:
+            points.append(("learning/picks_per_round", m.picks_per_round[m.last_round_ended]))
+        return points
 
-    def close(self, timeout_s: float = 1e9) -> None:
-        """Log the Q-table if it changed since it was last logged, then flush (for at most `timeout_s`)."""
-        self._maybe_log_q(force=True)
-        self.rec.flush(timeout_sec=max(timeout_s, 0.0))
+    def _add_points(self, changes: set[Change], index: tuple[int, int, int]) -> None:
+        for path, value in self._points(changes):
+            self._scalars[path].add(index, float(value))
 
     def _maybe_log_q(self, force: bool) -> None:
         if self.q_throttle.due(self._now_ns, force):

@@ -1,7 +1,8 @@
 """Where the view's events come from: the live bus or a recording.
 
-Rule: both sources yield `(event, None)` for an event to fold and
-`(None, note)` for something the view should say instead (a malformed bus
+Rule: both sources yield `(event, None)` for an event to fold,
+`(None, None)` at each poll that finds the live source caught up (nothing
+waiting: a coalescing view may draw now), and `(None, note)` for something the view should say instead (a malformed bus
 message, a gap in a source's sequence numbers, a corrupt or truncated
 recording); nothing raises on bad content and nothing is published: the view
 never changes a session.
@@ -37,6 +38,10 @@ from pairplay.schemas.keys import parse_event_key, session_keys
 from pairplay.services.runner import fetch_log
 
 Item = tuple[object | None, str | None]
+
+
+class Info(str):
+    """A note that is news, not a loss (the catch-up from the recorder): logged at INFO, not WARNING."""
 
 
 class SequenceGaps:
@@ -113,7 +118,7 @@ class LiveSource:
         if self.backlog_error:
             yield None, self.backlog_error
         if self.backlog:
-            yield None, f"caught up from the recorder: {len(self.backlog)} events published before the view joined"
+            yield None, Info(f"caught up from the recorder: {len(self.backlog)} events published before the view joined")
         for event in self.backlog:
             yield from self._accept(event)
         self.backlog = []
@@ -123,6 +128,7 @@ class LiveSource:
                 if sample is None:
                     now = time.monotonic()
                     idle_since = idle_since or now
+                    yield None, None  # caught up: a coalescing view may draw what it holds
                     if self.ended and now - idle_since >= grace_s:
                         return
                     time.sleep(poll_s)
