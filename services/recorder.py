@@ -51,7 +51,8 @@ import msgspec
 from pairplay import __version__
 from pairplay.errors import OutputError
 from pairplay.replay.writer import FLUSH_INTERVAL_NS, LOSS_BOUND_NS, EventLogWriter
-from pairplay.schemas.events import RecordingGap, SessionStarted, decode_event, encode_event
+from pairplay.schemas.checked import check_event
+from pairplay.schemas.events import RecordingGap, decode_event, encode_event
 from pairplay.schemas.envelope import Nanos, stamped
 from pairplay.schemas.keys import alive_key, event_key, query_key, session_keys
 
@@ -205,7 +206,9 @@ class Recorder:
                       {"session": session, "software_version": __version__, "started_ns": str(clock())})
         self.inbox = Inbox(clock=clock, per_source=PER_SOURCE)
         self.outbox = Outbox(bus, self.name) if bus is not None else None
-        self.guard = Guard(session, own=self.name)  # its own refusals are written directly (_publish)
+        # its own refusals are written directly (_publish); it writes the bytes it checked and needs
+        # only their envelope: the checked twin of each event (schemas/checked.py), not the event
+        self.guard = Guard(session, own=self.name, decode=check_event)
         self.refusals = Refusals()
         self.kept: list[tuple[str, bytes]] = []
         self.seq = 0
@@ -547,14 +550,15 @@ class Recorder:
             self._fail(f"{type(err).__name__}: {err}" if str(err) else type(err).__name__)
             raise RecordingFailed(self.failure) from err
         self.kept.append((key, payload))  # one append is atomic; readers copy it under self._lock
-        if isinstance(event, SessionStarted):
-            c = event.config
+        tag = type(event).__name__
+        if tag == "SessionStarted":
+            c = event.config  # a SessionConfig in the twin too (only Nanos fields differ)
             self._guarded(self.writer.add_metadata, "pairplay.session", {
                 "config": msgspec.json.encode(c).decode(), "session": c.session, "participant": c.participant,
                 "persona": c.persona, "seed": str(c.seed), "game_index": str(c.game_index),
                 "algorithm": c.algorithm, "software_version": c.software_version or __version__,
                 "streams": str(c.streams)})
-        elif type(event).__name__ == "SessionEnded":
+        elif tag == "SessionEnded":
             self.ended = True
             self._ended_ns = received_ns
         return True
