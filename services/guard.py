@@ -53,6 +53,7 @@ class Verdict(NamedTuple):
 
 
 QUIET = Verdict(None, None, quiet=True)
+_new_tuple = tuple.__new__
 
 
 class Guard:
@@ -133,7 +134,8 @@ class Guard:
         self.last_seq[key] = seq  # note(), inlined: seq is above both already or equal to top
         if seq > top:
             self.top_seq[source] = seq
-        return Verdict(event, None)
+        return _new_tuple(Verdict, (event, None, False))  # Verdict(event, None) without its Python __new__
+
 
     def note(self, key: str, event: Event) -> None:
         """Remember a taken event (also: one folded from the log by a resume)."""

@@ -73,6 +73,11 @@ BATCH_S = 0.02  # a backlog is written in batches of at most this long (step)
 # shedding loses events for sure, a backlog only if the recorder is killed before it catches up, and
 # then the file records how far behind it was (a 100,000-event burst at 30-75k/s: 3-36k shed at 20,000)
 PER_SOURCE = 200_000
+# `pairplay run recorder`'s GIL switch interval (Python's default 5 ms): Zenoh's callback thread, which
+# takes each event off the bus (its log time), waits at most this long for the GIL while the writing thread
+# works through a backlog (best of 3 bursts, load 12-17: 0.97-1.56x the raw subscriber at 1 ms against
+# 0.52-0.68x at 5 ms; the writing thread then lags more: flushes 2.9-3.2 s after against 1.2-1.8 s)
+RECORDER_SWITCH_S = 0.001
 PIECE_FLUSH_S = 0.005  # within a batch, a flush due by age waits at most this long (step)
 BACKLOG_METADATA = "pairplay.recorder.backlog"  # a flush older than the loss bound (_note_backlog)
 FORCE_SESSION_HINT = "choose another --session, or --force to replace its recordings"
@@ -476,10 +481,11 @@ class Recorder:
             else:  # a query for the log
                 self._answer_log(payload)
             return
-        overlap = self._overlap > 0
-        if overlap:
+        if self._overlap:  # (what came while a refill was answered may repeat it)
             self._overlap -= 1
-        self.record(key, payload, received_ns, quiet=overlap or received_ns < self._quiet_until_ns)
+            self.record(key, payload, received_ns, True)
+        else:
+            self.record(key, payload, received_ns, received_ns < self._quiet_until_ns)
 
     def _link(self, up: bool, router: str, at_ns: int) -> None:
         """The link to the router went (note when) or came back (record the outage, refill after
@@ -533,12 +539,11 @@ class Recorder:
         """Check and write one message; False (and a recorded rejection) if it fails a check.
         `quiet`: it may repeat what was copied or refilled; a repeat is skipped, not refused.
         Raises RecordingFailed if the file cannot be written."""
-        verdict = self.guard.check(key, payload, overlap=quiet)
-        if verdict.quiet:
+        event, reason, skip = self.guard.check(key, payload, quiet)
+        if skip:
             return False  # our own refusal coming back: written already
-        event = verdict.event
-        if verdict.reason is not None:
-            return self._reject(verdict.reason, key, payload, event)
+        if reason is not None:
+            return self._reject(reason, key, payload, event)
         # the recorder's own times: log time = when it took the message (its clock, monotonic in the file),
         # publish time = the same; the envelope's time_ns is the publisher's claim and stays in the payload.
         # (The writer is called directly, not through _guarded: this runs once per message.)
