@@ -66,7 +66,8 @@ def run(args: argparse.Namespace) -> int:
         waits = waiting_for(args.wait_for) if args.service == "game" else ""
         print(f"listening {' '.join(bus.locators()) or '(no listener)'}{' - ' + waits if waits else ''}", flush=True)
         if args.service == "recorder":
-            from pairplay.services.recorder import Recorder, RecordingExists, latest_file, same_live_session
+            from pairplay.services.recorder import (
+                RECORDER_SWITCH_S, Recorder, RecordingExists, latest_file, same_live_session)
             path = Path(args.out) / f"{args.session}.mcap"
             earlier = latest_file(path)
             # a recorder restarted within the live session continues its file; a new session's is refused
@@ -75,6 +76,7 @@ def run(args: argparse.Namespace) -> int:
                 raise RecordingExists(earlier, args.session, "no live session on the bus sent what it holds; "
                                       "choose another --session (a recording is never replaced)")
             recorder = Recorder(bus, args.session, path, on_failure=lambda _why: stop.set(), restart=restart)
+            sys.setswitchinterval(RECORDER_SWITCH_S)  # this process is the recorder alone (see its rule)
             recorder.start()
             game = GameWatch(bus, args.session)  # a session whose end never reached us: its game is gone
             checked = 0.0

@@ -79,21 +79,22 @@ class EventLogWriter:
         return channel
 
     def write(self, key: str, payload: bytes, *, log_time_ns: int, publish_time_ns: int = 0, sequence: int = 0) -> None:
-        """Append one message (already validated JSON of the key's event type)."""
+        """Append one message (already validated JSON of the key's event type).
+        (Once per event in the recorder: kept to the few operations the rule needs.)"""
         if not (0 <= log_time_ns < U64 and 0 <= publish_time_ns < U64):
             raise ValueError(f"times out of MCAP's range: log {log_time_ns}, publish {publish_time_ns}")
-        log_time_ns = int(log_time_ns)
         if log_time_ns < self._last_log_ns:  # monotonic per file (see rule)
             log_time_ns = self._last_log_ns
-        self._last_log_ns = log_time_ns
+        else:
+            log_time_ns = self._last_log_ns = int(log_time_ns)
         channel = self._channels.get(key)
         if channel is None:
             channel = self.channel_for(key)
         self._writer.add_message(channel, log_time_ns, payload, publish_time_ns or log_time_ns, sequence & 0xFFFFFFFF)
         self.count += 1
-        self._unflushed += 1
-        if self._oldest_ns is None:
+        if not self._unflushed:
             self._oldest_ns = log_time_ns
+        self._unflushed += 1
 
     def add_metadata(self, name: str, data: dict[str, str]) -> None:
         self._writer.add_metadata(name, {str(k): str(v) for k, v in data.items()})

@@ -53,11 +53,17 @@ class Verdict(NamedTuple):
 
 
 QUIET = Verdict(None, None, quiet=True)
+_new_tuple = tuple.__new__
 
 
 class Guard:
-    def __init__(self, session: str, own: str | None = None):
-        self.session, self.own = session, own
+    """`decode`: what turns a payload into the object checked and handed on: the event
+    (events.decode_event, for a service that folds it) or its checked twin
+    (schemas/checked.py check_event: every check of the event's decoder, for the recorder,
+    which writes the bytes and only needs the envelope)."""
+
+    def __init__(self, session: str, own: str | None = None, decode: Callable[[bytes], object] = decode_event):
+        self.session, self.own, self.decode = session, own, decode
         self.last_seq: dict[str, int] = {}  # per key
         self.top_seq: dict[str, int] = {}  # per source: the highest taken
         self.once: set[str] = set()  # ONCE_PER_SESSION tags taken
@@ -65,19 +71,23 @@ class Guard:
         self.skipped = 0  # deliveries at or below the cut, skipped quietly
         self._keys: dict[str, tuple] = {}  # key -> what the key alone decides (_key)
 
-    def _key(self, key: str) -> tuple[bool, object, str | None]:
+    def _key(self, key: str) -> tuple:
         """What the key alone decides, once per key: (our own key, its parts, why it is not an
-        event key). Cached for at most KEYS_CACHED
-        keys (made-up keys cannot grow the cache); the recorder checks every message of a
-        session on a handful of keys."""
+        event key, what an event that matches the key gets: None (checked on), QUIET (our own
+        source) or the reason it is refused (wrong session, a source that may not publish it)).
+        Cached for at most KEYS_CACHED keys (made-up keys cannot grow the cache); the recorder
+        checks every message of a session on a handful of keys."""
         info = self._keys.get(key)
         if info is None:
             own = self.own is not None and key.count("/") == 3 and key.split("/", 3)[2] == self.own
             try:
                 k = parse_event_key(key)
-                info = (own, k, None)
             except ValueError as err:
-                info = (own, None, str(err))
+                info = (own, None, str(err), None)
+            else:  # the order of check's rule: session, our own source, who may publish the event
+                matched = (f"wrong session {k.session!r} (this is {self.session!r})" if k.session != self.session
+                           else QUIET if k.source == self.own else publisher_refusal(k.tag, k.source))
+                info = (own, k, None, matched)
             if len(self._keys) < KEYS_CACHED:
                 self._keys[key] = info
         return info
@@ -85,29 +95,24 @@ class Guard:
     def check(self, key: str, payload: bytes, overlap: bool = False) -> Verdict:
         """Decide on one message (see rule). `overlap`: it may repeat what a resume
         already folded from the log; an old sequence number is then quietly skipped."""
-        own, k, key_error = self._key(key)
-        if own:
+        info = self._keys.get(key) or self._key(key)
+        if info[0]:
             return QUIET  # our own publication, delivered back to us
         if len(payload) > MAX_PAYLOAD:
             return Verdict(None, f"payload of {len(payload)} bytes is over the limit of {MAX_PAYLOAD}")
         try:
-            event = decode_event(payload)
+            event = self.decode(payload)
         except (msgspec.DecodeError, msgspec.ValidationError) as err:
             return Verdict(None, f"malformed payload: {err}")
+        _own, k, key_error, matched = info
         if k is None:
             return Verdict(event, key_error)
-        tag = type(event).__name__
         source = event.source
-        if k.session != event.session or k.source != source or k.tag != tag:
+        if k.source != source or k.session != event.session or k.tag != type(event).__name__:
             return Verdict(event, f"key {key} does not match the payload's session {event.session!r}, source "
-                                  f"{source!r}, event {tag}")
-        if event.session != self.session:
-            return Verdict(event, f"wrong session {event.session!r} (this is {self.session!r})")
-        if source == self.own:
-            return Verdict(event, None, quiet=True)
-        refusal = publisher_refusal(tag, source)
-        if refusal is not None:
-            return Verdict(event, refusal)
+                                  f"{source!r}, event {type(event).__name__}")
+        if matched is not None:  # what the key decides (_key)
+            return Verdict(event, None, quiet=True) if matched is QUIET else Verdict(event, matched)
         seq = event.seq
         last = self.last_seq.get(key, 0)
         if seq <= last:
@@ -122,14 +127,15 @@ class Guard:
         if seq > top + MAX_SEQ_JUMP:
             return Verdict(event, f"sequence number {seq} from {source} jumps more than {MAX_SEQ_JUMP} "
                                   f"above the highest seen from it ({top})")
-        if tag in ONCE_PER_SESSION:
-            if tag in self.once:
-                return Verdict(event, f"a second {tag} in session {self.session}")
-            self.once.add(tag)
+        if k.tag in ONCE_PER_SESSION:
+            if k.tag in self.once:
+                return Verdict(event, f"a second {k.tag} in session {self.session}")
+            self.once.add(k.tag)
         self.last_seq[key] = seq  # note(), inlined: seq is above both already or equal to top
         if seq > top:
             self.top_seq[source] = seq
-        return Verdict(event, None)
+        return _new_tuple(Verdict, (event, None, False))  # Verdict(event, None) without its Python __new__
+
 
     def note(self, key: str, event: Event) -> None:
         """Remember a taken event (also: one folded from the log by a resume)."""

@@ -51,7 +51,8 @@ import msgspec
 from pairplay import __version__
 from pairplay.errors import OutputError
 from pairplay.replay.writer import FLUSH_INTERVAL_NS, LOSS_BOUND_NS, EventLogWriter
-from pairplay.schemas.events import RecordingGap, SessionStarted, decode_event, encode_event
+from pairplay.schemas.checked import check_event
+from pairplay.schemas.events import RecordingGap, decode_event, encode_event
 from pairplay.schemas.envelope import Nanos, stamped
 from pairplay.schemas.keys import alive_key, event_key, query_key, session_keys
 
@@ -72,6 +73,11 @@ BATCH_S = 0.02  # a backlog is written in batches of at most this long (step)
 # shedding loses events for sure, a backlog only if the recorder is killed before it catches up, and
 # then the file records how far behind it was (a 100,000-event burst at 30-75k/s: 3-36k shed at 20,000)
 PER_SOURCE = 200_000
+# `pairplay run recorder`'s GIL switch interval (Python's default 5 ms): Zenoh's callback thread, which
+# takes each event off the bus (its log time), waits at most this long for the GIL while the writing thread
+# works through a backlog (best of 3 bursts, load 12-17: 0.97-1.56x the raw subscriber at 1 ms against
+# 0.52-0.68x at 5 ms; the writing thread then lags more: flushes 2.9-3.2 s after against 1.2-1.8 s)
+RECORDER_SWITCH_S = 0.001
 PIECE_FLUSH_S = 0.005  # within a batch, a flush due by age waits at most this long (step)
 BACKLOG_METADATA = "pairplay.recorder.backlog"  # a flush older than the loss bound (_note_backlog)
 FORCE_SESSION_HINT = "choose another --session, or --force to replace its recordings"
@@ -205,7 +211,9 @@ class Recorder:
                       {"session": session, "software_version": __version__, "started_ns": str(clock())})
         self.inbox = Inbox(clock=clock, per_source=PER_SOURCE)
         self.outbox = Outbox(bus, self.name) if bus is not None else None
-        self.guard = Guard(session, own=self.name)  # its own refusals are written directly (_publish)
+        # its own refusals are written directly (_publish); it writes the bytes it checked and needs
+        # only their envelope: the checked twin of each event (schemas/checked.py), not the event
+        self.guard = Guard(session, own=self.name, decode=check_event)
         self.refusals = Refusals()
         self.kept: list[tuple[str, bytes]] = []
         self.seq = 0
@@ -473,10 +481,11 @@ class Recorder:
             else:  # a query for the log
                 self._answer_log(payload)
             return
-        overlap = self._overlap > 0
-        if overlap:
+        if self._overlap:  # (what came while a refill was answered may repeat it)
             self._overlap -= 1
-        self.record(key, payload, received_ns, quiet=overlap or received_ns < self._quiet_until_ns)
+            self.record(key, payload, received_ns, True)
+        else:
+            self.record(key, payload, received_ns, received_ns < self._quiet_until_ns)
 
     def _link(self, up: bool, router: str, at_ns: int) -> None:
         """The link to the router went (note when) or came back (record the outage, refill after
@@ -530,12 +539,11 @@ class Recorder:
         """Check and write one message; False (and a recorded rejection) if it fails a check.
         `quiet`: it may repeat what was copied or refilled; a repeat is skipped, not refused.
         Raises RecordingFailed if the file cannot be written."""
-        verdict = self.guard.check(key, payload, overlap=quiet)
-        if verdict.quiet:
+        event, reason, skip = self.guard.check(key, payload, quiet)
+        if skip:
             return False  # our own refusal coming back: written already
-        event = verdict.event
-        if verdict.reason is not None:
-            return self._reject(verdict.reason, key, payload, event)
+        if reason is not None:
+            return self._reject(reason, key, payload, event)
         # the recorder's own times: log time = when it took the message (its clock, monotonic in the file),
         # publish time = the same; the envelope's time_ns is the publisher's claim and stays in the payload.
         # (The writer is called directly, not through _guarded: this runs once per message.)
@@ -547,14 +555,15 @@ class Recorder:
             self._fail(f"{type(err).__name__}: {err}" if str(err) else type(err).__name__)
             raise RecordingFailed(self.failure) from err
         self.kept.append((key, payload))  # one append is atomic; readers copy it under self._lock
-        if isinstance(event, SessionStarted):
-            c = event.config
+        tag = type(event).__name__
+        if tag == "SessionStarted":
+            c = event.config  # a SessionConfig in the twin too (only Nanos fields differ)
             self._guarded(self.writer.add_metadata, "pairplay.session", {
                 "config": msgspec.json.encode(c).decode(), "session": c.session, "participant": c.participant,
                 "persona": c.persona, "seed": str(c.seed), "game_index": str(c.game_index),
                 "algorithm": c.algorithm, "software_version": c.software_version or __version__,
                 "streams": str(c.streams)})
-        elif type(event).__name__ == "SessionEnded":
+        elif tag == "SessionEnded":
             self.ended = True
             self._ended_ns = received_ns
         return True

@@ -68,3 +68,9 @@ def test_the_readme_table_is_rewritten_between_its_markers(tmp_path):
     (tmp_path / "NO.md").write_text("no markers")
     with pytest.raises(ValueError):
         bench.write_readme(tmp_path / "NO.md", text)
+
+
+def test_recorder_cpu_row_measures_the_recorders_writing_thread_beside_the_bare_writer():
+    from pairplay.bench.bus import recorder_cpu_rows
+    (row,) = recorder_cpu_rows(300, repeats=1)
+    assert row["value"] > 0 and row["reference_value"] > 0 and row["ratio"] == pytest.approx(row["value"] / row["reference_value"])
