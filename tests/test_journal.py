@@ -251,6 +251,20 @@ def test_a_finished_recording_leaves_no_journal_and_a_failed_one_keeps_it(tmp_pa
         assert wal_path(failing.path).exists()
 
 
+def test_a_journal_that_cannot_be_written_fails_the_recording_loudly_and_stays(tmp_path):
+    failures = []
+    with listener() as bus:
+        rec = Recorder(bus, "j1", tmp_path / "j1.mcap", on_failure=failures.append)
+        rec.start()
+        os.close(rec.journal._fd)  # the journal's file can no longer be written (as a full disk)
+        rec.enqueue(*start())
+        assert wait_until(lambda: rec.journal.failure is not None, 10)
+        assert wait_until(lambda: not rec.step(0.01) and rec.failure is not None, 10)
+        rec.journal._fd = -1
+        assert rec.close() is not None
+    assert failures and "journal" in failures[0] and wal_path(rec.path).exists()
+
+
 def test_a_restarted_recorder_takes_what_the_earlier_journal_holds(tmp_path):
     events = [start()] + [pick(s) for s in range(1, 31)]
     path = cut_recording(tmp_path, events[:11])
