@@ -1,7 +1,9 @@
 """`pairplay recover REC`: complete a recording a crash cut short (replay/recover.py).
 
 Rule: writes REC's readable records into a complete, indexed file (default
-<stem>.recovered.mcap beside it, or -o); the original is never modified, an
+<stem>.recovered.mcap beside it, or -o), and what the recorder's journal beside
+it (REC.journal, replay/wal.py) holds that REC lacks, through the live checks
+(services/walmerge.py), saying how many it took; the original is never modified, an
 existing output is replaced only with --force, and the output appears only
 when complete. Exit 0 when the output is complete, 2 (one line on stderr,
 nothing written) when REC is missing, empty or not MCAP, holds no session
@@ -24,8 +26,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from pairplay.replay.recover import recover
+    from pairplay.services.walmerge import admit
 
-    done = recover(args.recording, args.output, force=args.force)
+    done = recover(args.recording, args.output, force=args.force, admit=admit)
     if done.damaged:
         state = f"damaged ({done.reason}); every intact part kept"
     elif done.truncated:
@@ -35,5 +38,10 @@ def run(args: argparse.Namespace) -> int:
     ended = "" if done.ended else "; the session's end was not recorded (partial session)"
     if not done.started:
         ended = "; its SessionStarted is not in it (lost, or never recorded): no session to rebuild or verify"
-    print(f"{args.recording}: {state}; {done.messages} messages kept in {done.output}{ended}")
+    journal = ""
+    if done.journal is not None:
+        journal = (f"; {done.from_journal} events taken from its journal {done.journal.name}"
+                   f"{f', {done.journal_refused} of its messages refused (recorded as refusals)' if done.journal_refused else ''}"
+                   f"{f' (read up to its torn tail: {done.journal_torn})' if done.journal_torn else ''}")
+    print(f"{args.recording}: {state}; {done.messages} messages kept in {done.output}{journal}{ended}")
     return 0

@@ -9,6 +9,16 @@ says what recover completed (the summary and index it wrote), what it read,
 from where, what was wrong (every damaged part, the cut) and how far the
 session got (whether its SessionEnded survived, the last round). A whole file
 recovers to an equivalent whole file. The original is never modified.
+
+A recorder that did not finish its file leaves its write-ahead journal beside
+it (`<recording>.journal`, replay/wal.py): what it received, durable within
+5 ms of receipt. Given an `admit` (the live checks: services/walmerge.py; the
+`recover` verb gives it), recover reads the journal up to its end or its torn
+tail and adds, after the file's records, what `admit` decides the file lacks
+(the events, and the refusals of what the live recorder would have refused),
+counted in the "pairplay.recovered" metadata (`from_journal`, `journal_refused`,
+`journal_torn`). A journal of another session is refused (InputError); an
+unreadable one is named and left out, never a traceback.
 """
 
 from __future__ import annotations
@@ -20,12 +30,18 @@ from pathlib import Path
 from mcap.records import Channel, Message, Metadata, Schema
 from mcap.writer import CompressionType, Writer
 
+from typing import Callable
+
 from pairplay.errors import InputError, OutputError
+from pairplay.schemas.events import EVENT_BY_TAG
+from pairplay.schemas.jsonschema import schema_text
+from pairplay.schemas.keys import parse_event_key
 from pairplay.outputs import check_output, output_file
 
 from .check import check_recording, no_session
 from .mcapscan import scan
 from .reader import read_log
+from .wal import NotAJournal, read_journal, wal_path
 from .writer import CHUNK_SIZE, PROFILE
 
 
@@ -39,17 +55,24 @@ class Recovered:
     ended: bool = False  # the session's SessionEnded was among the records kept
     last_round: int = -1
     started: bool = True  # the session's SessionStarted was among the records kept
+    journal: Path | None = None  # the journal read beside it, if any
+    from_journal: int = 0  # events added from it
+    journal_refused: int = 0  # records of it refused by the live checks (recorded as refusals)
+    journal_torn: str = ""  # where the journal stops short of a frame's end ("" if it does not)
 
 
 def default_output(path: Path) -> Path:
     return path.with_name(path.stem + ".recovered.mcap")
 
 
-def recover(path: str | Path, output: str | Path | None = None, force: bool = False) -> Recovered:
-    """Copy the intact records of `path` into a complete file (see rule).
+def recover(path: str | Path, output: str | Path | None = None, force: bool = False,
+            admit: Callable | None = None) -> Recovered:
+    """Copy the intact records of `path` into a complete file (see rule), and with `admit`
+    (services/walmerge.admit) what its journal holds that the file lacks.
 
     InputError if `path` is not an MCAP file at all (missing, empty, no MCAP magic) or holds no
-    session (check.py `no_session`), unless it is cut or damaged and holds pairplay events;
+    session (check.py `no_session`), unless it is cut or damaged and holds pairplay events (in it
+    or in its journal), or if its journal is of another session;
     OutputError if `output` exists (unless `force`) or is the input; the output
     appears only when complete (pairplay.outputs)."""
     path = check_recording(path)
@@ -59,9 +82,10 @@ def recover(path: str | Path, output: str | Path | None = None, force: bool = Fa
     check_output(output, force)
     log = read_log(path)
     why = no_session(log)
+    journal, journal_error = _journal_beside(path, log) if admit is not None else (None, "")
     # a cut or damaged file of a session's events is kept whatever it lost (its start may be in the lost
     # part, or before a recorder that joined late); one with nothing of a session, or whole, has nothing
-    if why and not (log.events and not log.whole):
+    if why and not ((log.events or (journal is not None and journal.records)) and not log.whole):
         raise InputError(f"{why}; nothing to recover", path)
     checked = scan(path)
     messages, ended, last_round = 0, False, -1
@@ -94,15 +118,61 @@ def recover(path: str | Path, output: str | Path | None = None, force: bool = Fa
                         last_round = max(last_round, _round_of(record.data))
             elif isinstance(record, Metadata):
                 writer.add_metadata(record.name, dict(record.metadata))
+        added = None
+        if journal is not None:
+            recorded = [(topics[r.channel_id], r.data) for r in checked.records
+                        if isinstance(r, Message) and r.channel_id in topics]
+            added = admit(journal.session, recorded, journal.records)
+            by_topic = {topic: cid for cid, topic in topics.items()}
+            last_ns = max((r.log_time for r in checked.records if isinstance(r, Message)), default=0)
+            for key, payload, log_ns, seq in added.items:
+                channel = by_topic.get(key)
+                if channel is None:
+                    tag = parse_event_key(key).tag
+                    schema = writer.register_schema(tag, "jsonschema", schema_text(EVENT_BY_TAG[tag]).encode())
+                    channel = by_topic[key] = writer.register_channel(key, "json", schema)
+                last_ns = max(last_ns, log_ns)  # log times never go back in a file (writer.py)
+                writer.add_message(channel, last_ns, payload, last_ns, seq & 0xFFFFFFFF)
+                messages += 1
+                tag = key.rsplit("/", 1)[-1]
+                ended |= tag == "SessionEnded"
+                if tag == "RoundStarted":
+                    last_round = max(last_round, _round_of(payload))
+                why = why if tag != "SessionStarted" else ""
         damaged = [str(d) for d in checked.damage]
         reason = "" if checked.whole else checked.describe()
         writer.add_metadata("pairplay.recovered", {
             "source": str(path), "messages": str(messages), "truncated": str(checked.truncated).lower(),
             "reason": reason, "damaged": json.dumps(damaged), "lost_chunks": str(len(checked.lost_chunks)),
             "completed": "summary, indexes and CRCs written by pairplay recover",
-            "session_ended": str(ended).lower(), "last_round": str(last_round)})
+            "session_ended": str(ended).lower(), "last_round": str(last_round),
+            **({"journal": journal.path.name if journal is not None else journal_error,
+                "from_journal": str(added.taken if added else 0),
+                "journal_refused": str(added.refused if added else 0),
+                "journal_torn": journal.torn if journal is not None else ""}
+               if journal is not None or journal_error else {})})
         writer.finish()
-    return Recovered(output, messages, checked.truncated, reason, damaged, ended, last_round, started=not why)
+    return Recovered(output, messages, checked.truncated, reason, damaged, ended, last_round, started=not why,
+                     journal=journal.path if journal is not None else None,
+                     from_journal=added.taken if added else 0, journal_refused=added.refused if added else 0,
+                     journal_torn=journal.torn if journal is not None else "")
+
+
+def _journal_beside(path: Path, log):
+    """(the journal beside `path` read, or None; why an existing one could not be read, or "").
+    InputError if it is of another session than the recording's."""
+    beside = wal_path(path)
+    if not beside.exists():
+        return None, ""
+    try:
+        journal = read_journal(beside)
+    except (NotAJournal, OSError) as err:
+        return None, f"{beside.name} not read: {err}"
+    session = log.metadata.get("pairplay.recorder", {}).get("session", "")
+    if session and journal.session != session:
+        raise InputError(f"the journal beside it ({beside.name}) is of session {journal.session!r}, "
+                         f"not {session!r}; move it away", path)
+    return journal, ""
 
 
 def _round_of(payload: bytes) -> int:

@@ -37,6 +37,7 @@ from pairplay.schemas.policy import read_policy, write_policy
 from pairplay.schemas.study import Study, StudyFileError, load_study
 
 from .reader import read_log
+from .wal import wal_path
 
 STUDY_FILE, JOURNAL, SETTINGS = "study.toml", "journal.jsonl", "settings.json"
 
@@ -330,11 +331,12 @@ class StudyData:
 
     # -- export and deletion -------------------------------------------------
     def files_of(self, pid: str) -> list[Path]:
-        """Every file of the folder that holds `pid`'s data (recordings, policies, exports)."""
+        """Every file of the folder that holds `pid`'s data (recordings and their journals, policies, exports)."""
         self.participant(pid)
         files = []
         for g in self.games_of(pid):
             files.append(self.folder / g.recording)
+            files.append(wal_path(self.folder / g.recording))  # a killed recorder's journal: their data too
             if g.ended is not None and g.ended.policy:
                 files.append(self.folder / g.ended.policy)
         files += list((self.folder / "exports").glob(f"{pid}.zip"))
@@ -470,6 +472,9 @@ def _export_readme(pid: str, study: str, games: list[Game], files: list[Path], a
         what = ("MCAP recording of every event of the game (JSON messages, JSON Schemas inside; "
                 "open with any MCAP reader, e.g. `mcap cat`, Foxglove, or Python's mcap package)"
                 if rel.endswith(".mcap") else
+                "the recorder's write-ahead journal of that recording, left by a recorder that did not finish it "
+                "(what it received, raw; `pairplay recover` adds it to the recording)"
+                if rel.endswith(".journal") else
                 "the policy learned in that game (JSON: Q-table 24 states x 88 actions, greedy action per state)")
         lines.append(f"- {rel}: {what}")
     lines += [f"- answers.csv: {answers} questionnaire answers (one row per item)",

@@ -11,7 +11,15 @@ and what waits in the inbox is taken in pieces (one lock each), a due flush done
 between them at most every 5 ms (never held to a batch's end), so a SIGKILL loses
 at most 0.1 s while the recorder keeps up with what arrives (`pairplay recover`
 completes such a file); when it cannot, the file records how far behind a flush
-was (BACKLOG_METADATA, and `max_flush_age_ms` at the end). A close is done by its
+was (BACKLOG_METADATA, and `max_flush_age_ms` at the end). That bound holds only for
+what reached the writer: under load the writer falls behind and what waits in its inbox
+(memory) would die with the process. So every message is made durable when it is received:
+the bus callback appends it to the write-ahead journal beside the file (`<recording>.journal`,
+replay/wal.py), which a thread writes to the OS every 5 ms; a SIGKILL then loses only what was
+received in the last 5 ms + scheduling, whatever the backlog, and `pairplay recover` adds from
+the journal what the cut file lacks, through the live checks (services/walmerge.py). The
+journal is removed once the file is complete and fsync'd; a restarted recorder takes the
+earlier file's journal too (`_continue`). A close is done by its
 deadline; what is still queued then is counted and recorded, not waited for. The session config, seed and software version
 go into MCAP metadata ("pairplay.session") when SessionStarted passes, the
 recorder's own into "pairplay.recorder". It answers restarting services with
@@ -40,6 +48,7 @@ from __future__ import annotations
 
 import glob
 import logging
+import os
 from collections import Counter
 import threading
 import time
@@ -50,6 +59,7 @@ import msgspec
 
 from pairplay import __version__
 from pairplay.errors import OutputError
+from pairplay.replay.wal import JournalWriter, NotAJournal, read_journal, wal_path
 from pairplay.replay.writer import FLUSH_INTERVAL_NS, LOSS_BOUND_NS, EventLogWriter
 from pairplay.schemas.checked import check_event
 from pairplay.schemas.events import RecordingGap, decode_event, encode_event
@@ -59,6 +69,7 @@ from pairplay.schemas.keys import alive_key, event_key, query_key, session_keys
 from pairplay.services.bus import MISSED, HEARTBEAT_S, Bus, Deadline, Inbox, Outbox
 from pairplay.services.guard import Guard, Refusals
 from pairplay.services.runner import LOG_QUERY, SENT_QUERY
+from pairplay.services.walmerge import admit
 
 log = logging.getLogger("pairplay.recorder")
 END_METADATA = "pairplay.recorder.end"  # how the recording ended (Recorder.close)
@@ -81,6 +92,7 @@ RECORDER_SWITCH_S = 0.001
 PIECE_FLUSH_S = 0.005  # within a batch, a flush due by age waits at most this long (step)
 BACKLOG_METADATA = "pairplay.recorder.backlog"  # a flush older than the loss bound (_note_backlog)
 FORCE_SESSION_HINT = "choose another --session, or --force to replace its recordings"
+JOURNAL_METADATA = "pairplay.recorder.journal"  # what a restarted recorder took from the earlier file's journal
 ABSENCE_METADATA = "pairplay.recorder.absence"  # a service off the bus mid-session (_alive)
 LINK_METADATA = "pairplay.recorder.link"  # an outage of the recorder's link to its router (_link)
 LINK_SLACK_NS = 500_000_000  # a token may be reported gone this long before our own link is
@@ -116,6 +128,8 @@ def free_path(path: Path) -> Path:
     if latest is None:
         return path
     n = 1 if latest == path else int(latest.name[len(path.stem) + 1:len(latest.name) - len(path.suffix)]) + 1
+    while wal_path(path.with_name(f"{path.stem}.{n}{path.suffix}")).exists():  # nor a journal
+        n += 1
     return path.with_name(f"{path.stem}.{n}{path.suffix}")
 
 
@@ -130,12 +144,23 @@ class RecordingExists(OutputError):
         self.existing = existing
 
 
+def journals_of(path: Path) -> list[Path]:
+    """The write-ahead journals (replay/wal.py) of a session's recordings, `path`'s and every
+    `<stem>.<k>.mcap`'s, whether or not the recording is still there."""
+    path = Path(path)
+    if not path.parent.is_dir():
+        return []
+    found = [wal_path(path)] + sorted(path.parent.glob(f"{glob.escape(path.stem)}.*{glob.escape(path.suffix)}.journal"))
+    return [p for p in found if p.exists()]
+
+
 def check_new_recording(path: str | Path, force: bool = False, hint: str = FORCE_SESSION_HINT) -> Path:
     """`path` for a new session's recording, refused (RecordingExists, naming the file) if the session
-    has a recording already; with `force` the session's old recordings are removed first (call it
-    before anything starts, after every other check of the options)."""
+    has a recording already, or a recording's journal (what a killed recorder received); with `force`
+    the session's old recordings and journals are removed first (call it before anything starts, after
+    every other check of the options)."""
     path = Path(path)
-    existing = recordings_of(path)
+    existing = recordings_of(path) + journals_of(path)
     if existing and not force:
         raise RecordingExists(existing[0], path.stem, hint)
     for p in existing:
@@ -182,6 +207,15 @@ def same_live_session(bus: Bus, session: str, earlier: Path, timeout_s: float = 
     return answered > 0
 
 
+def _fsync(path: Path) -> None:
+    """Push a closed file's data to the disk (before its journal goes)."""
+    fd = os.open(path, os.O_RDONLY)
+    try:
+        os.fsync(fd)
+    finally:
+        os.close(fd)
+
+
 class RecordingFailed(Exception):
     """The recorder could not write its file (disk full, file size limit, a writer error)."""
 
@@ -209,6 +243,8 @@ class Recorder:
         self.writer = EventLogWriter(self.path, flush_interval_ns=flush_interval_ns)
         self._guarded(self.writer.add_metadata, "pairplay.recorder",
                       {"session": session, "software_version": __version__, "started_ns": str(clock())})
+        self.journal: JournalWriter | None = None  # made by start (a recorder on a bus)
+        self._journal_add = None
         self.inbox = Inbox(clock=clock, per_source=PER_SOURCE)
         self.outbox = Outbox(bus, self.name) if bus is not None else None
         # its own refusals are written directly (_publish); it writes the bytes it checked and needs
@@ -252,8 +288,39 @@ class Recorder:
                         last_ns = max(last_ns, record.log_time)
         except Exception as err:  # the cut of a crashed file: everything before it is kept
             log.info("recorder: %s ends early (%s); %d events copied", earlier, err, copied)
+        copied, last_ns = self._continue_journal(earlier, copied, last_ns)
         self.continued = {"earlier_file": earlier.name, "copied": copied, "last_copied_ns": last_ns}
         log.info("recorder: continuing %s (%d events) in %s", earlier, copied, self.path)
+
+    def _continue_journal(self, earlier: Path, copied: int, last_ns: int) -> tuple[int, int]:
+        """What the earlier file's journal holds that the file lacks (the inbox its recorder died
+        with), decided as `pairplay recover` does (services/walmerge.py), copied after the file's
+        events and counted (metadata JOURNAL_METADATA). The journal is left where it is."""
+        beside = wal_path(earlier)
+        if not beside.exists():
+            return copied, last_ns
+        try:
+            journal = read_journal(beside)
+        except (NotAJournal, OSError) as err:
+            log.warning("recorder: the journal %s is not read: %s", beside, err)
+            self._guarded(self.writer.add_metadata, JOURNAL_METADATA, {"earlier_journal": beside.name,
+                                                                       "not_read": str(err)})
+            return copied, last_ns
+        if journal.session != self.session:
+            log.warning("recorder: the journal %s is of session %r: not taken", beside, journal.session)
+            return copied, last_ns
+        with self._lock:
+            recorded = list(self.kept)
+        added = admit(self.session, recorded, journal.records)
+        for key, payload, log_ns, _seq in added.items:
+            if self._copy(key, payload, log_ns):
+                copied += 1
+                last_ns = max(last_ns, log_ns)
+        self._guarded(self.writer.add_metadata, JOURNAL_METADATA, {
+            "earlier_journal": beside.name, "taken": str(added.taken), "refused": str(added.refused),
+            "torn": journal.torn})
+        log.info("recorder: %d events taken from %s (%d refused)", added.taken, beside, added.refused)
+        return copied, last_ns
 
     def _copy(self, key: str, payload: bytes, log_time_ns: int) -> bool:
         source = key.split("/")[2] if key.count("/") == 3 else ""
@@ -364,6 +431,11 @@ class Recorder:
 
     # -- bus side (Zenoh threads: hand over, never wait) --------------------
     def start(self) -> None:
+        """Open the journal (FileExistsError if one is there: never replaced), then subscribe."""
+        self.journal = JournalWriter(self.path, self.session, software_version=__version__, clock=self.clock,
+                                     on_failure=self._on_journal_failure)
+        self._journal_add = self.journal.add
+        self.journal.start()
         self.bus.subscribe(session_keys(self.session), self.enqueue, self._on_miss)
         self.bus.queryable(query_key(self.session, self.name, LOG_QUERY), self.inbox.control)
         if self.bus.options.recovers:
@@ -373,7 +445,13 @@ class Recorder:
         self.refill()
 
     def enqueue(self, key: str, payload: bytes) -> None:
-        self.inbox.put(key, payload)
+        # durable when received (the journal), whatever waits before it in the inbox; a message the
+        # inbox sheds is only counted, as live, so it is not journaled either
+        if self.inbox.put(key, payload) and self._journal_add is not None:
+            self._journal_add((key, payload))
+
+    def _on_journal_failure(self, why: str) -> None:
+        self.inbox.control(("journal", why))
 
     def _on_miss(self, publisher: str, n: int) -> None:
         self.inbox.lost(f"publisher {publisher}", MISSED, n)  # recorded as a count, then refilled
@@ -474,6 +552,9 @@ class Recorder:
         if key is None:
             if payload is _REFILL:  # Zenoh lost messages for good: refill now
                 self._refill_at = time.monotonic()
+            elif isinstance(payload, tuple) and payload[0] == "journal":  # its write failed: so has the recording
+                self._fail(payload[1])
+                raise RecordingFailed(payload[1])
             elif isinstance(payload, tuple) and payload[0] == "alive":
                 self._alive(*payload[1:])
             elif isinstance(payload, tuple):
@@ -694,10 +775,13 @@ class Recorder:
                     "unrecorded_at_exit": str(unrecorded),
                     "max_flush_age_ms": f"{self.writer.max_flush_age_ns / 1e6:.1f}"})
                 self._guarded(self.writer.close)
+                self._guarded(_fsync, self.path)
             except RecordingFailed:
                 pass
         else:
             self.writer.abandon()
+        if self.journal is not None:  # kept unless the file is complete and on disk: recover reads it
+            self.journal.close(remove=self.failure is None)
         if self.outbox is not None:
             self.outbox.close(deadline.left(cap=0.5))
         return self.failure

@@ -146,6 +146,9 @@ def test_an_aborted_game_is_journaled_with_its_reason_and_stays_open(tmp_path):
 
 def test_export_holds_everything_of_one_participant_with_a_readme(played, tmp_path):
     data = copy_study(played, tmp_path)
+    from pairplay.replay.wal import JournalWriter
+    killed = data.games_of("p02")[0]  # a recorder killed in that game left its journal: their data too
+    JournalWriter(data.folder / killed.recording, killed.session).close()
     path = data.export_participant("p02")
     with zipfile.ZipFile(path) as z:
         names = set(z.namelist())
@@ -158,6 +161,7 @@ def test_export_holds_everything_of_one_participant_with_a_readme(played, tmp_pa
     assert {a["participant"] for a in answers} == {"p02"} and len(answers) > 10
     assert all(x["participant"] == "p02" for x in lines if "participant" in x)
     assert all(s in readme for s in sessions) and "answers.csv" in readme and "merged/phase2-bias" in readme
+    assert f"{killed.recording}.journal" in names and "write-ahead journal" in readme
     with pytest.raises(StudyDataError, match="exists"):
         data.export_participant("p02")
 

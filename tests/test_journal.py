@@ -1,0 +1,322 @@
+"""The recorder's write-ahead journal (issue 12 item 6): every message durable when received.
+
+A recorder SIGKILLed with a backlog loses nothing the journal held (before the journal the
+inbox's backlog died with it); a torn journal is read up to its tear; forged and refused
+messages in a journal stay refused and are recorded as such; recover without a journal is
+unchanged; a restarted recorder takes what the earlier journal holds; a stray journal is one
+line wherever a recording is expected, and a session id whose journal is left is taken."""
+
+from __future__ import annotations
+
+import os
+import shutil
+import signal
+import subprocess
+import sys
+import time
+
+import pytest
+
+from pairplay.errors import InputError
+from pairplay.replay.reader import read_log
+from pairplay.replay.recover import recover
+from pairplay.replay.wal import MAGIC, JournalWriter, NotAJournal, read_journal, wal_path
+from pairplay.schemas import events as ev
+from pairplay.schemas.envelope import stamped
+from pairplay.schemas.events import encode_event
+from pairplay.schemas.keys import alive_key, event_key
+from pairplay.schemas.session import SessionConfig
+from pairplay.services.recorder import Recorder, RecordingExists, check_new_recording
+from pairplay.services.walmerge import admit
+
+from busutil import listener, wait_until
+
+
+def message(event, source="game", seq=1, session="j1"):
+    e = stamped(event, session=session, source=source, seq=seq, time_ns=seq)
+    return event_key(session, source, type(event).__name__), encode_event(e)
+
+
+def start(session="j1"):
+    cfg = SessionConfig(session=session, participant="sim:ashley", persona="ashley", seed=1, rounds=3)
+    return message(ev.SessionStarted(config=cfg), session=session)
+
+
+def pick(seq, session="j1"):
+    return message(ev.CardPicked(round=0, turn=seq, card=seq % 18), source="participant", seq=seq, session=session)
+
+
+def journal_of(recording, items, session="j1"):
+    """A journal beside `recording` holding `items` ((key, payload)), written in two frames."""
+    j = JournalWriter(recording, session, clock=iter(range(10**9, 10**10, 1000)).__next__)
+    half = len(items) // 2
+    for k, p in items[:half]:
+        j.add((k, p))
+    j.write_pending()
+    for k, p in items[half:]:
+        j.add((k, p))
+    j.close()
+    return j.path
+
+
+def cut_recording(tmp_path, events, name="j1.mcap", session="j1"):
+    """A recording of `events` cut as a SIGKILL cuts it: flushed, never finished."""
+    live = Recorder(None, session, tmp_path / "live" / name, clock=iter(range(10**9, 10**10, 1000)).__next__)
+    for i, (k, p) in enumerate(events):
+        assert live.record(k, p, 10**9 + i)
+    live.writer.flush(live.clock())
+    live.writer._stream.flush()
+    shutil.copy(live.path, tmp_path / name)
+    live.close()
+    return tmp_path / name
+
+
+# -- the journal file -------------------------------------------------------------
+def test_a_journal_reads_back_every_record_in_order_with_its_header(tmp_path):
+    items = [pick(s) for s in range(1, 101)]
+    path = journal_of(tmp_path / "j1.mcap", items)
+    assert path.name == "j1.mcap.journal" and path.read_bytes().startswith(MAGIC)
+    j = read_journal(path)
+    assert j.session == "j1" and j.header["recording"] == "j1.mcap" and not j.torn
+    assert [(k, p) for k, p, _ in j.records] == items and j.frames == 3
+
+
+@pytest.mark.parametrize("tear", ["mid-head", "mid-body", "flipped", "zeros"])
+def test_a_torn_journal_is_read_up_to_its_tear(tmp_path, tear):
+    items = [pick(s) for s in range(1, 101)]
+    path = journal_of(tmp_path / "j1.mcap", items)
+    data = path.read_bytes()
+    whole = read_journal(path)
+    first_frame_end = len(data) - (len(data) - len(MAGIC)) // 2  # somewhere in the last frame
+    if tear == "mid-head":  # the last frame's head cut: find it by re-reading the first two frames
+        data = data + b"\x01\x02\x03"
+    elif tear == "mid-body":
+        data = data[:-7]
+    elif tear == "flipped":
+        data = data[:-3] + bytes([data[-3] ^ 0xFF]) + data[-2:]
+    else:  # a power cut's zero-filled tail
+        data = data + b"\0" * 64
+    path.write_bytes(data)
+    j = read_journal(path)
+    assert j.torn, tear
+    expected = whole.records if tear in ("mid-head", "zeros") else whole.records[:50]
+    assert j.records == expected, (tear, first_frame_end)
+
+
+def test_what_is_not_a_journal_is_refused_in_one_sentence(tmp_path):
+    (tmp_path / "x.journal").write_bytes(b"hello")
+    with pytest.raises(NotAJournal):
+        read_journal(tmp_path / "x.journal")
+    (tmp_path / "y.journal").write_bytes(MAGIC + b"\xff" * 30)
+    with pytest.raises(NotAJournal):
+        read_journal(tmp_path / "y.journal")
+
+
+def test_a_journal_is_never_replaced(tmp_path):
+    journal_of(tmp_path / "j1.mcap", [pick(1)])
+    with pytest.raises(FileExistsError):
+        JournalWriter(tmp_path / "j1.mcap", "j1")
+
+
+# -- recover with a journal ---------------------------------------------------------
+def test_recover_adds_what_the_cut_file_lacks_from_its_journal_and_nothing_twice(tmp_path):
+    events = [start()] + [pick(s) for s in range(1, 41)]
+    path = cut_recording(tmp_path, events[:21])  # the file holds the start and picks 1-20
+    journal_of(path, events)  # the journal holds everything received: start and picks 1-40
+    done = recover(path, admit=admit)
+    assert done.from_journal == 20 and done.journal_refused == 0 and done.journal == wal_path(path)
+    log = read_log(done.output)
+    assert [r.event.seq for r in log.events if r.event.source == "participant"] == list(range(1, 41))
+    assert not [r for r in log.events if r.event.source == "recorder"]
+    meta = log.metadata["pairplay.recovered"]
+    assert meta["from_journal"] == "20" and meta["journal"] == "j1.mcap.journal" and meta["journal_torn"] == ""
+    assert wal_path(path).exists()  # recover never changes its inputs
+
+
+def test_forged_and_refused_messages_in_a_journal_stay_refused_and_are_recorded(tmp_path):
+    events = [start()] + [pick(s) for s in range(1, 11)]
+    path = cut_recording(tmp_path, events[:6])
+    forged = [
+        message(ev.SessionEnded(), source="participant", seq=11),  # a source that may not publish it
+        pick(10**9),  # a sequence number jump
+        (event_key("j1", "participant", "CardPicked"), b"{not json"),  # malformed
+        message(ev.CardPicked(round=0, turn=3, card=0), source="participant", seq=3),  # a repeat, other bytes
+        message(ev.SessionStarted(config=SessionConfig(session="j1", participant="sim:x", persona="ashley", seed=2, rounds=1)),
+                seq=99),  # a second start
+        message(ev.MessageRejected(reason="x", key="k"), source="recorder", seq=1),  # our own echo: skipped
+        pick(1, session="other"),  # another session's
+    ]
+    journal_of(path, events + forged)
+    done = recover(path, admit=admit)
+    assert done.from_journal == 5 and done.journal_refused == 6
+    log = read_log(done.output)
+    assert [r.event.seq for r in log.events if r.event.source == "participant"] == list(range(1, 11))
+    assert sum(isinstance(r.event, ev.SessionEnded) for r in log.events) == 0
+    refusals = [r.event for r in log.events if r.event.source == "recorder"]
+    assert len(refusals) == 6 and all(isinstance(e, ev.MessageRejected) and e.reason for e in refusals)
+    assert [e.seq for e in refusals] == list(range(1, 7))
+    reasons = " | ".join(e.reason for e in refusals)
+    for words in ("jumps", "malformed", "not above", "second SessionStarted", "wrong session"):
+        assert words in reasons, words
+
+
+def test_a_refusal_the_file_holds_already_is_not_recorded_twice(tmp_path):
+    events = [start(), pick(1), pick(2)]
+    bad = pick(10**9)
+    live = Recorder(None, "j1", tmp_path / "live" / "j1.mcap")
+    for i, (k, p) in enumerate(events[:2] + [bad]):
+        live.record(k, p, 10**9 + i)
+    live.writer.flush(live.clock())
+    live.writer._stream.flush()
+    shutil.copy(live.path, tmp_path / "j1.mcap")
+    live.close()
+    journal_of(tmp_path / "j1.mcap", events[:2] + [bad] + events[2:])
+    done = recover(tmp_path / "j1.mcap", admit=admit)
+    assert done.from_journal == 1 and done.journal_refused == 1
+    log = read_log(done.output)
+    assert sum(r.event.source == "recorder" for r in log.events) == 1  # the live refusal, once
+
+
+def test_recover_reads_a_torn_journal_up_to_its_tear_and_says_so(tmp_path, pairplay_cli):
+    events = [start()] + [pick(s) for s in range(1, 41)]
+    path = cut_recording(tmp_path, events[:11])
+    journal = journal_of(path, events)
+    journal.write_bytes(journal.read_bytes()[:-5])  # the second frame (picks 20-40) torn
+    ran = pairplay_cli("recover", path)
+    assert ran.returncode == 0, ran.stderr
+    assert "9 events taken from its journal j1.mcap.journal" in ran.stdout and "torn" in ran.stdout
+    log = read_log(tmp_path / "j1.recovered.mcap")
+    assert [r.event.seq for r in log.events if r.event.source == "participant"] == list(range(1, 20))
+
+
+def test_recover_without_a_journal_is_unchanged(tmp_path, pairplay_cli):
+    events = [start()] + [pick(s) for s in range(1, 11)]
+    path = cut_recording(tmp_path, events)
+    ran = pairplay_cli("recover", path)
+    assert ran.returncode == 0 and "from its journal" not in ran.stdout, ran.stdout
+    log = read_log(tmp_path / "j1.recovered.mcap")
+    assert len(log.events) == 11
+    assert not any(k.startswith("journal") or k == "from_journal" for k in log.metadata["pairplay.recovered"])
+
+
+def test_a_journal_of_another_session_is_refused_in_one_line(tmp_path, pairplay_cli):
+    path = cut_recording(tmp_path, [start(), pick(1)])
+    journal_of(path, [pick(1, session="other")], session="other")
+    ran = pairplay_cli("recover", path)
+    assert ran.returncode == 2 and len(ran.stderr.strip().splitlines()) == 1 and "Traceback" not in ran.stderr
+    assert "session 'other'" in ran.stderr
+
+
+def test_a_file_cut_before_its_first_flush_is_recovered_from_its_journal(tmp_path):
+    events = [start()] + [pick(s) for s in range(1, 6)]
+    path = cut_recording(tmp_path, [])  # only MCAP's magic and header reached the disk
+    journal_of(path, events)
+    done = recover(path, admit=admit)
+    assert done.from_journal == 6 and done.started
+    assert len(read_log(done.output).events) == 6
+
+
+# -- stray journals ------------------------------------------------------------------
+@pytest.mark.parametrize("verb", [["rebuild"], ["recover"], ["replay", "--verify"], ["view", "--no-save", "--recording"],
+                                  ["counterfactual", "--fit-only"]])
+def test_a_journal_given_as_a_recording_is_one_line_naming_recover(tmp_path, pairplay_cli, verb):
+    path = cut_recording(tmp_path, [start(), pick(1)])
+    journal = journal_of(path, [start(), pick(1)])
+    ran = pairplay_cli(*verb, journal, cwd=tmp_path)
+    assert ran.returncode != 0 and "Traceback" not in ran.stderr
+    lines = ran.stderr.strip().splitlines()
+    assert len(lines) == 1 and "journal" in lines[0] and "pairplay recover j1.mcap" in lines[0], ran.stderr
+
+
+def test_a_session_whose_journal_is_left_is_taken_and_force_removes_it(tmp_path):
+    journal_of(tmp_path / "j1.mcap", [pick(1)])  # a killed recorder's, its recording moved away
+    with pytest.raises(RecordingExists):
+        check_new_recording(tmp_path / "j1.mcap")
+    check_new_recording(tmp_path / "j1.mcap", force=True)
+    assert not wal_path(tmp_path / "j1.mcap").exists()
+
+
+# -- the recorder -----------------------------------------------------------------
+def test_a_finished_recording_leaves_no_journal_and_a_failed_one_keeps_it(tmp_path):
+    with listener() as bus:
+        rec = Recorder(bus, "j1", tmp_path / "j1.mcap")
+        rec.start()
+        assert wal_path(rec.path).exists()
+        assert rec.close() is None
+        assert not wal_path(rec.path).exists() and read_log(rec.path).whole
+        failing = Recorder(bus, "j2", tmp_path / "j2.mcap")
+        failing.start()
+        failing._fail("disk full (test)")
+        failing.close()
+        assert wal_path(failing.path).exists()
+
+
+def test_a_journal_that_cannot_be_written_fails_the_recording_loudly_and_stays(tmp_path):
+    failures = []
+    with listener() as bus:
+        rec = Recorder(bus, "j1", tmp_path / "j1.mcap", on_failure=failures.append)
+        rec.start()
+        os.close(rec.journal._fd)  # the journal's file can no longer be written (as a full disk)
+        rec.enqueue(*start())
+        assert wait_until(lambda: rec.journal.failure is not None, 10)
+        assert wait_until(lambda: not rec.step(0.01) and rec.failure is not None, 10)
+        rec.journal._fd = -1
+        assert rec.close() is not None
+    assert failures and "journal" in failures[0] and wal_path(rec.path).exists()
+
+
+def test_a_restarted_recorder_takes_what_the_earlier_journal_holds(tmp_path):
+    events = [start()] + [pick(s) for s in range(1, 31)]
+    path = cut_recording(tmp_path, events[:11])
+    journal_of(path, events + [pick(10**9)])
+    rec = Recorder(None, "j1", path, restart=True)
+    rec.close()
+    log = read_log(rec.path)
+    assert rec.path.name == "j1.1.mcap"
+    assert [r.event.seq for r in log.events if r.event.source == "participant"] == list(range(1, 31))
+    assert log.metadata["pairplay.recorder.journal"]["taken"] == "20"
+    assert log.metadata["pairplay.recorder.journal"]["refused"] == "1"
+    assert sum(isinstance(r.event, ev.MessageRejected) for r in log.events) == 1
+
+
+def test_a_recorder_killed_with_a_backlog_loses_nothing_its_journal_held(tmp_path, pairplay_cli):
+    """A burst faster than the recorder's writer, SIGKILL as soon as the journal holds the last
+    event: the cut file lacks at least its unflushed tail (and the backlog, if any); recover takes
+    it all from the journal. Before the journal, what waited in the inbox died with the process."""
+    n = 20_000
+    with listener() as bus:
+        rec = subprocess.Popen([sys.executable, "-m", "pairplay", "run", "recorder", "--session", "jk", "--out",
+                                str(tmp_path), "--connect", bus.locators()[0]],
+                               stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+        try:
+            assert wait_until(lambda: alive_key("jk", "recorder") in bus.alive_now(alive_key("jk", "*")), 30)
+            key = event_key("jk", "participant", "CardPicked")
+            assert wait_until(lambda: bus.matching(key))
+            burst = [encode_event(stamped(ev.CardPicked(round=0, turn=seq, card=seq % 18), session="jk",
+                                          source="participant", seq=seq, time_ns=seq)) for seq in range(1, n + 1)]
+            put = bus.publisher(key).put
+            for payload in burst:  # as fast as this process can: faster than the recorder's writer
+                put(payload)
+            with open(wal_path(tmp_path / "jk.mcap"), "rb") as journal:
+                tail = b""
+
+                def journaled() -> bool:  # the last event is in the journal (read as it grows)
+                    nonlocal tail
+                    tail = tail[-len(burst[-1]):] + journal.read()
+                    return burst[-1] in tail
+
+                assert wait_until(journaled, 30, 0.0005)
+            rec.send_signal(signal.SIGKILL)
+            rec.wait(10)
+        finally:
+            if rec.poll() is None:
+                rec.kill()
+                rec.wait()
+    cut = read_log(tmp_path / "jk.mcap")
+    assert cut.truncated and len(cut.events) < n
+    ran = pairplay_cli("recover", tmp_path / "jk.mcap")
+    assert ran.returncode == 0, ran.stderr
+    taken = n - len(cut.events)
+    assert f"{taken} events taken from its journal" in ran.stdout, ran.stdout
+    log = read_log(tmp_path / "jk.recovered.mcap")
+    assert [r.event.seq for r in log.events if r.event.source == "participant"] == list(range(1, n + 1))
