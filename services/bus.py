@@ -37,10 +37,13 @@ No bus callback ever blocks (a callback that waits on a publish can wait on a
 peer that waits on it: the whole process froze, LIBRARY-NOTES). A callback only
 hands its sample to an `Inbox`: bounded per source and in bytes, it never
 waits; what does not fit is shed and counted, and the service records the
-count. Each service publishes from one place it owns, its `Outbox` thread; its
-publishers use congestion control BLOCK (Zenoh's default, DROP, silently lost
-72-95% of events between processes under load), which is safe there because
-no consumer's callback can hold it up. SIGINT and SIGTERM set a stop flag;
+count. Each service publishes from one place it owns, its `Outbox`: its thread,
+or the service's own thread when that thread is idle (`Outbox.publish_here`:
+two thread hand-offs less per service on a pick's way, issue 16), one at a time
+and in order; never a bus callback or the main thread (signals). Its publishers
+use congestion control BLOCK (Zenoh's default, DROP, silently lost 72-95% of
+events between processes under load), which is safe there because no
+consumer's callback can hold it up. SIGINT and SIGTERM set a stop flag;
 every wait in a service checks it, and `Bus.close` gives Zenoh a bounded time
 (a session closing under a blocked publish takes ~5.5 s: measured), so a
 process exits within 2 s, its recording finished. That bound holds by construction:
