@@ -122,7 +122,13 @@ def run(args: argparse.Namespace) -> int:
         except Stopped:
             return 0
         print(f"{args.service} running in session {args.session}", flush=True)
-        node.run(stop)
+        # the service's own thread publishes what it decides (Node.step) and may wait in a put on a
+        # congested peer; this (main) thread stays free for the signals and the bounded shutdown
+        thread = node.run_in_thread(stop)
+        while thread.is_alive() and not stop.wait(0.05):
+            pass
+        if stop.is_set():
+            thread.join(deadline_of(stop).left(0.5, 0.2))
         if args.service == "game" and not logic.done:  # stopped: the session's end says why and how far
             from pairplay.services.session import end_reason
             reason, detail = end_reason(stop, "")

@@ -37,10 +37,13 @@ No bus callback ever blocks (a callback that waits on a publish can wait on a
 peer that waits on it: the whole process froze, LIBRARY-NOTES). A callback only
 hands its sample to an `Inbox`: bounded per source and in bytes, it never
 waits; what does not fit is shed and counted, and the service records the
-count. Each service publishes from one place it owns, its `Outbox` thread; its
-publishers use congestion control BLOCK (Zenoh's default, DROP, silently lost
-72-95% of events between processes under load), which is safe there because
-no consumer's callback can hold it up. SIGINT and SIGTERM set a stop flag;
+count. Each service publishes from one place it owns, its `Outbox`: its thread,
+or the service's own thread when that thread is idle (`Outbox.publish_here`:
+two thread hand-offs less per service on a pick's way, issue 16), one at a time
+and in order; never a bus callback or the main thread (signals). Its publishers
+use congestion control BLOCK (Zenoh's default, DROP, silently lost 72-95% of
+events between processes under load), which is safe there because no
+consumer's callback can hold it up. SIGINT and SIGTERM set a stop flag;
 every wait in a service checks it, and `Bus.close` gives Zenoh a bounded time
 (a session closing under a blocked publish takes ~5.5 s: measured), so a
 process exits within 2 s, its recording finished. That bound holds by construction:
@@ -56,7 +59,6 @@ import argparse
 import copy
 import json
 import logging
-import queue
 import signal
 import sys
 import threading
@@ -419,27 +421,42 @@ class Inbox:
 
 
 class Outbox:
-    """The one place a service publishes from: a thread of its own (see module rule).
+    """The one place a service publishes from: its own thread, or its owner's (see module rule).
 
-    `send` and `call` never wait. The thread publishes in order with BLOCK
-    publishers; `call(fn)` runs `fn` there in turn (a query's answer).
-    `keep`: remember what was sent (a restarted recorder asks for it)."""
+    `send` and `call` never wait. Publishing is in order with BLOCK publishers, by
+    whichever holds `_putting`: the Outbox's thread, or the owner thread through
+    `publish_here` (a service thread after a step). `send(..., wake=False)` only
+    queues, for the owner that calls `publish_here` next: it publishes what waits
+    itself when nobody else is publishing, so an event leaves without two thread
+    hand-offs (issue 16: ~50 us each cold, and the Outbox thread waking in the
+    middle of a step took the GIL from it); when the thread is busy it leaves
+    everything to it. The owner may thus wait in a put (a congested peer; Zenoh
+    closes the link after ~5 s), never in a bus callback: callers must be a
+    thread no signal handler or bus callback runs on (services/runner.py runs its
+    Node in a thread of its own for that). `call(fn)` runs `fn` in turn (a
+    query's answer). `keep`: remember what was sent (a restarted recorder asks)."""
 
     def __init__(self, bus: "Bus", name: str, keep: bool = False):
         self.bus, self.name = bus, name
-        self._queue: queue.SimpleQueue = queue.SimpleQueue()
-        self._pending = 0
+        self._items: deque = deque()  # (key, payload) or (None, fn), in order
+        self._pending = 0  # queued or being published
         self._lock = threading.Lock()
-        self._idle = threading.Condition(self._lock)
+        self._wake = threading.Condition(self._lock)  # the thread: something was sent
+        self._idle = threading.Condition(self._lock)  # flush: nothing pending
+        self._putting = threading.Lock()  # held by whoever publishes now: one at a time keeps the order
+        self._stopping = False
         self.sent: list[tuple[str, bytes]] | None = [] if keep else None
         self.failed = 0
         self._thread = threading.Thread(target=self._run, name=f"pairplay-{name}-outbox", daemon=True)
         self._thread.start()
 
-    def send(self, key: str, payload: bytes) -> None:
+    def send(self, key: str, payload: bytes, wake: bool = True) -> None:
+        """Queue `payload` for `key`; `wake=False`: the caller calls `publish_here` next."""
         with self._lock:
             self._pending += 1
-        self._queue.put((key, payload))
+            self._items.append((key, payload))
+            if wake:
+                self._wake.notify()
 
     def send_within(self, key: str, payload: bytes, stop: threading.Event, most: int = 1_000) -> bool:
         """`send`, once fewer than `most` wait (a producer faster than the bus: `pairplay replay` at
@@ -454,13 +471,40 @@ class Outbox:
     def call(self, fn: Callable[[], None]) -> None:
         with self._lock:
             self._pending += 1
-        self._queue.put((None, fn))
+            self._items.append((None, fn))
+            self._wake.notify()
+
+    def publish_here(self) -> None:
+        """Publish what waits from the calling thread, unless the Outbox's thread is publishing
+        (then it takes everything, in order). May wait in a put: see the class rule."""
+        if self._putting.acquire(blocking=False):
+            try:
+                self._drain()
+            finally:
+                self._putting.release()
+        # what came in meanwhile (or while the thread held _putting) is the thread's: its
+        # wait checks for waiting items, so nothing is stranded
+        with self._lock:
+            if self._items:
+                self._wake.notify()
 
     def _run(self) -> None:
         while True:
-            key, item = self._queue.get()
-            if key is _STOP:
-                return
+            with self._lock:
+                while not self._items and not self._stopping:
+                    self._wake.wait()
+                if self._stopping and not self._items:
+                    return
+            with self._putting:
+                self._drain()
+
+    def _drain(self) -> None:
+        """Publish until nothing waits (the caller holds `_putting`)."""
+        while True:
+            with self._lock:
+                if not self._items:
+                    return
+                key, item = self._items.popleft()
             try:
                 if key is None:
                     item()
@@ -487,6 +531,8 @@ class Outbox:
         """Wait (bounded) until everything sent so far is published; False on timeout."""
         deadline = time.monotonic() + timeout_s
         with self._lock:
+            if self._items:
+                self._wake.notify()  # queued with wake=False by an owner that stopped before publishing
             while self._pending:
                 left = deadline - time.monotonic()
                 if left <= 0:
@@ -497,11 +543,10 @@ class Outbox:
     def close(self, timeout_s: float = 1.0) -> bool:
         """Publish what is queued (bounded by `timeout_s`), then stop the thread."""
         done = self.flush(timeout_s)
-        self._queue.put((_STOP, None))
+        with self._lock:
+            self._stopping = True
+            self._wake.notify()
         return done
-
-
-_STOP = object()
 
 
 class Bus:

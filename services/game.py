@@ -31,10 +31,9 @@ from __future__ import annotations
 
 from collections import deque
 
-import numpy as np
 
 from pairplay.core.board import Board, IllegalPick, Outcome, deal
-from pairplay.core.geometry import N_CARDS, states_of
+from pairplay.core.geometry import N_CARDS, state_of
 from pairplay.core.rng import UniformStream
 from pairplay.schemas import events as ev
 from pairplay.schemas.session import SessionConfig
@@ -195,7 +194,9 @@ class GameLogic:
     def _request(self, observed: int) -> ev.SuggestionRequested:
         match = self.board.partner(self.first)
         covered = self.board.covered
-        state = int(states_of(np.array([observed]), np.array([match]), np.array([covered], dtype=np.int64))[0])
+        # the scalar form (the batch one's numpy calls were most of a first pick's cost cold: issue 16);
+        # the match, the first card's partner, is covered, so the state exists
+        state = state_of(observed, match, covered)
         self.observed = observed
         self.attempt += 1
         return ev.SuggestionRequested(round=self.round, turn=self.turn, attempt=self.attempt, state=state,

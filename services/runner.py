@@ -11,8 +11,9 @@ the history the publishers' caches send a subscriber that joins late) are
 skipped quietly: the log is the restarted service's cut point (services/guard.py).
 Zenoh's callback threads only put samples into the Node's Inbox (never
 waiting; a flood is shed there and the count recorded); one thread per Node
-handles them in arrival order, and the Node's Outbox thread publishes what it
-decides (services/bus.py). Every wait checks the stop flag.
+handles them in arrival order and publishes what it decides itself when its
+Outbox's thread is idle, else leaves it to that thread (services/bus.py; issue
+16: two thread hand-offs less per service). Every wait checks the stop flag.
 """
 
 from __future__ import annotations
@@ -155,6 +156,7 @@ class Node:
         self._lock = threading.RLock()  # the Node's thread, or the session ending it from outside
         self.game_gone_s = GAME_GONE_S  # see GameWatch
         self.game_watch: GameWatch | None = None
+        self._keys: dict[tuple[str, str], str] = {}  # (source, tag) -> key (publish); sources are ours, tags a fixed set
     def _on_message(self, key: str, payload: bytes) -> None:
         self.inbox.put(key, payload)  # Zenoh's thread: hand over, never wait
 
@@ -172,9 +174,15 @@ class Node:
         with self._lock:
             return self.driver.reject(reason, key, source, seq, payload)
 
-    def publish(self, events: list[Event]) -> None:
+    def publish(self, events: list[Event], wake: bool = True) -> None:
+        """Queue `events` on the Outbox; `wake=False`: the caller publishes them itself next
+        (`outbox.publish_here`, outside the lock: see step)."""
         for e in events:
-            self.outbox.send(event_key(self.session, e.source, type(e).__name__), encode_event(e))
+            tag = type(e).__name__
+            key = self._keys.get((e.source, tag))
+            if key is None:  # built and checked once per source and tag (the check is most of its cost)
+                key = self._keys[(e.source, tag)] = event_key(self.session, e.source, tag)
+            self.outbox.send(key, encode_event(e), wake)
 
     def start(self, wait_for: tuple[str, ...] = (), wait_timeout_s: float = WAIT_FOR_S) -> None:
         """Subscribe, announce, catch up; with `wait_for`, first wait for those services' tokens.
@@ -237,20 +245,29 @@ class Node:
             self.stop.wait(0.05)
 
     def step(self, timeout_s: float = 0.1) -> bool:
-        """Handle one message (False if none came)."""
+        """Handle one message (False if none came). Off the main thread, what it decides is
+        published from this thread (`Outbox.publish_here`: no hand-off to the Outbox's thread,
+        issue 16), after the lock is released: a put that waits on a congested peer then holds
+        up only this thread, never the session's end (`end_game` takes the lock) or a signal
+        (handled on the main thread; run() on the main thread leaves publishing to the Outbox)."""
+        here = threading.current_thread() is not threading.main_thread()
         item = self.inbox.get(timeout_s)
-        shed = self.inbox.take_shed()
-        if shed or self.driver.refusals.pending():
-            self.publish(self.driver.tick(shed))
-        if item is None:
-            return False
-        key, payload, _ = item
-        if key is None:  # a restarted recorder asks what we sent
-            answer_sent(self.outbox, self.logic.name, payload)
+        try:
+            shed = self.inbox.take_shed()
+            if shed or self.driver.refusals.pending():
+                self.publish(self.driver.tick(shed), wake=not here)
+            if item is None:
+                return False
+            key, payload, _ = item
+            if key is None:  # a restarted recorder asks what we sent
+                answer_sent(self.outbox, self.logic.name, payload)
+                return True
+            with self._lock:
+                self.publish(self.driver.receive(key, payload), wake=not here)
             return True
-        with self._lock:
-            self.publish(self.driver.receive(key, payload))
-        return True
+        finally:
+            if here:
+                self.outbox.publish_here()
 
     def run(self, stop: threading.Event | None = None) -> None:
         stop = stop or self.stop
