@@ -120,6 +120,8 @@ def _run(args) -> int:
         print("\n".join(describe(parse_study(text, source))))
         return 0
     if args.action == "init":
+        from pairplay.outputs import check_folder
+        check_folder(args.folder)  # a place the system refuses, named as given, before anything is written
         study_path = args.study
         if args.study == EXAMPLE_NAME and not Path(args.study).exists():
             tmp = args.folder.resolve().parent / f".{EXAMPLE_NAME}.toml"

@@ -32,6 +32,7 @@ from pathlib import Path
 import msgspec
 
 from pairplay import __version__
+from pairplay.outputs import output_file
 from pairplay.schemas import journal as j
 from pairplay.schemas.policy import read_policy, write_policy
 from pairplay.schemas.study import Study, StudyFileError, load_study
@@ -47,17 +48,13 @@ class StudyDataError(ValueError):
 
 
 def atomic_write(path: Path, data: bytes) -> None:
-    """Write `data` to `path` through a temporary file renamed when complete (removed on any failure)."""
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
-    try:
-        with open(tmp, "wb") as f:
-            f.write(data)
-            f.flush()
-            os.fsync(f.fileno())
-        os.replace(tmp, path)
-    finally:  # a full disk or Ctrl-C: no temporary file left beside the target
-        tmp.unlink(missing_ok=True)
+    """Write `data` to `path` through a temporary file renamed when complete (pairplay/outputs.py
+    `output_file`: removed on any failure, with the folders made for it; a refusal names `path`, not the
+    temporary file: `participant export -o /proc/p.zip` said "(/proc/.p.zip.<pid>.tmp)")."""
+    with output_file(path, "wb", force=True) as f:
+        f.write(data)
+        f.flush()
+        os.fsync(f.fileno())
 
 
 @dataclass

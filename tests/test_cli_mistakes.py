@@ -200,6 +200,10 @@ CASES = [
     Case("counterfactual --out where no folder can be made", ["counterfactual", "rec.mcap", "--out", "/proc/x"],
          "(/proc/x)"),
     Case("sweep --out where no folder can be made", ["sweep", "grid.toml", "--out", "/proc/x"], "(/proc/x)"),
+    Case("participant export -o where no file can be made", ["participant", "export", "study", "p01", "-o",
+                                                             "/proc/p.zip"], "cannot write there: No such file or directory (/proc)"),
+    Case("protocol init where no folder can be made", ["protocol", "init", "/proc/st", "--study", "thesis-ch7"],
+         "cannot write there: No such file or directory (/proc/st)"),
 ]
 
 
@@ -234,6 +238,7 @@ def _fixtures(root: Path) -> None:
     (root / "grid.toml").write_text('seeds = 1\n[study]\npersonas = "blind"\ngames = 1\nrounds = 20\n'
                                     '[grid]\npsi_decay = [0.9]\n')
     assert main(["protocol", "init", str(root / "study"), "--study", "thesis-ch7", "--quiet"]) == 0
+    assert main(["protocol", "register", str(root / "study"), "--count", "1", "--quiet"]) == 0  # p01
 
 
 ENV = dict(os.environ, COLUMNS="200")
