@@ -34,7 +34,7 @@ import threading
 from dataclasses import dataclass
 from pathlib import Path
 
-from pairplay.cli.args import add_force, float_at_least, port_or_any, session_id
+from pairplay.cli.args import add_force, float_at_least, int_at_least, port_or_any, session_id
 from pairplay.errors import InputError, OptionError, OutputError, UserError
 from pairplay.outputs import check_output, output_path
 from pairplay.replay.check import read_session
@@ -68,8 +68,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                      help="draw the board, suggestion and Q-table at most every S seconds (wall clock); every "
                           "event's line and every curve point is kept (default: 0.1 live, 0 = every event "
                           "for a recording)")
-    out.add_argument("--nice", type=int, choices=range(0, 20), default=10, metavar="N",
-                     help="live: lower the view's drawing thread by N nice levels (0-19), so the session it "
+    out.add_argument("--nice", type=int_at_least(0), default=10, metavar="N",
+                     help="live: lower the view's drawing thread by N nice levels (to 19 at most), so the session it "
                           "watches gets the CPU first; the bus's receive threads keep their priority")
     out.add_argument("--rerun-analytics", action="store_true",
                      help="leave rerun's usage analytics to your rerun settings (default: off for viewers started here)")
