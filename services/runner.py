@@ -255,7 +255,8 @@ class Node:
         try:
             shed = self.inbox.take_shed()
             if shed or self.driver.refusals.pending():
-                self.publish(self.driver.tick(shed), wake=not here)
+                with self._lock:  # numbered and queued in one go: the queue's order is the numbers' order
+                    self.publish(self.driver.tick(shed), wake=not here)
             if item is None:
                 return False
             key, payload, _ = item
@@ -280,7 +281,8 @@ class Node:
                 log.warning("%s: the session's game left the bus %.0f s ago without this service seeing the "
                             "session's end (a cut link?); stopping", self.logic.name, self.game_watch.gone_s)
                 break
-        self.publish(self.driver.tick(self.inbox.take_shed(), force=True))
+        with self._lock:  # `pairplay run` may end the game from its main thread meanwhile
+            self.publish(self.driver.tick(self.inbox.take_shed(), force=True))
         if self.driver.guard.skipped:
             log.info("%s skipped %d deliveries its log already held", self.logic.name, self.driver.guard.skipped)
 

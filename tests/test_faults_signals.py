@@ -104,6 +104,9 @@ def verbs(tmp: Path, tag: str) -> list[Verb]:
              lambda line: line.startswith("listening"), rec / f"{s('rec')}.mcap"),
         Verb("run game (waiting for its services)", ["run", "game", "--participant", "sim:ashley", "--session",
              s("game")], lambda line: line.startswith("listening"), settle_s=0.5),
+        # its Node runs in a thread of its own (it publishes from there, issue 16); the main thread waits on the stop flag
+        Verb("run learner (running)", ["run", "learner", "--session", s("lrn")],
+             lambda line: line.startswith("learner running")),
     ]
 
 
@@ -155,7 +158,8 @@ def signalled(request, tmp_path_factory):
 
 NAMES = ["session (playing 300 rounds)", "lab (waiting for its board)", "protocol serve (console idle)",
          "protocol pilot (a game playing)", "replay (paced)", "view (a recording, paced)", "view (live, waiting)",
-         "robot (bridge waiting)", "run recorder (waiting)", "run game (waiting for its services)"]
+         "robot (bridge waiting)", "run recorder (waiting)", "run game (waiting for its services)",
+         "run learner (running)"]
 
 
 @pytest.mark.parametrize("name", NAMES)
