@@ -646,7 +646,11 @@ class Recorder:
                 "streams": str(c.streams)})
         elif tag == "SessionEnded":
             self.ended = True
-            self._ended_ns = received_ns
+            # when the session ended: the game's stamp if earlier than our receipt. A service leaves once it
+            # saw the end, but its token's drop (Zenoh control traffic) can reach us before the end itself
+            # (data queued behind a backlog): by receipt time it looked absent and never back (_close_absences)
+            stamp = event.time_ns if isinstance(event.time_ns, int) else event.time_ns.sec * 10**9 + event.time_ns.nsec
+            self._ended_ns = min(received_ns, stamp)
         return True
 
     def _reject(self, reason: str, key: str, payload: bytes, event=None) -> bool:
@@ -749,7 +753,7 @@ class Recorder:
             self.refusals.shed(shed)
         if self.failure is None:  # off the bus mid-session and never back
             for service, left_ns in sorted(self._absent.items()):
-                if self._ended_ns is None or left_ns < self._ended_ns:
+                if self._ended_ns is None or left_ns < self._ended_ns - LINK_SLACK_NS:  # (slack: the hosts' clocks)
                     try:
                         self._note_absence(service, left_ns, None)
                     except RecordingFailed:

@@ -20,7 +20,7 @@ from pairplay.schemas.events import encode_event
 from pairplay.schemas.keys import alive_key, event_key
 from pairplay.schemas.robot import RobotActed
 from pairplay.services.participant import ParticipantLogic
-from pairplay.services.recorder import Recorder
+from pairplay.services.recorder import ABSENCE_METADATA, Recorder
 from pairplay.services.robot.bridge import RobotBridge
 from pairplay.services.runner import Node
 
@@ -80,3 +80,19 @@ def test_without_a_robot_nothing_is_counted(tmp_path):
     assert recorder.record(event_key("unrep", "learner", "SuggestionMade"), encode_event(e), 1)
     recorder.close()
     assert not [r for r in read_log(tmp_path / "unrep.mcap").events if isinstance(r.event, ev.MessageRejected)]
+
+
+def test_a_service_that_left_with_the_end_is_no_absence_whatever_came_first(tmp_path):
+    """A service leaves once it saw SessionEnded, but its token's drop (Zenoh control traffic) can reach the
+    recorder before the SessionEnded itself (data queued behind a backlog): the recorder recorded "participant
+    was off the bus and did not come back" (seen at load 15 in test_faults_restart). The session ended when the
+    game stamped its end; a service gone well before that is still an absence."""
+    t0 = 10**18
+    recorder = Recorder(None, "unrep", tmp_path / "unrep.mcap")
+    recorder._alive("participant", False, t0 + 2 * 10**9)  # the drop is seen first ...
+    recorder._alive("learner", False, t0 - 5 * 10**9)  # (gone 5 s before the end: an absence)
+    end = stamped(ev.SessionEnded(), session="unrep", source="game", seq=1, time_ns=t0 + 1 * 10**9)
+    assert recorder.record(event_key("unrep", "game", "SessionEnded"), encode_event(end), t0 + 3 * 10**9)  # ... then the end
+    recorder.close()
+    from test_faults_restart import metadata_all
+    assert [a["service"] for a in metadata_all(tmp_path / "unrep.mcap", ABSENCE_METADATA)] == ["learner"]
