@@ -104,7 +104,7 @@ def session_id(text: str) -> str:
     text = key_chunk("session id")(text)
     if "." in text or "\\" in text:
         raise argparse.ArgumentTypeError(
-            f"session id {text!r} must be free of . and \\: it names its recording files (<id>.mcap, <id>.<k>.mcap)")
+            f"session id '{text}' must be free of . and \\: it names its recording files (<id>.mcap, <id>.<k>.mcap)")
     return text
 
 

@@ -14,8 +14,11 @@ replay/check.py `no_session`), or the output exists.
 from __future__ import annotations
 
 import argparse
+import logging
 
 from pairplay.cli.args import add_force
+
+log = logging.getLogger("pairplay.recover")
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -44,4 +47,7 @@ def run(args: argparse.Namespace) -> int:
                    f"{f', {done.journal_refused} of its messages refused (recorded as refusals)' if done.journal_refused else ''}"
                    f"{f' (read up to its torn tail: {done.journal_torn})' if done.journal_torn else ''}")
     print(f"{args.recording}: {state}; {done.messages} messages kept in {done.output}{journal}{ended}")
+    if done.journal_error:  # what it held (up to the last 5 ms before a crash) is not in the output: said, not silent
+        log.warning("recover: the journal beside %s is unreadable, none of its records were used: %s",
+                    args.recording, done.journal_error)
     return 0

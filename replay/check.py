@@ -38,7 +38,7 @@ def check_recording(path: str | Path) -> Path:
     if head != MCAP_MAGIC:
         from .wal import SUFFIX, is_journal
         if is_journal(path):  # a recorder's journal left beside a recording it did not finish
-            beside = path.name[:-len(SUFFIX)] if path.name.endswith(SUFFIX) else "the recording"
+            beside = str(path)[:-len(SUFFIX)] if path.name.endswith(SUFFIX) else "the recording"  # as given: pasteable
             raise InputError(f"a recorder's write-ahead journal, not a recording: `pairplay recover {beside}` "
                              f"adds what it holds to the recording beside it", path)
         raise InputError("not a recording: not an MCAP file (it does not begin as one)", path)

@@ -109,8 +109,10 @@ class Scan:
         """One line: what is wrong, or 'whole'."""
         parts = [str(d) for d in self.damage]
         if self.truncated:
-            parts.append(f"file end: cut at byte {self.cut_at} of {self.size}"
-                         + (f" ({self.cut_what})" if self.cut_what else ""))
+            # a file cut between two records ends at its last byte: "cut at byte N of N" read as nothing cut
+            where = (f"cut at byte {self.cut_at} of {self.size}" if self.cut_at < self.size
+                     else f"ends after its last whole record (byte {self.size}) without MCAP's summary and footer")
+            parts.append(f"file end: {where}" + (f" ({self.cut_what})" if self.cut_what else ""))
         return "; ".join(parts) if parts else "whole"
 
 

@@ -59,6 +59,7 @@ class Recovered:
     from_journal: int = 0  # events added from it
     journal_refused: int = 0  # records of it refused by the live checks (recorded as refusals)
     journal_torn: str = ""  # where the journal stops short of a frame's end ("" if it does not)
+    journal_error: str = ""  # a journal beside it that could not be read at all: why (its records are not used)
 
 
 def default_output(path: Path) -> Path:
@@ -155,7 +156,7 @@ def recover(path: str | Path, output: str | Path | None = None, force: bool = Fa
     return Recovered(output, messages, checked.truncated, reason, damaged, ended, last_round, started=not why,
                      journal=journal.path if journal is not None else None,
                      from_journal=added.taken if added else 0, journal_refused=added.refused if added else 0,
-                     journal_torn=journal.torn if journal is not None else "")
+                     journal_torn=journal.torn if journal is not None else "", journal_error=journal_error)
 
 
 def _journal_beside(path: Path, log):

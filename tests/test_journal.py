@@ -189,6 +189,27 @@ def test_recover_reads_a_torn_journal_up_to_its_tear_and_says_so(tmp_path, pairp
     assert [r.event.seq for r in log.events if r.event.source == "participant"] == list(range(1, 20))
 
 
+@pytest.mark.parametrize("damage", ["header", "garbage"])
+def test_recover_says_when_the_journal_beside_it_is_unreadable(tmp_path, pairplay_cli, damage):
+    """A journal damaged in its header, or garbage under the journal's name, was dropped without a word and
+    recover exited 0 as if there had been none (a new user's trial): what it held is lost, so it is a
+    WARNING naming the journal; the output is still written (the recording's own records)."""
+    events = [start()] + [pick(s) for s in range(1, 21)]
+    path = cut_recording(tmp_path, events[:11])
+    journal = journal_of(path, events)
+    if damage == "header":
+        data = bytearray(journal.read_bytes())
+        data[25:45] = b"\xff" * 20  # inside the header frame: its CRC fails
+        journal.write_bytes(bytes(data))
+    else:
+        journal.write_bytes(bytes(range(20)))
+    ran = pairplay_cli("recover", path)
+    assert ran.returncode == 0, ran.stderr
+    lines = ran.stderr.strip().splitlines()
+    assert len(lines) == 1 and "WARNING" in lines[0] and "j1.mcap.journal" in lines[0] and "unreadable" in lines[0]
+    assert "Traceback" not in ran.stderr
+
+
 def test_recover_without_a_journal_is_unchanged(tmp_path, pairplay_cli):
     events = [start()] + [pick(s) for s in range(1, 11)]
     path = cut_recording(tmp_path, events)
@@ -225,7 +246,8 @@ def test_a_journal_given_as_a_recording_is_one_line_naming_recover(tmp_path, pai
     ran = pairplay_cli(*verb, journal, cwd=tmp_path)
     assert ran.returncode != 0 and "Traceback" not in ran.stderr
     lines = ran.stderr.strip().splitlines()
-    assert len(lines) == 1 and "journal" in lines[0] and "pairplay recover j1.mcap" in lines[0], ran.stderr
+    # the recording as the user gave its journal (folder included: a pasteable command)
+    assert len(lines) == 1 and "journal" in lines[0] and f"pairplay recover {path}`" in lines[0], ran.stderr
 
 
 def test_a_session_whose_journal_is_left_is_taken_and_force_removes_it(tmp_path):
