@@ -436,7 +436,7 @@ class Recorder:
                                      on_failure=self._on_journal_failure)
         self._journal_add = self.journal.add
         self.journal.start()
-        self.bus.subscribe(session_keys(self.session), self.enqueue, self._on_miss)
+        self.bus.subscribe(session_keys(self.session), self.enqueue, self._on_miss, drain=True)
         self.bus.queryable(query_key(self.session, self.name, LOG_QUERY), self.inbox.control)
         if self.bus.options.recovers:
             self.bus.on_router_link(self._on_link)
