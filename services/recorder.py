@@ -14,7 +14,7 @@ completes such a file); when it cannot, the file records how far behind a flush
 was (BACKLOG_METADATA, and `max_flush_age_ms` at the end). That bound holds only for
 what reached the writer: under load the writer falls behind and what waits in its inbox
 (memory) would die with the process. So every message is made durable when it is received:
-the bus callback appends it to the write-ahead journal beside the file (`<recording>.journal`,
+the thread that takes it off the bus appends it to the write-ahead journal beside the file (`<recording>.journal`,
 replay/wal.py), which a thread writes to the OS every 5 ms; a SIGKILL then loses only what was
 received in the last 5 ms + scheduling, whatever the backlog, and `pairplay recover` adds from
 the journal what the cut file lacks, through the live checks (services/walmerge.py). The
@@ -84,10 +84,11 @@ BATCH_S = 0.02  # a backlog is written in batches of at most this long (step)
 # shedding loses events for sure, a backlog only if the recorder is killed before it catches up, and
 # then the file records how far behind it was (a 100,000-event burst at 30-75k/s: 3-36k shed at 20,000)
 PER_SOURCE = 200_000
-# `pairplay run recorder`'s GIL switch interval (Python's default 5 ms): Zenoh's callback thread, which
-# takes each event off the bus (its log time), waits at most this long for the GIL while the writing thread
-# works through a backlog (best of 3 bursts, load 12-17: 0.97-1.56x the raw subscriber at 1 ms against
-# 0.52-0.68x at 5 ms; the writing thread then lags more: flushes 2.9-3.2 s after against 1.2-1.8 s)
+# `pairplay run recorder`'s GIL switch interval (Python's default 5 ms): the thread that takes each event off
+# the bus (its log time; a drained subscription, services/bus.py) waits at most this long for the GIL while the
+# writing thread works through a backlog (best of 3 bursts, load 12-17: 0.97-1.56x the raw subscriber at 1 ms
+# against 0.52-0.68x at 5 ms, with zenoh-python's callback thread; the writing thread then lags more: flushes
+# 2.9-3.2 s after against 1.2-1.8 s)
 RECORDER_SWITCH_S = 0.001
 PIECE_FLUSH_S = 0.005  # within a batch, a flush due by age waits at most this long (step)
 BACKLOG_METADATA = "pairplay.recorder.backlog"  # a flush older than the loss bound (_note_backlog)
