@@ -3,7 +3,10 @@
 Rule: a user's mistake is ONE line on stderr, `pairplay <verb>: <what>
 (<where>)`, and exit 2: argparse's own refusals (Parser.error), any
 `pairplay.errors.UserError` a verb raises, and an OSError (a file or port the
-system refused). Anything else is a bug of ours and keeps its traceback.
+system refused), whenever it comes (before the work or during it: a full disk
+part way). A session whose recording could not be written (`RecordingFailed`,
+whichever verb ran it) is one line and exit 1, a session that failed (README's
+exit table). Anything else is a bug of ours and keeps its traceback.
 
 A signal, at any moment (while the verb loads, waits, works or shuts down),
 ends the verb with 128 + its number: 130 for SIGINT (Ctrl-C), 143 for
@@ -299,6 +302,26 @@ def _main(argv: list[str]) -> int:
     except OSError as err:  # the file system or network refused: the user's setup, not our bug
         print(f"pairplay {_who(args)}: {os_error_line(err)}", file=sys.stderr)
         return 2
+    except Exception as err:
+        line = recording_failed_line(err)
+        if line is None:
+            raise
+        print(f"pairplay {_who(args)}: {line}", file=sys.stderr)
+        return 1  # a session that failed: README's exit table
+
+
+def recording_failed_line(err: BaseException) -> str | None:
+    """The line of a session whose recording could not be written (services/recorder.py
+    `RecordingFailed`: a full disk, a file size limit), else None. Every verb that runs a session
+    (session, lab, protocol pilot) says it so and exits 1 (README's exit table: a session that
+    failed); before, only `session` did, and `lab` or `protocol pilot` on a full disk ended in a
+    traceback. The recorder's module is only looked up: a verb that runs no session never loads it."""
+    recorder = sys.modules.get("pairplay.services.recorder")
+    if recorder is None or not isinstance(err, recorder.RecordingFailed):
+        return None
+    path = err.path or "the recording"
+    return (f"writing {path} failed ({err.reason}); the session stopped; the file is readable up to the "
+            f"failure: pairplay recover {path}")
 
 
 def _who(args: argparse.Namespace) -> str:

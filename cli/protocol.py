@@ -105,10 +105,8 @@ def run(args) -> int:
         print(f"pairplay protocol {args.action}: {err.args[0] if isinstance(err, KeyError) else err}",
               file=sys.stderr)
         return 2
-    except OSError as err:
-        print(f"pairplay protocol {args.action}: {getattr(err, 'filename', '') or ''}: {err.strerror or err}",
-              file=sys.stderr)
-        return 2
+    # an OSError (a full disk part way) is said by cli/main.py, as every verb's: `what (where)`; said
+    # here it was `pairplay protocol init: : No space left on device` when it named no file
 
 
 def _run(args) -> int:
@@ -126,7 +124,11 @@ def _run(args) -> int:
         if args.study == EXAMPLE_NAME and not Path(args.study).exists():
             tmp = args.folder.resolve().parent / f".{EXAMPLE_NAME}.toml"
             tmp.parent.mkdir(parents=True, exist_ok=True)
-            tmp.write_text(example_text(), encoding="utf-8")
+            try:
+                tmp.write_text(example_text(), encoding="utf-8")
+            except OSError as err:  # a full disk: said of the folder asked for, not of our file, which goes
+                tmp.unlink(missing_ok=True)
+                raise OSError(err.errno, err.strerror, str(args.folder)) from None
             study_path = tmp
         else:
             load_study(study_path)

@@ -46,7 +46,7 @@ from pairplay.cli.args import add_force, count, duration, non_negative, positive
 from pairplay.core.geometry import PICKS_UNIT
 from pairplay.cli.robot import add_robot_arguments, check_robot_args, robot_choice
 from pairplay.services.bus import BusOpenError, ConfigFileError, add_bus_arguments, options_from_args, stop_on_signals
-from pairplay.services.recorder import RecordingFailed, check_new_recording
+from pairplay.services.recorder import check_new_recording
 from pairplay.services.runner import waiting_for
 from pairplay.services.session import run_session
 
@@ -214,10 +214,6 @@ def run(args: argparse.Namespace) -> int:
     except (ConfigFileError, BusOpenError) as err:
         print(f"pairplay session: {err}", file=sys.stderr)
         return 2
-    except RecordingFailed as err:
-        print(f"pairplay session: writing {err.path} failed ({err.reason}); the session stopped; the file is "
-              f"readable up to the failure: pairplay recover {err.path}", file=sys.stderr)
-        return 1
     if "recorder" in args.external:
         print(f"session {config.session} over; the external recorder writes its file")
         return 0

@@ -7,8 +7,11 @@ the same grid into the same folder resumes: finished cells are not computed
 again. A folder that holds another grid's sweep, or files but no sweep, is
 refused unless --force; an --out that is a file is refused before any work.
 `--scheduler tcp://HOST:PORT` runs the cells on a Dask distributed cluster.
-Interrupted (SIGINT/SIGTERM), the cells finished stay and the line says so;
-with none finished, nothing the sweep made stays (`interrupted`).
+Interrupted (SIGINT/SIGTERM), or refused a write by the system while it runs
+(a full disk, a folder removed under it: exit 2, as any OSError, README's exit
+table; it was 1, and the line named no file), the cells finished stay and ONE
+line says why and so; with none finished, nothing the sweep made stays
+(`stopped`).
 """
 
 from __future__ import annotations
@@ -21,7 +24,7 @@ from tqdm import tqdm
 
 from pairplay.cli.args import count
 from pairplay.errors import OutputError
-from pairplay.outputs import check_folder
+from pairplay.outputs import check_folder, write_text
 from pairplay.report.sweep import GridError, finished_cells, read_grid, run_sweep, write_sweep
 
 
@@ -33,29 +36,27 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--force", action="store_true", help="replace a folder that holds another grid's sweep, or write into one that holds other files")
 
 
-def interrupted(out: Path, grid, made: list[Path], had_copy: bool) -> int:
-    """A signal stopped the sweep: the cells it finished stay (the same command resumes from them) and
-    the line says so; with none finished, nothing it made stays (grid.toml, cells/, the folders it
-    made): an interrupted sweep left an empty sweep folder. Re-raises when it has nothing to say
-    (cli/main.py says the usual line)."""
-    import os
-
-    from pairplay.cli.main import interrupted_what
-    for tmp in (out / "cells").glob(f".*.{os.getpid()}.tmp"):  # a cell being written (_write_json_atomic)
-        tmp.unlink(missing_ok=True)
-    kept = len(finished_cells(out, grid))
+def stopped(out: Path, grid, made: list[Path], had_copy: bool, why: str) -> int | None:
+    """The sweep stopped part way (a signal; the system refused a write: a full disk, a folder removed
+    under it): the cells it finished stay (the same command resumes from them) and ONE line says
+    `why` and so; with none finished, nothing it made stays (grid.toml, cells/, the folders it made:
+    an interrupted sweep left an empty sweep folder) and None is returned: the caller says why its
+    own way (cli/main.py's line for a signal)."""
+    kept = len(finished_cells(out, grid))  # a cell being written is not among them: its temporary file is gone
     if kept:
-        print(f"pairplay sweep: {interrupted_what()}; {kept} of {len(grid.cells())} cells finished, kept in "
-              f"{out / 'cells'}: the same command resumes from them", file=sys.stderr)
-        return 130  # the status is the signal's (cli/main.py)
+        print(f"pairplay sweep: {why}; {kept} of {len(grid.cells())} cells finished, kept in {out / 'cells'}: "
+              "the same command resumes from them", file=sys.stderr)
+        return 0
     if not had_copy:
         (out / "grid.toml").unlink(missing_ok=True)
     for folder in made:  # deepest first; one that holds something stays
         try:
             folder.rmdir()
+        except FileNotFoundError:  # not made yet (stopped before cells/): the ones above may be
+            continue
         except OSError:
             break
-    raise KeyboardInterrupt
+    return None
 
 
 def run(args) -> int:
@@ -79,22 +80,26 @@ def run(args) -> int:
             old.unlink()
     made = [f for f in (out / "cells", out, *out.absolute().parents) if not f.exists()]
     had_copy = copy.exists()
-    out.mkdir(parents=True, exist_ok=True)
-    copy.write_text(text)
-    cells = grid.cells()
-    done = len(finished_cells(out, grid))
     try:
+        out.mkdir(parents=True, exist_ok=True)
+        write_text(copy, text, force=True)
+        cells = grid.cells()
+        done = len(finished_cells(out, grid))
         with tqdm(total=len(cells), initial=done, desc="sweep", unit="cell", disable=args.quiet,
                   file=sys.stderr, dynamic_ncols=True) as bar:
-            try:
-                result = run_sweep(grid, out, scheduler=args.scheduler, workers=args.workers, progress=bar.update)
-            except OSError as exc:
-                print(f"pairplay sweep: {exc}", file=sys.stderr)
-                return 1
+            result = run_sweep(grid, out, scheduler=args.scheduler, workers=args.workers, progress=bar.update)
         results = finished_cells(out, grid)
         write_sweep(out, grid, results, result)  # a signal here: the cells stay, a rerun writes these again
     except KeyboardInterrupt:
-        return interrupted(out, grid, made, had_copy)
+        from pairplay.cli.main import interrupted_what
+        if stopped(out, grid, made, had_copy, interrupted_what()) is None:
+            raise  # nothing kept: cli/main.py says the usual line
+        return 130  # the status is the signal's (cli/main.py)
+    except OSError as err:  # the system refused a write while the sweep ran: exit 2, as before the work
+        from pairplay.cli.main import os_error_line
+        if stopped(out, grid, made, had_copy, os_error_line(err)) is None:
+            raise  # nothing kept: cli/main.py says the line (README: exit 2, nothing written)
+        return 2
     print(f"{result.cells} cells ({len(grid.settings())} settings x {len(grid.seeds)} seeds), {result.computed} "
           f"computed in {result.wall_s:.1f} s on {result.where}; {out / 'sweep.md'}")
     return 0

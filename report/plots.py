@@ -236,11 +236,12 @@ def reuse_curves(keys: list[str], names: dict[str, str], curves: np.ndarray, ora
     _save(fig, path, dpi=100)
 
 
-def _save(fig, path: Path, dpi: int) -> None:
-    """Write the figure whole or not at all (a temporary file renamed; pairplay.outputs)."""
+def _save(fig, path: Path, dpi: int, force: bool = False) -> None:
+    """Write the figure whole or not at all (a temporary file renamed; pairplay.outputs); `force`
+    replaces an existing one. A refusal by the system is an OSError naming `path`."""
     from pairplay.outputs import output_path
 
-    with output_path(path) as tmp:
+    with output_path(path, force) as tmp:
         fig.savefig(tmp, dpi=dpi, format="png")
     _pyplot().close(fig)
 
@@ -301,8 +302,7 @@ def sweep_measure(labels: list[str], mean: list[float], low: list[float], high: 
     ax.set_title(f"{measure}: mean over {seeds} seeds, 95% confidence interval", fontsize=10)
     ax.grid(axis="y", alpha=0.3)
     fig.tight_layout()
-    fig.savefig(path, dpi=100)
-    plt.close(fig)
+    _save(fig, path, dpi=100, force=True)  # a resumed sweep draws its figures again
 
 
 def human_curves(curves: dict[str, np.ndarray], path: Path, title: str, dashed: tuple[str, ...] = ()) -> None:

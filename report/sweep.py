@@ -32,7 +32,6 @@ import hashlib
 import itertools
 import json
 import math
-import os
 import time
 import tomllib
 from dataclasses import asdict, dataclass, fields
@@ -41,6 +40,7 @@ from typing import Callable, Iterable
 
 import numpy as np
 
+from pairplay.outputs import output_file, write_text
 from pairplay.processes import worker_pool
 from pairplay.core.study import LEARNING_ALGORITHMS
 from pairplay.report.study import StudySettings
@@ -194,9 +194,10 @@ def _run_cell_alone(grid: Grid, cell: Cell) -> tuple[str, dict]:
 
 
 def _write_json_atomic(path: Path, data: dict) -> None:
-    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
-    tmp.write_text(json.dumps(data, sort_keys=True, indent=1))
-    os.replace(tmp, path)
+    """`data` to `path` whole or not at all (pairplay.outputs: its temporary file is removed on any
+    error or signal, and a full disk's OSError names `path`; before, it named nothing and left the
+    temporary file)."""
+    write_text(path, json.dumps(data, sort_keys=True, indent=1), force=True)
 
 
 def finished_cells(out: Path, grid: Grid) -> dict[str, dict]:
@@ -298,13 +299,14 @@ def write_sweep(out: str | Path, grid: Grid, results: dict[str, dict], run: Swee
     rows = summarise(grid, results)
     keys = list(grid.axes)
     written = [out / "sweep.csv", out / "cells.csv", out / "sweep.md"]
-    with open(out / "sweep.csv", "w", newline="") as f:
+    # each file whole or not at all, replaced on a resumed sweep (pairplay.outputs; an OSError names it)
+    with output_file(out / "sweep.csv", "w", force=True, newline="") as f:
         w = csv.writer(f)
         w.writerow([*keys, "measure", "n", "mean", "sd", "ci95_low", "ci95_high"])
         for r in rows:
             w.writerow([*(r[k] for k in keys), r["measure"], r["n"], f"{r['mean']:.6f}", f"{r['sd']:.6f}",
                         f"{r['ci95_low']:.6f}", f"{r['ci95_high']:.6f}"])
-    with open(out / "cells.csv", "w", newline="") as f:
+    with output_file(out / "cells.csv", "w", force=True, newline="") as f:
         w = csv.writer(f)
         w.writerow(["cell", *keys, "seed", "measure", "value"])
         for cell in grid.cells():
@@ -331,5 +333,5 @@ def write_sweep(out: str | Path, grid: Grid, results: dict[str, dict], run: Swee
     md += [f"| {setting_label((k, r[k]) for k in keys)} | {r['measure']} | {r['n']} | {r['mean']:.3f} | "
            f"{r['sd']:.3f} | {r['ci95_low']:.3f} to {r['ci95_high']:.3f} |" for r in rows]
     md += ["", *[f"![{p.stem}](figures/{p.name})" for p in figures], ""]
-    (out / "sweep.md").write_text("\n".join(md))
+    write_text(out / "sweep.md", "\n".join(md), force=True)
     return written + figures

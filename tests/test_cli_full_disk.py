@@ -53,3 +53,61 @@ def test_rebuild_on_a_full_disk_names_the_file_and_leaves_nothing(tmp_path):
     [line] = err.strip().splitlines()
     assert line.startswith("pairplay rebuild: No space left on device; removed the ") and "(full/rb/" in line, line
     assert r.stdout.strip() == "", r.stdout  # nothing left: neither the first recording's outputs nor a temp file
+
+
+TINY_GRID = 'seeds = 1\n[study]\npersonas = "blind"\ngames = 1\nrounds = 1\neval_rounds = 1\n'
+
+
+@pytest.mark.skipif(not CAN_UNSHARE, reason="needs root and unshare for a private tmpfs")
+@pytest.mark.parametrize("fill", [0, 4096], ids=["cell", "grid-copy"])
+def test_sweep_on_a_full_disk_is_exit_2_one_line_naming_the_file_and_nothing_left(tmp_path, fill):
+    """Before: a full disk while the sweep wrote its first cell exited 1 (README's table: 2, the system
+    refused what was asked), said "[Errno 28] No space left on device" naming no file, and left the
+    cell's temporary file, grid.toml and the folders; one full before grid.toml named no file either.
+    A 4 KiB tmpfs holds grid.toml (one page) and not a cell; pre-filled, not grid.toml."""
+    full = tmp_path / "full"
+    full.mkdir()
+    (tmp_path / "grid.toml").write_text(TINY_GRID)
+    script = ('mount -t tmpfs -o size=4k tmpfs full && { [ "$1" = 0 ] || head -c "$1" /dev/zero >full/fill; } '
+              '2>/dev/null; "$0" -m pairplay sweep grid.toml --out full/sw -q >out 2>err; echo $? >rc; '
+              'find full -mindepth 1 ! -name fill')
+    r = subprocess.run(["unshare", "--mount", "--propagation", "private", "sh", "-c", script, sys.executable,
+                        str(fill)], cwd=tmp_path, capture_output=True, text=True, timeout=300)
+    err = (tmp_path / "err").read_text()
+    assert (tmp_path / "rc").read_text().strip() == "2" and "Traceback" not in err, err
+    [line] = err.strip().splitlines()
+    named = "full/sw/grid.toml" if fill else "full/sw/cells/"
+    assert line.startswith("pairplay sweep: No space left on device (") and named in line, line
+    assert r.stdout.strip() == "", r.stdout  # nothing left: no cell's temporary file, no grid.toml, no folder
+    assert (tmp_path / "out").read_text() == ""
+
+
+def _in_full_tmpfs(tmp_path: Path, fill: int, *args: str) -> tuple[int, str, list[str]]:
+    """`python -m pairplay ARGS` in tmp_path with ./full a 4 KiB tmpfs holding `fill` bytes already:
+    its status, its stderr and the files and folders it left in ./full (found inside the namespace)."""
+    (tmp_path / "full").mkdir()
+    script = ('mount -t tmpfs -o size=4k tmpfs full && { [ "$1" = 0 ] || head -c "$1" /dev/zero >full/fill; } '
+              '2>/dev/null; shift; "$0" -m pairplay "$@" >/dev/null 2>err; echo $? >rc; find full -mindepth 1 ! -name fill')
+    r = subprocess.run(["unshare", "--mount", "--propagation", "private", "sh", "-c", script, sys.executable,
+                        str(fill), *args], cwd=tmp_path, capture_output=True, text=True, timeout=300)
+    return int((tmp_path / "rc").read_text()), (tmp_path / "err").read_text(), r.stdout.split()
+
+
+@pytest.mark.skipif(not CAN_UNSHARE, reason="needs root and unshare for a private tmpfs")
+def test_lab_whose_recording_fails_says_so_in_one_line_exit_1_as_a_session(tmp_path):
+    """Before: `pairplay session` said it (exit 1, README: a session that failed) but `pairplay lab`, which
+    runs the same session, ended in a RecordingFailed traceback (`protocol pilot` too: one handler now)."""
+    code, err, _ = _in_full_tmpfs(tmp_path, 0, "lab", "--participant", "human:p1", "--session", "s1",
+                                  "--out", "full/rec", "--linger", "0")
+    assert code == 1 and "Traceback" not in err, err
+    [line] = [x for x in err.splitlines() if x.startswith("pairplay lab:")]
+    assert "writing full/rec/s1.mcap failed (" in line and "pairplay recover full/rec/s1.mcap" in line, err
+
+
+@pytest.mark.skipif(not CAN_UNSHARE, reason="needs root and unshare for a private tmpfs")
+def test_protocol_init_of_the_example_on_a_full_disk_names_the_folder_asked_for(tmp_path):
+    """Before: `pairplay protocol init: : No space left on device` (its own OSError line, no file named;
+    its temporary copy of the example was written beside the folder, which the error left unnamed)."""
+    code, err, left = _in_full_tmpfs(tmp_path, 3000, "protocol", "init", "full/st", "--study", "thesis-ch7")
+    assert (code, err.strip()) == (2, "pairplay protocol init: No space left on device (full/st)")
+    assert left == []
