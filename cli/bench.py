@@ -23,6 +23,7 @@ from pathlib import Path
 
 from pairplay.bench.goals import MISSED, goal_text, verdict
 from pairplay.cli.args import count
+from pairplay.outputs import write_text
 
 # name -> module providing bench_rows(quick)
 SOURCES: dict[str, str] = {
@@ -139,15 +140,15 @@ def markdown(rows: list[dict], runs: int, started: datetime.datetime, loads: lis
 
 
 def write_readme(path: Path, text: str) -> None:
-    """Replace the README's table between the bench markers (written to a temp file, then renamed)."""
+    """Replace the README's table between the bench markers (pairplay.outputs: a temporary file renamed
+    when complete, removed on any error; a full disk's OSError names `path`: it named nothing and left
+    README.md.tmp)."""
     old = path.read_text()
     if README_START not in old or README_END not in old:
         raise ValueError(f"{path} has no {README_START} ... {README_END} section")
     head, rest = old.split(README_START, 1)
     _, tail = rest.split(README_END, 1)
-    tmp = path.with_name(path.name + ".tmp")
-    tmp.write_text(f"{head}{README_START}\n{text}\n{README_END}{tail}")
-    tmp.replace(path)
+    write_text(path, f"{head}{README_START}\n{text}\n{README_END}{tail}", force=True)
 
 
 def run(args) -> int:

@@ -111,3 +111,20 @@ def test_protocol_init_of_the_example_on_a_full_disk_names_the_folder_asked_for(
     code, err, left = _in_full_tmpfs(tmp_path, 3000, "protocol", "init", "full/st", "--study", "thesis-ch7")
     assert (code, err.strip()) == (2, "pairplay protocol init: No space left on device (full/st)")
     assert left == []
+
+
+@pytest.mark.skipif(not CAN_UNSHARE, reason="needs root and unshare for a private tmpfs")
+def test_bench_readme_table_on_a_full_disk_names_the_readme_and_leaves_it_whole(tmp_path):
+    """Before: `bench --readme` wrote README.md.tmp beside it and renamed it: a full disk named no file
+    (cli/main.py's line said `No space left on device`) and left the partial README.md.tmp."""
+    (tmp_path / "full").mkdir()
+    script = ('mount -t tmpfs -o size=4k tmpfs full && printf "a\\n<!-- bench:start -->\\nold\\n<!-- bench:end -->\\n" '
+              '>full/README.md && "$0" -c "$1" 2>err; echo $? >rc; ls -A full; cat full/README.md')
+    code = ("import sys\nfrom pathlib import Path\nfrom pairplay.cli import bench\n"
+            "bench.README_START, bench.README_END = '<!-- bench:start -->', '<!-- bench:end -->'\n"
+            "try:\n    bench.write_readme(Path('full/README.md'), 'x' * 8000)\n"
+            "except OSError as err:\n    print(err.strerror, err.filename, file=sys.stderr)\n")
+    r = subprocess.run(["unshare", "--mount", "--propagation", "private", "sh", "-c", script, sys.executable, code],
+                       cwd=tmp_path, capture_output=True, text=True, timeout=120)
+    assert (tmp_path / "err").read_text().strip() == "No space left on device full/README.md"
+    assert r.stdout.split("\n", 1) == ["README.md", "a\n<!-- bench:start -->\nold\n<!-- bench:end -->\n"], r.stdout
