@@ -229,7 +229,7 @@ def _serve(data: StudyData, args) -> int:
             if server.console.thread is not None:
                 server.console.thread.join(shutdown_wait(stop, 10.0, reserve=0.3))
             server.close(shutdown_wait(stop, 10.0, reserve=0.2))
-    print(f"pairplay protocol serve: stopped ({getattr(stop, 'why', '') or 'done'})")
+    print(f"pairplay protocol serve: stopped ({getattr(stop, 'why', '') or 'done'})", file=sys.stderr)  # not a result
     return 0
 
 
@@ -274,7 +274,7 @@ def _pilot(data: StudyData, args) -> int:
             if not stop.is_set():
                 raise
     if stop.is_set():
-        print(f"interrupted ({stop.why}); `pairplay protocol status {data.folder}` shows what is left")
+        print(f"interrupted ({stop.why}); `pairplay protocol status {data.folder}` shows what is left", file=sys.stderr)
         return 0
     print(f"plan complete; `pairplay report {data.folder}` writes the report")
     return 0

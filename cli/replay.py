@@ -22,6 +22,7 @@ refused (one line on stderr, exit 2), in both modes.
 from __future__ import annotations
 
 import argparse
+import sys
 import time
 
 from pairplay.cli.args import session_id
@@ -98,5 +99,7 @@ def run(args: argparse.Namespace) -> int:
             n -= outbox.pending()
         took = time.perf_counter() - t0
     stopped = f"; stopped by {stop.why} after {n} of {len(log.events)}" if getattr(stop, "why", "") else ""
-    print(f"replayed {n} events in {took:.2f} s ({n / max(took, 1e-9):.0f}/s){stopped}")
+    # interrupted, the line goes to stderr, as every verb's (stdout holds results only)
+    print(f"replayed {n} events in {took:.2f} s ({n / max(took, 1e-9):.0f}/s){stopped}",
+          file=sys.stderr if stopped else sys.stdout)
     return 0

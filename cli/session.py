@@ -164,14 +164,16 @@ def print_interrupted(summary: dict, path: Path, why: str, rounds: int) -> int:
     the signal's (cli/main.py: 130 SIGINT, 143 SIGTERM). A session stopped before its game started
     keeps its file (what came up, and that the signal stopped it: the recorder's end record): a
     session id is taken once it has a recording, and the stop stays on record; every verb then says
-    the file holds no session (replay/check.py), and `--force` reuses the id."""
+    the file holds no session (replay/check.py), and `--force` reuses the id. The line goes to stderr,
+    as every verb's interrupted line (stdout holds results only: a complete session's summary)."""
     if summary["started"]:
         print(f"interrupted ({why}) after {summary['rounds_played']} of {rounds} rounds; recorded "
               f"{summary['events']} events to {path}"
-              + (f" ({summary['unrecorded']} messages shed or unrecorded, counted in it)" if summary['unrecorded'] else ""))
+              + (f" ({summary['unrecorded']} messages shed or unrecorded, counted in it)" if summary['unrecorded'] else ""),
+              file=sys.stderr)
     else:
         print(f"interrupted ({why}) before the session started; recorded {summary['events']} events to {path}, "
-              "no session in it (the id stays taken: --force reuses it)")
+              "no session in it (the id stays taken: --force reuses it)", file=sys.stderr)
     return 0
 
 

@@ -12,8 +12,9 @@ A signal (exit 130/143, cli/main.py) before the source ended keeps what was
 drawn as `<stem>.partial.rrd` (a partial view of a live session may be
 wanted; it never takes the complete view's name, and its event log says it is
 partial); before the first event nothing is saved. Output: one line of result
-on stdout (saved / interrupted); what the view does is INFO (-v); what it
-noticed (a malformed message, a gap) is a WARNING.
+on stdout (saved); interrupted, its one line goes to stderr, as every verb's;
+what the view does is INFO (-v); what it noticed (a malformed message, a gap)
+is a WARNING.
 Rerun's usage analytics stay off for anything the view starts (view_output).
 
   pairplay view --recording recordings/s1.mcap              # -> recordings/s1.rrd
@@ -30,6 +31,7 @@ import itertools
 import logging
 import os
 import signal
+import sys
 import threading
 from dataclasses import dataclass
 from pathlib import Path
@@ -102,15 +104,16 @@ def run(args: argparse.Namespace) -> int:
                 raise KeptPartial(keep_partial(tmp, rrd, args.force))
     except KeptPartial as kept:
         print(f"interrupted ({done.why}) after {_counts(done)}, before the source ended; "
-              f"the partial view is in {kept.path}")
+              f"the partial view is in {kept.path}", file=sys.stderr)
         return 0
     except NothingDrawn as stopped:  # a signal before the first event: nothing to save (exit 128 + signal)
-        print(f"interrupted ({stopped}) before any event was drawn; nothing saved")
+        print(f"interrupted ({stopped}) before any event was drawn; nothing saved", file=sys.stderr)
         return 0
     except RrdWriteFailed as err:  # the temporary .rrd is gone (output_path); nothing saved
         raise OutputError(f"writing the .rrd failed ({err}); nothing saved", rrd or "the view's output") from None
     if done.partial:
-        print(f"interrupted ({done.why}) after {_counts(done)}, before the source ended; nothing saved")
+        print(f"interrupted ({done.why}) after {_counts(done)}, before the source ended; nothing saved",
+              file=sys.stderr)
     else:
         print(f"saved {rrd}: {_counts(done)}" if rrd is not None else f"viewed {_counts(done)}")
     return 0

@@ -51,7 +51,8 @@ def test_the_levels_each_option_lets_through(capsys, verbose, quiet, shown):
         configure_logging(False, False)
 
 
-def test_an_interrupted_session_prints_one_summary_line_and_nothing_on_stderr(tmp_path):
+def test_an_interrupted_session_prints_its_one_interrupted_line_on_stderr_and_no_result_on_stdout(tmp_path):
+    """Before: the line went to stdout (session and view), where every other verb says it on stderr."""
     p = subprocess.Popen([sys.executable, "-m", "pairplay", "session", "--participant", "sim:ashley", "--rounds",
                           "1000", "--session", "int1", "--out", str(tmp_path)], stdout=subprocess.PIPE,
                          stderr=subprocess.PIPE, text=True, env=dict(os.environ, PYTHONUNBUFFERED="1"))
@@ -62,8 +63,8 @@ def test_an_interrupted_session_prints_one_summary_line_and_nothing_on_stderr(tm
         out, err = p.communicate(timeout=60)
     finally:
         p.kill()
-    assert p.returncode == 130 and err == "", err  # 128 + SIGINT, whatever the moment (cli/main.py)
-    lines = out.strip().splitlines()
-    assert len(lines) == 1, out
+    assert p.returncode == 130 and out == "", out  # 128 + SIGINT, whatever the moment (cli/main.py)
+    lines = err.strip().splitlines()
+    assert len(lines) == 1, err
     (line,) = lines
     assert line.startswith("interrupted (SIGINT) ") and f"events to {tmp_path / 'int1.mcap'}" in line, line

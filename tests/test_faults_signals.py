@@ -48,21 +48,33 @@ class Verb:
         self.name, self.args, self.ready, self.recording = name, args, ready, recording
         self.settle_s, self.check = settle_s, check
         self.proc = None
-        self.lines: list[str] = []
+        self.lines: list[str] = []  # both streams, as they came
+        self.streams: dict[str, list[str]] = {"stdout": [], "stderr": []}
+        self.readers: list[threading.Thread] = []
         self.is_ready = threading.Event()
 
     def start(self, cwd: Path) -> None:
         self.proc = subprocess.Popen([sys.executable, "-m", "pairplay", *self.args], cwd=cwd, text=True,
-                                     stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
+                                     stdout=subprocess.PIPE, stderr=subprocess.PIPE,
                                      env=dict(os.environ, PYTHONUNBUFFERED="1"))
-        threading.Thread(target=self._read, daemon=True).start()
+        self.readers = [threading.Thread(target=self._read, args=(name,), daemon=True) for name in self.streams]
+        for reader in self.readers:
+            reader.start()
 
-    def _read(self) -> None:
-        for line in self.proc.stdout:
+    def _read(self, name: str) -> None:
+        for line in getattr(self.proc, name):
             self.lines.append(line)
+            self.streams[name].append(line)
             if self.ready(line):
                 self.is_ready.set()
-        self.is_ready.set()  # ended: nothing more to wait for
+        if all(not r.is_alive() or r is threading.current_thread() for r in self.readers):
+            self.is_ready.set()  # ended: nothing more to wait for
+
+    def read(self, name: str) -> str:
+        """What the ended process wrote on stream `name` ("stdout", "stderr")."""
+        for reader in self.readers:
+            reader.join(10)
+        return "".join(self.streams[name])
 
     def output(self) -> str:
         return "".join(self.lines)
@@ -182,6 +194,24 @@ def test_a_long_running_verb_exits_soon_after_a_signal_its_recording_finished_an
         assert log.metadata["pairplay.recorder.end"]["stopped_by"] == sig.name, log.metadata
     if v.check == "rrd":  # what was drawn is kept, under a name that says it is partial (cli/view.py)
         assert (tmp / "paced.partial.rrd").stat().st_size > 0 and not (tmp / "paced.rrd").exists(), out
+
+
+# the verbs whose stop is one line naming the signal (the others stop silently: run, robot)
+SAYS_SO = {"session (playing 300 rounds)", "lab (waiting for its board)", "protocol serve (console idle)",
+           "protocol pilot (a game playing)", "replay (paced)", "view (a recording, paced)", "view (live, waiting)"}
+
+
+@pytest.mark.parametrize("name", NAMES)
+def test_a_signalled_verb_says_it_was_stopped_on_stderr_and_keeps_stdout_for_results(signalled, name):
+    """Before: session, lab, view, replay, router and protocol serve/pilot printed their interrupted line
+    on stdout (their summary's stream), where the others (cli/main.py) said it on stderr."""
+    sig, _, took = signalled
+    v, _ = took[name]
+    out, err = v.read("stdout"), v.read("stderr")
+    assert not [line for line in out.splitlines() if sig.name in line or "interrupted" in line], out
+    if name in SAYS_SO:
+        said = [line for line in err.splitlines() if sig.name in line and not line.startswith(("INFO ", "WARNING "))]
+        assert len(said) == 1, err  # the log's lines (-v) aside
 
 
 WAITS = {"join", "close", "flush", "wait_idle", "stop"}  # calls that wait for something else to finish
