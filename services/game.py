@@ -29,8 +29,10 @@ reason; an abort ends the session at once (SessionEnded "aborted", the reason as
 
 from __future__ import annotations
 
+import re
 from collections import deque
 
+import msgspec
 
 from pairplay.core.board import Board, IllegalPick, Outcome, deal
 from pairplay.core.geometry import N_CARDS, state_of
@@ -39,6 +41,21 @@ from pairplay.schemas import events as ev
 from pairplay.schemas.session import SessionConfig
 
 from pairplay.services.node import Rejected, stream_seed
+
+
+def elsewhen(got: tuple[int, int], now: tuple[int, int]) -> str:
+    """Why an input for another moment of the game is refused, `for round 2, turn 4, but the game is in
+    round 3, turn 1`: (round, turn) indices as events hold them (from 0), counted from 1 where a user
+    reads them, as the board shows them (README). Before, the reasons said the indices (`pick for round 1
+    turn 3, but the game is at round 2 turn 0`), a round behind the board's: recorded PickRejected
+    reasons of that wording are still the same reason (`GameLogic.comparable`)."""
+    return (f"for round {got[0] + 1}, turn {got[1] + 1}, but the game is in round {now[0] + 1}, "
+            f"turn {now[1] + 1}")
+
+
+# A recorded PickRejected reason of the wording before `elsewhen` (its numbers from 0): recordings made
+# before it verify, and a game restarted over one resumes (node.py Driver.same).
+_OLD_ELSEWHEN = re.compile(r"pick for round (-?\d+) turn (-?\d+), but the game is at round (-?\d+) turn (-?\d+)")
 
 
 # the participant's inputs: a simulated participant, or the touch-screen board of the human study
@@ -78,6 +95,16 @@ class GameLogic:
     def start(self) -> list[ev.Event]:
         return [ev.SessionStarted(config=self.config), *self._deal()]
 
+    @staticmethod
+    def comparable(e: ev.Event) -> ev.Event:
+        """`e` as resume and verify compare it (node.py Driver.same): a PickRejected whose reason has the
+        wording of before `elsewhen` (numbers from 0) in today's; anything else as it is."""
+        old = _OLD_ELSEWHEN.fullmatch(e.reason) if isinstance(e, ev.PickRejected) else None
+        if old is None:
+            return e
+        r, t, now_r, now_t = map(int, old.groups())
+        return msgspec.structs.replace(e, reason=f"pick {elsewhen((r, t), (now_r, now_t))}")
+
     def end(self, reason: str, detail: str = "") -> list[ev.Event]:
         """End the session early (interrupted, aborted or failed), saying how far it got; [] if it is over."""
         if self.done:
@@ -106,8 +133,7 @@ class GameLogic:
         if isinstance(e, ev.GazeFixated):
             return self._gaze(e)
         if (e.round, e.turn) != (self.round, self.turn):
-            raise Rejected(f"{type(e).__name__} for round {e.round} turn {e.turn}, but the game is at "
-                           f"round {self.round} turn {self.turn}")
+            raise Rejected(f"{type(e).__name__} {elsewhen((e.round, e.turn), (self.round, self.turn))}")
         if isinstance(e, ev.CardObserved):
             return self._observed(e)
         return self._wrong_suggestion(e)
@@ -119,8 +145,7 @@ class GameLogic:
         if self.paused:
             return refuse("the session is paused")
         if (e.round, e.turn) != (self.round, self.turn):
-            return refuse(f"pick for round {e.round} turn {e.turn}, but the game is at round {self.round} "
-                          f"turn {self.turn}")
+            return refuse(f"pick {elsewhen((e.round, e.turn), (self.round, self.turn))}")
         if self.first >= 0 and self.attempt < 0 and self.config.observed_source != "gaze":
             return refuse("the second card comes after the suggestion: the observed card is not known yet")
         try:

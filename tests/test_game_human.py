@@ -11,6 +11,7 @@ from pairplay.schemas.session import SessionConfig
 from pairplay.services.game import GameLogic
 from pairplay.services.learner import LearnerLogic
 from pairplay.services.node import Driver
+from pairplay.services.verify import verify_events
 
 
 class Table:
@@ -98,3 +99,39 @@ def test_only_the_tracker_may_report_gaze():
     t = Table(observed_source="gaze")
     t.send("board", ev.GazeFixated(card=3), 1.0)
     assert "published only by tracker" in t.of(ev.MessageRejected)[0].reason  # schemas/trust.py
+
+
+def test_inputs_for_another_round_are_refused_with_rounds_counted_from_1_and_old_wordings_still_verify():
+    """Before: `pick for round 1 turn 3, but the game is at round 0 turn 0`, the indices, a round behind the
+    board's `Round 1`. A recorded PickRejected is compared by verify (and a restart's resume) with the
+    recomputed one, so recordings made before keep their wording and must still verify: same numbers,
+    either wording; a changed number still fails."""
+    import msgspec
+
+    class Recorded(Table):  # the inputs are in the log too, as a recorder holds them
+        def send(self, source, event, at_s):
+            self.seq[source] = self.seq.get(source, 0) + 1
+            e = stamped(event, session="t", source=source, seq=self.seq[source], time_ns=int(at_s * 1e9))
+            self.log.append(e)
+            self.publish(self.game.receive(event_key("t", source, type(event).__name__), encode_event(e)))
+    t = Recorded()
+    t.send("board", ev.CardPicked(round=1, turn=3, card=0), 1.0)
+    t.send("board", ev.WrongSuggestionPressed(round=0, turn=2, attempt=0), 1.5)
+    t.send("board", ev.CardObserved(round=2, turn=0, card=1, observed_source="intended"), 1.7)
+    [picked] = t.of(ev.PickRejected)
+    assert picked.reason == "pick for round 2, turn 4, but the game is in round 1, turn 1"
+    assert [m.reason for m in t.of(ev.MessageRejected)] == [
+        "WrongSuggestionPressed for round 1, turn 3, but the game is in round 1, turn 1",
+        "CardObserved for round 3, turn 1, but the game is in round 1, turn 1"]
+    a, b = t.miss()
+    t.send("board", ev.CardPicked(round=0, turn=0, card=a), 2.0)
+    t.send("board", ev.CardPicked(round=0, turn=0, card=b), 4.0)  # the game goes on, as before the refusals
+    assert len(t.of(ev.TurnResolved)) == 1
+    assert verify_events(t.log).ok
+
+    def worded(reason):
+        return [msgspec.structs.replace(e, reason=reason) if isinstance(e, ev.PickRejected) else e for e in t.log]
+    assert verify_events(worded("pick for round 1 turn 3, but the game is at round 0 turn 0")).ok  # as recorded before
+    for tampered in ("pick for round 1 turn 3, but the game is at round 0 turn 1",
+                     "pick for round 2, turn 4, but the game is in round 2, turn 1"):
+        assert not verify_events(worded(tampered)).ok, tampered

@@ -132,6 +132,7 @@ def test_wrong_suggestion_reload_two_tabs_and_bad_messages(browser, tmp_path):
         reasons = [r["reason"] for r in page.evaluate("window.pairplay.rejected")]
         assert "malformed" in reasons[0] and "malformed" in reasons[1] and "malformed" in reasons[2]
         assert "stale" in reasons[3] and "stale" in reasons[4] and "not on the board" in reasons[5]
+        assert reasons[3].startswith("stale: for round 1, turn 8, but the game is in round 1, turn "), reasons[3]
         assert "not above" in reasons[6] and "at most 4096" in reasons[7] and "binary" in reasons[8]
         # a lost connection: the page reconnects by itself and gets the whole view again
         page.evaluate("window.pairplay.link.ws.close()")

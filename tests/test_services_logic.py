@@ -121,7 +121,8 @@ def test_illegal_picks_are_refused_with_the_rule_and_change_nothing():
     out = feed(game, ev.CardObserved(round=0, turn=0, card=5, observed_source="intended"))
     assert isinstance(out[0], ev.SuggestionRequested) and out[0].observed == 5
     out = feed(game, ev.CardPicked(round=3, turn=0, card=6))
-    assert isinstance(out[0], ev.PickRejected) and "round 3" in out[0].reason
+    assert isinstance(out[0], ev.PickRejected) and "for round 4, turn 1, but the game is in round 1, turn 1" \
+        in out[0].reason  # counted from 1, as the board shows them
     out = feed(game, ev.CardPicked(round=0, turn=0, card=4))
     assert isinstance(out[0], ev.PickRejected) and "already face up" in out[0].reason
 

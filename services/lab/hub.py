@@ -39,6 +39,7 @@ from pairplay.schemas.events import EVENT_BY_TAG
 from pairplay.schemas.session import SessionConfig
 
 from pairplay.services.bus import Bus
+from pairplay.services.game import elsewhen
 from pairplay.services.lab.model import LabModel
 from pairplay.services.runner import Node
 
@@ -280,8 +281,7 @@ class LabHub:
             self._refuse(c, f"the game takes no input now ({phase})", raw, msg.id)
             return
         if (msg.round, msg.turn) != here:
-            self._refuse(c, f"stale: for round {msg.round} turn {msg.turn}, but the game is at round {here[0]} "
-                            f"turn {here[1]}", raw, msg.id)
+            self._refuse(c, f"stale: {elsewhen((msg.round, msg.turn), here)}", raw, msg.id)  # counted from 1
             return
         if isinstance(msg, Pick):
             if not 0 <= msg.card < N_CARDS:
