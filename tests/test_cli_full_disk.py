@@ -128,3 +128,22 @@ def test_bench_readme_table_on_a_full_disk_names_the_readme_and_leaves_it_whole(
                        cwd=tmp_path, capture_output=True, text=True, timeout=120)
     assert (tmp_path / "err").read_text().strip() == "No space left on device full/README.md"
     assert r.stdout.split("\n", 1) == ["README.md", "a\n<!-- bench:start -->\nold\n<!-- bench:end -->\n"], r.stdout
+
+
+@pytest.mark.skipif(not CAN_UNSHARE, reason="needs root and unshare for a private tmpfs")
+def test_sweep_filling_the_disk_after_a_cell_keeps_it_exit_2_and_says_the_same_command_resumes(tmp_path):
+    """8 KiB hold grid.toml and the first cell (a page each), not the second: the finished cell stays, as
+    after a signal, and the one line says so and names the file that could not be written."""
+    (tmp_path / "grid.toml").write_text(TINY_GRID.replace("seeds = 1", "seeds = 2"))
+    (tmp_path / "full").mkdir()
+    script = ('mount -t tmpfs -o size=8k tmpfs full && "$0" -m pairplay sweep grid.toml --out full/sw -q >out 2>err; '
+              'echo $? >rc; find full -mindepth 1 -type f')
+    r = subprocess.run(["unshare", "--mount", "--propagation", "private", "sh", "-c", script, sys.executable],
+                       cwd=tmp_path, capture_output=True, text=True, timeout=300)
+    err = (tmp_path / "err").read_text()
+    assert (tmp_path / "rc").read_text().strip() == "2" and "Traceback" not in err, err
+    [line] = err.strip().splitlines()
+    assert line.startswith("pairplay sweep: No space left on device (full/sw/cells/") and line.endswith(
+        "; 1 of 2 cells finished, kept in full/sw/cells: the same command resumes from them"), line
+    files = sorted(r.stdout.split())
+    assert len(files) == 2 and files[1] == "full/sw/grid.toml" and files[0].startswith("full/sw/cells/"), files
