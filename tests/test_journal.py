@@ -20,6 +20,7 @@ import pytest
 from pairplay.errors import InputError
 from pairplay.replay.reader import read_log
 from pairplay.replay.recover import recover
+from pairplay.replay.check import MCAP_MAGIC
 from pairplay.replay.wal import MAGIC, JournalWriter, NotAJournal, read_journal, wal_path
 from pairplay.schemas import events as ev
 from pairplay.schemas.envelope import stamped
@@ -235,6 +236,31 @@ def test_a_file_cut_before_its_first_flush_is_recovered_from_its_journal(tmp_pat
     done = recover(path, admit=admit)
     assert done.from_journal == 6 and done.started
     assert len(read_log(done.output).events) == 6
+
+
+@pytest.mark.parametrize("left", [b"", MCAP_MAGIC[:5]])
+def test_a_file_of_nothing_beside_its_journal_is_recovered_from_it_and_named_so_elsewhere(tmp_path, pairplay_cli,
+                                                                                         left):
+    """A recorder SIGKILLed before its first flush leaves a 0-byte MCAP (its writer buffers even the
+    magic; measured: tests/test_recorder_restart.py) and what it received in its journal. Before,
+    `pairplay recover` refused it ("empty file (0 bytes), not a recording") and the journal's events
+    could not be recovered; every other verb said the same, without a word of the journal."""
+    events = [start()] + [pick(s) for s in range(1, 6)]
+    path = tmp_path / "j1.mcap"
+    path.write_bytes(left)
+    journal_of(path, events)
+    ran = pairplay_cli("recover", path)
+    assert ran.returncode == 0, ran.stderr
+    assert "6 events taken from its journal" in ran.stdout, ran.stdout
+    log = read_log(tmp_path / "j1.recovered.mcap")
+    assert log.whole and [r.payload for r in log.events] == [p for _, p in events]
+    assert path.read_bytes() == left  # the original is never modified
+    ran = pairplay_cli("replay", "--verify", path)
+    lines = ran.stderr.strip().splitlines()
+    assert ran.returncode == 2 and len(lines) == 1 and f"pairplay recover {path}`" in lines[0], ran.stderr
+    wal_path(path).unlink()  # without its journal: not a recording, as before
+    ran = pairplay_cli("recover", path)
+    assert ran.returncode == 2 and "not a recording" in ran.stderr and "journal" not in ran.stderr, ran.stderr
 
 
 # -- stray journals ------------------------------------------------------------------
