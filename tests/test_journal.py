@@ -327,6 +327,26 @@ def test_a_restarted_recorder_takes_what_the_earlier_journal_holds(tmp_path):
     assert sum(isinstance(r.event, ev.MessageRejected) for r in log.events) == 1
 
 
+def test_a_recorder_restarted_twice_keeps_what_each_earlier_recording_and_journal_holds(tmp_path):
+    """The second restart's predecessor was killed before its first flush: its file is empty, its
+    journal holds what it received live, but not what it had copied from the first file (a copy is
+    not received). Before, the newest file and its journal alone were read: the first file's events
+    and its journal's were not in the new file (what the services still had was refilled on a bus;
+    the robot's, the recorder's own and a since-restarted service's were lost)."""
+    events = [start()] + [pick(s) for s in range(1, 31)]
+    path = cut_recording(tmp_path, events[:6])  # j1.mcap: cut after its 5th pick
+    journal_of(path, events[:11])  # what its recorder had received: up to the 10th
+    (tmp_path / "j1.1.mcap").write_bytes(b"")  # the restarted recorder, killed before its first flush
+    journal_of(tmp_path / "j1.1.mcap", events[21:])  # what it received live: the 21st on
+    rec = Recorder(None, "j1", path, restart=True)
+    rec.close()
+    assert rec.path.name == "j1.2.mcap"
+    log = read_log(rec.path)
+    assert [r.event.seq for r in log.events if r.event.source == "participant"] == \
+        list(range(1, 11)) + list(range(21, 31))  # (11-20: a bus's refill; nobody held them here)
+    assert not log.of("MessageRejected")
+
+
 def test_a_recorder_killed_with_a_backlog_loses_nothing_its_journal_held(tmp_path, pairplay_cli):
     """A burst faster than the recorder's writer, SIGKILL as soon as the journal holds the last
     event: the cut file lacks its unflushed tail and its backlog, if any (measured: 48-649 events
