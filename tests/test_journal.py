@@ -238,6 +238,44 @@ def test_a_file_cut_before_its_first_flush_is_recovered_from_its_journal(tmp_pat
     assert len(read_log(done.output).events) == 6
 
 
+def refusals_in(events) -> int:
+    """How many refusals the recorder's MessageRejected events account for: one each, or its count."""
+    out = 0
+    for e in events:
+        if isinstance(e, ev.MessageRejected) and e.source == "recorder":
+            words = e.reason.split(" ", 1)
+            out += int(words[0]) if e.key == "" and words[0].isdigit() else 1
+    return out
+
+
+@pytest.mark.parametrize("cut_after", ["counts", "one_by_one"])
+def test_refusals_the_live_recorder_only_counted_are_not_counted_again_by_recover(tmp_path, cut_after):
+    """A flood of 200 malformed messages in one second: the live recorder records 20 refusals one by
+    one (its rate) and counts the other 180 in one MessageRejected. Before, recover matched only the
+    refusals recorded one by one and refused the 180 counted ones again (20 more one by one, 160 more
+    counted): 380 refusals for 200 messages. Cut before the count reached the file, recover counts
+    them once (the count is what the SIGKILL lost)."""
+    live = Recorder(None, "j1", tmp_path / "live" / "j1.mcap", clock=iter(range(10**9, 10**10, 1000)).__next__)
+    events = [start(), pick(1)]
+    flood = [(event_key("j1", "participant", "CardPicked"), b"{not json %d" % i) for i in range(200)]
+    for i, (k, p) in enumerate(events + flood + [pick(2)]):
+        live.record(k, p, 10**9 + i)
+    if cut_after == "counts":
+        live._publish(live.refusals.tick(live.clock(), force=True))
+    live.writer.flush(live.clock())
+    live.writer._stream.flush()
+    shutil.copy(live.path, tmp_path / "j1.mcap")
+    live.close()
+    held = read_log(tmp_path / "j1.mcap").events
+    assert refusals_in(r.event for r in held) == (200 if cut_after == "counts" else 20)
+    journal_of(tmp_path / "j1.mcap", events + flood + [pick(2), pick(3)])
+    done = recover(tmp_path / "j1.mcap", admit=admit)
+    assert done.from_journal == 1 and done.journal_refused == 200
+    log = read_log(done.output)
+    assert refusals_in(r.event for r in log.events) == 200
+    assert [r.event.seq for r in log.events if r.event.source == "participant"] == [1, 2, 3]
+
+
 @pytest.mark.parametrize("left", [b"", MCAP_MAGIC[:5]])
 def test_a_file_of_nothing_beside_its_journal_is_recovered_from_it_and_named_so_elsewhere(tmp_path, pairplay_cli,
                                                                                          left):
