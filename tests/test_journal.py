@@ -427,3 +427,41 @@ def test_a_recorder_killed_with_a_backlog_loses_nothing_its_journal_held(tmp_pat
     assert f"{taken} events taken from its journal" in ran.stdout, ran.stdout
     log = read_log(tmp_path / "jk.recovered.mcap")
     assert [r.event.seq for r in log.events if r.event.source == "participant"] == list(range(1, n + 1))
+
+
+def test_a_flood_refused_live_then_a_sigkill_is_accounted_once_by_recover(tmp_path, pairplay_cli):
+    """The same on a real bus: a `pairplay run recorder` refuses a flood of malformed messages (20
+    one by one, the rest counted), is SIGKILLed once its file holds the count, and recover accounts
+    for each refused message once (before: the counted ones twice)."""
+    n = 500
+    with listener() as bus:
+        rec = subprocess.Popen([sys.executable, "-m", "pairplay", "run", "recorder", "--session", "jf", "--out",
+                                str(tmp_path), "--connect", bus.locators()[0]],
+                               stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+        try:
+            assert wait_until(lambda: alive_key("jf", "recorder") in bus.alive_now(alive_key("jf", "*")), 30)
+            key = event_key("jf", "participant", "CardPicked")
+            assert wait_until(lambda: bus.matching(key))
+            put = bus.publisher(key).put
+            for i in range(n):
+                put(b"{not json %d" % i)
+
+            def accounted() -> bool:  # every refusal is in the file (one by one or counted), flushed
+                try:
+                    return refusals_in(r.event for r in read_log(tmp_path / "jf.mcap").events) >= n
+                except Exception:
+                    return False
+
+            assert wait_until(accounted, 30, 0.05)
+            assert wait_until(lambda: len(read_journal(wal_path(tmp_path / "jf.mcap")).records) >= n, 10)
+            rec.send_signal(signal.SIGKILL)
+            rec.wait(10)
+        finally:
+            if rec.poll() is None:
+                rec.kill()
+                rec.wait()
+    ran = pairplay_cli("recover", tmp_path / "jf.mcap")
+    # (no SessionStarted: a cut file of refusals is still kept, and says so)
+    assert ran.returncode == 0, ran.stderr
+    log = read_log(tmp_path / "jf.recovered.mcap")
+    assert refusals_in(r.event for r in log.events) == n
