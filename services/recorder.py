@@ -216,9 +216,9 @@ def earlier_records(earlier: Path, session: str, before: list[tuple[str, bytes, 
 def recorded_before(path: Path, session: str, until: Path | None = None
                     ) -> tuple[list[tuple[str, bytes, int]], list[dict]]:
     """What the session's recordings at `path` hold together (`recordings_of`, oldest first up to
-    `until` if given, each
-    read by `earlier_records`), each message once (a restarted recorder's file starts with copies of
-    its predecessor's, byte for byte), and the account of every journal read. The newest file alone
+    `until` if given, each read by `earlier_records`), each message once (a restarted recorder's file
+    starts with copies of its predecessor's, byte for byte), and the account of every journal read
+    (JOURNAL_METADATA's fields). Returns ([(key, payload, log_time_ns)], [account]). The newest file alone
     is not enough: a restarted recorder's copy reaches its disk only at its flushes and is not in
     its journal (which holds what it received), so killed before its first flush it leaves only
     what came live, and the older files still hold the rest."""
