@@ -6,7 +6,9 @@ it (REC.journal, replay/wal.py) holds that REC lacks, through the live checks
 (services/walmerge.py), saying how many it took; the original is never modified, an
 existing output is replaced only with --force, and the output appears only
 when complete. Exit 0 when the output is complete, 2 (one line on stderr,
-nothing written) when REC is missing, empty or not MCAP, holds no session
+nothing written) when REC is missing, empty or not MCAP (a file of nothing
+with its journal beside it, as a recorder killed before its first flush leaves
+it, is completed from the journal), holds no session
 (only MCAP's magic or header, another program's MCAP, no SessionStarted:
 replay/check.py `no_session`), or the output exists.
 """

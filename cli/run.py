@@ -71,7 +71,7 @@ def run(args: argparse.Namespace) -> int:
             path = Path(args.out) / f"{args.session}.mcap"
             earlier = latest_file(path)
             # a recorder restarted within the live session continues its file; a new session's is refused
-            restart = earlier is not None and same_live_session(bus, args.session, earlier)
+            restart = earlier is not None and same_live_session(bus, args.session, path)
             if earlier is not None and not restart:
                 raise RecordingExists(earlier, args.session, "no live session on the bus sent what it holds; "
                                       "choose another --session (a recording is never replaced)")

@@ -5,7 +5,8 @@ starts with MCAP's magic bytes (MCAP specification: the file begins with
 0x89 "MCAP0" CR LF); anything else is an `InputError` naming the path, raised
 before anything is written. How much of a real MCAP file is intact is the
 reader's business (reader.py); this only keeps what is not MCAP at all from
-being read as an empty recording. A recording a verb folds, verifies,
+being read as an empty recording (a file of nothing whose recorder's journal is
+beside it is named as `pairplay recover`'s to complete). A recording a verb folds, verifies,
 replays, views, fits or recovers must also hold a session (its
 SessionStarted): `read_session` refuses one that does not, saying what the
 file is (only the magic, a header, another program's MCAP, a session that
@@ -21,8 +22,12 @@ from pairplay.errors import InputError
 MCAP_MAGIC = b"\x89MCAP0\r\n"
 
 
-def check_recording(path: str | Path) -> Path:
-    """`path` as a Path if it can be read as an MCAP recording; InputError saying why not."""
+def check_recording(path: str | Path, journal_ok: bool = False) -> Path:
+    """`path` as a Path if it can be read as an MCAP recording; InputError saying why not.
+
+    A recorder killed before its first flush leaves a file of nothing (0 bytes, or cut inside
+    MCAP's magic) and what it received in its journal beside it (wal.py): such a file is refused
+    naming `pairplay recover`, or taken with `journal_ok` (recover: the journal holds the recording)."""
     path = Path(path)
     if not path.exists():
         raise InputError("no such recording", path)
@@ -33,8 +38,16 @@ def check_recording(path: str | Path) -> Path:
             head = f.read(len(MCAP_MAGIC))
     except OSError as err:
         raise InputError(f"cannot read the recording: {err.strerror}", path) from None
-    if not head:
-        raise InputError("empty file (0 bytes), not a recording", path)
+    if len(head) < len(MCAP_MAGIC) and MCAP_MAGIC.startswith(head):  # nothing of MCAP past (part of) its magic
+        from .wal import wal_path
+        if wal_path(path).exists():
+            if journal_ok:
+                return path
+            what = "empty file (0 bytes)" if not head else f"cut inside MCAP's magic ({len(head)} bytes)"
+            raise InputError(f"{what}: its recorder stopped before it wrote a record; the journal beside it "
+                             f"({wal_path(path).name}) holds what it received: `pairplay recover {path}`", path)
+        if not head:
+            raise InputError("empty file (0 bytes), not a recording", path)
     if head != MCAP_MAGIC:
         from .wal import SUFFIX, is_journal
         if is_journal(path):  # a recorder's journal left beside a recording it did not finish

@@ -71,12 +71,13 @@ def recover(path: str | Path, output: str | Path | None = None, force: bool = Fa
     """Copy the intact records of `path` into a complete file (see rule), and with `admit`
     (services/walmerge.admit) what its journal holds that the file lacks.
 
-    InputError if `path` is not an MCAP file at all (missing, empty, no MCAP magic) or holds no
+    InputError if `path` is not an MCAP file at all (missing, empty, no MCAP magic: unless, with
+    `admit`, its journal is beside it, as a recorder killed before its first flush leaves it) or holds no
     session (check.py `no_session`), unless it is cut or damaged and holds pairplay events (in it
     or in its journal), or if its journal is of another session;
     OutputError if `output` exists (unless `force`) or is the input; the output
     appears only when complete (pairplay.outputs)."""
-    path = check_recording(path)
+    path = check_recording(path, journal_ok=admit is not None)  # (a file of nothing: its journal holds it)
     output = Path(output) if output is not None else default_output(path)
     if output.resolve() == path.resolve():
         raise OutputError("recover writes a new file; give an output path other than the input", output)

@@ -42,6 +42,8 @@ from pairplay.schemas.trust import MAX_PAYLOAD, MAX_SEQ_JUMP, ONCE_PER_SESSION, 
 
 EXCERPT = 200
 MAX_KINDS = 20
+OTHER_KIND = ("*", "other refusals")  # what a refusal beyond MAX_KINDS kinds in a second is counted under
+_COUNT = re.compile(r"(\d+) messages refused and not recorded one by one \(limit \d+/s\): (.*)", re.S)  # tick's
 SECOND_NS = 1_000_000_000
 KEYS_CACHED = 4096
 
@@ -168,12 +170,24 @@ class Refusals:
             self._hold(source, reason)
         return out
 
+    @staticmethod
+    def kind(source: str, reason: str) -> tuple[str, str]:
+        """What a refusal is counted under: (its source, its reason without numbers and details)."""
+        return source[:40], re.sub(r"\d+", "N", reason.split(":", 1)[0])[:100]
+
+    @staticmethod
+    def counted(rejection: MessageRejected) -> tuple[tuple[str, str], int] | None:
+        """(kind, how many) if `rejection` is a count of refusals not recorded one by one (`tick`),
+        else None (one refusal recorded by itself)."""
+        found = None if rejection.key else _COUNT.match(rejection.reason)
+        return ((rejection.offending_source, found[2]), int(found[1])) if found else None
+
     def _hold(self, source: str, reason: str, n: int = 1) -> None:
         """Count a refusal under its kind: the reason without its numbers and details; at most
         MAX_KINDS kinds a second (made-up sources or keys cannot make the summary a flood)."""
-        kind = (source[:40], re.sub(r"\d+", "N", reason.split(":", 1)[0])[:100])
+        kind = self.kind(source, reason)
         if kind not in self.held and len(self.held) >= MAX_KINDS:
-            kind = ("*", "other refusals")
+            kind = OTHER_KIND
         self.held[kind] += n
 
     def shed(self, counts: Counter) -> None:

@@ -29,7 +29,12 @@ A session id is taken once it has a recording: a NEW session whose recording
 (`<session>.mcap` or any `<session>.<k>.mcap`) exists is refused before anything
 starts (RecordingExists, `check_new_recording`); only a recorder restarted
 within the same live session (`same_live_session`: the services on the bus now
-sent the very events the earlier file holds) continues it.
+sent the very events the earlier recording holds) continues it. What an earlier
+recording holds is its file's readable messages and what its journal adds
+(`earlier_records`): a recorder killed before its first flush leaves a file of
+no message, everything it received in its journal; and a restart reads every
+earlier recording of the session (`recorded_before`), as a restarted recorder's
+copy of its predecessor's is neither received nor journaled.
 Behind a router that restarts (services/bus.py: Zenoh's advanced pub/sub recovers
 what the outage held up) the recorder records each outage of its link (metadata
 LINK_METADATA) and, once the link is back and Zenoh's recovery has had
@@ -169,27 +174,86 @@ def check_new_recording(path: str | Path, force: bool = False, hint: str = FORCE
     return path
 
 
-def same_live_session(bus: Bus, session: str, earlier: Path, timeout_s: float = 3.0) -> bool:
-    """Whether the services of `session` on the bus now are the ones `earlier` recorded: each one that
-    answers (SENT_QUERY) sent, under the sequence number of its first event in the file, the very bytes
-    the file holds (a ServiceStarted carries its service's start time, so a new session that reuses the
-    id differs). False if the file holds no event of another service, or nobody answers."""
+def earlier_records(earlier: Path, session: str, before: list[tuple[str, bytes, int]] = ()
+                    ) -> tuple[list[tuple[str, bytes, int]], dict | None]:
+    """What an earlier recording of `session` holds: every readable message of the file (a crash may
+    have cut it: what was read before the cut) as (key, payload, log_time_ns) in file order, then
+    what its journal (`<earlier>.journal`, replay/wal.py) holds that the file lacks, decided by the
+    live checks as `pairplay recover` decides it (services/walmerge.py; refusals included); and the
+    journal's account (JOURNAL_METADATA's fields), or None if no journal is beside it. A recorder
+    killed before its first flush leaves a file of no message: all it received is in its journal.
+    `before`: what the session's recordings older than `earlier` hold (`recorded_before`), which
+    the journal's records are checked after, as the live recorder checked them."""
     from mcap.records import Channel, Message
     from pairplay.replay.reader import iter_records
     topics: dict[int, str] = {}
-    first: dict[str, tuple[int, bytes]] = {}
+    held: list[tuple[str, bytes, int]] = []
     try:
         for record in iter_records(earlier):
             if isinstance(record, Channel):
                 topics[record.id] = record.topic
             elif isinstance(record, Message) and record.channel_id in topics:
-                source = topics[record.channel_id].split("/")[2] if topics[record.channel_id].count("/") == 3 else ""
-                if source and source != Recorder.name:
-                    seq = decode_event(record.data).seq
-                    if source not in first or seq < first[source][0]:
-                        first[source] = (seq, record.data)
-    except Exception as err:  # a crash's cut: what was read before it is enough to compare
-        log.info("recorder: %s ends early (%s)", earlier, err)
+                held.append((topics[record.channel_id], record.data, record.log_time))
+    except Exception as err:  # the cut of a crashed file: everything before it is kept
+        log.info("recorder: %s ends early (%s); %d messages read", earlier, err, len(held))
+    beside = wal_path(earlier)
+    if not beside.exists():
+        return held, None
+    try:
+        journal = read_journal(beside)
+    except (NotAJournal, OSError) as err:
+        log.warning("recorder: the journal %s is not read: %s", beside, err)
+        return held, {"earlier_journal": beside.name, "not_read": str(err)}
+    if journal.session != session:
+        log.warning("recorder: the journal %s is of session %r: not taken", beside, journal.session)
+        return held, {"earlier_journal": beside.name, "not_read": f"of session {journal.session!r}"}
+    added = admit(session, [(k, p) for k, p, _ in (*before, *held)], journal.records)
+    return held + [(k, p, ns) for k, p, ns, _seq in added.items], {
+        "earlier_journal": beside.name, "taken": str(added.taken), "refused": str(added.refused),
+        "torn": journal.torn}
+
+
+def recorded_before(path: Path, session: str, until: Path | None = None
+                    ) -> tuple[list[tuple[str, bytes, int]], list[dict]]:
+    """What the session's recordings at `path` hold together (`recordings_of`, oldest first up to
+    `until` if given, each read by `earlier_records`), each message once (a restarted recorder's file
+    starts with copies of its predecessor's, byte for byte), and the account of every journal read
+    (JOURNAL_METADATA's fields). Returns ([(key, payload, log_time_ns)], [account]). The newest file alone
+    is not enough: a restarted recorder's copy reaches its disk only at its flushes and is not in
+    its journal (which holds what it received), so killed before its first flush it leaves only
+    what came live, and the older files still hold the rest."""
+    held: list[tuple[str, bytes, int]] = []
+    seen: set[tuple[str, bytes]] = set()
+    journals = []
+    for earlier in recordings_of(path):
+        records, journal = earlier_records(earlier, session, held)
+        for key, payload, log_ns in records:
+            if (key, payload) not in seen:
+                seen.add((key, payload))
+                held.append((key, payload, log_ns))
+        if journal is not None:
+            journals.append(journal)
+        if earlier == until:
+            break
+    return held, journals
+
+
+def same_live_session(bus: Bus, session: str, path: Path, timeout_s: float = 3.0) -> bool:
+    """Whether the services of `session` on the bus now are the ones its recordings at `path` recorded:
+    each one that answers (SENT_QUERY) sent, under the sequence number of its first event in them (the
+    files and what their journals add: `recorded_before`), the very bytes they hold (a ServiceStarted
+    carries its service's start time, so a new session that reuses the id differs). False if the
+    recording holds no event of another service, or nobody answers."""
+    first: dict[str, tuple[int, bytes]] = {}
+    for key, data, _ in recorded_before(path, session)[0]:
+        source = key.split("/")[2] if key.count("/") == 3 else ""
+        if source and source != Recorder.name:
+            try:
+                seq = decode_event(data).seq
+            except (msgspec.DecodeError, msgspec.ValidationError):
+                continue
+            if source not in first or seq < first[source][0]:
+                first[source] = (seq, data)
     if not first:
         return False
     after = ",".join(f"{s}:{seq - 1}" for s, (seq, _) in sorted(first.items()))
@@ -235,6 +299,7 @@ class Recorder:
         (`check_new_recording`); one `restart`ed within the same live session (`same_live_session`)
         continues the newest of them in a file of its own (`free_path`)."""
         earlier = latest_file(Path(path)) if restart else None
+        base = Path(path)
         if not restart:
             check_new_recording(path)
         self.bus, self.session, self.path, self.clock = bus, session, free_path(Path(path)), clock
@@ -269,59 +334,26 @@ class Recorder:
         self._absent: dict[str, int] = {}  # service -> when its token went, until it is back (_alive)
         self.absences: list[dict] = []  # recorded (ABSENCE_METADATA)
         if earlier is not None:
-            self._continue(earlier)
+            self._continue(base, earlier)
 
     # -- a restarted recorder: continue the session's record ----------------
-    def _continue(self, earlier: Path) -> None:
-        """Copy every readable event of the session's newest earlier file (a crash may have
-        cut it) into this one, so this file alone holds the whole session."""
-        from mcap.records import Channel, Message
-        from pairplay.replay.reader import iter_records
-        topics: dict[int, str] = {}
+    def _continue(self, base: Path, earlier: Path) -> None:
+        """Copy every event the session's earlier recordings hold (`recorded_before`: each file's
+        readable messages, a crash may have cut it, then what its journal adds: the inbox its recorder
+        died with; `earlier` is the newest) into this one, so this file alone holds the whole session;
+        what each journal gave is counted (metadata JOURNAL_METADATA). The journals are left where they are."""
+        held, journals = recorded_before(base, self.session, until=earlier)  # (not this file, made already)
         copied, last_ns = 0, 0
-        try:
-            for record in iter_records(earlier):
-                if isinstance(record, Channel):
-                    topics[record.id] = record.topic
-                elif isinstance(record, Message) and record.channel_id in topics:
-                    if self._copy(topics[record.channel_id], record.data, record.log_time):
-                        copied += 1
-                        last_ns = max(last_ns, record.log_time)
-        except Exception as err:  # the cut of a crashed file: everything before it is kept
-            log.info("recorder: %s ends early (%s); %d events copied", earlier, err, copied)
-        copied, last_ns = self._continue_journal(earlier, copied, last_ns)
-        self.continued = {"earlier_file": earlier.name, "copied": copied, "last_copied_ns": last_ns}
-        log.info("recorder: continuing %s (%d events) in %s", earlier, copied, self.path)
-
-    def _continue_journal(self, earlier: Path, copied: int, last_ns: int) -> tuple[int, int]:
-        """What the earlier file's journal holds that the file lacks (the inbox its recorder died
-        with), decided as `pairplay recover` does (services/walmerge.py), copied after the file's
-        events and counted (metadata JOURNAL_METADATA). The journal is left where it is."""
-        beside = wal_path(earlier)
-        if not beside.exists():
-            return copied, last_ns
-        try:
-            journal = read_journal(beside)
-        except (NotAJournal, OSError) as err:
-            log.warning("recorder: the journal %s is not read: %s", beside, err)
-            self._guarded(self.writer.add_metadata, JOURNAL_METADATA, {"earlier_journal": beside.name,
-                                                                       "not_read": str(err)})
-            return copied, last_ns
-        if journal.session != self.session:
-            log.warning("recorder: the journal %s is of session %r: not taken", beside, journal.session)
-            return copied, last_ns
-        with self._lock:
-            recorded = list(self.kept)
-        added = admit(self.session, recorded, journal.records)
-        for key, payload, log_ns, _seq in added.items:
+        for key, payload, log_ns in held:
             if self._copy(key, payload, log_ns):
                 copied += 1
                 last_ns = max(last_ns, log_ns)
-        self._guarded(self.writer.add_metadata, JOURNAL_METADATA, {
-            "earlier_journal": beside.name, "taken": str(added.taken), "refused": str(added.refused),
-            "torn": journal.torn})
-        log.info("recorder: %d events taken from %s (%d refused)", added.taken, beside, added.refused)
-        return copied, last_ns
+        for journal in journals:
+            self._guarded(self.writer.add_metadata, JOURNAL_METADATA, journal)
+            log.info("recorder: %s events taken from %s (%s refused)", journal.get("taken", 0),
+                     journal["earlier_journal"], journal.get("refused", 0))
+        self.continued = {"earlier_file": earlier.name, "copied": copied, "last_copied_ns": last_ns}
+        log.info("recorder: continuing %s (%d events) in %s", earlier, copied, self.path)
 
     def _copy(self, key: str, payload: bytes, log_time_ns: int) -> bool:
         source = key.split("/")[2] if key.count("/") == 3 else ""

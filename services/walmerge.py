@@ -8,7 +8,10 @@ that has first noted every event of the recording, exactly as the live recorder
 would have checked it then. Taken, it is added with the journal's receipt time;
 refused, the refusal is added as the recorder's MessageRejected (at the live
 rate, counts beyond it: guard.Refusals), unless the recording holds that very
-refusal already (same key and sequence number, one by one). So a forged or
+refusal already (same key and sequence number, one by one) or counted it (a
+count of its kind, from the same source, not used up by earlier records: the
+live recorder records 20 a second one by one and counts the rest, which were
+refused again, a flood's refusals counted nearly twice). So a forged or
 malformed message in the journal stays refused and is recorded as refused, a
 repeat of a recorded event is a refusal as it would have been live, and the
 recorder's own messages (delivered back to it) are skipped as live. Used by
@@ -27,7 +30,7 @@ import msgspec
 from pairplay.schemas.envelope import stamped
 from pairplay.schemas.events import decode_event, encode_event
 from pairplay.schemas.keys import event_key
-from pairplay.services.guard import Guard, Refusals
+from pairplay.services.guard import OTHER_KIND, Guard, Refusals
 
 RECORDER = "recorder"  # the recorder's source name (services/recorder.py Recorder.name)
 
@@ -48,6 +51,7 @@ def admit(session: str, recorded: Iterable[tuple[str, bytes]], journal: Iterable
     guard = Guard(session, own=RECORDER)
     present: Counter = Counter()
     refusals_recorded: Counter = Counter()
+    counts_recorded: Counter = Counter()  # (source, kind) -> refusals the live recorder only counted
     own_seq = 0
     for key, payload in recorded:
         try:
@@ -56,8 +60,12 @@ def admit(session: str, recorded: Iterable[tuple[str, bytes]], journal: Iterable
             continue
         if event.source == RECORDER:
             own_seq = max(own_seq, event.seq)
-            if type(event).__name__ == "MessageRejected" and event.key:
-                refusals_recorded[(event.key, event.offending_seq)] += 1
+            if type(event).__name__ == "MessageRejected":
+                counted = Refusals.counted(event)
+                if counted is not None:
+                    counts_recorded[counted[0]] += counted[1]
+                elif event.key:
+                    refusals_recorded[(event.key, event.offending_seq)] += 1
             continue
         guard.note(key, event)
         present[(key, payload)] += 1
@@ -90,6 +98,11 @@ def admit(session: str, recorded: Iterable[tuple[str, bytes]], journal: Iterable
         seq = getattr(event, "seq", 0)
         if refusals_recorded[(key, seq)] > 0:  # refused live, and that refusal is in the file
             refusals_recorded[(key, seq)] -= 1
+            continue
+        kind = Refusals.kind(getattr(event, "source", ""), verdict.reason)
+        kind = kind if counts_recorded[kind] > 0 else OTHER_KIND
+        if counts_recorded[kind] > 0:  # refused live beyond the rate: counted in the file already
+            counts_recorded[kind] -= 1
             continue
         record_refusals(refusals.refuse(taken_ns, verdict.reason, key, getattr(event, "source", ""), seq, payload),
                         taken_ns)

@@ -20,6 +20,7 @@ import pytest
 from pairplay.errors import InputError
 from pairplay.replay.reader import read_log
 from pairplay.replay.recover import recover
+from pairplay.replay.check import MCAP_MAGIC
 from pairplay.replay.wal import MAGIC, JournalWriter, NotAJournal, read_journal, wal_path
 from pairplay.schemas import events as ev
 from pairplay.schemas.envelope import stamped
@@ -237,6 +238,69 @@ def test_a_file_cut_before_its_first_flush_is_recovered_from_its_journal(tmp_pat
     assert len(read_log(done.output).events) == 6
 
 
+def refusals_in(events) -> int:
+    """How many refusals the recorder's MessageRejected events account for: one each, or its count."""
+    out = 0
+    for e in events:
+        if isinstance(e, ev.MessageRejected) and e.source == "recorder":
+            words = e.reason.split(" ", 1)
+            out += int(words[0]) if e.key == "" and words[0].isdigit() else 1
+    return out
+
+
+@pytest.mark.parametrize("cut_after", ["counts", "one_by_one"])
+def test_refusals_the_live_recorder_only_counted_are_not_counted_again_by_recover(tmp_path, cut_after):
+    """A flood of 200 malformed messages in one second: the live recorder records 20 refusals one by
+    one (its rate) and counts the other 180 in one MessageRejected. Before, recover matched only the
+    refusals recorded one by one and refused the 180 counted ones again (20 more one by one, 160 more
+    counted): 380 refusals for 200 messages. Cut before the count reached the file, recover counts
+    them once (the count is what the SIGKILL lost)."""
+    live = Recorder(None, "j1", tmp_path / "live" / "j1.mcap", clock=iter(range(10**9, 10**10, 1000)).__next__)
+    events = [start(), pick(1)]
+    flood = [(event_key("j1", "participant", "CardPicked"), b"{not json %d" % i) for i in range(200)]
+    for i, (k, p) in enumerate(events + flood + [pick(2)]):
+        live.record(k, p, 10**9 + i)
+    if cut_after == "counts":
+        live._publish(live.refusals.tick(live.clock(), force=True))
+    live.writer.flush(live.clock())
+    live.writer._stream.flush()
+    shutil.copy(live.path, tmp_path / "j1.mcap")
+    live.close()
+    held = read_log(tmp_path / "j1.mcap").events
+    assert refusals_in(r.event for r in held) == (200 if cut_after == "counts" else 20)
+    journal_of(tmp_path / "j1.mcap", events + flood + [pick(2), pick(3)])
+    done = recover(tmp_path / "j1.mcap", admit=admit)
+    assert done.from_journal == 1 and done.journal_refused == 200
+    log = read_log(done.output)
+    assert refusals_in(r.event for r in log.events) == 200
+    assert [r.event.seq for r in log.events if r.event.source == "participant"] == [1, 2, 3]
+
+
+@pytest.mark.parametrize("left", [b"", MCAP_MAGIC[:5]])
+def test_a_file_of_nothing_beside_its_journal_is_recovered_from_it_and_named_so_elsewhere(tmp_path, pairplay_cli,
+                                                                                         left):
+    """A recorder SIGKILLed before its first flush leaves a 0-byte MCAP (its writer buffers even the
+    magic; measured: tests/test_recorder_restart.py) and what it received in its journal. Before,
+    `pairplay recover` refused it ("empty file (0 bytes), not a recording") and the journal's events
+    could not be recovered; every other verb said the same, without a word of the journal."""
+    events = [start()] + [pick(s) for s in range(1, 6)]
+    path = tmp_path / "j1.mcap"
+    path.write_bytes(left)
+    journal_of(path, events)
+    ran = pairplay_cli("recover", path)
+    assert ran.returncode == 0, ran.stderr
+    assert "6 events taken from its journal" in ran.stdout, ran.stdout
+    log = read_log(tmp_path / "j1.recovered.mcap")
+    assert log.whole and [r.payload for r in log.events] == [p for _, p in events]
+    assert path.read_bytes() == left  # the original is never modified
+    ran = pairplay_cli("replay", "--verify", path)
+    lines = ran.stderr.strip().splitlines()
+    assert ran.returncode == 2 and len(lines) == 1 and f"pairplay recover {path}`" in lines[0], ran.stderr
+    wal_path(path).unlink()  # without its journal: not a recording, as before
+    ran = pairplay_cli("recover", path)
+    assert ran.returncode == 2 and "not a recording" in ran.stderr and "journal" not in ran.stderr, ran.stderr
+
+
 # -- stray journals ------------------------------------------------------------------
 @pytest.mark.parametrize("verb", [["rebuild"], ["recover"], ["replay", "--verify"], ["view", "--no-save", "--recording"],
                                   ["counterfactual", "--fit-only"]])
@@ -301,6 +365,26 @@ def test_a_restarted_recorder_takes_what_the_earlier_journal_holds(tmp_path):
     assert sum(isinstance(r.event, ev.MessageRejected) for r in log.events) == 1
 
 
+def test_a_recorder_restarted_twice_keeps_what_each_earlier_recording_and_journal_holds(tmp_path):
+    """The second restart's predecessor was killed before its first flush: its file is empty, its
+    journal holds what it received live, but not what it had copied from the first file (a copy is
+    not received). Before, the newest file and its journal alone were read: the first file's events
+    and its journal's were not in the new file (what the services still had was refilled on a bus;
+    the robot's, the recorder's own and a since-restarted service's were lost)."""
+    events = [start()] + [pick(s) for s in range(1, 31)]
+    path = cut_recording(tmp_path, events[:6])  # j1.mcap: cut after its 5th pick
+    journal_of(path, events[:11])  # what its recorder had received: up to the 10th
+    (tmp_path / "j1.1.mcap").write_bytes(b"")  # the restarted recorder, killed before its first flush
+    journal_of(tmp_path / "j1.1.mcap", events[21:])  # what it received live: the 21st on
+    rec = Recorder(None, "j1", path, restart=True)
+    rec.close()
+    assert rec.path.name == "j1.2.mcap"
+    log = read_log(rec.path)
+    assert [r.event.seq for r in log.events if r.event.source == "participant"] == \
+        list(range(1, 11)) + list(range(21, 31))  # (11-20: a bus's refill; nobody held them here)
+    assert not log.of("MessageRejected")
+
+
 def test_a_recorder_killed_with_a_backlog_loses_nothing_its_journal_held(tmp_path, pairplay_cli):
     """A burst faster than the recorder's writer, SIGKILL as soon as the journal holds the last
     event: the cut file lacks its unflushed tail and its backlog, if any (measured: 48-649 events
@@ -343,3 +427,41 @@ def test_a_recorder_killed_with_a_backlog_loses_nothing_its_journal_held(tmp_pat
     assert f"{taken} events taken from its journal" in ran.stdout, ran.stdout
     log = read_log(tmp_path / "jk.recovered.mcap")
     assert [r.event.seq for r in log.events if r.event.source == "participant"] == list(range(1, n + 1))
+
+
+def test_a_flood_refused_live_then_a_sigkill_is_accounted_once_by_recover(tmp_path, pairplay_cli):
+    """The same on a real bus: a `pairplay run recorder` refuses a flood of malformed messages (20
+    one by one, the rest counted), is SIGKILLed once its file holds the count, and recover accounts
+    for each refused message once (before: the counted ones twice)."""
+    n = 500
+    with listener() as bus:
+        rec = subprocess.Popen([sys.executable, "-m", "pairplay", "run", "recorder", "--session", "jf", "--out",
+                                str(tmp_path), "--connect", bus.locators()[0]],
+                               stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+        try:
+            assert wait_until(lambda: alive_key("jf", "recorder") in bus.alive_now(alive_key("jf", "*")), 30)
+            key = event_key("jf", "participant", "CardPicked")
+            assert wait_until(lambda: bus.matching(key))
+            put = bus.publisher(key).put
+            for i in range(n):
+                put(b"{not json %d" % i)
+
+            def accounted() -> bool:  # every refusal is in the file (one by one or counted), flushed
+                try:
+                    return refusals_in(r.event for r in read_log(tmp_path / "jf.mcap").events) >= n
+                except Exception:
+                    return False
+
+            assert wait_until(accounted, 30, 0.05)
+            assert wait_until(lambda: len(read_journal(wal_path(tmp_path / "jf.mcap")).records) >= n, 10)
+            rec.send_signal(signal.SIGKILL)
+            rec.wait(10)
+        finally:
+            if rec.poll() is None:
+                rec.kill()
+                rec.wait()
+    ran = pairplay_cli("recover", tmp_path / "jf.mcap")
+    # (no SessionStarted: a cut file of refusals is still kept, and says so)
+    assert ran.returncode == 0, ran.stderr
+    log = read_log(tmp_path / "jf.recovered.mcap")
+    assert refusals_in(r.event for r in log.events) == n

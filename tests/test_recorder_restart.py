@@ -1,0 +1,112 @@
+"""A recorder SIGKILLed before its first flush and restarted within the live session continues it.
+
+Before: its MCAP file held no message yet (only MCAP's magic and header), its journal (replay/wal.py)
+what it had received; `pairplay run recorder` again read only the MCAP to decide whether the services
+on the bus sent what the earlier recording holds (services/recorder.py `same_live_session`), found
+nothing, and refused in one line ("a recording of this session exists"): the rest of the session went
+unrecorded. Now every decision about what the earlier recording holds reads its journal where the
+MCAP lacks it (`earlier_records`)."""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import time
+
+from pairplay.replay.reader import read_log
+from pairplay.replay.wal import MAGIC, read_journal, wal_path
+from pairplay.schemas import events as ev
+
+from busutil import wait_until
+from test_faults import endpoint_of, first_line, session_proc
+
+ENV = dict(os.environ, PYTHONUNBUFFERED="1")
+
+
+def recorder(tmp_path, session: str, endpoint: str) -> subprocess.Popen:
+    return subprocess.Popen([sys.executable, "-m", "pairplay", "run", "recorder", "--session", session, "--out",
+                             str(tmp_path), "--connect", endpoint], stdout=subprocess.DEVNULL,
+                            stderr=subprocess.PIPE, text=True, env=ENV)
+
+
+def kill_before_first_flush(tmp_path, session: str, endpoint: str) -> bool:
+    """Start a recorder and SIGKILL it as soon as its journal holds its first frame of records
+    (the file is flushed 25 ms after its oldest message, the journal every 5 ms); whether its MCAP
+    then held no message (False: the machine was too slow to catch the window)."""
+    journal = wal_path(tmp_path / f"{session}.mcap")
+    first = recorder(tmp_path, session, endpoint)
+    try:
+        assert wait_until(lambda: journal.exists() and journal.stat().st_size > 0, 60), "no journal"
+        header = 0
+
+        def records() -> bool:  # past the header frame: the header's size is read once it is complete
+            nonlocal header
+            data = journal.read_bytes()
+            if not header and len(data) >= len(MAGIC) + 20:
+                header = len(MAGIC) + 20 + int.from_bytes(data[len(MAGIC):len(MAGIC) + 4], "little")
+            return bool(header) and len(data) > header
+
+        assert wait_until(records, 60, 0.0002), "the journal never held a record"
+        first.send_signal(signal.SIGKILL)
+        first.wait(10)
+    finally:
+        if first.poll() is None:
+            first.kill()
+            first.wait()
+    return not read_log(tmp_path / f"{session}.mcap").events
+
+
+def test_a_recorder_killed_before_its_first_flush_and_restarted_continues_the_session(tmp_path):
+    for attempt in range(4):  # a loaded machine may let the first flush come before the kill: again
+        session = f"rk{attempt}"
+        p = session_proc(tmp_path, "--participant", "sim:ashley", "--rounds", "150", "--session", session,
+                         "--external", "recorder")
+        second = None
+        try:
+            endpoint = endpoint_of(first_line(p))
+            if not kill_before_first_flush(tmp_path, session, endpoint):
+                continue
+            journaled = read_journal(wal_path(tmp_path / f"{session}.mcap")).records
+            assert journaled
+            second = recorder(tmp_path, session, endpoint)
+            # once the restarted recorder has refilled the gap (its RecordingGap is in its file), the
+            # session is stopped (as its experimenter would: seconds, not its 150 rounds)
+            assert wait_until(lambda: second.poll() is not None or read_log(tmp_path / f"{session}.1.mcap").of(
+                "RecordingGap") if (tmp_path / f"{session}.1.mcap").exists() else second.poll() is not None,
+                60, 0.1)
+            assert second.poll() is None, second.stderr.read()
+            p.send_signal(signal.SIGTERM)
+            p.communicate(timeout=60)
+            assert second.wait(timeout=30) == 0, second.stderr.read()
+            break
+        finally:
+            for proc in (p, second):
+                if proc is not None and proc.poll() is None:
+                    proc.kill()
+                    proc.communicate()
+    else:
+        raise AssertionError("the first flush came before the kill in every attempt")
+    assert p.returncode == 143  # (SIGTERM's)
+    path = tmp_path / f"{session}.1.mcap"
+    ran = subprocess.run([sys.executable, "-m", "pairplay", "replay", "--verify", str(path)], capture_output=True,
+                         text=True, env=ENV, timeout=120)
+    assert ran.returncode == 0, ran.stdout + ran.stderr
+    log = read_log(path)
+    assert log.whole and not log.bad
+    gaps = [r.event for r in log.events if isinstance(r.event, ev.RecordingGap)]
+    assert len(gaps) == 1 and gaps[0].earlier_file == f"{session}.mcap" and gaps[0].copied > 0
+    assert log.metadata["pairplay.recorder.journal"]["taken"] == str(gaps[0].copied)
+    payloads = {r.payload for r in log.events}
+    lost = [k for k, p, _ in journaled if not k.split("/")[2] == "recorder" and p not in payloads]
+    assert not lost, lost[:5]  # nothing received before the kill is lost
+    for source in ("game", "learner", "participant"):  # ... nor doubled, nor missing since
+        seqs = sorted(r.event.seq for r in log.events if r.event.source == source)
+        assert seqs == list(range(1, len(seqs) + 1)), source
+    assert len(log.of("SessionStarted")) == 1
+    assert [e.reason for e in log.of("SessionEnded")] == ["interrupted"], log.of("SessionEnded")
+    # (the robot bridge does not answer a refill: its events of the gap are counted as not reported)
+    refused = [r.event.reason for r in log.events if isinstance(r.event, ev.MessageRejected)
+               and "not reported" not in r.event.reason]
+    assert not refused, refused[:5]
