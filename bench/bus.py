@@ -88,17 +88,18 @@ def _pct(samples_s: list[float]) -> tuple[float, float]:
 
 
 # -- the reference processes ----------------------------------------------------------
-def handed_over(bus: Bus, asked: str, answer: str) -> threading.Thread:
+def handed_over(bus: Bus, asked: str, answer: str, stop: threading.Event | None = None) -> threading.Thread:
     """The shape every pairplay service must have, with no logic: the bus callback hands each
     sample on `asked` to an Inbox, a thread of its own publishes it on `answer` (a callback that
-    publishes can freeze the process: LIBRARY-NOTES, services/bus.py's rule)."""
+    publishes can freeze the process: LIBRARY-NOTES, services/bus.py's rule); until `stop` is set."""
     inbox = Inbox()
     bus.subscribe(asked, lambda k, p: inbox.put(k, p))
     publisher = bus.publisher(answer)
+    stop = stop or threading.Event()
 
     def run() -> None:
-        while True:
-            item = inbox.get(1.0)
+        while not stop.is_set():
+            item = inbox.get(0.1)
             if item is not None:
                 publisher.put(item[1])
     thread = threading.Thread(target=run, name=f"bench-{asked}", daemon=True)
@@ -159,7 +160,8 @@ def latency_rows(turns: int) -> list[dict]:
             bus.subscribe("bench/pong", lambda _k, p: pongs.put(time.perf_counter()))
             # the contract's floor: the pick's way with a hand-off at each end and no logic (the game here, the
             # learner's process there: the echo process)
-            handed_over(bus, "bench/floor/pick", "bench/floor/ask")
+            floor_stop = threading.Event()
+            handed_over(bus, "bench/floor/pick", "bench/floor/ask", floor_stop)
             answers: queue.Queue = queue.Queue()
             bus.subscribe("bench/floor/answer", lambda _k, p: answers.put(time.perf_counter()))
             floor_pick = bus.publisher("bench/floor/pick")
@@ -224,6 +226,7 @@ def latency_rows(turns: int) -> list[dict]:
                 if r.round_over:
                     rnd, turn, matched = rnd + 1, 0, 0
             stop.set()
+            floor_stop.set()
         finally:
             _stop(learner)
             _stop(echo_proc)
@@ -242,11 +245,11 @@ def latency_rows(turns: int) -> list[dict]:
                  reference="raw zenoh ping-pong back to back (200 B), p50", reference_value=r50,
                  ratio=p50 / r50),  # context: a warm loop
             # context: what the rule that no callback publishes costs by itself, paced the same (see module rule)
-            dict(row="the contract's floor: that round trip handed to a thread at each end, no logic, p50", value=f50,
+            dict(row="the contract's floor: the paced raw round trip handed to a thread at each end, no logic, p50", value=f50,
                  unit="us", reference="raw zenoh ping-pong, paced like the session (one per turn), p50",
                  reference_value=q50, ratio=f50 / q50),
-            dict(row="pick -> suggestion latency across processes, p50", value=p50, unit="us",
-                 reference="the contract's floor (above), p50", reference_value=f50, ratio=p50 / f50)]
+            dict(row="pick -> suggestion latency across processes, p50, over the contract's floor", value=p50,
+                 unit="us", reference="the contract's floor (above), p50", reference_value=f50, ratio=p50 / f50)]
 
 
 def _burst(bus: Bus, key_of, n: int, session: str) -> int:

@@ -3,7 +3,12 @@
 from __future__ import annotations
 
 import queue
+import signal
+import subprocess
+import sys
 import time
+from contextlib import contextmanager
+from typing import Iterator
 
 from pairplay.services.bus import Bus, BusOptions
 
@@ -30,3 +35,26 @@ def wait_until(predicate, timeout_s: float = 20.0, every_s: float = 0.02) -> boo
             return True
         time.sleep(every_s)
     return predicate()
+
+
+@contextmanager
+def recorder_process(bus: Bus, session: str, out, stderr=subprocess.DEVNULL) -> Iterator[subprocess.Popen]:
+    """`pairplay run recorder` for `session` into folder `out`, connected to `bus`, once its token is
+    up; killed and reaped at the end if it is still running (a test that failed half-way)."""
+    from pairplay.schemas.keys import alive_key
+    proc = subprocess.Popen([sys.executable, "-m", "pairplay", "run", "recorder", "--session", session,
+                             "--out", str(out), "--connect", bus.locators()[0]],
+                            stdout=subprocess.DEVNULL, stderr=stderr, text=True)
+    try:
+        assert wait_until(lambda: alive_key(session, "recorder") in bus.alive_now(alive_key(session, "*")), 30)
+        yield proc
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+
+
+def sigkill(proc: subprocess.Popen) -> None:
+    """SIGKILL a process and reap it."""
+    proc.send_signal(signal.SIGKILL)
+    proc.wait(10)

@@ -10,14 +10,9 @@ from __future__ import annotations
 
 import os
 import shutil
-import signal
-import subprocess
-import sys
-import time
 
 import pytest
 
-from pairplay.errors import InputError
 from pairplay.replay.reader import read_log
 from pairplay.replay.recover import recover
 from pairplay.replay.check import MCAP_MAGIC
@@ -25,12 +20,12 @@ from pairplay.replay.wal import MAGIC, JournalWriter, NotAJournal, read_journal,
 from pairplay.schemas import events as ev
 from pairplay.schemas.envelope import stamped
 from pairplay.schemas.events import encode_event
-from pairplay.schemas.keys import alive_key, event_key
+from pairplay.schemas.keys import event_key
 from pairplay.schemas.session import SessionConfig
 from pairplay.services.recorder import Recorder, RecordingExists, check_new_recording
 from pairplay.services.walmerge import admit
 
-from busutil import listener, wait_until
+from busutil import listener, recorder_process, sigkill, wait_until
 
 
 def message(event, source="game", seq=1, session="j1"):
@@ -391,34 +386,24 @@ def test_a_recorder_killed_with_a_backlog_loses_nothing_its_journal_held(tmp_pat
     at load 2; a loaded machine may let it catch up first); recover takes it all from the journal.
     Before the journal, what waited in the inbox died with the process."""
     n = 20_000
-    with listener() as bus:
-        rec = subprocess.Popen([sys.executable, "-m", "pairplay", "run", "recorder", "--session", "jk", "--out",
-                                str(tmp_path), "--connect", bus.locators()[0]],
-                               stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
-        try:
-            assert wait_until(lambda: alive_key("jk", "recorder") in bus.alive_now(alive_key("jk", "*")), 30)
-            key = event_key("jk", "participant", "CardPicked")
-            assert wait_until(lambda: bus.matching(key))
-            burst = [encode_event(stamped(ev.CardPicked(round=0, turn=seq, card=seq % 18), session="jk",
-                                          source="participant", seq=seq, time_ns=seq)) for seq in range(1, n + 1)]
-            put = bus.publisher(key).put
-            for payload in burst:  # as fast as this process can: faster than the recorder's writer
-                put(payload)
-            with open(wal_path(tmp_path / "jk.mcap"), "rb") as journal:
-                tail = b""
+    with listener() as bus, recorder_process(bus, "jk", tmp_path) as rec:
+        key = event_key("jk", "participant", "CardPicked")
+        assert wait_until(lambda: bus.matching(key))
+        burst = [encode_event(stamped(ev.CardPicked(round=0, turn=seq, card=seq % 18), session="jk",
+                                      source="participant", seq=seq, time_ns=seq)) for seq in range(1, n + 1)]
+        put = bus.publisher(key).put
+        for payload in burst:  # as fast as this process can: faster than the recorder's writer
+            put(payload)
+        with open(wal_path(tmp_path / "jk.mcap"), "rb") as journal:
+            tail = b""
 
-                def journaled() -> bool:  # the last event is in the journal (read as it grows)
-                    nonlocal tail
-                    tail = tail[-len(burst[-1]):] + journal.read()
-                    return burst[-1] in tail
+            def journaled() -> bool:  # the last event is in the journal (read as it grows)
+                nonlocal tail
+                tail = tail[-len(burst[-1]):] + journal.read()
+                return burst[-1] in tail
 
-                assert wait_until(journaled, 30, 0.0005)
-            rec.send_signal(signal.SIGKILL)
-            rec.wait(10)
-        finally:
-            if rec.poll() is None:
-                rec.kill()
-                rec.wait()
+            assert wait_until(journaled, 30, 0.0005)
+        sigkill(rec)
     cut = read_log(tmp_path / "jk.mcap")
     assert cut.truncated  # (what it lacks depends on the load: its unflushed tail, its backlog, or nothing)
     ran = pairplay_cli("recover", tmp_path / "jk.mcap")
@@ -434,32 +419,22 @@ def test_a_flood_refused_live_then_a_sigkill_is_accounted_once_by_recover(tmp_pa
     one by one, the rest counted), is SIGKILLed once its file holds the count, and recover accounts
     for each refused message once (before: the counted ones twice)."""
     n = 500
-    with listener() as bus:
-        rec = subprocess.Popen([sys.executable, "-m", "pairplay", "run", "recorder", "--session", "jf", "--out",
-                                str(tmp_path), "--connect", bus.locators()[0]],
-                               stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
-        try:
-            assert wait_until(lambda: alive_key("jf", "recorder") in bus.alive_now(alive_key("jf", "*")), 30)
-            key = event_key("jf", "participant", "CardPicked")
-            assert wait_until(lambda: bus.matching(key))
-            put = bus.publisher(key).put
-            for i in range(n):
-                put(b"{not json %d" % i)
+    with listener() as bus, recorder_process(bus, "jf", tmp_path) as rec:
+        key = event_key("jf", "participant", "CardPicked")
+        assert wait_until(lambda: bus.matching(key))
+        put = bus.publisher(key).put
+        for i in range(n):
+            put(b"{not json %d" % i)
 
-            def accounted() -> bool:  # every refusal is in the file (one by one or counted), flushed
-                try:
-                    return refusals_in(r.event for r in read_log(tmp_path / "jf.mcap").events) >= n
-                except Exception:
-                    return False
+        def accounted() -> bool:  # every refusal is in the file (one by one or counted), flushed
+            try:
+                return refusals_in(r.event for r in read_log(tmp_path / "jf.mcap").events) >= n
+            except Exception:
+                return False
 
-            assert wait_until(accounted, 30, 0.05)
-            assert wait_until(lambda: len(read_journal(wal_path(tmp_path / "jf.mcap")).records) >= n, 10)
-            rec.send_signal(signal.SIGKILL)
-            rec.wait(10)
-        finally:
-            if rec.poll() is None:
-                rec.kill()
-                rec.wait()
+        assert wait_until(accounted, 30, 0.05)
+        assert wait_until(lambda: len(read_journal(wal_path(tmp_path / "jf.mcap")).records) >= n, 10)
+        sigkill(rec)
     ran = pairplay_cli("recover", tmp_path / "jf.mcap")
     # (no SessionStarted: a cut file of refusals is still kept, and says so)
     assert ran.returncode == 0, ran.stderr

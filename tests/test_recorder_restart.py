@@ -13,7 +13,6 @@ import os
 import signal
 import subprocess
 import sys
-import time
 
 from pairplay.replay.reader import read_log
 from pairplay.replay.wal import MAGIC, read_journal, wal_path

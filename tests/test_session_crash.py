@@ -28,7 +28,7 @@ from pairplay.services.runner import fetch_log
 from pairplay.services.session import run_session
 from pairplay.services.verify import verify_recording
 
-from busutil import collect, listener, wait_until
+from busutil import collect, listener, recorder_process, sigkill, wait_until
 
 
 def spawn(*args):
@@ -93,29 +93,21 @@ def test_a_killed_service_resumes_from_the_log_and_nothing_is_lost_or_doubled(tm
 
 
 def test_a_recorder_killed_with_sigkill_keeps_all_but_its_last_flush_and_recovers(tmp_path):
-    with listener() as bus:
-        rec = spawn("recorder", "--session", "rk", "--out", str(tmp_path), "--connect", bus.locators()[0])
-        try:
-            assert wait_until(lambda: alive_key("rk", "recorder") in bus.alive_now(alive_key("rk", "*")), 30)
-            key = event_key("rk", "participant", "CardPicked")
-            assert wait_until(lambda: bus.matching(key))
+    with listener() as bus, recorder_process(bus, "rk", tmp_path) as rec:
+        key = event_key("rk", "participant", "CardPicked")
+        assert wait_until(lambda: bus.matching(key))
 
-            def burst(first, n):
-                for seq in range(first, first + n):
-                    e = stamped(ev.CardPicked(round=0, turn=seq, card=seq % 18), session="rk",
-                                source="participant", seq=seq, time_ns=seq)
-                    bus.put(key, encode_event(e))
+        def burst(first, n):
+            for seq in range(first, first + n):
+                e = stamped(ev.CardPicked(round=0, turn=seq, card=seq % 18), session="rk",
+                            source="participant", seq=seq, time_ns=seq)
+                bus.put(key, encode_event(e))
 
-            burst(1, 3000)
-            assert wait_until(lambda: len(fetch_log(bus, "rk")) == 3000)  # all 3000 reached the recorder
-            threading.Event().wait(0.3)  # quiet for longer than the 0.1 s flush interval
-            burst(3001, 2000)
-            rec.send_signal(signal.SIGKILL)
-            rec.wait(10)
-        finally:
-            if rec.poll() is None:
-                rec.kill()
-                rec.wait()
+        burst(1, 3000)
+        assert wait_until(lambda: len(fetch_log(bus, "rk")) == 3000)  # all 3000 reached the recorder
+        threading.Event().wait(0.3)  # quiet for longer than the 0.1 s flush interval
+        burst(3001, 2000)
+        sigkill(rec)
     path = tmp_path / "rk.mcap"
     log = read_log(path)
     assert log.truncated  # never finished: no summary, no footer
