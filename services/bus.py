@@ -55,6 +55,7 @@ what a step could not finish by then is counted and recorded, not waited for.
 
 from __future__ import annotations
 
+import _thread
 import argparse
 import copy
 import json
@@ -835,23 +836,38 @@ def _replies(replies, wait_s: float, stop: threading.Event | None):
 def stop_on_signals(stop: threading.Event, then: Callable[[], object] | None = None) -> None:
     """SIGINT/SIGTERM set `stop`, name the signal in `stop.why` and start the shutdown's
     `stop.deadline` (a second SIGINT still interrupts); then call `then()` (it must only set
-    flags: it runs in the signal handler). Main thread only."""
+    flags). `stop` is set and `then` called by a thread started from the handler: a handler
+    runs on the main thread between two of its bytecodes, possibly while that thread holds the
+    lock of the Event it waits on. Main thread only."""
     def handler(signum, frame):
-        if stop.is_set() and signum == signal.SIGINT:
+        # a signal taken already (its name in `why`), not a stop set by the work's own end: the first Ctrl-C
+        # as a session finished its file was read as a second one and the file left cut (a new user's trial)
+        taken = bool(getattr(stop, "why", ""))
+        if taken and signum == signal.SIGINT:
             raise KeyboardInterrupt
-        log.info("signal %s: stopping", signal.Signals(signum).name)
         global signalled
         signalled = signal.Signals(signum).name  # the exit skips the interpreter's teardown (cli/main.py)
-        if not stop.is_set():
-            stop.why = signal.Signals(signum).name  # what ended the session, for its SessionEnded
-            deadline_of(stop)  # the shutdown's time starts now, not when a thread notices
-        stop.set()
-        if then is not None:
-            then()
+        if taken:
+            return
+        stop.why = signal.Signals(signum).name  # what ended the session, for its SessionEnded
+        deadline_of(stop)  # the shutdown's time starts now, not when a thread notices
+        # Setting an Event takes its lock, which the main thread holds for a moment inside `stop.wait()`
+        # (or any Event's wait): from the handler, running on that thread, the set waited for ever (a
+        # router froze on SIGTERM, 1 of ~10 runs of test_cli_signals). So a thread of its own sets the
+        # flags; `stop.why` and the deadline above are plain attributes, there at once.
+        _thread.start_new_thread(_stop_now, (stop, then, signum))
     signal.signal(signal.SIGINT, handler)
     signal.signal(signal.SIGTERM, handler)
     # A signal that came before this handler replaced the command's own (cli/interrupts.py; read through
     # sys.modules: services do not import cli) stops at once: its KeyboardInterrupt may have been lost.
     pending = getattr(sys.modules.get("pairplay.cli.interrupts"), "received", 0)
-    if pending and not stop.is_set():
+    if pending and not getattr(stop, "why", ""):
         handler(pending, None)
+
+
+def _stop_now(stop: threading.Event, then: Callable[[], object] | None, signum: int) -> None:
+    """stop_on_signals' work that takes locks, off the signal handler's thread."""
+    log.info("signal %s: stopping", signal.Signals(signum).name)
+    stop.set()
+    if then is not None:
+        then()

@@ -239,7 +239,7 @@ class StudyRunner:
     def interrupt(self, stop: threading.Event) -> None:
         """The process got a signal (`stop`, services/bus.py stop_on_signals): the running game stops with
         the signal's name and deadline, its recording finished; no step starts after it. Only sets flags
-        (called from the signal handler)."""
+        (called right after the signal, services/bus.py stop_on_signals)."""
         self.interrupted = stop
         if self._stop is not None and not self._stop.is_set():
             pass_stop(stop, self._stop)

@@ -237,3 +237,58 @@ def test_no_wait_of_a_shutdown_path_has_a_fixed_timeout_of_its_own():
     # before: the lab's web server joined for 10 s, its hub for 5 s, the console's game for 10 s, a pilot's
     # scripted player for 5 s, whatever the shutdown had left
     assert fixed_waits(ROOT) == []
+
+
+def test_a_signal_that_lands_while_the_main_thread_holds_its_stop_flags_lock_does_not_freeze_it():
+    """A Python signal handler runs on the main thread between two of its bytecodes, possibly inside
+    `stop.wait()` while that thread holds the Event's lock; the handler setting the Event there waited
+    for ever (a `pairplay router` froze on SIGTERM, 1 of ~10 runs of test_cli_signals). The lock is
+    held here by the thread that then runs the handler, as in that freeze."""
+    from pairplay.services import bus as bus_module
+    before = getattr(bus_module, "signalled", None)
+    stop = threading.Event()
+    then_ran = threading.Event()
+    saved = {s: signal.getsignal(s) for s in (signal.SIGINT, signal.SIGTERM)}
+    try:
+        bus_module.stop_on_signals(stop, then=then_ran.set)
+        handler = signal.getsignal(signal.SIGTERM)
+    finally:
+        for s, h in saved.items():
+            signal.signal(s, h)
+
+    def inside_wait() -> None:
+        with stop._cond:  # what Event.wait holds between its checks
+            handler(signal.SIGTERM, None)
+    t = threading.Thread(target=inside_wait, daemon=True)
+    t.start()
+    t.join(5)
+    assert not t.is_alive(), "the handler froze on the stop flag's lock"
+    try:
+        assert stop.wait(5) and then_ran.wait(5)
+        assert stop.why == "SIGTERM"
+    finally:
+        bus_module.signalled = before  # what this process's exit would say: not ours to leave set
+
+
+def test_the_first_ctrl_c_after_the_work_set_its_own_stop_is_not_taken_for_a_second_one():
+    """A session sets its stop flag when its game ends, then finishes its file; a first Ctrl-C then was
+    read as a second one (KeyboardInterrupt: 'interrupted again', the file left cut, a new user's trial
+    in 3 of 6 tries). Only a signal already taken makes the next SIGINT a second one."""
+    from pairplay.services import bus as bus_module
+    before = getattr(bus_module, "signalled", None)
+    stop = threading.Event()
+    saved = {s: signal.getsignal(s) for s in (signal.SIGINT, signal.SIGTERM)}
+    try:
+        bus_module.stop_on_signals(stop)
+        handler = signal.getsignal(signal.SIGINT)
+    finally:
+        for s, h in saved.items():
+            signal.signal(s, h)
+    try:
+        stop.set()  # the work's own end, no signal
+        handler(signal.SIGINT, None)  # the first Ctrl-C: taken, not raised
+        assert stop.why == "SIGINT"
+        with pytest.raises(KeyboardInterrupt):
+            handler(signal.SIGINT, None)  # the second one interrupts
+    finally:
+        bus_module.signalled = before
