@@ -32,6 +32,7 @@ from pairplay.schemas.session import SessionConfig
 
 from .check import read_session
 from .fold import READS, SessionFold, fold_events, stream_seed
+from .forgery import contradiction
 
 
 class RebuildError(InputError):
@@ -99,8 +100,14 @@ def rebuild_events(events, source: str = "", truncated: bool = False, note: str 
 
 
 def rebuild_recording(path: str | Path) -> Rebuilt:
-    """The recording at `path` rebuilt; InputError (RebuildError) if it is not a session recording."""
+    """The recording at `path` rebuilt; InputError (RebuildError) if it is not a session recording, or if
+    it contradicts itself about who published what (replay/forgery.py: a forged start or end)."""
     log = read_session(path, only=READS)  # the events the fold only counts are not decoded (speed)
+    # who published what: among the decoded events (every one a fold reads, the game's start, rounds' ends,
+    # refusals and end among them); `replay --verify` checks every event (replay/forgery.py)
+    forged = contradiction(r.event for r in log.events)
+    if forged:
+        raise RebuildError(f"{forged}: not rebuilt", path)
     note = "" if log.whole else f"{'damaged' if log.damage else 'truncated'}: {log.error}"
     return rebuild_events((r.event for r in log.events), str(path), log.truncated, note,
                           log.metadata.get("pairplay.recovered"), log.metadata.get("pairplay.recorder.end"),

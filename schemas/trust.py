@@ -16,7 +16,10 @@ Rule: a message is taken only if
   a listener cannot see between two it can: rejections are rate-limited
   (`REJECTIONS_PER_S`);
 - its envelope is in range (schemas/envelope.py: seq 1..2^53, time_ns 0..2^63).
-One session has one SessionStarted and one SessionEnded: a second is refused.
+One session has one SessionStarted and one SessionEnded: a second is refused, and
+so is one that does not fit its source's sequence (services/guard.py; issue
+"forge": Zenoh names no publisher per message, so whatever came first claiming
+to be the game used to win: a forged end ended the services).
 Everything refused is recorded (MessageRejected, rate-limited with counts).
 Who can put a message on a key at all is Zenoh's access control
 (docs/bus.md "Security"): these rules hold whatever the network lets through.
@@ -63,6 +66,9 @@ PUBLISHERS: dict[str, frozenset[str]] = {
     "SessionAborted": CLIENTS,  # an eye tracker (observed source "gaze", issue 14)
 }
 ONCE_PER_SESSION = frozenset({"SessionStarted", "SessionEnded"})
+# who starts and ends a session (the game): one process per session, numbering every event it publishes.
+# Other source names may be several publishers' (every page of the lab publishes as "board").
+STARTERS = frozenset().union(*(PUBLISHERS[tag] for tag in ONCE_PER_SESSION))
 
 
 def publisher_refusal(tag: str, source: str) -> str | None:

@@ -7,8 +7,26 @@ not publish its event, its sequence number is not above the last one on its
 key (a duplicate or out of order) or jumps more than MAX_SEQ_JUMP above the
 highest seen from its source (a refused jump is not remembered, so a forged
 seq 1e9 cannot make the real messages after it look like duplicates), or it
-is a second SessionStarted/SessionEnded. A service ignores its own messages
-delivered back to it, before decoding them.
+is a second SessionStarted/SessionEnded.
+
+Starts and ends (ONCE_PER_SESSION; issue "forge": whatever came first claiming
+to be the game won). Zenoh names no publisher per message, so a guard cannot
+authenticate one; it takes a start or an end only where it fits its claimed
+source's own sequence, and notices when the source contradicts it later:
+- a start or an end whose seq is not above every seq already taken from its
+  source is refused (a source starts before and ends after everything else it
+  publishes);
+- once one is taken, another event of that source at the same seq, or (an end)
+  a later event of the source that is not its shell's (ServiceStarted,
+  MessageRejected) nor a start or end, shows the one taken was not the source's:
+  the notice is recorded (a MessageRejected naming it, `notices`) and an end's slot is
+  given back, so the source's real end is taken when it comes. "Later" is by seq, or,
+  for a guard that gets the whole session (`whole`: the recorder, a service not
+  subscribed by tag; Zenoh keeps a publisher's order on a link), by arrival.
+A service ignores its own messages delivered back to it, before decoding them;
+one that gets its whole session keeps what it published (`mine`, services/runner.py)
+and names a message on its own keys that is not in it a forgery (`forged`): the
+game thus sees a forged start or end of its session (services/session.py stops it).
 
 A service restarted after a crash takes its state from the recorder's log
 (node.Driver.resume) up to a cut point: per key, the last sequence number the
@@ -45,6 +63,11 @@ MAX_KINDS = 20
 OTHER_KIND = ("*", "other refusals")  # what a refusal beyond MAX_KINDS kinds in a second is counted under
 _COUNT = re.compile(r"(\d+) messages refused and not recorded one by one \(limit \d+/s\): (.*)", re.S)  # tick's
 SECOND_NS = 1_000_000_000
+CONTRADICTED = "contradicted: "  # how a notice's reason begins (_conflict): not a refusal of the message named
+NO_END = 2**62  # above every seq (schemas/envelope.py Seq): no end taken yet
+# what does not contradict a start or end taken from its source (_conflict): its shell's events (published
+# after its end too) and a start or end itself (a second one is refused: it cannot displace the one taken)
+UNCONTRADICTING = frozenset({"ServiceStarted", "MessageRejected"}) | ONCE_PER_SESSION
 KEYS_CACHED = 4096
 
 
@@ -64,11 +87,18 @@ class Guard:
     (schemas/checked.py check_event: every check of the event's decoder, for the recorder,
     which writes the bytes and only needs the envelope)."""
 
-    def __init__(self, session: str, own: str | None = None, decode: Callable[[bytes], object] = decode_event):
+    def __init__(self, session: str, own: str | None = None, decode: Callable[[bytes], object] = decode_event,
+                 whole: bool = False):
         self.session, self.own, self.decode = session, own, decode
+        self.whole = whole  # it gets every key of the session, each publisher's in its order (see rule)
+        self.mine: dict[bytes, None] | None = None  # what we published, to tell our echo from a forgery (see rule)
+        self.forged: list[tuple[Event | None, str]] = []  # messages on our own keys we did not publish, why
         self.last_seq: dict[str, int] = {}  # per key
         self.top_seq: dict[str, int] = {}  # per source: the highest taken
-        self.once: set[str] = set()  # ONCE_PER_SESSION tags taken
+        self.once: dict[str, tuple[str, int]] = {}  # ONCE_PER_SESSION tag taken -> (its key, its seq)
+        self.took: set[tuple[str, int]] = set()  # (key, seq) of every start and end ever taken (a slot given back too)
+        self.marks: dict[str, tuple[int, int]] = {}  # per source: seq of the start and of the end taken from it
+        self.notices: list[tuple[str, str, str, int]] = []  # (reason, key, source, seq) to record (_conflict)
         self.cut: dict[str, int] = {}  # per key: the last seq a resume took from the log (see rule)
         self.skipped = 0  # deliveries at or below the cut, skipped quietly
         self._keys: dict[str, tuple] = {}  # key -> what the key alone decides (_key)
@@ -99,7 +129,9 @@ class Guard:
         already folded from the log; an old sequence number is then quietly skipped."""
         info = self._keys.get(key) or self._key(key)
         if info[0]:
-            return QUIET  # our own publication, delivered back to us
+            if self.mine is None or payload in self.mine:
+                return QUIET  # our own publication, delivered back to us
+            return self._forged(key, payload)
         if len(payload) > MAX_PAYLOAD:
             return Verdict(None, f"payload of {len(payload)} bytes is over the limit of {MAX_PAYLOAD}")
         try:
@@ -129,23 +161,71 @@ class Guard:
         if seq > top + MAX_SEQ_JUMP:
             return Verdict(event, f"sequence number {seq} from {source} jumps more than {MAX_SEQ_JUMP} "
                                   f"above the highest seen from it ({top})")
+        marks = self.marks.get(source)
+        if marks is not None and (seq == marks[0] or seq == marks[1] or (marks[1] < NO_END and (
+                seq > marks[1] or (self.whole and not overlap)) and k.tag not in UNCONTRADICTING)):
+            self._conflict(k.tag, key, source, seq, marks)
         if k.tag in ONCE_PER_SESSION:
             if k.tag in self.once:
-                return Verdict(event, f"a second {k.tag} in session {self.session}")
-            self.once.add(k.tag)
+                return Verdict(event, f"a second {k.tag} in session {self.session} (the one taken claims {source!r} "
+                                      f"seq {self.once[k.tag][1]}; this one seq {seq})")
+            if seq <= top:  # a start or an end is never behind its source's own events (see rule)
+                return Verdict(event, f"{k.tag} seq {seq} claiming {source!r} is not after the events {source} "
+                                      f"already published (seq {top}): not {source}'s; refused")
+            self._take_once(k.tag, key, source, seq)
         self.last_seq[key] = seq  # note(), inlined: seq is above both already or equal to top
         if seq > top:
             self.top_seq[source] = seq
         return _new_tuple(Verdict, (event, None, False))  # Verdict(event, None) without its Python __new__
 
 
+    def _forged(self, key: str, payload: bytes) -> Verdict:
+        """A message on one of our own keys that we did not publish (see rule): named, kept in `forged`."""
+        try:
+            event = self.decode(payload)
+        except (msgspec.DecodeError, msgspec.ValidationError):
+            event = None
+        if event is not None and event.seq <= self.cut.get(key, 0):
+            self.skipped += 1  # our own from before a restart, as the log gave it (a cache's replay): see rule
+            return QUIET
+        what = (f"{type(event).__name__} seq {event.seq} claiming source {event.source!r}" if event is not None
+                else f"a malformed message")
+        reason = f"forged: {what} on {key} was not published by this {self.own} (another process on the bus)"
+        self.forged.append((event, reason))
+        return Verdict(event, reason)
+
     def note(self, key: str, event: Event) -> None:
         """Remember a taken event (also: one folded from the log by a resume)."""
         self.last_seq[key] = max(self.last_seq.get(key, 0), event.seq)
         self.top_seq[event.source] = max(self.top_seq.get(event.source, 0), event.seq)
         tag = type(event).__name__
-        if tag in ONCE_PER_SESSION:
-            self.once.add(tag)
+        if tag in ONCE_PER_SESSION and tag not in self.once:
+            self._take_once(tag, key, event.source, event.seq)
+
+    def _take_once(self, tag: str, key: str, source: str, seq: int) -> None:
+        """Take a source's SessionStarted/SessionEnded: remember where, so that a later event of the
+        source that contradicts it (`_conflict`) can be noticed with one dict lookup per message."""
+        self.once[tag] = (key, seq)
+        self.took.add((key, seq))
+        start, end = self.marks.get(source, (-1, NO_END))
+        self.marks[source] = (seq, end) if tag == "SessionStarted" else (start, seq)
+
+    def _conflict(self, tag: str, key: str, source: str, seq: int, marks: tuple[int, int]) -> None:
+        """An event of `source` contradicts the start or end taken from it (see rule): the one taken
+        claimed `source` but was not its (another event at its seq, or events after an end). The end's
+        slot is given back (the source's real end is taken when it comes); the notice is recorded."""
+        start, end = marks
+        if seq == start:
+            what, other = "SessionStarted", f"{tag} seq {seq} claims the same seq"
+        else:
+            what = "SessionEnded"
+            other = f"{tag} seq {seq} came {'at the same seq' if seq == end else 'after it'}"
+            self.once.pop("SessionEnded", None)
+            self.marks[source] = (start, NO_END)
+        taken = self.once.get(what, (event_key_of(key, what), start if what == "SessionStarted" else end))
+        self.notices.append((f"{CONTRADICTED}the {what} taken as {source}'s (seq {taken[1]}) was not {source}'s: {other}"
+                             + ("; its real end will be taken" if what == "SessionEnded" else ""),
+                             taken[0], source, taken[1]))
 
 
 class Refusals:
@@ -208,3 +288,8 @@ class Refusals:
 
     def pending(self) -> bool:
         return bool(self.held)
+
+
+def event_key_of(key: str, tag: str) -> str:
+    """`key` (pairplay/<session>/<source>/<tag>) with its tag replaced."""
+    return key.rsplit("/", 1)[0] + "/" + tag

@@ -145,6 +145,19 @@ class Driver:
         """One bus message in, the stamped events to publish out (see rule and guard.py).
         What a resume already took from the log is skipped quietly (the guard's cut)."""
         verdict = self.guard.check(key, payload)
+        if self.guard.notices:  # a start or end taken earlier was contradicted (guard._conflict)
+            return self._noticed() + self._take(verdict, key, payload)
+        return self._take(verdict, key, payload)
+
+    def _noticed(self) -> list[Event]:
+        """Record the guard's notices (a start or end it took turned out not to be its source's)."""
+        out: list[Event] = []
+        for reason, key, source, seq in self.guard.notices:
+            out += self.reject(reason, key, source, seq)
+        self.guard.notices.clear()
+        return out
+
+    def _take(self, verdict, key: str, payload: bytes) -> list[Event]:
         if verdict.quiet:
             return []
         event = verdict.event

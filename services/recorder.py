@@ -315,7 +315,7 @@ class Recorder:
         self.outbox = Outbox(bus, self.name) if bus is not None else None
         # its own refusals are written directly (_publish); it writes the bytes it checked and needs
         # only their envelope: the checked twin of each event (schemas/checked.py), not the event
-        self.guard = Guard(session, own=self.name, decode=check_event)
+        self.guard = Guard(session, own=self.name, decode=check_event, whole=True)
         self.refusals = Refusals()
         self.kept: list[tuple[str, bytes]] = []
         self.seq = 0
@@ -654,6 +654,11 @@ class Recorder:
         `quiet`: it may repeat what was copied or refilled; a repeat is skipped, not refused.
         Raises RecordingFailed if the file cannot be written."""
         event, reason, skip = self.guard.check(key, payload, quiet)
+        if self.guard.notices:  # a start or end taken earlier was contradicted (services/guard.py _conflict)
+            for why, k, source, seq in self.guard.notices:
+                self._reject(why, k, b"", source=source, seq=seq)
+            self.guard.notices.clear()
+            self.ended = self.ended and "SessionEnded" in self.guard.once
         if skip:
             return False  # our own refusal coming back: written already
         if reason is not None:
@@ -686,9 +691,9 @@ class Recorder:
             self._ended_ns = min(received_ns, stamp)
         return True
 
-    def _reject(self, reason: str, key: str, payload: bytes, event=None) -> bool:
-        out = self.refusals.refuse(self.clock(), reason, key, getattr(event, "source", ""),
-                                   getattr(event, "seq", 0), payload)
+    def _reject(self, reason: str, key: str, payload: bytes, event=None, source: str = "", seq: int = 0) -> bool:
+        out = self.refusals.refuse(self.clock(), reason, key, getattr(event, "source", source),
+                                   getattr(event, "seq", seq), payload)
         if any(e.reason == reason for e in out):
             log.warning("recorder rejected %s: %s", key, reason[:300])
         self._publish(out)

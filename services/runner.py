@@ -31,6 +31,7 @@ from pairplay import __version__
 from pairplay.schemas.envelope import Event
 from pairplay.schemas.events import ServiceStarted, decode_event, encode_event
 from pairplay.schemas.keys import alive_key, event_key, query_key, session_keys
+from pairplay.schemas.trust import STARTERS
 
 from pairplay.services.bus import MISSED, Bus, Inbox, Outbox
 from pairplay.services.node import Driver, Logic
@@ -146,6 +147,11 @@ class Node:
                  resume: bool = True, stop: threading.Event | None = None):
         self.bus, self.logic, self.session = bus, logic, session
         self.driver = Driver(logic, session, clock)
+        self._mine = None
+        if not getattr(logic, "by_tag", False):  # subscribed to the whole session: it sees its own echo
+            self.driver.guard.whole = True
+            if logic.name in STARTERS:  # the game: what it published; a message on its keys not in it is forged
+                self._mine = self.driver.guard.mine = {}  # (services/guard.py, services/forgery.py)
         self.clock = clock
         self.resume = resume
         self.stop = stop if stop is not None else threading.Event()
@@ -182,7 +188,10 @@ class Node:
             key = self._keys.get((e.source, tag))
             if key is None:  # built and checked once per source and tag (the check is most of its cost)
                 key = self._keys[(e.source, tag)] = event_key(self.session, e.source, tag)
-            self.outbox.send(key, encode_event(e), wake)
+            payload = encode_event(e)
+            if self._mine is not None:
+                self._mine[payload] = None
+            self.outbox.send(key, payload, wake)
 
     def start(self, wait_for: tuple[str, ...] = (), wait_timeout_s: float = WAIT_FOR_S) -> None:
         """Subscribe, announce, catch up; with `wait_for`, first wait for those services' tokens.

@@ -29,7 +29,9 @@ from pairplay.schemas.events import MessageRejected, decode_event
 from pairplay.schemas.keys import alive_key, event_key
 from pairplay.schemas.session import SessionConfig
 from pairplay.services.bus import CLOSE_TIMEOUT_S, Bus, BusOptions, Deadline, deadline_of
+from pairplay.services.forgery import ForgeryWatch
 from pairplay.services.game import GameLogic
+from pairplay.services.guard import CONTRADICTED
 from pairplay.services.learner import LearnerLogic
 from pairplay.services.participant import ParticipantLogic
 from pairplay.services.recorder import Recorder, RecordingFailed
@@ -46,6 +48,33 @@ class StartRefused(UserError):
     waiting for picks that cannot come (the new-user trial's 10-minute hang). `where`: the recording."""
 
 
+class ForgedEvent(UserError):
+    """Another process on the bus published a SessionStarted or SessionEnded claiming to be this session's
+    game (schemas/trust.py: Zenoh gives no authenticated publisher per message; docs/bus.md "Security").
+    The game saw it on its own key without having published it, and a service took it (or one in another
+    process may have: services/forgery.py): a forged end ends a service, a forged start configures it. The
+    session is stopped, its recording finished, and this one line names the event. `where`: the recording."""
+
+
+def forgery_watch(game: Node | None, nodes: list[Node], recorder: Recorder | None, bridge,
+                  external: list[str]) -> ForgeryWatch:
+    """The session's watch on forged starts and ends its game sees (services/forgery.py)."""
+    listeners = [(n.logic.name, n.driver.guard) for n in nodes if n is not game]
+    listeners += [("recorder", recorder.guard)] if recorder is not None else []
+    listeners += [(bridge.logic.name, bridge.shell.guard)] if bridge is not None else []
+    return ForgeryWatch(game, listeners, external)
+
+
+def refused_start_text(reason: str) -> str:
+    """The line of a session whose recorder refused the game's SessionStarted. When it had taken another
+    one on the game's key first, that one was not this game's (it publishes one start): say so."""
+    text = f"the recorder refused the session's start ({reason[:200]})"
+    if reason.startswith("a second SessionStarted") or "duplicate or out of order" in reason:
+        text += ("; the SessionStarted it took first claiming source 'game' was not this game's (another "
+                 "process on the bus forged it, or the recording is an earlier session's)")
+    return text + "; the session was stopped"
+
+
 def watch_start_refused(bus: Bus, session: str, on_refused) -> object:
     """Call `on_refused(reason)` (once, on a Zenoh thread: it must not wait) when a recorder publishes a
     MessageRejected of the game's SessionStarted in `session`; returns the subscriber."""
@@ -57,7 +86,7 @@ def watch_start_refused(bus: Bus, session: str, on_refused) -> object:
             e = decode_event(payload)
         except Exception:  # the recorder's own events; a stray payload is not ours to judge here
             return
-        if isinstance(e, MessageRejected) and e.key == started_key and not told:
+        if isinstance(e, MessageRejected) and e.key == started_key and not told and not e.reason.startswith(CONTRADICTED):
             told.append(e.reason)
             on_refused(e.reason)
     return bus.subscribe(event_key(session, "recorder", "MessageRejected"), seen)
@@ -139,8 +168,9 @@ def run_session(config: SessionConfig, path: str | Path, *, bus: Bus | None = No
             game.run_in_thread(stop)
         else:
             needed.append("game")
+        watch = forgery_watch(game, nodes, recorder, bridge, [s for s in needed if s in external])
         failure = watch_services(bus, config.session, nodes, [s for s in needed if s in external or s == "robot"],
-                                 stop, settle_timeout_s)
+                                 stop, settle_timeout_s, forged=watch.verdict)
         end_game(game, stop, failure, recorder)
         if not failure and not stop.is_set():
             # an external recorder stays until everyone else left: do not wait for it
@@ -174,9 +204,12 @@ def run_session(config: SessionConfig, path: str | Path, *, bus: Bus | None = No
                            rounds_played=game.logic.round if game is not None else 0)
     if failure is not None:
         raise RecordingFailed(failure, recorder.path)
+    where = recorder.path if recorder is not None else f"session {config.session}"
+    forged = forgery_watch(game, nodes, recorder, bridge, [s for s in external if s in needed]).verdict()
+    if forged:
+        raise ForgedEvent(f"{forged}: the session was stopped", where)
     if refused:
-        raise StartRefused(f"the recorder refused the session's start ({refused[0][:200]}); the session was "
-                           "stopped", recorder.path if recorder is not None else f"session {config.session}")
+        raise StartRefused(refused_start_text(refused[0]), where)
     return recorder.path if recorder is not None else Path(path)
 
 
@@ -237,13 +270,17 @@ def end_reason(stop: threading.Event, failure: str) -> tuple[str, str]:
 
 
 def watch_services(bus: Bus, session: str, nodes: list[Node], external: list[str], stop: threading.Event,
-                   grace_s: float) -> str:
+                   grace_s: float, forged=lambda: "") -> str:
     """Wait until the in-process nodes are done or `stop`; return why a needed service failed ("" if none):
     an in-process node's thread died, or an external service's token was gone for `grace_s` (a crashed
-    service restarted within that time resumes from the log, services/runner.py)."""
+    service restarted within that time resumes from the log, services/runner.py), or `forged()` names
+    a forged start or end the game saw (ForgedEvent: checked every 0.1 s, so it stops within that)."""
     missing_since: dict[str, float] = {}
     checked = 0.0
     while not stop.is_set():
+        why = forged()
+        if why:
+            return why
         running = [n for n in nodes if n.thread is not None and n.thread.is_alive()]
         dead = [n.logic.name for n in nodes if n.thread is not None and not n.thread.is_alive() and not n.logic.done]
         if dead:

@@ -42,6 +42,8 @@ import json
 from dataclasses import dataclass, field
 
 from pairplay.replay.reader import read_log
+from pairplay.errors import InputError
+from pairplay.replay.forgery import contradiction
 from pairplay.schemas.events import RoundEnded, SessionEnded, SessionStarted
 
 from pairplay.services.game import GameLogic
@@ -169,7 +171,12 @@ def reach_of(end, rounds: int, how: str) -> str:
 
 
 def verify_recording(path) -> Verification:
+    """Verify the recording at `path`; InputError if it contradicts itself about who published what
+    (replay/forgery.py: two events claiming one source's seq, a forged start or end)."""
     log = read_log(path)
+    forged = contradiction(r.event for r in log.events)
+    if forged:
+        raise InputError(f"{forged}: not verified", path)
     # a file completed by `pairplay recover` still lacks the tail its crash lost
     recovered = log.metadata.get("pairplay.recovered", {})
     recovered_cut = recovered.get("truncated") == "true"

@@ -12,7 +12,9 @@ thread takes them, so no Python runs on Zenoh's receive path and a slow view
 never holds the session's BLOCK publishers back. If the view falls more than
 `capacity` samples behind, the oldest are overwritten; the view notices the gap
 in the senders' sequence numbers and says so (a view, unlike the recorder, may
-lose frames; the recording is the truth). A view that joins a running session
+lose frames; the recording is the truth). A SessionEnded ends the live view only while its
+source publishes nothing after it but its shell's events: one the game goes on after was not
+its end (forged on the bus: docs/bus.md "Forged starts and ends"), said as a note. A view that joins a running session
 first asks the recorder for the log so far (the query restarting services
 use; a read, it changes nothing), so it still shows the whole session.
 
@@ -31,6 +33,7 @@ from typing import Iterator
 import msgspec
 import zenoh
 
+from pairplay.replay.forgery import AFTER_END
 from pairplay.replay.reader import read_log
 from pairplay.schemas.events import decode_event
 from pairplay.schemas.keys import parse_event_key, session_keys
@@ -97,6 +100,7 @@ class LiveSource:
         self.session = session
         self.gaps = SequenceGaps()
         self.ended = False
+        self.ended_by = None  # the SessionEnded taken as the end: undone if its source goes on (issue "forge")
         # A RingChannel keeps the newest `capacity` samples inside Zenoh (no Python, no GIL on
         # the receive path) and never pushes back on the publishers; what it overwrites shows
         # up as a gap in the senders' sequence numbers.
@@ -162,6 +166,13 @@ class LiveSource:
         gap = self.gaps.check(event)
         if gap:
             yield None, gap
-        if type(event).__name__ == "SessionEnded":
-            self.ended = True
+        tag = type(event).__name__
+        end = self.ended_by
+        if end is not None and event.source == end.source and tag not in AFTER_END:
+            # the source goes on after "its" end: that end was not its (replay/forgery.py); follow on
+            self.ended, self.ended_by = False, None
+            yield None, (f"the SessionEnded seq {end.seq} claiming source {end.source!r} was not its end: its "
+                         f"{tag} seq {event.seq} came after it (forged on the bus?); still following the session")
+        if tag == "SessionEnded":
+            self.ended, self.ended_by = True, event
         yield event, None

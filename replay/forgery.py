@@ -1,0 +1,61 @@
+"""Does a recording contradict itself about who published what? The check before a rebuild or a verify.
+
+Rule: the game (the one source that starts and ends a session: schemas/trust.py) numbers its events
+1, 2, 3, ... per session (schemas/envelope.py), starts a session once and ends it once, and publishes
+nothing after its SessionEnded but its shell's events (ServiceStarted, MessageRejected). (Other
+source names may be several publishers': every page of the lab publishes as "board".) Zenoh names no publisher per message (docs/bus.md "Security"),
+so another process on the bus can publish an event claiming any source, and a recording made
+before the live checks of services/guard.py noticed it (or by an older pairplay) may hold it. A
+file where two different events claim the same (session, game, seq), where the game started or
+ended the same session twice, or where it published after its SessionEnded, holds at least
+one event that was not the game's: folding it would take whichever came first (a forged
+end before any round rebuilt as a session of 0 rounds, exit 0). `contradiction` names the first
+such pair, with both positions (the events' indices in the order given, from 0), so the verb can
+refuse the file in one line instead. Identical copies of one event (a copy, a refill) are not a
+contradiction. Pure: events in, words out.
+"""
+
+from __future__ import annotations
+
+from typing import Iterable
+
+from pairplay.schemas.envelope import Event
+from pairplay.schemas.trust import ONCE_PER_SESSION, STARTERS
+
+# what a source may publish after its end (its shell), or that is judged on its own (a second start or end)
+AFTER_END = frozenset({"ServiceStarted", "MessageRejected"}) | ONCE_PER_SESSION
+
+
+def _named(e: Event, pos: int) -> str:
+    return f"{type(e).__name__} seq {e.seq} (event {pos})"
+
+
+def contradiction(events: Iterable[Event]) -> str:
+    """The first contradiction among a session's `events` (see rule), in words; "" if none."""
+    seen: dict[tuple[str, str, int], tuple[int, Event]] = {}
+    once: dict[tuple[str, str, str], tuple[int, Event]] = {}
+    ends: dict[tuple[str, str], tuple[int, Event]] = {}
+    for pos, e in enumerate(events):
+        if e.source not in STARTERS:
+            continue
+        tag = type(e).__name__
+        at = (e.session, e.source, e.seq)
+        first = seen.get(at)
+        if first is not None and first[1] != e:
+            return (f"two events claim source {e.source!r} seq {e.seq}: {_named(first[1], first[0])} and "
+                    f"{_named(e, pos)}; one of them is not {e.source}'s (forged on the bus?)")
+        seen.setdefault(at, (pos, e))
+        if tag in ONCE_PER_SESSION:
+            earlier = once.get((e.session, e.source, tag))
+            if earlier is not None and earlier[1] != e:
+                return (f"two {tag} claim source {e.source!r}: {_named(earlier[1], earlier[0])} and {_named(e, pos)}; "
+                        f"one of them is not {e.source}'s (forged on the bus?)")
+            once.setdefault((e.session, e.source, tag), (pos, e))
+            if tag == "SessionEnded":
+                ends.setdefault((e.session, e.source), (pos, e))
+            continue
+        end = ends.get((e.session, e.source))
+        if end is not None and e.seq > end[1].seq and tag not in AFTER_END:
+            return (f"{e.source}'s {_named(end[1], end[0])} is followed by its {_named(e, pos)}: that end was not "
+                    f"{e.source}'s (forged on the bus?)")
+    return ""

@@ -1,0 +1,251 @@
+"""A forged SessionStarted or SessionEnded (issue "forge"): another process on the bus publishes one on the
+game's key, claiming source "game". Zenoh names no publisher per message (docs/bus.md "Security"), so
+nothing here authenticates; what must hold instead:
+- the game sees every message on its own keys and names one it did not publish; a session whose start or
+  end was forged stops within a bounded time, its recording finished, with ONE line naming the event, its
+  claimed source and that it was not this game's (never a silent wait, never a bare exit 2);
+- a start or end that does not fit its source's sequence is refused and recorded, and one taken that the
+  source contradicts later is noticed, recorded, and (an end) gives its slot back to the real one;
+- a file whose session holds two events claiming the same (source, seq), or events of the game after its
+  end, is reported by `rebuild` / `replay --verify` (exit non-zero, one line) instead of 0 rounds.
+Real zenoh on loopback, the forger a second bus session (a Zenoh client of the session's router).
+"""
+
+from __future__ import annotations
+
+import os
+import queue
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+from pairplay.replay.forgery import contradiction
+from pairplay.replay.reader import read_log
+from pairplay.replay.writer import EventLogWriter
+from pairplay.schemas import events as ev
+from pairplay.schemas.envelope import stamped
+from pairplay.schemas.events import decode_event, encode_event
+from pairplay.schemas.keys import alive_key, event_key
+from pairplay.schemas.session import SessionConfig
+from pairplay.services.bus import Bus, BusOptions
+from pairplay.services.guard import Guard
+
+from busutil import wait_until
+
+
+def session_proc(tmp_path, *args):
+    return subprocess.Popen([sys.executable, "-m", "pairplay", "session", "--out", str(tmp_path), *args],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            env=dict(os.environ, PYTHONUNBUFFERED="1"))
+
+
+def said(err: str) -> list[str]:
+    """What the process said on stderr beyond its log (the refusals it logged as WARNINGs)."""
+    return [line for line in err.strip().splitlines() if not line.startswith(("INFO ", "WARNING "))]
+
+
+def endpoint_of(line: str) -> str:
+    return line.split("bus listening on ", 1)[1].split()[0]
+
+
+def forge(session: str, event: ev.Event, seq: int) -> tuple[str, bytes]:
+    e = stamped(event, session=session, source="game", seq=seq, time_ns=time.time_ns())
+    return event_key(session, "game", type(event).__name__), encode_event(e)
+
+
+def game_events(client: Bus, session: str) -> queue.Queue:
+    """The game's events as the forger sees them (decoded in the test's thread, never in Zenoh's)."""
+    q: queue.Queue = queue.Queue()
+    client.subscribe(event_key(session, "game", "*"), lambda _k, p: q.put(p))
+    return q
+
+
+def forged_session(tmp_path, session: str, forger, *args) -> tuple[int, str, str]:
+    """`pairplay session` of sim:ashley (seed 1, `args` added) with `forger(client, seen)` run on a Zenoh
+    client of its bus (`seen`: the game's events); (exit status, stdout, stderr)."""
+    p = session_proc(tmp_path, "--participant", "sim:ashley", "--session", session, "--seed", "1", *args)
+    try:
+        endpoint = endpoint_of(p.stdout.readline())
+        with Bus(BusOptions(mode="client", connect=[endpoint])) as client:
+            forger(client, game_events(client, session))
+            out, err = p.communicate(timeout=90)  # the client stays until the session is over
+    finally:
+        p.kill()
+    return p.returncode, out, err
+
+
+def test_a_forged_end_that_fits_the_games_sequence_stops_the_session_with_one_line_naming_it(tmp_path):
+    # before: the learner and the recorder took it, the session waited silently for ever (the game alive,
+    # waiting for a suggestion), the game's real end was refused as "a second SessionEnded"
+    def forger(client, seen):
+        while True:  # the careful forger: the next seq of the game, counts that fit the game's progress
+            e = decode_event(seen.get(timeout=60))
+            if isinstance(e, ev.SuggestionRequested) and e.round >= 1:
+                break
+        client.put(*forge("forge1", ev.SessionEnded(reason="completed", rounds_played=e.round, round=e.round,
+                                                    turns_in_round=e.turn), e.seq + 1))
+    status, out, err = forged_session(tmp_path, "forge1", forger, "--rounds", "300")
+    assert status != 0
+    lines = said(err)
+    assert len(lines) == 1, err[-2000:]
+    assert "SessionEnded" in lines[0] and "'game'" in lines[0] and "not published by this game" in lines[0]
+    log = read_log(tmp_path / "forge1.mcap")
+    assert not log.truncated and not log.bad
+    events = [r.event for r in log.events]
+    # the game named the forgery in the file, and its own end says why the session stopped
+    assert any(isinstance(x, ev.MessageRejected) and x.source == "game" and x.reason.startswith("forged")
+               for x in events)
+    ends = [x for x in events if isinstance(x, ev.SessionEnded) and x.reason == "failed"]
+    assert ends and "SessionEnded" in ends[-1].detail
+
+
+def test_a_forged_start_before_the_game_starts_stops_the_session_naming_the_forgery(tmp_path):
+    # before: the recorder and the services took the forged config; the game's own start was refused as
+    # "a second SessionStarted" and the session ended with a bare "the recorder refused the session's start"
+    def forger(client, _seen):
+        assert wait_until(lambda: alive_key("forge2", "recorder") in client.alive_now(alive_key("forge2", "*")), 60)
+        fake = SessionConfig(session="forge2", participant="sim:ashley", persona="ashley", seed=99, rounds=1)
+        client.put(*forge("forge2", ev.SessionStarted(config=fake), 2))
+        time.sleep(0.3)
+        client.alive(alive_key("forge2", "robot"))  # the game waited for a robot: now it starts
+    status, out, err = forged_session(tmp_path, "forge2", forger, "--rounds", "5", "--external", "robot")
+    assert status != 0
+    lines = said(err)
+    assert len(lines) == 1, err[-2000:]
+    assert "SessionStarted" in lines[0] and "'game'" in lines[0] and "forged" in lines[0], lines[0]
+    assert not read_log(tmp_path / "forge2.mcap").truncated
+
+
+def message(session: str, event: ev.Event, seq: int, source: str = "game") -> tuple[str, bytes]:
+    e = stamped(event, session=session, source=source, seq=seq, time_ns=seq)
+    return event_key(session, source, type(event).__name__), encode_event(e)
+
+
+def test_an_end_behind_the_games_own_sequence_is_refused():
+    g = Guard("s")
+    assert g.check(*message("s", ev.RoundStarted(round=0, faces=[i // 2 for i in range(18)]), 5)).reason is None
+    # the trial's forger: a low seq (or any seq the game already passed)
+    verdict = g.check(*message("s", ev.SessionEnded(reason="forged"), 3))
+    assert verdict.reason and "not after the events game already published" in verdict.reason
+    # the game's real end is still taken
+    assert g.check(*message("s", ev.SessionEnded(reason="completed", rounds_played=1), 6)).reason is None
+
+
+def test_an_end_the_game_contradicts_is_noticed_and_gives_its_slot_back_to_the_real_end():
+    for whole, later_seq in ((False, 8), (True, 8), (True, 6)):
+        g = Guard("s", whole=whole)
+        g.check(*message("s", ev.RoundStarted(round=0, faces=[i // 2 for i in range(18)]), 5))
+        assert g.check(*message("s", ev.SessionEnded(reason="forged"), 7)).reason is None  # fits: taken
+        # the game goes on (a later seq; or, to a guard that gets every key in order, any later arrival)
+        assert g.check(*message("s", ev.RoundEnded(round=0, turns=1, matches=1), later_seq)).reason is None
+        assert len(g.notices) == 1 and "SessionEnded" in g.notices[0][0] and g.notices[0][3] == 7
+        assert g.check(*message("s", ev.SessionEnded(reason="completed", rounds_played=1), 9)).reason is None
+    # a guard that sees only some keys does not read a lower seq arriving late as a contradiction
+    g = Guard("s")
+    g.check(*message("s", ev.SessionEnded(reason="completed"), 7))
+    g.check(*message("s", ev.RoundEnded(round=0, turns=1, matches=1), 6))
+    assert not g.notices
+
+
+def test_a_second_end_cannot_displace_the_one_taken():
+    g = Guard("s", whole=True)
+    g.check(*message("s", ev.SessionEnded(reason="completed"), 7))
+    assert "a second SessionEnded" in g.check(*message("s", ev.SessionEnded(reason="forged"), 8)).reason
+    assert not g.notices  # nor do the game's shell events after its end
+    assert g.check(*message("s", ev.MessageRejected(reason="x", key="k"), 9)).reason is None and not g.notices
+
+
+def test_two_events_claiming_the_same_seq_of_a_start_are_noticed():
+    g = Guard("s", whole=True)
+    assert g.check(*message("s", ev.SessionStarted(config=_config()), 2)).reason is None
+    g.check(*message("s", ev.RoundStarted(round=0, faces=[i // 2 for i in range(18)]), 2))
+    assert len(g.notices) == 1 and "SessionStarted" in g.notices[0][0]
+
+
+def test_a_service_names_a_message_on_its_own_keys_it_did_not_publish():
+    g = Guard("s", own="game")
+    g.mine = {}
+    key, payload = message("s", ev.SessionEnded(reason="completed"), 4)
+    g.mine[payload] = None
+    assert g.check(key, payload).quiet  # our own echo
+    key, forged = message("s", ev.SessionEnded(reason="forged"), 4)
+    verdict = g.check(key, forged)
+    assert verdict.reason.startswith("forged: SessionEnded seq 4 claiming source 'game'") and len(g.forged) == 1
+
+
+def _config():
+    return SessionConfig(session="s", participant="sim:ashley", persona="ashley", seed=1, rounds=1)
+
+
+SAMPLE = Path(__file__).resolve().parent.parent / "recordings" / "samples" / "sim-ashley.mcap"
+
+
+def forged_copy(path: Path, how: str) -> Path:
+    """The sample recording with a forged SessionEnded written the way a recorder took it: right after
+    the game's start, at the game's next seq ("same-seq": the game's own next event then claims it too),
+    or at a seq the game never reached ("after": the game's events follow an end)."""
+    w = EventLogWriter(path)
+    for r in read_log(SAMPLE).events:
+        w.write(r.key, r.payload, log_time_ns=r.log_time_ns, sequence=r.event.seq)
+        if isinstance(r.event, ev.SessionStarted):
+            seq = r.event.seq + 1 if how == "same-seq" else r.event.seq + 5000
+            key, payload = forge(r.event.session, ev.SessionEnded(reason="completed"), seq)
+            w.write(key, payload, log_time_ns=r.log_time_ns + 1, sequence=seq)
+    w.close()
+    return path
+
+
+@pytest.mark.parametrize("how", ["same-seq", "after"])
+def test_rebuild_and_verify_report_a_forged_end_instead_of_a_session_of_0_rounds(tmp_path, how):
+    # before: `pairplay rebuild` of such a file exited 0 ("0 rounds" when the end came before any round)
+    rec = forged_copy(tmp_path / "forged.mcap", how)
+    for argv in (["rebuild", str(rec), "--out", str(tmp_path / "out")], ["replay", str(rec), "--verify"]):
+        p = subprocess.run([sys.executable, "-m", "pairplay", *argv], capture_output=True, text=True, timeout=120)
+        assert p.returncode != 0, (argv, p.stdout)
+        lines = p.stderr.strip().splitlines()
+        assert len(lines) == 1 and "SessionEnded seq" in lines[0] and "(event " in lines[0], p.stderr
+        assert "forged" in lines[0] and str(rec) in lines[0]
+    assert not (tmp_path / "out").exists() or not any((tmp_path / "out").iterdir())
+    # the sample itself is not reported
+    assert not contradiction(r.event for r in read_log(SAMPLE).events)
+
+
+def test_a_forged_end_every_service_refuses_is_recorded_and_the_session_plays_to_its_end(tmp_path):
+    # the trial's sloppy forger: an end at a seq the game passed long ago; every listener refuses it
+    def forger(client, seen):
+        while not isinstance(decode_event(seen.get(timeout=60)), ev.SuggestionRequested):
+            pass
+        client.put(*forge("forge3", ev.SessionEnded(reason="forged"), 2))
+    status, out, err = forged_session(tmp_path, "forge3", forger, "--rounds", "3")
+    assert status == 0, err[-2000:]
+    assert "rounds played: 3" in out and not said(err)
+    events = [r.event for r in read_log(tmp_path / "forge3.mcap").events]
+    assert [x.reason for x in events if isinstance(x, ev.SessionEnded)] == ["completed"]
+    named = [x for x in events if isinstance(x, ev.MessageRejected) and x.source == "game"]
+    assert named and "forged: SessionEnded seq 2 claiming source 'game'" in named[0].reason
+    assert any(isinstance(x, ev.MessageRejected) and x.source == "recorder" and "not after the events" in x.reason
+               for x in events)
+
+
+def test_the_live_view_follows_a_session_whose_game_goes_on_after_a_forged_end():
+    # before: any SessionEnded ended the live view (it stopped following half a second later)
+    from pairplay.services.view.sources import LiveSource
+    from busutil import listener
+    with listener() as bus:
+        source = LiveSource(bus, "s", catch_up=False)
+        try:
+            def take(event, seq):
+                return list(source._accept(stamped(event, session="s", source="game", seq=seq, time_ns=seq)))
+            take(ev.RoundStarted(round=0, faces=[i // 2 for i in range(18)]), 1)
+            take(ev.SessionEnded(reason="forged"), 2)
+            assert source.ended
+            notes = take(ev.RoundEnded(round=0, turns=1, matches=1), 3)
+            assert not source.ended and any(n and "was not its end" in str(n) for _, n in notes)
+            take(ev.SessionEnded(reason="completed", rounds_played=1), 4)
+            take(ev.MessageRejected(reason="x", key="k"), 5)  # the game's shell after its end: still ended
+            assert source.ended
+        finally:
+            source.close()
