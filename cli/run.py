@@ -25,6 +25,7 @@ from pairplay.cli.args import session_id
 from pairplay.errors import OptionError
 from pairplay.outputs import check_folder
 from pairplay.services.bus import Bus, Deadline, add_bus_arguments, deadline_of, options_from_args, stop_on_signals
+from pairplay.services.forgery import EVERY_LISTENER, ForgeryWatch
 from pairplay.services.runner import GameWatch, Node, Stopped, start_unless_stopped, waiting_for
 
 SERVICES = ("game", "learner", "participant", "recorder", "combiner")
@@ -125,17 +126,26 @@ def run(args: argparse.Namespace) -> int:
         # the service's own thread publishes what it decides (Node.step) and may wait in a put on a
         # congested peer; this (main) thread stays free for the signals and the bounded shutdown
         thread = node.run_in_thread(stop)
+        # a game alone in its process: every listener is elsewhere, so a forged start or end that fits the
+        # game's sequence may have been taken (services/forgery.py): the game ends the session, one line
+        watch = ForgeryWatch(node, [], external=EVERY_LISTENER) if args.service == "game" else None
+        forged = ""
         while thread.is_alive() and not stop.wait(0.05):
-            pass
+            forged = watch.verdict() if watch is not None else ""
+            if forged:
+                stop.set()
         if stop.is_set():
             thread.join(deadline_of(stop).left(0.5, 0.2))
         if args.service == "game" and not logic.done:  # stopped: the session's end says why and how far
             from pairplay.services.session import end_reason
-            reason, detail = end_reason(stop, "")
+            reason, detail = end_reason(stop, forged)
             with node._lock:
                 node.publish(node.driver._stamp(logic.end(reason, detail)))
             node.close(deadline_of(stop).left(0.3, 0.5))  # let the recorder take it before the bus closes
             time.sleep(deadline_of(stop).left(0.3, 0.2))
+        if forged:
+            from pairplay.services.session import ForgedEvent
+            raise ForgedEvent(f"{forged}: the game ended the session", f"session {args.session}")
         return 0
     finally:
         deadline = deadline_of(stop) if stop.is_set() else Deadline(1.0)

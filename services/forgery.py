@@ -26,6 +26,8 @@ from pairplay.schemas.keys import event_key
 from pairplay.schemas.trust import MAX_SEQ_JUMP, ONCE_PER_SESSION
 
 EVERYTHING = ("recorder", "board")  # listeners that take every event of the session (schemas/catalogue.py FLOW)
+# every service that may act on a start or an end: a game alone in its process (`pairplay run game`) has them all elsewhere
+EVERY_LISTENER = tuple(sorted({s for tag in ONCE_PER_SESSION for s in FLOW[tag][1]} | set(EVERYTHING)))
 
 
 def consumers(tag: str) -> tuple[str, ...]:

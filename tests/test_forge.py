@@ -64,13 +64,13 @@ def game_events(client: Bus, session: str) -> queue.Queue:
 
 
 def forged_session(tmp_path, session: str, forger, *args) -> tuple[int, str, str]:
-    """`pairplay session` of sim:ashley (seed 1, `args` added) with `forger(client, seen)` run on a Zenoh
-    client of its bus (`seen`: the game's events); (exit status, stdout, stderr)."""
+    """`pairplay session` of sim:ashley (seed 1, `args` added) with `forger(client, seen, endpoint)` run on a
+    Zenoh client of its bus (`seen`: the game's events; `endpoint`: the bus's); (exit status, stdout, stderr)."""
     p = session_proc(tmp_path, "--participant", "sim:ashley", "--session", session, "--seed", "1", *args)
     try:
         endpoint = endpoint_of(p.stdout.readline())
         with Bus(BusOptions(mode="client", connect=[endpoint])) as client:
-            forger(client, game_events(client, session))
+            forger(client, game_events(client, session), endpoint)
             out, err = p.communicate(timeout=90)  # the client stays until the session is over
     finally:
         p.kill()
@@ -80,7 +80,7 @@ def forged_session(tmp_path, session: str, forger, *args) -> tuple[int, str, str
 def test_a_forged_end_that_fits_the_games_sequence_stops_the_session_with_one_line_naming_it(tmp_path):
     # before: the learner and the recorder took it, the session waited silently for ever (the game alive,
     # waiting for a suggestion), the game's real end was refused as "a second SessionEnded"
-    def forger(client, seen):
+    def forger(client, seen, _endpoint):
         while True:  # the careful forger: the next seq of the game, counts that fit the game's progress
             e = decode_event(seen.get(timeout=60))
             if isinstance(e, ev.SuggestionRequested) and e.round >= 1:
@@ -105,7 +105,7 @@ def test_a_forged_end_that_fits_the_games_sequence_stops_the_session_with_one_li
 def test_a_forged_start_before_the_game_starts_stops_the_session_naming_the_forgery(tmp_path):
     # before: the recorder and the services took the forged config; the game's own start was refused as
     # "a second SessionStarted" and the session ended with a bare "the recorder refused the session's start"
-    def forger(client, _seen):
+    def forger(client, _seen, _endpoint):
         assert wait_until(lambda: alive_key("forge2", "recorder") in client.alive_now(alive_key("forge2", "*")), 60)
         fake = SessionConfig(session="forge2", participant="sim:ashley", persona="ashley", seed=99, rounds=1)
         client.put(*forge("forge2", ev.SessionStarted(config=fake), 2))
@@ -215,7 +215,7 @@ def test_rebuild_and_verify_report_a_forged_end_instead_of_a_session_of_0_rounds
 
 def test_a_forged_end_every_service_refuses_is_recorded_and_the_session_plays_to_its_end(tmp_path):
     # the trial's sloppy forger: an end at a seq the game passed long ago; every listener refuses it
-    def forger(client, seen):
+    def forger(client, seen, _endpoint):
         while not isinstance(decode_event(seen.get(timeout=60)), ev.SuggestionRequested):
             pass
         client.put(*forge("forge3", ev.SessionEnded(reason="forged"), 2))
@@ -249,3 +249,31 @@ def test_the_live_view_follows_a_session_whose_game_goes_on_after_a_forged_end()
             assert source.ended
         finally:
             source.close()
+
+
+def test_a_game_in_a_process_of_its_own_ends_the_session_on_a_forged_end_with_one_line(tmp_path):
+    # `pairplay run game`: every listener is in another process, so a fitting forged end may have been taken
+    # (before: the game waited for ever for the suggestion a stopped learner would never make)
+    game = []
+
+    def forger(client, seen, endpoint):
+        game.append(subprocess.Popen(
+            [sys.executable, "-m", "pairplay", "run", "game", "--participant", "sim:ashley", "--session", "forge5",
+             "--seed", "1", "--rounds", "300", "--connect", endpoint, "--wait-for", "recorder", "--wait-for",
+             "learner", "--wait-for", "participant"],
+            stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True, env=dict(os.environ, PYTHONUNBUFFERED="1")))
+        while not (isinstance(e := decode_event(seen.get(timeout=60)), ev.SuggestionRequested) and e.round >= 1):
+            pass
+        client.put(*forge("forge5", ev.SessionEnded(reason="completed", rounds_played=1), e.seq + 1))
+        game[0].wait(60)
+    try:
+        forged_session(tmp_path, "forge5", forger, "--rounds", "300", "--external", "game")
+    finally:
+        if game and game[0].poll() is None:
+            game[0].kill()
+    err = game[0].stderr.read()
+    assert game[0].returncode not in (0, None)
+    lines = said(err)
+    assert len(lines) == 1 and "SessionEnded" in lines[0] and "not published by this game" in lines[0], err
+    ends = [x for x in read_log(tmp_path / "forge5.mcap").of("SessionEnded") if x.reason == "failed"]
+    assert ends and "SessionEnded" in ends[0].detail
