@@ -18,8 +18,8 @@ from __future__ import annotations
 from pathlib import Path
 
 from pairplay.errors import InputError
+from pairplay.schemas.jsonfile import MCAP_MAGIC
 
-MCAP_MAGIC = b"\x89MCAP0\r\n"
 
 
 def check_recording(path: str | Path, journal_ok: bool = False) -> Path:

@@ -83,6 +83,11 @@ CASES = [
     Case("rebuild random bytes", ["rebuild", "random.mcap", "--out", "out"], "not a recording: not an MCAP file"),
     Case("rebuild a missing file", ["rebuild", "rec.mcap", "missing.mcap", "--out", "out"], "no such recording"),
     Case("profile a missing file", ["profile", "missing.json"], "no such policy file"),
+    # a recording where a policy file is wanted: "JSON is malformed" before (a researcher's trial)
+    Case("profile a recording", ["profile", "rec.mcap"],
+         "rec.mcap: an MCAP recording, not a policy file (`pairplay rebuild` makes the policy files of recordings)"),
+    Case("pi-reuse from a recording", SIM + ["--algorithm", "pi-reuse", "--policy", "rec.mcap"],
+         "an MCAP recording, not a policy file"),
     # item 3: an existing output is never replaced without --force; outputs never collide
     Case("recover -o an existing file", ["recover", "rec.mcap", "-o", "existing.mcap"], "exists; --force"),
     Case("recover beside its existing output", ["recover", "old.mcap"], "old.recovered.mcap"),
