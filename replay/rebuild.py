@@ -7,7 +7,9 @@ seed, as core.study does), so a rebuilt policy file equals the one the
 in-process study writes for the same seed and persona. Learning curves are per
 round: turns (9 is perfect play), picks, total reward, learned updates and
 inconsistent suggestions. A truncated recording rebuilds what it holds and
-says so; a recording without SessionStarted is refused with the reason. A
+says so; a recording without SessionStarted is refused with the reason, and
+so is one whose session has no round recorded whole (`NoWholeRound`: check.py
+`no_whole_round`; it gave a policy of 0 rounds). A
 policy from a partial session (interrupted, aborted, failed, cut short,
 damaged or completed by `pairplay recover`) says why in its file's `partial`
 field and in `Rebuilt.partial`.
@@ -30,12 +32,16 @@ from pairplay.core.policies import to_policy_file
 from pairplay.schemas.policy import PolicyFile, write_policy
 from pairplay.schemas.session import SessionConfig
 
-from .check import read_session
+from .check import no_whole_round, read_session
 from .fold import READS, SessionFold, fold_events, stream_seed
 
 
 class RebuildError(InputError):
     """A recording that cannot be rebuilt; the message says why."""
+
+
+class NoWholeRound(RebuildError):
+    """A session recording with no round recorded whole: nothing to rebuild (check.py `no_whole_round`)."""
 
 
 @dataclass
@@ -99,8 +105,12 @@ def rebuild_events(events, source: str = "", truncated: bool = False, note: str 
 
 
 def rebuild_recording(path: str | Path) -> Rebuilt:
-    """The recording at `path` rebuilt; InputError (RebuildError) if it is not a session recording."""
+    """The recording at `path` rebuilt; InputError (RebuildError) if it is not a session recording,
+    NoWholeRound if its session has no round recorded whole."""
     log = read_session(path, only=READS)  # the events the fold only counts are not decoded (speed)
+    empty = no_whole_round((r.event for r in log.events), log.truncated)
+    if empty:
+        raise NoWholeRound(f"{empty}; nothing to rebuild", path)
     note = "" if log.whole else f"{'damaged' if log.damage else 'truncated'}: {log.error}"
     return rebuild_events((r.event for r in log.events), str(path), log.truncated, note,
                           log.metadata.get("pairplay.recovered"), log.metadata.get("pairplay.recorder.end"),

@@ -33,6 +33,7 @@ from typing import Callable
 
 from pairplay import __version__
 from pairplay.core.policies import users_from_policies
+from pairplay.replay.check import no_whole_round
 from pairplay.replay.fold import fold_events
 from pairplay.replay.reader import read_log
 from pairplay.replay.rebuild import rebuild_recording, write_outputs
@@ -260,7 +261,7 @@ class StudyRunner:
         fold = fold_events(r.event for r in recorded.events)
         completed = fold.ended is not None and fold.ended.reason == "completed"
         policy = ""
-        if fold.config is not None:
+        if fold.config is not None and not no_whole_round(r.event for r in recorded.events):  # else no policy
             written = write_outputs(rebuild_recording(path), self.data.folder / "policies")
             written[1].unlink()  # the learning curve is in the recording and the report
             policy = written[0].relative_to(self.data.folder).as_posix()

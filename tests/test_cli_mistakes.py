@@ -176,6 +176,18 @@ CASES = [
          "holds no session"),
     Case("view a header alone", ["view", "--recording", "header.mcap", "--out", "new.rrd"], "holds no session"),
     Case("counterfactual of 10 bytes", ["counterfactual", "ten.mcap", "--out", "cf"], "holds no session"),
+    # a session with no round recorded whole (a new user's trial, 2026-12-01): verify said "PASS as far as the
+    # file goes" and rebuild wrote a policy of 0 rounds, both exit 0
+    Case("verify a file cut before its first round", ["replay", "cut.mcap", "--verify"],
+         "holds no whole round: the file is cut before round 1 of "),
+    Case("rebuild a file cut before its first round", ["rebuild", "cut.mcap", "--out", "out"],
+         "holds no whole round: the file is cut before round 1 of "),
+    Case("verify a session stopped in round 1", ["replay", "stopped0.mcap", "--verify"],
+         "holds no whole round: the session ended (interrupted (SIGINT)) in round 1 of "),
+    Case("rebuild a session stopped in round 1 beside a good one", ["rebuild", "rec.mcap", "stopped0.mcap", "--out",
+                                                                    "out"], "nothing to rebuild (stopped0.mcap)"),
+    Case("combine a policy of 0 rounds", ["combine", "policies", "zero.json"], "holds no whole round"),
+    Case("profile a policy of 0 rounds", ["profile", "policies", "zero.json"], "holds no whole round"),
     # an empty or blank id was taken (`--session ''` fell back to a made-up id); a refused atomic write
     # named the temporary file beside the user's
     Case("session --session ''", SIM + ["--session", ""], "session id '' must be non-empty"),
@@ -232,6 +244,7 @@ def _fixtures(root: Path) -> None:
     spec["reward_bonus"] = "consistent"
     (root / "spec").mkdir()
     (root / "spec" / "blind.json").write_text(json.dumps(spec))
+    _no_round_files(root)
     (root / "rebuilt").mkdir()
     (root / "rebuilt" / "rec.policy.json").write_bytes(b"the user's rebuilt policy")
     (root / "ro").mkdir()
@@ -269,6 +282,42 @@ def _no_session_files(root: Path) -> None:
     w.write(event_key("s1", "learner", "ServiceStarted"), encode_event(e), log_time_ns=10)
     w.close()
 
+
+
+def _no_round_files(root: Path) -> None:
+    """Recordings whose session has no round recorded whole (a new user's trial, 2026-12-01: verify
+    said "PASS as far as the file goes", rebuild wrote a policy of 0 rounds, both exit 0): cut.mcap,
+    the sample's events up to its first RoundEnded in a file cut after its last chunk (summary and
+    footer lost, as a crash leaves it); stopped0.mcap, the same events ended by the game's SessionEnded
+    (interrupted in round 1), a whole file; and zero.json, a learned policy of 0 rounds, no state updated."""
+
+    from pairplay.replay.mcapscan import scan
+    from pairplay.replay.reader import read_log
+    from pairplay.replay.writer import EventLogWriter
+    from pairplay.schemas.envelope import stamped
+    from pairplay.schemas.events import SessionEnded, encode_event
+    from pairplay.schemas.keys import event_key
+
+    events = []
+    for r in read_log(SAMPLE).events:
+        if type(r.event).__name__ == "RoundEnded" and r.event.source == "game":
+            break
+        events.append(r.event)
+    last = max(e.seq for e in events if e.source == "game")
+    ended = stamped(SessionEnded(reason="interrupted", detail="SIGINT", rounds_played=0, round=0, turns_in_round=2),
+                    session=events[0].session, source="game", seq=last + 1, time_ns=events[-1].time_ns + 1)
+    for name, evs in (("cut.mcap", events), ("stopped0.mcap", events + [ended])):
+        w = EventLogWriter(root / name, chunk_size=2048)
+        for i, e in enumerate(evs):
+            w.write(event_key(e.session, e.source, type(e).__name__), encode_event(e), log_time_ns=10**18 + i,
+                    sequence=e.seq)
+        w.close()
+    chunks = scan(root / "cut.mcap").chunks
+    data = (root / "cut.mcap").read_bytes()
+    (root / "cut.mcap").write_bytes(data[:chunks[-1].offset + chunks[-1].length])
+    spec = json.loads((root / "policies" / "blind" / "game-00.json").read_text())
+    spec.update(rounds=0, visits=[0] * len(spec["visits"]))
+    (root / "zero.json").write_text(json.dumps(spec))
 
 
 def _readonly_command(case: Case, root: Path) -> list[str]:
