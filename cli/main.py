@@ -1,7 +1,10 @@
 """`pairplay <verb>`: one command line whose verbs match what a researcher does.
 
 Rule: a user's mistake is ONE line on stderr, `pairplay <verb>: <what>
-(<where>)`, and exit 2: argparse's own refusals (Parser.error), any
+(<where>)`, and exit 2: no verb (`pairplay: no verb given: one of study, ...
+(see pairplay --help)`; it printed the whole help on stdout with exit 2), no
+action of a verb that has them (`pairplay protocol: no action given: one of
+check, init, ...`, `pairplay run`'s service alike), argparse's own refusals (Parser.error), any
 `pairplay.errors.UserError` a verb raises, and an OSError (a file or port the
 system refused), whenever it comes (before the work or during it: a full disk
 part way). A session whose recording could not be written (`RecordingFailed`,
@@ -98,7 +101,19 @@ class Parser(argparse.ArgumentParser):
         return namespace, extra
 
     def error(self, message: str):
-        self.exit(2, f"{self.prog}: {message} (see {self.prog} --help)\n")
+        self.exit(2, f"{self.prog}: {self.choice_missing(message) or message} (see {self.prog} --help)\n")
+
+    def choice_missing(self, message: str) -> str:
+        """`no ACTION given: one of check, init, ...` when what is missing is a choice of words (a verb's
+        action, `run`'s service), else "": the choices said on the line, not only its name."""
+        prefix = "the following arguments are required: "
+        if not message.startswith(prefix):
+            return ""
+        first = message[len(prefix):].split(", ")[0]
+        for action in self._actions:
+            if not action.option_strings and action.choices and first in (action.metavar, action.dest):
+                return f"no {first.lower()} given: one of {', '.join(action.choices)}"
+        return ""
 
 
 def build_parser(argv: list[str]) -> tuple[argparse.ArgumentParser, argparse.ArgumentParser | None]:
@@ -265,8 +280,8 @@ def _main(argv: list[str]) -> int:
     args, extra = parser.parse_known_args(argv)
     if extra:  # said by the parser of the verb (or its action) that met them, naming it
         args._usage_parser.error(f"unrecognized arguments: {' '.join(extra)}")
-    if not args.verb:
-        parser.print_help()
+    if not args.verb:  # a mistake: one line, as any (module rule); `pairplay --help` prints the help on stdout
+        print(f"pairplay: no verb given: one of {', '.join(VERBS)} (see pairplay --help)", file=sys.stderr)
         return 2
     configure_logging(args.verbose, args.quiet)
     module = importlib.import_module(VERBS[args.verb][0])
