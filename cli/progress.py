@@ -1,0 +1,30 @@
+"""Progress bars of the verbs that work for a while (study, sweep): one way to make them.
+
+Rule: a bar is drawn only on a terminal: when stderr is not a tty (a pipe, a file,
+a CI log, a test's capture) or the verb was given `-q/--quiet`, no bar is made and
+stderr holds only the verb's lines. Before, `pairplay sweep 2>log` wrote tqdm's
+redraws (carriage returns, one per cell) into the log ahead of its interrupted line,
+and `pairplay study` did the same. Every tqdm of the command line is made here.
+"""
+
+from __future__ import annotations
+
+import sys
+
+
+def shown(quiet: bool) -> bool:
+    """Whether a progress bar is drawn: not --quiet, and stderr is a terminal."""
+    stream = sys.stderr
+    try:
+        return not quiet and stream is not None and stream.isatty()
+    except (AttributeError, ValueError):  # a replaced or closed stream: no terminal
+        return False
+
+
+def bar(total: int, desc: str, unit: str, quiet: bool, **options):
+    """A tqdm bar on stderr of `total` `unit`s, disabled unless `shown(quiet)` (module rule);
+    `options` go to tqdm (initial, leave)."""
+    from tqdm import tqdm
+
+    return tqdm(total=total, desc=desc, unit=unit, disable=not shown(quiet), file=sys.stderr,
+                dynamic_ncols=True, **options)
