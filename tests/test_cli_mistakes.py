@@ -288,8 +288,9 @@ def _no_round_files(root: Path) -> None:
     """Recordings whose session has no round recorded whole (a new user's trial, 2026-12-01: verify
     said "PASS as far as the file goes", rebuild wrote a policy of 0 rounds, both exit 0): cut.mcap,
     the sample's events up to its first RoundEnded in a file cut after its last chunk (summary and
-    footer lost, as a crash leaves it); stopped0.mcap, the same events ended by the game's SessionEnded
-    (interrupted in round 1), a whole file; and zero.json, a learned policy of 0 rounds, no state updated."""
+    footer lost, as a crash leaves it); stopped0.mcap, its events up to the game's second
+    turn, then the game's SessionEnded as its shell writes it (interrupted in round 1 after 2 turns), a
+    whole file; and zero.json, a learned policy of 0 rounds, no state updated."""
 
     from pairplay.replay.mcapscan import scan
     from pairplay.replay.reader import read_log
@@ -303,10 +304,11 @@ def _no_round_files(root: Path) -> None:
         if type(r.event).__name__ == "RoundEnded" and r.event.source == "game":
             break
         events.append(r.event)
-    last = max(e.seq for e in events if e.source == "game")
+    resolved = [i for i, e in enumerate(events) if type(e).__name__ == "TurnResolved" and e.source == "game"]
+    stopped = events[:resolved[1] + 1]  # the game's end as its shell writes it after 2 turns of round 1
     ended = stamped(SessionEnded(reason="interrupted", detail="SIGINT", rounds_played=0, round=0, turns_in_round=2),
-                    session=events[0].session, source="game", seq=last + 1, time_ns=events[-1].time_ns + 1)
-    for name, evs in (("cut.mcap", events), ("stopped0.mcap", events + [ended])):
+                    session=events[0].session, source="game", seq=stopped[-1].seq + 1, time_ns=stopped[-1].time_ns + 1)
+    for name, evs in (("cut.mcap", events), ("stopped0.mcap", stopped + [ended])):
         w = EventLogWriter(root / name, chunk_size=2048)
         for i, e in enumerate(evs):
             w.write(event_key(e.session, e.source, type(e).__name__), encode_event(e), log_time_ns=10**18 + i,
