@@ -46,7 +46,7 @@ from pairplay.cli.args import add_force, count, duration, non_negative, positive
 from pairplay.core.geometry import PICKS_UNIT
 from pairplay.cli.robot import add_robot_arguments, check_robot_args, robot_choice
 from pairplay.services.bus import BusOpenError, ConfigFileError, add_bus_arguments, options_from_args, stop_on_signals
-from pairplay.services.recorder import check_new_recording
+from pairplay.services.recorder import FORCE_SESSION_HINT, check_new_recording
 from pairplay.services.runner import waiting_for
 from pairplay.services.session import run_session
 
@@ -186,7 +186,7 @@ def run(args: argparse.Namespace) -> int:
     check_folder(args.out)
     path = Path(args.out) / f"{config.session}.mcap"
     if "recorder" not in args.external:  # an external recorder checks its own folder
-        check_new_recording(path, args.force)
+        check_new_recording(path, args.force, FORCE_SESSION_HINT)  # this verb has --force
     stop = threading.Event()
     stop_on_signals(stop)
 

@@ -31,6 +31,7 @@ import pytest
 from pairplay.cli.main import main
 
 from cli_zygote import Zygote
+from hints import bad_options
 
 SAMPLE = Path(__file__).resolve().parents[1] / "recordings" / "samples" / "sim-ashley.mcap"
 CAN_UNSHARE = os.geteuid() == 0 and shutil.which("unshare") is not None
@@ -371,6 +372,7 @@ def test_a_mistake_gets_one_line_and_changes_nothing(case, ran):
     assert len(lines) == 1, r.stderr
     verb = " ".join(case.args[:2] if case.args[0] in ("protocol", "participant") else case.args[:1])  # its action too
     assert lines[0].startswith(f"pairplay {verb}: ") and case.expect in lines[0], lines[0]
+    assert bad_options(verb.split(), lines[0]) == [], lines[0]  # what it says to type exists (tests/hints.py)
     assert r.stdout == "", r.stdout  # refused before any work: no line before the refusal
     assert got.after == got.before, "files changed: " + str(set(got.after.items()) ^ set(got.before.items()))
 
