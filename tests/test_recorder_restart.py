@@ -61,7 +61,7 @@ def kill_before_first_flush(tmp_path, session: str, endpoint: str) -> bool:
 def test_a_recorder_killed_before_its_first_flush_and_restarted_continues_the_session(tmp_path):
     for attempt in range(4):  # a loaded machine may let the first flush come before the kill: again
         session = f"rk{attempt}"
-        p = session_proc(tmp_path, "--participant", "sim:ashley", "--rounds", "150", "--session", session,
+        p = session_proc(tmp_path, "--participant", "sim:ashley", "--rounds", "5000", "--session", session,
                          "--external", "recorder")
         second = None
         try:
@@ -72,7 +72,8 @@ def test_a_recorder_killed_before_its_first_flush_and_restarted_continues_the_se
             assert journaled
             second = recorder(tmp_path, session, endpoint)
             # once the restarted recorder has refilled the gap (its RecordingGap is in its file), the
-            # session is stopped (as its experimenter would: seconds, not its 150 rounds)
+            # session is stopped (as its experimenter would: seconds, not its 5,000 rounds; with 150 a quick
+            # machine could play them all first and end it "completed", not "interrupted")
             assert wait_until(lambda: second.poll() is not None or read_log(tmp_path / f"{session}.1.mcap").of(
                 "RecordingGap") if (tmp_path / f"{session}.1.mcap").exists() else second.poll() is not None,
                 60, 0.1)
