@@ -9,8 +9,9 @@ the same learning: it would weigh double), a profile of a participant with a
 single policy (algorithm 3 compares policies: it would say 0% / 0%), an
 --exclude naming no participant, policies of different reward rules (the
 files of each rule are named), a learned policy that learned nothing (0 rounds,
-no state ever updated: an older rebuild of a recording cut before its first
-round wrote one; it would count as a participant who agrees with everything),
+no state ever updated, its Q-table all 0: an older rebuild of a recording cut
+before its first round wrote one; it would count as a participant who agrees
+with everything; a table written by hand, with values, is taken),
 and an existing --out without --force.
 """
 
@@ -85,8 +86,9 @@ def _load(args) -> tuple[list, list[str]]:
     policies = [read_policy(f) for f in files]
     names = [str(f) for f in files]
     for p, name in zip(policies, names):
-        if p.algorithm in LEARNED and p.rounds == 0 and not any(p.visits):
-            raise InputError("holds no whole round: a policy of 0 rounds that updated no state; leave it out", name)
+        if p.algorithm in LEARNED and p.rounds == 0 and not any(p.visits) and not any(map(any, p.q)):
+            raise InputError("holds no whole round: a policy of 0 rounds that learned nothing (no state updated, "
+                             "its Q-table all 0); leave it out", name)
     check_distinct(policies, names)
     return policies, names
 

@@ -33,11 +33,12 @@ as far as the file goes: the file is cut, the session's end is missing
 is in it (only its index was lost) says that too. Rounds are counted from 1, as
 the board shows them. A verdict about what is there, so the exit status is 0
 for all of these (as for a stopped session), 1 for FAIL (cli/replay.py).
-Before, a cut file said a plain `verify: PASS`. A recording whose session has
-no round recorded whole (cut, or stopped, before round 1 ended) is refused
-(`verify_recording` raises InputError: replay/check.py `no_whole_round`; a
-damaged one still FAILs, naming the part): it said "PASS as far as the file
-goes" with exit 0 about nothing.
+Before, a cut file said a plain `verify: PASS`. A file cut (or without its
+session's end) before round 1 ended is refused (`verify_recording` raises
+InputError: replay/check.py `no_whole_round`; a damaged one still FAILs,
+naming the part): it said "PASS as far as the file goes" with exit 0 about no
+whole round. A session that ended in round 1 (aborted, interrupted) is
+verified: its whole life is in the file, and the verdict says where it stopped.
 """
 
 from __future__ import annotations
@@ -193,6 +194,6 @@ def verify_recording(path) -> Verification:
         errors.append(f"{len(log.bad)} messages do not decode: {log.bad[0].reason}")
     result.error = "; ".join(errors) or result.error
     empty = no_whole_round((r.event for r in log.events), log.truncated)
-    if empty and result.ok:  # a PASS about nothing (a FAIL, a damaged part, is said as one)
+    if empty and result.ok and not result.ended:  # a PASS about nothing whole (a FAIL, a damaged part, says so)
         raise InputError(f"{empty}; nothing to verify", path)
     return result

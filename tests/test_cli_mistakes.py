@@ -183,8 +183,6 @@ CASES = [
          "holds no whole round: the file is cut before round 1 of "),
     Case("rebuild a file cut before its first round", ["rebuild", "cut.mcap", "--out", "out"],
          "holds no whole round: the file is cut before round 1 of "),
-    Case("verify a session stopped in round 1", ["replay", "stopped0.mcap", "--verify"],
-         "holds no whole round: the session ended (interrupted (SIGINT)) in round 1 of "),
     Case("rebuild a session stopped in round 1 beside a good one", ["rebuild", "rec.mcap", "stopped0.mcap", "--out",
                                                                     "out"], "nothing to rebuild (stopped0.mcap)"),
     Case("combine a policy of 0 rounds", ["combine", "policies", "zero.json"], "holds no whole round"),
@@ -291,7 +289,7 @@ def _no_round_files(root: Path) -> None:
     the sample's events up to its first RoundEnded in a file cut after its last chunk (summary and
     footer lost, as a crash leaves it); stopped0.mcap, its events up to the game's second
     turn, then the game's SessionEnded as its shell writes it (interrupted in round 1 after 2 turns), a
-    whole file; and zero.json, a learned policy of 0 rounds, no state updated."""
+    whole file (verified: its whole life is in it; not rebuilt: a policy of 0 rounds); and zero.json, a learned policy of 0 rounds, no state updated."""
 
     from pairplay.replay.mcapscan import scan
     from pairplay.replay.reader import read_log
@@ -319,7 +317,7 @@ def _no_round_files(root: Path) -> None:
     data = (root / "cut.mcap").read_bytes()
     (root / "cut.mcap").write_bytes(data[:chunks[-1].offset + chunks[-1].length])
     spec = json.loads((root / "policies" / "blind" / "game-00.json").read_text())
-    spec.update(rounds=0, visits=[0] * len(spec["visits"]))
+    spec.update(rounds=0, visits=[0] * len(spec["visits"]), q=[[0.0] * len(row) for row in spec["q"]])
     (root / "zero.json").write_text(json.dumps(spec))
 
 
