@@ -77,6 +77,40 @@ def test_every_option_a_verbs_module_names_is_one_of_that_verb(verb):
     assert sorted((line, o) for line, o in named if o not in known) == [], f"{module.name} names options {verb} lacks"
 
 
+def _functions(path: Path) -> dict[str, ast.FunctionDef]:
+    return {n.name: n for n in ast.parse(path.read_text()).body if isinstance(n, ast.FunctionDef)}
+
+
+@pytest.mark.parametrize("verb", list(VERBS))
+def test_every_option_a_function_another_verb_borrows_names_is_one_of_that_verb_too(verb):
+    """`lab` prints `session`'s interrupted line (cli/session.py print_interrupted): an option that line
+    names must be one of lab's as well (it said "--force reuses it"; lab has no --force)."""
+    module = ROOT / "cli" / f"{VERBS[verb][0].rsplit('.', 1)[1]}.py"
+    known = verb_options([verb])
+    _, chosen = build_parser([verb])
+    for action in chosen._actions:
+        if isinstance(action, argparse._SubParsersAction):
+            for sub in action.choices.values():
+                known |= {o for a in sub._actions for o in a.option_strings}
+    wrong = []
+    for node in ast.walk(ast.parse(module.read_text())):
+        if isinstance(node, ast.ImportFrom) and (node.module or "").startswith("pairplay.cli."):
+            lender = ROOT / "cli" / f"{node.module.rsplit('.', 1)[1]}.py"
+            if lender == module or not lender.exists():
+                continue
+            functions = _functions(lender)
+            for alias in node.names:
+                fn = functions.get(alias.name)
+                if fn is None or alias.name.startswith("add_"):  # add_*: argparse declarations, its own options
+                    continue
+                body = ast.Module(body=fn.body[1:] if ast.get_docstring(fn) else fn.body, type_ignores=[])
+                for n in ast.walk(body):
+                    if isinstance(n, ast.Constant) and isinstance(n.value, str):
+                        wrong += [f"{lender.name}:{n.lineno} {alias.name}: {o}"
+                                  for o in OPTION.findall(COMMAND.sub("", n.value)) if o not in known]
+    assert wrong == [], f"{verb} shows lines naming options it lacks"
+
+
 def test_every_pairplay_command_the_code_names_parses():
     wrong = []
     for folder in CODE:
