@@ -60,7 +60,7 @@ def partial_reason(fold: SessionFold, note: str = "", recovered: dict[str, str] 
     why = []
     e = fold.ended
     if e is None:
-        why.append(f"no SessionEnded: the recording stops after {len(fold.rounds)} rounds")
+        why.append(f"no SessionEnded: the recording stops after {len(fold.whole_rounds())} rounds")
     elif e.reason != "completed":
         where = f" in round {e.round + 1} after {e.turns_in_round} turns" if e.round >= 0 else ""  # from 1, as the board
         why.append(f"{e.reason}{f' ({e.detail})' if e.detail else ''} after {e.rounds_played} of "
@@ -98,7 +98,7 @@ def rebuild_events(events, source: str = "", truncated: bool = False, note: str 
             who = None
     policy = to_policy_file(q, np.array(fold.visits), greedy, algorithm=c.algorithm,
                             participant=c.persona or c.participant, persona=who, seed=c.seed, game=c.game_index,
-                            rounds=len(fold.rounds), config=c.learner_config(), software=__version__,
+                            rounds=len(fold.whole_rounds()), config=c.learner_config(), software=__version__,
                             reward_bonus=c.reward_bonus, partial=partial,
                             lspi=c.lspi_config() if fold.lspi is not None else None)
     return Rebuilt(source, c, fold, policy, truncated, note, partial)
@@ -122,7 +122,8 @@ CURVE_COLUMNS = ("round", "turns", "picks", "matches", "reward", "learned", "inc
 
 def curve_rows(fold: SessionFold) -> list[dict]:
     return [{"round": r, "turns": s.turns, "picks": 2 * s.turns, "matches": s.matches, "reward": s.reward,
-             "learned": s.learned, "inconsistent": s.inconsistent} for r, s in sorted(fold.rounds.items())]
+             "learned": s.learned, "inconsistent": s.inconsistent}
+            for r, s in sorted(fold.rounds.items()) if s.ended]  # whole rounds only (fold.py)
 
 
 def output_stem(source: str | Path) -> str:

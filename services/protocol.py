@@ -271,7 +271,7 @@ class StudyRunner:
                                        "the game did not end")
         self.data.append(j.GameEnded(session=config.session, participant=config.participant.split(":", 1)[1],
                                      outcome="completed" if completed else "aborted", reason=reason,
-                                     rounds_played=len(fold.rounds), policy=policy, questionnaire=answered))
+                                     rounds_played=len(fold.whole_rounds()), policy=policy, questionnaire=answered))
         self.data.write_tables()
         return self.data.state.games[config.session]
 
