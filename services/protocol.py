@@ -33,7 +33,6 @@ from typing import Callable
 
 from pairplay import __version__
 from pairplay.core.policies import users_from_policies
-from pairplay.replay.check import no_whole_round
 from pairplay.replay.fold import fold_events
 from pairplay.replay.reader import read_log
 from pairplay.replay.rebuild import rebuild_recording, write_outputs
@@ -261,7 +260,7 @@ class StudyRunner:
         fold = fold_events(r.event for r in recorded.events)
         completed = fold.ended is not None and fold.ended.reason == "completed"
         policy = ""
-        if fold.config is not None and not no_whole_round(r.event for r in recorded.events):  # else no policy
+        if fold.config is not None and fold.whole_rounds():  # a game stopped in round 1 has no policy to give
             written = write_outputs(rebuild_recording(path), self.data.folder / "policies")
             written[1].unlink()  # the learning curve is in the recording and the report
             policy = written[0].relative_to(self.data.folder).as_posix()
