@@ -25,6 +25,9 @@ def test_a_bar_is_shown_on_a_terminal_only_and_never_with_quiet(monkeypatch):
         with os.fdopen(slave, "w", closefd=False) as tty, os.fdopen(w, "w", closefd=False) as pipe:
             monkeypatch.setattr(sys, "stderr", tty)
             assert progress.shown(quiet=False) and not progress.shown(quiet=True)
+            monkeypatch.setenv("TQDM_DISABLE", "1")  # tqdm's own switch, honoured
+            assert not progress.shown(quiet=False)
+            monkeypatch.delenv("TQDM_DISABLE")
             with progress.bar(3, "x", "cell", quiet=False) as bar:
                 assert not bar.disable
             monkeypatch.setattr(sys, "stderr", pipe)
