@@ -10,11 +10,12 @@ nothing written) when REC is missing, empty or not MCAP (a file of nothing
 with its journal beside it, as a recorder killed before its first flush leaves
 it, is completed from the journal), holds no session
 (only MCAP's magic or header, another program's MCAP, no SessionStarted:
-replay/check.py `no_session`), or the output exists. A complete file (whole,
+replay/check.py `no_session`), or the output it would write exists. A complete file (whole,
 as its recorder finished it) is not copied: the line says it is complete and
 what its journal beside it, if any, holds (`nothing more: all N of its records
 are in the file`, or the N events it adds, then written to the output as for a
-cut file); with nothing recovered nothing is written (exit 0). A journal that
+cut file); with nothing recovered nothing is written (exit 0), and an existing output (an
+older version's copy) is neither refused nor touched. A journal that
 holds nothing more is stale: recover never removes a user's file unasked, it
 names `--discard-journal`, which removes such a journal (and only such a one:
 refused, nothing changed, when the journal holds something the file lacks or

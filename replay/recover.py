@@ -81,13 +81,12 @@ def recover(path: str | Path, output: str | Path | None = None, force: bool = Fa
     `admit`, its journal is beside it, as a recorder killed before its first flush leaves it) or holds no
     session (check.py `no_session`), unless it is cut or damaged and holds pairplay events (in it
     or in its journal), or if its journal is of another session;
-    OutputError if `output` exists (unless `force`) or is the input; the output
-    appears only when complete (pairplay.outputs)."""
+    OutputError if `output` is the input, or exists (unless `force`) when there is something to
+    write; the output appears only when complete (pairplay.outputs)."""
     path = check_recording(path, journal_ok=admit is not None)  # (a file of nothing: its journal holds it)
     output = Path(output) if output is not None else default_output(path)
     if output.resolve() == path.resolve():
         raise OutputError("recover writes a new file; give an output path other than the input", output)
-    check_output(output, force)
     log = read_log(path)
     why = no_session(log)
     journal, journal_error = _journal_beside(path, log) if admit is not None else (None, "")
@@ -112,6 +111,7 @@ def recover(path: str | Path, output: str | Path | None = None, force: bool = Fa
                          journal_present=added.present if added is not None else 0,
                          journal_torn=journal.torn if journal is not None else "", journal_error=journal_error,
                          complete=complete)
+    check_output(output, force)  # only an output that will be written (a complete file writes none)
     messages, ended, last_round = 0, False, -1
     schema_ids: dict[int, int] = {}
     channel_ids: dict[int, int] = {}

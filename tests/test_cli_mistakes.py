@@ -29,6 +29,7 @@ from pathlib import Path
 import pytest
 
 from pairplay.cli.main import main
+from pairplay.replay.mcapscan import scan
 
 from cli_zygote import Zygote
 from hints import bad_options
@@ -85,7 +86,8 @@ CASES = [
     Case("rebuild a missing file", ["rebuild", "rec.mcap", "missing.mcap", "--out", "out"], "no such recording"),
     Case("profile a missing file", ["profile", "missing.json"], "no such policy file"),
     # item 3: an existing output is never replaced without --force; outputs never collide
-    Case("recover -o an existing file", ["recover", "rec.mcap", "-o", "existing.mcap"], "exists; --force"),
+    # (of a cut file: a complete one writes nothing, so no output of it is refused)
+    Case("recover -o an existing file", ["recover", "cut.mcap", "-o", "existing.mcap"], "exists; --force"),
     Case("recover beside its existing output", ["recover", "old.mcap"], "old.recovered.mcap"),
     Case("view --out an existing .rrd", ["view", "--recording", "rec.mcap", "--out", "existing.rrd"], "exists; --force"),
     Case("view's default .rrd exists", ["view", "--recording", "rec.mcap"], "rec.rrd"),
@@ -156,7 +158,7 @@ CASES = [
     Case("study --out on a read-only file system", ["study", "--quiet", "--out", "ro/study"], "read-only", readonly=True),
     Case("session --out on a read-only file system", SIM + ["--out", "ro/rec"], "read-only", readonly=True),
     Case("combine -o on a read-only file system", ["combine", "policies", "-o", "ro/m.json"], "read-only", readonly=True),
-    Case("recover -o on a read-only file system", ["recover", "rec.mcap", "-o", "ro/r.mcap"], "read-only", readonly=True),
+    Case("recover -o on a read-only file system", ["recover", "cut.mcap", "-o", "ro/r.mcap"], "read-only", readonly=True),
     Case("rebuild --out on a read-only file system", ["rebuild", "rec.mcap", "--out", "ro"], "read-only", readonly=True),
     # a file holding no session (a new user's trial, 2026-11-30): recover wrote an empty file and exit 0,
     # verify said it on stdout with exit 1, rebuild of such files exit 1, view printed 3 lines
@@ -206,7 +208,7 @@ CASES = [
     Case("run recorder --out where no folder can be made", ["run", "recorder", "--session", "s", "--out", "/proc/x"],
          "cannot write there: No such file or directory (/proc/x)"),
     Case("rebuild --out where no folder can be made", ["rebuild", "rec.mcap", "--out", "/proc/x"], "(/proc/x)"),
-    Case("recover -o where no file can be made", ["recover", "rec.mcap", "-o", "/proc/x.mcap"], "(/proc)"),
+    Case("recover -o where no file can be made", ["recover", "cut.mcap", "-o", "/proc/x.mcap"], "(/proc)"),
     Case("combine -o where no file can be made", ["combine", "policies", "-o", "/proc/m.json"], "(/proc)"),
     Case("counterfactual --out where no folder can be made", ["counterfactual", "rec.mcap", "--out", "/proc/x"],
          "(/proc/x)"),
@@ -225,7 +227,8 @@ def _snapshot(root: Path) -> dict[str, str]:
 
 def _fixtures(root: Path) -> None:
     shutil.copy(SAMPLE, root / "rec.mcap")
-    shutil.copy(SAMPLE, root / "old.mcap")
+    last = scan(SAMPLE).chunks[-1]  # cut after its last chunk, as a crash leaves it: recover has work to do
+    (root / "old.mcap").write_bytes(SAMPLE.read_bytes()[:last.offset + last.length])
     (root / "other").mkdir()
     shutil.copy(SAMPLE, root / "other" / "rec.mcap")
     (root / "old.recovered.mcap").write_bytes(b"the user's file")

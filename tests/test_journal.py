@@ -465,6 +465,11 @@ def test_recover_of_a_complete_file_writes_nothing_and_names_a_stale_journal(tmp
     assert ran.stdout.strip() == f"{path}: complete already ({len(read_log(path).events)} messages; the session's " \
         "end was not recorded: a partial session); nothing to recover, nothing written", ran.stdout
     assert not (tmp_path / "j1.recovered.mcap").exists()
+    (tmp_path / "j1.recovered.mcap").write_bytes(b"an older version's copy")  # not refused: nothing is written
+    ran = pairplay_cli("recover", path)
+    assert ran.returncode == 0 and "nothing written" in ran.stdout, ran.stderr
+    assert (tmp_path / "j1.recovered.mcap").read_bytes() == b"an older version's copy"
+    (tmp_path / "j1.recovered.mcap").unlink()
     journal = journal_of(path, events)  # a stale journal: everything it holds is in the file
     ran = pairplay_cli("recover", path)
     assert ran.returncode == 0 and ran.stderr == "", ran.stderr
