@@ -57,7 +57,10 @@ def test_a_fix_naming_an_option_is_shown_only_by_a_verb_that_has_it(tmp_path, ca
     err = OutputError("exists", tmp_path / "m.json", fix="--force replaces it", option="--force")
     assert err.line({"--force"}) == f"exists; --force replaces it ({tmp_path / 'm.json'})"
     assert err.line({"--out"}) == str(err) == f"exists ({tmp_path / 'm.json'})"  # a log, a web page, a bus event
-    (tmp_path / "r.mcap").write_bytes((ROOT / "recordings" / "samples" / "sim-ashley.mcap").read_bytes())
+    from pairplay.replay.mcapscan import scan
+    sample = ROOT / "recordings" / "samples" / "sim-ashley.mcap"
+    last = scan(sample).chunks[-1]  # cut: recover has a file to write (a complete one writes none)
+    (tmp_path / "r.mcap").write_bytes(sample.read_bytes()[:last.offset + last.length])
     (tmp_path / "mine.mcap").write_bytes(b"the user's")
     assert main(["recover", str(tmp_path / "r.mcap"), "-o", str(tmp_path / "mine.mcap")]) == 2
     line = capsys.readouterr().err.strip()
