@@ -143,7 +143,9 @@ def recover(path: str | Path, output: str | Path | None = None, force: bool = Fa
             elif isinstance(record, Metadata):
                 writer.add_metadata(record.name, dict(record.metadata))
         if added is not None:
-            by_topic = {topic: cid for cid, topic in topics.items()}
+            # the output's ids: channel_ids maps the source's to them (they match only if both writers numbered
+            # alike, which a file another tool wrote need not)
+            by_topic = {topic: channel_ids[cid] for cid, topic in topics.items()}
             last_ns = max((r.log_time for r in checked.records if isinstance(r, Message)), default=0)
             for key, payload, log_ns, seq in added.items:
                 channel = by_topic.get(key)

@@ -502,3 +502,25 @@ def test_a_journal_holding_more_than_a_complete_file_is_recovered_and_never_disc
     ran = pairplay_cli("recover", cut, "--discard-journal")
     assert ran.returncode == 2 and "is not complete (cut short)" in ran.stderr, ran.stderr
     assert not (tmp_path / "j2.recovered.mcap").exists()
+
+
+def test_what_the_journal_adds_goes_on_the_output_channel_of_its_topic_whatever_the_numbering(tmp_path, monkeypatch):
+    """recover put a journal's events on the channel with the source file's id, which is the output's
+    only while both writers number channels alike (a file another tool wrote, ids not 1, 2, ...)."""
+    from mcap.writer import Writer
+
+    import pairplay.replay.recover as recover_module
+
+    class Shifted(Writer):  # numbers its channels from 2: channel 1 is an unused one it registers first
+        def start(self, *args, **kwargs):
+            super().start(*args, **kwargs)
+            super().register_channel("unused", "json", 0)
+    monkeypatch.setattr(recover_module, "Writer", Shifted)
+    events = [start()] + [pick(s) for s in range(1, 41)]
+    path = cut_recording(tmp_path, events[:21])
+    journal_of(path, events)
+    done = recover(path, admit=admit)
+    assert done.from_journal == 20
+    log = read_log(done.output)
+    assert [r.event.seq for r in log.events if r.event.source == "participant"] == list(range(1, 41))
+    assert all(r.key == event_key("j1", r.event.source, type(r.event).__name__) for r in log.events)
