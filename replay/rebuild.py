@@ -60,7 +60,8 @@ def partial_reason(fold: SessionFold, note: str = "", recovered: dict[str, str] 
     why = []
     e = fold.ended
     if e is None:
-        why.append(f"no SessionEnded: the recording stops after {len(fold.whole_rounds())} rounds")
+        n = len(fold.whole_rounds())
+        why.append(f"no SessionEnded: the recording stops after {n} round{'s' * (n != 1)}")
     elif e.reason != "completed":
         where = f" in round {e.round + 1} after {e.turns_in_round} turns" if e.round >= 0 else ""  # from 1, as the board
         why.append(f"{e.reason}{f' ({e.detail})' if e.detail else ''} after {e.rounds_played} of "
