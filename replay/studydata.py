@@ -227,7 +227,8 @@ class StudyData:
                 raise StudyDataError(err.args[0]) from None
             if label and self.key_file is None:
                 raise StudyDataError("this study has no key file: register by pseudonymous id only "
-                                     "(or create the study with --key-file PATH outside its folder)")
+                                     "(or create the study with `pairplay protocol init FOLDER --key-file PATH`, "
+                                     "the key file outside its folder)")
             pid = f"p{self.state.next_number:02d}"
             if label:
                 with open_key_file(self.key_file) as f:

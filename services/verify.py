@@ -33,7 +33,12 @@ as far as the file goes: the file is cut, the session's end is missing
 is in it (only its index was lost) says that too. Rounds are counted from 1, as
 the board shows them. A verdict about what is there, so the exit status is 0
 for all of these (as for a stopped session), 1 for FAIL (cli/replay.py).
-Before, a cut file said a plain `verify: PASS`.
+Before, a cut file said a plain `verify: PASS`. A file cut (or without its
+session's end) before round 1 ended is refused (`verify_recording` raises
+InputError: replay/check.py `no_whole_round`; a damaged one still FAILs,
+naming the part): it said "PASS as far as the file goes" with exit 0 about no
+whole round. A session that ended in round 1 (aborted, interrupted) is
+verified: its whole life is in the file, and the verdict says where it stopped.
 """
 
 from __future__ import annotations
@@ -41,9 +46,10 @@ from __future__ import annotations
 import json
 from dataclasses import dataclass, field
 
-from pairplay.replay.reader import read_log
 from pairplay.errors import InputError
+from pairplay.replay.check import no_whole_round
 from pairplay.replay.forgery import contradiction
+from pairplay.replay.reader import read_log
 from pairplay.schemas.events import RoundEnded, SessionEnded, SessionStarted
 
 from pairplay.services.game import GameLogic
@@ -171,8 +177,9 @@ def reach_of(end, rounds: int, how: str) -> str:
 
 
 def verify_recording(path) -> Verification:
-    """Verify the recording at `path`; InputError if it contradicts itself about who published what
-    (replay/forgery.py: two events claiming one source's seq, a forged start or end)."""
+    """The verification of the recording at `path` (module rule); InputError if it contradicts itself
+    about who published what (replay/forgery.py: two events claiming one game seq, a forged start or end),
+    or if it would PASS but holds no round recorded whole (replay/check.py `no_whole_round`)."""
     log = read_log(path)
     forged = contradiction(r.event for r in log.events)
     if forged:
@@ -191,4 +198,7 @@ def verify_recording(path) -> Verification:
     if log.bad:
         errors.append(f"{len(log.bad)} messages do not decode: {log.bad[0].reason}")
     result.error = "; ".join(errors) or result.error
+    empty = no_whole_round((r.event for r in log.events), log.truncated)
+    if empty and result.ok and not result.ended:  # a PASS about nothing whole (a FAIL, a damaged part, says so)
+        raise InputError(f"{empty}; nothing to verify", path)
     return result

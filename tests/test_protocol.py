@@ -145,6 +145,30 @@ def test_an_aborted_game_is_journaled_with_its_reason_and_stays_open(tmp_path):
     assert result.ok, result
 
 
+class Idle(ScriptedPlayer):
+    """Picks nothing: the game is aborted in its first round."""
+
+    def handle(self, e):
+        return []
+
+
+def test_a_game_aborted_in_its_first_round_gets_no_policy_of_0_rounds(tmp_path):
+    """Before: its recording was rebuilt into policies/ as a policy of 0 rounds (replay/check.py
+    no_whole_round: an input that yields nothing gives no output)."""
+    data = StudyData.create(tmp_path / "s", STUDY)
+    pid = data.register("phase1")
+    with Bus(BusOptions()) as bus:
+        runner = StudyRunner(data, bus)
+
+        def watch(e):
+            if type(e).__name__ == "RoundStarted" and e.round == 0:
+                threading.Thread(target=runner.abort, args=("the participant had to leave",)).start()
+        game = runner.run_game(pid, "phase1", 0, Idle("tatiana"), on_event=watch)
+    assert game.ended.outcome == "aborted" and game.ended.rounds_played == 0
+    assert game.ended.policy == "" and not list((data.folder / "policies").rglob("*.json"))
+    assert verify_recording(data.folder / game.recording).ok  # its whole (short) life verifies
+
+
 def test_export_holds_everything_of_one_participant_with_a_readme(played, tmp_path):
     data = copy_study(played, tmp_path)
     from pairplay.replay.wal import JournalWriter
