@@ -17,6 +17,7 @@ import os
 import queue
 import subprocess
 import sys
+import threading
 import time
 from pathlib import Path
 
@@ -32,8 +33,9 @@ from pairplay.schemas.keys import alive_key, event_key
 from pairplay.schemas.session import SessionConfig
 from pairplay.services.bus import Bus, BusOptions
 from pairplay.services.guard import Guard
+from pairplay.services.session import run_session
 
-from busutil import wait_until
+from busutil import connector, wait_until
 
 
 def session_proc(tmp_path, *args):
@@ -214,16 +216,33 @@ def test_rebuild_and_verify_report_a_forged_end_instead_of_a_session_of_0_rounds
 
 
 def test_a_forged_end_every_service_refuses_is_recorded_and_the_session_plays_to_its_end(tmp_path):
-    # the trial's sloppy forger: an end at a seq the game passed long ago; every listener refuses it
-    def forger(client, seen, _endpoint):
+    # the trial's sloppy forger: an end at a seq the game passed long ago; every listener refuses it.
+    # In-process, the game waiting for the forger's token: a 3-round session is over in a blink, and the
+    # forger must be subscribed before it starts
+    config = SessionConfig(session="forge3", participant="sim:ashley", persona="ashley", seed=1, rounds=3)
+    box: dict = {}
+    ready = threading.Event()
+
+    def on_bus(bus):
+        box["bus"] = bus
+        ready.set()
+
+    def run():
+        box["path"] = run_session(config, tmp_path / "forge3.mcap", on_bus=on_bus, wait_also=("forger",))
+    runner = threading.Thread(target=run, daemon=True)
+    runner.start()
+    assert ready.wait(30)
+    with connector(box["bus"]) as client:
+        seen = game_events(client, "forge3")
+        client.alive(alive_key("forge3", "forger"))  # the game starts now
         while not isinstance(decode_event(seen.get(timeout=60)), ev.SuggestionRequested):
             pass
         client.put(*forge("forge3", ev.SessionEnded(reason="forged"), 2))
-    status, out, err = forged_session(tmp_path, "forge3", forger, "--rounds", "3")
-    assert status == 0, err[-2000:]
-    assert "rounds played: 3" in out and not said(err)
+        runner.join(60)
+    assert not runner.is_alive() and box.get("path") is not None  # no ForgedEvent: it played to its end
     events = [r.event for r in read_log(tmp_path / "forge3.mcap").events]
     assert [x.reason for x in events if isinstance(x, ev.SessionEnded)] == ["completed"]
+    assert len(read_log(tmp_path / "forge3.mcap").of("RoundEnded")) == 3
     named = [x for x in events if isinstance(x, ev.MessageRejected) and x.source == "game"]
     assert named and "forged: SessionEnded seq 2 claiming source 'game'" in named[0].reason
     assert any(isinstance(x, ev.MessageRejected) and x.source == "recorder" and "not after the events" in x.reason
