@@ -46,7 +46,7 @@ def float_at_least(low: float, above: bool = False):
     return parse
 
 
-SEED_MAX = 2**64 - 1  # core/rng.py SEED_RANGE (not imported: it loads the compiled kernels; a test pins it)
+SEED_MAX = 2**64 - 1  # schemas/session.py SEED_RANGE, core/rng.py's (not imported: the parser stays light; a test pins it)
 
 
 def seed_number(text: str) -> int:
@@ -57,6 +57,18 @@ def seed_number(text: str) -> int:
         raise argparse.ArgumentTypeError(f"not an integer: {text!r}") from None
     if not 0 <= value <= SEED_MAX:
         raise argparse.ArgumentTypeError(f"a seed is 0..{SEED_MAX}, got {value}")
+    return value
+
+
+GAME_INDEX_MAX = 2**63 - 1  # schemas/session.py GAME_INDEX_RANGE, core/rng.py's (a test pins it)
+
+
+def game_index(text: str) -> int:
+    """A game of a seed: an integer 0..GAME_INDEX_MAX (`--game-index 99999999999999999999` passed
+    `non_negative`, started the bus and ended in core/rng.py's range check, a traceback)."""
+    value = int_at_least(0)(text)
+    if value > GAME_INDEX_MAX:
+        raise argparse.ArgumentTypeError(f"a game index is 0..{GAME_INDEX_MAX}, got {value}")
     return value
 
 
