@@ -72,6 +72,23 @@ def game_index(text: str) -> int:
     return value
 
 
+def int_between(low: int, high: int, why: str = ""):
+    """An argparse type: an integer low..high; `why` (the bound's reason) is said when refused."""
+    def parse(text: str) -> int:
+        value = int_at_least(low)(text)
+        if value > high:
+            raise argparse.ArgumentTypeError(f"must be {low}..{high}{f' ({why})' if why else ''}, got {value}")
+        return value
+    parse.__name__ = f"integer {low}..{high}"
+    return parse
+
+
+def workers(text: str) -> int:
+    """A number of local worker processes: 1..pairplay.processes.max_workers() (its docstring says why)."""
+    from pairplay.processes import max_workers
+    return int_between(1, max_workers(), "the CPUs this process may use: more only queue cells")(text)
+
+
 def port_or_any(text: str) -> int:
     """A TCP port, or 0 for one the system picks."""
     value = int_at_least(0)(text)

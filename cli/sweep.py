@@ -22,7 +22,7 @@ from pathlib import Path
 
 from tqdm import tqdm
 
-from pairplay.cli.args import count
+from pairplay.cli.args import workers
 from pairplay.errors import OutputError
 from pairplay.outputs import check_folder, write_text
 from pairplay.report.sweep import GridError, finished_cells, read_grid, run_sweep, write_sweep
@@ -32,7 +32,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("grid", type=Path, help="the sweep's TOML file ([study], [grid], seeds, reuse)")
     p.add_argument("--out", type=Path, help="result folder (default out/sweep-<grid file name>)")
     p.add_argument("--scheduler", metavar="ADDRESS", help="a Dask distributed scheduler (tcp://host:port)")
-    p.add_argument("--workers", type=count, default=1, help="local processes when no --scheduler (default 1)")
+    p.add_argument("--workers", type=workers, default=1,
+                   help="local processes when no --scheduler (default 1; at most the CPUs this process may use)")
     p.add_argument("--force", action="store_true", help="replace a folder that holds another grid's sweep, or write into one that holds other files")
 
 

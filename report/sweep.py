@@ -41,7 +41,7 @@ from typing import Callable, Iterable
 import numpy as np
 
 from pairplay.outputs import output_file, write_text
-from pairplay.processes import worker_pool
+from pairplay.processes import check_workers, worker_pool
 from pairplay.core.rng import SEED_RANGE
 from pairplay.report.study import SettingError, StudySettings
 
@@ -230,6 +230,8 @@ def run_sweep(grid: Grid, out: str | Path, *, scheduler: str | None = None, work
 
     `scheduler`: a Dask distributed scheduler address (tcp://host:port), or None to
     run here (`workers` > 1: that many local processes)."""
+    if scheduler is None:
+        check_workers(workers)  # before anything is written
     out = Path(out)
     (out / "cells").mkdir(parents=True, exist_ok=True)
     cells = grid.cells()

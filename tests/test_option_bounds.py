@@ -56,3 +56,37 @@ def test_a_study_files_seed_is_in_the_seed_range(seed):
     from pairplay.schemas.study import StudyFileError, example_text, parse_study
     with pytest.raises(StudyFileError, match="study.seed: must be 0..18446744073709551615"):
         parse_study(example_text().replace("seed = 0", f"seed = {seed}", 1), "s.toml")
+
+
+def test_sweep_workers_are_bounded_by_the_cpus_in_the_parser_and_in_run_sweep(tmp_path, capsys):
+    from pairplay.processes import check_workers, max_workers
+    from pairplay.report.sweep import read_grid, run_sweep
+    top = max_workers()
+    assert top >= 2 and check_workers(top) == top
+    grid = tmp_path / "g.toml"
+    grid.write_text('seeds = 1\n[study]\npersonas = "blind"\ngames = 1\nrounds = 1\neval_rounds = 1\n')
+    for n in ("1000", str(top + 1)):
+        assert _status(["sweep", "--quiet", str(grid), "--workers", n, "--out", str(tmp_path / "o")]) == 2
+        err = capsys.readouterr().err
+        assert f"--workers: must be 1..{top}" in err and err.count("\n") == 1
+    with pytest.raises(ValueError, match=f"workers must be 1..{top}"):
+        run_sweep(read_grid(grid), tmp_path / "o", workers=1000)
+    assert not (tmp_path / "o").exists()
+
+
+def test_protocol_register_takes_the_consoles_bound(tmp_path, capsys):
+    from pathlib import Path
+
+    import pairplay.services.console as console
+    from pairplay.replay.studydata import REGISTER_AT_ONCE
+    folder = tmp_path / "study"
+    assert main(["protocol", "init", str(folder), "--study", "thesis-ch7"]) == 0
+    capsys.readouterr()
+    for n in ("100000", str(REGISTER_AT_ONCE + 1), "0"):
+        assert _status(["protocol", "register", str(folder), "--count", n]) == 2
+        err = capsys.readouterr().err
+        assert "--count" in err and err.count("\n") == 1
+    assert main(["protocol", "register", str(folder), "--count", str(REGISTER_AT_ONCE)]) == 0
+    assert len(capsys.readouterr().out.split()) == REGISTER_AT_ONCE
+    page = (Path(console.__file__).parent / "static" / "console.html").read_text()
+    assert f'id="register-count" type="number" min="1" max="{REGISTER_AT_ONCE}"' in page  # the page says it too
