@@ -95,11 +95,14 @@ class StudySettings:
         """Whether run_study runs the speed-up (algorithm 5): it holds each persona out of the others."""
         return not self.train_only and len(self.persona_list()) >= 2
 
-    def check(self, speed_up: bool | None = None, spell: Callable[[str], str] = str) -> list:
+    def check(self, speed_up: bool | None = None, spell: Callable[[str], str] = str,
+              compare_learners: bool | None = None) -> list:
         """The personas, once every setting is known to make the study asked for; raises SettingError
         (its `key`, the setting's field name) for the first that core cannot run or that would run
         something else. `speed_up`: whether the speed-up runs (default: as run_study decides; a sweep
-        says `reuse`). `spell` names a setting in the message (the CLI's `--reuse-last`)."""
+        says `reuse`). `compare_learners`: whether LSPI is compared with Q-learning by snapshots (default: as
+        run_study decides, lspi without train_only; a sweep's cells do not). `spell` names a setting in
+        the message (the CLI's `--reuse-last`)."""
         personas = self.persona_list()
         lo, hi = SEED_RANGE
         if not lo <= self.seed <= hi:
@@ -119,6 +122,12 @@ class StudySettings:
             self.lspi()
         except ValueError as exc:
             raise SettingError("lspi_ridge" if "ridge" in str(exc) else "lspi_every", str(exc)) from None
+        if compare_learners is None:
+            compare_learners = self.algorithm == "lspi" and not self.train_only
+        if compare_learners and self.rounds < SPEED_EVERY:  # no snapshot: the comparison was dropped silently
+            raise SettingError("rounds", f"must be at least {SPEED_EVERY} with {spell('algorithm')} lspi (it is "
+                               f"compared with Q-learning by greedy snapshots every {SPEED_EVERY} rounds); "
+                               f"got {self.rounds}")
         when = "" if speed_up is not None else f" (2+ personas without {spell('train_only')})"
         if speed_up if speed_up is not None else self.runs_speed_up():
             every = study.REUSE_SNAPSHOT_EVERY
@@ -439,6 +448,7 @@ def _run(args, out, progress_bar, personas, config, names, timings, start, figur
 
     t0 = time.perf_counter()
     lspi = args.lspi()
+    # check() refused fewer rounds than SPEED_EVERY unless --train-only (which needs no snapshot)
     snapshot_every = SPEED_EVERY if lspi is not None and args.rounds >= SPEED_EVERY else None
     with progress_bar(len(personas) * args.games * args.rounds, "training") as bar:
         training = study.train(personas, args.games, args.rounds, args.seed, config, progress=_progress(bar),

@@ -36,6 +36,7 @@ STUDY_MISTAKES = [
     (["--rounds", "10", "--reuse-last", "50"], "--reuse-last: must be below --rounds 10"),
     (["--rounds", "60", "--reuse-last", "60"], "--reuse-last: must be below --rounds 60"),
     (["--personas", "nobody"], "--personas: unknown persona 'nobody'"),
+    (["--personas", "blind", "--algorithm", "lspi", "--rounds", "9"], "--rounds: must be at least 10 with --algorithm lspi"),
 ]
 
 
