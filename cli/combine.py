@@ -8,7 +8,11 @@ policy given twice (the same file, a folder named twice, or two files holding
 the same learning: it would weigh double), a profile of a participant with a
 single policy (algorithm 3 compares policies: it would say 0% / 0%), an
 --exclude naming no participant, policies of different reward rules (the
-files of each rule are named), and an existing --out without --force.
+files of each rule are named), a learned policy that learned nothing (0 rounds,
+no state ever updated, its Q-table all 0: an older rebuild of a recording cut
+before its first round wrote one; it would count as a participant who agrees
+with everything; a table written by hand, with values, is taken),
+and an existing --out without --force.
 """
 
 from __future__ import annotations
@@ -29,6 +33,9 @@ from pairplay.errors import InputError, OptionError
 from pairplay.outputs import check_output
 from pairplay.schemas.policy import read_policy, write_policy
 from pairplay.cli.args import add_force, non_negative, seed_number
+
+
+LEARNED = ("q-learning", "lspi", "pi-reuse")  # policies a session learned (not combined, oracle or fixed ones)
 
 
 def _policy_paths(paths: list[Path]) -> list[Path]:
@@ -78,6 +85,10 @@ def _load(args) -> tuple[list, list[str]]:
     files = _policy_paths(args.policies)
     policies = [read_policy(f) for f in files]
     names = [str(f) for f in files]
+    for p, name in zip(policies, names):
+        if p.algorithm in LEARNED and p.rounds == 0 and not any(p.visits) and not any(map(any, p.q)):
+            raise InputError("holds no whole round: a policy of 0 rounds that learned nothing (no state updated, "
+                             "its Q-table all 0); leave it out", name)
     check_distinct(policies, names)
     return policies, names
 

@@ -114,7 +114,8 @@ def run(args: argparse.Namespace) -> int:
               file=sys.stderr)
         return 2
     if getattr(stop, "why", "") and summary:
-        return print_interrupted(summary, path, stop.why, config.rounds)  # no reading the file back: 2 s
+        return print_interrupted(summary, path, stop.why, config.rounds,  # no reading the file back: 2 s
+                                 "the id stays taken: choose another --session")  # (lab has no --force)
     from pairplay.replay.fold import fold_events
     from pairplay.replay.reader import read_log
 

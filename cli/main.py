@@ -1,7 +1,10 @@
 """`pairplay <verb>`: one command line whose verbs match what a researcher does.
 
 Rule: a user's mistake is ONE line on stderr, `pairplay <verb>: <what>
-(<where>)`, and exit 2: argparse's own refusals (Parser.error), any
+(<where>)`, and exit 2: no verb (`pairplay: no verb given: one of study, ...
+(see pairplay --help)`; it printed the whole help on stdout with exit 2), no
+action of a verb that has them (`pairplay protocol: no action given: one of
+check, init, ...`, `pairplay run`'s service alike), argparse's own refusals (Parser.error), any
 `pairplay.errors.UserError` a verb raises, and an OSError (a file or port the
 system refused), whenever it comes (before the work or during it: a full disk
 part way). A session whose recording could not be written (`RecordingFailed`,
@@ -98,7 +101,19 @@ class Parser(argparse.ArgumentParser):
         return namespace, extra
 
     def error(self, message: str):
-        self.exit(2, f"{self.prog}: {message} (see {self.prog} --help)\n")
+        self.exit(2, f"{self.prog}: {self.choice_missing(message) or message} (see {self.prog} --help)\n")
+
+    def choice_missing(self, message: str) -> str:
+        """`no ACTION given: one of check, init, ...` when what is missing is a choice of words (a verb's
+        action, `run`'s service), else "": the choices said on the line, not only its name."""
+        prefix = "the following arguments are required: "
+        if not message.startswith(prefix):
+            return ""
+        first = message[len(prefix):].split(", ")[0]
+        for action in self._actions:
+            if not action.option_strings and action.choices and first in (action.metavar, action.dest):
+                return f"no {first.lower()} given: one of {', '.join(action.choices)}"
+        return ""
 
 
 def build_parser(argv: list[str]) -> tuple[argparse.ArgumentParser, argparse.ArgumentParser | None]:
@@ -261,12 +276,12 @@ def _main(argv: list[str]) -> int:
               f"(see pairplay {misplaced[0]} --help)",
               file=sys.stderr)
         return 2
-    parser, _ = build_parser(argv)
+    parser, chosen = build_parser(argv)
     args, extra = parser.parse_known_args(argv)
     if extra:  # said by the parser of the verb (or its action) that met them, naming it
         args._usage_parser.error(f"unrecognized arguments: {' '.join(extra)}")
-    if not args.verb:
-        parser.print_help()
+    if not args.verb:  # a mistake: one line, as any (module rule); `pairplay --help` prints the help on stdout
+        print(f"pairplay: no verb given: one of {', '.join(VERBS)} (see pairplay --help)", file=sys.stderr)
         return 2
     configure_logging(args.verbose, args.quiet)
     module = importlib.import_module(VERBS[args.verb][0])
@@ -296,8 +311,8 @@ def _main(argv: list[str]) -> int:
             raise
         print(f"pairplay {args.verb}: {interrupted_what()}; nothing more was written", file=sys.stderr)
         return exit_code_of(signal_received() or signal.SIGINT)
-    except UserError as err:
-        print(f"pairplay {_who(args)}: {err.line()}", file=sys.stderr)
+    except UserError as err:  # a fix naming an option this verb lacks is left out (errors.UserError)
+        print(f"pairplay {_who(args)}: {err.line(options_of(chosen, args))}", file=sys.stderr)
         return 2
     except OSError as err:  # the file system or network refused: the user's setup, not our bug
         print(f"pairplay {_who(args)}: {os_error_line(err)}", file=sys.stderr)
@@ -322,6 +337,21 @@ def recording_failed_line(err: BaseException) -> str | None:
     path = err.path or "the recording"
     return (f"writing {path} failed ({err.reason}); the session stopped; the file is readable up to the "
             f"failure: pairplay recover {path}")
+
+
+def options_of(verb: argparse.ArgumentParser | None, args: argparse.Namespace) -> frozenset[str]:
+    """The options a user can give the verb that ran (`verb`'s parser), and its action's when it has
+    one (`protocol init --key-file`): what a line's hints may name."""
+    if verb is None:
+        return frozenset()
+    found = set()
+    for action in verb._actions:
+        found.update(action.option_strings)
+        if isinstance(action, argparse._SubParsersAction):
+            chosen = action.choices.get(getattr(args, action.dest, None) or "")
+            if chosen is not None:
+                found.update(o for a in chosen._actions for o in a.option_strings)
+    return frozenset(found)
 
 
 def _who(args: argparse.Namespace) -> str:

@@ -8,7 +8,9 @@ never collide: X.mcap and X.recovered.mcap keep theirs apart), and, unless
 MCAP file, none given twice, no two giving the same output names, and no
 output may exist unless --force, and every REC must hold a session (a
 SessionStarted: replay/check.py `read_session`; a stub left by an old
-version's failed start, another program's MCAP) (one line, exit 2, nothing
+version's failed start, another program's MCAP) with a round recorded whole
+(`no_whole_round`: a file cut, or a session stopped, before round 1 ended gave
+a policy of 0 rounds, exit 0) (one line, exit 2, nothing
 written: the others are not rebuilt either, so a rerun after removing it
 writes them all). Writing is all or nothing (pairplay/outputs.py `all_or_nothing`): a full disk
 or a signal part way removes the outputs and folders this run had made, and

@@ -10,7 +10,16 @@ nothing written) when REC is missing, empty or not MCAP (a file of nothing
 with its journal beside it, as a recorder killed before its first flush leaves
 it, is completed from the journal), holds no session
 (only MCAP's magic or header, another program's MCAP, no SessionStarted:
-replay/check.py `no_session`), or the output exists.
+replay/check.py `no_session`), or the output it would write exists. A complete file (whole,
+as its recorder finished it) is not copied: the line says it is complete and
+what its journal beside it, if any, holds (`nothing more: all N of its records
+are in the file`, or the N events it adds, then written to the output as for a
+cut file); with nothing recovered nothing is written (exit 0), and an existing output (an
+older version's copy) is neither refused nor touched. A journal that
+holds nothing more is stale: recover never removes a user's file unasked, it
+names `--discard-journal`, which removes such a journal (and only such a one:
+refused, nothing changed, when the journal holds something the file lacks or
+cannot be read, or when the file is not complete).
 """
 
 from __future__ import annotations
@@ -19,6 +28,7 @@ import argparse
 import logging
 
 from pairplay.cli.args import add_force
+from pairplay.errors import OptionError
 
 log = logging.getLogger("pairplay.recover")
 
@@ -27,13 +37,24 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("recording", metavar="REC")
     p.add_argument("-o", "--output", help="output file (default <stem>.recovered.mcap beside REC)")
     add_force(p, "an existing output file")
+    p.add_argument("--discard-journal", action="store_true",
+                   help="remove the journal beside a complete REC when it holds nothing REC lacks (a stale one)")
 
 
 def run(args: argparse.Namespace) -> int:
     from pairplay.replay.recover import recover
     from pairplay.services.walmerge import admit
 
+    if args.discard_journal:  # decided before anything is written: only a stale journal is removed
+        done = recover(args.recording, args.output, force=args.force, admit=admit, write=False)
+        if not done.complete:
+            raise OptionError("--discard-journal removes only a stale journal beside a complete recording; this "
+                              f"one is not complete ({_not_complete(done)}): recover it without the option",
+                              args.recording)
+        return _complete(args, done)
     done = recover(args.recording, args.output, force=args.force, admit=admit)
+    if done.complete:
+        return _complete(args, done)
     if done.damaged:
         state = f"damaged ({done.reason}); every intact part kept"
     elif done.truncated:
@@ -52,4 +73,43 @@ def run(args: argparse.Namespace) -> int:
     if done.journal_error:  # what it held (up to the last 5 ms before a crash) is not in the output: said, not silent
         log.warning("recover: the journal beside %s is unreadable, none of its records were used: %s",
                     args.recording, done.journal_error)
+    return 0
+
+
+def _not_complete(done) -> str:
+    """Why a recording is not complete, in words (for a refused --discard-journal)."""
+    if done.damaged:
+        return "damaged"
+    if done.truncated:
+        return "cut short"
+    return f"its journal holds {done.from_journal + done.journal_refused} records it lacks"
+
+
+def _complete(args: argparse.Namespace, done) -> int:
+    """REC is complete and its journal holds nothing more: nothing was written; say so, and what the
+    journal holds; remove a stale journal only with --discard-journal (module rule)."""
+    from pairplay.replay.wal import wal_path
+
+    journal = wal_path(args.recording)
+    said = f"{args.recording}: complete already ({done.messages} messages"
+    said += ")" if done.ended else "; the session's end was not recorded: a partial session)"
+    said += "; nothing to recover, nothing written"
+    if done.journal_error:  # unreadable: what it holds is unknown, so it is never called stale
+        if args.discard_journal:
+            raise OptionError(f"--discard-journal: {done.journal_error}; it was not removed", journal)
+        print(f"{said}; the journal beside it is unreadable")
+        log.warning("recover: the journal beside %s is unreadable, none of its records were used: %s",
+                    args.recording, done.journal_error)
+        return 0
+    if done.journal is None:
+        if args.discard_journal:
+            raise OptionError("--discard-journal: there is no journal beside it", args.recording)
+        print(said)
+        return 0
+    held = f"its journal {journal.name} holds nothing more ({done.journal_present} events, all in the file)"
+    if args.discard_journal:
+        journal.unlink()
+        print(f"{said}; {held}: removed (--discard-journal)")
+        return 0
+    print(f"{said}; {held}: it is stale; `pairplay recover {args.recording} --discard-journal` removes it")
     return 0

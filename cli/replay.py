@@ -16,7 +16,10 @@ holds is right), and the line says what is missing. Replay's first
 line names its bus endpoint, so a view can attach (`pairplay view --session S
 --connect ENDPOINT`). A REC that is missing, empty, not MCAP or without events
 or holding no session (no SessionStarted: replay/check.py `read_session`) is
-refused (one line on stderr, exit 2), in both modes.
+refused (one line on stderr, exit 2), in both modes; `--verify` also refuses
+a file cut (or without its session's end) before its first round ended
+(replay/check.py `no_whole_round`: it said "PASS as far as the file goes",
+exit 0, about no whole round).
 """
 
 from __future__ import annotations

@@ -46,7 +46,7 @@ from pairplay.cli.args import add_force, count, duration, game_index, positive_n
 from pairplay.core.geometry import PICKS_UNIT
 from pairplay.cli.robot import add_robot_arguments, check_robot_args, robot_choice
 from pairplay.services.bus import BusOpenError, ConfigFileError, add_bus_arguments, options_from_args, stop_on_signals
-from pairplay.services.recorder import check_new_recording
+from pairplay.services.recorder import FORCE_SESSION_HINT, check_new_recording
 from pairplay.services.runner import waiting_for
 from pairplay.services.session import run_session
 
@@ -158,14 +158,15 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     add_bus_arguments(p)
 
 
-def print_interrupted(summary: dict, path: Path, why: str, rounds: int) -> int:
+def print_interrupted(summary: dict, path: Path, why: str, rounds: int, taken: str = "the id stays taken") -> int:
     """What a session stopped by a signal says, in ONE line, from `summary` (run_session's): the
     process must be gone within 2 s of the signal, so the file is not read back. The exit status is
     the signal's (cli/main.py: 130 SIGINT, 143 SIGTERM). A session stopped before its game started
     keeps its file (what came up, and that the signal stopped it: the recorder's end record): a
     session id is taken once it has a recording, and the stop stays on record; every verb then says
-    the file holds no session (replay/check.py), and `--force` reuses the id. The line goes to stderr,
-    as every verb's interrupted line (stdout holds results only: a complete session's summary)."""
+    the file holds no session (replay/check.py); `taken` says so, and what the verb offers (session:
+    `--force` reuses the id; lab, which never replaces a person's recording, has no --force). The line
+    goes to stderr, as every verb's interrupted line (stdout holds results only: a complete session's summary)."""
     if summary["started"]:
         print(f"interrupted ({why}) after {summary['rounds_played']} of {rounds} rounds; recorded "
               f"{summary['events']} events to {path}"
@@ -173,7 +174,7 @@ def print_interrupted(summary: dict, path: Path, why: str, rounds: int) -> int:
               file=sys.stderr)
     else:
         print(f"interrupted ({why}) before the session started; recorded {summary['events']} events to {path}, "
-              "no session in it (the id stays taken: --force reuses it)", file=sys.stderr)
+              f"no session in it ({taken})", file=sys.stderr)
     return 0
 
 
@@ -186,7 +187,7 @@ def run(args: argparse.Namespace) -> int:
     check_folder(args.out)
     path = Path(args.out) / f"{config.session}.mcap"
     if "recorder" not in args.external:  # an external recorder checks its own folder
-        check_new_recording(path, args.force)
+        check_new_recording(path, args.force, FORCE_SESSION_HINT)  # this verb has --force
     stop = threading.Event()
     stop_on_signals(stop)
 
@@ -220,7 +221,7 @@ def run(args: argparse.Namespace) -> int:
         print(f"session {config.session} over; the external recorder writes its file")
         return 0
     if getattr(stop, "why", ""):
-        return print_interrupted(summary, path, stop.why, config.rounds)
+        return print_interrupted(summary, path, stop.why, config.rounds, "the id stays taken: --force reuses it")
     from pairplay.replay.fold import fold_events
     from pairplay.replay.reader import read_log
     recorded = read_log(path)

@@ -58,11 +58,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def _bar(quiet: bool):
-    from tqdm import tqdm
+    from pairplay.cli.progress import bar as progress
 
     def bar(total: int, desc: str):
-        return tqdm(total=total, desc=desc, unit="round", disable=quiet, file=sys.stderr,
-                    dynamic_ncols=True, leave=False)
+        return progress(total, desc, "round", quiet, leave=False)  # on a terminal only (cli/progress.py)
     return bar
 
 

@@ -20,9 +20,8 @@ import argparse
 import sys
 from pathlib import Path
 
-from tqdm import tqdm
-
 from pairplay.cli.args import workers
+from pairplay.cli.progress import bar as progress
 from pairplay.errors import OutputError
 from pairplay.outputs import check_folder, write_text
 from pairplay.report.sweep import GridError, finished_cells, read_grid, run_sweep, write_sweep
@@ -86,8 +85,7 @@ def run(args) -> int:
         write_text(copy, text, force=True)
         cells = grid.cells()
         done = len(finished_cells(out, grid))
-        with tqdm(total=len(cells), initial=done, desc="sweep", unit="cell", disable=args.quiet,
-                  file=sys.stderr, dynamic_ncols=True) as bar:
+        with progress(len(cells), "sweep", "cell", args.quiet, initial=done) as bar:  # on a terminal only
             result = run_sweep(grid, out, scheduler=args.scheduler, workers=args.workers, progress=bar.update)
         results = finished_cells(out, grid)
         write_sweep(out, grid, results, result)  # a signal here: the cells stay, a rerun writes these again

@@ -58,7 +58,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     add_force(out, "an existing .rrd")
     out.add_argument("--no-save", action="store_true", help="do not save an .rrd (needs --serve or --spawn)")
     out.add_argument("--serve", action="store_true",
-                     help="serve rerun's web viewer (data on 127.0.0.1 only; see docs/view.md)")
+                     help="serve rerun's web viewer (page and data on 127.0.0.1 only; see docs/view.md)")
     out.add_argument("--grpc-port", type=port_or_any, default=DEFAULT_GRPC_PORT, help="rerun data port for --serve/--spawn")
     out.add_argument("--web-port", type=port_or_any, default=DEFAULT_WEB_PORT, help="web viewer page port for --serve")
     out.add_argument("--spawn", action="store_true", help="open rerun's native viewer (needs a display)")

@@ -16,20 +16,32 @@ import re
 
 
 class UserError(Exception):
-    """A mistake the user can fix. `str(err)` says what, `err.where` says where ('' if nowhere)."""
+    """A mistake the user can fix. `str(err)` says what, `err.where` says where ('' if nowhere).
 
-    def __init__(self, what: str, where: str | object = ""):
+    `fix`, with the `option` it names (`fix="--force replaces it", option="--force"`), is a way out
+    that only some verbs offer: code below the command line does not know which verb runs it, so
+    the verb that shows the line gives its options (`line(options)`) and a fix naming an option it
+    lacks is left out (a hint must name only what exists where it is read: tests/test_hints.py)."""
+
+    def __init__(self, what: str, where: str | object = "", *, fix: str = "", option: str = ""):
         super().__init__(what)
         self.what = what
         self.where = str(where) if where not in (None, "") else ""
+        self.fix, self.option = fix, option
 
-    def line(self) -> str:
+    def line(self, options: frozenset[str] | set[str] | None = None) -> str:
         """What and where, on one line: `where` is added unless the text names it already, as a
-        whole name (a folder `here` is not named by "there", nor `out` by "out/study")."""
+        whole name (a folder `here` is not named by "there", nor `out` by "out/study"); then the
+        `fix`, unless `options` (those of the verb showing the line; None: every option) lack its `option`."""
         text = " ".join(self.what.split())
+        if self.fix and (options is None or not self.option or self.option in options):
+            text = f"{text}; {self.fix}"
         return f"{text} ({self.where})" if self.where and not names(text, self.where) else text
 
-    __str__ = line  # wherever it is shown (a log, an event's error field), it says where
+    def __str__(self) -> str:
+        """The line wherever it is shown with no verb's options known (a log, an event's error field, a
+        web page): where it is, and no fix naming an option (none can be given there)."""
+        return self.line(frozenset())
 
 
 class InputError(UserError, ValueError):

@@ -33,7 +33,7 @@ from typing import IO, Iterable, Iterator
 
 from pairplay.errors import OutputError
 
-FORCE_HINT = "exists; --force replaces it"
+FORCE_FIX = "--force replaces it"  # shown only by a verb that has --force (errors.UserError `fix`)
 
 
 def _existing_ancestor(path: Path) -> Path:
@@ -80,7 +80,7 @@ def check_output(path: str | Path, force: bool = False) -> Path:
     if path.is_dir():
         raise OutputError("is a folder; give a file name", path)
     if (path.exists() or path.is_symlink()) and not force:
-        raise OutputError(FORCE_HINT, path)
+        raise OutputError("exists", path, fix=FORCE_FIX, option="--force")
     _check_parent(path)
     return path
 
@@ -236,7 +236,8 @@ def check_output_folder(path: str | Path, force: bool = False) -> Path:
     holds no files unless `force`; OutputError otherwise (call it before the work)."""
     path = check_folder(path)
     if path.exists() and not _is_empty_dir(path) and not force:
-        raise OutputError("exists and is not empty; --force replaces the files written there", path)
+        raise OutputError("exists and is not empty", path, fix="--force replaces the files written there",
+                          option="--force")
     return path
 
 

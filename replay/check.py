@@ -10,7 +10,11 @@ beside it is named as `pairplay recover`'s to complete). A recording a verb fold
 replays, views, fits or recovers must also hold a session (its
 SessionStarted): `read_session` refuses one that does not, saying what the
 file is (only the magic, a header, another program's MCAP, a session that
-never started), for every such verb alike.
+never started), for every such verb alike. A verb whose result is made of whole
+rounds (rebuild's policy and curve, verify's verdict, a combiner's policy from a
+recording) also refuses a session with no round recorded whole (`no_whole_round`):
+a file cut, or a session stopped, before its first round ended gave a policy of 0
+rounds, or "PASS as far as the file goes", with exit 0 (a new user's trial).
 """
 
 from __future__ import annotations
@@ -18,8 +22,8 @@ from __future__ import annotations
 from pathlib import Path
 
 from pairplay.errors import InputError
+from pairplay.schemas.jsonfile import MCAP_MAGIC
 
-MCAP_MAGIC = b"\x89MCAP0\r\n"
 
 
 def check_recording(path: str | Path, journal_ok: bool = False) -> Path:
@@ -95,3 +99,29 @@ def read_session(path: str | Path, only: frozenset[str] | None = None):
     if why:
         raise InputError(why, path)
     return log
+
+
+def no_whole_round(events, truncated: bool = False) -> str:
+    """Why the session of `events` (a recording's, in file order) has no round recorded whole, in
+    words ("" if it has one: a RoundEnded of its game). `truncated`: the file is cut (reader.EventLog).
+
+    Rounds are counted from 1, as the board shows them."""
+    started = ended = None
+    for e in events:
+        tag = type(e).__name__
+        if tag == "SessionStarted" and started is None:
+            started = e
+        elif getattr(e, "source", "") != "game":
+            continue
+        elif tag == "RoundEnded":
+            return ""
+        elif tag == "SessionEnded":
+            ended = e
+    of = f" of {started.config.rounds}" if started is not None else ""
+    if ended is not None:
+        how = f"{ended.reason}{f' ({ended.detail})' if ended.detail else ''}"
+        where = f" in round 1{of} after {ended.turns_in_round} turns" if ended.round >= 0 else " before round 1"
+        return f"holds no whole round: the session ended ({how}){where}"
+    if truncated:
+        return f"holds no whole round: the file is cut before round 1{of} ended"
+    return f"holds no whole round: the recording stops before round 1{of} ended"

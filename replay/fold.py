@@ -11,7 +11,11 @@ samples go, in order, through the live learner's own code (a batch of one), so
 the weights are the live learner's bit for bit; each event's q_before and, after
 a policy improvement, the digest of the weights are checked the same way.
 Learning curves come from RoundEnded (turns per round: 9 is perfect play) and
-RewardGiven (reward per round).
+RewardGiven (reward per round), over the whole rounds only (`whole_rounds`: those
+whose RoundEnded is in the log). A round a session stopped in, or a file was cut
+in, was a row of 0 turns and 0 picks (its rewards had made it a round): curves
+ended in a "perfect" 0, the mean picks fell, and rebuild, lab and session
+counted it as played. Its updates still count in the Q-table.
 """
 
 from __future__ import annotations
@@ -44,6 +48,7 @@ class RoundStats:
     reward: float = 0.0
     learned: int = 0
     inconsistent: int = 0
+    ended: bool = False  # its RoundEnded is in the log: a whole round
 
 
 @dataclass
@@ -91,15 +96,19 @@ class SessionFold:
             self.evolve(e)
         return self
 
+    def whole_rounds(self) -> list[int]:
+        """The indices of the rounds whose RoundEnded is in the log, in order (module rule)."""
+        return [r for r in sorted(self.rounds) if self.rounds[r].ended]
+
     def turns_per_round(self) -> list[int]:
-        return [self.rounds[r].turns for r in sorted(self.rounds)]
+        return [self.rounds[r].turns for r in self.whole_rounds()]
 
     def picks_per_round(self) -> list[int]:
-        """Cards picked per round, the study's unit (2 per turn; 18 = perfect play)."""
-        return [2 * self.rounds[r].turns for r in sorted(self.rounds)]
+        """Cards picked per whole round, the study's unit (2 per turn; 18 = perfect play)."""
+        return [2 * self.rounds[r].turns for r in self.whole_rounds()]
 
     def reward_per_round(self) -> list[float]:
-        return [self.rounds[r].reward for r in sorted(self.rounds)]
+        return [self.rounds[r].reward for r in self.whole_rounds()]
 
 
 def _session_started(s: SessionFold, e: ev.SessionStarted) -> None:
@@ -148,6 +157,7 @@ def _perceived(s: SessionFold, e: ev.SuggestionPerceived) -> None:
 
 def _round_ended(s: SessionFold, e: ev.RoundEnded) -> None:
     stats = s.round(e.round)
+    stats.ended = True
     stats.turns, stats.matches = e.turns, e.matches
 
 

@@ -38,7 +38,8 @@ from mcap.data_stream import ReadDataStream
 from mcap.records import (Attachment, AttachmentIndex, Channel, Chunk, ChunkIndex, DataEnd, Footer, Header,
                           Message, MessageIndex, Metadata, MetadataIndex, Schema, Statistics, SummaryOffset)
 
-MAGIC = b"\x89MCAP0\r\n"
+from pairplay.schemas.jsonfile import MCAP_MAGIC
+
 _HEAD = struct.Struct("<BQ")
 _CHUNK_HEAD = struct.Struct("<QQQI")
 _READERS: dict[int, Callable[[ReadDataStream, int], Any]] = {
@@ -264,7 +265,7 @@ class _Walker:
             try:
                 self.record_at(end)
             except (Unreadable, EOFError):
-                return self.data[end:end + 8] == MAGIC
+                return self.data[end:end + 8] == MCAP_MAGIC
             return True
         return opcode == 0x0C
 
@@ -290,7 +291,7 @@ class _Walker:
             if data:
                 self.damage(0, "header", f"{len(data)} bytes: too short for the MCAP magic")
             return scan
-        if data[:8] != MAGIC:
+        if data[:8] != MCAP_MAGIC:
             self.damage(0, "header", "the file does not start with the MCAP magic")
         pos = 8
         chunk = None
@@ -437,9 +438,9 @@ class _Walker:
     def footer(self, pos: int, end: int, footer: Footer, summary_start: int) -> None:
         data, scan = self.data, self.scan
         tail = data[end:]
-        if len(tail) < len(MAGIC) and MAGIC.startswith(tail):
+        if len(tail) < len(MCAP_MAGIC) and MCAP_MAGIC.startswith(tail):
             scan.truncated, scan.cut_at = True, len(data)  # cut inside the closing magic
-        elif tail != MAGIC:
+        elif tail != MCAP_MAGIC:
             self.damage(end, "file end", "the closing MCAP magic is missing or followed by other bytes")
         if footer.summary_start and footer.summary_start != summary_start:
             self.damage(pos, "footer", f"says the summary starts at byte {footer.summary_start}, it starts at "

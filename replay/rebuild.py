@@ -7,7 +7,9 @@ seed, as core.study does), so a rebuilt policy file equals the one the
 in-process study writes for the same seed and persona. Learning curves are per
 round: turns (9 is perfect play), picks, total reward, learned updates and
 inconsistent suggestions. A truncated recording rebuilds what it holds and
-says so; a recording without SessionStarted is refused with the reason. A
+says so; a recording without SessionStarted is refused with the reason, and
+so is one whose session has no round recorded whole (`NoWholeRound`: check.py
+`no_whole_round`; it gave a policy of 0 rounds). A
 policy from a partial session (interrupted, aborted, failed, cut short,
 damaged or completed by `pairplay recover`) says why in its file's `partial`
 field and in `Rebuilt.partial`.
@@ -30,12 +32,16 @@ from pairplay.core.policies import to_policy_file
 from pairplay.schemas.policy import PolicyFile, write_policy
 from pairplay.schemas.session import SessionConfig
 
-from .check import read_session
+from .check import no_whole_round, read_session
 from .fold import READS, SessionFold, fold_events, stream_seed
 
 
 class RebuildError(InputError):
     """A recording that cannot be rebuilt; the message says why."""
+
+
+class NoWholeRound(RebuildError):
+    """A session recording with no round recorded whole: nothing to rebuild (check.py `no_whole_round`)."""
 
 
 @dataclass
@@ -54,7 +60,8 @@ def partial_reason(fold: SessionFold, note: str = "", recovered: dict[str, str] 
     why = []
     e = fold.ended
     if e is None:
-        why.append(f"no SessionEnded: the recording stops after {len(fold.rounds)} rounds")
+        n = len(fold.whole_rounds())
+        why.append(f"no SessionEnded: the recording stops after {n} round{'s' * (n != 1)}")
     elif e.reason != "completed":
         where = f" in round {e.round + 1} after {e.turns_in_round} turns" if e.round >= 0 else ""  # from 1, as the board
         why.append(f"{e.reason}{f' ({e.detail})' if e.detail else ''} after {e.rounds_played} of "
@@ -92,15 +99,19 @@ def rebuild_events(events, source: str = "", truncated: bool = False, note: str 
             who = None
     policy = to_policy_file(q, np.array(fold.visits), greedy, algorithm=c.algorithm,
                             participant=c.persona or c.participant, persona=who, seed=c.seed, game=c.game_index,
-                            rounds=len(fold.rounds), config=c.learner_config(), software=__version__,
+                            rounds=len(fold.whole_rounds()), config=c.learner_config(), software=__version__,
                             reward_bonus=c.reward_bonus, partial=partial,
                             lspi=c.lspi_config() if fold.lspi is not None else None)
     return Rebuilt(source, c, fold, policy, truncated, note, partial)
 
 
 def rebuild_recording(path: str | Path) -> Rebuilt:
-    """The recording at `path` rebuilt; InputError (RebuildError) if it is not a session recording."""
+    """The recording at `path` rebuilt; InputError (RebuildError) if it is not a session recording,
+    NoWholeRound if its session has no round recorded whole."""
     log = read_session(path, only=READS)  # the events the fold only counts are not decoded (speed)
+    empty = no_whole_round((r.event for r in log.events), log.truncated)
+    if empty:
+        raise NoWholeRound(f"{empty}; nothing to rebuild", path)
     note = "" if log.whole else f"{'damaged' if log.damage else 'truncated'}: {log.error}"
     return rebuild_events((r.event for r in log.events), str(path), log.truncated, note,
                           log.metadata.get("pairplay.recovered"), log.metadata.get("pairplay.recorder.end"),
@@ -112,7 +123,8 @@ CURVE_COLUMNS = ("round", "turns", "picks", "matches", "reward", "learned", "inc
 
 def curve_rows(fold: SessionFold) -> list[dict]:
     return [{"round": r, "turns": s.turns, "picks": 2 * s.turns, "matches": s.matches, "reward": s.reward,
-             "learned": s.learned, "inconsistent": s.inconsistent} for r, s in sorted(fold.rounds.items())]
+             "learned": s.learned, "inconsistent": s.inconsistent}
+            for r, s in sorted(fold.rounds.items()) if s.ended]  # whole rounds only (fold.py)
 
 
 def output_stem(source: str | Path) -> str:

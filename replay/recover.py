@@ -8,7 +8,10 @@ tail or a damaged chunk stays lost, and a "pairplay.recovered" metadata record
 says what recover completed (the summary and index it wrote), what it read,
 from where, what was wrong (every damaged part, the cut) and how far the
 session got (whether its SessionEnded survived, the last round). A whole file
-recovers to an equivalent whole file. The original is never modified.
+(complete already) is not copied: nothing is written unless something is
+recovered (`Recovered.complete`, output None), as when its journal holds
+nothing it lacks; before, a complete file was copied to <stem>.recovered.mcap, a second
+file of the same events. The original is never modified.
 
 A recorder that did not finish its file leaves its write-ahead journal beside
 it (`<recording>.journal`, replay/wal.py): what it received, durable within
@@ -47,7 +50,7 @@ from .writer import CHUNK_SIZE, PROFILE
 
 @dataclass
 class Recovered:
-    output: Path
+    output: Path | None  # None: nothing written (`complete`, or asked not to `write`)
     messages: int
     truncated: bool
     reason: str  # "" when the input was whole
@@ -60,6 +63,8 @@ class Recovered:
     journal_refused: int = 0  # records of it refused by the live checks (recorded as refusals)
     journal_torn: str = ""  # where the journal stops short of a frame's end ("" if it does not)
     journal_error: str = ""  # a journal beside it that could not be read at all: why (its records are not used)
+    journal_present: int = 0  # records of the journal the file holds already
+    complete: bool = False  # the file is whole and its journal (if any) holds nothing it lacks: nothing written
 
 
 def default_output(path: Path) -> Path:
@@ -67,21 +72,21 @@ def default_output(path: Path) -> Path:
 
 
 def recover(path: str | Path, output: str | Path | None = None, force: bool = False,
-            admit: Callable | None = None) -> Recovered:
+            admit: Callable | None = None, write: bool = True) -> Recovered:
     """Copy the intact records of `path` into a complete file (see rule), and with `admit`
-    (services/walmerge.admit) what its journal holds that the file lacks.
+    (services/walmerge.admit) what its journal holds that the file lacks; nothing when the file is
+    `complete` already (output None); with `write` False, only what it would do (output None).
 
     InputError if `path` is not an MCAP file at all (missing, empty, no MCAP magic: unless, with
     `admit`, its journal is beside it, as a recorder killed before its first flush leaves it) or holds no
     session (check.py `no_session`), unless it is cut or damaged and holds pairplay events (in it
     or in its journal), or if its journal is of another session;
-    OutputError if `output` exists (unless `force`) or is the input; the output
-    appears only when complete (pairplay.outputs)."""
+    OutputError if `output` is the input, or exists (unless `force`) when there is something to
+    write; the output appears only when complete (pairplay.outputs)."""
     path = check_recording(path, journal_ok=admit is not None)  # (a file of nothing: its journal holds it)
     output = Path(output) if output is not None else default_output(path)
     if output.resolve() == path.resolve():
         raise OutputError("recover writes a new file; give an output path other than the input", output)
-    check_output(output, force)
     log = read_log(path)
     why = no_session(log)
     journal, journal_error = _journal_beside(path, log) if admit is not None else (None, "")
@@ -90,6 +95,23 @@ def recover(path: str | Path, output: str | Path | None = None, force: bool = Fa
     if why and not ((log.events or (journal is not None and journal.records)) and not log.whole):
         raise InputError(f"{why}; nothing to recover", path)
     checked = scan(path)
+    added = None
+    if journal is not None:  # what the journal holds that the file lacks, decided before anything is written
+        topics = {r.id: r.topic for r in checked.summary_records + checked.records if isinstance(r, Channel)}
+        recorded = [(topics[r.channel_id], r.data) for r in checked.records
+                    if isinstance(r, Message) and r.channel_id in topics]
+        added = admit(journal.session, recorded, journal.records)
+    complete = checked.whole and not (added is not None and added.items)  # and nothing more to add
+    if complete or not write:
+        return Recovered(None, sum(isinstance(r, Message) for r in checked.records), checked.truncated,
+                         "" if checked.whole else checked.describe(), [str(d) for d in checked.damage],
+                         ended=any(type(r.event).__name__ == "SessionEnded" for r in log.events),
+                         started=not why, journal=journal.path if journal is not None else None,
+                         from_journal=added.taken if added else 0, journal_refused=added.refused if added else 0,
+                         journal_present=added.present if added is not None else 0,
+                         journal_torn=journal.torn if journal is not None else "", journal_error=journal_error,
+                         complete=complete)
+    check_output(output, force)  # only an output that will be written (a complete file writes none)
     messages, ended, last_round = 0, False, -1
     schema_ids: dict[int, int] = {}
     channel_ids: dict[int, int] = {}
@@ -120,12 +142,10 @@ def recover(path: str | Path, output: str | Path | None = None, force: bool = Fa
                         last_round = max(last_round, _round_of(record.data))
             elif isinstance(record, Metadata):
                 writer.add_metadata(record.name, dict(record.metadata))
-        added = None
-        if journal is not None:
-            recorded = [(topics[r.channel_id], r.data) for r in checked.records
-                        if isinstance(r, Message) and r.channel_id in topics]
-            added = admit(journal.session, recorded, journal.records)
-            by_topic = {topic: cid for cid, topic in topics.items()}
+        if added is not None:
+            # the output's ids: channel_ids maps the source's to them (they match only if both writers numbered
+            # alike, which a file another tool wrote need not)
+            by_topic = {topic: channel_ids[cid] for cid, topic in topics.items()}
             last_ns = max((r.log_time for r in checked.records if isinstance(r, Message)), default=0)
             for key, payload, log_ns, seq in added.items:
                 channel = by_topic.get(key)
@@ -155,6 +175,7 @@ def recover(path: str | Path, output: str | Path | None = None, force: bool = Fa
                if journal is not None or journal_error else {})})
         writer.finish()
     return Recovered(output, messages, checked.truncated, reason, damaged, ended, last_round, started=not why,
+                     journal_present=added.present if added else 0,
                      journal=journal.path if journal is not None else None,
                      from_journal=added.taken if added else 0, journal_refused=added.refused if added else 0,
                      journal_torn=journal.torn if journal is not None else "", journal_error=journal_error)

@@ -57,6 +57,22 @@ def atomic_write(path: Path, data: bytes) -> None:
         os.fsync(f.fileno())
 
 
+KEY_FILE_MODE, KEY_FOLDER_MODE = 0o600, 0o700  # the one file that links ids to names: its owner only
+
+
+def open_key_file(path: Path):
+    """The key file for appending, created (with the folder it is in) readable by its owner only, and
+    made so if it was not (a key file written 0644 by pairplay <= 0.3, or by hand). `StudyDataError`
+    if it cannot be made (the path says where)."""
+    try:
+        path.parent.mkdir(mode=KEY_FOLDER_MODE, parents=True, exist_ok=True)
+        fd = os.open(path, os.O_WRONLY | os.O_APPEND | os.O_CREAT, KEY_FILE_MODE)
+        os.fchmod(fd, KEY_FILE_MODE)
+    except OSError as err:
+        raise StudyDataError(f"key file {path}: {err.strerror or err}") from None
+    return open(fd, "a", encoding="utf-8", newline="")
+
+
 @dataclass
 class Game:
     session: str
@@ -162,6 +178,8 @@ class StudyData:
             if key.is_relative_to(folder):
                 raise StudyDataError(f"--key-file {key}: must be outside the study folder {folder} "
                                      "(names never sit beside the recordings)")
+            open_key_file(key).close()  # made now, owner-only: a path that cannot hold it is said here, not at
+            # the first registration with a name (an existing key file is kept as it is, only its mode tightened)
         text = Path(study_file).read_bytes()
         folder.mkdir(parents=True, exist_ok=True)
         for sub in ("recordings", "policies", "merged"):
@@ -215,11 +233,11 @@ class StudyData:
                 raise StudyDataError(err.args[0]) from None
             if label and self.key_file is None:
                 raise StudyDataError("this study has no key file: register by pseudonymous id only "
-                                     "(or create the study with --key-file PATH outside its folder)")
+                                     "(or create the study with `pairplay protocol init FOLDER --key-file PATH`, "
+                                     "the key file outside its folder)")
             pid = f"p{self.state.next_number:02d}"
             if label:
-                self.key_file.parent.mkdir(parents=True, exist_ok=True)
-                with open(self.key_file, "a", encoding="utf-8", newline="") as f:
+                with open_key_file(self.key_file) as f:
                     csv.writer(f).writerow([pid, label.replace("\n", " ")])
             self.append(j.ParticipantRegistered(participant=pid, joins=joins))
             return pid
@@ -398,10 +416,8 @@ class StudyData:
             for e in self.read_journal():
                 if getattr(e, "participant", None) == pid or getattr(e, "session", None) in sessions:
                     removed += 1
-                elif isinstance(e, j.BiasCombined):
-                    kept.append(_redacted_combination(e, pid))
-                else:
-                    kept.append(e)
+                else:  # a combination of their games, a note naming them: kept without the id
+                    kept.append(_redacted(e, pid))
             for m in merged:
                 _redact_policy_file(self.folder / m, pid)
             key_removed = self._drop_from_key_file(pid)
@@ -432,7 +448,11 @@ class StudyData:
             return False
         buf = io.StringIO()
         csv.writer(buf).writerows(kept)
-        atomic_write(key, buf.getvalue().encode("utf-8"))
+        with output_file(key, "wb", force=True) as f:  # atomic_write's way, owner-only before it is renamed
+            os.fchmod(f.fileno(), KEY_FILE_MODE)
+            f.write(buf.getvalue().encode("utf-8"))
+            f.flush()
+            os.fsync(f.fileno())
         return True
 
 
@@ -441,20 +461,29 @@ def _redact(text: str, pid: str) -> str:
     return re.sub(rf"(?<![A-Za-z0-9]){re.escape(pid)}(?![0-9])", "deleted", text)
 
 
-def _redacted_combination(e: j.BiasCombined, pid: str) -> j.BiasCombined:
-    """A combination that used `pid`'s games, kept (others' phase-2 games were played on it) without the id."""
-    return msgspec.structs.replace(e, users=[_redact(u, pid) for u in e.users],
-                                   inputs=[_redact(i, pid) for i in e.inputs],
-                                   profiles={_redact(k, pid): v for k, v in e.profiles.items()})
+def _redacted(value, pid: str):
+    """`value` with `pid` redacted (`_redact`) from every text it holds, at any depth: each string, list
+    item, dict key and value, and field of a struct (a journal event, a policy file). Every field, not a
+    list of the ones known to name people: a merged policy's per-state `rules` and a combination's
+    `decided_by` ("fewer-errors(human:p02+human:p03)") kept the id when only users, inputs, participant
+    and merged_from were redacted."""
+    if isinstance(value, str):
+        return _redact(value, pid)
+    if isinstance(value, list):
+        return [_redacted(v, pid) for v in value]
+    if isinstance(value, dict):
+        return {_redacted(k, pid): _redacted(v, pid) for k, v in value.items()}
+    if isinstance(value, msgspec.Struct):
+        return msgspec.structs.replace(value, **{f: _redacted(getattr(value, f), pid)
+                                                 for f in value.__struct_fields__})
+    return value
 
 
 def _redact_policy_file(path: Path, pid: str) -> None:
-    """A merged policy file keeps its actions but no longer names `pid` (participant, merged_from)."""
+    """A merged policy file keeps its actions but names `pid` nowhere (`_redacted`)."""
     if not path.is_file():
         return
-    policy = read_policy(path)
-    write_policy(path, msgspec.structs.replace(
-        policy, participant=_redact(policy.participant, pid), merged_from=[_redact(m, pid) for m in policy.merged_from]), force=True)  # the redaction replaces it
+    write_policy(path, _redacted(read_policy(path), pid), force=True)  # the redaction replaces it
 
 
 def _utc(ns: int) -> str:

@@ -17,14 +17,17 @@ from typing import Generic, TypeVar
 import msgspec
 
 T = TypeVar("T")
+MCAP_MAGIC = b"\x89MCAP0\r\n"  # the first (and last) 8 bytes of every MCAP file (the MCAP specification);
+# here, the lowest layer that reads files, so replay/ takes it from here too
 
 
 class JsonFileKind(Generic[T]):
     """encode/decode/write/read of one file kind: `struct` (a msgspec Struct type), the `error` it
     raises (InputError subclass), `what` names it in messages ("policy file")."""
 
-    def __init__(self, struct: type[T], error: type[Exception], what: str):
+    def __init__(self, struct: type[T], error: type[Exception], what: str, from_recording: str = ""):
         self.error, self.what = error, what
+        self.from_recording = from_recording  # what makes one of a recording, said when given a recording
         self._encoder = msgspec.json.Encoder()
         self._decoder = msgspec.json.Decoder(struct)
 
@@ -34,6 +37,9 @@ class JsonFileKind(Generic[T]):
     def decode(self, data: bytes, source: str | None = None) -> T:
         """Parse and check; the kind's error, starting with `source` (default: `what`), otherwise."""
         source = source or self.what
+        if data[:len(MCAP_MAGIC)] == MCAP_MAGIC:  # was "JSON is malformed": the user gave the wrong file
+            raise self.error(f"{source}: an MCAP recording, not a {self.what}"
+                             + (f" ({self.from_recording})" if self.from_recording else ""))
         try:
             return self._decoder.decode(data)
         except self.error as exc:

@@ -92,6 +92,7 @@ class PolicyFile(msgspec.Struct, frozen=True, kw_only=True):
             raise PolicyFileError(f"a merged policy names one rule per state ({N_STATES})")
 
 
-FILE = JsonFileKind(PolicyFile, PolicyFileError, "policy file")  # schemas/jsonfile.py
+FILE = JsonFileKind(PolicyFile, PolicyFileError, "policy file",
+                    from_recording="`pairplay rebuild` makes the policy files of recordings")  # schemas/jsonfile.py
 # decode (data, source), write (path, value, force=False), read (path): the codec, by the names callers know
 encode_policy, decode_policy, write_policy, read_policy = FILE.encode, FILE.decode, FILE.write, FILE.read

@@ -56,6 +56,7 @@ class CombinerLogic:
             policies += [rebuild_recording(self._inside(p)).policy for p in r.recordings]
             return [self._combine(r, inputs, policies)]
         except (OSError, PolicyFileError, RebuildError, ValueError, UserError) as err:
+            # a requester on the bus gives no command-line option: str() leaves out a fix naming one
             return [ev.PolicyCombined(request_id=r.request_id, inputs=inputs, actions=[], ok=False,
                                       error=f"{type(err).__name__}: {err}")]
 

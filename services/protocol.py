@@ -260,7 +260,7 @@ class StudyRunner:
         fold = fold_events(r.event for r in recorded.events)
         completed = fold.ended is not None and fold.ended.reason == "completed"
         policy = ""
-        if fold.config is not None:
+        if fold.config is not None and fold.whole_rounds():  # a game stopped in round 1 has no policy to give
             written = write_outputs(rebuild_recording(path), self.data.folder / "policies")
             written[1].unlink()  # the learning curve is in the recording and the report
             policy = written[0].relative_to(self.data.folder).as_posix()
@@ -270,7 +270,7 @@ class StudyRunner:
                                        "the game did not end")
         self.data.append(j.GameEnded(session=config.session, participant=config.participant.split(":", 1)[1],
                                      outcome="completed" if completed else "aborted", reason=reason,
-                                     rounds_played=len(fold.rounds), policy=policy, questionnaire=answered))
+                                     rounds_played=len(fold.whole_rounds()), policy=policy, questionnaire=answered))
         self.data.write_tables()
         return self.data.state.games[config.session]
 

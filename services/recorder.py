@@ -97,6 +97,11 @@ PER_SOURCE = 200_000
 RECORDER_SWITCH_S = 0.001
 PIECE_FLUSH_S = 0.005  # within a batch, a flush due by age waits at most this long (step)
 BACKLOG_METADATA = "pairplay.recorder.backlog"  # a flush older than the loss bound (_note_backlog)
+# What a refused session id's line tells the user to do: it must name only options of the verb that
+# shows it (tests/test_hints.py). NEW_SESSION_HINT names none a verb may lack (every verb that records
+# has --session); `pairplay session`, which has --force, gives FORCE_SESSION_HINT (before, a recorder
+# of `pairplay run recorder` refused with it, and `run` has no --force).
+NEW_SESSION_HINT = "choose another --session (a recording is never replaced)"
 FORCE_SESSION_HINT = "choose another --session, or --force to replace its recordings"
 JOURNAL_METADATA = "pairplay.recorder.journal"  # what a restarted recorder took from the earlier file's journal
 ABSENCE_METADATA = "pairplay.recorder.absence"  # a service off the bus mid-session (_alive)
@@ -145,8 +150,10 @@ class RecordingExists(OutputError):
     (Recorder's `restart`); a new session with that id would be recorded into the old session's file,
     its start refused as a repeat (the hang of the new-user trial)."""
 
-    def __init__(self, existing: Path, session: str, hint: str = FORCE_SESSION_HINT):
-        super().__init__(f"session {session} has a recording already; {hint}", existing)
+    def __init__(self, existing: Path, session: str, hint: str = NEW_SESSION_HINT):
+        what = "a recording already" if not existing.name.endswith(".journal") else \
+            "a recorder's journal already, its recording gone (what a recorder that did not finish received)"
+        super().__init__(f"session {session} has {what}; {hint}", existing)
         self.existing = existing
 
 
@@ -160,7 +167,7 @@ def journals_of(path: Path) -> list[Path]:
     return [p for p in found if p.exists()]
 
 
-def check_new_recording(path: str | Path, force: bool = False, hint: str = FORCE_SESSION_HINT) -> Path:
+def check_new_recording(path: str | Path, force: bool = False, hint: str = NEW_SESSION_HINT) -> Path:
     """`path` for a new session's recording, refused (RecordingExists, naming the file) if the session
     has a recording already, or a recording's journal (what a killed recorder received); with `force`
     the session's old recordings and journals are removed first (call it before anything starts, after

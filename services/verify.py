@@ -33,7 +33,12 @@ as far as the file goes: the file is cut, the session's end is missing
 is in it (only its index was lost) says that too. Rounds are counted from 1, as
 the board shows them. A verdict about what is there, so the exit status is 0
 for all of these (as for a stopped session), 1 for FAIL (cli/replay.py).
-Before, a cut file said a plain `verify: PASS`.
+Before, a cut file said a plain `verify: PASS`. A file cut (or without its
+session's end) before round 1 ended is refused (`verify_recording` raises
+InputError: replay/check.py `no_whole_round`; a damaged one still FAILs,
+naming the part): it said "PASS as far as the file goes" with exit 0 about no
+whole round. A session that ended in round 1 (aborted, interrupted) is
+verified: its whole life is in the file, and the verdict says where it stopped.
 """
 
 from __future__ import annotations
@@ -41,6 +46,8 @@ from __future__ import annotations
 import json
 from dataclasses import dataclass, field
 
+from pairplay.errors import InputError
+from pairplay.replay.check import no_whole_round
 from pairplay.replay.reader import read_log
 from pairplay.schemas.events import RoundEnded, SessionEnded, SessionStarted
 
@@ -169,6 +176,8 @@ def reach_of(end, rounds: int, how: str) -> str:
 
 
 def verify_recording(path) -> Verification:
+    """The verification of the recording at `path` (module rule); InputError if it would PASS but
+    holds no round recorded whole (replay/check.py `no_whole_round`)."""
     log = read_log(path)
     # a file completed by `pairplay recover` still lacks the tail its crash lost
     recovered = log.metadata.get("pairplay.recovered", {})
@@ -184,4 +193,7 @@ def verify_recording(path) -> Verification:
     if log.bad:
         errors.append(f"{len(log.bad)} messages do not decode: {log.bad[0].reason}")
     result.error = "; ".join(errors) or result.error
+    empty = no_whole_round((r.event for r in log.events), log.truncated)
+    if empty and result.ok and not result.ended:  # a PASS about nothing whole (a FAIL, a damaged part, says so)
+        raise InputError(f"{empty}; nothing to verify", path)
     return result

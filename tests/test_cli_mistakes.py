@@ -29,8 +29,10 @@ from pathlib import Path
 import pytest
 
 from pairplay.cli.main import main
+from pairplay.replay.mcapscan import scan
 
 from cli_zygote import Zygote
+from hints import bad_options
 
 SAMPLE = Path(__file__).resolve().parents[1] / "recordings" / "samples" / "sim-ashley.mcap"
 CAN_UNSHARE = os.geteuid() == 0 and shutil.which("unshare") is not None
@@ -83,8 +85,14 @@ CASES = [
     Case("rebuild random bytes", ["rebuild", "random.mcap", "--out", "out"], "not a recording: not an MCAP file"),
     Case("rebuild a missing file", ["rebuild", "rec.mcap", "missing.mcap", "--out", "out"], "no such recording"),
     Case("profile a missing file", ["profile", "missing.json"], "no such policy file"),
+    # a recording where a policy file is wanted: "JSON is malformed" before (a researcher's trial)
+    Case("profile a recording", ["profile", "rec.mcap"],
+         "rec.mcap: an MCAP recording, not a policy file (`pairplay rebuild` makes the policy files of recordings)"),
+    Case("pi-reuse from a recording", SIM + ["--algorithm", "pi-reuse", "--policy", "rec.mcap"],
+         "an MCAP recording, not a policy file"),
     # item 3: an existing output is never replaced without --force; outputs never collide
-    Case("recover -o an existing file", ["recover", "rec.mcap", "-o", "existing.mcap"], "exists; --force"),
+    # (of a cut file: a complete one writes nothing, so no output of it is refused)
+    Case("recover -o an existing file", ["recover", "cut.mcap", "-o", "existing.mcap"], "exists; --force"),
     Case("recover beside its existing output", ["recover", "old.mcap"], "old.recovered.mcap"),
     Case("view --out an existing .rrd", ["view", "--recording", "rec.mcap", "--out", "existing.rrd"], "exists; --force"),
     Case("view's default .rrd exists", ["view", "--recording", "rec.mcap"], "rec.rrd"),
@@ -155,7 +163,7 @@ CASES = [
     Case("study --out on a read-only file system", ["study", "--quiet", "--out", "ro/study"], "read-only", readonly=True),
     Case("session --out on a read-only file system", SIM + ["--out", "ro/rec"], "read-only", readonly=True),
     Case("combine -o on a read-only file system", ["combine", "policies", "-o", "ro/m.json"], "read-only", readonly=True),
-    Case("recover -o on a read-only file system", ["recover", "rec.mcap", "-o", "ro/r.mcap"], "read-only", readonly=True),
+    Case("recover -o on a read-only file system", ["recover", "cut.mcap", "-o", "ro/r.mcap"], "read-only", readonly=True),
     Case("rebuild --out on a read-only file system", ["rebuild", "rec.mcap", "--out", "ro"], "read-only", readonly=True),
     # a file holding no session (a new user's trial, 2026-11-30): recover wrote an empty file and exit 0,
     # verify said it on stdout with exit 1, rebuild of such files exit 1, view printed 3 lines
@@ -176,6 +184,16 @@ CASES = [
          "holds no session"),
     Case("view a header alone", ["view", "--recording", "header.mcap", "--out", "new.rrd"], "holds no session"),
     Case("counterfactual of 10 bytes", ["counterfactual", "ten.mcap", "--out", "cf"], "holds no session"),
+    # a session with no round recorded whole (a new user's trial, 2026-12-01): verify said "PASS as far as the
+    # file goes" and rebuild wrote a policy of 0 rounds, both exit 0
+    Case("verify a file cut before its first round", ["replay", "cut.mcap", "--verify"],
+         "holds no whole round: the file is cut before round 1 of "),
+    Case("rebuild a file cut before its first round", ["rebuild", "cut.mcap", "--out", "out"],
+         "holds no whole round: the file is cut before round 1 of "),
+    Case("rebuild a session stopped in round 1 beside a good one", ["rebuild", "rec.mcap", "stopped0.mcap", "--out",
+                                                                    "out"], "nothing to rebuild (stopped0.mcap)"),
+    Case("combine a policy of 0 rounds", ["combine", "policies", "zero.json"], "holds no whole round"),
+    Case("profile a policy of 0 rounds", ["profile", "policies", "zero.json"], "holds no whole round"),
     # an empty or blank id was taken (`--session ''` fell back to a made-up id); a refused atomic write
     # named the temporary file beside the user's
     Case("session --session ''", SIM + ["--session", ""], "session id '' must be non-empty"),
@@ -195,7 +213,7 @@ CASES = [
     Case("run recorder --out where no folder can be made", ["run", "recorder", "--session", "s", "--out", "/proc/x"],
          "cannot write there: No such file or directory (/proc/x)"),
     Case("rebuild --out where no folder can be made", ["rebuild", "rec.mcap", "--out", "/proc/x"], "(/proc/x)"),
-    Case("recover -o where no file can be made", ["recover", "rec.mcap", "-o", "/proc/x.mcap"], "(/proc)"),
+    Case("recover -o where no file can be made", ["recover", "cut.mcap", "-o", "/proc/x.mcap"], "(/proc)"),
     Case("combine -o where no file can be made", ["combine", "policies", "-o", "/proc/m.json"], "(/proc)"),
     Case("counterfactual --out where no folder can be made", ["counterfactual", "rec.mcap", "--out", "/proc/x"],
          "(/proc/x)"),
@@ -214,7 +232,8 @@ def _snapshot(root: Path) -> dict[str, str]:
 
 def _fixtures(root: Path) -> None:
     shutil.copy(SAMPLE, root / "rec.mcap")
-    shutil.copy(SAMPLE, root / "old.mcap")
+    last = scan(SAMPLE).chunks[-1]  # cut after its last chunk, as a crash leaves it: recover has work to do
+    (root / "old.mcap").write_bytes(SAMPLE.read_bytes()[:last.offset + last.length])
     (root / "other").mkdir()
     shutil.copy(SAMPLE, root / "other" / "rec.mcap")
     (root / "old.recovered.mcap").write_bytes(b"the user's file")
@@ -232,6 +251,7 @@ def _fixtures(root: Path) -> None:
     spec["reward_bonus"] = "consistent"
     (root / "spec").mkdir()
     (root / "spec" / "blind.json").write_text(json.dumps(spec))
+    _no_round_files(root)
     (root / "rebuilt").mkdir()
     (root / "rebuilt" / "rec.policy.json").write_bytes(b"the user's rebuilt policy")
     (root / "ro").mkdir()
@@ -269,6 +289,44 @@ def _no_session_files(root: Path) -> None:
     w.write(event_key("s1", "learner", "ServiceStarted"), encode_event(e), log_time_ns=10)
     w.close()
 
+
+
+def _no_round_files(root: Path) -> None:
+    """Recordings whose session has no round recorded whole (a new user's trial, 2026-12-01: verify
+    said "PASS as far as the file goes", rebuild wrote a policy of 0 rounds, both exit 0): cut.mcap,
+    the sample's events up to its first RoundEnded in a file cut after its last chunk (summary and
+    footer lost, as a crash leaves it); stopped0.mcap, its events up to the game's second
+    turn, then the game's SessionEnded as its shell writes it (interrupted in round 1 after 2 turns), a
+    whole file (verified: its whole life is in it; not rebuilt: a policy of 0 rounds); and zero.json, a learned policy of 0 rounds, no state updated."""
+
+    from pairplay.replay.mcapscan import scan
+    from pairplay.replay.reader import read_log
+    from pairplay.replay.writer import EventLogWriter
+    from pairplay.schemas.envelope import stamped
+    from pairplay.schemas.events import SessionEnded, encode_event
+    from pairplay.schemas.keys import event_key
+
+    events = []
+    for r in read_log(SAMPLE).events:
+        if type(r.event).__name__ == "RoundEnded" and r.event.source == "game":
+            break
+        events.append(r.event)
+    resolved = [i for i, e in enumerate(events) if type(e).__name__ == "TurnResolved" and e.source == "game"]
+    stopped = events[:resolved[1] + 1]  # the game's end as its shell writes it after 2 turns of round 1
+    ended = stamped(SessionEnded(reason="interrupted", detail="SIGINT", rounds_played=0, round=0, turns_in_round=2),
+                    session=events[0].session, source="game", seq=stopped[-1].seq + 1, time_ns=stopped[-1].time_ns + 1)
+    for name, evs in (("cut.mcap", events), ("stopped0.mcap", stopped + [ended])):
+        w = EventLogWriter(root / name, chunk_size=2048)
+        for i, e in enumerate(evs):
+            w.write(event_key(e.session, e.source, type(e).__name__), encode_event(e), log_time_ns=10**18 + i,
+                    sequence=e.seq)
+        w.close()
+    chunks = scan(root / "cut.mcap").chunks
+    data = (root / "cut.mcap").read_bytes()
+    (root / "cut.mcap").write_bytes(data[:chunks[-1].offset + chunks[-1].length])
+    spec = json.loads((root / "policies" / "blind" / "game-00.json").read_text())
+    spec.update(rounds=0, visits=[0] * len(spec["visits"]), q=[[0.0] * len(row) for row in spec["q"]])
+    (root / "zero.json").write_text(json.dumps(spec))
 
 
 def _readonly_command(case: Case, root: Path) -> list[str]:
@@ -320,6 +378,7 @@ def test_a_mistake_gets_one_line_and_changes_nothing(case, ran):
     assert len(lines) == 1, r.stderr
     verb = " ".join(case.args[:2] if case.args[0] in ("protocol", "participant") else case.args[:1])  # its action too
     assert lines[0].startswith(f"pairplay {verb}: ") and case.expect in lines[0], lines[0]
+    assert bad_options(verb.split(), lines[0]) == [], lines[0]  # what it says to type exists (tests/hints.py)
     assert r.stdout == "", r.stdout  # refused before any work: no line before the refusal
     assert got.after == got.before, "files changed: " + str(set(got.after.items()) ^ set(got.before.items()))
 

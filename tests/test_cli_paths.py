@@ -15,6 +15,7 @@ from pathlib import Path
 import pytest
 
 from pairplay.cli.main import main
+from pairplay.replay.mcapscan import scan
 
 SAMPLE = Path(__file__).resolve().parents[1] / "recordings" / "samples" / "sim-ashley.mcap"
 GRID = "[study]\ngames = 1\nrounds = 5\n[grid]\npsi = [0.5, 1.0]\n"
@@ -27,7 +28,7 @@ CASES = {
     "sweep into a file": (["sweep", "g.toml", "--quiet", "--out", "f"], "f"),
     "rebuild": (["rebuild", "rec.mcap", "--out", "e"], "e/rec.policy.json"),
     "combine": (["combine", "policies", "-o", "f"], "f"),
-    "recover": (["recover", "rec.mcap", "-o", "f"], "f"),
+    "recover": (["recover", "cut.mcap", "-o", "f"], "f"),  # a cut file: a complete one writes nothing
     "view": (["view", "--recording", "rec.mcap", "--out", "f"], "f"),
     "session into a file": (["session", "--participant", "sim:ashley", "--out", "f"], "f"),
     "session over a recording": (["session", "--participant", "sim:ashley", "--session", "e", "--out", "e"],
@@ -40,6 +41,8 @@ CASES = {
 def template(tmp_path_factory) -> Path:
     root = tmp_path_factory.mktemp("paths")
     shutil.copy(SAMPLE, root / "rec.mcap")
+    last = scan(SAMPLE).chunks[-1]
+    (root / "cut.mcap").write_bytes(SAMPLE.read_bytes()[:last.offset + last.length])
     assert main(["study", "--quiet", "--train-only", "--personas", "blind,deaf", "--games", "2", "--rounds", "5",
                  "--out", str(root / "st")]) == 0
     shutil.move(root / "st" / "policies", root / "policies")

@@ -66,3 +66,45 @@ def test_the_system_refusing_an_actions_output_names_the_action(tmp_path, capsys
     assert main(["participant", "export", str(folder), "p01", "-o", str(tmp_path / "afile" / "p01.zip")]) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and err.startswith("pairplay participant export: "), err
+
+
+def _multi_level() -> list[str]:
+    """The verbs that take a word naming what to do (an action, `run`'s service): read from their parsers."""
+    from pairplay.cli.main import build_parser
+    found = []
+    for verb in VERBS:
+        _, p = build_parser([verb])
+        if any(not a.option_strings and a.choices and a.required for a in p._actions):
+            found.append(verb)
+    return found
+
+
+def test_the_multi_level_verbs_are_found():
+    assert {"protocol", "participant", "run"} <= set(_multi_level())
+
+
+def test_no_verb_is_a_mistake_in_one_line_and_help_is_asked_for_on_stdout(capsys):
+    """A new user's trial, 2026-12-01: bare `pairplay` printed the whole help on stdout and exited 2."""
+    assert main([]) == 2
+    out, err = capsys.readouterr()
+    assert out == "" and err.splitlines() == [
+        f"pairplay: no verb given: one of {', '.join(VERBS)} (see pairplay --help)"], (out, err)
+    with pytest.raises(SystemExit) as end:
+        main(["--help"])
+    out, err = capsys.readouterr()
+    assert end.value.code == 0 and err == "" and "usage: pairplay" in out and "rebuild" in out
+
+
+@pytest.mark.parametrize("verb", _multi_level())
+def test_a_verb_without_its_action_is_one_line_naming_the_choices_and_its_help(verb, capsys):
+    with pytest.raises(SystemExit) as end:
+        main([verb])
+    out, err = capsys.readouterr()
+    assert end.value.code == 2 and out == "", (out, err)
+    [line] = err.splitlines()
+    assert line.startswith(f"pairplay {verb}: no ") and " given: one of " in line and \
+        line.endswith(f"(see pairplay {verb} --help)"), line
+    with pytest.raises(SystemExit) as end:
+        main([verb, "--help"])
+    out, err = capsys.readouterr()
+    assert end.value.code == 0 and err == "" and f"usage: pairplay {verb}" in out

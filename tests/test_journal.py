@@ -440,3 +440,87 @@ def test_a_flood_refused_live_then_a_sigkill_is_accounted_once_by_recover(tmp_pa
     assert ran.returncode == 0, ran.stderr
     log = read_log(tmp_path / "jf.recovered.mcap")
     assert refusals_in(r.event for r in log.events) == n
+
+
+# -- a complete recording: nothing to recover ---------------------------------------------
+def complete_recording(tmp_path, events, name="j1.mcap", session="j1"):
+    """A recording of `events` finished by its recorder (whole: summary, index, footer)."""
+    live = Recorder(None, session, tmp_path / "live" / name, clock=iter(range(10**9, 10**10, 1000)).__next__)
+    for i, (k, p) in enumerate(events):
+        assert live.record(k, p, 10**9 + i)
+    live.close()
+    shutil.copy(live.path, tmp_path / name)
+    return tmp_path / name
+
+
+def test_recover_of_a_complete_file_writes_nothing_and_names_a_stale_journal(tmp_path, pairplay_cli):
+    """A new user's trial, 2026-12-01: recover of a complete recording wrote a copy (<stem>.recovered.mcap)
+    and said nothing of the stale journal beside it. Now: complete, nothing written, the journal's
+    content said, and removed only when told (--discard-journal)."""
+    events = [start()] + [pick(s) for s in range(1, 11)]
+    path = complete_recording(tmp_path, events)
+    before = path.read_bytes()
+    ran = pairplay_cli("recover", path)
+    assert ran.returncode == 0 and ran.stderr == "", ran.stderr
+    assert ran.stdout.strip() == f"{path}: complete already ({len(read_log(path).events)} messages; the session's " \
+        "end was not recorded: a partial session); nothing to recover, nothing written", ran.stdout
+    assert not (tmp_path / "j1.recovered.mcap").exists()
+    (tmp_path / "j1.recovered.mcap").write_bytes(b"an older version's copy")  # not refused: nothing is written
+    ran = pairplay_cli("recover", path)
+    assert ran.returncode == 0 and "nothing written" in ran.stdout, ran.stderr
+    assert (tmp_path / "j1.recovered.mcap").read_bytes() == b"an older version's copy"
+    (tmp_path / "j1.recovered.mcap").unlink()
+    journal = journal_of(path, events)  # a stale journal: everything it holds is in the file
+    ran = pairplay_cli("recover", path)
+    assert ran.returncode == 0 and ran.stderr == "", ran.stderr
+    assert f"its journal j1.mcap.journal holds nothing more ({len(events)} events, all in the file)" in ran.stdout
+    assert f"`pairplay recover {path} --discard-journal` removes it" in ran.stdout, ran.stdout
+    assert journal.exists() and not (tmp_path / "j1.recovered.mcap").exists()
+    ran = pairplay_cli("recover", path, "--discard-journal")
+    assert ran.returncode == 0 and "removed (--discard-journal)" in ran.stdout, (ran.stdout, ran.stderr)
+    assert not journal.exists() and path.read_bytes() == before
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["j1.mcap", "live"]
+    ran = pairplay_cli("recover", path, "--discard-journal")
+    assert ran.returncode == 2 and ran.stderr.strip().splitlines() == [
+        f"pairplay recover: --discard-journal: there is no journal beside it ({path})"], ran.stderr
+
+
+def test_a_journal_holding_more_than_a_complete_file_is_recovered_and_never_discarded(tmp_path, pairplay_cli):
+    events = [start()] + [pick(s) for s in range(1, 11)]
+    path = complete_recording(tmp_path, events[:9])
+    journal = journal_of(path, events)  # 2 events more than the file
+    ran = pairplay_cli("recover", path, "--discard-journal")
+    lines = ran.stderr.strip().splitlines()
+    assert ran.returncode == 2 and len(lines) == 1 and "its journal holds 2 records it lacks" in lines[0], ran.stderr
+    assert journal.exists() and not (tmp_path / "j1.recovered.mcap").exists()
+    ran = pairplay_cli("recover", path)
+    assert ran.returncode == 0 and "2 events taken from its journal j1.mcap.journal" in ran.stdout, ran.stdout
+    log = read_log(tmp_path / "j1.recovered.mcap")
+    assert [r.event.seq for r in log.events if r.event.source == "participant"] == list(range(1, 11))
+    assert journal.exists()  # recover never changes its inputs
+    cut = cut_recording(tmp_path, events[:5], name="j2.mcap")
+    ran = pairplay_cli("recover", cut, "--discard-journal")
+    assert ran.returncode == 2 and "is not complete (cut short)" in ran.stderr, ran.stderr
+    assert not (tmp_path / "j2.recovered.mcap").exists()
+
+
+def test_what_the_journal_adds_goes_on_the_output_channel_of_its_topic_whatever_the_numbering(tmp_path, monkeypatch):
+    """recover put a journal's events on the channel with the source file's id, which is the output's
+    only while both writers number channels alike (a file another tool wrote, ids not 1, 2, ...)."""
+    from mcap.writer import Writer
+
+    import pairplay.replay.recover as recover_module
+
+    class Shifted(Writer):  # numbers its channels from 2: channel 1 is an unused one it registers first
+        def start(self, *args, **kwargs):
+            super().start(*args, **kwargs)
+            super().register_channel("unused", "json", 0)
+    monkeypatch.setattr(recover_module, "Writer", Shifted)
+    events = [start()] + [pick(s) for s in range(1, 41)]
+    path = cut_recording(tmp_path, events[:21])
+    journal_of(path, events)
+    done = recover(path, admit=admit)
+    assert done.from_journal == 20
+    log = read_log(done.output)
+    assert [r.event.seq for r in log.events if r.event.source == "participant"] == list(range(1, 41))
+    assert all(r.key == event_key("j1", r.event.source, type(r.event).__name__) for r in log.events)

@@ -15,7 +15,7 @@ import pytest
 from pairplay.errors import InputError
 from pairplay.replay.check import MCAP_MAGIC
 
-from pairplay.replay.mcapscan import MAGIC, scan
+from pairplay.replay.mcapscan import scan
 from pairplay.replay.reader import read_log
 from pairplay.replay.rebuild import rebuild_recording
 from pairplay.replay.recover import recover

@@ -28,8 +28,11 @@ def pairplay(pairplay_cli):
 def test_an_existing_file_is_replaced_only_with_force(tmp_path):
     target = tmp_path / "a.json"
     write_text(target, "first")
-    with pytest.raises(OutputError, match="exists; --force"):
+    with pytest.raises(OutputError, match="exists") as err:
         write_text(target, "second")
+    # the way out is named only where it exists: by a verb that has --force (tests/test_hints.py)
+    assert err.value.line({"--force"}) == f"exists; --force replaces it ({target})"
+    assert err.value.line({"--out"}) == str(err.value) == f"exists ({target})"
     assert target.read_text() == "first"
     write_text(target, "third", force=True)
     assert target.read_text() == "third"
@@ -96,9 +99,11 @@ def test_a_folder_of_outputs_appears_whole_and_is_merged_only_with_force(tmp_pat
 
 
 def test_rebuild_names_outputs_by_file_so_a_recovered_copy_keeps_its_own(tmp_path, pairplay):
-    shutil.copy(SAMPLE, tmp_path / "X.mcap")
+    from pairplay.replay.mcapscan import scan
+    last = scan(SAMPLE).chunks[-1]  # X.mcap cut after its last chunk, as a crash leaves it: recover writes a copy
+    (tmp_path / "X.mcap").write_bytes(SAMPLE.read_bytes()[:last.offset + last.length])
     r = pairplay("recover", "X.mcap", cwd=tmp_path)
-    assert r.returncode == 0, r.stderr
+    assert r.returncode == 0 and (tmp_path / "X.recovered.mcap").exists(), r.stderr
     r = pairplay("rebuild", "X.mcap", "X.recovered.mcap", "--out", "rebuilt", cwd=tmp_path)
     assert r.returncode == 0, r.stderr
     names = sorted(p.name for p in (tmp_path / "rebuilt").iterdir())

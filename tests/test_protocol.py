@@ -21,6 +21,7 @@ from pairplay.replay.reader import read_log
 from pairplay.replay.studydata import StudyData, StudyDataError
 from pairplay.report.human import human_report
 from pairplay.schemas import journal as j
+from pairplay.schemas.policy import read_policy
 from pairplay.services.bus import Bus, BusOptions
 from pairplay.services.protocol import StudyRunner, scripted_players
 from pairplay.services.scripted import ScriptedPlayer
@@ -144,6 +145,30 @@ def test_an_aborted_game_is_journaled_with_its_reason_and_stays_open(tmp_path):
     assert result.ok, result
 
 
+class Idle(ScriptedPlayer):
+    """Picks nothing: the game is aborted in its first round."""
+
+    def handle(self, e):
+        return []
+
+
+def test_a_game_aborted_in_its_first_round_gets_no_policy_of_0_rounds(tmp_path):
+    """Before: its recording was rebuilt into policies/ as a policy of 0 rounds (replay/check.py
+    no_whole_round: an input that yields nothing gives no output)."""
+    data = StudyData.create(tmp_path / "s", STUDY)
+    pid = data.register("phase1")
+    with Bus(BusOptions()) as bus:
+        runner = StudyRunner(data, bus)
+
+        def watch(e):
+            if type(e).__name__ == "RoundStarted" and e.round == 0:
+                threading.Thread(target=runner.abort, args=("the participant had to leave",)).start()
+        game = runner.run_game(pid, "phase1", 0, Idle("tatiana"), on_event=watch)
+    assert game.ended.outcome == "aborted" and game.ended.rounds_played == 0
+    assert game.ended.policy == "" and not list((data.folder / "policies").rglob("*.json"))
+    assert verify_recording(data.folder / game.recording).ok  # its whole (short) life verifies
+
+
 def test_export_holds_everything_of_one_participant_with_a_readme(played, tmp_path):
     data = copy_study(played, tmp_path)
     from pairplay.replay.wal import JournalWriter
@@ -166,6 +191,49 @@ def test_export_holds_everything_of_one_participant_with_a_readme(played, tmp_pa
         data.export_participant("p02")
 
 
+def test_the_key_file_is_its_owners_alone_from_init_to_deletion(tmp_path):
+    """The key file is the one file that links ids to names: it was written 0644 (its folder too), made
+    only at the first registration with a name (a researcher's trial)."""
+    import stat
+    key = tmp_path / "private" / "keys.csv"
+    data = StudyData.create(tmp_path / "study", STUDY, key_file=key)
+    assert key.is_file() and key.read_text() == ""  # made at init: a path that cannot hold it is said there
+
+    def mode(p: Path) -> int:
+        return stat.S_IMODE(p.stat().st_mode)
+    assert (mode(key), mode(key.parent)) == (0o600, 0o700)
+    data.register("phase1", "Zoë Müller")
+    data.register("phase1", "Someone Else")
+    assert mode(key) == 0o600 and "Zoë Müller" in key.read_text(encoding="utf-8")
+    data.delete_participant("p01")  # rewritten without their line: still owner-only
+    assert mode(key) == 0o600 and "Zoë" not in key.read_text(encoding="utf-8")
+    key.chmod(0o644)  # one written by an older pairplay, or by hand: tightened at the next name
+    data.register("phase1", "A Third")
+    assert mode(key) == 0o600
+    with pytest.raises(StudyDataError, match="key file .*nothere"):
+        StudyData.create(tmp_path / "study2", STUDY, key_file=tmp_path / "study" / "study.toml" / "nothere" / "k.csv")
+
+
+def names_anywhere(folder: Path, pid: str) -> list[str]:
+    return [str(f) for f in folder.rglob("*") if f.is_file() and pid.encode() in f.read_bytes()]
+
+
+@pytest.mark.parametrize("pid", ["p02"])
+def test_a_deleted_participant_is_named_in_no_rule_combination_or_new_report(played, tmp_path, pid):
+    """The merged policy's per-state rules and the journal's BiasCombined decided_by name the users
+    whose games decided a state ("fewer-errors(human:p01+human:p02)"); they kept the id, and a report
+    made after the deletion wrote it again (a researcher's trial: 24 rules, report.md 24 times)."""
+    data = copy_study(played, tmp_path)
+    merged = data.folder / "merged" / "phase2-bias.policy.json"
+    assert f"human:{pid}" in " ".join(read_policy(merged).rules)  # the case: the id decided states
+    data.delete_participant(pid)
+    assert not names_anywhere(data.folder, pid)
+    assert all("deleted" in r or f"human:{pid}" not in r for r in read_policy(merged).rules)
+    human_report(data.folder)
+    assert (data.folder / "report" / "report.md").is_file()
+    assert not names_anywhere(data.folder, pid)
+
+
 def test_delete_erases_a_participant_everywhere_and_keeps_an_anonymous_event(played, tmp_path):
     data = copy_study(played, tmp_path)
     human_report(data.folder)
@@ -173,9 +241,7 @@ def test_delete_erases_a_participant_everywhere_and_keeps_an_anonymous_event(pla
     before = [g.session for g in data.games_of("p01")]
     gone = data.delete_participant("p01")
     folder = data.folder
-    for f in folder.rglob("*"):
-        if f.is_file():
-            assert b"p01" not in f.read_bytes(), f
+    assert not names_anywhere(folder, "p01")
     assert not any((folder / "recordings" / f"{s}.mcap").exists() for s in before)
     assert not (folder / "exports" / "p01.zip").exists() and not (folder / "report").exists()
     assert "First Person" not in (tmp_path / "keys.csv").read_text()

@@ -157,3 +157,24 @@ def test_reading_only_what_the_fold_reads_gives_the_same_fold_and_keeps_bad_mess
     b = fold_events(r.event for r in some.events).count(some.skipped)
     assert (a.q == b.q).all() and a.counts == b.counts and a.events == b.events == 61
     assert a.turns_per_round() == b.turns_per_round() == [1]
+
+
+def test_a_round_a_session_stopped_in_is_no_row_of_the_curve_nor_a_round_played():
+    """Cut (or stopped) part way into round 2: the fold counted round 2 (its rewards made it a round)
+    as a round of 0 turns and 0 picks: the curve ended in a 'perfect' 0, the policy said 2 rounds, the
+    mean picks fell. Whole rounds only; round 2's updates still count in the Q-table."""
+    from loopback_session import loopback_events
+    from pairplay.replay.rebuild import curve_rows, rebuild_events
+    from pairplay.schemas.session import SessionConfig
+
+    events = loopback_events(SessionConfig(session="cut2", participant="sim:blind", persona="blind", seed=3,
+                                           rounds=3))
+    first_end = next(i for i, e in enumerate(events) if type(e).__name__ == "RoundEnded")
+    later = next(i for i, e in enumerate(events) if i > first_end and type(e).__name__ == "QUpdated")
+    cut = events[:later + 3]
+    rebuilt = rebuild_events(cut, "cut2.mcap", truncated=True)
+    fold = rebuilt.fold
+    assert fold.whole_rounds() == [0] and len(fold.picks_per_round()) == 1 and fold.picks_per_round()[0] > 0
+    assert [row["round"] for row in curve_rows(fold)] == [0]
+    assert rebuilt.policy.rounds == 1 and "stops after 1 round" in rebuilt.partial and "1 rounds" not in rebuilt.partial
+    assert sum(fold.visits) == sum(type(e).__name__ == "QUpdated" for e in cut)  # round 2's updates kept

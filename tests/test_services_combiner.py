@@ -58,3 +58,25 @@ def test_combine_requests_over_the_bus(tmp_path):
     assert read_policy(tmp_path / "bias.json").greedy == ok.actions
     assert not bad.ok and "missing.json" in bad.error
     assert node.driver.rejections == 1  # the garbage, with a reason; the combiner went on
+
+
+def test_a_recording_with_no_whole_round_is_refused_with_its_reason_and_nothing_written(tmp_path):
+    """Combining a recording cut before its first round ended folded a policy of 0 rounds into the
+    merge (replay/check.py `no_whole_round`); the answer now says why and nothing is written."""
+    from pathlib import Path
+
+    from pairplay.replay.reader import read_log
+    from pairplay.replay.writer import EventLogWriter
+
+    sample = Path(__file__).resolve().parents[1] / "recordings" / "samples" / "sim-ashley.mcap"
+    w = EventLogWriter(tmp_path / "cut.mcap")
+    for r in read_log(sample).events:
+        if type(r.event).__name__ == "RoundEnded":
+            break
+        w.write(r.key, r.payload, log_time_ns=r.event.time_ns, sequence=r.event.seq)
+    w.close()
+    logic = CombinerLogic(tmp_path)
+    [answer] = logic.handle(ev.CombineRequested(request_id="r", recordings=["cut.mcap", str(sample)],
+                                                output_path="m.json"))
+    assert not answer.ok and "holds no whole round: the recording stops before round 1 of " in answer.error
+    assert "cut.mcap" in answer.error and not (tmp_path / "m.json").exists()

@@ -111,8 +111,11 @@ def test_a_live_session_on_the_bus_is_viewed_to_the_end_and_bad_messages_are_not
     assert any("malformed message on pairplay/live1/game/CardRevealed" in r["TextLog:text"][0] for r in rows["events"])
 
 
-def test_serving_binds_the_data_port_to_loopback(tmp_path):
+def test_serving_binds_the_data_port_and_the_page_to_loopback_only(tmp_path):
+    """Nothing listens beyond loopback unless configured: rerun's own page server (`rr.serve_web_viewer`)
+    listened on all interfaces (0.0.0.0:9090); `--serve` now runs `rerun --serve-web --bind 127.0.0.1`."""
     import socket
+    import urllib.request
 
     ports = []
     for _ in range(2):
@@ -120,15 +123,24 @@ def test_serving_binds_the_data_port_to_loopback(tmp_path):
         s.bind(("127.0.0.1", 0))
         ports.append(s.getsockname()[1])
         s.close()
+
+    def listening() -> set[str]:
+        lines = Path("/proc/net/tcp").read_text().splitlines()[1:] + Path("/proc/net/tcp6").read_text().splitlines()[1:]
+        return {line.split()[1] for line in lines if line.split()[3] == "0A"}  # state LISTEN
     rec, where = open_stream(ViewOutput(rrd=tmp_path / "s.rrd", serve=True, grpc_port=ports[0], web_port=ports[1]))
     try:
-        listening = Path("/proc/net/tcp").read_text().splitlines()[1:]
-        local = {line.split()[1] for line in listening if line.split()[3] == "0A"}  # state LISTEN
-        assert f"0100007F:{ports[0]:04X}" in local  # 127.0.0.1:grpc
-        assert f"00000000:{ports[0]:04X}" not in local
-        assert any(f"127.0.0.1:{ports[1]}" in w for w in where)
+        local = listening()
+        for port in ports:
+            assert f"0100007F:{port:04X}" in local  # 127.0.0.1
+            assert not any(a.endswith(f":{port:04X}") and not a.startswith("0100007F") for a in local), (port, local)
+        assert any(f"http://127.0.0.1:{ports[1]}/" in w for w in where)
+        with urllib.request.urlopen(f"http://127.0.0.1:{ports[1]}/", timeout=10) as page:
+            assert page.status == 200 and b"<html" in page.read().lower()
+        rec.log("events", __import__("rerun").TextLog("served"))
     finally:
         finish(rec)
+    assert not {f"0100007F:{port:04X}" for port in ports} & listening()  # stopped with the view
+    assert (tmp_path / "s.rrd").stat().st_size > 0
 
 
 def test_rerun_analytics_stay_off(tmp_path):

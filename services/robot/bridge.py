@@ -28,6 +28,13 @@ every SuggestionMade of the log without its RobotActed is counted as not
 reported ("made before this robot bridge joined"), and a log that holds the
 session's end ends the bridge at once (it waited for ever for an end that had
 passed). It then takes suggestions from the moment it joins.
+
+Like every service (services/runner.py `answer_sent`), the bridge answers a
+restarted recorder's refill query (`pairplay/<session>/_query/robot/sent?after=
+robot:<seq>`) with what it published after that number, so the RobotActed of
+a recorder's outage are refilled into its file. Before, nobody answered for
+the robot: those reports were missing from the recording and the gap named the
+robot unanswered.
 """
 
 from __future__ import annotations
@@ -41,12 +48,12 @@ from typing import Callable
 from pairplay import __version__
 from pairplay.schemas import events as ev
 from pairplay.schemas.envelope import Event
-from pairplay.schemas.keys import alive_key, event_key, session_keys
+from pairplay.schemas.keys import alive_key, event_key, query_key, session_keys
 from pairplay.schemas.robot import BoardCalibration, RobotActed, RobotConfig
 
 from pairplay.services.bus import Bus, Deadline, Inbox, Outbox, deadline_of
 from pairplay.services.node import Driver, Rejected
-from pairplay.services.runner import GAME_GONE_S, GameWatch, fetch_log
+from pairplay.services.runner import GAME_GONE_S, SENT_QUERY, GameWatch, answer_sent, fetch_log
 from pairplay.services.robot.backends import open_robot
 from pairplay.services.robot.driver import RobotDriver, Suggestion
 
@@ -98,7 +105,8 @@ class RobotBridge:
         self._config, self._calibration = config, calibration
         self._lock = threading.Lock()
         self._inbox = Inbox()  # Zenoh's callback threads only hand over (services/bus.py)
-        self._outbox = Outbox(bus, NAME)  # the one place the bridge publishes from
+        self._outbox = Outbox(bus, NAME, keep=True)  # the one place the bridge publishes from; kept: a restarted
+        # recorder asks what it sent (answer_sent)
         self.robot: RobotDriver | None = None
         # suggestions handed to the robot and RobotActed published (under _lock): what `cut` counts
         self._handed = self._reported = 0
@@ -162,6 +170,7 @@ class RobotBridge:
                                 calibration=self._calibration, on_rejected=self._on_robot_rejected)
         for tag in self.logic.listens:  # Zenoh then does not even send the others here
             self.bus.subscribe(f"{session_keys(self.session)[:-2]}*/{tag}", self._inbox.put)
+        self.bus.queryable(query_key(self.session, NAME, SENT_QUERY), self._inbox.control)  # a recorder's refill
         self.bus.alive(alive_key(self.session, NAME))
         self.game_watch = GameWatch(self.bus, self.session, self.game_gone_s)
         self.backend = self.robot.transport.url
@@ -209,6 +218,9 @@ class RobotBridge:
         if item is None:
             return False
         key, payload, _ = item
+        if key is None:  # a restarted recorder asks what we sent (its refill)
+            answer_sent(self._outbox, NAME, payload)
+            return True
         with self._lock:
             self._publish(self.shell.receive(key, payload))
         return True

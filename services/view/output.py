@@ -3,11 +3,14 @@
 Rule: the default output is a file and nothing listens on the network. Every
 output is a rerun sink of one RecordingStream, so the file, the web viewer and
 the native viewer show the same data with the same blueprint.
-- `--serve`: rerun's gRPC server, bound to 127.0.0.1 (GrpcServerSink's
-  bind_ip), and rerun's web-viewer page server. The page server has no bind
-  option in rerun 0.41: it listens on all interfaces, but it only hands out the
-  viewer's HTML/JS/wasm; the data stays on the loopback gRPC port, so a remote
-  browser gets an empty viewer. To watch from another machine, forward both
+- `--serve`: rerun's own server (`rerun --serve-web --bind 127.0.0.1`, the
+  wheel's `rerun` program, in a process of its own): its gRPC data port and its
+  web-viewer page port both bound to 127.0.0.1; the view sends to it as to a
+  native viewer. (The SDK's page server, `rr.serve_web_viewer`, has no bind
+  option in rerun 0.41 and listened on all interfaces.) It lives as long as the
+  view: `finish` stops it (its process group), and, started from a process
+  with no other thread (`pairplay view`), it gets SIGTERM if the view dies
+  (Linux's parent-death signal). To watch from another machine, forward both
   ports over SSH.
 - `--spawn`: rerun's native viewer as its own process (needs a display),
   started with `--bind 127.0.0.1` so its data port is loopback only too.
@@ -29,9 +32,12 @@ from __future__ import annotations
 
 import os
 import shutil
+import signal
 import socket
 import subprocess
 import sys
+import tempfile
+import threading
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -100,6 +106,74 @@ def spawn_viewer(port: int, analytics_off: bool = True) -> subprocess.Popen:
     return viewer
 
 
+_SERVERS: dict[int, subprocess.Popen] = {}  # id(stream) -> the rerun server `--serve` started for it (finish stops it)
+
+
+def rerun_binary() -> str:
+    """The wheel's `rerun` program itself (rerun_cli/rerun): the `rerun` script on PATH is a Python
+    wrapper that runs it as a child, so signalling the wrapper left the server listening."""
+    try:
+        import rerun_cli
+        binary = Path(rerun_cli.__file__).with_name("rerun")
+        if binary.is_file() and os.access(binary, os.X_OK):
+            return str(binary)
+    except ImportError:
+        pass
+    return rerun_executable()
+
+
+def _die_with_parent() -> None:  # runs in the child between fork and exec: no Python state touched
+    import ctypes
+    ctypes.CDLL(None, use_errno=True).prctl(1, 15)  # PR_SET_PDEATHSIG, SIGTERM
+
+
+def serve_viewer(grpc_port: int, web_port: int, analytics_off: bool = True) -> subprocess.Popen:
+    """rerun's web viewer and gRPC proxy, both bound to 127.0.0.1 (see module rule), in a process
+    group of its own (Ctrl-C goes to the view, which stops it when finished); raises if it does not
+    come up within SPAWN_TIMEOUT_S."""
+    command = [rerun_binary(), "--serve-web", "--bind", "127.0.0.1", "--port", str(grpc_port),
+               "--web-viewer-port", str(web_port), "--hide-welcome-screen"]
+    with tempfile.TemporaryFile() as said:  # its log (a pipe nobody reads could fill and stop it)
+        server = subprocess.Popen(command, env=viewer_environment(dict(os.environ), analytics_off),
+                                  stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=said,
+                                  start_new_session=True,
+                                  # (a preexec_fn may deadlock a process with other threads: only without them)
+                                  preexec_fn=_die_with_parent if sys.platform == "linux"
+                                  and threading.active_count() == 1 else None)
+        deadline = time.monotonic() + SPAWN_TIMEOUT_S
+        while not (_port_open(grpc_port, 0.2) and _port_open(web_port, 0.2)):
+            if server.poll() is not None or time.monotonic() > deadline:
+                stop_server(server)
+                said.seek(0)
+                last = [x for x in said.read().decode("utf-8", "replace").splitlines() if x.strip()][-1:]
+                raise RuntimeError(f"rerun's web viewer server did not start on 127.0.0.1 ports {grpc_port} and "
+                                   f"{web_port} (exit code {server.poll()}{': ' + last[0][:200] if last else ''})")
+    return server
+
+
+def stop_server(server: subprocess.Popen, timeout_s: float = 2.0) -> None:
+    """Stop a server `serve_viewer` started: SIGTERM, then SIGKILL after `timeout_s`."""
+    def signal_group(sig: int) -> None:  # its group (start_new_session): whatever it started goes too
+        try:
+            os.killpg(server.pid, sig)
+        except ProcessLookupError:
+            pass
+    if server.poll() is None:
+        signal_group(signal.SIGTERM)
+        try:
+            server.wait(timeout_s)
+        except subprocess.TimeoutExpired:
+            signal_group(signal.SIGKILL)
+            server.wait()
+
+
+def _free_port() -> int:
+    """A port the OS has free on 127.0.0.1 now (for `--web-port 0`/`--grpc-port 0`: any)."""
+    with socket.socket() as probe:
+        probe.bind(("127.0.0.1", 0))
+        return probe.getsockname()[1]
+
+
 def require_free_port(host: str, port: int, option: str) -> None:
     """OptionError if `host:port` cannot be bound now. rerun's servers bind in a thread of
     their own and only log a failure (then the first flush raises), so we ask first."""
@@ -121,12 +195,26 @@ def open_stream(out: ViewOutput, recording_name: str = "") -> tuple[rr.Recording
     it named with the user's path, not the temporary one)."""
     if out.serve:
         require_free_port("127.0.0.1", out.grpc_port, "--grpc-port")
-        require_free_port("0.0.0.0", out.web_port, "--web-port")
+        require_free_port("127.0.0.1", out.web_port, "--web-port")
     elif out.spawn:
         require_free_port("127.0.0.1", out.grpc_port, "--grpc-port")
     if out.rrd is not None:  # made here first: the system's refusal is an OSError naming the file, and no
         out.rrd.parent.mkdir(parents=True, exist_ok=True)  # stream exists yet to print rerun's own warning
         out.rrd.open("wb").close()
+    server = None
+    if out.serve:  # started before the stream's threads exist (its preexec_fn runs between fork and exec)
+        grpc_port, web_port = out.grpc_port or _free_port(), out.web_port or _free_port()
+        server = serve_viewer(grpc_port, web_port, analytics_off=not out.rerun_analytics)
+    try:
+        return _stream(out, recording_name, server, *((grpc_port, web_port) if server else (0, 0)))
+    except BaseException:
+        if server is not None:
+            stop_server(server)
+        raise
+
+
+def _stream(out: ViewOutput, recording_name: str, server: subprocess.Popen | None, grpc_port: int,
+            web_port: int) -> tuple[rr.RecordingStream, list[str]]:
     rec = rr.RecordingStream(APP_ID)
     sinks: list = []
     where: list[str] = []
@@ -136,12 +224,12 @@ def open_stream(out: ViewOutput, recording_name: str = "") -> tuple[rr.Recording
         spawn_viewer(out.grpc_port, analytics_off=not out.rerun_analytics)
         sinks.append(rr.GrpcSink(f"rerun+http://127.0.0.1:{out.grpc_port}/proxy"))
         where.append(f"native viewer on 127.0.0.1:{out.grpc_port}")
-    if out.serve:
-        server = rr.GrpcServerSink(bind_ip="127.0.0.1", port=out.grpc_port)
-        sinks.append(server)
-        rr.serve_web_viewer(web_port=out.web_port, open_browser=False, connect_to=server.uri)
-        where.append(f"web viewer: http://127.0.0.1:{out.web_port}/?url={quote(server.uri, safe='')}"
-                     f" (data on 127.0.0.1:{out.grpc_port} only; the page server listens on all interfaces)")
+    if server is not None:
+        _SERVERS[id(rec)] = server
+        uri = f"rerun+http://127.0.0.1:{grpc_port}/proxy"
+        sinks.append(rr.GrpcSink(uri))
+        where.append(f"web viewer: http://127.0.0.1:{web_port}/?url={quote(uri, safe='')}"
+                     f" (page and data on 127.0.0.1 only: ports {web_port} and {grpc_port})")
     if not sinks:
         raise ValueError("the view needs an output: an .rrd path, --serve or --spawn")
     rec.set_sinks(*sinks, default_blueprint=blueprint())
@@ -153,5 +241,10 @@ def open_stream(out: ViewOutput, recording_name: str = "") -> tuple[rr.Recording
 def finish(rec: rr.RecordingStream, timeout_s: float = 1e9) -> None:
     """Flush (for at most `timeout_s`: a stopped view takes what its shutdown's deadline leaves) and
     drop the sinks, so a saved .rrd gets its footer (rerun's index)."""
-    rec.flush(timeout_sec=max(timeout_s, 0.0))
-    rec.disconnect()
+    try:
+        rec.flush(timeout_sec=max(timeout_s, 0.0))
+        rec.disconnect()
+    finally:
+        server = _SERVERS.pop(id(rec), None)
+        if server is not None:
+            stop_server(server, min(max(timeout_s, 0.1), 2.0))
