@@ -39,7 +39,7 @@ from pairplay.core.oracle import oracle_policies
 from pairplay.core.personas import PERSONAS, persona
 from pairplay.core.policies import to_policy_file
 from pairplay.core.reward import BONUS_RULE_TEXT
-from pairplay.core.rng import SEED_RANGE
+from pairplay.core.rng import GAME_INDEX_RANGE, SEED_RANGE
 from pairplay.errors import OptionError
 from pairplay.schemas.config import DEFAULT_REWARD_BONUS, LearnerConfig, LSPIConfig, REWARD_BONUS_RULES
 from pairplay.outputs import output_folder
@@ -111,6 +111,14 @@ class StudySettings:
                          ("trained_updates", 0), ("reuse_last", 0)):
             if getattr(self, key) < low:
                 raise SettingError(key, f"must be at least {low}, got {getattr(self, key)}")
+        # game g of a persona is stream game g, and its evaluation EVAL_GAME_OFFSET + g (core/study.py):
+        # both must be game indices core/rng.py takes (`--games 99999999999999999999` grew a list until
+        # memory ran out)
+        top = GAME_INDEX_RANGE[1] + 1 - study.EVAL_GAME_OFFSET
+        for key in ("games", "reuse_seeds"):
+            if getattr(self, key) > top:
+                raise SettingError(key, f"must be 1..{top} (each game is a game index of core/rng.py), "
+                                   f"got {getattr(self, key)}")
         for key in ("psi", "psi_decay"):
             if not 0 <= getattr(self, key) <= 1:  # also refuses nan
                 raise SettingError(key, f"must be between 0 and 1, got {getattr(self, key)}")

@@ -36,6 +36,8 @@ STUDY_MISTAKES = [
     (["--rounds", "10", "--reuse-last", "50"], "--reuse-last: must be below --rounds 10"),
     (["--rounds", "60", "--reuse-last", "60"], "--reuse-last: must be below --rounds 60"),
     (["--personas", "nobody"], "--personas: unknown persona 'nobody'"),
+    (["--games", "99999999999999999999"], "--games: must be 1..9223372036853775808"),
+    (["--reuse-seeds", str(2**63)], "--reuse-seeds: must be 1..9223372036853775808"),
     (["--personas", "blind", "--algorithm", "lspi", "--rounds", "9"], "--rounds: must be at least 10 with --algorithm lspi"),
 ]
 
