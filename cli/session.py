@@ -122,10 +122,6 @@ def _config_from_args(args: argparse.Namespace) -> SessionConfig:
                                   else "human-phase1")
     preset = PRESETS[preset_name]
     schedule = preset(rounds) if preset_name != "virtual" else preset()
-    if args.algorithm == "pi-reuse" and schedule.reuse_rounds is not None and schedule.reuse_rounds < 1:
-        # human-phase2 reuses all rounds but the last: with one round, pi-reuse would never reuse
-        raise OptionError(f"--rounds: pi-reuse with the {preset_name} schedule needs at least 2 rounds (its last "
-                          f"round uses the new policy alone), got {rounds}", "--rounds")
     lspi = msgspec.UNSET
     given = {k: v for k, v in (("ridge", getattr(args, "lspi_ridge", None)),
                                ("improve_every", getattr(args, "lspi_every", None))) if v is not None}

@@ -165,14 +165,9 @@ def _check(study: Study) -> None:
             if name not in study.questionnaire:
                 raise StudyFileError(f"{where}.questionnaires: no [questionnaire.{name}] in the file")
         try:
-            schedule = study.learner_config(p)
+            study.learner_config(p)
         except (TypeError, ValueError) as err:
             raise StudyFileError(f"{where}.learner: {err}") from None
-        if p.algorithm == "pi-reuse" and schedule.reuse_rounds is not None and schedule.reuse_rounds < 1:
-            # the phase would never reuse: human-phase2's last round is on the new policy alone
-            raise StudyFileError(f"{where}.rounds: a pi-reuse phase needs at least one round of reuse (the "
-                                 f"{p.preset} schedule's last round uses the new policy alone; reuse_rounds "
-                                 f"{schedule.reuse_rounds}), got rounds {p.rounds}")
         seen.append(p.id)
     if study.phase[0].players == "all":
         raise StudyFileError("phase[0].players: the first phase has no earlier players; use \"new\"")

@@ -130,22 +130,3 @@ def test_a_sweep_checks_every_cell_before_it_writes_anything(text, needle, tmp_p
     err = capsys.readouterr().err
     assert needle in err and err.count("\n") == 1 and "Traceback" not in err, err
     assert not (tmp_path / "out").exists()
-
-
-def test_a_pi_reuse_phase_or_session_that_would_never_reuse_is_refused(tmp_path, capsys):
-    """human-phase2 reuses every round but the last: with one round, 'pi-reuse' was Q-learning."""
-    from pairplay.schemas.study import StudyFileError, example_text, parse_study
-    text = example_text()
-    one = text.replace('rounds = 5\nalgorithm = "pi-reuse"', 'rounds = 1\nalgorithm = "pi-reuse"', 1)
-    assert one != text
-    with pytest.raises(StudyFileError, match=r"phase\[1\].rounds: a pi-reuse phase needs at least one round of reuse"):
-        parse_study(one, "s.toml")
-    parse_study(text.replace('rounds = 5\nalgorithm = "pi-reuse"', 'rounds = 2\nalgorithm = "pi-reuse"', 1), "s.toml")
-    policy = tmp_path / "p.json"
-    policy.write_text("{}")  # refused before the policy is read
-    out = tmp_path / "rec"
-    assert main(["session", "--participant", "human:p1", "--algorithm", "pi-reuse", "--policy", str(policy),
-                 "--rounds", "1", "--session", "s", "--out", str(out)]) == 2
-    err = capsys.readouterr().err
-    assert "--rounds: pi-reuse with the human-phase2 schedule needs at least 2 rounds" in err and err.count("\n") == 1
-    assert not out.exists()
