@@ -46,7 +46,7 @@ def float_at_least(low: float, above: bool = False):
     return parse
 
 
-SEED_MAX = 2**64 - 1  # core/rng.py SEED_RANGE (not imported: it loads the compiled kernels; a test pins it)
+SEED_MAX = 2**64 - 1  # schemas/session.py SEED_RANGE, core/rng.py's (not imported: the parser stays light; a test pins it)
 
 
 def seed_number(text: str) -> int:
@@ -58,6 +58,35 @@ def seed_number(text: str) -> int:
     if not 0 <= value <= SEED_MAX:
         raise argparse.ArgumentTypeError(f"a seed is 0..{SEED_MAX}, got {value}")
     return value
+
+
+GAME_INDEX_MAX = 2**63 - 1  # schemas/session.py GAME_INDEX_RANGE, core/rng.py's (a test pins it)
+
+
+def game_index(text: str) -> int:
+    """A game of a seed: an integer 0..GAME_INDEX_MAX (`--game-index 99999999999999999999` passed
+    `non_negative`, started the bus and ended in core/rng.py's range check, a traceback)."""
+    value = int_at_least(0)(text)
+    if value > GAME_INDEX_MAX:
+        raise argparse.ArgumentTypeError(f"a game index is 0..{GAME_INDEX_MAX}, got {value}")
+    return value
+
+
+def int_between(low: int, high: int, why: str = ""):
+    """An argparse type: an integer low..high; `why` (the bound's reason) is said when refused."""
+    def parse(text: str) -> int:
+        value = int_at_least(low)(text)
+        if value > high:
+            raise argparse.ArgumentTypeError(f"must be {low}..{high}{f' ({why})' if why else ''}, got {value}")
+        return value
+    parse.__name__ = f"integer {low}..{high}"
+    return parse
+
+
+def workers(text: str) -> int:
+    """A number of local worker processes: 1..pairplay.processes.max_workers() (its docstring says why)."""
+    from pairplay.processes import max_workers
+    return int_between(1, max_workers(), "the CPUs this process may use: more only queue cells")(text)
 
 
 def port_or_any(text: str) -> int:

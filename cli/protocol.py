@@ -19,9 +19,9 @@ import sys
 import time
 from pathlib import Path
 
-from pairplay.cli.args import count, session_id
+from pairplay.cli.args import int_between, session_id
 from pairplay.core.personas import persona
-from pairplay.replay.studydata import StudyData, StudyDataError
+from pairplay.replay.studydata import REGISTER_AT_ONCE, StudyData, StudyDataError
 from pairplay.schemas.study import StudyFileError, example_text, load_study, parse_study
 
 EXAMPLE_NAME = "thesis-ch7"
@@ -42,7 +42,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     r.add_argument("folder", type=Path)
     r.add_argument("--phase", help="the phase they first play (default: the first)")
     r.add_argument("--name", default="", help="written to the key file only (refused without one)")
-    r.add_argument("--count", type=count, default=1, help="register this many (default 1)")
+    r.add_argument("--count", type=int_between(1, REGISTER_AT_ONCE, "as the console: one request registers a few dozen at most"),
+                   default=1, help=f"register this many (default 1, at most {REGISTER_AT_ONCE})")
     s = sub.add_parser("status", help="the plan: every step, done or next, and why a step is blocked")
     s.add_argument("folder", type=Path)
     pl = sub.add_parser("pilot", help="run the open steps of the plan with scripted participants (core personas)")

@@ -42,7 +42,7 @@ from pairplay.outputs import check_folder
 from pairplay.schemas.policy import read_policy
 from pairplay.schemas.session import IGNORE_CLOCKS, OBSERVED_SOURCES, SessionConfig, learner_overrides, lspi_overrides
 
-from pairplay.cli.args import add_force, count, duration, non_negative, positive_number, seed_number, session_id
+from pairplay.cli.args import add_force, count, duration, game_index, positive_number, seed_number, session_id
 from pairplay.core.geometry import PICKS_UNIT
 from pairplay.cli.robot import add_robot_arguments, check_robot_args, robot_choice
 from pairplay.services.bus import BusOpenError, ConfigFileError, add_bus_arguments, options_from_args, stop_on_signals
@@ -60,7 +60,7 @@ def add_config_arguments(p: argparse.ArgumentParser) -> None:
     g.add_argument("--session", type=session_id, help="session id (default: <participant>-seed<seed>-game<i>-<UTC time>)")
     g.add_argument("--seed", type=seed_number, default=0, help="the session's seed")
     g.add_argument("--rounds", type=count, help="rounds to play (default: 20 for sim:, 5 for human:, thesis 7.2)")
-    g.add_argument("--game-index", type=non_negative, default=0, help="which game of the seed (0, 1, ...)")
+    g.add_argument("--game-index", type=game_index, default=0, help="which game of the seed (0, 1, ... 2**63-1)")
     g.add_argument("--algorithm", choices=("q-learning", "pi-reuse", "fixed", "lspi"), default="q-learning",
                    help="the learner: Q-learning from scratch (thesis 5.1), pi-reuse of --policy (algorithm 5), "
                         "--policy played as it is, or online LSPI from scratch (algorithm 2, core/lspi.py)")

@@ -18,9 +18,9 @@ from pairplay.cli.args import add_force, count, fraction, non_negative, positive
 from pairplay.core.geometry import PICKS_UNIT
 from pairplay.core.personas import PERSONAS
 from pairplay.errors import OptionError
-from pairplay.schemas.config import DEFAULT_REWARD_BONUS, LSPIConfig, REWARD_BONUS_RULES as BONUS_RULES
+from pairplay.schemas.config import DEFAULT_REWARD_BONUS, REWARD_BONUS_RULES as BONUS_RULES
 
-# the study's modules (numpy kernels, matplotlib) load in run(): a mistyped option is refused at once
+# the study's modules load in run(): `pairplay --help` stays quick
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -65,23 +65,33 @@ def _bar(quiet: bool):
     return bar
 
 
-def run(args) -> int:
-    from pairplay.core.personas import persona
-    from pairplay.outputs import check_output_folder
+def option(key: str) -> str:
+    """A StudySettings field's option: reuse_last -> --reuse-last (the two are one table: every field is
+    an option of this verb, tests/test_study_options.py)."""
+    return "--" + key.replace("_", "-")
 
-    try:  # the options first, before the study's modules load: a mistake is refused at once
-        [persona(k.strip()) for k in args.personas.split(",") if k.strip()]
-    except KeyError as exc:
-        raise OptionError(exc.args[0], f"--personas {args.personas}") from None
-    if args.algorithm == "lspi":
-        try:
-            LSPIConfig(ridge=args.lspi_ridge, improve_every=args.lspi_every)
-        except ValueError as exc:
-            raise OptionError(str(exc), f"--lspi-ridge {args.lspi_ridge} --lspi-every {args.lspi_every}") from None
-    check_output_folder(args.out, args.force)
-    from pairplay.report.study import StudySettings, run_study, text_table
+
+def settings_of(args):
+    """The one config object (report/study.py StudySettings) from the parsed options, checked: an
+    OptionError naming the option and its allowed range for a combination core cannot run or would run
+    as something else (no persona, one twice, fewer rounds than the speed-up's snapshot interval...)."""
+    from pairplay.report.study import SettingError, StudySettings
 
     settings = StudySettings(**{k: getattr(args, k) for k in StudySettings.__dataclass_fields__})
+    try:
+        settings.check(spell=option)
+    except SettingError as exc:
+        raise OptionError(f"{option(exc.key)}: {exc.what}", option(exc.key)) from None
+    return settings
+
+
+def run(args) -> int:
+    from pairplay.outputs import check_output_folder
+
+    settings = settings_of(args)  # every option first, before anything is written
+    check_output_folder(args.out, args.force)
+    from pairplay.report.study import first_rounds_text, run_study, text_table
+
     report = run_study(settings, args.out, _bar(args.quiet), force=args.force)
     if settings.train_only:
         print(f"training: {report.timings['training']:.2f} s; policies and curves in {report.out}")
@@ -99,7 +109,7 @@ def run(args) -> int:
         print(text_table(report.speed))
     if report.reuse is not None:
         print()
-        print(f"policy reuse (algorithm 5), each persona held out: first 50 rounds in {PICKS_UNIT}; "
+        print(f"policy reuse (algorithm 5), each persona held out: {first_rounds_text(settings.rounds)} in {PICKS_UNIT}; "
               "rounds until the greedy policy is within 1.10x the oracle")
         print(text_table(report.reuse))
     print()

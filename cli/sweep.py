@@ -20,7 +20,7 @@ import argparse
 import sys
 from pathlib import Path
 
-from pairplay.cli.args import count
+from pairplay.cli.args import workers
 from pairplay.cli.progress import bar as progress
 from pairplay.errors import OutputError
 from pairplay.outputs import check_folder, write_text
@@ -31,7 +31,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("grid", type=Path, help="the sweep's TOML file ([study], [grid], seeds, reuse)")
     p.add_argument("--out", type=Path, help="result folder (default out/sweep-<grid file name>)")
     p.add_argument("--scheduler", metavar="ADDRESS", help="a Dask distributed scheduler (tcp://host:port)")
-    p.add_argument("--workers", type=count, default=1, help="local processes when no --scheduler (default 1)")
+    p.add_argument("--workers", type=workers, default=1,
+                   help="local processes when no --scheduler (default 1; at most the CPUs this process may use)")
     p.add_argument("--force", action="store_true", help="replace a folder that holds another grid's sweep, or write into one that holds other files")
 
 

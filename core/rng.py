@@ -42,6 +42,8 @@ from typing import Sequence
 
 import numpy as np
 
+from pairplay.schemas.session import GAME_INDEX_RANGE, SEED_RANGE  # noqa: F401  (SEED_RANGE: this module's)
+
 from . import kernels
 
 ROLES = ("deal", "agent", "user", "snapshot")
@@ -50,7 +52,6 @@ assert (kernels.DEAL, kernels.AGENT, kernels.USER, kernels.SNAPSHOT) == tuple(_R
 
 
 STREAMS_VERSION = 2  # the derivation new sessions record (SessionConfig.streams)
-SEED_RANGE = (0, 2**64 - 1)
 _STUDY_ROLES = ("reuse:", "combine:", "oracle:")
 
 
@@ -75,8 +76,8 @@ def game_seed(seed: int, persona: str, game: int, version: int = STREAMS_VERSION
         raise ValueError(f"unknown stream derivation {version} (this pairplay knows 1 and {STREAMS_VERSION})")
     if not SEED_RANGE[0] <= seed <= SEED_RANGE[1]:
         raise ValueError(f"seed {seed} is outside {SEED_RANGE[0]}..{SEED_RANGE[1]}")
-    if not 0 <= game < 2**63:
-        raise ValueError(f"game index {game} is outside 0..{2**63 - 1}")
+    if not GAME_INDEX_RANGE[0] <= game <= GAME_INDEX_RANGE[1]:
+        raise ValueError(f"game index {game} is outside {GAME_INDEX_RANGE[0]}..{GAME_INDEX_RANGE[1]}")
     if seed < 2**32 and _study_label(persona):
         return _derivation_1(seed, persona, game)
     digest = hashlib.blake2b(f"{seed}\x00{game}".encode(), digest_size=8, key=b"pairplay streams 2",

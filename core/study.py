@@ -27,6 +27,9 @@ from .simulate import SimResult, run_games
 
 EVAL_GAME_OFFSET = 1_000_000  # evaluation games are seeded apart from training games
 LEARNING_ALGORITHMS = {"q-learning": "q", "lspi": "lspi"}  # the study's learners -> run_games mode
+# the speed-up's greedy snapshots: one every 10 rounds, so a speed-up game needs at least 10 rounds
+REUSE_SNAPSHOT_EVERY = 10
+FIRST_ROUNDS = 50  # the speed-up's measure: online picks per round over the first 50 rounds (thesis 6.4)
 
 
 class Training(NamedTuple):
@@ -296,7 +299,7 @@ class ReuseResult(NamedTuple):
 
 
 def reuse_experiment(personas: Sequence[Persona], users: UserSet, oracle_picks: dict, seeds: int, rounds: int,
-                     seed: int, config: LearnerConfig, snapshot_every: int = 10, snapshot_rounds: int = 20,
+                     seed: int, config: LearnerConfig, snapshot_every: int = REUSE_SNAPSHOT_EVERY, snapshot_rounds: int = 20,
                      target: float = 1.10, progress=None, reward_bonus: str = DEFAULT_REWARD_BONUS) -> ReuseResult:
     """Thesis 6.4 / 7: for each persona held out, Q-learning from scratch vs pi-reuse on the merge of the others."""
     runs = reuse_runs(personas, users, seeds, rounds, seed, config, snapshot_every, progress, reward_bonus)
@@ -318,7 +321,7 @@ class ReuseRuns(NamedTuple):
 
 
 def reuse_runs(personas: Sequence[Persona], users: UserSet, seeds: int, rounds: int, seed: int,
-               config: LearnerConfig, snapshot_every: int = 10, progress=None,
+               config: LearnerConfig, snapshot_every: int = REUSE_SNAPSHOT_EVERY, progress=None,
                reward_bonus: str = DEFAULT_REWARD_BONUS) -> ReuseRuns:
     """Each persona held out: `seeds` games from scratch and the same games with pi-reuse on the merge of the others."""
     from .combine import combine
@@ -356,7 +359,7 @@ def reuse_result(runs: ReuseRuns, oracle_picks: dict, snap_picks: np.ndarray, ta
     limit = np.array([oracle_picks[p.key] * target for p in runs.flat])
     reached = snap_picks <= limit[None, :, None]
     first = np.where(reached.any(-1), (np.argmax(reached, -1) + 1) * runs.snapshot_every, np.nan)  # (2, n)
-    first50 = np.stack([scratch[:, :50].mean(1), reuse[:, :50].mean(1)])  # (2, n)
+    first50 = np.stack([scratch[:, :FIRST_ROUNDS].mean(1), reuse[:, :FIRST_ROUNDS].mean(1)])  # (2, n)
     curves = np.stack([scratch, reuse]).reshape(2, P, seeds, rounds).mean(2)
     return ReuseResult([p.key for p in runs.personas], seeds,
                        first50.reshape(2, P, seeds).transpose(1, 0, 2),

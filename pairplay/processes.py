@@ -69,6 +69,29 @@ class _ParentInterruptedPool(ProcessPoolExecutor):
             signal.pthread_sigmask(signal.SIG_SETMASK, blocked)  # a Ctrl-C that came meanwhile is raised now
 
 
+def max_workers() -> int:
+    """The most local worker processes a verb starts: the CPUs this process may run on (at least 2).
+
+    Why: each worker runs one CPU-bound cell on one thread (core/threads.py) and holds its own
+    compiled kernels and arrays, so more workers than CPUs only queue the cells and multiply the
+    memory; `sweep --workers 1000` was accepted. 2 at least, so `--workers 2` runs anywhere."""
+    import os
+    try:
+        cpus = len(os.sched_getaffinity(0))
+    except AttributeError:  # not Linux
+        cpus = os.cpu_count() or 1
+    return max(2, cpus)
+
+
+def check_workers(workers: int) -> int:
+    """`workers` if 1..max_workers(); ValueError saying the range and why otherwise."""
+    top = max_workers()
+    if isinstance(workers, bool) or not isinstance(workers, int) or not 1 <= workers <= top:
+        raise ValueError(f"workers must be 1..{top} (the CPUs this process may use: more only queue cells), "
+                         f"got {workers!r}")
+    return workers
+
+
 def process_pool(workers: int) -> ProcessPoolExecutor:
     """A pool of `workers` (>= 1) spawned processes that ignore SIGINT. Stop it with `stop_pool`."""
     return _ParentInterruptedPool(workers, mp_context=multiprocessing.get_context("spawn"),

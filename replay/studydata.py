@@ -141,6 +141,12 @@ class Step:
         return f"{self.participant}: {self.phase} game {self.game + 1}"
 
 
+# participants registered by one request (`protocol register --count`, the console's API): a lab
+# registers a session's people at once, a few dozen at most; a larger count is a typo that would
+# write that many ids into the study's tables and key file
+REGISTER_AT_ONCE = 50
+
+
 class StudyData:
     """A study folder (see the module rule). Thread-safe: the console and the game runner share it."""
 

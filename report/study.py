@@ -23,8 +23,9 @@ from __future__ import annotations
 import contextlib
 import csv
 import hashlib
+import shlex
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, fields
 from pathlib import Path
 from types import SimpleNamespace
 from typing import Callable
@@ -38,7 +39,9 @@ from pairplay.core.oracle import oracle_policies
 from pairplay.core.personas import PERSONAS, persona
 from pairplay.core.policies import to_policy_file
 from pairplay.core.reward import BONUS_RULE_TEXT
-from pairplay.schemas.config import DEFAULT_REWARD_BONUS, LearnerConfig, LSPIConfig
+from pairplay.core.rng import GAME_INDEX_RANGE, SEED_RANGE
+from pairplay.errors import OptionError
+from pairplay.schemas.config import DEFAULT_REWARD_BONUS, LearnerConfig, LSPIConfig, REWARD_BONUS_RULES
 from pairplay.outputs import output_folder
 from pairplay.processes import off_main_thread, process_pool, stop_pool
 from pairplay.schemas.policy import write_policy
@@ -73,8 +76,102 @@ class StudySettings:
         return LSPIConfig(ridge=self.lspi_ridge, improve_every=self.lspi_every)
 
     def persona_list(self):
-        """The personas named (KeyError naming an unknown one)."""
-        return [persona(k.strip()) for k in self.personas.split(",") if k.strip()]
+        """The personas named, in order (SettingError for none, an unknown one or one named twice)."""
+        names = [k.strip() for k in self.personas.split(",") if k.strip()]
+        if not names:
+            raise SettingError("personas", f"names no persona: give one or more of {', '.join(PERSONAS)}")
+        chosen = []
+        for name in names:
+            try:
+                p = persona(name)
+            except KeyError as exc:
+                raise SettingError("personas", exc.args[0]) from None
+            if p.key in [c.key for c in chosen]:  # trained twice, its policy files would collide (game-00.json of the same key)
+                raise SettingError("personas", f"names {p.key} twice: each persona is trained once")
+            chosen.append(p)
+        return chosen
+
+    def runs_speed_up(self) -> bool:
+        """Whether run_study runs the speed-up (algorithm 5): it holds each persona out of the others."""
+        return not self.train_only and len(self.persona_list()) >= 2
+
+    def check(self, speed_up: bool | None = None, spell: Callable[[str], str] = str,
+              compare_learners: bool | None = None) -> list:
+        """The personas, once every setting is known to make the study asked for; raises SettingError
+        (its `key`, the setting's field name) for the first that core cannot run or that would run
+        something else. `speed_up`: whether the speed-up runs (default: as run_study decides; a sweep
+        says `reuse`). `compare_learners`: whether LSPI is compared with Q-learning by snapshots (default: as
+        run_study decides, lspi without train_only; a sweep's cells do not). `spell` names a setting in
+        the message (the CLI's `--reuse-last`)."""
+        personas = self.persona_list()
+        lo, hi = SEED_RANGE
+        if not lo <= self.seed <= hi:
+            raise SettingError("seed", f"a seed is {lo}..{hi}, got {self.seed}")
+        for key, low in (("games", 1), ("rounds", 1), ("eval_rounds", 1), ("reuse_seeds", 1),
+                         ("trained_updates", 0), ("reuse_last", 0)):
+            if getattr(self, key) < low:
+                raise SettingError(key, f"must be at least {low}, got {getattr(self, key)}")
+        # game g of a persona is stream game g, and its evaluation EVAL_GAME_OFFSET + g (core/study.py):
+        # both must be game indices core/rng.py takes (`--games 99999999999999999999` grew a list until
+        # memory ran out)
+        top = GAME_INDEX_RANGE[1] + 1 - study.EVAL_GAME_OFFSET
+        for key in ("games", "reuse_seeds"):
+            if getattr(self, key) > top:
+                raise SettingError(key, f"must be 1..{top} (each game is a game index of core/rng.py), "
+                                   f"got {getattr(self, key)}")
+        for key in ("psi", "psi_decay"):
+            if not 0 <= getattr(self, key) <= 1:  # also refuses nan
+                raise SettingError(key, f"must be between 0 and 1, got {getattr(self, key)}")
+        if self.reward_bonus not in REWARD_BONUS_RULES:
+            raise SettingError("reward_bonus", f"must be one of {', '.join(REWARD_BONUS_RULES)}, got {self.reward_bonus!r}")
+        if self.algorithm not in study.LEARNING_ALGORITHMS:
+            raise SettingError("algorithm", f"must be one of {', '.join(study.LEARNING_ALGORITHMS)}, got {self.algorithm!r}")
+        try:
+            self.lspi()
+        except ValueError as exc:
+            raise SettingError("lspi_ridge" if "ridge" in str(exc) else "lspi_every", str(exc)) from None
+        if compare_learners is None:
+            compare_learners = self.algorithm == "lspi" and not self.train_only
+        if compare_learners and self.rounds < SPEED_EVERY:  # no snapshot: the comparison was dropped silently
+            raise SettingError("rounds", f"must be at least {SPEED_EVERY} with {spell('algorithm')} lspi (it is "
+                               f"compared with Q-learning by greedy snapshots every {SPEED_EVERY} rounds); "
+                               f"got {self.rounds}")
+        when = "" if speed_up is not None else f" (2+ personas without {spell('train_only')})"
+        if speed_up if speed_up is not None else self.runs_speed_up():
+            every = study.REUSE_SNAPSHOT_EVERY
+            if self.rounds < every:  # no snapshot of the greedy policy, so no 'rounds to 1.10x the oracle'
+                raise SettingError("rounds", f"must be at least {every} when the speed-up runs{when}: its greedy "
+                                   f"snapshots are taken every {every} rounds; got {self.rounds}")
+            if self.reuse_last >= self.rounds:  # reuse_rounds 0: the pi-reuse arm would be Q-learning
+                raise SettingError("reuse_last", f"must be below {spell('rounds')} {self.rounds} (0.."
+                                   f"{self.rounds - 1}: the last N rounds of pi-reuse use the new policy alone; "
+                                   f"N >= rounds leaves no round of reuse), got {self.reuse_last}")
+        return personas
+
+    def rerun_command(self) -> str:
+        """`pairplay study ...` with every setting that differs from the default (seed, games, rounds and
+        the reward rule always): the same study again. The options are the fields' names."""
+        shown = ("seed", "games", "rounds", "reward_bonus")
+        default = StudySettings()
+        words = ["pairplay", "study"]
+        for f in fields(self):
+            value = getattr(self, f.name)
+            if f.name not in shown and value == getattr(default, f.name):
+                continue
+            option = "--" + f.name.replace("_", "-")
+            if isinstance(value, bool):
+                words.append(option)  # a flag: only ever shown when set (the default is False)
+            else:
+                words += [option, shlex.quote(repr(value) if isinstance(value, float) else str(value))]
+        return " ".join(words)
+
+
+class SettingError(OptionError):
+    """A study setting that cannot run as asked; `key` is its StudySettings field name."""
+
+    def __init__(self, key: str, what: str):
+        super().__init__(what, key)
+        self.key = key
 
 
 @dataclass
@@ -306,8 +403,9 @@ def run_study(args: StudySettings, out: Path, progress_bar: Callable = _no_bar, 
     snapshots). Figures are drawn in a child process meanwhile.
     The folder is built beside `out` and renamed when complete (pairplay.outputs.output_folder):
     OutputError, before any work, if `out` exists with files in it and not `force`; an
-    interrupted study leaves nothing. Raises KeyError for an unknown persona."""
-    personas = args.persona_list()
+    interrupted study leaves nothing. Raises SettingError (an OptionError), before any work, for a
+    setting that cannot run as asked (StudySettings.check)."""
+    personas = args.check()
     return_freed_memory()
     with output_folder(out, force) as tmp:
         report = _run_study(args, personas, tmp, progress_bar, figures_in_background)
@@ -358,6 +456,7 @@ def _run(args, out, progress_bar, personas, config, names, timings, start, figur
 
     t0 = time.perf_counter()
     lspi = args.lspi()
+    # check() refused fewer rounds than SPEED_EVERY unless --train-only (which needs no snapshot)
     snapshot_every = SPEED_EVERY if lspi is not None and args.rounds >= SPEED_EVERY else None
     with progress_bar(len(personas) * args.games * args.rounds, "training") as bar:
         training = study.train(personas, args.games, args.rounds, args.seed, config, progress=_progress(bar),
@@ -455,7 +554,8 @@ def _run(args, out, progress_bar, personas, config, names, timings, start, figur
     with open(out / "merged_evaluation.csv", "w", newline="") as f:
         csv.writer(f).writerows(merge_rows)
 
-    reuse_rows = [["held-out persona", "first 50 rounds: scratch", "first 50 rounds: pi-reuse", "gain",
+    first = first_rounds_text(args.rounds)  # "first 50 rounds", or all of a shorter game's
+    reuse_rows = [["held-out persona", f"{first}: scratch", f"{first}: pi-reuse", "gain",
                    f"rounds to {1.10:.2f}x oracle: scratch", "pi-reuse"]]
     reuse = None
     if runs is not None:
@@ -480,21 +580,19 @@ def _run(args, out, progress_bar, personas, config, names, timings, start, figur
     timings["waiting for figures"] = time.perf_counter() - t0
     timings["total"] = time.perf_counter() - start
 
-    first50 = {k: c[:, :50].mean() for k, c in curves.items()}
-    last50 = {k: c[:, -50:].mean() for k, c in curves.items()}
+    first50 = {k: c[:, :study.FIRST_ROUNDS].mean() for k, c in curves.items()}
+    last50 = {k: c[:, -study.FIRST_ROUNDS:].mean() for k, c in curves.items()}
     learner_text = "Q-learning with the thesis's schedules (epsilon 0.9 - 0.1/50 rounds, floor 0.1; alpha 0.5 - " \
         "0.05/50 rounds)" if lspi is None else \
         f"online LSPI (algorithm 2, core/lspi.py: {lspi.tilings} tilings {lspi.tile_width:g} grid steps wide" \
         f"{' + one tile per state' if lspi.exact else ''}, ridge {lspi.ridge:g}, policy improvement every " \
         f"{lspi.improve_every} samples, gamma {lspi.gamma:g}) with Q-learning's epsilon schedule"
-    rerun = "" if lspi is None else f" --algorithm lspi --lspi-ridge {lspi.ridge:g} --lspi-every {lspi.improve_every}"
     report = [
         "# pairplay study report", "",
         f"pairplay {__version__}, seed {args.seed}, {len(personas)} personas x {args.games} games x "
         f"{args.rounds} rounds, {learner_text}; the 1/|candidate set| bonus "
         f"{BONUS_RULE_TEXT[args.reward_bonus]} (rule `{args.reward_bonus}`). "
-        f"Re-run: `pairplay study --seed {args.seed} --games {args.games} --rounds {args.rounds}"
-        f" --reward-bonus {args.reward_bonus}{rerun}`.", "",
+        f"Re-run: `{args.rerun_command()}`.", "",
         "## Learned policies against the references", "",
         f"Picks per round, each greedy policy played {args.eval_rounds} rounds with epsilon 0; the oracle "
         "and the user alone play the same games (core/oracle.py documents the oracle).", "",
@@ -502,7 +600,7 @@ def _run(args, out, progress_bar, personas, config, names, timings, start, figur
         *gap_section(cmp, training),
         *(speed_lines or []),
         "## Learning curves (figure 6.4)", "",
-        markdown_table([["persona", "first 50 rounds", "last 50 rounds"]] +
+        markdown_table([["persona", first, first.replace("first", "last")]] +
                        [[k, f"{first50[k]:.2f}", f"{last50[k]:.2f}"] for k in curves]), "",
         "![learning curves](learning_curves.png)", "",
         "## User information (algorithm 3, figure 6.5)", "",
@@ -533,7 +631,7 @@ def _run(args, out, progress_bar, personas, config, names, timings, start, figur
                    "multiple of 10 rounds after which the learner's greedy policy, played 20 rounds with "
                    "epsilon 0, needs at most 1.10x the oracle's picks.", "",
                    markdown_table(reuse_rows), "",
-                   f"pi-reuse beats scratch on the first 50 rounds for {(gains > 0).sum()} of {len(gains)} "
+                   f"pi-reuse beats scratch on the {first} for {(gains > 0).sum()} of {len(gains)} "
                    f"held-out personas; median gain {np.median(gains):.2f} picks per round.", "",
                    "![reuse](reuse.png)", ""]
     report += [TIMINGS_HEADING, "", markdown_table([["phase", "seconds"]] + [[k, f"{v:.2f}"] for k, v in timings.items()]), ""]
@@ -549,6 +647,13 @@ def _run(args, out, progress_bar, personas, config, names, timings, start, figur
 SPEED_EVERY = 10  # rounds between greedy snapshots when two learners are compared
 
 
+def first_rounds_text(rounds: int) -> str:
+    """The label of the early-learning measure: 'first 50 rounds', or 'first 20 rounds (all)' of a shorter game
+    (the measure averages the rounds there are: a 20-round run's report said 'first 50 rounds')."""
+    n = study.FIRST_ROUNDS
+    return f"first {n} rounds" if rounds >= n else f"first {rounds} rounds (all)"
+
+
 def _rounds_text(x: np.ndarray) -> str:
     """Rounds to a target over games (nan: never reached) as 'mean \u00b1 sd (k never)'."""
     hit = x[~np.isnan(x)]
@@ -562,13 +667,14 @@ def speed_section(speed: study.Speed, oracle: dict[str, float], out: Path, names
     """speed.csv, speed.png and the report's lines: the learners side by side on the same games.
 
     `oracle` is the oracle's picks per round by persona key."""
+    n = study.FIRST_ROUNDS
     rows = [["persona", "focus", *[f"rounds to {speed.target:.2f}x oracle: {a}" for a in speed.algorithms],
-             *[f"first 50 rounds: {a}" for a in speed.algorithms],
+             *[f"{first_rounds_text(speed.curves.shape[-1])}: {a}" for a in speed.algorithms],
              *[f"last snapshot / oracle: {a}" for a in speed.algorithms]]]
     for i, key in enumerate(speed.persona):
         rows.append([key, str(PERSONAS[key].focus),
                      *[_rounds_text(speed.rounds_to_target[a, i]) for a in range(len(speed.algorithms))],
-                     *[f"{speed.curves[a, i, :, :50].mean():.2f} \u00b1 {speed.curves[a, i, :, :50].mean(1).std():.2f}"
+                     *[f"{speed.curves[a, i, :, :n].mean():.2f} \u00b1 {speed.curves[a, i, :, :n].mean(1).std():.2f}"
                        for a in range(len(speed.algorithms))],
                      *[f"{speed.snapshot_picks[a, i, :, -1].mean() / oracle[key]:.3f}"
                        for a in range(len(speed.algorithms))]])

@@ -41,9 +41,9 @@ from typing import Callable, Iterable
 import numpy as np
 
 from pairplay.outputs import output_file, write_text
-from pairplay.processes import worker_pool
-from pairplay.core.study import LEARNING_ALGORITHMS
-from pairplay.report.study import StudySettings
+from pairplay.processes import check_workers, worker_pool
+from pairplay.core.rng import SEED_RANGE
+from pairplay.report.study import SettingError, StudySettings
 
 SWEEPABLE = {f.name: f.type for f in fields(StudySettings) if f.name not in ("seed", "train_only")}
 
@@ -128,23 +128,24 @@ def read_grid(path: str | Path) -> Grid:
         if seeds < 1:
             raise GridError(f"{path}: seeds = {seeds}: give a count of at least 1 or a list of seeds")
         seeds = list(range(seeds))
-    if not isinstance(seeds, list) or not seeds or not all(isinstance(s, int) and s >= 0 for s in seeds):
-        raise GridError(f"{path}: seeds must be a count or a list of seeds >= 0")
-    grid = Grid(base, axes, tuple(seeds), bool(data.get("reuse", False)))
-    for s in grid.settings():  # every cell's settings must make a study
+    lo, hi = SEED_RANGE
+    if not isinstance(seeds, list) or not seeds or not all(
+            isinstance(s, int) and not isinstance(s, bool) and lo <= s <= hi for s in seeds):
+        raise GridError(f"{path}: seeds must be a count or a list of seeds {lo}..{hi}")
+    if len(set(seeds)) != len(seeds):
+        raise GridError(f"{path}: seeds repeats a seed")
+    reuse = data.get("reuse", False)
+    if not isinstance(reuse, bool):  # `reuse = "no"` was taken as true
+        raise GridError(f"{path}: reuse = {reuse!r} must be true or false")
+    grid = Grid(base, axes, tuple(seeds), reuse)
+    for s in grid.settings():  # every cell's settings, before any cell runs: each must make the study asked for
         settings = grid.study_settings(Cell(s, grid.seeds[0]))
         try:
-            personas = settings.persona_list()
-        except KeyError as exc:
-            raise GridError(f"{path}: {exc.args[0]}") from None
-        if min(settings.games, settings.rounds, settings.eval_rounds) < 1:
-            raise GridError(f"{path}: games, rounds and eval_rounds must be at least 1 ({dict(s)})")
-        if settings.algorithm not in LEARNING_ALGORITHMS:
-            raise GridError(f"{path}: algorithm = {settings.algorithm!r} is not one of {', '.join(LEARNING_ALGORITHMS)}")
-        try:
-            settings.lspi()
-        except ValueError as exc:
-            raise GridError(f"{path}: {exc} ({dict(s)})") from None
+            personas = settings.check(speed_up=grid.reuse, compare_learners=False)
+        except SettingError as exc:
+            value = getattr(settings, exc.key)
+            cell = f" (cell {dict(s)})" if s else ""
+            raise GridError(f"{path}: {exc.key} = {value!r}: {exc.what}{cell}") from None
         if grid.reuse and len(personas) < 2:
             raise GridError(f"{path}: reuse = true needs at least 2 personas (one is held out)")
     return grid
@@ -229,6 +230,8 @@ def run_sweep(grid: Grid, out: str | Path, *, scheduler: str | None = None, work
 
     `scheduler`: a Dask distributed scheduler address (tcp://host:port), or None to
     run here (`workers` > 1: that many local processes)."""
+    if scheduler is None:
+        check_workers(workers)  # before anything is written
     out = Path(out)
     (out / "cells").mkdir(parents=True, exist_ok=True)
     cells = grid.cells()

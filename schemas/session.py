@@ -15,6 +15,8 @@ import msgspec
 
 from .config import REWARD_BONUS_RULES, UNSTATED_REWARD_BONUS, LearnerConfig, LSPIConfig
 
+SEED_RANGE = (0, 2**64 - 1)  # every seed here has its own streams (core/rng.py game_seed, derivation 2)
+GAME_INDEX_RANGE = (0, 2**63 - 1)  # a game of a seed: core/rng.py hashes it as a signed 64-bit count
 ALGORITHMS = ("q-learning", "pi-reuse", "fixed", "lspi")
 # Where the observed card (the one the user looks at before the second pick) comes from:
 # "intended": the simulated participant reports the card it would pick unaided;
@@ -84,8 +86,8 @@ class SessionConfig(msgspec.Struct, frozen=True, kw_only=True):
             raise ValueError(f"session id {self.session!r} must be non-empty, without / * $ # ? @ or spaces")
         if self.rounds < 1:
             raise ValueError(f"rounds must be >= 1, got {self.rounds}")
-        if self.game_index < 0:
-            raise ValueError(f"game_index must be >= 0, got {self.game_index}")
+        if not GAME_INDEX_RANGE[0] <= self.game_index <= GAME_INDEX_RANGE[1]:
+            raise ValueError(f"game index must be {GAME_INDEX_RANGE[0]}..{GAME_INDEX_RANGE[1]}, got {self.game_index}")
         if self.algorithm not in ALGORITHMS:
             raise ValueError(f"algorithm {self.algorithm!r} is not one of {ALGORITHMS}")
         if self.observed_source not in OBSERVED_SOURCES:
@@ -102,13 +104,11 @@ class SessionConfig(msgspec.Struct, frozen=True, kw_only=True):
             raise ValueError("a simulated participant needs a persona")
         if self.streams not in (1, 2):
             raise ValueError(f"stream derivation {self.streams} is not one this pairplay knows (1, 2)")
-        if self.streams >= 2 and not 0 <= self.seed <= 2**64 - 1:
-            raise ValueError(f"seed {self.seed} is outside the accepted range 0..{2**64 - 1}")
+        if self.streams >= 2 and not SEED_RANGE[0] <= self.seed <= SEED_RANGE[1]:
+            raise ValueError(f"seed {self.seed} is outside the accepted range {SEED_RANGE[0]}..{SEED_RANGE[1]}")
         if self.streams == 1 and not 0 <= self.seed <= 2**32 - 1:
             raise ValueError(f"seed {self.seed}: stream derivation 1 (pairplay <= 0.2) takes seeds 0..{2**32 - 1} "
                              "only (it cut them to 32 bits); use streams=2")
-        if self.game_index < 0:
-            raise ValueError(f"game index {self.game_index} must be >= 0")
         if self.participant.startswith("sim:") and self.observed_source == "gaze":
             raise ValueError("a simulated participant reports its intended card: observed source 'gaze' is for "
                              "a person with an eye tracker")

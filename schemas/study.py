@@ -28,6 +28,7 @@ from typing import Literal, Union
 import msgspec
 
 from .config import LearnerConfig
+from .session import SEED_RANGE
 
 ID = re.compile(r"^[a-z0-9][a-z0-9_-]{0,39}$")
 PRESETS = ("virtual", "human-phase1", "human-phase2")
@@ -131,6 +132,8 @@ def _check(study: Study) -> None:
             raise StudyFileError(f"{where}: {value!r} must be 1-40 characters of a-z 0-9 - _ (it names files)")
 
     need_id("study.id", study.study.id)
+    if not SEED_RANGE[0] <= study.study.seed <= SEED_RANGE[1]:  # every session's seed (core/rng.py game_seed)
+        raise StudyFileError(f"study.seed: must be {SEED_RANGE[0]}..{SEED_RANGE[1]}, got {study.study.seed}")
     for key in ("ignore_window_ms", "turn_back_ms"):
         if getattr(study.study, key) < 0:
             raise StudyFileError(f"study.{key}: must be >= 0, got {getattr(study.study, key)}")

@@ -123,8 +123,10 @@ def verbs(tmp: Path, tag: str) -> list[Verb]:
 
 
 def pilot_recording(folder: Path) -> Path | None:
-    found = sorted((folder / "recordings").glob("*.mcap")) if (folder / "recordings").is_dir() else []
-    return found[0] if found else None
+    """The recording of the pilot's game playing now: the newest (under load the first game can end before
+    the signal comes, and the second is the one it stops: checking the first failed once)."""
+    found = list((folder / "recordings").glob("*.mcap")) if (folder / "recordings").is_dir() else []
+    return max(found, key=lambda f: (f.stat().st_mtime_ns, f.name)) if found else None
 
 
 @pytest.fixture(scope="module", params=[signal.SIGTERM, pytest.param(signal.SIGINT, marks=pytest.mark.slow)],

@@ -9,6 +9,9 @@ re-pinned twice since for main's format changes: policy files gained their
 names its unit of picks per round (report.md); no CSV changed. The future-work sections' CSVs were
 added later without changing any file: frames.csv (future work 2) in both studies, and the full study's
 precombination.csv (future work 3), which its pin had lacked.
+The reduced study's report.md was re-pinned once more when its "Re-run:" line began to hold every
+setting that differs from the default (it had dropped --eval-rounds, --reuse-seeds, --reuse-last): that
+line alone changed (checked by putting the old line back: the old digest).
 tools/study_digests.py rewrites it; only do that when a result is meant to
 change, and say why.
 """

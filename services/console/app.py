@@ -30,7 +30,7 @@ from starlette.staticfiles import StaticFiles
 from pairplay.core.actions import ACTION_NAMES
 from pairplay.core.geometry import N_STATES, STATE_NAMES
 from pairplay.outputs import output_folder
-from pairplay.replay.studydata import StudyDataError
+from pairplay.replay.studydata import REGISTER_AT_ONCE, StudyDataError
 
 from pairplay.services.protocol import StudyRunner
 
@@ -169,8 +169,8 @@ def console_routes(console: Console) -> list:
         body = await _body(request)
         phase = _str(body, "phase", data.study.phase[0].id)
         count = body.get("count", 1)
-        if not isinstance(count, int) or not 1 <= count <= 50:
-            raise StudyDataError("count must be 1..50")
+        if isinstance(count, bool) or not isinstance(count, int) or not 1 <= count <= REGISTER_AT_ONCE:
+            raise StudyDataError(f"count must be 1..{REGISTER_AT_ONCE}")
         label = _str(body, "label", "")
         ids = [data.register(phase, label) for _ in range(count)]
         data.write_tables()

@@ -1,0 +1,132 @@
+"""Study and sweep settings a researcher gets wrong are refused up front, as one kind (StudySettings.check).
+
+Before: `pairplay study --rounds 1` (2, 5, 9) ended in a traceback in core/study.py (the speed-up takes a
+greedy snapshot every 10 rounds: none, an array of size 0); `--personas ' '` in another (no array to
+stack); `--personas deaf,deaf` said a *temporary* policy file existed; `--rounds 10 --reuse-last 50`
+ran a pi-reuse arm that never reused and a report of the "first 50 rounds" of 10; a sweep with
+`reuse = true` and `rounds = [5, 20]` ran until the 5 failed (exit 1, nothing kept), one with
+`personas = " "` left cells/ and grid.toml behind, one with "blind,blind" exited 0. And the report's
+"Re-run:" line dropped every option but four, so it printed another study's command.
+Now: exit 2, ONE line naming the option (or grid key) and its range, nothing written.
+"""
+
+from __future__ import annotations
+
+import argparse
+import shlex
+from pathlib import Path
+
+import pytest
+
+from pairplay.cli import study as study_verb
+from pairplay.cli.main import main
+from pairplay.report.study import SettingError, StudySettings, first_rounds_text
+
+STUDY_MISTAKES = [
+    (["--rounds", "1"], "--rounds: must be at least 10"),
+    (["--rounds", "2"], "--rounds: must be at least 10"),
+    (["--rounds", "5"], "--rounds: must be at least 10"),
+    (["--rounds", "9", "--reuse-last", "2"], "--rounds: must be at least 10"),
+    (["--personas", " "], "--personas: names no persona"),
+    (["--personas", ""], "--personas: names no persona"),
+    (["--personas", ", ,"], "--personas: names no persona"),
+    (["--personas", "deaf,deaf"], "--personas: names deaf twice"),
+    (["--personas", "deaf,Deaf"], "--personas: names deaf twice"),
+    (["--personas", "blind,deaf", "--rounds", "10"], "--reuse-last: must be below --rounds 10"),
+    (["--rounds", "10", "--reuse-last", "50"], "--reuse-last: must be below --rounds 10"),
+    (["--rounds", "60", "--reuse-last", "60"], "--reuse-last: must be below --rounds 60"),
+    (["--personas", "nobody"], "--personas: unknown persona 'nobody'"),
+    (["--games", "99999999999999999999"], "--games: must be 1..9223372036853775808"),
+    (["--reuse-seeds", str(2**63)], "--reuse-seeds: must be 1..9223372036853775808"),
+    (["--personas", "blind", "--algorithm", "lspi", "--rounds", "9"], "--rounds: must be at least 10 with --algorithm lspi"),
+]
+
+
+@pytest.mark.parametrize("argv,needle", STUDY_MISTAKES)
+def test_a_study_that_cannot_run_as_asked_is_refused_in_one_line(argv, needle, tmp_path, capsys):
+    out = tmp_path / "study"
+    for force in ([], ["--force"]):  # --force changes nothing: the mistake is the option's
+        assert main(["study", "--quiet", *argv, "--out", str(out), *force]) == 2
+        err = capsys.readouterr().err
+        assert needle in err and err.count("\n") == 1 and "Traceback" not in err, err
+    assert not out.exists() and list(tmp_path.iterdir()) == []
+
+
+def test_what_the_speed_up_needs_binds_only_when_it_runs():
+    # one persona, or --train-only: no speed-up, so no snapshot interval and no pi-reuse window
+    StudySettings(personas="blind", rounds=1).check()
+    StudySettings(personas="blind,deaf", rounds=1, train_only=True).check()
+    with pytest.raises(SettingError) as info:
+        StudySettings(personas="blind", rounds=5).check(speed_up=True)  # a sweep's reuse = true
+    assert info.value.key == "rounds"
+
+
+def test_run_study_refuses_what_the_verb_refuses(tmp_path):
+    from pairplay.report.study import run_study
+    with pytest.raises(SettingError, match="names blind twice"):
+        run_study(StudySettings(personas="blind,blind", rounds=1, train_only=True), tmp_path / "s")
+    assert not (tmp_path / "s").exists()
+
+
+def test_a_short_games_early_measure_says_it_is_all_its_rounds():
+    assert first_rounds_text(500) == first_rounds_text(50) == "first 50 rounds"
+    assert first_rounds_text(20) == "first 20 rounds (all)"
+
+
+def _parse(line: str) -> StudySettings:
+    """A printed `pairplay study ...` line through the study's own parser, as the config it makes."""
+    words = shlex.split(line)
+    assert words[:2] == ["pairplay", "study"]
+    p = argparse.ArgumentParser()
+    study_verb.add_arguments(p)
+    args = p.parse_args(words[2:])
+    return StudySettings(**{k: getattr(args, k) for k in StudySettings.__dataclass_fields__})
+
+
+@pytest.mark.parametrize("changes", [
+    {},
+    dict(personas="blind,deaf,tatiana", games=2, rounds=60, eval_rounds=5, reuse_seeds=2, reuse_last=10),
+    dict(seed=2**64 - 1, psi=0.5, psi_decay=0.875, trained_updates=0, reward_bonus="match"),
+    dict(algorithm="lspi", lspi_ridge=0.1, lspi_every=3, personas="wasim, frances"),
+    dict(psi=0.1 + 0.2, psi_decay=1.0 / 3, train_only=True),  # floats that print long: their repr round-trips
+])
+def test_the_rerun_line_parses_back_to_the_same_study(changes):
+    settings = StudySettings(**changes)
+    line = settings.rerun_command()
+    assert _parse(line) == settings, line
+    for key in changes:  # every option that differs from the default is on the line
+        assert "--" + key.replace("_", "-") in line
+
+
+def test_every_study_setting_is_an_option_of_the_verb():
+    p = argparse.ArgumentParser()
+    study_verb.add_arguments(p)
+    dests = {a.dest for a in p._actions}
+    assert set(StudySettings.__dataclass_fields__) <= dests
+
+
+GRID_MISTAKES = [
+    ('reuse = true\nseeds = 1\n[study]\npersonas = "blind,deaf"\ngames = 1\neval_rounds = 2\nreuse_seeds = 1\n'
+     'reuse_last = 2\n[grid]\nrounds = [20, 5]\n', "rounds = 5: must be at least 10"),
+    ('seeds = 1\n[study]\npersonas = " "\n', "personas = ' ': names no persona"),
+    ('seeds = 1\n[grid]\npersonas = ["blind", ""]\n', "personas = '': names no persona"),
+    ('seeds = 1\n[study]\npersonas = "blind,blind"\n', "personas = 'blind,blind': names blind twice"),
+    ('reuse = true\nseeds = 1\n[study]\npersonas = "blind,deaf"\nrounds = 20\n', "reuse_last = 50: must be below rounds 20"),
+    ('seeds = [1, 99999999999999999999]\n[study]\npersonas = "blind"\n', "seeds 0..18446744073709551615"),
+    ('seeds = [1, 1]\n[study]\npersonas = "blind"\n', "repeats a seed"),
+    ('reuse = "no"\n[study]\npersonas = "blind"\n', "must be true or false"),
+    ('[grid]\npsi = [0.5, 1.5]\n', "psi = 1.5: must be between 0 and 1"),
+    ('[study]\nalgorithm = "sarsa"\n', "algorithm = 'sarsa': must be one of q-learning, lspi"),
+    ('[study]\nreward_bonus = "always"\n', "reward_bonus = 'always': must be one of correct, consistent, match"),
+]
+
+
+@pytest.mark.parametrize("text,needle", GRID_MISTAKES)
+def test_a_sweep_checks_every_cell_before_it_writes_anything(text, needle, tmp_path, capsys):
+    grid = tmp_path / "grid.toml"
+    grid.write_text(text)
+    out = tmp_path / "out" / "sweep"
+    assert main(["sweep", "--quiet", str(grid), "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert needle in err and err.count("\n") == 1 and "Traceback" not in err, err
+    assert not (tmp_path / "out").exists()
