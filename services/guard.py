@@ -91,7 +91,9 @@ class Guard:
                  whole: bool = False):
         self.session, self.own, self.decode = session, own, decode
         self.whole = whole  # it gets every key of the session, each publisher's in its order (see rule)
-        self.mine: dict[bytes, None] | None = None  # what we published, to tell our echo from a forgery (see rule)
+        # what we published and has not come back yet, to tell our echo from a forgery (see rule); each is
+        # dropped when it comes back (kept, they grew with the session: every event the game ever published)
+        self.mine: dict[bytes, None] | None = None
         self.forged: list[tuple[Event | None, str]] = []  # messages on our own keys we did not publish, why
         self.last_seq: dict[str, int] = {}  # per key
         self.top_seq: dict[str, int] = {}  # per source: the highest taken
@@ -129,8 +131,10 @@ class Guard:
         already folded from the log; an old sequence number is then quietly skipped."""
         info = self._keys.get(key) or self._key(key)
         if info[0]:
-            if self.mine is None or payload in self.mine:
+            if self.mine is None:
                 return QUIET  # our own publication, delivered back to us
+            if self.mine.pop(payload, False) is None:  # ours, delivered back once (Zenoh delivers a session's own
+                return QUIET  # publication once to each of its subscribers): forgotten, so what is kept stays small
             return self._forged(key, payload)
         if len(payload) > MAX_PAYLOAD:
             return Verdict(None, f"payload of {len(payload)} bytes is over the limit of {MAX_PAYLOAD}")

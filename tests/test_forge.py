@@ -296,3 +296,20 @@ def test_a_game_in_a_process_of_its_own_ends_the_session_on_a_forged_end_with_on
     assert len(lines) == 1 and "SessionEnded" in lines[0] and "not published by this game" in lines[0], err
     ends = [x for x in read_log(tmp_path / "forge5.mcap").of("SessionEnded") if x.reason == "failed"]
     assert ends and "SessionEnded" in ends[0].detail
+
+
+def test_the_games_own_events_are_forgotten_once_they_come_back():
+    """What the game keeps to tell its echo from a forgery is only what has not come back yet: it kept
+    every event it ever published (memory growing with the session)."""
+    from pairplay.services.guard import Guard
+
+    guard = Guard("s", own="game")
+    guard.mine = {}
+    key = "pairplay/s/game/RoundStarted"
+    for n in range(1000):
+        payload = b'{"n": %d}' % n
+        guard.mine[payload] = None  # published (services/runner.py Node.publish)
+        assert guard.check(key, payload).quiet  # its echo
+    assert guard.mine == {}
+    assert not guard.check(key, b'{"n": 5}').quiet  # the same bytes again are not an echo of ours: named
+    assert guard.forged
