@@ -69,6 +69,7 @@ NO_END = 2**62  # above every seq (schemas/envelope.py Seq): no end taken yet
 # after its end too) and a start or end itself (a second one is refused: it cannot displace the one taken)
 UNCONTRADICTING = frozenset({"ServiceStarted", "MessageRejected"}) | ONCE_PER_SESSION
 KEYS_CACHED = 4096
+FORGED_KEPT = 1000  # forged starts and ends kept for the session to judge (services/forgery.py); the rest are refused
 
 
 class Verdict(NamedTuple):
@@ -94,7 +95,7 @@ class Guard:
         # what we published and has not come back yet, to tell our echo from a forgery (see rule); each is
         # dropped when it comes back (kept, they grew with the session: every event the game ever published)
         self.mine: dict[bytes, None] | None = None
-        self.forged: list[tuple[Event | None, str]] = []  # messages on our own keys we did not publish, why
+        self.forged: list[tuple[Event, str]] = []  # forged starts and ends on our own keys, why (`_forged`)
         self.last_seq: dict[str, int] = {}  # per key
         self.top_seq: dict[str, int] = {}  # per source: the highest taken
         self.once: dict[str, tuple[str, int]] = {}  # ONCE_PER_SESSION tag taken -> (its key, its seq)
@@ -195,7 +196,10 @@ class Guard:
         what = (f"{type(event).__name__} seq {event.seq} claiming source {event.source!r}" if event is not None
                 else f"a malformed message")
         reason = f"forged: {what} on {key} was not published by this {self.own} (another process on the bus)"
-        self.forged.append((event, reason))
+        if event is not None and type(event).__name__ in ONCE_PER_SESSION and len(self.forged) < FORGED_KEPT:
+            # what the session acts on (services/forgery.py); every other forgery is only refused and recorded,
+            # so a flood of them cannot grow this list (each refusal is counted: Refusals)
+            self.forged.append((event, reason))
         return Verdict(event, reason)
 
     def note(self, key: str, event: Event) -> None:

@@ -311,5 +311,25 @@ def test_the_games_own_events_are_forgotten_once_they_come_back():
         guard.mine[payload] = None  # published (services/runner.py Node.publish)
         assert guard.check(key, payload).quiet  # its echo
     assert guard.mine == {}
-    assert not guard.check(key, b'{"n": 5}').quiet  # the same bytes again are not an echo of ours: named
-    assert guard.forged
+    again = guard.check(key, b'{"n": 5}')  # the same bytes again are not an echo of ours: named
+    assert not again.quiet and again.reason.startswith("forged: ")
+
+
+def test_a_flood_of_forgeries_on_the_games_keys_keeps_only_the_starts_and_ends_to_judge():
+    """Every forgery is refused (and counted); only forged starts and ends, the ones the session acts on,
+    are kept for it to judge, at most FORGED_KEPT: the list grew with every forged message."""
+    from pairplay.schemas import events as ev
+    from pairplay.schemas.envelope import stamped
+    from pairplay.schemas.events import encode_event
+    from pairplay.services.guard import FORGED_KEPT, Guard
+
+    guard = Guard("s", own="game")
+    guard.mine = {}
+    for n in range(1, 3001):
+        e = stamped(ev.RoundStarted(round=0, faces=list(range(18))), session="s", source="game", seq=n, time_ns=n)
+        assert guard.check("pairplay/s/game/RoundStarted", encode_event(e)).reason.startswith("forged: ")
+    assert guard.forged == []
+    for n in range(1, FORGED_KEPT + 50):
+        e = stamped(ev.SessionEnded(reason="completed", rounds_played=1), session="s", source="game", seq=n, time_ns=n)
+        assert guard.check("pairplay/s/game/SessionEnded", encode_event(e)).reason.startswith("forged: ")
+    assert len(guard.forged) == FORGED_KEPT
