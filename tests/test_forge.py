@@ -333,3 +333,37 @@ def test_a_flood_of_forgeries_on_the_games_keys_keeps_only_the_starts_and_ends_t
         e = stamped(ev.SessionEnded(reason="completed", rounds_played=1), session="s", source="game", seq=n, time_ns=n)
         assert guard.check("pairplay/s/game/SessionEnded", encode_event(e)).reason.startswith("forged: ")
     assert len(guard.forged) == FORGED_KEPT
+
+
+def test_a_listener_subscribed_by_tag_takes_the_start_after_later_events_of_the_game():
+    """The learner subscribes by tag: Zenoh keeps no order between its keys, so the game's
+    SuggestionRequested (seq 5) may come before the SessionStarted (seq 2) the game sent first. The
+    learner refused that start as 'not after the events game already published' and the session
+    waited for ever (a fresh-clone CI run). Now only a guard that gets the whole session in order
+    applies that rule."""
+    from pairplay.schemas import events as ev
+    from pairplay.schemas.envelope import stamped
+    from pairplay.schemas.events import encode_event
+    from pairplay.schemas.keys import event_key
+    from pairplay.schemas.session import SessionConfig
+    from pairplay.services.game import GameLogic
+    from pairplay.services.learner import LearnerLogic
+    from pairplay.services.node import Driver
+
+    config = SessionConfig(session="s", participant="sim:deaf", persona="deaf", seed=3, rounds=2)
+    game = Driver(GameLogic(config), "s", clock=lambda: 1)
+    out = game.start()  # SessionStarted, RoundStarted
+    deal = [e for e in out if isinstance(e, ev.RoundStarted)][0]
+    pick = stamped(ev.CardPicked(round=0, turn=0, card=0), session="s", source="participant", seq=1, time_ns=1)
+    out += game.receive(event_key("s", "participant", "CardPicked"), encode_event(pick))
+    observed = stamped(ev.CardObserved(round=0, turn=0, card=[c for c in range(18) if c and deal.faces[c] != deal.faces[0]][0],
+                                       observed_source="intended"), session="s", source="participant", seq=2, time_ns=2)
+    out += game.receive(event_key("s", "participant", "CardObserved"), encode_event(observed))
+    request = [e for e in out if isinstance(e, ev.SuggestionRequested)]
+    start = [e for e in out if isinstance(e, ev.SessionStarted)]
+    assert request and start and request[0].seq > start[0].seq
+    learner = Driver(LearnerLogic(), "s", clock=lambda: 1)
+    made = learner.receive(event_key("s", "game", "SuggestionRequested"), encode_event(request[0]))  # first: waits
+    made += learner.receive(event_key("s", "game", "SessionStarted"), encode_event(start[0]))
+    assert not [e for e in made if isinstance(e, ev.MessageRejected)], made
+    assert [type(e).__name__ for e in made] == ["SuggestionMade"]
