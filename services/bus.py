@@ -580,11 +580,15 @@ class Bus:
         self._closed = False
         self.missed: Counter = Counter()  # publisher -> messages Zenoh reported lost for good (recovering bus)
 
-    def publisher(self, key: str) -> zenoh.Publisher:
-        pub = self._publishers.get(key)
+    def publisher(self, key: str, express: bool | None = None) -> zenoh.Publisher:
+        """The BLOCK publisher of `key`, declared once; `express=False` (Bus.put_batched): a second one
+        on the key without express (a plain bus only)."""
+        batched = express is False and self.express
+        cache = self._batched if batched else self._publishers
+        pub = cache.get(key)
         if pub is None:
             with self._lock:
-                pub = self._publishers.get(key)
+                pub = cache.get(key)
                 if pub is None:
                     if self.options.recovers:
                         pub = zenoh.ext.declare_advanced_publisher(
@@ -593,8 +597,8 @@ class Bus:
                             sample_miss_detection=zenoh.ext.MissDetectionConfig(heartbeat=HEARTBEAT_S, sporadic_heartbeat=None))
                     else:
                         pub = self.session.declare_publisher(key, congestion_control=zenoh.CongestionControl.BLOCK,
-                                                             express=self.express)
-                    self._publishers[key] = pub
+                                                             express=self.express and not batched)
+                    cache[key] = pub
         return pub
 
     def matching(self, key: str) -> bool:
@@ -625,17 +629,7 @@ class Bus:
         Outbox's rule), or a sample may wait that long. Order is kept (one batch, one
         priority). A recovering bus's publishers keep their caches per publisher, so there
         this is `put` (one publisher per key keeps a late joiner's replay in order)."""
-        if self.options.recovers:
-            self.put(key, payload)
-            return
-        pub = self._batched.get(key)
-        if pub is None:
-            with self._lock:
-                pub = self._batched.get(key)
-                if pub is None:
-                    pub = self._batched[key] = self.session.declare_publisher(
-                        key, congestion_control=zenoh.CongestionControl.BLOCK, express=False)
-        pub.put(payload)
+        self.publisher(key, express=self.options.recovers).put(payload)
 
     def subscribe(self, key_expr: str, callback: Callable[[str, bytes], None],
                   on_miss: Callable[[str, int], None] | None = None, *, drain: bool = False):
