@@ -201,12 +201,12 @@ def open_stream(out: ViewOutput, recording_name: str = "") -> tuple[rr.Recording
     if out.rrd is not None:  # made here first: the system's refusal is an OSError naming the file, and no
         out.rrd.parent.mkdir(parents=True, exist_ok=True)  # stream exists yet to print rerun's own warning
         out.rrd.open("wb").close()
-    server = None
+    server, grpc_port, web_port = None, 0, 0
     if out.serve:  # started before the stream's threads exist (its preexec_fn runs between fork and exec)
         grpc_port, web_port = out.grpc_port or _free_port(), out.web_port or _free_port()
         server = serve_viewer(grpc_port, web_port, analytics_off=not out.rerun_analytics)
     try:
-        return _stream(out, recording_name, server, *((grpc_port, web_port) if server else (0, 0)))
+        return _stream(out, recording_name, server, grpc_port, web_port)
     except BaseException:
         if server is not None:
             stop_server(server)
