@@ -42,8 +42,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="games per held-out persona in the speed-up experiment (default 10)")
     p.add_argument("--psi", type=fraction, default=1.0, help="pi-reuse: psi at the start of each round (default 1)")
     p.add_argument("--psi-decay", type=fraction, default=0.95, help="pi-reuse: v, psi's decay per suggestion (default 0.95)")
-    p.add_argument("--reuse-last", type=non_negative, default=50,
-                   help="pi-reuse: the last N rounds use the new policy alone (default 50)")
+    p.add_argument("--reuse-last", type=non_negative, default=None,
+                   help="pi-reuse: the last N rounds use the new policy alone (default 50; a quarter of "
+                        "--rounds when --rounds is 50 or fewer)")
     p.add_argument("--algorithm", choices=("q-learning", "lspi"), default="q-learning",
                    help="the learner: Q-learning (thesis 5.1.1, default) or online LSPI (algorithm 2, core/lspi.py); "
                         "with lspi, Q-learning also trains on the same games for the side-by-side comparison")
@@ -71,13 +72,24 @@ def option(key: str) -> str:
     return "--" + key.replace("_", "-")
 
 
+def default_reuse_last(rounds: int) -> int:
+    """--reuse-last when not given: 50 (the study's), or a quarter of a study of 50 rounds or fewer, where
+    50 would leave pi-reuse no round (the Re-run line then states it: it differs from 50)."""
+    from pairplay.report.study import StudySettings
+    default = StudySettings.reuse_last
+    return default if rounds > default else rounds // 4
+
+
 def settings_of(args):
     """The one config object (report/study.py StudySettings) from the parsed options, checked: an
     OptionError naming the option and its allowed range for a combination core cannot run or would run
     as something else (no persona, one twice, fewer rounds than the speed-up's snapshot interval...)."""
     from pairplay.report.study import SettingError, StudySettings
 
-    settings = StudySettings(**{k: getattr(args, k) for k in StudySettings.__dataclass_fields__})
+    given = {k: getattr(args, k) for k in StudySettings.__dataclass_fields__}
+    if given["reuse_last"] is None:  # not given: the default must fit a short study (`--rounds 20` was refused
+        given["reuse_last"] = default_reuse_last(given["rounds"])  # for the default's 50: a new user's trial)
+    settings = StudySettings(**given)
     try:
         settings.check(spell=option)
     except SettingError as exc:
