@@ -42,6 +42,11 @@ def session_keys(session: str) -> str:
     return f"{ROOT}/{check_chunk('session', session)}/**"
 
 
+def source_keys(session: str, source: str) -> str:
+    """Wildcard of everything one source publishes in one session."""
+    return f"{ROOT}/{check_chunk('session', session)}/{check_chunk('source', source)}/**"
+
+
 def query_key(session: str, service: str, name: str) -> str:
     return f"{ROOT}/{check_chunk('session', session)}/{QUERY_CHUNK}/{service}/{name}"
 

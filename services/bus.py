@@ -89,6 +89,8 @@ HEARTBEAT_S = 0.25  # a recovering publisher tells its last sequence number this
 # ten times what waits while the thread waits its turn for the GIL (1 ms in `pairplay run recorder`)
 DRAIN_CAPACITY = 1024
 BUCKETS_CACHED = 4096  # keys whose Inbox allowance is remembered (made-up keys cannot grow it past this)
+# Bus.subscribe's `origin`: where the samples it takes were published (Zenoh's allowed_origin)
+ORIGINS = {"any": zenoh.Locality.ANY, "remote": zenoh.Locality.REMOTE, "local": zenoh.Locality.SESSION_LOCAL}
 
 
 def safe_defaults(scouting_delay_ms: int = 100) -> dict[str, Any]:
@@ -632,7 +634,8 @@ class Bus:
         self.publisher(key, express=self.options.recovers).put(payload)
 
     def subscribe(self, key_expr: str, callback: Callable[[str, bytes], None],
-                  on_miss: Callable[[str, int], None] | None = None, *, drain: bool = False):
+                  on_miss: Callable[[str, int], None] | None = None, *, drain: bool = False,
+                  origin: str = "any"):
         """Call `callback(key, payload)` for every sample. The callback runs on a Zenoh
         thread: it must not raise and must not wait (hand the sample to an Inbox).
         A recovering bus (see rule) calls `on_miss(publisher, n)` when Zenoh reports `n`
@@ -646,7 +649,14 @@ class Bus:
         writing thread working through a backlog, each of those takes waited for it (issue 16:
         a 100,000-event burst was taken 0.50-0.87x as fast as a raw subscriber, 1.45-1.88x
         drained, same run, load < 1). The channel is bounded like Zenoh's default one (a
-        consumer that stops taking holds up Zenoh's thread, never memory); ours never stops."""
+        consumer that stops taking holds up Zenoh's thread, never memory); ours never stops.
+
+        `origin`: "any", or only what other processes publish ("remote") or only what this
+        process does ("local"): Zenoh's `allowed_origin` (a session's own publications
+        reach its own subscribers without the network; services/runner.py keeps a service's
+        own echo away so)."""
+        allowed_origin = ORIGINS[origin]
+
         def on_sample(sample: zenoh.Sample) -> None:
             try:
                 callback(str(sample.key_expr), sample.payload.to_bytes())
@@ -654,7 +664,7 @@ class Bus:
                 log.exception("subscriber callback on %s failed", sample.key_expr)
         handler = zenoh.handlers.FifoChannel(DRAIN_CAPACITY) if drain else on_sample
         if not self.options.recovers:
-            sub = self.session.declare_subscriber(key_expr, handler)
+            sub = self.session.declare_subscriber(key_expr, handler, allowed_origin=allowed_origin)
             self._declared.append(sub)
             if drain:
                 self._drain_samples(sub.handler, on_sample, key_expr)
@@ -671,7 +681,7 @@ class Bus:
             except Exception:
                 log.exception("miss listener on %s failed", key_expr)
         sub = zenoh.ext.declare_advanced_subscriber(
-            self.session, key_expr, handler,
+            self.session, key_expr, handler, allowed_origin=allowed_origin,
             recovery=zenoh.ext.RecoveryConfig(periodic_queries=None, heartbeat=True))
         self._declared.append(sub)
         self._declared.append(sub.sample_miss_listener(on_lost))

@@ -25,10 +25,12 @@ source's own sequence, and notices when the source contradicts it later:
   given back, so the source's real end is taken when it comes. "Later" is by seq, or,
   for a guard that gets the whole session (`whole`: the recorder, a service not
   subscribed by tag; Zenoh keeps a publisher's order on a link), by arrival.
-A service ignores its own messages delivered back to it, before decoding them;
-one that gets its whole session keeps what it published (`mine`, services/runner.py)
-and names a message on its own keys that is not in it a forgery (`forged`): the
-game thus sees a forged start or end of its session (services/session.py stops it).
+A service ignores messages on its own keys, before decoding them (its own,
+delivered back to the recorder, which takes the whole session), except the
+game (`names_forgeries`): its own publications never come back to it
+(services/runner.py Node.subscribe), so a message on its keys is another
+process's and is named a forgery (`forged`): the game thus sees a forged start
+or end of its session (services/session.py stops it).
 
 A service restarted after a crash takes its state from the recorder's log
 (node.Driver.resume) up to a cut point: per key, the last sequence number the
@@ -94,9 +96,7 @@ class Guard:
                  whole: bool = False):
         self.session, self.own, self.decode = session, own, decode
         self.whole = whole  # it gets every key of the session, each publisher's in its order (see rule)
-        # what we published and has not come back yet, to tell our echo from a forgery (see rule); each is
-        # dropped when it comes back (kept, they grew with the session: every event the game ever published)
-        self.mine: dict[bytes, None] | None = None
+        self.names_forgeries = False  # a message on our own keys is not ours: a forgery (see rule)
         self.forged: list[tuple[Event, str]] = []  # forged starts and ends on our own keys, why (`_forged`)
         self.last_seq: dict[str, int] = {}  # per key
         self.top_seq: dict[str, int] = {}  # per source: the highest taken
@@ -134,11 +134,7 @@ class Guard:
         already folded from the log; an old sequence number is then quietly skipped."""
         info = self._keys.get(key) or self._key(key)
         if info[0]:
-            if self.mine is None:
-                return QUIET  # our own publication, delivered back to us
-            if self.mine.pop(payload, False) is None:  # ours, delivered back once (Zenoh delivers a session's own
-                return QUIET  # publication once to each of its subscribers): forgotten, so what is kept stays small
-            return self._forged(key, payload)
+            return self._forged(key, payload) if self.names_forgeries else QUIET
         if len(payload) > MAX_PAYLOAD:
             return Verdict(None, f"payload of {len(payload)} bytes is over the limit of {MAX_PAYLOAD}")
         try:

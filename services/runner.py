@@ -1,7 +1,8 @@
 """A service on the bus: a Driver fed from a Zenoh subscription, in its own thread.
 
-Rule: a Node subscribes to its session's keys (or, for a logic that copes with
-any order between keys, just those of the events it reads) before anything else, declares
+Rule: a Node subscribes to its session's keys but its own publications (or, for
+a logic that copes with any order between keys, just those of the events it
+reads: `Node.subscribe`) before anything else, declares
 its liveliness token, then asks the recorder for the session's log so far. An
 empty log is a fresh start (ServiceStarted, then the logic's first outputs);
 a non-empty one is a restart: the Driver re-feeds it (node.py) and the service
@@ -30,8 +31,8 @@ import msgspec
 from pairplay import __version__
 from pairplay.schemas.envelope import Event
 from pairplay.schemas.events import ServiceStarted, decode_event, encode_event
-from pairplay.schemas.keys import alive_key, event_key, query_key, session_keys
-from pairplay.schemas.trust import STARTERS
+from pairplay.schemas.keys import alive_key, event_key, query_key, session_keys, source_keys
+from pairplay.schemas.trust import SOURCES, STARTERS
 
 from pairplay.services.bus import MISSED, Bus, Inbox, Outbox
 from pairplay.services.node import Driver, Logic
@@ -147,11 +148,10 @@ class Node:
                  resume: bool = True, stop: threading.Event | None = None):
         self.bus, self.logic, self.session = bus, logic, session
         self.driver = Driver(logic, session, clock)
-        self._mine = None
-        if not getattr(logic, "by_tag", False):  # subscribed to the whole session: it sees its own echo
+        if not getattr(logic, "by_tag", False):  # the whole session, each publisher's in its order (`subscribe`)
             self.driver.guard.whole = True
-            if logic.name in STARTERS:  # the game: what it published; a message on its keys not in it is forged
-                self._mine = self.driver.guard.mine = {}  # (services/guard.py, services/forgery.py)
+            if logic.name in STARTERS:  # the game: its own publications never come back to it (`subscribe`), so
+                self.driver.guard.names_forgeries = True  # a message on its keys is another process's (forgery.py)
         self.clock = clock
         self.resume = resume
         self.stop = stop if stop is not None else threading.Event()
@@ -188,20 +188,31 @@ class Node:
             key = self._keys.get((e.source, tag))
             if key is None:  # built and checked once per source and tag (the check is most of its cost)
                 key = self._keys[(e.source, tag)] = event_key(self.session, e.source, tag)
-            payload = encode_event(e)
-            if self._mine is not None:
-                self._mine[payload] = None
-            self.outbox.send(key, payload, wake)
+            self.outbox.send(key, encode_event(e), wake)
+
+    def subscribe(self) -> None:
+        """The Node's subscriptions (module rule). A logic that copes with any order between keys
+        (`by_tag`): only the tags it reads; Zenoh then does not even send the others here. Any
+        other: the whole session but its own echo, each publisher's messages in its order: what
+        other processes publish on one subscription (Zenoh keeps a publisher's order on a link),
+        what this process's other services publish on one subscription per source. A session's
+        own publications reach its own subscribers without the network, and the game's came back
+        to it while it was still putting the rest of a step's events: the callbacks of its own
+        echoes took the GIL between its puts and held up the one the learner waits for (issue
+        16: pick -> suggestion 2.16-2.25x the paced raw round trip with the echo, 2.10-2.14x
+        without, 6 interleaved runs each; docs/bus.md "Fifth pass")."""
+        if getattr(self.logic, "by_tag", False):
+            for tag in sorted(self.logic.consumes):
+                self.bus.subscribe(f"{session_keys(self.session)[:-2]}*/{tag}", self._on_message, self._on_miss)
+            return
+        self.bus.subscribe(session_keys(self.session), self._on_message, self._on_miss, origin="remote")
+        for source in sorted(SOURCES - {self.logic.name}):
+            self.bus.subscribe(source_keys(self.session, source), self._on_message, self._on_miss, origin="local")
 
     def start(self, wait_for: tuple[str, ...] = (), wait_timeout_s: float = WAIT_FOR_S) -> None:
         """Subscribe, announce, catch up; with `wait_for`, first wait for those services' tokens.
         Raises Stopped if the stop flag is set meanwhile."""
-        if getattr(self.logic, "by_tag", False):
-            # only the tags the logic reads: Zenoh then does not even send the others here
-            for tag in sorted(self.logic.consumes):
-                self.bus.subscribe(f"{session_keys(self.session)[:-2]}*/{tag}", self._on_message, self._on_miss)
-        else:
-            self.bus.subscribe(session_keys(self.session), self._on_message, self._on_miss)
+        self.subscribe()
         self.bus.queryable(query_key(self.session, self.logic.name, SENT_QUERY), self.inbox.control)
         if self.logic.name != "game":
             self.game_watch = GameWatch(self.bus, self.session, self.game_gone_s)

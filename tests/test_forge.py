@@ -168,13 +168,11 @@ def test_two_events_claiming_the_same_seq_of_a_start_are_noticed():
 
 
 def test_a_service_names_a_message_on_its_own_keys_it_did_not_publish():
-    g = Guard("s", own="game")
-    g.mine = {}
     key, payload = message("s", ev.SessionEnded(reason="completed"), 4)
-    g.mine[payload] = None
-    assert g.check(key, payload).quiet  # our own echo
-    key, forged = message("s", ev.SessionEnded(reason="forged"), 4)
-    verdict = g.check(key, forged)
+    assert Guard("s", own="game").check(key, payload).quiet  # any other service: ignored unread
+    g = Guard("s", own="game")
+    g.names_forgeries = True  # the game: its own never come back to it (services/runner.py Node.subscribe)
+    verdict = g.check(key, payload)
     assert verdict.reason.startswith("forged: SessionEnded seq 4 claiming source 'game'") and len(g.forged) == 1
 
 
@@ -298,21 +296,47 @@ def test_a_game_in_a_process_of_its_own_ends_the_session_on_a_forged_end_with_on
     assert ends and "SessionEnded" in ends[0].detail
 
 
-def test_the_games_own_events_are_forgotten_once_they_come_back():
-    """What the game keeps to tell its echo from a forgery is only what has not come back yet: it kept
-    every event it ever published (memory growing with the session)."""
-    from pairplay.services.guard import Guard
+def test_the_games_own_events_never_come_back_to_it_and_another_processs_on_its_keys_are_named():
+    """The game subscribes around its own echo (services/runner.py Node.subscribe): Zenoh delivered
+    each of its publications back to its own subscription, whose callbacks took the GIL between
+    the puts of one step (issue 16), and the game kept every payload it published until its echo
+    came, to tell it from a forgery. Now none comes back, the same bytes from another process are
+    named forged, and what an in-process service publishes still reaches it."""
+    from pairplay.services.game import GameLogic
+    from pairplay.services.runner import Node
 
-    guard = Guard("s", own="game")
-    guard.mine = {}
-    key = "pairplay/s/game/RoundStarted"
-    for n in range(1000):
-        payload = b'{"n": %d}' % n
-        guard.mine[payload] = None  # published (services/runner.py Node.publish)
-        assert guard.check(key, payload).quiet  # its echo
-    assert guard.mine == {}
-    again = guard.check(key, b'{"n": 5}')  # the same bytes again are not an echo of ours: named
-    assert not again.quiet and again.reason.startswith("forged: ")
+    session = "echo"
+    config = SessionConfig(session=session, participant="human:t", seed=1, rounds=10, observed_source="first-pick",
+                           ignore_rule="time")
+    with Bus() as bus, Bus(BusOptions(listen=[], connect=[bus.locators()[0]])) as other:
+        game = Node(bus, GameLogic(config), session, resume=False)
+        checked: list[tuple[str, bytes]] = []
+        check = game.driver.guard.check
+        game.driver.guard.check = lambda key, payload, overlap=False: (checked.append((key, payload)),
+                                                                       check(key, payload, overlap))[1]
+        mine: list[tuple[str, bytes]] = []
+        bus.subscribe(event_key(session, "game", "*"), lambda k, p: mine.append((k, p)))  # what it publishes
+        stop = threading.Event()
+        game.start()
+        game.run_in_thread(stop)
+        try:
+            pick = stamped(ev.CardPicked(round=0, turn=0, card=0), session=session, source="board", seq=1,
+                           time_ns=10**18)
+            bus.put(event_key(session, "board", "CardPicked"), encode_event(pick))  # in-process, like the lab's board
+            assert wait_until(lambda: any(k.endswith("/SuggestionRequested") for k, _ in mine))
+            assert wait_until(lambda: any(k.endswith("/board/CardPicked") for k, _ in checked))
+            time.sleep(0.3)
+            assert [k for k, _ in checked if "/game/" in k] == []  # none of its own came back
+            key, payload = next((k, p) for k, p in mine if k.endswith("/RoundStarted"))
+            other.put(key, payload)  # its own bytes again, from another process: not its
+            assert wait_until(lambda: any("/game/" in k for k, _ in checked))
+            assert wait_until(lambda: any(k.endswith("/MessageRejected") for k, _ in mine))
+        finally:
+            stop.set()
+            game.thread.join(5)
+            game.close()
+    rejected = [decode_event(p) for k, p in mine if k.endswith("/MessageRejected")]
+    assert rejected[0].reason.startswith("forged: RoundStarted seq") and rejected[0].key == key
 
 
 def test_a_flood_of_forgeries_on_the_games_keys_keeps_only_the_starts_and_ends_to_judge():
@@ -324,7 +348,7 @@ def test_a_flood_of_forgeries_on_the_games_keys_keeps_only_the_starts_and_ends_t
     from pairplay.services.guard import FORGED_KEPT, Guard
 
     guard = Guard("s", own="game")
-    guard.mine = {}
+    guard.names_forgeries = True
     for n in range(1, 3001):
         e = stamped(ev.RoundStarted(round=0, faces=list(range(18))), session="s", source="game", seq=n, time_ns=n)
         assert guard.check("pairplay/s/game/RoundStarted", encode_event(e)).reason.startswith("forged: ")
