@@ -26,6 +26,7 @@ from pairplay.errors import OptionError
 from pairplay.outputs import check_folder
 from pairplay.services.bus import Bus, Deadline, add_bus_arguments, deadline_of, options_from_args, stop_on_signals
 from pairplay.services.forgery import EVERY_LISTENER, ForgeryWatch
+from pairplay.services.refusal import RefusalWatch
 from pairplay.services.runner import GameWatch, Node, Stopped, start_unless_stopped, waiting_for
 
 SERVICES = ("game", "learner", "participant", "recorder", "combiner")
@@ -118,6 +119,10 @@ def run(args: argparse.Namespace) -> int:
         # a game given its config starts the session; every other service, and a game
         # restarted by session id alone, catches up from the recorder's log
         node = Node(bus, logic, args.session, resume=not (args.service == "game" and args.participant), stop=stop)
+        # a game alone in its process: a service elsewhere that refuses its start can take no part, and the
+        # game would wait for it for ever: it ends the session, one line (services/refusal.py); subscribed
+        # before the start. Its end refused: the refusing service's own process ends (runner.GameWatch)
+        refusals = RefusalWatch(bus, args.session, node, tags=("SessionStarted",)) if args.service == "game" else None
         try:
             start_unless_stopped(lambda: node.start(wait_for=tuple(args.wait_for)), stop, args.service)
         except Stopped:
@@ -129,16 +134,17 @@ def run(args: argparse.Namespace) -> int:
         # a game alone in its process: every listener is elsewhere, so a forged start or end that fits the
         # game's sequence may have been taken (services/forgery.py): the game ends the session, one line
         watch = ForgeryWatch(node, [], external=EVERY_LISTENER) if args.service == "game" else None
-        forged = ""
+        forged = refused = ""
         while thread.is_alive() and not stop.wait(0.05):
             forged = watch.verdict() if watch is not None else ""
-            if forged:
+            refused = refusals.verdict() if refusals is not None and not forged else ""
+            if forged or refused:
                 stop.set()
         if stop.is_set():
             thread.join(deadline_of(stop).left(0.5, 0.2))
         if args.service == "game" and not logic.done:  # stopped: the session's end says why and how far
             from pairplay.services.session import end_reason
-            reason, detail = end_reason(stop, forged)
+            reason, detail = end_reason(stop, forged or refused)
             with node._lock:
                 node.publish(node.driver._stamp(logic.end(reason, detail)))
             node.close(deadline_of(stop).left(0.3, 0.5))  # let the recorder take it before the bus closes
@@ -146,6 +152,8 @@ def run(args: argparse.Namespace) -> int:
         if forged:
             from pairplay.services.session import ForgedEvent
             raise ForgedEvent(f"{forged}: the game ended the session", f"session {args.session}")
+        if refused:
+            raise refusals.error(f"session {args.session}")
         return 0
     finally:
         deadline = deadline_of(stop) if stop.is_set() else Deadline(1.0)

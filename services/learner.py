@@ -28,7 +28,7 @@ from pairplay.core.reward import WRONG_SUGGESTION, human_reward, simulated_rewar
 from pairplay.core.rng import UniformStream
 from pairplay.schemas import events as ev
 
-from pairplay.services.node import NotYet, Rejected, stream_seed
+from pairplay.services.node import NotYet, Rejected, refused_start, stream_seed
 
 MODE_OF_ALGORITHM = {"q-learning": "q", "pi-reuse": "reuse", "fixed": "fixed", "lspi": "lspi"}
 HOW_NAMES = {How.GREEDY: "greedy", How.EXPLORE: "explore", How.BIAS: "bias", How.FIXED: "fixed"}
@@ -51,6 +51,7 @@ class LearnerLogic:
         self.resolved: dict[tuple[int, int], ev.TurnResolved] = {}
         self.round_started = -1
         self.ended = False
+        self.refused = ""  # why we refused the session's start (refused_start)
         # the batch of one an LSPI learner reads, filled in place per update (the Q-learner's live path is
         # core/learning.py suggest_one / learn_one, which keep their own), and the round for start_round
         self._state, self._action, self._round = (np.zeros(1, dtype=np.int64) for _ in range(3))
@@ -67,7 +68,8 @@ class LearnerLogic:
         if isinstance(e, ev.SessionStarted):
             return self._configure(e)
         if self.config is None:
-            raise NotYet
+            self.ended = refused_start(self, e)  # NotYet until the start comes; after a refused one, the end
+            return []
         if isinstance(e, ev.SuggestionRequested):
             return self._suggest(e)
         if isinstance(e, ev.SuggestionPerceived):
@@ -88,10 +90,12 @@ class LearnerLogic:
             e.config.validate()
             schedule = e.config.learner_config()
         except ValueError as err:
-            raise Rejected(f"cannot learn with this session config: {err}") from None
+            self.refused = f"cannot learn with this session config: {err}"
+            raise Rejected(self.refused) from None
         policy = np.array(e.config.policy_actions, dtype=np.int64) if e.config.policy_actions else None
         if policy is not None and (policy.shape != (N_STATES,) or policy.min() < 0 or policy.max() >= N_ACTIONS):
-            raise Rejected(f"policy_actions must be {N_STATES} action codes 0..{N_ACTIONS - 1}")
+            self.refused = f"policy_actions must be {N_STATES} action codes 0..{N_ACTIONS - 1}"
+            raise Rejected(self.refused)
         mode = MODE_OF_ALGORITHM[e.config.algorithm]
         stream = UniformStream([stream_seed(e.config)], "agent")
         if mode == "lspi":

@@ -68,6 +68,18 @@ class Logic(Protocol):
     # from 0); resume and verify compare `comparable` of both (Driver.same)
 
 
+def refused_start(logic, event: Event) -> bool:
+    """What a logic with no session config does with `event`: waits for the start (NotYet), unless it
+    refused the start (`logic.refused`: why). Then it can play no part: it ends on the game's end (True:
+    the logic marks itself ended) and refuses everything else, naming why; before, it held them, and the
+    end behind them, for ever (a `pairplay run learner` that refused the start ran on after the session)."""
+    if not logic.refused:
+        raise NotYet
+    if type(event).__name__ != "SessionEnded":
+        raise Rejected(f"the session's start was refused ({logic.refused[:200]})")
+    return True
+
+
 def _seq(event: Event) -> int:
     return event.seq
 

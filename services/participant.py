@@ -22,7 +22,7 @@ from pairplay.core.rng import UniformStream
 from pairplay.core.user import SimulatedUsers
 from pairplay.schemas import events as ev
 
-from pairplay.services.node import NotYet, Rejected, stream_seed
+from pairplay.services.node import NotYet, Rejected, refused_start, stream_seed
 
 
 class ParticipantLogic:
@@ -35,6 +35,7 @@ class ParticipantLogic:
         self.persona_key = persona_key  # None: whatever the session config names
         self.users: SimulatedUsers | None = None
         self.done = False
+        self.refused = ""  # why we refused the session's start (refused_start)
         self.stage = "idle"  # idle -> first -> observed -> second -> idle
         self.round, self.turn = -1, -1
 
@@ -45,7 +46,8 @@ class ParticipantLogic:
         if isinstance(e, ev.SessionStarted):
             return self._configure(e)
         if self.users is None:
-            raise NotYet
+            self.done = refused_start(self, e)  # NotYet until the start comes; after a refused one, the end
+            return []
         if isinstance(e, ev.RoundStarted):
             return self._round(e)
         if isinstance(e, ev.CardRevealed):
@@ -64,15 +66,18 @@ class ParticipantLogic:
 
     def _configure(self, e: ev.SessionStarted) -> list[ev.Event]:
         c = e.config
-        if not c.participant.startswith("sim:"):
-            raise Rejected(f"participant {c.participant!r} is not a simulated one")
         key = self.persona_key or c.persona
-        if self.persona_key and self.persona_key != c.persona:
-            raise Rejected(f"this participant plays {self.persona_key!r}, the session expects {c.persona!r}")
-        try:
-            who = persona(key)
-        except KeyError as err:
-            raise Rejected(str(err)) from None
+        if not c.participant.startswith("sim:"):
+            self.refused = f"participant {c.participant!r} is not a simulated one"
+        elif self.persona_key and self.persona_key != c.persona:
+            self.refused = f"this participant plays {self.persona_key!r}, the session expects {c.persona!r}"
+        else:
+            try:
+                who = persona(key)
+            except KeyError as err:
+                self.refused = str(err)
+        if self.refused:
+            raise Rejected(self.refused)
         self.config = c
         self.users = SimulatedUsers([who], UniformStream([stream_seed(c)], "user"))
         return []

@@ -11,7 +11,7 @@ Every session ends with a SessionEnded that says why: "completed" (the game
 played every round), "interrupted" (SIGINT/SIGTERM: `stop.why` names the
 signal), "aborted" (the caller's `stop` without a signal: the experimenter) or
 "failed" (a service the session needs left the bus and did not come back within
-`settle_timeout_s`), with how far it got; the robot's suggestions still awaiting
+`settle_timeout_s`, or refused the game's start: services/refusal.py), with how far it got; the robot's suggestions still awaiting
 an acknowledgement are recorded as "in-flight" (schemas/robot.py).
 """
 
@@ -25,27 +25,20 @@ from pathlib import Path
 import logging
 
 from pairplay.errors import UserError
-from pairplay.schemas.events import MessageRejected, decode_event
-from pairplay.schemas.keys import alive_key, event_key
+from pairplay.schemas.keys import alive_key
 from pairplay.schemas.session import SessionConfig
 from pairplay.services.bus import CLOSE_TIMEOUT_S, Bus, BusOptions, Deadline, deadline_of
 from pairplay.services.forgery import ForgeryWatch
 from pairplay.services.game import GameLogic
-from pairplay.services.guard import CONTRADICTED
 from pairplay.services.learner import LearnerLogic
 from pairplay.services.participant import ParticipantLogic
 from pairplay.services.recorder import Recorder, RecordingFailed
+from pairplay.services.refusal import EndRefused, RefusalWatch, StartRefused  # noqa: F401  (StartRefused: re-exported)
 from pairplay.services.robot.bridge import ROBOT_CLOSE_S
 from pairplay.services.robot.choice import RobotChoice, start_bridge
 from pairplay.services.runner import Node, Stopped, start_unless_stopped
 
 log = logging.getLogger("pairplay.session")
-
-
-class StartRefused(UserError):
-    """The recorder refused the game's SessionStarted (`reason`): nothing of the session can be recorded,
-    and the services that read the log would never see it start. The session is ended at once instead of
-    waiting for picks that cannot come (the new-user trial's 10-minute hang). `where`: the recording."""
 
 
 class ForgedEvent(UserError):
@@ -63,33 +56,6 @@ def forgery_watch(game: Node | None, nodes: list[Node], recorder: Recorder | Non
     listeners += [("recorder", recorder.guard)] if recorder is not None else []
     listeners += [(bridge.logic.name, bridge.shell.guard)] if bridge is not None else []
     return ForgeryWatch(game, listeners, external)
-
-
-def refused_start_text(reason: str) -> str:
-    """The line of a session whose recorder refused the game's SessionStarted. When it had taken another
-    one on the game's key first, that one was not this game's (it publishes one start): say so."""
-    text = f"the recorder refused the session's start ({reason[:200]})"
-    if reason.startswith("a second SessionStarted") or "duplicate or out of order" in reason:
-        text += ("; the SessionStarted it took first claiming source 'game' was not this game's (another "
-                 "process on the bus forged it, or the recording is an earlier session's)")
-    return text + "; the session was stopped"
-
-
-def watch_start_refused(bus: Bus, session: str, on_refused) -> object:
-    """Call `on_refused(reason)` (once, on a Zenoh thread: it must not wait) when a recorder publishes a
-    MessageRejected of the game's SessionStarted in `session`; returns the subscriber."""
-    started_key = event_key(session, "game", "SessionStarted")
-    told = []
-
-    def seen(_key: str, payload: bytes) -> None:
-        try:
-            e = decode_event(payload)
-        except Exception:  # the recorder's own events; a stray payload is not ours to judge here
-            return
-        if isinstance(e, MessageRejected) and e.key == started_key and not told and not e.reason.startswith(CONTRADICTED):
-            told.append(e.reason)
-            on_refused(e.reason)
-    return bus.subscribe(event_key(session, "recorder", "MessageRejected"), seen)
 
 
 def run_session(config: SessionConfig, path: str | Path, *, bus: Bus | None = None,
@@ -137,8 +103,9 @@ def run_session(config: SessionConfig, path: str | Path, *, bus: Bus | None = No
         needed.append("tracker")  # the eye tracker: without it no turn gets a suggestion
     nodes = []
     bridge = game = None
-    refused: list[str] = []  # the recorder refused the session's start: it ends at once (StartRefused)
-    watch_start_refused(bus, config.session, lambda reason: (refused.append(reason), stop.set()))
+    # a service that refuses the game's own start or end: the session stops at once (services/refusal.py);
+    # subscribed before the game starts, told which game is this session's once there is one
+    refusals = RefusalWatch(bus, config.session, None)
     try:
         if robot is not None:
             bridge = start_unless_stopped(lambda: start_bridge(bus, config.session, robot), stop, "robot")
@@ -166,16 +133,17 @@ def run_session(config: SessionConfig, path: str | Path, *, bus: Bus | None = No
                 nodes_out["game"] = game
             start_unless_stopped(lambda: game.start(wait_for=tuple(needed) + tuple(wait_also)), stop, "game")
             game.run_in_thread(stop)
+            refusals.game = game
         else:
             needed.append("game")
         watch = forgery_watch(game, nodes, recorder, bridge, [s for s in needed if s in external])
         failure = watch_services(bus, config.session, nodes, [s for s in needed if s in external or s == "robot"],
-                                 stop, settle_timeout_s, forged=watch.verdict)
+                                 stop, settle_timeout_s, broken=lambda: watch.verdict() or refusals.verdict())
         end_game(game, stop, failure, recorder)
         if not failure and not stop.is_set():
             # an external recorder stays until everyone else left: do not wait for it
             wait_external_exit(bus, config.session, [s for s in external if s in needed and s != "recorder"], stop,
-                               settle_timeout_s)
+                               settle_timeout_s, broken=refusals.verdict)
         if hold is not None and not failure and recorder is not None:
             hold(recorder)
         if recorder is not None:
@@ -208,8 +176,9 @@ def run_session(config: SessionConfig, path: str | Path, *, bus: Bus | None = No
     forged = forgery_watch(game, nodes, recorder, bridge, [s for s in external if s in needed]).verdict()
     if forged:
         raise ForgedEvent(f"{forged}: the session was stopped", where)
-    if refused:
-        raise StartRefused(refused_start_text(refused[0]), where)
+    refused = refusals.error(where)
+    if refused is not None:
+        raise refused
     return recorder.path if recorder is not None else Path(path)
 
 
@@ -270,15 +239,16 @@ def end_reason(stop: threading.Event, failure: str) -> tuple[str, str]:
 
 
 def watch_services(bus: Bus, session: str, nodes: list[Node], external: list[str], stop: threading.Event,
-                   grace_s: float, forged=lambda: "") -> str:
+                   grace_s: float, broken=lambda: "") -> str:
     """Wait until the in-process nodes are done or `stop`; return why a needed service failed ("" if none):
     an in-process node's thread died, or an external service's token was gone for `grace_s` (a crashed
-    service restarted within that time resumes from the log, services/runner.py), or `forged()` names
-    a forged start or end the game saw (ForgedEvent: checked every 0.1 s, so it stops within that)."""
+    service restarted within that time resumes from the log, services/runner.py), or `broken()` names
+    why the session cannot go on: a forged start or end the game saw (ForgedEvent), a service that
+    refused the game's own start or end (services/refusal.py); checked every 0.1 s, so it stops within that."""
     missing_since: dict[str, float] = {}
     checked = 0.0
     while not stop.is_set():
-        why = forged()
+        why = broken()
         if why:
             return why
         running = [n for n in nodes if n.thread is not None and n.thread.is_alive()]
@@ -347,10 +317,12 @@ def wait_all_recorded(recorder: Recorder, nodes: list[Node], bridge, timeout_s: 
     return sum(missing.values())
 
 
-def wait_external_exit(bus: Bus, session: str, services: list[str], stop: threading.Event, timeout_s: float) -> None:
-    """Wait until the external services settled and left the bus (they exit when done)."""
+def wait_external_exit(bus: Bus, session: str, services: list[str], stop: threading.Event, timeout_s: float,
+                       broken=lambda: "") -> None:
+    """Wait until the external services settled and left the bus (they exit when done), or `broken()`
+    names why one will not (it refused the game's end: services/refusal.py)."""
     deadline = time.monotonic() + timeout_s
-    while services and not stop.is_set() and time.monotonic() < deadline:
+    while services and not stop.is_set() and time.monotonic() < deadline and not broken():
         alive = bus.alive_now(alive_key(session, "*"), timeout_s=0.5)
         if not any(alive_key(session, s) in alive for s in services):
             return
