@@ -24,7 +24,12 @@ source's own sequence, and notices when the source contradicts it later:
   the notice is recorded (a MessageRejected naming it, `notices`) and an end's slot is
   given back, so the source's real end is taken when it comes. "Later" is by seq, or,
   for a guard that gets the whole session (`whole`: the recorder, a service not
-  subscribed by tag; Zenoh keeps a publisher's order on a link), by arrival.
+  subscribed by tag; Zenoh keeps a publisher's order on a link), by arrival. Not on a
+  recovering bus (services/bus.py `--recover`): each key has its own publisher there,
+  and what an outage held up comes back in order per key only, so the game's next event
+  may arrive before its start and an earlier one after its end; judged by arrival, the
+  real start was refused (the session then stopped: services/refusal.py) and the real
+  end noted as contradicted. There `whole` is off and a guard judges by seq.
 A service ignores messages on its own keys, before decoding them (its own,
 delivered back to the recorder, which takes the whole session), except the
 game (`names_forgeries`): its own publications never come back to it
@@ -96,6 +101,7 @@ class Guard:
                  whole: bool = False):
         self.session, self.own, self.decode = session, own, decode
         self.whole = whole  # it gets every key of the session, each publisher's in its order (see rule)
+        # (False on a recovering bus, whose order holds per key only: see rule)
         self.names_forgeries = False  # a message on our own keys is not ours: a forgery (see rule)
         self.forged: list[tuple[Event, str]] = []  # forged starts and ends on our own keys, why (`_forged`)
         self.last_seq: dict[str, int] = {}  # per key

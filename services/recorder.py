@@ -322,7 +322,8 @@ class Recorder:
         self.outbox = Outbox(bus, self.name) if bus is not None else None
         # its own refusals are written directly (_publish); it writes the bytes it checked and needs
         # only their envelope: the checked twin of each event (schemas/checked.py), not the event
-        self.guard = Guard(session, own=self.name, decode=check_event, whole=True)
+        # the whole session, in each publisher's order unless the bus recovers an outage per key (guard.py `whole`)
+        self.guard = Guard(session, own=self.name, decode=check_event, whole=bus is None or not bus.options.recovers)
         self.refusals = Refusals()
         self.kept: list[tuple[str, bytes]] = []
         self.seq = 0

@@ -148,8 +148,9 @@ class Node:
                  resume: bool = True, stop: threading.Event | None = None):
         self.bus, self.logic, self.session = bus, logic, session
         self.driver = Driver(logic, session, clock)
-        if not getattr(logic, "by_tag", False):  # the whole session, each publisher's in its order (`subscribe`)
-            self.driver.guard.whole = True
+        if not getattr(logic, "by_tag", False):  # the whole session, each publisher's in its order (`subscribe`),
+            # unless the bus recovers an outage per key (services/guard.py `whole`)
+            self.driver.guard.whole = not bus.options.recovers
             if logic.name in STARTERS:  # the game: its own publications never come back to it (`subscribe`), so
                 self.driver.guard.names_forgeries = True  # a message on its keys is another process's (forgery.py)
         self.clock = clock

@@ -209,3 +209,46 @@ def test_a_game_run_alone_whose_start_a_service_refuses_ends_the_session_in_one_
     assert len(lines) == 1 and "the participant refused the session's start (participant 'human:p1' is not a " \
                                "simulated one)" in lines[0] and "session ref5" in lines[0], err[-2000:]
     assert [e.reason for e in ends] == ["failed"] and "participant refused" in ends[0].detail
+
+
+FACES = [i // 2 for i in range(18)]
+
+
+def test_on_a_recovering_bus_the_games_start_and_end_are_judged_by_seq_not_by_arrival(tmp_path):
+    """Behind a `pairplay router` (`--recover`) every key has its own advanced publisher and cache, and
+    what an outage held up comes back in order per key only (services/bus.py): the game's next event
+    may arrive before its start, an earlier one after its end. The recorder and every service that gets
+    the whole session judged a start or end by arrival there: they refused the game's real start as "not
+    after the events game already published" (and the session then stopped: StartRefused) and noted its
+    real end as "contradicted" (the recorder then waited for another end). On a recovering bus they judge
+    by seq, as a service subscribed by tag does."""
+    from pairplay.services.participant import ParticipantLogic
+    from pairplay.services.recorder import Recorder
+    from pairplay.services.runner import Node
+
+    config = SessionConfig(session="ref6", participant="sim:ashley", persona="ashley", seed=1, rounds=1)
+    start = message("ref6", ev.SessionStarted(config=config), 2)
+    first_round = message("ref6", ev.RoundStarted(round=0, faces=FACES), 3)
+    round_end = message("ref6", ev.RoundEnded(round=0, turns=9, matches=9), 9)
+    end = message("ref6", ev.SessionEnded(reason="completed", rounds_played=1), 10)
+    with Bus(BusOptions(recovery=True)) as bus:
+        recorder = Recorder(bus, "ref6", tmp_path / "ref6.mcap")
+        participant = Node(bus, ParticipantLogic(), "ref6")
+        try:
+            for n, (key, payload) in enumerate((first_round, start, end, round_end)):  # as an outage's recovery
+                assert recorder.record(key, payload, n + 1), (key, recorder.refusals.total)
+                out = participant.driver.receive(key, payload)
+                assert not [e for e in out if isinstance(e, ev.MessageRejected)], out
+                assert not recorder.guard.notices and not participant.driver.guard.notices
+            assert recorder.ended and "SessionEnded" in recorder.guard.once
+            assert participant.logic.users is not None  # it took the game's start
+        finally:
+            recorder.close()
+    # a bus that keeps each publisher's order across keys (one link, no recovery) still judges by arrival
+    with Bus(BusOptions()) as bus:
+        recorder = Recorder(bus, "ref6", tmp_path / "ref6b.mcap")
+        try:
+            assert recorder.record(*first_round, 1)
+            assert not recorder.record(*start, 2)  # a start behind the game's events there is not the game's
+        finally:
+            recorder.close()
