@@ -99,20 +99,31 @@ class RefusalWatch:
         # the game's own refusals on its keys are of forgeries; a notice is not a refusal (see rule)
         if tag is None or e.source == "game" or e.reason.startswith(CONTRADICTED):
             return
+        if self.seqs.get(tag, e.offending_seq) != e.offending_seq:
+            return  # of another start or end than the game's, known by now: a flood of those keeps nothing
         with self._lock:
             if len(self.kept) < KEPT:
                 self.kept.append((tag, e.offending_seq, e.source, e.reason))
 
     def verdict(self) -> str:
         """"" to go on; else the line of the first of the game's own events a service refused."""
-        if self.game is None or not self.kept:
-            return ""
+        if self.game is not None and self.kept:
+            self._judge()
+        for tag in self.tags:
+            if tag in self.found:
+                return refused_text(tag, self.found[tag])
+        return ""
+
+    def _judge(self) -> None:
+        """Move the refusals kept so far into `found` (the game's own) or drop them (see rule)."""
         with self._lock:
             kept, self.kept = self.kept, []
         for tag, seq, source, reason in kept:
             real = self.seqs.get(tag)
             if real is None:
-                real = published_seq(self.game, tag)
+                # a game that has not ended has published no end: no scan of all it sent (a forged end's refusal)
+                ended = tag != "SessionEnded" or self.game.logic.done
+                real = published_seq(self.game, tag) if ended else None
                 if real is None:  # not published yet (the refusal overtook the game's Outbox): judged later
                     with self._lock:
                         self.kept.append((tag, seq, source, reason))
@@ -120,10 +131,6 @@ class RefusalWatch:
                 self.seqs[tag] = real
             if seq == real:
                 self.found.setdefault(tag, []).append((source, reason))
-        for tag in self.tags:
-            if tag in self.found:
-                return refused_text(tag, self.found[tag])
-        return ""
 
     def error(self, where) -> UserError | None:
         """The error a verb raises for what `verdict` found (None if nothing)."""
