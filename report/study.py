@@ -166,6 +166,14 @@ class StudySettings:
         return " ".join(words)
 
 
+def default_reuse_last(rounds: int) -> int:
+    """reuse_last when a study or a sweep does not give it: 50 (StudySettings'), or a quarter of a study of
+    50 rounds or fewer, where 50 would leave pi-reuse no round (`pairplay study --rounds 20` and a sweep's
+    `rounds = 20` were refused for an option the user never gave; the Re-run line states it: it is not 50)."""
+    default = StudySettings.reuse_last
+    return default if rounds > default else rounds // 4
+
+
 class SettingError(OptionError):
     """A study setting that cannot run as asked; `key` is its StudySettings field name."""
 

@@ -43,7 +43,7 @@ import numpy as np
 from pairplay.outputs import output_file, write_text
 from pairplay.processes import check_workers, worker_pool
 from pairplay.core.rng import SEED_RANGE
-from pairplay.report.study import SettingError, StudySettings
+from pairplay.report.study import SettingError, StudySettings, default_reuse_last
 
 SWEEPABLE = {f.name: f.type for f in fields(StudySettings) if f.name not in ("seed", "train_only")}
 
@@ -84,7 +84,10 @@ class Grid:
         return [Cell(s, seed) for s in self.settings() for seed in self.seeds]
 
     def study_settings(self, cell: Cell) -> StudySettings:
-        return StudySettings(**{**self.base, **dict(cell.setting), "seed": cell.seed})
+        given = {**self.base, **dict(cell.setting), "seed": cell.seed}
+        if "reuse_last" not in given:  # not in the grid: the study's default for the cell's rounds (50 refused rounds = 20)
+            given["reuse_last"] = default_reuse_last(given.get("rounds", StudySettings.rounds))
+        return StudySettings(**given)
 
 
 def _typed(path: str, key: str, value):
@@ -329,7 +332,9 @@ def write_sweep(out: str | Path, grid: Grid, results: dict[str, dict], run: Swee
     md = ["# pairplay sweep", "",
           f"{len(grid.settings())} settings x {len(grid.seeds)} seeds = {run.cells} cells; computed {run.computed} "
           f"in {run.wall_s:.1f} s ({run.where}); fixed settings: "
-          + (", ".join(f"{k}={v}" for k, v in grid.base.items()) or "the study's defaults") + ".", "",
+          + (", ".join(f"{k}={v}" for k, v in grid.base.items()) or "the study's defaults") + "."
+          + (" reuse_last, not given, is the study's default: 50, or rounds // 4 for 50 rounds or fewer."
+             if grid.reuse and "reuse_last" not in {**grid.base, **grid.axes} else ""), "",
           "Each row: the mean over seeds, the sample sd, and the 95% confidence interval of the mean "
           "(Student's t). Picks per round: 18 is perfect play, lower is better; ratio: learned / oracle.", "",
           "| setting | measure | n | mean | sd | 95% CI |", "|---|---|---|---|---|---|"]
