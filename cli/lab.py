@@ -124,7 +124,8 @@ def run(args: argparse.Namespace) -> int:
     e = fold.ended
     if getattr(stop, "why", ""):  # a signal: ONE line, as `pairplay session`
         when = "before the session started" if fold.config is None else \
-            f"after {len(fold.rounds)} of {config.rounds} rounds"
+            f"after the session had completed all {config.rounds} rounds" if e is not None and e.reason == "completed" \
+            else f"after {len(fold.rounds)} of {config.rounds} rounds"
         print(f"interrupted ({stop.why}) {when}; recorded {len(recorded.events)} events to {path}", file=sys.stderr)
         return 0  # the status is the signal's (cli/main.py)
     print(f"recorded {len(recorded.events)} events to {path}")

@@ -165,9 +165,15 @@ def print_interrupted(summary: dict, path: Path, why: str, rounds: int, taken: s
     keeps its file (what came up, and that the signal stopped it: the recorder's end record): a
     session id is taken once it has a recording, and the stop stays on record; every verb then says
     the file holds no session (replay/check.py); `taken` says so, and what the verb offers (session:
-    `--force` reuses the id; lab, which never replaces a person's recording, has no --force). The line
+    `--force` reuses the id; lab, which never replaces a person's recording, has no --force). A session
+    whose game had completed every round when the signal came is complete (its SessionEnded says
+    "completed"; verify and rebuild take it whole): the line says so, as every verb's after its work was
+    done (cli/main.py), not "interrupted after 20 of 20 rounds"; the status is still the signal's. The line
     goes to stderr, as every verb's interrupted line (stdout holds results only: a complete session's summary)."""
-    if summary["started"]:
+    if summary.get("ended") == "completed":  # the signal came after the last round: nothing was cut short
+        print(f"interrupted ({why}) after the session had completed all {rounds} rounds; recorded "
+              f"{summary['events']} events to {path}; nothing was undone", file=sys.stderr)
+    elif summary["started"]:
         print(f"interrupted ({why}) after {summary['rounds_played']} of {rounds} rounds; recorded "
               f"{summary['events']} events to {path}"
               + (f" ({summary['unrecorded']} messages shed or unrecorded, counted in it)" if summary['unrecorded'] else ""),
