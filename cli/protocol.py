@@ -275,7 +275,7 @@ def _pilot(data: StudyData, args) -> int:
             if not stop.is_set():
                 raise
     if stop.is_set():
-        print(f"interrupted ({stop.why}); `pairplay protocol status {data.folder}` shows what is left", file=sys.stderr)
+        print(f"pairplay protocol pilot: interrupted ({stop.why}); `pairplay protocol status {data.folder}` shows what is left", file=sys.stderr)
         return 0
     print(f"plan complete; `pairplay report {data.folder}` writes the report")
     return 0

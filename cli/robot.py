@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import argparse
 import socket
+import sys
 import threading
 
 from pairplay.cli.args import session_id
@@ -159,4 +160,6 @@ def _serve(args: argparse.Namespace) -> int:
         print(f"robot bridge for session {args.session} on {bridge.backend}; bus {' '.join(bus.locators())}",
               flush=True)
         bridge.run(stop)
+    if getattr(stop, "why", ""):  # the status is the signal's (cli/main.py); it said nothing
+        print(f"pairplay robot: stopped ({stop.why})", file=sys.stderr)  # every verb's line: stderr
     return 0

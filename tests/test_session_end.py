@@ -100,7 +100,7 @@ def test_a_signal_after_the_last_round_says_the_session_completed(tmp_path):
             watcher.close()
     path = tmp_path / "late.mcap"
     assert p.returncode == 143, (out, err)
-    assert err.splitlines() == [f"interrupted (SIGTERM) after the session had completed all 3 rounds; recorded "
+    assert err.splitlines() == [f"pairplay session: interrupted (SIGTERM) after the session had completed all 3 rounds; recorded "
                                 f"{len(read_log(path).events)} events to {path}; nothing was undone"], err
     [end] = ended(path)
     assert end.reason == "completed" and end.rounds_played == 3
