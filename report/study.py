@@ -41,6 +41,7 @@ from pairplay.core.policies import to_policy_file
 from pairplay.core.reward import BONUS_RULE_TEXT
 from pairplay.core.rng import GAME_INDEX_RANGE, SEED_RANGE
 from pairplay.errors import OptionError
+from pairplay.lists import comma_items
 from pairplay.schemas.config import DEFAULT_REWARD_BONUS, LearnerConfig, LSPIConfig, REWARD_BONUS_RULES
 from pairplay.outputs import output_folder
 from pairplay.processes import off_main_thread, process_pool, stop_pool
@@ -77,7 +78,10 @@ class StudySettings:
 
     def persona_list(self):
         """The personas named, in order (SettingError for none, an unknown one or one named twice)."""
-        names = [k.strip() for k in self.personas.split(",") if k.strip()]
+        try:
+            names = comma_items(self.personas)
+        except ValueError as exc:  # `a,,b` ran a and b without a word
+            raise SettingError("personas", str(exc)) from None
         if not names:
             raise SettingError("personas", f"names no persona: give one or more of {', '.join(PERSONAS)}")
         chosen = []
