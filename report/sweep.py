@@ -2,7 +2,9 @@
 
 Rule: a sweep is read from a TOML file (`read_grid`): fixed study settings in
 [study], lists of values in [grid] (the sweep is their product), and the
-seeds (`seeds = 5` for 0..4, or a list). Each (setting, seed) is one cell:
+seeds (`seeds = 5` for 0..4, or a list). `personas` is a comma-separated
+string or a TOML list of names, as fixed in [study] and as each value of a
+[grid] axis (`personas = [["blind", "deaf"], ["blind"]]`). Each (setting, seed) is one cell:
 `cell_measures` runs the study's training, evaluation (and, with
 `reuse = true`, the policy-reuse experiment) through `pairplay.core.study` and
 returns plain numbers, so a cell's result depends on its settings and seed
@@ -94,6 +96,12 @@ def _typed(path: str, key: str, value):
     want = SWEEPABLE.get(key)
     if want is None:
         raise GridError(f"{path}: unknown study setting {key!r} (known: {', '.join(sorted(SWEEPABLE))})")
+    if key == "personas" and isinstance(value, list) and all(isinstance(v, str) for v in value):
+        # a TOML list of names (["ashley", "helmut"]) is the list it says, as the study's "ashley,helmut"
+        # (it was refused: "is not a str"); its names are checked as the study's (StudySettings.check)
+        if not all(v.strip() and "," not in v for v in value):
+            raise GridError(f"{path}: personas = {value!r}: each item of the list is one persona's name")
+        value = ",".join(value)
     kind = {"int": int, "float": (int, float), "str": str, "bool": bool}[want if isinstance(want, str) else want.__name__]
     if isinstance(value, bool) and kind is not bool or not isinstance(value, kind):
         raise GridError(f"{path}: {key} = {value!r} is not a {want}")

@@ -72,11 +72,27 @@ def test_a_dask_cluster_of_two_workers_gives_the_same_tables(tmp_path):
     ("reuse = true\n[study]\npersonas = 'blind'", "at least 2 personas"),
     ("[study]\ngames = 2\n[grid]\ngames = [1, 2]", "both fixed"),
     ("grid = [", "not TOML"),
+    ("[study]\npersonas = ['blind', '']", "each item of the list is one persona's name"),
+    ("[study]\npersonas = ['blind', 3]", "is not a str"),
+    ("[grid]\npersonas = [['blind', 'blind']]", "names blind twice"),
 ])
 def test_a_grid_that_cannot_run_is_refused_naming_the_file_and_key(tmp_path, text, needle):
     with pytest.raises(GridError, match=needle) as info:
         read_grid(_grid(tmp_path, text))
     assert str(tmp_path / "grid.toml") in str(info.value)
+
+
+def test_personas_may_be_a_toml_list_the_same_sweep_as_the_string(tmp_path):
+    """`personas = ["ashley", "helmut"]` was refused ("is not a str"): a researcher writes a list in TOML.
+    A list is the names it holds, fixed or as a grid value: the same settings and cells as the string."""
+    as_text = read_grid(_grid(tmp_path, 'seeds = 1\n[study]\npersonas = "ashley,helmut"\n'
+                                        '[grid]\nrounds = [20]\n'))
+    as_list = read_grid(_grid(tmp_path, 'seeds = 1\n[study]\npersonas = ["ashley", "helmut"]\n'
+                                        '[grid]\nrounds = [20]\n'))
+    assert as_list == as_text and [c.id for c in as_list.cells()] == [c.id for c in as_text.cells()]
+    axis = read_grid(_grid(tmp_path, 'seeds = 1\n[grid]\npersonas = [["blind", "deaf"], "blind", ["deaf"]]\n'))
+    assert axis.axes == {"personas": ["blind,deaf", "blind", "deaf"]}
+    assert [s.persona_list()[0].key for s in map(axis.study_settings, axis.cells())] == ["blind", "blind", "deaf"]
 
 
 def test_the_verb_refuses_another_grids_folder_in_one_line(tmp_path):
