@@ -16,6 +16,10 @@ Rule: `run_study(settings, out)` runs the study of thesis chapter 6 through
   frames.csv, frames.png            future work 2: merging across mirrored users, with and without calibration
   report.md                         the tables and figures, with the run's settings
 It returns the tables it wrote, so a caller (the CLI, a notebook) can print them.
+A study written with force into a folder that holds an earlier one removes the
+earlier one's files of these names that it does not write itself (STUDY_OUTPUTS:
+the sections of a persona not in this study, the speed-up's tables after a
+--train-only run...), so no stale file looks current; no other file is touched.
 """
 
 from __future__ import annotations
@@ -342,6 +346,14 @@ def write_merges(out: Path, personas, users: study.UserSet, args, figures=None) 
 
 TIMINGS_HEADING = "## Timings"
 
+# Every file a study may write, as patterns of its relative path (pairplay.outputs.is_owned; the module
+# rule lists them): a --force run removes those of an earlier study it does not write itself.
+STUDY_OUTPUTS = ("policies/*/game-*.json", "merged/*.json", "report.md", "curves.csv", "curves_summary.csv",
+                 "learning_curves.png", "evaluation.csv", "evaluation.png", "profiles.csv", "profiles.png",
+                 "merged.png", "merged_evaluation.csv", "reuse.csv", "reuse.png", "speed.csv", "speed.png",
+                 "action_profiles.csv", "action_merges.csv", "action_merges.png", "frames.csv", "frames.png",
+                 "precombination.csv", "precombination.png")
+
 
 def output_digests(out: Path) -> dict[str, str]:
     """sha256 (hex) of every file a study wrote under `out` that its seed decides, by relative path.
@@ -414,12 +426,13 @@ def run_study(args: StudySettings, out: Path, progress_bar: Callable = _no_bar, 
     evaluation (learned, oracle and user alone; merged policies; the speed-up's
     snapshots). Figures are drawn in a child process meanwhile.
     The folder is built beside `out` and renamed when complete (pairplay.outputs.output_folder):
-    OutputError, before any work, if `out` exists with files in it and not `force`; an
+    OutputError, before any work, if `out` exists with files in it and not `force`; with `force`,
+    an earlier study's files there that this one does not write are removed (STUDY_OUTPUTS); an
     interrupted study leaves nothing. Raises SettingError (an OptionError), before any work, for a
     setting that cannot run as asked (StudySettings.check)."""
     personas = args.check()
     return_freed_memory()
-    with output_folder(out, force) as tmp:
+    with output_folder(out, force, owned=STUDY_OUTPUTS) as tmp:
         report = _run_study(args, personas, tmp, progress_bar, figures_in_background)
     report.out = Path(out)
     return report

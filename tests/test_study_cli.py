@@ -129,3 +129,29 @@ def test_the_combiner_service_refuses_what_combine_refuses(study_dir):
     before = (study_dir / "report.md").read_bytes()
     [over] = logic.handle(ev.CombineRequested(request_id="over", policies=[same, deaf], output_path="report.md"))
     assert not over.ok and "exists" in over.error and (study_dir / "report.md").read_bytes() == before
+
+
+def _files(folder):
+    return sorted(p.relative_to(folder).as_posix() for p in folder.rglob("*") if p.is_file())
+
+
+def test_a_forced_study_over_an_older_one_keeps_none_of_the_older_ones_files(tmp_path, capsys):
+    """`study --force` into the folder of an older study kept the older one's files the new one does not
+    write (policies, sections of personas not in it, the speed-up's tables): stale files that looked
+    current. Now the folder holds what a fresh study of the same options writes, and the files that are
+    not a study's (a researcher's notes) stay. Every file a study writes is one of STUDY_OUTPUTS."""
+    from pairplay.outputs import is_owned
+    from pairplay.report.study import STUDY_OUTPUTS
+
+    small = ["--games", "1", "--rounds", "20", "--eval-rounds", "5", "--reuse-seeds", "1", "--quiet"]
+    out, fresh = tmp_path / "study", tmp_path / "fresh"
+    assert main(["study", *small, "--personas", "blind,deaf,tatiana", "--algorithm", "lspi", "--out", str(out)]) == 0
+    older = _files(out)
+    assert [f for f in older if not is_owned(f, STUDY_OUTPUTS)] == [] and "speed.csv" in older
+    (out / "notes.txt").write_text("the researcher's")
+    (out / "policies" / "notes.txt").write_text("the researcher's")
+    newer = ["study", *small, "--personas", "blind", "--train-only"]
+    assert main([*newer, "--out", str(out), "--force"]) == 0
+    assert main([*newer, "--out", str(fresh)]) == 0
+    assert _files(out) == sorted(_files(fresh) + ["notes.txt", "policies/notes.txt"])
+    assert not (out / "policies" / "deaf").exists()
