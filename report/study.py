@@ -596,7 +596,7 @@ def _run(args, out, progress_bar, personas, config, names, timings, start, figur
                      out / "reuse.png")
     t0 = time.perf_counter()
     state.oracle, state.alone = oracle, alone
-    future_lines = [line for finish in finishers for line in finish(state)]
+    future_lines = [line for finish in finishers for line in finish(state)] + future.not_run_lines(state)
     if finishers:
         timings["future work"] = future_seconds + time.perf_counter() - t0
     future_lines += frame_lines
@@ -638,7 +638,11 @@ def _run(args, out, progress_bar, personas, config, names, timings, start, figur
         "## Merged policies (algorithm 4, figure 6.6)", "",
         "Each persona is represented by one of its policies, picked at random by the seed (thesis 6.2); "
         "picks per round with epsilon 0.", "",
-        markdown_table(merge_rows), "", "![merged](merged.png)", "",
+        markdown_table(merge_rows), "",
+        # one persona: nothing to merge, and no merged.png (the report showed a broken figure, no reason)
+        *(["![merged](merged.png)", ""] if merges else
+          [f"No merged policy: a merge (algorithm 4) needs at least 2 personas; this study has {len(personas)}.",
+           ""]),
     ]
     for name, merged in merges.items():
         rules: dict[str, int] = {}
@@ -659,6 +663,10 @@ def _run(args, out, progress_bar, personas, config, names, timings, start, figur
                    f"pi-reuse beats scratch on the {first} for {(gains > 0).sum()} of {len(gains)} "
                    f"held-out personas; median gain {np.median(gains):.2f} picks per round.", "",
                    "![reuse](reuse.png)", ""]
+    else:  # one persona: left out without a word before
+        report += ["", "## Policy reuse speed-up (algorithm 5)", "",
+                   "Not run: each persona is held out and its bias policy merged from the others, so the "
+                   f"speed-up needs at least 2 personas; this study has {len(personas)}.", ""]
     report += [TIMINGS_HEADING, "", markdown_table([["phase", "seconds"]] + [[k, f"{v:.2f}"] for k, v in timings.items()]), ""]
     # the future-work sections come after the timings, so that report.md up to its timings stays the
     # thesis's study, whose bytes tests/test_study_digests.py pins

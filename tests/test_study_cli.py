@@ -155,3 +155,27 @@ def test_a_forced_study_over_an_older_one_keeps_none_of_the_older_ones_files(tmp
     assert main([*newer, "--out", str(fresh)]) == 0
     assert _files(out) == sorted(_files(fresh) + ["notes.txt", "policies/notes.txt"])
     assert not (out / "policies" / "deaf").exists()
+
+
+SECTIONS = ("## Merged policies (algorithm 4, figure 6.6)", "## Policy reuse speed-up (algorithm 5)",
+            "## Per-user pre-combination (future work 3)", "## Action-level profiles (future work 1)")
+
+
+def _figures_missing(out):
+    import re
+    return [f for f in re.findall(r"!\[[^\]]*\]\(([^)]+)\)", (out / "report.md").read_text()) if not (out / f).exists()]
+
+
+def test_a_report_says_why_a_section_did_not_run(tmp_path, study_dir):
+    """A study of one persona left the speed-up and the future-work sections out without a word and showed
+    merged.png, which it never drew: each section is there, saying what it needs; no figure is missing."""
+    out = tmp_path / "one"
+    assert main(["study", "--quiet", "--personas", "blind", "--games", "1", "--rounds", "20", "--eval-rounds", "5",
+                 "--out", str(out)]) == 0
+    text = (out / "report.md").read_text()
+    for heading in SECTIONS:
+        body = text.split(heading + "\n", 1)[1].split("\n## ", 1)[0]
+        assert "needs at least 2 personas" in body or "at least 2 personas to merge" in body, (heading, body)
+    assert _figures_missing(out) == []
+    several = (study_dir / "report.md").read_text()  # 3 personas of 2 games: future work needs 5
+    assert several.count("needs at least 5 games per persona") == 2 and _figures_missing(study_dir) == []
