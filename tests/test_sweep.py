@@ -129,3 +129,21 @@ def test_a_sweep_over_the_learner_runs_lspi_and_refuses_lspi_settings_that_canno
     for bad in ('algorithm = ["sarsa"]', 'algorithm = ["lspi"]\nlspi_every = [0]'):
         with pytest.raises(GridError, match="algorithm|improve_every"):
             read_grid(_grid(tmp_path, GRID.replace('reward_bonus = ["correct", "consistent"]', bad)))
+
+
+def test_a_resume_with_nothing_to_do_writes_nothing_and_says_so(tmp_path, capsys):
+    """Run again on a finished sweep, the verb rewrote sweep.md ("computed 0 in 0.0 s"), losing what the run
+    that did the work said. Now nothing is written, and one line says there was nothing to do."""
+    from pairplay.cli.main import main
+
+    grid, out = _grid(tmp_path, GRID.replace("seeds = 2", "seeds = 1")), tmp_path / "out"
+    assert main(["sweep", str(grid), "--out", str(out), "--quiet"]) == 0
+    assert "2 computed" in capsys.readouterr().out
+    before = {p: (p.read_bytes(), p.stat().st_mtime_ns) for p in out.rglob("*") if p.is_file()}
+    assert main(["sweep", str(grid), "--out", str(out), "--quiet"]) == 0
+    said = capsys.readouterr().out.splitlines()
+    assert said == [f"nothing to do: all 2 cells (2 settings x 1 seeds) were finished; {out / 'sweep.md'} is as it was"]
+    assert {p: (p.read_bytes(), p.stat().st_mtime_ns) for p in out.rglob("*") if p.is_file()} == before
+    (out / "sweep.md").unlink()  # the summary not written (a run stopped after its cells): written, 0 computed
+    assert main(["sweep", str(grid), "--out", str(out), "--quiet"]) == 0
+    assert "0 computed" in capsys.readouterr().out and (out / "sweep.md").is_file()
