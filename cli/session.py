@@ -132,6 +132,10 @@ def _config_from_args(args: argparse.Namespace) -> SessionConfig:
             raise OptionError(str(err), "--lspi-ridge/--lspi-every") from None
     elif given:
         raise OptionError(f"--lspi-ridge/--lspi-every need --algorithm lspi, not {args.algorithm}", "--algorithm")
+    never = schedule.never_reuses() if args.algorithm == "pi-reuse" else ""
+    if never:  # `--rounds 1` under human-phase2: its one round is the last, on the new policy alone
+        raise OptionError(f"--algorithm pi-reuse with --rounds {rounds} would never reuse the bias policy: "
+                          f"{never} (preset {preset_name}); give --rounds 2 or more", f"--rounds {rounds}")
     actions = []
     if args.policy:
         actions = list(read_policy(args.policy).greedy)

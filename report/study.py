@@ -150,6 +150,9 @@ class StudySettings:
             if self.rounds < every:  # no snapshot of the greedy policy, so no 'rounds to 1.10x the oracle'
                 raise SettingError("rounds", f"must be at least {every} when the speed-up runs{when}: its greedy "
                                    f"snapshots are taken every {every} rounds; got {self.rounds}")
+            if self.psi <= 0:  # psi 0: the bias is never taken, the pi-reuse arm would be Q-learning
+                raise SettingError("psi", f"must be above 0 when the speed-up runs{when}: pi-reuse with psi 0 never "
+                                   f"takes the bias policy's action (its arm would be Q-learning), got {self.psi}")
             if self.reuse_last >= self.rounds:  # reuse_rounds 0: the pi-reuse arm would be Q-learning
                 raise SettingError("reuse_last", f"must be below {spell('rounds')} {self.rounds} (0.."
                                    f"{self.rounds - 1}: the last N rounds of pi-reuse use the new policy alone; "

@@ -128,6 +128,10 @@ CASES = [
     Case("session --rounds 0", SIM[:3] + ["--rounds", "0"], "--rounds: must be at least 1"),
     Case("session --policy with q-learning", SIM + ["--policy", "existing.json"], "--policy is used only by"),
     Case("session pi-reuse without --policy", SIM + ["--algorithm", "pi-reuse"], "needs --policy"),
+    # its one round under human-phase2 is the last, on the new policy alone: it never reused (Q-learning)
+    Case("session pi-reuse of 1 round", ["session", "--participant", "human:p9", "--algorithm", "pi-reuse",
+                                         "--policy", "policies/blind/game-00.json", "--rounds", "1"],
+         "--algorithm pi-reuse with --rounds 1 would never reuse the bias policy"),
     Case("session --policy not a policy", SIM + ["--algorithm", "pi-reuse", "--policy", "random.mcap"], "random.mcap"),
     Case("session unknown persona", ["session", "--participant", "sim:nobody"], "unknown persona"),
     Case("session --out an existing file", SIM + ["--out", "existing.json"], "is a file, not a folder"),

@@ -36,6 +36,7 @@ STUDY_MISTAKES = [
     (["--rounds", "10", "--reuse-last", "50"], "--reuse-last: must be below --rounds 10"),
     (["--rounds", "60", "--reuse-last", "60"], "--reuse-last: must be below --rounds 60"),
     (["--personas", "nobody"], "--personas: unknown persona 'nobody'"),
+    (["--psi", "0"], "--psi: must be above 0 when the speed-up runs"),  # its pi-reuse arm was Q-learning
     (["--games", "99999999999999999999"], "--games: must be 1..9223372036853775808"),
     (["--reuse-seeds", str(2**63)], "--reuse-seeds: must be 1..9223372036853775808"),
     (["--personas", "blind", "--algorithm", "lspi", "--rounds", "9"], "--rounds: must be at least 10 with --algorithm lspi"),
@@ -148,6 +149,8 @@ GRID_MISTAKES = [
     ('seeds = [1, 1]\n[study]\npersonas = "blind"\n', "repeats a seed"),
     ('reuse = "no"\n[study]\npersonas = "blind"\n', "must be true or false"),
     ('[grid]\npsi = [0.5, 1.5]\n', "psi = 1.5: must be between 0 and 1"),
+    ('reuse = true\nseeds = 1\n[study]\npersonas = "blind,deaf"\n[grid]\npsi = [0.5, 0.0]\n',
+     "psi = 0.0: must be above 0 when the speed-up runs"),
     ('[study]\nalgorithm = "sarsa"\n', "algorithm = 'sarsa': must be one of q-learning, lspi"),
     ('[study]\nreward_bonus = "always"\n', "reward_bonus = 'always': must be one of correct, consistent, match"),
 ]
