@@ -72,7 +72,9 @@ def test_a_signal_after_the_last_round_says_the_session_completed(tmp_path):
     rounds", as if cut short, of a recording that verify and rebuild take whole (a new researcher's trial).
     It is complete: the line says so and that nothing was undone; the status is the signal's, as every
     verb's after its work was done (README). The session waits for its external learner to leave, a
-    process held stopped here (SIGSTOP), so the signal surely comes after the last round."""
+    process held stopped here (SIGSTOP) once it has settled every suggestion's reward (its last events
+    are the session's: frozen before them, the file lacks them), so the signal surely comes after the
+    last round and the learner's last update."""
     env = dict(os.environ, PYTHONUNBUFFERED="1")
     p = subprocess.Popen([sys.executable, "-m", "pairplay", "session", "--participant", "sim:wasim", "--rounds", "3",
                           "--session", "late", "--external", "learner", "--out", str(tmp_path)],
@@ -84,9 +86,13 @@ def test_a_signal_after_the_last_round_says_the_session_completed(tmp_path):
         endpoint = line.split(" - ")[0].split()[-1]
         watcher = Bus(BusOptions(mode="client", connect=[endpoint]))
         ends = collect(watcher, event_key("late", "game", "SessionEnded"))
+        made = collect(watcher, event_key("late", "learner", "SuggestionMade"))
+        rewarded = collect(watcher, event_key("late", "learner", "RewardGiven"))
         learner = subprocess.Popen([sys.executable, "-m", "pairplay", "run", "learner", "--session", "late",
                                     "--connect", endpoint, "--quiet"], stdout=subprocess.DEVNULL, env=env)
         ends.get(timeout=120)
+        assert wait_until(lambda: made.qsize() == rewarded.qsize(), 60)  # every suggestion settled
+        time.sleep(0.5)  # the rest of the settling's events (QUpdated) follow its RewardGiven at once
         learner.send_signal(signal.SIGSTOP)  # its token stays: the session waits for it to leave
         p.send_signal(signal.SIGTERM)
         out, err = p.communicate(timeout=30)
@@ -104,7 +110,8 @@ def test_a_signal_after_the_last_round_says_the_session_completed(tmp_path):
                                 f"{len(read_log(path).events)} events to {path}; nothing was undone"], err
     [end] = ended(path)
     assert end.reason == "completed" and end.rounds_played == 3
-    assert verify_recording(path).ok and rebuild_recording(path).partial == ""
+    verified = verify_recording(path)
+    assert verified.ok and rebuild_recording(path).partial == "", [(c.service, c.mismatches[:2], c.extra) for c in verified.checks]
 
 
 def test_an_experimenter_stop_is_recorded_as_aborted(tmp_path):
