@@ -23,6 +23,7 @@ from pathlib import Path
 
 from pairplay.bench.goals import MISSED, goal_text, verdict
 from pairplay.cli.args import count
+from pairplay.lists import comma_items
 from pairplay.outputs import write_text
 
 # name -> module providing bench_rows(quick)
@@ -152,7 +153,11 @@ def write_readme(path: Path, text: str) -> None:
 
 
 def run(args) -> int:
-    names = [n.strip() for n in args.only.split(",") if n.strip()]
+    try:
+        names = comma_items(args.only)
+    except ValueError as exc:  # `a,,b` measured a and b without a word
+        print(f"pairplay bench: {exc} (--only)", file=sys.stderr)
+        return 2
     unknown = [n for n in names if n not in SOURCES]
     if unknown:
         print(f"pairplay bench: unknown source(s) {unknown}; known: {', '.join(SOURCES)}", file=sys.stderr)

@@ -30,6 +30,7 @@ from pairplay.core.geometry import STATE_NAMES
 from pairplay.core.policies import (by_participant, check_distinct, check_exclude, check_profiles_computable,
                                     combined_policy_file, common_reward_bonus, users_from_policies)
 from pairplay.errors import InputError, OptionError
+from pairplay.lists import comma_items
 from pairplay.outputs import check_output
 from pairplay.schemas.policy import read_policy, write_policy
 from pairplay.cli.args import add_force, non_negative, seed_number
@@ -156,7 +157,10 @@ def run_combine(args) -> int:
     if args.out is not None:
         check_output(args.out, args.force)  # before any work
     policies, files = _load(args)
-    exclude = {x.strip() for x in args.exclude.split(",") if x.strip()}
+    try:
+        exclude = set(comma_items(args.exclude))
+    except ValueError as exc:  # `p1,,p2`: a name lost to a typo would be combined
+        raise OptionError(str(exc), "--exclude") from None
     check_exclude(policies, exclude)
     kept = [(p, f) for p, f in zip(policies, files) if p.participant not in exclude]
     if not kept:

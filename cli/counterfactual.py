@@ -54,8 +54,14 @@ def parse_arms(text: str) -> list[tuple[str, str]]:
     from pairplay.errors import OptionError
     from pairplay.report.counterfactual import ARM_TEXT
 
+    from pairplay.lists import comma_items
+
     arms: list[tuple[str, str]] = []
-    for item in (s.strip() for s in text.split(",")):
+    try:
+        items = comma_items(text)
+    except ValueError as exc:
+        raise OptionError(str(exc), "--policy") from None
+    for item in items:
         kind, _, path = item.partition(":")
         if kind in ARM_TEXT and not path:
             arms.append((kind, ""))

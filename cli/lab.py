@@ -115,7 +115,7 @@ def run(args: argparse.Namespace) -> int:
         return 2
     if getattr(stop, "why", "") and summary:
         return print_interrupted(summary, path, stop.why, config.rounds,  # no reading the file back: 2 s
-                                 "the id stays taken: choose another --session")  # (lab has no --force)
+                                 "the id stays taken: choose another --session", "lab")  # (lab has no --force)
     from pairplay.replay.fold import fold_events
     from pairplay.replay.reader import read_log
 
@@ -124,8 +124,9 @@ def run(args: argparse.Namespace) -> int:
     e = fold.ended
     if getattr(stop, "why", ""):  # a signal: ONE line, as `pairplay session`
         when = "before the session started" if fold.config is None else \
-            f"after {len(fold.rounds)} of {config.rounds} rounds"
-        print(f"interrupted ({stop.why}) {when}; recorded {len(recorded.events)} events to {path}", file=sys.stderr)
+            f"after the session had completed all {config.rounds} rounds" if e is not None and e.reason == "completed" \
+            else f"after {len(fold.rounds)} of {config.rounds} rounds"
+        print(f"pairplay lab: interrupted ({stop.why}) {when}; recorded {len(recorded.events)} events to {path}", file=sys.stderr)
         return 0  # the status is the signal's (cli/main.py)
     print(f"recorded {len(recorded.events)} events to {path}")
     ended = "no SessionEnded recorded" if e is None else e.reason + (f" ({e.detail})" if e.detail else "")

@@ -21,6 +21,7 @@ from pathlib import Path
 
 from pairplay.cli.args import int_between, session_id
 from pairplay.core.personas import persona
+from pairplay.lists import comma_items
 from pairplay.replay.studydata import REGISTER_AT_ONCE, StudyData, StudyDataError
 from pairplay.schemas.study import StudyFileError, example_text, load_study, parse_study
 
@@ -172,6 +173,14 @@ def _run(args) -> int:
     raise AssertionError(args.action)
 
 
+def _items(text: str, option: str) -> list[str]:
+    """The items of a comma-separated option (pairplay/lists.py: an empty one is refused, not skipped)."""
+    try:
+        return comma_items(text)
+    except ValueError as exc:
+        raise StudyDataError(f"{option} {exc}") from None
+
+
 def _robot(args):
     """(RobotChoice or None, overridden?) from --robot; StudyDataError if it is wrong."""
     from pairplay.services.robot.choice import NO_ROBOT, RobotChoice, check_choice
@@ -201,7 +210,7 @@ def _serve(data: StudyData, args) -> int:
     if bool(args.certfile) != bool(args.keyfile):
         raise StudyDataError("--certfile and --keyfile go together")
     pilot = {}
-    for pair in filter(None, (x.strip() for x in args.pilot.split(","))):
+    for pair in _items(args.pilot, "--pilot"):
         pid, _, key = pair.partition("=")
         data.participant(pid)
         pilot[pid] = persona(key).key
@@ -241,7 +250,7 @@ def _pilot(data: StudyData, args) -> int:
     from pairplay.services.protocol import StudyRunner, scripted_players
     from pairplay.services.robot.choice import NO_ROBOT, RobotChoice, check_choice
 
-    keys = [k.strip() for k in args.personas.split(",") if k.strip()]
+    keys = _items(args.personas, "--personas")
     ids = list(data.state.participants)
     if len(keys) != len(ids):
         raise StudyDataError(f"--personas names {len(keys)} personas for {len(ids)} registered participants "
@@ -275,7 +284,7 @@ def _pilot(data: StudyData, args) -> int:
             if not stop.is_set():
                 raise
     if stop.is_set():
-        print(f"interrupted ({stop.why}); `pairplay protocol status {data.folder}` shows what is left", file=sys.stderr)
+        print(f"pairplay protocol pilot: interrupted ({stop.why}); `pairplay protocol status {data.folder}` shows what is left", file=sys.stderr)
         return 0
     print(f"plan complete; `pairplay report {data.folder}` writes the report")
     return 0

@@ -30,11 +30,11 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 def run(args) -> int:
     from pairplay.outputs import check_output_folder, output_folder
-    from pairplay.report.human import human_report
+    from pairplay.report.human import HUMAN_OUTPUTS, human_report
 
     out = check_output_folder(args.out or args.folder / "report", args.force)  # before any work
     try:
-        with output_folder(out, args.force) as tmp:
+        with output_folder(out, args.force, owned=HUMAN_OUTPUTS) as tmp:
             report = human_report(args.folder, tmp, args.reference)
     except (StudyDataError, PolicyFileError, ValueError) as err:
         print(f"pairplay report: {err}", file=sys.stderr)

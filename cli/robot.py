@@ -14,11 +14,13 @@ from __future__ import annotations
 
 import argparse
 import socket
+import sys
 import threading
 
 from pairplay.cli.args import session_id
 from pairplay.core.geometry import N_CARDS
 from pairplay.errors import OptionError, UserError
+from pairplay.lists import comma_items
 from pairplay.schemas.policy import N_ACTIONS
 
 from pairplay.services.bus import Bus, add_bus_arguments, options_from_args, stop_on_signals
@@ -88,7 +90,11 @@ def run(args: argparse.Namespace) -> int:
 def action_codes(text: str) -> list[int]:
     """--try's comma-separated action codes, each 0..87 (argparse type)."""
     try:
-        codes = [int(c) for c in text.split(",") if c.strip()]
+        items = comma_items(text)
+    except ValueError as exc:  # `35,,46` tried two actions without a word
+        raise argparse.ArgumentTypeError(str(exc)) from None
+    try:
+        codes = [int(c) for c in items]
     except ValueError:
         raise argparse.ArgumentTypeError(f"action codes are integers 0..{N_ACTIONS - 1}, got {text!r}") from None
     if not codes or any(not 0 <= c < N_ACTIONS for c in codes):
@@ -159,4 +165,6 @@ def _serve(args: argparse.Namespace) -> int:
         print(f"robot bridge for session {args.session} on {bridge.backend}; bus {' '.join(bus.locators())}",
               flush=True)
         bridge.run(stop)
+    if getattr(stop, "why", ""):  # the status is the signal's (cli/main.py); it said nothing
+        print(f"pairplay robot: stopped ({stop.why})", file=sys.stderr)  # every verb's line: stderr
     return 0

@@ -33,5 +33,5 @@ def run(args: argparse.Namespace) -> int:
         print(f"pairplay router: {err}", file=sys.stderr)
         return 2
     if getattr(stop, "why", ""):  # the status is the signal's (cli/main.py: 130, 143)
-        print(f"stopped ({stop.why})", file=sys.stderr, flush=True)  # every verb's interrupted line: stderr
+        print(f"pairplay router: stopped ({stop.why})", file=sys.stderr, flush=True)  # every verb's interrupted line: stderr
     return 0

@@ -52,6 +52,13 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     stop = threading.Event()
     stop_on_signals(stop)
+    code = _run(args, stop)
+    if code == 0 and getattr(stop, "why", ""):  # the status is the signal's (cli/main.py); it said nothing
+        print(f"pairplay run {args.service}: stopped ({stop.why})", file=sys.stderr)  # every verb's line: stderr
+    return code
+
+
+def _run(args: argparse.Namespace, stop: threading.Event) -> int:
     config = None
     if args.service == "game" and args.participant:
         from pairplay.cli.session import config_from_args

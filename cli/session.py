@@ -132,6 +132,10 @@ def _config_from_args(args: argparse.Namespace) -> SessionConfig:
             raise OptionError(str(err), "--lspi-ridge/--lspi-every") from None
     elif given:
         raise OptionError(f"--lspi-ridge/--lspi-every need --algorithm lspi, not {args.algorithm}", "--algorithm")
+    never = schedule.never_reuses() if args.algorithm == "pi-reuse" else ""
+    if never:  # `--rounds 1` under human-phase2: its one round is the last, on the new policy alone
+        raise OptionError(f"--algorithm pi-reuse with --rounds {rounds} would never reuse the bias policy: "
+                          f"{never} (preset {preset_name}); give --rounds 2 or more", f"--rounds {rounds}")
     actions = []
     if args.policy:
         actions = list(read_policy(args.policy).greedy)
@@ -158,22 +162,30 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     add_bus_arguments(p)
 
 
-def print_interrupted(summary: dict, path: Path, why: str, rounds: int, taken: str = "the id stays taken") -> int:
+def print_interrupted(summary: dict, path: Path, why: str, rounds: int, taken: str = "the id stays taken",
+                      verb: str = "session") -> int:
     """What a session stopped by a signal says, in ONE line, from `summary` (run_session's): the
     process must be gone within 2 s of the signal, so the file is not read back. The exit status is
     the signal's (cli/main.py: 130 SIGINT, 143 SIGTERM). A session stopped before its game started
     keeps its file (what came up, and that the signal stopped it: the recorder's end record): a
     session id is taken once it has a recording, and the stop stays on record; every verb then says
     the file holds no session (replay/check.py); `taken` says so, and what the verb offers (session:
-    `--force` reuses the id; lab, which never replaces a person's recording, has no --force). The line
-    goes to stderr, as every verb's interrupted line (stdout holds results only: a complete session's summary)."""
-    if summary["started"]:
-        print(f"interrupted ({why}) after {summary['rounds_played']} of {rounds} rounds; recorded "
+    `--force` reuses the id; lab, which never replaces a person's recording, has no --force). A session
+    whose game had completed every round when the signal came is complete (its SessionEnded says
+    "completed"; verify and rebuild take it whole): the line says so, as every verb's after its work was
+    done (cli/main.py), not "interrupted after 20 of 20 rounds"; the status is still the signal's. The line
+    goes to stderr, as every verb's interrupted line (stdout holds results only: a complete session's summary),
+    and starts `pairplay <verb>:` as every one-line message does (`verb`: session or lab; it had none)."""
+    if summary.get("ended") == "completed":  # the signal came after the last round: nothing was cut short
+        print(f"pairplay {verb}: interrupted ({why}) after the session had completed all {rounds} rounds; recorded "
+              f"{summary['events']} events to {path}; nothing was undone", file=sys.stderr)
+    elif summary["started"]:
+        print(f"pairplay {verb}: interrupted ({why}) after {summary['rounds_played']} of {rounds} rounds; recorded "
               f"{summary['events']} events to {path}"
               + (f" ({summary['unrecorded']} messages shed or unrecorded, counted in it)" if summary['unrecorded'] else ""),
               file=sys.stderr)
     else:
-        print(f"interrupted ({why}) before the session started; recorded {summary['events']} events to {path}, "
+        print(f"pairplay {verb}: interrupted ({why}) before the session started; recorded {summary['events']} events to {path}, "
               f"no session in it ({taken})", file=sys.stderr)
     return 0
 

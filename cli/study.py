@@ -72,19 +72,11 @@ def option(key: str) -> str:
     return "--" + key.replace("_", "-")
 
 
-def default_reuse_last(rounds: int) -> int:
-    """--reuse-last when not given: 50 (the study's), or a quarter of a study of 50 rounds or fewer, where
-    50 would leave pi-reuse no round (the Re-run line then states it: it differs from 50)."""
-    from pairplay.report.study import StudySettings
-    default = StudySettings.reuse_last
-    return default if rounds > default else rounds // 4
-
-
 def settings_of(args):
     """The one config object (report/study.py StudySettings) from the parsed options, checked: an
     OptionError naming the option and its allowed range for a combination core cannot run or would run
     as something else (no persona, one twice, fewer rounds than the speed-up's snapshot interval...)."""
-    from pairplay.report.study import SettingError, StudySettings
+    from pairplay.report.study import SettingError, StudySettings, default_reuse_last
 
     given = {k: getattr(args, k) for k in StudySettings.__dataclass_fields__}
     if given["reuse_last"] is None:  # not given: the default must fit a short study (`--rounds 20` was refused

@@ -4,7 +4,8 @@ Rule: the grid file says what is fixed ([study]), what is swept ([grid]) and
 the seeds; results land in --out (default out/sweep-<grid name>): cells/ (one
 JSON per finished cell), sweep.csv, cells.csv, figures/, sweep.md. Running
 the same grid into the same folder resumes: finished cells are not computed
-again. A folder that holds another grid's sweep, or files but no sweep, is
+again; with every cell finished and the summary written, nothing is written
+(sweep.md keeps the run that did the work) and one line says so. A folder that holds another grid's sweep, or files but no sweep, is
 refused unless --force; an --out that is a file is refused before any work.
 `--scheduler tcp://HOST:PORT` runs the cells on a Dask distributed cluster.
 Interrupted (SIGINT/SIGTERM), or refused a write by the system while it runs
@@ -25,6 +26,9 @@ from pairplay.cli.progress import bar as progress
 from pairplay.errors import OutputError
 from pairplay.outputs import check_folder, write_text
 from pairplay.report.sweep import GridError, finished_cells, read_grid, run_sweep, write_sweep
+
+
+SUMMARY = ("sweep.csv", "cells.csv", "sweep.md")  # what write_sweep writes besides the figures, sweep.md last
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -80,11 +84,17 @@ def run(args) -> int:
             old.unlink()
     made = [f for f in (out / "cells", out, *out.absolute().parents) if not f.exists()]
     had_copy = copy.exists()
+    cells = grid.cells()
+    done = len(finished_cells(out, grid))
+    if had_copy and done == len(cells) and all((out / name).is_file() for name in SUMMARY):
+        # a resume with nothing to do rewrote sweep.md ("computed 0 in 0.0 s"), losing the run that did the work
+        print(f"nothing to do: all {len(cells)} cells ({len(grid.settings())} settings x {len(grid.seeds)} seeds) "
+              f"were finished; {out / 'sweep.md'} is as it was")
+        return 0
     try:
         out.mkdir(parents=True, exist_ok=True)
-        write_text(copy, text, force=True)
-        cells = grid.cells()
-        done = len(finished_cells(out, grid))
+        if not had_copy or copy.read_text() != text:  # the same grid's copy stays as it is
+            write_text(copy, text, force=True)
         with progress(len(cells), "sweep", "cell", args.quiet, initial=done) as bar:  # on a terminal only
             result = run_sweep(grid, out, scheduler=args.scheduler, workers=args.workers, progress=bar.update)
         results = finished_cells(out, grid)

@@ -103,16 +103,16 @@ def run(args: argparse.Namespace) -> int:
             if done.partial and rrd is not None:  # never under the name of a complete view (module rule)
                 raise KeptPartial(keep_partial(tmp, rrd, args.force))
     except KeptPartial as kept:
-        print(f"interrupted ({done.why}) after {_counts(done)}, before the source ended; "
+        print(f"pairplay view: interrupted ({done.why}) after {_counts(done)}, before the source ended; "
               f"the partial view is in {kept.path}", file=sys.stderr)
         return 0
     except NothingDrawn as stopped:  # a signal before the first event: nothing to save (exit 128 + signal)
-        print(f"interrupted ({stopped}) before any event was drawn; nothing saved", file=sys.stderr)
+        print(f"pairplay view: interrupted ({stopped}) before any event was drawn; nothing saved", file=sys.stderr)
         return 0
     except RrdWriteFailed as err:  # the temporary .rrd is gone (output_path); nothing saved
         raise OutputError(f"writing the .rrd failed ({err}); nothing saved", rrd or "the view's output") from None
     if done.partial:
-        print(f"interrupted ({done.why}) after {_counts(done)}, before the source ended; nothing saved",
+        print(f"pairplay view: interrupted ({done.why}) after {_counts(done)}, before the source ended; nothing saved",
               file=sys.stderr)
     else:
         print(f"saved {rrd}: {_counts(done)}" if rrd is not None else f"viewed {_counts(done)}")

@@ -7,7 +7,11 @@ when it is complete; on any error, or Ctrl-C, the temporary file (and any
 folder made for it) is removed and the target is untouched. Without `force` the final step is a hard link
 (`os.link` fails if the target appeared meanwhile), so even a file created
 while we worked is not replaced. A folder of outputs (a study's report) is
-built in a temporary folder and renamed as a whole. Refusals are
+built in a temporary folder and renamed as a whole; written with `force` into
+a folder that holds an earlier run, it also removes the earlier run's files
+that this run did not write, those its writer names as its own (`owned`:
+a study's sections of a persona no longer in it looked current), and never
+another file. Refusals are
 `OutputError`s naming the path, raised before any work where the caller
 checks first (`check_output`, `check_outputs`, `check_folder`: each makes the
 folders it needs and a file there, then removes them, so a place the system
@@ -26,6 +30,7 @@ from __future__ import annotations
 
 import contextlib
 import errno
+import fnmatch
 import os
 import shutil
 from pathlib import Path
@@ -242,10 +247,13 @@ def check_output_folder(path: str | Path, force: bool = False) -> Path:
 
 
 @contextlib.contextmanager
-def output_folder(path: str | Path, force: bool = False) -> Iterator[Path]:
+def output_folder(path: str | Path, force: bool = False, owned: tuple[str, ...] = ()) -> Iterator[Path]:
     """A new temporary folder beside `path` to fill; when the block ends without error it
     becomes `path`. A non-empty `path` is refused unless `force`; with `force` each file
-    written replaces its namesake there and the folder's other files stay."""
+    written replaces its namesake there, a file there that `owned` names (the writer's own
+    outputs: patterns of relative paths, `policies/*/game-*.json`, see `is_owned`) and that this
+    run did not write is removed (an earlier run's, stale beside this one's), with the folders
+    that leaves empty, and every other file stays."""
     path = check_output_folder(path, force)
     created = _missing_folders(path.absolute().parent)
     _mkdir(path.absolute().parent)
@@ -263,17 +271,43 @@ def output_folder(path: str | Path, force: bool = False) -> Iterator[Path]:
         if not path.exists() or _is_empty_dir(path):
             os.replace(tmp, path)  # rename(2) onto an empty folder is atomic
         else:
+            written = set()
             for src in sorted(tmp.rglob("*")):
                 if src.is_file():
                     dst = path / src.relative_to(tmp)
                     _mkdir(dst.parent)
                     os.replace(src, dst)
+                    written.add(dst.relative_to(path).as_posix())
+            _remove_stale(path, written, owned)
         done = True
     finally:
         if tmp.exists():
             shutil.rmtree(tmp, ignore_errors=True)
         if not done:
             _remove_empty(created)
+
+
+def is_owned(relative: str, owned: tuple[str, ...]) -> bool:
+    """Whether the posix path `relative` (inside an output folder) is named by one of the patterns
+    `owned`, part by part (fnmatch: `merged/*.json` names merged/a.json, not merged/x/a.json)."""
+    parts = relative.split("/")
+    return any(len(parts) == len(p.split("/")) and all(map(fnmatch.fnmatchcase, parts, p.split("/")))
+               for p in owned)
+
+
+def _remove_stale(path: Path, written: set[str], owned: tuple[str, ...]) -> None:
+    """Remove the files under `path` that `owned` names and this run did not write (output_folder)."""
+    if not owned:
+        return
+    for old in sorted(path.rglob("*"), reverse=True):  # deepest first: a folder after its files
+        rel = old.relative_to(path).as_posix()
+        if old.is_file() and not old.is_symlink() and rel not in written and is_owned(rel, owned):
+            old.unlink()
+            with contextlib.suppress(OSError):  # a folder left holding something else stays
+                parent = old.parent
+                while parent != path and not any(parent.iterdir()):
+                    parent.rmdir()
+                    parent = parent.parent
 
 
 @contextlib.contextmanager

@@ -10,6 +10,9 @@ the share of suggestions followed by a match, per arm). Arms are summarised
 over seeds: mean, sample sd, 95% t-interval of the mean; each arm beside the
 recorded learner replayed on the same seeds ("same"), as a paired difference
 per seed; "differs" when that difference's 95% interval leaves out 0.
+Written with force over an earlier run, the earlier run's files of these names
+that this one does not write are removed (COUNTERFACTUAL_OUTPUTS: the table and
+figure of a run that now fits the user alone, another recording's user model).
 """
 
 from __future__ import annotations
@@ -142,11 +145,14 @@ def counterfactual_figure(recorded: Recorded, runs: dict, path: Path, title: str
     _save(fig, path, 110)
 
 
+COUNTERFACTUAL_OUTPUTS = ("*.usermodel.json", "counterfactual.csv", "counterfactual.md", "counterfactual.png")
+
+
 def write_counterfactual(out: str | Path, stem: str, model: UserModelFile, recorded: Recorded | None,
                          runs: dict | None, texts: dict[str, str], force: bool = False) -> list[Path]:
     """Fill the folder `out` (see the module rule); `runs` None writes the fitted user alone."""
     written = []
-    with output_folder(out, force) as tmp:
+    with output_folder(out, force, owned=COUNTERFACTUAL_OUTPUTS) as tmp:
         write_user_model(tmp / f"{stem}.usermodel.json", model)
         written.append(f"{stem}.usermodel.json")
         lines = [f"# Counterfactual replay of {model.recording}", "",

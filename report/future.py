@@ -12,7 +12,8 @@ Before the study's evaluations play, it computes what it needs from `state`
 `batch`, the study's single core.study.Evaluations (`batch.add(personas,
 policies, rounds, game_index)`, or a core helper that calls it, such as
 `core.study.add_on_personas`), keeping the slices `add` returns. It returns
-None if it does not apply to these settings, else `finish(state) -> lines`,
+None if it does not apply to these settings (then `not_run_lines` gives its
+heading and why, so the report never drops a section without a word), else `finish(state) -> lines`,
 which the study calls after the batch has played (`batch.picks[slice]`; the
 comparison's `state.oracle` and `state.alone` are set by then): it writes the
 section's CSV, hands its figure to `state.figures.draw(name, *plain data)` (a
@@ -54,9 +55,24 @@ class Study:
     alone: dict[str, float] = field(default_factory=dict)  # persona key -> the user alone's (after play)
 
 
+PRECOMBINATION_HEADING = "## Per-user pre-combination (future work 3)"
+MIN_GAMES = 5  # five disjoint replicates of each persona's games (core/precombine.py)
+
+
+def applies(state: Study) -> str:
+    """Why the future-work sections cannot run with these settings ("" if they can): both merge personas'
+    policies from disjoint replicates of their games."""
+    games, n = state.args.games, len(state.personas)
+    if games >= MIN_GAMES and n >= 2:
+        return ""
+    return (f"Not run: this section needs at least {MIN_GAMES} games per persona (disjoint replicates of each "
+            f"persona's policies) and at least 2 personas to merge; this study has {games} game"
+            f"{'s' if games != 1 else ''} of {n} persona{'s' if n != 1 else ''}.")
+
+
 def precombination(state: Study, batch):
     """Future work 3 (core/precombine.py): needs 5 disjoint replicates of each persona's games, 2+ personas."""
-    if state.args.games < 5 or len(state.personas) < 2:
+    if applies(state):
         return None
     pending = add_combination(batch, state.personas, state.training, state.args.seed)
 
@@ -69,7 +85,7 @@ def precombination(state: Study, batch):
 def action_level(state: Study, batch):
     """Future work 1 (core/actionlevel.py): on the same studies as future work 3; its reading personas
     learn in games of their own, the partners' games are the study's."""
-    if state.args.games < 5 or len(state.personas) < 2:
+    if applies(state):
         return None
     from pairplay.core.actionlevel import add_action_level
     from pairplay.report.future_actions import action_level_section
@@ -82,6 +98,16 @@ def action_level(state: Study, batch):
 
 
 SECTIONS = (precombination, action_level)
+
+
+def not_run_lines(state: Study) -> list[str]:
+    """The headings of the sections that do not apply to these settings, each with why (a study of one
+    persona, or of fewer than 5 games, left them out without a word)."""
+    why = applies(state)
+    if not why:
+        return []
+    from pairplay.report.future_actions import ACTION_LEVEL_HEADING
+    return [line for heading in (PRECOMBINATION_HEADING, ACTION_LEVEL_HEADING) for line in (heading, "", why, "")]
 
 
 def precombination_section(out: Path, exp, names: dict[str, str], oracle: dict[str, float],
@@ -113,7 +139,7 @@ def precombination_section(out: Path, exp, names: dict[str, str], oracle: dict[s
     diff = pre - base
     verdict = ("better" if diff.mean() < 0 else "worse") if abs(diff.mean()) > diff.std() else "no clearer"
     return [
-        "## Per-user pre-combination (future work 3)", "",
+        PRECOMBINATION_HEADING, "",
         "The thesis represents each user in a merge by one random policy (6.2) and proposes merging each "
         "user's own policies first (chapter 8). Here all personas are merged three ways, on the same "
         f"policies: {R} replicates, each from disjoint games of every persona (2 policies a user when "

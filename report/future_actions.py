@@ -20,6 +20,9 @@ from pairplay.core.personas import READING_PERSONAS
 from pairplay.report import plots
 
 
+ACTION_LEVEL_HEADING = "## Action-level profiles (future work 1)"
+
+
 def _pct(x: float) -> str:
     return f"{100 * x:.0f}"
 
@@ -84,7 +87,7 @@ def action_level_section(out: Path, exp, markdown_table, draw=plots.draw) -> lis
                for k in exp.persona if (a3[k].speech, a3[k].head) != (al[k].speech, al[k].head)]
     differ = int((exp.replicate_info[..., :2] != exp.replicate_info[..., 2:]).any(-1).sum())
     return [
-        "## Action-level profiles (future work 1)", "",
+        ACTION_LEVEL_HEADING, "",
         "The thesis's algorithm 3 compares a user's policies suggestion by suggestion (5.2.1), so two composite "
         "actions that mean the same to the user count as speech and head incompatibilities, and algorithm 4 "
         "merges policies part by part (5.2.2), so a pair a user understands only as one whole can be split; "

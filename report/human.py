@@ -7,12 +7,15 @@ listed and left out of every figure and table. It writes:
   picks.csv                       picks per round of every valid game (18 is perfect play)
   games.png   (figure 7.3a)       phase 1: mean picks per round of game 1, game 2, ...
   phases.png  (figure 7.3b)       mean picks per round: phase 1 (its games averaged) vs phase 2 ...
-  users.png   (figure 7.6)        a reuse phase: returning users (who played before) vs new users
+  users-<phase>.png (figure 7.6)  a reuse phase: returning users (who played before) vs new users
   merged.png  (figure 7.5)        each bias policy: state code vs action code, with a reference policy if given
   attention.csv                   per participant and phase: suggestions, ignored (pick interval under the
                                   window, 7.1.2), wrong-suggestion presses (7.1.3), bias share (pi-reuse)
   questionnaire.csv               per item, phase and group: n, mean/median (Likert), counts (choice)
   report.md                       all of it, with the study's settings
+A report written again over an earlier one (`pairplay report --force`, the console) removes the
+earlier one's files of these names that it does not write (HUMAN_OUTPUTS: a figure 7.6 of a phase no
+longer reported); no other file is touched.
 """
 
 from __future__ import annotations
@@ -34,6 +37,10 @@ from pairplay.schemas.policy import read_policy
 
 from pairplay.report import plots
 from pairplay.report.study import markdown_table
+
+
+HUMAN_OUTPUTS = ("picks.csv", "games.png", "phases.png", "users-*.png", "merged.png", "attention.csv",
+                 "questionnaire.csv", "report.md")  # pairplay.outputs.output_folder `owned`
 
 
 @dataclass

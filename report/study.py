@@ -16,6 +16,10 @@ Rule: `run_study(settings, out)` runs the study of thesis chapter 6 through
   frames.csv, frames.png            future work 2: merging across mirrored users, with and without calibration
   report.md                         the tables and figures, with the run's settings
 It returns the tables it wrote, so a caller (the CLI, a notebook) can print them.
+A study written with force into a folder that holds an earlier one removes the
+earlier one's files of these names that it does not write itself (STUDY_OUTPUTS:
+the sections of a persona not in this study, the speed-up's tables after a
+--train-only run...), so no stale file looks current; no other file is touched.
 """
 
 from __future__ import annotations
@@ -41,6 +45,7 @@ from pairplay.core.policies import to_policy_file
 from pairplay.core.reward import BONUS_RULE_TEXT
 from pairplay.core.rng import GAME_INDEX_RANGE, SEED_RANGE
 from pairplay.errors import OptionError
+from pairplay.lists import comma_items
 from pairplay.schemas.config import DEFAULT_REWARD_BONUS, LearnerConfig, LSPIConfig, REWARD_BONUS_RULES
 from pairplay.outputs import output_folder
 from pairplay.processes import off_main_thread, process_pool, stop_pool
@@ -77,7 +82,10 @@ class StudySettings:
 
     def persona_list(self):
         """The personas named, in order (SettingError for none, an unknown one or one named twice)."""
-        names = [k.strip() for k in self.personas.split(",") if k.strip()]
+        try:
+            names = comma_items(self.personas)
+        except ValueError as exc:  # `a,,b` ran a and b without a word
+            raise SettingError("personas", str(exc)) from None
         if not names:
             raise SettingError("personas", f"names no persona: give one or more of {', '.join(PERSONAS)}")
         chosen = []
@@ -142,6 +150,9 @@ class StudySettings:
             if self.rounds < every:  # no snapshot of the greedy policy, so no 'rounds to 1.10x the oracle'
                 raise SettingError("rounds", f"must be at least {every} when the speed-up runs{when}: its greedy "
                                    f"snapshots are taken every {every} rounds; got {self.rounds}")
+            if self.psi <= 0:  # psi 0: the bias is never taken, the pi-reuse arm would be Q-learning
+                raise SettingError("psi", f"must be above 0 when the speed-up runs{when}: pi-reuse with psi 0 never "
+                                   f"takes the bias policy's action (its arm would be Q-learning), got {self.psi}")
             if self.reuse_last >= self.rounds:  # reuse_rounds 0: the pi-reuse arm would be Q-learning
                 raise SettingError("reuse_last", f"must be below {spell('rounds')} {self.rounds} (0.."
                                    f"{self.rounds - 1}: the last N rounds of pi-reuse use the new policy alone; "
@@ -164,6 +175,14 @@ class StudySettings:
             else:
                 words += [option, shlex.quote(repr(value) if isinstance(value, float) else str(value))]
         return " ".join(words)
+
+
+def default_reuse_last(rounds: int) -> int:
+    """reuse_last when a study or a sweep does not give it: 50 (StudySettings'), or a quarter of a study of
+    50 rounds or fewer, where 50 would leave pi-reuse no round (`pairplay study --rounds 20` and a sweep's
+    `rounds = 20` were refused for an option the user never gave; the Re-run line states it: it is not 50)."""
+    default = StudySettings.reuse_last
+    return default if rounds > default else rounds // 4
 
 
 class SettingError(OptionError):
@@ -330,6 +349,14 @@ def write_merges(out: Path, personas, users: study.UserSet, args, figures=None) 
 
 TIMINGS_HEADING = "## Timings"
 
+# Every file a study may write, as patterns of its relative path (pairplay.outputs.is_owned; the module
+# rule lists them): a --force run removes those of an earlier study it does not write itself.
+STUDY_OUTPUTS = ("policies/*/game-*.json", "merged/*.json", "report.md", "curves.csv", "curves_summary.csv",
+                 "learning_curves.png", "evaluation.csv", "evaluation.png", "profiles.csv", "profiles.png",
+                 "merged.png", "merged_evaluation.csv", "reuse.csv", "reuse.png", "speed.csv", "speed.png",
+                 "action_profiles.csv", "action_merges.csv", "action_merges.png", "frames.csv", "frames.png",
+                 "precombination.csv", "precombination.png")
+
 
 def output_digests(out: Path) -> dict[str, str]:
     """sha256 (hex) of every file a study wrote under `out` that its seed decides, by relative path.
@@ -402,12 +429,13 @@ def run_study(args: StudySettings, out: Path, progress_bar: Callable = _no_bar, 
     evaluation (learned, oracle and user alone; merged policies; the speed-up's
     snapshots). Figures are drawn in a child process meanwhile.
     The folder is built beside `out` and renamed when complete (pairplay.outputs.output_folder):
-    OutputError, before any work, if `out` exists with files in it and not `force`; an
+    OutputError, before any work, if `out` exists with files in it and not `force`; with `force`,
+    an earlier study's files there that this one does not write are removed (STUDY_OUTPUTS); an
     interrupted study leaves nothing. Raises SettingError (an OptionError), before any work, for a
     setting that cannot run as asked (StudySettings.check)."""
     personas = args.check()
     return_freed_memory()
-    with output_folder(out, force) as tmp:
+    with output_folder(out, force, owned=STUDY_OUTPUTS) as tmp:
         report = _run_study(args, personas, tmp, progress_bar, figures_in_background)
     report.out = Path(out)
     return report
@@ -571,7 +599,7 @@ def _run(args, out, progress_bar, personas, config, names, timings, start, figur
                      out / "reuse.png")
     t0 = time.perf_counter()
     state.oracle, state.alone = oracle, alone
-    future_lines = [line for finish in finishers for line in finish(state)]
+    future_lines = [line for finish in finishers for line in finish(state)] + future.not_run_lines(state)
     if finishers:
         timings["future work"] = future_seconds + time.perf_counter() - t0
     future_lines += frame_lines
@@ -613,7 +641,11 @@ def _run(args, out, progress_bar, personas, config, names, timings, start, figur
         "## Merged policies (algorithm 4, figure 6.6)", "",
         "Each persona is represented by one of its policies, picked at random by the seed (thesis 6.2); "
         "picks per round with epsilon 0.", "",
-        markdown_table(merge_rows), "", "![merged](merged.png)", "",
+        markdown_table(merge_rows), "",
+        # one persona: nothing to merge, and no merged.png (the report showed a broken figure, no reason)
+        *(["![merged](merged.png)", ""] if merges else
+          [f"No merged policy: a merge (algorithm 4) needs at least 2 personas; this study has {len(personas)}.",
+           ""]),
     ]
     for name, merged in merges.items():
         rules: dict[str, int] = {}
@@ -634,6 +666,10 @@ def _run(args, out, progress_bar, personas, config, names, timings, start, figur
                    f"pi-reuse beats scratch on the {first} for {(gains > 0).sum()} of {len(gains)} "
                    f"held-out personas; median gain {np.median(gains):.2f} picks per round.", "",
                    "![reuse](reuse.png)", ""]
+    else:  # one persona: left out without a word before
+        report += ["", "## Policy reuse speed-up (algorithm 5)", "",
+                   "Not run: each persona is held out and its bias policy merged from the others, so the "
+                   f"speed-up needs at least 2 personas; this study has {len(personas)}.", ""]
     report += [TIMINGS_HEADING, "", markdown_table([["phase", "seconds"]] + [[k, f"{v:.2f}"] for k, v in timings.items()]), ""]
     # the future-work sections come after the timings, so that report.md up to its timings stays the
     # thesis's study, whose bytes tests/test_study_digests.py pins

@@ -2,7 +2,9 @@
 
 Rule: a sweep is read from a TOML file (`read_grid`): fixed study settings in
 [study], lists of values in [grid] (the sweep is their product), and the
-seeds (`seeds = 5` for 0..4, or a list). Each (setting, seed) is one cell:
+seeds (`seeds = 5` for 0..4, or a list). `personas` is a comma-separated
+string or a TOML list of names, as fixed in [study] and as each value of a
+[grid] axis (`personas = [["blind", "deaf"], ["blind"]]`). Each (setting, seed) is one cell:
 `cell_measures` runs the study's training, evaluation (and, with
 `reuse = true`, the policy-reuse experiment) through `pairplay.core.study` and
 returns plain numbers, so a cell's result depends on its settings and seed
@@ -43,7 +45,7 @@ import numpy as np
 from pairplay.outputs import output_file, write_text
 from pairplay.processes import check_workers, worker_pool
 from pairplay.core.rng import SEED_RANGE
-from pairplay.report.study import SettingError, StudySettings
+from pairplay.report.study import SettingError, StudySettings, default_reuse_last
 
 SWEEPABLE = {f.name: f.type for f in fields(StudySettings) if f.name not in ("seed", "train_only")}
 
@@ -84,13 +86,22 @@ class Grid:
         return [Cell(s, seed) for s in self.settings() for seed in self.seeds]
 
     def study_settings(self, cell: Cell) -> StudySettings:
-        return StudySettings(**{**self.base, **dict(cell.setting), "seed": cell.seed})
+        given = {**self.base, **dict(cell.setting), "seed": cell.seed}
+        if "reuse_last" not in given:  # not in the grid: the study's default for the cell's rounds (50 refused rounds = 20)
+            given["reuse_last"] = default_reuse_last(given.get("rounds", StudySettings.rounds))
+        return StudySettings(**given)
 
 
 def _typed(path: str, key: str, value):
     want = SWEEPABLE.get(key)
     if want is None:
         raise GridError(f"{path}: unknown study setting {key!r} (known: {', '.join(sorted(SWEEPABLE))})")
+    if key == "personas" and isinstance(value, list) and all(isinstance(v, str) for v in value):
+        # a TOML list of names (["ashley", "helmut"]) is the list it says, as the study's "ashley,helmut"
+        # (it was refused: "is not a str"); its names are checked as the study's (StudySettings.check)
+        if not all(v.strip() and "," not in v for v in value):
+            raise GridError(f"{path}: personas = {value!r}: each item of the list is one persona's name")
+        value = ",".join(value)
     kind = {"int": int, "float": (int, float), "str": str, "bool": bool}[want if isinstance(want, str) else want.__name__]
     if isinstance(value, bool) and kind is not bool or not isinstance(value, kind):
         raise GridError(f"{path}: {key} = {value!r} is not a {want}")
@@ -329,7 +340,9 @@ def write_sweep(out: str | Path, grid: Grid, results: dict[str, dict], run: Swee
     md = ["# pairplay sweep", "",
           f"{len(grid.settings())} settings x {len(grid.seeds)} seeds = {run.cells} cells; computed {run.computed} "
           f"in {run.wall_s:.1f} s ({run.where}); fixed settings: "
-          + (", ".join(f"{k}={v}" for k, v in grid.base.items()) or "the study's defaults") + ".", "",
+          + (", ".join(f"{k}={v}" for k, v in grid.base.items()) or "the study's defaults") + "."
+          + (" reuse_last, not given, is the study's default: 50, or rounds // 4 for 50 rounds or fewer."
+             if grid.reuse and "reuse_last" not in {**grid.base, **grid.axes} else ""), "",
           "Each row: the mean over seeds, the sample sd, and the 95% confidence interval of the mean "
           "(Student's t). Picks per round: 18 is perfect play, lower is better; ratio: learned / oracle.", "",
           "| setting | measure | n | mean | sd | 95% CI |", "|---|---|---|---|---|---|"]

@@ -51,6 +51,16 @@ class LearnerConfig(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
     psi_round_decay: float = 1.0
     reuse_rounds: int | None = None
 
+    def never_reuses(self) -> str:
+        """Why pi-reuse on this schedule would never take the bias policy's action, "" if it does: such a
+        session or phase is Q-learning called pi-reuse (a protocol phase of 1 round under human-phase2,
+        whose last round is on the new policy alone, was accepted and never reused)."""
+        if self.reuse_rounds is not None and self.reuse_rounds < 1:
+            return f"its schedule plays every round on the new policy alone (reuse_rounds {self.reuse_rounds})"
+        if self.psi_start <= 0:
+            return "its psi starts at 0"
+        return ""
+
     @classmethod
     def human_phase1(cls, rounds: int = 5) -> "LearnerConfig":
         """Thesis 7.2: epsilon 0.9 falling by a fifth of 0.9 each round (5 rounds)."""

@@ -165,9 +165,14 @@ def _check(study: Study) -> None:
             if name not in study.questionnaire:
                 raise StudyFileError(f"{where}.questionnaires: no [questionnaire.{name}] in the file")
         try:
-            study.learner_config(p)
+            schedule = study.learner_config(p)
         except (TypeError, ValueError) as err:
             raise StudyFileError(f"{where}.learner: {err}") from None
+        never = schedule.never_reuses() if p.algorithm == "pi-reuse" else ""
+        if never:  # 1 round under human-phase2: its one round is the last, on the new policy alone
+            raise StudyFileError(f"{where}: a pi-reuse phase of {p.rounds} round{'s' if p.rounds != 1 else ''} "
+                                 f"that never reuses the bias policy: {never} (preset {p.preset}; give 2 rounds "
+                                 "or more, or learner overrides that reuse)")
         seen.append(p.id)
     if study.phase[0].players == "all":
         raise StudyFileError("phase[0].players: the first phase has no earlier players; use \"new\"")

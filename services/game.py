@@ -79,6 +79,7 @@ class GameLogic:
         self.deals = UniformStream([stream_seed(config)], "deal")
         self.round = 0
         self.done = False
+        self.ended = ""  # the SessionEnded reason once the session is over (a caller's summary: completed or not)
         self.board: Board | None = None
         self.paused = False
         self.fixations: deque[ev.GazeFixated] = deque(maxlen=self.GAZE_KEPT)
@@ -109,7 +110,7 @@ class GameLogic:
         """End the session early (interrupted, aborted or failed), saying how far it got; [] if it is over."""
         if self.done:
             return []
-        self.done = True
+        self.done, self.ended = True, reason
         return [ev.SessionEnded(reason=reason, rounds_played=self.round, detail=detail, round=self.round,
                                 turns_in_round=self.turn)]
 
@@ -244,6 +245,6 @@ class GameLogic:
         out.append(ev.RoundEnded(round=self.round, turns=self.turn + 1, matches=self.matches))
         self.round += 1
         if self.round >= self.config.rounds:
-            self.done = True
+            self.done, self.ended = True, "completed"
             return out + [ev.SessionEnded(reason="completed", rounds_played=self.round)]
         return out + self._deal()

@@ -79,7 +79,8 @@ def run_session(config: SessionConfig, path: str | Path, *, bus: Bus | None = No
     `summary`, if given, receives what the caller may print without reading the
     file back (an interrupted process has no time for that): `events` written,
     `unrecorded` messages the recorder shed (floods, and what was still queued
-    at the exit), `started` whether the game started the session, `rounds_played`.
+    at the exit), `started` whether the game started the session, `rounds_played`, `ended` the game's
+    SessionEnded reason ("" if it published none: "completed" under a signal that came after the last round).
 
     Stopped (SIGINT/SIGTERM, the caller's `stop`, a recording failure), every step
     of the shutdown shares one deadline (`stop.deadline`, services/bus.py), so
@@ -169,7 +170,8 @@ def run_session(config: SessionConfig, path: str | Path, *, bus: Bus | None = No
         if summary is not None and recorder is not None:
             summary.update(events=recorder.writer.count, unrecorded=recorder.inbox.shed_total,
                            started=game is not None and game.driver.seq > 0,
-                           rounds_played=game.logic.round if game is not None else 0)
+                           rounds_played=game.logic.round if game is not None else 0,
+                           ended=game.logic.ended if game is not None else "")
     if failure is not None:
         raise RecordingFailed(failure, recorder.path)
     where = recorder.path if recorder is not None else f"session {config.session}"

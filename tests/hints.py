@@ -35,6 +35,8 @@ def bad_command(command: str) -> str:
         return "" if words[0] in ("--help", "-h", "--version") else f"{words[0]} before a verb"
     if words[0].isupper() or words[0].startswith("<"):  # `pairplay VERB --help`: a placeholder verb
         return ""
+    if words[0].endswith(":"):  # a message shown, `pairplay router: stopped (SIGTERM)`: its verb must exist
+        return "" if words[0][:-1] in VERBS else f"no verb {words[0][:-1]!r}"
     if words[0] not in VERBS:
         return f"no verb {words[0]!r}"
     known = verb_options(words[:2])

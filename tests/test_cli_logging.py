@@ -67,4 +67,4 @@ def test_an_interrupted_session_prints_its_one_interrupted_line_on_stderr_and_no
     lines = err.strip().splitlines()
     assert len(lines) == 1, err
     (line,) = lines
-    assert line.startswith("interrupted (SIGINT) ") and f"events to {tmp_path / 'int1.mcap'}" in line, line
+    assert line.startswith("pairplay session: interrupted (SIGINT) ") and f"events to {tmp_path / 'int1.mcap'}" in line, line

@@ -107,7 +107,10 @@ def test_the_whole_protocol_from_the_console(browser, tmp_path, robot, rounds, o
     # clicks are fast: learn from every turn (no ignore window); missed pairs turn back quickly
     study.write_text(STUDY.read_text().replace('robot = "none"', f'robot = "{robot}"')
                      .replace("rounds = 2", f"rounds = {rounds}").replace("ignore_window_ms = 1500", "ignore_window_ms = 0")
-                     .replace("[study]", "[study]\nturn_back_ms = 30"))
+                     .replace("[study]", "[study]\nturn_back_ms = 30")
+                     # a 1-round pi-reuse phase under human-phase2 never reuses (refused): its one round reuses
+                     .replace('preset = "human-phase2"', 'preset = "human-phase2"' + (
+                         "\nlearner = { reuse_rounds = 1 }" if rounds == 1 else "")))
     data = StudyData.create(tmp_path / "study", study)
     shots = Path(os.environ.get("PAIRPLAY_DOCS_SHOTS", tmp_path))
     inbox: queue.Queue = queue.Queue()

@@ -238,3 +238,14 @@ def test_cli_never_replaces_an_output_folder_without_force(tmp_path, capsys):
     assert _main(capsys, SAMPLE, "--fit-only", "--out", out, "--force")[0] == 0
     assert model.read_bytes() == before  # the same recording, the same bytes
     assert not [p for p in out.parent.iterdir() if p.name.startswith(".")]  # no temporary folder left
+
+
+def test_a_forced_fit_only_run_over_a_full_one_leaves_no_stale_comparison(tmp_path, capsys):
+    """`--fit-only --force` over a run that played arms kept its counterfactual.csv and .png beside the new
+    fit: a comparison of a run that played none looked current. The earlier run's own files the new one
+    does not write go; a file that is not the verb's stays."""
+    out = tmp_path / "cf"
+    assert _main(capsys, SAMPLE, "--policy", "same", "--seeds", 2, "--rounds", 5, "--out", out)[0] == 0
+    (out / "notes.txt").write_text("the researcher's")
+    assert _main(capsys, SAMPLE, "--fit-only", "--out", out, "--force")[0] == 0
+    assert sorted(p.name for p in out.iterdir()) == ["counterfactual.md", "notes.txt", "sim-helmut-fmt2.usermodel.json"]

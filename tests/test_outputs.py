@@ -130,3 +130,31 @@ def test_recover_and_view_never_replace_what_exists(tmp_path, pairplay):
     r = pairplay("recover", "R.mcap", "-o", "R.mcap", cwd=tmp_path)
     assert r.returncode == 2 and (tmp_path / "R.mcap").read_bytes() == SAMPLE.read_bytes()
     assert sorted(p.name for p in tmp_path.iterdir()) == ["R.mcap", "R.rrd"]
+
+
+def test_a_forced_folder_loses_the_earlier_runs_own_files_this_run_did_not_write(tmp_path):
+    """`study --force` over an older study kept the older study's files the new one does not write (a
+    persona's policies no longer in it): stale files that looked current. Now the files the writer names
+    as its own (`owned`) and this run did not write go, with the folders that leaves empty; every other
+    file, and a folder holding one, stays."""
+    out = tmp_path / "report"
+    owned = ("policies/*/game-*.json", "report.md", "reuse.csv")
+    with output_folder(out, owned=owned) as tmp:
+        for rel in ("report.md", "reuse.csv", "policies/a/game-00.json", "policies/b/game-00.json"):
+            (tmp / rel).parent.mkdir(parents=True, exist_ok=True)
+            (tmp / rel).write_text("old")
+    (out / "notes.txt").write_text("the user's")
+    (out / "policies" / "b" / "mine.txt").write_text("the user's")
+    (out / "policies" / "b" / "deeper").mkdir()
+    (out / "policies" / "b" / "deeper" / "game-00.json").write_text("not a pattern's depth")
+    with output_folder(out, force=True, owned=owned) as tmp:
+        (tmp / "policies" / "a").mkdir(parents=True)
+        (tmp / "policies" / "a" / "game-00.json").write_text("new")
+        (tmp / "report.md").write_text("new")
+    left = sorted(p.relative_to(out).as_posix() for p in out.rglob("*") if p.is_file())
+    assert left == ["notes.txt", "policies/a/game-00.json", "policies/b/deeper/game-00.json", "policies/b/mine.txt",
+                    "report.md"]
+    assert (out / "report.md").read_text() == "new"
+    with output_folder(out, force=True, owned=owned) as tmp:  # the folder it leaves empty goes too
+        (tmp / "report.md").write_text("newer")
+    assert not (out / "policies" / "a").exists() and (out / "policies" / "b" / "mine.txt").exists()

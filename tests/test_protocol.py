@@ -318,8 +318,10 @@ def test_report_force_keeps_the_folders_other_files_and_a_failure_leaves_no_temp
     (mine / "notes.txt").write_text("the user's notes")
     assert main(["report", str(data.folder), "--out", str(mine)]) == 2  # not empty: refused without --force
     assert "--force" in capsys.readouterr().err
+    (mine / "users-phase9.png").write_bytes(b"an earlier report's figure 7.6 of a phase it no longer has")
     assert main(["report", str(data.folder), "--out", str(mine), "--force"]) == 0
     assert (mine / "notes.txt").read_text() == "the user's notes" and (mine / "report.md").is_file()
+    assert not (mine / "users-phase9.png").exists()  # the report's own name, not written now: stale, removed
     (tmp_path / "afile").write_text("a file")
     assert main(["report", str(data.folder), "--out", str(tmp_path / "afile"), "--force"]) == 2
     err = capsys.readouterr().err

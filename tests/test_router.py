@@ -52,7 +52,7 @@ def test_router_verb_refuses_a_port_in_use_on_one_line():
     assert second.returncode == 2 and second.stderr.count("\n") == 1 and "pairplay router" in second.stderr
     assert first.returncode == 143  # SIGTERM: 128 + 15, as every verb (cli/main.py), after a clean stop
     out, err = first.communicate(timeout=10)
-    assert (out, err) == ("", "stopped (SIGTERM)\n")  # the stop's line on stderr, as every verb's (was stdout)
+    assert (out, err) == ("", "pairplay router: stopped (SIGTERM)\n")  # the stop's line on stderr, as every verb's (was stdout)
 
 
 def run_through_router(tmp_path, session: str, rounds: int, cache_samples: int, outage_s: float = 1.5,

@@ -67,6 +67,53 @@ def test_a_signalled_session_records_it_was_interrupted_and_how_far_it_got(tmp_p
     assert verified.ok and verified.stopped == f"interrupted ({sig.name})", [c.mismatches[:2] for c in verified.checks]
 
 
+def test_a_signal_after_the_last_round_says_the_session_completed(tmp_path):
+    """A session signalled after its game had played every round said "interrupted (SIGTERM) after 3 of 3
+    rounds", as if cut short, of a recording that verify and rebuild take whole (a new researcher's trial).
+    It is complete: the line says so and that nothing was undone; the status is the signal's, as every
+    verb's after its work was done (README). The session waits for its external learner to leave, a
+    process held stopped here (SIGSTOP) once it has settled every suggestion's reward (its last events
+    are the session's: frozen before them, the file lacks them), so the signal surely comes after the
+    last round and the learner's last update."""
+    env = dict(os.environ, PYTHONUNBUFFERED="1")
+    p = subprocess.Popen([sys.executable, "-m", "pairplay", "session", "--participant", "sim:wasim", "--rounds", "3",
+                          "--session", "late", "--external", "learner", "--out", str(tmp_path)],
+                         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
+    learner = watcher = None
+    try:
+        while "bus listening" not in (line := p.stdout.readline()):
+            assert p.poll() is None
+        endpoint = line.split(" - ")[0].split()[-1]
+        watcher = Bus(BusOptions(mode="client", connect=[endpoint]))
+        ends = collect(watcher, event_key("late", "game", "SessionEnded"))
+        made = collect(watcher, event_key("late", "learner", "SuggestionMade"))
+        rewarded = collect(watcher, event_key("late", "learner", "RewardGiven"))
+        learner = subprocess.Popen([sys.executable, "-m", "pairplay", "run", "learner", "--session", "late",
+                                    "--connect", endpoint, "--quiet"], stdout=subprocess.DEVNULL, env=env)
+        ends.get(timeout=120)
+        assert wait_until(lambda: made.qsize() == rewarded.qsize(), 60)  # every suggestion settled
+        time.sleep(0.5)  # the rest of the settling's events (QUpdated) follow its RewardGiven at once
+        learner.send_signal(signal.SIGSTOP)  # its token stays: the session waits for it to leave
+        p.send_signal(signal.SIGTERM)
+        out, err = p.communicate(timeout=30)
+    finally:
+        for proc in (p, learner):
+            if proc is not None and proc.poll() is None:
+                proc.send_signal(signal.SIGCONT)
+                proc.kill()
+                proc.wait()
+        if watcher is not None:
+            watcher.close()
+    path = tmp_path / "late.mcap"
+    assert p.returncode == 143, (out, err)
+    assert err.splitlines() == [f"pairplay session: interrupted (SIGTERM) after the session had completed all 3 rounds; recorded "
+                                f"{len(read_log(path).events)} events to {path}; nothing was undone"], err
+    [end] = ended(path)
+    assert end.reason == "completed" and end.rounds_played == 3
+    verified = verify_recording(path)
+    assert verified.ok and rebuild_recording(path).partial == "", [(c.service, c.mismatches[:2], c.extra) for c in verified.checks]
+
+
 def test_an_experimenter_stop_is_recorded_as_aborted(tmp_path):
     config = SessionConfig(session="abort", participant="sim:blind", persona="blind", seed=1, rounds=100000)
     stop, nodes = threading.Event(), {}

@@ -129,3 +129,53 @@ def test_the_combiner_service_refuses_what_combine_refuses(study_dir):
     before = (study_dir / "report.md").read_bytes()
     [over] = logic.handle(ev.CombineRequested(request_id="over", policies=[same, deaf], output_path="report.md"))
     assert not over.ok and "exists" in over.error and (study_dir / "report.md").read_bytes() == before
+
+
+def _files(folder):
+    return sorted(p.relative_to(folder).as_posix() for p in folder.rglob("*") if p.is_file())
+
+
+def test_a_forced_study_over_an_older_one_keeps_none_of_the_older_ones_files(tmp_path, capsys):
+    """`study --force` into the folder of an older study kept the older one's files the new one does not
+    write (policies, sections of personas not in it, the speed-up's tables): stale files that looked
+    current. Now the folder holds what a fresh study of the same options writes, and the files that are
+    not a study's (a researcher's notes) stay. Every file a study writes is one of STUDY_OUTPUTS."""
+    from pairplay.outputs import is_owned
+    from pairplay.report.study import STUDY_OUTPUTS
+
+    small = ["--games", "1", "--rounds", "20", "--eval-rounds", "5", "--reuse-seeds", "1", "--quiet"]
+    out, fresh = tmp_path / "study", tmp_path / "fresh"
+    assert main(["study", *small, "--personas", "blind,deaf,tatiana", "--algorithm", "lspi", "--out", str(out)]) == 0
+    older = _files(out)
+    assert [f for f in older if not is_owned(f, STUDY_OUTPUTS)] == [] and "speed.csv" in older
+    (out / "notes.txt").write_text("the researcher's")
+    (out / "policies" / "notes.txt").write_text("the researcher's")
+    newer = ["study", *small, "--personas", "blind", "--train-only"]
+    assert main([*newer, "--out", str(out), "--force"]) == 0
+    assert main([*newer, "--out", str(fresh)]) == 0
+    assert _files(out) == sorted(_files(fresh) + ["notes.txt", "policies/notes.txt"])
+    assert not (out / "policies" / "deaf").exists()
+
+
+SECTIONS = ("## Merged policies (algorithm 4, figure 6.6)", "## Policy reuse speed-up (algorithm 5)",
+            "## Per-user pre-combination (future work 3)", "## Action-level profiles (future work 1)")
+
+
+def _figures_missing(out):
+    import re
+    return [f for f in re.findall(r"!\[[^\]]*\]\(([^)]+)\)", (out / "report.md").read_text()) if not (out / f).exists()]
+
+
+def test_a_report_says_why_a_section_did_not_run(tmp_path, study_dir):
+    """A study of one persona left the speed-up and the future-work sections out without a word and showed
+    merged.png, which it never drew: each section is there, saying what it needs; no figure is missing."""
+    out = tmp_path / "one"
+    assert main(["study", "--quiet", "--personas", "blind", "--games", "1", "--rounds", "20", "--eval-rounds", "5",
+                 "--out", str(out)]) == 0
+    text = (out / "report.md").read_text()
+    for heading in SECTIONS:
+        body = text.split(heading + "\n", 1)[1].split("\n## ", 1)[0]
+        assert "needs at least 2 personas" in body or "at least 2 personas to merge" in body, (heading, body)
+    assert _figures_missing(out) == []
+    several = (study_dir / "report.md").read_text()  # 3 personas of 2 games: future work needs 5
+    assert several.count("needs at least 5 games per persona") == 2 and _figures_missing(study_dir) == []

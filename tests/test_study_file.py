@@ -48,6 +48,12 @@ BASE = example_text()
      "phase[0].learner"),
     (("algorithm = \"pi-reuse\"", "algorithm = \"q-learning\"", 1), "phase[1].bias"),
     (("[study]", "[study", 1), "not valid TOML"),
+    # a pi-reuse phase that never reuses (its one round under human-phase2 is the last, on the new policy
+    # alone; psi 0) was accepted: Q-learning, called pi-reuse in the journal and the report
+    (("rounds = 5\nalgorithm = \"pi-reuse\"", "rounds = 1\nalgorithm = \"pi-reuse\"", 1),
+     "phase[1]: a pi-reuse phase of 1 round that never reuses the bias policy"),
+    (("preset = \"human-phase2\"", "preset = \"human-phase2\"\nlearner = { psi_start = 0.0 }", 1),
+     "phase[1]: a pi-reuse phase of 5 rounds that never reuses the bias policy: its psi starts at 0"),
 ])
 def test_a_mistake_is_one_line_naming_the_place(change, where):
     old, new, count = change

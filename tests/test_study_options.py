@@ -29,12 +29,14 @@ STUDY_MISTAKES = [
     (["--rounds", "9", "--reuse-last", "2"], "--rounds: must be at least 10"),
     (["--personas", " "], "--personas: names no persona"),
     (["--personas", ""], "--personas: names no persona"),
-    (["--personas", ", ,"], "--personas: names no persona"),
+    (["--personas", ", ,"], "--personas: ', ,' has an empty item (item 1 of 3)"),
+    (["--personas", "deaf,,blind"], "--personas: 'deaf,,blind' has an empty item (item 2 of 3)"),
     (["--personas", "deaf,deaf"], "--personas: names deaf twice"),
     (["--personas", "deaf,Deaf"], "--personas: names deaf twice"),
     (["--rounds", "10", "--reuse-last", "50"], "--reuse-last: must be below --rounds 10"),
     (["--rounds", "60", "--reuse-last", "60"], "--reuse-last: must be below --rounds 60"),
     (["--personas", "nobody"], "--personas: unknown persona 'nobody'"),
+    (["--psi", "0"], "--psi: must be above 0 when the speed-up runs"),  # its pi-reuse arm was Q-learning
     (["--games", "99999999999999999999"], "--games: must be 1..9223372036853775808"),
     (["--reuse-seeds", str(2**63)], "--reuse-seeds: must be 1..9223372036853775808"),
     (["--personas", "blind", "--algorithm", "lspi", "--rounds", "9"], "--rounds: must be at least 10 with --algorithm lspi"),
@@ -63,6 +65,22 @@ def test_a_short_study_without_reuse_last_gets_a_default_that_fits(rounds, reuse
     settings = study_verb.settings_of(args)
     assert settings.reuse_last == reuse_last
     assert (f"--reuse-last {reuse_last}" in settings.rerun_command()) == (reuse_last != 50)
+
+
+@pytest.mark.parametrize("where", ["[study]\nrounds = 20\n", "[grid]\nrounds = [20, 60]\n"])
+def test_a_short_sweep_without_reuse_last_gets_the_studys_default(where, tmp_path):
+    """A sweep of `rounds = 20` with `reuse = true` and no reuse_last was refused for the default 50, which
+    `pairplay study --rounds 20` no longer is: a cell's reuse_last not given is the study's
+    default_reuse_last of its own rounds (one helper for the verb and the sweep); one given is kept."""
+    from pairplay.report.sweep import read_grid
+    path = tmp_path / "grid.toml"
+    head = 'reuse = true\nseeds = 1\n[study]\npersonas = "blind,deaf"\n'
+    path.write_text(head + where.replace("[study]\n", ""))
+    grid = read_grid(path)
+    got = {s.rounds: s.reuse_last for s in map(grid.study_settings, grid.cells())}
+    assert got == ({20: 5} if "[study]" in where else {20: 5, 60: 50})
+    path.write_text(head + "reuse_last = 3\n" + where.replace("[study]\n", ""))
+    assert {s.reuse_last for s in map(read_grid(path).study_settings, read_grid(path).cells())} == {3}
 
 
 def test_what_the_speed_up_needs_binds_only_when_it_runs():
@@ -124,11 +142,15 @@ GRID_MISTAKES = [
     ('seeds = 1\n[study]\npersonas = " "\n', "personas = ' ': names no persona"),
     ('seeds = 1\n[grid]\npersonas = ["blind", ""]\n', "personas = '': names no persona"),
     ('seeds = 1\n[study]\npersonas = "blind,blind"\n', "personas = 'blind,blind': names blind twice"),
-    ('reuse = true\nseeds = 1\n[study]\npersonas = "blind,deaf"\nrounds = 20\n', "reuse_last = 50: must be below rounds 20"),
+    ('seeds = 1\n[grid]\npersonas = ["blind", "blind,,deaf"]\n', "personas = 'blind,,deaf': 'blind,,deaf' has an empty item"),
+    ('reuse = true\nseeds = 1\n[study]\npersonas = "blind,deaf"\nrounds = 20\nreuse_last = 50\n',
+     "reuse_last = 50: must be below rounds 20"),
     ('seeds = [1, 99999999999999999999]\n[study]\npersonas = "blind"\n', "seeds 0..18446744073709551615"),
     ('seeds = [1, 1]\n[study]\npersonas = "blind"\n', "repeats a seed"),
     ('reuse = "no"\n[study]\npersonas = "blind"\n', "must be true or false"),
     ('[grid]\npsi = [0.5, 1.5]\n', "psi = 1.5: must be between 0 and 1"),
+    ('reuse = true\nseeds = 1\n[study]\npersonas = "blind,deaf"\n[grid]\npsi = [0.5, 0.0]\n',
+     "psi = 0.0: must be above 0 when the speed-up runs"),
     ('[study]\nalgorithm = "sarsa"\n', "algorithm = 'sarsa': must be one of q-learning, lspi"),
     ('[study]\nreward_bonus = "always"\n', "reward_bonus = 'always': must be one of correct, consistent, match"),
 ]

@@ -72,11 +72,27 @@ def test_a_dask_cluster_of_two_workers_gives_the_same_tables(tmp_path):
     ("reuse = true\n[study]\npersonas = 'blind'", "at least 2 personas"),
     ("[study]\ngames = 2\n[grid]\ngames = [1, 2]", "both fixed"),
     ("grid = [", "not TOML"),
+    ("[study]\npersonas = ['blind', '']", "each item of the list is one persona's name"),
+    ("[study]\npersonas = ['blind', 3]", "is not a str"),
+    ("[grid]\npersonas = [['blind', 'blind']]", "names blind twice"),
 ])
 def test_a_grid_that_cannot_run_is_refused_naming_the_file_and_key(tmp_path, text, needle):
     with pytest.raises(GridError, match=needle) as info:
         read_grid(_grid(tmp_path, text))
     assert str(tmp_path / "grid.toml") in str(info.value)
+
+
+def test_personas_may_be_a_toml_list_the_same_sweep_as_the_string(tmp_path):
+    """`personas = ["ashley", "helmut"]` was refused ("is not a str"): a researcher writes a list in TOML.
+    A list is the names it holds, fixed or as a grid value: the same settings and cells as the string."""
+    as_text = read_grid(_grid(tmp_path, 'seeds = 1\n[study]\npersonas = "ashley,helmut"\n'
+                                        '[grid]\nrounds = [20]\n'))
+    as_list = read_grid(_grid(tmp_path, 'seeds = 1\n[study]\npersonas = ["ashley", "helmut"]\n'
+                                        '[grid]\nrounds = [20]\n'))
+    assert as_list == as_text and [c.id for c in as_list.cells()] == [c.id for c in as_text.cells()]
+    axis = read_grid(_grid(tmp_path, 'seeds = 1\n[grid]\npersonas = [["blind", "deaf"], "blind", ["deaf"]]\n'))
+    assert axis.axes == {"personas": ["blind,deaf", "blind", "deaf"]}
+    assert [s.persona_list()[0].key for s in map(axis.study_settings, axis.cells())] == ["blind", "blind", "deaf"]
 
 
 def test_the_verb_refuses_another_grids_folder_in_one_line(tmp_path):
@@ -113,3 +129,21 @@ def test_a_sweep_over_the_learner_runs_lspi_and_refuses_lspi_settings_that_canno
     for bad in ('algorithm = ["sarsa"]', 'algorithm = ["lspi"]\nlspi_every = [0]'):
         with pytest.raises(GridError, match="algorithm|improve_every"):
             read_grid(_grid(tmp_path, GRID.replace('reward_bonus = ["correct", "consistent"]', bad)))
+
+
+def test_a_resume_with_nothing_to_do_writes_nothing_and_says_so(tmp_path, capsys):
+    """Run again on a finished sweep, the verb rewrote sweep.md ("computed 0 in 0.0 s"), losing what the run
+    that did the work said. Now nothing is written, and one line says there was nothing to do."""
+    from pairplay.cli.main import main
+
+    grid, out = _grid(tmp_path, GRID.replace("seeds = 2", "seeds = 1")), tmp_path / "out"
+    assert main(["sweep", str(grid), "--out", str(out), "--quiet"]) == 0
+    assert "2 computed" in capsys.readouterr().out
+    before = {p: (p.read_bytes(), p.stat().st_mtime_ns) for p in out.rglob("*") if p.is_file()}
+    assert main(["sweep", str(grid), "--out", str(out), "--quiet"]) == 0
+    said = capsys.readouterr().out.splitlines()
+    assert said == [f"nothing to do: all 2 cells (2 settings x 1 seeds) were finished; {out / 'sweep.md'} is as it was"]
+    assert {p: (p.read_bytes(), p.stat().st_mtime_ns) for p in out.rglob("*") if p.is_file()} == before
+    (out / "sweep.md").unlink()  # the summary not written (a run stopped after its cells): written, 0 computed
+    assert main(["sweep", str(grid), "--out", str(out), "--quiet"]) == 0
+    assert "0 computed" in capsys.readouterr().out and (out / "sweep.md").is_file()

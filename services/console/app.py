@@ -227,11 +227,11 @@ def console_routes(console: Console) -> list:
         return JSONResponse({"deleted": msgspec.to_builtins(gone)})
 
     async def report(request: Request) -> Response:
-        from pairplay.report.human import human_report
+        from pairplay.report.human import HUMAN_OUTPUTS, human_report
 
         def work():
             out = data.folder / "report"
-            with output_folder(out, force=True) as tmp:  # a failure leaves the old report and no temporary folder
+            with output_folder(out, force=True, owned=HUMAN_OUTPUTS) as tmp:  # a failure leaves the old report and no temporary folder
                 human_report(data.folder, tmp)
             return f"report written: {out / 'report.md'}"
         console.start("report", work)
