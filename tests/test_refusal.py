@@ -157,7 +157,9 @@ def test_a_participant_that_refuses_the_games_real_end_does_not_keep_the_session
     assert wait_until(lambda: buses and buses[0].locators(), 30)
     with Bus(BusOptions(mode="client", connect=buses[0].locators())) as client:
         started = threading.Event()
-        client.subscribe(event_key("ref4", "game", "RoundStarted"), lambda _k, _p: started.set())
+        # the participant's first pick: it has taken the start (its messages come on subscriptions of their own
+        # per origin, services/runner.py Node.subscribe, so the game's RoundStarted seen here does not tell)
+        client.subscribe(event_key("ref4", "participant", "CardPicked"), lambda _k, _p: started.set())
         assert wait_until(lambda: alive_key("ref4", "game") in client.alive_now(alive_key("ref4", "*")), 30)
         client.alive(alive_key("ref4", "robot"))  # the game waited for a robot: it starts now
         assert started.wait(30)  # after the start: forged before it, it would make them refuse the start
