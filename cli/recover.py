@@ -42,8 +42,14 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from pairplay.livelock import LIVE, is_live
     from pairplay.replay.recover import recover
+    from pairplay.replay.wal import wal_path
     from pairplay.services.walmerge import admit
+
+    for live in (args.recording, wal_path(args.recording)):
+        if is_live(live):  # not cut: still being written (pairplay/livelock.py); its journal is not stale either
+            raise OptionError(f"{LIVE}: recover it once its session has stopped; nothing written", live)
 
     if args.discard_journal:  # decided before anything is written: only a stale journal is removed
         done = recover(args.recording, args.output, force=args.force, admit=admit, write=False)

@@ -23,7 +23,8 @@ OSError naming the user's path, never our temporary one (`_named_for_user`):
 
 The one exception is a live recording (services/recorder.py): it streams to
 its final name so that a crash loses at most its last 0.1 s (`pairplay
-recover` completes it), and it never replaces a file (`free_path`).
+recover` completes it), and it never replaces a file (`free_path`); while its recorder
+lives it is locked (pairplay/livelock.py) and `check_output` refuses it, `force` or not.
 """
 
 from __future__ import annotations
@@ -37,6 +38,7 @@ from pathlib import Path
 from typing import IO, Iterable, Iterator
 
 from pairplay.errors import OutputError
+from pairplay.livelock import LIVE, is_live
 
 FORCE_FIX = "--force replaces it"  # shown only by a verb that has --force (errors.UserError `fix`)
 
@@ -86,6 +88,8 @@ def check_output(path: str | Path, force: bool = False) -> Path:
         raise OutputError("is a folder; give a file name", path)
     if (path.exists() or path.is_symlink()) and not force:
         raise OutputError("exists", path, fix=FORCE_FIX, option="--force")
+    if is_live(path):  # --force or not: a live recording (or its journal) is never replaced
+        raise OutputError(f"{LIVE}; not replaced", path)
     _check_parent(path)
     return path
 

@@ -36,6 +36,7 @@ from pairplay.outputs import output_file
 from pairplay.schemas import journal as j
 from pairplay.schemas.policy import read_policy, write_policy
 from pairplay.schemas.study import Study, StudyFileError, load_study
+from pairplay.livelock import LIVE, is_live
 
 from .reader import read_log
 from .wal import wal_path
@@ -406,6 +407,10 @@ class StudyData:
             merged = self.merged_using(pid)
             files = self.files_of(pid)
             sessions = {g.session for g in self.games_of(pid)}
+            live = [f for f in files + [x for g in sessions for x in (self.folder / "recordings").glob(f"{g}.*")]
+                    if is_live(f)]
+            if live:  # its recorder still writes it (a game's questionnaire holds it open): pairplay/livelock.py
+                raise StudyDataError(f"{pid}: {live[0]} {LIVE}: stop its session first")
             for f in files:
                 f.unlink()
             for g in sessions:  # anything else a tool wrote next to the recording (e.g. a view's .rrd)

@@ -31,6 +31,7 @@ Format (little-endian; all integers unsigned):
 
 from __future__ import annotations
 
+import fcntl
 import os
 import struct
 import threading
@@ -92,6 +93,7 @@ class JournalWriter:
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
         self._fd = os.open(self.path, os.O_WRONLY | os.O_CREAT | os.O_EXCL | os.O_APPEND, 0o600)
+        fcntl.flock(self._fd, fcntl.LOCK_EX | fcntl.LOCK_NB)  # live while we write it (pairplay/livelock.py)
         header = _encode({"session": session, "recording": Path(recording).name,
                           "software_version": software_version, "started_ns": str(clock())})
         self._write(MAGIC + _frame(header, 0, clock()))
@@ -144,17 +146,17 @@ class JournalWriter:
             self._thread.join(1.0)
         if self._thread is None or not self._thread.is_alive():
             self.write_pending()
+        if remove:  # before the close: a journal that is there is locked until it is gone
+            try:
+                self.path.unlink()
+            except OSError:
+                pass
         if self._fd >= 0:
             try:
                 os.close(self._fd)
             except OSError:
                 pass
             self._fd = -1
-        if remove:
-            try:
-                self.path.unlink()
-            except OSError:
-                pass
 
 
 @dataclass

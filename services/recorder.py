@@ -64,6 +64,7 @@ import msgspec
 
 from pairplay import __version__
 from pairplay.errors import OutputError
+from pairplay.livelock import LIVE, hold, is_live, release
 from pairplay.replay.wal import JournalWriter, NotAJournal, read_journal, wal_path
 from pairplay.replay.writer import FLUSH_INTERVAL_NS, LOSS_BOUND_NS, EventLogWriter
 from pairplay.schemas.checked import check_event
@@ -103,6 +104,8 @@ BACKLOG_METADATA = "pairplay.recorder.backlog"  # a flush older than the loss bo
 # of `pairplay run recorder` refused with it, and `run` has no --force).
 NEW_SESSION_HINT = "choose another --session (a recording is never replaced)"
 FORCE_SESSION_HINT = "choose another --session, or --force to replace its recordings"
+# a recording a live recorder holds (pairplay/livelock.py): --force cannot replace it, so no verb's hint names it
+LIVE_SESSION_HINT = "choose another --session (a live session's recording is never replaced, not even with --force)"
 JOURNAL_METADATA = "pairplay.recorder.journal"  # what a restarted recorder took from the earlier file's journal
 ABSENCE_METADATA = "pairplay.recorder.absence"  # a service off the bus mid-session (_alive)
 LINK_METADATA = "pairplay.recorder.link"  # an outage of the recorder's link to its router (_link)
@@ -150,11 +153,13 @@ class RecordingExists(OutputError):
     (Recorder's `restart`); a new session with that id would be recorded into the old session's file,
     its start refused as a repeat (the hang of the new-user trial)."""
 
-    def __init__(self, existing: Path, session: str, hint: str = NEW_SESSION_HINT):
+    def __init__(self, existing: Path, session: str, hint: str = NEW_SESSION_HINT, live: bool = False):
         what = "a recording already" if not existing.name.endswith(".journal") else \
             "a recorder's journal already, its recording gone (what a recorder that did not finish received)"
+        if live:  # no --force in the hint: nothing replaces a live recording (pairplay/livelock.py)
+            what, hint = f"a recording that {LIVE}", LIVE_SESSION_HINT
         super().__init__(f"session {session} has {what}; {hint}", existing)
-        self.existing = existing
+        self.existing, self.live = existing, live
 
 
 def journals_of(path: Path) -> list[Path]:
@@ -171,9 +176,12 @@ def check_new_recording(path: str | Path, force: bool = False, hint: str = NEW_S
     """`path` for a new session's recording, refused (RecordingExists, naming the file) if the session
     has a recording already, or a recording's journal (what a killed recorder received); with `force`
     the session's old recordings and journals are removed first (call it before anything starts, after
-    every other check of the options)."""
+    every other check of the options), but never one a live recorder holds (refused, `force` or not)."""
     path = Path(path)
     existing = recordings_of(path) + journals_of(path)
+    live = [p for p in existing if is_live(p)]
+    if live:
+        raise RecordingExists(live[0], path.stem, live=True)
     if existing and not force:
         raise RecordingExists(existing[0], path.stem, hint)
     for p in existing:
@@ -311,9 +319,17 @@ class Recorder:
             check_new_recording(path)
         self.bus, self.session, self.path, self.clock = bus, session, free_path(Path(path)), clock
         self.path.parent.mkdir(parents=True, exist_ok=True)
-        self.on_failure = on_failure
-        self.failure: str | None = None  # why the file stopped being written
-        self.writer = EventLogWriter(self.path, flush_interval_ns=flush_interval_ns)
+        try:  # the file is ours (created, not found) and locked for our life (pairplay/livelock.py)
+            self._hold: int | None = hold(self.path, create=True)
+        except FileExistsError:  # made since the check: another recorder of this id started with us
+            raise RecordingExists(self.path, session, live=is_live(self.path)) from None
+        try:
+            self.on_failure = on_failure
+            self.failure: str | None = None  # why the file stopped being written
+            self.writer = EventLogWriter(self.path, flush_interval_ns=flush_interval_ns)
+        except BaseException:
+            self.release()
+            raise
         self._guarded(self.writer.add_metadata, "pairplay.recorder",
                       {"session": session, "software_version": __version__, "started_ns": str(clock())})
         self.journal: JournalWriter | None = None  # made by start (a recorder on a bus)
@@ -343,6 +359,12 @@ class Recorder:
         self.absences: list[dict] = []  # recorded (ABSENCE_METADATA)
         if earlier is not None:
             self._continue(base, earlier)
+
+    def release(self) -> None:
+        """Let go of the recording's lock (pairplay/livelock.py); close does it last."""
+        if self._hold is not None:
+            release(self._hold)
+            self._hold = None
 
     # -- a restarted recorder: continue the session's record ----------------
     def _continue(self, base: Path, earlier: Path) -> None:
@@ -832,6 +854,7 @@ class Recorder:
             self.writer.abandon()
         if self.journal is not None:  # kept unless the file is complete and on disk: recover reads it
             self.journal.close(remove=self.failure is None)
+        self.release()  # the journal gone: nothing of ours is live any more
         if self.outbox is not None:
             self.outbox.close(deadline.left(cap=0.5))
         return self.failure

@@ -89,12 +89,20 @@ def run_session(config: SessionConfig, path: str | Path, *, bus: Bus | None = No
     # the session's process is the router its external services connect to as clients
     bus = bus if bus is not None else Bus(bus_options or BusOptions(mode="router"))
     stop = stop or threading.Event()
-    if on_bus is not None:
-        on_bus(bus)
     recorder = recorder_thread = None
     recorder_stop = threading.Event()
     if "recorder" not in external:
-        recorder = Recorder(bus, config.session, path, on_failure=lambda _why: stop.set())
+        # the file is claimed before the caller's first line: of two sessions of one id started at the same
+        # moment, the one refused (RecordingExists) has printed nothing (pairplay/livelock.py)
+        try:
+            recorder = Recorder(bus, config.session, path, on_failure=lambda _why: stop.set())
+        except BaseException:
+            if own_bus:
+                bus.close(CLOSE_TIMEOUT_S)
+            raise
+    if on_bus is not None:
+        on_bus(bus)
+    if recorder is not None:
         recorder.start()
         recorder_thread = threading.Thread(target=recorder.run, args=(recorder_stop,), name="pairplay-recorder",
                                            daemon=True)
