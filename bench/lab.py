@@ -50,11 +50,17 @@ def _play(page, turns: int) -> list[dict]:
     return pings
 
 
+NOT_MEASURED = "lab: touch -> SuggestionMade -> robot command: not measured, "
+
+
 def bench_rows(quick: bool = False) -> list[dict]:
+    try:  # playwright is in the [test] and [picture] extras, not the quick start's install
+        from playwright.sync_api import sync_playwright
+    except ModuleNotFoundError as err:
+        return [{"row": f"{NOT_MEASURED}{(err.name or 'playwright').split('.')[0]} is not installed (pip install -e '.[test]'; no browser "
+                        "is downloaded)", "value": None, "unit": "ms"}]
     if not CHROMIUM.exists():
-        return [{"row": f"lab: touch -> SuggestionMade -> robot command: not measured, {CHROMIUM} is absent "
-                        "(apt-get install chromium)", "value": None, "unit": "ms"}]
-    from playwright.sync_api import sync_playwright
+        return [{"row": f"{NOT_MEASURED}{CHROMIUM} is absent (apt-get install chromium)", "value": None, "unit": "ms"}]
 
     from pairplay.services.lab.server import run_lab
 

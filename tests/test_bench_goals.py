@@ -74,3 +74,24 @@ def test_recorder_cpu_row_measures_the_recorders_writing_thread_beside_the_bare_
     from pairplay.bench.bus import recorder_cpu_rows
     (row,) = recorder_cpu_rows(300, repeats=1)
     assert row["value"] > 0 and row["reference_value"] > 0 and row["ratio"] == pytest.approx(row["value"] / row["reference_value"])
+
+
+def test_a_source_whose_optional_library_is_not_installed_is_a_row_not_a_traceback(monkeypatch, capsys):
+    """The quick start's install has no playwright (the [test] extra): `bench --quick` ended in
+    ModuleNotFoundError after 70 s and printed no row. Now the lab's row says why it was not measured,
+    as when Chromium is absent, and any source missing a library is one such row, the others printed."""
+    import sys
+
+    from pairplay.cli.main import main
+
+    monkeypatch.setitem(sys.modules, "playwright", None)  # import playwright -> ModuleNotFoundError
+    monkeypatch.setitem(sys.modules, "playwright.sync_api", None)
+    monkeypatch.setitem(sys.modules, "rerun", None)  # the view's source, imported afresh without it
+    monkeypatch.delitem(sys.modules, "pairplay.bench.view", raising=False)
+    assert main(["bench", "--quick", "--only", "lab,view"]) == 0
+    out, err = capsys.readouterr()
+    assert "Traceback" not in err
+    lab = next(line for line in out.splitlines() if line.startswith("lab:"))
+    assert "not measured, playwright is not installed" in lab, out
+    view = next(line for line in out.splitlines() if line.startswith("view:"))
+    assert "not measured, rerun is not installed" in view, out
