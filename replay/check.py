@@ -103,9 +103,12 @@ def read_session(path: str | Path, only: frozenset[str] | None = None):
     return log
 
 
-def no_whole_round(events, truncated: bool = False) -> str:
+def no_whole_round(events, truncated: bool = False, damaged: str = "") -> str:
     """Why the session of `events` (a recording's, in file order) has no round recorded whole, in
-    words ("" if it has one: a RoundEnded of its game). `truncated`: the file is cut (reader.EventLog).
+    words ("" if it has one: a RoundEnded of its game). `truncated`: the file is cut (reader.EventLog);
+    `damaged`: what is damaged in it, in the words every verb uses (reader.EventLog.error, from
+    mcapscan's `describe`: replay --verify and recover say the same), "" if no part is. A damaged
+    file is named as damaged, not as cut (a whole file whose chunks fail their CRC was "cut before round 1").
 
     Rounds are counted from 1, as the board shows them."""
     started = ended = None
@@ -124,6 +127,8 @@ def no_whole_round(events, truncated: bool = False) -> str:
         how = f"{ended.reason}{f' ({ended.detail})' if ended.detail else ''}"
         where = f" in round 1{of} after {ended.turns_in_round} turns" if ended.round >= 0 else " before round 1"
         return f"holds no whole round: the session ended ({how}){where}"
+    if damaged:
+        return f"holds no whole round: the file is damaged ({damaged}), no round{of} ended in its intact parts"
     if truncated:
         return f"holds no whole round: the file is cut before round 1{of} ended"
     return f"holds no whole round: the recording stops before round 1{of} ended"

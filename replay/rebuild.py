@@ -117,7 +117,7 @@ def rebuild_recording(path: str | Path) -> Rebuilt:
     forged = contradiction(r.event for r in log.events)
     if forged:
         raise RebuildError(f"{forged}: not rebuilt", path)
-    empty = no_whole_round((r.event for r in log.events), log.truncated)
+    empty = no_whole_round((r.event for r in log.events), log.truncated, log.error if log.damage else "")
     if empty:
         raise NoWholeRound(f"{empty}; nothing to rebuild", path)
     note = "" if log.whole else f"{'damaged' if log.damage else 'truncated'}: {log.error}"

@@ -198,7 +198,7 @@ def verify_recording(path) -> Verification:
     if log.bad:
         errors.append(f"{len(log.bad)} messages do not decode: {log.bad[0].reason}")
     result.error = "; ".join(errors) or result.error
-    empty = no_whole_round((r.event for r in log.events), log.truncated)
+    empty = no_whole_round((r.event for r in log.events), log.truncated, log.error if log.damage else "")
     if empty and result.ok and not result.ended:  # a PASS about nothing whole (a FAIL, a damaged part, says so)
         raise InputError(f"{empty}; nothing to verify", path)
     return result

@@ -198,3 +198,28 @@ def test_random_damage_never_raises_and_never_invents(whole, tmp_path):
         assert {r.payload for r in log.events} <= full
         if bytes(bad) != data:
             assert not log.whole or log.events == read_log(whole).events
+
+
+def test_a_damaged_file_with_no_round_left_whole_is_called_damaged_not_cut(whole, tmp_path, capsys):
+    """A whole file whose chunks fail their CRC: rebuild said "the file is cut before round 1"; it names the
+    damage, in the words replay --verify and recover use (reader.EventLog.error)."""
+    from pairplay.cli.main import main
+
+    bad = bytearray(whole.read_bytes())
+    for c in scan(whole).chunks[1:]:  # the session's start (chunk 0) stays; every round's end is damaged
+        bad[c.offset + c.length - 7] ^= 0x5A
+    p = variant(tmp_path, bytes(bad))
+    log = read_log(p)
+    assert log.damage and log.of("SessionStarted") and not log.of("RoundEnded")
+    first = str(log.damage[0])
+    for argv in (["rebuild", str(p), "--out", str(tmp_path / "out")], ["replay", str(p), "--verify"]):
+        code = main(argv)
+        out, err = capsys.readouterr()
+        said = out + err
+        assert "is cut before" not in said, said
+        if argv[0] == "rebuild":
+            assert code == 2 and len(err.strip().splitlines()) == 1, err
+            assert "holds no whole round: the file is damaged (" in err and first in err, err
+        else:  # verify: FAIL, naming the same damage
+            assert code != 0 and first in said, said
+    assert not (tmp_path / "out").exists()
