@@ -36,6 +36,7 @@ from pairplay.outputs import output_file
 from pairplay.schemas import journal as j
 from pairplay.schemas.policy import read_policy, write_policy
 from pairplay.schemas.study import Study, StudyFileError, load_study
+from pairplay import csvcell
 from pairplay.livelock import LIVE, is_live
 
 from .reader import read_log
@@ -239,7 +240,7 @@ class StudyData:
             pid = f"p{self.state.next_number:02d}"
             if label:
                 with open_key_file(self.key_file) as f:
-                    csv.writer(f).writerow([pid, label.replace("\n", " ")])
+                    csvcell.writer(f).writerow([pid, label.replace("\r", " ").replace("\n", " ")])  # never a formula (pairplay/csvcell.py)
             self.append(j.ParticipantRegistered(participant=pid, joins=joins))
             return pid
 
@@ -344,7 +345,7 @@ class StudyData:
             paths = []
             for name, (head, rows) in tables.items():
                 buf = io.StringIO()
-                w = csv.writer(buf)
+                w = csvcell.writer(buf)  # answers are what people typed: never a formula
                 w.writerow(head)
                 w.writerows(rows)
                 atomic_write(self.folder / name, buf.getvalue().encode())
@@ -386,7 +387,7 @@ class StudyData:
                     z.write(f, f.relative_to(self.folder).as_posix())
                 cols = ["participant", "phase", "game", "session", "questionnaire", "item", "answer"]
                 text = io.StringIO()
-                w = csv.writer(text)
+                w = csvcell.writer(text)
                 w.writerow(cols)
                 w.writerows([[r[c] for c in cols] for r in answers])
                 z.writestr("answers.csv", text.getvalue())
@@ -447,12 +448,13 @@ class StudyData:
         key = self.key_file
         if key is None or not key.is_file():
             return False
-        rows = list(csv.reader(key.read_text(encoding="utf-8").splitlines()))
+        with open(key, encoding="utf-8", newline="") as f:  # as csv reads it: a quoted cell may hold a CR
+            rows = list(csv.reader(f))
         kept = [r for r in rows if not r or r[0] != pid]
         if len(kept) == len(rows):
             return False
         buf = io.StringIO()
-        csv.writer(buf).writerows(kept)
+        csv.writer(buf).writerows(kept)  # the rows as read: their cells are written already (csvcell)
         with output_file(key, "wb", force=True) as f:  # atomic_write's way, owner-only before it is renamed
             os.fchmod(f.fileno(), KEY_FILE_MODE)
             f.write(buf.getvalue().encode("utf-8"))

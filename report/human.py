@@ -20,7 +20,6 @@ longer reported); no other file is touched.
 
 from __future__ import annotations
 
-import csv
 import statistics
 from collections import defaultdict
 from dataclasses import dataclass, field
@@ -28,7 +27,7 @@ from pathlib import Path
 
 import numpy as np
 
-from pairplay import __version__
+from pairplay import __version__, csvcell
 from pairplay.core.actions import ACTION_NAMES
 from pairplay.core.geometry import N_STATES, STATE_NAMES
 from pairplay.replay.reader import read_log
@@ -128,7 +127,7 @@ def human_report(folder: str | Path, out: str | Path | None = None, reference: s
 
     # picks per round, per game and phase (figures 7.3a, 7.3b, 7.6)
     with open(out / "picks.csv", "w", newline="") as f:
-        w = csv.writer(f)
+        w = csvcell.writer(f)
         w.writerow(["participant", "phase", "game", "returning", "round", "picks"])
         for s in games:
             for r, p in enumerate(s.picks):
@@ -223,7 +222,7 @@ def human_report(folder: str | Path, out: str | Path | None = None, reference: s
         att.append([f"all ({phase_id})", phase_id, "", "", str(sug), str(turns), str(ign),
                     f"{100 * ign / max(1, turns):.0f}%", str(pr), f"{100 * pr / max(1, sug):.0f}%"])
     with open(out / "attention.csv", "w", newline="") as f:
-        csv.writer(f).writerows(att)
+        csvcell.writer(f).writerows(att)
     sections += ["## Ignored suggestions and wrong-suggestion presses", "",
                  f"A turn whose two picks came less than {study.study.ignore_window_ms:g} ms apart ignored its "
                  "suggestion (thesis 7.1.2: no reward, no update); a press of the wrong-suggestion button gave -3 "
@@ -232,7 +231,7 @@ def human_report(folder: str | Path, out: str | Path | None = None, reference: s
     # questionnaires
     q_rows = questionnaire_rows(data, {s.session for s in games})
     with open(out / "questionnaire.csv", "w", newline="") as f:
-        csv.writer(f).writerows(q_rows)
+        csvcell.writer(f).writerows(q_rows)
     sections += ["## Questionnaires", "",
                  "Likert items: n, mean and median (1 = the low label); choices: counts; free text: every answer, "
                  "quoted. Groups: new users and returning users (who played an earlier phase).", "",

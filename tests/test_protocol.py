@@ -337,3 +337,36 @@ def test_atomic_write_leaves_no_temporary_file_when_the_write_fails(tmp_path):
     with pytest.raises(TypeError):
         atomic_write(tmp_path / "t.csv", "not bytes")  # the write itself fails, as on a full disk
     assert list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.parametrize("name", ['=HYPERLINK("http://x","click")', "+1+cmd|' /C calc'!A0", "-2+3", "@SUM(A1)",
+                                  "\tTab", "\rCR", "'quoted", "Zoë Müller", "-3", "O'Brien"])
+def test_a_name_is_never_a_formula_in_the_key_file_and_reads_back_the_same(tmp_path, pairplay_cli, name):
+    """CSV injection (OWASP): `protocol register --name '=HYPERLINK(...)'` was written as is, a formula
+    once the key file is opened in a spreadsheet. A cell starting with = + - @ tab or CR (or a quote)
+    gets one quote before it (pairplay/csvcell.py); `csvcell.value` reads back the very name."""
+    import csv
+
+    from pairplay import csvcell
+    key = tmp_path / "private" / "keys.csv"
+    assert pairplay_cli("protocol", "init", tmp_path / "study", "--study", "thesis-ch7", "--key-file", key,
+                        "--quiet").returncode == 0
+    r = pairplay_cli("protocol", "register", tmp_path / "study", f"--name={name}")
+    assert r.returncode == 0, r.stderr
+    with open(key, encoding="utf-8", newline="") as f:
+        [[pid, written]] = list(csv.reader(f))
+    assert pid == r.stdout.strip()
+    typed = name.replace("\r", " ")  # one line a name
+    assert not written.startswith(("=", "+", "@", "\t", "\r")) and written in (typed, "'" + typed)
+    assert not written.startswith("-") or written == "-3"  # a plain number stays a number
+    assert csvcell.value(written) == typed
+
+
+def test_every_table_of_what_people_typed_is_written_formula_free(tmp_path):
+    """The study's own tables and a participant's export go through the same rule (the answers are free text)."""
+    import io
+
+    from pairplay import csvcell
+    buf = io.StringIO()
+    csvcell.writer(buf).writerows([["=1+1", -1, 2.5, "-x", "ok"]])
+    assert buf.getvalue() == "'=1+1,-1,2.5,'-x,ok\r\n"
