@@ -74,10 +74,11 @@ import zenoh
 import zenoh.ext
 
 from pairplay.errors import UserError
+from pairplay.services.zenohcheck import MODES, exposed, type_errors
 
 log = logging.getLogger("pairplay.bus")
 LOOPBACK_ANY_PORT = "tcp/127.0.0.1:0"
-MODES = ("peer", "client", "router")
+# MODES: services/zenohcheck.py (the one list, also what a config file's "mode" may be)
 CLOSE_TIMEOUT_S = 0.5  # Bus.close waits this long for Zenoh, then leaves it to the process exit
 EXIT_BUDGET_S = 2.0  # a process is gone this long after SIGINT/SIGTERM (issue 12)
 SHUTDOWN_S = 1.1  # its services stopped and its recording finished within this; the rest is the exit's
@@ -189,7 +190,11 @@ class BusOptions:
         if self.recovers:  # back soon after a restarted router (Zenoh's own: 1 s, doubling up to 4 s)
             cfg["connect"]["retry"] = {"period_init_ms": 250, "period_max_ms": 1000, "period_increase_factor": 1.5}
         if self.zenoh_config:
-            cfg = overlay(cfg, read_config_file(self.zenoh_config))
+            data = read_config_file(self.zenoh_config)
+            wrong = type_errors(data)  # the keys we read or set (services/zenohcheck.py)
+            if wrong:
+                raise ConfigFileError(f"cannot use the Zenoh config: {wrong[0]}", f"--zenoh-config {self.zenoh_config}")
+            cfg = overlay(cfg, data)
         cfg["mode"] = self.mode
         if self.listen is not None:
             cfg.setdefault("listen", {})["endpoints"] = list(self.listen)
@@ -845,6 +850,10 @@ def _open(options: BusOptions) -> zenoh.Session:
     mode) as a BusOpenError naming the options (one line for the user)."""
     _init_zenoh_log()
     config = options.to_zenoh()
+    exposed_to = exposed(options.to_dict())
+    if exposed_to:  # every verb's bus, in one line (services/zenohcheck.py)
+        log.warning("the bus listens beyond loopback without TLS (%s): anyone on that network can read and write "
+                    "the session; use tls/ endpoints (docs/bus.md, \"Security\")", " ".join(exposed_to))
     try:
         return zenoh.open(config)
     except Exception as err:

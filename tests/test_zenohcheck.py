@@ -1,0 +1,76 @@
+"""A Zenoh config's keys that pairplay reads have their types, and a bus listening beyond loopback without
+TLS is said (services/zenohcheck.py). Before: `{"mode": 5}` was accepted without a word, and a session whose
+--zenoh-config listened on tcp/0.0.0.0:0 printed no warning (the lab's --listen did)."""
+
+import json
+import logging
+import subprocess
+import sys
+
+import pytest
+
+from pairplay.cli.main import main
+from pairplay.services.bus import Bus, BusOptions
+from pairplay.services.zenohcheck import beyond_loopback
+
+
+@pytest.mark.parametrize("config, key", [
+    ({"mode": 5}, "mode"),
+    ({"mode": "routr"}, "mode"),
+    ({"listen": "tcp/127.0.0.1:0"}, "listen"),
+    ({"listen": {"endpoints": "tcp/127.0.0.1:0"}}, "listen.endpoints"),
+    ({"listen": {"endpoints": [7447]}}, "listen.endpoints"),
+    ({"scouting": {"multicast": {"enabled": "yes"}}}, "scouting.multicast.enabled"),
+    ({"scouting": {"delay": True}}, "scouting.delay"),
+    ({"adminspace": []}, "adminspace"),
+])
+def test_a_wrong_type_of_a_key_we_read_is_refused_in_one_line_naming_it(tmp_path, capsys, config, key):
+    path = tmp_path / "z.json5"
+    path.write_text(json.dumps(config))
+    assert main(["session", "--participant", "sim:ashley", "--rounds", "1", "--session", "zt", "--out",
+                 str(tmp_path / "rec"), "--zenoh-config", str(path)]) == 2
+    out, err = capsys.readouterr()
+    assert out == "" and len(err.strip().splitlines()) == 1, err
+    assert f"{key} must be" in err and str(path) in err, err
+    assert not (tmp_path / "rec" / "zt.mcap").exists()
+
+
+def test_a_config_of_the_right_types_opens(tmp_path):
+    path = tmp_path / "z.json5"
+    path.write_text(json.dumps({"mode": "peer", "listen": {"endpoints": {"peer": ["tcp/127.0.0.1:0"]}},
+                                "scouting": {"delay": 50, "multicast": {"enabled": False}},
+                                "timestamping": {"enabled": {"router": True, "peer": False}}}))
+    with Bus(BusOptions(zenoh_config=str(path))) as bus:
+        assert bus.locators()
+
+
+@pytest.mark.parametrize("endpoint, beyond", [
+    ("tcp/127.0.0.1:0", False), ("tcp/[::1]:7447", False), ("tcp/localhost:7447", False),
+    ("unixsock-stream//tmp/z.sock", False), ("tcp/0.0.0.0:0", True), ("tcp/[::]:7447", True),
+    ("udp/192.168.1.4:7447", True), ("tcp/server.lab:7447", True), ("tls/0.0.0.0:7447", True),
+])
+def test_which_listeners_reach_beyond_loopback(endpoint, beyond):
+    assert beyond_loopback(endpoint) == beyond
+
+
+def test_a_bus_listening_beyond_loopback_without_tls_is_said_once(tmp_path, caplog):
+    path = tmp_path / "z.json5"
+    path.write_text(json.dumps({"listen": {"endpoints": ["tcp/0.0.0.0:0"]}}))
+    with caplog.at_level(logging.WARNING, logger="pairplay.bus"):
+        with Bus(BusOptions(mode="peer", zenoh_config=str(path))):
+            pass
+        with Bus(BusOptions(mode="peer", listen=["tcp/127.0.0.1:0"])):
+            pass
+    said = [r.getMessage() for r in caplog.records if "beyond loopback" in r.getMessage()]
+    assert len(said) == 1 and "tcp/0.0.0.0:0" in said[0] and "TLS" in said[0], said
+
+
+def test_a_session_whose_config_listens_beyond_loopback_warns_on_stderr_in_one_line(tmp_path):
+    path = tmp_path / "z.json5"
+    path.write_text(json.dumps({"listen": {"endpoints": ["tcp/0.0.0.0:0"]}}))
+    r = subprocess.run([sys.executable, "-m", "pairplay", "session", "--participant", "sim:ashley", "--rounds", "1",
+                        "--session", "wide", "--out", "rec", "--zenoh-config", str(path)],
+                       cwd=tmp_path, capture_output=True, text=True, timeout=120)
+    assert r.returncode == 0, r.stderr
+    lines = [line for line in r.stderr.splitlines() if "beyond loopback" in line]
+    assert len(lines) == 1 and "tcp/0.0.0.0:0" in lines[0] and "WARNING" in lines[0], r.stderr
