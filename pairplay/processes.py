@@ -17,6 +17,15 @@ worker interrupted before its initializer printed a traceback). The parent's
 own Ctrl-C is held the same short while and raised once the pool has recorded
 the new worker, so `stop_pool` can stop it.
 
+A worker also never outlives its parent (`_watch_parent`): a parent killed by SIGKILL or
+the OOM killer runs no code of ours, and its idle worker waited for ever on its call queue
+(it holds that pipe's write end itself, so it never reads EOF), re-parented to init with
+the resource tracker it keeps alive. Each worker's thread compares its parent's pid with the
+pid that started it every `PARENT_POLL_S` and ends the worker at once (os._exit) when they
+differ. Not prctl(PR_SET_PDEATHSIG): Linux sends that when the *thread* that forked the
+child ends, and a pool's workers are started by whichever thread submits (off_main_thread's
+among them), which may end long before the process.
+
 `off_main_thread` runs a call that Python cannot safely interrupt (numba's
 compiler: see cli/interrupts.py) in a thread while the main thread waits for
 it. Ctrl-C interrupts the wait at once; the call is abandoned, still running,
@@ -28,8 +37,10 @@ from __future__ import annotations
 
 import contextlib
 import multiprocessing
+import os
 import signal
 import threading
+import time
 from concurrent.futures import Future, ProcessPoolExecutor
 from typing import Callable, Iterator, TypeVar
 
@@ -50,15 +61,29 @@ def off_main_thread(fn: Callable[..., T], *args) -> T:
     return done.result()
 
 
-def _ignore_interrupt() -> None:
+PARENT_POLL_S = 0.25  # a worker whose parent died ends within this (and its own scheduling)
+
+
+def _watch_parent(parent: int) -> None:
+    """End this worker as soon as its parent `parent` is gone (re-parented: our parent pid changed)."""
+    while os.getppid() == parent:
+        time.sleep(PARENT_POLL_S)
+    os._exit(1)  # nothing of the parent's is left to hand a result to; no teardown to wait on
+
+
+def _worker_start(parent: int) -> None:
+    """A pool worker's initializer: SIGINT ignored (module rule), and the parent watched."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # a Ctrl-C that came while starting up is discarded with it
     signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})
+    if os.getppid() != parent:  # it died while we started
+        os._exit(1)
+    threading.Thread(target=_watch_parent, args=(parent,), name="pairplay-parent-watch", daemon=True).start()
 
 
 class _ParentInterruptedPool(ProcessPoolExecutor):
     """Workers are started (lazily, by `submit`) with SIGINT blocked: a child inherits its parent
     thread's signal mask, so a Ctrl-C while the child's Python is still starting, before its
-    initializer could ignore SIGINT, waits blocked and is discarded by `_ignore_interrupt`
+    initializer could ignore SIGINT, waits blocked and is discarded by `_worker_start`
     instead of printing a traceback from the child's start-up."""
 
     def submit(self, fn, /, *args, **kwargs):
@@ -75,7 +100,6 @@ def max_workers() -> int:
     Why: each worker runs one CPU-bound cell on one thread (core/threads.py) and holds its own
     compiled kernels and arrays, so more workers than CPUs only queue the cells and multiply the
     memory; `sweep --workers 1000` was accepted. 2 at least, so `--workers 2` runs anywhere."""
-    import os
     try:
         cpus = len(os.sched_getaffinity(0))
     except AttributeError:  # not Linux
@@ -95,7 +119,7 @@ def check_workers(workers: int) -> int:
 def process_pool(workers: int) -> ProcessPoolExecutor:
     """A pool of `workers` (>= 1) spawned processes that ignore SIGINT. Stop it with `stop_pool`."""
     return _ParentInterruptedPool(workers, mp_context=multiprocessing.get_context("spawn"),
-                                  initializer=_ignore_interrupt)
+                                  initializer=_worker_start, initargs=(os.getpid(),))
 
 
 def stop_pool(pool: ProcessPoolExecutor, abandon: bool) -> None:
