@@ -75,10 +75,13 @@ def _run(args: argparse.Namespace, stop: threading.Event) -> int:
         waits = waiting_for(args.wait_for) if args.service == "game" else ""
         print(f"listening {' '.join(bus.locators()) or '(no listener)'}{' - ' + waits if waits else ''}", flush=True)
         if args.service == "recorder":
+            from pairplay.livelock import is_live
             from pairplay.services.recorder import (
                 RECORDER_SWITCH_S, Recorder, RecordingExists, latest_file, same_live_session)
             path = Path(args.out) / f"{args.session}.mcap"
             earlier = latest_file(path)
+            if earlier is not None and is_live(earlier):  # its recorder is running: not ours to continue
+                raise RecordingExists(earlier, args.session, live=True)
             # a recorder restarted within the live session continues its file; a new session's is refused
             restart = earlier is not None and same_live_session(bus, args.session, path)
             if earlier is not None and not restart:

@@ -315,6 +315,8 @@ class Recorder:
         continues the newest of them in a file of its own (`free_path`)."""
         earlier = latest_file(Path(path)) if restart else None
         base = Path(path)
+        if earlier is not None and is_live(earlier):  # its recorder still writes it: this would be a second
+            raise RecordingExists(earlier, session, live=True)  # one, each recording what the other lacks
         if not restart:
             check_new_recording(path)
         self.bus, self.session, self.path, self.clock = bus, session, free_path(Path(path)), clock

@@ -67,6 +67,20 @@ def test_a_recording_made_since_the_check_is_not_truncated_and_the_second_record
     assert read_log(tmp_path / "race.mcap").whole
 
 
+def test_a_restarted_recorder_is_refused_while_the_earlier_one_still_records(tmp_path):
+    """`pairplay run recorder` restarted within a live session continues the session's file in its own,
+    but only when the earlier recorder is gone: beside a live one, both would record the session."""
+    live = Recorder(None, "twice", tmp_path / "twice.mcap")
+    try:
+        with pytest.raises(RecordingExists) as refused:
+            Recorder(None, "twice", tmp_path / "twice.mcap", restart=True)
+        assert refused.value.live and not (tmp_path / "twice.1.mcap").exists()
+    finally:
+        live.close()
+    Recorder(None, "twice", tmp_path / "twice.mcap", restart=True).close()  # gone: continued
+    assert (tmp_path / "twice.1.mcap").exists()
+
+
 def test_a_session_refused_for_a_live_id_has_said_nothing_first(tmp_path):
     live = Recorder(None, "twin", tmp_path / "twin.mcap")
     said = []
