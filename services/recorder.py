@@ -105,7 +105,7 @@ BACKLOG_METADATA = "pairplay.recorder.backlog"  # a flush older than the loss bo
 NEW_SESSION_HINT = "choose another --session (a recording is never replaced)"
 FORCE_SESSION_HINT = "choose another --session, or --force to replace its recordings"
 # a recording a live recorder holds (pairplay/livelock.py): --force cannot replace it, so no verb's hint names it
-LIVE_SESSION_HINT = "choose another --session (a live session's recording is never replaced, not even with --force)"
+LIVE_SESSION_HINT = "choose another --session (a live session's recording is never replaced)"
 JOURNAL_METADATA = "pairplay.recorder.journal"  # what a restarted recorder took from the earlier file's journal
 ABSENCE_METADATA = "pairplay.recorder.absence"  # a service off the bus mid-session (_alive)
 LINK_METADATA = "pairplay.recorder.link"  # an outage of the recorder's link to its router (_link)

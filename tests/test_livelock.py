@@ -24,6 +24,7 @@ from pairplay.services.bus import Bus, BusOptions
 from pairplay.services.recorder import Recorder, RecordingExists
 from pairplay.services.session import run_session
 
+from hints import bad_options
 from test_session_ids import earlier_recording
 
 
@@ -43,7 +44,8 @@ def test_a_live_recording_is_never_replaced_by_a_new_session_of_its_id(tmp_path,
         assert main([verb, "--participant", who, "--rounds", "2", "--session", "dupF", "--out", str(tmp_path),
                      *force]) == 2
         err = _one_line(capsys, verb)
-        assert LIVE in err and "--session" in err and "--force to" not in err, err  # the hint is right
+        assert LIVE in err and "--session" in err and "--force" not in err, err  # the hint is right
+        assert bad_options([verb], err) == []  # it names only the verb's own options (tests/hints.py)
         assert os.stat(tmp_path / "dupF.mcap").st_ino == inode
     finally:
         live.close()
