@@ -166,11 +166,18 @@ def _run(args) -> int:
         data.write_tables()
         print(f"{args.session} marked invalid: {args.reason}")
         return 0
-    if args.action == "pilot":
-        return _pilot(data, args)
-    if args.action == "serve":
-        return _serve(data, args)
+    if args.action in ("pilot", "serve"):
+        # a completed game a signal left without its policy gets it now, from its recording
+        built_missing_policies(data, f"protocol {args.action}")
+        return _pilot(data, args) if args.action == "pilot" else _serve(data, args)
     raise AssertionError(args.action)
+
+
+def built_missing_policies(data: StudyData, verb: str) -> None:
+    """StudyData.build_missing_policies, each game it built or could not build said on stderr (a note,
+    not a result: the verb goes on)."""
+    for line in data.build_missing_policies():
+        print(f"pairplay {verb}: {line}", file=sys.stderr, flush=True)
 
 
 def _items(text: str, option: str) -> list[str]:

@@ -1,6 +1,7 @@
 """`pairplay report STUDY_FOLDER`: the human-world report of a study with people (report/human.py).
 
-Rule: reads only the study folder; writes <folder>/report (or --out) through a
+Rule: reads only the study folder (first building the policy of any completed game journaled
+without one, from its recording: replay/studydata.py build_missing_policies); writes <folder>/report (or --out) through a
 temporary folder renamed when complete (pairplay/outputs.py `output_folder`,
 as every verb's folder of outputs), never into a folder that holds files
 without --force; with --force each file of the report replaces its namesake
@@ -29,11 +30,15 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args) -> int:
+    from pairplay.cli.protocol import built_missing_policies
     from pairplay.outputs import check_output_folder, output_folder
+    from pairplay.replay.studydata import StudyData
     from pairplay.report.human import HUMAN_OUTPUTS, human_report
 
     out = check_output_folder(args.out or args.folder / "report", args.force)  # before any work
     try:
+        # a completed game a signal left without its policy gets it now, from its recording
+        built_missing_policies(StudyData(args.folder), "report")
         with output_folder(out, args.force, owned=HUMAN_OUTPUTS) as tmp:
             report = human_report(args.folder, tmp, args.reference)
     except (StudyDataError, PolicyFileError, ValueError) as err:

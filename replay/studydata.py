@@ -10,7 +10,11 @@ Rule: one folder per study, readable without pairplay:
   exports/<id>.zip             a participant's data, on request (`export_participant`)
 The state (who is registered, which game is next, what is done) is the fold of
 the journal (`StudyState`); the plan (`plan`) follows from the study file and
-that state. Participants are pseudonymous ids (p01, p02, ...): a name given at
+that state. How a game ended and its policy come from its recording
+(`game_end`); what a stopped server could not journal (the policy of a game
+completed before a signal cut its questionnaire, the end of a game whose
+process went while reading it back) is journaled later, from the recordings,
+by `build_missing_policies`. Participants are pseudonymous ids (p01, p02, ...): a name given at
 registration goes only to the key file, which must lie outside the study folder,
 and is refused when the study has no key file.
 """
@@ -39,7 +43,12 @@ from pairplay.schemas.study import Study, StudyFileError, load_study
 from pairplay import csvcell
 from pairplay.livelock import LIVE, is_live
 
+from pairplay.errors import InputError
+from pairplay.outputs import OutputError
+
+from .fold import fold_events
 from .reader import read_log
+from .rebuild import Rebuilt, rebuild_recording, write_outputs
 from .wal import wal_path
 
 STUDY_FILE, JOURNAL, SETTINGS = "study.toml", "journal.jsonl", "settings.json"
@@ -114,6 +123,9 @@ class StudyState:
         elif isinstance(e, j.GameEnded) and e.session in self.games:
             self.games[e.session].ended = e
             self.games[e.session].paused = False
+        elif isinstance(e, j.PolicyBuilt) and e.session in self.games and self.games[e.session].ended is not None:
+            game = self.games[e.session]
+            game.ended = msgspec.structs.replace(game.ended, policy=e.policy)
         elif isinstance(e, (j.GamePaused, j.GameResumed)) and e.session in self.games:
             self.games[e.session].paused = isinstance(e, j.GamePaused)
         elif isinstance(e, j.SessionMarkedInvalid) and e.session in self.games:
@@ -310,6 +322,57 @@ class StudyData:
             index += p.games if pid in self.players(p.id) else 0
         raise StudyDataError(f"no phase {phase!r}")
 
+    # -- what a signal left unsaid -------------------------------------------
+    def build_missing_policies(self) -> list[str]:
+        """Say in the journal what a stopped server could not, from the recordings (the event log is the
+        truth): the policy of every completed game journaled without one (a signal during its
+        questionnaire: PolicyBuilt), and the end of every game whose recording is finished and ended
+        but whose end was never journaled (a process gone while it read the recording back:
+        GameEnded, as `game_end`). One line for each game said: done, or why its policy is not (a
+        recording missing, unfinished, unreadable or partial: the game is left as it is, and the
+        combination refuses to go without it, StudyRunner.combine)."""
+        lines, changed = [], 0
+        with self._lock:
+            for g in list(self.state.games.values()):
+                path = self.folder / g.recording
+                if g.ended is None:
+                    if path.is_file() and not wal_path(path).exists() and _finished_game(path):
+                        ended = self.append(game_end(self.folder, g.session, g.participant, path, force=True))
+                        lines.append(f"{g.session}: journaled {ended.outcome} from its recording (the server "
+                                     "stopped before it said how the game ended)")
+                        changed += 1
+                    continue  # otherwise running here or elsewhere, or cut: shown as running, as it was
+                if g.ended.outcome != "completed" or g.ended.policy:
+                    continue
+                why = ""
+                if not path.is_file():
+                    why = f"its recording {g.recording} is missing"
+                elif wal_path(path).exists():
+                    why = (f"its recording {g.recording} was not finished (its recorder's journal is beside it: "
+                           "`pairplay recover` completes it)")
+                else:
+                    try:
+                        rebuilt = rebuild_recording(path)
+                    except (InputError, OSError) as err:
+                        why = f"its recording {g.recording} cannot be read: {_one_line(err)}"
+                    else:
+                        if rebuilt.partial:
+                            why = f"its recording {g.recording} is partial: {rebuilt.partial}"
+                    if not why:
+                        try:  # force: ours, of this recording (the file a build cut before its journal line wrote)
+                            policy = write_game_policy(self.folder, rebuilt, force=True)
+                        except (OutputError, OSError) as err:
+                            why = f"its policy cannot be written: {_one_line(err)}"
+                if why:
+                    lines.append(f"{g.session}: completed, but no policy built: {why}")
+                    continue
+                self.append(j.PolicyBuilt(session=g.session, participant=g.participant, policy=policy))
+                lines.append(f"{g.session}: policy built from its recording: {policy}")
+                changed += 1
+            if changed:
+                self.write_tables()
+        return lines
+
     # -- derived tables ------------------------------------------------------
     def answers(self) -> list[dict]:
         """Every questionnaire answer of every recorded game, one row per item."""
@@ -461,6 +524,48 @@ class StudyData:
             f.flush()
             os.fsync(f.fileno())
         return True
+
+
+def game_end(folder: Path, session: str, participant: str, path: Path, answered: bool | None = None,
+             abort_reason: str = "", force: bool = False) -> j.GameEnded:
+    """How a game ended, from its finished recording: completed or aborted (the reason its SessionEnded
+    gives, else `abort_reason`), its whole rounds and their policy (written to <folder>/policies, none
+    for a game stopped in round 1), whether the questionnaire was answered (`answered`, else whether
+    the recording holds the answers)."""
+    recorded = read_log(path)
+    fold = fold_events(r.event for r in recorded.events)
+    ended = fold.ended
+    completed = ended is not None and ended.reason == "completed"
+    policy = ""
+    if fold.config is not None and fold.whole_rounds():  # a game stopped in round 1 has no policy to give
+        policy = write_game_policy(folder, rebuild_recording(path), force=force)
+    reason = "" if completed else (f"{ended.reason}: {ended.detail}" if ended is not None and ended.detail else
+                                   ended.reason if ended is not None else abort_reason or "the game did not end")
+    if answered is None:
+        answered = bool(recorded.of("QuestionnaireAnswered"))
+    return j.GameEnded(session=session, participant=participant, outcome="completed" if completed else "aborted",
+                       reason=reason, rounds_played=len(fold.whole_rounds()), policy=policy, questionnaire=answered)
+
+
+def _finished_game(path: Path) -> bool:
+    """Is the recording whole and does it hold its game's end?"""
+    try:
+        recorded = read_log(path, only=frozenset({"SessionEnded"}))
+    except (InputError, OSError):
+        return False
+    return recorded.whole and bool(recorded.of("SessionEnded"))
+
+
+def write_game_policy(folder: Path, rebuilt: Rebuilt, force: bool = False) -> str:
+    """A game's rebuilt policy written to <folder>/policies (its learning curve is in the recording and
+    the report: not kept); returns its path relative to `folder`."""
+    policy, curve = write_outputs(rebuilt, folder / "policies", force=force)
+    curve.unlink()
+    return policy.relative_to(folder).as_posix()
+
+
+def _one_line(err: Exception) -> str:
+    return err.line() if isinstance(err, (InputError, OutputError)) else " ".join(str(err).split())
 
 
 def _redact(text: str, pid: str) -> str:

@@ -7,7 +7,9 @@ ended, what the experimenter paused, aborted or marked invalid and why, the
 bias policies combined, the participants deleted. A study's state is the fold
 of its journal (replay/studydata.py). Each line is a tagged Struct (field
 "event"), readable by any JSON tool; unknown fields are ignored on read, so
-an older pairplay reads a newer journal.
+an older pairplay reads a newer journal's lines of the types it knows; a type
+it does not know (PolicyBuilt, to a pairplay older than it) is refused in one
+line naming the journal's line, never skipped.
 
 One exception to append-only, by design: deleting a participant (the right to
 erasure) rewrites the journal without that participant's lines and appends a
@@ -65,6 +67,16 @@ class GameEnded(JournalEvent, tag="GameEnded"):
     questionnaire: bool = False  # answers recorded in the game's recording
 
 
+class PolicyBuilt(JournalEvent, kw_only=True, tag="PolicyBuilt"):
+    """The policy of a completed game, built from its recording after the game was journaled without one
+    (a signal stopped the server during the game's questionnaire: no time to read the recording back)."""
+
+    session: str
+    participant: str
+    policy: str  # the rebuilt policy file, relative to the study folder
+    by: str = "pairplay"
+
+
 class SessionMarkedInvalid(JournalEvent, tag="SessionMarkedInvalid"):
     session: str
     participant: str
@@ -97,7 +109,7 @@ class ParticipantDeleted(JournalEvent, tag="ParticipantDeleted"):
 
 
 JOURNAL_TYPES = (StudyCreated, ParticipantRegistered, GameStarted, GamePaused, GameResumed, GameEnded,
-                 SessionMarkedInvalid, BiasCombined, ParticipantDeleted)
+                 PolicyBuilt, SessionMarkedInvalid, BiasCombined, ParticipantDeleted)
 AnyJournal = JOURNAL_TYPES[0]
 for _t in JOURNAL_TYPES[1:]:
     AnyJournal = AnyJournal | _t  # type: ignore[assignment]

@@ -7,7 +7,11 @@ Rule: `StudyRunner` runs the steps of a study folder's plan (replay/studydata.py
   learner preset, for pi-reuse the phase's bias policy; the recording stays open
   after the game for the phase's questionnaire (QuestionnaireAnswered from the
   board), then the game's policy is rebuilt from the recording and the journal
-  says how it ended. Who touches the cards is not this module's business: the
+  says how it ended. A signal (`interrupt`) leaves no time to read the
+  recording back: a game that had completed (the signal came during its
+  questionnaire) is journaled completed without its policy, which the
+  folder's next serve, pilot or report builds from the recording
+  (StudyData.build_missing_policies); one that had not is aborted. Who touches the cards is not this module's business: the
   board page of the lab server, or a `ScriptedPlayer` (services/scripted.py) for
   pilots and tests.
 - a combination: a CombineRequested to the combiner service (services/combiner.py)
@@ -33,10 +37,7 @@ from typing import Callable
 
 from pairplay import __version__
 from pairplay.core.policies import users_from_policies
-from pairplay.replay.fold import fold_events
-from pairplay.replay.reader import read_log
-from pairplay.replay.rebuild import rebuild_recording, write_outputs
-from pairplay.replay.studydata import Game, StudyData, StudyDataError
+from pairplay.replay.studydata import Game, StudyData, StudyDataError, game_end
 from pairplay.schemas import events as ev
 from pairplay.schemas import journal as j
 from pairplay.schemas.envelope import stamped
@@ -247,30 +248,25 @@ class StudyRunner:
 
     def _finish_interrupted(self, config: SessionConfig, summary: dict, answered: bool) -> Game:
         """The journal's GameEnded of a game stopped by a signal, from what the session counted (its
-        recording is finished; `pairplay rebuild` makes its policy later, flagged partial)."""
-        why = getattr(self.interrupted, "why", "") or "a signal"
-        self.data.append(j.GameEnded(session=config.session, participant=config.participant.split(":", 1)[1],
-                                     outcome="aborted", reason=f"interrupted ({why})",
-                                     rounds_played=int(summary.get("rounds_played", 0)), policy="",
-                                     questionnaire=answered))
+        recording is finished; no time to read it back). A game that had completed (the signal came
+        during its questionnaire, or as it ended) is journaled completed, without its policy: the next
+        `protocol serve`, `pilot` or `report` builds it from the recording (StudyData.build_missing_policies).
+        One that had not is aborted (`pairplay rebuild` makes its policy, flagged partial)."""
+        pid = config.participant.split(":", 1)[1]
+        if summary.get("ended") == "completed":
+            self.data.append(j.GameEnded(session=config.session, participant=pid, outcome="completed",
+                                         rounds_played=int(summary.get("rounds_played", 0)), policy="",
+                                         questionnaire=answered))
+        else:
+            why = getattr(self.interrupted, "why", "") or "a signal"
+            self.data.append(j.GameEnded(session=config.session, participant=pid, outcome="aborted",
+                                         reason=f"interrupted ({why})", rounds_played=int(summary.get("rounds_played", 0)),
+                                         policy="", questionnaire=answered))
         return self.data.state.games[config.session]
 
     def _finish(self, config: SessionConfig, path: Path, answered: bool) -> Game:
-        recorded = read_log(path)
-        fold = fold_events(r.event for r in recorded.events)
-        completed = fold.ended is not None and fold.ended.reason == "completed"
-        policy = ""
-        if fold.config is not None and fold.whole_rounds():  # a game stopped in round 1 has no policy to give
-            written = write_outputs(rebuild_recording(path), self.data.folder / "policies")
-            written[1].unlink()  # the learning curve is in the recording and the report
-            policy = written[0].relative_to(self.data.folder).as_posix()
-        ended = fold.ended
-        reason = "" if completed else (f"{ended.reason}: {ended.detail}" if ended is not None and ended.detail else
-                                       ended.reason if ended is not None else self._abort_reason or
-                                       "the game did not end")
-        self.data.append(j.GameEnded(session=config.session, participant=config.participant.split(":", 1)[1],
-                                     outcome="completed" if completed else "aborted", reason=reason,
-                                     rounds_played=len(fold.whole_rounds()), policy=policy, questionnaire=answered))
+        self.data.append(game_end(self.data.folder, config.session, config.participant.split(":", 1)[1], path,
+                                  answered, self._abort_reason))
         self.data.write_tables()
         return self.data.state.games[config.session]
 
@@ -356,8 +352,16 @@ class StudyRunner:
             raise StudyDataError("a step is already running")
         try:
             self.live = Live(phase=phase_id, state="combining")
-            inputs = [g.ended.policy for g in self.data.state.games.values()
-                      if g.phase == phase.bias and g.valid_complete and g.ended.policy]
+            games = [g for g in self.data.state.games.values() if g.phase == phase.bias and g.valid_complete]
+            if any(not g.ended.policy for g in games):  # journaled without one (a signal in its questionnaire)
+                said = self.data.build_missing_policies()
+                lacking = [g for g in games if not g.ended.policy]
+                if lacking:  # never combined without a valid game's policy, silently
+                    why = next((line for line in said if line.startswith(lacking[0].session + ":")),
+                               f"{lacking[0].session}: no policy")
+                    raise StudyDataError(f"combining for {phase_id}: {why}; mark the game invalid to combine "
+                                         "without it")
+            inputs = [g.ended.policy for g in games]
             session = f"{self.data.study.study.id}-combine-{phase_id}"
             request_id = secrets.token_hex(6)
             output = f"merged/{phase_id}-bias.policy.json"

@@ -1,0 +1,236 @@
+"""A completed game whose questionnaire is cut by a signal stays completed, and its policy is built later.
+
+`pairplay protocol serve` is a real process: the console's API starts a game played by a scripted
+participant on the bus (`--pilot`), the game completes, the server waits for the questionnaire, and
+the process gets SIGTERM. Before: the journal said the game was aborted ("interrupted (SIGTERM)",
+no policy): open to be replayed and left out of the combination, though its recording held the
+whole game. Now it is journaled completed (questionnaire unanswered) and the next verb that runs or
+reports the study builds its policy from the recording (PolicyBuilt in the journal). A recording
+that cannot give it is said in one line and the game left as it is; the combination refuses to go
+without a valid game's policy.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import signal
+import subprocess
+import sys
+import threading
+import time
+import urllib.request
+from pathlib import Path
+
+import pytest
+
+from pairplay.replay.studydata import StudyData, StudyDataError
+from pairplay.replay.wal import wal_path
+from pairplay.schemas import journal as j
+from pairplay.services.bus import Bus, BusOptions
+from pairplay.services.protocol import StudyRunner
+from pairplay.services.scripted import ScriptedPlayer
+
+STUDY = Path(__file__).parent / "data" / "pilot-study.toml"
+# phase 1's questionnaire asks a new participant nothing: the scripted one never answers, and the
+# server waits for the answers as it waits for a person who has not given them yet
+UNANSWERED = STUDY.read_text().replace(
+    'players = "new"\nquestionnaires = ["after-game"]', 'players = "new"\nquestionnaires = ["later"]') + '''
+[questionnaire.later]
+title = "Asked of returning participants only"
+
+[[questionnaire.later.item]]
+id = "again"
+text = "Was this game different from your first ones?"
+kind = "text"
+required = false
+ask = "returning"
+'''
+
+
+def study_with(tmp_path: Path, text: str, participants: int = 1) -> StudyData:
+    toml = tmp_path / "study.toml"
+    toml.write_text(text)
+    data = StudyData.create(tmp_path / "study", toml)
+    for _ in range(participants):
+        data.register("phase1")
+    return data
+
+
+def api(url: str, token: str, body: dict | None = None) -> dict:
+    request = urllib.request.Request(url, data=None if body is None else json.dumps(body).encode(),
+                                     headers={"x-pairplay-token": token, "content-type": "application/json"})
+    with urllib.request.urlopen(request, timeout=30) as answer:
+        return json.loads(answer.read())
+
+
+def serve_until_questionnaire(folder: Path, pilot: str) -> tuple[subprocess.Popen, str]:
+    """A `protocol serve` process whose console started the next game, once the game is over and the
+    server waits for its questionnaire; (process, session)."""
+    proc = subprocess.Popen([sys.executable, "-m", "pairplay", "protocol", "serve", str(folder), "--pilot", pilot],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            env=dict(os.environ, PYTHONUNBUFFERED="1"))
+    err: list[str] = []
+    threading.Thread(target=lambda: err.extend(proc.stderr), daemon=True).start()
+    try:
+        line = ""
+        while "experimenter console:" not in line:
+            line = proc.stdout.readline()
+            assert line, f"serve ended before its console: {''.join(err)}"
+        console = line.split("experimenter console: ", 1)[1].strip()
+        base, token = console.split("/console?token=")
+        api(f"{base}/api/console/next", token, {})
+        deadline = time.monotonic() + 180
+        while (state := api(f"{base}/api/console/state", token))["live"]["state"] != "questionnaire":
+            assert time.monotonic() < deadline, state
+            time.sleep(0.1)
+        proc.stderr_lines = err
+        return proc, state["live"]["session"]
+    except BaseException:
+        proc.kill()
+        proc.wait()
+        raise
+
+
+def test_a_signal_during_the_questionnaire_keeps_the_completed_game_and_its_policy_is_built_next(
+        tmp_path, pairplay_cli):
+    data = study_with(tmp_path, UNANSWERED)
+    proc, session = serve_until_questionnaire(data.folder, "p01=ashley")
+    time.sleep(0.3)  # the server is waiting for the answers
+    proc.send_signal(signal.SIGTERM)
+    try:
+        proc.wait(timeout=30)
+    finally:
+        proc.kill()
+    assert "stopped (SIGTERM)" in "".join(proc.stderr_lines)
+
+    game = StudyData(data.folder).state.games[session]
+    # before: outcome "aborted", reason "interrupted (SIGTERM)": the complete game was to be played again
+    assert (game.ended.outcome, game.ended.reason, game.ended.rounds_played) == ("completed", "", 2), game.ended
+    assert game.valid_complete and not game.ended.questionnaire and game.ended.policy == ""
+    assert StudyData(data.folder).next_step().game == 1  # game 1 of p01 is done, not to be replayed
+
+    # the next verb that reports (or serves, pilots) the study builds the policy from the recording
+    done = pairplay_cli("report", data.folder)
+    assert done.returncode == 0, done.stderr
+    assert f"pairplay report: {session}: policy built from its recording: policies/{session}.policy.json" \
+        in done.stderr.splitlines(), done.stderr
+    again = StudyData(data.folder)
+    assert again.state.games[session].ended.policy == f"policies/{session}.policy.json"
+    assert (data.folder / again.state.games[session].ended.policy).is_file()
+    assert [type(e).__name__ for e in again.read_journal()][-1] == "PolicyBuilt"
+    assert f"policies/{session}.policy.json" in (data.folder / "sessions.csv").read_text()
+    # said once: a second report builds nothing
+    done = pairplay_cli("report", data.folder, "--force")
+    assert done.returncode == 0 and "policy built" not in done.stderr, done.stderr
+
+
+def completed_without_policy(tmp_path: Path, stripped: int = 4) -> StudyData:
+    """A study of 2 participants whose phase-1 games completed in-process (answers given), the first
+    `stripped` of them then journaled as a signal during the questionnaire leaves them: completed, no
+    policy (the policy files removed)."""
+    data = study_with(tmp_path, STUDY.read_text(), 2)
+    with Bus(BusOptions()) as bus:
+        runner = StudyRunner(data, bus)
+        for pid in list(data.state.participants):
+            for g in range(2):
+                name, items = runner.questions_for(pid, "phase1")
+                runner.run_game(pid, "phase1", g, ScriptedPlayer("ashley", questions=items, questionnaire=name))
+    lines = []
+    for e in data.read_journal():
+        if isinstance(e, j.GameEnded) and stripped > 0:
+            stripped -= 1
+            (data.folder / e.policy).unlink()
+            e = j.GameEnded(session=e.session, participant=e.participant, outcome="completed",
+                            rounds_played=e.rounds_played, questionnaire=True, time_ns=e.time_ns)
+        lines.append(j.encode_line(e))
+    (data.folder / "journal.jsonl").write_bytes(b"".join(lines))
+    return StudyData(data.folder)
+
+
+def test_a_recording_that_cannot_give_the_policy_is_said_in_one_line_and_the_combination_refuses(tmp_path):
+    data = completed_without_policy(tmp_path)
+    games = list(data.state.games.values())
+    assert all(g.valid_complete and not g.ended.policy for g in games)  # an older journal reads as it did
+    unfinished, missing, cut = games[0], games[1], games[2]
+    shutil.copy(data.folder / unfinished.recording, wal_path(data.folder / unfinished.recording))  # a killed recorder's
+    (data.folder / missing.recording).unlink()
+    whole = (data.folder / cut.recording).read_bytes()
+    (data.folder / cut.recording).write_bytes(whole[: len(whole) // 2])
+    lines = data.build_missing_policies()
+    assert len(lines) == 4 and all("\n" not in line for line in lines), lines
+    said = {line.split(":", 1)[0]: line for line in lines}
+    assert "was not finished" in said[unfinished.session] and "pairplay recover" in said[unfinished.session]
+    assert "is missing" in said[missing.session]
+    assert "is partial: truncated" in said[cut.session]
+    assert "policy built from its recording" in said[games[3].session]
+    for g in games[:3]:
+        assert g.valid_complete and g.ended.policy == ""  # left as it is
+    assert games[3].ended.policy
+    # the combination never goes without a valid game's policy, silently: it says which and why
+    with Bus(BusOptions()) as bus:
+        with pytest.raises(StudyDataError, match=f"combining for phase2: {unfinished.session}: completed, but no "
+                                                 "policy built: .*mark the game invalid"):
+            StudyRunner(data, bus).combine("phase2")
+    # the one built is journaled once: read again, nothing more to build for it
+    assert [line for line in StudyData(data.folder).build_missing_policies() if "policy built from" in line] == []
+
+
+def test_the_combination_builds_a_missing_policy_it_needs_and_combines(tmp_path):
+    """Before: a valid game without its policy was left out of the combination without a word."""
+    data = completed_without_policy(tmp_path, stripped=1)
+    with Bus(BusOptions()) as bus:
+        combined = StudyRunner(data, bus).combine("phase2")
+    assert sorted(combined.inputs) == sorted(f"policies/{g.session}.policy.json" for g in data.state.games.values())
+    assert sum(isinstance(e, j.PolicyBuilt) for e in data.read_journal()) == 1
+
+
+class Silent(ScriptedPlayer):
+    """Plays the whole game and never answers the questionnaire."""
+
+
+def test_an_abort_during_the_questionnaire_keeps_the_completed_game_with_its_policy(tmp_path):
+    """The console's abort (or skip) while the questionnaire is awaited: the game is over, so it stays
+    completed, its policy built as always (services/protocol.py abort, _finish)."""
+    data = study_with(tmp_path, STUDY.read_text())
+    with Bus(BusOptions()) as bus:
+        runner = StudyRunner(data, bus)
+
+        def watch(e):
+            if type(e).__name__ == "SessionEnded":
+                def abort():
+                    while runner.live.state != "questionnaire":
+                        time.sleep(0.01)
+                    runner.abort("the participant had to leave")
+                threading.Thread(target=abort).start()
+        game = runner.run_game("p01", "phase1", 0, Silent("ashley"), on_event=watch)
+    assert (game.ended.outcome, game.ended.reason, game.ended.questionnaire) == ("completed", "", False)
+    assert game.ended.policy and (data.folder / game.ended.policy).is_file()
+
+
+def test_a_game_whose_end_was_never_journaled_is_journaled_from_its_finished_recording(tmp_path):
+    """The process went while it read a finished game back (a signal then, the console's step cut at the
+    exit): its GameStarted has no GameEnded. Before: it stayed "running" for ever, its step open to be
+    played again. Now its end, policy and questionnaire come from the recording; a game whose recording
+    is not finished (a recorder's journal beside it: running elsewhere, or killed) is left as it is."""
+    data = completed_without_policy(tmp_path, stripped=0)
+    games = list(data.state.games.values())
+    ends = {e.session: e for e in data.read_journal() if isinstance(e, j.GameEnded)}
+    cut, running = games[0], games[1]
+    for g in (cut, running):
+        (data.folder / ends[g.session].policy).unlink()
+    shutil.copy(data.folder / running.recording, wal_path(data.folder / running.recording))
+    kept = [j.encode_line(e) for e in data.read_journal()
+            if not (isinstance(e, j.GameEnded) and e.session in (cut.session, running.session))]
+    (data.folder / "journal.jsonl").write_bytes(b"".join(kept))
+    data = StudyData(data.folder)
+    assert data.state.games[cut.session].ended is None and not data.state.games[cut.session].valid_complete
+
+    assert data.build_missing_policies() == [f"{cut.session}: journaled completed from its recording (the server "
+                                             "stopped before it said how the game ended)"]
+    ended = StudyData(data.folder).state.games[cut.session].ended
+    assert ended == j.GameEnded(session=cut.session, participant=cut.participant, outcome="completed", rounds_played=2,
+                                policy=ends[cut.session].policy, questionnaire=True, time_ns=ended.time_ns)
+    assert (data.folder / ended.policy).is_file()
+    assert data.state.games[running.session].ended is None  # not finished: left as it was
