@@ -143,12 +143,15 @@ def signalled(request, tmp_path_factory):
     took = {}
     try:
         for v in group:
-            if v.name.startswith("protocol pilot"):  # busy once its first game's recording has begun
+            if v.name.startswith("protocol pilot"):  # busy: a game's recording is being written (its journal
+                # beside it); a game of 100 rounds can be over by the pilot's turn, and a signal 1 s after seeing
+                # its file came between two games (the newest recording a completed one: 2 of 7 runs, load ~5)
                 deadline = time.monotonic() + START_S
-                while (pilot_recording(tmp / "pilot" / "study") is None and v.proc.poll() is None
-                       and time.monotonic() < deadline):
-                    time.sleep(0.05)
-                time.sleep(1.0)
+                while v.proc.poll() is None and time.monotonic() < deadline:
+                    newest = pilot_recording(tmp / "pilot" / "study")
+                    if newest is not None and newest.with_name(newest.name + ".journal").exists():
+                        break
+                    time.sleep(0.01)
             else:  # start-up: 1-5 s on CI's VM, up to a minute when other work loads it (load 40 seen)
                 v.is_ready.wait(START_S)
             time.sleep(v.settle_s)
