@@ -100,8 +100,9 @@ class Guard:
     def __init__(self, session: str, own: str | None = None, decode: Callable[[bytes], object] = decode_event,
                  whole: bool = False):
         self.session, self.own, self.decode = session, own, decode
-        self.whole = whole  # it gets every key of the session, each publisher's in its order (see rule)
-        # (False on a recovering bus, whose order holds per key only: see rule)
+        # it gets every key of the session, each publisher's in its order (False on a recovering bus, whose order
+        # holds per key only: see rule)
+        self.whole = whole
         self.names_forgeries = False  # a message on our own keys is not ours: a forgery (see rule)
         self.forged: list[tuple[Event, str]] = []  # forged starts and ends on our own keys, why (`_forged`)
         self.last_seq: dict[str, int] = {}  # per key
