@@ -109,6 +109,10 @@ def run(args) -> int:
         if stopped(out, grid, made, had_copy, os_error_line(err)) is None:
             raise  # nothing kept: cli/main.py says the line (README: exit 2, nothing written)
         return 2
+    except Exception:  # a cell failed (a fault, not the user's): with no cell finished, nothing it made stays,
+        if not finished_cells(out, grid):  # so a corrected grid runs into the same --out (it was refused as
+            stopped(out, grid, made, had_copy, "failed")  # "another grid's sweep"); finished cells stay to resume
+        raise
     print(f"{result.cells} cells ({len(grid.settings())} settings x {len(grid.seeds)} seeds), {result.computed} "
           f"computed in {result.wall_s:.1f} s on {result.where}; {out / 'sweep.md'}")
     return 0
