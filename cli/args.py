@@ -83,6 +83,42 @@ def int_between(low: int, high: int, why: str = ""):
     return parse
 
 
+def float_between(low: float, high: float, why: str = ""):
+    """An argparse type: a finite number low..high; `why` (the bound's reason) is said when refused."""
+    def parse(text: str) -> float:
+        value = float_at_least(low)(text)
+        if value > high:
+            raise argparse.ArgumentTypeError(f"must be {low:g}..{high:g}{f' ({why})' if why else ''}, got {text}")
+        return value
+    parse.__name__ = f"number {low:g}..{high:g}"
+    return parse
+
+
+SPEED_RANGE = (0.01, 1e6)  # a recording's pace, times real time: slower, one recorded second waits over 100 s
+
+
+def speed(text: str) -> float:
+    """A recording's pace (replay, view): `max` or 0 for as fast as possible, else a finite factor in
+    SPEED_RANGE. `--speed nan` replayed nothing with exit 0 and `--speed 1e-300` made a pause too long
+    for the clock (OverflowError)."""
+    if text == "max":
+        return 0.0
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not a number: {text!r}") from None
+    if value == 0:
+        return 0.0
+    low, high = SPEED_RANGE
+    if not low <= value <= high:  # also refuses nan and inf
+        raise argparse.ArgumentTypeError(f"must be max (or 0, as fast as possible) or {low:g}..{high:g} times real "
+                                         f"time (slower, one recorded second waits over {1 / low:g} s), got {text}")
+    return value
+
+
+duration = float_between(0, 3600, "seconds to wait: an hour at most")  # `--linger 1e300` overflowed the clock
+
+
 def workers(text: str) -> int:
     """A number of local worker processes: 1..pairplay.processes.max_workers() (its docstring says why)."""
     from pairplay.processes import max_workers
@@ -108,7 +144,7 @@ def fraction(text: str) -> float:
 count = int_at_least(1)  # rounds, games, seeds: at least one
 non_negative = int_at_least(0)
 positive_number = float_at_least(0, above=True)  # a ridge penalty
-duration = float_at_least(0)  # milliseconds or seconds to wait
+
 
 
 def key_chunk(what: str):

@@ -48,6 +48,7 @@ GAME_BYTES = 32_000  # per game: its Q-table and update counts (24 x 88), its me
 LSPI_GAME_BYTES = 2_600_000  # per LSPI game: its 88 inverse matrices over the default 60 features (core/lspi.py)
 GAME_ROUND_BYTES = 40  # per game and round: picks, inconsistent suggestions, greedy snapshots, their sums
 FIXED_GAME_ROUND_BYTES = 16  # the same for a fixed policy's game (an evaluation): no snapshots
+TRACE_GAME_ROUND_BYTES = 2_000  # the same with record="all": every turn's row, its buffer and its columns
 ROUND_BYTES = 100  # per round of the longest game: schedule tables, curves
 
 
@@ -59,9 +60,9 @@ def gigabytes(n: int) -> str:
     return f"{n / 1e9:.1f} GB"
 
 
-def batch_bytes(games: int, rounds: int, lspi: bool = False, fixed: bool = False) -> int:
+def batch_bytes(games: int, rounds: int, lspi: bool = False, fixed: bool = False, trace: bool = False) -> int:
     """About how many bytes run_games holds for `games` games of `rounds` rounds (an upper estimate)."""
-    per_round = FIXED_GAME_ROUND_BYTES if fixed else GAME_ROUND_BYTES
+    per_round = TRACE_GAME_ROUND_BYTES if trace else FIXED_GAME_ROUND_BYTES if fixed else GAME_ROUND_BYTES
     return games * (LSPI_GAME_BYTES if lspi else GAME_BYTES) + games * rounds * per_round + rounds * ROUND_BYTES
 
 
