@@ -72,26 +72,27 @@ def game_index(text: str) -> int:
     return value
 
 
+def _between(at_least, kind: str, low, high, why: str):
+    """An argparse type: a value of `at_least(low)` (int_at_least, float_at_least) that is also <= high."""
+    def parse(text: str):
+        value = at_least(low)(text)
+        if value > high:
+            raise argparse.ArgumentTypeError(f"must be {low:g}..{high:g}{f' ({why})' if why else ''}, got {text}"
+                                             if kind == "number" else
+                                             f"must be {low}..{high}{f' ({why})' if why else ''}, got {value}")
+        return value
+    parse.__name__ = f"{kind} {low}..{high}" if kind == "integer" else f"{kind} {low:g}..{high:g}"
+    return parse
+
+
 def int_between(low: int, high: int, why: str = ""):
     """An argparse type: an integer low..high; `why` (the bound's reason) is said when refused."""
-    def parse(text: str) -> int:
-        value = int_at_least(low)(text)
-        if value > high:
-            raise argparse.ArgumentTypeError(f"must be {low}..{high}{f' ({why})' if why else ''}, got {value}")
-        return value
-    parse.__name__ = f"integer {low}..{high}"
-    return parse
+    return _between(int_at_least, "integer", low, high, why)
 
 
 def float_between(low: float, high: float, why: str = ""):
     """An argparse type: a finite number low..high; `why` (the bound's reason) is said when refused."""
-    def parse(text: str) -> float:
-        value = float_at_least(low)(text)
-        if value > high:
-            raise argparse.ArgumentTypeError(f"must be {low:g}..{high:g}{f' ({why})' if why else ''}, got {text}")
-        return value
-    parse.__name__ = f"number {low:g}..{high:g}"
-    return parse
+    return _between(float_at_least, "number", low, high, why)
 
 
 SPEED_RANGE = (0.01, 1e6)  # a recording's pace, times real time: slower, one recorded second waits over 100 s
