@@ -95,7 +95,7 @@ def float_between(low: float, high: float, why: str = ""):
     return _between(float_at_least, "number", low, high, why)
 
 
-SPEED_RANGE = (0.01, 1e6)  # a recording's pace, times real time: slower, one recorded second waits over 100 s
+SPEED_RANGE = (1e-4, 1e6)  # a recording's pace, times real time: slower, one recorded second waits over 10000 s (the signal tests pace at 0.0005)
 
 
 def speed(text: str) -> float:

@@ -51,7 +51,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     src.add_argument("--session", type=session_id, help="session id: view it live on the bus (or pick it from a recording)")
     src.add_argument("--recording", type=Path, metavar="REC", help="an MCAP recording to view instead of the bus")
     src.add_argument("--speed", type=speed, default=0.0,
-                     help="recording pace: 1 = as recorded, 10 = ten times faster (0.01..1000000), 0 or max = as "
+                     help="recording pace: 1 = as recorded, 10 = ten times faster (0.0001..1000000), 0 or max = as "
                           "fast as possible (default)")
     out = parser.add_argument_group("where the view goes")
     out.add_argument("--out", type=Path, metavar="RRD",

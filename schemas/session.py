@@ -22,7 +22,6 @@ GAME_INDEX_RANGE = (0, 2**63 - 1)  # a game of a seed: core/rng.py hashes it as 
 # `ignore_window_ms = inf` passed `if value < 0` and the board page held a missed pair for ever.
 MS_RANGE = (0.0, 60_000.0)
 MS_FIELDS = ("ignore_window_ms", "turn_back_ms")
-N_STATES, N_ACTIONS = 24, 88  # a policy's states and action codes (schemas/policy.py pins the same)
 ALGORITHMS = ("q-learning", "pi-reuse", "fixed", "lspi")
 # Where the observed card (the one the user looks at before the second pick) comes from:
 # "intended": the simulated participant reports the card it would pick unaided;
@@ -102,10 +101,6 @@ class SessionConfig(msgspec.Struct, frozen=True, kw_only=True):
             raise ValueError(f"ignore_rule {self.ignore_rule!r} is not one of {IGNORE_RULES}")
         if self.algorithm in ("pi-reuse", "fixed") and not self.policy_actions:
             raise ValueError(f"algorithm {self.algorithm!r} needs policy_actions (a bias or fixed policy)")
-        if self.policy_actions and (len(self.policy_actions) != N_STATES
-                                    or not all(0 <= a < N_ACTIONS for a in self.policy_actions)):
-            raise ValueError(f"policy_actions must be {N_STATES} action codes 0..{N_ACTIONS - 1}, got "
-                             f"{len(self.policy_actions)} codes")
         for key in MS_FIELDS:
             if not MS_RANGE[0] <= getattr(self, key) <= MS_RANGE[1]:  # also refuses nan
                 raise ValueError(f"{key} must be {MS_RANGE[0]:g}..{MS_RANGE[1]:g}, got {getattr(self, key)}")

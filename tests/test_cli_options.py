@@ -69,7 +69,7 @@ REFUSED = {
     # bounds of what sizes time (a new user's trial, 2026-12-01): `--speed nan` replayed nothing with exit 0,
     # `--speed 1e-300` and `--linger 1e300` were OverflowError tracebacks, `--turn-back-ms 1e300` held a pair for ever
     "replay --speed nan": (["replay", "r.mcap", "--speed", "nan"], "--speed: must be max (or 0, as fast as possible) "
-                                                                    "or 0.01..1e+06 times real time"),
+                                                                    "or 0.0001..1e+06 times real time"),
     "replay --speed 1e-300": (["replay", "r.mcap", "--speed", "1e-300"], "got 1e-300"),
     "view --speed 1e-300": (["view", "--recording", "r.mcap", "--speed", "1e-300"], "--speed: must be max"),
     "lab --linger 1e300": (["lab", *MINIMAL["lab"]] + ["--linger", "1e300"],

@@ -92,16 +92,13 @@ def test_protocol_register_takes_the_consoles_bound(tmp_path, capsys):
     assert f'id="register-count" type="number" min="1" max="{REGISTER_AT_ONCE}"' in page  # the page says it too
 
 
-# A new user's trial (2026-12-01): a session config took nan in its learner schedule and any length of
-# policy_actions (only the learner refused them, after the session had started: the game waited for
-# ever), and inf board times; a policy file's numbers were taken as they were.
+# A new user's trial (2026-12-01): a session config took nan in its learner schedule (only the learner
+# refused it, after the session had started) and inf board times. (policy_actions of the wrong length stay
+# the learner's refusal: tests/test_refusal.py needs a config the game plays and the learner refuses.)
 BAD_CONFIGS = {
     "learner alpha_start nan": ({"learner": {"alpha_start": float("nan")}}, "alpha_start must be 0..1, got nan"),
     "learner epsilon_start 5": ({"learner": {"epsilon_start": 5.0}}, "epsilon_start must be 0..1, got 5.0"),
     "learner alpha_every 0": ({"learner": {"alpha_every": 0}}, "alpha_every must be 1..1000000000, got 0"),
-    "policy_actions of 2": ({"algorithm": "fixed", "policy_actions": [1, 2]},
-                            "policy_actions must be 24 action codes 0..87, got 2 codes"),
-    "policy_actions out of range": ({"algorithm": "fixed", "policy_actions": [88] * 24}, "policy_actions must be 24"),
     "turn_back_ms inf": ({"turn_back_ms": float("inf")}, "turn_back_ms must be 0..60000, got inf"),
     "ignore_window_ms nan": ({"ignore_window_ms": float("nan")}, "ignore_window_ms must be 0..60000, got nan"),
 }
