@@ -12,7 +12,9 @@ Interrupted (SIGINT/SIGTERM), or refused a write by the system while it runs
 (a full disk, a folder removed under it: exit 2, as any OSError, README's exit
 table; it was 1, and the line named no file), the cells finished stay and ONE
 line says why and so; with none finished, nothing the sweep made stays
-(`stopped`).
+(`stopped`). A cell that fails (a fault, not a mistake: every setting is checked
+before any work, its memory included, report/study.py) leaves the same: with no
+cell finished, no grid.toml that would refuse the corrected grid's re-run.
 """
 
 from __future__ import annotations
