@@ -72,15 +72,52 @@ def game_index(text: str) -> int:
     return value
 
 
+def _between(at_least, kind: str, low, high, why: str):
+    """An argparse type: a value of `at_least(low)` (int_at_least, float_at_least) that is also <= high."""
+    def parse(text: str):
+        value = at_least(low)(text)
+        if value > high:
+            raise argparse.ArgumentTypeError(f"must be {low:g}..{high:g}{f' ({why})' if why else ''}, got {text}"
+                                             if kind == "number" else
+                                             f"must be {low}..{high}{f' ({why})' if why else ''}, got {value}")
+        return value
+    parse.__name__ = f"{kind} {low}..{high}" if kind == "integer" else f"{kind} {low:g}..{high:g}"
+    return parse
+
+
 def int_between(low: int, high: int, why: str = ""):
     """An argparse type: an integer low..high; `why` (the bound's reason) is said when refused."""
-    def parse(text: str) -> int:
-        value = int_at_least(low)(text)
-        if value > high:
-            raise argparse.ArgumentTypeError(f"must be {low}..{high}{f' ({why})' if why else ''}, got {value}")
-        return value
-    parse.__name__ = f"integer {low}..{high}"
-    return parse
+    return _between(int_at_least, "integer", low, high, why)
+
+
+def float_between(low: float, high: float, why: str = ""):
+    """An argparse type: a finite number low..high; `why` (the bound's reason) is said when refused."""
+    return _between(float_at_least, "number", low, high, why)
+
+
+SPEED_RANGE = (1e-4, 1e6)  # a recording's pace, times real time: slower, one recorded second waits over 10000 s (the signal tests pace at 0.0005)
+
+
+def speed(text: str) -> float:
+    """A recording's pace (replay, view): `max` or 0 for as fast as possible, else a finite factor in
+    SPEED_RANGE. `--speed nan` replayed nothing with exit 0 and `--speed 1e-300` made a pause too long
+    for the clock (OverflowError)."""
+    if text == "max":
+        return 0.0
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not a number: {text!r}") from None
+    if value == 0:
+        return 0.0
+    low, high = SPEED_RANGE
+    if not low <= value <= high:  # also refuses nan and inf
+        raise argparse.ArgumentTypeError(f"must be max (or 0, as fast as possible) or {low:g}..{high:g} times real "
+                                         f"time (slower, one recorded second waits over {1 / low:g} s), got {text}")
+    return value
+
+
+duration = float_between(0, 3600, "seconds to wait: an hour at most")  # `--linger 1e300` overflowed the clock
 
 
 def workers(text: str) -> int:
@@ -108,7 +145,7 @@ def fraction(text: str) -> float:
 count = int_at_least(1)  # rounds, games, seeds: at least one
 non_negative = int_at_least(0)
 positive_number = float_at_least(0, above=True)  # a ridge penalty
-duration = float_at_least(0)  # milliseconds or seconds to wait
+
 
 
 def key_chunk(what: str):

@@ -76,6 +76,21 @@ def parse_arms(text: str) -> list[tuple[str, str]]:
     return arms
 
 
+def check_size(arms: int, seeds: int, rounds: int) -> None:
+    """OptionError if the arms' one batch would hold more than core/simulate.py MEMORY_LIMIT
+    (`--rounds 100000000` was a MemoryError traceback), naming --seeds if the default 10 would fit."""
+    from pairplay.core.counterfactual import arms_bytes
+    from pairplay.core.simulate import MEMORY_LIMIT, gigabytes
+    from pairplay.errors import OptionError
+
+    need = arms_bytes(arms, seeds, rounds)
+    where = f"--seeds {seeds}" if seeds > 10 and arms_bytes(arms, 10, rounds) <= MEMORY_LIMIT else f"--rounds {rounds}"
+    if need > MEMORY_LIMIT:
+        raise OptionError(f"{arms} arm{'s' if arms != 1 else ''} x {seeds} seeds x {rounds} rounds would hold about "
+                          f"{gigabytes(need)} of memory (every turn is kept for counterfactual.csv), over the "
+                          f"{gigabytes(MEMORY_LIMIT)} allowed: give fewer rounds, seeds or arms", where)
+
+
 def run(args: argparse.Namespace) -> int:
     import numpy as np
 
@@ -92,6 +107,8 @@ def run(args: argparse.Namespace) -> int:
     from pairplay.schemas.policy import read_policy
 
     arms_wanted = parse_arms(args.policy)
+    if args.rounds and not args.fit_only:  # before any work
+        check_size(len(arms_wanted), args.seeds, args.rounds)
     rec = check_recording(args.recording)
     stem = output_stem(rec)
     out = Path(args.out) if args.out else Path("out") / "counterfactual" / stem
@@ -132,6 +149,7 @@ def run(args: argparse.Namespace) -> int:
         rounds = args.rounds or len(turns.picks_per_round)
         if rounds < 1:
             raise InputError("completed no round: give --rounds for the arms to play", rec)
+        check_size(len(arms_wanted), args.seeds, rounds)
         learner = config.learner_config()
         persona = model.persona
         arms = []

@@ -28,24 +28,15 @@ import argparse
 import sys
 import time
 
-from pairplay.cli.args import session_id
+from pairplay.cli.args import session_id, speed
 from pairplay.errors import InputError
-
-
-def speed(text: str) -> float:
-    if text == "max":
-        return 0.0
-    value = float(text)
-    if value <= 0:
-        raise argparse.ArgumentTypeError("speed must be > 0 or 'max'")
-    return value
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     from pairplay.services.bus import add_bus_arguments
 
     p.add_argument("recording", metavar="REC")
-    p.add_argument("--speed", type=speed, default=1.0, help="N times real time, or max (default 1)")
+    p.add_argument("--speed", type=speed, default=1.0, help="N times real time (0.0001..1000000), or max (default 1)")
     p.add_argument("--as", dest="as_session", metavar="SESSION", type=session_id,
                    help="re-publish under this session id")
     p.add_argument("--verify", action="store_true", help="re-run fresh services on the recorded inputs and compare; exit 0 PASS (the last line says if "

@@ -40,9 +40,10 @@ from pairplay.schemas.keys import check_chunk
 from pairplay.errors import OptionError, UserError
 from pairplay.outputs import check_folder
 from pairplay.schemas.policy import read_policy
-from pairplay.schemas.session import IGNORE_CLOCKS, OBSERVED_SOURCES, SessionConfig, learner_overrides, lspi_overrides
+from pairplay.schemas.session import (IGNORE_CLOCKS, MS_RANGE, OBSERVED_SOURCES, SessionConfig, learner_overrides,
+                                      lspi_overrides)
 
-from pairplay.cli.args import add_force, count, duration, game_index, positive_number, seed_number, session_id
+from pairplay.cli.args import add_force, count, float_between, game_index, positive_number, seed_number, session_id
 from pairplay.core.geometry import PICKS_UNIT
 from pairplay.cli.robot import add_robot_arguments, check_robot_args, robot_choice
 from pairplay.services.bus import BusOpenError, ConfigFileError, add_bus_arguments, options_from_args, stop_on_signals
@@ -50,6 +51,7 @@ from pairplay.services.recorder import FORCE_SESSION_HINT, check_new_recording
 from pairplay.services.runner import waiting_for
 from pairplay.services.session import run_session
 
+milliseconds = float_between(*MS_RANGE, "the board's times: a minute at most")  # schemas/session.py MS_RANGE
 PRESETS = {"virtual": LearnerConfig, "human-phase1": LearnerConfig.human_phase1,
            "human-phase2": LearnerConfig.human_phase2}
 
@@ -71,12 +73,12 @@ def add_config_arguments(p: argparse.ArgumentParser) -> None:
     g.add_argument("--observed-source", choices=OBSERVED_SOURCES,
                    help="default: intended for sim:, first-pick for human: (gaze: an eye tracker's GazeFixated events)")
     g.add_argument("--ignore-rule", choices=("perceived", "time"), help="default: perceived for sim:, time for human:")
-    g.add_argument("--ignore-window-ms", type=duration, default=1500.0,
+    g.add_argument("--ignore-window-ms", type=milliseconds, default=1500.0,
                    help="'time' rule: picks closer than this ignored the suggestion (thesis 7.1.2; default 1500)")
     g.add_argument("--ignore-clock", choices=IGNORE_CLOCKS,
                    help="'time' rule: time the picks on the board page's clock (page, default for human:) or the "
                         "server's (server)")
-    g.add_argument("--turn-back-ms", type=duration, default=1500.0,
+    g.add_argument("--turn-back-ms", type=milliseconds, default=1500.0,
                    help="the board page shows a missed pair this long before turning it back (default 1500)")
     g.add_argument("--preset", choices=sorted(PRESETS),
                    help="learner schedule (thesis 6.2, 7.2); default: virtual for sim:, human-phase1 for a human "

@@ -12,7 +12,9 @@ Interrupted (SIGINT/SIGTERM), or refused a write by the system while it runs
 (a full disk, a folder removed under it: exit 2, as any OSError, README's exit
 table; it was 1, and the line named no file), the cells finished stay and ONE
 line says why and so; with none finished, nothing the sweep made stays
-(`stopped`).
+(`stopped`). A cell that fails (a fault, not a mistake: every setting is checked
+before any work, its memory included, report/study.py) leaves the same: with no
+cell finished, no grid.toml that would refuse the corrected grid's re-run.
 """
 
 from __future__ import annotations
@@ -109,6 +111,10 @@ def run(args) -> int:
         if stopped(out, grid, made, had_copy, os_error_line(err)) is None:
             raise  # nothing kept: cli/main.py says the line (README: exit 2, nothing written)
         return 2
+    except Exception:  # a cell failed (a fault, not the user's): with no cell finished, nothing it made stays,
+        if not finished_cells(out, grid):  # so a corrected grid runs into the same --out (it was refused as
+            stopped(out, grid, made, had_copy, "failed")  # "another grid's sweep"); finished cells stay to resume
+        raise
     print(f"{result.cells} cells ({len(grid.settings())} settings x {len(grid.seeds)} seeds), {result.computed} "
           f"computed in {result.wall_s:.1f} s on {result.where}; {out / 'sweep.md'}")
     return 0

@@ -36,7 +36,7 @@ import threading
 from dataclasses import dataclass
 from pathlib import Path
 
-from pairplay.cli.args import add_force, float_at_least, int_at_least, port_or_any, session_id
+from pairplay.cli.args import add_force, float_at_least, int_at_least, port_or_any, session_id, speed
 from pairplay.errors import InputError, OptionError, OutputError, UserError
 from pairplay.outputs import check_output, output_path
 from pairplay.replay.check import read_session
@@ -50,8 +50,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     src = parser.add_argument_group("what to view")
     src.add_argument("--session", type=session_id, help="session id: view it live on the bus (or pick it from a recording)")
     src.add_argument("--recording", type=Path, metavar="REC", help="an MCAP recording to view instead of the bus")
-    src.add_argument("--speed", type=float_at_least(0), default=0.0,
-                     help="recording pace: 1 = as recorded, 10 = ten times faster, 0 = as fast as possible (default)")
+    src.add_argument("--speed", type=speed, default=0.0,
+                     help="recording pace: 1 = as recorded, 10 = ten times faster (0.0001..1000000), 0 or max = as "
+                          "fast as possible (default)")
     out = parser.add_argument_group("where the view goes")
     out.add_argument("--out", type=Path, metavar="RRD",
                      help="the .rrd to save (default: next to the recording, or recordings/<session>.rrd)")

@@ -31,7 +31,7 @@ from pairplay.schemas.usermodel import CountedRate, FeatureFit, RateFit, UserMod
 from .geometry import N_STATES
 from .interpretation import SIGHT_SEES, consider_probability, hear_probability, memory_capacity
 from .oracle import USER_ALONE, oracle_policies
-from .simulate import run_games
+from .simulate import batch_bytes, run_games
 from .userfit import FEATURES, Fit
 
 # Observed sources of a recording -> the simulation's (a gaze is taken as the card the user intends)
@@ -120,6 +120,11 @@ def oracle_policy(persona: Persona, seed: int, bonus: str = DEFAULT_REWARD_BONUS
 
 def user_alone() -> np.ndarray:
     return USER_ALONE.copy()
+
+
+def arms_bytes(arms: int, seeds: int, rounds: int) -> int:
+    """About the bytes run_arms holds: one batch of arms x seeds games that records every turn."""
+    return batch_bytes(arms * seeds, rounds, trace=True)
 
 
 def run_arms(persona: Persona, arms: Sequence[Arm], seeds: Sequence[int], rounds: int,

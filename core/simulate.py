@@ -42,6 +42,30 @@ PIECES_PER_WORKER = 6  # pieces of unequal cost (personas, lengths) balance over
 TRACE_ROWS = 16  # a recorded trace's first rows per game and round; the kernel grows it when full
 
 
+# What a batch of games holds in memory, for refusing one that cannot fit before any work (the study's,
+# a sweep cell's, the counterfactual's arms): measured peaks (`/usr/bin/time -v`, pairplay 0.9) rounded up.
+GAME_BYTES = 32_000  # per game: its Q-table and update counts (24 x 88), its memory stamps, its streams
+LSPI_GAME_BYTES = 2_600_000  # per LSPI game: its 88 inverse matrices over the default 60 features (core/lspi.py)
+GAME_ROUND_BYTES = 40  # per game and round: picks, inconsistent suggestions, greedy snapshots, their sums
+FIXED_GAME_ROUND_BYTES = 16  # the same for a fixed policy's game (an evaluation): no snapshots
+TRACE_GAME_ROUND_BYTES = 2_000  # the same with record="all": every turn's row, its buffer and its columns
+ROUND_BYTES = 100  # per round of the longest game: schedule tables, curves
+
+
+MEMORY_LIMIT = 2 * 10**9  # bytes a study, sweep cell or counterfactual may plan to hold: generous for real use
+
+
+def gigabytes(n: int) -> str:
+    """Bytes as the refusals say them: '93.1 GB'."""
+    return f"{n / 1e9:.1f} GB"
+
+
+def batch_bytes(games: int, rounds: int, lspi: bool = False, fixed: bool = False, trace: bool = False) -> int:
+    """About how many bytes run_games holds for `games` games of `rounds` rounds (an upper estimate)."""
+    per_round = TRACE_GAME_ROUND_BYTES if trace else FIXED_GAME_ROUND_BYTES if fixed else GAME_ROUND_BYTES
+    return games * (LSPI_GAME_BYTES if lspi else GAME_BYTES) + games * rounds * per_round + rounds * ROUND_BYTES
+
+
 def _pieces(n: int) -> list[np.ndarray]:
     """The batch's games in contiguous pieces, in order (one piece below 2 * PIECE_GAMES games)."""
     count = max(1, min(n // PIECE_GAMES, PIECES_PER_WORKER * threads.WORKERS if threads.WORKERS > 1 else 1))

@@ -29,7 +29,7 @@ import csv
 import hashlib
 import shlex
 import time
-from dataclasses import dataclass, field, fields
+from dataclasses import dataclass, field, fields, replace
 from pathlib import Path
 from types import SimpleNamespace
 from typing import Callable
@@ -44,6 +44,7 @@ from pairplay.core.personas import PERSONAS, persona
 from pairplay.core.policies import to_policy_file
 from pairplay.core.reward import BONUS_RULE_TEXT
 from pairplay.core.rng import GAME_INDEX_RANGE, SEED_RANGE
+from pairplay.core.simulate import MEMORY_LIMIT, batch_bytes, gigabytes
 from pairplay.errors import OptionError
 from pairplay.lists import comma_items
 from pairplay.schemas.config import DEFAULT_REWARD_BONUS, LearnerConfig, LSPIConfig, REWARD_BONUS_RULES
@@ -53,6 +54,10 @@ from pairplay.schemas.policy import write_policy
 
 from pairplay.report import future, plots
 from pairplay.report.future_frames import frames_lines
+
+
+MEMORY_COUNTS = ("games", "rounds", "eval_rounds", "reuse_seeds")  # the settings that size the study's memory
+EVAL_GAMES_PER_GAME = 12  # evaluation games per training game: comparison 3, own + merged policies, future work
 
 
 @dataclass
@@ -127,6 +132,9 @@ class StudySettings:
             if getattr(self, key) > top:
                 raise SettingError(key, f"must be 1..{top} (each game is a game index of core/rng.py), "
                                    f"got {getattr(self, key)}")
+        self.check_memory(personas, speed_up if speed_up is not None else self.runs_speed_up(),
+                          self.algorithm == "lspi" and not self.train_only if compare_learners is None
+                          else compare_learners, spell)
         for key in ("psi", "psi_decay"):
             if not 0 <= getattr(self, key) <= 1:  # also refuses nan
                 raise SettingError(key, f"must be between 0 and 1, got {getattr(self, key)}")
@@ -158,6 +166,40 @@ class StudySettings:
                                    f"{self.rounds - 1}: the last N rounds of pi-reuse use the new policy alone; "
                                    f"N >= rounds leaves no round of reuse), got {self.reuse_last}")
         return personas
+
+    def memory_bytes(self, personas: int, speed_up: bool, compare_learners: bool) -> int:
+        """About the bytes the study holds at its peak (core/simulate.py batch_bytes): training (twice with
+        LSPI compared), the speed-up's runs, and every evaluation game of the one batch (each at the
+        longest's rounds: the comparison, the merged policies, future work, one per speed-up snapshot)."""
+        games = personas * self.games
+        total = batch_bytes(games, self.rounds, lspi=self.algorithm == "lspi")
+        if compare_learners:
+            total += batch_bytes(games, self.rounds)
+        if self.train_only:
+            return total
+        evals = EVAL_GAMES_PER_GAME * games
+        if speed_up:
+            runs = 2 * personas * self.reuse_seeds
+            total += batch_bytes(runs, self.rounds)
+            evals += runs * (self.rounds // study.REUSE_SNAPSHOT_EVERY)
+        return total + batch_bytes(evals, max(self.eval_rounds, study.FIRST_ROUNDS), fixed=True)
+
+    def check_memory(self, personas: list, speed_up: bool, compare_learners: bool,
+                     spell: Callable[[str], str] = str) -> None:
+        """SettingError if the study would hold more than MEMORY_LIMIT (`--games 1000000000` grew lists until
+        the system killed it), naming the count whose default would shrink it most."""
+        need = self.memory_bytes(len(personas), speed_up, compare_learners)
+        if need <= MEMORY_LIMIT:
+            return
+        default = StudySettings()
+        shrink = {k: self.memory_bytes(len(personas), speed_up, compare_learners) if getattr(self, k) <= getattr(default, k)
+                  else replace(self, **{k: getattr(default, k)}).memory_bytes(len(personas), speed_up, compare_learners)
+                  for k in MEMORY_COUNTS}
+        key = min(shrink, key=shrink.get)
+        sizes = ", ".join(f"{spell(k)} {getattr(self, k)}" for k in MEMORY_COUNTS if k != "reuse_seeds" or speed_up)
+        raise SettingError(key, f"the study would hold about {gigabytes(need)} of memory ({len(personas)} persona"
+                           f"{'s' if len(personas) != 1 else ''}, {sizes}), over the {gigabytes(MEMORY_LIMIT)} "
+                           f"allowed: give fewer games, rounds or personas; got {getattr(self, key)}")
 
     def rerun_command(self) -> str:
         """`pairplay study ...` with every setting that differs from the default (seed, games, rounds and

@@ -47,6 +47,7 @@ from pairplay.processes import check_workers, worker_pool
 from pairplay.core.rng import SEED_RANGE
 from pairplay.report.study import SettingError, StudySettings, default_reuse_last
 
+MAX_CELLS = 10_000  # settings x seeds: each cell is a whole study and a file (`seeds = 100000000` ran out of memory listing them)
 SWEEPABLE = {f.name: f.type for f in fields(StudySettings) if f.name not in ("seed", "train_only")}
 
 # Student's t, 97.5% quantile, by degrees of freedom (1..30); above 30 the normal 1.96 is within 2%.
@@ -135,10 +136,17 @@ def read_grid(path: str | Path) -> Grid:
     if clash:
         raise GridError(f"{path}: {', '.join(sorted(clash))} both fixed in [study] and swept in [grid]")
     seeds = data.get("seeds", 5)
+    settings = math.prod(len(v) for v in axes.values())
     if isinstance(seeds, int) and not isinstance(seeds, bool):
         if seeds < 1:
             raise GridError(f"{path}: seeds = {seeds}: give a count of at least 1 or a list of seeds")
+        if seeds * settings > MAX_CELLS:
+            raise GridError(f"{path}: seeds = {seeds}: {settings} setting{'s' if settings != 1 else ''} x {seeds} "
+                            f"seeds is over the {MAX_CELLS} cells a sweep may have")
         seeds = list(range(seeds))
+    if isinstance(seeds, list) and len(seeds) * settings > MAX_CELLS:
+        raise GridError(f"{path}: [grid]: {settings} settings x {len(seeds)} seeds is over the {MAX_CELLS} cells "
+                        "a sweep may have")
     lo, hi = SEED_RANGE
     if not isinstance(seeds, list) or not seeds or not all(
             isinstance(s, int) and not isinstance(s, bool) and lo <= s <= hi for s in seeds):

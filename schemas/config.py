@@ -22,6 +22,19 @@ DEFAULT_REWARD_BONUS = "correct"
 UNSTATED_REWARD_BONUS = "consistent"
 
 
+# Every LearnerConfig field's range, the one check of a schedule wherever it comes from (a session's
+# config, a study file's [[phase]] learner overrides, a policy file's config, the CLI's presets):
+# `alpha_start = nan` in a study file passed `protocol check`, then the learner refused the session and
+# the game waited for ever; `epsilon_start = 5.0` learned with nonsense. Probabilities and rates are
+# 0..1 (a step is how much one falls each `every` rounds); `every` counts rounds; None: no reuse limit.
+ROUNDS_MAX = 10**9  # a round count in a schedule (more than any study plays; numpy's int64 takes it)
+LEARNER_RANGES: dict[str, tuple[float, float]] = {
+    "epsilon_start": (0, 1), "epsilon_step": (0, 1), "epsilon_every": (1, ROUNDS_MAX), "epsilon_min": (0, 1),
+    "alpha_start": (0, 1), "alpha_step": (0, 1), "alpha_every": (1, ROUNDS_MAX), "alpha_min": (0, 1),
+    "psi_start": (0, 1), "psi_decay": (0, 1), "psi_round_decay": (0, 1), "reuse_rounds": (0, ROUNDS_MAX),
+}
+
+
 class LearnerConfig(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
     """Online Q-learning (thesis 5.1, algorithm 1) with optional pi-reuse (5.3).
 
@@ -50,6 +63,12 @@ class LearnerConfig(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
     psi_decay: float = 0.95
     psi_round_decay: float = 1.0
     reuse_rounds: int | None = None
+
+    def __post_init__(self) -> None:
+        for key, (low, high) in LEARNER_RANGES.items():
+            value = getattr(self, key)
+            if value is not None and not low <= value <= high:  # also refuses nan
+                raise ValueError(f"{key} must be {low}..{high}, got {value}")
 
     def never_reuses(self) -> str:
         """Why pi-reuse on this schedule would never take the bias policy's action, "" if it does: such a

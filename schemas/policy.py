@@ -27,6 +27,9 @@ from .jsonfile import JsonFileKind
 FORMAT = "pairplay.policy"
 VERSION = 1
 N_STATES, N_ACTIONS = 24, 88  # pinned here so the contract does not import core
+# |Q| at most this: a Q-value estimates the expected reward of one suggestion, whose rewards are a few
+# units (core/reward.py: -3..+2); a file with 1e308 was merged and profiled as if it meant something.
+Q_LIMIT = 1e6
 
 
 class PolicyFileError(InputError):
@@ -90,6 +93,30 @@ class PolicyFile(msgspec.Struct, frozen=True, kw_only=True):
             raise PolicyFileError(f"reward_bonus {self.reward_bonus!r} is not one of {REWARD_BONUS_RULES}")
         if self.rules and len(self.rules) != N_STATES:
             raise PolicyFileError(f"a merged policy names one rule per state ({N_STATES})")
+        self._check_numbers()
+
+    def _check_numbers(self) -> None:
+        """Counts are counts, the participant is named, Q-values are rewards' size (Q_LIMIT): a file with
+        `"rounds": -3`, negative visits, `"participant": ""` or Q of 1e308 was combined and profiled."""
+        if not self.participant.strip():
+            raise PolicyFileError("participant: empty; a policy names the persona or participant it was learned with")
+        if self.rounds < 0:
+            raise PolicyFileError(f"rounds: must be at least 0, got {self.rounds}")
+        for key in ("seed", "game"):
+            if getattr(self, key) is not None and getattr(self, key) < 0:
+                raise PolicyFileError(f"{key}: must be at least 0, got {getattr(self, key)}")
+        bad = [(s, v) for s, v in enumerate(self.visits) if v < 0]
+        if bad:
+            raise PolicyFileError(f"visits: must be at least 0, got {bad[0][1]} for state {bad[0][0]}")
+        for s, row in enumerate(self.q):
+            for a, v in enumerate(row):
+                if not -Q_LIMIT <= v <= Q_LIMIT:  # also refuses nan
+                    raise PolicyFileError(f"q: must be -{Q_LIMIT:g}..{Q_LIMIT:g} (a reward's size), got {v} "
+                                          f"at state {s}, action {a}")
+        if self.info is not None:
+            for key in ("speech", "head"):
+                if not 0 <= getattr(self.info, key) <= 1:
+                    raise PolicyFileError(f"info.{key}: an error share is 0..1, got {getattr(self.info, key)}")
 
 
 FILE = JsonFileKind(PolicyFile, PolicyFileError, "policy file",

@@ -17,6 +17,11 @@ from .config import REWARD_BONUS_RULES, UNSTATED_REWARD_BONUS, LearnerConfig, LS
 
 SEED_RANGE = (0, 2**64 - 1)  # every seed here has its own streams (core/rng.py game_seed, derivation 2)
 GAME_INDEX_RANGE = (0, 2**63 - 1)  # a game of a seed: core/rng.py hashes it as a signed 64-bit count
+# The board's times in milliseconds (ignore_window_ms, turn_back_ms): 0 up to a minute. Checked by
+# SessionConfig.validate, a study file's [study] (schemas/study.py) and the session options (cli/session.py):
+# `ignore_window_ms = inf` passed `if value < 0` and the board page held a missed pair for ever.
+MS_RANGE = (0.0, 60_000.0)
+MS_FIELDS = ("ignore_window_ms", "turn_back_ms")
 ALGORITHMS = ("q-learning", "pi-reuse", "fixed", "lspi")
 # Where the observed card (the one the user looks at before the second pick) comes from:
 # "intended": the simulated participant reports the card it would pick unaided;
@@ -96,6 +101,9 @@ class SessionConfig(msgspec.Struct, frozen=True, kw_only=True):
             raise ValueError(f"ignore_rule {self.ignore_rule!r} is not one of {IGNORE_RULES}")
         if self.algorithm in ("pi-reuse", "fixed") and not self.policy_actions:
             raise ValueError(f"algorithm {self.algorithm!r} needs policy_actions (a bias or fixed policy)")
+        for key in MS_FIELDS:
+            if not MS_RANGE[0] <= getattr(self, key) <= MS_RANGE[1]:  # also refuses nan
+                raise ValueError(f"{key} must be {MS_RANGE[0]:g}..{MS_RANGE[1]:g}, got {getattr(self, key)}")
         if self.reward_bonus not in REWARD_BONUS_RULES:
             raise ValueError(f"reward_bonus {self.reward_bonus!r} is not one of {REWARD_BONUS_RULES}")
         if self.ignore_clock not in IGNORE_CLOCKS:
@@ -129,8 +137,6 @@ class SessionConfig(msgspec.Struct, frozen=True, kw_only=True):
         if self.observed_source == "intended":
             raise ValueError("observed source 'intended' needs a simulated participant; a person's observed card "
                              "is the first pick ('first-pick', thesis 7.1.3) or an eye tracker's gaze ('gaze')")
-        if self.ignore_window_ms < 0 or self.turn_back_ms < 0:
-            raise ValueError("ignore_window_ms and turn_back_ms must be >= 0")
 
 
 def learner_overrides(config: LearnerConfig) -> dict[str, Union[float, int, None]]:

@@ -28,7 +28,7 @@ from typing import Literal, Union
 import msgspec
 
 from .config import LearnerConfig
-from .session import SEED_RANGE
+from .session import MS_FIELDS, MS_RANGE, SEED_RANGE
 
 ID = re.compile(r"^[a-z0-9][a-z0-9_-]{0,39}$")
 PRESETS = ("virtual", "human-phase1", "human-phase2")
@@ -134,9 +134,10 @@ def _check(study: Study) -> None:
     need_id("study.id", study.study.id)
     if not SEED_RANGE[0] <= study.study.seed <= SEED_RANGE[1]:  # every session's seed (core/rng.py game_seed)
         raise StudyFileError(f"study.seed: must be {SEED_RANGE[0]}..{SEED_RANGE[1]}, got {study.study.seed}")
-    for key in ("ignore_window_ms", "turn_back_ms"):
-        if getattr(study.study, key) < 0:
-            raise StudyFileError(f"study.{key}: must be >= 0, got {getattr(study.study, key)}")
+    for key in MS_FIELDS:
+        if not MS_RANGE[0] <= getattr(study.study, key) <= MS_RANGE[1]:  # also refuses nan and inf
+            raise StudyFileError(f"study.{key}: must be {MS_RANGE[0]:g}..{MS_RANGE[1]:g} (ms), "
+                                 f"got {getattr(study.study, key)}")
     robot = study.study.robot
     if not any(robot == s or (s.endswith("://") and robot.startswith(s) and len(robot) > len(s))
                for s in ROBOT_SCHEMES):

@@ -143,9 +143,9 @@ CASES = [
     Case("session invalid --zenoh-config", SIM + ["--zenoh-config", "random.mcap"], "cannot use the Zenoh config"),
     Case("run a learner without --session", ["run", "learner"], "--session is required"),
     Case("replay --as 'bad id'", ["replay", "rec.mcap", "--as", "bad id"], "--as: session id 'bad id'"),
-    Case("replay --speed -1", ["replay", "rec.mcap", "--speed", "-1"], "speed must be > 0"),
+    Case("replay --speed -1", ["replay", "rec.mcap", "--speed", "-1"], "--speed: must be max (or 0"),
     Case("view --speed -1", ["view", "--recording", "rec.mcap", "--speed", "-1", "--out", "new.rrd"],
-         "--speed: must be at least 0"),
+         "--speed: must be max (or 0"),
     Case("view --serve with its data port taken",
          ["view", "--recording", "rec.mcap", "--serve", "--no-save", "--grpc-port", str(TAKEN_PORT), "--web-port", "0"],
          f"--grpc-port {TAKEN_PORT}"),
@@ -155,6 +155,44 @@ CASES = [
     Case("replay to an unreachable --connect", ["replay", "rec.mcap", "--connect", f"tcp/127.0.0.1:{CLOSED}"],
          "cannot open the bus"),
     Case("study --eval-rounds 0", ["study", "--eval-rounds", "0"], "--eval-rounds: must be at least 1"),
+    # numbers that size memory or feed the learner are bounded before any work (a new user's trial,
+    # 2026-12-01): each of these was a MemoryError traceback or an OOM kill, a hang, or learned nonsense
+    Case("study --games 1000000000", ["study", "--games", "1000000000"],
+         "--games: the study would hold about 3795200.3 GB of memory (8 personas, --games 1000000000"),
+    Case("study --rounds 1000000000", ["study", "--rounds", "1000000000"], "--rounds: the study would hold about"),
+    Case("study --eval-rounds 1000000000", ["study", "--eval-rounds", "1000000000"],
+         "--eval-rounds: the study would hold about"),
+    Case("study of one persona --rounds 100000000", ["study", "--personas", "blind", "--rounds", "100000000"],
+         "--rounds: the study would hold about 50.0 GB of memory (1 persona, --games 10, --rounds 100000000, "
+         "--eval-rounds 200), over the 2.0 GB allowed"),
+    Case("counterfactual --rounds 100000000", ["counterfactual", "rec.mcap", "--rounds", "100000000", "--out", "cf"],
+         "3 arms x 10 seeds x 100000000 rounds would hold about 6010.0 GB of memory (every turn is kept for "
+         "counterfactual.csv), over the 2.0 GB allowed: give fewer rounds, seeds or arms (--rounds 100000000)"),
+    Case("counterfactual --seeds 100000000", ["counterfactual", "rec.mcap", "--seeds", "100000000", "--out", "cf"],
+         "(--seeds 100000000)"),
+    Case("sweep a grid of 10**10 rounds", ["sweep", "huge-rounds.toml", "--out", "sw"],
+         "huge-rounds.toml: rounds = 10000000000: the study would hold about"),
+    Case("sweep a grid of 10**8 seeds", ["sweep", "huge-seeds.toml", "--out", "sw"],
+         "huge-seeds.toml: seeds = 100000000: 1 setting x 100000000 seeds is over the 10000 cells a sweep may have"),
+    Case("protocol check a learner override of nan", ["protocol", "check", "alpha-nan.toml"],
+         "alpha-nan.toml: phase[0].learner: alpha_start must be 0..1, got nan"),
+    Case("protocol check an epsilon of 5", ["protocol", "check", "epsilon-5.toml"],
+         "epsilon-5.toml: phase[0].learner: epsilon_start must be 0..1, got 5.0"),
+    Case("protocol check an ignore window of inf", ["protocol", "check", "window-inf.toml"],
+         "window-inf.toml: study.ignore_window_ms: must be 0..60000 (ms), got inf"),
+    Case("protocol check a turn-back time of nan", ["protocol", "check", "turn-nan.toml"],
+         "turn-nan.toml: study.turn_back_ms: must be 0..60000 (ms), got nan"),
+    Case("replay --speed nan", ["replay", "rec.mcap", "--speed", "nan"], "--speed: must be max (or 0"),
+    Case("view --speed 1e-300", ["view", "--recording", "rec.mcap", "--speed", "1e-300", "--out", "new.rrd"],
+         "--speed: must be max (or 0, as fast as possible) or 0.0001..1e+06 times real time"),
+    Case("combine a policy of -3 rounds", ["combine", "policies", "bad/rounds-neg.json", "-o", "m.json"],
+         "bad/rounds-neg.json: corrupt or not a policy file: rounds: must be at least 0, got -3"),
+    Case("profile a policy of negative visits", ["profile", "policies/blind", "bad/visits-neg.json"],
+         "bad/visits-neg.json: corrupt or not a policy file: visits: must be at least 0, got -100 for state 0"),
+    Case("combine a policy of no participant", ["combine", "policies", "bad/participant-empty.json", "-o", "m.json"],
+         "bad/participant-empty.json: corrupt or not a policy file: participant: empty"),
+    Case("session --policy with a Q of 1e308", SIM + ["--algorithm", "pi-reuse", "--policy", "bad/q-huge.json"],
+         "bad/q-huge.json: corrupt or not a policy file: q: must be -1e+06..1e+06 (a reward's size), got 1e+308"),
     Case("session with a bad session id", SIM + ["--session", "a/b"], "session id 'a/b'"),
     Case("combine nothing left after --exclude", ["combine", "policies", "--exclude", "blind,deaf"],
          "no policies left to combine"),
@@ -275,6 +313,24 @@ def _fixtures(root: Path) -> None:
     (root / "ro").mkdir()
     (root / "grid.toml").write_text('seeds = 1\n[study]\npersonas = "blind"\ngames = 1\nrounds = 20\n'
                                     '[grid]\npsi_decay = [0.9]\n')
+    (root / "huge-rounds.toml").write_text('seeds = 2\n[study]\nrounds = 10000000000\n[grid]\npsi_decay = [0.9]\n')
+    (root / "huge-seeds.toml").write_text('seeds = 100000000\n[grid]\npsi_decay = [0.9]\n')
+    from pairplay.schemas.study import example_text
+    example = example_text()
+    phase1 = 'preset = "human-phase1"\n'
+    assert phase1 in example and "ignore_window_ms = 1500\n" in example
+    for name, text in (("alpha-nan", example.replace(phase1, phase1 + "learner = { alpha_start = nan }\n", 1)),
+                       ("epsilon-5", example.replace(phase1, phase1 + "learner = { epsilon_start = 5.0, alpha_start = -3.0 }\n", 1)),
+                       ("window-inf", example.replace("ignore_window_ms = 1500\n", "ignore_window_ms = inf\n")),
+                       ("turn-nan", example.replace("ignore_window_ms = 1500\n", "turn_back_ms = nan\n"))):
+        (root / f"{name}.toml").write_text(text)
+    good = json.loads((root / "policies" / "blind" / "game-00.json").read_text())
+    (root / "bad").mkdir()
+    q_huge = [row[:] for row in good["q"]]
+    q_huge[0][0] = 1e308
+    for name, change in (("rounds-neg", {"rounds": -3}), ("visits-neg", {"visits": [-100] + good["visits"][1:]}),
+                         ("participant-empty", {"participant": ""}), ("q-huge", {"q": q_huge})):
+        (root / "bad" / f"{name}.json").write_text(json.dumps({**good, **change}))
     assert main(["protocol", "init", str(root / "study"), "--study", "thesis-ch7", "--quiet"]) == 0
     assert main(["protocol", "register", str(root / "study"), "--count", "1", "--quiet"]) == 0  # p01
 

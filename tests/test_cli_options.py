@@ -40,8 +40,8 @@ def test_the_seed_range_is_core_rngs():
     assert (0, options.SEED_MAX) == SEED_RANGE
 
 
-@pytest.mark.parametrize("text", ["nan", "inf", "-inf", "-1"])
-def test_a_duration_is_a_finite_number_at_least_0(text):
+@pytest.mark.parametrize("text", ["nan", "inf", "-inf", "-1", "3601", "1e300"])
+def test_a_duration_is_a_finite_number_0_to_an_hour(text):
     with pytest.raises(argparse.ArgumentTypeError):
         options.duration(text)
 
@@ -65,7 +65,19 @@ REFUSED = {
     "sweep --workers 0": (["sweep", "g.toml", "--workers", "0"], "--workers: must be at least 1"),
     "bench --runs 0": (["bench", "--runs", "0"], "--runs: must be at least 1"),
     "protocol register --count 0": (["protocol", "register", "folder", "--count", "0"], "--count: must be at least 1"),
-    "view --speed inf": (["view", "--recording", "r.mcap", "--speed", "inf"], "--speed: not a finite number"),
+    "view --speed inf": (["view", "--recording", "r.mcap", "--speed", "inf"], "--speed: must be max (or 0, as fast"),
+    # bounds of what sizes time (a new user's trial, 2026-12-01): `--speed nan` replayed nothing with exit 0,
+    # `--speed 1e-300` and `--linger 1e300` were OverflowError tracebacks, `--turn-back-ms 1e300` held a pair for ever
+    "replay --speed nan": (["replay", "r.mcap", "--speed", "nan"], "--speed: must be max (or 0, as fast as possible) "
+                                                                    "or 0.0001..1e+06 times real time"),
+    "replay --speed 1e-300": (["replay", "r.mcap", "--speed", "1e-300"], "got 1e-300"),
+    "view --speed 1e-300": (["view", "--recording", "r.mcap", "--speed", "1e-300"], "--speed: must be max"),
+    "lab --linger 1e300": (["lab", *MINIMAL["lab"]] + ["--linger", "1e300"],
+                           "--linger: must be 0..3600 (seconds to wait: an hour at most), got 1e300"),
+    "session --turn-back-ms 1e300": (["session", *MINIMAL["session"]] + ["--turn-back-ms", "1e300"],
+                                     "--turn-back-ms: must be 0..60000"),
+    "session --ignore-window-ms 1e9": (["session", *MINIMAL["session"]] + ["--ignore-window-ms", "1e9"],
+                                       "--ignore-window-ms: must be 0..60000"),
 }
 
 

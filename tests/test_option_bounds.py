@@ -90,3 +90,41 @@ def test_protocol_register_takes_the_consoles_bound(tmp_path, capsys):
     assert len(capsys.readouterr().out.split()) == REGISTER_AT_ONCE
     page = (Path(console.__file__).parent / "static" / "console.html").read_text()
     assert f'id="register-count" type="number" min="1" max="{REGISTER_AT_ONCE}"' in page  # the page says it too
+
+
+# A new user's trial (2026-12-01): a session config took nan in its learner schedule (only the learner
+# refused it, after the session had started) and inf board times. (policy_actions of the wrong length stay
+# the learner's refusal: tests/test_refusal.py needs a config the game plays and the learner refuses.)
+BAD_CONFIGS = {
+    "learner alpha_start nan": ({"learner": {"alpha_start": float("nan")}}, "alpha_start must be 0..1, got nan"),
+    "learner epsilon_start 5": ({"learner": {"epsilon_start": 5.0}}, "epsilon_start must be 0..1, got 5.0"),
+    "learner alpha_every 0": ({"learner": {"alpha_every": 0}}, "alpha_every must be 1..1000000000, got 0"),
+    "turn_back_ms inf": ({"turn_back_ms": float("inf")}, "turn_back_ms must be 0..60000, got inf"),
+    "ignore_window_ms nan": ({"ignore_window_ms": float("nan")}, "ignore_window_ms must be 0..60000, got nan"),
+}
+
+
+@pytest.mark.parametrize("case", list(BAD_CONFIGS))
+def test_a_session_config_refuses_numbers_its_services_cannot_use(case):
+    from pairplay.schemas.session import SessionConfig
+
+    change, expected = BAD_CONFIGS[case]
+    config = SessionConfig(session="s", participant="sim:blind", persona="blind", seed=0, rounds=2, **change)
+    with pytest.raises(ValueError, match=expected.replace("(", r"\(").replace(")", r"\)")):
+        config.validate()
+
+
+def test_one_learner_range_check_serves_every_source():
+    """The CLI's presets, a study file's overrides and a policy file's config all make a LearnerConfig:
+    its one check (schemas/config.py LEARNER_RANGES) refuses out-of-range values wherever they come from."""
+    import msgspec
+
+    from pairplay.schemas.config import LEARNER_RANGES, LearnerConfig
+
+    assert set(LEARNER_RANGES) == set(LearnerConfig.__struct_fields__)
+    for rounds in (1, 5, 500):  # every preset of every length is in range
+        LearnerConfig.human_phase1(rounds), LearnerConfig.human_phase2(rounds)
+    with pytest.raises(ValueError, match="psi_decay must be 0..1"):
+        msgspec.structs.replace(LearnerConfig(), psi_decay=1.5)
+    with pytest.raises(msgspec.ValidationError, match="epsilon_min must be 0..1"):
+        msgspec.convert({"epsilon_min": -0.1}, LearnerConfig)
