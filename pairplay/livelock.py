@@ -30,6 +30,11 @@ def hold(path: str | Path, create: bool = False) -> int:
     fd = os.open(path, flags, 0o644)
     try:
         fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except BlockingIOError:
+        os.close(fd)
+        raise
+    except OSError:  # a file system without locks (ENOLCK, EOPNOTSUPP): record anyway, unlocked; only the
+        pass  # live check cannot see this recording (a lock is what tells it, never what lets it be written)
     except BaseException:
         os.close(fd)
         raise
