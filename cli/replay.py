@@ -30,6 +30,7 @@ import time
 
 from pairplay.cli.args import session_id, speed
 from pairplay.errors import InputError
+from pairplay.livelock import LIVE, is_live
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -62,7 +63,9 @@ def run(args: argparse.Namespace) -> int:
         if v.unknown:
             print(f"{sum(v.unknown.values())} events of types this version does not know, not compared: "
                   + ", ".join(f"{tag} ({n})" for tag, n in sorted(v.unknown.items())))
-        if v.truncated and not v.ended:
+        if v.truncated and not v.ended and is_live(args.recording):
+            print(f"the file {LIVE}: verified as far as it goes; verify it again once the session has ended")
+        elif v.truncated and not v.ended:
             print("the file is cut (a crash?): the session's end is missing; its last events were lost")
         if v.error:
             print(f"error: {v.error}")

@@ -27,6 +27,7 @@ import msgspec
 from mcap.decoder import DecoderFactory
 from mcap.records import Channel, Message, Metadata, Schema
 
+from pairplay.livelock import LIVE, is_live
 from pairplay.schemas.envelope import Event
 from pairplay.schemas.events import EVENT_BY_TAG, decode_event
 
@@ -85,6 +86,7 @@ class EventLog:
     bad: list[BadMessage] = field(default_factory=list)
     truncated: bool = False
     error: str = ""  # what is wrong with the file: every damaged part and the cut ("" if whole)
+    live: bool = False  # its end is missing because its recorder is still writing it, not a crash
     damage: list[Damage] = field(default_factory=list)  # the parts that failed a check (not read)
     unknown: list[UnknownEvent] = field(default_factory=list)
     channels: dict[int, tuple[str, str]] = field(default_factory=dict)  # id -> (topic, schema name)
@@ -185,6 +187,9 @@ def _read_log(path: str | Path, only: frozenset[str] | None = None) -> EventLog:
             log.metadata[record.name] = dict(record.metadata)
     log.truncated, log.damage = checked.truncated, checked.damage
     log.error = "" if checked.whole else checked.describe()
+    if log.truncated and is_live(path):  # not cut: its recorder is still writing it (pairplay/livelock.py)
+        log.live = True
+        log.error = f"{LIVE}, read as far as it goes; {log.error}"
     return log
 
 
