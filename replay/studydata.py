@@ -35,16 +35,13 @@ from pathlib import Path
 
 import msgspec
 
-from pairplay import __version__
-from pairplay.outputs import output_file
+from pairplay import __version__, csvcell
+from pairplay.errors import InputError
+from pairplay.livelock import LIVE, is_live
+from pairplay.outputs import OutputError, output_file
 from pairplay.schemas import journal as j
 from pairplay.schemas.policy import read_policy, write_policy
 from pairplay.schemas.study import Study, StudyFileError, load_study
-from pairplay import csvcell
-from pairplay.livelock import LIVE, is_live
-
-from pairplay.errors import InputError
-from pairplay.outputs import OutputError
 
 from .fold import fold_events
 from .reader import read_log
