@@ -34,6 +34,8 @@ import errno
 import fnmatch
 import os
 import shutil
+import signal
+import threading
 from pathlib import Path
 from typing import IO, Iterable, Iterator
 
@@ -257,7 +259,8 @@ def output_folder(path: str | Path, force: bool = False, owned: tuple[str, ...] 
     written replaces its namesake there, a file there that `owned` names (the writer's own
     outputs: patterns of relative paths, `policies/*/game-*.json`, see `is_owned`) and that this
     run did not write is removed (an earlier run's, stale beside this one's), with the folders
-    that leaves empty, and every other file stays."""
+    that leaves empty, and every other file stays. SIGINT/SIGTERM wait while the files are moved
+    in (`_signals_held`): the folder is the earlier run's or this one's, never half of each."""
     path = check_output_folder(path, force)
     created = _missing_folders(path.absolute().parent)
     _mkdir(path.absolute().parent)
@@ -274,21 +277,44 @@ def output_folder(path: str | Path, force: bool = False, owned: tuple[str, ...] 
             raise _named_for_user(err, tmp, path) from err
         if not path.exists() or _is_empty_dir(path):
             os.replace(tmp, path)  # rename(2) onto an empty folder is atomic
+            done = True
         else:
-            written = set()
-            for src in sorted(tmp.rglob("*")):
-                if src.is_file():
-                    dst = path / src.relative_to(tmp)
-                    _mkdir(dst.parent)
-                    os.replace(src, dst)
-                    written.add(dst.relative_to(path).as_posix())
-            _remove_stale(path, written, owned)
-        done = True
+            # file by file into the earlier run's folder: a Ctrl-C in this loop (milliseconds) left the folder
+            # half this run's and half the earlier one's, "nothing more was written" (a new user's trial), so
+            # the loop finishes first and the signal is delivered after it
+            with _signals_held():
+                written = set()
+                for src in sorted(tmp.rglob("*")):
+                    if src.is_file():
+                        dst = path / src.relative_to(tmp)
+                        _mkdir(dst.parent)
+                        os.replace(src, dst)
+                        written.add(dst.relative_to(path).as_posix())
+                _remove_stale(path, written, owned)
+                done = True  # before the held signal is delivered
     finally:
         if tmp.exists():
             shutil.rmtree(tmp, ignore_errors=True)
         if not done:
             _remove_empty(created)
+
+
+@contextlib.contextmanager
+def _signals_held() -> Iterator[None]:
+    """SIGINT and SIGTERM wait until the block is over, then are delivered to the handlers they would
+    have met (main thread only: Python runs signal handlers there; elsewhere nothing is held)."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    came: list[int] = []
+    before = {s: signal.signal(s, lambda signum, _frame: came.append(signum)) for s in (signal.SIGINT, signal.SIGTERM)}
+    try:
+        yield
+    finally:
+        for s, handler in before.items():
+            signal.signal(s, handler)
+        if came:
+            signal.raise_signal(came[0])
 
 
 def is_owned(relative: str, owned: tuple[str, ...]) -> bool:

@@ -158,3 +158,31 @@ def test_a_forced_folder_loses_the_earlier_runs_own_files_this_run_did_not_write
     with output_folder(out, force=True, owned=owned) as tmp:  # the folder it leaves empty goes too
         (tmp / "report.md").write_text("newer")
     assert not (out / "policies" / "a").exists() and (out / "policies" / "b" / "mine.txt").exists()
+
+
+def test_a_signal_while_a_forced_folder_is_merged_waits_until_every_file_is_in(tmp_path, monkeypatch):
+    """`study --force` over an earlier study, Ctrl-C while its files were moved in one by one: the folder
+    held 11 of 33 files of the new run and the rest of the earlier one's, and the verb said "nothing more
+    was written" (a new user's trial). The merge now finishes, then the signal is delivered."""
+    import signal
+
+    from pairplay import outputs
+
+    target = tmp_path / "out"
+    target.mkdir()
+    for name in ("a.csv", "b.csv", "c.csv"):
+        (target / name).write_text("old")
+    real_replace = outputs.os.replace
+    moved: list[str] = []
+
+    def replace(src, dst):
+        if not moved:
+            signal.raise_signal(signal.SIGINT)  # the user's Ctrl-C, in the middle of the merge
+        real_replace(src, dst)
+        moved.append(str(dst))
+    monkeypatch.setattr(outputs.os, "replace", replace)
+    with pytest.raises(KeyboardInterrupt):
+        with outputs.output_folder(target, force=True) as tmp:
+            for name in ("a.csv", "b.csv", "c.csv"):
+                (tmp / name).write_text("new")
+    assert [(target / n).read_text() for n in ("a.csv", "b.csv", "c.csv")] == ["new"] * 3
