@@ -317,6 +317,11 @@ def _main(argv: list[str]) -> int:
     except OSError as err:  # the file system or network refused: the user's setup, not our bug
         print(f"pairplay {_who(args)}: {os_error_line(err)}", file=sys.stderr)
         return 2
+    except MemoryError:  # the machine's or the process's limit (`ulimit -v`), like a full disk: the user's setup
+        # (a trial under `ulimit -v 2000000`: `view` ended in a traceback while rerun's modules loaded)
+        print(f"pairplay {_who(args)}: out of memory (the machine's memory or the process's limit, `ulimit -v`, "
+              f"ran out); outputs are written whole or not at all: run it again with more memory", file=sys.stderr)
+        return 2
     except Exception as err:
         line = recording_failed_line(err)
         if line is None:

@@ -108,3 +108,20 @@ def test_a_verb_without_its_action_is_one_line_naming_the_choices_and_its_help(v
         main([verb, "--help"])
     out, err = capsys.readouterr()
     assert end.value.code == 0 and err == "" and f"usage: pairplay {verb}" in out
+
+
+def test_running_out_of_memory_is_one_line_exit_2_not_a_traceback(tmp_path, monkeypatch, capsys):
+    """Before (a trial under `ulimit -v 2000000`): `view` ended in a MemoryError traceback while rerun's
+    modules loaded. Out of memory is the user's setup, like a full disk: one line, exit 2, nothing left."""
+    from pathlib import Path
+
+    from pairplay.replay import rebuild
+    sample = Path(__file__).resolve().parents[1] / "recordings" / "samples" / "sim-ashley.mcap"
+
+    def exhausted(*_a, **_k):
+        raise MemoryError
+    monkeypatch.setattr(rebuild, "rebuild_recording", exhausted)
+    assert main(["rebuild", str(sample), "--out", str(tmp_path / "out")]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and err.startswith("pairplay rebuild: out of memory"), err
+    assert not (tmp_path / "out").exists() or not any((tmp_path / "out").iterdir())
