@@ -128,6 +128,10 @@ def run_profile(args) -> int:
         print(f"states every policy of a participant updated at least {args.min_updates} times")
     else:
         _, profiles = users_from_policies(policies, args.seed)
+    # what the columns are (a new user's trial read Blind's "speech 0.0, head 52.2" as "no speech"): the
+    # report and the console say "speech incompatible %"; this table keeps its short columns and says it
+    print("speech %, head %: share of the compared states where the participant's policies disagree on speech, on "
+          "head (algorithm 3: high means the participant does not perceive that channel); smile, gaze: used at all")
     print("\n".join(_profile_lines(profiles, policies)))
     if args.actions:
         print("\naction level (core/actionlevel.py): algorithm 3's shares without the states where the policies' "

@@ -28,7 +28,7 @@ ARMS_HELP = ("comma-separated arms: same (the recorded learner, replayed: checks
 EPILOG = ("The fitted user is the persona (focus, hearing, sight, memory on the thesis's 1..6 scale) of maximum "
           "likelihood for the recorded picks, each feature with its 95% profile-likelihood set; it is saved as "
           "OUT/<REC name>.usermodel.json. Each arm plays it on the same seeds (the same deals); OUT/counterfactual.md "
-          "compares them with the recording (picks per round, suggestions followed by a match), with "
+          "compares them with the recording (picks per round, turns whose second pick matched), with "
           "counterfactual.csv (every simulated round) and counterfactual.png. README: 'Walkthrough: "
           "counterfactual replay of a recorded participant'.")
 

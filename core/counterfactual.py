@@ -61,7 +61,7 @@ class Arm(NamedTuple):
 
 class ArmRuns(NamedTuple):
     picks: np.ndarray  # (seeds, rounds) picks per round
-    hits: np.ndarray  # (seeds,) share of suggestions followed by a match
+    hits: np.ndarray  # (seeds,) share of turns whose second pick matched (report/counterfactual.py HITS)
 
 
 def fitted_persona(fit: Fit, participant: str, session: str) -> Persona:

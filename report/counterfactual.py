@@ -6,7 +6,7 @@ with force). Files: `<recording>.usermodel.json` (schemas/usermodel.py),
 `counterfactual.csv` (arm, seed, round, picks: every simulated round),
 `counterfactual.md` (the fitted user with its 95% sets, the comparison table
 and the assumptions) and `counterfactual.png` (picks per round by round, and
-the share of suggestions followed by a match, per arm). Arms are summarised
+the share of turns whose second pick matched, per arm: HITS). Arms are summarised
 over seeds: mean, sample sd, 95% t-interval of the mean; each arm beside the
 recorded learner replayed on the same seeds ("same"), as a paired difference
 per seed; "differs" when that difference's 95% interval leaves out 0.
@@ -57,15 +57,21 @@ def summarise(values: np.ndarray) -> Summary:
     return Summary(mean, sd, mean - half, mean + half)
 
 
+# the hits column: in every arm but "alone" each turn has a suggestion, so it is the share of suggestions
+# followed by a match; "alone" suggests nothing, so there it is the user's own share, the baseline (before,
+# the column said "suggestions followed by a match" for "alone" too: a new user's trial)
+HITS = "turns whose second pick matched (alone: unaided)"
+
+
 class Recorded(NamedTuple):
     picks: list[int]  # per complete round
-    hits: float  # share of suggestions followed by a match
+    hits: float  # share of the turns with a suggestion whose second pick matched
     suggestions: int
 
 
 def comparison_rows(recorded: Recorded, runs: dict, texts: dict[str, str]) -> list[list[str]]:
     """The comparison table: header first; picks are means over each seed's rounds."""
-    rows = [["arm", "what", f"{PICKS_UNIT}: mean \u00b1 sd [95% CI]", "suggestions followed by a match",
+    rows = [["arm", "what", f"{PICKS_UNIT}: mean \u00b1 sd [95% CI]", HITS,
              "minus recorded", "minus 'same' (paired) [95% CI]", "differs from 'same'"]]
     rec_mean = float(np.mean(recorded.picks)) if recorded.picks else float("nan")
     rows.append(["recorded", "what happened", f"{rec_mean:.2f} ({len(recorded.picks)} rounds)",
@@ -137,7 +143,7 @@ def counterfactual_figure(recorded: Recorded, runs: dict, path: Path, title: str
            color=[colours[k % len(colours)] for k in range(len(names))], capsize=4)
     bx.axhline(recorded.hits, color="black", lw=2, label=f"recorded ({recorded.hits:.0%})")
     bx.set_ylim(0, 1)
-    bx.set_ylabel("share of suggestions followed by a match")
+    bx.set_ylabel(HITS)
     bx.set_title("suggestion success (bars: 95% CI over seeds)", fontsize=9)
     bx.legend(fontsize=7)
     fig.suptitle(title, fontsize=10)
