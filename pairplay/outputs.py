@@ -48,7 +48,9 @@ FORCE_FIX = "--force replaces it"  # shown only by a verb that has --force (erro
 
 
 def _existing_ancestor(path: Path) -> Path:
-    p = path.absolute().parent
+    """The nearest existing folder above `path`, named as the user gave it (relative stays relative:
+    a refusal named /tmp/work/afile where the user typed afile/x)."""
+    p = path.parent
     while not p.exists() and p != p.parent:
         p = p.parent
     return p
@@ -61,7 +63,7 @@ def _check_parent(path: Path, probe: bool = True) -> None:
     if not os.access(parent, os.W_OK | os.X_OK):
         raise OutputError("cannot write there: the folder is read-only", parent)
     if probe:
-        _try_writing(path.absolute().parent)
+        _try_writing(path.parent)
 
 
 def _try_writing(folder: Path) -> None:
@@ -268,8 +270,8 @@ def output_folder(path: str | Path, force: bool = False, owned: tuple[str, ...] 
     outputs with check_outputs); a file written replaces its namesake only with `force`, and
     without it a namesake that appeared meanwhile refuses the whole (nothing moved in)."""
     path = check_folder(path) if among_others else check_output_folder(path, force)
-    created = _missing_folders(path.absolute().parent)
-    _mkdir(path.absolute().parent)
+    created = _missing_folders(path.parent)
+    _mkdir(path.parent)
     tmp = _temp_name(path)
     try:
         tmp.mkdir()

@@ -163,10 +163,11 @@ class StudyData:
 
     def __init__(self, folder: str | Path):
         self.folder = Path(folder).resolve()
+        self.given = Path(folder)  # as the user gave it: what a refusal names (it named the resolved path)
         if not (self.folder / JOURNAL).is_file():
-            raise StudyDataError(f"{self.folder}: not a study folder (no {JOURNAL}; `pairplay protocol init` makes one)")
+            raise StudyDataError(f"{self.given}: not a study folder (no {JOURNAL}; `pairplay protocol init` makes one)")
         try:
-            self.study: Study = load_study(self.folder / STUDY_FILE)
+            self.study: Study = load_study(self.given / STUDY_FILE)
         except StudyFileError as err:
             raise StudyDataError(str(err)) from None
         self.settings = msgspec.json.decode((self.folder / SETTINGS).read_bytes()) \
@@ -180,14 +181,14 @@ class StudyData:
     @classmethod
     def create(cls, folder: str | Path, study_file: str | Path, key_file: str | Path | None = None) -> "StudyData":
         """A new study folder from a study file; StudyFileError / StudyDataError if it cannot be."""
-        folder = Path(folder).resolve()
+        given, folder = Path(folder), Path(folder).resolve()
         load_study(study_file)  # refuse a bad file before making anything
         if (folder / JOURNAL).exists():
-            raise StudyDataError(f"{folder}: already a study folder")
+            raise StudyDataError(f"{given}: already a study folder")
         if key_file is not None:
             key = Path(key_file).resolve()
             if key.is_relative_to(folder):
-                raise StudyDataError(f"--key-file {key}: must be outside the study folder {folder} "
+                raise StudyDataError(f"--key-file {key_file}: must be outside the study folder {given} "
                                      "(names never sit beside the recordings)")
             open_key_file(key).close()  # made now, owner-only: a path that cannot hold it is said here, not at
             # the first registration with a name (an existing key file is kept as it is, only its mode tightened)
@@ -202,7 +203,7 @@ class StudyData:
         created = j.StudyCreated(study=study.study.id, study_file_sha256=hashlib.sha256(text).hexdigest(),
                                  software_version=__version__, time_ns=time.time_ns())
         atomic_write(folder / JOURNAL, j.encode_line(created))
-        return cls(folder)
+        return cls(given)
 
     # -- the journal ---------------------------------------------------------
     def read_journal(self) -> list[j.JournalEvent]:
@@ -214,7 +215,7 @@ class StudyData:
                 try:
                     events.append(j.decode_line(line))
                 except (msgspec.DecodeError, msgspec.ValidationError) as err:
-                    raise StudyDataError(f"{self.folder / JOURNAL}:{n}: {err}") from None
+                    raise StudyDataError(f"{self.given / JOURNAL}:{n}: {err}") from None
         return events
 
     def append(self, event: j.JournalEvent) -> j.JournalEvent:
