@@ -10,7 +10,10 @@ output may exist unless --force, and every REC must hold a session (a
 SessionStarted: replay/check.py `read_session`; a stub left by an old
 version's failed start, another program's MCAP) with a round recorded whole
 (`no_whole_round`: a file cut, or a session stopped, before round 1 ended gave
-a policy of 0 rounds, exit 0) (one line, exit 2, nothing
+a policy of 0 rounds, exit 0), and, unless --partial, none may have lost events
+in its middle (`Rebuilt.lost`: a damaged part, or a recover of a damaged file;
+its policy lacks updates the learner made: it was exit 0, flagged, and a
+1,500-character damage line printed twice) (one line, exit 2, nothing
 written: the others are not rebuilt either, so a rerun after removing it
 writes them all). Writing is all or nothing: every output is written into a
 temporary folder beside --out and moved in only when all are complete, a signal
@@ -37,6 +40,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("recordings", nargs="+", metavar="REC", help="MCAP recordings of sessions")
     p.add_argument("--out", default="rebuilt", help="output folder (default rebuilt/)")
     p.add_argument("--no-plot", action="store_true", help="skip the learning-curve figure")
+    p.add_argument("--partial", action="store_true",
+                   help="also rebuild a recording that lost events in its middle (a damaged file, or one recovered "
+                        "from one), exit 0: its policy lacks the lost updates and is flagged partial (without it: "
+                        "refused, exit 2, nothing written)")
     add_force(p, "existing policy files, curves and the figure in --out")
 
 
@@ -55,6 +62,10 @@ def run(args: argparse.Namespace) -> int:
             raise InputError(f"given twice (also as {seen[key]})", rec)
         seen[key] = rec
     done = [rebuild_recording(rec) for rec in args.recordings]  # one holding no session: refused, nothing written
+    for rebuilt in done:
+        if rebuilt.lost and not args.partial:  # it was exit 0 with a PARTIAL policy and a 1,500-character line, twice
+            raise InputError(f"{rebuilt.lost}: its policy would lack the updates lost with it", rebuilt.source,
+                             fix="--partial writes it anyway, flagged partial", option="--partial")
     planned: dict[Path, str] = {}
     for rebuilt in done:
         for path in output_paths(rebuilt, out):
@@ -87,9 +98,8 @@ def write_all(done, staged: Path, out: Path, args: argparse.Namespace) -> list[s
             f"{f.counts.get('QUpdated', 0)} Q updates"
         lines.append(f"{rebuilt.source}: {f.events} events, {len(picks)} rounds, mean {mean} {PICKS_UNIT}, "
                      f"{updates}"
-                     f"{'; ' + rebuilt.note if rebuilt.note else ''}"
                      f"{'; %d q_before mismatches' % f.q_mismatches if f.q_mismatches else ''}")
-        if rebuilt.partial:
+        if rebuilt.partial:  # the damage (the note) is said here, once, short (reader.EventLog.brief)
             lines.append(f"  PARTIAL session: {rebuilt.partial}")
         lines.append("  " + ", ".join(str(out / p.name) for p in paths))
     if done and not args.no_plot:
