@@ -66,15 +66,16 @@ def run(args: argparse.Namespace) -> int:
         if rebuilt.lost and not args.partial:  # it was exit 0 with a PARTIAL policy and a 1,500-character line, twice
             raise InputError(f"{rebuilt.lost}: its policy would lack the updates lost with it", rebuilt.source,
                              fix="--partial writes it anyway, flagged partial", option="--partial")
-    planned: dict[Path, str] = {}
+    planned: dict[Path, tuple[Path, str]] = {}  # resolved -> (the path as the user will read it, its source)
     for rebuilt in done:
         for path in output_paths(rebuilt, out):
             if path.resolve() in planned:
-                raise OutputError(f"{planned[path.resolve()]} and {rebuilt.source} would write the same output; "
+                raise OutputError(f"{planned[path.resolve()][1]} and {rebuilt.source} would write the same output; "
                                   "rename one", path)
-            planned[path.resolve()] = rebuilt.source
+            planned[path.resolve()] = (path, rebuilt.source)
     figure = out / FIGURE
-    outputs = list(planned) + ([figure] if done and not args.no_plot else [])
+    # named as given: "exists (/tmp/.../rq/x.policy.json)" for `--out rq` (the resolved key)
+    outputs = [path for path, _ in planned.values()] + ([figure] if done and not args.no_plot else [])
     check_outputs(outputs, args.force)
     with output_folder(out, args.force, among_others=True) as staged:
         lines = write_all(done, staged, out, args)

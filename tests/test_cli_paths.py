@@ -74,6 +74,7 @@ def test_a_refused_output_is_named_in_the_one_line(case, template, tmp_path, mon
 # verb's arguments, given relative -> the path as given, which the one line must name (and nothing absolute)
 AS_GIVEN = {
     "rebuild": (["rebuild", "rec.mcap", "--out", "f/x"], "(f)"),
+    "rebuild over an output": (["rebuild", "rec.mcap", "--out", "e"], "exists; --force replaces it (e/rec.policy.json)"),
     "recover": (["recover", "cut.mcap", "-o", "f/x/r.mcap"], "(f)"),
     "study": (["study", "--quiet", "--out", "f/s"], "(f)"),
     "combine": (["combine", "policies", "-o", "f/m.json"], "(f)"),
