@@ -137,15 +137,15 @@ def test_a_resume_with_nothing_to_do_writes_nothing_and_says_so(tmp_path, capsys
     from pairplay.cli.main import main
 
     grid, out = _grid(tmp_path, GRID.replace("seeds = 2", "seeds = 1")), tmp_path / "out"
-    assert main(["sweep", str(grid), "--out", str(out), "--quiet"]) == 0
+    assert main(["sweep", str(grid), "--out", str(out)]) == 0  # not -q: it silences these lines
     assert "2 computed" in capsys.readouterr().out
     before = {p: (p.read_bytes(), p.stat().st_mtime_ns) for p in out.rglob("*") if p.is_file()}
-    assert main(["sweep", str(grid), "--out", str(out), "--quiet"]) == 0
+    assert main(["sweep", str(grid), "--out", str(out)]) == 0  # not -q: it silences these lines
     said = capsys.readouterr().out.splitlines()
     assert said == [f"nothing to do: all 2 cells (2 settings x 1 seeds) were finished; {out / 'sweep.md'} is as it was"]
     assert {p: (p.read_bytes(), p.stat().st_mtime_ns) for p in out.rglob("*") if p.is_file()} == before
     (out / "sweep.md").unlink()  # the summary not written (a run stopped after its cells): written, 0 computed
-    assert main(["sweep", str(grid), "--out", str(out), "--quiet"]) == 0
+    assert main(["sweep", str(grid), "--out", str(out)]) == 0  # not -q: it silences these lines
     assert "0 computed" in capsys.readouterr().out and (out / "sweep.md").is_file()
 
 
