@@ -44,6 +44,7 @@ import numpy as np
 
 from pairplay.outputs import output_file, output_folder, write_text
 from pairplay.processes import check_workers, worker_pool
+from pairplay.schemas.jsonfile import without_bom
 from pairplay.core.rng import SEED_RANGE
 from pairplay.report.study import SettingError, StudySettings, default_reuse_last
 
@@ -114,7 +115,7 @@ def read_grid(path: str | Path) -> Grid:
     path = str(path)
     try:
         with open(path, "rb") as f:
-            data = tomllib.load(f)
+            data = tomllib.loads(without_bom(f.read()).decode("utf-8"))
     except FileNotFoundError:
         raise GridError(f"{path}: no such file") from None
     except tomllib.TOMLDecodeError as exc:
