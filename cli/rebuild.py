@@ -76,7 +76,7 @@ def run(args: argparse.Namespace) -> int:
     figure = out / FIGURE
     # named as given: "exists (/tmp/.../rq/x.policy.json)" for `--out rq` (the resolved key)
     outputs = [path for path, _ in planned.values()] + ([figure] if done and not args.no_plot else [])
-    check_outputs(outputs, args.force)
+    check_outputs(outputs, args.force, inputs=args.recordings)
     with output_folder(out, args.force, among_others=True) as staged:
         lines = write_all(done, staged, out, args)
     work_done()  # everything is written: a signal from now on is reported, and undoes nothing

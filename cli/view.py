@@ -97,7 +97,8 @@ def run(args: argparse.Namespace) -> int:
         raise OptionError("--no-save leaves no output; add --serve or --spawn", "--no-save")
     rrd = None if args.no_save else (args.out or _default_rrd(args))
     if rrd is not None:
-        check_output(rrd, args.force)  # before any work: an existing .rrd stays unless --force
+        # before any work: an existing .rrd stays unless --force, and the recording viewed always
+        check_output(rrd, args.force, inputs=[args.recording] if args.recording else [])
     try:
         with output_path(rrd, args.force) if rrd is not None else contextlib.nullcontext() as tmp:
             done = _view(args, tmp)

@@ -84,14 +84,28 @@ def _try_writing(folder: Path) -> None:
         _remove_empty(created)
 
 
-def check_output(path: str | Path, force: bool = False) -> Path:
+def _file_id(path: Path) -> tuple[int, int] | None:
+    """The file `path` is (device, inode: the same whatever name, link or `..` reaches it), None if none."""
+    try:
+        st = path.stat()
+    except OSError:
+        return None
+    return st.st_dev, st.st_ino
+
+
+def check_output(path: str | Path, force: bool = False, inputs: Iterable[str | Path] = ()) -> Path:
     """`path` as a Path if a file may be written there; OutputError otherwise.
 
-    Refused: a folder, an existing file (unless `force`), a place whose nearest
-    existing folder is a file or read-only."""
+    Refused: a folder, one of the verb's `inputs` (by any name, `force` or not: `combine a.json b.json
+    -o a.json --force` replaced its own input, silently), an existing file (unless `force`), a place
+    whose nearest existing folder is a file or read-only."""
     path = Path(path)
     if path.is_dir():
         raise OutputError("is a folder; give a file name", path)
+    me = _file_id(path)
+    if me is not None and any(_file_id(Path(i)) == me for i in inputs):
+        raise OutputError("is one of the inputs; an input is never replaced, --force or not: give another output",
+                          path)
     if (path.exists() or path.is_symlink()) and not force:
         raise OutputError("exists", path, fix=FORCE_FIX, option="--force")
     if is_live(path):  # --force or not: a live recording (or its journal) is never replaced
@@ -100,12 +114,13 @@ def check_output(path: str | Path, force: bool = False) -> Path:
     return path
 
 
-def check_outputs(paths: Iterable[str | Path], force: bool = False) -> list[Path]:
+def check_outputs(paths: Iterable[str | Path], force: bool = False, inputs: Iterable[str | Path] = ()) -> list[Path]:
     """check_output for each, and no two the same file (outputs of different inputs never collide)."""
     seen: dict[Path, Path] = {}
     out = []
+    inputs = list(inputs)
     for p in paths:
-        p = check_output(p, force)
+        p = check_output(p, force, inputs)
         key = p.absolute()
         if key in seen:
             raise OutputError("two outputs would be written to the same file", p)

@@ -436,6 +436,10 @@ class StudyData:
         with self._lock:
             self.participant(pid)
             out = Path(out) if out else self.folder / "exports" / f"{pid}.zip"
+            inside = out.resolve().relative_to(self.folder).parts if out.resolve().is_relative_to(self.folder) else ()
+            if out.exists() and inside and inside[0] != "exports":  # -o study/journal.jsonl --force replaced it
+                raise StudyDataError(f"{out}: a file of the study folder; an export never replaces one, --force or "
+                                     "not: give another -o")
             if out.exists() and not force:
                 raise StudyDataError(f"{out} exists (use --force to replace it)")
             games = self.games_of(pid)
