@@ -283,11 +283,14 @@ def output_folder(path: str | Path, force: bool = False, owned: tuple[str, ...] 
     in (`_signals_held`): the folder is the earlier run's or this one's, never half of each.
     `among_others`: `path` may hold other files (`rebuild --out`: the caller checked its own
     outputs with check_outputs); a file written replaces its namesake only with `force`, and
-    without it a namesake that appeared meanwhile refuses the whole (nothing moved in)."""
+    without it a namesake that appeared meanwhile refuses the whole (nothing moved in). A `path`
+    without a name of its own (`.`, `..`: `rebuild --out .` was a traceback) is filled from a temporary
+    folder inside it, file by file the same way."""
     path = check_folder(path) if among_others else check_output_folder(path, force)
     created = _missing_folders(path.parent)
     _mkdir(path.parent)
-    tmp = _temp_name(path)
+    nameless = path.name in ("", ".", "..")  # no folder beside it can be named after it, nor renamed onto it
+    tmp = path / _temp_name(Path("staging")).name if nameless else _temp_name(path)
     try:
         tmp.mkdir()
     except OSError as err:
@@ -298,7 +301,7 @@ def output_folder(path: str | Path, force: bool = False, owned: tuple[str, ...] 
             yield tmp
         except OSError as err:
             raise _named_for_user(err, tmp, path) from err
-        if not path.exists() or _is_empty_dir(path):
+        if not nameless and (not path.exists() or _is_empty_dir(path)):
             os.replace(tmp, path)  # rename(2) onto an empty folder is atomic
             done = True
         else:

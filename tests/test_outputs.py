@@ -213,3 +213,16 @@ def test_no_verb_replaces_one_of_its_own_inputs_even_with_force(tmp_path, pairpl
         assert "is one of the inputs; an input is never replaced, --force or not" in r.stderr, (args, r.stderr)
     assert {p: p.read_bytes() for p in tmp_path.rglob("*") if p.is_file()} == before
 
+
+def test_a_folder_named_dot_is_written_into(tmp_path, pairplay):
+    """`rebuild --out .` was a traceback after the last change (no folder beside `.` can be named after it),
+    and `study --out . --force` one before it: such a folder is filled from a temporary folder inside it."""
+    shutil.copy(SAMPLE, tmp_path / "rec.mcap")
+    r = pairplay("rebuild", "rec.mcap", "--out", ".", "--no-plot", cwd=tmp_path)
+    assert r.returncode == 0, r.stderr
+    r = pairplay("study", "--out", ".", "--force", "--games", "1", "--rounds", "3", "--personas", "blind",
+                 "--eval-rounds", "1", "-q", cwd=tmp_path)
+    assert r.returncode == 0 and r.stderr == "", r.stderr
+    names = {p.name for p in tmp_path.iterdir()}
+    assert {"rec.mcap", "rec.policy.json", "rec.curve.csv", "report.md"} <= names
+    assert not [n for n in names if n.startswith(".")]  # no temporary folder left
