@@ -328,7 +328,9 @@ class StudyData:
         but whose end was never journaled (a process gone while it read the recording back:
         GameEnded, as `game_end`). One line for each game said: done, or why its policy is not (a
         recording missing, unfinished, unreadable or partial: the game is left as it is, and the
-        combination refuses to go without it, StudyRunner.combine)."""
+        combination refuses to go without it, StudyRunner.combine). A completed game whose journaled
+        policy file is gone (deleted by hand) is built again the same way and journaled (PolicyBuilt): it
+        was neither rebuilt nor said, since the journal named a policy."""
         lines, changed = [], 0
         with self._lock:
             for g in list(self.state.games.values()):
@@ -340,8 +342,10 @@ class StudyData:
                                      "stopped before it said how the game ended)")
                         changed += 1
                     continue  # otherwise running here or elsewhere, or cut: shown as running, as it was
-                if g.ended.outcome != "completed" or g.ended.policy:
+                gone = bool(g.ended.policy) and not (self.folder / g.ended.policy).is_file()
+                if g.ended.outcome != "completed" or (g.ended.policy and not gone):
                     continue
+                was = f"its policy {g.ended.policy} is missing; " if gone else ""
                 why = ""
                 if not path.is_file():
                     why = f"its recording {g.recording} is missing"
@@ -362,10 +366,10 @@ class StudyData:
                         except (OutputError, OSError) as err:
                             why = f"its policy cannot be written: {_one_line(err)}"
                 if why:
-                    lines.append(f"{g.session}: completed, but no policy built: {why}")
+                    lines.append(f"{g.session}: completed, but {was}no policy built: {why}")
                     continue
                 self.append(j.PolicyBuilt(session=g.session, participant=g.participant, policy=policy))
-                lines.append(f"{g.session}: policy built from its recording: {policy}")
+                lines.append(f"{g.session}: {was}policy built from its recording: {policy}")
                 changed += 1
             if changed:
                 self.write_tables()
