@@ -270,5 +270,5 @@ def test_a_sweep_interrupted_after_its_cells_keeps_them_and_says_so(tmp_path, mo
                    "the same command resumes from them"], err
     assert len(list((out / "cells").glob("*.json"))) == 2
     monkeypatch.undo()
-    assert main(["sweep", str(tmp_path / "grid.toml"), "--out", str(out), "--quiet"]) == 0  # resumes: 0 computed
+    assert main(["sweep", str(tmp_path / "grid.toml"), "--out", str(out)]) == 0  # resumes: 0 computed (-q: silent)
     assert "0 computed" in capsys.readouterr().out
