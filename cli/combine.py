@@ -161,6 +161,8 @@ def run_combine(args) -> int:
     if args.out is not None:
         check_output(args.out, args.force)  # before any work
     policies, files = _load(args)
+    if args.out is not None:
+        check_output(args.out, args.force, inputs=files)  # -o a.json --force replaced its own input a.json
     try:
         exclude = set(comma_items(args.exclude))
     except ValueError as exc:  # `p1,,p2`: a name lost to a typo would be combined

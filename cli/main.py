@@ -24,7 +24,12 @@ signal, by the verb. Every option's help shows its default
 
 Logging, the same for every verb: warnings and errors only by default, `-v/--verbose`
 adds the INFO lines (what the services do), `-q/--quiet` leaves nothing but
-errors (and no progress bars); a verb's results go to stdout either way. The
+errors (and no progress bars). A verb whose results are files it writes
+(`QUIET_SUMMARIES`: study, sweep, rebuild, ...) says on stdout what it wrote, and
+`-q` silences that too (rebuild's per-file lines and the study's tables and
+timings were printed under -q: a new user's trial); a verb whose result is what
+it prints (`profile`, `replay --verify`'s verdict, `protocol status`, `bench`)
+prints it either way, and the listening line of a bus verb (its endpoint) too. The
 options stand after the verb or after its action (`pairplay protocol check
 FILE -v`); `configure_logging` sets them for the run.
 
@@ -144,6 +149,9 @@ def add_log_options(p: argparse.ArgumentParser, default=False) -> None:
                    help="log nothing but errors; no progress bars")
 
 
+# verbs whose stdout only says what they wrote to files: silenced by -q (module rule)
+QUIET_SUMMARIES = frozenset({"study", "sweep", "rebuild", "recover", "combine", "counterfactual", "report",
+                             "participant", "view"})
 LOG_FORMAT = "%(levelname)s %(name)s: %(message)s"
 _handler: logging.Handler | None = None
 
@@ -196,6 +204,16 @@ def main(argv: list[str] | None = None, exiting: bool = False) -> int:
         if not exiting:
             for s, handler in saved.items():
                 signal.signal(s, handler)
+
+
+@contextlib.contextmanager
+def _summary_silenced(quiet: bool):
+    """stdout dropped while a verb of QUIET_SUMMARIES runs under -q (module rule); stderr untouched."""
+    if not quiet:
+        yield
+        return
+    with open(os.devnull, "w") as sink, contextlib.redirect_stdout(sink):
+        yield
 
 
 def signal_received() -> int:
@@ -290,7 +308,8 @@ def _main(argv: list[str]) -> int:
         if interrupts.received:  # a signal came while loading and something swallowed its KeyboardInterrupt
             raise KeyboardInterrupt
         running = True
-        code = int(module.run(args) or 0)
+        with _summary_silenced(args.quiet and args.verb in QUIET_SUMMARIES):
+            code = int(module.run(args) or 0)
         stopped = signal_received()  # at once: a signal the verb's own handler (a bus verb's) met while it ran
         interrupts.work_done()
         if stopped:

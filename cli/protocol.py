@@ -74,7 +74,7 @@ def _study_file(name: str) -> tuple[str, str]:
     if name == EXAMPLE_NAME and not Path(name).exists():
         return example_text(), f"{EXAMPLE_NAME} (shipped example)"
     try:
-        return Path(name).read_text(encoding="utf-8"), name
+        return Path(name).read_text(encoding="utf-8-sig"), name  # as load_study: a byte order mark is fine
     except UnicodeDecodeError:  # as load_study says it (a random or binary file was a traceback)
         raise StudyFileError(f"{name}: cannot read: not UTF-8 text") from None
 

@@ -10,11 +10,17 @@ output may exist unless --force, and every REC must hold a session (a
 SessionStarted: replay/check.py `read_session`; a stub left by an old
 version's failed start, another program's MCAP) with a round recorded whole
 (`no_whole_round`: a file cut, or a session stopped, before round 1 ended gave
-a policy of 0 rounds, exit 0) (one line, exit 2, nothing
+a policy of 0 rounds, exit 0), and, unless --partial, none may have lost events
+in its middle (`Rebuilt.lost`: a damaged part, or a recover of a damaged file;
+its policy lacks updates the learner made: it was exit 0, flagged, and a
+1,500-character damage line printed twice) (one line, exit 2, nothing
 written: the others are not rebuilt either, so a rerun after removing it
-writes them all). Writing is all or nothing (pairplay/outputs.py `all_or_nothing`): a full disk
-or a signal part way removes the outputs and folders this run had made, and
-the error says so. The result lines are printed once everything is written
+writes them all). Writing is all or nothing: every output is written into a
+temporary folder beside --out and moved in only when all are complete, a signal
+waiting while they are (pairplay/outputs.py `output_folder`, `among_others`:
+the files already in --out stay), so a full disk or a Ctrl-C part way leaves
+--out as it was (with --force: the earlier policies, never half old and half
+new) and no folder this run made. The result lines are printed once everything is written
 (cli/interrupts.py `work_done`: a signal after that is reported, nothing undone).
 """
 
@@ -27,17 +33,24 @@ from pairplay.cli.args import add_force
 from pairplay.core.geometry import PERFECT_PICKS, PICKS_UNIT
 
 
+FIGURE = "learning-curves.png"
+
+
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("recordings", nargs="+", metavar="REC", help="MCAP recordings of sessions")
     p.add_argument("--out", default="rebuilt", help="output folder (default rebuilt/)")
     p.add_argument("--no-plot", action="store_true", help="skip the learning-curve figure")
+    p.add_argument("--partial", action="store_true",
+                   help="also rebuild a recording that lost events in its middle (a damaged file, or one recovered "
+                        "from one), exit 0: its policy lacks the lost updates and is flagged partial (without it: "
+                        "refused, exit 2, nothing written)")
     add_force(p, "existing policy files, curves and the figure in --out")
 
 
 def run(args: argparse.Namespace) -> int:
     from pairplay.cli.interrupts import work_done
     from pairplay.errors import InputError, OutputError
-    from pairplay.outputs import all_or_nothing, check_folder, check_outputs
+    from pairplay.outputs import check_folder, check_outputs, output_folder
     from pairplay.replay.check import check_recording
     from pairplay.replay.rebuild import output_paths, rebuild_recording
 
@@ -49,30 +62,36 @@ def run(args: argparse.Namespace) -> int:
             raise InputError(f"given twice (also as {seen[key]})", rec)
         seen[key] = rec
     done = [rebuild_recording(rec) for rec in args.recordings]  # one holding no session: refused, nothing written
-    planned: dict[Path, str] = {}
+    for rebuilt in done:
+        if rebuilt.lost and not args.partial:  # it was exit 0 with a PARTIAL policy and a 1,500-character line, twice
+            raise InputError(f"{rebuilt.lost}: its policy would lack the updates lost with it", rebuilt.source,
+                             fix="--partial writes it anyway, flagged partial", option="--partial")
+    planned: dict[Path, tuple[Path, str]] = {}  # resolved -> (the path as the user will read it, its source)
     for rebuilt in done:
         for path in output_paths(rebuilt, out):
             if path.resolve() in planned:
-                raise OutputError(f"{planned[path.resolve()]} and {rebuilt.source} would write the same output; "
+                raise OutputError(f"{planned[path.resolve()][1]} and {rebuilt.source} would write the same output; "
                                   "rename one", path)
-            planned[path.resolve()] = rebuilt.source
-    figure = out / "learning-curves.png"
-    outputs = list(planned) + ([figure] if done and not args.no_plot else [])
-    check_outputs(outputs, args.force)
-    with all_or_nothing(outputs):
-        lines = write_all(done, out, figure, args)
+            planned[path.resolve()] = (path, rebuilt.source)
+    figure = out / FIGURE
+    # named as given: "exists (/tmp/.../rq/x.policy.json)" for `--out rq` (the resolved key)
+    outputs = [path for path, _ in planned.values()] + ([figure] if done and not args.no_plot else [])
+    check_outputs(outputs, args.force, inputs=args.recordings)
+    with output_folder(out, args.force, among_others=True) as staged:
+        lines = write_all(done, staged, out, args)
     work_done()  # everything is written: a signal from now on is reported, and undoes nothing
     print("\n".join(lines))
     return 0
 
 
-def write_all(done, out: Path, figure: Path, args: argparse.Namespace) -> list[str]:
-    """Write each rebuilt recording's outputs and the figure; the lines saying what was written
-    (printed by the caller only once all of it is: `all_or_nothing` may remove it)."""
+def write_all(done, staged: Path, out: Path, args: argparse.Namespace) -> list[str]:
+    """Write each rebuilt recording's outputs and the figure into `staged` (output_folder's); the
+    lines saying what was written, by the names they will have in `out` (printed by the caller only
+    once all of it is moved in)."""
     from pairplay.replay.rebuild import write_outputs
     lines = []
     for rebuilt in done:
-        paths = write_outputs(rebuilt, out, args.force)
+        paths = write_outputs(rebuilt, staged)
         f = rebuilt.fold
         picks = f.picks_per_round()
         mean = f"{sum(picks) / len(picks):.1f}" if picks else "-"
@@ -80,13 +99,13 @@ def write_all(done, out: Path, figure: Path, args: argparse.Namespace) -> list[s
             f"{f.counts.get('QUpdated', 0)} Q updates"
         lines.append(f"{rebuilt.source}: {f.events} events, {len(picks)} rounds, mean {mean} {PICKS_UNIT}, "
                      f"{updates}"
-                     f"{'; ' + rebuilt.note if rebuilt.note else ''}"
                      f"{'; %d q_before mismatches' % f.q_mismatches if f.q_mismatches else ''}")
-        if rebuilt.partial:
+        if rebuilt.partial:  # the damage (the note) is said here, once, short (reader.EventLog.brief)
             lines.append(f"  PARTIAL session: {rebuilt.partial}")
-        lines.append("  " + ", ".join(str(p) for p in paths))
+        lines.append("  " + ", ".join(str(out / p.name) for p in paths))
     if done and not args.no_plot:
-        lines.append(f"  {plot_curves(done, figure, args.force)}")
+        plot_curves(done, staged / FIGURE)
+        lines.append(f"  {out / FIGURE}")
     return lines
 
 

@@ -53,7 +53,8 @@ def run(args: argparse.Namespace) -> int:
         from pairplay.services.verify import verify_recording
 
         v = verify_recording(args.recording)
-        beyond = "where the session stopped, not compared" if v.excused else "the recording"
+        beyond = ("the damaged part, not compared" if v.lost_part else
+                  "where the session stopped, not compared" if v.excused else "the recording")
         for c in v.checks:
             state = "ok" if c.ok(v.excused) else "DIFFERS"
             print(f"{c.service:12s} {c.compared:7d} derived events compared: {state}"
@@ -79,9 +80,9 @@ def run(args: argparse.Namespace) -> int:
     from pairplay.services.replayer import republish
 
     if not log.events:
-        raise InputError(f"holds no events to replay{' (' + log.error + ')' if log.error else ''}", args.recording)
+        raise InputError(f"holds no events to replay{' (' + log.brief + ')' if log.brief else ''}", args.recording)
     if not log.whole:
-        print(f"{args.recording}: not whole ({log.error}); replaying the {len(log.events)} events of its intact parts")
+        print(f"{args.recording}: not whole ({log.brief}); replaying the {len(log.events)} events of its intact parts")
     stop = threading.Event()
     stop_on_signals(stop)
     with Bus(options_from_args(args), stop=stop) as bus:

@@ -10,7 +10,9 @@ services read the config from the bus. The first line printed is `listening <end
 connect further processes to this one. A recorder whose session has a
 recording in --out continues it only if the services of the session on the bus
 sent the very events it holds (a recorder restarted within the live session,
-services/recorder.py `same_live_session`); otherwise it refuses in one line.
+services/recorder.py `same_live_session`); otherwise it refuses in one line,
+before its `listening` line (a live recording's before the bus opens: the
+listening line came first, then the refusal).
 """
 
 from __future__ import annotations
@@ -66,27 +68,31 @@ def _run(args: argparse.Namespace, stop: threading.Event) -> int:
         args.session = config.session
     elif not args.session:
         raise OptionError(f"--session is required for the {args.service}", "--session")
+    earlier = None
     if args.service == "recorder":
+        from pairplay.livelock import is_live
+        from pairplay.services.recorder import RecordingExists, latest_file, same_live_session
         check_folder(args.out)
+        path = Path(args.out) / f"{args.session}.mcap"
+        earlier = latest_file(path)
+        # before the bus opens: its listening line came first, then this refusal (a new user's trial)
+        if earlier is not None and is_live(earlier):  # its recorder is running: not ours to continue
+            raise RecordingExists(earlier, args.session, live=True)
     bus = Bus(options_from_args(args))  # a BusError (one line, exit 2) if it cannot open
     node = None
     try:
-        # the first line: where we listen (an orchestrator connects there), and what a game waits for
-        waits = waiting_for(args.wait_for) if args.service == "game" else ""
-        print(f"listening {' '.join(bus.locators()) or '(no listener)'}{' - ' + waits if waits else ''}", flush=True)
         if args.service == "recorder":
-            from pairplay.livelock import is_live
-            from pairplay.services.recorder import (
-                RECORDER_SWITCH_S, Recorder, RecordingExists, latest_file, same_live_session)
-            path = Path(args.out) / f"{args.session}.mcap"
-            earlier = latest_file(path)
-            if earlier is not None and is_live(earlier):  # its recorder is running: not ours to continue
-                raise RecordingExists(earlier, args.session, live=True)
-            # a recorder restarted within the live session continues its file; a new session's is refused
+            # a recorder restarted within the live session continues its file; a new session's is refused,
+            # before the listening line (asking the bus takes up to 3 s; a refusal is the one line said)
             restart = earlier is not None and same_live_session(bus, args.session, path)
             if earlier is not None and not restart:
                 raise RecordingExists(earlier, args.session, "no live session on the bus sent what it holds; "
                                       "choose another --session (a recording is never replaced)")
+        # the first line: where we listen (an orchestrator connects there), and what a game waits for
+        waits = waiting_for(args.wait_for) if args.service == "game" else ""
+        print(f"listening {' '.join(bus.locators()) or '(no listener)'}{' - ' + waits if waits else ''}", flush=True)
+        if args.service == "recorder":
+            from pairplay.services.recorder import RECORDER_SWITCH_S, Recorder
             recorder = Recorder(bus, args.session, path, on_failure=lambda _why: stop.set(), restart=restart)
             sys.setswitchinterval(RECORDER_SWITCH_S)  # this process is the recorder alone (see its rule)
             recorder.start()

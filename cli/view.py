@@ -11,7 +11,10 @@ be written is one line naming the user's path, never our temporary one.
 A signal (exit 130/143, cli/main.py) before the source ended keeps what was
 drawn as `<stem>.partial.rrd` (a partial view of a live session may be
 wanted; it never takes the complete view's name, and its event log says it is
-partial); before the first event nothing is saved. Output: one line of result
+partial); before the first event nothing is saved. A recording its recorder
+is still writing (pairplay/livelock.py) is drawn as far as it goes and saved
+as `<stem>.partial.rrd` too, the result line saying the recording is live (it
+was saved as `<stem>.rrd`, a part passed off as the whole). Output: one line of result
 on stdout (saved); interrupted, its one line goes to stderr, as every verb's;
 what the view does is INFO (-v); what it noticed (a malformed message, a gap)
 is a WARNING.
@@ -38,6 +41,7 @@ from pathlib import Path
 
 from pairplay.cli.args import add_force, float_at_least, int_at_least, port_or_any, session_id, speed
 from pairplay.errors import InputError, OptionError, OutputError, UserError
+from pairplay.livelock import LIVE, is_live
 from pairplay.outputs import check_output, output_path
 from pairplay.replay.check import read_session
 from pairplay.services.bus import add_bus_arguments
@@ -88,8 +92,10 @@ def _default_rrd(args: argparse.Namespace) -> Path:
 def run(args: argparse.Namespace) -> int:
     if not args.recording and not args.session:
         raise OptionError("give --session ID (live) or --recording REC", "what to view")
+    live = False
     if args.recording:
         held = read_session(args.recording)  # a file holding no session is refused before rerun loads
+        live = held.live or is_live(args.recording)  # its recorder still writes it: what it holds is a part
         if args.session:  # before rerun loads and anything is drawn
             if not any(r.event.session == args.session for r in held.events):
                 raise InputError(f"holds no events of session {args.session}; nothing saved", args.recording)
@@ -97,13 +103,20 @@ def run(args: argparse.Namespace) -> int:
         raise OptionError("--no-save leaves no output; add --serve or --spawn", "--no-save")
     rrd = None if args.no_save else (args.out or _default_rrd(args))
     if rrd is not None:
-        check_output(rrd, args.force)  # before any work: an existing .rrd stays unless --force
+        # before any work: an existing .rrd stays unless --force, and the recording viewed always
+        check_output(rrd, args.force, inputs=[args.recording] if args.recording else [])
     try:
         with output_path(rrd, args.force) if rrd is not None else contextlib.nullcontext() as tmp:
             done = _view(args, tmp)
-            if done.partial and rrd is not None:  # never under the name of a complete view (module rule)
+            # never under the name of a complete view (module rule), nor one of a live recording: it was saved
+            # as s1.rrd, a part of the session passed off as the whole (a new user's trial)
+            if (done.partial or live) and rrd is not None:
                 raise KeptPartial(keep_partial(tmp, rrd, args.force))
     except KeptPartial as kept:
+        if not done.partial:  # a live recording, drawn as far as it goes: a result, said on stdout
+            print(f"saved {kept.path}: {_counts(done)}; partial: {args.recording} {LIVE}, view it again once "
+                  "its session has ended")
+            return 0
         print(f"pairplay view: interrupted ({done.why}) after {_counts(done)}, before the source ended; "
               f"the partial view is in {kept.path}", file=sys.stderr)
         return 0
@@ -116,7 +129,8 @@ def run(args: argparse.Namespace) -> int:
         print(f"pairplay view: interrupted ({done.why}) after {_counts(done)}, before the source ended; nothing saved",
               file=sys.stderr)
     else:
-        print(f"saved {rrd}: {_counts(done)}" if rrd is not None else f"viewed {_counts(done)}")
+        print(f"saved {rrd}: {_counts(done)}" if rrd is not None else
+              f"viewed {_counts(done)}{f'; partial: {args.recording} {LIVE}' if live else ''}")
     return 0
 
 

@@ -11,7 +11,9 @@ built in a temporary folder and renamed as a whole; written with `force` into
 a folder that holds an earlier run, it also removes the earlier run's files
 that this run did not write, those its writer names as its own (`owned`:
 a study's sections of a persona no longer in it looked current), and never
-another file. Refusals are
+another file; one that holds other files too (`among_others`: `rebuild --out`,
+a sweep's summary beside its cells) gets its files moved in together the same
+way. Refusals are
 `OutputError`s naming the path, raised before any work where the caller
 checks first (`check_output`, `check_outputs`, `check_folder`: each makes the
 folders it needs and a file there, then removes them, so a place the system
@@ -46,7 +48,9 @@ FORCE_FIX = "--force replaces it"  # shown only by a verb that has --force (erro
 
 
 def _existing_ancestor(path: Path) -> Path:
-    p = path.absolute().parent
+    """The nearest existing folder above `path`, named as the user gave it (relative stays relative:
+    a refusal named /tmp/work/afile where the user typed afile/x)."""
+    p = path.parent
     while not p.exists() and p != p.parent:
         p = p.parent
     return p
@@ -59,7 +63,7 @@ def _check_parent(path: Path, probe: bool = True) -> None:
     if not os.access(parent, os.W_OK | os.X_OK):
         raise OutputError("cannot write there: the folder is read-only", parent)
     if probe:
-        _try_writing(path.absolute().parent)
+        _try_writing(path.parent)
 
 
 def _try_writing(folder: Path) -> None:
@@ -80,14 +84,28 @@ def _try_writing(folder: Path) -> None:
         _remove_empty(created)
 
 
-def check_output(path: str | Path, force: bool = False) -> Path:
+def _file_id(path: Path) -> tuple[int, int] | None:
+    """The file `path` is (device, inode: the same whatever name, link or `..` reaches it), None if none."""
+    try:
+        st = path.stat()
+    except OSError:
+        return None
+    return st.st_dev, st.st_ino
+
+
+def check_output(path: str | Path, force: bool = False, inputs: Iterable[str | Path] = ()) -> Path:
     """`path` as a Path if a file may be written there; OutputError otherwise.
 
-    Refused: a folder, an existing file (unless `force`), a place whose nearest
-    existing folder is a file or read-only."""
+    Refused: a folder, one of the verb's `inputs` (by any name, `force` or not: `combine a.json b.json
+    -o a.json --force` replaced its own input, silently), an existing file (unless `force`), a place
+    whose nearest existing folder is a file or read-only."""
     path = Path(path)
     if path.is_dir():
         raise OutputError("is a folder; give a file name", path)
+    me = _file_id(path)
+    if me is not None and any(_file_id(Path(i)) == me for i in inputs):
+        raise OutputError("is one of the inputs; an input is never replaced, --force or not: give another output",
+                          path)
     if (path.exists() or path.is_symlink()) and not force:
         raise OutputError("exists", path, fix=FORCE_FIX, option="--force")
     if is_live(path):  # --force or not: a live recording (or its journal) is never replaced
@@ -96,12 +114,13 @@ def check_output(path: str | Path, force: bool = False) -> Path:
     return path
 
 
-def check_outputs(paths: Iterable[str | Path], force: bool = False) -> list[Path]:
+def check_outputs(paths: Iterable[str | Path], force: bool = False, inputs: Iterable[str | Path] = ()) -> list[Path]:
     """check_output for each, and no two the same file (outputs of different inputs never collide)."""
     seen: dict[Path, Path] = {}
     out = []
+    inputs = list(inputs)
     for p in paths:
-        p = check_output(p, force)
+        p = check_output(p, force, inputs)
         key = p.absolute()
         if key in seen:
             raise OutputError("two outputs would be written to the same file", p)
@@ -253,18 +272,25 @@ def check_output_folder(path: str | Path, force: bool = False) -> Path:
 
 
 @contextlib.contextmanager
-def output_folder(path: str | Path, force: bool = False, owned: tuple[str, ...] = ()) -> Iterator[Path]:
+def output_folder(path: str | Path, force: bool = False, owned: tuple[str, ...] = (),
+                  among_others: bool = False) -> Iterator[Path]:
     """A new temporary folder beside `path` to fill; when the block ends without error it
     becomes `path`. A non-empty `path` is refused unless `force`; with `force` each file
     written replaces its namesake there, a file there that `owned` names (the writer's own
     outputs: patterns of relative paths, `policies/*/game-*.json`, see `is_owned`) and that this
     run did not write is removed (an earlier run's, stale beside this one's), with the folders
     that leaves empty, and every other file stays. SIGINT/SIGTERM wait while the files are moved
-    in (`_signals_held`): the folder is the earlier run's or this one's, never half of each."""
-    path = check_output_folder(path, force)
-    created = _missing_folders(path.absolute().parent)
-    _mkdir(path.absolute().parent)
-    tmp = _temp_name(path)
+    in (`_signals_held`): the folder is the earlier run's or this one's, never half of each.
+    `among_others`: `path` may hold other files (`rebuild --out`: the caller checked its own
+    outputs with check_outputs); a file written replaces its namesake only with `force`, and
+    without it a namesake that appeared meanwhile refuses the whole (nothing moved in). A `path`
+    without a name of its own (`.`, `..`: `rebuild --out .` was a traceback) is filled from a temporary
+    folder inside it, file by file the same way."""
+    path = check_folder(path) if among_others else check_output_folder(path, force)
+    created = _missing_folders(path.parent)
+    _mkdir(path.parent)
+    nameless = path.name in ("", ".", "..")  # no folder beside it can be named after it, nor renamed onto it
+    tmp = path / _temp_name(Path("staging")).name if nameless else _temp_name(path)
     try:
         tmp.mkdir()
     except OSError as err:
@@ -275,7 +301,7 @@ def output_folder(path: str | Path, force: bool = False, owned: tuple[str, ...] 
             yield tmp
         except OSError as err:
             raise _named_for_user(err, tmp, path) from err
-        if not path.exists() or _is_empty_dir(path):
+        if not nameless and (not path.exists() or _is_empty_dir(path)):
             os.replace(tmp, path)  # rename(2) onto an empty folder is atomic
             done = True
         else:
@@ -283,13 +309,16 @@ def output_folder(path: str | Path, force: bool = False, owned: tuple[str, ...] 
             # half this run's and half the earlier one's, "nothing more was written" (a new user's trial), so
             # the loop finishes first and the signal is delivered after it
             with _signals_held():
+                files = [(src, path / src.relative_to(tmp)) for src in sorted(tmp.rglob("*")) if src.is_file()]
+                if not force:
+                    for _, dst in files:
+                        if dst.exists() or dst.is_symlink():
+                            raise OutputError("appeared while it was being written; not replaced", dst)
                 written = set()
-                for src in sorted(tmp.rglob("*")):
-                    if src.is_file():
-                        dst = path / src.relative_to(tmp)
-                        _mkdir(dst.parent)
-                        os.replace(src, dst)
-                        written.add(dst.relative_to(path).as_posix())
+                for src, dst in files:
+                    _mkdir(dst.parent)
+                    os.replace(src, dst)
+                    written.add(dst.relative_to(path).as_posix())
                 _remove_stale(path, written, owned)
                 done = True  # before the held signal is delivered
     finally:
@@ -338,35 +367,3 @@ def _remove_stale(path: Path, written: set[str], owned: tuple[str, ...]) -> None
                 while parent != path and not any(parent.iterdir()):
                     parent.rmdir()
                     parent = parent.parent
-
-
-@contextlib.contextmanager
-def all_or_nothing(outputs: list[Path]) -> Iterator[None]:
-    """The files `outputs` (each written by output_file/output_path in the block) are written all, or
-    none of those that did not exist before: an error (a full disk) or a signal part way removes the
-    ones this run had made, and the folders it had made for them (an interrupted `rebuild --out new/`
-    left new/ behind, empty). An OSError then says so, and names, with --force, the files it had
-    already replaced (each complete: output_path), which stay."""
-    outputs = [Path(p) for p in outputs]
-
-    def stamp(p: Path):
-        st = p.stat()
-        return st.st_ino, st.st_mtime_ns
-    before = {p: stamp(p) for p in outputs if p.exists()}
-    folders = sorted({f for p in outputs for f in _missing_folders(p.parent)}, key=lambda f: -len(f.parts))
-    try:
-        yield
-    except BaseException as err:
-        made = [p for p in outputs if p not in before and p.exists()]
-        for p in made:
-            p.unlink(missing_ok=True)
-        for folder in folders:  # deepest first; a folder someone else filled meanwhile stays
-            with contextlib.suppress(OSError):
-                folder.rmdir()
-        replaced = [str(p) for p in before if p.exists() and stamp(p) != before[p]]
-        if isinstance(err, OSError):
-            note = f"removed the {len(made)} outputs written before it" if made else "nothing written"
-            if replaced:
-                note += f"; already replaced (complete, kept): {', '.join(replaced)}"
-            raise OSError(err.errno, f"{err.strerror or err}; {note}", err.filename) from err
-        raise

@@ -83,7 +83,7 @@ def no_session(log) -> str:
         topics = sorted({topic for topic, _ in log.channels.values()})[:2]
         return (f"holds no session: not a pairplay recording ({foreign} messages, none a pairplay event; "
                 f"channels {', '.join(repr(t) for t in topics)})")
-    lost = f", and parts of it are damaged ({log.error})" if log.damage else ""
+    lost = f", and parts of it are damaged ({log.brief})" if log.damage else ""
     # a recorder that finished its file says why it stopped, even before any event came (a signal
     # during the game's wait for its services, on a loaded machine: test_session_end)
     n = len(log.events) + sum(log.skipped.values())

@@ -15,7 +15,12 @@ sequence numbers rising in file order (a pairplay recorder writes them so:
 chunks out of order break it), the data section CRC, the summary CRC, the
 Chunk Indexes against the chunks actually found (offsets, lengths, times) and
 the Statistics' counts. Each finding is a `Damage` naming the part (which
-chunk, the data end, the summary, the footer, the file's end) and its bytes.
+chunk, the data end, the summary, the footer, the file's end) and its bytes;
+one whose records are lost (a chunk that does not open, unreadable bytes) says
+where they were among the records read (`lost_at`) and what was lost (`lost`),
+and `Scan.brief` says in one short line what was lost where (the data-section
+CRC that a lost chunk breaks too is not repeated there: `describe` has every
+finding, and was 1,500 characters printed twice by `rebuild`).
 
 A damaged part is never read as if it were whole: a chunk whose bytes fail a
 check gives none of its records. The rest is kept: after unreadable bytes the
@@ -30,6 +35,7 @@ from __future__ import annotations
 import struct
 import zlib
 from dataclasses import dataclass, field
+from dataclasses import replace as _replace
 from io import BytesIO
 from pathlib import Path
 from typing import Any, Callable
@@ -64,6 +70,8 @@ class Damage:
     offset: int  # the first byte of the affected part
     part: str  # "chunk 3 (bytes 120-4096)", "data end", "summary", "footer", "file end", ...
     what: str
+    lost_at: int = -1  # records lost here: how many records of the scan came before them (-1: none lost)
+    lost: str = ""  # what was lost, short: "its 139 messages (log times ...)", "the records there"
 
     def __str__(self) -> str:
         return f"{self.part}: {self.what}"
@@ -78,6 +86,7 @@ class ChunkSeen:
     end: int
     intact: bool
     messages: list[tuple[int, int, int]] = field(default_factory=list)  # (offset in chunk, channel, log time)
+    listed: int = 0  # a chunk that does not open: the messages its Message Indexes list (lost with it)
     by_channel: dict[int, set[tuple[int, int]]] | None = field(default=None, repr=False)  # channel -> (offset, time)
 
 
@@ -115,6 +124,26 @@ class Scan:
                      else f"ends after its last whole record (byte {self.size}) without MCAP's summary and footer")
             parts.append(f"file end: {where}" + (f" ({self.cut_what})" if self.cut_what else ""))
         return "; ".join(parts) if parts else "whole"
+
+    def brief(self) -> str:
+        """One short line: what was lost where ("chunk 7 (bytes 79265-85442): its 139 messages lost (zstd
+        data does not decompress)"), then the cut; without a lost part, `describe`."""
+        lost = [d for d in self.damage if d.lost_at >= 0]
+        if not lost:
+            return self.describe()
+        def said(d: Damage) -> str:
+            return f"{d.part}: {d.lost} lost ({d.what.split(': its records')[0]})"
+        if len(lost) <= 2:
+            parts = [said(d) for d in lost]
+        else:  # every lost chunk named was a line of thousands of characters
+            parts = [f"{len(lost)} parts lost, the first {said(lost[0])}, the last {lost[-1].part}"]
+        # the data section's CRC covers the lost bytes: it fails with them, a consequence, not news
+        others = sum(1 for d in self.damage if d.lost_at < 0 and d.part != "data section")
+        if others:
+            parts.append(f"{others} more finding{'s' * (others != 1)} (pairplay recover names each)")
+        if self.truncated:
+            parts.append(f"file end: cut at byte {self.cut_at} of {self.size}")
+        return "; ".join(parts)
 
 
 _MESSAGE_HEAD = struct.Struct("<HIQQ")
@@ -224,14 +253,16 @@ class _Walker:
         self.scan = Scan(path, size=len(data))
         self.last_seq: dict[int, tuple[int, int]] = {}  # channel -> (sequence, chunk number)
         self.last_intact: ChunkSeen | None = None  # the last chunk whose records were read
+        self.lost_chunk: tuple[int, ChunkSeen] | None = None  # the last chunk that did not open, its Damage's index
         self.messages = 0  # Message records read (the Statistics' count is checked against it)
         self.data_end_at = -1
         self.chunk_indexes: list[ChunkIndex] = []
         self.statistics: Statistics | None = None
         self.summary_records: list[Any] = []
 
-    def damage(self, offset: int, part: str, what: str) -> None:
-        self.scan.damage.append(Damage(offset, part, what))
+    def damage(self, offset: int, part: str, what: str, lost: str = "") -> None:
+        """A finding; `lost`: what it lost (records that are not read), said where they were."""
+        self.scan.damage.append(Damage(offset, part, what, len(self.scan.records) if lost else -1, lost))
 
     def record_at(self, pos: int) -> tuple[int, int, Any]:
         """(opcode, end, record) of the record at `pos` (Unreadable if it is not one)."""
@@ -304,12 +335,13 @@ class _Walker:
                     scan.truncated, scan.cut_at = True, pos
                     return scan
                 self.damage(pos, f"bytes {pos}-{nxt}", "a record runs past the end of the file: its length is "
-                            "damaged")
+                            "damaged", lost="the records there")
                 pos = nxt
                 continue
             except Unreadable as err:
                 nxt = self.resync(pos)
-                self.damage(pos, f"bytes {pos}-{nxt if nxt >= 0 else len(data)}", f"unreadable: {err}")
+                self.damage(pos, f"bytes {pos}-{nxt if nxt >= 0 else len(data)}", f"unreadable: {err}",
+                            lost="the records there")
                 if nxt < 0:
                     scan.truncated, scan.cut_at = True, pos
                     return scan
@@ -347,7 +379,8 @@ class _Walker:
         try:
             records, seen.messages = _open_chunk(chunk)
         except Unreadable as err:
-            self.damage(pos, part, f"{err}: its records are not read")
+            self.damage(pos, part, f"{err}: its records are not read", lost="its messages")
+            self.lost_chunk = (len(self.scan.damage) - 1, seen)
             return seen
         previous = self.last_intact
         if previous is not None and chunk.message_start_time < previous.start:
@@ -381,7 +414,11 @@ class _Walker:
         if chunk is None:
             self.damage(pos, f"message index (byte {pos})", "a Message Index with no chunk before it")
             return
-        if not chunk.intact:
+        if not chunk.intact:  # its messages are lost: how many, as its indexes say
+            chunk.listed += len(index.records)
+            if self.lost_chunk is not None and self.lost_chunk[1] is chunk:
+                k = self.lost_chunk[0]
+                self.scan.damage[k] = _replace(self.scan.damage[k], lost=f"its {chunk.listed} messages")
             return
         if chunk.by_channel is None:  # once per chunk, not once per index
             chunk.by_channel = {}

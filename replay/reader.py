@@ -86,8 +86,10 @@ class EventLog:
     bad: list[BadMessage] = field(default_factory=list)
     truncated: bool = False
     error: str = ""  # what is wrong with the file: every damaged part and the cut ("" if whole)
+    brief: str = ""  # the same in one short line: what was lost where (mcapscan's `Scan.brief`)
     live: bool = False  # its end is missing because its recorder is still writing it, not a crash
     damage: list[Damage] = field(default_factory=list)  # the parts that failed a check (not read)
+    lost_from: int = -1  # where the first part whose records are lost was, as an index of `events` (-1: none)
     unknown: list[UnknownEvent] = field(default_factory=list)
     channels: dict[int, tuple[str, str]] = field(default_factory=dict)  # id -> (topic, schema name)
     skipped: dict[str, int] = field(default_factory=dict)  # read_log(only=...): events not decoded, by tag
@@ -129,6 +131,9 @@ def gc_paused():
             gc.enable()
 
 
+_LOST_HERE = object()  # _read_log's marker among the records: a damaged part's lost records were here
+
+
 def read_log(path: str | Path, only: frozenset[str] | None = None) -> EventLog:
     """Read a recording (whole, cut or damaged); see the module rule.
 
@@ -150,7 +155,12 @@ def _read_log(path: str | Path, only: frozenset[str] | None = None) -> EventLog:
     skipped: dict[str, int] = log.skipped
     decode, head = decode_event, _tagged.decode
     append = log.events.append
-    for record in checked.summary_records + checked.records:
+    records = checked.summary_records + checked.records
+    lost = [d.lost_at for d in checked.damage if d.lost_at >= 0]
+    if lost:  # a marker where the first lost part's records were (`lost_from`)
+        at = len(checked.summary_records) + min(lost)
+        records = [*records[:at], _LOST_HERE, *records[at:]]
+    for record in records:
         if type(record) is Message:  # most records (mcap's record classes have no subclasses)
             key = channels.get(record.channel_id)
             if key is None:
@@ -185,11 +195,15 @@ def _read_log(path: str | Path, only: frozenset[str] | None = None) -> EventLog:
             log.schemas[record.id] = (record.name, record.encoding, record.data)
         elif isinstance(record, Metadata):
             log.metadata[record.name] = dict(record.metadata)
+        elif record is _LOST_HERE:
+            log.lost_from = len(log.events)
     log.truncated, log.damage = checked.truncated, checked.damage
     log.error = "" if checked.whole else checked.describe()
+    log.brief = "" if checked.whole else checked.brief()
     if log.truncated and is_live(path):  # not cut: its recorder is still writing it (pairplay/livelock.py)
         log.live = True
         log.error = f"{LIVE}, read as far as it goes; {log.error}"
+        log.brief = f"{LIVE}, read as far as it goes; {log.brief}"
     return log
 
 

@@ -12,7 +12,10 @@ so is one whose session has no round recorded whole (`NoWholeRound`: check.py
 `no_whole_round`; it gave a policy of 0 rounds). A
 policy from a partial session (interrupted, aborted, failed, cut short,
 damaged or completed by `pairplay recover`) says why in its file's `partial`
-field and in `Rebuilt.partial`.
+field and in `Rebuilt.partial`; one whose file lost events in its middle (a
+damaged part; a recover of such a file) says what in `Rebuilt.lost`: its
+policy lacks updates the learner made, so it is no state the learner was ever
+in (`pairplay rebuild` writes it only with --partial).
 """
 
 from __future__ import annotations
@@ -54,6 +57,7 @@ class Rebuilt:
     truncated: bool
     note: str = ""
     partial: str = ""  # why the session is not complete ("" if it is)
+    lost: str = ""  # what the file lost in its middle, short: a damaged part, or parts lost before a recover
 
 
 def partial_reason(fold: SessionFold, note: str = "", recovered: dict[str, str] | None = None) -> str:
@@ -117,13 +121,18 @@ def rebuild_recording(path: str | Path) -> Rebuilt:
     forged = contradiction(r.event for r in log.events)
     if forged:
         raise RebuildError(f"{forged}: not rebuilt", path)
-    empty = no_whole_round((r.event for r in log.events), log.truncated, log.error if log.damage else "")
+    empty = no_whole_round((r.event for r in log.events), log.truncated, log.brief if log.damage else "")
     if empty:
         raise NoWholeRound(f"{empty}; nothing to rebuild", path)
-    note = "" if log.whole else f"{'damaged' if log.damage else 'truncated'}: {log.error}"
-    return rebuild_events((r.event for r in log.events), str(path), log.truncated, note,
-                          log.metadata.get("pairplay.recovered"), log.metadata.get("pairplay.recorder.end"),
-                          skipped=log.skipped)
+    note = "" if log.whole else f"{'damaged' if log.damage else 'truncated'}: {log.brief}"
+    recovered = log.metadata.get("pairplay.recovered") or {}
+    rebuilt = rebuild_events((r.event for r in log.events), str(path), log.truncated, note,
+                             recovered, log.metadata.get("pairplay.recorder.end"), skipped=log.skipped)
+    if log.lost_from >= 0:
+        rebuilt.lost = f"the file is damaged ({log.brief})"
+    elif recovered.get("damaged", "[]") not in ("", "[]"):
+        rebuilt.lost = "it was recovered from a damaged file, whose damaged parts are lost"
+    return rebuilt
 
 
 CURVE_COLUMNS = ("round", "turns", "picks", "matches", "reward", "learned", "inconsistent")

@@ -163,10 +163,11 @@ class StudyData:
 
     def __init__(self, folder: str | Path):
         self.folder = Path(folder).resolve()
+        self.given = Path(folder)  # as the user gave it: what a refusal names (it named the resolved path)
         if not (self.folder / JOURNAL).is_file():
-            raise StudyDataError(f"{self.folder}: not a study folder (no {JOURNAL}; `pairplay protocol init` makes one)")
+            raise StudyDataError(f"{self.given}: not a study folder (no {JOURNAL}; `pairplay protocol init` makes one)")
         try:
-            self.study: Study = load_study(self.folder / STUDY_FILE)
+            self.study: Study = load_study(self.given / STUDY_FILE)
         except StudyFileError as err:
             raise StudyDataError(str(err)) from None
         self.settings = msgspec.json.decode((self.folder / SETTINGS).read_bytes()) \
@@ -180,14 +181,14 @@ class StudyData:
     @classmethod
     def create(cls, folder: str | Path, study_file: str | Path, key_file: str | Path | None = None) -> "StudyData":
         """A new study folder from a study file; StudyFileError / StudyDataError if it cannot be."""
-        folder = Path(folder).resolve()
+        given, folder = Path(folder), Path(folder).resolve()
         load_study(study_file)  # refuse a bad file before making anything
         if (folder / JOURNAL).exists():
-            raise StudyDataError(f"{folder}: already a study folder")
+            raise StudyDataError(f"{given}: already a study folder")
         if key_file is not None:
             key = Path(key_file).resolve()
             if key.is_relative_to(folder):
-                raise StudyDataError(f"--key-file {key}: must be outside the study folder {folder} "
+                raise StudyDataError(f"--key-file {key_file}: must be outside the study folder {given} "
                                      "(names never sit beside the recordings)")
             open_key_file(key).close()  # made now, owner-only: a path that cannot hold it is said here, not at
             # the first registration with a name (an existing key file is kept as it is, only its mode tightened)
@@ -202,7 +203,7 @@ class StudyData:
         created = j.StudyCreated(study=study.study.id, study_file_sha256=hashlib.sha256(text).hexdigest(),
                                  software_version=__version__, time_ns=time.time_ns())
         atomic_write(folder / JOURNAL, j.encode_line(created))
-        return cls(folder)
+        return cls(given)
 
     # -- the journal ---------------------------------------------------------
     def read_journal(self) -> list[j.JournalEvent]:
@@ -214,7 +215,7 @@ class StudyData:
                 try:
                     events.append(j.decode_line(line))
                 except (msgspec.DecodeError, msgspec.ValidationError) as err:
-                    raise StudyDataError(f"{self.folder / JOURNAL}:{n}: {err}") from None
+                    raise StudyDataError(f"{self.given / JOURNAL}:{n}: {err}") from None
         return events
 
     def append(self, event: j.JournalEvent) -> j.JournalEvent:
@@ -327,7 +328,9 @@ class StudyData:
         but whose end was never journaled (a process gone while it read the recording back:
         GameEnded, as `game_end`). One line for each game said: done, or why its policy is not (a
         recording missing, unfinished, unreadable or partial: the game is left as it is, and the
-        combination refuses to go without it, StudyRunner.combine)."""
+        combination refuses to go without it, StudyRunner.combine). A completed game whose journaled
+        policy file is gone (deleted by hand) is built again the same way and journaled (PolicyBuilt): it
+        was neither rebuilt nor said, since the journal named a policy."""
         lines, changed = [], 0
         with self._lock:
             for g in list(self.state.games.values()):
@@ -339,8 +342,10 @@ class StudyData:
                                      "stopped before it said how the game ended)")
                         changed += 1
                     continue  # otherwise running here or elsewhere, or cut: shown as running, as it was
-                if g.ended.outcome != "completed" or g.ended.policy:
+                gone = bool(g.ended.policy) and not (self.folder / g.ended.policy).is_file()
+                if g.ended.outcome != "completed" or (g.ended.policy and not gone):
                     continue
+                was = f"its policy {g.ended.policy} is missing; " if gone else ""
                 why = ""
                 if not path.is_file():
                     why = f"its recording {g.recording} is missing"
@@ -361,10 +366,10 @@ class StudyData:
                         except (OutputError, OSError) as err:
                             why = f"its policy cannot be written: {_one_line(err)}"
                 if why:
-                    lines.append(f"{g.session}: completed, but no policy built: {why}")
+                    lines.append(f"{g.session}: completed, but {was}no policy built: {why}")
                     continue
                 self.append(j.PolicyBuilt(session=g.session, participant=g.participant, policy=policy))
-                lines.append(f"{g.session}: policy built from its recording: {policy}")
+                lines.append(f"{g.session}: {was}policy built from its recording: {policy}")
                 changed += 1
             if changed:
                 self.write_tables()
@@ -435,6 +440,10 @@ class StudyData:
         with self._lock:
             self.participant(pid)
             out = Path(out) if out else self.folder / "exports" / f"{pid}.zip"
+            inside = out.resolve().relative_to(self.folder).parts if out.resolve().is_relative_to(self.folder) else ()
+            if out.exists() and inside and inside[0] != "exports":  # -o study/journal.jsonl --force replaced it
+                raise StudyDataError(f"{out}: a file of the study folder; an export never replaces one, --force or "
+                                     "not: give another -o")
             if out.exists() and not force:
                 raise StudyDataError(f"{out} exists (use --force to replace it)")
             games = self.games_of(pid)

@@ -42,8 +42,9 @@ from typing import Callable, Iterable
 
 import numpy as np
 
-from pairplay.outputs import output_file, write_text
+from pairplay.outputs import output_file, output_folder, write_text
 from pairplay.processes import check_workers, worker_pool
+from pairplay.schemas.jsonfile import without_bom
 from pairplay.core.rng import SEED_RANGE
 from pairplay.report.study import SettingError, StudySettings, default_reuse_last
 
@@ -114,7 +115,7 @@ def read_grid(path: str | Path) -> Grid:
     path = str(path)
     try:
         with open(path, "rb") as f:
-            data = tomllib.load(f)
+            data = tomllib.loads(without_bom(f.read()).decode("utf-8"))
     except FileNotFoundError:
         raise GridError(f"{path}: no such file") from None
     except tomllib.TOMLDecodeError as exc:
@@ -314,14 +315,22 @@ def setting_label(setting: Iterable[tuple[str, object]]) -> str:
 
 
 def write_sweep(out: str | Path, grid: Grid, results: dict[str, dict], run: SweepRun) -> list[Path]:
-    """sweep.csv (the summary), cells.csv (every cell and seed), one figure per measure, sweep.md."""
+    """sweep.csv (the summary), cells.csv (every cell and seed), one figure per measure, sweep.md: all
+    written beside `out` and moved in together (pairplay.outputs.output_folder, `among_others`: cells/ and
+    grid.toml stay), so a signal or a full disk part way leaves the earlier summary whole, never a new
+    sweep.csv beside an old sweep.md."""
+    out = Path(out)
+    with output_folder(out, force=True, among_others=True) as staged:
+        written = _write_summary(staged, grid, results, run)
+    return [out / p.relative_to(staged) for p in written]
+
+
+def _write_summary(out: Path, grid: Grid, results: dict[str, dict], run: SweepRun) -> list[Path]:
     from pairplay.report import plots
 
-    out = Path(out)
     rows = summarise(grid, results)
     keys = list(grid.axes)
     written = [out / "sweep.csv", out / "cells.csv", out / "sweep.md"]
-    # each file whole or not at all, replaced on a resumed sweep (pairplay.outputs; an OSError names it)
     with output_file(out / "sweep.csv", "w", force=True, newline="") as f:
         w = csv.writer(f)
         w.writerow([*keys, "measure", "n", "mean", "sd", "ci95_low", "ci95_high"])

@@ -6,7 +6,11 @@ so the same value gives the same bytes); it is written only through
 pairplay.outputs (atomic, no clobber without `force`); reading it either gives
 the whole checked value or raises the kind's own error (an InputError
 subclass) whose message starts with the file's name and says why, never a
-half-read value. The Struct's `__post_init__` checks `format` and `version`.
+half-read value. The Struct's `__post_init__` checks `format` and `version`;
+a file without `format` is refused naming the field (the Struct's default
+filled it in: `{}`-like files with the other fields were read as policies).
+A UTF-8 byte order mark (a Windows editor's) is accepted, as in every text
+input of ours (`without_bom`): it was "malformed at byte 0", the BOM unnamed.
 """
 
 from __future__ import annotations
@@ -17,8 +21,22 @@ from typing import Generic, TypeVar
 import msgspec
 
 T = TypeVar("T")
+BOM = b"\xef\xbb\xbf"  # UTF-8's byte order mark: Notepad and other editors start a saved file with it
 MCAP_MAGIC = b"\x89MCAP0\r\n"  # the first (and last) 8 bytes of every MCAP file (the MCAP specification);
 # here, the lowest layer that reads files, so replay/ takes it from here too
+
+
+def without_bom(data: bytes) -> bytes:
+    """`data` without a leading UTF-8 byte order mark (what encoding="utf-8-sig" does for text): every
+    JSON or TOML input a user may have saved from an editor is read through this or utf-8-sig."""
+    return data[len(BOM):] if data.startswith(BOM) else data
+
+
+class _Format(msgspec.Struct):
+    format: str  # required: a kind's Struct has a default for it, so a file without it was accepted
+
+
+_format_decoder = msgspec.json.Decoder(_Format)
 
 
 class JsonFileKind(Generic[T]):
@@ -40,6 +58,14 @@ class JsonFileKind(Generic[T]):
         if data[:len(MCAP_MAGIC)] == MCAP_MAGIC:  # was "JSON is malformed": the user gave the wrong file
             raise self.error(f"{source}: an MCAP recording, not a {self.what}"
                              + (f" ({self.from_recording})" if self.from_recording else ""))
+        data = without_bom(data)
+        try:
+            _format_decoder.decode(data)
+        except msgspec.ValidationError as exc:
+            if "missing required field `format`" in str(exc):
+                raise self.error(f'{source}: no "format" field: not a {self.what}') from None
+        except msgspec.DecodeError:
+            pass  # malformed: said below, as before
         try:
             return self._decoder.decode(data)
         except self.error as exc:

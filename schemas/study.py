@@ -230,7 +230,7 @@ def load_study(path: str | Path) -> Study:
     """Read and check a study file (StudyFileError, one line, if it cannot be used)."""
     path = Path(path)
     try:
-        text = path.read_text(encoding="utf-8")
+        text = path.read_text(encoding="utf-8-sig")  # an editor's byte order mark is no TOML error
     except (OSError, UnicodeDecodeError) as err:
         raise StudyFileError(f"{path}: cannot read: {getattr(err, 'strerror', None) or err}") from None
     return parse_study(text, str(path))

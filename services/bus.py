@@ -142,7 +142,7 @@ class ConfigFileError(BusError, ValueError):
 
 def read_config_file(path: str) -> dict[str, Any]:
     try:
-        data = json5.loads(Path(path).read_text())
+        data = json5.loads(Path(path).read_text(encoding="utf-8-sig"))  # a byte order mark is no JSON5 error
     except OSError as err:
         raise ConfigFileError(f"cannot use the Zenoh config: {err.strerror or err}", f"--zenoh-config {path}") from None
     except ValueError as err:

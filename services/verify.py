@@ -22,7 +22,12 @@ comes from hardware and is not recomputed. Events of types this version does
 not know (a newer pairplay's) are counted and named, and the verdict is about
 the events this version derives. A file with a damaged part (a chunk that fails
 its CRC, chunks out of order, a bad data-section or summary CRC: replay/mcapscan.py)
-or a file recovered from one is never verified as whole: FAIL, naming the part.
+or a file recovered from one is never verified as whole: FAIL, naming the part
+(`verify: FAIL: the file is damaged (...)`, what was lost where in a short line:
+reader.EventLog.brief). A part whose events are lost (reader.EventLog.lost_from)
+ends the comparison there, as a cut would: every event after it follows lost
+ones, and was printed as DIFFERS before "verified the whole session"; how many
+events came after it, not compared, is said (`Verification.not_compared`).
 
 The last line (`Verification.verdict`) says in one line whether the events
 verified and how far: `verify: PASS` for a whole session; for a session
@@ -82,10 +87,15 @@ class Verification:
     rounds: int = 0  # rounds the session was configured for
     rounds_recorded: int = 0  # rounds whose RoundEnded is in the file
     ended: bool = False  # the game's SessionEnded is in the file
+    damaged: str = ""  # what a damaged file lost where, short (reader.EventLog.brief); "" if not damaged
+    lost_part: bool = False  # verified only up to a part of the file whose events are lost
+    not_compared: int = 0  # events after that part, not compared (they follow lost events)
 
     @property
     def verdict(self) -> str:
         """The last line of `replay --verify` (module rule)."""
+        if self.damaged:
+            return f"verify: FAIL: the file is damaged ({self.damaged})"
         if not self.ok:
             return "verify: FAIL"
         if self.truncated and not self.ended:
@@ -102,11 +112,11 @@ class Verification:
     @property
     def excused(self) -> bool:
         """Whether recomputed events beyond the recording are excused: the session did not run to its end."""
-        return self.truncated or bool(self.stopped)
+        return self.truncated or bool(self.stopped) or self.lost_part
 
     @property
     def ok(self) -> bool:
-        return not self.error and all(c.ok(self.excused) for c in self.checks)
+        return not self.error and not self.damaged and all(c.ok(self.excused) for c in self.checks)
 
 
 def in_source_order(events: list) -> list:
@@ -187,18 +197,33 @@ def verify_recording(path) -> Verification:
     # a file completed by `pairplay recover` still lacks the tail its crash lost
     recovered = log.metadata.get("pairplay.recovered", {})
     recovered_cut = recovered.get("truncated") == "true"
-    result = verify_events((r.event for r in log.events), str(path), log.truncated or recovered_cut)
+    events = [r.event for r in log.events]
+    if log.lost_from > 0:  # a part lost in the middle: every event after it follows lost ones and would
+        # "differ" (a new user's trial: DIFFERS lines, then "verified the whole session"); verified up to it
+        result = verify_events(events[:log.lost_from], str(path), True)
+        result.truncated = log.truncated or recovered_cut
+        result.lost_part = True
+        result.not_compared = len(events) - log.lost_from
+        result.reach = (f"up to the damaged part: {result.events} events, "
+                        f"{_rounds_words(result.rounds_recorded, result.rounds)}; the {result.not_compared} events "
+                        "after it are not compared (they follow the lost ones)")
+    else:
+        result = verify_events(events, str(path), log.truncated or recovered_cut)
     result.unknown = log.unknown_types()
     errors = []
     if log.damage:
-        errors.append(f"damaged, not read: {'; '.join(str(d) for d in log.damage)}")
+        result.damaged = log.brief
+        if log.lost_from < 0:
+            result.reach = f"the {result.events} events the file holds (no event lost, but the file is damaged)"
     lost = json.loads(recovered.get("damaged", "[]") or "[]")
     if lost:
         errors.append(f"recovered from a damaged file, parts lost: {'; '.join(lost)}")
+        result.reach = (f"the {result.events} events the file holds, not the whole session: "
+                        "parts of the recording it was recovered from were lost")
     if log.bad:
         errors.append(f"{len(log.bad)} messages do not decode: {log.bad[0].reason}")
     result.error = "; ".join(errors) or result.error
-    empty = no_whole_round((r.event for r in log.events), log.truncated, log.error if log.damage else "")
+    empty = no_whole_round((r.event for r in log.events), log.truncated, log.brief if log.damage else "")
     if empty and result.ok and not result.ended:  # a PASS about nothing whole (a FAIL, a damaged part, says so)
         raise InputError(f"{empty}; nothing to verify", path)
     return result

@@ -68,3 +68,26 @@ def test_an_interrupted_session_prints_its_one_interrupted_line_on_stderr_and_no
     assert len(lines) == 1, err
     (line,) = lines
     assert line.startswith("pairplay session: interrupted (SIGINT) ") and f"events to {tmp_path / 'int1.mcap'}" in line, line
+
+
+def test_quiet_silences_the_summaries_of_verbs_that_write_files_not_results_that_are_printed(tmp_path, capsys):
+    """A new user's trial: `rebuild -q` still printed its per-file lines and `study -q` its tables and
+    timings. -q now leaves stdout empty for a verb whose results are files (cli/main.py QUIET_SUMMARIES);
+    a verb whose result is what it prints (profile) prints it either way, and errors still come."""
+    from pathlib import Path
+
+    from pairplay.cli.main import main
+
+    sample = Path(__file__).resolve().parents[1] / "recordings" / "samples" / "sim-ashley.mcap"
+    runs = {"rebuild": ["rebuild", str(sample), "--out", str(tmp_path / "rb"), "--no-plot"],
+            "study": ["study", "--out", str(tmp_path / "st"), "--personas", "blind", "--games", "2", "--rounds", "5",
+                      "--eval-rounds", "2"]}
+    for verb, args in runs.items():
+        assert main(args + ["-q"]) == 0, verb
+        out, err = capsys.readouterr()
+        assert (out, err) == ("", ""), verb
+    assert (tmp_path / "rb" / "sim-ashley.policy.json").is_file() and (tmp_path / "st" / "report.md").is_file()
+    assert main(["profile", *map(str, sorted((tmp_path / "st" / "policies").rglob("*.json"))), "-q"]) == 0
+    assert capsys.readouterr().out.strip()  # profile's result is its table
+    assert main(runs["rebuild"] + ["-q"]) == 2  # its outputs exist: the refusal still comes, on stderr
+    assert "exists" in capsys.readouterr().err

@@ -69,3 +69,32 @@ def test_a_refused_output_is_named_in_the_one_line(case, template, tmp_path, mon
     path = re.escape(named)
     assert re.search(rf"(?<![\w./-])(\S*/)?{path}(?![\w/-]|\.\w)", lines[0]), lines[0]
     assert sorted(p.relative_to(root) for p in root.rglob("*")) == before  # nothing written
+
+
+# verb's arguments, given relative -> the path as given, which the one line must name (and nothing absolute)
+AS_GIVEN = {
+    "rebuild": (["rebuild", "rec.mcap", "--out", "f/x"], "(f)"),
+    "rebuild over an output": (["rebuild", "rec.mcap", "--out", "e"], "exists; --force replaces it (e/rec.policy.json)"),
+    "recover": (["recover", "cut.mcap", "-o", "f/x/r.mcap"], "(f)"),
+    "study": (["study", "--quiet", "--out", "f/s"], "(f)"),
+    "combine": (["combine", "policies", "-o", "f/m.json"], "(f)"),
+    "view": (["view", "--recording", "rec.mcap", "--out", "f/v.rrd"], "(f)"),
+    "counterfactual": (["counterfactual", "rec.mcap", "--out", "f/c"], "(f)"),
+    "protocol status": (["protocol", "status", "nostudy"], ": nostudy: not a study folder"),
+    "report": (["report", "nostudy"], ": nostudy: not a study folder"),
+    "participant export": (["participant", "export", "nostudy", "P1"], ": nostudy: not a study folder"),
+}
+
+
+@pytest.mark.parametrize("case", AS_GIVEN, ids=list(AS_GIVEN))
+def test_a_refusal_names_the_path_as_the_user_gave_it(case, template, tmp_path, monkeypatch, capsys):
+    """A new user's trial: `rebuild --out afile/x` said "a file stands where a folder is needed
+    (/tmp/.../afile)" and `protocol status nosuch` "/tmp/.../nosuch: not a study folder": paths the user
+    never typed (outputs._existing_ancestor and StudyData resolved them). Now the path as given."""
+    args, said = AS_GIVEN[case]
+    root = tmp_path / "w"
+    shutil.copytree(template, root)
+    monkeypatch.chdir(root)
+    assert main(args) == 2
+    [line] = capsys.readouterr().err.strip().splitlines()
+    assert said in line and str(root) not in line and str(tmp_path) not in line, line

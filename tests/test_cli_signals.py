@@ -164,6 +164,32 @@ def test_rebuild_interrupted_part_way_leaves_nothing_it_created_not_even_its_fol
     assert err.splitlines() == [f"pairplay rebuild: interrupted ({said}); nothing more was written"]
 
 
+@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM], ids=["SIGINT", "SIGTERM"])
+def test_rebuild_force_interrupted_part_way_leaves_the_earlier_policies_all_of_them(
+        sig, tmp_path, monkeypatch, capsys, command_handlers):
+    """Before (a new user's trial): `rebuild --out DIR --force` replaced its outputs one by one, so a
+    Ctrl-C after the first recording's left DIR holding its new policy beside the second's old one.
+    Now everything is written beside DIR first and moved in as a whole (outputs.output_folder)."""
+    import pairplay.replay.rebuild as rebuild
+    for name in ("a", "b"):
+        shutil.copy(SAMPLE, tmp_path / f"{name}.mcap")
+    out = tmp_path / "out"
+    out.mkdir()
+    earlier = {f"{n}.{kind}": "earlier run" for n in ("a", "b") for kind in ("policy.json", "curve.csv")}
+    earlier |= {"learning-curves.png": "earlier run", "notes.txt": "the user's"}
+    for name, text in earlier.items():
+        (out / name).write_text(text)
+    _signal_after(monkeypatch, rebuild, "write_outputs", sig)  # after the first recording's outputs
+    args = ["rebuild", str(tmp_path / "a.mcap"), str(tmp_path / "b.mcap"), "--out", str(out), "--force"]
+    assert main(args) == 128 + sig
+    assert {p.name: p.read_text() for p in out.iterdir()} == earlier
+    assert {p.name for p in tmp_path.iterdir()} == {"a.mcap", "b.mcap", "out"}  # no staging folder left
+    monkeypatch.undo()
+    assert main(args) == 0  # uninterrupted, every output is the new run's and the user's file stays
+    assert {p.name for p in out.iterdir()} == set(earlier)
+    assert [n for n in earlier if (out / n).read_bytes() == b"earlier run"] == []
+
+
 def test_rebuild_interrupted_keeps_a_folder_that_was_there(tmp_path, monkeypatch, capsys, command_handlers):
     import pairplay.cli.rebuild as cli_rebuild
     shutil.copy(SAMPLE, tmp_path / "a.mcap")
@@ -244,5 +270,5 @@ def test_a_sweep_interrupted_after_its_cells_keeps_them_and_says_so(tmp_path, mo
                    "the same command resumes from them"], err
     assert len(list((out / "cells").glob("*.json"))) == 2
     monkeypatch.undo()
-    assert main(["sweep", str(tmp_path / "grid.toml"), "--out", str(out), "--quiet"]) == 0  # resumes: 0 computed
+    assert main(["sweep", str(tmp_path / "grid.toml"), "--out", str(out)]) == 0  # resumes: 0 computed (-q: silent)
     assert "0 computed" in capsys.readouterr().out

@@ -109,7 +109,7 @@ def test_a_flipped_byte_in_a_chunk_loses_that_chunk_only_and_is_named(whole, tmp
             assert f"chunk {k} (bytes {c.offset}-{c.offset + c.length}): CRC mismatch" in log.error or \
                    "does not decompress" in log.error
         v = verify_recording(p)
-        assert not v.ok and "damaged" in v.error
+        assert not v.ok and v.verdict.startswith("verify: FAIL: the file is damaged (")
         done = recover(p, tmp_path / "out.mcap")
         assert done.messages == len(got) and done.damaged
         rv = verify_recording(done.output)
@@ -176,7 +176,7 @@ def test_every_reader_path_says_which_part(whole, tmp_path):
     p = variant(tmp_path, bytes(bad))
     part = f"chunk 2 (bytes {c.offset}-{c.offset + c.length})"
     assert part in rebuild_recording(p).note
-    assert part in verify_recording(p).error
+    assert part in verify_recording(p).verdict
     notes = [note for _, note in recording_items(p) if note]
     assert any(part in n for n in notes)
     done = recover(p, tmp_path / "r.mcap")
@@ -202,7 +202,7 @@ def test_random_damage_never_raises_and_never_invents(whole, tmp_path):
 
 def test_a_damaged_file_with_no_round_left_whole_is_called_damaged_not_cut(whole, tmp_path, capsys):
     """A whole file whose chunks fail their CRC: rebuild said "the file is cut before round 1"; it names the
-    damage, in the words replay --verify and recover use (reader.EventLog.error)."""
+    damage, in the words replay --verify uses (reader.EventLog.brief: short, what was lost where)."""
     from pairplay.cli.main import main
 
     bad = bytearray(whole.read_bytes())
@@ -211,7 +211,7 @@ def test_a_damaged_file_with_no_round_left_whole_is_called_damaged_not_cut(whole
     p = variant(tmp_path, bytes(bad))
     log = read_log(p)
     assert log.damage and log.of("SessionStarted") and not log.of("RoundEnded")
-    first = str(log.damage[0])
+    first = log.damage[0].part
     for argv in (["rebuild", str(p), "--out", str(tmp_path / "out")], ["replay", str(p), "--verify"]):
         code = main(argv)
         out, err = capsys.readouterr()
@@ -223,3 +223,47 @@ def test_a_damaged_file_with_no_round_left_whole_is_called_damaged_not_cut(whole
         else:  # verify: FAIL, naming the same damage
             assert code != 0 and first in said, said
     assert not (tmp_path / "out").exists()
+
+
+def _middle_chunk_lost(whole, tmp_path):
+    chunks = scan(whole).chunks
+    c = chunks[len(chunks) // 2]
+    bad = bytearray(whole.read_bytes())
+    bad[c.offset + c.length // 2:c.offset + c.length // 2 + 16] = b"\xff" * 16
+    return variant(tmp_path, bytes(bad)), f"chunk {c.number} (bytes {c.offset}-{c.offset + c.length})"
+
+
+def test_a_chunk_lost_in_the_middle_is_verified_up_to_it_and_the_verdict_says_damaged(whole, tmp_path, capsys):
+    """A new user's trial: `replay --verify` of a file with a middle chunk overwritten printed DIFFERS lines
+    that only followed from the lost chunk, then "verified the whole session" before its FAIL. Now it compares
+    up to the lost part, says how many events after it it did not compare, and its verdict says the file is
+    damaged (what was lost where, short)."""
+    from pairplay.cli.main import main
+
+    p, part = _middle_chunk_lost(whole, tmp_path)
+    assert main(["replay", str(p), "--verify"]) == 1
+    out = capsys.readouterr().out
+    lines = out.splitlines()
+    assert "DIFFERS" not in out and "whole session" not in out, out
+    assert lines[-1].startswith(f"verify: FAIL: the file is damaged ({part}: its ") and "messages lost" in lines[-1]
+    assert lines[-2].startswith("verified up to the damaged part: ") and "after it are not compared" in lines[-2]
+    assert out.count(part) == 1 and len(lines[-1]) < 200, out
+
+
+def test_a_chunk_lost_in_the_middle_is_rebuilt_only_with_partial_its_damage_said_once(whole, tmp_path, capsys):
+    """The same file: `rebuild` exited 0 with a PARTIAL policy (its Q-table lacks updates the learner made)
+    and printed a 1,500-character damage line twice. Now it is refused in one line unless --partial, and then
+    the damage is said once, short."""
+    from pairplay.cli.main import main
+
+    p, part = _middle_chunk_lost(whole, tmp_path)
+    assert main(["rebuild", str(p), "--out", str(tmp_path / "rb")]) == 2
+    out, err = capsys.readouterr()
+    assert out == "" and not (tmp_path / "rb").exists()
+    [line] = err.splitlines()
+    assert line.startswith(f"pairplay rebuild: the file is damaged ({part}: its ") and "--partial" in line, line
+    assert line.endswith(f"({p})") and len(line) < 400, line
+    assert main(["rebuild", str(p), "--out", str(tmp_path / "rb"), "--partial"]) == 0
+    out, err = capsys.readouterr()
+    assert out.count(part) == 1 and "PARTIAL session: " in out and len(max(out.splitlines(), key=len)) < 250, out
+    assert part in json.loads((tmp_path / "rb" / "damaged.policy.json").read_text())["partial"]

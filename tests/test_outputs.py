@@ -186,3 +186,43 @@ def test_a_signal_while_a_forced_folder_is_merged_waits_until_every_file_is_in(t
             for name in ("a.csv", "b.csv", "c.csv"):
                 (tmp / name).write_text("new")
     assert [(target / n).read_text() for n in ("a.csv", "b.csv", "c.csv")] == ["new"] * 3
+
+
+def test_no_verb_replaces_one_of_its_own_inputs_even_with_force(tmp_path, pairplay):
+    """A new user's trial: `combine a.json b.json -o a.json --force` replaced its input a.json with the merged
+    policy, silently. Now every verb whose output can be one of its inputs refuses it in one line, by any name
+    the input is given (./a.json, a hard link), --force or not: combine -o, view --out, rebuild's outputs."""
+    import os
+
+    helmut = SAMPLE.with_name("sim-helmut-fmt2.mcap")
+    assert pairplay("rebuild", SAMPLE, helmut, "--out", "rb", "--no-plot", cwd=tmp_path).returncode == 0
+    os.replace(tmp_path / "rb" / "sim-ashley.policy.json", tmp_path / "a.json")
+    os.replace(tmp_path / "rb" / "sim-helmut-fmt2.policy.json", tmp_path / "b.json")
+    shutil.copy(SAMPLE, tmp_path / "rec.mcap")
+    (tmp_path / "out").mkdir()
+    shutil.copy(SAMPLE, tmp_path / "out" / "learning-curves.png")  # an MCAP file by any name is a recording
+    os.link(tmp_path / "a.json", tmp_path / "a-link.json")
+    cases = [("combine", "a.json", "b.json", "-o", "a.json"), ("combine", "a.json", "b.json", "-o", "./a.json"),
+             ("combine", "a-link.json", "b.json", "-o", "a.json"),
+             ("view", "--recording", "rec.mcap", "--out", "rec.mcap"),
+             ("rebuild", "out/learning-curves.png", "--out", "out")]
+    before = {p: p.read_bytes() for p in tmp_path.rglob("*") if p.is_file()}
+    for args in cases:
+        r = pairplay(*args, "--force", cwd=tmp_path)
+        assert r.returncode == 2 and r.stderr.count("\n") == 1, (args, r.stderr)
+        assert "is one of the inputs; an input is never replaced, --force or not" in r.stderr, (args, r.stderr)
+    assert {p: p.read_bytes() for p in tmp_path.rglob("*") if p.is_file()} == before
+
+
+def test_a_folder_named_dot_is_written_into(tmp_path, pairplay):
+    """`rebuild --out .` was a traceback after the last change (no folder beside `.` can be named after it),
+    and `study --out . --force` one before it: such a folder is filled from a temporary folder inside it."""
+    shutil.copy(SAMPLE, tmp_path / "rec.mcap")
+    r = pairplay("rebuild", "rec.mcap", "--out", ".", "--no-plot", cwd=tmp_path)
+    assert r.returncode == 0, r.stderr
+    r = pairplay("study", "--out", ".", "--force", "--games", "1", "--rounds", "3", "--personas", "blind",
+                 "--eval-rounds", "1", "-q", cwd=tmp_path)
+    assert r.returncode == 0 and r.stderr == "", r.stderr
+    names = {p.name for p in tmp_path.iterdir()}
+    assert {"rec.mcap", "rec.policy.json", "rec.curve.csv", "report.md"} <= names
+    assert not [n for n in names if n.startswith(".")]  # no temporary folder left

@@ -191,6 +191,20 @@ def test_export_holds_everything_of_one_participant_with_a_readme(played, tmp_pa
         data.export_participant("p02")
 
 
+def test_an_export_never_replaces_a_file_of_the_study_folder(played, tmp_path):
+    """`participant export -o STUDY/journal.jsonl --force` replaced the study's journal with the zip (its output
+    can be one of its inputs: every file of the study folder is one); refused, --force or not. exports/ is its own."""
+    data = copy_study(played, tmp_path)
+    recording = data.folder / data.games_of("p02")[0].recording
+    for target in (data.folder / "journal.jsonl", recording):
+        before = target.read_bytes()
+        with pytest.raises(StudyDataError, match="a file of the study folder; an export never replaces one"):
+            data.export_participant("p02", target, force=True)
+        assert target.read_bytes() == before
+    path = data.export_participant("p02")
+    assert data.export_participant("p02", path, force=True) == path
+
+
 def test_the_key_file_is_its_owners_alone_from_init_to_deletion(tmp_path):
     """The key file is the one file that links ids to names: it was written 0644 (its folder too), made
     only at the first registration with a name (a researcher's trial)."""

@@ -177,6 +177,27 @@ def test_a_recording_that_cannot_give_the_policy_is_said_in_one_line_and_the_com
     assert [line for line in StudyData(data.folder).build_missing_policies() if "policy built from" in line] == []
 
 
+def test_a_policy_file_deleted_by_hand_is_built_again_and_said(tmp_path):
+    """A completed game's policy file deleted by hand (the journal still names it) was neither rebuilt nor
+    reported by serve, pilot or report: build_missing_policies skipped every game journaled with a policy.
+    Now it is built again from the recording (the event log is the truth), journaled and said."""
+    data = completed_without_policy(tmp_path, stripped=0)
+    game = next(iter(data.state.games.values()))
+    policy = data.folder / game.ended.policy
+    before = policy.read_bytes()
+    policy.unlink()
+    lines = StudyData(data.folder).build_missing_policies()
+    assert lines == [f"{game.session}: its policy {game.ended.policy} is missing; policy built from its recording: "
+                     f"{game.ended.policy}"], lines
+    assert policy.read_bytes() == before
+    assert StudyData(data.folder).build_missing_policies() == []  # said once
+    policy.unlink()
+    (data.folder / game.recording).unlink()  # nothing to build it from: said, left as it is
+    [line] = StudyData(data.folder).build_missing_policies()
+    assert line.startswith(f"{game.session}: completed, but its policy {game.ended.policy} is missing; no policy "
+                           "built: its recording"), line
+
+
 def test_the_combination_builds_a_missing_policy_it_needs_and_combines(tmp_path):
     """Before: a valid game without its policy was left out of the combination without a word."""
     data = completed_without_policy(tmp_path, stripped=1)

@@ -137,13 +137,36 @@ def test_a_resume_with_nothing_to_do_writes_nothing_and_says_so(tmp_path, capsys
     from pairplay.cli.main import main
 
     grid, out = _grid(tmp_path, GRID.replace("seeds = 2", "seeds = 1")), tmp_path / "out"
-    assert main(["sweep", str(grid), "--out", str(out), "--quiet"]) == 0
+    assert main(["sweep", str(grid), "--out", str(out)]) == 0  # not -q: it silences these lines
     assert "2 computed" in capsys.readouterr().out
     before = {p: (p.read_bytes(), p.stat().st_mtime_ns) for p in out.rglob("*") if p.is_file()}
-    assert main(["sweep", str(grid), "--out", str(out), "--quiet"]) == 0
+    assert main(["sweep", str(grid), "--out", str(out)]) == 0  # not -q: it silences these lines
     said = capsys.readouterr().out.splitlines()
     assert said == [f"nothing to do: all 2 cells (2 settings x 1 seeds) were finished; {out / 'sweep.md'} is as it was"]
     assert {p: (p.read_bytes(), p.stat().st_mtime_ns) for p in out.rglob("*") if p.is_file()} == before
     (out / "sweep.md").unlink()  # the summary not written (a run stopped after its cells): written, 0 computed
-    assert main(["sweep", str(grid), "--out", str(out), "--quiet"]) == 0
+    assert main(["sweep", str(grid), "--out", str(out)]) == 0  # not -q: it silences these lines
     assert "0 computed" in capsys.readouterr().out and (out / "sweep.md").is_file()
+
+
+def test_a_summary_interrupted_part_way_leaves_the_earlier_one_whole(tmp_path, monkeypatch):
+    """Before: sweep.csv, cells.csv, the figures and sweep.md were replaced one by one, so a Ctrl-C while the
+    figures were drawn left a new sweep.csv beside the earlier sweep.md. Now the summary is written beside the
+    folder and moved in as a whole (outputs.output_folder); the cells and grid.toml stay as they are."""
+    from pairplay.report import plots
+
+    grid = read_grid(_grid(tmp_path, GRID.replace("seeds = 2", "seeds = 1")))
+    out = tmp_path / "out"
+    run = run_sweep(grid, out)
+    write_sweep(out, grid, finished_cells(out, grid), run)
+    for name in ("sweep.csv", "cells.csv", "sweep.md"):
+        (out / name).write_text("earlier run")
+    before = {p: p.read_bytes() for p in out.rglob("*") if p.is_file()}
+
+    def ctrl_c(*args, **kwargs):
+        raise KeyboardInterrupt
+    monkeypatch.setattr(plots, "sweep_measure", ctrl_c)
+    with pytest.raises(KeyboardInterrupt):
+        write_sweep(out, grid, finished_cells(out, grid), run)
+    assert {p: p.read_bytes() for p in out.rglob("*") if p.is_file()} == before
+    assert [p.name for p in tmp_path.iterdir() if p.name.startswith(".")] == []  # no staging folder left

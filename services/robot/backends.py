@@ -17,6 +17,7 @@ from urllib.parse import parse_qs, urlsplit
 
 import msgspec
 
+from pairplay.schemas.jsonfile import without_bom
 from pairplay.schemas.robot import GESTURE_PRESETS, PRESET_NOTES, BoardCalibration, RobotActed, RobotConfig
 
 from pairplay.services.robot import iristk_protocol
@@ -93,7 +94,7 @@ def load_robot_config(path: str | None) -> RobotConfig:
         return RobotConfig()
     try:
         with open(path, "rb") as f:
-            config = msgspec.json.decode(f.read(), type=RobotConfig)
+            config = msgspec.json.decode(without_bom(f.read()), type=RobotConfig)
     except OSError as exc:
         raise ValueError(f"cannot read robot config {path}: {exc}") from exc
     except msgspec.DecodeError as exc:

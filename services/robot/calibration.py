@@ -18,6 +18,7 @@ from pathlib import Path
 import msgspec
 
 from pairplay.core.geometry import COLS, N_CARDS, ROWS, card_of
+from pairplay.schemas.jsonfile import without_bom
 from pairplay.schemas.robot import BoardCalibration, Point
 
 DEFAULT_FILE = "calibration_default.json"
@@ -41,7 +42,7 @@ def load_calibration(path: str | Path | None = None) -> BoardCalibration:
             raise CalibrationError(f"cannot read calibration {path}: {exc}") from exc
         where = str(path)
     try:
-        calibration = msgspec.json.decode(raw, type=BoardCalibration)
+        calibration = msgspec.json.decode(without_bom(raw), type=BoardCalibration)
     except msgspec.DecodeError as exc:  # ValidationError is a subclass
         raise CalibrationError(f"calibration {where} is not valid: {exc}") from exc
     check_calibration(calibration, where)

@@ -89,7 +89,7 @@ def recording_items(path: str | Path, *, speed: float = 0.0, session: str | None
             return
         yield event, None
     if not log.whole:
-        yield None, f"recording not whole ({log.error}); its intact parts are shown"
+        yield None, f"recording not whole ({log.brief}); its intact parts are shown"
 
 
 class LiveSource:

@@ -1,0 +1,80 @@
+"""Every JSON or TOML file a user gives is read the same way: an editor's UTF-8 byte order mark is accepted
+(it was "malformed at byte 0", the mark unnamed), and a versioned file of ours (policy, user model) without its
+"format" field is refused in one line naming the field (the field's default filled it in: it was accepted).
+A new user's trial; before, every case here failed."""
+
+from __future__ import annotations
+
+import json
+from importlib import resources
+from pathlib import Path
+
+import pytest
+
+from pairplay.errors import InputError
+from pairplay.replay.rebuild import rebuild_recording
+from pairplay.schemas import policy as policy_file
+BOM = b"\xef\xbb\xbf"  # what Notepad puts first
+
+SAMPLE = Path(__file__).resolve().parents[1] / "recordings" / "samples" / "sim-ashley.mcap"
+
+
+@pytest.fixture(scope="module")
+def policy_bytes() -> bytes:
+    return policy_file.FILE.encode(rebuild_recording(SAMPLE).policy)
+
+
+def test_a_policy_file_with_a_byte_order_mark_is_read(tmp_path, policy_bytes):
+    (tmp_path / "p.json").write_bytes(BOM + policy_bytes)
+    (tmp_path / "q.json").write_bytes(policy_bytes)
+    assert policy_file.read_policy(tmp_path / "p.json") == policy_file.read_policy(tmp_path / "q.json")
+
+
+@pytest.mark.parametrize("kind", ["policy", "user-model"])
+def test_a_versioned_file_without_format_is_refused_naming_the_field(tmp_path, policy_bytes, kind):
+    from pairplay.schemas import usermodel
+    if kind == "policy":
+        data, reader = json.loads(policy_bytes), policy_file.FILE
+    else:
+        data, reader = {"version": 1}, usermodel.FILE
+    data.pop("format", None)
+    path = tmp_path / "x.json"
+    path.write_text(json.dumps(data))
+    with pytest.raises(InputError) as err:
+        reader.read(path)
+    assert str(err.value) == f'{path}: no "format" field: not a {kind} file'
+
+
+def test_the_cli_refuses_a_policy_without_format_in_one_line(tmp_path, policy_bytes, capsys):
+    from pairplay.cli.main import main
+
+    data = json.loads(policy_bytes)
+    data.pop("format")
+    (tmp_path / "a.json").write_text(json.dumps(data))
+    (tmp_path / "b.json").write_bytes(BOM + policy_bytes)
+    assert main(["combine", str(tmp_path / "a.json"), str(tmp_path / "b.json"), "-o", str(tmp_path / "m.json")]) == 2
+    [line] = capsys.readouterr().err.splitlines()
+    assert 'no "format" field' in line and "a.json" in line, line
+
+
+def test_text_inputs_with_a_byte_order_mark_are_read(tmp_path):
+    from pairplay.report.sweep import read_grid
+    from pairplay.schemas.study import example_text, load_study
+    from pairplay.services.bus import read_config_file
+    from pairplay.services.robot.backends import load_robot_config
+    from pairplay.services.robot.calibration import load_calibration
+
+    files = {
+        "study.toml": example_text().encode(),
+        "grid.toml": b'seeds = 1\n[study]\npersonas = "blind"\n',
+        "calibration.json": resources.files("pairplay.services.robot").joinpath("calibration_default.json").read_bytes(),
+        "robot.json": b"{}",
+        "zenoh.json5": b"{mode: 'peer'}",
+    }
+    for name, data in files.items():
+        (tmp_path / name).write_bytes(BOM + data)
+    assert load_study(tmp_path / "study.toml").study.id
+    assert len(read_grid(tmp_path / "grid.toml").cells()) == 1
+    assert load_calibration(tmp_path / "calibration.json") == load_calibration(None)
+    assert load_robot_config(str(tmp_path / "robot.json")) == load_robot_config(None)
+    assert read_config_file(str(tmp_path / "zenoh.json5")) == {"mode": "peer"}
