@@ -297,7 +297,7 @@ def _main(argv: list[str]) -> int:
     parser, chosen = build_parser(argv)
     args, extra = parser.parse_known_args(argv)
     if extra:  # said by the parser of the verb (or its action) that met them, naming it
-        args._usage_parser.error(f"unrecognized arguments: {' '.join(extra)}")
+        args._usage_parser.error(f"unrecognized arguments: {' '.join(extra)}{_option_for(args._usage_parser, extra)}")
     if not args.verb:  # a mistake: one line, as any (module rule); `pairplay --help` prints the help on stdout
         print(f"pairplay: no verb given: one of {', '.join(VERBS)} (see pairplay --help)", file=sys.stderr)
         return 2
@@ -376,6 +376,19 @@ def options_of(verb: argparse.ArgumentParser | None, args: argparse.Namespace) -
             if chosen is not None:
                 found.update(o for a in chosen._actions for o in a.option_strings)
     return frozenset(found)
+
+
+def _option_for(parser: argparse.ArgumentParser, extra: list[str]) -> str:
+    """`; a recording is given with --recording X` when a stray word is what one of the parser's options
+    takes (a file that exists, an option whose value is such a file: metavar REC for an .mcap), else "".
+    A new user's trial typed `pairplay view rec.mcap`, told only "unrecognized arguments"."""
+    words = [w for w in extra if not w.startswith("-")]
+    if len(words) != 1 or not os.path.isfile(words[0]):
+        return ""
+    takes = [a for a in parser._actions if a.option_strings and a.metavar == "REC" and a.nargs is None]
+    if not words[0].endswith(".mcap") or len(takes) != 1:
+        return ""
+    return f"; a recording is given with {takes[0].option_strings[0]} {words[0]}"
 
 
 def _who(args: argparse.Namespace) -> str:

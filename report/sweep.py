@@ -42,6 +42,7 @@ from typing import Callable, Iterable
 
 import numpy as np
 
+from pairplay.errors import OptionError
 from pairplay.outputs import output_file, output_folder, write_text
 from pairplay.processes import check_workers, worker_pool
 from pairplay.schemas.jsonfile import without_bom
@@ -269,7 +270,11 @@ def run_sweep(grid: Grid, out: str | Path, *, scheduler: str | None = None, work
 
     if scheduler:
         from dask.distributed import Client, as_completed
-        with Client(scheduler, timeout="10s") as client:
+        try:
+            client = Client(scheduler, timeout="10s")
+        except OSError as err:  # named by its option (a new user's trial: "Timed out trying to connect ..." alone)
+            raise OptionError(f"no Dask scheduler answered at {scheduler} ({err})", "--scheduler") from None
+        with client:
             futures = [client.submit(_run_cell, grid, c, key=f"pairplay-cell-{c.id}", pure=True) for c in todo]
             for future in as_completed(futures):
                 store(*future.result())

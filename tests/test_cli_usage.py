@@ -125,3 +125,14 @@ def test_running_out_of_memory_is_one_line_exit_2_not_a_traceback(tmp_path, monk
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and err.startswith("pairplay rebuild: out of memory"), err
     assert not (tmp_path / "out").exists() or not any((tmp_path / "out").iterdir())
+
+
+def test_a_recording_given_without_its_option_is_told_which_option_takes_it(capsys):
+    """Before (a new user's trial): `pairplay view rec.mcap` said only "unrecognized arguments"."""
+    from pathlib import Path
+    sample = Path(__file__).resolve().parents[1] / "recordings" / "samples" / "sim-ashley.mcap"
+    with pytest.raises(SystemExit) as end:
+        main(["view", str(sample)])
+    assert end.value.code == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and f"a recording is given with --recording {sample}" in err, err

@@ -170,3 +170,19 @@ def test_a_summary_interrupted_part_way_leaves_the_earlier_one_whole(tmp_path, m
         write_sweep(out, grid, finished_cells(out, grid), run)
     assert {p: p.read_bytes() for p in out.rglob("*") if p.is_file()} == before
     assert [p.name for p in tmp_path.iterdir() if p.name.startswith(".")] == []  # no staging folder left
+
+
+def test_a_scheduler_that_does_not_answer_is_one_line_naming_the_option(tmp_path, capsys):
+    """Before (a new user's trial): 'pairplay sweep: Timed out trying to connect to tcp://... after 10 s',
+    which did not say it was --scheduler's address."""
+    import socket
+
+    from pairplay.cli.main import main
+    with socket.socket() as s:  # a port nothing listens on
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    grid = tmp_path / "g.toml"
+    grid.write_text('seeds = 1\n[study]\npersonas = "blind"\ngames = 1\nrounds = 1\neval_rounds = 1\n')
+    assert main(["sweep", str(grid), "--out", str(tmp_path / "o"), "--scheduler", f"tcp://127.0.0.1:{port}"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "--scheduler" in err and f"127.0.0.1:{port}" in err, err
