@@ -71,7 +71,8 @@ def run(args) -> int:
     except GridError as exc:
         print(f"pairplay sweep: {exc}", file=sys.stderr)
         return 2
-    out = check_folder(args.out or Path("out") / f"sweep-{args.grid.stem}")
+    # out/sweep-<grid>, the grid's "sweep-" said once (examples/sweep-psi.toml wrote out/sweep-sweep-psi)
+    out = check_folder(args.out or Path("out") / f"sweep-{args.grid.stem.removeprefix('sweep-')}")
     copy = out / "grid.toml"
     text = args.grid.read_text()
     if out.is_dir() and any(out.iterdir()) and not copy.exists() and not args.force:  # not a sweep's folder

@@ -186,3 +186,13 @@ def test_a_scheduler_that_does_not_answer_is_one_line_naming_the_option(tmp_path
     assert main(["sweep", str(grid), "--out", str(tmp_path / "o"), "--scheduler", f"tcp://127.0.0.1:{port}"]) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "--scheduler" in err and f"127.0.0.1:{port}" in err, err
+
+
+def test_the_default_folder_says_sweep_once(tmp_path, monkeypatch):
+    """Before (a new user's trial): examples/sweep-psi.toml wrote out/sweep-sweep-psi."""
+    from pairplay.cli.main import main
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "sweep-tiny.toml").write_text('seeds = 1\n[study]\npersonas = "blind"\ngames = 1\nrounds = 1\n'
+                                              'eval_rounds = 1\n')
+    assert main(["sweep", "sweep-tiny.toml", "-q"]) == 0
+    assert sorted(p.name for p in (tmp_path / "out").iterdir()) == ["sweep-tiny"]
