@@ -52,6 +52,8 @@ class PolicyFile(msgspec.Struct, frozen=True, kw_only=True):
     algorithm: str  # "q-learning", "lspi", "pi-reuse", "combined", "oracle"
     participant: str  # persona key, or a study participant's id
     persona: Persona | None = None
+    # the seed the game was played with: a session's --seed (`rebuild`), or the per-game seed `pairplay study`
+    # derived from its --seed and `game` (a new user's trial read the two as one meaning)
     seed: int | None = None
     game: int | None = None
     rounds: int = 0
