@@ -351,7 +351,7 @@ class StudyData:
                     try:
                         rebuilt = rebuild_recording(path)
                     except (InputError, OSError) as err:
-                        why = f"its recording {g.recording} cannot be read: {_one_line(err)}"
+                        why = f"its recording {g.recording} cannot be read: {one_line(err)}"
                     else:
                         if rebuilt.partial:
                             why = f"its recording {g.recording} is partial: {rebuilt.partial}"
@@ -359,7 +359,7 @@ class StudyData:
                         try:  # force: ours, of this recording (the file a build cut before its journal line wrote)
                             policy = write_game_policy(self.folder, rebuilt, force=True)
                         except (OutputError, OSError) as err:
-                            why = f"its policy cannot be written: {_one_line(err)}"
+                            why = f"its policy cannot be written: {one_line(err)}"
                 if why:
                     lines.append(f"{g.session}: completed, but no policy built: {why}")
                     continue
@@ -561,7 +561,8 @@ def write_game_policy(folder: Path, rebuilt: Rebuilt, force: bool = False) -> st
     return policy.relative_to(folder).as_posix()
 
 
-def _one_line(err: Exception) -> str:
+def one_line(err: Exception) -> str:
+    """An error as one line: a UserError's own line, else its message with its newlines folded."""
     return err.line() if isinstance(err, (InputError, OutputError)) else " ".join(str(err).split())
 
 

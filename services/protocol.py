@@ -28,6 +28,7 @@ done steps, the combination and the report.
 
 from __future__ import annotations
 
+import logging
 import secrets
 import threading
 import time
@@ -37,7 +38,7 @@ from typing import Callable
 
 from pairplay import __version__
 from pairplay.core.policies import users_from_policies
-from pairplay.replay.studydata import Game, StudyData, StudyDataError, game_end
+from pairplay.replay.studydata import Game, StudyData, StudyDataError, game_end, one_line
 from pairplay.schemas import events as ev
 from pairplay.schemas import journal as j
 from pairplay.schemas.envelope import stamped
@@ -51,6 +52,8 @@ from pairplay.services.recorder import RecordingExists, check_new_recording
 from pairplay.services.robot.choice import NO_ROBOT, RobotChoice
 from pairplay.services.runner import Node
 from pairplay.services.session import run_session
+
+log = logging.getLogger("pairplay.protocol")
 
 
 @dataclass
@@ -169,58 +172,73 @@ class StudyRunner:
             combined = self.data.state.combined.get(phase_id)
             self.data.append(j.GameStarted(participant=pid, phase=phase_id, game=game, session=config.session,
                                            recording=recording, bias=combined.output if combined else ""))
-            token = secrets.token_urlsafe(18)
-            self.live = Live(session=config.session, participant=pid, phase=phase_id, game=game,
-                             rounds=config.rounds, state="playing", board=player is not None,
-                             questionnaire_token=token if phase.questionnaires else "", board_token=token)
-            hub = None
-            if player is None and self.lab is not None:
-                from pairplay.services.lab.hub import LabHub
-                hub = self.lab.add(LabHub(config, token=token))  # the board page: /s/<session>/board?t=<token>
-            self._stop, self._abort_reason, self._control_seq = threading.Event(), "", 0
-            if self.interrupted is not None:  # a signal came while this game was being set up
-                pass_stop(self.interrupted, self._stop)
-            self._skip.clear()
-            answered = threading.Event()
-            watch = [self.bus.subscribe(f"pairplay/{config.session}/**", self._watcher(on_event, answered))]
-            node = None
-            if player is not None:
-                node = Node(self.bus, player, config.session, clock=getattr(player, "clock", time.time_ns),
-                            resume=False)
-                node.start()
-                node.run_in_thread(self._stop)
-
-            def hold(_recorder) -> None:
-                if phase.questionnaires and not self._stop.is_set() and not self._abort_reason:
-                    deadline = time.monotonic() + self.questionnaire_timeout_s
-                    while not (answered.is_set() or self._skip.is_set() or self._stop.is_set()) \
-                            and time.monotonic() < deadline:
-                        time.sleep(0.02)
-                    time.sleep(0.05)  # the answer reaches the recorder on its own thread
-
-            # the game waits for the board: the lab's hub, a scripted player, or a board elsewhere on the bus
-            summary: dict = {}
-            stop = self._stop
             try:
-                path = run_session(config, self.data.folder / recording, bus=self.bus, stop=stop,
-                                   robot=self.robot, hold=hold, summary=summary,
-                                   wait_also=() if player is not None or hub is not None else ("board",),
-                                   extra_nodes=(lambda bus: [hub.make_node(bus)]) if hub is not None else None)
-            finally:
-                if hub is not None:
-                    self.lab.hubs.pop(config.session, None)
-                    hub.close(shutdown_wait(stop, 5.0, reserve=0.3))
+                return self._play(config, phase, recording, player, on_event)
+            except Exception as err:  # the journal never keeps a started game without its end
+                if config.session in self.data.state.games and self.data.state.games[config.session].ended is None:
+                    why = f"the game failed: {one_line(err)}"
+                    log.error("%s: %s", config.session, why)
+                    self.data.append(j.GameEnded(session=config.session, participant=pid, outcome="aborted",
+                                                 reason=why, rounds_played=0, policy="", questionnaire=False))
+                    self.data.write_tables()
+                    raise StudyDataError(f"{config.session}: {why}") from err
+                raise
+        finally:
+            self.live.state = "idle"
+            self._busy.release()
+
+    def _play(self, config: SessionConfig, phase, recording: str, player, on_event) -> Game:
+        """The started game (journaled GameStarted) played to its end; its GameEnded journaled."""
+        pid, phase_id, game = config.participant.split(":", 1)[1], phase.id, self.data.state.games[config.session].game
+        token = secrets.token_urlsafe(18)
+        self.live = Live(session=config.session, participant=pid, phase=phase_id, game=game,
+                         rounds=config.rounds, state="playing", board=player is not None,
+                         questionnaire_token=token if phase.questionnaires else "", board_token=token)
+        hub = None
+        if player is None and self.lab is not None:
+            from pairplay.services.lab.hub import LabHub
+            hub = self.lab.add(LabHub(config, token=token))  # the board page: /s/<session>/board?t=<token>
+        self._stop, self._abort_reason, self._control_seq = threading.Event(), "", 0
+        if self.interrupted is not None:  # a signal came while this game was being set up
+            pass_stop(self.interrupted, self._stop)
+        self._skip.clear()
+        answered = threading.Event()
+        watch = [self.bus.subscribe(f"pairplay/{config.session}/**", self._watcher(on_event, answered))]
+        node = None
+        if player is not None:
+            node = Node(self.bus, player, config.session, clock=getattr(player, "clock", time.time_ns),
+                        resume=False)
+            node.start()
+            node.run_in_thread(self._stop)
+
+        def hold(_recorder) -> None:
+            if phase.questionnaires and not self._stop.is_set() and not self._abort_reason:
+                deadline = time.monotonic() + self.questionnaire_timeout_s
+                while not (answered.is_set() or self._skip.is_set() or self._stop.is_set()) \
+                        and time.monotonic() < deadline:
+                    time.sleep(0.02)
+                time.sleep(0.05)  # the answer reaches the recorder on its own thread
+
+        # the game waits for the board: the lab's hub, a scripted player, or a board elsewhere on the bus
+        summary: dict = {}
+        stop = self._stop
+        try:
+            path = run_session(config, self.data.folder / recording, bus=self.bus, stop=stop,
+                               robot=self.robot, hold=hold, summary=summary,
+                               wait_also=() if player is not None or hub is not None else ("board",),
+                               extra_nodes=(lambda bus: [hub.make_node(bus)]) if hub is not None else None)
+        finally:  # also when the session failed to start: no board, player or subscription outlives it
+            if hub is not None:
+                self.lab.hubs.pop(config.session, None)
+                hub.close(shutdown_wait(stop, 5.0, reserve=0.3))
             stop.set()
             if node is not None and node.thread is not None:
                 node.thread.join(shutdown_wait(stop, 5.0, reserve=0.3))
             for sub in watch:
                 _undeclare(sub)
-            if self.interrupted is not None:  # a signal: no reading back, the process is gone within 2 s
-                return self._finish_interrupted(config, summary, answered.is_set())
-            return self._finish(config, path, answered.is_set())
-        finally:
-            self.live.state = "idle"
-            self._busy.release()
+        if self.interrupted is not None:  # a signal: no reading back, the process is gone within 2 s
+            return self._finish_interrupted(config, summary, answered.is_set())
+        return self._finish(config, path, answered.is_set())
 
     def _watcher(self, on_event, answered: threading.Event):
         from pairplay.schemas.events import decode_event
