@@ -92,6 +92,7 @@ class Game:
     ended: j.GameEnded | None = None
     invalid: str = ""
     paused: bool = False
+    scripted: str = ""  # the persona that played instead of a person (a rehearsal); "" for a person
 
     @property
     def valid_complete(self) -> bool:
@@ -116,7 +117,8 @@ class StudyState:
             number = int(e.participant[1:]) if e.participant[1:].isdigit() else 0
             self.next_number = max(self.next_number, number + 1)
         elif isinstance(e, j.GameStarted):
-            self.games[e.session] = Game(e.session, e.participant, e.phase, e.game, e.recording, e.bias)
+            self.games[e.session] = Game(e.session, e.participant, e.phase, e.game, e.recording, e.bias,
+                                         scripted=e.scripted)
         elif isinstance(e, j.GameEnded) and e.session in self.games:
             self.games[e.session].ended = e
             self.games[e.session].paused = False
@@ -277,6 +279,17 @@ class StudyData:
     def games_of(self, pid: str, phase: str | None = None) -> list[Game]:
         return [g for g in self.state.games.values() if g.participant == pid and (phase is None or g.phase == phase)]
 
+    def scripted_as(self, pid: str) -> str:
+        """The personas that played `pid`'s games instead of a person (a rehearsal), "+"-joined; "" if none."""
+        return "+".join(dict.fromkeys(g.scripted for g in self.games_of(pid) if g.scripted))
+
+    def combined_games(self, phase: str) -> list[Game]:
+        """The games a bias policy of `phase`'s games combines: its valid ones that people played; all of
+        them (the scripted ones too) when no person played one, a rehearsal, so a pilot reaches the next phase."""
+        valid = [g for g in self.state.games.values() if g.phase == phase and g.valid_complete]
+        people = [g for g in valid if not g.scripted]
+        return people or valid
+
     def plan(self) -> list[Step]:
         """Every step of the protocol, in order, with what is done and what is blocked."""
         steps: list[Step] = []
@@ -390,14 +403,17 @@ class StudyData:
         """participants.csv, sessions.csv and answers.csv, rewritten from the journal and recordings."""
         with self._lock:
             tables = {
-                "participants.csv": (["participant", "joins", "registered_utc"],
-                                     [[pid, r.joins, _utc(r.time_ns)] for pid, r in self.state.participants.items()]),
+                # scripted: the personas that played a participant's games instead of a person (a rehearsal)
+                "participants.csv": (["participant", "joins", "registered_utc", "scripted"],
+                                     [[pid, r.joins, _utc(r.time_ns), self.scripted_as(pid)]
+                                      for pid, r in self.state.participants.items()]),
                 "sessions.csv": (["session", "participant", "phase", "game", "outcome", "reason", "rounds_played",
-                                  "invalid", "recording", "policy", "bias"],
+                                  "invalid", "recording", "policy", "bias", "scripted"],
                                  [[g.session, g.participant, g.phase, g.game + 1,
                                    g.ended.outcome if g.ended else "running", g.ended.reason if g.ended else "",
                                    g.ended.rounds_played if g.ended else 0, g.invalid, g.recording,
-                                   g.ended.policy if g.ended else "", g.bias] for g in self.state.games.values()]),
+                                   g.ended.policy if g.ended else "", g.bias, g.scripted]
+                                  for g in self.state.games.values()]),
             }
             answers = self.answers()
             cols = ["participant", "phase", "game", "session", "questionnaire", "item", "answer", "returning", "valid"]

@@ -113,7 +113,7 @@ class StudyRunner:
         self._control_seq = 0
 
     # -- a game --------------------------------------------------------------
-    def config_for(self, pid: str, phase_id: str, game: int) -> SessionConfig:
+    def config_for(self, pid: str, phase_id: str, game: int, scripted: str = "") -> SessionConfig:
         study, phase = self.data.study, self.data.study.phase_by_id(phase_id)
         actions: list[int] = []
         if phase.bias:
@@ -127,7 +127,7 @@ class StudyRunner:
             observed_source="first-pick", ignore_rule="time", ignore_window_ms=float(study.study.ignore_window_ms),
             ignore_clock=study.study.ignore_clock, turn_back_ms=float(study.study.turn_back_ms),
             policy_actions=actions, learner=learner_overrides(study.learner_config(phase)),
-            software_version=__version__)
+            software_version=__version__, scripted=scripted)
         config.validate()
         return config
 
@@ -162,7 +162,8 @@ class StudyRunner:
             self.check_step(pid, phase_id, game)
             if player is None and pid in self.scripted:
                 player = scripted_players(self, self.scripted)(pid, phase_id, game)
-            config = self.config_for(pid, phase_id, game)
+            scripted = scripted_persona(player)
+            config = self.config_for(pid, phase_id, game, scripted)
             phase = self.data.study.phase_by_id(phase_id)
             recording = f"recordings/{config.session}.mcap"
             try:  # a recording the journal does not know (a copied folder, a game cut before its journal line)
@@ -171,7 +172,8 @@ class StudyRunner:
                 raise StudyDataError(err.line()) from None
             combined = self.data.state.combined.get(phase_id)
             self.data.append(j.GameStarted(participant=pid, phase=phase_id, game=game, session=config.session,
-                                           recording=recording, bias=combined.output if combined else ""))
+                                           recording=recording, bias=combined.output if combined else "",
+                                           scripted=scripted))
             try:
                 return self._play(config, phase, recording, player, on_event)
             except Exception as err:  # the journal never keeps a started game without its end
@@ -370,7 +372,7 @@ class StudyRunner:
             raise StudyDataError("a step is already running")
         try:
             self.live = Live(phase=phase_id, state="combining")
-            games = [g for g in self.data.state.games.values() if g.phase == phase.bias and g.valid_complete]
+            games = self.data.combined_games(phase.bias)  # people's games; scripted ones only in a rehearsal
             if any(not g.ended.policy for g in games):  # journaled without one (a signal in its questionnaire)
                 said = self.data.build_missing_policies()
                 lacking = [g for g in games if not g.ended.policy]
@@ -480,6 +482,15 @@ def _undeclare(sub) -> None:
         sub.undeclare()
     except Exception:  # already closed with its session
         pass
+
+
+def scripted_persona(player) -> str:
+    """Who plays a game as the board instead of a person: the scripted player's persona key ("scripted" for a
+    player without one); "" for None, the board page a person touches."""
+    if player is None:
+        return ""
+    persona = getattr(player, "persona", None)
+    return getattr(persona, "key", "") or "scripted"
 
 
 def scripted_players(runner: StudyRunner, personas: dict[str, str], press_wrong: dict[str, bool] | None = None):

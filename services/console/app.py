@@ -80,7 +80,8 @@ class Console:
         games = [{"session": g.session, "participant": g.participant, "phase": g.phase, "game": g.game + 1,
                   "outcome": g.ended.outcome if g.ended else "running", "reason": g.ended.reason if g.ended else "",
                   "rounds": g.ended.rounds_played if g.ended else 0, "invalid": g.invalid,
-                  "questionnaire": bool(g.ended and g.ended.questionnaire)} for g in data.state.games.values()]
+                  "questionnaire": bool(g.ended and g.ended.questionnaire), "scripted": g.scripted}
+                 for g in data.state.games.values()]
         combined = {}
         for phase, c in data.state.combined.items():
             combined[phase] = {
@@ -232,8 +233,10 @@ def console_routes(console: Console) -> list:
         def work():
             out = data.folder / "report"
             with output_folder(out, force=True, owned=HUMAN_OUTPUTS) as tmp:  # a failure leaves the old report and no temporary folder
-                human_report(data.folder, tmp)
-            return f"report written: {out / 'report.md'}"
+                made = human_report(data.folder, tmp)
+            kind = (f" (a rehearsal: {len(made.games)} scripted games, no person played)" if made.rehearsal else
+                    f" ({len(made.scripted)} scripted games left out)" if made.scripted else "")
+            return f"report written: {out / 'report.md'}{kind}"
         console.start("report", work)
         return JSONResponse({"started": "report"})
 
