@@ -38,6 +38,8 @@ from typing import Callable
 
 from pairplay import __version__
 from pairplay.core.policies import users_from_policies
+from pairplay.replay.delivery import delivery_counts, delivery_line
+from pairplay.replay.reader import read_log
 from pairplay.replay.studydata import Game, StudyData, StudyDataError, game_end, one_line
 from pairplay.schemas import events as ev
 from pairplay.schemas import journal as j
@@ -105,6 +107,7 @@ class StudyRunner:
         self.robot = robot if robot is not None else (None if url == NO_ROBOT else RobotChoice(url))
         self.questionnaire_timeout_s = questionnaire_timeout_s
         self.live = Live()
+        self.delivery: dict[str, str] = {}  # session -> what its robot delivered (replay/delivery.py)
         self._stop: threading.Event | None = None
         self.interrupted: threading.Event | None = None  # the process's signal (interrupt): no more steps
         self._skip = threading.Event()
@@ -287,6 +290,12 @@ class StudyRunner:
     def _finish(self, config: SessionConfig, path: Path, answered: bool) -> Game:
         self.data.append(game_end(self.data.folder, config.session, config.participant.split(":", 1)[1], path,
                                   answered, self._abort_reason))
+        if self.robot is not None:  # a robot it could not reach is said, not only under -v
+            acted = read_log(path, only=frozenset({"RobotActed"})).of("RobotActed")
+            line = self.delivery[config.session] = delivery_line(acted)
+            total, delivered, *_ = delivery_counts(acted)
+            if delivered < total:
+                log.warning("%s: %s", config.session, line)
         self.data.write_tables()
         return self.data.state.games[config.session]
 

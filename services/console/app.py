@@ -61,7 +61,8 @@ class Console:
         def run() -> None:
             try:
                 result = work()
-                self.last = {"step": label, "ok": True, "message": _describe(result)}
+                robot = self.runner.delivery.get(getattr(result, "session", ""), "")
+                self.last = {"step": label, "ok": True, "message": _describe(result) + (f"; {robot}" if robot else "")}
             except StudyDataError as err:
                 self.last = {"step": label, "ok": False, "message": str(err)}
             except Exception as err:  # a step must never take the console down with it
