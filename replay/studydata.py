@@ -283,12 +283,13 @@ class StudyData:
         """The personas that played `pid`'s games instead of a person (a rehearsal), "+"-joined; "" if none."""
         return "+".join(dict.fromkeys(g.scripted for g in self.games_of(pid) if g.scripted))
 
-    def combined_games(self, phase: str) -> list[Game]:
-        """The games a bias policy of `phase`'s games combines: its valid ones that people played; all of
-        them (the scripted ones too) when no person played one, a rehearsal, so a pilot reaches the next phase."""
+    def combined_games(self, phase: str, include_scripted: bool = False) -> list[Game]:
+        """The games a bias policy of `phase`'s games combines: its valid ones that people played, unless
+        `include_scripted` (a rehearsal asked for: `protocol pilot`, `serve --pilot`); all of them when no
+        person played one (a rehearsal's folder), so a rehearsal reaches the next phase."""
         valid = [g for g in self.state.games.values() if g.phase == phase and g.valid_complete]
         people = [g for g in valid if not g.scripted]
-        return people or valid
+        return valid if include_scripted else people or valid
 
     def plan(self) -> list[Step]:
         """Every step of the protocol, in order, with what is done and what is blocked."""

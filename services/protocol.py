@@ -103,6 +103,7 @@ class StudyRunner:
         self.lab = lab
         # a dress rehearsal: participant id -> core persona that plays instead of a person (services/scripted.py)
         self.scripted: dict[str, str] = {}
+        self.rehearsal = False  # `protocol pilot`: every game scripted, the combination takes them (run_plan's players)
         url = data.study.study.robot
         self.robot = robot if robot is not None else (None if url == NO_ROBOT else RobotChoice(url))
         self.questionnaire_timeout_s = questionnaire_timeout_s
@@ -381,7 +382,8 @@ class StudyRunner:
             raise StudyDataError("a step is already running")
         try:
             self.live = Live(phase=phase_id, state="combining")
-            games = self.data.combined_games(phase.bias)  # people's games; scripted ones only in a rehearsal
+            # people's games; scripted ones too in a rehearsal (personas asked to play: pilot, serve --pilot)
+            games = self.data.combined_games(phase.bias, include_scripted=self.rehearsal or bool(self.scripted))
             if any(not g.ended.policy for g in games):  # journaled without one (a signal in its questionnaire)
                 said = self.data.build_missing_policies()
                 lacking = [g for g in games if not g.ended.policy]
@@ -442,7 +444,9 @@ class StudyRunner:
 
     # -- the whole protocol, for pilots and tests ----------------------------
     def run_plan(self, players: Callable[[str, str, int], object], on_step: Callable | None = None) -> list:
-        """Run every open step of the plan in order; `players(pid, phase, game)` gives each game's player."""
+        """Run every open step of the plan in order; `players(pid, phase, game)` gives each game's player
+        (a rehearsal: the combination takes the scripted games it played)."""
+        self.rehearsal = True
         done = []
         while self.interrupted is None and (step := self.data.next_step()) is not None:
             if step.blocked:
