@@ -73,7 +73,9 @@ class Live:
     robot: str = ""
     paused: bool = False
     state: str = "idle"  # idle | playing | questionnaire | combining
-    board: bool = False  # a board (page or scripted player) is on the game's bus
+    # a board (a scripted player, or a board elsewhere) is on the game's bus; when the lab serves the board,
+    # the console says a board page is connected instead (services/console/app.py)
+    board: bool = False
     questionnaire_token: str = ""  # the per-game token of the questionnaire page
     board_token: str = ""  # the board page's token (the same, when there is a questionnaire)
 

@@ -91,6 +91,10 @@ class Console:
                            for s, (a, r) in enumerate(zip(c.actions, c.decided_by)) if s < N_STATES - 1]}
         live_d = asdict(live)
         live_d.pop("questionnaire_token")
+        hub = self.runner.lab.hubs.get(live.session) if self.runner.lab is not None and live.session else None
+        if hub is not None:  # the lab serves the board: "connected" is a board page on its WebSocket, not the
+            # lab's board service joining the bus (it does before any page is open)
+            live_d["board"] = any(c.page == "board" for c in list(hub.clients))
         if live.session and live.questionnaire_token and live.state in ("playing", "questionnaire"):
             live_d["questionnaire_url"] = f"/questionnaire?session={live.session}&token={live.questionnaire_token}"
         if live.session and self.board_url is not None and live.state == "playing":
