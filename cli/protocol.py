@@ -152,6 +152,8 @@ def _run(args) -> int:
         data.write_tables()
         return 0
     if args.action == "status":
+        if not data.state.participants:  # an empty plan is not a complete one
+            print(f"nobody is registered: `pairplay protocol register {data.folder}` first")
         for step in data.plan():
             mark = "done" if step.done else ("blocked" if step.blocked else "open")
             print(f"[{mark:7}] {step.label}" + (f"  ({step.blocked})" if step.blocked and not step.done else ""))

@@ -301,8 +301,12 @@ class StudyData:
                 players = {s.participant for s in earlier}
                 waiting = not earlier or not all(s.done for s in earlier)
                 done = phase.id in self.state.combined
-                why = ("the games of " + phase.bias + " are not all played") if waiting else \
-                    ("it needs at least 2 players" if len(players) < 2 else "")
+                # nobody registered is not "games not all played": that said to play games nobody could
+                # (an empty study, a new user's trial); what to do first is to register people
+                why = (f"nobody plays {phase.bias} yet: register its participants first (at least 2)" if not earlier
+                       else f"it needs at least 2 players: register another participant for {phase.bias}"
+                       if len(players) < 2 else ("the games of " + phase.bias + " are not all played") if waiting
+                       else "")
                 steps.append(Step("combine", phase.id, done=done, blocked="" if done else why))
                 if not done:
                     blocked = f"the bias policy of {phase.id} is not combined yet"

@@ -139,3 +139,21 @@ def test_a_game_that_fails_to_start_is_journaled_ended_and_the_console_says_why(
     ended = {e["session"] for e in journal if e["event"] == "GameEnded"}
     assert started and started == ended, journal
     assert state["next"]["label"] and not state["next"]["done"]  # the same game again, as a retry
+
+
+def test_an_empty_study_says_to_register_participants_first(lab, pairplay_cli):
+    """Before: "[blocked] combine the policies ... (the games of phase1 are not all played)", in the
+    console and `protocol status`, of a study nobody was registered in (a new user's trial)."""
+    server, data = lab
+    _, state = call(f"{server.url}/api/console/state?token={server.token}")
+    assert "register its participants first" in state["next"]["blocked"], state["next"]
+    assert "not all played" not in state["next"]["blocked"]
+    status, answer = call(f"{server.url}/api/console/next?token={server.token}", {})
+    assert status == 400 and "register its participants first" in answer["error"], answer
+    r = pairplay_cli("protocol", "status", data.folder)
+    assert r.returncode == 0 and "not all played" not in r.stdout, r.stdout
+    assert r.stdout.splitlines()[0] == f"nobody is registered: `pairplay protocol register {data.folder}` first"
+    assert "register its participants first" in r.stdout
+    data.register("phase1")
+    _, state = call(f"{server.url}/api/console/state?token={server.token}")
+    assert state["plan"][2]["kind"] == "combine" and "register another participant" in state["plan"][2]["blocked"]

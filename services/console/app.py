@@ -185,7 +185,8 @@ def console_routes(console: Console) -> list:
     async def start_next(request: Request) -> Response:
         step = data.next_step()
         if step is None:
-            raise StudyDataError("the plan is complete")
+            raise StudyDataError("the plan is complete" if data.state.participants else
+                                 "nobody is registered: register participants first")
         if step.blocked:
             raise StudyDataError(f"{step.label}: {step.blocked}")
         if step.kind == "combine":

@@ -59,7 +59,7 @@ function render(s) {
     if (s.next && p.label === s.next.label) li.classList.add("next");
     plan.appendChild(li);
   });
-  $("next-step").textContent = s.next ? `next: ${s.next.label}` : "the plan is complete";
+  $("next-step").textContent = s.next ? `next: ${s.next.label}` : s.participants.length ? "the plan is complete" : "nobody is registered: register participants first";
   $("run-next").disabled = s.busy || !s.next || !!s.next.blocked;
 
   const L = s.live;
