@@ -25,7 +25,7 @@ from pairplay.services.recorder import check_new_recording
 from pairplay.services.bus import LOOPBACK_ANY_PORT, MODES, BusOptions, stop_on_signals
 
 from pairplay.cli.args import duration
-from pairplay.cli.robot import add_robot_arguments, check_robot_args, robot_choice
+from pairplay.cli.robot import add_robot_arguments, check_robot_args, probe_robot_args, robot_choice
 from pairplay.cli.session import add_config_arguments, config_from_args, print_interrupted
 
 LOOPBACK = "127.0.0.1"
@@ -76,6 +76,7 @@ def run(args: argparse.Namespace) -> int:
     except (ValueError, KeyError, PolicyFileError) as err:
         print(f"pairplay lab: {err}", file=sys.stderr)
         return 2
+    probe_robot_args(args)  # an OptionError: one line with its way out (cli/main.py)
     from pairplay.services.lab.server import run_lab
 
     stop = threading.Event()
@@ -132,4 +133,8 @@ def run(args: argparse.Namespace) -> int:
     ended = "no SessionEnded recorded" if e is None else e.reason + (f" ({e.detail})" if e.detail else "")
     print(f"rounds played: {len(fold.turns_per_round())} of {config.rounds}; rejections: {len(fold.rejections)}; "
           f"ended: {ended}")
+    from pairplay.replay.delivery import delivery_line
+    robot = delivery_line(recorded.of("RobotActed"))
+    if robot:
+        print(robot)
     return 0 if e is not None and e.reason in ("completed", "interrupted", "aborted") else 1  # as `pairplay session`

@@ -152,6 +152,8 @@ def _run(args) -> int:
         data.write_tables()
         return 0
     if args.action == "status":
+        if not data.state.participants:  # an empty plan is not a complete one
+            print(f"nobody is registered: `pairplay protocol register {data.folder}` first")
         for step in data.plan():
             mark = "done" if step.done else ("blocked" if step.blocked else "open")
             print(f"[{mark:7}] {step.label}" + (f"  ({step.blocked})" if step.blocked and not step.done else ""))
@@ -203,6 +205,20 @@ def _robot(args):
     return choice, True
 
 
+def warn_unreachable(runner, verb: str) -> None:
+    """A WARNING line if the study's robot does not accept a connection now. Not a refusal: the console
+    and the plan go on (the robot may be switched on before the first game; each game's line says how
+    many suggestions reached it)."""
+    from pairplay.services.robot.choice import robot_unreachable
+    if runner.robot is None:
+        return
+    why = robot_unreachable(runner.robot.url)
+    if why:
+        print(f"pairplay protocol {verb}: warning: the robot does not accept a connection now: {why} "
+              f"(--robot {runner.robot.url.split('?')[0]}); its games record what it cannot deliver as failed",
+              file=sys.stderr, flush=True)
+
+
 def _serve(data: StudyData, args) -> int:
     import threading
 
@@ -236,6 +252,7 @@ def _serve(data: StudyData, args) -> int:
                                     ssl_keyfile=args.keyfile).start()
         except OSError as err:
             raise StudyDataError(f"--listen {args.listen}: {err.strerror or err}") from None
+        warn_unreachable(runner, "serve")
         print(f"experimenter console: {server.console_url}", flush=True)
         print(f"bus (boards and scripted players connect here): {' '.join(bus.locators())}", flush=True)
         try:
@@ -280,10 +297,13 @@ def _pilot(data: StudyData, args) -> int:
         runners.append(runner)
         if args.robot == NO_ROBOT:
             runner.robot = None
+        warn_unreachable(runner, "pilot")
 
         def said(step, result) -> None:
             what = f"{len(result.users)} users combined" if step.kind == "combine" else \
                 f"{result.ended.outcome}, {result.ended.rounds_played} rounds"
+            robot = runner.delivery.get(getattr(result, "session", ""), "")
+            what += f"; {robot}" if robot else ""
             print(f"{time.perf_counter() - t0:7.1f} s  {step.label}: {what}", flush=True)
         try:
             runner.run_plan(scripted_players(runner, personas), on_step=said)

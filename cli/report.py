@@ -27,6 +27,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="a policy file drawn beside each bias policy (figure 7.5: the virtual Blind+Deaf merge, "
                         "out/study/merged/blind+deaf.json of `pairplay study`)")
     p.add_argument("--force", action="store_true", help="replace the files of an existing report")
+    p.add_argument("--include-scripted", action="store_true",
+                   help="pool the games scripted personas played (protocol pilot, serve --pilot) with people's "
+                        "(default: listed and left out; a folder no person played in is reported as a rehearsal)")
 
 
 def run(args) -> int:
@@ -40,10 +43,12 @@ def run(args) -> int:
         # a completed game a signal left without its policy gets it now, from its recording
         built_missing_policies(StudyData(args.folder), "report")
         with output_folder(out, args.force, owned=HUMAN_OUTPUTS) as tmp:
-            report = human_report(args.folder, tmp, args.reference)
+            report = human_report(args.folder, tmp, args.reference, include_scripted=args.include_scripted)
     except (StudyDataError, PolicyFileError, ValueError) as err:
         print(f"pairplay report: {err}", file=sys.stderr)
         return 2
+    if report.rehearsal:
+        print(f"a rehearsal: {len(report.games)} scripted games, no person played")
     print(f"{len(report.games)} valid games of {len({g.participant for g in report.games})} participants"
           + (f"; left out: {', '.join(report.excluded)}" if report.excluded else ""))
     print(f"report: {out / 'report.md'}")

@@ -13,7 +13,6 @@ takes (add_robot_arguments, check_robot_args, bridge_from_args).
 from __future__ import annotations
 
 import argparse
-import socket
 import sys
 import threading
 
@@ -26,13 +25,12 @@ from pairplay.schemas.policy import N_ACTIONS
 from pairplay.services.bus import Bus, add_bus_arguments, options_from_args, stop_on_signals
 from pairplay.services.robot.backends import FORMS, load_robot_config, open_robot, parse_robot_url
 from pairplay.services.robot.bridge import RobotBridge
-from pairplay.services.robot.choice import RobotChoice, check_choice, start_bridge
+from pairplay.services.robot.choice import CONNECT_PROBE_S, RobotChoice, check_choice, robot_unreachable, start_bridge
 from pairplay.services.robot.calibration import CalibrationError, load_calibration
 from pairplay.services.robot.driver import Suggestion
 
 from pairplay.services.robot.choice import NO_ROBOT
 
-CONNECT_PROBE_S = 1.0  # --try: a robot that does not answer a TCP connect in this time is reported
 
 
 def add_robot_arguments(p: argparse.ArgumentParser) -> None:
@@ -41,6 +39,9 @@ def add_robot_arguments(p: argparse.ArgumentParser) -> None:
                    help=f"robot backend: {FORMS}, or none (default: virtual, no hardware)")
     g.add_argument("--robot-config", metavar="FILE", help="RobotConfig JSON: gesture names, texts, timings")
     g.add_argument("--calibration", metavar="FILE", help="board calibration JSON (default: the packaged one)")
+    g.add_argument("--robot-unreachable-ok", action="store_true",
+                   help="start even if the robot does not accept a connection now (the bridge keeps trying; "
+                        "what it cannot deliver is recorded failed). Default: refuse the session")
 
 
 def robot_choice(args: argparse.Namespace) -> RobotChoice | None:
@@ -55,6 +56,16 @@ def check_robot_args(args: argparse.Namespace) -> None:
     choice = robot_choice(args)
     if choice is not None:
         check_choice(choice)
+
+
+def probe_robot_args(args: argparse.Namespace) -> None:
+    """OptionError if the networked robot of --robot does not accept a connection now: a session started
+    with an unreachable robot recorded every suggestion failed and said so only under -v (a new user's
+    trial). --robot-unreachable-ok goes on without it; the virtual robot and --robot none need no probe."""
+    if robot_choice(args) is None or getattr(args, "robot_unreachable_ok", False):
+        return
+    probe_robot(args.robot, fix="--robot-unreachable-ok starts the session anyway (the bridge keeps trying), "
+                                "--robot none without a robot", option="--robot-unreachable-ok")
 
 
 def bridge_from_args(bus: Bus, session: str, args: argparse.Namespace, stop=None) -> RobotBridge | None:
@@ -113,17 +124,13 @@ def card(text: str) -> int:
     return value
 
 
-def probe_robot(url: str, timeout_s: float = CONNECT_PROBE_S) -> None:
+def probe_robot(url: str, timeout_s: float = CONNECT_PROBE_S, fix: str = "", option: str = "") -> None:
     """OptionError at once if a networked robot does not accept a TCP connection: `--try` is a
     check before a study, so say so in about a second instead of retrying with backoff."""
-    scheme, host, port, _, _ = parse_robot_url(url)
-    if scheme == "virtual":
-        return
-    try:
-        socket.create_connection((host, port), timeout=timeout_s).close()
-    except OSError as err:
-        reason = err.strerror or ("no answer within %g s" % timeout_s if isinstance(err, TimeoutError) else str(err))
-        raise OptionError(f"the robot does not accept a connection: {reason}", f"--robot {url}") from None
+    reason = robot_unreachable(url, timeout_s)
+    if reason:  # the URL without its query: a Realtime key is never echoed
+        raise OptionError(f"the robot does not accept a connection: {reason}", f"--robot {url.split('?')[0]}",
+                          fix=fix, option=option)
 
 
 def _try(args: argparse.Namespace) -> int:

@@ -45,7 +45,7 @@ from pairplay.schemas.session import (IGNORE_CLOCKS, MS_RANGE, OBSERVED_SOURCES,
 
 from pairplay.cli.args import add_force, count, float_between, game_index, positive_number, seed_number, session_id
 from pairplay.core.geometry import PICKS_UNIT
-from pairplay.cli.robot import add_robot_arguments, check_robot_args, robot_choice
+from pairplay.cli.robot import add_robot_arguments, check_robot_args, probe_robot_args, robot_choice
 from pairplay.services.bus import BusOpenError, ConfigFileError, add_bus_arguments, options_from_args, stop_on_signals
 from pairplay.services.recorder import FORCE_SESSION_HINT, check_new_recording
 from pairplay.services.runner import waiting_for
@@ -198,6 +198,8 @@ def run(args: argparse.Namespace) -> int:
         check_robot_args(args)
     except ValueError as err:
         raise OptionError(str(err), "robot options") from None
+    if "robot" not in args.external:  # a bridge elsewhere (`pairplay robot`) reaches its robot itself
+        probe_robot_args(args)
     check_folder(args.out)
     path = Path(args.out) / f"{config.session}.mcap"
     if "recorder" not in args.external:  # an external recorder checks its own folder
@@ -236,6 +238,7 @@ def run(args: argparse.Namespace) -> int:
         return 0
     if getattr(stop, "why", ""):
         return print_interrupted(summary, path, stop.why, config.rounds, "the id stays taken: --force reuses it")
+    from pairplay.replay.delivery import delivery_line
     from pairplay.replay.fold import fold_events
     from pairplay.replay.reader import read_log
     recorded = read_log(path)
@@ -245,6 +248,9 @@ def run(args: argparse.Namespace) -> int:
     print(f"rounds played: {len(picks)}; {PICKS_UNIT}: {picks[:10]}{' ...' if len(picks) > 10 else ''}")
     print(f"rejections: {len(fold.rejections)}; Q updates: {fold.counts.get('QUpdated', 0)}"
           + (f"; LSPI samples: {fold.counts.get('LSPIUpdated', 0)}" if config.algorithm == "lspi" else ""))
+    robot = delivery_line(recorded.of("RobotActed"))
+    if robot:
+        print(robot)
     e = fold.ended
     if e is None:
         print("ended: no SessionEnded recorded")

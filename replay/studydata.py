@@ -92,6 +92,7 @@ class Game:
     ended: j.GameEnded | None = None
     invalid: str = ""
     paused: bool = False
+    scripted: str = ""  # the persona that played instead of a person (a rehearsal); "" for a person
 
     @property
     def valid_complete(self) -> bool:
@@ -116,7 +117,8 @@ class StudyState:
             number = int(e.participant[1:]) if e.participant[1:].isdigit() else 0
             self.next_number = max(self.next_number, number + 1)
         elif isinstance(e, j.GameStarted):
-            self.games[e.session] = Game(e.session, e.participant, e.phase, e.game, e.recording, e.bias)
+            self.games[e.session] = Game(e.session, e.participant, e.phase, e.game, e.recording, e.bias,
+                                         scripted=e.scripted)
         elif isinstance(e, j.GameEnded) and e.session in self.games:
             self.games[e.session].ended = e
             self.games[e.session].paused = False
@@ -278,6 +280,18 @@ class StudyData:
     def games_of(self, pid: str, phase: str | None = None) -> list[Game]:
         return [g for g in self.state.games.values() if g.participant == pid and (phase is None or g.phase == phase)]
 
+    def scripted_as(self, pid: str) -> str:
+        """The personas that played `pid`'s games instead of a person (a rehearsal), "+"-joined; "" if none."""
+        return "+".join(dict.fromkeys(g.scripted for g in self.games_of(pid) if g.scripted))
+
+    def combined_games(self, phase: str, include_scripted: bool = False) -> list[Game]:
+        """The games a bias policy of `phase`'s games combines: its valid ones that people played, unless
+        `include_scripted` (a rehearsal asked for: `protocol pilot`, `serve --pilot`); all of them when no
+        person played one (a rehearsal's folder), so a rehearsal reaches the next phase."""
+        valid = [g for g in self.state.games.values() if g.phase == phase and g.valid_complete]
+        people = [g for g in valid if not g.scripted]
+        return valid if include_scripted else people or valid
+
     def plan(self) -> list[Step]:
         """Every step of the protocol, in order, with what is done and what is blocked."""
         steps: list[Step] = []
@@ -288,8 +302,12 @@ class StudyData:
                 players = {s.participant for s in earlier}
                 waiting = not earlier or not all(s.done for s in earlier)
                 done = phase.id in self.state.combined
-                why = ("the games of " + phase.bias + " are not all played") if waiting else \
-                    ("it needs at least 2 players" if len(players) < 2 else "")
+                # nobody registered is not "games not all played": that said to play games nobody could
+                # (an empty study, a new user's trial); what to do first is to register people
+                why = (f"nobody plays {phase.bias} yet: register its participants first (at least 2)" if not earlier
+                       else f"it needs at least 2 players: register another participant for {phase.bias}"
+                       if len(players) < 2 else ("the games of " + phase.bias + " are not all played") if waiting
+                       else "")
                 steps.append(Step("combine", phase.id, done=done, blocked="" if done else why))
                 if not done:
                     blocked = f"the bias policy of {phase.id} is not combined yet"
@@ -356,7 +374,7 @@ class StudyData:
                     try:
                         rebuilt = rebuild_recording(path)
                     except (InputError, OSError) as err:
-                        why = f"its recording {g.recording} cannot be read: {_one_line(err)}"
+                        why = f"its recording {g.recording} cannot be read: {one_line(err)}"
                     else:
                         if rebuilt.partial:
                             why = f"its recording {g.recording} is partial: {rebuilt.partial}"
@@ -364,7 +382,7 @@ class StudyData:
                         try:  # force: ours, of this recording (the file a build cut before its journal line wrote)
                             policy = write_game_policy(self.folder, rebuilt, force=True)
                         except (OutputError, OSError) as err:
-                            why = f"its policy cannot be written: {_one_line(err)}"
+                            why = f"its policy cannot be written: {one_line(err)}"
                 if why:
                     lines.append(f"{g.session}: completed, but {was}no policy built: {why}")
                     continue
@@ -395,14 +413,17 @@ class StudyData:
         """participants.csv, sessions.csv and answers.csv, rewritten from the journal and recordings."""
         with self._lock:
             tables = {
-                "participants.csv": (["participant", "joins", "registered_utc"],
-                                     [[pid, r.joins, _utc(r.time_ns)] for pid, r in self.state.participants.items()]),
+                # scripted: the personas that played a participant's games instead of a person (a rehearsal)
+                "participants.csv": (["participant", "joins", "registered_utc", "scripted"],
+                                     [[pid, r.joins, _utc(r.time_ns), self.scripted_as(pid)]
+                                      for pid, r in self.state.participants.items()]),
                 "sessions.csv": (["session", "participant", "phase", "game", "outcome", "reason", "rounds_played",
-                                  "invalid", "recording", "policy", "bias"],
+                                  "invalid", "recording", "policy", "bias", "scripted"],
                                  [[g.session, g.participant, g.phase, g.game + 1,
                                    g.ended.outcome if g.ended else "running", g.ended.reason if g.ended else "",
                                    g.ended.rounds_played if g.ended else 0, g.invalid, g.recording,
-                                   g.ended.policy if g.ended else "", g.bias] for g in self.state.games.values()]),
+                                   g.ended.policy if g.ended else "", g.bias, g.scripted]
+                                  for g in self.state.games.values()]),
             }
             answers = self.answers()
             cols = ["participant", "phase", "game", "session", "questionnaire", "item", "answer", "returning", "valid"]
@@ -570,7 +591,8 @@ def write_game_policy(folder: Path, rebuilt: Rebuilt, force: bool = False) -> st
     return policy.relative_to(folder).as_posix()
 
 
-def _one_line(err: Exception) -> str:
+def one_line(err: Exception) -> str:
+    """An error as one line: a UserError's own line, else its message with its newlines folded."""
     return err.line() if isinstance(err, (InputError, OutputError)) else " ".join(str(err).split())
 
 

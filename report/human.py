@@ -3,7 +3,12 @@
 Rule: `human_report(folder, out)` reads only the study folder (replay/studydata.py):
 the journal says which recording is which game of which participant in which
 phase, the recordings say what happened. Games marked invalid or aborted are
-listed and left out of every figure and table. It writes:
+listed and left out of every figure and table. So are the games scripted
+personas played instead of people (a dress rehearsal: `protocol pilot`,
+`serve --pilot`; the journal's GameStarted `scripted`): they are listed by
+name and persona, and counted in nothing people did, unless
+`include_scripted`; a folder where no person played is reported as what it
+is, a rehearsal of N scripted games. It writes:
   picks.csv                       picks per round of every valid game (18 is perfect play)
   games.png   (figure 7.3a)       phase 1: mean picks per round of game 1, game 2, ...
   phases.png  (figure 7.3b)       mean picks per round: phase 1 (its games averaged) vs phase 2 ...
@@ -100,22 +105,33 @@ class HumanReport:
     curves: dict[str, np.ndarray]  # label -> mean picks per round
     questionnaire: list[list[str]]
     attention: list[list[str]]
+    rehearsal: bool = False  # no person played: every reported game is a scripted persona's
+    scripted: list[str] = field(default_factory=list)  # the sessions scripted personas played
 
 
-def human_report(folder: str | Path, out: str | Path | None = None, reference: str | Path | None = None) -> HumanReport:
+def human_report(folder: str | Path, out: str | Path | None = None, reference: str | Path | None = None,
+                 include_scripted: bool = False) -> HumanReport:
     """Write the report of the study in `folder` to `out` (default <folder>/report); see the module rule.
 
     `reference`: a policy file drawn beside each bias policy (figure 7.5 compares the
     human merge with the virtual Blind+Deaf one: `pairplay study`'s merged/blind+deaf.json).
+    `include_scripted`: report the scripted games with people's (by default they are left out, listed).
     Raises StudyDataError for a folder that is not a study, ValueError if it has no valid game."""
     data = StudyData(folder)
     study = data.study
     out = Path(out) if out else data.folder / "report"
     out.mkdir(parents=True, exist_ok=True)
     games, excluded = [], []
+    valid = [g for g in data.state.games.values() if g.valid_complete]
+    scripted = [g for g in valid if g.scripted]
+    # a folder no person played in is a rehearsal: its scripted games are what there is to report
+    rehearsal = bool(valid) and len(scripted) == len(valid)
     for g in data.state.games.values():
         if not g.valid_complete:
             excluded.append(f"{g.session} ({g.invalid and 'invalid: ' + g.invalid or (g.ended.reason if g.ended else 'running')})")
+            continue
+        if g.scripted and not (include_scripted or rehearsal):
+            excluded.append(f"{g.session} (scripted: {g.scripted})")
             continue
         path = data.folder / g.recording
         if not path.is_file():
@@ -177,7 +193,9 @@ def human_report(folder: str | Path, out: str | Path | None = None, reference: s
     # the merged policies (figure 7.5)
     ref = read_policy(reference) if reference else None
     panels = []
+    by_policy = {g.ended.policy: g for g in data.state.games.values() if g.ended is not None and g.ended.policy}
     for phase_id, c in data.state.combined.items():
+        personas = sorted({by_policy[p].scripted for p in c.inputs if p in by_policy and by_policy[p].scripted})
         merged_path = data.folder / c.output
         rules: dict[str, int] = defaultdict(int)
         for r in c.decided_by:
@@ -196,7 +214,9 @@ def human_report(folder: str | Path, out: str | Path | None = None, reference: s
                      f"Combined by the combiner service from {len(c.inputs)} policy files of {', '.join(c.users)} "
                      f"(`{c.output}`{'' if merged_path.is_file() else ', file since removed'}); "
                      f"{exact} of {N_STATES - 1} states say the exact position (codes 33-44); rules: "
-                     + "; ".join(f"{k} x{v}" for k, v in sorted(rules.items(), key=lambda kv: -kv[1])) + ".", "",
+                     + "; ".join(f"{k} x{v}" for k, v in sorted(rules.items(), key=lambda kv: -kv[1])) + "."
+                     + (f" **Combined from scripted games** (personas {', '.join(personas)}): a rehearsal's bias "
+                        "policy, not people's." if personas else ""), "",
                      "Profiles (algorithm 3) of the users combined:", "", markdown_table(prof_rows), "",
                      "<details><summary>every state</summary>", "", markdown_table(state_rows), "", "</details>", ""]
     if panels:
@@ -237,7 +257,21 @@ def human_report(folder: str | Path, out: str | Path | None = None, reference: s
                  "quoted. Groups: new users and returning users (who played an earlier phase).", "",
                  markdown_table(q_rows), ""]
 
-    head = [f"# {study.study.title or study.study.id}: the human-world report", "",
+    kinds = sorted({g.scripted for g in scripted})
+    if rehearsal:
+        title = f"# {study.study.title or study.study.id}: a rehearsal of {len(scripted)} scripted games"
+        note = [f"No person played: every game was played by a scripted persona ({', '.join(kinds)}; "
+                "`protocol pilot` or `serve --pilot`). This checks the protocol, not people: its figures are "
+                "the personas'.", ""]
+    elif scripted and include_scripted:
+        title = f"# {study.study.title or study.study.id}: the human-world report, with scripted games"
+        note = [f"{len(scripted)} of these games were played by scripted personas ({', '.join(kinds)}), not people, "
+                "and are pooled with people's games as asked (`--include-scripted`).", ""]
+    else:
+        title = f"# {study.study.title or study.study.id}: the human-world report"
+        note = [f"{len(scripted)} games played by scripted personas ({', '.join(kinds)}) are left out of every "
+                "figure and table (`pairplay report --include-scripted` pools them).", ""] if scripted else []
+    head = [title, "", *note,
             f"pairplay {__version__}; study `{study.study.id}` (seed {study.study.seed}); "
             f"{len({s.participant for s in games})} participants, {len(games)} valid games"
             + (f"; left out: {', '.join(excluded)}" if excluded else "") + ". Phases: "
@@ -245,7 +279,8 @@ def human_report(folder: str | Path, out: str | Path | None = None, reference: s
                         + (f" on the bias of {p.bias}" if p.bias else "") for p in study.phase)
             + f". Re-run: `pairplay report {data.folder}`.", ""]
     (out / "report.md").write_text("\n".join(head + sections))
-    return HumanReport(out, games, excluded, curves, q_rows, att)
+    return HumanReport(out, games, excluded, curves, q_rows, att, rehearsal=rehearsal,
+                       scripted=[g.session for g in scripted])
 
 
 def questionnaire_rows(data: StudyData, sessions: set[str]) -> list[list[str]]:

@@ -45,6 +45,9 @@ class GameStarted(JournalEvent, tag="GameStarted"):
     session: str
     recording: str  # path relative to the study folder
     bias: str = ""  # the merged policy file a pi-reuse game starts from
+    # the core persona that played instead of a person (a dress rehearsal: `protocol pilot`, `serve --pilot`);
+    # "" for a person (and every game of a journal older than the field)
+    scripted: str = ""
 
 
 class GamePaused(JournalEvent, tag="GamePaused"):

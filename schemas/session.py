@@ -70,6 +70,10 @@ class SessionConfig(msgspec.Struct, frozen=True, kw_only=True):
     # LSPI's settings (schemas.config.LSPIConfig fields that differ from its defaults),
     # for algorithm "lspi"; left out of other sessions' events (UNSET).
     lspi: Union[dict[str, Union[float, int, bool]], msgspec.UnsetType] = msgspec.UNSET
+    # A protocol game a scripted player played instead of the person `participant` names (a dress rehearsal:
+    # `protocol pilot`, `protocol serve --pilot`): the core persona that touched the board; "" for a person's
+    # game, a simulated participant's (sim:, whose persona is `persona`) and every older recording.
+    scripted: str = ""
 
     def lspi_config(self) -> LSPIConfig:
         """LSPI's settings as the strict Struct (ValueError if unknown keys or values that cannot run)."""

@@ -28,12 +28,13 @@ from typing import Literal, Union
 import msgspec
 
 from .config import LearnerConfig
+from .robot_url import parse_robot_url
 from .session import MS_FIELDS, MS_RANGE, SEED_RANGE
 
 ID = re.compile(r"^[a-z0-9][a-z0-9_-]{0,39}$")
 PRESETS = ("virtual", "human-phase1", "human-phase2")
 ALGORITHMS = ("q-learning", "pi-reuse")
-ROBOT_SCHEMES = ("virtual", "none", "iristk://", "furhat://")
+NO_ROBOT = "none"  # a study without a robot bridge (services/robot/choice.py NO_ROBOT)
 EXAMPLE = "thesis-ch7.toml"
 
 
@@ -117,7 +118,9 @@ class Study(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
         """The phase's schedule: its preset for its rounds, with its overrides."""
         base = {"virtual": lambda r: LearnerConfig(), "human-phase1": LearnerConfig.human_phase1,
                 "human-phase2": LearnerConfig.human_phase2}[phase.preset](phase.rounds)
-        return msgspec.structs.replace(base, **phase.learner)
+        # convert, not replace: replace checks neither the types nor the ranges, and the session that
+        # reads the schedule back (SessionConfig.learner_config) would refuse it when the game starts
+        return msgspec.convert({**msgspec.structs.asdict(base), **phase.learner}, LearnerConfig)
 
     def questions(self, name: str, returning: bool) -> list[Item]:
         """The items of questionnaire `name` a (returning or new) participant is asked."""
@@ -139,9 +142,13 @@ def _check(study: Study) -> None:
             raise StudyFileError(f"study.{key}: must be {MS_RANGE[0]:g}..{MS_RANGE[1]:g} (ms), "
                                  f"got {getattr(study.study, key)}")
     robot = study.study.robot
-    if not any(robot == s or (s.endswith("://") and robot.startswith(s) and len(robot) > len(s))
-               for s in ROBOT_SCHEMES):
-        raise StudyFileError(f"study.robot: {robot!r} is not virtual, none, iristk://HOST[:PORT] or furhat://HOST[:PORT]")
+    if robot != NO_ROBOT:  # the --robot option's parser: a URL a session would refuse is refused here
+        try:
+            parse_robot_url(robot)
+        except ValueError as err:
+            why = str(err).removeprefix("--robot ")
+            forms = "" if "use one of" in why else " (virtual, none, iristk://HOST[:PORT] or furhat://HOST[:PORT])"
+            raise StudyFileError(f"study.robot: {why}{forms}") from None
     if not study.phase:
         raise StudyFileError("phase: a study needs at least one [[phase]]")
     seen: list[str] = []
@@ -167,7 +174,7 @@ def _check(study: Study) -> None:
                 raise StudyFileError(f"{where}.questionnaires: no [questionnaire.{name}] in the file")
         try:
             schedule = study.learner_config(p)
-        except (TypeError, ValueError) as err:
+        except (TypeError, ValueError, msgspec.ValidationError) as err:
             raise StudyFileError(f"{where}.learner: {err}") from None
         never = schedule.never_reuses() if p.algorithm == "pi-reuse" else ""
         if never:  # 1 round under human-phase2: its one round is the last, on the new policy alone

@@ -28,6 +28,7 @@ done steps, the combination and the report.
 
 from __future__ import annotations
 
+import logging
 import secrets
 import threading
 import time
@@ -37,7 +38,9 @@ from typing import Callable
 
 from pairplay import __version__
 from pairplay.core.policies import users_from_policies
-from pairplay.replay.studydata import Game, StudyData, StudyDataError, game_end
+from pairplay.replay.delivery import delivery_counts, delivery_line
+from pairplay.replay.reader import read_log
+from pairplay.replay.studydata import Game, StudyData, StudyDataError, game_end, one_line
 from pairplay.schemas import events as ev
 from pairplay.schemas import journal as j
 from pairplay.schemas.envelope import stamped
@@ -51,6 +54,8 @@ from pairplay.services.recorder import RecordingExists, check_new_recording
 from pairplay.services.robot.choice import NO_ROBOT, RobotChoice
 from pairplay.services.runner import Node
 from pairplay.services.session import run_session
+
+log = logging.getLogger("pairplay.protocol")
 
 
 @dataclass
@@ -68,7 +73,9 @@ class Live:
     robot: str = ""
     paused: bool = False
     state: str = "idle"  # idle | playing | questionnaire | combining
-    board: bool = False  # a board (page or scripted player) is on the game's bus
+    # a board (a scripted player, or a board elsewhere) is on the game's bus; when the lab serves the board,
+    # the console says a board page is connected instead (services/console/app.py)
+    board: bool = False
     questionnaire_token: str = ""  # the per-game token of the questionnaire page
     board_token: str = ""  # the board page's token (the same, when there is a questionnaire)
 
@@ -98,10 +105,12 @@ class StudyRunner:
         self.lab = lab
         # a dress rehearsal: participant id -> core persona that plays instead of a person (services/scripted.py)
         self.scripted: dict[str, str] = {}
+        self.rehearsal = False  # `protocol pilot`: every game scripted, the combination takes them (run_plan's players)
         url = data.study.study.robot
         self.robot = robot if robot is not None else (None if url == NO_ROBOT else RobotChoice(url))
         self.questionnaire_timeout_s = questionnaire_timeout_s
         self.live = Live()
+        self.delivery: dict[str, str] = {}  # session -> what its robot delivered (replay/delivery.py)
         self._stop: threading.Event | None = None
         self.interrupted: threading.Event | None = None  # the process's signal (interrupt): no more steps
         self._skip = threading.Event()
@@ -110,7 +119,7 @@ class StudyRunner:
         self._control_seq = 0
 
     # -- a game --------------------------------------------------------------
-    def config_for(self, pid: str, phase_id: str, game: int) -> SessionConfig:
+    def config_for(self, pid: str, phase_id: str, game: int, scripted: str = "") -> SessionConfig:
         study, phase = self.data.study, self.data.study.phase_by_id(phase_id)
         actions: list[int] = []
         if phase.bias:
@@ -124,7 +133,7 @@ class StudyRunner:
             observed_source="first-pick", ignore_rule="time", ignore_window_ms=float(study.study.ignore_window_ms),
             ignore_clock=study.study.ignore_clock, turn_back_ms=float(study.study.turn_back_ms),
             policy_actions=actions, learner=learner_overrides(study.learner_config(phase)),
-            software_version=__version__)
+            software_version=__version__, scripted=scripted)
         config.validate()
         return config
 
@@ -159,7 +168,8 @@ class StudyRunner:
             self.check_step(pid, phase_id, game)
             if player is None and pid in self.scripted:
                 player = scripted_players(self, self.scripted)(pid, phase_id, game)
-            config = self.config_for(pid, phase_id, game)
+            scripted = scripted_persona(player)
+            config = self.config_for(pid, phase_id, game, scripted)
             phase = self.data.study.phase_by_id(phase_id)
             recording = f"recordings/{config.session}.mcap"
             try:  # a recording the journal does not know (a copied folder, a game cut before its journal line)
@@ -168,59 +178,75 @@ class StudyRunner:
                 raise StudyDataError(err.line()) from None
             combined = self.data.state.combined.get(phase_id)
             self.data.append(j.GameStarted(participant=pid, phase=phase_id, game=game, session=config.session,
-                                           recording=recording, bias=combined.output if combined else ""))
-            token = secrets.token_urlsafe(18)
-            self.live = Live(session=config.session, participant=pid, phase=phase_id, game=game,
-                             rounds=config.rounds, state="playing", board=player is not None,
-                             questionnaire_token=token if phase.questionnaires else "", board_token=token)
-            hub = None
-            if player is None and self.lab is not None:
-                from pairplay.services.lab.hub import LabHub
-                hub = self.lab.add(LabHub(config, token=token))  # the board page: /s/<session>/board?t=<token>
-            self._stop, self._abort_reason, self._control_seq = threading.Event(), "", 0
-            if self.interrupted is not None:  # a signal came while this game was being set up
-                pass_stop(self.interrupted, self._stop)
-            self._skip.clear()
-            answered = threading.Event()
-            watch = [self.bus.subscribe(f"pairplay/{config.session}/**", self._watcher(on_event, answered))]
-            node = None
-            if player is not None:
-                node = Node(self.bus, player, config.session, clock=getattr(player, "clock", time.time_ns),
-                            resume=False)
-                node.start()
-                node.run_in_thread(self._stop)
-
-            def hold(_recorder) -> None:
-                if phase.questionnaires and not self._stop.is_set() and not self._abort_reason:
-                    deadline = time.monotonic() + self.questionnaire_timeout_s
-                    while not (answered.is_set() or self._skip.is_set() or self._stop.is_set()) \
-                            and time.monotonic() < deadline:
-                        time.sleep(0.02)
-                    time.sleep(0.05)  # the answer reaches the recorder on its own thread
-
-            # the game waits for the board: the lab's hub, a scripted player, or a board elsewhere on the bus
-            summary: dict = {}
-            stop = self._stop
+                                           recording=recording, bias=combined.output if combined else "",
+                                           scripted=scripted))
             try:
-                path = run_session(config, self.data.folder / recording, bus=self.bus, stop=stop,
-                                   robot=self.robot, hold=hold, summary=summary,
-                                   wait_also=() if player is not None or hub is not None else ("board",),
-                                   extra_nodes=(lambda bus: [hub.make_node(bus)]) if hub is not None else None)
-            finally:
-                if hub is not None:
-                    self.lab.hubs.pop(config.session, None)
-                    hub.close(shutdown_wait(stop, 5.0, reserve=0.3))
+                return self._play(config, phase, recording, player, on_event)
+            except Exception as err:  # the journal never keeps a started game without its end
+                if config.session in self.data.state.games and self.data.state.games[config.session].ended is None:
+                    why = f"the game failed: {one_line(err)}"
+                    log.error("%s: %s", config.session, why)
+                    self.data.append(j.GameEnded(session=config.session, participant=pid, outcome="aborted",
+                                                 reason=why, rounds_played=0, policy="", questionnaire=False))
+                    self.data.write_tables()
+                    raise StudyDataError(f"{config.session}: {why}") from err
+                raise
+        finally:
+            self.live.state = "idle"
+            self._busy.release()
+
+    def _play(self, config: SessionConfig, phase, recording: str, player, on_event) -> Game:
+        """The started game (journaled GameStarted) played to its end; its GameEnded journaled."""
+        pid, phase_id, game = config.participant.split(":", 1)[1], phase.id, self.data.state.games[config.session].game
+        token = secrets.token_urlsafe(18)
+        self.live = Live(session=config.session, participant=pid, phase=phase_id, game=game,
+                         rounds=config.rounds, state="playing", board=player is not None,
+                         questionnaire_token=token if phase.questionnaires else "", board_token=token)
+        hub = None
+        if player is None and self.lab is not None:
+            from pairplay.services.lab.hub import LabHub
+            hub = self.lab.add(LabHub(config, token=token))  # the board page: /s/<session>/board?t=<token>
+        self._stop, self._abort_reason, self._control_seq = threading.Event(), "", 0
+        if self.interrupted is not None:  # a signal came while this game was being set up
+            pass_stop(self.interrupted, self._stop)
+        self._skip.clear()
+        answered = threading.Event()
+        watch = [self.bus.subscribe(f"pairplay/{config.session}/**", self._watcher(on_event, answered))]
+        node = None
+        if player is not None:
+            node = Node(self.bus, player, config.session, clock=getattr(player, "clock", time.time_ns),
+                        resume=False)
+            node.start()
+            node.run_in_thread(self._stop)
+
+        def hold(_recorder) -> None:
+            if phase.questionnaires and not self._stop.is_set() and not self._abort_reason:
+                deadline = time.monotonic() + self.questionnaire_timeout_s
+                while not (answered.is_set() or self._skip.is_set() or self._stop.is_set()) \
+                        and time.monotonic() < deadline:
+                    time.sleep(0.02)
+                time.sleep(0.05)  # the answer reaches the recorder on its own thread
+
+        # the game waits for the board: the lab's hub, a scripted player, or a board elsewhere on the bus
+        summary: dict = {}
+        stop = self._stop
+        try:
+            path = run_session(config, self.data.folder / recording, bus=self.bus, stop=stop,
+                               robot=self.robot, hold=hold, summary=summary,
+                               wait_also=() if player is not None or hub is not None else ("board",),
+                               extra_nodes=(lambda bus: [hub.make_node(bus)]) if hub is not None else None)
+        finally:  # also when the session failed to start: no board, player or subscription outlives it
+            if hub is not None:
+                self.lab.hubs.pop(config.session, None)
+                hub.close(shutdown_wait(stop, 5.0, reserve=0.3))
             stop.set()
             if node is not None and node.thread is not None:
                 node.thread.join(shutdown_wait(stop, 5.0, reserve=0.3))
             for sub in watch:
                 _undeclare(sub)
-            if self.interrupted is not None:  # a signal: no reading back, the process is gone within 2 s
-                return self._finish_interrupted(config, summary, answered.is_set())
-            return self._finish(config, path, answered.is_set())
-        finally:
-            self.live.state = "idle"
-            self._busy.release()
+        if self.interrupted is not None:  # a signal: no reading back, the process is gone within 2 s
+            return self._finish_interrupted(config, summary, answered.is_set())
+        return self._finish(config, path, answered.is_set())
 
     def _watcher(self, on_event, answered: threading.Event):
         from pairplay.schemas.events import decode_event
@@ -267,6 +293,12 @@ class StudyRunner:
     def _finish(self, config: SessionConfig, path: Path, answered: bool) -> Game:
         self.data.append(game_end(self.data.folder, config.session, config.participant.split(":", 1)[1], path,
                                   answered, self._abort_reason))
+        if self.robot is not None:  # a robot it could not reach is said, not only under -v
+            acted = read_log(path, only=frozenset({"RobotActed"})).of("RobotActed")
+            line = self.delivery[config.session] = delivery_line(acted)
+            total, delivered, *_ = delivery_counts(acted)
+            if delivered < total:
+                log.warning("%s: %s", config.session, line)
         self.data.write_tables()
         return self.data.state.games[config.session]
 
@@ -352,7 +384,8 @@ class StudyRunner:
             raise StudyDataError("a step is already running")
         try:
             self.live = Live(phase=phase_id, state="combining")
-            games = [g for g in self.data.state.games.values() if g.phase == phase.bias and g.valid_complete]
+            # people's games; scripted ones too in a rehearsal (personas asked to play: pilot, serve --pilot)
+            games = self.data.combined_games(phase.bias, include_scripted=self.rehearsal or bool(self.scripted))
             if any(not g.ended.policy for g in games):  # journaled without one (a signal in its questionnaire)
                 said = self.data.build_missing_policies()
                 lacking = [g for g in games if not g.ended.policy]
@@ -413,7 +446,9 @@ class StudyRunner:
 
     # -- the whole protocol, for pilots and tests ----------------------------
     def run_plan(self, players: Callable[[str, str, int], object], on_step: Callable | None = None) -> list:
-        """Run every open step of the plan in order; `players(pid, phase, game)` gives each game's player."""
+        """Run every open step of the plan in order; `players(pid, phase, game)` gives each game's player
+        (a rehearsal: the combination takes the scripted games it played)."""
+        self.rehearsal = True
         done = []
         while self.interrupted is None and (step := self.data.next_step()) is not None:
             if step.blocked:
@@ -462,6 +497,15 @@ def _undeclare(sub) -> None:
         sub.undeclare()
     except Exception:  # already closed with its session
         pass
+
+
+def scripted_persona(player) -> str:
+    """Who plays a game as the board instead of a person: the scripted player's persona key ("scripted" for a
+    player without one); "" for None, the board page a person touches."""
+    if player is None:
+        return ""
+    persona = getattr(player, "persona", None)
+    return getattr(persona, "key", "") or "scripted"
 
 
 def scripted_players(runner: StudyRunner, personas: dict[str, str], press_wrong: dict[str, bool] | None = None):

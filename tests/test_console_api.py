@@ -104,3 +104,56 @@ def test_answers_are_checked_against_the_items():
                      ({**good, "comments": "x" * 2001}, "at most"), ([1, 2], "object")]:
         with pytest.raises(StudyDataError, match=why):
             check_answers(items, bad)
+
+
+def test_a_game_that_fails_to_start_is_journaled_ended_and_the_console_says_why(tmp_path):
+    """Before: a robot URL the bridge refuses (a study file checked by an older pairplay, or a runner given
+    one) made POST next say "started", logged a traceback, and left a GameStarted without an end in the
+    journal (the console showed the game running for ever)."""
+    import time
+
+    from pairplay.services.robot.choice import RobotChoice
+
+    data = StudyData.create(tmp_path / "study", STUDY)
+    with Bus(BusOptions()) as bus:
+        server = ConsoleServer(StudyRunner(data, bus, robot=RobotChoice("furhat://"))).start()
+        try:
+            t = server.token
+            call(f"{server.url}/api/console/register?token={t}", {"phase": "phase1", "count": 2})
+            status, answer = call(f"{server.url}/api/console/next?token={t}", {})
+            assert status == 200, answer
+            deadline = time.monotonic() + 20
+            while True:
+                _, state = call(f"{server.url}/api/console/state?token={t}")
+                if not state["busy"] or time.monotonic() > deadline:
+                    break
+                time.sleep(0.05)
+        finally:
+            server.close()
+    assert not state["busy"] and not state["last"]["ok"], state["last"]
+    assert "needs a host" in state["last"]["message"] and "\n" not in state["last"]["message"]
+    [game] = state["games"]
+    assert game["outcome"] == "aborted" and "the game failed" in game["reason"] and "needs a host" in game["reason"]
+    journal = [json.loads(line) for line in (tmp_path / "study" / "journal.jsonl").read_text().splitlines()]
+    started = {e["session"] for e in journal if e["event"] == "GameStarted"}
+    ended = {e["session"] for e in journal if e["event"] == "GameEnded"}
+    assert started and started == ended, journal
+    assert state["next"]["label"] and not state["next"]["done"]  # the same game again, as a retry
+
+
+def test_an_empty_study_says_to_register_participants_first(lab, pairplay_cli):
+    """Before: "[blocked] combine the policies ... (the games of phase1 are not all played)", in the
+    console and `protocol status`, of a study nobody was registered in (a new user's trial)."""
+    server, data = lab
+    _, state = call(f"{server.url}/api/console/state?token={server.token}")
+    assert "register its participants first" in state["next"]["blocked"], state["next"]
+    assert "not all played" not in state["next"]["blocked"]
+    status, answer = call(f"{server.url}/api/console/next?token={server.token}", {})
+    assert status == 400 and "register its participants first" in answer["error"], answer
+    r = pairplay_cli("protocol", "status", data.folder)
+    assert r.returncode == 0 and "not all played" not in r.stdout, r.stdout
+    assert r.stdout.splitlines()[0] == f"nobody is registered: `pairplay protocol register {data.folder}` first"
+    assert "register its participants first" in r.stdout
+    data.register("phase1")
+    _, state = call(f"{server.url}/api/console/state?token={server.token}")
+    assert state["plan"][2]["kind"] == "combine" and "register another participant" in state["plan"][2]["blocked"]

@@ -396,3 +396,55 @@ def test_every_table_of_what_people_typed_is_written_formula_free(tmp_path):
     buf = io.StringIO()
     csvcell.writer(buf).writerows([["=1+1", -1, 2.5, "-x", "ok"]])
     assert buf.getvalue() == "'=1+1,-1,2.5,'-x,ok\r\n"
+
+
+def test_a_scripted_game_is_marked_where_it_is_recorded_and_the_report_says_a_rehearsal(played, tmp_path):
+    """Before: a persona's game was recorded as a person's (participant human:p01, persona "", no mark in
+    the journal, sessions.csv or participants.csv) and the report pooled it with people's games as "the
+    human-world report" (a new user's trial)."""
+    root, ids = played
+    data = StudyData(root / "study")
+    personas = dict(zip(ids, PERSONAS))
+    for g in data.state.games.values():
+        assert g.scripted == personas[g.participant], g
+        config = read_log(data.folder / g.recording).of("SessionStarted")[0].config
+        assert config.scripted == personas[g.participant] and config.participant == f"human:{g.participant}"
+    journal = [json.loads(line) for line in (data.folder / "journal.jsonl").read_text().splitlines()]
+    assert all(e["scripted"] == personas[e["participant"]] for e in journal if e["event"] == "GameStarted")
+    with open(data.folder / "sessions.csv") as f:
+        assert {r["scripted"] for r in csv.DictReader(f)} == set(PERSONAS)
+    with open(data.folder / "participants.csv") as f:
+        assert {r["participant"]: r["scripted"] for r in csv.DictReader(f)} == personas
+    report = human_report(data.folder, tmp_path / "report")
+    text = (report.out / "report.md").read_text()
+    assert report.rehearsal and len(report.games) == 8
+    assert "a rehearsal of 8 scripted games" in text.splitlines()[0] and "No person played" in text
+    assert "Combined from scripted games" in text
+
+
+def test_people_s_games_are_reported_and_combined_without_the_scripted_ones(played, tmp_path):
+    """A folder where people played p01's and p03's games (journal lines without `scripted`, as every
+    journal before the field) and personas the others': the report and the combination leave the
+    personas' games out unless asked. Before: pooled, unmarked."""
+    data = copy_study(played, tmp_path)
+    people = {"p01", "p03"}
+    lines = []
+    for line in (data.folder / "journal.jsonl").read_text().splitlines():
+        e = json.loads(line)
+        if e["event"] == "GameStarted" and e["participant"] in people:
+            del e["scripted"]
+        lines.append(json.dumps(e))
+    (data.folder / "journal.jsonl").write_text("\n".join(lines) + "\n")
+    data = StudyData(data.folder)
+    assert [g.participant for g in data.combined_games("phase1")] == ["p01", "p01"]
+    report = human_report(data.folder, tmp_path / "report")
+    text = (report.out / "report.md").read_text()
+    assert not report.rehearsal and {s.participant for s in report.games} == people
+    assert "the human-world report" in text.splitlines()[0]
+    assert "4 games played by scripted personas (blind, vincent) are left out" in text
+    assert "pilot-p02-phase1-g1 (scripted: blind)" in text
+    with open(report.out / "picks.csv") as f:
+        assert {r["participant"] for r in csv.DictReader(f)} == people
+    assert {r[0] for r in report.attention[1:] if not r[0].startswith("all")} == people
+    pooled = human_report(data.folder, tmp_path / "pooled", include_scripted=True)
+    assert len(pooled.games) == 8 and "with scripted games" in (pooled.out / "report.md").read_text()

@@ -46,3 +46,43 @@ def test_a_robot_slow_to_report_at_the_end_loses_no_robot_acted(tmp_path, monkey
     config = SessionConfig(session="slowrobot", participant="sim:tatiana", persona="tatiana", seed=2, rounds=1)
     tags = _tags(run_session(config, tmp_path / "slowrobot.mcap", robot=RobotChoice()))
     assert tags["SuggestionMade"] > 0 and tags["RobotActed"] == tags["SuggestionMade"]
+
+
+def _closed_port() -> int:
+    import socket
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def test_an_unreachable_robot_is_said_once_and_the_summary_counts_what_it_got(tmp_path, pairplay_cli):
+    """Before: `session --robot furhat://192.0.2.10` exited 0 with every suggestion failed or superseded
+    ("bridge closed before delivery"), the connect error only under -v, the summary silent (a new user's
+    trial). Now the session refuses such a robot (test_cli_mistakes.py); --robot-unreachable-ok goes on,
+    says the robot is unreachable once (WARNING), and the summary counts what was delivered."""
+    url = f"iristk://127.0.0.1:{_closed_port()}"
+    r = pairplay_cli("session", "--participant", "sim:tatiana", "--rounds", "1", "--session", "away", "--robot", url,
+                     "--robot-unreachable-ok", "--out", tmp_path)
+    assert r.returncode == 0, r.stderr
+    warnings = [line for line in r.stderr.splitlines() if "cannot connect" in line]
+    assert len(warnings) == 1 and warnings[0].startswith("WARNING") and "Connection refused" in warnings[0], r.stderr
+    acted = read_log(tmp_path / "away.mcap").of("RobotActed")
+    sent = [a for a in acted if a.outcome != "nothing"]
+    [line] = [line for line in r.stdout.splitlines() if line.startswith("robot ")]
+    assert line.startswith(f"robot {url}: 0 of {len(sent)} suggestions delivered ("), line
+    assert "robot unreachable" in line and "Connection refused" in line, line
+
+
+def test_protocol_pilot_warns_of_an_unreachable_robot_and_each_game_says_what_it_delivered(tmp_path, pairplay_cli):
+    from pathlib import Path
+    study = tmp_path / "s.toml"
+    url = f"iristk://127.0.0.1:{_closed_port()}"
+    text = (Path(__file__).parent / "data" / "pilot-study.toml").read_text().replace('robot = "none"', f'robot = "{url}"')
+    study.write_text(text.replace("games = 2", "games = 1", 1))
+    assert pairplay_cli("protocol", "init", tmp_path / "f", "--study", study).returncode == 0
+    assert pairplay_cli("protocol", "register", tmp_path / "f", "--count", "2").returncode == 0
+    r = pairplay_cli("protocol", "pilot", tmp_path / "f", "--personas", "tatiana,blind", timeout=300)
+    assert r.returncode == 0, r.stderr
+    assert "pairplay protocol pilot: warning: the robot does not accept a connection now" in r.stderr, r.stderr
+    game = [line for line in r.stdout.splitlines() if "phase1" in line and "completed" in line]
+    assert game and f"robot {url}: 0 of " in game[0] and "suggestions delivered" in game[0], r.stdout

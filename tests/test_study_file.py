@@ -43,6 +43,16 @@ BASE = example_text()
     (("id = \"avoided-wrong\"", "id = \"followed\"", 1), "questionnaire.after-game.item[1].id"),
     (("id = \"thesis-ch7\"", "id = \"My Study\"", 1), "study.id"),
     (("robot = \"virtual\"", "robot = \"telepathy\"", 1), "study.robot"),
+    # a robot URL the session's --robot refuses (no host, a bad port) passed check and init, then the
+    # study's first game crashed with a traceback (a new user's trial): the study file uses that parser
+    (("robot = \"virtual\"", "robot = \"furhat://\"", 1), "study.robot: 'furhat://': needs a host"),
+    (("robot = \"virtual\"", "robot = \"iristk://\"", 1), "study.robot: 'iristk://': needs a host"),
+    (("robot = \"virtual\"", "robot = \"furhat://h:99999\"", 1), "study.robot: 'furhat://h:99999': bad port"),
+    (("robot = \"virtual\"", "robot = \"furhat://h:abc\"", 1), "study.robot: 'furhat://h:abc': bad port"),
+    (("robot = \"virtual\"", "robot = \"furhat://h?colour=red\"", 1), "unknown parameter 'colour'"),
+    # a learner override of the wrong type passed check and failed when the game's session read it back
+    (("preset = \"human-phase1\"", "preset = \"human-phase1\"\nlearner = { epsilon_every = 1.5 }", 1),
+     "phase[0].learner: Expected `int`, got `float`"),
     (("kind = \"likert\"", "kind = \"slider\"", 1), "item[0].kind"),
     (("preset = \"human-phase1\"", "preset = \"human-phase1\"\nlearner = { epsilon_jump = 1 }", 1),
      "phase[0].learner"),
@@ -83,3 +93,9 @@ def test_load_study_reports_an_unreadable_file(tmp_path):
     (tmp_path / "s.toml").write_bytes(b"\xff\xfe bad")
     with pytest.raises(StudyFileError, match="cannot read"):
         load_study(tmp_path / "s.toml")
+
+
+@pytest.mark.parametrize("url", ["virtual", "none", "virtual?time_scale=0.1", "furhat://192.0.2.10",
+                                 "iristk://robot.local:1932?ticket=lab", "furhat://h:9000?key=k&gestures=furhat"])
+def test_a_robot_url_a_session_takes_is_taken_by_the_study_file(url):
+    parse_study(BASE.replace('robot = "virtual"', f'robot = "{url}"', 1), "s.toml")

@@ -61,7 +61,8 @@ class Console:
         def run() -> None:
             try:
                 result = work()
-                self.last = {"step": label, "ok": True, "message": _describe(result)}
+                robot = self.runner.delivery.get(getattr(result, "session", ""), "")
+                self.last = {"step": label, "ok": True, "message": _describe(result) + (f"; {robot}" if robot else "")}
             except StudyDataError as err:
                 self.last = {"step": label, "ok": False, "message": str(err)}
             except Exception as err:  # a step must never take the console down with it
@@ -80,7 +81,8 @@ class Console:
         games = [{"session": g.session, "participant": g.participant, "phase": g.phase, "game": g.game + 1,
                   "outcome": g.ended.outcome if g.ended else "running", "reason": g.ended.reason if g.ended else "",
                   "rounds": g.ended.rounds_played if g.ended else 0, "invalid": g.invalid,
-                  "questionnaire": bool(g.ended and g.ended.questionnaire)} for g in data.state.games.values()]
+                  "questionnaire": bool(g.ended and g.ended.questionnaire), "scripted": g.scripted}
+                 for g in data.state.games.values()]
         combined = {}
         for phase, c in data.state.combined.items():
             combined[phase] = {
@@ -89,6 +91,10 @@ class Console:
                            for s, (a, r) in enumerate(zip(c.actions, c.decided_by)) if s < N_STATES - 1]}
         live_d = asdict(live)
         live_d.pop("questionnaire_token")
+        hub = self.runner.lab.hubs.get(live.session) if self.runner.lab is not None and live.session else None
+        if hub is not None:  # the lab serves the board: "connected" is a board page on its WebSocket, not the
+            # lab's board service joining the bus (it does before any page is open)
+            live_d["board"] = any(c.page == "board" for c in list(hub.clients))
         if live.session and live.questionnaire_token and live.state in ("playing", "questionnaire"):
             live_d["questionnaire_url"] = f"/questionnaire?session={live.session}&token={live.questionnaire_token}"
         if live.session and self.board_url is not None and live.state == "playing":
@@ -179,7 +185,8 @@ def console_routes(console: Console) -> list:
     async def start_next(request: Request) -> Response:
         step = data.next_step()
         if step is None:
-            raise StudyDataError("the plan is complete")
+            raise StudyDataError("the plan is complete" if data.state.participants else
+                                 "nobody is registered: register participants first")
         if step.blocked:
             raise StudyDataError(f"{step.label}: {step.blocked}")
         if step.kind == "combine":
@@ -232,8 +239,10 @@ def console_routes(console: Console) -> list:
         def work():
             out = data.folder / "report"
             with output_folder(out, force=True, owned=HUMAN_OUTPUTS) as tmp:  # a failure leaves the old report and no temporary folder
-                human_report(data.folder, tmp)
-            return f"report written: {out / 'report.md'}"
+                made = human_report(data.folder, tmp)
+            kind = (f" (a rehearsal: {len(made.games)} scripted games, no person played)" if made.rehearsal else
+                    f" ({len(made.scripted)} scripted games left out)" if made.scripted else "")
+            return f"report written: {out / 'report.md'}{kind}"
         console.start("report", work)
         return JSONResponse({"started": "report"})
 

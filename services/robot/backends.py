@@ -6,77 +6,28 @@ run: iristk://host:port?ticket=furhat&name=pairplay&gestures=thesis,
 furhat://host:port?key=SECRET&gestures=furhat, virtual?time_scale=0.1.
 Gesture names default to the backend's own set (GESTURE_PRESETS): "iristk" over
 the broker, "furhat" over the Realtime API and for the virtual robot.
-An unknown scheme, port or parameter is refused with the accepted forms.
+An unknown scheme, port or parameter is refused with the accepted forms
+(schemas/robot_url.py: the one parser of a robot URL, also a study file's).
 """
 
 from __future__ import annotations
 
 import logging
 from typing import Callable
-from urllib.parse import parse_qs, urlsplit
 
 import msgspec
 
 from pairplay.schemas.jsonfile import without_bom
 from pairplay.schemas.robot import GESTURE_PRESETS, PRESET_NOTES, BoardCalibration, RobotActed, RobotConfig
+from pairplay.schemas.robot_url import FORMS, parse_robot_url  # noqa: F401 (FORMS: the --robot help)
 
-from pairplay.services.robot import iristk_protocol
 from pairplay.services.robot.calibration import Board, load_calibration
 from pairplay.services.robot.driver import RobotDriver
 from pairplay.services.robot.iristk import IrisTKTransport
-from pairplay.services.robot.realtime import DEFAULT_PORT as REALTIME_PORT
 from pairplay.services.robot.realtime import RealtimeTransport
 from pairplay.services.robot.render import Renderer
 from pairplay.services.robot.transport import Transport
 from pairplay.services.robot.virtual import VirtualTransport
-
-FORMS = "virtual, iristk://HOST[:1932], furhat://HOST[:9000]"
-DEFAULT_GESTURES = {"virtual": "furhat", "iristk": "iristk", "furhat": "furhat"}
-# query parameter -> RobotConfig field, per scheme
-OVERRIDES = {
-    "virtual": {},
-    "iristk": {"ticket": "iristk_ticket", "name": "iristk_name", "agent": "iristk_agent"},
-    "furhat": {"key": "realtime_key"},
-}
-
-
-def parse_robot_url(url: str, config: RobotConfig | None = None) -> tuple[str, str, int, RobotConfig, dict]:
-    """(scheme, host, port, effective config, extra params) of a --robot URL; ValueError if wrong."""
-    config = config or RobotConfig()
-    parts = urlsplit(url if "://" in url else url.replace("virtual", "virtual://", 1))
-    scheme = parts.scheme
-    if scheme not in OVERRIDES:
-        raise ValueError(f"--robot {url!r}: unknown backend {scheme!r}; use one of {FORMS}")
-    try:
-        port = parts.port
-    except ValueError as exc:
-        raise ValueError(f"--robot {url!r}: bad port ({exc})") from None
-    host = parts.hostname or ""
-    if scheme != "virtual" and not host:
-        raise ValueError(f"--robot {url!r}: needs a host, e.g. {scheme}://192.0.2.10")
-    default_port = iristk_protocol.DEFAULT_PORT if scheme == "iristk" else REALTIME_PORT
-    params = {k: v[-1] for k, v in parse_qs(parts.query, keep_blank_values=True).items()}
-    changes: dict = {}
-    extra: dict = {}
-    for key, value in params.items():
-        if key in OVERRIDES[scheme]:
-            changes[OVERRIDES[scheme][key]] = value
-        elif key == "gestures":
-            if value not in GESTURE_PRESETS:
-                raise ValueError(f"--robot {url!r}: gestures must be one of {sorted(GESTURE_PRESETS)}")
-            changes["gestures"] = GESTURE_PRESETS[value]
-        elif key == "time_scale" and scheme == "virtual":
-            try:
-                extra["time_scale"] = float(value)
-            except ValueError:
-                raise ValueError(f"--robot {url!r}: time_scale must be a number") from None
-        else:
-            raise ValueError(f"--robot {url!r}: unknown parameter {key!r}")
-    if config.gestures is None and "gestures" not in changes:
-        changes["gestures"] = GESTURE_PRESETS[DEFAULT_GESTURES[scheme]]
-    config = msgspec.structs.replace(config, **changes)
-    config.validate()
-    return scheme, host, port or default_port, config, extra
 
 
 def make_transport(url: str, config: RobotConfig | None = None) -> tuple[Transport, RobotConfig]:

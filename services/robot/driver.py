@@ -166,6 +166,7 @@ class RobotDriver:
         self._generation = 0
         self._connected = False
         self._ever_connected = False
+        self._said_unreachable = False  # the first failed connect was said as a WARNING
         self._backoff = config.reconnect_min_s
         self._next_attempt = 0.0
         self._connected_at = 0.0
@@ -400,7 +401,11 @@ class RobotDriver:
             return
         except (OSError, ValueError) as exc:  # ConnectionError, timeouts
             self._last_error = f"{type(exc).__name__}: {exc}"
-            log.info("robot %s: cannot connect (%s); retry in %.2f s", self.transport.url, self._last_error, self._backoff)
+            # said once as a WARNING (an unreachable robot was silent without -v), then each retry at INFO
+            level = logging.INFO if self._ever_connected or self._said_unreachable else logging.WARNING
+            self._said_unreachable = True
+            log.log(level, "robot %s: cannot connect (%s); retry in %.2f s", self.transport.url, self._last_error,
+                    self._backoff)
             self._next_attempt = time.monotonic() + self._backoff
             self._backoff = min(self._backoff * 2, self.config.reconnect_max_s)
             return
@@ -595,7 +600,9 @@ class RobotDriver:
         for perf in list(self._active.values()):
             dropped = [s for s in perf.steps if s.dropped]
             if perf.has_unsent():
-                self._finish(perf, "failed", "bridge closed before delivery")
+                # why it was not delivered: a robot never reached says so (it read as a bridge's fault)
+                why = "" if self._connected else f" (robot unreachable: {self._last_error})"
+                self._finish(perf, "failed", f"bridge closed before delivery{why}")
             elif dropped:
                 self._finish(perf, "superseded", self._why_superseded(perf, dropped))
             elif perf.outstanding:

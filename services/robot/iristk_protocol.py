@@ -48,11 +48,12 @@ import json
 import re
 from dataclasses import dataclass
 
+from pairplay.schemas.robot_url import DEFAULT_PORTS
 from pairplay.schemas.robot import check_name_filter
 
 EVENT_CLASS = "iristk.system.Event"
 LOCATION_CLASS = "iristk.situated.Location"
-DEFAULT_PORT = 1932
+DEFAULT_PORT = DEFAULT_PORTS["iristk"]
 DEFAULT_TICKET = "furhat"
 MAX_EVENT_BYTES = 1 << 20  # a count above this is a corrupt stream, not an event
 MAX_LINE_BYTES = 1 << 16

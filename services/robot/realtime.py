@@ -43,6 +43,7 @@ import uuid
 from websockets.exceptions import ConnectionClosed, InvalidHandshake, InvalidURI
 from websockets.sync.client import ClientConnection, connect
 
+from pairplay.schemas.robot_url import DEFAULT_PORTS
 from pairplay.schemas.robot import RobotConfig
 
 from pairplay.services.robot.render import Command, Gesture, Look, Say, StopSpeech
@@ -52,7 +53,7 @@ from pairplay.services.robot.transport import (
 
 log = logging.getLogger("pairplay.robot.realtime")
 
-DEFAULT_PORT = 9000
+DEFAULT_PORT = DEFAULT_PORTS["furhat"]
 PATH = "/v1/events"
 REPLIES = {"response.speak.start": SPEECH_START, "response.speak.end": SPEECH_END,
            "response.gesture.end": GESTURE_END}

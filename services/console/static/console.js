@@ -59,7 +59,7 @@ function render(s) {
     if (s.next && p.label === s.next.label) li.classList.add("next");
     plan.appendChild(li);
   });
-  $("next-step").textContent = s.next ? `next: ${s.next.label}` : "the plan is complete";
+  $("next-step").textContent = s.next ? `next: ${s.next.label}` : s.participants.length ? "the plan is complete" : "nobody is registered: register participants first";
   $("run-next").disabled = s.busy || !s.next || !!s.next.blocked;
 
   const L = s.live;
@@ -98,7 +98,7 @@ function render(s) {
   const tb = $("games").tBodies[0]; tb.innerHTML = "";
   s.games.forEach((g) => {
     const r = tb.insertRow(); if (g.invalid) r.className = "invalid";
-    [g.session, g.participant, g.phase, g.game, g.outcome + (g.reason ? ` (${g.reason})` : "") + (g.invalid ? ` invalid: ${g.invalid}` : ""),
+    [g.session, g.participant + (g.scripted ? ` (scripted: ${g.scripted})` : ""), g.phase, g.game, g.outcome + (g.reason ? ` (${g.reason})` : "") + (g.invalid ? ` invalid: ${g.invalid}` : ""),
      g.questionnaire ? "answered" : "-"].forEach((v) => r.insertCell().textContent = v);
     const b = el("button", "mark invalid"); b.disabled = !!g.invalid || g.outcome === "running";
     b.onclick = () => { const why = prompt(`Why is ${g.session} invalid?`); if (why) api("/api/console/control/invalid", {session: g.session, reason: why}).then(() => say(`${g.session} marked invalid`)); };
