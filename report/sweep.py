@@ -29,7 +29,6 @@ Measures (picks per round: 18 is perfect play, lower is better):
 
 from __future__ import annotations
 
-import csv
 import hashlib
 import itertools
 import json
@@ -42,6 +41,7 @@ from typing import Callable, Iterable
 
 import numpy as np
 
+from pairplay import csvcell
 from pairplay.outputs import output_file, write_text
 from pairplay.processes import check_workers, worker_pool
 from pairplay.core.rng import SEED_RANGE
@@ -323,13 +323,13 @@ def write_sweep(out: str | Path, grid: Grid, results: dict[str, dict], run: Swee
     written = [out / "sweep.csv", out / "cells.csv", out / "sweep.md"]
     # each file whole or not at all, replaced on a resumed sweep (pairplay.outputs; an OSError names it)
     with output_file(out / "sweep.csv", "w", force=True, newline="") as f:
-        w = csv.writer(f)
+        w = csvcell.writer(f)
         w.writerow([*keys, "measure", "n", "mean", "sd", "ci95_low", "ci95_high"])
         for r in rows:
             w.writerow([*(r[k] for k in keys), r["measure"], r["n"], f"{r['mean']:.6f}", f"{r['sd']:.6f}",
                         f"{r['ci95_low']:.6f}", f"{r['ci95_high']:.6f}"])
     with output_file(out / "cells.csv", "w", force=True, newline="") as f:
-        w = csv.writer(f)
+        w = csvcell.writer(f)
         w.writerow(["cell", *keys, "seed", "measure", "value"])
         for cell in grid.cells():
             for measure, value in sorted(results[cell.id].items()):

@@ -382,3 +382,26 @@ def test_every_table_of_what_people_typed_is_written_formula_free(tmp_path):
     buf = io.StringIO()
     csvcell.writer(buf).writerows([["=1+1", -1, 2.5, "-x", "ok"]])
     assert buf.getvalue() == "'=1+1,-1,2.5,'-x,ok\r\n"
+
+
+def test_every_csv_pairplay_writes_goes_through_csvcell():
+    """The simulated study's, the sweep's and the counterfactual's tables were written by csv.writer
+    itself: a name in them that a spreadsheet takes for a formula went out raw. Every CSV writer in
+    pairplay's code is csvcell's, but for the two whose cells are known safe (said beside each)."""
+    import re
+
+    root = Path(__file__).resolve().parents[1]
+    allowed = {
+        ("replay/studydata.py", "csv.writer(buf).writerows(kept)"),  # the rows as read: written by csvcell already
+        ("replay/rebuild.py", "csv.DictWriter(f, fieldnames=CURVE_COLUMNS)"),  # a curve's counts only
+    }
+    raw = []
+    for path in sorted(root.rglob("*.py")):
+        rel = path.relative_to(root).as_posix()
+        if rel.startswith((".venv/", "tests/", "build/")) or rel == "pairplay/csvcell.py":
+            continue
+        for line in path.read_text(encoding="utf-8").splitlines():
+            m = re.search(r"\bcsv\.(writer|DictWriter)\(.*", line)
+            if m and not any(rel == a and text in line for a, text in allowed):
+                raw.append(f"{rel}: {line.strip()}")
+    assert raw == [], raw
