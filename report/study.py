@@ -123,6 +123,11 @@ class StudySettings:
                          ("trained_updates", 0), ("reuse_last", 0)):
             if getattr(self, key) < low:
                 raise SettingError(key, f"must be at least {low}, got {getattr(self, key)}")
+        # a state's updates are counted in 64 bits (core/combine.py trained_states): a larger threshold
+        # (`--trained-updates 1e23`) was met by no state, and the study ran on without a word
+        if self.trained_updates > UPDATES_MAX:
+            raise SettingError("trained_updates", f"must be 0..{UPDATES_MAX} (a state's updates are counted in "
+                               f"64 bits), got {self.trained_updates}")
         # game g of a persona is stream game g, and its evaluation EVAL_GAME_OFFSET + g (core/study.py):
         # both must be game indices core/rng.py takes (`--games 99999999999999999999` grew a list until
         # memory ran out)
@@ -224,6 +229,9 @@ def default_reuse_last(rounds: int) -> int:
     `rounds = 20` were refused for an option the user never gave; the Re-run line states it: it is not 50)."""
     default = StudySettings.reuse_last
     return default if rounds > default else rounds // 4
+
+
+UPDATES_MAX = 2**63 - 1  # the top of a state's update count (int64); cli/args.py's (a test pins it)
 
 
 class SettingError(OptionError):
