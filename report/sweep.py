@@ -243,6 +243,25 @@ class SweepRun:
     where: str
 
 
+def check_sweep_memory(grid: Grid, workers: int) -> None:
+    """OptionError (naming --workers) if `workers` local processes, each running a cell, could hold more
+    than core/simulate.py MEMORY_LIMIT at once: each cell is checked against the limit alone
+    (StudySettings.check_memory), and `--workers 8` ran eight of them side by side (8 x 2 GB)."""
+    from pairplay.core.simulate import MEMORY_LIMIT, gigabytes
+    from pairplay.errors import OptionError
+
+    at_once = min(workers, len(grid.cells()))
+    if at_once <= 1:
+        return
+    cell = max(grid.study_settings(Cell(s, grid.seeds[0])).memory_bytes(
+        len(grid.study_settings(Cell(s, grid.seeds[0])).persona_list()), grid.reuse, False) for s in grid.settings())
+    if cell * at_once > MEMORY_LIMIT:
+        fit = max(1, MEMORY_LIMIT // max(cell, 1))
+        raise OptionError(f"{at_once} workers would hold about {gigabytes(cell * at_once)} of memory at once "
+                          f"({at_once} cells of up to {gigabytes(cell)}), over the {gigabytes(MEMORY_LIMIT)} allowed: "
+                          f"give --workers {fit} or fewer", f"--workers {workers}")
+
+
 def run_sweep(grid: Grid, out: str | Path, *, scheduler: str | None = None, workers: int = 1,
               progress: Callable[[int], None] | None = None) -> SweepRun:
     """Compute every cell of `grid` that `out`/cells/ does not hold yet; see the module rule.
@@ -251,6 +270,7 @@ def run_sweep(grid: Grid, out: str | Path, *, scheduler: str | None = None, work
     run here (`workers` > 1: that many local processes)."""
     if scheduler is None:
         check_workers(workers)  # before anything is written
+        check_sweep_memory(grid, workers)
     out = Path(out)
     (out / "cells").mkdir(parents=True, exist_ok=True)
     cells = grid.cells()
