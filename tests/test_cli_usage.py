@@ -108,3 +108,14 @@ def test_a_verb_without_its_action_is_one_line_naming_the_choices_and_its_help(v
         main([verb, "--help"])
     out, err = capsys.readouterr()
     assert end.value.code == 0 and err == "" and f"usage: pairplay {verb}" in out
+
+
+def test_a_value_that_starts_with_a_dash_is_said_how_to_give(capsys, tmp_path):
+    """`protocol register --name -2+3`: argparse takes -2+3 for an option and said only "expected one
+    argument"; the line says to give it as --name=-2+3 (which registers it: tests/test_protocol.py)."""
+    from pairplay.cli.main import main
+    with pytest.raises(SystemExit) as exc:
+        main(["protocol", "register", str(tmp_path / "study"), "--name", "-2+3"])
+    err = capsys.readouterr().err
+    assert exc.value.code == 2 and err.count("\n") == 1, err
+    assert "argument --name: expected one argument" in err and "--name=VALUE when the value starts with '-'" in err
