@@ -143,6 +143,9 @@ def fraction(text: str) -> float:
 
 
 count = int_at_least(1)  # rounds, games, seeds: at least one
+UPDATES_MAX = 2**63 - 1  # report/study.py's: a state's update count is an int64 (a test pins it)
+# how often a state was updated, a threshold (`--trained-updates 1e23` was met by no state, without a word)
+update_count = int_between(0, UPDATES_MAX, "a state's updates are counted in 64 bits")
 non_negative = int_at_least(0)
 positive_number = float_at_least(0, above=True)  # a ridge penalty
 

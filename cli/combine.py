@@ -33,7 +33,7 @@ from pairplay.errors import InputError, OptionError
 from pairplay.lists import comma_items
 from pairplay.outputs import check_output
 from pairplay.schemas.policy import read_policy, write_policy
-from pairplay.cli.args import add_force, non_negative, seed_number
+from pairplay.cli.args import add_force, seed_number, update_count
 
 
 LEARNED = ("q-learning", "lspi", "pi-reuse")  # policies a session learned (not combined, oracle or fixed ones)
@@ -63,7 +63,7 @@ def _common(p: argparse.ArgumentParser) -> None:
 
 def add_profile_arguments(p: argparse.ArgumentParser) -> None:
     _common(p)
-    p.add_argument("--min-updates", type=non_negative, default=0,
+    p.add_argument("--min-updates", type=update_count, default=0,
                    help="compare only the states every policy of a participant updated at least this many "
                         "times (default 0: the 23 spatial states, algorithm 3; thesis 6.4: untrained states)")
     p.add_argument("--actions", action="store_true",

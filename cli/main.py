@@ -46,6 +46,7 @@ import contextlib
 import importlib
 import logging
 import os
+import re
 import signal
 import sys
 import threading
@@ -106,7 +107,18 @@ class Parser(argparse.ArgumentParser):
         return namespace, extra
 
     def error(self, message: str):
-        self.exit(2, f"{self.prog}: {self.choice_missing(message) or message} (see {self.prog} --help)\n")
+        self.exit(2, f"{self.prog}: {self.choice_missing(message) or self.dash_value(message) or message} "
+                     f"(see {self.prog} --help)\n")
+
+    @staticmethod
+    def dash_value(message: str) -> str:
+        """argparse's `expected one argument` says how to give a value that starts with '-': argparse takes
+        `--name -2+3` for two options (`--name=-2+3` is the one way), and said only that one was missing."""
+        m = re.fullmatch(r"argument (\S+): expected one argument", message)
+        if not m:
+            return ""
+        option = m.group(1).split("/")[-1]
+        return f"{message}: give it after {option}, or as {option}=VALUE when the value starts with '-'"
 
     def choice_missing(self, message: str) -> str:
         """`no ACTION given: one of check, init, ...` when what is missing is a choice of words (a verb's

@@ -13,6 +13,10 @@ sent the very events it holds (a recorder restarted within the live session,
 services/recorder.py `same_live_session`); otherwise it refuses in one line,
 before its `listening` line (a live recording's before the bus opens: the
 listening line came first, then the refusal).
+An option a service does not use is refused in one line, never ignored: the
+session's options (--algorithm, --policy, --rounds, ...) belong to the game that
+starts the session; a learner, a participant, a recorder, a combiner and a game
+restarted by --session alone follow the config the session was started with.
 """
 
 from __future__ import annotations
@@ -49,6 +53,50 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     for action in extra._actions:
         if action.dest not in known and action.option_strings:
             p._add_action(action)
+            _note_given(action)
+    for action in p._actions:
+        if action.dest in ("participant", "wait_for", "out"):
+            _note_given(action)
+
+
+# options besides the bus's and --session that a service uses; the session's options (the game's, with
+# --participant) are in CONFIG: any other a service is given is refused (module rule)
+USES = {"game": {"participant", "wait_for"}, "recorder": {"out"}, "combiner": {"out"},
+        "learner": set(), "participant": set()}
+
+
+def _note_given(action: argparse.Action) -> None:
+    """Make `action` note its dest in the namespace's `_given` when its option is on the command line
+    (a default looks the same as a value given once parsed; the help still shows the default)."""
+    base = type(action)
+
+    class Noted(base):
+        def __call__(self, parser, namespace, values, option_string=None):
+            namespace._given = getattr(namespace, "_given", ()) + ((self.dest, option_string or self.dest),)
+            super().__call__(parser, namespace, values, option_string)
+
+    action.__class__ = Noted
+
+
+def refuse_unused(args: argparse.Namespace) -> None:
+    """OptionError naming the first option given that `args.service` would not use (module rule)."""
+    starts = args.service == "game" and bool(args.participant)
+    for dest, option in getattr(args, "_given", ()):
+        if dest in USES[args.service] or (starts and dest not in ("out",)):
+            continue
+        value = getattr(args, dest)
+        shown = " ".join(map(str, value)) if isinstance(value, list) else value
+        if dest in ("participant", "wait_for"):
+            why = "used by the game only"
+        elif dest == "out":
+            why = "used by the recorder and the combiner only"
+        elif args.service == "game":
+            why = ("a session's option, taken by a game that starts it (with --participant); a game restarted "
+                   "by --session alone plays the config in the session's log")
+        else:
+            why = (f"a session's option: the {args.service} follows the config the game started the session with "
+                   f"(pairplay run game --participant ... {option} ...), whatever it is given")
+        raise OptionError(f"{option} {shown} is not taken by pairplay run {args.service}: {why}", option)
 
 
 def run(args: argparse.Namespace) -> int:
@@ -61,6 +109,7 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _run(args: argparse.Namespace, stop: threading.Event) -> int:
+    refuse_unused(args)
     config = None
     if args.service == "game" and args.participant:
         from pairplay.cli.session import config_from_args

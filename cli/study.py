@@ -14,7 +14,7 @@ import argparse
 import sys
 from pathlib import Path
 
-from pairplay.cli.args import add_force, count, fraction, non_negative, positive_number, seed_number
+from pairplay.cli.args import add_force, count, fraction, non_negative, positive_number, seed_number, update_count
 from pairplay.core.geometry import PICKS_UNIT
 from pairplay.core.personas import PERSONAS
 from pairplay.errors import OptionError
@@ -35,7 +35,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="when the 1/|candidate set| bonus is paid: when the candidate set holds the match "
                         "(correct, default), on every consistent suggestion (consistent, SPEC's literal reading) "
                         "or on a match only (see README: the reward bonus)")
-    p.add_argument("--trained-updates", type=non_negative, default=50,
+    p.add_argument("--trained-updates", type=update_count, default=50,
                    help="profiles are also given over the states every policy of a persona updated at least "
                         "this many times (default 50; thesis 6.4: untrained states)")
     p.add_argument("--reuse-seeds", type=count, default=10,

@@ -27,7 +27,8 @@ from pairplay.cli.args import workers
 from pairplay.cli.progress import bar as progress
 from pairplay.errors import OutputError
 from pairplay.outputs import check_folder, write_text
-from pairplay.report.sweep import GridError, finished_cells, read_grid, run_sweep, write_sweep
+from pairplay.report.sweep import (GridError, check_sweep_memory, finished_cells, read_grid, run_sweep,
+                                    write_sweep)
 
 
 SUMMARY = ("sweep.csv", "cells.csv", "sweep.md")  # what write_sweep writes besides the figures, sweep.md last
@@ -71,6 +72,8 @@ def run(args) -> int:
     except GridError as exc:
         print(f"pairplay sweep: {exc}", file=sys.stderr)
         return 2
+    if args.scheduler is None:  # before anything is written (run_sweep checks it again)
+        check_sweep_memory(grid, args.workers)
     # out/sweep-<grid>, the grid's "sweep-" said once (examples/sweep-psi.toml wrote out/sweep-sweep-psi)
     out = check_folder(args.out or Path("out") / f"sweep-{args.grid.stem.removeprefix('sweep-')}")
     copy = out / "grid.toml"

@@ -10,8 +10,8 @@ key file, is the same name). A number, and text that is a plain number (`-3`,
 `-0.5`: a spreadsheet makes it that number, nothing runs), is written as it
 is. Every CSV of what people typed goes through here (the study's key file, its
 tables and a participant's export, the human-world report's tables: names,
-questionnaire answers); the simulated study's tables hold only numbers and our
-own names.
+questionnaire answers) and every table of the simulated study, the sweep and the
+counterfactual (a persona's name comes from a study file: `=cmd` is text too).
 """
 
 from __future__ import annotations

@@ -17,13 +17,13 @@ figure of a run that now fits the user alone, another recording's user model).
 
 from __future__ import annotations
 
-import csv
 import math
 from pathlib import Path
 from typing import NamedTuple
 
 import numpy as np
 
+from pairplay import csvcell
 from pairplay.core.geometry import PERFECT_PICKS, PICKS_UNIT
 from pairplay.outputs import output_folder
 from pairplay.schemas.usermodel import UserModelFile, write_user_model
@@ -183,7 +183,7 @@ def write_counterfactual(out: str | Path, stem: str, model: UserModelFile, recor
                       f"({PERFECT_PICKS} = perfect).", "", markdown_table(rows), "",
                       "![counterfactual](counterfactual.png)", ""]
             with open(tmp / "counterfactual.csv", "w", newline="") as f:
-                w = csv.writer(f)
+                w = csvcell.writer(f)
                 w.writerow(["arm", "seed", "round", "picks"])
                 for name, r in runs.items():
                     for s in range(r.picks.shape[0]):

@@ -29,13 +29,13 @@ the queueing step. Keep a section cheap: `pairplay study` has a 5 s budget
 
 from __future__ import annotations
 
-import csv
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Callable
 
 import numpy as np
 
+from pairplay import csvcell
 from pairplay.core.precombine import add_combination
 
 
@@ -130,7 +130,7 @@ def precombination_section(out: Path, exp, names: dict[str, str], oracle: dict[s
     rows.append(["oracle", f"{np.mean([oracle[p] for p in exp.persona]):.2f}",
                  *[f"{oracle[p]:.2f}" for p in exp.persona], ""])
     with open(out / "precombination.csv", "w", newline="") as f:
-        csv.writer(f).writerows(rows)
+        csvcell.writer(f).writerows(rows)
     draw("grouped_bars_with_spread",
          [names.get(p, p) for p in exp.persona], {s: picks[k] for k, s in enumerate(exp.strategies)},
          [float(oracle[p]) for p in exp.persona], out / "precombination.png",

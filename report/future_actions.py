@@ -9,11 +9,11 @@ perfect play; lower is better), mean and standard deviation over replicates.
 
 from __future__ import annotations
 
-import csv
 from pathlib import Path
 
 import numpy as np
 
+from pairplay import csvcell
 from pairplay.core.actions import ACTION_NAMES
 from pairplay.core.geometry import PERFECT_PICKS, STATE_NAMES
 from pairplay.core.personas import READING_PERSONAS
@@ -67,7 +67,7 @@ def action_level_section(out: Path, exp, markdown_table, draw=plots.draw) -> lis
     profiles, merges = profile_rows(exp), merge_rows(exp)
     for name, rows in (("action_profiles.csv", profiles), ("action_merges.csv", merges)):
         with open(out / name, "w", newline="") as f:
-            csv.writer(f).writerows(rows)
+            csvcell.writer(f).writerows(rows)
     R = exp.picks.shape[1]
     labels = [f"{'+'.join(exp.merges[j])}: {key}" for j, key in exp.members]
     draw("grouped_bars_with_spread", labels, {s: exp.picks[k] for k, s in enumerate(exp.strategies)},

@@ -9,11 +9,11 @@ lower is better), mean and standard deviation over the replicates.
 
 from __future__ import annotations
 
-import csv
 from pathlib import Path
 
 import numpy as np
 
+from pairplay import csvcell
 from pairplay.core.frame_study import frame_experiment
 from pairplay.core.frames import FRAME_PERSONAS, FRAMES
 
@@ -45,7 +45,7 @@ def frames_section(out: Path, exp, markdown_table, draw) -> list[str]:
         rows.append([label, *[_cell(per_rep[k]) for k in range(len(exp.arms))],
                      f"{(per_rep[with_] - per_rep[without]).mean():+.2f}"])
     with open(out / "frames.csv", "w", newline="") as f:
-        csv.writer(f).writerows(rows)
+        csvcell.writer(f).writerows(rows)
     acc_rows = [["persona (frame)", *[f"{n} suggestion{'s' if n > 1 else ''}" for n in exp.lengths]]]
     acc_rows += [[name, *[f"{100 * a:.1f}%" for a in acc]] for name, acc in zip(names, exp.accuracy)]
     draw("frame_calibration", names, {arm: picks[k] for k, arm in enumerate(exp.arms)}, list(exp.lengths),

@@ -25,7 +25,6 @@ the sections of a persona not in this study, the speed-up's tables after a
 from __future__ import annotations
 
 import contextlib
-import csv
 import hashlib
 import shlex
 import time
@@ -36,7 +35,7 @@ from typing import Callable
 
 import numpy as np
 
-from pairplay import __version__
+from pairplay import __version__, csvcell
 from pairplay.core import kernels, study
 from pairplay.core.geometry import PICKS_UNIT
 from pairplay.core.oracle import oracle_policies
@@ -124,6 +123,11 @@ class StudySettings:
                          ("trained_updates", 0), ("reuse_last", 0)):
             if getattr(self, key) < low:
                 raise SettingError(key, f"must be at least {low}, got {getattr(self, key)}")
+        # a state's updates are counted in 64 bits (core/combine.py trained_states): a larger threshold
+        # (`--trained-updates 1e23`) was met by no state, and the study ran on without a word
+        if self.trained_updates > UPDATES_MAX:
+            raise SettingError("trained_updates", f"must be 0..{UPDATES_MAX} (a state's updates are counted in "
+                               f"64 bits), got {self.trained_updates}")
         # game g of a persona is stream game g, and its evaluation EVAL_GAME_OFFSET + g (core/study.py):
         # both must be game indices core/rng.py takes (`--games 99999999999999999999` grew a list until
         # memory ran out)
@@ -227,6 +231,9 @@ def default_reuse_last(rounds: int) -> int:
     return default if rounds > default else rounds // 4
 
 
+UPDATES_MAX = 2**63 - 1  # the top of a state's update count (int64); cli/args.py's (a test pins it)
+
+
 class SettingError(OptionError):
     """A study setting that cannot run as asked; `key` is its StudySettings field name."""
 
@@ -269,7 +276,7 @@ def write_curves(out: Path, training: study.Training) -> dict[str, np.ndarray]:
     picks = training.result.picks
     curves: dict[str, list[np.ndarray]] = {}
     with open(out / "curves.csv", "w", newline="") as f:
-        w = csv.writer(f)
+        w = csvcell.writer(f)
         w.writerow(["persona", "game", "round", "picks", "inconsistent"])
         for row, (p, g) in enumerate(zip(training.personas, training.game_index)):
             curves.setdefault(p.key, []).append(picks[row])
@@ -278,7 +285,7 @@ def write_curves(out: Path, training: study.Training) -> dict[str, np.ndarray]:
                         enumerate(zip(picks[row].tolist(), training.result.inconsistent[row].tolist())))
     stacked = {k: np.stack(v) for k, v in curves.items()}
     with open(out / "curves_summary.csv", "w", newline="") as f:
-        w = csv.writer(f)
+        w = csvcell.writer(f)
         w.writerow(["persona", "round", "mean", "sd", "min", "max"])
         for key, c in stacked.items():
             for r in range(c.shape[1]):
@@ -558,7 +565,7 @@ def _run(args, out, progress_bar, personas, config, names, timings, start, figur
     users = study.user_set(personas, training, args.seed, args.trained_updates)
     prof_rows = profile_rows(personas, users)
     with open(out / "profiles.csv", "w", newline="") as f:
-        csv.writer(f).writerows(prof_rows)
+        csvcell.writer(f).writerows(prof_rows)
     figures.draw("profiles", [p.key for p in personas], names, [_info(users.profiles[p.key].info) for p in personas],
                  [(p.focus, p.memory, p.hearing, p.sight) for p in personas], out / "profiles.png",
                  [None if users.trained[p.key] is None else _info(users.trained[p.key].info) for p in personas],
@@ -606,7 +613,7 @@ def _run(args, out, progress_bar, personas, config, names, timings, start, figur
 
     table = evaluation_table(cmp)
     with open(out / "evaluation.csv", "w", newline="") as f:
-        csv.writer(f).writerows(table)
+        csvcell.writer(f).writerows(table)
     figures.draw("comparison_bars", cmp.persona, {"user alone": cmp.alone, "learned": cmp.learned, "oracle": cmp.oracle},
                  out / "evaluation.png", f"{PICKS_UNIT}, epsilon 0")
     oracle = dict(zip(cmp.persona, cmp.oracle))
@@ -622,7 +629,7 @@ def _run(args, out, progress_bar, personas, config, names, timings, start, figur
         merge_rows.append([p.key, f"{alone[p.key]:.2f}", f"{merged_eval[('own', p.key)]:.2f}",
                            *[f"{merged_eval[(k, p.key)]:.2f}" for k in merges], f"{oracle[p.key]:.2f}"])
     with open(out / "merged_evaluation.csv", "w", newline="") as f:
-        csv.writer(f).writerows(merge_rows)
+        csvcell.writer(f).writerows(merge_rows)
 
     first = first_rounds_text(args.rounds)  # "first 50 rounds", or all of a shorter game's
     reuse_rows = [["held-out persona", f"{first}: scratch", f"{first}: pi-reuse", "gain",
@@ -636,7 +643,7 @@ def _run(args, out, progress_bar, personas, config, names, timings, start, figur
                                f"{f50[1].mean():.2f} \u00b1 {f50[1].std():.2f}",
                                f"{f50[0].mean() - f50[1].mean():+.2f}", _rounds_text(r2t[0]), _rounds_text(r2t[1])])
         with open(out / "reuse.csv", "w", newline="") as f:
-            csv.writer(f).writerows(reuse_rows)
+            csvcell.writer(f).writerows(reuse_rows)
         figures.draw("reuse_curves", reuse.persona, names, reuse.curves, [oracle[k] for k in reuse.persona],
                      out / "reuse.png")
     t0 = time.perf_counter()
@@ -757,7 +764,7 @@ def speed_section(speed: study.Speed, oracle: dict[str, float], out: Path, names
                      *[f"{speed.snapshot_picks[a, i, :, -1].mean() / oracle[key]:.3f}"
                        for a in range(len(speed.algorithms))]])
     with open(out / "speed.csv", "w", newline="") as f:
-        csv.writer(f).writerows(rows)
+        csvcell.writer(f).writerows(rows)
     figures.draw("algorithm_curves", speed.curves, speed.algorithms, speed.persona, names,
                  [oracle[k] for k in speed.persona], out / "speed.png")
     lines = ["## LSPI beside Q-learning (same games, same exploration schedule)", "",

@@ -29,7 +29,6 @@ Measures (picks per round: 18 is perfect play, lower is better):
 
 from __future__ import annotations
 
-import csv
 import hashlib
 import itertools
 import json
@@ -42,6 +41,7 @@ from typing import Callable, Iterable
 
 import numpy as np
 
+from pairplay import csvcell
 from pairplay.errors import OptionError
 from pairplay.outputs import output_file, output_folder, write_text
 from pairplay.processes import check_workers, worker_pool
@@ -245,6 +245,25 @@ class SweepRun:
     where: str
 
 
+def check_sweep_memory(grid: Grid, workers: int) -> None:
+    """OptionError (naming --workers) if `workers` local processes, each running a cell, could hold more
+    than core/simulate.py MEMORY_LIMIT at once: each cell is checked against the limit alone
+    (StudySettings.check_memory), and `--workers 8` ran eight of them side by side (8 x 2 GB)."""
+    from pairplay.core.simulate import MEMORY_LIMIT, gigabytes
+    from pairplay.errors import OptionError
+
+    at_once = min(workers, len(grid.cells()))
+    if at_once <= 1:
+        return
+    cell = max(grid.study_settings(Cell(s, grid.seeds[0])).memory_bytes(
+        len(grid.study_settings(Cell(s, grid.seeds[0])).persona_list()), grid.reuse, False) for s in grid.settings())
+    if cell * at_once > MEMORY_LIMIT:
+        fit = max(1, MEMORY_LIMIT // max(cell, 1))
+        raise OptionError(f"{at_once} workers would hold about {gigabytes(cell * at_once)} of memory at once "
+                          f"({at_once} cells of up to {gigabytes(cell)}), over the {gigabytes(MEMORY_LIMIT)} allowed: "
+                          f"give --workers {fit} or fewer", f"--workers {workers}")
+
+
 def run_sweep(grid: Grid, out: str | Path, *, scheduler: str | None = None, workers: int = 1,
               progress: Callable[[int], None] | None = None) -> SweepRun:
     """Compute every cell of `grid` that `out`/cells/ does not hold yet; see the module rule.
@@ -253,6 +272,7 @@ def run_sweep(grid: Grid, out: str | Path, *, scheduler: str | None = None, work
     run here (`workers` > 1: that many local processes)."""
     if scheduler is None:
         check_workers(workers)  # before anything is written
+        check_sweep_memory(grid, workers)
     out = Path(out)
     (out / "cells").mkdir(parents=True, exist_ok=True)
     cells = grid.cells()
@@ -337,13 +357,13 @@ def _write_summary(out: Path, grid: Grid, results: dict[str, dict], run: SweepRu
     keys = list(grid.axes)
     written = [out / "sweep.csv", out / "cells.csv", out / "sweep.md"]
     with output_file(out / "sweep.csv", "w", force=True, newline="") as f:
-        w = csv.writer(f)
+        w = csvcell.writer(f)
         w.writerow([*keys, "measure", "n", "mean", "sd", "ci95_low", "ci95_high"])
         for r in rows:
             w.writerow([*(r[k] for k in keys), r["measure"], r["n"], f"{r['mean']:.6f}", f"{r['sd']:.6f}",
                         f"{r['ci95_low']:.6f}", f"{r['ci95_high']:.6f}"])
     with output_file(out / "cells.csv", "w", force=True, newline="") as f:
-        w = csv.writer(f)
+        w = csvcell.writer(f)
         w.writerow(["cell", *keys, "seed", "measure", "value"])
         for cell in grid.cells():
             for measure, value in sorted(results[cell.id].items()):

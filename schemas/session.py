@@ -14,6 +14,7 @@ from typing import Union
 import msgspec
 
 from .config import REWARD_BONUS_RULES, UNSTATED_REWARD_BONUS, LearnerConfig, LSPIConfig
+from .policy import N_ACTIONS, N_STATES
 
 SEED_RANGE = (0, 2**64 - 1)  # every seed here has its own streams (core/rng.py game_seed, derivation 2)
 GAME_INDEX_RANGE = (0, 2**63 - 1)  # a game of a seed: core/rng.py hashes it as a signed 64-bit count
@@ -105,6 +106,11 @@ class SessionConfig(msgspec.Struct, frozen=True, kw_only=True):
             raise ValueError(f"ignore_rule {self.ignore_rule!r} is not one of {IGNORE_RULES}")
         if self.algorithm in ("pi-reuse", "fixed") and not self.policy_actions:
             raise ValueError(f"algorithm {self.algorithm!r} needs policy_actions (a bias or fixed policy)")
+        if self.policy_actions and (len(self.policy_actions) != N_STATES
+                                    or not all(0 <= a < N_ACTIONS for a in self.policy_actions)):
+            # checked here, not first by the learner: the game started a session its learner then refused
+            raise ValueError(f"policy_actions must be {N_STATES} action codes 0..{N_ACTIONS - 1}, got "
+                             f"{len(self.policy_actions)} codes")
         for key in MS_FIELDS:
             if not MS_RANGE[0] <= getattr(self, key) <= MS_RANGE[1]:  # also refuses nan
                 raise ValueError(f"{key} must be {MS_RANGE[0]:g}..{MS_RANGE[1]:g}, got {getattr(self, key)}")

@@ -216,7 +216,7 @@ def parse_study(text: str, source: str = "study") -> Study:
     try:
         study = msgspec.convert(raw, Study)
     except msgspec.ValidationError as err:
-        raise StudyFileError(f"{source}: {_where(str(err))}") from None
+        raise StudyFileError(f"{source}: {_where(str(err), raw)}") from None
     try:
         _check(study)
     except StudyFileError as err:
@@ -224,13 +224,42 @@ def parse_study(text: str, source: str = "study") -> Study:
     return study
 
 
-def _where(message: str) -> str:
-    """msgspec's 'Expected `int`, got `str` - at `$.phase[0].rounds`' as 'phase[0].rounds: Expected ...'."""
+def _where(message: str, raw: object = None) -> str:
+    """msgspec's 'Expected `int`, got `str` - at `$.phase[0].rounds`' as 'phase[0].rounds: Expected ...'.
+    A table's value (`learner = { alpha_start = "x" }`) msgspec says at `[...]`: its key is named, from
+    the TOML read (`raw`), so the line says which field."""
     m = re.match(r"^(.*) - at `\$\.?(.*)`$", message)
     if not m:
         return message
     what, where = m.groups()
+    if "[...]" in where and raw is not None:
+        where = _name_keys(where, what, raw)
     return f"{where or 'top level'}: {what}"
+
+
+# msgspec's name of a TOML value's type, as its "got `...`" says it
+GOT = {str: "str", bool: "bool", int: "int", float: "float", list: "array", dict: "object"}
+
+
+def _name_keys(where: str, what: str, raw: object) -> str:
+    """`where` with each `[...]` (a key msgspec does not name) replaced by `.key`: the first key of that
+    table whose value is the type msgspec got (`got `str``), else its first key."""
+    got = re.search(r"got `(\w+)`", what)
+    out, node = "", raw
+    for token in re.findall(r"\.?[^.\[]+|\[[^\]]*\]", where):
+        if token == "[...]" and isinstance(node, dict) and node:
+            keys = [k for k, v in node.items() if got and GOT.get(type(v)) == got.group(1)] or list(node)
+            key = keys[0]
+            out, node = f"{out}.{key}", node[key]
+            continue
+        out += token
+        name = token.lstrip(".")
+        if token.startswith("["):
+            index = token[1:-1]
+            node = node[int(index)] if index.isdigit() and isinstance(node, list) and int(index) < len(node) else None
+        else:
+            node = node.get(name) if isinstance(node, dict) else None
+    return out
 
 
 def load_study(path: str | Path) -> Study:

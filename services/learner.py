@@ -20,7 +20,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from pairplay.core.actions import ACTION_NAMES, N_ACTIONS
+from pairplay.core.actions import ACTION_NAMES
 from pairplay.core.geometry import N_STATES
 from pairplay.core.learning import How, Learner
 from pairplay.core.lspi import LSPILearner, weights_digest
@@ -92,10 +92,8 @@ class LearnerLogic:
         except ValueError as err:
             self.refused = f"cannot learn with this session config: {err}"
             raise Rejected(self.refused) from None
+        # a policy of the wrong length or codes is refused by validate (SessionConfig), as the game refuses it
         policy = np.array(e.config.policy_actions, dtype=np.int64) if e.config.policy_actions else None
-        if policy is not None and (policy.shape != (N_STATES,) or policy.min() < 0 or policy.max() >= N_ACTIONS):
-            self.refused = f"policy_actions must be {N_STATES} action codes 0..{N_ACTIONS - 1}"
-            raise Rejected(self.refused)
         mode = MODE_OF_ALGORITHM[e.config.algorithm]
         stream = UniformStream([stream_seed(e.config)], "agent")
         if mode == "lspi":

@@ -136,3 +136,14 @@ def test_a_recording_given_without_its_option_is_told_which_option_takes_it(caps
     assert end.value.code == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and f"a recording is given with --recording {sample}" in err, err
+
+
+def test_a_value_that_starts_with_a_dash_is_said_how_to_give(capsys, tmp_path):
+    """`protocol register --name -2+3`: argparse takes -2+3 for an option and said only "expected one
+    argument"; the line says to give it as --name=-2+3 (which registers it: tests/test_protocol.py)."""
+    from pairplay.cli.main import main
+    with pytest.raises(SystemExit) as exc:
+        main(["protocol", "register", str(tmp_path / "study"), "--name", "-2+3"])
+    err = capsys.readouterr().err
+    assert exc.value.code == 2 and err.count("\n") == 1, err
+    assert "argument --name: expected one argument" in err and "--name=VALUE when the value starts with '-'" in err

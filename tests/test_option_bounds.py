@@ -128,3 +128,25 @@ def test_one_learner_range_check_serves_every_source():
         msgspec.structs.replace(LearnerConfig(), psi_decay=1.5)
     with pytest.raises(msgspec.ValidationError, match="epsilon_min must be 0..1"):
         msgspec.convert({"epsilon_min": -0.1}, LearnerConfig)
+
+
+def test_trained_updates_above_what_a_state_can_count_is_refused(tmp_path, capsys):
+    """`pairplay study --trained-updates 1e23` (as an integer) ran the whole study on a threshold no
+    state can meet, without a word; it is refused in one line, nothing written."""
+    out = tmp_path / "study"
+    assert _status(["study", "--trained-updates", str(10**23), "--games", "1", "--rounds", "10", "--eval-rounds",
+                    "1", "--personas", "ashley,blind", "--reuse-seeds", "1", "--out", str(out), "--quiet"]) == 2
+    err = capsys.readouterr().err
+    assert "--trained-updates" in err and "must be 0..9223372036854775807" in err and err.count("\n") == 1, err
+    assert not out.exists()
+
+
+def test_the_update_count_bound_is_the_studys():
+    from pairplay.report.study import UPDATES_MAX
+    assert options.UPDATES_MAX == UPDATES_MAX == 2**63 - 1
+
+
+def test_profile_min_updates_above_what_a_state_can_count_is_refused(tmp_path, capsys):
+    assert _status(["profile", str(tmp_path), "--min-updates", str(10**23)]) == 2
+    err = capsys.readouterr().err
+    assert "--min-updates" in err and "9223372036854775807" in err and err.count("\n") == 1, err

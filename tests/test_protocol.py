@@ -448,3 +448,26 @@ def test_people_s_games_are_reported_and_combined_without_the_scripted_ones(play
     assert {r[0] for r in report.attention[1:] if not r[0].startswith("all")} == people
     pooled = human_report(data.folder, tmp_path / "pooled", include_scripted=True)
     assert len(pooled.games) == 8 and "with scripted games" in (pooled.out / "report.md").read_text()
+
+
+def test_every_csv_pairplay_writes_goes_through_csvcell():
+    """The simulated study's, the sweep's and the counterfactual's tables were written by csv.writer
+    itself: a name in them that a spreadsheet takes for a formula went out raw. Every CSV writer in
+    pairplay's code is csvcell's, but for the two whose cells are known safe (said beside each)."""
+    import re
+
+    root = Path(__file__).resolve().parents[1]
+    allowed = {
+        ("replay/studydata.py", "csv.writer(buf).writerows(kept)"),  # the rows as read: written by csvcell already
+        ("replay/rebuild.py", "csv.DictWriter(f, fieldnames=CURVE_COLUMNS)"),  # a curve's counts only
+    }
+    raw = []
+    for path in sorted(root.rglob("*.py")):
+        rel = path.relative_to(root).as_posix()
+        if rel.startswith((".venv/", "tests/", "build/")) or rel == "pairplay/csvcell.py":
+            continue
+        for line in path.read_text(encoding="utf-8").splitlines():
+            m = re.search(r"\bcsv\.(writer|DictWriter)\(.*", line)
+            if m and not any(rel == a and text in line for a, text in allowed):
+                raw.append(f"{rel}: {line.strip()}")
+    assert raw == [], raw

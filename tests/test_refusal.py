@@ -33,8 +33,8 @@ SETTLES_S = 30.0  # a session that stops at once is done in a few seconds even a
 
 
 def unlearnable(session: str, rounds: int = 3) -> SessionConfig:
-    """A config the game plays but the learner cannot take (a fixed policy of one action, not one per state:
-    SessionConfig.validate checks only that there is one): the learner refuses the game's real start."""
+    """A config of a fixed policy of one action, not one per state: refused by SessionConfig.validate
+    (before, only the learner checked its length, and refused the start the game had published)."""
     return SessionConfig(session=session, participant="sim:ashley", persona="ashley", seed=1, rounds=rounds,
                          algorithm="fixed", policy_actions=[0])
 
@@ -63,48 +63,52 @@ def finished(thread: threading.Thread, stop: threading.Event, timeout_s: float =
     return True
 
 
-def test_a_learner_in_the_process_that_refuses_the_start_stops_the_session_with_one_line(tmp_path):
-    stop = threading.Event()
-    thread, out = run_in_thread(unlearnable("ref1"), tmp_path / "ref1.mcap", stop=stop, settle_timeout_s=5)
-    assert finished(thread, stop), "the session waited for a learner that had refused its start"
-    err = out.get("error")
-    assert err is not None and type(err).__name__ == "StartRefused", out
-    line = err.line()
-    assert line.startswith("the learner refused the session's start (policy_actions must be"), line
-    assert str(tmp_path / "ref1.mcap") in line and "\n" not in line
-    log = read_log(tmp_path / "ref1.mcap")
-    assert not log.truncated and not log.bad
-    events = [r.event for r in log.events]
-    ends = [e for e in events if isinstance(e, ev.SessionEnded)]
-    assert len(ends) == 1 and ends[0].reason == "failed" and "learner refused the session's start" in ends[0].detail
-    assert any(isinstance(e, ev.MessageRejected) and e.source == "learner" and e.offending_seq == 2 for e in events)
+def test_a_policy_the_learner_cannot_take_is_refused_at_the_config_before_the_session_starts(tmp_path):
+    """SessionConfig.validate checks policy_actions' length and codes: the game never starts a session its
+    learner would refuse (before: it published the start, and the learner refused it)."""
+    with pytest.raises(ValueError, match="policy_actions must be 24 action codes 0..87, got 1 codes"):
+        unlearnable("ref0").validate()
+    with pytest.raises(ValueError, match="policy_actions must be 24 action codes"):
+        SessionConfig(session="ref0", participant="sim:ashley", persona="ashley", seed=1, rounds=3,
+                      algorithm="fixed", policy_actions=[88] * 24).validate()
+    thread, out = run_in_thread(unlearnable("ref0"), tmp_path / "ref0.mcap", stop=threading.Event(),
+                                settle_timeout_s=5)
+    thread.join(30)
+    assert isinstance(out.get("error"), ValueError) and "policy_actions must be" in str(out["error"]), out
 
 
 def test_a_learner_in_another_process_that_refuses_the_start_stops_the_session(tmp_path):
-    """`pairplay run learner` (the session's --external learner) refuses the real start."""
+    """The session's --external learner refuses the game's real start (its refusal built by hand here: every
+    config the game can start, the learner takes; what it refuses is a later pairplay's, or an earlier's)."""
     stop = threading.Event()
     buses: list[Bus] = []
-    thread, out = run_in_thread(unlearnable("ref2"), tmp_path / "ref2.mcap", stop=stop, settle_timeout_s=5,
-                                external=("learner",), on_bus=buses.append,
-                                bus_options=BusOptions(mode="router"))
+    config = SessionConfig(session="ref2", participant="sim:ashley", persona="ashley", seed=1, rounds=3)
+    thread, out = run_in_thread(config, tmp_path / "ref2.mcap", stop=stop, settle_timeout_s=5,
+                                external=("learner",), on_bus=buses.append, bus_options=BusOptions(mode="router"))
     assert wait_until(lambda: buses and buses[0].locators(), 30)
-    learner = subprocess.Popen([sys.executable, "-m", "pairplay", "run", "learner", "--session", "ref2",
-                                "--connect", buses[0].locators()[0]],
-                               stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
-    try:
+    start_key = event_key("ref2", "game", "SessionStarted")
+    with Bus(BusOptions(mode="client", connect=buses[0].locators())) as client:
+        starts: list[bytes] = []
+        client.subscribe(start_key, lambda _k, p: starts.append(p))
+        assert wait_until(lambda: alive_key("ref2", "game") in client.alive_now(alive_key("ref2", "*")), 30)
+        client.alive(alive_key("ref2", "learner"))  # the game waited for its learner: it starts now
+        assert wait_until(lambda: starts, 30)
+        seq = decode_event(starts[0]).seq
+        client.put(*message("ref2", ev.MessageRejected(reason="cannot learn with this session config: by hand",
+                                                       key=start_key, offending_source="game", offending_seq=seq),
+                            1, source="learner"))
         assert finished(thread, stop, SETTLES_S + 30), "the session waited for a learner that had refused its start"
-        err = out.get("error")
-        assert err is not None and type(err).__name__ == "StartRefused", out
-        assert err.line().startswith("the learner refused the session's start (policy_actions must be"), err.line()
-        ends = [r.event for r in read_log(tmp_path / "ref2.mcap").events if isinstance(r.event, ev.SessionEnded)]
-        assert [e.reason for e in ends] == ["failed"] and "learner refused" in ends[0].detail
-        # the learner took the game's end (before: it held it behind the start it refused and waited for ever)
-        learner.wait(20)
-        assert learner.returncode == 0, learner.stderr.read()[-2000:]
-    finally:
-        if learner.poll() is None:
-            learner.kill()
-            learner.wait()
+    err = out.get("error")
+    assert err is not None and type(err).__name__ == "StartRefused", out
+    line = err.line()
+    assert line.startswith("the learner refused the session's start (cannot learn with this session config: by hand"), line
+    assert str(tmp_path / "ref2.mcap") in line and "\n" not in line
+    log = read_log(tmp_path / "ref2.mcap")
+    assert not log.truncated and not log.bad
+    events = [r.event for r in log.events]
+    ends = [e for e in events if isinstance(e, ev.SessionEnded)]
+    assert [e.reason for e in ends] == ["failed"] and "learner refused the session's start" in ends[0].detail
+    assert any(isinstance(e, ev.MessageRejected) and e.source == "learner" and e.offending_seq == seq for e in events)
 
 
 def test_a_refusal_of_a_forged_start_or_a_notice_does_not_stop_the_session(tmp_path):

@@ -12,6 +12,10 @@ precombination.csv (future work 3), which its pin had lacked.
 The reduced study's report.md was re-pinned once more when its "Re-run:" line began to hold every
 setting that differs from the default (it had dropped --eval-rounds, --reuse-seeds, --reuse-last): that
 line alone changed (checked by putting the old line back: the old digest).
+Re-pinned when every CSV of the study began to go through pairplay/csvcell.py: a text cell starting
+with - (a mark '-', '- (2 never)', '-0.55 ± 0.64'), which a spreadsheet reads as a formula (#NAME?),
+gained its one leading quote; profiles.csv, reuse.csv, action_profiles.csv and action_merges.csv
+changed by that alone, no number did.
 tools/study_digests.py rewrites it; only do that when a result is meant to
 change, and say why.
 """

@@ -99,3 +99,14 @@ def test_load_study_reports_an_unreadable_file(tmp_path):
                                  "iristk://robot.local:1932?ticket=lab", "furhat://h:9000?key=k&gestures=furhat"])
 def test_a_robot_url_a_session_takes_is_taken_by_the_study_file(url):
     parse_study(BASE.replace('robot = "virtual"', f'robot = "{url}"', 1), "s.toml")
+
+
+@pytest.mark.parametrize("learner, field", [('{ alpha_start = "x" }', "phase[0].learner.alpha_start"),
+                                            ('{ epsilon_start = 0.5, alpha_start = [1] }',
+                                             "phase[0].learner.alpha_start")])
+def test_a_learner_setting_of_the_wrong_type_names_its_field(learner, field):
+    """msgspec says a table's value at `learner[...]`: the line named the table, not the field."""
+    text = example_text().replace('players = "new"\n', f'players = "new"\nlearner = {learner}\n', 1)
+    with pytest.raises(StudyFileError) as err:
+        parse_study(text, "s.toml")
+    assert str(err.value).startswith(f"s.toml: {field}: Expected `int | float | null`, got"), str(err.value)

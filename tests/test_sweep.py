@@ -196,3 +196,23 @@ def test_the_default_folder_says_sweep_once(tmp_path, monkeypatch):
                                               'eval_rounds = 1\n')
     assert main(["sweep", "sweep-tiny.toml", "-q"]) == 0
     assert sorted(p.name for p in (tmp_path / "out").iterdir()) == ["sweep-tiny"]
+
+
+def test_workers_that_together_would_pass_the_memory_limit_are_refused_before_anything_is_written(tmp_path, capsys):
+    """Each cell was checked against core/simulate.py MEMORY_LIMIT alone: `--workers N` ran N such cells side
+    by side (N x 2 GB). Two cells of about 1.2 GB each on two workers are refused, naming --workers."""
+    from pairplay.cli.main import main
+    from pairplay.processes import max_workers
+    if max_workers() < 2:
+        pytest.skip("one CPU: --workers 2 is refused by its own bound")
+    grid = tmp_path / "big.toml"
+    grid.write_text('seeds = 2\n\n[study]\npersonas = "ashley"\ngames = 2500\nrounds = 500\n\n[grid]\n'
+                    'reward_bonus = ["correct"]\n')
+    out = tmp_path / "sweep"
+    try:
+        code = main(["sweep", str(grid), "--workers", "2", "--out", str(out)])
+    except SystemExit as exc:
+        code = exc.code
+    err = capsys.readouterr().err
+    assert code == 2 and err.count("\n") == 1 and "--workers" in err and "over the 2.0 GB allowed" in err, err
+    assert not out.exists()
