@@ -29,13 +29,33 @@ from pathlib import Path
 
 from pairplay.cli.args import session_id
 from pairplay.errors import OptionError
+from pairplay.lists import comma_items
 from pairplay.outputs import check_folder
 from pairplay.services.bus import Bus, Deadline, add_bus_arguments, deadline_of, options_from_args, stop_on_signals
 from pairplay.services.forgery import EVERY_LISTENER, ForgeryWatch
 from pairplay.services.refusal import RefusalWatch
+from pairplay.schemas.trust import SERVICES as BUS_SERVICES
 from pairplay.services.runner import GameWatch, Node, Stopped, start_unless_stopped, waiting_for
 
 SERVICES = ("game", "learner", "participant", "recorder", "combiner")
+
+
+WAITABLE = BUS_SERVICES - {"game"}  # what a game can wait for: every other service on the bus
+
+
+def services_to_wait_for(text: str) -> list[str]:
+    """`learner,recorder` -> ["learner", "recorder"]; argparse's one line for an unknown name or an empty item.
+    A new user's trial gave `--wait-for learner,participant,recorder`: taken as one service of that name, the game
+    waited 30 s and said none of them was on the bus, though all three were (and `--wait-for foo` waited too)."""
+    try:
+        names = comma_items(text)
+    except ValueError as err:
+        raise argparse.ArgumentTypeError(str(err)) from None
+    unknown = [n for n in names if n not in WAITABLE]
+    if unknown or not names:
+        raise argparse.ArgumentTypeError(f"{', '.join(unknown) or repr(text)}: not a service to wait for "
+                                         f"(one of {', '.join(sorted(WAITABLE))})")
+    return names
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -44,7 +64,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--out", default="recordings",
                    help="recorder: directory of the recording; combiner: the directory its requests' paths lie in")
     p.add_argument("--participant", help="game: sim:<persona> or human:<id>")
-    p.add_argument("--wait-for", action="append", default=[], help="game: services to wait for before starting")
+    p.add_argument("--wait-for", action="extend", type=services_to_wait_for, default=[], metavar="SERVICES",
+                   help=f"game: services to wait for before starting, comma-separated or the option repeated "
+                        f"(of {', '.join(sorted(WAITABLE))})")
     add_bus_arguments(p)
     known = {a.dest for a in p._actions}
     from pairplay.cli.session import add_config_arguments
@@ -95,7 +117,7 @@ def refuse_unused(args: argparse.Namespace) -> None:
                    "by --session alone plays the config in the session's log")
         else:
             why = (f"a session's option: the {args.service} follows the config the game started the session with "
-                   f"(pairplay run game --participant ... {option} ...), whatever it is given")
+                   f"(pairplay run game --participant ... {option} ...)")
         raise OptionError(f"{option} {shown} is not taken by pairplay run {args.service}: {why}", option)
 
 

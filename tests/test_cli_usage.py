@@ -147,3 +147,19 @@ def test_a_value_that_starts_with_a_dash_is_said_how_to_give(capsys, tmp_path):
     err = capsys.readouterr().err
     assert exc.value.code == 2 and err.count("\n") == 1, err
     assert "argument --name: expected one argument" in err and "--name=VALUE when the value starts with '-'" in err
+
+
+def test_a_game_waits_for_a_comma_list_of_services_and_refuses_a_name_that_is_none(capsys):
+    """Before (a new user's trial): `run game --wait-for learner,participant,recorder` was one service of
+    that name; the game waited 30 s and said none was on the bus, though all three were; `--wait-for foo`
+    waited 30 s too."""
+    from pairplay.cli.main import build_parser
+    parser, _ = build_parser(["run"])
+    args = parser.parse_args(["run", "game", "--participant", "sim:ashley", "--wait-for", "learner,participant",
+                              "--wait-for", "recorder"])
+    assert args.wait_for == ["learner", "participant", "recorder"]
+    with pytest.raises(SystemExit) as end:
+        main(["run", "game", "--participant", "sim:ashley", "--wait-for", "learner,foo"])
+    assert end.value.code == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "foo: not a service to wait for" in err, err
