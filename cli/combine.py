@@ -87,6 +87,10 @@ def _load(args) -> tuple[list, list[str]]:
     policies = [read_policy(f) for f in files]
     names = [str(f) for f in files]
     for p, name in zip(policies, names):
+        if p.algorithm == "combined":  # a merge of users' policies is no user's: its users would count twice
+            # (a new user's trial: a second `combine cf` took the first's cf/m.json as a third policy of ashley)
+            raise InputError(f"is a combined policy (merged from {len(p.merged_from)} files), not one user's "
+                             "policy: give the users' own policies", name)
         if p.algorithm in LEARNED and p.rounds == 0 and not any(p.visits) and not any(map(any, p.q)):
             raise InputError("holds no whole round: a policy of 0 rounds that learned nothing (no state updated, "
                              "its Q-table all 0); leave it out", name)

@@ -174,3 +174,22 @@ def test_profile_actions_prints_both_extractions(tmp_path, capsys):
     from pairplay.schemas.policy import read_policy
     merged = read_policy(target)
     assert merged.greedy[S] == EXACT and merged.rules[S].endswith("whole=chosen(2 of 2)")
+
+
+def test_a_combined_policy_is_never_taken_as_a_users_policy(tmp_path, capsys):
+    """Before (a new user's trial): a second `combine FOLDER -o FOLDER/m2.json` took the first's merged
+    FOLDER/m.json as one more policy of a user (its profile said 3 policies of 2); now it is refused."""
+    from pairplay.cli.main import main
+    from pairplay.core.policies import to_policy_file
+    from pairplay.schemas.policy import write_policy
+    policies, q = user_tables([UP_LEFT_WORDS, LEFT_UP_WORDS], [{UP_LEFT_WORDS: 1.5}, {LEFT_UP_WORDS: 1.6}])
+    for shift, name in enumerate(("a", "b")):
+        for i in range(2):
+            write_policy(tmp_path / f"{name}{i}.json", to_policy_file(
+                q[i] + 0.1 * shift, np.zeros((N_STATES, 88), dtype=np.int64), policies[i], algorithm="q-learning", participant=name))
+    assert main(["combine", str(tmp_path), "-o", str(tmp_path / "m.json")]) == 0
+    capsys.readouterr()
+    assert main(["combine", str(tmp_path), "-o", str(tmp_path / "m2.json")]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "is a combined policy" in err and "m.json" in err, err
+    assert not (tmp_path / "m2.json").exists()
