@@ -43,6 +43,8 @@ def parse_robot_url(url: str, config: RobotConfig | None = None) -> tuple[str, s
         port = parts.port
     except ValueError as exc:
         raise ValueError(f"--robot {url!r}: bad port ({exc})") from None
+    if port == 0:  # `port or DEFAULT_PORTS` below made :0 the default port without a word (a new user's trial)
+        raise ValueError(f"--robot {url!r}: bad port (0: give the robot's port, or none for the default)")
     host = parts.hostname or ""
     if scheme != "virtual" and not host:
         raise ValueError(f"--robot {url!r}: needs a host, e.g. {scheme}://192.0.2.10")

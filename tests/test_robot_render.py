@@ -143,7 +143,9 @@ def test_robot_urls_choose_the_backend_and_its_gesture_names():
 
 @pytest.mark.parametrize("url, reason", [("ros://h", "unknown backend"), ("iristk://", "needs a host"),
                                          ("iristk://h:99999", "bad port"), ("furhat://h?colour=1", "unknown parameter"),
-                                         ("iristk://h?gestures=odd", "gestures must be")])
+                                         ("iristk://h?gestures=odd", "gestures must be"),
+                                         # before (a new user's trial): :0 became the default port without a word
+                                         ("iristk://127.0.0.1:0", "bad port"), ("furhat://h:0", "bad port")])
 def test_bad_robot_urls_are_refused(url, reason):
     with pytest.raises(ValueError, match=reason):
         parse_robot_url(url)
