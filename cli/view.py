@@ -14,7 +14,9 @@ wanted; it never takes the complete view's name, and its event log says it is
 partial); before the first event nothing is saved. A recording its recorder
 is still writing (pairplay/livelock.py) is drawn as far as it goes and saved
 as `<stem>.partial.rrd` too, the result line saying the recording is live (it
-was saved as `<stem>.rrd`, a part passed off as the whole). Output: one line of result
+was saved as `<stem>.rrd`, a part passed off as the whole), and so is a
+damaged recording that lost events in its middle (rebuild's rule: never
+passed off as whole), its line naming the damage. Output: one line of result
 on stdout (saved); interrupted, its one line goes to stderr, as every verb's;
 what the view does is INFO (-v); what it noticed (a malformed message, a gap)
 is a WARNING.
@@ -92,10 +94,13 @@ def _default_rrd(args: argparse.Namespace) -> Path:
 def run(args: argparse.Namespace) -> int:
     if not args.recording and not args.session:
         raise OptionError("give --session ID (live) or --recording REC", "what to view")
-    live = False
+    live, lost = False, ""
     if args.recording:
         held = read_session(args.recording)  # a file holding no session is refused before rerun loads
         live = held.live or is_live(args.recording)  # its recorder still writes it: what it holds is a part
+        # a damaged file that lost events in its middle draws a part too (as rebuild refuses to pass it off as whole;
+        # a new user's trial: saved as d.rrd, the whole name, and -q hid the damage)
+        lost = held.brief if held.lost_from >= 0 else ""
         if args.session:  # before rerun loads and anything is drawn
             if not any(r.event.session == args.session for r in held.events):
                 raise InputError(f"holds no events of session {args.session}; nothing saved", args.recording)
@@ -110,9 +115,12 @@ def run(args: argparse.Namespace) -> int:
             done = _view(args, tmp)
             # never under the name of a complete view (module rule), nor one of a live recording: it was saved
             # as s1.rrd, a part of the session passed off as the whole (a new user's trial)
-            if (done.partial or live) and rrd is not None:
+            if (done.partial or live or lost) and rrd is not None:
                 raise KeptPartial(keep_partial(tmp, rrd, args.force))
     except KeptPartial as kept:
+        if not done.partial and lost:  # events lost in the file: what is left, drawn, under a name that says so
+            print(f"saved {kept.path}: {_counts(done)}; partial: {args.recording} is damaged ({lost})")
+            return 0
         if not done.partial:  # a live recording, drawn as far as it goes: a result, said on stdout
             print(f"saved {kept.path}: {_counts(done)}; partial: {args.recording} {LIVE}, view it again once "
                   "its session has ended")

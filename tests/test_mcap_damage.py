@@ -267,3 +267,17 @@ def test_a_chunk_lost_in_the_middle_is_rebuilt_only_with_partial_its_damage_said
     out, err = capsys.readouterr()
     assert out.count(part) == 1 and "PARTIAL session: " in out and len(max(out.splitlines(), key=len)) < 250, out
     assert part in json.loads((tmp_path / "rb" / "damaged.policy.json").read_text())["partial"]
+
+
+def test_a_view_of_a_file_that_lost_events_is_saved_as_partial_and_names_the_damage(whole, tmp_path, capsys):
+    """A new user's trial: `view --recording d.mcap` of a file that lost a middle chunk saved d.rrd, the
+    complete view's name (and -q hid the damage warning). It is saved as d.partial.rrd, its line naming the
+    damage, as rebuild never passes such a file off as whole."""
+    from pairplay.cli.main import main
+
+    p, part = _middle_chunk_lost(whole, tmp_path)
+    assert main(["view", "--recording", str(p)]) == 0
+    out = capsys.readouterr().out
+    assert not p.with_suffix(".rrd").exists() and (tmp_path / "damaged.partial.rrd").stat().st_size > 0
+    [line] = out.splitlines()
+    assert line.startswith(f"saved {tmp_path / 'damaged.partial.rrd'}: ") and f"{p} is damaged ({part}" in line, line
