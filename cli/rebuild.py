@@ -102,6 +102,8 @@ def write_all(done, staged: Path, out: Path, args: argparse.Namespace) -> list[s
                      f"{'; %d q_before mismatches' % f.q_mismatches if f.q_mismatches else ''}")
         if rebuilt.partial:  # the damage (the note) is said here, once, short (reader.EventLog.brief)
             lines.append(f"  PARTIAL session: {rebuilt.partial}")
+        if rebuilt.damage_read:
+            lines.append(f"  {rebuilt.damage_read}")
         lines.append("  " + ", ".join(str(out / p.name) for p in paths))
     if done and not args.no_plot:
         plot_curves(done, staged / FIGURE)

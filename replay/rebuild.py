@@ -58,6 +58,7 @@ class Rebuilt:
     note: str = ""
     partial: str = ""  # why the session is not complete ("" if it is)
     lost: str = ""  # what the file lost in its middle, short: a damaged part, or parts lost before a recover
+    damage_read: str = ""  # a damage that lost no event (the policy is whole): said, not a partial session
 
 
 def partial_reason(fold: SessionFold, note: str = "", recovered: dict[str, str] | None = None) -> str:
@@ -124,10 +125,15 @@ def rebuild_recording(path: str | Path) -> Rebuilt:
     empty = no_whole_round((r.event for r in log.events), log.truncated, log.brief if log.damage else "")
     if empty:
         raise NoWholeRound(f"{empty}; nothing to rebuild", path)
-    note = "" if log.whole else f"{'damaged' if log.damage else 'truncated'}: {log.brief}"
+    # a damaged part that lost no event (a summary's CRC, an index) leaves the session whole: its policy is the
+    # learner's, not partial (a new user's trial: flagged PARTIAL without --partial); said in `damage_read`
+    loss_free = bool(log.damage) and not log.truncated and log.lost_from < 0
+    note = "" if log.whole or loss_free else f"{'damaged' if log.damage else 'truncated'}: {log.brief}"
     recovered = log.metadata.get("pairplay.recovered") or {}
     rebuilt = rebuild_events((r.event for r in log.events), str(path), log.truncated, note,
                              recovered, log.metadata.get("pairplay.recorder.end"), skipped=log.skipped)
+    if loss_free:
+        rebuilt.damage_read = f"the file is damaged, no event lost ({log.brief}): pairplay recover makes a whole copy"
     if log.lost_from >= 0:
         rebuilt.lost = f"the file is damaged ({log.brief})"
     elif recovered.get("damaged", "[]") not in ("", "[]"):

@@ -281,3 +281,20 @@ def test_a_view_of_a_file_that_lost_events_is_saved_as_partial_and_names_the_dam
     assert not p.with_suffix(".rrd").exists() and (tmp_path / "damaged.partial.rrd").stat().st_size > 0
     [line] = out.splitlines()
     assert line.startswith(f"saved {tmp_path / 'damaged.partial.rrd'}: ") and f"{p} is damaged ({part}" in line, line
+
+
+def test_a_damage_that_lost_no_event_leaves_the_policy_whole_and_is_said(whole, tmp_path):
+    """A new user's trial: a file whose summary alone was damaged (every event read) was rebuilt without
+    --partial into a policy flagged PARTIAL, while a lost chunk is refused without it. The policy of a session
+    whose every event was read is the learner's: not partial; the damage is still said."""
+    data = whole.read_bytes()
+    footer_at = len(data) - 8 - 29
+    summary_start = struct.unpack_from("<Q", data, footer_at + 9)[0]
+    bad = bytearray(data)
+    bad[summary_start + 20] ^= 1
+    p = variant(tmp_path, bytes(bad), "summary.mcap")
+    assert read_log(p).damage and len(read_log(p).events) == len(payloads(whole))
+    rebuilt = rebuild_recording(p)
+    assert rebuilt.partial == rebuild_recording(whole).partial == "" and not rebuilt.lost
+    assert rebuilt.policy == rebuild_recording(whole).policy
+    assert rebuilt.damage_read.startswith("the file is damaged, no event lost (")
