@@ -174,6 +174,9 @@ def session_id(text: str) -> str:
     if "." in text or "\\" in text:
         raise argparse.ArgumentTypeError(
             f"session id '{text}' must be free of . and \\: it names its recording files (<id>.mcap, <id>.<k>.mcap)")
+    if text.startswith("-"):  # `--session=-x` wrote -x.mcap, a file every command takes for an option (a trial)
+        raise argparse.ArgumentTypeError(f"session id '{text}' must not start with '-': it names its recording "
+                                         f"files (<id>.mcap), which commands would take for an option")
     return text
 
 

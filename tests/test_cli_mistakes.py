@@ -275,6 +275,8 @@ CASES = [
     Case("session --session ''", SIM + ["--session", ""], "session id '' must be non-empty"),
     Case("session --session blank", SIM + ["--session", " \t"], "session id ' \\t' must be non-empty"),
     Case("run learner --session ''", ["run", "learner", "--session", ""], "session id '' must be non-empty"),
+    # before (a new user's trial): accepted, and the recorder wrote -x.mcap, a file commands take for an option
+    Case("run recorder --session=-x", ["run", "recorder", "--session=-x"], "session id '-x' must not start with '-'"),
     Case("replay --as blank", ["replay", "rec.mcap", "--as", " "], "session id ' ' must be non-empty"),
     Case("participant export an empty id", ["participant", "export", "study", ""], "participant id '' must be"),
     Case("study --out where no folder can be made", ["study", "--quiet", "--train-only", "--out", "/proc/forbidden"],
