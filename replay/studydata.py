@@ -406,7 +406,7 @@ class StudyData:
                     rows.append({"participant": g.participant, "phase": g.phase, "game": g.game + 1,
                                  "session": g.session, "questionnaire": e.questionnaire, "item": item,
                                  "answer": answer, "returning": int(self.returning(g.participant, g.phase)),
-                                 "valid": int(not g.invalid)})
+                                 "valid": int(not g.invalid), "scripted": g.scripted})
         return rows
 
     def write_tables(self) -> list[Path]:
@@ -426,7 +426,9 @@ class StudyData:
                                   for g in self.state.games.values()]),
             }
             answers = self.answers()
-            cols = ["participant", "phase", "game", "session", "questionnaire", "item", "answer", "returning", "valid"]
+            # scripted: a persona's answers, not a person's (a new user's trial had to join on sessions.csv)
+            cols = ["participant", "phase", "game", "session", "questionnaire", "item", "answer", "returning", "valid",
+                    "scripted"]
             tables["answers.csv"] = (cols, [[r[c] for c in cols] for r in answers])
             paths = []
             for name, (head, rows) in tables.items():

@@ -415,6 +415,9 @@ def test_a_scripted_game_is_marked_where_it_is_recorded_and_the_report_says_a_re
         assert {r["scripted"] for r in csv.DictReader(f)} == set(PERSONAS)
     with open(data.folder / "participants.csv") as f:
         assert {r["participant"]: r["scripted"] for r in csv.DictReader(f)} == personas
+    with open(data.folder / "answers.csv") as f:  # a persona's answers say so too (a trial joined on sessions.csv)
+        answers = list(csv.DictReader(f))
+    assert answers and all(r["scripted"] == personas[r["participant"]] for r in answers)
     report = human_report(data.folder, tmp_path / "report")
     text = (report.out / "report.md").read_text()
     assert report.rehearsal and len(report.games) == 8
