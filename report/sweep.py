@@ -264,6 +264,9 @@ def check_sweep_memory(grid: Grid, workers: int) -> None:
                           f"give --workers {fit} or fewer", f"--workers {workers}")
 
 
+SCHEDULER_TIMEOUT_S = 10  # how long a --scheduler has to answer (Dask's Client timeout)
+
+
 def run_sweep(grid: Grid, out: str | Path, *, scheduler: str | None = None, workers: int = 1,
               progress: Callable[[int], None] | None = None) -> SweepRun:
     """Compute every cell of `grid` that `out`/cells/ does not hold yet; see the module rule.
@@ -291,7 +294,7 @@ def run_sweep(grid: Grid, out: str | Path, *, scheduler: str | None = None, work
     if scheduler:
         from dask.distributed import Client, as_completed
         try:
-            client = Client(scheduler, timeout="10s")
+            client = Client(scheduler, timeout=f"{SCHEDULER_TIMEOUT_S}s")
         except OSError as err:  # named by its option (a new user's trial: "Timed out trying to connect ..." alone)
             raise OptionError(f"no Dask scheduler answered at {scheduler} ({err})", "--scheduler") from None
         with client:

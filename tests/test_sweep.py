@@ -172,12 +172,14 @@ def test_a_summary_interrupted_part_way_leaves_the_earlier_one_whole(tmp_path, m
     assert [p.name for p in tmp_path.iterdir() if p.name.startswith(".")] == []  # no staging folder left
 
 
-def test_a_scheduler_that_does_not_answer_is_one_line_naming_the_option(tmp_path, capsys):
+def test_a_scheduler_that_does_not_answer_is_one_line_naming_the_option(tmp_path, capsys, monkeypatch):
     """Before (a new user's trial): 'pairplay sweep: Timed out trying to connect to tcp://... after 10 s',
     which did not say it was --scheduler's address."""
     import socket
 
     from pairplay.cli.main import main
+    from pairplay.report import sweep
+    monkeypatch.setattr(sweep, "SCHEDULER_TIMEOUT_S", 1)  # the 10 s of a lab's network are not needed here
     with socket.socket() as s:  # a port nothing listens on
         s.bind(("127.0.0.1", 0))
         port = s.getsockname()[1]
