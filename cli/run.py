@@ -31,15 +31,13 @@ from pairplay.cli.args import session_id
 from pairplay.errors import OptionError
 from pairplay.lists import comma_items
 from pairplay.outputs import check_folder
+from pairplay.schemas.trust import SERVICES as BUS_SERVICES
 from pairplay.services.bus import Bus, Deadline, add_bus_arguments, deadline_of, options_from_args, stop_on_signals
 from pairplay.services.forgery import EVERY_LISTENER, ForgeryWatch
 from pairplay.services.refusal import RefusalWatch
-from pairplay.schemas.trust import SERVICES as BUS_SERVICES
 from pairplay.services.runner import GameWatch, Node, Stopped, start_unless_stopped, waiting_for
 
-SERVICES = ("game", "learner", "participant", "recorder", "combiner")
-
-
+SERVICES = ("game", "learner", "participant", "recorder", "combiner")  # what `run` runs
 WAITABLE = BUS_SERVICES - {"game"}  # what a game can wait for: every other service on the bus
 
 
