@@ -250,13 +250,12 @@ def check_sweep_memory(grid: Grid, workers: int) -> None:
     than core/simulate.py MEMORY_LIMIT at once: each cell is checked against the limit alone
     (StudySettings.check_memory), and `--workers 8` ran eight of them side by side (8 x 2 GB)."""
     from pairplay.core.simulate import MEMORY_LIMIT, gigabytes
-    from pairplay.errors import OptionError
 
     at_once = min(workers, len(grid.cells()))
     if at_once <= 1:
         return
-    cell = max(grid.study_settings(Cell(s, grid.seeds[0])).memory_bytes(
-        len(grid.study_settings(Cell(s, grid.seeds[0])).persona_list()), grid.reuse, False) for s in grid.settings())
+    settings = [grid.study_settings(Cell(s, grid.seeds[0])) for s in grid.settings()]
+    cell = max(st.memory_bytes(len(st.persona_list()), grid.reuse, False) for st in settings)
     if cell * at_once > MEMORY_LIMIT:
         fit = max(1, MEMORY_LIMIT // max(cell, 1))
         raise OptionError(f"{at_once} workers would hold about {gigabytes(cell * at_once)} of memory at once "
