@@ -297,6 +297,7 @@ def _pilot(data: StudyData, args) -> int:
         runners.append(runner)
         if args.robot == NO_ROBOT:
             runner.robot = None
+        runner.warns_undelivered = False  # each game's step line below says what its robot delivered
         warn_unreachable(runner, "pilot")
 
         def said(step, result) -> None:

@@ -111,6 +111,9 @@ class StudyRunner:
         self.questionnaire_timeout_s = questionnaire_timeout_s
         self.live = Live()
         self.delivery: dict[str, str] = {}  # session -> what its robot delivered (replay/delivery.py)
+        # a WARNING when a game's robot did not get every suggestion; off where each game's line says it already
+        # (`protocol pilot`: the line came twice, a WARNING and the step's, for every game: a new user's trial)
+        self.warns_undelivered = True
         self._stop: threading.Event | None = None
         self.interrupted: threading.Event | None = None  # the process's signal (interrupt): no more steps
         self._skip = threading.Event()
@@ -297,7 +300,7 @@ class StudyRunner:
             acted = read_log(path, only=frozenset({"RobotActed"})).of("RobotActed")
             line = self.delivery[config.session] = delivery_line(acted)
             total, delivered, *_ = delivery_counts(acted)
-            if delivered < total:
+            if delivered < total and self.warns_undelivered:
                 log.warning("%s: %s", config.session, line)
         self.data.write_tables()
         return self.data.state.games[config.session]

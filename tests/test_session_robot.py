@@ -86,3 +86,5 @@ def test_protocol_pilot_warns_of_an_unreachable_robot_and_each_game_says_what_it
     assert "pairplay protocol pilot: warning: the robot does not accept a connection now" in r.stderr, r.stderr
     game = [line for line in r.stdout.splitlines() if "phase1" in line and "completed" in line]
     assert game and f"robot {url}: 0 of " in game[0] and "suggestions delivered" in game[0], r.stdout
+    # said once a game, on its step line (before, also as a WARNING: every game's line twice)
+    assert "suggestions delivered" not in r.stderr, r.stderr
