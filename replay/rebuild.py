@@ -129,6 +129,11 @@ def rebuild_recording(path: str | Path) -> Rebuilt:
     # learner's, not partial (a new user's trial: flagged PARTIAL without --partial); said in `damage_read`
     loss_free = bool(log.damage) and not log.truncated and log.lost_from < 0
     note = "" if log.whole or loss_free else f"{'damaged' if log.damage else 'truncated'}: {log.brief}"
+    # messages in the file that do not decode are events the fold cannot take (a Q update among them: a Q-table
+    # the learner never had); the reader keeps them in `bad` (a new user's trial: rebuilt with exit 0, no word)
+    bad = (f"{len(log.bad)} message{'s' * (len(log.bad) != 1)} in it do not decode "
+           f"({log.bad[0].key or 'no channel'}: {log.bad[0].reason[:80]})") if log.bad else ""
+    note = "; ".join(n for n in (note, bad) if n)
     recovered = log.metadata.get("pairplay.recovered") or {}
     rebuilt = rebuild_events((r.event for r in log.events), str(path), log.truncated, note,
                              recovered, log.metadata.get("pairplay.recorder.end"), skipped=log.skipped)
@@ -138,6 +143,8 @@ def rebuild_recording(path: str | Path) -> Rebuilt:
         rebuilt.lost = f"the file is damaged ({log.brief})"
     elif recovered.get("damaged", "[]") not in ("", "[]"):
         rebuilt.lost = "it was recovered from a damaged file, whose damaged parts are lost"
+    elif bad:
+        rebuilt.lost = f"the file is damaged ({bad})"
     return rebuilt
 
 

@@ -298,3 +298,28 @@ def test_a_damage_that_lost_no_event_leaves_the_policy_whole_and_is_said(whole, 
     assert rebuilt.partial == rebuild_recording(whole).partial == "" and not rebuilt.lost
     assert rebuilt.policy == rebuild_recording(whole).policy
     assert rebuilt.damage_read.startswith("the file is damaged, no event lost (")
+
+
+def test_messages_that_do_not_decode_are_never_rebuilt_as_whole(whole, tmp_path, capsys):
+    """A new user's trial: a valid MCAP file whose QUpdated payloads were partly replaced by bytes that do not
+    decode was rebuilt with exit 0, no word, its policy lacking those updates and not flagged partial. Now
+    rebuild refuses it in one line unless --partial, as a file that lost a chunk."""
+    from pairplay.cli.main import main
+
+    p = tmp_path / "bad.mcap"
+    w = EventLogWriter(p, chunk_size=4096)
+    broken = 0
+    for r in read_log(whole).events:
+        payload = r.payload
+        if type(r.event).__name__ == "QUpdated" and broken < 3:
+            payload, broken = b'{"type":"broken"', broken + 1
+        w.write(r.key, payload, log_time_ns=r.log_time_ns, sequence=r.event.seq)
+    w.close()
+    assert broken == 3 and len(read_log(p).bad) == 3
+    assert main(["rebuild", str(p), "--out", str(tmp_path / "rb")]) == 2
+    out, err = capsys.readouterr()
+    assert out == "" and not (tmp_path / "rb").exists()
+    [line] = err.splitlines()
+    assert "3 messages in it do not decode" in line and "--partial" in line, line
+    assert main(["rebuild", str(p), "--out", str(tmp_path / "rb"), "--partial", "--no-plot"]) == 0
+    assert "do not decode" in json.loads((tmp_path / "rb" / "bad.policy.json").read_text())["partial"]
