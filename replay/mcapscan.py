@@ -255,6 +255,8 @@ class _Walker:
         self.last_intact: ChunkSeen | None = None  # the last chunk whose records were read
         self.lost_chunk: tuple[int, ChunkSeen] | None = None  # the last chunk that did not open, its Damage's index
         self.messages = 0  # Message records read (the Statistics' count is checked against it)
+        self.metadata = self.attachments = 0  # the same, of the data section's Metadata and Attachment records
+        self.summary_crc_held = False  # the footer's summary CRC was there and matched
         self.data_end_at = -1
         self.chunk_indexes: list[ChunkIndex] = []
         self.statistics: Statistics | None = None
@@ -363,6 +365,9 @@ class _Walker:
                 return scan
             elif isinstance(record, (Schema, Channel, Metadata)):
                 scan.records.append(record)
+                self.metadata += isinstance(record, Metadata)
+            elif opcode == 0x09:
+                self.attachments += 1
             elif isinstance(record, Message):
                 self.sequence(pos, record, "message", -1)
                 scan.records.append(record)
@@ -487,6 +492,8 @@ class _Walker:
             if crc != footer.summary_crc:
                 self.damage(footer.summary_start, "summary", f"CRC mismatch (recorded {footer.summary_crc:#010x}, "
                             f"computed {crc:#010x})")
+            else:
+                self.summary_crc_held = True
         scan.summary = bool(footer.summary_start)
         if not any(d.part == "summary" for d in scan.damage):
             scan.summary_records = self.summary_records
@@ -515,6 +522,24 @@ class _Walker:
             if self.statistics.message_count != messages and not lost:
                 self.damage(self.data_end_at, "summary", f"statistics count {self.statistics.message_count} "
                             f"messages, the data section holds {messages}")
+        self.unlose_accounted()
+
+    def unlose_accounted(self) -> None:
+        """Unreadable bytes outside every chunk lost nothing when a summary that proves itself (its CRC
+        held, nothing in it disagreed) accounts for everything the data section holds: every chunk it
+        indexes was read whole, and its Statistics count exactly the messages, chunks, metadata and
+        attachment records read. Those bytes then held only what the summary does not count (Message
+        Index records: a reader's index, not data); they are still a finding, but none lost."""
+        stats, scan = self.statistics, self.scan
+        if (stats is None or not self.summary_crc_held or any(d.part == "summary" or d.part.startswith("chunk")
+                                                              for d in scan.damage)
+                or len(self.chunk_indexes) != len(scan.chunks) or not all(c.intact for c in scan.chunks)
+                or (stats.message_count, stats.chunk_count, stats.metadata_count, stats.attachment_count)
+                != (self.messages, len(scan.chunks), self.metadata, self.attachments)):
+            return
+        scan.damage = [_replace(d, lost_at=-1, lost="", what=f"{d.what}; no message lost (the summary accounts "
+                                "for every chunk, message and metadata record read)")
+                       if d.lost_at >= 0 and d.part.startswith("bytes ") else d for d in scan.damage]
 
 
 def scan(path: str | Path) -> Scan:

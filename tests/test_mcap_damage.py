@@ -323,3 +323,40 @@ def test_messages_that_do_not_decode_are_never_rebuilt_as_whole(whole, tmp_path,
     assert "3 messages in it do not decode" in line and "--partial" in line, line
     assert main(["rebuild", str(p), "--out", str(tmp_path / "rb"), "--partial", "--no-plot"]) == 0
     assert "do not decode" in json.loads((tmp_path / "rb" / "bad.policy.json").read_text())["partial"]
+
+
+def test_damaged_index_bytes_between_chunks_lose_no_event_when_the_summary_accounts_for_every_one(whole, tmp_path):
+    """A new user's trial: 200 bytes overwritten between two chunks (their Message Index records) lost no
+    message, yet verify and rebuild took the part as lost events (rebuild refused it without --partial). The
+    summary (its CRC holding) lists every chunk, and its Statistics count every message, metadata record and
+    chunk: when everything it lists was read whole, the unreadable bytes held none of it."""
+    data = whole.read_bytes()
+    chunks = scan(whole).chunks
+    c, after = chunks[3], chunks[4]
+    assert after.offset > c.offset + c.length  # Message Index records lie between them
+    bad = bytearray(data)
+    bad[c.offset + c.length:after.offset] = b"\xff" * (after.offset - c.offset - c.length)
+    p = variant(tmp_path, bytes(bad), "index.mcap")
+    s = scan(p)
+    assert s.damage and not [d for d in s.damage if d.lost_at >= 0], s.describe()
+    assert any("no message lost" in d.what for d in s.damage), s.describe()
+    assert payloads(p) == payloads(whole)
+    rebuilt = rebuild_recording(p)
+    assert rebuilt.partial == "" and not rebuilt.lost and rebuilt.policy == rebuild_recording(whole).policy
+    assert rebuilt.damage_read.startswith("the file is damaged, no event lost (")
+    checked = verify_recording(p)  # every event compared; a damaged file still FAILs, saying nothing was lost
+    assert not checked.lost_part and checked.not_compared == 0 and "no event lost" in checked.reach
+
+
+def test_index_bytes_damaged_with_the_summary_damaged_too_are_still_taken_as_lost(whole, tmp_path):
+    """Without a summary whose CRC holds, nothing accounts for what the unreadable bytes held: lost."""
+    data = whole.read_bytes()
+    chunks = scan(whole).chunks
+    c, after = chunks[3], chunks[4]
+    bad = bytearray(data)
+    bad[c.offset + c.length:after.offset] = b"\xff" * (after.offset - c.offset - c.length)
+    footer_at = len(data) - 8 - 29
+    summary_start = struct.unpack_from("<Q", data, footer_at + 9)[0]
+    bad[summary_start + 20] ^= 1
+    s = scan(variant(tmp_path, bytes(bad), "both.mcap"))
+    assert [d for d in s.damage if d.lost_at >= 0], s.describe()
