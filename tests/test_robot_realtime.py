@@ -73,16 +73,35 @@ def test_a_refused_key_fails_at_once_and_is_not_retried(stage, key):
     assert server.requests == []  # nothing reached the robot without access
 
 
-def test_the_client_waits_for_response_auth_with_access_even_without_a_key(stage, monkeypatch):
+def test_the_client_waits_for_response_auth_with_access_even_without_a_key(stage, monkeypatch, caplog):
     # only the wait for response.auth is shortened (the maker's client waits 5 s; the rule is the same): the
     # WebSocket opening handshake keeps its 5 s, so a loaded machine still gets to the auth and fails there
     monkeypatch.setattr(realtime, "AUTH_TIMEOUT_S", 0.3)
     collector, robot = stage
-    server, driver = robot(answers_auth=False, config=msgspec.structs.replace(FAST, give_up_s=0.5))
+    server, driver = robot(answers_auth=False)
     driver.perform(suggestion(EXACT))
-    assert driver.wait_idle(PATIENCE_S)
+    # the attempt runs beside the driver (driver.py): once it failed on the auth, the reason is the auth's
+    assert collector.wait_for(lambda c: any("request.auth" in r.getMessage() for r in caplog.records))
+    driver.close()
     assert collector.acted[0].outcome == "failed" and server.requests == []
     assert "request.auth" in collector.acted[0].error
+
+
+def test_a_robot_that_never_answers_the_auth_holds_up_nothing(stage, monkeypatch):
+    """A connect that hangs (a robot that accepted the WebSocket and does not answer request.auth) ran on
+    the driver's one thread: no suggestion was accounted and no close done until the auth's timeout.
+    Now the attempt runs beside it (the same as IrisTK's handshake: test_robot_iristk)."""
+    monkeypatch.setattr(realtime, "AUTH_TIMEOUT_S", 2 * PATIENCE_S)  # it would outlast every wait below
+    collector, robot = stage
+    server, driver = robot(answers_auth=False)
+    driver.perform(suggestion(EXACT, seq=1))
+    driver.perform(suggestion(EXACT, seq=2))
+    assert collector.wait_for(lambda c: 1 in c.by_seq())
+    driver.close(PATIENCE_S)
+    assert sorted(collector.by_seq()) == [1, 2] and server.requests == []
+    for acted in collector.acted:
+        assert acted.outcome == "failed" and acted.commands == [] and acted.unsent, acted
+        assert "robot not connected yet (the first connection attempt is under way)" in acted.error
 
 
 def test_each_auth_has_its_own_request_id_and_only_awaited_requests_carry_one(stage):
