@@ -12,12 +12,13 @@ the robot acknowledged it, or why it failed. Outcomes:
                    Not if its due commands could not be written (robot
                    unreachable, nobody subscribed): that is "failed"
   "aborted"        every command was written, and a newer suggestion cut its
-                   speech short (or the robot reports it aborted)
+                   speech short (or the robot reports it aborted); not if the
+                   connection died before its reply: "unacknowledged"
   "stopped"        the robot reports its speech stopped early, and not by us
                    (IrisTK monitor.speech.end with "stopped": another client cut it)
   "unacknowledged" sent, but the robot never confirmed within the ack timeout, or
-                   a command was written just before the connection died (see
-                   `unconfirmed`)
+                   a command was written just before the connection died, or the
+                   connection died while its reply was awaited (see `unconfirmed`)
   "failed"         not delivered (robot unreachable or not connected yet, nobody
                    subscribed on the broker, access refused, bridge closed; also
                    when a newer suggestion came while it could not be written;

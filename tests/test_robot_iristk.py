@@ -391,6 +391,55 @@ def test_broker_drop_mid_session_loses_and_repeats_nothing(stage):
     assert by_seq[9].reconnects == 1 and by_seq[9].commands  # held while down, sent after
 
 
+def test_a_robot_that_goes_away_mid_speech_and_comes_back_is_accounted_as_what_happened(stage):
+    """The robot's broker dies while it speaks a suggestion, two more come while it is away, it comes
+    back. Before, the speech was recorded "aborted" (delivered: "a newer suggestion cut it short"),
+    though nothing of the newer one reached the robot and its speech end could never come over the lost
+    line, and the newer one, never deliverable, "superseded". Now: unacknowledged (connection lost),
+    failed (robot unreachable), then after the reconnect the newest is delivered."""
+    broker, furhat, collector, robot = stage
+    robot_side = furhat(speech_s=60.0)  # still speaking when the line goes
+    driver = robot()
+    driver.perform(suggestion(EXACT, seq=1))
+    assert broker.wait_for(lambda b: any(e.name == "monitor.speech.start" for e in b.events))
+    broker.stop()
+    assert until(lambda: not driver.connected)
+    driver.perform(suggestion(EXACT, seq=2))
+    driver.perform(suggestion(GAZE, seq=3))
+    assert collector.wait_for(lambda c: {1, 2} <= set(c.by_seq()))
+    broker.start()  # it comes back on the same port, and the robot's system rejoins
+    assert collector.wait_for(lambda c: 3 in c.by_seq())
+    driver.perform(suggestion(GAZE, seq=4))
+    assert collector.wait_for(lambda c: 4 in c.by_seq())
+    by_seq = collector.by_seq()
+    spoken = by_seq[1]
+    assert spoken.outcome == "unacknowledged" and "the connection was lost" in spoken.error, spoken
+    assert spoken.commands and spoken.replies == ["monitor.speech.start"]
+    assert by_seq[2].outcome == "failed" and "robot unreachable" in by_seq[2].error and by_seq[2].commands == []
+    assert by_seq[3].outcome == "sent" and by_seq[3].reconnects == 1  # held while away, written after
+    assert by_seq[4].outcome == "sent"
+    assert robot_side.joins >= 2 and len(collector.acted) == 4
+    line = delivery_line(collector.acted)
+    assert "2 of 4 suggestions delivered (1 failed, 1 unacknowledged)" in line, line
+
+
+def test_a_speech_whose_connection_died_is_unacknowledged_when_it_dies(stage):
+    """Its speech end can never come (replies of a former connection are dropped): before, the suggestion
+    waited out ack_timeout_s (a session's end waiting with it) or, closed first, was recorded "in-flight",
+    "the robot's acknowledgement was awaited", as if it might have come after the recording closed."""
+    broker, furhat, collector, robot = stage
+    furhat(speech_s=60.0)
+    driver = robot(config=msgspec.structs.replace(FAST, ack_timeout_s=2 * PATIENCE_S))
+    driver.perform(suggestion(EXACT, seq=1))
+    assert broker.wait_for(lambda b: any(e.name == "monitor.speech.start" for e in b.events))
+    broker.stop()
+    assert collector.wait_for(lambda c: 1 in c.by_seq())  # when the line went, not after ack_timeout_s
+    (acted,) = collector.acted
+    assert acted.outcome == "unacknowledged", acted
+    assert acted.error.startswith("no speech.end: the connection was lost (")
+    assert acted.replies == ["monitor.speech.start"] and acted.unconfirmed == []  # it reached the robot
+
+
 def test_nothing_is_sent_before_the_robot_is_subscribed_and_the_unsent_are_recorded(stage):
     broker, furhat, collector, robot = stage
     robot_side = furhat(rejoin=False)  # IrisTK's BrokerClient never rejoins a restarted broker

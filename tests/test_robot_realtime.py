@@ -14,6 +14,7 @@ from robot_doubles.furhat_realtime import FurhatRealtimeServer
 from robot_doubles.harness import FAMILIES, FAST, PATIENCE_S, OBSERVED, TARGET, Collector, suggestion
 
 from pairplay.core.actions import code_of_parts
+from pairplay.replay.delivery import delivery_line
 from pairplay.services.robot import open_robot, realtime
 from pairplay.services.robot.calibration import load_calibration
 
@@ -229,6 +230,27 @@ def test_a_dropped_connection_loses_and_repeats_nothing(stage):
     assert len(ids) == len(set(ids))
     assert driver.reconnects == 1 and server.auths == [True, True]
     assert all(a.outcome == "done" for a in collector.acted)
+
+
+def test_a_robot_that_drops_the_line_mid_speech_and_comes_back_is_accounted_as_what_happened(stage):
+    """The robot drops the connection while it speaks; the driver reconnects. The speech's end could never
+    come (a former connection's replies are dropped): before, it waited out ack_timeout_s or was recorded
+    "in-flight" at the end; now it is unacknowledged when the line goes, and the next one is delivered."""
+    collector, robot = stage
+    server, driver = robot(config=msgspec.structs.replace(FAST, ack_timeout_s=2 * PATIENCE_S))
+    server.speech_s = 60.0  # still speaking when the line goes
+    driver.perform(suggestion(EXACT, seq=1))
+    assert server.wait_for(lambda s: requests(s, "request.speak.text"))
+    server.drop_all()
+    assert collector.wait_for(lambda c: 1 in c.by_seq())  # when the line went, not after ack_timeout_s
+    spoken = collector.by_seq()[1]
+    assert spoken.outcome == "unacknowledged" and "the connection was lost" in spoken.error, spoken
+    server.speech_s = 0.05
+    assert _until_connected(driver) and driver.reconnects == 1
+    driver.perform(dataclasses.replace(suggestion(EXACT, seq=2), target=OBSERVED + 1))
+    assert collector.wait_for(lambda c: 2 in c.by_seq())
+    assert collector.by_seq()[2].outcome == "done" and server.auths == [True, True]
+    assert "1 of 2 suggestions delivered (1 unacknowledged)" in delivery_line(collector.acted)
 
 
 def test_malformed_frames_from_the_robot_are_reported_and_skipped(stage):

@@ -26,7 +26,13 @@ the reason a suggestion went undelivered if its due commands could not be
 written when the newer one came (the robot unreachable, or not connected yet;
 on IrisTK nobody subscribed to them): it is "failed", `error` saying why
 ("not delivered: robot unreachable: ...; then ... stale"). Before, an unreachable
-robot's session counted all but its last suggestion "superseded". What goes out
+robot's session counted all but its last suggestion "superseded". And a
+suggestion whose speech was written but whose connection died before the robot
+confirmed it is "unacknowledged", never "aborted": its replies cannot come, and
+nothing of the newer one reached the robot to cut it short. So is any suggestion
+whose awaited replies were all promised over a connection now gone, at once
+when it goes (it used to wait ack_timeout_s, or be recorded "in-flight" at the
+end, as if its reply might still have come). What goes out
 instead is what undoes the stale one's effect on the robot, as steps of the new
 suggestion (recorded in its RobotActed; the stop first, the head after the new
 speech, if any):
@@ -114,6 +120,7 @@ class _Step:
     sent: bool = False
     dropped: bool = False  # its suggestion was superseded before it was written: never written
     sent_at: float = 0.0  # monotonic time of the write
+    generation: int = 0  # the connection it was written on (its replies come over that one only)
     confirmed: bool = False  # a reply about it came
     inflight: bool = False  # written just before the connection died, never confirmed
 
@@ -189,6 +196,7 @@ class RobotDriver:
         self._next_attempt = 0.0
         self._connected_at = 0.0
         self._dropped_at = 0.0
+        self._dropped_why = ""  # why the last connection was lost
         self._last_error = ""  # why the last connect failed or the connection was lost ("": neither yet)
         self._held = ""  # why the next due command waits although connected ("" = it does not)
         self._closing = False  # the worker saw the close request
@@ -392,6 +400,7 @@ class RobotDriver:
         affected = self._mark_inflight(now if seen is None else seen)
         self._connected = False
         self._dropped_at = now
+        self._dropped_why = reason
         self._held = ""
         self._last_error = reason
         self.transport.close()
@@ -399,7 +408,8 @@ class RobotDriver:
             self._backoff = self.config.reconnect_min_s  # it was a good connection: start again
         self._next_attempt = now + self._backoff
         self._backoff = min(self._backoff * 2, self.config.reconnect_max_s)
-        for perf in affected:
+        # and those awaiting replies: none can come over the lost line (a drop is rare: the scan is not per message)
+        for perf in [*affected, *(p for p in self._active.values() if p.outstanding)]:
             self._check(perf, now)
 
     def _mark_inflight(self, dropped_at: float) -> list[_Performance]:
@@ -544,7 +554,7 @@ class RobotDriver:
             self._sent(perf, step, sent_ns)
 
     def _sent(self, perf: _Performance, step: _Step, sent_ns: int) -> None:
-        step.sent = True
+        step.sent, step.generation = True, self._generation
         perf.next_step += 1
         step.sent_at = perf.last_send = time.monotonic()
         perf.sent_ns = perf.sent_ns or sent_ns
@@ -580,14 +590,15 @@ class RobotDriver:
         # ANOTHER module proves nothing: the face's gesture end overtook the synthesizer's speech end, and the
         # aborted speech was reported without it: test_robot_iristk, 1 of 4 CI runs)
         overtaken = all(perf.index < self._replied_upto.get(_module_of(kind), 0) for _, kind in perf.outstanding)
+        lost = self._lost_since(perf)
         if perf.failed_by_robot:
             self._finish(perf, "failed", perf.failed_by_robot)
         elif perf.superseded and perf.outstanding:
-            # replies still in flight are recorded until the robot has moved on
-            if overtaken or now >= perf.superseded_at + self.config.abort_grace_s:
-                self._finish(perf, *self._stale_fate(perf, dropped))
+            # replies still in flight are recorded until the robot has moved on (none can come over a lost line)
+            if lost or overtaken or now >= perf.superseded_at + self.config.abort_grace_s:
+                self._finish(perf, *self._stale_fate(perf, dropped, lost))
         elif dropped:
-            self._finish(perf, *self._stale_fate(perf, dropped))
+            self._finish(perf, *self._stale_fate(perf, dropped, lost))
         elif perf.cut_by_robot:
             self._finish(perf, "aborted")
         elif perf.stopped_by_robot and not perf.outstanding:
@@ -596,6 +607,8 @@ class RobotDriver:
             self._finish(perf, "unacknowledged",
                          f"{len(inflight)} command(s) written within {self.config.inflight_window_s:g} s before"
                          f" the connection died ({self._last_error}): they may not have reached the robot")
+        elif lost:  # not "in-flight" at the end, nor waiting out ack_timeout_s: the replies cannot come
+            self._finish(perf, "unacknowledged", self._why_lost(perf, lost))
         elif not perf.outstanding and perf.steps and not perf.promised and self._connected \
                 and now < perf.last_send + self.config.inflight_window_s:
             return  # nothing will confirm these: wait out the in-flight window (a timer) before saying "sent"
@@ -628,15 +641,32 @@ class RobotDriver:
             return f"robot unreachable: {self._last_error}"
         return "robot not connected yet (the first connection attempt is under way)"
 
-    def _stale_fate(self, perf: _Performance, dropped: list[_Step]) -> tuple[str, str]:
+    def _lost_since(self, perf: _Performance) -> str:
+        """Why none of the replies `perf` awaits can come: each was promised over a connection that is
+        gone (the driver drops a former connection's replies); "" if one still can, or none is awaited."""
+        if not perf.outstanding:
+            return ""
+        live = self._generation if self._connected else -1
+        written_on = {s.command_id: s.generation for s in perf.steps if s.sent}
+        if any(written_on.get(command_id) == live for command_id, _ in perf.outstanding):
+            return ""
+        return self._dropped_why or "connection lost"
+
+    @staticmethod
+    def _why_lost(perf: _Performance, lost: str) -> str:
+        return f"no {perf.outstanding[0][1]}: the connection was lost ({lost}) before the robot confirmed it"
+
+    def _stale_fate(self, perf: _Performance, dropped: list[_Step], lost: str) -> tuple[str, str]:
         """(outcome, error) of a superseded suggestion (module docstring): failed if the robot could not
-        take its due commands, superseded if the rest were dropped as stale, else aborted (the newer
-        one's speech cut its own)."""
+        take its due commands, superseded if the rest were dropped as stale, unacknowledged if its replies
+        died with the connection, else aborted (the newer one's speech cut its own)."""
         if dropped and perf.undelivered:
             return "failed", (f"not delivered: {perf.undelivered}; then a newer suggestion made it stale"
                               " (its unwritten commands dropped)")
         if dropped:
             return "superseded", self._why_superseded(perf, dropped)
+        if lost:
+            return "unacknowledged", self._why_lost(perf, lost)
         return "aborted", ""
 
     def _finish(self, perf: _Performance, outcome: str, error: str = "") -> None:
@@ -702,7 +732,7 @@ class RobotDriver:
                 why = self._stuck()
                 self._finish(perf, "failed", f"bridge closed before delivery{f' ({why})' if why else ''}")
             elif dropped:
-                self._finish(perf, *self._stale_fate(perf, dropped))
+                self._finish(perf, *self._stale_fate(perf, dropped, self._lost_since(perf)))
             elif perf.outstanding:
                 self._finish(perf, "in-flight", "the session ended while the robot's acknowledgement was awaited")
             elif any(s.inflight for s in perf.steps):
