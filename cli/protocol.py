@@ -15,6 +15,7 @@ game; `--pilot p02=blind` lets personas play some participants' games.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import sys
 import time
 from pathlib import Path
@@ -305,7 +306,8 @@ def _pilot(data: StudyData, args) -> int:
                 f"{result.ended.outcome}, {result.ended.rounds_played} rounds"
             robot = runner.delivery.get(getattr(result, "session", ""), "")
             what += f"; {robot}" if robot else ""
-            print(f"{time.perf_counter() - t0:7.1f} s  {step.label}: {what}", flush=True)
+            played = dataclasses.replace(step, scripted=getattr(result, "scripted", ""))  # "p01 (scripted: blind)"
+            print(f"{time.perf_counter() - t0:7.1f} s  {played.label}: {what}", flush=True)
         try:
             runner.run_plan(scripted_players(runner, personas), on_step=said)
         except StudyDataError:

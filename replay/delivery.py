@@ -4,8 +4,9 @@ Rule: every suggestion the robot bridge took has one RobotActed (schemas/robot.p
 `delivery_line` counts those with something to send ("nothing", the do-nothing
 action, has not) as delivered (done, sent, aborted, stopped), unconfirmed (unacknowledged, in-flight:
 written, not confirmed), superseded (a newer suggestion came first: normal when
-the participant is quick) and not delivered (failed), naming the commonest
-reason a suggestion failed. A session whose robot could not be reached said
+the participant is quick) and not delivered (failed: also a stale one the robot
+could not have taken, unreachable, which the driver records failed, not
+superseded), naming the commonest reason a suggestion failed. A session whose robot could not be reached said
 so only under -v, and its summary said nothing: this line is what `session`,
 `lab` and `protocol serve/pilot` print after a game with a robot.
 """

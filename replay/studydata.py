@@ -17,6 +17,11 @@ process went while reading it back) is journaled later, from the recordings,
 by `build_missing_policies`. Participants are pseudonymous ids (p01, p02, ...): a name given at
 registration goes only to the key file, which must lie outside the study folder,
 and is refused when the study has no key file.
+A persona that played a participant's games (a rehearsal) is named as what it is
+wherever a participant is named for people to read (`user_names`, `named`, the
+plan's labels; the tables' `scripted` column): a scripted game's session runs as
+`human:<id>` (the plan's participant), so its policy file, a combination's users
+and rules said `human:p01` of a persona (the report's bias section, the console).
 """
 
 from __future__ import annotations
@@ -146,12 +151,14 @@ class Step:
     game: int = 0
     done: bool = False
     blocked: str = ""  # why it cannot run yet ("" = it can)
+    scripted: str = ""  # a persona played it (a rehearsal): the label says so
 
     @property
     def label(self) -> str:
         if self.kind == "combine":
             return f"combine the policies of the players before {self.phase} into its bias policy"
-        return f"{self.participant}: {self.phase} game {self.game + 1}"
+        who = f"{self.participant} (scripted: {self.scripted})" if self.scripted else self.participant
+        return f"{who}: {self.phase} game {self.game + 1}"
 
 
 # participants registered by one request (`protocol register --count`, the console's API): a lab
@@ -284,6 +291,21 @@ class StudyData:
         """The personas that played `pid`'s games instead of a person (a rehearsal), "+"-joined; "" if none."""
         return "+".join(dict.fromkeys(g.scripted for g in self.games_of(pid) if g.scripted))
 
+    def user_names(self, combined: j.BiasCombined) -> dict[str, str]:
+        """How to name each user of a combination (its `users`, `profiles` and `decided_by` say `human:<id>`,
+        the sessions' participant): `sim:<persona> as <id>` if personas played all its combined games,
+        `human:<id> (with scripted games: <persona>)` if some; a person's id stays as it is."""
+        by_policy = {g.ended.policy: g for g in self.state.games.values() if g.ended is not None and g.ended.policy}
+        names = {}
+        for user in dict.fromkeys([*combined.users, *combined.profiles]):
+            pid = user.split(":", 1)[1] if user.startswith("human:") else user
+            games = [by_policy[p] for p in combined.inputs if p in by_policy and by_policy[p].participant == pid]
+            personas = "+".join(dict.fromkeys(g.scripted for g in games if g.scripted))
+            if personas:
+                names[user] = (f"sim:{personas} as {pid}" if all(g.scripted for g in games)
+                               else f"{user} (with scripted games: {personas})")
+        return names
+
     def combined_games(self, phase: str, include_scripted: bool = False) -> list[Game]:
         """The games a bias policy of `phase`'s games combines: its valid ones that people played, unless
         `include_scripted` (a rehearsal asked for: `protocol pilot`, `serve --pilot`); all of them when no
@@ -312,9 +334,10 @@ class StudyData:
                 if not done:
                     blocked = f"the bias policy of {phase.id} is not combined yet"
             for pid in self.players(phase.id):
-                done_games = sorted(g.game for g in self.games_of(pid, phase.id) if g.valid_complete)
+                done_games = {g.game: g.scripted for g in self.games_of(pid, phase.id) if g.valid_complete}
                 for game in range(phase.games):
-                    steps.append(Step("play", phase.id, pid, game, done=game in done_games, blocked=blocked))
+                    steps.append(Step("play", phase.id, pid, game, done=game in done_games, blocked=blocked,
+                                      scripted=done_games.get(game, "")))
         return steps
 
     def next_step(self) -> Step | None:
@@ -598,9 +621,23 @@ def one_line(err: Exception) -> str:
     return err.line() if isinstance(err, (InputError, OutputError)) else " ".join(str(err).split())
 
 
+def _id(text_id: str) -> str:
+    """A pattern of `text_id` as a whole id in a text (p01 is not in p010 nor in xp01)."""
+    return rf"(?<![A-Za-z0-9]){re.escape(text_id)}(?![0-9])"
+
+
+def named(text: str, names: dict[str, str]) -> str:
+    """`text` (a combination's rule, "fewer-errors(human:p02+human:p03)") with each id of `names`
+    replaced by its name (`StudyData.user_names`)."""
+    if not names:
+        return text
+    pattern = "|".join(_id(i) for i in sorted(names, key=len, reverse=True))
+    return re.sub(pattern, lambda m: names[m.group(0)], text)
+
+
 def _redact(text: str, pid: str) -> str:
     """`text` with the pseudonym `pid` (as an id, in `human:<id>` and in session names) replaced by "deleted"."""
-    return re.sub(rf"(?<![A-Za-z0-9]){re.escape(pid)}(?![0-9])", "deleted", text)
+    return re.sub(_id(pid), "deleted", text)
 
 
 def _redacted(value, pid: str):

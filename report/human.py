@@ -8,7 +8,10 @@ personas played instead of people (a dress rehearsal: `protocol pilot`,
 `serve --pilot`; the journal's GameStarted `scripted`): they are listed by
 name and persona, and counted in nothing people did, unless
 `include_scripted`; a folder where no person played is reported as what it
-is, a rehearsal of N scripted games. It writes:
+is, a rehearsal of N scripted games. A persona is named as what it is wherever a
+participant is named: a `scripted` column in picks.csv and attention.csv, and
+`sim:<persona> as <id>` in the bias section, never the `human:<id>` its session
+ran as (StudyData.user_names). It writes:
   picks.csv                       picks per round of every valid game (18 is perfect play)
   games.png   (figure 7.3a)       phase 1: mean picks per round of game 1, game 2, ...
   phases.png  (figure 7.3b)       mean picks per round: phase 1 (its games averaged) vs phase 2 ...
@@ -36,7 +39,7 @@ from pairplay import __version__, csvcell
 from pairplay.core.actions import ACTION_NAMES
 from pairplay.core.geometry import N_STATES, STATE_NAMES
 from pairplay.replay.reader import read_log
-from pairplay.replay.studydata import StudyData
+from pairplay.replay.studydata import StudyData, named
 from pairplay.schemas.policy import read_policy
 
 from pairplay.report import plots
@@ -55,6 +58,7 @@ class GameStats:
     game: int
     returning: bool
     picks: list[int] = field(default_factory=list)  # per round
+    scripted: str = ""  # the persona that played it instead of a person
     suggestions: int = 0
     ignored: int = 0  # turns resolved under the ignore window
     turns: int = 0
@@ -65,7 +69,7 @@ class GameStats:
 
 def game_stats(path: Path, g, returning: bool, rounds: int) -> GameStats:
     s = GameStats(g.session, g.participant, g.phase, g.game, returning,
-                  from_bias=[0] * rounds, per_round_suggestions=[0] * rounds)
+                  from_bias=[0] * rounds, per_round_suggestions=[0] * rounds, scripted=g.scripted)
     for e in read_log(path).of("RoundEnded", "SuggestionMade", "TurnResolved", "WrongSuggestionPressed"):
         name = type(e).__name__
         if name == "RoundEnded":
@@ -144,10 +148,10 @@ def human_report(folder: str | Path, out: str | Path | None = None, reference: s
     # picks per round, per game and phase (figures 7.3a, 7.3b, 7.6)
     with open(out / "picks.csv", "w", newline="") as f:
         w = csvcell.writer(f)
-        w.writerow(["participant", "phase", "game", "returning", "round", "picks"])
+        w.writerow(["participant", "phase", "game", "returning", "round", "picks", "scripted"])
         for s in games:
             for r, p in enumerate(s.picks):
-                w.writerow([s.participant, s.phase, s.game + 1, int(s.returning), r + 1, p])
+                w.writerow([s.participant, s.phase, s.game + 1, int(s.returning), r + 1, p, s.scripted])
     curves: dict[str, np.ndarray] = {}
     sections: list[str] = []
     first = study.phase[0]
@@ -197,21 +201,23 @@ def human_report(folder: str | Path, out: str | Path | None = None, reference: s
     for phase_id, c in data.state.combined.items():
         personas = sorted({by_policy[p].scripted for p in c.inputs if p in by_policy and by_policy[p].scripted})
         merged_path = data.folder / c.output
+        names = data.user_names(c)  # a persona as what it is, not the `human:<id>` its session ran as
         rules: dict[str, int] = defaultdict(int)
         for r in c.decided_by:
-            rules[r] += 1
+            rules[named(r, names)] += 1
         prof_rows = [["user", "speech incompatible %", "head incompatible %", "smile", "gaze"]]
         for user, prof in c.profiles.items():
-            prof_rows.append([user, f"{100 * prof['speech']:.1f}", f"{100 * prof['head']:.1f}",
+            prof_rows.append([names.get(user, user), f"{100 * prof['speech']:.1f}", f"{100 * prof['head']:.1f}",
                               "yes" if prof["facial"] else "no", "yes" if prof["gaze"] else "no"])
         state_rows = [["state", "action", "decided by"]]
         for s_, (a, rule) in enumerate(zip(c.actions, c.decided_by)):
             if s_ < N_STATES - 1:
-                state_rows.append([f"{s_} {STATE_NAMES[s_]}", f"{a}: {ACTION_NAMES[a]}", rule])
+                state_rows.append([f"{s_} {STATE_NAMES[s_]}", f"{a}: {ACTION_NAMES[a]}", named(rule, names)])
         exact = sum(1 for a in c.actions[:N_STATES - 1] if 33 <= a <= 44)
         panels.append((f"{phase_id} bias ({len(c.users)} users)", np.asarray(c.actions)))
         sections += [f"## The bias policy of {phase_id} (algorithm 4, figure 7.5)", "",
-                     f"Combined by the combiner service from {len(c.inputs)} policy files of {', '.join(c.users)} "
+                     f"Combined by the combiner service from {len(c.inputs)} policy files of "
+                     f"{', '.join(names.get(u, u) for u in c.users)} "
                      f"(`{c.output}`{'' if merged_path.is_file() else ', file since removed'}); "
                      f"{exact} of {N_STATES - 1} states say the exact position (codes 33-44); rules: "
                      + "; ".join(f"{k} x{v}" for k, v in sorted(rules.items(), key=lambda kv: -kv[1])) + "."
@@ -226,7 +232,7 @@ def human_report(folder: str | Path, out: str | Path | None = None, reference: s
 
     # attention: ignored suggestions and wrong-suggestion presses
     att = [["participant", "phase", "games", "returning", "suggestions", "turns", "ignored turns",
-            "ignored share", "wrong-suggestion presses", "presses per suggestion"]]
+            "ignored share", "wrong-suggestion presses", "presses per suggestion", "scripted"]]
     by_pp: dict[tuple[str, str], list[GameStats]] = defaultdict(list)
     for s in games:
         by_pp[(s.participant, s.phase)].append(s)
@@ -237,10 +243,11 @@ def human_report(folder: str | Path, out: str | Path | None = None, reference: s
         t = totals[phase_id]
         t[0] += sug; t[1] += turns; t[2] += ign; t[3] += pr  # noqa: E702
         att.append([pid, phase_id, str(len(ss)), "yes" if ss[0].returning else "no", str(sug), str(turns), str(ign),
-                    f"{100 * ign / max(1, turns):.0f}%", str(pr), f"{100 * pr / max(1, sug):.0f}%"])
+                    f"{100 * ign / max(1, turns):.0f}%", str(pr), f"{100 * pr / max(1, sug):.0f}%",
+                    "+".join(dict.fromkeys(s.scripted for s in ss if s.scripted))])
     for phase_id, (sug, turns, ign, pr) in totals.items():
         att.append([f"all ({phase_id})", phase_id, "", "", str(sug), str(turns), str(ign),
-                    f"{100 * ign / max(1, turns):.0f}%", str(pr), f"{100 * pr / max(1, sug):.0f}%"])
+                    f"{100 * ign / max(1, turns):.0f}%", str(pr), f"{100 * pr / max(1, sug):.0f}%", ""])
     with open(out / "attention.csv", "w", newline="") as f:
         csvcell.writer(f).writerows(att)
     sections += ["## Ignored suggestions and wrong-suggestion presses", "",

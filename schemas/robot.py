@@ -8,18 +8,22 @@ the robot acknowledged it, or why it failed. Outcomes:
   "superseded"     a newer suggestion came before all its commands were written:
                    it is stale (the participant has picked since), so those not
                    written were dropped, never written (`unsent`); `commands`
-                   has what was (often nothing), `error` says by which suggestion
+                   has what was (often nothing), `error` says by which suggestion.
+                   Not if its due commands could not be written (robot
+                   unreachable, nobody subscribed): that is "failed"
   "aborted"        every command was written, and a newer suggestion cut its
-                   speech short (or the robot reports it aborted)
+                   speech short (or the robot reports it aborted); not if the
+                   connection died before its reply: "unacknowledged"
   "stopped"        the robot reports its speech stopped early, and not by us
                    (IrisTK monitor.speech.end with "stopped": another client cut it)
   "unacknowledged" sent, but the robot never confirmed within the ack timeout, or
-                   a command was written just before the connection died (see
-                   `unconfirmed`)
-  "failed"         not delivered (robot unreachable, nobody subscribed on the
-                   broker, access refused, bridge closed; see `error` and
-                   `unsent`), or the robot reports it failed (Realtime
-                   response.speak.end "failed": true)
+                   a command was written just before the connection died, or the
+                   connection died while its reply was awaited (see `unconfirmed`)
+  "failed"         not delivered (robot unreachable or not connected yet, nobody
+                   subscribed on the broker, access refused, bridge closed; also
+                   when a newer suggestion came while it could not be written;
+                   see `error` and `unsent`), or the robot reports it failed
+                   (Realtime response.speak.end "failed": true)
   "nothing"        the "do nothing" action: nothing to send
   "in-flight"      sent, and the session ended while the robot's acknowledgement was
                    still awaited (it may have come after the recording closed)

@@ -77,6 +77,7 @@ class Live:
     # the console says a board page is connected instead (services/console/app.py)
     board: bool = False
     questionnaire_token: str = ""  # the per-game token of the questionnaire page
+    scripted: str = ""  # the persona playing instead of a person (a rehearsal): the console says so
     board_token: str = ""  # the board page's token (the same, when there is a questionnaire)
 
     def see(self, e: ev.Event) -> None:
@@ -203,7 +204,7 @@ class StudyRunner:
         pid, phase_id, game = config.participant.split(":", 1)[1], phase.id, self.data.state.games[config.session].game
         token = secrets.token_urlsafe(18)
         self.live = Live(session=config.session, participant=pid, phase=phase_id, game=game,
-                         rounds=config.rounds, state="playing", board=player is not None,
+                         rounds=config.rounds, state="playing", board=player is not None, scripted=config.scripted,
                          questionnaire_token=token if phase.questionnaires else "", board_token=token)
         hub = None
         if player is None and self.lab is not None:

@@ -425,6 +425,44 @@ def test_a_scripted_game_is_marked_where_it_is_recorded_and_the_report_says_a_re
     assert "Combined from scripted games" in text
 
 
+def test_a_persona_is_named_a_persona_wherever_the_report_console_or_tables_name_a_participant(played, tmp_path):
+    """A new user's trial: the report's bias section named the personas' users `human:p01` (the sessions
+    of a rehearsal run as the plan's participant), in its list of users, its profiles and every state's
+    rule; so did the console's combination, and picks.csv and attention.csv did not say a row was a
+    persona's. Now: `sim:<persona> as <id>`, a `scripted` column, and a person stays `human:<id>`."""
+    from pairplay.services.console.app import Console
+
+    root, ids = played
+    personas = dict(zip(ids, PERSONAS))
+    data = StudyData(root / "study")
+    report = human_report(data.folder, tmp_path / "report")
+    text = (report.out / "report.md").read_text()
+    assert "human:" not in text
+    combined = data.state.combined["phase2"]
+    users = [f"sim:{personas[u.split(':')[1]]} as {u.split(':')[1]}" for u in combined.users]
+    assert f"policy files of {', '.join(users)} (" in text
+    assert all(f"| {u} |" in text for u in users)  # the profiles
+    for name in ("picks.csv", "attention.csv"):
+        with open(report.out / name) as f:
+            rows = [r for r in csv.DictReader(f) if not r["participant"].startswith("all")]
+        assert rows and all(r["scripted"] == personas[r["participant"]] for r in rows), name
+    state = Console(StudyRunner(data, None), "token").state()
+    assert "human:" not in json.dumps(state["combined"])
+    assert state["combined"]["phase2"]["users"] == users
+    assert {p["id"]: p["scripted"] for p in state["participants"]} == personas
+    assert all(f"{s['participant']} (scripted: {personas[s['participant']]}):" in s["label"]
+               for s in state["plan"] if s["kind"] == "play")  # `protocol status` and the pilot's lines too
+    # a person stays what they are: p01's games played by a person (journal lines without `scripted`)
+    mixed = copy_study(played, tmp_path / "mixed")
+    lines = [json.loads(line) for line in (mixed.folder / "journal.jsonl").read_text().splitlines()]
+    for e in lines:
+        if e["event"] == "GameStarted" and e["participant"] == ids[0]:
+            del e["scripted"]
+    (mixed.folder / "journal.jsonl").write_text("".join(json.dumps(e) + "\n" for e in lines))
+    names = StudyData(mixed.folder).user_names(combined)
+    assert f"human:{ids[0]}" not in names and names[f"human:{ids[1]}"] == f"sim:{personas[ids[1]]} as {ids[1]}"
+
+
 def test_people_s_games_are_reported_and_combined_without_the_scripted_ones(played, tmp_path):
     """A folder where people played p01's and p03's games (journal lines without `scripted`, as every
     journal before the field) and personas the others': the report and the combination leave the

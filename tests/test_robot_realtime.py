@@ -14,6 +14,7 @@ from robot_doubles.furhat_realtime import FurhatRealtimeServer
 from robot_doubles.harness import FAMILIES, FAST, PATIENCE_S, OBSERVED, TARGET, Collector, suggestion
 
 from pairplay.core.actions import code_of_parts
+from pairplay.replay.delivery import delivery_line
 from pairplay.services.robot import open_robot, realtime
 from pairplay.services.robot.calibration import load_calibration
 
@@ -73,16 +74,35 @@ def test_a_refused_key_fails_at_once_and_is_not_retried(stage, key):
     assert server.requests == []  # nothing reached the robot without access
 
 
-def test_the_client_waits_for_response_auth_with_access_even_without_a_key(stage, monkeypatch):
+def test_the_client_waits_for_response_auth_with_access_even_without_a_key(stage, monkeypatch, caplog):
     # only the wait for response.auth is shortened (the maker's client waits 5 s; the rule is the same): the
     # WebSocket opening handshake keeps its 5 s, so a loaded machine still gets to the auth and fails there
     monkeypatch.setattr(realtime, "AUTH_TIMEOUT_S", 0.3)
     collector, robot = stage
-    server, driver = robot(answers_auth=False, config=msgspec.structs.replace(FAST, give_up_s=0.5))
+    server, driver = robot(answers_auth=False)
     driver.perform(suggestion(EXACT))
-    assert driver.wait_idle(PATIENCE_S)
+    # the attempt runs beside the driver (driver.py): once it failed on the auth, the reason is the auth's
+    assert collector.wait_for(lambda c: any("request.auth" in r.getMessage() for r in caplog.records))
+    driver.close()
     assert collector.acted[0].outcome == "failed" and server.requests == []
     assert "request.auth" in collector.acted[0].error
+
+
+def test_a_robot_that_never_answers_the_auth_holds_up_nothing(stage, monkeypatch):
+    """A connect that hangs (a robot that accepted the WebSocket and does not answer request.auth) ran on
+    the driver's one thread: no suggestion was accounted and no close done until the auth's timeout.
+    Now the attempt runs beside it (the same as IrisTK's handshake: test_robot_iristk)."""
+    monkeypatch.setattr(realtime, "AUTH_TIMEOUT_S", 2 * PATIENCE_S)  # it would outlast every wait below
+    collector, robot = stage
+    server, driver = robot(answers_auth=False)
+    driver.perform(suggestion(EXACT, seq=1))
+    driver.perform(suggestion(EXACT, seq=2))
+    assert collector.wait_for(lambda c: 1 in c.by_seq())
+    driver.close(PATIENCE_S)
+    assert sorted(collector.by_seq()) == [1, 2] and server.requests == []
+    for acted in collector.acted:
+        assert acted.outcome == "failed" and acted.commands == [] and acted.unsent, acted
+        assert "robot not connected yet (the first connection attempt is under way)" in acted.error
 
 
 def test_each_auth_has_its_own_request_id_and_only_awaited_requests_carry_one(stage):
@@ -210,6 +230,27 @@ def test_a_dropped_connection_loses_and_repeats_nothing(stage):
     assert len(ids) == len(set(ids))
     assert driver.reconnects == 1 and server.auths == [True, True]
     assert all(a.outcome == "done" for a in collector.acted)
+
+
+def test_a_robot_that_drops_the_line_mid_speech_and_comes_back_is_accounted_as_what_happened(stage):
+    """The robot drops the connection while it speaks; the driver reconnects. The speech's end could never
+    come (a former connection's replies are dropped): before, it waited out ack_timeout_s or was recorded
+    "in-flight" at the end; now it is unacknowledged when the line goes, and the next one is delivered."""
+    collector, robot = stage
+    server, driver = robot(config=msgspec.structs.replace(FAST, ack_timeout_s=2 * PATIENCE_S))
+    server.speech_s = 60.0  # still speaking when the line goes
+    driver.perform(suggestion(EXACT, seq=1))
+    assert server.wait_for(lambda s: requests(s, "request.speak.text"))
+    server.drop_all()
+    assert collector.wait_for(lambda c: 1 in c.by_seq())  # when the line went, not after ack_timeout_s
+    spoken = collector.by_seq()[1]
+    assert spoken.outcome == "unacknowledged" and "the connection was lost" in spoken.error, spoken
+    server.speech_s = 0.05
+    assert _until_connected(driver) and driver.reconnects == 1
+    driver.perform(dataclasses.replace(suggestion(EXACT, seq=2), target=OBSERVED + 1))
+    assert collector.wait_for(lambda c: 2 in c.by_seq())
+    assert collector.by_seq()[2].outcome == "done" and server.auths == [True, True]
+    assert "1 of 2 suggestions delivered (1 unacknowledged)" in delivery_line(collector.acted)
 
 
 def test_malformed_frames_from_the_robot_are_reported_and_skipped(stage):

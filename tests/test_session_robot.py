@@ -69,7 +69,9 @@ def test_an_unreachable_robot_is_said_once_and_the_summary_counts_what_it_got(tm
     acted = read_log(tmp_path / "away.mcap").of("RobotActed")
     sent = [a for a in acted if a.outcome != "nothing"]
     [line] = [line for line in r.stdout.splitlines() if line.startswith("robot ")]
-    assert line.startswith(f"robot {url}: 0 of {len(sent)} suggestions delivered ("), line
+    # every one failed, none "superseded": the stale ones were not delivered because the robot was away
+    assert line.startswith(f"robot {url}: 0 of {len(sent)} suggestions delivered ({len(sent)} failed); "), line
+    assert all(a.outcome == "failed" and "robot unreachable" in a.error for a in sent)
     assert "robot unreachable" in line and "Connection refused" in line, line
 
 

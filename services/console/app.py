@@ -30,7 +30,7 @@ from starlette.staticfiles import StaticFiles
 from pairplay.core.actions import ACTION_NAMES
 from pairplay.core.geometry import N_STATES, STATE_NAMES
 from pairplay.outputs import output_folder
-from pairplay.replay.studydata import REGISTER_AT_ONCE, StudyDataError
+from pairplay.replay.studydata import REGISTER_AT_ONCE, StudyDataError, named
 
 from pairplay.services.protocol import StudyRunner
 
@@ -85,9 +85,12 @@ class Console:
                  for g in data.state.games.values()]
         combined = {}
         for phase, c in data.state.combined.items():
+            names = data.user_names(c)  # a persona as what it is, not the `human:<id>` its session ran as
             combined[phase] = {
-                "users": c.users, "output": c.output, "profiles": c.profiles,
-                "states": [{"state": f"{s} {STATE_NAMES[s]}", "action": f"{a}: {ACTION_NAMES[a]}", "rule": r}
+                "users": [names.get(u, u) for u in c.users], "output": c.output,
+                "profiles": {names.get(u, u): p for u, p in c.profiles.items()},
+                "states": [{"state": f"{s} {STATE_NAMES[s]}", "action": f"{a}: {ACTION_NAMES[a]}",
+                            "rule": named(r, names)}
                            for s, (a, r) in enumerate(zip(c.actions, c.decided_by)) if s < N_STATES - 1]}
         live_d = asdict(live)
         live_d.pop("questionnaire_token")
@@ -102,7 +105,7 @@ class Console:
         return {
             "study": {"id": data.study.study.id, "title": data.study.study.title, "folder": str(data.folder),
                       "phases": [p.id for p in data.study.phase], "key_file": bool(data.key_file)},
-            "participants": [{"id": pid, "joins": r.joins,
+            "participants": [{"id": pid, "joins": r.joins, "scripted": data.scripted_as(pid),
                               "games": sum(1 for g in data.games_of(pid) if g.valid_complete)}
                              for pid, r in data.state.participants.items()],
             "plan": plan, "next": nxt, "games": games, "combined": combined, "live": live_d,

@@ -6,7 +6,14 @@ returned, and is never written again (each carries a unique id). When the robot
 is unreachable, due commands wait and the worker reconnects with exponential
 backoff (reconnect_min_s doubling up to reconnect_max_s; it starts again from
 the minimum only after a connection that lasted longer than the maximum, so a
-robot that accepts and drops at once is not hammered).
+robot that accepts and drops at once is not hammered). A connect attempt runs
+on a thread of its own, one at a time, bounded by its transport's timeouts
+(an unrouted host's connect took ~3 s, a silent one's handshake 5 s): the
+worker goes on taking suggestions, accounting for them and closing meanwhile
+(it used to sit in the connect: a pilot's game with an unreachable robot took
+twice as long, its bridge waiting for the worker). A connection made after the
+driver closed is closed by its thread. Only the virtual robot, whose connect
+cannot block, is connected by the worker itself (Transport.connects_at_once).
 
 A new suggestion supersedes the previous one, and a superseded suggestion is
 stale: the participant has picked since, so telling them where a card WAS is
@@ -14,7 +21,18 @@ wrong. Its commands not yet written (held by the rate limit, waiting for a
 head turn's later step, or for the robot to come back) are dropped, never
 written, and its RobotActed is "superseded", `commands` what was written and
 `unsent` what was dropped. So only the newest suggestion ever has commands to
-write, and the robot is never behind by more than one suggestion. What goes out
+write, and the robot is never behind by more than one suggestion. Stale is not
+the reason a suggestion went undelivered if its due commands could not be
+written when the newer one came (the robot unreachable, or not connected yet;
+on IrisTK nobody subscribed to them): it is "failed", `error` saying why
+("not delivered: robot unreachable: ...; then ... stale"). Before, an unreachable
+robot's session counted all but its last suggestion "superseded". And a
+suggestion whose speech was written but whose connection died before the robot
+confirmed it is "unacknowledged", never "aborted": its replies cannot come, and
+nothing of the newer one reached the robot to cut it short. So is any suggestion
+whose awaited replies were all promised over a connection now gone, at once
+when it goes (it used to wait ack_timeout_s, or be recorded "in-flight" at the
+end, as if its reply might still have come). What goes out
 instead is what undoes the stale one's effect on the robot, as steps of the new
 suggestion (recorded in its RobotActed; the stop first, the head after the new
 speech, if any):
@@ -102,6 +120,7 @@ class _Step:
     sent: bool = False
     dropped: bool = False  # its suggestion was superseded before it was written: never written
     sent_at: float = 0.0  # monotonic time of the write
+    generation: int = 0  # the connection it was written on (its replies come over that one only)
     confirmed: bool = False  # a reply about it came
     inflight: bool = False  # written just before the connection died, never confirmed
 
@@ -118,6 +137,7 @@ class _Performance:
     superseded: bool = False
     superseded_at: float = 0.0
     superseded_by: int = 0  # the newer suggestion's seq
+    undelivered: str = ""  # superseded while its due commands could not be written: why (then "failed")
     cut_by_robot: bool = False  # the robot reported one of its commands aborted
     stopped_by_robot: str = ""  # the robot reported its speech stopped early (what it said)
     failed_by_robot: str = ""  # the robot reported a command failed (what it said)
@@ -165,13 +185,19 @@ class RobotDriver:
         self._ids = (f"pairplay.{prefix}.{n}" for n in itertools.count(1))
         self._generation = 0
         self._connected = False
+        self._connecting = False  # a connect attempt is under way on its own thread
+        self._lost_connecting = ""  # the attempt's reader said Disconnected before the attempt's result came
+        self._attempt_lock = threading.Lock()  # the attempt's thread vs the worker's shutdown:
+        self._attempt_opened = False  # ... a connection made whose result the worker has not taken yet
+        self._shut = False  # ... the worker has shut down: a connection made now is closed by its thread
         self._ever_connected = False
         self._said_unreachable = False  # the first failed connect was said as a WARNING
         self._backoff = config.reconnect_min_s
         self._next_attempt = 0.0
         self._connected_at = 0.0
         self._dropped_at = 0.0
-        self._last_error = "not connected yet"
+        self._dropped_why = ""  # why the last connection was lost
+        self._last_error = ""  # why the last connect failed or the connection was lost ("": neither yet)
         self._held = ""  # why the next due command waits although connected ("" = it does not)
         self._closing = False  # the worker saw the close request
         self._close_requested = False
@@ -221,6 +247,7 @@ class RobotDriver:
 
     # -- the worker thread --------------------------------------------------------------
     def _run(self) -> None:
+        self._tick()  # the first connect attempt starts before any suggestion is taken
         while True:
             wake = self._next_wakeup()
             try:
@@ -250,6 +277,8 @@ class RobotDriver:
             self._add(suggestion, steps, received_ns, start)
         elif item[0] == "report":
             self._report(item[1], item[2], item[3])
+        elif item[0] == "attempt":
+            self._attempted(item[1], item[2])
         elif item[0] == "close":
             self._closing = True
 
@@ -276,6 +305,8 @@ class RobotDriver:
     def _supersede(self, perf: _Performance, newer: Suggestion, at: float) -> None:
         """A newer suggestion came: what this one has not written is stale, dropped."""
         perf.superseded, perf.superseded_at, perf.superseded_by = True, at, newer.suggestion_seq
+        if perf.has_unsent() and perf.start + perf.steps[perf.next_step].at_s <= at:
+            perf.undelivered = self._stuck(perf.steps[perf.next_step])  # due, and the robot could not take it
         for step in perf.steps[perf.next_step:]:
             step.dropped = True
         perf.next_step = len(perf.steps)
@@ -296,6 +327,8 @@ class RobotDriver:
             elif self._connected:
                 log.warning("robot %s disconnected: %s", self.transport.url, report.reason)
                 self._drop(report.reason, seen)
+            elif self._connecting:  # its reader ended before the attempt's result came: dropped on arrival
+                self._lost_connecting = report.reason
         elif isinstance(report, Rejected):
             self.rejected += 1
             log.warning("robot %s sent an unreadable frame: %s", self.transport.url, report.reason)
@@ -356,7 +389,8 @@ class RobotDriver:
         self.refused = reason
         self._connected = False
         self._last_error = reason
-        self.transport.close()
+        if not self._connecting:  # else the attempt's result closes it (only its thread touches it now)
+            self.transport.close()
         for perf in list(self._active.values()):
             if perf.has_unsent():
                 self._finish(perf, "failed", reason)
@@ -366,6 +400,7 @@ class RobotDriver:
         affected = self._mark_inflight(now if seen is None else seen)
         self._connected = False
         self._dropped_at = now
+        self._dropped_why = reason
         self._held = ""
         self._last_error = reason
         self.transport.close()
@@ -373,7 +408,8 @@ class RobotDriver:
             self._backoff = self.config.reconnect_min_s  # it was a good connection: start again
         self._next_attempt = now + self._backoff
         self._backoff = min(self._backoff * 2, self.config.reconnect_max_s)
-        for perf in affected:
+        # and those awaiting replies: none can come over the lost line (a drop is rare: the scan is not per message)
+        for perf in [*affected, *(p for p in self._active.values() if p.outstanding)]:
             self._check(perf, now)
 
     def _mark_inflight(self, dropped_at: float) -> list[_Performance]:
@@ -393,14 +429,54 @@ class RobotDriver:
         return affected
 
     def _connect(self) -> None:
+        """Start a connect attempt: on its own thread (module docstring), or at once for the virtual robot."""
         self._generation += 1
-        try:
-            self.transport.connect(self._deliver, self._generation)
-        except AccessRefused as exc:  # the robot refused access: asking again cannot help
-            self._refuse(str(exc))
+        self._lost_connecting = ""
+        if getattr(self.transport, "connects_at_once", False):
+            self._attempted(self._generation, self._try_connect(self._generation))
             return
-        except (OSError, ValueError) as exc:  # ConnectionError, timeouts
-            self._last_error = f"{type(exc).__name__}: {exc}"
+        self._connecting = True
+        threading.Thread(target=self._attempt, args=(self._generation,), daemon=True,
+                         name=f"robot {self.transport.url} connect").start()
+
+    def _try_connect(self, generation: int) -> Exception | None:
+        try:
+            self.transport.connect(self._deliver, generation)
+        except (OSError, ValueError) as exc:  # ConnectionError, timeouts, AccessRefused
+            return exc
+        except Exception as exc:  # a bug must cost one attempt, not the robot: said, and retried with backoff
+            log.exception("robot %s: connect failed", self.transport.url)
+            return exc
+        return None
+
+    def _attempt(self, generation: int) -> None:
+        """The attempt's thread: connect, then hand the result to the worker, or close what it opened
+        if the worker has shut down meanwhile (nobody else would)."""
+        error = self._try_connect(generation)
+        with self._attempt_lock:
+            late = self._shut
+            if not late:
+                self._attempt_opened = error is None
+                self._inbox.put(("attempt", generation, error))
+        if late and error is None:
+            self.transport.close()
+
+    def _attempted(self, generation: int, error: Exception | None) -> None:
+        """The worker takes an attempt's result."""
+        self._connecting = False
+        with self._attempt_lock:
+            self._attempt_opened = False
+        if generation != self._generation:  # cannot happen (one attempt at a time); never act on a stale one
+            return
+        if self.refused:  # refused while it connected: close what it opened, never retry
+            if error is None:
+                self.transport.close()
+            return
+        if isinstance(error, AccessRefused):  # the robot refused access: asking again cannot help
+            self._refuse(str(error))
+            return
+        if error is not None:
+            self._last_error = f"{type(error).__name__}: {error}"
             # said once as a WARNING (an unreachable robot was silent without -v), then each retry at INFO
             level = logging.INFO if self._ever_connected or self._said_unreachable else logging.WARNING
             self._said_unreachable = True
@@ -416,10 +492,14 @@ class RobotDriver:
             for perf in self._active.values():
                 perf.reconnects += 1
         self._ever_connected = True
+        if self._lost_connecting:  # its reader already said the line is gone
+            lost, self._lost_connecting = self._lost_connecting, ""
+            log.warning("robot %s disconnected: %s", self.transport.url, lost)
+            self._drop(lost)
 
     def _tick(self) -> None:
         now = time.monotonic()
-        if not self._connected and not self.refused and now >= self._next_attempt:
+        if not self._connected and not self._connecting and not self.refused and now >= self._next_attempt:
             self._connect()
         perf = self._current
         if perf is not None and self._connected:
@@ -474,7 +554,7 @@ class RobotDriver:
             self._sent(perf, step, sent_ns)
 
     def _sent(self, perf: _Performance, step: _Step, sent_ns: int) -> None:
-        step.sent = True
+        step.sent, step.generation = True, self._generation
         perf.next_step += 1
         step.sent_at = perf.last_send = time.monotonic()
         perf.sent_ns = perf.sent_ns or sent_ns
@@ -500,7 +580,7 @@ class RobotDriver:
         if perf.finished:
             return
         if perf.has_unsent():
-            stuck = self._held or (not self._connected and f"robot unreachable: {self._last_error}")
+            stuck = self._stuck()
             if stuck and now >= perf.start + self.config.give_up_s:
                 self._finish(perf, "failed", f"not delivered within {self.config.give_up_s:g} s: {stuck}")
             return
@@ -510,14 +590,15 @@ class RobotDriver:
         # ANOTHER module proves nothing: the face's gesture end overtook the synthesizer's speech end, and the
         # aborted speech was reported without it: test_robot_iristk, 1 of 4 CI runs)
         overtaken = all(perf.index < self._replied_upto.get(_module_of(kind), 0) for _, kind in perf.outstanding)
+        lost = self._lost_since(perf)
         if perf.failed_by_robot:
             self._finish(perf, "failed", perf.failed_by_robot)
         elif perf.superseded and perf.outstanding:
-            # replies still in flight are recorded until the robot has moved on
-            if overtaken or now >= perf.superseded_at + self.config.abort_grace_s:
-                self._finish(perf, "superseded" if dropped else "aborted", self._why_superseded(perf, dropped))
+            # replies still in flight are recorded until the robot has moved on (none can come over a lost line)
+            if lost or overtaken or now >= perf.superseded_at + self.config.abort_grace_s:
+                self._finish(perf, *self._stale_fate(perf, dropped, lost))
         elif dropped:
-            self._finish(perf, "superseded", self._why_superseded(perf, dropped))
+            self._finish(perf, *self._stale_fate(perf, dropped, lost))
         elif perf.cut_by_robot:
             self._finish(perf, "aborted")
         elif perf.stopped_by_robot and not perf.outstanding:
@@ -526,6 +607,8 @@ class RobotDriver:
             self._finish(perf, "unacknowledged",
                          f"{len(inflight)} command(s) written within {self.config.inflight_window_s:g} s before"
                          f" the connection died ({self._last_error}): they may not have reached the robot")
+        elif lost:  # not "in-flight" at the end, nor waiting out ack_timeout_s: the replies cannot come
+            self._finish(perf, "unacknowledged", self._why_lost(perf, lost))
         elif not perf.outstanding and perf.steps and not perf.promised and self._connected \
                 and now < perf.last_send + self.config.inflight_window_s:
             return  # nothing will confirm these: wait out the in-flight window (a timer) before saying "sent"
@@ -540,6 +623,51 @@ class RobotDriver:
     def _why_superseded(perf: _Performance, dropped: list[_Step]) -> str:
         return (f"superseded by suggestion {perf.superseded_by} before {len(dropped)} of its {len(perf.steps)}"
                 " command(s) were written: dropped as stale") if dropped else ""
+
+    def _stuck(self, step: _Step | None = None) -> str:
+        """Why the newest suggestion's due commands (from `step`, if given: asked now, not as the last
+        write found them) cannot be written now ("" if they can): the one reason of "failed" for a
+        suggestion the robot could not take, stale or given up."""
+        if self._connected:
+            if step is None:
+                return self._held
+            if step.wire is None:
+                try:
+                    step.wire = self.transport.encode(step.step.command, step.command_id, self._clock_ns())
+                except (TypeError, ValueError):
+                    return ""  # not the robot's doing (_send_due fails it with the reason)
+            return self.transport.ready(step.wire)
+        if self._last_error:
+            return f"robot unreachable: {self._last_error}"
+        return "robot not connected yet (the first connection attempt is under way)"
+
+    def _lost_since(self, perf: _Performance) -> str:
+        """Why none of the replies `perf` awaits can come: each was promised over a connection that is
+        gone (the driver drops a former connection's replies); "" if one still can, or none is awaited."""
+        if not perf.outstanding:
+            return ""
+        live = self._generation if self._connected else -1
+        written_on = {s.command_id: s.generation for s in perf.steps if s.sent}
+        if any(written_on.get(command_id) == live for command_id, _ in perf.outstanding):
+            return ""
+        return self._dropped_why or "connection lost"
+
+    @staticmethod
+    def _why_lost(perf: _Performance, lost: str) -> str:
+        return f"no {perf.outstanding[0][1]}: the connection was lost ({lost}) before the robot confirmed it"
+
+    def _stale_fate(self, perf: _Performance, dropped: list[_Step], lost: str) -> tuple[str, str]:
+        """(outcome, error) of a superseded suggestion (module docstring): failed if the robot could not
+        take its due commands, superseded if the rest were dropped as stale, unacknowledged if its replies
+        died with the connection, else aborted (the newer one's speech cut its own)."""
+        if dropped and perf.undelivered:
+            return "failed", (f"not delivered: {perf.undelivered}; then a newer suggestion made it stale"
+                              " (its unwritten commands dropped)")
+        if dropped:
+            return "superseded", self._why_superseded(perf, dropped)
+        if lost:
+            return "unacknowledged", self._why_lost(perf, lost)
+        return "aborted", ""
 
     def _finish(self, perf: _Performance, outcome: str, error: str = "") -> None:
         perf.finished = True
@@ -586,7 +714,7 @@ class RobotDriver:
         times = []
         if self._timers:
             times.append(self._timers[0][0])
-        if not self._connected and not self.refused:
+        if not self._connected and not self._connecting and not self.refused:
             times.append(self._next_attempt)
         perf = self._current
         if perf is not None and not perf.finished and perf.has_unsent():
@@ -601,17 +729,20 @@ class RobotDriver:
             dropped = [s for s in perf.steps if s.dropped]
             if perf.has_unsent():
                 # why it was not delivered: a robot never reached says so (it read as a bridge's fault)
-                why = "" if self._connected else f" (robot unreachable: {self._last_error})"
-                self._finish(perf, "failed", f"bridge closed before delivery{why}")
+                why = self._stuck()
+                self._finish(perf, "failed", f"bridge closed before delivery{f' ({why})' if why else ''}")
             elif dropped:
-                self._finish(perf, "superseded", self._why_superseded(perf, dropped))
+                self._finish(perf, *self._stale_fate(perf, dropped, self._lost_since(perf)))
             elif perf.outstanding:
                 self._finish(perf, "in-flight", "the session ended while the robot's acknowledgement was awaited")
             elif any(s.inflight for s in perf.steps):
                 self._finish(perf, "unacknowledged", "written just before the connection died")
             else:
                 self._finish(perf, "done" if perf.promised else "sent" if perf.steps else "nothing")
-        if self._connected:
+        with self._attempt_lock:
+            self._shut = True  # an attempt still under way closes what it opens (_attempt)
+            opened = self._attempt_opened  # made, its result not taken: ours to close
+        if self._connected or opened:
             self._connected = False
             self.transport.close()
 

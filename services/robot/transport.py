@@ -10,8 +10,13 @@ reports what the robot says through one callback, from its own reader thread:
                `permanent`: the robot refused us, do not retry: fail at once)
   Changed      the robot side changed who listens (IrisTK: a broker SUBSCRIBE);
                the driver asks `ready(wire)` again for commands it holds back
-Only the driver's worker thread calls connect, send and close, so writes never
-interleave. `generation` tells a stale reader's reports from the live one's.
+Only the driver's worker thread calls send and close, so writes never
+interleave; connect runs on a thread of its own (it may block up to its
+timeouts), never beside a send or another connect: the driver writes nothing
+until it returned, and a connection it made after the driver shut down is
+closed by that thread. `connects_at_once` (default False) says connect cannot
+block (the in-process virtual robot): the worker calls it itself. `generation`
+tells a stale reader's reports from the live one's.
 """
 
 from __future__ import annotations

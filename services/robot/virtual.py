@@ -33,6 +33,7 @@ _encode = msgspec.json.Encoder().encode
 
 class VirtualTransport:
     url = "virtual"
+    connects_at_once = True  # in-process: its connect cannot block (transport.py)
 
     def __init__(self, time_scale: float = 1.0) -> None:
         if time_scale < 0:

@@ -47,7 +47,7 @@ function render(s) {
     phases.innerHTML = ""; s.study.phases.forEach((p) => phases.appendChild(el("option", p)));
   }
   const ul = $("participants"); ul.innerHTML = "";
-  s.participants.forEach((p) => ul.appendChild(el("li", `${p.id} (joins ${p.joins}; ${p.games} valid game(s))`)));
+  s.participants.forEach((p) => ul.appendChild(el("li", `${p.id} (joins ${p.joins}; ${p.games} valid game(s)${p.scripted ? `; scripted: ${p.scripted}` : ""})`)));
   const sel = $("data-participant"), keep = sel.value; sel.innerHTML = "";
   s.participants.forEach((p) => sel.appendChild(el("option", p.id)));
   if ([...sel.options].some((o) => o.value === keep)) sel.value = keep;
@@ -63,7 +63,7 @@ function render(s) {
   $("run-next").disabled = s.busy || !s.next || !!s.next.blocked;
 
   const L = s.live;
-  $("live-session").textContent = L.session ? `${L.session} (${L.participant}, ${L.phase} game ${L.game + 1})` : "none";
+  $("live-session").textContent = L.session ? `${L.session} (${L.participant}${L.scripted ? ` (scripted: ${L.scripted})` : ""}, ${L.phase} game ${L.game + 1})` : "none";
   $("live-state").textContent = L.state + (L.paused ? " (paused)" : "");
   $("live-board").textContent = L.session ? (L.board ? "connected" : "waiting for the board page") : "";
   const bu = $("live-board");
