@@ -234,7 +234,8 @@ def run(args: argparse.Namespace) -> int:
         print(f"pairplay session: {err}", file=sys.stderr)
         return 2
     if "recorder" in args.external:
-        print(f"session {config.session} over; the external recorder writes its file")
+        if not getattr(args, "quiet", False):
+            print(f"session {config.session} over; the external recorder writes its file")
         return 0
     if getattr(stop, "why", ""):
         return print_interrupted(summary, path, stop.why, config.rounds, "the id stays taken: --force reuses it")
@@ -244,13 +245,14 @@ def run(args: argparse.Namespace) -> int:
     recorded = read_log(path)
     fold = fold_events(r.event for r in recorded.events)
     picks = fold.picks_per_round()
-    print(f"recorded {len(recorded.events)} events to {path}")
-    print(f"rounds played: {len(picks)}; {PICKS_UNIT}: {picks[:10]}{' ...' if len(picks) > 10 else ''}")
-    print(f"rejections: {len(fold.rejections)}; Q updates: {fold.counts.get('QUpdated', 0)}"
-          + (f"; LSPI samples: {fold.counts.get('LSPIUpdated', 0)}" if config.algorithm == "lspi" else ""))
-    robot = delivery_line(recorded.of("RobotActed"))
-    if robot:
-        print(robot)
+    if not getattr(args, "quiet", False):  # a summary of the file it wrote: -q leaves it out (cli/main.py QUIET_SUMMARIES)
+        print(f"recorded {len(recorded.events)} events to {path}")
+        print(f"rounds played: {len(picks)}; {PICKS_UNIT}: {picks[:10]}{' ...' if len(picks) > 10 else ''}")
+        print(f"rejections: {len(fold.rejections)}; Q updates: {fold.counts.get('QUpdated', 0)}"
+              + (f"; LSPI samples: {fold.counts.get('LSPIUpdated', 0)}" if config.algorithm == "lspi" else ""))
+        robot = delivery_line(recorded.of("RobotActed"))
+        if robot:
+            print(robot)
     e = fold.ended
     if e is None:
         print("ended: no SessionEnded recorded")
