@@ -43,6 +43,7 @@ import numpy as np
 
 from pairplay import csvcell
 from pairplay.errors import OptionError
+from pairplay.numbers import shown, type_name
 from pairplay.outputs import output_file, output_folder, write_text
 from pairplay.processes import check_workers, worker_pool
 from pairplay.schemas.jsonfile import without_bom
@@ -95,6 +96,12 @@ class Grid:
         return StudySettings(**given)
 
 
+def as_toml(value) -> str:
+    """A setting's value as the sweep file writes it: numbers as given (`shown`), text quoted."""
+    return shown(value) if isinstance(value, (int, float)) and not isinstance(value, bool) else \
+        str(value).lower() if isinstance(value, bool) else repr(value)
+
+
 def _typed(path: str, key: str, value):
     want = SWEEPABLE.get(key)
     if want is None:
@@ -107,7 +114,7 @@ def _typed(path: str, key: str, value):
         value = ",".join(value)
     kind = {"int": int, "float": (int, float), "str": str, "bool": bool}[want if isinstance(want, str) else want.__name__]
     if isinstance(value, bool) and kind is not bool or not isinstance(value, kind):
-        raise GridError(f"{path}: {key} = {value!r} is not a {want}")
+        raise GridError(f"{path}: {key} = {value!r} is not {type_name(want)}")
     return float(value) if want in ("float", float) else value
 
 
@@ -165,8 +172,9 @@ def read_grid(path: str | Path) -> Grid:
             personas = settings.check(speed_up=grid.reuse, compare_learners=False)
         except SettingError as exc:
             value = getattr(settings, exc.key)
-            cell = f" (cell {dict(s)})" if s else ""
-            raise GridError(f"{path}: {exc.key} = {value!r}: {exc.what}{cell}") from None
+            # numbers as the file gave them (a TOML 2 became 2.0 for a float setting: pairplay/numbers.py)
+            cell = f" (cell {', '.join(f'{k} = {as_toml(v)}' for k, v in s)})" if s else ""
+            raise GridError(f"{path}: {exc.key} = {as_toml(value)}: {exc.what}{cell}") from None
         if grid.reuse and len(personas) < 2:
             raise GridError(f"{path}: reuse = true needs at least 2 personas (one is held out)")
     return grid

@@ -27,6 +27,8 @@ from typing import Literal, Union
 
 import msgspec
 
+from pairplay.numbers import shown
+
 from .config import LearnerConfig
 from .robot_url import parse_robot_url
 from .session import MS_FIELDS, MS_RANGE, SEED_RANGE
@@ -140,7 +142,7 @@ def _check(study: Study) -> None:
     for key in MS_FIELDS:
         if not MS_RANGE[0] <= getattr(study.study, key) <= MS_RANGE[1]:  # also refuses nan and inf
             raise StudyFileError(f"study.{key}: must be {MS_RANGE[0]:g}..{MS_RANGE[1]:g} (ms), "
-                                 f"got {getattr(study.study, key)}")
+                                 f"got {shown(getattr(study.study, key))}")
     robot = study.study.robot
     if robot != NO_ROBOT:  # the --robot option's parser: a URL a session would refuse is refused here
         try:

@@ -67,13 +67,13 @@ def test_a_dask_cluster_of_two_workers_gives_the_same_tables(tmp_path):
     ("[grid]\npsi = 0.5", "must be a non-empty list"),
     ("[grid]\nwobble = [1, 2]", "unknown study setting 'wobble'"),
     ("[grid]\ngames = [1, 1]", "repeats a value"),
-    ("[grid]\ngames = ['two']", "is not a int"),
+    ("[grid]\ngames = ['two']", "is not an integer"),
     ("[study]\npersonas = 'nobody'", "nobody"),
     ("reuse = true\n[study]\npersonas = 'blind'", "at least 2 personas"),
     ("[study]\ngames = 2\n[grid]\ngames = [1, 2]", "both fixed"),
     ("grid = [", "not TOML"),
     ("[study]\npersonas = ['blind', '']", "each item of the list is one persona's name"),
-    ("[study]\npersonas = ['blind', 3]", "is not a str"),
+    ("[study]\npersonas = ['blind', 3]", "is not text"),
     ("[grid]\npersonas = [['blind', 'blind']]", "names blind twice"),
 ])
 def test_a_grid_that_cannot_run_is_refused_naming_the_file_and_key(tmp_path, text, needle):
