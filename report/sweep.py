@@ -47,6 +47,7 @@ from pairplay.numbers import shown, type_name
 from pairplay.outputs import output_file, output_folder, write_text
 from pairplay.processes import check_workers, worker_pool
 from pairplay.schemas.jsonfile import without_bom
+from pairplay.schemas.tomlplace import misplaced, table_not_value
 from pairplay.core.rng import SEED_RANGE
 from pairplay.report.study import SettingError, StudySettings, default_reuse_last
 
@@ -118,6 +119,30 @@ def _typed(path: str, key: str, value):
     return float(value) if want in ("float", float) else value
 
 
+TOP = "the top of the file"
+# the file's tables and the keys each takes (schemas/tomlplace.py)
+PLACES = {TOP: frozenset({"study", "grid", "seeds", "reuse"}), "[study]": frozenset(SWEEPABLE),
+          "[grid]": frozenset(SWEEPABLE)}
+
+
+def _check_places(path: str, data: dict) -> None:
+    """GridError for a key or a table at the wrong level: `seeds` or `reuse` below the [study] or [grid]
+    line (that table's then; it was "unknown study setting 'seeds'"), a [study.psi] table where psi takes
+    a value, `study = 3` where a table is expected (a traceback)."""
+    for key, value in data.items():
+        if key in ("study", "grid") and not isinstance(value, dict):
+            raise GridError(f"{path}: {key}: a value where a table is expected: write a [{key}] line, its keys below it")
+        if key in ("seeds", "reuse") and isinstance(value, dict):
+            raise GridError(f"{path}: {key}: {table_not_value(key, f'[{key}]', TOP)}")
+    for table in ("study", "grid"):
+        for key, value in data.get(table, {}).items():
+            said = misplaced(key, f"[{table}]", PLACES, [TOP])
+            if not said and isinstance(value, dict):
+                said = table_not_value(key, f"[{table}.{key}]", f"[{table}]")
+            if said:
+                raise GridError(f"{path}: {table}.{key}: {said}")
+
+
 def read_grid(path: str | Path) -> Grid:
     """The sweep described by a TOML file (GridError naming the file and the key)."""
     path = str(path)
@@ -130,6 +155,7 @@ def read_grid(path: str | Path) -> Grid:
         raise GridError(f"{path}: not TOML ({exc})") from None
     except UnicodeDecodeError:  # tomllib decodes bytes itself: a binary file was a traceback
         raise GridError(f"{path}: not TOML (not UTF-8 text)") from None
+    _check_places(path, data)
     unknown = set(data) - {"study", "grid", "seeds", "reuse"}
     if unknown:
         raise GridError(f"{path}: unknown key(s) {', '.join(sorted(unknown))}: use [study], [grid], seeds, reuse")
