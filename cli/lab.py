@@ -129,12 +129,15 @@ def run(args: argparse.Namespace) -> int:
             else f"after {len(fold.rounds)} of {config.rounds} rounds"
         print(f"pairplay lab: interrupted ({stop.why}) {when}; recorded {len(recorded.events)} events to {path}", file=sys.stderr)
         return 0  # the status is the signal's (cli/main.py)
-    print(f"recorded {len(recorded.events)} events to {path}")
     ended = "no SessionEnded recorded" if e is None else e.reason + (f" ({e.detail})" if e.detail else "")
-    print(f"rounds played: {len(fold.turns_per_round())} of {config.rounds}; rejections: {len(fold.rejections)}; "
-          f"ended: {ended}")
-    from pairplay.replay.delivery import delivery_line
-    robot = delivery_line(recorded.of("RobotActed"))
-    if robot:
-        print(robot)
+    if not getattr(args, "quiet", False):  # a summary of the file it wrote: -q leaves it out (cli/main.py QUIET_SUMMARIES)
+        print(f"recorded {len(recorded.events)} events to {path}")
+        print(f"rounds played: {len(fold.turns_per_round())} of {config.rounds}; rejections: {len(fold.rejections)}; "
+              f"ended: {ended}")
+        from pairplay.replay.delivery import delivery_line
+        robot = delivery_line(recorded.of("RobotActed"))
+        if robot:
+            print(robot)
+    elif e is None or e.reason != "completed":  # how a session that did not complete ended is still said
+        print(f"ended: {ended}")
     return 0 if e is not None and e.reason in ("completed", "interrupted", "aborted") else 1  # as `pairplay session`

@@ -25,9 +25,11 @@ signal, by the verb. Every option's help shows its default
 Logging, the same for every verb: warnings and errors only by default, `-v/--verbose`
 adds the INFO lines (what the services do), `-q/--quiet` leaves nothing but
 errors (and no progress bars). A verb whose results are files it writes
-(`QUIET_SUMMARIES`: study, sweep, rebuild, ...) says on stdout what it wrote, and
-`-q` silences that too (rebuild's per-file lines and the study's tables and
-timings were printed under -q: a new user's trial); a verb whose result is what
+(`QUIET_SUMMARIES`: study, sweep, rebuild, protocol init, ...; session and lab
+after their listening line) says on stdout what it wrote, and `-q` silences
+that too (rebuild's per-file lines, the study's tables and timings and
+`protocol init`'s protocol were printed under -q: new users' trials); a
+session that did not complete still says how it ended; a verb whose result is what
 it prints (`profile`, `replay --verify`'s verdict, `protocol status`, `bench`)
 prints it either way, and the listening line of a bus verb (its endpoint) too. The
 options stand after the verb or after its action (`pairplay protocol check
@@ -161,9 +163,12 @@ def add_log_options(p: argparse.ArgumentParser, default=False) -> None:
                    help="log nothing but errors; no progress bars")
 
 
-# verbs whose stdout only says what they wrote to files: silenced by -q (module rule)
+# verbs (or a verb's actions) whose stdout only says what they wrote to files: silenced by -q (module
+# rule). `protocol` is both: init, mark-invalid and pilot write, check, status and register print results
+# (init -q printed the whole protocol: a new user's trial). `session` and `lab` say their listening line
+# first, so they leave out their summary themselves (cli/session.py, cli/lab.py).
 QUIET_SUMMARIES = frozenset({"study", "sweep", "rebuild", "recover", "combine", "counterfactual", "report",
-                             "participant", "view"})
+                             "participant", "view", "protocol init", "protocol mark-invalid", "protocol pilot"})
 LOG_FORMAT = "%(levelname)s %(name)s: %(message)s"
 _handler: logging.Handler | None = None
 
@@ -320,7 +325,7 @@ def _main(argv: list[str]) -> int:
         if interrupts.received:  # a signal came while loading and something swallowed its KeyboardInterrupt
             raise KeyboardInterrupt
         running = True
-        with _summary_silenced(args.quiet and args.verb in QUIET_SUMMARIES):
+        with _summary_silenced(args.quiet and (args.verb in QUIET_SUMMARIES or _who(args) in QUIET_SUMMARIES)):
             code = int(module.run(args) or 0)
         stopped = signal_received()  # at once: a signal the verb's own handler (a bus verb's) met while it ran
         interrupts.work_done()

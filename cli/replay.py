@@ -97,7 +97,9 @@ def run(args: argparse.Namespace) -> int:
             n -= outbox.pending()
         took = time.perf_counter() - t0
     stopped = f"; stopped by {stop.why} after {n} of {len(log.events)}" if getattr(stop, "why", "") else ""
-    # interrupted, the line goes to stderr, as every verb's (stdout holds results only)
-    print(f"{'pairplay replay: ' if stopped else ''}replayed {n} events in {took:.2f} s ({n / max(took, 1e-9):.0f}/s){stopped}",
-          file=sys.stderr if stopped else sys.stdout)
+    # interrupted, the line goes to stderr, as every verb's (stdout holds results only); -q leaves out the
+    # summary of a replay that went through (cli/main.py QUIET_SUMMARIES)
+    if stopped or not getattr(args, "quiet", False):
+        print(f"{'pairplay replay: ' if stopped else ''}replayed {n} events in {took:.2f} s ({n / max(took, 1e-9):.0f}/s){stopped}",
+              file=sys.stderr if stopped else sys.stdout)
     return 0

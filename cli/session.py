@@ -19,8 +19,10 @@ schedule of their algorithm (phase 1: Q-learning, phase 2: pi-reuse) and games
 of 5 rounds by default; settings a person cannot satisfy are refused
 (SessionConfig.validate). A person plays on the board of `pairplay lab`.
 A session id whose recording exists (<session>.mcap or any <session>.<k>.mcap
-in --out) is refused before anything starts, unless --force, which removes
-those recordings; there is no resume of an ended or interrupted session.
+in --out) is refused before anything starts, unless --force, which sets those
+recordings aside (services/recorder.py set_aside) and removes them once the new
+recording holds a session: a session stopped before its game started gives
+them back; there is no resume of an ended or interrupted session.
 """
 
 from __future__ import annotations
@@ -47,7 +49,7 @@ from pairplay.cli.args import add_force, count, float_between, game_index, posit
 from pairplay.core.geometry import PICKS_UNIT
 from pairplay.cli.robot import add_robot_arguments, check_robot_args, probe_robot_args, robot_choice
 from pairplay.services.bus import BusOpenError, ConfigFileError, add_bus_arguments, options_from_args, stop_on_signals
-from pairplay.services.recorder import FORCE_SESSION_HINT, check_new_recording
+from pairplay.services.recorder import FORCE_SESSION_HINT, REPLACED, check_new_recording, set_aside, settle_aside
 from pairplay.services.runner import waiting_for
 from pairplay.services.session import run_session
 
@@ -202,8 +204,24 @@ def run(args: argparse.Namespace) -> int:
         probe_robot_args(args)
     check_folder(args.out)
     path = Path(args.out) / f"{config.session}.mcap"
-    if "recorder" not in args.external:  # an external recorder checks its own folder
-        check_new_recording(path, args.force, FORCE_SESSION_HINT)  # this verb has --force
+    if "recorder" not in args.external and not args.force:  # an external recorder checks its own folder
+        check_new_recording(path, FORCE_SESSION_HINT)  # this verb has --force
+    summary: dict = {"started": False}  # run_session's, once it has stopped
+    if not args.force or "recorder" in args.external:
+        return _run(args, config, path, summary)
+    # --force: the earlier recordings are set aside, not removed, until the new one holds a session (a
+    # stop before the game started gives them back); before, a Ctrl-C there had already removed them
+    aside = set_aside(path)
+    try:
+        code = _run(args, config, path, summary, kept=bool(aside))
+    finally:  # "started" is missing when a second Ctrl-C cut the shutdown short: both are kept
+        settle_aside(aside, path, replaced=summary.get("started"))
+    return code
+
+
+def _run(args: argparse.Namespace, config: SessionConfig, path: Path, summary: dict, kept: bool = False) -> int:
+    """The session once its recording's path is free (`run`); `summary`: run_session's. `kept`: --force set
+    earlier recordings aside, given back if the game does not start (`run`)."""
     stop = threading.Event()
     stop_on_signals(stop)
 
@@ -220,23 +238,31 @@ def run(args: argparse.Namespace) -> int:
     try:
         bus_options = options_from_args(args, default_mode="router")
         bus_options.to_dict()  # a bad --zenoh-config is the user's mistake: one line, before anything starts
-        summary: dict = {}
         path = run_session(config, path, bus_options=bus_options,
                            external=tuple(args.external), stop=stop, on_bus=announce, summary=summary,
                            robot=None if "robot" in args.external else robot_choice(args))
     except KeyboardInterrupt:  # a second Ctrl-C: the shutdown of the first was cut short
+        if "events" not in summary:  # run_session did not get to say whether the game had started
+            summary["started"] = None
         if stop.is_set() and "recorder" not in args.external:
             print(f"pairplay session: interrupted again (Ctrl-C) while stopping; {path} holds what was recorded "
-                  f"up to now and may lack its end: pairplay recover {path} completes it", file=sys.stderr)
+                  f"up to now and may lack its end: pairplay recover {path} completes it"
+                  + (f"; the earlier recordings are kept beside it, named *{REPLACED}" if kept else ""),
+                  file=sys.stderr)
             return 130
         raise
     except (ConfigFileError, BusOpenError) as err:
         print(f"pairplay session: {err}", file=sys.stderr)
         return 2
     if "recorder" in args.external:
-        print(f"session {config.session} over; the external recorder writes its file")
+        if not getattr(args, "quiet", False):
+            print(f"session {config.session} over; the external recorder writes its file")
         return 0
     if getattr(stop, "why", ""):
+        if kept and not summary.get("started"):  # its file holds no session: the earlier ones get their names back
+            print(f"pairplay session: interrupted ({stop.why}) before the session started; {path}: the earlier "
+                  f"recordings are kept (--force replaces them once a new session starts)", file=sys.stderr)
+            return 0
         return print_interrupted(summary, path, stop.why, config.rounds, "the id stays taken: --force reuses it")
     from pairplay.replay.delivery import delivery_line
     from pairplay.replay.fold import fold_events
@@ -244,13 +270,14 @@ def run(args: argparse.Namespace) -> int:
     recorded = read_log(path)
     fold = fold_events(r.event for r in recorded.events)
     picks = fold.picks_per_round()
-    print(f"recorded {len(recorded.events)} events to {path}")
-    print(f"rounds played: {len(picks)}; {PICKS_UNIT}: {picks[:10]}{' ...' if len(picks) > 10 else ''}")
-    print(f"rejections: {len(fold.rejections)}; Q updates: {fold.counts.get('QUpdated', 0)}"
-          + (f"; LSPI samples: {fold.counts.get('LSPIUpdated', 0)}" if config.algorithm == "lspi" else ""))
-    robot = delivery_line(recorded.of("RobotActed"))
-    if robot:
-        print(robot)
+    if not getattr(args, "quiet", False):  # a summary of the file it wrote: -q leaves it out (cli/main.py QUIET_SUMMARIES)
+        print(f"recorded {len(recorded.events)} events to {path}")
+        print(f"rounds played: {len(picks)}; {PICKS_UNIT}: {picks[:10]}{' ...' if len(picks) > 10 else ''}")
+        print(f"rejections: {len(fold.rejections)}; Q updates: {fold.counts.get('QUpdated', 0)}"
+              + (f"; LSPI samples: {fold.counts.get('LSPIUpdated', 0)}" if config.algorithm == "lspi" else ""))
+        robot = delivery_line(recorded.of("RobotActed"))
+        if robot:
+            print(robot)
     e = fold.ended
     if e is None:
         print("ended: no SessionEnded recorded")

@@ -46,6 +46,7 @@ from pairplay.core.rng import GAME_INDEX_RANGE, SEED_RANGE
 from pairplay.core.simulate import MEMORY_LIMIT, batch_bytes, gigabytes
 from pairplay.errors import OptionError
 from pairplay.lists import comma_items
+from pairplay.numbers import shown
 from pairplay.schemas.config import DEFAULT_REWARD_BONUS, LearnerConfig, LSPIConfig, REWARD_BONUS_RULES
 from pairplay.outputs import output_folder
 from pairplay.processes import off_main_thread, process_pool, stop_pool
@@ -141,7 +142,7 @@ class StudySettings:
                           else compare_learners, spell)
         for key in ("psi", "psi_decay"):
             if not 0 <= getattr(self, key) <= 1:  # also refuses nan
-                raise SettingError(key, f"must be between 0 and 1, got {getattr(self, key)}")
+                raise SettingError(key, f"must be between 0 and 1, got {shown(getattr(self, key))}")
         if self.reward_bonus not in REWARD_BONUS_RULES:
             raise SettingError("reward_bonus", f"must be one of {', '.join(REWARD_BONUS_RULES)}, got {self.reward_bonus!r}")
         if self.algorithm not in study.LEARNING_ALGORITHMS:
@@ -164,7 +165,7 @@ class StudySettings:
                                    f"snapshots are taken every {every} rounds; got {self.rounds}")
             if self.psi <= 0:  # psi 0: the bias is never taken, the pi-reuse arm would be Q-learning
                 raise SettingError("psi", f"must be above 0 when the speed-up runs{when}: pi-reuse with psi 0 never "
-                                   f"takes the bias policy's action (its arm would be Q-learning), got {self.psi}")
+                                   f"takes the bias policy's action (its arm would be Q-learning), got {shown(self.psi)}")
             if self.reuse_last >= self.rounds:  # reuse_rounds 0: the pi-reuse arm would be Q-learning
                 raise SettingError("reuse_last", f"must be below {spell('rounds')} {self.rounds} (0.."
                                    f"{self.rounds - 1}: the last N rounds of pi-reuse use the new policy alone; "

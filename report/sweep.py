@@ -43,9 +43,11 @@ import numpy as np
 
 from pairplay import csvcell
 from pairplay.errors import OptionError
+from pairplay.numbers import shown, type_name
 from pairplay.outputs import output_file, output_folder, write_text
 from pairplay.processes import check_workers, worker_pool
 from pairplay.schemas.jsonfile import without_bom
+from pairplay.schemas.tomlplace import misplaced, table_not_value
 from pairplay.core.rng import SEED_RANGE
 from pairplay.report.study import SettingError, StudySettings, default_reuse_last
 
@@ -95,6 +97,12 @@ class Grid:
         return StudySettings(**given)
 
 
+def as_toml(value) -> str:
+    """A setting's value as the sweep file writes it: numbers as given (`shown`), text quoted."""
+    return shown(value) if isinstance(value, (int, float)) and not isinstance(value, bool) else \
+        str(value).lower() if isinstance(value, bool) else repr(value)
+
+
 def _typed(path: str, key: str, value):
     want = SWEEPABLE.get(key)
     if want is None:
@@ -107,8 +115,32 @@ def _typed(path: str, key: str, value):
         value = ",".join(value)
     kind = {"int": int, "float": (int, float), "str": str, "bool": bool}[want if isinstance(want, str) else want.__name__]
     if isinstance(value, bool) and kind is not bool or not isinstance(value, kind):
-        raise GridError(f"{path}: {key} = {value!r} is not a {want}")
+        raise GridError(f"{path}: {key} = {value!r} is not {type_name(want)}")
     return float(value) if want in ("float", float) else value
+
+
+TOP = "the top of the file"
+# the file's tables and the keys each takes (schemas/tomlplace.py)
+PLACES = {TOP: frozenset({"study", "grid", "seeds", "reuse"}), "[study]": frozenset(SWEEPABLE),
+          "[grid]": frozenset(SWEEPABLE)}
+
+
+def _check_places(path: str, data: dict) -> None:
+    """GridError for a key or a table at the wrong level: `seeds` or `reuse` below the [study] or [grid]
+    line (that table's then; it was "unknown study setting 'seeds'"), a [study.psi] table where psi takes
+    a value, `study = 3` where a table is expected (a traceback)."""
+    for key, value in data.items():
+        if key in ("study", "grid") and not isinstance(value, dict):
+            raise GridError(f"{path}: {key}: a value where a table is expected: write a [{key}] line, its keys below it")
+        if key in ("seeds", "reuse") and isinstance(value, dict):
+            raise GridError(f"{path}: {key}: {table_not_value(key, f'[{key}]', TOP)}")
+    for table in ("study", "grid"):
+        for key, value in data.get(table, {}).items():
+            said = misplaced(key, f"[{table}]", PLACES, [TOP])
+            if not said and isinstance(value, dict):
+                said = table_not_value(key, f"[{table}.{key}]", f"[{table}]")
+            if said:
+                raise GridError(f"{path}: {table}.{key}: {said}")
 
 
 def read_grid(path: str | Path) -> Grid:
@@ -123,6 +155,7 @@ def read_grid(path: str | Path) -> Grid:
         raise GridError(f"{path}: not TOML ({exc})") from None
     except UnicodeDecodeError:  # tomllib decodes bytes itself: a binary file was a traceback
         raise GridError(f"{path}: not TOML (not UTF-8 text)") from None
+    _check_places(path, data)
     unknown = set(data) - {"study", "grid", "seeds", "reuse"}
     if unknown:
         raise GridError(f"{path}: unknown key(s) {', '.join(sorted(unknown))}: use [study], [grid], seeds, reuse")
@@ -165,8 +198,9 @@ def read_grid(path: str | Path) -> Grid:
             personas = settings.check(speed_up=grid.reuse, compare_learners=False)
         except SettingError as exc:
             value = getattr(settings, exc.key)
-            cell = f" (cell {dict(s)})" if s else ""
-            raise GridError(f"{path}: {exc.key} = {value!r}: {exc.what}{cell}") from None
+            # numbers as the file gave them (a TOML 2 became 2.0 for a float setting: pairplay/numbers.py)
+            cell = f" (cell {', '.join(f'{k} = {as_toml(v)}' for k, v in s)})" if s else ""
+            raise GridError(f"{path}: {exc.key} = {as_toml(value)}: {exc.what}{cell}") from None
         if grid.reuse and len(personas) < 2:
             raise GridError(f"{path}: reuse = true needs at least 2 personas (one is held out)")
     return grid

@@ -10,6 +10,8 @@ from __future__ import annotations
 
 import msgspec
 
+from pairplay.numbers import shown
+
 # When the simulated reward pays its 1/|candidate set| bonus (thesis 6.1.3; core/reward.py):
 # "correct": on a considered suggestion whose candidate set holds the matching card
 #   (pairplay's default; SPEC's reading pays a certain miss, see README "The reward bonus");
@@ -68,7 +70,7 @@ class LearnerConfig(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
         for key, (low, high) in LEARNER_RANGES.items():
             value = getattr(self, key)
             if value is not None and not low <= value <= high:  # also refuses nan
-                raise ValueError(f"{key} must be {low}..{high}, got {value}")
+                raise ValueError(f"{key} must be {low}..{high}, got {shown(value)}")
 
     def never_reuses(self) -> str:
         """Why pi-reuse on this schedule would never take the bias policy's action, "" if it does: such a
@@ -120,11 +122,11 @@ class LSPIConfig(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
 
     def __post_init__(self) -> None:
         if not self.ridge > 0:
-            raise ValueError(f"lspi ridge must be > 0, got {self.ridge}")
+            raise ValueError(f"lspi ridge must be > 0, got {shown(self.ridge)}")
         if self.improve_every < 1:
             raise ValueError(f"lspi improve_every must be >= 1, got {self.improve_every}")
         if not 0 <= self.gamma < 1:
-            raise ValueError(f"lspi gamma must be in [0, 1), got {self.gamma}")
+            raise ValueError(f"lspi gamma must be in [0, 1), got {shown(self.gamma)}")
         if self.tilings < 0 or (self.tilings and not self.tile_width >= 1):
             raise ValueError("lspi needs tilings >= 0 and tile_width >= 1 (grid steps)")
         if not self.tilings and not self.exact:

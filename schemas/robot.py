@@ -39,6 +39,8 @@ import re
 
 import msgspec
 
+from pairplay.numbers import shown
+
 from .envelope import Event, Nanos
 
 # IrisTK's speeds for action.gaze / action.attend (IrisTK doc/markdown/events.md line 301).
@@ -186,10 +188,10 @@ class RobotConfig(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
         """Raise ValueError with a clear reason if the config cannot work."""
         for name in ("head_turn_offset_m", "ack_timeout_s", "abort_grace_s", "give_up_s", "reconnect_min_s", "reconnect_max_s"):
             if not getattr(self, name) > 0:
-                raise ValueError(f"robot config: {name} must be > 0, got {getattr(self, name)}")
+                raise ValueError(f"robot config: {name} must be > 0, got {shown(getattr(self, name))}")
         for name in ("head_turn_lead_s", "head_turn_hold_s", "inflight_window_s"):
             if not getattr(self, name) >= 0:
-                raise ValueError(f"robot config: {name} must be >= 0, got {getattr(self, name)}")
+                raise ValueError(f"robot config: {name} must be >= 0, got {shown(getattr(self, name))}")
         if self.reconnect_max_s < self.reconnect_min_s:
             raise ValueError("robot config: reconnect_max_s must be >= reconnect_min_s")
         for name in ("iristk_ticket", "iristk_name"):
@@ -210,7 +212,7 @@ class RobotConfig(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
             raise ValueError("robot config: iristk_head_event attend needs iristk_agent (SystemAgentFlow only"
                              " takes an action.attend location whose agent is its own)")
         if not self.max_commands_per_s > 0:
-            raise ValueError(f"robot config: max_commands_per_s must be > 0, got {self.max_commands_per_s}")
+            raise ValueError(f"robot config: max_commands_per_s must be > 0, got {shown(self.max_commands_per_s)}")
         if not 1 <= self.command_burst <= 500:
             raise ValueError(f"robot config: command_burst must be 1..500 (an IrisTK module queue holds 1000),"
                              f" got {self.command_burst}")

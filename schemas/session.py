@@ -13,6 +13,8 @@ from typing import Union
 
 import msgspec
 
+from pairplay.numbers import shown
+
 from .config import REWARD_BONUS_RULES, UNSTATED_REWARD_BONUS, LearnerConfig, LSPIConfig
 from .policy import N_ACTIONS, N_STATES
 
@@ -113,7 +115,7 @@ class SessionConfig(msgspec.Struct, frozen=True, kw_only=True):
                              f"{len(self.policy_actions)} codes")
         for key in MS_FIELDS:
             if not MS_RANGE[0] <= getattr(self, key) <= MS_RANGE[1]:  # also refuses nan
-                raise ValueError(f"{key} must be {MS_RANGE[0]:g}..{MS_RANGE[1]:g}, got {getattr(self, key)}")
+                raise ValueError(f"{key} must be {MS_RANGE[0]:g}..{MS_RANGE[1]:g}, got {shown(getattr(self, key))}")
         if self.reward_bonus not in REWARD_BONUS_RULES:
             raise ValueError(f"reward_bonus {self.reward_bonus!r} is not one of {REWARD_BONUS_RULES}")
         if self.ignore_clock not in IGNORE_CLOCKS:

@@ -27,9 +27,12 @@ from typing import Literal, Union
 
 import msgspec
 
+from pairplay.numbers import shown
+
 from .config import LearnerConfig
 from .robot_url import parse_robot_url
 from .session import MS_FIELDS, MS_RANGE, SEED_RANGE
+from .tomlplace import misplaced, table_not_value
 
 ID = re.compile(r"^[a-z0-9][a-z0-9_-]{0,39}$")
 PRESETS = ("virtual", "human-phase1", "human-phase2")
@@ -140,7 +143,7 @@ def _check(study: Study) -> None:
     for key in MS_FIELDS:
         if not MS_RANGE[0] <= getattr(study.study, key) <= MS_RANGE[1]:  # also refuses nan and inf
             raise StudyFileError(f"study.{key}: must be {MS_RANGE[0]:g}..{MS_RANGE[1]:g} (ms), "
-                                 f"got {getattr(study.study, key)}")
+                                 f"got {shown(getattr(study.study, key))}")
     robot = study.study.robot
     if robot != NO_ROBOT:  # the --robot option's parser: a URL a session would refuse is refused here
         try:
@@ -175,7 +178,8 @@ def _check(study: Study) -> None:
         try:
             schedule = study.learner_config(p)
         except (TypeError, ValueError, msgspec.ValidationError) as err:
-            raise StudyFileError(f"{where}.learner: {err}") from None
+            # a phase's key below its [phase.learner] line is the learner's (schemas/tomlplace.py)
+            raise StudyFileError(_placed(f"{err} - at `$.{where}.learner`") or f"{where}.learner: {err}") from None
         never = schedule.never_reuses() if p.algorithm == "pi-reuse" else ""
         if never:  # 1 round under human-phase2: its one round is the last, on the new policy alone
             raise StudyFileError(f"{where}: a pi-reuse phase of {p.rounds} round{'s' if p.rounds != 1 else ''} "
@@ -216,7 +220,7 @@ def parse_study(text: str, source: str = "study") -> Study:
     try:
         study = msgspec.convert(raw, Study)
     except msgspec.ValidationError as err:
-        raise StudyFileError(f"{source}: {_where(str(err), raw)}") from None
+        raise StudyFileError(f"{source}: {_placed(str(err), raw) or _where(str(err), raw)}") from None
     try:
         _check(study)
     except StudyFileError as err:
@@ -235,6 +239,79 @@ def _where(message: str, raw: object = None) -> str:
     if "[...]" in where and raw is not None:
         where = _name_keys(where, what, raw)
     return f"{where or 'top level'}: {what}"
+
+
+# the file's tables (schemas/tomlplace.py): a table's path, its indices as "#" and a questionnaire's name as
+# "*", -> the Struct whose fields are its keys
+TABLES = {(): Study, ("study",): StudyHead, ("phase", "#"): Phase, ("phase", "#", "learner"): LearnerConfig,
+          ("questionnaire", "*"): Questionnaire, ("questionnaire", "*", "item", "#"): Item}
+
+
+def _shape(path: tuple) -> tuple:
+    return tuple("#" if isinstance(t, int) else "*" if n == 1 and path[0] == "questionnaire" else t
+                 for n, t in enumerate(path))
+
+
+def _header(path: tuple) -> str:
+    """A table's header as the file writes it: ("phase", 0, "learner") -> [phase.learner]."""
+    if not path:
+        return "the top level"
+    names = ".".join(t for t in path if isinstance(t, str))
+    return f"[[{names}]]" if isinstance(path[-1], int) else f"[{names}]"
+
+
+def _keys(shape: tuple) -> frozenset[str]:
+    return frozenset(f.name for f in msgspec.structs.fields(TABLES[shape]))
+
+
+def _placed(message: str, raw: object = None) -> str:
+    """msgspec's error as 'where: which table the key belongs to' when a key or a table stands at the wrong
+    level (schemas/tomlplace.py), else "". `raw`: the TOML read, to find a required key that a table
+    written too early took (`[phase.learner]` above the phase's `games`)."""
+    m = re.match(r"^(.*) - at `\$\.?(.*)`$", message)
+    if not m:
+        return ""
+    what, where = m.groups()
+    if "[...]" in where:  # a table's value (a key of [phase.learner], a questionnaire's name): named from `raw`
+        if raw is None:
+            return ""
+        where = _name_keys(where, what, raw)
+    path = tuple(int(t[1:-1]) if t.startswith("[") else t.lstrip(".")
+                 for t in re.findall(r"\[\d+\]|\.?[^.\[]+", where))
+    unknown = re.match(r"Object contains unknown field `(.+)`$", what)
+    missing = re.match(r"Object missing required field `(.+)`$", what)
+    if unknown or missing:
+        table, key = path, (unknown or missing).group(1)
+        if missing:  # a table below the table's other keys took it: name it there
+            node = _at(raw, table)
+            child = next((k for k, v in (node or {}).items() if isinstance(v, dict) and key in v), None)
+            if child is None or _shape(table + (child,)) not in TABLES:
+                return ""
+            table, where = table + (child,), f"{where}.{child}"
+        where = f"{where}.{key}" if where else key
+    elif path and isinstance(path[-1], str) and _shape(path[:-1]) in TABLES:
+        table, key = path[:-1], path[-1]
+        if "got `object`" in what and isinstance(_at(raw, path), dict) and key in _keys(_shape(table)):
+            return f"{where}: {table_not_value(key, _header(path), _header(table))}"
+    else:
+        return ""
+    if _shape(table) not in TABLES:
+        return ""
+    tables = {_header(tuple(t if t not in ("#", "*") else (0 if t == "#" else (table[1] if len(table) > 1 else "NAME"))
+                            for t in shape)): _keys(shape) for shape in TABLES}
+    enclosing = [_header(table[:n]) for n in range(len(table) - 1, -1, -1) if _shape(table[:n]) in TABLES]
+    said = misplaced(key, _header(table), tables, enclosing)
+    return f"{where}: {said}" if said else ""
+
+
+def _at(raw: object, path: tuple) -> object:
+    """The TOML read's value at `path` (None if it has none)."""
+    for token in path:
+        if isinstance(token, int):
+            raw = raw[token] if isinstance(raw, list) and token < len(raw) else None
+        else:
+            raw = raw.get(token) if isinstance(raw, dict) else None
+    return raw
 
 
 # msgspec's name of a TOML value's type, as its "got `...`" says it

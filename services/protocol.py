@@ -154,6 +154,8 @@ class StudyRunner:
         raise StudyDataError(f"{pid} does not play game {game + 1} of {phase_id}")
 
     def questions_for(self, pid: str, phase_id: str) -> tuple[str, list]:
+        """(questionnaire name, the items `pid` is asked after a game of `phase_id`): ("", []) for a phase
+        without one; its items can be none (all asked of the others): then nothing is asked or waited for."""
         phase = self.data.study.phase_by_id(phase_id)
         if not phase.questionnaires:
             return "", []
@@ -203,9 +205,12 @@ class StudyRunner:
         """The started game (journaled GameStarted) played to its end; its GameEnded journaled."""
         pid, phase_id, game = config.participant.split(":", 1)[1], phase.id, self.data.state.games[config.session].game
         token = secrets.token_urlsafe(18)
+        # what this participant is asked, not whether the phase names a questionnaire: one whose items are all
+        # for the others (`ask = "returning"` for a new participant) asks nothing, and nothing is waited for
+        asks = bool(self.questions_for(pid, phase_id)[1])
         self.live = Live(session=config.session, participant=pid, phase=phase_id, game=game,
                          rounds=config.rounds, state="playing", board=player is not None, scripted=config.scripted,
-                         questionnaire_token=token if phase.questionnaires else "", board_token=token)
+                         questionnaire_token=token if asks else "", board_token=token)
         hub = None
         if player is None and self.lab is not None:
             from pairplay.services.lab.hub import LabHub
@@ -224,7 +229,7 @@ class StudyRunner:
             node.run_in_thread(self._stop)
 
         def hold(_recorder) -> None:
-            if phase.questionnaires and not self._stop.is_set() and not self._abort_reason:
+            if asks and not self._stop.is_set() and not self._abort_reason:
                 deadline = time.monotonic() + self.questionnaire_timeout_s
                 while not (answered.is_set() or self._skip.is_set() or self._stop.is_set()) \
                         and time.monotonic() < deadline:

@@ -172,21 +172,63 @@ def journals_of(path: Path) -> list[Path]:
     return [p for p in found if p.exists()]
 
 
-def check_new_recording(path: str | Path, force: bool = False, hint: str = NEW_SESSION_HINT) -> Path:
+def check_new_recording(path: str | Path, hint: str = NEW_SESSION_HINT) -> Path:
     """`path` for a new session's recording, refused (RecordingExists, naming the file) if the session
-    has a recording already, or a recording's journal (what a killed recorder received); with `force`
-    the session's old recordings and journals are removed first (call it before anything starts, after
-    every other check of the options), but never one a live recorder holds (refused, `force` or not)."""
+    has a recording already, or a recording's journal (what a killed recorder received), a live one
+    with LIVE_SESSION_HINT (call it before anything starts, after every other check of the options).
+    `session --force` sets them aside instead (`set_aside`): nothing removes them before the new
+    recording holds a session."""
     path = Path(path)
     existing = recordings_of(path) + journals_of(path)
     live = [p for p in existing if is_live(p)]
     if live:
         raise RecordingExists(live[0], path.stem, live=True)
-    if existing and not force:
+    if existing:
         raise RecordingExists(existing[0], path.stem, hint)
-    for p in existing:
-        p.unlink()
     return path
+
+
+REPLACED = ".replaced"  # `session --force`: an earlier recording kept beside the new one until it holds a session
+
+
+def set_aside(path: str | Path) -> list[tuple[Path, Path]]:
+    """`session --force`: the session's recordings and journals renamed `<name>.replaced` (no longer the
+    session's: the new recording takes `path`), as (original, aside) pairs; refused as
+    `check_new_recording` refuses one a live recorder holds. They are kept until the new recording holds
+    a session (`settle_aside`): a session stopped before its game started (a Ctrl-C while it waited for
+    its services) gives them back, as `study --force` and `rebuild --force` keep their old outputs until
+    the new ones are complete (before, --force removed them first, and such a stop lost them)."""
+    path = Path(path)
+    existing = recordings_of(path) + journals_of(path)
+    live = [p for p in existing if is_live(p)]
+    if live:
+        raise RecordingExists(live[0], path.stem, live=True)
+    aside = []
+    for p in existing:
+        kept = p.with_name(p.name + REPLACED)
+        os.replace(p, kept)
+        aside.append((p, kept))
+    return aside
+
+
+def settle_aside(aside: list[tuple[Path, Path]], path: str | Path, replaced: bool | None) -> None:
+    """The end of `set_aside`: `replaced` (the new recording holds a session), the earlier files are
+    removed; False, the new recording and its journal, which hold no session, are removed and the earlier
+    files get their names back; None (not known: a second Ctrl-C cut the shutdown short), both are kept."""
+    if replaced is None:
+        return
+    if replaced:
+        for _, kept in aside:
+            kept.unlink(missing_ok=True)
+        return
+    if not aside:
+        return
+    for p in recordings_of(Path(path)) + journals_of(Path(path)):
+        if not is_live(p):
+            p.unlink(missing_ok=True)
+    for original, kept in aside:
+        if kept.exists() and not original.exists():
+            os.replace(kept, original)
 
 
 def earlier_records(earlier: Path, session: str, before: list[tuple[str, bytes, int]] = ()

@@ -91,3 +91,25 @@ def test_quiet_silences_the_summaries_of_verbs_that_write_files_not_results_that
     assert capsys.readouterr().out.strip()  # profile's result is its table
     assert main(runs["rebuild"] + ["-q"]) == 2  # its outputs exist: the refusal still comes, on stderr
     assert "exists" in capsys.readouterr().err
+
+
+def test_quiet_silences_what_the_protocol_actions_and_the_session_verbs_say_they_wrote(tmp_path, pairplay_cli):
+    """A new user's trial: `protocol init -q` printed the whole protocol (QUIET_SUMMARIES named verbs,
+    and `protocol` is a verb whose actions are both: init writes a folder, status prints a result), and
+    `session -q` its summary of the recording it wrote. Now an action whose result is files (init,
+    mark-invalid, pilot) and the session's summary are silenced by -q; a printed result (register's id,
+    check's protocol, status) and the listening line still come."""
+    folder = tmp_path / "study"
+    done = pairplay_cli("protocol", "init", folder, "--study", "thesis-ch7", "-q")
+    assert (done.returncode, done.stdout, done.stderr) == (0, "", ""), done
+    done = pairplay_cli("protocol", "register", folder, "-q")
+    assert done.returncode == 0 and done.stdout.strip() == "p01", done  # its result: the new id
+    done = pairplay_cli("protocol", "check", "thesis-ch7", "-q")
+    assert done.returncode == 0 and done.stdout.startswith("study thesis-ch7"), done  # its result: the protocol
+    done = pairplay_cli("protocol", "status", folder, "-q")
+    assert done.returncode == 0 and "p01" in done.stdout, done
+    done = pairplay_cli("session", "--participant", "sim:blind", "--rounds", "1", "--session", "q1",
+                        "--out", tmp_path / "rec", "-q")
+    assert done.returncode == 0 and done.stderr == "", done
+    assert done.stdout.startswith("session q1: bus listening on") and done.stdout.count("\n") == 1, done.stdout
+    assert (tmp_path / "rec" / "q1.mcap").is_file()

@@ -192,7 +192,7 @@ CASES = [
     Case("protocol check a learner override of nan", ["protocol", "check", "alpha-nan.toml"],
          "alpha-nan.toml: phase[0].learner: alpha_start must be 0..1, got nan"),
     Case("protocol check an epsilon of 5", ["protocol", "check", "epsilon-5.toml"],
-         "epsilon-5.toml: phase[0].learner: epsilon_start must be 0..1, got 5.0"),
+         "epsilon-5.toml: phase[0].learner: epsilon_start must be 0..1, got 5"),
     Case("protocol check an ignore window of inf", ["protocol", "check", "window-inf.toml"],
          "window-inf.toml: study.ignore_window_ms: must be 0..60000 (ms), got inf"),
     Case("protocol check a turn-back time of nan", ["protocol", "check", "turn-nan.toml"],

@@ -22,7 +22,7 @@ from pairplay.schemas.envelope import stamped
 from pairplay.schemas.events import encode_event
 from pairplay.schemas.keys import event_key
 from pairplay.schemas.session import SessionConfig
-from pairplay.services.recorder import Recorder, RecordingExists, check_new_recording
+from pairplay.services.recorder import Recorder, RecordingExists, check_new_recording, set_aside, settle_aside
 from pairplay.services.walmerge import admit
 
 from busutil import listener, recorder_process, sigkill, wait_until
@@ -313,8 +313,10 @@ def test_a_session_whose_journal_is_left_is_taken_and_force_removes_it(tmp_path)
     journal_of(tmp_path / "j1.mcap", [pick(1)])  # a killed recorder's, its recording moved away
     with pytest.raises(RecordingExists):
         check_new_recording(tmp_path / "j1.mcap")
-    check_new_recording(tmp_path / "j1.mcap", force=True)
+    aside = set_aside(tmp_path / "j1.mcap")  # session --force: removed once the new session has started
     assert not wal_path(tmp_path / "j1.mcap").exists()
+    settle_aside(aside, tmp_path / "j1.mcap", replaced=True)
+    assert list(tmp_path.iterdir()) == []
 
 
 # -- the recorder -----------------------------------------------------------------

@@ -24,7 +24,7 @@ def human(**fields) -> SessionConfig:
     ({"ignore_rule": "perceived"}, "ignore rule 'perceived' needs a simulated participant"),
     ({"observed_source": "intended"}, "observed source 'intended' needs a simulated participant"),
     ({"ignore_clock": "sundial"}, "ignore_clock"),
-    ({"ignore_window_ms": -1.0}, "ignore_window_ms must be 0..60000, got -1.0"),
+    ({"ignore_window_ms": -1.0}, "ignore_window_ms must be 0..60000, got -1"),
 ])
 def test_a_person_cannot_be_asked_what_only_a_simulation_reports(fields, words):
     config = human(**fields)

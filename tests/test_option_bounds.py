@@ -97,7 +97,7 @@ def test_protocol_register_takes_the_consoles_bound(tmp_path, capsys):
 # the learner's refusal: tests/test_refusal.py needs a config the game plays and the learner refuses.)
 BAD_CONFIGS = {
     "learner alpha_start nan": ({"learner": {"alpha_start": float("nan")}}, "alpha_start must be 0..1, got nan"),
-    "learner epsilon_start 5": ({"learner": {"epsilon_start": 5.0}}, "epsilon_start must be 0..1, got 5.0"),
+    "learner epsilon_start 5": ({"learner": {"epsilon_start": 5.0}}, "epsilon_start must be 0..1, got 5"),
     "learner alpha_every 0": ({"learner": {"alpha_every": 0}}, "alpha_every must be 1..1000000000, got 0"),
     "turn_back_ms inf": ({"turn_back_ms": float("inf")}, "turn_back_ms must be 0..60000, got inf"),
     "ignore_window_ms nan": ({"ignore_window_ms": float("nan")}, "ignore_window_ms must be 0..60000, got nan"),

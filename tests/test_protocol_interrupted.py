@@ -1,8 +1,9 @@
 """A completed game whose questionnaire is cut by a signal stays completed, and its policy is built later.
 
-`pairplay protocol serve` is a real process: the console's API starts a game played by a scripted
-participant on the bus (`--pilot`), the game completes, the server waits for the questionnaire, and
-the process gets SIGTERM. Before: the journal said the game was aborted ("interrupted (SIGTERM)",
+`pairplay protocol serve` is a real process: the console's API starts a game whose participant
+plays on the board page (its WebSocket, driven by the test as a person's page would be), the game
+completes, the server waits for the questionnaire the participant has not answered, and the process
+gets SIGTERM. Before: the journal said the game was aborted ("interrupted (SIGTERM)",
 no policy): open to be replayed and left out of the combination, though its recording held the
 whole game. Now it is journaled completed (questionnaire unanswered) and the next verb that runs or
 reports the study builds its policy from the recording (PolicyBuilt in the journal). A recording
@@ -33,9 +34,8 @@ from pairplay.services.protocol import StudyRunner
 from pairplay.services.scripted import ScriptedPlayer
 
 STUDY = Path(__file__).parent / "data" / "pilot-study.toml"
-# phase 1's questionnaire asks a new participant nothing: the scripted one never answers, and the
-# server waits for the answers as it waits for a person who has not given them yet
-UNANSWERED = STUDY.read_text().replace(
+# phase 1's questionnaire asks a new participant nothing (all its items are for returning ones)
+UNASKED = STUDY.read_text().replace(
     'players = "new"\nquestionnaires = ["after-game"]', 'players = "new"\nquestionnaires = ["later"]') + '''
 [questionnaire.later]
 title = "Asked of returning participants only"
@@ -65,10 +65,10 @@ def api(url: str, token: str, body: dict | None = None) -> dict:
         return json.loads(answer.read())
 
 
-def serve_until_questionnaire(folder: Path, pilot: str) -> tuple[subprocess.Popen, str]:
-    """A `protocol serve` process whose console started the next game, once the game is over and the
-    server waits for its questionnaire; (process, session)."""
-    proc = subprocess.Popen([sys.executable, "-m", "pairplay", "protocol", "serve", str(folder), "--pilot", pilot],
+def serve_until_questionnaire(folder: Path) -> tuple[subprocess.Popen, str]:
+    """A `protocol serve` process whose console started the next game, played on its board page, once the
+    game is over and the server waits for the questionnaire nobody answers; (process, session)."""
+    proc = subprocess.Popen([sys.executable, "-m", "pairplay", "protocol", "serve", str(folder)],
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
                             env=dict(os.environ, PYTHONUNBUFFERED="1"))
     err: list[str] = []
@@ -81,10 +81,17 @@ def serve_until_questionnaire(folder: Path, pilot: str) -> tuple[subprocess.Pope
         console = line.split("experimenter console: ", 1)[1].strip()
         base, token = console.split("/console?token=")
         api(f"{base}/api/console/next", token, {})
-        deadline = time.monotonic() + 180
+        deadline = time.monotonic() + 60
+        while "board_url" not in (live := api(f"{base}/api/console/state", token)["live"]):
+            assert time.monotonic() < deadline, live
+            time.sleep(0.1)
+        play_the_board(base.replace("http", "ws", 1) + live["board_url"].replace("/board?", "/ws?") +
+                       "&page=board&client=person")
+        deadline = time.monotonic() + 60
         while (state := api(f"{base}/api/console/state", token))["live"]["state"] != "questionnaire":
             assert time.monotonic() < deadline, state
             time.sleep(0.1)
+        assert "questionnaire_url" in state["live"], state  # a real questionnaire awaits its answers
         proc.stderr_lines = err
         return proc, state["live"]["session"]
     except BaseException:
@@ -93,10 +100,62 @@ def serve_until_questionnaire(folder: Path, pilot: str) -> tuple[subprocess.Pope
         raise
 
 
+def play_the_board(url: str, timeout_s: float = 120.0) -> None:
+    """Play a game on the board page's WebSocket as a person with a perfect memory would (services/lab/hub.py
+    says what goes over it): a pair whose faces were seen, else a card not seen yet; until the game is over."""
+    from websockets.sync.client import connect
+
+    known: dict[int, int] = {}  # card -> face, of the cards of this round's deal seen and not matched
+    acted, sent, deal = None, 0, None
+    deadline = time.monotonic() + timeout_s
+    with connect(url, open_timeout=30) as ws:
+        view = None
+        while True:
+            message = json.loads(ws.recv(timeout=max(0.1, deadline - time.monotonic())))
+            if message["type"] == "rejected":
+                acted = None  # a pick that came too early or late: choose again
+            elif message["type"] == "state":
+                view = message["state"]
+            if view is None:
+                continue
+            if view["phase"] == "over":
+                return
+            if view["round"] != deal:  # a new round, a new deal
+                known, deal = {}, view["round"]
+            cards = view["cards"]
+            for card, c in enumerate(cards):
+                if c["state"] == "matched":
+                    known.pop(card, None)
+                elif c["face"] >= 0:
+                    known[card] = c["face"]
+            turn = view["last_turn"]
+            if turn and not turn["matched"] and turn["round"] == deal:
+                known.update(zip(turn["cards"], turn["faces"]))
+            down = [card for card, c in enumerate(cards) if c["state"] == "down"]
+            if not down:  # the round is over: the next one's deal comes
+                continue
+            here = (view["round"], view["turn"])
+            if view["phase"] == "first" and acted != (*here, 0):
+                pair = next((a for a in down for b in down if a != b and known.get(a, -1) == known.get(b, -2)), None)
+                card = pair if pair is not None else next((c for c in down if c not in known), down[0])
+                acted = (*here, 0)
+            elif view["phase"] == "second" and acted == (*here, 0):
+                face = known.get(view["first"], cards[view["first"]]["face"])
+                card = next((c for c in down if known.get(c) == face), None)
+                if card is None:
+                    card = next((c for c in down if c not in known), down[0])
+                acted = (*here, 1)
+            else:
+                continue
+            sent += 1
+            ws.send(json.dumps({"type": "pick", "id": sent, "round": here[0], "turn": here[1], "card": card,
+                                "page_ms": time.time() * 1000}))
+
+
 def test_a_signal_during_the_questionnaire_keeps_the_completed_game_and_its_policy_is_built_next(
         tmp_path, pairplay_cli):
-    data = study_with(tmp_path, UNANSWERED)
-    proc, session = serve_until_questionnaire(data.folder, "p01=ashley")
+    data = study_with(tmp_path, STUDY.read_text())
+    proc, session = serve_until_questionnaire(data.folder)
     time.sleep(0.3)  # the server is waiting for the answers
     proc.send_signal(signal.SIGTERM)
     try:
@@ -124,6 +183,32 @@ def test_a_signal_during_the_questionnaire_keeps_the_completed_game_and_its_poli
     # said once: a second report builds nothing
     done = pairplay_cli("report", data.folder, "--force")
     assert done.returncode == 0 and "policy built" not in done.stderr, done.stderr
+
+
+def test_a_questionnaire_that_asks_this_participant_nothing_does_not_hold_the_game(tmp_path):
+    """Before: a phase naming a questionnaire held every game for its answers, though all its items were
+    for returning participants: a new one was asked nothing and the session waited (the console showed an
+    empty questionnaire) until the experimenter skipped it or the timeout. Now what the participant is
+    asked (StudyRunner.questions_for) decides: no item, no questionnaire link, no wait."""
+    data = study_with(tmp_path, UNASKED)
+    pid = next(iter(data.state.participants))
+    ended: list[float] = []
+    tokens: list[str] = []
+    with Bus(BusOptions()) as bus:
+        runner = StudyRunner(data, bus, questionnaire_timeout_s=45.0)
+        name, items = runner.questions_for(pid, "phase1")
+        assert (name, items) == ("later", [])
+
+        def seen(e) -> None:
+            if type(e).__name__ == "SessionEnded":
+                ended.append(time.monotonic())
+                tokens.append(runner.live.questionnaire_token)
+        game = runner.run_game(pid, "phase1", 0, ScriptedPlayer("ashley", questions=items, questionnaire=name),
+                               on_event=seen)
+        returned = time.monotonic()
+    assert game.ended.outcome == "completed" and not game.ended.questionnaire and game.ended.policy
+    assert tokens == [""]  # the console offers no questionnaire link
+    assert returned - ended[0] < 20, returned - ended[0]  # before: the 45 s timeout, waiting for no answer
 
 
 def completed_without_policy(tmp_path: Path, stripped: int = 4) -> StudyData:

@@ -130,3 +130,40 @@ def test_a_made_up_session_id_obeys_the_id_rule_too(verb):
     config = config_from_args(parser.parse_args(argv))
     assert "." not in config.session and config.session.startswith("p_1-seed0-game0-")
     assert session_id(config.session) == config.session
+
+
+def test_force_keeps_the_earlier_recordings_until_the_new_session_has_started(tmp_path):
+    """A new user's trial: `session --force` stopped by Ctrl-C before its game started (it waited for an
+    external learner) had already removed the earlier recording; `study --force` and `rebuild --force`
+    keep their old outputs until the new ones are complete. Now the earlier recordings are set aside and
+    given back (the new file, of no session, removed); once the new session starts they go."""
+    import os
+    import signal
+    import subprocess
+    import sys
+
+    old = earlier_recording(tmp_path / "dup.mcap")
+    numbered = earlier_recording(tmp_path / "dup.2.mcap")
+    before = {p.name: p.read_bytes() for p in (old, numbered)}
+    p = subprocess.Popen([sys.executable, "-m", "pairplay", "session", "--participant", "sim:ashley", "--session",
+                          "dup", "--out", str(tmp_path), "--force", "--external", "learner"],
+                         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                         env=dict(os.environ, PYTHONUNBUFFERED="1"))
+    try:
+        first = p.stdout.readline()
+        assert first.startswith("session dup: bus listening on"), first
+        p.send_signal(signal.SIGINT)  # the game still waits for its learner
+        out, err = p.communicate(timeout=60)
+    finally:
+        p.kill()
+    assert p.returncode == 130, err
+    assert err.strip() == (f"pairplay session: interrupted (SIGINT) before the session started; {tmp_path / 'dup.mcap'}: "
+                           "the earlier recordings are kept (--force replaces them once a new session starts)"), err
+    assert {p.name: p.read_bytes() for p in recordings_of(tmp_path / "dup.mcap")} == before  # before: none left
+    assert sorted(f.name for f in tmp_path.iterdir()) == ["dup.2.mcap", "dup.mcap"]
+
+    # a session that starts replaces them, once its recording is finished
+    assert main(["session", "--participant", "sim:ashley", "--session", "dup", "--rounds", "1", "--out", str(tmp_path),
+                 "--force", "-q"]) == 0
+    assert [f.name for f in tmp_path.iterdir()] == ["dup.mcap"]
+    assert read_log(tmp_path / "dup.mcap").of("SessionEnded")[0].reason == "completed"

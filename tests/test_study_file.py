@@ -110,3 +110,38 @@ def test_a_learner_setting_of_the_wrong_type_names_its_field(learner, field):
     with pytest.raises(StudyFileError) as err:
         parse_study(text, "s.toml")
     assert str(err.value).startswith(f"s.toml: {field}: Expected `int | float | null`, got"), str(err.value)
+
+
+PHASE1_KEYS = 'players = "new"\nquestionnaires = ["after-game"]'
+PHASE_REST = 'algorithm = "q-learning"\npreset = "human-phase1"\n' + PHASE1_KEYS
+
+
+@pytest.mark.parametrize("old,new,said", [
+    # a new user's trial: [phase.learner] written before the phase's last keys took them into the learner
+    (PHASE1_KEYS, 'players = "new"\n[phase.learner]\nepsilon_start = 0.5\nquestionnaires = ["after-game"]',
+     "phase[0].learner.questionnaires: `questionnaires` belongs to [[phase]], not to [phase.learner]: the keys "
+     "after a [phase.learner] line are that table's; move `questionnaires = ...` above that line"),
+    ("games = 2\nrounds = 5\n" + PHASE_REST, PHASE_REST + "\n[phase.learner]\nepsilon_start = 0.5\ngames = 2\nrounds = 5",
+     "phase[0].learner.games: `games` belongs to [[phase]], not to [phase.learner]"),
+    ('preset = "human-phase1"\n', '[phase.learner]\nepsilon_start = 0.5\npreset = "human-phase1"\n',
+     "phase[0].learner.preset: `preset` belongs to [[phase]], not to [phase.learner]"),
+    # a key of one table written in another
+    ("[study]\n", "[study]\n[study.learner]\nalpha_start = 0.3\n",
+     "study.learner: [study] has no key `learner`; `learner` is a key of [[phase]]"),
+    ("[study]\n", "[study]\nrounds = 3\n", "study.rounds: [study] has no key `rounds`; `rounds` is a key of [[phase]]"),
+    # a table where a value was expected
+    ("seed = 0\n", "[study.seed]\nvalue = 0\n",
+     "study.seed: [study.seed] is a table, where `seed` takes a value: write `seed = ...` among the keys of [study]"),
+    (PHASE1_KEYS, PHASE1_KEYS + "\n[phase.learner.epsilon_start]\nx = 1",
+     "phase[0].learner.epsilon_start: [phase.learner.epsilon_start] is a table, where `epsilon_start` takes a "
+     "value: write `epsilon_start = ...` among the keys of [phase.learner]"),
+    ('title = "About the game you just played"\n', '[questionnaire.after-game.title]\ntext = "x"\n',
+     "questionnaire.after-game.title: [questionnaire.after-game.title] is a table, where `title` takes a value"),
+])
+def test_a_table_or_key_at_the_wrong_level_says_where_it_belongs(old, new, said):
+    assert old in BASE
+    with pytest.raises(StudyFileError) as info:
+        parse_study(BASE.replace(old, new, 1), "s.toml")
+    line = str(info.value)
+    assert line.startswith("s.toml: ") and "\n" not in line and said in line, line
+    assert "Expected" not in line and "got `" not in line, line

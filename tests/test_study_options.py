@@ -150,7 +150,7 @@ GRID_MISTAKES = [
     ('reuse = "no"\n[study]\npersonas = "blind"\n', "must be true or false"),
     ('[grid]\npsi = [0.5, 1.5]\n', "psi = 1.5: must be between 0 and 1"),
     ('reuse = true\nseeds = 1\n[study]\npersonas = "blind,deaf"\n[grid]\npsi = [0.5, 0.0]\n',
-     "psi = 0.0: must be above 0 when the speed-up runs"),
+     "psi = 0: must be above 0 when the speed-up runs"),
     ('[study]\nalgorithm = "sarsa"\n', "algorithm = 'sarsa': must be one of q-learning, lspi"),
     ('[study]\nreward_bonus = "always"\n', "reward_bonus = 'always': must be one of correct, consistent, match"),
 ]
@@ -165,3 +165,30 @@ def test_a_sweep_checks_every_cell_before_it_writes_anything(text, needle, tmp_p
     err = capsys.readouterr().err
     assert needle in err and err.count("\n") == 1 and "Traceback" not in err, err
     assert not (tmp_path / "out").exists()
+
+
+def test_a_number_is_echoed_as_it_was_given_and_a_type_is_named_in_words(tmp_path, capsys):
+    """A new user's trial: `--psi 0` was said back as "got 0.0" (options and TOML integers become floats
+    on the way in: pairplay/numbers.py `shown`), and the sweep said "is not a int". Every refusal of a
+    setting, a study file's value and a sweep's grid echoes the number as given."""
+    from pairplay.report.sweep import GridError, read_grid
+    from pairplay.schemas.study import StudyFileError, example_text, parse_study
+
+    assert main(["study", "--personas", "blind,tatiana", "--games", "1", "--rounds", "10", "--psi", "0",
+                 "--out", str(tmp_path / "s")]) == 2
+    err = capsys.readouterr().err
+    assert err.rstrip().endswith("got 0") and "0.0" not in err, err
+    for old, new, said in (
+            ('players = "new"\n', 'players = "new"\nlearner = { epsilon_start = 2 }\n', "got 2"),
+            ("ignore_window_ms = 1500", "ignore_window_ms = 100000", "got 100000")):
+        text = example_text().replace(old, new, 1)
+        with pytest.raises(StudyFileError) as info:
+            parse_study(text, "s.toml")
+        assert str(info.value).endswith(said) and f"{said}.0" not in str(info.value), info.value
+    grids = {"[grid]\ngames = ['two']": "is not an integer", "[grid]\npsi = [2]": "got 2",
+             "[grid]\nseed_count = 1\n": "is not a", "[grid]\nrounds = [3.5]": "is not an integer"}
+    for text, said in list(grids.items())[:2] + [list(grids.items())[3]]:
+        (tmp_path / "g.toml").write_text(text)
+        with pytest.raises(GridError) as info:
+            read_grid(tmp_path / "g.toml").cells() if "psi" in text else read_grid(tmp_path / "g.toml")
+        assert said in str(info.value) and " a int" not in str(info.value) and "2.0" not in str(info.value), info.value

@@ -67,13 +67,13 @@ def test_a_dask_cluster_of_two_workers_gives_the_same_tables(tmp_path):
     ("[grid]\npsi = 0.5", "must be a non-empty list"),
     ("[grid]\nwobble = [1, 2]", "unknown study setting 'wobble'"),
     ("[grid]\ngames = [1, 1]", "repeats a value"),
-    ("[grid]\ngames = ['two']", "is not a int"),
+    ("[grid]\ngames = ['two']", "is not an integer"),
     ("[study]\npersonas = 'nobody'", "nobody"),
     ("reuse = true\n[study]\npersonas = 'blind'", "at least 2 personas"),
     ("[study]\ngames = 2\n[grid]\ngames = [1, 2]", "both fixed"),
     ("grid = [", "not TOML"),
     ("[study]\npersonas = ['blind', '']", "each item of the list is one persona's name"),
-    ("[study]\npersonas = ['blind', 3]", "is not a str"),
+    ("[study]\npersonas = ['blind', 3]", "is not text"),
     ("[grid]\npersonas = [['blind', 'blind']]", "names blind twice"),
 ])
 def test_a_grid_that_cannot_run_is_refused_naming_the_file_and_key(tmp_path, text, needle):
@@ -218,3 +218,21 @@ def test_workers_that_together_would_pass_the_memory_limit_are_refused_before_an
     err = capsys.readouterr().err
     assert code == 2 and err.count("\n") == 1 and "--workers" in err and "over the 2.0 GB allowed" in err, err
     assert not out.exists()
+
+
+@pytest.mark.parametrize("text,said", [
+    # a new user's trial: a top-level key written below a table's line is that table's
+    ("[study]\npersonas = 'blind'\nseeds = 3\n", "study.seeds: `seeds` belongs at the top of the file, not to "
+     "[study]: the keys after a [study] line are that table's; move `seeds = ...` above that line"),
+    ("[grid]\npsi = [0.5]\nreuse = true\n", "grid.reuse: `reuse` belongs at the top of the file, not to [grid]"),
+    ("[grid.psi]\nx = [1]\n", "grid.psi: [grid.psi] is a table, where `psi` takes a value: write `psi = ...` "
+     "among the keys of [grid]"),
+    ("[study.psi]\nx = 1\n", "study.psi: [study.psi] is a table, where `psi` takes a value"),
+    ("[seeds]\nn = 1\n", "seeds: [seeds] is a table, where `seeds` takes a value: write `seeds = ...` at the top"),
+    ("study = 3\n", "study: a value where a table is expected: write a [study] line, its keys below it"),  # a traceback
+])
+def test_a_key_or_table_at_the_wrong_level_says_where_it_belongs(tmp_path, text, said):
+    (tmp_path / "g.toml").write_text(text)
+    with pytest.raises(GridError) as info:
+        read_grid(tmp_path / "g.toml")
+    assert str(info.value) == f"{tmp_path / 'g.toml'}: {said}" or said in str(info.value), info.value

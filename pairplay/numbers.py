@@ -1,0 +1,30 @@
+"""A number as a message shows it: as the user wrote it, not as the float it became.
+
+Rule: a value a user gave (an option, a file's key) is echoed by `shown(value)`:
+an integral float without its `.0` (`--psi 0` was said "got 0.0", `epsilon_start
+= 2` "got 2.0": options and TOML integers become floats on the way in), any other
+number as Python's shortest exact text (0.95, 1e-300, nan, inf), anything else
+as str(). `type_name(kind)` is a Python type's name as a sentence says it ("an
+integer", not "a int"). Standard library only (every layer imports this).
+"""
+
+from __future__ import annotations
+
+import math
+
+# a type's name in a sentence: "is not an integer", "must be a number" (the sweep said "is not a int")
+TYPE_NAMES = {"int": "an integer", "float": "a number", "str": "text", "bool": "true or false",
+              "list": "a list", "dict": "a table"}
+
+
+def shown(value: object) -> str:
+    """`value` as a message echoes it (module rule)."""
+    if isinstance(value, float) and math.isfinite(value) and value.is_integer() and abs(value) < 1e16:
+        return str(int(value))
+    return str(value)
+
+
+def type_name(kind: object) -> str:
+    """A type (or its name) as a sentence says it: int -> "an integer" (module rule)."""
+    name = kind if isinstance(kind, str) else getattr(kind, "__name__", str(kind))
+    return TYPE_NAMES.get(name, f"a {name}")

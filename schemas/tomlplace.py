@@ -1,0 +1,45 @@
+"""Where a key of a TOML file belongs, said when it stands at the wrong level.
+
+Rule: a file's tables are named by their headers (`[study]`, `[[phase]]`,
+`[phase.learner]`) with the keys each takes. In TOML every key after a
+`[table]` line is that table's, so a table written too early (`[phase.learner]`
+above the phase's last keys) takes the keys below it, and a key of one table
+written under another is a key that table does not have. Both were reported as
+a type error ("Expected `int | float | null`, got `array`") or an unknown field;
+`misplaced` says instead which table the key belongs to, `table_not_value` that
+a `[table]` stands where a key takes a value. Each returns the message's text
+(the reader prefixes the file and the key path), "" when the rule does not
+apply. Standard library only.
+"""
+
+from __future__ import annotations
+
+from typing import Collection, Mapping, Sequence
+
+
+def misplaced(key: str, here: str, tables: Mapping[str, Collection[str]], enclosing: Sequence[str] = ()) -> str:
+    """Why `key`, written under the table `here`, is not that table's: it belongs to `enclosing` (the
+    tables `here` is inside, innermost first: written above the `here` line, it would be theirs), or to
+    another table of the file; "" if `here` takes it or no table does."""
+    if key in tables.get(here, ()):
+        return ""
+    for header in enclosing:
+        if key in tables.get(header, ()):
+            return (f"`{key}` belongs {_to(header)}, not to {here}: the keys after a {here} line are that "
+                    f"table's; move `{key} = ...` above that line")
+    for header, keys in tables.items():
+        if header != here and key in keys:
+            return f"{here} has no key `{key}`; `{key}` is a key of {header}"
+    return ""
+
+
+def table_not_value(key: str, table: str, here: str) -> str:
+    """The line's text for a `table` header (`[study.seed]`) standing where `key` of the table `here` takes
+    a value."""
+    place = f"among the keys of {here}" if here.startswith("[") else f"at {here}"
+    return f"{table} is a table, where `{key}` takes a value: write `{key} = ...` {place}"
+
+
+def _to(header: str) -> str:
+    """"to [study]", but "at the top of the file": a header, or a place named in words."""
+    return f"to {header}" if header.startswith("[") else f"at {header}"
