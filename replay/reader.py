@@ -11,7 +11,11 @@ message is decoded with msgspec into its event class; a message of an event
 type this version does not know (a newer pairplay's) is counted and kept as an
 `UnknownEvent` by its tag; any other message that does not decode is kept as a
 `BadMessage` with the reason (a recording is evidence: nothing is dropped
-silently).
+silently). A message that does not decode is an event every verb reading the
+file lacks (a Q update among them: a Q-table the learner never had), so such a
+file is damaged as one that lost a part: `EventLog.undecoded` says so in the one
+line every verb uses (rebuild, counterfactual, replay and verify, view, report),
+`damaged` and `note` join it to the file's damaged parts and its cut.
 `EventDecoderFactory` plugs the same decoding into mcap's own readers.
 """
 
@@ -99,6 +103,37 @@ class EventLog:
     def whole(self) -> bool:
         """Every byte of the file checked out and nothing is missing at its end."""
         return not self.truncated and not self.damage
+
+    @property
+    def undecoded(self) -> str:
+        """The messages in the file that do not decode, in one short line ("" if none): how many, the first's
+        channel and reason (a new user's trial: rebuilt, then fitted, with exit 0 and no word)."""
+        if not self.bad:
+            return ""
+        first = self.bad[0]
+        return (f"{len(self.bad)} message{'s' * (len(self.bad) != 1)} in it do not decode "
+                f"({first.key or 'no channel'}: {first.reason[:80]})")
+
+    @property
+    def damaged(self) -> str:
+        """What is damaged in the file, in one short line ("" if nothing): its damaged parts (`brief`) and
+        the messages that do not decode (`undecoded`); a cut alone is not damage."""
+        return "; ".join(n for n in (self.brief if self.damage else "", self.undecoded) if n)
+
+    @property
+    def note(self) -> str:
+        """What a verb that reads the file's intact parts lacks, in one short line ("" if the file is whole and
+        every message decodes): "damaged: ..." or "truncated: ..." (`brief`), and `undecoded`."""
+        cut = "" if self.whole else f"{'damaged' if self.damage else 'truncated'}: {self.brief}"
+        return "; ".join(n for n in (cut, self.undecoded) if n)
+
+    @property
+    def lost(self) -> str:
+        """What the file lost among its events, in one short line ("" if nothing): a damaged part that held
+        some (`lost_from`: said by `brief`) and the messages that do not decode (`undecoded`). What is made of
+        such a file lacks events its session had (rebuild: refused without --partial; view: a partial view;
+        report: the game left out); a damage that lost no event (a summary's CRC) is not a loss."""
+        return "; ".join(n for n in (self.brief if self.lost_from >= 0 else "", self.undecoded) if n)
 
     def unknown_types(self) -> dict[str, int]:
         """How many events of each type this version does not know, by tag."""

@@ -131,20 +131,17 @@ def rebuild_recording(path: str | Path) -> Rebuilt:
     note = "" if log.whole or loss_free else f"{'damaged' if log.damage else 'truncated'}: {log.brief}"
     # messages in the file that do not decode are events the fold cannot take (a Q update among them: a Q-table
     # the learner never had); the reader keeps them in `bad` (a new user's trial: rebuilt with exit 0, no word)
-    bad = (f"{len(log.bad)} message{'s' * (len(log.bad) != 1)} in it do not decode "
-           f"({log.bad[0].key or 'no channel'}: {log.bad[0].reason[:80]})") if log.bad else ""
+    bad = log.undecoded
     note = "; ".join(n for n in (note, bad) if n)
     recovered = log.metadata.get("pairplay.recovered") or {}
     rebuilt = rebuild_events((r.event for r in log.events), str(path), log.truncated, note,
                              recovered, log.metadata.get("pairplay.recorder.end"), skipped=log.skipped)
     if loss_free:
         rebuilt.damage_read = f"the file is damaged, no event lost ({log.brief}): pairplay recover makes a whole copy"
-    if log.lost_from >= 0:
-        rebuilt.lost = f"the file is damaged ({log.brief})"
+    if log.lost:
+        rebuilt.lost = f"the file is damaged ({log.lost})"
     elif recovered.get("damaged", "[]") not in ("", "[]"):
         rebuilt.lost = "it was recovered from a damaged file, whose damaged parts are lost"
-    elif bad:
-        rebuilt.lost = f"the file is damaged ({bad})"
     return rebuilt
 
 

@@ -300,22 +300,29 @@ def test_a_damage_that_lost_no_event_leaves_the_policy_whole_and_is_said(whole, 
     assert rebuilt.damage_read.startswith("the file is damaged, no event lost (")
 
 
+def undecodable(whole, tmp_path, tag="QUpdated", n=3, name="bad.mcap"):
+    """A valid MCAP copy of `whole` whose first `n` messages of event `tag` are bytes that do not decode."""
+    p = tmp_path / name
+    w = EventLogWriter(p, chunk_size=4096)
+    broken = 0
+    for r in read_log(whole).events:
+        payload = r.payload
+        if type(r.event).__name__ == tag and broken < n:
+            payload, broken = b'{"type":"broken"', broken + 1
+        w.write(r.key, payload, log_time_ns=r.log_time_ns, sequence=r.event.seq)
+    w.close()
+    assert broken == min(n, sum(type(r.event).__name__ == tag for r in read_log(whole).events))
+    return p
+
+
 def test_messages_that_do_not_decode_are_never_rebuilt_as_whole(whole, tmp_path, capsys):
     """A new user's trial: a valid MCAP file whose QUpdated payloads were partly replaced by bytes that do not
     decode was rebuilt with exit 0, no word, its policy lacking those updates and not flagged partial. Now
     rebuild refuses it in one line unless --partial, as a file that lost a chunk."""
     from pairplay.cli.main import main
 
-    p = tmp_path / "bad.mcap"
-    w = EventLogWriter(p, chunk_size=4096)
-    broken = 0
-    for r in read_log(whole).events:
-        payload = r.payload
-        if type(r.event).__name__ == "QUpdated" and broken < 3:
-            payload, broken = b'{"type":"broken"', broken + 1
-        w.write(r.key, payload, log_time_ns=r.log_time_ns, sequence=r.event.seq)
-    w.close()
-    assert broken == 3 and len(read_log(p).bad) == 3
+    p = undecodable(whole, tmp_path)
+    assert len(read_log(p).bad) == 3
     assert main(["rebuild", str(p), "--out", str(tmp_path / "rb")]) == 2
     out, err = capsys.readouterr()
     assert out == "" and not (tmp_path / "rb").exists()
@@ -360,3 +367,27 @@ def test_index_bytes_damaged_with_the_summary_damaged_too_are_still_taken_as_los
     bad[summary_start + 20] ^= 1
     s = scan(variant(tmp_path, bytes(bad), "both.mcap"))
     assert [d for d in s.damage if d.lost_at >= 0], s.describe()
+
+
+def test_every_verb_that_reads_a_recording_names_messages_that_do_not_decode(whole, tmp_path, capsys):
+    """A new user's trial: after rebuild learned to call undecodable messages damage, `counterfactual` fitted
+    such a file with no word and `view` saved it under the complete view's name. Every verb that reads a
+    recording says it in rebuild's words (reader.EventLog.undecoded): counterfactual and replay read its
+    intact parts and say so, view saves <stem>.partial.rrd, verify fails naming it."""
+    from pairplay.cli.main import main
+
+    p = undecodable(whole, tmp_path)
+    said = "3 messages in it do not decode (pairplay/dmg/learner/QUpdated: "
+    assert main(["counterfactual", str(p), "--fit-only", "--out", str(tmp_path / "cf")]) == 0
+    out = capsys.readouterr().out
+    assert f"{p}: not whole ({said}" in out, out
+    assert main(["replay", str(p), "--speed", "max"]) == 0
+    out = capsys.readouterr().out
+    assert f"{p}: not whole ({said}" in out, out
+    assert main(["replay", str(p), "--verify"]) == 1
+    out = capsys.readouterr().out
+    assert f"error: {said}" in out and out.splitlines()[-1].startswith("verify: FAIL"), out
+    assert main(["view", "--recording", str(p)]) == 0
+    [line] = capsys.readouterr().out.splitlines()
+    assert not p.with_suffix(".rrd").exists() and (tmp_path / "bad.partial.rrd").stat().st_size > 0
+    assert line.startswith(f"saved {tmp_path / 'bad.partial.rrd'}: ") and f"{p} is damaged ({said}" in line, line
