@@ -78,3 +78,33 @@ def test_text_inputs_with_a_byte_order_mark_are_read(tmp_path):
     assert load_calibration(tmp_path / "calibration.json") == load_calibration(None)
     assert load_robot_config(str(tmp_path / "robot.json")) == load_robot_config(None)
     assert read_config_file(str(tmp_path / "zenoh.json5")) == {"mode": "peer"}
+
+
+def test_a_merge_of_a_partial_policy_is_flagged_partial_and_said_once(tmp_path, policy_bytes, capsys):
+    """A new user's trial: `combine` of a policy flagged partial (a session stopped early, a damaged recording)
+    wrote a merged policy whose `partial` field was empty, and said nothing. A merge of any partial input is
+    partial, naming that input and why, in the file and once on the console; the combiner service alike."""
+    import msgspec
+
+    from pairplay.cli.main import main
+    from pairplay.schemas import events as ev
+    from pairplay.services.combiner import CombinerLogic
+
+    why = "interrupted (SIGINT) after 3 of 10 rounds"
+    partial = msgspec.structs.replace(policy_file.FILE.decode(policy_bytes), partial=why)
+    policy_file.write_policy(tmp_path / "a.json", partial)
+    whole = policy_file.FILE.decode(policy_bytes)  # another participant's policy: Q differs in one state
+    other = msgspec.structs.replace(whole, participant="helmut", q=[[v + 0.5 for v in whole.q[0]], *whole.q[1:]])
+    policy_file.write_policy(tmp_path / "b.json", other)
+    assert main(["combine", str(tmp_path / "a.json"), str(tmp_path / "b.json"), "-o", str(tmp_path / "m.json")]) == 0
+    out = capsys.readouterr().out
+    merged = policy_file.read_policy(tmp_path / "m.json")
+    assert merged.partial == f"made of a partial policy: {tmp_path / 'a.json'} ({why})", merged.partial
+    assert out.count("PARTIAL") == 1 and f"PARTIAL merge: {merged.partial}" in out, out
+    [answer] = CombinerLogic(tmp_path).handle(ev.CombineRequested(request_id="r", policies=["a.json", "b.json"],
+                                                                  output_path="bus.json"))
+    assert answer.ok and policy_file.read_policy(tmp_path / "bus.json").partial == f"made of a partial policy: a.json ({why})"
+    # a partial policy of a participant left out takes no part
+    assert main(["combine", str(tmp_path / "a.json"), str(tmp_path / "b.json"), "--exclude", "ashley",
+                 "-o", str(tmp_path / "w.json")]) == 0
+    assert "PARTIAL" not in capsys.readouterr().out and policy_file.read_policy(tmp_path / "w.json").partial == ""
