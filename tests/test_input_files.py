@@ -80,6 +80,14 @@ def test_text_inputs_with_a_byte_order_mark_are_read(tmp_path):
     assert read_config_file(str(tmp_path / "zenoh.json5")) == {"mode": "peer"}
 
 
+def other_policy(policy_bytes: bytes, participant: str = "helmut"):
+    """Another policy (by default another participant's): the sample's, its Q differing in one state."""
+    import msgspec
+
+    whole = policy_file.FILE.decode(policy_bytes)
+    return msgspec.structs.replace(whole, participant=participant, q=[[v + 0.5 for v in whole.q[0]], *whole.q[1:]])
+
+
 def test_a_merge_of_a_partial_policy_is_flagged_partial_and_said_once(tmp_path, policy_bytes, capsys):
     """A new user's trial: `combine` of a policy flagged partial (a session stopped early, a damaged recording)
     wrote a merged policy whose `partial` field was empty, and said nothing. A merge of any partial input is
@@ -93,9 +101,7 @@ def test_a_merge_of_a_partial_policy_is_flagged_partial_and_said_once(tmp_path, 
     why = "interrupted (SIGINT) after 3 of 10 rounds"
     partial = msgspec.structs.replace(policy_file.FILE.decode(policy_bytes), partial=why)
     policy_file.write_policy(tmp_path / "a.json", partial)
-    whole = policy_file.FILE.decode(policy_bytes)  # another participant's policy: Q differs in one state
-    other = msgspec.structs.replace(whole, participant="helmut", q=[[v + 0.5 for v in whole.q[0]], *whole.q[1:]])
-    policy_file.write_policy(tmp_path / "b.json", other)
+    policy_file.write_policy(tmp_path / "b.json", other_policy(policy_bytes))
     assert main(["combine", str(tmp_path / "a.json"), str(tmp_path / "b.json"), "-o", str(tmp_path / "m.json")]) == 0
     out = capsys.readouterr().out
     merged = policy_file.read_policy(tmp_path / "m.json")
@@ -108,3 +114,31 @@ def test_a_merge_of_a_partial_policy_is_flagged_partial_and_said_once(tmp_path, 
     assert main(["combine", str(tmp_path / "a.json"), str(tmp_path / "b.json"), "--exclude", "ashley",
                  "-o", str(tmp_path / "w.json")]) == 0
     assert "PARTIAL" not in capsys.readouterr().out and policy_file.read_policy(tmp_path / "w.json").partial == ""
+
+
+@pytest.mark.parametrize("verb", [
+    ["session", "--participant", "sim:deaf", "--algorithm", "fixed", "--policy", "{a}"],
+    ["session", "--participant", "sim:deaf", "--algorithm", "pi-reuse", "--policy", "{a}"],
+    ["combine", "{a}", "{b}"],
+    ["profile", "{a}", "{c}"],
+    ["counterfactual", str(SAMPLE), "--policy", "fixed:{a}", "--out", "{tmp}/cf"],
+], ids=lambda v: " ".join(v[:4:3] if v[0] == "session" else v[:1]))
+def test_a_policy_file_of_an_unknown_algorithm_is_refused_naming_the_file_and_the_value(tmp_path, policy_bytes,
+                                                                                           capsys, verb):
+    """A new user's trial: a policy file saying "algorithm": "banana" was taken by `session --algorithm fixed`
+    (and combined, profiled, played) as a policy. Wherever a policy file is read (schemas/policy.py), an
+    algorithm that is not one of ALGORITHMS is one line naming the file and the value, exit 2."""
+    from pairplay.cli.main import main
+
+    data = json.loads(policy_bytes)
+    data["algorithm"] = "banana"
+    (tmp_path / "a.json").write_text(json.dumps(data))
+    policy_file.write_policy(tmp_path / "b.json", other_policy(policy_bytes))
+    policy_file.write_policy(tmp_path / "c.json", other_policy(policy_bytes, "ashley"))  # a second of hers
+    args = [a.format(a=tmp_path / "a.json", b=tmp_path / "b.json", c=tmp_path / "c.json", tmp=tmp_path)
+            for a in verb]
+    assert main(args) == 2
+    out, err = capsys.readouterr()
+    [line] = err.splitlines()
+    assert f"{tmp_path / 'a.json'}: " in line and "algorithm 'banana' is not one of q-learning, " in line, line
+    assert not (tmp_path / "cf").exists()
