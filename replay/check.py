@@ -47,11 +47,11 @@ def check_recording(path: str | Path, journal_ok: bool = False) -> Path:
         if wal_path(path).exists():
             if journal_ok:
                 return path
-            what = "empty file (0 bytes)" if not head else f"cut inside MCAP's magic ({len(head)} bytes)"
+            what = "the file is empty (0 bytes)" if not head else f"cut inside MCAP's magic ({len(head)} bytes)"
             raise InputError(f"{what}: its recorder stopped before it wrote a record; the journal beside it "
                              f"({wal_path(path).name}) holds what it received: `pairplay recover {path}`", path)
         if not head:
-            raise InputError("empty file (0 bytes), not a recording", path)
+            raise InputError("the file is empty (0 bytes), not a recording", path)  # every input's words (jsonfile.empty)
     if head != MCAP_MAGIC:
         from .wal import SUFFIX, is_journal
         if is_journal(path):  # a recorder's journal left beside a recording it did not finish

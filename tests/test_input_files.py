@@ -142,3 +142,50 @@ def test_a_policy_file_of_an_unknown_algorithm_is_refused_naming_the_file_and_th
     [line] = err.splitlines()
     assert f"{tmp_path / 'a.json'}: " in line and "algorithm 'banana' is not one of q-learning, " in line, line
     assert not (tmp_path / "cf").exists()
+
+
+EMPTY_INPUTS = [
+    ["session", "--participant", "sim:deaf", "--algorithm", "fixed", "--policy", "{f}.json"],
+    ["combine", "{f}.json", "-o", "{tmp}/m.json"],
+    ["protocol", "check", "{f}.toml"],
+    ["protocol", "init", "{tmp}/study", "--study", "{f}.toml"],
+    ["sweep", "{f}.toml", "--out", "{tmp}/sweep"],
+    ["robot", "--try", "1", "--robot-config", "{f}.json"],
+    ["robot", "--try", "1", "--calibration", "{f}.json"],
+    ["lab", "--participant", "human:p1", "--zenoh-config", "{f}.json5"],
+    ["rebuild", "{f}.mcap", "--out", "{tmp}/rb"],
+]
+
+
+def _verb_id(v: list[str]) -> str:
+    return " ".join(v[:2]) if v[0] == "protocol" else f"robot {v[-2]}" if v[0] == "robot" else v[0]
+
+
+# a text input of blanks too (an MCAP file of blanks is not MCAP: said so, test_cli_mistakes)
+@pytest.mark.parametrize("verb,blank", [pytest.param(v, b, id=f"{_verb_id(v)}-{name}")
+                                        for v in EMPTY_INPUTS for b, name in ((b"", "0 bytes"), (BOM + b"\n \n", "blank"))
+                                        if not (v[0] == "rebuild" and b)])
+def test_an_empty_input_file_is_said_to_be_empty_naming_it(tmp_path, capsys, verb, blank):
+    """A new user's trial: an empty --policy file said "Input data was truncated" (msgspec's words), an empty
+    study file "Object missing required field `study`", an empty sweep file ran the default study with exit 0.
+    Every JSON, TOML or MCAP input that is empty is one line naming the file, "the file is empty", exit 2,
+    nothing written (schemas/jsonfile.py `empty`)."""
+    from pairplay.cli.main import main
+
+    args = [a.format(f=tmp_path / "in", tmp=tmp_path) for a in verb]
+    given = next(a for a in args if a.startswith(str(tmp_path / "in")))
+    Path(given).write_bytes(blank)
+    assert main(args) == 2
+    out, err = capsys.readouterr()
+    [line] = err.splitlines()
+    assert "the file is empty" in line and given in line, line
+    assert sorted(p.name for p in tmp_path.iterdir()) == [Path(given).name]
+
+
+def test_an_empty_user_model_file_is_said_to_be_empty(tmp_path):
+    from pairplay.schemas import usermodel
+
+    (tmp_path / "u.json").write_bytes(b"")
+    with pytest.raises(InputError) as err:
+        usermodel.read_user_model(tmp_path / "u.json")
+    assert str(err.value) == f"{tmp_path / 'u.json'}: the file is empty"
