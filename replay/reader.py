@@ -111,7 +111,8 @@ class EventLog:
         if not self.bad:
             return ""
         first = self.bad[0]
-        return (f"{len(self.bad)} message{'s' * (len(self.bad) != 1)} in it do not decode "
+        one = len(self.bad) == 1
+        return (f"{len(self.bad)} message{'' if one else 's'} in it {'does' if one else 'do'} not decode "
                 f"({first.key or 'no channel'}: {first.reason[:80]})")
 
     @property

@@ -122,7 +122,7 @@ def rebuild_recording(path: str | Path) -> Rebuilt:
     forged = contradiction(r.event for r in log.events)
     if forged:
         raise RebuildError(f"{forged}: not rebuilt", path)
-    empty = no_whole_round((r.event for r in log.events), log.truncated, log.brief if log.damage else "")
+    empty = no_whole_round((r.event for r in log.events), log.truncated, log.damaged)
     if empty:
         raise NoWholeRound(f"{empty}; nothing to rebuild", path)
     # a damaged part that lost no event (a summary's CRC, an index) leaves the session whole: its policy is the

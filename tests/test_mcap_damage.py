@@ -391,3 +391,57 @@ def test_every_verb_that_reads_a_recording_names_messages_that_do_not_decode(who
     [line] = capsys.readouterr().out.splitlines()
     assert not p.with_suffix(".rrd").exists() and (tmp_path / "bad.partial.rrd").stat().st_size > 0
     assert line.startswith(f"saved {tmp_path / 'bad.partial.rrd'}: ") and f"{p} is damaged ({said}" in line, line
+
+
+@pytest.mark.parametrize("verb", [["rebuild", "{p}", "--out", "{tmp}/rb"], ["rebuild", "{p}", "--out", "{tmp}/rb", "--partial"],
+                                  ["counterfactual", "{p}", "--out", "{tmp}/cf"], ["replay", "{p}", "--verify"],
+                                  ["view", "--recording", "{p}"], ["replay", "{p}", "--speed", "max"]],
+                         ids=lambda v: " ".join(v[:1] + v[4:] + v[2:3] if v[0] == "replay" else v[:1] + v[4:]))
+def test_a_file_that_yields_no_session_through_its_damage_names_the_damage(whole, tmp_path, capsys, verb):
+    """A new user's trial: a recording whose SessionStarted did not decode was "a session that never started".
+    When the damage leaves no session, every verb's one line names it (what and where)."""
+    from pairplay.cli.main import main
+
+    p = undecodable(whole, tmp_path, "SessionStarted")
+    assert main([a.format(p=p, tmp=tmp_path) for a in verb]) == 2
+    out, err = capsys.readouterr()
+    [line] = err.splitlines()
+    assert ("holds no session: " in line and "no SessionStarted in its intact parts: the file is damaged (1 message "
+            "in it does not decode (pairplay/dmg/game/SessionStarted: ") in line and str(p) in line, line
+    assert sorted(f.name for f in tmp_path.iterdir()) == ["bad.mcap"]
+
+
+@pytest.mark.parametrize("partial", [False, True])
+def test_a_file_whose_round_ends_do_not_decode_is_not_a_session_ended_before_round_1(whole, tmp_path, capsys, partial):
+    """A new user's trial: a recording whose RoundEnded messages did not decode was refused as "holds no whole round:
+    the session ended (completed) before round 1", the damage unnamed: a session that completed its 3 rounds. The
+    line names the damage first (replay/check.py no_whole_round), for rebuild (and the combiner: rebuild_recording)
+    with or without --partial."""
+    from pairplay.cli.main import main
+
+    p = undecodable(whole, tmp_path, "RoundEnded", n=100)
+    assert main(["rebuild", str(p), "--out", str(tmp_path / "rb")] + ["--partial"] * partial) == 2
+    [line] = capsys.readouterr().err.splitlines()
+    assert ("holds no whole round: the file is damaged (3 messages in it do not decode (pairplay/dmg/game/RoundEnded: "
+            in line and "no round of 3 ended in its intact parts; its SessionEnded says completed" in line), line
+    with pytest.raises(InputError, match="the file is damaged \\(3 messages in it do not decode"):
+        rebuild_recording(p)
+
+
+@pytest.mark.parametrize("how", ["undecodable", "chunks"])
+def test_a_fit_left_no_turn_by_damage_names_the_damage(whole, tmp_path, capsys, how):
+    """A new user's trial: `counterfactual` of a heavily damaged file said "holds no resolved turn: nothing to fit
+    a user to", the damage unnamed. The line says what is damaged and where."""
+    from pairplay.cli.main import main
+
+    if how == "undecodable":
+        p, damage = undecodable(whole, tmp_path, "TurnResolved", n=1000), "do not decode (pairplay/dmg/game/TurnResolved: "
+    else:
+        data = bytearray(whole.read_bytes())
+        for c in scan(whole).chunks[1:-1]:  # every chunk's CRC but the first's and the last's fails
+            data[c.offset + c.length - 7] ^= 0x5A
+        p, damage = variant(tmp_path, bytes(data), "bad.mcap"), "parts lost, the first chunk 1 (bytes "
+    assert main(["counterfactual", str(p), "--out", str(tmp_path / "cf")]) == 2
+    [line] = capsys.readouterr().err.splitlines()
+    assert line.startswith("pairplay counterfactual: holds no resolved turn in its intact parts (") and damage in line, line
+    assert not (tmp_path / "cf").exists()
