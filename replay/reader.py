@@ -94,6 +94,9 @@ class EventLog:
     live: bool = False  # its end is missing because its recorder is still writing it, not a crash
     damage: list[Damage] = field(default_factory=list)  # the parts that failed a check (not read)
     lost_from: int = -1  # where the first part whose records are lost was, as an index of `events` (-1: none)
+    # where events are lost, as indexes of `events` (the event before each was read, the one at it after the loss):
+    # every damaged part whose records are lost, and every message that does not decode (`bad`)
+    lost_at: list[int] = field(default_factory=list)
     unknown: list[UnknownEvent] = field(default_factory=list)
     channels: dict[int, tuple[str, str]] = field(default_factory=dict)  # id -> (topic, schema name)
     skipped: dict[str, int] = field(default_factory=dict)  # read_log(only=...): events not decoded, by tag
@@ -192,16 +195,21 @@ def _read_log(path: str | Path, only: frozenset[str] | None = None) -> EventLog:
     decode, head = decode_event, _tagged.decode
     append = log.events.append
     records = checked.summary_records + checked.records
-    lost = [d.lost_at for d in checked.damage if d.lost_at >= 0]
-    if lost:  # a marker where the first lost part's records were (`lost_from`)
-        at = len(checked.summary_records) + min(lost)
-        records = [*records[:at], _LOST_HERE, *records[at:]]
+    lost = sorted({len(checked.summary_records) + d.lost_at for d in checked.damage if d.lost_at >= 0})
+    if lost:  # a marker where each lost part's records were (`lost_at`; the first: `lost_from`)
+        marked, before = [], 0
+        for at in lost:
+            marked += records[before:at]
+            marked.append(_LOST_HERE)
+            before = at
+        records = marked + records[before:]
     for record in records:
         if type(record) is Message:  # most records (mcap's record classes have no subclasses)
             key = channels.get(record.channel_id)
             if key is None:
                 log.bad.append(BadMessage("", f"message on unknown channel {record.channel_id}",
                                           record.log_time, record.data))
+                log.lost_at.append(len(log.events))
                 continue
             tag = skip_tags.get(record.channel_id)
             if tag is not None:
@@ -219,6 +227,7 @@ def _read_log(path: str | Path, only: frozenset[str] | None = None) -> EventLog:
                     log.unknown.append(UnknownEvent(key, tag, record.log_time, record.data))
                 else:
                     log.bad.append(BadMessage(key, str(err), record.log_time, record.data))
+                    log.lost_at.append(len(log.events))
         elif isinstance(record, Channel):
             channels[record.id] = record.topic
             log.channels[record.id] = (record.topic, str(record.schema_id))
@@ -232,7 +241,9 @@ def _read_log(path: str | Path, only: frozenset[str] | None = None) -> EventLog:
         elif isinstance(record, Metadata):
             log.metadata[record.name] = dict(record.metadata)
         elif record is _LOST_HERE:
-            log.lost_from = len(log.events)
+            log.lost_at.append(len(log.events))
+            if log.lost_from < 0:
+                log.lost_from = len(log.events)
     log.truncated, log.damage = checked.truncated, checked.damage
     log.error = "" if checked.whole else checked.describe()
     log.brief = "" if checked.whole else checked.brief()

@@ -445,3 +445,36 @@ def test_a_fit_left_no_turn_by_damage_names_the_damage(whole, tmp_path, capsys, 
     [line] = capsys.readouterr().err.splitlines()
     assert line.startswith("pairplay counterfactual: holds no resolved turn in its intact parts (") and damage in line, line
     assert not (tmp_path / "cf").exists()
+
+
+def _curve(path):
+    import csv
+
+    with open(path, newline="") as f:
+        return list(csv.DictReader(f))
+
+
+@pytest.mark.parametrize("how", ["chunk", "undecodable"])
+def test_a_partial_rebuild_s_curve_marks_the_rounds_the_damage_hit(whole, tmp_path, capsys, how):
+    """A new user's trial: a `--partial` rebuild's curve.csv did not say which rounds the damage took events of,
+    so a researcher read their counts as whole. Its `damaged` column is 1 for exactly the rounds whose events
+    were lost (a chunk, or messages that do not decode) and 0 for every other round, whose row is the whole
+    file's."""
+    from pairplay.cli.main import main
+
+    if how == "chunk":
+        p, _ = _middle_chunk_lost(whole, tmp_path)
+    else:
+        p = undecodable(whole, tmp_path, "TurnResolved", n=2)
+    kept = {r.payload for r in read_log(p).events}
+    hit = {r.event.round for r in read_log(whole).events if r.payload not in kept and hasattr(r.event, "round")}
+    assert main(["rebuild", str(whole), str(p), "--out", str(tmp_path / "rb"), "--partial", "--no-plot"]) == 0
+    capsys.readouterr()
+    full = {row["round"]: row for row in _curve(tmp_path / "rb" / "whole.curve.csv")}
+    rows = _curve(tmp_path / "rb" / f"{p.stem}.curve.csv")
+    assert all(row["damaged"] == "0" for row in full.values())
+    marked = {int(row["round"]) for row in rows if row["damaged"] == "1"}
+    assert hit and marked == hit & {int(row["round"]) for row in rows}, (marked, hit)
+    for row in rows:
+        if row["damaged"] == "0":
+            assert row == full[row["round"]]
