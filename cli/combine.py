@@ -12,7 +12,9 @@ files of each rule are named), a learned policy that learned nothing (0 rounds,
 no state ever updated, its Q-table all 0: an older rebuild of a recording cut
 before its first round wrote one; it would count as a participant who agrees
 with everything; a table written by hand, with values, is taken),
-and an existing --out without --force.
+and an existing --out without --force. A merge of any policy flagged partial
+(a session not completed, a damaged recording) is partial: its file's `partial`
+field names that input and why (core/policies.py `partial_inputs`), said once.
 """
 
 from __future__ import annotations
@@ -28,7 +30,7 @@ from pairplay.core.actionlevel import combine_actions, extract_action_info
 from pairplay.core.combine import COMPARED_STATES, combine, extract_info, trained_states
 from pairplay.core.geometry import STATE_NAMES
 from pairplay.core.policies import (by_participant, check_distinct, check_exclude, check_profiles_computable,
-                                    combined_policy_file, common_reward_bonus, users_from_policies)
+                                    combined_policy_file, common_reward_bonus, partial_inputs, users_from_policies)
 from pairplay.errors import InputError, OptionError
 from pairplay.lists import comma_items
 from pairplay.outputs import check_output
@@ -185,14 +187,17 @@ def run_combine(args) -> int:
         merged = combine_actions(users, [a.values for a in action])
     else:
         merged = combine(users)
+    partial = partial_inputs(policies, files, exclude)  # a merge of a partial policy is partial: flagged, said once
     if args.out:  # written before the listing, so a reader that stops early loses nothing
         write_policy(args.out, combined_policy_file(merged, users, files, args.seed, f"pairplay {__version__}",
-                                                    reward_rule), args.force)
+                                                    reward_rule, partial), args.force)
     print("\n".join(_profile_lines(profiles, policies)))
     print(f"\nmerged: speech {100 * merged.info.speech:.1f}%, head {100 * merged.info.head:.1f}%, "
           f"smile {merged.info.facial}, gaze {merged.info.gaze}\n")
     for s, (a, rule) in enumerate(zip(merged.policy, merged.rules)):
         print(f"{s:2d} {STATE_NAMES[s]:16s} {int(a):2d} {ACTIONS[int(a)].name:55s} {rule}")
+    if partial:
+        print(f"\nPARTIAL merge: {partial}")
     if args.out:
         print(f"\nwrote {args.out}")
     return 0

@@ -116,7 +116,7 @@ def run(args: argparse.Namespace) -> int:
     files = {path: read_policy(path) for _, path in arms_wanted if path}
 
     log = read_session(rec)
-    note = "" if log.whole else f"{'damaged' if log.damage else 'truncated'}: {log.brief}"
+    note = log.note  # its damage, cut and messages that do not decode (reader.EventLog), as rebuild's
     events = [r.event for r in log.events]
     turns = turns_from_events(events, str(rec), note)
     config = turns.config
@@ -170,7 +170,9 @@ def run(args: argparse.Namespace) -> int:
             else:
                 kind = name.partition(":")[0]
                 arms.append(cf.Arm(name, kind, learner, np.asarray(files[path].greedy)))
-                texts[name] = f"{'pi-reuse of' if kind == 'reuse' else 'fixed'} {Path(path).name}"
+                # a partial policy's arm says so where its results are (core/policies.py partial_inputs)
+                partial = " (a partial policy)" if files[path].partial else ""
+                texts[name] = f"{'pi-reuse of' if kind == 'reuse' else 'fixed'} {Path(path).name}{partial}"
         seeds = [game_seed(args.seed, f"counterfactual:{config.session}", i) for i in range(args.seeds)]
         runs = cf.run_arms(persona, arms, seeds, rounds, config.observed_source, config.reward_bonus)
     paths = write_counterfactual(out, stem, model, recorded, runs, texts, args.force)

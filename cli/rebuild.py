@@ -2,7 +2,8 @@
 
 Rule: each recording X.mcap gives X.policy.json and X.curve.csv in --out
 (replay/rebuild.py; named by the file, so the outputs of different recordings
-never collide: X.mcap and X.recovered.mcap keep theirs apart), and, unless
+never collide: X.mcap and X.recovered.mcap keep theirs apart; the curve's
+`damaged` column marks the rounds a damaged file lost events of), and, unless
 --no-plot, one figure of every recording's picks per round (learning curves;
 18 picks is perfect play). Before anything is written: every REC must be an
 MCAP file, none given twice, no two giving the same output names, and no

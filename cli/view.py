@@ -15,8 +15,9 @@ partial); before the first event nothing is saved. A recording its recorder
 is still writing (pairplay/livelock.py) is drawn as far as it goes and saved
 as `<stem>.partial.rrd` too, the result line saying the recording is live (it
 was saved as `<stem>.rrd`, a part passed off as the whole), and so is a
-damaged recording that lost events in its middle (rebuild's rule: never
-passed off as whole), its line naming the damage. Output: one line of result
+damaged recording that lost events in its middle or holds messages that do
+not decode (reader.EventLog.lost; rebuild's rule: never passed off as whole),
+its line naming the damage. Output: one line of result
 on stdout (saved); interrupted, its one line goes to stderr, as every verb's;
 what the view does is INFO (-v); what it noticed (a malformed message, a gap)
 is a WARNING.
@@ -100,7 +101,8 @@ def run(args: argparse.Namespace) -> int:
         live = held.live or is_live(args.recording)  # its recorder still writes it: what it holds is a part
         # a damaged file that lost events in its middle draws a part too (as rebuild refuses to pass it off as whole;
         # a new user's trial: saved as d.rrd, the whole name, and -q hid the damage)
-        lost = held.brief if held.lost_from >= 0 else ""
+        # (messages that do not decode are events lost too: reader.EventLog.lost)
+        lost = held.lost
         if args.session:  # before rerun loads and anything is drawn
             if not any(r.event.session == args.session for r in held.events):
                 raise InputError(f"holds no events of session {args.session}; nothing saved", args.recording)

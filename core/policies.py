@@ -122,9 +122,24 @@ def check_profiles_computable(policies: list[PolicyFile], names: list[str]) -> N
                          + _some([f"{who} ({name})" for who, name in alone]))
 
 
+def partial_inputs(policies: list[PolicyFile], names: list[str], exclude=()) -> str:
+    """Why a file derived from these policies is partial ("" if none is): a policy flagged partial (a session
+    not completed, a damaged recording: replay/rebuild.py) makes whatever is made of it partial too, so the
+    flag is carried, naming the first such input and its reason (a new user's trial: `combine` of a partial
+    policy wrote a merged policy that did not say so). Policies of `exclude`d participants take no part."""
+    flagged = [(name, p.partial) for p, name in zip(policies, names) if p.partial and p.participant not in exclude]
+    if not flagged:
+        return ""
+    name, why = flagged[0]
+    more = f" and {len(flagged) - 1} more" if len(flagged) > 1 else ""
+    return f"made of a partial policy: {name} ({why}){more}"
+
+
 def combined_policy_file(merged: Combined, users: list[User], merged_from: list[str], seed: int | None,
-                         software: str = "", reward_bonus: str = DEFAULT_REWARD_BONUS) -> PolicyFile:
+                         software: str = "", reward_bonus: str = DEFAULT_REWARD_BONUS,
+                         partial: str = "") -> PolicyFile:
+    """The merged policy's file; `partial`: why it is partial (`partial_inputs` of what it was made of)."""
     return to_policy_file(merged.q, np.zeros(len(merged.policy), dtype=np.int64), merged.policy,
                           algorithm="combined", participant="+".join(sorted(u.name for u in users)),
                           seed=seed, info=merged.info, merged_from=merged_from, rules=merged.rules,
-                          software=software, reward_bonus=reward_bonus)
+                          software=software, reward_bonus=reward_bonus, partial=partial)

@@ -47,11 +47,11 @@ def check_recording(path: str | Path, journal_ok: bool = False) -> Path:
         if wal_path(path).exists():
             if journal_ok:
                 return path
-            what = "empty file (0 bytes)" if not head else f"cut inside MCAP's magic ({len(head)} bytes)"
+            what = "the file is empty (0 bytes)" if not head else f"cut inside MCAP's magic ({len(head)} bytes)"
             raise InputError(f"{what}: its recorder stopped before it wrote a record; the journal beside it "
                              f"({wal_path(path).name}) holds what it received: `pairplay recover {path}`", path)
         if not head:
-            raise InputError("empty file (0 bytes), not a recording", path)
+            raise InputError("the file is empty (0 bytes), not a recording", path)  # every input's words (jsonfile.empty)
     if head != MCAP_MAGIC:
         from .wal import SUFFIX, is_journal
         if is_journal(path):  # a recorder's journal left beside a recording it did not finish
@@ -83,12 +83,15 @@ def no_session(log) -> str:
         topics = sorted({topic for topic, _ in log.channels.values()})[:2]
         return (f"holds no session: not a pairplay recording ({foreign} messages, none a pairplay event; "
                 f"channels {', '.join(repr(t) for t in topics)})")
-    lost = f", and parts of it are damaged ({log.brief})" if log.damage else ""
     # a recorder that finished its file says why it stopped, even before any event came (a signal
     # during the game's wait for its services, on a loaded machine: test_session_end)
     n = len(log.events) + sum(log.skipped.values())
+    if log.damaged:  # its start may be lost to the damage (a part, a message that does not decode): no session
+        # that "never started" (a new user's trial: a SessionStarted that did not decode was said so)
+        return (f"holds no session: {n} pairplay events but no SessionStarted in its intact parts: the file is "
+                f"damaged ({log.damaged})")
     why = f"stopped ({stopped}) before its game started" if stopped else "a session that never started"
-    return f"holds no session: {n} pairplay events but no SessionStarted ({why}{lost})"
+    return f"holds no session: {n} pairplay events but no SessionStarted ({why})"
 
 
 def read_session(path: str | Path, only: frozenset[str] | None = None):
@@ -106,9 +109,10 @@ def read_session(path: str | Path, only: frozenset[str] | None = None):
 def no_whole_round(events, truncated: bool = False, damaged: str = "") -> str:
     """Why the session of `events` (a recording's, in file order) has no round recorded whole, in
     words ("" if it has one: a RoundEnded of its game). `truncated`: the file is cut (reader.EventLog);
-    `damaged`: what is damaged in it, in the words every verb uses (reader.EventLog.error, from
-    mcapscan's `describe`: replay --verify and recover say the same), "" if no part is. A damaged
-    file is named as damaged, not as cut (a whole file whose chunks fail their CRC was "cut before round 1").
+    `damaged`: what is damaged in it, in the words every verb uses (reader.EventLog.damaged: its
+    damaged parts and the messages that do not decode), "" if nothing is. A damaged file is named as
+    damaged, not as cut (a whole file whose chunks fail their CRC was "cut before round 1"), nor as a
+    session that ended before its first round (its RoundEnded lost to the damage), whatever else it holds.
 
     Rounds are counted from 1, as the board shows them."""
     started = ended = None
@@ -126,9 +130,12 @@ def no_whole_round(events, truncated: bool = False, damaged: str = "") -> str:
     if ended is not None:
         how = f"{ended.reason}{f' ({ended.detail})' if ended.detail else ''}"
         where = f" in round 1{of} after {ended.turns_in_round} turns" if ended.round >= 0 else " before round 1"
+    if damaged:  # first: a round's end lost to the damage is no round that never ended (a new user's trial:
+        # RoundEnded messages that did not decode were "the session ended (completed) before round 1")
+        end = f"; its SessionEnded says {how}{where}" if ended is not None else ""
+        return f"holds no whole round: the file is damaged ({damaged}), no round{of} ended in its intact parts{end}"
+    if ended is not None:
         return f"holds no whole round: the session ended ({how}){where}"
-    if damaged:
-        return f"holds no whole round: the file is damaged ({damaged}), no round{of} ended in its intact parts"
     if truncated:
         return f"holds no whole round: the file is cut before round 1{of} ended"
     return f"holds no whole round: the recording stops before round 1{of} ended"

@@ -11,7 +11,11 @@ message is decoded with msgspec into its event class; a message of an event
 type this version does not know (a newer pairplay's) is counted and kept as an
 `UnknownEvent` by its tag; any other message that does not decode is kept as a
 `BadMessage` with the reason (a recording is evidence: nothing is dropped
-silently).
+silently). A message that does not decode is an event every verb reading the
+file lacks (a Q update among them: a Q-table the learner never had), so such a
+file is damaged as one that lost a part: `EventLog.undecoded` says so in the one
+line every verb uses (rebuild, counterfactual, replay and verify, view, report),
+`damaged` and `note` join it to the file's damaged parts and its cut.
 `EventDecoderFactory` plugs the same decoding into mcap's own readers.
 """
 
@@ -90,6 +94,9 @@ class EventLog:
     live: bool = False  # its end is missing because its recorder is still writing it, not a crash
     damage: list[Damage] = field(default_factory=list)  # the parts that failed a check (not read)
     lost_from: int = -1  # where the first part whose records are lost was, as an index of `events` (-1: none)
+    # where events are lost, as indexes of `events` (the event before each was read, the one at it after the loss):
+    # every damaged part whose records are lost, and every message that does not decode (`bad`)
+    lost_at: list[int] = field(default_factory=list)
     unknown: list[UnknownEvent] = field(default_factory=list)
     channels: dict[int, tuple[str, str]] = field(default_factory=dict)  # id -> (topic, schema name)
     skipped: dict[str, int] = field(default_factory=dict)  # read_log(only=...): events not decoded, by tag
@@ -99,6 +106,38 @@ class EventLog:
     def whole(self) -> bool:
         """Every byte of the file checked out and nothing is missing at its end."""
         return not self.truncated and not self.damage
+
+    @property
+    def undecoded(self) -> str:
+        """The messages in the file that do not decode, in one short line ("" if none): how many, the first's
+        channel and reason (a new user's trial: rebuilt, then fitted, with exit 0 and no word)."""
+        if not self.bad:
+            return ""
+        first = self.bad[0]
+        one = len(self.bad) == 1
+        return (f"{len(self.bad)} message{'' if one else 's'} in it {'does' if one else 'do'} not decode "
+                f"({first.key or 'no channel'}: {first.reason[:80]})")
+
+    @property
+    def damaged(self) -> str:
+        """What is damaged in the file, in one short line ("" if nothing): its damaged parts (`brief`) and
+        the messages that do not decode (`undecoded`); a cut alone is not damage."""
+        return "; ".join(n for n in (self.brief if self.damage else "", self.undecoded) if n)
+
+    @property
+    def note(self) -> str:
+        """What a verb that reads the file's intact parts lacks, in one short line ("" if the file is whole and
+        every message decodes): "damaged: ..." or "truncated: ..." (`brief`), and `undecoded`."""
+        cut = "" if self.whole else f"{'damaged' if self.damage else 'truncated'}: {self.brief}"
+        return "; ".join(n for n in (cut, self.undecoded) if n)
+
+    @property
+    def lost(self) -> str:
+        """What the file lost among its events, in one short line ("" if nothing): a damaged part that held
+        some (`lost_from`: said by `brief`) and the messages that do not decode (`undecoded`). What is made of
+        such a file lacks events its session had (rebuild: refused without --partial; view: a partial view;
+        report: the game left out); a damage that lost no event (a summary's CRC) is not a loss."""
+        return "; ".join(n for n in (self.brief if self.lost_from >= 0 else "", self.undecoded) if n)
 
     def unknown_types(self) -> dict[str, int]:
         """How many events of each type this version does not know, by tag."""
@@ -156,16 +195,21 @@ def _read_log(path: str | Path, only: frozenset[str] | None = None) -> EventLog:
     decode, head = decode_event, _tagged.decode
     append = log.events.append
     records = checked.summary_records + checked.records
-    lost = [d.lost_at for d in checked.damage if d.lost_at >= 0]
-    if lost:  # a marker where the first lost part's records were (`lost_from`)
-        at = len(checked.summary_records) + min(lost)
-        records = [*records[:at], _LOST_HERE, *records[at:]]
+    lost = sorted({len(checked.summary_records) + d.lost_at for d in checked.damage if d.lost_at >= 0})
+    if lost:  # a marker where each lost part's records were (`lost_at`; the first: `lost_from`)
+        marked, before = [], 0
+        for at in lost:
+            marked += records[before:at]
+            marked.append(_LOST_HERE)
+            before = at
+        records = marked + records[before:]
     for record in records:
         if type(record) is Message:  # most records (mcap's record classes have no subclasses)
             key = channels.get(record.channel_id)
             if key is None:
                 log.bad.append(BadMessage("", f"message on unknown channel {record.channel_id}",
                                           record.log_time, record.data))
+                log.lost_at.append(len(log.events))
                 continue
             tag = skip_tags.get(record.channel_id)
             if tag is not None:
@@ -183,6 +227,7 @@ def _read_log(path: str | Path, only: frozenset[str] | None = None) -> EventLog:
                     log.unknown.append(UnknownEvent(key, tag, record.log_time, record.data))
                 else:
                     log.bad.append(BadMessage(key, str(err), record.log_time, record.data))
+                    log.lost_at.append(len(log.events))
         elif isinstance(record, Channel):
             channels[record.id] = record.topic
             log.channels[record.id] = (record.topic, str(record.schema_id))
@@ -196,7 +241,9 @@ def _read_log(path: str | Path, only: frozenset[str] | None = None) -> EventLog:
         elif isinstance(record, Metadata):
             log.metadata[record.name] = dict(record.metadata)
         elif record is _LOST_HERE:
-            log.lost_from = len(log.events)
+            log.lost_at.append(len(log.events))
+            if log.lost_from < 0:
+                log.lost_from = len(log.events)
     log.truncated, log.damage = checked.truncated, checked.damage
     log.error = "" if checked.whole else checked.describe()
     log.brief = "" if checked.whole else checked.brief()

@@ -6,7 +6,8 @@ seeded tie-break (core.learning.greedy_policy seeded by the session's stream
 seed, as core.study does), so a rebuilt policy file equals the one the
 in-process study writes for the same seed and persona. Learning curves are per
 round: turns (9 is perfect play), picks, total reward, learned updates and
-inconsistent suggestions. A truncated recording rebuilds what it holds and
+inconsistent suggestions, and whether the file's damage took events of that round
+(`damaged`: reader.EventLog.lost_at, `damaged_rounds`). A truncated recording rebuilds what it holds and
 says so; a recording without SessionStarted is refused with the reason, and
 so is one whose session has no round recorded whole (`NoWholeRound`: check.py
 `no_whole_round`; it gave a policy of 0 rounds). A
@@ -59,6 +60,7 @@ class Rebuilt:
     partial: str = ""  # why the session is not complete ("" if it is)
     lost: str = ""  # what the file lost in its middle, short: a damaged part, or parts lost before a recover
     damage_read: str = ""  # a damage that lost no event (the policy is whole): said, not a partial session
+    damaged_rounds: frozenset[int] = frozenset()  # the rounds whose events the file's damage took some of
 
 
 def partial_reason(fold: SessionFold, note: str = "", recovered: dict[str, str] | None = None) -> str:
@@ -122,7 +124,7 @@ def rebuild_recording(path: str | Path) -> Rebuilt:
     forged = contradiction(r.event for r in log.events)
     if forged:
         raise RebuildError(f"{forged}: not rebuilt", path)
-    empty = no_whole_round((r.event for r in log.events), log.truncated, log.brief if log.damage else "")
+    empty = no_whole_round((r.event for r in log.events), log.truncated, log.damaged)
     if empty:
         raise NoWholeRound(f"{empty}; nothing to rebuild", path)
     # a damaged part that lost no event (a summary's CRC, an index) leaves the session whole: its policy is the
@@ -131,29 +133,41 @@ def rebuild_recording(path: str | Path) -> Rebuilt:
     note = "" if log.whole or loss_free else f"{'damaged' if log.damage else 'truncated'}: {log.brief}"
     # messages in the file that do not decode are events the fold cannot take (a Q update among them: a Q-table
     # the learner never had); the reader keeps them in `bad` (a new user's trial: rebuilt with exit 0, no word)
-    bad = (f"{len(log.bad)} message{'s' * (len(log.bad) != 1)} in it do not decode "
-           f"({log.bad[0].key or 'no channel'}: {log.bad[0].reason[:80]})") if log.bad else ""
+    bad = log.undecoded
     note = "; ".join(n for n in (note, bad) if n)
     recovered = log.metadata.get("pairplay.recovered") or {}
     rebuilt = rebuild_events((r.event for r in log.events), str(path), log.truncated, note,
                              recovered, log.metadata.get("pairplay.recorder.end"), skipped=log.skipped)
     if loss_free:
         rebuilt.damage_read = f"the file is damaged, no event lost ({log.brief}): pairplay recover makes a whole copy"
-    if log.lost_from >= 0:
-        rebuilt.lost = f"the file is damaged ({log.brief})"
+    rebuilt.damaged_rounds = damaged_rounds([r.event for r in log.events], log.lost_at)
+    if log.lost:
+        rebuilt.lost = f"the file is damaged ({log.lost})"
     elif recovered.get("damaged", "[]") not in ("", "[]"):
         rebuilt.lost = "it was recovered from a damaged file, whose damaged parts are lost"
-    elif bad:
-        rebuilt.lost = f"the file is damaged ({bad})"
     return rebuilt
 
 
-CURVE_COLUMNS = ("round", "turns", "picks", "matches", "reward", "learned", "inconsistent")
+def damaged_rounds(events: list, lost_at: list[int]) -> frozenset[int]:
+    """The rounds a loss in the file hit: at each place events were lost (reader.EventLog.lost_at: a damaged
+    part, a message that does not decode), the round of the nearest event read before it and of the nearest
+    after it (a part lost across a round's end took from both; a round lost whole has no end read, so it is
+    no round of the curve)."""
+    hit = set()
+    for at in lost_at:
+        before = next((e.round for e in reversed(events[:at]) if getattr(e, "round", -1) >= 0), None)
+        after = next((e.round for e in events[at:] if getattr(e, "round", -1) >= 0), None)
+        hit.update(r for r in (before, after) if r is not None)
+    return frozenset(hit)
 
 
-def curve_rows(fold: SessionFold) -> list[dict]:
+# `damaged`: 1 for a round the file's damage took events of (Rebuilt.damaged_rounds): its counts are incomplete
+CURVE_COLUMNS = ("round", "turns", "picks", "matches", "reward", "learned", "inconsistent", "damaged")
+
+
+def curve_rows(fold: SessionFold, damaged: frozenset[int] = frozenset()) -> list[dict]:
     return [{"round": r, "turns": s.turns, "picks": 2 * s.turns, "matches": s.matches, "reward": s.reward,
-             "learned": s.learned, "inconsistent": s.inconsistent}
+             "learned": s.learned, "inconsistent": s.inconsistent, "damaged": int(r in damaged)}
             for r, s in sorted(fold.rounds.items()) if s.ended]  # whole rounds only (fold.py)
 
 
@@ -178,5 +192,5 @@ def write_outputs(rebuilt: Rebuilt, out_dir: str | Path, force: bool = False) ->
     with output_file(curve_path, "w", force, newline="") as f:
         w = csv.DictWriter(f, fieldnames=CURVE_COLUMNS)
         w.writeheader()
-        w.writerows(curve_rows(rebuilt.fold))
+        w.writerows(curve_rows(rebuilt.fold, rebuilt.damaged_rounds))
     return [policy_path, curve_path]

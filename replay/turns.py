@@ -88,8 +88,9 @@ def turns_from_events(events, source: str = "", note: str = "") -> RecordedTurns
                 covered &= ~((1 << e.first) | (1 << e.second))
     if config is None:
         raise InputError("no SessionStarted: not a pairplay session recording", source)
-    if not rows:
-        raise InputError("holds no resolved turn: nothing to fit a user to", source)
+    if not rows:  # what left none, if the file is damaged or cut (a new user's trial: the damage unnamed)
+        raise InputError(f"holds no resolved turn{f' in its intact parts ({note})' if note else ''}: nothing to "
+                         "fit a user to", source)
     cols = np.array(rows, dtype=np.int64).T
     obs = Observations(np.zeros(len(rows), dtype=np.int64), cols[0], cols[1], cols[2], cols[3], cols[4], cols[5],
                        cols[6], np.stack(partners).astype(np.int64), cols[7], cols[8])
@@ -99,5 +100,5 @@ def turns_from_events(events, source: str = "", note: str = "") -> RecordedTurns
 def read_turns(path) -> RecordedTurns:
     """A recording's turns (see the module rule); InputError naming the file if it has none to fit."""
     log = read_session(path)
-    note = "" if log.whole else f"{'damaged' if log.damage else 'truncated'}: {log.brief}"
+    note = log.note  # its damage, cut and messages that do not decode (reader.EventLog), as rebuild's
     return turns_from_events((r.event for r in log.events), str(path), note)

@@ -3,7 +3,10 @@
 Rule: `human_report(folder, out)` reads only the study folder (replay/studydata.py):
 the journal says which recording is which game of which participant in which
 phase, the recordings say what happened. Games marked invalid or aborted are
-listed and left out of every figure and table. So are the games scripted
+listed and left out of every figure and table, and so is a game whose recording
+lost events (a damaged part, messages that do not decode: reader.EventLog.lost,
+the loss rebuild refuses without --partial): its picks would be a part passed
+off as the game. So are the games scripted
 personas played instead of people (a dress rehearsal: `protocol pilot`,
 `serve --pilot`; the journal's GameStarted `scripted`): they are listed by
 name and persona, and counted in nothing people did, unless
@@ -67,10 +70,11 @@ class GameStats:
     per_round_suggestions: list[int] = field(default_factory=list)
 
 
-def game_stats(path: Path, g, returning: bool, rounds: int) -> GameStats:
+def game_stats(log, g, returning: bool, rounds: int) -> GameStats:
+    """The stats of game `g` from its read recording (reader.EventLog)."""
     s = GameStats(g.session, g.participant, g.phase, g.game, returning,
                   from_bias=[0] * rounds, per_round_suggestions=[0] * rounds, scripted=g.scripted)
-    for e in read_log(path).of("RoundEnded", "SuggestionMade", "TurnResolved", "WrongSuggestionPressed"):
+    for e in log.of("RoundEnded", "SuggestionMade", "TurnResolved", "WrongSuggestionPressed"):
         name = type(e).__name__
         if name == "RoundEnded":
             s.picks.append(2 * e.turns)
@@ -141,7 +145,11 @@ def human_report(folder: str | Path, out: str | Path | None = None, reference: s
         if not path.is_file():
             excluded.append(f"{g.session} (recording missing)")
             continue
-        games.append(game_stats(path, g, data.returning(g.participant, g.phase), study.phase_by_id(g.phase).rounds))
+        log = read_log(path)
+        if log.lost:  # (a new user's trial: messages that do not decode were left out of its picks, no word)
+            excluded.append(f"{g.session} (recording damaged: {log.lost})")
+            continue
+        games.append(game_stats(log, g, data.returning(g.participant, g.phase), study.phase_by_id(g.phase).rounds))
     if not games:
         raise ValueError(f"{data.folder}: no completed, valid game to report on")
 

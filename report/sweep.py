@@ -46,7 +46,7 @@ from pairplay.errors import OptionError
 from pairplay.numbers import shown, type_name
 from pairplay.outputs import output_file, output_folder, write_text
 from pairplay.processes import check_workers, worker_pool
-from pairplay.schemas.jsonfile import without_bom
+from pairplay.schemas.jsonfile import empty, without_bom
 from pairplay.schemas.tomlplace import misplaced, table_not_value
 from pairplay.core.rng import SEED_RANGE
 from pairplay.report.study import SettingError, StudySettings, default_reuse_last
@@ -148,7 +148,10 @@ def read_grid(path: str | Path) -> Grid:
     path = str(path)
     try:
         with open(path, "rb") as f:
-            data = tomllib.loads(without_bom(f.read()).decode("utf-8"))
+            raw = f.read()
+        if empty(raw):  # (read as a grid of nothing, it ran the default study, exit 0: a new user's trial)
+            raise GridError(f"{path}: {empty(raw)}")
+        data = tomllib.loads(without_bom(raw).decode("utf-8"))
     except FileNotFoundError:
         raise GridError(f"{path}: no such file") from None
     except tomllib.TOMLDecodeError as exc:

@@ -11,6 +11,8 @@ a file without `format` is refused naming the field (the Struct's default
 filled it in: `{}`-like files with the other fields were read as policies).
 A UTF-8 byte order mark (a Windows editor's) is accepted, as in every text
 input of ours (`without_bom`): it was "malformed at byte 0", the BOM unnamed.
+A file of nothing (or of blanks) is "<file>: the file is empty" (`empty`), in
+every JSON, TOML or MCAP input alike.
 """
 
 from __future__ import annotations
@@ -30,6 +32,18 @@ def without_bom(data: bytes) -> bytes:
     """`data` without a leading UTF-8 byte order mark (what encoding="utf-8-sig" does for text): every
     JSON or TOML input a user may have saved from an editor is read through this or utf-8-sig."""
     return data[len(BOM):] if data.startswith(BOM) else data
+
+
+def empty(data: bytes | str) -> str:
+    """"the file is empty" (with how many bytes of blank it holds, if any) if `data`, a file's content, holds
+    nothing but a byte order mark and whitespace, else "". Every JSON, TOML or MCAP input says so in these
+    words, naming the file: msgspec said "Input data was truncated", a study file "Object missing required
+    field `study`", JSON5 "Empty strings are not legal JSON5", and an empty sweep file ran the default
+    study with exit 0 (a new user's trial)."""
+    raw = data.encode("utf-8") if isinstance(data, str) else data
+    if without_bom(raw).strip():
+        return ""
+    return "the file is empty" + (f" ({len(raw)} bytes of blank)" if raw else "")
 
 
 class _Format(msgspec.Struct):
@@ -58,6 +72,8 @@ class JsonFileKind(Generic[T]):
         if data[:len(MCAP_MAGIC)] == MCAP_MAGIC:  # was "JSON is malformed": the user gave the wrong file
             raise self.error(f"{source}: an MCAP recording, not a {self.what}"
                              + (f" ({self.from_recording})" if self.from_recording else ""))
+        if empty(data):
+            raise self.error(f"{source}: {empty(data)}")
         data = without_bom(data)
         try:
             _format_decoder.decode(data)

@@ -9,8 +9,9 @@ What Q means depends on `algorithm`: "q-learning" (and "pi-reuse") files hold th
 running average of eq. 5.2; "lspi" files hold phi(s, a)^T theta of online LSPI
 (core/lspi.py), say so in `q_meaning` and carry the LSPI settings in `lspi`. Both
 estimate the expected reward of a considered suggestion (gamma 0), on one scale.
-`format` and `version` say what the file is; a reader refuses anything else
-with a clear error (PolicyFileError), never a half-read policy.
+`format` and `version` say what the file is, `algorithm` what made it (one of
+ALGORITHMS); a reader refuses anything else with a clear error (PolicyFileError),
+never a half-read policy.
 
 Version 1 fields are below; later versions add fields with defaults at the end.
 """
@@ -27,6 +28,10 @@ from .jsonfile import JsonFileKind
 FORMAT = "pairplay.policy"
 VERSION = 1
 N_STATES, N_ACTIONS = 24, 88  # pinned here so the contract does not import core
+# what a policy file's `algorithm` may say: a session's learners (schemas/session.py ALGORITHMS, which imports this
+# module: written out here), a merge, the oracle's; any other value was read and used as a policy (a new user's
+# trial: `session --algorithm fixed --policy` of a file saying "algorithm": "banana")
+ALGORITHMS = ("q-learning", "lspi", "pi-reuse", "fixed", "combined", "oracle")
 # |Q| at most this: a Q-value estimates the expected reward of one suggestion, whose rewards are a few
 # units (core/reward.py: -3..+2); a file with 1e308 was merged and profiled as if it meant something.
 Q_LIMIT = 1e6
@@ -49,7 +54,7 @@ class UserInfo(msgspec.Struct, frozen=True):
 class PolicyFile(msgspec.Struct, frozen=True, kw_only=True):
     format: str = FORMAT
     version: int = VERSION
-    algorithm: str  # "q-learning", "lspi", "pi-reuse", "combined", "oracle"
+    algorithm: str  # one of ALGORITHMS
     participant: str  # persona key, or a study participant's id
     persona: Persona | None = None
     # the seed the game was played with: a session's --seed (`rebuild`), or the per-game seed `pairplay study`
@@ -83,6 +88,8 @@ class PolicyFile(msgspec.Struct, frozen=True, kw_only=True):
         if self.version > VERSION:
             raise PolicyFileError(f"policy file version {self.version} is newer than this pairplay "
                                   f"(reads up to {VERSION}); upgrade pairplay")
+        if self.algorithm not in ALGORITHMS:
+            raise PolicyFileError(f"algorithm {self.algorithm!r} is not one of {', '.join(ALGORITHMS)}")
         if len(self.states) != N_STATES or len(self.greedy) != N_STATES or len(self.visits) != N_STATES:
             raise PolicyFileError(f"a policy has {N_STATES} states; this file has "
                                   f"{len(self.states)} names, {len(self.greedy)} actions, {len(self.visits)} visit counts")

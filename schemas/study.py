@@ -30,6 +30,7 @@ import msgspec
 from pairplay.numbers import shown
 
 from .config import LearnerConfig
+from .jsonfile import empty
 from .robot_url import parse_robot_url
 from .session import MS_FIELDS, MS_RANGE, SEED_RANGE
 from .tomlplace import misplaced, table_not_value
@@ -213,6 +214,8 @@ def _check(study: Study) -> None:
 
 def parse_study(text: str, source: str = "study") -> Study:
     """A Study from TOML text; StudyFileError('<source>: <where>: <what>') if anything is wrong."""
+    if empty(text):  # (tomllib reads it as a table of nothing: "Object missing required field `study`")
+        raise StudyFileError(f"{source}: {empty(text)}")
     try:
         raw = tomllib.loads(text)
     except tomllib.TOMLDecodeError as err:

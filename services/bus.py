@@ -74,6 +74,7 @@ import zenoh
 import zenoh.ext
 
 from pairplay.errors import UserError
+from pairplay.schemas.jsonfile import empty
 from pairplay.services.zenohcheck import MODES, exposed, type_errors
 
 log = logging.getLogger("pairplay.bus")
@@ -142,9 +143,15 @@ class ConfigFileError(BusError, ValueError):
 
 def read_config_file(path: str) -> dict[str, Any]:
     try:
-        data = json5.loads(Path(path).read_text(encoding="utf-8-sig"))  # a byte order mark is no JSON5 error
+        text = Path(path).read_text(encoding="utf-8-sig")  # a byte order mark is no JSON5 error
     except OSError as err:
         raise ConfigFileError(f"cannot use the Zenoh config: {err.strerror or err}", f"--zenoh-config {path}") from None
+    except UnicodeDecodeError as err:  # not text at all
+        raise ConfigFileError(f"cannot use the Zenoh config: not JSON5: {err}", f"--zenoh-config {path}") from None
+    if empty(text):  # (JSON5 said "Empty strings are not legal JSON5")
+        raise ConfigFileError(f"cannot use the Zenoh config: {empty(text)}", f"--zenoh-config {path}")
+    try:
+        data = json5.loads(text)
     except ValueError as err:
         raise ConfigFileError(f"cannot use the Zenoh config: not JSON5: {err}", f"--zenoh-config {path}") from None
     if not isinstance(data, dict):

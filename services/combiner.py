@@ -22,7 +22,8 @@ from pathlib import Path
 
 from pairplay import __version__
 from pairplay.core.combine import combine
-from pairplay.core.policies import check_distinct, combined_policy_file, common_reward_bonus, users_from_policies
+from pairplay.core.policies import (check_distinct, combined_policy_file, common_reward_bonus, partial_inputs,
+                                    users_from_policies)
 from pairplay.errors import UserError
 from pairplay.replay.rebuild import RebuildError, rebuild_recording
 from pairplay.schemas import events as ev
@@ -71,7 +72,8 @@ class CombinerLogic:
         out = ""
         if r.output_path:
             write_policy(self._inside(r.output_path),
-                         combined_policy_file(merged, users, inputs, r.seed, software=__version__, reward_bonus=rule))
+                         combined_policy_file(merged, users, inputs, r.seed, software=__version__, reward_bonus=rule,
+                                              partial=partial_inputs(policies, inputs, set(r.exclude))))
             out = r.output_path
         return ev.PolicyCombined(request_id=r.request_id, inputs=inputs, actions=[int(a) for a in merged.policy],
                                  decided_by=list(merged.rules), output_path=out, users=[u.name for u in users],

@@ -221,9 +221,9 @@ def verify_recording(path) -> Verification:
         result.reach = (f"the {result.events} events the file holds, not the whole session: "
                         "parts of the recording it was recovered from were lost")
     if log.bad:
-        errors.append(f"{len(log.bad)} messages do not decode: {log.bad[0].reason}")
+        errors.append(log.undecoded)  # the words rebuild, view and counterfactual use (reader.EventLog)
     result.error = "; ".join(errors) or result.error
-    empty = no_whole_round((r.event for r in log.events), log.truncated, log.brief if log.damage else "")
+    empty = no_whole_round((r.event for r in log.events), log.truncated, log.damaged)
     if empty and result.ok and not result.ended:  # a PASS about nothing whole (a FAIL, a damaged part, says so)
         raise InputError(f"{empty}; nothing to verify", path)
     return result

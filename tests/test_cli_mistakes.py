@@ -67,7 +67,7 @@ SIM = ["session", "--participant", "sim:blind", "--rounds", "2"]
 CASES = [
     # item 4: input that is not what the verb needs
     Case("recover a missing file", ["recover", "missing.mcap"], "no such recording (missing.mcap)"),
-    Case("recover a zero-byte file", ["recover", "empty.mcap"], "empty file (0 bytes)"),
+    Case("recover a zero-byte file", ["recover", "empty.mcap"], "the file is empty (0 bytes)"),
     Case("recover random bytes", ["recover", "random.mcap"], "not a recording: not an MCAP file (it does not begin as one) (random.mcap)"),
     # a binary file where a text file is wanted (a traceback before: UnicodeDecodeError, the new-user trial 2026-11-30)
     Case("sweep a binary grid file", ["sweep", "random.mcap"], "random.mcap: not TOML (not UTF-8 text)"),
@@ -75,10 +75,10 @@ CASES = [
          "random.mcap: cannot read: not UTF-8 text"),
     Case("recover a folder", ["recover", "policies"], "a folder, not a recording"),
     Case("replay a missing file", ["replay", "missing.mcap"], "no such recording"),
-    Case("replay a zero-byte file", ["replay", "empty.mcap", "--speed", "max"], "empty file"),
+    Case("replay a zero-byte file", ["replay", "empty.mcap", "--speed", "max"], "the file is empty"),
     Case("replay random bytes", ["replay", "random.mcap", "--speed", "max"], "not a recording: not an MCAP file"),
     Case("verify random bytes", ["replay", "random.mcap", "--verify"], "not a recording: not an MCAP file"),
-    Case("view a zero-byte file", ["view", "--recording", "empty.mcap"], "empty file"),
+    Case("view a zero-byte file", ["view", "--recording", "empty.mcap"], "the file is empty"),
     Case("view random bytes", ["view", "--recording", "random.mcap"], "not a recording: not an MCAP file"),
     Case("view a session the recording does not hold",
          ["view", "--recording", "rec.mcap", "--session", "wrong", "--out", "new.rrd"], "holds no events of session wrong"),

@@ -204,7 +204,7 @@ def test_cli_mistakes_are_one_line_and_write_nothing(tmp_path, capsys):
     text.write_text("not a recording")
     _no_turn_recording(no_turn)
     out = tmp_path / "out"
-    cases = [((tmp_path / "missing.mcap",), "no such recording"), ((empty,), "empty file"),
+    cases = [((tmp_path / "missing.mcap",), "no such recording"), ((empty,), "the file is empty"),
              ((text,), "not an MCAP file"), ((tmp_path,), "a folder"),
              ((no_turn,), "no resolved turn"),
              ((SAMPLE, "--policy", "same,best"), "unknown arm 'best'"),
@@ -214,7 +214,7 @@ def test_cli_mistakes_are_one_line_and_write_nothing(tmp_path, capsys):
              ((SAMPLE, "--seeds", "1"), "must be at least 2"),
              ((SAMPLE, "--fit-also", SAMPLE.parent / "sim-ashley-fmt2.mcap"), "fit one participant at a time"),
              ((SAMPLE, "--fit-also", SAMPLE), "given twice"),
-             ((SAMPLE, "--fit-also", empty), "empty file")]
+             ((SAMPLE, "--fit-also", empty), "the file is empty")]
     for args, words in cases:
         try:
             code, err = _main(capsys, *args, "--out", out)

@@ -78,3 +78,114 @@ def test_text_inputs_with_a_byte_order_mark_are_read(tmp_path):
     assert load_calibration(tmp_path / "calibration.json") == load_calibration(None)
     assert load_robot_config(str(tmp_path / "robot.json")) == load_robot_config(None)
     assert read_config_file(str(tmp_path / "zenoh.json5")) == {"mode": "peer"}
+
+
+def other_policy(policy_bytes: bytes, participant: str = "helmut"):
+    """Another policy (by default another participant's): the sample's, its Q differing in one state."""
+    import msgspec
+
+    whole = policy_file.FILE.decode(policy_bytes)
+    return msgspec.structs.replace(whole, participant=participant, q=[[v + 0.5 for v in whole.q[0]], *whole.q[1:]])
+
+
+def test_a_merge_of_a_partial_policy_is_flagged_partial_and_said_once(tmp_path, policy_bytes, capsys):
+    """A new user's trial: `combine` of a policy flagged partial (a session stopped early, a damaged recording)
+    wrote a merged policy whose `partial` field was empty, and said nothing. A merge of any partial input is
+    partial, naming that input and why, in the file and once on the console; the combiner service alike."""
+    import msgspec
+
+    from pairplay.cli.main import main
+    from pairplay.schemas import events as ev
+    from pairplay.services.combiner import CombinerLogic
+
+    why = "interrupted (SIGINT) after 3 of 10 rounds"
+    partial = msgspec.structs.replace(policy_file.FILE.decode(policy_bytes), partial=why)
+    policy_file.write_policy(tmp_path / "a.json", partial)
+    policy_file.write_policy(tmp_path / "b.json", other_policy(policy_bytes))
+    assert main(["combine", str(tmp_path / "a.json"), str(tmp_path / "b.json"), "-o", str(tmp_path / "m.json")]) == 0
+    out = capsys.readouterr().out
+    merged = policy_file.read_policy(tmp_path / "m.json")
+    assert merged.partial == f"made of a partial policy: {tmp_path / 'a.json'} ({why})", merged.partial
+    assert out.count("PARTIAL") == 1 and f"PARTIAL merge: {merged.partial}" in out, out
+    [answer] = CombinerLogic(tmp_path).handle(ev.CombineRequested(request_id="r", policies=["a.json", "b.json"],
+                                                                  output_path="bus.json"))
+    assert answer.ok and policy_file.read_policy(tmp_path / "bus.json").partial == f"made of a partial policy: a.json ({why})"
+    # a partial policy of a participant left out takes no part
+    assert main(["combine", str(tmp_path / "a.json"), str(tmp_path / "b.json"), "--exclude", "ashley",
+                 "-o", str(tmp_path / "w.json")]) == 0
+    assert "PARTIAL" not in capsys.readouterr().out and policy_file.read_policy(tmp_path / "w.json").partial == ""
+
+
+@pytest.mark.parametrize("verb", [
+    ["session", "--participant", "sim:deaf", "--algorithm", "fixed", "--policy", "{a}"],
+    ["session", "--participant", "sim:deaf", "--algorithm", "pi-reuse", "--policy", "{a}"],
+    ["combine", "{a}", "{b}"],
+    ["profile", "{a}", "{c}"],
+    ["counterfactual", str(SAMPLE), "--policy", "fixed:{a}", "--out", "{tmp}/cf"],
+], ids=lambda v: " ".join(v[:4:3] if v[0] == "session" else v[:1]))
+def test_a_policy_file_of_an_unknown_algorithm_is_refused_naming_the_file_and_the_value(tmp_path, policy_bytes,
+                                                                                           capsys, verb):
+    """A new user's trial: a policy file saying "algorithm": "banana" was taken by `session --algorithm fixed`
+    (and combined, profiled, played) as a policy. Wherever a policy file is read (schemas/policy.py), an
+    algorithm that is not one of ALGORITHMS is one line naming the file and the value, exit 2."""
+    from pairplay.cli.main import main
+
+    data = json.loads(policy_bytes)
+    data["algorithm"] = "banana"
+    (tmp_path / "a.json").write_text(json.dumps(data))
+    policy_file.write_policy(tmp_path / "b.json", other_policy(policy_bytes))
+    policy_file.write_policy(tmp_path / "c.json", other_policy(policy_bytes, "ashley"))  # a second of hers
+    args = [a.format(a=tmp_path / "a.json", b=tmp_path / "b.json", c=tmp_path / "c.json", tmp=tmp_path)
+            for a in verb]
+    assert main(args) == 2
+    out, err = capsys.readouterr()
+    [line] = err.splitlines()
+    assert f"{tmp_path / 'a.json'}: " in line and "algorithm 'banana' is not one of q-learning, " in line, line
+    assert not (tmp_path / "cf").exists()
+
+
+EMPTY_INPUTS = [
+    ["session", "--participant", "sim:deaf", "--algorithm", "fixed", "--policy", "{f}.json"],
+    ["combine", "{f}.json", "-o", "{tmp}/m.json"],
+    ["protocol", "check", "{f}.toml"],
+    ["protocol", "init", "{tmp}/study", "--study", "{f}.toml"],
+    ["sweep", "{f}.toml", "--out", "{tmp}/sweep"],
+    ["robot", "--try", "1", "--robot-config", "{f}.json"],
+    ["robot", "--try", "1", "--calibration", "{f}.json"],
+    ["lab", "--participant", "human:p1", "--zenoh-config", "{f}.json5"],
+    ["rebuild", "{f}.mcap", "--out", "{tmp}/rb"],
+]
+
+
+def _verb_id(v: list[str]) -> str:
+    return " ".join(v[:2]) if v[0] == "protocol" else f"robot {v[-2]}" if v[0] == "robot" else v[0]
+
+
+# a text input of blanks too (an MCAP file of blanks is not MCAP: said so, test_cli_mistakes)
+@pytest.mark.parametrize("verb,blank", [pytest.param(v, b, id=f"{_verb_id(v)}-{name}")
+                                        for v in EMPTY_INPUTS for b, name in ((b"", "0 bytes"), (BOM + b"\n \n", "blank"))
+                                        if not (v[0] == "rebuild" and b)])
+def test_an_empty_input_file_is_said_to_be_empty_naming_it(tmp_path, capsys, verb, blank):
+    """A new user's trial: an empty --policy file said "Input data was truncated" (msgspec's words), an empty
+    study file "Object missing required field `study`", an empty sweep file ran the default study with exit 0.
+    Every JSON, TOML or MCAP input that is empty is one line naming the file, "the file is empty", exit 2,
+    nothing written (schemas/jsonfile.py `empty`)."""
+    from pairplay.cli.main import main
+
+    args = [a.format(f=tmp_path / "in", tmp=tmp_path) for a in verb]
+    given = next(a for a in args if a.startswith(str(tmp_path / "in")))
+    Path(given).write_bytes(blank)
+    assert main(args) == 2
+    out, err = capsys.readouterr()
+    [line] = err.splitlines()
+    assert "the file is empty" in line and given in line, line
+    assert sorted(p.name for p in tmp_path.iterdir()) == [Path(given).name]
+
+
+def test_an_empty_user_model_file_is_said_to_be_empty(tmp_path):
+    from pairplay.schemas import usermodel
+
+    (tmp_path / "u.json").write_bytes(b"")
+    with pytest.raises(InputError) as err:
+        usermodel.read_user_model(tmp_path / "u.json")
+    assert str(err.value) == f"{tmp_path / 'u.json'}: the file is empty"

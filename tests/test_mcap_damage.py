@@ -300,22 +300,29 @@ def test_a_damage_that_lost_no_event_leaves_the_policy_whole_and_is_said(whole, 
     assert rebuilt.damage_read.startswith("the file is damaged, no event lost (")
 
 
+def undecodable(whole, tmp_path, tag="QUpdated", n=3, name="bad.mcap"):
+    """A valid MCAP copy of `whole` whose first `n` messages of event `tag` are bytes that do not decode."""
+    p = tmp_path / name
+    w = EventLogWriter(p, chunk_size=4096)
+    broken = 0
+    for r in read_log(whole).events:
+        payload = r.payload
+        if type(r.event).__name__ == tag and broken < n:
+            payload, broken = b'{"type":"broken"', broken + 1
+        w.write(r.key, payload, log_time_ns=r.log_time_ns, sequence=r.event.seq)
+    w.close()
+    assert broken == min(n, sum(type(r.event).__name__ == tag for r in read_log(whole).events))
+    return p
+
+
 def test_messages_that_do_not_decode_are_never_rebuilt_as_whole(whole, tmp_path, capsys):
     """A new user's trial: a valid MCAP file whose QUpdated payloads were partly replaced by bytes that do not
     decode was rebuilt with exit 0, no word, its policy lacking those updates and not flagged partial. Now
     rebuild refuses it in one line unless --partial, as a file that lost a chunk."""
     from pairplay.cli.main import main
 
-    p = tmp_path / "bad.mcap"
-    w = EventLogWriter(p, chunk_size=4096)
-    broken = 0
-    for r in read_log(whole).events:
-        payload = r.payload
-        if type(r.event).__name__ == "QUpdated" and broken < 3:
-            payload, broken = b'{"type":"broken"', broken + 1
-        w.write(r.key, payload, log_time_ns=r.log_time_ns, sequence=r.event.seq)
-    w.close()
-    assert broken == 3 and len(read_log(p).bad) == 3
+    p = undecodable(whole, tmp_path)
+    assert len(read_log(p).bad) == 3
     assert main(["rebuild", str(p), "--out", str(tmp_path / "rb")]) == 2
     out, err = capsys.readouterr()
     assert out == "" and not (tmp_path / "rb").exists()
@@ -360,3 +367,114 @@ def test_index_bytes_damaged_with_the_summary_damaged_too_are_still_taken_as_los
     bad[summary_start + 20] ^= 1
     s = scan(variant(tmp_path, bytes(bad), "both.mcap"))
     assert [d for d in s.damage if d.lost_at >= 0], s.describe()
+
+
+def test_every_verb_that_reads_a_recording_names_messages_that_do_not_decode(whole, tmp_path, capsys):
+    """A new user's trial: after rebuild learned to call undecodable messages damage, `counterfactual` fitted
+    such a file with no word and `view` saved it under the complete view's name. Every verb that reads a
+    recording says it in rebuild's words (reader.EventLog.undecoded): counterfactual and replay read its
+    intact parts and say so, view saves <stem>.partial.rrd, verify fails naming it."""
+    from pairplay.cli.main import main
+
+    p = undecodable(whole, tmp_path)
+    said = "3 messages in it do not decode (pairplay/dmg/learner/QUpdated: "
+    assert main(["counterfactual", str(p), "--fit-only", "--out", str(tmp_path / "cf")]) == 0
+    out = capsys.readouterr().out
+    assert f"{p}: not whole ({said}" in out, out
+    assert main(["replay", str(p), "--speed", "max"]) == 0
+    out = capsys.readouterr().out
+    assert f"{p}: not whole ({said}" in out, out
+    assert main(["replay", str(p), "--verify"]) == 1
+    out = capsys.readouterr().out
+    assert f"error: {said}" in out and out.splitlines()[-1].startswith("verify: FAIL"), out
+    assert main(["view", "--recording", str(p)]) == 0
+    [line] = capsys.readouterr().out.splitlines()
+    assert not p.with_suffix(".rrd").exists() and (tmp_path / "bad.partial.rrd").stat().st_size > 0
+    assert line.startswith(f"saved {tmp_path / 'bad.partial.rrd'}: ") and f"{p} is damaged ({said}" in line, line
+
+
+@pytest.mark.parametrize("verb", [["rebuild", "{p}", "--out", "{tmp}/rb"], ["rebuild", "{p}", "--out", "{tmp}/rb", "--partial"],
+                                  ["counterfactual", "{p}", "--out", "{tmp}/cf"], ["replay", "{p}", "--verify"],
+                                  ["view", "--recording", "{p}"], ["replay", "{p}", "--speed", "max"]],
+                         ids=lambda v: " ".join(v[:1] + v[4:] + v[2:3] if v[0] == "replay" else v[:1] + v[4:]))
+def test_a_file_that_yields_no_session_through_its_damage_names_the_damage(whole, tmp_path, capsys, verb):
+    """A new user's trial: a recording whose SessionStarted did not decode was "a session that never started".
+    When the damage leaves no session, every verb's one line names it (what and where)."""
+    from pairplay.cli.main import main
+
+    p = undecodable(whole, tmp_path, "SessionStarted")
+    assert main([a.format(p=p, tmp=tmp_path) for a in verb]) == 2
+    out, err = capsys.readouterr()
+    [line] = err.splitlines()
+    assert ("holds no session: " in line and "no SessionStarted in its intact parts: the file is damaged (1 message "
+            "in it does not decode (pairplay/dmg/game/SessionStarted: ") in line and str(p) in line, line
+    assert sorted(f.name for f in tmp_path.iterdir()) == ["bad.mcap"]
+
+
+@pytest.mark.parametrize("partial", [False, True])
+def test_a_file_whose_round_ends_do_not_decode_is_not_a_session_ended_before_round_1(whole, tmp_path, capsys, partial):
+    """A new user's trial: a recording whose RoundEnded messages did not decode was refused as "holds no whole round:
+    the session ended (completed) before round 1", the damage unnamed: a session that completed its 3 rounds. The
+    line names the damage first (replay/check.py no_whole_round), for rebuild (and the combiner: rebuild_recording)
+    with or without --partial."""
+    from pairplay.cli.main import main
+
+    p = undecodable(whole, tmp_path, "RoundEnded", n=100)
+    assert main(["rebuild", str(p), "--out", str(tmp_path / "rb")] + ["--partial"] * partial) == 2
+    [line] = capsys.readouterr().err.splitlines()
+    assert ("holds no whole round: the file is damaged (3 messages in it do not decode (pairplay/dmg/game/RoundEnded: "
+            in line and "no round of 3 ended in its intact parts; its SessionEnded says completed" in line), line
+    with pytest.raises(InputError, match="the file is damaged \\(3 messages in it do not decode"):
+        rebuild_recording(p)
+
+
+@pytest.mark.parametrize("how", ["undecodable", "chunks"])
+def test_a_fit_left_no_turn_by_damage_names_the_damage(whole, tmp_path, capsys, how):
+    """A new user's trial: `counterfactual` of a heavily damaged file said "holds no resolved turn: nothing to fit
+    a user to", the damage unnamed. The line says what is damaged and where."""
+    from pairplay.cli.main import main
+
+    if how == "undecodable":
+        p, damage = undecodable(whole, tmp_path, "TurnResolved", n=1000), "do not decode (pairplay/dmg/game/TurnResolved: "
+    else:
+        data = bytearray(whole.read_bytes())
+        for c in scan(whole).chunks[1:-1]:  # every chunk's CRC but the first's and the last's fails
+            data[c.offset + c.length - 7] ^= 0x5A
+        p, damage = variant(tmp_path, bytes(data), "bad.mcap"), "parts lost, the first chunk 1 (bytes "
+    assert main(["counterfactual", str(p), "--out", str(tmp_path / "cf")]) == 2
+    [line] = capsys.readouterr().err.splitlines()
+    assert line.startswith("pairplay counterfactual: holds no resolved turn in its intact parts (") and damage in line, line
+    assert not (tmp_path / "cf").exists()
+
+
+def _curve(path):
+    import csv
+
+    with open(path, newline="") as f:
+        return list(csv.DictReader(f))
+
+
+@pytest.mark.parametrize("how", ["chunk", "undecodable"])
+def test_a_partial_rebuild_s_curve_marks_the_rounds_the_damage_hit(whole, tmp_path, capsys, how):
+    """A new user's trial: a `--partial` rebuild's curve.csv did not say which rounds the damage took events of,
+    so a researcher read their counts as whole. Its `damaged` column is 1 for exactly the rounds whose events
+    were lost (a chunk, or messages that do not decode) and 0 for every other round, whose row is the whole
+    file's."""
+    from pairplay.cli.main import main
+
+    if how == "chunk":
+        p, _ = _middle_chunk_lost(whole, tmp_path)
+    else:
+        p = undecodable(whole, tmp_path, "TurnResolved", n=2)
+    kept = {r.payload for r in read_log(p).events}
+    hit = {r.event.round for r in read_log(whole).events if r.payload not in kept and hasattr(r.event, "round")}
+    assert main(["rebuild", str(whole), str(p), "--out", str(tmp_path / "rb"), "--partial", "--no-plot"]) == 0
+    capsys.readouterr()
+    full = {row["round"]: row for row in _curve(tmp_path / "rb" / "whole.curve.csv")}
+    rows = _curve(tmp_path / "rb" / f"{p.stem}.curve.csv")
+    assert all(row["damaged"] == "0" for row in full.values())
+    marked = {int(row["round"]) for row in rows if row["damaged"] == "1"}
+    assert hit and marked == hit & {int(row["round"]) for row in rows}, (marked, hit)
+    for row in rows:
+        if row["damaged"] == "0":
+            assert row == full[row["round"]]

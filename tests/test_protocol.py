@@ -512,3 +512,25 @@ def test_every_csv_pairplay_writes_goes_through_csvcell():
             if m and not any(rel == a and text in line for a, text in allowed):
                 raw.append(f"{rel}: {line.strip()}")
     assert raw == [], raw
+
+
+def test_the_report_leaves_out_a_game_whose_recording_holds_messages_that_do_not_decode(played, tmp_path):
+    """A new user's trial: a recording whose TurnResolved and RoundEnded messages did not decode was reported
+    with its intact rounds only, as if the game were whole, with no word. The report leaves it out and says
+    why (reader.EventLog.lost: the loss rebuild refuses without --partial)."""
+    from pairplay.replay.writer import EventLogWriter
+
+    data = copy_study(played, tmp_path)
+    game = next(g for g in data.state.games.values() if g.valid_complete and g.participant == "p03")
+    path = data.folder / game.recording
+    records = read_log(path).events
+    w = EventLogWriter(path, chunk_size=4096)
+    for r in records:
+        broken = type(r.event).__name__ == "RoundEnded"
+        w.write(r.key, b'{"type":"broken"' if broken else r.payload, log_time_ns=r.log_time_ns, sequence=r.event.seq)
+    w.close()
+    report = human_report(data.folder, tmp_path / "report")
+    assert game.session not in {s.session for s in report.games}
+    [left] = [e for e in report.excluded if e.startswith(game.session)]
+    assert "recording damaged: 2 messages in it do not decode (" in left, left
+    assert left in (report.out / "report.md").read_text()

@@ -17,7 +17,7 @@ from typing import Callable
 
 import msgspec
 
-from pairplay.schemas.jsonfile import without_bom
+from pairplay.schemas.jsonfile import empty, without_bom
 from pairplay.schemas.robot import GESTURE_PRESETS, PRESET_NOTES, BoardCalibration, RobotActed, RobotConfig
 from pairplay.schemas.robot_url import FORMS, parse_robot_url  # noqa: F401 (FORMS: the --robot help)
 
@@ -45,7 +45,10 @@ def load_robot_config(path: str | None) -> RobotConfig:
         return RobotConfig()
     try:
         with open(path, "rb") as f:
-            config = msgspec.json.decode(without_bom(f.read()), type=RobotConfig)
+            raw = f.read()
+        if empty(raw):
+            raise ValueError(f"robot config {path}: {empty(raw)}")
+        config = msgspec.json.decode(without_bom(raw), type=RobotConfig)
     except OSError as exc:
         raise ValueError(f"cannot read robot config {path}: {exc}") from exc
     except msgspec.DecodeError as exc:

@@ -18,7 +18,7 @@ from pathlib import Path
 import msgspec
 
 from pairplay.core.geometry import COLS, N_CARDS, ROWS, card_of
-from pairplay.schemas.jsonfile import without_bom
+from pairplay.schemas.jsonfile import empty, without_bom
 from pairplay.schemas.robot import BoardCalibration, Point
 
 DEFAULT_FILE = "calibration_default.json"
@@ -41,6 +41,8 @@ def load_calibration(path: str | Path | None = None) -> BoardCalibration:
         except OSError as exc:
             raise CalibrationError(f"cannot read calibration {path}: {exc}") from exc
         where = str(path)
+        if empty(raw):
+            raise CalibrationError(f"calibration {where}: {empty(raw)}")
     try:
         calibration = msgspec.json.decode(without_bom(raw), type=BoardCalibration)
     except msgspec.DecodeError as exc:  # ValidationError is a subclass
