@@ -24,10 +24,12 @@ the events this version derives. A file with a damaged part (a chunk that fails
 its CRC, chunks out of order, a bad data-section or summary CRC: replay/mcapscan.py)
 or a file recovered from one is never verified as whole: FAIL, naming the part
 (`verify: FAIL: the file is damaged (...)`, what was lost where in a short line:
-reader.EventLog.brief). A part whose events are lost (reader.EventLog.lost_from)
-ends the comparison there, as a cut would: every event after it follows lost
-ones, and was printed as DIFFERS before "verified the whole session"; how many
-events came after it, not compared, is said (`Verification.not_compared`).
+reader.EventLog.brief). A message that does not decode is damage too, and a
+lost event. The first lost event (a part whose events are lost, or a message
+that does not decode: reader.EventLog.lost_at) ends the comparison there, as a
+cut would: every event after it follows lost ones, and was printed as DIFFERS
+before "verified the whole session"; how many events came after it, not
+compared, is said (`Verification.not_compared`).
 
 The last line (`Verification.verdict`) says in one line whether the events
 verified and how far: `verify: PASS` for a whole session; for a session
@@ -198,12 +200,14 @@ def verify_recording(path) -> Verification:
     recovered = log.metadata.get("pairplay.recovered", {})
     recovered_cut = recovered.get("truncated") == "true"
     events = [r.event for r in log.events]
-    if log.lost_from > 0:  # a part lost in the middle: every event after it follows lost ones and would
-        # "differ" (a new user's trial: DIFFERS lines, then "verified the whole session"); verified up to it
-        result = verify_events(events[:log.lost_from], str(path), True)
+    # the first event lost: in a damaged part, or a message that does not decode (reader.EventLog.lost_at)
+    first_lost = log.lost_at[0] if log.lost_at else -1
+    if first_lost > 0:  # lost in the middle: every event after it follows lost ones and would "differ"
+        # (new users' trials: DIFFERS lines, then "verified the whole session"); verified up to it
+        result = verify_events(events[:first_lost], str(path), True)
         result.truncated = log.truncated or recovered_cut
         result.lost_part = True
-        result.not_compared = len(events) - log.lost_from
+        result.not_compared = len(events) - first_lost
         result.reach = (f"up to the damaged part: {result.events} events, "
                         f"{_rounds_words(result.rounds_recorded, result.rounds)}; the {result.not_compared} events "
                         "after it are not compared (they follow the lost ones)")
@@ -211,17 +215,15 @@ def verify_recording(path) -> Verification:
         result = verify_events(events, str(path), log.truncated or recovered_cut)
     result.unknown = log.unknown_types()
     errors = []
-    if log.damage:
-        result.damaged = log.brief
-        if log.lost_from < 0:
+    if log.damaged:  # damaged parts and messages that do not decode, in the words every verb uses (reader.EventLog)
+        result.damaged = log.damaged
+        if first_lost < 0:
             result.reach = f"the {result.events} events the file holds (no event lost, but the file is damaged)"
     lost = json.loads(recovered.get("damaged", "[]") or "[]")
     if lost:
         errors.append(f"recovered from a damaged file, parts lost: {'; '.join(lost)}")
         result.reach = (f"the {result.events} events the file holds, not the whole session: "
                         "parts of the recording it was recovered from were lost")
-    if log.bad:
-        errors.append(log.undecoded)  # the words rebuild, view and counterfactual use (reader.EventLog)
     result.error = "; ".join(errors) or result.error
     empty = no_whole_round((r.event for r in log.events), log.truncated, log.damaged)
     if empty and result.ok and not result.ended:  # a PASS about nothing whole (a FAIL, a damaged part, says so)
