@@ -29,6 +29,7 @@ from pairplay.core.games import MemoryGames
 from pairplay.core.geometry import N_CARDS, N_STATES, NOT_ONE_CARD_STATE
 from pairplay.core.personas import persona as find_persona
 from pairplay.core.reward import check_bonus_rule
+from pairplay.core.rng import check_seed
 from pairplay.schemas.config import DEFAULT_REWARD_BONUS
 
 ENV_ID = "pairplay/Memory-v0"
@@ -81,6 +82,7 @@ class MemoryEnv(gymnasium.Env):
         return rich_observations(np.array([state]), turn)[0]
 
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
+        seed = None if seed is None else check_seed(seed)  # before Gymnasium's, which takes any int >= 0
         super().reset(seed=seed)
         options = options or {}
         if "persona" in options:

@@ -25,6 +25,7 @@ from pairplay.core.games import MemoryGames
 from pairplay.core.geometry import NOT_ONE_CARD_STATE
 from pairplay.core.personas import persona as find_persona
 from pairplay.core.reward import check_bonus_rule
+from pairplay.core.rng import check_seed
 from pairplay.schemas.config import DEFAULT_REWARD_BONUS
 
 from .env import observation_space, rich_observations
@@ -72,6 +73,7 @@ class MemoryVectorEnv(VectorEnv):
             seeds = [int(s) for s in seed]
             if len(seeds) != self.num_envs:
                 raise ValueError(f"{len(seeds)} seeds for {self.num_envs} games")
+        seeds = [check_seed(s, f"seed of game {i}") for i, s in enumerate(seeds)]
         self._games = MemoryGames(self.personas, seeds, self.observed_source, self.reward_bonus)
         states = self._games.observe()
         return self._obs(states, self._games.turn), {}

@@ -116,3 +116,15 @@ def test_bad_options_and_actions_are_refused():
         vec.step(np.array([0, 99]))
     obs, info = env.reset(options={"persona": "deaf"})
     assert env.persona.key == "deaf" and obs in env.observation_space
+
+
+@pytest.mark.parametrize("seed", [2**64, 2**64 + 1, 2**70])
+def test_a_seed_beyond_the_rngs_range_is_refused_not_aliased(seed):
+    """reset(seed=2**64) played seed 0's games (2**64 + 1 seed 1's): seeds are cut to 64 bits by no one now."""
+    with pytest.raises(ValueError, match="0..18446744073709551615"):
+        MemoryEnv().reset(seed=seed)
+    vec = MemoryVectorEnv(2)
+    for seeds in (seed, [3, seed], 2**64 - 1):  # an int seed s gives the games s and s + 1
+        with pytest.raises(ValueError, match="0..18446744073709551615"):
+            vec.reset(seed=seeds)
+    assert MemoryEnv().reset(seed=2**64 - 1)[0] in range(24) and vec.reset(seed=2**64 - 2)[0].shape == (2,)
