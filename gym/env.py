@@ -27,10 +27,10 @@ from gymnasium import spaces
 from pairplay.core.actions import N_ACTIONS
 from pairplay.core.games import MemoryGames
 from pairplay.core.geometry import N_CARDS, N_STATES, NOT_ONE_CARD_STATE
-from pairplay.core.personas import persona as find_persona
 from pairplay.core.reward import check_bonus_rule
-from pairplay.core.rng import check_seed
 from pairplay.schemas.config import DEFAULT_REWARD_BONUS
+
+from . import checks
 
 ENV_ID = "pairplay/Memory-v0"
 OBSERVATIONS = ("state", "rich")
@@ -66,7 +66,7 @@ class MemoryEnv(gymnasium.Env):
 
     def __init__(self, persona: str = "tatiana", reward_bonus: str = DEFAULT_REWARD_BONUS,
                  observation: str = "state", observed_source: str = "intended"):
-        self.persona = find_persona(persona)
+        self.persona = checks.persona(persona)
         self.reward_bonus = check_bonus_rule(reward_bonus)
         self.observation = observation
         self.observed_source = observed_source
@@ -82,12 +82,12 @@ class MemoryEnv(gymnasium.Env):
         return rich_observations(np.array([state]), turn)[0]
 
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
-        seed = None if seed is None else check_seed(seed)  # before Gymnasium's, which takes any int >= 0
+        seed = checks.reset_seed(seed)  # before Gymnasium's, which takes any int >= 0
+        new_persona = checks.reset_options(options)
         super().reset(seed=seed)
-        options = options or {}
-        if "persona" in options:
-            self.persona = find_persona(str(options["persona"]))
-        if seed is not None or self._games is None or "persona" in options:
+        if new_persona is not None:
+            self.persona = new_persona
+        if seed is not None or self._games is None or new_persona is not None:
             game_seed = int(seed) if seed is not None else int(self.np_random.integers(2 ** 63))
             self._games = MemoryGames([self.persona], [game_seed], self.observed_source, self.reward_bonus)
         else:
@@ -99,8 +99,7 @@ class MemoryEnv(gymnasium.Env):
     def step(self, action):
         if not self._open:
             raise RuntimeError("the round is over (or never started): call reset()")
-        if not self.action_space.contains(action):
-            raise ValueError(f"action {action!r} is not one of the {N_ACTIONS} composite codes")
+        checks.action(self.action_space, action)
         out = self._games.act(np.array([int(action)]))
         info = {"picks": int(out.picks[0]), "learned": bool(out.learned[0]), "matched": bool(out.matched[0]),
                 "considered": bool(out.considered[0]), "consistent": bool(out.consistent[0])}

@@ -23,11 +23,10 @@ from gymnasium.vector.utils import batch_space
 from pairplay.core.actions import N_ACTIONS
 from pairplay.core.games import MemoryGames
 from pairplay.core.geometry import NOT_ONE_CARD_STATE
-from pairplay.core.personas import persona as find_persona
 from pairplay.core.reward import check_bonus_rule
-from pairplay.core.rng import check_seed
 from pairplay.schemas.config import DEFAULT_REWARD_BONUS
 
+from . import checks
 from .env import observation_space, rich_observations
 
 
@@ -38,14 +37,11 @@ class MemoryVectorEnv(VectorEnv):
 
     def __init__(self, num_envs: int = 1, persona: str | Sequence[str] = "tatiana",
                  reward_bonus: str = DEFAULT_REWARD_BONUS, observation: str = "state",
-                 observed_source: str = "intended", **_ignored):
-        if num_envs < 1:
-            raise ValueError("num_envs must be >= 1")
-        keys = [persona] * num_envs if isinstance(persona, str) else list(persona)
-        if len(keys) != num_envs:
-            raise ValueError(f"{len(keys)} personas for {num_envs} games")
-        self.num_envs = num_envs
-        self.personas = [find_persona(k) for k in keys]
+                 observed_source: str = "intended"):
+        if isinstance(num_envs, bool) or not isinstance(num_envs, (int, np.integer)) or num_envs < 1:
+            raise ValueError(f"num_envs must be an integer >= 1, got {num_envs!r}")
+        self.num_envs = num_envs = int(num_envs)
+        self.personas = checks.personas(persona, num_envs)
         self.reward_bonus = check_bonus_rule(reward_bonus)
         self.observation = observation
         self.observed_source = observed_source
@@ -62,18 +58,16 @@ class MemoryVectorEnv(VectorEnv):
         return rich_observations(states, turn)
 
     def reset(self, *, seed: int | Sequence[int] | None = None, options: dict[str, Any] | None = None):
-        if seed is None:
+        seeds = checks.reset_seeds(seed, self.num_envs)
+        new_persona = checks.reset_options(options)
+        if new_persona is not None:
+            self.personas = [new_persona] * self.num_envs
+        if seeds is None:
             if self._np_random is None:
                 self._np_random, _ = seeding.np_random(None)
             seeds = [int(s) for s in self._np_random.integers(2 ** 63, size=self.num_envs)]
-        elif isinstance(seed, (int, np.integer)):
-            self._np_random, _ = seeding.np_random(int(seed))
-            seeds = [int(seed) + i for i in range(self.num_envs)]
-        else:
-            seeds = [int(s) for s in seed]
-            if len(seeds) != self.num_envs:
-                raise ValueError(f"{len(seeds)} seeds for {self.num_envs} games")
-        seeds = [check_seed(s, f"seed of game {i}") for i, s in enumerate(seeds)]
+        elif not isinstance(seed, (list, tuple, np.ndarray)):
+            self._np_random, _ = seeding.np_random(seeds[0])
         self._games = MemoryGames(self.personas, seeds, self.observed_source, self.reward_bonus)
         states = self._games.observe()
         return self._obs(states, self._games.turn), {}
@@ -81,10 +75,8 @@ class MemoryVectorEnv(VectorEnv):
     def step(self, actions):
         if self._games is None:
             raise RuntimeError("call reset() first")
-        actions = np.asarray(actions)
-        if actions.shape != (self.num_envs,) or actions.min() < 0 or actions.max() >= N_ACTIONS:
-            raise ValueError(f"actions must be {self.num_envs} composite codes 0..{N_ACTIONS - 1}")
-        out = self._games.act(actions)
+        checks.action(self.action_space, actions)
+        out = self._games.act(np.asarray(actions, dtype=np.int64))
         ones = np.ones(self.num_envs, dtype=bool)
         info: dict[str, Any] = {}
         for key in ("picks", "learned", "matched", "considered", "consistent"):

@@ -128,3 +128,40 @@ def test_a_seed_beyond_the_rngs_range_is_refused_not_aliased(seed):
         with pytest.raises(ValueError, match="0..18446744073709551615"):
             vec.reset(seed=seeds)
     assert MemoryEnv().reset(seed=2**64 - 1)[0] in range(24) and vec.reset(seed=2**64 - 2)[0].shape == (2,)
+
+
+def test_the_vector_env_refuses_what_the_single_env_refuses():
+    """The vector env ignored a mistyped option (it played tatiana), a reset's persona, float actions and
+    seeds the single env refuses (-1, 1.7, 2**64 in a list); both now take their input through one check."""
+    for make in (lambda **kw: gymnasium.make(ENV_ID, **kw),
+                 lambda **kw: gymnasium.make_vec(ENV_ID, num_envs=4, vectorization_mode="vector_entry_point", **kw)):
+        with pytest.raises(TypeError, match="persnoa"):
+            make(persnoa="deaf")
+    env, vec = MemoryEnv(), MemoryVectorEnv(4)
+    for bad, error in ((-1, ValueError), (2**64, ValueError), (1.7, TypeError), (2.0, TypeError), ("3", TypeError),
+                       (True, TypeError)):
+        for reset in (lambda: env.reset(seed=bad), lambda: vec.reset(seed=bad), lambda: vec.reset(seed=[1, bad, 2, 3])):
+            with pytest.raises(error, match="seed"):
+                reset()
+    with pytest.raises(ValueError, match="3 seeds for 4 games"):
+        vec.reset(seed=[1, 2, 3])
+    env.reset(seed=1)
+    vec.reset(seed=1)
+    for bad in (3.0, 3.5, "3", None, 88, -1, np.uint64(3), np.array([3]), [3]):
+        with pytest.raises(ValueError, match="composite code"):
+            env.step(bad)
+        with pytest.raises(ValueError, match="composite code"):
+            vec.step([0, 1, bad, 2] if np.ndim(bad) == 0 else [bad] * 4)
+    with pytest.raises(ValueError, match="composite code"):
+        vec.step(np.array([0.5, 1, 2, 3]))
+    env.step(np.int64(3))
+    vec.step(np.array([0, 1, 2, 3], dtype=np.int32))
+    for options, error in (({"personna": "blind"}, ValueError), ({"persona": "zzz"}, KeyError),
+                           ({"persona": 5}, TypeError), ({"reset_mask": np.ones(4, bool)}, ValueError)):
+        for target in (env, vec):
+            with pytest.raises(error, match="persona|reset option"):
+                target.reset(seed=2, options=options)
+    obs, _ = vec.reset(seed=5, options={"persona": "blind"})
+    assert [p.key for p in vec.personas] == ["blind"] * 4
+    assert obs.tolist() == [MemoryEnv(persona="blind").reset(seed=5 + i)[0] for i in range(4)]
+    assert env.reset(seed=5, options={"persona": "blind"})[0] == obs[0] and env.persona.key == "blind"
