@@ -35,6 +35,8 @@ from . import checks
 ENV_ID = "pairplay/Memory-v0"
 OBSERVATIONS = ("state", "rich")
 RICH_SIZE = N_STATES + 3 * N_CARDS
+# a step's info: core.games.Outcome's fields by these names, as these types (the vector env batches them)
+STEP_INFO = {"picks": int, "learned": bool, "matched": bool, "considered": bool, "consistent": bool}
 
 
 def observation_space(kind: str) -> spaces.Space:
@@ -101,8 +103,7 @@ class MemoryEnv(gymnasium.Env):
             raise RuntimeError("the round is over (or never started): call reset()")
         checks.action(self.action_space, action)
         out = self._games.act(np.array([int(action)]))
-        info = {"picks": int(out.picks[0]), "learned": bool(out.learned[0]), "matched": bool(out.matched[0]),
-                "considered": bool(out.considered[0]), "consistent": bool(out.consistent[0])}
+        info = {key: kind(getattr(out, key)[0]) for key, kind in STEP_INFO.items()}
         terminated = bool(out.round_over[0])
         if terminated:
             self._open = False

@@ -54,32 +54,54 @@ def test_a_fixed_policy_through_the_env_picks_what_the_study_picks(source, rule)
     assert picks == list(study.picks[0]) and got == rewards[:len(got)] and len(got) == len(rewards)
 
 
-def test_the_vector_env_is_one_env_per_game_stepped_together():
+def _same(a, b) -> bool:
+    """Two info dicts (or values in them) alike: the same keys, equal arrays, object arrays element by element."""
+    if isinstance(a, dict):
+        return isinstance(b, dict) and a.keys() == b.keys() and all(_same(a[k], b[k]) for k in a)
+    if isinstance(a, np.ndarray) and a.dtype == object:
+        return b.dtype == object and a.shape == b.shape and all(_same(x, y) for x, y in zip(a, b))
+    return np.array_equal(a, b) and np.asarray(a).dtype == np.asarray(b).dtype
+
+
+@pytest.mark.parametrize("observation", ["state", "rich"])
+def test_the_vector_env_is_a_sync_vector_env_of_single_envs(observation):
+    """Gymnasium's SAME_STEP semantics, checked against its SyncVectorEnv of MemoryEnvs: the same observations,
+    rewards and ends, the same info layout (a game whose round ended has its step's info in final_info and its
+    new round's reset info at the top), and reset() without a seed deals every game's next round (it started
+    new games with random seeds; a round's end left its info at the top level)."""
     n, seed = 6, 42
     ours = gymnasium.make_vec(ENV_ID, num_envs=n, vectorization_mode="vector_entry_point", persona="blind",
-                              observation="rich")
+                              observation=observation)
     assert isinstance(ours.unwrapped, MemoryVectorEnv)
     assert ours.observation_space == batch_space(ours.single_observation_space, n)
     assert ours.action_space == batch_space(ours.single_action_space, n)
     assert ours.metadata["autoreset_mode"] == AutoresetMode.SAME_STEP
-    sync = SyncVectorEnv([lambda: MemoryEnv(persona="blind", observation="rich") for _ in range(n)],
+    sync = SyncVectorEnv([lambda: MemoryEnv(persona="blind", observation=observation) for _ in range(n)],
                          autoreset_mode=AutoresetMode.SAME_STEP)
-    a, _ = ours.reset(seed=seed)
-    b, _ = sync.reset(seed=seed)
-    assert np.array_equal(a, b) and a in ours.observation_space
+    a, ia = ours.reset(seed=seed)
+    b, ib = sync.reset(seed=seed)
+    assert np.array_equal(a, b) and _same(ia, ib) and a in ours.observation_space
     rng = np.random.default_rng(0)
     ended = 0
-    for _ in range(60):
+    for step in range(160):
+        if step in (70, 71):  # mid-round, then again at once: every game's next round, as each single env's reset()
+            a, ia = ours.reset()
+            b, ib = sync.reset()
+            assert np.array_equal(a, b) and _same(ia, ib)
+        if step == 120:  # a new persona with seeds: new games
+            a, ia = ours.reset(seed=[7, 8, 9, 10, 11, 2**64 - 1], options={"persona": "deaf"})
+            b, ib = sync.reset(seed=[7, 8, 9, 10, 11, 2**64 - 1], options={"persona": "deaf"})
+            assert np.array_equal(a, b) and _same(ia, ib)
         actions = rng.integers(0, 88, n)
         a, ra, ta, ua, ia = ours.step(actions)
         b, rb, tb, ub, ib = sync.step(actions)
         assert np.array_equal(a, b) and np.array_equal(ra, rb) and np.array_equal(ta, tb) and not ua.any()
         assert a in ours.observation_space and ra.dtype == np.float64
-        if ta.any():
-            ended += int(ta.sum())
-            assert np.array_equal(ia["_final_obs"], ib["_final_obs"])
-            assert np.array_equal(ia["final_obs"][ta], np.stack(ib["final_obs"][ib["_final_obs"]]))
-    assert ended >= n  # every game finished a round and went on
+        assert _same(ia, ib), (step, ia, ib)
+        ended += int(ta.sum())
+        if ta.any() and not ta.all():
+            assert set(ia) >= {"final_obs", "final_info", "round", "picks"}
+    assert ended >= 2 * n  # the games finished rounds before and after the resets
     ours.close()
     sync.close()
 
@@ -95,7 +117,7 @@ def test_the_vector_env_reproduces_the_study_for_many_games():
     while min(len(p) for p in picks) < rounds:
         obs, _, over, _, info = env.step(policy[obs])
         for g in np.nonzero(over)[0]:
-            picks[g].append(int(info["picks"][g]))
+            picks[g].append(int(info["final_info"]["picks"][g]))  # a round's end: its step info is final_info
     assert [p[:rounds] for p in picks] == study.picks.tolist()
 
 
