@@ -63,21 +63,22 @@ def _same(a, b) -> bool:
     return np.array_equal(a, b) and np.asarray(a).dtype == np.asarray(b).dtype
 
 
-@pytest.mark.parametrize("observation", ["state", "rich"])
-def test_the_vector_env_is_a_sync_vector_env_of_single_envs(observation):
+@pytest.mark.parametrize("observation,source,personas", [("state", "intended", ["blind"] * 6),
+                                                         ("rich", "first-pick", ["deaf", "blind", "helmut"] * 2)])
+def test_the_vector_env_is_a_sync_vector_env_of_single_envs(observation, source, personas):
     """Gymnasium's SAME_STEP semantics, checked against its SyncVectorEnv of MemoryEnvs: the same observations,
     rewards and ends, the same info layout (a game whose round ended has its step's info in final_info and its
     new round's reset info at the top), and reset() without a seed deals every game's next round (it started
     new games with random seeds; a round's end left its info at the top level)."""
     n, seed = 6, 42
-    ours = gymnasium.make_vec(ENV_ID, num_envs=n, vectorization_mode="vector_entry_point", persona="blind",
-                              observation=observation)
+    ours = gymnasium.make_vec(ENV_ID, num_envs=n, vectorization_mode="vector_entry_point", persona=personas,
+                              observation=observation, observed_source=source)
     assert isinstance(ours.unwrapped, MemoryVectorEnv)
     assert ours.observation_space == batch_space(ours.single_observation_space, n)
     assert ours.action_space == batch_space(ours.single_action_space, n)
     assert ours.metadata["autoreset_mode"] == AutoresetMode.SAME_STEP
-    sync = SyncVectorEnv([lambda: MemoryEnv(persona="blind", observation=observation) for _ in range(n)],
-                         autoreset_mode=AutoresetMode.SAME_STEP)
+    sync = SyncVectorEnv([lambda k=k: MemoryEnv(persona=k, observation=observation, observed_source=source)
+                          for k in personas], autoreset_mode=AutoresetMode.SAME_STEP)
     a, ia = ours.reset(seed=seed)
     b, ib = sync.reset(seed=seed)
     assert np.array_equal(a, b) and _same(ia, ib) and a in ours.observation_space
