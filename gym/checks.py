@@ -1,7 +1,8 @@
 """What a user hands pairplay.gym, checked once for both environments.
 
-Rule: MemoryEnv and MemoryVectorEnv take their personas, reset seeds, reset
-options and actions through these functions and no other check, so the
+Rule: MemoryEnv and MemoryVectorEnv take their constructor options, personas,
+reset seeds, reset options and actions through these functions and no other
+check, all at once (a constructor checks every option it is given), so the
 vector env refuses exactly what the single env refuses (it had its own, looser
 checks: it played tatiana for a mistyped `persnoa=`, ignored
 `reset(options={"persona": ...})`, stepped 0.5 as action 0 and took seeds -1
@@ -19,11 +20,39 @@ import numpy as np
 from gymnasium import spaces
 
 from pairplay.core.actions import N_ACTIONS
+from pairplay.core.games import check_observed_source
 from pairplay.core.personas import persona as find_persona
+from pairplay.core.reward import check_bonus_rule
 from pairplay.core.rng import check_seed
 from pairplay.schemas.config import Persona
 
+OBSERVATIONS = ("state", "rich")
+RENDER_MODES: list[str] = []  # metadata["render_modes"]: the task draws nothing (render_mode None only)
 RESET_OPTIONS = ("persona",)  # what reset(options=...) takes; anything else is a mistake, not ignored
+
+
+def observation(kind: Any) -> str:
+    """The observation kind: "state" (the thesis's Discrete(24)) or "rich" (Box(78))."""
+    if kind not in OBSERVATIONS:
+        raise ValueError(f"observation must be one of {OBSERVATIONS}, got {kind!r}")
+    return kind
+
+
+def render_mode(mode: Any) -> None:
+    """Gymnasium's render_mode: None (nothing is drawn) is the only one; any other is refused here, not
+    taken and failed at render()."""
+    if mode is not None and mode not in RENDER_MODES:
+        raise ValueError(f"render_mode {mode!r} is not supported: pairplay/Memory-v0 draws nothing (its "
+                         "metadata render_modes is empty; render_mode None is the one mode; the board is in "
+                         "the observation with observation='rich')")
+
+
+def env_options(reward_bonus: Any, kind: Any, observed_source: Any, mode: Any) -> None:
+    """Every constructor option but the persona(s), checked when the env is made, not at its first reset."""
+    check_bonus_rule(reward_bonus)
+    observation(kind)
+    check_observed_source(observed_source)
+    render_mode(mode)
 
 
 def persona(key: Any) -> Persona:

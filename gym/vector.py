@@ -28,26 +28,27 @@ from gymnasium.vector.utils import batch_space
 from pairplay.core.actions import N_ACTIONS
 from pairplay.core.games import MemoryGames, Outcome
 from pairplay.core.geometry import NOT_ONE_CARD_STATE
-from pairplay.core.reward import check_bonus_rule
 from pairplay.schemas.config import DEFAULT_REWARD_BONUS
 
 from . import checks
-from .env import STEP_INFO, observation_space, rich_observations
+from .env import STEP_INFO, observation_space, render_nothing, rich_observations
 
 
 class MemoryVectorEnv(VectorEnv):
     """`num_envs` games of the task at once; see the module rule."""
 
-    metadata = {"autoreset_mode": AutoresetMode.SAME_STEP, "render_modes": []}
+    metadata = {"autoreset_mode": AutoresetMode.SAME_STEP, "render_modes": list(checks.RENDER_MODES)}
 
     def __init__(self, num_envs: int = 1, persona: str | Sequence[str] = "tatiana",
                  reward_bonus: str = DEFAULT_REWARD_BONUS, observation: str = "state",
-                 observed_source: str = "intended"):
+                 observed_source: str = "intended", render_mode: str | None = None):
         if isinstance(num_envs, bool) or not isinstance(num_envs, (int, np.integer)) or num_envs < 1:
             raise ValueError(f"num_envs must be an integer >= 1, got {num_envs!r}")
         self.num_envs = num_envs = int(num_envs)
+        checks.env_options(reward_bonus, observation, observed_source, render_mode)
         self.personas = checks.personas(persona, num_envs)
-        self.reward_bonus = check_bonus_rule(reward_bonus)
+        self.reward_bonus = reward_bonus
+        self.render_mode = render_mode
         self.observation = observation
         self.observed_source = observed_source
         self.single_observation_space = observation_space(observation)
@@ -76,7 +77,7 @@ class MemoryVectorEnv(VectorEnv):
                 seeds = [int(s) for s in self.np_random.integers(2 ** 63, size=self.num_envs)]
             self._games = MemoryGames(self.personas, seeds, self.observed_source, self.reward_bonus)
         states = self._games.observe()
-        return self._obs(states, self._games.turn), {"round": self._games.round_index.copy(),
+        return self._obs(states, self._games.turn), {"round": self._games.deal_index.copy(),
                                                      "_round": np.ones(self.num_envs, dtype=bool)}
 
     def step(self, actions):
@@ -94,10 +95,13 @@ class MemoryVectorEnv(VectorEnv):
             info["final_obs"], info["_final_obs"] = self._final_obs(ended), over.copy()
             info["final_info"], info["_final_info"] = _masked(out, over), over.copy()
             self._games.new_round(ended)
-            info["round"], info["_round"] = np.where(over, self._games.round_index, 0), over.copy()
+            info["round"], info["_round"] = np.where(over, self._games.deal_index, 0), over.copy()
         states = self._games.observe()
         return (self._obs(states, self._games.turn), out.rewards.astype(np.float64), over.copy(),
                 np.zeros(self.num_envs, dtype=bool), info)
+
+    def render(self) -> None:
+        return render_nothing()
 
     def _final_obs(self, ended: np.ndarray) -> np.ndarray:
         """(num_envs,) object array, Gymnasium's final_obs: each ended game's terminal observation, None elsewhere."""

@@ -188,3 +188,42 @@ def test_the_vector_env_refuses_what_the_single_env_refuses():
     assert [p.key for p in vec.personas] == ["blind"] * 4
     assert obs.tolist() == [MemoryEnv(persona="blind").reset(seed=5 + i)[0] for i in range(4)]
     assert env.reset(seed=5, options={"persona": "blind"})[0] == obs[0] and env.persona.key == "blind"
+
+
+def test_gymnasiums_conventions_render_mode_render_and_options_checked_at_construction():
+    """render_mode was a TypeError from the constructor, render() a NotImplementedError without a word, and
+    observed_source="bogus" was taken by make and refused only at the first reset."""
+    makes = (lambda **kw: gymnasium.make(ENV_ID, **kw),
+             lambda **kw: gymnasium.make_vec(ENV_ID, num_envs=2, vectorization_mode="vector_entry_point", **kw))
+    for make in makes:
+        env = make(render_mode=None)
+        assert env.render_mode is None and env.metadata["render_modes"] == []
+        env.reset(seed=1)
+        with pytest.warns(UserWarning, match="render_mode"):
+            assert env.render() is None
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")  # Gymnasium's own warning that the mode is not in render_modes
+            for mode in ("rgb_array", "human", "ansi"):
+                with pytest.raises(ValueError, match=f"render_mode '{mode}' is not supported"):
+                    make(render_mode=mode)
+        with pytest.raises(ValueError, match="observed source"):
+            make(observed_source="bogus")
+    with pytest.raises(ValueError, match="None for some games"):
+        MemoryVectorEnv(3).reset(seed=[1, None, 2])
+
+
+def test_info_round_is_the_index_of_the_rounds_deal_from_0():
+    """info["round"] counts from 0, as RoundStarted.round and rebuild's curve.csv do (what a person reads counts
+    from 1); a round abandoned by reset() counts: the next deal was reported as the same round again."""
+    env = MemoryEnv()
+    assert env.reset(seed=3)[1] == {"round": 0}
+    env.step(0)
+    assert env.reset()[1] == {"round": 1}  # round 0's deal abandoned: this is the game's second deal
+    done = False
+    while not done:
+        _, _, done, _, _ = env.step(0)
+    assert env.reset()[1] == {"round": 2} and env.reset(seed=3)[1] == {"round": 0}
+    vec = MemoryVectorEnv(2)
+    vec.reset(seed=3)
+    vec.step([0, 0])
+    assert vec.reset()[1]["round"].tolist() == [1, 1]
