@@ -29,6 +29,13 @@ _BIT = np.int64(1) << np.arange(N_CARDS, dtype=np.int64)
 OBSERVED_SOURCES = ("intended", "first-pick")
 
 
+def check_observed_source(source: str) -> str:
+    """`source` if it is one of OBSERVED_SOURCES (the card a suggestion is read against), else ValueError."""
+    if source not in OBSERVED_SOURCES:
+        raise ValueError(f"observed source {source!r} is not one of {OBSERVED_SOURCES}")
+    return source
+
+
 class Outcome(NamedTuple):
     """What one suggestion led to, per game."""
 
@@ -46,8 +53,7 @@ class MemoryGames:
 
     def __init__(self, personas: Sequence[Persona], seeds: Sequence[int], observed_source: str = "intended",
                  reward_bonus: str = DEFAULT_REWARD_BONUS):
-        if observed_source not in OBSERVED_SOURCES:
-            raise ValueError(f"observed source must be one of {OBSERVED_SOURCES}")
+        check_observed_source(observed_source)
         if len(personas) != len(seeds):
             raise ValueError("one seed per game")
         self.bonus = check_bonus_rule(reward_bonus)
@@ -59,7 +65,8 @@ class MemoryGames:
         self.partner = deal(self.deals.take(N_CARDS))[1]
         self.matched = np.zeros(n, dtype=np.int64)
         self.picks = np.zeros(n, dtype=np.int32)
-        self.round_index = np.zeros(n, dtype=np.int64)
+        self.round_index = np.zeros(n, dtype=np.int64)  # rounds cleared
+        self.deal_index = np.zeros(n, dtype=np.int64)  # the current deal's index: a round abandoned counts too
         self._turn = None
 
     def new_round(self, games: np.ndarray) -> None:
@@ -69,6 +76,7 @@ class MemoryGames:
             self.partner[games] = deal(self.deals.take(N_CARDS, games))[1]
             self.matched[games] = 0
             self.picks[games] = 0
+            self.deal_index[games] += 1
             self.users.new_round(games)
 
     def observe(self) -> np.ndarray:

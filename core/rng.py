@@ -31,6 +31,10 @@ differ (tested). Everything else, where derivation 1 aliased (it cut seeds to
 with one CRC-32 shared their streams), goes through BLAKE2b of the seed, the
 label and the game index. Derivation 1 stays available, exactly, for the
 recordings made with it (SessionConfig.streams).
+
+A game's seed is an integer in SEED_RANGE, checked where it becomes a stream
+(`check_seed`: stream_key, stream_keys, game_seed), never cut to 64 bits or
+truncated to an integer: 2**64 was seed 0's game, -1 seed 2**64-1's, 1.7 seed 1's.
 """
 
 from __future__ import annotations
@@ -65,19 +69,27 @@ def _study_label(label: str) -> bool:
     return label in PERSONAS
 
 
+def check_seed(seed, what: str = "seed", bounds: tuple[int, int] = SEED_RANGE) -> int:
+    """`seed` as an int: an integer (Python's or numpy's, not a bool) within `bounds` (SEED_RANGE).
+    TypeError for anything else that is not an integer, ValueError (naming the range) outside it."""
+    if isinstance(seed, (bool, np.bool_)) or not isinstance(seed, (int, np.integer)):
+        raise TypeError(f"{what} must be an integer {bounds[0]}..{bounds[1]}, got {seed!r}")
+    seed = int(seed)
+    if not bounds[0] <= seed <= bounds[1]:
+        raise ValueError(f"{what} {seed} is outside {bounds[0]}..{bounds[1]}")
+    return seed
+
+
 def game_seed(seed: int, persona: str, game: int, version: int = STREAMS_VERSION) -> int:
     """A 64-bit seed for game `game` (>= 0) of `persona` (a persona key or a participant id) under
     study seed `seed` (0..2**64-1), by stream derivation `version` (see the module rule).
-    Raises ValueError for a seed or game index out of range (version 1 takes what it always took)."""
-    seed, game = int(seed), int(game)
+    Raises ValueError for a seed or game index out of range, TypeError for one that is not an integer
+    (version 1 takes what it always took)."""
     if version == 1:
-        return _derivation_1(seed, persona, game)
+        return _derivation_1(int(seed), persona, int(game))
     if version != 2:
         raise ValueError(f"unknown stream derivation {version} (this pairplay knows 1 and {STREAMS_VERSION})")
-    if not SEED_RANGE[0] <= seed <= SEED_RANGE[1]:
-        raise ValueError(f"seed {seed} is outside {SEED_RANGE[0]}..{SEED_RANGE[1]}")
-    if not GAME_INDEX_RANGE[0] <= game <= GAME_INDEX_RANGE[1]:
-        raise ValueError(f"game index {game} is outside {GAME_INDEX_RANGE[0]}..{GAME_INDEX_RANGE[1]}")
+    seed, game = check_seed(seed), check_seed(game, "game index", GAME_INDEX_RANGE)
     if seed < 2**32 and _study_label(persona):
         return _derivation_1(seed, persona, game)
     digest = hashlib.blake2b(f"{seed}\x00{game}".encode(), digest_size=8, key=b"pairplay streams 2",
@@ -98,7 +110,7 @@ def stream_key(seed: int, role: str) -> int:
     """The 64-bit SplitMix64 key of one game's stream for one role."""
     if role not in _ROLE_KEY:
         raise ValueError(f"unknown role {role!r}; roles are {ROLES}")
-    return _stream_key(int(seed) & 0xFFFFFFFFFFFFFFFF, _ROLE_KEY[role])
+    return _stream_key(check_seed(seed), _ROLE_KEY[role])
 
 
 @lru_cache(maxsize=1 << 16)
@@ -113,7 +125,7 @@ def stream_keys(seeds: Sequence[int], roles: Sequence[str] = ROLES) -> np.ndarra
         if role not in _ROLE_KEY:
             raise ValueError(f"unknown role {role!r}; roles are {ROLES}")
     wanted = tuple(role in roles for role in ROLES)
-    keys = np.array([_key_row(int(s) & 0xFFFFFFFFFFFFFFFF, wanted) for s in seeds], dtype=np.uint64)
+    keys = np.array([_key_row(check_seed(s), wanted) for s in seeds], dtype=np.uint64)
     return keys.reshape(len(seeds), len(ROLES))
 
 

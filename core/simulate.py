@@ -28,7 +28,7 @@ from pairplay.schemas.config import DEFAULT_REWARD_BONUS, LearnerConfig, LSPICon
 from . import kernels, threads
 from .geometry import N_CARDS, N_STATES
 from .actions import N_ACTIONS
-from .games import OBSERVED_SOURCES
+from .games import check_observed_source
 from .learning import MODES, _policy_table, schedule_tables
 from .lspi import play_lspi
 from .reward import BONUS_CODES, simulated_reward
@@ -116,8 +116,7 @@ def run_games(personas: Sequence[Persona], seeds: Sequence[int], rounds: int | S
     the robot renders them (core/frames.py; 0, the thesis's user, by default),
     one for all games or one per game.
     """
-    if observed_source not in OBSERVED_SOURCES:
-        raise ValueError(f"observed source must be one of {OBSERVED_SOURCES}")
+    check_observed_source(observed_source)
     if record not in RECORDS:
         raise ValueError(f"record must be one of {list(RECORDS)}")
     n = len(personas)

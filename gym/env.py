@@ -13,7 +13,11 @@ are those of the study's game seeded s (core.rng.game_seed gives the study's
 seeds), so a fixed policy played here for R episodes picks what the study's
 run_games picks for that seed; `reset()` deals the next round of the same game.
 The persona (appendix A) is a constructor option or `reset(options={"persona": key})`
-(which starts a new game).
+(which starts a new game). Every option is checked when the env is made
+(gym/checks.py, shared with the vector env). reset's info["round"] is the
+index of the round's deal in its game, from 0 as RoundStarted.round counts (a
+round abandoned by reset() counts). render_mode None is the only one: render()
+draws nothing and returns None.
 """
 
 from __future__ import annotations
@@ -27,21 +31,27 @@ from gymnasium import spaces
 from pairplay.core.actions import N_ACTIONS
 from pairplay.core.games import MemoryGames
 from pairplay.core.geometry import N_CARDS, N_STATES, NOT_ONE_CARD_STATE
-from pairplay.core.personas import persona as find_persona
-from pairplay.core.reward import check_bonus_rule
 from pairplay.schemas.config import DEFAULT_REWARD_BONUS
 
+from . import checks
+
 ENV_ID = "pairplay/Memory-v0"
-OBSERVATIONS = ("state", "rich")
 RICH_SIZE = N_STATES + 3 * N_CARDS
+# a step's info: core.games.Outcome's fields by these names, as these types (the vector env batches them)
+STEP_INFO = {"picks": int, "learned": bool, "matched": bool, "considered": bool, "consistent": bool}
 
 
 def observation_space(kind: str) -> spaces.Space:
-    if kind not in OBSERVATIONS:
-        raise ValueError(f"observation must be one of {OBSERVATIONS}, got {kind!r}")
-    if kind == "state":
+    if checks.observation(kind) == "state":
         return spaces.Discrete(N_STATES)
     return spaces.Box(0.0, 1.0, (RICH_SIZE,), dtype=np.float32)
+
+
+def render_nothing() -> None:
+    """render() under render_mode None, Gymnasium's convention: nothing is drawn, None returned, and a
+    warning says so (it raised NotImplementedError without a word)."""
+    gymnasium.logger.warn("render() draws nothing: pairplay/Memory-v0's one render_mode is None (the board is "
+                          "in the observation with observation='rich'); it returns None")
 
 
 def rich_observations(states: np.ndarray, turn: dict | None) -> np.ndarray:
@@ -61,12 +71,14 @@ def rich_observations(states: np.ndarray, turn: dict | None) -> np.ndarray:
 class MemoryEnv(gymnasium.Env):
     """The task for one simulated user; see the module rule."""
 
-    metadata = {"render_modes": []}
+    metadata = {"render_modes": list(checks.RENDER_MODES)}
 
     def __init__(self, persona: str = "tatiana", reward_bonus: str = DEFAULT_REWARD_BONUS,
-                 observation: str = "state", observed_source: str = "intended"):
-        self.persona = find_persona(persona)
-        self.reward_bonus = check_bonus_rule(reward_bonus)
+                 observation: str = "state", observed_source: str = "intended", render_mode: str | None = None):
+        checks.env_options(reward_bonus, observation, observed_source, render_mode)
+        self.persona = checks.persona(persona)
+        self.reward_bonus = reward_bonus
+        self.render_mode = render_mode
         self.observation = observation
         self.observed_source = observed_source
         self.observation_space = observation_space(observation)
@@ -81,27 +93,29 @@ class MemoryEnv(gymnasium.Env):
         return rich_observations(np.array([state]), turn)[0]
 
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
+        seed = checks.reset_seed(seed)  # before Gymnasium's, which takes any int >= 0
+        new_persona = checks.reset_options(options)
         super().reset(seed=seed)
-        options = options or {}
-        if "persona" in options:
-            self.persona = find_persona(str(options["persona"]))
-        if seed is not None or self._games is None or "persona" in options:
+        if new_persona is not None:
+            self.persona = new_persona
+        if seed is not None or self._games is None or new_persona is not None:
             game_seed = int(seed) if seed is not None else int(self.np_random.integers(2 ** 63))
             self._games = MemoryGames([self.persona], [game_seed], self.observed_source, self.reward_bonus)
         else:
             self._games.new_round(np.array([0]))
         state = int(self._games.observe()[0])
         self._open = True
-        return self._obs(state), {"round": int(self._games.round_index[0])}
+        return self._obs(state), {"round": int(self._games.deal_index[0])}
+
+    def render(self) -> None:
+        return render_nothing()
 
     def step(self, action):
         if not self._open:
             raise RuntimeError("the round is over (or never started): call reset()")
-        if not self.action_space.contains(action):
-            raise ValueError(f"action {action!r} is not one of the {N_ACTIONS} composite codes")
+        checks.action(self.action_space, action)
         out = self._games.act(np.array([int(action)]))
-        info = {"picks": int(out.picks[0]), "learned": bool(out.learned[0]), "matched": bool(out.matched[0]),
-                "considered": bool(out.considered[0]), "consistent": bool(out.consistent[0])}
+        info = {key: kind(getattr(out, key)[0]) for key, kind in STEP_INFO.items()}
         terminated = bool(out.round_over[0])
         if terminated:
             self._open = False

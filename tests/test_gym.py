@@ -54,32 +54,55 @@ def test_a_fixed_policy_through_the_env_picks_what_the_study_picks(source, rule)
     assert picks == list(study.picks[0]) and got == rewards[:len(got)] and len(got) == len(rewards)
 
 
-def test_the_vector_env_is_one_env_per_game_stepped_together():
+def _same(a, b) -> bool:
+    """Two info dicts (or values in them) alike: the same keys, equal arrays, object arrays element by element."""
+    if isinstance(a, dict):
+        return isinstance(b, dict) and a.keys() == b.keys() and all(_same(a[k], b[k]) for k in a)
+    if isinstance(a, np.ndarray) and a.dtype == object:
+        return b.dtype == object and a.shape == b.shape and all(_same(x, y) for x, y in zip(a, b))
+    return np.array_equal(a, b) and np.asarray(a).dtype == np.asarray(b).dtype
+
+
+@pytest.mark.parametrize("observation,source,personas", [("state", "intended", ["blind"] * 6),
+                                                         ("rich", "first-pick", ["deaf", "blind", "helmut"] * 2)])
+def test_the_vector_env_is_a_sync_vector_env_of_single_envs(observation, source, personas):
+    """Gymnasium's SAME_STEP semantics, checked against its SyncVectorEnv of MemoryEnvs: the same observations,
+    rewards and ends, the same info layout (a game whose round ended has its step's info in final_info and its
+    new round's reset info at the top), and reset() without a seed deals every game's next round (it started
+    new games with random seeds; a round's end left its info at the top level)."""
     n, seed = 6, 42
-    ours = gymnasium.make_vec(ENV_ID, num_envs=n, vectorization_mode="vector_entry_point", persona="blind",
-                              observation="rich")
+    ours = gymnasium.make_vec(ENV_ID, num_envs=n, vectorization_mode="vector_entry_point", persona=personas,
+                              observation=observation, observed_source=source)
     assert isinstance(ours.unwrapped, MemoryVectorEnv)
     assert ours.observation_space == batch_space(ours.single_observation_space, n)
     assert ours.action_space == batch_space(ours.single_action_space, n)
     assert ours.metadata["autoreset_mode"] == AutoresetMode.SAME_STEP
-    sync = SyncVectorEnv([lambda: MemoryEnv(persona="blind", observation="rich") for _ in range(n)],
-                         autoreset_mode=AutoresetMode.SAME_STEP)
-    a, _ = ours.reset(seed=seed)
-    b, _ = sync.reset(seed=seed)
-    assert np.array_equal(a, b) and a in ours.observation_space
+    sync = SyncVectorEnv([lambda k=k: MemoryEnv(persona=k, observation=observation, observed_source=source)
+                          for k in personas], autoreset_mode=AutoresetMode.SAME_STEP)
+    a, ia = ours.reset(seed=seed)
+    b, ib = sync.reset(seed=seed)
+    assert np.array_equal(a, b) and _same(ia, ib) and a in ours.observation_space
     rng = np.random.default_rng(0)
     ended = 0
-    for _ in range(60):
+    for step in range(160):
+        if step in (70, 71):  # mid-round, then again at once: every game's next round, as each single env's reset()
+            a, ia = ours.reset()
+            b, ib = sync.reset()
+            assert np.array_equal(a, b) and _same(ia, ib)
+        if step == 120:  # a new persona with seeds: new games
+            a, ia = ours.reset(seed=[7, 8, 9, 10, 11, 2**64 - 1], options={"persona": "deaf"})
+            b, ib = sync.reset(seed=[7, 8, 9, 10, 11, 2**64 - 1], options={"persona": "deaf"})
+            assert np.array_equal(a, b) and _same(ia, ib)
         actions = rng.integers(0, 88, n)
         a, ra, ta, ua, ia = ours.step(actions)
         b, rb, tb, ub, ib = sync.step(actions)
         assert np.array_equal(a, b) and np.array_equal(ra, rb) and np.array_equal(ta, tb) and not ua.any()
         assert a in ours.observation_space and ra.dtype == np.float64
-        if ta.any():
-            ended += int(ta.sum())
-            assert np.array_equal(ia["_final_obs"], ib["_final_obs"])
-            assert np.array_equal(ia["final_obs"][ta], np.stack(ib["final_obs"][ib["_final_obs"]]))
-    assert ended >= n  # every game finished a round and went on
+        assert _same(ia, ib), (step, ia, ib)
+        ended += int(ta.sum())
+        if ta.any() and not ta.all():
+            assert set(ia) >= {"final_obs", "final_info", "round", "picks"}
+    assert ended >= 2 * n  # the games finished rounds before and after the resets
     ours.close()
     sync.close()
 
@@ -95,7 +118,7 @@ def test_the_vector_env_reproduces_the_study_for_many_games():
     while min(len(p) for p in picks) < rounds:
         obs, _, over, _, info = env.step(policy[obs])
         for g in np.nonzero(over)[0]:
-            picks[g].append(int(info["picks"][g]))
+            picks[g].append(int(info["final_info"]["picks"][g]))  # a round's end: its step info is final_info
     assert [p[:rounds] for p in picks] == study.picks.tolist()
 
 
@@ -116,3 +139,91 @@ def test_bad_options_and_actions_are_refused():
         vec.step(np.array([0, 99]))
     obs, info = env.reset(options={"persona": "deaf"})
     assert env.persona.key == "deaf" and obs in env.observation_space
+
+
+@pytest.mark.parametrize("seed", [2**64, 2**64 + 1, 2**70])
+def test_a_seed_beyond_the_rngs_range_is_refused_not_aliased(seed):
+    """reset(seed=2**64) played seed 0's games (2**64 + 1 seed 1's): seeds are cut to 64 bits by no one now."""
+    with pytest.raises(ValueError, match="0..18446744073709551615"):
+        MemoryEnv().reset(seed=seed)
+    vec = MemoryVectorEnv(2)
+    for seeds in (seed, [3, seed], 2**64 - 1):  # an int seed s gives the games s and s + 1
+        with pytest.raises(ValueError, match="0..18446744073709551615"):
+            vec.reset(seed=seeds)
+    assert MemoryEnv().reset(seed=2**64 - 1)[0] in range(24) and vec.reset(seed=2**64 - 2)[0].shape == (2,)
+
+
+def test_the_vector_env_refuses_what_the_single_env_refuses():
+    """The vector env ignored a mistyped option (it played tatiana), a reset's persona, float actions and
+    seeds the single env refuses (-1, 1.7, 2**64 in a list); both now take their input through one check."""
+    for make in (lambda **kw: gymnasium.make(ENV_ID, **kw),
+                 lambda **kw: gymnasium.make_vec(ENV_ID, num_envs=4, vectorization_mode="vector_entry_point", **kw)):
+        with pytest.raises(TypeError, match="persnoa"):
+            make(persnoa="deaf")
+    env, vec = MemoryEnv(), MemoryVectorEnv(4)
+    for bad, error in ((-1, ValueError), (2**64, ValueError), (1.7, TypeError), (2.0, TypeError), ("3", TypeError),
+                       (True, TypeError)):
+        for reset in (lambda: env.reset(seed=bad), lambda: vec.reset(seed=bad), lambda: vec.reset(seed=[1, bad, 2, 3])):
+            with pytest.raises(error, match="seed"):
+                reset()
+    with pytest.raises(ValueError, match="3 seeds for 4 games"):
+        vec.reset(seed=[1, 2, 3])
+    env.reset(seed=1)
+    vec.reset(seed=1)
+    for bad in (3.0, 3.5, "3", None, 88, -1, np.uint64(3), np.array([3]), [3]):
+        with pytest.raises(ValueError, match="composite code"):
+            env.step(bad)
+        with pytest.raises(ValueError, match="composite code"):
+            vec.step([0, 1, bad, 2] if np.ndim(bad) == 0 else [bad] * 4)
+    with pytest.raises(ValueError, match="composite code"):
+        vec.step(np.array([0.5, 1, 2, 3]))
+    env.step(np.int64(3))
+    vec.step(np.array([0, 1, 2, 3], dtype=np.int32))
+    for options, error in (({"personna": "blind"}, ValueError), ({"persona": "zzz"}, KeyError),
+                           ({"persona": 5}, TypeError), ({"reset_mask": np.ones(4, bool)}, ValueError)):
+        for target in (env, vec):
+            with pytest.raises(error, match="persona|reset option"):
+                target.reset(seed=2, options=options)
+    obs, _ = vec.reset(seed=5, options={"persona": "blind"})
+    assert [p.key for p in vec.personas] == ["blind"] * 4
+    assert obs.tolist() == [MemoryEnv(persona="blind").reset(seed=5 + i)[0] for i in range(4)]
+    assert env.reset(seed=5, options={"persona": "blind"})[0] == obs[0] and env.persona.key == "blind"
+
+
+def test_gymnasiums_conventions_render_mode_render_and_options_checked_at_construction():
+    """render_mode was a TypeError from the constructor, render() a NotImplementedError without a word, and
+    observed_source="bogus" was taken by make and refused only at the first reset."""
+    makes = (lambda **kw: gymnasium.make(ENV_ID, **kw),
+             lambda **kw: gymnasium.make_vec(ENV_ID, num_envs=2, vectorization_mode="vector_entry_point", **kw))
+    for make in makes:
+        env = make(render_mode=None)
+        assert env.render_mode is None and env.metadata["render_modes"] == []
+        env.reset(seed=1)
+        with pytest.warns(UserWarning, match="render_mode"):
+            assert env.render() is None
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")  # Gymnasium's own warning that the mode is not in render_modes
+            for mode in ("rgb_array", "human", "ansi"):
+                with pytest.raises(ValueError, match=f"render_mode '{mode}' is not supported"):
+                    make(render_mode=mode)
+        with pytest.raises(ValueError, match="observed source"):
+            make(observed_source="bogus")
+    with pytest.raises(ValueError, match="None for some games"):
+        MemoryVectorEnv(3).reset(seed=[1, None, 2])
+
+
+def test_info_round_is_the_index_of_the_rounds_deal_from_0():
+    """info["round"] counts from 0, as RoundStarted.round and rebuild's curve.csv do (what a person reads counts
+    from 1); a round abandoned by reset() counts: the next deal was reported as the same round again."""
+    env = MemoryEnv()
+    assert env.reset(seed=3)[1] == {"round": 0}
+    env.step(0)
+    assert env.reset()[1] == {"round": 1}  # round 0's deal abandoned: this is the game's second deal
+    done = False
+    while not done:
+        _, _, done, _, _ = env.step(0)
+    assert env.reset()[1] == {"round": 2} and env.reset(seed=3)[1] == {"round": 0}
+    vec = MemoryVectorEnv(2)
+    vec.reset(seed=3)
+    vec.step([0, 0])
+    assert vec.reset()[1]["round"].tolist() == [1, 1]

@@ -77,3 +77,21 @@ def test_recordings_made_with_derivation_1_verify_under_it():
         assert verify_recording(SAMPLES / name).ok
     # the human sample's streams differ between the derivations: the recorded version decides
     assert game_seed(3, "p01", 0, 1) != game_seed(3, "p01", 0, 2)
+
+
+@pytest.mark.parametrize("seed", [-1, 2**64, 2**64 + 1, 2**70, 1.7, 2.0, True])
+def test_a_games_streams_refuse_a_seed_they_would_alias(seed):
+    """A game's streams (core.rng) took any number and cut it to 64 bits: 2**64 played seed 0's game, -1 seed
+    2**64-1's, 1.7 seed 1's; the study, the sessions and pairplay.gym all key their games through them."""
+    from pairplay.core.rng import UniformStream, stream_key, stream_keys
+    from pairplay.core.simulate import run_games
+
+    error = TypeError if isinstance(seed, (bool, float)) else ValueError
+    for make in (lambda: stream_key(seed, "deal"), lambda: stream_keys([3, seed]),
+                 lambda: UniformStream([seed], "user"), lambda: game_seed(seed, "deaf", 0),
+                 lambda: run_games([PERSONAS["deaf"]], [seed], 1)):
+        with pytest.raises(error, match="seed"):
+            make()
+    with pytest.raises(TypeError, match="game index"):
+        game_seed(3, "deaf", 1.5)
+    assert stream_key(2**64 - 1, "deal") != stream_key(0, "deal") and stream_keys([2**64 - 1]).shape == (1, 4)
