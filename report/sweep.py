@@ -300,7 +300,55 @@ def check_sweep_memory(grid: Grid, workers: int) -> None:
                           f"give --workers {fit} or fewer", f"--workers {workers}")
 
 
-SCHEDULER_TIMEOUT_S = 10  # how long a --scheduler has to answer (Dask's Client timeout)
+SCHEDULER_TIMEOUT_S = 10  # how long a --scheduler has to answer, its handshake included
+
+
+def check_scheduler(address: str) -> None:
+    """OptionError naming --scheduler and `address` unless a Dask scheduler answers there within
+    SCHEDULER_TIMEOUT_S of wall-clock time: connected, the comm handshake done, and its `identity`
+    saying Scheduler. Dask's own Client timeout covers the connect only: at a port whose service
+    waits for a request (`python3 -m http.server`) its handshake waited for ever, at one that sends
+    bytes first (an SSH banner) it read them as a frame length and asked for 3 EiB (MemoryError: the
+    line said "out of memory"), and a word with no port (`nonsense`) was a ValueError's traceback.
+    Every way the probe can fail is the one line: a wrong address is the user's to fix."""
+    import asyncio
+
+    from distributed.comm import connect
+    from distributed.comm.addressing import parse_address, parse_host_port
+    from distributed.comm.registry import get_backend
+
+    def refuse(what: str) -> OptionError:
+        return OptionError(f"{what} at {address}: give the scheduler's address, tcp://HOST:PORT", "--scheduler")
+
+    try:
+        scheme, location = parse_address(address)
+        get_backend(scheme)  # foo://host:1: "unknown address scheme"
+        if scheme in ("tcp", "tls", "ws", "wss"):
+            parse_host_port(location)
+    except (ValueError, TypeError) as err:
+        raise refuse(f"not a Dask address ({err})") from None
+
+    async def identity() -> dict:
+        comm = await connect(address, timeout=SCHEDULER_TIMEOUT_S)
+        try:
+            await comm.write({"op": "identity", "reply": True})
+            return await comm.read()
+        finally:
+            comm.abort()
+
+    try:
+        said = asyncio.run(asyncio.wait_for(identity(), SCHEDULER_TIMEOUT_S))
+    except (TimeoutError, asyncio.TimeoutError):
+        raise refuse(f"no Dask scheduler answered within {SCHEDULER_TIMEOUT_S} s") from None
+    except MemoryError:  # its first bytes, read as a Dask frame's length, asked for exbibytes
+        raise refuse("something that is not a Dask scheduler answered (bytes that are no Dask message)") from None
+    except Exception as err:  # noqa: BLE001 - whatever the other end did: the address is wrong
+        why = f"{type(err).__name__}: {err}" if str(err) else type(err).__name__
+        raise refuse(f"no Dask scheduler answered ({' '.join(why.split())})") from None
+    kind = said.get("type") if isinstance(said, dict) else None
+    if kind != "Scheduler":
+        raise refuse(f"a Dask {kind}, not a scheduler, answered" if isinstance(kind, str)
+                     else "something that is not a Dask scheduler answered")
 
 
 def run_sweep(grid: Grid, out: str | Path, *, scheduler: str | None = None, workers: int = 1,
@@ -329,6 +377,7 @@ def run_sweep(grid: Grid, out: str | Path, *, scheduler: str | None = None, work
 
     if scheduler:
         from dask.distributed import Client, as_completed
+        check_scheduler(scheduler)  # the whole handshake within the timeout (Client's covers the connect only)
         try:
             client = Client(scheduler, timeout=f"{SCHEDULER_TIMEOUT_S}s")
         except OSError as err:  # named by its option (a new user's trial: "Timed out trying to connect ..." alone)
