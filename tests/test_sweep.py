@@ -2,6 +2,7 @@
 
 import contextlib
 import http.server
+import json
 import signal
 import socketserver
 import subprocess
@@ -198,6 +199,74 @@ def test_a_scheduler_that_does_not_answer_is_one_line_naming_the_option(tmp_path
     assert main(["sweep", str(grid), "--out", str(tmp_path / "o"), "--scheduler", f"tcp://127.0.0.1:{port}"]) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "--scheduler" in err and f"127.0.0.1:{port}" in err, err
+
+
+def _no_measures(d):
+    d["measures"] = {}
+
+
+def _one_measure_less(d):
+    del d["measures"]["blind/last50"]
+
+
+def _text_measure(d):
+    d["measures"]["blind/learned"] = "20.8"
+
+
+def _nan_measure(d):
+    d["measures"]["all/ratio"] = float("nan")
+
+
+def _another_seed(d):
+    d["seed"] += 100
+
+
+@pytest.mark.parametrize("damage,said", [
+    (_text_measure, "measure(s) not a finite number: blind/learned = '20.8'"),
+    (_nan_measure, "measure(s) not a finite number: all/ratio = nan"),
+    (_no_measures, "lacks measure(s) all/ratio, blind/first50"),
+    (_one_measure_less, "lacks measure(s) blind/last50"),
+    (_another_seed, "holds another cell's setting or seed"),
+    ("{", "not a cell file"),
+    ("", "the file is empty"),
+])
+def test_a_cell_file_that_cannot_be_used_is_computed_again_and_said(tmp_path, capsys, damage, said):
+    """A new user's trial: a cell whose measure was text ended the summary in a traceback; one of `"measures":
+    {}` counted as finished and the summary said n = 1 where the seeds were 2, without a word (a NaN alike);
+    a file that was not JSON was computed again without a word. Every cell file is checked whole when read
+    (CellFile, its measures those of the cell); one that cannot be used is computed again and a line names it.
+    The tables are those of the undamaged sweep."""
+    from pairplay.cli.main import main
+
+    grid, out = _grid(tmp_path, GRID.replace('["correct", "consistent"]', '["correct"]')), tmp_path / "out"
+    assert main(["sweep", str(grid), "--out", str(out), "-q"]) == 0
+    before = _tables(out)
+    victim = sorted((out / "cells").glob("*.json"))[0]
+    if isinstance(damage, str):
+        victim.write_text(damage)
+    else:
+        data = json.loads(victim.read_text())
+        damage(data)
+        victim.write_text(json.dumps(data))
+    (out / "sweep.md").unlink()  # as a sweep stopped before its summary
+    capsys.readouterr()
+    assert main(["sweep", str(grid), "--out", str(out)]) == 0
+    captured = capsys.readouterr()
+    lines = captured.err.splitlines()
+    assert len(lines) == 1 and lines[0].startswith(f"WARNING pairplay.sweep: {victim}: {said}"), captured.err
+    assert lines[0].endswith(": computing the cell again") and "1 computed" in captured.out, captured
+    assert _tables(out) == before
+
+
+def test_the_measures_a_cell_file_must_hold_are_those_a_cell_gives(tmp_path):
+    """`measure_names` (what a cell file is checked against) and `cell_measures` (what a cell computes) agree,
+    with the reuse experiment and without."""
+    from pairplay.report.sweep import cell_measures, measure_names
+    for reuse in (False, True):
+        grid = read_grid(_grid(tmp_path, f'seeds = 1\nreuse = {str(reuse).lower()}\n[study]\npersonas = "blind,deaf"\n'
+                                         'games = 1\nrounds = 10\neval_rounds = 2\nreuse_seeds = 1\n'))
+        settings = grid.study_settings(grid.cells()[0])
+        assert set(cell_measures(settings, reuse)) == measure_names(settings, reuse)
 
 
 class _Hung(BaseException):
