@@ -4,7 +4,11 @@ Rule: every row is measured in this run next to a reference measured in the
 same run (ratios are what travel between machines) and judged against its goal
 in bench/goals.py (one table): met, missed, or context for a row without a
 goal. `--runs N` repeats everything and gives each figure as a range, the
-verdict on the median. `--check` exits 1 when a goal is missed.
+verdict on the median. `--quick` runs fewer and smaller measurements, each
+timed after an untimed run of the same work as the full bench's are
+(bench/core.py warm_then_best: it timed a cold first run, whose verdicts
+said "missed" and "met" of the first call's costs), so its verdicts judge
+the same goals, if on noisier figures. `--check` exits 1 when a goal is missed.
 `--readme README.md` rewrites the README's benchmark table (between
 `<!-- bench:start -->` and `<!-- bench:end -->`) from this run, with the date,
 the machine and its load. Sources are modules with `bench_rows(quick) -> list[dict]`.
@@ -40,7 +44,8 @@ README_START, README_END = "<!-- bench:start -->", "<!-- bench:end -->"
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--only", default=",".join(SOURCES), help=f"comma-separated sources (default: {','.join(SOURCES)})")
-    p.add_argument("--quick", action="store_true", help="smaller runs (a smoke test, noisier numbers)")
+    p.add_argument("--quick", action="store_true",
+                   help="fewer, smaller runs, each timed warm as in the full bench (a smoke test, noisier numbers)")
     p.add_argument("--runs", type=count, default=1, help="measure everything N times; figures as ranges (default 1)")
     p.add_argument("--json", action="store_true", help="print the rows as JSON")
     p.add_argument("--check", action="store_true", help="exit 1 when a goal is missed")

@@ -95,3 +95,40 @@ def test_a_source_whose_optional_library_is_not_installed_is_a_row_not_a_traceba
     assert "not measured, playwright is not installed" in lab, out
     view = next(line for line in out.splitlines() if line.startswith("view:"))
     assert "not measured, rerun is not installed" in view, out
+
+
+def test_quick_mode_times_warm_runs_as_the_full_mode_does(monkeypatch):
+    """A new user's trial: `bench --quick` timed one cold run (the games' stream keys hashed inside the
+    timing, ~20 us a game and role: 8,192 for the batch of 2,048): agent steps/s 0.7-2.2 M/s, "missed",
+    where the full bench measured 6-7 M/s. Now the timed run (the last: repeats 1) hashes no key; the
+    one before it, untimed, did."""
+    from pairplay.bench import core
+    from pairplay.core.rng import _key_row
+
+    hashed, real = [], core.run_games
+
+    def run_games(*args, **kwargs):  # the real games, each call's new keys written down
+        before = _key_row.cache_info().misses
+        result = real(*args, **kwargs)
+        hashed.append(_key_row.cache_info().misses - before)
+        return result
+    monkeypatch.setattr(core, "run_games", run_games)
+    _key_row.cache_clear()
+    core.simulator_rate(2048, 20, repeats=1)  # bench_rows(quick=True)'s batch
+    assert hashed[0] == 2048 and hashed[-1] == 0, hashed
+
+
+def test_the_scaling_rows_base_is_a_warm_run(monkeypatch):
+    """A new user's trial: the scaling rows' base (8 x 10 games x 500 rounds) was the first training of the
+    process, cold, so the rows beside it always said "met". Every timed training now follows an untimed
+    one of the same size."""
+    from pairplay.bench import core
+
+    calls, real = [], core.train
+
+    def train(personas, games, rounds, seed):  # the real training, each call written down
+        calls.append((games, rounds))
+        return real(personas, games, rounds, seed)
+    monkeypatch.setattr(core, "train", train)
+    core.scaling_rows(1)
+    assert calls == [(10, 500), (10, 500), (100, 500), (100, 500), (10, 2000), (10, 2000)]
