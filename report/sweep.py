@@ -396,8 +396,18 @@ def check_scheduler(address: str) -> None:
         finally:
             comm.abort()
 
+    def probe() -> dict:
+        return asyncio.run(asyncio.wait_for(identity(), SCHEDULER_TIMEOUT_S))
+
     try:
-        said = asyncio.run(asyncio.wait_for(identity(), SCHEDULER_TIMEOUT_S))
+        try:
+            asyncio.get_running_loop()
+        except RuntimeError:  # none (the command line): probe on this thread, a signal ends it at once
+            said = probe()
+        else:  # called from a running loop (a notebook): asyncio.run must have a thread of its own
+            from concurrent.futures import ThreadPoolExecutor
+            with ThreadPoolExecutor(1) as pool:
+                said = pool.submit(probe).result()
     except (TimeoutError, asyncio.TimeoutError):
         raise refuse(f"no Dask scheduler answered within {SCHEDULER_TIMEOUT_S} s") from None
     except MemoryError:  # its first bytes, read as a Dask frame's length, asked for exbibytes

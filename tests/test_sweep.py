@@ -340,6 +340,20 @@ def test_a_scheduler_address_where_no_scheduler_is_one_line_within_the_timeout(t
     assert not (tmp_path / "o").exists()
 
 
+def test_the_scheduler_check_says_the_same_from_a_running_event_loop():
+    """run_sweep called in a notebook (an event loop running): the probe's asyncio.run was refused there, and
+    the line said "RuntimeError: asyncio.run() cannot be called from a running event loop" of any address."""
+    import asyncio
+
+    from pairplay.report.sweep import check_scheduler
+
+    async def in_a_loop(address):
+        check_scheduler(address)
+    with _server(b"SSH-2.0-OpenSSH_9.6\r\n" * 4) as address:
+        with pytest.raises(OptionError, match="bytes that are no Dask message"):
+            asyncio.run(in_a_loop(address))
+
+
 def test_the_default_folder_says_sweep_once(tmp_path, monkeypatch):
     """Before (a new user's trial): examples/sweep-psi.toml wrote out/sweep-sweep-psi."""
     from pairplay.cli.main import main
