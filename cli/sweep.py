@@ -7,7 +7,9 @@ the same grid into the same folder resumes: finished cells are not computed
 again; with every cell finished and the summary written, nothing is written
 (sweep.md keeps the run that did the work) and one line says so. A folder that holds another grid's sweep, or files but no sweep, is
 refused unless --force; an --out that is a file is refused before any work.
-`--scheduler tcp://HOST:PORT` runs the cells on a Dask distributed cluster.
+`--scheduler tcp://HOST:PORT` runs the cells on a Dask distributed cluster; an address
+where no Dask scheduler answers in time is refused before anything is written
+(report/sweep.py check_scheduler).
 Interrupted (SIGINT/SIGTERM), or refused a write by the system while it runs
 (a full disk, a folder removed under it: exit 2, as any OSError, README's exit
 table; it was 1, and the line named no file), the cells finished stay and ONE
@@ -27,7 +29,7 @@ from pairplay.cli.args import workers
 from pairplay.cli.progress import bar as progress
 from pairplay.errors import OutputError
 from pairplay.outputs import check_folder, write_text
-from pairplay.report.sweep import (GridError, check_sweep_memory, finished_cells, read_grid, run_sweep,
+from pairplay.report.sweep import (GridError, check_scheduler, check_sweep_memory, finished_cells, read_grid, run_sweep,
                                     write_sweep)
 
 
@@ -74,6 +76,8 @@ def run(args) -> int:
         return 2
     if args.scheduler is None:  # before anything is written (run_sweep checks it again)
         check_sweep_memory(grid, args.workers)
+    else:
+        check_scheduler(args.scheduler)
     # out/sweep-<grid>, the grid's "sweep-" said once (examples/sweep-psi.toml wrote out/sweep-sweep-psi)
     out = check_folder(args.out or Path("out") / f"sweep-{args.grid.stem.removeprefix('sweep-')}")
     copy = out / "grid.toml"

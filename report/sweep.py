@@ -12,7 +12,12 @@ only, wherever it runs. `run_sweep` runs the cells that have no result yet:
 in this process (or `workers` local processes), or on a Dask distributed
 cluster (`scheduler` = its address); each finished cell is written at once to
 cells/<id>.json (atomically), so an interrupted sweep resumes without
-recomputing finished cells. Then `summarise` folds the cells into one row per
+recomputing finished cells. A cell file is checked whole when read
+(`read_cells`: a msgspec CellFile, its seed and setting the cell's, its
+measures exactly the cell's, each a finite number); one that cannot be used
+is not a finished cell: it is computed again, with a warning naming the file
+and why (a measure that was text ended the summary in a traceback, and
+`"measures": {}` counted as finished, the summary's n one short). Then `summarise` folds the cells into one row per
 (setting, measure): n, mean, sd and the 95% confidence interval of the mean
 (Student's t), and the report writes sweep.csv, cells.csv, one figure per
 measure and sweep.md.
@@ -32,13 +37,15 @@ from __future__ import annotations
 import hashlib
 import itertools
 import json
+import logging
 import math
 import time
 import tomllib
 from dataclasses import asdict, dataclass, fields
 from pathlib import Path
-from typing import Callable, Iterable
+from typing import Any, Callable, Iterable
 
+import msgspec
 import numpy as np
 
 from pairplay import csvcell
@@ -50,6 +57,8 @@ from pairplay.schemas.jsonfile import empty, without_bom
 from pairplay.schemas.tomlplace import misplaced, table_not_value
 from pairplay.core.rng import SEED_RANGE
 from pairplay.report.study import SettingError, StudySettings, default_reuse_last
+
+log = logging.getLogger("pairplay.sweep")
 
 MAX_CELLS = 10_000  # settings x seeds: each cell is a whole study and a file (`seeds = 100000000` ran out of memory listing them)
 SWEEPABLE = {f.name: f.type for f in fields(StudySettings) if f.name not in ("seed", "train_only")}
@@ -259,19 +268,70 @@ def _write_json_atomic(path: Path, data: dict) -> None:
     write_text(path, json.dumps(data, sort_keys=True, indent=1), force=True)
 
 
-def finished_cells(out: Path, grid: Grid) -> dict[str, dict]:
-    """Results already on disk for this grid's cells: id -> measures (others are ignored)."""
-    done = {}
+PER_PERSONA = ("learned", "oracle", "ratio", "first50", "last50")  # each persona's measures (the module rule)
+
+
+def measure_names(settings: StudySettings, reuse: bool) -> frozenset[str]:
+    """The measures `cell_measures(settings, reuse)` gives: a cell file must hold exactly these."""
+    keys = [p.key for p in settings.persona_list()]
+    names = {f"{k}/{m}" for k in keys for m in PER_PERSONA + (("reuse_gain",) if reuse else ())}
+    return frozenset(names | {"all/ratio"})
+
+
+class CellFile(msgspec.Struct, forbid_unknown_fields=True):
+    """cells/<id>.json as `run_sweep` writes it: the cell's grid values, its seed, its measures."""
+    setting: list[tuple[str, Any]]
+    seed: int
+    measures: dict[str, Any]  # each a finite number, checked by `_check_cell` naming the measure (msgspec: "$.measures[...]")
+
+
+def _check_cell(path: Path, grid: Grid, cell: Cell) -> dict[str, float]:
+    """The measures of the cell file at `path`, or ValueError saying why it cannot be used: not JSON,
+    not a cell (msgspec: a measure that is text, a field missing), another cell's setting or seed, a
+    measure missing or one this cell has not (`"measures": {}` was taken as finished: the summary's n
+    silently one short), or one that is not a finite number."""
+    data = path.read_bytes()
+    if empty(data):
+        raise ValueError(empty(data))
+    try:
+        found = msgspec.convert(json.loads(without_bom(data)), CellFile)  # json: NaN is read, then refused below
+    except ValueError as err:  # json.JSONDecodeError, msgspec.ValidationError
+        raise ValueError(f"not a cell file: {' '.join(str(err).split())}") from None
+    if found.seed != cell.seed or found.setting != [tuple(kv) for kv in json.loads(json.dumps(cell.setting))]:
+        raise ValueError("holds another cell's setting or seed")
+    want = measure_names(grid.study_settings(cell), grid.reuse)
+    missing, extra = sorted(want - set(found.measures)), sorted(set(found.measures) - want)
+    if missing or extra:
+        raise ValueError("; ".join(([f"lacks measure(s) {', '.join(missing)}"] if missing else [])
+                                   + ([f"has measure(s) no cell of this grid has: {', '.join(extra)}"] if extra else [])))
+    odd = [f"{k} = {v!r}" for k, v in sorted(found.measures.items())
+           if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v)]
+    if odd:
+        raise ValueError(f"measure(s) not a finite number: {', '.join(odd)}")
+    return {k: float(v) for k, v in found.measures.items()}
+
+
+def read_cells(out: Path, grid: Grid) -> tuple[dict[str, dict], dict[Path, str]]:
+    """The results on disk for this grid's cells (id -> measures), each file checked whole
+    (`_check_cell`), and the files of this grid's cells that could not be used (path -> why):
+    those cells are not finished. Files of other cells are left alone (--force removes another
+    grid's)."""
+    done, invalid = {}, {}
     wanted = {c.id: c for c in grid.cells()}
     for path in sorted((out / "cells").glob("*.json")):
+        if path.stem not in wanted:
+            continue
         try:
-            data = json.loads(path.read_text())
-        except (OSError, ValueError):
-            continue  # a damaged cell file is recomputed
-        cid = path.stem
-        if cid in wanted and data.get("seed") == wanted[cid].seed and isinstance(data.get("measures"), dict):
-            done[cid] = data["measures"]
-    return done
+            done[path.stem] = _check_cell(path, grid, wanted[path.stem])
+        except (OSError, ValueError) as err:
+            invalid[path] = err.strerror if isinstance(err, OSError) and err.strerror else str(err)
+    return done, invalid
+
+
+def finished_cells(out: Path, grid: Grid) -> dict[str, dict]:
+    """Results already on disk for this grid's cells: id -> measures (`read_cells`: an unusable file is
+    not a finished cell)."""
+    return read_cells(out, grid)[0]
 
 
 @dataclass
@@ -300,7 +360,65 @@ def check_sweep_memory(grid: Grid, workers: int) -> None:
                           f"give --workers {fit} or fewer", f"--workers {workers}")
 
 
-SCHEDULER_TIMEOUT_S = 10  # how long a --scheduler has to answer (Dask's Client timeout)
+SCHEDULER_TIMEOUT_S = 10  # how long a --scheduler has to answer, its handshake included
+
+
+def check_scheduler(address: str) -> None:
+    """OptionError naming --scheduler and `address` unless a Dask scheduler answers there within
+    SCHEDULER_TIMEOUT_S of wall-clock time: connected, the comm handshake done, and its `identity`
+    saying Scheduler. Dask's own Client timeout covers the connect only: at a port whose service
+    waits for a request (`python3 -m http.server`) its handshake waited for ever, at one that sends
+    bytes first (an SSH banner) it read them as a frame length and asked for 3 EiB (MemoryError: the
+    line said "out of memory"), and a word with no port (`nonsense`) was a ValueError's traceback.
+    Every way the probe can fail is the one line: a wrong address is the user's to fix."""
+    import asyncio
+
+    from distributed.comm import connect
+    from distributed.comm.addressing import parse_address, parse_host_port
+    from distributed.comm.registry import get_backend
+
+    def refuse(what: str) -> OptionError:
+        return OptionError(f"{what} at {address}: give the scheduler's address, tcp://HOST:PORT", "--scheduler")
+
+    try:
+        scheme, location = parse_address(address)
+        get_backend(scheme)  # foo://host:1: "unknown address scheme"
+        if scheme in ("tcp", "tls", "ws", "wss"):
+            parse_host_port(location)
+    except (ValueError, TypeError) as err:
+        raise refuse(f"not a Dask address ({err})") from None
+
+    async def identity() -> dict:
+        comm = await connect(address, timeout=SCHEDULER_TIMEOUT_S)
+        try:
+            await comm.write({"op": "identity", "reply": True})
+            return await comm.read()
+        finally:
+            comm.abort()
+
+    def probe() -> dict:
+        return asyncio.run(asyncio.wait_for(identity(), SCHEDULER_TIMEOUT_S))
+
+    try:
+        try:
+            asyncio.get_running_loop()
+        except RuntimeError:  # none (the command line): probe on this thread, a signal ends it at once
+            said = probe()
+        else:  # called from a running loop (a notebook): asyncio.run must have a thread of its own
+            from concurrent.futures import ThreadPoolExecutor
+            with ThreadPoolExecutor(1) as pool:
+                said = pool.submit(probe).result()
+    except (TimeoutError, asyncio.TimeoutError):
+        raise refuse(f"no Dask scheduler answered within {SCHEDULER_TIMEOUT_S} s") from None
+    except MemoryError:  # its first bytes, read as a Dask frame's length, asked for exbibytes
+        raise refuse("something that is not a Dask scheduler answered (bytes that are no Dask message)") from None
+    except Exception as err:  # noqa: BLE001 - whatever the other end did: the address is wrong
+        why = f"{type(err).__name__}: {err}" if str(err) else type(err).__name__
+        raise refuse(f"no Dask scheduler answered ({' '.join(why.split())})") from None
+    kind = said.get("type") if isinstance(said, dict) else None
+    if kind != "Scheduler":
+        raise refuse(f"a Dask {kind}, not a scheduler, answered" if isinstance(kind, str)
+                     else "something that is not a Dask scheduler answered")
 
 
 def run_sweep(grid: Grid, out: str | Path, *, scheduler: str | None = None, workers: int = 1,
@@ -315,7 +433,9 @@ def run_sweep(grid: Grid, out: str | Path, *, scheduler: str | None = None, work
     out = Path(out)
     (out / "cells").mkdir(parents=True, exist_ok=True)
     cells = grid.cells()
-    done = finished_cells(out, grid)
+    done, invalid = read_cells(out, grid)
+    for path, why in invalid.items():  # said, then computed again (it was done without a word, or not at all)
+        log.warning("%s: %s: computing the cell again", path, why)
     todo = [c for c in cells if c.id not in done]
     by_id = {c.id: c for c in cells}
     start = time.perf_counter()
@@ -329,6 +449,7 @@ def run_sweep(grid: Grid, out: str | Path, *, scheduler: str | None = None, work
 
     if scheduler:
         from dask.distributed import Client, as_completed
+        check_scheduler(scheduler)  # the whole handshake within the timeout (Client's covers the connect only)
         try:
             client = Client(scheduler, timeout=f"{SCHEDULER_TIMEOUT_S}s")
         except OSError as err:  # named by its option (a new user's trial: "Timed out trying to connect ..." alone)

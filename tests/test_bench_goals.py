@@ -95,3 +95,110 @@ def test_a_source_whose_optional_library_is_not_installed_is_a_row_not_a_traceba
     assert "not measured, playwright is not installed" in lab, out
     view = next(line for line in out.splitlines() if line.startswith("view:"))
     assert "not measured, rerun is not installed" in view, out
+
+
+def test_quick_mode_times_warm_runs_as_the_full_mode_does(monkeypatch):
+    """A new user's trial: `bench --quick` timed one cold run (the games' stream keys hashed inside the
+    timing, ~20 us a game and role: 8,192 for the batch of 2,048): agent steps/s 0.7-2.2 M/s, "missed",
+    where the full bench measured 6-7 M/s. Now the timed run (the last: repeats 1) hashes no key; the
+    one before it, untimed, did."""
+    from pairplay.bench import core
+    from pairplay.core.rng import _key_row
+
+    hashed, real = [], core.run_games
+
+    def run_games(*args, **kwargs):  # the real games, each call's new keys written down
+        before = _key_row.cache_info().misses
+        result = real(*args, **kwargs)
+        hashed.append(_key_row.cache_info().misses - before)
+        return result
+    monkeypatch.setattr(core, "run_games", run_games)
+    _key_row.cache_clear()
+    core.simulator_rate(2048, 20, repeats=1)  # bench_rows(quick=True)'s batch
+    assert hashed[0] == 2048 and hashed[-1] == 0, hashed
+
+
+def test_the_scaling_rows_base_is_a_warm_run(monkeypatch):
+    """A new user's trial: the scaling rows' base (8 x 10 games x 500 rounds) was the first training of the
+    process, cold, so the rows beside it always said "met". Every timed training now follows an untimed
+    one of the same size."""
+    from pairplay.bench import core
+
+    calls, real = [], core.train
+
+    def train(personas, games, rounds, seed):  # the real training, each call written down
+        calls.append((games, rounds))
+        return real(personas, games, rounds, seed)
+    monkeypatch.setattr(core, "train", train)
+    core.scaling_rows(1)
+    assert calls == [(10, 500), (10, 500), (100, 500), (100, 500), (10, 2000), (10, 2000)]
+
+
+def _one_source(monkeypatch, measured: list):
+    """The bench with one source of one row (the real sources take minutes), each measuring written down."""
+    import sys
+    import types
+
+    def rows(quick):
+        measured.append(quick)
+        return [row("oracle", value=0.4)]
+    monkeypatch.setattr(bench, "SOURCES", {"fake": "fake_bench_source"})
+    monkeypatch.setitem(sys.modules, "fake_bench_source", types.SimpleNamespace(bench_rows=rows))
+
+
+@pytest.mark.parametrize("text,extra,said", [
+    ("# no markers\n", [], "has no <!-- bench:start --> ... <!-- bench:end --> section"),
+    (f"{bench.README_END}\nold\n{bench.README_START}\n", [], "has no <!-- bench:start -->"),
+    (b"\xff\xfe binary", [], "not UTF-8 text"),
+    (f"{bench.README_START}\nold\n{bench.README_END}\n", ["--quick"], "--quick would replace it with part of one"),
+])
+def test_a_readme_that_cannot_take_this_runs_table_is_refused_before_measuring(monkeypatch, tmp_path, capsys,
+                                                                               text, extra, said):
+    """A new user's trial: a --readme without the bench markers was refused only after all the measuring
+    (minutes), a binary one was a traceback after it, and `--quick --only lspi --readme` replaced the
+    README's whole 35-row table with LSPI's 4 quick rows. Now the README, and a run whose table may replace
+    its own (every source, full size), are checked first: one line, exit 2, nothing measured or written."""
+    from pairplay.cli.main import main
+
+    measured = []
+    _one_source(monkeypatch, measured)
+    readme = tmp_path / "R2.md"
+    readme.write_bytes(text if isinstance(text, bytes) else text.encode())
+    before = readme.read_bytes()
+    assert main(["bench", "--readme", str(readme), *extra]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and said in err and "Traceback" not in err, err
+    assert measured == [] and readme.read_bytes() == before and sorted(tmp_path.iterdir()) == [readme]
+
+
+def test_readme_with_only_part_of_the_sources_is_refused(monkeypatch, tmp_path, capsys):
+    """`bench --only lspi --readme README.md` replaced the README's whole table with LSPI's rows."""
+    import sys
+    import types
+
+    from pairplay.cli.main import main
+
+    measured = []
+    _one_source(monkeypatch, measured)
+    monkeypatch.setitem(bench.SOURCES, "other", "other_bench_source")
+    monkeypatch.setitem(sys.modules, "other_bench_source", types.SimpleNamespace(bench_rows=lambda quick: []))
+    readme = tmp_path / "README.md"
+    readme.write_text(f"{bench.README_START}\nold\n{bench.README_END}\n")
+    assert main(["bench", "--only", "fake", "--readme", str(readme)]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "--only would replace it with part of one" in err and "--readme" in err, err
+    assert measured == [] and "old" in readme.read_text()
+
+
+def test_the_readme_table_names_the_command_that_ran(monkeypatch, tmp_path, capsys):
+    """Before: the header said "Generated by `pairplay bench --runs 1 --readme README.md`" whatever ran."""
+    from pairplay.cli.main import main
+
+    measured = []
+    _one_source(monkeypatch, measured)
+    readme = tmp_path / "my readme.md"
+    readme.write_text(f"# x\n{bench.README_START}\nold\n{bench.README_END}\nafter\n")
+    assert main(["bench", "--runs", "2", "--readme", str(readme)]) == 0
+    text = readme.read_text()
+    assert measured == [False, False] and "old" not in text and text.endswith(f"{bench.README_END}\nafter\n")
+    assert f"Generated by `pairplay bench --runs 2 --readme '{readme}'` on " in text, text

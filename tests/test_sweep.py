@@ -1,11 +1,19 @@
 """`pairplay sweep`: a grid of study settings x seeds, resumable, the same tables locally and on Dask."""
 
+import contextlib
+import http.server
+import json
+import signal
+import socketserver
 import subprocess
 import sys
+import threading
+import time
 from pathlib import Path
 
 import pytest
 
+from pairplay.errors import OptionError
 from pairplay.report.sweep import Cell, GridError, finished_cells, read_grid, run_sweep, summarise, write_sweep
 
 GRID = """
@@ -57,6 +65,9 @@ def test_a_dask_cluster_of_two_workers_gives_the_same_tables(tmp_path):
     with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, host="127.0.0.1",
                                   dashboard_address=None) as cluster:
         remote = run_sweep(grid, tmp_path / "dask", scheduler=cluster.scheduler_address)
+        worker = next(iter(cluster.workers.values())).worker_address  # a worker's port given for the scheduler's:
+        with pytest.raises(OptionError, match="a Dask Worker, not a scheduler"):  # a TypeError's traceback
+            run_sweep(grid, tmp_path / "dask", scheduler=worker)
     assert remote.computed == 4 and remote.where.startswith("dask tcp://127.0.0.1:")
     write_sweep(tmp_path / "dask", grid, finished_cells(tmp_path / "dask", grid), remote)
     assert _tables(tmp_path / "dask") == _tables(tmp_path / "local")
@@ -188,6 +199,159 @@ def test_a_scheduler_that_does_not_answer_is_one_line_naming_the_option(tmp_path
     assert main(["sweep", str(grid), "--out", str(tmp_path / "o"), "--scheduler", f"tcp://127.0.0.1:{port}"]) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "--scheduler" in err and f"127.0.0.1:{port}" in err, err
+
+
+def _no_measures(d):
+    d["measures"] = {}
+
+
+def _one_measure_less(d):
+    del d["measures"]["blind/last50"]
+
+
+def _text_measure(d):
+    d["measures"]["blind/learned"] = "20.8"
+
+
+def _nan_measure(d):
+    d["measures"]["all/ratio"] = float("nan")
+
+
+def _another_seed(d):
+    d["seed"] += 100
+
+
+@pytest.mark.parametrize("damage,said", [
+    (_text_measure, "measure(s) not a finite number: blind/learned = '20.8'"),
+    (_nan_measure, "measure(s) not a finite number: all/ratio = nan"),
+    (_no_measures, "lacks measure(s) all/ratio, blind/first50"),
+    (_one_measure_less, "lacks measure(s) blind/last50"),
+    (_another_seed, "holds another cell's setting or seed"),
+    ("{", "not a cell file"),
+    ("", "the file is empty"),
+])
+def test_a_cell_file_that_cannot_be_used_is_computed_again_and_said(tmp_path, capsys, damage, said):
+    """A new user's trial: a cell whose measure was text ended the summary in a traceback; one of `"measures":
+    {}` counted as finished and the summary said n = 1 where the seeds were 2, without a word (a NaN alike);
+    a file that was not JSON was computed again without a word. Every cell file is checked whole when read
+    (CellFile, its measures those of the cell); one that cannot be used is computed again and a line names it.
+    The tables are those of the undamaged sweep."""
+    from pairplay.cli.main import main
+
+    grid, out = _grid(tmp_path, GRID.replace('["correct", "consistent"]', '["correct"]')), tmp_path / "out"
+    assert main(["sweep", str(grid), "--out", str(out), "-q"]) == 0
+    before = _tables(out)
+    victim = sorted((out / "cells").glob("*.json"))[0]
+    if isinstance(damage, str):
+        victim.write_text(damage)
+    else:
+        data = json.loads(victim.read_text())
+        damage(data)
+        victim.write_text(json.dumps(data))
+    (out / "sweep.md").unlink()  # as a sweep stopped before its summary
+    capsys.readouterr()
+    assert main(["sweep", str(grid), "--out", str(out)]) == 0
+    captured = capsys.readouterr()
+    lines = captured.err.splitlines()
+    assert len(lines) == 1 and lines[0].startswith(f"WARNING pairplay.sweep: {victim}: {said}"), captured.err
+    assert lines[0].endswith(": computing the cell again") and "1 computed" in captured.out, captured
+    assert _tables(out) == before
+
+
+def test_the_measures_a_cell_file_must_hold_are_those_a_cell_gives(tmp_path):
+    """`measure_names` (what a cell file is checked against) and `cell_measures` (what a cell computes) agree,
+    with the reuse experiment and without."""
+    from pairplay.report.sweep import cell_measures, measure_names
+    for reuse in (False, True):
+        grid = read_grid(_grid(tmp_path, f'seeds = 1\nreuse = {str(reuse).lower()}\n[study]\npersonas = "blind,deaf"\n'
+                                         'games = 1\nrounds = 10\neval_rounds = 2\nreuse_seeds = 1\n'))
+        settings = grid.study_settings(grid.cells()[0])
+        assert set(cell_measures(settings, reuse)) == measure_names(settings, reuse)
+
+
+class _Hung(BaseException):
+    """The test's own deadline passed (a BaseException: no handler of the verb's takes it for its own)."""
+
+
+@contextlib.contextmanager
+def _server(reply: bytes | None):
+    """A TCP service on loopback that is no Dask scheduler: it sends `reply` on each connection, or,
+    with None, is `http.server`'s, which waits for a request line Dask never sends."""
+    if reply is None:
+        class Quiet(http.server.SimpleHTTPRequestHandler):
+            def log_message(self, *args):  # its log goes to stderr, where the verb's one line is looked for
+                pass
+        server = http.server.ThreadingHTTPServer(("127.0.0.1", 0), Quiet)
+    else:
+        class Banner(socketserver.BaseRequestHandler):
+            def handle(self):
+                self.request.sendall(reply)
+                self.request.recv(1024)  # the other side's bytes, then close
+        server = socketserver.ThreadingTCPServer(("127.0.0.1", 0), Banner)
+    server.daemon_threads = True
+    thread = threading.Thread(target=server.serve_forever, daemon=True)
+    thread.start()
+    try:
+        yield f"tcp://127.0.0.1:{server.server_address[1]}"
+    finally:
+        server.shutdown()
+        server.server_close()
+
+
+@pytest.mark.parametrize("service,said", [
+    ("nonsense", "not a Dask address"),
+    ("tcp://127.0.0.1", "not a Dask address"),
+    ("foo://127.0.0.1:1", "not a Dask address"),
+    (b"SSH-2.0-OpenSSH_9.6\r\n" * 4, "not a Dask scheduler answered"),
+    (None, "no Dask scheduler answered within 1 s"),
+])
+def test_a_scheduler_address_where_no_scheduler_is_one_line_within_the_timeout(tmp_path, capsys, monkeypatch,
+                                                                                service, said):
+    """A new user's trial: `--scheduler nonsense` was a ValueError's traceback (exit 1); a port whose service
+    sends bytes first (an SSH banner) said "out of memory (... ulimit -v ...)" (Dask read them as a frame's
+    length and asked for 3 EiB); one of `python3 -m http.server` hung over 300 s (Dask's timeout covers the
+    connect, not its handshake). Each is one line naming the option and the address, exit 2, in the timeout,
+    and nothing is written."""
+    from pairplay.cli.main import main
+    from pairplay.report import sweep
+    monkeypatch.setattr(sweep, "SCHEDULER_TIMEOUT_S", 1)
+    grid = tmp_path / "g.toml"
+    grid.write_text('seeds = 1\n[study]\npersonas = "blind"\ngames = 1\nrounds = 1\neval_rounds = 1\n')
+
+    def hung(*_):
+        raise _Hung
+    before = signal.signal(signal.SIGALRM, hung)
+    try:
+        with _server(service) if isinstance(service, bytes) or service is None else \
+                contextlib.nullcontext(service) as address:
+            start = time.monotonic()
+            signal.setitimer(signal.ITIMER_REAL, 20)
+            try:
+                code = main(["sweep", str(grid), "--out", str(tmp_path / "o"), "--scheduler", address])
+            finally:
+                signal.setitimer(signal.ITIMER_REAL, 0)
+            took = time.monotonic() - start
+    finally:
+        signal.signal(signal.SIGALRM, before)
+    err = capsys.readouterr().err
+    assert code == 2 and err.count("\n") == 1 and said in err, err
+    assert "--scheduler" in err and address in err and "memory" not in err, err
+    assert took < 1 + 3, took  # the timeout, and what importing Dask takes
+    assert not (tmp_path / "o").exists()
+
+
+def test_the_scheduler_check_says_the_same_from_a_running_event_loop():
+    """run_sweep called in a notebook (an event loop running): the probe's asyncio.run was refused there, and
+    the line said "RuntimeError: asyncio.run() cannot be called from a running event loop" of any address."""
+    import asyncio
+
+    from pairplay.report.sweep import check_scheduler
+
+    async def in_a_loop(address):
+        check_scheduler(address)
+    with _server(b"SSH-2.0-OpenSSH_9.6\r\n" * 4) as address:
+        with pytest.raises(OptionError, match="bytes that are no Dask message"):
+            asyncio.run(in_a_loop(address))
 
 
 def test_the_default_folder_says_sweep_once(tmp_path, monkeypatch):
