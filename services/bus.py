@@ -879,7 +879,11 @@ class Bus:
             except Exception as err:
                 log.warning("closing the Zenoh session: %s", err)
         closer = threading.Thread(target=close_all, name="pairplay-bus-close", daemon=True)
-        closer.start()
+        try:
+            closer.start()
+        except RuntimeError:  # out of threads (`ulimit -v`): closed here, unbounded, rather than left open (zenoh's
+            close_all()       # subscriber threads are not daemons: an open session held the process's exit for ever)
+            return True
         closer.join(timeout_s)
         if closer.is_alive():
             # INFO: nothing is lost (README's logging rule): the exit ends it; a default-level line after

@@ -351,7 +351,10 @@ class StudyRunner:
             self._skip.set()
             return
         self._control(ev.SessionAborted(reason=reason.strip()))
-        threading.Timer(grace_s, stop.set).start()
+        try:
+            threading.Timer(grace_s, stop.set).start()
+        except RuntimeError:  # out of threads (`ulimit -v`): no grace, the session is stopped now
+            stop.set()
 
     def skip_questionnaire(self) -> None:
         if self.live.state != "questionnaire":

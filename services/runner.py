@@ -313,9 +313,10 @@ class Node:
             log.info("%s skipped %d deliveries its log already held", self.logic.name, self.driver.guard.skipped)
 
     def run_in_thread(self, stop: threading.Event | None = None) -> threading.Thread:
-        self.thread = threading.Thread(target=self.run, args=(stop,), name=f"pairplay-{self.logic.name}", daemon=True)
-        self.thread.start()
-        return self.thread
+        thread = threading.Thread(target=self.run, args=(stop,), name=f"pairplay-{self.logic.name}", daemon=True)
+        thread.start()  # kept only once started: a thread that could not start is never joined (it raised)
+        self.thread = thread
+        return thread
 
     def close(self, timeout_s: float = 1.0) -> bool:
         """Publish what is still queued (bounded), then end the Outbox's thread; True if everything went out."""

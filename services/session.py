@@ -104,22 +104,26 @@ def run_session(config: SessionConfig, path: str | Path, *, bus: Bus | None = No
         except BaseException:
             bus.close(CLOSE_TIMEOUT_S)
             raise
-    if on_bus is not None:
-        on_bus(given or bus)  # what the caller attaches is the caller's: it may outlive the session
-    if recorder is not None:
-        recorder.start()
-        recorder_thread = threading.Thread(target=recorder.run, args=(recorder_stop,), name="pairplay-recorder",
-                                           daemon=True)
-        recorder_thread.start()
     needed = ["recorder", "learner"] + (["participant"] if config.participant.startswith("sim:") else [])
     if config.observed_source == "gaze":
         needed.append("tracker")  # the eye tracker: without it no turn gets a suggestion
     nodes = []
     bridge = game = None
-    # a service that refuses the game's own start or end: the session stops at once (services/refusal.py);
-    # subscribed before the game starts, told which game is this session's once there is one
-    refusals = RefusalWatch(bus, config.session, None)
+    # Everything from here on is undone by the `finally` whatever fails, a thread that could not start included
+    # (`ulimit -v`): a bus left open kept zenoh-python's threads, which are not daemons, and the process hung
+    # in its exit (a new user's `bench`: 11 min) after a traceback.
     try:
+        if on_bus is not None:
+            on_bus(given or bus)  # what the caller attaches is the caller's: it may outlive the session
+        if recorder is not None:
+            recorder.start()
+            thread = threading.Thread(target=recorder.run, args=(recorder_stop,), name="pairplay-recorder",
+                                      daemon=True)
+            thread.start()
+            recorder_thread = thread  # only once started (close_all joins it)
+        # a service that refuses the game's own start or end: the session stops at once (services/refusal.py);
+        # subscribed before the game starts, told which game is this session's once there is one
+        refusals = RefusalWatch(bus, config.session, None)
         if robot is not None:
             bridge = start_unless_stopped(lambda: start_bridge(bus, config.session, robot), stop, "robot")
         if bridge is not None:
@@ -173,9 +177,11 @@ def run_session(config: SessionConfig, path: str | Path, *, bus: Bus | None = No
         if not interrupted:  # the services' own shutdown steps (deadline_of) share this one, not a signal's
             stop.deadline = deadline
         stop.set()
-        failure = close_all(nodes, bridge, recorder, recorder_thread, recorder_stop, deadline, interrupted,
-                            stopped_by(stop) if interrupted else "")
-        bus.close(deadline.left(cap=CLOSE_TIMEOUT_S))
+        try:
+            failure = close_all(nodes, bridge, recorder, recorder_thread, recorder_stop, deadline, interrupted,
+                                stopped_by(stop) if interrupted else "")
+        finally:
+            bus.close(deadline.left(cap=CLOSE_TIMEOUT_S))
         if interrupted:
             log.info("stopped: services and recording closed %.2f s before the shutdown's deadline", deadline.left())
         if summary is not None and recorder is not None:
@@ -217,7 +223,8 @@ def close_all(nodes: list[Node], bridge, recorder: Recorder | None, recorder_thr
         return None
     wait_all_recorded(recorder, nodes, bridge, deadline.left(RESERVE["recorder_thread"] + 0.05, LAST_EVENTS_WAIT_S))
     recorder_stop.set()
-    recorder_thread.join(deadline.left(RESERVE["recorder_thread"], 1.0))
+    if recorder_thread is not None:  # None: it could not start
+        recorder_thread.join(deadline.left(RESERVE["recorder_thread"], 1.0))
     # the recorder's own deadline: the shutdown's, less what closing the bus keeps
     return recorder.close(stopped_by=stopped, deadline=Deadline(deadline.left(RESERVE["recorder"])))
 
