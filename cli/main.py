@@ -56,7 +56,7 @@ import threading
 from pairplay import __version__
 from pairplay.cli import interrupts
 from pairplay.cli.interrupts import DeferredInterrupt
-from pairplay.errors import UserError
+from pairplay.errors import UserError, out_of_threads
 
 # verb -> (module, one-line help)
 VERBS: dict[str, tuple[str, str]] = {
@@ -359,6 +359,11 @@ def _main(argv: list[str]) -> int:
               f"ran out); outputs are written whole or not at all: run it again with more memory", file=sys.stderr)
         return 2
     except Exception as err:
+        if out_of_threads(err):  # the same kind as MemoryError: a limit of the user's setup (errors.py)
+            print(f"pairplay {_who(args)}: out of threads (a new thread could not start: the process's memory "
+                  f"limit, `ulimit -v`, or the machine's thread limit ran out): run it again with more memory (a "
+                  f"higher `ulimit -v`)", file=sys.stderr)
+            return 2
         line = recording_failed_line(err)
         if line is None:
             raise

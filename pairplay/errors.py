@@ -59,3 +59,11 @@ class OptionError(UserError, ValueError):
 def names(text: str, where: str) -> bool:
     """Whether `text` holds `where` as a whole name: not inside a longer word, path or option."""
     return re.search(rf"(?<![\w./-]){re.escape(where)}(?![\w/-]|\.\w)", text) is not None
+
+
+def out_of_threads(err: BaseException) -> bool:
+    """Whether `err` is Python's refusal to start a thread ("can't start new thread": the process's
+    address-space limit, `ulimit -v`, or the machine's thread limit ran out; zenoh-python's subscriber
+    threads raise it too). The user's setup, like running out of memory: the command line says one
+    line, exit 2 (cli/main.py), never a traceback."""
+    return isinstance(err, RuntimeError) and "can't start new thread" in str(err)

@@ -64,6 +64,7 @@ import signal
 import sys
 import threading
 import time
+import weakref
 from collections import Counter, deque
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -471,6 +472,9 @@ class Outbox:
         self.failed = 0
         self._thread = threading.Thread(target=self._run, name=f"pairplay-{name}-outbox", daemon=True)
         self._thread.start()
+        adopt = getattr(bus, "adopt", None)
+        if adopt is not None:  # its bus (a game's scope) stops the thread when it closes, if nobody did
+            adopt(self)
 
     def send(self, key: str, payload: bytes, wake: bool = True) -> None:
         """Queue `payload` for `key`; `wake=False`: the caller calls `publish_here` next."""
@@ -569,14 +573,33 @@ class Outbox:
     def close(self, timeout_s: float = 1.0) -> bool:
         """Publish what is queued (bounded by `timeout_s`), then stop the thread."""
         done = self.flush(timeout_s)
+        self.stop()
+        return done
+
+    def stop(self) -> None:
+        """End the thread once what is queued is handed on (published, or counted failed once the bus
+        is closed); never waits."""
         with self._lock:
             self._stopping = True
             self._wake.notify()
-        return done
+
+
+class BusClosed(RuntimeError):
+    """A declaration or a publish on a bus, or a bus's scope, that is closed already."""
 
 
 class Bus:
-    """One Zenoh session with cached BLOCK publishers."""
+    """One Zenoh session with cached BLOCK publishers.
+
+    Everything declared through a Bus (subscribers, each with the callback thread zenoh-python
+    gives it; queryables; liveliness tokens and watchers; publishers) and every Outbox made on
+    it are released by its `close`. `scope()` is a Bus on the same session whose close releases
+    only its own, the session left open: a process that runs game after game on one bus (`protocol
+    pilot`, `protocol serve`) runs each on a scope of its own, or each game's ~40 declarations and
+    their threads lived until the process ended (a new user's 12-game pilot: 53 -> 511 threads,
+    1.8 -> 5.5 GB of address space; under `ulimit -v 3000000` game 5 could not start a thread).
+    Once closed, a bus refuses new declarations and publishes (BusClosed): a service's start
+    left running after a stop cannot declare on the open session what nobody would release."""
 
     def __init__(self, options: BusOptions | None = None, session: zenoh.Session | None = None,
                  express: bool = True, stop: threading.Event | None = None):
@@ -592,7 +615,39 @@ class Bus:
         self._lock = threading.Lock()
         self._declared: list = []
         self._closed = False
+        self._parent: Bus | None = None  # a scope's bus (scope): its close leaves the session open
+        self._scopes: list[Bus] = []  # open scopes: closed with this bus
+        self._outboxes: weakref.WeakSet[Outbox] = weakref.WeakSet()  # their threads end with this bus (adopt)
         self.missed: Counter = Counter()  # publisher -> messages Zenoh reported lost for good (recovering bus)
+
+    def scope(self) -> "Bus":
+        """A Bus on this one's Zenoh session whose close releases only what was declared through
+        it (class rule); closed with this bus, if not before."""
+        child = Bus(self.options, session=self.session, express=self.express, stop=self.stop)
+        child._parent = self
+        with self._lock:
+            if self._closed:
+                raise BusClosed("the bus is closed")
+            self._scopes.append(child)
+        return child
+
+    def adopt(self, outbox: "Outbox") -> None:
+        """An Outbox made on this bus: its thread is stopped when the bus closes (if its owner did not)."""
+        with self._lock:
+            closed = self._closed
+            if not closed:
+                self._outboxes.add(outbox)
+        if closed:
+            outbox.stop()
+
+    def _keep(self, declared):
+        """Remember a declaration for `close`; on a closed bus, undeclare it at once and raise BusClosed."""
+        with self._lock:
+            if not self._closed:
+                self._declared.append(declared)
+                return declared
+        _undeclare(declared)
+        raise BusClosed("the bus is closed")
 
     def publisher(self, key: str, express: bool | None = None) -> zenoh.Publisher:
         """The BLOCK publisher of `key`, declared once; `express=False` (Bus.put_batched): a second one
@@ -602,6 +657,8 @@ class Bus:
         pub = cache.get(key)
         if pub is None:
             with self._lock:
+                if self._closed:
+                    raise BusClosed(f"the bus is closed: nothing is published on {key}")
                 pub = cache.get(key)
                 if pub is None:
                     if self.options.recovers:
@@ -623,6 +680,8 @@ class Bus:
         probe = self._probes.get(key)
         if probe is None:
             with self._lock:
+                if self._closed:
+                    raise BusClosed("the bus is closed")
                 probe = self._probes.get(key) or self.session.declare_publisher(key)
                 self._probes[key] = probe
         return probe.matching_status.matching
@@ -676,8 +735,7 @@ class Bus:
                 log.exception("subscriber callback on %s failed", sample.key_expr)
         handler = zenoh.handlers.FifoChannel(DRAIN_CAPACITY) if drain else on_sample
         if not self.options.recovers:
-            sub = self.session.declare_subscriber(key_expr, handler, allowed_origin=allowed_origin)
-            self._declared.append(sub)
+            sub = self._keep(self.session.declare_subscriber(key_expr, handler, allowed_origin=allowed_origin))
             if drain:
                 self._drain_samples(sub.handler, on_sample, key_expr)
             return sub
@@ -692,11 +750,10 @@ class Bus:
                     on_miss(publisher, miss.nb)
             except Exception:
                 log.exception("miss listener on %s failed", key_expr)
-        sub = zenoh.ext.declare_advanced_subscriber(
+        sub = self._keep(zenoh.ext.declare_advanced_subscriber(
             self.session, key_expr, handler, allowed_origin=allowed_origin,
-            recovery=zenoh.ext.RecoveryConfig(periodic_queries=None, heartbeat=True))
-        self._declared.append(sub)
-        self._declared.append(sub.sample_miss_listener(on_lost))
+            recovery=zenoh.ext.RecoveryConfig(periodic_queries=None, heartbeat=True)))
+        self._keep(sub.sample_miss_listener(on_lost))
         if drain:
             self._drain_samples(sub.handler, on_sample, key_expr)
         return sub
@@ -729,9 +786,7 @@ class Bus:
                     callback(event.kind == zenoh.SampleKind.PUT, str(event.transport.zid))
             except Exception:
                 log.exception("router link listener failed")
-        listener = self.session.info.declare_transport_events_listener(on_event)
-        self._declared.append(listener)
-        return listener
+        return self._keep(self.session.info.declare_transport_events_listener(on_event))
 
     def queryable(self, key_expr: str, on_query: Callable[[zenoh.Query], None]):
         """Hand each query on `key_expr` to `on_query`, which must not wait: it passes the
@@ -741,9 +796,7 @@ class Bus:
                 on_query(query)
             except Exception:
                 log.exception("queryable %s failed", key_expr)
-        q = self.session.declare_queryable(key_expr, handler)
-        self._declared.append(q)
-        return q
+        return self._keep(self.session.declare_queryable(key_expr, handler))
 
     @staticmethod
     def answer(query: zenoh.Query, payloads: list[bytes]) -> None:
@@ -769,9 +822,7 @@ class Bus:
 
     def alive(self, key: str):
         """Declare a liveliness token: others see this service while it runs."""
-        token = self.session.liveliness().declare_token(key)
-        self._declared.append(token)
-        return token
+        return self._keep(self.session.liveliness().declare_token(key))
 
     def watch_alive(self, key_expr: str, callback: Callable[[str, bool], None]):
         """Call `callback(key, up)` when a liveliness token on `key_expr` appears (up) or goes (a
@@ -782,9 +833,7 @@ class Bus:
                 callback(str(sample.key_expr), sample.kind == zenoh.SampleKind.PUT)
             except Exception:
                 log.exception("liveliness watcher on %s failed", key_expr)
-        sub = self.session.liveliness().declare_subscriber(key_expr, on_token, history=True)
-        self._declared.append(sub)
-        return sub
+        return self._keep(self.session.liveliness().declare_subscriber(key_expr, on_token, history=True))
 
     def alive_now(self, key_expr: str, timeout_s: float = 1.0, stop: threading.Event | None = None) -> set[str]:
         """The liveliness tokens on `key_expr` now; returns early, with what came, once `stop` is set
@@ -816,27 +865,25 @@ class Bus:
         went away), leave the rest to the process exit. True if closed."""
         if timeout_s is None:
             timeout_s = shutdown_wait(self.stop, CLOSE_TIMEOUT_S)
-        if self._closed:
+        if not self._shut():
             return True
-        self._closed = True
+        if self._parent is not None:
+            self._parent._forget(self)
 
         def close_all() -> None:
-            for d in reversed(self._declared):
-                try:
-                    d.undeclare()
-                except Exception:  # already gone with its session
-                    pass
-            for p in list(self._publishers.values()) + list(self._batched.values()) + list(self._probes.values()):
-                try:
-                    p.undeclare()
-                except Exception:
-                    pass
+            self._undeclare_all()
+            if self._parent is not None:
+                return  # a scope: the session is its parent's
             try:
                 self.session.close()
             except Exception as err:
                 log.warning("closing the Zenoh session: %s", err)
         closer = threading.Thread(target=close_all, name="pairplay-bus-close", daemon=True)
-        closer.start()
+        try:
+            closer.start()
+        except RuntimeError:  # out of threads (`ulimit -v`): closed here, unbounded, rather than left open (zenoh's
+            close_all()       # subscriber threads are not daemons: an open session held the process's exit for ever)
+            return True
         closer.join(timeout_s)
         if closer.is_alive():
             # INFO: nothing is lost (README's logging rule): the exit ends it; a default-level line after
@@ -845,11 +892,51 @@ class Bus:
             return False
         return True
 
+    def _shut(self) -> bool:
+        """Refuse declarations and publishes from now on, this bus's and its scopes', and stop their
+        Outboxes' threads (never waits); False if it was closed already."""
+        with self._lock:
+            if self._closed:
+                return False
+            self._closed = True
+            scopes, outboxes = list(self._scopes), list(self._outboxes)
+        for scope in scopes:
+            scope._shut()
+        for outbox in outboxes:
+            outbox.stop()
+        return True
+
+    def _forget(self, scope: "Bus") -> None:
+        with self._lock:
+            if scope in self._scopes:
+                self._scopes.remove(scope)
+
+    def _undeclare_all(self) -> None:
+        """Undeclare what was declared through this bus and its scopes (after `_shut`: nothing new comes)."""
+        with self._lock:
+            scopes, self._scopes = self._scopes, []
+            declared, self._declared = self._declared, []
+            publishers = list(self._publishers.values()) + list(self._batched.values()) + list(self._probes.values())
+            self._publishers, self._batched, self._probes = {}, {}, {}
+        for scope in scopes:
+            scope._undeclare_all()
+        for d in reversed(declared):
+            _undeclare(d)
+        for p in publishers:
+            _undeclare(p)
+
     def __enter__(self) -> "Bus":
         return self
 
     def __exit__(self, *exc) -> None:
         self.close()
+
+
+def _undeclare(declared) -> None:
+    try:
+        declared.undeclare()
+    except Exception:  # already gone with its session
+        pass
 
 
 def _open(options: BusOptions) -> zenoh.Session:

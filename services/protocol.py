@@ -48,7 +48,7 @@ from pairplay.schemas.keys import event_key
 from pairplay.schemas.policy import read_policy
 from pairplay.schemas.session import SessionConfig, learner_overrides
 
-from pairplay.services.bus import Bus, pass_stop, shutdown_wait
+from pairplay.services.bus import Bus, BusClosed, pass_stop, shutdown_wait
 from pairplay.services.combiner import CombinerLogic
 from pairplay.services.recorder import RecordingExists, check_new_recording
 from pairplay.services.robot.choice import NO_ROBOT, RobotChoice
@@ -121,6 +121,7 @@ class StudyRunner:
         self._abort_reason = ""
         self._busy = threading.Lock()
         self._control_seq = 0
+        self._game_bus: Bus | None = None  # the running game's scope of `bus` (_play)
 
     # -- a game --------------------------------------------------------------
     def config_for(self, pid: str, phase_id: str, game: int, scripted: str = "") -> SessionConfig:
@@ -220,13 +221,21 @@ class StudyRunner:
             pass_stop(self.interrupted, self._stop)
         self._skip.clear()
         answered = threading.Event()
-        watch = [self.bus.subscribe(f"pairplay/{config.session}/**", self._watcher(on_event, answered))]
+        # everything this game declares on the study's bus (the watch, the player, the session's services) is
+        # on a scope of it, released at the game's end with every thread it holds (services/bus.py Bus)
+        bus = self._game_bus = self.bus.scope()
         node = None
-        if player is not None:
-            node = Node(self.bus, player, config.session, clock=getattr(player, "clock", time.time_ns),
-                        resume=False)
-            node.start()
-            node.run_in_thread(self._stop)
+        try:
+            bus.subscribe(f"pairplay/{config.session}/**", self._watcher(on_event, answered))
+            if player is not None:
+                node = Node(bus, player, config.session, clock=getattr(player, "clock", time.time_ns),
+                            resume=False)
+                node.start()
+                node.run_in_thread(self._stop)
+        except BaseException:
+            self._game_bus = None
+            bus.close(shutdown_wait(self._stop, 1.0))
+            raise
 
         def hold(_recorder) -> None:
             if asks and not self._stop.is_set() and not self._abort_reason:
@@ -240,19 +249,19 @@ class StudyRunner:
         summary: dict = {}
         stop = self._stop
         try:
-            path = run_session(config, self.data.folder / recording, bus=self.bus, stop=stop,
+            path = run_session(config, self.data.folder / recording, bus=bus, stop=stop,
                                robot=self.robot, hold=hold, summary=summary,
                                wait_also=() if player is not None or hub is not None else ("board",),
                                extra_nodes=(lambda bus: [hub.make_node(bus)]) if hub is not None else None)
-        finally:  # also when the session failed to start: no board, player or subscription outlives it
+        finally:  # also when the session failed to start: no board, player, subscription or thread outlives it
             if hub is not None:
                 self.lab.hubs.pop(config.session, None)
                 hub.close(shutdown_wait(stop, 5.0, reserve=0.3))
             stop.set()
-            if node is not None and node.thread is not None:
-                node.thread.join(shutdown_wait(stop, 5.0, reserve=0.3))
-            for sub in watch:
-                _undeclare(sub)
+            if node is not None:
+                node.finish(shutdown_wait(stop, 5.0, reserve=0.3), shutdown_wait(stop, 0.5, reserve=0.25))
+            self._game_bus = None
+            bus.close(shutdown_wait(stop, 1.0, reserve=0.2))
         if self.interrupted is not None:  # a signal: no reading back, the process is gone within 2 s
             return self._finish_interrupted(config, summary, answered.is_set())
         return self._finish(config, path, answered.is_set())
@@ -317,7 +326,17 @@ class StudyRunner:
         self._control_seq += 1
         e = stamped(event, session=self.live.session, source="experimenter", seq=self._control_seq,
                     time_ns=time.time_ns())
-        self.bus.put(event_key(self.live.session, "experimenter", type(event).__name__), ev.encode_event(e))
+        self._put(event_key(self.live.session, "experimenter", type(event).__name__), ev.encode_event(e))
+
+    def _put(self, key: str, payload: bytes) -> None:
+        """Publish on the running game's scope of the bus (its publishers go with the game)."""
+        bus = self._game_bus
+        try:
+            if bus is None:
+                raise BusClosed("no game")
+            bus.put(key, payload)
+        except BusClosed:
+            raise StudyDataError("no game is running") from None
 
     def abort(self, reason: str, grace_s: float = 5.0) -> None:
         """End the running game: the game records SessionEnded "aborted" with the reason; if it does not
@@ -332,7 +351,10 @@ class StudyRunner:
             self._skip.set()
             return
         self._control(ev.SessionAborted(reason=reason.strip()))
-        threading.Timer(grace_s, stop.set).start()
+        try:
+            threading.Timer(grace_s, stop.set).start()
+        except RuntimeError:  # out of threads (`ulimit -v`): no grace, the session is stopped now
+            stop.set()
 
     def skip_questionnaire(self) -> None:
         if self.live.state != "questionnaire":
@@ -352,7 +374,7 @@ class StudyRunner:
         live.questionnaire_token = ""  # one answer per game
         e = stamped(ev.QuestionnaireAnswered(questionnaire=name, answers=clean), session=session, source="board",
                     seq=1, time_ns=time.time_ns())
-        self.bus.put(event_key(session, "board", "QuestionnaireAnswered"), ev.encode_event(e))
+        self._put(event_key(session, "board", "QuestionnaireAnswered"), ev.encode_event(e))
         return e
 
     def pause(self, reason: str = "") -> None:
@@ -418,16 +440,18 @@ class StudyRunner:
                 if isinstance(e, ev.PolicyCombined) and e.request_id == request_id:
                     answer.append(e)
                     got.set()
-            sub = self.bus.subscribe(event_key(session, "combiner", "PolicyCombined"), on_answer)
             stop = threading.Event()
-            node = Node(self.bus, CombinerLogic(self.data.folder), session, resume=False)
-            node.start()
-            node.run_in_thread(stop)
+            bus = self.bus.scope()  # the combiner's declarations and threads go with the step (services/bus.py Bus)
+            node = None
             try:
+                bus.subscribe(event_key(session, "combiner", "PolicyCombined"), on_answer)
+                node = Node(bus, CombinerLogic(self.data.folder), session, resume=False)
+                node.start()
+                node.run_in_thread(stop)
                 request = stamped(ev.CombineRequested(request_id=request_id, policies=inputs, seed=self.data.study.study.seed,
                                                       output_path=output),
                                   session=session, source="experimenter", seq=1, time_ns=time.time_ns())
-                self.bus.put(event_key(session, "experimenter", "CombineRequested"), ev.encode_event(request))
+                bus.put(event_key(session, "experimenter", "CombineRequested"), ev.encode_event(request))
                 waited = time.monotonic() + timeout_s
                 while not got.wait(0.05):  # a signal does not wait for the combiner (interrupt)
                     if self.interrupted is not None:
@@ -436,7 +460,10 @@ class StudyRunner:
                         raise StudyDataError(f"the combiner did not answer within {timeout_s:.0f} s")
             finally:
                 stop.set()
-                _undeclare(sub)
+                if node is not None:
+                    node.finish(shutdown_wait(self.interrupted, 2.0, reserve=0.3),
+                                shutdown_wait(self.interrupted, 0.5, reserve=0.25))
+                bus.close(shutdown_wait(self.interrupted, 1.0, reserve=0.2))
             result = answer[0]
             if not result.ok:
                 raise StudyDataError(f"the combiner refused: {result.error}")
@@ -499,13 +526,6 @@ def check_answers(items, answers) -> dict[str, str]:
             raise StudyDataError(f"question {item.id!r}: at most {item.max_chars} characters")
         out[item.id] = text
     return out
-
-
-def _undeclare(sub) -> None:
-    try:
-        sub.undeclare()
-    except Exception:  # already closed with its session
-        pass
 
 
 def scripted_persona(player) -> str:

@@ -313,10 +313,20 @@ class Node:
             log.info("%s skipped %d deliveries its log already held", self.logic.name, self.driver.guard.skipped)
 
     def run_in_thread(self, stop: threading.Event | None = None) -> threading.Thread:
-        self.thread = threading.Thread(target=self.run, args=(stop,), name=f"pairplay-{self.logic.name}", daemon=True)
-        self.thread.start()
-        return self.thread
+        thread = threading.Thread(target=self.run, args=(stop,), name=f"pairplay-{self.logic.name}", daemon=True)
+        thread.start()  # kept only once started: a thread that could not start is never joined (it raised)
+        self.thread = thread
+        return thread
 
     def close(self, timeout_s: float = 1.0) -> bool:
-        """Publish what is still queued (bounded); True if everything went out."""
+        """Publish what is still queued (bounded), then end the Outbox's thread; True if everything went out."""
         return self.outbox.close(timeout_s)
+
+    def finish(self, join_s: float, flush_s: float) -> bool:
+        """After its stop: wait (at most `join_s`) for the Node's thread, then `close` (at most `flush_s`).
+        Every owner of a Node ends it so; a Node not closed kept its Outbox's thread for the process's
+        life (a pilot's scripted board and the combiner: one more thread per game)."""
+        thread = self.thread
+        if thread is not None:
+            thread.join(join_s)
+        return self.close(flush_s)

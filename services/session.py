@@ -85,9 +85,14 @@ def run_session(config: SessionConfig, path: str | Path, *, bus: Bus | None = No
     Stopped (SIGINT/SIGTERM, the caller's `stop`, a recording failure), every step
     of the shutdown shares one deadline (`stop.deadline`, services/bus.py), so
     the process is done within `SHUTDOWN_S` of the signal, its recording finished."""
-    own_bus = bus is None
     # the session's process is the router its external services connect to as clients
-    bus = bus if bus is not None else Bus(bus_options or BusOptions(mode="router"))
+    given = bus
+    if given is None:
+        bus = Bus(bus_options or BusOptions(mode="router"))
+    else:
+        # the caller's bus outlives the session (a study's games, one after another): the session declares
+        # on a scope of it, released at its end with every subscriber's thread (services/bus.py Bus)
+        bus = given.scope()
     stop = stop or threading.Event()
     recorder = recorder_thread = None
     recorder_stop = threading.Event()
@@ -97,25 +102,28 @@ def run_session(config: SessionConfig, path: str | Path, *, bus: Bus | None = No
         try:
             recorder = Recorder(bus, config.session, path, on_failure=lambda _why: stop.set())
         except BaseException:
-            if own_bus:
-                bus.close(CLOSE_TIMEOUT_S)
+            bus.close(CLOSE_TIMEOUT_S)
             raise
-    if on_bus is not None:
-        on_bus(bus)
-    if recorder is not None:
-        recorder.start()
-        recorder_thread = threading.Thread(target=recorder.run, args=(recorder_stop,), name="pairplay-recorder",
-                                           daemon=True)
-        recorder_thread.start()
     needed = ["recorder", "learner"] + (["participant"] if config.participant.startswith("sim:") else [])
     if config.observed_source == "gaze":
         needed.append("tracker")  # the eye tracker: without it no turn gets a suggestion
     nodes = []
     bridge = game = None
-    # a service that refuses the game's own start or end: the session stops at once (services/refusal.py);
-    # subscribed before the game starts, told which game is this session's once there is one
-    refusals = RefusalWatch(bus, config.session, None)
+    # Everything from here on is undone by the `finally` whatever fails, a thread that could not start included
+    # (`ulimit -v`): a bus left open kept zenoh-python's threads, which are not daemons, and the process hung
+    # in its exit (a new user's `bench`: 11 min) after a traceback.
     try:
+        if on_bus is not None:
+            on_bus(given or bus)  # what the caller attaches is the caller's: it may outlive the session
+        if recorder is not None:
+            recorder.start()
+            thread = threading.Thread(target=recorder.run, args=(recorder_stop,), name="pairplay-recorder",
+                                      daemon=True)
+            thread.start()
+            recorder_thread = thread  # only once started (close_all joins it)
+        # a service that refuses the game's own start or end: the session stops at once (services/refusal.py);
+        # subscribed before the game starts, told which game is this session's once there is one
+        refusals = RefusalWatch(bus, config.session, None)
         if robot is not None:
             bridge = start_unless_stopped(lambda: start_bridge(bus, config.session, robot), stop, "robot")
         if bridge is not None:
@@ -169,9 +177,10 @@ def run_session(config: SessionConfig, path: str | Path, *, bus: Bus | None = No
         if not interrupted:  # the services' own shutdown steps (deadline_of) share this one, not a signal's
             stop.deadline = deadline
         stop.set()
-        failure = close_all(nodes, bridge, recorder, recorder_thread, recorder_stop, deadline, interrupted,
-                            stopped_by(stop) if interrupted else "")
-        if own_bus:
+        try:
+            failure = close_all(nodes, bridge, recorder, recorder_thread, recorder_stop, deadline, interrupted,
+                                stopped_by(stop) if interrupted else "")
+        finally:
             bus.close(deadline.left(cap=CLOSE_TIMEOUT_S))
         if interrupted:
             log.info("stopped: services and recording closed %.2f s before the shutdown's deadline", deadline.left())
@@ -203,9 +212,7 @@ def close_all(nodes: list[Node], bridge, recorder: Recorder | None, recorder_thr
               deadline: Deadline, interrupted: bool, stopped: str) -> str | None:
     """Stop the services, then finish the recording, all by `deadline`; the recording's failure, if any."""
     for node in nodes:
-        if node.thread is not None:
-            node.thread.join(deadline.left(RESERVE["nodes"], 1.0))
-        node.close(deadline.left(RESERVE["nodes"], 0.3))
+        node.finish(deadline.left(RESERVE["nodes"], 1.0), deadline.left(RESERVE["nodes"], 0.3))
     if bridge is not None and bridge.thread is not None:
         # the bridge reports the robot's last acknowledgements before the recorder closes
         bridge.thread.join(deadline.left(RESERVE["bridge"], 1.5 if interrupted else bridge.settle_s + ROBOT_CLOSE_S + 2))
@@ -216,7 +223,8 @@ def close_all(nodes: list[Node], bridge, recorder: Recorder | None, recorder_thr
         return None
     wait_all_recorded(recorder, nodes, bridge, deadline.left(RESERVE["recorder_thread"] + 0.05, LAST_EVENTS_WAIT_S))
     recorder_stop.set()
-    recorder_thread.join(deadline.left(RESERVE["recorder_thread"], 1.0))
+    if recorder_thread is not None:  # None: it could not start
+        recorder_thread.join(deadline.left(RESERVE["recorder_thread"], 1.0))
     # the recorder's own deadline: the shutdown's, less what closing the bus keeps
     return recorder.close(stopped_by=stopped, deadline=Deadline(deadline.left(RESERVE["recorder"])))
 

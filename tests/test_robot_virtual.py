@@ -199,3 +199,38 @@ def test_a_bug_on_one_report_costs_that_report_not_the_robot(monkeypatch):
     finally:
         driver.close()
     assert [a.outcome for a in collector.acted] == ["done", "done"]
+
+
+NO_NEW_THREAD = """
+import resource, sys, threading
+from robot_doubles.harness import FAMILIES, FAST, PATIENCE_S, Collector, suggestion
+from pairplay.services.robot import open_robot
+collector = Collector()
+driver = open_robot("virtual?time_scale=0.01", collector.on_acted, config=FAST, on_rejected=collector.on_rejected)
+threading.stack_size(16 << 20)  # a thread started from now on needs 16 MiB of address space for its stack
+vm_kb = next(int(line.split()[1]) for line in open("/proc/self/status") if line.startswith("VmSize:"))
+limit = (vm_kb + 4096) * 1024  # 4 MiB more than now: room for Python's objects, none for a thread
+resource.setrlimit(resource.RLIMIT_AS, (limit, limit))
+try:
+    for seq, code in enumerate(FAMILIES.values()):
+        driver.perform(suggestion(code, seq=seq))
+        assert driver.wait_idle(PATIENCE_S)
+finally:
+    driver.close()
+print(sorted((a.suggestion_seq, a.outcome) for a in collector.acted))
+"""
+
+
+def test_the_virtual_robot_replies_where_no_thread_can_start():
+    """Before (a new user's trial under `ulimit -v`): the virtual robot started a thread for its delayed
+    replies at its first one; where it could not start, the driver's tick failed with a traceback and no
+    later reply came (speech and gesture ends never confirmed: suggestions "unacknowledged"). Its replies
+    are now served by the driver's own worker: the same outcomes as with threads to spare. A real limit,
+    in a child process (the driver started first, then no room is left for another thread)."""
+    import subprocess
+    import sys
+    from pathlib import Path
+    r = subprocess.run([sys.executable, "-c", NO_NEW_THREAD], cwd=Path(__file__).parent, capture_output=True,
+                       text=True, timeout=120)
+    assert r.returncode == 0 and "Traceback" not in r.stderr, r.stderr[-3000:]
+    assert r.stdout.strip() == str([(0, "done"), (1, "done"), (2, "done"), (3, "done"), (4, "sent"), (5, "sent")])

@@ -69,8 +69,13 @@ class Console:
                 log.exception("step %s failed", label)
                 self.last = {"step": label, "ok": False, "message": f"{type(err).__name__}: {err}"}
         self.last = {"step": label, "ok": True, "message": "running"}
-        self.thread = threading.Thread(target=run, name="pairplay-console-step", daemon=True)
-        self.thread.start()
+        thread = threading.Thread(target=run, name="pairplay-console-step", daemon=True)
+        try:
+            thread.start()
+        except RuntimeError as err:  # out of threads (`ulimit -v`): the step is said failed, as any other
+            self.last = {"step": label, "ok": False, "message": f"the step could not start: {err}"}
+            return
+        self.thread = thread  # only once started: the server's shutdown joins it
 
     # -- what the page shows -------------------------------------------------
     def state(self) -> dict:

@@ -44,9 +44,10 @@ class WebServer:
         cannot be bound. We bind the socket here and hand it to uvicorn: uvicorn binding it itself in its
         thread printed its own "ERROR: [Errno 98] ..." line beside the verb's one line."""
         sock = _bind(self.server.config.host, self.server.config.port)
-        self.thread = threading.Thread(target=self.server.run, kwargs={"sockets": [sock]}, name="pairplay-lab-web",
-                                       daemon=True)
-        self.thread.start()
+        thread = threading.Thread(target=self.server.run, kwargs={"sockets": [sock]}, name="pairplay-lab-web",
+                                  daemon=True)
+        thread.start()
+        self.thread = thread  # only once started: `stop` joins it
         deadline = time.monotonic() + timeout_s
         while not self.server.started:
             if not self.thread.is_alive() or time.monotonic() > deadline:

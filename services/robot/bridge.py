@@ -249,9 +249,10 @@ class RobotBridge:
             self.close(self.settle_s)
 
     def run_in_thread(self, stop: threading.Event) -> threading.Thread:
-        self.thread = threading.Thread(target=self.run, args=(stop,), name="pairplay-robot", daemon=True)
-        self.thread.start()
-        return self.thread
+        thread = threading.Thread(target=self.run, args=(stop,), name="pairplay-robot", daemon=True)
+        thread.start()  # kept only once started: a thread that could not start is never joined (it raised)
+        self.thread = thread
+        return thread
 
     def close(self, settle_s: float | None = None, deadline: Deadline | None = None) -> None:
         """Let the robot report what is open (for at most `settle_s`), then close its connection;

@@ -210,6 +210,10 @@ class RobotDriver:
         self.inflight_marked = 0  # commands recorded unconfirmed because the connection died just after
         self.reconnects = 0
         self.rejected = 0
+        # a transport that replies on its own time (the virtual robot) is served by this worker, no thread of its
+        # own (services/robot/transport.py: `due`, `serve_due`)
+        self._replies_due = getattr(transport, "due", None)
+        self._serve_due = getattr(transport, "serve_due", None)
         self._thread = threading.Thread(target=self._run, name=f"robot {transport.url}", daemon=True)
 
     # -- called from other threads ------------------------------------------------------
@@ -499,6 +503,8 @@ class RobotDriver:
 
     def _tick(self) -> None:
         now = time.monotonic()
+        if self._serve_due is not None:  # a transport's own delayed replies (the virtual robot's): handled next
+            self._serve_due(now)
         if not self._connected and not self._connecting and not self.refused and now >= self._next_attempt:
             self._connect()
         perf = self._current
@@ -714,6 +720,9 @@ class RobotDriver:
         times = []
         if self._timers:
             times.append(self._timers[0][0])
+        replies_due = self._replies_due() if self._replies_due is not None else None
+        if replies_due is not None:
+            times.append(replies_due)
         if not self._connected and not self._connecting and not self.refused:
             times.append(self._next_attempt)
         perf = self._current

@@ -16,7 +16,10 @@ timeouts), never beside a send or another connect: the driver writes nothing
 until it returned, and a connection it made after the driver shut down is
 closed by that thread. `connects_at_once` (default False) says connect cannot
 block (the in-process virtual robot): the worker calls it itself. `generation`
-tells a stale reader's reports from the live one's.
+tells a stale reader's reports from the live one's. A transport whose replies
+come on its own time without a connection (the virtual robot) may offer
+`due()` (when its earliest reply is due, or None) and `serve_due(now)`: the
+worker wakes then and calls it, so it needs no thread of its own.
 """
 
 from __future__ import annotations

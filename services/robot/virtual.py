@@ -6,8 +6,12 @@ and an end (the end after SPEECH_S_PER_WORD per word, times `time_scale`), a
 gesture with an end after GESTURE_S, and a newer speech or a stop ends the
 current speech early. Its wire messages are the neutral commands as JSON with
 their id, so a recording shows what a robot would have been asked to do.
-Its delayed replies wait in one heap served by one thread (not a thread per
-reply: a simulated session asks for thousands), which sleeps until the earliest.
+Its delayed replies wait in one heap served by the driver's own worker
+(services/robot/driver.py): `due()` says when the earliest is due, the worker
+sleeps until then and `serve_due()` hands on what is due. No thread of its own
+(there was one per transport, started by its first delayed reply: where a thread
+could not start, `ulimit -v`, the driver's tick failed with a traceback and no
+later reply of that robot ever came, its suggestions recorded unacknowledged).
 """
 
 from __future__ import annotations
@@ -44,10 +48,8 @@ class VirtualTransport:
         self._generation = 0
         self._due: list[tuple[float, int, str, str, str, bool]] = []  # heap: (when, n, kind, id, name, speech)
         self._order = itertools.count()
-        self._timer: threading.Thread | None = None
         self._speaking: str | None = None  # id of the speech playing now
         self._lock = threading.Lock()
-        self._wake = threading.Condition(self._lock)
 
     def encode(self, command: Command, command_id: str, time_ns: int) -> Wire:
         body = _encode(command).decode()  # '{"type":...}': the id goes first, as a field of the same object
@@ -91,27 +93,23 @@ class VirtualTransport:
         if delay <= 0:
             self._fire(kind, command_id, name, speech)
             return
-        with self._wake:
+        with self._lock:
             heapq.heappush(self._due, (time.monotonic() + delay, next(self._order), kind, command_id, name, speech))
-            if self._timer is None:
-                self._timer = threading.Thread(target=self._serve, name="virtual robot replies", daemon=True)
-                self._timer.start()
-            self._wake.notify()
 
-    def _serve(self) -> None:
-        """The reply thread: sleeps until the earliest due reply, fires what is due, until closed."""
-        me = threading.current_thread()
-        while True:
-            with self._wake:
-                while self._timer is me and (not self._due or self._due[0][0] > time.monotonic()):
-                    self._wake.wait(None if not self._due else self._due[0][0] - time.monotonic())
-                if self._timer is not me:
-                    return
-                due = []
-                while self._due and self._due[0][0] <= time.monotonic():
-                    due.append(heapq.heappop(self._due))
-            for _, _, kind, command_id, name, speech in due:
-                self._fire(kind, command_id, name, speech)
+    def due(self) -> float | None:
+        """When the earliest delayed reply is due (time.monotonic), None if none waits: the driver's
+        worker wakes then (its `_next_wakeup`)."""
+        with self._lock:
+            return self._due[0][0] if self._due else None
+
+    def serve_due(self, now: float) -> None:
+        """Hand on every reply due by `now`, in order (the driver's worker, each tick)."""
+        with self._lock:
+            due = []
+            while self._due and self._due[0][0] <= now:
+                due.append(heapq.heappop(self._due))
+        for _, _, kind, command_id, name, speech in due:
+            self._fire(kind, command_id, name, speech)
 
     def _fire(self, kind: str, command_id: str, name: str, speech: bool) -> None:
         if speech:
@@ -127,9 +125,7 @@ class VirtualTransport:
             deliver(Reply(self._generation, kind, command_id, name, aborted))
 
     def close(self) -> None:
-        with self._wake:
+        with self._lock:
             self._due.clear()
-            self._timer = None  # the reply thread sees it is no longer the one and ends
             self._speaking = None
-            self._wake.notify_all()
         self._deliver = None
