@@ -76,7 +76,7 @@ def add_profile_arguments(p: argparse.ArgumentParser) -> None:
 def add_combine_arguments(p: argparse.ArgumentParser) -> None:
     _common(p)
     p.add_argument("--out", "-o", type=Path, help="write the merged policy file here")
-    p.add_argument("--exclude", default="", help="comma-separated participants to leave out")
+    p.add_argument("--exclude", help="comma-separated participants to leave out")
     p.add_argument("--actions", action="store_true",
                    help="action-level information and wholes kept (thesis chapter 8, future work 1; "
                         "core/actionlevel.py) instead of algorithms 3 and 4 alone")
@@ -170,7 +170,7 @@ def run_combine(args) -> int:
     if args.out is not None:
         check_output(args.out, args.force, inputs=files)  # -o a.json --force replaced its own input a.json
     try:
-        exclude = set(comma_items(args.exclude))
+        exclude = set(comma_items(args.exclude)) if args.exclude is not None else set()
     except ValueError as exc:  # `p1,,p2`: a name lost to a typo would be combined
         raise OptionError(str(exc), "--exclude") from None
     check_exclude(policies, exclude)

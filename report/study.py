@@ -87,12 +87,12 @@ class StudySettings:
 
     def persona_list(self):
         """The personas named, in order (SettingError for none, an unknown one or one named twice)."""
+        if not self.personas.strip():
+            raise SettingError("personas", f"names no persona: give one or more of {', '.join(PERSONAS)}")
         try:
             names = comma_items(self.personas)
         except ValueError as exc:  # `a,,b` ran a and b without a word
             raise SettingError("personas", str(exc)) from None
-        if not names:
-            raise SettingError("personas", f"names no persona: give one or more of {', '.join(PERSONAS)}")
         chosen = []
         for name in names:
             try:
