@@ -8,7 +8,8 @@ policy given twice (the same file, a folder named twice, or two files holding
 the same learning: it would weigh double), a profile of a participant with a
 single policy (algorithm 3 compares policies: it would say 0% / 0%), an
 --exclude naming no participant, policies of different reward rules (the
-files of each rule are named), a learned policy that learned nothing (0 rounds,
+files of each rule are named; a profile too: a participant's policies would
+differ by the rule, not by what the participant perceives), a learned policy that learned nothing (0 rounds,
 no state ever updated, its Q-table all 0: an older rebuild of a recording cut
 before its first round wrote one; it would count as a participant who agrees
 with everything; a table written by hand, with values, is taken),
@@ -129,6 +130,9 @@ def _trained_profiles(policies, min_updates: int) -> dict:
 def run_profile(args) -> int:
     policies, names = _load(args)
     check_profiles_computable(policies, names)
+    # a participant's policies of different reward rules differ by the rule, not by what the participant
+    # perceives: refused as combine refuses them (a new user's trial: profile pooled them without a word)
+    common_reward_bonus(policies, names)
     if args.min_updates > 0:
         profiles = _trained_profiles(policies, args.min_updates)
         print(f"states every policy of a participant updated at least {args.min_updates} times")

@@ -242,6 +242,11 @@ CASES = [
     Case("combine --exclude a typo", ["combine", "policies", "--exclude", "blnd"], "no policy of 'blnd'"),
     Case("combine mixed reward rules names the files", ["combine", "policies/deaf", "spec/blind.json"],
          "consistent: spec/blind.json"),
+    # profile pooled a participant's policies of different reward rules without a word (a new user's trial,
+    # `profile q1/policies q2/policies --actions`), where combine refused the same files
+    Case("profile mixed reward rules names the files", ["profile", "policies/blind/game-01.json", "spec/blind.json",
+                                                        "policies/deaf", "--actions"],
+         "their Q-values cannot be compared; consistent: spec/blind.json; correct: policies/blind/game-01.json"),
     # found by the trial (2026-11-30): the lab's pages on a port in use printed uvicorn's own ERROR line
     # beside ours (two lines; the lab exited 1)
     Case("lab --listen a port in use", ["lab", "--participant", "human:p1", "--listen", f"127.0.0.1:{TAKEN_PORT}"],
