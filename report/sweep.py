@@ -198,7 +198,7 @@ def read_grid(path: str | Path) -> Grid:
     for s in grid.settings():  # every cell's settings, before any cell runs: each must make the study asked for
         settings = grid.study_settings(Cell(s, grid.seeds[0]))
         try:
-            personas = settings.check(speed_up=grid.reuse, compare_learners=False)
+            personas = settings.check(speed_up=grid.reuse, compare_learners=False, given={*base, *dict(s)})
         except SettingError as exc:
             value = getattr(settings, exc.key)
             # numbers as the file gave them (a TOML 2 became 2.0 for a float setting: pairplay/numbers.py)
