@@ -286,3 +286,13 @@ def test_the_same_arm_of_an_lspi_recording_replays_lspi_with_its_settings(tmp_pa
     # the recorded settings tell (the defaults play otherwise on these seeds), and so does the learner
     assert not np.array_equal(want, run_games([fitted] * 3, seeds, rounds, mode="lspi").picks)
     assert not np.array_equal(want, rows["picks"][rows["arm"] == "q"].reshape(3, rounds))
+
+
+def test_the_share_of_matched_turns_has_an_interval_within_0_and_100_percent():
+    """A trial's table said `91.9% [83.7%, 100.2%]`: the t-interval of a mean of shares near 1 passed 100%."""
+    from pairplay.core.counterfactual import ArmRuns
+    from pairplay.report.counterfactual import Recorded, comparison_rows
+    hits = np.array([1.0, 1.0, 0.757])
+    rows = comparison_rows(Recorded([20], 0.9, 10), {"same": ArmRuns(np.full((3, 1), 18.0), hits)}, {})
+    cell = rows[-1][3]
+    assert cell.startswith("91.9% [") and cell.endswith(", 100.0%]"), cell
