@@ -154,6 +154,8 @@ def read_grid(path: str | Path) -> Grid:
         data = tomllib.loads(without_bom(raw).decode("utf-8"))
     except FileNotFoundError:
         raise GridError(f"{path}: no such file") from None
+    except IsADirectoryError:  # it said `Is a directory (bad)`: the system's words, not what to give
+        raise GridError(f"{path}: a folder, not a sweep file: give the grid's TOML file") from None
     except tomllib.TOMLDecodeError as exc:
         raise GridError(f"{path}: not TOML ({exc})") from None
     except UnicodeDecodeError:  # tomllib decodes bytes itself: a binary file was a traceback

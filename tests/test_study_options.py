@@ -163,6 +163,14 @@ GRID_MISTAKES = [
 ]
 
 
+def test_a_folder_given_as_the_sweep_file_is_one_clear_line(tmp_path, capsys):
+    (tmp_path / "bad").mkdir()  # a trial: `pairplay sweep bad` said `Is a directory (bad)`
+    assert main(["sweep", "--quiet", str(tmp_path / "bad"), "--out", str(tmp_path / "out")]) == 2
+    err = capsys.readouterr().err
+    assert err == f"pairplay sweep: {tmp_path / 'bad'}: a folder, not a sweep file: give the grid's TOML file\n", err
+    assert not (tmp_path / "out").exists()
+
+
 @pytest.mark.parametrize("text,needle", GRID_MISTAKES)
 def test_a_sweep_checks_every_cell_before_it_writes_anything(text, needle, tmp_path, capsys):
     grid = tmp_path / "grid.toml"
