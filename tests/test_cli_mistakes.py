@@ -71,6 +71,10 @@ CASES = [
     Case("recover random bytes", ["recover", "random.mcap"], "not a recording: not an MCAP file (it does not begin as one) (random.mcap)"),
     # a binary file where a text file is wanted (a traceback before: UnicodeDecodeError, the new-user trial 2026-11-30)
     Case("sweep a binary grid file", ["sweep", "random.mcap"], "random.mcap: not TOML (not UTF-8 text)"),
+    # a trial: `--workers 2 --scheduler X` was accepted and --workers ignored (the cluster's workers run the cells)
+    Case("sweep --workers with --scheduler", ["sweep", "grid.toml", "--workers", "2", "--scheduler",
+                                              f"tcp://127.0.0.1:{_closed_port()}", "--out", "sw"],
+         "the cluster's own workers run the cells: give one or the other (--workers 2)"),
     Case("protocol check a binary study file", ["protocol", "check", "random.mcap"],
          "random.mcap: cannot read: not UTF-8 text"),
     Case("recover a folder", ["recover", "policies"], "a folder, not a recording"),
