@@ -8,7 +8,8 @@ policy given twice (the same file, a folder named twice, or two files holding
 the same learning: it would weigh double), a profile of a participant with a
 single policy (algorithm 3 compares policies: it would say 0% / 0%), an
 --exclude naming no participant, policies of different reward rules (the
-files of each rule are named), a learned policy that learned nothing (0 rounds,
+files of each rule are named; a profile too: a participant's policies would
+differ by the rule, not by what the participant perceives), a learned policy that learned nothing (0 rounds,
 no state ever updated, its Q-table all 0: an older rebuild of a recording cut
 before its first round wrote one; it would count as a participant who agrees
 with everything; a table written by hand, with values, is taken),
@@ -76,7 +77,7 @@ def add_profile_arguments(p: argparse.ArgumentParser) -> None:
 def add_combine_arguments(p: argparse.ArgumentParser) -> None:
     _common(p)
     p.add_argument("--out", "-o", type=Path, help="write the merged policy file here")
-    p.add_argument("--exclude", default="", help="comma-separated participants to leave out")
+    p.add_argument("--exclude", help="comma-separated participants to leave out")
     p.add_argument("--actions", action="store_true",
                    help="action-level information and wholes kept (thesis chapter 8, future work 1; "
                         "core/actionlevel.py) instead of algorithms 3 and 4 alone")
@@ -129,6 +130,9 @@ def _trained_profiles(policies, min_updates: int) -> dict:
 def run_profile(args) -> int:
     policies, names = _load(args)
     check_profiles_computable(policies, names)
+    # a participant's policies of different reward rules differ by the rule, not by what the participant
+    # perceives: refused as combine refuses them (a new user's trial: profile pooled them without a word)
+    common_reward_bonus(policies, names)
     if args.min_updates > 0:
         profiles = _trained_profiles(policies, args.min_updates)
         print(f"states every policy of a participant updated at least {args.min_updates} times")
@@ -170,7 +174,7 @@ def run_combine(args) -> int:
     if args.out is not None:
         check_output(args.out, args.force, inputs=files)  # -o a.json --force replaced its own input a.json
     try:
-        exclude = set(comma_items(args.exclude))
+        exclude = set(comma_items(args.exclude)) if args.exclude is not None else set()
     except ValueError as exc:  # `p1,,p2`: a name lost to a typo would be combined
         raise OptionError(str(exc), "--exclude") from None
     check_exclude(policies, exclude)

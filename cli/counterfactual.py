@@ -76,15 +76,16 @@ def parse_arms(text: str) -> list[tuple[str, str]]:
     return arms
 
 
-def check_size(arms: int, seeds: int, rounds: int) -> None:
-    """OptionError if the arms' one batch would hold more than core/simulate.py MEMORY_LIMIT
-    (`--rounds 100000000` was a MemoryError traceback), naming --seeds if the default 10 would fit."""
+def check_size(arms: int, seeds: int, rounds: int, lspi: int = 0) -> None:
+    """OptionError if the arms' batches (`lspi` of them LSPI arms) would hold more than core/simulate.py
+    MEMORY_LIMIT (`--rounds 100000000` was a MemoryError traceback), naming --seeds if the default 10 would fit."""
     from pairplay.core.counterfactual import arms_bytes
     from pairplay.core.simulate import MEMORY_LIMIT, gigabytes
     from pairplay.errors import OptionError
 
-    need = arms_bytes(arms, seeds, rounds)
-    where = f"--seeds {seeds}" if seeds > 10 and arms_bytes(arms, 10, rounds) <= MEMORY_LIMIT else f"--rounds {rounds}"
+    need = arms_bytes(arms, seeds, rounds, lspi)
+    where = (f"--seeds {seeds}" if seeds > 10 and arms_bytes(arms, 10, rounds, lspi) <= MEMORY_LIMIT
+             else f"--rounds {rounds}")
     if need > MEMORY_LIMIT:
         raise OptionError(f"{arms} arm{'s' if arms != 1 else ''} x {seeds} seeds x {rounds} rounds would hold about "
                           f"{gigabytes(need)} of memory (every turn is kept for counterfactual.csv), over the "
@@ -105,6 +106,7 @@ def run(args: argparse.Namespace) -> int:
     from pairplay.replay.turns import read_turns, turns_from_events
     from pairplay.report.counterfactual import ARM_TEXT, Recorded, console_text, write_counterfactual
     from pairplay.schemas.policy import read_policy
+    from pairplay.schemas.session import MODE_OF_ALGORITHM
 
     arms_wanted = parse_arms(args.policy)
     if args.rounds and not args.fit_only:  # before any work
@@ -149,14 +151,16 @@ def run(args: argparse.Namespace) -> int:
         rounds = args.rounds or len(turns.picks_per_round)
         if rounds < 1:
             raise InputError("completed no round: give --rounds for the arms to play", rec)
-        check_size(len(arms_wanted), args.seeds, rounds)
+        same_mode = MODE_OF_ALGORITHM[config.algorithm]
+        check_size(len(arms_wanted), args.seeds, rounds, int(same_mode == "lspi" and ("same", "") in arms_wanted))
         learner = config.learner_config()
         persona = model.persona
         arms = []
         for name, path in arms_wanted:
             if name == "same":
-                mode = {"q-learning": "q", "pi-reuse": "reuse", "fixed": "fixed"}[config.algorithm]
-                arms.append(cf.Arm(name, mode, learner, np.asarray(config.policy_actions) if mode != "q" else None))
+                table = np.asarray(config.policy_actions) if same_mode in ("reuse", "fixed") else None
+                arms.append(cf.Arm(name, same_mode, learner, table,
+                                   config.lspi_config() if same_mode == "lspi" else None))
             elif name == "q":
                 arms.append(cf.Arm(name, "q", learner))
             elif name == "final":

@@ -61,7 +61,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     sv.add_argument("--robot", help="override the study's robot (virtual, none, iristk://..., furhat://...)")
     sv.add_argument("--certfile", help="TLS certificate (PEM): serve https/wss (as `pairplay lab`)")
     sv.add_argument("--keyfile", help="TLS private key (PEM) of --certfile")
-    sv.add_argument("--pilot", default="",
+    sv.add_argument("--pilot",
                     help="ID=PERSONA,...: these participants are played by core personas on the bus (a dress "
                          "rehearsal from the console; the others play on the board page)")
     m = sub.add_parser("mark-invalid", help="keep a game out of the plan, the combination and the report")
@@ -234,7 +234,7 @@ def _serve(data: StudyData, args) -> int:
     if bool(args.certfile) != bool(args.keyfile):
         raise StudyDataError("--certfile and --keyfile go together")
     pilot = {}
-    for pair in _items(args.pilot, "--pilot"):
+    for pair in _items(args.pilot, "--pilot") if args.pilot is not None else []:
         pid, _, key = pair.partition("=")
         data.participant(pid)
         pilot[pid] = persona(key).key

@@ -37,7 +37,7 @@ import msgspec
 
 from pairplay import __version__
 from pairplay.core.rng import STREAMS_VERSION
-from pairplay.schemas.config import DEFAULT_REWARD_BONUS, REWARD_BONUS_RULES, LearnerConfig, LSPIConfig
+from pairplay.schemas.config import DEFAULT_REWARD_BONUS, REWARD_BONUS_RULES, LearnerConfig, LSPIConfig, lspi_unused
 from pairplay.schemas.keys import check_chunk
 from pairplay.errors import OptionError, UserError
 from pairplay.outputs import check_folder
@@ -127,15 +127,17 @@ def _config_from_args(args: argparse.Namespace) -> SessionConfig:
     preset = PRESETS[preset_name]
     schedule = preset(rounds) if preset_name != "virtual" else preset()
     lspi = msgspec.UNSET
+    options = {"ridge": "--lspi-ridge", "improve_every": "--lspi-every"}
     given = {k: v for k, v in (("ridge", getattr(args, "lspi_ridge", None)),
                                ("improve_every", getattr(args, "lspi_every", None))) if v is not None}
+    unused = lspi_unused(args.algorithm, [options[k] for k in given])
+    if unused:
+        raise OptionError(unused, "--algorithm")
     if args.algorithm == "lspi":
         try:
             lspi = lspi_overrides(LSPIConfig(**given))
         except ValueError as err:
             raise OptionError(str(err), "--lspi-ridge/--lspi-every") from None
-    elif given:
-        raise OptionError(f"--lspi-ridge/--lspi-every need --algorithm lspi, not {args.algorithm}", "--algorithm")
     never = schedule.never_reuses() if args.algorithm == "pi-reuse" else ""
     if never:  # `--rounds 1` under human-phase2: its one round is the last, on the new policy alone
         raise OptionError(f"--algorithm pi-reuse with --rounds {rounds} would never reuse the bias policy: "

@@ -48,9 +48,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--algorithm", choices=("q-learning", "lspi"), default="q-learning",
                    help="the learner: Q-learning (thesis 5.1.1, default) or online LSPI (algorithm 2, core/lspi.py); "
                         "with lspi, Q-learning also trains on the same games for the side-by-side comparison")
-    p.add_argument("--lspi-ridge", type=positive_number, default=1.0, help="lspi: delta, the ridge penalty (default 1)")
-    p.add_argument("--lspi-every", type=count, default=10,
-                   help="lspi: K, samples between policy improvements (default 10)")
+    # no default here (StudySettings' is used): given with another algorithm, they are refused, not ignored
+    p.add_argument("--lspi-ridge", type=positive_number, help="lspi: delta, the ridge penalty (default 1)")
+    p.add_argument("--lspi-every", type=count, help="lspi: K, samples between policy improvements (default 10)")
     p.add_argument("--out", type=Path, default=Path("out/study"),
                    help="report folder (default out/study); refused if it holds files, unless --force")
     add_force(p, "the files of an existing report folder")
@@ -76,14 +76,15 @@ def settings_of(args):
     """The one config object (report/study.py StudySettings) from the parsed options, checked: an
     OptionError naming the option and its allowed range for a combination core cannot run or would run
     as something else (no persona, one twice, fewer rounds than the speed-up's snapshot interval...)."""
-    from pairplay.report.study import SettingError, StudySettings, default_reuse_last
+    from pairplay.report.study import LSPI_SETTINGS, SettingError, StudySettings, default_reuse_last
 
     given = {k: getattr(args, k) for k in StudySettings.__dataclass_fields__}
     if given["reuse_last"] is None:  # not given: the default must fit a short study (`--rounds 20` was refused
         given["reuse_last"] = default_reuse_last(given["rounds"])  # for the default's 50: a new user's trial)
-    settings = StudySettings(**given)
+    unset = [k for k in LSPI_SETTINGS if given[k] is None]  # not given: StudySettings' default
+    settings = StudySettings(**{k: v for k, v in given.items() if k not in unset})
     try:
-        settings.check(spell=option)
+        settings.check(spell=option, given=[k for k in LSPI_SETTINGS if k not in unset])
     except SettingError as exc:
         raise OptionError(f"{option(exc.key)}: {exc.what}", option(exc.key)) from None
     return settings

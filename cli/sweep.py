@@ -7,8 +7,9 @@ the same grid into the same folder resumes: finished cells are not computed
 again; with every cell finished and the summary written, nothing is written
 (sweep.md keeps the run that did the work) and one line says so. A folder that holds another grid's sweep, or files but no sweep, is
 refused unless --force; an --out that is a file is refused before any work.
-`--scheduler tcp://HOST:PORT` runs the cells on a Dask distributed cluster; an address
-where no Dask scheduler answers in time is refused before anything is written
+`--scheduler tcp://HOST:PORT` runs the cells on a Dask distributed cluster (with
+--workers, which would be ignored there, it is refused); an address where no Dask
+scheduler answers in time is refused before anything is written
 (report/sweep.py check_scheduler).
 Interrupted (SIGINT/SIGTERM), or refused a write by the system while it runs
 (a full disk, a folder removed under it: exit 2, as any OSError, README's exit
@@ -27,7 +28,7 @@ from pathlib import Path
 
 from pairplay.cli.args import workers
 from pairplay.cli.progress import bar as progress
-from pairplay.errors import OutputError
+from pairplay.errors import OptionError, OutputError
 from pairplay.outputs import check_folder, write_text
 from pairplay.report.sweep import (GridError, check_scheduler, check_sweep_memory, finished_cells, read_grid, run_sweep,
                                     write_sweep)
@@ -40,7 +41,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("grid", type=Path, help="the sweep's TOML file ([study], [grid], seeds, reuse)")
     p.add_argument("--out", type=Path, help="result folder (default out/sweep-<grid file name>)")
     p.add_argument("--scheduler", metavar="ADDRESS", help="a Dask distributed scheduler (tcp://host:port)")
-    p.add_argument("--workers", type=workers, default=1,
+    p.add_argument("--workers", type=workers,
                    help="local processes when no --scheduler (default 1; at most the CPUs this process may use)")
     p.add_argument("--force", action="store_true", help="replace a folder that holds another grid's sweep, or write into one that holds other files")
 
@@ -69,6 +70,10 @@ def stopped(out: Path, grid, made: list[Path], had_copy: bool, why: str) -> int 
 
 
 def run(args) -> int:
+    if args.scheduler is not None and args.workers is not None:  # it was accepted and ignored (a trial)
+        raise OptionError(f"--workers is the local processes run without --scheduler; on {args.scheduler} the "
+                          "cluster's own workers run the cells: give one or the other", f"--workers {args.workers}")
+    args.workers = args.workers or 1
     try:
         grid = read_grid(args.grid)
     except GridError as exc:

@@ -6,8 +6,8 @@ policy playing it for the recording's number of rounds, once per seed. Every
 arm plays the same seeds, so seed i deals the same boards in every arm and the
 arms compare pairwise (a difference per seed, then its mean). Arms:
 - "same": the recorded session's own learner (its algorithm, schedule and
-  bias or fixed policy): a check of the fit, it should give what the
-  recording gave, within the spread of the seeds;
+  bias or fixed policy, or its LSPI settings): a check of the fit, it should
+  give what the recording gave, within the spread of the seeds;
 - "q": Q-learning from scratch, on the recorded session's schedule;
 - "final": the recorded learner's final greedy policy, played fixed;
 - "oracle": the best policy for the fitted user (core/oracle.py);
@@ -15,6 +15,11 @@ arms compare pairwise (a difference per seed, then its mean). Arms:
 - any other name: a given policy, pi-reused ("reuse") or played fixed ("fixed").
 Measures, the same for the recording and every arm: picks per round (18 is
 perfect play) and the share of suggestions after which the second card matched.
+An LSPI arm plays in a batch of its own (run_games plays LSPI in its own
+lockstep runner, which records no trace); its share comes from its picks, which
+hold it exactly: every round ends with its 9 pairs matched, each by one turn
+whose second pick matched, and every turn is 2 picks, so the share is
+9 rounds / (picks / 2) (the kernel arms' traces give the same, tested).
 
 Pure: numpy in, numpy out; randomness from the seeds given.
 """
@@ -25,10 +30,10 @@ from typing import NamedTuple, Sequence
 
 import numpy as np
 
-from pairplay.schemas.config import DEFAULT_REWARD_BONUS, LearnerConfig, Persona
+from pairplay.schemas.config import DEFAULT_REWARD_BONUS, LearnerConfig, LSPIConfig, Persona
 from pairplay.schemas.usermodel import CountedRate, FeatureFit, RateFit, UserModelFile
 
-from .geometry import N_STATES
+from .geometry import N_CARDS, N_STATES
 from .interpretation import SIGHT_SEES, consider_probability, hear_probability, memory_capacity
 from .oracle import USER_ALONE, oracle_policies
 from .simulate import batch_bytes, run_games
@@ -54,9 +59,10 @@ ASSUMPTIONS = (
 
 class Arm(NamedTuple):
     name: str
-    mode: str  # run_games mode: "q", "reuse" or "fixed"
+    mode: str  # run_games mode: "q", "reuse", "fixed" or "lspi"
     config: LearnerConfig
     table: np.ndarray | None = None  # (24,) the bias (reuse) or fixed policy
+    lspi: LSPIConfig | None = None  # mode "lspi": its settings (None: the defaults)
 
 
 class ArmRuns(NamedTuple):
@@ -122,14 +128,38 @@ def user_alone() -> np.ndarray:
     return USER_ALONE.copy()
 
 
-def arms_bytes(arms: int, seeds: int, rounds: int) -> int:
-    """About the bytes run_arms holds: one batch of arms x seeds games that records every turn."""
-    return batch_bytes(arms * seeds, rounds, trace=True)
+def arms_bytes(arms: int, seeds: int, rounds: int, lspi: int = 0) -> int:
+    """About the bytes run_arms holds: one batch of the arms x seeds games that records every turn, then
+    the `lspi` arms' (of `arms`) one after the other, each a batch of seeds LSPI games without a trace."""
+    lspi_batch = batch_bytes(seeds, rounds, lspi=True) if lspi else 0
+    return batch_bytes((arms - lspi) * seeds, rounds, trace=True) + lspi_batch
+
+
+def hits_of_picks(picks: np.ndarray) -> np.ndarray:
+    """(seeds,) share of turns whose second pick matched, from (seeds, rounds) picks of complete rounds
+    (module rule: N_CARDS / 2 such turns a round, 2 picks a turn)."""
+    return N_CARDS * picks.shape[1] / np.maximum(picks.sum(axis=1), 1)
 
 
 def run_arms(persona: Persona, arms: Sequence[Arm], seeds: Sequence[int], rounds: int,
              observed_source: str = "intended", reward_bonus: str = DEFAULT_REWARD_BONUS) -> dict[str, ArmRuns]:
-    """Every arm against `persona`, once per seed, all in one batch of the compiled simulator."""
+    """Every arm against `persona`, once per seed: the learners and policies in one batch of the compiled
+    simulator, each LSPI arm in a batch of its own (module rule); the result in the arms' order."""
+    runs = _run_batch(persona, [a for a in arms if a.mode != "lspi"], seeds, rounds, observed_source, reward_bonus)
+    for arm in arms:
+        if arm.mode == "lspi":
+            result = run_games([persona] * len(seeds), list(seeds), rounds, config=arm.config, mode="lspi",
+                               lspi=arm.lspi, observed_source=SIM_SOURCE[observed_source], reward_bonus=reward_bonus)
+            picks = result.picks.astype(np.float64)
+            runs[arm.name] = ArmRuns(picks, hits_of_picks(picks))
+    return {arm.name: runs[arm.name] for arm in arms}
+
+
+def _run_batch(persona: Persona, arms: Sequence[Arm], seeds: Sequence[int], rounds: int, observed_source: str,
+               reward_bonus: str) -> dict[str, ArmRuns]:
+    """The arms of the compiled kernel (no LSPI) in one batch, every turn recorded."""
+    if not arms:
+        return {}
     n_seeds = len(seeds)
     games = len(arms) * n_seeds
     tables = np.zeros((games, N_STATES), dtype=np.int64)

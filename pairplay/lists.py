@@ -1,19 +1,23 @@
 """A comma-separated list a user gives (`--personas a,b`, `--exclude p1,p2`, `--try 35,46`).
 
-Rule: each item is stripped of spaces (`wasim, frances` is two names); blank
-text is the empty list; an empty item inside (`a,,b`, `a,b,`, ` , `) is a
-mistake, refused with a ValueError naming the text and the item's place, never
-skipped: `--personas a,,b` ran two personas without a word, where the user may
-have lost a name to a typo. Standard library only (every layer imports this).
+Rule: each item is stripped of spaces (`wasim, frances` is two names); an
+empty item inside (`a,,b`, `a,b,`, ` , `) is a mistake, refused with a
+ValueError naming the text and the item's place, never skipped: `--personas
+a,,b` ran two personas without a word, where the user may have lost a name to a
+typo. Blank text names nothing and is refused the same way: `bench --only ""`
+measured nothing and exited 0 with an empty table, `counterfactual --policy ""`
+quietly only fitted (a shell variable left empty is the usual cause). An option
+whose list may be left out has no default text: it is None, not "". Standard
+library only (every layer imports this).
 """
 
 from __future__ import annotations
 
 
 def comma_items(text: str) -> list[str]:
-    """The items of `text` (module rule); ValueError for an empty one."""
+    """The items of `text` (module rule); ValueError for an empty one or none."""
     if not text.strip():
-        return []
+        raise ValueError(f"{text!r} names nothing: give one or more, comma-separated")
     items = [item.strip() for item in text.split(",")]
     for place, item in enumerate(items, 1):
         if not item:

@@ -7,7 +7,10 @@ with force). Files: `<recording>.usermodel.json` (schemas/usermodel.py),
 `counterfactual.md` (the fitted user with its 95% sets, the comparison table
 and the assumptions) and `counterfactual.png` (picks per round by round, and
 the share of turns whose second pick matched, per arm: HITS). Arms are summarised
-over seeds: mean, sample sd, 95% t-interval of the mean; each arm beside the
+over seeds: mean, sample sd, 95% t-interval of the mean (a share's clipped to
+0..100%: near 100% the t-interval of a mean of shares passed it, `91.9% [83.7%,
+100.2%]`, a share no seed can reach; the clip moves no bound a share can take,
+so the interval still holds the true share as often); each arm beside the
 recorded learner replayed on the same seeds ("same"), as a paired difference
 per seed; "differs" when that difference's 95% interval leaves out 0.
 Written with force over an earlier run, the earlier run's files of these names
@@ -47,14 +50,21 @@ class Summary(NamedTuple):
     high: float
 
 
-def summarise(values: np.ndarray) -> Summary:
-    """Mean, sample sd and 95% t-interval of the mean of per-seed values."""
+def summarise(values: np.ndarray, within: tuple[float, float] | None = None) -> Summary:
+    """Mean, sample sd and 95% t-interval of the mean of per-seed values, clipped to `within` if given
+    (SHARE for shares: module rule)."""
     v = np.asarray(values, dtype=float)
     n = v.size
     mean = float(v.mean())
     sd = float(v.std(ddof=1)) if n > 1 else 0.0
     half = t975(n) * sd / math.sqrt(n) if n > 1 else 0.0
-    return Summary(mean, sd, mean - half, mean + half)
+    low, high = mean - half, mean + half
+    if within is not None:
+        low, high = max(low, within[0]), min(high, within[1])
+    return Summary(mean, sd, low, high)
+
+
+SHARE = (0.0, 1.0)  # the bounds of a share (HITS)
 
 
 # the hits column: in every arm but "alone" each turn has a suggestion, so it is the share of suggestions
@@ -79,7 +89,7 @@ def comparison_rows(recorded: Recorded, runs: dict, texts: dict[str, str]) -> li
     base = runs["same"].picks.mean(axis=1) if "same" in runs else None
     for name, r in runs.items():
         per_seed = r.picks.mean(axis=1)
-        s, h = summarise(per_seed), summarise(r.hits)
+        s, h = summarise(per_seed), summarise(r.hits, SHARE)
         paired, differs = "", ""
         if base is not None and name != "same":
             d = summarise(per_seed - base)
@@ -138,7 +148,7 @@ def counterfactual_figure(recorded: Recorded, runs: dict, path: Path, title: str
     ax.set_title("picks per round (band: 95% CI over seeds)", fontsize=9)
     ax.legend(fontsize=7)
     names = list(runs)
-    stats = [summarise(runs[n].hits) for n in names]
+    stats = [summarise(runs[n].hits, SHARE) for n in names]
     bx.bar(names, [s.mean for s in stats], yerr=[[s.mean - s.low for s in stats], [s.high - s.mean for s in stats]],
            color=[colours[k % len(colours)] for k in range(len(names))], capsize=4)
     bx.axhline(recorded.hits, color="black", lw=2, label=f"recorded ({recorded.hits:.0%})")

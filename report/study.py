@@ -31,7 +31,7 @@ import time
 from dataclasses import dataclass, field, fields, replace
 from pathlib import Path
 from types import SimpleNamespace
-from typing import Callable
+from typing import Callable, Collection
 
 import numpy as np
 
@@ -47,7 +47,7 @@ from pairplay.core.simulate import MEMORY_LIMIT, batch_bytes, gigabytes
 from pairplay.errors import OptionError
 from pairplay.lists import comma_items
 from pairplay.numbers import shown
-from pairplay.schemas.config import DEFAULT_REWARD_BONUS, LearnerConfig, LSPIConfig, REWARD_BONUS_RULES
+from pairplay.schemas.config import DEFAULT_REWARD_BONUS, LearnerConfig, LSPIConfig, REWARD_BONUS_RULES, lspi_unused
 from pairplay.outputs import output_folder
 from pairplay.processes import off_main_thread, process_pool, stop_pool
 from pairplay.schemas.policy import write_policy
@@ -57,6 +57,7 @@ from pairplay.report.future_frames import frames_lines
 
 
 MEMORY_COUNTS = ("games", "rounds", "eval_rounds", "reuse_seeds")  # the settings that size the study's memory
+LSPI_SETTINGS = ("lspi_ridge", "lspi_every")  # the settings only algorithm lspi takes
 EVAL_GAMES_PER_GAME = 12  # evaluation games per training game: comparison 3, own + merged policies, future work
 
 
@@ -87,12 +88,12 @@ class StudySettings:
 
     def persona_list(self):
         """The personas named, in order (SettingError for none, an unknown one or one named twice)."""
+        if not self.personas.strip():
+            raise SettingError("personas", f"names no persona: give one or more of {', '.join(PERSONAS)}")
         try:
             names = comma_items(self.personas)
         except ValueError as exc:  # `a,,b` ran a and b without a word
             raise SettingError("personas", str(exc)) from None
-        if not names:
-            raise SettingError("personas", f"names no persona: give one or more of {', '.join(PERSONAS)}")
         chosen = []
         for name in names:
             try:
@@ -109,13 +110,14 @@ class StudySettings:
         return not self.train_only and len(self.persona_list()) >= 2
 
     def check(self, speed_up: bool | None = None, spell: Callable[[str], str] = str,
-              compare_learners: bool | None = None) -> list:
+              compare_learners: bool | None = None, given: Collection[str] = ()) -> list:
         """The personas, once every setting is known to make the study asked for; raises SettingError
         (its `key`, the setting's field name) for the first that core cannot run or that would run
         something else. `speed_up`: whether the speed-up runs (default: as run_study decides; a sweep
         says `reuse`). `compare_learners`: whether LSPI is compared with Q-learning by snapshots (default: as
         run_study decides, lspi without train_only; a sweep's cells do not). `spell` names a setting in
-        the message (the CLI's `--reuse-last`)."""
+        the message (the CLI's `--reuse-last`). `given`: the settings the user gave (the options on the
+        command line, the keys of a sweep's cell), for those that only some algorithm takes."""
         personas = self.persona_list()
         lo, hi = SEED_RANGE
         if not lo <= self.seed <= hi:
@@ -147,6 +149,9 @@ class StudySettings:
             raise SettingError("reward_bonus", f"must be one of {', '.join(REWARD_BONUS_RULES)}, got {self.reward_bonus!r}")
         if self.algorithm not in study.LEARNING_ALGORITHMS:
             raise SettingError("algorithm", f"must be one of {', '.join(study.LEARNING_ALGORITHMS)}, got {self.algorithm!r}")
+        unused = lspi_unused(self.algorithm, [spell(k) for k in LSPI_SETTINGS if k in given], spell("algorithm"))
+        if unused:  # (session's rule: Q-learning would ignore them)
+            raise SettingError("algorithm", unused)
         try:
             self.lspi()
         except ValueError as exc:

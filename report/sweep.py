@@ -27,7 +27,8 @@ Measures (picks per round: 18 is perfect play, lower is better):
   <persona>/oracle         the oracle on the same evaluation games
   <persona>/ratio          learned / oracle
   <persona>/first50        online picks per round over the first 50 training rounds
-  <persona>/last50         ... over the last 50 training rounds
+  <persona>/last50         ... over the last 50 training rounds (a cell of fewer rounds has fewer in
+                           each: its names stay, so a rounds axis lines up, and sweep.md says the windows)
   <persona>/reuse_gain     (reuse = true) scratch minus pi-reuse, first 50 rounds, held out
   all/ratio                mean of the personas' ratios
 """
@@ -56,6 +57,7 @@ from pairplay.processes import check_workers, worker_pool
 from pairplay.schemas.jsonfile import empty, without_bom
 from pairplay.schemas.tomlplace import misplaced, table_not_value
 from pairplay.core.rng import SEED_RANGE
+from pairplay.core.study import FIRST_ROUNDS
 from pairplay.report.study import SettingError, StudySettings, default_reuse_last
 
 log = logging.getLogger("pairplay.sweep")
@@ -163,6 +165,8 @@ def read_grid(path: str | Path) -> Grid:
         data = tomllib.loads(without_bom(raw).decode("utf-8"))
     except FileNotFoundError:
         raise GridError(f"{path}: no such file") from None
+    except IsADirectoryError:  # it said `Is a directory (bad)`: the system's words, not what to give
+        raise GridError(f"{path}: a folder, not a sweep file: give the grid's TOML file") from None
     except tomllib.TOMLDecodeError as exc:
         raise GridError(f"{path}: not TOML ({exc})") from None
     except UnicodeDecodeError:  # tomllib decodes bytes itself: a binary file was a traceback
@@ -207,7 +211,7 @@ def read_grid(path: str | Path) -> Grid:
     for s in grid.settings():  # every cell's settings, before any cell runs: each must make the study asked for
         settings = grid.study_settings(Cell(s, grid.seeds[0]))
         try:
-            personas = settings.check(speed_up=grid.reuse, compare_learners=False)
+            personas = settings.check(speed_up=grid.reuse, compare_learners=False, given={*base, *dict(s)})
         except SettingError as exc:
             value = getattr(settings, exc.key)
             # numbers as the file gave them (a TOML 2 became 2.0 for a float setting: pairplay/numbers.py)
@@ -235,8 +239,8 @@ def cell_measures(settings: StudySettings, reuse: bool = False) -> dict[str, flo
         out[f"{p.key}/learned"] = float(cmp.learned[i])
         out[f"{p.key}/oracle"] = float(cmp.oracle[i])
         out[f"{p.key}/ratio"] = float(cmp.learned[i] / cmp.oracle[i])
-        out[f"{p.key}/first50"] = float(picks[rows, :50].mean())
-        out[f"{p.key}/last50"] = float(picks[rows, -50:].mean())
+        out[f"{p.key}/first50"] = float(picks[rows, :FIRST_ROUNDS].mean())  # fewer rounds: all (windows_note)
+        out[f"{p.key}/last50"] = float(picks[rows, -FIRST_ROUNDS:].mean())
     out["all/ratio"] = float(np.mean([out[f"{p.key}/ratio"] for p in personas]))
     if reuse:
         users = study.user_set(personas, training, settings.seed, settings.trained_updates)
@@ -499,6 +503,18 @@ def setting_label(setting: Iterable[tuple[str, object]]) -> str:
     return ", ".join(f"{k}={v}" for k, v in setting) or "(no grid)"
 
 
+def windows_note(grid: Grid) -> str:
+    """What first50 and last50 average in the cells shorter than 100 rounds ("" if none is): a 40-round
+    study's first50 and last50 were both its 40 rounds, the same value under two names (a trial)."""
+    n = FIRST_ROUNDS
+    short = sorted({s.rounds for s in map(grid.study_settings, grid.cells()) if s.rounds < 2 * n})
+    if not short:
+        return ""
+    said = "; ".join(f"rounds = {r}: the first and last {min(r, n)} of {r}" + (" (both all of them: one value)"
+                                                                               if r <= n else "") for r in short)
+    return f" first{n} and last{n} average the first and last {n} training rounds, fewer in a shorter cell: {said}."
+
+
 def write_sweep(out: str | Path, grid: Grid, results: dict[str, dict], run: SweepRun) -> list[Path]:
     """sweep.csv (the summary), cells.csv (every cell and seed), one figure per measure, sweep.md: all
     written beside `out` and moved in together (pairplay.outputs.output_folder, `among_others`: cells/ and
@@ -546,7 +562,8 @@ def _write_summary(out: Path, grid: Grid, results: dict[str, dict], run: SweepRu
           + (" reuse_last, not given, is the study's default: 50, or rounds // 4 for 50 rounds or fewer."
              if grid.reuse and "reuse_last" not in {**grid.base, **grid.axes} else ""), "",
           "Each row: the mean over seeds, the sample sd, and the 95% confidence interval of the mean "
-          "(Student's t). Picks per round: 18 is perfect play, lower is better; ratio: learned / oracle.", "",
+          "(Student's t). Picks per round: 18 is perfect play, lower is better; ratio: learned / oracle."
+          + windows_note(grid), "",
           "| setting | measure | n | mean | sd | 95% CI |", "|---|---|---|---|---|---|"]
     md += [f"| {setting_label((k, r[k]) for k in keys)} | {r['measure']} | {r['n']} | {r['mean']:.3f} | "
            f"{r['sd']:.3f} | {r['ci95_low']:.3f} to {r['ci95_high']:.3f} |" for r in rows]

@@ -133,6 +133,15 @@ class LSPIConfig(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
             raise ValueError("lspi needs some features: tilings > 0 or exact")
 
 
+def lspi_unused(algorithm: str, given: list[str], algorithm_option: str = "--algorithm") -> str:
+    """Why the LSPI settings `given` (as the user spelled them: `--lspi-ridge`, a sweep's `lspi_ridge`) cannot
+    go with `algorithm`, or "" if they can: a learner that is not LSPI would ignore them without a word
+    (`study --lspi-ridge 2` ran Q-learning, exit 0). One rule for session, study and sweep."""
+    if algorithm == "lspi" or not given:
+        return ""
+    return f"{'/'.join(given)} need{'s' if len(given) == 1 else ''} {algorithm_option} lspi, not {algorithm}"
+
+
 class Persona(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
     """A simulated user of appendix A: features on the thesis's 1..6 scale."""
 

@@ -25,7 +25,11 @@ GAME_INDEX_RANGE = (0, 2**63 - 1)  # a game of a seed: core/rng.py hashes it as 
 # `ignore_window_ms = inf` passed `if value < 0` and the board page held a missed pair for ever.
 MS_RANGE = (0.0, 60_000.0)
 MS_FIELDS = ("ignore_window_ms", "turn_back_ms")
-ALGORITHMS = ("q-learning", "pi-reuse", "fixed", "lspi")
+# Every algorithm and the learner mode that plays it (core/learning.py MODES, core/simulate.py run_games):
+# the one table for the session's learner (services/learner.py) and the counterfactual's "same" arm
+# (cli/counterfactual.py), whose own table had no "lspi" (a KeyError traceback on every LSPI recording).
+MODE_OF_ALGORITHM = {"q-learning": "q", "pi-reuse": "reuse", "fixed": "fixed", "lspi": "lspi"}
+ALGORITHMS = tuple(MODE_OF_ALGORITHM)
 # Where the observed card (the one the user looks at before the second pick) comes from:
 # "intended": the simulated participant reports the card it would pick unaided;
 # "first-pick": the first card of the turn (the thesis's human study, 7.1.3);

@@ -27,10 +27,10 @@ from pairplay.core.lspi import LSPILearner, weights_digest
 from pairplay.core.reward import WRONG_SUGGESTION, human_reward, simulated_reward_one
 from pairplay.core.rng import UniformStream
 from pairplay.schemas import events as ev
+from pairplay.schemas.session import MODE_OF_ALGORITHM
 
 from pairplay.services.node import NotYet, Rejected, refused_start, stream_seed
 
-MODE_OF_ALGORITHM = {"q-learning": "q", "pi-reuse": "reuse", "fixed": "fixed", "lspi": "lspi"}
 HOW_NAMES = {How.GREEDY: "greedy", How.EXPLORE: "explore", How.BIAS: "bias", How.FIXED: "fixed"}
 
 

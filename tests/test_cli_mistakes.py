@@ -71,6 +71,10 @@ CASES = [
     Case("recover random bytes", ["recover", "random.mcap"], "not a recording: not an MCAP file (it does not begin as one) (random.mcap)"),
     # a binary file where a text file is wanted (a traceback before: UnicodeDecodeError, the new-user trial 2026-11-30)
     Case("sweep a binary grid file", ["sweep", "random.mcap"], "random.mcap: not TOML (not UTF-8 text)"),
+    # a trial: `--workers 2 --scheduler X` was accepted and --workers ignored (the cluster's workers run the cells)
+    Case("sweep --workers with --scheduler", ["sweep", "grid.toml", "--workers", "2", "--scheduler",
+                                              f"tcp://127.0.0.1:{_closed_port()}", "--out", "sw"],
+         "the cluster's own workers run the cells: give one or the other (--workers 2)"),
     Case("protocol check a binary study file", ["protocol", "check", "random.mcap"],
          "random.mcap: cannot read: not UTF-8 text"),
     Case("recover a folder", ["recover", "policies"], "a folder, not a recording"),
@@ -124,6 +128,19 @@ CASES = [
          "--personas 'blind,' has an empty item (item 2 of 2)"),
     Case("protocol serve --pilot with an empty pair", ["protocol", "serve", "study", "--pilot", ",p01=blind"],
          "--pilot ',p01=blind' has an empty item (item 1 of 2)"),
+    # a comma list that names nothing is refused too: `bench --only ""` measured nothing and exited 0 with an
+    # empty table, `counterfactual --policy ""` quietly only fitted (a shell variable left empty)
+    Case("bench --only empty", ["bench", "--only", ""], "'' names nothing: give one or more, comma-separated (--only)"),
+    Case("bench --only blank", ["bench", "--only", " "], "' ' names nothing"),
+    Case("counterfactual --policy empty", ["counterfactual", "rec.mcap", "--policy", "", "--out", "cf"],
+         "'' names nothing: give one or more, comma-separated (--policy)"),
+    Case("combine --exclude empty", ["combine", "policies", "--exclude", " "], "' ' names nothing"),
+    Case("robot --try empty", ["robot", "--try", ""], "'' names nothing"),
+    Case("run --wait-for empty", ["run", "game", "--wait-for", ""], "'' names nothing"),
+    Case("study --personas empty", ["study", "--personas", ""], "--personas: names no persona"),
+    Case("protocol pilot --personas empty", ["protocol", "pilot", "study", "--personas", ""],
+         "--personas '' names nothing"),
+    Case("protocol serve --pilot empty", ["protocol", "serve", "study", "--pilot", ""], "--pilot '' names nothing"),
     Case("session --game-index -1", SIM + ["--game-index", "-1"], "--game-index: must be at least 0"),
     Case("session --rounds 0", SIM[:3] + ["--rounds", "0"], "--rounds: must be at least 1"),
     Case("session --policy with q-learning", SIM + ["--policy", "existing.json"], "--policy is used only by"),
@@ -229,6 +246,11 @@ CASES = [
     Case("combine --exclude a typo", ["combine", "policies", "--exclude", "blnd"], "no policy of 'blnd'"),
     Case("combine mixed reward rules names the files", ["combine", "policies/deaf", "spec/blind.json"],
          "consistent: spec/blind.json"),
+    # profile pooled a participant's policies of different reward rules without a word (a new user's trial,
+    # `profile q1/policies q2/policies --actions`), where combine refused the same files
+    Case("profile mixed reward rules names the files", ["profile", "policies/blind/game-01.json", "spec/blind.json",
+                                                        "policies/deaf", "--actions"],
+         "their Q-values cannot be compared; consistent: spec/blind.json; correct: policies/blind/game-01.json"),
     # found by the trial (2026-11-30): the lab's pages on a port in use printed uvicorn's own ERROR line
     # beside ours (two lines; the lab exited 1)
     Case("lab --listen a port in use", ["lab", "--participant", "human:p1", "--listen", f"127.0.0.1:{TAKEN_PORT}"],

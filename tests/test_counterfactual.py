@@ -249,3 +249,50 @@ def test_a_forced_fit_only_run_over_a_full_one_leaves_no_stale_comparison(tmp_pa
     (out / "notes.txt").write_text("the researcher's")
     assert _main(capsys, SAMPLE, "--fit-only", "--out", out, "--force")[0] == 0
     assert sorted(p.name for p in out.iterdir()) == ["counterfactual.md", "notes.txt", "sim-helmut-fmt2.usermodel.json"]
+
+
+def test_the_share_of_matched_turns_follows_from_the_picks_of_complete_rounds():
+    # an LSPI arm records no trace: its share is hits_of_picks (9 matching turns a round, 2 picks a turn),
+    # which must be what the kernel arms' recorded turns give
+    from pairplay.core.counterfactual import hits_of_picks, oracle_policy, user_alone
+    p = persona("vincent")
+    arms = [Arm("q", "q", LearnerConfig()), Arm("alone", "fixed", LearnerConfig(), user_alone()),
+            Arm("oracle", "fixed", LearnerConfig(), oracle_policy(p, 0))]
+    for name, run in run_arms(p, arms, [7, 8, 9], 6).items():
+        assert np.allclose(hits_of_picks(run.picks), run.hits, rtol=0, atol=1e-12), name
+
+
+def test_the_same_arm_of_an_lspi_recording_replays_lspi_with_its_settings(tmp_path, capsys):
+    """`counterfactual` on any LSPI recording was a KeyError traceback: the "same" arm's table of
+    algorithms had no "lspi". The arm replays the session's LSPI learner with its recorded settings."""
+    from pairplay.core.rng import game_seed
+    from pairplay.schemas.config import DEFAULT_REWARD_BONUS, LSPIConfig
+    from pairplay.services.session import run_session
+
+    config = SessionConfig(session="cflspi", participant="sim:blind", persona="blind", seed=1, rounds=4,
+                           algorithm="lspi", lspi={"improve_every": 3, "tilings": 1}, software_version="test",
+                           reward_bonus=DEFAULT_REWARD_BONUS, streams=2)
+    path = run_session(config, tmp_path / "cflspi.mcap")
+    out = tmp_path / "cf"
+    code, err = _main(capsys, path, "--policy", "same,final,q", "--seeds", 3, "--rounds", 12, "--out", out)
+    assert code == 0 and "Traceback" not in err, err
+    rows = np.genfromtxt(out / "counterfactual.csv", delimiter=",", names=True, dtype=None, encoding="utf-8")
+    same = rows[rows["arm"] == "same"]
+    fitted = read_user_model(out / "cflspi.usermodel.json").persona
+    seeds = [game_seed(0, "counterfactual:cflspi", i) for i in range(3)]
+    rounds = 12
+    want = run_games([fitted] * 3, seeds, rounds, mode="lspi", lspi=LSPIConfig(improve_every=3, tilings=1)).picks
+    assert np.array_equal(same["picks"].reshape(3, rounds), want)  # LSPI, with the recorded settings
+    # the recorded settings tell (the defaults play otherwise on these seeds), and so does the learner
+    assert not np.array_equal(want, run_games([fitted] * 3, seeds, rounds, mode="lspi").picks)
+    assert not np.array_equal(want, rows["picks"][rows["arm"] == "q"].reshape(3, rounds))
+
+
+def test_the_share_of_matched_turns_has_an_interval_within_0_and_100_percent():
+    """A trial's table said `91.9% [83.7%, 100.2%]`: the t-interval of a mean of shares near 1 passed 100%."""
+    from pairplay.core.counterfactual import ArmRuns
+    from pairplay.report.counterfactual import Recorded, comparison_rows
+    hits = np.array([1.0, 1.0, 0.757])
+    rows = comparison_rows(Recorded([20], 0.9, 10), {"same": ArmRuns(np.full((3, 1), 18.0), hits)}, {})
+    cell = rows[-1][3]
+    assert cell.startswith("91.9% [") and cell.endswith(", 100.0%]"), cell

@@ -40,6 +40,9 @@ STUDY_MISTAKES = [
     (["--games", "99999999999999999999"], "--games: must be 1..9223372036853775808"),
     (["--reuse-seeds", str(2**63)], "--reuse-seeds: must be 1..9223372036853775808"),
     (["--personas", "blind", "--algorithm", "lspi", "--rounds", "9"], "--rounds: must be at least 10 with --algorithm lspi"),
+    # LSPI's settings with Q-learning ran Q-learning without a word (session refused them): session's rule
+    (["--lspi-ridge", "2"], "--algorithm: --lspi-ridge needs --algorithm lspi, not q-learning"),
+    (["--lspi-every", "3", "--lspi-ridge", "1"], "--lspi-ridge/--lspi-every need --algorithm lspi, not q-learning"),
 ]
 
 
@@ -153,7 +156,19 @@ GRID_MISTAKES = [
      "psi = 0: must be above 0 when the speed-up runs"),
     ('[study]\nalgorithm = "sarsa"\n', "algorithm = 'sarsa': must be one of q-learning, lspi"),
     ('[study]\nreward_bonus = "always"\n', "reward_bonus = 'always': must be one of correct, consistent, match"),
+    # LSPI's settings in a cell that learns by Q-learning, which ignored them (the study's and session's rule)
+    ('seeds = 1\n[study]\nlspi_ridge = 2\n', "algorithm = 'q-learning': lspi_ridge needs algorithm lspi, not q-learning"),
+    ('seeds = 1\n[grid]\nalgorithm = ["lspi", "q-learning"]\nlspi_every = [3, 10]\n',
+     "lspi_every needs algorithm lspi, not q-learning (cell algorithm = 'q-learning', lspi_every = 3)"),
 ]
+
+
+def test_a_folder_given_as_the_sweep_file_is_one_clear_line(tmp_path, capsys):
+    (tmp_path / "bad").mkdir()  # a trial: `pairplay sweep bad` said `Is a directory (bad)`
+    assert main(["sweep", "--quiet", str(tmp_path / "bad"), "--out", str(tmp_path / "out")]) == 2
+    err = capsys.readouterr().err
+    assert err == f"pairplay sweep: {tmp_path / 'bad'}: a folder, not a sweep file: give the grid's TOML file\n", err
+    assert not (tmp_path / "out").exists()
 
 
 @pytest.mark.parametrize("text,needle", GRID_MISTAKES)

@@ -400,3 +400,16 @@ def test_a_key_or_table_at_the_wrong_level_says_where_it_belongs(tmp_path, text,
     with pytest.raises(GridError) as info:
         read_grid(tmp_path / "g.toml")
     assert str(info.value) == f"{tmp_path / 'g.toml'}: {said}" or said in str(info.value), info.value
+
+
+def test_sweep_md_says_what_first50_and_last50_average_in_short_cells(tmp_path):
+    """A trial: a 40-round sweep's first50 and last50 were both all 40 rounds, one value under two names,
+    and nothing said so. sweep.md states each short cell's windows."""
+    grid = read_grid(_grid(tmp_path, GRID.replace("rounds = 20\n", "").replace(
+        'reward_bonus = ["correct", "consistent"]', "rounds = [20, 60]").replace("seeds = 2", "seeds = 1")))
+    run = run_sweep(grid, tmp_path / "out")
+    write_sweep(tmp_path / "out", grid, finished_cells(tmp_path / "out", grid), run)
+    md = (tmp_path / "out" / "sweep.md").read_text()
+    assert ("first50 and last50 average the first and last 50 training rounds, fewer in a shorter cell: "
+            "rounds = 20: the first and last 20 of 20 (both all of them: one value); "
+            "rounds = 60: the first and last 50 of 60.") in md, md
