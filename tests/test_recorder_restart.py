@@ -107,9 +107,11 @@ def test_a_recorder_killed_before_its_first_flush_and_restarted_continues_the_se
         assert seqs == list(range(1, len(seqs) + 1)), source
     assert len(log.of("SessionStarted")) == 1
     assert [e.reason for e in log.of("SessionEnded")] == ["interrupted"], log.of("SessionEnded")
-    # (suggestions the bridge had not reported when SIGTERM closed it are counted as not reported)
+    # (suggestions the bridge had not reported when SIGTERM closed it are counted as not reported; a pick the
+    # participant made as the SIGTERM came reaches the game after its end, and is refused and recorded so: a
+    # full suite under load)
     refused = [r.event.reason for r in log.events if isinstance(r.event, ev.MessageRejected)
-               and "not reported" not in r.event.reason]
+               and "not reported" not in r.event.reason and not r.event.reason.startswith("the session is over; ")]
     assert not refused, refused[:5]
 
 
