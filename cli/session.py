@@ -249,7 +249,8 @@ def _run(args: argparse.Namespace, config: SessionConfig, path: Path, summary: d
         if stop.is_set() and "recorder" not in args.external:
             print(f"pairplay session: interrupted again (Ctrl-C) while stopping; {path} holds what was recorded "
                   f"up to now and may lack its end: pairplay recover {path} completes it"
-                  + (f"; the earlier recordings are kept beside it, named *{REPLACED}" if kept else ""),
+                  + (f"; the earlier recordings are kept beside it, named *{REPLACED}: if it holds no session (the "
+                     "game had not started), remove it and give them their names back" if kept else ""),
                   file=sys.stderr)
             return 130
         raise

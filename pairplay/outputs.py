@@ -367,3 +367,19 @@ def _remove_stale(path: Path, written: set[str], owned: tuple[str, ...]) -> None
                 while parent != path and not any(parent.iterdir()):
                     parent.rmdir()
                     parent = parent.parent
+
+
+# `session --force` (services/recorder.py set_aside): an earlier recording and its journal renamed so, kept
+# beside the new one until the new one holds a session; one left there was set aside by a run cut short
+REPLACED = ".replaced"
+
+
+def set_aside_of(path: str | Path) -> list[Path]:
+    """What a `session --force` cut short before it settled left set aside beside the recording `path`:
+    the `<name>.replaced` files of its recordings and journals (the earlier session's only copy)."""
+    import glob
+
+    path = Path(path)
+    if not path.parent.is_dir():
+        return []
+    return sorted(path.parent.glob(f"{glob.escape(path.stem)}.*{REPLACED}"))

@@ -43,7 +43,7 @@ import msgspec
 from pairplay import __version__, csvcell
 from pairplay.errors import InputError
 from pairplay.livelock import LIVE, is_live
-from pairplay.outputs import OutputError, output_file
+from pairplay.outputs import OutputError, output_file, set_aside_of
 from pairplay.schemas import journal as j
 from pairplay.schemas.policy import read_policy, write_policy
 from pairplay.schemas.study import Study, StudyFileError, load_study
@@ -471,6 +471,7 @@ class StudyData:
         for g in self.games_of(pid):
             files.append(self.folder / g.recording)
             files.append(wal_path(self.folder / g.recording))  # a killed recorder's journal: their data too
+            files += set_aside_of(self.folder / g.recording)  # an earlier recording a cut-short --force set aside
             if g.ended is not None and g.ended.policy:
                 files.append(self.folder / g.ended.policy)
         files += list((self.folder / "exports").glob(f"{pid}.zip"))

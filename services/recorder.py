@@ -65,6 +65,7 @@ import msgspec
 from pairplay import __version__
 from pairplay.errors import OutputError
 from pairplay.livelock import LIVE, hold, is_live, release
+from pairplay.outputs import REPLACED, set_aside_of
 from pairplay.replay.wal import JournalWriter, NotAJournal, read_journal, wal_path
 from pairplay.replay.writer import FLUSH_INTERVAL_NS, LOSS_BOUND_NS, EventLogWriter
 from pairplay.schemas.checked import check_event
@@ -158,6 +159,11 @@ class RecordingExists(OutputError):
             "a recorder's journal already, its recording gone (what a recorder that did not finish received)"
         if live:  # no --force in the hint: nothing replaces a live recording (pairplay/livelock.py)
             what, hint = f"a recording that {LIVE}", LIVE_SESSION_HINT
+        elif existing.name.endswith(REPLACED):  # --force or not: the only copy of an earlier recording
+            original = existing.name[:-len(REPLACED)]
+            what = ("a recording set aside by a `session --force` that was cut short before it settled (killed, or "
+                    "a second Ctrl-C): it may be the only copy of the earlier session")
+            hint = f"give it its name back (mv {existing.name} {original}, after removing what stands there) or remove it"
         super().__init__(f"session {session} has {what}; {hint}", existing)
         self.existing, self.live = existing, live
 
@@ -183,12 +189,12 @@ def check_new_recording(path: str | Path, hint: str = NEW_SESSION_HINT) -> Path:
     live = [p for p in existing if is_live(p)]
     if live:
         raise RecordingExists(live[0], path.stem, live=True)
+    aside = set_aside_of(path)  # named first: the one file whose loss --force would not undo
+    if aside:
+        raise RecordingExists(aside[0], path.stem)
     if existing:
         raise RecordingExists(existing[0], path.stem, hint)
     return path
-
-
-REPLACED = ".replaced"  # `session --force`: an earlier recording kept beside the new one until it holds a session
 
 
 def set_aside(path: str | Path) -> list[tuple[Path, Path]]:
@@ -203,6 +209,9 @@ def set_aside(path: str | Path) -> list[tuple[Path, Path]]:
     live = [p for p in existing if is_live(p)]
     if live:
         raise RecordingExists(live[0], path.stem, live=True)
+    left = set_aside_of(path)  # an earlier --force cut short: renaming onto it would lose the earlier session
+    if left:
+        raise RecordingExists(left[0], path.stem)
     aside = []
     for p in existing:
         kept = p.with_name(p.name + REPLACED)

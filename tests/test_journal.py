@@ -526,3 +526,42 @@ def test_what_the_journal_adds_goes_on_the_output_channel_of_its_topic_whatever_
     log = read_log(done.output)
     assert [r.event.seq for r in log.events if r.event.source == "participant"] == list(range(1, 41))
     assert all(r.key == event_key("j1", r.event.source, type(r.event).__name__) for r in log.events)
+
+
+def test_a_recording_an_interrupted_force_left_aside_is_never_overwritten_and_keeps_the_id_taken(tmp_path):
+    """A new user's trial: `session --force` killed (SIGKILL) before it settled left <name>.mcap.replaced, the
+    real earlier recording. Nothing said it: a session without --force started beside it, and the next --force
+    renamed the new fragment onto it (the earlier recording gone, even when that second --force was stopped
+    and said "the earlier recordings are kept"). Now the set-aside file keeps the id taken and is named, with or
+    without --force, until the user gives it back or removes it; a participant's export carries it."""
+    from pairplay.services.recorder import RecordingExists, check_new_recording, set_aside
+
+    path = tmp_path / "s1.mcap"
+    earlier = tmp_path / "s1.mcap.replaced"
+    earlier.write_bytes(b"the real earlier recording")
+    (tmp_path / "s1.mcap").write_bytes(b"a fragment")
+    for check in (check_new_recording, set_aside):
+        with pytest.raises(RecordingExists, match=r"set aside by a `session --force` that was cut short"):
+            check(path)
+    (tmp_path / "s1.mcap").unlink()  # the fragment removed: the id is still taken by what was set aside
+    with pytest.raises(RecordingExists, match=r"s1\.mcap\.replaced"):
+        check_new_recording(path)
+    assert earlier.read_bytes() == b"the real earlier recording"
+
+
+def test_a_participants_export_carries_a_recording_a_cut_short_force_set_aside(tmp_path):
+    """The same trial: `participant export` left out <game>.mcap.replaced, the participant's real game, and
+    took the fragment beside it; `participant delete` removed it. Both now take it."""
+    from pairplay.replay.studydata import StudyData
+    from test_protocol import STUDY  # a small study file, as the protocol tests use
+
+    data = StudyData.create(tmp_path / "s", STUDY)
+    pid = data.register("phase1")
+    recording = data.folder / "recordings" / f"{data.session_id(pid, 'phase1', 0)}.mcap"
+    recording.parent.mkdir(parents=True, exist_ok=True)
+    aside = recording.with_name(recording.name + ".replaced")
+    aside.write_bytes(b"the participant's real game")
+    from pairplay.schemas import journal as j
+    data.append(j.GameStarted(session=data.session_id(pid, "phase1", 0), participant=pid, phase="phase1", game=0,
+                              recording=str(recording.relative_to(data.folder))))
+    assert aside in data.files_of(pid)
