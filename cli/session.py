@@ -75,7 +75,7 @@ def add_config_arguments(p: argparse.ArgumentParser) -> None:
     g.add_argument("--observed-source", choices=OBSERVED_SOURCES,
                    help="default: intended for sim:, first-pick for human: (gaze: an eye tracker's GazeFixated events)")
     g.add_argument("--ignore-rule", choices=("perceived", "time"), help="default: perceived for sim:, time for human:")
-    g.add_argument("--ignore-window-ms", type=milliseconds, default=1500.0,
+    g.add_argument("--ignore-window-ms", type=milliseconds,
                    help="'time' rule: picks closer than this ignored the suggestion (thesis 7.1.2; default 1500)")
     g.add_argument("--ignore-clock", choices=IGNORE_CLOCKS,
                    help="'time' rule: time the picks on the board page's clock (page, default for human:) or the "
@@ -138,6 +138,12 @@ def _config_from_args(args: argparse.Namespace) -> SessionConfig:
             lspi = lspi_overrides(LSPIConfig(**given))
         except ValueError as err:
             raise OptionError(str(err), "--lspi-ridge/--lspi-every") from None
+    ignore_rule = args.ignore_rule or ("perceived" if sim else "time")
+    timed = [o for o, v in (("--ignore-window-ms", args.ignore_window_ms), ("--ignore-clock", args.ignore_clock))
+             if v is not None]
+    if timed and ignore_rule != "time":  # ignored without a word (a trial), as LSPI's settings were (lspi_unused)
+        raise OptionError(f"{'/'.join(timed)} appl{'ies' if len(timed) == 1 else 'y'} to --ignore-rule time only, "
+                          f"not {ignore_rule}" + ("" if args.ignore_rule else " (sim:'s default)"), "--ignore-rule")
     never = schedule.never_reuses() if args.algorithm == "pi-reuse" else ""
     if never:  # `--rounds 1` under human-phase2: its one round is the last, on the new policy alone
         raise OptionError(f"--algorithm pi-reuse with --rounds {rounds} would never reuse the bias policy: "
@@ -149,9 +155,10 @@ def _config_from_args(args: argparse.Namespace) -> SessionConfig:
         session=session, participant=args.participant, persona=who if sim else "", seed=args.seed,
         rounds=rounds, game_index=args.game_index, algorithm=args.algorithm,
         observed_source=args.observed_source or ("intended" if sim else "first-pick"),
-        ignore_rule=args.ignore_rule or ("perceived" if sim else "time"), policy_actions=actions,
+        ignore_rule=ignore_rule, policy_actions=actions,
         learner=learner_overrides(schedule), software_version=__version__,
-        reward_bonus=args.reward_bonus, streams=STREAMS_VERSION, ignore_window_ms=args.ignore_window_ms,
+        reward_bonus=args.reward_bonus, streams=STREAMS_VERSION,
+        ignore_window_ms=1500.0 if args.ignore_window_ms is None else args.ignore_window_ms,
         ignore_clock=args.ignore_clock or ("server" if sim else "page"), turn_back_ms=args.turn_back_ms, lspi=lspi)
     config.validate()
     return config

@@ -65,6 +65,11 @@ CLOSED = _closed_port()
 SIM = ["session", "--participant", "sim:blind", "--rounds", "2"]
 
 CASES = [
+    # a trial: the 'time' rule's settings with another rule were ignored without a word, exit 0 (as LSPI's were)
+    Case("session --ignore-window-ms with perceived", SIM + ["--ignore-rule", "perceived", "--ignore-window-ms", "700"],
+         "--ignore-window-ms applies to --ignore-rule time only, not perceived"),
+    Case("session --ignore-clock for sim's rule", SIM + ["--ignore-clock", "page"],
+         "--ignore-clock applies to --ignore-rule time only, not perceived (sim:'s default)"),
     # item 4: input that is not what the verb needs
     Case("recover a missing file", ["recover", "missing.mcap"], "no such recording (missing.mcap)"),
     Case("recover a zero-byte file", ["recover", "empty.mcap"], "the file is empty (0 bytes)"),
