@@ -361,6 +361,36 @@ class StudyData:
             index += p.games if pid in self.players(p.id) else 0
         raise StudyDataError(f"no phase {phase!r}")
 
+    # -- a game's recording --------------------------------------------------
+    def recording_of(self, g: Game):
+        """(its read recording (reader.EventLog), "") if game `g`'s recording can stand for the game, else (None,
+        why not, in the words the report names the game by): missing; holding no session (a 0-byte file, the
+        ~1 KB an interrupted `session --force` leaves: check.no_session, the reader's words); damaged (events
+        lost: EventLog.lost); holding no whole round (check.no_whole_round). A
+        journal that says "completed" does not make a file that holds none of it the game: its picks would
+        silently be no picks."""
+        from .check import check_recording, no_session, no_whole_round
+
+        path = self.folder / g.recording
+        if not path.is_file():
+            return None, "recording missing"
+        try:
+            check_recording(path)
+            log = read_log(path)
+        except InputError as err:  # not MCAP at all, or a file of nothing: no session either
+            return None, f"recording holds no session: {err.what}"
+        except OSError as err:
+            return None, f"recording unreadable: {err.strerror or err}"
+        why = no_session(log)
+        if why:
+            return None, f"recording {why}"
+        if log.lost:  # (a new user's trial: messages that do not decode were left out of its picks, no word)
+            return None, f"recording damaged: {log.lost}"
+        why = no_whole_round([r.event for r in log.events], log.truncated, log.damaged)
+        if why:
+            return None, f"recording {why}"
+        return log, ""
+
     # -- what a signal left unsaid -------------------------------------------
     def build_missing_policies(self) -> list[str]:
         """Say in the journal what a stopped server could not, from the recordings (the event log is the

@@ -6,7 +6,9 @@ phase, the recordings say what happened. Games marked invalid or aborted are
 listed and left out of every figure and table, and so is a game whose recording
 lost events (a damaged part, messages that do not decode: reader.EventLog.lost,
 the loss rebuild refuses without --partial): its picks would be a part passed
-off as the game. So are the games scripted
+off as the game; and so is a game whose recording is missing, holds no session (a 0-byte
+file, what an interrupted `session --force` leaves) or no whole round (StudyData.recording_of):
+named with the reader's words, never counted valid. So are the games scripted
 personas played instead of people (a dress rehearsal: `protocol pilot`,
 `serve --pilot`; the journal's GameStarted `scripted`): they are listed by
 name and persona, and counted in nothing people did, unless
@@ -41,7 +43,6 @@ import numpy as np
 from pairplay import __version__, csvcell
 from pairplay.core.actions import ACTION_NAMES
 from pairplay.core.geometry import N_STATES, STATE_NAMES
-from pairplay.replay.reader import read_log
 from pairplay.replay.studydata import StudyData, named
 from pairplay.schemas.policy import read_policy
 
@@ -141,13 +142,9 @@ def human_report(folder: str | Path, out: str | Path | None = None, reference: s
         if g.scripted and not (include_scripted or rehearsal):
             excluded.append(f"{g.session} (scripted: {g.scripted})")
             continue
-        path = data.folder / g.recording
-        if not path.is_file():
-            excluded.append(f"{g.session} (recording missing)")
-            continue
-        log = read_log(path)
-        if log.lost:  # (a new user's trial: messages that do not decode were left out of its picks, no word)
-            excluded.append(f"{g.session} (recording damaged: {log.lost})")
+        log, why = data.recording_of(g)  # missing, no session, damaged, no whole round, another game's
+        if log is None:
+            excluded.append(f"{g.session} ({why})")
             continue
         games.append(game_stats(log, g, data.returning(g.participant, g.phase), study.phase_by_id(g.phase).rounds))
     if not games:

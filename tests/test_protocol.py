@@ -534,3 +534,52 @@ def test_the_report_leaves_out_a_game_whose_recording_holds_messages_that_do_not
     [left] = [e for e in report.excluded if e.startswith(game.session)]
     assert "recording damaged: 2 messages in it do not decode (" in left, left
     assert left in (report.out / "report.md").read_text()
+
+
+def _rewrite(path: Path, keep=lambda tag: True, change=None) -> None:
+    """Write the recording at `path` again with only the events whose tag `keep` takes, each SessionStarted's
+    JSON passed through `change` (a new user's trial: an interrupted `session --force`, another session)."""
+    from pairplay.replay.writer import EventLogWriter
+
+    records = read_log(path).events
+    w = EventLogWriter(path, chunk_size=4096)
+    for r in records:
+        tag = type(r.event).__name__
+        if not keep(tag):
+            continue
+        payload = r.payload
+        if tag == "SessionStarted" and change is not None:
+            payload = json.dumps(change(json.loads(payload))).encode()
+        w.write(r.key, payload, log_time_ns=r.log_time_ns, sequence=r.event.seq)
+    w.close()
+
+
+def test_the_report_leaves_out_a_game_whose_recording_holds_no_session_or_no_whole_round(played, tmp_path):
+    """A new user's trial: a 0-byte recording, and the file an interrupted `session --force` leaves (no
+    SessionStarted), were counted as valid games ("18 valid games", exit 0) and their data vanished from
+    picks.csv without a word. Each is left out and named with the reader's words, as a missing one is;
+    so is a recording whose session ended before its first round."""
+    from pairplay.replay.writer import EventLogWriter
+
+    data = copy_study(played, tmp_path)
+    games = [g for g in data.state.games.values() if g.valid_complete and not g.invalid]
+    empty, header, unstarted, no_round = games[:4]
+    (data.folder / empty.recording).write_bytes(b"")
+    EventLogWriter(data.folder / header.recording).close()  # a recorder that wrote nothing but MCAP's frame
+    _rewrite(data.folder / unstarted.recording, keep=lambda tag: tag != "SessionStarted")
+    _rewrite(data.folder / no_round.recording, keep=lambda tag: tag != "RoundEnded")
+    report = human_report(data.folder, tmp_path / "report")
+    reported = {s.session for s in report.games}
+    text = (report.out / "report.md").read_text()
+    words = [(empty, "recording holds no session: the file is empty (0 bytes)"),
+             (header, "recording holds no session: an MCAP file with no"),
+             (unstarted, "recording holds no session: "),
+             (no_round, "recording holds no whole round: ")]
+    for g, why in words:
+        assert g.session not in reported, g.session
+        [left] = [e for e in report.excluded if e.startswith(g.session + " (")]
+        assert left.startswith(f"{g.session} ({why}"), left
+        assert left in text
+    assert f"{len(games) - 4} valid games" in text
+    with open(report.out / "picks.csv") as f:
+        assert len(list(csv.DictReader(f))) == (len(games) - 4) * 2
