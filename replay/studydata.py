@@ -14,7 +14,9 @@ that state. How a game ended and its policy come from its recording
 (`game_end`); what a stopped server could not journal (the policy of a game
 completed before a signal cut its questionnaire, the end of a game whose
 process went while reading it back) is journaled later, from the recordings,
-by `build_missing_policies`. Participants are pseudonymous ids (p01, p02, ...): a name given at
+by `build_missing_policies`. A game's recording stands for the game only if it is that game's
+(`not_this_game`: its SessionStarted against the journal and the plan): another session written over
+it (`session --force --session <its id>`) gives the game no picks, answers or policy. Participants are pseudonymous ids (p01, p02, ...): a name given at
 registration goes only to the key file, which must lie outside the study folder,
 and is refused when the study has no key file.
 A persona that played a participant's games (a rehearsal) is named as what it is
@@ -366,7 +368,8 @@ class StudyData:
         """(its read recording (reader.EventLog), "") if game `g`'s recording can stand for the game, else (None,
         why not, in the words the report names the game by): missing; holding no session (a 0-byte file, the
         ~1 KB an interrupted `session --force` leaves: check.no_session, the reader's words); damaged (events
-        lost: EventLog.lost); holding no whole round (check.no_whole_round). A
+        lost: EventLog.lost); holding no whole round (check.no_whole_round); or not this game's (`not_this_game`:
+        a `session --force --session <its id> --out STUDY/recordings` replaced it with another session). A
         journal that says "completed" does not make a file that holds none of it the game: its picks would
         silently be no picks."""
         from .check import check_recording, no_session, no_whole_round
@@ -389,7 +392,35 @@ class StudyData:
         why = no_whole_round([r.event for r in log.events], log.truncated, log.damaged)
         if why:
             return None, f"recording {why}"
+        why = self.not_this_game(g, log.of("SessionStarted")[0].config)
+        if why:
+            return None, f"recording is not this game's: {why}"
         return log, ""
+
+    def not_this_game(self, g: Game, config) -> str:
+        """Why a session's config (its SessionStarted's) is not game `g`'s as the journal and plan say, in
+        words ("" if it is): its session id, participant (`human:<id>`), the phase's rounds, and the persona of a
+        scripted game (one a person played is taken as the journal says: its config's `scripted` is not read)."""
+        rounds = self.study.phase_by_id(g.phase).rounds
+        said = [f"session {config.session}" if config.session != g.session else "",
+                f"participant {config.participant}" if config.participant != f"human:{g.participant}" else "",
+                f"{config.rounds} round{'s' if config.rounds != 1 else ''}" if config.rounds != rounds else "",
+                f"persona {config.scripted or config.persona or 'none'}" if g.scripted and config.scripted != g.scripted else ""]
+        said = [s for s in said if s]
+        if not said:
+            return ""
+        plays = f"human:{g.participant}" + (f" (scripted: {g.scripted})" if g.scripted else "")
+        return (f"it holds {', '.join(said)}; the journal's game is {g.session} of {plays}, {rounds} "
+                f"round{'s' if rounds != 1 else ''}")
+
+    def _not_this_games_file(self, g: Game, path: Path) -> str:
+        """`not_this_game` of the session the recording at `path` starts ("" if it starts none or cannot be read:
+        what reads it next says so)."""
+        try:
+            started = read_log(path, only=frozenset({"SessionStarted"})).of("SessionStarted")
+        except (InputError, OSError):
+            return ""
+        return self.not_this_game(g, started[0].config) if started else ""
 
     # -- what a signal left unsaid -------------------------------------------
     def build_missing_policies(self) -> list[str]:
@@ -407,7 +438,8 @@ class StudyData:
             for g in list(self.state.games.values()):
                 path = self.folder / g.recording
                 if g.ended is None:
-                    if path.is_file() and not wal_path(path).exists() and _finished_game(path):
+                    if path.is_file() and not wal_path(path).exists() and _finished_game(path) \
+                            and not self._not_this_games_file(g, path):  # another session's end is not its
                         ended = self.append(game_end(self.folder, g.session, g.participant, path, force=True))
                         lines.append(f"{g.session}: journaled {ended.outcome} from its recording (the server "
                                      "stopped before it said how the game ended)")
@@ -431,6 +463,8 @@ class StudyData:
                     else:
                         if rebuilt.partial:
                             why = f"its recording {g.recording} is partial: {rebuilt.partial}"
+                        elif self.not_this_game(g, rebuilt.config):  # (a `session --force` over it)
+                            why = f"its recording {g.recording} is not this game's: {self.not_this_game(g, rebuilt.config)}"
                     if not why:
                         try:  # force: ours, of this recording (the file a build cut before its journal line wrote)
                             policy = write_game_policy(self.folder, rebuilt, force=True)
@@ -454,7 +488,11 @@ class StudyData:
             path = self.folder / g.recording
             if not path.is_file():
                 continue
-            for e in read_log(path).of("QuestionnaireAnswered"):
+            log = read_log(path)
+            started = log.of("SessionStarted")
+            if started and self.not_this_game(g, started[0].config):  # another session's answers are not its
+                continue  # participant's (a `session --force` over a study game's recording)
+            for e in log.of("QuestionnaireAnswered"):
                 for item, answer in e.answers.items():
                     rows.append({"participant": g.participant, "phase": g.phase, "game": g.game + 1,
                                  "session": g.session, "questionnaire": e.questionnaire, "item": item,

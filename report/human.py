@@ -8,7 +8,9 @@ lost events (a damaged part, messages that do not decode: reader.EventLog.lost,
 the loss rebuild refuses without --partial): its picks would be a part passed
 off as the game; and so is a game whose recording is missing, holds no session (a 0-byte
 file, what an interrupted `session --force` leaves) or no whole round (StudyData.recording_of):
-named with the reader's words, never counted valid. So are the games scripted
+named with the reader's words, never counted valid; and so is a recording that is not
+that game's (its SessionStarted's session id, participant, the plan's rounds, a scripted
+game's persona against the journal: a `session --force --session <its id>` over it). So are the games scripted
 personas played instead of people (a dress rehearsal: `protocol pilot`,
 `serve --pilot`; the journal's GameStarted `scripted`): they are listed by
 name and persona, and counted in nothing people did, unless

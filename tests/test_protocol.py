@@ -583,3 +583,59 @@ def test_the_report_leaves_out_a_game_whose_recording_holds_no_session_or_no_who
     assert f"{len(games) - 4} valid games" in text
     with open(report.out / "picks.csv") as f:
         assert len(list(csv.DictReader(f))) == (len(games) - 4) * 2
+
+
+@pytest.mark.parametrize("other", ["another-game", "participant", "rounds", "persona"])
+def test_the_report_leaves_out_a_recording_that_is_not_its_games(played, tmp_path, other):
+    """A new user's trial: `session --force --session <a study game's id> --out STUDY/recordings` replaced a
+    study game's recording with an unrelated session (another persona, 1 round) and the report used it
+    without a word. Each game's recording is checked against the journal (its session id, participant,
+    the plan's rounds, the persona of a scripted game) and left out, named with why, if it is not that game's."""
+    data = copy_study(played, tmp_path)
+    games = [g for g in data.state.games.values() if g.valid_complete]
+    game, donor = games[0], games[1]
+    path = data.folder / game.recording
+    if other == "another-game":
+        shutil.copy(data.folder / donor.recording, path)
+        why = f"session {donor.session}"
+    else:
+        change = {"participant": ("participant", "sim:vincent"), "rounds": ("rounds", 1),
+                  "persona": ("scripted", "deaf" if game.scripted != "deaf" else "blind")}[other]
+
+        def swap(e, field=change[0], value=change[1]):
+            e["config"][field] = value
+            return e
+        _rewrite(path, change=swap)
+        why = {"participant": "sim:vincent", "rounds": "1 round", "persona": change[1]}[other]
+    report = human_report(data.folder, tmp_path / "report")
+    assert game.session not in {s.session for s in report.games}
+    [left] = [e for e in report.excluded if e.startswith(game.session + " (")]
+    assert left.startswith(f"{game.session} (recording is not this game's: "), left
+    assert why in left, left
+    assert left in (report.out / "report.md").read_text()
+
+
+def test_the_answers_table_takes_no_answer_from_a_recording_that_is_not_its_games(played, tmp_path):
+    """answers.csv gave the answers a replacing session's recording holds (another game's, copied over) to the
+    journal's game and participant: the tables read a game's answers only from a recording that is that game's."""
+    data = copy_study(played, tmp_path)
+    games = [g for g in data.state.games.values() if g.valid_complete]
+    game, donor = games[0], next(g for g in games if g.participant != games[0].participant)
+    assert any(a["session"] == game.session for a in data.answers())
+    shutil.copy(data.folder / donor.recording, data.folder / game.recording)
+    assert not any(a["session"] == game.session for a in StudyData(data.folder).answers())
+
+
+def test_no_policy_is_built_for_a_game_from_a_recording_that_is_not_its_games(played, tmp_path):
+    """build_missing_policies rebuilt a completed game's missing policy from whatever its recording path held:
+    another session copied over it (`session --force`) became the game's policy, journaled. It is refused, said."""
+    data = copy_study(played, tmp_path)
+    games = [g for g in data.state.games.values() if g.valid_complete]
+    game, donor = games[0], games[1]
+    (data.folder / game.ended.policy).unlink()
+    shutil.copy(data.folder / donor.recording, data.folder / game.recording)
+    [line] = StudyData(data.folder).build_missing_policies()
+    assert line.startswith(f"{game.session}: completed, but its policy {game.ended.policy} is missing; no policy "
+                           f"built: its recording {game.recording} is not this game's: it holds session "
+                           f"{donor.session}"), line
+    assert not (data.folder / game.ended.policy).exists()
