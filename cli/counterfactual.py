@@ -93,6 +93,7 @@ def check_size(arms: int, seeds: int, rounds: int, lspi: int = 0) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    import msgspec
     import numpy as np
 
     from pairplay import __version__
@@ -134,6 +135,9 @@ def run(args: argparse.Namespace) -> int:
                              "at a time", other.source)
         for why in other.skipped:
             print(f"{other.source}: turn left out of the fit: {why}")
+        if other.note:
+            print(f"{other.source}: not whole ({other.note}); fitting the {len(other.observations.first)} turns of "
+                  "its intact parts")
     seen = {rec.resolve()}
     for path in args.fit_also:
         if Path(path).resolve() in seen:
@@ -142,6 +146,9 @@ def run(args: argparse.Namespace) -> int:
     fit = fit_user(pooled([turns.observations] + [o.observations for o in others]), config.observed_source)
     model = cf.to_user_model(fit, recording=rec.name, fitted_on=[rec.name] + [Path(p).name for p in args.fit_also], session=config.session, participant=config.participant,
                              observed_source=config.observed_source, software=__version__)
+    # the files carry what the fit lacked (a damaged or cut recording's intact parts), not only the console
+    partial = "; ".join(f"{Path(t.source).name}: {t.note}" for t in [turns, *others] if t.note)
+    model = msgspec.structs.replace(model, partial=partial)
     obs = turns.observations
     shown = obs.action >= 0
     recorded = Recorded(turns.picks_per_round, float((obs.second[shown] == obs.match[shown]).mean()) if shown.any()

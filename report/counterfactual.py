@@ -5,7 +5,8 @@ complete (pairplay.outputs.output_folder: an existing non-empty folder only
 with force). Files: `<recording>.usermodel.json` (schemas/usermodel.py),
 `counterfactual.csv` (arm, seed, round, picks: every simulated round),
 `counterfactual.md` (the fitted user with its 95% sets, the comparison table
-and the assumptions) and `counterfactual.png` (picks per round by round, and
+and the assumptions; a fit of a damaged or cut recording's intact parts says so
+in its header, as the user model's `partial` does: reader.EventLog.note) and `counterfactual.png` (picks per round by round, and
 the share of turns whose second pick matched, per arm: HITS). Arms are summarised
 over seeds: mean, sample sd, 95% t-interval of the mean (a share's clipped to
 0..100%: near 100% the t-interval of a mean of shares passed it, `91.9% [83.7%,
@@ -171,13 +172,15 @@ def write_counterfactual(out: str | Path, stem: str, model: UserModelFile, recor
     with output_folder(out, force, owned=COUNTERFACTUAL_OUTPUTS) as tmp:
         write_user_model(tmp / f"{stem}.usermodel.json", model)
         written.append(f"{stem}.usermodel.json")
-        lines = [f"# Counterfactual replay of {model.recording}", "",
-                 f"Session {model.session}, participant {model.participant}, observed card: "
-                 f"{model.observed_source}. The simulated user fitted to the recorded picks"
-                 f"{' of ' + ', '.join(model.fitted_on) if len(model.fitted_on) > 1 else ''} "
-                 f"(maximum likelihood over {model.picks} picks, log L = {model.loglik:.1f}; "
-                 f"evidence: {', '.join(f'{k} {v}' for k, v in model.evidence.items())}):", "",
-                 markdown_table(model_rows(model)), ""]
+        lines = [f"# Counterfactual replay of {model.recording}", ""]
+        if model.partial:  # a fit of intact parts only: said where the results are read
+            lines += [f"**Partial recording:** fitted on the intact parts only ({model.partial}).", ""]
+        lines += [f"Session {model.session}, participant {model.participant}, observed card: "
+                  f"{model.observed_source}. The simulated user fitted to the recorded picks"
+                  f"{' of ' + ', '.join(model.fitted_on) if len(model.fitted_on) > 1 else ''} "
+                  f"(maximum likelihood over {model.picks} picks, log L = {model.loglik:.1f}; "
+                  f"evidence: {', '.join(f'{k} {v}' for k, v in model.evidence.items())}):", "",
+                  markdown_table(model_rows(model)), ""]
         lines += [f"**Caveat:** {c}." for c in caveats(model)] + ([""] if caveats(model) else [])
         if model.considered_counted is not None:
             c = model.considered_counted

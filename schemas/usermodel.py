@@ -81,6 +81,9 @@ class UserModelFile(msgspec.Struct, frozen=True, kw_only=True):
     assumptions: list[str] = []
     software: str = ""
     fitted_on: list[str] = []  # every recording whose turns the fit used (file names; REC first)
+    # what the fitted recordings lacked, "<file name>: <reader.EventLog.note>" joined by "; " ("" if all were
+    # whole): a fit of a damaged or cut file's intact parts says so in the file, not only on stderr
+    partial: str = ""
 
     def __post_init__(self) -> None:
         if self.format != FORMAT:

@@ -494,3 +494,27 @@ def test_messages_that_do_not_decode_are_verified_up_to_the_first_and_never_call
     assert "DIFFERS" not in out and "whole session" not in out, out
     assert lines[-2].startswith("verified up to the damaged part: ") and "after it are not compared" in lines[-2]
     assert lines[-1].startswith("verify: FAIL") and "3 messages in it do not decode" in lines[-1], lines[-1]
+
+
+def test_a_counterfactual_of_a_damaged_recording_says_so_in_its_files(whole, tmp_path, capsys):
+    """A new user's trial: `counterfactual` of a damaged recording said "not whole" on the console only;
+    counterfactual.md and the user-model file read as a whole session's fit. Both carry the reader's note
+    (reader.EventLog.note): the md's header, the model's `partial`; a whole recording's say nothing."""
+    from pairplay.cli.main import main
+    from pairplay.replay.reader import read_log
+    from pairplay.schemas.usermodel import read_user_model
+
+    p = undecodable(whole, tmp_path)
+    note = read_log(p).note
+    assert note
+    assert main(["counterfactual", str(p), "--policy", "q", "--seeds", "2", "--out", str(tmp_path / "cf")]) == 0
+    capsys.readouterr()
+    md = (tmp_path / "cf" / "counterfactual.md").read_text()
+    head = md.split("## ")[0]
+    assert f"**Partial recording:** fitted on the intact parts only ({p.name}: {note})" in head, head
+    model = read_user_model(tmp_path / "cf" / f"{p.stem}.usermodel.json")
+    assert model.partial == f"{p.name}: {note}"
+    assert main(["counterfactual", str(whole), "--fit-only", "--out", str(tmp_path / "cf-whole")]) == 0
+    capsys.readouterr()
+    assert "Partial" not in (tmp_path / "cf-whole" / "counterfactual.md").read_text()
+    assert read_user_model(tmp_path / "cf-whole" / f"{whole.stem}.usermodel.json").partial == ""
