@@ -178,18 +178,21 @@ def journals_of(path: Path) -> list[Path]:
     return [p for p in found if p.exists()]
 
 
-def check_new_recording(path: str | Path, hint: str = NEW_SESSION_HINT) -> Path:
+def check_new_recording(path: str | Path, hint: str = NEW_SESSION_HINT, set_aside_too: bool = True) -> Path:
     """`path` for a new session's recording, refused (RecordingExists, naming the file) if the session
     has a recording already, or a recording's journal (what a killed recorder received), a live one
     with LIVE_SESSION_HINT (call it before anything starts, after every other check of the options).
     `session --force` sets them aside instead (`set_aside`): nothing removes them before the new
-    recording holds a session."""
+    recording holds a session; one a cut-short --force left set aside keeps the id taken too
+    (`set_aside_too`)."""
     path = Path(path)
     existing = recordings_of(path) + journals_of(path)
     live = [p for p in existing if is_live(p)]
     if live:
         raise RecordingExists(live[0], path.stem, live=True)
-    aside = set_aside_of(path)  # named first: the one file whose loss --force would not undo
+    # named first: the one file whose loss --force would not undo; not by the Recorder (`set_aside_too`
+    # False), which a running `session --force` makes beside the files it has just set aside itself
+    aside = set_aside_of(path) if set_aside_too else []
     if aside:
         raise RecordingExists(aside[0], path.stem)
     if existing:
@@ -368,8 +371,8 @@ class Recorder:
         base = Path(path)
         if earlier is not None and is_live(earlier):  # its recorder still writes it: this would be a second
             raise RecordingExists(earlier, session, live=True)  # one, each recording what the other lacks
-        if not restart:
-            check_new_recording(path)
+        if not restart:  # (the verbs check what a cut-short --force set aside before they start: cli/session.py)
+            check_new_recording(path, set_aside_too=False)
         self.bus, self.session, self.path, self.clock = bus, session, free_path(Path(path)), clock
         self.path.parent.mkdir(parents=True, exist_ok=True)
         try:  # the file is ours (created, not found) and locked for our life (pairplay/livelock.py)
