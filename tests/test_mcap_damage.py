@@ -529,6 +529,19 @@ def test_a_round_whose_end_was_lost_is_the_row_marked_damaged_not_the_next(whole
             assert row == full[r], (row, full[r])
 
 
+def test_the_rebuild_figure_draws_each_whole_round_at_its_own_round(whole, tmp_path):
+    """Seen beside the curve.csv fault: the figure drew the whole rounds' picks at x = 1, 2, ... in order, so when
+    round 0's end was lost, round 1's picks were drawn as round 1 of the figure (round 0's place) and every later
+    round one to the left. Each whole round is drawn at its own round (round + 1, as the axis counts from 1)."""
+    from pairplay.cli.rebuild import curve_points
+
+    p = _round_end_lost(whole, tmp_path, "undecodable-end")
+    full = rebuild_recording(whole).fold
+    x, picks = curve_points(rebuild_recording(p).fold)
+    assert x == [2, 3] and picks == full.picks_per_round()[1:], (x, picks)
+    assert curve_points(full) == ([1, 2, 3], full.picks_per_round())
+
+
 def test_messages_that_do_not_decode_are_verified_up_to_the_first_and_never_called_the_whole_session(whole, tmp_path,
                                                                                                     capsys):
     """A helper's finding: `replay --verify` of a file whose messages do not decode printed "verified the whole
