@@ -112,6 +112,14 @@ def write_all(done, staged: Path, out: Path, args: argparse.Namespace) -> list[s
     return lines
 
 
+def curve_points(fold) -> tuple[list[int], list[int]]:
+    """A recording's line in the figure: each whole round's picks at its own round, counted from 1 (a round whose
+    end a damaged file lost has no point, and the rounds after it stay in their places: drawn at 1, 2, ... in
+    order, they moved one to the left)."""
+    rounds = fold.whole_rounds()
+    return [r + 1 for r in rounds], fold.picks_per_round()
+
+
 def plot_curves(rebuilt, path: Path, force: bool = False) -> Path:
     import matplotlib
     matplotlib.use("Agg")
@@ -121,8 +129,7 @@ def plot_curves(rebuilt, path: Path, force: bool = False) -> Path:
 
     fig, ax = plt.subplots(figsize=(7, 4))
     for r in rebuilt:
-        picks = r.fold.picks_per_round()
-        ax.plot(range(1, len(picks) + 1), picks, label=Path(r.source).name, lw=1)
+        ax.plot(*curve_points(r.fold), label=Path(r.source).name, lw=1)
     ax.axhline(PERFECT_PICKS, color="grey", ls=":", lw=1, label=f"perfect play ({PERFECT_PICKS} picks)")
     ax.set_xlabel("round")
     ax.set_ylabel(PICKS_UNIT)

@@ -117,7 +117,8 @@ def rebuild_recording(path: str | Path) -> Rebuilt:
     """The recording at `path` rebuilt; InputError (RebuildError) if it is not a session recording, or if
     it contradicts itself about who published what (replay/forgery.py: a forged start or end), NoWholeRound
     if its session has no round recorded whole."""
-    log = read_session(path, only=READS)  # the events the fold only counts are not decoded (speed)
+    # the events the fold only counts are not decoded (speed), but rounds' starts are: damaged_rounds needs them
+    log = read_session(path, only=CURVE_READS)
     # who published what, first (a forged end before any round is named as that, not as "no whole round"):
     # among the decoded events (every one a fold reads: the game's start, rounds' ends, refusals and end
     # among them); `replay --verify` checks every event (replay/forgery.py)
@@ -148,27 +149,60 @@ def rebuild_recording(path: str | Path) -> Rebuilt:
     return rebuilt
 
 
+CURVE_READS = READS | {"RoundStarted"}  # what rebuild decodes: the fold's events, and where rounds start
+
+
 def damaged_rounds(events: list, lost_at: list[int]) -> frozenset[int]:
-    """The rounds a loss in the file hit: at each place events were lost (reader.EventLog.lost_at: a damaged
-    part, a message that does not decode), the round of the nearest event read before it and of the nearest
-    after it (a part lost across a round's end took from both; a round lost whole has no end read, so it is
-    no round of the curve)."""
+    """The rounds a loss in the file hit, at each place events were lost (reader.EventLog.lost_at: a damaged
+    part, a message that does not decode): a round with events read on both sides of it (the loss lies inside
+    it); the round of the nearest event read before it if that round's RoundEnded was not read (the loss took
+    its end); the round of the nearest event read after it if its RoundStarted was not read (the loss took its
+    start). A round whose end and start were both read is not hit by a loss between them (a new user's trial:
+    round 0's lost RoundEnded flagged the next, intact round and dropped round 0's row). A round lost whole
+    has no event read, so it is no round of the curve. `events` must hold the RoundStarted and RoundEnded
+    read (`CURVE_READS`)."""
+    first: dict[int, int] = {}
+    last: dict[int, int] = {}
+    ended, started = set(), set()
+    rounds = []  # each event's round, -1 for none
+    for i, e in enumerate(events):
+        r = getattr(e, "round", -1)
+        rounds.append(r)
+        if r < 0:
+            continue
+        first.setdefault(r, i)
+        last[r] = i
+        name = type(e).__name__
+        if name == "RoundEnded":
+            ended.add(r)
+        elif name == "RoundStarted":
+            started.add(r)
     hit = set()
     for at in lost_at:
-        before = next((e.round for e in reversed(events[:at]) if getattr(e, "round", -1) >= 0), None)
-        after = next((e.round for e in events[at:] if getattr(e, "round", -1) >= 0), None)
-        hit.update(r for r in (before, after) if r is not None)
+        hit.update(r for r in first if first[r] < at <= last[r])
+        before = next((r for r in reversed(rounds[:at]) if r >= 0), None)
+        after = next((r for r in rounds[at:] if r >= 0), None)
+        if before is not None and before not in ended:
+            hit.add(before)
+        if after is not None and after not in started:
+            hit.add(after)
     return frozenset(hit)
 
 
-# `damaged`: 1 for a round the file's damage took events of (Rebuilt.damaged_rounds): its counts are incomplete
+# `damaged`: 1 for a round the file's damage took events of (Rebuilt.damaged_rounds): its counts may be partial.
+# `turns`, `picks` and `matches` come only from the round's RoundEnded: a damaged round whose RoundEnded was lost
+# keeps its row (what was read of it: `reward`, `learned`, `inconsistent`, partial) with those three empty, not 0
+# (0 picks would read as better than a perfect round's 18)
 CURVE_COLUMNS = ("round", "turns", "picks", "matches", "reward", "learned", "inconsistent", "damaged")
 
 
 def curve_rows(fold: SessionFold, damaged: frozenset[int] = frozenset()) -> list[dict]:
-    return [{"round": r, "turns": s.turns, "picks": 2 * s.turns, "matches": s.matches, "reward": s.reward,
-             "learned": s.learned, "inconsistent": s.inconsistent, "damaged": int(r in damaged)}
-            for r, s in sorted(fold.rounds.items()) if s.ended]  # whole rounds only (fold.py)
+    """One row per round recorded whole, and per damaged round (CURVE_COLUMNS); a round a session stopped in,
+    or a file was cut in, has none (fold.py)."""
+    return [{"round": r, "turns": s.turns if s.ended else "", "picks": 2 * s.turns if s.ended else "",
+             "matches": s.matches if s.ended else "", "reward": s.reward, "learned": s.learned,
+             "inconsistent": s.inconsistent, "damaged": int(r in damaged)}
+            for r, s in sorted(fold.rounds.items()) if s.ended or r in damaged]
 
 
 def output_stem(source: str | Path) -> str:

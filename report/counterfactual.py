@@ -8,10 +8,14 @@ with force). Files: `<recording>.usermodel.json` (schemas/usermodel.py),
 and the assumptions; a fit of a damaged or cut recording's intact parts says so
 in its header, as the user model's `partial` does: reader.EventLog.note) and `counterfactual.png` (picks per round by round, and
 the share of turns whose second pick matched, per arm: HITS). Arms are summarised
-over seeds: mean, sample sd, 95% t-interval of the mean (a share's clipped to
-0..100%: near 100% the t-interval of a mean of shares passed it, `91.9% [83.7%,
-100.2%]`, a share no seed can reach; the clip moves no bound a share can take,
-so the interval still holds the true share as often); each arm beside the
+over seeds: mean, sample sd, 95% t-interval of the mean, clipped to the values
+the measure can take: a share's to 0..100% (near 100% the t-interval of a mean
+of shares passed it, `91.9% [83.7%, 100.2%]`, a share no seed can reach), picks
+per round's at 18 below, in the table and the figure's band (`final 27.33 ±
+3.77 [-6.55, 61.22]` of 2 seeds: no round takes fewer than 18 picks, a perfect
+one; report/sweep.py clips its picks measures the same, `measure_bounds`); the
+clip moves no bound a mean can take, so the interval still holds the true mean
+as often. A paired difference has no such bound and is not clipped. Each arm beside the
 recorded learner replayed on the same seeds ("same"), as a paired difference
 per seed; "differs" when that difference's 95% interval leaves out 0.
 Written with force over an earlier run, the earlier run's files of these names
@@ -33,7 +37,7 @@ from pairplay.outputs import output_folder
 from pairplay.schemas.usermodel import UserModelFile, write_user_model
 
 from .study import markdown_table, text_table
-from .sweep import t975
+from .sweep import PICKS, t975
 
 ARM_TEXT = {
     "same": "the recorded learner, replayed (checks the fit)",
@@ -90,7 +94,7 @@ def comparison_rows(recorded: Recorded, runs: dict, texts: dict[str, str]) -> li
     base = runs["same"].picks.mean(axis=1) if "same" in runs else None
     for name, r in runs.items():
         per_seed = r.picks.mean(axis=1)
-        s, h = summarise(per_seed), summarise(r.hits, SHARE)
+        s, h = summarise(per_seed, PICKS), summarise(r.hits, SHARE)
         paired, differs = "", ""
         if base is not None and name != "same":
             d = summarise(per_seed - base)
@@ -126,6 +130,15 @@ def caveats(model: UserModelFile) -> list[str]:
     return out
 
 
+def picks_band(picks: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Per round (columns of seeds x rounds): the mean over seeds and its 95% t-interval, clipped at 18 (PICKS:
+    module rule)."""
+    mean = picks.mean(axis=0)
+    n = picks.shape[0]
+    half = t975(n) * picks.std(axis=0, ddof=1) / math.sqrt(n) if n > 1 else np.zeros_like(mean)
+    return mean, np.clip(mean - half, *PICKS), np.clip(mean + half, *PICKS)
+
+
 def counterfactual_figure(recorded: Recorded, runs: dict, path: Path, title: str) -> None:
     from .plots import _pyplot, _save
 
@@ -134,12 +147,11 @@ def counterfactual_figure(recorded: Recorded, runs: dict, path: Path, title: str
     colours = plt.rcParams["axes.prop_cycle"].by_key()["color"]
     for k, (name, r) in enumerate(runs.items()):
         x = np.arange(1, r.picks.shape[1] + 1)
-        mean = r.picks.mean(axis=0)
+        mean, low, high = picks_band(r.picks)
         n = r.picks.shape[0]
-        half = t975(n) * r.picks.std(axis=0, ddof=1) / math.sqrt(n) if n > 1 else np.zeros_like(mean)
         c = colours[k % len(colours)]
         ax.plot(x, mean, color=c, lw=1.5, label=f"{name} (mean of {n} seeds)")
-        ax.fill_between(x, mean - half, mean + half, color=c, alpha=0.18, lw=0)
+        ax.fill_between(x, low, high, color=c, alpha=0.18, lw=0)
     if recorded.picks:
         ax.plot(np.arange(1, len(recorded.picks) + 1), recorded.picks, color="black", lw=2, marker="o", ms=3,
                 label="recorded")

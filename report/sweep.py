@@ -19,7 +19,8 @@ is not a finished cell: it is computed again, with a warning naming the file
 and why (a measure that was text ended the summary in a traceback, and
 `"measures": {}` counted as finished, the summary's n one short). Then `summarise` folds the cells into one row per
 (setting, measure): n, mean, sd and the 95% confidence interval of the mean
-(Student's t), and the report writes sweep.csv, cells.csv, one figure per
+(Student's t; clipped to the values the measure can take, `measure_bounds`: a picks-per-round measure's at
+18, a perfect round, a ratio's at 0, as report/counterfactual.py's intervals are), and the report writes sweep.csv, cells.csv, one figure per
 measure and sweep.md.
 
 Measures (picks per round: 18 is perfect play, lower is better):
@@ -56,6 +57,7 @@ from pairplay.outputs import output_file, output_folder, write_text
 from pairplay.processes import check_workers, worker_pool
 from pairplay.schemas.jsonfile import empty, without_bom
 from pairplay.schemas.tomlplace import misplaced, table_not_value
+from pairplay.core.geometry import PERFECT_PICKS
 from pairplay.core.rng import SEED_RANGE
 from pairplay.core.study import FIRST_ROUNDS
 from pairplay.report.study import SettingError, StudySettings, default_reuse_last
@@ -481,6 +483,19 @@ def t975(n: int) -> float:
     return T975[n - 2] if 2 <= n <= len(T975) + 1 else 1.96
 
 
+# the bounds of a mean of picks per round: no round takes fewer than 18 picks (a perfect one), so an interval of
+# such a mean stops there (report/counterfactual.py's module rule says why a clip keeps the interval's coverage)
+PICKS = (float(PERFECT_PICKS), math.inf)
+PICKS_MEASURES = ("learned", "oracle", "first50", "last50")  # the per-persona measures counted in picks per round
+
+
+def measure_bounds(measure: str) -> tuple[float, float]:
+    """The values a sweep measure can take: PICKS for a count of picks per round, 0 and above for a ratio of two
+    (learned / oracle), any for a difference (reuse_gain)."""
+    kind = measure.split("/")[-1]
+    return PICKS if kind in PICKS_MEASURES else (0.0, math.inf) if kind == "ratio" else (-math.inf, math.inf)
+
+
 def summarise(grid: Grid, results: dict[str, dict]) -> list[dict]:
     """One row per (setting, measure): the setting's values, measure, n, mean, sd, ci95_low, ci95_high.
 
@@ -494,8 +509,9 @@ def summarise(grid: Grid, results: dict[str, dict]) -> list[dict]:
             mean = float(values.mean())
             sd = float(values.std(ddof=1)) if n > 1 else 0.0
             half = t975(n) * sd / math.sqrt(n) if n > 1 else 0.0
+            floor, ceiling = measure_bounds(measure)
             rows.append({**dict(setting), "measure": measure, "n": n, "mean": mean, "sd": sd,
-                         "ci95_low": mean - half, "ci95_high": mean + half})
+                         "ci95_low": max(mean - half, floor), "ci95_high": min(mean + half, ceiling)})
     return rows
 
 
@@ -562,7 +578,8 @@ def _write_summary(out: Path, grid: Grid, results: dict[str, dict], run: SweepRu
           + (" reuse_last, not given, is the study's default: 50, or rounds // 4 for 50 rounds or fewer."
              if grid.reuse and "reuse_last" not in {**grid.base, **grid.axes} else ""), "",
           "Each row: the mean over seeds, the sample sd, and the 95% confidence interval of the mean "
-          "(Student's t). Picks per round: 18 is perfect play, lower is better; ratio: learned / oracle."
+          "(Student's t; a picks-per-round measure's stops at 18, which no round goes below, a ratio's at 0). "
+          "Picks per round: 18 is perfect play, lower is better; ratio: learned / oracle."
           + windows_note(grid), "",
           "| setting | measure | n | mean | sd | 95% CI |", "|---|---|---|---|---|---|"]
     md += [f"| {setting_label((k, r[k]) for k in keys)} | {r['measure']} | {r['n']} | {r['mean']:.3f} | "

@@ -296,3 +296,25 @@ def test_the_share_of_matched_turns_has_an_interval_within_0_and_100_percent():
     rows = comparison_rows(Recorded([20], 0.9, 10), {"same": ArmRuns(np.full((3, 1), 18.0), hits)}, {})
     cell = rows[-1][3]
     assert cell.startswith("91.9% [") and cell.endswith(", 100.0%]"), cell
+
+
+def test_an_interval_of_picks_per_round_stops_at_18_a_perfect_round():
+    """A trial's table said `final 27.33 ± 3.77 [-6.55, 61.22]`: the t-interval of a mean of 2 seeds went below
+    18 picks per round (and below 0), which no round can take. The table's interval and the figure's band of
+    picks per round are clipped at 18, as the share's is at 0..100%; the paired difference, not a count of
+    picks, is not."""
+    from pairplay.core.counterfactual import ArmRuns
+    from pairplay.report.counterfactual import Recorded, comparison_rows
+
+    final = np.array([[24.0, 25.0], [30.0, 30.66]])  # per seed means 24.5, 30.33: mean 27.4, low < 0
+    same = np.array([[18.0, 18.0], [40.0, 40.0]])
+    rows = comparison_rows(Recorded([20], 0.9, 10), {"same": ArmRuns(same, np.array([0.5, 0.5])),
+                                                     "final": ArmRuns(final, np.array([0.5, 0.5]))}, {})
+    for row in rows[2:]:
+        low = float(row[2].split("[")[1].split(",")[0])
+        assert low == 18.0, row
+    assert float(rows[-1][5].split("[")[1].split(",")[0]) < 0  # the paired difference keeps its interval
+    from pairplay.report.counterfactual import picks_band
+
+    mean, low, high = picks_band(same)
+    assert np.all(low == 18.0) and np.all(high > mean), (low, high)

@@ -480,6 +480,68 @@ def test_a_partial_rebuild_s_curve_marks_the_rounds_the_damage_hit(whole, tmp_pa
             assert row == full[row["round"]]
 
 
+def _round_end_lost(whole, tmp_path, how):
+    """A copy of `whole` that lost round 0's RoundEnded: as one message that does not decode (the trial's
+    b'{"x":'), or inside the chunk that held it."""
+    events = read_log(whole).events
+    end = next(r.payload for r in events if type(r.event).__name__ == "RoundEnded" and r.event.round == 0)
+    if how == "undecodable-end":
+        p = tmp_path / "end.mcap"
+        w = EventLogWriter(p, chunk_size=4096)
+        for r in events:
+            w.write(r.key, b'{"x":' if r.payload == end else r.payload, log_time_ns=r.log_time_ns,
+                    sequence=r.event.seq)
+        w.close()
+        return p
+    data = whole.read_bytes()
+    for c in scan(whole).chunks:
+        bad = bytearray(data)
+        bad[c.offset + c.length // 2:c.offset + c.length // 2 + 16] = b"\xff" * 16
+        p = variant(tmp_path, bytes(bad), f"chunk{c.number}.mcap")
+        if end not in {r.payload for r in read_log(p).events}:
+            return p
+    raise AssertionError("no chunk holds round 0's RoundEnded")
+
+
+@pytest.mark.parametrize("how", ["undecodable-end", "chunk-end"])
+def test_a_round_whose_end_was_lost_is_the_row_marked_damaged_not_the_next(whole, tmp_path, capsys, how):
+    """A new user's trial (16:00): when round 0's RoundEnded was lost (one message that does not decode, or in a
+    lost chunk), curve.csv dropped round 0's row and flagged the next, intact round damaged. The round the loss
+    hit keeps its row, marked damaged, with what was recorded of it (its turns, picks and matches came only from
+    the lost RoundEnded: empty, not 0); an intact round is 0 and its row is the whole file's."""
+    from pairplay.cli.main import main
+
+    p = _round_end_lost(whole, tmp_path, how)
+    kept = {r.payload for r in read_log(p).events}
+    hit = {r.event.round for r in read_log(whole).events if r.payload not in kept and getattr(r.event, "round", -1) >= 0}
+    assert 0 in hit
+    assert main(["rebuild", str(whole), str(p), "--out", str(tmp_path / "rb"), "--partial", "--no-plot"]) == 0
+    capsys.readouterr()
+    full = {row["round"]: row for row in _curve(tmp_path / "rb" / "whole.curve.csv")}
+    rows = {row["round"]: row for row in _curve(tmp_path / "rb" / f"{p.stem}.curve.csv")}
+    assert set(rows) == set(full), (rows, hit)  # no row dropped: round 0 kept
+    assert {int(r) for r, row in rows.items() if row["damaged"] == "1"} == hit
+    zero = rows["0"]
+    assert (zero["turns"], zero["picks"], zero["matches"]) == ("", "", ""), zero
+    float(zero["reward"]), int(zero["learned"]), int(zero["inconsistent"])  # what was read of it: counts, may be partial
+    for r, row in rows.items():
+        if int(r) not in hit:
+            assert row == full[r], (row, full[r])
+
+
+def test_the_rebuild_figure_draws_each_whole_round_at_its_own_round(whole, tmp_path):
+    """Seen beside the curve.csv fault: the figure drew the whole rounds' picks at x = 1, 2, ... in order, so when
+    round 0's end was lost, round 1's picks were drawn as round 1 of the figure (round 0's place) and every later
+    round one to the left. Each whole round is drawn at its own round (round + 1, as the axis counts from 1)."""
+    from pairplay.cli.rebuild import curve_points
+
+    p = _round_end_lost(whole, tmp_path, "undecodable-end")
+    full = rebuild_recording(whole).fold
+    x, picks = curve_points(rebuild_recording(p).fold)
+    assert x == [2, 3] and picks == full.picks_per_round()[1:], (x, picks)
+    assert curve_points(full) == ([1, 2, 3], full.picks_per_round())
+
+
 def test_messages_that_do_not_decode_are_verified_up_to_the_first_and_never_called_the_whole_session(whole, tmp_path,
                                                                                                     capsys):
     """A helper's finding: `replay --verify` of a file whose messages do not decode printed "verified the whole

@@ -413,3 +413,28 @@ def test_sweep_md_says_what_first50_and_last50_average_in_short_cells(tmp_path):
     assert ("first50 and last50 average the first and last 50 training rounds, fewer in a shorter cell: "
             "rounds = 20: the first and last 20 of 20 (both all of them: one value); "
             "rounds = 60: the first and last 50 of 60.") in md, md
+
+
+def test_an_interval_of_picks_per_round_stops_at_18_a_perfect_round(tmp_path):
+    """A trial's sweep.md said `blind/learned 12.976 to 28.224`: the t-interval of a mean of 2 seeds went below
+    18 picks per round, which no round can take (18 = perfect). Every picks-per-round measure's interval is
+    clipped at 18, in sweep.csv, sweep.md and the figures; a ratio (learned / oracle) at 0, its own floor."""
+    from pairplay.report.sweep import SweepRun
+
+    grid = read_grid(_grid(tmp_path))
+    per_seed = [{"blind/learned": 19.0, "blind/oracle": 18.2, "blind/first50": 19.0, "blind/last50": 18.5,
+                 "blind/ratio": 0.5, "all/ratio": 0.5},
+                {"blind/learned": 22.2, "blind/oracle": 21.0, "blind/first50": 30.0, "blind/last50": 25.0,
+                 "blind/ratio": 1.5, "all/ratio": 1.5}]
+    results = {Cell(setting, seed).id: per_seed[k] for setting in grid.settings() for k, seed in enumerate(grid.seeds)}
+    rows = summarise(grid, results)
+    picks = [r for r in rows if r["measure"].split("/")[-1] in ("learned", "oracle", "first50", "last50")]
+    assert len(picks) == 8 and all(r["ci95_low"] == 18.0 and r["ci95_high"] > r["mean"] for r in picks), picks
+    ratio = [r for r in rows if r["measure"].endswith("ratio")]
+    assert ratio and all(r["ci95_low"] == 0.0 < r["mean"] for r in ratio)  # a ratio's floor is 0, not 18
+    write_sweep(tmp_path / "out", grid, results, SweepRun(4, 4, 0.1, "this process"))
+    md = (tmp_path / "out" / "sweep.md").read_text()
+    assert "| blind/learned | 2 | 20.600 | 2.263 | 18.000 to 40.930 |" in md, md
+    low = [line.split(",")[-2] for line in (tmp_path / "out" / "sweep.csv").read_text().splitlines()
+           if "/learned" in line]
+    assert low == ["18.000000"] * 2
