@@ -38,10 +38,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--trained-updates", type=update_count, default=50,
                    help="profiles are also given over the states every policy of a persona updated at least "
                         "this many times (default 50; thesis 6.4: untrained states)")
-    p.add_argument("--reuse-seeds", type=count, default=10,
+    p.add_argument("--reuse-seeds", type=count,
                    help="games per held-out persona in the speed-up experiment (default 10)")
-    p.add_argument("--psi", type=fraction, default=1.0, help="pi-reuse: psi at the start of each round (default 1)")
-    p.add_argument("--psi-decay", type=fraction, default=0.95, help="pi-reuse: v, psi's decay per suggestion (default 0.95)")
+    p.add_argument("--psi", type=fraction, help="pi-reuse: psi at the start of each round (default 1)")
+    p.add_argument("--psi-decay", type=fraction, help="pi-reuse: v, psi's decay per suggestion (default 0.95)")
     p.add_argument("--reuse-last", type=non_negative, default=None,
                    help="pi-reuse: the last N rounds use the new policy alone (default 50; a quarter of "
                         "--rounds when --rounds is 50 or fewer)")
@@ -76,15 +76,19 @@ def settings_of(args):
     """The one config object (report/study.py StudySettings) from the parsed options, checked: an
     OptionError naming the option and its allowed range for a combination core cannot run or would run
     as something else (no persona, one twice, fewer rounds than the speed-up's snapshot interval...)."""
-    from pairplay.report.study import LSPI_SETTINGS, SettingError, StudySettings, default_reuse_last
+    from pairplay.report.study import (LSPI_SETTINGS, REUSE_SETTINGS, SettingError, StudySettings,
+                                      default_reuse_last)
 
     given = {k: getattr(args, k) for k in StudySettings.__dataclass_fields__}
+    # the settings only LSPI or only the speed-up takes are refused where they would be ignored
+    # (StudySettings.check): their options default to None (not given), then to StudySettings' defaults
+    optional = (*LSPI_SETTINGS, *REUSE_SETTINGS)
+    named = [k for k in optional if given[k] is not None]
     if given["reuse_last"] is None:  # not given: the default must fit a short study (`--rounds 20` was refused
         given["reuse_last"] = default_reuse_last(given["rounds"])  # for the default's 50: a new user's trial)
-    unset = [k for k in LSPI_SETTINGS if given[k] is None]  # not given: StudySettings' default
-    settings = StudySettings(**{k: v for k, v in given.items() if k not in unset})
+    settings = StudySettings(**{k: v for k, v in given.items() if not (k in optional and v is None)})
     try:
-        settings.check(spell=option, given=[k for k in LSPI_SETTINGS if k not in unset])
+        settings.check(spell=option, given=named)
     except SettingError as exc:
         raise OptionError(f"{option(exc.key)}: {exc.what}", option(exc.key)) from None
     return settings

@@ -58,6 +58,7 @@ from pairplay.report.future_frames import frames_lines
 
 MEMORY_COUNTS = ("games", "rounds", "eval_rounds", "reuse_seeds")  # the settings that size the study's memory
 LSPI_SETTINGS = ("lspi_ridge", "lspi_every")  # the settings only algorithm lspi takes
+REUSE_SETTINGS = ("psi", "psi_decay", "reuse_last", "reuse_seeds")  # the settings only the speed-up takes
 EVAL_GAMES_PER_GAME = 12  # evaluation games per training game: comparison 3, own + merged policies, future work
 
 
@@ -163,7 +164,13 @@ class StudySettings:
                                f"compared with Q-learning by greedy snapshots every {SPEED_EVERY} rounds); "
                                f"got {self.rounds}")
         when = "" if speed_up is not None else f" (2+ personas without {spell('train_only')})"
-        if speed_up if speed_up is not None else self.runs_speed_up():
+        runs_it = speed_up if speed_up is not None else self.runs_speed_up()
+        idle = [k for k in REUSE_SETTINGS if k in given]
+        if idle and not runs_it:  # ignored without a word, as LSPI's settings were (a trial: exit 0, cells alike)
+            how = "reuse = true" if speed_up is not None else f"2+ personas without {spell('train_only')}"
+            raise SettingError(idle[0], f"{'/'.join(spell(k) for k in idle)} set the speed-up experiment (pi-reuse), "
+                               f"which does not run here: it needs {how}")
+        if runs_it:
             every = study.REUSE_SNAPSHOT_EVERY
             if self.rounds < every:  # no snapshot of the greedy policy, so no 'rounds to 1.10x the oracle'
                 raise SettingError("rounds", f"must be at least {every} when the speed-up runs{when}: its greedy "

@@ -361,9 +361,9 @@ def _fixtures(root: Path) -> None:
     (root / "rebuilt" / "rec.policy.json").write_bytes(b"the user's rebuilt policy")
     (root / "ro").mkdir()
     (root / "grid.toml").write_text('seeds = 1\n[study]\npersonas = "blind"\ngames = 1\nrounds = 20\n'
-                                    '[grid]\npsi_decay = [0.9]\n')
-    (root / "huge-rounds.toml").write_text('seeds = 2\n[study]\nrounds = 10000000000\n[grid]\npsi_decay = [0.9]\n')
-    (root / "huge-seeds.toml").write_text('seeds = 100000000\n[grid]\npsi_decay = [0.9]\n')
+                                    '[grid]\ntrained_updates = [50]\n')
+    (root / "huge-rounds.toml").write_text('seeds = 2\n[study]\nrounds = 10000000000\n[grid]\ntrained_updates = [50]\n')
+    (root / "huge-seeds.toml").write_text('seeds = 100000000\n[grid]\ntrained_updates = [50]\n')
     from pairplay.schemas.study import example_text
     example = example_text()
     phase1 = 'preset = "human-phase1"\n'
@@ -566,7 +566,7 @@ def test_ctrl_c_at_a_terminal_reaches_every_worker_yet_prints_one_line_and_leave
     import time
     grid = tmp_path / "grid.toml"
     grid.write_text('seeds = 4\n[study]\npersonas = "blind,deaf"\ngames = 2\nrounds = 400\neval_rounds = 50\n'
-                    '[grid]\npsi_decay = [0.9, 0.95]\n')
+                    '[grid]\ntrained_updates = [50, 40]\n')
     args = {"study": ["study", "--quiet", "--out", "report"],
             "sweep": ["sweep", str(grid), "--workers", "2", "--quiet", "--out", "swept"]}[verb]
     # the study with an empty numba cache: the Ctrl-C comes while its kernels compile

@@ -240,7 +240,7 @@ def test_every_verb_a_signal_after_its_run_returned_is_one_line_and_its_status(
     assert len(lines) == 1 and lines[0].startswith(f"pairplay {verb}: interrupted (SIGTERM) after it had finished"), err
 
 
-GRID = 'seeds = 2\n[study]\npersonas = "blind"\ngames = 1\nrounds = 20\neval_rounds = 10\n[grid]\npsi_decay = [0.9]\n'
+GRID = 'seeds = 2\n[study]\npersonas = "blind"\ngames = 1\nrounds = 20\neval_rounds = 10\n[grid]\ntrained_updates = [50]\n'
 
 
 def test_a_sweep_interrupted_before_any_cell_leaves_nothing(tmp_path, monkeypatch, capsys, command_handlers):

@@ -15,7 +15,7 @@ from pathlib import Path
 from pairplay.cli import progress
 
 ROOT = Path(__file__).resolve().parents[1]
-GRID = 'seeds = 1\n[study]\npersonas = "blind"\ngames = 1\nrounds = 20\neval_rounds = 5\n[grid]\npsi_decay = [0.9]\n'
+GRID = 'seeds = 1\n[study]\npersonas = "blind"\ngames = 1\nrounds = 20\neval_rounds = 5\n[grid]\ntrained_updates = [50]\n'
 
 
 def test_a_bar_is_shown_on_a_terminal_only_and_never_with_quiet(monkeypatch):

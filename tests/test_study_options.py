@@ -42,6 +42,11 @@ STUDY_MISTAKES = [
     (["--personas", "blind", "--algorithm", "lspi", "--rounds", "9"], "--rounds: must be at least 10 with --algorithm lspi"),
     # LSPI's settings with Q-learning ran Q-learning without a word (session refused them): session's rule
     (["--lspi-ridge", "2"], "--algorithm: --lspi-ridge needs --algorithm lspi, not q-learning"),
+    # a trial: the speed-up's settings where it does not run were ignored, exit 0 (as LSPI's were)
+    (["--personas", "blind", "--psi", "0.3", "--reuse-last", "2"],
+     "--psi: --psi/--reuse-last set the speed-up experiment (pi-reuse), which does not run here: it needs 2+ "
+     "personas without --train-only"),
+    (["--train-only", "--psi-decay", "0.3"], "--psi-decay: --psi-decay set the speed-up experiment"),
     (["--lspi-every", "3", "--lspi-ridge", "1"], "--lspi-ridge/--lspi-every need --algorithm lspi, not q-learning"),
 ]
 
@@ -122,7 +127,8 @@ def _parse(line: str) -> StudySettings:
     dict(personas="blind,deaf,tatiana", games=2, rounds=60, eval_rounds=5, reuse_seeds=2, reuse_last=10),
     dict(seed=2**64 - 1, psi=0.5, psi_decay=0.875, trained_updates=0, reward_bonus="match"),
     dict(algorithm="lspi", lspi_ridge=0.1, lspi_every=3, personas="wasim, frances"),
-    dict(psi=0.1 + 0.2, psi_decay=1.0 / 3, train_only=True),  # floats that print long: their repr round-trips
+    dict(psi=0.1 + 0.2, psi_decay=1.0 / 3),  # floats that print long: their repr round-trips
+    dict(train_only=True, games=3),  # (the speed-up's settings are refused with it: they would be ignored)
 ])
 def test_the_rerun_line_parses_back_to_the_same_study(changes):
     settings = StudySettings(**changes)
@@ -151,13 +157,17 @@ GRID_MISTAKES = [
     ('seeds = [1, 99999999999999999999]\n[study]\npersonas = "blind"\n', "seeds 0..18446744073709551615"),
     ('seeds = [1, 1]\n[study]\npersonas = "blind"\n', "repeats a seed"),
     ('reuse = "no"\n[study]\npersonas = "blind"\n', "must be true or false"),
-    ('[grid]\npsi = [0.5, 1.5]\n', "psi = 1.5: must be between 0 and 1"),
+    ('reuse = true\nseeds = 1\n[study]\npersonas = "blind,deaf"\n[grid]\npsi = [0.5, 1.5]\n',
+     "psi = 1.5: must be between 0 and 1"),
     ('reuse = true\nseeds = 1\n[study]\npersonas = "blind,deaf"\n[grid]\npsi = [0.5, 0.0]\n',
      "psi = 0: must be above 0 when the speed-up runs"),
     ('[study]\nalgorithm = "sarsa"\n', "algorithm = 'sarsa': must be one of q-learning, lspi"),
     ('[study]\nreward_bonus = "always"\n', "reward_bonus = 'always': must be one of correct, consistent, match"),
     # LSPI's settings in a cell that learns by Q-learning, which ignored them (the study's and session's rule)
     ('seeds = 1\n[study]\nlspi_ridge = 2\n', "algorithm = 'q-learning': lspi_ridge needs algorithm lspi, not q-learning"),
+    # a trial: a grid of the speed-up's settings without `reuse = true` gave cells alike, exit 0
+    ('seeds = 1\n[study]\npersonas = "blind,deaf"\n[grid]\npsi_decay = [0.5, 0.99]\n',
+     "psi_decay = 0.5: psi_decay set the speed-up experiment (pi-reuse), which does not run here: it needs reuse = true"),
     ('seeds = 1\n[grid]\nalgorithm = ["lspi", "q-learning"]\nlspi_every = [3, 10]\n',
      "lspi_every needs algorithm lspi, not q-learning (cell algorithm = 'q-learning', lspi_every = 3)"),
 ]

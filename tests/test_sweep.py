@@ -264,7 +264,7 @@ def test_the_measures_a_cell_file_must_hold_are_those_a_cell_gives(tmp_path):
     from pairplay.report.sweep import cell_measures, measure_names
     for reuse in (False, True):
         grid = read_grid(_grid(tmp_path, f'seeds = 1\nreuse = {str(reuse).lower()}\n[study]\npersonas = "blind,deaf"\n'
-                                         'games = 1\nrounds = 10\neval_rounds = 2\nreuse_seeds = 1\n'))
+                                         'games = 1\nrounds = 10\neval_rounds = 2\n'))
         settings = grid.study_settings(grid.cells()[0])
         assert set(cell_measures(settings, reuse)) == measure_names(settings, reuse)
 
