@@ -18,7 +18,7 @@ from pairplay.cli.main import main
 from pairplay.replay.mcapscan import scan
 
 SAMPLE = Path(__file__).resolve().parents[1] / "recordings" / "samples" / "sim-ashley.mcap"
-GRID = "[study]\ngames = 1\nrounds = 5\n[grid]\npsi = [0.5, 1.0]\n"
+GRID = "[study]\ngames = 1\nrounds = 5\n[grid]\ntrained_updates = [50, 40]\n"
 
 # verb's arguments -> the path the one line must name (relative to the case's folder)
 CASES = {
