@@ -177,11 +177,21 @@ def damaged_rounds(events: list, lost_at: list[int]) -> frozenset[int]:
             ended.add(r)
         elif name == "RoundStarted":
             started.add(r)
+    # the round of the nearest event read before / from each place (one pass each: a file with thousands of
+    # messages that do not decode has as many places, and a scan per place was quadratic)
+    before_at, r_before = [None] * (len(rounds) + 1), None
+    for i, r in enumerate(rounds):
+        before_at[i] = r_before
+        r_before = r if r >= 0 else r_before
+    before_at[len(rounds)] = r_before
+    after_at, r_after = [None] * (len(rounds) + 1), None
+    for i in range(len(rounds) - 1, -1, -1):
+        r_after = rounds[i] if rounds[i] >= 0 else r_after
+        after_at[i] = r_after
     hit = set()
     for at in lost_at:
         hit.update(r for r in first if first[r] < at <= last[r])
-        before = next((r for r in reversed(rounds[:at]) if r >= 0), None)
-        after = next((r for r in rounds[at:] if r >= 0), None)
+        before, after = before_at[at], after_at[at]
         if before is not None and before not in ended:
             hit.add(before)
         if after is not None and after not in started:
