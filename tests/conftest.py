@@ -10,9 +10,16 @@ its own process with its own browser, ports (port 0) and tmp_path.
 from __future__ import annotations
 
 import os
+import signal
 from pathlib import Path
 
 import pytest
+
+# A suite started in the background (`cmd &` in a script, nohup) inherits SIGINT ignored, and Python then
+# installs no KeyboardInterrupt handler: the tests that deliver a Ctrl-C to themselves or to the commands
+# they start (which inherit the ignored signal) failed only when started so. Each test process takes it back.
+if signal.getsignal(signal.SIGINT) is signal.SIG_IGN:
+    signal.signal(signal.SIGINT, signal.default_int_handler)
 
 CHROMIUM = Path("/usr/bin/chromium")
 CHROMIUM_ARGS = ["--no-sandbox", "--disable-gpu", "--disable-dev-shm-usage", "--disable-background-networking",
