@@ -181,8 +181,7 @@ class StudyData:
             self.study: Study = load_study(self.given / STUDY_FILE)
         except StudyFileError as err:
             raise StudyDataError(str(err)) from None
-        self.settings = msgspec.json.decode((self.folder / SETTINGS).read_bytes()) \
-            if (self.folder / SETTINGS).is_file() else {}
+        self.settings = _settings(self.folder / SETTINGS)
         self._lock = threading.RLock()
         self.state = StudyState()
         for e in self.read_journal():
@@ -596,6 +595,10 @@ class StudyData:
                     if is_live(f)]
             if live:  # its recorder still writes it (a game's questionnaire holds it open): pairplay/livelock.py
                 raise StudyDataError(f"{pid}: {live[0]} {LIVE}: stop its session first")
+            key = self.key_file
+            if key is not None and not key.is_file():  # before anything is deleted: their name stays in it
+                raise StudyDataError(f"{pid}: the key file {key} is not there (an unmounted drive?): their name "
+                                     "would stay in it; make it reachable first, then delete")
             for f in files:
                 f.unlink()
             for g in sessions:  # anything else a tool wrote next to the recording (e.g. a view's .rrd)
@@ -645,6 +648,25 @@ class StudyData:
             f.flush()
             os.fsync(f.fileno())
         return True
+
+
+class FolderSettings(msgspec.Struct, forbid_unknown_fields=True):
+    """settings.json: where the key file is ("" for none)."""
+
+    key_file: str = ""
+
+
+def _settings(path: Path) -> dict:
+    """settings.json as a dict ({} without one); StudyDataError, one line naming it, if it is not what
+    `create` writes (a list, a number where the key file's path goes: `participant delete` crashed halfway,
+    its files gone and its journal lines kept, a new user's trial)."""
+    if not path.is_file():
+        return {}
+    try:
+        return msgspec.structs.asdict(msgspec.json.decode(path.read_bytes(), type=FolderSettings))
+    except (msgspec.DecodeError, msgspec.ValidationError) as err:
+        raise StudyDataError(f"{path}: not the study's settings ({err}): it is {{\"key_file\": \"<path or empty>\"}}") \
+            from None
 
 
 def game_end(folder: Path, session: str, participant: str, path: Path, answered: bool | None = None,

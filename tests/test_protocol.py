@@ -228,6 +228,23 @@ def test_the_key_file_is_its_owners_alone_from_init_to_deletion(tmp_path):
         StudyData.create(tmp_path / "study2", STUDY, key_file=tmp_path / "study" / "study.toml" / "nothere" / "k.csv")
 
 
+def test_a_deletion_whose_key_file_is_away_or_whose_settings_are_not_the_studys_deletes_nothing(tmp_path):
+    """A new user's trial: with the key file away (an unmounted drive) `participant delete` exited 0, the name
+    left in it for good (the id gone, a retry refused); with settings.json of another shape it crashed halfway,
+    the files gone, the journal and the key file still naming them. Both are refused before anything goes."""
+    key = tmp_path / "private" / "keys.csv"
+    data = StudyData.create(tmp_path / "study", STUDY, key_file=key)
+    data.register("phase1", "Bob Jones")
+    key.rename(key.with_suffix(".away"))
+    with pytest.raises(StudyDataError, match="the key file .*keys.csv is not there"):
+        data.delete_participant("p01")
+    key.with_suffix(".away").rename(key)
+    assert data.participant("p01") and "Bob Jones" in key.read_text(encoding="utf-8")
+    (tmp_path / "study" / "settings.json").write_text("[1, 2]")
+    with pytest.raises(StudyDataError, match="settings.json: not the study's settings"):
+        StudyData(tmp_path / "study")
+
+
 def names_anywhere(folder: Path, pid: str) -> list[str]:
     """The files of `folder` that hold `pid`: a recording's records read decompressed (its zstd bytes held
     "p02" by chance once: a flaky failure), a figure's pixels not at all, any other file as its bytes."""
