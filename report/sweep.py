@@ -379,12 +379,16 @@ def check_scheduler(address: str) -> None:
     Every way the probe can fail is the one line: a wrong address is the user's to fix."""
     import asyncio
 
-    from distributed.comm import connect
-    from distributed.comm.addressing import parse_address, parse_host_port
-    from distributed.comm.registry import get_backend
-
     def refuse(what: str) -> OptionError:
         return OptionError(f"{what} at {address}: give the scheduler's address, tcp://HOST:PORT", "--scheduler")
+
+    try:
+        from distributed.comm import connect
+        from distributed.comm.addressing import parse_address, parse_host_port
+        from distributed.comm.registry import get_backend
+    except ImportError:  # a plain install has no Dask (a trial: a traceback)
+        raise OptionError("a Dask cluster needs Dask's distributed package: pip install -e '.[cluster]'",
+                          "--scheduler") from None
 
     try:
         scheme, location = parse_address(address)

@@ -438,3 +438,15 @@ def test_an_interval_of_picks_per_round_stops_at_18_a_perfect_round(tmp_path):
     low = [line.split(",")[-2] for line in (tmp_path / "out" / "sweep.csv").read_text().splitlines()
            if "/learned" in line]
     assert low == ["18.000000"] * 2
+
+
+def test_a_scheduler_without_dasks_distributed_installed_is_one_line(monkeypatch):
+    """A new user's trial: on a plain install (no `cluster` extra) `sweep --scheduler` was a ModuleNotFoundError
+    traceback."""
+    import sys
+
+    from pairplay.errors import OptionError
+    from pairplay.report.sweep import check_scheduler
+    monkeypatch.setitem(sys.modules, "distributed.comm", None)  # as if not installed: its import fails
+    with pytest.raises(OptionError, match=r"needs Dask's distributed package: pip install -e '\.\[cluster\]'"):
+        check_scheduler("tcp://127.0.0.1:1")
