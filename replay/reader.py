@@ -22,6 +22,7 @@ line every verb uses (rebuild, counterfactual, replay and verify, view, report),
 from __future__ import annotations
 
 import gc
+import json
 from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -171,6 +172,39 @@ def gc_paused():
 
 
 _LOST_HERE = object()  # _read_log's marker among the records: a damaged part's lost records were here
+RECOVERED = "pairplay.recovered"  # the metadata record `pairplay recover` writes (replay/recover.py)
+# in it: where the damaged file's lost parts were, as the number of messages the recovered file holds before each
+LOST_AT_KEY = "lost_at_messages"
+
+
+def recovered_lost(recovered: dict[str, str]) -> bool:
+    """Whether the damaged file a recovered one (its RECOVERED metadata) was made from lost messages: a
+    damage that lost none (an index, a CRC) left the session whole; a file recovered before recover said
+    where its losses were (no LOST_AT_KEY) is taken as having lost some, as it was."""
+    if recovered.get("damaged", "[]") in ("", "[]"):
+        return False
+    return recovered.get(LOST_AT_KEY, "") != "[]"
+
+
+def _recovered_losses(records: list) -> list[int] | None:
+    """Where a file `pairplay recover` wrote lost parts of the file it was recovered from, as indexes of
+    `records` (None: not such a file, or one recovered before recover said where). Its metadata record is
+    written after every message but the last chunk's, so it is looked for from the end."""
+    for record in reversed(records):
+        if type(record) is Metadata and record.name == RECOVERED and LOST_AT_KEY in record.metadata:
+            try:
+                wanted = sorted(int(n) for n in json.loads(record.metadata[LOST_AT_KEY]))
+            except (ValueError, TypeError):
+                return None
+            at, seen, found = 0, 0, []
+            for i, r in enumerate(records):
+                while at < len(wanted) and wanted[at] <= seen:
+                    found.append(i)
+                    at += 1
+                if type(r) is Message:
+                    seen += 1
+            return found + [len(records)] * (len(wanted) - at)
+    return None
 
 
 def read_log(path: str | Path, only: frozenset[str] | None = None) -> EventLog:
@@ -196,6 +230,8 @@ def _read_log(path: str | Path, only: frozenset[str] | None = None) -> EventLog:
     append = log.events.append
     records = checked.summary_records + checked.records
     lost = sorted({len(checked.summary_records) + d.lost_at for d in checked.damage if d.lost_at >= 0})
+    # a recovered file is whole, but its source lost parts: marked where they were, as in the source
+    lost = sorted({*lost, *(_recovered_losses(records) or ())})
     if lost:  # a marker where each lost part's records were (`lost_at`; the first: `lost_from`)
         marked, before = [], 0
         for at in lost:

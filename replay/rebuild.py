@@ -38,6 +38,7 @@ from pairplay.schemas.session import SessionConfig
 
 from .check import no_whole_round, read_session
 from .fold import READS, SessionFold, fold_events, stream_seed
+from .reader import recovered_lost
 from .forgery import contradiction
 
 
@@ -144,7 +145,7 @@ def rebuild_recording(path: str | Path) -> Rebuilt:
     rebuilt.damaged_rounds = damaged_rounds([r.event for r in log.events], log.lost_at)
     if log.lost:
         rebuilt.lost = f"the file is damaged ({log.lost})"
-    elif recovered.get("damaged", "[]") not in ("", "[]"):
+    elif recovered_lost(recovered):  # (a damage that lost no message is no loss: its session is whole)
         rebuilt.lost = "it was recovered from a damaged file, whose damaged parts are lost"
     return rebuilt
 

@@ -6,7 +6,11 @@ one) is copied, in order, into a new file that is then finished with a summary,
 an index and CRCs, so any MCAP reader opens it. Nothing is invented: a lost
 tail or a damaged chunk stays lost, and a "pairplay.recovered" metadata record
 says what recover completed (the summary and index it wrote), what it read,
-from where, what was wrong (every damaged part, the cut) and how far the
+from where, what was wrong (every damaged part, the cut), where each damaged
+part's lost messages were (`lost_at`: how many messages the new file holds
+before each; the reader marks a loss there, as it does in the damaged file, so
+`replay --verify` compares up to the first, where it printed every event after
+a lost one as DIFFERS, and a damage that lost no message is no loss) and how far the
 session got (whether its SessionEnded survived, the last round). A whole file
 (complete already) is not copied: nothing is written unless something is
 recovered (`Recovered.complete`, output None), as when its journal holds
@@ -36,6 +40,7 @@ from mcap.writer import CompressionType, Writer
 from typing import Callable
 
 from pairplay.errors import InputError, OutputError
+from pairplay.replay.reader import LOST_AT_KEY
 from pairplay.schemas.events import EVENT_BY_TAG
 from pairplay.schemas.jsonschema import schema_text
 from pairplay.schemas.keys import parse_event_key
@@ -121,7 +126,15 @@ def recover(path: str | Path, output: str | Path | None = None, force: bool = Fa
         writer.start(profile=PROFILE, library="pairplay recover")
         # the summary's Schemas and Channels first: they name the channels of messages whose own
         # records were in a lost chunk
-        for record in checked.summary_records + checked.records:
+        # where each damaged part's lost records were, as the number of messages written before them: the
+        # reader marks a loss there (replay/reader.py LOST_AT_KEY), as in the damaged file, so `replay --verify`
+        # stops comparing at the first and `rebuild` flags the rounds around each
+        losses = sorted({len(checked.summary_records) + d.lost_at for d in checked.damage if d.lost_at >= 0})
+        lost_at: list[int] = []
+        for at, record in enumerate(checked.summary_records + checked.records):
+            while losses and at >= losses[0]:
+                lost_at.append(messages)
+                losses.pop(0)
             if isinstance(record, Schema):
                 if record.id not in schema_ids:
                     schema_ids[record.id] = writer.register_schema(record.name, record.encoding, record.data)
@@ -161,11 +174,13 @@ def recover(path: str | Path, output: str | Path | None = None, force: bool = Fa
                 if tag == "RoundStarted":
                     last_round = max(last_round, _round_of(payload))
                 why = why if tag != "SessionStarted" else ""
+        lost_at += [messages] * len(losses)  # a part lost after the last record read
         damaged = [str(d) for d in checked.damage]
         reason = "" if checked.whole else checked.describe()
         writer.add_metadata("pairplay.recovered", {
             "source": str(path), "messages": str(messages), "truncated": str(checked.truncated).lower(),
             "reason": reason, "damaged": json.dumps(damaged), "lost_chunks": str(len(checked.lost_chunks)),
+            LOST_AT_KEY: json.dumps(lost_at), "lost": json.dumps([f"{d.part}: {d.lost}" for d in checked.damage if d.lost_at >= 0]),
             "completed": "summary, indexes and CRCs written by pairplay recover",
             "session_ended": str(ended).lower(), "last_round": str(last_round),
             **({"journal": journal.path.name if journal is not None else journal_error,

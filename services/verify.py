@@ -29,7 +29,12 @@ lost event. The first lost event (a part whose events are lost, or a message
 that does not decode: reader.EventLog.lost_at) ends the comparison there, as a
 cut would: every event after it follows lost ones, and was printed as DIFFERS
 before "verified the whole session"; how many events came after it, not
-compared, is said (`Verification.not_compared`).
+compared, is said (`Verification.not_compared`). A file `pairplay recover` made of a
+damaged one is whole, but its metadata says where the lost parts were (replay/recover.py
+`lost_at`), and the reader marks a loss there: it is compared up to the first of them, as
+the damaged file is (it printed every event after the hole as DIFFERS: artefacts of the
+loss, not differences), and FAILs naming the parts; one whose damage lost no message (an
+index, a CRC) is verified whole and says it was recovered.
 
 The last line (`Verification.verdict`) says in one line whether the events
 verified and how far: `verify: PASS` for a whole session; for a session
@@ -56,7 +61,7 @@ from dataclasses import dataclass, field
 from pairplay.errors import InputError
 from pairplay.replay.check import no_whole_round
 from pairplay.replay.forgery import contradiction
-from pairplay.replay.reader import read_log
+from pairplay.replay.reader import read_log, recovered_lost
 from pairplay.schemas.events import RoundEnded, SessionEnded, SessionStarted
 
 from pairplay.services.game import GameLogic
@@ -220,7 +225,15 @@ def verify_recording(path) -> Verification:
         if first_lost < 0:
             result.reach = f"the {result.events} events the file holds (no event lost, but the file is damaged)"
     lost = json.loads(recovered.get("damaged", "[]") or "[]")
-    if lost:
+    parts = json.loads(recovered.get("lost", "[]") or "[]")  # what each part that lost messages lost (recover)
+    if lost and not recovered_lost(recovered):  # its damaged parts lost no message (an index, a CRC): whole
+        result.reach = f"{result.reach} (recovered from a damaged file; no message was lost)"
+    elif lost and first_lost > 0:  # compared up to the first lost part, as in the damaged file itself
+        errors.append(f"recovered from a damaged file, parts lost: {'; '.join(parts or lost)}")
+        result.reach = (f"up to the first part lost from the recording it was recovered from: {result.events} "
+                        f"events, {_rounds_words(result.rounds_recorded, result.rounds)}; the {result.not_compared} "
+                        "events after it are not compared (they follow the lost ones)")
+    elif lost:
         errors.append(f"recovered from a damaged file, parts lost: {'; '.join(lost)}")
         result.reach = (f"the {result.events} events the file holds, not the whole session: "
                         "parts of the recording it was recovered from were lost")

@@ -113,7 +113,10 @@ def test_a_flipped_byte_in_a_chunk_loses_that_chunk_only_and_is_named(whole, tmp
         done = recover(p, tmp_path / "out.mcap")
         assert done.messages == len(got) and done.damaged
         rv = verify_recording(done.output)
-        assert not rv.ok and "recovered from a damaged file" in rv.error
+        if len(got) < len(full):
+            assert not rv.ok and "recovered from a damaged file" in rv.error
+        else:  # a chunk's header damaged, every message read: its copy holds the whole session (it FAILed)
+            assert rv.ok and "recovered from a damaged file; no message was lost" in rv.reach, rv.error
         (tmp_path / "out.mcap").unlink()
 
 
@@ -580,3 +583,43 @@ def test_a_counterfactual_of_a_damaged_recording_says_so_in_its_files(whole, tmp
     capsys.readouterr()
     assert "Partial" not in (tmp_path / "cf-whole" / "counterfactual.md").read_text()
     assert read_user_model(tmp_path / "cf-whole" / f"{whole.stem}.usermodel.json").partial == ""
+
+
+def test_a_recovered_file_of_a_chunk_lost_in_the_middle_is_verified_up_to_it_not_claimed_different(
+        whole, tmp_path, capsys):
+    """A new user's trial: `replay --verify` of what `pairplay recover` made of a file whose middle chunk was
+    lost printed DIFFERS for every service: the events after the hole follow lost ones (a pick the game never
+    got), artefacts of the loss, not differences. The recovered file now says where its source lost parts
+    (recover's metadata), the reader marks a loss there, and verify compares up to it, as for the damaged
+    file itself: the same events compared, the same not compared; FAIL naming the part and what it lost."""
+    from pairplay.cli.main import main
+
+    p, part = _middle_chunk_lost(whole, tmp_path)
+    direct = verify_recording(p)
+    done = recover(p, tmp_path / "r.mcap")
+    assert main(["replay", str(done.output), "--verify"]) == 1
+    out = capsys.readouterr().out
+    lines = out.splitlines()
+    assert "DIFFERS" not in out and "whole session" not in out and "not recomputed" not in out, out
+    assert f"parts lost: {part}: its " in out and "messages" in out, out
+    assert lines[-2].startswith("verified up to the first part lost from the recording it was recovered from: ")
+    again = verify_recording(done.output)
+    assert (again.events, again.not_compared, again.lost_part) == (direct.events, direct.not_compared, True)
+    log = read_log(done.output)
+    assert log.lost_at == read_log(p).lost_at and log.whole  # the same place, in a whole file
+    rebuilt = rebuild_recording(done.output)  # and rebuild's curve flags the same rounds as the damaged file's
+    assert rebuilt.damaged_rounds == rebuild_recording(p).damaged_rounds != frozenset() and rebuilt.lost
+
+
+def test_a_recovered_file_whose_damage_lost_no_message_is_verified_whole(whole, tmp_path):
+    """The index bytes between two chunks damaged, no message lost (the summary accounts for every one):
+    recover makes a whole copy, and `replay --verify` of it said FAIL, "recovered from a damaged file, parts
+    lost", and rebuild refused it without --partial, for a session of which nothing was lost."""
+    chunks = scan(whole).chunks
+    c, after = chunks[3], chunks[4]
+    bad = bytearray(whole.read_bytes())
+    bad[c.offset + c.length:after.offset] = b"\xff" * (after.offset - c.offset - c.length)
+    done = recover(variant(tmp_path, bytes(bad), "index.mcap"), tmp_path / "r.mcap")
+    checked = verify_recording(done.output)
+    assert checked.ok and not checked.error and "no message was lost" in checked.reach, (checked.error, checked.reach)
+    assert not rebuild_recording(done.output).lost
