@@ -21,7 +21,12 @@ temporary folder beside --out and moved in only when all are complete, a signal
 waiting while they are (pairplay/outputs.py `output_folder`, `among_others`:
 the files already in --out stay), so a full disk or a Ctrl-C part way leaves
 --out as it was (with --force: the earlier policies, never half old and half
-new) and no folder this run made. The result lines are printed once everything is written
+new) and no folder this run made. --out may hold other files: rebuild lists the
+files it wrote there in its manifest (`.pairplay-rebuild.json`), and `--force`
+removes the ones an earlier rebuild wrote that this one does not write again
+(`rebuild A B C --out D`, then `rebuild A --out D --force`: B's and C's policies
+and curves stayed beside A's new ones, one folder of two runs); every other
+file stays. The result lines are printed once everything is written
 (cli/interrupts.py `work_done`: a signal after that is reported, nothing undone).
 """
 
@@ -35,6 +40,10 @@ from pairplay.core.geometry import PERFECT_PICKS, PICKS_UNIT
 
 
 FIGURE = "learning-curves.png"
+# what rebuild writes in --out (pairplay/outputs.py `owned`); among a user's files there, so its manifest says
+# which of them a run wrote: `--force` removes those an earlier run wrote that this one does not write again
+REBUILD_OUTPUTS = ("*.policy.json", "*.curve.csv", FIGURE)
+MANIFEST = ".pairplay-rebuild.json"
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -78,7 +87,7 @@ def run(args: argparse.Namespace) -> int:
     # named as given: "exists (/tmp/.../rq/x.policy.json)" for `--out rq` (the resolved key)
     outputs = [path for path, _ in planned.values()] + ([figure] if done and not args.no_plot else [])
     check_outputs(outputs, args.force, inputs=args.recordings)
-    with output_folder(out, args.force, among_others=True) as staged:
+    with output_folder(out, args.force, owned=REBUILD_OUTPUTS, among_others=True, manifest=MANIFEST) as staged:
         lines = write_all(done, staged, out, args)
     work_done()  # everything is written: a signal from now on is reported, and undoes nothing
     print("\n".join(lines))

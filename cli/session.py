@@ -49,7 +49,8 @@ from pairplay.cli.args import add_force, count, float_between, game_index, posit
 from pairplay.core.geometry import PICKS_UNIT
 from pairplay.cli.robot import add_robot_arguments, check_robot_args, probe_robot_args, robot_choice
 from pairplay.services.bus import BusOpenError, ConfigFileError, add_bus_arguments, options_from_args, stop_on_signals
-from pairplay.services.recorder import FORCE_SESSION_HINT, REPLACED, check_new_recording, set_aside, settle_aside
+from pairplay.services.recorder import (FORCE_SESSION_HINT, REPLACED, check_new_recording, check_not_folders, set_aside,
+                                        settle_aside)
 from pairplay.services.runner import waiting_for
 from pairplay.services.session import run_session
 
@@ -215,6 +216,8 @@ def run(args: argparse.Namespace) -> int:
     path = Path(args.out) / f"{config.session}.mcap"
     if "recorder" not in args.external and not args.force:  # an external recorder checks its own folder
         check_new_recording(path, FORCE_SESSION_HINT)  # this verb has --force
+    elif "recorder" not in args.external:  # --force sets recordings aside, never a folder: refused before the work
+        check_not_folders(path)
     summary: dict = {"started": False}  # run_session's, once it has stopped
     if not args.force or "recorder" in args.external:
         return _run(args, config, path, summary)

@@ -6,7 +6,14 @@ JSON per finished cell), sweep.csv, cells.csv, figures/, sweep.md. Running
 the same grid into the same folder resumes: finished cells are not computed
 again; with every cell finished and the summary written, nothing is written
 (sweep.md keeps the run that did the work) and one line says so. A folder that holds another grid's sweep, or files but no sweep, is
-refused unless --force; an --out that is a file is refused before any work.
+refused unless --force; an --out that is a file is refused before any work, and so
+is a folder where one of its files goes (a cell's file, sweep.md, a figure) or a
+file where one of its folders goes (cells/, figures/): named, one line, exit 2
+(`check_sweep_places`; a folder is not the sweep's to remove, so it is not taken for
+a damaged cell). The summary (sweep.csv, cells.csv, sweep.md, figures/) is written
+whole each time; the figures an earlier run drew that this one does not draw
+(a --force run of another grid) are removed (report/sweep.py `SWEEP_OUTPUTS`, its
+manifest `.pairplay-sweep.json`), every other file stays.
 `--scheduler tcp://HOST:PORT` runs the cells on a Dask distributed cluster (with
 --workers, which would be ignored there, it is refused); an address where no Dask
 scheduler answers in time is refused before anything is written
@@ -69,6 +76,23 @@ def stopped(out: Path, grid, made: list[Path], had_copy: bool, why: str) -> int 
     return None
 
 
+def check_sweep_places(out: Path, grid) -> None:
+    """OutputError before any work if a file the sweep writes would land on a folder, or under a file where
+    a folder goes (cells/, figures/): a cell file replaced by a folder was found only when the cell, computed,
+    was stored ("is a folder; give a file name", exit 2, its work lost); now it is named with its setting and
+    seed. A folder is never removed (it is not the sweep's), so it is refused, not taken for a damaged cell."""
+    from pairplay.outputs import check_places
+    from pairplay.report.sweep import SWEEP_OUTPUTS, setting_label
+
+    for cell in grid.cells():
+        place = out / "cells" / f"{cell.id}.json"
+        if place.is_dir() and not place.is_symlink():
+            raise OutputError(f"is a folder where cell {cell.id}'s result is written ({setting_label(cell.setting)}, "
+                              f"seed {cell.seed}); a folder is never replaced, --force or not: remove or rename it",
+                              place)
+    check_places(out, SWEEP_OUTPUTS, files=["grid.toml", *SUMMARY, *(f"cells/{c.id}.json" for c in grid.cells())])
+
+
 def run(args) -> int:
     if args.scheduler is not None and args.workers is not None:  # it was accepted and ignored (a trial)
         raise OptionError(f"--workers is the local processes run without --scheduler; on {args.scheduler} the "
@@ -94,9 +118,11 @@ def run(args) -> int:
         print(f"pairplay sweep: {out} holds the sweep of another grid ({copy}); give another --out or --force",
               file=sys.stderr)
         return 2
+    check_sweep_places(out, grid)  # before any work: a folder where a file goes is not one of ours to replace
     if copy.exists() and copy.read_text() != text:  # --force: the other grid's cells no longer count
         for old in (out / "cells").glob("*.json"):
-            old.unlink()
+            if old.is_file() or old.is_symlink():  # a folder of that name is not a cell file of ours: it stays
+                old.unlink()
     made = [f for f in (out / "cells", out, *out.absolute().parents) if not f.exists()]
     had_copy = copy.exists()
     cells = grid.cells()

@@ -13,7 +13,12 @@ that this run did not write, those its writer names as its own (`owned`:
 a study's sections of a persona no longer in it looked current), and never
 another file; one that holds other files too (`among_others`: `rebuild --out`,
 a sweep's summary beside its cells) gets its files moved in together the same
-way. Refusals are
+way, and there the writer's manifest (`manifest`: the files it wrote, run after
+run) says which files the patterns name are its own, so a forced run removes an
+earlier run's stale outputs and never the user's file of such a name. A folder
+standing where a file is written, or a file where a folder is needed, is refused
+(`check_places`, from `check_output_folder` before the work): a folder is never
+replaced or removed, `force` or not. Refusals are
 `OutputError`s naming the path, raised before any work where the caller
 checks first (`check_output`, `check_outputs`, `check_folder`: each makes the
 folders it needs and a file there, then removes them, so a place the system
@@ -261,19 +266,54 @@ def _is_empty_dir(path: Path) -> bool:
     return path.is_dir() and not any(path.iterdir())
 
 
-def check_output_folder(path: str | Path, force: bool = False) -> Path:
+def check_output_folder(path: str | Path, force: bool = False, owned: tuple[str, ...] = ()) -> Path:
     """`path` as a Path if output_folder may fill it: a folder that is, or can become, ours and
-    holds no files unless `force`; OutputError otherwise (call it before the work)."""
+    holds no files unless `force`, and where none of the writer's own files (`owned`) would land on a
+    folder or under a file (`check_places`); OutputError otherwise (call it before the work)."""
     path = check_folder(path)
     if path.exists() and not _is_empty_dir(path) and not force:
         raise OutputError("exists and is not empty", path, fix="--force replaces the files written there",
                           option="--force")
+    check_places(path, owned)
     return path
+
+
+def check_places(path: Path, owned: tuple[str, ...] = (), files: Iterable[str] = ()) -> None:
+    """OutputError, before any work, if a file the writer may write under the folder `path` (one `owned`
+    names, or one of `files`: relative posix paths) would land where a folder stands, or under a file
+    standing where a folder is needed (`study --out D --force` with D/report.md a folder ran the whole
+    study, then failed moving it in). A folder is never removed or replaced: it is not one of ours."""
+    if not path.is_dir():
+        return
+    for rel in files:
+        target = path / rel
+        if target.is_dir() and not target.is_symlink():
+            raise OutputError("is a folder where a file is written; a folder is never replaced, --force or not: "
+                              "remove or rename it", target)
+        _check_above(path, target)
+    for pattern in owned:
+        parts = pattern.split("/")
+        literal = 0  # the folders above the pattern's first wildcard must be folders
+        while literal < len(parts) - 1 and not any(c in parts[literal] for c in "*?["):
+            literal += 1
+        _check_above(path, path.joinpath(*parts[:literal], "x"))
+        for old in sorted(path.glob(pattern)):
+            if old.is_dir() and not old.is_symlink() and is_owned(old.relative_to(path).as_posix(), (pattern,)):
+                raise OutputError("is a folder where a file is written; a folder is never replaced, --force or "
+                                  "not: remove or rename it", old)
+
+
+def _check_above(path: Path, target: Path) -> None:
+    """OutputError if a folder between `path` and `target` stands there as a file."""
+    for above in reversed(target.relative_to(path).parents[:-1] if target != path else ()):
+        if (path / above).exists() and not (path / above).is_dir():
+            raise OutputError("is a file where a folder is needed; it is never replaced, --force or not: "
+                              "remove or rename it", path / above)
 
 
 @contextlib.contextmanager
 def output_folder(path: str | Path, force: bool = False, owned: tuple[str, ...] = (),
-                  among_others: bool = False) -> Iterator[Path]:
+                  among_others: bool = False, manifest: str = "") -> Iterator[Path]:
     """A new temporary folder beside `path` to fill; when the block ends without error it
     becomes `path`. A non-empty `path` is refused unless `force`; with `force` each file
     written replaces its namesake there, a file there that `owned` names (the writer's own
@@ -283,10 +323,17 @@ def output_folder(path: str | Path, force: bool = False, owned: tuple[str, ...] 
     in (`_signals_held`): the folder is the earlier run's or this one's, never half of each.
     `among_others`: `path` may hold other files (`rebuild --out`: the caller checked its own
     outputs with check_outputs); a file written replaces its namesake only with `force`, and
-    without it a namesake that appeared meanwhile refuses the whole (nothing moved in). A `path`
+    without it a namesake that appeared meanwhile refuses the whole (nothing moved in); there `owned`
+    alone cannot tell the writer's files from the user's, so the writer keeps a `manifest` (a file of
+    that name in `path`, `write_manifest`: the files it wrote there, by every run into it), and with
+    `force` a file is removed only if `owned` names it and the earlier manifest lists it (`rebuild
+    REC1 --out D --force` after `rebuild REC1 REC2 --out D` left REC2's policy in D, beside REC1's
+    new one; a user's x.policy.json there stays). A file would land on a folder, or under a file,
+    in `path`: OutputError before anything is moved in (`check_places` says it before the work). A `path`
     without a name of its own (`.`, `..`: `rebuild --out .` was a traceback) is filled from a temporary
     folder inside it, file by file the same way."""
-    path = check_folder(path) if among_others else check_output_folder(path, force)
+    path = check_folder(path) if among_others else check_output_folder(path, force, owned)
+    earlier = read_manifest(path / manifest) if manifest else None
     created = _missing_folders(path.parent)
     _mkdir(path.parent)
     nameless = path.name in ("", ".", "..")  # no folder beside it can be named after it, nor renamed onto it
@@ -301,6 +348,10 @@ def output_folder(path: str | Path, force: bool = False, owned: tuple[str, ...] 
             yield tmp
         except OSError as err:
             raise _named_for_user(err, tmp, path) from err
+        if manifest:  # what this run wrote, and what an earlier run wrote that stays (none of it with force)
+            ours = sorted(src.relative_to(tmp).as_posix() for src in tmp.rglob("*") if src.is_file())
+            kept = [] if force else [f for f in (earlier or ()) if f not in ours and (path / f).is_file()]
+            write_manifest(tmp / manifest, sorted({*ours, *kept}))
         if not nameless and (not path.exists() or _is_empty_dir(path)):
             os.replace(tmp, path)  # rename(2) onto an empty folder is atomic
             done = True
@@ -312,14 +363,19 @@ def output_folder(path: str | Path, force: bool = False, owned: tuple[str, ...] 
                 files = [(src, path / src.relative_to(tmp)) for src in sorted(tmp.rglob("*")) if src.is_file()]
                 if not force:
                     for _, dst in files:
-                        if dst.exists() or dst.is_symlink():
+                        if dst.name != manifest and (dst.exists() or dst.is_symlink()):
                             raise OutputError("appeared while it was being written; not replaced", dst)
+                # all or nothing: a folder where a file goes, or a file where a folder goes, refuses the whole
+                check_places(path, files=[dst.relative_to(path).as_posix() for _, dst in files])
                 written = set()
                 for src, dst in files:
                     _mkdir(dst.parent)
                     os.replace(src, dst)
                     written.add(dst.relative_to(path).as_posix())
-                _remove_stale(path, written, owned)
+                if manifest:  # among others: only the files an earlier run of this writer wrote are stale
+                    _remove_stale(path, written, owned, listed=set(earlier or ()) if force else set())
+                else:
+                    _remove_stale(path, written, owned)
                 done = True  # before the held signal is delivered
     finally:
         if tmp.exists():
@@ -354,12 +410,15 @@ def is_owned(relative: str, owned: tuple[str, ...]) -> bool:
                for p in owned)
 
 
-def _remove_stale(path: Path, written: set[str], owned: tuple[str, ...]) -> None:
-    """Remove the files under `path` that `owned` names and this run did not write (output_folder)."""
+def _remove_stale(path: Path, written: set[str], owned: tuple[str, ...], listed: set[str] | None = None) -> None:
+    """Remove the files under `path` that `owned` names and this run did not write (output_folder);
+    with `listed` (an earlier run's manifest), only those it lists too."""
     if not owned:
         return
     for old in sorted(path.rglob("*"), reverse=True):  # deepest first: a folder after its files
         rel = old.relative_to(path).as_posix()
+        if listed is not None and rel not in listed:
+            continue
         if old.is_file() and not old.is_symlink() and rel not in written and is_owned(rel, owned):
             old.unlink()
             with contextlib.suppress(OSError):  # a folder left holding something else stays
@@ -367,6 +426,38 @@ def _remove_stale(path: Path, written: set[str], owned: tuple[str, ...]) -> None
                 while parent != path and not any(parent.iterdir()):
                     parent.rmdir()
                     parent = parent.parent
+
+
+MANIFEST_FORMAT = "pairplay.outputs/1"
+
+
+def read_manifest(path: Path) -> list[str]:
+    """The relative paths an output folder's manifest (`write_manifest`) lists; [] if there is none, or
+    if it is not one (a user's file of that name, a damaged one: logged, and nothing is taken from it).
+    A listed path is only ever removed if its writer's `owned` patterns name it too (`_remove_stale`),
+    so a forged manifest cannot name a file outside them (`../x`, `notes.txt`)."""
+    import json
+    import logging
+
+    if not path.is_file():
+        return []
+    try:
+        data = json.loads(path.read_text(encoding="utf-8"))
+        if data.get("format") != MANIFEST_FORMAT or not all(isinstance(f, str) for f in data["files"]):
+            raise ValueError("not a pairplay manifest")
+        return [f for f in data["files"] if f and not f.startswith("/") and ".." not in f.split("/")]
+    except (OSError, ValueError, AttributeError, KeyError, TypeError) as err:
+        logging.getLogger("pairplay.outputs").warning("%s: not read (%s); no earlier output is removed", path, err)
+        return []
+
+
+def write_manifest(path: Path, files: list[str]) -> None:
+    """An output folder's manifest: the files its writer wrote there (output_folder `manifest`)."""
+    import json
+
+    doc = {"format": MANIFEST_FORMAT, "written_by": "pairplay", "files": files,
+           "note": "the files pairplay wrote in this folder; a --force run removes those it does not write again"}
+    path.write_text(json.dumps(doc, indent=1) + "\n", encoding="utf-8")
 
 
 # `session --force` (services/recorder.py set_aside): an earlier recording and its journal renamed so, kept

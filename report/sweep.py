@@ -535,13 +535,21 @@ def windows_note(grid: Grid) -> str:
     return f" first{n} and last{n} average the first and last {n} training rounds, fewer in a shorter cell: {said}."
 
 
+# the summary's files (pairplay/outputs.py `owned`) and its manifest, the ones a run wrote: the summary is written
+# whole each time, so an earlier run's that this one does not write again are removed (a forced sweep of another
+# grid left the first grid's figures beside the new ones), never a user's file of such a name
+SWEEP_OUTPUTS = ("sweep.csv", "cells.csv", "sweep.md", "figures/*.png")
+MANIFEST = ".pairplay-sweep.json"
+
+
 def write_sweep(out: str | Path, grid: Grid, results: dict[str, dict], run: SweepRun) -> list[Path]:
     """sweep.csv (the summary), cells.csv (every cell and seed), one figure per measure, sweep.md: all
     written beside `out` and moved in together (pairplay.outputs.output_folder, `among_others`: cells/ and
     grid.toml stay), so a signal or a full disk part way leaves the earlier summary whole, never a new
-    sweep.csv beside an old sweep.md."""
+    sweep.csv beside an old sweep.md; the figures an earlier summary drew that this one does not (another
+    grid's measures) are removed (`SWEEP_OUTPUTS`, `MANIFEST`)."""
     out = Path(out)
-    with output_folder(out, force=True, among_others=True) as staged:
+    with output_folder(out, force=True, owned=SWEEP_OUTPUTS, among_others=True, manifest=MANIFEST) as staged:
         written = _write_summary(staged, grid, results, run)
     return [out / p.relative_to(staged) for p in written]
 

@@ -178,6 +178,19 @@ def journals_of(path: Path) -> list[Path]:
     return [p for p in found if p.exists()]
 
 
+def check_not_folders(path: str | Path) -> None:
+    """OutputError naming it if the recording `path`, one of its `<stem>.<k>.mcap`, a journal or a file set
+    aside of the session is a folder: it is no recording, and not pairplay's to
+    replace or rename, --force or not. Called before anything starts: `session --force` ran the whole
+    session, then exited 2, the folder renamed `<id>.mcap.replaced`; without --force it said "has a
+    recording already; --force replaces it", which did not."""
+    path = Path(path)
+    for p in [path, *recordings_of(path), *journals_of(path), *set_aside_of(path)]:
+        if p.is_dir():
+            raise OutputError("is a folder where the session's recording (or its journal) is written; a folder is "
+                              "never replaced or renamed, --force or not: remove or rename it", p)
+
+
 def check_new_recording(path: str | Path, hint: str = NEW_SESSION_HINT, set_aside_too: bool = True) -> Path:
     """`path` for a new session's recording, refused (RecordingExists, naming the file) if the session
     has a recording already, or a recording's journal (what a killed recorder received), a live one
@@ -186,6 +199,7 @@ def check_new_recording(path: str | Path, hint: str = NEW_SESSION_HINT, set_asid
     recording holds a session; one a cut-short --force left set aside keeps the id taken too
     (`set_aside_too`)."""
     path = Path(path)
+    check_not_folders(path)
     existing = recordings_of(path) + journals_of(path)
     live = [p for p in existing if is_live(p)]
     if live:
@@ -208,6 +222,7 @@ def set_aside(path: str | Path) -> list[tuple[Path, Path]]:
     its services) gives them back, as `study --force` and `rebuild --force` keep their old outputs until
     the new ones are complete (before, --force removed them first, and such a stop lost them)."""
     path = Path(path)
+    check_not_folders(path)  # (the caller checked before its work; a folder made meanwhile is not renamed either)
     existing = recordings_of(path) + journals_of(path)
     live = [p for p in existing if is_live(p)]
     if live:

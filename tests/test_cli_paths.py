@@ -98,3 +98,71 @@ def test_a_refusal_names_the_path_as_the_user_gave_it(case, template, tmp_path, 
     assert main(args) == 2
     [line] = capsys.readouterr().err.strip().splitlines()
     assert said in line and str(root) not in line and str(tmp_path) not in line, line
+
+
+# verb's arguments, with --force: a folder stands where the verb writes a file (or a file where it needs a folder)
+# in `d` -> the path the one line must name. Before: the verb did its work and failed moving it in (`study`: "Is a
+# directory (.d.<pid>.tmp/report.md -> d/report.md)"), or `session --force` played the whole session, renamed
+# the folder <id>.mcap.replaced and exited 2; now each is refused before any work, nothing renamed or written.
+IN_THE_WAY = {
+    "study: a folder for its report.md": (["study", "--quiet", "--out", "d", "--force"], "d/report.md"),
+    "study: a file for its policies/": (["study", "--quiet", "--out", "p", "--force"], "p/policies"),
+    "counterfactual": (["counterfactual", "rec.mcap", "--fit-only", "--out", "d", "--force"], "d/counterfactual.md"),
+    "rebuild": (["rebuild", "rec.mcap", "--out", "d", "--force"], "d/rec.policy.json"),
+    "sweep: a folder for its sweep.md": (["sweep", "g.toml", "--quiet", "--out", "d", "--force"], "d/sweep.md"),
+    "sweep: a file for its figures/": (["sweep", "g.toml", "--quiet", "--out", "p", "--force"], "p/figures"),
+    "session --force": (["session", "--participant", "sim:ashley", "--rounds", "1", "--session", "m", "--out", "d",
+                         "--force"], "d/m.mcap"),
+    "session": (["session", "--participant", "sim:ashley", "--rounds", "1", "--session", "m", "--out", "d"],
+                "d/m.mcap"),
+    "session --force: a folder for a later part": (["session", "--participant", "sim:ashley", "--rounds", "1",
+                                                     "--session", "n", "--out", "d", "--force"], "d/n.2.mcap"),
+    "recover": (["recover", "cut.mcap", "-o", "d", "--force"], "d"),
+    "combine": (["combine", "policies", "-o", "d", "--force"], "d"),
+    "view": (["view", "--recording", "rec.mcap", "--out", "d", "--force"], "d"),
+}
+
+
+@pytest.mark.parametrize("case", IN_THE_WAY, ids=list(IN_THE_WAY))
+def test_a_folder_where_a_file_goes_is_refused_before_any_work(case, template, tmp_path, monkeypatch, capsys):
+    args, named = IN_THE_WAY[case]
+    root = tmp_path / "w"
+    shutil.copytree(template, root)
+    for folder in ("d/report.md", "d/counterfactual.md", "d/rec.policy.json", "d/sweep.md", "d/m.mcap", "d/n.2.mcap"):
+        (root / folder).mkdir(parents=True)
+        (root / folder / "the user's").write_text("kept")
+    (root / "p").mkdir()
+    for name in ("policies", "figures"):
+        (root / "p" / name).write_text("the user's file")
+    monkeypatch.chdir(root)
+    before = sorted(p.relative_to(root) for p in root.rglob("*"))
+    assert main(args) == 2
+    out, err = capsys.readouterr()
+    lines = err.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith(f"pairplay {args[0]}: "), err
+    assert lines[0].endswith(f"({named})") and "Traceback" not in err, lines[0]
+    assert not re.search("--force (to )?replace", lines[0]), lines[0]  # (`session` offered it; --force renamed it)
+    assert out == "", out  # refused before any work: a session printed its bus line, then played
+    assert sorted(p.relative_to(root) for p in root.rglob("*")) == before  # nothing written, nothing renamed
+
+
+def test_a_sweep_cell_file_that_is_a_folder_is_refused_naming_the_cell_before_any_cell_runs(template, tmp_path,
+                                                                                             monkeypatch, capsys):
+    """A resumed sweep whose last cell's file had become a folder computed every other cell and then that one,
+    and failed storing it: "is a folder; give a file name", its work lost. A folder is not the sweep's to
+    remove, so it is not taken for a damaged cell (which is computed again): it is refused before any cell
+    runs, one line naming the cell, its setting and seed."""
+    from pairplay.report.sweep import read_grid
+
+    root = tmp_path / "w"
+    shutil.copytree(template, root)
+    monkeypatch.chdir(root)
+    cells = read_grid(Path("g.toml")).cells()
+    (root / "s" / "cells" / f"{cells[-1].id}.json").mkdir(parents=True)
+    shutil.copy(root / "g.toml", root / "s" / "grid.toml")  # a sweep of this grid, to resume
+    assert main(["sweep", "g.toml", "--quiet", "--out", "s"]) == 2
+    out, err = capsys.readouterr()
+    [line] = err.strip().splitlines()
+    assert f"cell {cells[-1].id}'s result" in line and f"seed {cells[-1].seed}" in line, line
+    assert line.endswith(f"(s/cells/{cells[-1].id}.json)"), line
+    assert sorted(p.name for p in (root / "s" / "cells").iterdir()) == [f"{cells[-1].id}.json"]  # no cell ran

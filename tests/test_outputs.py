@@ -106,7 +106,7 @@ def test_rebuild_names_outputs_by_file_so_a_recovered_copy_keeps_its_own(tmp_pat
     assert r.returncode == 0 and (tmp_path / "X.recovered.mcap").exists(), r.stderr
     r = pairplay("rebuild", "X.mcap", "X.recovered.mcap", "--out", "rebuilt", cwd=tmp_path)
     assert r.returncode == 0, r.stderr
-    names = sorted(p.name for p in (tmp_path / "rebuilt").iterdir())
+    names = sorted(p.name for p in (tmp_path / "rebuilt").iterdir() if p.name != ".pairplay-rebuild.json")
     assert names == ["X.curve.csv", "X.policy.json", "X.recovered.curve.csv", "X.recovered.policy.json",
                      "learning-curves.png"]
     assert read_policy(tmp_path / "rebuilt" / "X.policy.json").q == \
@@ -117,7 +117,7 @@ def test_rebuild_names_outputs_by_file_so_a_recovered_copy_keeps_its_own(tmp_pat
     assert r.returncode == 2 and "exists; --force" in r.stderr
     r = pairplay("rebuild", "X.mcap", "--out", "rebuilt", "--force", cwd=tmp_path)
     assert r.returncode == 0 and (tmp_path / "rebuilt" / "X.policy.json").read_bytes() == before
-    assert not list((tmp_path / "rebuilt").glob(".*"))  # no temporary file left
+    assert [p.name for p in (tmp_path / "rebuilt").glob(".*")] == [".pairplay-rebuild.json"]  # no temporary file
 
 
 def test_recover_and_view_never_replace_what_exists(tmp_path, pairplay):
@@ -226,3 +226,51 @@ def test_a_folder_named_dot_is_written_into(tmp_path, pairplay):
     names = {p.name for p in tmp_path.iterdir()}
     assert {"rec.mcap", "rec.policy.json", "rec.curve.csv", "report.md"} <= names
     assert not [n for n in names if n.startswith(".")]  # no temporary folder left
+
+
+def _files(folder: Path) -> list[str]:
+    return sorted(p.relative_to(folder).as_posix() for p in folder.rglob("*") if p.is_file())
+
+
+def test_a_forced_rebuild_of_fewer_recordings_keeps_none_of_the_earlier_ones_outputs(tmp_path, pairplay):
+    """A trial: `rebuild A B C --out D`, then `rebuild A --out D --force`: B's and C's policies and curves stayed
+    in D beside A's new ones (and the figure of A alone), one folder of two runs. rebuild's --out may hold the
+    user's files, so its patterns alone cannot tell its own: it lists what it wrote in its manifest, and
+    --force removes what an earlier rebuild wrote there and this one does not; the user's files stay, one
+    named like a policy too. Without --force, a rebuild of another recording adds to the folder (and to the
+    manifest, so a later --force removes those as well)."""
+    for name in "ABCE":
+        shutil.copy(SAMPLE, tmp_path / f"{name}.mcap")
+    assert pairplay("rebuild", "A.mcap", "B.mcap", "C.mcap", "--out", "D", cwd=tmp_path).returncode == 0
+    d = tmp_path / "D"
+    (d / "notes.txt").write_text("the user's")
+    (d / "mine.policy.json").write_text("the user's, named like a policy")
+    r = pairplay("rebuild", "A.mcap", "--out", "D", "--force", cwd=tmp_path)
+    assert r.returncode == 0, r.stderr
+    ours = ["A.curve.csv", "A.policy.json", "learning-curves.png"]
+    assert _files(d) == sorted([".pairplay-rebuild.json", *ours, "mine.policy.json", "notes.txt"])
+    r = pairplay("rebuild", "E.mcap", "--out", "D", "--no-plot", cwd=tmp_path)  # added beside, not replacing
+    assert r.returncode == 0 and (d / "E.policy.json").exists() and (d / "A.policy.json").exists(), r.stderr
+    r = pairplay("rebuild", "A.mcap", "--out", "D", "--force", cwd=tmp_path)
+    assert r.returncode == 0 and _files(d) == sorted([".pairplay-rebuild.json", *ours, "mine.policy.json",
+                                                       "notes.txt"]), _files(d)
+
+
+def test_a_manifest_names_no_file_outside_its_writers_own(tmp_path):
+    """An output folder's manifest is read, not trusted: a file it lists is removed by a --force run only if
+    the writer's patterns name it too, inside the folder (a forged or garbled manifest removed nothing else)."""
+    out = tmp_path / "D"
+    out.mkdir()
+    (out / "notes.txt").write_text("the user's")
+    (tmp_path / "outside.policy.json").write_text("the user's")
+    (out / ".m.json").write_text('{"format": "pairplay.outputs/1", "files": ["notes.txt", "../outside.policy.json", '
+                                 '"old.policy.json"]}')
+    (out / "old.policy.json").write_text("an earlier run's")
+    with output_folder(out, force=True, owned=("*.policy.json",), among_others=True, manifest=".m.json") as tmp:
+        (tmp / "new.policy.json").write_text("this run's")
+    assert _files(out) == [".m.json", "new.policy.json", "notes.txt"] and (tmp_path / "outside.policy.json").exists()
+    (out / ".m.json").write_text("not json")  # unreadable: nothing is taken from it
+    (out / "other.policy.json").write_text("the user's")
+    with output_folder(out, force=True, owned=("*.policy.json",), among_others=True, manifest=".m.json") as tmp:
+        (tmp / "newer.policy.json").write_text("this run's")
+    assert _files(out) == [".m.json", "new.policy.json", "newer.policy.json", "notes.txt", "other.policy.json"]

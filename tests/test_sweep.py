@@ -450,3 +450,27 @@ def test_a_scheduler_without_dasks_distributed_installed_is_one_line(monkeypatch
     monkeypatch.setitem(sys.modules, "distributed.comm", None)  # as if not installed: its import fails
     with pytest.raises(OptionError, match=r"needs Dask's distributed package: pip install -e '\.\[cluster\]'"):
         check_scheduler("tcp://127.0.0.1:1")
+
+
+def test_a_forced_sweep_of_another_grid_keeps_none_of_the_first_grids_figures(tmp_path):
+    """A trial: `sweep A --out D`, then `sweep B --out D --force` (another grid: other personas): the figures of
+    A's measures stayed in figures/ beside B's, one folder of two sweeps. The summary is written whole each
+    time, and what an earlier summary wrote that this one does not (its manifest says which) is removed; the
+    folder then holds what a fresh sweep of B writes, and the user's files, one in figures/ too."""
+    from pairplay.cli.main import main
+
+    def files(folder):
+        return sorted(p.relative_to(folder).as_posix() for p in folder.rglob("*") if p.is_file())
+
+    first = _grid(tmp_path, GRID.replace("seeds = 2", "seeds = 1"))
+    other = tmp_path / "other.toml"
+    other.write_text(GRID.replace("seeds = 2", "seeds = 1").replace('"blind"', '"deaf"').replace(
+        'reward_bonus = ["correct", "consistent"]', 'reward_bonus = ["correct"]'))
+    out, fresh = tmp_path / "D", tmp_path / "fresh"
+    assert main(["sweep", str(first), "--out", str(out), "--quiet"]) == 0
+    assert "figures/blind-ratio.png" in files(out)
+    (out / "notes.txt").write_text("the user's")
+    (out / "figures" / "mine.png").write_bytes(b"the user's")
+    assert main(["sweep", str(other), "--out", str(out), "--quiet", "--force"]) == 0
+    assert main(["sweep", str(other), "--out", str(fresh), "--quiet"]) == 0
+    assert files(out) == sorted(files(fresh) + ["figures/mine.png", "notes.txt"]), files(out)
