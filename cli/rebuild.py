@@ -22,7 +22,7 @@ waiting while they are (pairplay/outputs.py `output_folder`, `among_others`:
 the files already in --out stay), so a full disk or a Ctrl-C part way leaves
 --out as it was (with --force: the earlier policies, never half old and half
 new) and no folder this run made. --out may hold other files: rebuild lists the
-files it wrote there in its manifest (`.pairplay-rebuild.json`), and `--force`
+files it wrote there in its manifest (`.pairplay-rebuild.manifest`), and `--force`
 removes the ones an earlier rebuild wrote that this one does not write again
 (`rebuild A B C --out D`, then `rebuild A --out D --force`: B's and C's policies
 and curves stayed beside A's new ones, one folder of two runs); every other
@@ -43,7 +43,7 @@ FIGURE = "learning-curves.png"
 # what rebuild writes in --out (pairplay/outputs.py `owned`); among a user's files there, so its manifest says
 # which of them a run wrote: `--force` removes those an earlier run wrote that this one does not write again
 REBUILD_OUTPUTS = ("*.policy.json", "*.curve.csv", FIGURE)
-MANIFEST = ".pairplay-rebuild.json"
+MANIFEST = ".pairplay-rebuild.manifest"
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:

@@ -13,7 +13,7 @@ file where one of its folders goes (cells/, figures/): named, one line, exit 2
 a damaged cell). The summary (sweep.csv, cells.csv, sweep.md, figures/) is written
 whole each time; the figures an earlier run drew that this one does not draw
 (a --force run of another grid) are removed (report/sweep.py `SWEEP_OUTPUTS`, its
-manifest `.pairplay-sweep.json`), every other file stays.
+manifest `.pairplay-sweep.manifest`), every other file stays.
 `--scheduler tcp://HOST:PORT` runs the cells on a Dask distributed cluster (with
 --workers, which would be ignored there, it is refused); an address where no Dask
 scheduler answers in time is refused before anything is written

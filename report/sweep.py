@@ -539,7 +539,7 @@ def windows_note(grid: Grid) -> str:
 # whole each time, so an earlier run's that this one does not write again are removed (a forced sweep of another
 # grid left the first grid's figures beside the new ones), never a user's file of such a name
 SWEEP_OUTPUTS = ("sweep.csv", "cells.csv", "sweep.md", "figures/*.png")
-MANIFEST = ".pairplay-sweep.json"
+MANIFEST = ".pairplay-sweep.manifest"
 
 
 def write_sweep(out: str | Path, grid: Grid, results: dict[str, dict], run: SweepRun) -> list[Path]:

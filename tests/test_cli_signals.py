@@ -26,6 +26,7 @@ from pathlib import Path
 import pytest
 
 from pairplay.cli.main import main
+from pairplay.cli.rebuild import MANIFEST
 
 SAMPLE = Path(__file__).resolve().parents[1] / "recordings" / "samples" / "sim-ashley.mcap"
 
@@ -186,7 +187,7 @@ def test_rebuild_force_interrupted_part_way_leaves_the_earlier_policies_all_of_t
     assert {p.name for p in tmp_path.iterdir()} == {"a.mcap", "b.mcap", "out"}  # no staging folder left
     monkeypatch.undo()
     assert main(args) == 0  # uninterrupted, every output is the new run's and the user's file stays
-    assert {p.name for p in out.iterdir()} == set(earlier)
+    assert {p.name for p in out.iterdir()} == set(earlier) | {MANIFEST}  # (the files it wrote: cli/rebuild.py)
     assert [n for n in earlier if (out / n).read_bytes() == b"earlier run"] == []
 
 
@@ -214,7 +215,8 @@ def test_a_signal_after_the_work_is_done_exits_128_plus_n_saying_the_work_is_com
     monkeypatch.undo()
     out, err = capsys.readouterr()
     assert "a.mcap: " in out and "learning-curves.png" in out
-    assert {p.name for p in (tmp_path / "out").iterdir()} == {"a.policy.json", "a.curve.csv", "learning-curves.png"}
+    assert {p.name for p in (tmp_path / "out").iterdir()} == {"a.policy.json", "a.curve.csv", "learning-curves.png",
+                                                               MANIFEST}
     said = "Ctrl-C" if sig == signal.SIGINT else "SIGTERM"
     assert err.splitlines() == [f"pairplay rebuild: interrupted ({said}) after it had finished; nothing was undone"]
     assert cli_rebuild  # the verb's module was the one run

@@ -106,7 +106,7 @@ def test_rebuild_names_outputs_by_file_so_a_recovered_copy_keeps_its_own(tmp_pat
     assert r.returncode == 0 and (tmp_path / "X.recovered.mcap").exists(), r.stderr
     r = pairplay("rebuild", "X.mcap", "X.recovered.mcap", "--out", "rebuilt", cwd=tmp_path)
     assert r.returncode == 0, r.stderr
-    names = sorted(p.name for p in (tmp_path / "rebuilt").iterdir() if p.name != ".pairplay-rebuild.json")
+    names = sorted(p.name for p in (tmp_path / "rebuilt").iterdir() if p.name != ".pairplay-rebuild.manifest")
     assert names == ["X.curve.csv", "X.policy.json", "X.recovered.curve.csv", "X.recovered.policy.json",
                      "learning-curves.png"]
     assert read_policy(tmp_path / "rebuilt" / "X.policy.json").q == \
@@ -117,7 +117,7 @@ def test_rebuild_names_outputs_by_file_so_a_recovered_copy_keeps_its_own(tmp_pat
     assert r.returncode == 2 and "exists; --force" in r.stderr
     r = pairplay("rebuild", "X.mcap", "--out", "rebuilt", "--force", cwd=tmp_path)
     assert r.returncode == 0 and (tmp_path / "rebuilt" / "X.policy.json").read_bytes() == before
-    assert [p.name for p in (tmp_path / "rebuilt").glob(".*")] == [".pairplay-rebuild.json"]  # no temporary file
+    assert [p.name for p in (tmp_path / "rebuilt").glob(".*")] == [".pairplay-rebuild.manifest"]  # no temporary file
 
 
 def test_recover_and_view_never_replace_what_exists(tmp_path, pairplay):
@@ -225,7 +225,7 @@ def test_a_folder_named_dot_is_written_into(tmp_path, pairplay):
     assert r.returncode == 0 and r.stderr == "", r.stderr
     names = {p.name for p in tmp_path.iterdir()}
     assert {"rec.mcap", "rec.policy.json", "rec.curve.csv", "report.md"} <= names
-    assert not [n for n in names if n.startswith(".")]  # no temporary folder left
+    assert [n for n in names if n.startswith(".")] == [".pairplay-rebuild.manifest"]  # no temporary folder left
 
 
 def _files(folder: Path) -> list[str]:
@@ -248,11 +248,11 @@ def test_a_forced_rebuild_of_fewer_recordings_keeps_none_of_the_earlier_ones_out
     r = pairplay("rebuild", "A.mcap", "--out", "D", "--force", cwd=tmp_path)
     assert r.returncode == 0, r.stderr
     ours = ["A.curve.csv", "A.policy.json", "learning-curves.png"]
-    assert _files(d) == sorted([".pairplay-rebuild.json", *ours, "mine.policy.json", "notes.txt"])
+    assert _files(d) == sorted([".pairplay-rebuild.manifest", *ours, "mine.policy.json", "notes.txt"])
     r = pairplay("rebuild", "E.mcap", "--out", "D", "--no-plot", cwd=tmp_path)  # added beside, not replacing
     assert r.returncode == 0 and (d / "E.policy.json").exists() and (d / "A.policy.json").exists(), r.stderr
     r = pairplay("rebuild", "A.mcap", "--out", "D", "--force", cwd=tmp_path)
-    assert r.returncode == 0 and _files(d) == sorted([".pairplay-rebuild.json", *ours, "mine.policy.json",
+    assert r.returncode == 0 and _files(d) == sorted([".pairplay-rebuild.manifest", *ours, "mine.policy.json",
                                                        "notes.txt"]), _files(d)
 
 
