@@ -52,6 +52,9 @@ class Resolution(NamedTuple):
     round_over: bool
 
 
+_new_board = tuple.__new__
+
+
 class Board(NamedTuple):
     """One game's board between events: faces, matched cards, cards up this turn."""
 
@@ -100,7 +103,8 @@ class Board(NamedTuple):
     def pick(self, card: int) -> tuple["Board", Outcome]:
         self.check(card)
         up = self.up + (int(card),)
-        return self._replace(up=up), (Outcome.FIRST if len(up) == 1 else Outcome.SECOND)
+        # the tuple built directly: NamedTuple._replace is a Python call chain, on every live pick (issue 16)
+        return _new_board(Board, (self.faces, self.matched, up)), (Outcome.FIRST if len(up) == 1 else Outcome.SECOND)
 
     def resolve(self) -> tuple["Board", Resolution]:
         """End a turn with two cards up: a pair stays up, a miss turns back."""

@@ -121,17 +121,28 @@ STATE_NAMES: tuple[str, ...] = tuple(
 LEVEL_OF_COUNT = np.array([0] + [level_of_count(n) for n in range(1, N_CARDS + 1)], dtype=np.int8)
 
 
+# The same tables as Python ints for `state_of`, a live session's one state per request: on a pick after an
+# idle turn, each numpy scalar index and helper call of the formula cost microseconds cold (issue 16).
+_CELL_MASK_OF: tuple[tuple[int, ...], ...] = tuple(
+    tuple(int(CELL_MASK[o, cell_of(o, t)]) for t in range(N_CARDS)) for o in range(N_CARDS))
+_STATE_OF_COUNT: tuple[tuple[int, ...], ...] = tuple(
+    tuple(int(STATE_INDEX[cell_of(o, t), level_of_count(n)]) if n else -1 for n in range(N_CARDS + 1))
+    for o in range(N_CARDS) for t in range(N_CARDS))
+
+
 def state_of(observed: int, match: int, covered_mask: int) -> int:
     """State index of a suggestion (thesis 4.1).
 
     `covered_mask` is the bit mask of face-down cards at the moment of the
     suggestion (the first card of the turn is face up, so it is not in it).
+    The formula (cell_of, the cell's covered count, level_of_count, STATE_INDEX),
+    read from tables of Python ints built from it (tests/test_states.py checks
+    every observed, match and cell count against the formula).
     """
-    cell = cell_of(observed, match)
-    n = (int(CELL_MASK[observed, cell]) & covered_mask).bit_count()
+    n = (_CELL_MASK_OF[observed][match] & covered_mask).bit_count()
     if n < 1:
         raise ValueError("the matching card must be covered when a suggestion is asked")
-    return int(STATE_INDEX[cell, level_of_count(n)])
+    return _STATE_OF_COUNT[observed * N_CARDS + match][n]
 
 
 def neighbours_mask(card: int) -> int:

@@ -120,6 +120,8 @@ class Learner:
         # a batch of one's arguments and results (suggest_one, learn_one), filled in place per call
         self._one_state, self._one_action, self._one_round = (np.zeros(1, dtype=np.int64) for _ in range(3))
         self._one_how, self._one_reward, self._one_learn = np.zeros(1, _INT8), np.zeros(1), np.ones(1, dtype=bool)
+        # the stream's arrays, which its draws advance in place (core/rng.py), read once for suggest_one
+        self._stream_keys, self._stream_positions = stream.keys, stream.positions
 
     def start_round(self, round_index, games=slice(None)) -> None:
         """Reset psi for the games starting a round (algorithm 5, line 4)."""
@@ -175,9 +177,12 @@ class Learner:
         if self._n != 1:
             raise ValueError("suggest_one is for a learner of one game")
         self._one_state[0], self._one_round[0] = state, round_index
-        kernels.learners_suggest(self.q, self._one_state, self.stream.keys, self.stream.positions,
-                                 self._per_round(EPSILON, self._one_round), self._mode, self.psi, self._psi_decay,
-                                 self._table, self._one_action, self._one_how)
+        # this round's schedule views, made by _per_round at the round's first suggestion; its checks and
+        # calls cost ~6 us on a pick after an idle turn (issue 16)
+        epsilon = self._views[EPSILON] if round_index == self._round_of_views else \
+            self._per_round(EPSILON, self._one_round)
+        kernels.learners_suggest(self.q, self._one_state, self._stream_keys, self._stream_positions, epsilon,
+                                 self._mode, self.psi, self._psi_decay, self._table, self._one_action, self._one_how)
         return int(self._one_action[0]), int(self._one_how[0])
 
     def learn_one(self, state: int, action: int, reward: float, round_index: int) -> None:

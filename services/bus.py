@@ -484,6 +484,14 @@ class Outbox:
             if wake:
                 self._wake.notify()
 
+    def send_all(self, items: list[tuple[str, bytes]], wake: bool = True) -> None:
+        """`send` of each (key, payload) in order, under one taking of the lock (a step's events)."""
+        with self._lock:
+            self._pending += len(items)
+            self._items.extend(items)
+            if wake:
+                self._wake.notify()
+
     def send_within(self, key: str, payload: bytes, stop: threading.Event, most: int = 1_000) -> bool:
         """`send`, once fewer than `most` wait (a producer faster than the bus: `pairplay replay` at
         full speed); the wait checks `stop`, so a signal never waits on a blocked publish. False
@@ -525,34 +533,48 @@ class Outbox:
                 self._drain()
 
     def _drain(self) -> None:
-        """Publish until nothing waits (the caller holds `_putting`)."""
+        """Publish until nothing waits (the caller holds `_putting`): what waits is taken as a run, under
+        one taking of the lock, and counted done once the run is out (a step's events: issue 16)."""
         while True:
             with self._lock:
                 if not self._items:
                     return
-                key, item = self._items.popleft()
-                more = bool(self._items) and self._items[0][0] is not None  # another event right behind
+                run = list(self._items)
+                self._items.clear()
+            done = 0
             try:
-                if key is None:
-                    item()
-                else:
-                    if more:  # rides in Zenoh's batch; the last of the run (express) sends it (Bus.put_batched)
-                        self.bus.put_batched(key, item)
-                    else:
-                        self.bus.put(key, item)
-                    if self.sent is not None:
-                        self.sent.append((key, item))
-            except Exception as err:  # a closed session, a refused key: counted, the thread goes on
-                self.failed += 1
-                # the bus closed under a stopping process (a signal at start-up): counted, INFO (README's logging
-                # rule: a WARNING is for data a running session lost or refused)
-                closing = getattr(self.bus, "_closed", False)
-                log.log(logging.INFO if closing else logging.WARNING, "%s could not publish %s: %s", self.name, key, err)
+                last = len(run) - 1
+                for i, (key, item) in enumerate(run):
+                    # another event right behind: it rides in Zenoh's batch, and the last of the run (express)
+                    # sends it (Bus.put_batched); one that came in after the run was taken is the next run's
+                    self._publish(key, item, i < last and run[i + 1][0] is not None)
+                    done += 1
             finally:
                 with self._lock:
-                    self._pending -= 1
+                    if done < len(run):  # left by an exception _publish does not count (a thread's exit): kept
+                        self._items.extendleft(reversed(run[done:]))
+                    self._pending -= done
                     if not self._pending:
                         self._idle.notify_all()
+
+    def _publish(self, key: str | None, item, more: bool) -> None:
+        """One item of a run: an event put (batched when `more`), or a call; a failure counted, never raised."""
+        try:
+            if key is None:
+                item()
+            else:
+                if more:
+                    self.bus.put_batched(key, item)
+                else:
+                    self.bus.put(key, item)
+                if self.sent is not None:
+                    self.sent.append((key, item))
+        except Exception as err:  # a closed session, a refused key: counted, the thread goes on
+            self.failed += 1
+            # the bus closed under a stopping process (a signal at start-up): counted, INFO (README's logging
+            # rule: a WARNING is for data a running session lost or refused)
+            closing = getattr(self.bus, "_closed", False)
+            log.log(logging.INFO if closing else logging.WARNING, "%s could not publish %s: %s", self.name, key, err)
 
     def pending(self) -> int:
         return self._pending

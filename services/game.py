@@ -115,9 +115,12 @@ class GameLogic:
                                 turns_in_round=self.turn)]
 
     def _deal(self) -> list[ev.Event]:
-        faces, _ = deal(self.deals.take(N_CARDS))
+        faces, partners = deal(self.deals.take(N_CARDS))
         faces = faces[0]
         self.board = Board.from_faces(faces)
+        # each card's partner, read once a round: a request's match (Board.partner scans the faces: a pick's
+        # cost after an idle turn, issue 16)
+        self.partners = tuple(int(p) for p in partners[0])
         self.matches = 0
         self._new_turn(0)
         return [ev.RoundStarted(round=self.round, faces=[int(f) for f in faces])]
@@ -218,7 +221,7 @@ class GameLogic:
         return [self._request(self.observed)]
 
     def _request(self, observed: int) -> ev.SuggestionRequested:
-        match = self.board.partner(self.first)
+        match = self.partners[self.first]
         covered = self.board.covered
         # the scalar form (the batch one's numpy calls were most of a first pick's cost cold: issue 16);
         # the match, the first card's partner, is covered, so the state exists

@@ -119,11 +119,11 @@ class LearnerLogic:
             self.round_started = r.round
             # per-round schedule values, for the record (computed once a round: latency)
             self.epsilon, self.alpha = self.learner.schedule(r.round)
-        psi = float(self.learner.psi[0])
+        psi = float(self.learner.psi[0]) if self.mode == "reuse" else 0.0  # before the suggestion decays it
         action, how = self.learner.suggest_one(r.state, r.round)
         self.open = ev.SuggestionMade(
             round=r.round, turn=r.turn, attempt=r.attempt, state=r.state, action=action,
-            chosen_by=HOW_NAMES[how], epsilon=self.epsilon, alpha=self.alpha, psi=psi if self.mode == "reuse" else 0.0,
+            chosen_by=HOW_NAMES[how], epsilon=self.epsilon, alpha=self.alpha, psi=psi,
             observed=r.observed, target=r.match, action_name=ACTION_NAMES[action], request_seq=r.seq)
         return out + [self.open]
 

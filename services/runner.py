@@ -184,12 +184,16 @@ class Node:
     def publish(self, events: list[Event], wake: bool = True) -> None:
         """Queue `events` on the Outbox; `wake=False`: the caller publishes them itself next
         (`outbox.publish_here`, outside the lock: see step)."""
+        if not events:
+            return
+        items = []
         for e in events:
             tag = type(e).__name__
             key = self._keys.get((e.source, tag))
             if key is None:  # built and checked once per source and tag (the check is most of its cost)
                 key = self._keys[(e.source, tag)] = event_key(self.session, e.source, tag)
-            self.outbox.send(key, encode_event(e), wake)
+            items.append((key, encode_event(e)))
+        self.outbox.send_all(items, wake)
 
     def subscribe(self) -> None:
         """The Node's subscriptions (module rule). A logic that copes with any order between keys

@@ -94,3 +94,19 @@ def test_batched_states_agree_with_the_scalar_rule():
     covered = rng.integers(0, 1 << 18, 2000) | (1 << match) | (1 << obs)
     batched = G.states_of(obs, match, covered)
     assert [G.state_of(int(o), int(m), int(c)) for o, m, c in zip(obs, match, covered)] == batched.tolist()
+
+
+def test_the_scalar_rules_tables_agree_with_the_formula_for_every_observed_match_and_count():
+    """state_of reads tables of Python ints (a live pick's speed); the formula of thesis 4.1 is the truth:
+    for every observed card, matching card and number of covered cards in the match's cell."""
+    for observed in range(G.N_CARDS):
+        for match in range(G.N_CARDS):
+            cell = G.cell_of(observed, match)
+            in_cell = [c for c in G.bits_of(int(G.CELL_MASK[observed, cell])) if c != match]
+            for extra in range(len(in_cell) + 1):
+                covered = only(match, *in_cell[:extra])
+                n = extra + 1
+                assert G.state_of(observed, match, covered) == int(G.STATE_INDEX[cell, G.level_of_count(n)])
+                # cards outside the cell never count
+                assert G.state_of(observed, match, covered | (G.ALL_CARDS & ~int(G.CELL_MASK[observed, cell]))) \
+                    == int(G.STATE_INDEX[cell, G.level_of_count(n)])
