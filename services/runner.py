@@ -153,6 +153,8 @@ class Node:
             self.driver.guard.whole = not bus.options.recovers
             if logic.name in STARTERS:  # the game: its own publications never come back to it (`subscribe`), so
                 self.driver.guard.names_forgeries = True  # a message on its keys is another process's (forgery.py)
+        else:  # only the tags it reads (`subscribe`): see services/guard.py `by_tag`
+            self.driver.guard.by_tag = True
         self.clock = clock
         self.resume = resume
         self.stop = stop if stop is not None else threading.Event()

@@ -114,6 +114,7 @@ class RobotBridge:
         self.backend = ""  # the robot's URL without its query (a Realtime key must not be recorded)
         self.logic = BridgeLogic(self._perform)
         self.shell = Driver(self.logic, session, clock)
+        self.shell.guard.by_tag = True  # it subscribes to the tags it listens to only (`start`; services/guard.py)
         self.thread: threading.Thread | None = None
         self.game_gone_s = GAME_GONE_S  # see runner.GameWatch
         self.game_watch: GameWatch | None = None
