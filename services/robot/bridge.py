@@ -178,6 +178,8 @@ class RobotBridge:
         recorded = fetch_log(self.bus, self.session, stop=stop)
         if not any(isinstance(e, ev.SessionStarted) for e in recorded):
             recorded = []  # the session has not started: nothing to catch up with
+        else:
+            self.game_watch.existed()  # a game gone before we watched never shows its token (runner.GameWatch)
         announce = ev.ServiceStarted(service=f"{NAME} {self.backend}", version=__version__,
                                      resumed_events=len(recorded))
         with self._lock:
