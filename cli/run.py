@@ -166,6 +166,8 @@ def _run(args: argparse.Namespace, stop: threading.Event) -> int:
             sys.setswitchinterval(RECORDER_SWITCH_S)  # this process is the recorder alone (see its rule)
             recorder.start()
             game = GameWatch(bus, args.session)  # a session whose end never reached us: its game is gone
+            if restart:  # its game was live when we asked (same_live_session), and may have ended since
+                game.existed()
             checked = 0.0
             try:
                 # after SessionEnded the learner still settles the last reward: stay while others are on the bus

@@ -340,7 +340,8 @@ class StudyRunner:
 
     def abort(self, reason: str, grace_s: float = 5.0) -> None:
         """End the running game: the game records SessionEnded "aborted" with the reason; if it does not
-        within `grace_s` (a crashed game), the session is stopped anyway."""
+        within `grace_s` (a crashed game, or a slow one on a loaded machine), the session is stopped
+        anyway, its end "aborted" with the same reason."""
         if not reason.strip():
             raise StudyDataError("an abort needs a reason")
         stop = self._stop
@@ -351,6 +352,7 @@ class StudyRunner:
             self._skip.set()
             return
         self._control(ev.SessionAborted(reason=reason.strip()))
+        stop.aborted = reason.strip()  # the end's detail if the stop below ends the game first (session.end_reason)
         try:
             threading.Timer(grace_s, stop.set).start()
         except RuntimeError:  # out of threads (`ulimit -v`): no grace, the session is stopped now

@@ -110,6 +110,13 @@ class GameWatch:
         elif self.seen and self.gone_since is None:
             self.gone_since = self.clock()
 
+    def existed(self) -> None:
+        """The game was on the bus before this service came (it restarted into a live session: the log or
+        the bus said so). A game that ended during the service's start-up never shows it its token: before,
+        such a service (a restarted recorder at load 8+) waited for ever; now its absence counts from here."""
+        if not self.seen:
+            self.seen, self.gone_since = True, self.clock()
+
     def gone(self) -> bool:
         return self.gone_since is not None and self.clock() - self.gone_since >= self.gone_s
 
@@ -153,6 +160,8 @@ class Node:
             self.driver.guard.whole = not bus.options.recovers
             if logic.name in STARTERS:  # the game: its own publications never come back to it (`subscribe`), so
                 self.driver.guard.names_forgeries = True  # a message on its keys is another process's (forgery.py)
+        else:  # only the tags it reads (`subscribe`): see services/guard.py `by_tag`
+            self.driver.guard.by_tag = True
         self.clock = clock
         self.resume = resume
         self.stop = stop if stop is not None else threading.Event()
@@ -234,6 +243,8 @@ class Node:
             raise Stopped(self.logic.name)
         if not any(type(e).__name__ == "SessionStarted" for e in recorded):
             recorded = []  # the session has not started: nothing to catch up with
+        elif self.game_watch is not None:
+            self.game_watch.existed()
         announce = ServiceStarted(service=self.logic.name, version=__version__, resumed_events=len(recorded))
         if recorded:
             log.info("%s resumes from %d recorded events", self.logic.name, len(recorded))

@@ -253,7 +253,11 @@ def end_reason(stop: threading.Event, failure: str) -> tuple[str, str]:
     if failure:
         return "failed", failure
     why = stopped_by(stop)
-    return ("aborted", why) if why == "stopped by the experimenter" else ("interrupted", why)
+    if why != "stopped by the experimenter":
+        return "interrupted", why
+    # an abort the game did not take in time (services/protocol.py StudyRunner.abort: its grace, which a loaded
+    # machine can outlast) keeps the experimenter's reason; before, the end said "stopped by the experimenter"
+    return "aborted", getattr(stop, "aborted", "") or why
 
 
 def watch_services(bus: Bus, session: str, nodes: list[Node], external: list[str], stop: threading.Event,

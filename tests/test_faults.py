@@ -19,6 +19,7 @@ import resource
 import signal
 import subprocess
 import sys
+import threading
 import time
 from collections import Counter
 
@@ -36,7 +37,9 @@ from pairplay.services.bus import Bus, BusOptions, Deadline, Inbox
 from pairplay.services.guard import Refusals
 from pairplay.services.learner import LearnerLogic
 from pairplay.services.node import Driver
+from pairplay.services.participant import ParticipantLogic
 from pairplay.services.recorder import Recorder, RecordingFailed
+from pairplay.services.runner import Node
 from pairplay.services.verify import verify_recording
 
 from busutil import wait_until
@@ -353,34 +356,88 @@ def test_a_bad_zenoh_config_file_is_one_line_and_exit_2(tmp_path):
     assert p.returncode == 2 and len(err.strip().splitlines()) == 1 and "bad.json5" in err
 
 
+class Holding(ParticipantLogic):
+    """The simulated participant, held (a person thinking) once it has handled `allowed` events: the game waits
+    for its picks, so the session goes on, or ends, only when the test lets it (`allow`)."""
+
+    def __init__(self, allowed: float):
+        super().__init__()
+        self.handled, self.allowed = 0, allowed
+        self.cond = threading.Condition()
+
+    def handle(self, event):
+        with self.cond:
+            while self.handled >= self.allowed:
+                self.cond.wait()
+            self.handled += 1
+        return super().handle(event)
+
+    def allow(self, more: float) -> None:
+        with self.cond:
+            self.allowed = self.handled + more
+            self.cond.notify_all()
+
+    def held(self) -> bool:
+        with self.cond:
+            return self.handled >= self.allowed
+
+
 def test_a_restarted_recorder_continues_the_sessions_record_and_marks_the_gap(tmp_path):
     # before: the new recorder wrote <session>.1.mcap without the session's start; verify refused
     # it and the events of the gap were in neither file
     env = dict(os.environ, PYTHONUNBUFFERED="1")
-    p = session_proc(tmp_path, "--participant", "sim:ashley", "--rounds", "150", "--session", "rr1",
-                     "--external", "recorder")
+    p = session_proc(tmp_path, "--participant", "sim:ashley", "--rounds", "40", "--session", "rr1",
+                     "--external", "recorder", "--external", "participant")
 
     def recorder(endpoint):
         return subprocess.Popen([sys.executable, "-m", "pairplay", "run", "recorder", "--session", "rr1", "--out",
                                  str(tmp_path), "--connect", endpoint], stdout=subprocess.DEVNULL,
-                                stderr=subprocess.DEVNULL, env=env)
+                                stderr=subprocess.PIPE, text=True, env=env)
+    # The session goes on only as its participant (here, a client of its bus) lets it: before, it played on
+    # during the gap and the new recorder's start-up, and at load 8+ it could end before the new recorder
+    # was on the bus, which then waited for an end it had missed (not done 30 s after the session's).
+    participant = Holding(allowed=200)  # the game's start and a few rounds, then held
+    stop = threading.Event()
+    first = second = bus = thread = None
     try:
         endpoint = endpoint_of(first_line(p))
+        bus = Bus(BusOptions(mode="client", connect=[endpoint]))
+        node = Node(bus, participant, "rr1", stop=stop)
+        node.start()
+
+        def play() -> None:  # and leave the bus once the session has ended for it, as its own process would
+            node.run(stop)
+            node.close(1.0)
+            bus.close()
+        thread = threading.Thread(target=play, daemon=True)
+        thread.start()
         first = recorder(endpoint)
-        # the game starts once the recorder is on the bus; let the session run a little
+        assert wait_until(participant.held, 120), "the game did not start"
         assert wait_until(lambda: (tmp_path / "rr1.mcap").exists() and (tmp_path / "rr1.mcap").stat().st_size
-                          > 8_000, 60)
+                          > 8_000, 60)  # what the first recorder took, flushed by its age
         first.kill()
         first.wait()
-        time.sleep(1.0)  # the gap: the session goes on unrecorded (150 rounds: it is still on when the new one comes)
+        participant.allow(150)  # the gap: the session goes on unrecorded
+        assert wait_until(participant.held, 120)
         second = recorder(endpoint)
+        # on the bus: the recorder's token comes after its subscription (services/recorder.py)
+        assert wait_until(lambda: alive_key("rr1", "recorder") in bus.alive_now(alive_key("rr1", "*")), 120), \
+            second.stderr.read() if second.poll() is not None else "the new recorder never came up"
+        participant.allow(float("inf"))
         p.communicate(timeout=120)
-        second.wait(timeout=30)
+        assert second.wait(timeout=30) == 0, second.stderr.read()
     finally:
-        p.kill()
-        first.kill()
-        second.kill()
-    assert p.returncode == 0 and second.returncode == 0
+        participant.allow(float("inf"))
+        stop.set()
+        if thread is not None:
+            thread.join(10)
+        if bus is not None:
+            bus.close()
+        for proc in (p, first, second):
+            if proc is not None and proc.poll() is None:
+                proc.kill()
+                proc.wait()
+    assert p.returncode == 0
     log = read_log(tmp_path / "rr1.1.mcap")
     assert not log.truncated and not log.bad
     gaps = [r.event for r in log.events if isinstance(r.event, ev.RecordingGap)]

@@ -96,3 +96,28 @@ def test_a_service_that_left_with_the_end_is_no_absence_whatever_came_first(tmp_
     recorder.close()
     from test_faults_restart import metadata_all
     assert [a["service"] for a in metadata_all(tmp_path / "unrep.mcap", ABSENCE_METADATA)] == ["learner"]
+
+
+def test_a_restarted_service_whose_game_ended_during_its_start_up_stops():
+    """A service restarted into a live session (a recorder continuing its file, a Node or the robot bridge
+    resuming from the log) whose game ended during its start-up never sees the game's token: it waited for
+    the token to come and then go, for ever (a restarted recorder still running 90 s after its session's
+    end, 2 of 10 runs of test_faults' restarted-recorder test at load ~11). Knowing the game was there
+    (`existed`), it counts the game's absence from then on."""
+    from pairplay.services.runner import GameWatch
+
+    from busutil import wait_until
+    game_bus = listener()
+    bus = connector(game_bus)
+    try:
+        game_bus.alive(alive_key("here", "game"))
+        here, ended = GameWatch(bus, "here", gone_s=0.3), GameWatch(bus, "ended", gone_s=0.3)
+        here.existed()
+        ended.existed()
+        assert wait_until(ended.gone, 10)  # before: never (its token never seen)
+        assert wait_until(lambda: here.seen and here.gone_since is None, 10) and not here.gone()
+        game_bus.close()  # and a game seen that leaves is gone as before
+        assert wait_until(here.gone, 20)
+    finally:
+        bus.close()
+        game_bus.close()

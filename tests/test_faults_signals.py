@@ -38,6 +38,7 @@ START_S = 240.0  # how long a verb may take to reach its state (a loaded VM), no
 # the load's share, not the deadline's: 3 s, and 0.15 s more per runnable process beyond the cores (exits took
 # 0.2-1.1 s at load ~2; up to 7 s at load 40-60, when a signal waits for a CPU to reach Python's main thread)
 SLACK_S = float(os.environ.get("PAIRPLAY_SIGNAL_SLACK_S", "3.0")) + 0.15 * max(0.0, os.getloadavg()[0] - os.cpu_count())
+PILOT_ROUNDS, PILOT_GAMES = 100, 4  # the pilot's phase-1 games: 1.5-4 s each alone; signalled in one's first half
 
 
 class Verb:
@@ -80,11 +81,12 @@ class Verb:
         return "".join(self.lines)
 
 
-def study_folder(root: Path, rounds: int) -> Path:
+def study_folder(root: Path, rounds: int, games: int = 2) -> Path:
     from pairplay.replay.studydata import StudyData
     root.mkdir(parents=True, exist_ok=True)
     toml = root / "study.toml"
-    toml.write_text(STUDY.read_text().replace("rounds = 2", f"rounds = {rounds}"))
+    text = STUDY.read_text().replace("rounds = 2", f"rounds = {rounds}")
+    toml.write_text(text.replace("games = 2", f"games = {games}", 1))  # phase 1's
     data = StudyData.create(root / "study", toml, key_file=root / "keys.csv")
     data.register("phase1")
     return data.folder
@@ -95,7 +97,7 @@ def verbs(tmp: Path, tag: str) -> list[Verb]:
     rec = tmp / "rec"
     s = lambda name: f"{name}-{tag}"  # noqa: E731  (one session id per verb and signal)
     serve = study_folder(tmp / "serve", 2)
-    pilot = study_folder(tmp / "pilot", 100)
+    pilot = study_folder(tmp / "pilot", PILOT_ROUNDS, games=PILOT_GAMES)
     game_started = lambda line: "bus listening" in line  # noqa: E731
     return [
         Verb("session (playing 300 rounds)", ["session", "--participant", "sim:ashley", "--rounds", "300", "--session",
@@ -104,7 +106,7 @@ def verbs(tmp: Path, tag: str) -> list[Verb]:
              str(rec)], game_started, rec / f"{s('lab')}.mcap"),
         Verb("protocol serve (console idle)", ["protocol", "serve", str(serve)], lambda line: line.startswith("bus")),
         Verb("protocol pilot (a game playing)", ["protocol", "pilot", str(pilot), "--personas", "ashley"],
-             lambda line: False, "pilot", settle_s=0.0),
+             lambda line: False, None, settle_s=0.0),  # its recording: the game it was signalled in
         Verb("replay (paced)", ["replay", str(SAMPLE), "--speed", "0.0005"], lambda line: "replaying" in line),
         Verb("view (a recording, paced)", ["view", "--recording", str(SAMPLE), "--speed", "0.0005", "--out",
              str(tmp / "paced.rrd"), "-v"], lambda line: "drawing" in line, settle_s=1.0, check="rrd"),
@@ -123,10 +125,36 @@ def verbs(tmp: Path, tag: str) -> list[Verb]:
 
 
 def pilot_recording(folder: Path) -> Path | None:
-    """The recording of the pilot's game playing now: the newest (under load the first game can end before
-    the signal comes, and the second is the one it stops: checking the first failed once)."""
+    """The recording of the pilot's game playing now: the newest."""
     found = list((folder / "recordings").glob("*.mcap")) if (folder / "recordings").is_dir() else []
     return max(found, key=lambda f: (f.stat().st_mtime_ns, f.name)) if found else None
+
+
+def frozen(proc: subprocess.Popen) -> bool:
+    """Every thread of `proc` is stopped (SIGSTOP takes effect per thread, not when kill() returns); a thread
+    that is exiting (Z, X) runs no more either."""
+    try:
+        tasks = list(Path(f"/proc/{proc.pid}/task").iterdir())
+        return all((t / "stat").read_text().rsplit(")", 1)[1].split()[0] in "tTZX" for t in tasks)
+    except (FileNotFoundError, ProcessLookupError, IndexError):  # it ended, or that thread did
+        return proc.poll() is not None
+
+
+def game_with_rounds_left(folder: Path, rounds: int) -> Path | None:
+    """The recording of a game that is playing with at least half its `rounds` to go (read while the pilot
+    is frozen): its journal is beside it (the recorder has not finished it) and holds no SessionEnded and
+    at most rounds / 2 RoundStarted. None if there is no such game now."""
+    from pairplay.replay.wal import NotAJournal, read_journal, wal_path
+    newest = pilot_recording(folder)
+    if newest is None or not wal_path(newest).exists():
+        return None
+    try:
+        keys = [key.rsplit("/", 1)[-1] for key, _payload, _t in read_journal(wal_path(newest)).records]
+    except (NotAJournal, OSError):
+        return None  # its header not written yet
+    if "SessionEnded" in keys or keys.count("RoundStarted") > rounds // 2:
+        return None
+    return newest
 
 
 @pytest.fixture(scope="module", params=[signal.SIGTERM, pytest.param(signal.SIGINT, marks=pytest.mark.slow)],
@@ -143,21 +171,29 @@ def signalled(request, tmp_path_factory):
     took = {}
     try:
         for v in group:
-            if v.name.startswith("protocol pilot"):  # busy: a game's recording is being written (its journal
-                # beside it); a game of 100 rounds can be over by the pilot's turn, and a signal 1 s after seeing
-                # its file came between two games (the newest recording a completed one: 2 of 7 runs, load ~5)
+            if v.name.startswith("protocol pilot"):  # busy: a game playing. Signalled once its game's
+                # recording was seen, the game could end by itself before the signal (the test's thread waits for
+                # a CPU under load; then the newest recording was a completed one, or the plan was over: 2 of 7
+                # runs at load ~5). So the pilot is frozen (SIGSTOP) while its game's journal is read, signalled
+                # frozen only in a game with half its rounds to go, then let go: the signal is taken first
                 deadline = time.monotonic() + START_S
                 while v.proc.poll() is None and time.monotonic() < deadline:
-                    newest = pilot_recording(tmp / "pilot" / "study")
-                    if newest is not None and newest.with_name(newest.name + ".journal").exists():
+                    v.proc.send_signal(signal.SIGSTOP)
+                    while not frozen(v.proc) and time.monotonic() < deadline:
+                        time.sleep(0.001)
+                    v.recording = game_with_rounds_left(tmp / "pilot" / "study", PILOT_ROUNDS)
+                    if v.recording is not None:
                         break
-                    time.sleep(0.01)
+                    v.proc.send_signal(signal.SIGCONT)
+                    time.sleep(0.02)
+                assert v.recording is not None, f"{v.name}: no game seen playing: {v.output()}"
             else:  # start-up: 1-5 s on CI's VM, up to a minute when other work loads it (load 40 seen)
                 v.is_ready.wait(START_S)
             time.sleep(v.settle_s)
             assert v.proc.poll() is None, f"{v.name} ended before the signal: {v.output()}"
             t0 = time.monotonic()
             v.proc.send_signal(sig)
+            v.proc.send_signal(signal.SIGCONT)  # the pilot's (frozen above); nothing to the others
             try:
                 v.proc.wait(timeout=EXIT_BUDGET_S + SLACK_S + 10)
             except subprocess.TimeoutExpired:
@@ -189,10 +225,7 @@ def test_a_long_running_verb_exits_soon_after_a_signal_its_recording_finished_an
     assert v.proc.returncode == 128 + sig, f"{name}: exit {v.proc.returncode} after {sig.name}: {out}"  # cli/main.py
     assert "Traceback" not in out, out
     assert seconds < EXIT_BUDGET_S + SLACK_S, f"{name}: {seconds:.2f} s after {sig.name} (load {os.getloadavg()}): {out}"
-    recording = v.recording
-    if recording == "pilot":
-        recording = pilot_recording(tmp / "pilot" / "study")
-        assert recording is not None, out
+    recording = v.recording  # the pilot's: the game it was playing when signalled
     if recording is not None:
         log = read_log(recording)
         assert not log.truncated and log.whole, (name, log.error)

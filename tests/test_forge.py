@@ -160,6 +160,24 @@ def test_a_second_end_cannot_displace_the_one_taken():
     assert g.check(*message("s", ev.MessageRejected(reason="x", key="k"), 9)).reason is None and not g.notices
 
 
+def test_a_guard_subscribed_by_tag_takes_the_real_end_after_a_forged_one_it_took():
+    """The learner and the robot bridge get only the tags they read: the game's refusal of a forged end they
+    took (a MessageRejected at its seq) and its events after it never reach them. Before: the game's real
+    end, at a higher seq, was refused as "a second SessionEnded", and the learner, its last suggestion never
+    settled, waited 30 s for the game to leave the bus (GameWatch)."""
+    g = Guard("s")
+    g.by_tag = True
+    g.check(*message("s", ev.RoundStarted(round=0, faces=[i // 2 for i in range(18)]), 5))
+    assert g.check(*message("s", ev.SessionEnded(reason="completed"), 6)).reason is None  # the forger's: fits
+    verdict = g.check(*message("s", ev.SessionEnded(reason="failed", detail="forged"), 8))  # the game's own
+    assert verdict.reason is None and verdict.event.reason == "failed"
+    assert len(g.notices) == 1 and g.notices[0][0].startswith("contradicted: the SessionEnded taken as game's (seq 6)")
+    # a guard that gets every key in the game's order saw what came between: it refuses a second end
+    w = Guard("s", whole=True)
+    w.check(*message("s", ev.SessionEnded(reason="completed"), 6))
+    assert "a second SessionEnded" in w.check(*message("s", ev.SessionEnded(reason="failed"), 8)).reason
+
+
 def test_two_events_claiming_the_same_seq_of_a_start_are_noticed():
     g = Guard("s", whole=True)
     assert g.check(*message("s", ev.SessionStarted(config=_config()), 2)).reason is None
@@ -284,7 +302,7 @@ def test_a_game_in_a_process_of_its_own_ends_the_session_on_a_forged_end_with_on
         client.put(*forge("forge5", ev.SessionEnded(reason="completed", rounds_played=1), e.seq + 1))
         game[0].wait(60)
     try:
-        forged_session(tmp_path, "forge5", forger, "--rounds", "300", "--external", "game")
+        _, _, session_err = forged_session(tmp_path, "forge5", forger, "--rounds", "300", "--external", "game")
     finally:
         if game and game[0].poll() is None:
             game[0].kill()
@@ -294,6 +312,9 @@ def test_a_game_in_a_process_of_its_own_ends_the_session_on_a_forged_end_with_on
     assert len(lines) == 1 and "SessionEnded" in lines[0] and "not published by this game" in lines[0], err
     ends = [x for x in read_log(tmp_path / "forge5.mcap").of("SessionEnded") if x.reason == "failed"]
     assert ends and "SessionEnded" in ends[0].detail
+    # the session's learner took the game's real end (before: it refused it as a second end when it had taken
+    # the forged one, and the session waited 30 s for the learner's GameWatch; 32-33 s a run in the suite)
+    assert "a second SessionEnded" not in session_err and "left the bus" not in session_err, session_err
 
 
 def test_the_games_own_events_never_come_back_to_it_and_another_processs_on_its_keys_are_named():

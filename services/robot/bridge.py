@@ -114,6 +114,7 @@ class RobotBridge:
         self.backend = ""  # the robot's URL without its query (a Realtime key must not be recorded)
         self.logic = BridgeLogic(self._perform)
         self.shell = Driver(self.logic, session, clock)
+        self.shell.guard.by_tag = True  # it subscribes to the tags it listens to only (`start`; services/guard.py)
         self.thread: threading.Thread | None = None
         self.game_gone_s = GAME_GONE_S  # see runner.GameWatch
         self.game_watch: GameWatch | None = None
@@ -177,6 +178,8 @@ class RobotBridge:
         recorded = fetch_log(self.bus, self.session, stop=stop)
         if not any(isinstance(e, ev.SessionStarted) for e in recorded):
             recorded = []  # the session has not started: nothing to catch up with
+        else:
+            self.game_watch.existed()  # a game gone before we watched never shows its token (runner.GameWatch)
         announce = ev.ServiceStarted(service=f"{NAME} {self.backend}", version=__version__,
                                      resumed_events=len(recorded))
         with self._lock:
