@@ -56,7 +56,7 @@ from pairplay.numbers import shown, type_name
 from pairplay.outputs import output_file, output_folder, write_text
 from pairplay.processes import check_workers, worker_pool
 from pairplay.schemas.jsonfile import empty, without_bom
-from pairplay.schemas.tomlplace import misplaced, table_not_value
+from pairplay.schemas.tomlplace import TOP, misplaced, table_not_value
 from pairplay.core.geometry import PERFECT_PICKS
 from pairplay.core.rng import SEED_RANGE
 from pairplay.core.study import FIRST_ROUNDS
@@ -132,7 +132,6 @@ def _typed(path: str, key: str, value):
     return float(value) if want in ("float", float) else value
 
 
-TOP = "the top of the file"
 # the file's tables and the keys each takes (schemas/tomlplace.py)
 PLACES = {TOP: frozenset({"study", "grid", "seeds", "reuse"}), "[study]": frozenset(SWEEPABLE),
           "[grid]": frozenset(SWEEPABLE)}
@@ -140,13 +139,17 @@ PLACES = {TOP: frozenset({"study", "grid", "seeds", "reuse"}), "[study]": frozen
 
 def _check_places(path: str, data: dict) -> None:
     """GridError for a key or a table at the wrong level: `seeds` or `reuse` below the [study] or [grid]
-    line (that table's then; it was "unknown study setting 'seeds'"), a [study.psi] table where psi takes
-    a value, `study = 3` where a table is expected (a traceback)."""
+    line (that table's then; it was "unknown study setting 'seeds'"), a study setting above them (it was
+    "unknown key(s) psi"), a [study.psi] table where psi takes a value, `study = 3` where a table is
+    expected (a traceback)."""
     for key, value in data.items():
         if key in ("study", "grid") and not isinstance(value, dict):
             raise GridError(f"{path}: {key}: a value where a table is expected: write a [{key}] line, its keys below it")
         if key in ("seeds", "reuse") and isinstance(value, dict):
             raise GridError(f"{path}: {key}: {table_not_value(key, f'[{key}]', TOP)}")
+        said = misplaced(key, TOP, PLACES)  # a study setting above the [study] or [grid] line
+        if said:
+            raise GridError(f"{path}: {key}: {said}")
     for table in ("study", "grid"):
         for key, value in data.get(table, {}).items():
             said = misplaced(key, f"[{table}]", PLACES, [TOP])

@@ -389,6 +389,10 @@ def test_workers_that_together_would_pass_the_memory_limit_are_refused_before_an
     ("[study]\npersonas = 'blind'\nseeds = 3\n", "study.seeds: `seeds` belongs at the top of the file, not to "
      "[study]: the keys after a [study] line are that table's; move `seeds = ...` above that line"),
     ("[grid]\npsi = [0.5]\nreuse = true\n", "grid.reuse: `reuse` belongs at the top of the file, not to [grid]"),
+    # a trial: a study setting above the [study] or [grid] line (it was "unknown key(s) psi")
+    ("seeds = 2\npsi = 0.5\n[grid]\nrounds = [10, 20]\n", "psi: `psi` belongs to [study] or [grid], not at the top "
+     "of the file (above its first [table] line): move `psi = ...` below the [study] or [grid] line"),
+    ("rounds = 10\n[study]\npsi = 0.5\n", "rounds: `rounds` belongs to [study] or [grid], not at the top of the file"),
     ("[grid.psi]\nx = [1]\n", "grid.psi: [grid.psi] is a table, where `psi` takes a value: write `psi = ...` "
      "among the keys of [grid]"),
     ("[study.psi]\nx = 1\n", "study.psi: [study.psi] is a table, where `psi` takes a value"),
