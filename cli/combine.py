@@ -15,12 +15,14 @@ before its first round wrote one; it would count as a participant who agrees
 with everything; a table written by hand, with values, is taken),
 and an existing --out without --force. A merge of any policy flagged partial
 (a session not completed, a damaged recording) is partial: its file's `partial`
-field names that input and why (core/policies.py `partial_inputs`), said once.
+field names that input and why (core/policies.py `partial_inputs`), said once; a
+profile of one says so after its table and on stderr.
 """
 
 from __future__ import annotations
 
 import argparse
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -147,6 +149,12 @@ def run_profile(args) -> int:
         print("\naction level (core/actionlevel.py): algorithm 3's shares without the states where the policies' "
               "differing actions are wholes the participant recognises")
         print("\n".join(_action_lines(policies, args.min_updates)))
+    # a profile of a partial policy (rebuild --partial) is partial as a merge of one is (a trial: profile said
+    # nothing): in the output, which may go to a file, and on stderr, which a reader of the terminal sees
+    partial = partial_inputs(policies, names)
+    if partial:
+        print(f"\nPARTIAL profile: {partial}")
+        print(f"pairplay profile: PARTIAL profile: {partial}", file=sys.stderr)
     return 0
 
 
