@@ -372,6 +372,17 @@ def check_sweep_memory(grid: Grid, workers: int) -> None:
 SCHEDULER_TIMEOUT_S = 10  # how long a --scheduler has to answer, its handshake included
 
 
+# the schemes a --scheduler may use: tls:// and wss:// need a security configuration (certificates) sweep does
+# not take, inproc:// is one process's own, ucx:// needs UCX (Dask's connector for it could not even start)
+SCHEMES = ("tcp", "ws")
+
+
+def _scheduler_refused(address: str, what: str) -> OptionError:
+    """The one line of a --scheduler where no scheduler can be reached: what happened, then the fix."""
+    return OptionError(f"{what}: give the address a Dask scheduler prints at its start, tcp://HOST:PORT",
+                       f"--scheduler {address}")
+
+
 def check_scheduler(address: str) -> None:
     """OptionError naming --scheduler and `address` unless a Dask scheduler answers there within
     SCHEDULER_TIMEOUT_S of wall-clock time: connected, the comm handshake done, and its `identity`
@@ -379,15 +390,19 @@ def check_scheduler(address: str) -> None:
     waits for a request (`python3 -m http.server`) its handshake waited for ever, at one that sends
     bytes first (an SSH banner) it read them as a frame length and asked for 3 EiB (MemoryError: the
     line said "out of memory"), and a word with no port (`nonsense`) was a ValueError's traceback.
-    Every way the probe can fail is the one line: a wrong address is the user's to fix."""
+    Dask's connect retries a refused connection until its timeout (a closed port took the whole 10 s),
+    so a plain socket connects first: refused, an unknown host, an unreachable network fail at once.
+    Every way the probe can fail is the one line, in our words: a wrong address is the user's to fix."""
     import asyncio
+    import socket
 
     def refuse(what: str) -> OptionError:
-        return OptionError(f"{what} at {address}: give the scheduler's address, tcp://HOST:PORT", "--scheduler")
+        return _scheduler_refused(address, what)
 
     try:
         from distributed.comm import connect
         from distributed.comm.addressing import parse_address, parse_host_port
+        from distributed.comm.core import CommClosedError
         from distributed.comm.registry import get_backend
     except ImportError:  # a plain install has no Dask (a trial: a traceback)
         raise OptionError("a Dask cluster needs Dask's distributed package: pip install -e '.[cluster]'",
@@ -396,13 +411,21 @@ def check_scheduler(address: str) -> None:
     try:
         scheme, location = parse_address(address)
         get_backend(scheme)  # foo://host:1: "unknown address scheme"
-        if scheme in ("tcp", "tls", "ws", "wss"):
-            parse_host_port(location)
-    except (ValueError, TypeError) as err:
-        raise refuse(f"not a Dask address ({err})") from None
+    except (ValueError, TypeError):
+        raise refuse(f"not a Dask address (unknown scheme {address.partition('://')[0]}://)") from None
+    if scheme not in SCHEMES:
+        raise refuse(f"sweep reaches a scheduler over {' or '.join(s + '://' for s in SCHEMES)}, not {scheme}://")
+    try:
+        host, port = parse_host_port(location)
+    except (ValueError, TypeError):  # `nonsense`, `tcp://localhost`: no port
+        raise refuse(f"not a Dask address (HOST:PORT expected after {scheme}://, got {location!r})") from None
+    if not host:
+        raise refuse(f"not a Dask address (no host before :{port})")
+    if not 1 <= port <= 65535:
+        raise refuse(f"not a Dask address (port {port} is not 1..65535)")
 
-    async def identity() -> dict:
-        comm = await connect(address, timeout=SCHEDULER_TIMEOUT_S)
+    async def identity(timeout: float) -> dict:
+        comm = await connect(address, timeout=timeout)
         try:
             await comm.write({"op": "identity", "reply": True})
             return await comm.read()
@@ -410,7 +433,11 @@ def check_scheduler(address: str) -> None:
             comm.abort()
 
     def probe() -> dict:
-        return asyncio.run(asyncio.wait_for(identity(), SCHEDULER_TIMEOUT_S))
+        deadline = time.monotonic() + SCHEDULER_TIMEOUT_S
+        with socket.create_connection((host, port), timeout=SCHEDULER_TIMEOUT_S):
+            pass  # something listens: now Dask's own handshake, in the time left
+        left = max(deadline - time.monotonic(), 0.1)
+        return asyncio.run(asyncio.wait_for(identity(left), left))
 
     try:
         try:
@@ -421,17 +448,31 @@ def check_scheduler(address: str) -> None:
             from concurrent.futures import ThreadPoolExecutor
             with ThreadPoolExecutor(1) as pool:
                 said = pool.submit(probe).result()
-    except (TimeoutError, asyncio.TimeoutError):
+    except ConnectionRefusedError:
+        raise refuse(f"nothing listens at that address (connection refused)") from None
+    except socket.gaierror:
+        raise refuse(f"the host {host} is not known (no address found for it)") from None
+    except (TimeoutError, asyncio.TimeoutError):  # socket.timeout too; Dask's connect says "Timed out" below
         raise refuse(f"no Dask scheduler answered within {SCHEDULER_TIMEOUT_S} s") from None
     except MemoryError:  # its first bytes, read as a Dask frame's length, asked for exbibytes
-        raise refuse("something that is not a Dask scheduler answered (bytes that are no Dask message)") from None
-    except Exception as err:  # noqa: BLE001 - whatever the other end did: the address is wrong
-        why = f"{type(err).__name__}: {err}" if str(err) else type(err).__name__
-        raise refuse(f"no Dask scheduler answered ({' '.join(why.split())})") from None
+        raise refuse(f"something that is not a Dask scheduler answered "
+                     "(bytes that are no Dask message)") from None
+    except CommClosedError:  # (an OSError) the other end closed the connection in the handshake
+        raise refuse(f"something that is not a Dask scheduler answered "
+                     "(it closed the connection)") from None
+    except OSError as err:
+        if "timed out" in str(err).lower():  # Dask's connect: "Timed out trying to connect to ... after 10 s"
+            raise refuse(f"no Dask scheduler answered within {SCHEDULER_TIMEOUT_S} s") from None
+        why = err.strerror or " ".join(str(err).split()) or type(err).__name__  # "Network is unreachable"
+        raise refuse(f"cannot connect ({why})") from None
+    except Exception as err:  # noqa: BLE001 - whatever else the other end did: the address is wrong
+        why = " ".join(str(err).split())
+        raise refuse(f"no Dask scheduler answered ({type(err).__name__}{': ' + why if why else ''})"
+                     ) from None
     kind = said.get("type") if isinstance(said, dict) else None
     if kind != "Scheduler":
         raise refuse(f"a Dask {kind}, not a scheduler, answered" if isinstance(kind, str)
-                     else "something that is not a Dask scheduler answered")
+                     else f"something that is not a Dask scheduler answered")
 
 
 def run_sweep(grid: Grid, out: str | Path, *, scheduler: str | None = None, workers: int = 1,
@@ -465,8 +506,8 @@ def run_sweep(grid: Grid, out: str | Path, *, scheduler: str | None = None, work
         check_scheduler(scheduler)  # the whole handshake within the timeout (Client's covers the connect only)
         try:
             client = Client(scheduler, timeout=f"{SCHEDULER_TIMEOUT_S}s")
-        except OSError as err:  # named by its option (a new user's trial: "Timed out trying to connect ..." alone)
-            raise OptionError(f"no Dask scheduler answered at {scheduler} ({err})", "--scheduler") from None
+        except OSError:  # it answered the check a moment ago (a new user's trial: "Timed out trying to connect ..." alone)
+            raise _scheduler_refused(scheduler, "the Dask scheduler there stopped answering") from None
         with client:
             futures = [client.submit(_run_cell, grid, c, key=f"pairplay-cell-{c.id}", pure=True) for c in todo]
             for future in as_completed(futures):

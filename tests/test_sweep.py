@@ -201,6 +201,43 @@ def test_a_scheduler_that_does_not_answer_is_one_line_naming_the_option(tmp_path
     assert err.count("\n") == 1 and "--scheduler" in err and f"127.0.0.1:{port}" in err, err
 
 
+def _closed_port() -> int:
+    import socket
+    with socket.socket() as s:  # a port nothing listens on
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+@pytest.mark.parametrize("address,said", [
+    ("tcp://127.0.0.1:{closed}", "nothing listens at that address (connection refused)"),
+    ("ws://127.0.0.1:{closed}", "nothing listens at that address (connection refused)"),
+    ("tcp://127.0.0.1:99999", "not a Dask address (port 99999 is not 1..65535)"),
+    ("tcp://:8786", "not a Dask address (no host before :8786)"),
+    ("tcp://localhost", "not a Dask address (HOST:PORT expected after tcp://, got 'localhost')"),
+    ("inproc://x", "sweep reaches a scheduler over tcp:// or ws://, not inproc://"),
+    ("ucx://127.0.0.1:1", "not ucx://"),
+    ("tls://127.0.0.1:1", "not tls://"),
+    ("tcp://no-such-host.invalid:8786", "the host no-such-host.invalid is not known"),
+])
+def test_a_scheduler_that_cannot_be_reached_is_one_line_in_our_words_at_once(tmp_path, capsys, address, said):
+    """A trial: a refused connection took Dask's whole 10 s (its connect retries until its timeout), and Dask's
+    texts came through ("(OSError: Timed out trying to connect ...)", "(ValueError: not enough values to unpack",
+    "(TypeError: Can't instantiate abstract class UCXConnector", "TLS expects a `ssl_context` argument"). Each
+    is one line saying what, naming --scheduler and the address, exit 2, well within the 10 s."""
+    from pairplay.cli.main import main
+    address = address.format(closed=_closed_port())
+    grid = tmp_path / "g.toml"
+    grid.write_text('seeds = 1\n[study]\npersonas = "blind"\ngames = 1\nrounds = 1\neval_rounds = 1\n')
+    start = time.monotonic()
+    code = main(["sweep", str(grid), "--out", str(tmp_path / "o"), "--scheduler", address])
+    took = time.monotonic() - start
+    err = capsys.readouterr().err
+    assert code == 2 and err.count("\n") == 1 and said in err and f"(--scheduler {address})" in err, err
+    assert "Error" not in err and "Timed out" not in err and "expects" not in err, err
+    assert took < 5, took  # importing Dask's modules, not its 10 s
+    assert not (tmp_path / "o").exists()
+
+
 def _no_measures(d):
     d["measures"] = {}
 
@@ -285,8 +322,11 @@ def _server(reply: bytes | None):
     else:
         class Banner(socketserver.BaseRequestHandler):
             def handle(self):
-                self.request.sendall(reply)
-                self.request.recv(1024)  # the other side's bytes, then close
+                try:
+                    self.request.sendall(reply)
+                    self.request.recv(1024)  # the other side's bytes, then close
+                except ConnectionResetError:  # the check's first connection (is anything listening?) closes
+                    pass  # unread: socketserver's traceback of it went to the stderr the verb's line is read from
         server = socketserver.ThreadingTCPServer(("127.0.0.1", 0), Banner)
     server.daemon_threads = True
     thread = threading.Thread(target=server.serve_forever, daemon=True)
