@@ -5,7 +5,9 @@ an integral float without its `.0` (`--psi 0` was said "got 0.0", `epsilon_start
 = 2` "got 2.0": options and TOML integers become floats on the way in), any other
 number as Python's shortest exact text (0.95, 1e-300, nan, inf), anything else
 as str(). `type_name(kind)` is a Python type's name as a sentence says it ("an
-integer", not "a int"). Standard library only (every layer imports this).
+integer", not "a int"). A count is said with its noun by `counted(n, noun)`:
+"1 participant", "2 participants" (a fixed plural said "1 participants").
+Standard library only (every layer imports this).
 """
 
 from __future__ import annotations
@@ -28,3 +30,10 @@ def type_name(kind: object) -> str:
     """A type (or its name) as a sentence says it: int -> "an integer" (module rule)."""
     name = kind if isinstance(kind, str) else getattr(kind, "__name__", str(kind))
     return TYPE_NAMES.get(name, f"a {name}")
+
+
+def counted(n: object, noun: str, many: str = "", spec: str = "") -> str:
+    """`n` and its noun, singular for exactly 1 (module rule): counted(1, "round") -> "1 round",
+    counted(3, "policy", "policies") -> "3 policies". `many`: the plural when it is not noun + "s";
+    `spec`: the number's format (",": 12,345)."""
+    return f"{n:{spec}} {noun if n == 1 else many or noun + 's'}"

@@ -52,7 +52,7 @@ import numpy as np
 
 from pairplay import csvcell
 from pairplay.errors import OptionError
-from pairplay.numbers import shown, type_name
+from pairplay.numbers import counted, shown, type_name
 from pairplay.outputs import output_file, output_folder, write_text
 from pairplay.processes import check_workers, worker_pool
 from pairplay.schemas.jsonfile import empty, without_bom
@@ -197,11 +197,11 @@ def read_grid(path: str | Path) -> Grid:
         if seeds < 1:
             raise GridError(f"{path}: seeds = {seeds}: give a count of at least 1 or a list of seeds")
         if seeds * settings > MAX_CELLS:
-            raise GridError(f"{path}: seeds = {seeds}: {settings} setting{'s' if settings != 1 else ''} x {seeds} "
-                            f"seeds is over the {MAX_CELLS} cells a sweep may have")
+            raise GridError(f"{path}: seeds = {seeds}: {counted(settings, 'setting')} x "
+                            f"{counted(seeds, 'seed')} is over the {MAX_CELLS} cells a sweep may have")
         seeds = list(range(seeds))
     if isinstance(seeds, list) and len(seeds) * settings > MAX_CELLS:
-        raise GridError(f"{path}: [grid]: {settings} settings x {len(seeds)} seeds is over the {MAX_CELLS} cells "
+        raise GridError(f"{path}: [grid]: {counted(settings, 'setting')} x {counted(len(seeds), 'seed')} is over the {MAX_CELLS} cells "
                         "a sweep may have")
     lo, hi = SEED_RANGE
     if not isinstance(seeds, list) or not seeds or not all(
@@ -364,8 +364,8 @@ def check_sweep_memory(grid: Grid, workers: int) -> None:
     cell = max(st.memory_bytes(len(st.persona_list()), grid.reuse, False) for st in settings)
     if cell * at_once > MEMORY_LIMIT:
         fit = max(1, MEMORY_LIMIT // max(cell, 1))
-        raise OptionError(f"{at_once} workers would hold about {gigabytes(cell * at_once)} of memory at once "
-                          f"({at_once} cells of up to {gigabytes(cell)}), over the {gigabytes(MEMORY_LIMIT)} allowed: "
+        raise OptionError(f"{counted(at_once, 'worker')} would hold about {gigabytes(cell * at_once)} of memory at once "
+                          f"({counted(at_once, 'cell')} of up to {gigabytes(cell)}), over the {gigabytes(MEMORY_LIMIT)} allowed: "
                           f"give --workers {fit} or fewer", f"--workers {workers}")
 
 
@@ -518,7 +518,7 @@ def run_sweep(grid: Grid, out: str | Path, *, scheduler: str | None = None, work
         with worker_pool(workers) as pool:
             for future in done_first([pool.submit(_run_cell_alone, grid, c) for c in todo]):
                 store(*future.result())
-        where = f"{workers} local processes"
+        where = f"{counted(workers, 'local process', 'local processes')}"
     else:
         for c in todo:
             store(*_run_cell(grid, c))
@@ -576,7 +576,7 @@ def windows_note(grid: Grid) -> str:
         return ""
     said = "; ".join(f"rounds = {r}: the first and last {min(r, n)} of {r}" + (" (both all of them: one value)"
                                                                                if r <= n else "") for r in short)
-    return f" first{n} and last{n} average the first and last {n} training rounds, fewer in a shorter cell: {said}."
+    return f" first{n} and last{n} average the first and last {counted(n, 'training round')}, fewer in a shorter cell: {said}."
 
 
 def write_sweep(out: str | Path, grid: Grid, results: dict[str, dict], run: SweepRun) -> list[Path]:
@@ -620,7 +620,7 @@ def _write_summary(out: Path, grid: Grid, results: dict[str, dict], run: SweepRu
                             [r["ci95_high"] for r in mine], path, measure, len(grid.seeds))
         figures.append(path)
     md = ["# pairplay sweep", "",
-          f"{len(grid.settings())} settings x {len(grid.seeds)} seeds = {run.cells} cells; computed {run.computed} "
+          f"{counted(len(grid.settings()), 'setting')} x {counted(len(grid.seeds), 'seed')} = {counted(run.cells, 'cell')}; computed {run.computed} "
           f"in {run.wall_s:.1f} s ({run.where}); fixed settings: "
           + (", ".join(f"{k}={v}" for k, v in grid.base.items()) or "the study's defaults") + "."
           + (" reuse_last, not given, is the study's default: 50, or rounds // 4 for 50 rounds or fewer."

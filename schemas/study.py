@@ -27,7 +27,7 @@ from typing import Literal, Union
 
 import msgspec
 
-from pairplay.numbers import shown
+from pairplay.numbers import counted, shown
 
 from .config import LearnerConfig
 from .jsonfile import empty
@@ -183,7 +183,7 @@ def _check(study: Study) -> None:
             raise StudyFileError(_placed(f"{err} - at `$.{where}.learner`") or f"{where}.learner: {err}") from None
         never = schedule.never_reuses() if p.algorithm == "pi-reuse" else ""
         if never:  # 1 round under human-phase2: its one round is the last, on the new policy alone
-            raise StudyFileError(f"{where}: a pi-reuse phase of {p.rounds} round{'s' if p.rounds != 1 else ''} "
+            raise StudyFileError(f"{where}: a pi-reuse phase of {counted(p.rounds, 'round')} "
                                  f"that never reuses the bias policy: {never} (preset {p.preset}; give 2 rounds "
                                  "or more, or learner overrides that reuse)")
         seen.append(p.id)
