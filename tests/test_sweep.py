@@ -153,7 +153,7 @@ def test_a_resume_with_nothing_to_do_writes_nothing_and_says_so(tmp_path, capsys
     before = {p: (p.read_bytes(), p.stat().st_mtime_ns) for p in out.rglob("*") if p.is_file()}
     assert main(["sweep", str(grid), "--out", str(out)]) == 0  # not -q: it silences these lines
     said = capsys.readouterr().out.splitlines()
-    assert said == [f"nothing to do: all 2 cells (2 settings x 1 seeds) were finished; {out / 'sweep.md'} is as it was"]
+    assert said == [f"nothing to do: all 2 cells (2 settings x 1 seed) were finished; {out / 'sweep.md'} is as it was"]
     assert {p: (p.read_bytes(), p.stat().st_mtime_ns) for p in out.rglob("*") if p.is_file()} == before
     (out / "sweep.md").unlink()  # the summary not written (a run stopped after its cells): written, 0 computed
     assert main(["sweep", str(grid), "--out", str(out)]) == 0  # not -q: it silences these lines
