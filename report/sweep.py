@@ -52,7 +52,7 @@ import numpy as np
 
 from pairplay import csvcell
 from pairplay.errors import OptionError
-from pairplay.numbers import counted, shown, type_name
+from pairplay.numbers import counted, shown, type_name, typed_floats
 from pairplay.outputs import output_file, output_folder, write_text
 from pairplay.processes import check_workers, worker_pool
 from pairplay.schemas.jsonfile import empty, without_bom
@@ -128,7 +128,7 @@ def _typed(path: str, key: str, value):
         value = ",".join(value)
     kind = {"int": int, "float": (int, float), "str": str, "bool": bool}[want if isinstance(want, str) else want.__name__]
     if isinstance(value, bool) and kind is not bool or not isinstance(value, kind):
-        raise GridError(f"{path}: {key} = {value!r} is not {type_name(want)}")
+        raise GridError(f"{path}: {key} = {as_toml(value)} is not {type_name(want)}")
     return float(value) if want in ("float", float) else value
 
 
@@ -160,14 +160,19 @@ def _check_places(path: str, data: dict) -> None:
 
 
 def read_grid(path: str | Path) -> Grid:
-    """The sweep described by a TOML file (GridError naming the file and the key)."""
-    path = str(path)
+    """The sweep described by a TOML file (GridError naming the file and the key; a number it echoes, as the
+    file has it: pairplay/numbers.py typed_floats)."""
+    with typed_floats() as parse_float:
+        return _read_grid(str(path), parse_float)
+
+
+def _read_grid(path: str, parse_float) -> Grid:
     try:
         with open(path, "rb") as f:
             raw = f.read()
         if empty(raw):  # (read as a grid of nothing, it ran the default study, exit 0: a new user's trial)
             raise GridError(f"{path}: {empty(raw)}")
-        data = tomllib.loads(without_bom(raw).decode("utf-8"))
+        data = tomllib.loads(without_bom(raw).decode("utf-8"), parse_float=parse_float)
     except FileNotFoundError:
         raise GridError(f"{path}: no such file") from None
     except IsADirectoryError:  # it said `Is a directory (bad)`: the system's words, not what to give

@@ -27,7 +27,7 @@ from typing import Literal, Union
 
 import msgspec
 
-from pairplay.numbers import counted, shown
+from pairplay.numbers import counted, shown, typed_floats
 
 from .config import LearnerConfig
 from .jsonfile import empty
@@ -216,18 +216,19 @@ def parse_study(text: str, source: str = "study") -> Study:
     """A Study from TOML text; StudyFileError('<source>: <where>: <what>') if anything is wrong."""
     if empty(text):  # (tomllib reads it as a table of nothing: "Object missing required field `study`")
         raise StudyFileError(f"{source}: {empty(text)}")
-    try:
-        raw = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as err:
-        raise StudyFileError(f"{source}: not valid TOML: {err}") from None
-    try:
-        study = msgspec.convert(raw, Study)
-    except msgspec.ValidationError as err:
-        raise StudyFileError(f"{source}: {_placed(str(err), raw) or _where(str(err), raw)}") from None
-    try:
-        _check(study)
-    except StudyFileError as err:
-        raise StudyFileError(f"{source}: {err}") from None
+    with typed_floats() as parse_float:  # a number a line echoes, as the file has it (pairplay/numbers.py)
+        try:
+            raw = tomllib.loads(text, parse_float=parse_float)
+        except tomllib.TOMLDecodeError as err:
+            raise StudyFileError(f"{source}: not valid TOML: {err}") from None
+        try:
+            study = msgspec.convert(raw, Study)
+        except msgspec.ValidationError as err:
+            raise StudyFileError(f"{source}: {_placed(str(err), raw) or _where(str(err), raw)}") from None
+        try:
+            _check(study)
+        except StudyFileError as err:
+            raise StudyFileError(f"{source}: {err}") from None
     return study
 
 

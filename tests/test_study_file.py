@@ -156,3 +156,11 @@ def test_a_table_or_key_at_the_wrong_level_says_where_it_belongs(old, new, said)
     line = str(info.value)
     assert line.startswith("s.toml: ") and "\n" not in line and said in line, line
     assert "Expected" not in line and "got `" not in line, line
+
+
+@pytest.mark.parametrize("typed", ["1e7", "6.0e41", "60_001.0"])
+def test_a_number_of_the_study_file_is_echoed_as_the_file_has_it(typed):
+    """A trial: `ignore_window_ms = 1e7` was said "got 10000000": the number as parsed, not as written."""
+    with pytest.raises(StudyFileError) as info:
+        parse_study(BASE.replace("ignore_window_ms = 1500", f"ignore_window_ms = {typed}", 1), "s.toml")
+    assert str(info.value) == f"s.toml: study.ignore_window_ms: must be 0..60000 (ms), got {typed}", info.value

@@ -494,3 +494,17 @@ def test_a_scheduler_without_dasks_distributed_installed_is_one_line(monkeypatch
     monkeypatch.setitem(sys.modules, "distributed.comm", None)  # as if not installed: its import fails
     with pytest.raises(OptionError, match=r"needs Dask's distributed package: pip install -e '\.\[cluster\]'"):
         check_scheduler("tcp://127.0.0.1:1")
+
+
+@pytest.mark.parametrize("line,said", [
+    ("rounds = 1e7", "rounds = 1e7 is not an integer"),  # it was "rounds = 10000000.0 is not an integer"
+    ("psi = 1e7", "psi = 1e7: must be between 0 and 1, got 1e7"),  # "psi = 10000000: ..., got 10000000"
+    ("psi = 1.50", "psi = 1.50: must be between 0 and 1, got 1.50"),
+])
+def test_a_number_of_the_sweep_file_is_echoed_as_the_file_has_it(tmp_path, line, said):
+    """A trial: a refused number was echoed as Python parsed it, not as written; the line points at the file's
+    text (pairplay/numbers.py typed_floats)."""
+    (tmp_path / "g.toml").write_text(f'seeds = 1\n[study]\npersonas = "blind"\n{line}\n')
+    with pytest.raises(GridError) as info:
+        read_grid(tmp_path / "g.toml")
+    assert str(info.value) == f"{tmp_path / 'g.toml'}: {said}", info.value
