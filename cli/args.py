@@ -1,7 +1,10 @@
 """Option types shared by the verbs: numbers with their range, seeds, ports, the --force flag.
 
 Rule: a value out of range is refused by argparse itself, before any work, with
-the range in the message (`argument --rounds: must be at least 1, got -1`);
+the range in the message (`argument --rounds: must be at least 1, got -1`), the
+value echoed as the user typed it (`--seed 1e3` is "not an integer: '1e3'", `--rounds
+0_0` "got 0_0", `--psi 2e0` "got 2e0": the line points at what is on the command line;
+an integer's echo was its parsed value, a number's the text);
 main's Parser prints it on one line. A verb states its ranges where it declares
 its options, never later in its run(). Every number option has a type from here
 (tests/test_cli_options.py checks every verb): a bare `type=int` let `--seed -5`
@@ -24,7 +27,7 @@ def int_at_least(low: int):
         except ValueError:
             raise argparse.ArgumentTypeError(f"not an integer: {text!r}") from None
         if value < low:
-            raise argparse.ArgumentTypeError(f"must be at least {low}, got {value}")
+            raise argparse.ArgumentTypeError(f"must be at least {low}, got {text}")
         return value
     parse.__name__ = f"integer >= {low}"
     return parse
@@ -56,7 +59,7 @@ def seed_number(text: str) -> int:
     except ValueError:
         raise argparse.ArgumentTypeError(f"not an integer: {text!r}") from None
     if not 0 <= value <= SEED_MAX:
-        raise argparse.ArgumentTypeError(f"a seed is 0..{SEED_MAX}, got {value}")
+        raise argparse.ArgumentTypeError(f"a seed is 0..{SEED_MAX}, got {text}")
     return value
 
 
@@ -68,7 +71,7 @@ def game_index(text: str) -> int:
     `non_negative`, started the bus and ended in core/rng.py's range check, a traceback)."""
     value = int_at_least(0)(text)
     if value > GAME_INDEX_MAX:
-        raise argparse.ArgumentTypeError(f"a game index is 0..{GAME_INDEX_MAX}, got {value}")
+        raise argparse.ArgumentTypeError(f"a game index is 0..{GAME_INDEX_MAX}, got {text}")
     return value
 
 
@@ -79,7 +82,7 @@ def _between(at_least, kind: str, low, high, why: str):
         if value > high:
             raise argparse.ArgumentTypeError(f"must be {low:g}..{high:g}{f' ({why})' if why else ''}, got {text}"
                                              if kind == "number" else
-                                             f"must be {low}..{high}{f' ({why})' if why else ''}, got {value}")
+                                             f"must be {low}..{high}{f' ({why})' if why else ''}, got {text}")
         return value
     parse.__name__ = f"{kind} {low}..{high}" if kind == "integer" else f"{kind} {low:g}..{high:g}"
     return parse
@@ -130,7 +133,7 @@ def port_or_any(text: str) -> int:
     """A TCP port, or 0 for one the system picks."""
     value = int_at_least(0)(text)
     if value > 65535:
-        raise argparse.ArgumentTypeError(f"a port is 0..65535, got {value}")
+        raise argparse.ArgumentTypeError(f"a port is 0..65535, got {text}")
     return value
 
 

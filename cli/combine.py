@@ -15,12 +15,14 @@ before its first round wrote one; it would count as a participant who agrees
 with everything; a table written by hand, with values, is taken),
 and an existing --out without --force. A merge of any policy flagged partial
 (a session not completed, a damaged recording) is partial: its file's `partial`
-field names that input and why (core/policies.py `partial_inputs`), said once.
+field names that input and why (core/policies.py `partial_inputs`), said once; a
+profile of one says so after its table and on stderr.
 """
 
 from __future__ import annotations
 
 import argparse
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -37,6 +39,7 @@ from pairplay.lists import comma_items
 from pairplay.outputs import check_output
 from pairplay.schemas.policy import read_policy, write_policy
 from pairplay.cli.args import add_force, seed_number, update_count
+from pairplay.numbers import counted
 
 
 LEARNED = ("q-learning", "lspi", "pi-reuse")  # policies a session learned (not combined, oracle or fixed ones)
@@ -92,7 +95,7 @@ def _load(args) -> tuple[list, list[str]]:
     for p, name in zip(policies, names):
         if p.algorithm == "combined":  # a merge of users' policies is no user's: its users would count twice
             # (a new user's trial: a second `combine cf` took the first's cf/m.json as a third policy of ashley)
-            raise InputError(f"is a combined policy (merged from {len(p.merged_from)} files), not one user's "
+            raise InputError(f"is a combined policy (merged from {counted(len(p.merged_from), 'file')}), not one user's "
                              "policy: give the users' own policies", name)
         if p.algorithm in LEARNED and p.rounds == 0 and not any(p.visits) and not any(map(any, p.q)):
             raise InputError("holds no whole round: a policy of 0 rounds that learned nothing (no state updated, "
@@ -135,7 +138,7 @@ def run_profile(args) -> int:
     common_reward_bonus(policies, names)
     if args.min_updates > 0:
         profiles = _trained_profiles(policies, args.min_updates)
-        print(f"states every policy of a participant updated at least {args.min_updates} times")
+        print(f"states every policy of a participant updated at least {counted(args.min_updates, 'time')}")
     else:
         _, profiles = users_from_policies(policies, args.seed)
     # what the columns are (a new user's trial read Blind's "speech 0.0, head 52.2" as "no speech"): the
@@ -147,6 +150,12 @@ def run_profile(args) -> int:
         print("\naction level (core/actionlevel.py): algorithm 3's shares without the states where the policies' "
               "differing actions are wholes the participant recognises")
         print("\n".join(_action_lines(policies, args.min_updates)))
+    # a profile of a partial policy (rebuild --partial) is partial as a merge of one is (a trial: profile said
+    # nothing): in the output, which may go to a file, and on stderr, which a reader of the terminal sees
+    partial = partial_inputs(policies, names)
+    if partial:
+        print(f"\nPARTIAL profile: {partial}")
+        print(f"pairplay profile: PARTIAL profile: {partial}", file=sys.stderr)
     return 0
 
 

@@ -18,6 +18,7 @@ import argparse
 from pathlib import Path
 
 from pairplay.cli.args import add_force, count, int_at_least, seed_number
+from pairplay.numbers import counted
 
 ARMS_HELP = ("comma-separated arms: same (the recorded learner, replayed: checks the fit), q (Q-learning from "
              "scratch), final (the recorded learner's final policy, fixed), oracle (the best policy for the fitted "
@@ -87,7 +88,7 @@ def check_size(arms: int, seeds: int, rounds: int, lspi: int = 0) -> None:
     where = (f"--seeds {seeds}" if seeds > 10 and arms_bytes(arms, 10, rounds, lspi) <= MEMORY_LIMIT
              else f"--rounds {rounds}")
     if need > MEMORY_LIMIT:
-        raise OptionError(f"{arms} arm{'s' if arms != 1 else ''} x {seeds} seeds x {rounds} rounds would hold about "
+        raise OptionError(f"{counted(arms, 'arm')} x {counted(seeds, 'seed')} x {counted(rounds, 'round')} would hold about "
                           f"{gigabytes(need)} of memory (every turn is kept for counterfactual.csv), over the "
                           f"{gigabytes(MEMORY_LIMIT)} allowed: give fewer rounds, seeds or arms", where)
 
@@ -127,7 +128,7 @@ def run(args: argparse.Namespace) -> int:
     for why in turns.skipped:
         print(f"{rec}: turn left out of the fit: {why}")
     if note:
-        print(f"{rec}: not whole ({note}); fitting the {len(turns.observations.first)} turns of its intact parts")
+        print(f"{rec}: not whole ({note}); fitting the {counted(len(turns.observations.first), 'turn')} of its intact parts")
     others = [read_turns(path) for path in args.fit_also]
     for other in others:
         if other.config.participant != config.participant or other.config.observed_source != config.observed_source:
@@ -137,7 +138,7 @@ def run(args: argparse.Namespace) -> int:
         for why in other.skipped:
             print(f"{other.source}: turn left out of the fit: {why}")
         if other.note:
-            print(f"{other.source}: not whole ({other.note}); fitting the {len(other.observations.first)} turns of "
+            print(f"{other.source}: not whole ({other.note}); fitting the {counted(len(other.observations.first), 'turn')} of "
                   "its intact parts")
     seen = {rec.resolve()}
     for path in args.fit_also:

@@ -27,6 +27,7 @@ from pairplay.services.bus import LOOPBACK_ANY_PORT, MODES, BusOptions, stop_on_
 from pairplay.cli.args import duration
 from pairplay.cli.robot import add_robot_arguments, check_robot_args, probe_robot_args, robot_choice
 from pairplay.cli.session import add_config_arguments, config_from_args, print_interrupted
+from pairplay.numbers import counted
 
 LOOPBACK = "127.0.0.1"
 
@@ -88,7 +89,7 @@ def run(args: argparse.Namespace) -> int:
         if host not in (LOOPBACK, "localhost", "::1") and not args.certfile:
             print("pairplay lab: warning: serving beyond loopback without TLS (README: serving the board "
                   "beyond loopback)", file=sys.stderr)
-        print(f"session {config.session}: {config.participant}, {config.rounds} rounds, {config.algorithm}, "
+        print(f"session {config.session}: {config.participant}, {counted(config.rounds, 'round')}, {config.algorithm}, "
               f"observed card: {config.observed_source}", flush=True)
         print(f"board:  {urls.board}", flush=True)
         print(f"mirror: {urls.mirror}", flush=True)
@@ -125,13 +126,13 @@ def run(args: argparse.Namespace) -> int:
     e = fold.ended
     if getattr(stop, "why", ""):  # a signal: ONE line, as `pairplay session`
         when = "before the session started" if fold.config is None else \
-            f"after the session had completed all {config.rounds} rounds" if e is not None and e.reason == "completed" \
-            else f"after {len(fold.rounds)} of {config.rounds} rounds"
-        print(f"pairplay lab: interrupted ({stop.why}) {when}; recorded {len(recorded.events)} events to {path}", file=sys.stderr)
+            f"after the session had completed all {counted(config.rounds, 'round')}" if e is not None and e.reason == "completed" \
+            else f"after {len(fold.rounds)} of {counted(config.rounds, 'round')}"
+        print(f"pairplay lab: interrupted ({stop.why}) {when}; recorded {counted(len(recorded.events), 'event')} to {path}", file=sys.stderr)
         return 0  # the status is the signal's (cli/main.py)
     ended = "no SessionEnded recorded" if e is None else e.reason + (f" ({e.detail})" if e.detail else "")
     if not getattr(args, "quiet", False):  # a summary of the file it wrote: -q leaves it out (cli/main.py QUIET_SUMMARIES)
-        print(f"recorded {len(recorded.events)} events to {path}")
+        print(f"recorded {counted(len(recorded.events), 'event')} to {path}")
         print(f"rounds played: {len(fold.turns_per_round())} of {config.rounds}; rejections: {len(fold.rejections)}; "
               f"ended: {ended}")
         from pairplay.replay.delivery import delivery_line

@@ -25,7 +25,7 @@ signal, by the verb. Every option's help shows its default
 Logging, the same for every verb: warnings and errors only by default, `-v/--verbose`
 adds the INFO lines (what the services do), `-q/--quiet` leaves nothing but
 errors (and no progress bars). A verb whose results are files it writes
-(`QUIET_SUMMARIES`: study, sweep, rebuild, protocol init, ...; session and lab
+(`QUIET_SUMMARIES`: study, sweep, rebuild, protocol init and check, ...; session and lab
 after their listening line) says on stdout what it wrote, and `-q` silences
 that too (rebuild's per-file lines, the study's tables and timings and
 `protocol init`'s protocol were printed under -q: new users' trials); a
@@ -164,11 +164,13 @@ def add_log_options(p: argparse.ArgumentParser, default=False) -> None:
 
 
 # verbs (or a verb's actions) whose stdout only says what they wrote to files: silenced by -q (module
-# rule). `protocol` is both: init, mark-invalid and pilot write, check, status and register print results
-# (init -q printed the whole protocol: a new user's trial). `session` and `lab` say their listening line
+# rule). `protocol` is both: init, mark-invalid and pilot write, status and register print results
+# (init -q printed the whole protocol: a new user's trial); check's result is its status (a mistake: one line
+# on stderr), its listing of the protocol a summary (`check -q` printed it: a trial). `session` and `lab` say their listening line
 # first, so they leave out their summary themselves (cli/session.py, cli/lab.py).
 QUIET_SUMMARIES = frozenset({"study", "sweep", "rebuild", "recover", "combine", "counterfactual", "report",
-                             "participant", "view", "protocol init", "protocol mark-invalid", "protocol pilot"})
+                             "participant", "view", "protocol init", "protocol mark-invalid", "protocol pilot",
+                             "protocol check"})
 LOG_FORMAT = "%(levelname)s %(name)s: %(message)s"
 _handler: logging.Handler | None = None
 

@@ -16,6 +16,7 @@ from pathlib import Path
 
 from pairplay.cli.args import key_chunk
 from pairplay.replay.studydata import StudyData, StudyDataError
+from pairplay.numbers import counted
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -42,8 +43,8 @@ def run(args) -> int:
         if not args.yes:
             raise StudyDataError(f"deleting {args.participant} cannot be undone: add --yes")
         gone = data.delete_participant(args.participant)
-        print(f"deleted: {gone.sessions_removed} games, {gone.files_removed} files, "
-              f"{gone.journal_lines_removed} journal lines"
+        print(f"deleted: {counted(gone.sessions_removed, 'game')}, {counted(gone.files_removed, 'file')}, "
+              f"{counted(gone.journal_lines_removed, 'journal line')}"
               + (", their line of the key file" if gone.key_file_line_removed else "")
               + f" (deletion {gone.deletion})")
         for m in gone.merged_policies_using_them:

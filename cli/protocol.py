@@ -25,6 +25,7 @@ from pairplay.core.personas import persona
 from pairplay.lists import comma_items
 from pairplay.replay.studydata import REGISTER_AT_ONCE, StudyData, StudyDataError
 from pairplay.schemas.study import StudyFileError, example_text, load_study, parse_study
+from pairplay.numbers import counted
 
 EXAMPLE_NAME = "thesis-ch7"
 
@@ -86,7 +87,7 @@ def describe(study) -> list[str]:
              f"wrong-suggestion button {'on' if study.study.wrong_suggestion_button else 'off'}"]
     for p in study.phase:
         cfg = study.learner_config(p)
-        lines.append(f"  {p.id}: {p.players} players, {p.games} game(s) x {p.rounds} rounds, {p.algorithm} "
+        lines.append(f"  {p.id}: {p.players} players, {counted(p.games, 'game')} x {counted(p.rounds, 'round')}, {p.algorithm} "
                      f"({p.preset}: epsilon {cfg.epsilon_start:g} - {cfg.epsilon_step:g}/round"
                      + (f", psi x{cfg.psi_round_decay:g}/round, new policy alone from round {cfg.reuse_rounds + 1}"
                         if p.algorithm == "pi-reuse" and cfg.reuse_rounds is not None else "")
@@ -96,7 +97,7 @@ def describe(study) -> list[str]:
         kinds = {}
         for item in q.item:
             kinds[item.kind] = kinds.get(item.kind, 0) + 1
-        lines.append(f"  questionnaire {name}: {len(q.item)} items ("
+        lines.append(f"  questionnaire {name}: {counted(len(q.item), 'item')} ("
                      + ", ".join(f"{v} {k}" for k, v in kinds.items()) + ")")
     return lines
 
@@ -278,7 +279,7 @@ def _pilot(data: StudyData, args) -> int:
     keys = _items(args.personas, "--personas")
     ids = list(data.state.participants)
     if len(keys) != len(ids):
-        raise StudyDataError(f"--personas names {len(keys)} personas for {len(ids)} registered participants "
+        raise StudyDataError(f"--personas names {counted(len(keys), 'persona')} for {counted(len(ids), 'registered participant')} "
                              f"({', '.join(ids) or 'none'})")
     personas = {pid: persona(k).key for pid, k in zip(ids, keys)}
     robot = None
@@ -302,8 +303,8 @@ def _pilot(data: StudyData, args) -> int:
         warn_unreachable(runner, "pilot")
 
         def said(step, result) -> None:
-            what = f"{len(result.users)} users combined" if step.kind == "combine" else \
-                f"{result.ended.outcome}, {result.ended.rounds_played} rounds"
+            what = f"{counted(len(result.users), 'user')} combined" if step.kind == "combine" else \
+                f"{result.ended.outcome}, {counted(result.ended.rounds_played, 'round')}"
             robot = runner.delivery.get(getattr(result, "session", ""), "")
             what += f"; {robot}" if robot else ""
             played = dataclasses.replace(step, scripted=getattr(result, "scripted", ""))  # "p01 (scripted: blind)"

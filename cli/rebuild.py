@@ -37,6 +37,7 @@ from pathlib import Path
 
 from pairplay.cli.args import add_force
 from pairplay.core.geometry import PERFECT_PICKS, PICKS_UNIT
+from pairplay.numbers import counted
 
 
 FIGURE = "learning-curves.png"
@@ -107,7 +108,7 @@ def write_all(done, staged: Path, out: Path, args: argparse.Namespace) -> list[s
         mean = f"{sum(picks) / len(picks):.1f}" if picks else "-"
         updates = f"{f.counts.get('LSPIUpdated', 0)} LSPI samples" if f.lspi is not None else \
             f"{f.counts.get('QUpdated', 0)} Q updates"
-        lines.append(f"{rebuilt.source}: {f.events} events, {len(picks)} rounds, mean {mean} {PICKS_UNIT}, "
+        lines.append(f"{rebuilt.source}: {counted(f.events, 'event')}, {counted(len(picks), 'round')}, mean {mean} {PICKS_UNIT}, "
                      f"{updates}"
                      f"{'; %d q_before mismatches' % f.q_mismatches if f.q_mismatches else ''}")
         if rebuilt.partial:  # the damage (the note) is said here, once, short (reader.EventLog.brief)

@@ -29,6 +29,7 @@ import logging
 
 from pairplay.cli.args import add_force
 from pairplay.errors import OptionError
+from pairplay.numbers import counted
 
 log = logging.getLogger("pairplay.recover")
 
@@ -72,10 +73,10 @@ def run(args: argparse.Namespace) -> int:
         ended = "; its SessionStarted is not in it (lost, or never recorded): no session to rebuild or verify"
     journal = ""
     if done.journal is not None:
-        journal = (f"; {done.from_journal} events taken from its journal {done.journal.name}"
+        journal = (f"; {counted(done.from_journal, 'event')} taken from its journal {done.journal.name}"
                    f"{f', {done.journal_refused} of its messages refused (recorded as refusals)' if done.journal_refused else ''}"
                    f"{f' (read up to its torn tail: {done.journal_torn})' if done.journal_torn else ''}")
-    print(f"{args.recording}: {state}; {done.messages} messages kept in {done.output}{journal}{ended}")
+    print(f"{args.recording}: {state}; {counted(done.messages, 'message')} kept in {done.output}{journal}{ended}")
     if done.journal_error:  # what it held (up to the last 5 ms before a crash) is not in the output: said, not silent
         log.warning("recover: the journal beside %s is unreadable, none of its records were used: %s",
                     args.recording, done.journal_error)
@@ -88,7 +89,7 @@ def _not_complete(done) -> str:
         return "damaged"
     if done.truncated:
         return "cut short"
-    return f"its journal holds {done.from_journal + done.journal_refused} records it lacks"
+    return f"its journal holds {counted(done.from_journal + done.journal_refused, 'record')} it lacks"
 
 
 def _complete(args: argparse.Namespace, done) -> int:
@@ -97,7 +98,7 @@ def _complete(args: argparse.Namespace, done) -> int:
     from pairplay.replay.wal import wal_path
 
     journal = wal_path(args.recording)
-    said = f"{args.recording}: complete already ({done.messages} messages"
+    said = f"{args.recording}: complete already ({counted(done.messages, 'message')}"
     said += ")" if done.ended else "; the session's end was not recorded: a partial session)"
     said += "; nothing to recover, nothing written"
     if done.journal_error:  # unreadable: what it holds is unknown, so it is never called stale
@@ -112,7 +113,7 @@ def _complete(args: argparse.Namespace, done) -> int:
             raise OptionError("--discard-journal: there is no journal beside it", args.recording)
         print(said)
         return 0
-    held = f"its journal {journal.name} holds nothing more ({done.journal_present} events, all in the file)"
+    held = f"its journal {journal.name} holds nothing more ({counted(done.journal_present, 'event')}, all in the file)"
     if args.discard_journal:
         journal.unlink()
         print(f"{said}; {held}: removed (--discard-journal)")

@@ -31,6 +31,7 @@ import time
 from pairplay.cli.args import session_id, speed
 from pairplay.errors import InputError
 from pairplay.livelock import LIVE, is_live
+from pairplay.numbers import counted
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -62,7 +63,7 @@ def run(args: argparse.Namespace) -> int:
             for m in c.mismatches[:5]:
                 print(f"    {m}")
         if v.unknown:
-            print(f"{sum(v.unknown.values())} events of types this version does not know, not compared: "
+            print(f"{counted(sum(v.unknown.values()), 'event')} of types this version does not know, not compared: "
                   + ", ".join(f"{tag} ({n})" for tag, n in sorted(v.unknown.items())))
         if v.truncated and not v.ended and is_live(args.recording):
             print(f"the file {LIVE}: verified as far as it goes; verify it again once the session has ended")
@@ -82,7 +83,7 @@ def run(args: argparse.Namespace) -> int:
     if not log.events:
         raise InputError(f"holds no events to replay{' (' + log.brief + ')' if log.brief else ''}", args.recording)
     if log.note:  # a damaged or cut file, or messages that do not decode: not re-published, said (reader.EventLog)
-        print(f"{args.recording}: not whole ({log.note}); replaying the {len(log.events)} events of its intact parts")
+        print(f"{args.recording}: not whole ({log.note}); replaying the {counted(len(log.events), 'event')} of its intact parts")
     stop = threading.Event()
     stop_on_signals(stop)
     with Bus(options_from_args(args), stop=stop) as bus:
@@ -100,6 +101,6 @@ def run(args: argparse.Namespace) -> int:
     # interrupted, the line goes to stderr, as every verb's (stdout holds results only); -q leaves out the
     # summary of a replay that went through (cli/main.py QUIET_SUMMARIES)
     if stopped or not getattr(args, "quiet", False):
-        print(f"{'pairplay replay: ' if stopped else ''}replayed {n} events in {took:.2f} s ({n / max(took, 1e-9):.0f}/s){stopped}",
+        print(f"{'pairplay replay: ' if stopped else ''}replayed {counted(n, 'event')} in {took:.2f} s ({n / max(took, 1e-9):.0f}/s){stopped}",
               file=sys.stderr if stopped else sys.stdout)
     return 0

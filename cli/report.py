@@ -16,6 +16,7 @@ import argparse
 import sys
 from pathlib import Path
 
+from pairplay.numbers import counted
 from pairplay.replay.studydata import StudyDataError
 from pairplay.schemas.policy import PolicyFileError
 
@@ -48,8 +49,8 @@ def run(args) -> int:
         print(f"pairplay report: {err}", file=sys.stderr)
         return 2
     if report.rehearsal:
-        print(f"a rehearsal: {len(report.games)} scripted games, no person played")
-    print(f"{len(report.games)} valid games of {len({g.participant for g in report.games})} participants"
+        print(f"a rehearsal: {counted(len(report.games), 'scripted game')}, no person played")
+    print(f"{counted(len(report.games), 'valid game')} of {counted(len({g.participant for g in report.games}), 'participant')}"
           + (f"; left out: {', '.join(report.excluded)}" if report.excluded else ""))
     print(f"report: {out / 'report.md'}")
     return 0

@@ -53,6 +53,7 @@ from pairplay.services.recorder import (FORCE_SESSION_HINT, REPLACED, check_new_
                                         settle_aside)
 from pairplay.services.runner import waiting_for
 from pairplay.services.session import run_session
+from pairplay.numbers import counted
 
 milliseconds = float_between(*MS_RANGE, "the board's times: a minute at most")  # schemas/session.py MS_RANGE
 PRESETS = {"virtual": LearnerConfig, "human-phase1": LearnerConfig.human_phase1,
@@ -191,15 +192,15 @@ def print_interrupted(summary: dict, path: Path, why: str, rounds: int, taken: s
     goes to stderr, as every verb's interrupted line (stdout holds results only: a complete session's summary),
     and starts `pairplay <verb>:` as every one-line message does (`verb`: session or lab; it had none)."""
     if summary.get("ended") == "completed":  # the signal came after the last round: nothing was cut short
-        print(f"pairplay {verb}: interrupted ({why}) after the session had completed all {rounds} rounds; recorded "
-              f"{summary['events']} events to {path}; nothing was undone", file=sys.stderr)
+        print(f"pairplay {verb}: interrupted ({why}) after the session had completed all {counted(rounds, 'round')}; recorded "
+              f"{counted(summary['events'], 'event')} to {path}; nothing was undone", file=sys.stderr)
     elif summary["started"]:
-        print(f"pairplay {verb}: interrupted ({why}) after {summary['rounds_played']} of {rounds} rounds; recorded "
-              f"{summary['events']} events to {path}"
-              + (f" ({summary['unrecorded']} messages shed or unrecorded, counted in it)" if summary['unrecorded'] else ""),
+        print(f"pairplay {verb}: interrupted ({why}) after {summary['rounds_played']} of {counted(rounds, 'round')}; recorded "
+              f"{counted(summary['events'], 'event')} to {path}"
+              + (f" ({counted(summary['unrecorded'], 'message')} shed or unrecorded, counted in it)" if summary['unrecorded'] else ""),
               file=sys.stderr)
     else:
-        print(f"pairplay {verb}: interrupted ({why}) before the session started; recorded {summary['events']} events to {path}, "
+        print(f"pairplay {verb}: interrupted ({why}) before the session started; recorded {counted(summary['events'], 'event')} to {path}, "
               f"no session in it ({taken})", file=sys.stderr)
     return 0
 
@@ -284,7 +285,7 @@ def _run(args: argparse.Namespace, config: SessionConfig, path: Path, summary: d
     fold = fold_events(r.event for r in recorded.events)
     picks = fold.picks_per_round()
     if not getattr(args, "quiet", False):  # a summary of the file it wrote: -q leaves it out (cli/main.py QUIET_SUMMARIES)
-        print(f"recorded {len(recorded.events)} events to {path}")
+        print(f"recorded {counted(len(recorded.events), 'event')} to {path}")
         print(f"rounds played: {len(picks)}; {PICKS_UNIT}: {picks[:10]}{' ...' if len(picks) > 10 else ''}")
         print(f"rejections: {len(fold.rejections)}; Q updates: {fold.counts.get('QUpdated', 0)}"
               + (f"; LSPI samples: {fold.counts.get('LSPIUpdated', 0)}" if config.algorithm == "lspi" else ""))
@@ -296,5 +297,5 @@ def _run(args: argparse.Namespace, config: SessionConfig, path: Path, summary: d
         print("ended: no SessionEnded recorded")
     elif e.reason != "completed":
         print(f"ended: {e.reason}{f' ({e.detail})' if e.detail else ''} after {e.rounds_played} of "
-              f"{config.rounds} rounds")
+              f"{counted(config.rounds, 'round')}")
     return 0 if e is not None and e.reason in ("completed", "interrupted", "aborted") else 1

@@ -39,6 +39,7 @@ from pairplay.errors import OptionError, OutputError
 from pairplay.outputs import check_folder, write_text
 from pairplay.report.sweep import (GridError, check_scheduler, check_sweep_memory, finished_cells, read_grid, run_sweep,
                                     write_sweep)
+from pairplay.numbers import counted
 
 
 SUMMARY = ("sweep.csv", "cells.csv", "sweep.md")  # what write_sweep writes besides the figures, sweep.md last
@@ -61,7 +62,7 @@ def stopped(out: Path, grid, made: list[Path], had_copy: bool, why: str) -> int 
     own way (cli/main.py's line for a signal)."""
     kept = len(finished_cells(out, grid))  # a cell being written is not among them: its temporary file is gone
     if kept:
-        print(f"pairplay sweep: {why}; {kept} of {len(grid.cells())} cells finished, kept in {out / 'cells'}: "
+        print(f"pairplay sweep: {why}; {kept} of {counted(len(grid.cells()), 'cell')} finished, kept in {out / 'cells'}: "
               "the same command resumes from them", file=sys.stderr)
         return 0
     if not had_copy:
@@ -129,7 +130,7 @@ def run(args) -> int:
     done = len(finished_cells(out, grid))
     if had_copy and done == len(cells) and all((out / name).is_file() for name in SUMMARY):
         # a resume with nothing to do rewrote sweep.md ("computed 0 in 0.0 s"), losing the run that did the work
-        print(f"nothing to do: all {len(cells)} cells ({len(grid.settings())} settings x {len(grid.seeds)} seeds) "
+        print(f"nothing to do: all {counted(len(cells), 'cell')} ({counted(len(grid.settings()), 'setting')} x {counted(len(grid.seeds), 'seed')}) "
               f"were finished; {out / 'sweep.md'} is as it was")
         return 0
     try:
@@ -154,6 +155,6 @@ def run(args) -> int:
         if not finished_cells(out, grid):  # so a corrected grid runs into the same --out (it was refused as
             stopped(out, grid, made, had_copy, "failed")  # "another grid's sweep"); finished cells stay to resume
         raise
-    print(f"{result.cells} cells ({len(grid.settings())} settings x {len(grid.seeds)} seeds), {result.computed} "
+    print(f"{counted(result.cells, 'cell')} ({counted(len(grid.settings()), 'setting')} x {counted(len(grid.seeds), 'seed')}), {result.computed} "
           f"computed in {result.wall_s:.1f} s on {result.where}; {out / 'sweep.md'}")
     return 0

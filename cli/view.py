@@ -49,6 +49,7 @@ from pairplay.outputs import check_output, output_path
 from pairplay.replay.check import read_session
 from pairplay.services.bus import add_bus_arguments
 from pairplay.services.view import DEFAULT_GRPC_PORT, DEFAULT_WEB_PORT, RrdWriteFailed  # without loading rerun (slow)
+from pairplay.numbers import counted
 
 log = logging.getLogger("pairplay.view")
 
@@ -145,7 +146,7 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _counts(done: "Viewed") -> str:
-    return f"{done.events} events, {done.notes} notes, Q-table logged {done.q_logged} times"
+    return f"{counted(done.events, 'event')}, {counted(done.notes, 'note')}, Q-table logged {counted(done.q_logged, 'time')}"
 
 
 class NothingDrawn(Exception):

@@ -54,6 +54,7 @@ from pairplay.schemas.policy import UserInfo
 from .actions import HEARING_NOTHING, N_ACTIONS, VISUAL_NOTHING, code_of
 from .combine import (_HEAD, _SPEECH, COMPARED_STATES, Combined, User, _exempt_head, _exempt_speech, combine,
                       extract_info, incompatible, parts)
+from pairplay.numbers import counted
 
 RECOGNISED = 0.0  # V(s, a) above this: the user recognises the whole action
 REJECTED = -0.5  # V(s, a) below this: the user rejects it
@@ -101,7 +102,7 @@ def extract_action_info(policies: np.ndarray, q_tables: np.ndarray,
     policies = np.atleast_2d(np.asarray(policies, dtype=np.int64))
     q_tables = np.asarray(q_tables, dtype=np.float64).reshape(-1, *policies.shape[1:], N_ACTIONS)
     if len(q_tables) != len(policies):
-        raise ValueError(f"{len(policies)} policies but {len(q_tables)} Q-tables")
+        raise ValueError(f"{counted(len(policies), 'policy', 'policies')} but {len(q_tables)} Q-tables")
     base = extract_info(policies, states)
     values = action_values(q_tables)
     whole = whole_actions(values)

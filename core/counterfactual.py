@@ -38,6 +38,7 @@ from .interpretation import SIGHT_SEES, consider_probability, hear_probability, 
 from .oracle import USER_ALONE, oracle_policies
 from .simulate import batch_bytes, run_games
 from .userfit import FEATURES, Fit
+from pairplay.numbers import counted
 
 # Observed sources of a recording -> the simulation's (a gaze is taken as the card the user intends)
 SIM_SOURCE = {"intended": "intended", "first-pick": "first-pick", "gaze": "intended"}
@@ -84,7 +85,7 @@ def _means(feature: str, level: int) -> str:
     if feature == "hearing":
         return f"hears speech with q = {hear_probability(level):.1f}"
     if feature == "memory":
-        return f"remembers {memory_capacity(level)} cards"
+        return f"remembers {counted(memory_capacity(level), 'card')}"
     seen = sorted(SIGHT_SEES[level])
     return "sees " + (", ".join(seen) if seen else "no visual part")
 

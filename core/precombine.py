@@ -30,6 +30,7 @@ from pairplay.schemas.config import Persona
 
 from .combine import Combined, User, combine, extract_info
 from .rng import game_seed
+from pairplay.numbers import counted
 
 STRATEGIES = ("one random policy", "all policies", "pre-combined")
 
@@ -91,7 +92,7 @@ def add_combination(batch, personas: Sequence[Persona], training, seed: int, rep
     from .study import add_on_personas
     games = len(training.personas) // len(personas)
     if games < replicates:
-        raise ValueError(f"{games} games per persona cannot make {replicates} disjoint replicates")
+        raise ValueError(f"{counted(games, 'game')} per persona cannot make {counted(replicates, 'disjoint replicate')}")
     merged: list[list[Combined]] = [[] for _ in STRATEGIES]
     named: dict[str, np.ndarray] = {}
     for r in range(replicates):

@@ -20,5 +20,7 @@ from .vector import MemoryVectorEnv
 __all__ = ["ENV_ID", "MemoryEnv", "MemoryVectorEnv"]
 
 if ENV_ID not in gymnasium.registry:
-    gymnasium.register(id=ENV_ID, entry_point="pairplay.gym.env:MemoryEnv",
-                       vector_entry_point="pairplay.gym.vector:MemoryVectorEnv")
+    # the env checker is ours (gym/env.py EnvChecker): Gymnasium's left an env whose first reset was refused
+    # broken (its next valid reset unchecked, its first step a TypeError)
+    gymnasium.register(id=ENV_ID, entry_point="pairplay.gym.env:checked_env",
+                       vector_entry_point="pairplay.gym.vector:MemoryVectorEnv", disable_env_checker=True)

@@ -25,6 +25,7 @@ from pairplay.core.personas import persona as find_persona
 from pairplay.core.reward import check_bonus_rule
 from pairplay.core.rng import check_seed
 from pairplay.schemas.config import Persona
+from pairplay.numbers import counted
 
 OBSERVATIONS = ("state", "rich")
 RENDER_MODES: list[str] = []  # metadata["render_modes"]: the task draws nothing (render_mode None only)
@@ -66,9 +67,9 @@ def personas(keys: str | Sequence[str], n: int) -> list[Persona]:
     """One persona per game: one key for all `n`, or a sequence of `n` keys."""
     many = [keys] * n if isinstance(keys, str) else list(keys) if isinstance(keys, (list, tuple)) else None
     if many is None:
-        raise TypeError(f"persona must be a key or a list of {n} keys, got {keys!r}")
+        raise TypeError(f"persona must be a key or a list of {counted(n, 'key')}, got {keys!r}")
     if len(many) != n:
-        raise ValueError(f"{len(many)} personas for {n} games")
+        raise ValueError(f"{counted(len(many), 'persona')} for {counted(n, 'game')}")
     return [persona(k) for k in many]
 
 
@@ -91,7 +92,7 @@ def reset_seeds(seed: Any, n: int) -> list[int] | None:
         reset_seed(seed)  # raises: not an integer
     values = list(seed)
     if len(values) != n:
-        raise ValueError(f"{len(values)} seeds for {n} games")
+        raise ValueError(f"{counted(len(values), 'seed')} for {counted(n, 'game')}")
     if all(s is None for s in values):
         return None
     if any(s is None for s in values):
@@ -122,5 +123,5 @@ def action(space: spaces.Space, value: Any) -> None:
         ok = False
     if not ok:
         what = (f"action {value!r} is not one of the {N_ACTIONS} composite codes" if not space.shape else
-                f"actions must be {space.shape[0]} composite codes, one per game, got {value!r}")
+                f"actions must be {counted(space.shape[0], 'composite code')}, one per game, got {value!r}")
         raise ValueError(f"{what} (integers 0..{N_ACTIONS - 1})")

@@ -17,11 +17,17 @@ The persona (appendix A) is a constructor option or `reset(options={"persona": k
 (gym/checks.py, shared with the vector env). reset's info["round"] is the
 index of the round's deal in its game, from 0 as RoundStarted.round counts (a
 round abandoned by reset() counts). render_mode None is the only one: render()
-draws nothing and returns None.
+draws nothing and returns None. `gymnasium.make` gives it under `EnvChecker`,
+Gymnasium's passive env checker marking a check done only when the call it
+checks succeeded: Gymnasium 1.4's marks the first reset checked before it
+runs, so after a refused first reset (a bad seed or option) the next valid
+reset skipped its checks and the first step raised a TypeError (its data-reuse
+check compared against a reset it never saw): the env stayed broken.
 """
 
 from __future__ import annotations
 
+import copy
 from typing import Any
 
 import gymnasium
@@ -45,6 +51,44 @@ def observation_space(kind: str) -> spaces.Space:
     if checks.observation(kind) == "state":
         return spaces.Discrete(N_STATES)
     return spaces.Box(0.0, 1.0, (RICH_SIZE,), dtype=np.float32)
+
+
+class EnvChecker(gymnasium.wrappers.PassiveEnvChecker):
+    """Gymnasium's passive env checker, its first reset's and first step's checks run on the first such call
+    that succeeds (module rule): a call the env refuses leaves them to the next one."""
+
+    def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
+        checked = self.checked_reset
+        try:
+            return super().reset(seed=seed, options=options)
+        except BaseException:
+            self.checked_reset = checked
+            raise
+
+    def step(self, action):
+        checked = self.checked_step
+        try:
+            return super().step(action)
+        except BaseException:
+            self.checked_step = checked
+            raise
+
+    @property
+    def spec(self):
+        """The env's spec, Gymnasium's checker off: this one stands in for it (Gymnasium's checker marks it
+        on), so an env made again from `env.spec` is this one again, not under Gymnasium's too."""
+        spec = self.env.spec
+        if spec is None:
+            return None
+        spec = copy.deepcopy(spec)
+        spec.disable_env_checker = True
+        return spec
+
+
+def checked_env(**kwargs) -> gymnasium.Env:
+    """The registered entry point: a MemoryEnv under EnvChecker (the id is registered with Gymnasium's own
+    checker off: this one stands in for it)."""
+    return EnvChecker(MemoryEnv(**kwargs))
 
 
 def render_nothing() -> None:

@@ -23,6 +23,7 @@ from pathlib import Path
 
 from pairplay.errors import InputError
 from pairplay.schemas.jsonfile import MCAP_MAGIC
+from pairplay.numbers import counted
 
 
 
@@ -47,7 +48,7 @@ def check_recording(path: str | Path, journal_ok: bool = False) -> Path:
         if wal_path(path).exists():
             if journal_ok:
                 return path
-            what = "the file is empty (0 bytes)" if not head else f"cut inside MCAP's magic ({len(head)} bytes)"
+            what = "the file is empty (0 bytes)" if not head else f"cut inside MCAP's magic ({counted(len(head), 'byte')})"
             raise InputError(f"{what}: its recorder stopped before it wrote a record; the journal beside it "
                              f"({wal_path(path).name}) holds what it received: `pairplay recover {path}`", path)
         if not head:
@@ -76,22 +77,22 @@ def no_session(log) -> str:
     if not log.events and not foreign and not log.skipped and not stopped:
         # in words a user has (not "MCAP's magic"): the recorder died before it wrote anything
         if size <= len(MCAP_MAGIC) + 2:
-            return f"holds no session: an MCAP file with no records ({size} bytes): the recording holds nothing"
+            return f"holds no session: an MCAP file with no records ({counted(size, 'byte')}): the recording holds nothing"
         cut = ", cut short" if log.truncated else ""
-        return f"holds no session: an MCAP file with no messages ({size} bytes{cut}): the recording holds nothing"
+        return f"holds no session: an MCAP file with no messages ({counted(size, 'byte')}{cut}): the recording holds nothing"
     if not log.events and not log.skipped and foreign:
         topics = sorted({topic for topic, _ in log.channels.values()})[:2]
-        return (f"holds no session: not a pairplay recording ({foreign} messages, none a pairplay event; "
+        return (f"holds no session: not a pairplay recording ({counted(foreign, 'message')}, none a pairplay event; "
                 f"channels {', '.join(repr(t) for t in topics)})")
     # a recorder that finished its file says why it stopped, even before any event came (a signal
     # during the game's wait for its services, on a loaded machine: test_session_end)
     n = len(log.events) + sum(log.skipped.values())
     if log.damaged:  # its start may be lost to the damage (a part, a message that does not decode): no session
         # that "never started" (a new user's trial: a SessionStarted that did not decode was said so)
-        return (f"holds no session: {n} pairplay events but no SessionStarted in its intact parts: the file is "
+        return (f"holds no session: {counted(n, 'pairplay event')} but no SessionStarted in its intact parts: the file is "
                 f"damaged ({log.damaged})")
     why = f"stopped ({stopped}) before its game started" if stopped else "a session that never started"
-    return f"holds no session: {n} pairplay events but no SessionStarted ({why})"
+    return f"holds no session: {counted(n, 'pairplay event')} but no SessionStarted ({why})"
 
 
 def read_session(path: str | Path, only: frozenset[str] | None = None):
@@ -129,7 +130,7 @@ def no_whole_round(events, truncated: bool = False, damaged: str = "") -> str:
     of = f" of {started.config.rounds}" if started is not None else ""
     if ended is not None:
         how = f"{ended.reason}{f' ({ended.detail})' if ended.detail else ''}"
-        where = f" in round 1{of} after {ended.turns_in_round} turns" if ended.round >= 0 else " before round 1"
+        where = f" in round 1{of} after {counted(ended.turns_in_round, 'turn')}" if ended.round >= 0 else " before round 1"
     if damaged:  # first: a round's end lost to the damage is no round that never ended (a new user's trial:
         # RoundEnded messages that did not decode were "the session ended (completed) before round 1")
         end = f"; its SessionEnded says {how}{where}" if ended is not None else ""

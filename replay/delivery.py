@@ -17,6 +17,7 @@ from collections import Counter
 from typing import Iterable
 
 from pairplay.schemas.robot import RobotActed
+from pairplay.numbers import counted
 
 DELIVERED = ("done", "sent", "aborted", "stopped")
 UNCONFIRMED = ("unacknowledged", "in-flight")
@@ -44,7 +45,7 @@ def delivery_line(acted: Iterable[RobotActed]) -> str:
     total, delivered, others, error, backend = delivery_counts(acted)
     if not total:
         return ""
-    line = f"robot {backend}: {delivered} of {total} suggestions delivered"
+    line = f"robot {backend}: {delivered} of {counted(total, 'suggestion')} delivered"
     parts = [f"{others[o]} {o}" for o in ("failed", *UNCONFIRMED, "superseded") if others[o]]
     if parts:
         line += f" ({', '.join(parts)})"

@@ -45,6 +45,7 @@ from mcap.records import (Attachment, AttachmentIndex, Channel, Chunk, ChunkInde
                           Message, MessageIndex, Metadata, MetadataIndex, Schema, Statistics, SummaryOffset)
 
 from pairplay.schemas.jsonfile import MCAP_MAGIC
+from pairplay.numbers import counted
 
 _HEAD = struct.Struct("<BQ")
 _CHUNK_HEAD = struct.Struct("<QQQI")
@@ -136,7 +137,7 @@ class Scan:
         if len(lost) <= 2:
             parts = [said(d) for d in lost]
         else:  # every lost chunk named was a line of thousands of characters
-            parts = [f"{len(lost)} parts lost, the first {said(lost[0])}, the last {lost[-1].part}"]
+            parts = [f"{counted(len(lost), 'part')} lost, the first {said(lost[0])}, the last {lost[-1].part}"]
         # the data section's CRC covers the lost bytes: it fails with them, a consequence, not news
         others = sum(1 for d in self.damage if d.lost_at < 0 and d.part != "data section")
         if others:
@@ -164,7 +165,7 @@ def _parse(opcode: int, content: bytes) -> Any:
             raise Unreadable("MessageIndex content does not parse (too short)")
         channel_id, n = _INDEX_HEAD.unpack_from(content)
         if n % 16 or _INDEX_HEAD.size + n != len(content):
-            raise Unreadable(f"MessageIndex declares {len(content)} bytes but its fields take {_INDEX_HEAD.size + n}")
+            raise Unreadable(f"MessageIndex declares {counted(len(content), 'byte')} but its fields take {_INDEX_HEAD.size + n}")
         flat = struct.unpack_from(f"<{n // 8}Q", content, _INDEX_HEAD.size)
         return MessageIndex(channel_id=channel_id, records=list(zip(flat[::2], flat[1::2])))
     reader = _READERS.get(opcode)
@@ -176,7 +177,7 @@ def _parse(opcode: int, content: bytes) -> Any:
     except Exception as err:  # EndOfFile, struct.error, UnicodeDecodeError: not what the opcode says
         raise Unreadable(f"{_name(opcode)} content does not parse ({type(err).__name__})") from None
     if opcode != 0x05 and stream.count != len(content):
-        raise Unreadable(f"{_name(opcode)} declares {len(content)} bytes but its fields take {stream.count}")
+        raise Unreadable(f"{_name(opcode)} declares {counted(len(content), 'byte')} but its fields take {stream.count}")
     return record
 
 
@@ -211,7 +212,7 @@ def _open_chunk(chunk: Chunk) -> tuple[list[Any], list[tuple[int, int, int]]]:
     except Exception as err:
         raise Unreadable(f"{chunk.compression} data does not decompress ({type(err).__name__})") from None
     if len(data) != chunk.uncompressed_size:
-        raise Unreadable(f"decompresses to {len(data)} bytes, the chunk says {chunk.uncompressed_size}")
+        raise Unreadable(f"decompresses to {counted(len(data), 'byte')}, the chunk says {chunk.uncompressed_size}")
     if chunk.uncompressed_crc and zlib.crc32(data) != chunk.uncompressed_crc:
         raise Unreadable(f"CRC mismatch (recorded {chunk.uncompressed_crc:#010x}, computed {zlib.crc32(data):#010x})")
     records, messages, pos, size = [], [], 0, len(data)
@@ -322,7 +323,7 @@ class _Walker:
         if len(data) < 8:
             scan.truncated, scan.cut_at = True, 0
             if data:
-                self.damage(0, "header", f"{len(data)} bytes: too short for the MCAP magic")
+                self.damage(0, "header", f"{counted(len(data), 'byte')}: too short for the MCAP magic")
             return scan
         if data[:8] != MCAP_MAGIC:
             self.damage(0, "header", "the file does not start with the MCAP magic")
@@ -423,7 +424,7 @@ class _Walker:
             chunk.listed += len(index.records)
             if self.lost_chunk is not None and self.lost_chunk[1] is chunk:
                 k = self.lost_chunk[0]
-                self.scan.damage[k] = _replace(self.scan.damage[k], lost=f"its {chunk.listed} messages")
+                self.scan.damage[k] = _replace(self.scan.damage[k], lost=f"its {counted(chunk.listed, 'message')}")
             return
         if chunk.by_channel is None:  # once per chunk, not once per index
             chunk.by_channel = {}
@@ -433,8 +434,8 @@ class _Walker:
         listed = {(off, t) for t, off in index.records}
         if listed != mine:
             self.damage(pos, f"message index of chunk {chunk.number} (byte {pos})",
-                        f"lists {len(listed)} messages of channel {index.channel_id}, the chunk holds {len(mine)} "
-                        f"({len(listed - mine)} entries point at no such message)")
+                        f"lists {counted(len(listed), 'message')} of channel {index.channel_id}, the chunk holds {len(mine)} "
+                        f"({counted(len(listed - mine), 'entry', 'entries')} point at no such message)")
         times = [t for t, _ in index.records]
         if times != sorted(times):
             self.damage(pos, f"message index of chunk {chunk.number} (byte {pos})", "log times not in order")
@@ -504,13 +505,13 @@ class _Walker:
             return
         found = {c.offset: c for c in self.scan.chunks}
         if len(self.chunk_indexes) != len(self.scan.chunks):
-            self.damage(self.data_end_at, "summary", f"indexes {len(self.chunk_indexes)} chunks, the data section "
+            self.damage(self.data_end_at, "summary", f"indexes {counted(len(self.chunk_indexes), 'chunk')}, the data section "
                         f"holds {len(self.scan.chunks)}")
         for i, ci in enumerate(self.chunk_indexes):
             c = found.get(ci.chunk_start_offset)
             if c is None or c.length != ci.chunk_length or (c.start, c.end) != (ci.message_start_time,
                                                                              ci.message_end_time):
-                self.damage(ci.chunk_start_offset, f"chunk index {i}", f"no chunk of {ci.chunk_length} bytes, log "
+                self.damage(ci.chunk_start_offset, f"chunk index {i}", f"no chunk of {counted(ci.chunk_length, 'byte')}, log "
                             f"times {ci.message_start_time}-{ci.message_end_time} at byte {ci.chunk_start_offset}: "
                             "chunks moved or changed")
             elif c.number != i:
@@ -520,8 +521,8 @@ class _Walker:
             messages = self.messages
             lost = any(not c.intact for c in self.scan.chunks)
             if self.statistics.message_count != messages and not lost:
-                self.damage(self.data_end_at, "summary", f"statistics count {self.statistics.message_count} "
-                            f"messages, the data section holds {messages}")
+                self.damage(self.data_end_at, "summary", f"statistics count "
+                            f"{counted(self.statistics.message_count, 'message')}, the data section holds {messages}")
         self.unlose_accounted()
 
     def unlose_accounted(self) -> None:

@@ -40,6 +40,7 @@ from .check import no_whole_round, read_session
 from .fold import READS, SessionFold, fold_events, stream_seed
 from .reader import recovered_lost
 from .forgery import contradiction
+from pairplay.numbers import counted
 
 
 class RebuildError(InputError):
@@ -72,9 +73,9 @@ def partial_reason(fold: SessionFold, note: str = "", recovered: dict[str, str] 
         n = len(fold.whole_rounds())
         why.append(f"no SessionEnded: the recording stops after {n} round{'s' * (n != 1)}")
     elif e.reason != "completed":
-        where = f" in round {e.round + 1} after {e.turns_in_round} turns" if e.round >= 0 else ""  # from 1, as the board
+        where = f" in round {e.round + 1} after {counted(e.turns_in_round, 'turn')}" if e.round >= 0 else ""  # from 1, as the board
         why.append(f"{e.reason}{f' ({e.detail})' if e.detail else ''} after {e.rounds_played} of "
-                   f"{fold.config.rounds} rounds{where}")
+                   f"{counted(fold.config.rounds, 'round')}{where}")
     if note:
         why.append(note)
     if recovered:

@@ -49,6 +49,7 @@ from pairplay.outputs import OutputError, output_file, set_aside_of
 from pairplay.schemas import journal as j
 from pairplay.schemas.policy import read_policy, write_policy
 from pairplay.schemas.study import Study, StudyFileError, load_study
+from pairplay.numbers import counted
 
 from .fold import fold_events
 from .reader import read_log
@@ -403,14 +404,14 @@ class StudyData:
         rounds = self.study.phase_by_id(g.phase).rounds
         said = [f"session {config.session}" if config.session != g.session else "",
                 f"participant {config.participant}" if config.participant != f"human:{g.participant}" else "",
-                f"{config.rounds} round{'s' if config.rounds != 1 else ''}" if config.rounds != rounds else "",
+                counted(config.rounds, "round") if config.rounds != rounds else "",
                 f"persona {config.scripted or config.persona or 'none'}" if g.scripted and config.scripted != g.scripted else ""]
         said = [s for s in said if s]
         if not said:
             return ""
         plays = f"human:{g.participant}" + (f" (scripted: {g.scripted})" if g.scripted else "")
-        return (f"it holds {', '.join(said)}; the journal's game is {g.session} of {plays}, {rounds} "
-                f"round{'s' if rounds != 1 else ''}")
+        return (f"it holds {', '.join(said)}; the journal's game is {g.session} of {plays}, "
+                f"{counted(rounds, 'round')}")
 
     def _not_this_games_file(self, g: Game, path: Path) -> str:
         """`not_this_game` of the session the recording at `path` starts ("" if it starts none or cannot be read:
@@ -779,7 +780,7 @@ def _export_readme(pid: str, study: str, games: list[Game], files: list[Path], a
                 if rel.endswith(".journal") else
                 "the policy learned in that game (JSON: Q-table 24 states x 88 actions, greedy action per state)")
         lines.append(f"- {rel}: {what}")
-    lines += [f"- answers.csv: {answers} questionnaire answers (one row per item)",
+    lines += [f"- answers.csv: {counted(answers, 'questionnaire answer')} (one row per item)",
               "- journal.jsonl: the study journal's lines about this participant (registration, games, marks)", ""]
     if merged:
         lines += ["Merged policies combined from this participant's games (kept in the study; not included): "

@@ -42,6 +42,7 @@ from pathlib import Path
 from typing import Callable
 
 import msgspec
+from pairplay.numbers import counted
 
 MAGIC = b"\x89pairplay journal 1\n"  # 20 bytes: no MCAP reader takes it for a recording
 assert len(MAGIC) == 20
@@ -196,11 +197,11 @@ def read_journal(path: str | Path) -> Journal:
         size, count, taken_ns, crc = _HEAD.unpack_from(data, pos)
         start = pos + _HEAD.size
         if size > MAX_FRAME or start + size > len(data):
-            torn = f"cut inside a frame at byte {pos} of {len(data)} ({size} bytes announced)"
+            torn = f"cut inside a frame at byte {pos} of {len(data)} ({counted(size, 'byte')} announced)"
             break
         body = data[start:start + size]
         if zlib.crc32(body, zlib.crc32(data[pos:pos + 16])) != crc:
-            torn = f"a frame at byte {pos} fails its CRC (torn or damaged); {len(data) - pos} bytes not read"
+            torn = f"a frame at byte {pos} fails its CRC (torn or damaged); {counted(len(data) - pos, 'byte')} not read"
             break
         frames.append((body, count, taken_ns))
         pos = start + size
@@ -218,7 +219,7 @@ def read_journal(path: str | Path) -> Journal:
             journal.torn = f"frame {i} is unreadable ({err}); read up to it"
             break
         if len(items) != count:
-            journal.torn = f"frame {i} holds {len(items)} records, its head says {count}; read up to it"
+            journal.torn = f"frame {i} holds {counted(len(items), 'record')}, its head says {count}; read up to it"
             break
         journal.records.extend((k, p, taken_ns) for k, p in items)
     return journal

@@ -38,6 +38,7 @@ from pairplay.schemas.usermodel import UserModelFile, write_user_model
 
 from .study import markdown_table, text_table
 from .sweep import PICKS, t975
+from pairplay.numbers import counted
 
 ARM_TEXT = {
     "same": "the recorded learner, replayed (checks the fit)",
@@ -89,7 +90,7 @@ def comparison_rows(recorded: Recorded, runs: dict, texts: dict[str, str]) -> li
     rows = [["arm", "what", f"{PICKS_UNIT}: mean \u00b1 sd [95% CI]", HITS,
              "minus recorded", "minus 'same' (paired) [95% CI]", "differs from 'same'"]]
     rec_mean = float(np.mean(recorded.picks)) if recorded.picks else float("nan")
-    rows.append(["recorded", "what happened", f"{rec_mean:.2f} ({len(recorded.picks)} rounds)",
+    rows.append(["recorded", "what happened", f"{rec_mean:.2f} ({counted(len(recorded.picks), 'round')})",
                  f"{recorded.hits:.1%} of {recorded.suggestions}", "", "", ""])
     base = runs["same"].picks.mean(axis=1) if "same" in runs else None
     for name, r in runs.items():
@@ -150,7 +151,7 @@ def counterfactual_figure(recorded: Recorded, runs: dict, path: Path, title: str
         mean, low, high = picks_band(r.picks)
         n = r.picks.shape[0]
         c = colours[k % len(colours)]
-        ax.plot(x, mean, color=c, lw=1.5, label=f"{name} (mean of {n} seeds)")
+        ax.plot(x, mean, color=c, lw=1.5, label=f"{name} (mean of {counted(n, 'seed')})")
         ax.fill_between(x, low, high, color=c, alpha=0.18, lw=0)
     if recorded.picks:
         ax.plot(np.arange(1, len(recorded.picks) + 1), recorded.picks, color="black", lw=2, marker="o", ms=3,
@@ -190,20 +191,20 @@ def write_counterfactual(out: str | Path, stem: str, model: UserModelFile, recor
         lines += [f"Session {model.session}, participant {model.participant}, observed card: "
                   f"{model.observed_source}. The simulated user fitted to the recorded picks"
                   f"{' of ' + ', '.join(model.fitted_on) if len(model.fitted_on) > 1 else ''} "
-                  f"(maximum likelihood over {model.picks} picks, log L = {model.loglik:.1f}; "
+                  f"(maximum likelihood over {counted(model.picks, 'pick')}, log L = {model.loglik:.1f}; "
                   f"evidence: {', '.join(f'{k} {v}' for k, v in model.evidence.items())}):", "",
                   markdown_table(model_rows(model)), ""]
         lines += [f"**Caveat:** {c}." for c in caveats(model)] + ([""] if caveats(model) else [])
         if model.considered_counted is not None:
             c = model.considered_counted
-            lines += [f"Check: the simulated participant reported considering {c.count} of {c.of} suggestions "
+            lines += [f"Check: the simulated participant reported considering {c.count} of {counted(c.of, 'suggestion')} "
                       f"whose match it did not remember ({c.rate:.2f}, 95% {c.low95:.2f} .. {c.high95:.2f}); the "
                       f"fit's p is {model.p_consider.estimate:.2f}.", ""]
         if runs:
             rows = comparison_rows(recorded, runs, texts)
             n = next(iter(runs.values())).picks.shape
             lines += ["## Recorded vs counterfactual", "",
-                      f"Each arm plays the fitted user for {n[1]} rounds on {n[0]} seeds (the same deals in every "
+                      f"Each arm plays the fitted user for {counted(n[1], 'round')} on {counted(n[0], 'seed')} (the same deals in every "
                       "arm); picks per round are each seed's mean over its rounds, lower is better "
                       f"({PERFECT_PICKS} = perfect).", "", markdown_table(rows), "",
                       "![counterfactual](counterfactual.png)", ""]

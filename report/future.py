@@ -37,6 +37,7 @@ import numpy as np
 
 from pairplay import csvcell
 from pairplay.core.precombine import add_combination
+from pairplay.numbers import counted
 
 
 @dataclass
@@ -66,8 +67,8 @@ def applies(state: Study) -> str:
     if games >= MIN_GAMES and n >= 2:
         return ""
     return (f"Not run: this section needs at least {MIN_GAMES} games per persona (disjoint replicates of each "
-            f"persona's policies) and at least 2 personas to merge; this study has {games} game"
-            f"{'s' if games != 1 else ''} of {n} persona{'s' if n != 1 else ''}.")
+            f"persona's policies) and at least 2 personas to merge; this study has "
+            f"{counted(games, 'game')} of {counted(n, 'persona')}.")
 
 
 def precombination(state: Study, batch):

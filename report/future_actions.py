@@ -18,6 +18,7 @@ from pairplay.core.actions import ACTION_NAMES
 from pairplay.core.geometry import PERFECT_PICKS, STATE_NAMES
 from pairplay.core.personas import READING_PERSONAS
 from pairplay.report import plots
+from pairplay.numbers import counted
 
 
 ACTION_LEVEL_HEADING = "## Action-level profiles (future work 1)"
@@ -35,7 +36,7 @@ def profile_rows(exp) -> list[list[str]]:
     """Per persona: algorithm 3 beside the action-level information, over all its policies and per replicate."""
     rows = [["persona", "reads as one whole", "algorithm 3: speech % / head %", "action level: speech % / head %",
              "synonym states (counted by algorithm 3 only)", "wholes found (state: action)",
-             f"{exp.replicate_info.shape[1]} replicates of 2 policies: algorithm 3 -> action level, speech % / head %"]]
+             f"{counted(exp.replicate_info.shape[1], 'replicate')} of 2 policies: algorithm 3 -> action level, speech % / head %"]]
     for i, key in enumerate(exp.persona):
         prof = exp.profiles[key]
         reads = ", ".join(READING_PERSONAS[key].reads) if key in READING_PERSONAS else ""
@@ -118,8 +119,8 @@ def action_level_section(out: Path, exp, markdown_table, draw=plots.draw) -> lis
         markdown_table(merges), "",
         "Change in picks per round of the merged policies, wholes kept minus algorithm 3 + 4, mean \u00b1 sd "
         "over the replicates (negative = fewer picks, better), by who played them: " + "; ".join(verdicts) +
-        f". The action-level information alone changed {int(exp.info_changed.sum())} state(s) of the "
-        f"{exp.info_changed.size} merged policies (it changes a merge only where it changes a member's error "
+        f". The action-level information alone changed "
+        f"{counted(int(exp.info_changed.sum()), 'state')} of the {counted(exp.info_changed.size, 'merged policy', 'merged policies')} (it changes a merge only where it changes a member's error "
         "shares, and with 2 policies a user it seldom does); the change comes from keeping wholes.", "",
         "![action-level merges](action_merges.png)", "",
     ]

@@ -16,6 +16,7 @@ import numpy as np
 from pairplay import csvcell
 from pairplay.core.frame_study import frame_experiment
 from pairplay.core.frames import FRAME_PERSONAS, FRAMES
+from pairplay.numbers import counted
 
 
 def frames_lines(out: Path, seed: int, rounds: int, reward_bonus: str, markdown_table, draw) -> list[str]:
@@ -46,14 +47,14 @@ def frames_section(out: Path, exp, markdown_table, draw) -> list[str]:
                      f"{(per_rep[with_] - per_rep[without]).mean():+.2f}"])
     with open(out / "frames.csv", "w", newline="") as f:
         csvcell.writer(f).writerows(rows)
-    acc_rows = [["persona (frame)", *[f"{n} suggestion{'s' if n > 1 else ''}" for n in exp.lengths]]]
+    acc_rows = [["persona (frame)", *[counted(n, "suggestion") for n in exp.lengths]]]
     acc_rows += [[name, *[f"{100 * a:.1f}%" for a in acc]] for name, acc in zip(names, exp.accuracy)]
     draw("frame_calibration", names, {arm: picks[k] for k, arm in enumerate(exp.arms)}, list(exp.lengths),
          exp.accuracy, out / "frames.png", R, exp.accuracy_sessions)
     all_diff = picks[with_].mean(axis=1) - picks[without].mean(axis=1)  # (replicates,)
     mir_diff = picks[with_][:, mirrored].mean(axis=1) - picks[without][:, mirrored].mean(axis=1)
     enough = [n for n, a in zip(exp.lengths, exp.accuracy.min(axis=0)) if a >= 0.95]
-    needs = f"{enough[0]} suggestions are right in at least 95% of rounds for every user" if enough else \
+    needs = f"{counted(enough[0], 'suggestion')} are right in at least 95% of rounds for every user" if enough else \
         "no round length measured is right in 95% of rounds for every user"
     frames = ", ".join(f"{FRAMES[f]}" for f in range(len(FRAMES)))
     return [
@@ -64,10 +65,10 @@ def frames_section(out: Path, exp, markdown_table, draw) -> list[str]:
         f"the robot speaking and turning its head in its own frame, so a mirrored user's policy is right only "
         f"in that user's frame. Per replicate ({R}, disjoint games) one policy a user; all five are merged "
         "with algorithm 4 as they are ('without calibration'), and again after a calibration round of "
-        f"{exp.trials} suggestions with known answers at the start of each session inferred each user's frame, "
+        f"{counted(exp.trials, 'suggestion')} with known answers at the start of each session inferred each user's frame, "
         "moved every policy to the robot's frame before the merge and the merge back into each user's "
         "inferred frame when played ('with calibration'). Every column plays the same evaluation games "
-        f"({exp.eval_rounds} rounds per user and replicate, epsilon 0); picks per round, lower is better.", "",
+        f"({counted(exp.eval_rounds, 'round')} per user and replicate, epsilon 0); picks per round, lower is better.", "",
         markdown_table(rows), "",
         f"With minus without calibration: {all_diff.mean():+.2f} \u00b1 {all_diff.std():.2f} picks per round over "
         f"all users, {mir_diff.mean():+.2f} \u00b1 {mir_diff.std():.2f} over the mirrored ones (mean \u00b1 sd "
@@ -76,7 +77,7 @@ def frames_section(out: Path, exp, markdown_table, draw) -> list[str]:
         f"{100 * exp.calibrated_right:.1f}% of the experiment's calibration rounds inferred the right frame. "
         "A mirrored user's own policy stays behind the merge with calibration: 'Try at row x and column y' "
         "names a wrong card to it until the robot says the coordinates in its frame.", "",
-        f"The calibration round alone ({exp.accuracy_sessions} simulated rounds per user and length; "
+        f"The calibration round alone ({counted(exp.accuracy_sessions, 'simulated round')} per user and length; "
         "suggestions alternate 'Try at row x and column y' with a card in the top or bottom row and a diagonal "
         f"head turn; ties go to the robot's frame): {needs}.", "",
         markdown_table(acc_rows), "",

@@ -50,6 +50,7 @@ from pairplay.schemas.policy import read_policy
 
 from pairplay.report import plots
 from pairplay.report.study import markdown_table
+from pairplay.numbers import counted
 
 
 HUMAN_OUTPUTS = ("picks.csv", "games.png", "phases.png", "users-*.png", "merged.png", "attention.csv",
@@ -221,12 +222,12 @@ def human_report(folder: str | Path, out: str | Path | None = None, reference: s
             if s_ < N_STATES - 1:
                 state_rows.append([f"{s_} {STATE_NAMES[s_]}", f"{a}: {ACTION_NAMES[a]}", named(rule, names)])
         exact = sum(1 for a in c.actions[:N_STATES - 1] if 33 <= a <= 44)
-        panels.append((f"{phase_id} bias ({len(c.users)} users)", np.asarray(c.actions)))
+        panels.append((f"{phase_id} bias ({counted(len(c.users), 'user')})", np.asarray(c.actions)))
         sections += [f"## The bias policy of {phase_id} (algorithm 4, figure 7.5)", "",
-                     f"Combined by the combiner service from {len(c.inputs)} policy files of "
+                     f"Combined by the combiner service from {counted(len(c.inputs), 'policy file')} of "
                      f"{', '.join(names.get(u, u) for u in c.users)} "
                      f"(`{c.output}`{'' if merged_path.is_file() else ', file since removed'}); "
-                     f"{exact} of {N_STATES - 1} states say the exact position (codes 33-44); rules: "
+                     f"{exact} of {counted(N_STATES - 1, 'state')} say the exact position (codes 33-44); rules: "
                      + "; ".join(f"{k} x{v}" for k, v in sorted(rules.items(), key=lambda kv: -kv[1])) + "."
                      + (f" **Combined from scripted games** (personas {', '.join(personas)}): a rehearsal's bias "
                         "policy, not people's." if personas else ""), "",
@@ -273,7 +274,7 @@ def human_report(folder: str | Path, out: str | Path | None = None, reference: s
 
     kinds = sorted({g.scripted for g in scripted})
     if rehearsal:
-        title = f"# {study.study.title or study.study.id}: a rehearsal of {len(scripted)} scripted games"
+        title = f"# {study.study.title or study.study.id}: a rehearsal of {counted(len(scripted), 'scripted game')}"
         note = [f"No person played: every game was played by a scripted persona ({', '.join(kinds)}; "
                 "`protocol pilot` or `serve --pilot`). This checks the protocol, not people: its figures are "
                 "the personas'.", ""]
@@ -283,13 +284,13 @@ def human_report(folder: str | Path, out: str | Path | None = None, reference: s
                 "and are pooled with people's games as asked (`--include-scripted`).", ""]
     else:
         title = f"# {study.study.title or study.study.id}: the human-world report"
-        note = [f"{len(scripted)} games played by scripted personas ({', '.join(kinds)}) are left out of every "
+        note = [f"{counted(len(scripted), 'game')} played by scripted personas ({', '.join(kinds)}) are left out of every "
                 "figure and table (`pairplay report --include-scripted` pools them).", ""] if scripted else []
     head = [title, "", *note,
             f"pairplay {__version__}; study `{study.study.id}` (seed {study.study.seed}); "
-            f"{len({s.participant for s in games})} participants, {len(games)} valid games"
+            f"{counted(len({s.participant for s in games}), 'participant')}, {counted(len(games), 'valid game')}"
             + (f"; left out: {', '.join(excluded)}" if excluded else "") + ". Phases: "
-            + "; ".join(f"{p.id}: {p.games} game(s) x {p.rounds} rounds, {p.algorithm} ({p.preset})"
+            + "; ".join(f"{p.id}: {counted(p.games, 'game')} x {counted(p.rounds, 'round')}, {p.algorithm} ({p.preset})"
                         + (f" on the bias of {p.bias}" if p.bias else "") for p in study.phase)
             + f". Re-run: `pairplay report {data.folder}`.", ""]
     (out / "report.md").write_text("\n".join(head + sections))

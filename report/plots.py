@@ -23,6 +23,7 @@ def _pyplot():
     return plt
 
 from pairplay.core.geometry import PERFECT_PICKS, PICKS_UNIT  # noqa: E402
+from pairplay.numbers import counted
 
 
 def _fit(fig, left: float, bottom: float, top: float, right: float = 0.15, wspace: float | None = None,
@@ -299,7 +300,7 @@ def sweep_measure(labels: list[str], mean: list[float], low: list[float], high: 
     ax.set_xticks(x, labels, rotation=60, ha="right", fontsize=7)
     unit = {"ratio": "learned / oracle (1 = the oracle)", "reuse_gain": "picks per round saved by pi-reuse"}
     ax.set_ylabel(unit.get(measure.split("/")[-1], "picks per round (18 = perfect)"))
-    ax.set_title(f"{measure}: mean over {seeds} seeds, 95% confidence interval", fontsize=10)
+    ax.set_title(f"{measure}: mean over {counted(seeds, 'seed')}, 95% confidence interval", fontsize=10)
     ax.grid(axis="y", alpha=0.3)
     fig.tight_layout()
     _save(fig, path, dpi=100, force=True)  # a resumed sweep draws its figures again
@@ -404,7 +405,7 @@ def frame_calibration(labels: list[str], series: dict[str, np.ndarray], lengths:
     ax.set_xticks(x, labels, rotation=12, fontsize=8)
     ax.set_ylabel("picks per round (18 = perfect; lower is better)")
     ax.set_ylim(PERFECT_PICKS - 1, max(float(np.asarray(v).max()) for v in series.values()) + 3)
-    ax.set_title(f"one merged policy for all the users, played to each (mean \u00b1 sd over {replicates} replicates)",
+    ax.set_title(f"one merged policy for all the users, played to each (mean \u00b1 sd over {counted(replicates, 'replicate')})",
                  fontsize=9)
     ax.grid(axis="y", alpha=0.3)
     ax.legend(fontsize=8, ncol=3, frameon=False, loc="upper left")
@@ -416,7 +417,7 @@ def frame_calibration(labels: list[str], series: dict[str, np.ndarray], lengths:
     ax2.set_ylabel("frame inferred right (% of rounds)")
     ax2.set_xticks(lengths)
     ax2.set_ylim(min(50.0, 100 * float(np.min(accuracy)) - 5), 101)
-    ax2.set_title(f"calibration round, {sessions} rounds per user and length", fontsize=9)
+    ax2.set_title(f"calibration round, {counted(sessions, 'round')} per user and length", fontsize=9)
     ax2.grid(alpha=0.3)
     ax2.legend(fontsize=7, frameon=False, loc="lower right")
     _fit(fig, left=_left_of_labels(labels, 12, 0.8, 8, share=0.5), bottom=max(0.75, _under_labels(labels, 12, 8)),

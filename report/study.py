@@ -46,7 +46,7 @@ from pairplay.core.rng import GAME_INDEX_RANGE, SEED_RANGE
 from pairplay.core.simulate import MEMORY_LIMIT, batch_bytes, gigabytes
 from pairplay.errors import OptionError
 from pairplay.lists import comma_items
-from pairplay.numbers import shown
+from pairplay.numbers import counted, shown
 from pairplay.schemas.config import DEFAULT_REWARD_BONUS, LearnerConfig, LSPIConfig, REWARD_BONUS_RULES, lspi_unused
 from pairplay.outputs import output_folder
 from pairplay.processes import off_main_thread, process_pool, stop_pool
@@ -174,7 +174,7 @@ class StudySettings:
             every = study.REUSE_SNAPSHOT_EVERY
             if self.rounds < every:  # no snapshot of the greedy policy, so no 'rounds to 1.10x the oracle'
                 raise SettingError("rounds", f"must be at least {every} when the speed-up runs{when}: its greedy "
-                                   f"snapshots are taken every {every} rounds; got {self.rounds}")
+                                   f"snapshots are taken every {counted(every, 'round')}; got {self.rounds}")
             if self.psi <= 0:  # psi 0: the bias is never taken, the pi-reuse arm would be Q-learning
                 raise SettingError("psi", f"must be above 0 when the speed-up runs{when}: pi-reuse with psi 0 never "
                                    f"takes the bias policy's action (its arm would be Q-learning), got {shown(self.psi)}")
@@ -214,8 +214,8 @@ class StudySettings:
                   for k in MEMORY_COUNTS}
         key = min(shrink, key=shrink.get)
         sizes = ", ".join(f"{spell(k)} {getattr(self, k)}" for k in MEMORY_COUNTS if k != "reuse_seeds" or speed_up)
-        raise SettingError(key, f"the study would hold about {gigabytes(need)} of memory ({len(personas)} persona"
-                           f"{'s' if len(personas) != 1 else ''}, {sizes}), over the {gigabytes(MEMORY_LIMIT)} "
+        raise SettingError(key, f"the study would hold about {gigabytes(need)} of memory ("
+                           f"{counted(len(personas), 'persona')}, {sizes}), over the {gigabytes(MEMORY_LIMIT)} "
                            f"allowed: give fewer games, rounds or personas; got {getattr(self, key)}")
 
     def rerun_command(self) -> str:
@@ -674,17 +674,17 @@ def _run(args, out, progress_bar, personas, config, names, timings, start, figur
     last50 = {k: c[:, -study.FIRST_ROUNDS:].mean() for k, c in curves.items()}
     learner_text = "Q-learning with the thesis's schedules (epsilon 0.9 - 0.1/50 rounds, floor 0.1; alpha 0.5 - " \
         "0.05/50 rounds)" if lspi is None else \
-        f"online LSPI (algorithm 2, core/lspi.py: {lspi.tilings} tilings {lspi.tile_width:g} grid steps wide" \
+        f"online LSPI (algorithm 2, core/lspi.py: {counted(lspi.tilings, 'tiling')} {lspi.tile_width:g} grid steps wide" \
         f"{' + one tile per state' if lspi.exact else ''}, ridge {lspi.ridge:g}, policy improvement every " \
-        f"{lspi.improve_every} samples, gamma {lspi.gamma:g}) with Q-learning's epsilon schedule"
+        f"{counted(lspi.improve_every, 'sample')}, gamma {lspi.gamma:g}) with Q-learning's epsilon schedule"
     report = [
         "# pairplay study report", "",
-        f"pairplay {__version__}, seed {args.seed}, {len(personas)} personas x {args.games} games x "
-        f"{args.rounds} rounds, {learner_text}; the 1/|candidate set| bonus "
+        f"pairplay {__version__}, seed {args.seed}, {counted(len(personas), 'persona')} x {counted(args.games, 'game')} x "
+        f"{counted(args.rounds, 'round')}, {learner_text}; the 1/|candidate set| bonus "
         f"{BONUS_RULE_TEXT[args.reward_bonus]} (rule `{args.reward_bonus}`). "
         f"Re-run: `{args.rerun_command()}`.", "",
         "## Learned policies against the references", "",
-        f"Picks per round, each greedy policy played {args.eval_rounds} rounds with epsilon 0; the oracle "
+        f"Picks per round, each greedy policy played {counted(args.eval_rounds, 'round')} with epsilon 0; the oracle "
         "and the user alone play the same games (core/oracle.py documents the oracle).", "",
         markdown_table(table), "", "![evaluation](evaluation.png)", "",
         *gap_section(cmp, training),
@@ -694,11 +694,11 @@ def _run(args, out, progress_bar, personas, config, names, timings, start, figur
                        [[k, f"{first50[k]:.2f}", f"{last50[k]:.2f}"] for k in curves]), "",
         "![learning curves](learning_curves.png)", "",
         "## User information (algorithm 3, figure 6.5)", "",
-        f"Over each persona's {args.games} policies, shares of the 23 spatial states; (S)/(H) mark speech/head "
+        f"Over each persona's {counted(args.games, 'policy', 'policies')}, shares of the 23 spatial states; (S)/(H) mark speech/head "
         "incompatibilities, with the mean number of Q updates the state got in a game. Policies disagree "
         "where states are seldom trained (thesis 6.4: untrained states), hence the median updates per state, "
         f"and the same comparison over the n states every one of the persona's policies updated at least "
-        f"{args.trained_updates} times (`--trained-updates`).", "",
+        f"{counted(args.trained_updates, 'time')} (`--trained-updates`).", "",
         markdown_table(prof_rows), "", "![profiles](profiles.png)", "",
         "## Merged policies (algorithm 4, figure 6.6)", "",
         "Each persona is represented by one of its policies, picked at random by the seed (thesis 6.2); "
@@ -719,9 +719,9 @@ def _run(args, out, progress_bar, personas, config, names, timings, start, figur
     if reuse is not None:
         gains = reuse.first50[:, 0].mean(1) - reuse.first50[:, 1].mean(1)
         report += ["", "## Policy reuse speed-up (algorithm 5)", "",
-                   f"Each persona held out; bias = merge of the other personas. {args.reuse_seeds} games each, "
+                   f"Each persona held out; bias = merge of the other personas. {counted(args.reuse_seeds, 'game')} each, "
                    f"psi {args.psi} decaying by {args.psi_decay} per suggestion, reset every round, the last "
-                   f"{args.reuse_last} rounds on the new policy alone. 'Rounds to 1.10x oracle': the first "
+                   f"{counted(args.reuse_last, 'round')} on the new policy alone. 'Rounds to 1.10x oracle': the first "
                    "multiple of 10 rounds after which the learner's greedy policy, played 20 rounds with "
                    "epsilon 0, needs at most 1.10x the oracle's picks.", "",
                    markdown_table(reuse_rows), "",
@@ -749,7 +749,7 @@ def first_rounds_text(rounds: int) -> str:
     """The label of the early-learning measure: 'first 50 rounds', or 'first 20 rounds (all)' of a shorter game
     (the measure averages the rounds there are: a 20-round run's report said 'first 50 rounds')."""
     n = study.FIRST_ROUNDS
-    return f"first {n} rounds" if rounds >= n else f"first {rounds} rounds (all)"
+    return f"first {counted(n, 'round')}" if rounds >= n else f"first {counted(rounds, 'round')} (all)"
 
 
 def _rounds_text(x: np.ndarray) -> str:
@@ -781,8 +781,8 @@ def speed_section(speed: study.Speed, oracle: dict[str, float], out: Path, names
     figures.draw("algorithm_curves", speed.curves, speed.algorithms, speed.persona, names,
                  [oracle[k] for k in speed.persona], out / "speed.png")
     lines = ["## LSPI beside Q-learning (same games, same exploration schedule)", "",
-             f"Both learners train on the same {args.games} games per persona (same deals and users); every "
-             f"{speed.every} rounds each learner's greedy policy plays 20 rounds with epsilon 0 on the same "
+             f"Both learners train on the same {counted(args.games, 'game')} per persona (same deals and users); every "
+             f"{counted(speed.every, 'round')} each learner's greedy policy plays 20 rounds with epsilon 0 on the same "
              f"evaluation games. 'Rounds to {speed.target:.2f}x oracle': the first such snapshot within "
              f"{speed.target:.2f}x the oracle's picks per round, mean \u00b1 sd over games.", "",
              markdown_table(rows), "", "![LSPI beside Q-learning](speed.png)", ""]

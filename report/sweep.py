@@ -52,11 +52,11 @@ import numpy as np
 
 from pairplay import csvcell
 from pairplay.errors import OptionError
-from pairplay.numbers import shown, type_name
+from pairplay.numbers import counted, shown, type_name, typed_floats
 from pairplay.outputs import output_file, output_folder, write_text
 from pairplay.processes import check_workers, worker_pool
 from pairplay.schemas.jsonfile import empty, without_bom
-from pairplay.schemas.tomlplace import misplaced, table_not_value
+from pairplay.schemas.tomlplace import TOP, misplaced, table_not_value
 from pairplay.core.geometry import PERFECT_PICKS
 from pairplay.core.rng import SEED_RANGE
 from pairplay.core.study import FIRST_ROUNDS
@@ -128,11 +128,10 @@ def _typed(path: str, key: str, value):
         value = ",".join(value)
     kind = {"int": int, "float": (int, float), "str": str, "bool": bool}[want if isinstance(want, str) else want.__name__]
     if isinstance(value, bool) and kind is not bool or not isinstance(value, kind):
-        raise GridError(f"{path}: {key} = {value!r} is not {type_name(want)}")
+        raise GridError(f"{path}: {key} = {as_toml(value)} is not {type_name(want)}")
     return float(value) if want in ("float", float) else value
 
 
-TOP = "the top of the file"
 # the file's tables and the keys each takes (schemas/tomlplace.py)
 PLACES = {TOP: frozenset({"study", "grid", "seeds", "reuse"}), "[study]": frozenset(SWEEPABLE),
           "[grid]": frozenset(SWEEPABLE)}
@@ -140,13 +139,17 @@ PLACES = {TOP: frozenset({"study", "grid", "seeds", "reuse"}), "[study]": frozen
 
 def _check_places(path: str, data: dict) -> None:
     """GridError for a key or a table at the wrong level: `seeds` or `reuse` below the [study] or [grid]
-    line (that table's then; it was "unknown study setting 'seeds'"), a [study.psi] table where psi takes
-    a value, `study = 3` where a table is expected (a traceback)."""
+    line (that table's then; it was "unknown study setting 'seeds'"), a study setting above them (it was
+    "unknown key(s) psi"), a [study.psi] table where psi takes a value, `study = 3` where a table is
+    expected (a traceback)."""
     for key, value in data.items():
         if key in ("study", "grid") and not isinstance(value, dict):
             raise GridError(f"{path}: {key}: a value where a table is expected: write a [{key}] line, its keys below it")
         if key in ("seeds", "reuse") and isinstance(value, dict):
             raise GridError(f"{path}: {key}: {table_not_value(key, f'[{key}]', TOP)}")
+        said = misplaced(key, TOP, PLACES)  # a study setting above the [study] or [grid] line
+        if said:
+            raise GridError(f"{path}: {key}: {said}")
     for table in ("study", "grid"):
         for key, value in data.get(table, {}).items():
             said = misplaced(key, f"[{table}]", PLACES, [TOP])
@@ -157,14 +160,19 @@ def _check_places(path: str, data: dict) -> None:
 
 
 def read_grid(path: str | Path) -> Grid:
-    """The sweep described by a TOML file (GridError naming the file and the key)."""
-    path = str(path)
+    """The sweep described by a TOML file (GridError naming the file and the key; a number it echoes, as the
+    file has it: pairplay/numbers.py typed_floats)."""
+    with typed_floats() as parse_float:
+        return _read_grid(str(path), parse_float)
+
+
+def _read_grid(path: str, parse_float) -> Grid:
     try:
         with open(path, "rb") as f:
             raw = f.read()
         if empty(raw):  # (read as a grid of nothing, it ran the default study, exit 0: a new user's trial)
             raise GridError(f"{path}: {empty(raw)}")
-        data = tomllib.loads(without_bom(raw).decode("utf-8"))
+        data = tomllib.loads(without_bom(raw).decode("utf-8"), parse_float=parse_float)
     except FileNotFoundError:
         raise GridError(f"{path}: no such file") from None
     except IsADirectoryError:  # it said `Is a directory (bad)`: the system's words, not what to give
@@ -194,11 +202,11 @@ def read_grid(path: str | Path) -> Grid:
         if seeds < 1:
             raise GridError(f"{path}: seeds = {seeds}: give a count of at least 1 or a list of seeds")
         if seeds * settings > MAX_CELLS:
-            raise GridError(f"{path}: seeds = {seeds}: {settings} setting{'s' if settings != 1 else ''} x {seeds} "
-                            f"seeds is over the {MAX_CELLS} cells a sweep may have")
+            raise GridError(f"{path}: seeds = {seeds}: {counted(settings, 'setting')} x "
+                            f"{counted(seeds, 'seed')} is over the {MAX_CELLS} cells a sweep may have")
         seeds = list(range(seeds))
     if isinstance(seeds, list) and len(seeds) * settings > MAX_CELLS:
-        raise GridError(f"{path}: [grid]: {settings} settings x {len(seeds)} seeds is over the {MAX_CELLS} cells "
+        raise GridError(f"{path}: [grid]: {counted(settings, 'setting')} x {counted(len(seeds), 'seed')} is over the {MAX_CELLS} cells "
                         "a sweep may have")
     lo, hi = SEED_RANGE
     if not isinstance(seeds, list) or not seeds or not all(
@@ -361,12 +369,23 @@ def check_sweep_memory(grid: Grid, workers: int) -> None:
     cell = max(st.memory_bytes(len(st.persona_list()), grid.reuse, False) for st in settings)
     if cell * at_once > MEMORY_LIMIT:
         fit = max(1, MEMORY_LIMIT // max(cell, 1))
-        raise OptionError(f"{at_once} workers would hold about {gigabytes(cell * at_once)} of memory at once "
-                          f"({at_once} cells of up to {gigabytes(cell)}), over the {gigabytes(MEMORY_LIMIT)} allowed: "
+        raise OptionError(f"{counted(at_once, 'worker')} would hold about {gigabytes(cell * at_once)} of memory at once "
+                          f"({counted(at_once, 'cell')} of up to {gigabytes(cell)}), over the {gigabytes(MEMORY_LIMIT)} allowed: "
                           f"give --workers {fit} or fewer", f"--workers {workers}")
 
 
 SCHEDULER_TIMEOUT_S = 10  # how long a --scheduler has to answer, its handshake included
+
+
+# the schemes a --scheduler may use: tls:// and wss:// need a security configuration (certificates) sweep does
+# not take, inproc:// is one process's own, ucx:// needs UCX (Dask's connector for it could not even start)
+SCHEMES = ("tcp", "ws")
+
+
+def _scheduler_refused(address: str, what: str) -> OptionError:
+    """The one line of a --scheduler where no scheduler can be reached: what happened, then the fix."""
+    return OptionError(f"{what}: give the address a Dask scheduler prints at its start, tcp://HOST:PORT",
+                       f"--scheduler {address}")
 
 
 def check_scheduler(address: str) -> None:
@@ -376,15 +395,19 @@ def check_scheduler(address: str) -> None:
     waits for a request (`python3 -m http.server`) its handshake waited for ever, at one that sends
     bytes first (an SSH banner) it read them as a frame length and asked for 3 EiB (MemoryError: the
     line said "out of memory"), and a word with no port (`nonsense`) was a ValueError's traceback.
-    Every way the probe can fail is the one line: a wrong address is the user's to fix."""
+    Dask's connect retries a refused connection until its timeout (a closed port took the whole 10 s),
+    so a plain socket connects first: refused, an unknown host, an unreachable network fail at once.
+    Every way the probe can fail is the one line, in our words: a wrong address is the user's to fix."""
     import asyncio
+    import socket
 
     def refuse(what: str) -> OptionError:
-        return OptionError(f"{what} at {address}: give the scheduler's address, tcp://HOST:PORT", "--scheduler")
+        return _scheduler_refused(address, what)
 
     try:
         from distributed.comm import connect
         from distributed.comm.addressing import parse_address, parse_host_port
+        from distributed.comm.core import CommClosedError
         from distributed.comm.registry import get_backend
     except ImportError:  # a plain install has no Dask (a trial: a traceback)
         raise OptionError("a Dask cluster needs Dask's distributed package: pip install -e '.[cluster]'",
@@ -393,13 +416,21 @@ def check_scheduler(address: str) -> None:
     try:
         scheme, location = parse_address(address)
         get_backend(scheme)  # foo://host:1: "unknown address scheme"
-        if scheme in ("tcp", "tls", "ws", "wss"):
-            parse_host_port(location)
-    except (ValueError, TypeError) as err:
-        raise refuse(f"not a Dask address ({err})") from None
+    except (ValueError, TypeError):
+        raise refuse(f"not a Dask address (unknown scheme {address.partition('://')[0]}://)") from None
+    if scheme not in SCHEMES:
+        raise refuse(f"sweep reaches a scheduler over {' or '.join(s + '://' for s in SCHEMES)}, not {scheme}://")
+    try:
+        host, port = parse_host_port(location)
+    except (ValueError, TypeError):  # `nonsense`, `tcp://localhost`: no port
+        raise refuse(f"not a Dask address (HOST:PORT expected after {scheme}://, got {location!r})") from None
+    if not host:
+        raise refuse(f"not a Dask address (no host before :{port})")
+    if not 1 <= port <= 65535:
+        raise refuse(f"not a Dask address (port {port} is not 1..65535)")
 
-    async def identity() -> dict:
-        comm = await connect(address, timeout=SCHEDULER_TIMEOUT_S)
+    async def identity(timeout: float) -> dict:
+        comm = await connect(address, timeout=timeout)
         try:
             await comm.write({"op": "identity", "reply": True})
             return await comm.read()
@@ -407,7 +438,11 @@ def check_scheduler(address: str) -> None:
             comm.abort()
 
     def probe() -> dict:
-        return asyncio.run(asyncio.wait_for(identity(), SCHEDULER_TIMEOUT_S))
+        deadline = time.monotonic() + SCHEDULER_TIMEOUT_S
+        with socket.create_connection((host, port), timeout=SCHEDULER_TIMEOUT_S):
+            pass  # something listens: now Dask's own handshake, in the time left
+        left = max(deadline - time.monotonic(), 0.1)
+        return asyncio.run(asyncio.wait_for(identity(left), left))
 
     try:
         try:
@@ -418,17 +453,31 @@ def check_scheduler(address: str) -> None:
             from concurrent.futures import ThreadPoolExecutor
             with ThreadPoolExecutor(1) as pool:
                 said = pool.submit(probe).result()
-    except (TimeoutError, asyncio.TimeoutError):
+    except ConnectionRefusedError:
+        raise refuse(f"nothing listens at that address (connection refused)") from None
+    except socket.gaierror:
+        raise refuse(f"the host {host} is not known (no address found for it)") from None
+    except (TimeoutError, asyncio.TimeoutError):  # socket.timeout too; Dask's connect says "Timed out" below
         raise refuse(f"no Dask scheduler answered within {SCHEDULER_TIMEOUT_S} s") from None
     except MemoryError:  # its first bytes, read as a Dask frame's length, asked for exbibytes
-        raise refuse("something that is not a Dask scheduler answered (bytes that are no Dask message)") from None
-    except Exception as err:  # noqa: BLE001 - whatever the other end did: the address is wrong
-        why = f"{type(err).__name__}: {err}" if str(err) else type(err).__name__
-        raise refuse(f"no Dask scheduler answered ({' '.join(why.split())})") from None
+        raise refuse(f"something that is not a Dask scheduler answered "
+                     "(bytes that are no Dask message)") from None
+    except CommClosedError:  # (an OSError) the other end closed the connection in the handshake
+        raise refuse(f"something that is not a Dask scheduler answered "
+                     "(it closed the connection)") from None
+    except OSError as err:
+        if "timed out" in str(err).lower():  # Dask's connect: "Timed out trying to connect to ... after 10 s"
+            raise refuse(f"no Dask scheduler answered within {SCHEDULER_TIMEOUT_S} s") from None
+        why = err.strerror or " ".join(str(err).split()) or type(err).__name__  # "Network is unreachable"
+        raise refuse(f"cannot connect ({why})") from None
+    except Exception as err:  # noqa: BLE001 - whatever else the other end did: the address is wrong
+        why = " ".join(str(err).split())
+        raise refuse(f"no Dask scheduler answered ({type(err).__name__}{': ' + why if why else ''})"
+                     ) from None
     kind = said.get("type") if isinstance(said, dict) else None
     if kind != "Scheduler":
         raise refuse(f"a Dask {kind}, not a scheduler, answered" if isinstance(kind, str)
-                     else "something that is not a Dask scheduler answered")
+                     else f"something that is not a Dask scheduler answered")
 
 
 def run_sweep(grid: Grid, out: str | Path, *, scheduler: str | None = None, workers: int = 1,
@@ -462,8 +511,8 @@ def run_sweep(grid: Grid, out: str | Path, *, scheduler: str | None = None, work
         check_scheduler(scheduler)  # the whole handshake within the timeout (Client's covers the connect only)
         try:
             client = Client(scheduler, timeout=f"{SCHEDULER_TIMEOUT_S}s")
-        except OSError as err:  # named by its option (a new user's trial: "Timed out trying to connect ..." alone)
-            raise OptionError(f"no Dask scheduler answered at {scheduler} ({err})", "--scheduler") from None
+        except OSError:  # it answered the check a moment ago (a new user's trial: "Timed out trying to connect ..." alone)
+            raise _scheduler_refused(scheduler, "the Dask scheduler there stopped answering") from None
         with client:
             futures = [client.submit(_run_cell, grid, c, key=f"pairplay-cell-{c.id}", pure=True) for c in todo]
             for future in as_completed(futures):
@@ -474,7 +523,7 @@ def run_sweep(grid: Grid, out: str | Path, *, scheduler: str | None = None, work
         with worker_pool(workers) as pool:
             for future in done_first([pool.submit(_run_cell_alone, grid, c) for c in todo]):
                 store(*future.result())
-        where = f"{workers} local processes"
+        where = f"{counted(workers, 'local process', 'local processes')}"
     else:
         for c in todo:
             store(*_run_cell(grid, c))
@@ -532,7 +581,7 @@ def windows_note(grid: Grid) -> str:
         return ""
     said = "; ".join(f"rounds = {r}: the first and last {min(r, n)} of {r}" + (" (both all of them: one value)"
                                                                                if r <= n else "") for r in short)
-    return f" first{n} and last{n} average the first and last {n} training rounds, fewer in a shorter cell: {said}."
+    return f" first{n} and last{n} average the first and last {counted(n, 'training round')}, fewer in a shorter cell: {said}."
 
 
 # the summary's files (pairplay/outputs.py `owned`) and its manifest, the ones a run wrote: the summary is written
@@ -584,7 +633,7 @@ def _write_summary(out: Path, grid: Grid, results: dict[str, dict], run: SweepRu
                             [r["ci95_high"] for r in mine], path, measure, len(grid.seeds))
         figures.append(path)
     md = ["# pairplay sweep", "",
-          f"{len(grid.settings())} settings x {len(grid.seeds)} seeds = {run.cells} cells; computed {run.computed} "
+          f"{counted(len(grid.settings()), 'setting')} x {counted(len(grid.seeds), 'seed')} = {counted(run.cells, 'cell')}; computed {run.computed} "
           f"in {run.wall_s:.1f} s ({run.where}); fixed settings: "
           + (", ".join(f"{k}={v}" for k, v in grid.base.items()) or "the study's defaults") + "."
           + (" reuse_last, not given, is the study's default: 50, or rounds // 4 for 50 rounds or fewer."

@@ -21,6 +21,7 @@ from pathlib import Path
 from typing import Generic, TypeVar
 
 import msgspec
+from pairplay.numbers import counted
 
 T = TypeVar("T")
 BOM = b"\xef\xbb\xbf"  # UTF-8's byte order mark: Notepad and other editors start a saved file with it
@@ -43,7 +44,7 @@ def empty(data: bytes | str) -> str:
     raw = data.encode("utf-8") if isinstance(data, str) else data
     if without_bom(raw).strip():
         return ""
-    return "the file is empty" + (f" ({len(raw)} bytes of blank)" if raw else "")
+    return "the file is empty" + (f" ({counted(len(raw), 'byte')} of blank)" if raw else "")
 
 
 class _Format(msgspec.Struct):

@@ -24,6 +24,7 @@ from pairplay.errors import InputError
 
 from .config import REWARD_BONUS_RULES, UNSTATED_REWARD_BONUS, LearnerConfig, LSPIConfig, Persona
 from .jsonfile import JsonFileKind
+from pairplay.numbers import counted
 
 FORMAT = "pairplay.policy"
 VERSION = 1
@@ -92,7 +93,7 @@ class PolicyFile(msgspec.Struct, frozen=True, kw_only=True):
             raise PolicyFileError(f"algorithm {self.algorithm!r} is not one of {', '.join(ALGORITHMS)}")
         if len(self.states) != N_STATES or len(self.greedy) != N_STATES or len(self.visits) != N_STATES:
             raise PolicyFileError(f"a policy has {N_STATES} states; this file has "
-                                  f"{len(self.states)} names, {len(self.greedy)} actions, {len(self.visits)} visit counts")
+                                  f"{counted(len(self.states), 'name')}, {counted(len(self.greedy), 'action')}, {len(self.visits)} visit counts")
         if len(self.q) != N_STATES or any(len(row) != N_ACTIONS for row in self.q):
             raise PolicyFileError(f"the Q-table must be {N_STATES} x {N_ACTIONS}")
         bad = [a for a in self.greedy if not 0 <= a < N_ACTIONS]

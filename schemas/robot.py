@@ -147,6 +147,24 @@ class SpeechTexts(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
     right: str = "Maybe right"
 
 
+# each number of the robot config, its range: (lowest, whether the lowest itself is allowed, highest). A time
+# beyond its highest is no setting anyone means, and a huge one (1e20 s) overflowed the driver's thread wait
+# (OverflowError: timestamp out of range): refused when the file is read, with the range
+RANGES = {
+    "head_turn_offset_m": (0.0, False, 2.0),  # past the observed card, on a board a metre or so wide
+    "ack_timeout_s": (0.0, False, 600.0),
+    "abort_grace_s": (0.0, False, 60.0),
+    "give_up_s": (0.0, False, 3600.0),
+    "reconnect_min_s": (0.0, False, 60.0),
+    "reconnect_max_s": (0.0, False, 600.0),
+    "head_turn_lead_s": (0.0, True, 60.0),
+    "head_turn_hold_s": (0.0, True, 60.0),
+    "inflight_window_s": (0.0, True, 10.0),
+    "max_commands_per_s": (0.0, False, 1000.0),
+}
+SIGNS = ("yaw_sign", "pitch_sign")  # a direction: +1 or -1 (0 froze the head on one axis, 2 doubled its turns)
+
+
 class RobotConfig(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
     """How the bridge renders and delivers suggestions; every field has a default.
 
@@ -186,12 +204,14 @@ class RobotConfig(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
 
     def validate(self) -> None:
         """Raise ValueError with a clear reason if the config cannot work."""
-        for name in ("head_turn_offset_m", "ack_timeout_s", "abort_grace_s", "give_up_s", "reconnect_min_s", "reconnect_max_s"):
-            if not getattr(self, name) > 0:
-                raise ValueError(f"robot config: {name} must be > 0, got {shown(getattr(self, name))}")
-        for name in ("head_turn_lead_s", "head_turn_hold_s", "inflight_window_s"):
-            if not getattr(self, name) >= 0:
-                raise ValueError(f"robot config: {name} must be >= 0, got {shown(getattr(self, name))}")
+        for name, (low, low_ok, high) in RANGES.items():
+            value = getattr(self, name)
+            if not ((value >= low if low_ok else value > low) and value <= high):  # also refuses nan
+                need = f"{shown(low)}..{shown(high)}" if low_ok else f"> {shown(low)} and at most {shown(high)}"
+                raise ValueError(f"robot config: {name} must be {need}, got {shown(value)}")
+        for name in SIGNS:
+            if getattr(self, name) not in (1, -1):
+                raise ValueError(f"robot config: {name} must be 1 or -1 (a direction), got {shown(getattr(self, name))}")
         if self.reconnect_max_s < self.reconnect_min_s:
             raise ValueError("robot config: reconnect_max_s must be >= reconnect_min_s")
         for name in ("iristk_ticket", "iristk_name"):
@@ -211,8 +231,6 @@ class RobotConfig(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
         if self.iristk_head_event == "attend" and not self.iristk_agent:
             raise ValueError("robot config: iristk_head_event attend needs iristk_agent (SystemAgentFlow only"
                              " takes an action.attend location whose agent is its own)")
-        if not self.max_commands_per_s > 0:
-            raise ValueError(f"robot config: max_commands_per_s must be > 0, got {shown(self.max_commands_per_s)}")
         if not 1 <= self.command_burst <= 500:
             raise ValueError(f"robot config: command_burst must be 1..500 (an IrisTK module queue holds 1000),"
                              f" got {self.command_burst}")

@@ -13,7 +13,7 @@ from typing import Union
 
 import msgspec
 
-from pairplay.numbers import shown
+from pairplay.numbers import counted, shown
 
 from .config import REWARD_BONUS_RULES, UNSTATED_REWARD_BONUS, LearnerConfig, LSPIConfig
 from .policy import N_ACTIONS, N_STATES
@@ -116,7 +116,7 @@ class SessionConfig(msgspec.Struct, frozen=True, kw_only=True):
                                     or not all(0 <= a < N_ACTIONS for a in self.policy_actions)):
             # checked here, not first by the learner: the game started a session its learner then refused
             raise ValueError(f"policy_actions must be {N_STATES} action codes 0..{N_ACTIONS - 1}, got "
-                             f"{len(self.policy_actions)} codes")
+                             f"{counted(len(self.policy_actions), 'code')}")
         for key in MS_FIELDS:
             if not MS_RANGE[0] <= getattr(self, key) <= MS_RANGE[1]:  # also refuses nan
                 raise ValueError(f"{key} must be {MS_RANGE[0]:g}..{MS_RANGE[1]:g}, got {shown(getattr(self, key))}")

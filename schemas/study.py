@@ -27,13 +27,13 @@ from typing import Literal, Union
 
 import msgspec
 
-from pairplay.numbers import shown
+from pairplay.numbers import counted, shown, typed_floats
 
 from .config import LearnerConfig
 from .jsonfile import empty
 from .robot_url import parse_robot_url
 from .session import MS_FIELDS, MS_RANGE, SEED_RANGE
-from .tomlplace import misplaced, table_not_value
+from .tomlplace import TOP, misplaced, table_not_value
 
 ID = re.compile(r"^[a-z0-9][a-z0-9_-]{0,39}$")
 PRESETS = ("virtual", "human-phase1", "human-phase2")
@@ -183,7 +183,7 @@ def _check(study: Study) -> None:
             raise StudyFileError(_placed(f"{err} - at `$.{where}.learner`") or f"{where}.learner: {err}") from None
         never = schedule.never_reuses() if p.algorithm == "pi-reuse" else ""
         if never:  # 1 round under human-phase2: its one round is the last, on the new policy alone
-            raise StudyFileError(f"{where}: a pi-reuse phase of {p.rounds} round{'s' if p.rounds != 1 else ''} "
+            raise StudyFileError(f"{where}: a pi-reuse phase of {counted(p.rounds, 'round')} "
                                  f"that never reuses the bias policy: {never} (preset {p.preset}; give 2 rounds "
                                  "or more, or learner overrides that reuse)")
         seen.append(p.id)
@@ -216,18 +216,19 @@ def parse_study(text: str, source: str = "study") -> Study:
     """A Study from TOML text; StudyFileError('<source>: <where>: <what>') if anything is wrong."""
     if empty(text):  # (tomllib reads it as a table of nothing: "Object missing required field `study`")
         raise StudyFileError(f"{source}: {empty(text)}")
-    try:
-        raw = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as err:
-        raise StudyFileError(f"{source}: not valid TOML: {err}") from None
-    try:
-        study = msgspec.convert(raw, Study)
-    except msgspec.ValidationError as err:
-        raise StudyFileError(f"{source}: {_placed(str(err), raw) or _where(str(err), raw)}") from None
-    try:
-        _check(study)
-    except StudyFileError as err:
-        raise StudyFileError(f"{source}: {err}") from None
+    with typed_floats() as parse_float:  # a number a line echoes, as the file has it (pairplay/numbers.py)
+        try:
+            raw = tomllib.loads(text, parse_float=parse_float)
+        except tomllib.TOMLDecodeError as err:
+            raise StudyFileError(f"{source}: not valid TOML: {err}") from None
+        try:
+            study = msgspec.convert(raw, Study)
+        except msgspec.ValidationError as err:
+            raise StudyFileError(f"{source}: {_placed(str(err), raw) or _where(str(err), raw)}") from None
+        try:
+            _check(study)
+        except StudyFileError as err:
+            raise StudyFileError(f"{source}: {err}") from None
     return study
 
 
@@ -235,10 +236,9 @@ def _where(message: str, raw: object = None) -> str:
     """msgspec's 'Expected `int`, got `str` - at `$.phase[0].rounds`' as 'phase[0].rounds: Expected ...'.
     A table's value (`learner = { alpha_start = "x" }`) msgspec says at `[...]`: its key is named, from
     the TOML read (`raw`), so the line says which field."""
-    m = re.match(r"^(.*) - at `\$\.?(.*)`$", message)
-    if not m:
+    if not re.search(r" - at `\$", message):
         return message
-    what, where = m.groups()
+    what, where = _located(message)
     if "[...]" in where and raw is not None:
         where = _name_keys(where, what, raw)
     return f"{where or 'top level'}: {what}"
@@ -250,6 +250,13 @@ TABLES = {(): Study, ("study",): StudyHead, ("phase", "#"): Phase, ("phase", "#"
           ("questionnaire", "*"): Questionnaire, ("questionnaire", "*", "item", "#"): Item}
 
 
+def _located(message: str) -> tuple[str, str]:
+    """msgspec's message as (what, where): 'Expected `int`, got `str` - at `$.phase[0].rounds`' ->
+    ('Expected ...', 'phase[0].rounds'); where is "" at the file's top, which msgspec does not name."""
+    m = re.match(r"^(.*) - at `\$\.?(.*)`$", message)
+    return m.groups() if m else (message, "")
+
+
 def _shape(path: tuple) -> tuple:
     return tuple("#" if isinstance(t, int) else "*" if n == 1 and path[0] == "questionnaire" else t
                  for n, t in enumerate(path))
@@ -258,7 +265,7 @@ def _shape(path: tuple) -> tuple:
 def _header(path: tuple) -> str:
     """A table's header as the file writes it: ("phase", 0, "learner") -> [phase.learner]."""
     if not path:
-        return "the top level"
+        return TOP
     names = ".".join(t for t in path if isinstance(t, str))
     return f"[[{names}]]" if isinstance(path[-1], int) else f"[{names}]"
 
@@ -271,10 +278,8 @@ def _placed(message: str, raw: object = None) -> str:
     """msgspec's error as 'where: which table the key belongs to' when a key or a table stands at the wrong
     level (schemas/tomlplace.py), else "". `raw`: the TOML read, to find a required key that a table
     written too early took (`[phase.learner]` above the phase's `games`)."""
-    m = re.match(r"^(.*) - at `\$\.?(.*)`$", message)
-    if not m:
-        return ""
-    what, where = m.groups()
+    # msgspec names no place for a key of the file's top ("Object contains unknown field `robot`")
+    what, where = _located(message)
     if "[...]" in where:  # a table's value (a key of [phase.learner], a questionnaire's name): named from `raw`
         if raw is None:
             return ""

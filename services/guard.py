@@ -69,6 +69,7 @@ from pairplay.schemas.envelope import Event
 from pairplay.schemas.events import MessageRejected, decode_event
 from pairplay.schemas.keys import parse_event_key
 from pairplay.schemas.trust import MAX_PAYLOAD, MAX_SEQ_JUMP, ONCE_PER_SESSION, REJECTIONS_PER_S, publisher_refusal
+from pairplay.numbers import counted
 
 EXCERPT = 200
 MAX_KINDS = 20
@@ -149,7 +150,7 @@ class Guard:
         if info[0]:
             return self._forged(key, payload) if self.names_forgeries else QUIET
         if len(payload) > MAX_PAYLOAD:
-            return Verdict(None, f"payload of {len(payload)} bytes is over the limit of {MAX_PAYLOAD}")
+            return Verdict(None, f"payload of {counted(len(payload), 'byte')} is over the limit of {MAX_PAYLOAD}")
         try:
             event = self.decode(payload)
         except (msgspec.DecodeError, msgspec.ValidationError) as err:
@@ -318,7 +319,7 @@ class Refusals:
             return []
         self.window_ns, self.in_window = now_ns, 0
         held, self.held = self.held, Counter()
-        return [MessageRejected(reason=f"{n} messages refused and not recorded one by one (limit {self.per_s}/s): "
+        return [MessageRejected(reason=f"{counted(n, 'message')} refused and not recorded one by one (limit {self.per_s}/s): "
                                        f"{kind}", key="", offending_source=source, excerpt="")
                 for (source, kind), n in sorted(held.items())]
 

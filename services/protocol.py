@@ -54,6 +54,7 @@ from pairplay.services.recorder import RecordingExists, check_new_recording
 from pairplay.services.robot.choice import NO_ROBOT, RobotChoice
 from pairplay.services.runner import Node
 from pairplay.services.session import run_session
+from pairplay.numbers import counted
 
 log = logging.getLogger("pairplay.protocol")
 
@@ -525,7 +526,7 @@ def check_answers(items, answers) -> dict[str, str]:
         if item.kind == "choice" and text not in item.options:
             raise StudyDataError(f"question {item.id!r}: {text[:40]!r} is not one of its options")
         if len(text) > item.max_chars:
-            raise StudyDataError(f"question {item.id!r}: at most {item.max_chars} characters")
+            raise StudyDataError(f"question {item.id!r}: at most {counted(item.max_chars, 'character')}")
         out[item.id] = text
     return out
 

@@ -68,6 +68,7 @@ from pairplay.services.game import GameLogic
 from pairplay.services.learner import LearnerLogic
 from pairplay.services.node import SHELL_TAGS, Driver
 from pairplay.services.participant import ParticipantLogic
+from pairplay.numbers import counted
 
 
 @dataclass
@@ -107,11 +108,11 @@ class Verification:
             return "verify: FAIL"
         if self.truncated and not self.ended:
             return (f"verify: PASS as far as the file goes: the file is cut, the session's end is missing "
-                    f"(verified {self.events} events, {_rounds_words(self.rounds_recorded, self.rounds)}; "
+                    f"(verified {counted(self.events, 'event')}, {_rounds_words(self.rounds_recorded, self.rounds)}; "
                     f"what came after the cut is lost)")
         if self.truncated:
-            return (f"verify: PASS; the file is cut, after its session's end was recorded ({self.events} "
-                    f"events verified; what the cut lost came after it)")
+            return (f"verify: PASS; the file is cut, after its session's end was recorded ("
+                    f"{counted(self.events, 'event')} verified; what the cut lost came after it)")
         if self.stopped:
             return f"verify: PASS up to where the session stopped ({self.stopped})"
         return "verify: PASS"
@@ -185,12 +186,12 @@ def stopped_how(end, rounds: int, truncated: bool) -> str:
 def reach_of(end, rounds: int, how: str) -> str:
     """How far a verification went: the whole session, or up to where it stopped."""
     if not how:
-        return f"the whole session ({rounds} rounds)"
+        return f"the whole session ({counted(rounds, 'round')})"
     if end is None:
         return f"up to where the recording stops ({how})"
     # counted from 1, as the board shows them (SessionEnded.round counts from 0)
-    where = f"in round {end.round + 1} after {end.turns_in_round} turns" if end.round >= 0 else "before its first round"
-    return f"up to where the session stopped: {how} after {end.rounds_played} of {rounds} rounds, {where}"
+    where = f"in round {end.round + 1} after {counted(end.turns_in_round, 'turn')}" if end.round >= 0 else "before its first round"
+    return f"up to where the session stopped: {how} after {end.rounds_played} of {counted(rounds, 'round')}, {where}"
 
 
 def verify_recording(path) -> Verification:
@@ -213,8 +214,8 @@ def verify_recording(path) -> Verification:
         result.truncated = log.truncated or recovered_cut
         result.lost_part = True
         result.not_compared = len(events) - first_lost
-        result.reach = (f"up to the damaged part: {result.events} events, "
-                        f"{_rounds_words(result.rounds_recorded, result.rounds)}; the {result.not_compared} events "
+        result.reach = (f"up to the damaged part: {counted(result.events, 'event')}, "
+                        f"{_rounds_words(result.rounds_recorded, result.rounds)}; the {counted(result.not_compared, 'event')} "
                         "after it are not compared (they follow the lost ones)")
     else:
         result = verify_events(events, str(path), log.truncated or recovered_cut)
@@ -223,7 +224,7 @@ def verify_recording(path) -> Verification:
     if log.damaged:  # damaged parts and messages that do not decode, in the words every verb uses (reader.EventLog)
         result.damaged = log.damaged
         if first_lost < 0:
-            result.reach = f"the {result.events} events the file holds (no event lost, but the file is damaged)"
+            result.reach = f"the {counted(result.events, 'event')} the file holds (no event lost, but the file is damaged)"
     lost = json.loads(recovered.get("damaged", "[]") or "[]")
     parts = json.loads(recovered.get("lost", "[]") or "[]")  # what each part that lost messages lost (recover)
     if lost and not recovered_lost(recovered):  # its damaged parts lost no message (an index, a CRC): whole
@@ -235,7 +236,7 @@ def verify_recording(path) -> Verification:
                         "events after it are not compared (they follow the lost ones)")
     elif lost:
         errors.append(f"recovered from a damaged file, parts lost: {'; '.join(lost)}")
-        result.reach = (f"the {result.events} events the file holds, not the whole session: "
+        result.reach = (f"the {counted(result.events, 'event')} the file holds, not the whole session: "
                         "parts of the recording it was recovered from were lost")
     result.error = "; ".join(errors) or result.error
     empty = no_whole_round((r.event for r in log.events), log.truncated, log.damaged)

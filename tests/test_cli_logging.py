@@ -98,14 +98,20 @@ def test_quiet_silences_what_the_protocol_actions_and_the_session_verbs_say_they
     and `protocol` is a verb whose actions are both: init writes a folder, status prints a result), and
     `session -q` its summary of the recording it wrote. Now an action whose result is files (init,
     mark-invalid, pilot) and the session's summary are silenced by -q; a printed result (register's id,
-    check's protocol, status) and the listening line still come."""
+    status) and the listening line still come. A trial: `protocol check -q` printed the whole protocol; a
+    check's result is its status (a mistake is one line on stderr, -q or not)."""
     folder = tmp_path / "study"
     done = pairplay_cli("protocol", "init", folder, "--study", "thesis-ch7", "-q")
     assert (done.returncode, done.stdout, done.stderr) == (0, "", ""), done
     done = pairplay_cli("protocol", "register", folder, "-q")
     assert done.returncode == 0 and done.stdout.strip() == "p01", done  # its result: the new id
     done = pairplay_cli("protocol", "check", "thesis-ch7", "-q")
-    assert done.returncode == 0 and done.stdout.startswith("study thesis-ch7"), done  # its result: the protocol
+    assert (done.returncode, done.stdout, done.stderr) == (0, "", ""), done  # its result: the status
+    done = pairplay_cli("protocol", "check", "thesis-ch7")
+    assert done.returncode == 0 and done.stdout.startswith("study thesis-ch7"), done  # without -q: the protocol
+    (tmp_path / "bad.toml").write_text('robot = "virtual"\n' + (folder / "study.toml").read_text())
+    done = pairplay_cli("protocol", "check", tmp_path / "bad.toml", "-q")
+    assert done.returncode == 2 and done.stdout == "" and done.stderr.count("\n") == 1, done
     done = pairplay_cli("protocol", "status", folder, "-q")
     assert done.returncode == 0 and "p01" in done.stdout, done
     done = pairplay_cli("session", "--participant", "sim:blind", "--rounds", "1", "--session", "q1",

@@ -78,6 +78,17 @@ REFUSED = {
                                      "--turn-back-ms: must be 0..60000"),
     "session --ignore-window-ms 1e9": (["session", *MINIMAL["session"]] + ["--ignore-window-ms", "1e9"],
                                        "--ignore-window-ms: must be 0..60000"),
+    # a refused value is echoed as typed, integers as numbers are (a trial: `--seed 1_0...0` was said in the
+    # digits Python parsed, `--rounds 0_0` as "got 0"): the line points at what is on the command line
+    "session --rounds 0_0": (["session", *MINIMAL["session"]] + ["--rounds", "0_0"],
+                             "--rounds: must be at least 1, got 0_0 "),
+    "session --seed 1_0...0": (["session", *MINIMAL["session"]] + ["--seed", "1_" + "0" * 22],
+                               "--seed: a seed is 0..18446744073709551615, got 1_" + "0" * 22 + " "),
+    "session --game-index 2**63": (["session", *MINIMAL["session"]] + ["--game-index", "9_223_372_036_854_775_808"],
+                                "got 9_223_372_036_854_775_808 "),
+    "sweep --workers 99_999": (["sweep", "g.toml", "--workers", "99_999"], "got 99_999 "),
+    "view --web-port 7_0000": (["view", "--recording", "r.mcap", "--web-port", "7_0000"],
+                               "--web-port: a port is 0..65535, got 7_0000 "),
 }
 
 

@@ -227,3 +227,30 @@ def test_info_round_is_the_index_of_the_rounds_deal_from_0():
     vec.reset(seed=3)
     vec.step([0, 0])
     assert vec.reset()[1]["round"].tolist() == [1, 1]
+
+
+@pytest.mark.parametrize("refused", [{"seed": -1}, {"seed": 1.5}, {"options": {"bogus": 1}},
+                                     {"options": {"persona": "nobody"}}])
+def test_an_env_whose_first_reset_was_refused_works_and_is_checked_at_the_next(refused):
+    """A trial (Gymnasium 1.4): `gymnasium.make`'s env checker marks the first reset checked before it runs,
+    so after a refused first reset the next valid one went unchecked and the first step raised a TypeError
+    (`cannot unpack non-iterable NoneType object`: its data-reuse check compared against a reset it never
+    saw): the env stayed broken. Our checker (gym/env.py EnvChecker) marks a check done only once its call
+    succeeded; a refused step alike. The same env then plays like a fresh one."""
+    env = gymnasium.make(ENV_ID, persona="deaf")
+    with pytest.raises((TypeError, ValueError, KeyError)):  # an unknown persona: KeyError, as at construction
+        env.reset(**refused)
+    checker = env.env
+    assert type(checker).__name__ == "EnvChecker" and not checker.checked_reset
+    obs, info = env.reset(seed=3)
+    assert checker.checked_reset and info == {"round": 0}
+    with pytest.raises(ValueError):  # an action out of the space: the step's checks wait for a valid one
+        env.step(88)
+    assert not checker.checked_step
+    fresh = gymnasium.make(ENV_ID, persona="deaf")
+    assert fresh.reset(seed=3)[0] == obs
+    for action in (3, 35, 3, 0):
+        assert env.step(action)[:4] == fresh.step(action)[:4]
+    assert checker.checked_step and checker.checked_data_reuse
+    # made again from its spec, it is under this checker alone, not Gymnasium's too
+    assert str(gymnasium.make(env.spec)) == str(env) == "<OrderEnforcing<EnvChecker<MemoryEnv<pairplay/Memory-v0>>>>"

@@ -116,6 +116,29 @@ def test_a_merge_of_a_partial_policy_is_flagged_partial_and_said_once(tmp_path, 
     assert "PARTIAL" not in capsys.readouterr().out and policy_file.read_policy(tmp_path / "w.json").partial == ""
 
 
+def test_a_profile_of_a_partial_policy_says_it_is_partial_in_its_output_and_on_stderr(tmp_path, policy_bytes,
+                                                                                      capsys):
+    """A trial: `profile` of a policy a `rebuild --partial` made (`partial` set) said nothing, where `combine`
+    flags its merge. Its output (often redirected to a file) and stderr name the input and why, once each."""
+    import msgspec
+
+    from pairplay.cli.main import main
+
+    why = "lost 2 messages that do not decode"
+    partial = msgspec.structs.replace(policy_file.FILE.decode(policy_bytes), partial=why)
+    policy_file.write_policy(tmp_path / "a.json", partial)
+    policy_file.write_policy(tmp_path / "c.json", other_policy(policy_bytes, "ashley"))  # a second of hers
+    assert main(["profile", str(tmp_path / "a.json"), str(tmp_path / "c.json")]) == 0
+    captured = capsys.readouterr()
+    said = f"PARTIAL profile: made of a partial policy: {tmp_path / 'a.json'} ({why})"
+    assert captured.out.count("PARTIAL") == 1 and said in captured.out, captured.out
+    assert captured.err == f"pairplay profile: {said}\n", captured.err
+    policy_file.write_policy(tmp_path / "a.json", policy_file.FILE.decode(policy_bytes), force=True)
+    assert main(["profile", str(tmp_path / "a.json"), str(tmp_path / "c.json")]) == 0
+    captured = capsys.readouterr()
+    assert "PARTIAL" not in captured.out and captured.err == "", captured
+
+
 @pytest.mark.parametrize("verb", [
     ["session", "--participant", "sim:deaf", "--algorithm", "fixed", "--policy", "{a}"],
     ["session", "--participant", "sim:deaf", "--algorithm", "pi-reuse", "--policy", "{a}"],

@@ -66,7 +66,7 @@ def finished(thread: threading.Thread, stop: threading.Event, timeout_s: float =
 def test_a_policy_the_learner_cannot_take_is_refused_at_the_config_before_the_session_starts(tmp_path):
     """SessionConfig.validate checks policy_actions' length and codes: the game never starts a session its
     learner would refuse (before: it published the start, and the learner refused it)."""
-    with pytest.raises(ValueError, match="policy_actions must be 24 action codes 0..87, got 1 codes"):
+    with pytest.raises(ValueError, match="policy_actions must be 24 action codes 0..87, got 1 code"):
         unlearnable("ref0").validate()
     with pytest.raises(ValueError, match="policy_actions must be 24 action codes"):
         SessionConfig(session="ref0", participant="sim:ashley", persona="ashley", seed=1, rounds=3,

@@ -129,6 +129,13 @@ PHASE_REST = 'algorithm = "q-learning"\npreset = "human-phase1"\n' + PHASE1_KEYS
     ("[study]\n", "[study]\n[study.learner]\nalpha_start = 0.3\n",
      "study.learner: [study] has no key `learner`; `learner` is a key of [[phase]]"),
     ("[study]\n", "[study]\nrounds = 3\n", "study.rounds: [study] has no key `rounds`; `rounds` is a key of [[phase]]"),
+    # a new user's trial: a table's key written above the file's first [table] line (it was msgspec's
+    # "Object contains unknown field `robot`")
+    ('robot = "virtual"\n', "", None),
+    ("[study]\n", "seed = 3\n[study]\n", "seed: `seed` belongs to [study], not at the top of the file (above its "
+     "first [table] line): move `seed = ...` below the [study] line"),
+    ("[study]\n", "games = 3\n[study]\n", "games: `games` belongs to [[phase]], not at the top of the file"),
+    ("[study]\n", 'text = "x"\n[study]\n', "text: `text` belongs to [[questionnaire.NAME.item]], not at the top"),
     # a table where a value was expected
     ("seed = 0\n", "[study.seed]\nvalue = 0\n",
      "study.seed: [study.seed] is a table, where `seed` takes a value: write `seed = ...` among the keys of [study]"),
@@ -140,8 +147,20 @@ PHASE_REST = 'algorithm = "q-learning"\npreset = "human-phase1"\n' + PHASE1_KEYS
 ])
 def test_a_table_or_key_at_the_wrong_level_says_where_it_belongs(old, new, said):
     assert old in BASE
+    text = BASE.replace(old, new, 1)
+    if said is None:  # the robot above [study]: the trial's own file
+        text, said = old + text, ("robot: `robot` belongs to [study], not at the top of the file (above its first "
+                                  "[table] line): move `robot = ...` below the [study] line")
     with pytest.raises(StudyFileError) as info:
-        parse_study(BASE.replace(old, new, 1), "s.toml")
+        parse_study(text, "s.toml")
     line = str(info.value)
     assert line.startswith("s.toml: ") and "\n" not in line and said in line, line
     assert "Expected" not in line and "got `" not in line, line
+
+
+@pytest.mark.parametrize("typed", ["1e7", "6.0e41", "60_001.0"])
+def test_a_number_of_the_study_file_is_echoed_as_the_file_has_it(typed):
+    """A trial: `ignore_window_ms = 1e7` was said "got 10000000": the number as parsed, not as written."""
+    with pytest.raises(StudyFileError) as info:
+        parse_study(BASE.replace("ignore_window_ms = 1500", f"ignore_window_ms = {typed}", 1), "s.toml")
+    assert str(info.value) == f"s.toml: study.ignore_window_ms: must be 0..60000 (ms), got {typed}", info.value

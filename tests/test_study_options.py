@@ -160,7 +160,7 @@ GRID_MISTAKES = [
     ('reuse = true\nseeds = 1\n[study]\npersonas = "blind,deaf"\n[grid]\npsi = [0.5, 1.5]\n',
      "psi = 1.5: must be between 0 and 1"),
     ('reuse = true\nseeds = 1\n[study]\npersonas = "blind,deaf"\n[grid]\npsi = [0.5, 0.0]\n',
-     "psi = 0: must be above 0 when the speed-up runs"),
+     "psi = 0.0: must be above 0 when the speed-up runs"),  # 0.0 as the file has it (pairplay/numbers.py)
     ('[study]\nalgorithm = "sarsa"\n', "algorithm = 'sarsa': must be one of q-learning, lspi"),
     ('[study]\nreward_bonus = "always"\n', "reward_bonus = 'always': must be one of correct, consistent, match"),
     # LSPI's settings in a cell that learns by Q-learning, which ignored them (the study's and session's rule)

@@ -153,7 +153,7 @@ def test_a_resume_with_nothing_to_do_writes_nothing_and_says_so(tmp_path, capsys
     before = {p: (p.read_bytes(), p.stat().st_mtime_ns) for p in out.rglob("*") if p.is_file()}
     assert main(["sweep", str(grid), "--out", str(out)]) == 0  # not -q: it silences these lines
     said = capsys.readouterr().out.splitlines()
-    assert said == [f"nothing to do: all 2 cells (2 settings x 1 seeds) were finished; {out / 'sweep.md'} is as it was"]
+    assert said == [f"nothing to do: all 2 cells (2 settings x 1 seed) were finished; {out / 'sweep.md'} is as it was"]
     assert {p: (p.read_bytes(), p.stat().st_mtime_ns) for p in out.rglob("*") if p.is_file()} == before
     (out / "sweep.md").unlink()  # the summary not written (a run stopped after its cells): written, 0 computed
     assert main(["sweep", str(grid), "--out", str(out)]) == 0  # not -q: it silences these lines
@@ -199,6 +199,43 @@ def test_a_scheduler_that_does_not_answer_is_one_line_naming_the_option(tmp_path
     assert main(["sweep", str(grid), "--out", str(tmp_path / "o"), "--scheduler", f"tcp://127.0.0.1:{port}"]) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "--scheduler" in err and f"127.0.0.1:{port}" in err, err
+
+
+def _closed_port() -> int:
+    import socket
+    with socket.socket() as s:  # a port nothing listens on
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+@pytest.mark.parametrize("address,said", [
+    ("tcp://127.0.0.1:{closed}", "nothing listens at that address (connection refused)"),
+    ("ws://127.0.0.1:{closed}", "nothing listens at that address (connection refused)"),
+    ("tcp://127.0.0.1:99999", "not a Dask address (port 99999 is not 1..65535)"),
+    ("tcp://:8786", "not a Dask address (no host before :8786)"),
+    ("tcp://localhost", "not a Dask address (HOST:PORT expected after tcp://, got 'localhost')"),
+    ("inproc://x", "sweep reaches a scheduler over tcp:// or ws://, not inproc://"),
+    ("ucx://127.0.0.1:1", "not ucx://"),
+    ("tls://127.0.0.1:1", "not tls://"),
+    ("tcp://no-such-host.invalid:8786", "the host no-such-host.invalid is not known"),
+])
+def test_a_scheduler_that_cannot_be_reached_is_one_line_in_our_words_at_once(tmp_path, capsys, address, said):
+    """A trial: a refused connection took Dask's whole 10 s (its connect retries until its timeout), and Dask's
+    texts came through ("(OSError: Timed out trying to connect ...)", "(ValueError: not enough values to unpack",
+    "(TypeError: Can't instantiate abstract class UCXConnector", "TLS expects a `ssl_context` argument"). Each
+    is one line saying what, naming --scheduler and the address, exit 2, well within the 10 s."""
+    from pairplay.cli.main import main
+    address = address.format(closed=_closed_port())
+    grid = tmp_path / "g.toml"
+    grid.write_text('seeds = 1\n[study]\npersonas = "blind"\ngames = 1\nrounds = 1\neval_rounds = 1\n')
+    start = time.monotonic()
+    code = main(["sweep", str(grid), "--out", str(tmp_path / "o"), "--scheduler", address])
+    took = time.monotonic() - start
+    err = capsys.readouterr().err
+    assert code == 2 and err.count("\n") == 1 and said in err and f"(--scheduler {address})" in err, err
+    assert "Error" not in err and "Timed out" not in err and "expects" not in err, err
+    assert took < 5, took  # importing Dask's modules, not its 10 s
+    assert not (tmp_path / "o").exists()
 
 
 def _no_measures(d):
@@ -285,8 +322,11 @@ def _server(reply: bytes | None):
     else:
         class Banner(socketserver.BaseRequestHandler):
             def handle(self):
-                self.request.sendall(reply)
-                self.request.recv(1024)  # the other side's bytes, then close
+                try:
+                    self.request.sendall(reply)
+                    self.request.recv(1024)  # the other side's bytes, then close
+                except ConnectionResetError:  # the check's first connection (is anything listening?) closes
+                    pass  # unread: socketserver's traceback of it went to the stderr the verb's line is read from
         server = socketserver.ThreadingTCPServer(("127.0.0.1", 0), Banner)
     server.daemon_threads = True
     thread = threading.Thread(target=server.serve_forever, daemon=True)
@@ -389,6 +429,10 @@ def test_workers_that_together_would_pass_the_memory_limit_are_refused_before_an
     ("[study]\npersonas = 'blind'\nseeds = 3\n", "study.seeds: `seeds` belongs at the top of the file, not to "
      "[study]: the keys after a [study] line are that table's; move `seeds = ...` above that line"),
     ("[grid]\npsi = [0.5]\nreuse = true\n", "grid.reuse: `reuse` belongs at the top of the file, not to [grid]"),
+    # a trial: a study setting above the [study] or [grid] line (it was "unknown key(s) psi")
+    ("seeds = 2\npsi = 0.5\n[grid]\nrounds = [10, 20]\n", "psi: `psi` belongs to [study] or [grid], not at the top "
+     "of the file (above its first [table] line): move `psi = ...` below the [study] or [grid] line"),
+    ("rounds = 10\n[study]\npsi = 0.5\n", "rounds: `rounds` belongs to [study] or [grid], not at the top of the file"),
     ("[grid.psi]\nx = [1]\n", "grid.psi: [grid.psi] is a table, where `psi` takes a value: write `psi = ...` "
      "among the keys of [grid]"),
     ("[study.psi]\nx = 1\n", "study.psi: [study.psi] is a table, where `psi` takes a value"),
@@ -474,3 +518,17 @@ def test_a_forced_sweep_of_another_grid_keeps_none_of_the_first_grids_figures(tm
     assert main(["sweep", str(other), "--out", str(out), "--quiet", "--force"]) == 0
     assert main(["sweep", str(other), "--out", str(fresh), "--quiet"]) == 0
     assert files(out) == sorted(files(fresh) + ["figures/mine.png", "notes.txt"]), files(out)
+
+
+@pytest.mark.parametrize("line,said", [
+    ("rounds = 1e7", "rounds = 1e7 is not an integer"),  # it was "rounds = 10000000.0 is not an integer"
+    ("psi = 1e7", "psi = 1e7: must be between 0 and 1, got 1e7"),  # "psi = 10000000: ..., got 10000000"
+    ("psi = 1.50", "psi = 1.50: must be between 0 and 1, got 1.50"),
+])
+def test_a_number_of_the_sweep_file_is_echoed_as_the_file_has_it(tmp_path, line, said):
+    """A trial: a refused number was echoed as Python parsed it, not as written; the line points at the file's
+    text (pairplay/numbers.py typed_floats)."""
+    (tmp_path / "g.toml").write_text(f'seeds = 1\n[study]\npersonas = "blind"\n{line}\n')
+    with pytest.raises(GridError) as info:
+        read_grid(tmp_path / "g.toml")
+    assert str(info.value) == f"{tmp_path / 'g.toml'}: {said}", info.value

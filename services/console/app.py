@@ -33,6 +33,7 @@ from pairplay.outputs import output_folder
 from pairplay.replay.studydata import REGISTER_AT_ONCE, StudyDataError, named
 
 from pairplay.services.protocol import StudyRunner
+from pairplay.numbers import counted
 
 log = logging.getLogger("pairplay.console")
 STATIC = Path(__file__).parent / "static"
@@ -124,9 +125,9 @@ def _describe(result) -> str:
         return "done"
     if hasattr(result, "ended") and getattr(result, "ended", None) is not None:
         e = result.ended
-        return f"{result.session}: {e.outcome}" + (f" ({e.reason})" if e.reason else "") + f", {e.rounds_played} rounds"
+        return f"{result.session}: {e.outcome}" + (f" ({e.reason})" if e.reason else "") + f", {counted(e.rounds_played, 'round')}"
     if hasattr(result, "users"):
-        return f"bias policy of {result.phase}: {len(result.users)} users combined into {result.output}"
+        return f"bias policy of {result.phase}: {counted(len(result.users), 'user')} combined into {result.output}"
     return str(result)
 
 
@@ -248,8 +249,8 @@ def console_routes(console: Console) -> list:
             out = data.folder / "report"
             with output_folder(out, force=True, owned=HUMAN_OUTPUTS) as tmp:  # a failure leaves the old report and no temporary folder
                 made = human_report(data.folder, tmp)
-            kind = (f" (a rehearsal: {len(made.games)} scripted games, no person played)" if made.rehearsal else
-                    f" ({len(made.scripted)} scripted games left out)" if made.scripted else "")
+            kind = (f" (a rehearsal: {counted(len(made.games), 'scripted game')}, no person played)" if made.rehearsal else
+                    f" ({counted(len(made.scripted), 'scripted game')} left out)" if made.scripted else "")
             return f"report written: {out / 'report.md'}{kind}"
         console.start("report", work)
         return JSONResponse({"started": "report"})

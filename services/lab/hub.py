@@ -42,6 +42,7 @@ from pairplay.services.bus import Bus
 from pairplay.services.game import elsewhen
 from pairplay.services.lab.model import LabModel
 from pairplay.services.runner import Node
+from pairplay.numbers import counted
 
 log = logging.getLogger("pairplay.lab")
 MAX_MESSAGE = 4096  # bytes: a page's messages are small; longer ones are refused and recorded
@@ -255,7 +256,7 @@ class LabHub:
     def _take(self, c: Client, text: str) -> None:
         raw = text.encode()
         if len(raw) > MAX_MESSAGE:
-            self._refuse(c, f"message of {len(raw)} bytes: a page's messages are at most {MAX_MESSAGE}", raw)
+            self._refuse(c, f"message of {counted(len(raw), 'byte')}: a page's messages are at most {MAX_MESSAGE}", raw)
             return
         try:
             msg = _decode(raw)

@@ -17,6 +17,7 @@ from typing import Iterable
 from pairplay.services.bus import shutdown_wait
 from pairplay.services.view.rerun_logger import RerunView
 from pairplay.services.view.sources import Info
+from pairplay.numbers import counted
 
 
 @contextlib.contextmanager
@@ -69,7 +70,7 @@ def drive(view: RerunView, items: Iterable, *, stop: threading.Event | None = No
             view.idle()
     summary.stopped = stop is not None and stop.is_set()
     if summary.stopped:  # the file itself says it is not the whole source
-        view.note(f"view stopped by {getattr(stop, 'why', '') or 'a stop'} after {summary.events} events, "
+        view.note(f"view stopped by {getattr(stop, 'why', '') or 'a stop'} after {counted(summary.events, 'event')}, "
                   "before its source ended: this view is partial")
     view.close(shutdown_wait(stop, 1e9, reserve=0.4))  # stopped: within the shutdown's deadline
     summary.q_logged = view.q_logged

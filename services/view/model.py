@@ -29,6 +29,7 @@ import numpy as np
 from pairplay.core.actions import FACIAL, GAZE, HEAD, N_ACTIONS, SPEECH, SPEECH_EXACT, action
 from pairplay.core.geometry import ALL_CARDS, COLS, N_CARDS, N_STATES, STATE_NAMES, card_col, card_row
 from pairplay.core.interpretation import HEAR_SET, VIS_SET
+from pairplay.numbers import counted
 
 
 class Cell(IntEnum):
@@ -161,12 +162,12 @@ class ViewModel:
 def _session_started(m: ViewModel, e) -> tuple[set[Change], str]:
     cfg = e.config
     m.session, m.participant, m.algorithm, m.rounds = cfg.session, cfg.participant, cfg.algorithm, cfg.rounds
-    return {Change.SESSION, Change.NOTE}, f"session {cfg.session}: {cfg.participant}, {cfg.algorithm}, {cfg.rounds} rounds"
+    return {Change.SESSION, Change.NOTE}, f"session {cfg.session}: {cfg.participant}, {cfg.algorithm}, {counted(cfg.rounds, 'round')}"
 
 
 def _round_started(m: ViewModel, e) -> tuple[set[Change], str]:
     if len(e.faces) != N_CARDS:
-        return {Change.NOTE}, f"ignored RoundStarted with {len(e.faces)} faces (expected {N_CARDS})"
+        return {Change.NOTE}, f"ignored RoundStarted with {counted(len(e.faces), 'face')} (expected {N_CARDS})"
     m.round, m.turn = e.round, 0
     m.faces = list(e.faces)
     m.face_up = m.matched = 0
@@ -276,12 +277,12 @@ def _lspi_updated(m: ViewModel, e) -> tuple[set[Change], str]:
 def _round_ended(m: ViewModel, e) -> tuple[set[Change], str]:
     m.picks_per_round[e.round] = 2 * e.turns
     m.last_round_ended = e.round
-    return {Change.ROUND_END, Change.NOTE}, f"round {e.round + 1} over: {2 * e.turns} picks"
+    return {Change.ROUND_END, Change.NOTE}, f"round {e.round + 1} over: {counted(2 * e.turns, 'pick')}"
 
 
 def _session_ended(m: ViewModel, e) -> tuple[set[Change], str]:
     m.ended = e.reason or "ended"
-    return {Change.SESSION, Change.NOTE}, f"session ended: {m.ended}, {e.rounds_played} rounds"
+    return {Change.SESSION, Change.NOTE}, f"session ended: {m.ended}, {counted(e.rounds_played, 'round')}"
 
 
 def _rejected(m: ViewModel, e) -> tuple[set[Change], str]:

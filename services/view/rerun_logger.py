@@ -34,6 +34,7 @@ import rerun.blueprint as rrb
 from pairplay.core.geometry import COLS, N_CARDS, ROWS, card_col, card_row
 
 from pairplay.services.view.model import Cell, Change, ViewModel
+from pairplay.numbers import counted
 
 APP_ID = "pairplay"
 FACE_LETTERS = string.ascii_uppercase
@@ -334,5 +335,5 @@ class RerunView:
 
     def _session_text(self) -> str:
         m = self.model
-        text = f"**{m.session}** - {m.participant}, {m.algorithm}, {m.rounds} rounds"
+        text = f"**{m.session}** - {m.participant}, {m.algorithm}, {counted(m.rounds, 'round')}"
         return text + (f" - ended: {m.ended}" if m.ended else "")

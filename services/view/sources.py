@@ -39,6 +39,7 @@ from pairplay.schemas.events import decode_event
 from pairplay.schemas.keys import parse_event_key, session_keys
 
 from pairplay.services.runner import fetch_log
+from pairplay.numbers import counted
 
 Item = tuple[object | None, str | None]
 
@@ -122,7 +123,7 @@ class LiveSource:
         if self.backlog_error:
             yield None, self.backlog_error
         if self.backlog:
-            yield None, Info(f"caught up from the recorder: {len(self.backlog)} events published before the view joined")
+            yield None, Info(f"caught up from the recorder: {counted(len(self.backlog), 'event')} published before the view joined")
         for event in self.backlog:
             yield from self._accept(event)
         self.backlog = []
