@@ -231,9 +231,10 @@ def verify_recording(path) -> Verification:
         result.reach = f"{result.reach} (recovered from a damaged file; no message was lost)"
     elif lost and first_lost > 0:  # compared up to the first lost part, as in the damaged file itself
         errors.append(f"recovered from a damaged file, parts lost: {'; '.join(parts or lost)}")
-        result.reach = (f"up to the first part lost from the recording it was recovered from: {result.events} "
-                        f"events, {_rounds_words(result.rounds_recorded, result.rounds)}; the {result.not_compared} "
-                        "events after it are not compared (they follow the lost ones)")
+        result.reach = (f"up to the first part lost from the recording it was recovered from: "
+                        f"{counted(result.events, 'event')}, {_rounds_words(result.rounds_recorded, result.rounds)}; "
+                        f"the {counted(result.not_compared, 'event')} after it are not compared (they follow the lost "
+                        "ones)")
     elif lost:
         errors.append(f"recovered from a damaged file, parts lost: {'; '.join(lost)}")
         result.reach = (f"the {counted(result.events, 'event')} the file holds, not the whole session: "
