@@ -42,9 +42,7 @@ class MemoryVectorEnv(VectorEnv):
     def __init__(self, num_envs: int = 1, persona: str | Sequence[str] = "tatiana",
                  reward_bonus: str = DEFAULT_REWARD_BONUS, observation: str = "state",
                  observed_source: str = "intended", render_mode: str | None = None):
-        if isinstance(num_envs, bool) or not isinstance(num_envs, (int, np.integer)) or num_envs < 1:
-            raise ValueError(f"num_envs must be an integer >= 1, got {num_envs!r}")
-        self.num_envs = num_envs = int(num_envs)
+        self.num_envs = num_envs = checks.num_envs(num_envs)
         checks.env_options(reward_bonus, observation, observed_source, render_mode)
         self.personas = checks.personas(persona, num_envs)
         self.reward_bonus = reward_bonus

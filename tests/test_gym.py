@@ -123,7 +123,7 @@ def test_the_vector_env_reproduces_the_study_for_many_games():
 
 
 def test_bad_options_and_actions_are_refused():
-    with pytest.raises(KeyError, match="unknown persona"):
+    with pytest.raises(ValueError, match="unknown persona"):
         MemoryEnv(persona="nobody")
     with pytest.raises(ValueError, match="observation"):
         MemoryEnv(observation="pixels")
@@ -179,7 +179,7 @@ def test_the_vector_env_refuses_what_the_single_env_refuses():
         vec.step(np.array([0.5, 1, 2, 3]))
     env.step(np.int64(3))
     vec.step(np.array([0, 1, 2, 3], dtype=np.int32))
-    for options, error in (({"personna": "blind"}, ValueError), ({"persona": "zzz"}, KeyError),
+    for options, error in (({"personna": "blind"}, ValueError), ({"persona": "zzz"}, ValueError),
                            ({"persona": 5}, TypeError), ({"reset_mask": np.ones(4, bool)}, ValueError)):
         for target in (env, vec):
             with pytest.raises(error, match="persona|reset option"):
@@ -238,7 +238,7 @@ def test_an_env_whose_first_reset_was_refused_works_and_is_checked_at_the_next(r
     saw): the env stayed broken. Our checker (gym/env.py EnvChecker) marks a check done only once its call
     succeeded; a refused step alike. The same env then plays like a fresh one."""
     env = gymnasium.make(ENV_ID, persona="deaf")
-    with pytest.raises((TypeError, ValueError, KeyError)):  # an unknown persona: KeyError, as at construction
+    with pytest.raises((TypeError, ValueError)):
         env.reset(**refused)
     checker = env.env
     assert type(checker).__name__ == "EnvChecker" and not checker.checked_reset
@@ -254,3 +254,39 @@ def test_an_env_whose_first_reset_was_refused_works_and_is_checked_at_the_next(r
     assert checker.checked_step and checker.checked_data_reuse
     # made again from its spec, it is under this checker alone, not Gymnasium's too
     assert str(gymnasium.make(env.spec)) == str(env) == "<OrderEnforcing<EnvChecker<MemoryEnv<pairplay/Memory-v0>>>>"
+
+
+BAD_VALUES = ["nobody", "", 5, None, 1.5, b"tatiana", ["tatiana"], {"a": 1}, np.int64(3), np.nan, True, -1,
+              2 ** 70, 10 ** 12, np.array([1, 2])]
+
+
+def test_every_bad_argument_of_either_env_is_a_value_or_type_error():
+    """docs/gym.md: a mistake is a ValueError (out of range) or a TypeError (the wrong kind). An unknown
+    persona was a KeyError (constructor, persona list, `reset(options={"persona": "nobody"})`) and a huge
+    num_envs numpy's OverflowError (2**70) or MemoryError (10**12): every argument of both envs, fed the
+    same bad values, raises one of the two kinds or works."""
+    def refused_or_taken(call):
+        try:
+            call()
+        except (ValueError, TypeError):
+            pass
+    for bad in BAD_VALUES:
+        for option in ("persona", "reward_bonus", "observation", "observed_source", "render_mode"):
+            refused_or_taken(lambda: MemoryEnv(**{option: bad}))
+            refused_or_taken(lambda: MemoryVectorEnv(2, **{option: bad}))
+        refused_or_taken(lambda: MemoryVectorEnv(2, persona=[bad, "tatiana"]))
+        env, vec = MemoryEnv(), MemoryVectorEnv(2)
+        for target in (env, vec):
+            refused_or_taken(lambda: target.reset(seed=bad))
+            refused_or_taken(lambda: target.reset(options=bad))
+            refused_or_taken(lambda: target.reset(options={"persona": bad}))
+        refused_or_taken(lambda: vec.reset(seed=[bad, 1]))
+        env.reset(seed=1), vec.reset(seed=1)
+        refused_or_taken(lambda: env.step(bad))
+        refused_or_taken(lambda: vec.step([bad, 1]))
+    for bad in (2 ** 70, 10 ** 12, 10 ** 7, 0, -1, 1.0, True, "2"):
+        with pytest.raises((ValueError, TypeError), match="num_envs"):
+            MemoryVectorEnv(bad)
+    for target in (MemoryEnv(), MemoryVectorEnv(2)):
+        with pytest.raises(ValueError, match="unknown persona 'nobody'; known: ashley"):
+            target.reset(options={"persona": "nobody"})
