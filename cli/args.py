@@ -146,6 +146,14 @@ def fraction(text: str) -> float:
 
 
 count = int_at_least(1)  # rounds, games, seeds: at least one
+# A session over the bus (session, lab, run) holds what it played until it ends (every service's Outbox keeps
+# what it sent for a restarted recorder, the recorder and the CLI keep the events, the allocator keeps the
+# rest): measured `session --participant sim:ashley`, peak RSS 289 MB at 200 rounds, 327 MB at 400, 465 MB
+# at 800, 744 MB at 1600, so ~0.35 MB a round on ~180 MB. `--rounds 1000000000` grew to 3.7 GB in 10 min
+# and was killed; the limit keeps a session under ~2 GB, as core/simulate.py MEMORY_LIMIT keeps a study.
+SESSION_ROUNDS_MAX = 5_000
+session_rounds = int_between(1, SESSION_ROUNDS_MAX, "a session over the bus holds ~0.35 MB a round until it "
+                                                    "ends: at most ~2 GB")
 UPDATES_MAX = 2**63 - 1  # report/study.py's: a state's update count is an int64 (a test pins it)
 # how often a state was updated, a threshold (`--trained-updates 1e23` was met by no state, without a word)
 update_count = int_between(0, UPDATES_MAX, "a state's updates are counted in 64 bits")

@@ -45,7 +45,8 @@ from pairplay.schemas.policy import read_policy
 from pairplay.schemas.session import (IGNORE_CLOCKS, MS_RANGE, OBSERVED_SOURCES, SessionConfig, learner_overrides,
                                       lspi_overrides)
 
-from pairplay.cli.args import add_force, count, float_between, game_index, positive_number, seed_number, session_id
+from pairplay.cli.args import (add_force, count, float_between, game_index, positive_number, seed_number, session_id,
+                               session_rounds)
 from pairplay.core.geometry import PICKS_UNIT
 from pairplay.cli.robot import add_robot_arguments, check_robot_args, probe_robot_args, robot_choice
 from pairplay.services.bus import BusOpenError, ConfigFileError, add_bus_arguments, options_from_args, stop_on_signals
@@ -65,7 +66,8 @@ def add_config_arguments(p: argparse.ArgumentParser) -> None:
     g.add_argument("--participant", required=True, help="sim:<persona> (a simulated user) or human:<id>")
     g.add_argument("--session", type=session_id, help="session id (default: <participant>-seed<seed>-game<i>-<UTC time>)")
     g.add_argument("--seed", type=seed_number, default=0, help="the session's seed")
-    g.add_argument("--rounds", type=count, help="rounds to play (default: 20 for sim:, 5 for human:, thesis 7.2)")
+    g.add_argument("--rounds", type=session_rounds, help="rounds to play, 1..5000 (default: 20 for sim:, 5 for "
+                   "human:, thesis 7.2)")
     g.add_argument("--game-index", type=game_index, default=0, help="which game of the seed (0, 1, ... 2**63-1)")
     g.add_argument("--algorithm", choices=("q-learning", "pi-reuse", "fixed", "lspi"), default="q-learning",
                    help="the learner: Q-learning from scratch (thesis 5.1), pi-reuse of --policy (algorithm 5), "

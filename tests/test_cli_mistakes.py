@@ -194,6 +194,14 @@ CASES = [
     Case("study --eval-rounds 0", ["study", "--eval-rounds", "0"], "--eval-rounds: must be at least 1"),
     # numbers that size memory or feed the learner are bounded before any work (a new user's trial,
     # 2026-12-01): each of these was a MemoryError traceback or an OOM kill, a hang, or learned nonsense
+    # a session over the bus holds ~0.35 MB a round until it ends (cli/args.py SESSION_ROUNDS_MAX):
+    # `--rounds 1000000000` was taken and grew to 3.7 GB in 10 minutes before it was killed
+    *(Case(f"{verb} --rounds 1000000000", [*verb, "--participant", who, "--rounds", "1000000000"],
+           "--rounds: must be 1..5000 (a session over the bus holds ~0.35 MB a round until it ends: at most ~2 GB), "
+           "got 1000000000") for verb, who in ((["session"], "sim:ashley"), (["lab"], "human:p1"),
+                                                (["run", "game"], "sim:ashley"))),
+    Case("session --rounds 5001", ["session", "--participant", "sim:ashley", "--rounds", "5001"],
+         "--rounds: must be 1..5000"),
     Case("study --games 1000000000", ["study", "--games", "1000000000"],
          "--games: the study would hold about 3795200.3 GB of memory (8 personas, --games 1000000000"),
     Case("study --rounds 1000000000", ["study", "--rounds", "1000000000"], "--rounds: the study would hold about"),

@@ -52,7 +52,7 @@ ROWS = [
     Row("router running SIGINT", ["router", "--listen", "tcp/127.0.0.1:0"], signal.SIGINT, False, "listening"),
     Row("router running SIGTERM", ["router", "--listen", "tcp/127.0.0.1:0"], signal.SIGTERM, False, "listening"),
     Row("replay running SIGTERM", ["replay", "rec.mcap", "--speed", "0.01"], signal.SIGTERM, False, "replaying"),
-    Row("session running", ["session", "--participant", "sim:blind", "--rounds", "100000", "--session", "r1",
+    Row("session running", ["session", "--participant", "sim:blind", "--rounds", "5000", "--session", "r1",
                             "--out", "rec"], signal.SIGTERM, False, "bus listening"),
     Row("run learner running", ["run", "learner", "--session", "r2"], signal.SIGINT, False, "listening"),
     Row("robot running", ["robot", "--session", "r3", "--robot", "virtual"], signal.SIGTERM, False, "robot bridge"),

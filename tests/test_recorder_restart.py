@@ -122,7 +122,7 @@ def test_a_recorder_killed_mid_session_gets_the_robots_reports_of_its_outage_ref
     hole in the robot's numbers, each counted at the close as a suggestion not reported, and the
     RecordingGap named the robot unanswered."""
     session = "rkr"
-    p = session_proc(tmp_path, "--participant", "sim:ashley", "--rounds", "100000", "--session", session,
+    p = session_proc(tmp_path, "--participant", "sim:ashley", "--rounds", "5000", "--session", session,
                      "--external", "recorder")
     first = second = None
     path, restarted = tmp_path / f"{session}.mcap", tmp_path / f"{session}.1.mcap"
