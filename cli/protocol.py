@@ -305,6 +305,8 @@ def _pilot(data: StudyData, args) -> int:
         def said(step, result) -> None:
             what = f"{counted(len(result.users), 'user')} combined" if step.kind == "combine" else \
                 f"{result.ended.outcome}, {counted(result.ended.rounds_played, 'round')}"
+            if getattr(result, "partial", ""):  # a combination of a partial policy, as `pairplay profile` says it
+                what += f"; PARTIAL profile: {result.partial}"
             robot = runner.delivery.get(getattr(result, "session", ""), "")
             what += f"; {robot}" if robot else ""
             played = dataclasses.replace(step, scripted=getattr(result, "scripted", ""))  # "p01 (scripted: blind)"

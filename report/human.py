@@ -232,6 +232,7 @@ def human_report(folder: str | Path, out: str | Path | None = None, reference: s
                      + (f" **Combined from scripted games** (personas {', '.join(personas)}): a rehearsal's bias "
                         "policy, not people's." if personas else ""), "",
                      "Profiles (algorithm 3) of the users combined:", "", markdown_table(prof_rows), "",
+                     *([f"**PARTIAL profile: {c.partial}**", ""] if c.partial else []),
                      "<details><summary>every state</summary>", "", markdown_table(state_rows), "", "</details>", ""]
     if panels:
         plots.human_merged(panels, None if ref is None else ("reference: " + ref.participant, np.asarray(ref.greedy)),

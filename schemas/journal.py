@@ -98,6 +98,9 @@ class BiasCombined(JournalEvent, tag="BiasCombined"):
     actions: list[int]
     decided_by: list[str]
     profiles: dict[str, dict[str, float]] = {}  # user -> speech, head (shares), facial, gaze (0/1), compared_states
+    # why the profiles and the merged policy are partial ("" if not): core/policies.py partial_inputs, as the
+    # combiner's merged file says it and `pairplay profile` says "PARTIAL profile: ..." (they said nothing here)
+    partial: str = ""
 
 
 class ParticipantDeleted(JournalEvent, tag="ParticipantDeleted"):

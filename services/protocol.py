@@ -37,7 +37,7 @@ from pathlib import Path
 from typing import Callable
 
 from pairplay import __version__
-from pairplay.core.policies import users_from_policies
+from pairplay.core.policies import partial_inputs, users_from_policies
 from pairplay.replay.delivery import delivery_counts, delivery_line
 from pairplay.replay.reader import read_log
 from pairplay.replay.studydata import Game, StudyData, StudyDataError, game_end, one_line
@@ -477,7 +477,8 @@ class StudyRunner:
                 output=output, actions=result.actions, decided_by=result.decided_by,
                 profiles={u: {"speech": p.info.speech, "head": p.info.head, "facial": float(p.info.facial),
                               "gaze": float(p.info.gaze), "compared_states": float(p.info.compared_states)}
-                          for u, p in profiles.items()})
+                          for u, p in profiles.items()},
+                partial=partial_inputs(policies, inputs))
             return self.data.append(event)
         finally:
             self.live.state = "idle"

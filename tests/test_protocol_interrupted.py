@@ -340,3 +340,25 @@ def test_a_game_whose_end_was_never_journaled_is_journaled_from_its_finished_rec
                                 policy=ends[cut.session].policy, questionnaire=True, time_ns=ended.time_ns)
     assert (data.folder / ended.policy).is_file()
     assert data.state.games[running.session].ended is None  # not finished: left as it was
+
+
+def test_a_combination_of_a_partial_policy_journals_its_profiles_as_partial(tmp_path):
+    """The combiner's merged file of a partial input policy says so (core/policies.py partial_inputs) and
+    `pairplay profile` says "PARTIAL profile: ..."; the protocol's combine step journaled the users' profiles
+    (BiasCombined, shown by the console and the report) with no word of it. Now the event carries the
+    merged file's very reason, and it reads back from the journal."""
+    import msgspec
+
+    from pairplay.schemas import policy as policy_file
+
+    data = completed_without_policy(tmp_path, stripped=0)
+    game = next(iter(data.state.games.values()))
+    why = "lost 2 messages that do not decode"
+    path = data.folder / game.ended.policy
+    policy_file.write_policy(path, msgspec.structs.replace(policy_file.read_policy(path), partial=why), force=True)
+    with Bus(BusOptions()) as bus:
+        event = StudyRunner(data, bus).combine("phase2")
+    expected = f"made of a partial policy: {game.ended.policy} ({why})"
+    assert event.partial == expected, event.partial
+    assert policy_file.read_policy(data.folder / event.output).partial == expected  # the combiner's, the same
+    assert StudyData(data.folder).state.combined["phase2"].partial == expected

@@ -95,6 +95,7 @@ class Console:
             combined[phase] = {
                 "users": [names.get(u, u) for u in c.users], "output": c.output,
                 "profiles": {names.get(u, u): p for u, p in c.profiles.items()},
+                "partial": f"PARTIAL profile: {c.partial}" if c.partial else "",  # as `pairplay profile` says it
                 "states": [{"state": f"{s} {STATE_NAMES[s]}", "action": f"{a}: {ACTION_NAMES[a]}",
                             "rule": named(r, names)}
                            for s, (a, r) in enumerate(zip(c.actions, c.decided_by)) if s < N_STATES - 1]}

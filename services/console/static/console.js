@@ -88,6 +88,7 @@ function render(s) {
       const r = t.insertRow(); [u, (100 * p.speech).toFixed(1) + "%", (100 * p.head).toFixed(1) + "%", p.facial ? "yes" : "no", p.gaze ? "yes" : "no"].forEach((v) => r.insertCell().textContent = v);
     }
     comb.appendChild(t);
+    if (c.partial) { const w = el("p", c.partial, "partial"); w.id = "partial-" + phase; comb.appendChild(w); }
     const rules = el("table", undefined, "rules"); rules.id = "rules-" + phase;
     const rh = rules.insertRow(); ["state", "action", "rule that decided it"].forEach((h) => rh.appendChild(el("th", h)));
     c.states.forEach((st) => { const r = rules.insertRow(); [st.state, st.action, st.rule].forEach((v) => r.insertCell().textContent = v); });
