@@ -643,6 +643,55 @@ def test_the_answers_table_takes_no_answer_from_a_recording_that_is_not_its_game
     assert not any(a["session"] == game.session for a in StudyData(data.folder).answers())
 
 
+def _answers_damaged(path: Path, how: str) -> None:
+    """The recording at `path` written again, its QuestionnaireAnswered message lost: bytes that do not decode
+    ("undecodable"), or a flipped byte in the chunk that holds it ("chunk": its CRC fails, the chunk is lost)."""
+    from pairplay.replay.mcapscan import scan
+    from pairplay.replay.writer import EventLogWriter
+
+    records = read_log(path).events
+    [answered] = [r for r in records if type(r.event).__name__ == "QuestionnaireAnswered"]
+    w = EventLogWriter(path, chunk_size=4096)
+    for r in records:
+        broken = how == "undecodable" and r is answered
+        w.write(r.key, b'{"type":"broken"' if broken else r.payload, log_time_ns=r.log_time_ns, sequence=r.event.seq)
+    w.close()
+    if how == "chunk":
+        [c] = [c for c in scan(path).chunks if any(t == answered.log_time_ns for _, _, t in c.messages)]
+        data = bytearray(path.read_bytes())
+        data[c.offset + c.length - 7] ^= 0x5A
+        path.write_bytes(bytes(data))
+
+
+@pytest.mark.parametrize("how", ["undecodable", "chunk"])
+def test_an_answer_its_recording_lost_is_a_row_saying_so_in_answers_csv_and_the_export(played, tmp_path, how):
+    """answers.csv silently left out a game's answers when its QuestionnaireAnswered message did not decode (or
+    the chunk that held it was damaged): the game looked unanswered, with no word. The lost answers are one row
+    (the phase's questionnaire, item and answer empty) whose `lost` column says why in the reader's words, in the
+    tables and in the participant's export; the report's questionnaire table counts no answer from it."""
+    data = copy_study(played, tmp_path)
+    game = next(g for g in data.state.games.values() if g.valid_complete and g.ended.questionnaire)
+    before = [a for a in data.answers() if a["session"] == game.session]
+    assert before and all(not a.get("lost") for a in before)
+    _answers_damaged(data.folder / game.recording, how)
+    data = StudyData(data.folder)
+    data.write_tables()
+    with open(data.folder / "answers.csv", newline="") as f:
+        rows = list(csv.DictReader(f))
+    [lost] = [r for r in rows if r["session"] == game.session]
+    assert lost["item"] == lost["answer"] == "" and lost["questionnaire"] == before[0]["questionnaire"], lost
+    words = {"undecodable": "the answers do not decode (", "chunk": "not in the recording: damaged: chunk "}[how]
+    assert words in lost["lost"], lost
+    assert all(r["lost"] == "" and r["item"] for r in rows if r["session"] != game.session)
+    with zipfile.ZipFile(data.export_participant(game.participant, tmp_path / "p.zip")) as z:
+        exported = list(csv.DictReader(z.read("answers.csv").decode().splitlines()))
+        readme = z.read("README.txt").decode()
+    assert [r["lost"] for r in exported if r["session"] == game.session] == [lost["lost"]]
+    assert "1 row for answers a damaged recording lost" in readme, readme
+    from pairplay.report.human import questionnaire_rows
+    assert all(r[4] != "0" for r in questionnaire_rows(data, {game.session})[1:])
+
+
 def test_no_policy_is_built_for_a_game_from_a_recording_that_is_not_its_games(played, tmp_path):
     """build_missing_policies rebuilt a completed game's missing policy from whatever its recording path held:
     another session copied over it (`session --force`) became the game's policy, journaled. It is refused, said."""
