@@ -682,20 +682,38 @@ def game_end(folder: Path, session: str, participant: str, path: Path, answered:
     """How a game ended, from its finished recording: completed or aborted (the reason its SessionEnded
     gives, else `abort_reason`), its whole rounds and their policy (written to <folder>/policies, none
     for a game stopped in round 1), whether the questionnaire was answered (`answered`, else whether
-    the recording holds the answers)."""
+    the recording holds the answers, one that does not decode included: answers.csv says it was lost).
+    A recording that lost events (`recording_damage`) gives no policy, as `build_missing_policies`
+    refuses one (the game's Q-table is not what the file holds), and the damage is the GameEnded's
+    reason, in the reader's words; a completed game keeps its outcome (the next start's
+    build_missing_policies says again why it has no policy; the combination refuses to go without it).
+    Before, a partial policy was written and journaled as the game's, with no word."""
     recorded = read_log(path)
     fold = fold_events(r.event for r in recorded.events)
     ended = fold.ended
     completed = ended is not None and ended.reason == "completed"
+    damaged = recording_damage(recorded)
     policy = ""
-    if fold.config is not None and fold.whole_rounds():  # a game stopped in round 1 has no policy to give
+    if fold.config is not None and fold.whole_rounds() and not damaged:  # a game stopped in round 1: no policy
         policy = write_game_policy(folder, rebuild_recording(path), force=force)
     reason = "" if completed else (f"{ended.reason}: {ended.detail}" if ended is not None and ended.detail else
                                    ended.reason if ended is not None else abort_reason or "the game did not end")
+    if damaged:
+        reason = "; ".join(r for r in (reason, f"recording {damaged}: no policy built") if r)
     if answered is None:
-        answered = bool(recorded.of("QuestionnaireAnswered"))
+        answered = bool(recorded.of("QuestionnaireAnswered")) or bool(lost_answers(recorded, False, False))
     return j.GameEnded(session=session, participant=participant, outcome="completed" if completed else "aborted",
                        reason=reason, rounds_played=len(fold.whole_rounds()), policy=policy, questionnaire=answered)
+
+
+def recording_damage(log) -> str:
+    """What a game's finished recording (reader.EventLog) lost, in the reader's words ("" if nothing):
+    "damaged: ..." for events lost (`EventLog.lost`: a damaged part that held some, messages that do not
+    decode) or "truncated: ..." for a cut (a finished file that stops early lost its end). A damage that
+    lost no event (a summary's CRC) is not a loss, as for rebuild."""
+    if log.lost:
+        return f"damaged: {log.lost}"
+    return f"truncated: {log.brief}" if log.truncated else ""
 
 
 def lost_answers(log, decoded: bool, journaled: bool) -> list[str]:

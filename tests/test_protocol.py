@@ -17,6 +17,8 @@ from pathlib import Path
 
 import pytest
 
+from damageutil import damage
+
 from pairplay.replay.reader import read_log
 from pairplay.replay.studydata import StudyData, StudyDataError
 from pairplay.report.human import human_report
@@ -167,6 +169,37 @@ def test_a_game_aborted_in_its_first_round_gets_no_policy_of_0_rounds(tmp_path):
     assert game.ended.outcome == "aborted" and game.ended.rounds_played == 0
     assert game.ended.policy == "" and not list((data.folder / "policies").rglob("*.json"))
     assert verify_recording(data.folder / game.recording).ok  # its whole (short) life verifies
+
+
+@pytest.mark.parametrize("how", ["chunk", "undecodable"])
+def test_a_game_whose_recording_is_damaged_when_read_back_gets_no_policy_and_says_why(tmp_path, monkeypatch, caplog,
+                                                                                     how):
+    """The study's runner read each game's fresh recording back (game_end) with no damage check: a recording
+    that lost a chunk, or whose Q update does not decode, was rebuilt into a partial policy journaled as the
+    game's, its GameEnded saying nothing. Now no policy is built from it (as build_missing_policies refuses
+    one), its GameEnded's reason says why in the reader's words, and the runner says it (a warning)."""
+    import pairplay.services.protocol as protocol
+
+    real = protocol.run_session
+
+    def damaged_after_it_is_written(*args, **kwargs):
+        path = real(*args, **kwargs)  # the real game: its recording finished and closed
+        damage(path, how)
+        return path
+
+    monkeypatch.setattr(protocol, "run_session", damaged_after_it_is_written)
+    data = StudyData.create(tmp_path / "s", STUDY)
+    pid = data.register("phase1")
+    with Bus(BusOptions()) as bus:
+        runner = StudyRunner(data, bus, questionnaire_timeout_s=60.0)
+        game = runner.run_game(pid, "phase1", 0, scripted_players(runner, {pid: "tatiana"})(pid, "phase1", 0))
+    words = {"chunk": "recording damaged: chunk ", "undecodable": "recording damaged: 1 message in it does not decode ("}
+    assert game.ended.policy == "" and not list((data.folder / "policies").rglob("*.json")), game.ended
+    assert words[how] in game.ended.reason and game.ended.reason.endswith(": no policy built"), game.ended.reason
+    assert any(game.session in r.getMessage() and "no policy built" in r.getMessage()
+               for r in caplog.records if r.levelname == "WARNING"), caplog.text
+    [line] = StudyData(data.folder).build_missing_policies()  # the next start says it again: no policy from it
+    assert line.startswith(f"{game.session}: completed, but no policy built: its recording ") and "partial" in line
 
 
 def test_export_holds_everything_of_one_participant_with_a_readme(played, tmp_path):
@@ -643,26 +676,6 @@ def test_the_answers_table_takes_no_answer_from_a_recording_that_is_not_its_game
     assert not any(a["session"] == game.session for a in StudyData(data.folder).answers())
 
 
-def _answers_damaged(path: Path, how: str) -> None:
-    """The recording at `path` written again, its QuestionnaireAnswered message lost: bytes that do not decode
-    ("undecodable"), or a flipped byte in the chunk that holds it ("chunk": its CRC fails, the chunk is lost)."""
-    from pairplay.replay.mcapscan import scan
-    from pairplay.replay.writer import EventLogWriter
-
-    records = read_log(path).events
-    [answered] = [r for r in records if type(r.event).__name__ == "QuestionnaireAnswered"]
-    w = EventLogWriter(path, chunk_size=4096)
-    for r in records:
-        broken = how == "undecodable" and r is answered
-        w.write(r.key, b'{"type":"broken"' if broken else r.payload, log_time_ns=r.log_time_ns, sequence=r.event.seq)
-    w.close()
-    if how == "chunk":
-        [c] = [c for c in scan(path).chunks if any(t == answered.log_time_ns for _, _, t in c.messages)]
-        data = bytearray(path.read_bytes())
-        data[c.offset + c.length - 7] ^= 0x5A
-        path.write_bytes(bytes(data))
-
-
 @pytest.mark.parametrize("how", ["undecodable", "chunk"])
 def test_an_answer_its_recording_lost_is_a_row_saying_so_in_answers_csv_and_the_export(played, tmp_path, how):
     """answers.csv silently left out a game's answers when its QuestionnaireAnswered message did not decode (or
@@ -673,7 +686,7 @@ def test_an_answer_its_recording_lost_is_a_row_saying_so_in_answers_csv_and_the_
     game = next(g for g in data.state.games.values() if g.valid_complete and g.ended.questionnaire)
     before = [a for a in data.answers() if a["session"] == game.session]
     assert before and all(not a.get("lost") for a in before)
-    _answers_damaged(data.folder / game.recording, how)
+    damage(data.folder / game.recording, how, tag="QuestionnaireAnswered")
     data = StudyData(data.folder)
     data.write_tables()
     with open(data.folder / "answers.csv", newline="") as f:

@@ -17,39 +17,13 @@ import pytest
 
 from busutil import wait_until
 
+from damageutil import damage
+
 from pairplay.livelock import is_live
-from pairplay.replay.mcapscan import scan
 from pairplay.replay.reader import read_log
-from pairplay.replay.writer import EventLogWriter
 
 WORDS = {"chunk": "is not whole: damaged: chunk ", "cut": "is not whole: truncated: ",
          "undecodable": "is not whole: 1 message in it does not decode ("}
-
-
-def damage(path, how: str) -> None:
-    """Damage the finished recording at `path` as a disk or a careless hand would: a flipped byte in its middle
-    chunk (its CRC fails), its last third cut off, or one Q update's bytes replaced by bytes that do not decode."""
-    if how == "chunk":
-        chunks = scan(path).chunks
-        c = chunks[len(chunks) // 2]
-        data = bytearray(path.read_bytes())
-        data[c.offset + c.length - 7] ^= 0x5A
-        path.write_bytes(bytes(data))
-    elif how == "cut":
-        data = path.read_bytes()
-        path.write_bytes(data[:len(data) * 2 // 3])
-    else:
-        log = read_log(path)
-        w = EventLogWriter(path, chunk_size=4096)
-        broken = False
-        for r in log.events:
-            bad = not broken and type(r.event).__name__ == "QUpdated"
-            broken = broken or bad
-            w.write(r.key, b'{"type":"broken"' if bad else r.payload, log_time_ns=r.log_time_ns,
-                    sequence=r.event.seq)
-        w.close()
-        assert broken
-    assert read_log(path).note
 
 
 @pytest.mark.parametrize("how", ["chunk", "cut", "undecodable"])
