@@ -17,7 +17,7 @@ from pathlib import Path
 
 import pytest
 
-from damageutil import damage
+from damageutil import damage, damaged_when_written
 
 from pairplay.replay.reader import read_log
 from pairplay.replay.studydata import StudyData, StudyDataError
@@ -180,20 +180,14 @@ def test_a_game_whose_recording_is_damaged_when_read_back_gets_no_policy_and_say
     one), its GameEnded's reason says why in the reader's words, and the runner says it (a warning)."""
     import pairplay.services.protocol as protocol
 
-    real = protocol.run_session
-
-    def damaged_after_it_is_written(*args, **kwargs):
-        path = real(*args, **kwargs)  # the real game: its recording finished and closed
-        damage(path, how)
-        return path
-
-    monkeypatch.setattr(protocol, "run_session", damaged_after_it_is_written)
+    damaged_when_written(monkeypatch, protocol, how)  # the real one's recording, finished and closed
     data = StudyData.create(tmp_path / "s", STUDY)
     pid = data.register("phase1")
     with Bus(BusOptions()) as bus:
         runner = StudyRunner(data, bus, questionnaire_timeout_s=60.0)
         game = runner.run_game(pid, "phase1", 0, scripted_players(runner, {pid: "tatiana"})(pid, "phase1", 0))
-    words = {"chunk": "recording damaged: chunk ", "undecodable": "recording damaged: 1 message in it does not decode ("}
+    words = {"chunk": "recording damaged: chunk ",
+             "undecodable": "recording damaged: 1 message in it does not decode ("}
     assert game.ended.policy == "" and not list((data.folder / "policies").rglob("*.json")), game.ended
     assert words[how] in game.ended.reason and game.ended.reason.endswith(": no policy built"), game.ended.reason
     assert any(game.session in r.getMessage() and "no policy built" in r.getMessage()

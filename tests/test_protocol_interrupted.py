@@ -352,7 +352,8 @@ def test_a_game_journaled_from_a_recording_whose_answers_do_not_decode_is_answer
     data = completed_without_policy(tmp_path, stripped=0)
     cut = next(iter(data.state.games.values()))
     (data.folder / cut.ended.policy).unlink()
-    kept = [j.encode_line(e) for e in data.read_journal() if not (isinstance(e, j.GameEnded) and e.session == cut.session)]
+    kept = [j.encode_line(e) for e in data.read_journal()
+            if not (isinstance(e, j.GameEnded) and e.session == cut.session)]
     (data.folder / "journal.jsonl").write_bytes(b"".join(kept))
     damage(data.folder / cut.recording, "undecodable", tag="QuestionnaireAnswered")
     data = StudyData(data.folder)

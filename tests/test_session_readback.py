@@ -17,7 +17,7 @@ import pytest
 
 from busutil import wait_until
 
-from damageutil import damage
+from damageutil import damage, damaged_when_written
 
 from pairplay.livelock import is_live
 from pairplay.replay.reader import read_log
@@ -32,14 +32,7 @@ def test_a_session_whose_recording_is_not_whole_when_read_back_says_so_and_exits
     import pairplay.cli.session as cli_session
     from pairplay.cli.main import main
 
-    real = cli_session.run_session
-
-    def damaged_after_it_is_written(*args, **kwargs):
-        path = real(*args, **kwargs)  # the real session: its recording finished and closed
-        damage(path, how)
-        return path
-
-    monkeypatch.setattr(cli_session, "run_session", damaged_after_it_is_written)
+    damaged_when_written(monkeypatch, cli_session, how)  # the real one's recording, finished and closed
     code = main(["session", "--participant", "sim:blind", "--rounds", "2", "--session", "rb", "--out", str(tmp_path)])
     out, err = capsys.readouterr()
     path = tmp_path / "rb.mcap"
