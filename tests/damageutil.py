@@ -43,14 +43,14 @@ def _rewritten(path, tag: str, broken: bool) -> int:
     return first.log_time_ns
 
 
-def damaged_when_written(monkeypatch, module, how: str) -> None:
-    """`module.run_session` (the one a verb or the study runner calls) made to damage (`damage`) the recording
-    the real session has just finished and closed, before its caller reads it back."""
+def damaged_when_written(monkeypatch, module, how: str, tag: str = "") -> None:
+    """`module.run_session` (the one a verb or the study runner calls) made to damage (`damage`, `how` and `tag`
+    as there) the recording the real session has just finished and closed, before its caller reads it back."""
     real = module.run_session
 
     def damaged_after_it_is_written(*args, **kwargs):
         path = real(*args, **kwargs)
-        damage(path, how)
+        damage(path, how, tag)
         return path
 
     monkeypatch.setattr(module, "run_session", damaged_after_it_is_written)
