@@ -26,7 +26,7 @@ from pairplay.services.bus import LOOPBACK_ANY_PORT, MODES, BusOptions, stop_on_
 
 from pairplay.cli.args import duration
 from pairplay.cli.robot import add_robot_arguments, check_robot_args, probe_robot_args, robot_choice
-from pairplay.cli.session import add_config_arguments, config_from_args, print_interrupted
+from pairplay.cli.session import add_config_arguments, config_from_args, print_interrupted, read_back
 from pairplay.numbers import counted
 
 LOOPBACK = "127.0.0.1"
@@ -121,14 +121,15 @@ def run(args: argparse.Namespace) -> int:
     from pairplay.replay.fold import fold_events
     from pairplay.replay.reader import read_log
 
-    recorded = read_log(path)
+    recorded = read_log(path) if getattr(stop, "why", "") else read_back(path, "lab")  # (a signal: one line)
     fold = fold_events(r.event for r in recorded.events)
     e = fold.ended
     if getattr(stop, "why", ""):  # a signal: ONE line, as `pairplay session`
         when = "before the session started" if fold.config is None else \
             f"after the session had completed all {counted(config.rounds, 'round')}" if e is not None and e.reason == "completed" \
             else f"after {len(fold.rounds)} of {counted(config.rounds, 'round')}"
-        print(f"pairplay lab: interrupted ({stop.why}) {when}; recorded {counted(len(recorded.events), 'event')} to {path}", file=sys.stderr)
+        print(f"pairplay lab: interrupted ({stop.why}) {when}; recorded {counted(len(recorded.events), 'event')} to {path}"
+              + (f" (read back, it is not whole: {recorded.note})" if recorded.note else ""), file=sys.stderr)
         return 0  # the status is the signal's (cli/main.py)
     ended = "no SessionEnded recorded" if e is None else e.reason + (f" ({e.detail})" if e.detail else "")
     if not getattr(args, "quiet", False):  # a summary of the file it wrote: -q leaves it out (cli/main.py QUIET_SUMMARIES)
@@ -141,4 +142,6 @@ def run(args: argparse.Namespace) -> int:
             print(robot)
     elif e is None or e.reason != "completed":  # how a session that did not complete ended is still said
         print(f"ended: {ended}")
+    if recorded.note:  # said by read_back; as `pairplay session`
+        return 1
     return 0 if e is not None and e.reason in ("completed", "interrupted", "aborted") else 1  # as `pairplay session`

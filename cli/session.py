@@ -207,6 +207,22 @@ def print_interrupted(summary: dict, path: Path, why: str, rounds: int, taken: s
     return 0
 
 
+def read_back(path: Path, verb: str):
+    """The recording a session just wrote, read back for its summary (`pairplay session`, `pairplay lab`)
+    through the reader every verb uses (replay/reader.py `read_log`), so it is judged as they judge it: what it
+    lacks (a damaged part, a cut, messages that do not decode: `EventLog.note`) is said in ONE line on stderr,
+    naming the file, and the verb exits 1; the summary then counts what the file holds. Its summary read the
+    file with no check: a recording that lost a chunk after it was closed was summed up as a session of
+    fewer events, exit 0."""
+    from pairplay.replay.reader import read_log
+
+    recorded = read_log(path)
+    if recorded.note:
+        print(f"pairplay {verb}: the recording {path} read back is not whole: {recorded.note} (the summary counts "
+              f"what it holds; `pairplay verify {path}` says more)", file=sys.stderr)
+    return recorded
+
+
 def run(args: argparse.Namespace) -> int:
     config = config_from_args(args)
     try:
@@ -282,8 +298,7 @@ def _run(args: argparse.Namespace, config: SessionConfig, path: Path, summary: d
         return print_interrupted(summary, path, stop.why, config.rounds, "the id stays taken: --force reuses it")
     from pairplay.replay.delivery import delivery_line
     from pairplay.replay.fold import fold_events
-    from pairplay.replay.reader import read_log
-    recorded = read_log(path)
+    recorded = read_back(path, "session")
     fold = fold_events(r.event for r in recorded.events)
     picks = fold.picks_per_round()
     if not getattr(args, "quiet", False):  # a summary of the file it wrote: -q leaves it out (cli/main.py QUIET_SUMMARIES)
@@ -300,4 +315,6 @@ def _run(args: argparse.Namespace, config: SessionConfig, path: Path, summary: d
     elif e.reason != "completed":
         print(f"ended: {e.reason}{f' ({e.detail})' if e.detail else ''} after {e.rounds_played} of "
               f"{counted(config.rounds, 'round')}")
+    if recorded.note:  # the session's recording lacks what the summary would count: not a clean run
+        return 1
     return 0 if e is not None and e.reason in ("completed", "interrupted", "aborted") else 1

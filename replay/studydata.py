@@ -482,7 +482,9 @@ class StudyData:
 
     # -- derived tables ------------------------------------------------------
     def answers(self) -> list[dict]:
-        """Every questionnaire answer of every recorded game, one row per item."""
+        """Every questionnaire answer of every recorded game, one row per item (`lost` ""), and a row for
+        each answer its recording lost (`lost_answers`: item and answer empty, `lost` says why, in the
+        reader's words): a QuestionnaireAnswered that does not decode was left out with no word."""
         rows = []
         for g in self.state.games.values():
             path = self.folder / g.recording
@@ -492,12 +494,17 @@ class StudyData:
             started = log.of("SessionStarted")
             if started and self.not_this_game(g, started[0].config):  # another session's answers are not its
                 continue  # participant's (a `session --force` over a study game's recording)
-            for e in log.of("QuestionnaireAnswered"):
+            row = {"participant": g.participant, "phase": g.phase, "game": g.game + 1, "session": g.session,
+                   "returning": int(self.returning(g.participant, g.phase)), "valid": int(not g.invalid),
+                   "scripted": g.scripted}
+            answered = log.of("QuestionnaireAnswered")
+            for e in answered:
                 for item, answer in e.answers.items():
-                    rows.append({"participant": g.participant, "phase": g.phase, "game": g.game + 1,
-                                 "session": g.session, "questionnaire": e.questionnaire, "item": item,
-                                 "answer": answer, "returning": int(self.returning(g.participant, g.phase)),
-                                 "valid": int(not g.invalid), "scripted": g.scripted})
+                    rows.append(row | {"questionnaire": e.questionnaire, "item": item, "answer": answer, "lost": ""})
+            phase = self.study.phase_by_id(g.phase)
+            asked = phase.questionnaires[0] if phase.questionnaires else ""
+            for why in lost_answers(log, bool(answered), g.ended is not None and g.ended.questionnaire):
+                rows.append(row | {"questionnaire": asked, "item": "", "answer": "", "lost": why})
         return rows
 
     def write_tables(self) -> list[Path]:
@@ -518,8 +525,9 @@ class StudyData:
             }
             answers = self.answers()
             # scripted: a persona's answers, not a person's (a new user's trial had to join on sessions.csv)
+            # lost: an answer its recording lost (damage), said in the row that stands for it (`lost_answers`)
             cols = ["participant", "phase", "game", "session", "questionnaire", "item", "answer", "returning", "valid",
-                    "scripted"]
+                    "scripted", "lost"]
             tables["answers.csv"] = (cols, [[r[c] for c in cols] for r in answers])
             paths = []
             for name, (head, rows) in tables.items():
@@ -569,14 +577,14 @@ class StudyData:
             with zipfile.ZipFile(buf, "w", zipfile.ZIP_DEFLATED) as z:
                 for f in files:
                     z.write(f, f.relative_to(self.folder).as_posix())
-                cols = ["participant", "phase", "game", "session", "questionnaire", "item", "answer"]
+                cols = ["participant", "phase", "game", "session", "questionnaire", "item", "answer", "lost"]
                 text = io.StringIO()
                 w = csvcell.writer(text)
                 w.writerow(cols)
                 w.writerows([[r[c] for c in cols] for r in answers])
                 z.writestr("answers.csv", text.getvalue())
                 z.writestr("journal.jsonl", b"".join(j.encode_line(e) for e in lines))
-                z.writestr("README.txt", _export_readme(pid, self.study.study.id, games, files, len(answers),
+                z.writestr("README.txt", _export_readme(pid, self.study.study.id, games, files, answers,
                                                         self.merged_using(pid), self.folder))
             atomic_write(out, buf.getvalue())
             return out
@@ -675,20 +683,55 @@ def game_end(folder: Path, session: str, participant: str, path: Path, answered:
     """How a game ended, from its finished recording: completed or aborted (the reason its SessionEnded
     gives, else `abort_reason`), its whole rounds and their policy (written to <folder>/policies, none
     for a game stopped in round 1), whether the questionnaire was answered (`answered`, else whether
-    the recording holds the answers)."""
+    the recording holds the answers, one that does not decode included: answers.csv says it was lost).
+    A recording that lost events (`recording_damage`) gives no policy, as `build_missing_policies`
+    refuses one (the game's Q-table is not what the file holds), and the damage is the GameEnded's
+    reason, in the reader's words; a completed game keeps its outcome (the next start's
+    build_missing_policies says again why it has no policy; the combination refuses to go without it).
+    Before, a partial policy was written and journaled as the game's, with no word."""
     recorded = read_log(path)
     fold = fold_events(r.event for r in recorded.events)
     ended = fold.ended
     completed = ended is not None and ended.reason == "completed"
+    damaged = recording_damage(recorded)
     policy = ""
-    if fold.config is not None and fold.whole_rounds():  # a game stopped in round 1 has no policy to give
+    if fold.config is not None and fold.whole_rounds() and not damaged:  # a game stopped in round 1: no policy
         policy = write_game_policy(folder, rebuild_recording(path), force=force)
     reason = "" if completed else (f"{ended.reason}: {ended.detail}" if ended is not None and ended.detail else
                                    ended.reason if ended is not None else abort_reason or "the game did not end")
+    if damaged:
+        reason = "; ".join(r for r in (reason, f"recording {damaged}: no policy built") if r)
     if answered is None:
-        answered = bool(recorded.of("QuestionnaireAnswered"))
+        answered = bool(recorded.of("QuestionnaireAnswered")) or bool(lost_answers(recorded, False, False))
     return j.GameEnded(session=session, participant=participant, outcome="completed" if completed else "aborted",
                        reason=reason, rounds_played=len(fold.whole_rounds()), policy=policy, questionnaire=answered)
+
+
+def recording_damage(log) -> str:
+    """What a game's finished recording (reader.EventLog) lost, in the reader's words ("" if nothing):
+    "damaged: ..." for events lost (`EventLog.lost`: a damaged part that held some, messages that do not
+    decode) or "truncated: ..." for a cut (a finished file that stops early lost its end). A damage that
+    lost no event (a summary's CRC) is not a loss, as for rebuild."""
+    if log.lost:
+        return f"damaged: {log.lost}"
+    return f"truncated: {log.brief}" if log.truncated else ""
+
+
+def lost_answers(log, decoded: bool, journaled: bool) -> list[str]:
+    """Why each questionnaire answer a read recording (reader.EventLog) lost is missing, one line each ([] if
+    none): a QuestionnaireAnswered message that does not decode (or one on no channel: it may be one), in the
+    reader's words; and, when no answer decoded but the journal says the game's questionnaire was answered
+    (`journaled`), a damaged part that lost events (`EventLog.brief`) or the file's cut: the answers may have
+    been in it. A game's answers are one message, so one that decoded leaves nothing else to lose."""
+    if decoded:
+        return []
+    bad = [b for b in log.bad if b.key.rsplit("/", 1)[-1] in ("QuestionnaireAnswered", "")]
+    if bad:
+        return [f"the answers do not decode ({b.key or 'no channel'}: {b.reason[:80]})" for b in bad]
+    if journaled and (log.lost_from >= 0 or log.truncated):
+        return [f"answered (the journal says), not in the recording: "
+                f"{'damaged' if log.damage else 'truncated'}: {log.brief}"]
+    return []
 
 
 def _finished_game(path: Path) -> bool:
@@ -761,8 +804,8 @@ def _utc(ns: int) -> str:
     return time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime(ns / 1e9)) if ns else ""
 
 
-def _export_readme(pid: str, study: str, games: list[Game], files: list[Path], answers: int, merged: list[str],
-                   folder: Path) -> str:
+def _export_readme(pid: str, study: str, games: list[Game], files: list[Path], answers: list[dict],
+                   merged: list[str], folder: Path) -> str:
     lines = [f"Data of participant {pid} in study {study} (pairplay {__version__})", "",
              "Everything pairplay holds about this pseudonymous participant:", ""]
     for g in games:
@@ -780,7 +823,10 @@ def _export_readme(pid: str, study: str, games: list[Game], files: list[Path], a
                 if rel.endswith(".journal") else
                 "the policy learned in that game (JSON: Q-table 24 states x 88 actions, greedy action per state)")
         lines.append(f"- {rel}: {what}")
-    lines += [f"- answers.csv: {counted(answers, 'questionnaire answer')} (one row per item)",
+    lost = sum(1 for a in answers if a["lost"])
+    lines += [f"- answers.csv: {counted(len(answers) - lost, 'questionnaire answer')} (one row per item)"
+              + (f", and {counted(lost, 'row')} for answers a damaged recording lost (column `lost`: why)"
+                 if lost else ""),
               "- journal.jsonl: the study journal's lines about this participant (registration, games, marks)", ""]
     if merged:
         lines += ["Merged policies combined from this participant's games (kept in the study; not included): "

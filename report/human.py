@@ -301,7 +301,7 @@ def human_report(folder: str | Path, out: str | Path | None = None, reference: s
 
 def questionnaire_rows(data: StudyData, sessions: set[str]) -> list[list[str]]:
     """One row per questionnaire item, phase and group (new / returning)."""
-    answers = [a for a in data.answers() if a["session"] in sessions]
+    answers = [a for a in data.answers() if a["session"] in sessions and not a["lost"]]  # (a lost one: no answer)
     grouped: dict[tuple, list[str]] = defaultdict(list)
     for a in answers:
         grouped[(a["questionnaire"], a["item"], a["phase"], "returning" if a["returning"] else "new")].append(a["answer"])

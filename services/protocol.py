@@ -40,7 +40,7 @@ from pairplay import __version__
 from pairplay.core.policies import partial_inputs, users_from_policies
 from pairplay.replay.delivery import delivery_counts, delivery_line
 from pairplay.replay.reader import read_log
-from pairplay.replay.studydata import Game, StudyData, StudyDataError, game_end, one_line
+from pairplay.replay.studydata import Game, StudyData, StudyDataError, game_end, one_line, recording_damage
 from pairplay.schemas import events as ev
 from pairplay.schemas import journal as j
 from pairplay.schemas.envelope import stamped
@@ -310,10 +310,16 @@ class StudyRunner:
         return self.data.state.games[config.session]
 
     def _finish(self, config: SessionConfig, path: Path, answered: bool) -> Game:
+        """The game's GameEnded journaled from its recording, read back with the reader's checks (`game_end`):
+        a recording that lost events gets no policy, and that is said here too, as a robot it could not reach."""
         self.data.append(game_end(self.data.folder, config.session, config.participant.split(":", 1)[1], path,
                                   answered, self._abort_reason))
+        recorded = read_log(path, only=frozenset({"RobotActed"}))
+        damaged = recording_damage(recorded)
+        if damaged:
+            log.warning("%s: its recording is %s: no policy built", config.session, damaged)
         if self.robot is not None:  # a robot it could not reach is said, not only under -v
-            acted = read_log(path, only=frozenset({"RobotActed"})).of("RobotActed")
+            acted = recorded.of("RobotActed")
             line = self.delivery[config.session] = delivery_line(acted)
             total, delivered, *_ = delivery_counts(acted)
             if delivered < total and self.warns_undelivered:

@@ -17,6 +17,8 @@ from pathlib import Path
 
 import pytest
 
+from damageutil import damage, damaged_when_written
+
 from pairplay.replay.reader import read_log
 from pairplay.replay.studydata import StudyData, StudyDataError
 from pairplay.report.human import human_report
@@ -186,6 +188,34 @@ def test_a_game_aborted_in_its_first_round_gets_no_policy_of_0_rounds(tmp_path):
     assert game.ended.outcome == "aborted" and game.ended.rounds_played == 0
     assert game.ended.policy == "" and not list((data.folder / "policies").rglob("*.json"))
     assert verify_recording(data.folder / game.recording).ok  # its whole (short) life verifies
+
+
+@pytest.mark.parametrize("how", ["chunk", "undecodable"])
+def test_a_game_whose_recording_is_damaged_when_read_back_gets_no_policy_and_says_why(tmp_path, monkeypatch, caplog,
+                                                                                     how):
+    """The study's runner read each game's fresh recording back (game_end) with no damage check: a recording
+    that lost a chunk, or whose Q update does not decode, was rebuilt into a partial policy journaled as the
+    game's, its GameEnded saying nothing. Now no policy is built from it (as build_missing_policies refuses
+    one), its GameEnded's reason says why in the reader's words, and the runner says it (a warning)."""
+    import pairplay.services.protocol as protocol
+
+    # the real game's recording, finished and closed, loses its first Q update (the chunk that holds it, or its
+    # bytes): its game's end is kept (the middle chunk may hold it, as chunks' sizes vary with time)
+    damaged_when_written(monkeypatch, protocol, how, tag="QUpdated")
+    data = StudyData.create(tmp_path / "s", STUDY)
+    pid = data.register("phase1")
+    with Bus(BusOptions()) as bus:
+        runner = StudyRunner(data, bus, questionnaire_timeout_s=60.0)
+        game = runner.run_game(pid, "phase1", 0, scripted_players(runner, {pid: "tatiana"})(pid, "phase1", 0))
+    words = {"chunk": "recording damaged: chunk ",
+             "undecodable": "recording damaged: 1 message in it does not decode ("}
+    assert game.ended.outcome == "completed" and game.ended.policy == "", game.ended
+    assert not list((data.folder / "policies").rglob("*.json"))
+    assert words[how] in game.ended.reason and game.ended.reason.endswith(": no policy built"), game.ended.reason
+    assert any(game.session in r.getMessage() and "no policy built" in r.getMessage()
+               for r in caplog.records if r.levelname == "WARNING"), caplog.text
+    [line] = StudyData(data.folder).build_missing_policies()  # the next start says it again: no policy from it
+    assert line.startswith(f"{game.session}: completed, but no policy built: its recording ") and "partial" in line
 
 
 def test_export_holds_everything_of_one_participant_with_a_readme(played, tmp_path):
@@ -660,6 +690,35 @@ def test_the_answers_table_takes_no_answer_from_a_recording_that_is_not_its_game
     assert any(a["session"] == game.session for a in data.answers())
     shutil.copy(data.folder / donor.recording, data.folder / game.recording)
     assert not any(a["session"] == game.session for a in StudyData(data.folder).answers())
+
+
+@pytest.mark.parametrize("how", ["undecodable", "chunk"])
+def test_an_answer_its_recording_lost_is_a_row_saying_so_in_answers_csv_and_the_export(played, tmp_path, how):
+    """answers.csv silently left out a game's answers when its QuestionnaireAnswered message did not decode (or
+    the chunk that held it was damaged): the game looked unanswered, with no word. The lost answers are one row
+    (the phase's questionnaire, item and answer empty) whose `lost` column says why in the reader's words, in the
+    tables and in the participant's export; the report's questionnaire table counts no answer from it."""
+    data = copy_study(played, tmp_path)
+    game = next(g for g in data.state.games.values() if g.valid_complete and g.ended.questionnaire)
+    before = [a for a in data.answers() if a["session"] == game.session]
+    assert before and all(not a.get("lost") for a in before)
+    damage(data.folder / game.recording, how, tag="QuestionnaireAnswered")
+    data = StudyData(data.folder)
+    data.write_tables()
+    with open(data.folder / "answers.csv", newline="") as f:
+        rows = list(csv.DictReader(f))
+    [lost] = [r for r in rows if r["session"] == game.session]
+    assert lost["item"] == lost["answer"] == "" and lost["questionnaire"] == before[0]["questionnaire"], lost
+    words = {"undecodable": "the answers do not decode (", "chunk": "not in the recording: damaged: chunk "}[how]
+    assert words in lost["lost"], lost
+    assert all(r["lost"] == "" and r["item"] for r in rows if r["session"] != game.session)
+    with zipfile.ZipFile(data.export_participant(game.participant, tmp_path / "p.zip")) as z:
+        exported = list(csv.DictReader(z.read("answers.csv").decode().splitlines()))
+        readme = z.read("README.txt").decode()
+    assert [r["lost"] for r in exported if r["session"] == game.session] == [lost["lost"]]
+    assert "1 row for answers a damaged recording lost" in readme, readme
+    from pairplay.report.human import questionnaire_rows
+    assert all(r[4] != "0" for r in questionnaire_rows(data, {game.session})[1:])
 
 
 def test_no_policy_is_built_for_a_game_from_a_recording_that_is_not_its_games(played, tmp_path):

@@ -362,3 +362,27 @@ def test_a_combination_of_a_partial_policy_journals_its_profiles_as_partial(tmp_
     assert event.partial == expected, event.partial
     assert policy_file.read_policy(data.folder / event.output).partial == expected  # the combiner's, the same
     assert StudyData(data.folder).state.combined["phase2"].partial == expected
+
+
+def test_a_game_journaled_from_a_recording_whose_answers_do_not_decode_is_answered_and_gets_no_policy(tmp_path):
+    """The end of a game never journaled, taken from its finished recording (build_missing_policies, game_end):
+    a QuestionnaireAnswered that does not decode made it journaled unanswered (the participant had answered;
+    answers.csv says the answers were lost), and its policy was built from a recording that lost an event, no
+    word. Now it is answered, gets no policy, and its reason says why in the reader's words."""
+    from damageutil import damage
+
+    data = completed_without_policy(tmp_path, stripped=0)
+    cut = next(iter(data.state.games.values()))
+    (data.folder / cut.ended.policy).unlink()
+    kept = [j.encode_line(e) for e in data.read_journal()
+            if not (isinstance(e, j.GameEnded) and e.session == cut.session)]
+    (data.folder / "journal.jsonl").write_bytes(b"".join(kept))
+    damage(data.folder / cut.recording, "undecodable", tag="QuestionnaireAnswered")
+    data = StudyData(data.folder)
+    [line] = data.build_missing_policies()
+    assert line.startswith(f"{cut.session}: journaled completed from its recording"), line
+    ended = StudyData(data.folder).state.games[cut.session].ended
+    assert ended.questionnaire and ended.policy == "", ended
+    assert ended.reason.startswith("recording damaged: 1 message in it does not decode (") \
+        and ended.reason.endswith(": no policy built"), ended.reason
+    assert not list((data.folder / "policies").glob(f"{cut.session}*"))

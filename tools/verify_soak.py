@@ -49,7 +49,9 @@ def pairplay(*args: str) -> subprocess.CompletedProcess:
 
 
 def alter_one_suggestion(src: Path, dst: Path) -> str:
-    """Copy `src` with the action of one SuggestionMade (a third of the way in) changed; return its name."""
+    """Copy `src` with the action of one SuggestionMade (a third of the way in) changed; return its name.
+    (mcap's own reader, not the damage-aware one, replay/reader.py: `src` is a recording this soak has just
+    verified PASS, whole, with it; mcap's reader raises on any damage it meets, so nothing is lost silently.)"""
     with open(src, "rb") as f:
         messages = list(make_reader(f).iter_messages(log_time_order=False))
     made = [i for i, (_, c, m) in enumerate(messages) if c.topic.endswith("/SuggestionMade")]

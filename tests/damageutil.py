@@ -1,0 +1,56 @@
+"""Real damage done to a real, finished recording, as a disk or a careless hand would (tests of the verbs that
+read a recording back: each must say what the reader says, replay/reader.py `EventLog.note`)."""
+
+from __future__ import annotations
+
+from pairplay.replay.mcapscan import scan
+from pairplay.replay.reader import read_log
+from pairplay.replay.writer import EventLogWriter
+
+
+def damage(path, how: str, tag: str = "") -> None:
+    """Damage the finished recording at `path`: "chunk", a flipped byte in a chunk (its CRC fails: the chunk
+    is lost), the one holding the first event of `tag` (the file written again in 4 KB chunks first), else its
+    middle one; "cut", its last third cut off; "undecodable", the first event of `tag` (default a Q update)
+    replaced by bytes that do not decode."""
+    if how == "cut":
+        data = path.read_bytes()
+        path.write_bytes(data[:len(data) * 2 // 3])
+    elif how == "chunk":
+        chunks = scan(path).chunks
+        c = chunks[len(chunks) // 2]
+        if tag:
+            when = _rewritten(path, tag, broken=False)
+            [c] = [c for c in scan(path).chunks if any(t == when for _, _, t in c.messages)]
+        data = bytearray(path.read_bytes())
+        data[c.offset + c.length - 7] ^= 0x5A
+        path.write_bytes(bytes(data))
+    else:
+        _rewritten(path, tag or "QUpdated", broken=True)
+    assert read_log(path).note
+
+
+def _rewritten(path, tag: str, broken: bool) -> int:
+    """The recording at `path` written again in 4 KB chunks, the first event of `tag` replaced by bytes that do
+    not decode if `broken`; that event's log time."""
+    log = read_log(path)
+    [first] = [r for r in log.events if type(r.event).__name__ == tag][:1]
+    w = EventLogWriter(path, chunk_size=4096)
+    for r in log.events:
+        w.write(r.key, b'{"type":"broken"' if broken and r is first else r.payload, log_time_ns=r.log_time_ns,
+                sequence=r.event.seq)
+    w.close()
+    return first.log_time_ns
+
+
+def damaged_when_written(monkeypatch, module, how: str, tag: str = "") -> None:
+    """`module.run_session` (the one a verb or the study runner calls) made to damage (`damage`, `how` and `tag`
+    as there) the recording the real session has just finished and closed, before its caller reads it back."""
+    real = module.run_session
+
+    def damaged_after_it_is_written(*args, **kwargs):
+        path = real(*args, **kwargs)
+        damage(path, how, tag)
+        return path
+
+    monkeypatch.setattr(module, "run_session", damaged_after_it_is_written)
