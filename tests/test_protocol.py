@@ -734,3 +734,17 @@ def test_no_policy_is_built_for_a_game_from_a_recording_that_is_not_its_games(pl
                            f"built: its recording {game.recording} is not this game's: it holds session "
                            f"{donor.session}"), line
     assert not (data.folder / game.ended.policy).exists()
+
+
+def test_the_console_offers_the_board_link_only_once_the_board_has_a_url(tmp_path):
+    """The console's state had "board_url": null while the lab's board for the game was not up yet; a client
+    that waited for the key (test_protocol_interrupted's) read null and failed. Now the key comes with a URL."""
+    from pairplay.services.console.app import Console
+    from pairplay.services.protocol import Live
+
+    data = StudyData.create(tmp_path / "s", STUDY)
+    runner = StudyRunner(data, None)
+    runner.live = Live(session="s-1", state="playing")
+    assert "board_url" not in Console(runner, "token", board_url=lambda session: None).state()["live"]
+    assert Console(runner, "token", board_url=lambda session: f"/board?session={session}").state()["live"][
+        "board_url"] == "/board?session=s-1"

@@ -108,7 +108,9 @@ class Console:
         if live.session and live.questionnaire_token and live.state in ("playing", "questionnaire"):
             live_d["questionnaire_url"] = f"/questionnaire?session={live.session}&token={live.questionnaire_token}"
         if live.session and self.board_url is not None and live.state == "playing":
-            live_d["board_url"] = self.board_url(live.session)
+            url = self.board_url(live.session)  # None until the lab's board for this game is up
+            if url:  # a key only with a URL to open (a client waiting for "board_url" got null and failed)
+                live_d["board_url"] = url
         return {
             "study": {"id": data.study.study.id, "title": data.study.study.title, "folder": str(data.folder),
                       "phases": [p.id for p in data.study.phase], "key_file": bool(data.key_file)},
