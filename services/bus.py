@@ -298,6 +298,9 @@ def pass_stop(source: threading.Event, target: threading.Event) -> None:
     target.set()
 
 
+_NOTHING_SHED: Counter = Counter()  # Inbox.take_shed's answer when nothing was shed (shared: never changed)
+
+
 class Inbox:
     """Zenoh's callback threads -> one service thread; `put` never waits (see module rule).
 
@@ -433,7 +436,9 @@ class Inbox:
             return self._items[0][2] if self._items else None
 
     def take_shed(self) -> Counter:
-        """What was shed since the last call, by (source, why)."""
+        """What was shed since the last call, by (source, why); empty, do not change it."""
+        if not self.shed:  # the usual case, once per step of a service: no lock and no new Counter (a shed
+            return _NOTHING_SHED  # counted meanwhile, after this read under the GIL, is the next call's)
         with self._cond:
             out, self.shed = self.shed, Counter()
         return out

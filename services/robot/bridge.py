@@ -151,7 +151,7 @@ class RobotBridge:
                 return 0
             self._cut = True
             left = self._handed - self._reported
-            shed = self._inbox.take_shed()
+            shed = Counter(self._inbox.take_shed())  # added to below: a copy (take_shed may give its shared empty one)
             if left:
                 log.warning("robot %s: %d suggestion(s) not reported: %s", self.backend, left, why)
                 shed[(NAME, f"suggestion not reported, {why}")] += left
