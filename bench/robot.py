@@ -121,15 +121,17 @@ def _raw_reference(publisher: Bus, subscriber: Bus, broker: StandInBroker, n: in
         sock.close()
 
 
+# back-to-back suggestions are far above a participant's pace: the robot-side rate limit lifted (it would add its
+# 1/max_commands_per_s wait, which is what it is for, not the path)
+BENCH_CONFIG = RobotConfig(ack_timeout_s=0.5, abort_grace_s=0.05, max_commands_per_s=1e6, command_burst=500)
+
+
 def bench_rows(quick: bool = False) -> list[dict]:
     n = 100 if quick else 400
     publisher = Bus(BusOptions())
     subscriber = Bus(BusOptions(listen=[], connect=publisher.locators()))
     broker, raw_broker = StandInBroker(), StandInBroker()
-    # back-to-back suggestions are far above a participant's pace: lift the robot-side rate
-    # limit (it would add its 1/max_commands_per_s wait, which is what it is for, not the path)
-    config = RobotConfig(ack_timeout_s=0.5, abort_grace_s=0.05, max_commands_per_s=1e6, command_burst=500)
-    bridge = RobotBridge(subscriber, SESSION, f"iristk://127.0.0.1:{broker.port}", config=config, settle_s=1.0)
+    bridge = RobotBridge(subscriber, SESSION, f"iristk://127.0.0.1:{broker.port}", config=BENCH_CONFIG, settle_s=1.0)
     stop = threading.Event()
     try:
         bridge.start()
