@@ -39,6 +39,8 @@ from __future__ import annotations
 import contextlib
 import errno
 import fnmatch
+import json
+import logging
 import os
 import shutil
 import signal
@@ -436,9 +438,6 @@ def read_manifest(path: Path) -> list[str]:
     if it is not one (a user's file of that name, a damaged one: logged, and nothing is taken from it).
     A listed path is only ever removed if its writer's `owned` patterns name it too (`_remove_stale`),
     so a forged manifest cannot name a file outside them (`../x`, `notes.txt`)."""
-    import json
-    import logging
-
     if not path.is_file():
         return []
     try:
@@ -453,8 +452,6 @@ def read_manifest(path: Path) -> list[str]:
 
 def write_manifest(path: Path, files: list[str]) -> None:
     """An output folder's manifest: the files its writer wrote there (output_folder `manifest`)."""
-    import json
-
     doc = {"format": MANIFEST_FORMAT, "written_by": "pairplay", "files": files,
            "note": "the files pairplay wrote in this folder; a --force run removes those it does not write again"}
     path.write_text(json.dumps(doc, indent=1) + "\n", encoding="utf-8")
