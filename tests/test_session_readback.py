@@ -75,3 +75,20 @@ def test_a_lab_session_whose_recording_is_not_whole_when_read_back_says_so_and_e
     [line] = [x for x in err.splitlines() if x.startswith("pairplay lab:")]
     assert line.startswith(f"pairplay lab: the recording {path} read back ") and WORDS["chunk"] in line, line
     assert "Traceback" not in err and proc.returncode == 1, (proc.returncode, err)
+
+
+def test_every_pairplay_command_a_message_names_is_a_verb():
+    """The read-back line named `pairplay verify`, a verb that does not exist (it is `pairplay replay --verify`).
+    Every `pairplay <word>` quoted in backticks in the CLI's and services' texts is a verb of the CLI."""
+    import re
+    from pathlib import Path
+
+    from pairplay.cli.main import VERBS
+
+    root = Path(__file__).resolve().parents[1]
+    named = {(f.relative_to(root).as_posix(), m.group(1))
+             for package in ("cli", "services", "replay", "report", "schemas", "pairplay")
+             for f in (root / package).rglob("*.py")
+             for m in re.finditer(r"`pairplay ([a-z][a-z-]*)", f.read_text(encoding="utf-8"))}
+    assert named
+    assert not [(f, verb) for f, verb in named if verb not in VERBS], [(f, v) for f, v in named if v not in VERBS]
