@@ -60,15 +60,23 @@ def test_a_refused_output_is_named_in_the_one_line(case, template, tmp_path, mon
     args, named = CASES[case]
     root = tmp_path / "w"
     shutil.copytree(template, root)
+    _, line = refused_in_one_line(args, root, monkeypatch, capsys)
+    path = re.escape(named)
+    assert re.search(rf"(?<![\w./-])(\S*/)?{path}(?![\w/-]|\.\w)", line), line
+
+
+def refused_in_one_line(args: list[str], root, monkeypatch, capsys) -> tuple[str, str]:
+    """Run `pairplay <args>` in `root`: exit 2, ONE line on stderr that starts with the verb, nothing written
+    or renamed under `root`; (stdout, the line)."""
     monkeypatch.chdir(root)
     before = sorted(p.relative_to(root) for p in root.rglob("*"))
     assert main(args) == 2
     out, err = capsys.readouterr()
     lines = err.strip().splitlines()
     assert len(lines) == 1 and lines[0].startswith(f"pairplay {args[0]}: "), err
-    path = re.escape(named)
-    assert re.search(rf"(?<![\w./-])(\S*/)?{path}(?![\w/-]|\.\w)", lines[0]), lines[0]
-    assert sorted(p.relative_to(root) for p in root.rglob("*")) == before  # nothing written
+    assert "Traceback" not in err, err
+    assert sorted(p.relative_to(root) for p in root.rglob("*")) == before  # nothing written, nothing renamed
+    return out, lines[0]
 
 
 # verb's arguments, given relative -> the path as given, which the one line must name (and nothing absolute)
@@ -134,16 +142,10 @@ def test_a_folder_where_a_file_goes_is_refused_before_any_work(case, template, t
     (root / "p").mkdir()
     for name in ("policies", "figures"):
         (root / "p" / name).write_text("the user's file")
-    monkeypatch.chdir(root)
-    before = sorted(p.relative_to(root) for p in root.rglob("*"))
-    assert main(args) == 2
-    out, err = capsys.readouterr()
-    lines = err.strip().splitlines()
-    assert len(lines) == 1 and lines[0].startswith(f"pairplay {args[0]}: "), err
-    assert lines[0].endswith(f"({named})") and "Traceback" not in err, lines[0]
-    assert not re.search("--force (to )?replace", lines[0]), lines[0]  # (`session` offered it; --force renamed it)
+    out, line = refused_in_one_line(args, root, monkeypatch, capsys)
+    assert line.endswith(f"({named})"), line
+    assert not re.search("--force (to )?replace", line), line  # (`session` offered it; --force renamed it)
     assert out == "", out  # refused before any work: a session printed its bus line, then played
-    assert sorted(p.relative_to(root) for p in root.rglob("*")) == before  # nothing written, nothing renamed
 
 
 def test_a_sweep_cell_file_that_is_a_folder_is_refused_naming_the_cell_before_any_cell_runs(template, tmp_path,
