@@ -522,10 +522,12 @@ class Outbox:
             finally:
                 self._putting.release()
         # what came in meanwhile (or while the thread held _putting) is the thread's: its
-        # wait checks for waiting items, so nothing is stranded
-        with self._lock:
-            if self._items:
-                self._wake.notify()
+        # wait checks for waiting items, so nothing is stranded. Read first without the lock (a
+        # step's usual case, nothing left): an item sent after the read woke the thread itself
+        if self._items:
+            with self._lock:
+                if self._items:
+                    self._wake.notify()
 
     def _run(self) -> None:
         while True:

@@ -291,11 +291,11 @@ class Node:
         issue 16), after the lock is released: a put that waits on a congested peer then holds
         up only this thread, never the session's end (`end_game` takes the lock) or a signal
         (handled on the main thread; run() on the main thread leaves publishing to the Outbox)."""
-        here = threading.current_thread() is not threading.main_thread()
+        here = threading.get_ident() != threading.main_thread().ident
         item = self.inbox.get(timeout_s)
         try:
             shed = self.inbox.take_shed()
-            if shed or self.driver.refusals.pending():
+            if shed or self.driver.refusals.held:  # (Refusals.pending, read inline: once per step)
                 with self._lock:  # numbered and queued in one go: the queue's order is the numbers' order
                     self.publish(self.driver.tick(shed), wake=not here)
             if item is None:
