@@ -5,8 +5,11 @@ the seeds; results land in --out (default out/sweep-<grid name>): cells/ (one
 JSON per finished cell), sweep.csv, cells.csv, figures/, sweep.md. Running
 the same grid into the same folder resumes: finished cells are not computed
 again; with every cell finished and the summary written, nothing is written
-(sweep.md keeps the run that did the work) and one line says so. A folder that holds another grid's sweep, or files but no sweep, is
-refused unless --force; an --out that is a file is refused before any work, and so
+(sweep.md keeps the run that did the work) and one line says so. "The same grid" is
+the same grid as read (`same_grid`: its settings, axes, seeds and reuse), not the same
+text: a comment changes nothing. A folder that holds another grid's sweep, or files but
+no sweep, is refused unless --force (which removes the other grid's cell files, those
+named by a cell id, and no other file in cells/); an --out that is a file is refused before any work, and so
 is a folder where one of its files goes (a cell's file, sweep.md, a figure) or a
 file where one of its folders goes (cells/, figures/): named, one line, exit 2
 (`check_sweep_places`; a folder is not the sweep's to remove, so it is not taken for
@@ -30,6 +33,7 @@ cell finished, no grid.toml that would refuse the corrected grid's re-run.
 from __future__ import annotations
 
 import argparse
+import re
 import sys
 from pathlib import Path
 
@@ -77,6 +81,20 @@ def stopped(out: Path, grid, made: list[Path], had_copy: bool, why: str) -> int 
     return None
 
 
+CELL_FILE = re.compile(r"[0-9a-f]{20}\.json")  # report/sweep.py Cell.id: a 10-byte blake2b digest, in hex
+
+
+def same_grid(copy: Path, grid) -> bool:
+    """Whether the sweep folder's `grid.toml` describes `grid` (the same settings, axes, seeds and reuse:
+    a cell's id digests only its axes' values and seed, so a changed [study] setting is another grid too).
+    Compared as read, not as text: a comment or a blank line made "the sweep of another grid" (exit 2),
+    and with --force every finished cell was thrown away. A copy that no longer reads is another grid."""
+    try:
+        return read_grid(copy) == grid
+    except (GridError, OSError, UnicodeDecodeError):
+        return False
+
+
 def check_sweep_places(out: Path, grid) -> None:
     """OutputError before any work if a file the sweep writes would land on a folder, or under a file where
     a folder goes (cells/, figures/): a cell file replaced by a folder was found only when the cell, computed,
@@ -115,14 +133,16 @@ def run(args) -> int:
     if out.is_dir() and any(out.iterdir()) and not copy.exists() and not args.force:  # not a sweep's folder
         raise OutputError("holds files but no sweep (no grid.toml); give another --out, or --force to write "
                           "the sweep's files there", out)
-    if copy.exists() and copy.read_text() != text and not args.force:
+    other_grid = copy.exists() and not same_grid(copy, grid)
+    if other_grid and not args.force:
         print(f"pairplay sweep: {out} holds the sweep of another grid ({copy}); give another --out or --force",
               file=sys.stderr)
         return 2
     check_sweep_places(out, grid)  # before any work: a folder where a file goes is not one of ours to replace
-    if copy.exists() and copy.read_text() != text:  # --force: the other grid's cells no longer count
+    if other_grid:  # --force: the other grid's cells no longer count
         for old in (out / "cells").glob("*.json"):
-            if old.is_file() or old.is_symlink():  # a folder of that name is not a cell file of ours: it stays
+            # a cell file of ours (its name a cell id); a folder of that name, or a user's file, stays
+            if CELL_FILE.fullmatch(old.name) and (old.is_file() or old.is_symlink()):
                 old.unlink()
     made = [f for f in (out / "cells", out, *out.absolute().parents) if not f.exists()]
     had_copy = copy.exists()
