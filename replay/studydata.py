@@ -567,6 +567,9 @@ class StudyData:
             if out.exists() and inside and inside[0] != "exports":  # -o study/journal.jsonl --force replaced it
                 raise StudyDataError(f"{out}: a file of the study folder; an export never replaces one, --force or "
                                      "not: give another -o")
+            if out.is_dir():  # said "exists (use --force to replace it)", and --force then said it is a folder
+                raise StudyDataError(f"{out}: is a folder; give a file name (a folder is never replaced, --force or "
+                                     "not)")
             if out.exists() and not force:
                 raise StudyDataError(f"{out} exists (use --force to replace it)")
             games = self.games_of(pid)

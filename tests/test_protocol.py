@@ -252,6 +252,12 @@ def test_an_export_never_replaces_a_file_of_the_study_folder(played, tmp_path):
         assert target.read_bytes() == before
     path = data.export_participant("p02")
     assert data.export_participant("p02", path, force=True) == path
+    # a folder as -o: said "exists (use --force to replace it)", and --force then said it is a folder (a trial)
+    (tmp_path / "dd").mkdir()
+    for force in (False, True):
+        with pytest.raises(StudyDataError, match="dd: is a folder; give a file name") as info:
+            data.export_participant("p02", tmp_path / "dd", force=force)
+        assert "use --force" not in str(info.value)
 
 
 def test_the_key_file_is_its_owners_alone_from_init_to_deletion(tmp_path):
