@@ -39,6 +39,7 @@ from __future__ import annotations
 import contextlib
 import errno
 import fnmatch
+import glob
 import json
 import logging
 import os
@@ -152,7 +153,36 @@ def check_folder(path: str | Path) -> Path:
 
 
 def _temp_name(path: Path) -> Path:
+    """A temporary name beside `path`: `.<name>.<pid>.<random>.tmp`; those a killed process left (SIGKILL:
+    nothing of ours runs) are removed by the next writer of the same `path` (`_remove_dead_temps`)."""
+    _remove_dead_temps(path)
     return path.with_name(f".{path.name}.{os.getpid()}.{os.urandom(3).hex()}.tmp")
+
+
+def _remove_dead_temps(path: Path) -> None:
+    """Remove what `_temp_name` made beside `path` for a process that is gone (a `rebuild --force` killed
+    with SIGKILL left `.<name>.<pid>.<hex>.tmp` folders of up to ~1 MB for good); a live process's, or one
+    whose process cannot be told, stays. Best effort: a temporary that cannot be removed is left."""
+    for old in path.parent.glob(f".{glob.escape(path.name)}.*.tmp"):
+        parts = old.name[len(path.name) + 2:].split(".")  # <pid>, <hex>, "tmp"
+        if len(parts) != 3 or not parts[0].isdigit() or int(parts[0]) == os.getpid() or _alive(int(parts[0])):
+            continue
+        with contextlib.suppress(OSError):
+            if old.is_dir() and not old.is_symlink():
+                shutil.rmtree(old)
+            else:
+                old.unlink()
+
+
+def _alive(pid: int) -> bool:
+    """Whether process `pid` exists (or cannot be told: not ours to judge)."""
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except (PermissionError, OverflowError, ValueError):
+        return True
+    return True
 
 
 def _missing_folders(path: Path) -> list[Path]:

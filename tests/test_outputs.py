@@ -274,3 +274,27 @@ def test_a_manifest_names_no_file_outside_its_writers_own(tmp_path):
     with output_folder(out, force=True, owned=("*.policy.json",), among_others=True, manifest=".m.json") as tmp:
         (tmp / "newer.policy.json").write_text("this run's")
     assert _files(out) == [".m.json", "new.policy.json", "newer.policy.json", "notes.txt", "other.policy.json"]
+
+
+def test_a_killed_writers_temporaries_are_removed_by_the_next_writer_and_a_live_ones_stay(tmp_path):
+    """A trial: SIGKILL during `rebuild --force` left `.<out>.<pid>.<hex>.tmp` folders (up to ~1 MB) beside
+    --out, and later runs left them there for good. The next writer of the same output removes those of a
+    process that is gone; a live process's temporary stays (it is being written)."""
+    import os
+
+    from pairplay.outputs import output_folder, write_text
+
+    out = tmp_path / "out"
+    dead = tmp_path / ".out.99999999.abcdef.tmp"  # above every pid_max: no such process
+    (dead / "sub").mkdir(parents=True)
+    (dead / "sub" / "policy.json").write_text("{}")
+    live = tmp_path / f".out.{os.getppid()}.abcdef.tmp"
+    live.mkdir()
+    dead_file = tmp_path / ".report.md.99999999.a1b2c3.tmp"
+    dead_file.write_text("half")
+    with output_folder(out) as tmp:
+        (tmp / "a.txt").write_text("a")
+    write_text(tmp_path / "report.md", "whole")
+    assert not dead.exists() and not dead_file.exists()
+    assert live.is_dir()
+    assert (out / "a.txt").read_text() == "a" and (tmp_path / "report.md").read_text() == "whole"
