@@ -369,7 +369,7 @@ def output_folder(path: str | Path, force: bool = False, owned: tuple[str, ...] 
     created = _missing_folders(path.parent)
     _mkdir(path.parent)
     nameless = path.name in ("", ".", "..")  # no folder beside it can be named after it, nor renamed onto it
-    tmp = path / _temp_name(Path("staging")).name if nameless else _temp_name(path)
+    tmp = _temp_name(path / "staging") if nameless else _temp_name(path)
     try:
         tmp.mkdir()
     except OSError as err:
