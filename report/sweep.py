@@ -152,7 +152,7 @@ def _check_places(path: str, data: dict) -> None:
             raise GridError(f"{path}: {key}: {said}")
     for table in ("study", "grid"):
         for key, value in data.get(table, {}).items():
-            said = misplaced(key, f"[{table}]", PLACES, [TOP])
+            said = misplaced(key, f"[{table}]", PLACES, [TOP], table=isinstance(value, dict))
             if not said and isinstance(value, dict):
                 said = table_not_value(key, f"[{table}.{key}]", f"[{table}]")
             if said:

@@ -308,7 +308,7 @@ def _placed(message: str, raw: object = None) -> str:
     tables = {_header(tuple(t if t not in ("#", "*") else (0 if t == "#" else (table[1] if len(table) > 1 else "NAME"))
                             for t in shape)): _keys(shape) for shape in TABLES}
     enclosing = [_header(table[:n]) for n in range(len(table) - 1, -1, -1) if _shape(table[:n]) in TABLES]
-    said = misplaced(key, _header(table), tables, enclosing)
+    said = misplaced(key, _header(table), tables, enclosing, table=isinstance(_at(raw, table + (key,)), dict))
     return f"{where}: {said}" if said else ""
 
 

@@ -22,23 +22,28 @@ from typing import Collection, Mapping, Sequence
 TOP = "the top of the file"
 
 
-def misplaced(key: str, here: str, tables: Mapping[str, Collection[str]], enclosing: Sequence[str] = ()) -> str:
+def misplaced(key: str, here: str, tables: Mapping[str, Collection[str]], enclosing: Sequence[str] = (),
+              table: bool = False) -> str:
     """Why `key`, written under the table `here`, is not that table's: it belongs to `enclosing` (the
     tables `here` is inside, innermost first: written above the `here` line, it would be theirs), or to
     another table of the file (all of them named when `here` is the top of the file: its key is above every
-    table's line); "" if `here` takes it or no table does."""
+    table's line); "" if `here` takes it or no table does. `table`: what stands there is a table (a
+    `[study.grid]` line), so the advice moves the table, not a `key = ...` line."""
     if key in tables.get(here, ()):
         return ""
+    what = f"the `{key}` table" if table else f"`{key} = ...`"
     for header in enclosing:
         if key in tables.get(header, ()):
+            where = (f"write it as its own [{key}] table, not inside {here}" if table and not header.startswith("[") else
+                     f"move {what} above that line")
             return (f"`{key}` belongs {_to(header)}, not to {here}: the keys after a {here} line are that "
-                    f"table's; move `{key} = ...` above that line")
+                    f"table's; {where}")
     owners = [header for header, keys in tables.items() if header != here and key in keys]
     if owners and not here.startswith("["):
         # a table's key written above the file's first [table] line (`robot = ...` above [study])
         tables_ = " or ".join(owners)
         return (f"`{key}` belongs to {tables_}, not {_to(here)} (above its first [table] line): "
-                f"move `{key} = ...` below the {tables_} line")
+                f"move {what} below the {tables_} line")
     if owners:
         return f"{here} has no key `{key}`; `{key}` is a key of {owners[0]}"
     return ""

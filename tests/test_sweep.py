@@ -557,3 +557,12 @@ def test_a_comment_in_the_grid_file_is_the_same_grid_and_another_grid_keeps_the_
     left = sorted(p.name for p in (out / "cells").glob("*.json"))
     assert left == sorted([*cells, "mine.json"]), left  # (a cell's id digests its axes and seed: the same names)
     assert all((out / "cells" / name).stat().st_mtime_ns != stamps[name] for name in cells)  # computed again
+
+
+def test_a_table_inside_another_is_told_to_stand_as_its_own_table(tmp_path):
+    """A trial: `[study.grid]` was told "move `grid = ...` above that line", a key's advice for a table."""
+    (tmp_path / "g.toml").write_text('seeds = 1\n[study]\npersonas = "blind"\n[study.grid]\npsi = [0.1, 0.2]\n')
+    with pytest.raises(GridError) as info:
+        read_grid(tmp_path / "g.toml")
+    assert "write it as its own [grid] table, not inside [study]" in str(info.value), info.value
+    assert "grid = ..." not in str(info.value)
