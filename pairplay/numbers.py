@@ -21,7 +21,7 @@ _TYPED: contextvars.ContextVar[dict | None] = contextvars.ContextVar("pairplay_t
 
 # a type's name in a sentence: "is not an integer", "must be a number" (the sweep said "is not a int")
 TYPE_NAMES = {"int": "an integer", "float": "a number", "str": "text", "bool": "true or false",
-              "list": "a list", "dict": "a table"}
+              "list": "a list", "dict": "a table", "array": "a list", "object": "a table"}  # (msgspec: array, object)
 
 
 def shown(value: object) -> str:

@@ -27,7 +27,7 @@ from typing import Literal, Union
 
 import msgspec
 
-from pairplay.numbers import counted, shown, typed_floats
+from pairplay.numbers import TYPE_NAMES, counted, shown, type_name, typed_floats
 
 from .config import LearnerConfig
 from .jsonfile import empty
@@ -241,6 +241,11 @@ def _where(message: str, raw: object = None) -> str:
     what, where = _located(message)
     if "[...]" in where and raw is not None:
         where = _name_keys(where, what, raw)
+    # msgspec's type names in words, as the sweep file's check says them ("rounds = 1e3 is not an integer"
+    # there, "Expected `int`, got `float`" here: a trial)
+    kinds = re.fullmatch(r"Expected `(\w+)`, got `(\w+)`", what)
+    if kinds and all(k in TYPE_NAMES for k in kinds.groups()):
+        what = f"must be {type_name(kinds[1])}, not {type_name(kinds[2])}"
     return f"{where or 'top level'}: {what}"
 
 

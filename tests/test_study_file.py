@@ -54,6 +54,8 @@ BASE = example_text()
     (("preset = \"human-phase1\"", "preset = \"human-phase1\"\nlearner = { epsilon_every = 1.5 }", 1),
      "phase[0].learner: Expected `int`, got `float`"),
     (("kind = \"likert\"", "kind = \"slider\"", 1), "item[0].kind"),
+    # msgspec's "Expected `int`, got `float`" in the words the sweep file uses (a trial)
+    (("rounds = 5", "rounds = 1e3", 1), "phase[0].rounds: must be an integer, not a number"),
     (("preset = \"human-phase1\"", "preset = \"human-phase1\"\nlearner = { epsilon_jump = 1 }", 1),
      "phase[0].learner"),
     (("algorithm = \"pi-reuse\"", "algorithm = \"q-learning\"", 1), "phase[1].bias"),
