@@ -133,12 +133,13 @@ def run(args) -> int:
     if out.is_dir() and any(out.iterdir()) and not copy.exists() and not args.force:  # not a sweep's folder
         raise OutputError("holds files but no sweep (no grid.toml); give another --out, or --force to write "
                           "the sweep's files there", out)
+    check_sweep_places(out, grid)  # before any work: a folder where a file goes is not one of ours to replace
+    # (first: a folder at grid.toml was "the sweep of another grid", and with --force the OS's "Is a directory")
     other_grid = copy.exists() and not same_grid(copy, grid)
     if other_grid and not args.force:
         print(f"pairplay sweep: {out} holds the sweep of another grid ({copy}); give another --out or --force",
               file=sys.stderr)
         return 2
-    check_sweep_places(out, grid)  # before any work: a folder where a file goes is not one of ours to replace
     if other_grid:  # --force: the other grid's cells no longer count
         for old in (out / "cells").glob("*.json"):
             # a cell file of ours (its name a cell id); a folder of that name, or a user's file, stays

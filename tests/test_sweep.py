@@ -566,3 +566,18 @@ def test_a_table_inside_another_is_told_to_stand_as_its_own_table(tmp_path):
         read_grid(tmp_path / "g.toml")
     assert "write it as its own [grid] table, not inside [study]" in str(info.value), info.value
     assert "grid = ..." not in str(info.value)
+
+
+def test_a_folder_at_the_sweeps_grid_copy_is_named_as_a_folder_with_or_without_force(tmp_path, capsys):
+    """A trial: a folder at D/grid.toml was "the sweep of another grid", and with --force the OS's "Is a
+    directory"; it is a folder where the sweep writes a file, said so either way, before any work."""
+    from pairplay.cli.main import main
+
+    out = tmp_path / "D"
+    (out / "grid.toml").mkdir(parents=True)
+    for force in ([], ["--force"]):
+        assert main(["sweep", str(_grid(tmp_path)), "--out", str(out), "--quiet", *force]) == 2
+        err = capsys.readouterr().err.strip()
+        assert err.endswith(f"is a folder where a file is written; a folder is never replaced, --force or not: "
+                            f"remove or rename it ({out / 'grid.toml'})"), err
+    assert not (out / "cells").exists()
