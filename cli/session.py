@@ -219,7 +219,7 @@ def read_back(path: Path, verb: str):
     recorded = read_log(path)
     if recorded.note:
         print(f"pairplay {verb}: the recording {path} read back is not whole: {recorded.note} (the summary counts "
-              f"what it holds; `pairplay replay {path} --verify` says more)", file=sys.stderr)
+              f"what it holds; `pairplay replay --verify` of it says more)", file=sys.stderr)
     return recorded
 
 
