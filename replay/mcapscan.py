@@ -506,8 +506,8 @@ class _Walker:
                 opcode, end, record = self.record_at(pos)
             except EOFError:
                 if data.endswith(MCAP_MAGIC):  # the file's end is there: not a cut, a damaged length
-                    self.damage(pos, "summary", f"a record at byte {pos} runs past the file's end, which is whole "
-                                "(the closing MCAP magic is there): its length is damaged")
+                    self.damage(pos, "summary", f"the record at byte {pos} has a length past the file's end, which is "
+                                "whole (the closing MCAP magic is there): its length is damaged")
                     return scan
                 scan.truncated, scan.cut_at = True, pos
                 scan.cut_what = "inside the summary; the data section is complete"
