@@ -27,7 +27,14 @@ check gives none of its records. The rest is kept: after unreadable bytes the
 scan looks for the next record that proves itself (a chunk whose CRC matches,
 or a Data End / Metadata record that parses exactly), so every intact chunk
 after a damaged one is still read. A file that simply stops (a crash) is
-`truncated`, with the offset where it stops.
+`truncated`, with the offset where it stops; one cut after its Data End lost
+no message (`data_complete`). A summary record whose length runs past a file
+that ends with the closing magic is a damaged summary, not a cut. Unreadable
+bytes right after an intact chunk that are exactly its Message Index records
+(as its messages make them, but for a few damaged bytes) lost nothing: still a
+finding, named as that chunk's index, with no `lost` (a new user's trial:
+two damaged index lengths read as lost records, so verify stopped at the
+first and rebuild refused the file, all of whose messages were read).
 """
 
 from __future__ import annotations
@@ -89,6 +96,7 @@ class ChunkSeen:
     messages: list[tuple[int, int, int]] = field(default_factory=list)  # (offset in chunk, channel, log time)
     listed: int = 0  # a chunk that does not open: the messages its Message Indexes list (lost with it)
     by_channel: dict[int, set[tuple[int, int]]] | None = field(default=None, repr=False)  # channel -> (offset, time)
+    indexed: set[int] = field(default_factory=set)  # the channels whose Message Index after it was read
 
 
 @dataclass
@@ -107,6 +115,7 @@ class Scan:
     # whose own Schema/Channel records were in a lost chunk
     summary_records: list[Any] = field(default_factory=list)
     size: int = 0
+    data_complete: bool = False  # the Data End was read: a cut or damage after it lost no message
 
     @property
     def whole(self) -> bool:
@@ -262,6 +271,7 @@ class _Walker:
         self.chunk_indexes: list[ChunkIndex] = []
         self.statistics: Statistics | None = None
         self.summary_records: list[Any] = []
+        self.indexes_of: ChunkSeen | None = None  # the intact chunk read last, with nothing but its indexes since
 
     def damage(self, offset: int, part: str, what: str, lost: str = "") -> None:
         """A finding; `lost`: what it lost (records that are not read), said where they were."""
@@ -337,24 +347,26 @@ class _Walker:
                 if nxt < 0:
                     scan.truncated, scan.cut_at = True, pos
                     return scan
-                self.damage(pos, f"bytes {pos}-{nxt}", "a record runs past the end of the file: its length is "
-                            "damaged", lost="the records there")
+                self.unreadable(pos, nxt, "a record runs past the end of the file: its length is damaged")
                 pos = nxt
                 continue
             except Unreadable as err:
                 nxt = self.resync(pos)
-                self.damage(pos, f"bytes {pos}-{nxt if nxt >= 0 else len(data)}", f"unreadable: {err}",
-                            lost="the records there")
                 if nxt < 0:
+                    self.damage(pos, f"bytes {pos}-{len(data)}", f"unreadable: {err}", lost="the records there")
                     scan.truncated, scan.cut_at = True, pos
                     return scan
+                self.unreadable(pos, nxt, f"unreadable: {err}")
                 pos = nxt
                 continue
+            if opcode != 0x07:
+                self.indexes_of = None
             if opcode == 0x01:
                 if pos != 8:
                     self.damage(pos, f"header (byte {pos})", "a second Header record")
             elif opcode == 0x06:
                 chunk = self.chunk(pos, end, record)
+                self.indexes_of = chunk if chunk.intact else None
             elif opcode == 0x07:
                 self.message_index(pos, record, chunk)
             elif opcode == 0x0F:
@@ -376,6 +388,41 @@ class _Walker:
             pos = end
         scan.truncated, scan.cut_at = True, pos
         return scan
+
+    def unreadable(self, pos: int, nxt: int, what: str) -> None:
+        """Bytes `pos`-`nxt` that do not read: lost records, unless they are the Message Indexes of the intact
+        chunk just read (`only_indexes`): an index is a reader's aid, its chunk's messages were all read."""
+        chunk = self.indexes_of
+        self.indexes_of = None
+        if chunk is not None and self.only_indexes(chunk, pos, nxt):
+            self.damage(pos, f"message index of chunk {chunk.number} (bytes {pos}-{nxt})",
+                        f"{what}; only the chunk's Message Index records were there (its messages were all read): "
+                        "no message lost")
+            return
+        self.damage(pos, f"bytes {pos}-{nxt}", what, lost="the records there")
+
+    def only_indexes(self, chunk: ChunkSeen, pos: int, nxt: int) -> bool:
+        """Do bytes `pos`-`nxt` hold exactly the Message Index records still owed for `chunk` (one per channel
+        of its messages not indexed yet), each one's bytes as its messages make them but for a few damaged ones
+        (at most a quarter of a record)? Then no other record, and so no message, can have been there."""
+        owed: dict[int, list[tuple[int, int]]] = {}
+        for off, ch, t in chunk.messages:
+            if ch not in chunk.indexed:
+                owed.setdefault(ch, []).append((t, off))
+        expected = []
+        for ch, entries in owed.items():
+            body = struct.pack(f"<HI{2 * len(entries)}Q", ch, 16 * len(entries), *(x for e in entries for x in e))
+            expected.append(_HEAD.pack(0x07, len(body)) + body)
+        data, at = self.data, pos
+        while at < nxt and expected:
+            def differ(e: bytes) -> int:
+                return sum(a != b for a, b in zip(e, data[at:at + len(e)])) + max(0, at + len(e) - nxt)
+            best = min(expected, key=differ)
+            if differ(best) > len(best) // 4:
+                return False
+            expected.remove(best)
+            at += len(best)
+        return at == nxt
 
     def chunk(self, pos: int, end: int, chunk: Chunk) -> ChunkSeen:
         n = len(self.scan.chunks)
@@ -426,6 +473,7 @@ class _Walker:
                 k = self.lost_chunk[0]
                 self.scan.damage[k] = _replace(self.scan.damage[k], lost=f"its {counted(chunk.listed, 'message')}")
             return
+        chunk.indexed.add(index.channel_id)
         if chunk.by_channel is None:  # once per chunk, not once per index
             chunk.by_channel = {}
             for off, ch, t in chunk.messages:
@@ -442,6 +490,7 @@ class _Walker:
 
     def data_end(self, pos: int, record: DataEnd) -> None:
         self.data_end_at = pos
+        self.scan.data_complete = True
         if record.data_section_crc:
             crc = zlib.crc32(self.data[:pos])
             if crc != record.data_section_crc:
@@ -456,6 +505,10 @@ class _Walker:
             try:
                 opcode, end, record = self.record_at(pos)
             except EOFError:
+                if data.endswith(MCAP_MAGIC):  # the file's end is there: not a cut, a damaged length
+                    self.damage(pos, "summary", f"the record at byte {pos} has a length past the file's end, which is "
+                                "whole (the closing MCAP magic is there): its length is damaged")
+                    return scan
                 scan.truncated, scan.cut_at = True, pos
                 scan.cut_what = "inside the summary; the data section is complete"
                 return scan

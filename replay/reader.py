@@ -90,6 +90,7 @@ class EventLog:
     metadata: dict[str, dict[str, str]] = field(default_factory=dict)
     bad: list[BadMessage] = field(default_factory=list)
     truncated: bool = False
+    data_complete: bool = False  # its Data End was read: a cut or damage after it (the summary) lost no message
     error: str = ""  # what is wrong with the file: every damaged part and the cut ("" if whole)
     brief: str = ""  # the same in one short line: what was lost where (mcapscan's `Scan.brief`)
     live: bool = False  # its end is missing because its recorder is still writing it, not a crash
@@ -107,6 +108,12 @@ class EventLog:
     def whole(self) -> bool:
         """Every byte of the file checked out and nothing is missing at its end."""
         return not self.truncated and not self.damage
+
+    @property
+    def cut_lost(self) -> bool:
+        """Whether the file's cut lost events: it stops before its data section's end (a cut in the summary,
+        after the Data End, lost none: every message was read)."""
+        return self.truncated and not self.data_complete
 
     @property
     def undecoded(self) -> str:
@@ -175,6 +182,13 @@ _LOST_HERE = object()  # _read_log's marker among the records: a damaged part's 
 RECOVERED = "pairplay.recovered"  # the metadata record `pairplay recover` writes (replay/recover.py)
 # in it: where the damaged file's lost parts were, as the number of messages the recovered file holds before each
 LOST_AT_KEY = "lost_at_messages"
+DATA_COMPLETE_KEY = "data_complete"  # in it: "true" when the source's data section was read to its Data End
+
+
+def recovered_cut(recovered: dict[str, str]) -> bool:
+    """Whether the file a recovered one was made from was cut before its data section's end (a cut after it,
+    in the summary, lost no message); one recovered before recover said so is taken as cut, as it was."""
+    return recovered.get("truncated") == "true" and recovered.get(DATA_COMPLETE_KEY) != "true"
 
 
 def recovered_lost(recovered: dict[str, str]) -> bool:
@@ -280,7 +294,7 @@ def _read_log(path: str | Path, only: frozenset[str] | None = None) -> EventLog:
             log.lost_at.append(len(log.events))
             if log.lost_from < 0:
                 log.lost_from = len(log.events)
-    log.truncated, log.damage = checked.truncated, checked.damage
+    log.truncated, log.damage, log.data_complete = checked.truncated, checked.damage, checked.data_complete
     log.error = "" if checked.whole else checked.describe()
     log.brief = "" if checked.whole else checked.brief()
     if log.truncated and is_live(path):  # not cut: its recorder is still writing it (pairplay/livelock.py)

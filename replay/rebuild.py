@@ -12,7 +12,8 @@ says so; a recording without SessionStarted is refused with the reason, and
 so is one whose session has no round recorded whole (`NoWholeRound`: check.py
 `no_whole_round`; it gave a policy of 0 rounds). A
 policy from a partial session (interrupted, aborted, failed, cut short,
-damaged or completed by `pairplay recover`) says why in its file's `partial`
+damaged or completed by `pairplay recover` of a file that lost events; a
+damage that lost none, or a cut after the data section, recovered or not, leaves it whole) says why in its file's `partial`
 field and in `Rebuilt.partial`; one whose file lost events in its middle (a
 damaged part; a recover of such a file) says what in `Rebuilt.lost`: its
 policy lacks updates the learner made, so it is no state the learner was ever
@@ -38,7 +39,7 @@ from pairplay.schemas.session import SessionConfig
 
 from .check import no_whole_round, read_session
 from .fold import READS, SessionFold, fold_events, stream_seed
-from .reader import recovered_lost
+from .reader import recovered_cut, recovered_lost
 from .forgery import contradiction
 from pairplay.numbers import counted
 
@@ -78,10 +79,14 @@ def partial_reason(fold: SessionFold, note: str = "", recovered: dict[str, str] 
                    f"{counted(fold.config.rounds, 'round')}{where}")
     if note:
         why.append(note)
-    if recovered:
-        lost = recovered.get("damaged", "[]") not in ("", "[]")
-        why.append("completed by pairplay recover" + (" from a damaged file" if lost else
-                                                       " after a cut" if recovered.get("truncated") == "true" else ""))
+    if recovered:  # a damage that lost no message (an index, a summary), or a cut after the data section, left
+        # the session whole: recovering it does not make it partial (a new user's trial: it did)
+        lost, cut = recovered_lost(recovered), recovered_cut(recovered)
+        damaged = recovered.get("damaged", "[]") not in ("", "[]")
+        added = recovered.get("from_journal", "0") not in ("", "0")
+        if lost or cut or added or not (damaged or recovered.get("truncated") == "true"):
+            why.append("completed by pairplay recover" + (" from a damaged file" if lost else
+                                                           " after a cut" if cut else ""))
     return "; ".join(why)
 
 
@@ -132,7 +137,8 @@ def rebuild_recording(path: str | Path) -> Rebuilt:
         raise NoWholeRound(f"{empty}; nothing to rebuild", path)
     # a damaged part that lost no event (a summary's CRC, an index) leaves the session whole: its policy is the
     # learner's, not partial (a new user's trial: flagged PARTIAL without --partial); said in `damage_read`
-    loss_free = bool(log.damage) and not log.truncated and log.lost_from < 0
+    # a cut after the data section's end (in the summary) lost none either
+    loss_free = (bool(log.damage) or log.truncated) and log.lost_from < 0 and not log.cut_lost
     note = "" if log.whole or loss_free else f"{'damaged' if log.damage else 'truncated'}: {log.brief}"
     # messages in the file that do not decode are events the fold cannot take (a Q update among them: a Q-table
     # the learner never had); the reader keeps them in `bad` (a new user's trial: rebuilt with exit 0, no word)
@@ -142,7 +148,8 @@ def rebuild_recording(path: str | Path) -> Rebuilt:
     rebuilt = rebuild_events((r.event for r in log.events), str(path), log.truncated, note,
                              recovered, log.metadata.get("pairplay.recorder.end"), skipped=log.skipped)
     if loss_free:
-        rebuilt.damage_read = f"the file is damaged, no event lost ({log.brief}): pairplay recover makes a whole copy"
+        rebuilt.damage_read = (f"the file is {'damaged' if log.damage else 'cut after its data section'}, no event "
+                               f"lost ({log.brief}): pairplay recover makes a whole copy")
     rebuilt.damaged_rounds = damaged_rounds([r.event for r in log.events], log.lost_at)
     if log.lost:
         rebuilt.lost = f"the file is damaged ({log.lost})"

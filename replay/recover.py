@@ -10,7 +10,9 @@ from where, what was wrong (every damaged part, the cut), where each damaged
 part's lost messages were (`lost_at`: how many messages the new file holds
 before each; the reader marks a loss there, as it does in the damaged file, so
 `replay --verify` compares up to the first, where it printed every event after
-a lost one as DIFFERS, and a damage that lost no message is no loss) and how far the
+a lost one as DIFFERS, and a damage that lost no message is no loss), whether the data
+section was read to its Data End (`data_complete`: a cut after it, in the summary, lost no
+message, so the copy is not a partial session) and how far the
 session got (whether its SessionEnded survived, the last round). A whole file
 (complete already) is not copied: nothing is written unless something is
 recovered (`Recovered.complete`, output None), as when its journal holds
@@ -40,7 +42,7 @@ from mcap.writer import CompressionType, Writer
 from typing import Callable
 
 from pairplay.errors import InputError, OutputError
-from pairplay.replay.reader import LOST_AT_KEY
+from pairplay.replay.reader import DATA_COMPLETE_KEY, LOST_AT_KEY
 from pairplay.schemas.events import EVENT_BY_TAG
 from pairplay.schemas.jsonschema import schema_text
 from pairplay.schemas.keys import parse_event_key
@@ -179,7 +181,7 @@ def recover(path: str | Path, output: str | Path | None = None, force: bool = Fa
         reason = "" if checked.whole else checked.describe()
         writer.add_metadata("pairplay.recovered", {
             "source": str(path), "messages": str(messages), "truncated": str(checked.truncated).lower(),
-            "reason": reason, "damaged": json.dumps(damaged), "lost_chunks": str(len(checked.lost_chunks)),
+            DATA_COMPLETE_KEY: str(checked.data_complete).lower(), "reason": reason, "damaged": json.dumps(damaged), "lost_chunks": str(len(checked.lost_chunks)),
             LOST_AT_KEY: json.dumps(lost_at), "lost": json.dumps([f"{d.part}: {d.lost}" for d in checked.damage if d.lost_at >= 0]),
             "completed": "summary, indexes and CRCs written by pairplay recover",
             "session_ended": str(ended).lower(), "last_round": str(last_round),

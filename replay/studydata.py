@@ -714,10 +714,10 @@ def recording_damage(log) -> str:
     """What a game's finished recording (reader.EventLog) lost, in the reader's words ("" if nothing):
     "damaged: ..." for events lost (`EventLog.lost`: a damaged part that held some, messages that do not
     decode) or "truncated: ..." for a cut (a finished file that stops early lost its end). A damage that
-    lost no event (a summary's CRC) is not a loss, as for rebuild."""
+    lost no event (a summary's CRC), or a cut after the data section's end, is not a loss, as for rebuild."""
     if log.lost:
         return f"damaged: {log.lost}"
-    return f"truncated: {log.brief}" if log.truncated else ""
+    return f"truncated: {log.brief}" if log.cut_lost else ""
 
 
 def lost_answers(log, decoded: bool, journaled: bool) -> list[str]:
@@ -731,7 +731,7 @@ def lost_answers(log, decoded: bool, journaled: bool) -> list[str]:
     bad = [b for b in log.bad if b.key.rsplit("/", 1)[-1] in ("QuestionnaireAnswered", "")]
     if bad:
         return [f"the answers do not decode ({b.key or 'no channel'}: {b.reason[:80]})" for b in bad]
-    if journaled and (log.lost_from >= 0 or log.truncated):
+    if journaled and (log.lost_from >= 0 or log.cut_lost):
         return [f"answered (the journal says), not in the recording: "
                 f"{'damaged' if log.damage else 'truncated'}: {log.brief}"]
     return []

@@ -9,7 +9,8 @@ earlier ones), so every order a recorder can hold gives the same verdict; and ev
 without the envelope's wall time and sequence number, with the event the live
 service recorded, one by one in order. A recomputed event the recording lacks
 or a recorded one never recomputed is a failure too, unless the recording was
-cut short, or recovered from a cut (then the tail is excused and reported).
+cut short, or recovered from a cut (then the tail is excused and reported; a
+cut after the data section's end, in the summary, lost none: reader.recovered_cut).
 A session that stopped before its end (SessionEnded interrupted, aborted or
 failed: a signal, the experimenter, a service lost; or no SessionEnded at all)
 is verified up to where it stopped, whatever the moment: the game is fed the
@@ -61,7 +62,7 @@ from dataclasses import dataclass, field
 from pairplay.errors import InputError
 from pairplay.replay.check import no_whole_round
 from pairplay.replay.forgery import contradiction
-from pairplay.replay.reader import read_log, recovered_lost
+from pairplay.replay.reader import read_log, recovered_cut, recovered_lost
 from pairplay.schemas.events import RoundEnded, SessionEnded, SessionStarted
 
 from pairplay.services.game import GameLogic
@@ -204,21 +205,21 @@ def verify_recording(path) -> Verification:
         raise InputError(f"{forged}: not verified", path)
     # a file completed by `pairplay recover` still lacks the tail its crash lost
     recovered = log.metadata.get("pairplay.recovered", {})
-    recovered_cut = recovered.get("truncated") == "true"
+    cut_before = recovered_cut(recovered)  # (a cut after the data section's end lost no message)
     events = [r.event for r in log.events]
     # the first event lost: in a damaged part, or a message that does not decode (reader.EventLog.lost_at)
     first_lost = log.lost_at[0] if log.lost_at else -1
     if first_lost > 0:  # lost in the middle: every event after it follows lost ones and would "differ"
         # (new users' trials: DIFFERS lines, then "verified the whole session"); verified up to it
         result = verify_events(events[:first_lost], str(path), True)
-        result.truncated = log.truncated or recovered_cut
+        result.truncated = log.truncated or cut_before
         result.lost_part = True
         result.not_compared = len(events) - first_lost
         result.reach = (f"up to the damaged part: {counted(result.events, 'event')}, "
                         f"{_rounds_words(result.rounds_recorded, result.rounds)}; the {counted(result.not_compared, 'event')} "
                         "after it are not compared (they follow the lost ones)")
     else:
-        result = verify_events(events, str(path), log.truncated or recovered_cut)
+        result = verify_events(events, str(path), log.truncated or cut_before)
     result.unknown = log.unknown_types()
     errors = []
     if log.damaged:  # damaged parts and messages that do not decode, in the words every verb uses (reader.EventLog)

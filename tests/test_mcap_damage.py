@@ -623,3 +623,107 @@ def test_a_recovered_file_whose_damage_lost_no_message_is_verified_whole(whole, 
     checked = verify_recording(done.output)
     assert checked.ok and not checked.error and "no message was lost" in checked.reach, (checked.error, checked.reach)
     assert not rebuild_recording(done.output).lost
+
+
+def _summary_start(data: bytes) -> int:
+    return struct.unpack_from("<Q", data, len(data) - 8 - 29 + 9)[0]
+
+
+def _index_length_damaged(whole, tmp_path, cut_in_summary: bool, name: str):
+    """`whole` with 0xee written into the length of the first Message Index after chunks 3 and 6 (the bytes up to
+    the next chunk do not read), and, if `cut_in_summary`, cut inside its summary (after the Data End): every
+    message and the SessionEnded are intact (a new user's trial, trial10)."""
+    data = bytearray(whole.read_bytes())
+    chunks = scan(whole).chunks
+    for c in (chunks[3], chunks[6]):
+        assert data[c.offset + c.length] == 0x07  # a Message Index follows the chunk
+        data[c.offset + c.length + 1] = 0xEE
+    if cut_in_summary:
+        data = data[:_summary_start(bytes(data)) + 30]
+    return variant(tmp_path, bytes(data), name)
+
+
+def test_damaged_index_lengths_lose_no_message_even_without_a_summary_to_account_for_them(whole, tmp_path, capsys):
+    """trial10: two Message Index lengths damaged and the summary cut: `replay --verify` said "the file is cut
+    (a crash?): the session's end is missing; its last events were lost" (the end was there), verified up to
+    the first index only, and `recover` of it kept every message yet verify FAILed it ("parts lost") and
+    rebuild refused it as partial. The unreadable bytes are exactly the chunk's Message Index records (rebuilt
+    from its messages, but for the damaged bytes): no message was there."""
+    p = _index_length_damaged(whole, tmp_path, True, "two.mcap")
+    s = scan(p)
+    assert s.truncated and not [d for d in s.damage if d.lost_at >= 0], s.describe()
+    assert sum(d.part.startswith("message index of chunk") and "no message lost" in d.what for d in s.damage) == 2
+    assert s.data_complete  # the cut came after the Data End
+    assert payloads(p) == payloads(whole)
+    from pairplay.cli.main import main
+
+    assert main(["replay", str(p), "--verify"]) == 1  # damaged: FAIL, but every event compared and the end found
+    out = capsys.readouterr().out
+    assert "a crash?" not in out and "lost" not in out.replace("no message lost", "").replace("no event lost", ""), out
+    checked = verify_recording(p)
+    assert checked.ended and not checked.lost_part and checked.not_compared == 0 and "no event lost" in checked.reach
+    rebuilt = rebuild_recording(p)
+    assert rebuilt.partial == "" and not rebuilt.lost and rebuilt.policy == rebuild_recording(whole).policy
+    done = recover(p, tmp_path / "two.rec.mcap")
+    again = verify_recording(done.output)
+    assert again.ok and not again.error and not again.truncated and "no message was lost" in again.reach, (
+        again.error, again.reach)
+    rebuilt = rebuild_recording(done.output)
+    assert rebuilt.partial == "" and not rebuilt.lost and rebuilt.policy == rebuild_recording(whole).policy
+
+
+def test_index_bytes_followed_by_other_records_are_still_taken_as_lost(whole, tmp_path):
+    """Unreadable bytes longer than the chunk's Message Indexes (they held something else too): lost."""
+    data = bytearray(whole.read_bytes())
+    chunks = scan(whole).chunks
+    c, after = chunks[3], chunks[4]
+    data[c.offset + c.length + 1] = 0xEE
+    data[after.offset + after.length - 7] ^= 0x5A  # the next chunk fails its CRC: the unreadable bytes run past it
+    s = scan(variant(tmp_path, bytes(data), "more.mcap"))
+    assert any(d.lost_at >= 0 and d.part.startswith("bytes ") for d in s.damage), s.describe()
+
+
+def test_a_damaged_length_in_the_summary_is_damage_not_a_cut(whole, tmp_path):
+    """trial10: a summary record's length damaged (the file whole to its closing magic, every message read)
+    was taken as a cut: rebuild printed "PARTIAL session: truncated ..." and flagged the policy partial."""
+    data = bytearray(whole.read_bytes())
+    data[_summary_start(bytes(data)) + 8] = 0xEE  # the top byte of its first record's length: far past the end
+    p = variant(tmp_path, bytes(data), "summary-length.mcap")
+    s = scan(p)
+    assert not s.truncated and [d.part for d in s.damage] == ["summary"] and "length is damaged" in s.describe()
+    rebuilt = rebuild_recording(p)
+    assert rebuilt.partial == "" and not rebuilt.lost and rebuilt.damage_read.startswith("the file is damaged, no event lost")
+    checked = verify_recording(p)
+    assert not checked.truncated and not checked.lost_part and "no event lost" in checked.reach
+
+
+def test_recovering_a_file_that_lost_no_message_never_makes_its_policy_partial(whole, tmp_path):
+    """trial10: a file whose only damage was a Message Index rebuilt whole, but after `recover` its policy said
+    "PARTIAL ... completed by pairplay recover": recovering made it worse. The same for a file cut inside its
+    summary (its data section complete): rebuilt and verified as whole, after recover as before."""
+    only_index = _index_length_damaged(whole, tmp_path, False, "index.mcap")
+    data = whole.read_bytes()
+    cut = variant(tmp_path, data[:_summary_start(data) + 30], "cut-summary.mcap")
+    for p in (only_index, cut):
+        assert rebuild_recording(p).partial == "", p
+        done = recover(p, tmp_path / f"{p.stem}.rec.mcap")
+        rebuilt = rebuild_recording(done.output)
+        assert rebuilt.partial == "" and not rebuilt.lost and rebuilt.policy == rebuild_recording(whole).policy, (
+            p, rebuilt.partial)
+        checked = verify_recording(done.output)
+        assert checked.ok and not checked.truncated and not checked.error, (p, checked.verdict)
+    whole_cut = rebuild_recording(cut)
+    assert whole_cut.damage_read.startswith("the file is cut after its data section, no event lost (")
+
+
+def test_a_study_game_whose_file_is_cut_after_its_data_section_lost_nothing(whole, tmp_path):
+    """The study's game end (replay/studydata.py `recording_damage`, `lost_answers`) took any cut as lost events
+    ("truncated: ...: no policy built"); a cut inside the summary, after the Data End, lost none."""
+    from pairplay.replay.studydata import lost_answers, recording_damage
+
+    data = whole.read_bytes()
+    log = read_log(variant(tmp_path, data[:_summary_start(data) + 30], "cut-summary.mcap"))
+    assert log.truncated and len(log.events) == len(payloads(whole))
+    assert recording_damage(log) == "" and lost_answers(log, False, True) == []
+    earlier = read_log(variant(tmp_path, data[:len(data) // 2], "cut-data.mcap"))  # a cut in the data: a loss
+    assert recording_damage(earlier).startswith("truncated: ") and lost_answers(earlier, False, True)

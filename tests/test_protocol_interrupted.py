@@ -26,6 +26,8 @@ from pathlib import Path
 
 import pytest
 
+from pairplay.replay.mcapscan import scan
+
 from pairplay.replay.studydata import StudyData, StudyDataError
 from pairplay.replay.wal import wal_path
 from pairplay.schemas import journal as j
@@ -242,7 +244,10 @@ def test_a_recording_that_cannot_give_the_policy_is_said_in_one_line_and_the_com
     shutil.copy(data.folder / unfinished.recording, wal_path(data.folder / unfinished.recording))  # a killed recorder's
     (data.folder / missing.recording).unlink()
     whole = (data.folder / cut.recording).read_bytes()
-    (data.folder / cut.recording).write_bytes(whole[: len(whole) // 2])
+    # cut after its last chunk, before its Data End: what came after is unknown (more chunks?), so cut short;
+    # half the file fell in its summary, after every message and the Data End: that cut lost nothing
+    last = scan(data.folder / cut.recording).chunks[-1]
+    (data.folder / cut.recording).write_bytes(whole[: last.offset + last.length + 5])
     lines = data.build_missing_policies()
     assert len(lines) == 4 and all("\n" not in line for line in lines), lines
     said = {line.split(":", 1)[0]: line for line in lines}
