@@ -368,7 +368,7 @@ class StudyData:
         """(its read recording (reader.EventLog), "") if game `g`'s recording can stand for the game, else (None,
         why not, in the words the report names the game by): missing; holding no session (a 0-byte file, the
         ~1 KB an interrupted `session --force` leaves: check.no_session, the reader's words); damaged (events
-        lost: EventLog.lost); holding no whole round (check.no_whole_round); or not this game's (`not_this_game`:
+        lost: EventLog.lost, a recovered file's source's losses among them); holding no whole round (check.no_whole_round); or not this game's (`not_this_game`:
         a `session --force --session <its id> --out STUDY/recordings` replaced it with another session). A
         journal that says "completed" does not make a file that holds none of it the game: its picks would
         silently be no picks."""
@@ -728,9 +728,9 @@ def lost_answers(log, decoded: bool, journaled: bool) -> list[str]:
     bad = [b for b in log.bad if b.key.rsplit("/", 1)[-1] in ("QuestionnaireAnswered", "")]
     if bad:
         return [f"the answers do not decode ({b.key or 'no channel'}: {b.reason[:80]})" for b in bad]
-    if journaled and (log.lost_from >= 0 or log.truncated):
+    if journaled and (log.lost_from >= 0 or log.truncated):  # (a recovered file's source's losses: `lost`)
         return [f"answered (the journal says), not in the recording: "
-                f"{'damaged' if log.damage else 'truncated'}: {log.brief}"]
+                f"{recording_damage(log)}"]
     return []
 
 
