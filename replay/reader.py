@@ -33,6 +33,7 @@ from mcap.decoder import DecoderFactory
 from mcap.records import Channel, Message, Metadata, Schema
 
 from pairplay.livelock import LIVE, is_live
+from pairplay.numbers import counted
 from pairplay.schemas.envelope import Event
 from pairplay.schemas.events import EVENT_BY_TAG, decode_event
 
@@ -207,7 +208,7 @@ def said_source_lost(recovered: dict[str, str]) -> str:
     if not parts:  # recovered before recover said what each part lost
         return f"{head} whose damaged parts are lost"
     if len(parts) > 2:  # every part named was a line of thousands of characters (as Scan.brief)
-        return f"{head}: {len(parts)} parts lost, the first {parts[0]}, the last {parts[-1].split(': ')[0]}"
+        return f"{head}: {counted(len(parts), 'part')} lost, the first {parts[0]}, the last {parts[-1].split(': ')[0]}"
     return f"{head}: {'; '.join(p + ' lost' for p in parts)}"
 
 
