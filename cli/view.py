@@ -122,7 +122,9 @@ def run(args: argparse.Namespace) -> int:
                 raise KeptPartial(keep_partial(tmp, rrd, args.force))
     except KeptPartial as kept:
         if not done.partial and lost:  # events lost in the file: what is left, drawn, under a name that says so
-            print(f"saved {kept.path}: {_counts(done)}; partial: {args.recording} is damaged ({lost})")
+            # (a whole file recovered from one that lost parts: `lost` says what, reader.EventLog.source_lost)
+            said = f"is damaged ({lost})" if held.damaged else f"was {lost}"
+            print(f"saved {kept.path}: {_counts(done)}; partial: {args.recording} {said}")
             return 0
         if not done.partial:  # a live recording, drawn as far as it goes: a result, said on stdout
             print(f"saved {kept.path}: {_counts(done)}; partial: {args.recording} {LIVE}, view it again once "

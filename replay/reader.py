@@ -33,6 +33,7 @@ from mcap.decoder import DecoderFactory
 from mcap.records import Channel, Message, Metadata, Schema
 
 from pairplay.livelock import LIVE, is_live
+from pairplay.numbers import counted
 from pairplay.schemas.envelope import Event
 from pairplay.schemas.events import EVENT_BY_TAG, decode_event
 
@@ -103,6 +104,10 @@ class EventLog:
     channels: dict[int, tuple[str, str]] = field(default_factory=dict)  # id -> (topic, schema name)
     skipped: dict[str, int] = field(default_factory=dict)  # read_log(only=...): events not decoded, by tag
     schemas: dict[int, tuple[str, str, bytes]] = field(default_factory=dict)  # id -> (name, encoding, data)
+    # a file `pairplay recover` made of a damaged one: what its source lost (the file itself may be whole, its
+    # session is not), in one short line (from its RECOVERED metadata); "" if its source lost no
+    # message (an index, a CRC: the session is whole) or it is no recovered file
+    source_lost: str = ""
 
     @property
     def whole(self) -> bool:
@@ -134,18 +139,21 @@ class EventLog:
 
     @property
     def note(self) -> str:
-        """What a verb that reads the file's intact parts lacks, in one short line ("" if the file is whole and
-        every message decodes): "damaged: ..." or "truncated: ..." (`brief`), and `undecoded`."""
+        """What a verb that reads the file's intact parts lacks, in one short line ("" if the file is whole,
+        every message decodes and it is no recovery of a file that lost some): "damaged: ..." or "truncated: ..."
+        (`brief`), what the file it was recovered from lost (`source_lost`), and `undecoded`."""
         cut = "" if self.whole else f"{'damaged' if self.damage else 'truncated'}: {self.brief}"
-        return "; ".join(n for n in (cut, self.undecoded) if n)
+        return "; ".join(n for n in (cut, self.source_lost, self.undecoded) if n)
 
     @property
     def lost(self) -> str:
         """What the file lost among its events, in one short line ("" if nothing): a damaged part that held
-        some (`lost_from`: said by `brief`) and the messages that do not decode (`undecoded`). What is made of
+        some (said by `brief`), what the damaged file it was recovered from lost (`source_lost`: a recovered
+        file is whole, its session is not) and the messages that do not decode (`undecoded`). What is made of
         such a file lacks events its session had (rebuild: refused without --partial; view: a partial view;
         report: the game left out); a damage that lost no event (a summary's CRC) is not a loss."""
-        return "; ".join(n for n in (self.brief if self.lost_from >= 0 else "", self.undecoded) if n)
+        own = any(d.lost_at >= 0 for d in self.damage)
+        return "; ".join(n for n in (self.brief if own else "", self.source_lost, self.undecoded) if n)
 
     def unknown_types(self) -> dict[str, int]:
         """How many events of each type this version does not know, by tag."""
@@ -198,6 +206,24 @@ def recovered_lost(recovered: dict[str, str]) -> bool:
     if recovered.get("damaged", "[]") in ("", "[]"):
         return False
     return recovered.get(LOST_AT_KEY, "") != "[]"
+
+
+def said_source_lost(recovered: dict[str, str]) -> str:
+    """What the damaged file a recovered one (its RECOVERED metadata) was made from lost, in one short line, as
+    `Scan.brief` says a damaged file's ("" if it lost no message: `recovered_lost`)."""
+    if not recovered_lost(recovered):
+        return ""
+    try:
+        parts = [str(p) for p in json.loads(recovered.get("lost", "[]") or "[]")]
+    except (ValueError, TypeError):
+        parts = []
+    source = Path(recovered.get("source", "")).name
+    head = f"recovered from a damaged file{f' ({source})' if source else ''}"
+    if not parts:  # recovered before recover said what each part lost
+        return f"{head} whose damaged parts are lost"
+    if len(parts) > 2:  # every part named was a line of thousands of characters (as Scan.brief)
+        return f"{head}: {counted(len(parts), 'part')} lost, the first {parts[0]}, the last {parts[-1].split(': ')[0]}"
+    return f"{head}: {'; '.join(p + ' lost' for p in parts)}"
 
 
 def _recovered_losses(records: list) -> list[int] | None:
@@ -295,6 +321,7 @@ def _read_log(path: str | Path, only: frozenset[str] | None = None) -> EventLog:
             if log.lost_from < 0:
                 log.lost_from = len(log.events)
     log.truncated, log.damage, log.data_complete = checked.truncated, checked.damage, checked.data_complete
+    log.source_lost = said_source_lost(log.metadata.get(RECOVERED, {}))
     log.error = "" if checked.whole else checked.describe()
     log.brief = "" if checked.whole else checked.brief()
     if log.truncated and is_live(path):  # not cut: its recorder is still writing it (pairplay/livelock.py)

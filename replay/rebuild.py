@@ -151,10 +151,8 @@ def rebuild_recording(path: str | Path) -> Rebuilt:
         rebuilt.damage_read = (f"the file is {'damaged' if log.damage else 'cut after its data section'}, no event "
                                f"lost ({log.brief}): pairplay recover makes a whole copy")
     rebuilt.damaged_rounds = damaged_rounds([r.event for r in log.events], log.lost_at)
-    if log.lost:
-        rebuilt.lost = f"the file is damaged ({log.lost})"
-    elif recovered_lost(recovered):  # (a damage that lost no message is no loss: its session is whole)
-        rebuilt.lost = "it was recovered from a damaged file, whose damaged parts are lost"
+    if log.lost:  # the file's own damage, or its source's if it was recovered (reader.EventLog.source_lost)
+        rebuilt.lost = f"the file is damaged ({log.lost})" if log.damaged else log.lost
     return rebuilt
 
 

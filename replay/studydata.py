@@ -368,8 +368,10 @@ class StudyData:
         """(its read recording (reader.EventLog), "") if game `g`'s recording can stand for the game, else (None,
         why not, in the words the report names the game by): missing; holding no session (a 0-byte file, the
         ~1 KB an interrupted `session --force` leaves: check.no_session, the reader's words); damaged (events
-        lost: EventLog.lost); holding no whole round (check.no_whole_round); or not this game's (`not_this_game`:
-        a `session --force --session <its id> --out STUDY/recordings` replaced it with another session). A
+        lost: EventLog.lost, a recovered file's source's losses among them); holding no whole round
+        (check.no_whole_round); not this game's (`not_this_game`: a `session --force --session <its id> --out
+        STUDY/recordings` replaced it with another session); or without the game's SessionEnded (a cut file:
+        its rounds are a part of the game). A
         journal that says "completed" does not make a file that holds none of it the game: its picks would
         silently be no picks."""
         from .check import check_recording, no_session, no_whole_round
@@ -395,6 +397,11 @@ class StudyData:
         why = self.not_this_game(g, log.of("SessionStarted")[0].config)
         if why:
             return None, f"recording is not this game's: {why}"
+        if not any(getattr(e, "source", "") == "game" for e in log.of("SessionEnded")):
+            # its rounds are a part of the game, not the game (a new user's trial: a cut recording was one of
+            # "5 valid games", its partial rounds in the figures)
+            cut = f"truncated: {log.brief}; " if log.truncated else ""
+            return None, f"recording {cut}no SessionEnded: its rounds are a part of the game"
         return log, ""
 
     def not_this_game(self, g: Game, config) -> str:
@@ -731,9 +738,9 @@ def lost_answers(log, decoded: bool, journaled: bool) -> list[str]:
     bad = [b for b in log.bad if b.key.rsplit("/", 1)[-1] in ("QuestionnaireAnswered", "")]
     if bad:
         return [f"the answers do not decode ({b.key or 'no channel'}: {b.reason[:80]})" for b in bad]
-    if journaled and (log.lost_from >= 0 or log.cut_lost):
+    if journaled and (log.lost_from >= 0 or log.cut_lost):  # (a recovered file's source's losses: `lost`)
         return [f"answered (the journal says), not in the recording: "
-                f"{'damaged' if log.damage else 'truncated'}: {log.brief}"]
+                f"{recording_damage(log)}"]
     return []
 
 

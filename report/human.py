@@ -4,10 +4,12 @@ Rule: `human_report(folder, out)` reads only the study folder (replay/studydata.
 the journal says which recording is which game of which participant in which
 phase, the recordings say what happened. Games marked invalid or aborted are
 listed and left out of every figure and table, and so is a game whose recording
-lost events (a damaged part, messages that do not decode: reader.EventLog.lost,
+lost events (a damaged part, messages that do not decode, parts the file a recovered one was made from
+lost: reader.EventLog.lost,
 the loss rebuild refuses without --partial): its picks would be a part passed
 off as the game; and so is a game whose recording is missing, holds no session (a 0-byte
-file, what an interrupted `session --force` leaves) or no whole round (StudyData.recording_of):
+file, what an interrupted `session --force` leaves), no whole round or no SessionEnded (a cut file: its
+rounds are a part of the game) (StudyData.recording_of):
 named with the reader's words, never counted valid; and so is a recording that is not
 that game's (its SessionStarted's session id, participant, the plan's rounds, a scripted
 game's persona against the journal: a `session --force --session <its id>` over it). So are the games scripted

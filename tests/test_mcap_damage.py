@@ -727,3 +727,52 @@ def test_a_study_game_whose_file_is_cut_after_its_data_section_lost_nothing(whol
     assert recording_damage(log) == "" and lost_answers(log, False, True) == []
     earlier = read_log(variant(tmp_path, data[:len(data) // 2], "cut-data.mcap"))  # a cut in the data: a loss
     assert recording_damage(earlier).startswith("truncated: ") and lost_answers(earlier, False, True)
+
+
+def test_a_recovered_file_of_a_chunk_lost_is_partial_to_every_verb_that_reads_damage(whole, tmp_path, capsys):
+    """A new user's trial: what `pairplay recover` made of a file that lost a chunk is whole, and only verify and
+    rebuild read its metadata saying where its source lost parts: `view` saved it as the complete view ("0
+    notes"), `counterfactual` fitted it with no "Partial recording" line. The reader carries the source's losses
+    (EventLog.source_lost, in `note` and `lost`), so every verb says them as it says a damaged file's."""
+    from pairplay.cli.main import main
+    from pairplay.schemas.usermodel import read_user_model
+
+    p, part = _middle_chunk_lost(whole, tmp_path)
+    r = recover(p, tmp_path / "r.mcap").output
+    log = read_log(r)
+    assert log.whole and not log.damaged
+    said = f"recovered from a damaged file ({p.name}): {part}: its "
+    assert log.note.startswith(said) and log.lost == log.note and "messages lost" in log.note, log.note
+    assert main(["view", "--recording", str(r)]) == 0
+    [line] = capsys.readouterr().out.splitlines()
+    assert not r.with_suffix(".rrd").exists() and (tmp_path / "r.partial.rrd").stat().st_size > 0
+    assert line.startswith(f"saved {tmp_path / 'r.partial.rrd'}: ") and f"{r} was {said}" in line, line
+    assert main(["counterfactual", str(r), "--fit-only", "--out", str(tmp_path / "cf")]) == 0
+    capsys.readouterr()
+    head = (tmp_path / "cf" / "counterfactual.md").read_text().split("## ")[0]
+    assert f"**Partial recording:** fitted on the intact parts only ({r.name}: {said}" in head, head
+    assert read_user_model(tmp_path / "cf" / "r.usermodel.json").partial.startswith(f"{r.name}: {said}")
+    assert said in rebuild_recording(r).lost
+    assert any(note and said in note for _, note in recording_items(r))
+
+
+def test_a_recovered_file_whose_damage_lost_no_message_is_whole_to_every_verb(whole, tmp_path, capsys):
+    """The other side of the rule: a recovered file whose source's damage lost no message (index bytes between
+    two chunks) holds the whole session, and no verb calls it partial."""
+    from pairplay.cli.main import main
+
+    chunks = scan(whole).chunks
+    c, after = chunks[3], chunks[4]
+    bad = bytearray(whole.read_bytes())
+    bad[c.offset + c.length:after.offset] = b"\xff" * (after.offset - c.offset - c.length)
+    r = recover(variant(tmp_path, bytes(bad), "index.mcap"), tmp_path / "r.mcap").output
+    log = read_log(r)
+    assert log.whole and (log.note, log.lost, log.source_lost, log.damaged) == ("", "", "", "")
+    assert main(["view", "--recording", str(r)]) == 0
+    [line] = capsys.readouterr().out.splitlines()
+    assert (tmp_path / "r.rrd").stat().st_size > 0 and "partial" not in line, line
+    assert main(["counterfactual", str(r), "--fit-only", "--out", str(tmp_path / "cf")]) == 0
+    capsys.readouterr()
+    assert "Partial" not in (tmp_path / "cf" / "counterfactual.md").read_text()
+    assert not rebuild_recording(r).lost
+    assert not any(note for _, note in recording_items(r))

@@ -754,3 +754,63 @@ def test_the_console_offers_the_board_link_only_once_the_board_has_a_url(tmp_pat
     assert "board_url" not in Console(runner, "token", board_url=lambda session: None).state()["live"]
     assert Console(runner, "token", board_url=lambda session: f"/board?session={session}").state()["live"][
         "board_url"] == "/board?session=s-1"
+
+
+def test_the_report_and_answers_leave_out_what_a_recovered_recording_s_source_lost(played, tmp_path):
+    """A new user's trial: a study game's recording replaced by what `pairplay recover` made of it after it lost
+    a chunk (a whole file whose metadata says where its source lost parts) was counted as a valid game, its
+    answers as answered. The reader carries the source's losses (EventLog.lost): the game is left out and named
+    with them, as a damaged recording is, and the answers it lost are a row saying so in answers.csv."""
+    from pairplay.replay.recover import recover
+
+    data = copy_study(played, tmp_path)
+    games = [g for g in data.state.games.values() if g.valid_complete]
+    game = next(g for g in games if g.ended.questionnaire)
+    path = data.folder / game.recording
+    damage(path, "chunk", tag="QuestionnaireAnswered")
+    recovered = recover(path, tmp_path / "r.mcap").output
+    shutil.copy(recovered, path)
+    assert read_log(path).whole
+    said = f"recovered from a damaged file ({path.name}): chunk "
+    data = StudyData(data.folder)
+    report = human_report(data.folder, tmp_path / "report")
+    assert game.session not in {s.session for s in report.games}
+    [left] = [e for e in report.excluded if e.startswith(game.session + " (")]
+    assert left.startswith(f"{game.session} (recording damaged: {said}"), left
+    assert left in (report.out / "report.md").read_text()
+    assert f"{len(games) - 1} valid games" in (report.out / "report.md").read_text()
+    [lost] = [a for a in data.answers() if a["session"] == game.session]
+    assert lost["item"] == "" and f"not in the recording: damaged: {said}" in lost["lost"], lost
+
+
+def test_the_report_leaves_out_a_game_whose_recording_is_cut(played, tmp_path):
+    """A new user's trial: a study game's recording cut short (its last rounds and its SessionEnded gone) was
+    counted as a valid game ("5 valid games") and its partial rounds went into the figures: a part passed off as
+    the game. It is left out and named, the cut in the reader's words, as a damaged one is."""
+    data = copy_study(played, tmp_path)
+    games = [g for g in data.state.games.values() if g.valid_complete]
+    game = games[0]
+    path = data.folder / game.recording
+    from pairplay.replay.mcapscan import scan
+    from pairplay.replay.writer import EventLogWriter
+
+    events = read_log(path).events  # written again in 4 KB chunks, cut in the one after the last round's start
+    w = EventLogWriter(path, chunk_size=4096)
+    for r in events:
+        w.write(r.key, r.payload, log_time_ns=r.log_time_ns, sequence=r.event.seq)
+    w.close()
+    last = [r.log_time_ns for r in events if type(r.event).__name__ == "RoundStarted"][-1]
+    chunks = scan(path).chunks
+    [at] = [i for i, c in enumerate(chunks) if any(t == last for _, _, t in c.messages)]
+    path.write_bytes(path.read_bytes()[:chunks[at + 1].offset + chunks[at + 1].length // 2])
+    cut = read_log(path)
+    assert cut.truncated and not cut.of("SessionEnded") and cut.of("RoundEnded")  # a whole round is left
+    report = human_report(data.folder, tmp_path / "report")
+    text = (report.out / "report.md").read_text()
+    assert game.session not in {s.session for s in report.games}
+    [left] = [e for e in report.excluded if e.startswith(game.session + " (")]
+    assert left.startswith(f"{game.session} (recording truncated: file end: cut at byte "), left
+    assert "no SessionEnded: its rounds are a part of the game" in left and left in text
+    assert f"{len(games) - 1} valid games" in text
+    with open(report.out / "picks.csv") as f:
+        assert len(list(csv.DictReader(f))) == (len(games) - 1) * 2  # its 1 whole round is in no row
