@@ -90,9 +90,12 @@ def same_grid(copy: Path, grid) -> bool:
     Compared as read, not as text: a comment or a blank line made "the sweep of another grid" (exit 2),
     and with --force every finished cell was thrown away. A copy that no longer reads is another grid."""
     try:
-        return read_grid(copy) == grid
+        read = read_grid(copy)
     except (GridError, OSError, UnicodeDecodeError):
         return False
+    # the axes' order too: a cell's id digests its setting in the grid's key order (reordered [grid] keys
+    # were "the same grid", and every cell was computed again under new ids beside the old ones)
+    return read == grid and list(read.axes) == list(grid.axes)
 
 
 def check_sweep_places(out: Path, grid) -> None:

@@ -43,6 +43,7 @@ import glob
 import json
 import logging
 import os
+import re
 import shutil
 import signal
 import threading
@@ -159,13 +160,17 @@ def _temp_name(path: Path) -> Path:
     return path.with_name(f".{path.name}.{os.getpid()}.{os.urandom(3).hex()}.tmp")
 
 
+_TEMP_HEX = re.compile(r"[0-9a-f]{6}")  # _temp_name's os.urandom(3).hex()
+
+
 def _remove_dead_temps(path: Path) -> None:
     """Remove what `_temp_name` made beside `path` for a process that is gone (a `rebuild --force` killed
     with SIGKILL left `.<name>.<pid>.<hex>.tmp` folders of up to ~1 MB for good); a live process's, or one
     whose process cannot be told, stays. Best effort: a temporary that cannot be removed is left."""
     for old in path.parent.glob(f".{glob.escape(path.name)}.*.tmp"):
         parts = old.name[len(path.name) + 2:].split(".")  # <pid>, <hex>, "tmp"
-        if len(parts) != 3 or not parts[0].isdigit() or int(parts[0]) == os.getpid() or _alive(int(parts[0])):
+        if (len(parts) != 3 or not parts[0].isdigit() or not _TEMP_HEX.fullmatch(parts[1])
+                or int(parts[0]) == os.getpid() or _alive(int(parts[0]))):  # only a name _temp_name gives
             continue
         with contextlib.suppress(OSError):
             if old.is_dir() and not old.is_symlink():

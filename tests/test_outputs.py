@@ -292,9 +292,12 @@ def test_a_killed_writers_temporaries_are_removed_by_the_next_writer_and_a_live_
     live.mkdir()
     dead_file = tmp_path / ".report.md.99999999.a1b2c3.tmp"
     dead_file.write_text("half")
+    not_ours = tmp_path / ".out.99999997.zz.tmp"  # a dead pid, but not a name _temp_name gives (a trial)
+    (not_ours / "important.txt").parent.mkdir()
+    (not_ours / "important.txt").write_text("the user's")
     with output_folder(out) as tmp:
         (tmp / "a.txt").write_text("a")
     write_text(tmp_path / "report.md", "whole")
     assert not dead.exists() and not dead_file.exists()
-    assert live.is_dir()
+    assert live.is_dir() and (not_ours / "important.txt").read_text() == "the user's"
     assert (out / "a.txt").read_text() == "a" and (tmp_path / "report.md").read_text() == "whole"

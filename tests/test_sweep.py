@@ -581,3 +581,18 @@ def test_a_folder_at_the_sweeps_grid_copy_is_named_as_a_folder_with_or_without_f
         assert err.endswith(f"is a folder where a file is written; a folder is never replaced, --force or not: "
                             f"remove or rename it ({out / 'grid.toml'})"), err
     assert not (out / "cells").exists()
+
+
+def test_a_grid_whose_axes_are_reordered_is_another_grid(tmp_path):
+    """A trial: reordered [grid] keys were "the same grid" (dicts compare without order), yet a cell's id digests
+    its setting in the grid's key order, so every cell was computed again beside the old ones."""
+    from pairplay.cli.sweep import same_grid
+
+    head = 'seeds = 1\n[study]\npersonas = "blind"\ngames = 1\nrounds = 20\n[grid]\n'
+    one = _grid(tmp_path, head + 'reward_bonus = ["correct"]\neval_rounds = [5, 6]\n')
+    (tmp_path / "two.toml").write_text("# a note\n" + head + 'reward_bonus = ["correct"]\neval_rounds = [5, 6]\n')
+    (tmp_path / "three.toml").write_text(head + 'eval_rounds = [5, 6]\nreward_bonus = ["correct"]\n')
+    grid = read_grid(one)
+    assert same_grid(tmp_path / "two.toml", grid)
+    assert not same_grid(tmp_path / "three.toml", grid)
+    assert {c.id for c in read_grid(tmp_path / "three.toml").cells()} != {c.id for c in grid.cells()}
