@@ -121,7 +121,7 @@ def run(args: argparse.Namespace) -> int:
     files = {path: read_policy(path) for _, path in arms_wanted if path}
 
     log = read_session(rec)
-    note = log.note  # its damage, cut and messages that do not decode (reader.EventLog), as rebuild's
+    note = log.missing  # what its damage, cut and undecodable messages lost (reader.EventLog), as rebuild's
     events = [r.event for r in log.events]
     turns = turns_from_events(events, str(rec), note)
     config = turns.config

@@ -82,8 +82,8 @@ def run(args: argparse.Namespace) -> int:
 
     if not log.events:
         raise InputError(f"holds no events to replay{' (' + log.brief + ')' if log.brief else ''}", args.recording)
-    if log.note:  # a damaged or cut file, or messages that do not decode: not re-published, said (reader.EventLog)
-        print(f"{args.recording}: not whole ({log.note}); replaying the {counted(len(log.events), 'event')} of its intact parts")
+    if log.missing:  # what a damaged or cut file, or messages that do not decode, lost: not re-published, said
+        print(f"{args.recording}: not whole ({log.missing}); replaying the {counted(len(log.events), 'event')} of its intact parts")
     stop = threading.Event()
     stop_on_signals(stop)
     with Bus(options_from_args(args), stop=stop) as bus:

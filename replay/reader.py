@@ -155,6 +155,15 @@ class EventLog:
         own = any(d.lost_at >= 0 for d in self.damage)
         return "; ".join(n for n in (self.brief if own else "", self.source_lost, self.undecoded) if n)
 
+    @property
+    def missing(self) -> str:
+        """`note` when the file lacks events of its session (a damaged part that held some, a cut before its data
+        section's end, a recovered file's source's losses, messages that do not decode: `lost`, `cut_lost`); ""
+        when its damage lost none (an index, a summary, a cut after the Data End): such a file is whole to a verb
+        that reads its events (counterfactual, view, replay said "not whole" of it, and marked their output
+        partial)."""
+        return self.note if (self.lost or self.cut_lost) else ""
+
     def unknown_types(self) -> dict[str, int]:
         """How many events of each type this version does not know, by tag."""
         counts: dict[str, int] = {}

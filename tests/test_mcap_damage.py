@@ -776,3 +776,28 @@ def test_a_recovered_file_whose_damage_lost_no_message_is_whole_to_every_verb(wh
     assert "Partial" not in (tmp_path / "cf" / "counterfactual.md").read_text()
     assert not rebuild_recording(r).lost
     assert not any(note for _, note in recording_items(r))
+
+
+def test_a_file_whose_damage_lost_no_message_is_whole_to_counterfactual_view_and_replay(whole, tmp_path, capsys):
+    """trial11: a file whose Message Index lengths are damaged and that is cut after its Data End loses no message,
+    yet counterfactual ("not whole ...; fitting the turns of its intact parts", a Partial line, the model
+    partial), view ("recording not whole") and replay said it lacked something: they read `note` (any damage), not
+    what was lost (`EventLog.missing`). A file that lost events still says so in all three."""
+    from pairplay.cli.main import main
+    from pairplay.replay.reader import read_log
+    from pairplay.schemas.usermodel import read_user_model
+    from pairplay.services.view.sources import recording_items
+
+    p = _index_length_damaged(whole, tmp_path, cut_in_summary=True, name="loss-free.mcap")
+    log = read_log(p)
+    assert log.note and not log.missing  # damaged, nothing lost
+    assert main(["counterfactual", str(p), "--fit-only", "--out", str(tmp_path / "cf")]) == 0
+    out = capsys.readouterr().out
+    assert "not whole" not in out, out
+    assert "Partial" not in (tmp_path / "cf" / "counterfactual.md").read_text()
+    assert read_user_model(tmp_path / "cf" / f"{p.stem}.usermodel.json").partial == ""
+    notes = [note for _e, note in recording_items(p) if note]
+    assert not [n for n in notes if "not whole" in n], notes
+    lost = undecodable(whole, tmp_path)
+    assert read_log(lost).missing
+    assert [n for _e, n in recording_items(lost) if n and "not whole" in n]

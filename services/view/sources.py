@@ -89,8 +89,8 @@ def recording_items(path: str | Path, *, speed: float = 0.0, session: str | None
         if stop.is_set():
             return
         yield event, None
-    if log.note:  # damaged, cut, recovered from a file that lost parts, messages that do not decode (reader.EventLog)
-        yield None, f"recording not whole ({log.note}); its intact parts are shown"
+    if log.missing:  # damaged, cut, recovered from a file that lost parts, undecodable: what it lost (reader.EventLog)
+        yield None, f"recording not whole ({log.missing}); its intact parts are shown"
 
 
 class LiveSource:
