@@ -74,7 +74,7 @@ from pairplay.numbers import counted
 EXCERPT = 200
 MAX_KINDS = 20
 OTHER_KIND = ("*", "other refusals")  # what a refusal beyond MAX_KINDS kinds in a second is counted under
-_COUNT = re.compile(r"(\d+) messages refused and not recorded one by one \(limit \d+/s\): (.*)", re.S)  # tick's
+_COUNT = re.compile(r"(\d+) messages? refused and not recorded one by one \(limit \d+/s\): (.*)", re.S)  # tick's
 SECOND_NS = 1_000_000_000
 CONTRADICTED = "contradicted: "  # how a notice's reason begins (_conflict): not a refusal of the message named
 NO_END = 2**62  # above every seq (schemas/envelope.py Seq): no end taken yet

@@ -258,3 +258,17 @@ def test_on_a_recovering_bus_the_games_start_and_end_are_judged_by_seq_not_by_ar
             assert not recorder.record(*start, 2)  # a start behind the game's events there is not the game's
         finally:
             recorder.close()
+
+
+@pytest.mark.parametrize("n", [1, 2, 7])
+def test_a_count_of_refusals_reads_back_whatever_its_number(n):
+    """The count's line says its noun ("1 message refused ...", numbers.counted), and the reader of counts
+    (Refusals.counted: the console's and the report's totals) matched only "messages": a count of 1 was lost."""
+    from collections import Counter
+
+    from pairplay.services.guard import Refusals
+
+    r = Refusals()
+    r.shed(Counter({("board", "larger than 10 bytes"): n}))
+    [count] = r.tick(10**9, force=True)
+    assert Refusals.counted(count) == (("board", "shed unread (larger than N bytes)"), n), count.reason
