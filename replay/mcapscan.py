@@ -125,6 +125,12 @@ class Scan:
     def lost_chunks(self) -> list[ChunkSeen]:
         return [c for c in self.chunks if not c.intact]
 
+    def losses(self) -> list[tuple[int, int | None]]:
+        """Each part whose records are lost: (its `lost_at`, how many messages it held as its Message Indexes
+        list them; None when that is not known: unreadable bytes, a chunk whose indexes were lost with it)."""
+        listed = {c.offset: c.listed for c in self.chunks if not c.intact}
+        return [(d.lost_at, listed.get(d.offset) or None) for d in self.damage if d.lost_at >= 0]
+
     def describe(self) -> str:
         """One line: what is wrong, or 'whole'."""
         parts = [str(d) for d in self.damage]

@@ -227,6 +227,12 @@ def said_source_lost(recovered: dict[str, str]) -> str:
     except (ValueError, TypeError):
         parts = []
     source = Path(recovered.get("source", "")).name
+    try:  # a recovered file recovered again: the files before its source (replay/recover.py `earlier`), oldest first
+        earlier = [Path(str(e)).name for e in json.loads(recovered.get("earlier", "[]") or "[]") if e]
+    except (ValueError, TypeError):
+        earlier = []
+    if source and earlier:
+        source += f", itself recovered from {' and '.join(reversed(earlier))}"
     head = f"recovered from a damaged file{f' ({source})' if source else ''}"
     if not parts:  # recovered before recover said what each part lost
         return f"{head} whose damaged parts are lost"
@@ -235,18 +241,26 @@ def said_source_lost(recovered: dict[str, str]) -> str:
     return f"{head}: {'; '.join(p + ' lost' for p in parts)}"
 
 
-def _recovered_losses(records: list) -> list[int] | None:
+def recovered_losses(records: list, own: list[tuple[int, int | None]] = ()) -> list[int] | None:
     """Where a file `pairplay recover` wrote lost parts of the file it was recovered from, as indexes of
     `records` (None: not such a file, or one recovered before recover said where). Its metadata record is
-    written after every message but the last chunk's, so it is looked for from the end."""
+    written after every message but the last chunk's, so it is looked for from the end. `own`: the parts this
+    file lost itself (damaged after its recovery), as (index of `records`, how many messages it held; None: not
+    known): the recorded places count the messages the file held when it was written, those lost among them,
+    so each lost part's messages are counted where it was (a mark inside it falls at it; a mark after a part
+    whose count is not known falls at that part too: where it was past it is not known)."""
     for record in reversed(records):
         if type(record) is Metadata and record.name == RECOVERED and LOST_AT_KEY in record.metadata:
             try:
                 wanted = sorted(int(n) for n in json.loads(record.metadata[LOST_AT_KEY]))
             except (ValueError, TypeError):
                 return None
-            at, seen, found = 0, 0, []
+            lost = sorted(own)
+            at, seen, found, k = 0, 0, [], 0
             for i, r in enumerate(records):
+                while k < len(lost) and lost[k][0] <= i:  # a part lost before this record: its messages were here
+                    seen = float("inf") if lost[k][1] is None else seen + lost[k][1]
+                    k += 1
                 while at < len(wanted) and wanted[at] <= seen:
                     found.append(i)
                     at += 1
@@ -278,9 +292,11 @@ def _read_log(path: str | Path, only: frozenset[str] | None = None) -> EventLog:
     decode, head = decode_event, _tagged.decode
     append = log.events.append
     records = checked.summary_records + checked.records
-    lost = sorted({len(checked.summary_records) + d.lost_at for d in checked.damage if d.lost_at >= 0})
-    # a recovered file is whole, but its source lost parts: marked where they were, as in the source
-    lost = sorted({*lost, *(_recovered_losses(records) or ())})
+    own = [(len(checked.summary_records) + at, n) for at, n in checked.losses()]
+    lost = sorted({at for at, _ in own})
+    # a recovered file is whole, but its source lost parts: marked where they were, as in the source (and, if it
+    # lost parts itself since, counted with theirs: `recovered_losses`)
+    lost = sorted({*lost, *(recovered_losses(records, own) or ())})
     if lost:  # a marker where each lost part's records were (`lost_at`; the first: `lost_from`)
         marked, before = [], 0
         for at in lost:

@@ -20,27 +20,16 @@ from pairplay.replay.reader import read_log
 from pairplay.replay.rebuild import rebuild_recording
 from pairplay.replay.recover import recover
 from pairplay.replay.writer import EventLogWriter
-from pairplay.schemas.events import encode_event
-from pairplay.schemas.keys import event_key
-from pairplay.schemas.session import SessionConfig
 from pairplay.services.verify import verify_recording
 from pairplay.services.view.sources import recording_items
 
-from loopback_session import loopback_events
+from damageutil import small_chunked_session
 
 
 @pytest.fixture(scope="module")
 def whole(tmp_path_factory):
     """A real recording of a 3-round session, written by the recorder's writer in small chunks (about 20)."""
-    config = SessionConfig(session="dmg", participant="sim:deaf", persona="deaf", seed=4, rounds=3)
-    path = tmp_path_factory.mktemp("dmg") / "whole.mcap"
-    w = EventLogWriter(path, chunk_size=4096)
-    w.add_metadata("pairplay.session", {"session": config.session})
-    for i, e in enumerate(loopback_events(config)):
-        w.write(event_key(e.session, e.source, type(e).__name__), encode_event(e), log_time_ns=10**18 + i,
-                sequence=e.seq)
-    w.close()
-    return path
+    return small_chunked_session(tmp_path_factory.mktemp("dmg") / "whole.mcap", "dmg")
 
 
 def payloads(path):
