@@ -116,6 +116,9 @@ class Scan:
     summary_records: list[Any] = field(default_factory=list)
     size: int = 0
     data_complete: bool = False  # the Data End was read: a cut or damage after it lost no message
+    # how many messages the file held, as its summary's Statistics count them when the summary's CRC held (None:
+    # no such summary): what its lost parts held is this less the messages read, when they do not say it
+    counted_messages: int | None = None
 
     @property
     def whole(self) -> bool:
@@ -557,6 +560,8 @@ class _Walker:
         scan.summary = bool(footer.summary_start)
         if not any(d.part == "summary" for d in scan.damage):
             scan.summary_records = self.summary_records
+            if self.summary_crc_held and self.statistics is not None:
+                scan.counted_messages = self.statistics.message_count
         self.check_summary()
 
     def check_summary(self) -> None:

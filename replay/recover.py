@@ -224,9 +224,16 @@ def recover(path: str | Path, output: str | Path | None = None, force: bool = Fa
 
 
 def _lost_count(checked) -> int | None:
-    """How many messages the damaged parts lost (mcapscan `Scan.losses`); None when a part's count is not known."""
+    """How many messages the damaged parts lost: what each part's Message Indexes list (mcapscan `Scan.losses`),
+    or, when a part's are lost with it, what the summary's Statistics count less the messages read (a summary
+    whose CRC held); None when neither says."""
     counts = [n for _, n in checked.losses()]
-    return None if None in counts else sum(counts)
+    if None not in counts:
+        return sum(counts)
+    if checked.counted_messages is None:
+        return None
+    read = sum(type(r) is Message for r in checked.records)
+    return checked.counted_messages - read if checked.counted_messages > read else None
 
 
 def _carried(earlier: dict[str, str], new: dict[str, str]) -> dict[str, str]:

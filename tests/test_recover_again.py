@@ -1,7 +1,8 @@
 """A recording recovered, damaged again and recovered again keeps every loss (task rec2, the lead's and new users'
 trials): the second recovery wrote only its own losses and the reader reads the newest "pairplay.recovered"
 record, so the twice-recovered file of a session that lost a chunk was verified, rebuilt and viewed as whole.
-replay/recover.py carries the earlier losses forward; every copy of a recording keeps its metadata.
+replay/recover.py carries the earlier losses forward; every copy of a recording keeps its metadata; recover's
+line says how many messages were lost and where.
 """
 
 import json
@@ -124,6 +125,47 @@ def test_a_recovered_cut_recovered_again_is_still_cut(whole, tmp_path):
     va, vb = verify_recording(once), verify_recording(twice)
     assert vb.truncated and vb.events == va.events and vb.verdict.split("(")[0] == va.verdict.split("(")[0]
     assert rebuild_recording(twice).partial and "after a cut" in rebuild_recording(twice).partial
+
+
+def test_recover_says_how_many_messages_were_lost_and_where(whole, tmp_path, capsys):
+    """Recover's line named each damaged part's check ("its records are not read") but not what was lost: the
+    count the lost chunk's Message Indexes give, with its noun, and the part; a damage that lost no message says
+    so; a recovered file recovered again says the earlier losses it carries over."""
+    from pairplay.cli.main import main
+
+    p, part = _chunk_lost(whole, tmp_path / "damaged.mcap", len(scan(whole).chunks) // 2)
+    listed = next(c.listed for c in scan(p).chunks if not c.intact)
+    assert listed > 1
+    assert main(["recover", str(p), "-o", str(tmp_path / "once.mcap")]) == 0
+    [line] = capsys.readouterr().out.splitlines()
+    assert f"; {listed} messages lost ({part}: its {listed} messages); every intact part kept; " in line, line
+    _tail_zeroed(tmp_path / "once.mcap", tmp_path / "once-dmg.mcap", 37)
+    assert main(["recover", str(tmp_path / "once-dmg.mcap"), "-o", str(tmp_path / "twice.mcap")]) == 0
+    [line] = capsys.readouterr().out.splitlines()
+    assert "; no message lost; every intact part kept; " in line, line
+    assert (f"; what its source had lost is carried over (recovered from a damaged file (damaged.mcap): {part}: "
+            f"its {listed} messages lost)") in line, line
+
+
+def test_recover_counts_what_unreadable_bytes_lost_by_the_summary_or_says_it_is_not_known(whole, tmp_path, capsys):
+    """A chunk whose record head is zeroed: its bytes do not read, so no Message Index says what they held; the
+    summary's Statistics (its CRC holds) count the file's messages, and the difference is what was lost. With the
+    summary zeroed too, nothing says: the line says the count is not known, never a number it cannot know."""
+    from pairplay.cli.main import main
+
+    c = scan(whole).chunks[5]
+    data = bytearray(whole.read_bytes())
+    data[c.offset:c.offset + 9] = b"\0" * 9
+    p = tmp_path / "head.mcap"
+    p.write_bytes(bytes(data))
+    n = len(read_log(whole).events) - len(read_log(p).events)
+    assert main(["recover", str(p), "-o", str(tmp_path / "r.mcap")]) == 0
+    [line] = capsys.readouterr().out.splitlines()
+    assert f"; {n} messages lost (bytes {c.offset}-" in line and ": the records there); every intact part kept" in line
+    _tail_zeroed(p, tmp_path / "head-and-tail.mcap", 37)
+    assert main(["recover", str(tmp_path / "head-and-tail.mcap"), "-o", str(tmp_path / "r2.mcap")]) == 0
+    [line] = capsys.readouterr().out.splitlines()
+    assert f"; messages lost, how many is not known (bytes {c.offset}-" in line, line
 
 
 def test_the_soak_s_altered_copy_keeps_the_recording_s_metadata(whole, tmp_path):
