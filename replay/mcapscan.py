@@ -35,6 +35,18 @@ bytes right after an intact chunk that are exactly its Message Index records
 finding, named as that chunk's index, with no `lost` (a new user's trial:
 two damaged index lengths read as lost records, so verify stopped at the
 first and rebuild refused the file, all of whose messages were read).
+
+What a reader can trust (the specification): the messages are the data
+section's, each chunk proved by its own CRC and the whole section by the Data
+End's; the summary and footer are an index of it (a reader may rebuild them
+from the data section), proved by the footer's summary CRC (zero: "not to be
+checked", as the spec says) and checked here against the data section anyway
+(Chunk Indexes, Statistics). So a zeroed or damaged footer or summary (the last
+bytes of a file overwritten: its closing magic always goes first) lost no
+message when the Data End was read (`data_complete`), and is still damage: a
+finding that makes the file not `whole` (verify FAILs naming it; "no event lost,
+but the file is damaged"), never a file called whole. `counted_messages`, the
+Statistics' count, is kept only from a summary whose CRC held.
 """
 
 from __future__ import annotations
