@@ -21,8 +21,10 @@ reads the newest: the twice-recovered file was "whole"): `lost_at` holds the
 source's marked losses too, moved to where they fall in the new file, `damaged`
 and `lost` list the earlier parts first, a cut of an earlier source before its
 Data End stays a cut, the journal counts add up, and `earlier` names the
-earlier sources (oldest first). The old record is not copied (its `lost_at`
-counts messages of the source, not of the new file). Every tool that copies a
+earlier sources (oldest first): reader.carry_recovery. The old record is not
+copied (its `lost_at` counts messages of the source, not of the new file); a
+file an older recover made twice holds both, and the reader folds them
+(reader.folded_recovery). Every tool that copies a
 recording's messages into a new MCAP keeps its metadata so (tools/verify_soak.py
 copies every record). A whole file
 (complete already) is not copied: nothing is written unless something is
@@ -53,8 +55,8 @@ from mcap.writer import CompressionType, Writer
 from typing import Callable
 
 from pairplay.errors import InputError, OutputError
-from pairplay.replay.reader import (DATA_COMPLETE_KEY, LOST_AT_KEY, RECOVERED, recovered_losses, recovered_cut,
-                                    recovered_lost, said_source_lost)
+from pairplay.replay.reader import (DATA_COMPLETE_KEY, LOST_AT_KEY, RECOVERED, carry_recovery, folded_recovery,
+                                    recovered_losses, said_source_lost)
 from pairplay.schemas.events import EVENT_BY_TAG
 from pairplay.schemas.jsonschema import schema_text
 from pairplay.schemas.keys import parse_event_key
@@ -125,8 +127,7 @@ def recover(path: str | Path, output: str | Path | None = None, force: bool = Fa
         added = admit(journal.session, recorded, journal.records)
     complete = checked.whole and not (added is not None and added.items)  # and nothing more to add
     # the source's own recovery record, if it was recovered before: its losses are carried forward (module rule)
-    earlier = next((dict(r.metadata) for r in reversed(checked.records)
-                    if isinstance(r, Metadata) and r.name == RECOVERED), {})
+    earlier = folded_recovery(checked.records)
     lost_parts = [f"{d.part}: {d.lost}" for d in checked.damage if d.lost_at >= 0]
     lost_words = dict(lost=lost_parts, lost_messages=_lost_count(checked), earlier_lost=said_source_lost(earlier))
     if complete or not write:
@@ -203,7 +204,7 @@ def recover(path: str | Path, output: str | Path | None = None, force: bool = Fa
         lost_at += [messages] * len(losses)  # a part lost after the last record read
         damaged = [str(d) for d in checked.damage]
         reason = "" if checked.whole else checked.describe()
-        writer.add_metadata(RECOVERED, _carried(earlier, {
+        writer.add_metadata(RECOVERED, carry_recovery(earlier, {
             "source": str(path), "messages": str(messages), "truncated": str(checked.truncated).lower(),
             DATA_COMPLETE_KEY: str(checked.data_complete).lower(), "reason": reason, "damaged": json.dumps(damaged), "lost_chunks": str(len(checked.lost_chunks)),
             LOST_AT_KEY: json.dumps(lost_at), "lost": json.dumps([f"{d.part}: {d.lost}" for d in checked.damage if d.lost_at >= 0]),
@@ -234,42 +235,6 @@ def _lost_count(checked) -> int | None:
         return None
     read = sum(type(r) is Message for r in checked.records)
     return checked.counted_messages - read if checked.counted_messages > read else None
-
-
-def _carried(earlier: dict[str, str], new: dict[str, str]) -> dict[str, str]:
-    """The RECOVERED record of a new recovery, `new`, with the losses of the source's own (`earlier`: {} if the
-    source was never recovered) carried forward (module rule). `new`'s LOST_AT_KEY holds the earlier marks
-    already (moved into the new file's count); an earlier record that lost messages without saying where (a
-    recover before LOST_AT_KEY) leaves the new one without it too: lost, place unknown, as it was."""
-    if not earlier:
-        return new
-    merged = {**earlier, **new}
-    for key in ("damaged", "lost"):
-        merged[key] = json.dumps(_listed(earlier.get(key)) + _listed(new.get(key)))
-    merged["earlier"] = json.dumps(_listed(earlier.get("earlier")) + [earlier.get("source", "")])
-    if recovered_cut(earlier):  # an earlier cut before the Data End: its tail is lost from every copy
-        merged["truncated"], merged[DATA_COMPLETE_KEY] = "true", "false"
-    for key in ("from_journal", "journal_refused", "lost_chunks"):
-        if key in earlier:
-            merged[key] = str(_number(earlier[key]) + _number(new.get(key, "0")))
-    if recovered_lost(earlier) and LOST_AT_KEY not in earlier:
-        merged.pop(LOST_AT_KEY, None)
-    return merged
-
-
-def _listed(text: str | None) -> list[str]:
-    try:
-        value = json.loads(text or "[]")
-    except ValueError:
-        return [text] if text else []
-    return [str(v) for v in value] if isinstance(value, list) else [str(value)]
-
-
-def _number(text: str) -> int:
-    try:
-        return int(text)
-    except ValueError:
-        return 0
 
 
 def _journal_beside(path: Path, log):

@@ -83,6 +83,29 @@ def test_a_recovered_file_damaged_and_recovered_again_keeps_the_first_losses(who
     _said_alike(once, thrice.output)
 
 
+def test_a_file_an_older_recover_made_twice_is_read_with_every_recovery_s_losses(whole, tmp_path):
+    """A file an older pairplay recovered twice holds the first recovery's record, copied, and the second's after
+    it, which said only its own findings (a summary: no message lost); the reader read the newest alone, so the
+    session was whole to every verb. It folds them (reader.folded_recovery): the same as the once-recovered file."""
+    from pairplay.replay.reader import LOST_AT_KEY
+    from pairplay.replay.writer import EventLogWriter
+
+    p, part = _chunk_lost(whole, tmp_path / "damaged.mcap", len(scan(whole).chunks) // 2)
+    once = recover(p, tmp_path / "once.mcap").output
+    old = tmp_path / "old-twice.mcap"
+    w = EventLogWriter(old)
+    for name, data in _metadata(once):
+        w.add_metadata(name, data)
+    for r in read_log(once).events:
+        w.write(r.key, r.payload, log_time_ns=r.log_time_ns, sequence=r.event.seq)
+    w.add_metadata(RECOVERED, {"source": str(tmp_path / "once-dmg.mcap"), "truncated": "false",
+                               "data_complete": "true", "reason": "summary: unreadable at byte 1",
+                               "damaged": json.dumps(["summary: unreadable at byte 1"]), LOST_AT_KEY: "[]",
+                               "lost": "[]"})
+    w.close()
+    _said_alike(once, old)
+
+
 def test_a_second_recovery_that_loses_more_moves_the_earlier_marks_to_where_they_fall(whole, tmp_path, monkeypatch):
     """The second damage loses a chunk before the first's hole: the earlier mark, a count of messages of the
     once-recovered file, is moved back by what was lost before it, so each mark still stands before the same
