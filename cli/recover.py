@@ -5,7 +5,12 @@ Rule: writes REC's readable records into a complete, indexed file (default
 it (REC.journal, replay/wal.py) holds that REC lacks, through the live checks
 (services/walmerge.py), saying how many it took; the original is never modified, an
 existing output is replaced only with --force, and the output appears only
-when complete. Exit 0 when the output is complete, 2 (one line on stderr,
+when complete. The line says how many messages the damage lost and where (each
+lost part, and the count its Message Indexes give: "18 messages lost (chunk 7
+(bytes ...): its 18 messages)", or the summary's Statistics less the messages read
+when the lost bytes do not say; "not known" when neither does, "no
+message lost" for an index or a summary) and, for a recovered file recovered
+again, the earlier losses it carries over (replay/recover.py). Exit 0 when the output is complete, 2 (one line on stderr,
 nothing written) when REC is missing, empty or not MCAP (a file of nothing
 with its journal beside it, as a recorder killed before its first flush leaves
 it, is completed from the journal), holds no session
@@ -63,7 +68,7 @@ def run(args: argparse.Namespace) -> int:
     if done.complete:
         return _complete(args, done)
     if done.damaged:
-        state = f"damaged ({done.reason}); every intact part kept"
+        state = f"damaged ({done.reason}); {_lost(done)}; every intact part kept"
     elif done.truncated:
         state = f"cut short ({done.reason})"
     else:
@@ -76,11 +81,25 @@ def run(args: argparse.Namespace) -> int:
         journal = (f"; {counted(done.from_journal, 'event')} taken from its journal {done.journal.name}"
                    f"{f', {done.journal_refused} of its messages refused (recorded as refusals)' if done.journal_refused else ''}"
                    f"{f' (read up to its torn tail: {done.journal_torn})' if done.journal_torn else ''}")
-    print(f"{args.recording}: {state}; {counted(done.messages, 'message')} kept in {done.output}{journal}{ended}")
+    earlier = f"; what its source had lost is carried over ({done.earlier_lost})" if done.earlier_lost else ""
+    print(f"{args.recording}: {state}; {counted(done.messages, 'message')} kept in {done.output}{earlier}{journal}{ended}")
     if done.journal_error:  # what it held (up to the last 5 ms before a crash) is not in the output: said, not silent
         log.warning("recover: the journal beside %s is unreadable, none of its records were used: %s",
                     args.recording, done.journal_error)
     return 0
+
+
+def _lost(done) -> str:
+    """How many messages the damage lost and where, in words (recover's line said neither: only each part's
+    check, "its records are not read"): "18 messages lost (chunk 7 (bytes ...): its 18 messages)"; a count the
+    file does not give (unreadable bytes, no summary to count them: replay/recover.py `_lost_count`) is said to be
+    not known; "no message lost" (an index, a summary)."""
+    if not done.lost:
+        return "no message lost"
+    where = "; ".join(done.lost)
+    if done.lost_messages is None:
+        return f"messages lost, how many is not known ({where})"
+    return f"{counted(done.lost_messages, 'message')} lost ({where})"
 
 
 def _not_complete(done) -> str:

@@ -35,6 +35,18 @@ bytes right after an intact chunk that are exactly its Message Index records
 finding, named as that chunk's index, with no `lost` (a new user's trial:
 two damaged index lengths read as lost records, so verify stopped at the
 first and rebuild refused the file, all of whose messages were read).
+
+What a reader can trust (the specification): the messages are the data
+section's, each chunk proved by its own CRC and the whole section by the Data
+End's; the summary and footer are an index of it (a reader may rebuild them
+from the data section), proved by the footer's summary CRC (zero: "not to be
+checked", as the spec says) and checked here against the data section anyway
+(Chunk Indexes, Statistics). So a zeroed or damaged footer or summary (the last
+bytes of a file overwritten: its closing magic always goes first) lost no
+message when the Data End was read (`data_complete`), and is still damage: a
+finding that makes the file not `whole` (verify FAILs naming it; "no event lost,
+but the file is damaged"), never a file called whole. `counted_messages`, the
+Statistics' count, is kept only from a summary whose CRC held.
 """
 
 from __future__ import annotations
@@ -116,6 +128,9 @@ class Scan:
     summary_records: list[Any] = field(default_factory=list)
     size: int = 0
     data_complete: bool = False  # the Data End was read: a cut or damage after it lost no message
+    # how many messages the file held, as its summary's Statistics count them when the summary's CRC held (None:
+    # no such summary): what its lost parts held is this less the messages read, when they do not say it
+    counted_messages: int | None = None
 
     @property
     def whole(self) -> bool:
@@ -124,6 +139,12 @@ class Scan:
     @property
     def lost_chunks(self) -> list[ChunkSeen]:
         return [c for c in self.chunks if not c.intact]
+
+    def losses(self) -> list[tuple[int, int | None]]:
+        """Each part whose records are lost: (its `lost_at`, how many messages it held as its Message Indexes
+        list them; None when that is not known: unreadable bytes, a chunk whose indexes were lost with it)."""
+        listed = {c.offset: c.listed for c in self.chunks if not c.intact}
+        return [(d.lost_at, listed.get(d.offset) or None) for d in self.damage if d.lost_at >= 0]
 
     def describe(self) -> str:
         """One line: what is wrong, or 'whole'."""
@@ -551,6 +572,8 @@ class _Walker:
         scan.summary = bool(footer.summary_start)
         if not any(d.part == "summary" for d in scan.damage):
             scan.summary_records = self.summary_records
+            if self.summary_crc_held and self.statistics is not None:
+                scan.counted_messages = self.statistics.message_count
         self.check_summary()
 
     def check_summary(self) -> None:

@@ -227,6 +227,12 @@ def said_source_lost(recovered: dict[str, str]) -> str:
     except (ValueError, TypeError):
         parts = []
     source = Path(recovered.get("source", "")).name
+    try:  # a recovered file recovered again: the files before its source (replay/recover.py `earlier`), oldest first
+        earlier = [Path(str(e)).name for e in json.loads(recovered.get("earlier", "[]") or "[]") if e]
+    except (ValueError, TypeError):
+        earlier = []
+    if source and earlier:
+        source += f", itself recovered from {' and '.join(reversed(earlier))}"
     head = f"recovered from a damaged file{f' ({source})' if source else ''}"
     if not parts:  # recovered before recover said what each part lost
         return f"{head} whose damaged parts are lost"
@@ -235,25 +241,94 @@ def said_source_lost(recovered: dict[str, str]) -> str:
     return f"{head}: {'; '.join(p + ' lost' for p in parts)}"
 
 
-def _recovered_losses(records: list) -> list[int] | None:
+def carry_recovery(earlier: dict[str, str], new: dict[str, str], marks_moved: bool = True) -> dict[str, str]:
+    """The RECOVERED record of a recovery, `new`, with the losses of the recovery before it (`earlier`: {} if its
+    source was never recovered) carried forward (replay/recover.py's rule): the damaged parts and losses of both,
+    the earlier first; a cut before the Data End stays a cut; journal counts add up; `earlier` names the earlier
+    sources, oldest first. `marks_moved`: `new`'s LOST_AT_KEY holds the earlier marks already, moved into its
+    count (recover); else (`folded_recovery` of a file an older recover made twice) the earlier marks before
+    `new`'s first are kept (nothing the newer recovery lost came before them) and those after it are left to
+    it (where they fall past a newer loss is not known; every verb stops comparing at the first). An earlier
+    record that lost messages without saying where (a recover before LOST_AT_KEY) leaves none: lost, place
+    unknown, as it was."""
+    if not earlier:
+        return new
+    merged = {**earlier, **new}
+    for key in ("damaged", "lost"):
+        merged[key] = json.dumps(_listed(earlier.get(key)) + _listed(new.get(key)))
+    merged["earlier"] = json.dumps(_listed(earlier.get("earlier")) + [earlier.get("source", "")])
+    if recovered_cut(earlier):  # an earlier cut before the Data End: its tail is lost from every copy
+        merged["truncated"], merged[DATA_COMPLETE_KEY] = "true", "false"
+    for key in ("from_journal", "journal_refused", "lost_chunks"):
+        if key in earlier:
+            merged[key] = str(_number(earlier[key]) + _number(new.get(key, "0")))
+    if not marks_moved and LOST_AT_KEY in earlier and LOST_AT_KEY in new:
+        try:
+            old, mine = (sorted(int(n) for n in json.loads(m[LOST_AT_KEY])) for m in (earlier, new))
+        except (ValueError, TypeError):
+            old, mine = [], []
+        merged[LOST_AT_KEY] = json.dumps(sorted({*mine, *(n for n in old if not mine or n <= mine[0])}))
+    if recovered_lost(earlier) and LOST_AT_KEY not in earlier:
+        merged.pop(LOST_AT_KEY, None)
+    return merged
+
+
+def folded_recovery(records: list) -> dict[str, str]:
+    """A file's RECOVERED metadata, every such record of it folded ({} if none): recover now writes one that
+    carries every earlier recovery's losses (it has `earlier`); a file an older recover made of a recovered one
+    holds the earlier record copied and its own after it, and the reader read only the newest (the earlier
+    losses were forgotten): they are carried here (`carry_recovery`, marks not moved)."""
+    found = [dict(r.metadata) for r in records if type(r) is Metadata and r.name == RECOVERED]
+    folded: dict[str, str] = {}
+    for newer in found:
+        folded = newer if "earlier" in newer else carry_recovery(folded, newer, marks_moved=False)
+    return folded
+
+
+def _listed(text: str | None) -> list[str]:
+    try:
+        value = json.loads(text or "[]")
+    except ValueError:
+        return [text] if text else []
+    return [str(v) for v in value] if isinstance(value, list) else [str(value)]
+
+
+def _number(text: str) -> int:
+    try:
+        return int(text)
+    except ValueError:
+        return 0
+
+
+def recovered_losses(records: list, own: list[tuple[int, int | None]] = (),
+                     recovered: dict[str, str] | None = None) -> list[int] | None:
     """Where a file `pairplay recover` wrote lost parts of the file it was recovered from, as indexes of
     `records` (None: not such a file, or one recovered before recover said where). Its metadata record is
-    written after every message but the last chunk's, so it is looked for from the end."""
-    for record in reversed(records):
-        if type(record) is Metadata and record.name == RECOVERED and LOST_AT_KEY in record.metadata:
-            try:
-                wanted = sorted(int(n) for n in json.loads(record.metadata[LOST_AT_KEY]))
-            except (ValueError, TypeError):
-                return None
-            at, seen, found = 0, 0, []
-            for i, r in enumerate(records):
-                while at < len(wanted) and wanted[at] <= seen:
-                    found.append(i)
-                    at += 1
-                if type(r) is Message:
-                    seen += 1
-            return found + [len(records)] * (len(wanted) - at)
-    return None
+    written after every message but the last chunk's; every one is read (`folded_recovery`). `own`: the parts this
+    file lost itself (damaged after its recovery), as (index of `records`, how many messages it held; None: not
+    known): the recorded places count the messages the file held when it was written, those lost among them,
+    so each lost part's messages are counted where it was (a mark inside it falls at it; a mark after a part
+    whose count is not known falls at that part too: where it was past it is not known). `recovered`: the
+    file's `folded_recovery`, if known."""
+    recovered = folded_recovery(records) if recovered is None else recovered
+    if LOST_AT_KEY not in recovered:
+        return None
+    try:
+        wanted = sorted(int(n) for n in json.loads(recovered[LOST_AT_KEY]))
+    except (ValueError, TypeError):
+        return None
+    lost = sorted(own)
+    at, seen, found, k = 0, 0, [], 0
+    for i, r in enumerate(records):
+        while k < len(lost) and lost[k][0] <= i:  # a part lost before this record: its messages were here
+            seen = float("inf") if lost[k][1] is None else seen + lost[k][1]
+            k += 1
+        while at < len(wanted) and wanted[at] <= seen:
+            found.append(i)
+            at += 1
+        if type(r) is Message:
+            seen += 1
+    return found + [len(records)] * (len(wanted) - at)
 
 
 def read_log(path: str | Path, only: frozenset[str] | None = None) -> EventLog:
@@ -278,9 +353,12 @@ def _read_log(path: str | Path, only: frozenset[str] | None = None) -> EventLog:
     decode, head = decode_event, _tagged.decode
     append = log.events.append
     records = checked.summary_records + checked.records
-    lost = sorted({len(checked.summary_records) + d.lost_at for d in checked.damage if d.lost_at >= 0})
-    # a recovered file is whole, but its source lost parts: marked where they were, as in the source
-    lost = sorted({*lost, *(_recovered_losses(records) or ())})
+    own = [(len(checked.summary_records) + at, n) for at, n in checked.losses()]
+    lost = sorted({at for at, _ in own})
+    # a recovered file is whole, but its source lost parts: marked where they were, as in the source (and, if it
+    # lost parts itself since, counted with theirs: `recovered_losses`)
+    recovered = folded_recovery(records)  # every recovery's losses, not the newest's alone
+    lost = sorted({*lost, *(recovered_losses(records, own, recovered) or ())})
     if lost:  # a marker where each lost part's records were (`lost_at`; the first: `lost_from`)
         marked, before = [], 0
         for at in lost:
@@ -330,6 +408,8 @@ def _read_log(path: str | Path, only: frozenset[str] | None = None) -> EventLog:
             if log.lost_from < 0:
                 log.lost_from = len(log.events)
     log.truncated, log.damage, log.data_complete = checked.truncated, checked.damage, checked.data_complete
+    if recovered:
+        log.metadata[RECOVERED] = recovered
     log.source_lost = said_source_lost(log.metadata.get(RECOVERED, {}))
     log.error = "" if checked.whole else checked.describe()
     log.brief = "" if checked.whole else checked.brief()

@@ -13,7 +13,20 @@ before each; the reader marks a loss there, as it does in the damaged file, so
 a lost one as DIFFERS, and a damage that lost no message is no loss), whether the data
 section was read to its Data End (`data_complete`: a cut after it, in the summary, lost no
 message, so the copy is not a partial session) and how far the
-session got (whether its SessionEnded survived, the last round). A whole file
+session got (whether its SessionEnded survived, the last round). A source that is
+itself a recovered file (recovered, then damaged again) carries its own
+"pairplay.recovered" record: its losses are carried forward into the one new
+record, never dropped (a second recovery wrote only its own, and the reader
+reads the newest: the twice-recovered file was "whole"): `lost_at` holds the
+source's marked losses too, moved to where they fall in the new file, `damaged`
+and `lost` list the earlier parts first, a cut of an earlier source before its
+Data End stays a cut, the journal counts add up, and `earlier` names the
+earlier sources (oldest first): reader.carry_recovery. The old record is not
+copied (its `lost_at` counts messages of the source, not of the new file); a
+file an older recover made twice holds both, and the reader folds them
+(reader.folded_recovery). Every tool that copies a
+recording's messages into a new MCAP keeps its metadata so (tools/verify_soak.py
+copies every record). A whole file
 (complete already) is not copied: nothing is written unless something is
 recovered (`Recovered.complete`, output None), as when its journal holds
 nothing it lacks; before, a complete file was copied to <stem>.recovered.mcap, a second
@@ -42,7 +55,8 @@ from mcap.writer import CompressionType, Writer
 from typing import Callable
 
 from pairplay.errors import InputError, OutputError
-from pairplay.replay.reader import DATA_COMPLETE_KEY, LOST_AT_KEY
+from pairplay.replay.reader import (DATA_COMPLETE_KEY, LOST_AT_KEY, RECOVERED, carry_recovery, folded_recovery,
+                                    recovered_losses, said_source_lost)
 from pairplay.schemas.events import EVENT_BY_TAG
 from pairplay.schemas.jsonschema import schema_text
 from pairplay.schemas.keys import parse_event_key
@@ -72,6 +86,9 @@ class Recovered:
     journal_error: str = ""  # a journal beside it that could not be read at all: why (its records are not used)
     journal_present: int = 0  # records of the journal the file holds already
     complete: bool = False  # the file is whole and its journal (if any) holds nothing it lacks: nothing written
+    lost: list[str] = field(default_factory=list)  # each damaged part that lost messages, and what: "chunk 7 (...): its 18 messages"
+    lost_messages: int | None = 0  # how many messages those parts held (None: not known, unreadable bytes' records)
+    earlier_lost: str = ""  # what the source's own source lost, carried forward (a recovered file recovered again)
 
 
 def default_output(path: Path) -> Path:
@@ -109,6 +126,10 @@ def recover(path: str | Path, output: str | Path | None = None, force: bool = Fa
                     if isinstance(r, Message) and r.channel_id in topics]
         added = admit(journal.session, recorded, journal.records)
     complete = checked.whole and not (added is not None and added.items)  # and nothing more to add
+    # the source's own recovery record, if it was recovered before: its losses are carried forward (module rule)
+    earlier = folded_recovery(checked.records)
+    lost_parts = [f"{d.part}: {d.lost}" for d in checked.damage if d.lost_at >= 0]
+    lost_words = dict(lost=lost_parts, lost_messages=_lost_count(checked), earlier_lost=said_source_lost(earlier))
     if complete or not write:
         return Recovered(None, sum(isinstance(r, Message) for r in checked.records), checked.truncated,
                          "" if checked.whole else checked.describe(), [str(d) for d in checked.damage],
@@ -117,7 +138,7 @@ def recover(path: str | Path, output: str | Path | None = None, force: bool = Fa
                          from_journal=added.taken if added else 0, journal_refused=added.refused if added else 0,
                          journal_present=added.present if added is not None else 0,
                          journal_torn=journal.torn if journal is not None else "", journal_error=journal_error,
-                         complete=complete)
+                         complete=complete, **lost_words)
     check_output(output, force)  # only an output that will be written (a complete file writes none)
     messages, ended, last_round = 0, False, -1
     schema_ids: dict[int, int] = {}
@@ -131,7 +152,11 @@ def recover(path: str | Path, output: str | Path | None = None, force: bool = Fa
         # where each damaged part's lost records were, as the number of messages written before them: the
         # reader marks a loss there (replay/reader.py LOST_AT_KEY), as in the damaged file, so `replay --verify`
         # stops comparing at the first and `rebuild` flags the rounds around each
-        losses = sorted({len(checked.summary_records) + d.lost_at for d in checked.damage if d.lost_at >= 0})
+        # and where the source's own source lost parts, if it is a recovered file (module rule)
+        losses = sorted({len(checked.summary_records) + d.lost_at for d in checked.damage if d.lost_at >= 0}
+                        | set(recovered_losses(checked.summary_records + checked.records,
+                                               [(len(checked.summary_records) + at, n) for at, n in checked.losses()])
+                              or ()))
         lost_at: list[int] = []
         for at, record in enumerate(checked.summary_records + checked.records):
             while losses and at >= losses[0]:
@@ -155,7 +180,7 @@ def recover(path: str | Path, output: str | Path | None = None, force: bool = Fa
                     ended |= tag == "SessionEnded"
                     if tag == "RoundStarted":
                         last_round = max(last_round, _round_of(record.data))
-            elif isinstance(record, Metadata):
+            elif isinstance(record, Metadata) and record.name != RECOVERED:  # (an earlier one: carried below)
                 writer.add_metadata(record.name, dict(record.metadata))
         if added is not None:
             # the output's ids: channel_ids maps the source's to them (they match only if both writers numbered
@@ -179,7 +204,7 @@ def recover(path: str | Path, output: str | Path | None = None, force: bool = Fa
         lost_at += [messages] * len(losses)  # a part lost after the last record read
         damaged = [str(d) for d in checked.damage]
         reason = "" if checked.whole else checked.describe()
-        writer.add_metadata("pairplay.recovered", {
+        writer.add_metadata(RECOVERED, carry_recovery(earlier, {
             "source": str(path), "messages": str(messages), "truncated": str(checked.truncated).lower(),
             DATA_COMPLETE_KEY: str(checked.data_complete).lower(), "reason": reason, "damaged": json.dumps(damaged), "lost_chunks": str(len(checked.lost_chunks)),
             LOST_AT_KEY: json.dumps(lost_at), "lost": json.dumps([f"{d.part}: {d.lost}" for d in checked.damage if d.lost_at >= 0]),
@@ -189,13 +214,27 @@ def recover(path: str | Path, output: str | Path | None = None, force: bool = Fa
                 "from_journal": str(added.taken if added else 0),
                 "journal_refused": str(added.refused if added else 0),
                 "journal_torn": journal.torn if journal is not None else ""}
-               if journal is not None or journal_error else {})})
+               if journal is not None or journal_error else {})}))
         writer.finish()
     return Recovered(output, messages, checked.truncated, reason, damaged, ended, last_round, started=not why,
                      journal_present=added.present if added else 0,
                      journal=journal.path if journal is not None else None,
                      from_journal=added.taken if added else 0, journal_refused=added.refused if added else 0,
-                     journal_torn=journal.torn if journal is not None else "", journal_error=journal_error)
+                     journal_torn=journal.torn if journal is not None else "", journal_error=journal_error,
+                     **lost_words)
+
+
+def _lost_count(checked) -> int | None:
+    """How many messages the damaged parts lost: what each part's Message Indexes list (mcapscan `Scan.losses`),
+    or, when a part's are lost with it, what the summary's Statistics count less the messages read (a summary
+    whose CRC held); None when neither says."""
+    counts = [n for _, n in checked.losses()]
+    if None not in counts:
+        return sum(counts)
+    if checked.counted_messages is None:
+        return None
+    read = sum(type(r) is Message for r in checked.records)
+    return checked.counted_messages - read if checked.counted_messages > read else None
 
 
 def _journal_beside(path: Path, log):

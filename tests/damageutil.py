@@ -6,6 +6,24 @@ from __future__ import annotations
 from pairplay.replay.mcapscan import scan
 from pairplay.replay.reader import read_log
 from pairplay.replay.writer import EventLogWriter
+from pairplay.schemas.events import encode_event
+from pairplay.schemas.keys import event_key
+from pairplay.schemas.session import SessionConfig
+
+
+def small_chunked_session(path, session: str):
+    """A real recording of a 3-round session at `path`, written by the recorder's writer in small chunks (about
+    20), to be damaged."""
+    from loopback_session import loopback_events
+
+    config = SessionConfig(session=session, participant="sim:deaf", persona="deaf", seed=4, rounds=3)
+    w = EventLogWriter(path, chunk_size=4096)
+    w.add_metadata("pairplay.session", {"session": config.session})
+    for i, e in enumerate(loopback_events(config)):
+        w.write(event_key(e.session, e.source, type(e).__name__), encode_event(e), log_time_ns=10**18 + i,
+                sequence=e.seq)
+    w.close()
+    return path
 
 
 def damage(path, how: str, tag: str = "") -> None:

@@ -20,27 +20,16 @@ from pairplay.replay.reader import read_log
 from pairplay.replay.rebuild import rebuild_recording
 from pairplay.replay.recover import recover
 from pairplay.replay.writer import EventLogWriter
-from pairplay.schemas.events import encode_event
-from pairplay.schemas.keys import event_key
-from pairplay.schemas.session import SessionConfig
 from pairplay.services.verify import verify_recording
 from pairplay.services.view.sources import recording_items
 
-from loopback_session import loopback_events
+from damageutil import small_chunked_session
 
 
 @pytest.fixture(scope="module")
 def whole(tmp_path_factory):
     """A real recording of a 3-round session, written by the recorder's writer in small chunks (about 20)."""
-    config = SessionConfig(session="dmg", participant="sim:deaf", persona="deaf", seed=4, rounds=3)
-    path = tmp_path_factory.mktemp("dmg") / "whole.mcap"
-    w = EventLogWriter(path, chunk_size=4096)
-    w.add_metadata("pairplay.session", {"session": config.session})
-    for i, e in enumerate(loopback_events(config)):
-        w.write(event_key(e.session, e.source, type(e).__name__), encode_event(e), log_time_ns=10**18 + i,
-                sequence=e.seq)
-    w.close()
-    return path
+    return small_chunked_session(tmp_path_factory.mktemp("dmg") / "whole.mcap", "dmg")
 
 
 def payloads(path):
@@ -801,3 +790,27 @@ def test_a_file_whose_damage_lost_no_message_is_whole_to_counterfactual_view_and
     lost = undecodable(whole, tmp_path)
     assert read_log(lost).missing
     assert [n for _e, n in recording_items(lost) if n and "not whole" in n]
+
+
+@pytest.mark.parametrize("zeroed", ["magic", "footer-crc", "footer", "summary-tail", "summary"])
+def test_a_zeroed_footer_or_summary_is_damage_that_verify_names_though_every_message_reads(whole, tmp_path, capsys,
+                                                                                          zeroed):
+    """Task rec2 (3): the last N bytes of a recording zeroed (its closing magic, its footer's CRC, the footer, the
+    summary's tail, the whole summary). Every message is in the data section, proved by its chunks' CRCs and the
+    Data End's CRC, so none is lost; but the summary and footer are parts of the file, and a zeroed one is damage
+    (mcapscan's rule: what a reader can trust): `replay --verify` FAILs naming it, never PASS, never silent. (Found
+    so on main already: a pin, not a fix.)"""
+    from pairplay.cli.main import main
+
+    data = whole.read_bytes()
+    start = _summary_start(data)
+    n = {"magic": 8, "footer-crc": 12, "footer": 37, "summary-tail": 100, "summary": len(data) - start}[zeroed]
+    p = variant(tmp_path, data[:-n] + b"\0" * n, f"zeroed-{n}.mcap")
+    log = read_log(p)
+    assert not log.whole and log.data_complete and not log.truncated and not log.missing
+    assert payloads(p) == payloads(whole)  # every message read
+    part = "file end" if n <= 20 else "summary"
+    assert main(["replay", str(p), "--verify"]) == 1
+    lines = capsys.readouterr().out.splitlines()
+    assert lines[-1].startswith(f"verify: FAIL: the file is damaged ({part}: "), lines[-1]
+    assert "no event lost, but the file is damaged" in "\n".join(lines), lines

@@ -7,7 +7,7 @@ recording is verified REPEATS times, every verdict must be PASS: the first by
 the CLI as a user types it (`pairplay replay REC --verify`), the others by
 `verify_recording` in this process (the function the CLI calls; --cli-every 1
 makes every one a CLI run, slower by a Python start-up each). Then one recording gets one derived event altered (a
-SuggestionMade's action, rewritten into a copy of the file) and must FAIL
+SuggestionMade's action, rewritten into a copy of the file, its metadata records kept) and must FAIL
 REPEATS times out of REPEATS, naming that event. Prints one line per recording
 and the totals; exit 1 if any verdict is not the expected one.
 
@@ -53,7 +53,11 @@ def alter_one_suggestion(src: Path, dst: Path) -> str:
     (mcap's own reader, not the damage-aware one, replay/reader.py: `src` is a recording this soak has just
     verified PASS, whole, with it; mcap's reader raises on any damage it meets, so nothing is lost silently.)"""
     with open(src, "rb") as f:
-        messages = list(make_reader(f).iter_messages(log_time_order=False))
+        reader = make_reader(f)
+        messages = list(reader.iter_messages(log_time_order=False))
+        # every metadata record too: a copy without them loses what they say (a recovered file's
+        # "pairplay.recovered": what its source lost; replay/recover.py)
+        metadata = list(reader.iter_metadata())
     made = [i for i, (_, c, m) in enumerate(messages) if c.topic.endswith("/SuggestionMade")]
     target = made[len(made) // 3]
     with open(dst, "wb") as out:
@@ -72,6 +76,8 @@ def alter_one_suggestion(src: Path, dst: Path) -> str:
                 e = msgspec.structs.replace(e, action=(e.action + 1) % 88)
                 data, name = encode_event(e), f"SuggestionMade seq {e.seq}"
             w.add_message(channels[channel.id], message.log_time, data, message.publish_time, message.sequence)
+        for m in metadata:
+            w.add_metadata(m.name, dict(m.metadata))
         w.finish()
     return name
 
