@@ -14,7 +14,7 @@ import argparse
 import sys
 from pathlib import Path
 
-from pairplay.cli.args import key_chunk
+from pairplay.cli.args import file_in, key_chunk, output_file
 from pairplay.replay.studydata import StudyData, StudyDataError
 from pairplay.numbers import counted
 
@@ -24,7 +24,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     e = sub.add_parser("export", help="one zip of a participant's recordings, policies and answers, with a README")
     e.add_argument("folder", type=Path)
     e.add_argument("participant", type=key_chunk("participant id"))
-    e.add_argument("-o", "--out", type=Path, help="the zip (default <folder>/exports/<id>.zip)")
+    e.add_argument("-o", "--out", type=output_file(into=True),
+                   help="the zip (default <folder>/exports/<id>.zip; a folder: <id>.zip in it)")
     e.add_argument("--force", action="store_true", help="replace an existing zip")
     d = sub.add_parser("delete", help="erase a participant's data from the study (cannot be undone)")
     d.add_argument("folder", type=Path)
@@ -36,7 +37,8 @@ def run(args) -> int:
     try:
         data = StudyData(args.folder)
         if args.action == "export":
-            path = data.export_participant(args.participant, args.out, force=args.force)
+            path = data.export_participant(args.participant, file_in(args.out, f"{args.participant}.zip"),
+                                           force=args.force)
             print(f"{args.participant}: {path}")
             return 0
         data.participant(args.participant)
