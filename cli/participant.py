@@ -17,6 +17,7 @@ from pathlib import Path
 from pairplay.cli.args import file_in, key_chunk, output_file
 from pairplay.replay.studydata import StudyData, StudyDataError
 from pairplay.numbers import counted
+from pairplay.outputs import check_folder
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -36,12 +37,13 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 def run(args) -> int:
     try:
         data = StudyData(args.folder)
-        if args.action == "export":
-            path = data.export_participant(args.participant, file_in(args.out, f"{args.participant}.zip"),
-                                           force=args.force)
+        if args.action == "export":  # its default named as given (a refusal named the resolved study folder)
+            out = file_in(args.out, f"{args.participant}.zip") or args.folder / "exports" / f"{args.participant}.zip"
+            path = data.export_participant(args.participant, out, force=args.force)
             print(f"{args.participant}: {path}")
             return 0
         data.participant(args.participant)
+        check_folder(args.folder)  # it writes in it: a folder one may not write in is one line, named as given
         if not args.yes:
             raise StudyDataError(f"deleting {args.participant} cannot be undone: add --yes")
         gone = data.delete_participant(args.participant)

@@ -145,6 +145,9 @@ def _run(args) -> int:
         print("\n".join(describe(data.study)))
         return 0
     data = StudyData(args.folder)
+    if args.action != "status":  # the others write in it: a folder one may not write in is one line now, named as
+        from pairplay.outputs import check_folder  # given (serve served its console and failed at each step)
+        check_folder(args.folder)
     if args.action == "register":
         if args.name and args.count != 1:
             raise StudyDataError("--name registers one participant: leave out --count")
