@@ -64,7 +64,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                           "fast as possible (default)")
     out = parser.add_argument_group("where the view goes")
     out.add_argument("--out", type=output_file(into=True), metavar="RRD",
-                     help="the .rrd to save (default: next to the recording, or recordings/<session>.rrd)")
+                     help="the .rrd to save (default: next to the recording, or recordings/<session>.rrd; a folder, "
+                          "DIR/: that name in it)")
     add_force(out, "an existing .rrd")
     out.add_argument("--no-save", action="store_true", help="do not save an .rrd (needs --serve or --spawn)")
     out.add_argument("--serve", action="store_true",
