@@ -17,6 +17,9 @@ from __future__ import annotations
 
 import argparse
 import math
+import os
+from pathlib import Path
+from typing import NamedTuple
 
 
 def int_at_least(low: int):
@@ -189,6 +192,65 @@ def session_id(text: str) -> str:
         raise argparse.ArgumentTypeError(f"session id '{text}' must not start with '-': it names its recording "
                                          f"files (<id>.mcap), which commands would take for an option")
     return text
+
+
+# Output paths. Rule: an option that names an output FILE is declared with `output_file`, one that names an
+# output FOLDER with `output_folder` (tests/test_cli_paths.py finds every one on every verb's parser). argparse's
+# `type=Path` dropped what said "folder": `-o out/` and `-o out/.` became Path('out'), and `participant export
+# -o out/`, `recover -o out/`, `view --out x/`, `combine -o cmb/` wrote a FILE named out (a new user's trials).
+# A file option given as a folder goes into that folder under the verb's default name (`into`), or, where the
+# verb has none, is refused naming the option; never a file named after the folder.
+
+
+def names_folder(text: str) -> bool:
+    """Whether the path `text` can only name a folder: it ends with a separator, or its last part is `.` or
+    `..` (pathlib forgets a trailing `/` and a last `.`)."""
+    seps = tuple(s for s in (os.sep, os.altsep) if s)
+    return text.endswith(seps) or text.rsplit(os.sep, 1)[-1] in (".", "..")
+
+
+class IntoFolder(NamedTuple):
+    """An output file's option given as a folder (`-o out/`): the file goes into `folder` under the verb's
+    default name (`file_in`)."""
+    folder: Path
+    given: str
+
+    def __str__(self) -> str:
+        return self.given
+
+
+def output_file(into: bool = False):
+    """An argparse type: an output FILE's path. Given as a folder (`names_folder`): with `into` (the verb has
+    a default name for the file) an IntoFolder, which the verb names with `file_in`; without, refused (the
+    verb has no name to give the file)."""
+    def parse(text: str) -> Path | IntoFolder:
+        if not text:
+            raise argparse.ArgumentTypeError("an empty path names no file")
+        if names_folder(text):
+            if into:
+                return IntoFolder(Path(text), text)
+            raise argparse.ArgumentTypeError(f"{text!r} names a folder; give a file name (a folder is never "
+                                             "written as a file)")
+        return Path(text)
+    parse.__name__ = "output file"
+    parse.into = into  # type: ignore[attr-defined]  # read by tests/test_cli_paths.py
+    return parse
+
+
+def output_folder(text: str) -> Path:
+    """An argparse type: an output FOLDER's path (a trailing `/` says the same thing: kept as a folder)."""
+    if not text:
+        raise argparse.ArgumentTypeError("an empty path names no folder")
+    return Path(text)
+
+
+output_folder.__name__ = "output folder"
+
+
+def file_in(value: Path | IntoFolder | None, default_name: str) -> Path | None:
+    """The output file an `output_file(into=True)` option names: `value` itself, or, given as a folder,
+    `default_name` in that folder (`recover cut.mcap -o out/` writes out/cut.recovered.mcap); None stays None."""
+    return value.folder / default_name if isinstance(value, IntoFolder) else value
 
 
 def add_force(p: argparse.ArgumentParser, what: str = "existing outputs") -> None:

@@ -29,7 +29,7 @@ import sys
 from pathlib import Path
 
 from pairplay.bench.goals import MISSED, goal_text, verdict
-from pairplay.cli.args import count
+from pairplay.cli.args import count, output_file
 from pairplay.errors import InputError, OptionError
 from pairplay.lists import comma_items
 from pairplay.outputs import check_output, write_text
@@ -54,7 +54,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--runs", type=count, default=1, help="measure everything N times; figures as ranges (default 1)")
     p.add_argument("--json", action="store_true", help="print the rows as JSON")
     p.add_argument("--check", action="store_true", help="exit 1 when a goal is missed")
-    p.add_argument("--readme", type=Path, metavar="README",
+    p.add_argument("--readme", type=output_file(), metavar="README",
                    help="rewrite the benchmark table of this README from this run")
 
 

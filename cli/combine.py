@@ -38,7 +38,7 @@ from pairplay.errors import InputError, OptionError
 from pairplay.lists import comma_items
 from pairplay.outputs import check_output
 from pairplay.schemas.policy import read_policy, write_policy
-from pairplay.cli.args import add_force, seed_number, update_count
+from pairplay.cli.args import add_force, output_file, seed_number, update_count
 from pairplay.numbers import counted
 
 
@@ -79,7 +79,7 @@ def add_profile_arguments(p: argparse.ArgumentParser) -> None:
 
 def add_combine_arguments(p: argparse.ArgumentParser) -> None:
     _common(p)
-    p.add_argument("--out", "-o", type=Path, help="write the merged policy file here")
+    p.add_argument("--out", "-o", type=output_file(), help="write the merged policy file here")
     p.add_argument("--exclude", help="comma-separated participants to leave out")
     p.add_argument("--actions", action="store_true",
                    help="action-level information and wholes kept (thesis chapter 8, future work 1; "

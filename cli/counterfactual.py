@@ -17,7 +17,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from pairplay.cli.args import add_force, count, int_at_least, seed_number
+from pairplay.cli.args import add_force, count, int_at_least, output_folder, seed_number
 from pairplay.numbers import counted
 
 ARMS_HELP = ("comma-separated arms: same (the recorded learner, replayed: checks the fit), q (Q-learning from "
@@ -45,7 +45,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--seed", type=seed_number, default=0, help="names the arms' seeds")
     p.add_argument("--rounds", type=count, default=None,
                    help="rounds each arm plays (default: as many as the recording completed)")
-    p.add_argument("--out", default=None, help="output folder (default: out/counterfactual/<recording name>)")
+    p.add_argument("--out", type=output_folder, default=None, help="output folder (default: out/counterfactual/<recording name>)")
     p.add_argument("--fit-only", action="store_true", help="write the fitted user alone, play no arm")
     add_force(p, "the files of a non-empty --out folder")
 

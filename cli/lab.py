@@ -24,7 +24,7 @@ from pairplay.outputs import check_folder
 from pairplay.services.recorder import check_new_recording
 from pairplay.services.bus import LOOPBACK_ANY_PORT, MODES, BusOptions, stop_on_signals
 
-from pairplay.cli.args import duration
+from pairplay.cli.args import duration, output_folder
 from pairplay.cli.robot import add_robot_arguments, check_robot_args, probe_robot_args, robot_choice
 from pairplay.cli.session import add_config_arguments, config_from_args, print_interrupted, read_back
 from pairplay.numbers import counted
@@ -34,7 +34,7 @@ LOOPBACK = "127.0.0.1"
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     add_config_arguments(p)
-    p.add_argument("--out", default="recordings", help="directory of the recording (default recordings/); a session whose recording "
+    p.add_argument("--out", type=output_folder, default="recordings", help="directory of the recording (default recordings/); a session whose recording "
                    "(<session>.mcap or <session>.<k>.mcap) exists there is refused")
     w = p.add_argument_group("web server")
     w.add_argument("--listen", default=f"{LOOPBACK}:0", metavar="HOST:PORT",

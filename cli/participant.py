@@ -14,9 +14,10 @@ import argparse
 import sys
 from pathlib import Path
 
-from pairplay.cli.args import key_chunk
+from pairplay.cli.args import file_in, key_chunk, output_file
 from pairplay.replay.studydata import StudyData, StudyDataError
 from pairplay.numbers import counted
+from pairplay.outputs import check_folder
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -24,7 +25,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     e = sub.add_parser("export", help="one zip of a participant's recordings, policies and answers, with a README")
     e.add_argument("folder", type=Path)
     e.add_argument("participant", type=key_chunk("participant id"))
-    e.add_argument("-o", "--out", type=Path, help="the zip (default <folder>/exports/<id>.zip)")
+    e.add_argument("-o", "--out", type=output_file(into=True),
+                   help="the zip (default <folder>/exports/<id>.zip; a folder: <id>.zip in it)")
     e.add_argument("--force", action="store_true", help="replace an existing zip")
     d = sub.add_parser("delete", help="erase a participant's data from the study (cannot be undone)")
     d.add_argument("folder", type=Path)
@@ -35,11 +37,13 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 def run(args) -> int:
     try:
         data = StudyData(args.folder)
-        if args.action == "export":
-            path = data.export_participant(args.participant, args.out, force=args.force)
+        if args.action == "export":  # its default named as given (a refusal named the resolved study folder)
+            out = file_in(args.out, f"{args.participant}.zip") or args.folder / "exports" / f"{args.participant}.zip"
+            path = data.export_participant(args.participant, out, force=args.force)
             print(f"{args.participant}: {path}")
             return 0
         data.participant(args.participant)
+        check_folder(args.folder)  # it writes in it: a folder one may not write in is one line, named as given
         if not args.yes:
             raise StudyDataError(f"deleting {args.participant} cannot be undone: add --yes")
         gone = data.delete_participant(args.participant)

@@ -20,7 +20,7 @@ import sys
 import time
 from pathlib import Path
 
-from pairplay.cli.args import int_between, session_id
+from pairplay.cli.args import int_between, output_file, output_folder, session_id
 from pairplay.core.personas import persona
 from pairplay.lists import comma_items
 from pairplay.replay.studydata import REGISTER_AT_ONCE, StudyData, StudyDataError
@@ -37,9 +37,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     e = sub.add_parser("example", help="print the shipped example study file (the thesis's chapter 7)")
     e.set_defaults(study_file=EXAMPLE_NAME)
     i = sub.add_parser("init", help="make a study folder from a study file")
-    i.add_argument("folder", type=Path)
+    i.add_argument("folder", type=output_folder)
     i.add_argument("--study", required=True, help=f"the study TOML file, or {EXAMPLE_NAME} for the shipped example")
-    i.add_argument("--key-file", type=Path,
+    i.add_argument("--key-file", type=output_file(),
                    help="a CSV of id,name kept OUTSIDE the study folder (optional; without it no name is accepted)")
     r = sub.add_parser("register", help="register a participant: prints their pseudonymous id")
     r.add_argument("folder", type=Path)
@@ -145,6 +145,9 @@ def _run(args) -> int:
         print("\n".join(describe(data.study)))
         return 0
     data = StudyData(args.folder)
+    if args.action != "status":  # the others write in it: a folder one may not write in is one line now, named as
+        from pairplay.outputs import check_folder  # given (serve served its console and failed at each step)
+        check_folder(args.folder)
     if args.action == "register":
         if args.name and args.count != 1:
             raise StudyDataError("--name registers one participant: leave out --count")

@@ -35,7 +35,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from pairplay.cli.args import add_force
+from pairplay.cli.args import add_force, output_folder
 from pairplay.core.geometry import PERFECT_PICKS, PICKS_UNIT
 from pairplay.numbers import counted
 
@@ -49,7 +49,7 @@ MANIFEST = ".pairplay-rebuild.manifest"
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("recordings", nargs="+", metavar="REC", help="MCAP recordings of sessions")
-    p.add_argument("--out", default="rebuilt", help="output folder (default rebuilt/)")
+    p.add_argument("--out", type=output_folder, default="rebuilt", help="output folder (default rebuilt/)")
     p.add_argument("--no-plot", action="store_true", help="skip the learning-curve figure")
     p.add_argument("--partial", action="store_true",
                    help="also rebuild a recording that lost events in its middle (a damaged file, or one recovered "

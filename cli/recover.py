@@ -31,8 +31,9 @@ from __future__ import annotations
 
 import argparse
 import logging
+from pathlib import Path
 
-from pairplay.cli.args import add_force
+from pairplay.cli.args import add_force, file_in, output_file
 from pairplay.errors import OptionError
 from pairplay.numbers import counted
 
@@ -41,7 +42,8 @@ log = logging.getLogger("pairplay.recover")
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("recording", metavar="REC")
-    p.add_argument("-o", "--output", help="output file (default <stem>.recovered.mcap beside REC)")
+    p.add_argument("-o", "--output", type=output_file(into=True),
+                   help="output file (default <stem>.recovered.mcap beside REC; a folder: that name in it)")
     add_force(p, "an existing output file")
     p.add_argument("--discard-journal", action="store_true",
                    help="remove the journal beside a complete REC when it holds nothing REC lacks (a stale one)")
@@ -49,7 +51,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from pairplay.livelock import LIVE, is_live
-    from pairplay.replay.recover import recover
+    from pairplay.replay.recover import default_output, recover
     from pairplay.replay.wal import wal_path
     from pairplay.services.walmerge import admit
 
@@ -57,6 +59,7 @@ def run(args: argparse.Namespace) -> int:
         if is_live(live):  # not cut: still being written (pairplay/livelock.py); its journal is not stale either
             raise OptionError(f"{LIVE}: recover it once its session has stopped; nothing written", live)
 
+    args.output = file_in(args.output, default_output(Path(args.recording)).name)  # `-o out/`: into out/
     if args.discard_journal:  # decided before anything is written: only a stale journal is removed
         done = recover(args.recording, args.output, force=args.force, admit=admit, write=False)
         if not done.complete:

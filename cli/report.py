@@ -16,6 +16,7 @@ import argparse
 import sys
 from pathlib import Path
 
+from pairplay.cli.args import output_folder
 from pairplay.numbers import counted
 from pairplay.replay.studydata import StudyDataError
 from pairplay.schemas.policy import PolicyFileError
@@ -23,7 +24,7 @@ from pairplay.schemas.policy import PolicyFileError
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("folder", type=Path, help="the study folder (pairplay protocol init)")
-    p.add_argument("--out", type=Path, help="report folder (default <folder>/report)")
+    p.add_argument("--out", type=output_folder, help="report folder (default <folder>/report)")
     p.add_argument("--reference", type=Path,
                    help="a policy file drawn beside each bias policy (figure 7.5: the virtual Blind+Deaf merge, "
                         "out/study/merged/blind+deaf.json of `pairplay study`)")

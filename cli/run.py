@@ -27,7 +27,7 @@ import threading
 import time
 from pathlib import Path
 
-from pairplay.cli.args import session_id
+from pairplay.cli.args import output_folder, session_id
 from pairplay.errors import OptionError
 from pairplay.lists import comma_items
 from pairplay.outputs import check_folder
@@ -59,7 +59,7 @@ def services_to_wait_for(text: str) -> list[str]:
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("service", choices=SERVICES)
     p.add_argument("--session", type=session_id, help="session id (required except for the game, which can make one)")
-    p.add_argument("--out", default="recordings",
+    p.add_argument("--out", type=output_folder, default="recordings",
                    help="recorder: directory of the recording; combiner: the directory its requests' paths lie in")
     p.add_argument("--participant", help="game: sim:<persona> or human:<id>")
     p.add_argument("--wait-for", action="extend", type=services_to_wait_for, default=[], metavar="SERVICES",

@@ -45,8 +45,8 @@ from pairplay.schemas.policy import read_policy
 from pairplay.schemas.session import (IGNORE_CLOCKS, MS_RANGE, OBSERVED_SOURCES, SessionConfig, learner_overrides,
                                       lspi_overrides)
 
-from pairplay.cli.args import (add_force, count, float_between, game_index, positive_number, seed_number, session_id,
-                               session_rounds)
+from pairplay.cli.args import (add_force, count, float_between, game_index, output_folder, positive_number, seed_number,
+                               session_id, session_rounds)
 from pairplay.core.geometry import PICKS_UNIT
 from pairplay.cli.robot import add_robot_arguments, check_robot_args, probe_robot_args, robot_choice
 from pairplay.services.bus import BusOpenError, ConfigFileError, add_bus_arguments, options_from_args, stop_on_signals
@@ -170,7 +170,7 @@ def _config_from_args(args: argparse.Namespace) -> SessionConfig:
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     add_config_arguments(p)
-    p.add_argument("--out", default="recordings", help="folder of the recording (default recordings/); a session "
+    p.add_argument("--out", type=output_folder, default="recordings", help="folder of the recording (default recordings/); a session "
                    "whose recording (<session>.mcap or <session>.<k>.mcap) exists there is refused unless --force")
     add_force(p, "the session's existing recordings (<session>.mcap and <session>.<k>.mcap)")
     add_robot_arguments(p)

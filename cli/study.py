@@ -14,7 +14,8 @@ import argparse
 import sys
 from pathlib import Path
 
-from pairplay.cli.args import add_force, count, fraction, non_negative, positive_number, seed_number, update_count
+from pairplay.cli.args import (add_force, count, fraction, non_negative, output_folder, positive_number, seed_number,
+                               update_count)
 from pairplay.core.geometry import PICKS_UNIT
 from pairplay.core.personas import PERSONAS
 from pairplay.errors import OptionError
@@ -51,7 +52,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     # no default here (StudySettings' is used): given with another algorithm, they are refused, not ignored
     p.add_argument("--lspi-ridge", type=positive_number, help="lspi: delta, the ridge penalty (default 1)")
     p.add_argument("--lspi-every", type=count, help="lspi: K, samples between policy improvements (default 10)")
-    p.add_argument("--out", type=Path, default=Path("out/study"),
+    p.add_argument("--out", type=output_folder, default=Path("out/study"),
                    help="report folder (default out/study); refused if it holds files, unless --force")
     add_force(p, "the files of an existing report folder")
     p.add_argument("--train-only", action="store_true",

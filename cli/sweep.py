@@ -37,7 +37,7 @@ import re
 import sys
 from pathlib import Path
 
-from pairplay.cli.args import workers
+from pairplay.cli.args import output_folder, workers
 from pairplay.cli.progress import bar as progress
 from pairplay.errors import OptionError, OutputError
 from pairplay.outputs import check_folder, write_text
@@ -51,7 +51,7 @@ SUMMARY = ("sweep.csv", "cells.csv", "sweep.md")  # what write_sweep writes besi
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("grid", type=Path, help="the sweep's TOML file ([study], [grid], seeds, reuse)")
-    p.add_argument("--out", type=Path, help="result folder (default out/sweep-<grid file name>)")
+    p.add_argument("--out", type=output_folder, help="result folder (default out/sweep-<grid file name>)")
     p.add_argument("--scheduler", metavar="ADDRESS", help="a Dask distributed scheduler (tcp://host:port)")
     p.add_argument("--workers", type=workers,
                    help="local processes when no --scheduler (default 1; at most the CPUs this process may use)")

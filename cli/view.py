@@ -42,7 +42,8 @@ import threading
 from dataclasses import dataclass
 from pathlib import Path
 
-from pairplay.cli.args import add_force, float_at_least, int_at_least, port_or_any, session_id, speed
+from pairplay.cli.args import (add_force, file_in, float_at_least, int_at_least, output_file, port_or_any,
+                                session_id, speed)
 from pairplay.errors import InputError, OptionError, OutputError, UserError
 from pairplay.livelock import LIVE, is_live
 from pairplay.outputs import check_output, output_path
@@ -62,8 +63,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                      help="recording pace: 1 = as recorded, 10 = ten times faster (0.0001..1000000), 0 or max = as "
                           "fast as possible (default)")
     out = parser.add_argument_group("where the view goes")
-    out.add_argument("--out", type=Path, metavar="RRD",
-                     help="the .rrd to save (default: next to the recording, or recordings/<session>.rrd)")
+    out.add_argument("--out", type=output_file(into=True), metavar="RRD",
+                     help="the .rrd to save (default: next to the recording, or recordings/<session>.rrd; a folder, "
+                          "DIR/: that name in it)")
     add_force(out, "an existing .rrd")
     out.add_argument("--no-save", action="store_true", help="do not save an .rrd (needs --serve or --spawn)")
     out.add_argument("--serve", action="store_true",
@@ -109,7 +111,7 @@ def run(args: argparse.Namespace) -> int:
                 raise InputError(f"holds no events of session {args.session}; nothing saved", args.recording)
     if args.no_save and not (args.serve or args.spawn):
         raise OptionError("--no-save leaves no output; add --serve or --spawn", "--no-save")
-    rrd = None if args.no_save else (args.out or _default_rrd(args))
+    rrd = None if args.no_save else (file_in(args.out, _default_rrd(args).name) or _default_rrd(args))
     if rrd is not None:
         # before any work: an existing .rrd stays unless --force, and the recording viewed always
         check_output(rrd, args.force, inputs=[args.recording] if args.recording else [])

@@ -201,8 +201,8 @@ class StudyData:
             if key.is_relative_to(folder):
                 raise StudyDataError(f"--key-file {key_file}: must be outside the study folder {given} "
                                      "(names never sit beside the recordings)")
-            open_key_file(key).close()  # made now, owner-only: a path that cannot hold it is said here, not at
-            # the first registration with a name (an existing key file is kept as it is, only its mode tightened)
+            open_key_file(Path(key_file)).close()  # made now, owner-only: a path that cannot hold it is said here (as
+            # given), not at the first registration with a name (an existing key file is kept, only its mode tightened)
         text = Path(study_file).read_bytes()
         folder.mkdir(parents=True, exist_ok=True)
         for sub in ("recordings", "policies", "merged"):

@@ -49,7 +49,7 @@ class Case:
     name: str
     args: list[str]
     expect: str  # a piece of the one stderr line
-    readonly: bool = False  # run with ./ro a read-only file system
+    readonly: bool | str = False  # run with ./ro a read-only file system (a name: that folder of the fixtures made read-only)
     code: int = 2
     result: subprocess.CompletedProcess | None = field(default=None, repr=False)
     before: dict = field(default_factory=dict, repr=False)
@@ -276,6 +276,43 @@ CASES = [
     Case("combine -o on a read-only file system", ["combine", "policies", "-o", "ro/m.json"], "read-only", readonly=True),
     Case("recover -o on a read-only file system", ["recover", "cut.mcap", "-o", "ro/r.mcap"], "read-only", readonly=True),
     Case("rebuild --out on a read-only file system", ["rebuild", "rec.mcap", "--out", "ro"], "read-only", readonly=True),
+    # every other verb's outputs, and a file option given as the read-only folder (`-o ro/`: the file goes in it)
+    Case("recover -o into a read-only folder", ["recover", "cut.mcap", "-o", "ro/"], "read-only (ro)", readonly=True),
+    Case("view --out on a read-only file system", ["view", "--recording", "rec.mcap", "--out", "ro/v.rrd"],
+         "read-only (ro)", readonly=True),
+    Case("view --out into a read-only folder", ["view", "--recording", "rec.mcap", "--out", "ro/"], "read-only (ro)",
+         readonly=True),
+    Case("counterfactual --out on a read-only file system", ["counterfactual", "rec.mcap", "--out", "ro/cf"],
+         "read-only (ro)", readonly=True),
+    Case("sweep --out on a read-only file system", ["sweep", "grid.toml", "--out", "ro/sw"], "read-only (ro)",
+         readonly=True),
+    Case("report --out on a read-only file system", ["report", "study", "--out", "ro/rep"], "read-only (ro)",
+         readonly=True),
+    Case("run recorder --out on a read-only file system", ["run", "recorder", "--session", "s", "--out", "ro/x"],
+         "read-only (ro)", readonly=True),
+    Case("lab --out on a read-only file system", ["lab", "--participant", "human:p1", "--out", "ro/x"],
+         "read-only (ro)", readonly=True),
+    Case("protocol init on a read-only file system", ["protocol", "init", "ro/st", "--study", "thesis-ch7"],
+         "read-only (ro)", readonly=True),
+    # before: the key file's line named the resolved path (/tmp/.../ro/keys.csv), not the one typed
+    Case("protocol init --key-file on a read-only file system", ["protocol", "init", "st", "--study", "thesis-ch7",
+                                                                 "--key-file", "ro/keys.csv"],
+         "key file ro/keys.csv: Read-only file system", readonly=True),
+    Case("participant export -o on a read-only file system", ["participant", "export", "study", "p01", "-o",
+                                                              "ro/p.zip"], "read-only (ro)", readonly=True),
+    # a study folder one may not write in: before, `protocol serve` served its console (each step then failed),
+    # and the others named the resolved path of the file they failed on (/tmp/.../study/journal.jsonl)
+    Case("participant export into a read-only study", ["participant", "export", "study", "p01"],
+         "read-only (study)", readonly="study"),
+    Case("participant delete in a read-only study", ["participant", "delete", "study", "p01", "--yes"],
+         "read-only (study)", readonly="study"),
+    Case("protocol register in a read-only study", ["protocol", "register", "study"], "read-only (study)",
+         readonly="study"),
+    Case("protocol mark-invalid in a read-only study", ["protocol", "mark-invalid", "study", "s1", "--reason", "x"],
+         "read-only (study)", readonly="study"),
+    Case("protocol pilot in a read-only study", ["protocol", "pilot", "study", "--personas", "blind"],
+         "read-only (study)", readonly="study"),
+    Case("protocol serve a read-only study", ["protocol", "serve", "study"], "read-only (study)", readonly="study"),
     # a file holding no session (a new user's trial, 2026-11-30): recover wrote an empty file and exit 0,
     # verify said it on stdout with exit 1, rebuild of such files exit 1, view printed 3 lines
     # said in a user's words (not "only MCAP's magic")
@@ -461,10 +498,14 @@ def _no_round_files(root: Path) -> None:
 
 
 def _readonly_command(case: Case, root: Path) -> list[str]:
-    """A whole `python -m pairplay` in a private mount namespace: the read-only tmpfs is seen by it alone."""
-    return ["unshare", "--mount", "--propagation", "private", "sh", "-c",
-            'mount -t tmpfs -o ro tmpfs "$0" && exec "$@"', str(root / "ro"), sys.executable, "-m", "pairplay",
-            *case.args]
+    """A whole `python -m pairplay` in a private mount namespace: the read-only tmpfs (or the fixtures' folder
+    `case.readonly` bound read-only, its files kept) is seen by it alone."""
+    if isinstance(case.readonly, str):
+        mount, place = 'mount --bind "$0" "$0" && mount -o remount,ro,bind "$0" && exec "$@"', root / case.readonly
+    else:
+        mount, place = 'mount -t tmpfs -o ro tmpfs "$0" && exec "$@"', root / "ro"
+    return ["unshare", "--mount", "--propagation", "private", "sh", "-c", mount, str(place), sys.executable, "-m",
+            "pairplay", *case.args]
 
 
 def _run(case: Case, template: Path, base: Path, zygote: Zygote) -> Case:

@@ -168,3 +168,114 @@ def test_a_sweep_cell_file_that_is_a_folder_is_refused_naming_the_cell_before_an
     assert f"cell {cells[-1].id}'s result" in line and f"seed {cells[-1].seed}" in line, line
     assert line.endswith(f"(s/cells/{cells[-1].id}.json)"), line
     assert sorted(p.name for p in (root / "s" / "cells").iterdir()) == [f"{cells[-1].id}.json"]  # no cell ran
+
+
+# Every output argument of every verb, typed with a trailing slash (a new user's trials: `participant export -o out/`,
+# `recover -o out/`, `view --out x/`, `combine -o cmb/` each wrote a FILE named after the folder: argparse's
+# `type=Path` drops the slash). An output file's option given as a folder puts the file in it under the verb's
+# default name, or, where the verb has none, is refused naming the option; a folder's option is a folder.
+# (prog, option) -> the arguments typed and: ("into", the file written) or ("refused", the option the line names)
+TRAILING_SLASH = {
+    ("pairplay recover", "-o/--output"): (["recover", "cut.mcap", "-o", "o/"], ("into", "o/cut.recovered.mcap")),
+    ("pairplay view", "--out"): (["view", "--recording", "rec.mcap", "--out", "o/"], ("into", "o/rec.rrd")),
+    ("pairplay participant export", "-o/--out"): (["participant", "export", "study", "p01", "-o", "o/."],
+                                                  ("into", "o/p01.zip")),
+    ("pairplay combine", "--out/-o"): (["combine", "policies", "-o", "o/"], ("refused", "--out/-o")),
+    ("pairplay protocol init", "--key-file"): (["protocol", "init", "s", "--study", "thesis-ch7", "--key-file", "o/"],
+                                               ("refused", "--key-file")),
+    ("pairplay bench", "--readme"): (["bench", "--readme", "o/"], ("refused", "--readme")),
+}
+# the folder outputs: a trailing slash names the folder they are anyway
+FOLDERS = {("pairplay study", "--out"), ("pairplay session", "--out"), ("pairplay lab", "--out"),
+           ("pairplay run", "--out"), ("pairplay rebuild", "--out"), ("pairplay counterfactual", "--out"),
+           ("pairplay sweep", "--out"), ("pairplay report", "--out"), ("pairplay protocol init", "folder")}
+# an argument called so names a place the verb writes (an input is never called so)
+OUTPUT_NAMES = {"-o", "--out", "--output", "--key-file", "--readme"}
+
+
+def _output_arguments() -> dict[tuple[str, str], object]:
+    """(prog, option) -> argparse type, for every argument of every verb (and action) that is declared with
+    an output type of cli/args.py or is called like an output (OUTPUT_NAMES, `--*-out`)."""
+    import argparse
+
+    from pairplay.cli import args as options
+    from pairplay.cli.main import VERBS, build_parser
+
+    def parsers(parser):
+        yield parser
+        for action in parser._actions:
+            if isinstance(action, argparse._SubParsersAction):
+                for nested in action.choices.values():
+                    yield from parsers(nested)
+
+    found = {}
+    for verb in VERBS:
+        for p in parsers(build_parser([verb])[1]):
+            for a in p._actions:
+                typed = a.type is options.output_folder or getattr(a.type, "__name__", "") == "output file"
+                named = any(o in OUTPUT_NAMES or o.endswith("-out") for o in a.option_strings)
+                if typed or named:
+                    found[(p.prog, "/".join(a.option_strings) or a.dest)] = a.type
+    return found
+
+
+def test_every_output_argument_is_declared_a_file_or_a_folder_and_tested_with_a_trailing_slash():
+    from pairplay.cli import args as options
+
+    found = _output_arguments()
+    assert set(found) == set(TRAILING_SLASH) | FOLDERS, "an output argument without its row here (or a row of none)"
+    for key, kind in found.items():
+        if key in FOLDERS:
+            assert kind is options.output_folder, key
+        else:  # a file: into a folder where the verb has a default name, else refused
+            assert getattr(kind, "__name__", "") == "output file", key
+            assert kind.into == (TRAILING_SLASH[key][1][0] == "into"), key
+
+
+@pytest.fixture(scope="module")
+def with_study(template, tmp_path_factory) -> Path:
+    root = tmp_path_factory.mktemp("paths-study")
+    shutil.copytree(template, root, dirs_exist_ok=True)
+    assert main(["protocol", "init", str(root / "study"), "--study", "thesis-ch7", "--quiet"]) == 0
+    assert main(["protocol", "register", str(root / "study"), "--quiet"]) == 0  # p01
+    return root
+
+
+@pytest.mark.parametrize("key", TRAILING_SLASH, ids=[" ".join(k) for k in TRAILING_SLASH])
+def test_an_output_file_given_with_a_trailing_slash_goes_into_that_folder_or_is_refused(key, with_study, tmp_path,
+                                                                                          monkeypatch, capsys):
+    args, (then, what) = TRAILING_SLASH[key]
+    root = tmp_path / "w"
+    shutil.copytree(with_study, root)
+    monkeypatch.chdir(root)
+    before = sorted(p.relative_to(root) for p in root.rglob("*"))
+    try:
+        code = main(args)
+    except SystemExit as refused:  # argparse's refusal, before the verb runs
+        code = refused.code
+    out, err = capsys.readouterr()
+    assert not (root / "o").is_file(), "a file named after the folder"
+    if then == "into":
+        assert code == 0, err
+        assert (root / what).is_file(), sorted(p.name for p in (root / "o").iterdir())
+        assert what in out, out  # the line says where it went
+    else:
+        lines = err.strip().splitlines()
+        assert code == 2 and len(lines) == 1 and lines[0].startswith(f"{key[0]}: "), err
+        assert f"argument {what}: 'o/' names a folder" in lines[0], lines[0]
+        assert sorted(p.relative_to(root) for p in root.rglob("*")) == before  # nothing written
+
+
+@pytest.mark.parametrize("key", sorted(FOLDERS), ids=[" ".join(k) for k in sorted(FOLDERS)])
+def test_an_output_folder_given_with_a_trailing_slash_is_that_folder(key):
+    from pairplay.cli.main import build_parser
+
+    verb = key[0].split()[1:]
+    parser, _ = build_parser(verb)
+    option = key[1].split("/")[-1]
+    given = {"pairplay session": ["--participant", "sim:blind"], "pairplay lab": ["--participant", "human:p1"],
+             "pairplay run": ["recorder"], "pairplay rebuild": ["r.mcap"], "pairplay counterfactual": ["r.mcap"],
+             "pairplay sweep": ["g.toml"], "pairplay report": ["st"], "pairplay protocol init": ["--study", "x"]}
+    rest = given.get(key[0], [])
+    args = parser.parse_args([*verb, *rest, "x/"] if option == "folder" else [*verb, *rest, option, "x/"])
+    assert Path(getattr(args, "folder" if option == "folder" else "out")) == Path("x")
