@@ -53,7 +53,7 @@ import numpy as np
 from pairplay import csvcell
 from pairplay.errors import OptionError
 from pairplay.numbers import counted, shown, type_name, typed_floats
-from pairplay.outputs import output_file, output_folder, write_text
+from pairplay.outputs import manifest_name, output_file, output_folder, write_text
 from pairplay.processes import check_workers, worker_pool
 from pairplay.schemas.jsonfile import empty, without_bom
 from pairplay.schemas.tomlplace import TOP, misplaced, table_not_value
@@ -588,7 +588,7 @@ def windows_note(grid: Grid) -> str:
 # whole each time, so an earlier run's that this one does not write again are removed (a forced sweep of another
 # grid left the first grid's figures beside the new ones), never a user's file of such a name
 SWEEP_OUTPUTS = ("sweep.csv", "cells.csv", "sweep.md", "figures/*.png")
-MANIFEST = ".pairplay-sweep.manifest"
+MANIFEST = manifest_name("sweep")
 
 
 def write_sweep(out: str | Path, grid: Grid, results: dict[str, dict], run: SweepRun) -> list[Path]:
