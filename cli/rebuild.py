@@ -38,13 +38,14 @@ from pathlib import Path
 from pairplay.cli.args import add_force, output_folder
 from pairplay.core.geometry import PERFECT_PICKS, PICKS_UNIT
 from pairplay.numbers import counted
+from pairplay.outputs import manifest_name
 
 
 FIGURE = "learning-curves.png"
 # what rebuild writes in --out (pairplay/outputs.py `owned`); among a user's files there, so its manifest says
 # which of them a run wrote: `--force` removes those an earlier run wrote that this one does not write again
 REBUILD_OUTPUTS = ("*.policy.json", "*.curve.csv", FIGURE)
-MANIFEST = ".pairplay-rebuild.manifest"
+MANIFEST = manifest_name("rebuild")
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:

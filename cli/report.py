@@ -38,13 +38,13 @@ def run(args) -> int:
     from pairplay.cli.protocol import built_missing_policies
     from pairplay.outputs import check_output_folder, output_folder
     from pairplay.replay.studydata import StudyData
-    from pairplay.report.human import HUMAN_OUTPUTS, human_report
+    from pairplay.report.human import HUMAN_MANIFEST, HUMAN_OUTPUTS, human_report
 
     out = check_output_folder(args.out or args.folder / "report", args.force, HUMAN_OUTPUTS)  # before any work
     try:
         # a completed game a signal left without its policy gets it now, from its recording
         built_missing_policies(StudyData(args.folder), "report")
-        with output_folder(out, args.force, owned=HUMAN_OUTPUTS) as tmp:
+        with output_folder(out, args.force, owned=HUMAN_OUTPUTS, manifest=HUMAN_MANIFEST) as tmp:
             report = human_report(args.folder, tmp, args.reference, include_scripted=args.include_scripted)
     except (StudyDataError, PolicyFileError, ValueError) as err:
         print(f"pairplay report: {err}", file=sys.stderr)

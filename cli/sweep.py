@@ -9,7 +9,8 @@ again; with every cell finished and the summary written, nothing is written
 the same grid as read (`same_grid`: its settings, axes, seeds and reuse), not the same
 text: a comment changes nothing. A folder that holds another grid's sweep, or files but
 no sweep, is refused unless --force (which removes the other grid's cell files, those
-named by a cell id, and no other file in cells/); an --out that is a file is refused before any work, and so
+a sweep wrote: named by the id of the cell they hold, report/sweep.py `is_cell_file`; a
+user's file named like one stays, and is said); an --out that is a file is refused before any work, and so
 is a folder where one of its files goes (a cell's file, sweep.md, a figure) or a
 file where one of its folders goes (cells/, figures/): named, one line, exit 2
 (`check_sweep_places`; a folder is not the sweep's to remove, so it is not taken for
@@ -33,6 +34,7 @@ cell finished, no grid.toml that would refuse the corrected grid's re-run.
 from __future__ import annotations
 
 import argparse
+import logging
 import re
 import sys
 from pathlib import Path
@@ -41,9 +43,11 @@ from pairplay.cli.args import output_folder, workers
 from pairplay.cli.progress import bar as progress
 from pairplay.errors import OptionError, OutputError
 from pairplay.outputs import check_folder, write_text
-from pairplay.report.sweep import (GridError, check_scheduler, check_sweep_memory, finished_cells, read_grid, run_sweep,
-                                    write_sweep)
+from pairplay.report.sweep import (GridError, check_scheduler, check_sweep_memory, finished_cells, is_cell_file,
+                                    read_grid, run_sweep, write_sweep)
 from pairplay.numbers import counted
+
+log = logging.getLogger("pairplay.sweep")
 
 
 SUMMARY = ("sweep.csv", "cells.csv", "sweep.md")  # what write_sweep writes besides the figures, sweep.md last
@@ -144,10 +148,15 @@ def run(args) -> int:
               file=sys.stderr)
         return 2
     if other_grid:  # --force: the other grid's cells no longer count
-        for old in (out / "cells").glob("*.json"):
-            # a cell file of ours (its name a cell id); a folder of that name, or a user's file, stays
-            if CELL_FILE.fullmatch(old.name) and (old.is_file() or old.is_symlink()):
+        for old in sorted((out / "cells").glob("*.json")):
+            # a cell file a sweep wrote (its name the id of the cell it holds); a folder of that name, or a
+            # user's file, one named like a cell too (it was removed), stays, and is said
+            if not CELL_FILE.fullmatch(old.name):
+                continue
+            if is_cell_file(old):
                 old.unlink()
+            else:
+                log.warning("%s: named like a cell but not one a sweep wrote; left", old)
     made = [f for f in (out / "cells", out, *out.absolute().parents) if not f.exists()]
     had_copy = copy.exists()
     cells = grid.cells()

@@ -9,13 +9,14 @@ folder made for it) is removed and the target is untouched. Without `force` the 
 while we worked is not replaced. A folder of outputs (a study's report) is
 built in a temporary folder and renamed as a whole; written with `force` into
 a folder that holds an earlier run, it also removes the earlier run's files
-that this run did not write, those its writer names as its own (`owned`:
-a study's sections of a persona no longer in it looked current), and never
-another file; one that holds other files too (`among_others`: `rebuild --out`,
-a sweep's summary beside its cells) gets its files moved in together the same
-way, and there the writer's manifest (`manifest`: the files it wrote, run after
-run) says which files the patterns name are its own, so a forced run removes an
-earlier run's stale outputs and never the user's file of such a name. A folder
+that this run did not write (a study's sections of a persona no longer in it
+looked current), and never another file: which are the writer's own its
+patterns (`owned`) and its manifest (`manifest`: the files it wrote there, run
+after run) say together, so a forced run removes an earlier run's stale outputs
+and never the user's file of such a name (one it leaves is said); a folder
+written before the manifests keeps all it holds. One that holds other files too
+(`among_others`: `rebuild --out`, a sweep's summary beside its cells) gets its
+files moved in together the same way. A folder
 standing where a file is written, or a file where a folder is needed, is refused
 (`check_places`, from `check_output_folder` before the work): a folder is never
 replaced or removed, `force` or not. Refusals are
@@ -52,6 +53,7 @@ from typing import IO, Iterable, Iterator
 
 from pairplay.errors import OutputError
 from pairplay.livelock import LIVE, is_live
+from pairplay.numbers import counted
 
 FORCE_FIX = "--force replaces it"  # shown only by a verb that has --force (errors.UserError `fix`)
 
@@ -262,6 +264,7 @@ def output_path(path: str | Path, force: bool = False) -> Iterator[Path]:
     _mkdir(path.parent)
     tmp = _temp_name(path)
     done = False
+    left: list[str] = []
     try:
         try:
             yield tmp
@@ -353,22 +356,27 @@ def output_folder(path: str | Path, force: bool = False, owned: tuple[str, ...] 
                   among_others: bool = False, manifest: str = "") -> Iterator[Path]:
     """A new temporary folder beside `path` to fill; when the block ends without error it
     becomes `path`. A non-empty `path` is refused unless `force`; with `force` each file
-    written replaces its namesake there, a file there that `owned` names (the writer's own
-    outputs: patterns of relative paths, `policies/*/game-*.json`, see `is_owned`) and that this
-    run did not write is removed (an earlier run's, stale beside this one's), with the folders
-    that leaves empty, and every other file stays. SIGINT/SIGTERM wait while the files are moved
+    written replaces its namesake there. A writer that names its own outputs (`owned`: patterns of
+    relative paths, `policies/*/game-*.json`, see `is_owned`) keeps a `manifest` (a file of that
+    name in `path`, `write_manifest`: the files it wrote there, by every run into it; required with
+    `owned`): the patterns alone cannot tell its files from the user's (`study --force` removed a
+    user's notes named like a game file, `report --force` a figure of their own named `users-*.png`).
+    With `force` a file there that `owned` names, the earlier manifest lists and this run did not
+    write is removed (an earlier run's, stale beside this one's), with the folders that leaves empty;
+    every other file stays, and one of them that `owned` names is said in one warning (`_say_left`:
+    the user's, or one an older pairplay wrote before the manifests, to remove by hand if stale).
+    SIGINT/SIGTERM wait while the files are moved
     in (`_signals_held`): the folder is the earlier run's or this one's, never half of each.
     `among_others`: `path` may hold other files (`rebuild --out`: the caller checked its own
     outputs with check_outputs); a file written replaces its namesake only with `force`, and
-    without it a namesake that appeared meanwhile refuses the whole (nothing moved in); there `owned`
-    alone cannot tell the writer's files from the user's, so the writer keeps a `manifest` (a file of
-    that name in `path`, `write_manifest`: the files it wrote there, by every run into it), and with
-    `force` a file is removed only if `owned` names it and the earlier manifest lists it (`rebuild
-    REC1 --out D --force` after `rebuild REC1 REC2 --out D` left REC2's policy in D, beside REC1's
-    new one; a user's x.policy.json there stays). A file would land on a folder, or under a file,
+    without it a namesake that appeared meanwhile refuses the whole (nothing moved in) (`rebuild
+    REC1 --out D --force` after `rebuild REC1 REC2 --out D` removes REC2's policy from D; a user's
+    x.policy.json there stays). A file would land on a folder, or under a file,
     in `path`: OutputError before anything is moved in (`check_places` says it before the work). A `path`
     without a name of its own (`.`, `..`: `rebuild --out .` was a traceback) is filled from a temporary
     folder inside it, file by file the same way."""
+    if owned and not manifest:  # the patterns alone cannot tell the writer's files from the user's
+        raise ValueError("output_folder: a writer that names its own files (owned) keeps a manifest of them")
     path = check_folder(path) if among_others else check_output_folder(path, force, owned)
     earlier = read_manifest(path / manifest) if manifest else None
     created = _missing_folders(path.parent)
@@ -380,6 +388,7 @@ def output_folder(path: str | Path, force: bool = False, owned: tuple[str, ...] 
     except OSError as err:
         raise _named_for_user(err, tmp, path) from err
     done = False
+    left: list[str] = []
     try:
         try:
             yield tmp
@@ -409,11 +418,12 @@ def output_folder(path: str | Path, force: bool = False, owned: tuple[str, ...] 
                     _mkdir(dst.parent)
                     os.replace(src, dst)
                     written.add(dst.relative_to(path).as_posix())
-                if manifest:  # among others: only the files an earlier run of this writer wrote are stale
-                    _remove_stale(path, written, owned, listed=set(earlier or ()) if force else set())
-                else:
-                    _remove_stale(path, written, owned)
+                # only the files an earlier run of this writer wrote (its manifest) are stale; one named
+                # like them that no run listed (the user's, or an older pairplay's) stays, and is said
+                left = _remove_stale(path, written, owned, listed=set(earlier or ()) if force else set())
                 done = True  # before the held signal is delivered
+            if left and force:
+                _say_left(path, left, manifest)
     finally:
         if tmp.exists():
             shutil.rmtree(tmp, ignore_errors=True)
@@ -447,25 +457,46 @@ def is_owned(relative: str, owned: tuple[str, ...]) -> bool:
                for p in owned)
 
 
-def _remove_stale(path: Path, written: set[str], owned: tuple[str, ...], listed: set[str] | None = None) -> None:
-    """Remove the files under `path` that `owned` names and this run did not write (output_folder);
-    with `listed` (an earlier run's manifest), only those it lists too."""
+def _remove_stale(path: Path, written: set[str], owned: tuple[str, ...], listed: set[str]) -> list[str]:
+    """Remove the files under `path` that `owned` names, this run did not write and `listed` (an earlier
+    run's manifest) lists (output_folder); return those `owned` names that this run did not write and
+    no manifest lists, which stay (sorted relative paths)."""
+    left: list[str] = []
     if not owned:
-        return
+        return left
     for old in sorted(path.rglob("*"), reverse=True):  # deepest first: a folder after its files
         rel = old.relative_to(path).as_posix()
-        if listed is not None and rel not in listed:
+        if not old.is_file() or old.is_symlink() or rel in written or not is_owned(rel, owned):
             continue
-        if old.is_file() and not old.is_symlink() and rel not in written and is_owned(rel, owned):
-            old.unlink()
-            with contextlib.suppress(OSError):  # a folder left holding something else stays
-                parent = old.parent
-                while parent != path and not any(parent.iterdir()):
-                    parent.rmdir()
-                    parent = parent.parent
+        if rel not in listed:
+            left.append(rel)
+            continue
+        old.unlink()
+        with contextlib.suppress(OSError):  # a folder left holding something else stays
+            parent = old.parent
+            while parent != path and not any(parent.iterdir()):
+                parent.rmdir()
+                parent = parent.parent
+    return sorted(left)
+
+
+def _say_left(path: Path, left: list[str], manifest: str) -> None:
+    """One line (a warning) naming the files a forced run left in `path` though its patterns name them:
+    no manifest there listed them, so they are the user's, or an older pairplay's written before the
+    manifests; a stale one of those is the user's to remove by hand."""
+    shown = ", ".join(left[:5]) + (f" and {len(left) - 5} more" if len(left) > 5 else "")
+    logging.getLogger("pairplay.outputs").warning(
+        "%s: left %s named like this verb's outputs that it did not write (not in %s: the user's, or an older "
+        "pairplay's; remove any that are stale by hand): %s", path, counted(len(left), "file"), manifest, shown)
 
 
 MANIFEST_FORMAT = "pairplay.outputs/1"
+
+
+def manifest_name(writer: str) -> str:
+    """The name of `writer`'s manifest in its output folder (`.pairplay-study.manifest`): one per writer, so
+    one verb's forced run never takes another's files, written into the same folder, for its own."""
+    return f".pairplay-{writer}.manifest"
 
 
 def read_manifest(path: Path) -> list[str]:

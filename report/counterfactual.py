@@ -20,7 +20,9 @@ recorded learner replayed on the same seeds ("same"), as a paired difference
 per seed; "differs" when that difference's 95% interval leaves out 0.
 Written with force over an earlier run, the earlier run's files of these names
 that this one does not write are removed (COUNTERFACTUAL_OUTPUTS: the table and
-figure of a run that now fits the user alone, another recording's user model).
+figure of a run that now fits the user alone, another recording's user model),
+only those its manifest (COUNTERFACTUAL_MANIFEST) says a run wrote: a user's
+`alice.usermodel.json` there stays.
 """
 
 from __future__ import annotations
@@ -33,7 +35,7 @@ import numpy as np
 
 from pairplay import csvcell
 from pairplay.core.geometry import PERFECT_PICKS, PICKS_UNIT
-from pairplay.outputs import output_folder
+from pairplay.outputs import manifest_name, output_folder
 from pairplay.schemas.usermodel import UserModelFile, write_user_model
 
 from .study import markdown_table, text_table
@@ -176,13 +178,14 @@ def counterfactual_figure(recorded: Recorded, runs: dict, path: Path, title: str
 
 
 COUNTERFACTUAL_OUTPUTS = ("*.usermodel.json", "counterfactual.csv", "counterfactual.md", "counterfactual.png")
+COUNTERFACTUAL_MANIFEST = manifest_name("counterfactual")  # the files it wrote there: --force removes only those
 
 
 def write_counterfactual(out: str | Path, stem: str, model: UserModelFile, recorded: Recorded | None,
                          runs: dict | None, texts: dict[str, str], force: bool = False) -> list[Path]:
     """Fill the folder `out` (see the module rule); `runs` None writes the fitted user alone."""
     written = []
-    with output_folder(out, force, owned=COUNTERFACTUAL_OUTPUTS) as tmp:
+    with output_folder(out, force, owned=COUNTERFACTUAL_OUTPUTS, manifest=COUNTERFACTUAL_MANIFEST) as tmp:
         write_user_model(tmp / f"{stem}.usermodel.json", model)
         written.append(f"{stem}.usermodel.json")
         lines = [f"# Counterfactual replay of {model.recording}", ""]

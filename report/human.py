@@ -32,7 +32,8 @@ ran as (StudyData.user_names). It writes:
   report.md                       all of it, with the study's settings
 A report written again over an earlier one (`pairplay report --force`, the console) removes the
 earlier one's files of these names that it does not write (HUMAN_OUTPUTS: a figure 7.6 of a phase no
-longer reported); no other file is touched.
+longer reported), only those its manifest (HUMAN_MANIFEST) says a report wrote; no other file is touched
+(a user's `users-x.png` stays).
 """
 
 from __future__ import annotations
@@ -53,10 +54,12 @@ from pairplay.schemas.policy import read_policy
 from pairplay.report import plots
 from pairplay.report.study import markdown_table
 from pairplay.numbers import counted
+from pairplay.outputs import manifest_name
 
 
 HUMAN_OUTPUTS = ("picks.csv", "games.png", "phases.png", "users-*.png", "merged.png", "attention.csv",
                  "questionnaire.csv", "report.md")  # pairplay.outputs.output_folder `owned`
+HUMAN_MANIFEST = manifest_name("report")  # the files a report wrote in its folder (the CLI's and the console's)
 
 
 @dataclass

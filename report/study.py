@@ -19,7 +19,9 @@ It returns the tables it wrote, so a caller (the CLI, a notebook) can print them
 A study written with force into a folder that holds an earlier one removes the
 earlier one's files of these names that it does not write itself (STUDY_OUTPUTS:
 the sections of a persona not in this study, the speed-up's tables after a
---train-only run...), so no stale file looks current; no other file is touched.
+--train-only run...), so no stale file looks current, only those its manifest
+(STUDY_MANIFEST) says a study wrote; no other file is touched (a user's notes
+named like a game file stay).
 """
 
 from __future__ import annotations
@@ -48,7 +50,7 @@ from pairplay.errors import OptionError
 from pairplay.lists import comma_items
 from pairplay.numbers import counted, shown
 from pairplay.schemas.config import DEFAULT_REWARD_BONUS, LearnerConfig, LSPIConfig, REWARD_BONUS_RULES, lspi_unused
-from pairplay.outputs import output_folder
+from pairplay.outputs import manifest_name, output_folder
 from pairplay.processes import off_main_thread, process_pool, stop_pool
 from pairplay.schemas.policy import write_policy
 
@@ -418,6 +420,7 @@ STUDY_OUTPUTS = ("policies/*/game-*.json", "merged/*.json", "report.md", "curves
                  "merged.png", "merged_evaluation.csv", "reuse.csv", "reuse.png", "speed.csv", "speed.png",
                  "action_profiles.csv", "action_merges.csv", "action_merges.png", "frames.csv", "frames.png",
                  "precombination.csv", "precombination.png")
+STUDY_MANIFEST = manifest_name("study")  # the files a study wrote in its folder: --force removes only those
 
 
 def output_digests(out: Path) -> dict[str, str]:
@@ -425,11 +428,14 @@ def output_digests(out: Path) -> dict[str, str]:
 
     Figures (*.png: matplotlib's bytes are not ours to pin) are left out, and
     report.md is hashed up to its timings section (wall clock, not results).
+    The manifest (STUDY_MANIFEST) is left out too: it is deterministic (sorted relative names, no time, no
+    path), but it is bookkeeping for --force, not a result, and it only lists names the digests and the
+    figures already give; the pinned set (tests/data/study_digests.json) stays the study's results.
     The study's equality contract (tests/test_study_digests.py) compares these.
     """
     digests = {}
     for path in sorted(Path(out).rglob("*")):
-        if not path.is_file() or path.suffix == ".png":
+        if not path.is_file() or path.suffix == ".png" or path.relative_to(out).as_posix() == STUDY_MANIFEST:
             continue
         data = path.read_bytes()
         if path.name == "report.md":
@@ -497,7 +503,7 @@ def run_study(args: StudySettings, out: Path, progress_bar: Callable = _no_bar, 
     setting that cannot run as asked (StudySettings.check)."""
     personas = args.check()
     return_freed_memory()
-    with output_folder(out, force, owned=STUDY_OUTPUTS) as tmp:
+    with output_folder(out, force, owned=STUDY_OUTPUTS, manifest=STUDY_MANIFEST) as tmp:
         report = _run_study(args, personas, tmp, progress_bar, figures_in_background)
     report.out = Path(out)
     return report

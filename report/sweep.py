@@ -53,7 +53,7 @@ import numpy as np
 from pairplay import csvcell
 from pairplay.errors import OptionError
 from pairplay.numbers import counted, shown, type_name, typed_floats
-from pairplay.outputs import output_file, output_folder, write_text
+from pairplay.outputs import manifest_name, output_file, output_folder, write_text
 from pairplay.processes import check_workers, worker_pool
 from pairplay.schemas.jsonfile import empty, without_bom
 from pairplay.schemas.tomlplace import TOP, misplaced, table_not_value
@@ -325,6 +325,18 @@ def _check_cell(path: Path, grid: Grid, cell: Cell) -> dict[str, float]:
     return {k: float(v) for k, v in found.measures.items()}
 
 
+def is_cell_file(path: Path) -> bool:
+    """Whether `path` is a cell file a sweep wrote, of any grid: a CellFile named by its own cell's id (the
+    digest of the setting and seed it holds), which a user's file of a cell-like name is not by chance. Why
+    not a manifest (pairplay/outputs.py): cells are written one by one as each finishes, and a stopped sweep's
+    are kept to resume from, so a list written at the end would miss them; each cell file says what it is."""
+    try:
+        found = msgspec.convert(json.loads(without_bom(path.read_bytes())), CellFile)
+    except (OSError, ValueError, RecursionError):  # not readable, not JSON, not a cell
+        return False
+    return Cell(tuple(tuple(kv) for kv in found.setting), found.seed).id == path.stem
+
+
 def read_cells(out: Path, grid: Grid) -> tuple[dict[str, dict], dict[Path, str]]:
     """The results on disk for this grid's cells (id -> measures), each file checked whole
     (`_check_cell`), and the files of this grid's cells that could not be used (path -> why):
@@ -588,7 +600,7 @@ def windows_note(grid: Grid) -> str:
 # whole each time, so an earlier run's that this one does not write again are removed (a forced sweep of another
 # grid left the first grid's figures beside the new ones), never a user's file of such a name
 SWEEP_OUTPUTS = ("sweep.csv", "cells.csv", "sweep.md", "figures/*.png")
-MANIFEST = ".pairplay-sweep.manifest"
+MANIFEST = manifest_name("sweep")
 
 
 def write_sweep(out: str | Path, grid: Grid, results: dict[str, dict], run: SweepRun) -> list[Path]:

@@ -160,7 +160,8 @@ def test_cli_fits_the_sample_and_a_counterfactual_differs_measurably(tmp_path, c
     code, err = _main(capsys, SAMPLE, "--policy", "same,oracle", "--seeds", 5, "--out", out)
     assert code == 0, err
     names = sorted(p.name for p in out.iterdir())
-    assert names == ["counterfactual.csv", "counterfactual.md", "counterfactual.png", "sim-helmut-fmt2.usermodel.json"]
+    assert names == [".pairplay-counterfactual.manifest", "counterfactual.csv", "counterfactual.md", "counterfactual.png",
+                     "sim-helmut-fmt2.usermodel.json"]
     model = read_user_model(out / "sim-helmut-fmt2.usermodel.json")
     assert (model.persona.focus, model.persona.memory) == (4, 4)
     md = (out / "counterfactual.md").read_text()
@@ -248,7 +249,8 @@ def test_a_forced_fit_only_run_over_a_full_one_leaves_no_stale_comparison(tmp_pa
     assert _main(capsys, SAMPLE, "--policy", "same", "--seeds", 2, "--rounds", 5, "--out", out)[0] == 0
     (out / "notes.txt").write_text("the researcher's")
     assert _main(capsys, SAMPLE, "--fit-only", "--out", out, "--force")[0] == 0
-    assert sorted(p.name for p in out.iterdir()) == ["counterfactual.md", "notes.txt", "sim-helmut-fmt2.usermodel.json"]
+    assert sorted(p.name for p in out.iterdir()) == [".pairplay-counterfactual.manifest", "counterfactual.md", "notes.txt",
+                                                     "sim-helmut-fmt2.usermodel.json"]
 
 
 def test_the_share_of_matched_turns_follows_from_the_picks_of_complete_rounds():

@@ -7,6 +7,7 @@ outputs of different inputs never collide (rebuild names outputs by file).
 
 from __future__ import annotations
 
+import json
 import shutil
 from pathlib import Path
 
@@ -135,11 +136,11 @@ def test_recover_and_view_never_replace_what_exists(tmp_path, pairplay):
 def test_a_forced_folder_loses_the_earlier_runs_own_files_this_run_did_not_write(tmp_path):
     """`study --force` over an older study kept the older study's files the new one does not write (a
     persona's policies no longer in it): stale files that looked current. Now the files the writer names
-    as its own (`owned`) and this run did not write go, with the folders that leaves empty; every other
-    file, and a folder holding one, stays."""
+    as its own (`owned`), an earlier run wrote (its manifest) and this run did not write go, with the folders
+    that leaves empty; every other file, and a folder holding one, stays."""
     out = tmp_path / "report"
     owned = ("policies/*/game-*.json", "report.md", "reuse.csv")
-    with output_folder(out, owned=owned) as tmp:
+    with output_folder(out, owned=owned, manifest=".m") as tmp:
         for rel in ("report.md", "reuse.csv", "policies/a/game-00.json", "policies/b/game-00.json"):
             (tmp / rel).parent.mkdir(parents=True, exist_ok=True)
             (tmp / rel).write_text("old")
@@ -147,15 +148,15 @@ def test_a_forced_folder_loses_the_earlier_runs_own_files_this_run_did_not_write
     (out / "policies" / "b" / "mine.txt").write_text("the user's")
     (out / "policies" / "b" / "deeper").mkdir()
     (out / "policies" / "b" / "deeper" / "game-00.json").write_text("not a pattern's depth")
-    with output_folder(out, force=True, owned=owned) as tmp:
+    with output_folder(out, force=True, owned=owned, manifest=".m") as tmp:
         (tmp / "policies" / "a").mkdir(parents=True)
         (tmp / "policies" / "a" / "game-00.json").write_text("new")
         (tmp / "report.md").write_text("new")
     left = sorted(p.relative_to(out).as_posix() for p in out.rglob("*") if p.is_file())
-    assert left == ["notes.txt", "policies/a/game-00.json", "policies/b/deeper/game-00.json", "policies/b/mine.txt",
+    assert left == [".m", "notes.txt", "policies/a/game-00.json", "policies/b/deeper/game-00.json", "policies/b/mine.txt",
                     "report.md"]
     assert (out / "report.md").read_text() == "new"
-    with output_folder(out, force=True, owned=owned) as tmp:  # the folder it leaves empty goes too
+    with output_folder(out, force=True, owned=owned, manifest=".m") as tmp:  # the folder it leaves empty goes too
         (tmp / "report.md").write_text("newer")
     assert not (out / "policies" / "a").exists() and (out / "policies" / "b" / "mine.txt").exists()
 
@@ -225,7 +226,8 @@ def test_a_folder_named_dot_is_written_into(tmp_path, pairplay):
     assert r.returncode == 0 and r.stderr == "", r.stderr
     names = {p.name for p in tmp_path.iterdir()}
     assert {"rec.mcap", "rec.policy.json", "rec.curve.csv", "report.md"} <= names
-    assert [n for n in names if n.startswith(".")] == [".pairplay-rebuild.manifest"]  # no temporary folder left
+    # no temporary folder left; each verb's manifest of what it wrote there
+    assert sorted(n for n in names if n.startswith(".")) == [".pairplay-rebuild.manifest", ".pairplay-study.manifest"]
 
 
 def _files(folder: Path) -> list[str]:
@@ -301,3 +303,82 @@ def test_a_killed_writers_temporaries_are_removed_by_the_next_writer_and_a_live_
     assert not dead.exists() and not dead_file.exists()
     assert live.is_dir() and (not_ours / "important.txt").read_text() == "the user's"
     assert (out / "a.txt").read_text() == "a" and (tmp_path / "report.md").read_text() == "whole"
+
+
+ONE_GAME_STUDY = """[study]
+id = "one"
+title = "one game"
+seed = 0
+ignore_window_ms = 1500
+wrong_suggestion_button = true
+robot = "none"
+
+[[phase]]
+id = "phase1"
+title = "phase 1"
+games = 1
+rounds = 1
+algorithm = "q-learning"
+preset = "human-phase1"
+players = "new"
+"""
+STUDY_ARGS = ("--games", "1", "--rounds", "3", "--eval-rounds", "1", "--train-only")
+
+# verb -> (its first run into D, its forced run into D (writing fewer files than the first), a user's file named
+# like one of its outputs, an earlier run's output the forced run no longer writes, the verb's manifest); the forced
+# run without -q, which would keep its warnings (what it left) to itself
+FORCED = {
+    "study": (("study", "--out", "D", "--personas", "blind,deaf", *STUDY_ARGS, "-q"),
+              ("study", "--out", "D", "--personas", "blind", *STUDY_ARGS),
+              "policies/mine/game-01.json", "policies/deaf/game-00.json", ".pairplay-study.manifest"),
+    "counterfactual": (("counterfactual", "rec.mcap", "--policy", "same", "--seeds", "2", "--out", "D", "-q"),
+                       ("counterfactual", "rec.mcap", "--fit-only", "--out", "D"),
+                       "alice.usermodel.json", "counterfactual.csv", ".pairplay-counterfactual.manifest"),
+    "report": (("report", "pf", "--out", "D"), ("report", "pf", "--out", "D"),
+               "users-mine.png", "users-phase9.png", ".pairplay-report.manifest"),
+}
+
+
+@pytest.mark.parametrize("verb", FORCED)
+def test_a_forced_folder_verb_removes_only_what_it_wrote_and_says_what_it_left(verb, tmp_path, pairplay):
+    """A trial: `study --force`, `counterfactual --force` and `report --force` removed every file their
+    patterns name that the run did not write: a user's notes named like a game file, their own `users-*.png`
+    or `*.usermodel.json`, gone. Each folder verb now keeps a manifest of what it wrote there (as rebuild and
+    sweep did); --force removes an earlier run's stale file it lists, keeps the user's, and says so."""
+    first, forced, users, stale, manifest = FORCED[verb]
+    shutil.copy(SAMPLE, tmp_path / "rec.mcap")
+    if verb == "report":  # a study folder with one scripted game played over the bus
+        (tmp_path / "one.toml").write_text(ONE_GAME_STUDY)
+        for args in (("protocol", "init", "pf", "--study", "one.toml"), ("protocol", "register", "pf"),
+                     ("protocol", "pilot", "pf", "--personas", "blind", "-q")):
+            r = pairplay(*args, cwd=tmp_path)
+            assert r.returncode == 0, r.stderr
+    r = pairplay(*first, cwd=tmp_path)
+    assert r.returncode == 0, r.stderr
+    d = tmp_path / "D"
+    if verb == "report":  # an earlier report's figure 7.6 of a phase this one no longer has
+        (d / stale).write_bytes(b"an earlier report's")
+        if (d / manifest).is_file():
+            listed = json.loads((d / manifest).read_text())
+            (d / manifest).write_text(json.dumps({**listed, "files": sorted([*listed["files"], stale])}))
+    assert (d / stale).is_file()
+    (d / users).parent.mkdir(parents=True, exist_ok=True)
+    (d / users).write_text("the user's, named like an output")
+    (d / "notes.txt").write_text("the user's")
+    r = pairplay(*forced, "--force", cwd=tmp_path)
+    assert r.returncode == 0, r.stderr
+    assert (d / users).is_file(), f"--force removed the user's {users}"
+    assert (d / users).read_text() == "the user's, named like an output" and (d / "notes.txt").is_file()
+    assert not (d / stale).exists()  # an earlier run's, listed: stale, removed
+    lines = [line for line in r.stderr.splitlines() if users in line]
+    assert len(lines) == 1 and "left 1 file" in lines[0] and manifest in lines[0], r.stderr
+    assert users not in json.loads((d / manifest).read_text())["files"]  # still not ours: a later --force keeps it
+
+
+def test_a_writer_that_names_its_own_files_keeps_a_manifest(tmp_path):
+    """The patterns alone cannot tell a writer's files from the user's: output_folder refuses `owned` without
+    a `manifest` (a programming error), so no folder writer can go back to removing by pattern alone."""
+    with pytest.raises(ValueError, match="manifest"):
+        with output_folder(tmp_path / "D", owned=("*.csv",)):
+            pass
+    assert list(tmp_path.iterdir()) == []

@@ -21,7 +21,7 @@ from damageutil import damage, damaged_when_written
 
 from pairplay.replay.reader import read_log
 from pairplay.replay.studydata import StudyData, StudyDataError
-from pairplay.report.human import human_report
+from pairplay.report.human import HUMAN_MANIFEST, human_report
 from pairplay.schemas import journal as j
 from pairplay.schemas.policy import read_policy
 from pairplay.services.bus import Bus, BusOptions
@@ -416,10 +416,16 @@ def test_report_force_keeps_the_folders_other_files_and_a_failure_leaves_no_temp
     (mine / "notes.txt").write_text("the user's notes")
     assert main(["report", str(data.folder), "--out", str(mine)]) == 2  # not empty: refused without --force
     assert "--force" in capsys.readouterr().err
-    (mine / "users-phase9.png").write_bytes(b"an earlier report's figure 7.6 of a phase it no longer has")
+    (mine / "users-phase9.png").write_bytes(b"the user's figure, named like a report's figure 7.6")
     assert main(["report", str(data.folder), "--out", str(mine), "--force"]) == 0
     assert (mine / "notes.txt").read_text() == "the user's notes" and (mine / "report.md").is_file()
-    assert not (mine / "users-phase9.png").exists()  # the report's own name, not written now: stale, removed
+    assert (mine / "users-phase9.png").is_file()  # the report's name, but no report wrote it (its manifest): kept
+    assert "left 1 file" in capsys.readouterr().err  # and said
+    listed = json.loads((mine / HUMAN_MANIFEST).read_text())  # as if an earlier report had written it
+    (mine / HUMAN_MANIFEST).write_text(json.dumps({**listed, "files": [*listed["files"], "users-phase9.png"]}))
+    assert main(["report", str(data.folder), "--out", str(mine), "--force"]) == 0
+    assert not (mine / "users-phase9.png").exists()  # the report's own, not written now: stale, removed
+    capsys.readouterr()
     (tmp_path / "afile").write_text("a file")
     assert main(["report", str(data.folder), "--out", str(tmp_path / "afile"), "--force"]) == 2
     err = capsys.readouterr().err

@@ -141,13 +141,13 @@ def test_a_forced_study_over_an_older_one_keeps_none_of_the_older_ones_files(tmp
     current. Now the folder holds what a fresh study of the same options writes, and the files that are
     not a study's (a researcher's notes) stay. Every file a study writes is one of STUDY_OUTPUTS."""
     from pairplay.outputs import is_owned
-    from pairplay.report.study import STUDY_OUTPUTS
+    from pairplay.report.study import STUDY_MANIFEST, STUDY_OUTPUTS
 
     small = ["--games", "1", "--rounds", "20", "--eval-rounds", "5", "--reuse-seeds", "1", "--quiet"]
     out, fresh = tmp_path / "study", tmp_path / "fresh"
     assert main(["study", *small, "--personas", "blind,deaf,tatiana", "--algorithm", "lspi", "--out", str(out)]) == 0
     older = _files(out)
-    assert [f for f in older if not is_owned(f, STUDY_OUTPUTS)] == [] and "speed.csv" in older
+    assert [f for f in older if not is_owned(f, STUDY_OUTPUTS)] == [STUDY_MANIFEST] and "speed.csv" in older
     (out / "notes.txt").write_text("the researcher's")
     (out / "policies" / "notes.txt").write_text("the researcher's")
     newer = ["study", *small[:small.index("--reuse-seeds")], *small[small.index("--reuse-seeds") + 2:], "--personas",

@@ -537,7 +537,8 @@ def test_a_number_of_the_sweep_file_is_echoed_as_the_file_has_it(tmp_path, line,
 def test_a_comment_in_the_grid_file_is_the_same_grid_and_another_grid_keeps_the_users_cell_files(tmp_path):
     """A trial: only a `# comment` added to the grid file made "the sweep of another grid" (exit 2), and with
     --force every finished cell (the same cells) was thrown away; a forced sweep of another grid removed every
-    cells/*.json, a user's file there too. Grids are compared as read; only cell files (a cell id) are removed."""
+    cells/*.json, a user's file there too, and then any file named like a cell. Grids are compared as read; only
+    cell files a sweep wrote (a cell named by its own id) are removed."""
     from pairplay.cli.main import main
 
     one = GRID.replace("seeds = 2", "seeds = 1")
@@ -550,12 +551,14 @@ def test_a_comment_in_the_grid_file_is_the_same_grid_and_another_grid_keeps_the_
     assert main(["sweep", str(first), "--out", str(out), "--quiet"]) == 0  # a resume: nothing to compute
     assert {p.name: p.stat().st_mtime_ns for p in (out / "cells").glob("*.json")} == stamps
     (out / "cells" / "mine.json").write_text("{}")
+    mine = "0" * 20 + ".json"  # named like a cell (a cell id), but no sweep wrote it: it was removed
+    (out / "cells" / mine).write_text('{"the user\'s": "notes"}')
     other = tmp_path / "other.toml"
     other.write_text(one.replace('"blind"', '"deaf"'))
     assert main(["sweep", str(other), "--out", str(out), "--quiet"]) == 2  # another grid: refused
     assert main(["sweep", str(other), "--out", str(out), "--quiet", "--force"]) == 0
     left = sorted(p.name for p in (out / "cells").glob("*.json"))
-    assert left == sorted([*cells, "mine.json"]), left  # (a cell's id digests its axes and seed: the same names)
+    assert left == sorted([*cells, "mine.json", mine]), left  # (a cell's id digests its axes and seed: the same names)
     assert all((out / "cells" / name).stat().st_mtime_ns != stamps[name] for name in cells)  # computed again
 
 

@@ -246,11 +246,11 @@ def console_routes(console: Console) -> list:
         return JSONResponse({"deleted": msgspec.to_builtins(gone)})
 
     async def report(request: Request) -> Response:
-        from pairplay.report.human import HUMAN_OUTPUTS, human_report
+        from pairplay.report.human import HUMAN_MANIFEST, HUMAN_OUTPUTS, human_report
 
         def work():
             out = data.folder / "report"
-            with output_folder(out, force=True, owned=HUMAN_OUTPUTS) as tmp:  # a failure leaves the old report and no temporary folder
+            with output_folder(out, force=True, owned=HUMAN_OUTPUTS, manifest=HUMAN_MANIFEST) as tmp:  # a failure leaves the old report and no temporary folder
                 made = human_report(data.folder, tmp)
             kind = (f" (a rehearsal: {counted(len(made.games), 'scripted game')}, no person played)" if made.rehearsal else
                     f" ({counted(len(made.scripted), 'scripted game')} left out)" if made.scripted else "")
