@@ -6,8 +6,6 @@ import json
 import shutil
 import signal
 import socketserver
-import subprocess
-import sys
 import threading
 import time
 from pathlib import Path
@@ -107,12 +105,11 @@ def test_personas_may_be_a_toml_list_the_same_sweep_as_the_string(tmp_path):
     assert [s.persona_list()[0].key for s in map(axis.study_settings, axis.cells())] == ["blind", "blind", "deaf"]
 
 
-def test_the_verb_refuses_another_grids_folder_in_one_line(tmp_path):
+def test_the_verb_refuses_another_grids_folder_in_one_line(tmp_path, pairplay_cli):
     out = tmp_path / "out"
     out.mkdir()
     (out / "grid.toml").write_text("seeds = 1\n")
-    run = subprocess.run([sys.executable, "-m", "pairplay", "sweep", str(_grid(tmp_path)), "--out", str(out),
-                          "--quiet"], capture_output=True, text=True, timeout=120)
+    run = pairplay_cli("sweep", _grid(tmp_path), "--out", out, "--quiet")
     assert run.returncode == 2 and "another grid" in run.stderr and len(run.stderr.strip().splitlines()) == 1
     assert Cell((), 0).id != Cell((), 1).id
 
