@@ -1,7 +1,7 @@
 """Many `python -m pairplay ARGS` processes without paying pairplay's import in each.
 
-Rule: a zygote process imports every module of pairplay once (and nothing else: no thread, no
-socket, no file), then forks one child per command. A child is a whole process of its own, as
+Rule: a zygote process imports every module of pairplay once, and matplotlib's pyplot as the verbs
+that draw import it (and nothing else: no thread, no socket, no file), then forks one child per command. A child is a whole process of its own, as
 `python -m pairplay ARGS` is: its own working folder, stdin from /dev/null, stdout and stderr
 to files, `pairplay.__main__` run as __main__ (runpy, as `-m` does), and the interpreter's own
 exit (atexit handlers, teardown) unless the verb ends with os._exit. Only the import is shared:
@@ -47,6 +47,10 @@ def _preload() -> None:
     for info in pkgutil.iter_modules(importlib.import_module("pairplay").__path__, "pairplay."):
         if info.name != "pairplay.__main__":  # run per command, as `-m` runs it
             importlib.import_module(info.name)
+    # pyplot, as the verbs that draw import it (report/plots.py's _pyplot, rebuild's curves: Agg): ~1 s of
+    # CPU per drawing command (rebuild, sweep, counterfactual, protocol report); it starts no thread
+    from pairplay.report.plots import _pyplot
+    _pyplot()
 
 
 def _child(request: dict) -> None:

@@ -78,15 +78,28 @@ def pytest_xdist_auto_num_workers(config) -> int:
     return 0 if "slow" in marks.replace("not slow", "") else 2
 
 
-# Files whose tests take the longest (wall time of a full run on 2 workers, 2026-11-30 17:00 UTC, after the
-# mistakes table and the run-to-completion commands went to pairplay_cli): run first, so that with whole files
-# per worker (--dist loadfile) neither worker is left alone with one at the end. test_study_batch stays first:
-# it is short and compiles the numba kernels into their cache before the files that start many processes.
-LONGEST_FIRST = ("test_study_batch.py", "test_console_browser.py", "test_study_digests.py", "test_lab_browser.py",
-                 "test_session_cli.py", "test_sweep.py", "test_faults.py", "test_session_crash.py", "test_router.py",
-                 "test_replay_samples.py", "test_faults_signals.py", "test_cli_mistakes.py", "test_session_end.py",
-                 "test_lab_config.py", "test_outputs.py", "test_lspi_session.py", "test_lspi_study.py",
-                 "test_security.py", "test_determinism.py", "test_report_figures.py", "test_study_cli.py")
+# Files whose tests take the longest (summed test time of a full run on 2 workers, 2026-12-01 19:55 UTC, load
+# 5-20; test_sweep 186 s of 1,620 s): run first, so that with whole files per worker (--dist loadfile) neither
+# worker is left alone with one at the end. pytest-xdist >= 3.5 sorts the files by their NUMBER of tests
+# (test_cli_mistakes' 158 rows first, test_study_batch's 3 late), which ignored this list; pytest_configure
+# turns that off where xdist lets it (3.8's --no-loadscope-reorder; an option in addopts would be refused by
+# 3.5-3.7, which pyproject allows). test_study_batch stays first: it is short and
+# compiles the numba kernels into their cache before the files that start many processes.
+LONGEST_FIRST = ("test_study_batch.py", "test_sweep.py", "test_cli_mistakes.py", "test_protocol.py",
+                 "test_session_end.py", "test_console_browser.py", "test_outputs.py", "test_lab_browser.py",
+                 "test_faults.py", "test_recorder_restart.py", "test_mcap_damage.py", "test_cli_full_disk.py",
+                 "test_study_cli.py", "test_journal.py", "test_view_cli.py", "test_router.py", "test_forge.py",
+                 "test_faults_signals.py", "test_faults_restart.py", "test_protocol_interrupted.py",
+                 "test_session_crash.py", "test_session_cli.py", "test_lspi_session.py", "test_cli_logging.py",
+                 "test_report_figures.py", "test_faults_startup.py", "test_livelock.py", "test_docs.py",
+                 "test_study_digests.py", "test_lab_config.py", "test_replay_samples.py", "test_security.py",
+                 "test_determinism.py", "test_lspi_study.py")
+
+
+def pytest_configure(config) -> None:
+    """Files go out to the workers in LONGEST_FIRST's order, not by their number of tests."""
+    if hasattr(config.option, "loadscopereorder"):
+        config.option.loadscopereorder = False
 
 
 def pytest_collection_modifyitems(items) -> None:

@@ -217,11 +217,11 @@ def forged_copy(path: Path, how: str) -> Path:
 
 
 @pytest.mark.parametrize("how", ["same-seq", "after"])
-def test_rebuild_and_verify_report_a_forged_end_instead_of_a_session_of_0_rounds(tmp_path, how):
+def test_rebuild_and_verify_report_a_forged_end_instead_of_a_session_of_0_rounds(tmp_path, how, pairplay_cli):
     # before: `pairplay rebuild` of such a file exited 0 ("0 rounds" when the end came before any round)
     rec = forged_copy(tmp_path / "forged.mcap", how)
     for argv in (["rebuild", str(rec), "--out", str(tmp_path / "out")], ["replay", str(rec), "--verify"]):
-        p = subprocess.run([sys.executable, "-m", "pairplay", *argv], capture_output=True, text=True, timeout=120)
+        p = pairplay_cli(*argv)
         assert p.returncode != 0, (argv, p.stdout)
         lines = p.stderr.strip().splitlines()
         assert len(lines) == 1 and "SessionEnded seq" in lines[0] and "(event " in lines[0], p.stderr

@@ -12,8 +12,6 @@ from __future__ import annotations
 
 import argparse
 import ast
-import subprocess
-import sys
 from pathlib import Path
 
 import pytest
@@ -42,11 +40,10 @@ def strings(path: Path) -> list[tuple[int, str]]:
             if isinstance(n, ast.Constant) and isinstance(n.value, str) and id(n) not in skip]
 
 
-def test_run_recorder_beside_a_journal_whose_recording_is_gone_names_no_option_run_lacks(tmp_path):
+def test_run_recorder_beside_a_journal_whose_recording_is_gone_names_no_option_run_lacks(tmp_path, pairplay_cli):
     (tmp_path / "d").mkdir()
     (tmp_path / "d" / "s.mcap.journal").write_bytes(b"")  # its recording removed, its journal left
-    r = subprocess.run([sys.executable, "-m", "pairplay", "run", "recorder", "--session", "s", "--out", "d"],
-                       cwd=tmp_path, capture_output=True, text=True, timeout=120)
+    r = pairplay_cli("run", "recorder", "--session", "s", "--out", "d", cwd=tmp_path)
     [line] = r.stderr.strip().splitlines()
     assert r.returncode == 2 and line.startswith("pairplay run: session s has a recorder's journal already"), r.stderr
     assert "--force" not in line and bad_options(["run", "recorder"], line) == [], line

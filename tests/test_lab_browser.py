@@ -10,8 +10,6 @@ from __future__ import annotations
 
 import json
 import queue
-import subprocess
-import sys
 
 import msgspec
 
@@ -50,7 +48,7 @@ def card_centers(page) -> dict:
     return {i: (b["x"] + b["width"] / 2, b["y"] + b["height"] / 2) for i, b in boxes.items()}
 
 
-def test_a_whole_game_played_by_clicks_verifies_and_rebuilds(browser, tmp_path):
+def test_a_whole_game_played_by_clicks_verifies_and_rebuilds(browser, tmp_path, pairplay_cli):
     """Five rounds; persona Tatiana (core.user) decides every card, the script clicks it."""
     config = human_config("lab-game", rounds=5, ignore_window_ms=0.0)  # clicks are fast: learn from every turn
     inbox: queue.Queue = queue.Queue()
@@ -84,8 +82,7 @@ def test_a_whole_game_played_by_clicks_verifies_and_rebuilds(browser, tmp_path):
     assert len(of(events, "RewardGiven")) == len(of(events, "SuggestionMade")) and of(events, "QUpdated")
     assert len(of(events, "RobotActed")) == len(of(events, "SuggestionMade"))  # the virtual robot acted on each
     assert not of(events, "PickRejected") and not of(events, "MessageRejected")
-    run = lambda *a: subprocess.run([sys.executable, "-m", "pairplay", *a], capture_output=True, text=True,
-                                    timeout=120)
+    run = pairplay_cli
     r = run("replay", str(path), "--verify")
     assert r.returncode == 0 and "verify: PASS" in r.stdout, r.stdout + r.stderr
     r = run("rebuild", str(path), "--out", str(tmp_path / "rebuilt"))

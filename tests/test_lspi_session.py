@@ -67,12 +67,8 @@ def test_lspi_settings_are_checked_before_a_session_starts():
         msgspec.structs.replace(CONFIG, algorithm="q-learning").validate()
 
 
-def test_pairplay_session_and_rebuild_with_lspi_from_the_command_line(tmp_path):
-    import subprocess
-    import sys
-
-    def pairplay(*args):
-        return subprocess.run([sys.executable, "-m", "pairplay", *args], capture_output=True, text=True, timeout=120)
+def test_pairplay_session_and_rebuild_with_lspi_from_the_command_line(tmp_path, pairplay_cli):
+    pairplay = pairplay_cli
     r = pairplay("session", "--participant", "sim:deaf", "--seed", "2", "--rounds", "3", "--session", "lspicli",
                  "--algorithm", "lspi", "--lspi-every", "5", "--out", str(tmp_path))
     assert r.returncode == 0 and "LSPI samples:" in r.stdout, r.stdout + r.stderr

@@ -33,7 +33,7 @@ def ended(path):
 
 
 @pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM])
-def test_a_signalled_session_records_it_was_interrupted_and_how_far_it_got(tmp_path, sig):
+def test_a_signalled_session_records_it_was_interrupted_and_how_far_it_got(tmp_path, sig, pairplay_cli):
     p = subprocess.Popen([sys.executable, "-m", "pairplay", "session", "--participant", "sim:wasim", "--rounds",
                           "5000", "--session", "sig", "--out", str(tmp_path)], stdout=subprocess.PIPE,
                          stderr=subprocess.STDOUT, text=True, env=dict(os.environ, PYTHONUNBUFFERED="1"))
@@ -59,8 +59,7 @@ def test_a_signalled_session_records_it_was_interrupted_and_how_far_it_got(tmp_p
     assert end.round == end.rounds_played and end.turns_in_round >= 0
     rebuilt = rebuild_recording(path)
     assert rebuilt.partial.startswith(f"interrupted ({sig.name}) after {end.rounds_played} of 5000 rounds")
-    r = subprocess.run([sys.executable, "-m", "pairplay", "rebuild", str(path), "--out", str(tmp_path / "rb"),
-                        "--no-plot"], capture_output=True, text=True)
+    r = pairplay_cli("rebuild", path, "--out", tmp_path / "rb", "--no-plot")
     assert "PARTIAL session: interrupted" in r.stdout, r.stdout
     assert read_policy(tmp_path / "rb" / "sig.policy.json").partial.startswith("interrupted")
     verified = verify_recording(path)  # up to where the signal stopped it (was a false FAIL at that round)

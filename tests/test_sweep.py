@@ -3,10 +3,9 @@
 import contextlib
 import http.server
 import json
+import shutil
 import signal
 import socketserver
-import subprocess
-import sys
 import threading
 import time
 from pathlib import Path
@@ -106,12 +105,11 @@ def test_personas_may_be_a_toml_list_the_same_sweep_as_the_string(tmp_path):
     assert [s.persona_list()[0].key for s in map(axis.study_settings, axis.cells())] == ["blind", "blind", "deaf"]
 
 
-def test_the_verb_refuses_another_grids_folder_in_one_line(tmp_path):
+def test_the_verb_refuses_another_grids_folder_in_one_line(tmp_path, pairplay_cli):
     out = tmp_path / "out"
     out.mkdir()
     (out / "grid.toml").write_text("seeds = 1\n")
-    run = subprocess.run([sys.executable, "-m", "pairplay", "sweep", str(_grid(tmp_path)), "--out", str(out),
-                          "--quiet"], capture_output=True, text=True, timeout=120)
+    run = pairplay_cli("sweep", _grid(tmp_path), "--out", out, "--quiet")
     assert run.returncode == 2 and "another grid" in run.stderr and len(run.stderr.strip().splitlines()) == 1
     assert Cell((), 0).id != Cell((), 1).id
 
@@ -258,6 +256,18 @@ def _another_seed(d):
     d["seed"] += 100
 
 
+@pytest.fixture(scope="module")
+def swept(tmp_path_factory):
+    """One finished sweep of one setting x 2 seeds (grid.toml, out/), made once for the damaged-cell cases:
+    each copies it and damages its own copy (it cost each case a sweep and a summary of its own)."""
+    from pairplay.cli.main import main
+
+    folder = tmp_path_factory.mktemp("swept")
+    grid = _grid(folder, GRID.replace('["correct", "consistent"]', '["correct"]'))
+    assert main(["sweep", str(grid), "--out", str(folder / "out"), "-q"]) == 0
+    return folder
+
+
 @pytest.mark.parametrize("damage,said", [
     (_text_measure, "measure(s) not a finite number: blind/learned = '20.8'"),
     (_nan_measure, "measure(s) not a finite number: all/ratio = nan"),
@@ -267,7 +277,7 @@ def _another_seed(d):
     ("{", "not a cell file"),
     ("", "the file is empty"),
 ])
-def test_a_cell_file_that_cannot_be_used_is_computed_again_and_said(tmp_path, capsys, damage, said):
+def test_a_cell_file_that_cannot_be_used_is_computed_again_and_said(swept, tmp_path, capsys, damage, said):
     """A new user's trial: a cell whose measure was text ended the summary in a traceback; one of `"measures":
     {}` counted as finished and the summary said n = 1 where the seeds were 2, without a word (a NaN alike);
     a file that was not JSON was computed again without a word. Every cell file is checked whole when read
@@ -275,8 +285,9 @@ def test_a_cell_file_that_cannot_be_used_is_computed_again_and_said(tmp_path, ca
     The tables are those of the undamaged sweep."""
     from pairplay.cli.main import main
 
-    grid, out = _grid(tmp_path, GRID.replace('["correct", "consistent"]', '["correct"]')), tmp_path / "out"
-    assert main(["sweep", str(grid), "--out", str(out), "-q"]) == 0
+    grid, out = tmp_path / "grid.toml", tmp_path / "out"
+    shutil.copy(swept / "grid.toml", grid)
+    shutil.copytree(swept / "out", out)  # a finished sweep of that grid
     before = _tables(out)
     victim = sorted((out / "cells").glob("*.json"))[0]
     if isinstance(damage, str):

@@ -2,8 +2,6 @@
 verify counts and names them, and its verdict is about the events this version derives."""
 
 import json
-import subprocess
-import sys
 
 import msgspec
 from mcap.writer import CompressionType, Writer
@@ -53,7 +51,7 @@ def write_newer(path, alter=None):
         w.finish()
 
 
-def test_unknown_types_are_counted_and_named_and_the_verdict_is_about_known_ones(tmp_path):
+def test_unknown_types_are_counted_and_named_and_the_verdict_is_about_known_ones(tmp_path, pairplay_cli):
     path = tmp_path / "newer.mcap"
     write_newer(path)
     log = read_log(path)
@@ -61,8 +59,7 @@ def test_unknown_types_are_counted_and_named_and_the_verdict_is_about_known_ones
     v = verify_recording(path)
     assert v.ok and v.unknown == {"RoundPaused": 1, "RobotBlinked": 2, "PolicySnapshot": 1}
     assert rebuild_recording(path).fold.ended is not None
-    r = subprocess.run([sys.executable, "-m", "pairplay", "replay", str(path), "--verify"], capture_output=True,
-                       text=True)
+    r = pairplay_cli("replay", path, "--verify")
     assert r.returncode == 0 and "verify: PASS" in r.stdout, r.stdout + r.stderr
     assert "4 events of types this version does not know, not compared: PolicySnapshot (1), RobotBlinked (2), " \
            "RoundPaused (1)" in r.stdout

@@ -35,15 +35,10 @@ from pairplay.services.view.rerun_logger import RerunView
 SAMPLE = Path(__file__).resolve().parents[1] / "recordings" / "samples" / "sim-ashley.mcap"
 
 
-def pairplay(*args, cwd) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "pairplay", *args], cwd=cwd, capture_output=True, text=True,
-                          timeout=300)
-
-
 @pytest.mark.parametrize("out", ["/proc/x.rrd", "/proc/self/x/y.rrd", "/sys/x.rrd"])
-def test_an_rrd_the_system_refuses_is_one_line_naming_the_users_path_and_nothing_is_left(tmp_path, out):
+def test_an_rrd_the_system_refuses_is_one_line_naming_the_users_path_and_nothing_is_left(tmp_path, out, pairplay_cli):
     shutil.copy(SAMPLE, tmp_path / "rec.mcap")
-    r = pairplay("view", "--recording", "rec.mcap", "--out", out, cwd=tmp_path)
+    r = pairplay_cli("view", "--recording", "rec.mcap", "--out", out, cwd=tmp_path)
     assert r.returncode == 2 and r.stdout == "", (r.stdout, r.stderr)
     lines = r.stderr.strip().splitlines()
     assert len(lines) == 1 and lines[0].startswith("pairplay view: ") and lines[0].endswith(")"), r.stderr
@@ -92,18 +87,18 @@ def test_an_interrupted_view_keeps_a_partial_view_under_a_name_that_says_so(tmp_
     assert any(f"view stopped by {sig.name}" in t and "this view is partial" in t for t in texts), texts[-3:]
 
 
-def test_a_view_prints_one_line_of_result_and_its_steps_only_with_verbose(tmp_path):
+def test_a_view_prints_one_line_of_result_and_its_steps_only_with_verbose(tmp_path, pairplay_cli):
     shutil.copy(SAMPLE, tmp_path / "rec.mcap")
-    r = pairplay("view", "--recording", "rec.mcap", cwd=tmp_path)
+    r = pairplay_cli("view", "--recording", "rec.mcap", cwd=tmp_path)
     assert r.returncode == 0 and r.stderr == "", r.stderr
     assert r.stdout.splitlines() == ["saved rec.rrd: 677 events, 0 notes, Q-table logged 5 times"], r.stdout
-    r = pairplay("view", "--recording", "rec.mcap", "--out", "v.rrd", "-v", cwd=tmp_path)
+    r = pairplay_cli("view", "--recording", "rec.mcap", "--out", "v.rrd", "-v", cwd=tmp_path)
     assert r.returncode == 0 and r.stdout.startswith("saved v.rrd: ") and len(r.stdout.splitlines()) == 1
     assert r.stderr.startswith("INFO pairplay.view: drawing rec.mcap"), r.stderr
     # what the view noticed is a WARNING, shown by default; the result is still one line
     data = SAMPLE.read_bytes()
     (tmp_path / "cut.mcap").write_bytes(data[: len(data) // 2])
-    r = pairplay("view", "--recording", "cut.mcap", cwd=tmp_path)
+    r = pairplay_cli("view", "--recording", "cut.mcap", cwd=tmp_path)
     assert r.returncode == 0 and len(r.stdout.splitlines()) == 1 and r.stdout.startswith("saved cut.rrd: ")
     assert r.stderr.startswith("WARNING pairplay.view: view: recording not whole"), r.stderr
 
