@@ -216,7 +216,7 @@ CASES = [
     Case("counterfactual --seeds 100000000", ["counterfactual", "rec.mcap", "--seeds", "100000000", "--out", "cf"],
          "(--seeds 100000000)"),
     Case("sweep a grid of 10**10 rounds", ["sweep", "huge-rounds.toml", "--out", "sw"],
-         "huge-rounds.toml: rounds = 10000000000: the study would hold about"),
+         "huge-rounds.toml: [study] rounds = 10000000000: the study would hold about"),
     Case("sweep a grid of 10**8 seeds", ["sweep", "huge-seeds.toml", "--out", "sw"],
          "huge-seeds.toml: seeds = 100000000: 1 setting x 100000000 seeds is over the 10000 cells a sweep may have"),
     Case("protocol check a learner override of nan", ["protocol", "check", "alpha-nan.toml"],
