@@ -125,6 +125,7 @@ def test_quiet_keeps_where_to_watch_a_view_and_leaves_out_the_bench_progress(tmp
     """-q keeps the results a user asked for and leaves out progress and chatter, every verb alike (cli/main.py
     rule). `view --serve -q` printed nothing, not even the address of the viewer it served (view was silenced
     whole, as a verb whose results are files); `bench -q` still said "measuring ..." and the load average."""
+    import select
     import signal
     import subprocess
     import sys
@@ -145,7 +146,9 @@ def test_quiet_keeps_where_to_watch_a_view_and_leaves_out_the_bench_progress(tmp
                              "--serve", "--grpc-port", "0", "--web-port", "0", "-q"],
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=tmp_path)
     try:
-        line = view.stdout.readline()  # (on main: nothing until the process ended)
+        # (before: nothing until the process ended, which --serve leaves to a Ctrl-C)
+        ready = select.select([view.stdout], [], [], 60)[0]
+        line = view.stdout.readline() if ready else ""
         assert line.startswith("web viewer: http://127.0.0.1:"), line
     finally:
         time.sleep(0.2)
