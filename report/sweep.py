@@ -246,7 +246,7 @@ def _read_grid(path: str, parse_float) -> Grid:
             # where the value came from, as the file has it (a TOML 2 became 2.0 for a float setting, 1_000 1000:
             # pairplay/numbers.py, schemas/tomlplace.py); a setting the file does not give is the study's default
             at = ("study", exc.key) if exc.key in base else _axis_at(exc.key, value, axes) if exc.key in axes else None
-            said = typed(at, _at(data, at)) if at else shown(value)
+            said = typed(at, _at(data, at)) if at else as_toml(value)
             what = exc.what
             for parsed in dict.fromkeys((shown(value), str(value), repr(value))):  # its "got 1000": as typed
                 if what.endswith(f"got {parsed}"):
