@@ -226,13 +226,15 @@ def run(args) -> int:
     for i in range(args.runs):
         rows = []
         for name in names:
-            print(f"measuring {name} (run {i + 1} of {args.runs}) ...", file=sys.stderr, flush=True)
+            if not getattr(args, "quiet", False):  # progress: -q keeps the table and the missed goals, its results (cli/main.py)
+                print(f"measuring {name} (run {i + 1} of {args.runs}) ...", file=sys.stderr, flush=True)
             rows += _measured(name, args.quick)
             loads.append(os.getloadavg())
         runs.append(rows)
     rows = merge_runs(runs)
     print(json.dumps(rows, indent=1) if args.json else table(rows))
-    print(f"load average (1 min) {min(l[0] for l in loads):.1f}-{max(l[0] for l in loads):.1f}", file=sys.stderr)
+    if not getattr(args, "quiet", False):
+        print(f"load average (1 min) {min(l[0] for l in loads):.1f}-{max(l[0] for l in loads):.1f}", file=sys.stderr)
     if args.readme is not None:
         write_readme(args.readme, markdown(rows, args.runs, started, loads, readme_command(args.runs, args.readme)))
     missed = [r["row"] for r in rows if r["verdict"] == MISSED]

@@ -27,7 +27,8 @@ adds the INFO lines (what the services do), `-q/--quiet` leaves nothing but
 errors (and no progress bars). A verb whose results are files it writes
 (`QUIET_SUMMARIES`: study, sweep, rebuild, protocol init and check, ...; session and lab
 after their listening line) says on stdout what it wrote, and `-q` silences
-that too (rebuild's per-file lines, the study's tables and timings and
+that too (`view` its "saved" line, keeping where to watch it; `bench` its "measuring" and load lines, `run`
+its "running in session" line: progress and chatter) (rebuild's per-file lines, the study's tables and timings and
 `protocol init`'s protocol were printed under -q: new users' trials); a
 session that did not complete still says how it ended; a verb whose result is what
 it prints (`profile`, `replay --verify`'s verdict, `protocol status`, `bench`)
@@ -167,9 +168,10 @@ def add_log_options(p: argparse.ArgumentParser, default=False) -> None:
 # rule). `protocol` is both: init, mark-invalid and pilot write, status and register print results
 # (init -q printed the whole protocol: a new user's trial); check's result is its status (a mistake: one line
 # on stderr), its listing of the protocol a summary (`check -q` printed it: a trial). `session` and `lab` say their listening line
-# first, so they leave out their summary themselves (cli/session.py, cli/lab.py).
+# first, so they leave out their summary themselves (cli/session.py, cli/lab.py), as `view` does (where to watch
+# it, --serve or --spawn, is a result); `bench` and `run` leave out their progress and chatter.
 QUIET_SUMMARIES = frozenset({"study", "sweep", "rebuild", "recover", "combine", "counterfactual", "report",
-                             "participant", "view", "protocol init", "protocol mark-invalid", "protocol pilot",
+                             "participant", "protocol init", "protocol mark-invalid", "protocol pilot",
                              "protocol check"})
 LOG_FORMAT = "%(levelname)s %(name)s: %(message)s"
 _handler: logging.Handler | None = None

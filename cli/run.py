@@ -214,7 +214,8 @@ def _run(args: argparse.Namespace, stop: threading.Event) -> int:
             start_unless_stopped(lambda: node.start(wait_for=tuple(args.wait_for)), stop, args.service)
         except Stopped:
             return 0
-        print(f"{args.service} running in session {args.session}", flush=True)
+        if not getattr(args, "quiet", False):  # chatter: its listening line said where it is (cli/main.py -q rule)
+            print(f"{args.service} running in session {args.session}", flush=True)
         # the service's own thread publishes what it decides (Node.step) and may wait in a put on a
         # congested peer; this (main) thread stays free for the signals and the bounded shutdown
         thread = node.run_in_thread(stop)

@@ -112,6 +112,9 @@ def run(args: argparse.Namespace) -> int:
     if args.no_save and not (args.serve or args.spawn):
         raise OptionError("--no-save leaves no output; add --serve or --spawn", "--no-save")
     rrd = None if args.no_save else (file_in(args.out, _default_rrd(args).name) or _default_rrd(args))
+    # a summary of the file it wrote: -q leaves it out; where to watch the view (--serve, --spawn) is a result
+    # -q keeps (it was silenced with the summary: view was one of cli/main.py QUIET_SUMMARIES)
+    say = print if not getattr(args, "quiet", False) else (lambda *_, **__: None)
     if rrd is not None:
         # before any work: an existing .rrd stays unless --force, and the recording viewed always
         check_output(rrd, args.force, inputs=[args.recording] if args.recording else [])
@@ -126,10 +129,10 @@ def run(args: argparse.Namespace) -> int:
         if not done.partial and lost:  # events lost in the file: what is left, drawn, under a name that says so
             # (a whole file recovered from one that lost parts: `lost` says what, reader.EventLog.source_lost)
             said = f"is damaged ({lost})" if held.damaged else f"was {lost}"
-            print(f"saved {kept.path}: {_counts(done)}; partial: {args.recording} {said}")
+            say(f"saved {kept.path}: {_counts(done)}; partial: {args.recording} {said}")
             return 0
         if not done.partial:  # a live recording, drawn as far as it goes: a result, said on stdout
-            print(f"saved {kept.path}: {_counts(done)}; partial: {args.recording} {LIVE}, view it again once "
+            say(f"saved {kept.path}: {_counts(done)}; partial: {args.recording} {LIVE}, view it again once "
                   "its session has ended")
             return 0
         print(f"pairplay view: interrupted ({done.why}) after {_counts(done)}, before the source ended; "
@@ -144,7 +147,7 @@ def run(args: argparse.Namespace) -> int:
         print(f"pairplay view: interrupted ({done.why}) after {_counts(done)}, before the source ended; nothing saved",
               file=sys.stderr)
     else:
-        print(f"saved {rrd}: {_counts(done)}" if rrd is not None else
+        say(f"saved {rrd}: {_counts(done)}" if rrd is not None else
               f"viewed {_counts(done)}{f'; partial: {args.recording} {LIVE}' if live else ''}")
     return 0
 

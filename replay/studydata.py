@@ -45,7 +45,7 @@ import msgspec
 from pairplay import __version__, csvcell
 from pairplay.errors import InputError
 from pairplay.livelock import LIVE, is_live
-from pairplay.outputs import OutputError, output_file, set_aside_of
+from pairplay.outputs import OutputError, check_places, output_file, set_aside_of
 from pairplay.schemas import journal as j
 from pairplay.schemas.policy import read_policy, write_policy
 from pairplay.schemas.study import Study, StudyFileError, load_study
@@ -57,6 +57,7 @@ from .rebuild import Rebuilt, rebuild_recording, write_outputs
 from .wal import wal_path
 
 STUDY_FILE, JOURNAL, SETTINGS = "study.toml", "journal.jsonl", "settings.json"
+SUBFOLDERS = {"recordings": ".mcap", "policies": ".policy.json", "merged": ".policy.json"}  # and the files each holds
 
 
 class StudyDataError(ValueError):
@@ -176,6 +177,9 @@ class StudyData:
     def __init__(self, folder: str | Path):
         self.folder = Path(folder).resolve()
         self.given = Path(folder)  # as the user gave it: what a refusal names (it named the resolved path)
+        if (self.folder / JOURNAL).is_dir():  # it said "not a study folder (no journal.jsonl ...)": there is one
+            raise StudyDataError(f"{self.given / JOURNAL}: is a folder where the study's journal is written; a folder "
+                                 "is never replaced: remove or rename it")
         if not (self.folder / JOURNAL).is_file():
             raise StudyDataError(f"{self.given}: not a study folder (no {JOURNAL}; `pairplay protocol init` makes one)")
         try:
@@ -194,6 +198,10 @@ class StudyData:
         """A new study folder from a study file; StudyFileError / StudyDataError if it cannot be."""
         given, folder = Path(folder), Path(folder).resolve()
         load_study(study_file)  # refuse a bad file before making anything
+        # a folder where the study's files are written, a file where its folders are: named, before anything is
+        # made (journal.jsonl a folder was "already a study folder", recordings a file the OS's "File exists")
+        check_places(given, owned=tuple(f"{sub}/*{ext}" for sub, ext in SUBFOLDERS.items()),
+                     files=[STUDY_FILE, SETTINGS, JOURNAL])
         if (folder / JOURNAL).exists():
             raise StudyDataError(f"{given}: already a study folder")
         if key_file is not None:
@@ -205,7 +213,7 @@ class StudyData:
             # given), not at the first registration with a name (an existing key file is kept, only its mode tightened)
         text = Path(study_file).read_bytes()
         folder.mkdir(parents=True, exist_ok=True)
-        for sub in ("recordings", "policies", "merged"):
+        for sub in SUBFOLDERS:
             (folder / sub).mkdir(exist_ok=True)
         atomic_write(folder / STUDY_FILE, text)
         atomic_write(folder / SETTINGS, msgspec.json.encode(

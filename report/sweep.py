@@ -36,6 +36,7 @@ Measures (picks per round: 18 is perfect play, lower is better):
 
 from __future__ import annotations
 
+import difflib
 import hashlib
 import itertools
 import json
@@ -56,7 +57,7 @@ from pairplay.numbers import counted, shown, type_name, typed_floats
 from pairplay.outputs import manifest_name, output_file, output_folder, write_text
 from pairplay.processes import check_workers, worker_pool
 from pairplay.schemas.jsonfile import empty, without_bom
-from pairplay.schemas.tomlplace import TOP, misplaced, table_not_value
+from pairplay.schemas.tomlplace import TOP, Written, misplaced, table_not_value
 from pairplay.core.geometry import PERFECT_PICKS
 from pairplay.core.rng import SEED_RANGE
 from pairplay.core.study import FIRST_ROUNDS
@@ -116,19 +117,25 @@ def as_toml(value) -> str:
         str(value).lower() if isinstance(value, bool) else repr(value)
 
 
-def _typed(path: str, key: str, value):
+def _typed(path: str, at: tuple, value, written: Written):
+    """The value of the study setting at `at` (("study", key) or ("grid", key, n)) as its StudySettings field
+    takes it; GridError `FILE: [table] key: what` (schemas/tomlplace.py Written), the value as typed."""
+    key = at[1]
     want = SWEEPABLE.get(key)
     if want is None:
-        raise GridError(f"{path}: unknown study setting {key!r} (known: {', '.join(sorted(SWEEPABLE))})")
+        near = difflib.get_close_matches(key, SWEEPABLE, n=1, cutoff=0.75)  # a misspelt setting
+        raise GridError(f"{path}: {written.place(at[:2])}: no study setting `{key}`"
+                        + (f" (did you mean `{near[0]}`?)" if near else f"; known: {', '.join(sorted(SWEEPABLE))}"))
     if key == "personas" and isinstance(value, list) and all(isinstance(v, str) for v in value):
         # a TOML list of names (["ashley", "helmut"]) is the list it says, as the study's "ashley,helmut"
         # (it was refused: "is not a str"); its names are checked as the study's (StudySettings.check)
         if not all(v.strip() and "," not in v for v in value):
-            raise GridError(f"{path}: personas = {value!r}: each item of the list is one persona's name")
+            raise GridError(f"{path}: {written.place(at[:2])}: {written.typed(at, value)}: each item of the list is "
+                            "one persona's name")
         value = ",".join(value)
     kind = {"int": int, "float": (int, float), "str": str, "bool": bool}[want if isinstance(want, str) else want.__name__]
     if isinstance(value, bool) and kind is not bool or not isinstance(value, kind):
-        raise GridError(f"{path}: {key} = {as_toml(value)} is not {type_name(want)}")
+        raise GridError(f"{path}: {written.place(at[:2])}: must be {type_name(want)}, got {written.typed(at, value)}")
     return float(value) if want in ("float", float) else value
 
 
@@ -137,7 +144,7 @@ PLACES = {TOP: frozenset({"study", "grid", "seeds", "reuse"}), "[study]": frozen
           "[grid]": frozenset(SWEEPABLE)}
 
 
-def _check_places(path: str, data: dict) -> None:
+def _check_places(path: str, data: dict, written: Written) -> None:
     """GridError for a key or a table at the wrong level: `seeds` or `reuse` below the [study] or [grid]
     line (that table's then; it was "unknown study setting 'seeds'"), a study setting above them (it was
     "unknown key(s) psi"), a [study.psi] table where psi takes a value, `study = 3` where a table is
@@ -146,17 +153,17 @@ def _check_places(path: str, data: dict) -> None:
         if key in ("study", "grid") and not isinstance(value, dict):
             raise GridError(f"{path}: {key}: a value where a table is expected: write a [{key}] line, its keys below it")
         if key in ("seeds", "reuse") and isinstance(value, dict):
-            raise GridError(f"{path}: {key}: {table_not_value(key, f'[{key}]', TOP)}")
+            raise GridError(f"{path}: {written.place((key,))}: {table_not_value(key, f'[{key}]', TOP)}")
         said = misplaced(key, TOP, PLACES)  # a study setting above the [study] or [grid] line
         if said:
-            raise GridError(f"{path}: {key}: {said}")
+            raise GridError(f"{path}: {written.place((key,))}: {said}")
     for table in ("study", "grid"):
         for key, value in data.get(table, {}).items():
             said = misplaced(key, f"[{table}]", PLACES, [TOP], table=isinstance(value, dict))
             if not said and isinstance(value, dict):
                 said = table_not_value(key, f"[{table}.{key}]", f"[{table}]")
             if said:
-                raise GridError(f"{path}: {table}.{key}: {said}")
+                raise GridError(f"{path}: {written.place((table, key))}: {said}")
 
 
 def read_grid(path: str | Path) -> Grid:
@@ -172,7 +179,8 @@ def _read_grid(path: str, parse_float) -> Grid:
             raw = f.read()
         if empty(raw):  # (read as a grid of nothing, it ran the default study, exit 0: a new user's trial)
             raise GridError(f"{path}: {empty(raw)}")
-        data = tomllib.loads(without_bom(raw).decode("utf-8"), parse_float=parse_float)
+        text = without_bom(raw).decode("utf-8")
+        data = tomllib.loads(text, parse_float=parse_float)
     except FileNotFoundError:
         raise GridError(f"{path}: no such file") from None
     except IsADirectoryError:  # it said `Is a directory (bad)`: the system's words, not what to give
@@ -181,42 +189,53 @@ def _read_grid(path: str, parse_float) -> Grid:
         raise GridError(f"{path}: not TOML ({exc})") from None
     except UnicodeDecodeError:  # tomllib decodes bytes itself: a binary file was a traceback
         raise GridError(f"{path}: not TOML (not UTF-8 text)") from None
-    _check_places(path, data)
-    unknown = set(data) - {"study", "grid", "seeds", "reuse"}
+    written = Written(text, data)  # the file's places and values in its own words (schemas/tomlplace.py)
+    _check_places(path, data, written)
+    unknown = sorted(set(data) - {"study", "grid", "seeds", "reuse"})
     if unknown:
-        raise GridError(f"{path}: unknown key(s) {', '.join(sorted(unknown))}: use [study], [grid], seeds, reuse")
-    base = {k: _typed(path, k, v) for k, v in data.get("study", {}).items()}
+        near = difflib.get_close_matches(unknown[0], ["seeds", "reuse"], n=1, cutoff=0.75)
+        raise GridError(f"{path}: {written.place((unknown[0],))}: no such key at {TOP}"
+                        + (f" (did you mean `{near[0]}`?)" if near else "; it takes [study], [grid], seeds, reuse"))
+    base = {k: _typed(path, ("study", k), v, written) for k, v in data.get("study", {}).items()}
     axes = {}
     for k, values in data.get("grid", {}).items():
         if not isinstance(values, list) or not values:
-            raise GridError(f"{path}: [grid] {k} must be a non-empty list of values")
-        axes[k] = [_typed(path, k, v) for v in values]
-        if len(set(map(repr, axes[k]))) != len(axes[k]):
-            raise GridError(f"{path}: [grid] {k} repeats a value")
-    clash = set(base) & set(axes)
+            raise GridError(f"{path}: {written.place(('grid', k))}: must be a non-empty list of values, "
+                            f"got {written.typed(('grid', k), values)}")
+        axes[k] = [_typed(path, ("grid", k, n), v, written) for n, v in enumerate(values)]
+        again = next((n for n, v in enumerate(axes[k]) if repr(v) in map(repr, axes[k][:n])), None)
+        if again is not None:
+            raise GridError(f"{path}: {written.place(('grid', k))}: repeats a value "
+                            f"({written.typed(('grid', k, again), values[again])})")
+    clash = sorted(set(base) & set(axes))
     if clash:
-        raise GridError(f"{path}: {', '.join(sorted(clash))} both fixed in [study] and swept in [grid]")
+        raise GridError(f"{path}: {written.place(('grid', clash[0]))}: both fixed in [study] and swept in [grid]")
     seeds = data.get("seeds", 5)
     settings = math.prod(len(v) for v in axes.values())
+    typed = written.typed
     if isinstance(seeds, int) and not isinstance(seeds, bool):
         if seeds < 1:
-            raise GridError(f"{path}: seeds = {seeds}: give a count of at least 1 or a list of seeds")
+            raise GridError(f"{path}: seeds = {typed(('seeds',), seeds)}: give a count of at least 1 or a list of seeds")
         if seeds * settings > MAX_CELLS:
-            raise GridError(f"{path}: seeds = {seeds}: {counted(settings, 'setting')} x "
+            raise GridError(f"{path}: seeds = {typed(('seeds',), seeds)}: {counted(settings, 'setting')} x "
                             f"{counted(seeds, 'seed')} is over the {MAX_CELLS} cells a sweep may have")
         seeds = list(range(seeds))
     if isinstance(seeds, list) and len(seeds) * settings > MAX_CELLS:
         raise GridError(f"{path}: [grid]: {counted(settings, 'setting')} x {counted(len(seeds), 'seed')} is over the {MAX_CELLS} cells "
                         "a sweep may have")
     lo, hi = SEED_RANGE
-    if not isinstance(seeds, list) or not seeds or not all(
-            isinstance(s, int) and not isinstance(s, bool) and lo <= s <= hi for s in seeds):
-        raise GridError(f"{path}: seeds must be a count or a list of seeds {lo}..{hi}")
+    if not isinstance(seeds, list) or not seeds:
+        raise GridError(f"{path}: seeds: must be a count or a list of seeds {lo}..{hi}, got {typed(('seeds',), seeds)}")
+    bad = next((n for n, s in enumerate(seeds) if not (isinstance(s, int) and not isinstance(s, bool) and lo <= s <= hi)), None)
+    if bad is not None:
+        raise GridError(f"{path}: seeds: must be a count or a list of seeds {lo}..{hi}, "
+                        f"got {typed(('seeds', bad), seeds[bad])}")
     if len(set(seeds)) != len(seeds):
-        raise GridError(f"{path}: seeds repeats a seed")
+        again = next(n for n, s in enumerate(seeds) if s in seeds[:n])
+        raise GridError(f"{path}: seeds: repeats a seed ({typed(('seeds', again), seeds[again])})")
     reuse = data.get("reuse", False)
     if not isinstance(reuse, bool):  # `reuse = "no"` was taken as true
-        raise GridError(f"{path}: reuse = {reuse!r} must be true or false")
+        raise GridError(f"{path}: reuse: must be true or false, got {typed(('reuse',), reuse)}")
     grid = Grid(base, axes, tuple(seeds), reuse)
     for s in grid.settings():  # every cell's settings, before any cell runs: each must make the study asked for
         settings = grid.study_settings(Cell(s, grid.seeds[0]))
@@ -224,12 +243,31 @@ def _read_grid(path: str, parse_float) -> Grid:
             personas = settings.check(speed_up=grid.reuse, compare_learners=False, given={*base, *dict(s)})
         except SettingError as exc:
             value = getattr(settings, exc.key)
-            # numbers as the file gave them (a TOML 2 became 2.0 for a float setting: pairplay/numbers.py)
-            cell = f" (cell {', '.join(f'{k} = {as_toml(v)}' for k, v in s)})" if s else ""
-            raise GridError(f"{path}: {exc.key} = {as_toml(value)}: {exc.what}{cell}") from None
+            # where the value came from, as the file has it (a TOML 2 became 2.0 for a float setting, 1_000 1000:
+            # pairplay/numbers.py, schemas/tomlplace.py); a setting the file does not give is the study's default
+            at = ("study", exc.key) if exc.key in base else _axis_at(exc.key, value, axes) if exc.key in axes else None
+            said = typed(at, _at(data, at)) if at else as_toml(value)
+            what = exc.what
+            for parsed in dict.fromkeys((shown(value), str(value), repr(value))):  # its "got 1000": as typed
+                if what.endswith(f"got {parsed}"):
+                    what = what[:-len(parsed)] + said
+            place = f"{written.place(at[:2])} = {said}" if at else f"{exc.key} = {said} (the study's default)"
+            values = [f"{k} = {typed(_axis_at(k, v, axes), _at(data, _axis_at(k, v, axes)))}" for k, v in s]
+            cell = f" (cell {', '.join(values)})" if s else ""
+            raise GridError(f"{path}: {place}: {what}{cell}") from None
         if grid.reuse and len(personas) < 2:
-            raise GridError(f"{path}: reuse = true needs at least 2 personas (one is held out)")
+            raise GridError(f"{path}: reuse: reuse = true needs at least 2 personas (one is held out)")
     return grid
+
+
+def _axis_at(key: str, value, axes: dict) -> tuple:
+    """The place in the file of a [grid] axis's value: ("grid", key, index)."""
+    return ("grid", key, next(n for n, v in enumerate(axes[key]) if repr(v) == repr(value)))
+
+
+def _at(data: dict, at: tuple):
+    """The TOML read's value at `at` (("study", key) or ("grid", key, n))."""
+    return data[at[0]][at[1]] if len(at) == 2 else data[at[0]][at[1]][at[2]]
 
 
 def cell_measures(settings: StudySettings, reuse: bool = False) -> dict[str, float]:

@@ -4,8 +4,9 @@ Rule: `load_study(path)` reads the file with tomllib, converts it strictly (an
 unknown key is an error) and checks what a type cannot say (a phase's bias
 names an earlier phase, a questionnaire named by a phase exists, a Likert
 scale has 2..11 points...). Every problem is a `StudyFileError` whose message
-is ONE line naming the file and the place (`phase[1].bias`, `questionnaire.
-after-game.item[3].kind`): the CLI prints it as it is. Nothing else in the
+is ONE line naming the file and the place in the file's words
+(`[[phase]] "phase2" bias`, `[[questionnaire.after-game.item]] "followed" kind`,
+a value as typed: schemas/tomlplace.py Written): the CLI prints it as it is. Nothing else in the
 file is trusted: ids become file and bus key chunks, so they are restricted
 to [a-z0-9-_].
 
@@ -19,8 +20,10 @@ new policy alone; a questionnaire after every game built from what sections
 
 from __future__ import annotations
 
+import difflib
 import re
 import tomllib
+import typing
 from importlib import resources
 from pathlib import Path
 from typing import Literal, Union
@@ -33,7 +36,7 @@ from .config import LearnerConfig
 from .jsonfile import empty
 from .robot_url import parse_robot_url
 from .session import MS_FIELDS, MS_RANGE, SEED_RANGE
-from .tomlplace import TOP, misplaced, table_not_value
+from .tomlplace import Written, header, misplaced, table_not_value
 
 ID = re.compile(r"^[a-z0-9][a-z0-9_-]{0,39}$")
 PRESETS = ("virtual", "human-phase1", "human-phase2")
@@ -132,19 +135,30 @@ class Study(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
         return [i for i in self.questionnaire[name].item if i.ask in wanted]
 
 
-def _check(study: Study) -> None:
-    """Every rule a type cannot state; raises StudyFileError('<where>: <what>')."""
-    def need_id(where: str, value: str) -> None:
-        if not ID.match(value):
-            raise StudyFileError(f"{where}: {value!r} must be 1-40 characters of a-z 0-9 - _ (it names files)")
+class _Bad(Exception):
+    """A rule of `_check` broken at `path` (keys, and ints for array elements): what is wrong."""
 
-    need_id("study.id", study.study.id)
+    def __init__(self, path: tuple, what: str):
+        super().__init__(what)
+        self.path, self.what = path, what
+
+
+def _check(study: Study, written: Written) -> None:
+    """Every rule a type cannot state; raises _Bad(path, what), each value as the file has it (`typed`)."""
+    typed = written.typed
+
+    def need_id(path: tuple, value: str) -> None:
+        if not ID.match(value):
+            raise _Bad(path, f"{typed(path, value)} must be 1-40 characters of a-z 0-9 - _ (it names files)")
+
+    need_id(("study", "id"), study.study.id)
     if not SEED_RANGE[0] <= study.study.seed <= SEED_RANGE[1]:  # every session's seed (core/rng.py game_seed)
-        raise StudyFileError(f"study.seed: must be {SEED_RANGE[0]}..{SEED_RANGE[1]}, got {study.study.seed}")
+        raise _Bad(("study", "seed"), f"must be {SEED_RANGE[0]}..{SEED_RANGE[1]}, "
+                                      f"got {typed(('study', 'seed'), study.study.seed)}")
     for key in MS_FIELDS:
         if not MS_RANGE[0] <= getattr(study.study, key) <= MS_RANGE[1]:  # also refuses nan and inf
-            raise StudyFileError(f"study.{key}: must be {MS_RANGE[0]:g}..{MS_RANGE[1]:g} (ms), "
-                                 f"got {shown(getattr(study.study, key))}")
+            raise _Bad(("study", key), f"must be {MS_RANGE[0]:g}..{MS_RANGE[1]:g} (ms), "
+                                       f"got {typed(('study', key), getattr(study.study, key))}")
     robot = study.study.robot
     if robot != NO_ROBOT:  # the --robot option's parser: a URL a session would refuse is refused here
         try:
@@ -152,68 +166,85 @@ def _check(study: Study) -> None:
         except ValueError as err:
             why = str(err).removeprefix("--robot ")
             forms = "" if "use one of" in why else " (virtual, none, iristk://HOST[:PORT] or furhat://HOST[:PORT])"
-            raise StudyFileError(f"study.robot: {why}{forms}") from None
+            raise _Bad(("study", "robot"), f"{why}{forms}") from None
     if not study.phase:
-        raise StudyFileError("phase: a study needs at least one [[phase]]")
+        raise _Bad((), "a study needs at least one [[phase]]")
     seen: list[str] = []
     for n, p in enumerate(study.phase):
-        where = f"phase[{n}]"
-        need_id(f"{where}.id", p.id)
+        where = ("phase", n)
+        need_id(where + ("id",), p.id)
         if p.id in seen:
-            raise StudyFileError(f"{where}.id: {p.id!r} is used twice")
+            raise _Bad(where + ("id",), f"{typed(where + ('id',), p.id)} is used twice")
         if not 1 <= p.games <= 20:
-            raise StudyFileError(f"{where}.games: must be 1..20, got {p.games}")
+            raise _Bad(where + ("games",), f"must be 1..20, got {typed(where + ('games',), p.games)}")
         if not 1 <= p.rounds <= 100:
-            raise StudyFileError(f"{where}.rounds: must be 1..100, got {p.rounds}")
+            raise _Bad(where + ("rounds",), f"must be 1..100, got {typed(where + ('rounds',), p.rounds)}")
+        bias = where + ("bias",)
         if p.algorithm == "pi-reuse" and not p.bias:
-            raise StudyFileError(f"{where}.bias: pi-reuse needs the phase whose policies make the bias policy")
+            raise _Bad(bias, "pi-reuse needs the phase whose policies make the bias policy")
         if p.bias and p.bias not in seen:
-            raise StudyFileError(f"{where}.bias: {p.bias!r} is not an earlier phase (earlier: {seen or 'none'})")
+            raise _Bad(bias, f"{typed(bias, p.bias)} is not an earlier phase (earlier: {', '.join(seen) or 'none'})")
         if p.bias and p.algorithm != "pi-reuse":
-            raise StudyFileError(f"{where}.bias: only a pi-reuse phase uses a bias policy")
+            raise _Bad(bias, "only a pi-reuse phase uses a bias policy")
         if p.bias and study.phase_by_id(p.bias).games < 1:
-            raise StudyFileError(f"{where}.bias: phase {p.bias!r} plays no games")
+            raise _Bad(bias, f"phase {typed(bias, p.bias)} plays no games")
         for name in p.questionnaires:
             if name not in study.questionnaire:
-                raise StudyFileError(f"{where}.questionnaires: no [questionnaire.{name}] in the file")
+                raise _Bad(where + ("questionnaires",), f"no [questionnaire.{name}] in the file")
         try:
             schedule = study.learner_config(p)
         except (TypeError, ValueError, msgspec.ValidationError) as err:
-            # a phase's key below its [phase.learner] line is the learner's (schemas/tomlplace.py)
-            raise StudyFileError(_placed(f"{err} - at `$.{where}.learner`") or f"{where}.learner: {err}") from None
+            raise _learner(err, where + ("learner",), p.learner, written) from None
         never = schedule.never_reuses() if p.algorithm == "pi-reuse" else ""
         if never:  # 1 round under human-phase2: its one round is the last, on the new policy alone
-            raise StudyFileError(f"{where}: a pi-reuse phase of {counted(p.rounds, 'round')} "
-                                 f"that never reuses the bias policy: {never} (preset {p.preset}; give 2 rounds "
-                                 "or more, or learner overrides that reuse)")
+            raise _Bad(where, f"a pi-reuse phase of {counted(p.rounds, 'round')} "
+                              f"that never reuses the bias policy: {never} (preset {p.preset}; give 2 rounds "
+                              "or more, or learner overrides that reuse)")
         seen.append(p.id)
     if study.phase[0].players == "all":
-        raise StudyFileError("phase[0].players: the first phase has no earlier players; use \"new\"")
+        raise _Bad(("phase", 0, "players"), "the first phase has no earlier players; use \"new\"")
     for name, q in study.questionnaire.items():
-        need_id(f"questionnaire.{name}", name)
+        need_id(("questionnaire", name), name)
         if not q.item:
-            raise StudyFileError(f"questionnaire.{name}: needs at least one [[questionnaire.{name}.item]]")
+            raise _Bad(("questionnaire", name), f"needs at least one [[questionnaire.{name}.item]]")
         ids: set[str] = set()
         for n, item in enumerate(q.item):
-            where = f"questionnaire.{name}.item[{n}]"
-            need_id(f"{where}.id", item.id)
+            where = ("questionnaire", name, "item", n)
+            need_id(where + ("id",), item.id)
             if item.id in ids:
-                raise StudyFileError(f"{where}.id: {item.id!r} is used twice in questionnaire {name!r}")
+                raise _Bad(where + ("id",), f"{typed(where + ('id',), item.id)} is used twice in questionnaire {name}")
             ids.add(item.id)
             if not item.text.strip():
-                raise StudyFileError(f"{where}.text: the question is empty")
+                raise _Bad(where + ("text",), "the question is empty")
             if item.kind == "likert" and not 2 <= item.scale <= 11:
-                raise StudyFileError(f"{where}.scale: a Likert scale has 2..11 points, got {item.scale}")
+                raise _Bad(where + ("scale",), f"a Likert scale has 2..11 points, "
+                                               f"got {typed(where + ('scale',), item.scale)}")
             if item.kind == "choice" and len(item.options) < 2:
-                raise StudyFileError(f"{where}.options: a choice needs at least 2 options")
+                raise _Bad(where + ("options",), "a choice needs at least 2 options")
             if item.kind != "choice" and item.options:
-                raise StudyFileError(f"{where}.options: only a choice item has options")
+                raise _Bad(where + ("options",), "only a choice item has options")
             if not 1 <= item.max_chars <= 20000:
-                raise StudyFileError(f"{where}.max_chars: must be 1..20000")
+                raise _Bad(where + ("max_chars",), f"must be 1..20000, got {typed(where + ('max_chars',), item.max_chars)}")
+
+
+def _learner(err: Exception, where: tuple, given: dict, written: Written) -> _Bad:
+    """A phase's learner overrides that LearnerConfig refuses, at the key it names: its range ("alpha_start
+    must be 0..1, got nan", the value as typed), msgspec's type or unknown key (a phase's key below its
+    [phase.learner] line is the learner's: schemas/tomlplace.py)."""
+    text = str(err)
+    ranged = re.fullmatch(r"(\w+) must be (.+), got .*", text)
+    if ranged and ranged[1] in given:
+        path = where + (ranged[1],)
+        return _Bad(path, f"must be {ranged[2]}, got {written.typed(path, given[ranged[1]])}")
+    what, inner = _located(text)  # msgspec's `$.epsilon_every`: a key of the learner's
+    text = f"{what} - at `$.{where[0]}[{where[1]}].{where[2]}{'.' + inner if inner else ''}`"
+    placed = _placed(text, written.raw, written)
+    return placed or _where(text, written.raw, written)
 
 
 def parse_study(text: str, source: str = "study") -> Study:
-    """A Study from TOML text; StudyFileError('<source>: <where>: <what>') if anything is wrong."""
+    """A Study from TOML text; StudyFileError('<source>: <place>: <what>') if anything is wrong, the place in
+    the file's words (`[[phase]] "phase1" rounds`: schemas/tomlplace.py Written)."""
     if empty(text):  # (tomllib reads it as a table of nothing: "Object missing required field `study`")
         raise StudyFileError(f"{source}: {empty(text)}")
     with typed_floats() as parse_float:  # a number a line echoes, as the file has it (pairplay/numbers.py)
@@ -221,32 +252,71 @@ def parse_study(text: str, source: str = "study") -> Study:
             raw = tomllib.loads(text, parse_float=parse_float)
         except tomllib.TOMLDecodeError as err:
             raise StudyFileError(f"{source}: not valid TOML: {err}") from None
+        written = Written(text, raw)
         try:
             study = msgspec.convert(raw, Study)
+            _check(study, written)
         except msgspec.ValidationError as err:
-            raise StudyFileError(f"{source}: {_placed(str(err), raw) or _where(str(err), raw)}") from None
-        try:
-            _check(study)
-        except StudyFileError as err:
-            raise StudyFileError(f"{source}: {err}") from None
+            bad = _placed(str(err), raw, written) or _where(str(err), raw, written)
+            raise StudyFileError(_line(source, bad, written)) from None
+        except _Bad as bad:
+            raise StudyFileError(_line(source, bad, written)) from None
     return study
 
 
-def _where(message: str, raw: object = None) -> str:
-    """msgspec's 'Expected `int`, got `str` - at `$.phase[0].rounds`' as 'phase[0].rounds: Expected ...'.
-    A table's value (`learner = { alpha_start = "x" }`) msgspec says at `[...]`: its key is named, from
-    the TOML read (`raw`), so the line says which field."""
-    if not re.search(r" - at `\$", message):
-        return message
+def _line(source: str, bad: _Bad, written: Written) -> str:
+    """`FILE: [table] key: what`, the place in the file's words (a rule of the whole file: `FILE: what`)."""
+    place = written.place(bad.path)
+    return f"{source}: {place}: {bad.what}" if place else f"{source}: {bad.what}"
+
+
+def _where(message: str, raw: object, written: Written) -> _Bad:
+    """msgspec's 'Expected `int`, got `str` - at `$.phase[0].rounds`' as (path, 'must be an integer, got
+    "five"'), in words (as the sweep file's check says them) and the value as the file has it. A table's
+    value (`learner = { alpha_start = "x" }`) msgspec says at `[...]`: its key is named from the TOML read
+    (`raw`). An unknown key is said with the keys its table takes (the one it resembles first)."""
     what, where = _located(message)
-    if "[...]" in where and raw is not None:
+    if "[...]" in where:
         where = _name_keys(where, what, raw)
-    # msgspec's type names in words, as the sweep file's check says them ("rounds = 1e3 is not an integer"
-    # there, "Expected `int`, got `float`" here: a trial)
-    kinds = re.fullmatch(r"Expected `(\w+)`, got `(\w+)`", what)
-    if kinds and all(k in TYPE_NAMES for k in kinds.groups()):
-        what = f"must be {type_name(kinds[1])}, not {type_name(kinds[2])}"
-    return f"{where or 'top level'}: {what}"
+    path = _path(where)
+    kinds = re.fullmatch(r"Expected `([\w |]+)`, got `(\w+)`", what)
+    if kinds:
+        wanted = [k for k in kinds[1].split(" | ") if k != "null"]
+        if {"int", "float"} <= set(wanted):
+            wanted.remove("int")  # "a number" covers both
+        if all(k in TYPE_NAMES for k in wanted):
+            return _Bad(path, f"must be {' or '.join(type_name(k) for k in wanted)}, "
+                              f"got {written.typed(path, _at(raw, path))}")
+    enum = re.fullmatch(r"Invalid enum value (.+)", what)
+    if enum:
+        options = _options(path)
+        said = f"must be one of {', '.join(options)}" if options else "is not one of the values it takes"
+        return _Bad(path, f"{said}, got {written.typed(path, _at(raw, path))}")
+    unknown = re.fullmatch(r"Object contains unknown field `(.+)`", what)
+    if unknown:
+        key, shape = unknown[1], _shape(path)
+        keys = sorted(_keys(shape)) if shape in TABLES else []
+        kind = "table" if isinstance(_at(raw, path + (key,)), dict) else "key"
+        near = difflib.get_close_matches(key, keys, n=1, cutoff=0.75) if kind == "key" else []  # a misspelt key
+        said = f"{header(path)} has no {kind} `{key}`"
+        said += f" (did you mean `{near[0]}`?)" if near else f"; its keys: {', '.join(keys)}" if keys else ""
+        return _Bad(path + (key,), said)
+    missing = re.fullmatch(r"Object missing required field `(.+)`", what)
+    if missing:
+        return _Bad(path, f"needs `{missing[1]} = ...` (a {header(path)} has no default for it)"
+                    if path else f"needs a [{missing[1]}] table")
+    return _Bad(path, what)
+
+
+def _options(path: tuple) -> list[str]:
+    """The values a Literal field at `path` takes (Item.kind: likert, text, choice), [] if none known."""
+    shape = _shape(path[:-1])
+    if shape not in TABLES or not path:
+        return []
+    for f in msgspec.structs.fields(TABLES[shape]):
+        if f.name == path[-1]:
+            return [str(a) for a in typing.get_args(f.type)]
+    return []
 
 
 # the file's tables (schemas/tomlplace.py): a table's path, its indices as "#" and a questionnaire's name as
@@ -258,8 +328,14 @@ TABLES = {(): Study, ("study",): StudyHead, ("phase", "#"): Phase, ("phase", "#"
 def _located(message: str) -> tuple[str, str]:
     """msgspec's message as (what, where): 'Expected `int`, got `str` - at `$.phase[0].rounds`' ->
     ('Expected ...', 'phase[0].rounds'); where is "" at the file's top, which msgspec does not name."""
-    m = re.match(r"^(.*) - at `\$\.?(.*)`$", message)
+    m = re.match(r"^(.*?) - at `\$\.?(.*)`$", message)
     return m.groups() if m else (message, "")
+
+
+def _path(where: str) -> tuple:
+    """msgspec's 'phase[0].learner.alpha_start' (its keys named) as ("phase", 0, "learner", "alpha_start")."""
+    return tuple(int(t[1:-1]) if t.startswith("[") else t.lstrip(".")
+                 for t in re.findall(r"\[\d+\]|\.?[^.\[]+", where))
 
 
 def _shape(path: tuple) -> tuple:
@@ -267,30 +343,19 @@ def _shape(path: tuple) -> tuple:
                  for n, t in enumerate(path))
 
 
-def _header(path: tuple) -> str:
-    """A table's header as the file writes it: ("phase", 0, "learner") -> [phase.learner]."""
-    if not path:
-        return TOP
-    names = ".".join(t for t in path if isinstance(t, str))
-    return f"[[{names}]]" if isinstance(path[-1], int) else f"[{names}]"
-
-
 def _keys(shape: tuple) -> frozenset[str]:
     return frozenset(f.name for f in msgspec.structs.fields(TABLES[shape]))
 
 
-def _placed(message: str, raw: object = None) -> str:
-    """msgspec's error as 'where: which table the key belongs to' when a key or a table stands at the wrong
-    level (schemas/tomlplace.py), else "". `raw`: the TOML read, to find a required key that a table
+def _placed(message: str, raw: object, written: Written) -> _Bad | None:
+    """msgspec's error as (path, which table the key belongs to) when a key or a table stands at the wrong
+    level (schemas/tomlplace.py), else None. `raw`: the TOML read, to find a required key that a table
     written too early took (`[phase.learner]` above the phase's `games`)."""
     # msgspec names no place for a key of the file's top ("Object contains unknown field `robot`")
     what, where = _located(message)
     if "[...]" in where:  # a table's value (a key of [phase.learner], a questionnaire's name): named from `raw`
-        if raw is None:
-            return ""
         where = _name_keys(where, what, raw)
-    path = tuple(int(t[1:-1]) if t.startswith("[") else t.lstrip(".")
-                 for t in re.findall(r"\[\d+\]|\.?[^.\[]+", where))
+    path = _path(where)
     unknown = re.match(r"Object contains unknown field `(.+)`$", what)
     missing = re.match(r"Object missing required field `(.+)`$", what)
     if unknown or missing:
@@ -299,22 +364,21 @@ def _placed(message: str, raw: object = None) -> str:
             node = _at(raw, table)
             child = next((k for k, v in (node or {}).items() if isinstance(v, dict) and key in v), None)
             if child is None or _shape(table + (child,)) not in TABLES:
-                return ""
-            table, where = table + (child,), f"{where}.{child}"
-        where = f"{where}.{key}" if where else key
+                return None
+            table = table + (child,)
     elif path and isinstance(path[-1], str) and _shape(path[:-1]) in TABLES:
         table, key = path[:-1], path[-1]
         if "got `object`" in what and isinstance(_at(raw, path), dict) and key in _keys(_shape(table)):
-            return f"{where}: {table_not_value(key, _header(path), _header(table))}"
+            return _Bad(path, table_not_value(key, header(path), header(table)))
     else:
-        return ""
+        return None
     if _shape(table) not in TABLES:
-        return ""
-    tables = {_header(tuple(t if t not in ("#", "*") else (0 if t == "#" else (table[1] if len(table) > 1 else "NAME"))
-                            for t in shape)): _keys(shape) for shape in TABLES}
-    enclosing = [_header(table[:n]) for n in range(len(table) - 1, -1, -1) if _shape(table[:n]) in TABLES]
-    said = misplaced(key, _header(table), tables, enclosing, table=isinstance(_at(raw, table + (key,)), dict))
-    return f"{where}: {said}" if said else ""
+        return None
+    tables = {header(tuple(t if t not in ("#", "*") else (0 if t == "#" else (table[1] if len(table) > 1 else "NAME"))
+                           for t in shape)): _keys(shape) for shape in TABLES}
+    enclosing = [header(table[:n]) for n in range(len(table) - 1, -1, -1) if _shape(table[:n]) in TABLES]
+    said = misplaced(key, header(table), tables, enclosing, table=isinstance(_at(raw, table + (key,)), dict))
+    return _Bad(table + (key,), said) if said else None
 
 
 def _at(raw: object, path: tuple) -> object:

@@ -186,9 +186,12 @@ def check_not_folders(path: str | Path) -> None:
     recording already; --force replaces it", which did not."""
     path = Path(path)
     for p in [path, *recordings_of(path), *journals_of(path), *set_aside_of(path)]:
-        if p.is_dir():
-            raise OutputError("is a folder where the session's recording (or its journal) is written; a folder is "
-                              "never replaced or renamed, --force or not: remove or rename it", p)
+        if p.is_dir():  # which file it stands for, by its name (a `.replaced` was called the recording)
+            what = (f"`session --force` keeps the earlier recording (named *{REPLACED})" if p.name.endswith(REPLACED)
+                    else "a killed recorder's journal is kept" if p.name.endswith(".journal")
+                    else "the session's recording is written")
+            raise OutputError(f"is a folder where {what}; a folder is never replaced or renamed, --force or not: "
+                              "remove or rename it", p)
 
 
 def check_new_recording(path: str | Path, hint: str = NEW_SESSION_HINT, set_aside_too: bool = True) -> Path:

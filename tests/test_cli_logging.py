@@ -119,3 +119,39 @@ def test_quiet_silences_what_the_protocol_actions_and_the_session_verbs_say_they
     assert done.returncode == 0 and done.stderr == "", done
     assert done.stdout.startswith("session q1: bus listening on") and done.stdout.count("\n") == 1, done.stdout
     assert (tmp_path / "rec" / "q1.mcap").is_file()
+
+
+def test_quiet_keeps_where_to_watch_a_view_and_leaves_out_the_bench_progress(tmp_path, monkeypatch, capsys):
+    """-q keeps the results a user asked for and leaves out progress and chatter, every verb alike (cli/main.py
+    rule). `view --serve -q` printed nothing, not even the address of the viewer it served (view was silenced
+    whole, as a verb whose results are files); `bench -q` still said "measuring ..." and the load average."""
+    import select
+    import signal
+    import subprocess
+    import sys
+    import time
+    from pathlib import Path
+
+    from pairplay.cli.main import main
+    from test_bench_goals import _one_source
+
+    _one_source(monkeypatch, [])
+    assert main(["bench", "--only", "fake", "-q"]) == 0
+    out, err = capsys.readouterr()
+    assert "0.40 s" in out and err == "", (out, err)  # the table is its result; no progress, no load line
+    assert main(["bench", "--only", "fake"]) == 0
+    assert "measuring fake" in capsys.readouterr().err  # without -q: its progress
+    sample = Path(__file__).resolve().parents[1] / "recordings" / "samples" / "sim-ashley.mcap"
+    view = subprocess.Popen([sys.executable, "-m", "pairplay", "view", "--recording", str(sample), "--no-save",
+                             "--serve", "--grpc-port", "0", "--web-port", "0", "-q"],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=tmp_path)
+    try:
+        # (before: nothing until the process ended, which --serve leaves to a Ctrl-C)
+        ready = select.select([view.stdout], [], [], 60)[0]
+        line = view.stdout.readline() if ready else ""
+        assert line.startswith("web viewer: http://127.0.0.1:"), line
+    finally:
+        time.sleep(0.2)
+        view.send_signal(signal.SIGINT)
+        out, err = view.communicate(timeout=60)
+    assert "saved" not in out and "viewed" not in out, out  # the summary: left out under -q

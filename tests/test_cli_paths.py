@@ -279,3 +279,47 @@ def test_an_output_folder_given_with_a_trailing_slash_is_that_folder(key):
     rest = given.get(key[0], [])
     args = parser.parse_args([*verb, *rest, "x/"] if option == "folder" else [*verb, *rest, option, "x/"])
     assert Path(getattr(args, "folder" if option == "folder" else "out")) == Path("x")
+
+# a folder (or a file) where a study folder's journal and files, or `session --force`'s set-aside copy, are
+# written: the one line names it and says which it stands for. Before: `protocol init` with journal.jsonl a
+# folder said "already a study folder", `protocol status` "not a study folder (no journal.jsonl ...)", init with
+# recordings a file the OS's "File exists", a folder <id>.mcap.replaced "where the session's recording (or its
+# journal) is written" (trial; the lead's hint list)
+IN_THE_WAY_NAMED = {
+    "protocol init: a folder for journal.jsonl": (["protocol", "init", "s", "--study", "study.toml"], "s/journal.jsonl",
+                                                  "is a folder where a file is written"),
+    "protocol init: a folder for study.toml": (["protocol", "init", "t", "--study", "study.toml"], "t/study.toml",
+                                               "is a folder where a file is written"),
+    "protocol init: a file for recordings/": (["protocol", "init", "u", "--study", "study.toml"], "u/recordings",
+                                              "is a file where a folder is needed"),
+    "protocol status: a folder for journal.jsonl": (["protocol", "status", "s"], "s/journal.jsonl",
+                                                    "is a folder where the study's journal is written"),
+    "session: a folder for the set-aside copy": (["session", "--participant", "sim:ashley", "--rounds", "1",
+                                                  "--session", "m", "--out", "d"], "d/m.mcap.replaced",
+                                                 "is a folder where `session --force` keeps the earlier recording"),
+}
+
+
+@pytest.mark.parametrize("case", IN_THE_WAY_NAMED, ids=list(IN_THE_WAY_NAMED))
+def test_a_folder_where_a_study_file_or_a_set_aside_copy_goes_is_named_for_what_it_stands_for(
+        case, template, tmp_path, monkeypatch, capsys):
+    from pairplay.schemas.study import example_text
+
+    args, named, said = IN_THE_WAY_NAMED[case]
+    root = tmp_path / "w"
+    shutil.copytree(template, root)
+    (root / "study.toml").write_text(example_text())
+    for folder in ("s/journal.jsonl", "t/study.toml", "d/m.mcap.replaced"):
+        (root / folder).mkdir(parents=True)
+    (root / "u").mkdir()
+    (root / "u" / "recordings").write_text("the user's file")
+    monkeypatch.chdir(root)
+    before = sorted(p.relative_to(root) for p in root.rglob("*"))
+    assert main(args) == 2
+    out, err = capsys.readouterr()
+    [line] = err.strip().splitlines()
+    verb = " ".join(args[:2] if args[0] == "protocol" else args[:1])
+    assert line.startswith(f"pairplay {verb}: ") and out == "", err
+    assert sorted(p.relative_to(root) for p in root.rglob("*")) == before  # nothing written, nothing renamed
+    assert said in line and named in line and "already a study folder" not in line, line
+    assert "not a study folder" not in line and "File exists" not in line and "(or its journal)" not in line, line

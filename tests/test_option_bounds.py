@@ -54,7 +54,7 @@ def test_a_session_config_refuses_a_game_index_core_cannot_run():
 @pytest.mark.parametrize("seed", ["-1", "18446744073709551616"])
 def test_a_study_files_seed_is_in_the_seed_range(seed):
     from pairplay.schemas.study import StudyFileError, example_text, parse_study
-    with pytest.raises(StudyFileError, match="study.seed: must be 0..18446744073709551615"):
+    with pytest.raises(StudyFileError, match=r"\[study\] seed: must be 0..18446744073709551615"):
         parse_study(example_text().replace("seed = 0", f"seed = {seed}", 1), "s.toml")
 
 

@@ -148,10 +148,10 @@ def test_every_study_setting_is_an_option_of_the_verb():
 GRID_MISTAKES = [
     ('reuse = true\nseeds = 1\n[study]\npersonas = "blind,deaf"\ngames = 1\neval_rounds = 2\nreuse_seeds = 1\n'
      'reuse_last = 2\n[grid]\nrounds = [20, 5]\n', "rounds = 5: must be at least 10"),
-    ('seeds = 1\n[study]\npersonas = " "\n', "personas = ' ': names no persona"),
-    ('seeds = 1\n[grid]\npersonas = ["blind", ""]\n', "personas = '': names no persona"),
-    ('seeds = 1\n[study]\npersonas = "blind,blind"\n', "personas = 'blind,blind': names blind twice"),
-    ('seeds = 1\n[grid]\npersonas = ["blind", "blind,,deaf"]\n', "personas = 'blind,,deaf': 'blind,,deaf' has an empty item"),
+    ('seeds = 1\n[study]\npersonas = " "\n', '[study] personas = " ": names no persona'),
+    ('seeds = 1\n[grid]\npersonas = ["blind", ""]\n', '[grid] personas = "": names no persona'),
+    ('seeds = 1\n[study]\npersonas = "blind,blind"\n', '[study] personas = "blind,blind": names blind twice'),
+    ('seeds = 1\n[grid]\npersonas = ["blind", "blind,,deaf"]\n', '[grid] personas = "blind,,deaf": \'blind,,deaf\' has an empty item'),
     ('reuse = true\nseeds = 1\n[study]\npersonas = "blind,deaf"\nrounds = 20\nreuse_last = 50\n',
      "reuse_last = 50: must be below rounds 20"),
     ('seeds = [1, 99999999999999999999]\n[study]\npersonas = "blind"\n', "seeds 0..18446744073709551615"),
@@ -161,15 +161,15 @@ GRID_MISTAKES = [
      "psi = 1.5: must be between 0 and 1"),
     ('reuse = true\nseeds = 1\n[study]\npersonas = "blind,deaf"\n[grid]\npsi = [0.5, 0.0]\n',
      "psi = 0.0: must be above 0 when the speed-up runs"),  # 0.0 as the file has it (pairplay/numbers.py)
-    ('[study]\nalgorithm = "sarsa"\n', "algorithm = 'sarsa': must be one of q-learning, lspi"),
-    ('[study]\nreward_bonus = "always"\n', "reward_bonus = 'always': must be one of correct, consistent, match"),
+    ('[study]\nalgorithm = "sarsa"\n', '[study] algorithm = "sarsa": must be one of q-learning, lspi, got "sarsa"'),
+    ('[study]\nreward_bonus = "always"\n', '[study] reward_bonus = "always": must be one of correct, consistent, match'),
     # LSPI's settings in a cell that learns by Q-learning, which ignored them (the study's and session's rule)
-    ('seeds = 1\n[study]\nlspi_ridge = 2\n', "algorithm = 'q-learning': lspi_ridge needs algorithm lspi, not q-learning"),
+    ('seeds = 1\n[study]\nlspi_ridge = 2\n', "algorithm = 'q-learning' (the study's default): lspi_ridge needs algorithm lspi, not q-learning"),
     # a trial: a grid of the speed-up's settings without `reuse = true` gave cells alike, exit 0
     ('seeds = 1\n[study]\npersonas = "blind,deaf"\n[grid]\npsi_decay = [0.5, 0.99]\n',
      "psi_decay = 0.5: psi_decay set the speed-up experiment (pi-reuse), which does not run here: it needs reuse = true"),
     ('seeds = 1\n[grid]\nalgorithm = ["lspi", "q-learning"]\nlspi_every = [3, 10]\n',
-     "lspi_every needs algorithm lspi, not q-learning (cell algorithm = 'q-learning', lspi_every = 3)"),
+     'lspi_every needs algorithm lspi, not q-learning (cell algorithm = "q-learning", lspi_every = 3)'),
 ]
 
 
@@ -210,8 +210,8 @@ def test_a_number_is_echoed_as_it_was_given_and_a_type_is_named_in_words(tmp_pat
         with pytest.raises(StudyFileError) as info:
             parse_study(text, "s.toml")
         assert str(info.value).endswith(said) and f"{said}.0" not in str(info.value), info.value
-    grids = {"[grid]\ngames = ['two']": "is not an integer", "[grid]\npsi = [2]": "got 2",
-             "[grid]\nseed_count = 1\n": "is not a", "[grid]\nrounds = [3.5]": "is not an integer"}
+    grids = {"[grid]\ngames = ['two']": "must be an integer, got 'two'", "[grid]\npsi = [2]": "got 2",
+             "[grid]\nseed_count = 1\n": "is not a", "[grid]\nrounds = [3.5]": "must be an integer, got 3.5"}
     for text, said in list(grids.items())[:2] + [list(grids.items())[3]]:
         (tmp_path / "g.toml").write_text(text)
         with pytest.raises(GridError) as info:

@@ -74,16 +74,24 @@ def test_a_dask_cluster_of_two_workers_gives_the_same_tables(tmp_path):
 
 @pytest.mark.parametrize("text,needle", [
     ("seeds = 0", "seeds = 0"),
-    ("[grid]\npsi = 0.5", "must be a non-empty list"),
-    ("[grid]\nwobble = [1, 2]", "unknown study setting 'wobble'"),
-    ("[grid]\ngames = [1, 1]", "repeats a value"),
-    ("[grid]\ngames = ['two']", "is not an integer"),
+    ("seeds = 1_000_000", "seeds = 1_000_000: 1 setting x 1000000 seeds"),  # as typed, not 1000000
+    ("seeds = [1, 0x1]", r"seeds: repeats a seed \(0x1\)"),
+    ("seed = 3", r"seed: no such key at the top of the file \(did you mean `seeds`\?\)"),  # "unknown key\(s\)"
+    ("[grid]\npsi = 0.5", r"\[grid\] psi: must be a non-empty list of values, got 0.5"),
+    ("[grid]\nwobble = [1, 2]", r"\[grid\] wobble: no study setting `wobble`; known: algorithm, "),
+    # a misspelt setting: the one it resembles (it was "unknown study setting 'rouns'", no table)
+    ("[study]\nrouns = 20", r"\[study\] rouns: no study setting `rouns` \(did you mean `rounds`\?\)"),
+    # a value as typed (`rounds = 20.0`, `1_0`), where it came from: the table and key
+    ("[study]\nrounds = 20.0", r"\[study\] rounds: must be an integer, got 20.0$"),
+    ("[grid]\nrounds = [20, 1_0, -1_0]", r"\[grid\] rounds = -1_0: must be at least 1, got -1_0 \(cell rounds = -1_0\)"),
+    ("[grid]\ngames = [1, 1]", r"\[grid\] games: repeats a value \(1\)"),
+    ("[grid]\ngames = ['two']", "must be an integer, got 'two'"),
     ("[study]\npersonas = 'nobody'", "nobody"),
     ("reuse = true\n[study]\npersonas = 'blind'", "at least 2 personas"),
-    ("[study]\ngames = 2\n[grid]\ngames = [1, 2]", "both fixed"),
+    ("[study]\ngames = 2\n[grid]\ngames = [1, 2]", r"\[grid\] games: both fixed in \[study\] and swept in \[grid\]"),
     ("grid = [", "not TOML"),
     ("[study]\npersonas = ['blind', '']", "each item of the list is one persona's name"),
-    ("[study]\npersonas = ['blind', 3]", "is not text"),
+    ("[study]\npersonas = ['blind', 3]", r"\[study\] personas: must be text, got \['blind', 3\]"),
     ("[grid]\npersonas = [['blind', 'blind']]", "names blind twice"),
 ])
 def test_a_grid_that_cannot_run_is_refused_naming_the_file_and_key(tmp_path, text, needle):
@@ -437,17 +445,17 @@ def test_workers_that_together_would_pass_the_memory_limit_are_refused_before_an
 
 @pytest.mark.parametrize("text,said", [
     # a new user's trial: a top-level key written below a table's line is that table's
-    ("[study]\npersonas = 'blind'\nseeds = 3\n", "study.seeds: `seeds` belongs at the top of the file, not to "
+    ("[study]\npersonas = 'blind'\nseeds = 3\n", "[study] seeds: `seeds` belongs at the top of the file, not to "
      "[study]: the keys after a [study] line are that table's; move `seeds = ...` above that line"),
-    ("[grid]\npsi = [0.5]\nreuse = true\n", "grid.reuse: `reuse` belongs at the top of the file, not to [grid]"),
+    ("[grid]\npsi = [0.5]\nreuse = true\n", "[grid] reuse: `reuse` belongs at the top of the file, not to [grid]"),
     # a trial: a study setting above the [study] or [grid] line (it was "unknown key(s) psi")
     ("seeds = 2\npsi = 0.5\n[grid]\nrounds = [10, 20]\n", "psi: `psi` belongs to [study] or [grid], not at the top "
      "of the file (above its first [table] line): move `psi = ...` below the [study] or [grid] line"),
     ("rounds = 10\n[study]\npsi = 0.5\n", "rounds: `rounds` belongs to [study] or [grid], not at the top of the file"),
-    ("[grid.psi]\nx = [1]\n", "grid.psi: [grid.psi] is a table, where `psi` takes a value: write `psi = ...` "
+    ("[grid.psi]\nx = [1]\n", "[grid.psi]: [grid.psi] is a table, where `psi` takes a value: write `psi = ...` "
      "among the keys of [grid]"),
-    ("[study.psi]\nx = 1\n", "study.psi: [study.psi] is a table, where `psi` takes a value"),
-    ("[seeds]\nn = 1\n", "seeds: [seeds] is a table, where `seeds` takes a value: write `seeds = ...` at the top"),
+    ("[study.psi]\nx = 1\n", "[study.psi]: [study.psi] is a table, where `psi` takes a value"),
+    ("[seeds]\nn = 1\n", "[seeds]: [seeds] is a table, where `seeds` takes a value: write `seeds = ...` at the top"),
     ("study = 3\n", "study: a value where a table is expected: write a [study] line, its keys below it"),  # a traceback
 ])
 def test_a_key_or_table_at_the_wrong_level_says_where_it_belongs(tmp_path, text, said):
@@ -532,9 +540,9 @@ def test_a_forced_sweep_of_another_grid_keeps_none_of_the_first_grids_figures(tm
 
 
 @pytest.mark.parametrize("line,said", [
-    ("rounds = 1e7", "rounds = 1e7 is not an integer"),  # it was "rounds = 10000000.0 is not an integer"
-    ("psi = 1e7", "psi = 1e7: must be between 0 and 1, got 1e7"),  # "psi = 10000000: ..., got 10000000"
-    ("psi = 1.50", "psi = 1.50: must be between 0 and 1, got 1.50"),
+    ("rounds = 1e7", "[study] rounds: must be an integer, got 1e7"),  # it was "rounds = 10000000.0 is not an integer"
+    ("psi = 1e7", "[study] psi = 1e7: must be between 0 and 1, got 1e7"),  # "psi = 10000000: ..., got 10000000"
+    ("psi = 1.50", "[study] psi = 1.50: must be between 0 and 1, got 1.50"),
 ])
 def test_a_number_of_the_sweep_file_is_echoed_as_the_file_has_it(tmp_path, line, said):
     """A trial: a refused number was echoed as Python parsed it, not as written; the line points at the file's
