@@ -47,6 +47,7 @@ from pairplay.errors import InputError
 from pairplay.livelock import LIVE, is_live
 from pairplay.outputs import OutputError, check_places, output_file, set_aside_of
 from pairplay.schemas import journal as j
+from pairplay.schemas.jsonfile import in_words
 from pairplay.schemas.policy import read_policy, write_policy
 from pairplay.schemas.study import Study, StudyFileError, load_study
 from pairplay.numbers import counted
@@ -692,7 +693,8 @@ def _settings(path: Path) -> dict:
     try:
         return msgspec.structs.asdict(msgspec.json.decode(path.read_bytes(), type=FolderSettings))
     except (msgspec.DecodeError, msgspec.ValidationError) as err:
-        raise StudyDataError(f"{path}: not the study's settings ({err}): it is {{\"key_file\": \"<path or empty>\"}}") \
+        raise StudyDataError(f"{path}: not the study's settings ({in_words(err, FolderSettings)}): it is "
+                             f"{{\"key_file\": \"<path or empty>\"}}") \
             from None
 
 

@@ -12,16 +12,25 @@ filled it in: `{}`-like files with the other fields were read as policies).
 A UTF-8 byte order mark (a Windows editor's) is accepted, as in every text
 input of ours (`without_bom`): it was "malformed at byte 0", the BOM unnamed.
 A file of nothing (or of blanks) is "<file>: the file is empty" (`empty`), in
-every JSON, TOML or MCAP input alike.
+every JSON, TOML or MCAP input alike. Why a JSON file cannot be used is said in
+the file's words (`in_words`): the key as the file writes it and what is wrong
+("q[0][1]: must be a number, got text"; "has no key `yaw_sgn` (did you mean
+`yaw_sign`?)"), not msgspec's ("Expected `float`, got `str` - at `$.q[0][1]`"),
+for every JSON input alike (policy and user-model files, the robot config, the
+calibration).
 """
 
 from __future__ import annotations
 
+import difflib
+import re
+import types
+import typing
 from pathlib import Path
 from typing import Generic, TypeVar
 
 import msgspec
-from pairplay.numbers import counted
+from pairplay.numbers import counted, type_name
 
 T = TypeVar("T")
 BOM = b"\xef\xbb\xbf"  # UTF-8's byte order mark: Notepad and other editors start a saved file with it
@@ -47,6 +56,72 @@ def empty(data: bytes | str) -> str:
     return "the file is empty" + (f" ({counted(len(raw), 'byte')} of blank)" if raw else "")
 
 
+_LOCATED = re.compile(r"(.*?)(?: - at `\$(.*)`)?", re.S)
+_BOUND = {">=": "at least", "<=": "at most", ">": "above", "<": "below"}
+
+
+def in_words(exc: Exception, struct: type | None = None) -> str:
+    """Why msgspec could not read a JSON file, in the file's words (module rule): "KEY: what is wrong",
+    KEY the path as the file writes it (`cards[0][2]`, `learner.alpha`; none at the top). `struct`, the
+    Struct the file is read as, names the keys a table takes for an unknown one (and the one it resembles).
+    What it does not know is said as msgspec says it."""
+    text = str(exc)
+    if not isinstance(exc, msgspec.ValidationError):
+        malformed = re.fullmatch(r"JSON is malformed: (.*)", text, re.S)
+        return f"not valid JSON: {malformed[1]}" if malformed else text
+    what, where = _LOCATED.fullmatch(text).groups()
+    where = (where or "").lstrip(".")
+    said = what
+    if kinds := re.fullmatch(r"Expected `([\w |]+)`, got `(\w+)`", what):
+        wanted = [k for k in kinds[1].split(" | ") if k != "null"]
+        if {"int", "float"} <= set(wanted):
+            wanted.remove("int")  # "a number" covers both
+        said = f"must be {' or '.join(type_name(k) for k in wanted)}, got {type_name(kinds[2])}"
+    elif bound := re.fullmatch(r"Expected `(?:int|float)` (>=|<=|>|<) (\S+)", what):
+        said = f"must be {_BOUND[bound[1]]} {bound[2]}"
+    elif length := re.fullmatch(r"Expected `(array|str|object)` of (?:length (>=|<=) (\d+)|(at least |at most )?"
+                                r"length (\d+)(?:, got (\d+))?)", what):
+        item = {"array": "item", "str": "character", "object": "key"}[length[1]]
+        bound = _BOUND[length[2]] if length[2] else (length[4] or "exactly ").strip()
+        said = f"must hold {bound} {counted(int(length[3] or length[5]), item)}" + (
+            f", holds {length[6]}" if length[6] else "")
+    elif unknown := re.fullmatch(r"Object contains unknown field `(.+)`", what):
+        key, keys = unknown[1], sorted(_keys_at(struct, where))
+        near = difflib.get_close_matches(key, keys, n=1, cutoff=0.75)
+        said = f"no key `{key}` is known here" + (f" (did you mean `{near[0]}`?)" if near
+                                                   else f"; the keys: {', '.join(keys)}" if keys else "")
+    elif missing := re.fullmatch(r"Object missing required field `(.+)`", what):
+        said = f"needs the key `{missing[1]}`"
+    elif enum := re.fullmatch(r"Invalid enum value (.+)", what):
+        said = f"{enum[1]} is not one of the values it takes"
+    return f"{where}: {said}" if where else said
+
+
+def _keys_at(struct: type | None, where: str) -> set[str]:
+    """The keys of the Struct that `where` (msgspec's path: `a.b[0].c`) leads to in `struct`; none if unknown."""
+    kind: object = struct
+    for token in re.findall(r"\[\d+\]|[^.\[\]]+", where):
+        kind = _struct_in(kind)
+        if token.startswith("["):
+            args = [a for a in typing.get_args(kind) if a is not type(None)]
+            kind = args[0] if args else None
+        elif kind is not None and isinstance(kind, type) and issubclass(kind, msgspec.Struct):
+            kind = next((f.type for f in msgspec.structs.fields(kind) if f.encode_name == token), None)
+        else:
+            return set()
+    kind = _struct_in(kind)
+    if isinstance(kind, type) and issubclass(kind, msgspec.Struct):
+        return {f.encode_name for f in msgspec.structs.fields(kind)}
+    return set()
+
+
+def _struct_in(kind: object) -> object:
+    """`kind` with an Optional (a union with None) taken off."""
+    union = typing.get_origin(kind) in (typing.Union, types.UnionType)
+    args = [a for a in typing.get_args(kind) if a is not type(None)] if union else []
+    return args[0] if len(args) == 1 else kind
+
+
 class _Format(msgspec.Struct):
     format: str  # required: a kind's Struct has a default for it, so a file without it was accepted
 
@@ -63,6 +138,7 @@ class JsonFileKind(Generic[T]):
         self.from_recording = from_recording  # what makes one of a recording, said when given a recording
         self._encoder = msgspec.json.Encoder()
         self._decoder = msgspec.json.Decoder(struct)
+        self._struct = struct
 
     def encode(self, value: T) -> bytes:
         return msgspec.json.format(self._encoder.encode(value), indent=1) + b"\n"
@@ -88,7 +164,7 @@ class JsonFileKind(Generic[T]):
         except self.error as exc:
             raise self.error(f"{source}: {exc}") from None
         except (msgspec.ValidationError, msgspec.DecodeError, ValueError) as exc:
-            raise self.error(f"{source}: corrupt or not a {self.what}: {exc}") from None
+            raise self.error(f"{source}: corrupt or not a {self.what}: {in_words(exc, self._struct)}") from None
 
     def write(self, path, value: T, force: bool = False) -> None:
         """Write atomically (a crash never leaves half a file); an existing file is replaced only

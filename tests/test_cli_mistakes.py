@@ -238,6 +238,14 @@ CASES = [
          "bad/participant-empty.json: corrupt or not a policy file: participant: empty"),
     Case("session --policy with a Q of 1e308", SIM + ["--algorithm", "pi-reuse", "--policy", "bad/q-huge.json"],
          "bad/q-huge.json: corrupt or not a policy file: q: must be -1e+06..1e+06 (a reward's size), got 1e+308"),
+    # JSON files in the file's words, not msgspec's ("Expected `float`, got `str` - at `$.q[0][1]`",
+    # "Object contains unknown field `yaw_sgn`"): schemas/jsonfile.py in_words
+    Case("combine a policy with text in its Q-table", ["combine", "policies", "bad/q-text.json", "-o", "m.json"],
+         "bad/q-text.json: corrupt or not a policy file: q[0][1]: must be a number, got text"),
+    Case("robot --try with a misspelt robot config key", ["robot", "--try", "3", "--robot-config", "rc-typo.json"],
+         "robot config rc-typo.json is not valid: no key `yaw_sgn` is known here (did you mean `yaw_sign`?)"),
+    Case("robot --try with a calibration of text", ["robot", "--try", "3", "--calibration", "cal-text.json"],
+         "calibration cal-text.json is not valid: cards[0][2]: must be a number, got text"),
     Case("session with a bad session id", SIM + ["--session", "a/b"], "session id 'a/b'"),
     Case("combine nothing left after --exclude", ["combine", "policies", "--exclude", "blind,deaf"],
          "no policies left to combine"),
@@ -425,6 +433,11 @@ def _fixtures(root: Path) -> None:
     for name, change in (("rounds-neg", {"rounds": -3}), ("visits-neg", {"visits": [-100] + good["visits"][1:]}),
                          ("participant-empty", {"participant": ""}), ("q-huge", {"q": q_huge})):
         (root / "bad" / f"{name}.json").write_text(json.dumps({**good, **change}))
+    q_text = [row[:] for row in good["q"]]
+    q_text[0][1] = "x"
+    (root / "bad" / "q-text.json").write_text(json.dumps({**good, "q": q_text}))
+    (root / "rc-typo.json").write_text('{"yaw_sgn": -1}')
+    (root / "cal-text.json").write_text('{"cards": [[0.1, 0.2, "near"]]}')
     assert main(["protocol", "init", str(root / "study"), "--study", "thesis-ch7", "--quiet"]) == 0
     assert main(["protocol", "register", str(root / "study"), "--count", "1", "--quiet"]) == 0  # p01
 

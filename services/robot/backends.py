@@ -17,7 +17,7 @@ from typing import Callable
 
 import msgspec
 
-from pairplay.schemas.jsonfile import empty, without_bom
+from pairplay.schemas.jsonfile import empty, in_words, without_bom
 from pairplay.schemas.robot import GESTURE_PRESETS, PRESET_NOTES, BoardCalibration, RobotActed, RobotConfig
 from pairplay.schemas.robot_url import FORMS, parse_robot_url  # noqa: F401 (FORMS: the --robot help)
 
@@ -52,7 +52,7 @@ def load_robot_config(path: str | None) -> RobotConfig:
     except OSError as exc:
         raise ValueError(f"cannot read robot config {path}: {exc}") from exc
     except msgspec.DecodeError as exc:
-        raise ValueError(f"robot config {path} is not valid: {exc}") from exc
+        raise ValueError(f"robot config {path} is not valid: {in_words(exc, RobotConfig)}") from exc
     config.validate()
     return config
 

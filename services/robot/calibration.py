@@ -18,7 +18,7 @@ from pathlib import Path
 import msgspec
 
 from pairplay.core.geometry import COLS, N_CARDS, ROWS, card_of
-from pairplay.schemas.jsonfile import empty, without_bom
+from pairplay.schemas.jsonfile import empty, in_words, without_bom
 from pairplay.schemas.robot import BoardCalibration, Point
 
 DEFAULT_FILE = "calibration_default.json"
@@ -46,7 +46,7 @@ def load_calibration(path: str | Path | None = None) -> BoardCalibration:
     try:
         calibration = msgspec.json.decode(without_bom(raw), type=BoardCalibration)
     except msgspec.DecodeError as exc:  # ValidationError is a subclass
-        raise CalibrationError(f"calibration {where} is not valid: {exc}") from exc
+        raise CalibrationError(f"calibration {where} is not valid: {in_words(exc, BoardCalibration)}") from exc
     check_calibration(calibration, where)
     return calibration
 
