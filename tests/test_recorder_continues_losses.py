@@ -132,3 +132,51 @@ def test_the_continued_file_says_it_continues_a_damaged_recording_and_recover_ca
     done = recover(tmp_path / "cut.mcap", tmp_path / "r.mcap")
     said = read_log(done.output).lost
     assert said.startswith("recovered from a damaged file (cut.mcap, itself recovered from c6.mcap)") and part in said, said
+
+
+def test_a_live_restart_whose_refill_gives_back_the_damaged_chunk_stays_whole(tmp_path):
+    """The live path: a recorder SIGKILLed mid-session, a middle chunk of its file damaged and its journal
+    removed before the restart. The restarted recorder's refill asks the services for what they published after
+    the hole and writes it into the hole (`_fill_hole`): every event the damaged file held is in the new file, and
+    the loss is not recorded (`_note_earlier_lost`: holes filled, as many as the chunk held, none left)."""
+    import signal
+
+    from busutil import wait_until
+    from pairplay.replay.wal import wal_path
+    from test_faults import endpoint_of, first_line, session_proc
+    from test_recorder_restart import recorder
+
+    s = "lv"
+    p = session_proc(tmp_path, "--participant", "sim:ashley", "--rounds", "5000", "--session", s,
+                     "--external", "recorder")
+    first = second = None
+    try:
+        endpoint = endpoint_of(first_line(p))
+        first = recorder(tmp_path, s, endpoint)
+        f = tmp_path / f"{s}.mcap"
+        assert wait_until(lambda: f.exists() and len(scan(f).chunks) >= 3, 120, 0.2)
+        first.send_signal(signal.SIGKILL)
+        first.wait(10)
+        chunks = scan(f).chunks
+        c = chunks[len(chunks) // 2]
+        held = {r.payload for r in read_log(f).events}
+        data = bytearray(f.read_bytes())
+        data[c.offset + c.length - 7] ^= 0x5A
+        f.write_bytes(bytes(data))
+        wal_path(f).unlink()
+        assert read_log(f).lost
+        second = recorder(tmp_path, s, endpoint)
+        new = tmp_path / f"{s}.1.mcap"
+        assert wait_until(lambda: second.poll() is not None or (new.exists() and read_log(new).of("RecordingGap")),
+                          120, 0.3)
+        p.send_signal(signal.SIGTERM)
+        p.communicate(timeout=60)
+        assert second.wait(timeout=30) == 0, second.stderr.read()
+    finally:
+        for proc in (p, first, second):
+            if proc is not None and proc.poll() is None:
+                proc.kill()
+                proc.communicate()
+    log = read_log(new)
+    assert held <= {r.payload for r in log.events}
+    assert not log.lost and "pairplay.recovered" not in log.metadata, log.lost
