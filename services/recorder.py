@@ -549,6 +549,9 @@ class Recorder:
                 copied += 1
                 last_ns = max(last_ns, log_ns)
         if losses:  # what the earlier files lost that no journal gives back: recorded as recover records it
+            # a later file that continued an earlier one carries its losses already (named in its `earlier`)
+            carried = {Path(e).name for one in losses for e in _listed(one.get("earlier"))}
+            losses = [one for one in losses if Path(one.get("source", "")).name not in carried]
             lost: dict = {}
             marks = []
             for one in losses:

@@ -117,7 +117,19 @@ def test_a_predecessor_that_is_a_recovered_file_keeps_its_losses_and_a_second_re
     new = _continued(tmp_path / "c4.mcap", "c4")
     assert part in read_log(new).lost and not verify_recording(new).ok, read_log(new).lost
     again = _continued(tmp_path / "c4.mcap", "c4")  # restarted once more: the losses carried again
-    assert again.name == "c4.2.mcap" and part in read_log(again).lost, read_log(again).lost
+    assert again.name == "c4.2.mcap" and read_log(again).lost.count(part) == 1, read_log(again).lost
+    assert read_log(again).lost_at == read_log(new).lost_at
+
+
+def test_a_second_restart_says_the_first_damage_once(tmp_path):
+    earlier = small_chunked_session(tmp_path / "c7.mcap", "c7")
+    damage(earlier, "chunk")
+    part = _lost_part(earlier)
+    first = _continued(tmp_path / "c7.mcap", "c7")
+    again = _continued(tmp_path / "c7.mcap", "c7")  # reads c7.mcap (damaged) and c7.1.mcap (which carries it)
+    said = read_log(again).lost
+    assert again.name == "c7.2.mcap" and said.count(part) == 1, said
+    assert read_log(again).lost_at == read_log(first).lost_at
 
 
 def test_the_continued_file_says_it_continues_a_damaged_recording_and_recover_carries_it(tmp_path):
