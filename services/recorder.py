@@ -381,12 +381,6 @@ def earlier_losses(earlier: Path, checked, records: list, at_message: list[int],
     return folded
 
 
-def _count_of(lost: str) -> int | None:
-    """How many messages a lost part held, from its words ("chunk 7 (...): its 18 messages"; None: not said)."""
-    words = lost.rsplit(": ", 1)[-1].split()
-    return int(words[1]) if len(words) >= 2 and words[0] in ("its", "their") and words[1].isdigit() else None
-
-
 def recorded_before(path: Path, session: str, until: Path | None = None
                     ) -> tuple[list[tuple[str, bytes, int]], list[dict], list[dict]]:
     """What the session's recordings at `path` hold together (`recordings_of`, oldest first up to
@@ -562,7 +556,7 @@ class Recorder:
             lost["messages"] = str(len(self.kept))
             self._earlier_lost = lost
             if self.bus is None:  # no refill to come (with a bus, `refill` records it: the services may give it back)
-                self._note_earlier_lost(0)
+                self._note_earlier_lost(False)
         for journal in journals:
             self._guarded(self.writer.add_metadata, JOURNAL_METADATA, journal)
             log.info("recorder: %s events taken from %s (%s refused)", journal.get("taken", 0),
@@ -570,20 +564,20 @@ class Recorder:
         self.continued = {"earlier_file": earlier.name, "copied": copied, "last_copied_ns": last_ns}
         log.info("recorder: continuing %s (%d events) in %s", earlier, copied, self.path)
 
-    def _note_earlier_lost(self, filled: int) -> None:
-        """Record what the earlier recordings lost (`_continue`), unless the refill gave it back: `filled` events
-        written into holes, at least as many as the losses held (each count known), and no source's sequence
-        numbers in the file (the recorder's own too: its refusals are asked of nobody) with a hole left."""
+    def _note_earlier_lost(self, refilled: bool) -> None:
+        """Record what the earlier recordings lost (`_continue`), unless the refill gave it back: `refilled`, every
+        source in the file answered it, and no source's sequence numbers in the file (the recorder's own too: its
+        refusals are asked of nobody) have a hole left below their last (the lost events came back by `record`
+        or `_fill_hole`: counting only the holes filled missed those above the last one of their key)."""
         lost, self._earlier_lost = self._earlier_lost, None
         if not lost:
             return
-        counts = [_count_of(x) for x in _listed(lost.get("lost"))]
         seen = self._seen()
         with self._lock:
             seen[self.name] = {decode_event(p).seq for k, p in self.kept if k.split("/")[2] == self.name}
         holes = any(seqs and len(seqs) < max(seqs) for seqs in seen.values())
-        if counts and None not in counts and filled >= sum(counts) and not holes:
-            log.info("recorder: what the earlier recording lost was refilled (%d events)", filled)
+        if refilled and not holes:
+            log.info("recorder: what the earlier recording lost was refilled by the services")
             return
         self._guarded(self.writer.add_metadata, RECOVERED, lost)
         log.warning("recorder: continuing a session whose earlier recording lost messages: %s", said_source_lost(lost))
@@ -633,7 +627,7 @@ class Recorder:
         seen = self._seen()
         sources = self._contiguous(seen)
         after = ",".join(f"{s}:{n}" for s, n in sorted(sources.items()))
-        answered, refilled, filled = [], 0, 0
+        answered, refilled = [], 0
         for payload in self.bus.query(f"{query_key(self.session, '*', SENT_QUERY)}?after={after}", timeout_s):
             try:
                 name, items = msgspec.msgpack.decode(payload, type=tuple[str, list[tuple[str, bytes]]])
@@ -650,7 +644,6 @@ class Recorder:
                     refilled += 1
                 elif event.seq not in seen.get(event.source, ()) and self._fill_hole(key, data):
                     refilled += 1  # below what came live on its key since: a hole Zenoh did not close
-                    filled += 1
                 seen.setdefault(event.source, set()).add(event.seq)
         self._overlap = len(self.inbox)  # what came meanwhile may repeat the refill: no rejections for that
         self._quiet_until_ns = self.clock() + int(REFILL_QUIET_S * 1e9)  # nor for what was still on its way
@@ -670,7 +663,7 @@ class Recorder:
                                unanswered=sorted(set(sources) - set(answered)))
             self._publish([gap])
             return
-        self._note_earlier_lost(filled)  # what the earlier recordings lost, unless this gave it back
+        self._note_earlier_lost(not set(sources) - set(answered))  # unless this gave it back
         gap = RecordingGap(earlier_file=self.continued["earlier_file"], copied=self.continued["copied"],
                            last_copied_ns=Nanos(self.continued["last_copied_ns"]), resumed_ns=Nanos(resumed_ns),
                            refilled=refilled, refilled_from=sorted(answered),
@@ -1047,7 +1040,7 @@ class Recorder:
                 pass
         if self.failure is None:
             try:
-                self._note_earlier_lost(0)  # (closed before its refill: what the earlier recordings lost, still)
+                self._note_earlier_lost(False)  # (closed before its refill: what the earlier recordings lost, still)
                 self._guarded(self.writer.add_metadata, END_METADATA, {
                     "ended_ns": str(self.clock()), "session_ended": str(self.ended).lower(), "stopped_by": stopped_by,
                     "unrecorded_at_exit": str(unrecorded),
