@@ -233,7 +233,9 @@ def said_source_lost(recovered: dict[str, str]) -> str:
         earlier = []
     if source and earlier:
         source += f", itself recovered from {' and '.join(reversed(earlier))}"
-    head = f"recovered from a damaged file{f' ({source})' if source else ''}"
+    # (a restarted recorder's file records its predecessor's losses so too: services/recorder.py `earlier_losses`)
+    how = "continues a damaged recording" if recovered.get("continued") else "recovered from a damaged file"
+    head = f"{how}{f' ({source})' if source else ''}"
     if not parts:  # recovered before recover said what each part lost
         return f"{head} whose damaged parts are lost"
     if len(parts) > 2:  # every part named was a line of thousands of characters (as Scan.brief)
@@ -254,6 +256,8 @@ def carry_recovery(earlier: dict[str, str], new: dict[str, str], marks_moved: bo
     if not earlier:
         return new
     merged = {**earlier, **new}
+    if "continued" not in new:  # (said of the newest: a recovered copy of a continued file is a recovered file)
+        merged.pop("continued", None)
     for key in ("damaged", "lost"):
         merged[key] = json.dumps(_listed(earlier.get(key)) + _listed(new.get(key)))
     merged["earlier"] = json.dumps(_listed(earlier.get("earlier")) + [earlier.get("source", "")])

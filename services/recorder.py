@@ -34,7 +34,12 @@ recording holds is its file's readable messages and what its journal adds
 (`earlier_records`): a recorder killed before its first flush leaves a file of
 no message, everything it received in its journal; and a restart reads every
 earlier recording of the session (`recorded_before`), as a restarted recorder's
-copy of its predecessor's is neither received nor journaled.
+copy of its predecessor's is neither received nor journaled. What an earlier file
+lost that neither its journal nor the refill gives back (a damaged chunk, a file that
+is itself a recovered one with recorded losses: `earlier_losses`) is recorded in the
+new file as `pairplay recover` records a source's losses (reader.RECOVERED,
+`carry_recovery`), so every verb says the session is partial; before, "this file alone
+holds the whole session" was said of it, and every verb took the session as whole.
 Behind a router that restarts (services/bus.py: Zenoh's advanced pub/sub recovers
 what the outage held up) the recorder records each outage of its link (metadata
 LINK_METADATA) and, once the link is back and Zenoh's recovery has had
@@ -52,6 +57,7 @@ own link to its router are that outage (LINK_METADATA), not absences.
 from __future__ import annotations
 
 import glob
+import json
 import logging
 import os
 from collections import Counter
@@ -66,6 +72,7 @@ from pairplay import __version__
 from pairplay.errors import OutputError
 from pairplay.livelock import LIVE, hold, is_live, release
 from pairplay.outputs import REPLACED, set_aside_of
+from pairplay.replay.reader import LOST_AT_KEY, RECOVERED, _listed, carry_recovery, said_source_lost
 from pairplay.replay.wal import JournalWriter, NotAJournal, read_journal, wal_path
 from pairplay.replay.writer import FLUSH_INTERVAL_NS, LOSS_BOUND_NS, EventLogWriter
 from pairplay.schemas.checked import check_event
@@ -262,67 +269,147 @@ def settle_aside(aside: list[tuple[Path, Path]], path: str | Path, replaced: boo
 
 
 def earlier_records(earlier: Path, session: str, before: list[tuple[str, bytes, int]] = ()
-                    ) -> tuple[list[tuple[str, bytes, int]], dict | None]:
+                    ) -> tuple[list[tuple[str, bytes, int]], dict | None, dict]:
     """What an earlier recording of `session` holds: every readable message of the file (a crash may
     have cut it: what was read before the cut) as (key, payload, log_time_ns) in file order, then
     what its journal (`<earlier>.journal`, replay/wal.py) holds that the file lacks, decided by the
-    live checks as `pairplay recover` decides it (services/walmerge.py; refusals included); and the
-    journal's account (JOURNAL_METADATA's fields), or None if no journal is beside it. A recorder
+    live checks as `pairplay recover` decides it (services/walmerge.py; refusals included); the
+    journal's account (JOURNAL_METADATA's fields), or None if no journal is beside it; and what the
+    file lost that its journal does not give back (`earlier_losses`: {} if nothing). A recorder
     killed before its first flush leaves a file of no message: all it received is in its journal.
     `before`: what the session's recordings older than `earlier` hold (`recorded_before`), which
     the journal's records are checked after, as the live recorder checked them."""
     from mcap.records import Channel, Message
-    from pairplay.replay.reader import iter_records
+    from pairplay.replay.mcapscan import scan
     topics: dict[int, str] = {}
     held: list[tuple[str, bytes, int]] = []
     try:
-        for record in iter_records(earlier):
-            if isinstance(record, Channel):
-                topics[record.id] = record.topic
-            elif isinstance(record, Message) and record.channel_id in topics:
-                held.append((topics[record.channel_id], record.data, record.log_time))
-    except Exception as err:  # the cut of a crashed file: everything before it is kept
-        log.info("recorder: %s ends early (%s); %d messages read", earlier, err, len(held))
+        checked = scan(earlier)
+    except OSError as err:  # gone or unreadable since it was listed: nothing of it is held
+        log.warning("recorder: %s is not read: %s", earlier, err)
+        return held, None, {}
+    records = checked.summary_records + checked.records
+    at_message: list[int] = []  # for each record, how many messages of the file come before it
+    for record in records:
+        at_message.append(len(held))
+        if isinstance(record, Channel):
+            topics[record.id] = record.topic
+        elif isinstance(record, Message) and record.channel_id in topics:
+            held.append((topics[record.channel_id], record.data, record.log_time))
+    if checked.truncated:  # the cut of a crashed file: everything before it is kept
+        log.info("recorder: %s ends early (%s); %d messages read", earlier, checked.describe(), len(held))
     beside = wal_path(earlier)
-    if not beside.exists():
-        return held, None
-    try:
-        journal = read_journal(beside)
-    except (NotAJournal, OSError) as err:
-        log.warning("recorder: the journal %s is not read: %s", beside, err)
-        return held, {"earlier_journal": beside.name, "not_read": str(err)}
-    if journal.session != session:
-        log.warning("recorder: the journal %s is of session %r: not taken", beside, journal.session)
-        return held, {"earlier_journal": beside.name, "not_read": f"of session {journal.session!r}"}
-    added = admit(session, [(k, p) for k, p, _ in (*before, *held)], journal.records)
-    return held + [(k, p, ns) for k, p, ns, _seq in added.items], {
-        "earlier_journal": beside.name, "taken": str(added.taken), "refused": str(added.refused),
-        "torn": journal.torn}
+    journal, account, added = None, None, []
+    if beside.exists():
+        try:
+            journal = read_journal(beside)
+        except (NotAJournal, OSError) as err:
+            log.warning("recorder: the journal %s is not read: %s", beside, err)
+            account = {"earlier_journal": beside.name, "not_read": str(err)}
+        else:
+            if journal.session != session:
+                log.warning("recorder: the journal %s is of session %r: not taken", beside, journal.session)
+                account = {"earlier_journal": beside.name, "not_read": f"of session {journal.session!r}"}
+                journal = None
+            else:
+                admitted = admit(session, [(k, p) for k, p, _ in (*before, *held)], journal.records)
+                added = [(k, p, ns) for k, p, ns, _seq in admitted.items]
+                account = {"earlier_journal": beside.name, "taken": str(admitted.taken),
+                           "refused": str(admitted.refused), "torn": journal.torn}
+    lost = earlier_losses(earlier, checked, records, at_message, held, journal, added)
+    return held + added, account, lost
+
+
+def earlier_losses(earlier: Path, checked, records: list, at_message: list[int], held: list[tuple[str, bytes, int]],
+                   journal, added: list[tuple[str, bytes, int]]) -> dict[str, str]:
+    """What an earlier recording lost that its journal does not give back, as `pairplay recover` records a damaged
+    file's losses (the RECOVERED metadata's fields, reader.carry_recovery's format; {} if it lost none): its
+    damaged parts that lost messages, and, if it is itself a recovered file (renamed into the session), the
+    losses its record carries. Each loss is placed by the message read after it ((key, payload); None at the
+    file's end: `_marks`), which the continuing recorder turns into its own count (`Recorder._continue`). A part's
+    loss is given back only when the journal beside the file (every message its recorder received, in order)
+    holds what it held and the live checks took it (`added`): the records received between the messages read
+    around the part that the file lacks. A part in the middle is not: the live checks refuse its events as out of
+    order after the later ones the file holds (recorded as refusals, not events). A damage that lost no message
+    (an index, a CRC) is no loss."""
+    from pairplay.replay.reader import folded_recovery, recovered_losses, recovered_lost
+    order: dict[tuple[str, bytes], int] = {}  # each journal record's first place (received order)
+    for i, r in enumerate(journal.records if journal is not None else ()):
+        order.setdefault((r[0], r[1]), i)
+    in_file = {(k, p) for k, p, _ in held}
+    taken = {(k, p) for k, p, _ in added}
+
+    def message_at(index: int) -> tuple[str, bytes] | None:
+        n = at_message[index] if index < len(at_message) else len(held)
+        return held[n][:2] if n < len(held) else None
+
+    def given_back(at: int, count: int | None) -> bool:
+        """The journal holds what the part held and it was taken: the records received between the messages
+        read around it (all of the journal's after the last read before it, for a part at the end of a journal
+        not torn) that the file lacks, as many as the part held if that is known, every one in the copy."""
+        if journal is None:
+            return False
+        n = at_message[at] if at < len(at_message) else len(held)
+        before, after = (held[n - 1][:2] if n else None), message_at(at)
+        if (before is not None and before not in order) or (after is not None and after not in order) or (
+                after is None and journal.torn):
+            return False
+        start, end = order[before] + 1 if before is not None else 0, order[after] if after is not None else len(journal.records)
+        between = [(r[0], r[1]) for r in journal.records[start:end] if (r[0], r[1]) not in in_file]
+        return (count is None or len(between) >= count) and all(x in taken for x in between)
+
+    own = [(len(checked.summary_records) + at, n) for at, n in checked.losses()]
+    parts, marks = [], []
+    lost_parts = [d for d in checked.damage if d.lost_at >= 0]
+    for d, (at, n) in zip(lost_parts, own):
+        if given_back(at, n):
+            continue  # its journal gave back what the part held
+        parts.append(d)
+        marks.append(message_at(at))
+    recovered = folded_recovery(records)
+    carried = recovered_lost(recovered)
+    if carried:  # the losses a recovered file's record carries, where they fall among its records
+        marks += [message_at(i) for i in (recovered_losses(records, own, recovered) or [len(records)])]
+    if not parts and not carried:
+        return {}
+    # (its cut, if a crash left one, is not what is recorded: its journal and the refill give that back)
+    mine = {"source": earlier.name, "truncated": "false", "data_complete": "true", "reason": checked.describe(),
+            "damaged": json.dumps([str(d) for d in parts]), "lost": json.dumps([f"{d.part}: {d.lost}" for d in parts]),
+            "lost_chunks": str(sum(1 for c in checked.lost_chunks if any(d.offset == c.offset for d in parts))),
+            "continued": "copied by a restarted recorder, which records what its predecessor lost"}
+    if not parts:
+        mine["damaged"] = mine["lost"] = "[]"
+    folded = carry_recovery(recovered, mine) if carried else mine
+    folded["_marks"] = marks  # where each loss was, by the message read after it (popped by Recorder._continue)
+    return folded
 
 
 def recorded_before(path: Path, session: str, until: Path | None = None
-                    ) -> tuple[list[tuple[str, bytes, int]], list[dict]]:
+                    ) -> tuple[list[tuple[str, bytes, int]], list[dict], list[dict]]:
     """What the session's recordings at `path` hold together (`recordings_of`, oldest first up to
     `until` if given, each read by `earlier_records`), each message once (a restarted recorder's file
-    starts with copies of its predecessor's, byte for byte), and the account of every journal read
-    (JOURNAL_METADATA's fields). Returns ([(key, payload, log_time_ns)], [account]). The newest file alone
+    starts with copies of its predecessor's, byte for byte), the account of every journal read
+    (JOURNAL_METADATA's fields) and what each file lost that its journal does not give back
+    (`earlier_losses`). Returns ([(key, payload, log_time_ns)], [account], [losses]). The newest file alone
     is not enough: a restarted recorder's copy reaches its disk only at its flushes and is not in
     its journal (which holds what it received), so killed before its first flush it leaves only
     what came live, and the older files still hold the rest."""
     held: list[tuple[str, bytes, int]] = []
     seen: set[tuple[str, bytes]] = set()
-    journals = []
+    journals, losses = [], []
     for earlier in recordings_of(path):
-        records, journal = earlier_records(earlier, session, held)
+        records, journal, lost = earlier_records(earlier, session, held)
         for key, payload, log_ns in records:
             if (key, payload) not in seen:
                 seen.add((key, payload))
                 held.append((key, payload, log_ns))
         if journal is not None:
             journals.append(journal)
+        if lost:
+            losses.append(lost)
         if earlier == until:
             break
-    return held, journals
+    return held, journals, losses
 
 
 def same_live_session(bus: Bus, session: str, path: Path, timeout_s: float = 3.0) -> bool:
@@ -422,6 +509,7 @@ class Recorder:
         self._overlap = 0
         self._backlog_noted_ns = -10**18
         self.continued: dict | None = None
+        self._earlier_lost: dict | None = None  # what the earlier recordings lost, until recorded (_note_earlier_lost)
         self._link_lost_ns: int | None = None  # when the link to the router went, until the refill after it
         self._refill_at: float | None = None  # monotonic time of the next refill (relink), if one is due
         self._quiet_until_ns = 0
@@ -446,18 +534,56 @@ class Recorder:
         readable messages, a crash may have cut it, then what its journal adds: the inbox its recorder
         died with; `earlier` is the newest) into this one, so this file alone holds the whole session;
         what each journal gave is counted (metadata JOURNAL_METADATA). The journals are left where they are."""
-        held, journals = recorded_before(base, self.session, until=earlier)  # (not this file, made already)
+        held, journals, losses = recorded_before(base, self.session, until=earlier)  # (not this file, made already)
         copied, last_ns = 0, 0
+        first = {}  # each message's first place in the copy: where a loss before it is marked
+        for i, (key, payload, _) in enumerate(held):
+            first.setdefault((key, payload), i)
+        written = []  # messages in this file before each of `held` was copied
         for key, payload, log_ns in held:
+            written.append(len(self.kept))
             if self._copy(key, payload, log_ns):
                 copied += 1
                 last_ns = max(last_ns, log_ns)
+        if losses:  # what the earlier files lost that no journal gives back: recorded as recover records it
+            # a later file that continued an earlier one carries its losses already (named in its `earlier`)
+            carried = {Path(e).name for one in losses for e in _listed(one.get("earlier"))}
+            losses = [one for one in losses if Path(one.get("source", "")).name not in carried]
+            lost: dict = {}
+            marks = []
+            for one in losses:
+                marks += one.pop("_marks")
+                lost = carry_recovery(lost, one)
+            lost[LOST_AT_KEY] = json.dumps(sorted(
+                written[first[m]] if m is not None and m in first else len(self.kept) for m in marks))
+            lost["messages"] = str(len(self.kept))
+            self._earlier_lost = lost
+            if self.bus is None:  # no refill to come (with a bus, `refill` records it: the services may give it back)
+                self._note_earlier_lost(False)
         for journal in journals:
             self._guarded(self.writer.add_metadata, JOURNAL_METADATA, journal)
             log.info("recorder: %s events taken from %s (%s refused)", journal.get("taken", 0),
                      journal["earlier_journal"], journal.get("refused", 0))
         self.continued = {"earlier_file": earlier.name, "copied": copied, "last_copied_ns": last_ns}
         log.info("recorder: continuing %s (%d events) in %s", earlier, copied, self.path)
+
+    def _note_earlier_lost(self, refilled: bool) -> None:
+        """Record what the earlier recordings lost (`_continue`), unless the refill gave it back: `refilled`, every
+        source in the file answered it, and no source's sequence numbers in the file (the recorder's own too: its
+        refusals are asked of nobody) have a hole left below their last (the lost events came back by `record`
+        or `_fill_hole`: counting only the holes filled missed those above the last one of their key)."""
+        lost, self._earlier_lost = self._earlier_lost, None
+        if not lost:
+            return
+        seen = self._seen()
+        with self._lock:
+            seen[self.name] = {decode_event(p).seq for k, p in self.kept if k.split("/")[2] == self.name}
+        holes = any(seqs and len(seqs) < max(seqs) for seqs in seen.values())
+        if refilled and not holes:
+            log.info("recorder: what the earlier recording lost was refilled by the services")
+            return
+        self._guarded(self.writer.add_metadata, RECOVERED, lost)
+        log.warning("recorder: continuing a session whose earlier recording lost messages: %s", said_source_lost(lost))
 
     def _copy(self, key: str, payload: bytes, log_time_ns: int) -> bool:
         source = key.split("/")[2] if key.count("/") == 3 else ""
@@ -540,6 +666,7 @@ class Recorder:
                                unanswered=sorted(set(sources) - set(answered)))
             self._publish([gap])
             return
+        self._note_earlier_lost(not set(sources) - set(answered))  # unless this gave it back
         gap = RecordingGap(earlier_file=self.continued["earlier_file"], copied=self.continued["copied"],
                            last_copied_ns=Nanos(self.continued["last_copied_ns"]), resumed_ns=Nanos(resumed_ns),
                            refilled=refilled, refilled_from=sorted(answered),
@@ -916,6 +1043,7 @@ class Recorder:
                 pass
         if self.failure is None:
             try:
+                self._note_earlier_lost(False)  # (closed before its refill: what the earlier recordings lost, still)
                 self._guarded(self.writer.add_metadata, END_METADATA, {
                     "ended_ns": str(self.clock()), "session_ended": str(self.ended).lower(), "stopped_by": stopped_by,
                     "unrecorded_at_exit": str(unrecorded),

@@ -814,3 +814,41 @@ def test_a_zeroed_footer_or_summary_is_damage_that_verify_names_though_every_mes
     lines = capsys.readouterr().out.splitlines()
     assert lines[-1].startswith(f"verify: FAIL: the file is damaged ({part}: "), lines[-1]
     assert "no event lost, but the file is damaged" in "\n".join(lines), lines
+
+
+@pytest.mark.parametrize("head", ["zeroed", "length"])
+def test_a_chunk_whose_record_head_is_unreadable_is_one_finding_not_every_later_chunk_out_of_order(
+        whole, tmp_path, capsys, head):
+    """Task rec3 item 2: chunk 7's record head (opcode and length, 9 bytes) zeroed, or its length alone damaged.
+    The scan reads on from the next chunk that proves itself, but it numbered the chunks it found, so the
+    summary's index had every later chunk "indexed as chunk N+1: chunks out of order" (~30 findings, a line of
+    2,000 characters from recover). Now the summary's Chunk Index names the unreadable bytes as chunk 7, its
+    messages are counted from its Message Index records (intact after it), and the one damage is said once with
+    its consequence; the later chunks are in order, as they are."""
+    from pairplay.cli.main import main
+
+    chunks = scan(whole).chunks
+    c = chunks[7]
+    bad = bytearray(whole.read_bytes())
+    if head == "zeroed":
+        bad[c.offset:c.offset + 9] = bytes(9)
+    else:
+        bad[c.offset + 1:c.offset + 9] = struct.pack("<Q", 2**40)
+    p = variant(tmp_path, bytes(bad))
+    s = scan(p)
+    assert "out of order" not in s.describe() and "chunk index" not in s.describe(), s.describe()
+    [lost] = [d for d in s.damage if d.lost_at >= 0]
+    assert lost.part.startswith(f"chunk 7 (bytes {c.offset}-") and lost.lost == f"its {len(c.messages)} messages"
+    assert f"{len(chunks) - 8} later chunks read" in lost.what, lost.what
+    assert [d.part for d in s.damage if d is not lost] == ["data section"], s.describe()  # the CRC the lost bytes break
+    assert len(s.lost_chunks) == 1 and [x.number for x in s.chunks] == list(range(len(chunks)))
+    assert len(read_log(p).events) == len(read_log(whole).events) - len(c.messages)
+    assert main(["recover", str(p), "-o", str(tmp_path / "r.mcap")]) == 0
+    [line] = capsys.readouterr().out.splitlines()
+    assert line.count("chunk 7 (") == 2 and f"{len(c.messages)} messages lost" in line and len(line) < 700, line
+    meta = read_log(tmp_path / "r.mcap").metadata["pairplay.recovered"]
+    assert meta["lost_chunks"] == "1" and [d.split(":")[0] for d in json.loads(meta["damaged"])] == [
+        lost.part, "data section"]
+    assert main(["replay", str(p), "--verify"]) == 1
+    verdict = capsys.readouterr().out.splitlines()[-1]
+    assert verdict.startswith("verify: FAIL: the file is damaged (chunk 7 (") and "more finding" not in verdict, verdict
