@@ -129,6 +129,8 @@ def run(args: argparse.Namespace) -> int:
         print(f"{rec}: turn left out of the fit: {why}")
     if note:
         print(f"{rec}: not whole ({note}); fitting the {counted(len(turns.observations.first), 'turn')} of its intact parts")
+    elif log.loss_free:  # damaged where no event was: fitted whole, the damage said (reader.EventLog.loss_free)
+        print(f"{rec}: {log.loss_free}")
     others = [read_turns(path) for path in args.fit_also]
     for other in others:
         if other.config.participant != config.participant or other.config.observed_source != config.observed_source:
@@ -188,7 +190,8 @@ def run(args: argparse.Namespace) -> int:
                 texts[name] = f"{'pi-reuse of' if kind == 'reuse' else 'fixed'} {Path(path).name}{partial}"
         seeds = [game_seed(args.seed, f"counterfactual:{config.session}", i) for i in range(args.seeds)]
         runs = cf.run_arms(persona, arms, seeds, rounds, config.observed_source, config.reward_bonus)
-    paths = write_counterfactual(out, stem, model, recorded, runs, texts, args.force)
+    paths = write_counterfactual(out, stem, model, recorded, runs, texts, args.force,
+                                 read_whole=f"{rec.name}: {log.loss_free}" if log.loss_free else "")
     print(console_text(model, recorded, runs, texts))
     print("wrote " + ", ".join(str(p) for p in paths))
     return 0

@@ -120,7 +120,12 @@ def _complete(args: argparse.Namespace, done) -> int:
     from pairplay.replay.wal import wal_path
 
     journal = wal_path(args.recording)
+    # a whole file recovered from a damaged or cut one: its session still lacks what its source lost, said in the
+    # reader's words (reader.EventLog.source_lost, source_cut), as every verb says it (a new user's trial: "nothing
+    # to recover" of a copy that had lost 229 messages, and no word of the loss)
+    lost = "; ".join(n for n in (done.earlier_lost, done.earlier_cut) if n)
     said = f"{args.recording}: complete already ({counted(done.messages, 'message')}"
+    said += f"; {lost}" if lost else ""
     said += ")" if done.ended else "; the session's end was not recorded: a partial session)"
     said += "; nothing to recover, nothing written"
     if done.journal_error:  # unreadable: what it holds is unknown, so it is never called stale

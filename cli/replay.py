@@ -67,6 +67,8 @@ def run(args: argparse.Namespace) -> int:
                   + ", ".join(f"{tag} ({n})" for tag, n in sorted(v.unknown.items())))
         if v.truncated and not v.ended and is_live(args.recording):
             print(f"the file {LIVE}: verified as far as it goes; verify it again once the session has ended")
+        elif v.truncated and not v.ended and v.source_cut:  # a whole copy of a cut file: its source's cut, in the
+            print(f"the session's end is missing: {v.source_cut}")  # reader's words (reader.EventLog.source_cut)
         elif v.truncated and not v.ended:
             print("the file is cut (a crash?): the session's end is missing; its last events were lost")
         if v.error:
@@ -84,6 +86,8 @@ def run(args: argparse.Namespace) -> int:
         raise InputError(f"holds no events to replay{' (' + log.brief + ')' if log.brief else ''}", args.recording)
     if log.missing:  # what a damaged or cut file, or messages that do not decode, lost: not re-published, said
         print(f"{args.recording}: not whole ({log.missing}); replaying the {counted(len(log.events), 'event')} of its intact parts")
+    elif log.loss_free:  # damaged where no event was: every event replayed, the damage said (reader.EventLog.loss_free)
+        print(f"{args.recording}: {log.loss_free}")
     stop = threading.Event()
     stop_on_signals(stop)
     with Bus(options_from_args(args), stop=stop) as bus:

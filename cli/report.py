@@ -52,6 +52,7 @@ def run(args) -> int:
     if report.rehearsal:
         print(f"a rehearsal: {counted(len(report.games), 'scripted game')}, no person played")
     print(f"{counted(len(report.games), 'valid game')} of {counted(len({g.participant for g in report.games}), 'participant')}"
-          + (f"; left out: {', '.join(report.excluded)}" if report.excluded else ""))
+          + (f"; left out: {', '.join(report.excluded)}" if report.excluded else "")
+          + (f"; read whole from a damaged file: {', '.join(report.read_whole)}" if report.read_whole else ""))
     print(f"report: {out / 'report.md'}")
     return 0

@@ -98,7 +98,7 @@ def _default_rrd(args: argparse.Namespace) -> Path:
 def run(args: argparse.Namespace) -> int:
     if not args.recording and not args.session:
         raise OptionError("give --session ID (live) or --recording REC", "what to view")
-    live, lost = False, ""
+    live, lost, held = False, "", None
     if args.recording:
         held = read_session(args.recording)  # a file holding no session is refused before rerun loads
         live = held.live or is_live(args.recording)  # its recorder still writes it: what it holds is a part
@@ -120,7 +120,7 @@ def run(args: argparse.Namespace) -> int:
         check_output(rrd, args.force, inputs=[args.recording] if args.recording else [])
     try:
         with output_path(rrd, args.force) if rrd is not None else contextlib.nullcontext() as tmp:
-            done = _view(args, tmp)
+            done = _view(args, tmp, held)
             # never under the name of a complete view (module rule), nor one of a live recording: it was saved
             # as s1.rrd, a part of the session passed off as the whole (a new user's trial)
             if (done.partial or live or lost) and rrd is not None:
@@ -147,8 +147,10 @@ def run(args: argparse.Namespace) -> int:
         print(f"pairplay view: interrupted ({done.why}) after {_counts(done)}, before the source ended; nothing saved",
               file=sys.stderr)
     else:
-        say(f"saved {rrd}: {_counts(done)}" if rrd is not None else
-              f"viewed {_counts(done)}{f'; partial: {args.recording} {LIVE}' if live else ''}")
+        # a damage that lost no event: drawn whole, and said as every verb says it (reader.EventLog.loss_free)
+        whole_read = f"; {args.recording}: {held.loss_free}" if held is not None and held.loss_free else ""
+        say(f"saved {rrd}: {_counts(done)}{whole_read}" if rrd is not None else
+              f"viewed {_counts(done)}{f'; partial: {args.recording} {LIVE}' if live else ''}{whole_read}")
     return 0
 
 
@@ -206,8 +208,9 @@ def keep_partial(tmp: Path, rrd: Path, force: bool) -> Path:
     raise AssertionError("unreachable")
 
 
-def _view(args: argparse.Namespace, tmp_rrd: Path | None) -> Viewed:
-    """Draw into the temporary .rrd (renamed by the caller when this returns)."""
+def _view(args: argparse.Namespace, tmp_rrd: Path | None, held=None) -> Viewed:
+    """Draw into the temporary .rrd (renamed by the caller when this returns); `held`: the recording as `run`
+    read and checked it (reader.EventLog), drawn so, never read a second time."""
     from pairplay.services.bus import open_bus, options_from_args, shutdown_wait, stop_on_signals
     from pairplay.services.view.drive import drive, lowered_priority
     from pairplay.services.view.output import ViewOutput, finish, open_stream
@@ -233,7 +236,8 @@ def _view(args: argparse.Namespace, tmp_rrd: Path | None) -> Viewed:
     try:
         if args.recording:
             log.info("drawing %s%s; Ctrl-C to stop", args.recording, f" at {args.speed:g}x" if args.speed else "")
-            summary = drive(view, recording_items(args.recording, speed=args.speed, session=args.session, stop=stop),
+            summary = drive(view, recording_items(args.recording, speed=args.speed, session=args.session, stop=stop,
+                                                   log=held),
                             stop=stop, echo=_echo)
             if summary.events == 0 and stop.is_set():
                 raise NothingDrawn(stop.why)

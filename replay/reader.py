@@ -138,12 +138,38 @@ class EventLog:
         return "; ".join(n for n in (self.brief if self.damage else "", self.undecoded) if n)
 
     @property
+    def source_cut(self) -> str:
+        """What a recovered file's source lost to its cut, in one short line (`said_source_cut`; "" if it was not
+        cut before its data section's end, or this is no recovered file): the file is whole, its session is a
+        part, as the cut file's was (a new user's trial: view and counterfactual said nothing of it)."""
+        return said_source_cut(self.metadata.get(RECOVERED, {}))
+
+    @property
+    def loss_free(self) -> str:
+        """What is wrong with a file that lost no event (a damaged summary or index, a cut after its Data End),
+        in the one line every verb says of it ("" if the file is whole, or lost events: `missing` says what): its
+        events are the session's, so no verb fails it or marks its output partial, and none is silent of it
+        (a new user's trial: verify FAILed it, view, counterfactual and report said nothing)."""
+        if self.whole or self.missing or self.lost_from >= 0:
+            return ""
+        what = "damaged" if self.damage else "cut after its data section"
+        return f"the file is {what}, no event lost ({self.brief}): pairplay recover makes a whole copy"
+
+    @property
+    def data_intact(self) -> bool:
+        """Whether every damaged part is after the data section (the summary, the footer, the file's end: where no
+        event is) and the data section was read to its Data End: every event is as recorded, proved by its chunk's
+        and the data section's CRC. Damage inside the data section (an index, the data section's CRC, chunks moved)
+        lost no event either, but bytes among the events changed: verify still FAILs it (services/verify.py)."""
+        return self.data_complete and all(d.part.startswith(AFTER_DATA) for d in self.damage)
+
+    @property
     def note(self) -> str:
         """What a verb that reads the file's intact parts lacks, in one short line ("" if the file is whole,
         every message decodes and it is no recovery of a file that lost some): "damaged: ..." or "truncated: ..."
         (`brief`), what the file it was recovered from lost (`source_lost`), and `undecoded`."""
         cut = "" if self.whole else f"{'damaged' if self.damage else 'truncated'}: {self.brief}"
-        return "; ".join(n for n in (cut, self.source_lost, self.undecoded) if n)
+        return "; ".join(n for n in (cut, self.source_lost, self.source_cut, self.undecoded) if n)
 
     @property
     def lost(self) -> str:
@@ -158,11 +184,11 @@ class EventLog:
     @property
     def missing(self) -> str:
         """`note` when the file lacks events of its session (a damaged part that held some, a cut before its data
-        section's end, a recovered file's source's losses, messages that do not decode: `lost`, `cut_lost`); ""
+        section's end, a recovered file's source's losses or cut (`source_cut`), messages that do not decode: `lost`, `cut_lost`); ""
         when its damage lost none (an index, a summary, a cut after the Data End): such a file is whole to a verb
         that reads its events (counterfactual, view, replay said "not whole" of it, and marked their output
         partial)."""
-        return self.note if (self.lost or self.cut_lost) else ""
+        return self.note if (self.lost or self.cut_lost or self.source_cut) else ""
 
     def unknown_types(self) -> dict[str, int]:
         """How many events of each type this version does not know, by tag."""
@@ -195,6 +221,7 @@ def gc_paused():
             gc.enable()
 
 
+AFTER_DATA = ("summary", "footer", "file end", "chunk index")  # mcapscan's parts after the Data End (`data_intact`)
 _LOST_HERE = object()  # _read_log's marker among the records: a damaged part's lost records were here
 RECOVERED = "pairplay.recovered"  # the metadata record `pairplay recover` writes (replay/recover.py)
 # in it: where the damaged file's lost parts were, as the number of messages the recovered file holds before each
@@ -241,6 +268,15 @@ def said_source_lost(recovered: dict[str, str]) -> str:
     if len(parts) > 2:  # every part named was a line of thousands of characters (as Scan.brief)
         return f"{head}: {counted(len(parts), 'part')} lost, the first {parts[0]}, the last {parts[-1].split(': ')[0]}"
     return f"{head}: {'; '.join(p + ' lost' for p in parts)}"
+
+
+def said_source_cut(recovered: dict[str, str]) -> str:
+    """What the file a recovered one (its RECOVERED metadata) was made from lost to its cut, in one short line
+    ("" if it was not cut before its data section's end: `recovered_cut`); every verb says it so."""
+    if not recovered_cut(recovered):
+        return ""
+    source = Path(recovered.get("source", "")).name
+    return f"recovered from a cut file{f' ({source})' if source else ''}: the events after its cut are lost"
 
 
 def carry_recovery(earlier: dict[str, str], new: dict[str, str], marks_moved: bool = True) -> dict[str, str]:

@@ -39,7 +39,7 @@ from pairplay.schemas.session import SessionConfig
 
 from .check import no_whole_round, read_session
 from .fold import READS, SessionFold, fold_events, stream_seed
-from .reader import recovered_cut, recovered_lost
+from .reader import recovered_cut, recovered_lost, said_source_cut
 from .forgery import contradiction
 from pairplay.numbers import counted
 
@@ -85,8 +85,9 @@ def partial_reason(fold: SessionFold, note: str = "", recovered: dict[str, str] 
         damaged = recovered.get("damaged", "[]") not in ("", "[]")
         added = recovered.get("from_journal", "0") not in ("", "0")
         if lost or cut or added or not (damaged or recovered.get("truncated") == "true"):
+            # a cut source in the words every verb says it in (reader.said_source_cut)
             why.append("completed by pairplay recover" + (" from a damaged file" if lost else
-                                                           " after a cut" if cut else ""))
+                                                           f": {said_source_cut(recovered)}" if cut else ""))
     return "; ".join(why)
 
 
@@ -147,9 +148,8 @@ def rebuild_recording(path: str | Path) -> Rebuilt:
     recovered = log.metadata.get("pairplay.recovered") or {}
     rebuilt = rebuild_events((r.event for r in log.events), str(path), log.truncated, note,
                              recovered, log.metadata.get("pairplay.recorder.end"), skipped=log.skipped)
-    if loss_free:
-        rebuilt.damage_read = (f"the file is {'damaged' if log.damage else 'cut after its data section'}, no event "
-                               f"lost ({log.brief}): pairplay recover makes a whole copy")
+    if loss_free:  # said as every verb says it (reader.EventLog.loss_free)
+        rebuilt.damage_read = log.loss_free
     rebuilt.damaged_rounds = damaged_rounds([r.event for r in log.events], log.lost_at)
     if log.lost:  # the file's own damage, or its source's if it was recovered (reader.EventLog.source_lost)
         rebuilt.lost = f"the file is damaged ({log.lost})" if log.damaged else log.lost

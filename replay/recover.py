@@ -56,7 +56,7 @@ from typing import Callable
 
 from pairplay.errors import InputError, OutputError
 from pairplay.replay.reader import (DATA_COMPLETE_KEY, LOST_AT_KEY, RECOVERED, carry_recovery, folded_recovery,
-                                    recovered_losses, said_source_lost)
+                                    recovered_losses, said_source_cut, said_source_lost)
 from pairplay.schemas.events import EVENT_BY_TAG
 from pairplay.schemas.jsonschema import schema_text
 from pairplay.schemas.keys import parse_event_key
@@ -89,6 +89,7 @@ class Recovered:
     lost: list[str] = field(default_factory=list)  # each damaged part that lost messages, and what: "chunk 7 (...): its 18 messages"
     lost_messages: int | None = 0  # how many messages those parts held (None: not known, unreadable bytes' records)
     earlier_lost: str = ""  # what the source's own source lost, carried forward (a recovered file recovered again)
+    earlier_cut: str = ""  # what the source's own source lost to its cut (reader.said_source_cut), likewise
 
 
 def default_output(path: Path) -> Path:
@@ -129,7 +130,8 @@ def recover(path: str | Path, output: str | Path | None = None, force: bool = Fa
     # the source's own recovery record, if it was recovered before: its losses are carried forward (module rule)
     earlier = folded_recovery(checked.records)
     lost_parts = [f"{d.part}: {d.lost}" for d in checked.damage if d.lost_at >= 0]
-    lost_words = dict(lost=lost_parts, lost_messages=_lost_count(checked), earlier_lost=said_source_lost(earlier))
+    lost_words = dict(lost=lost_parts, lost_messages=_lost_count(checked), earlier_lost=said_source_lost(earlier),
+                      earlier_cut=said_source_cut(earlier))
     if complete or not write:
         return Recovered(None, sum(isinstance(r, Message) for r in checked.records), checked.truncated,
                          "" if checked.whole else checked.describe(), [str(d) for d in checked.damage],

@@ -409,7 +409,8 @@ class StudyData:
         if not any(getattr(e, "source", "") == "game" for e in log.of("SessionEnded")):
             # its rounds are a part of the game, not the game (a new user's trial: a cut recording was one of
             # "5 valid games", its partial rounds in the figures)
-            cut = f"truncated: {log.brief}; " if log.truncated else ""
+            # (a recovered copy of a cut file: its source's cut, in the reader's words: reader.EventLog.source_cut)
+            cut = f"truncated: {log.brief}; " if log.truncated else f"{log.source_cut}; " if log.source_cut else ""
             return None, f"recording {cut}no SessionEnded: its rounds are a part of the game"
         return log, ""
 
@@ -734,7 +735,8 @@ def recording_damage(log) -> str:
     lost no event (a summary's CRC), or a cut after the data section's end, is not a loss, as for rebuild."""
     if log.lost:
         return f"damaged: {log.lost}"
-    return f"truncated: {log.brief}" if log.cut_lost else ""
+    # (a recovered copy of a cut file lost its source's end: reader.EventLog.source_cut)
+    return f"truncated: {log.brief}" if log.cut_lost else log.source_cut
 
 
 def lost_answers(log, decoded: bool, journaled: bool) -> list[str]:

@@ -182,8 +182,9 @@ COUNTERFACTUAL_MANIFEST = manifest_name("counterfactual")  # the files it wrote 
 
 
 def write_counterfactual(out: str | Path, stem: str, model: UserModelFile, recorded: Recorded | None,
-                         runs: dict | None, texts: dict[str, str], force: bool = False) -> list[Path]:
-    """Fill the folder `out` (see the module rule); `runs` None writes the fitted user alone."""
+                         runs: dict | None, texts: dict[str, str], force: bool = False, read_whole: str = "") -> list[Path]:
+    """Fill the folder `out` (see the module rule); `runs` None writes the fitted user alone. `read_whole`: a
+    damage of the recording that lost no event (reader.EventLog.loss_free), said in the header too."""
     written = []
     with output_folder(out, force, owned=COUNTERFACTUAL_OUTPUTS, manifest=COUNTERFACTUAL_MANIFEST) as tmp:
         write_user_model(tmp / f"{stem}.usermodel.json", model)
@@ -191,6 +192,8 @@ def write_counterfactual(out: str | Path, stem: str, model: UserModelFile, recor
         lines = [f"# Counterfactual replay of {model.recording}", ""]
         if model.partial:  # a fit of intact parts only: said where the results are read
             lines += [f"**Partial recording:** fitted on the intact parts only ({model.partial}).", ""]
+        elif read_whole:  # fitted on every event, the damage said where the results are read
+            lines += [f"**Damaged recording, no event lost:** fitted on every event ({read_whole}).", ""]
         lines += [f"Session {model.session}, participant {model.participant}, observed card: "
                   f"{model.observed_source}. The simulated user fitted to the recorded picks"
                   f"{' of ' + ', '.join(model.fitted_on) if len(model.fitted_on) > 1 else ''} "

@@ -124,6 +124,8 @@ class HumanReport:
     attention: list[list[str]]
     rehearsal: bool = False  # no person played: every reported game is a scripted persona's
     scripted: list[str] = field(default_factory=list)  # the sessions scripted personas played
+    # games whose recording is damaged where no event was (reader.EventLog.loss_free): reported whole, said
+    read_whole: list[str] = field(default_factory=list)
 
 
 def human_report(folder: str | Path, out: str | Path | None = None, reference: str | Path | None = None,
@@ -138,7 +140,7 @@ def human_report(folder: str | Path, out: str | Path | None = None, reference: s
     study = data.study
     out = Path(out) if out else data.folder / "report"
     out.mkdir(parents=True, exist_ok=True)
-    games, excluded = [], []
+    games, excluded, read_whole = [], [], []
     valid = [g for g in data.state.games.values() if g.valid_complete]
     scripted = [g for g in valid if g.scripted]
     # a folder no person played in is a rehearsal: its scripted games are what there is to report
@@ -155,6 +157,8 @@ def human_report(folder: str | Path, out: str | Path | None = None, reference: s
             excluded.append(f"{g.session} ({why})")
             continue
         games.append(game_stats(log, g, data.returning(g.participant, g.phase), study.phase_by_id(g.phase).rounds))
+        if log.loss_free:  # every event read: the game counts, its file's damage said (a new user's trial: no word)
+            read_whole.append(f"{g.session} ({log.loss_free})")
     if not games:
         raise ValueError(f"{data.folder}: no completed, valid game to report on")
 
@@ -295,13 +299,14 @@ def human_report(folder: str | Path, out: str | Path | None = None, reference: s
     head = [title, "", *note,
             f"pairplay {__version__}; study `{study.study.id}` (seed {study.study.seed}); "
             f"{counted(len({s.participant for s in games}), 'participant')}, {counted(len(games), 'valid game')}"
-            + (f"; left out: {', '.join(excluded)}" if excluded else "") + ". Phases: "
+            + (f"; left out: {', '.join(excluded)}" if excluded else "")
+            + (f"; read whole from a damaged file: {', '.join(read_whole)}" if read_whole else "") + ". Phases: "
             + "; ".join(f"{p.id}: {counted(p.games, 'game')} x {counted(p.rounds, 'round')}, {p.algorithm} ({p.preset})"
                         + (f" on the bias of {p.bias}" if p.bias else "") for p in study.phase)
             + f". Re-run: `pairplay report {data.folder}`.", ""]
     (out / "report.md").write_text("\n".join(head + sections))
     return HumanReport(out, games, excluded, curves, q_rows, att, rehearsal=rehearsal,
-                       scripted=[g.session for g in scripted])
+                       scripted=[g.session for g in scripted], read_whole=read_whole)
 
 
 def questionnaire_rows(data: StudyData, sessions: set[str]) -> list[list[str]]:

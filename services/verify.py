@@ -25,7 +25,12 @@ the events this version derives. A file with a damaged part (a chunk that fails
 its CRC, chunks out of order, a bad data-section or summary CRC: replay/mcapscan.py)
 or a file recovered from one is never verified as whole: FAIL, naming the part
 (`verify: FAIL: the file is damaged (...)`, what was lost where in a short line:
-reader.EventLog.brief). A message that does not decode is damage too, and a
+reader.EventLog.brief), unless its damage lost no event and is all after the data section
+(the summary, the footer: reader.EventLog.data_intact; every event is as recorded, proved by
+the chunks' and the data section's CRCs, and is compared): that PASSes, the damage said after
+it in the line every verb says of such a file (reader.EventLog.loss_free). Damage among the
+events that lost none (an index, the data section's CRC, chunks moved) still FAILs: bytes
+there changed. A message that does not decode is damage too, and a
 lost event. The first lost event (a part whose events are lost, or a message
 that does not decode: reader.EventLog.lost_at) ends the comparison there, as a
 cut would: every event after it follows lost ones, and was printed as DIFFERS
@@ -99,10 +104,17 @@ class Verification:
     damaged: str = ""  # what a damaged file lost where, short (reader.EventLog.brief); "" if not damaged
     lost_part: bool = False  # verified only up to a part of the file whose events are lost
     not_compared: int = 0  # events after that part, not compared (they follow lost events)
+    source_cut: str = ""  # a whole copy of a cut file: what its source's cut lost (reader.EventLog.source_cut)
+    read_whole: str = ""  # a damage that lost no event (reader.EventLog.loss_free): said with the PASS, not a FAIL
 
     @property
     def verdict(self) -> str:
-        """The last line of `replay --verify` (module rule)."""
+        """The last line of `replay --verify` (module rule); a damage that lost no event is said after a PASS."""
+        said = self._verdict
+        return f"{said}; {self.read_whole}" if self.read_whole and said.startswith("verify: PASS") else said
+
+    @property
+    def _verdict(self) -> str:
         if self.damaged:
             return f"verify: FAIL: the file is damaged ({self.damaged})"
         if not self.ok:
@@ -222,22 +234,27 @@ def verify_recording(path) -> Verification:
         result = verify_events(events, str(path), log.truncated or cut_before)
     result.unknown = log.unknown_types()
     errors = []
-    if log.damaged:  # damaged parts and messages that do not decode, in the words every verb uses (reader.EventLog)
+    result.source_cut = log.source_cut if not log.truncated else ""
+    if log.loss_free and log.data_intact:  # damaged after the data section (its summary): every event is as recorded
+        # and compared whole; said, not failed, in the words every verb says it in (reader.EventLog.loss_free; a new
+        # user's trial: verify FAILed the file rebuild, view and counterfactual took as whole)
+        result.read_whole = log.loss_free
+    elif log.damaged:  # damaged parts and messages that do not decode, in the words every verb uses (reader.EventLog)
         result.damaged = log.damaged
         if first_lost < 0:
             result.reach = f"the {counted(result.events, 'event')} the file holds (no event lost, but the file is damaged)"
     lost = json.loads(recovered.get("damaged", "[]") or "[]")
-    parts = json.loads(recovered.get("lost", "[]") or "[]")  # what each part that lost messages lost (recover)
     if lost and not recovered_lost(recovered):  # its damaged parts lost no message (an index, a CRC): whole
         result.reach = f"{result.reach} (recovered from a damaged file; no message was lost)"
     elif lost and first_lost > 0:  # compared up to the first lost part, as in the damaged file itself
-        errors.append(f"recovered from a damaged file, parts lost: {'; '.join(parts or lost)}")
+        # what the source lost, in the reader's words (reader.EventLog.source_lost), as every verb says it
+        errors.append(log.source_lost)
         result.reach = (f"up to the first part lost from the recording it was recovered from: "
                         f"{counted(result.events, 'event')}, {_rounds_words(result.rounds_recorded, result.rounds)}; "
                         f"the {counted(result.not_compared, 'event')} after it are not compared (they follow the lost "
                         "ones)")
     elif lost:
-        errors.append(f"recovered from a damaged file, parts lost: {'; '.join(lost)}")
+        errors.append(log.source_lost)
         result.reach = (f"the {counted(result.events, 'event')} the file holds, not the whole session: "
                         "parts of the recording it was recovered from were lost")
     result.error = "; ".join(errors) or result.error

@@ -590,7 +590,8 @@ def test_a_recovered_file_of_a_chunk_lost_in_the_middle_is_verified_up_to_it_not
     out = capsys.readouterr().out
     lines = out.splitlines()
     assert "DIFFERS" not in out and "whole session" not in out and "not recomputed" not in out, out
-    assert f"parts lost: {part}: its " in out and "messages" in out, out
+    # what the source lost, in the reader's words (task agree: "parts lost: ...: the records there" read unfinished)
+    assert f"error: recovered from a damaged file (damaged.mcap): {part}: its " in out and "messages lost" in out, out
     assert lines[-2].startswith("verified up to the first part lost from the recording it was recovered from: ")
     again = verify_recording(done.output)
     assert (again.events, again.not_compared, again.lost_part) == (direct.events, direct.not_compared, True)
@@ -682,8 +683,8 @@ def test_a_damaged_length_in_the_summary_is_damage_not_a_cut(whole, tmp_path):
     assert not s.truncated and [d.part for d in s.damage] == ["summary"] and "length is damaged" in s.describe()
     rebuilt = rebuild_recording(p)
     assert rebuilt.partial == "" and not rebuilt.lost and rebuilt.damage_read.startswith("the file is damaged, no event lost")
-    checked = verify_recording(p)
-    assert not checked.truncated and not checked.lost_part and "no event lost" in checked.reach
+    checked = verify_recording(p)  # damaged after the data section only: PASS, the damage said (task agree)
+    assert not checked.truncated and not checked.lost_part and checked.ok and "no event lost" in checked.verdict
 
 
 def test_recovering_a_file_that_lost_no_message_never_makes_its_policy_partial(whole, tmp_path):
@@ -798,8 +799,8 @@ def test_a_zeroed_footer_or_summary_is_damage_that_verify_names_though_every_mes
     """Task rec2 (3): the last N bytes of a recording zeroed (its closing magic, its footer's CRC, the footer, the
     summary's tail, the whole summary). Every message is in the data section, proved by its chunks' CRCs and the
     Data End's CRC, so none is lost; but the summary and footer are parts of the file, and a zeroed one is damage
-    (mcapscan's rule: what a reader can trust): `replay --verify` FAILs naming it, never PASS, never silent. (Found
-    so on main already: a pin, not a fix.)"""
+    (mcapscan's rule: what a reader can trust): `replay --verify` names it, never silent; it PASSes (task agree: the
+    verbs agree no event is lost, every one is compared), the damage said after the PASS."""
     from pairplay.cli.main import main
 
     data = whole.read_bytes()
@@ -810,10 +811,13 @@ def test_a_zeroed_footer_or_summary_is_damage_that_verify_names_though_every_mes
     assert not log.whole and log.data_complete and not log.truncated and not log.missing
     assert payloads(p) == payloads(whole)  # every message read
     part = "file end" if n <= 20 else "summary"
-    assert main(["replay", str(p), "--verify"]) == 1
+    # task agree: every event is as recorded (the chunks' and the Data End's CRCs) and compared: PASS, never silent,
+    # the damage said in the words every verb says it (reader.EventLog.loss_free; it was a FAIL here, exit 0 and
+    # whole to rebuild, view and counterfactual)
+    assert main(["replay", str(p), "--verify"]) == 0
     lines = capsys.readouterr().out.splitlines()
-    assert lines[-1].startswith(f"verify: FAIL: the file is damaged ({part}: "), lines[-1]
-    assert "no event lost, but the file is damaged" in "\n".join(lines), lines
+    assert lines[-1] == f"verify: PASS; {log.loss_free}", lines[-1]
+    assert log.loss_free.startswith(f"the file is damaged, no event lost ({part}: "), log.loss_free
 
 
 @pytest.mark.parametrize("head", ["zeroed", "length"])

@@ -147,7 +147,7 @@ def test_a_recovered_cut_recovered_again_is_still_cut(whole, tmp_path):
     assert recovered_cut(read_log(twice).metadata[RECOVERED])
     va, vb = verify_recording(once), verify_recording(twice)
     assert vb.truncated and vb.events == va.events and vb.verdict.split("(")[0] == va.verdict.split("(")[0]
-    assert rebuild_recording(twice).partial and "after a cut" in rebuild_recording(twice).partial
+    assert rebuild_recording(twice).partial and "recovered from a cut file" in rebuild_recording(twice).partial
 
 
 def test_recover_says_how_many_messages_were_lost_and_where(whole, tmp_path, capsys):

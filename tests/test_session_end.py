@@ -174,7 +174,7 @@ def test_recover_marks_what_it_completed_and_rebuild_flags_the_policy(tmp_path):
     assert meta["truncated"] == "true" and meta["session_ended"] == "false" and "pairplay recover" in meta["completed"]
     assert int(meta["last_round"]) == done.last_round >= 0 and not done.ended
     rebuilt = rebuild_recording(done.output)
-    assert "no SessionEnded" in rebuilt.partial and "completed by pairplay recover after a cut" in rebuilt.partial
+    assert "no SessionEnded" in rebuilt.partial and "completed by pairplay recover: recovered from a cut file (cut-short.mcap): the events after its cut are lost" in rebuilt.partial
     [policy] = [p for p in write_outputs(rebuilt, tmp_path / "rb") if p.name.endswith(".policy.json")]
     assert "pairplay recover" in read_policy(policy).partial
     whole = rebuild_recording(path)

@@ -34,7 +34,7 @@ import msgspec
 import zenoh
 
 from pairplay.replay.forgery import AFTER_END
-from pairplay.replay.reader import read_log
+from pairplay.replay.reader import EventLog, read_log
 from pairplay.schemas.events import decode_event
 from pairplay.schemas.keys import parse_event_key, session_keys
 
@@ -64,12 +64,15 @@ class SequenceGaps:
 
 
 def recording_items(path: str | Path, *, speed: float = 0.0, session: str | None = None,
-                    sleep=None, clock=time.monotonic, stop: threading.Event | None = None) -> Iterator[Item]:
+                    sleep=None, clock=time.monotonic, stop: threading.Event | None = None,
+                    log: EventLog | None = None) -> Iterator[Item]:
     """Events of one session of a recording, paced by `speed` (0: as fast as possible). The pacing
-    waits on `stop` (`sleep` defaults to `stop.wait`): a signal never waits for the next event."""
+    waits on `stop` (`sleep` defaults to `stop.wait`): a signal never waits for the next event.
+    `log`: the recording read already (cli/view.py reads it to check it first): drawn as read, not read
+    again (a file a `recover` or a recorder changes beside the view could differ, or fail, the second time)."""
     stop = stop if stop is not None else threading.Event()
     sleep = sleep or stop.wait
-    log = read_log(path)
+    log = log if log is not None else read_log(path)
     chosen = session
     t0_event = t0_wall = None
     for bad in log.bad:
@@ -91,6 +94,9 @@ def recording_items(path: str | Path, *, speed: float = 0.0, session: str | None
         yield event, None
     if log.missing:  # damaged, cut, recovered from a file that lost parts, undecodable: what it lost (reader.EventLog)
         yield None, f"recording not whole ({log.missing}); its intact parts are shown"
+    elif log.loss_free:  # damaged where no event was: drawn whole, the damage noted in the view (and said in
+        # view's saved line: cli/view.py; reader.EventLog.loss_free)
+        yield None, Info(f"recording read whole: {log.loss_free}")
 
 
 class LiveSource:
