@@ -117,3 +117,22 @@ def test_every_verb_says_what_the_file_is_in_the_reader_s_words(whole, tmp_path,
             assert "not whole" not in out and "Partial recording" not in md, out
         else:
             assert f"not whole ({said})" in out and "**Partial recording:**" in md, out
+
+
+def test_view_draws_the_recording_it_read_and_checked_never_reading_it_again(whole, tmp_path):
+    """Task agree (a): `view --recording trunc.mcap` once ended in a traceback inside drive(view,
+    recording_items(...)) while a `recover` ran in the same folder: the file was read twice, once to check it
+    (cli/view.py) and again, unchecked, inside the draw. Now the draw takes the log read and checked: a file
+    removed, replaced or rewritten beside the view after its check is not read again."""
+    from pairplay.services.view.sources import recording_items
+
+    data = whole.read_bytes()
+    cut = tmp_path / "trunc.mcap"
+    cut.write_bytes(data[:len(data) * 6 // 10])
+    held = read_log(cut)
+    cut.write_bytes(b"not an MCAP file any more")  # rewritten beside the view after its check
+    items = list(recording_items(cut, log=held))
+    assert sum(e is not None for e, _ in items) == len(held.events) > 0
+    assert [n for _, n in items if n and "not whole" in n and "truncated" in n], items[-1]
+    cut.unlink()  # and gone: nothing is read
+    assert sum(e is not None for e, _ in recording_items(cut, log=held)) == len(held.events)
