@@ -148,8 +148,9 @@ class EventLog:
     def loss_free(self) -> str:
         """What is wrong with a file that lost no event (a damaged summary or index, a cut after its Data End),
         in the one line every verb says of it ("" if the file is whole, or lost events: `missing` says what): its
-        events are the session's, so no verb fails it or marks its output partial, and none is silent of it
-        (a new user's trial: verify FAILed it, view, counterfactual and report said nothing)."""
+        events are the session's, so no verb marks its output partial, and none is silent of it (a new user's
+        trial: verify FAILed it, view, counterfactual and report said nothing); verify PASSes it when the damage
+        is all after the data section (`data_intact`)."""
         if self.whole or self.missing or self.lost_from >= 0:
             return ""
         what = "damaged" if self.damage else "cut after its data section"
@@ -167,7 +168,7 @@ class EventLog:
     def note(self) -> str:
         """What a verb that reads the file's intact parts lacks, in one short line ("" if the file is whole,
         every message decodes and it is no recovery of a file that lost some): "damaged: ..." or "truncated: ..."
-        (`brief`), what the file it was recovered from lost (`source_lost`), and `undecoded`."""
+        (`brief`), what the file it was recovered from lost (`source_lost`, `source_cut`), and `undecoded`."""
         cut = "" if self.whole else f"{'damaged' if self.damage else 'truncated'}: {self.brief}"
         return "; ".join(n for n in (cut, self.source_lost, self.source_cut, self.undecoded) if n)
 
@@ -184,7 +185,8 @@ class EventLog:
     @property
     def missing(self) -> str:
         """`note` when the file lacks events of its session (a damaged part that held some, a cut before its data
-        section's end, a recovered file's source's losses or cut (`source_cut`), messages that do not decode: `lost`, `cut_lost`); ""
+        section's end, a recovered file's source's losses or cut (`source_cut`), messages that do not decode:
+        `lost`, `cut_lost`); ""
         when its damage lost none (an index, a summary, a cut after the Data End): such a file is whole to a verb
         that reads its events (counterfactual, view, replay said "not whole" of it, and marked their output
         partial)."""
