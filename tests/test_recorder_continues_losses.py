@@ -53,7 +53,8 @@ def test_a_continued_file_says_what_its_damaged_predecessor_lost_to_every_verb(t
     assert not v.ok and v.lost_part and (v.events, v.not_compared) == (direct.events, direct.not_compared)
     assert main(["replay", str(new), "--verify"]) == 1
     out = capsys.readouterr().out
-    assert f"parts lost: {part}: its " in out and "DIFFERS" not in out, out
+    # what its predecessor lost, in the reader's words (task agree: reader.EventLog.source_lost)
+    assert f"error: {log.source_lost}" in out and f"{part}: its " in out and "DIFFERS" not in out, out
     assert main(["rebuild", str(new), "--out", str(tmp_path / "rb")]) == 2  # refused without --partial
     err = capsys.readouterr().err
     assert part in err and "--partial" in err, err
