@@ -480,6 +480,26 @@ def _remove_stale(path: Path, written: set[str], owned: tuple[str, ...], listed:
     return sorted(left)
 
 
+def remove_written(path: Path, owned: tuple[str, ...], manifest: str) -> list[str]:
+    """Remove from the output folder `path` what its writer wrote there (the files its manifest lists that
+    its patterns `owned` name, and the manifest), with the folders that leaves empty, `path` included;
+    return the files left (sorted relative paths: the user's notes, figures; a folder written before the
+    manifests keeps all it holds). `participant delete` removed the whole report/ folder, the researcher's
+    notes.md in it included: a derived output goes, a file of the user's never does."""
+    if not path.is_dir():
+        return []
+    listed = set(read_manifest(path / manifest))
+    _remove_stale(path, set(), owned, listed)
+    (path / manifest).unlink(missing_ok=True)
+    left = sorted(f.relative_to(path).as_posix() for f in path.rglob("*") if f.is_file() or f.is_symlink())
+    for folder in sorted((f for f in path.rglob("*") if f.is_dir() and not f.is_symlink()), reverse=True):
+        with contextlib.suppress(OSError):
+            folder.rmdir()  # only an empty one goes
+    with contextlib.suppress(OSError):
+        path.rmdir()
+    return left
+
+
 def _say_left(path: Path, left: list[str], manifest: str) -> None:
     """One line (a warning) naming the files a forced run left in `path` though its patterns name them:
     no manifest there listed them, so they are the user's, or an older pairplay's written before the
