@@ -306,16 +306,39 @@ def _is_empty_dir(path: Path) -> bool:
     return path.is_dir() and not any(path.iterdir())
 
 
-def check_output_folder(path: str | Path, force: bool = False, owned: tuple[str, ...] = ()) -> Path:
+def check_output_folder(path: str | Path, force: bool = False, owned: tuple[str, ...] = (),
+                        manifest: str = "") -> Path:
     """`path` as a Path if output_folder may fill it: a folder that is, or can become, ours and
-    holds no files unless `force`, and where none of the writer's own files (`owned`) would land on a
-    folder or under a file (`check_places`); OutputError otherwise (call it before the work)."""
+    holds no files unless `force`, where none of the writer's own files (`owned`) would land on a
+    folder or under a file (`check_places`), nor replace a file another verb wrote there (`check_theirs`;
+    `manifest`: the writer's own); OutputError otherwise (call it before the work)."""
     path = check_folder(path)
+    check_theirs(path, owned, manifest)
     if path.exists() and not _is_empty_dir(path) and not force:
         raise OutputError("exists and is not empty", path, fix="--force replaces the files written there",
                           option="--force")
     check_places(path, owned)
     return path
+
+
+def check_theirs(path: Path, owned: tuple[str, ...], manifest: str) -> None:
+    """OutputError, before any work, if a file the writer may write in the folder `path` (one its patterns
+    `owned` name) is listed by another writer's manifest there (`.pairplay-<verb>.manifest`): that verb's
+    output, not this one's to replace, `--force` or not (`study --out R --force` replaced the report.md and
+    merged.png a `pairplay report --out R` wrote, silently: the two write those names). Checked for every
+    writer of a folder (study, report, counterfactual, rebuild, sweep), whatever names they share now."""
+    if not owned or not path.is_dir():
+        return
+    for other in sorted(path.glob(manifest_name("*"))):
+        if other.name == manifest or not other.is_file():
+            continue
+        before, after = manifest_name("*").split("*")
+        verb = other.name.removeprefix(before).removesuffix(after)
+        for rel in read_manifest(other):
+            if is_owned(rel, owned) and (path / rel).is_file():
+                raise OutputError(f"was written by `pairplay {verb}` (its manifest {other.name} lists it); "
+                                  "another verb's output is not replaced, --force or not: give another folder",
+                                  path / rel)
 
 
 def check_places(path: Path, owned: tuple[str, ...] = (), files: Iterable[str] = ()) -> None:
@@ -377,7 +400,8 @@ def output_folder(path: str | Path, force: bool = False, owned: tuple[str, ...] 
     folder inside it, file by file the same way."""
     if owned and not manifest:  # the patterns alone cannot tell the writer's files from the user's
         raise ValueError("output_folder: a writer that names its own files (owned) keeps a manifest of them")
-    path = check_folder(path) if among_others else check_output_folder(path, force, owned)
+    path = check_folder(path) if among_others else check_output_folder(path, force, owned, manifest)
+    check_theirs(path, owned, manifest)  # again (among_others too): another verb may have written there meanwhile
     earlier = read_manifest(path / manifest) if manifest else None
     created = _missing_folders(path.parent)
     _mkdir(path.parent)
