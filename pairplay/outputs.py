@@ -14,7 +14,9 @@ looked current), and never another file: which are the writer's own its
 patterns (`owned`) and its manifest (`manifest`: the files it wrote there, run
 after run) say together, so a forced run removes an earlier run's stale outputs
 and never the user's file of such a name (one it leaves is said); a folder
-written before the manifests keeps all it holds. One that holds other files too
+written before the manifests keeps all it holds. A file another writer's
+manifest there lists is that writer's: never replaced, `force` or not
+(`check_theirs`: `study` and `report` both write report.md). One that holds other files too
 (`among_others`: `rebuild --out`, a sweep's summary beside its cells) gets its
 files moved in together the same way. A folder
 standing where a file is written, or a file where a folder is needed, is refused
