@@ -8,7 +8,8 @@ and journals where it went. `delete` erases the participant everywhere pairplay
 put their data (replay/studydata.py) and journals the deletion without their id;
 it asks for --yes, since it cannot be undone, and lists the merged policies that
 were combined from their games, the exports the journal says were made outside the
-folder (it cannot reach those) and the files of report/ it kept (the user's).
+folder (it cannot reach those) and the files of report/ it kept (the user's), these
+on stderr, -q or not: a copy of their data is never left unsaid.
 """
 
 from __future__ import annotations
@@ -57,8 +58,8 @@ def run(args) -> int:
               + f" (deletion {gone.deletion})")
         for m in gone.merged_policies_using_them:
             print(f"merged policy combined from their games (kept; re-combine without them if needed): {m}")
-        for line in left_lines(args.folder, args.participant, erased):
-            print(line)
+        for line in left_lines(args.folder, args.participant, erased):  # on stderr: -q never hides a copy left
+            print(line, file=sys.stderr)
         return 0
     except StudyDataError as err:
         print(f"pairplay participant {args.action}: {err}", file=sys.stderr)

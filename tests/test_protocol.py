@@ -378,8 +378,8 @@ def test_an_export_inside_the_study_folder_goes_only_to_exports_and_one_outside_
     outside = tmp_path / "handed" / "p01.zip"
     assert main(["participant", "export", str(folder), "p01", "-o", str(outside), "--quiet"]) == 0
     capsys.readouterr()
-    assert main(["participant", "delete", str(folder), "p01", "--yes"]) == 0
-    out = capsys.readouterr().out
+    assert main(["participant", "delete", str(folder), "p01", "--yes", "--quiet"]) == 0  # -q hides no copy left
+    out = capsys.readouterr().err
     assert not names_anywhere(folder, "p01") and not list(folder.rglob("*.zip"))
     [line] = [x for x in out.splitlines() if "NOT erased" in x]
     assert str(outside) in line and "outside the study folder" in line and outside.is_file()
@@ -399,7 +399,7 @@ def test_a_deletion_removes_only_what_the_report_wrote_and_names_what_it_kept(pl
     (folder / "report" / "mine" / "figure.svg").write_text("<svg/>")
     capsys.readouterr()
     assert main(["participant", "delete", str(folder), "p01", "--yes"]) == 0
-    out = capsys.readouterr().out
+    out = capsys.readouterr().err
     assert not any((folder / "report" / f).exists() for f in written)
     assert not (folder / "report" / HUMAN_MANIFEST).exists()
     assert (folder / "report" / "notes.md").read_text() == "p01 was tired; p02 fine\n"
@@ -411,7 +411,7 @@ def test_a_deletion_removes_only_what_the_report_wrote_and_names_what_it_kept(pl
     data = copy_study(played, tmp_path / "again")  # a report and nothing else: the folder goes with it
     assert main(["report", str(data.folder), "--quiet"]) == 0
     assert main(["participant", "delete", str(data.folder), "p01", "--yes"]) == 0
-    assert not (data.folder / "report").exists() and "not written by the report" not in capsys.readouterr().out
+    assert not (data.folder / "report").exists() and "not written by the report" not in capsys.readouterr().err
 
 
 def test_the_human_world_report(played, tmp_path):
