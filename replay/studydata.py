@@ -47,7 +47,7 @@ import msgspec
 from pairplay import __version__, csvcell
 from pairplay.errors import InputError
 from pairplay.livelock import LIVE, is_live
-from pairplay.outputs import OutputError, check_places, output_file, remove_written, set_aside_of
+from pairplay.outputs import OutputError, check_places, manifest_name, output_file, remove_written, set_aside_of
 from pairplay.schemas import journal as j
 from pairplay.schemas.policy import read_policy, write_policy
 from pairplay.schemas.study import Study, StudyFileError, load_study
@@ -59,6 +59,11 @@ from .rebuild import Rebuilt, rebuild_recording, write_outputs
 from .wal import wal_path
 
 STUDY_FILE, JOURNAL, SETTINGS = "study.toml", "journal.jsonl", "settings.json"
+# what `pairplay report` writes in <folder>/report (report/human.py), and its manifest: here, below the report,
+# since a participant's deletion removes those files (and only those: a user's notes.md there stays)
+REPORT_OUTPUTS = ("picks.csv", "games.png", "phases.png", "users-*.png", "merged.png", "attention.csv",
+                  "questionnaire.csv", "report.md")
+REPORT_MANIFEST = manifest_name("report")
 SUBFOLDERS = {"recordings": ".mcap", "policies": ".policy.json", "merged": ".policy.json"}  # and the files each holds
 
 
@@ -661,10 +666,9 @@ class StudyData:
             self.state = state
             # derived files that held their rows: the tables are rewritten, the report's files are removed (it
             # is stale without them); a file of the user's in report/ (notes.md) stays, and is said
-            from pairplay.report.human import HUMAN_MANIFEST, HUMAN_OUTPUTS
             report = self.folder / "report"
             left = [(f"report/{rel}", _names(report / rel, pid))
-                    for rel in remove_written(report, HUMAN_OUTPUTS, HUMAN_MANIFEST)]
+                    for rel in remove_written(report, REPORT_OUTPUTS, REPORT_MANIFEST)]
             deleted = self.append(j.ParticipantDeleted(
                 deletion=secrets.token_hex(6), sessions_removed=len(sessions), files_removed=len(files),
                 journal_lines_removed=removed, merged_policies_using_them=merged, key_file_line_removed=key_removed))
