@@ -106,8 +106,8 @@ def run(args: argparse.Namespace) -> int:
     from pairplay.replay.check import check_recording, read_session
     from pairplay.replay.rebuild import output_stem, rebuild_events
     from pairplay.replay.turns import read_turns, turns_from_events
-    from pairplay.report.counterfactual import (ARM_TEXT, COUNTERFACTUAL_OUTPUTS, Recorded, console_text,
-                                               write_counterfactual)
+    from pairplay.report.counterfactual import (ARM_TEXT, COUNTERFACTUAL_MANIFEST, COUNTERFACTUAL_OUTPUTS, Recorded,
+                                               console_text, write_counterfactual)
     from pairplay.schemas.policy import read_policy
     from pairplay.schemas.session import MODE_OF_ALGORITHM
 
@@ -117,7 +117,7 @@ def run(args: argparse.Namespace) -> int:
     rec = check_recording(args.recording)
     stem = output_stem(rec)
     out = Path(args.out) if args.out else Path("out") / "counterfactual" / stem
-    check_output_folder(out, args.force, COUNTERFACTUAL_OUTPUTS)
+    check_output_folder(out, args.force, COUNTERFACTUAL_OUTPUTS, COUNTERFACTUAL_MANIFEST)
     files = {path: read_policy(path) for _, path in arms_wanted if path}
 
     log = read_session(rec)

@@ -2,10 +2,14 @@
 
 Rule: `export` writes one zip (recordings, policies, questionnaire answers,
 their journal lines, a README of the contents) to <folder>/exports/<id>.zip or
-`-o PATH`, never over an existing file without --force. `delete` erases the
-participant everywhere pairplay put their data (replay/studydata.py) and
-journals the deletion without their id; it asks for --yes, since it cannot be
-undone, and lists the merged policies that were combined from their games.
+`-o PATH` outside the study folder (inside it only exports/<id>.zip: a copy in
+recordings/ survived the deletion), never over an existing file without --force,
+and journals where it went. `delete` erases the participant everywhere pairplay
+put their data (replay/studydata.py) and journals the deletion without their id;
+it asks for --yes, since it cannot be undone, and lists the merged policies that
+were combined from their games, the exports the journal says were made outside the
+folder (it cannot reach those) and the files of report/ it kept (the user's), these
+on stderr, -q or not: a copy of their data is never left unsaid.
 """
 
 from __future__ import annotations
@@ -46,14 +50,30 @@ def run(args) -> int:
         check_folder(args.folder)  # it writes in it: a folder one may not write in is one line, named as given
         if not args.yes:
             raise StudyDataError(f"deleting {args.participant} cannot be undone: add --yes")
-        gone = data.delete_participant(args.participant)
+        erased = data.delete_participant(args.participant)
+        gone = erased.event
         print(f"deleted: {counted(gone.sessions_removed, 'game')}, {counted(gone.files_removed, 'file')}, "
               f"{counted(gone.journal_lines_removed, 'journal line')}"
               + (", their line of the key file" if gone.key_file_line_removed else "")
               + f" (deletion {gone.deletion})")
         for m in gone.merged_policies_using_them:
             print(f"merged policy combined from their games (kept; re-combine without them if needed): {m}")
+        for line in left_lines(args.folder, args.participant, erased):  # on stderr: -q never hides a copy left
+            print(line, file=sys.stderr)
         return 0
     except StudyDataError as err:
         print(f"pairplay participant {args.action}: {err}", file=sys.stderr)
         return 2
+
+
+def left_lines(folder: Path, pid: str, erased) -> list[str]:
+    """What a deletion could not erase, one line each (nothing survives unsaid): an export made outside the
+    study folder (the journal says where; pairplay cannot reach a copy handed on), a file of report/ the
+    report did not write (the user's: it stays; it may name them)."""
+    lines = [f"NOT erased: an export of {pid} made outside the study folder: {path}"
+             + ("" if Path(path).exists() else " (not there now: moved or copied elsewhere?)")
+             + "; erase it (and any copy of it) by hand" for path in erased.elsewhere]
+    for rel, names in erased.left:
+        lines.append(f"kept {folder / rel}: not written by the report (the user's)"
+                     + (f"; it names {pid}: edit it by hand" if names else f"; check it does not mention {pid}"))
+    return lines

@@ -40,7 +40,8 @@ def run(args) -> int:
     from pairplay.replay.studydata import StudyData
     from pairplay.report.human import HUMAN_MANIFEST, HUMAN_OUTPUTS, human_report
 
-    out = check_output_folder(args.out or args.folder / "report", args.force, HUMAN_OUTPUTS)  # before any work
+    out = check_output_folder(args.out or args.folder / "report", args.force, HUMAN_OUTPUTS,
+                              HUMAN_MANIFEST)  # before any work
     try:
         # a completed game a signal left without its policy gets it now, from its recording
         built_missing_policies(StudyData(args.folder), "report")

@@ -99,9 +99,9 @@ def run(args) -> int:
     from pairplay.outputs import check_output_folder
 
     settings = settings_of(args)  # every option first, before anything is written
-    from pairplay.report.study import STUDY_OUTPUTS, first_rounds_text, run_study, text_table
+    from pairplay.report.study import STUDY_MANIFEST, STUDY_OUTPUTS, first_rounds_text, run_study, text_table
 
-    check_output_folder(args.out, args.force, STUDY_OUTPUTS)  # a folder where a file of it goes: refused now
+    check_output_folder(args.out, args.force, STUDY_OUTPUTS, STUDY_MANIFEST)  # a folder where a file of it goes: refused now
 
     report = run_study(settings, args.out, _bar(args.quiet), force=args.force)
     if settings.train_only:

@@ -107,8 +107,10 @@ def check_sweep_places(out: Path, grid) -> None:
     a folder goes (cells/, figures/): a cell file replaced by a folder was found only when the cell, computed,
     was stored ("is a folder; give a file name", exit 2, its work lost); now it is named with its setting and
     seed. A folder is never removed (it is not the sweep's), so it is refused, not taken for a damaged cell."""
-    from pairplay.outputs import check_places
-    from pairplay.report.sweep import SWEEP_OUTPUTS, setting_label
+    from pairplay.outputs import check_places, check_theirs
+    from pairplay.report.sweep import MANIFEST, SWEEP_OUTPUTS, setting_label
+
+    check_theirs(out, SWEEP_OUTPUTS, MANIFEST)  # another verb's file there (its manifest says) is not the sweep's
 
     for cell in grid.cells():
         place = out / "cells" / f"{cell.id}.json"

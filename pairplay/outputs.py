@@ -14,7 +14,9 @@ looked current), and never another file: which are the writer's own its
 patterns (`owned`) and its manifest (`manifest`: the files it wrote there, run
 after run) say together, so a forced run removes an earlier run's stale outputs
 and never the user's file of such a name (one it leaves is said); a folder
-written before the manifests keeps all it holds. One that holds other files too
+written before the manifests keeps all it holds. A file another writer's
+manifest there lists is that writer's: never replaced, `force` or not
+(`check_theirs`: `study` and `report` both write report.md). One that holds other files too
 (`among_others`: `rebuild --out`, a sweep's summary beside its cells) gets its
 files moved in together the same way. A folder
 standing where a file is written, or a file where a folder is needed, is refused
@@ -306,16 +308,39 @@ def _is_empty_dir(path: Path) -> bool:
     return path.is_dir() and not any(path.iterdir())
 
 
-def check_output_folder(path: str | Path, force: bool = False, owned: tuple[str, ...] = ()) -> Path:
+def check_output_folder(path: str | Path, force: bool = False, owned: tuple[str, ...] = (),
+                        manifest: str = "") -> Path:
     """`path` as a Path if output_folder may fill it: a folder that is, or can become, ours and
-    holds no files unless `force`, and where none of the writer's own files (`owned`) would land on a
-    folder or under a file (`check_places`); OutputError otherwise (call it before the work)."""
+    holds no files unless `force`, where none of the writer's own files (`owned`) would land on a
+    folder or under a file (`check_places`), nor replace a file another verb wrote there (`check_theirs`;
+    `manifest`: the writer's own); OutputError otherwise (call it before the work)."""
     path = check_folder(path)
+    check_theirs(path, owned, manifest)
     if path.exists() and not _is_empty_dir(path) and not force:
         raise OutputError("exists and is not empty", path, fix="--force replaces the files written there",
                           option="--force")
     check_places(path, owned)
     return path
+
+
+def check_theirs(path: Path, owned: tuple[str, ...], manifest: str) -> None:
+    """OutputError, before any work, if a file the writer may write in the folder `path` (one its patterns
+    `owned` name) is listed by another writer's manifest there (`.pairplay-<verb>.manifest`): that verb's
+    output, not this one's to replace, `--force` or not (`study --out R --force` replaced the report.md and
+    merged.png a `pairplay report --out R` wrote, silently: the two write those names). Checked for every
+    writer of a folder (study, report, counterfactual, rebuild, sweep), whatever names they share now."""
+    if not owned or not path.is_dir():
+        return
+    for other in sorted(path.glob(manifest_name("*"))):
+        if other.name == manifest or not other.is_file():
+            continue
+        before, after = manifest_name("*").split("*")
+        verb = other.name.removeprefix(before).removesuffix(after)
+        for rel in read_manifest(other):
+            if is_owned(rel, owned) and (path / rel).is_file():
+                raise OutputError(f"was written by `pairplay {verb}` (its manifest {other.name} lists it); "
+                                  "another verb's output is not replaced, --force or not: give another folder",
+                                  path / rel)
 
 
 def check_places(path: Path, owned: tuple[str, ...] = (), files: Iterable[str] = ()) -> None:
@@ -377,7 +402,8 @@ def output_folder(path: str | Path, force: bool = False, owned: tuple[str, ...] 
     folder inside it, file by file the same way."""
     if owned and not manifest:  # the patterns alone cannot tell the writer's files from the user's
         raise ValueError("output_folder: a writer that names its own files (owned) keeps a manifest of them")
-    path = check_folder(path) if among_others else check_output_folder(path, force, owned)
+    path = check_folder(path) if among_others else check_output_folder(path, force, owned, manifest)
+    check_theirs(path, owned, manifest)  # again (among_others too): another verb may have written there meanwhile
     earlier = read_manifest(path / manifest) if manifest else None
     created = _missing_folders(path.parent)
     _mkdir(path.parent)
@@ -478,6 +504,26 @@ def _remove_stale(path: Path, written: set[str], owned: tuple[str, ...], listed:
                 parent.rmdir()
                 parent = parent.parent
     return sorted(left)
+
+
+def remove_written(path: Path, owned: tuple[str, ...], manifest: str) -> list[str]:
+    """Remove from the output folder `path` what its writer wrote there (the files its manifest lists that
+    its patterns `owned` name, and the manifest), with the folders that leaves empty, `path` included;
+    return the files left (sorted relative paths: the user's notes, figures; a folder written before the
+    manifests keeps all it holds). `participant delete` removed the whole report/ folder, the researcher's
+    notes.md in it included: a derived output goes, a file of the user's never does."""
+    if not path.is_dir():
+        return []
+    listed = set(read_manifest(path / manifest))
+    _remove_stale(path, set(), owned, listed)
+    (path / manifest).unlink(missing_ok=True)
+    left = sorted(f.relative_to(path).as_posix() for f in path.rglob("*") if f.is_file() or f.is_symlink())
+    for folder in sorted((f for f in path.rglob("*") if f.is_dir() and not f.is_symlink()), reverse=True):
+        with contextlib.suppress(OSError):
+            folder.rmdir()  # only an empty one goes
+    with contextlib.suppress(OSError):
+        path.rmdir()
+    return left
 
 
 def _say_left(path: Path, left: list[str], manifest: str) -> None:

@@ -7,7 +7,9 @@ Rule: one folder per study, readable without pairplay:
   policies/<session>.policy.json   the policy each game learned (rebuilt from its recording)
   merged/<phase>-bias.policy.json  the bias policy of a pi-reuse phase, with the rule of each state
   participants.csv, sessions.csv, answers.csv   tables derived from the above (`write_tables`)
-  exports/<id>.zip             a participant's data, on request (`export_participant`)
+  exports/<id>.zip             a participant's data, on request (`export_participant`): the only place
+                               inside the folder an export goes (a copy elsewhere in it survived the
+                               deletion); one outside the folder is journaled, and the deletion names it
 The state (who is registered, which game is next, what is done) is the fold of
 the journal (`StudyState`); the plan (`plan`) follows from the study file and
 that state. How a game ended and its policy come from its recording
@@ -45,7 +47,7 @@ import msgspec
 from pairplay import __version__, csvcell
 from pairplay.errors import InputError
 from pairplay.livelock import LIVE, is_live
-from pairplay.outputs import OutputError, check_places, output_file, set_aside_of
+from pairplay.outputs import OutputError, check_places, manifest_name, output_file, remove_written, set_aside_of
 from pairplay.schemas import journal as j
 from pairplay.schemas.jsonfile import in_words
 from pairplay.schemas.policy import read_policy, write_policy
@@ -58,6 +60,11 @@ from .rebuild import Rebuilt, rebuild_recording, write_outputs
 from .wal import wal_path
 
 STUDY_FILE, JOURNAL, SETTINGS = "study.toml", "journal.jsonl", "settings.json"
+# what `pairplay report` writes in <folder>/report (report/human.py), and its manifest: here, below the report,
+# since a participant's deletion removes those files (and only those: a user's notes.md there stays)
+REPORT_OUTPUTS = ("picks.csv", "games.png", "phases.png", "users-*.png", "merged.png", "attention.csv",
+                  "questionnaire.csv", "report.md")
+REPORT_MANIFEST = manifest_name("report")
 SUBFOLDERS = {"recordings": ".mcap", "policies": ".policy.json", "merged": ".policy.json"}  # and the files each holds
 
 
@@ -584,6 +591,10 @@ class StudyData:
             if out.exists() and inside and inside[0] != "exports":  # -o study/journal.jsonl --force replaced it
                 raise StudyDataError(f"{out}: a file of the study folder; an export never replaces one, --force or "
                                      "not: give another -o")
+            if inside and inside != ("exports", f"{pid}.zip"):  # -o study/recordings/: a copy delete never found
+                raise StudyDataError(f"{out}: inside the study folder an export goes only to "
+                                     f"{self.given / 'exports' / f'{pid}.zip'} (erased with the participant): give no "
+                                     "-o, or a path outside the study folder")
             if out.is_dir():  # said "exists (use --force to replace it)", and --force then said it is a folder
                 raise StudyDataError(f"{out}: is a folder; give a file name (a folder is never replaced, --force or "
                                      "not)")
@@ -607,11 +618,16 @@ class StudyData:
                 z.writestr("README.txt", _export_readme(pid, self.study.study.id, games, files, answers,
                                                         self.merged_using(pid), self.folder))
             atomic_write(out, buf.getvalue())
+            # where it went, so that their deletion names a copy outside the folder (it cannot erase that one)
+            self.append(j.ParticipantExported(participant=pid, path=str(out.resolve()),
+                                              sha256=hashlib.sha256(buf.getvalue()).hexdigest()))
             return out
 
-    def delete_participant(self, pid: str) -> j.ParticipantDeleted:
+    def delete_participant(self, pid: str) -> "Deletion":
         """Erase `pid` everywhere pairplay put their data (see the module rule); the deletion is journaled
-        without their id. Refused while one of their games is running."""
+        without their id. Refused while one of their games is running. What it could not erase is returned
+        to be said: the exports journaled outside the study folder, the files of report/ the report did not
+        write (a user's notes may name them)."""
         with self._lock:
             self.participant(pid)
             running = [g.session for g in self.games_of(pid) if g.ended is None]
@@ -634,6 +650,8 @@ class StudyData:
                 for extra in (self.folder / "recordings").glob(f"{g}.*"):
                     extra.unlink()
                     files.append(extra)
+            elsewhere = sorted({e.path for e in self.read_journal() if isinstance(e, j.ParticipantExported)
+                                and e.participant == pid and not Path(e.path).is_relative_to(self.folder)})
             kept, removed = [], 0
             for e in self.read_journal():
                 if getattr(e, "participant", None) == pid or getattr(e, "session", None) in sessions:
@@ -648,17 +666,16 @@ class StudyData:
             for e in kept:
                 state.evolve(e)
             self.state = state
-            # derived files that held their rows: the tables are rewritten, a report is removed
+            # derived files that held their rows: the tables are rewritten, the report's files are removed (it
+            # is stale without them); a file of the user's in report/ (notes.md) stays, and is said
             report = self.folder / "report"
-            if report.is_dir():
-                for f in sorted(report.rglob("*"), reverse=True):
-                    f.unlink() if f.is_file() else f.rmdir()
-                report.rmdir()
+            left = [(f"report/{rel}", _names(report / rel, pid))
+                    for rel in remove_written(report, REPORT_OUTPUTS, REPORT_MANIFEST)]
             deleted = self.append(j.ParticipantDeleted(
                 deletion=secrets.token_hex(6), sessions_removed=len(sessions), files_removed=len(files),
                 journal_lines_removed=removed, merged_policies_using_them=merged, key_file_line_removed=key_removed))
             self.write_tables()
-            return deleted
+            return Deletion(deleted, left, elsewhere)
 
     def _drop_from_key_file(self, pid: str) -> bool:
         key = self.key_file
@@ -677,6 +694,25 @@ class StudyData:
             f.flush()
             os.fsync(f.fileno())
         return True
+
+
+@dataclass(frozen=True)
+class Deletion:
+    """What `delete_participant` did (`event`, journaled without the id) and what it could not erase, to be
+    said: files of report/ the report did not write (`left`: relative path, whether it names the id) and the
+    exports journaled outside the study folder (`elsewhere`: absolute paths)."""
+
+    event: j.ParticipantDeleted
+    left: list[tuple[str, bool]]
+    elsewhere: list[str]
+
+
+def _names(path: Path, pid: str) -> bool:
+    """Whether the file `path` holds the id `pid` as a whole id (its bytes; a figure's pixels cannot tell)."""
+    try:
+        return re.search(_id(pid).encode(), path.read_bytes()) is not None
+    except OSError:
+        return False
 
 
 class FolderSettings(msgspec.Struct, forbid_unknown_fields=True):

@@ -48,18 +48,17 @@ import numpy as np
 from pairplay import __version__, csvcell
 from pairplay.core.actions import ACTION_NAMES
 from pairplay.core.geometry import N_STATES, STATE_NAMES
-from pairplay.replay.studydata import StudyData, named
+from pairplay.replay.studydata import REPORT_MANIFEST, REPORT_OUTPUTS, StudyData, named
 from pairplay.schemas.policy import read_policy
 
 from pairplay.report import plots
 from pairplay.report.study import markdown_table
 from pairplay.numbers import counted
-from pairplay.outputs import manifest_name
 
 
-HUMAN_OUTPUTS = ("picks.csv", "games.png", "phases.png", "users-*.png", "merged.png", "attention.csv",
-                 "questionnaire.csv", "report.md")  # pairplay.outputs.output_folder `owned`
-HUMAN_MANIFEST = manifest_name("report")  # the files a report wrote in its folder (the CLI's and the console's)
+# pairplay.outputs.output_folder `owned`, and the manifest of the files a report wrote in its folder (the CLI's
+# and the console's): defined with the study folder (replay/studydata.py), whose participant deletion removes them
+HUMAN_OUTPUTS, HUMAN_MANIFEST = REPORT_OUTPUTS, REPORT_MANIFEST
 
 
 @dataclass

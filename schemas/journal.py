@@ -4,7 +4,7 @@ Rule: the games themselves are recorded by the bus recorder (one MCAP file per
 game); the journal records the study around them: who was registered (a
 pseudonymous id, never a name), which game of which phase a session was, how it
 ended, what the experimenter paused, aborted or marked invalid and why, the
-bias policies combined, the participants deleted. A study's state is the fold
+bias policies combined, where a participant's data was exported, the participants deleted. A study's state is the fold
 of its journal (replay/studydata.py). Each line is a tagged Struct (field
 "event"), readable by any JSON tool; unknown fields are ignored on read, so
 an older pairplay reads a newer journal's lines of the types it knows; a type
@@ -103,6 +103,15 @@ class BiasCombined(JournalEvent, tag="BiasCombined"):
     partial: str = ""
 
 
+class ParticipantExported(JournalEvent, tag="ParticipantExported"):
+    """A participant's data was exported to a zip: where (absolute), so that their deletion can name the copy
+    it cannot reach (one outside the study folder; inside it an export goes only to exports/<id>.zip)."""
+
+    participant: str
+    path: str
+    sha256: str = ""
+
+
 class ParticipantDeleted(JournalEvent, tag="ParticipantDeleted"):
     """A participant was erased; no id is kept, only what the deletion touched."""
 
@@ -115,7 +124,7 @@ class ParticipantDeleted(JournalEvent, tag="ParticipantDeleted"):
 
 
 JOURNAL_TYPES = (StudyCreated, ParticipantRegistered, GameStarted, GamePaused, GameResumed, GameEnded,
-                 PolicyBuilt, SessionMarkedInvalid, BiasCombined, ParticipantDeleted)
+                 PolicyBuilt, SessionMarkedInvalid, BiasCombined, ParticipantExported, ParticipantDeleted)
 AnyJournal = JOURNAL_TYPES[0]
 for _t in JOURNAL_TYPES[1:]:
     AnyJournal = AnyJournal | _t  # type: ignore[assignment]

@@ -382,3 +382,70 @@ def test_a_writer_that_names_its_own_files_keeps_a_manifest(tmp_path):
         with output_folder(tmp_path / "D", owned=("*.csv",)):
             pass
     assert list(tmp_path.iterdir()) == []
+
+
+def _writers():
+    """Every verb that fills a folder of outputs: (verb, its patterns, its manifest, among others' files)."""
+    from pairplay.cli.rebuild import MANIFEST as REBUILD_MANIFEST, REBUILD_OUTPUTS
+    from pairplay.report.counterfactual import COUNTERFACTUAL_MANIFEST, COUNTERFACTUAL_OUTPUTS
+    from pairplay.report.human import HUMAN_MANIFEST, HUMAN_OUTPUTS
+    from pairplay.report.study import STUDY_MANIFEST, STUDY_OUTPUTS
+    from pairplay.report.sweep import MANIFEST as SWEEP_MANIFEST, SWEEP_OUTPUTS
+    return [("study", STUDY_OUTPUTS, STUDY_MANIFEST, False), ("report", HUMAN_OUTPUTS, HUMAN_MANIFEST, False),
+            ("counterfactual", COUNTERFACTUAL_OUTPUTS, COUNTERFACTUAL_MANIFEST, False),
+            ("rebuild", REBUILD_OUTPUTS, REBUILD_MANIFEST, True), ("sweep", SWEEP_OUTPUTS, SWEEP_MANIFEST, True)]
+
+
+def _shared_pairs():
+    """(first writer, second writer, a file name both write): each pattern of one made a name ('*' -> 'x')
+    that the other's patterns name too (study and report both write report.md and merged.png)."""
+    from pairplay.outputs import is_owned
+    pairs = []
+    for a in _writers():
+        for b in _writers():
+            if a[0] == b[0]:
+                continue
+            for pattern in a[1]:
+                name = pattern.replace("*", "x")
+                if is_owned(name, b[1]):
+                    pairs.append((a, b, name))
+    return pairs
+
+
+def test_the_writers_share_names_so_the_check_is_needed():
+    shared = {(a[0], b[0], name) for a, b, name in _shared_pairs()}
+    assert {("report", "study", "report.md"), ("study", "report", "merged.png")} <= shared
+
+
+@pytest.mark.parametrize("a,b,name", _shared_pairs(), ids=lambda v: v[0] if isinstance(v, tuple) else v)
+def test_a_file_another_verbs_manifest_lists_is_never_replaced_by_a_forced_writer(a, b, name, tmp_path):
+    """`study --out R --force`, R holding what `pairplay report --out R` wrote (report.md, merged.png: the two
+    write those names), replaced them silently. A file another writer's manifest lists is not this writer's to
+    replace, --force or not: refused before the work, naming the file and the verb that wrote it."""
+    out = tmp_path / "out"
+    with output_folder(out, owned=a[1], among_others=a[3], manifest=a[2]) as tmp:
+        (tmp / name).parent.mkdir(parents=True, exist_ok=True)
+        (tmp / name).write_text(f"{a[0]}'s\n")
+    with pytest.raises(OutputError, match=rf"was written by `pairplay {a[0]}` \(its manifest {a[2]} lists it\)") \
+            as info:
+        with output_folder(out, force=True, owned=b[1], among_others=b[3], manifest=b[2]) as tmp:
+            (tmp / name).parent.mkdir(parents=True, exist_ok=True)
+            (tmp / name).write_text(f"{b[0]}'s\n")
+    assert str(out / name) in str(info.value)
+    assert (out / name).read_text() == f"{a[0]}'s\n"
+
+
+def test_study_force_refuses_a_folder_holding_a_reports_files_before_any_work(tmp_path, capsys):
+    """The new user's case, by the command line: one line naming the report's file and its verb, exit 2."""
+    from pairplay.cli.main import main
+    from pairplay.report.human import HUMAN_MANIFEST, HUMAN_OUTPUTS
+    out = tmp_path / "r"
+    with output_folder(out, owned=HUMAN_OUTPUTS, manifest=HUMAN_MANIFEST) as tmp:
+        (tmp / "report.md").write_text("the human-world report\n")
+        (tmp / "merged.png").write_bytes(b"\x89PNG")
+    assert main(["study", "--quiet", "--train-only", "--personas", "blind", "--games", "1", "--rounds", "5",
+                 "--out", str(out), "--force"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "`pairplay report`" in err and str(out / "merged.png") in err, err
+    assert (out / "report.md").read_text() == "the human-world report\n"
+    assert sorted(p.name for p in out.iterdir()) == sorted([HUMAN_MANIFEST, "merged.png", "report.md"])

@@ -21,7 +21,8 @@ from damageutil import damage, damaged_when_written
 
 from pairplay.replay.reader import read_log
 from pairplay.replay.studydata import StudyData, StudyDataError
-from pairplay.report.human import HUMAN_MANIFEST, human_report
+from pairplay.outputs import output_folder
+from pairplay.report.human import HUMAN_MANIFEST, HUMAN_OUTPUTS, human_report
 from pairplay.schemas import journal as j
 from pairplay.schemas.policy import read_policy
 from pairplay.services.bus import Bus, BusOptions
@@ -334,10 +335,13 @@ def test_a_deleted_participant_is_named_in_no_rule_combination_or_new_report(pla
 
 def test_delete_erases_a_participant_everywhere_and_keeps_an_anonymous_event(played, tmp_path):
     data = copy_study(played, tmp_path)
-    human_report(data.folder)
+    with output_folder(data.folder / "report", owned=HUMAN_OUTPUTS, manifest=HUMAN_MANIFEST) as tmp:
+        human_report(data.folder, tmp)  # as `pairplay report` writes it: with its manifest
     data.export_participant("p01")
     before = [g.session for g in data.games_of("p01")]
-    gone = data.delete_participant("p01")
+    erased = data.delete_participant("p01")
+    gone = erased.event
+    assert erased.left == [] and erased.elsewhere == []
     folder = data.folder
     assert not names_anywhere(folder, "p01")
     assert not any((folder / "recordings" / f"{s}.mcap").exists() for s in before)
@@ -351,6 +355,63 @@ def test_delete_erases_a_participant_everywhere_and_keeps_an_anonymous_event(pla
     assert "p01" not in fresh.state.participants and fresh.register("phase2") == "p06"
     with pytest.raises(StudyDataError, match="no participant"):
         fresh.export_participant("p01")
+
+
+def test_an_export_inside_the_study_folder_goes_only_to_exports_and_one_outside_is_named_by_the_deletion(
+        played, tmp_path, capsys):
+    """A new user's trial: `participant export STUDY p01 -o STUDY/recordings/` (or STUDY/, STUDY/merged/) wrote a
+    zip of all their data there, and `participant delete` said "deleted" with two full copies left. Inside the
+    study folder an export goes only to exports/<id>.zip (which the deletion erases); one outside it (beyond its
+    reach) is journaled, and the deletion names it in a line of its own."""
+    from pairplay.cli.main import main
+    data = copy_study(played, tmp_path)
+    folder = data.folder
+    for target in (folder / "recordings", folder, folder / "merged", folder / "policies" / "p01.zip",
+                   folder / "exports" / "other.zip"):
+        assert main(["participant", "export", str(folder), "p01", "-o", f"{target}/" if target.suffix == "" else
+                     str(target), "--quiet"]) == 2
+        err = capsys.readouterr().err
+        assert "inside the study folder an export goes only to" in err and "exports/p01.zip" in err, err
+        assert len(err.strip().splitlines()) == 1
+    assert not list(folder.rglob("*.zip"))
+    assert main(["participant", "export", str(folder), "p01", "--quiet"]) == 0  # the default: exports/p01.zip
+    outside = tmp_path / "handed" / "p01.zip"
+    assert main(["participant", "export", str(folder), "p01", "-o", str(outside), "--quiet"]) == 0
+    capsys.readouterr()
+    assert main(["participant", "delete", str(folder), "p01", "--yes", "--quiet"]) == 0  # -q hides no copy left
+    out = capsys.readouterr().err
+    assert not names_anywhere(folder, "p01") and not list(folder.rglob("*.zip"))
+    [line] = [x for x in out.splitlines() if "NOT erased" in x]
+    assert str(outside) in line and "outside the study folder" in line and outside.is_file()
+
+
+def test_a_deletion_removes_only_what_the_report_wrote_and_names_what_it_kept(played, tmp_path, capsys):
+    """`participant delete` removed the whole report/ folder, the researcher's notes.md and figures in it. It
+    removes the files the report's manifest lists (stale without the participant) and keeps the others, each
+    named in a line, saying whether it names the participant."""
+    from pairplay.cli.main import main
+    data = copy_study(played, tmp_path)
+    folder = data.folder
+    assert main(["report", str(folder), "--quiet"]) == 0
+    written = set(json.loads((folder / "report" / HUMAN_MANIFEST).read_text())["files"])
+    (folder / "report" / "notes.md").write_text("p01 was tired; p02 fine\n")
+    (folder / "report" / "mine").mkdir()
+    (folder / "report" / "mine" / "figure.svg").write_text("<svg/>")
+    capsys.readouterr()
+    assert main(["participant", "delete", str(folder), "p01", "--yes"]) == 0
+    out = capsys.readouterr().err
+    assert not any((folder / "report" / f).exists() for f in written)
+    assert not (folder / "report" / HUMAN_MANIFEST).exists()
+    assert (folder / "report" / "notes.md").read_text() == "p01 was tired; p02 fine\n"
+    assert (folder / "report" / "mine" / "figure.svg").is_file()
+    notes = [x for x in out.splitlines() if "notes.md" in x]
+    figure = [x for x in out.splitlines() if "figure.svg" in x]
+    assert len(notes) == 1 and "kept" in notes[0] and "names p01" in notes[0], out
+    assert len(figure) == 1 and "kept" in figure[0] and "names p01" not in figure[0], out
+    data = copy_study(played, tmp_path / "again")  # a report and nothing else: the folder goes with it
+    assert main(["report", str(data.folder), "--quiet"]) == 0
+    assert main(["participant", "delete", str(data.folder), "p01", "--yes"]) == 0
+    assert not (data.folder / "report").exists() and "not written by the report" not in capsys.readouterr().err
 
 
 def test_the_human_world_report(played, tmp_path):

@@ -242,8 +242,9 @@ def console_routes(console: Console) -> list:
         pid = _str(body, "participant", "")
         if _str(body, "confirm", "") != pid:
             raise StudyDataError("type the participant's id to confirm the deletion")
-        gone = data.delete_participant(pid)
-        return JSONResponse({"deleted": msgspec.to_builtins(gone)})
+        erased = data.delete_participant(pid)
+        return JSONResponse({"deleted": msgspec.to_builtins(erased.event), "not_erased": erased.elsewhere,
+                             "kept": [{"file": rel, "names_them": names} for rel, names in erased.left]})
 
     async def report(request: Request) -> Response:
         from pairplay.report.human import HUMAN_MANIFEST, HUMAN_OUTPUTS, human_report

@@ -134,7 +134,9 @@ $("delete").onclick = async () => {
   const r = await api("/api/console/delete", {participant: pid, confirm: $("delete-confirm").value});
   $("delete-confirm").value = "";
   $("data-result").textContent = `deleted ${pid}: ${r.deleted.sessions_removed} games, ${r.deleted.files_removed} files` +
-    (r.deleted.merged_policies_using_them.length ? `; merged policies that used them: ${r.deleted.merged_policies_using_them.join(", ")}` : "");
+    (r.deleted.merged_policies_using_them.length ? `; merged policies that used them: ${r.deleted.merged_policies_using_them.join(", ")}` : "") +
+    r.not_erased.map(p => `; NOT erased, an export made outside the study folder: ${p} (erase it by hand)`).join("") +
+    r.kept.map(k => `; kept ${k.file}, not written by the report` + (k.names_them ? ` (it names ${pid}: edit it by hand)` : "")).join("");
 };
 $("report").onclick = () => api("/api/console/report", {});
 poll();
