@@ -177,6 +177,8 @@ def run(args) -> int:
         if not redo:
             print(f"nothing to do: {every} were finished; {out / 'sweep.md'} is as it was")
             return 0
+        if not any((out / f).exists() for f in redo) and len(redo) == len(summary_files(grid, finished_cells(out, grid))):
+            redo = None  # no summary yet (a run stopped after its cells): written as any run's, its usual line
     try:
         out.mkdir(parents=True, exist_ok=True)
         if not had_copy or copy.read_text() != text:  # the same grid's copy stays as it is
