@@ -39,31 +39,29 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run(args) -> int:
-    try:
-        data = StudyData(args.folder)
-        if args.action == "export":  # its default named as given (a refusal named the resolved study folder)
-            out = file_in(args.out, f"{args.participant}.zip") or args.folder / "exports" / f"{args.participant}.zip"
-            path = data.export_participant(args.participant, out, force=args.force)
-            print(f"{args.participant}: {path}")
-            return 0
-        data.participant(args.participant)
-        check_folder(args.folder)  # it writes in it: a folder one may not write in is one line, named as given
-        if not args.yes:
-            raise StudyDataError(f"deleting {args.participant} cannot be undone: add --yes")
-        erased = data.delete_participant(args.participant)
-        gone = erased.event
-        print(f"deleted: {counted(gone.sessions_removed, 'game')}, {counted(gone.files_removed, 'file')}, "
-              f"{counted(gone.journal_lines_removed, 'journal line')}"
-              + (", their line of the key file" if gone.key_file_line_removed else "")
-              + f" (deletion {gone.deletion})")
-        for m in gone.merged_policies_using_them:
-            print(f"merged policy combined from their games (kept; re-combine without them if needed): {m}")
-        for line in left_lines(args.folder, args.participant, erased):  # on stderr: -q never hides a copy left
-            print(line, file=sys.stderr)
+    # a StudyDataError is a UserError: cli/main.py says it, `pairplay participant <action>: what (where)`, with
+    # the fix this action's options offer (`exists; --force replaces it`: it was said here without it)
+    data = StudyData(args.folder)
+    if args.action == "export":  # its default named as given (a refusal named the resolved study folder)
+        out = file_in(args.out, f"{args.participant}.zip") or args.folder / "exports" / f"{args.participant}.zip"
+        path = data.export_participant(args.participant, out, force=args.force)
+        print(f"{args.participant}: {path}")
         return 0
-    except StudyDataError as err:
-        print(f"pairplay participant {args.action}: {err}", file=sys.stderr)
-        return 2
+    data.participant(args.participant)
+    check_folder(args.folder)  # it writes in it: a folder one may not write in is one line, named as given
+    if not args.yes:
+        raise StudyDataError(f"deleting {args.participant} cannot be undone: add --yes")
+    erased = data.delete_participant(args.participant)
+    gone = erased.event
+    print(f"deleted: {counted(gone.sessions_removed, 'game')}, {counted(gone.files_removed, 'file')}, "
+          f"{counted(gone.journal_lines_removed, 'journal line')}"
+          + (", their line of the key file" if gone.key_file_line_removed else "")
+          + f" (deletion {gone.deletion})")
+    for m in gone.merged_policies_using_them:
+        print(f"merged policy combined from their games (kept; re-combine without them if needed): {m}")
+    for line in left_lines(args.folder, args.participant, erased):  # on stderr: -q never hides a copy left
+        print(line, file=sys.stderr)
+    return 0
 
 
 def left_lines(folder: Path, pid: str, erased) -> list[str]:

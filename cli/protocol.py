@@ -256,7 +256,7 @@ def _serve(data: StudyData, args) -> int:
             server = StudyLabServer(runner, host=host.strip("[]"), port=int(port), ssl_certfile=args.certfile,
                                     ssl_keyfile=args.keyfile).start()
         except OSError as err:
-            raise StudyDataError(f"--listen {args.listen}: {err.strerror or err}") from None
+            raise StudyDataError(f"cannot serve the console: {err.strerror or err}", f"--listen {args.listen}") from None
         warn_unreachable(runner, "serve")
         print(f"experimenter console: {server.console_url}", flush=True)
         print(f"bus (boards and scripted players connect here): {' '.join(bus.locators())}", flush=True)

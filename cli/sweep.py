@@ -5,7 +5,12 @@ the seeds; results land in --out (default out/sweep-<grid name>): cells/ (one
 JSON per finished cell), sweep.csv, cells.csv, figures/, sweep.md. Running
 the same grid into the same folder resumes: finished cells are not computed
 again; with every cell finished and the summary written, nothing is written
-(sweep.md keeps the run that did the work) and one line says so. "The same grid" is
+(sweep.md keeps the run that did the work) and one line says so; a summary file
+missing or unreadable (a deleted figure, a junk sweep.md: report/sweep.py
+`summary_to_write`) is written again, the others kept, and the line names it
+(it said "nothing to do" and left them so). With --force the whole summary is
+written again from the cells (a folder's --force replaces the files it writes
+there); the cells are results and stay. "The same grid" is
 the same grid as read (`same_grid`: its settings, axes, seeds and reuse), not the same
 text: a comment changes nothing. A folder that holds another grid's sweep, or files but
 no sweep, is refused unless --force (which removes the other grid's cell files, those
@@ -44,7 +49,8 @@ from pairplay.cli.progress import bar as progress
 from pairplay.errors import OptionError, OutputError
 from pairplay.outputs import check_folder, write_text
 from pairplay.report.sweep import (GridError, check_scheduler, check_sweep_memory, finished_cells, is_cell_file,
-                                    read_grid, run_sweep, write_sweep)
+                                    read_grid, run_sweep, summary_files, summary_to_write,
+                                    write_sweep)
 from pairplay.numbers import counted
 
 log = logging.getLogger("pairplay.sweep")
@@ -59,7 +65,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--scheduler", metavar="ADDRESS", help="a Dask distributed scheduler (tcp://host:port)")
     p.add_argument("--workers", type=workers,
                    help="local processes when no --scheduler (default 1; at most the CPUs this process may use)")
-    p.add_argument("--force", action="store_true", help="replace a folder that holds another grid's sweep, or write into one that holds other files")
+    p.add_argument("--force", action="store_true", help="replace a folder that holds another grid's sweep, or write into one that holds other files; "
+                   "a finished sweep's summary is written again from its cells")
 
 
 def stopped(out: Path, grid, made: list[Path], had_copy: bool, why: str) -> int | None:
@@ -163,11 +170,17 @@ def run(args) -> int:
     had_copy = copy.exists()
     cells = grid.cells()
     done = len(finished_cells(out, grid))
-    if had_copy and done == len(cells) and all((out / name).is_file() for name in SUMMARY):
-        # a resume with nothing to do rewrote sweep.md ("computed 0 in 0.0 s"), losing the run that did the work
-        print(f"nothing to do: all {counted(len(cells), 'cell')} ({counted(len(grid.settings()), 'setting')} x {counted(len(grid.seeds), 'seed')}) "
-              f"were finished; {out / 'sweep.md'} is as it was")
-        return 0
+    every = f"all {counted(len(cells), 'cell')} ({counted(len(grid.settings()), 'setting')} x {counted(len(grid.seeds), 'seed')})"
+    redo = None  # a finished sweep resumed without --force: the summary files to write again, the others stay
+    if had_copy and done == len(cells) and not args.force:
+        # a resume with nothing to do rewrote sweep.md ("computed 0 in 0.0 s"), losing the run that did the work;
+        # but a deleted figure or a junk sweep.md stayed so too ("nothing to do"): those are written again
+        redo = summary_to_write(out, grid, finished_cells(out, grid))
+        if not redo:
+            print(f"nothing to do: {every} were finished; {out / 'sweep.md'} is as it was")
+            return 0
+        if not any((out / f).exists() for f in redo) and len(redo) == len(summary_files(grid, finished_cells(out, grid))):
+            redo = None  # no summary yet (a run stopped after its cells): written as any run's, its usual line
     try:
         out.mkdir(parents=True, exist_ok=True)
         if not had_copy or copy.read_text() != text:  # the same grid's copy stays as it is
@@ -175,7 +188,10 @@ def run(args) -> int:
         with progress(len(cells), "sweep", "cell", args.quiet, initial=done) as bar:  # on a terminal only
             result = run_sweep(grid, out, scheduler=args.scheduler, workers=args.workers, progress=bar.update)
         results = finished_cells(out, grid)
-        write_sweep(out, grid, results, result)  # a signal here: the cells stay, a rerun writes these again
+        # --force: the whole summary written again from the cells (README: a folder's --force replaces the files
+        # it writes there; it said "nothing to do" and left a junk sweep.md); the cells are results and stay
+        keep = [] if redo is None else [f for f in summary_files(grid, results) if f not in redo]
+        write_sweep(out, grid, results, result, keep=keep)  # a signal here: the cells stay, a rerun writes these again
     except KeyboardInterrupt:
         from pairplay.cli.main import interrupted_what
         if stopped(out, grid, made, had_copy, interrupted_what()) is None:
@@ -190,6 +206,10 @@ def run(args) -> int:
         if not finished_cells(out, grid):  # so a corrected grid runs into the same --out (it was refused as
             stopped(out, grid, made, had_copy, "failed")  # "another grid's sweep"); finished cells stay to resume
         raise
+    if redo is not None:
+        print(f"{every} were finished; written again (missing or unreadable): {', '.join(redo)}; the rest is as "
+              f"it was; {out / 'sweep.md'}")
+        return 0
     print(f"{counted(result.cells, 'cell')} ({counted(len(grid.settings()), 'setting')} x {counted(len(grid.seeds), 'seed')}), {result.computed} "
           f"computed in {result.wall_s:.1f} s on {result.where}; {out / 'sweep.md'}")
     return 0

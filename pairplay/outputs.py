@@ -404,7 +404,7 @@ def output_folder(path: str | Path, force: bool = False, owned: tuple[str, ...] 
         raise ValueError("output_folder: a writer that names its own files (owned) keeps a manifest of them")
     path = check_folder(path) if among_others else check_output_folder(path, force, owned, manifest)
     check_theirs(path, owned, manifest)  # again (among_others too): another verb may have written there meanwhile
-    earlier = read_manifest(path / manifest) if manifest else None
+    earlier = read_manifest(path / manifest, owned) if manifest else None
     created = _missing_folders(path.parent)
     _mkdir(path.parent)
     nameless = path.name in ("", ".", "..")  # no folder beside it can be named after it, nor renamed onto it
@@ -545,21 +545,32 @@ def manifest_name(writer: str) -> str:
     return f".pairplay-{writer}.manifest"
 
 
-def read_manifest(path: Path) -> list[str]:
+def read_manifest(path: Path, owned: tuple[str, ...] = ()) -> list[str]:
     """The relative paths an output folder's manifest (`write_manifest`) lists; [] if there is none, or
     if it is not one (a user's file of that name, a damaged one: logged, and nothing is taken from it).
-    A listed path is only ever removed if its writer's `owned` patterns name it too (`_remove_stale`),
-    so a forged manifest cannot name a file outside them (`../x`, `notes.txt`)."""
+    An entry outside the folder (`../x`, `/etc/x`, empty) or, given the writer's `owned` patterns, one they do
+    not name (`notes.txt`) is ignored, and the ignored entries are named in one warning (a forged manifest
+    removed nothing outside, but said nothing either). A listed path is only ever removed if `owned` names
+    it too (`_remove_stale`), so a forged manifest cannot name a file outside them."""
     if not path.is_file():
         return []
     try:
         data = json.loads(path.read_text(encoding="utf-8"))
         if data.get("format") != MANIFEST_FORMAT or not all(isinstance(f, str) for f in data["files"]):
             raise ValueError("not a pairplay manifest")
-        return [f for f in data["files"] if f and not f.startswith("/") and ".." not in f.split("/")]
     except (OSError, ValueError, AttributeError, KeyError, TypeError) as err:
         logging.getLogger("pairplay.outputs").warning("%s: not read (%s); no earlier output is removed", path, err)
         return []
+    files, ignored = [], []
+    for f in data["files"]:
+        inside = f and not f.startswith(("/", "\\")) and ".." not in re.split(r"[/\\]", f) and ":" not in f[:2]
+        (files if inside and (not owned or is_owned(f, owned)) else ignored).append(f)
+    if ignored:
+        shown = ", ".join(map(repr, ignored[:5])) + (f" and {len(ignored) - 5} more" if len(ignored) > 5 else "")
+        logging.getLogger("pairplay.outputs").warning(
+            "%s: ignored %s outside the folder or not named like this verb's outputs (nothing of theirs is removed): "
+            "%s", path, counted(len(ignored), "entry", "entries"), shown)
+    return files
 
 
 def write_manifest(path: Path, files: list[str]) -> None:

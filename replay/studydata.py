@@ -45,9 +45,10 @@ from pathlib import Path
 import msgspec
 
 from pairplay import __version__, csvcell
-from pairplay.errors import InputError
+from pairplay.errors import InputError, UserError
 from pairplay.livelock import LIVE, is_live
-from pairplay.outputs import OutputError, check_places, manifest_name, output_file, remove_written, set_aside_of
+from pairplay.outputs import (OutputError, check_output, check_places, manifest_name, output_file,
+                              remove_written, set_aside_of)
 from pairplay.schemas import journal as j
 from pairplay.schemas.jsonfile import in_words
 from pairplay.schemas.policy import read_policy, write_policy
@@ -68,8 +69,10 @@ REPORT_MANIFEST = manifest_name("report")
 SUBFOLDERS = {"recordings": ".mcap", "policies": ".policy.json", "merged": ".policy.json"}  # and the files each holds
 
 
-class StudyDataError(ValueError):
-    """A request the study folder cannot satisfy; the message says what and where (one line)."""
+class StudyDataError(UserError, ValueError):
+    """A request the study folder cannot satisfy: what, and where (a file, a folder, an option) as every
+    refusal says it, `what (where)` (pairplay/errors.py UserError: it said `<path> exists (use --force to
+    replace it)`, `key file <path>: <why>`, `<folder>: already a study folder`, unlike every other verb)."""
 
 
 def atomic_write(path: Path, data: bytes) -> None:
@@ -94,7 +97,7 @@ def open_key_file(path: Path):
         fd = os.open(path, os.O_WRONLY | os.O_APPEND | os.O_CREAT, KEY_FILE_MODE)
         os.fchmod(fd, KEY_FILE_MODE)
     except OSError as err:
-        raise StudyDataError(f"key file {path}: {err.strerror or err}") from None
+        raise StudyDataError(f"cannot write the key file there: {err.strerror or err}", path) from None
     return open(fd, "a", encoding="utf-8", newline="")
 
 
@@ -186,8 +189,8 @@ class StudyData:
         self.folder = Path(folder).resolve()
         self.given = Path(folder)  # as the user gave it: what a refusal names (it named the resolved path)
         if (self.folder / JOURNAL).is_dir():  # it said "not a study folder (no journal.jsonl ...)": there is one
-            raise StudyDataError(f"{self.given / JOURNAL}: is a folder where the study's journal is written; a folder "
-                                 "is never replaced: remove or rename it")
+            raise StudyDataError("is a folder where the study's journal is written; a folder is never replaced: "
+                                 "remove or rename it", self.given / JOURNAL)
         if not (self.folder / JOURNAL).is_file():
             raise StudyDataError(f"{self.given}: not a study folder (no {JOURNAL}; `pairplay protocol init` makes one)")
         try:
@@ -211,7 +214,8 @@ class StudyData:
         check_places(given, owned=tuple(f"{sub}/*{ext}" for sub, ext in SUBFOLDERS.items()),
                      files=[STUDY_FILE, SETTINGS, JOURNAL])
         if (folder / JOURNAL).exists():
-            raise StudyDataError(f"{given}: already a study folder")
+            # not "already a study folder": a folder named `study` is a word of it, and the line then left out where
+            raise StudyDataError(f"already initialised ({JOURNAL} is there); give another folder", given)
         if key_file is not None:
             key = Path(key_file).resolve()
             if key.is_relative_to(folder):
@@ -589,17 +593,18 @@ class StudyData:
             out = Path(out) if out else self.folder / "exports" / f"{pid}.zip"
             inside = out.resolve().relative_to(self.folder).parts if out.resolve().is_relative_to(self.folder) else ()
             if out.exists() and inside and inside[0] != "exports":  # -o study/journal.jsonl --force replaced it
-                raise StudyDataError(f"{out}: a file of the study folder; an export never replaces one, --force or "
-                                     "not: give another -o")
+                raise StudyDataError("a file of the study folder; an export never replaces one, --force or not: "
+                                     "give another -o", out)
             if inside and inside != ("exports", f"{pid}.zip"):  # -o study/recordings/: a copy delete never found
-                raise StudyDataError(f"{out}: inside the study folder an export goes only to "
+                raise StudyDataError(f"inside the study folder an export goes only to "
                                      f"{self.given / 'exports' / f'{pid}.zip'} (erased with the participant): give no "
-                                     "-o, or a path outside the study folder")
-            if out.is_dir():  # said "exists (use --force to replace it)", and --force then said it is a folder
-                raise StudyDataError(f"{out}: is a folder; give a file name (a folder is never replaced, --force or "
-                                     "not)")
-            if out.exists() and not force:
-                raise StudyDataError(f"{out} exists (use --force to replace it)")
+                                     "-o, or a path outside the study folder", out)
+            # a folder (it said "exists (use --force to replace it)", and --force then said it is a folder), an
+            # existing file without --force: refused in every output's words (`exists; --force replaces it (<path>)`)
+            try:
+                check_output(out, force)
+            except OutputError as err:
+                raise StudyDataError(err.what, err.where, fix=err.fix, option=err.option) from None
             games = self.games_of(pid)
             answers = [r for r in self.answers() if r["participant"] == pid]
             lines = [e for e in self.read_journal() if getattr(e, "participant", None) == pid]

@@ -641,16 +641,72 @@ SWEEP_OUTPUTS = ("sweep.csv", "cells.csv", "sweep.md", "figures/*.png")
 MANIFEST = manifest_name("sweep")
 
 
-def write_sweep(out: str | Path, grid: Grid, results: dict[str, dict], run: SweepRun) -> list[Path]:
+def write_sweep(out: str | Path, grid: Grid, results: dict[str, dict], run: SweepRun,
+                keep: Iterable[str] = ()) -> list[Path]:
     """sweep.csv (the summary), cells.csv (every cell and seed), one figure per measure, sweep.md: all
     written beside `out` and moved in together (pairplay.outputs.output_folder, `among_others`: cells/ and
     grid.toml stay), so a signal or a full disk part way leaves the earlier summary whole, never a new
     sweep.csv beside an old sweep.md; the figures an earlier summary drew that this one does not (another
-    grid's measures) are removed (`SWEEP_OUTPUTS`, `MANIFEST`)."""
+    grid's measures) are removed (`SWEEP_OUTPUTS`, `MANIFEST`). `keep`: summary files (relative paths) that
+    stay as they are in `out` (a resume with nothing to compute writes again only what is missing or
+    unreadable, `summary_to_write`: sweep.md keeps what the run that did the work said); each is copied
+    into the staged summary, so it is one of this run's files, not an earlier run's stale one."""
+    import shutil
+
     out = Path(out)
     with output_folder(out, force=True, owned=SWEEP_OUTPUTS, among_others=True, manifest=MANIFEST) as staged:
         written = _write_summary(staged, grid, results, run)
+        for rel in keep:
+            if (out / rel).is_file() and (staged / rel).is_file():
+                shutil.copy2(out / rel, staged / rel)  # its bytes and time, as they were
     return [out / p.relative_to(staged) for p in written]
+
+
+PNG = b"\x89PNG\r\n\x1a\n"  # the first bytes of every PNG file
+
+
+def _header_line(row: list[str]) -> str:
+    import io
+
+    text = io.StringIO(newline="")
+    csvcell.writer(text).writerow(row)
+    return text.getvalue()
+
+
+def summary_files(grid: Grid, results: dict[str, dict]) -> dict[str, Callable[[bytes], bool]]:
+    """The files `write_sweep` writes for `results` (relative paths), each with the test its bytes pass
+    when it can be read as what it is: a table's header row, sweep.md's title, a figure's PNG signature."""
+    keys = list(grid.axes)
+    files: dict[str, Callable[[bytes], bool]] = {
+        "sweep.csv": lambda b: b.startswith(_header_line(
+            [*keys, "measure", "n", "mean", "sd", "ci95_low", "ci95_high"]).encode()),
+        "cells.csv": lambda b: b.startswith(_header_line(["cell", *keys, "seed", "measure", "value"]).encode()),
+        "sweep.md": lambda b: b.startswith(b"# pairplay sweep\n"),
+    }
+    for measure in sorted({r["measure"] for r in summarise(grid, results)}):
+        files[f"figures/{figure_name(measure)}"] = lambda b: b.startswith(PNG)
+    return files
+
+
+def summary_to_write(out: Path, grid: Grid, results: dict[str, dict]) -> list[str]:
+    """The summary files of a finished sweep in `out` that a resume writes again: those missing, or that
+    cannot be read as what they are (no permission to read, a junk sweep.md, a truncated figure); the
+    others stay as they are (a resume with all of them there said "nothing to do"; one with a figure
+    deleted said so too, and the figure stayed missing)."""
+    redo = []
+    for rel, readable in summary_files(grid, results).items():
+        try:
+            ok = (out / rel).is_file() and readable((out / rel).read_bytes())
+        except OSError:
+            ok = False
+        if not ok:
+            redo.append(rel)
+    return redo
+
+
+def figure_name(measure: str) -> str:
+    """The file of `measure`'s figure in figures/ (`all/ratio`: all-ratio.png)."""
+    return measure.replace("/", "-") + ".png"
 
 
 def _write_summary(out: Path, grid: Grid, results: dict[str, dict], run: SweepRun) -> list[Path]:
@@ -677,7 +733,7 @@ def _write_summary(out: Path, grid: Grid, results: dict[str, dict], run: SweepRu
         # a measure of one persona exists only in the settings that train it (a `personas` axis)
         mine = [r for r in rows if r["measure"] == measure]
         labels = [setting_label((k, r[k]) for k in keys) for r in mine]
-        path = out / "figures" / (measure.replace("/", "-") + ".png")
+        path = out / "figures" / figure_name(measure)
         path.parent.mkdir(exist_ok=True)
         plots.sweep_measure(labels, [r["mean"] for r in mine], [r["ci95_low"] for r in mine],
                             [r["ci95_high"] for r in mine], path, measure, len(grid.seeds))

@@ -277,7 +277,7 @@ CASES = [
     Case("lab --listen a port in use", ["lab", "--participant", "human:p1", "--listen", f"127.0.0.1:{TAKEN_PORT}"],
          f"Address already in use (--listen 127.0.0.1:{TAKEN_PORT})"),
     Case("protocol serve --listen a port in use", ["protocol", "serve", "study", "--listen", f"127.0.0.1:{TAKEN_PORT}"],
-         f"--listen 127.0.0.1:{TAKEN_PORT}: Address already in use"),
+         f"cannot serve the console: Address already in use (--listen 127.0.0.1:{TAKEN_PORT})"),  # the lab's words
     # read-only places (a read-only tmpfs mounted at ./ro)
     Case("study --out on a read-only file system", ["study", "--quiet", "--out", "ro/study"], "read-only", readonly=True),
     Case("session --out on a read-only file system", SIM + ["--out", "ro/rec"], "read-only", readonly=True),
@@ -305,7 +305,13 @@ CASES = [
     # before: the key file's line named the resolved path (/tmp/.../ro/keys.csv), not the one typed
     Case("protocol init --key-file on a read-only file system", ["protocol", "init", "st", "--study", "thesis-ch7",
                                                                  "--key-file", "ro/keys.csv"],
-         "key file ro/keys.csv: Read-only file system", readonly=True),
+         "cannot write the key file there: Read-only file system (ro/keys.csv)", readonly=True),
+    # "what (where)" as every other refusal (pairplay/outputs.py check_output's words): before, `<path> exists
+    # (use --force to replace it)`, `<folder>: already a study folder`, `key file <path>: <why>`
+    Case("participant export -o over an existing file", ["participant", "export", "study", "p01", "-o", "rec.mcap"],
+         "exists; --force replaces it (rec.mcap)"),
+    Case("protocol init an existing study folder", ["protocol", "init", "study", "--study", "thesis-ch7"],
+         "already initialised (journal.jsonl is there); give another folder (study)"),
     Case("participant export -o on a read-only file system", ["participant", "export", "study", "p01", "-o",
                                                               "ro/p.zip"], "read-only (ro)", readonly=True),
     # a study folder one may not write in: before, `protocol serve` served its console (each step then failed),

@@ -84,3 +84,13 @@ def test_a_file_the_readme_shows_is_shown_as_it_is():
             assert block == (README.parent / named.group(1)).read_text(), named.group(1)
             shown += 1
     assert shown >= 1
+
+
+def test_the_walkthroughs_listing_says_what_a_fresh_folder_holds():
+    """A new user's trial: the walkthrough's `ls recordings/  # ... beside samples/` is wrong in a fresh folder
+    (its sessions make recordings/ with their files alone; samples/ is the checkout's committed recordings).
+    The comment names samples/ only as what a checkout of pairplay holds besides."""
+    line = next(x for x in README.read_text().splitlines() if x.startswith("ls recordings/"))
+    said = line.split("#", 1)[1]
+    assert "blind-g0.mcap" in said and "deaf-g1.mcap" in said, line
+    assert "samples/" not in said or "in a checkout" in said, line

@@ -278,6 +278,29 @@ def test_a_manifest_names_no_file_outside_its_writers_own(tmp_path):
     assert _files(out) == [".m.json", "new.policy.json", "newer.policy.json", "notes.txt", "other.policy.json"]
 
 
+def test_a_manifests_ignored_entries_are_named_in_one_warning(tmp_path, caplog):
+    """Before: a tampered manifest (`../victim.x`, an absolute path, a file not named like the writer's outputs)
+    removed nothing outside, but said nothing: the entries were dropped silently. Now they are named in one
+    warning; the writer's own entries are still read (an earlier run's stale output goes)."""
+    import logging
+
+    out = tmp_path / "D"
+    out.mkdir()
+    (tmp_path / "victim.x").write_text("the user's")
+    (out / "notes.txt").write_text("the user's")
+    (out / "old.policy.json").write_text("an earlier run's")
+    (out / ".m.json").write_text(json.dumps({"format": "pairplay.outputs/1", "files": [
+        "../victim.x", str(tmp_path / "victim.x"), "notes.txt", "old.policy.json"]}))
+    with caplog.at_level(logging.WARNING, logger="pairplay.outputs"):
+        with output_folder(out, force=True, owned=("*.policy.json",), among_others=True, manifest=".m.json") as tmp:
+            (tmp / "new.policy.json").write_text("this run's")
+    said = [r.getMessage() for r in caplog.records if "ignored" in r.getMessage()]
+    assert len(said) == 1, [r.getMessage() for r in caplog.records]
+    assert all(repr(e) in said[0] for e in ("../victim.x", str(tmp_path / "victim.x"), "notes.txt")), said
+    assert "old.policy.json" not in said[0] and str(out / ".m.json") in said[0] and "3 entries" in said[0]
+    assert _files(out) == [".m.json", "new.policy.json", "notes.txt"] and (tmp_path / "victim.x").exists()
+
+
 def test_a_killed_writers_temporaries_are_removed_by_the_next_writer_and_a_live_ones_stay(tmp_path):
     """A trial: SIGKILL during `rebuild --force` left `.<out>.<pid>.<hex>.tmp` folders (up to ~1 MB) beside
     --out, and later runs left them there for good. The next writer of the same output removes those of a

@@ -163,7 +163,43 @@ def test_a_resume_with_nothing_to_do_writes_nothing_and_says_so(tmp_path, capsys
     assert {p: (p.read_bytes(), p.stat().st_mtime_ns) for p in out.rglob("*") if p.is_file()} == before
     (out / "sweep.md").unlink()  # the summary not written (a run stopped after its cells): written, 0 computed
     assert main(["sweep", str(grid), "--out", str(out)]) == 0  # not -q: it silences these lines
-    assert "0 computed" in capsys.readouterr().out and (out / "sweep.md").is_file()
+    assert "written again (missing or unreadable): sweep.md;" in capsys.readouterr().out
+    assert "computed 0" in (out / "sweep.md").read_text()
+
+
+def test_force_writes_the_summary_again_and_a_resume_writes_what_is_missing_or_unreadable(tmp_path, capsys):
+    """Before (a new user's trial): `sweep g.toml --out sw --force` on a finished sweep said "nothing to do" and
+    left a junk sweep.md and a deleted figure missing, though a folder's --force replaces the files it writes
+    there; without --force a deleted figure stayed missing too. Now --force writes the summary again from the
+    cells (which stay), and a resume writes again only what is missing or unreadable, the rest as it was."""
+    from pairplay.cli.main import main
+
+    grid, out = _grid(tmp_path, GRID.replace("seeds = 2", "seeds = 1")), tmp_path / "out"
+    assert main(["sweep", str(grid), "--out", str(out), "-q"]) == 0
+    cells = {p: (p.read_bytes(), p.stat().st_mtime_ns) for p in (out / "cells").iterdir()}
+    good_md = (out / "sweep.md").read_bytes()
+    (out / "sweep.md").write_text("junk")
+    (out / "figures" / "all-ratio.png").unlink()
+    assert main(["sweep", str(grid), "--out", str(out), "--force", "-q"]) == 0
+    assert (out / "sweep.md").read_bytes().startswith(b"# pairplay sweep\n")
+    assert (out / "figures" / "all-ratio.png").read_bytes().startswith(b"\x89PNG")
+    assert {p: (p.read_bytes(), p.stat().st_mtime_ns) for p in (out / "cells").iterdir()} == cells
+    capsys.readouterr()
+
+    (out / "sweep.md").write_bytes(good_md)  # as the run that did the work wrote it: kept
+    (out / "figures" / "all-ratio.png").unlink()
+    (out / "cells.csv").write_bytes(b"\xff\xfe junk")
+    kept = {p: (p.read_bytes(), p.stat().st_mtime_ns) for p in out.rglob("*")
+            if p.is_file() and p.name not in ("cells.csv", "all-ratio.png", ".pairplay-sweep.manifest")}
+    assert main(["sweep", str(grid), "--out", str(out)]) == 0
+    said = capsys.readouterr().out.splitlines()
+    assert said == ["all 2 cells (2 settings x 1 seed) were finished; written again (missing or unreadable): "
+                    f"cells.csv, figures/all-ratio.png; the rest is as it was; {out / 'sweep.md'}"], said
+    assert (out / "figures" / "all-ratio.png").read_bytes().startswith(b"\x89PNG")
+    assert (out / "cells.csv").read_text().startswith("cell,reward_bonus,seed,measure,value")
+    assert {p: (p.read_bytes(), p.stat().st_mtime_ns) for p in kept} == kept
+    assert main(["sweep", str(grid), "--out", str(out)]) == 0  # now whole: nothing to do
+    assert capsys.readouterr().out.startswith("nothing to do: ")
 
 
 def test_a_summary_interrupted_part_way_leaves_the_earlier_one_whole(tmp_path, monkeypatch):
