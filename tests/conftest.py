@@ -68,14 +68,16 @@ def pairplay_cli(tmp_path_factory):
 
 
 def pytest_xdist_auto_num_workers(config) -> int:
-    """`-n auto` (pyproject's addopts): two workers, as CI has two cores and many tests wait on
-    sockets, child processes and the browser. None for a run that selects the slow tests (soaks and
+    """`-n auto` (pyproject's addopts): three workers on CI's two cores, as many tests wait on
+    sockets, child processes and the browser (a two-worker run used 1.3 cores on average: 523 s of CPU
+    in 403 s; 2026-12-01, 1,881 tests on this 2-core VM, warm numba cache: two workers ~330 s, three
+    292 s). None for a run that selects the slow tests (soaks and
     fault runs time themselves and make machine-wide network namespaces). PAIRPLAY_TEST_WORKERS=N
     sets the number (0: everything in the main process, as `-n 0` does)."""
     if os.environ.get("PAIRPLAY_TEST_WORKERS", "").isdecimal():
         return int(os.environ["PAIRPLAY_TEST_WORKERS"])
     marks = config.getoption("markexpr", "") or ""
-    return 0 if "slow" in marks.replace("not slow", "") else 2
+    return 0 if "slow" in marks.replace("not slow", "") else 3
 
 
 # Files whose tests take the longest (summed test time of a full run on 2 workers, 2026-12-01 19:55 UTC, load
