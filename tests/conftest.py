@@ -99,9 +99,16 @@ LONGEST_FIRST = ("test_study_batch.py", "test_sweep.py", "test_cli_mistakes.py",
 
 
 def pytest_configure(config) -> None:
-    """Files go out to the workers in LONGEST_FIRST's order, not by their number of tests."""
+    """Files go out to the workers in LONGEST_FIRST's order, not by their number of tests. The controller of
+    an xdist run compiles the numba kernels into their on-disk cache once, before the workers start: in a
+    fresh clone each of the three workers (and the commands they start) compiled them at the same moment on
+    two cores (a fresh clone's suite 337 s against 292 s with the cache warm)."""
     if hasattr(config.option, "loadscopereorder"):
         config.option.loadscopereorder = False
+    if getattr(config.option, "numprocesses", None) and not hasattr(config, "workerinput") \
+            and not config.option.collectonly:
+        from pairplay.core import kernels
+        kernels.warm_up()
 
 
 def pytest_collection_modifyitems(items) -> None:
