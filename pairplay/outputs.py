@@ -266,7 +266,6 @@ def output_path(path: str | Path, force: bool = False) -> Iterator[Path]:
     _mkdir(path.parent)
     tmp = _temp_name(path)
     done = False
-    left: list[str] = []
     try:
         try:
             yield tmp
