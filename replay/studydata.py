@@ -70,6 +70,11 @@ STUDY_FILE, JOURNAL, SETTINGS = "study.toml", "journal.jsonl", "settings.json"
 REPORT_OUTPUTS = ("picks.csv", "games.png", "phases.png", "users-*.png", "merged.png", "attention.csv",
                   "questionnaire.csv", "report.md")
 REPORT_MANIFEST = manifest_name("report")
+# the study folder's own files (`pairplay protocol`), listed in its manifest, written again from the journal at each
+# of its lines (`write_folder_manifest`): another verb's folder output is refused any of them (outputs.check_theirs:
+# `rebuild --out STUDY/policies --force` replaced a game's policy; `study --out STUDY --force` took the folder)
+PROTOCOL_MANIFEST = manifest_name("protocol")
+TABLES = ("participants.csv", "sessions.csv", "answers.csv")
 SUBFOLDERS = {"recordings": ".mcap", "policies": ".policy.json", "merged": ".policy.json"}  # and the files each holds
 
 
@@ -238,7 +243,9 @@ class StudyData:
         created = j.StudyCreated(study=study.study.id, study_file_sha256=hashlib.sha256(text).hexdigest(),
                                  software_version=__version__, time_ns=time.time_ns())
         atomic_write(folder / JOURNAL, j.encode_line(created))
-        return cls(given)
+        made = cls(given)
+        made.write_folder_manifest()
+        return made
 
     # -- the journal ---------------------------------------------------------
     def read_journal(self) -> list[j.JournalEvent]:
@@ -262,7 +269,22 @@ class StudyData:
                 f.flush()
                 os.fsync(f.fileno())
             self.state.evolve(event)
+            self.write_folder_manifest()
             return event
+
+    def write_folder_manifest(self) -> None:
+        """The study folder's manifest (PROTOCOL_MANIFEST, pairplay/outputs.py's format): its files as the journal
+        says them (the study file, settings, journal, tables, each game's recording, its recorder's journal and
+        its policy, each bias policy, each participant's export), so that no other verb's folder output takes one
+        (outputs.check_theirs). Written again at each journal line: a deletion's leaves their games out."""
+        files = {STUDY_FILE, SETTINGS, JOURNAL, *TABLES}
+        for g in self.state.games.values():
+            files |= {g.recording, f"{g.recording}.journal"}
+            if g.ended is not None and g.ended.policy:
+                files.add(g.ended.policy)
+        files |= {c.output for c in self.state.combined.values()}
+        files |= {f"exports/{pid}.zip" for pid in self.state.participants}
+        write_manifest(self.folder / PROTOCOL_MANIFEST, sorted(files))
 
     # -- participants --------------------------------------------------------
     @property

@@ -111,3 +111,35 @@ def test_a_copy_into_the_folders_own_places_is_not_journaled(played, tmp_path, c
     assert main(["view", "--recording", str(rec), "--quiet"]) == 0
     assert rec.with_suffix(".rrd").is_file()
     assert _copies(data) == []
+
+
+def test_no_other_verbs_folder_output_takes_a_file_of_a_study_folder(played, tmp_path, capsys):  # noqa: F811
+    """A people's study folder kept no manifest, so the cross-verb check (pairplay/outputs.py check_theirs) did
+    not cover it: `rebuild REC --out STUDY/policies --force` replaced the game's policy in the study (and left
+    a curve beside it), and `study --out STUDY --force` was let into the folder. The study folder's manifest
+    (.pairplay-protocol.manifest, written from the journal at each of its lines) lists its files; a writer's
+    output that one of its patterns names is refused, in the folder or below it, --force or not."""
+    from pairplay.outputs import OutputError, check_output_folder, check_theirs, manifest_name
+    from pairplay.report.study import STUDY_MANIFEST, STUDY_OUTPUTS
+
+    data = copy_study(played, tmp_path)
+    folder = data.folder
+    data.append(j.GamePaused(session="none", participant="p01"))  # a folder made before: its manifest comes
+    g = _game(data, "p01")  # at its next journal line
+    policy = folder / g.ended.policy
+    before = policy.read_bytes()
+    capsys.readouterr()
+    assert main(["rebuild", str(folder / g.recording), "--out", str(folder / "policies"), "--force",
+                 "--no-plot"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "was written by `pairplay protocol`" in err and str(policy) in err, err
+    assert policy.read_bytes() == before and not list((folder / "policies").glob("*.curve.csv"))
+    with pytest.raises(OutputError, match=r"merged/phase2-bias.policy.json.*|was written by `pairplay protocol`"):
+        check_output_folder(folder, True, STUDY_OUTPUTS, STUDY_MANIFEST)  # what `study --out STUDY --force` checks
+    # a made-up writer of one of the study's tables: refused, naming it
+    with pytest.raises(OutputError, match="was written by `pairplay protocol`") as info:
+        check_theirs(folder, ("sessions.csv",), manifest_name("made-up"))
+    assert str(folder / "sessions.csv") in str(info.value)
+    data.delete_participant("p01")  # the manifest follows the journal: their games are listed no more
+    listed = json.loads((folder / ".pairplay-protocol.manifest").read_text())["files"]
+    assert g.recording not in listed and "journal.jsonl" in listed and not names_anywhere(folder, "p01")
