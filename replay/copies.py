@@ -24,7 +24,7 @@ from pairplay.errors import OutputError
 from pairplay.outputs import is_owned
 from pairplay.schemas import journal as j
 
-from .studydata import JOURNAL, REPORT_OUTPUTS, STUDY_FILE, StudyData, StudyDataError, sha256_of
+from .studydata import JOURNAL, REPORT_OUTPUTS, STUDY_FILE, StudyData, sha256_of
 
 
 def study_root(path: str | Path) -> Path | None:
@@ -87,15 +87,15 @@ class Copies:
         self.verb = verb
         self._studies: dict[Path, StudyData] = {}
         self._of: dict[Path, tuple[Path, frozenset[str]]] = {}  # an input, resolved -> (its study, whose data)
+        self._typed: dict[Path, Path] = {}  # a study, resolved -> as the user's path reaches it (what a refusal names)
         for given in inputs:
             root = study_root(given)
             if root is None:
                 continue
-            if root not in self._studies:
-                try:
-                    self._studies[root] = StudyData(root)
-                except StudyDataError:
-                    continue  # not a study folder pairplay can read: its journal cannot be kept either
+            self._typed.setdefault(root, next((p for p in (Path(given), *Path(given).parents)
+                                               if p.resolve() == root), root))
+            if root not in self._studies:  # one pairplay cannot read is said (StudyDataError): its copy unjournaled
+                self._studies[root] = StudyData(root)  # would be a copy the deletion never knew
             key = Path(given).resolve()
             rel = "" if key == root else key.relative_to(root).as_posix()
             pids = frozenset(holders(self._studies[root], rel))
@@ -117,9 +117,9 @@ class Copies:
         """Before any work: OutputError, naming the journal, if a study whose data the verb would write to `places`
         (its output files or folders) cannot take the journal line of it (a copy the deletion would not know)."""
         for root in self._lines([Path(p) for p in places], None):
-            journal = root / JOURNAL
+            journal = self._typed.get(root, root) / JOURNAL
             try:  # opened for appending, nothing written: what the append will need (a read-only mount refuses)
-                os.close(os.open(journal, os.O_WRONLY | os.O_APPEND))
+                os.close(os.open(root / JOURNAL, os.O_WRONLY | os.O_APPEND))
             except OSError as err:
                 raise OutputError(f"cannot write there ({err.strerror or err}), and this `pairplay {self.verb}` "
                                   "writes a copy of its participants' data that their deletion must know: make the "

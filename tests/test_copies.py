@@ -8,6 +8,10 @@ researcher runs them (`pairplay ...` through cli.main), on the study's real reco
 from __future__ import annotations
 
 import json
+import os
+import shutil
+import subprocess
+import sys
 from pathlib import Path
 
 import pytest
@@ -143,3 +147,18 @@ def test_no_other_verbs_folder_output_takes_a_file_of_a_study_folder(played, tmp
     data.delete_participant("p01")  # the manifest follows the journal: their games are listed no more
     listed = json.loads((folder / ".pairplay-protocol.manifest").read_text())["files"]
     assert g.recording not in listed and "journal.jsonl" in listed and not names_anywhere(folder, "p01")
+
+
+@pytest.mark.skipif(not (os.geteuid() == 0 and shutil.which("unshare")), reason="needs root and unshare")
+def test_a_copy_whose_study_journal_cannot_take_its_line_is_not_made(played, tmp_path):  # noqa: F811
+    """A study folder on a read-only mount: `rebuild` of its recording elsewhere would be a copy their deletion
+    never knew. Refused before any work, one line naming the journal as typed; nothing written."""
+    data = copy_study(played, tmp_path)
+    rec = Path(_game(data, "p01").recording)
+    mount = 'mount --bind "$0" "$0" && mount -o remount,ro,bind "$0" && exec "$@"'
+    r = subprocess.run(["unshare", "--mount", "--propagation", "private", "sh", "-c", mount, "study",
+                        sys.executable, "-m", "pairplay", "rebuild", str("study" / rec), "--out", "rebuilt"],
+                       cwd=tmp_path, capture_output=True, text=True, timeout=300)
+    assert r.returncode == 2 and len(r.stderr.strip().splitlines()) == 1, r.stderr
+    assert "(study/journal.jsonl)" in r.stderr and "Read-only file system" in r.stderr, r.stderr
+    assert not (tmp_path / "rebuilt").exists()
