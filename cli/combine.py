@@ -182,6 +182,9 @@ def run_combine(args) -> int:
     policies, files = _load(args)
     if args.out is not None:
         check_output(args.out, args.force, inputs=files)  # -o a.json --force replaced its own input a.json
+        from pairplay.replay.copies import Copies
+        copies = Copies("combine", files)  # a study's policies merged: a copy of their data their deletion must know
+        copies.check([args.out])
     try:
         exclude = set(comma_items(args.exclude)) if args.exclude is not None else set()
     except ValueError as exc:  # `p1,,p2`: a name lost to a typo would be combined
@@ -204,6 +207,7 @@ def run_combine(args) -> int:
     if args.out:  # written before the listing, so a reader that stops early loses nothing
         write_policy(args.out, combined_policy_file(merged, users, files, args.seed, f"pairplay {__version__}",
                                                     reward_rule, partial), args.force)
+        copies.journal([args.out], inputs=[f for _, f in kept])  # an excluded participant's data is not in it
     print("\n".join(_profile_lines(profiles, policies)))
     print(f"\nmerged: speech {100 * merged.info.speech:.1f}%, head {100 * merged.info.head:.1f}%, "
           f"smile {merged.info.facial}, gaze {merged.info.gaze}\n")

@@ -118,6 +118,10 @@ def run(args: argparse.Namespace) -> int:
     stem = output_stem(rec)
     out = Path(args.out) if args.out else Path("out") / "counterfactual" / stem
     check_output_folder(out, args.force, COUNTERFACTUAL_OUTPUTS, COUNTERFACTUAL_MANIFEST)
+    from pairplay.replay.copies import Copies
+    # a study's recording fitted (or its policies played): a copy of its participant's data their deletion must know
+    copies = Copies("counterfactual", [rec, *args.fit_also, *(path for _, path in arms_wanted if path)])
+    copies.check([out])
     files = {path: read_policy(path) for _, path in arms_wanted if path}
 
     log = read_session(rec)
@@ -192,6 +196,7 @@ def run(args: argparse.Namespace) -> int:
         runs = cf.run_arms(persona, arms, seeds, rounds, config.observed_source, config.reward_bonus)
     paths = write_counterfactual(out, stem, model, recorded, runs, texts, args.force,
                                  read_whole=f"{rec.name}: {log.loss_free}" if log.loss_free else "")
+    copies.journal(paths)
     print(console_text(model, recorded, runs, texts))
     print("wrote " + ", ".join(str(p) for p in paths))
     return 0

@@ -7,9 +7,11 @@ recordings/ survived the deletion), never over an existing file without --force,
 and journals where it went. `delete` erases the participant everywhere pairplay
 put their data (replay/studydata.py) and journals the deletion without their id;
 it asks for --yes, since it cannot be undone, and lists the merged policies that
-were combined from their games, the exports the journal says were made outside the
-folder (it cannot reach those) and the files of report/ it kept (the user's), these
-on stderr, -q or not: a copy of their data is never left unsaid.
+were combined from their games; each copy the journal names beyond the folder's own
+places (an export outside it, a verb's output: replay/copies.py) is erased, and said,
+if still pairplay's unchanged file; the copies it could not erase (changed, moved)
+and the files of report/ it kept (the user's) are said on stderr, -q or not: a copy
+of their data is never left unsaid.
 """
 
 from __future__ import annotations
@@ -59,18 +61,30 @@ def run(args) -> int:
           + f" (deletion {gone.deletion})")
     for m in gone.merged_policies_using_them:
         print(f"merged policy combined from their games (kept; re-combine without them if needed): {m}")
+    for c in erased.copies:
+        if c.erased:
+            print(f"erased {copy_words(c, args.participant)}: {c.path} (pairplay's own file, unchanged: the bytes it wrote)")
     for line in left_lines(args.folder, args.participant, erased):  # on stderr: -q never hides a copy left
         print(line, file=sys.stderr)
     return 0
 
 
+def copy_words(c, pid: str) -> str:
+    """What a journaled copy is, in words: an export, or a verb's output."""
+    return (f"an export of {pid} made outside the study folder" if c.verb == "participant export"
+            else f"a copy of {pid}'s data `pairplay {c.verb}` wrote")
+
+
 def left_lines(folder: Path, pid: str, erased) -> list[str]:
-    """What a deletion could not erase, one line each (nothing survives unsaid): an export made outside the
-    study folder (the journal says where; pairplay cannot reach a copy handed on), a file of report/ the
-    report did not write (the user's: it stays; it may name them)."""
-    lines = [f"NOT erased: an export of {pid} made outside the study folder: {path}"
-             + ("" if Path(path).exists() else " (not there now: moved or copied elsewhere?)")
-             + "; erase it (and any copy of it) by hand" for path in erased.elsewhere]
+    """What a deletion could not erase, one line each (nothing survives unsaid): a journaled copy (an export made
+    outside the study folder, a verb's output) that is no longer pairplay's unchanged file (changed since, or
+    moved: pairplay cannot reach a copy handed on), a file of report/ the report did not write (the user's: it
+    stays; it may name them)."""
+    why = {"changed": "changed since pairplay wrote it (not the bytes it wrote), so not erased",
+           "missing": "not there now (moved or copied elsewhere?)",
+           "unverifiable": "journaled without its checksum (an older pairplay): it cannot be told unchanged"}
+    lines = [f"NOT erased: {copy_words(c, pid)}: {c.path} ({why.get(c.fate, c.fate)}); erase it "
+             f"(and any copy of it) by hand" for c in erased.copies if not c.erased]
     for rel, names in erased.left:
         lines.append(f"kept {folder / rel}: not written by the report (the user's)"
                      + (f"; it names {pid}: edit it by hand" if names else f"; check it does not mention {pid}"))

@@ -68,6 +68,9 @@ def run(args: argparse.Namespace) -> int:
 
     out = check_folder(args.out)
     check_theirs(out, REBUILD_OUTPUTS, MANIFEST)  # another verb's file there is not ours to replace: said before the work
+    from pairplay.replay.copies import Copies
+    copies = Copies("rebuild", args.recordings)  # a study's recording rebuilt: a copy their deletion must know
+    copies.check([out])
     seen: dict[Path, str] = {}
     for rec in args.recordings:
         key = check_recording(rec).resolve()
@@ -92,6 +95,10 @@ def run(args: argparse.Namespace) -> int:
     check_outputs(outputs, args.force, inputs=args.recordings)
     with output_folder(out, args.force, owned=REBUILD_OUTPUTS, among_others=True, manifest=MANIFEST) as staged:
         lines = write_all(done, staged, out, args)
+    for rebuilt in done:  # each recording's policy and curve are its participant's; the figure is everyone's
+        copies.journal(output_paths(rebuilt, out), inputs=[rebuilt.source])
+    if done and not args.no_plot:
+        copies.journal([figure])
     work_done()  # everything is written: a signal from now on is reported, and undoes nothing
     print("\n".join(lines))
     return 0

@@ -67,7 +67,12 @@ def run(args: argparse.Namespace) -> int:
                               f"one is not complete ({_not_complete(done)}): recover it without the option",
                               args.recording)
         return _complete(args, done)
+    from pairplay.replay.copies import Copies
+    copies = Copies("recover", [args.recording])  # a study's recording copied beyond recordings/: their deletion knows
+    copies.check([args.output or default_output(Path(args.recording))])
     done = recover(args.recording, args.output, force=args.force, admit=admit)
+    if not done.complete:
+        copies.journal([done.output])
     if done.complete:
         return _complete(args, done)
     if done.damaged:

@@ -40,16 +40,22 @@ def run(args) -> int:
     from pairplay.replay.studydata import StudyData
     from pairplay.report.human import HUMAN_MANIFEST, HUMAN_OUTPUTS, human_report
 
+    from pairplay.replay.copies import Copies
+
     out = check_output_folder(args.out or args.folder / "report", args.force, HUMAN_OUTPUTS,
                               HUMAN_MANIFEST)  # before any work
+    copies = Copies("report", [args.folder])  # a report beyond report/ is a copy their deletion must know
+    copies.check([out])
     try:
         # a completed game a signal left without its policy gets it now, from its recording
         built_missing_policies(StudyData(args.folder), "report")
         with output_folder(out, args.force, owned=HUMAN_OUTPUTS, manifest=HUMAN_MANIFEST) as tmp:
             report = human_report(args.folder, tmp, args.reference, include_scripted=args.include_scripted)
+            written = [out / f.relative_to(tmp) for f in sorted(tmp.rglob("*")) if f.is_file()]
     except (StudyDataError, PolicyFileError, ValueError) as err:
         print(f"pairplay report: {err}", file=sys.stderr)
         return 2
+    copies.journal(written)
     if report.rehearsal:
         print(f"a rehearsal: {counted(len(report.games), 'scripted game')}, no person played")
     print(f"{counted(len(report.games), 'valid game')} of {counted(len({g.participant for g in report.games}), 'participant')}"

@@ -118,6 +118,10 @@ def run(args: argparse.Namespace) -> int:
     if rrd is not None:
         # before any work: an existing .rrd stays unless --force, and the recording viewed always
         check_output(rrd, args.force, inputs=[args.recording] if args.recording else [])
+    from pairplay.replay.copies import Copies
+    copies = Copies("view", [args.recording] if args.recording else [])  # a study's recording drawn elsewhere: a
+    if rrd is not None:  # copy of its participant's data their deletion must know (replay/copies.py)
+        copies.check([rrd])
     try:
         with output_path(rrd, args.force) if rrd is not None else contextlib.nullcontext() as tmp:
             done = _view(args, tmp, held)
@@ -126,6 +130,7 @@ def run(args: argparse.Namespace) -> int:
             if (done.partial or live or lost) and rrd is not None:
                 raise KeptPartial(keep_partial(tmp, rrd, args.force))
     except KeptPartial as kept:
+        copies.journal([kept.path])
         if not done.partial and lost:  # events lost in the file: what is left, drawn, under a name that says so
             # (a whole file recovered from one that lost parts: `lost` says what, reader.EventLog.source_lost)
             said = f"is damaged ({lost})" if held.damaged else f"was {lost}"
@@ -143,6 +148,8 @@ def run(args: argparse.Namespace) -> int:
         return 0
     except RrdWriteFailed as err:  # the temporary .rrd is gone (output_path); nothing saved
         raise OutputError(f"writing the .rrd failed ({err}); nothing saved", rrd or "the view's output") from None
+    if rrd is not None and not done.partial:
+        copies.journal([rrd])
     if done.partial:
         print(f"pairplay view: interrupted ({done.why}) after {_counts(done)}, before the source ended; nothing saved",
               file=sys.stderr)

@@ -16,7 +16,8 @@ after run) say together, so a forced run removes an earlier run's stale outputs
 and never the user's file of such a name (one it leaves is said); a folder
 written before the manifests keeps all it holds. A file another writer's
 manifest there lists is that writer's: never replaced, `force` or not
-(`check_theirs`: `study` and `report` both write report.md). One that holds other files too
+(`check_theirs`: `study` and `report` both write report.md), and so is a file a manifest in a folder above
+lists (a people's study folder's: `rebuild --out STUDY/policies` is refused a game's policy). One that holds other files too
 (`among_others`: `rebuild --out`, a sweep's summary beside its cells) gets its
 files moved in together the same way. A folder
 standing where a file is written, or a file where a folder is needed, is refused
@@ -324,22 +325,31 @@ def check_output_folder(path: str | Path, force: bool = False, owned: tuple[str,
 
 def check_theirs(path: Path, owned: tuple[str, ...], manifest: str) -> None:
     """OutputError, before any work, if a file the writer may write in the folder `path` (one its patterns
-    `owned` name) is listed by another writer's manifest there (`.pairplay-<verb>.manifest`): that verb's
-    output, not this one's to replace, `--force` or not (`study --out R --force` replaced the report.md and
-    merged.png a `pairplay report --out R` wrote, silently: the two write those names). Checked for every
-    writer of a folder (study, report, counterfactual, rebuild, sweep), whatever names they share now."""
+    `owned` name) is listed by another writer's manifest there (`.pairplay-<verb>.manifest`), or by a manifest
+    in a folder above it (a people's study folder's, `.pairplay-protocol.manifest`, lists its recordings,
+    policies and tables: `rebuild --out STUDY/policies --force` replaced a game's policy): that verb's output,
+    not this one's to replace, `--force` or not (`study --out R --force` replaced the report.md and merged.png a
+    `pairplay report --out R` wrote, silently: the two write those names). Checked for every writer of a folder
+    (study, report, counterfactual, rebuild, sweep), whatever names they share now."""
     if not owned or not path.is_dir():
         return
-    for other in sorted(path.glob(manifest_name("*"))):
-        if other.name == manifest or not other.is_file():
-            continue
-        before, after = manifest_name("*").split("*")
-        verb = other.name.removeprefix(before).removesuffix(after)
-        for rel in read_manifest(other):
-            if is_owned(rel, owned) and (path / rel).is_file():
-                raise OutputError(f"was written by `pairplay {verb}` (its manifest {other.name} lists it); "
-                                  "another verb's output is not replaced, --force or not: give another folder",
-                                  path / rel)
+    here = path.absolute()
+    for folder in (here, *here.parents):
+        for other in sorted(folder.glob(manifest_name("*"))):
+            if (folder == here and other.name == manifest) or not other.is_file():
+                continue
+            before, after = manifest_name("*").split("*")
+            verb = other.name.removeprefix(before).removesuffix(after)
+            for listed in read_manifest(other):
+                file = folder / listed
+                if not file.is_relative_to(here):
+                    continue
+                rel = file.relative_to(here).as_posix()
+                if is_owned(rel, owned) and file.is_file():
+                    where = other.name if folder == here else os.path.relpath(other, here)
+                    raise OutputError(f"was written by `pairplay {verb}` (its manifest {where} lists it); "
+                                      "another verb's output is not replaced, --force or not: give another folder",
+                                      path / rel)
 
 
 def check_places(path: Path, owned: tuple[str, ...] = (), files: Iterable[str] = ()) -> None:
@@ -573,10 +583,16 @@ def read_manifest(path: Path, owned: tuple[str, ...] = ()) -> list[str]:
 
 
 def write_manifest(path: Path, files: list[str]) -> None:
-    """An output folder's manifest: the files its writer wrote there (output_folder `manifest`)."""
+    """An output folder's manifest: the files its writer wrote there (output_folder `manifest`), written whole
+    or not at all (a study folder's is written again beside its journal at each of its lines)."""
     doc = {"format": MANIFEST_FORMAT, "written_by": "pairplay", "files": files,
            "note": "the files pairplay wrote in this folder; a --force run removes those it does not write again"}
-    path.write_text(json.dumps(doc, indent=1) + "\n", encoding="utf-8")
+    tmp = _temp_name(path)
+    try:
+        tmp.write_text(json.dumps(doc, indent=1) + "\n", encoding="utf-8")
+        os.replace(tmp, path)
+    finally:
+        tmp.unlink(missing_ok=True)
 
 
 # `session --force` (services/recorder.py set_aside): an earlier recording and its journal renamed so, kept

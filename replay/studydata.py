@@ -9,7 +9,11 @@ Rule: one folder per study, readable without pairplay:
   participants.csv, sessions.csv, answers.csv   tables derived from the above (`write_tables`)
   exports/<id>.zip             a participant's data, on request (`export_participant`): the only place
                                inside the folder an export goes (a copy elsewhere in it survived the
-                               deletion); one outside the folder is journaled, and the deletion names it
+                               deletion); one outside the folder is journaled (ParticipantExported)
+Every other copy of a participant's data pairplay writes (a verb's output made of the folder's files, beyond
+the places above: replay/copies.py) is journaled too (CopyWritten, with the SHA-256 of what was written), and
+the deletion erases each journaled copy that is still pairplay's own, unchanged file, and names the others
+(changed since, or gone from there: `copies_of`, `_settle`).
 The state (who is registered, which game is next, what is done) is the fold of
 the journal (`StudyState`); the plan (`plan`) follows from the study file and
 that state. How a game ended and its policy come from its recording
@@ -47,8 +51,8 @@ import msgspec
 from pairplay import __version__, csvcell
 from pairplay.errors import InputError, UserError
 from pairplay.livelock import LIVE, is_live
-from pairplay.outputs import (OutputError, check_output, check_places, manifest_name, output_file,
-                              remove_written, set_aside_of)
+from pairplay.outputs import (OutputError, check_output, check_places, manifest_name, output_file, read_manifest,
+                              remove_written, set_aside_of, write_manifest)
 from pairplay.schemas import journal as j
 from pairplay.schemas.jsonfile import in_words
 from pairplay.schemas.policy import read_policy, write_policy
@@ -66,6 +70,11 @@ STUDY_FILE, JOURNAL, SETTINGS = "study.toml", "journal.jsonl", "settings.json"
 REPORT_OUTPUTS = ("picks.csv", "games.png", "phases.png", "users-*.png", "merged.png", "attention.csv",
                   "questionnaire.csv", "report.md")
 REPORT_MANIFEST = manifest_name("report")
+# the study folder's own files (`pairplay protocol`), listed in its manifest, written again from the journal at each
+# of its lines (`write_folder_manifest`): another verb's folder output is refused any of them (outputs.check_theirs:
+# `rebuild --out STUDY/policies --force` replaced a game's policy; `study --out STUDY --force` took the folder)
+PROTOCOL_MANIFEST = manifest_name("protocol")
+TABLES = ("participants.csv", "sessions.csv", "answers.csv")
 SUBFOLDERS = {"recordings": ".mcap", "policies": ".policy.json", "merged": ".policy.json"}  # and the files each holds
 
 
@@ -234,7 +243,9 @@ class StudyData:
         created = j.StudyCreated(study=study.study.id, study_file_sha256=hashlib.sha256(text).hexdigest(),
                                  software_version=__version__, time_ns=time.time_ns())
         atomic_write(folder / JOURNAL, j.encode_line(created))
-        return cls(given)
+        made = cls(given)
+        made.write_folder_manifest()
+        return made
 
     # -- the journal ---------------------------------------------------------
     def read_journal(self) -> list[j.JournalEvent]:
@@ -258,7 +269,22 @@ class StudyData:
                 f.flush()
                 os.fsync(f.fileno())
             self.state.evolve(event)
+            self.write_folder_manifest()
             return event
+
+    def write_folder_manifest(self) -> None:
+        """The study folder's manifest (PROTOCOL_MANIFEST, pairplay/outputs.py's format): its files as the journal
+        says them (the study file, settings, journal, tables, each game's recording, its recorder's journal and
+        its policy, each bias policy, each participant's export), so that no other verb's folder output takes one
+        (outputs.check_theirs). Written again at each journal line: a deletion's leaves their games out."""
+        files = {STUDY_FILE, SETTINGS, JOURNAL, *TABLES}
+        for g in self.state.games.values():
+            files |= {g.recording, f"{g.recording}.journal"}
+            if g.ended is not None and g.ended.policy:
+                files.add(g.ended.policy)
+        files |= {c.output for c in self.state.combined.values()}
+        files |= {f"exports/{pid}.zip" for pid in self.state.participants}
+        write_manifest(self.folder / PROTOCOL_MANIFEST, sorted(files))
 
     # -- participants --------------------------------------------------------
     @property
@@ -623,16 +649,18 @@ class StudyData:
                 z.writestr("README.txt", _export_readme(pid, self.study.study.id, games, files, answers,
                                                         self.merged_using(pid), self.folder))
             atomic_write(out, buf.getvalue())
-            # where it went, so that their deletion names a copy outside the folder (it cannot erase that one)
+            # where it went and what it wrote, so that their deletion erases it while it is this file unchanged, and
+            # names it otherwise (a copy handed on is beyond its reach)
             self.append(j.ParticipantExported(participant=pid, path=str(out.resolve()),
                                               sha256=hashlib.sha256(buf.getvalue()).hexdigest()))
             return out
 
     def delete_participant(self, pid: str) -> "Deletion":
         """Erase `pid` everywhere pairplay put their data (see the module rule); the deletion is journaled
-        without their id. Refused while one of their games is running. What it could not erase is returned
-        to be said: the exports journaled outside the study folder, the files of report/ the report did not
-        write (a user's notes may name them)."""
+        without their id. Refused while one of their games is running. The copies journaled beyond the folder's
+        own places (an export outside it, a verb's output: `copies_of`) are erased if still pairplay's unchanged
+        files. What it did with them, and what it could not erase (a changed or moved copy, the files of report/
+        the report did not write: a user's notes may name them), is returned to be said."""
         with self._lock:
             self.participant(pid)
             running = [g.session for g in self.games_of(pid) if g.ended is None]
@@ -655,12 +683,22 @@ class StudyData:
                 for extra in (self.folder / "recordings").glob(f"{g}.*"):
                     extra.unlink()
                     files.append(extra)
-            elsewhere = sorted({e.path for e in self.read_journal() if isinstance(e, j.ParticipantExported)
-                                and e.participant == pid and not Path(e.path).is_relative_to(self.folder)})
+            # the copies of their data journaled beyond the places above (an export -o elsewhere, a verb's output:
+            # replay/copies.py): each erased if still pairplay's unchanged file, else named
+            copies = [_settle(e, {f.resolve() for f in files}) for e in self.copies_of(pid)]
+            erased = {c.path for c in copies if c.erased}
+            _tidy_manifests({Path(c.path).parent for c in copies if c.erased})
             kept, removed = [], 0
             for e in self.read_journal():
                 if getattr(e, "participant", None) == pid or getattr(e, "session", None) in sessions:
                     removed += 1
+                elif isinstance(e, j.CopyWritten) and pid in e.participants:
+                    # a copy erased now, or of their data alone, goes; one of others' data too stays theirs
+                    others = [p for p in e.participants if p != pid]
+                    if e.path in erased or not others:
+                        removed += 1
+                    else:
+                        kept.append(_redacted(msgspec.structs.replace(e, participants=others), pid))
                 else:  # a combination of their games, a note naming them: kept without the id
                     kept.append(_redacted(e, pid))
             for m in merged:
@@ -678,9 +716,23 @@ class StudyData:
                     for rel in remove_written(report, REPORT_OUTPUTS, REPORT_MANIFEST)]
             deleted = self.append(j.ParticipantDeleted(
                 deletion=secrets.token_hex(6), sessions_removed=len(sessions), files_removed=len(files),
-                journal_lines_removed=removed, merged_policies_using_them=merged, key_file_line_removed=key_removed))
+                journal_lines_removed=removed, merged_policies_using_them=merged, key_file_line_removed=key_removed,
+                copies_erased=len(erased)))
             self.write_tables()
-            return Deletion(deleted, left, elsewhere)
+            return Deletion(deleted, left, [c for c in copies if c.fate])
+
+    def copies_of(self, pid: str) -> list[j.ParticipantExported | j.CopyWritten]:
+        """The copies of `pid`'s data the journal says were made beyond the places their deletion erases by
+        itself: exports outside the folder (ParticipantExported), verbs' outputs (CopyWritten); for a path written
+        more than once, its last writing, if that holds their data (an earlier one was replaced by it)."""
+        last: dict[str, j.ParticipantExported | j.CopyWritten] = {}
+        for e in self.read_journal():
+            if isinstance(e, (j.ParticipantExported, j.CopyWritten)):
+                last[e.path] = e
+        return [e for e in last.values()
+                if (isinstance(e, j.ParticipantExported) and e.participant == pid
+                    and not Path(e.path).is_relative_to(self.folder))
+                or (isinstance(e, j.CopyWritten) and pid in e.participants)]
 
     def _drop_from_key_file(self, pid: str) -> bool:
         key = self.key_file
@@ -702,14 +754,92 @@ class StudyData:
 
 
 @dataclass(frozen=True)
+class Copy:
+    """What a deletion did with one journaled copy of the participant's data (`copies_of`): `fate` "erased"
+    (pairplay's own file, unchanged: the bytes it wrote, at the path it wrote them), "changed" (other bytes
+    there now, or no longer a plain file), "missing" (not there now), "unverifiable" (journaled without its
+    SHA-256, by an older pairplay), "unreadable: <why>", "not erased: <why>" (removing it failed)."""
+
+    path: str
+    verb: str  # "participant export", or the verb that wrote it
+    fate: str
+
+    @property
+    def erased(self) -> bool:
+        return self.fate == "erased"
+
+
+def _settle(e: j.ParticipantExported | j.CopyWritten, removed: set[Path]) -> Copy:
+    """Erase the journaled copy `e` if it is still pairplay's own, unchanged file (its SHA-256 is the journaled
+    one); say what it is otherwise. A file the deletion removed already (`removed`: in the folder) is fate ""."""
+    verb = "participant export" if isinstance(e, j.ParticipantExported) else e.verb
+    path = Path(e.path)
+    if not path.exists() and not path.is_symlink():
+        return Copy(e.path, verb, "" if path in removed else "missing")
+    if path.is_symlink() or not path.is_file() or is_live(path):  # not the file pairplay wrote there
+        return Copy(e.path, verb, "changed")
+    if not e.sha256:
+        return Copy(e.path, verb, "unverifiable")
+    try:
+        same = sha256_of(path) == e.sha256
+    except OSError as err:
+        return Copy(e.path, verb, f"unreadable: {err.strerror or err}")
+    if not same:
+        return Copy(e.path, verb, "changed")
+    try:
+        path.unlink()
+    except OSError as err:
+        return Copy(e.path, verb, f"not erased: {err.strerror or err}")
+    return Copy(e.path, verb, "erased")
+
+
+def _tidy_manifests(folders: set[Path]) -> None:
+    """In each folder a deletion erased copies from: a verb's manifest there (pairplay/outputs.py) no longer lists
+    them (it named the files, the participant's id in a session's name among them), and goes when it lists
+    nothing more, with the folder if that leaves it empty. Best effort: what cannot be tidied stays as it is."""
+    for folder in folders:
+        for manifest in folder.glob(manifest_name("*")):
+            listed = read_manifest(manifest)
+            there = [f for f in listed if (folder / f).is_file()]
+            if there == listed:
+                continue
+            try:
+                if there:
+                    write_manifest(manifest, there)
+                else:
+                    manifest.unlink()
+            except OSError:
+                pass
+        try:
+            folder.rmdir()  # only an empty one goes
+        except OSError:
+            pass
+
+
+def sha256_of(path: Path) -> str:
+    """The SHA-256 of the file `path` (hex), read in blocks."""
+    h = hashlib.sha256()
+    with open(path, "rb") as f:
+        for block in iter(lambda: f.read(1 << 20), b""):
+            h.update(block)
+    return h.hexdigest()
+
+
+@dataclass(frozen=True)
 class Deletion:
     """What `delete_participant` did (`event`, journaled without the id) and what it could not erase, to be
     said: files of report/ the report did not write (`left`: relative path, whether it names the id) and the
-    exports journaled outside the study folder (`elsewhere`: absolute paths)."""
+    copies the journal names beyond the folder's own places (`copies`: exports outside the folder, verbs'
+    outputs), each erased or not, and why."""
 
     event: j.ParticipantDeleted
     left: list[tuple[str, bool]]
-    elsewhere: list[str]
+    copies: list[Copy]
+
+    @property
+    def elsewhere(self) -> list[str]:
+        """The copies not erased (absolute paths)."""
+        return [c.path for c in self.copies if not c.erased]
 
 
 def _names(path: Path, pid: str) -> bool:

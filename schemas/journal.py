@@ -4,7 +4,8 @@ Rule: the games themselves are recorded by the bus recorder (one MCAP file per
 game); the journal records the study around them: who was registered (a
 pseudonymous id, never a name), which game of which phase a session was, how it
 ended, what the experimenter paused, aborted or marked invalid and why, the
-bias policies combined, where a participant's data was exported, the participants deleted. A study's state is the fold
+bias policies combined, where a participant's data was exported or copied by a verb (CopyWritten), the
+participants deleted. A study's state is the fold
 of its journal (replay/studydata.py). Each line is a tagged Struct (field
 "event"), readable by any JSON tool; unknown fields are ignored on read, so
 an older pairplay reads a newer journal's lines of the types it knows; a type
@@ -112,6 +113,20 @@ class ParticipantExported(JournalEvent, tag="ParticipantExported"):
     sha256: str = ""
 
 
+class CopyWritten(JournalEvent, kw_only=True, tag="CopyWritten"):
+    """A file derived from participants' data (a recording, a game's or a bias policy, the study folder) that a
+    verb wrote where their deletion would not erase it by itself (`rebuild --out`, `view --out`, `counterfactual`,
+    `report --out`, `recover -o`, `combine -o`: replay/copies.py): whose data it holds, which verb wrote it,
+    where (absolute) and the SHA-256 of the bytes written, so that the deletion erases it while it is still
+    pairplay's unchanged file and names it otherwise."""
+
+    participants: list[str]
+    verb: str
+    path: str
+    sha256: str
+    by: str = "pairplay"
+
+
 class ParticipantDeleted(JournalEvent, tag="ParticipantDeleted"):
     """A participant was erased; no id is kept, only what the deletion touched."""
 
@@ -121,10 +136,11 @@ class ParticipantDeleted(JournalEvent, tag="ParticipantDeleted"):
     journal_lines_removed: int
     merged_policies_using_them: list[str] = []
     key_file_line_removed: bool = False
+    copies_erased: int = 0  # journaled copies outside the folder's own places, erased as pairplay's unchanged files
 
 
 JOURNAL_TYPES = (StudyCreated, ParticipantRegistered, GameStarted, GamePaused, GameResumed, GameEnded,
-                 PolicyBuilt, SessionMarkedInvalid, BiasCombined, ParticipantExported, ParticipantDeleted)
+                 PolicyBuilt, SessionMarkedInvalid, BiasCombined, ParticipantExported, CopyWritten, ParticipantDeleted)
 AnyJournal = JOURNAL_TYPES[0]
 for _t in JOURNAL_TYPES[1:]:
     AnyJournal = AnyJournal | _t  # type: ignore[assignment]

@@ -357,12 +357,13 @@ def test_delete_erases_a_participant_everywhere_and_keeps_an_anonymous_event(pla
         fresh.export_participant("p01")
 
 
-def test_an_export_inside_the_study_folder_goes_only_to_exports_and_one_outside_is_named_by_the_deletion(
+def test_an_export_inside_the_study_folder_goes_only_to_exports_and_one_outside_is_erased_or_named_by_the_deletion(
         played, tmp_path, capsys):
     """A new user's trial: `participant export STUDY p01 -o STUDY/recordings/` (or STUDY/, STUDY/merged/) wrote a
     zip of all their data there, and `participant delete` said "deleted" with two full copies left. Inside the
-    study folder an export goes only to exports/<id>.zip (which the deletion erases); one outside it (beyond its
-    reach) is journaled, and the deletion names it in a line of its own."""
+    study folder an export goes only to exports/<id>.zip (which the deletion erases); one outside it is journaled
+    with its SHA-256, and the deletion erases it while it is that file unchanged, and names it in a line of its
+    own otherwise."""
     from pairplay.cli.main import main
     data = copy_study(played, tmp_path)
     folder = data.folder
@@ -375,14 +376,17 @@ def test_an_export_inside_the_study_folder_goes_only_to_exports_and_one_outside_
         assert len(err.strip().splitlines()) == 1
     assert not list(folder.rglob("*.zip"))
     assert main(["participant", "export", str(folder), "p01", "--quiet"]) == 0  # the default: exports/p01.zip
-    outside = tmp_path / "handed" / "p01.zip"
-    assert main(["participant", "export", str(folder), "p01", "-o", str(outside), "--quiet"]) == 0
+    outside, kept = tmp_path / "handed" / "p01.zip", tmp_path / "handed" / "p01-annotated.zip"
+    for path in (outside, kept):
+        assert main(["participant", "export", str(folder), "p01", "-o", str(path), "--quiet"]) == 0
+    kept.write_bytes(kept.read_bytes() + b"annotated")  # no longer the bytes pairplay wrote: named, not erased
     capsys.readouterr()
     assert main(["participant", "delete", str(folder), "p01", "--yes", "--quiet"]) == 0  # -q hides no copy left
     out = capsys.readouterr().err
     assert not names_anywhere(folder, "p01") and not list(folder.rglob("*.zip"))
     [line] = [x for x in out.splitlines() if "NOT erased" in x]
-    assert str(outside) in line and "outside the study folder" in line and outside.is_file()
+    assert str(kept) in line and "outside the study folder" in line and kept.is_file()
+    assert not outside.exists()  # pairplay's own export, unchanged: erased (replay/copies.py)
 
 
 def test_a_deletion_removes_only_what_the_report_wrote_and_names_what_it_kept(played, tmp_path, capsys):

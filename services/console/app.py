@@ -244,6 +244,7 @@ def console_routes(console: Console) -> list:
             raise StudyDataError("type the participant's id to confirm the deletion")
         erased = data.delete_participant(pid)
         return JSONResponse({"deleted": msgspec.to_builtins(erased.event), "not_erased": erased.elsewhere,
+                             "erased_copies": [c.path for c in erased.copies if c.erased],
                              "kept": [{"file": rel, "names_them": names} for rel, names in erased.left]})
 
     async def report(request: Request) -> Response:

@@ -135,7 +135,8 @@ $("delete").onclick = async () => {
   $("delete-confirm").value = "";
   $("data-result").textContent = `deleted ${pid}: ${r.deleted.sessions_removed} games, ${r.deleted.files_removed} files` +
     (r.deleted.merged_policies_using_them.length ? `; merged policies that used them: ${r.deleted.merged_policies_using_them.join(", ")}` : "") +
-    r.not_erased.map(p => `; NOT erased, an export made outside the study folder: ${p} (erase it by hand)`).join("") +
+    r.erased_copies.map(p => `; erased pairplay's unchanged copy ${p}`).join("") +
+    r.not_erased.map(p => `; NOT erased, a copy made outside the study folder's own places (changed or moved): ${p} (erase it by hand)`).join("") +
     r.kept.map(k => `; kept ${k.file}, not written by the report` + (k.names_them ? ` (it names ${pid}: edit it by hand)` : "")).join("");
 };
 $("report").onclick = () => api("/api/console/report", {});

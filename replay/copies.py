@@ -1,0 +1,138 @@
+"""Copies of a study's participant data that a verb writes where their deletion would not reach on its own.
+
+Rule: a verb that writes a file derived from a study folder's data (a game's recording or anything beside it, a
+game's policy, a bias policy, the folder itself for the report) journals it in that study's journal
+(`CopyWritten`: whose data, which verb, the absolute path, the SHA-256 of the bytes written), once the file is in
+place, unless the deletion erases it by itself (a file named after the game beside its recording in recordings/,
+the report's own files in report/, exports/<id>.zip). Whose data an input holds the journal says (`holders`):
+the game whose recording or policy it is, the games a bias policy combined, everyone who played for the whole
+folder. Before any work the verb checks that the journal can take the line (`Copies.check`): a copy its
+participant's deletion would not know is never made. `pairplay participant delete` (replay/studydata.py
+`delete_participant`) then erases each journaled copy that is still pairplay's own, unchanged file (the same path,
+a regular file, the bytes it wrote) and names every other one: changed since, or gone from there.
+A file made from a copy (a recording copied elsewhere by hand, an export unzipped) is beyond what pairplay can
+know: the journal names the copies pairplay made, not the ones people make of them.
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+from typing import Iterable
+
+from pairplay.errors import OutputError
+from pairplay.outputs import is_owned
+from pairplay.schemas import journal as j
+
+from .studydata import JOURNAL, REPORT_OUTPUTS, STUDY_FILE, StudyData, sha256_of
+
+
+def study_root(path: str | Path) -> Path | None:
+    """The study folder (`pairplay protocol init`: its journal and study file) that is `path` or holds it, resolved;
+    None if there is none."""
+    p = Path(path).resolve()
+    for folder in (p, *p.parents):
+        if (folder / JOURNAL).is_file() and (folder / STUDY_FILE).is_file():
+            return folder
+    return None
+
+
+def holders(data: StudyData, rel: str) -> set[str]:
+    """The participants whose data the study's file `rel` (relative posix path; "" for the whole folder) holds,
+    as its journal says: the game whose recording (or a file named after it beside it), journal or policy it is,
+    the games of a bias policy's combination, an export's participant, everyone who played for the folder."""
+    games = list(data.state.games.values())
+    if rel == "":
+        return {g.participant for g in games}
+    found = set()
+    for g in games:
+        policy = g.ended.policy if g.ended is not None else ""
+        if (rel == g.recording or rel == policy or rel.startswith(f"recordings/{g.session}.")
+                or rel.startswith(f"policies/{g.session}.")):
+            found.add(g.participant)
+    by_policy = {g.ended.policy: g.participant for g in games if g.ended is not None and g.ended.policy}
+    for combined in data.state.combined.values():
+        if rel == combined.output:
+            found |= {by_policy[i] for i in combined.inputs if i in by_policy}
+    parts = rel.split("/")
+    if len(parts) == 2 and parts[0] == "exports" and parts[1].endswith(".zip"):
+        found |= {parts[1][:-4]} & set(data.state.participants)
+    return found
+
+
+def erased_anyway(data: StudyData, pids: Iterable[str], verb: str, path: Path) -> bool:
+    """Whether `participant delete` erases `path` by itself for each of `pids` (no line is needed): inside their
+    study folder, a file named after one of their games in recordings/ (what a view or a recover writes beside
+    it), their exports/<id>.zip, or a file of report/ the report wrote (its manifest lists it)."""
+    path = Path(path).resolve()
+    if not path.is_relative_to(data.folder):
+        return False
+    rel = path.relative_to(data.folder).as_posix()
+    if verb == "report" and rel.startswith("report/") and is_owned(rel.removeprefix("report/"), REPORT_OUTPUTS):
+        return True
+    for pid in pids:
+        sessions = [g.session for g in data.games_of(pid)]
+        if not (rel == f"exports/{pid}.zip"
+                or any(rel.startswith(f"recordings/{s}.") and "/" not in rel.removeprefix("recordings/")
+                       for s in sessions)):
+            return False
+    return True
+
+
+class Copies:
+    """What a run of `verb` reads of study folders (its `inputs`: files, or a study folder), to journal what it
+    writes of them (module rule)."""
+
+    def __init__(self, verb: str, inputs: Iterable[str | Path]):
+        self.verb = verb
+        self._studies: dict[Path, StudyData] = {}
+        self._of: dict[Path, tuple[Path, frozenset[str]]] = {}  # an input, resolved -> (its study, whose data)
+        self._typed: dict[Path, Path] = {}  # a study, resolved -> as the user's path reaches it (what a refusal names)
+        for given in inputs:
+            root = study_root(given)
+            if root is None:
+                continue
+            self._typed.setdefault(root, next((p for p in (Path(given), *Path(given).parents)
+                                               if p.resolve() == root), root))
+            if root not in self._studies:  # one pairplay cannot read is said (StudyDataError): its copy unjournaled
+                self._studies[root] = StudyData(root)  # would be a copy the deletion never knew
+            key = Path(given).resolve()
+            rel = "" if key == root else key.relative_to(root).as_posix()
+            pids = frozenset(holders(self._studies[root], rel))
+            if pids:
+                self._of[key] = (root, pids)
+
+    def _lines(self, written: Iterable[Path], inputs: Iterable[str | Path] | None) -> dict[Path, set[str]]:
+        """(study -> whose data) of the outputs `written` made of `inputs` (default: all of the verb's)."""
+        keys = self._of if inputs is None else [Path(i).resolve() for i in inputs]
+        studies: dict[Path, set[str]] = {}
+        for key in keys:
+            if key in self._of:
+                root, pids = self._of[key]
+                studies.setdefault(root, set()).update(pids)
+        return {root: pids for root, pids in studies.items()
+                if not all(erased_anyway(self._studies[root], pids, self.verb, w) for w in written)}
+
+    def check(self, places: Iterable[str | Path]) -> None:
+        """Before any work: OutputError, naming the journal, if a study whose data the verb would write to `places`
+        (its output files or folders) cannot take the journal line of it (a copy the deletion would not know)."""
+        for root in self._lines([Path(p) for p in places], None):
+            journal = self._typed.get(root, root) / JOURNAL
+            try:  # opened for appending, nothing written: what the append will need (a read-only mount refuses)
+                os.close(os.open(root / JOURNAL, os.O_WRONLY | os.O_APPEND))
+            except OSError as err:
+                raise OutputError(f"cannot write there ({err.strerror or err}), and this `pairplay {self.verb}` "
+                                  "writes a copy of its participants' data that their deletion must know: make the "
+                                  "study's journal writable first", journal) from None
+
+    def journal(self, written: Iterable[str | Path], inputs: Iterable[str | Path] | None = None) -> None:
+        """Journal each file of `written` (in place now) made of `inputs` (default: all of the verb's) in the
+        studies whose data they hold, one CopyWritten each, but for the ones their deletion erases by itself."""
+        written = [Path(w) for w in written if Path(w).is_file()]
+        for root, pids in self._lines(written, inputs).items():
+            data = self._studies[root]
+            for w in written:
+                if erased_anyway(data, pids, self.verb, w):
+                    continue
+                data.append(j.CopyWritten(participants=sorted(pids), verb=self.verb, path=str(w.resolve()),
+                                          sha256=sha256_of(w)))
