@@ -149,11 +149,8 @@ def _run(args) -> int:
         from pairplay.outputs import check_folder  # given (serve served its console and failed at each step)
         check_folder(args.folder)
     if args.action == "register":
-        if args.name and args.count != 1:
-            raise StudyDataError("--name registers one participant: leave out --count")
-        phase = args.phase or data.study.phase[0].id
-        for _ in range(args.count):
-            print(data.register(phase, args.name))
+        for pid in data.register_many(args.phase or data.study.phase[0].id, args.count, args.name):
+            print(pid)
         data.write_tables()
         return 0
     if args.action == "status":
@@ -164,14 +161,8 @@ def _run(args) -> int:
             print(f"[{mark:7}] {step.label}" + (f"  ({step.blocked})" if step.blocked and not step.done else ""))
         return 0
     if args.action == "mark-invalid":
-        from pairplay.services.bus import Bus, BusOptions  # noqa: F401  (the runner lives with the services)
-        from pairplay.schemas import journal as j
-        game = data.state.games.get(args.session)
-        if game is None:
-            raise StudyDataError(f"no session {args.session!r} in this study")
-        data.append(j.SessionMarkedInvalid(session=args.session, participant=game.participant, reason=args.reason))
-        data.write_tables()
-        print(f"{args.session} marked invalid: {args.reason}")
+        marked = data.mark_invalid(args.session, args.reason)
+        print(f"{args.session} marked invalid: {marked.reason}")
         return 0
     if args.action in ("pilot", "serve"):
         # a completed game a signal left without its policy gets it now, from its recording

@@ -311,6 +311,30 @@ class StudyData:
             self.append(j.ParticipantRegistered(participant=pid, joins=joins))
             return pid
 
+    def register_many(self, joins: str, count: int = 1, label: str = "", *, count_name: str = "--count",
+                      label_name: str = "--name") -> list[str]:
+        """Register `count` participants for phase `joins` (the rule of the CLI and the console alike): a
+        label names one person, so it goes with a count of 1 only. `count_name` / `label_name` are the
+        caller's words for them (the CLI's options, the console's JSON keys). Raises StudyDataError."""
+        if isinstance(count, bool) or not isinstance(count, int) or not 1 <= count <= REGISTER_AT_ONCE:
+            raise StudyDataError(f"{count_name} must be a whole number 1..{REGISTER_AT_ONCE}, got {count!r}")
+        if label and count != 1:
+            raise StudyDataError(f"{label_name} registers one participant: leave out {count_name}")
+        return [self.register(joins, label) for _ in range(count)]
+
+    def mark_invalid(self, session: str, reason: str) -> j.SessionMarkedInvalid:
+        """Journal a game as invalid (left out of every report); the reason is required and kept as
+        given, stripped. Raises StudyDataError for an unknown session or an empty reason."""
+        if not reason.strip():  # the report says why a game is left out: a blank is no answer
+            raise StudyDataError("marking a session invalid needs a reason")
+        game = self.state.games.get(session)
+        if game is None:
+            raise StudyDataError(f"no session {session!r} in this study")
+        event = self.append(j.SessionMarkedInvalid(session=session, participant=game.participant,
+                                                   reason=reason.strip()))
+        self.write_tables()
+        return event
+
     def participant(self, pid: str) -> j.ParticipantRegistered:
         p = self.state.participants.get(pid)
         if p is None:

@@ -402,15 +402,6 @@ class StudyRunner:
         self._control(ev.SessionResumed())
         self.data.append(j.GameResumed(session=self.live.session, participant=self.live.participant))
 
-    def mark_invalid(self, session: str, reason: str) -> None:
-        game = self.data.state.games.get(session)
-        if game is None:
-            raise StudyDataError(f"no session {session!r} in this study")
-        if not reason.strip():
-            raise StudyDataError("marking a session invalid needs a reason")
-        self.data.append(j.SessionMarkedInvalid(session=session, participant=game.participant, reason=reason.strip()))
-        self.data.write_tables()
-
     # -- the combination -----------------------------------------------------
     def combine(self, phase_id: str, timeout_s: float = 60.0) -> j.BiasCombined:
         """The bias policy of `phase_id` from its bias phase's valid games, through the combiner service."""

@@ -320,6 +320,11 @@ CASES = [
          "read-only (study)", readonly="study"),
     Case("participant delete in a read-only study", ["participant", "delete", "study", "p01", "--yes"],
          "read-only (study)", readonly="study"),
+    # the console refused these and the command line took them (trial15): one rule, in replay/studydata.py
+    Case("protocol mark-invalid with an empty reason", ["protocol", "mark-invalid", "study", "s1", "--reason", ""],
+         "marking a session invalid needs a reason"),
+    Case("protocol mark-invalid with a blank reason", ["protocol", "mark-invalid", "study", "s1", "--reason", "  "],
+         "marking a session invalid needs a reason"),
     Case("protocol register in a read-only study", ["protocol", "register", "study"], "read-only (study)",
          readonly="study"),
     Case("protocol mark-invalid in a read-only study", ["protocol", "mark-invalid", "study", "s1", "--reason", "x"],

@@ -78,6 +78,30 @@ def test_malformed_and_refused_requests_get_one_line(lab):
         status, answer = call(f"{server.url}/api/console/{path}?token={t}", body, raw)
         assert status == 400 and "\n" not in answer["error"] and answer["error"], (path, answer)
     assert data.state.participants == {}
+
+
+def test_a_request_the_command_line_refuses_is_refused_by_the_console_in_the_same_words(lab):
+    """trial15: the console registered two participants under one name (`count` 2 with a `label`), which
+    `protocol register --name X --count 2` refuses; took an unknown key silently; and said "count must be
+    1..50" of the text "2". Every request body is now read as a Struct that refuses unknown keys, and the
+    register and mark-invalid rules are StudyData's, shared with the command line."""
+    server, data = lab
+    t = server.token
+    cases = [
+        ({"phase": "phase1", "count": 2, "label": "Anna"}, "a name (`label`) registers one participant: leave out `count`"),
+        ({"phase": "phase1", "count": "2"}, "count: must be an integer, got text"),
+        ({"phase": "phase1", "count": 0}, "`count` must be a whole number 1..50, got 0"),
+        ({"phase": "phase1", "extra": 1}, "no key `extra` is known here; the keys: count, label, phase"),
+        ({"phase": "phase1", "lable": "Anna"}, "no key `lable` is known here (did you mean `label`?)"),
+    ]
+    for body, said in cases:
+        status, answer = call(f"{server.url}/api/console/register?token={t}", body)
+        assert (status, answer["error"]) == (400, said), body
+    for body, said in [({"session": "nope", "reason": " "}, "marking a session invalid needs a reason"),
+                       ({"session": "nope", "reason": "x", "why": "y"}, "no key `why` is known here; the keys: reason, session")]:
+        status, answer = call(f"{server.url}/api/console/control/invalid?token={t}", body)
+        assert (status, answer["error"]) == (400, said), body
+    assert data.state.participants == {} and not data.read_journal()[1:]  # nothing registered, nothing journaled
     status, answer = call(f"{server.url}/api/console/register?token={t}", {"phase": "phase1", "count": 2})
     assert status == 200 and answer["registered"] == ["p01", "p02"]
     status, answer = call(f"{server.url}/api/console/delete?token={t}", {"participant": "p01", "confirm": "p02"})

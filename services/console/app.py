@@ -30,7 +30,8 @@ from starlette.staticfiles import StaticFiles
 from pairplay.core.actions import ACTION_NAMES
 from pairplay.core.geometry import N_STATES, STATE_NAMES
 from pairplay.outputs import output_folder
-from pairplay.replay.studydata import REGISTER_AT_ONCE, StudyDataError, named
+from pairplay.replay.studydata import StudyDataError, named
+from pairplay.schemas.jsonfile import in_words
 
 from pairplay.services.protocol import StudyRunner
 from pairplay.numbers import counted
@@ -149,11 +150,39 @@ async def _body(request: Request) -> dict:
     return body
 
 
-def _str(body: dict, key: str, default: str | None = None) -> str:
-    value = body.get(key, default)
-    if not isinstance(value, str):
-        raise StudyDataError(f"{key!r} must be a string")
-    return value
+class _Request(msgspec.Struct, forbid_unknown_fields=True, kw_only=True):
+    """A console request's JSON body: a key it does not know is refused, as in every file pairplay reads."""
+
+
+class RegisterRequest(_Request):
+    phase: str | None = None  # the first phase's by default
+    count: int = 1
+    label: str = ""  # a name for the key file: one participant only
+
+
+class ControlRequest(_Request):
+    reason: str = ""
+    session: str = ""  # "invalid": the session to mark
+
+
+class ParticipantRequest(_Request):
+    participant: str = ""
+    confirm: str = ""  # a deletion: the participant's id typed again
+
+
+class AnswerRequest(_Request):
+    session: str = ""
+    token: str = ""
+    answers: object = None  # checked item by item by the runner, which knows the questionnaire
+
+
+def _read(body: dict, kind: type[_Request]) -> _Request:
+    """`body` as `kind`, or StudyDataError in the file readers' words ("count: must be an integer, got text";
+    "no key `lable` is known here (did you mean `label`?)")."""
+    try:
+        return msgspec.convert(body, kind)
+    except msgspec.ValidationError as err:
+        raise StudyDataError(in_words(err, kind)) from None
 
 
 def console_routes(console: Console) -> list:
@@ -184,13 +213,9 @@ def console_routes(console: Console) -> list:
         return JSONResponse(console.state())
 
     async def register(request: Request) -> Response:
-        body = await _body(request)
-        phase = _str(body, "phase", data.study.phase[0].id)
-        count = body.get("count", 1)
-        if isinstance(count, bool) or not isinstance(count, int) or not 1 <= count <= REGISTER_AT_ONCE:
-            raise StudyDataError(f"count must be 1..{REGISTER_AT_ONCE}")
-        label = _str(body, "label", "")
-        ids = [data.register(phase, label) for _ in range(count)]
+        asked = _read(await _body(request), RegisterRequest)
+        ids = data.register_many(asked.phase or data.study.phase[0].id, asked.count, asked.label,
+                                 count_name="`count`", label_name="a name (`label`)")
         data.write_tables()
         return JSONResponse({"registered": ids})
 
@@ -209,25 +234,25 @@ def console_routes(console: Console) -> list:
         return JSONResponse({"started": step.label})
 
     async def control(request: Request) -> Response:
-        body = await _body(request)
+        asked = _read(await _body(request), ControlRequest)
         action = request.path_params["action"]
         if action == "pause":
-            runner.pause(_str(body, "reason", ""))
+            runner.pause(asked.reason)
         elif action == "resume":
             runner.resume()
         elif action == "abort":
-            runner.abort(_str(body, "reason", ""))
+            runner.abort(asked.reason)
         elif action == "skip-questionnaire":
             runner.skip_questionnaire()
         elif action == "invalid":
-            runner.mark_invalid(_str(body, "session", ""), _str(body, "reason", ""))
+            data.mark_invalid(asked.session, asked.reason)
         else:
             raise StudyDataError(f"no action {action!r}")
         return JSONResponse({"ok": action})
 
     async def export(request: Request) -> Response:
-        body = await _body(request)
-        path = data.export_participant(_str(body, "participant", ""), force=True)
+        asked = _read(await _body(request), ParticipantRequest)
+        path = data.export_participant(asked.participant, force=True)
         return JSONResponse({"export": f"/api/console/exports/{path.name}"})
 
     async def download(request: Request) -> Response:
@@ -238,9 +263,9 @@ def console_routes(console: Console) -> list:
         return FileResponse(path, filename=name, media_type="application/zip")
 
     async def delete(request: Request) -> Response:
-        body = await _body(request)
-        pid = _str(body, "participant", "")
-        if _str(body, "confirm", "") != pid:
+        asked = _read(await _body(request), ParticipantRequest)
+        pid = asked.participant
+        if asked.confirm != pid:
             raise StudyDataError("type the participant's id to confirm the deletion")
         erased = data.delete_participant(pid)
         return JSONResponse({"deleted": msgspec.to_builtins(erased.event), "not_erased": erased.elsewhere,
@@ -284,9 +309,8 @@ def console_routes(console: Console) -> list:
 
     async def q_answer(request: Request) -> Response:
         try:
-            body = await _body(request)
-            answers = body.get("answers")
-            runner.answer_questionnaire(_str(body, "session", ""), _str(body, "token", ""), answers)
+            asked = _read(await _body(request), AnswerRequest)
+            runner.answer_questionnaire(asked.session, asked.token, asked.answers)
         except StudyDataError as err:
             return JSONResponse({"error": str(err)}, status_code=400)
         return JSONResponse({"ok": True})
