@@ -13,9 +13,9 @@ message lost" for an index or a summary) and, for a recovered file recovered
 again, the earlier losses it carries over (replay/recover.py). Exit 0 when the output is complete, 2 (one line on stderr,
 nothing written) when REC is missing, empty or not MCAP (a file of nothing
 with its journal beside it, as a recorder killed before its first flush leaves
-it, is completed from the journal), holds no session
-(only MCAP's magic or header, another program's MCAP, no SessionStarted:
-replay/check.py `no_session`), or the output it would write exists. A complete file (whole,
+it, is completed from the journal), holds no session, cut, damaged or whole, and its
+journal adds none (only MCAP's magic or header, another program's MCAP, no SessionStarted:
+said in the reader's words, reader.EventLog.no_session, as every verb says it), or the output it would write exists. A complete file (whole,
 as its recorder finished it) is not copied: the line says it is complete and
 what its journal beside it, if any, holds (`nothing more: all N of its records
 are in the file`, or the N events it adds, then written to the output as for a
@@ -77,8 +77,6 @@ def run(args: argparse.Namespace) -> int:
     else:
         state = "complete already"
     ended = "" if done.ended else "; the session's end was not recorded (partial session)"
-    if not done.started:
-        ended = "; its SessionStarted is not in it (lost, or never recorded): no session to rebuild or verify"
     journal = ""
     if done.journal is not None:
         journal = (f"; {counted(done.from_journal, 'event')} taken from its journal {done.journal.name}"

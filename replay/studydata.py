@@ -387,14 +387,14 @@ class StudyData:
     def recording_of(self, g: Game):
         """(its read recording (reader.EventLog), "") if game `g`'s recording can stand for the game, else (None,
         why not, in the words the report names the game by): missing; holding no session (a 0-byte file, the
-        ~1 KB an interrupted `session --force` leaves: check.no_session, the reader's words); damaged (events
+        ~1 KB an interrupted `session --force` leaves: reader.EventLog.no_session, the reader's words); damaged (events
         lost: EventLog.lost, a recovered file's source's losses among them); holding no whole round
         (check.no_whole_round); not this game's (`not_this_game`: a `session --force --session <its id> --out
         STUDY/recordings` replaced it with another session); or without the game's SessionEnded (a cut file:
         its rounds are a part of the game). A
         journal that says "completed" does not make a file that holds none of it the game: its picks would
         silently be no picks."""
-        from .check import check_recording, no_session, no_whole_round
+        from .check import check_recording, no_whole_round
 
         path = self.folder / g.recording
         if not path.is_file():
@@ -406,9 +406,8 @@ class StudyData:
             return None, f"recording holds no session: {err.what}"
         except OSError as err:
             return None, f"recording unreadable: {err.strerror or err}"
-        why = no_session(log)
-        if why:
-            return None, f"recording {why}"
+        if log.no_session:
+            return None, f"recording {log.no_session}"
         if log.lost:  # (a new user's trial: messages that do not decode were left out of its picks, no word)
             return None, f"recording damaged: {log.lost}"
         why = no_whole_round([r.event for r in log.events], log.truncated, log.damaged)
