@@ -300,13 +300,26 @@ def said_source_lost(recovered: dict[str, str]) -> str:
     if source and earlier:
         source += f", itself recovered from {' and '.join(reversed(earlier))}"
     # (a restarted recorder's file records its predecessor's losses so too: services/recorder.py `earlier_losses`)
-    how = "continues a damaged recording" if recovered.get("continued") else "recovered from a damaged file"
+    how = said_source_made(recovered)
     head = f"{how}{f' ({source})' if source else ''}"
     if not parts:  # recovered before recover said what each part lost
         return f"{head} whose damaged parts are lost"
     if len(parts) > 2:  # every part named was a line of thousands of characters (as Scan.brief)
         return f"{head}: {counted(len(parts), 'part')} lost, the first {parts[0]}, the last {parts[-1].split(': ')[0]}"
     return f"{head}: {'; '.join(p + ' lost' for p in parts)}"
+
+
+def said_source(recovered: dict[str, str]) -> str:
+    """The file a recovered one (its RECOVERED metadata) was made of, in words that fit what it is: "the recording
+    it continues" (a restarted recorder's copy: services/recorder.py `earlier_losses`) or "the recording it was
+    recovered from" (`pairplay recover`); verify said the latter of a continued file (a new user's trial)."""
+    return "the recording it continues" if recovered.get("continued") else "the recording it was recovered from"
+
+
+def said_source_made(recovered: dict[str, str]) -> str:
+    """How a recovered file was made of a damaged one, as `said_source_lost` starts: "continues a damaged
+    recording" or "recovered from a damaged file"."""
+    return "continues a damaged recording" if recovered.get("continued") else "recovered from a damaged file"
 
 
 def said_source_cut(recovered: dict[str, str]) -> str:
