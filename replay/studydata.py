@@ -197,7 +197,7 @@ class StudyData:
             self.study: Study = load_study(self.given / STUDY_FILE)
         except StudyFileError as err:
             raise StudyDataError(str(err)) from None
-        self.settings = _settings(self.folder / SETTINGS)
+        self.settings = _settings(self.given / SETTINGS)  # named as given in a refusal (it named the resolved path)
         self._lock = threading.RLock()
         self.state = StudyState()
         for e in self.read_journal():
@@ -643,7 +643,9 @@ class StudyData:
             live = [f for f in files + [x for g in sessions for x in (self.folder / "recordings").glob(f"{g}.*")]
                     if is_live(f)]
             if live:  # its recorder still writes it (a game's questionnaire holds it open): pairplay/livelock.py
-                raise StudyDataError(f"{pid}: {live[0]} {LIVE}: stop its session first")
+                # named as given (the study folder as typed), not resolved
+                raise StudyDataError(f"{pid}: {self.given / live[0].relative_to(self.folder)} {LIVE}: stop its "
+                                     "session first")
             key = self.key_file
             if key is not None and not key.is_file():  # before anything is deleted: their name stays in it
                 raise StudyDataError(f"{pid}: the key file {key} is not there (an unmounted drive?): their name "
@@ -734,9 +736,8 @@ def _settings(path: Path) -> dict:
     try:
         return msgspec.structs.asdict(msgspec.json.decode(path.read_bytes(), type=FolderSettings))
     except (msgspec.DecodeError, msgspec.ValidationError) as err:
-        raise StudyDataError(f"{path}: not the study's settings ({in_words(err, FolderSettings)}): it is "
-                             f"{{\"key_file\": \"<path or empty>\"}}") \
-            from None
+        raise StudyDataError(f"not the study's settings ({in_words(err, FolderSettings)}): it is "
+                             f"{{\"key_file\": \"<path or empty>\"}}", path) from None
 
 
 def game_end(folder: Path, session: str, participant: str, path: Path, answered: bool | None = None,
