@@ -213,8 +213,9 @@ def run_combine(args) -> int:
           f"smile {merged.info.facial}, gaze {merged.info.gaze}\n")
     for s, (a, rule) in enumerate(zip(merged.policy, merged.rules)):
         print(f"{s:2d} {STATE_NAMES[s]:16s} {int(a):2d} {ACTIONS[int(a)].name:55s} {rule}")
-    if partial:
+    if partial:  # in the listing and on stderr, -q or not, as profile's (cli/main.py `warn`: -q hid it)
         print(f"\nPARTIAL merge: {partial}")
+        print(f"pairplay combine: PARTIAL merge: {partial}", file=sys.stderr)
     if args.out:
         print(f"\nwrote {args.out}")
     return 0

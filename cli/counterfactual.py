@@ -129,12 +129,16 @@ def run(args: argparse.Namespace) -> int:
     events = [r.event for r in log.events]
     turns = turns_from_events(events, str(rec), note)
     config = turns.config
+    from pairplay.cli.main import warn
+
+    # warnings about the fit, on stderr, -q or not (cli/main.py: on stdout, -q hid them with the summary)
     for why in turns.skipped:
-        print(f"{rec}: turn left out of the fit: {why}")
+        warn("counterfactual", f"{rec}: turn left out of the fit: {why}")
     if note:
-        print(f"{rec}: not whole ({note}); fitting the {counted(len(turns.observations.first), 'turn')} of its intact parts")
+        warn("counterfactual", f"{rec}: not whole ({note}); fitting the "
+                               f"{counted(len(turns.observations.first), 'turn')} of its intact parts")
     elif log.loss_free:  # damaged where no event was: fitted whole, the damage said (reader.EventLog.loss_free)
-        print(f"{rec}: {log.loss_free}")
+        warn("counterfactual", f"{rec}: {log.loss_free}")
     others = [read_turns(path) for path in args.fit_also]
     for other in others:
         if other.config.participant != config.participant or other.config.observed_source != config.observed_source:
@@ -142,10 +146,10 @@ def run(args: argparse.Namespace) -> int:
                              f"{config.participant} ({config.observed_source}) of {rec.name}: fit one participant "
                              "at a time", other.source)
         for why in other.skipped:
-            print(f"{other.source}: turn left out of the fit: {why}")
+            warn("counterfactual", f"{other.source}: turn left out of the fit: {why}")
         if other.note:
-            print(f"{other.source}: not whole ({other.note}); fitting the {counted(len(other.observations.first), 'turn')} of "
-                  "its intact parts")
+            warn("counterfactual", f"{other.source}: not whole ({other.note}); fitting the "
+                                   f"{counted(len(other.observations.first), 'turn')} of its intact parts")
     seen = {rec.resolve()}
     for path in args.fit_also:
         if Path(path).resolve() in seen:

@@ -32,7 +32,11 @@ its "running in session" line: progress and chatter) (rebuild's per-file lines, 
 `protocol init`'s protocol were printed under -q: new users' trials); a
 session that did not complete still says how it ended; a verb whose result is what
 it prints (`profile`, `replay --verify`'s verdict, `protocol status`, `bench`)
-prints it either way, and the listening line of a bus verb (its endpoint) too. The
+prints it either way, and the listening line of a bus verb (its endpoint) too. A warning about a
+verb's result (an input not whole: damaged, cut, events that do not decode, a damage that lost none;
+a partial output; turns a fit left out) is one line on stderr, `pairplay <verb>: <what>` (`warn`), -q
+or not: a damaged input is never hidden (replay and counterfactual said theirs on stdout, and
+counterfactual's, rebuild's and view's went with their summary under -q: a new user's trial). The
 options stand after the verb or after its action (`pairplay protocol check
 FILE -v`); `configure_logging` sets them for the run.
 
@@ -225,6 +229,11 @@ def main(argv: list[str] | None = None, exiting: bool = False) -> int:
         if not exiting:
             for s, handler in saved.items():
                 signal.signal(s, handler)
+
+
+def warn(verb: str, line: str) -> None:
+    """A warning about a verb's result: one line on stderr, `pairplay <verb>: <line>`, -q or not (module rule)."""
+    print(f"pairplay {verb}: {line}", file=sys.stderr, flush=True)
 
 
 @contextlib.contextmanager

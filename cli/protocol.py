@@ -141,7 +141,7 @@ def _run(args) -> int:
         finally:
             if study_path != args.study:
                 Path(study_path).unlink()
-        print(f"study folder {data.folder} ({data.study.study.id}); key file: {data.key_file or 'none'}")
+        print(f"study folder {data.given} ({data.study.study.id}); key file: {data.key_file or 'none'}")
         print("\n".join(describe(data.study)))
         return 0
     data = StudyData(args.folder)
@@ -155,7 +155,7 @@ def _run(args) -> int:
         return 0
     if args.action == "status":
         if not data.state.participants:  # an empty plan is not a complete one
-            print(f"nobody is registered: `pairplay protocol register {data.folder}` first")
+            print(f"nobody is registered: `pairplay protocol register {data.given}` first")
         for step in data.plan():
             mark = "done" if step.done else ("blocked" if step.blocked else "open")
             print(f"[{mark:7}] {step.label}" + (f"  ({step.blocked})" if step.blocked and not step.done else ""))
@@ -311,7 +311,7 @@ def _pilot(data: StudyData, args) -> int:
             if not stop.is_set():
                 raise
     if stop.is_set():
-        print(f"pairplay protocol pilot: interrupted ({stop.why}); `pairplay protocol status {data.folder}` shows what is left", file=sys.stderr)
+        print(f"pairplay protocol pilot: interrupted ({stop.why}); `pairplay protocol status {data.given}` shows what is left", file=sys.stderr)
         return 0
-    print(f"plan complete; `pairplay report {data.folder}` writes the report")
+    print(f"plan complete; `pairplay report {data.given}` writes the report")
     return 0

@@ -101,6 +101,13 @@ def run(args: argparse.Namespace) -> int:
         copies.journal([figure])
     work_done()  # everything is written: a signal from now on is reported, and undoes nothing
     print("\n".join(lines))
+    from pairplay.cli.main import warn
+
+    for rebuilt in done:  # warnings about the result, on stderr, -q or not (cli/main.py: -q hid them with the listing)
+        if rebuilt.partial:  # the damage (the note) is said here, once, short (reader.EventLog.brief)
+            warn("rebuild", f"{rebuilt.source}: PARTIAL session: {rebuilt.partial}")
+        if rebuilt.damage_read:
+            warn("rebuild", f"{rebuilt.source}: {rebuilt.damage_read}")
     return 0
 
 
@@ -120,10 +127,6 @@ def write_all(done, staged: Path, out: Path, args: argparse.Namespace) -> list[s
         lines.append(f"{rebuilt.source}: {counted(f.events, 'event')}, {counted(len(picks), 'round')}, mean {mean} {PICKS_UNIT}, "
                      f"{updates}"
                      f"{'; %d q_before mismatches' % f.q_mismatches if f.q_mismatches else ''}")
-        if rebuilt.partial:  # the damage (the note) is said here, once, short (reader.EventLog.brief)
-            lines.append(f"  PARTIAL session: {rebuilt.partial}")
-        if rebuilt.damage_read:
-            lines.append(f"  {rebuilt.damage_read}")
         lines.append("  " + ", ".join(str(out / p.name) for p in paths))
     if done and not args.no_plot:
         plot_curves(done, staged / FIGURE)

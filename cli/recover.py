@@ -13,9 +13,9 @@ message lost" for an index or a summary) and, for a recovered file recovered
 again, the earlier losses it carries over (replay/recover.py). Exit 0 when the output is complete, 2 (one line on stderr,
 nothing written) when REC is missing, empty or not MCAP (a file of nothing
 with its journal beside it, as a recorder killed before its first flush leaves
-it, is completed from the journal), holds no session
-(only MCAP's magic or header, another program's MCAP, no SessionStarted:
-replay/check.py `no_session`), or the output it would write exists. A complete file (whole,
+it, is completed from the journal), holds no session, cut, damaged or whole, and its
+journal adds none (only MCAP's magic or header, another program's MCAP, no SessionStarted:
+said in the reader's words, reader.EventLog.no_session, as every verb says it), or the output it would write exists. A complete file (whole,
 as its recorder finished it) is not copied: the line says it is complete and
 what its journal beside it, if any, holds (`nothing more: all N of its records
 are in the file`, or the N events it adds, then written to the output as for a
@@ -30,14 +30,12 @@ cannot be read, or when the file is not complete).
 from __future__ import annotations
 
 import argparse
-import logging
 from pathlib import Path
 
 from pairplay.cli.args import add_force, file_in, output_file
 from pairplay.errors import OptionError
 from pairplay.numbers import counted
 
-log = logging.getLogger("pairplay.recover")
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -82,8 +80,6 @@ def run(args: argparse.Namespace) -> int:
     else:
         state = "complete already"
     ended = "" if done.ended else "; the session's end was not recorded (partial session)"
-    if not done.started:
-        ended = "; its SessionStarted is not in it (lost, or never recorded): no session to rebuild or verify"
     journal = ""
     if done.journal is not None:
         journal = (f"; {counted(done.from_journal, 'event')} taken from its journal {done.journal.name}"
@@ -91,10 +87,18 @@ def run(args: argparse.Namespace) -> int:
                    f"{f' (read up to its torn tail: {done.journal_torn})' if done.journal_torn else ''}")
     earlier = f"; what its source had lost is carried over ({done.earlier_lost})" if done.earlier_lost else ""
     print(f"{args.recording}: {state}; {counted(done.messages, 'message')} kept in {done.output}{earlier}{journal}{ended}")
-    if done.journal_error:  # what it held (up to the last 5 ms before a crash) is not in the output: said, not silent
-        log.warning("recover: the journal beside %s is unreadable, none of its records were used: %s",
-                    args.recording, done.journal_error)
+    if done.journal_error:  # what it held (up to the last 5 ms before a crash) is not in the output: said, not silent,
+        _journal_unreadable(args, done)  # -q or not
     return 0
+
+
+def _journal_unreadable(args: argparse.Namespace, done) -> None:
+    """The warning of a journal beside REC that could not be read: on stderr, -q or not (cli/main.py `warn`: a
+    logged WARNING, which -q drops, hid what a crash may have lost)."""
+    from pairplay.cli.main import warn
+
+    warn("recover", f"the journal beside {args.recording} is unreadable, none of its records were used: "
+                    f"{done.journal_error}")
 
 
 def _lost(done) -> str:
@@ -137,8 +141,7 @@ def _complete(args: argparse.Namespace, done) -> int:
         if args.discard_journal:
             raise OptionError(f"--discard-journal: {done.journal_error}; it was not removed", journal)
         print(f"{said}; the journal beside it is unreadable")
-        log.warning("recover: the journal beside %s is unreadable, none of its records were used: %s",
-                    args.recording, done.journal_error)
+        _journal_unreadable(args, done)
         return 0
     if done.journal is None:
         if args.discard_journal:

@@ -84,10 +84,14 @@ def run(args: argparse.Namespace) -> int:
 
     if not log.events:
         raise InputError(f"holds no events to replay{' (' + log.brief + ')' if log.brief else ''}", args.recording)
+    from pairplay.cli.main import warn
+
+    # warnings about the result, on stderr, -q or not (cli/main.py: they were on stdout)
     if log.missing:  # what a damaged or cut file, or messages that do not decode, lost: not re-published, said
-        print(f"{args.recording}: not whole ({log.missing}); replaying the {counted(len(log.events), 'event')} of its intact parts")
+        warn("replay", f"{args.recording}: not whole ({log.missing}); replaying the "
+                       f"{counted(len(log.events), 'event')} of its intact parts")
     elif log.loss_free:  # damaged where no event was: every event replayed, the damage said (reader.EventLog.loss_free)
-        print(f"{args.recording}: {log.loss_free}")
+        warn("replay", f"{args.recording}: {log.loss_free}")
     stop = threading.Event()
     stop_on_signals(stop)
     with Bus(options_from_args(args), stop=stop) as bus:

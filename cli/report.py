@@ -59,7 +59,8 @@ def run(args) -> int:
     if report.rehearsal:
         print(f"a rehearsal: {counted(len(report.games), 'scripted game')}, no person played")
     print(f"{counted(len(report.games), 'valid game')} of {counted(len({g.participant for g in report.games}), 'participant')}"
-          + (f"; left out: {', '.join(report.excluded)}" if report.excluded else "")
-          + (f"; read whole from a damaged file: {', '.join(report.read_whole)}" if report.read_whole else ""))
+          + (f"; left out: {', '.join(report.excluded)}" if report.excluded else ""))
+    if report.read_whole:  # a damaged input, on stderr, -q or not (cli/main.py `warn`: -q hid it with the summary)
+        print(f"pairplay report: read whole from a damaged file: {', '.join(report.read_whole)}", file=sys.stderr)
     print(f"report: {out / 'report.md'}")
     return 0

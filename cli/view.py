@@ -17,7 +17,8 @@ as `<stem>.partial.rrd` too, the result line saying the recording is live (it
 was saved as `<stem>.rrd`, a part passed off as the whole), and so is a
 damaged recording that lost events in its middle or holds messages that do
 not decode (reader.EventLog.lost; rebuild's rule: never passed off as whole),
-its line naming the damage. Output: one line of result
+its result line saying it is partial and a line on stderr naming the damage (a
+damage that lost no event too), -q or not (cli/main.py `warn`). Output: one line of result
 on stdout (saved); interrupted, its one line goes to stderr, as every verb's;
 what the view does is INFO (-v); what it noticed (a malformed message, a gap)
 is a WARNING.
@@ -47,6 +48,7 @@ from pairplay.cli.args import (add_force, file_in, float_at_least, int_at_least,
 from pairplay.errors import InputError, OptionError, OutputError, UserError
 from pairplay.livelock import LIVE, is_live
 from pairplay.outputs import check_output, output_path
+from pairplay.cli.main import warn
 from pairplay.replay.check import read_session
 from pairplay.services.bus import add_bus_arguments
 from pairplay.services.view import DEFAULT_GRPC_PORT, DEFAULT_WEB_PORT, RrdWriteFailed  # without loading rerun (slow)
@@ -134,7 +136,8 @@ def run(args: argparse.Namespace) -> int:
         if not done.partial and lost:  # events lost in the file: what is left, drawn, under a name that says so
             # (a whole file recovered from one that lost parts: `lost` says what, reader.EventLog.source_lost)
             said = f"is damaged ({lost})" if held.damaged else f"was {lost}"
-            say(f"saved {kept.path}: {_counts(done)}; partial: {args.recording} {said}")
+            say(f"saved {kept.path}: {_counts(done)}; partial")
+            warn("view", f"{args.recording} {said}; the view is partial ({kept.path})")  # -q or not (cli/main.py)
             return 0
         if not done.partial:  # a live recording, drawn as far as it goes: a result, said on stdout
             say(f"saved {kept.path}: {_counts(done)}; partial: {args.recording} {LIVE}, view it again once "
@@ -154,10 +157,10 @@ def run(args: argparse.Namespace) -> int:
         print(f"pairplay view: interrupted ({done.why}) after {_counts(done)}, before the source ended; nothing saved",
               file=sys.stderr)
     else:
-        # a damage that lost no event: drawn whole, and said as every verb says it (reader.EventLog.loss_free)
-        whole_read = f"; {args.recording}: {held.loss_free}" if held is not None and held.loss_free else ""
-        say(f"saved {rrd}: {_counts(done)}{whole_read}" if rrd is not None else
-              f"viewed {_counts(done)}{f'; partial: {args.recording} {LIVE}' if live else ''}{whole_read}")
+        say(f"saved {rrd}: {_counts(done)}" if rrd is not None else
+              f"viewed {_counts(done)}{f'; partial: {args.recording} {LIVE}' if live else ''}")
+        if held is not None and held.loss_free:  # a damage that lost no event: drawn whole, the damage said as every
+            warn("view", f"{args.recording}: {held.loss_free}")  # verb says it (reader.EventLog.loss_free), on stderr
     return 0
 
 

@@ -10,7 +10,8 @@ beside it is named as `pairplay recover`'s to complete). A recording a verb fold
 replays, views, fits or recovers must also hold a session (its
 SessionStarted): `read_session` refuses one that does not, saying what the
 file is (only the magic, a header, another program's MCAP, a session that
-never started), for every such verb alike. A verb whose result is made of whole
+never started) in the reader's words (reader.EventLog.no_session: the reader
+decides what a file holds), for every such verb alike. A verb whose result is made of whole
 rounds (rebuild's policy and curve, verify's verdict, a combiner's policy from a
 recording) also refuses a session with no round recorded whole (`no_whole_round`):
 a file cut, or a session stopped, before its first round ended gave a policy of 0
@@ -63,47 +64,14 @@ def check_recording(path: str | Path, journal_ok: bool = False) -> Path:
     return path
 
 
-def no_session(log) -> str:
-    """Why a read recording (reader.EventLog) holds no session, in words; "" if it holds one.
-
-    A session starts with its SessionStarted (the config every verb folds with), so a file without
-    one holds no session, whatever else it holds: only MCAP's magic or header (a recorder that died
-    at once), another program's MCAP, or pairplay events of a session that never started."""
-    if any(type(r.event).__name__ == "SessionStarted" for r in log.events):
-        return ""
-    size = Path(log.path).stat().st_size if Path(log.path).exists() else 0
-    foreign = len(log.bad) + len(log.unknown)
-    stopped = log.metadata.get("pairplay.recorder.end", {}).get("stopped_by", "")
-    if not log.events and not foreign and not log.skipped and not stopped:
-        # in words a user has (not "MCAP's magic"): the recorder died before it wrote anything
-        if size <= len(MCAP_MAGIC) + 2:
-            return f"holds no session: an MCAP file with no records ({counted(size, 'byte')}): the recording holds nothing"
-        cut = ", cut short" if log.truncated else ""
-        return f"holds no session: an MCAP file with no messages ({counted(size, 'byte')}{cut}): the recording holds nothing"
-    if not log.events and not log.skipped and foreign:
-        topics = sorted({topic for topic, _ in log.channels.values()})[:2]
-        return (f"holds no session: not a pairplay recording ({counted(foreign, 'message')}, none a pairplay event; "
-                f"channels {', '.join(repr(t) for t in topics)})")
-    # a recorder that finished its file says why it stopped, even before any event came (a signal
-    # during the game's wait for its services, on a loaded machine: test_session_end)
-    n = len(log.events) + sum(log.skipped.values())
-    if log.damaged:  # its start may be lost to the damage (a part, a message that does not decode): no session
-        # that "never started" (a new user's trial: a SessionStarted that did not decode was said so)
-        return (f"holds no session: {counted(n, 'pairplay event')} but no SessionStarted in its intact parts: the file is "
-                f"damaged ({log.damaged})")
-    why = f"stopped ({stopped}) before its game started" if stopped else "a session that never started"
-    return f"holds no session: {counted(n, 'pairplay event')} but no SessionStarted ({why})"
-
-
 def read_session(path: str | Path, only: frozenset[str] | None = None):
     """The recording at `path` read (reader.read_log, `only` as there) if it holds a session;
-    InputError naming the path and saying what the file is if not (`no_session`)."""
+    InputError naming the path and saying what the file is if not (reader.EventLog.no_session)."""
     from .reader import read_log
     path = check_recording(path)
     log = read_log(path, only)
-    why = no_session(log)
-    if why:
-        raise InputError(why, path)
+    if log.no_session:
+        raise InputError(log.no_session, path)
     return log
 
 

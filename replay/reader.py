@@ -35,6 +35,7 @@ from mcap.records import Channel, Message, Metadata, Schema
 from pairplay.livelock import LIVE, is_live
 from pairplay.numbers import counted
 from pairplay.schemas.envelope import Event
+from pairplay.schemas.jsonfile import MCAP_MAGIC
 from pairplay.schemas.events import EVENT_BY_TAG, decode_event
 
 from .mcapscan import Damage, scan
@@ -192,6 +193,42 @@ class EventLog:
         partial)."""
         return self.note if (self.lost or self.cut_lost or self.source_cut) else ""
 
+    @property
+    def no_session(self) -> str:
+        """Why the file holds no session, in the one line every verb that reads a recording says it in ("" if it
+        holds one): replay, verify, rebuild, view, counterfactual, recover (replay/check.py `read_session`) and the
+        report of a study (replay/studydata.py `recording_of`). A session starts with its SessionStarted (the
+        config every verb folds with), so a file without one holds no session, whatever else it holds: only MCAP's
+        magic or header (a recorder that died at once), another program's MCAP, pairplay events of a session that
+        never started, or a session whose start the file's damage lost. A cut loses a file's end, never its start:
+        a cut file without a SessionStarted holds no session either (recover copied one and said so with exit 0,
+        where every other verb refused it: a new user's trial)."""
+        if any(type(r.event).__name__ == "SessionStarted" for r in self.events):
+            return ""
+        size = Path(self.path).stat().st_size if Path(self.path).exists() else 0
+        foreign = len(self.bad) + len(self.unknown)
+        stopped = self.metadata.get("pairplay.recorder.end", {}).get("stopped_by", "")
+        if not self.events and not foreign and not self.skipped and not stopped:
+            # in words a user has (not "MCAP's magic"): the recorder died before it wrote anything
+            if size <= len(MCAP_MAGIC) + 2:
+                return f"holds no session: an MCAP file with no records ({counted(size, 'byte')}): the recording holds nothing"
+            cut = ", cut short" if self.truncated else ""
+            return (f"holds no session: an MCAP file with no messages ({counted(size, 'byte')}{cut}): the recording "
+                    "holds nothing")
+        if not self.events and not self.skipped and foreign:
+            topics = sorted({topic for topic, _ in self.channels.values()})[:2]
+            return (f"holds no session: not a pairplay recording ({counted(foreign, 'message')}, none a pairplay event; "
+                    f"channels {', '.join(repr(t) for t in topics)})")
+        # a recorder that finished its file says why it stopped, even before any event came (a signal
+        # during the game's wait for its services, on a loaded machine: test_session_end)
+        n = len(self.events) + sum(self.skipped.values())
+        if self.damaged:  # its start may be lost to the damage (a part, a message that does not decode): no session
+            # that "never started" (a new user's trial: a SessionStarted that did not decode was said so)
+            return (f"holds no session: {counted(n, 'pairplay event')} but no SessionStarted in its intact parts: the "
+                    f"file is damaged ({self.damaged})")
+        why = f"stopped ({stopped}) before its game started" if stopped else "a session that never started"
+        return f"holds no session: {counted(n, 'pairplay event')} but no SessionStarted ({why})"
+
     def unknown_types(self) -> dict[str, int]:
         """How many events of each type this version does not know, by tag."""
         counts: dict[str, int] = {}
@@ -263,13 +300,26 @@ def said_source_lost(recovered: dict[str, str]) -> str:
     if source and earlier:
         source += f", itself recovered from {' and '.join(reversed(earlier))}"
     # (a restarted recorder's file records its predecessor's losses so too: services/recorder.py `earlier_losses`)
-    how = "continues a damaged recording" if recovered.get("continued") else "recovered from a damaged file"
+    how = said_source_made(recovered)
     head = f"{how}{f' ({source})' if source else ''}"
     if not parts:  # recovered before recover said what each part lost
         return f"{head} whose damaged parts are lost"
     if len(parts) > 2:  # every part named was a line of thousands of characters (as Scan.brief)
         return f"{head}: {counted(len(parts), 'part')} lost, the first {parts[0]}, the last {parts[-1].split(': ')[0]}"
     return f"{head}: {'; '.join(p + ' lost' for p in parts)}"
+
+
+def said_source(recovered: dict[str, str]) -> str:
+    """The file a recovered one (its RECOVERED metadata) was made of, in words that fit what it is: "the recording
+    it continues" (a restarted recorder's copy: services/recorder.py `earlier_losses`) or "the recording it was
+    recovered from" (`pairplay recover`); verify said the latter of a continued file (a new user's trial)."""
+    return "the recording it continues" if recovered.get("continued") else "the recording it was recovered from"
+
+
+def said_source_made(recovered: dict[str, str]) -> str:
+    """How a recovered file was made of a damaged one, as `said_source_lost` starts: "continues a damaged
+    recording" or "recovered from a damaged file"."""
+    return "continues a damaged recording" if recovered.get("continued") else "recovered from a damaged file"
 
 
 def said_source_cut(recovered: dict[str, str]) -> str:

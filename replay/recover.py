@@ -62,7 +62,7 @@ from pairplay.schemas.jsonschema import schema_text
 from pairplay.schemas.keys import parse_event_key
 from pairplay.outputs import check_output, output_file
 
-from .check import check_recording, no_session
+from .check import check_recording
 from .mcapscan import scan
 from .reader import read_log
 from .wal import NotAJournal, read_journal, wal_path
@@ -78,7 +78,6 @@ class Recovered:
     damaged: list[str] = field(default_factory=list)  # the parts not copied, and why
     ended: bool = False  # the session's SessionEnded was among the records kept
     last_round: int = -1
-    started: bool = True  # the session's SessionStarted was among the records kept
     journal: Path | None = None  # the journal read beside it, if any
     from_journal: int = 0  # events added from it
     journal_refused: int = 0  # records of it refused by the live checks (recorded as refusals)
@@ -103,9 +102,9 @@ def recover(path: str | Path, output: str | Path | None = None, force: bool = Fa
     `complete` already (output None); with `write` False, only what it would do (output None).
 
     InputError if `path` is not an MCAP file at all (missing, empty, no MCAP magic: unless, with
-    `admit`, its journal is beside it, as a recorder killed before its first flush leaves it) or holds no
-    session (check.py `no_session`), unless it is cut or damaged and holds pairplay events (in it
-    or in its journal), or if its journal is of another session;
+    `admit`, its journal is beside it, as a recorder killed before its first flush leaves it) or would
+    write no session (reader.EventLog.no_session: no SessionStarted in it, none its journal adds), or if
+    its journal is of another session;
     OutputError if `output` is the input, or exists (unless `force`) when there is something to
     write; the output appears only when complete (pairplay.outputs)."""
     path = check_recording(path, journal_ok=admit is not None)  # (a file of nothing: its journal holds it)
@@ -113,12 +112,7 @@ def recover(path: str | Path, output: str | Path | None = None, force: bool = Fa
     if output.resolve() == path.resolve():
         raise OutputError("recover writes a new file; give an output path other than the input", output)
     log = read_log(path)
-    why = no_session(log)
     journal, journal_error = _journal_beside(path, log) if admit is not None else (None, "")
-    # a cut or damaged file of a session's events is kept whatever it lost (its start may be in the lost
-    # part, or before a recorder that joined late); one with nothing of a session, or whole, has nothing
-    if why and not ((log.events or (journal is not None and journal.records)) and not log.whole):
-        raise InputError(f"{why}; nothing to recover", path)
     checked = scan(path)
     added = None
     if journal is not None:  # what the journal holds that the file lacks, decided before anything is written
@@ -126,6 +120,12 @@ def recover(path: str | Path, output: str | Path | None = None, force: bool = Fa
         recorded = [(topics[r.channel_id], r.data) for r in checked.records
                     if isinstance(r, Message) and r.channel_id in topics]
         added = admit(journal.session, recorded, journal.records)
+    # what it would write holds no session (no SessionStarted in the file, none its journal adds): refused in the
+    # reader's words, as every verb refuses such a file (reader.EventLog.no_session); a cut or damaged one was
+    # copied, exit 0, a file no verb takes (a new user's trial: "recover" 0, "replay --verify" 2 of one file)
+    if log.no_session and not (added is not None and any(key.rsplit("/", 1)[-1] == "SessionStarted"
+                                                          for key, *_ in added.items)):
+        raise InputError(log.no_session, path)
     complete = checked.whole and not (added is not None and added.items)  # and nothing more to add
     # the source's own recovery record, if it was recovered before: its losses are carried forward (module rule)
     earlier = folded_recovery(checked.records)
@@ -136,7 +136,7 @@ def recover(path: str | Path, output: str | Path | None = None, force: bool = Fa
         return Recovered(None, sum(isinstance(r, Message) for r in checked.records), checked.truncated,
                          "" if checked.whole else checked.describe(), [str(d) for d in checked.damage],
                          ended=any(type(r.event).__name__ == "SessionEnded" for r in log.events),
-                         started=not why, journal=journal.path if journal is not None else None,
+                         journal=journal.path if journal is not None else None,
                          from_journal=added.taken if added else 0, journal_refused=added.refused if added else 0,
                          journal_present=added.present if added is not None else 0,
                          journal_torn=journal.torn if journal is not None else "", journal_error=journal_error,
@@ -202,7 +202,6 @@ def recover(path: str | Path, output: str | Path | None = None, force: bool = Fa
                 ended |= tag == "SessionEnded"
                 if tag == "RoundStarted":
                     last_round = max(last_round, _round_of(payload))
-                why = why if tag != "SessionStarted" else ""
         lost_at += [messages] * len(losses)  # a part lost after the last record read
         damaged = [str(d) for d in checked.damage]
         reason = "" if checked.whole else checked.describe()
@@ -218,7 +217,7 @@ def recover(path: str | Path, output: str | Path | None = None, force: bool = Fa
                 "journal_torn": journal.torn if journal is not None else ""}
                if journal is not None or journal_error else {})}))
         writer.finish()
-    return Recovered(output, messages, checked.truncated, reason, damaged, ended, last_round, started=not why,
+    return Recovered(output, messages, checked.truncated, reason, damaged, ended, last_round,
                      journal_present=added.present if added else 0,
                      journal=journal.path if journal is not None else None,
                      from_journal=added.taken if added else 0, journal_refused=added.refused if added else 0,

@@ -206,7 +206,7 @@ class StudyData:
             self.study: Study = load_study(self.given / STUDY_FILE)
         except StudyFileError as err:
             raise StudyDataError(str(err)) from None
-        self.settings = _settings(self.folder / SETTINGS)
+        self.settings = _settings(self.given / SETTINGS)  # named as given in a refusal (it named the resolved path)
         self._lock = threading.RLock()
         self.state = StudyState()
         for e in self.read_journal():
@@ -437,14 +437,14 @@ class StudyData:
     def recording_of(self, g: Game):
         """(its read recording (reader.EventLog), "") if game `g`'s recording can stand for the game, else (None,
         why not, in the words the report names the game by): missing; holding no session (a 0-byte file, the
-        ~1 KB an interrupted `session --force` leaves: check.no_session, the reader's words); damaged (events
+        ~1 KB an interrupted `session --force` leaves: reader.EventLog.no_session, the reader's words); damaged (events
         lost: EventLog.lost, a recovered file's source's losses among them); holding no whole round
         (check.no_whole_round); not this game's (`not_this_game`: a `session --force --session <its id> --out
         STUDY/recordings` replaced it with another session); or without the game's SessionEnded (a cut file:
         its rounds are a part of the game). A
         journal that says "completed" does not make a file that holds none of it the game: its picks would
         silently be no picks."""
-        from .check import check_recording, no_session, no_whole_round
+        from .check import check_recording, no_whole_round
 
         path = self.folder / g.recording
         if not path.is_file():
@@ -456,9 +456,8 @@ class StudyData:
             return None, f"recording holds no session: {err.what}"
         except OSError as err:
             return None, f"recording unreadable: {err.strerror or err}"
-        why = no_session(log)
-        if why:
-            return None, f"recording {why}"
+        if log.no_session:
+            return None, f"recording {log.no_session}"
         if log.lost:  # (a new user's trial: messages that do not decode were left out of its picks, no word)
             return None, f"recording damaged: {log.lost}"
         why = no_whole_round([r.event for r in log.events], log.truncated, log.damaged)
@@ -696,7 +695,9 @@ class StudyData:
             live = [f for f in files + [x for g in sessions for x in (self.folder / "recordings").glob(f"{g}.*")]
                     if is_live(f)]
             if live:  # its recorder still writes it (a game's questionnaire holds it open): pairplay/livelock.py
-                raise StudyDataError(f"{pid}: {live[0]} {LIVE}: stop its session first")
+                # named as given (the study folder as typed), not resolved
+                raise StudyDataError(f"{pid}: {self.given / live[0].relative_to(self.folder)} {LIVE}: stop its "
+                                     "session first")
             key = self.key_file
             if key is not None and not key.is_file():  # before anything is deleted: their name stays in it
                 raise StudyDataError(f"{pid}: the key file {key} is not there (an unmounted drive?): their name "
@@ -889,9 +890,8 @@ def _settings(path: Path) -> dict:
     try:
         return msgspec.structs.asdict(msgspec.json.decode(path.read_bytes(), type=FolderSettings))
     except (msgspec.DecodeError, msgspec.ValidationError) as err:
-        raise StudyDataError(f"{path}: not the study's settings ({in_words(err, FolderSettings)}): it is "
-                             f"{{\"key_file\": \"<path or empty>\"}}") \
-            from None
+        raise StudyDataError(f"not the study's settings ({in_words(err, FolderSettings)}): it is "
+                             f"{{\"key_file\": \"<path or empty>\"}}", path) from None
 
 
 def game_end(folder: Path, session: str, participant: str, path: Path, answered: bool | None = None,

@@ -48,7 +48,7 @@ import numpy as np
 from pairplay import __version__, csvcell
 from pairplay.core.actions import ACTION_NAMES
 from pairplay.core.geometry import N_STATES, STATE_NAMES
-from pairplay.replay.studydata import REPORT_MANIFEST, REPORT_OUTPUTS, StudyData, named
+from pairplay.replay.studydata import REPORT_MANIFEST, REPORT_OUTPUTS, StudyData, StudyDataError, named
 from pairplay.schemas.policy import read_policy
 
 from pairplay.report import plots
@@ -134,7 +134,7 @@ def human_report(folder: str | Path, out: str | Path | None = None, reference: s
     `reference`: a policy file drawn beside each bias policy (figure 7.5 compares the
     human merge with the virtual Blind+Deaf one: `pairplay study`'s merged/blind+deaf.json).
     `include_scripted`: report the scripted games with people's (by default they are left out, listed).
-    Raises StudyDataError for a folder that is not a study, ValueError if it has no valid game."""
+    Raises StudyDataError for a folder that is not a study or that has no valid game (why each was left out)."""
     data = StudyData(folder)
     study = data.study
     out = Path(out) if out else data.folder / "report"
@@ -158,8 +158,11 @@ def human_report(folder: str | Path, out: str | Path | None = None, reference: s
         games.append(game_stats(log, g, data.returning(g.participant, g.phase), study.phase_by_id(g.phase).rounds))
         if log.loss_free:  # every event read: the game counts, its file's damage said (a new user's trial: no word)
             read_whole.append(f"{g.session} ({log.loss_free})")
-    if not games:
-        raise ValueError(f"{data.folder}: no completed, valid game to report on")
+    if not games:  # why each game was left out, the first named (a folder of games whose recordings hold no session
+        # said only "no completed, valid game", naming the resolved folder: a new user's trial)
+        left = (f": {counted(len(excluded), 'game')} left out, the first {excluded[0]}" if len(excluded) > 1 else
+                f": {excluded[0]} left out" if excluded else "")
+        raise StudyDataError(f"no completed, valid game to report on{left}", data.given)
 
     # picks per round, per game and phase (figures 7.3a, 7.3b, 7.6)
     with open(out / "picks.csv", "w", newline="") as f:

@@ -181,7 +181,8 @@ class StudyRunner:
             phase = self.data.study.phase_by_id(phase_id)
             recording = f"recordings/{config.session}.mcap"
             try:  # a recording the journal does not know (a copied folder, a game cut before its journal line)
-                check_new_recording(self.data.folder / recording, hint="the journal does not list it; move it away")
+                # named as the study folder was given (it named the resolved path)
+                check_new_recording(self.data.given / recording, hint="the journal does not list it; move it away")
             except RecordingExists as err:
                 raise StudyDataError(err.line()) from None
             combined = self.data.state.combined.get(phase_id)

@@ -67,7 +67,7 @@ from dataclasses import dataclass, field
 from pairplay.errors import InputError
 from pairplay.replay.check import no_whole_round
 from pairplay.replay.forgery import contradiction
-from pairplay.replay.reader import read_log, recovered_cut, recovered_lost
+from pairplay.replay.reader import read_log, recovered_cut, recovered_lost, said_source, said_source_made
 from pairplay.schemas.events import RoundEnded, SessionEnded, SessionStarted
 
 from pairplay.services.game import GameLogic
@@ -245,18 +245,18 @@ def verify_recording(path) -> Verification:
             result.reach = f"the {counted(result.events, 'event')} the file holds (no event lost, but the file is damaged)"
     lost = json.loads(recovered.get("damaged", "[]") or "[]")
     if lost and not recovered_lost(recovered):  # its damaged parts lost no message (an index, a CRC): whole
-        result.reach = f"{result.reach} (recovered from a damaged file; no message was lost)"
+        result.reach = f"{result.reach} ({said_source_made(recovered)}; no message was lost)"
     elif lost and first_lost > 0:  # compared up to the first lost part, as in the damaged file itself
         # what the source lost, in the reader's words (reader.EventLog.source_lost), as every verb says it
         errors.append(log.source_lost)
-        result.reach = (f"up to the first part lost from the recording it was recovered from: "
+        result.reach = (f"up to the first part lost from {said_source(recovered)}: "
                         f"{counted(result.events, 'event')}, {_rounds_words(result.rounds_recorded, result.rounds)}; "
                         f"the {counted(result.not_compared, 'event')} after it are not compared (they follow the lost "
                         "ones)")
     elif lost:
         errors.append(log.source_lost)
         result.reach = (f"the {counted(result.events, 'event')} the file holds, not the whole session: "
-                        "parts of the recording it was recovered from were lost")
+                        f"parts of {said_source(recovered)} were lost")
     result.error = "; ".join(errors) or result.error
     empty = no_whole_round((r.event for r in log.events), log.truncated, log.damaged)
     if empty and result.ok and not result.ended:  # a PASS about nothing whole (a FAIL, a damaged part, says so)

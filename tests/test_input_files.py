@@ -107,6 +107,11 @@ def test_a_merge_of_a_partial_policy_is_flagged_partial_and_said_once(tmp_path, 
     merged = policy_file.read_policy(tmp_path / "m.json")
     assert merged.partial == f"made of a partial policy: {tmp_path / 'a.json'} ({why})", merged.partial
     assert out.count("PARTIAL") == 1 and f"PARTIAL merge: {merged.partial}" in out, out
+    # a warning about the result: on stderr too, -q or not (cli/main.py `warn`: -q hid it with the listing)
+    assert main(["combine", str(tmp_path / "a.json"), str(tmp_path / "b.json"), "-o", str(tmp_path / "m.json"),
+                 "--force", "-q"]) == 0
+    out, err = capsys.readouterr()
+    assert out == "" and err == f"pairplay combine: PARTIAL merge: {merged.partial}\n", (out, err)
     [answer] = CombinerLogic(tmp_path).handle(ev.CombineRequested(request_id="r", policies=["a.json", "b.json"],
                                                                   output_path="bus.json"))
     assert answer.ok and policy_file.read_policy(tmp_path / "bus.json").partial == f"made of a partial policy: a.json ({why})"

@@ -62,6 +62,21 @@ def test_a_continued_file_says_what_its_damaged_predecessor_lost_to_every_verb(t
     assert log.lost_from == read_log(earlier).lost_from and len(whole.events) > held
 
 
+def test_verify_of_a_continued_file_names_the_recording_it_continues_not_one_it_was_recovered_from(tmp_path, capsys):
+    """A new user's trial: `replay --verify` of a restarted recorder's file (a continued file, no recovered one) said
+    "verified up to the first part lost from the recording it was recovered from": words that fit what the file is
+    (reader.said_source), as its error line says "continues a damaged recording"."""
+    from pairplay.cli.main import main
+
+    earlier = small_chunked_session(tmp_path / "c7.mcap", "c7")
+    damage(earlier, "chunk")
+    new = _continued(tmp_path / "c7.mcap", "c7")
+    assert main(["replay", str(new), "--verify"]) == 1
+    out = capsys.readouterr().out
+    assert "verified up to the first part lost from the recording it continues: " in out, out
+    assert "recovered" not in out, out
+
+
 def _journaled_then_damaged(tmp_path, session: str, chunk: int):
     """A finished recording with its recorder's journal beside it (all it received, as a recorder killed after
     its last flush leaves it), then the chunk at `chunk` damaged (its CRC fails); what the journal holds."""

@@ -103,18 +103,22 @@ def test_a_recorder_killed_with_sigkill_keeps_all_but_its_last_flush_and_recover
                             source="participant", seq=seq, time_ns=seq)
                 bus.put(key, encode_event(e))
 
+        # its session's start first: a recording recover completes (one holding no session is refused by every verb)
+        config = SessionConfig(session="rk", participant="sim:ashley", persona="ashley", seed=1, rounds=3)
+        bus.put(event_key("rk", "game", "SessionStarted"),
+                encode_event(stamped(ev.SessionStarted(config=config), session="rk", source="game", seq=1, time_ns=0)))
         burst(1, 3000)
-        assert wait_until(lambda: len(fetch_log(bus, "rk")) == 3000)  # all 3000 reached the recorder
+        assert wait_until(lambda: len(fetch_log(bus, "rk")) == 3001)  # all 3000 (and the start) reached the recorder
         threading.Event().wait(0.3)  # quiet for longer than the 0.1 s flush interval
         burst(3001, 2000)
         sigkill(rec)
     path = tmp_path / "rk.mcap"
     log = read_log(path)
     assert log.truncated  # never finished: no summary, no footer
-    seqs = [r.event.seq for r in log.events]
+    seqs = [r.event.seq for r in log.events if r.event.source == "participant"]
     assert seqs[:3000] == list(range(1, 3001))  # nothing older than the last flush is lost
     assert seqs == list(range(1, len(seqs) + 1))  # what survived is a prefix, in order
     done = recover(path)
     with open(done.output, "rb") as f:
-        assert sum(1 for _ in make_reader(f).iter_messages()) == len(seqs)
+        assert sum(1 for _ in make_reader(f).iter_messages()) == len(log.events)
     assert not read_log(done.output).truncated

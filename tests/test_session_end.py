@@ -60,7 +60,7 @@ def test_a_signalled_session_records_it_was_interrupted_and_how_far_it_got(tmp_p
     rebuilt = rebuild_recording(path)
     assert rebuilt.partial.startswith(f"interrupted ({sig.name}) after {end.rounds_played} of 5000 rounds")
     r = pairplay_cli("rebuild", path, "--out", tmp_path / "rb", "--no-plot")
-    assert "PARTIAL session: interrupted" in r.stdout, r.stdout
+    assert "PARTIAL session: interrupted" in r.stderr, r.stderr  # a warning: on stderr (cli/main.py `warn`)
     assert read_policy(tmp_path / "rb" / "sig.policy.json").partial.startswith("interrupted")
     verified = verify_recording(path)  # up to where the signal stopped it (was a false FAIL at that round)
     assert verified.ok and verified.stopped == f"interrupted ({sig.name})", [c.mismatches[:2] for c in verified.checks]

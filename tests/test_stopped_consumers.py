@@ -55,8 +55,8 @@ def test_verify_passes_up_to_the_stop(recordings, capsys):
 def test_rebuild_profile_and_combine_use_what_was_recorded(recordings, tmp_path, capsys):
     rebuilt = tmp_path / "rebuilt"
     assert main(["rebuild", *map(str, recordings), "--out", str(rebuilt), "--no-plot"]) == 0
-    out = capsys.readouterr().out
-    assert out.count("PARTIAL session: interrupted (SIGINT) after 1 of 3 rounds") == 2, out
+    err = capsys.readouterr().err  # warnings: on stderr (cli/main.py `warn`)
+    assert err.count("PARTIAL session: interrupted (SIGINT) after 1 of 3 rounds") == 2, err
     policy = json.loads((rebuilt / "blind-g0.policy.json").read_text())
     assert policy["partial"].startswith("interrupted (SIGINT)")
     assert main(["profile", str(rebuilt)]) == 0
