@@ -997,7 +997,7 @@ class Recorder:
                 counted += int(e.reason.split(" ", 1)[0])
         return max(0, len(made - acted) - counted) if robot else 0
 
-    def close(self, stopped_by: str = "", deadline: Deadline | None = None) -> str | None:
+    def close(self, stopped_by: str = "", deadline: Deadline | None = None, own=()) -> str | None:
         """Write what is queued, finish the file; never raises. The failure, if the
         file could not be written (it is then readable up to it: `pairplay recover`).
 
@@ -1009,11 +1009,20 @@ class Recorder:
         were still queued when it stopped (`unrecorded_at_exit`, also recorded as a count).
 
         Done by `deadline` (default `CLOSE_S` from now): the queue is written while
-        `FINISH_S` of it is left, the rest counted (`drain`)."""
+        `FINISH_S` of it is left, the rest counted (`drain`). `own`: (key, payload) of the
+        session's own end, published by this process (services/session.py end_game): written
+        after the queue, whatever the deadline left, unless the bus brought it already (a
+        repeat is skipped): the file says how the session ended even when the signal's
+        deadline passed before the bus brought it (a starved machine)."""
         deadline = deadline or Deadline(CLOSE_S)
         unrecorded = 0
         try:
             unrecorded = self.drain(deadline)
+            for key, payload in own:
+                if self.failure is None:
+                    self.record(key, payload, self.clock(), quiet=True)
+        except RecordingFailed:
+            pass
         except Exception as err:
             log.exception("recorder failed")
             self._fail(f"recorder error {type(err).__name__}: {err}")
