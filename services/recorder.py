@@ -948,16 +948,21 @@ class Recorder:
     def drain(self, deadline: Deadline) -> int:
         """Write what is queued until `deadline` (keeping `FINISH_S` of it to finish the file: a
         flood must not hold up the exit); what still waits then is shed, counted under
-        UNRECORDED_AT_EXIT and recorded as a MessageRejected count. Returns how many were shed."""
-        while self.failure is None and not deadline.passed(FINISH_S):
+        UNRECORDED_AT_EXIT and recorded as a MessageRejected count, but for the session's end
+        (SessionEnded), written whatever the deadline left: it is in hand, and without it the file
+        does not say how its session ended. Returns how many were shed."""
+        n: int | None = None  # shed, once the deadline has passed
+        while self.failure is None:
+            if n is None and deadline.passed(FINISH_S):
+                n = self.inbox.discard(UNRECORDED_AT_EXIT, keep=lambda key: key.endswith("/SessionEnded"))
             item = self.inbox.get(0)
             if item is None:
-                return 0
+                break
             try:
                 self._take(item)
             except RecordingFailed:
-                return 0
-        n = self.inbox.discard(UNRECORDED_AT_EXIT)
+                break
+        n = n or 0
         if n:
             log.warning("recorder: %d messages still queued at the exit are not recorded (counted)", n)
         return n
