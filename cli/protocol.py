@@ -251,11 +251,17 @@ def _serve(data: StudyData, args) -> int:
         warn_unreachable(runner, "serve")
         print(f"experimenter console: {server.console_url}", flush=True)
         print(f"bus (boards and scripted players connect here): {' '.join(bus.locators())}", flush=True)
+        cut = True  # a second Ctrl-C (KeyboardInterrupt) cuts the shutdown short: nothing more is waited for
         try:
             while not stop.wait(0.2):
                 pass
+            cut = False
         finally:
             runner.interrupt(stop)  # a game still running stops now (stop.why, stop.deadline)
+            if not cut:  # its end is this process's own last fact: journaled, however loaded the machine, before
+                # the bounded waits on the rest of the step (before, the join below took what the deadline left,
+                # nothing at load 15+, and the process exited without the game's GameEnded)
+                runner.wait_journaled()
             if server.console.thread is not None:
                 server.console.thread.join(shutdown_wait(stop, 10.0, reserve=0.3))
             server.close(shutdown_wait(stop, 10.0, reserve=0.2))

@@ -409,19 +409,27 @@ class Inbox:
     def __len__(self) -> int:
         return len(self._items)
 
-    def discard(self, why: str) -> int:
+    def discard(self, why: str, keep: Callable[[str], bool] | None = None) -> int:
         """Shed everything still waiting (counted under `why`, like any shed message; control
-        items are dropped); how many messages. For a shutdown that cannot wait for them."""
+        items are dropped); how many messages. For a shutdown that cannot wait for them.
+        `keep(key)`: the messages it is true of stay, in order (what a shutdown must still take)."""
         with self._cond:
             n = 0
-            for key, payload, _ in self._items:
-                if key is not None:
+            kept = deque()
+            for item in self._items:
+                key = item[0]
+                if key is not None and keep is not None and keep(key):
+                    kept.append(item)
+                elif key is not None:
                     self.shed[(source_of(key), why)] += 1
                     n += 1
             self.shed_total += n
-            self._items.clear()
+            self._items = kept
             self._count.clear()
             self._bytes = 0
+            for key, payload, _ in kept:  # (kept: a few; the inbox's counts hold them again)
+                self._count[self._bucket_of(key)] += 1
+                self._bytes += len(payload)
         return n
 
     def lost(self, source: str, why: str, n: int) -> None:

@@ -121,6 +121,10 @@ class StudyRunner:
         self._skip = threading.Event()
         self._abort_reason = ""
         self._busy = threading.Lock()
+        # set while no game's end is owed to the journal: cleared at its GameStarted, set once its GameEnded is
+        # written (or the step failed); a process stopped by a signal waits for it (`wait_journaled`)
+        self._journaled = threading.Event()
+        self._journaled.set()
         self._control_seq = 0
         self._game_bus: Bus | None = None  # the running game's scope of `bus` (_play)
 
@@ -186,6 +190,7 @@ class StudyRunner:
             except RecordingExists as err:
                 raise StudyDataError(err.line()) from None
             combined = self.data.state.combined.get(phase_id)
+            self._journaled.clear()
             self.data.append(j.GameStarted(participant=pid, phase=phase_id, game=game, session=config.session,
                                            recording=recording, bias=combined.output if combined else "",
                                            scripted=scripted))
@@ -202,7 +207,15 @@ class StudyRunner:
                 raise
         finally:
             self.live.state = "idle"
+            self._journaled.set()
             self._busy.release()
+
+    def wait_journaled(self) -> None:
+        """Wait until the running game's end is journaled (at once if none is running). The process's own
+        last fact, written as soon as its session has stopped (`_play`): every wait before it takes its time
+        from the signal's deadline, so this takes what the machine needs to write the file and the journal,
+        not what another process does; a second Ctrl-C still interrupts it."""
+        self._journaled.wait()
 
     def _play(self, config: SessionConfig, phase, recording: str, player, on_event) -> Game:
         """The started game (journaled GameStarted) played to its end; its GameEnded journaled."""
@@ -250,11 +263,17 @@ class StudyRunner:
         # the game waits for the board: the lab's hub, a scripted player, or a board elsewhere on the bus
         summary: dict = {}
         stop = self._stop
+        ended = None
         try:
             path = run_session(config, self.data.folder / recording, bus=bus, stop=stop,
                                robot=self.robot, hold=hold, summary=summary,
                                wait_also=() if player is not None or hub is not None else ("board",),
                                extra_nodes=(lambda bus: [hub.make_node(bus)]) if hub is not None else None)
+            if self.interrupted is not None:  # a signal: the game's end is journaled now, before the waits on
+                # the board, the player and the bus below (the deadline had often run out in them: the process
+                # exited without it at load ~15, and the next verb took the completed game for an interrupted one)
+                ended = self._finish_interrupted(config, summary, answered.is_set())
+                self._journaled.set()
         finally:  # also when the session failed to start: no board, player, subscription or thread outlives it
             if hub is not None:
                 self.lab.hubs.pop(config.session, None)
@@ -264,6 +283,8 @@ class StudyRunner:
                 node.finish(shutdown_wait(stop, 5.0, reserve=0.3), shutdown_wait(stop, 0.5, reserve=0.25))
             self._game_bus = None
             bus.close(shutdown_wait(stop, 1.0, reserve=0.2))
+        if ended is not None:
+            return ended
         if self.interrupted is not None:  # a signal: no reading back, the process is gone within 2 s
             return self._finish_interrupted(config, summary, answered.is_set())
         return self._finish(config, path, answered.is_set())

@@ -948,16 +948,21 @@ class Recorder:
     def drain(self, deadline: Deadline) -> int:
         """Write what is queued until `deadline` (keeping `FINISH_S` of it to finish the file: a
         flood must not hold up the exit); what still waits then is shed, counted under
-        UNRECORDED_AT_EXIT and recorded as a MessageRejected count. Returns how many were shed."""
-        while self.failure is None and not deadline.passed(FINISH_S):
+        UNRECORDED_AT_EXIT and recorded as a MessageRejected count, but for the session's end
+        (SessionEnded), written whatever the deadline left: it is in hand, and without it the file
+        does not say how its session ended. Returns how many were shed."""
+        n: int | None = None  # shed, once the deadline has passed
+        while self.failure is None:
+            if n is None and deadline.passed(FINISH_S):
+                n = self.inbox.discard(UNRECORDED_AT_EXIT, keep=lambda key: key.endswith("/SessionEnded"))
             item = self.inbox.get(0)
             if item is None:
-                return 0
+                break
             try:
                 self._take(item)
             except RecordingFailed:
-                return 0
-        n = self.inbox.discard(UNRECORDED_AT_EXIT)
+                break
+        n = n or 0
         if n:
             log.warning("recorder: %d messages still queued at the exit are not recorded (counted)", n)
         return n
@@ -997,7 +1002,7 @@ class Recorder:
                 counted += int(e.reason.split(" ", 1)[0])
         return max(0, len(made - acted) - counted) if robot else 0
 
-    def close(self, stopped_by: str = "", deadline: Deadline | None = None) -> str | None:
+    def close(self, stopped_by: str = "", deadline: Deadline | None = None, own=()) -> str | None:
         """Write what is queued, finish the file; never raises. The failure, if the
         file could not be written (it is then readable up to it: `pairplay recover`).
 
@@ -1009,11 +1014,20 @@ class Recorder:
         were still queued when it stopped (`unrecorded_at_exit`, also recorded as a count).
 
         Done by `deadline` (default `CLOSE_S` from now): the queue is written while
-        `FINISH_S` of it is left, the rest counted (`drain`)."""
+        `FINISH_S` of it is left, the rest counted (`drain`). `own`: (key, payload) of the
+        session's own end, published by this process (services/session.py end_game): written
+        after the queue, whatever the deadline left, unless the bus brought it already (a
+        repeat is skipped): the file says how the session ended even when the signal's
+        deadline passed before the bus brought it (a starved machine)."""
         deadline = deadline or Deadline(CLOSE_S)
         unrecorded = 0
         try:
             unrecorded = self.drain(deadline)
+            for key, payload in own:
+                if self.failure is None:
+                    self.record(key, payload, self.clock(), quiet=True)
+        except RecordingFailed:
+            pass
         except Exception as err:
             log.exception("recorder failed")
             self._fail(f"recorder error {type(err).__name__}: {err}")

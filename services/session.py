@@ -25,7 +25,8 @@ from pathlib import Path
 import logging
 
 from pairplay.errors import UserError
-from pairplay.schemas.keys import alive_key
+from pairplay.schemas.events import decode_event, encode_event
+from pairplay.schemas.keys import alive_key, event_key
 from pairplay.schemas.session import SessionConfig
 from pairplay.services.bus import CLOSE_TIMEOUT_S, Bus, BusOptions, Deadline, deadline_of
 from pairplay.services.forgery import ForgeryWatch
@@ -109,6 +110,7 @@ def run_session(config: SessionConfig, path: str | Path, *, bus: Bus | None = No
         needed.append("tracker")  # the eye tracker: without it no turn gets a suggestion
     nodes = []
     bridge = game = None
+    own_end: list = []  # the game's SessionEnded if the session's stop ended it (end_game)
     # Everything from here on is undone by the `finally` whatever fails, a thread that could not start included
     # (`ulimit -v`): a bus left open kept zenoh-python's threads, which are not daemons, and the process hung
     # in its exit (a new user's `bench`: 11 min) after a traceback.
@@ -156,7 +158,7 @@ def run_session(config: SessionConfig, path: str | Path, *, bus: Bus | None = No
         watch = forgery_watch(game, nodes, recorder, bridge, [s for s in needed if s in external])
         failure = watch_services(bus, config.session, nodes, [s for s in needed if s in external or s == "robot"],
                                  stop, settle_timeout_s, broken=lambda: watch.verdict() or refusals.verdict())
-        end_game(game, stop, failure, recorder)
+        own_end = end_game(game, stop, failure, recorder)
         if not failure and not stop.is_set():
             # an external recorder stays until everyone else left: do not wait for it
             wait_external_exit(bus, config.session, [s for s in external if s in needed and s != "recorder"], stop,
@@ -168,7 +170,7 @@ def run_session(config: SessionConfig, path: str | Path, *, bus: Bus | None = No
             wait_recorded(recorder, published(nodes, bridge), quiet_s=0.2 if external and not stop.is_set() else 0.0,
                           timeout_s=deadline_of(stop).left(RESERVE["recorded"], 1.0) if stop.is_set() else 5.0)
     except Stopped:  # SIGINT/SIGTERM (or a recording failure) while the game waited for its services
-        end_game(game, stop, "", recorder)
+        own_end = end_game(game, stop, "", recorder)
         if recorder is not None:
             wait_recorded(recorder, published(nodes, bridge), quiet_s=0.0, timeout_s=deadline_of(stop).left(RESERVE["recorded"], 1.0))
     finally:
@@ -179,7 +181,7 @@ def run_session(config: SessionConfig, path: str | Path, *, bus: Bus | None = No
         stop.set()
         try:
             failure = close_all(nodes, bridge, recorder, recorder_thread, recorder_stop, deadline, interrupted,
-                                stopped_by(stop) if interrupted else "")
+                                stopped_by(stop) if interrupted else "", own_end)
         finally:
             bus.close(deadline.left(cap=CLOSE_TIMEOUT_S))
         if interrupted:
@@ -209,8 +211,15 @@ LAST_EVENTS_WAIT_S = 10.0  # at most this long for the services' last events to 
 
 
 def close_all(nodes: list[Node], bridge, recorder: Recorder | None, recorder_thread, recorder_stop: threading.Event,
-              deadline: Deadline, interrupted: bool, stopped: str) -> str | None:
-    """Stop the services, then finish the recording, all by `deadline`; the recording's failure, if any."""
+              deadline: Deadline, interrupted: bool, stopped: str, own: list = ()) -> str | None:
+    """Stop the services, then finish the recording, all by `deadline`; the recording's failure, if any.
+
+    The deadline bounds the waits on others: the services' threads, the robot, the bus bringing their
+    last events. What is this process's own work is done whatever it left (on a starved machine the
+    signal's deadline has passed before the shutdown runs at all: load 20-29): the recorder's thread
+    finishes the batch it writes before the file is closed (closed under it, the file was cut, or the
+    thread's next write failed: "write to closed file"), and the session's own end (`own`: the
+    SessionEnded the stop made the game publish) is written even if the bus has not brought it yet."""
     for node in nodes:
         node.finish(deadline.left(RESERVE["nodes"], 1.0), deadline.left(RESERVE["nodes"], 0.3))
     if bridge is not None and bridge.thread is not None:
@@ -221,26 +230,33 @@ def close_all(nodes: list[Node], bridge, recorder: Recorder | None, recorder_thr
     if recorder is None:
         recorder_stop.set()
         return None
-    wait_all_recorded(recorder, nodes, bridge, deadline.left(RESERVE["recorder_thread"] + 0.05, LAST_EVENTS_WAIT_S))
+    wait_all_recorded(recorder, nodes, bridge, deadline.left(RESERVE["recorder_thread"] + 0.05, LAST_EVENTS_WAIT_S),
+                      own)
     recorder_stop.set()
     if recorder_thread is not None:  # None: it could not start
-        recorder_thread.join(deadline.left(RESERVE["recorder_thread"], 1.0))
+        # its own work (a step: what its inbox held, BATCH_S at most, and a due flush), never a wait on
+        # another: not cut by the deadline, or the file would be finished under the batch it writes
+        recorder_thread.join()
     # the recorder's own deadline: the shutdown's, less what closing the bus keeps
-    return recorder.close(stopped_by=stopped, deadline=Deadline(deadline.left(RESERVE["recorder"])))
+    return recorder.close(stopped_by=stopped, deadline=Deadline(deadline.left(RESERVE["recorder"])), own=own)
 
 
-def end_game(game: Node | None, stop: threading.Event, failure: str, recorder: Recorder | None) -> None:
+def end_game(game: Node | None, stop: threading.Event, failure: str, recorder: Recorder | None) -> list:
     """A game that has not ended the session ends it now, saying why (SessionEnded); one whose start has
-    not published its SessionStarted is not ended (its start, under the same lock, then sees the stop)."""
+    not published its SessionStarted is not ended (its start, under the same lock, then sees the stop).
+    Returns what it published, (key, payload) each: the session's own end, which its recorder writes
+    however long the bus takes to bring it (`close_all`)."""
     if game is None:
-        return
+        return []
     if recorder is not None and recorder.failure and not failure:
         failure = f"recording failed: {recorder.failure}"
     reason, detail = end_reason(stop, failure)
     with game._lock:
         if game.logic.done or game.driver.seq == 0:
-            return  # not started: nothing to end
-        game.publish(game.driver._stamp(game.logic.end(reason, detail)))
+            return []  # not started: nothing to end
+        events = game.driver._stamp(game.logic.end(reason, detail))
+        game.publish(events)
+    return [(event_key(game.session, e.source, type(e).__name__), encode_event(e)) for e in events]
 
 
 def stopped_by(stop: threading.Event) -> str:
@@ -316,7 +332,7 @@ def wait_recorded(recorder: Recorder, shells: list[tuple[str, object]], quiet_s:
         time.sleep(quiet_s)
 
 
-def wait_all_recorded(recorder: Recorder, nodes: list[Node], bridge, timeout_s: float) -> int:
+def wait_all_recorded(recorder: Recorder, nodes: list[Node], bridge, timeout_s: float, own=()) -> int:
     """Wait (at most `timeout_s`) until the recorder holds the last event of every service
     in this process, those they published while closing included; count what did not come.
 
@@ -330,6 +346,11 @@ def wait_all_recorded(recorder: Recorder, nodes: list[Node], bridge, timeout_s: 
     deadline = time.monotonic() + timeout_s
     while any(recorder.top_seq.get(name, 0) < seq for name, seq in last.items()) and time.monotonic() < deadline:
         time.sleep(0.005)
+    # the session's own end (`own`) is not missing: the recorder writes it itself (Recorder.close)
+    for key, payload in own:
+        source, seq = key.split("/")[-2], decode_event(payload).seq
+        if last.get(source) == seq:
+            last[source] = seq - 1
     missing = Counter({(name, "published, not received when the recording stopped"): seq - recorder.top_seq.get(name, 0)
                        for name, seq in last.items() if recorder.top_seq.get(name, 0) < seq})
     if missing:

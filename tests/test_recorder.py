@@ -48,3 +48,25 @@ def test_a_recording_is_never_overwritten(tmp_path):
     second = Recorder(None, "r1", tmp_path / "r1.mcap", restart=True)  # restarted within the live session
     second.close()
     assert first.path.name == "r1.mcap" and second.path.name == "r1.1.mcap"
+
+
+def test_a_close_past_its_deadline_still_writes_the_session_end_it_holds_and_counts_the_rest(tmp_path):
+    """Past its deadline a recorder's close sheds what is still queued (a flood must not hold up the exit),
+    counted; it shed the session's SessionEnded with it, already in hand: a starved `run recorder` (the
+    signal's deadline gone before it ran on) finished a file that does not say how its session ended. The
+    end is written; the rest is counted, as before."""
+    from pairplay.services.bus import Deadline
+
+    rec = Recorder(None, "r1", tmp_path / "r1.mcap")
+    cfg = SessionConfig(session="r1", participant="sim:ashley", persona="ashley", seed=9, rounds=1)
+    assert rec.record(*message(ev.SessionStarted(config=cfg)), 1)
+    rec.inbox.put(*message(ev.RoundStarted(round=0, faces=[i // 2 for i in range(18)]), seq=2))
+    rec.inbox.put(*message(ev.SessionEnded(reason="interrupted", detail="SIGTERM"), seq=3))
+    assert rec.close(stopped_by="SIGTERM", deadline=Deadline(0.0)) is None
+    log = read_log(tmp_path / "r1.mcap")
+    assert [type(r.event).__name__ for r in log.events if r.event.source == "game"] == ["SessionStarted",
+                                                                                      "SessionEnded"]
+    end = log.metadata["pairplay.recorder.end"]
+    assert (end["session_ended"], end["unrecorded_at_exit"]) == ("true", "1"), end
+    [shed] = [r.event for r in log.events if isinstance(r.event, ev.MessageRejected)]
+    assert "still queued when the recording stopped" in shed.reason and shed.offending_source == "game"

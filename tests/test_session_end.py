@@ -21,7 +21,7 @@ from pairplay.schemas import events as ev
 from pairplay.schemas.policy import read_policy
 from pairplay.schemas.keys import event_key
 from pairplay.schemas.session import SessionConfig
-from pairplay.services.bus import Bus, BusOptions
+from pairplay.services.bus import SHUTDOWN_S, Bus, BusOptions
 from pairplay.services.session import run_session
 from pairplay.services.verify import verify_recording
 
@@ -46,6 +46,12 @@ def test_a_signalled_session_records_it_was_interrupted_and_how_far_it_got(tmp_p
         rounds = collect(watcher, event_key("sig", "game", "RoundEnded"))
         rounds.get(timeout=60)
         p.send_signal(sig)
+        # a starved process (load 20-29): frozen right after the signal until its shutdown's deadline has passed,
+        # so no wait on its services or its robot has any time left; its own end and its file are still whole
+        time.sleep(0.05)
+        p.send_signal(signal.SIGSTOP)
+        time.sleep(SHUTDOWN_S + 0.4)
+        p.send_signal(signal.SIGCONT)
         out, _ = p.communicate(timeout=30)
     finally:
         if p.poll() is None:
@@ -129,6 +135,39 @@ def test_an_experimenter_stop_is_recorded_as_aborted(tmp_path):
             rebuild_recording(path)
     else:
         assert "aborted" in rebuild_recording(path).partial
+
+
+def test_a_signal_whose_deadline_passed_before_the_recorder_wrote_its_last_batch_still_finishes_the_file(
+        tmp_path, monkeypatch):
+    """The recorder's thread writes the session's last events while the shutdown goes on; on a loaded machine
+    (load 20-29) the signal's deadline had passed when the session joined that thread, so the join gave up at
+    once and the file was finished under a batch still being written: "write to closed file" (the session
+    said it failed) or a file that is not whole (test_session_end[SIGTERM], 1 of ~4 runs with the process
+    frozen right after its signal). The recorder's writing is this process's own work, not a wait on another:
+    it is finished before the file is. Here the deadline has passed when the stop comes (as after a freeze)
+    and the recorder's first write after it is slow (held 0.5 s)."""
+    from pairplay.services.bus import Deadline
+    from pairplay.services.recorder import Recorder
+
+    config = SessionConfig(session="late", participant="sim:blind", persona="blind", seed=1, rounds=100000)
+    stop, nodes, slowed = threading.Event(), {}, []
+    take = Recorder._take
+
+    def slow_take(self, item):  # on the recorder's thread: mid-session, the signal comes while it writes
+        if not slowed and "learner" in nodes and nodes["learner"].driver.seq > 10:
+            slowed.append(item)
+            stop.why, stop.deadline = "SIGTERM", Deadline(0.0)  # its deadline ran out before the process ran on
+            stop.set()
+            time.sleep(0.5)  # the batch under way, as on a starved machine
+        return take(self, item)
+    monkeypatch.setattr(Recorder, "_take", slow_take)
+    path = run_session(config, tmp_path / "late.mcap", stop=stop, nodes_out=nodes)
+    assert slowed
+    log = read_log(path)
+    assert log.whole, log.error
+    assert log.metadata["pairplay.recorder.end"]["stopped_by"] == "SIGTERM"
+    [end] = ended(path)  # the session's own end is in its file, whatever the deadline left
+    assert (end.reason, end.detail) == ("interrupted", "SIGTERM"), end
 
 
 def test_a_service_that_leaves_and_does_not_come_back_fails_the_session(tmp_path):
