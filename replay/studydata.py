@@ -735,9 +735,8 @@ def _settings(path: Path) -> dict:
     try:
         return msgspec.structs.asdict(msgspec.json.decode(path.read_bytes(), type=FolderSettings))
     except (msgspec.DecodeError, msgspec.ValidationError) as err:
-        raise StudyDataError(f"{path}: not the study's settings ({in_words(err, FolderSettings)}): it is "
-                             f"{{\"key_file\": \"<path or empty>\"}}") \
-            from None
+        raise StudyDataError(f"{path}: not the study's settings: {in_words(err, FolderSettings)}; it is "
+                             f"{{\"key_file\": \"<path or empty>\"}}") from None
 
 
 def game_end(folder: Path, session: str, participant: str, path: Path, answered: bool | None = None,

@@ -163,8 +163,9 @@ def test_the_other_input_files_refuse_a_misspelt_key_at_every_level(tmp_path):
     refused(CalibrationError, lambda: load_calibration(tmp_path / "cal.json"),
             "no key `descripton` is known here (did you mean `description`?)")
     (tmp_path / "settings.json").write_text('{"key_fiel": "k.csv"}')
-    refused(StudyDataError, lambda: _settings(tmp_path / "settings.json"),
-            "no key `key_fiel` is known here (did you mean `key_file`?)")
+    refused(StudyDataError, lambda: _settings(tmp_path / "settings.json"),  # (its words were in parentheses)
+            f"{tmp_path / 'settings.json'}: not the study's settings: no key `key_fiel` is known here (did you mean "
+            '`key_file`?); it is {"key_file": "<path or empty>"}')
     study = example_text()
     for old, new, said in [
             ("[study]", "sede = 3\n[study]", "s.toml: sede: the top of the file has no key `sede`"),
