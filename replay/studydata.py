@@ -890,7 +890,7 @@ def _settings(path: Path) -> dict:
     try:
         return msgspec.structs.asdict(msgspec.json.decode(path.read_bytes(), type=FolderSettings))
     except (msgspec.DecodeError, msgspec.ValidationError) as err:
-        raise StudyDataError(f"not the study's settings ({in_words(err, FolderSettings)}): it is "
+        raise StudyDataError(f"not the study's settings: {in_words(err, FolderSettings)}; it is "
                              f"{{\"key_file\": \"<path or empty>\"}}", path) from None
 
 

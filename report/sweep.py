@@ -56,7 +56,7 @@ from pairplay.errors import OptionError
 from pairplay.numbers import counted, shown, type_name, typed_floats
 from pairplay.outputs import manifest_name, output_file, output_folder, write_text
 from pairplay.processes import check_workers, worker_pool
-from pairplay.schemas.jsonfile import empty, without_bom
+from pairplay.schemas.jsonfile import empty, in_words, without_bom
 from pairplay.schemas.tomlplace import TOP, Written, misplaced, table_not_value
 from pairplay.core.geometry import PERFECT_PICKS
 from pairplay.core.rng import SEED_RANGE
@@ -347,8 +347,8 @@ def _check_cell(path: Path, grid: Grid, cell: Cell) -> dict[str, float]:
         raise ValueError(empty(data))
     try:
         found = msgspec.convert(json.loads(without_bom(data)), CellFile)  # json: NaN is read, then refused below
-    except ValueError as err:  # json.JSONDecodeError, msgspec.ValidationError
-        raise ValueError(f"not a cell file: {' '.join(str(err).split())}") from None
+    except ValueError as err:  # json.JSONDecodeError, msgspec.ValidationError (in the file's words: in_words)
+        raise ValueError(f"not a cell file: {' '.join(in_words(err, CellFile).split())}") from None
     if found.seed != cell.seed or found.setting != [tuple(kv) for kv in json.loads(json.dumps(cell.setting))]:
         raise ValueError("holds another cell's setting or seed")
     want = measure_names(grid.study_settings(cell), grid.reuse)

@@ -6,9 +6,15 @@ so the same value gives the same bytes); it is written only through
 pairplay.outputs (atomic, no clobber without `force`); reading it either gives
 the whole checked value or raises the kind's own error (an InputError
 subclass) whose message starts with the file's name and says why, never a
-half-read value. The Struct's `__post_init__` checks `format` and `version`;
+half-read value. Every Struct of a file refuses a key it does not declare
+(`forbid_unknown_fields`, at every level: a policy's misspelt `reward_bonsu`
+was dropped and its default used). What the file says it is is read first:
 a file without `format` is refused naming the field (the Struct's default
-filled it in: `{}`-like files with the other fields were read as policies).
+filled it in: `{}`-like files with the other fields were read as policies),
+another kind's file for its format, and a file of a newer `version` (which
+may add keys) for its version, not for a key it adds; an older file has fewer
+keys, never more (fields are only added, with defaults). The Struct's
+`__post_init__` checks `format` and `version` again, for values built in code.
 A UTF-8 byte order mark (a Windows editor's) is accepted, as in every text
 input of ours (`without_bom`): it was "malformed at byte 0", the BOM unnamed.
 A file of nothing (or of blanks) is "<file>: the file is empty" (`empty`), in
@@ -123,7 +129,10 @@ def _struct_in(kind: object) -> object:
 
 
 class _Format(msgspec.Struct):
+    """What a file says it is, read before the rest (its other keys ignored here): see JsonFileKind.decode."""
+
     format: str  # required: a kind's Struct has a default for it, so a file without it was accepted
+    version: object = None  # any JSON here: a version that is no integer is worded by the whole decode
 
 
 _format_decoder = msgspec.json.Decoder(_Format)
@@ -139,6 +148,9 @@ class JsonFileKind(Generic[T]):
         self._encoder = msgspec.json.Encoder()
         self._decoder = msgspec.json.Decoder(struct)
         self._struct = struct
+        # the format and version this pairplay writes: the Struct's defaults (its `format` and `version`)
+        defaults = {f.name: f.default for f in msgspec.structs.fields(struct)}
+        self.format, self.version = defaults["format"], defaults["version"]
 
     def encode(self, value: T) -> bytes:
         return msgspec.json.format(self._encoder.encode(value), indent=1) + b"\n"
@@ -153,12 +165,20 @@ class JsonFileKind(Generic[T]):
             raise self.error(f"{source}: {empty(data)}")
         data = without_bom(data)
         try:
-            _format_decoder.decode(data)
+            said = _format_decoder.decode(data)
         except msgspec.ValidationError as exc:
             if "missing required field `format`" in str(exc):
                 raise self.error(f'{source}: no "format" field: not a {self.what}') from None
         except msgspec.DecodeError:
             pass  # malformed: said below, as before
+        else:
+            # what the file is, before its keys: the Struct refuses a key it does not declare, and a file of
+            # another kind, or of a newer version (which may add keys), is refused for that, not for a key
+            if said.format != self.format:
+                raise self.error(f"{source}: not a pairplay {self.what} (format {said.format!r})")
+            if type(said.version) is int and said.version > self.version:
+                raise self.error(f"{source}: {self.what} version {said.version} is newer than this pairplay "
+                                 f"(reads up to {self.version}); upgrade pairplay")
         try:
             return self._decoder.decode(data)
         except self.error as exc:

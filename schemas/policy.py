@@ -10,7 +10,8 @@ running average of eq. 5.2; "lspi" files hold phi(s, a)^T theta of online LSPI
 (core/lspi.py), say so in `q_meaning` and carry the LSPI settings in `lspi`. Both
 estimate the expected reward of a considered suggestion (gamma 0), on one scale.
 `format` and `version` say what the file is, `algorithm` what made it (one of
-ALGORITHMS); a reader refuses anything else with a clear error (PolicyFileError),
+ALGORITHMS); a reader refuses anything else, and a key no Struct of the file
+declares (schemas/jsonfile.py), with a clear error (PolicyFileError),
 never a half-read policy.
 
 Version 1 fields are below; later versions add fields with defaults at the end.
@@ -42,7 +43,7 @@ class PolicyFileError(InputError):
     """A policy file that cannot be used; the message says why."""
 
 
-class UserInfo(msgspec.Struct, frozen=True):
+class UserInfo(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
     """User information of algorithm 3 (thesis figure 5.1): error shares 0..1."""
 
     speech: float
@@ -52,7 +53,7 @@ class UserInfo(msgspec.Struct, frozen=True):
     compared_states: int = 0
 
 
-class PolicyFile(msgspec.Struct, frozen=True, kw_only=True):
+class PolicyFile(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fields=True):
     format: str = FORMAT
     version: int = VERSION
     algorithm: str  # one of ALGORITHMS

@@ -7,7 +7,8 @@ scale), each feature's profile likelihood and 95% set, p and q on a finer grid,
 the lapse rate, what the session showed the user (the evidence), the recorded
 perception count where a simulated participant reported it, and the
 assumptions of the fit in words. `format` and `version` say what the file is;
-a reader refuses anything else with a clear error (UserModelFileError), never
+a reader refuses anything else, and a key no Struct of the file
+declares (schemas/jsonfile.py), with a clear error (UserModelFileError), never
 a half-read model. Written only through pairplay.outputs (no clobber without
 force, atomic).
 
@@ -31,7 +32,7 @@ class UserModelFileError(InputError):
     """A user-model file that cannot be used; the message says why."""
 
 
-class FeatureFit(msgspec.Struct, frozen=True, kw_only=True):
+class FeatureFit(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fields=True):
     """One feature of the persona (1..6): its estimate, profile log-likelihood and 95% set."""
 
     level: int  # the maximum-likelihood level
@@ -41,7 +42,7 @@ class FeatureFit(msgspec.Struct, frozen=True, kw_only=True):
     identified: bool  # False: every level is in the 95% set (the session cannot tell)
 
 
-class RateFit(msgspec.Struct, frozen=True, kw_only=True):
+class RateFit(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fields=True):
     """A probability profiled on a 0.01 grid (the other features at their estimate)."""
 
     estimate: float
@@ -49,7 +50,7 @@ class RateFit(msgspec.Struct, frozen=True, kw_only=True):
     high95: float
 
 
-class CountedRate(msgspec.Struct, frozen=True, kw_only=True):
+class CountedRate(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fields=True):
     """A rate counted from what a simulated participant reported (SuggestionPerceived), as a check."""
 
     count: int
@@ -59,7 +60,7 @@ class CountedRate(msgspec.Struct, frozen=True, kw_only=True):
     high95: float
 
 
-class UserModelFile(msgspec.Struct, frozen=True, kw_only=True):
+class UserModelFile(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fields=True):
     format: str = FORMAT
     version: int = VERSION
     recording: str  # the recording's file name (the one the arms are compared with)

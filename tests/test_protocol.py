@@ -46,6 +46,22 @@ def played(tmp_path_factory):
     return root, ids
 
 
+def test_every_json_and_toml_file_a_study_writes_reads_back_under_its_strict_reader(played):
+    """A study folder's files (the games' policies, the combiner's bias policy, settings.json, study.toml) read
+    back through the readers that refuse a key they do not declare (tests/test_unknown_keys.py): the study
+    never writes a key its reader does not know."""
+    from pairplay.replay.studydata import _settings
+    from pairplay.schemas.study import load_study
+
+    root, _ = played
+    folder = root / "study"
+    policies = sorted(folder.rglob("*.policy.json"))
+    assert [read_policy(p).format for p in policies] and any(p.parent.name == "merged" for p in policies)
+    assert {p.name for p in folder.rglob("*.json")} - {p.name for p in policies} == {"settings.json"}
+    assert _settings(folder / "settings.json")["key_file"]
+    assert load_study(folder / "study.toml").study.id == "pilot"
+
+
 def copy_study(played, tmp_path) -> StudyData:
     root, _ = played
     shutil.copytree(root / "study", tmp_path / "study")
@@ -297,7 +313,7 @@ def test_a_deletion_whose_key_file_is_away_or_whose_settings_are_not_the_studys_
     key.with_suffix(".away").rename(key)
     assert data.participant("p01") and "Bob Jones" in key.read_text(encoding="utf-8")
     (tmp_path / "study" / "settings.json").write_text("[1, 2]")
-    with pytest.raises(StudyDataError, match=r"not the study's settings .*\(.*study/settings.json\)$"):
+    with pytest.raises(StudyDataError, match=r"not the study's settings: .*\(.*study/settings.json\)$"):
         StudyData(tmp_path / "study")
 
 

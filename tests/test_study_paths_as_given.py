@@ -16,7 +16,7 @@ from test_no_session import STUDY, study  # noqa: F401 (the played study folder 
 
 from pairplay.cli.main import main
 
-SETTINGS_WORDS = 'not the study\'s settings (must be a table, got a list): it is {"key_file": "<path or empty>"}'
+SETTINGS_WORDS = 'not the study\'s settings: must be a table, got a list; it is {"key_file": "<path or empty>"}'
 
 
 @pytest.mark.parametrize("argv", [["report", "st"], ["participant", "export", "st", "p01"], ["protocol", "status", "st"],

@@ -300,6 +300,10 @@ def _another_seed(d):
     d["seed"] += 100
 
 
+def _misspelt_key(d):
+    d["measure"] = {}  # a key CellFile does not declare: said in the file's words (schemas/jsonfile.py in_words)
+
+
 @pytest.fixture(scope="module")
 def swept(tmp_path_factory):
     """One finished sweep of one setting x 2 seeds (grid.toml, out/), made once for the damaged-cell cases:
@@ -319,6 +323,7 @@ def swept(tmp_path_factory):
     (_one_measure_less, "lacks measure(s) blind/last50"),
     (_another_seed, "holds another cell's setting or seed"),
     ("{", "not a cell file"),
+    (_misspelt_key, "not a cell file: no key `measure` is known here (did you mean `measures`?)"),
     ("", "the file is empty"),
 ])
 def test_a_cell_file_that_cannot_be_used_is_computed_again_and_said(swept, tmp_path, capsys, damage, said):
