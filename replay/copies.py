@@ -95,7 +95,7 @@ class Copies:
             self._typed.setdefault(root, next((p for p in (Path(given), *Path(given).parents)
                                                if p.resolve() == root), root))
             if root not in self._studies:  # one pairplay cannot read is said (StudyDataError): its copy unjournaled
-                self._studies[root] = StudyData(root)  # would be a copy the deletion never knew
+                self._studies[root] = StudyData(self._typed[root])  # would be a copy the deletion never knew (named as typed)
             key = Path(given).resolve()
             rel = "" if key == root else key.relative_to(root).as_posix()
             pids = frozenset(holders(self._studies[root], rel))
