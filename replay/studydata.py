@@ -54,7 +54,7 @@ from pairplay.livelock import LIVE, is_live
 from pairplay.outputs import (OutputError, check_output, check_places, manifest_name, output_file, read_manifest,
                               remove_written, set_aside_of, write_manifest)
 from pairplay.schemas import journal as j
-from pairplay.schemas.jsonfile import in_words
+from pairplay.schemas.jsonfile import in_words, without_bom
 from pairplay.schemas.policy import read_policy, write_policy
 from pairplay.schemas.study import Study, StudyFileError, load_study
 from pairplay.numbers import counted
@@ -888,7 +888,7 @@ def _settings(path: Path) -> dict:
     if not path.is_file():
         return {}
     try:
-        return msgspec.structs.asdict(msgspec.json.decode(path.read_bytes(), type=FolderSettings))
+        return msgspec.structs.asdict(msgspec.json.decode(without_bom(path.read_bytes()), type=FolderSettings))
     except (msgspec.DecodeError, msgspec.ValidationError) as err:
         raise StudyDataError(f"not the study's settings: {in_words(err, FolderSettings)}; it is "
                              f"{{\"key_file\": \"<path or empty>\"}}", path) from None

@@ -78,6 +78,9 @@ def test_text_inputs_with_a_byte_order_mark_are_read(tmp_path):
     assert load_calibration(tmp_path / "calibration.json") == load_calibration(None)
     assert load_robot_config(str(tmp_path / "robot.json")) == load_robot_config(None)
     assert read_config_file(str(tmp_path / "zenoh.json5")) == {"mode": "peer"}
+    from pairplay.replay.studydata import _settings  # a study folder's settings.json, edited by hand (keys helper)
+    (tmp_path / "settings.json").write_bytes(BOM + b'{"key_file": ""}')
+    assert _settings(tmp_path / "settings.json") == {"key_file": ""}
 
 
 def other_policy(policy_bytes: bytes, participant: str = "helmut"):
