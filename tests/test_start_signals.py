@@ -153,3 +153,30 @@ def test_the_command_installs_its_handlers_before_it_loads_anything():
              "print(' '.join(sorted(set(sys.modules) - before)))")
     loaded = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True, check=True).stdout.split()
     assert set(loaded) <= {"pairplay", "pairplay.cli", "pairplay.cli.start", "pairplay.signals", "signal"}, loaded
+
+
+def test_every_handler_pairplay_installs_leaves_an_ignored_sigint_ignored():
+    """Each place that installs SIGINT/SIGTERM handlers, in a process that started with SIGINT ignored:
+    SIGINT stays ignored, SIGTERM is handled (before, each took SIGINT back: cli/interrupts.py's two,
+    services/bus.py stop_on_signals, pairplay/outputs.py's hold around a rename)."""
+    from pairplay.cli import interrupts
+    from pairplay.outputs import _signals_held
+    from pairplay.services.bus import stop_on_signals
+
+    saved = {s: signal.getsignal(s) for s in (signal.SIGINT, signal.SIGTERM)}
+    installs = {
+        "DeferredInterrupt.install": lambda: interrupts.DeferredInterrupt().install(),
+        "work_done": interrupts.work_done,
+        "stop_on_signals": lambda: stop_on_signals(threading.Event()),
+        "_signals_held": _signals_held,  # a context manager: checked inside it
+    }
+    try:
+        for name, install in installs.items():
+            signal.signal(signal.SIGINT, signal.SIG_IGN)
+            signal.signal(signal.SIGTERM, signal.SIG_DFL)
+            with install() or contextlib.nullcontext():
+                assert signal.getsignal(signal.SIGINT) is signal.SIG_IGN, name
+                assert signal.getsignal(signal.SIGTERM) not in (signal.SIG_IGN, signal.SIG_DFL), name
+    finally:
+        for s, handler in saved.items():
+            signal.signal(s, handler)
