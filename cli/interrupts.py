@@ -4,7 +4,8 @@ Rule: the pairplay command's SIGINT handler raises KeyboardInterrupt at once,
 except while the main thread holds numba's compiler lock (compiling a kernel,
 or loading one from the cache). Then the interrupt is held: a helper thread
 waits for the lock (it is free once the main thread has left the compiler) and
-delivers the interrupt to the main thread again (`_thread.interrupt_main`). A
+delivers the interrupt to the main thread again (`_thread.interrupt_main`, as the signal
+that came). A
 second Ctrl-C while one is held interrupts at once.
 
 Why: numba compiles through llvmlite, which calls back into Python from C
@@ -40,6 +41,8 @@ import signal
 import sys
 import threading
 
+from pairplay import signals
+
 
 def _compiler_lock():
     """numba's global compiler lock (an RLock wrapper), or None if numba is not loaded."""
@@ -55,8 +58,7 @@ def work_done() -> None:
     """The verb's work is complete (module rule): from now on SIGINT/SIGTERM are recorded in `late`
     and raise nothing. Main thread only (elsewhere: nothing to do; signals reach the main thread)."""
     if threading.current_thread() is threading.main_thread():
-        signal.signal(signal.SIGINT, _record_late)
-        signal.signal(signal.SIGTERM, _record_late)
+        signals.handle(_record_late)
 
 
 def _record_late(signum, frame) -> None:
@@ -72,27 +74,27 @@ class DeferredInterrupt:
         self._redelivered = False
 
     def install(self) -> None:
-        signal.signal(signal.SIGINT, self.handler)
-        signal.signal(signal.SIGTERM, self.handler)
+        signals.handle(self.handler)  # not over an ignored signal (pairplay/signals.py)
 
     def handler(self, signum, frame) -> None:
         global received
         redelivered, self._redelivered = self._redelivered, False
-        if not redelivered:  # a held interrupt comes back as SIGINT: keep the signal that caused it
+        if not redelivered:  # a held interrupt comes back (_deliver_after): it is the same signal, not a second
             received = signum
         if self.held and not redelivered:  # a second Ctrl-C: the user insists
             raise KeyboardInterrupt
         lock = _compiler_lock()
         if lock is not None and lock.is_locked():  # is_locked: held by this (the main) thread
             if not self.held or redelivered:
-                threading.Thread(target=self._deliver_after, args=(lock,), name="pairplay-interrupt",
+                threading.Thread(target=self._deliver_after, args=(lock, signum), name="pairplay-interrupt",
                                  daemon=True).start()
             self.held = True
             return
         self.held = False
         raise KeyboardInterrupt
 
-    def _deliver_after(self, lock) -> None:
+    def _deliver_after(self, lock, signum: int) -> None:
         with lock._lock:  # free once the main thread has left numba's compiler
             self._redelivered = True
-            _thread.interrupt_main(signal.SIGINT)
+            # as the signal that came: SIGINT may be ignored (pairplay/signals.py), and interrupt_main then does nothing
+            _thread.interrupt_main(signum)

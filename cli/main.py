@@ -58,7 +58,7 @@ import signal
 import sys
 import threading
 
-from pairplay import __version__
+from pairplay import __version__, signals
 from pairplay.cli import interrupts
 from pairplay.cli.interrupts import DeferredInterrupt
 from pairplay.errors import UserError, out_of_threads
@@ -206,6 +206,13 @@ def main(argv: list[str] | None = None, exiting: bool = False) -> int:
     in_main = threading.current_thread() is threading.main_thread()
     saved = {s: signal.getsignal(s) for s in (signal.SIGINT, signal.SIGTERM)} if in_main else {}
     try:
+        if exiting and in_main:
+            # Here, inside the try: a signal from now on raises KeyboardInterrupt where it is caught below.
+            DeferredInterrupt().install()
+            early = signals.take()  # one that came while the command loaded (cli/start.py's handler noted it)
+            if early:
+                interrupts.received = early
+                raise KeyboardInterrupt
         code = _main(argv)
     except KeyboardInterrupt:  # a signal before the verb ran (while its modules load)
         verb = argv[0] if argv and argv[0] in VERBS else ""
@@ -287,7 +294,6 @@ def entry() -> None:
     deadline): the teardown would end it inside native code, and the process
     aborted ("FATAL: exception not rethrown", SIGABRT) after its recording was
     finished."""
-    DeferredInterrupt().install()
     # The pools' semaphores are unlinked by multiprocessing's resource tracker when we end with os._exit
     # (below): its report of them ("leaked semaphore objects") is that clean-up, not a fault, and would
     # add lines to an interruption's one line. The tracker is a child process: it reads this variable.

@@ -54,6 +54,7 @@ import threading
 from pathlib import Path
 from typing import IO, Iterable, Iterator
 
+from pairplay import signals
 from pairplay.errors import OutputError
 from pairplay.livelock import LIVE, is_live
 from pairplay.numbers import counted
@@ -474,7 +475,8 @@ def _signals_held() -> Iterator[None]:
         yield
         return
     came: list[int] = []
-    before = {s: signal.signal(s, lambda signum, _frame: came.append(signum)) for s in (signal.SIGINT, signal.SIGTERM)}
+    before = {s: signal.getsignal(s) for s in signals.SIGNALS}
+    signals.handle(lambda signum, _frame: came.append(signum))  # an ignored signal stays ignored (pairplay/signals.py)
     try:
         yield
     finally:

@@ -74,6 +74,7 @@ import json5
 import zenoh
 import zenoh.ext
 
+from pairplay import signals
 from pairplay.errors import UserError
 from pairplay.schemas.jsonfile import empty
 from pairplay.services.zenohcheck import MODES, exposed, type_errors
@@ -1033,8 +1034,7 @@ def stop_on_signals(stop: threading.Event, then: Callable[[], object] | None = N
         # router froze on SIGTERM, 1 of ~10 runs of test_cli_signals). So a thread of its own sets the
         # flags; `stop.why` and the deadline above are plain attributes, there at once.
         _thread.start_new_thread(_stop_now, (stop, then, signum))
-    signal.signal(signal.SIGINT, handler)
-    signal.signal(signal.SIGTERM, handler)
+    signals.handle(handler)  # not over an ignored signal: it stays ignored (pairplay/signals.py)
     # A signal that came before this handler replaced the command's own (cli/interrupts.py; read through
     # sys.modules: services do not import cli) stops at once: its KeyboardInterrupt may have been lost.
     pending = getattr(sys.modules.get("pairplay.cli.interrupts"), "received", 0)

@@ -60,7 +60,7 @@ ROWS = [
 
 
 def _handlers_installed(pid: int, timeout_s: float = 60.0) -> bool:
-    """Wait until the process catches SIGTERM (pairplay/__main__.py installs its handlers first of all):
+    """Wait until the process catches SIGTERM (cli/start.py installs its handlers first of all):
     a signal before that meets the interpreter's own start-up, which no code of ours can answer."""
     deadline = time.monotonic() + timeout_s
     while time.monotonic() < deadline:
@@ -117,14 +117,14 @@ def test_a_signal_ends_a_verb_with_128_plus_its_number_at_any_moment(row, ran):
     assert "Traceback" not in r.stderr + r.stdout, r.stderr
     # ONE line says the stop, on stderr, `pairplay <verb>: ...` as every one-line message (the session's, the
     # lab's, view's, replay's and the router's had no prefix; `run` and `robot` said nothing at all); one
-    # while the verb's modules load is `pairplay: ...` (pairplay/__main__.py: no verb is known yet)
+    # before the verb is known (`pairplay` alone) is `pairplay: ...`
     said = [line for line in r.stderr.splitlines() if row.sig.name in line or "Ctrl-C" in line]
     assert len(said) == 1 and said[0].startswith((f"pairplay {row.args[0]}", "pairplay: ")), (row.name, r.stderr[-800:])
 
 
 @pytest.fixture
 def command_handlers():
-    """The pairplay command's own SIGINT/SIGTERM handlers (pairplay/__main__.py installs them), for an
+    """The pairplay command's own SIGINT/SIGTERM handlers (cli/main.py installs them for the command), for an
     in-process main(); pytest's come back after (main restores what it found)."""
     from pairplay.cli.interrupts import DeferredInterrupt
     saved = {s: signal.getsignal(s) for s in (signal.SIGINT, signal.SIGTERM)}

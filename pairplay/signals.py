@@ -1,0 +1,63 @@
+"""SIGINT and SIGTERM: a signal ignored stays ignored, and the command's first handler records.
+
+Rule: every SIGINT/SIGTERM handler pairplay installs goes through `handle`,
+which installs nothing over a signal that is ignored (SIG_IGN). An ignored
+signal is one the process inherited ignored: a POSIX shell starts a
+background job (`cmd &` in a script) with SIGINT ignored, and `nohup`-like
+launchers do the same; pairplay itself only ignores them in a pool's workers
+(pairplay/processes.py) and once a command's status is decided (cli/main.py).
+Such a process ignores that signal for its whole life: stop it with the other
+one (`kill PID` sends SIGTERM), which ends it with its one line and 143.
+
+Why leave it, when the contract says a process exits on SIGINT: the kernel
+discards an ignored signal, so one that came before our first line ran (the
+interpreter's own start-up, then the command's) is gone unseen; taking the
+signal back later made the same `kill -INT` stop the process or not by the
+moment it came (a new user's trial: `pairplay protocol serve F &`, SIGINT 0.05 s
+after start, served 618 s until a second SIGINT; one at 0.2 s stopped it). Only
+"ignored from the first instant to the last" holds at every moment, and it is
+the POSIX rule (the shell's and Python's own: Python installs no
+KeyboardInterrupt handler over an inherited SIG_IGN).
+
+`record` is the handler the command installs first of all (cli/start.py),
+before it loads anything: it only notes the signal in `received` (the first
+one), which cli/main.py reads once its own handler (cli/interrupts.py) is in
+place. Not raising there: a KeyboardInterrupt raised inside an import printed
+importlib's traceback, and SIGTERM before any handler killed the process
+without a line.
+
+Imports nothing but `signal` (its C part is loaded with the interpreter).
+"""
+
+from __future__ import annotations
+
+import signal
+
+SIGNALS = (signal.SIGINT, signal.SIGTERM)
+
+received = 0  # the first signal `record` met (0: none)
+
+
+def handle(handler: object, signals: tuple[int, ...] = SIGNALS) -> None:
+    """Install `handler` for each of `signals` not ignored (module rule). Main thread only."""
+    for signum in signals:
+        if signal.getsignal(signum) is not signal.SIG_IGN:
+            signal.signal(signum, handler)
+
+
+def ignored(signum: int) -> bool:
+    """Whether `signum` is ignored in this process (module rule: it stays so)."""
+    return signal.getsignal(signum) is signal.SIG_IGN
+
+
+def record(signum: int, frame: object) -> None:
+    """The command's first handler (module rule): notes the first signal, raises nothing."""
+    global received
+    received = received or signum
+
+
+def take() -> int:
+    """The signal `record` noted (0: none), forgotten once taken."""
+    global received
+    signum, received = received, 0
+    return signum
