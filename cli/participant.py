@@ -43,7 +43,11 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 def run(args) -> int:
     # a StudyDataError is a UserError: cli/main.py says it, `pairplay participant <action>: what (where)`, with
     # the fix this action's options offer (`exists; --force replaces it`: it was said here without it)
-    data = StudyData(args.folder)
+    with StudyData(args.folder, writer=f"participant {args.action}") as data:  # both write it: one writer per folder
+        return _on_folder(data, args)  # the lock released when the verb ends (in a process that goes on: tests)
+
+
+def _on_folder(data: StudyData, args) -> int:
     if args.action == "export":  # its default named as given (a refusal named the resolved study folder)
         out = file_in(args.out, f"{args.participant}.zip") or args.folder / "exports" / f"{args.participant}.zip"
         path = data.export_participant(args.participant, out, force=args.force)

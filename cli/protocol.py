@@ -144,7 +144,13 @@ def _run(args) -> int:
         print(f"study folder {data.given} ({data.study.study.id}); key file: {data.key_file or 'none'}")
         print("\n".join(describe(data.study)))
         return 0
-    data = StudyData(args.folder)
+    # every action but status writes the folder: it holds the folder's writer lock for the verb's length (serve: as
+    # long as it serves; one writer per study folder, pairplay/folderlock.py); status reads beside a writer
+    with StudyData(args.folder, writer="" if args.action == "status" else f"protocol {args.action}") as data:
+        return _on_folder(data, args)  # the lock released when the verb ends (in a process that goes on: tests)
+
+
+def _on_folder(data: StudyData, args) -> int:
     if args.action != "status":  # the others write in it: a folder one may not write in is one line now, named as
         from pairplay.outputs import check_folder  # given (serve served its console and failed at each step)
         check_folder(args.folder)

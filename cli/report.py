@@ -48,10 +48,13 @@ def run(args) -> int:
     copies.check([out])
     try:
         # a completed game a signal left without its policy gets it now, from its recording
-        built_missing_policies(StudyData(args.folder), "report")
-        with output_folder(out, args.force, owned=HUMAN_OUTPUTS, manifest=HUMAN_MANIFEST) as tmp:
-            report = human_report(args.folder, tmp, args.reference, include_scripted=args.include_scripted)
-            written = [out / f.relative_to(tmp) for f in sorted(tmp.rglob("*")) if f.is_file()]
+        # it journals policies and writes report/: a writer, the folder's lock held to the end (one writer per
+        # study folder: pairplay/folderlock.py; beside a running server, its console writes the report)
+        with StudyData(args.folder, writer="report") as data:
+            built_missing_policies(data, "report")
+            with output_folder(out, args.force, owned=HUMAN_OUTPUTS, manifest=HUMAN_MANIFEST) as tmp:
+                report = human_report(args.folder, tmp, args.reference, include_scripted=args.include_scripted)
+                written = [out / f.relative_to(tmp) for f in sorted(tmp.rglob("*")) if f.is_file()]
     except (StudyDataError, PolicyFileError, ValueError) as err:
         print(f"pairplay report: {err}", file=sys.stderr)
         return 2

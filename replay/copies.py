@@ -20,6 +20,7 @@ import os
 from pathlib import Path
 from typing import Iterable
 
+from pairplay import folderlock
 from pairplay.errors import OutputError
 from pairplay.outputs import is_owned
 from pairplay.schemas import journal as j
@@ -124,15 +125,24 @@ class Copies:
                 raise OutputError(f"cannot write there ({err.strerror or err}), and this `pairplay {self.verb}` "
                                   "writes a copy of its participants' data that their deletion must know: make the "
                                   "study's journal writable first", journal) from None
+            try:  # its line will need the folder's writer lock (one writer per study folder): free now?
+                folderlock.release(folderlock.take(root, self.verb))
+            except folderlock.FolderBusy as busy:
+                raise OutputError(f"another pairplay writes this study folder: {busy.holder or 'a process'}; this "
+                                  f"`pairplay {self.verb}` writes a copy of its participants' data that their deletion "
+                                  "must know, in its journal: run it when that one has finished",
+                                  self._typed.get(root, root)) from None
 
     def journal(self, written: Iterable[str | Path], inputs: Iterable[str | Path] | None = None) -> None:
         """Journal each file of `written` (in place now) made of `inputs` (default: all of the verb's) in the
         studies whose data they hold, one CopyWritten each, but for the ones their deletion erases by itself."""
         written = [Path(w) for w in written if Path(w).is_file()]
         for root, pids in self._lines(written, inputs).items():
-            data = self._studies[root]
-            for w in written:
-                if erased_anyway(data, pids, self.verb, w):
-                    continue
-                data.append(j.CopyWritten(participants=sorted(pids), verb=self.verb, path=str(w.resolve()),
-                                          sha256=sha256_of(w)))
+            # the journal read afresh, under the folder's writer lock: the verb itself may have journaled
+            # meanwhile (report's PolicyBuilt lines), and a copy read before would be refused as stale
+            with StudyData(self._typed[root], writer=self.verb) as data:
+                for w in written:
+                    if erased_anyway(data, pids, self.verb, w):
+                        continue
+                    data.append(j.CopyWritten(participants=sorted(pids), verb=self.verb, path=str(w.resolve()),
+                                              sha256=sha256_of(w)))

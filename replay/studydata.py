@@ -34,6 +34,7 @@ and rules said `human:p01` of a persona (the report's bias section, the console)
 
 from __future__ import annotations
 
+import contextlib
 import csv
 import hashlib
 import io
@@ -48,7 +49,7 @@ from pathlib import Path
 
 import msgspec
 
-from pairplay import __version__, csvcell
+from pairplay import __version__, csvcell, folderlock
 from pairplay.errors import InputError, UserError
 from pairplay.livelock import LIVE, is_live
 from pairplay.outputs import (OutputError, check_output, check_places, manifest_name, output_file, read_manifest,
@@ -194,7 +195,11 @@ REGISTER_AT_ONCE = 50
 class StudyData:
     """A study folder (see the module rule). Thread-safe: the console and the game runner share it."""
 
-    def __init__(self, folder: str | Path):
+    def __init__(self, folder: str | Path, writer: str = ""):
+        """`writer`: the verb that will write the folder ("protocol serve"): it takes the folder's writer lock
+        (pairplay/folderlock.py) for this object's life, before the journal is read, and a folder another
+        process writes is refused (StudyDataError naming the holder). Without it (a read-only verb) each
+        write takes the lock for its own length (`_writing`)."""
         self.folder = Path(folder).resolve()
         self.given = Path(folder)  # as the user gave it: what a refusal names (it named the resolved path)
         if (self.folder / JOURNAL).is_dir():  # it said "not a study folder (no journal.jsonl ...)": there is one
@@ -202,15 +207,91 @@ class StudyData:
                                  "remove or rename it", self.given / JOURNAL)
         if not (self.folder / JOURNAL).is_file():
             raise StudyDataError(f"{self.given}: not a study folder (no {JOURNAL}; `pairplay protocol init` makes one)")
-        try:
-            self.study: Study = load_study(self.given / STUDY_FILE)
-        except StudyFileError as err:
-            raise StudyDataError(str(err)) from None
-        self.settings = _settings(self.given / SETTINGS)  # named as given in a refusal (it named the resolved path)
         self._lock = threading.RLock()
-        self.state = StudyState()
-        for e in self.read_journal():
-            self.state.evolve(e)
+        self._hold: int | None = None
+        self._stamp: tuple = ()
+        if writer:
+            self._hold = self._take(writer)
+        try:
+            self.state = StudyState()
+            for e in self.read_journal():
+                self.state.evolve(e)
+            self._stamp = self._journal_stamp()
+            self._check_study_file()
+            try:
+                self.study: Study = load_study(self.given / STUDY_FILE)
+            except StudyFileError as err:
+                raise StudyDataError(str(err)) from None
+            self.settings = _settings(self.given / SETTINGS)  # named as given in a refusal (it named the resolved path)
+        except BaseException:
+            self.close()
+            raise
+
+    # -- one writer per folder (pairplay/folderlock.py) -------------------------
+    def _take(self, verb: str) -> int | None:
+        try:
+            return folderlock.take(self.folder, verb)
+        except folderlock.FolderBusy as busy:
+            raise StudyDataError(f"another pairplay writes this study folder: {busy.holder or 'a process'}; one "
+                                 "writer per study folder: stop it, or work in its console (`pairplay protocol "
+                                 "status` reads beside it)", self.given) from None
+
+    def close(self) -> None:
+        """Release the folder's writer lock, if this object holds it (the process's end does as well)."""
+        with self._lock:
+            fd, self._hold = self._hold, None
+            folderlock.release(fd)
+
+    def __enter__(self) -> "StudyData":
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+    def _journal_stamp(self) -> tuple:
+        st = os.stat(self.folder / JOURNAL)
+        return (st.st_ino, st.st_size, st.st_mtime_ns)
+
+    @contextlib.contextmanager
+    def _writing(self):
+        """Every write of the folder goes through here: it holds the writer lock (this object's, or taken for
+        the write's length when this object was made read-only) and refuses to write from a stale copy: a
+        journal changed since this object read or wrote it (by a process that took no lock: a pairplay
+        before the lock, a hand edit) would be overwritten by what this one holds in memory (a deletion
+        undone, an id given twice), so the write is refused and the verb is to be started again."""
+        with self._lock:
+            taken = None
+            if self._hold is None:
+                taken = self._hold = self._take("a write through pairplay's Python API")
+            try:
+                if self._stamp and self._journal_stamp() != self._stamp:
+                    raise StudyDataError(f"{JOURNAL} was changed by another process since this one read it; "
+                                         "nothing was written from the stale copy: start this verb again",
+                                         self.given / JOURNAL)
+                yield
+                self._stamp = self._journal_stamp()
+            finally:
+                if taken is not None:
+                    self.close()
+
+    def _check_study_file(self) -> None:
+        """The study file is fixed once the study is created: its bytes against the SHA-256 the journal's
+        first line recorded (StudyCreated). An edited file is refused, since the folder's games were played
+        under the old one (pilot played 2-round games beside 5-round ones, the report left games out). A
+        journal without a StudyCreated, or with an empty hash, was not written by pairplay's `protocol init`
+        (every one records it): there is nothing to check against, and it is read as it was."""
+        recorded = self.state.created.study_file_sha256 if self.state.created is not None else ""
+        path = self.given / STUDY_FILE
+        try:
+            text = path.read_bytes()
+        except OSError:
+            return  # missing or unreadable: load_study says it, in its words
+        now = hashlib.sha256(text).hexdigest()
+        if recorded and now != recorded:
+            raise StudyDataError(f"changed since the study was created (SHA-256 {now[:12]}..., the journal's first "
+                                 f"line recorded {recorded[:12]}...: the study file is fixed once created); put back "
+                                 "the file the study was created with, or make a new study folder for a new design "
+                                 "(`pairplay protocol init NEW_FOLDER --study FILE`)", path)
 
     # -- creating ------------------------------------------------------------
     @classmethod
@@ -221,7 +302,7 @@ class StudyData:
         # a folder where the study's files are written, a file where its folders are: named, before anything is
         # made (journal.jsonl a folder was "already a study folder", recordings a file the OS's "File exists")
         check_places(given, owned=tuple(f"{sub}/*{ext}" for sub, ext in SUBFOLDERS.items()),
-                     files=[STUDY_FILE, SETTINGS, JOURNAL])
+                     files=[STUDY_FILE, SETTINGS, JOURNAL, folderlock.LOCK_FILE])
         if (folder / JOURNAL).exists():
             # not "already a study folder": a folder named `study` is a word of it, and the line then left out where
             raise StudyDataError(f"already initialised ({JOURNAL} is there); give another folder", given)
@@ -237,6 +318,7 @@ class StudyData:
         for sub in SUBFOLDERS:
             (folder / sub).mkdir(exist_ok=True)
         atomic_write(folder / STUDY_FILE, text)
+        atomic_write(folder / folderlock.LOCK_FILE, b"")  # there from the start: a refused verb changes no file
         atomic_write(folder / SETTINGS, msgspec.json.encode(
             {"key_file": str(Path(key_file).resolve()) if key_file else ""}))
         study = load_study(folder / STUDY_FILE)
@@ -261,7 +343,7 @@ class StudyData:
         return events
 
     def append(self, event: j.JournalEvent) -> j.JournalEvent:
-        with self._lock:
+        with self._writing():
             if not event.time_ns:
                 event = msgspec.structs.replace(event, time_ns=time.time_ns())
             with open(self.folder / JOURNAL, "ab") as f:
@@ -295,7 +377,7 @@ class StudyData:
         """Register a participant for phase `joins`; returns the new pseudonymous id.
 
         `label` (a name, an e-mail...) goes only to the key file; refused without one."""
-        with self._lock:
+        with self._writing():
             try:
                 self.study.phase_by_id(joins)
             except KeyError as err:
@@ -511,7 +593,7 @@ class StudyData:
         policy file is gone (deleted by hand) is built again the same way and journaled (PolicyBuilt): it
         was neither rebuilt nor said, since the journal named a policy."""
         lines, changed = [], 0
-        with self._lock:
+        with self._writing():
             for g in list(self.state.games.values()):
                 path = self.folder / g.recording
                 if g.ended is None:
@@ -586,7 +668,7 @@ class StudyData:
 
     def write_tables(self) -> list[Path]:
         """participants.csv, sessions.csv and answers.csv, rewritten from the journal and recordings."""
-        with self._lock:
+        with self._writing():
             tables = {
                 # scripted: the personas that played a participant's games instead of a person (a rehearsal)
                 "participants.csv": (["participant", "joins", "registered_utc", "scripted"],
@@ -637,7 +719,7 @@ class StudyData:
 
     def export_participant(self, pid: str, out: str | Path | None = None, force: bool = False) -> Path:
         """One zip of `pid`'s recordings, policies, answers and journal lines, with a README."""
-        with self._lock:
+        with self._writing():
             self.participant(pid)
             out = Path(out) if out else self.folder / "exports" / f"{pid}.zip"
             inside = out.resolve().relative_to(self.folder).parts if out.resolve().is_relative_to(self.folder) else ()
@@ -684,7 +766,7 @@ class StudyData:
         own places (an export outside it, a verb's output: `copies_of`) are erased if still pairplay's unchanged
         files. What it did with them, and what it could not erase (a changed or moved copy, the files of report/
         the report did not write: a user's notes may name them), is returned to be said."""
-        with self._lock:
+        with self._writing():
             self.participant(pid)
             running = [g.session for g in self.games_of(pid) if g.ended is None]
             if running:
@@ -730,6 +812,7 @@ class StudyData:
                 _redact_policy_file(self.folder / m, pid)
             key_removed = self._drop_from_key_file(pid)
             atomic_write(self.folder / JOURNAL, b"".join(j.encode_line(e) for e in kept))
+            self._stamp = self._journal_stamp()  # ours: the append below writes on it
             state = StudyState()
             for e in kept:
                 state.evolve(e)
