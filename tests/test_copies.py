@@ -162,3 +162,36 @@ def test_a_copy_whose_study_journal_cannot_take_its_line_is_not_made(played, tmp
     assert r.returncode == 2 and len(r.stderr.strip().splitlines()) == 1, r.stderr
     assert "(study/journal.jsonl)" in r.stderr and "Read-only file system" in r.stderr, r.stderr
     assert not (tmp_path / "rebuilt").exists()
+
+
+def test_a_copy_is_journaled_after_the_verb_itself_wrote_the_journal_and_refused_while_another_writes_the_folder(
+        played, tmp_path, capsys):  # noqa: F811
+    """Two branches met here (copies, studyguard): a verb's copy line was appended through the StudyData read when
+    the verb began, so a journal written since (report's own PolicyBuilt lines; the merge's test) was refused as
+    a stale copy after the copy was made; and a copy made while a server held the folder could not take its line
+    at all. Now the line is written through the journal read afresh under the folder's writer lock, and a folder
+    another pairplay writes is refused before the copy is made, in one line naming who holds it."""
+    from pairplay import folderlock
+    from pairplay.replay.copies import Copies
+    from pairplay.replay.studydata import StudyData
+
+    data = copy_study(played, tmp_path)
+    folder, out = data.folder, tmp_path / "elsewhere"
+    rec1 = folder / _game(data, "p01", 0).recording
+    copies = Copies("rebuild", [rec1])
+    with StudyData(folder, writer="test") as other:  # the verb's own journal line meanwhile
+        other.append(j.ParticipantRegistered(participant="p09", joins=other.study.phase[0].id))
+    out.mkdir()
+    (out / "policy.json").write_bytes(b"{}")
+    copies.journal([out / "policy.json"])
+    assert [e.path for e in _copies(StudyData(folder))] == [str((out / "policy.json").resolve())]
+    held = folderlock.take(folder, "protocol serve")  # a running server's hold, in this process
+    try:
+        before = (folder / "journal.jsonl").read_bytes()
+        capsys.readouterr()
+        assert main(["rebuild", str(rec1), "--out", str(out / "rebuilt")]) == 2
+        err = capsys.readouterr().err
+        assert err.count("\n") == 1 and "another pairplay writes this study folder: protocol serve" in err, err
+        assert not (out / "rebuilt").exists() and (folder / "journal.jsonl").read_bytes() == before
+    finally:
+        folderlock.release(held)
