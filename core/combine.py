@@ -38,10 +38,12 @@ from typing import NamedTuple, Sequence
 
 import numpy as np
 
+from pairplay.arguments import at, given, list_argument
+from pairplay.errors import ArgumentError, InputError
 from pairplay.schemas.policy import UserInfo
 
 from .actions import (HEAD_NOD, HEARING_EXACT, HEARING_NOTHING, HEARING_PARTS, N_VISUAL, SPEECH_EXACT,
-                      SPEECH_RIGHT_CARD, VISUAL_GAZE, VISUAL_NOTHING, VISUAL_PARTS, code_of)
+                      SPEECH_RIGHT_CARD, VISUAL_GAZE, VISUAL_NOTHING, VISUAL_PARTS, N_ACTIONS, code_of)
 from .geometry import N_STATES, SPATIAL_STATES, STATE_INDEX, CELL_INDEX
 
 COMPARED_STATES = np.arange(len(SPATIAL_STATES))  # the 23 spatial states
@@ -78,16 +80,29 @@ class Profile(NamedTuple):
     head_states: list[int]
 
 
+def action_codes(policies, function: str, name: str) -> np.ndarray:
+    """`policies` as an (n, 24) array of greedy action codes 0..87, n >= 1 (one (24,) policy is n = 1);
+    ArgumentError for anything else (pairplay/arguments.py: `extract_info(None)` was numpy's TypeError)."""
+    array = np.atleast_2d(np.asarray(policies, dtype=object if policies is None else None))
+    if array.dtype.kind not in "iu" or array.ndim != 2 or array.shape[0] == 0 or array.shape[1] != N_STATES:
+        raise ArgumentError(f"{name} must be greedy action codes, an (n, {N_STATES}) array of integers "
+                            f"0..{N_ACTIONS - 1}, got {given(policies)}", at(function, name))
+    if array.min() < 0 or array.max() >= N_ACTIONS:
+        raise InputError(f"{name} holds a code outside 0..{N_ACTIONS - 1}: {int(array.min())}..{int(array.max())}",
+                         at(function, name))
+    return array
+
+
 def extract_info(policies: np.ndarray, states: Sequence[int] = COMPARED_STATES) -> Profile:
     """Algorithm 3 over one user's policies: (n_policies, 24) greedy action codes.
 
     `states` narrows the comparison (default: the 23 spatial states, as the thesis);
     shares are then of the states compared.
     """
-    policies = np.atleast_2d(np.asarray(policies))
+    policies = action_codes(policies, "extract_info", "policies")
     states = np.asarray(states, dtype=np.int64)
     if states.size == 0:
-        raise ValueError("no states to compare")
+        raise InputError("no states to compare", at("extract_info", "states"))
     h, v = parts(policies)
     speech, facial, head, gaze = _SPEECH[h], _FACIAL[h], _HEAD[v], _GAZE[v]
     speech_states = [int(s) for s in states if incompatible(speech[:, s], s, _exempt_speech)]
@@ -182,9 +197,9 @@ def _half(users: Sequence[User], state: int, hearing: bool) -> tuple[int, str]:
 
 
 def combine(users: Sequence[User]) -> Combined:
-    """Algorithm 4 for any number of users (see the module rule)."""
-    if not users:
-        raise ValueError("combine needs at least one user")
+    """Algorithm 4 for any number of users (see the module rule); InputError for none, ArgumentError
+    for an item that is no User (pairplay/arguments.py: users_from_policies makes them)."""
+    users = list_argument(users, User, "combine", "users", "a User (pairplay.users_from_policies makes them)")
     policy = np.zeros(N_STATES, dtype=np.int64)
     rules = []
     for s in range(N_STATES):

@@ -30,6 +30,9 @@ from typing import NamedTuple, Sequence
 
 import numpy as np
 
+from pairplay.arguments import at, given, instance_argument, integer_argument, list_argument
+from pairplay.core.reward import BONUS_RULES
+from pairplay.errors import InputError
 from pairplay.schemas.config import DEFAULT_REWARD_BONUS, LearnerConfig, LSPIConfig, Persona
 from pairplay.schemas.usermodel import CountedRate, FeatureFit, RateFit, UserModelFile
 
@@ -145,7 +148,20 @@ def hits_of_picks(picks: np.ndarray) -> np.ndarray:
 def run_arms(persona: Persona, arms: Sequence[Arm], seeds: Sequence[int], rounds: int,
              observed_source: str = "intended", reward_bonus: str = DEFAULT_REWARD_BONUS) -> dict[str, ArmRuns]:
     """Every arm against `persona`, once per seed: the learners and policies in one batch of the compiled
-    simulator, each LSPI arm in a batch of its own (module rule); the result in the arms' order."""
+    simulator, each LSPI arm in a batch of its own (module rule); the result in the arms' order.
+    A caller's mistake is an InputError (an ArgumentError for the wrong kind: pairplay/arguments.py)."""
+    fn = "run_arms"
+    instance_argument(persona, Persona, fn, "persona", "a Persona (pairplay.core.personas.persona(key))")
+    arms = list_argument(arms, Arm, fn, "arms", "an Arm")
+    seeds = list_argument(seeds, object, fn, "seeds", "an integer seed")
+    seeds = [integer_argument(s, fn, "seeds", low=0) for s in seeds]
+    rounds = integer_argument(rounds, fn, "rounds", low=1)
+    if observed_source not in SIM_SOURCE:
+        raise InputError(f"observed_source must be one of {', '.join(SIM_SOURCE)}, got {given(observed_source)}",
+                         at(fn, "observed_source"))
+    if reward_bonus not in BONUS_RULES:
+        raise InputError(f"reward_bonus must be one of {', '.join(BONUS_RULES)}, got {given(reward_bonus)}",
+                         at(fn, "reward_bonus"))
     runs = _run_batch(persona, [a for a in arms if a.mode != "lspi"], seeds, rounds, observed_source, reward_bonus)
     for arm in arms:
         if arm.mode == "lspi":

@@ -7,11 +7,14 @@ is a pure function of the learning. Reading back gives the arrays.
 
 from __future__ import annotations
 
+import os
+
 import numpy as np
 
 import msgspec
 
-from pairplay.errors import InputError, OptionError
+from pairplay.arguments import at, given, instance_argument, integer_argument, list_argument
+from pairplay.errors import ArgumentError, InputError, OptionError
 from pairplay.schemas.config import DEFAULT_REWARD_BONUS, LearnerConfig, LSPIConfig, Persona
 from pairplay.schemas.policy import PolicyFile, UserInfo
 
@@ -60,7 +63,20 @@ def by_participant(policies: list[PolicyFile], exclude=()) -> dict[str, list[Pol
 
 
 def users_from_policies(policies: list[PolicyFile], seed: int, exclude=()) -> tuple[list[User], dict[str, Profile]]:
-    """Group policy files by participant; each group becomes one combination input."""
+    """Group policy files by participant; each group becomes one combination input. InputError for no
+    policy, or every one excluded; ArgumentError (pairplay/arguments.py) for an item that is no read
+    policy (a path: read it first) or a seed that is no integer 0..2**64-1."""
+    fn = "users_from_policies"
+    for place, p in enumerate(list_argument(policies, object, fn, "policies", "a PolicyFile")):
+        if not isinstance(p, PolicyFile):
+            hint = ": a path, read it first: pairplay.read_policy(path)" if isinstance(p, (str, os.PathLike)) else ""
+            raise ArgumentError(f"policies[{place}] must be a PolicyFile (pairplay.read_policy), got {given(p)}{hint}",
+                                at(fn, "policies"))
+    seed = integer_argument(seed, fn, "seed", low=0)
+    exclude = list_argument(exclude, str, fn, "exclude", "a participant's id", empty_ok=True)
+    if not by_participant(policies, exclude):
+        raise InputError(f"every policy's participant is excluded ({', '.join(sorted(set(exclude)))}): nothing to "
+                         "combine", at(fn, "exclude"))
     users, profiles = [], {}
     for name, own in by_participant(policies, exclude).items():
         user, profile = represent(name, np.stack([greedy_of(p) for p in own]), np.stack([q_of(p) for p in own]), seed)
@@ -138,7 +154,13 @@ def partial_inputs(policies: list[PolicyFile], names: list[str], exclude=()) -> 
 def combined_policy_file(merged: Combined, users: list[User], merged_from: list[str], seed: int | None,
                          software: str = "", reward_bonus: str = DEFAULT_REWARD_BONUS,
                          partial: str = "") -> PolicyFile:
-    """The merged policy's file; `partial`: why it is partial (`partial_inputs` of what it was made of)."""
+    """The merged policy's file; `partial`: why it is partial (`partial_inputs` of what it was made of).
+    ArgumentError (pairplay/arguments.py) for a `merged` that is no Combined, `users` no list of Users."""
+    fn = "combined_policy_file"
+    instance_argument(merged, Combined, fn, "merged", "a Combined (pairplay.combine)")
+    users = list_argument(users, User, fn, "users", "a User (pairplay.users_from_policies)")
+    merged_from = list_argument(merged_from, str, fn, "merged_from", "a participant's id or a file's name", empty_ok=True)
+    seed = None if seed is None else integer_argument(seed, fn, "seed", low=0)
     return to_policy_file(merged.q, np.zeros(len(merged.policy), dtype=np.int64), merged.policy,
                           algorithm="combined", participant="+".join(sorted(u.name for u in users)),
                           seed=seed, info=merged.info, merged_from=merged_from, rules=merged.rules,

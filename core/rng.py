@@ -46,6 +46,7 @@ from typing import Sequence
 
 import numpy as np
 
+from pairplay.arguments import is_integer
 from pairplay.schemas.session import GAME_INDEX_RANGE, SEED_RANGE  # noqa: F401  (SEED_RANGE: this module's)
 
 from . import kernels
@@ -72,7 +73,7 @@ def _study_label(label: str) -> bool:
 def check_seed(seed, what: str = "seed", bounds: tuple[int, int] = SEED_RANGE) -> int:
     """`seed` as an int: an integer (Python's or numpy's, not a bool) within `bounds` (SEED_RANGE).
     TypeError for anything else that is not an integer, ValueError (naming the range) outside it."""
-    if isinstance(seed, (bool, np.bool_)) or not isinstance(seed, (int, np.integer)):
+    if not is_integer(seed):
         raise TypeError(f"{what} must be an integer {bounds[0]}..{bounds[1]}, got {seed!r}")
     seed = int(seed)
     if not bounds[0] <= seed <= bounds[1]:

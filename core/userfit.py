@@ -49,6 +49,9 @@ from typing import NamedTuple
 
 import numpy as np
 
+from pairplay.arguments import at, given, instance_argument
+from pairplay.errors import InputError
+
 from . import kernels
 from .actions import ACTION_HEARING, ACTION_VISUAL, HEARING_SMILE, VISUAL_GAZE
 from .geometry import ALL_CARDS, N_CARDS
@@ -275,10 +278,16 @@ def fit_user(obs: Observations, source: str, lapses: np.ndarray = LAPSES) -> Fit
     """Maximum-likelihood persona (and lapse) of the recorded turns `obs`; see the module rule.
 
     `source` is the recording's observed-card source ("intended", "first-pick", "gaze").
-    Raises ValueError for a recording without a single turn.
+    Raises InputError (a ValueError) for a recording without a single turn or an unknown `source`,
+    ArgumentError (pairplay/arguments.py) for `obs` that is no Observations.
     """
+    instance_argument(obs, Observations, "fit_user", "obs", "Observations (a read recording's `turns.observations`, "
+                      "pairplay.read_turns)")
+    if source not in SOURCES:
+        raise InputError(f"source must be one of {', '.join(SOURCES)} (a read recording's "
+                         f"`turns.config.observed_source`), got {given(source)}", at("fit_user", "source"))
     if len(obs.first) == 0:
-        raise ValueError("no turn to fit: the recording holds no resolved turn")
+        raise InputError("no turn to fit: the recording holds no resolved turn", at("fit_user", "obs"))
     lapses = np.asarray(lapses, dtype=float)
     grid = loglik_grid(obs, source, lapses)
     idx = np.unravel_index(int(np.argmax(grid)), grid.shape)  # C order: ties to the lower levels

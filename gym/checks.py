@@ -21,6 +21,7 @@ from typing import Any, Sequence
 import numpy as np
 from gymnasium import spaces
 
+from pairplay.arguments import is_integer
 from pairplay.core.actions import N_ACTIONS
 from pairplay.core.games import check_observed_source
 from pairplay.core.personas import persona as find_persona
@@ -73,7 +74,7 @@ def persona(key: Any) -> Persona:
 
 def num_envs(n: Any) -> int:
     """The vector env's number of games: an integer 1..MAX_NUM_ENVS."""
-    if isinstance(n, (bool, np.bool_)) or not isinstance(n, (int, np.integer)):
+    if not is_integer(n):
         raise TypeError(f"num_envs must be an integer (1..{MAX_NUM_ENVS:,}), got {n!r}")
     if not 1 <= n <= MAX_NUM_ENVS:
         raise ValueError(f"num_envs must be 1..{MAX_NUM_ENVS:,} (a game takes ~0.8 KB), got {n!r}")
@@ -102,7 +103,7 @@ def reset_seeds(seed: Any, n: int) -> list[int] | None:
     and seeds for others is refused: this env starts new games for all or none."""
     if seed is None:
         return None
-    if isinstance(seed, (int, np.integer)) and not isinstance(seed, (bool, np.bool_)):
+    if is_integer(seed):
         first = reset_seed(seed)
         return [reset_seed(first + i, f"seed + {i} (game {i}'s seed)") for i in range(n)]
     if not isinstance(seed, (list, tuple, np.ndarray)):
@@ -116,6 +117,13 @@ def reset_seeds(seed: Any, n: int) -> list[int] | None:
         raise ValueError("seed: None for some games and a seed for others; give every game a seed (new games) "
                          "or none (reset() deals every game's next round)")
     return [reset_seed(s, f"seed of game {i}") for i, s in enumerate(values)]
+
+
+def _bools(value: Any) -> bool:
+    """Whether `value` is a bool or holds bools (numpy's too, a list of them: its dtype is bool)."""
+    if isinstance(value, (list, tuple)):  # [True, 1] is an int array to numpy
+        return any(isinstance(v, (bool, np.bool_)) for v in value) or np.asarray(value).dtype == np.bool_
+    return isinstance(value, (bool, np.bool_)) or np.asarray(value).dtype == np.bool_
 
 
 def reset_options(options: Any) -> Persona | None:
@@ -133,9 +141,11 @@ def reset_options(options: Any) -> Persona | None:
 
 def action(space: spaces.Space, value: Any) -> None:
     """Raises unless `value` belongs to `space`: Discrete(88) for one env, its batch for the vector env
-    (Gymnasium's own membership, one rule for both: integers, numpy's too, 0..87; no float, no string)."""
+    (Gymnasium's own membership, one rule for both: integers, numpy's too, 0..87; no float, no string,
+    no bool: Gymnasium takes True as 1 and a bool array as codes 0 and 1, where reset(seed=True) was
+    refused; pairplay/arguments.py: a bool is never an integer)."""
     try:
-        ok = space.contains(value)
+        ok = space.contains(value) and not _bools(value)
     except (TypeError, ValueError):  # a ragged list, say: numpy cannot make it an array
         ok = False
     if not ok:

@@ -17,7 +17,7 @@ cheap). Everything else may change between versions::
 
     import pairplay
     report = pairplay.run_study(pairplay.StudySettings(seed=1, games=2, rounds=100), "out/s1")
-    log = pairplay.read_log("recordings/blind-g0.mcap")          # events, channels, damage
+    log = pairplay.read_log("recordings/samples/sim-ashley-fmt2.mcap")   # events, channels, damage
     fold = pairplay.fold_events(e.event for e in log.events)      # rounds, Q-table, rewards
     policies = [pairplay.read_policy(p) for p in paths]
     users, profiles = pairplay.users_from_policies(policies, seed=0)   # algorithm 3
@@ -66,6 +66,9 @@ __all__ = ["__version__", *API]
 def __getattr__(name: str):
     if name in API:
         value = getattr(importlib.import_module(API[name]), name)
+        if not isinstance(value, type):  # a function: its refusals name its arguments, not a verb's options
+            from pairplay.arguments import python_words
+            value = python_words(value)
         globals()[name] = value
         return value
     raise AttributeError(f"module 'pairplay' has no attribute {name!r}")

@@ -48,6 +48,11 @@ class InputError(UserError, ValueError):
     """An input is missing, empty or not what the verb needs."""
 
 
+class ArgumentError(InputError, TypeError):
+    """A public function was given a value of the wrong kind (pairplay/arguments.py): a number for a
+    path, a path for a read policy, a bool for an integer. Both an InputError and a TypeError."""
+
+
 class OutputError(UserError):
     """An output cannot be written where asked (exists, is a folder, read-only, collides)."""
 

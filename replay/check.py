@@ -22,23 +22,33 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from pairplay.arguments import path_argument
 from pairplay.errors import InputError
 from pairplay.schemas.jsonfile import MCAP_MAGIC
 from pairplay.numbers import counted
 
 
 
-def check_recording(path: str | Path, journal_ok: bool = False) -> Path:
-    """`path` as a Path if it can be read as an MCAP recording; InputError saying why not.
-
-    A recorder killed before its first flush leaves a file of nothing (0 bytes, or cut inside
-    MCAP's magic) and what it received in its journal beside it (wal.py): such a file is refused
-    naming `pairplay recover`, or taken with `journal_ok` (recover: the journal holds the recording)."""
-    path = Path(path)
+def recording_file(path: str | Path, function: str = "") -> Path:
+    """`path` as a Path if it names a file: InputError "no such recording" or "a folder" (every verb's
+    words) otherwise; given `function` (a public function's name), first an ArgumentError unless `path`
+    is a path at all (pairplay/arguments.py: read_log(None) was a TypeError of pathlib's)."""
+    path = path_argument(path, function) if function else Path(path)
     if not path.exists():
         raise InputError("no such recording", path)
     if path.is_dir():
         raise InputError("a folder, not a recording (give the .mcap files)", path)
+    return path
+
+
+def check_recording(path: str | Path, journal_ok: bool = False, function: str = "") -> Path:
+    """`path` as a Path if it can be read as an MCAP recording; InputError saying why not.
+
+    A recorder killed before its first flush leaves a file of nothing (0 bytes, or cut inside
+    MCAP's magic) and what it received in its journal beside it (wal.py): such a file is refused
+    naming `pairplay recover`, or taken with `journal_ok` (recover: the journal holds the recording).
+    `function`: the public function given `path` (recording_file)."""
+    path = recording_file(path, function)
     try:
         with open(path, "rb") as f:
             head = f.read(len(MCAP_MAGIC))
@@ -64,11 +74,12 @@ def check_recording(path: str | Path, journal_ok: bool = False) -> Path:
     return path
 
 
-def read_session(path: str | Path, only: frozenset[str] | None = None):
+def read_session(path: str | Path, only: frozenset[str] | None = None, function: str = ""):
     """The recording at `path` read (reader.read_log, `only` as there) if it holds a session;
-    InputError naming the path and saying what the file is if not (reader.EventLog.no_session)."""
+    InputError naming the path and saying what the file is if not (reader.EventLog.no_session).
+    `function`: the public function given `path` (recording_file)."""
     from .reader import read_log
-    path = check_recording(path)
+    path = check_recording(path, function=function)
     log = read_log(path, only)
     if log.no_session:
         raise InputError(log.no_session, path)

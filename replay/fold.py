@@ -24,6 +24,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from pairplay.arguments import at, given
 from pairplay.core.actions import N_ACTIONS
 from pairplay.core.geometry import N_STATES
 from pairplay.core.learning import q_update
@@ -31,6 +32,7 @@ from pairplay.core.lspi import LSPILearner, weights_digest
 from pairplay.core.rng import UniformStream, game_seed
 from pairplay.schemas import events as ev
 from pairplay.schemas.envelope import Event
+from pairplay.errors import ArgumentError
 from pairplay.schemas.session import SessionConfig
 
 
@@ -179,7 +181,25 @@ READS = frozenset(_HANDLERS)  # the event tags a fold reads; any other it only c
 
 
 def fold_events(events) -> SessionFold:
-    return SessionFold().fold(events)
+    """The fold of `events`, in order: events as a read log holds them (`e.event for e in log.events`).
+    ArgumentError (pairplay/arguments.py) for anything else: a non-iterable at once, an item that is no
+    event when it comes (`fold_events([1, 2])` was an empty fold, a log's records were counted as events)."""
+    return SessionFold().fold(_events(events))
+
+
+def _events(events):
+    if isinstance(events, (str, bytes, dict)) or not hasattr(events, "__iter__"):
+        raise ArgumentError(f"events must be an iterable of events, got {given(events)}", at("fold_events", "events"))
+    from .reader import UnknownEvent
+    return _each_event(events, (Event, UnknownEvent))
+
+
+def _each_event(events, kinds):
+    for place, e in enumerate(events):
+        if not isinstance(e, kinds):
+            hint = " (a read log's records hold theirs: `e.event for e in log.events`)" if hasattr(e, "event") else ""
+            raise ArgumentError(f"events[{place}] must be an event{hint}, got {given(e)}", at("fold_events", "events"))
+        yield e
 
 
 def fold_sessions(events) -> dict[str, SessionFold]:

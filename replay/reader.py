@@ -431,7 +431,11 @@ def read_log(path: str | Path, only: frozenset[str] | None = None) -> EventLog:
     channel, session, source and seq decode) and counted in `skipped` by tag, not
     kept (rebuild: 2/3 of a session's events are ones its fold only counts). A
     message whose envelope fails that check is decoded wholly, as without `only`,
-    so it still ends up an event, an UnknownEvent or a BadMessage."""
+    so it still ends up an event, an UnknownEvent or a BadMessage.
+    InputError, before any reading, if `path` names no file or a folder (ArgumentError if it is no path:
+    pairplay/arguments.py); what the file holds, cut, damaged or not MCAP at all, is the EventLog's to say."""
+    from .check import recording_file
+    path = recording_file(path, "read_log")
     with gc_paused():
         return _read_log(path, only)
 

@@ -126,7 +126,7 @@ def rebuild_recording(path: str | Path) -> Rebuilt:
     it contradicts itself about who published what (replay/forgery.py: a forged start or end), NoWholeRound
     if its session has no round recorded whole."""
     # the events the fold only counts are not decoded (speed), but rounds' starts are: damaged_rounds needs them
-    log = read_session(path, only=CURVE_READS)
+    log = read_session(path, only=CURVE_READS, function="rebuild_recording")
     # who published what, first (a forged end before any round is named as that, not as "no whole round"):
     # among the decoded events (every one a fold reads: the game's start, rounds' ends, refusals and end
     # among them); `replay --verify` checks every event (replay/forgery.py)

@@ -62,6 +62,8 @@ from pairplay.schemas.jsonschema import schema_text
 from pairplay.schemas.keys import parse_event_key
 from pairplay.outputs import check_output, output_file
 
+from pairplay.arguments import flag_argument, path_argument
+
 from .check import check_recording
 from .mcapscan import scan
 from .reader import read_log
@@ -107,8 +109,9 @@ def recover(path: str | Path, output: str | Path | None = None, force: bool = Fa
     its journal is of another session;
     OutputError if `output` is the input, or exists (unless `force`) when there is something to
     write; the output appears only when complete (pairplay.outputs)."""
-    path = check_recording(path, journal_ok=admit is not None)  # (a file of nothing: its journal holds it)
-    output = Path(output) if output is not None else default_output(path)
+    path = check_recording(path, journal_ok=admit is not None, function="recover")  # (a file of nothing: its journal holds it)
+    output = path_argument(output, "recover", "output") if output is not None else default_output(path)
+    force, write = flag_argument(force, "recover", "force"), flag_argument(write, "recover", "write")
     if output.resolve() == path.resolve():
         raise OutputError("recover writes a new file; give an output path other than the input", output)
     log = read_log(path)

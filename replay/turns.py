@@ -99,6 +99,6 @@ def turns_from_events(events, source: str = "", note: str = "") -> RecordedTurns
 
 def read_turns(path) -> RecordedTurns:
     """A recording's turns (see the module rule); InputError naming the file if it has none to fit."""
-    log = read_session(path)
+    log = read_session(path, function="read_turns")
     note = log.missing  # what its damage, cut and undecodable messages lost (reader.EventLog), as rebuild's
     return turns_from_events((r.event for r in log.events), str(path), note)

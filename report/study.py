@@ -46,9 +46,10 @@ from pairplay.core.policies import to_policy_file
 from pairplay.core.reward import BONUS_RULE_TEXT
 from pairplay.core.rng import GAME_INDEX_RANGE, SEED_RANGE
 from pairplay.core.simulate import MEMORY_LIMIT, batch_bytes, gigabytes
+from pairplay.arguments import flag_argument, given, instance_argument, is_integer, path_argument
 from pairplay.errors import OptionError
 from pairplay.lists import comma_items
-from pairplay.numbers import counted, shown
+from pairplay.numbers import counted, shown, type_name
 from pairplay.schemas.config import DEFAULT_REWARD_BONUS, LearnerConfig, LSPIConfig, REWARD_BONUS_RULES, lspi_unused
 from pairplay.outputs import manifest_name, output_folder
 from pairplay.processes import off_main_thread, process_pool, stop_pool
@@ -108,6 +109,19 @@ class StudySettings:
             chosen.append(p)
         return chosen
 
+    def check_kinds(self) -> None:
+        """SettingTypeError for the first setting not of its field's kind (a script's `rounds="20"` was a
+        comparison's TypeError, `personas=["blind"]` an AttributeError 'strip'): an integer is never a
+        bool nor a float, a number is an int or a float, a flag True or False, text a str."""
+        for f in fields(self):
+            value, kind = getattr(self, f.name), type(getattr(StudySettings, f.name))
+            ok = (isinstance(value, bool) if kind is bool else is_integer(value) if kind is int
+                  else isinstance(value, (int, float)) and not isinstance(value, bool) if kind is float
+                  else isinstance(value, kind))
+            if not ok:
+                want = "persona keys as one text, comma-separated ('blind,deaf')" if f.name == "personas" else type_name(kind)
+                raise SettingTypeError(f.name, f"must be {want}, got {given(value)}")
+
     def runs_speed_up(self) -> bool:
         """Whether run_study runs the speed-up (algorithm 5): it holds each persona out of the others."""
         return not self.train_only and len(self.persona_list()) >= 2
@@ -121,6 +135,7 @@ class StudySettings:
         run_study decides, lspi without train_only; a sweep's cells do not). `spell` names a setting in
         the message (the CLI's `--reuse-last`). `given`: the settings the user gave (the options on the
         command line, the keys of a sweep's cell), for those that only some algorithm takes."""
+        self.check_kinds()
         personas = self.persona_list()
         lo, hi = SEED_RANGE
         if not lo <= self.seed <= hi:
@@ -255,6 +270,11 @@ class SettingError(OptionError):
     def __init__(self, key: str, what: str):
         super().__init__(what, key)
         self.key = key
+
+
+class SettingTypeError(SettingError, TypeError):
+    """A study setting of the wrong kind (StudySettings.check_kinds): a SettingError and a TypeError
+    (pairplay/arguments.py's rule)."""
 
 
 @dataclass
@@ -500,7 +520,11 @@ def run_study(args: StudySettings, out: Path, progress_bar: Callable = _no_bar, 
     OutputError, before any work, if `out` exists with files in it and not `force`; with `force`,
     an earlier study's files there that this one does not write are removed (STUDY_OUTPUTS); an
     interrupted study leaves nothing. Raises SettingError (an OptionError), before any work, for a
-    setting that cannot run as asked (StudySettings.check)."""
+    setting that cannot run as asked (StudySettings.check); ArgumentError for `args` that are no
+    StudySettings, `out` no path, `force` not True or False (pairplay/arguments.py)."""
+    instance_argument(args, StudySettings, "run_study", "args", "a StudySettings (pairplay.StudySettings(seed=1, ...))")
+    out = path_argument(out, "run_study", "out")
+    force = flag_argument(force, "run_study", "force")
     personas = args.check()
     return_freed_memory()
     with output_folder(out, force, owned=STUDY_OUTPUTS, manifest=STUDY_MANIFEST) as tmp:

@@ -36,6 +36,7 @@ from pathlib import Path
 from typing import Generic, TypeVar
 
 import msgspec
+from pairplay.arguments import flag_argument, instance_argument, path_argument
 from pairplay.numbers import counted, type_name
 
 T = TypeVar("T")
@@ -151,6 +152,7 @@ class JsonFileKind(Generic[T]):
         # the format and version this pairplay writes: the Struct's defaults (its `format` and `version`)
         defaults = {f.name: f.default for f in msgspec.structs.fields(struct)}
         self.format, self.version = defaults["format"], defaults["version"]
+        self.noun = what.removesuffix(" file").replace("-", "_")  # its functions: read_policy, write_user_model
 
     def encode(self, value: T) -> bytes:
         return msgspec.json.format(self._encoder.encode(value), indent=1) + b"\n"
@@ -191,12 +193,16 @@ class JsonFileKind(Generic[T]):
         with `force` (OutputError otherwise; pairplay.outputs)."""
         from pairplay.outputs import write_bytes
 
-        write_bytes(path, self.encode(value), force)
+        function = f"write_{self.noun}"
+        path = path_argument(path, function)  # (write_policy(policy, path) wrote nothing and said pathlib's TypeError)
+        instance_argument(value, self._struct, function, "value", f"a {self._struct.__name__}")
+        write_bytes(path, self.encode(value), flag_argument(force, function, "force"))
 
     def read(self, path) -> T:
         """The checked value of the file at `path`; the kind's error if it cannot be read or used."""
+        path = path_argument(path, f"read_{self.noun}")
         try:
-            data = Path(path).read_bytes()
+            data = path.read_bytes()
         except OSError as exc:
             raise self.error(f"{path}: cannot read: {exc.strerror}") from None
         return self.decode(data, str(path))

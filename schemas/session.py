@@ -167,3 +167,22 @@ def lspi_overrides(config: LSPIConfig) -> dict[str, Union[float, int, bool]]:
 
 def _overrides(config, default) -> dict:
     return {f: getattr(config, f) for f in config.__struct_fields__ if getattr(config, f) != getattr(default, f)}
+
+
+def config_argument(config, function: str) -> SessionConfig:
+    """`config` handed to a public function (pairplay/arguments.py): ArgumentError unless it is a
+    SessionConfig whose every field is of its kind (msgspec's constructor checks none: rounds="20" or
+    True got through), InputError, naming the function, for one `validate` refuses."""
+    from pairplay.arguments import at, given, instance_argument
+    from pairplay.errors import ArgumentError, InputError
+    instance_argument(config, SessionConfig, function, "config", "a SessionConfig (pairplay.SessionConfig(session=..., ...))")
+    try:
+        msgspec.convert(msgspec.to_builtins(config), SessionConfig)
+    except (msgspec.ValidationError, TypeError) as exc:
+        from .jsonfile import in_words
+        raise ArgumentError(f"config.{in_words(exc, SessionConfig)}", at(function, "config")) from None
+    try:
+        config.validate()
+    except ValueError as exc:
+        raise InputError(f"config: {exc}", at(function, "config")) from None
+    return config

@@ -27,7 +27,8 @@ import logging
 from pairplay.errors import UserError
 from pairplay.schemas.events import decode_event, encode_event
 from pairplay.schemas.keys import alive_key, event_key
-from pairplay.schemas.session import SessionConfig
+from pairplay.arguments import path_argument
+from pairplay.schemas.session import SessionConfig, config_argument
 from pairplay.services.bus import CLOSE_TIMEOUT_S, Bus, BusOptions, Deadline, deadline_of
 from pairplay.services.forgery import ForgeryWatch
 from pairplay.services.game import GameLogic
@@ -85,7 +86,10 @@ def run_session(config: SessionConfig, path: str | Path, *, bus: Bus | None = No
 
     Stopped (SIGINT/SIGTERM, the caller's `stop`, a recording failure), every step
     of the shutdown shares one deadline (`stop.deadline`, services/bus.py), so
-    the process is done within `SHUTDOWN_S` of the signal, its recording finished."""
+    the process is done within `SHUTDOWN_S` of the signal, its recording finished.
+    A caller's `config` or `path` that cannot run is refused first (schemas/session.py config_argument)."""
+    config = config_argument(config, "run_session")
+    path = path_argument(path, "run_session")
     # the session's process is the router its external services connect to as clients
     given = bus
     if given is None:

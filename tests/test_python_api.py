@@ -1,0 +1,178 @@
+"""The public Python API says a caller's mistake in one line, and the README's script runs as written.
+
+A new user's trial (README "Scripting pairplay from Python") met raw errors from deep inside for
+ordinary mistakes: read_log("nope.mcap") a FileNotFoundError, users_from_policies(paths) and
+combine(["x"]) AttributeErrors, run_study(StudySettings(rounds="20")) a comparison's TypeError,
+fold_events([1, 2]) an empty fold, run_study into a folder of an earlier run "--force replaces"
+(in Python the argument is force=True). Every function of `pairplay.API` gets mistakes here
+(pairplay/arguments.py's rule: a UserError, one line, what and where; the wrong kind also a
+TypeError, the right kind unusable also a ValueError). The README's script is run from its text,
+twice (the second run replaced nothing before force=True), so it cannot drift.
+"""
+
+from __future__ import annotations
+
+import re
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+
+import pairplay
+from pairplay.errors import OutputError, UserError
+
+ROOT = Path(__file__).resolve().parents[1]
+SAMPLES = ROOT / "recordings" / "samples"
+REC = SAMPLES / "sim-helmut-fmt2.mcap"
+
+
+@pytest.fixture(scope="module")
+def made(tmp_path_factory):
+    """What a script has in hand: a read policy, users, a merge, a recording's turns; a folder to write in."""
+    tmp = tmp_path_factory.mktemp("api")
+    policy = pairplay.rebuild_recording(REC).policy
+    users, _ = pairplay.users_from_policies([policy], seed=0)
+    (tmp / "earlier").mkdir()
+    (tmp / "earlier" / "notes.txt").write_text("an earlier run's\n")
+    (tmp / "policy.json").write_text("{}\n")
+    (tmp / "text.mcap").write_text("not a recording\n")
+    return SimpleNamespace(tmp=tmp, policy=policy, users=users, merged=pairplay.combine(users),
+                           turns=pairplay.read_turns(REC))
+
+
+S, C = pairplay.StudySettings, pairplay.SessionConfig
+SIM = dict(session="api", seed=1, participant="sim:blind", persona="blind")
+
+# (function, call, what the error is besides a UserError, words its line holds)
+CASES = [
+    ("read_log", lambda m: pairplay.read_log(m.tmp / "nope.mcap"), ValueError, "no such recording"),
+    ("read_log", lambda m: pairplay.read_log(m.tmp), ValueError, "a folder, not a recording"),
+    ("read_log", lambda m: pairplay.read_log(None), TypeError, "path must be a path"),
+    ("read_log", lambda m: pairplay.read_log(42), TypeError, "(pairplay.read_log(path))"),
+    ("verify_recording", lambda m: pairplay.verify_recording(m.tmp / "nope.mcap"), ValueError, "no such recording"),
+    ("verify_recording", lambda m: pairplay.verify_recording(m.tmp / "text.mcap"), ValueError, "not an MCAP file"),
+    ("verify_recording", lambda m: pairplay.verify_recording(None), TypeError, "(pairplay.verify_recording(path))"),
+    ("read_turns", lambda m: pairplay.read_turns(None), TypeError, "(pairplay.read_turns(path))"),
+    ("rebuild_recording", lambda m: pairplay.rebuild_recording(3), TypeError, "(pairplay.rebuild_recording(path))"),
+    ("recover", lambda m: pairplay.recover(None), TypeError, "(pairplay.recover(path))"),
+    ("recover", lambda m: pairplay.recover(REC, m.tmp / "r.mcap", force="no"), TypeError, "force must be True or False"),
+    ("fold_events", lambda m: pairplay.fold_events([1, 2]), TypeError, "events[0] must be an event"),
+    ("fold_events", lambda m: pairplay.fold_events(None), TypeError, "(pairplay.fold_events(events))"),
+    ("fold_events", lambda m: pairplay.fold_events(pairplay.read_log(REC).events), TypeError,
+     "e.event for e in log.events"),
+    ("read_policy", lambda m: pairplay.read_policy(None), TypeError, "(pairplay.read_policy(path))"),
+    ("read_policy", lambda m: pairplay.read_policy(m.tmp / "nope.json"), ValueError, "cannot read"),
+    ("write_policy", lambda m: pairplay.write_policy(m.policy, m.tmp / "p.json"), TypeError,
+     "(pairplay.write_policy(path))"),
+    ("write_policy", lambda m: pairplay.write_policy(m.tmp / "p.json", "x"), TypeError, "value must be a PolicyFile"),
+    ("write_policy", lambda m: pairplay.write_policy(m.tmp / "policy.json", m.policy), OutputError,
+     "exists; force=True replaces it"),
+    ("read_user_model", lambda m: pairplay.read_user_model(None), TypeError, "(pairplay.read_user_model(path))"),
+    ("users_from_policies", lambda m: pairplay.users_from_policies([], seed=0), ValueError, "policies is empty"),
+    ("users_from_policies", lambda m: pairplay.users_from_policies([REC], seed=0), TypeError,
+     "read it first: pairplay.read_policy(path)"),
+    ("users_from_policies", lambda m: pairplay.users_from_policies([m.policy], seed=True), TypeError,
+     "seed must be an integer, got bool"),
+    ("users_from_policies", lambda m: pairplay.users_from_policies([m.policy], 0, exclude=[m.policy.participant]),
+     ValueError, "excluded"),
+    ("extract_info", lambda m: pairplay.extract_info(None), TypeError, "(pairplay.extract_info(policies))"),
+    ("extract_info", lambda m: pairplay.extract_info(np.full(24, 88)), ValueError, "outside 0..87"),
+    ("combine", lambda m: pairplay.combine(["x"]), TypeError, "users[0] must be a User"),
+    ("combine", lambda m: pairplay.combine([]), ValueError, "users is empty"),
+    ("combine", lambda m: pairplay.combine(None), TypeError, "(pairplay.combine(users))"),
+    ("combined_policy_file", lambda m: pairplay.combined_policy_file(m.users, m.users, [], 0), TypeError,
+     "merged must be a Combined"),
+    ("combined_policy_file", lambda m: pairplay.combined_policy_file(m.merged, m.users, [], 1.0), TypeError,
+     "seed must be an integer"),
+    ("fit_user", lambda m: pairplay.fit_user([], m.turns.config.observed_source), TypeError, "obs must be Observations"),
+    ("fit_user", lambda m: pairplay.fit_user(m.turns.observations, "bogus"), ValueError, "source must be one of"),
+    ("run_arms", lambda m: pairplay.run_arms("blind", [], [0], 10), TypeError, "persona must be a Persona"),
+    ("run_study", lambda m: pairplay.run_study({"seed": 1}, m.tmp / "s"), TypeError, "args must be a StudySettings"),
+    ("run_study", lambda m: pairplay.run_study(S(rounds="20"), m.tmp / "s"), TypeError, "must be an integer, got str '20' (rounds)"),
+    ("run_study", lambda m: pairplay.run_study(S(seed=1.5), m.tmp / "s"), TypeError, "must be an integer"),
+    ("run_study", lambda m: pairplay.run_study(S(personas=["blind"]), m.tmp / "s"), TypeError, "comma-separated"),
+    ("run_study", lambda m: pairplay.run_study(S(train_only=1), m.tmp / "s"), TypeError, "true or false"),
+    ("run_study", lambda m: pairplay.run_study(S(personas="nobody"), m.tmp / "s"), ValueError, "unknown persona"),
+    ("run_study", lambda m: pairplay.run_study(S(personas="blind", games=1, rounds=10), None), TypeError,
+     "(pairplay.run_study(out))"),
+    ("run_study", lambda m: pairplay.run_study(S(personas="blind", games=1, rounds=10), m.tmp / "earlier"),
+     OutputError, "exists and is not empty; force=True replaces"),
+    ("run_session", lambda m: pairplay.run_session({"session": "x"}, m.tmp / "x.mcap"), TypeError,
+     "config must be a SessionConfig"),
+    ("run_session", lambda m: pairplay.run_session(C(**SIM, rounds="20"), m.tmp / "x.mcap"), TypeError,
+     "config.rounds: must be an integer"),
+    ("run_session", lambda m: pairplay.run_session(C(**SIM, rounds=True), m.tmp / "x.mcap"), TypeError,
+     "config.rounds: must be an integer"),
+    ("run_session", lambda m: pairplay.run_session(C(**SIM, rounds=-1), m.tmp / "x.mcap"), ValueError,
+     "rounds must be >= 1"),
+    ("run_session", lambda m: pairplay.run_session(C(**SIM, rounds=5), None), TypeError,
+     "(pairplay.run_session(path))"),
+]
+
+
+@pytest.mark.parametrize("function, call, kind, words", CASES,
+                         ids=[f"{c[0]}-{i}" for i, c in enumerate(CASES)])
+def test_a_mistake_is_one_line_saying_what_and_where(made, function, call, kind, words):
+    with pytest.raises(UserError) as caught:
+        call(made)
+    err = caught.value
+    line = str(err)
+    assert isinstance(err, kind), f"{type(err).__name__} is no {kind.__name__}: {line}"
+    assert "\n" not in line and words in line, line
+    assert "--" not in line, f"a verb's option in the Python API's words: {line}"  # force=True, not --force
+    # where: the function and argument, the file or the setting (a JSON file's errors begin with the file)
+    assert err.where or line.startswith(f"{made.tmp}/"), f"says no where: {line}"
+
+
+def test_every_function_of_the_api_gets_a_mistake():
+    functions = {name for name in pairplay.API if not isinstance(getattr(pairplay, name), type)}
+    assert functions - {c[0] for c in CASES} == set()
+
+
+def test_the_functions_still_work(made):
+    """The checks refuse mistakes only: what the README does goes through (a policy's array, a tuple of users)."""
+    assert pairplay.extract_info(made.users[0].policy).info.compared_states == 23
+    assert len(pairplay.combine(tuple(made.users)).policy) == 24
+    assert pairplay.fold_events(e.event for e in pairplay.read_log(REC).events).whole_rounds()
+    assert pairplay.combined_policy_file(made.merged, made.users, ["a"], np.int64(1)).seed == 1
+
+
+def test_gym_refuses_a_bool_for_an_action():
+    """env.step(True) was action 1 and the vector env took a bool array, where reset(seed=True) was refused."""
+    import gymnasium
+    import pairplay.gym  # noqa: F401  (registers pairplay/Memory-v0)
+    env = gymnasium.make("pairplay/Memory-v0", persona="deaf")
+    env.reset(seed=1)
+    for action in (True, False, np.bool_(True)):
+        with pytest.raises(ValueError, match="integers 0..87"):
+            env.step(action)
+    env.step(np.int64(35))  # numpy's integers are integers
+    vec = gymnasium.make_vec("pairplay/Memory-v0", num_envs=4, vectorization_mode="vector_entry_point", persona="blind")
+    vec.reset(seed=0)
+    for actions in (np.array([True, False, True, True]), [True, 1, 2, 3]):
+        with pytest.raises(ValueError, match="one per game"):
+            vec.step(actions)
+    vec.step(np.array([1, 2, 3, 4]))
+    for seed in (True, np.bool_(False)):
+        with pytest.raises(TypeError):
+            env.reset(seed=seed)
+
+
+def readme_script() -> str:
+    section = (ROOT / "README.md").read_text().split("## Scripting pairplay from Python", 1)[1].split("\n## ", 1)[0]
+    return re.search(r"```python\n(.*?)```", section, re.S)[1]
+
+
+def test_the_readme_script_runs_as_written_twice(tmp_path):
+    """From a clone's folder (here: one holding only recordings/samples), as the README says; the second run
+    replaces the first's study (it stopped on "exists and is not empty")."""
+    shutil.copytree(SAMPLES, tmp_path / "recordings" / "samples")
+    (tmp_path / "script.py").write_text(readme_script())
+    for run in (1, 2):
+        done = subprocess.run([sys.executable, "script.py"], cwd=tmp_path, capture_output=True, text=True, timeout=600)
+        assert done.returncode == 0, f"run {run}: {done.stderr[-2000:]}"
+        assert "'focus'" in done.stdout and "learned/oracle" in done.stdout, done.stdout
