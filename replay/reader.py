@@ -262,8 +262,10 @@ def said_source_lost(recovered: dict[str, str]) -> str:
         earlier = []
     if source and earlier:
         source += f", itself recovered from {' and '.join(reversed(earlier))}"
-    # (a restarted recorder's file records its predecessor's losses so too: services/recorder.py `earlier_losses`)
-    how = "continues a damaged recording" if recovered.get("continued") else "recovered from a damaged file"
+    # (a restarted recorder's file records its predecessor's losses so too: services/recorder.py `earlier_losses`;
+    # and a live recorder what the bus lost that no refill gave back, `bus` "true": `Recorder._note_bus_lost`)
+    how = "continues a damaged recording" if recovered.get("continued") else \
+        "events lost on the bus that no refill gave back" if recovered.get("bus") == "true" else "recovered from a damaged file"
     head = f"{how}{f' ({source})' if source else ''}"
     if not parts:  # recovered before recover said what each part lost
         return f"{head} whose damaged parts are lost"
