@@ -687,7 +687,10 @@ class Recorder:
                      ", ".join(answered) or "nobody")
             # every source with a hole, answered or not (one that did not answer in time under load may next time:
             # before, only those that answered were asked again, and a hole of one that had not stayed unasked)
-            holes = [src for src, n in self._contiguous(seen).items() if n < max(seen[src])]
+            # (a head not held, of a source that joined before the recorder, only of one that answers: it had none)
+            between = _holes(seen)
+            holes = [src for src, n in self._contiguous(seen).items()
+                     if src in between or (src in answered and n < max(seen[src]))]
             if holes and self._refills_left > 0:  # what was still on its way when they answered: ask again
                 self._refills_left -= 1
                 self._refill_at = time.monotonic() + min(REFILL_BACKOFF_S, RELINK_SETTLE_S * 2 ** tries)
