@@ -31,6 +31,39 @@ def _round(session: str, seq: int) -> tuple[str, bytes]:
     return event_key(session, "game", "RoundEnded"), encode_event(e)
 
 
+def _start(recorder: Recorder, game_bus: Bus, outbox: Outbox, session: str, answers: bool,
+           stop: threading.Event) -> threading.Thread:
+    """The recorder started and running; the game answering its refill if `answers`; once the game sees it."""
+    recorder.start()
+    thread = threading.Thread(target=recorder.run, args=(stop,), daemon=True)
+    thread.start()
+    if answers:
+        game_bus.queryable(query_key(session, "game", SENT_QUERY), lambda q: answer_sent(outbox, "game", q))
+    _wait_for_recorder(game_bus, session)
+    return thread
+
+
+def _wait_for_recorder(game_bus: Bus, session: str) -> None:
+    deadline = time.monotonic() + 30
+    while alive_key(session, "recorder") not in game_bus.alive_now(alive_key(session, "*"), timeout_s=0.5):
+        assert time.monotonic() < deadline, "the game never saw the recorder"
+
+
+def _rounds(recorder: Recorder) -> int:
+    with recorder._lock:
+        return sum(1 for k, _ in recorder.kept if k.endswith("/RoundEnded"))
+
+
+def _close(recorder: Recorder, thread: threading.Thread, stop: threading.Event, rounds: int, wait_s: float) -> None:
+    """The recorder closed once it holds `rounds` RoundEnded, or `wait_s` from now."""
+    until = time.monotonic() + wait_s
+    while time.monotonic() < until and _rounds(recorder) < rounds:
+        time.sleep(0.05)
+    stop.set()
+    thread.join(10)
+    assert recorder.close() is None
+
+
 def _play(tmp_path, session: str, answers: bool, lost_from_record: bool, wait_s: float):
     """Events 1-10 of the game, 4-6 lost on the way; `answers`: the game answers the refill;
     `lost_from_record`: they are not in its record of what it sent either (a bounded record)."""
@@ -41,14 +74,7 @@ def _play(tmp_path, session: str, answers: bool, lost_from_record: bool, wait_s:
     game_bus = Bus(BusOptions(mode="client", connect=[endpoint]))
     outbox = Outbox(game_bus, "game", keep=True)
     try:
-        recorder.start()
-        thread = threading.Thread(target=recorder.run, args=(stop,), daemon=True)
-        thread.start()
-        if answers:
-            game_bus.queryable(query_key(session, "game", SENT_QUERY), lambda q: answer_sent(outbox, "game", q))
-        deadline = time.monotonic() + 30
-        while alive_key(session, "recorder") not in game_bus.alive_now(alive_key(session, "*"), timeout_s=0.5):
-            assert time.monotonic() < deadline, "the recorder never came up"
+        thread = _start(recorder, game_bus, outbox, session, answers, stop)
         for seq in range(1, 11):
             key, payload = _round(session, seq)
             if 4 <= seq <= 6:  # lost on the way (a put a closing link dropped)
@@ -57,16 +83,7 @@ def _play(tmp_path, session: str, answers: bool, lost_from_record: bool, wait_s:
                 continue
             outbox.send(key, payload)
         assert outbox.flush(10)
-        until = time.monotonic() + wait_s
-        while time.monotonic() < until:
-            with recorder._lock:
-                n = sum(1 for k, _ in recorder.kept if k.endswith("/RoundEnded"))
-            if n == 10:
-                break
-            time.sleep(0.05)
-        stop.set()
-        thread.join(10)
-        assert recorder.close() is None
+        _close(recorder, thread, stop, 10, wait_s)
     finally:
         outbox.close(1.0)
         game_bus.close()
@@ -125,19 +142,12 @@ def test_an_outage_of_a_plain_bus_at_the_end_is_refilled_or_its_tail_recorded_as
         stop = threading.Event()
         outbox = Outbox(game_bus, "game", keep=True)
         try:
-            recorder.start()
-            thread = threading.Thread(target=recorder.run, args=(stop,), daemon=True)
-            thread.start()
-            if answers:
-                game_bus.queryable(query_key(session, "game", SENT_QUERY), lambda q: answer_sent(outbox, "game", q))
-            deadline = time.monotonic() + 30
-            while alive_key(session, "recorder") not in game_bus.alive_now(alive_key(session, "*"), timeout_s=0.5):
-                assert time.monotonic() < deadline, "the recorder never came up"
+            thread = _start(recorder, game_bus, outbox, session, answers, stop)
             for seq in range(1, 6):
                 outbox.send(*_round(session, seq))
             assert outbox.flush(10)
             deadline = time.monotonic() + 10
-            while sum(1 for k, _ in list(recorder.kept) if k.endswith("/RoundEnded")) < 5:
+            while _rounds(recorder) < 5:
                 assert time.monotonic() < deadline
                 time.sleep(0.02)
             router.close()  # the router goes ...
@@ -146,15 +156,8 @@ def test_an_outage_of_a_plain_bus_at_the_end_is_refilled_or_its_tail_recorded_as
             assert outbox.flush(10)
             time.sleep(0.5)
             router = Bus(listen)  # ... and comes back on its port
-            deadline = time.monotonic() + 20  # both clients are back: the game sees the recorder's token again
-            while alive_key(session, "recorder") not in game_bus.alive_now(alive_key(session, "*"), timeout_s=0.5):
-                assert time.monotonic() < deadline, "the recorder's client never came back"
-            deadline = time.monotonic() + (10 if answers else 0)
-            while time.monotonic() < deadline and sum(1 for k, _ in list(recorder.kept) if k.endswith("/RoundEnded")) < 8:
-                time.sleep(0.05)
-            stop.set()
-            thread.join(10)
-            assert recorder.close() is None
+            _wait_for_recorder(game_bus, session)  # both clients are back: the game sees the recorder's token again
+            _close(recorder, thread, stop, 8, 10 if answers else 0)
         finally:
             outbox.close(1.0)
             for bus in (game_bus, rec_bus, router):
