@@ -78,6 +78,7 @@ import msgspec
 from pairplay import __version__
 from pairplay.errors import OutputError
 from pairplay.livelock import LIVE, hold, is_live, release
+from pairplay.numbers import counted
 from pairplay.outputs import REPLACED, set_aside_of
 from pairplay.replay.reader import LOST_AT_KEY, RECOVERED, _listed, carry_recovery, said_source_lost
 from pairplay.replay.wal import JournalWriter, NotAJournal, read_journal, wal_path
@@ -778,11 +779,11 @@ class Recorder:
                 n = b - a - 1
                 count += n
                 what = f"seq {a + 1}" if n == 1 else f"seqs {a + 1}-{b - 1}"
-                parts.append(f"{source} {what} ({n} event{'s' if n > 1 else ''})")
+                parts.append(f"{source} {what} ({counted(n, 'event')})")
                 marks.append(where.get((source, b), len(kept)))
             seqs = seen[source]
             if source in tails:
-                parts.append(f"{source} events after seq {max(seqs)} (how many not known: the link to the router "
+                parts.append(f"{source}: what it published after seq {max(seqs)} (how many not known: the link to the router "
                              "was down, and no refill was answered after it before the recording closed)")
                 marks.append(len(kept))
         if not parts:

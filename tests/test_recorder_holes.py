@@ -168,4 +168,4 @@ def test_an_outage_of_a_plain_bus_at_the_end_is_refilled_or_its_tail_recorded_as
             assert seqs == list(range(1, 9)) and not log.missing, log.missing  # before: 1-5, the file whole
         else:
             assert seqs == [1, 2, 3, 4, 5]
-            assert "game events after seq 5 (how many not known" in log.missing, log.missing
+            assert "game: what it published after seq 5 (how many not known" in log.missing, log.missing
