@@ -299,7 +299,8 @@ def said_source_lost(recovered: dict[str, str]) -> str:
         earlier = []
     if source and earlier:
         source += f", itself recovered from {' and '.join(reversed(earlier))}"
-    # (a restarted recorder's file records its predecessor's losses so too: services/recorder.py `earlier_losses`)
+    # (a restarted recorder's file records its predecessor's losses so too: services/recorder.py `earlier_losses`;
+    # and a live recorder what the bus lost that no refill gave back, `bus` "true": `Recorder._note_bus_lost`)
     how = said_source_made(recovered)
     head = f"{how}{f' ({source})' if source else ''}"
     if not parts:  # recovered before recover said what each part lost
@@ -318,8 +319,10 @@ def said_source(recovered: dict[str, str]) -> str:
 
 def said_source_made(recovered: dict[str, str]) -> str:
     """How a recovered file was made of a damaged one, as `said_source_lost` starts: "continues a damaged
-    recording" or "recovered from a damaged file"."""
-    return "continues a damaged recording" if recovered.get("continued") else "recovered from a damaged file"
+    recording", "events lost on the bus that no refill gave back" (a live recorder's, `bus` "true") or
+    "recovered from a damaged file"."""
+    return "continues a damaged recording" if recovered.get("continued") else \
+        "events lost on the bus that no refill gave back" if recovered.get("bus") == "true" else "recovered from a damaged file"
 
 
 def said_source_cut(recovered: dict[str, str]) -> str:

@@ -46,7 +46,14 @@ LINK_METADATA) and, once the link is back and Zenoh's recovery has had
 `RELINK_SETTLE_S`, or at once when Zenoh reports messages lost for good, asks the
 services for what they published after the last event of theirs it holds without
 a gap (the restarted recorder's refill): what Zenoh could not bring back is
-written then, and a RecordingGap (`earlier_file` "": this file) records it.
+written then, and a RecordingGap (`earlier_file` "": this file) records it. The link is watched on
+every bus, not only a recovering one (a plain bus loses what its queue held when a link closes under a
+full queue, and Zenoh says nothing: test_netns lost 9 game events so, the file whole), and a jump in a
+source's sequence numbers asks for the refill too. It is asked again while a hole is left (`REFILLS`,
+each later and with a longer timeout: `REFILL_BACKOFF_S`), and what no refill gave back (the refills
+given up, a service that did not answer or no longer had them, a recording closed before the refill
+after an outage) is recorded when the file closes, as `pairplay recover` records a damaged file's
+losses (reader.RECOVERED, `bus` "true": `_note_bus_lost`): every verb then says the session is partial.
 A service that leaves the bus before the session has ended (its liveliness token
 goes: a crash, a kill, its host's link) is an absence, recorded when it comes back
 (metadata ABSENCE_METADATA: `service`, `left_ns`, `back_ns`, `absent_ms`) or, if it
@@ -71,6 +78,7 @@ import msgspec
 from pairplay import __version__
 from pairplay.errors import OutputError
 from pairplay.livelock import LIVE, hold, is_live, release
+from pairplay.numbers import counted
 from pairplay.outputs import REPLACED, set_aside_of
 from pairplay.replay.reader import LOST_AT_KEY, RECOVERED, _listed, carry_recovery, said_source_lost
 from pairplay.replay.wal import JournalWriter, NotAJournal, read_journal, wal_path
@@ -121,6 +129,11 @@ LINK_SLACK_NS = 500_000_000  # a token may be reported gone this long before our
 RELINK_SETTLE_S = 4 * HEARTBEAT_S  # after the link is back: Zenoh's recovery first, then the refill
 REFILL_QUIET_S = 3.0  # after a refill, a message repeating one refilled is skipped quietly (it was in flight)
 REFILLS = 5  # a gap's refill is asked again this often while the file still has a hole below a source's last event
+# each time later (RELINK_SETTLE_S doubled, at most this: ~23 s of asking in all) and with a longer timeout (at most
+# REFILL_TIMEOUT_S * 2): at load 20 a service's answer came after the first ones, and the recorder gave up silently
+REFILL_BACKOFF_S = 8.0
+REFILL_TIMEOUT_S = 3.0
+BUS_LOST = "lost on the bus"  # what the RECOVERED record of holes no refill gave back says (`_note_bus_lost`)
 _REFILL = object()  # inbox control item: Zenoh reported messages lost for good
 
 
@@ -446,6 +459,18 @@ def same_live_session(bus: Bus, session: str, path: Path, timeout_s: float = 3.0
     return answered > 0
 
 
+def _holes(seen: dict[str, set[int]]) -> dict[str, list[tuple[int, int]]]:
+    """Per source with a hole, each (a, b): seqs a and b are held, none between (a source's events before its
+    first one held are not counted: a recorder that joined late never had them)."""
+    out: dict[str, list[tuple[int, int]]] = {}
+    for source, seqs in seen.items():
+        ordered = sorted(seqs)
+        found = [(a, b) for a, b in zip(ordered, ordered[1:]) if b > a + 1]
+        if found:
+            out[source] = found
+    return out
+
+
 def _fsync(path: Path) -> None:
     """Push a closed file's data to the disk (before its journal goes)."""
     fd = os.open(path, os.O_RDONLY)
@@ -515,6 +540,13 @@ class Recorder:
         self._quiet_until_ns = 0
         self._link_down = False
         self._refills_left = REFILLS
+        self._outage_pending = False  # a link outage no refill has been answered after yet (its tail not known)
+        self._last_seq: dict[str, int] = {}  # per source, its highest seq written (a jump past it: a hole, refilled)
+        self._recv_ns: dict[str, int] = {}  # per source, when its latest event was taken (a tail lost: `_tails`)
+        self._back_ns = 0  # when the link to the router last came back from an outage
+        self._earlier_recorded = False  # what the earlier recordings lost is recorded in the file (_note_earlier_lost)
+        self._copied_top: dict[str, int] = {}  # per source, its highest seq copied from the earlier recordings
+        self._held: dict[str, set[int]] = {}  # per source but ours, the seqs written (`_seen`: none decoded again)
         self.links: list[dict] = []  # the outages recorded (LINK_METADATA)
         self._ended_ns: int | None = None
         self._absent: dict[str, int] = {}  # service -> when its token went, until it is back (_alive)
@@ -564,6 +596,7 @@ class Recorder:
             self._guarded(self.writer.add_metadata, JOURNAL_METADATA, journal)
             log.info("recorder: %s events taken from %s (%s refused)", journal.get("taken", 0),
                      journal["earlier_journal"], journal.get("refused", 0))
+        self._copied_top = {source: max(seqs) for source, seqs in self._held.items()}
         self.continued = {"earlier_file": earlier.name, "copied": copied, "last_copied_ns": last_ns}
         log.info("recorder: continuing %s (%d events) in %s", earlier, copied, self.path)
 
@@ -583,6 +616,7 @@ class Recorder:
             log.info("recorder: what the earlier recording lost was refilled by the services")
             return
         self._guarded(self.writer.add_metadata, RECOVERED, lost)
+        self._earlier_recorded = True  # its holes are said there: not again as the bus's (`_note_bus_lost`)
         log.warning("recorder: continuing a session whose earlier recording lost messages: %s", said_source_lost(lost))
 
     def _copy(self, key: str, payload: bytes, log_time_ns: int) -> bool:
@@ -598,14 +632,9 @@ class Recorder:
         return True
 
     def _seen(self) -> dict[str, set[int]]:
-        """Per source, the sequence numbers the file holds."""
-        seen: dict[str, set[int]] = {}
-        with self._lock:
-            for key, _ in self.kept:
-                source = key.split("/")[2]
-                if source != self.name:
-                    seen.setdefault(source, set()).add(decode_event(_).seq)
-        return seen
+        """Per source, the sequence numbers the file holds (kept as they are written: `record`, `_fill_hole`;
+        before, every event in the file was decoded again for each refill and the close)."""
+        return {source: set(seqs) for source, seqs in self._held.items()}
 
     def _contiguous(self, seen: dict[str, set[int]] | None = None) -> dict[str, int]:
         """Per source, the last sequence number up to which the file has every event (a source's
@@ -619,7 +648,7 @@ class Recorder:
             out[source] = n
         return out
 
-    def refill(self, timeout_s: float = 3.0, since_ns: int | None = None) -> None:
+    def refill(self, timeout_s: float | None = None, since_ns: int | None = None) -> None:
         """Ask every service for what it published after the file's last event of it without a gap
         (a restarted recorder: the earlier file's), write that, then record the gap (RecordingGap).
         `since_ns`: a gap in this file's own stream (the link to the router was down from then, or
@@ -627,6 +656,8 @@ class Recorder:
         if (self.continued is None and since_ns is None) or self.bus is None:
             return
         resumed_ns = self.clock()
+        tries = REFILLS - self._refills_left  # asked again: a loaded service may answer late (REFILL_BACKOFF_S)
+        timeout_s = timeout_s if timeout_s is not None else REFILL_TIMEOUT_S * min(2, 1 + tries)
         seen = self._seen()
         sources = self._contiguous(seen)
         after = ",".join(f"{s}:{n}" for s, n in sorted(sources.items()))
@@ -651,21 +682,32 @@ class Recorder:
         self._overlap = len(self.inbox)  # what came meanwhile may repeat the refill: no rejections for that
         self._quiet_until_ns = self.clock() + int(REFILL_QUIET_S * 1e9)  # nor for what was still on its way
         if since_ns is not None:
+            if answered and not self._link_down:
+                self._outage_pending = False  # what each answer holds is known; a hole left is counted at the close
             log.info("recorder: after the gap from %d, %d events refilled from %s", since_ns, refilled,
                      ", ".join(answered) or "nobody")
-            holes = [src for src, n in self._contiguous(seen).items() if src in answered and n < max(seen[src])]
+            # every source with a hole, answered or not (one that did not answer in time under load may next time:
+            # before, only those that answered were asked again, and a hole of one that had not stayed unasked)
+            # (a head not held, of a source that joined before the recorder, only of one that answers: it had none)
+            between = _holes(seen)
+            holes = [src for src, n in self._contiguous(seen).items()
+                     if src in between or (src in answered and n < max(seen[src]))]
             if holes and self._refills_left > 0:  # what was still on its way when they answered: ask again
                 self._refills_left -= 1
-                self._refill_at, self._link_lost_ns = time.monotonic() + RELINK_SETTLE_S, since_ns
+                self._refill_at = time.monotonic() + min(REFILL_BACKOFF_S, RELINK_SETTLE_S * 2 ** tries)
+                self._link_lost_ns = since_ns
             else:
+                if holes:  # given up: the file records the holes when it closes (`_note_bus_lost`), never silently
+                    log.warning("recorder: holes left after %d refills in %s: recorded as lost when the file closes",
+                                REFILLS + 1, ", ".join(holes))
                 self._refills_left = REFILLS
             if not refilled:
-                return  # Zenoh brought everything back: the outage is in LINK_METADATA
+                return answered  # Zenoh brought everything back: the outage is in LINK_METADATA
             gap = RecordingGap(earlier_file="", copied=0, last_copied_ns=Nanos(since_ns), resumed_ns=Nanos(resumed_ns),
                                refilled=refilled, refilled_from=sorted(answered),
                                unanswered=sorted(set(sources) - set(answered)))
             self._publish([gap])
-            return
+            return answered
         self._note_earlier_lost(not set(sources) - set(answered))  # unless this gave it back
         gap = RecordingGap(earlier_file=self.continued["earlier_file"], copied=self.continued["copied"],
                            last_copied_ns=Nanos(self.continued["last_copied_ns"]), resumed_ns=Nanos(resumed_ns),
@@ -673,6 +715,85 @@ class Recorder:
                            unanswered=sorted(set(sources) - set(answered)))
         self._publish([gap])
         log.info("recorder: gap recorded: %d events refilled from %s", refilled, ", ".join(answered) or "nobody")
+        return answered
+
+    def _last_refill(self, deadline: Deadline) -> list[str] | None:
+        """At close, the refill still due (an outage or a jump too recent to have been asked about, or one asked
+        again) is asked now, in what the close's deadline leaves: the sources that answered; None if none was due
+        or it could not be asked (the link down, no time left: then every source's tail is unknown)."""
+        if self.bus is None or self.failure is not None or (self._refill_at is None and self._link_lost_ns is None):
+            return None
+        if not self._bus_holes() and not self._tails():
+            return None  # (a jump that closed by itself, an outage after which every source was heard: nothing to ask)
+        left = deadline.left(FINISH_S, cap=REFILL_TIMEOUT_S)
+        if self._link_down or left < 0.05:
+            return None
+        since = self._link_lost_ns if self._link_lost_ns is not None else self.clock()
+        self._refill_at = self._link_lost_ns = None
+        self._refills_left = 0  # no asking again: the file closes
+        try:
+            return self.refill(timeout_s=left, since_ns=since)
+        except RecordingFailed:
+            return None
+
+    def _bus_holes(self) -> dict[str, list[tuple[int, int]]]:
+        """The holes in the file's sequence numbers (`_holes`) but those of the earlier recordings' losses when
+        the file records them (`_note_earlier_lost`: a hole that starts in what was copied of them)."""
+        holes = _holes(self._seen())
+        if self._earlier_recorded:
+            holes = {s: kept for s, h in holes.items()
+                     if (kept := [(a, b) for a, b in h if a >= self._copied_top.get(s, 0)])}
+        return holes
+
+    def _tails(self) -> list[str]:
+        """The sources whose last events may be lost with no hole to show it: after a link outage no refill
+        was answered after (`_outage_pending`), those not heard from since the link came back (all, if it is
+        down): what was on the closed link's way was their last. One heard since shows a loss as a hole."""
+        if not self._outage_pending:
+            return []
+        return sorted(s for s in self._held if self._link_down or self._recv_ns.get(s, 0) < self._back_ns)
+
+    def _note_bus_lost(self, due: bool, answered: list[str] | None) -> None:
+        """Record in the file what it lacks that no refill gave back (the refills gave up, a service did not
+        answer or no longer had them, the recording closed first), as `pairplay recover` records a damaged
+        file's losses (RECOVERED metadata, `bus` "true"), so every verb says the session is partial: every hole
+        in a source's sequence numbers (between its first and last event in the file), and, when a refill was
+        still `due` at the close and a source did not `answer` it (None: it could not be asked), that source's
+        events after its last one in the file, how many not known. Before, the refill gave up silently: a
+        recorder cut off for 5 s at load 20 lost 9 game events and the file said it was whole (test_netns)."""
+        seen = self._seen()
+        holes = self._bus_holes()
+        tails = [s for s in self._tails() if s not in (answered or ())] if due else []
+        if not holes and not tails:
+            return  # (the usual close: nothing decoded)
+        with self._lock:
+            kept = list(self.kept)
+        where: dict[tuple[str, int], int] = {}  # (source, seq) -> its message's index in the file
+        for i, (key, payload) in enumerate(kept):
+            source = key.split("/")[2]
+            if source in holes:
+                where.setdefault((source, decode_event(payload).seq), i)
+        parts, marks, count = [], [], 0
+        for source in sorted(seen):
+            for a, b in holes.get(source, ()):
+                n = b - a - 1
+                count += n
+                what = f"seq {a + 1}" if n == 1 else f"seqs {a + 1}-{b - 1}"
+                parts.append(f"{source} {what} ({counted(n, 'event')})")
+                marks.append(where.get((source, b), len(kept)))
+            seqs = seen[source]
+            if source in tails:
+                parts.append(f"{source}: what it published after seq {max(seqs)} (how many not known: the link to the router "
+                             "was down, and no refill was answered after it before the recording closed)")
+                marks.append(len(kept))
+        if not parts:
+            return
+        log.warning("recorder: not refilled, recorded as lost: %s", "; ".join(parts))
+        self._guarded(self.writer.add_metadata, RECOVERED, {
+            "source": self.path.name, "truncated": "false", "data_complete": "true", "bus": "true",
+            "reason": f"{BUS_LOST}, not refilled", "damaged": json.dumps([f"{BUS_LOST}: {p}" for p in parts]),
+            "lost": json.dumps(parts), "lost_count": str(count), "lost_chunks": "0",
+            LOST_AT_KEY: json.dumps(sorted(marks)), "messages": str(len(kept))})
 
     def _fill_hole(self, key: str, payload: bytes) -> bool:
         """Write a refilled event older than the last one of its key in the file (every check but
@@ -683,6 +804,7 @@ class Recorder:
         self._guarded(self.writer.write, key, payload, log_time_ns=self.clock(), sequence=0)
         with self._lock:
             self.kept.append((key, payload))
+        self._held.setdefault(verdict.event.source, set()).add(verdict.event.seq)
         return True
 
     @property
@@ -702,8 +824,10 @@ class Recorder:
         self.journal.start()
         self.bus.subscribe(session_keys(self.session), self.enqueue, self._on_miss, drain=True)
         self.bus.queryable(query_key(self.session, self.name, LOG_QUERY), self.inbox.control)
-        if self.bus.options.recovers:
-            self.bus.on_router_link(self._on_link)
+        # the link to the router watched on every bus: a plain one loses what its queue held when the link closes
+        # (a 5 s cut under load: test_netns); before, only a recovering bus, and such an outage passed for every
+        # service's absence, with no refill
+        self.bus.on_router_link(self._on_link)
         self.bus.watch_alive(alive_key(self.session, "*"), self._on_alive)
         self.bus.alive(alive_key(self.session, self.name))
         self.refill()
@@ -835,8 +959,15 @@ class Recorder:
     def _link(self, up: bool, router: str, at_ns: int) -> None:
         """The link to the router went (note when) or came back (record the outage, refill after
         Zenoh's own recovery has had its time)."""
+        if not up and self.ended and not self._link_down:
+            # the session's end recorded, then the router goes: the session's process (a `pairplay session` is
+            # the router) ended, not an outage: nothing to refill after it (test_netns: every source's tail
+            # was recorded as not known). A refill still due is asked at the close (`_last_refill`).
+            log.info("recorder: the router %s left after the session's end", router)
+            return
         self._link_down = not up
         if not up:
+            self._outage_pending = True
             if self._link_lost_ns is None:
                 self._link_lost_ns = at_ns
                 log.warning("recorder: lost the link to router %s", router)
@@ -851,6 +982,7 @@ class Recorder:
         self.links.append(outage)
         log.warning("recorder: the link to router %s is back after %s ms", router, outage["outage_ms"])
         self._guarded(self.writer.add_metadata, LINK_METADATA, outage)
+        self._back_ns = at_ns
         self._refill_at = time.monotonic() + RELINK_SETTLE_S
 
     def _alive(self, service: str, up: bool, at_ns: int) -> None:
@@ -905,6 +1037,16 @@ class Recorder:
             self._fail(f"{type(err).__name__}: {err}" if str(err) else type(err).__name__)
             raise RecordingFailed(self.failure) from err
         self.kept.append((key, payload))  # one append is atomic; readers copy it under self._lock
+        self._held.setdefault(event.source, set()).add(event.seq)
+        self._recv_ns[event.source] = received_ns
+        last = self._last_seq.get(event.source)
+        if last is None or event.seq > last:
+            self._last_seq[event.source] = event.seq
+            if last is not None and event.seq > last + 1 and self._refill_at is None and self.bus is not None:
+                # a jump: what is between was lost on the way (a link closed under a full queue loses what it
+                # held, with no word from Zenoh when the bus does not recover: test_netns), or is still on its
+                # way (another key): asked for once the way has had its time; refill asks only if a hole is left
+                self._refill_at = time.monotonic() + RELINK_SETTLE_S
         tag = type(event).__name__
         if tag == "SessionStarted":
             c = event.config  # a SessionConfig in the twin too (only Nanos fields differ)
@@ -1057,7 +1199,10 @@ class Recorder:
                 pass
         if self.failure is None:
             try:
+                due = self._outage_pending
+                answered = self._last_refill(deadline)
                 self._note_earlier_lost(False)  # (closed before its refill: what the earlier recordings lost, still)
+                self._note_bus_lost(due, answered)
                 self._guarded(self.writer.add_metadata, END_METADATA, {
                     "ended_ns": str(self.clock()), "session_ended": str(self.ended).lower(), "stopped_by": stopped_by,
                     "unrecorded_at_exit": str(unrecorded),

@@ -81,7 +81,7 @@ def test_four_hosts_and_5_s_cuts_of_the_robot_and_the_recorder_links(hosts, tmp_
     first = server.stdout.readline()
     recorder = subprocess.Popen(in_ns("recorder", *py, "run", "recorder", "--session", "ns1", "--out", str(tmp_path),
                                       "--connect", f"tcp/{LINKS['recorder'][0]}:7447"),
-                                stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, env=env)
+                                stdout=subprocess.DEVNULL, stderr=open(tmp_path / "recorder.log", "w"), env=env)
     robot = subprocess.Popen(in_ns("robot", *py, "robot", "--session", "ns1", "--robot", "virtual",
                                    "--connect", f"tcp/{LINKS['robot'][0]}:7447"),
                              stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, env=env)
