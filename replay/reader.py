@@ -314,6 +314,8 @@ def said_source(recovered: dict[str, str]) -> str:
     """The file a recovered one (its RECOVERED metadata) was made of, in words that fit what it is: "the recording
     it continues" (a restarted recorder's copy: services/recorder.py `earlier_losses`) or "the recording it was
     recovered from" (`pairplay recover`); verify said the latter of a continued file (a new user's trial)."""
+    if recovered.get("bus") == "true":  # a live recorder's own record of what the bus lost (netns)
+        return "this recording on the bus (no refill gave it back)"
     return "the recording it continues" if recovered.get("continued") else "the recording it was recovered from"
 
 

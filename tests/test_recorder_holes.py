@@ -113,6 +113,8 @@ def test_a_hole_no_refill_gives_back_is_recorded_as_lost_and_every_reader_says_s
         assert isinstance(log.events[at].event, ev.RoundEnded) and log.events[at].event.seq == 7
         result = verify_recording(log.path)
         assert not result.ok and "game seqs 4-6" in result.error
+        # in words that fit a live recorder's own file (not "the recording it was recovered from": the merge)
+        assert "recovered" not in result.reach and "this recording on the bus" in result.reach, result.reach
 
 
 def _free_port() -> int:
