@@ -210,6 +210,7 @@ class StudyData:
         self._lock = threading.RLock()
         self._hold: int | None = None
         self._stamp: tuple = ()
+        self._started_here: set[str] = set()  # the sessions of games this object journaled as started, not yet ended
         if writer:
             self._hold = self._take(writer)
         try:
@@ -351,6 +352,10 @@ class StudyData:
                 f.flush()
                 os.fsync(f.fileno())
             self.state.evolve(event)
+            if isinstance(event, j.GameStarted):  # a game this process runs (delete_participant's "running")
+                self._started_here.add(event.session)
+            elif isinstance(event, j.GameEnded):
+                self._started_here.discard(event.session)
             self.write_folder_manifest()
             return event
 
@@ -768,9 +773,13 @@ class StudyData:
         the report did not write: a user's notes may name them), is returned to be said."""
         with self._writing():
             self.participant(pid)
-            running = [g.session for g in self.games_of(pid) if g.ended is None]
+            # Running is what this process started and has not ended: holding the folder's writer lock (one writer
+            # per study folder), no other process can be running a game of it, so a game journaled as started
+            # and never ended was the game of a process that died (SIGKILL, a power cut) and is deleted with the
+            # rest. It was "running" for ever: nothing could end it, and the participant could not be erased.
+            running = [g.session for g in self.games_of(pid) if g.ended is None and g.session in self._started_here]
             if running:
-                raise StudyDataError(f"{pid} has a game running ({running[0]}): abort it first")
+                raise StudyDataError(f"{pid} has a game running ({running[0]}): abort it first", self.given)
             merged = self.merged_using(pid)
             files = self.files_of(pid)
             sessions = {g.session for g in self.games_of(pid)}

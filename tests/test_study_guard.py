@@ -185,3 +185,21 @@ def test_a_journal_without_the_study_files_hash_is_read_as_it_was(tmp_path):
                                                      time_ns=first.time_ns)) + b"".join(lines[1:]))
     (data.folder / "study.toml").write_bytes((data.folder / "study.toml").read_bytes() + b"\n# a note\n")
     assert list(StudyData(data.folder).state.participants) == ["p01"]
+
+
+def test_a_game_whose_process_died_does_not_stop_the_participants_deletion_but_a_running_one_does(tmp_path):
+    """trial16: `protocol pilot` SIGKILLed mid-game left a GameStarted without its GameEnded, and `participant
+    delete` refused for ever ("p02 has a game running ... abort it first"): no verb could end that game, and the
+    participant could not be erased. A writer holds the folder's lock, so no other process can run a game of it:
+    only a game this process started and has not ended is running."""
+    data = a_study(tmp_path, registered=2)
+    started = dict(phase="phase1", game=1, recording="recordings/x.mcap")
+    with StudyData(data.folder, writer="protocol pilot") as died:  # its process SIGKILLed: no GameEnded
+        died.append(j.GameStarted(participant="p01", session="s-p01", **started))
+    with StudyData(data.folder, writer="participant delete") as now:
+        assert now.state.games["s-p01"].ended is None  # still "running" in the journal's words
+        now.append(j.GameStarted(participant="p02", session="s-p02", **started))  # this process's own game
+        with pytest.raises(StudyDataError, match=r"^p02 has a game running \(s-p02\): abort it first \(.*study\)$"):
+            now.delete_participant("p02")
+        now.delete_participant("p01")
+    assert "p01" not in (data.folder / "participants.csv").read_text()
