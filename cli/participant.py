@@ -43,7 +43,13 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 def run(args) -> int:
     # a StudyDataError is a UserError: cli/main.py says it, `pairplay participant <action>: what (where)`, with
     # the fix this action's options offer (`exists; --force replaces it`: it was said here without it)
-    with StudyData(args.folder, writer=f"participant {args.action}") as data:  # both write it: one writer per folder
+    # both write it: one writer per folder; a study file edited since the study began does not hold up a
+    # participant's export or erasure (a new user's trial: an unrelated edit stopped a deletion), it is said
+    with StudyData(args.folder, writer=f"participant {args.action}", study_file_edited_ok=True) as data:
+        if data.study_file_changed:
+            from pairplay.cli.main import warn
+            warn(f"participant {args.action}", f"the study file {data.study_file_changed}; the {args.action} goes on "
+                 "(it needs only the journal)")
         return _on_folder(data, args)  # the lock released when the verb ends (in a process that goes on: tests)
 
 

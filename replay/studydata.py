@@ -195,11 +195,13 @@ REGISTER_AT_ONCE = 50
 class StudyData:
     """A study folder (see the module rule). Thread-safe: the console and the game runner share it."""
 
-    def __init__(self, folder: str | Path, writer: str = ""):
+    def __init__(self, folder: str | Path, writer: str = "", study_file_edited_ok: bool = False):
         """`writer`: the verb that will write the folder ("protocol serve"): it takes the folder's writer lock
         (pairplay/folderlock.py) for this object's life, before the journal is read, and a folder another
         process writes is refused (StudyDataError naming the holder). Without it (a read-only verb) each
-        write takes the lock for its own length (`_writing`)."""
+        write takes the lock for its own length (`_writing`). `study_file_edited_ok`: a study file changed
+        since the study was created is not refused but said in `study_file_changed` (a participant's export
+        and deletion: their rights do not wait for the file to be put back)."""
         self.folder = Path(folder).resolve()
         self.given = Path(folder)  # as the user gave it: what a refusal names (it named the resolved path)
         if (self.folder / JOURNAL).is_dir():  # it said "not a study folder (no journal.jsonl ...)": there is one
@@ -218,7 +220,13 @@ class StudyData:
             for e in self.read_journal():
                 self.state.evolve(e)
             self._stamp = self._journal_stamp()
-            self._check_study_file()
+            self.study_file_changed = ""
+            try:
+                self._check_study_file()
+            except StudyDataError as changed:
+                if not study_file_edited_ok:
+                    raise
+                self.study_file_changed = str(changed)
             try:
                 self.study: Study = load_study(self.given / STUDY_FILE)
             except StudyFileError as err:

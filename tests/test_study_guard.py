@@ -158,7 +158,7 @@ def test_a_study_file_edited_in_the_folder_is_refused_by_every_verb_that_reads_i
     toml.write_bytes(original.replace(old.encode(), new.encode(), 1))
     before = files_of(data.folder)
     for args in (["protocol", "status"], ["protocol", "register"], ["protocol", "pilot", "--personas", "blind,deaf"],
-                 ["participant", "export", "p01"], ["report"]):
+                 ["report"]):
         done = pairplay(*args[:2], str(data.folder), *args[2:]) if args[0] != "report" else \
             pairplay("report", str(data.folder))
         lines = done.stderr.strip().splitlines()
@@ -168,6 +168,15 @@ def test_a_study_file_edited_in_the_folder_is_refused_by_every_verb_that_reads_i
     assert files_of(data.folder) == before  # no game played under the edited file, no report, no export
     with pytest.raises(StudyDataError, match="changed since the study was created"):
         StudyData(data.folder)
+    # a participant's export and erasure do not wait for the file to be put back (trial16: an unrelated edit
+    # stopped a deletion); the edit is said, on stderr
+    for args in (["export", "p01"], ["delete", "p02", "--yes"]):
+        done = pairplay("participant", args[0], str(data.folder), *args[1:])
+        lines = done.stderr.strip().splitlines()
+        assert done.returncode == 0 and len(lines) == 1, (args, done.stderr)
+        assert lines[0].startswith(f"pairplay participant {args[0]}: the study file changed since the study was created")
+        assert lines[0].endswith("(it needs only the journal)"), lines
+    assert (data.folder / "exports" / "p01.zip").is_file() and "p02" not in (data.folder / "participants.csv").read_text()
     toml.write_bytes(original)  # put back: the study goes on
     done = pairplay("protocol", "status", str(data.folder))
     assert done.returncode == 0, done.stderr
