@@ -255,3 +255,64 @@ def file_in(value: Path | IntoFolder | None, default_name: str) -> Path | None:
 
 def add_force(p: argparse.ArgumentParser, what: str = "existing outputs") -> None:
     p.add_argument("--force", action="store_true", help=f"replace {what} (never replaced without it)")
+
+
+# A people's study folder (`pairplay protocol init`) is written by `pairplay protocol` alone: its journal says what
+# every file in it is, and `participant delete` erases what it says. `report pk --out pk/recordings --force`,
+# `study --out pk/policies` (a simulated study inside a people's one) all wrote there, exit 0 (a new user's trial).
+# The places the study's own verbs own stay theirs: `report`'s STUDY/report, `participant export`'s
+# STUDY/exports/<id>.zip, and what `view`/`recover` write beside a game's recording in STUDY/recordings/ (the
+# deletion erases those too: replay/copies.py `erased_anyway`).
+
+
+def _owned_by_study_verb(verb: str, action: str | None, args, path: Path, into: bool, root: Path) -> bool:
+    """Whether the output `path` (a folder the file goes into, with `into`) inside the study folder `root`
+    (resolved) is a place `verb` itself owns there (see above)."""
+    full = path.resolve()
+    if verb == "report":
+        from pairplay.replay.copies import study_root
+        folder = getattr(args, "folder", None)
+        return full == root / "report" and folder is not None and study_root(folder) == root
+    if verb == "participant" and action == "export":
+        return True  # its own check says more (export_participant: only exports/<id>.zip of that participant)
+    if verb in ("view", "recover"):
+        if into:
+            return full == root / "recordings"
+        recordings = root / "recordings"
+        return full.parent == recordings and any(
+            full.name.startswith(f"{rec.name.split('.', 1)[0]}.") and full != rec
+            for rec in recordings.glob("*.mcap"))
+    return False
+
+
+def check_study_folders(verb: str, parser: argparse.ArgumentParser | None, args) -> None:
+    """Refuse, before any work, an output option (an `output_file` or `output_folder` one) of `verb` that names
+    a place inside a people's study folder (replay/copies.py `study_root`), but those the study's own verbs own
+    (see above): a UserError (cli/main.py: one line, exit 2) naming the option and the path as typed. `pairplay protocol`
+    writes its study folders: never refused here. Called by cli/main.py for every verb: the one place all pass."""
+    if parser is None or verb == "protocol":
+        return
+    from pairplay.replay.copies import study_root
+
+    parsers = [parser]
+    action = getattr(args, "action", None)
+    for a in parser._actions:
+        if isinstance(a, argparse._SubParsersAction) and action in a.choices:
+            parsers.append(a.choices[action])
+    for p in parsers:
+        for a in p._actions:
+            if not (a.type is output_folder or getattr(a.type, "__name__", "") == "output file"):
+                continue
+            value = getattr(args, a.dest, None)
+            if value is None or value == "":
+                continue
+            into = isinstance(value, IntoFolder)
+            path = value.folder if into else Path(value)
+            root = study_root(path)
+            if root is None or _owned_by_study_verb(verb, action, args, path, into, root):
+                continue
+            shown = max(a.option_strings, key=len) if a.option_strings else (a.metavar or a.dest)
+            from pairplay.errors import UserError
+            raise UserError(f"{shown} {str(value)!r}: inside a people's study folder only `pairplay protocol` writes "
+                            f"(and the study's own verbs their places: report/, exports/<id>.zip, a view or recover "
+                            f"beside a game's recording); give {shown} elsewhere")

@@ -61,6 +61,7 @@ import threading
 from pairplay import __version__, signals
 from pairplay.cli import interrupts
 from pairplay.cli.interrupts import DeferredInterrupt
+from pairplay.cli.args import check_study_folders
 from pairplay.errors import UserError, out_of_threads
 
 # verb -> (module, one-line help)
@@ -354,6 +355,7 @@ def _main(argv: list[str], arm=None) -> int:
     try:
         if interrupts.received:  # a signal came while loading and something swallowed its KeyboardInterrupt
             raise KeyboardInterrupt
+        check_study_folders(args.verb, chosen, args)  # before any work: a people's study folder is protocol's
         running = True
         with _summary_silenced(args.quiet and (args.verb in QUIET_SUMMARIES or _who(args) in QUIET_SUMMARIES)):
             code = int(module.run(args) or 0)
