@@ -275,7 +275,8 @@ class StudyData:
             try:
                 if self._stamp and self._journal_stamp() != self._stamp:
                     raise StudyDataError(f"{JOURNAL} was changed by another process since this one read it; "
-                                         "nothing was written from the stale copy: start this verb again",
+                                         "nothing was written from the stale copy: start this verb again (a running "
+                                         "`protocol serve`: stop and start it; was its .pairplay-lock removed?)",
                                          self.given / JOURNAL)
                 yield
                 self._stamp = self._journal_stamp()
