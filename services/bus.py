@@ -483,6 +483,8 @@ class Outbox:
         self._putting = threading.Lock()  # held by whoever publishes now: one at a time keeps the order
         self._stopping = False
         self.sent: list[tuple[str, bytes]] | None = [] if keep else None
+        self._publishing: tuple[list, int] = ([], 0)  # the run being published and how far (`_drain`; one
+        # attribute, so `in_hand` reads both at once)
         self.failed = 0
         self._thread = threading.Thread(target=self._run, name=f"pairplay-{name}-outbox", daemon=True)
         self._thread.start()
@@ -557,6 +559,7 @@ class Outbox:
                     return
                 run = list(self._items)
                 self._items.clear()
+                self._publishing = (run, 0)
             done = 0
             try:
                 last = len(run) - 1
@@ -565,6 +568,7 @@ class Outbox:
                     # sends it (Bus.put_batched); one that came in after the run was taken is the next run's
                     self._publish(key, item, i < last and run[i + 1][0] is not None)
                     done += 1
+                    self._publishing = (run, done)
             finally:
                 with self._lock:
                     if done < len(run):  # left by an exception _publish does not count (a thread's exit): kept
@@ -579,12 +583,12 @@ class Outbox:
             if key is None:
                 item()
             else:
+                if self.sent is not None:  # before the put: one that waits in it is in hand (`in_hand`)
+                    self.sent.append((key, item))
                 if more:
                     self.bus.put_batched(key, item)
                 else:
                     self.bus.put(key, item)
-                if self.sent is not None:
-                    self.sent.append((key, item))
         except Exception as err:  # a closed session, a refused key: counted, the thread goes on
             self.failed += 1
             # the bus closed under a stopping process (a signal at start-up): counted, INFO (README's logging
@@ -594,6 +598,18 @@ class Outbox:
 
     def pending(self) -> int:
         return self._pending
+
+    def in_hand(self) -> list[tuple[str, bytes]]:
+        """Every event this Outbox was given, in order: what it published or is publishing (`sent`, kept
+        only with `keep`), then what still waits. The events of an in-process service its session's
+        recorder writes at the close whatever the bus brought (services/session.py `own_tail`)."""
+        # read against the way an event moves (waiting -> the run being published -> sent): one that moves
+        # between two reads is seen twice (the caller drops a repeat), never missed
+        with self._lock:
+            waiting = [(key, item) for key, item in self._items if key is not None]
+        run, at = self._publishing
+        running = [(key, item) for key, item in run[at:] if key is not None]
+        return list(self.sent or ()) + running + waiting
 
     def flush(self, timeout_s: float) -> bool:
         """Wait (bounded) until everything sent so far is published; False on timeout."""

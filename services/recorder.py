@@ -1087,16 +1087,28 @@ class Recorder:
             if self.outbox is not None:
                 self.outbox.send(key, payload)
 
-    def drain(self, deadline: Deadline) -> int:
+    def drain(self, deadline: Deadline, own=()) -> int:
         """Write what is queued until `deadline` (keeping `FINISH_S` of it to finish the file: a
         flood must not hold up the exit); what still waits then is shed, counted under
         UNRECORDED_AT_EXIT and recorded as a MessageRejected count, but for the session's end
-        (SessionEnded), written whatever the deadline left: it is in hand, and without it the file
-        does not say how its session ended. Returns how many were shed."""
+        (SessionEnded) and what this process's own services published (`own`, Recorder.close),
+        written whatever the deadline left: they are in hand, and without them the file does not
+        say how its session ended, or has a hole below its end. Returns how many were shed."""
         n: int | None = None  # shed, once the deadline has passed
+        # at most as many of a source's as it has in `own` (a message on its key that is not its own, a forger's
+        # flood, is shed as before)
+        ours = Counter(key.split("/")[2] for key, _ in own)
+
+        def keep(key: str) -> bool:
+            source = key.split("/")[2]
+            if ours[source] > 0:
+                ours[source] -= 1
+                return True
+            return key.endswith("/SessionEnded")
+
         while self.failure is None:
             if n is None and deadline.passed(FINISH_S):
-                n = self.inbox.discard(UNRECORDED_AT_EXIT, keep=lambda key: key.endswith("/SessionEnded"))
+                n = self.inbox.discard(UNRECORDED_AT_EXIT, keep=keep)
             item = self.inbox.get(0)
             if item is None:
                 break
@@ -1156,15 +1168,16 @@ class Recorder:
         were still queued when it stopped (`unrecorded_at_exit`, also recorded as a count).
 
         Done by `deadline` (default `CLOSE_S` from now): the queue is written while
-        `FINISH_S` of it is left, the rest counted (`drain`). `own`: (key, payload) of the
-        session's own end, published by this process (services/session.py end_game): written
-        after the queue, whatever the deadline left, unless the bus brought it already (a
-        repeat is skipped): the file says how the session ended even when the signal's
-        deadline passed before the bus brought it (a starved machine)."""
+        `FINISH_S` of it is left, the rest counted (`drain`). `own`: (key, payload) of what
+        this process's services published that the file lacks, the session's own end included
+        (services/session.py own_tail): written after the queue, whatever the deadline left,
+        unless the bus brought it already (a repeat is skipped): the file says how the session
+        ended, with no hole below its end, even when the signal's deadline passed before the bus
+        brought them (a starved machine)."""
         deadline = deadline or Deadline(CLOSE_S)
         unrecorded = 0
         try:
-            unrecorded = self.drain(deadline)
+            unrecorded = self.drain(deadline, own)
             for key, payload in own:
                 if self.failure is None:
                     self.record(key, payload, self.clock(), quiet=True)

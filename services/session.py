@@ -234,15 +234,15 @@ def close_all(nodes: list[Node], bridge, recorder: Recorder | None, recorder_thr
     if recorder is None:
         recorder_stop.set()
         return None
-    wait_all_recorded(recorder, nodes, bridge, deadline.left(RESERVE["recorder_thread"] + 0.05, LAST_EVENTS_WAIT_S),
-                      own)
+    tail = wait_all_recorded(recorder, nodes, bridge,
+                             deadline.left(RESERVE["recorder_thread"] + 0.05, LAST_EVENTS_WAIT_S), own)
     recorder_stop.set()
     if recorder_thread is not None:  # None: it could not start
         # its own work (a step: what its inbox held, BATCH_S at most, and a due flush), never a wait on
         # another: not cut by the deadline, or the file would be finished under the batch it writes
         recorder_thread.join()
     # the recorder's own deadline: the shutdown's, less what closing the bus keeps
-    return recorder.close(stopped_by=stopped, deadline=Deadline(deadline.left(RESERVE["recorder"])), own=own)
+    return recorder.close(stopped_by=stopped, deadline=Deadline(deadline.left(RESERVE["recorder"])), own=tail)
 
 
 def end_game(game: Node | None, stop: threading.Event, failure: str, recorder: Recorder | None) -> list:
@@ -336,32 +336,63 @@ def wait_recorded(recorder: Recorder, shells: list[tuple[str, object]], quiet_s:
         time.sleep(quiet_s)
 
 
-def wait_all_recorded(recorder: Recorder, nodes: list[Node], bridge, timeout_s: float, own=()) -> int:
+def wait_all_recorded(recorder: Recorder, nodes: list[Node], bridge, timeout_s: float, own=()) -> list:
     """Wait (at most `timeout_s`) until the recorder holds the last event of every service
-    in this process, those they published while closing included; count what did not come.
+    in this process, those they published while closing included; return what it still lacks
+    of them (`own_tail`: the recorder writes it at its close) and count what even that lacks.
 
     `wait_recorded` ran before the services closed: a Node then publishes its last refusal
     counts, and the robot bridge reports its robot's still open suggestions (RobotActed),
     each through its outbox on its own thread. On a loaded machine the recorder stopped
     before they came (a soak's 80-round session lost 735 of 1,213 RobotActed, uncounted).
-    What has not come when the wait is over is counted in the file (a MessageRejected
-    count per source), never lost silently. Returns that count."""
+    What is neither recorded nor in hand when the wait is over (an outbox that keeps no
+    `sent`) is counted in the file (a MessageRejected count per source), never lost silently."""
     last = {name: shell.seq for name, shell in published(nodes, bridge)}
     deadline = time.monotonic() + timeout_s
     while any(recorder.top_seq.get(name, 0) < seq for name, seq in last.items()) and time.monotonic() < deadline:
         time.sleep(0.005)
-    # the session's own end (`own`) is not missing: the recorder writes it itself (Recorder.close)
-    for key, payload in own:
+    tail = own_tail(recorder, nodes, bridge, own)
+    covered = dict(recorder.top_seq)
+    for key, payload in tail:  # written by the recorder itself (Recorder.close): not missing
         source, seq = key.split("/")[-2], decode_event(payload).seq
-        if last.get(source) == seq:
-            last[source] = seq - 1
-    missing = Counter({(name, "published, not received when the recording stopped"): seq - recorder.top_seq.get(name, 0)
-                       for name, seq in last.items() if recorder.top_seq.get(name, 0) < seq})
+        covered[source] = max(covered.get(source, 0), seq)
+    missing = Counter({(name, "published, not received when the recording stopped"): seq - covered.get(name, 0)
+                       for name, seq in last.items() if covered.get(name, 0) < seq})
     if missing:
         log.warning("%d event(s) published but not received when the recording stopped: %s", sum(missing.values()),
                     ", ".join(f"{n} {c}" for (n, _), c in missing.items()))
         recorder.refusals.shed(missing)
-    return sum(missing.values())
+    return tail
+
+
+def own_tail(recorder: Recorder, nodes: list[Node], bridge, own=()) -> list[tuple[str, bytes]]:
+    """(key, payload) of what this process's services were given to publish that the recorder does not
+    hold yet, each service's in its order (`Outbox.in_hand`), then the session's own end (`own`, end_game)
+    if it is not among them. The recorder writes them at its close whatever the bus brought (Recorder.close):
+    this process's own work, not a wait on another. Before, only the end was: an event the bus had not
+    brought when a starved process's deadline passed (a SIGSTOP right after a SIGINT: test_session_end)
+    left a hole below the end, recorded as lost on the bus, and `rebuild` refused the session.
+
+    Each service's events are stamped in the order it hands them to its Outbox, so the scan stops at the
+    first one the recorder holds (a session's `sent` may hold 10^5 events)."""
+    outboxes = [(node.logic.name, node.outbox) for node in nodes]
+    if bridge is not None:
+        outboxes.append((bridge.logic.name, bridge.outbox))
+    tail: list[tuple[str, bytes]] = []
+    seen: set[tuple[str, int]] = set()
+    for name, outbox in outboxes:
+        top = recorder.top_seq.get(name, 0)
+        mine = []
+        for key, payload in reversed(outbox.in_hand()):
+            seq = decode_event(payload).seq
+            if seq <= top:
+                break
+            if (key, seq) not in seen:  # (in_hand may give one twice)
+                seen.add((key, seq))
+                mine.append((key, payload))
+        tail.extend(reversed(mine))
+    tail.extend((key, payload) for key, payload in own if (key, decode_event(payload).seq) not in seen)
+    return tail
 
 
 def wait_external_exit(bus: Bus, session: str, services: list[str], stop: threading.Event, timeout_s: float,

@@ -11,6 +11,7 @@ from robot_doubles.harness import FAST
 
 from pairplay.replay.reader import read_log
 from pairplay.schemas import events as ev
+from pairplay.schemas.keys import event_key
 from pairplay.schemas.robot import RobotActed
 from pairplay.schemas.session import SessionConfig
 from pairplay.services.bus import Bus
@@ -87,16 +88,31 @@ def test_the_sessions_own_recorder_waits_for_the_robots_last_reports(tmp_path, m
 
 def test_what_a_closing_service_published_but_the_recorder_never_got_is_counted():
     """The same kind for every service of the process (a Node's last refusal counts, the bridge's
-    RobotActed): the session waits for each one's last sequence number, and counts the rest."""
+    RobotActed): the session waits for each one's last sequence number; what the recorder lacks and
+    the service still holds (`Outbox.in_hand`) the recorder writes itself (services/session.py
+    own_tail); only what neither has is counted."""
+    def outbox(*items):
+        return SimpleNamespace(in_hand=lambda: list(items))
+
     recorder = SimpleNamespace(top_seq={"game": 40, "learner": 7, "robot": 3}, refusals=Refusals())
-    nodes = [SimpleNamespace(logic=SimpleNamespace(name=name), driver=SimpleNamespace(seq=seq))
+    nodes = [SimpleNamespace(logic=SimpleNamespace(name=name), driver=SimpleNamespace(seq=seq), outbox=outbox())
              for name, seq in (("game", 40), ("learner", 9))]
-    bridge = SimpleNamespace(logic=SimpleNamespace(name="robot"), shell=SimpleNamespace(seq=8))
-    assert wait_all_recorded(recorder, nodes, bridge, timeout_s=0.05) == 2 + 5
+    bridge = SimpleNamespace(logic=SimpleNamespace(name="robot"), shell=SimpleNamespace(seq=8), outbox=outbox())
+    assert wait_all_recorded(recorder, nodes, bridge, timeout_s=0.05) == []
     counts = {e.offending_source: e for e in recorder.refusals.tick(0, force=True)}
     assert set(counts) == {"learner", "robot"} and "not received when the recording stopped" in counts["robot"].reason
+    assert sum(int(e.reason.split()[0]) for e in counts.values()) == 2 + 5
+    # the learner's two are in its outbox's hands: written by the recorder, not counted
+    held = [(event_key("s", "learner", "MessageRejected"),
+             ev.encode_event(ev.MessageRejected(session="s", source="learner", seq=seq, reason="x", key="k")))
+            for seq in (7, 8, 9)]
+    nodes[1].outbox = outbox(*held)
+    assert wait_all_recorded(recorder, nodes, bridge, timeout_s=0.05) == held[1:]  # (seq 7: recorded)
+    counts = {e.offending_source: e for e in recorder.refusals.tick(0, force=True)}
+    assert set(counts) == {"robot"}
     recorder.top_seq.update(learner=9, robot=8)  # everything came
-    assert wait_all_recorded(recorder, nodes, bridge, timeout_s=0.05) == 0
+    assert wait_all_recorded(recorder, nodes, bridge, timeout_s=0.05) == []
+    assert not recorder.refusals.pending()
 
 
 def test_suggestions_a_slow_closing_robot_never_reported_are_counted_not_lost(tmp_path, monkeypatch):

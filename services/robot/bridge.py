@@ -137,6 +137,12 @@ class RobotBridge:
             self._publish(self.shell._stamp([acted]))
             self._reported += 1
 
+    @property
+    def outbox(self) -> Outbox:
+        """What the bridge publishes through: its session's recorder writes what it holds at the close
+        (services/session.py `own_tail`)."""
+        return self._outbox
+
     def cut(self, why: str) -> int:
         """Take no more reports from the robot; count the suggestions it has not reported yet.
 
