@@ -65,11 +65,13 @@ def refused_text(tag: str, refusals: list[tuple[str, str]]) -> str:
     return text + "; the session was stopped"
 
 
-def published_seq(game, tag: str) -> int | None:
-    """The seq of the game's own `tag` event once its Outbox has published it (None before): the start
-    near the beginning of what it sent, the end near the end."""
-    key = event_key(game.session, "game", tag)
-    for k, payload in (reversed(game.outbox.sent) if tag == "SessionEnded" else game.outbox.sent):
+def published_seq(node, tag: str, newest: bool | None = None) -> int | None:
+    """The seq of a node's own `tag` event once its Outbox has published it (None before): the first,
+    or with `newest` the last one (by default the game's end, near the end of what it sent; its start
+    is near the beginning). Also the robot bridge's count of its in-process learner's suggestions."""
+    key = event_key(node.session, node.logic.name, tag)
+    newest = tag == "SessionEnded" if newest is None else newest
+    for k, payload in (reversed(node.outbox.sent) if newest else node.outbox.sent):
         if k == key:
             return decode_event(payload).seq
     return None

@@ -36,6 +36,7 @@ from pairplay.services.learner import LearnerLogic
 from pairplay.services.participant import ParticipantLogic
 from pairplay.services.recorder import Recorder, RecordingFailed
 from pairplay.services.refusal import EndRefused, RefusalWatch, StartRefused  # noqa: F401  (StartRefused: re-exported)
+from pairplay.services.refusal import published_seq
 from pairplay.services.robot.bridge import ROBOT_CLOSE_S
 from pairplay.services.robot.choice import RobotChoice, start_bridge
 from pairplay.services.runner import Node, Stopped, start_unless_stopped
@@ -149,6 +150,9 @@ def run_session(config: SessionConfig, path: str | Path, *, bus: Bus | None = No
             node.run_in_thread(stop)
             if nodes_out is not None:
                 nodes_out[node.logic.name] = node
+            if bridge is not None and node.logic.name == "learner":  # the bridge takes all it published before
+                # it closes (its suggestions' callback thread may lag behind the session's end: bridge.py's rule)
+                bridge.published_suggestions = lambda learner=node: published_seq(learner, "SuggestionMade", True) or 0
         if "game" not in external:
             game = Node(bus, GameLogic(config), config.session, resume=False, stop=stop)
             nodes.append(game)

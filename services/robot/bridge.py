@@ -29,6 +29,18 @@ reported ("made before this robot bridge joined"), and a log that holds the
 session's end ends the bridge at once (it waited for ever for an end that had
 passed). It then takes suggestions from the moment it joins.
 
+A bridge in the learner's process (`pairplay session`: `published_suggestions`
+says the seq of the learner's last SuggestionMade) takes every suggestion the
+learner published before it closes, for at most LAST_SUGGESTION_WAIT_S and
+within a stop's shutdown deadline (a signal's 1.1 s leaves it no time; a
+session that ended by itself has 30 s). Its suggestions come on a Zenoh
+callback thread of their own, which a starved machine runs late: the session,
+ended by itself, stopped the bridge while its last suggestions were still on
+that thread, and they were never performed, counted at the recorder's close as
+without RobotActed (load 30-47: 14 RobotActed of 15). A bridge in another
+process cannot know what is still on its way; what it never got is counted
+there the same way.
+
 Like every service (services/runner.py `answer_sent`), the bridge answers a
 restarted recorder's refill query (`pairplay/<session>/_query/robot/sent?after=
 robot:<seq>`) with what it published after that number, so the RobotActed of
@@ -62,6 +74,7 @@ NAME = "robot"
 END_QUIET_S = 0.25  # after SessionEnded, stop once no message came for this long
 STOPPED_SETTLE_S = 1.0  # stopped by a signal or the experimenter: wait this long for the robot's replies
 STOPPED_RESERVE_S = 0.6  # stopped: done this long before the shutdown's deadline (the session waits until 0.55)
+LAST_SUGGESTION_WAIT_S = 5.0  # at most this long for an in-process learner's suggestions still on their way (rule)
 ROBOT_CLOSE_S = 20.0  # ended by itself: how long the driver may take to report what is still open (a
 # starved driver with ~800 open suggestions took over 5 s in the soak; a stopped session has its deadline)
 
@@ -81,6 +94,7 @@ class BridgeLogic:
     def __init__(self, perform: Callable[[Suggestion], None]) -> None:
         self.perform = perform
         self.done = False
+        self.last_suggestion = 0  # the highest SuggestionMade seq taken (RobotBridge.take_published)
 
     def start(self) -> list[Event]:
         return []
@@ -89,6 +103,7 @@ class BridgeLogic:
         if isinstance(event, ev.SessionEnded):
             self.done = True
         elif isinstance(event, ev.SuggestionMade):
+            self.last_suggestion = max(self.last_suggestion, event.seq)
             try:
                 self.perform(Suggestion(event.session, event.round, event.turn, event.attempt, event.action,
                                         event.observed, event.target, suggestion_seq=event.seq))
@@ -118,6 +133,8 @@ class RobotBridge:
         self.thread: threading.Thread | None = None
         self.game_gone_s = GAME_GONE_S  # see runner.GameWatch
         self.game_watch: GameWatch | None = None
+        # an in-process learner: the seq of its last SuggestionMade published (0: none yet); see rule
+        self.published_suggestions: Callable[[], int] | None = None
 
     def _perform(self, suggestion: Suggestion) -> None:
         if self.robot is None:
@@ -247,6 +264,7 @@ class RobotBridge:
         # SessionEnded before the last SuggestionMade): go on until the bus is quiet.
         while self.step(timeout_s=0.0 if stop.is_set() else END_QUIET_S):
             pass
+        self.take_published(stop)
         # stopped (a signal, the experimenter): what the robot has not acknowledged within a second, or
         # what the shutdown's deadline leaves, is recorded as in flight, and the process exits promptly
         if stop.is_set():
@@ -256,6 +274,24 @@ class RobotBridge:
             self.close(min(self.settle_s, STOPPED_SETTLE_S))
         else:
             self.close(self.settle_s)
+
+    def take_published(self, stop: threading.Event) -> bool:
+        """Take what an in-process learner published and our inbox has not brought yet (see rule), for
+        at most LAST_SUGGESTION_WAIT_S, and, once stopped, within the shutdown's deadline; whether every
+        one was taken."""
+        if self.published_suggestions is None:
+            return True
+        # stopped: within the shutdown's deadline, leaving the robot's last reports their share (a signal's 1.1 s
+        # leaves nothing to wait with; a session that ended by itself has SETTLE_S)
+        wait_s = (deadline_of(stop).left(STOPPED_RESERVE_S + 0.1 + STOPPED_SETTLE_S / 2, LAST_SUGGESTION_WAIT_S)
+                  if stop.is_set() else LAST_SUGGESTION_WAIT_S)
+        until = time.monotonic() + wait_s
+        while self.logic.last_suggestion < (self.published_suggestions() or 0):
+            left = until - time.monotonic()
+            if left <= 0:
+                return False
+            self.step(min(0.05, left))
+        return True
 
     def run_in_thread(self, stop: threading.Event) -> threading.Thread:
         thread = threading.Thread(target=self.run, args=(stop,), name="pairplay-robot", daemon=True)
