@@ -1010,10 +1010,11 @@ def _get(start: Callable[..., Any], *args: Any, **kwargs: Any) -> queue.SimpleQu
     (a shutdown's `stop`, `locators` once it has its answer) dropped the channel while the query went on,
     and each reply after that was Zenoh's ERROR "sending on a closed channel" (its log, on stdout: an
     interrupted session's stdout held it). Nothing can close this queue; what comes after the reader
-    went is dropped with it. The callback runs on Zenoh's thread (no thread of zenoh-python's per get:
-    indirect=False) and only puts, which never waits."""
+    went is dropped with it. The callback only puts, which never waits; it runs on zenoh-python's thread
+    for the get (indirect, as every callback of ours: a direct one makes Zenoh's network thread wait for
+    the GIL, docs/bus.md "Tried and not kept"), which holds Zenoh's end until the query is over."""
     replies: queue.SimpleQueue = queue.SimpleQueue()
-    start(*args, handler=zenoh.handlers.Callback(replies.put, lambda: replies.put(_DONE), indirect=False), **kwargs)
+    start(*args, handler=zenoh.handlers.Callback(replies.put, lambda: replies.put(_DONE)), **kwargs)
     return replies
 
 
