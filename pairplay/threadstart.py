@@ -24,7 +24,9 @@ import threading
 import time
 
 REFUSED = "can't start new thread"  # the words of the OS's refusal (errors.out_of_threads)
-GRACE_S = 2.0  # a new thread not running Python by then and gone from the interpreter died as it started
+GRACE_S = 10.0  # a new thread not running Python by then, and gone from the interpreter, died as it started: the
+# last resort (its death is reported through the unraisable hook first), long enough for a loaded machine to
+# schedule a new thread (one not yet scheduled is not in the interpreter under its own id either)
 _pending: dict = {}  # a bootstrap not yet running -> its start's state (`guard`)
 
 
