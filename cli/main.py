@@ -58,7 +58,7 @@ import signal
 import sys
 import threading
 
-from pairplay import __version__, signals
+from pairplay import __version__, signals, threadstart
 from pairplay.cli import interrupts
 from pairplay.cli.interrupts import DeferredInterrupt
 from pairplay.cli.args import check_study_folders
@@ -294,6 +294,7 @@ def entry() -> None:
     # (below): its report of them ("leaked semaphore objects") is that clean-up, not a fault, and would
     # add lines to an interruption's one line. The tracker is a child process: it reads this variable.
     os.environ["PYTHONWARNINGS"] = ",".join(filter(None, (os.environ.get("PYTHONWARNINGS"), QUIET_TRACKER)))
+    threadstart.guard()  # a thread that dies as it starts is refused, not waited for (pairplay/threadstart.py)
     code = main(exiting=True)
     if code in INTERRUPTED or _threads_left() or _signalled():
         atexit._run_exitfuncs()  # what was registered to run at exit still runs (multiprocessing's clean-up)

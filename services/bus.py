@@ -60,6 +60,7 @@ import argparse
 import copy
 import json
 import logging
+import queue
 import signal
 import sys
 import threading
@@ -128,13 +129,17 @@ _log_ready = False
 
 
 def _init_zenoh_log() -> None:
-    """Zenoh's own log follows RUST_LOG (e.g. RUST_LOG=zenoh::net::routing::interceptor::
-    access_control=trace shows each access-control decision), else only its errors."""
+    """Zenoh's own log only when asked for with RUST_LOG (e.g. RUST_LOG=zenoh::net::routing::interceptor::
+    access_control=trace shows each access-control decision; RUST_LOG=error, Zenoh's errors), else none.
+    Zenoh writes its log to stdout, and zenoh-python (1.10) offers no other stream (its bridge to Python's
+    logging is not built in): by default its ERROR lines landed on a verb's stdout, which holds results
+    only (an interrupted session printed "sending on a closed channel" there). What Zenoh refuses to our
+    calls reaches the user as our own one line (BusOpenError, ...), not through its log."""
     global _log_ready
     if not _log_ready:
         _log_ready = True
         try:
-            zenoh.init_log_from_env_or("error")
+            zenoh.try_init_log_from_env()  # nothing without RUST_LOG
         except Exception:  # already set up by the host program
             pass
 
@@ -865,8 +870,8 @@ class Bus:
         early, with what came, once `stop` is set."""
         out = []
         # no consolidation: a queryable may answer with many replies on one key
-        replies = self.session.get(selector, timeout=timeout_s,
-                                   consolidation=zenoh.QueryConsolidation(zenoh.ConsolidationMode.NONE))
+        replies = _get(self.session.get, selector, timeout=timeout_s,
+                       consolidation=zenoh.QueryConsolidation(zenoh.ConsolidationMode.NONE))
         for reply in _replies(replies, timeout_s + 1.0, stop):
             if reply.ok is not None:
                 out.append(reply.ok.payload.to_bytes())
@@ -892,7 +897,7 @@ class Bus:
     def alive_now(self, key_expr: str, timeout_s: float = 1.0, stop: threading.Event | None = None) -> set[str]:
         """The liveliness tokens on `key_expr` now; returns early, with what came, once `stop` is set
         (a shutdown does not wait out the query)."""
-        replies = self.session.liveliness().get(key_expr, timeout=timeout_s)
+        replies = _get(self.session.liveliness().get, key_expr, timeout=timeout_s)
         out: set[str] = set()
         for reply in _replies(replies, timeout_s + 0.5, stop):
             if reply.ok is not None:
@@ -902,7 +907,7 @@ class Bus:
     def locators(self) -> list[str]:
         """The endpoints this session really listens on (ports chosen by the OS)."""
         zid = str(self.session.zid())
-        for reply in self.session.get(f"@/{zid}/*", timeout=2.0):
+        for reply in _replies(_get(self.session.get, f"@/{zid}/*", timeout=2.0), 3.0, None):
             if reply.ok is None:
                 continue
             try:
@@ -1012,19 +1017,38 @@ def open_bus(options: BusOptions | None = None, stop: threading.Event | None = N
     return Bus(options, stop=stop)
 
 
-def _replies(replies, wait_s: float, stop: threading.Event | None):
-    """The replies of a zenoh get as they come, for at most `wait_s` seconds, until the channel closes
-    (every reply came) or `stop` is set (a shutdown does not wait out a query)."""
+_DONE = object()  # the last item of a get's replies (_get): Zenoh dropped its callback, every reply came
+
+
+def _get(start: Callable[..., Any], *args: Any, **kwargs: Any) -> queue.SimpleQueue:
+    """Start a Zenoh get (`start`: a session's or its liveliness's `get`) whose replies Zenoh's thread
+    puts in a queue of ours, `_DONE` last. A queue, not Zenoh's FifoChannel: a reader that stops early
+    (a shutdown's `stop`, `locators` once it has its answer) dropped the channel while the query went on,
+    and each reply after that was Zenoh's ERROR "sending on a closed channel" (its log, on stdout: an
+    interrupted session's stdout held it). Nothing can close this queue; what comes after the reader
+    went is dropped with it. The callback only puts, which never waits; it runs on zenoh-python's thread
+    for the get (indirect, as every callback of ours: a direct one makes Zenoh's network thread wait for
+    the GIL, docs/bus.md "Tried and not kept"), which holds Zenoh's end until the query is over."""
+    replies: queue.SimpleQueue = queue.SimpleQueue()
+    start(*args, handler=zenoh.handlers.Callback(replies.put, lambda: replies.put(_DONE)), **kwargs)
+    return replies
+
+
+def _replies(replies: queue.SimpleQueue, wait_s: float, stop: threading.Event | None):
+    """The replies of a get (`_get`) as they come, for at most `wait_s` seconds, until every reply
+    came or `stop` is set (a shutdown does not wait out a query)."""
     deadline = time.monotonic() + wait_s
-    while time.monotonic() < deadline and not (stop is not None and stop.is_set()):
-        try:
-            reply = replies.try_recv()
-        except Exception:  # the channel closed: every reply came
+    while not (stop is not None and stop.is_set()):
+        left = deadline - time.monotonic()
+        if left <= 0:
             return
-        if reply is None:
-            time.sleep(0.002)
-        else:
-            yield reply
+        try:
+            reply = replies.get(timeout=min(left, 0.002 if stop is not None else left))
+        except queue.Empty:
+            continue
+        if reply is _DONE:
+            return
+        yield reply
 
 
 def stop_on_signals(stop: threading.Event, then: Callable[[], object] | None = None) -> None:

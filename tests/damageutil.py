@@ -3,6 +3,8 @@ read a recording back: each must say what the reader says, replay/reader.py `Eve
 
 from __future__ import annotations
 
+import os
+
 from pairplay.replay.mcapscan import scan
 from pairplay.replay.reader import read_log
 from pairplay.replay.writer import EventLogWriter
@@ -33,7 +35,7 @@ def damage(path, how: str, tag: str = "") -> None:
     replaced by bytes that do not decode."""
     if how == "cut":
         data = path.read_bytes()
-        path.write_bytes(data[:len(data) * 2 // 3])
+        _replace(path, data[:len(data) * 2 // 3])
     elif how == "chunk":
         chunks = scan(path).chunks
         c = chunks[len(chunks) // 2]
@@ -42,7 +44,7 @@ def damage(path, how: str, tag: str = "") -> None:
             [c] = [c for c in scan(path).chunks if any(t == when for _, _, t in c.messages)]
         data = bytearray(path.read_bytes())
         data[c.offset + c.length - 7] ^= 0x5A
-        path.write_bytes(bytes(data))
+        _replace(path, bytes(data))
     else:
         _rewritten(path, tag or "QUpdated", broken=True)
     assert read_log(path).note
@@ -53,12 +55,23 @@ def _rewritten(path, tag: str, broken: bool) -> int:
     not decode if `broken`; that event's log time."""
     log = read_log(path)
     [first] = [r for r in log.events if type(r.event).__name__ == tag][:1]
-    w = EventLogWriter(path, chunk_size=4096)
+    tmp = path.with_name(path.name + ".damaging")
+    w = EventLogWriter(tmp, chunk_size=4096)
     for r in log.events:
         w.write(r.key, b'{"type":"broken"' if broken and r is first else r.payload, log_time_ns=r.log_time_ns,
                 sequence=r.event.seq)
     w.close()
+    os.replace(tmp, path)
     return first.log_time_ns
+
+
+def _replace(path, data: bytes) -> None:
+    """`path` holding `data`, whole at once: a process that reads it meanwhile (a verb reading its recording
+    back) reads the file before or after, never one cut to nothing by a rewrite (`write_bytes` truncates first:
+    the lab's read-back once saw the recording "truncated ... (byte 0)")."""
+    tmp = path.with_name(path.name + ".damaging")
+    tmp.write_bytes(data)
+    os.replace(tmp, path)
 
 
 def damaged_when_written(monkeypatch, module, how: str, tag: str = "") -> None:

@@ -22,6 +22,7 @@ from damageutil import damage, damaged_when_written
 from pairplay.livelock import is_live
 from pairplay.replay.reader import read_log
 
+LINGER_S = 10  # the lab's pages show the end this long before it reads its recording back (the damage's time)
 WORDS = {"chunk": "is not whole: damaged: chunk ", "cut": "is not whole: truncated: ",
          "undecodable": "is not whole: 1 message in it does not decode ("}
 
@@ -44,14 +45,20 @@ def test_a_session_whose_recording_is_not_whole_when_read_back_says_so_and_exits
 
 def test_a_lab_session_whose_recording_is_not_whole_when_read_back_says_so_and_exits_1(tmp_path):
     """A real `pairplay lab` process: its game is aborted by the experimenter's event on its bus, and while the
-    pages linger its finished recording loses a chunk; the summary then reads it back."""
+    pages linger its finished recording loses a chunk; the summary then reads it back.
+
+    Before, the pages did not linger (run_session sets the lab's stop flag at its end, and the linger waited on
+    that flag: services/lab/server.py `linger`), so the lab read its recording back ~1 s after the game's end,
+    racing this damage: read while `write_bytes` had cut the file to nothing it said "truncated: ... (byte 0)"
+    (CI, 1 run in 3). Now the lab is checked to be still lingering once the damage is done (whole at once:
+    damageutil `_replace`), so its read-back comes after it, always."""
     from pairplay.schemas.events import SessionAborted, encode_event
     from pairplay.schemas.keys import event_key
     from pairplay.services.bus import Bus, BusOptions
     from pairplay.schemas.envelope import stamped
 
     proc = subprocess.Popen([sys.executable, "-m", "pairplay", "lab", "--participant", "human:p9", "--session", "lb",
-                             "--rounds", "1", "--linger", "20", "--out", str(tmp_path)],
+                             "--rounds", "1", "--linger", str(LINGER_S), "--out", str(tmp_path)],
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     path = tmp_path / "lb.mcap"
     try:
@@ -67,8 +74,12 @@ def test_a_lab_session_whose_recording_is_not_whole_when_read_back_says_so_and_e
             # the session is over and its recording finished (its recorder gone): the pages linger 20 s
             assert wait_until(lambda: path.is_file() and not is_live(path)
                               and read_log(path).of("SessionEnded"), 30), "the recording was not finished"
+            finished = time.monotonic()
         damage(path, "chunk")
+        assert proc.poll() is None, "the lab did not linger: it read its recording back before the damage"
         out, err = proc.communicate(timeout=60)
+        # it lingered (its end began before `finished`: 2 s for this test's polling and a loaded machine)
+        assert time.monotonic() - finished >= LINGER_S - 2, time.monotonic() - finished
     finally:
         if proc.poll() is None:
             proc.kill()

@@ -21,7 +21,7 @@ from pathlib import Path
 import uvicorn
 
 from pairplay.schemas.session import SessionConfig
-from pairplay.services.bus import BusOptions, shutdown_wait
+from pairplay.services.bus import SHUTDOWN_S, BusOptions, Deadline, shutdown_wait
 from pairplay.services.lab.app import Lab, create_app
 from pairplay.services.lab.hub import MAX_FRAME, LabHub
 from pairplay.services.robot.choice import RobotChoice
@@ -99,6 +99,22 @@ def urls_of(base: str, hub: LabHub) -> LabUrls:
     return LabUrls(f"{base}/s/{hub.session}/board?t={hub.token}", f"{base}/s/{hub.session}/mirror?t={hub.token}")
 
 
+def linger(stop: threading.Event, seconds: float) -> None:
+    """Wait `seconds` (the pages show the session's end), or until a signal. run_session sets `stop` as its
+    services stop, whatever ended it, so the flag says nothing here: before, `stop.wait(linger_s)` returned at
+    once and `--linger` was never waited (the lab read its recording back ~1 s after the game's end). A signal
+    is `stop.why` (services/bus.py stop_on_signals); one during the linger gets a signal's shutdown deadline
+    from now (the flag's, set at the session's end, may have seconds left, more than a signal's exit allows)."""
+    if getattr(stop, "why", ""):  # the session was stopped by a signal: no linger
+        return
+    end = time.monotonic() + seconds
+    while time.monotonic() < end:
+        if getattr(stop, "why", ""):
+            stop.deadline = Deadline(SHUTDOWN_S)
+            return
+        time.sleep(min(0.05, max(0.0, end - time.monotonic())))
+
+
 def run_lab(config: SessionConfig, path: str | Path, *, host: str = "127.0.0.1", port: int = 0,
             bus_options: BusOptions | None = None, robot: RobotChoice | None = RobotChoice(),
             stop: threading.Event | None = None, on_ready=None, linger_s: float = 3.0,
@@ -124,7 +140,7 @@ def run_lab(config: SessionConfig, path: str | Path, *, host: str = "127.0.0.1",
     try:
         out = run_session(config, path, bus_options=bus_options, stop=stop, on_bus=on_bus, robot=robot,
                           extra_nodes=lambda bus: [hub.make_node(bus)], nodes_out=nodes_out, summary=summary)
-        stop.wait(linger_s)  # the pages show the end before the server goes
+        linger(stop, linger_s)  # the pages show the end before the server goes
         return out
     finally:
         # stopped: the recording is finished; the web server and the hub get what the deadline leaves

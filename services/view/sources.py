@@ -111,7 +111,10 @@ class LiveSource:
         # A RingChannel keeps the newest `capacity` samples inside Zenoh (no Python, no GIL on
         # the receive path) and never pushes back on the publishers; what it overwrites shows
         # up as a gap in the senders' sequence numbers.
-        self.subscriber = bus.session.declare_subscriber(session_keys(session), zenoh.handlers.RingChannel(capacity))
+        # Kept by the bus (Bus._keep): undeclared by its close before the channel goes, also when this
+        # source's own close never runs (its catch-up below interrupted)
+        self.subscriber = bus._keep(bus.session.declare_subscriber(session_keys(session),
+                                                                   zenoh.handlers.RingChannel(capacity)))
         # Subscribed first, then the recorder's log so far: a view that joins late starts
         # from the whole session; live samples already in the log are skipped by their seq.
         self.backlog: list = []
