@@ -138,14 +138,18 @@ class StudyState:
     combined: dict[str, j.BiasCombined] = field(default_factory=dict)  # phase -> its bias
     deletions: list[j.ParticipantDeleted] = field(default_factory=list)
     next_number: int = 1
+    # ids given out: a registration left in the journal, or a deletion (it removed its one registration line
+    # and keeps no id). Ids are given in order, so the next is one past both this count and the highest left.
+    ids_given: int = 0
 
     def evolve(self, e: j.JournalEvent) -> None:
         if isinstance(e, j.StudyCreated):
             self.created = e
         elif isinstance(e, j.ParticipantRegistered):
             self.participants[e.participant] = e
+            self.ids_given += 1
             number = int(e.participant[1:]) if e.participant[1:].isdigit() else 0
-            self.next_number = max(self.next_number, number + 1)
+            self.next_number = max(self.next_number, number + 1, self.ids_given + 1)
         elif isinstance(e, j.GameStarted):
             self.games[e.session] = Game(e.session, e.participant, e.phase, e.game, e.recording, e.bias,
                                          scripted=e.scripted)
@@ -163,8 +167,11 @@ class StudyState:
             self.combined[e.phase] = e
         elif isinstance(e, j.ParticipantDeleted):
             self.deletions.append(e)
-            # ids are never reused, even after a deletion took the highest one
-            self.next_number += 1
+            # ids are never reused, even after a deletion took the highest one; nor skipped: the deleted one
+            # counts once, as the one id it was (a `+= 1` on top of the highest left skipped one when the
+            # deleted id was not the highest: p02 of p01..p03 deleted, the next was p05)
+            self.ids_given += 1
+            self.next_number = max(self.next_number, self.ids_given + 1)
 
 
 @dataclass(frozen=True)
