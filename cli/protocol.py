@@ -23,7 +23,7 @@ from pathlib import Path
 from pairplay.cli.args import int_between, output_file, output_folder, session_id
 from pairplay.core.personas import persona
 from pairplay.lists import comma_items
-from pairplay.replay.studydata import REGISTER_AT_ONCE, StudyData, StudyDataError
+from pairplay.replay.studydata import JOURNAL, REGISTER_AT_ONCE, StudyData, StudyDataError, repair_journal
 from pairplay.schemas.study import (StudyFileError, bundled_studies, bundled_text, example_text, no_study_file,
                                     parse_study)
 from pairplay.numbers import counted
@@ -67,6 +67,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     sv.add_argument("--pilot",
                     help="ID=PERSONA,...: these participants are played by core personas on the bus (a dress "
                          "rehearsal from the console; the others play on the board page)")
+    rp = sub.add_parser("repair", help="set aside the journal's last line a crash cut (it blocks every verb until then)")
+    rp.add_argument("folder", type=Path)
     m = sub.add_parser("mark-invalid", help="keep a game out of the plan, the combination and the report")
     m.add_argument("folder", type=Path)
     m.add_argument("session", type=session_id)
@@ -91,6 +93,23 @@ def _study_file(name: str) -> tuple[str, str]:
         raise no_study_file(name) from None
     except OSError as err:  # as load_study says it
         raise StudyFileError(f"{name}: cannot read: {err.strerror or err}") from None
+
+
+def _repair(folder: Path) -> int:
+    """`protocol repair FOLDER` (replay/studyjournal.py): what it set aside, and what it means."""
+    done = repair_journal(folder)
+    journal = folder / JOURNAL
+    if done.aside is not None:
+        print(f"set aside the cut last line of {journal} ({counted(len(done.torn), 'byte')}, what a crash left of "
+              f"the event it wrote) in {folder / done.aside.name}; the journal keeps its "
+              f"{counted(done.kept, 'whole line')}: the study goes on from them (a game whose end was cut is "
+              "journaled from its recording by the next serve, pilot or report)")
+    elif done.newline:
+        print(f"{journal}: its last line was whole but for its end of line: added; nothing set aside "
+              f"({counted(done.kept, 'line')})")
+    else:
+        print(f"{journal}: nothing to repair: every line is whole ({counted(done.kept, 'line')})")
+    return 0
 
 
 def describe(study) -> list[str]:
@@ -157,6 +176,8 @@ def _run(args) -> int:
         print(f"study folder {data.given} ({data.study.study.id}); key file: {data.key_file or 'none'}")
         print("\n".join(describe(data.study)))
         return 0
+    if args.action == "repair":
+        return _repair(args.folder)
     # every action but status writes the folder: it holds the folder's writer lock for the verb's length (serve: as
     # long as it serves; one writer per study folder, pairplay/folderlock.py); status reads beside a writer
     with StudyData(args.folder, writer="" if args.action == "status" else f"protocol {args.action}") as data:

@@ -61,6 +61,7 @@ from pairplay.schemas.study import Study, StudyFileError, load_study
 from pairplay.numbers import counted
 
 from .fold import fold_events
+from . import studyjournal
 from .reader import read_log
 from .rebuild import Rebuilt, rebuild_recording, write_outputs
 from .wal import wal_path
@@ -245,12 +246,7 @@ class StudyData:
 
     # -- one writer per folder (pairplay/folderlock.py) -------------------------
     def _take(self, verb: str) -> int | None:
-        try:
-            return folderlock.take(self.folder, verb)
-        except folderlock.FolderBusy as busy:
-            raise StudyDataError(f"another pairplay writes this study folder: {busy.holder or 'a process'}; one "
-                                 "writer per study folder: stop it, or work in its console (`pairplay protocol "
-                                 "status` reads beside it)", self.given) from None
+        return _take_lock(self.folder, self.given, verb)
 
     def close(self) -> None:
         """Release the folder's writer lock, if this object holds it (the process's end does as well)."""
@@ -348,23 +344,21 @@ class StudyData:
 
     # -- the journal ---------------------------------------------------------
     def read_journal(self) -> list[j.JournalEvent]:
-        events = []
-        with open(self.folder / JOURNAL, "rb") as f:
-            for n, line in enumerate(f, 1):
-                if not line.strip():
-                    continue
-                try:
-                    events.append(j.decode_line(line))
-                except (msgspec.DecodeError, msgspec.ValidationError) as err:
-                    raise StudyDataError(f"{self.given / JOURNAL}:{n}: {err}") from None
-        return events
+        """Every event of the journal; StudyDataError naming a line that does not read and what to do (a
+        torn last line: `protocol repair`; replay/studyjournal.py)."""
+        try:
+            return studyjournal.events_of((self.folder / JOURNAL).read_bytes(), self.given / JOURNAL, self.given)
+        except studyjournal.JournalDamaged as err:
+            raise StudyDataError(str(err)) from None
 
     def append(self, event: j.JournalEvent) -> j.JournalEvent:
         with self._writing():
             if not event.time_ns:
                 event = msgspec.structs.replace(event, time_ns=time.time_ns())
-            with open(self.folder / JOURNAL, "ab") as f:
-                f.write(j.encode_line(event))
+            with open(self.folder / JOURNAL, "a+b") as f:  # (+: its last byte is read)
+                # a last line whole but for its end of line (a crash cut just that) would run on into this one
+                ends_open = f.tell() > 0 and os.pread(f.fileno(), 1, f.tell() - 1) != b"\n"
+                f.write((b"\n" if ends_open else b"") + j.encode_line(event))
                 f.flush()
                 os.fsync(f.fileno())
             self.state.evolve(event)
@@ -731,6 +725,11 @@ class StudyData:
             if g.ended is not None and g.ended.policy:
                 files.append(self.folder / g.ended.policy)
         files += list((self.folder / "exports").glob(f"{pid}.zip"))
+        # a journal line of theirs a crash cut, set aside by `protocol repair` (replay/studyjournal.py)
+        named = [f'"{pid}"'.encode()] + [f'"{g.session}"'.encode() for g in self.games_of(pid)]
+        for torn in self.folder.glob(f"{JOURNAL}{studyjournal.TORN}-*"):
+            if torn.is_file() and any(n in torn.read_bytes() for n in named):
+                files.append(torn)
         return [f for f in files if f.is_file()]
 
     def merged_using(self, pid: str) -> list[str]:
@@ -983,6 +982,33 @@ def _names(path: Path, pid: str) -> bool:
         return False
 
 
+def _take_lock(folder: Path, given: Path, verb: str) -> int | None:
+    """The study folder's writer lock for `verb` (pairplay/folderlock.py); StudyDataError naming the holder."""
+    try:
+        return folderlock.take(folder, verb)
+    except folderlock.FolderBusy as busy:
+        raise StudyDataError(f"another pairplay writes this study folder: {busy.holder or 'a process'}; one "
+                             "writer per study folder: stop it, or work in its console (`pairplay protocol "
+                             "status` reads beside it)", given) from None
+
+
+def repair_journal(folder: str | Path) -> studyjournal.Repaired:
+    """`pairplay protocol repair`: the journal's last line a crash cut set aside beside it, under the folder's
+    writer lock (replay/studyjournal.py); StudyDataError if it is no study folder or a line that is not the
+    torn last one is damaged (nothing changed then)."""
+    given = Path(folder)
+    resolved = given.resolve()
+    if not (resolved / JOURNAL).is_file():
+        raise StudyDataError(f"{given}: not a study folder (no {JOURNAL}; `pairplay protocol init` makes one)")
+    fd = _take_lock(resolved, given, "protocol repair")
+    try:
+        return studyjournal.repair(resolved / JOURNAL, given / JOURNAL, given)
+    except studyjournal.JournalDamaged as err:
+        raise StudyDataError(str(err)) from None
+    finally:
+        folderlock.release(fd)
+
+
 class FolderSettings(msgspec.Struct, forbid_unknown_fields=True):
     """settings.json: where the key file is ("" for none)."""
 
@@ -995,10 +1021,11 @@ def _settings(path: Path) -> dict:
     its files gone and its journal lines kept, a new user's trial)."""
     if not path.is_file():
         return {}
+    data = without_bom(path.read_bytes())
     try:
-        return msgspec.structs.asdict(msgspec.json.decode(without_bom(path.read_bytes()), type=FolderSettings))
+        return msgspec.structs.asdict(msgspec.json.decode(data, type=FolderSettings))
     except (msgspec.DecodeError, msgspec.ValidationError) as err:
-        raise StudyDataError(f"not the study's settings: {in_words(err, FolderSettings)}; it is "
+        raise StudyDataError(f"not the study's settings: {in_words(err, FolderSettings, data)}; it is "
                              f"{{\"key_file\": \"<path or empty>\"}}", path) from None
 
 

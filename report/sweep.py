@@ -56,7 +56,7 @@ from pairplay.nearest import nearest
 from pairplay.numbers import counted, shown, type_name, typed_floats
 from pairplay.outputs import manifest_name, output_file, output_folder, write_text
 from pairplay.processes import check_workers, worker_pool
-from pairplay.schemas.jsonfile import empty, in_words, without_bom
+from pairplay.schemas.jsonfile import empty, in_words, toml_words, without_bom
 from pairplay.schemas.tomlplace import TOP, Written, misplaced, table_not_value
 from pairplay.core.geometry import PERFECT_PICKS
 from pairplay.core.rng import SEED_RANGE
@@ -186,7 +186,7 @@ def _read_grid(path: str, parse_float) -> Grid:
     except IsADirectoryError:  # it said `Is a directory (bad)`: the system's words, not what to give
         raise GridError(f"{path}: a folder, not a sweep file: give the grid's TOML file") from None
     except tomllib.TOMLDecodeError as exc:
-        raise GridError(f"{path}: not TOML ({exc})") from None
+        raise GridError(f"{path}: not TOML: {toml_words(exc, text)}") from None
     except UnicodeDecodeError:  # tomllib decodes bytes itself: a binary file was a traceback
         raise GridError(f"{path}: not TOML (not UTF-8 text)") from None
     written = Written(text, data)  # the file's places and values in its own words (schemas/tomlplace.py)

@@ -33,7 +33,7 @@ from pairplay.nearest import nearest
 from pairplay.numbers import TYPE_NAMES, counted, shown, type_name, typed_floats
 
 from .config import LearnerConfig
-from .jsonfile import empty
+from .jsonfile import empty, toml_words
 from .robot_url import parse_robot_url
 from .session import MS_FIELDS, MS_RANGE, SEED_RANGE
 from .tomlplace import Written, header, misplaced, table_not_value
@@ -254,7 +254,7 @@ def parse_study(text: str, source: str = "study") -> Study:
         try:
             raw = tomllib.loads(text, parse_float=parse_float)
         except tomllib.TOMLDecodeError as err:
-            raise StudyFileError(f"{source}: not valid TOML: {err}") from None
+            raise StudyFileError(f"{source}: not valid TOML: {toml_words(err, text)}") from None
         written = Written(text, raw)
         try:
             study = msgspec.convert(raw, Study)
