@@ -38,6 +38,7 @@ import contextlib
 import csv
 import hashlib
 import io
+import logging
 import os
 import re
 import secrets
@@ -274,7 +275,7 @@ class StudyData:
         with self._lock:
             taken = None
             if self._hold is None:
-                taken = self._hold = self._take("a write through pairplay's Python API")
+                taken = self._hold = self._take(API_WRITE)
             try:
                 if self._stamp and self._journal_stamp() != self._stamp:
                     raise StudyDataError(f"{JOURNAL} was changed by another process since this one read it; "
@@ -982,14 +983,24 @@ def _names(path: Path, pid: str) -> bool:
         return False
 
 
+API_WRITE = "a write through pairplay's Python API"  # the holder's words of a StudyData made without a writer
+
+
 def _take_lock(folder: Path, given: Path, verb: str) -> int | None:
-    """The study folder's writer lock for `verb` (pairplay/folderlock.py); StudyDataError naming the holder."""
+    """The study folder's writer lock for `verb` (pairplay/folderlock.py: a short holder waited for, saying so
+    on stderr); StudyDataError naming the holder."""
+    waiting = folderlock.say_waiting(verb, given) if verb != API_WRITE else (  # a library's words: logged
+        lambda who: logging.getLogger("pairplay.studydata").warning("%s", folderlock.waiting_line(who, given)))
     try:
-        return folderlock.take(folder, verb)
+        return folderlock.take(folder, verb, folderlock.WAIT_S, waiting)
     except folderlock.FolderBusy as busy:
-        raise StudyDataError(f"another pairplay writes this study folder: {busy.holder or 'a process'}; one "
-                             "writer per study folder: stop it, or work in its console (`pairplay protocol "
-                             "status` reads beside it)", given) from None
+        who = busy.holder or "a process"
+        if folderlock.is_long(busy.holder):
+            raise StudyDataError(f"another pairplay writes this study folder: {who}; one writer per study folder: "
+                                 "stop it, or work in its console (`pairplay protocol status` reads beside it)",
+                                 given) from None
+        raise StudyDataError(f"another pairplay writes this study folder: {who}; waited {folderlock.WAIT_S:g} s "
+                             "for it to finish (one writer per study folder): run this again when it has", given) from None
 
 
 def repair_journal(folder: str | Path) -> studyjournal.Repaired:
