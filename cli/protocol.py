@@ -23,8 +23,9 @@ from pathlib import Path
 from pairplay.cli.args import int_between, output_file, output_folder, session_id
 from pairplay.core.personas import persona
 from pairplay.lists import comma_items
-from pairplay.replay.studydata import REGISTER_AT_ONCE, StudyData, StudyDataError
-from pairplay.schemas.study import StudyFileError, example_text, load_study, parse_study
+from pairplay.replay.studydata import JOURNAL, REGISTER_AT_ONCE, StudyData, StudyDataError, repair_journal
+from pairplay.schemas.study import (StudyFileError, bundled_studies, bundled_text, example_text, no_study_file,
+                                    parse_study)
 from pairplay.numbers import counted
 
 EXAMPLE_NAME = "thesis-ch7"
@@ -33,12 +34,13 @@ EXAMPLE_NAME = "thesis-ch7"
 def add_arguments(p: argparse.ArgumentParser) -> None:
     sub = p.add_subparsers(dest="action", metavar="ACTION", required=True)
     c = sub.add_parser("check", help="check a study file and print its protocol")
-    c.add_argument("study_file", help=f"a study TOML file, or {EXAMPLE_NAME} for the shipped example")
+    c.add_argument("study_file", help=f"a study TOML file, or a bundled study's name ({EXAMPLE_NAME}: the example)")
     e = sub.add_parser("example", help="print the shipped example study file (the thesis's chapter 7)")
     e.set_defaults(study_file=EXAMPLE_NAME)
     i = sub.add_parser("init", help="make a study folder from a study file")
     i.add_argument("folder", type=output_folder)
-    i.add_argument("--study", required=True, help=f"the study TOML file, or {EXAMPLE_NAME} for the shipped example")
+    i.add_argument("--study", required=True,
+                   help=f"the study TOML file, or a bundled study's name ({EXAMPLE_NAME}: the example)")
     i.add_argument("--key-file", type=output_file(),
                    help="a CSV of id,name kept OUTSIDE the study folder (optional; without it no name is accepted)")
     r = sub.add_parser("register", help="register a participant: prints their pseudonymous id")
@@ -65,20 +67,49 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     sv.add_argument("--pilot",
                     help="ID=PERSONA,...: these participants are played by core personas on the bus (a dress "
                          "rehearsal from the console; the others play on the board page)")
+    rp = sub.add_parser("repair", help="set aside the journal's last line a crash cut (it blocks every verb until then)")
+    rp.add_argument("folder", type=Path)
     m = sub.add_parser("mark-invalid", help="keep a game out of the plan, the combination and the report")
     m.add_argument("folder", type=Path)
     m.add_argument("session", type=session_id)
     m.add_argument("--reason", required=True)
 
 
+def _bundled(name: str) -> bool:
+    """`name` (a study file argument) names a bundled study: a file of that name here comes first."""
+    return name in bundled_studies() and not Path(name).exists()
+
+
 def _study_file(name: str) -> tuple[str, str]:
-    """(text, source) of a study file argument."""
-    if name == EXAMPLE_NAME and not Path(name).exists():
-        return example_text(), f"{EXAMPLE_NAME} (shipped example)"
+    """(text, source) of a study file argument: a file, or a bundled study's name (a name that is neither
+    is refused with the bundled ones: `--study thesis-ch8` said only "No such file or directory")."""
+    if _bundled(name):
+        return bundled_text(name), f"{name} (shipped example)" if name == EXAMPLE_NAME else f"{name} (bundled study)"
     try:
         return Path(name).read_text(encoding="utf-8-sig"), name  # as load_study: a byte order mark is fine
     except UnicodeDecodeError:  # as load_study says it (a random or binary file was a traceback)
         raise StudyFileError(f"{name}: cannot read: not UTF-8 text") from None
+    except FileNotFoundError:
+        raise no_study_file(name) from None
+    except OSError as err:  # as load_study says it
+        raise StudyFileError(f"{name}: cannot read: {err.strerror or err}") from None
+
+
+def _repair(folder: Path) -> int:
+    """`protocol repair FOLDER` (replay/studyjournal.py): what it set aside, and what it means."""
+    done = repair_journal(folder)
+    journal = folder / JOURNAL
+    if done.aside is not None:
+        print(f"set aside the cut last line of {journal} ({counted(len(done.torn), 'byte')}, what a crash left of "
+              f"the event it wrote) in {folder / done.aside.name}; the journal keeps its "
+              f"{counted(done.kept, 'whole line')}: the study goes on from them (a game whose end was cut is "
+              "journaled from its recording by the next serve, pilot or report)")
+    elif done.newline:
+        print(f"{journal}: its last line was whole but for its end of line: added; nothing set aside "
+              f"({counted(done.kept, 'line')})")
+    else:
+        print(f"{journal}: nothing to repair: every line is whole ({counted(done.kept, 'line')})")
+    return 0
 
 
 def describe(study) -> list[str]:
@@ -125,17 +156,18 @@ def _run(args) -> int:
         from pairplay.outputs import check_folder
         check_folder(args.folder)  # a place the system refuses, named as given, before anything is written
         study_path = args.study
-        if args.study == EXAMPLE_NAME and not Path(args.study).exists():
-            tmp = args.folder.resolve().parent / f".{EXAMPLE_NAME}.toml"
+        if _bundled(args.study):
+            tmp = args.folder.resolve().parent / f".{args.study}.toml"
             tmp.parent.mkdir(parents=True, exist_ok=True)
             try:
-                tmp.write_text(example_text(), encoding="utf-8")
+                tmp.write_text(bundled_text(args.study), encoding="utf-8")
             except OSError as err:  # a full disk: said of the folder asked for, not of our file, which goes
                 tmp.unlink(missing_ok=True)
                 raise OSError(err.errno, err.strerror, str(args.folder)) from None
             study_path = tmp
         else:
-            load_study(study_path)
+            text, source = _study_file(study_path)  # a name neither a file nor bundled: the bundled ones said
+            parse_study(text, source)
         try:
             data = StudyData.create(args.folder, study_path, args.key_file)
         finally:
@@ -144,6 +176,8 @@ def _run(args) -> int:
         print(f"study folder {data.given} ({data.study.study.id}); key file: {data.key_file or 'none'}")
         print("\n".join(describe(data.study)))
         return 0
+    if args.action == "repair":
+        return _repair(args.folder)
     # every action but status writes the folder: it holds the folder's writer lock for the verb's length (serve: as
     # long as it serves; one writer per study folder, pairplay/folderlock.py); status reads beside a writer
     with StudyData(args.folder, writer="" if args.action == "status" else f"protocol {args.action}") as data:

@@ -15,6 +15,7 @@ from importlib import resources
 
 import msgspec
 
+from pairplay.nearest import nearest
 from pairplay.schemas.config import Persona
 
 from .interpretation import reading_code
@@ -62,4 +63,6 @@ def persona(key: str) -> Persona:
     for p in PERSONAS.values():
         if p.name.lower() == k:
             return p
-    raise KeyError(f"unknown persona {key!r}; known: {', '.join(PERSONAS)}")
+    near = nearest(k, PERSONAS)  # `ashly`: the one meant, before the list
+    raise KeyError(f"unknown persona {key!r}" + (f" (did you mean {near!r}?)" if near else "")
+                   + f"; known: {', '.join(PERSONAS)}")

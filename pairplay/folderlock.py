@@ -3,8 +3,14 @@
 Rule: every verb that writes a study folder (its journal, its key file, its tables, recordings,
 policies, exports, report) holds an exclusive `fcntl.flock` on `<folder>/.pairplay-lock` from
 before it reads the journal until it ends (`protocol serve` for as long as it serves); a second
-writer is refused at once (no waiting) in one line naming the folder and the holder, whose verb,
-pid and start time the holder wrote into the lock file. The kernel drops the lock when the holder
+writer is refused in one line naming the folder and the holder, whose verb, pid and start time the
+holder wrote into the lock file: at once when the holder is a long one (`protocol serve`, `protocol
+pilot`: LONG_HOLDERS, which hold the folder for as long as they serve or play); a holder that writes
+and ends in a moment (register, mark-invalid, report, export, delete, repair, a verb's journal line
+of a copy) is first waited for, up to WAIT_S, the waiter saying on stderr for whom (`waiting`). Why
+wait: two short commands that collide (a script's register beside an export) should both do what
+they were asked; the second was refused at once, told to stop a holder that ended a moment later.
+The kernel drops the lock when the holder
 ends, however it ends (SIGKILL too), so a lock is never stale, and the file stays, empty when nobody
 writes (`protocol init` makes it; removing a locked file lets a third process lock a new one beside a
 holder of the old). Read-only verbs
@@ -18,10 +24,16 @@ from __future__ import annotations
 
 import fcntl
 import os
+import sys
 import time
 from pathlib import Path
+from typing import Callable
 
 LOCK_FILE = ".pairplay-lock"
+# verbs that hold a folder for minutes to hours: a writer beside them is refused at once (waiting is useless)
+LONG_HOLDERS = ("protocol serve", "protocol pilot")
+WAIT_S = 8.0  # how long a writer waits for a short holder: longer than a report's few seconds, short for a person
+POLL_S = 0.05
 
 
 class FolderBusy(Exception):
@@ -32,9 +44,11 @@ class FolderBusy(Exception):
         self.holder = holder
 
 
-def take(folder: str | Path, verb: str) -> int | None:
+def take(folder: str | Path, verb: str, wait: float = 0.0, waiting: Callable[[str], None] | None = None) -> int | None:
     """A descriptor holding `folder`'s writer lock (`release` it, or let the process end), after writing
-    `verb`, the pid and the time into the lock file. FolderBusy if another process holds it. None if the
+    `verb`, the pid and the time into the lock file. FolderBusy if another process holds it: at once if that
+    is a long holder (LONG_HOLDERS), else after waiting up to `wait` seconds for it to end, calling
+    `waiting(holder)` once when it starts to wait for a holder that named itself (module rule). None if the
     folder cannot hold a lock file (read-only: the verb's own check refuses it in its words) or its file
     system has no locks (the verb goes on unlocked, as a recording does: livelock.hold)."""
     path = Path(folder) / LOCK_FILE
@@ -45,14 +59,26 @@ def take(folder: str | Path, verb: str) -> int | None:
             fd = os.open(path, os.O_RDONLY | os.O_CLOEXEC)
         except OSError:
             return None
+    deadline, said = time.monotonic() + wait, False
     try:
-        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
-    except BlockingIOError:
-        os.close(fd)
-        raise FolderBusy(holder(path)) from None
-    except OSError:
+        while True:
+            try:
+                fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+                break
+            except BlockingIOError:
+                who = holder(path)  # "" for a moment after the holder took it, before it wrote its line
+                if is_long(who) or time.monotonic() >= deadline:
+                    raise FolderBusy(who) from None
+                if who and not said and waiting is not None:
+                    waiting(who)
+                    said = True
+                time.sleep(POLL_S)  # (a signal here unwinds: the descriptor is closed below)
+    except OSError:  # no locks on this file system
         os.close(fd)
         return None
+    except BaseException:  # FolderBusy, a KeyboardInterrupt while waiting
+        os.close(fd)
+        raise
     stamp = time.strftime("%Y-%m-%d %H:%M:%S UTC", time.gmtime())
     try:
         os.ftruncate(fd, 0)
@@ -60,6 +86,21 @@ def take(folder: str | Path, verb: str) -> int | None:
     except OSError:  # a read-only descriptor: the lock holds, the refusal cannot say who
         pass
     return fd
+
+
+def waiting_line(who: str, folder: str | Path) -> str:
+    """What a writer says when it starts to wait for `who` (a holder's line) to end (`take`'s `waiting`)."""
+    return f"waiting up to {WAIT_S:g} s for another pairplay that writes this study folder: {who} ({folder})"
+
+
+def say_waiting(verb: str, folder: str | Path) -> Callable[[str], None]:
+    """`take`'s `waiting` for the command `pairplay VERB`: its line on stderr (`folder` as the user gave it)."""
+    return lambda who: print(f"pairplay {verb}: {waiting_line(who, folder)}", file=sys.stderr, flush=True)
+
+
+def is_long(holder_line: str) -> bool:
+    """Whether the holder that wrote `holder_line` is a long one (LONG_HOLDERS): never waited for."""
+    return holder_line.startswith(LONG_HOLDERS)
 
 
 def holder(path: str | Path) -> str:

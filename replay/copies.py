@@ -125,8 +125,9 @@ class Copies:
                 raise OutputError(f"cannot write there ({err.strerror or err}), and this `pairplay {self.verb}` "
                                   "writes a copy of its participants' data that their deletion must know: make the "
                                   "study's journal writable first", journal) from None
-            try:  # its line will need the folder's writer lock (one writer per study folder): free now?
-                folderlock.release(folderlock.take(root, self.verb))
+            try:  # its line will need the folder's writer lock (one writer per study folder): free now (or soon)?
+                folderlock.release(folderlock.take(root, self.verb, folderlock.WAIT_S,
+                                                   folderlock.say_waiting(self.verb, self._typed.get(root, root))))
             except folderlock.FolderBusy as busy:
                 raise OutputError(f"another pairplay writes this study folder: {busy.holder or 'a process'}; this "
                                   f"`pairplay {self.verb}` writes a copy of its participants' data that their deletion "

@@ -38,6 +38,7 @@ import contextlib
 import csv
 import hashlib
 import io
+import logging
 import os
 import re
 import secrets
@@ -61,6 +62,7 @@ from pairplay.schemas.study import Study, StudyFileError, load_study
 from pairplay.numbers import counted
 
 from .fold import fold_events
+from . import studyjournal
 from .reader import read_log
 from .rebuild import Rebuilt, rebuild_recording, write_outputs
 from .wal import wal_path
@@ -138,14 +140,18 @@ class StudyState:
     combined: dict[str, j.BiasCombined] = field(default_factory=dict)  # phase -> its bias
     deletions: list[j.ParticipantDeleted] = field(default_factory=list)
     next_number: int = 1
+    # ids given out: a registration left in the journal, or a deletion (it removed its one registration line
+    # and keeps no id). Ids are given in order, so the next is one past both this count and the highest left.
+    ids_given: int = 0
 
     def evolve(self, e: j.JournalEvent) -> None:
         if isinstance(e, j.StudyCreated):
             self.created = e
         elif isinstance(e, j.ParticipantRegistered):
             self.participants[e.participant] = e
+            self.ids_given += 1
             number = int(e.participant[1:]) if e.participant[1:].isdigit() else 0
-            self.next_number = max(self.next_number, number + 1)
+            self.next_number = max(self.next_number, number + 1, self.ids_given + 1)
         elif isinstance(e, j.GameStarted):
             self.games[e.session] = Game(e.session, e.participant, e.phase, e.game, e.recording, e.bias,
                                          scripted=e.scripted)
@@ -163,8 +169,11 @@ class StudyState:
             self.combined[e.phase] = e
         elif isinstance(e, j.ParticipantDeleted):
             self.deletions.append(e)
-            # ids are never reused, even after a deletion took the highest one
-            self.next_number += 1
+            # ids are never reused, even after a deletion took the highest one; nor skipped: the deleted one
+            # counts once, as the one id it was (a `+= 1` on top of the highest left skipped one when the
+            # deleted id was not the highest: p02 of p01..p03 deleted, the next was p05)
+            self.ids_given += 1
+            self.next_number = max(self.next_number, self.ids_given + 1)
 
 
 @dataclass(frozen=True)
@@ -238,12 +247,7 @@ class StudyData:
 
     # -- one writer per folder (pairplay/folderlock.py) -------------------------
     def _take(self, verb: str) -> int | None:
-        try:
-            return folderlock.take(self.folder, verb)
-        except folderlock.FolderBusy as busy:
-            raise StudyDataError(f"another pairplay writes this study folder: {busy.holder or 'a process'}; one "
-                                 "writer per study folder: stop it, or work in its console (`pairplay protocol "
-                                 "status` reads beside it)", self.given) from None
+        return _take_lock(self.folder, self.given, verb)
 
     def close(self) -> None:
         """Release the folder's writer lock, if this object holds it (the process's end does as well)."""
@@ -271,7 +275,7 @@ class StudyData:
         with self._lock:
             taken = None
             if self._hold is None:
-                taken = self._hold = self._take("a write through pairplay's Python API")
+                taken = self._hold = self._take(API_WRITE)
             try:
                 if self._stamp and self._journal_stamp() != self._stamp:
                     raise StudyDataError(f"{JOURNAL} was changed by another process since this one read it; "
@@ -341,23 +345,21 @@ class StudyData:
 
     # -- the journal ---------------------------------------------------------
     def read_journal(self) -> list[j.JournalEvent]:
-        events = []
-        with open(self.folder / JOURNAL, "rb") as f:
-            for n, line in enumerate(f, 1):
-                if not line.strip():
-                    continue
-                try:
-                    events.append(j.decode_line(line))
-                except (msgspec.DecodeError, msgspec.ValidationError) as err:
-                    raise StudyDataError(f"{self.given / JOURNAL}:{n}: {err}") from None
-        return events
+        """Every event of the journal; StudyDataError naming a line that does not read and what to do (a
+        torn last line: `protocol repair`; replay/studyjournal.py)."""
+        try:
+            return studyjournal.events_of((self.folder / JOURNAL).read_bytes(), self.given / JOURNAL, self.given)
+        except studyjournal.JournalDamaged as err:
+            raise StudyDataError(str(err)) from None
 
     def append(self, event: j.JournalEvent) -> j.JournalEvent:
         with self._writing():
             if not event.time_ns:
                 event = msgspec.structs.replace(event, time_ns=time.time_ns())
-            with open(self.folder / JOURNAL, "ab") as f:
-                f.write(j.encode_line(event))
+            with open(self.folder / JOURNAL, "a+b") as f:  # (+: its last byte is read)
+                # a last line whole but for its end of line (a crash cut just that) would run on into this one
+                ends_open = f.tell() > 0 and os.pread(f.fileno(), 1, f.tell() - 1) != b"\n"
+                f.write((b"\n" if ends_open else b"") + j.encode_line(event))
                 f.flush()
                 os.fsync(f.fileno())
             self.state.evolve(event)
@@ -724,6 +726,11 @@ class StudyData:
             if g.ended is not None and g.ended.policy:
                 files.append(self.folder / g.ended.policy)
         files += list((self.folder / "exports").glob(f"{pid}.zip"))
+        # a journal line of theirs a crash cut, set aside by `protocol repair` (replay/studyjournal.py)
+        named = [f'"{pid}"'.encode()] + [f'"{g.session}"'.encode() for g in self.games_of(pid)]
+        for torn in self.folder.glob(f"{JOURNAL}{studyjournal.TORN}-*"):
+            if torn.is_file() and any(n in torn.read_bytes() for n in named):
+                files.append(torn)
         return [f for f in files if f.is_file()]
 
     def merged_using(self, pid: str) -> list[str]:
@@ -976,6 +983,43 @@ def _names(path: Path, pid: str) -> bool:
         return False
 
 
+API_WRITE = "a write through pairplay's Python API"  # the holder's words of a StudyData made without a writer
+
+
+def _take_lock(folder: Path, given: Path, verb: str) -> int | None:
+    """The study folder's writer lock for `verb` (pairplay/folderlock.py: a short holder waited for, saying so
+    on stderr); StudyDataError naming the holder."""
+    waiting = folderlock.say_waiting(verb, given) if verb != API_WRITE else (  # a library's words: logged
+        lambda who: logging.getLogger("pairplay.studydata").warning("%s", folderlock.waiting_line(who, given)))
+    try:
+        return folderlock.take(folder, verb, folderlock.WAIT_S, waiting)
+    except folderlock.FolderBusy as busy:
+        who = busy.holder or "a process"
+        if folderlock.is_long(busy.holder):
+            raise StudyDataError(f"another pairplay writes this study folder: {who}; one writer per study folder: "
+                                 "stop it, or work in its console (`pairplay protocol status` reads beside it)",
+                                 given) from None
+        raise StudyDataError(f"another pairplay writes this study folder: {who}; waited {folderlock.WAIT_S:g} s "
+                             "for it to finish (one writer per study folder): run this again when it has", given) from None
+
+
+def repair_journal(folder: str | Path) -> studyjournal.Repaired:
+    """`pairplay protocol repair`: the journal's last line a crash cut set aside beside it, under the folder's
+    writer lock (replay/studyjournal.py); StudyDataError if it is no study folder or a line that is not the
+    torn last one is damaged (nothing changed then)."""
+    given = Path(folder)
+    resolved = given.resolve()
+    if not (resolved / JOURNAL).is_file():
+        raise StudyDataError(f"{given}: not a study folder (no {JOURNAL}; `pairplay protocol init` makes one)")
+    fd = _take_lock(resolved, given, "protocol repair")
+    try:
+        return studyjournal.repair(resolved / JOURNAL, given / JOURNAL, given)
+    except studyjournal.JournalDamaged as err:
+        raise StudyDataError(str(err)) from None
+    finally:
+        folderlock.release(fd)
+
+
 class FolderSettings(msgspec.Struct, forbid_unknown_fields=True):
     """settings.json: where the key file is ("" for none)."""
 
@@ -988,10 +1032,11 @@ def _settings(path: Path) -> dict:
     its files gone and its journal lines kept, a new user's trial)."""
     if not path.is_file():
         return {}
+    data = without_bom(path.read_bytes())
     try:
-        return msgspec.structs.asdict(msgspec.json.decode(without_bom(path.read_bytes()), type=FolderSettings))
+        return msgspec.structs.asdict(msgspec.json.decode(data, type=FolderSettings))
     except (msgspec.DecodeError, msgspec.ValidationError) as err:
-        raise StudyDataError(f"not the study's settings: {in_words(err, FolderSettings)}; it is "
+        raise StudyDataError(f"not the study's settings: {in_words(err, FolderSettings, data)}; it is "
                              f"{{\"key_file\": \"<path or empty>\"}}", path) from None
 
 

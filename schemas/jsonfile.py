@@ -23,12 +23,16 @@ the file's words (`in_words`): the key as the file writes it and what is wrong
 ("q[0][1]: must be a number, got text"; "has no key `yaw_sgn` (did you mean
 `yaw_sign`?)"), not msgspec's ("Expected `float`, got `str` - at `$.q[0][1]`"),
 for every JSON input alike (policy and user-model files, the robot config, the
-calibration).
+calibration). A file that is no JSON at all is said with where and what to do (`syntax_words`): a file
+that ends inside its JSON is "cut short: it ends inside its JSON at line L (byte N, its end): a copy or a
+save that did not finish? put back a whole copy" (msgspec said "Input data was truncated", no file's
+place, no advice), a character that breaks it "not valid JSON at line L, column C (byte N): ...: correct
+it there"; a TOML file's syntax alike (`toml_words`: tomllib's "(at end of document)" is said as the line
+the file ends on).
 """
 
 from __future__ import annotations
 
-import difflib
 import re
 import types
 import typing
@@ -37,6 +41,7 @@ from typing import Generic, TypeVar
 
 import msgspec
 from pairplay.arguments import flag_argument, instance_argument, path_argument
+from pairplay.nearest import nearest
 from pairplay.numbers import counted, type_name
 
 T = TypeVar("T")
@@ -67,15 +72,50 @@ _LOCATED = re.compile(r"(.*?)(?: - at `\$(.*)`)?", re.S)
 _BOUND = {">=": "at least", "<=": "at most", ">": "above", "<": "below"}
 
 
-def in_words(exc: Exception, struct: type | None = None) -> str:
+def _line_column(data: bytes, at: int) -> tuple[int, int]:
+    """The line and column (from 1) of byte offset `at` of `data`."""
+    before = data[:at]
+    return before.count(b"\n") + 1, at - (before.rfind(b"\n") + 1) + 1
+
+
+def syntax_words(exc: Exception, data: bytes | None) -> str:
+    """msgspec's DecodeError for the JSON text `data` (a BOM taken off) with where and what to do (module
+    rule); its own words if `data` is not given or the error is not one of its two syntax errors."""
+    text = str(exc)
+    malformed = re.fullmatch(r"JSON is malformed: (.*?)(?: \(byte (\d+)\))?", text, re.S)
+    at_end = malformed is not None and malformed[2] is not None and data is not None and int(malformed[2]) >= len(data)
+    if data is not None and (text == "Input data was truncated" or at_end):  # cut: its end is the place (`1.`)
+        line = data.count(b"\n") + (0 if data.endswith(b"\n") else 1)
+        return (f"cut short: it ends inside its JSON at line {line} (byte {len(data)}, its end): a copy or a save "
+                "that did not finish? put back a whole copy")
+    if malformed is None:
+        return text
+    if data is None or malformed[2] is None:
+        return f"not valid JSON: {malformed[1]}"
+    line, column = _line_column(data, int(malformed[2]))
+    return f"not valid JSON at line {line}, column {column} (byte {malformed[2]}): {malformed[1]}: correct it there"
+
+
+def toml_words(exc: Exception, text: str) -> str:
+    """tomllib's TOMLDecodeError for `text` with where and what to do (module rule): its "(at end of
+    document)" is the line the file ends on, a cut or an unclosed quote or bracket."""
+    said = str(exc)
+    if said.endswith("(at end of document)"):
+        lines = text.count("\n") + (0 if text.endswith("\n") else 1)
+        return (f"{said.removesuffix(' (at end of document)')} at its end (line {lines}): cut short (a copy or a "
+                "save that did not finish? put back a whole copy), or a quote or bracket left open")
+    return f"{said}: correct it there" if re.search(r"\(at line \d+, column \d+\)$", said) else said
+
+
+def in_words(exc: Exception, struct: type | None = None, data: bytes | None = None) -> str:
     """Why msgspec could not read a JSON file, in the file's words (module rule): "KEY: what is wrong",
     KEY the path as the file writes it (`cards[0][2]`, `learner.alpha`; none at the top). `struct`, the
-    Struct the file is read as, names the keys a table takes for an unknown one (and the one it resembles).
+    Struct the file is read as, names the keys a table takes for an unknown one (and the one it resembles);
+    `data`, the text decoded (a BOM taken off), places a syntax error (`syntax_words`).
     What it does not know is said as msgspec says it."""
     text = str(exc)
     if not isinstance(exc, msgspec.ValidationError):
-        malformed = re.fullmatch(r"JSON is malformed: (.*)", text, re.S)
-        return f"not valid JSON: {malformed[1]}" if malformed else text
+        return syntax_words(exc, data)
     what, where = _LOCATED.fullmatch(text).groups()
     where = (where or "").lstrip(".")
     said = what
@@ -94,8 +134,8 @@ def in_words(exc: Exception, struct: type | None = None) -> str:
             f", holds {length[6]}" if length[6] else "")
     elif unknown := re.fullmatch(r"Object contains unknown field `(.+)`", what):
         key, keys = unknown[1], sorted(_keys_at(struct, where))
-        near = difflib.get_close_matches(key, keys, n=1, cutoff=0.75)
-        said = f"no key `{key}` is known here" + (f" (did you mean `{near[0]}`?)" if near
+        near = nearest(key, keys)
+        said = f"no key `{key}` is known here" + (f" (did you mean `{near}`?)" if near
                                                    else f"; the keys: {', '.join(keys)}" if keys else "")
     elif missing := re.fullmatch(r"Object missing required field `(.+)`", what):
         said = f"needs the key `{missing[1]}`"
@@ -186,7 +226,10 @@ class JsonFileKind(Generic[T]):
         except self.error as exc:
             raise self.error(f"{source}: {exc}") from None
         except (msgspec.ValidationError, msgspec.DecodeError, ValueError) as exc:
-            raise self.error(f"{source}: corrupt or not a {self.what}: {in_words(exc, self._struct)}") from None
+            said = in_words(exc, self._struct, data)
+            if said.startswith("cut short") and self.from_recording:  # or made again, from its recording
+                said += f", or make it again ({self.from_recording})"
+            raise self.error(f"{source}: corrupt or not a {self.what}: {said}") from None
 
     def write(self, path, value: T, force: bool = False) -> None:
         """Write atomically (a crash never leaves half a file); an existing file is replaced only

@@ -20,7 +20,6 @@ new policy alone; a questionnaire after every game built from what sections
 
 from __future__ import annotations
 
-import difflib
 import re
 import tomllib
 import typing
@@ -30,10 +29,11 @@ from typing import Literal, Union
 
 import msgspec
 
+from pairplay.nearest import nearest
 from pairplay.numbers import TYPE_NAMES, counted, shown, type_name, typed_floats
 
 from .config import LearnerConfig
-from .jsonfile import empty
+from .jsonfile import empty, toml_words
 from .robot_url import parse_robot_url
 from .session import MS_FIELDS, MS_RANGE, SEED_RANGE
 from .tomlplace import Written, header, misplaced, table_not_value
@@ -119,7 +119,10 @@ class Study(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
         for p in self.phase:
             if p.id == phase_id:
                 return p
-        raise KeyError(f"no phase {phase_id!r} in study {self.study.id!r}")
+        near = nearest(phase_id, [p.id for p in self.phase])  # `phse1`; not `phase3` for phase1: another one
+        hint = f" (did you mean {near!r}?)" if near else ""
+        raise KeyError(f"no phase {phase_id!r} in study {self.study.id!r}{hint}; its phases: "
+                       f"{', '.join(p.id for p in self.phase)}")
 
     def learner_config(self, phase: Phase) -> LearnerConfig:
         """The phase's schedule: its preset for its rounds, with its overrides."""
@@ -251,7 +254,7 @@ def parse_study(text: str, source: str = "study") -> Study:
         try:
             raw = tomllib.loads(text, parse_float=parse_float)
         except tomllib.TOMLDecodeError as err:
-            raise StudyFileError(f"{source}: not valid TOML: {err}") from None
+            raise StudyFileError(f"{source}: not valid TOML: {toml_words(err, text)}") from None
         written = Written(text, raw)
         try:
             study = msgspec.convert(raw, Study)
@@ -297,9 +300,9 @@ def _where(message: str, raw: object, written: Written) -> _Bad:
         key, shape = unknown[1], _shape(path)
         keys = sorted(_keys(shape)) if shape in TABLES else []
         kind = "table" if isinstance(_at(raw, path + (key,)), dict) else "key"
-        near = difflib.get_close_matches(key, keys, n=1, cutoff=0.75) if kind == "key" else []  # a misspelt key
+        near = nearest(key, keys) if kind == "key" else ""  # a misspelt key
         said = f"{header(path)} has no {kind} `{key}`"
-        said += f" (did you mean `{near[0]}`?)" if near else f"; its keys: {', '.join(keys)}" if keys else ""
+        said += f" (did you mean `{near}`?)" if near else f"; its keys: {', '.join(keys)}" if keys else ""
         return _Bad(path + (key,), said)
     missing = re.fullmatch(r"Object missing required field `(.+)`", what)
     if missing:
@@ -428,4 +431,25 @@ def load_study(path: str | Path) -> Study:
 
 def example_text() -> str:
     """The shipped example study (the thesis's chapter 7 protocol), as TOML text."""
-    return resources.files("pairplay.schemas").joinpath("studies", EXAMPLE).read_text(encoding="utf-8")
+    return bundled_text(EXAMPLE.removesuffix(".toml"))
+
+
+def bundled_studies() -> list[str]:
+    """The names of the study files shipped with pairplay (`studies/<name>.toml`: thesis-ch7), which
+    `protocol check` and `init --study` take for a file's path."""
+    folder = resources.files("pairplay.schemas").joinpath("studies")
+    return sorted(f.name.removesuffix(".toml") for f in folder.iterdir() if f.name.endswith(".toml"))
+
+
+def bundled_text(name: str) -> str:
+    """The TOML text of the bundled study `name` (one of `bundled_studies()`)."""
+    return resources.files("pairplay.schemas").joinpath("studies", f"{name}.toml").read_text(encoding="utf-8")
+
+
+def no_study_file(name: str) -> StudyFileError:
+    """The refusal of a study file argument that is neither a file nor a bundled study: with the bundled
+    ones (and the one it resembles), since `--study thesis-ch8` said only "No such file or directory"."""
+    near = nearest(name, bundled_studies())
+    return StudyFileError(f"{name}: no such study file, nor a bundled study" + (f" (did you mean {near!r}?)" if near else "")
+                          + f"; the bundled studies: {', '.join(bundled_studies())} (`pairplay protocol example` "
+                          "prints one to edit); or give the path of a study TOML file")

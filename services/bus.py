@@ -159,8 +159,11 @@ def read_config_file(path: str) -> dict[str, Any]:
         raise ConfigFileError(f"cannot use the Zenoh config: {empty(text)}", f"--zenoh-config {path}")
     try:
         data = json5.loads(text)
-    except ValueError as err:
-        raise ConfigFileError(f"cannot use the Zenoh config: not JSON5: {err}", f"--zenoh-config {path}") from None
+    except ValueError as err:  # json5 says the line and column; what to do, as every JSON input (jsonfile.syntax_words)
+        said = str(err).replace("<string>:", "line ", 1)
+        said += (": cut short (a copy or a save that did not finish? put back a whole copy), or a quote or bracket "
+                 "left open" if "Unexpected end of input" in said else ": correct it there")
+        raise ConfigFileError(f"cannot use the Zenoh config: not JSON5: {said}", f"--zenoh-config {path}") from None
     if not isinstance(data, dict):
         raise ConfigFileError("cannot use the Zenoh config: the top level must be an object", f"--zenoh-config {path}")
     return data

@@ -368,7 +368,7 @@ def test_delete_erases_a_participant_everywhere_and_keeps_an_anonymous_event(pla
     last = (folder / "journal.jsonl").read_text().splitlines()[-1]
     assert json.loads(last)["event"] == "ParticipantDeleted" and "p01" not in last
     fresh = StudyData(folder)  # the journal still folds, and ids are never reused
-    assert "p01" not in fresh.state.participants and fresh.register("phase2") == "p06"
+    assert "p01" not in fresh.state.participants and fresh.register("phase2") == "p05"  # p01..p04 given: no reuse, no skip
     with pytest.raises(StudyDataError, match="no participant"):
         fresh.export_participant("p01")
 

@@ -142,7 +142,7 @@ def test_a_stale_copy_of_the_journal_never_writes(tmp_path):
     with pytest.raises(StudyDataError, match="changed by another process"):
         stale.write_tables()  # it would write p01 back into participants.csv
     assert "p01" not in (data.folder / "participants.csv").read_text()
-    assert StudyData(data.folder).register("phase1") == "p04"  # a fresh read goes on (ids never reused: p03 and a deletion before)
+    assert StudyData(data.folder).register("phase1") == "p03"  # a fresh read goes on (p01, p02 given: no reuse, no skip)
 
 
 EDITED = {"rounds": ("rounds = 2", "rounds = 5"), "a comment": ("# Phase 1 (7.2)", "# phase one")}

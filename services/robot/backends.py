@@ -52,7 +52,7 @@ def load_robot_config(path: str | None) -> RobotConfig:
     except OSError as exc:
         raise ValueError(f"cannot read robot config {path}: {exc}") from exc
     except msgspec.DecodeError as exc:
-        raise ValueError(f"robot config {path} is not valid: {in_words(exc, RobotConfig)}") from exc
+        raise ValueError(f"robot config {path} is not valid: {in_words(exc, RobotConfig, without_bom(raw))}") from exc
     config.validate()
     return config
 

@@ -46,7 +46,8 @@ def load_calibration(path: str | Path | None = None) -> BoardCalibration:
     try:
         calibration = msgspec.json.decode(without_bom(raw), type=BoardCalibration)
     except msgspec.DecodeError as exc:  # ValidationError is a subclass
-        raise CalibrationError(f"calibration {where} is not valid: {in_words(exc, BoardCalibration)}") from exc
+        raise CalibrationError(f"calibration {where} is not valid: "
+                               f"{in_words(exc, BoardCalibration, without_bom(raw))}") from exc
     check_calibration(calibration, where)
     return calibration
 
