@@ -60,8 +60,8 @@ from pairplay.schemas.policy import read_policy, write_policy
 from pairplay.schemas.study import Study, StudyFileError, load_study
 from pairplay.numbers import counted
 
-from .fold import fold_events
-from .reader import read_log
+from .fold import fold_any
+from .reader import read_any_log
 from .rebuild import Rebuilt, rebuild_recording, write_outputs
 from .wal import wal_path
 
@@ -547,7 +547,7 @@ class StudyData:
             return None, "recording missing"
         try:
             check_recording(path)
-            log = read_log(path)
+            log = read_any_log(path)
         except InputError as err:  # not MCAP at all, or a file of nothing: no session either
             return None, f"recording holds no session: {err.what}"
         except OSError as err:
@@ -590,7 +590,7 @@ class StudyData:
         """`not_this_game` of the session the recording at `path` starts ("" if it starts none or cannot be read:
         what reads it next says so)."""
         try:
-            started = read_log(path, only=frozenset({"SessionStarted"})).of("SessionStarted")
+            started = read_any_log(path, only=frozenset({"SessionStarted"})).of("SessionStarted")
         except (InputError, OSError):
             return ""
         return self.not_this_game(g, started[0].config) if started else ""
@@ -663,7 +663,7 @@ class StudyData:
             path = self.folder / g.recording
             if not path.is_file():
                 continue
-            log = read_log(path)
+            log = read_any_log(path)
             started = log.of("SessionStarted")
             if started and self.not_this_game(g, started[0].config):  # another session's answers are not its
                 continue  # participant's (a `session --force` over a study game's recording)
@@ -1006,8 +1006,8 @@ def game_end(folder: Path, session: str, participant: str, path: Path, answered:
     reason, in the reader's words; a completed game keeps its outcome (the next start's
     build_missing_policies says again why it has no policy; the combination refuses to go without it).
     Before, a partial policy was written and journaled as the game's, with no word."""
-    recorded = read_log(path)
-    fold = fold_events(r.event for r in recorded.events)
+    recorded = read_any_log(path)
+    fold = fold_any(r.event for r in recorded.events)
     ended = fold.ended
     completed = ended is not None and ended.reason == "completed"
     damaged = recording_damage(recorded)
@@ -1055,7 +1055,7 @@ def lost_answers(log, decoded: bool, journaled: bool) -> list[str]:
 def _finished_game(path: Path) -> bool:
     """Is the recording whole and does it hold its game's end?"""
     try:
-        recorded = read_log(path, only=frozenset({"SessionEnded"}))
+        recorded = read_any_log(path, only=frozenset({"SessionEnded"}))
     except (InputError, OSError):
         return False
     return recorded.whole and bool(recorded.of("SessionEnded"))

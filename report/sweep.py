@@ -36,7 +36,6 @@ Measures (picks per round: 18 is perfect play, lower is better):
 
 from __future__ import annotations
 
-import difflib
 import hashlib
 import itertools
 import json
@@ -52,6 +51,7 @@ import msgspec
 import numpy as np
 
 from pairplay import csvcell
+from pairplay.arguments import near_key
 from pairplay.errors import OptionError
 from pairplay.numbers import counted, shown, type_name, typed_floats
 from pairplay.outputs import manifest_name, output_file, output_folder, write_text
@@ -123,9 +123,9 @@ def _typed(path: str, at: tuple, value, written: Written):
     key = at[1]
     want = SWEEPABLE.get(key)
     if want is None:
-        near = difflib.get_close_matches(key, SWEEPABLE, n=1, cutoff=0.75)  # a misspelt setting
+        near = near_key(key, SWEEPABLE)  # a misspelt setting
         raise GridError(f"{path}: {written.place(at[:2])}: no study setting `{key}`"
-                        + (f" (did you mean `{near[0]}`?)" if near else f"; known: {', '.join(sorted(SWEEPABLE))}"))
+                        + (f" (did you mean `{near}`?)" if near else f"; known: {', '.join(sorted(SWEEPABLE))}"))
     if key == "personas" and isinstance(value, list) and all(isinstance(v, str) for v in value):
         # a TOML list of names (["ashley", "helmut"]) is the list it says, as the study's "ashley,helmut"
         # (it was refused: "is not a str"); its names are checked as the study's (StudySettings.check)
@@ -193,9 +193,9 @@ def _read_grid(path: str, parse_float) -> Grid:
     _check_places(path, data, written)
     unknown = sorted(set(data) - {"study", "grid", "seeds", "reuse"})
     if unknown:
-        near = difflib.get_close_matches(unknown[0], ["seeds", "reuse"], n=1, cutoff=0.75)
+        near = near_key(unknown[0], ["seeds", "reuse"])
         raise GridError(f"{path}: {written.place((unknown[0],))}: no such key at {TOP}"
-                        + (f" (did you mean `{near[0]}`?)" if near else "; it takes [study], [grid], seeds, reuse"))
+                        + (f" (did you mean `{near}`?)" if near else "; it takes [study], [grid], seeds, reuse"))
     base = {k: _typed(path, ("study", k), v, written) for k, v in data.get("study", {}).items()}
     axes = {}
     for k, values in data.get("grid", {}).items():

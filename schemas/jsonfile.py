@@ -30,7 +30,6 @@ never as a typo of another key.
 
 from __future__ import annotations
 
-import difflib
 import re
 import types
 import typing
@@ -38,7 +37,7 @@ from pathlib import Path
 from typing import Generic, TypeVar
 
 import msgspec
-from pairplay.arguments import flag_argument, instance_argument, path_argument
+from pairplay.arguments import flag_argument, instance_argument, near_key, path_argument
 from pairplay.numbers import counted, type_name
 
 T = TypeVar("T")
@@ -96,11 +95,11 @@ def in_words(exc: Exception, struct: type | None = None) -> str:
             f", holds {length[6]}" if length[6] else "")
     elif unknown := re.fullmatch(r"Object contains unknown field `(.+)`", what):
         key, keys = unknown[1], sorted(_keys_at(struct, where))
-        near = difflib.get_close_matches(key, keys, n=1, cutoff=0.75)
+        near = near_key(key, keys)
         if (retired := retired_key(_struct_at(struct, where), key)) is not None:  # an older pairplay's file
             said = retired
         else:
-            said = f"no key `{key}` is known here" + (f" (did you mean `{near[0]}`?)" if near
+            said = f"no key `{key}` is known here" + (f" (did you mean `{near}`?)" if near
                                                        else f"; the keys: {', '.join(keys)}" if keys else "")
     elif missing := re.fullmatch(r"Object missing required field `(.+)`", what):
         said = f"needs the key `{missing[1]}`"

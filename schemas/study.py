@@ -20,7 +20,6 @@ new policy alone; a questionnaire after every game built from what sections
 
 from __future__ import annotations
 
-import difflib
 import re
 import tomllib
 import typing
@@ -30,6 +29,7 @@ from typing import Literal, Union
 
 import msgspec
 
+from pairplay.arguments import near_key
 from pairplay.numbers import TYPE_NAMES, counted, shown, type_name, typed_floats
 
 from .config import LearnerConfig
@@ -297,9 +297,9 @@ def _where(message: str, raw: object, written: Written) -> _Bad:
         key, shape = unknown[1], _shape(path)
         keys = sorted(_keys(shape)) if shape in TABLES else []
         kind = "table" if isinstance(_at(raw, path + (key,)), dict) else "key"
-        near = difflib.get_close_matches(key, keys, n=1, cutoff=0.75) if kind == "key" else []  # a misspelt key
+        near = near_key(key, keys) if kind == "key" else None  # a misspelt key
         said = f"{header(path)} has no {kind} `{key}`"
-        said += f" (did you mean `{near[0]}`?)" if near else f"; its keys: {', '.join(keys)}" if keys else ""
+        said += f" (did you mean `{near}`?)" if near else f"; its keys: {', '.join(keys)}" if keys else ""
         return _Bad(path + (key,), said)
     missing = re.fullmatch(r"Object missing required field `(.+)`", what)
     if missing:
