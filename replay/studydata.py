@@ -195,13 +195,15 @@ REGISTER_AT_ONCE = 50
 class StudyData:
     """A study folder (see the module rule). Thread-safe: the console and the game runner share it."""
 
-    def __init__(self, folder: str | Path, writer: str = "", study_file_edited_ok: bool = False):
+    def __init__(self, folder: str | Path, writer: str = "", study_file_edited_ok: bool = False,
+                 held: int | None = None):
         """`writer`: the verb that will write the folder ("protocol serve"): it takes the folder's writer lock
         (pairplay/folderlock.py) for this object's life, before the journal is read, and a folder another
         process writes is refused (StudyDataError naming the holder). Without it (a read-only verb) each
         write takes the lock for its own length (`_writing`). `study_file_edited_ok`: a study file changed
         since the study was created is not refused but said in `study_file_changed` (a participant's export
-        and deletion: their rights do not wait for the file to be put back)."""
+        and deletion: their rights do not wait for the file to be put back). `held`: the folder's writer lock, taken
+        already by the verb (replay/copies.py `Copies.hand_over`): this object holds it, in place of taking it."""
         self.folder = Path(folder).resolve()
         self.given = Path(folder)  # as the user gave it: what a refusal names (it named the resolved path)
         if (self.folder / JOURNAL).is_dir():  # it said "not a study folder (no journal.jsonl ...)": there is one
@@ -213,7 +215,9 @@ class StudyData:
         self._hold: int | None = None
         self._stamp: tuple = ()
         self._started_here: set[str] = set()  # the sessions of games this object journaled as started, not yet ended
-        if writer:
+        if held is not None:
+            self._hold = held
+        elif writer:
             self._hold = self._take(writer)
         try:
             self.state = StudyState()
