@@ -441,9 +441,12 @@ def read_log(path: str | Path, only: frozenset[str] | None = None) -> EventLog:
     (replay/check.py `check_recording`: no such file, a folder, a file of nothing, not MCAP, a recorder's journal;
     ArgumentError if it is no path: pairplay/arguments.py): a text file was read as an EventLog whose `error`
     said so, a researcher's script going on with no events. What a real MCAP file holds, cut or damaged, is
-    the EventLog's to say. `read_any_log` reads any file, as this did."""
-    from .check import check_recording
-    path = check_recording(path, function="read_log")
+    the EventLog's to say, and so is a file its recorder is writing now (pairplay/livelock.py: `live`), even
+    before its first record (it is no recorder that stopped). `read_any_log` reads any file, as this did."""
+    from .check import check_recording, recording_file
+    path = recording_file(path, "read_log")
+    if not is_live(path):
+        check_recording(path, function="read_log")
     with gc_paused():
         return _read_log(path, only)
 

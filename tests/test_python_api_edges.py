@@ -43,6 +43,24 @@ def test_read_log_of_a_file_that_is_no_recording_raises_naming_it(tmp_path, cont
     assert one_line(caught.value, words).endswith(f"({path})")
 
 
+def test_a_file_its_recorder_is_writing_reads_as_live_even_before_its_first_record(tmp_path):
+    """A script polling a recording a session is writing: a file of nothing yet, a journal beside it, is no
+    recorder that stopped (the refusal's words for a dead one): read as live, as far as it goes (nothing)."""
+    from pairplay import livelock
+    from pairplay.replay.wal import wal_path
+    path = tmp_path / "now.mcap"
+    held = livelock.hold(path, create=True)
+    try:
+        wal_path(path).write_bytes(b"")
+        log = pairplay.read_log(path)
+        assert log.live and not log.events and livelock.LIVE in log.error
+    finally:
+        livelock.release(held)
+    with pytest.raises(InputError) as caught:  # its recorder gone, the same file is one that stopped
+        pairplay.read_log(path)
+    one_line(caught.value, "its recorder stopped before it wrote a record", "pairplay recover")
+
+
 def test_the_non_raising_reader_is_kept_for_those_that_take_any_file(tmp_path):
     from pairplay.replay.reader import read_any_log
     path = tmp_path / "notes.mcap"
