@@ -8,9 +8,11 @@ kind (a number for a path, a path where a read policy is taken, text for a count
 used (an empty list, a file that does not exist) an InputError (a ValueError), a setting out of
 range an OptionError (a ValueError), an output that exists an OutputError (`force=True` replaces
 it). Errors deep inside (AttributeError 'strip', a comparison's TypeError, FileNotFoundError)
-said where the mistake surfaced, never what the caller gave. A bool is never an integer (True
-was taken as 1: `env.step(True)`); numpy's integers are. Standard library only (every layer
-imports this).
+said where the mistake surfaced, never what the caller gave. Before the values, the call itself:
+an argument the function or class does not take (with the one it resembles), one missing, too many
+by position (`call_arguments`: Python's and msgspec's TypeErrors named neither the API nor a way
+out). A bool is never an integer (True was taken as 1: `env.step(True)`); numpy's integers are.
+Standard library only (every layer imports this).
 """
 
 from __future__ import annotations
@@ -148,10 +150,10 @@ PYTHON_NAMES = {"--force": "force=True"}
 
 
 def python_words(function, name: str = ""):
-    """`function` as the public API hands it out (pairplay/__init__.py): its arguments checked first (`call_arguments`),
-    and a refusal whose way out names a verb's option (`--force replaces it`) names the argument instead (`force=True replaces it`), shown in
-    the error's one line; the command line imports the function itself and keeps its option's words. `name`: its
-    public name (`read_policy` is a file kind's bound `read`)."""
+    """`function` as the public API hands it out (pairplay/__init__.py): its arguments checked first
+    (`call_arguments`), and a refusal whose way out names a verb's option (`--force replaces it`) names the
+    argument instead (`force=True replaces it`), shown in the error's one line; the command line imports the
+    function itself and keeps its option's words. `name`: its public name (`read_policy` is a file kind's `read`)."""
     import functools
     import inspect
 
