@@ -118,11 +118,11 @@ def run(args: argparse.Namespace) -> int:
     if getattr(stop, "why", "") and summary:
         return print_interrupted(summary, path, stop.why, config.rounds,  # no reading the file back: 2 s
                                  "the id stays taken: choose another --session", "lab")  # (lab has no --force)
-    from pairplay.replay.fold import fold_events
-    from pairplay.replay.reader import read_log
+    from pairplay.replay.fold import fold_any
+    from pairplay.replay.reader import read_any_log
 
-    recorded = read_log(path) if getattr(stop, "why", "") else read_back(path, "lab")  # (a signal: one line)
-    fold = fold_events(r.event for r in recorded.events)
+    recorded = read_any_log(path) if getattr(stop, "why", "") else read_back(path, "lab")  # (a signal: one line)
+    fold = fold_any(r.event for r in recorded.events)
     e = fold.ended
     if getattr(stop, "why", ""):  # a signal: ONE line, as `pairplay session`
         when = "before the session started" if fold.config is None else \

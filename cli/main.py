@@ -359,7 +359,12 @@ def _main(argv: list[str], arm=None) -> int:
         check_study_folders(args.verb, chosen, args)  # before any work: a people's study folder is protocol's
         running = True
         with _summary_silenced(args.quiet and (args.verb in QUIET_SUMMARIES or _who(args) in QUIET_SUMMARIES)):
-            code = int(module.run(args) or 0)
+            try:
+                code = int(module.run(args) or 0)
+            finally:  # the study folders' locks its outputs took (replay/copies.py), however it ended
+                copies = sys.modules.get("pairplay.replay.copies")
+                if copies is not None:
+                    copies.release_held()
         stopped = signal_received()  # at once: a signal the verb's own handler (a bus verb's) met while it ran
         interrupts.work_done()
         if stopped:

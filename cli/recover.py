@@ -59,6 +59,9 @@ def run(args: argparse.Namespace) -> int:
 
     args.output = file_in(args.output, default_output(Path(args.recording)).name)  # `-o out/`: into out/
     if args.discard_journal:  # decided before anything is written: only a stale journal is removed
+        from pairplay.replay.copies import Copies
+        # removing it writes the study folder it may be in: the folder's lock first (replay/copies.py module rule)
+        Copies("recover", [args.recording]).check([wal_path(args.recording)])
         done = recover(args.recording, args.output, force=args.force, admit=admit, write=False)
         if not done.complete:
             raise OptionError("--discard-journal removes only a stale journal beside a complete recording; this "

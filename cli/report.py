@@ -50,7 +50,8 @@ def run(args) -> int:
         # a completed game a signal left without its policy gets it now, from its recording
         # it journals policies and writes report/: a writer, the folder's lock held to the end (one writer per
         # study folder: pairplay/folderlock.py; beside a running server, its console writes the report)
-        with StudyData(args.folder, writer="report") as data:
+        # (the lock is taken by copies.check already when `out` is in the folder: handed over, not taken twice)
+        with StudyData(args.folder, writer="report", held=copies.hand_over(args.folder)) as data:
             built_missing_policies(data, "report")
             with output_folder(out, args.force, owned=HUMAN_OUTPUTS, manifest=HUMAN_MANIFEST) as tmp:
                 report = human_report(args.folder, tmp, args.reference, include_scripted=args.include_scripted)

@@ -214,9 +214,9 @@ def read_back(path: Path, verb: str):
     naming the file, and the verb exits 1; the summary then counts what the file holds. Its summary read the
     file with no check: a recording that lost a chunk after it was closed was summed up as a session of
     fewer events, exit 0."""
-    from pairplay.replay.reader import read_log
+    from pairplay.replay.reader import read_any_log
 
-    recorded = read_log(path)
+    recorded = read_any_log(path)
     if recorded.note:
         print(f"pairplay {verb}: the recording {path} read back is not whole: {recorded.note} (the summary counts "
               f"what it holds; `pairplay replay --verify` of it says more)", file=sys.stderr)
@@ -297,9 +297,9 @@ def _run(args: argparse.Namespace, config: SessionConfig, path: Path, summary: d
             return 0
         return print_interrupted(summary, path, stop.why, config.rounds, "the id stays taken: --force reuses it")
     from pairplay.replay.delivery import delivery_line
-    from pairplay.replay.fold import fold_events
+    from pairplay.replay.fold import fold_any
     recorded = read_back(path, "session")
-    fold = fold_events(r.event for r in recorded.events)
+    fold = fold_any(r.event for r in recorded.events)
     picks = fold.picks_per_round()
     if not getattr(args, "quiet", False):  # a summary of the file it wrote: -q leaves it out (cli/main.py QUIET_SUMMARIES)
         print(f"recorded {counted(len(recorded.events), 'event')} to {path}")

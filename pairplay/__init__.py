@@ -68,7 +68,7 @@ def __getattr__(name: str):
         value = getattr(importlib.import_module(API[name]), name)
         if not isinstance(value, type):  # a function: its refusals name its arguments, not a verb's options
             from pairplay.arguments import python_words
-            value = python_words(value)
+            value = python_words(value, name)
         globals()[name] = value
         return value
     raise AttributeError(f"module 'pairplay' has no attribute {name!r}")

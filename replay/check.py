@@ -78,9 +78,9 @@ def read_session(path: str | Path, only: frozenset[str] | None = None, function:
     """The recording at `path` read (reader.read_log, `only` as there) if it holds a session;
     InputError naming the path and saying what the file is if not (reader.EventLog.no_session).
     `function`: the public function given `path` (recording_file)."""
-    from .reader import read_log
+    from .reader import read_any_log
     path = check_recording(path, function=function)
-    log = read_log(path, only)
+    log = read_any_log(path, only)
     if log.no_session:
         raise InputError(log.no_session, path)
     return log

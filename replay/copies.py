@@ -12,6 +12,12 @@ participant's deletion would not know is never made. `pairplay participant delet
 a regular file, the bytes it wrote) and names every other one: changed since, or gone from there.
 A file made from a copy (a recording copied elsewhere by hand, an export unzipped) is beyond what pairplay can
 know: the journal names the copies pairplay made, not the ones people make of them.
+A verb whose output lands inside a study folder writes that folder, journaled or not (a view's .rrd or a
+recover's copy beside a game's recording, a stale recorder's journal removed there, a report in report/; any
+other output there is refused: cli/args.py `check_study_folders`): `Copies.check` takes the folder's
+writer lock (pairplay/folderlock.py) for it, held until the verb ends (cli/main.py `release_held`; the
+kernel's at the process's end), and refuses at once, in one line, beside another writer (a running
+`protocol serve`): the .rrd of `view --recording R` was written into a served folder outside its lock.
 """
 
 from __future__ import annotations
@@ -80,12 +86,23 @@ def erased_anyway(data: StudyData, pids: Iterable[str], verb: str, path: Path) -
     return True
 
 
+_HELD: list[int] = []  # the study folders' writer locks the verbs of this process hold (`Copies.check`)
+
+
+def release_held() -> None:
+    """Release every study folder's writer lock a verb of this process took through `Copies.check` (module rule):
+    cli/main.py calls it when a verb ends, however it ends, so a verb run in-process (a test) leaves no lock."""
+    while _HELD:
+        folderlock.release(_HELD.pop())
+
+
 class Copies:
     """What a run of `verb` reads of study folders (its `inputs`: files, or a study folder), to journal what it
     writes of them (module rule)."""
 
     def __init__(self, verb: str, inputs: Iterable[str | Path]):
         self.verb = verb
+        self._held: dict[Path, int] = {}  # a study folder an output lands in, resolved -> its writer lock's descriptor
         self._studies: dict[Path, StudyData] = {}
         self._of: dict[Path, tuple[Path, frozenset[str]]] = {}  # an input, resolved -> (its study, whose data)
         self._typed: dict[Path, Path] = {}  # a study, resolved -> as the user's path reaches it (what a refusal names)
@@ -133,6 +150,27 @@ class Copies:
                                   f"`pairplay {self.verb}` writes a copy of its participants' data that their deletion "
                                   "must know, in its journal: run it when that one has finished",
                                   self._typed.get(root, root)) from None
+        for place in places:  # an output inside a study folder writes that folder: its lock, held (module rule)
+            root = study_root(place)
+            if root is None or root in self._held:
+                continue
+            try:
+                fd = folderlock.take(root, self.verb)
+            except folderlock.FolderBusy as busy:
+                raise OutputError(f"another pairplay writes this study folder: {busy.holder or 'a process'}; this "
+                                  f"`pairplay {self.verb}` would write into it ({place}): run it when that one has "
+                                  "finished", self._typed.get(root, root)) from None
+            if fd is not None:
+                self._held[root] = fd
+                _HELD.append(fd)
+
+    def hand_over(self, folder: str | Path) -> int | None:
+        """The writer lock this object holds of study folder `folder` (None if none), handed to the caller, who
+        releases it (a StudyData made with it: `StudyData(..., held=)`); this object forgets it."""
+        fd = self._held.pop(Path(folder).resolve(), None)
+        if fd is not None:
+            _HELD.remove(fd)
+        return fd
 
     def journal(self, written: Iterable[str | Path], inputs: Iterable[str | Path] | None = None) -> None:
         """Journal each file of `written` (in place now) made of `inputs` (default: all of the verb's) in the
@@ -141,7 +179,7 @@ class Copies:
         for root, pids in self._lines(written, inputs).items():
             # the journal read afresh, under the folder's writer lock: the verb itself may have journaled
             # meanwhile (report's PolicyBuilt lines), and a copy read before would be refused as stale
-            with StudyData(self._typed[root], writer=self.verb) as data:
+            with StudyData(self._typed[root], writer=self.verb, held=self.hand_over(root)) as data:
                 for w in written:
                     if erased_anyway(data, pids, self.verb, w):
                         continue

@@ -32,7 +32,7 @@ from pairplay.core.lspi import LSPILearner, weights_digest
 from pairplay.core.rng import UniformStream, game_seed
 from pairplay.schemas import events as ev
 from pairplay.schemas.envelope import Event
-from pairplay.errors import ArgumentError
+from pairplay.errors import ArgumentError, InputError
 from pairplay.schemas.session import SessionConfig
 
 
@@ -181,10 +181,24 @@ READS = frozenset(_HANDLERS)  # the event tags a fold reads; any other it only c
 
 
 def fold_events(events) -> SessionFold:
-    """The fold of `events`, in order: events as a read log holds them (`e.event for e in log.events`).
-    ArgumentError (pairplay/arguments.py) for anything else: a non-iterable at once, an item that is no
-    event when it comes (`fold_events([1, 2])` was an empty fold, a log's records were counted as events)."""
-    return SessionFold().fold(_events(events))
+    """The fold of `events`, in order: events as a read log holds them (`e.event for e in log.events`); the public
+    API's (`pairplay.fold_events`). ArgumentError (pairplay/arguments.py) for anything else: a non-iterable at
+    once, an item that is no event when it comes (`fold_events([1, 2])` was an empty fold, a log's records were
+    counted as events). InputError for no event at all: an empty log is no fold of a session (no config, no
+    round, a Q-table of zeros that passed for a learner's: `fold_events([])`, or a filter that kept nothing, gave
+    one with no word), as every verb refuses a recording that holds no session. `fold_any` folds nothing too."""
+    fold = SessionFold().fold(_events(events))
+    if not fold.events:
+        raise InputError("events is empty: no event to fold (a fold of nothing is no session's; "
+                         "a read log's are `e.event for e in log.events`)", at("fold_events", "events"))
+    return fold
+
+
+def fold_any(events) -> SessionFold:
+    """The fold of `events` (events, in order), none too: an empty fold. For the code that folds what a session
+    recorded, whatever it recorded (a session a signal stopped before its first event: lab, session, a study
+    server's game end, rebuild's count), and says so in its own words."""
+    return SessionFold().fold(events)
 
 
 def _events(events):

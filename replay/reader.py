@@ -429,7 +429,7 @@ def recovered_losses(records: list, own: list[tuple[int, int | None]] = (),
 
 
 def read_log(path: str | Path, only: frozenset[str] | None = None) -> EventLog:
-    """Read a recording (whole, cut or damaged); see the module rule.
+    """Read a recording (whole, cut or damaged); see the module rule. The public API's (`pairplay.read_log`).
 
     `only`: decode wholly only the events with these tags (what a fold reads); any
     other known event is checked by its envelope alone (its type agrees with its
@@ -437,8 +437,27 @@ def read_log(path: str | Path, only: frozenset[str] | None = None) -> EventLog:
     kept (rebuild: 2/3 of a session's events are ones its fold only counts). A
     message whose envelope fails that check is decoded wholly, as without `only`,
     so it still ends up an event, an UnknownEvent or a BadMessage.
-    InputError, before any reading, if `path` names no file or a folder (ArgumentError if it is no path:
-    pairplay/arguments.py); what the file holds, cut, damaged or not MCAP at all, is the EventLog's to say."""
+    InputError, before any reading, naming the file, if `path` is no recording at all, as every verb says it
+    (replay/check.py `check_recording`: no such file, a folder, a file of nothing, not MCAP, a recorder's journal;
+    ArgumentError if it is no path: pairplay/arguments.py): a text file was read as an EventLog whose `error`
+    said so, a researcher's script going on with no events. What a real MCAP file holds, cut or damaged, is
+    the EventLog's to say, and so is a file its recorder is writing now (pairplay/livelock.py: `live`), even
+    before its first record (it is no recorder that stopped). `read_any_log` reads any file, as this did."""
+    from .check import check_recording, recording_file
+    path = recording_file(path, "read_log")
+    if not is_live(path):
+        check_recording(path, function="read_log")
+    with gc_paused():
+        return _read_log(path, only)
+
+
+def read_any_log(path: str | Path, only: frozenset[str] | None = None) -> EventLog:
+    """`read_log` (`only` as there) of a file that need not be MCAP at all: what it is not is the EventLog's to say
+    (`error`, `no_session`). For code that checked the file first in its own words (replay/check.py `read_session`,
+    a study folder's readers, which say a game's unreadable recording as the game's), or must take what a recorder
+    left, whatever it is: recover (a file of nothing beside its journal), a server reading back the recording of a
+    game that just ended, a session's summary of its own recording. InputError only if `path` names no file or a
+    folder (ArgumentError if it is no path)."""
     from .check import recording_file
     path = recording_file(path, "read_log")
     with gc_paused():

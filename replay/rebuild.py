@@ -38,7 +38,7 @@ from pairplay.schemas.policy import PolicyFile, write_policy
 from pairplay.schemas.session import SessionConfig
 
 from .check import no_whole_round, read_session
-from .fold import READS, SessionFold, fold_events, stream_seed
+from .fold import READS, SessionFold, fold_any, stream_seed
 from .reader import recovered_cut, recovered_lost, said_source_cut
 from .forgery import contradiction
 from pairplay.numbers import counted
@@ -97,7 +97,7 @@ def rebuild_events(events, source: str = "", truncated: bool = False, note: str 
     """`events` folded and the learner's policy rebuilt; RebuildError without a SessionStarted.
     `ended` is the recorder's "pairplay.recorder.end" metadata, if the file has it; `skipped`, by
     tag, the events read_log did not decode because the fold only counts them."""
-    fold = fold_events(events).count(skipped or {})
+    fold = fold_any(events).count(skipped or {})
     if fold.config is None:
         if ended and ended.get("stopped_by"):
             raise RebuildError(f"{source or 'events'}: no SessionStarted: the recording was stopped "

@@ -66,7 +66,7 @@ from pairplay.arguments import flag_argument, path_argument
 
 from .check import check_recording
 from .mcapscan import scan
-from .reader import read_log
+from .reader import read_any_log
 from .wal import NotAJournal, read_journal, wal_path
 from .writer import CHUNK_SIZE, PROFILE
 
@@ -114,7 +114,7 @@ def recover(path: str | Path, output: str | Path | None = None, force: bool = Fa
     force, write = flag_argument(force, "recover", "force"), flag_argument(write, "recover", "write")
     if output.resolve() == path.resolve():
         raise OutputError("recover writes a new file; give an output path other than the input", output)
-    log = read_log(path)
+    log = read_any_log(path)
     journal, journal_error = _journal_beside(path, log) if admit is not None else (None, "")
     checked = scan(path)
     added = None

@@ -61,9 +61,9 @@ from pairplay.schemas.policy import read_policy, write_policy
 from pairplay.schemas.study import Study, StudyFileError, load_study
 from pairplay.numbers import counted
 
-from .fold import fold_events
+from .fold import fold_any
 from . import studyjournal
-from .reader import read_log
+from .reader import read_any_log
 from .rebuild import Rebuilt, rebuild_recording, write_outputs
 from .wal import wal_path
 
@@ -204,13 +204,15 @@ REGISTER_AT_ONCE = 50
 class StudyData:
     """A study folder (see the module rule). Thread-safe: the console and the game runner share it."""
 
-    def __init__(self, folder: str | Path, writer: str = "", study_file_edited_ok: bool = False):
+    def __init__(self, folder: str | Path, writer: str = "", study_file_edited_ok: bool = False,
+                 held: int | None = None):
         """`writer`: the verb that will write the folder ("protocol serve"): it takes the folder's writer lock
         (pairplay/folderlock.py) for this object's life, before the journal is read, and a folder another
         process writes is refused (StudyDataError naming the holder). Without it (a read-only verb) each
         write takes the lock for its own length (`_writing`). `study_file_edited_ok`: a study file changed
         since the study was created is not refused but said in `study_file_changed` (a participant's export
-        and deletion: their rights do not wait for the file to be put back)."""
+        and deletion: their rights do not wait for the file to be put back). `held`: the folder's writer lock, taken
+        already by the verb (replay/copies.py `Copies.hand_over`): this object holds it, in place of taking it."""
         self.folder = Path(folder).resolve()
         self.given = Path(folder)  # as the user gave it: what a refusal names (it named the resolved path)
         if (self.folder / JOURNAL).is_dir():  # it said "not a study folder (no journal.jsonl ...)": there is one
@@ -222,7 +224,9 @@ class StudyData:
         self._hold: int | None = None
         self._stamp: tuple = ()
         self._started_here: set[str] = set()  # the sessions of games this object journaled as started, not yet ended
-        if writer:
+        if held is not None:
+            self._hold = held
+        elif writer:
             self._hold = self._take(writer)
         try:
             self.state = StudyState()
@@ -549,7 +553,7 @@ class StudyData:
             return None, "recording missing"
         try:
             check_recording(path)
-            log = read_log(path)
+            log = read_any_log(path)
         except InputError as err:  # not MCAP at all, or a file of nothing: no session either
             return None, f"recording holds no session: {err.what}"
         except OSError as err:
@@ -592,7 +596,7 @@ class StudyData:
         """`not_this_game` of the session the recording at `path` starts ("" if it starts none or cannot be read:
         what reads it next says so)."""
         try:
-            started = read_log(path, only=frozenset({"SessionStarted"})).of("SessionStarted")
+            started = read_any_log(path, only=frozenset({"SessionStarted"})).of("SessionStarted")
         except (InputError, OSError):
             return ""
         return self.not_this_game(g, started[0].config) if started else ""
@@ -665,7 +669,7 @@ class StudyData:
             path = self.folder / g.recording
             if not path.is_file():
                 continue
-            log = read_log(path)
+            log = read_any_log(path)
             started = log.of("SessionStarted")
             if started and self.not_this_game(g, started[0].config):  # another session's answers are not its
                 continue  # participant's (a `session --force` over a study game's recording)
@@ -1051,8 +1055,8 @@ def game_end(folder: Path, session: str, participant: str, path: Path, answered:
     reason, in the reader's words; a completed game keeps its outcome (the next start's
     build_missing_policies says again why it has no policy; the combination refuses to go without it).
     Before, a partial policy was written and journaled as the game's, with no word."""
-    recorded = read_log(path)
-    fold = fold_events(r.event for r in recorded.events)
+    recorded = read_any_log(path)
+    fold = fold_any(r.event for r in recorded.events)
     ended = fold.ended
     completed = ended is not None and ended.reason == "completed"
     damaged = recording_damage(recorded)
@@ -1100,7 +1104,7 @@ def lost_answers(log, decoded: bool, journaled: bool) -> list[str]:
 def _finished_game(path: Path) -> bool:
     """Is the recording whole and does it hold its game's end?"""
     try:
-        recorded = read_log(path, only=frozenset({"SessionEnded"}))
+        recorded = read_any_log(path, only=frozenset({"SessionEnded"}))
     except (InputError, OSError):
         return False
     return recorded.whole and bool(recorded.of("SessionEnded"))

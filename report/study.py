@@ -46,7 +46,7 @@ from pairplay.core.policies import to_policy_file
 from pairplay.core.reward import BONUS_RULE_TEXT
 from pairplay.core.rng import GAME_INDEX_RANGE, SEED_RANGE
 from pairplay.core.simulate import MEMORY_LIMIT, batch_bytes, gigabytes
-from pairplay.arguments import flag_argument, given, instance_argument, is_integer, path_argument
+from pairplay.arguments import checked_dataclass, flag_argument, given, instance_argument, is_integer, path_argument
 from pairplay.errors import OptionError
 from pairplay.lists import comma_items
 from pairplay.numbers import counted, shown, type_name
@@ -65,6 +65,7 @@ REUSE_SETTINGS = ("psi", "psi_decay", "reuse_last", "reuse_seeds")  # the settin
 EVAL_GAMES_PER_GAME = 12  # evaluation games per training game: comparison 3, own + merged policies, future work
 
 
+@checked_dataclass  # a caller's mistake in the project's words (pairplay/arguments.py)
 @dataclass
 class StudySettings:
     """Everything that decides a study's results (the `pairplay study` options)."""

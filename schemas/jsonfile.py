@@ -29,6 +29,9 @@ save that did not finish? put back a whole copy" (msgspec said "Input data was t
 place, no advice), a character that breaks it "not valid JSON at line L, column C (byte N): ...: correct
 it there"; a TOML file's syntax alike (`toml_words`: tomllib's "(at end of document)" is said as the line
 the file ends on).
+A key an older pairplay's file holds and this one retired is said
+to be retired, with what replaced it (a Struct's `RETIRED` table, `retired_key`),
+never as a typo of another key.
 """
 
 from __future__ import annotations
@@ -135,8 +138,11 @@ def in_words(exc: Exception, struct: type | None = None, data: bytes | None = No
     elif unknown := re.fullmatch(r"Object contains unknown field `(.+)`", what):
         key, keys = unknown[1], sorted(_keys_at(struct, where))
         near = nearest(key, keys)
-        said = f"no key `{key}` is known here" + (f" (did you mean `{near}`?)" if near
-                                                   else f"; the keys: {', '.join(keys)}" if keys else "")
+        if (retired := retired_key(_struct_at(struct, where), key)) is not None:  # an older pairplay's file
+            said = retired
+        else:
+            said = f"no key `{key}` is known here" + (f" (did you mean `{near}`?)" if near
+                                                       else f"; the keys: {', '.join(keys)}" if keys else "")
     elif missing := re.fullmatch(r"Object missing required field `(.+)`", what):
         said = f"needs the key `{missing[1]}`"
     elif enum := re.fullmatch(r"Invalid enum value (.+)", what):
@@ -144,8 +150,28 @@ def in_words(exc: Exception, struct: type | None = None, data: bytes | None = No
     return f"{where}: {said}" if where else said
 
 
+def retired_key(struct: object, key: str) -> str | None:
+    """What a file that still holds `key`, which `struct` (a Struct of a file kind) no longer takes, is told: that
+    it was retired and what replaced it, from the Struct's `RETIRED` table (`ClassVar[dict[str, str]]`: key ->
+    what does its work now; data, never code); None if `key` was never one of its keys. A retired key was refused
+    as a typo, with a did-you-mean pointing at a key of another meaning (`iristk_subscriber_wait_s`: "did you mean
+    `iristk_subscribe`?")."""
+    table = getattr(struct, "RETIRED", None) if isinstance(struct, type) else None
+    if not isinstance(table, dict) or key not in table:
+        return None
+    return f"the key `{key}` was retired (this pairplay no longer reads it): {table[key]}; remove it from the file"
+
+
 def _keys_at(struct: type | None, where: str) -> set[str]:
     """The keys of the Struct that `where` (msgspec's path: `a.b[0].c`) leads to in `struct`; none if unknown."""
+    kind = _struct_at(struct, where)
+    if isinstance(kind, type) and issubclass(kind, msgspec.Struct):
+        return {f.encode_name for f in msgspec.structs.fields(kind)}
+    return set()
+
+
+def _struct_at(struct: type | None, where: str) -> object:
+    """The type that `where` (msgspec's path: `a.b[0].c`) leads to in `struct` (None if it leads nowhere known)."""
     kind: object = struct
     for token in re.findall(r"\[\d+\]|[^.\[\]]+", where):
         kind = _struct_in(kind)
@@ -155,11 +181,8 @@ def _keys_at(struct: type | None, where: str) -> set[str]:
         elif kind is not None and isinstance(kind, type) and issubclass(kind, msgspec.Struct):
             kind = next((f.type for f in msgspec.structs.fields(kind) if f.encode_name == token), None)
         else:
-            return set()
-    kind = _struct_in(kind)
-    if isinstance(kind, type) and issubclass(kind, msgspec.Struct):
-        return {f.encode_name for f in msgspec.structs.fields(kind)}
-    return set()
+            return None
+    return _struct_in(kind)
 
 
 def _struct_in(kind: object) -> object:

@@ -36,6 +36,7 @@ RobotActed get defaults and go at the end (envelope.py rule).
 from __future__ import annotations
 
 import re
+from typing import ClassVar
 
 import msgspec
 
@@ -172,6 +173,15 @@ class RobotConfig(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
     gestures: None means the backend's own preset ("iristk" over the broker,
     "furhat" over the Realtime API).
     """
+
+    # keys an older pairplay's config file may hold, each with what does its work now: a file holding one is refused
+    # saying so (schemas/jsonfile.py `retired_key`), not as a typo of a key of another meaning
+    RETIRED: ClassVar[dict[str, str]] = {
+        "iristk_subscriber_wait_s": "an IrisTK event nobody subscribes to is now held until the broker says someone "
+                                    "does, for at most `give_up_s` (then the suggestion is failed)",
+        "iristk_wait_for_subscriber": "an IrisTK event nobody subscribes to is now always held until the broker says "
+                                      "someone does, for at most `give_up_s` (then the suggestion is failed)",
+    }
 
     gestures: GestureNames | None = None
     speech: SpeechTexts = SpeechTexts()

@@ -17,6 +17,7 @@ from pairplay.numbers import counted, shown
 
 from .config import REWARD_BONUS_RULES, UNSTATED_REWARD_BONUS, LearnerConfig, LSPIConfig
 from .policy import N_ACTIONS, N_STATES
+from .public import PublicStructMeta
 
 SEED_RANGE = (0, 2**64 - 1)  # every seed here has its own streams (core/rng.py game_seed, derivation 2)
 GAME_INDEX_RANGE = (0, 2**63 - 1)  # a game of a seed: core/rng.py hashes it as a signed 64-bit count
@@ -45,7 +46,7 @@ IGNORE_RULES = ("perceived", "time")
 IGNORE_CLOCKS = ("server", "page")
 
 
-class SessionConfig(msgspec.Struct, frozen=True, kw_only=True):
+class SessionConfig(msgspec.Struct, frozen=True, kw_only=True, metaclass=PublicStructMeta):  # (schemas/public.py)
     session: str
     participant: str  # "sim:<persona>" or "human:<id>"
     seed: int

@@ -39,7 +39,7 @@ from typing import Callable
 from pairplay import __version__
 from pairplay.core.policies import partial_inputs, users_from_policies
 from pairplay.replay.delivery import delivery_counts, delivery_line
-from pairplay.replay.reader import read_log
+from pairplay.replay.reader import read_any_log
 from pairplay.replay.studydata import Game, StudyData, StudyDataError, game_end, one_line, recording_damage
 from pairplay.schemas import events as ev
 from pairplay.schemas import journal as j
@@ -336,7 +336,7 @@ class StudyRunner:
         a recording that lost events gets no policy, and that is said here too, as a robot it could not reach."""
         self.data.append(game_end(self.data.folder, config.session, config.participant.split(":", 1)[1], path,
                                   answered, self._abort_reason))
-        recorded = read_log(path, only=frozenset({"RobotActed"}))
+        recorded = read_any_log(path, only=frozenset({"RobotActed"}))
         damaged = recording_damage(recorded)
         if damaged:
             log.warning("%s: its recording is %s: no policy built", config.session, damaged)

@@ -67,7 +67,7 @@ from dataclasses import dataclass, field
 from pairplay.errors import InputError
 from pairplay.replay.check import check_recording, no_whole_round
 from pairplay.replay.forgery import contradiction
-from pairplay.replay.reader import read_log, recovered_cut, recovered_lost, said_source, said_source_made
+from pairplay.replay.reader import read_any_log, recovered_cut, recovered_lost, said_source, said_source_made
 from pairplay.schemas.events import RoundEnded, SessionEnded, SessionStarted
 
 from pairplay.services.game import GameLogic
@@ -211,7 +211,7 @@ def verify_recording(path) -> Verification:
     """The verification of the recording at `path` (module rule); InputError if it contradicts itself
     about who published what (replay/forgery.py: two events claiming one game seq, a forged start or end),
     or if it would PASS but holds no round recorded whole (replay/check.py `no_whole_round`)."""
-    log = read_log(check_recording(path, function="verify_recording"))  # (not MCAP at all: refused, as the verbs do)
+    log = read_any_log(check_recording(path, function="verify_recording"))  # (not MCAP at all: refused, as the verbs do)
     forged = contradiction(r.event for r in log.events)
     if forged:
         raise InputError(f"{forged}: not verified", path)

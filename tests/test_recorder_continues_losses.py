@@ -14,7 +14,7 @@ from __future__ import annotations
 import shutil
 
 from pairplay.replay.mcapscan import scan
-from pairplay.replay.reader import read_log
+from pairplay.replay.reader import read_any_log, read_log
 from pairplay.replay.recover import recover
 from pairplay.replay.wal import JournalWriter
 from pairplay.services.recorder import Recorder
@@ -195,7 +195,7 @@ def test_a_live_restart_whose_refill_gives_back_the_damaged_chunk_stays_whole(tm
         assert read_log(f).lost
         second = recorder(tmp_path, s, endpoint)
         new = tmp_path / f"{s}.1.mcap"
-        assert wait_until(lambda: second.poll() is not None or (new.exists() and read_log(new).of("RecordingGap")),
+        assert wait_until(lambda: second.poll() is not None or (new.exists() and read_any_log(new).of("RecordingGap")),
                           120, 0.3)
         p.send_signal(signal.SIGTERM)
         p.communicate(timeout=60)

@@ -15,7 +15,7 @@ import subprocess
 import sys
 import time
 
-from pairplay.replay.reader import read_log
+from pairplay.replay.reader import read_any_log, read_log
 from pairplay.replay.wal import MAGIC, read_journal, wal_path
 from pairplay.schemas import events as ev
 
@@ -55,7 +55,7 @@ def kill_before_first_flush(tmp_path, session: str, endpoint: str) -> bool:
         if first.poll() is None:
             first.kill()
             first.wait()
-    return not read_log(tmp_path / f"{session}.mcap").events
+    return not read_any_log(tmp_path / f"{session}.mcap").events
 
 
 def test_a_recorder_killed_before_its_first_flush_and_restarted_continues_the_session(tmp_path):
@@ -74,7 +74,7 @@ def test_a_recorder_killed_before_its_first_flush_and_restarted_continues_the_se
             # once the restarted recorder has refilled the gap (its RecordingGap is in its file), the
             # session is stopped (as its experimenter would: seconds, not its 5,000 rounds; with 150 a quick
             # machine could play them all first and end it "completed", not "interrupted")
-            assert wait_until(lambda: second.poll() is not None or read_log(tmp_path / f"{session}.1.mcap").of(
+            assert wait_until(lambda: second.poll() is not None or read_any_log(tmp_path / f"{session}.1.mcap").of(
                 "RecordingGap") if (tmp_path / f"{session}.1.mcap").exists() else second.poll() is not None,
                 60, 0.1)
             assert second.poll() is None, second.stderr.read()
@@ -129,7 +129,7 @@ def test_a_recorder_killed_mid_session_gets_the_robots_reports_of_its_outage_ref
     try:
         endpoint = endpoint_of(first_line(p))
         first = recorder(tmp_path, session, endpoint)
-        assert wait_until(lambda: path.exists() and len(read_log(path).of("RobotActed")) >= 20, 60), "no robot"
+        assert wait_until(lambda: path.exists() and len(read_any_log(path).of("RobotActed")) >= 20, 60), "no robot"
         first.send_signal(signal.SIGKILL)
         first.wait(10)
         time.sleep(1.0)  # the session plays on, the robot reports, nobody records
@@ -157,7 +157,7 @@ def test_a_recorder_killed_mid_session_gets_the_robots_reports_of_its_outage_ref
             waiting[:] = [f"suggestions made before the gap without RobotActed: {sorted(before - acted)[:10]}; "
                           f"acted on after it: {len(after & acted)}"]
             return before <= acted and len(after & acted) >= 5
-        assert wait_until(lambda: second.poll() is not None or restarted.exists() and caught_up(read_log(restarted)),
+        assert wait_until(lambda: second.poll() is not None or restarted.exists() and caught_up(read_any_log(restarted)),
                           60, 0.1), waiting[0]
         assert second.poll() is None, second.stderr.read()
         p.send_signal(signal.SIGTERM)

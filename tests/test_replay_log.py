@@ -7,12 +7,12 @@ import jsonschema
 import numpy as np
 import pytest
 
-from pairplay.errors import OutputError
+from pairplay.errors import InputError, OutputError
 from mcap.reader import make_reader
 
 from pairplay.core.learning import q_update
 from pairplay.replay.fold import fold_events
-from pairplay.replay.reader import EventDecoderFactory, read_log
+from pairplay.replay.reader import EventDecoderFactory, read_any_log, read_log
 from pairplay.replay.recover import recover
 from pairplay.replay.writer import EventLogWriter
 from pairplay.schemas import keys
@@ -113,11 +113,15 @@ def test_recover_refuses_to_overwrite_its_input(tmp_path):
         recover(path, path)
 
 
-def test_a_garbage_file_is_reported_not_raised(tmp_path):
+def test_a_garbage_file_is_reported_by_the_any_file_reader_and_refused_by_read_log(tmp_path):
+    """read_any_log (recover's, a server's read-back) says what the file is not; read_log, the public API's,
+    refuses it naming the file, as every verb does (tests/test_python_api_edges.py)."""
     path = tmp_path / "junk.mcap"
     path.write_bytes(b"not an mcap file at all")
-    log = read_log(path)
+    log = read_any_log(path)
     assert log.truncated and not log.events
+    with pytest.raises(InputError, match="not a recording: not an MCAP file"):
+        read_log(path)
 
 
 def test_fold_rebuilds_q_with_the_learners_update_and_flags_gaps():

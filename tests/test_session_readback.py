@@ -20,7 +20,7 @@ from busutil import wait_until
 from damageutil import damage, damaged_when_written
 
 from pairplay.livelock import is_live
-from pairplay.replay.reader import read_log
+from pairplay.replay.reader import read_any_log, read_log
 
 LINGER_S = 10  # the lab's pages show the end this long before it reads its recording back (the damage's time)
 WORDS = {"chunk": "is not whole: damaged: chunk ", "cut": "is not whole: truncated: ",
@@ -67,7 +67,7 @@ def test_a_lab_session_whose_recording_is_not_whole_when_read_back_says_so_and_e
         endpoint = lines[3].split()[3]
         with Bus(BusOptions(listen=[], connect=[endpoint])) as bus:
             # the game has started once its recording (flushed every 25 ms) holds its SessionStarted
-            assert wait_until(lambda: path.is_file() and read_log(path).of("SessionStarted"), 30), "no game started"
+            assert wait_until(lambda: path.is_file() and read_any_log(path).of("SessionStarted"), 30), "no game started"
             abort = stamped(SessionAborted(reason="the test ends it"), session="lb", source="experimenter", seq=1,
                             time_ns=time.time_ns())
             bus.put(event_key("lb", "experimenter", "SessionAborted"), encode_event(abort))

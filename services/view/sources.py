@@ -34,7 +34,7 @@ import msgspec
 import zenoh
 
 from pairplay.replay.forgery import AFTER_END
-from pairplay.replay.reader import EventLog, read_log
+from pairplay.replay.reader import EventLog, read_any_log
 from pairplay.schemas.events import decode_event
 from pairplay.schemas.keys import parse_event_key, session_keys
 
@@ -72,7 +72,7 @@ def recording_items(path: str | Path, *, speed: float = 0.0, session: str | None
     again (a file a `recover` or a recorder changes beside the view could differ, or fail, the second time)."""
     stop = stop if stop is not None else threading.Event()
     sleep = sleep or stop.wait
-    log = log if log is not None else read_log(path)
+    log = log if log is not None else read_any_log(path)
     chosen = session
     t0_event = t0_wall = None
     for bad in log.bad:
