@@ -65,12 +65,22 @@ def finished_copy(one_seed, tmp_path: Path, out: str = "out") -> tuple[Path, Pat
     return tmp_path / "grid.toml", tmp_path / out
 
 
-def test_a_sweep_writes_every_cell_and_resumes_without_recomputing(tmp_path):
-    grid = read_grid(_grid(tmp_path))
+@pytest.fixture(scope="module")
+def two_seeds(tmp_path_factory):
+    """GRID (2 settings x 2 seeds) swept locally and summarised, once: the resume and the Dask cluster start
+    from it (each computed the same four cells). Returns (folder, grid, the first run)."""
+    folder = tmp_path_factory.mktemp("two_seeds")
+    grid = read_grid(_grid(folder))
+    first = run_sweep(grid, folder / "out")
+    write_sweep(folder / "out", grid, finished_cells(folder / "out", grid), first)
+    return folder, grid, first
+
+
+def test_a_sweep_writes_every_cell_and_resumes_without_recomputing(two_seeds, tmp_path):
+    folder, grid, first = two_seeds
     assert len(grid.cells()) == 4 and len({c.id for c in grid.cells()}) == 4
-    first = run_sweep(grid, tmp_path / "out")
     assert (first.cells, first.computed) == (4, 4)
-    write_sweep(tmp_path / "out", grid, finished_cells(tmp_path / "out", grid), first)
+    shutil.copytree(folder / "out", tmp_path / "out")
     before = _tables(tmp_path / "out")
     victim = grid.cells()[1]
     (tmp_path / "out" / "cells" / f"{victim.id}.json").unlink()  # as if interrupted before that cell
@@ -84,11 +94,9 @@ def test_a_sweep_writes_every_cell_and_resumes_without_recomputing(tmp_path):
     assert (tmp_path / "out" / "figures" / "all-ratio.png").stat().st_size > 0
 
 
-def test_a_dask_cluster_of_two_workers_gives_the_same_tables(tmp_path):
+def test_a_dask_cluster_of_two_workers_gives_the_same_tables(two_seeds, tmp_path):
     distributed = pytest.importorskip("dask.distributed")
-    grid = read_grid(_grid(tmp_path))
-    local = run_sweep(grid, tmp_path / "local")
-    write_sweep(tmp_path / "local", grid, finished_cells(tmp_path / "local", grid), local)
+    folder, grid, _ = two_seeds  # the same grid swept locally
     with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, host="127.0.0.1",
                                   dashboard_address=None) as cluster:
         remote = run_sweep(grid, tmp_path / "dask", scheduler=cluster.scheduler_address)
@@ -97,7 +105,7 @@ def test_a_dask_cluster_of_two_workers_gives_the_same_tables(tmp_path):
             run_sweep(grid, tmp_path / "dask", scheduler=worker)
     assert remote.computed == 4 and remote.where.startswith("dask tcp://127.0.0.1:")
     write_sweep(tmp_path / "dask", grid, finished_cells(tmp_path / "dask", grid), remote)
-    assert _tables(tmp_path / "dask") == _tables(tmp_path / "local")
+    assert _tables(tmp_path / "dask") == _tables(folder / "out")
 
 
 @pytest.mark.parametrize("text,needle", [
