@@ -77,22 +77,25 @@ def serve() -> None:
     print(json.dumps({"ready": True, "threads": threads}), flush=True)
     running: dict[int, str] = {}
     selector = selectors.DefaultSelector()
-    selector.register(sys.stdin, selectors.EVENT_READ)
-    stdin_open = True
+    selector.register(0, selectors.EVENT_READ)
+    stdin_open, pending = True, b""
     while stdin_open or running:
         if stdin_open and selector.select(timeout=0.02):
-            line = sys.stdin.readline()
-            if not line:
-                stdin_open = False
-                continue
-            request = json.loads(line)
-            sys.stdout.flush()
-            pid = os.fork()
-            if pid == 0:
-                selector.close()
-                _child(request)
-            running[pid] = request["id"]
-            print(json.dumps({"id": request["id"], "pid": pid}), flush=True)
+            # the file descriptor itself, not sys.stdin: requests sent at once (commands started from
+            # several threads) arrive in one read, and a line left in sys.stdin's buffer was never
+            # selected again (its command waited for the next request; the last ones for ever)
+            data = os.read(0, 1 << 16)
+            stdin_open, pending = bool(data), pending + data
+            *lines, pending = pending.split(b"\n")
+            for line in lines:
+                request = json.loads(line)
+                sys.stdout.flush()
+                pid = os.fork()
+                if pid == 0:
+                    selector.close()
+                    _child(request)
+                running[pid] = request["id"]
+                print(json.dumps({"id": request["id"], "pid": pid}), flush=True)
         elif not stdin_open:
             threading.Event().wait(0.02)
         while running:

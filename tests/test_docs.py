@@ -45,32 +45,6 @@ def test_every_event_type_has_a_trust_rule_agreeing_with_its_publishers():
                 assert publisher_refusal(tag, source) is None, (tag, source)
 
 
-def test_the_scripting_example_runs_as_a_script(tmp_path):
-    """README's "Scripting pairplay from Python", saved as a file and run with `python script.py` from a
-    folder holding what it reads: run_study draws its figures in worker processes that import the
-    script again, so without its `__main__` guard it failed (BrokenProcessPool; a researcher's trial)."""
-    import os
-    import shutil
-    import subprocess
-    import sys
-
-    text = README.read_text()
-    section = text[text.index("## Scripting pairplay from Python"):]
-    script = re.search(r"```python\n(.*?)```", section, re.DOTALL).group(1)
-    (tmp_path / "script.py").write_text(script)
-    (tmp_path / "recordings").mkdir()
-    shutil.copytree(README.parent / "recordings" / "samples", tmp_path / "recordings" / "samples")
-    env = dict(os.environ, PYTHONUNBUFFERED="1")
-    made = subprocess.run([sys.executable, "-m", "pairplay", "session", "--participant", "sim:blind", "--seed", "1",
-                           "--rounds", "3", "--session", "blind-g0", "-q"], cwd=tmp_path, env=env,
-                          capture_output=True, text=True, timeout=180)
-    assert made.returncode == 0, made.stderr
-    ran = subprocess.run([sys.executable, "script.py"], cwd=tmp_path, env=env, capture_output=True, text=True,
-                         timeout=300)
-    assert ran.returncode == 0, ran.stderr[-2000:]
-    assert "'focus'" in ran.stdout and (tmp_path / "out" / "blind-deaf" / "report.md").is_file()
-
-
 def test_a_file_the_readme_shows_is_shown_as_it_is():
     """A listing whose first line names a file of the repository (`# pairplay sweep examples/X.toml`,
     `# examples/X.toml`) is that file, byte for byte: the sweep grid shown had lost three settings and

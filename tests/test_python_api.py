@@ -7,7 +7,8 @@ fold_events([1, 2]) an empty fold, run_study into a folder of an earlier run "--
 (in Python the argument is force=True). Every function of `pairplay.API` gets mistakes here
 (pairplay/arguments.py's rule: a UserError, one line, what and where; the wrong kind also a
 TypeError, the right kind unusable also a ValueError). The README's script is run from its text,
-twice (the second run replaced nothing before force=True), so it cannot drift.
+as a script, over an earlier study's folder (its second run replaced nothing before force=True), so it
+cannot drift.
 """
 
 from __future__ import annotations
@@ -167,12 +168,20 @@ def readme_script() -> str:
     return re.search(r"```python\n(.*?)```", section, re.S)[1]
 
 
-def test_the_readme_script_runs_as_written_twice(tmp_path):
-    """From a clone's folder (here: one holding only recordings/samples), as the README says; the second run
-    replaces the first's study (it stopped on "exists and is not empty")."""
+def test_the_readme_script_runs_as_written_over_an_earlier_study(tmp_path, pairplay_cli):
+    """From a clone's folder (here: one holding only recordings/samples), saved as a file and run with
+    `python script.py`, as the README says: run_study draws its figures in worker processes that import the
+    script again, so without its `__main__` guard it failed (BrokenProcessPool; a researcher's trial). Its
+    study folder already holds an earlier study (a small one: the script's second run stopped on "exists
+    and is not empty" before force=True; any earlier study's folder is refused so), which it replaces."""
     shutil.copytree(SAMPLES, tmp_path / "recordings" / "samples")
     (tmp_path / "script.py").write_text(readme_script())
-    for run in (1, 2):
-        done = subprocess.run([sys.executable, "script.py"], cwd=tmp_path, capture_output=True, text=True, timeout=600)
-        assert done.returncode == 0, f"run {run}: {done.stderr[-2000:]}"
-        assert "'focus'" in done.stdout and "learned/oracle" in done.stdout, done.stdout
+    earlier = pairplay_cli("study", "--quiet", "--personas", "blind,deaf", "--games", "1", "--rounds", "10",
+                           "--eval-rounds", "10", "--reuse-seeds", "1", "--out", "out/blind-deaf", cwd=tmp_path)
+    assert earlier.returncode == 0, earlier.stderr
+    assert len(list((tmp_path / "out" / "blind-deaf" / "policies").rglob("*.json"))) == 2
+    done = subprocess.run([sys.executable, "script.py"], cwd=tmp_path, capture_output=True, text=True, timeout=600)
+    assert done.returncode == 0, done.stderr[-2000:]
+    assert "'focus'" in done.stdout and "learned/oracle" in done.stdout, done.stdout
+    assert (tmp_path / "out" / "blind-deaf" / "report.md").is_file()
+    assert len(list((tmp_path / "out" / "blind-deaf" / "policies").rglob("*.json"))) == 6  # 2 personas x 3 games

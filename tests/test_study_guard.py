@@ -1,10 +1,11 @@
 """One writer per study folder, and the study file fixed once the study is created (a new user's trial).
 
-Real processes: a `pairplay protocol serve` holds its folder; every other verb that writes the folder
+Real processes: a `python -m pairplay protocol serve` holds its folder; every other verb that writes the folder
 (protocol serve, pilot, register, mark-invalid; participant export, delete; report) is refused at once in
 one line naming the folder and the holder, and writes nothing (the trial: two servers gave `p05` to Carla
 and to Dieter; `protocol register` beside a server did the same; a deletion beside a server was undone
-from its memory); `protocol status` reads beside it; the kernel drops the lock of a killed server. In a
+from its memory); `protocol status` reads beside it (those commands are processes forked from one
+that imported pairplay, conftest's pairplay_cli, all at once: each is refused or reads); the kernel drops the lock of a killed server. In a
 process, a StudyData never writes from a stale copy of the journal. A study.toml edited in the folder is
 refused by every verb that reads the folder (the trial's pilot played 2-round games beside 5-round ones,
 its report left games out with exit 0).
@@ -17,6 +18,7 @@ import signal
 import subprocess
 import sys
 import threading
+from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
 import pytest
@@ -27,9 +29,18 @@ from pairplay.schemas import journal as j
 STUDY = Path(__file__).parent / "data" / "pilot-study.toml"
 
 
-def pairplay(*args: str, timeout: float = 120) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "pairplay", *args], capture_output=True, text=True,
-                          timeout=timeout)
+@pytest.fixture
+def pairplay(pairplay_cli):
+    """`pairplay(*args)`: a whole process of its own per command, forked from one that imported pairplay
+    (conftest's pairplay_cli): these tests are of what the verbs do beside a holder, not of a start-up;
+    the server that holds the folder is a `python -m pairplay` of its own (serving)."""
+    return pairplay_cli
+
+
+def all_at_once(pairplay, commands: dict[str, list[str]]) -> dict[str, subprocess.CompletedProcess]:
+    """The commands run side by side (each is refused or only reads: none waits for another)."""
+    with ThreadPoolExecutor(len(commands)) as pool:
+        return dict(zip(commands, pool.map(lambda args: pairplay(*args), commands.values())))
 
 
 def a_study(tmp_path: Path, registered: int = 2) -> StudyData:
@@ -67,7 +78,7 @@ def files_of(folder: Path) -> dict[str, bytes]:
             if p.is_file() and p.name != ".pairplay-lock"}
 
 
-def test_a_second_writer_beside_a_running_server_is_refused_in_one_line_and_writes_nothing(tmp_path):
+def test_a_second_writer_beside_a_running_server_is_refused_in_one_line_and_writes_nothing(tmp_path, pairplay):
     data = a_study(tmp_path)
     folder = data.folder
     before, keys = files_of(folder), (tmp_path / "keys.csv").read_bytes()
@@ -82,16 +93,17 @@ def test_a_second_writer_beside_a_running_server_is_refused_in_one_line_and_writ
             "participant delete": ["participant", "delete", str(folder), "p02", "--yes"],
             "report": ["report", str(folder)],
         }
-        for verb, args in writers.items():
-            done = pairplay(*args)
+        # a reader runs beside the writer (and beside the refused ones)
+        ran = all_at_once(pairplay, {**writers, "status": ["protocol", "status", str(folder)]})
+        for verb in writers:
+            done = ran[verb]
             lines = done.stderr.strip().splitlines()
             assert done.returncode == 2 and len(lines) == 1, (verb, done.returncode, done.stderr)
             assert lines[0].startswith(f"pairplay {verb}: another pairplay writes this study folder: protocol serve "
                                        f"(pid {server.pid}, since "), (verb, lines)
             assert lines[0].endswith(f"({folder})"), (verb, lines)  # the folder, as given
             assert "Traceback" not in done.stderr
-        # a reader runs beside the writer
-        status = pairplay("protocol", "status", str(folder))
+        status = ran["status"]
         assert status.returncode == 0 and "p01: phase1 game 1" in status.stdout, status.stderr
         assert files_of(folder) == before  # nothing written: no second p03, p02 not deleted, no report
         assert (tmp_path / "keys.csv").read_bytes() == keys
@@ -103,7 +115,7 @@ def test_a_second_writer_beside_a_running_server_is_refused_in_one_line_and_writ
     assert (tmp_path / "keys.csv").read_text().splitlines()[-1] == "p03,Dieter"
 
 
-def test_a_killed_server_leaves_no_stale_lock(tmp_path):
+def test_a_killed_server_leaves_no_stale_lock(tmp_path, pairplay):
     data = a_study(tmp_path, registered=0)
     server = serving(data.folder)
     server.kill()  # SIGKILL: no handler runs; the kernel drops the lock
@@ -149,7 +161,7 @@ EDITED = {"rounds": ("rounds = 2", "rounds = 5"), "a comment": ("# Phase 1 (7.2)
 
 
 @pytest.mark.parametrize("edit", sorted(EDITED))
-def test_a_study_file_edited_in_the_folder_is_refused_by_every_verb_that_reads_it(tmp_path, edit):
+def test_a_study_file_edited_in_the_folder_is_refused_by_every_verb_that_reads_it(tmp_path, edit, pairplay):
     data = a_study(tmp_path)
     toml = data.folder / "study.toml"
     original = toml.read_bytes()
@@ -157,10 +169,11 @@ def test_a_study_file_edited_in_the_folder_is_refused_by_every_verb_that_reads_i
     assert old.encode() in original
     toml.write_bytes(original.replace(old.encode(), new.encode(), 1))
     before = files_of(data.folder)
-    for args in (["protocol", "status"], ["protocol", "register"], ["protocol", "pilot", "--personas", "blind,deaf"],
-                 ["report"]):
-        done = pairplay(*args[:2], str(data.folder), *args[2:]) if args[0] != "report" else \
-            pairplay("report", str(data.folder))
+    ran = all_at_once(pairplay, {"status": ["protocol", "status", str(data.folder)],
+                                 "register": ["protocol", "register", str(data.folder)],
+                                 "pilot": ["protocol", "pilot", str(data.folder), "--personas", "blind,deaf"],
+                                 "report": ["report", str(data.folder)]})
+    for args, done in ran.items():
         lines = done.stderr.strip().splitlines()
         assert done.returncode == 2 and len(lines) == 1, (args, done.returncode, done.stderr)
         assert "study.toml" in lines[0] and "changed since the study was created" in lines[0], lines

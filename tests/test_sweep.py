@@ -37,12 +37,50 @@ def _tables(out: Path) -> tuple[str, str]:
     return (out / "sweep.csv").read_text(), (out / "cells.csv").read_text()
 
 
-def test_a_sweep_writes_every_cell_and_resumes_without_recomputing(tmp_path):
-    grid = read_grid(_grid(tmp_path))
+ONE_SEED = GRID.replace("seeds = 2", "seeds = 1")
+
+
+@pytest.fixture(scope="module")
+def one_seed(tmp_path_factory):
+    """One finished sweep of ONE_SEED (2 settings x 1 seed) by the verb, made once: the tests that start from
+    a finished sweep copy it (finished_copy) and change their own copy (each paid a sweep and its figures).
+    Returns its folder and what the verb said while it computed the cells (not -q)."""
+    import contextlib
+    import io
+
+    from pairplay.cli.main import main
+
+    folder = tmp_path_factory.mktemp("one_seed")
+    said = io.StringIO()
+    with contextlib.redirect_stdout(said):
+        assert main(["sweep", str(_grid(folder, ONE_SEED)), "--out", str(folder / "out")]) == 0
+    return folder, said.getvalue()
+
+
+def finished_copy(one_seed, tmp_path: Path, out: str = "out") -> tuple[Path, Path]:
+    """(grid.toml, out folder) in tmp_path: a copy of one_seed's finished sweep, its files' times kept."""
+    folder, _ = one_seed
+    shutil.copy2(folder / "grid.toml", tmp_path / "grid.toml")
+    shutil.copytree(folder / "out", tmp_path / out)
+    return tmp_path / "grid.toml", tmp_path / out
+
+
+@pytest.fixture(scope="module")
+def two_seeds(tmp_path_factory):
+    """GRID (2 settings x 2 seeds) swept locally and summarised, once: the resume and the Dask cluster start
+    from it (each computed the same four cells). Returns (folder, grid, the first run)."""
+    folder = tmp_path_factory.mktemp("two_seeds")
+    grid = read_grid(_grid(folder))
+    first = run_sweep(grid, folder / "out")
+    write_sweep(folder / "out", grid, finished_cells(folder / "out", grid), first)
+    return folder, grid, first
+
+
+def test_a_sweep_writes_every_cell_and_resumes_without_recomputing(two_seeds, tmp_path):
+    folder, grid, first = two_seeds
     assert len(grid.cells()) == 4 and len({c.id for c in grid.cells()}) == 4
-    first = run_sweep(grid, tmp_path / "out")
     assert (first.cells, first.computed) == (4, 4)
-    write_sweep(tmp_path / "out", grid, finished_cells(tmp_path / "out", grid), first)
+    shutil.copytree(folder / "out", tmp_path / "out")
     before = _tables(tmp_path / "out")
     victim = grid.cells()[1]
     (tmp_path / "out" / "cells" / f"{victim.id}.json").unlink()  # as if interrupted before that cell
@@ -56,11 +94,9 @@ def test_a_sweep_writes_every_cell_and_resumes_without_recomputing(tmp_path):
     assert (tmp_path / "out" / "figures" / "all-ratio.png").stat().st_size > 0
 
 
-def test_a_dask_cluster_of_two_workers_gives_the_same_tables(tmp_path):
+def test_a_dask_cluster_of_two_workers_gives_the_same_tables(two_seeds, tmp_path):
     distributed = pytest.importorskip("dask.distributed")
-    grid = read_grid(_grid(tmp_path))
-    local = run_sweep(grid, tmp_path / "local")
-    write_sweep(tmp_path / "local", grid, finished_cells(tmp_path / "local", grid), local)
+    folder, grid, _ = two_seeds  # the same grid swept locally
     with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, host="127.0.0.1",
                                   dashboard_address=None) as cluster:
         remote = run_sweep(grid, tmp_path / "dask", scheduler=cluster.scheduler_address)
@@ -69,7 +105,7 @@ def test_a_dask_cluster_of_two_workers_gives_the_same_tables(tmp_path):
             run_sweep(grid, tmp_path / "dask", scheduler=worker)
     assert remote.computed == 4 and remote.where.startswith("dask tcp://127.0.0.1:")
     write_sweep(tmp_path / "dask", grid, finished_cells(tmp_path / "dask", grid), remote)
-    assert _tables(tmp_path / "dask") == _tables(tmp_path / "local")
+    assert _tables(tmp_path / "dask") == _tables(folder / "out")
 
 
 @pytest.mark.parametrize("text,needle", [
@@ -148,14 +184,13 @@ def test_a_sweep_over_the_learner_runs_lspi_and_refuses_lspi_settings_that_canno
             read_grid(_grid(tmp_path, GRID.replace('reward_bonus = ["correct", "consistent"]', bad)))
 
 
-def test_a_resume_with_nothing_to_do_writes_nothing_and_says_so(tmp_path, capsys):
+def test_a_resume_with_nothing_to_do_writes_nothing_and_says_so(one_seed, tmp_path, capsys):
     """Run again on a finished sweep, the verb rewrote sweep.md ("computed 0 in 0.0 s"), losing what the run
     that did the work said. Now nothing is written, and one line says there was nothing to do."""
     from pairplay.cli.main import main
 
-    grid, out = _grid(tmp_path, GRID.replace("seeds = 2", "seeds = 1")), tmp_path / "out"
-    assert main(["sweep", str(grid), "--out", str(out)]) == 0  # not -q: it silences these lines
-    assert "2 computed" in capsys.readouterr().out
+    assert "2 computed" in one_seed[1]  # the run that did the work (not -q: it silences these lines)
+    grid, out = finished_copy(one_seed, tmp_path)
     before = {p: (p.read_bytes(), p.stat().st_mtime_ns) for p in out.rglob("*") if p.is_file()}
     assert main(["sweep", str(grid), "--out", str(out)]) == 0  # not -q: it silences these lines
     said = capsys.readouterr().out.splitlines()
@@ -167,15 +202,15 @@ def test_a_resume_with_nothing_to_do_writes_nothing_and_says_so(tmp_path, capsys
     assert "computed 0" in (out / "sweep.md").read_text()
 
 
-def test_force_writes_the_summary_again_and_a_resume_writes_what_is_missing_or_unreadable(tmp_path, capsys):
+def test_force_writes_the_summary_again_and_a_resume_writes_what_is_missing_or_unreadable(one_seed, tmp_path,
+                                                                                          capsys):
     """Before (a new user's trial): `sweep g.toml --out sw --force` on a finished sweep said "nothing to do" and
     left a junk sweep.md and a deleted figure missing, though a folder's --force replaces the files it writes
     there; without --force a deleted figure stayed missing too. Now --force writes the summary again from the
     cells (which stay), and a resume writes again only what is missing or unreadable, the rest as it was."""
     from pairplay.cli.main import main
 
-    grid, out = _grid(tmp_path, GRID.replace("seeds = 2", "seeds = 1")), tmp_path / "out"
-    assert main(["sweep", str(grid), "--out", str(out), "-q"]) == 0
+    grid, out = finished_copy(one_seed, tmp_path)
     cells = {p: (p.read_bytes(), p.stat().st_mtime_ns) for p in (out / "cells").iterdir()}
     good_md = (out / "sweep.md").read_bytes()
     (out / "sweep.md").write_text("junk")
@@ -556,7 +591,7 @@ def test_a_scheduler_without_dasks_distributed_installed_is_one_line(monkeypatch
         check_scheduler("tcp://127.0.0.1:1")
 
 
-def test_a_forced_sweep_of_another_grid_keeps_none_of_the_first_grids_figures(tmp_path):
+def test_a_forced_sweep_of_another_grid_keeps_none_of_the_first_grids_figures(one_seed, tmp_path):
     """A trial: `sweep A --out D`, then `sweep B --out D --force` (another grid: other personas): the figures of
     A's measures stayed in figures/ beside B's, one folder of two sweeps. The summary is written whole each
     time, and what an earlier summary wrote that this one does not (its manifest says which) is removed; the
@@ -566,12 +601,11 @@ def test_a_forced_sweep_of_another_grid_keeps_none_of_the_first_grids_figures(tm
     def files(folder):
         return sorted(p.relative_to(folder).as_posix() for p in folder.rglob("*") if p.is_file())
 
-    first = _grid(tmp_path, GRID.replace("seeds = 2", "seeds = 1"))
     other = tmp_path / "other.toml"
-    other.write_text(GRID.replace("seeds = 2", "seeds = 1").replace('"blind"', '"deaf"').replace(
+    other.write_text(ONE_SEED.replace('"blind"', '"deaf"').replace(
         'reward_bonus = ["correct", "consistent"]', 'reward_bonus = ["correct"]'))
-    out, fresh = tmp_path / "D", tmp_path / "fresh"
-    assert main(["sweep", str(first), "--out", str(out), "--quiet"]) == 0
+    _, out = finished_copy(one_seed, tmp_path, "D")  # `sweep A --out D`, finished
+    fresh = tmp_path / "fresh"
     assert "figures/blind-ratio.png" in files(out)
     (out / "notes.txt").write_text("the user's")
     (out / "figures" / "mine.png").write_bytes(b"the user's")
@@ -594,17 +628,16 @@ def test_a_number_of_the_sweep_file_is_echoed_as_the_file_has_it(tmp_path, line,
     assert str(info.value) == f"{tmp_path / 'g.toml'}: {said}", info.value
 
 
-def test_a_comment_in_the_grid_file_is_the_same_grid_and_another_grid_keeps_the_users_cell_files(tmp_path):
+def test_a_comment_in_the_grid_file_is_the_same_grid_and_another_grid_keeps_the_users_cell_files(one_seed,
+                                                                                                tmp_path):
     """A trial: only a `# comment` added to the grid file made "the sweep of another grid" (exit 2), and with
     --force every finished cell (the same cells) was thrown away; a forced sweep of another grid removed every
     cells/*.json, a user's file there too, and then any file named like a cell. Grids are compared as read; only
     cell files a sweep wrote (a cell named by its own id) are removed."""
     from pairplay.cli.main import main
 
-    one = GRID.replace("seeds = 2", "seeds = 1")
-    first = _grid(tmp_path, one)
-    out = tmp_path / "D"
-    assert main(["sweep", str(first), "--out", str(out), "--quiet"]) == 0
+    one = ONE_SEED
+    first, out = finished_copy(one_seed, tmp_path, "D")  # `sweep grid.toml --out D`, finished
     cells = sorted(p.name for p in (out / "cells").glob("*.json"))
     stamps = {p.name: p.stat().st_mtime_ns for p in (out / "cells").glob("*.json")}
     first.write_text("# the same grid, with a note\n" + one)
