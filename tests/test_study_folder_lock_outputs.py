@@ -48,7 +48,7 @@ def a_stale_journal_beside(folder: Path, tmp_path: Path) -> Path:
     return folder / "recordings" / made.name
 
 
-def test_a_verb_writing_into_a_served_study_folder_is_refused_and_writes_nothing(study, tmp_path):
+def test_a_verb_writing_into_a_served_study_folder_is_refused_and_writes_nothing(study, tmp_path, pairplay):
     folder, rec, cut = study
     stale = a_stale_journal_beside(folder, tmp_path)
     verbs = {
@@ -77,7 +77,7 @@ def test_a_verb_writing_into_a_served_study_folder_is_refused_and_writes_nothing
     assert (folder / ".pairplay-lock").read_bytes() == b""  # and its own lock released
 
 
-def test_a_verb_run_in_process_releases_the_folders_lock_however_it_ends(study, capsys):
+def test_a_verb_run_in_process_releases_the_folders_lock_however_it_ends(study, capsys, pairplay):
     """The lock a verb's output took is released when it ends (cli/main.py), refused or not: a second verb in the
     same process (a test, a script calling main) is not refused by the first one's lock."""
     folder, rec, cut = study
