@@ -862,7 +862,7 @@ class StudyData:
                                      "would stay in it; make it reachable first, then delete")
             lines = self.key_file_ids().count(pid)
             if lines > 1:  # an id given twice (a crash, a torn registration, before ids_on_record): two people
-                raise StudyDataError(f"{pid}: the key file {key} holds {lines} lines for this id (it was given "
+                raise StudyDataError(f"{pid}: the key file {key} holds {counted(lines, 'line')} for this id (it was given "
                                      "twice after a crash); nothing was deleted, since it would erase both people: "
                                      "find whose data this is, give the other line a note by hand, then delete")
             for f in files:
