@@ -23,6 +23,7 @@ from pathlib import Path
 from pairplay.cli.args import int_between, output_file, output_folder, session_id
 from pairplay.core.personas import persona
 from pairplay.lists import comma_items
+from pairplay.replay import studyjournal
 from pairplay.replay.studydata import JOURNAL, REGISTER_AT_ONCE, StudyData, StudyDataError, repair_journal
 from pairplay.schemas.study import (StudyFileError, bundled_studies, bundled_text, example_text, no_study_file,
                                     parse_study)
@@ -104,6 +105,10 @@ def _repair(folder: Path) -> int:
               f"the event it wrote) in {folder / done.aside.name}; the journal keeps its "
               f"{counted(done.kept, 'whole line')}: the study goes on from them (a game whose end was cut is "
               "journaled from its recording by the next serve, pilot or report)")
+        pid = studyjournal.torn_registration(done.torn)
+        if pid:
+            print(f"the cut line was the registration of {pid}: that id will not be given again; its key-file "
+                  "line, if any, stays (`protocol status` lists it)")
     elif done.newline:
         print(f"{journal}: its last line was whole but for its end of line: added; nothing set aside "
               f"({counted(done.kept, 'line')})")
@@ -196,6 +201,10 @@ def _on_folder(data: StudyData, args) -> int:
     if args.action == "status":
         if not data.state.participants:  # an empty plan is not a complete one
             print(f"nobody is registered: `pairplay protocol register {data.given}` first")
+        if data.key_file is not None and data.key_file.is_file():
+            for pid in data.unjournaled_key_ids():  # a crash between the key line and the journal line
+                print(f"{pid}: in the key file, never journaled (a crash cut its registration): no data, the id is "
+                      "not given again")
         for step in data.plan():
             mark = "done" if step.done else ("blocked" if step.blocked else "open")
             print(f"[{mark:7}] {step.label}" + (f"  ({step.blocked})" if step.blocked and not step.done else ""))

@@ -296,8 +296,9 @@ class StudyData:
         """The study file is fixed once the study is created: its bytes against the SHA-256 the journal's
         first line recorded (StudyCreated). An edited file is refused, since the folder's games were played
         under the old one (pilot played 2-round games beside 5-round ones, the report left games out). A
-        journal without a StudyCreated, or with an empty hash, was not written by pairplay's `protocol init`
-        (every one records it): there is nothing to check against, and it is read as it was."""
+        journal without a StudyCreated is refused before this (replay/studyjournal.py: it lost its beginning);
+        one with an empty hash was not written by pairplay's `protocol init` (every one records it): there is
+        nothing to check against, and it is read as it was."""
         recorded = self.state.created.study_file_sha256 if self.state.created is not None else ""
         path = self.given / STUDY_FILE
         try:
@@ -406,12 +407,54 @@ class StudyData:
                 raise StudyDataError("this study has no key file: register by pseudonymous id only "
                                      "(or create the study with `pairplay protocol init FOLDER --key-file PATH`, "
                                      "the key file outside its folder)")
-            pid = f"p{self.state.next_number:02d}"
+            # one past every id a record shows given, not the journal's alone: a crash between the key-file line
+            # and the journal line, or a torn registration set aside by repair, gave the same id twice
+            # (and counted: a deletion keeps no id, so the ids given are the journal's count plus these, which are
+            # not in it; else p03 left by a crash, p04 registered and deleted, gave p04 again)
+            on_record = self.ids_on_record()
+            unjournaled = on_record - set(self.state.participants)
+            numbers = [int(i[1:]) + 1 for i in on_record if i[1:].isdigit()]
+            pid = f"p{max([self.state.next_number, self.state.ids_given + len(unjournaled) + 1] + numbers):02d}"
             if label:
                 with open_key_file(self.key_file) as f:
                     csvcell.writer(f).writerow([pid, label.replace("\r", " ").replace("\n", " ")])  # never a formula (pairplay/csvcell.py)
             self.append(j.ParticipantRegistered(participant=pid, joins=joins))
             return pid
+
+    def key_file_ids(self) -> list[str]:
+        """The ids of the key file's lines, in its order (one id twice: given twice by pairplay <= this fix);
+        StudyDataError if the study has one that cannot be read (an unmounted drive): its ids are not known."""
+        key = self.key_file
+        if key is None:
+            return []
+        try:
+            with open(key, encoding="utf-8", newline="") as f:  # as csv reads it: a quoted cell may hold a CR
+                return [r[0] for r in csv.reader(f) if r]
+        except FileNotFoundError:
+            raise StudyDataError("the key file is not there (an unmounted drive?): the ids it holds cannot be "
+                                 "checked, and one of them would be given again; make it reachable first", key) from None
+        except (OSError, UnicodeDecodeError, csv.Error) as err:
+            raise StudyDataError(f"cannot read the key file: {getattr(err, 'strerror', None) or err}", key) from None
+
+    def ids_on_record(self) -> set[str]:
+        """Every id a record shows was given, beyond the journal's registrations: the key file's lines (written
+        before the journal line: a crash between them leaves the key line alone), participants.csv (the tables
+        as last written) and the registrations of torn lines `protocol repair` set aside. None is given again."""
+        ids = set(self.key_file_ids()) | studyjournal.torn_ids(self.folder / JOURNAL)
+        try:
+            with open(self.folder / "participants.csv", encoding="utf-8", newline="") as f:
+                ids |= {r[0] for r in list(csv.reader(f))[1:] if r}
+        except FileNotFoundError:
+            pass
+        except (OSError, UnicodeDecodeError, csv.Error) as err:
+            raise StudyDataError(f"cannot read it: {getattr(err, 'strerror', None) or err}",
+                                 self.given / "participants.csv") from None
+        return ids
+
+    def unjournaled_key_ids(self) -> list[str]:
+        """Key-file ids with no registration in the journal (a crash between the two, a torn line set aside):
+        ids given to someone who has no data here; never given again (`ids_on_record`)."""
+        return [i for i in dict.fromkeys(self.key_file_ids()) if i not in self.state.participants]
 
     def register_many(self, joins: str, count: int = 1, label: str = "", *, count_name: str = "--count",
                       label_name: str = "--name") -> list[str]:
@@ -439,6 +482,10 @@ class StudyData:
 
     def participant(self, pid: str) -> j.ParticipantRegistered:
         p = self.state.participants.get(pid)
+        if p is None and self.key_file is not None and self.key_file.is_file() and pid in self.key_file_ids():
+            raise StudyDataError(f"{pid} is in the key file but was never journaled (a crash cut its registration): "
+                                 "nothing of theirs is in the study; the id is not given again; to erase their "
+                                 f"name, remove its line from the key file {self.key_file} by hand")
         if p is None:
             raise StudyDataError(f"no participant {pid!r} in study {self.study.study.id!r} "
                                  f"(registered: {', '.join(self.state.participants) or 'none'})")
@@ -813,6 +860,11 @@ class StudyData:
             if key is not None and not key.is_file():  # before anything is deleted: their name stays in it
                 raise StudyDataError(f"{pid}: the key file {key} is not there (an unmounted drive?): their name "
                                      "would stay in it; make it reachable first, then delete")
+            lines = self.key_file_ids().count(pid)
+            if lines > 1:  # an id given twice (a crash, a torn registration, before ids_on_record): two people
+                raise StudyDataError(f"{pid}: the key file {key} holds {counted(lines, 'line')} for this id (it was given "
+                                     "twice after a crash); nothing was deleted, since it would erase both people: "
+                                     "find whose data this is, give the other line a note by hand, then delete")
             for f in files:
                 f.unlink()
             for g in sessions:  # anything else a tool wrote next to the recording (e.g. a view's .rrd)

@@ -10,10 +10,19 @@ is journaled from its recording by the next `serve`, `pilot` or `report`, as aft
 line that does not read (a hand edit, a damaged disk) is not a crash's: repair refuses it and changes
 nothing; the refusal says to put back a backup or correct that line. Before, both said msgspec's "Input
 data was truncated" and no advice, and blocked every verb of the study.
+
+A journal starts with the StudyCreated line `protocol init` writes. One that does not (empty, 0 bytes, or its
+first lines lost) in a folder that holds a study's data was taken as a new study: nobody registered, p01 given
+again and participants.csv rewritten down to it. Every verb, repair too, refuses it: put back a backup.
+
+A torn line set aside that was a registration names the id it gave (`torn_registration`): the key file may
+hold that id's line already (it is written first), so the id is never given again (replay/studydata.py
+`ids_on_record`), and repair says so.
 """
 
 from __future__ import annotations
 
+import re
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -76,7 +85,38 @@ def events_of(data: bytes, named: Path, folder: Path, repairing: bool = False) -
                 + (", so `protocol repair` changed nothing" if repairing else "")
                 + f": put back a backup of {named.name}, or correct line {n} by hand (one JSON object a line, "
                 "docs/study.md)", n, False) from None
+    if not events or not isinstance(events[0], j.StudyCreated):
+        what = ("it is empty" if not events else
+                f"its first line is a {type(events[0]).__name__}, not the StudyCreated line `protocol init` writes")
+        raise JournalDamaged(
+            f"{named}: the journal lost its beginning ({what}); read so, the study would start again (ids given "
+            f"again, participants.csv rewritten), so every verb refuses it"
+            + (" and `protocol repair` changed nothing" if repairing else "")
+            + f": put back a backup of {named.name}", 1, False)
     return events
+
+
+_REGISTERED = re.compile(rb'"event"\s*:\s*"ParticipantRegistered".*?"participant"\s*:\s*"([^"\\]+)"')
+
+
+def torn_registration(tail: bytes) -> str:
+    """The participant id a torn line registered, if what is left of it says so; "" if not (another event,
+    or cut before its id)."""
+    m = _REGISTERED.search(tail)
+    return m.group(1).decode("utf-8", "replace") if m else ""
+
+
+def torn_ids(journal: Path) -> set[str]:
+    """The ids registered by torn lines `repair` set aside beside `journal` (module rule)."""
+    ids = set()
+    for aside in journal.parent.glob(f"{journal.name}{TORN}-*"):
+        try:
+            pid = torn_registration(aside.read_bytes())
+        except OSError:
+            continue
+        if pid:
+            ids.add(pid)
+    return ids
 
 
 @dataclass(frozen=True)

@@ -73,18 +73,24 @@ def test_repair_sets_the_torn_line_aside_unchanged_and_the_study_goes_on(pairpla
     assert journal.read_bytes() == head
     assert r.stdout.startswith(f"set aside the cut last line of {journal} ({len(whole) - len(head) - 5} bytes, what a crash left of the "
                                f"event it wrote) in {folder / aside.name}; the journal keeps its 3 whole lines"), r
-    # the study goes on from its whole lines: p03's registration was the torn line, so p03 is given now
-    assert pairplay_cli("protocol", "register", folder).stdout == "p03\n"
+    # the study goes on from its whole lines: p03's registration was the torn line, and its id is never given
+    # again (tests/test_ids_never_twice.py), so p04 is given now
+    assert r.stdout.splitlines()[-1].startswith("the cut line was the registration of p03: that id will not be given")
+    assert pairplay_cli("protocol", "register", folder).stdout == "p04\n"
     # a second crash's torn line goes to a file of its own, never over the first
     journal.write_bytes(journal.read_bytes()[:-7])
     assert pairplay_cli("protocol", "repair", folder).returncode == 0
     assert len(list(folder.glob("journal.jsonl.torn-*"))) == 2 and aside.read_bytes() == whole[len(head):-5]
     r = pairplay_cli("protocol", "repair", folder)
     assert r.returncode == 0 and r.stdout == f"{journal}: nothing to repair: every line is whole (3 lines)\n", r
-    # the torn lines name p03: their deletion erases them with the rest of their journal lines
-    assert pairplay_cli("protocol", "register", folder).stdout == "p03\n"
-    r = pairplay_cli("participant", "delete", folder, "p03", "--yes")
-    assert r.returncode == 0 and not list(folder.glob("journal.jsonl.torn-*")), r
+    assert pairplay_cli("protocol", "register", folder).stdout == "p05\n"
+    # a torn line naming a participant of the journal: their deletion erases it with the rest of their lines
+    with open(journal, "ab") as f:
+        f.write(b'{"event":"SessionMarkedInvalid","time_ns":1,"by":"experimenter","participant":"p05","ses')
+    assert pairplay_cli("protocol", "repair", folder).returncode == 0
+    r = pairplay_cli("participant", "delete", folder, "p05", "--yes")
+    assert r.returncode == 0 and len(list(folder.glob("journal.jsonl.torn-*"))) == 2, r
+    assert all(b'"p05"' not in t.read_bytes() for t in folder.glob("journal.jsonl.torn-*"))
 
 
 def test_a_damaged_line_that_is_not_the_last_is_refused_and_repair_changes_nothing(pairplay_cli, tmp_path):
