@@ -160,6 +160,8 @@ def python_words(function, name: str = ""):
         try:
             return function(*args, **kwargs)
         except UserError as err:
+            if hasattr(err, "in_python"):  # its words name a verb's option in its text (services/recorder.py)
+                err.in_python()
             if err.fix and err.option in PYTHON_NAMES:
                 err.fix, err.option = err.fix.replace(err.option, PYTHON_NAMES[err.option]), ""
             raise

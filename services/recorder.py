@@ -186,6 +186,13 @@ class RecordingExists(OutputError):
             hint = f"give it its name back (mv {existing.name} {original}, after removing what stands there) or remove it"
         super().__init__(f"session {session} has {what}; {hint}", existing)
         self.existing, self.live = existing, live
+        self._has, self._hint = what, hint
+
+    def in_python(self) -> None:
+        """The words of the Python API (pairplay/arguments.py python_words): run_session's `path`, not a
+        session id, names the file (`SessionConfig(session="a")` to "r3.mcap" was "session r3 has a recording
+        already; choose another --session"), and a function has no --session."""
+        self.what = f"the path given has {self._has} ({self.existing.name}); {self._hint.replace('--session', 'path')}"
 
 
 def journals_of(path: Path) -> list[Path]:

@@ -34,7 +34,7 @@ from pairplay.services.forgery import ForgeryWatch
 from pairplay.services.game import GameLogic
 from pairplay.services.learner import LearnerLogic
 from pairplay.services.participant import ParticipantLogic
-from pairplay.services.recorder import Recorder, RecordingFailed
+from pairplay.services.recorder import Recorder, RecordingFailed, check_new_recording
 from pairplay.services.refusal import EndRefused, RefusalWatch, StartRefused  # noqa: F401  (StartRefused: re-exported)
 from pairplay.services.refusal import published_seq
 from pairplay.services.robot.bridge import ROBOT_CLOSE_S
@@ -91,6 +91,8 @@ def run_session(config: SessionConfig, path: str | Path, *, bus: Bus | None = No
     A caller's `config` or `path` that cannot run is refused first (schemas/session.py config_argument)."""
     config = config_argument(config, "run_session")
     path = path_argument(path, "run_session")
+    if "recorder" not in external:  # refused before the bus opens (the Recorder checks again, claiming the file)
+        check_new_recording(path, set_aside_too=False)
     # the session's process is the router its external services connect to as clients
     given = bus
     if given is None:
