@@ -185,42 +185,6 @@ def config_argument(config, function: str) -> SessionConfig:
         raise ArgumentError(f"config.{in_words(exc, SessionConfig)}", at(function, "config")) from None
     try:
         config.validate()
-        startable(config)
     except ValueError as exc:
         raise InputError(f"config: {exc}", at(function, "config")) from None
     return config
-
-
-def startable(config: SessionConfig) -> None:
-    """ValueError unless the services can start `config`, a valid one: what `pairplay session` checks of its
-    options before anything starts (cli/session.py), made of every config handed to run_session, whoever built
-    it. Before, `persona="wasm"` opened the bus, the participant refused the game's start (StartRefused) and the
-    recording stayed behind; `participant="sim:ashley", persona="wasim"` ran as wasim; policy_actions under
-    q-learning were ignored without a word."""
-    from pairplay.core.personas import persona
-    from pairplay.nearest import nearest
-
-    kind, _, who = config.participant.partition(":")
-    if kind not in ("sim", "human"):
-        near = nearest(kind, ("sim", "human")) if _ else ""
-        raise ValueError(f"participant {config.participant!r}: use sim:<persona> or human:<id>"
-                         + (f" (did you mean '{near}:{who}'?)" if near else ""))
-    check_chunk("participant id", who)
-    if kind == "sim":
-        try:  # the participant plays `persona` (services/participant.py): a persona it knows
-            played = persona(config.persona)
-        except KeyError as err:
-            raise ValueError(err.args[0]) from None
-        try:
-            named = persona(who)
-        except KeyError as err:
-            raise ValueError(f"participant {config.participant!r}: {err.args[0]}") from None
-        if named.key != played.key:  # the session would record one persona and play another
-            raise ValueError(f"participant {config.participant!r} and persona {config.persona!r} disagree: give "
-                             f"persona={named.key!r} (or participant='sim:{played.key}')")
-    if config.policy_actions and config.algorithm not in ("pi-reuse", "fixed"):
-        raise ValueError(f"policy_actions are used only by algorithm 'pi-reuse' or 'fixed'; {config.algorithm!r} "
-                         "would ignore them")
-    never = config.learner_config().never_reuses() if config.algorithm == "pi-reuse" else ""
-    if never:
-        raise ValueError(f"algorithm 'pi-reuse' with rounds {config.rounds} would never reuse the bias policy: {never}")

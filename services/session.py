@@ -24,10 +24,12 @@ from pathlib import Path
 
 import logging
 
-from pairplay.errors import UserError
+from pairplay.core.personas import persona
+from pairplay.errors import InputError, UserError
+from pairplay.nearest import nearest
 from pairplay.schemas.events import decode_event, encode_event
-from pairplay.schemas.keys import alive_key, event_key
-from pairplay.arguments import path_argument
+from pairplay.schemas.keys import alive_key, check_chunk, event_key
+from pairplay.arguments import at, path_argument
 from pairplay.schemas.session import SessionConfig, config_argument
 from pairplay.services.bus import CLOSE_TIMEOUT_S, Bus, BusOptions, Deadline, deadline_of
 from pairplay.services.forgery import ForgeryWatch
@@ -90,6 +92,10 @@ def run_session(config: SessionConfig, path: str | Path, *, bus: Bus | None = No
     the process is done within `SHUTDOWN_S` of the signal, its recording finished.
     A caller's `config` or `path` that cannot run is refused first (schemas/session.py config_argument)."""
     config = config_argument(config, "run_session")
+    try:
+        startable(config)
+    except ValueError as exc:
+        raise InputError(f"config: {exc}", at("run_session", "config")) from None
     path = path_argument(path, "run_session")
     if "recorder" not in external:  # refused before the bus opens (the Recorder checks again, claiming the file)
         check_new_recording(path, set_aside_too=False)
@@ -211,6 +217,38 @@ def run_session(config: SessionConfig, path: str | Path, *, bus: Bus | None = No
     if refused is not None:
         raise refused
     return recorder.path if recorder is not None else Path(path)
+
+
+def startable(config: SessionConfig) -> None:
+    """ValueError unless the services can start `config`, a valid one: what `pairplay session` checks of its
+    options before anything starts (cli/session.py), made of every config handed to run_session, whoever built
+    it. Before, `persona="wasm"` opened the bus, the participant refused the game's start (StartRefused) and the
+    recording stayed behind; `participant="sim:ashley", persona="wasim"` ran as wasim; policy_actions under
+    q-learning were ignored without a word."""
+    kind, _, who = config.participant.partition(":")
+    if kind not in ("sim", "human"):
+        near = nearest(kind, ("sim", "human")) if _ else ""
+        raise ValueError(f"participant {config.participant!r}: use sim:<persona> or human:<id>"
+                         + (f" (did you mean '{near}:{who}'?)" if near else ""))
+    check_chunk("participant id", who)
+    if kind == "sim":
+        try:  # the participant plays `persona` (services/participant.py): a persona it knows
+            played = persona(config.persona)
+        except KeyError as err:
+            raise ValueError(err.args[0]) from None
+        try:
+            named = persona(who)
+        except KeyError as err:
+            raise ValueError(f"participant {config.participant!r}: {err.args[0]}") from None
+        if named.key != played.key:  # the session would record one persona and play another
+            raise ValueError(f"participant {config.participant!r} and persona {config.persona!r} disagree: give "
+                             f"persona={named.key!r} (or participant='sim:{played.key}')")
+    if config.policy_actions and config.algorithm not in ("pi-reuse", "fixed"):
+        raise ValueError(f"policy_actions are used only by algorithm 'pi-reuse' or 'fixed'; {config.algorithm!r} "
+                         "would ignore them")
+    never = config.learner_config().never_reuses() if config.algorithm == "pi-reuse" else ""
+    if never:
+        raise ValueError(f"algorithm 'pi-reuse' with rounds {config.rounds} would never reuse the bias policy: {never}")
 
 
 # Seconds of the shutdown's deadline each step leaves to the steps after it (services/bus.py
