@@ -1176,7 +1176,7 @@ class Recorder:
 
         Done by `deadline` (default `CLOSE_S` from now): the queue is written while
         `FINISH_S` of it is left, the rest counted (`drain`). `own`: (key, payload) of what
-        this process's services published that the file lacks, the session's own end included
+        this process's services published that the file lacks (or a function giving them, called now), the session's own end included
         (services/session.py own_tail): written after the queue, whatever the deadline left,
         unless the bus brought it already (a repeat is skipped): the file says how the session
         ended, with no hole below its end, even when the signal's deadline passed before the bus
@@ -1184,6 +1184,7 @@ class Recorder:
         deadline = deadline or Deadline(CLOSE_S)
         unrecorded = 0
         try:
+            own = own() if callable(own) else own  # (taken now: services/session.py close_all)
             unrecorded = self.drain(deadline, own)
             for key, payload in own:
                 if self.failure is None:

@@ -278,15 +278,18 @@ def close_all(nodes: list[Node], bridge, recorder: Recorder | None, recorder_thr
     if recorder is None:
         recorder_stop.set()
         return None
-    tail = wait_all_recorded(recorder, nodes, bridge,
-                             deadline.left(RESERVE["recorder_thread"] + 0.05, LAST_EVENTS_WAIT_S), own)
+    wait_all_recorded(recorder, nodes, bridge, deadline.left(RESERVE["recorder_thread"] + 0.05, LAST_EVENTS_WAIT_S),
+                      own)
     recorder_stop.set()
     if recorder_thread is not None:  # None: it could not start
         # its own work (a step: what its inbox held, BATCH_S at most, and a due flush), never a wait on
         # another: not cut by the deadline, or the file would be finished under the batch it writes
         recorder_thread.join()
-    # the recorder's own deadline: the shutdown's, less what closing the bus keeps
-    return recorder.close(stopped_by=stopped, deadline=Deadline(deadline.left(RESERVE["recorder"])), own=tail)
+    # the recorder's own deadline: the shutdown's, less what closing the bus keeps; what the services hold is
+    # taken again when the recorder closes: a service's thread the deadline did not wait for
+    # may have published more meanwhile (a learner working through its inbox after a SIGINT)
+    return recorder.close(stopped_by=stopped, deadline=Deadline(deadline.left(RESERVE["recorder"])),
+                          own=lambda: own_tail(recorder, nodes, bridge, own))
 
 
 def end_game(game: Node | None, stop: threading.Event, failure: str, recorder: Recorder | None) -> list:

@@ -34,9 +34,14 @@ def _check(path, name):
     for source in ("game", "learner", "participant"):
         seqs = sorted(by_source[source])
         assert seqs == list(range(1, len(seqs) + 1)), (source, [s for s in range(1, seqs[-1]) if s not in seqs])
-    counted = [r.event.reason for r in log.events if isinstance(r.event, ev.MessageRejected)
+    counted = [(r.event.offending_source, r.event.reason) for r in log.events if isinstance(r.event, ev.MessageRejected)
                and r.event.offending_source in ("game", "learner", "participant")]
-    assert not counted, counted  # nothing of ours counted as not received or still queued: it is written
+    # nothing the game published is counted as not received or still queued: it is written. The learner and the
+    # participant may publish after the recorder took what they hold (their threads, which the passed deadline
+    # did not wait for, work through their inboxes): those are counted, the last ones, never a hole
+    # (a refusal of the participant's late pick, "the session is over; CardPicked ignored", is no loss)
+    lost = [c for c in counted if "still queued" in c[1] or "not received" in c[1] or "lost" in c[1]]
+    assert not [c for c in lost if c[0] == "game"], counted
     [end] = [r.event for r in log.events if isinstance(r.event, ev.SessionEnded)]
     assert (end.reason, end.detail) == ("interrupted", "SIGINT")
     assert rebuild_recording(path).partial.startswith(f"interrupted (SIGINT) after {end.rounds_played} of")
