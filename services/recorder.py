@@ -1176,8 +1176,9 @@ class Recorder:
 
         Done by `deadline` (default `CLOSE_S` from now): the queue is written while
         `FINISH_S` of it is left, the rest counted (`drain`). `own`: (key, payload) of what
-        this process's services published that the file lacks (or a function giving them, called now), the session's own end included
-        (services/session.py own_tail): written after the queue, whatever the deadline left,
+        this process's services published that the file lacks, the session's own end included
+        (services/session.py own_tail), or a function giving them, called now: written after
+        the queue, whatever the deadline left,
         unless the bus brought it already (a repeat is skipped): the file says how the session
         ended, with no hole below its end, even when the signal's deadline passed before the bus
         brought them (a starved machine)."""

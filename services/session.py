@@ -286,8 +286,8 @@ def close_all(nodes: list[Node], bridge, recorder: Recorder | None, recorder_thr
         # another: not cut by the deadline, or the file would be finished under the batch it writes
         recorder_thread.join()
     # the recorder's own deadline: the shutdown's, less what closing the bus keeps; what the services hold is
-    # taken again when the recorder closes: a service's thread the deadline did not wait for
-    # may have published more meanwhile (a learner working through its inbox after a SIGINT)
+    # taken again when the recorder closes: a service's thread the deadline did not wait for may have
+    # published more meanwhile (a learner working through its inbox after a SIGINT)
     return recorder.close(stopped_by=stopped, deadline=Deadline(deadline.left(RESERVE["recorder"])),
                           own=lambda: own_tail(recorder, nodes, bridge, own))
 
