@@ -663,6 +663,46 @@ def test_ctrl_c_at_a_terminal_reaches_every_worker_yet_prints_one_line_and_leave
     assert {p.name for p in tmp_path.iterdir()} - {"grid.toml", "numba-cache", "swept"} == set()
 
 
+FINALIZERS = {  # a finalizer the garbage collector runs in the main thread, as the signal comes
+    "__del__": "class Thing:\n    def __del__(self):\n        signal_and_work()\n"
+               "def drop():\n    Thing()\n",
+    "WeakSet._remove": "import weakref\nclass Noisy(set):\n    def discard(self, item):\n"
+                       "        signal_and_work()\n        super().discard(item)\n"
+                       "class Thing:\n    pass\n"
+                       "held = weakref.WeakSet()\nheld.data = Noisy()\n"  # _remove calls data.discard
+                       "def drop():\n    held.add(Thing())\n",
+    "weakref.finalize": "import weakref\nclass Thing:\n    pass\n"
+                        "def drop():\n    weakref.finalize(Thing(), signal_and_work)\n",
+}
+
+
+@pytest.mark.parametrize("kind", FINALIZERS)
+def test_a_ctrl_c_inside_a_finalizer_is_not_swallowed(tmp_path, kind):
+    """A KeyboardInterrupt raised in a finalizer is printed as "Exception ignored" and swallowed: a study
+    interrupted as the collector ran a WeakSet's callback went on and exited 0 (CI, fresh clone of 61bc185).
+    The command's handler holds a signal that comes in one and delivers it once the finalizer is left."""
+    script = tmp_path / "fin.py"
+    script.write_text(
+        "import os, signal, time\n"
+        "from pairplay.cli.interrupts import DeferredInterrupt\n"
+        "def signal_and_work():\n"
+        "    os.kill(os.getpid(), signal.SIGINT)\n"
+        "    for _ in range(100_000):\n"  # the handler runs here, inside the finalizer
+        "        pass\n"
+        + FINALIZERS[kind] +
+        "DeferredInterrupt().install()\n"
+        "try:\n"
+        "    drop()\n"
+        "    print('finalized', flush=True)\n"
+        "    time.sleep(5)\n"
+        "    print('not interrupted')\n"
+        "except KeyboardInterrupt:\n"
+        "    print('interrupted')\n")
+    r = subprocess.run([sys.executable, str(script)], capture_output=True, text=True, timeout=60)
+    assert r.stdout.splitlines() == ["finalized", "interrupted"], (r.stdout, r.stderr)
+    assert "Exception ignored" not in r.stderr, r.stderr
+
+
 def test_a_ctrl_c_inside_numbas_compiler_waits_for_the_compile_then_interrupts(tmp_path):
     """llvmlite calls back into Python while it compiles: a KeyboardInterrupt there is swallowed
     (the run went on and exited 0) or leaves native objects half-built. The command's handler holds
