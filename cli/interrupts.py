@@ -25,14 +25,11 @@ so the exit status says it (cli/main.py `exit_code_of`: 130 SIGINT, 143
 SIGTERM). Before, SIGTERM killed a verb without its own handler outright (no
 line, a temporary file left) while one with a handler exited 0.
 
-A signal that comes while the main thread runs a finalizer is held too, for 10 ms at a
-time: `__del__`, or a weak reference's callback in the standard library (a WeakSet's
-`_remove`, WeakValueDictionary's, `weakref.finalize`) run from the garbage collector,
-and Python prints a KeyboardInterrupt raised there as "Exception ignored" and swallows
-it: the study went on and exited 0 after the user's Ctrl-C (CI, fresh clone of
-61bc185: test_ctrl_c_during_a_study..., the signal landed in WeakSet._remove). A
-finalizer is seen in the handler's frame chain; a generator closed by the collector or
-a callback of a bare `weakref.ref` is not (none runs in our main thread).
+A signal that comes while the main thread runs a finalizer (`__del__`, a WeakSet's
+`_remove`, `weakref.finalize`: pairplay/signals.py `in_finalizer`) is held too, 10 ms at
+a time: raised there, Python prints the KeyboardInterrupt as "Exception ignored" and
+swallows it (the study went on and exited 0: CI, test_ctrl_c_during_a_study..., the
+signal landed in WeakSet._remove).
 
 Once a verb's work is done (its outputs complete; `work_done`, called by a
 verb before it prints its result, and by cli/main.py when the verb returns),
@@ -49,29 +46,14 @@ import _thread
 import signal
 import sys
 import threading
-import time
 
 from pairplay import signals
-
-FINALIZER_RETRY_S = 0.01  # a signal held while a finalizer runs is delivered again this much later
-_WEAKREF_FILES = ("weakref.py", "_weakrefset.py")  # the standard library's weak-reference callbacks live here
 
 
 def _compiler_lock():
     """numba's global compiler lock (an RLock wrapper), or None if numba is not loaded."""
     module = sys.modules.get("numba.core.compiler_lock")
     return getattr(module, "global_compiler_lock", None)
-
-
-def _in_finalizer(frame) -> bool:
-    """Whether `frame` runs inside a finalizer (module rule): a `__del__`, or a standard-library weak-reference
-    callback, anywhere in its chain (an exception raised below one ends there, as "Exception ignored")."""
-    while frame is not None:
-        code = frame.f_code
-        if code.co_name == "__del__" or code.co_filename.endswith(_WEAKREF_FILES):
-            return True
-        frame = frame.f_back
-    return False
 
 
 received = 0  # the number of the signal that interrupted the verb (0: none yet)
@@ -96,7 +78,7 @@ class DeferredInterrupt:
     def __init__(self):
         self.held = False  # an interrupt waits for the compiler
         self._redelivered = False
-        self._retrying = False  # a redelivery after a finalizer is under way (_deliver_soon)
+        self._retrying = False  # a signal held in a finalizer is to come back (_again)
 
     def install(self) -> None:
         signals.handle(self.handler)  # not over an ignored signal (pairplay/signals.py)
@@ -106,11 +88,10 @@ class DeferredInterrupt:
         redelivered, self._redelivered = self._redelivered, False
         if not redelivered:  # a held interrupt comes back (_deliver_after): it is the same signal, not a second
             received = signum
-        if _in_finalizer(frame):  # raised here, it would be printed and swallowed (module rule)
+        if signals.in_finalizer(frame):  # raised here, it would be printed and swallowed (module rule)
             if not self._retrying:
                 self._retrying = True
-                threading.Thread(target=self._deliver_soon, args=(signum,), name="pairplay-interrupt",
-                                 daemon=True).start()
+                signals.deliver_again(signum, before=self._again)
             return
         if self.held and not redelivered:  # a second Ctrl-C: the user insists
             raise KeyboardInterrupt
@@ -124,11 +105,9 @@ class DeferredInterrupt:
         self.held = False
         raise KeyboardInterrupt
 
-    def _deliver_soon(self, signum: int) -> None:
-        time.sleep(FINALIZER_RETRY_S)  # finalizers are short: the main thread has left this one by then
+    def _again(self) -> None:  # a signal held in a finalizer comes back (signals.deliver_again)
         self._retrying = False
         self._redelivered = True
-        _thread.interrupt_main(signum)
 
     def _deliver_after(self, lock, signum: int) -> None:
         with lock._lock:  # free once the main thread has left numba's compiler

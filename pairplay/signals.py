@@ -26,7 +26,16 @@ place. Not raising there: a KeyboardInterrupt raised inside an import printed
 importlib's traceback, and SIGTERM before any handler killed the process
 without a line.
 
-Imports nothing but `signal` (its C part is loaded with the interpreter).
+A handler that raises KeyboardInterrupt must not raise it inside a finalizer
+(`in_finalizer`): a `__del__` or a standard-library weak-reference callback the
+garbage collector runs in the main thread, where Python prints the exception as
+"Exception ignored" and swallows it (a study went on and exited 0 after a
+Ctrl-C: CI, fresh clone of 61bc185). It delivers the signal again a moment
+later instead (`deliver_again`); finalizers are short. A generator closed by the
+collector or the callback of a bare `weakref.ref` is not seen (none runs in our
+main thread).
+
+Imports nothing but `signal` when loaded (its C part is loaded with the interpreter).
 """
 
 from __future__ import annotations
@@ -36,6 +45,8 @@ import signal
 SIGNALS = (signal.SIGINT, signal.SIGTERM)
 
 received = 0  # the first signal `record` met (0: none)
+FINALIZER_RETRY_S = 0.01  # a signal held while a finalizer runs is delivered again this much later
+_WEAKREF_FILES = ("weakref.py", "_weakrefset.py")  # the standard library's weak-reference callbacks live here
 
 
 def handle(handler: object, signals: tuple[int, ...] = SIGNALS) -> None:
@@ -61,3 +72,29 @@ def take() -> int:
     global received
     signum, received = received, 0
     return signum
+
+
+def in_finalizer(frame) -> bool:
+    """Whether `frame` (a handler's) runs inside a finalizer (module rule): a `__del__`, or a standard-library
+    weak-reference callback, anywhere in its chain (an exception raised below one ends there)."""
+    while frame is not None:
+        code = frame.f_code
+        if code.co_name == "__del__" or code.co_filename.endswith(_WEAKREF_FILES):
+            return True
+        frame = frame.f_back
+    return False
+
+
+def deliver_again(signum: int, before=None, delay_s: float = FINALIZER_RETRY_S) -> None:
+    """`signum` comes to the main thread's handler again `delay_s` seconds from now, as the signal that came
+    (`_thread.interrupt_main`); `before()` runs first, in the helper thread (it must only set flags)."""
+    import _thread
+    import threading
+    import time
+
+    def again():
+        time.sleep(delay_s)
+        if before is not None:
+            before()
+        _thread.interrupt_main(signum)
+    threading.Thread(target=again, name="pairplay-interrupt", daemon=True).start()

@@ -1065,6 +1065,9 @@ def stop_on_signals(stop: threading.Event, then: Callable[[], object] | None = N
         # as a session finished its file was read as a second one and the file left cut (a new user's trial)
         taken = bool(getattr(stop, "why", ""))
         if taken and signum == signal.SIGINT:
+            if signals.in_finalizer(frame):  # raised there it would be swallowed (pairplay/signals.py)
+                signals.deliver_again(signum)
+                return
             raise KeyboardInterrupt
         global signalled
         signalled = signal.Signals(signum).name  # the exit skips the interpreter's teardown (cli/main.py)

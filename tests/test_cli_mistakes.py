@@ -676,21 +676,28 @@ FINALIZERS = {  # a finalizer the garbage collector runs in the main thread, as 
 }
 
 
+HANDLERS = {  # a handler that raises KeyboardInterrupt, installed
+    "command": "from pairplay.cli.interrupts import DeferredInterrupt\nDeferredInterrupt().install()\n",
+    "session's second Ctrl-C": "import threading\nfrom pairplay.services.bus import stop_on_signals\n"
+                               "stop = threading.Event()\nstop_on_signals(stop)\n"
+                               "os.kill(os.getpid(), signal.SIGINT)\nassert stop.wait(5)\n",
+}
+
+
+@pytest.mark.parametrize("handler", HANDLERS)
 @pytest.mark.parametrize("kind", FINALIZERS)
-def test_a_ctrl_c_inside_a_finalizer_is_not_swallowed(tmp_path, kind):
+def test_a_ctrl_c_inside_a_finalizer_is_not_swallowed(tmp_path, kind, handler):
     """A KeyboardInterrupt raised in a finalizer is printed as "Exception ignored" and swallowed: a study
     interrupted as the collector ran a WeakSet's callback went on and exited 0 (CI, fresh clone of 61bc185).
     The command's handler holds a signal that comes in one and delivers it once the finalizer is left."""
     script = tmp_path / "fin.py"
     script.write_text(
         "import os, signal, time\n"
-        "from pairplay.cli.interrupts import DeferredInterrupt\n"
         "def signal_and_work():\n"
         "    os.kill(os.getpid(), signal.SIGINT)\n"
         "    for _ in range(100_000):\n"  # the handler runs here, inside the finalizer
         "        pass\n"
-        + FINALIZERS[kind] +
-        "DeferredInterrupt().install()\n"
+        + FINALIZERS[kind] + HANDLERS[handler] +
         "try:\n"
         "    drop()\n"
         "    print('finalized', flush=True)\n"
