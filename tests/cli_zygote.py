@@ -12,7 +12,7 @@ Why: the command-line mistakes table runs ~70 commands; each paid 0.2-1.6 s of C
 start and pairplay's import: numba, zenoh, numpy) for a few milliseconds of work, about 60 s of
 CPU of a suite that must finish in minutes on two cores.
 
-Protocol (JSON lines): request {"id", "args", "cwd", "out", "err"} on the zygote's stdin;
+Protocol (JSON lines): request {"id", "args", "cwd", "out", "err", "read_only"} on the zygote's stdin;
 replies {"id", "pid"} when forked and {"id", "code", "cpu"} (os.waitstatus_to_exitcode; its CPU
 seconds) when it ended.
 The zygote is single-threaded (fork is safe), reaps children by polling, and ends at EOF.
@@ -53,9 +53,38 @@ def _preload() -> None:
     _pyplot()
 
 
+def _read_only(how: str, place: str) -> None:
+    """In the forked child: a mount namespace of its own (as `unshare --mount --propagation private`) in which
+    `place` is read-only: an empty read-only tmpfs over it ("tmpfs"), or the folder itself bound read-only, its
+    files kept ("bind"). Only this child (and what it starts) sees it; the zygote and the test do not."""
+    import ctypes
+    libc = ctypes.CDLL(None, use_errno=True)
+    ms_rdonly, ms_remount, ms_bind, ms_rec, ms_private, clone_newns = 1, 32, 4096, 16384, 1 << 18, 0x20000
+
+    def check(result: int, what: str) -> None:
+        if result != 0:
+            errno = ctypes.get_errno()
+            raise OSError(errno, f"{what}: {os.strerror(errno)}")
+    target = place.encode()
+    check(libc.unshare(clone_newns), "unshare(CLONE_NEWNS)")
+    check(libc.mount(b"none", b"/", None, ms_rec | ms_private, None), "mount --make-rprivate /")
+    if how == "tmpfs":
+        check(libc.mount(b"tmpfs", target, b"tmpfs", ms_rdonly, None), f"mount -t tmpfs -o ro {place}")
+    else:
+        check(libc.mount(target, target, None, ms_bind, None), f"mount --bind {place}")
+        check(libc.mount(target, target, None, ms_remount | ms_bind | ms_rdonly, None), f"remount,ro,bind {place}")
+
+
 def _child(request: dict) -> None:
     """In the forked child: become `python -m pairplay ARGS` in its folder; never returns."""
     import runpy
+    if request.get("read_only"):
+        try:
+            _read_only(*request["read_only"])
+        except OSError as exc:  # said on the command's stderr, exit 125 (as env/unshare's own failures)
+            with open(request["err"], "w") as err:
+                err.write(f"cli_zygote: {exc}\n")
+            os._exit(125)
     os.chdir(request["cwd"])
     null = os.open(os.devnull, os.O_RDONLY)
     out = os.open(request["out"], os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o644)
@@ -140,13 +169,17 @@ class Zygote:
             if box is not None:
                 box.put(reply)
 
-    def run(self, args: list[str], cwd: Path, timeout: float = 300) -> subprocess.CompletedProcess:
+    def run(self, args: list[str], cwd: Path, timeout: float = 300,
+            read_only: tuple[str, Path] | None = None) -> subprocess.CompletedProcess:
+        """`read_only`: ("tmpfs" or "bind", folder): the command runs in a mount namespace of its own in which that
+        folder is read-only (_read_only; needs root), as under `unshare --mount --propagation private`."""
         with self._lock:
             self._next += 1
             rid = str(self._next)
             box = self._waiting[rid] = queue.Queue()
         out, err = self.scratch / f"cmd-{rid}.out", self.scratch / f"cmd-{rid}.err"
-        request = {"id": rid, "args": list(args), "cwd": str(cwd), "out": str(out), "err": str(err)}
+        request = {"id": rid, "args": list(args), "cwd": str(cwd), "out": str(out), "err": str(err),
+                   "read_only": [read_only[0], str(read_only[1])] if read_only else None}
         with self._lock:
             self.proc.stdin.write(json.dumps(request) + "\n")
             self.proc.stdin.flush()

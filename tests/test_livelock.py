@@ -130,7 +130,10 @@ def test_session_force_refuses_a_running_sessions_recording_and_it_keeps_its_own
     try:
         line = first.stdout.readline()
         assert "bus listening on" in line, (line, first.stderr.read() if first.poll() is not None else "")
-        time.sleep(5)  # playing (the trial's repro)
+        recording, deadline = tmp_path / "recF" / "dupF.mcap", time.monotonic() + 60
+        while not (recording.exists() and recording.stat().st_size > 0):  # playing, its file written (the trial's
+            assert time.monotonic() < deadline and first.poll() is None  # repro slept 5 s: 5 s of CPU playing)
+            time.sleep(0.05)
         second = subprocess.run([sys.executable, "-m", "pairplay", "session", "--participant", "sim:deaf", "--rounds",
                                  "20", "--session", "dupF", "--out", "recF", "--force", "--listen", "tcp/127.0.0.1:0"],
                                 cwd=tmp_path, capture_output=True, text=True, timeout=120)

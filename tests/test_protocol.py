@@ -744,20 +744,22 @@ def test_the_report_leaves_out_a_game_whose_recording_holds_no_session_or_no_who
         assert len(list(csv.DictReader(f))) == (len(games) - 4) * 2
 
 
-@pytest.mark.parametrize("other", ["another-game", "participant", "rounds", "persona"])
-def test_the_report_leaves_out_a_recording_that_is_not_its_games(played, tmp_path, other):
+def test_the_report_leaves_out_a_recording_that_is_not_its_games(played, tmp_path):
     """A new user's trial: `session --force --session <a study game's id> --out STUDY/recordings` replaced a
     study game's recording with an unrelated session (another persona, 1 round) and the report used it
     without a word. Each game's recording is checked against the journal (its session id, participant,
-    the plan's rounds, the persona of a scripted game) and left out, named with why, if it is not that game's."""
+    the plan's rounds, the persona of a scripted game) and left out, named with why, if it is not that game's.
+    The four ways are four games of one copy (two of each phase), reported once (each paid a report)."""
     data = copy_study(played, tmp_path)
     games = [g for g in data.state.games.values() if g.valid_complete]
-    game, donor = games[0], games[1]
-    path = data.folder / game.recording
-    if other == "another-game":
-        shutil.copy(data.folder / donor.recording, path)
-        why = f"session {donor.session}"
-    else:
+    donor = games[1]
+    whys = {}
+    for other, game in zip(["another-game", "participant", "rounds", "persona"], games[0::2]):
+        path = data.folder / game.recording
+        if other == "another-game":
+            shutil.copy(data.folder / donor.recording, path)
+            whys[game.session] = f"session {donor.session}"
+            continue
         change = {"participant": ("participant", "sim:vincent"), "rounds": ("rounds", 1),
                   "persona": ("scripted", "deaf" if game.scripted != "deaf" else "blind")}[other]
 
@@ -765,13 +767,17 @@ def test_the_report_leaves_out_a_recording_that_is_not_its_games(played, tmp_pat
             e["config"][field] = value
             return e
         _rewrite(path, change=swap)
-        why = {"participant": "sim:vincent", "rounds": "1 round", "persona": change[1]}[other]
+        whys[game.session] = {"participant": "sim:vincent", "rounds": "1 round", "persona": change[1]}[other]
+    assert len(whys) == 4 and donor.session not in whys
     report = human_report(data.folder, tmp_path / "report")
-    assert game.session not in {s.session for s in report.games}
-    [left] = [e for e in report.excluded if e.startswith(game.session + " (")]
-    assert left.startswith(f"{game.session} (recording is not this game's: "), left
-    assert why in left, left
-    assert left in (report.out / "report.md").read_text()
+    text = (report.out / "report.md").read_text()
+    for session, why in whys.items():
+        assert session not in {s.session for s in report.games}
+        [left] = [e for e in report.excluded if e.startswith(session + " (")]
+        assert left.startswith(f"{session} (recording is not this game's: "), left
+        assert why in left, left
+        assert left in text
+    assert donor.session in {s.session for s in report.games}  # the game whose recording was copied stays
 
 
 def test_the_answers_table_takes_no_answer_from_a_recording_that_is_not_its_games(played, tmp_path):

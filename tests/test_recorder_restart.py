@@ -58,7 +58,7 @@ def kill_before_first_flush(tmp_path, session: str, endpoint: str) -> bool:
     return not read_any_log(tmp_path / f"{session}.mcap").events
 
 
-def test_a_recorder_killed_before_its_first_flush_and_restarted_continues_the_session(tmp_path):
+def test_a_recorder_killed_before_its_first_flush_and_restarted_continues_the_session(tmp_path, pairplay_cli):
     for attempt in range(4):  # a loaded machine may let the first flush come before the kill: again
         session = f"rk{attempt}"
         p = session_proc(tmp_path, "--participant", "sim:ashley", "--rounds", "5000", "--session", session,
@@ -91,8 +91,7 @@ def test_a_recorder_killed_before_its_first_flush_and_restarted_continues_the_se
         raise AssertionError("the first flush came before the kill in every attempt")
     assert p.returncode == 143  # (SIGTERM's)
     path = tmp_path / f"{session}.1.mcap"
-    ran = subprocess.run([sys.executable, "-m", "pairplay", "replay", "--verify", str(path)], capture_output=True,
-                         text=True, env=ENV, timeout=120)
+    ran = pairplay_cli("replay", "--verify", path)
     assert ran.returncode == 0, ran.stdout + ran.stderr
     log = read_log(path)
     assert log.whole and not log.bad

@@ -10,8 +10,6 @@ its did-you-mean.
 from __future__ import annotations
 
 import json
-import subprocess
-import sys
 
 import msgspec
 import pytest
@@ -30,10 +28,9 @@ def test_a_retired_robot_config_key_is_refused_as_retired_naming_its_replacement
     assert f"the key `{key}` was retired" in line and "`give_up_s`" in line and "remove it from the file" in line, line
 
 
-def test_the_verb_says_it_in_one_line(tmp_path):
+def test_the_verb_says_it_in_one_line(tmp_path, pairplay_cli):
     (tmp_path / "old.json").write_text('{"iristk_subscriber_wait_s": 5.0}\n')
-    r = subprocess.run([sys.executable, "-m", "pairplay", "robot", "--try", "3", "--robot-config", "old.json"],
-                       cwd=tmp_path, capture_output=True, text=True, timeout=120)
+    r = pairplay_cli("robot", "--try", "3", "--robot-config", "old.json", cwd=tmp_path)
     assert r.returncode == 2, (r.returncode, r.stderr)
     lines = r.stderr.strip().splitlines()
     assert len(lines) == 1 and "Traceback" not in r.stderr, r.stderr

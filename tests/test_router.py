@@ -40,12 +40,11 @@ def start_router(port: int) -> subprocess.Popen:
     return p
 
 
-def test_router_verb_refuses_a_port_in_use_on_one_line():
+def test_router_verb_refuses_a_port_in_use_on_one_line(pairplay_cli):
     port = free_port()
     first = start_router(port)
     try:
-        second = subprocess.run([sys.executable, "-m", "pairplay", "router", "--listen", f"tcp/127.0.0.1:{port}"],
-                                capture_output=True, text=True, timeout=30)
+        second = pairplay_cli("router", "--listen", f"tcp/127.0.0.1:{port}", timeout=30)  # its words and exit
     finally:
         first.terminate()
         first.wait(10)

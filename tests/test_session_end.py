@@ -228,7 +228,7 @@ def test_old_recordings_end_without_the_new_fields_and_read_as_before():
 
 
 @pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM])
-def test_a_session_stopped_before_its_game_started_records_why_it_holds_no_session(tmp_path, sig):
+def test_a_session_stopped_before_its_game_started_records_why_it_holds_no_session(tmp_path, sig, pairplay_cli):
     """The game waits for an external learner that never comes; the signal ends the wait. No
     SessionEnded can be recorded for a session never started, so the recorder's last record says it."""
     p = subprocess.Popen([sys.executable, "-m", "pairplay", "session", "--participant", "sim:wasim", "--session",
@@ -249,8 +249,7 @@ def test_a_session_stopped_before_its_game_started_records_why_it_holds_no_sessi
     assert log.whole and ended(path) == []
     assert log.metadata["pairplay.recorder.end"]["stopped_by"] == sig.name
     assert log.metadata["pairplay.recorder.end"]["session_ended"] == "false"
-    r = subprocess.run([sys.executable, "-m", "pairplay", "rebuild", str(path), "--out", str(tmp_path / "rb")],
-                       capture_output=True, text=True)
+    r = pairplay_cli("rebuild", path, "--out", tmp_path / "rb")  # what it says, not how a process starts
     assert r.returncode == 2 and len(r.stderr.strip().splitlines()) == 1, r.stderr
     assert r.stderr.startswith("pairplay rebuild: holds no session: ") and \
         f"no SessionStarted (stopped ({sig.name}) before its game started) ({path})" in r.stderr, r.stderr

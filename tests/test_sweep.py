@@ -237,16 +237,16 @@ def test_force_writes_the_summary_again_and_a_resume_writes_what_is_missing_or_u
     assert capsys.readouterr().out.startswith("nothing to do: ")
 
 
-def test_a_summary_interrupted_part_way_leaves_the_earlier_one_whole(tmp_path, monkeypatch):
+def test_a_summary_interrupted_part_way_leaves_the_earlier_one_whole(one_seed, tmp_path, monkeypatch):
     """Before: sweep.csv, cells.csv, the figures and sweep.md were replaced one by one, so a Ctrl-C while the
     figures were drawn left a new sweep.csv beside the earlier sweep.md. Now the summary is written beside the
     folder and moved in as a whole (outputs.output_folder); the cells and grid.toml stay as they are."""
     from pairplay.report import plots
 
-    grid = read_grid(_grid(tmp_path, GRID.replace("seeds = 2", "seeds = 1")))
-    out = tmp_path / "out"
+    grid_file, out = finished_copy(one_seed, tmp_path)  # a finished sweep (it paid a sweep and a summary here)
+    grid = read_grid(grid_file)
     run = run_sweep(grid, out)
-    write_sweep(out, grid, finished_cells(out, grid), run)
+    assert run.computed == 0
     for name in ("sweep.csv", "cells.csv", "sweep.md"):
         (out / name).write_text("earlier run")
     before = {p: p.read_bytes() for p in out.rglob("*") if p.is_file()}
@@ -339,19 +339,7 @@ def _misspelt_key(d):
     d["measure"] = {}  # a key CellFile does not declare: said in the file's words (schemas/jsonfile.py in_words)
 
 
-@pytest.fixture(scope="module")
-def swept(tmp_path_factory):
-    """One finished sweep of one setting x 2 seeds (grid.toml, out/), made once for the damaged-cell cases:
-    each copies it and damages its own copy (it cost each case a sweep and a summary of its own)."""
-    from pairplay.cli.main import main
-
-    folder = tmp_path_factory.mktemp("swept")
-    grid = _grid(folder, GRID.replace('["correct", "consistent"]', '["correct"]'))
-    assert main(["sweep", str(grid), "--out", str(folder / "out"), "-q"]) == 0
-    return folder
-
-
-@pytest.mark.parametrize("damage,said", [
+DAMAGES = [
     (_text_measure, "measure(s) not a finite number: blind/learned = '20.8'"),
     (_nan_measure, "measure(s) not a finite number: all/ratio = nan"),
     (_no_measures, "lacks measure(s) all/ratio, blind/first50"),
@@ -360,33 +348,43 @@ def swept(tmp_path_factory):
     ("{", "not a cell file"),
     (_misspelt_key, "not a cell file: no key `measure` is known here (did you mean `measures`?)"),
     ("", "the file is empty"),
-])
-def test_a_cell_file_that_cannot_be_used_is_computed_again_and_said(swept, tmp_path, capsys, damage, said):
+]
+
+
+def test_a_cell_file_that_cannot_be_used_is_computed_again_and_said(tmp_path, capsys):
     """A new user's trial: a cell whose measure was text ended the summary in a traceback; one of `"measures":
     {}` counted as finished and the summary said n = 1 where the seeds were 2, without a word (a NaN alike);
     a file that was not JSON was computed again without a word. Every cell file is checked whole when read
     (CellFile, its measures those of the cell); one that cannot be used is computed again and a line names it.
-    The tables are those of the undamaged sweep."""
+    The tables are those of the undamaged sweep.
+    One finished sweep of one setting x 8 seeds, each cell file damaged in one of DAMAGES' ways, and one resume:
+    each damage is in a file of its own and said in a line of its own (each case paid a sweep and a summary)."""
     from pairplay.cli.main import main
 
-    grid, out = tmp_path / "grid.toml", tmp_path / "out"
-    shutil.copy(swept / "grid.toml", grid)
-    shutil.copytree(swept / "out", out)  # a finished sweep of that grid
+    grid, out = _grid(tmp_path, GRID.replace('["correct", "consistent"]', '["correct"]').replace(
+        "seeds = 2", f"seeds = {len(DAMAGES)}")), tmp_path / "out"
+    assert main(["sweep", str(grid), "--out", str(out), "-q"]) == 0  # a finished sweep of that grid
     before = _tables(out)
-    victim = sorted((out / "cells").glob("*.json"))[0]
-    if isinstance(damage, str):
-        victim.write_text(damage)
-    else:
-        data = json.loads(victim.read_text())
-        damage(data)
-        victim.write_text(json.dumps(data))
+    victims = sorted((out / "cells").glob("*.json"))
+    assert len(victims) == len(DAMAGES)
+    for victim, (damage, _) in zip(victims, DAMAGES):
+        if isinstance(damage, str):
+            victim.write_text(damage)
+        else:
+            data = json.loads(victim.read_text())
+            damage(data)
+            victim.write_text(json.dumps(data))
     (out / "sweep.md").unlink()  # as a sweep stopped before its summary
     capsys.readouterr()
     assert main(["sweep", str(grid), "--out", str(out)]) == 0
     captured = capsys.readouterr()
     lines = captured.err.splitlines()
-    assert len(lines) == 1 and lines[0].startswith(f"WARNING pairplay.sweep: {victim}: {said}"), captured.err
-    assert lines[0].endswith(": computing the cell again") and "1 computed" in captured.out, captured
+    assert len(lines) == len(DAMAGES), captured.err
+    for victim, (_, said) in zip(victims, DAMAGES):
+        [line] = [x for x in lines if x.startswith(f"WARNING pairplay.sweep: {victim}: ")]
+        assert line.startswith(f"WARNING pairplay.sweep: {victim}: {said}"), line
+        assert line.endswith(": computing the cell again"), line
+    assert f"{len(DAMAGES)} computed" in captured.out, captured
     assert _tables(out) == before
 
 

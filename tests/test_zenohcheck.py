@@ -4,8 +4,6 @@ TLS is said (services/zenohcheck.py). Before: `{"mode": 5}` was accepted without
 
 import json
 import logging
-import subprocess
-import sys
 
 import pytest
 
@@ -65,12 +63,11 @@ def test_a_bus_listening_beyond_loopback_without_tls_is_said_once(tmp_path, capl
     assert len(said) == 1 and "tcp/0.0.0.0:0" in said[0] and "TLS" in said[0], said
 
 
-def test_a_session_whose_config_listens_beyond_loopback_warns_on_stderr_in_one_line(tmp_path):
+def test_a_session_whose_config_listens_beyond_loopback_warns_on_stderr_in_one_line(tmp_path, pairplay_cli):
     path = tmp_path / "z.json5"
     path.write_text(json.dumps({"listen": {"endpoints": ["tcp/0.0.0.0:0"]}}))
-    r = subprocess.run([sys.executable, "-m", "pairplay", "session", "--participant", "sim:ashley", "--rounds", "1",
-                        "--session", "wide", "--out", "rec", "--zenoh-config", str(path)],
-                       cwd=tmp_path, capture_output=True, text=True, timeout=120)
+    r = pairplay_cli("session", "--participant", "sim:ashley", "--rounds", "1", "--session", "wide", "--out", "rec",
+                     "--zenoh-config", path, cwd=tmp_path)
     assert r.returncode == 0, r.stderr
     lines = [line for line in r.stderr.splitlines() if "beyond loopback" in line]
     assert len(lines) == 1 and "tcp/0.0.0.0:0" in lines[0] and "WARNING" in lines[0], r.stderr
