@@ -696,14 +696,13 @@ def test_a_ctrl_c_inside_a_finalizer_is_not_swallowed(tmp_path, kind, handler):
         "        pass\n"
         + FINALIZERS[kind] + HANDLERS[handler] +
         "try:\n"
-        "    drop()\n"
-        "    print('finalized', flush=True)\n"
+        "    drop()\n"  # the interrupt may land anywhere once the finalizer is left: here or in the sleep
         "    time.sleep(5)\n"
         "    print('not interrupted')\n"
         "except KeyboardInterrupt:\n"
         "    print('interrupted')\n")
     r = subprocess.run([sys.executable, str(script)], capture_output=True, text=True, timeout=60)
-    assert r.stdout.splitlines() == ["finalized", "interrupted"], (r.stdout, r.stderr)
+    assert r.stdout.splitlines() == ["interrupted"], (r.stdout, r.stderr)
     assert "Exception ignored" not in r.stderr, r.stderr
 
 
