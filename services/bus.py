@@ -1071,6 +1071,7 @@ def stop_on_signals(stop: threading.Event, then: Callable[[], object] | None = N
             raise KeyboardInterrupt
         global signalled
         signalled = signal.Signals(signum).name  # the exit skips the interpreter's teardown (cli/main.py)
+        signals.stopping = signals.stopping or signum  # a wait that is not on `stop` ends too (folderlock)
         if taken:
             return
         stop.why = signal.Signals(signum).name  # what ended the session, for its SessionEnded
