@@ -132,7 +132,16 @@ def run(args: argparse.Namespace) -> int:
             if (done.partial or live or lost) and rrd is not None:
                 raise KeptPartial(keep_partial(tmp, rrd, args.force))
     except KeptPartial as kept:
-        copies.journal([kept.path])
+        try:
+            copies.journal([kept.path])
+        except KeyboardInterrupt:  # its study folder was busy as the signal stopped the view: the wait ended at once
+            # (pairplay/folderlock.py), and a copy of a participant's data that their deletion would not know is
+            # never kept (replay/copies.py)
+            kept.path.unlink(missing_ok=True)
+            print(f"pairplay view: interrupted ({done.why}) after {_counts(done)}, before the source ended; nothing "
+                  "saved: its study folder is busy (another pairplay writes it), and the partial view, a copy of "
+                  "its participant's data, could not be journaled there", file=sys.stderr)
+            return 0
         if not done.partial and lost:  # events lost in the file: what is left, drawn, under a name that says so
             # (a whole file recovered from one that lost parts: `lost` says what, reader.EventLog.source_lost)
             said = f"is damaged ({lost})" if held.damaged else f"was {lost}"

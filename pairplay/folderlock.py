@@ -18,6 +18,13 @@ holder of the old). Read-only verbs
 the journal in memory and gave the same id to two people (`p05,Carla` and `p05,Dieter` in the key
 file), started one game twice, and undid a `participant delete` from a stale copy. flock, as
 pairplay/livelock.py says why: not fcntl record locks.
+
+A wait ends at once on SIGINT/SIGTERM, in every verb: a KeyboardInterrupt unwinds it where the command's
+handler raises one (cli/interrupts.py); where a verb stops on signals itself (services/bus.py
+`stop_on_signals`: it only sets its stop event, and this wait is not on that event) `take` sees the signal
+in pairplay/signals.py `stopping`, taken before the wait or during it, and raises KeyboardInterrupt itself
+(the verb ends as interrupted: 130/143, its one line). Before, a `view` of a study's game stopped by
+SIGTERM waited the whole 8 s to journal its partial copy, then said the folder was busy and exited 2.
 """
 
 from __future__ import annotations
@@ -28,6 +35,8 @@ import sys
 import time
 from pathlib import Path
 from typing import Callable
+
+from pairplay import signals
 
 LOCK_FILE = ".pairplay-lock"
 # verbs that hold a folder for minutes to hours: a writer beside them is refused at once (waiting is useless)
@@ -69,6 +78,8 @@ def take(folder: str | Path, verb: str, wait: float = 0.0, waiting: Callable[[st
                 who = holder(path)  # "" for a moment after the holder took it, before it wrote its line
                 if is_long(who) or time.monotonic() >= deadline:
                     raise FolderBusy(who) from None
+                if signals.stopping:  # the verb is stopping on a signal (module rule): no wait for another
+                    raise KeyboardInterrupt
                 if who and not said and waiting is not None:
                     waiting(who)
                     said = True

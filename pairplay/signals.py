@@ -35,6 +35,11 @@ later instead (`deliver_again`); finalizers are short. A generator closed by the
 collector or the callback of a bare `weakref.ref` is not seen (none runs in our
 main thread).
 
+A verb that stops on signals itself (services/bus.py `stop_on_signals`) raises
+nothing: it notes the signal in `stopping`, which a wait that is not its stop
+event's reads to end at once (pairplay/folderlock.py: a study folder's lock
+waited for up to 8 s after the signal, then refused as busy, exit 2).
+
 Imports nothing but `signal` when loaded (its C part is loaded with the interpreter).
 """
 
@@ -45,6 +50,7 @@ import signal
 SIGNALS = (signal.SIGINT, signal.SIGTERM)
 
 received = 0  # the first signal `record` met (0: none)
+stopping = 0  # the signal a verb's own handler took to stop on (services/bus.py stop_on_signals); 0: none
 FINALIZER_RETRY_S = 0.01  # a signal held while a finalizer runs is delivered again this much later
 _WEAKREF_FILES = ("weakref.py", "_weakrefset.py")  # the standard library's weak-reference callbacks live here
 

@@ -314,17 +314,29 @@ def said_source(recovered: dict[str, str]) -> str:
     """The file a recovered one (its RECOVERED metadata) was made of, in words that fit what it is: "the recording
     it continues" (a restarted recorder's copy: services/recorder.py `earlier_losses`) or "the recording it was
     recovered from" (`pairplay recover`); verify said the latter of a continued file (a new user's trial)."""
-    if recovered.get("bus") == "true":  # a live recorder's own record of what the bus lost (netns)
+    bus, shed = recovered.get("bus") == "true", recovered.get("shed") == "true"
+    if bus and shed:  # a live recorder's own record of holes, each under its cause (`Recorder._note_bus_lost`)
+        return "this recording on the bus (no refill gave it back) or shed by its recorder at the exit"
+    if bus:  # a live recorder's own record of what the bus lost (netns)
         return "this recording on the bus (no refill gave it back)"
+    if shed:  # what its recorder took off the bus and shed at the exit (a flood, or the signal's deadline passed)
+        return "this recording at its recorder's exit (shed, still queued when the recording stopped)"
     return "the recording it continues" if recovered.get("continued") else "the recording it was recovered from"
 
 
 def said_source_made(recovered: dict[str, str]) -> str:
     """How a recovered file was made of a damaged one, as `said_source_lost` starts: "continues a damaged
-    recording", "events lost on the bus that no refill gave back" (a live recorder's, `bus` "true") or
-    "recovered from a damaged file"."""
-    return "continues a damaged recording" if recovered.get("continued") else \
-        "events lost on the bus that no refill gave back" if recovered.get("bus") == "true" else "recovered from a damaged file"
+    recording", "events lost on the bus that no refill gave back" (a live recorder's, `bus` "true"), "events
+    its recorder shed at the exit ..." (`shed` "true"; both, joined, when it holds both) or "recovered from a
+    damaged file"."""
+    if recovered.get("continued"):
+        return "continues a damaged recording"
+    bus, shed = recovered.get("bus") == "true", recovered.get("shed") == "true"
+    if bus or shed:  # a live recorder's own record: what the bus lost, and what it shed itself at the exit, apart
+        # (a hole the exit's shedding left was said to be the bus's, and counted twice: shed, then lost)
+        return " and ".join(["events lost on the bus that no refill gave back"] * bus
+                            + ["events its recorder shed at the exit (still queued when the recording stopped)"] * shed)
+    return "recovered from a damaged file"
 
 
 def said_source_cut(recovered: dict[str, str]) -> str:

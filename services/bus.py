@@ -418,10 +418,12 @@ class Inbox:
     def __len__(self) -> int:
         return len(self._items)
 
-    def discard(self, why: str, keep: Callable[[str], bool] | None = None) -> int:
+    def discard(self, why: str, keep: Callable[[str], bool] | None = None, into: list | None = None) -> int:
         """Shed everything still waiting (counted under `why`, like any shed message; control
         items are dropped); how many messages. For a shutdown that cannot wait for them.
-        `keep(key)`: the messages it is true of stay, in order (what a shutdown must still take)."""
+        `keep(key)`: the messages it is true of stay, in order (what a shutdown must still take).
+        `into`: each message shed is appended to it, (key, payload), for the caller to say what it was
+        (the recorder: a hole they leave in its file is theirs, not the bus's)."""
         with self._cond:
             n = 0
             kept = deque()
@@ -432,6 +434,8 @@ class Inbox:
                 elif key is not None:
                     self.shed[(source_of(key), why)] += 1
                     n += 1
+                    if into is not None:
+                        into.append((key, item[1]))
             self.shed_total += n
             self._items = kept
             self._count.clear()
@@ -1071,6 +1075,7 @@ def stop_on_signals(stop: threading.Event, then: Callable[[], object] | None = N
             raise KeyboardInterrupt
         global signalled
         signalled = signal.Signals(signum).name  # the exit skips the interpreter's teardown (cli/main.py)
+        signals.stopping = signals.stopping or signum  # a wait that is not on `stop` ends too (folderlock)
         if taken:
             return
         stop.why = signal.Signals(signum).name  # what ended the session, for its SessionEnded

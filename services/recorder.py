@@ -63,6 +63,7 @@ own link to its router are that outage (LINK_METADATA), not absences.
 
 from __future__ import annotations
 
+import bisect
 import glob
 import json
 import logging
@@ -134,6 +135,9 @@ REFILLS = 5  # a gap's refill is asked again this often while the file still has
 REFILL_BACKOFF_S = 8.0
 REFILL_TIMEOUT_S = 3.0
 BUS_LOST = "lost on the bus"  # what the RECOVERED record of holes no refill gave back says (`_note_bus_lost`)
+# what it says of the holes the recorder's own shedding at the exit left (`drain`): they came, and were counted among
+# UNRECORDED_AT_EXIT (its MessageRejected count, `unrecorded_at_exit`); said once, under that cause
+SHED_AT_EXIT = "shed at the exit"
 _REFILL = object()  # inbox control item: Zenoh reported messages lost for good
 
 
@@ -466,6 +470,24 @@ def same_live_session(bus: Bus, session: str, path: Path, timeout_s: float = 3.0
     return answered > 0
 
 
+def _runs(first: int, last: int, marked: list[int]) -> list[tuple[int, int, bool]]:
+    """seqs `first`..`last` as maximal runs (a, b, whether they are `marked`: sorted, each within the range), in
+    order; as many steps as `marked` has, whatever the range (a forged seq may leave a hole of billions)."""
+    out: list[tuple[int, int, bool]] = []
+    at = first
+    for q in marked:
+        if q > at:
+            out.append((at, q - 1, False))
+        if out and out[-1][2] and out[-1][1] == q - 1:
+            out[-1] = (out[-1][0], q, True)
+        else:
+            out.append((q, q, True))
+        at = q + 1
+    if at <= last:
+        out.append((at, last, False))
+    return out
+
+
 def _holes(seen: dict[str, set[int]]) -> dict[str, list[tuple[int, int]]]:
     """Per source with a hole, each (a, b): seqs a and b are held, none between (a source's events before its
     first one held are not counted: a recorder that joined late never had them)."""
@@ -553,6 +575,7 @@ class Recorder:
         self._back_ns = 0  # when the link to the router last came back from an outage
         self._earlier_recorded = False  # what the earlier recordings lost is recorded in the file (_note_earlier_lost)
         self._copied_top: dict[str, int] = {}  # per source, its highest seq copied from the earlier recordings
+        self._shed_at_exit: list[tuple[str, bytes]] = []  # (key, payload) `drain` shed: their holes are not the bus's
         self._held: dict[str, set[int]] = {}  # per source but ours, the seqs written (`_seen`: none decoded again)
         self.links: list[dict] = []  # the outages recorded (LINK_METADATA)
         self._ended_ns: int | None = None
@@ -767,7 +790,10 @@ class Recorder:
         in a source's sequence numbers (between its first and last event in the file), and, when a refill was
         still `due` at the close and a source did not `answer` it (None: it could not be asked), that source's
         events after its last one in the file, how many not known. Before, the refill gave up silently: a
-        recorder cut off for 5 s at load 20 lost 9 game events and the file said it was whole (test_netns)."""
+        recorder cut off for 5 s at load 20 lost 9 game events and the file said it was whole (test_netns).
+        A hole's events that came and were shed at the exit (`drain`: a flood, or the deadline passed) are said
+        apart, as SHED_AT_EXIT (`shed` "true", `shed_count`): they are counted among UNRECORDED_AT_EXIT already,
+        and were said to be lost on the bus, and counted as lost too (an external `run recorder`'s close)."""
         seen = self._seen()
         holes = self._bus_holes()
         tails = [s for s in self._tails() if s not in (answered or ())] if due else []
@@ -780,27 +806,61 @@ class Recorder:
             source = key.split("/")[2]
             if source in holes:
                 where.setdefault((source, decode_event(payload).seq), i)
+        shed = self._shed_seqs(holes)
         parts, marks, count = [], [], 0
+        shed_parts, shed_count = [], 0
         for source in sorted(seen):
             for a, b in holes.get(source, ()):
-                n = b - a - 1
-                count += n
-                what = f"seq {a + 1}" if n == 1 else f"seqs {a + 1}-{b - 1}"
-                parts.append(f"{source} {what} ({counted(n, 'event')})")
+                ordered = shed.get(source, [])
+                inside = ordered[bisect.bisect_right(ordered, a):bisect.bisect_left(ordered, b)]
+                for first, last, was_shed in _runs(a + 1, b - 1, inside):
+                    n = last - first + 1
+                    what = f"seq {first}" if n == 1 else f"seqs {first}-{last}"
+                    if was_shed:  # it came, and the exit shed it: counted there (UNRECORDED_AT_EXIT), not again
+                        shed_count += n
+                        shed_parts.append(f"{source} {what} ({counted(n, 'event')} {SHED_AT_EXIT})")
+                    else:
+                        count += n
+                        parts.append(f"{source} {what} ({counted(n, 'event')})")
                 marks.append(where.get((source, b), len(kept)))
             seqs = seen[source]
             if source in tails:
                 parts.append(f"{source}: what it published after seq {max(seqs)} (how many not known: the link to the router "
                              "was down, and no refill was answered after it before the recording closed)")
                 marks.append(len(kept))
-        if not parts:
+        if not parts and not shed_parts:
             return
-        log.warning("recorder: not refilled, recorded as lost: %s", "; ".join(parts))
+        if parts:
+            log.warning("recorder: not refilled, recorded as lost: %s", "; ".join(parts))
+        if shed_parts:
+            log.warning("recorder: recorded as shed at the exit: %s", "; ".join(shed_parts))
+        record = {"source": self.path.name, "truncated": "false", "data_complete": "true"}
+        if parts:
+            record["bus"] = "true"
+        if shed_parts:  # (`shed_count` of them are among `unrecorded_at_exit`: not in `lost_count`)
+            record["shed"] = "true"
+        reasons = [f"{BUS_LOST}, not refilled"] * bool(parts) + [SHED_AT_EXIT] * bool(shed_parts)
         self._guarded(self.writer.add_metadata, RECOVERED, {
-            "source": self.path.name, "truncated": "false", "data_complete": "true", "bus": "true",
-            "reason": f"{BUS_LOST}, not refilled", "damaged": json.dumps([f"{BUS_LOST}: {p}" for p in parts]),
-            "lost": json.dumps(parts), "lost_count": str(count), "lost_chunks": "0",
-            LOST_AT_KEY: json.dumps(sorted(marks)), "messages": str(len(kept))})
+            **record, "reason": "; ".join(reasons),
+            "damaged": json.dumps([f"{BUS_LOST}: {p}" for p in parts] + [f"{SHED_AT_EXIT}: {p}" for p in shed_parts]),
+            "lost": json.dumps(parts + shed_parts), "lost_count": str(count), "shed_count": str(shed_count),
+            "lost_chunks": "0", LOST_AT_KEY: json.dumps(sorted(marks)), "messages": str(len(kept))})
+
+    def _shed_seqs(self, holes: dict[str, list[tuple[int, int]]]) -> dict[str, list[int]]:
+        """Per source with a hole in the file, the seqs of its messages `drain` shed at the exit (decoded only
+        then: a flood's shed messages cost nothing more at the usual close); one that does not decode is none."""
+        out: dict[str, set[int]] = {}
+        for key, payload in self._shed_at_exit:
+            source = key.split("/")[2] if key.count("/") == 3 else ""
+            if source not in holes:
+                continue
+            try:
+                event = decode_event(payload)
+            except (msgspec.DecodeError, msgspec.ValidationError):
+                continue
+            if event.source == source:
+                out.setdefault(source, set()).add(event.seq)
+        return {source: sorted(seqs) for source, seqs in out.items()}  # (sorted: each hole's share by bisection)
 
     def _fill_hole(self, key: str, payload: bytes) -> bool:
         """Write a refilled event older than the last one of its key in the file (every check but
@@ -1115,7 +1175,7 @@ class Recorder:
 
         while self.failure is None:
             if n is None and deadline.passed(FINISH_S):
-                n = self.inbox.discard(UNRECORDED_AT_EXIT, keep=keep)
+                n = self.inbox.discard(UNRECORDED_AT_EXIT, keep=keep, into=self._shed_at_exit)
             item = self.inbox.get(0)
             if item is None:
                 break

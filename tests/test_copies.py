@@ -9,9 +9,11 @@ from __future__ import annotations
 
 import json
 import os
+import signal
 import shutil
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 import pytest
@@ -196,3 +198,39 @@ def test_a_copy_is_journaled_after_the_verb_itself_wrote_the_journal_and_refused
         assert not (out / "rebuilt").exists() and (folder / "journal.jsonl").read_bytes() == before
     finally:
         folderlock.release(held)
+
+
+@pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGINT])
+def test_a_signal_while_a_stopped_view_waits_for_its_busy_study_folder_exits_at_once_and_keeps_no_copy(
+        played, tmp_path, sig):  # noqa: F811
+    """A view of a study's game stopped by a signal journals its partial copy; a short holder of the folder (an
+    export) made it wait the folder lock's whole 8 s after the signal (its handler only sets the stop event:
+    services/bus.py stop_on_signals), then exit 2 saying the folder was busy, its partial .rrd left unjournaled.
+    Now the wait ends on the signal (pairplay/folderlock.py), the copy is not kept, and the exit is the signal's."""
+    from pairplay import folderlock
+    from pairplay.replay.studydata import StudyData
+
+    data = copy_study(played, tmp_path)
+    rec = data.folder / _game(data, "p01", 0).recording
+    rrd = tmp_path / "out" / "view.rrd"
+    view = subprocess.Popen([sys.executable, "-m", "pairplay", "view", "-v", "--recording", str(rec), "--speed", "1",
+                             "--out", str(rrd)], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    held = None
+    try:
+        line = view.stderr.readline()  # past its check (the folder free then): it draws
+        assert "drawing" in line, line + view.stderr.read()
+        held = folderlock.take(data.folder, "participant export")  # a short holder, as the signal comes
+        before = (data.folder / "journal.jsonl").read_bytes()
+        sent = time.monotonic()
+        view.send_signal(sig)
+        out, err = view.communicate(timeout=60)
+        took = time.monotonic() - sent
+    finally:
+        view.kill()
+        folderlock.release(held)
+    lines = [x for x in err.splitlines() if not x.startswith("INFO ")]
+    assert view.returncode == 128 + sig and took < folderlock.WAIT_S / 2, (view.returncode, took, err)
+    assert len(lines) == 1 and lines[0].startswith(f"pairplay view: interrupted ({signal.Signals(sig).name}) after ")
+    assert "nothing saved" in lines[0] and "study folder is busy" in lines[0], lines
+    assert not list(rrd.parent.glob("*")), list(rrd.parent.glob("*"))  # no copy the deletion would not know
+    assert (data.folder / "journal.jsonl").read_bytes() == before and not _copies(StudyData(data.folder))

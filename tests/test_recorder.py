@@ -70,3 +70,47 @@ def test_a_close_past_its_deadline_still_writes_the_session_end_it_holds_and_cou
     assert (end["session_ended"], end["unrecorded_at_exit"]) == ("true", "1"), end
     [shed] = [r.event for r in log.events if isinstance(r.event, ev.MessageRejected)]
     assert "still queued when the recording stopped" in shed.reason and shed.offending_source == "game"
+    # the hole it left below the end (seq 2) is said as shed at the exit, counted there once: not lost on the bus
+    # (test_a_hole_the_exit_shed_is_said_once_under_its_cause_and_a_hole_of_the_bus_apart)
+    lost = log.metadata["pairplay.recovered"]
+    assert "bus" not in lost and (lost["lost_count"], lost["shed_count"]) == ("0", "1"), lost
+    assert "lost on the bus" not in log.missing and log.missing.startswith(
+        "events its recorder shed at the exit (still queued when the recording stopped) (r1.mcap): game seq 2 "), log.missing
+    assert log.lost_at == [1]  # the place is still marked: every verb says the session is partial there
+
+
+def test_a_hole_the_exit_shed_is_said_once_under_its_cause_and_a_hole_of_the_bus_apart(tmp_path):
+    """An external recorder (`pairplay run recorder`) whose close sheds its inbox (a flood, or the signal's deadline
+    passed) keeps the session's end: the events shed below it leave a hole. That hole was recorded as "lost on the
+    bus" (they came, and were shed) and counted twice: once as shed (the MessageRejected count, `unrecorded_at_exit`),
+    once as lost (`lost_count`). Now it is said as shed at the exit, counted once (`shed_count` names those of the
+    shed count that left a hole; `lost_count` only the bus's), and a hole the bus left beside it is still the bus's;
+    verify and every reader (reader.EventLog.missing) say each under its cause."""
+    import json
+
+    from pairplay.services.bus import Deadline
+    from pairplay.services.verify import verify_recording
+
+    rec = Recorder(None, "r1", tmp_path / "r1.mcap")
+    cfg = SessionConfig(session="r1", participant="sim:ashley", persona="ashley", seed=9, rounds=1)
+    assert rec.record(*message(ev.SessionStarted(config=cfg)), 1)
+    # seq 2 never comes (lost on the bus); 3 is recorded; 4-5 wait in the inbox at the exit, shed; 6 ends the session
+    assert rec.record(*message(ev.RoundStarted(round=0, faces=[i // 2 for i in range(18)]), seq=3), 3)
+    rec.inbox.put(*message(ev.CardRevealed(round=0, turn=0, card=0, face=0, pick=0), seq=4))
+    rec.inbox.put(*message(ev.CardRevealed(round=0, turn=0, card=1, face=0, pick=1), seq=5))
+    rec.inbox.put(*message(ev.SessionEnded(reason="interrupted", detail="SIGTERM"), seq=6))
+    assert rec.close(stopped_by="SIGTERM", deadline=Deadline(0.0)) is None
+    log = read_log(tmp_path / "r1.mcap")
+    assert [r.event.seq for r in log.events if r.event.source == "game"] == [1, 3, 6]
+    end = log.metadata["pairplay.recorder.end"]
+    [shed] = [r.event for r in log.events if isinstance(r.event, ev.MessageRejected)]
+    assert end["unrecorded_at_exit"] == "2" and shed.reason.startswith("2 messages ") and "still queued" in shed.reason
+    lost = log.metadata["pairplay.recovered"]
+    assert (lost["lost_count"], lost["shed_count"], lost["bus"], lost["shed"]) == ("1", "2", "true", "true"), lost
+    assert json.loads(lost["lost"]) == ["game seq 2 (1 event)", "game seqs 4-5 (2 events shed at the exit)"]
+    assert json.loads(lost["damaged"]) == ["lost on the bus: game seq 2 (1 event)",
+                                           "shed at the exit: game seqs 4-5 (2 events shed at the exit)"]
+    assert "lost on the bus that no refill gave back and events its recorder shed at the exit" in log.missing
+    result = verify_recording(log.path)
+    assert not result.ok and "shed at the exit" in result.error and "game seq 2 (1 event) lost" in result.error
+

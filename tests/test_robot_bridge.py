@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import threading
+import time
 
 from busutil import listener, wait_until
 from robot_doubles.harness import FAST
@@ -78,3 +79,40 @@ def test_suggestions_become_robot_acts_recorded_with_every_rejection(tmp_path):
     assert "<= 87 - at `$.action`" in reasons and "<= 17 - at `$.target`" in reasons and "malformed" in reasons
     assert "robot sent an unreadable frame" in reasons
     assert any(isinstance(e, ev.ServiceStarted) and e.service.startswith("robot iristk://") for e in events)
+
+
+def test_a_stopped_bridge_leaves_the_robot_its_share_of_the_signals_deadline_to_close():
+    """Stopped by a signal (the shutdown's 1.1 s, services/bus.py SHUTDOWN_S), the bridge waited for the robot's
+    replies until 0.7 s before the deadline (0.4 s) and gave its close, which sends what is due and closes the
+    connection (a Realtime robot's close handshake), the ~50 ms left: a robot whose close took 150 ms was left
+    mid-close as the process exited. Now the close has its share (ROBOT_CLOSE_SHARE_S), taken from the wait
+    for replies, and the bridge is still done STOPPED_RESERVE_S before the deadline."""
+    from pairplay.services.bus import SHUTDOWN_S, Deadline
+    from pairplay.services.robot.bridge import STOPPED_RESERVE_S
+
+    bus = listener()
+    bridge = RobotBridge(bus, SESSION, "virtual", config=FAST).start()
+    transport = bridge.robot.transport
+    closed: list[bool] = []
+    real_close = transport.close
+
+    def slow_close() -> None:  # the robot's end of the close takes 150 ms (a loaded Wi-Fi)
+        time.sleep(0.15)
+        real_close()
+        closed.append(True)
+
+    transport.close = slow_close
+    stop = threading.Event()
+    thread = bridge.run_in_thread(stop)
+    try:
+        bus.put(*made(1, code_of_parts(2, 0, 0, 0), 0))  # a speech: still open when the signal comes
+        assert wait_until(lambda: transport.performed, 10), "the robot never spoke"
+        stop.deadline = Deadline(SHUTDOWN_S)  # as the signal's handler starts it (stop_on_signals)
+        stop.set()
+        thread.join(5)
+        assert not thread.is_alive()
+        assert closed, "the robot's close was cut short: the bridge returned while the robot was still closing"
+        assert stop.deadline.left() >= STOPPED_RESERVE_S - 0.1, stop.deadline.left()  # still within its reserve
+    finally:
+        bridge.close()
+        bus.close()

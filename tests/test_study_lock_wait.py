@@ -69,3 +69,23 @@ def test_a_long_holder_is_refused_at_once_and_named(folder, long):
                                                  rf"{os.getpid()}, since .*\); one writer per study folder: stop it"):
             StudyData(folder, writer="protocol register")
         assert time.monotonic() - start < 2.0  # no wait (WAIT_S is 8 s): it holds the folder for hours
+
+
+def test_a_wait_for_a_short_holder_ends_at_once_once_the_verb_stops_on_a_signal(folder, monkeypatch):
+    """A verb that stops on signals itself (services/bus.py stop_on_signals) raises nothing in its handler: its
+    lock waits went on for the whole WAIT_S after the signal. The signal it took (pairplay/signals.py `stopping`)
+    ends the wait at once, as the KeyboardInterrupt of the other verbs does, and the lock is not taken."""
+    from pairplay import signals
+
+    fd = folderlock.take(folder, "report")
+    try:
+        monkeypatch.setattr(signals, "stopping", 15)
+        start = time.monotonic()
+        with pytest.raises(KeyboardInterrupt):
+            folderlock.take(folder, "protocol register", folderlock.WAIT_S)
+        assert time.monotonic() - start < 1.0
+    finally:
+        folderlock.release(fd)
+    taken = folderlock.take(folder, "protocol register", folderlock.WAIT_S)  # a free lock is taken, stopping or not
+    assert taken is not None
+    folderlock.release(taken)

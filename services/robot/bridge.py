@@ -74,6 +74,11 @@ NAME = "robot"
 END_QUIET_S = 0.25  # after SessionEnded, stop once no message came for this long
 STOPPED_SETTLE_S = 1.0  # stopped by a signal or the experimenter: wait this long for the robot's replies
 STOPPED_RESERVE_S = 0.6  # stopped: done this long before the shutdown's deadline (the session waits until 0.55)
+# stopped: of what the deadline leaves the bridge, this much is the robot's close (the driver sends what is due, reports
+# what is open and closes the connection: a Realtime robot's close handshake, up to its close_timeout of 1 s), taken
+# from the wait for its replies. Before, that wait took all but ~50 ms of a signal's 1.1 s (0.4 s to 0.05 s), and a
+# robot whose close took longer (a loaded Wi-Fi) was left mid-close as the process exited: its last commands cut
+ROBOT_CLOSE_SHARE_S = 0.25
 LAST_SUGGESTION_WAIT_S = 5.0  # at most this long for an in-process learner's suggestions still on their way (rule)
 ROBOT_CLOSE_S = 20.0  # ended by itself: how long the driver may take to report what is still open (a
 # starved driver with ~800 open suggestions took over 5 s in the soak; a stopped session has its deadline)
@@ -269,7 +274,8 @@ class RobotBridge:
         # what the shutdown's deadline leaves, is recorded as in flight, and the process exits promptly
         if stop.is_set():
             deadline = deadline_of(stop)
-            self.close(deadline.left(STOPPED_RESERVE_S + 0.1, min(self.settle_s, STOPPED_SETTLE_S)), deadline)
+            self.close(deadline.left(STOPPED_RESERVE_S + 0.05 + ROBOT_CLOSE_SHARE_S, min(self.settle_s, STOPPED_SETTLE_S)),
+                       deadline)
         elif orphaned:  # nobody records what the robot still reports: do not wait for it
             self.close(min(self.settle_s, STOPPED_SETTLE_S))
         else:
@@ -281,9 +287,10 @@ class RobotBridge:
         one was taken."""
         if self.published_suggestions is None:
             return True
-        # stopped: within the shutdown's deadline, leaving the robot's last reports their share (a signal's 1.1 s
-        # leaves nothing to wait with; a session that ended by itself has SETTLE_S)
-        wait_s = (deadline_of(stop).left(STOPPED_RESERVE_S + 0.1 + STOPPED_SETTLE_S / 2, LAST_SUGGESTION_WAIT_S)
+        # stopped: within the shutdown's deadline, leaving the robot's last reports and its close their share (a
+        # signal's 1.1 s leaves nothing to wait with; a session that ended by itself has SETTLE_S)
+        wait_s = (deadline_of(stop).left(STOPPED_RESERVE_S + 0.05 + ROBOT_CLOSE_SHARE_S + STOPPED_SETTLE_S / 2,
+                                         LAST_SUGGESTION_WAIT_S)
                   if stop.is_set() else LAST_SUGGESTION_WAIT_S)
         until = time.monotonic() + wait_s
         while self.logic.last_suggestion < (self.published_suggestions() or 0):
