@@ -235,6 +235,15 @@ def _items(text: str, option: str) -> list[str]:
         raise StudyDataError(f"{option} {exc}") from None
 
 
+def _persona(key: str, option: str) -> str:
+    """The key of the persona `key` names; StudyDataError naming `option` if none (it said only "unknown persona
+    'ashly' ...", not which option held it: every refusal of an option's value names the option)."""
+    try:
+        return persona(key).key
+    except KeyError as err:
+        raise StudyDataError(err.args[0], option) from None
+
+
 def _robot(args):
     """(RobotChoice or None, overridden?) from --robot; StudyDataError if it is wrong."""
     from pairplay.services.robot.choice import NO_ROBOT, RobotChoice, check_choice
@@ -279,9 +288,14 @@ def _serve(data: StudyData, args) -> int:
         raise StudyDataError("--certfile and --keyfile go together")
     pilot = {}
     for pair in _items(args.pilot, "--pilot") if args.pilot is not None else []:
-        pid, _, key = pair.partition("=")
-        data.participant(pid)
-        pilot[pid] = persona(key).key
+        pid, equals, key = pair.partition("=")
+        if not equals:  # `--pilot p01` was "unknown persona ''"
+            raise StudyDataError(f"{pair!r} is not ID=PERSONA (p01=tatiana)", "--pilot")
+        try:
+            data.participant(pid)
+        except StudyDataError as err:
+            raise StudyDataError(err.what, "--pilot") from None
+        pilot[pid] = _persona(key, "--pilot")
     stop = threading.Event()
     runners = []
     # a signal stops the running game at once, with its name and the shutdown's deadline (its recording finished)
@@ -330,7 +344,7 @@ def _pilot(data: StudyData, args) -> int:
     if len(keys) != len(ids):
         raise StudyDataError(f"--personas names {counted(len(keys), 'persona')} for {counted(len(ids), 'registered participant')} "
                              f"({', '.join(ids) or 'none'})")
-    personas = {pid: persona(k).key for pid, k in zip(ids, keys)}
+    personas = {pid: _persona(k, "--personas") for pid, k in zip(ids, keys)}
     robot = None
     if args.robot:
         robot = RobotChoice(args.robot) if args.robot != NO_ROBOT else None

@@ -294,7 +294,8 @@ def _where(message: str, raw: object, written: Written) -> _Bad:
     if enum:
         options = _options(path)
         said = f"must be one of {', '.join(options)}" if options else "is not one of the values it takes"
-        return _Bad(path, f"{said}, got {written.typed(path, _at(raw, path))}")
+        near = nearest(str(_at(raw, path)), options)  # `preset = "human-phse1"`: the one meant (pairplay/nearest.py)
+        return _Bad(path, f"{said}, got {written.typed(path, _at(raw, path))}" + (f" (did you mean {near!r}?)" if near else ""))
     unknown = re.fullmatch(r"Object contains unknown field `(.+)`", what)
     if unknown:
         key, shape = unknown[1], _shape(path)
