@@ -26,7 +26,7 @@ from pairplay.lists import comma_items
 from pairplay.replay import studyjournal
 from pairplay.replay.studydata import JOURNAL, REGISTER_AT_ONCE, StudyData, StudyDataError, repair_journal
 from pairplay.schemas.study import (StudyFileError, bundled_studies, bundled_text, example_text, no_study_file,
-                                    parse_study)
+                                    parse_study, study_file_of)
 from pairplay.numbers import counted
 
 EXAMPLE_NAME = "thesis-ch7"
@@ -86,8 +86,10 @@ def _study_file(name: str) -> tuple[str, str]:
     is refused with the bundled ones: `--study thesis-ch8` said only "No such file or directory")."""
     if _bundled(name):
         return bundled_text(name), f"{name} (shipped example)" if name == EXAMPLE_NAME else f"{name} (bundled study)"
+    path = study_file_of(name)  # a study folder: its own study file
+    name = str(path)
     try:
-        return Path(name).read_text(encoding="utf-8-sig"), name  # as load_study: a byte order mark is fine
+        return path.read_text(encoding="utf-8-sig"), name  # as load_study: a byte order mark is fine
     except UnicodeDecodeError:  # as load_study says it (a random or binary file was a traceback)
         raise StudyFileError(f"{name}: cannot read: not UTF-8 text") from None
     except FileNotFoundError:
@@ -173,10 +175,10 @@ def _run(args) -> int:
         else:
             text, source = _study_file(study_path)  # a name neither a file nor bundled: the bundled ones said
             parse_study(text, source)
-        try:
-            data = StudyData.create(args.folder, study_path, args.key_file)
+        try:  # (another study's folder: its study file, schemas/study.py study_file_of)
+            data = StudyData.create(args.folder, study_file_of(study_path), args.key_file)
         finally:
-            if study_path != args.study:
+            if study_path != args.study:  # ours, the bundled study's copy
                 Path(study_path).unlink()
         print(f"study folder {data.given} ({data.study.study.id}); key file: {data.key_file or 'none'}")
         print("\n".join(describe(data.study)))

@@ -59,6 +59,14 @@ def without_bom(data: bytes) -> bytes:
     return data[len(BOM):] if data.startswith(BOM) else data
 
 
+def a_folder(path, what: str, give: str) -> str:
+    """What a file input that is a folder is told, naming it: "<path>: a folder, not a <what>: give <give>".
+    Every JSON or TOML input reads through this (a policy, the robot config, the calibration, a study file): it
+    said the system's "cannot read: Is a directory", not what was expected there (a new user's trial:
+    `protocol check STUDY_FOLDER`, `report --reference FOLDER`)."""
+    return f"{path}: a folder, not a {what}: give {give}"
+
+
 def empty(data: bytes | str) -> str:
     """"the file is empty" (with how many bytes of blank it holds, if any) if `data`, a file's content, holds
     nothing but a byte order mark and whitespace, else "". Every JSON, TOML or MCAP input says so in these
@@ -269,6 +277,8 @@ class JsonFileKind(Generic[T]):
         path = path_argument(path, f"read_{self.noun}")
         try:
             data = path.read_bytes()
+        except IsADirectoryError:
+            raise self.error(a_folder(path, self.what, "the path of one file")) from None
         except OSError as exc:
             raise self.error(f"{path}: cannot read: {exc.strerror}") from None
         return self.decode(data, str(path))

@@ -33,7 +33,7 @@ from pairplay.nearest import nearest
 from pairplay.numbers import TYPE_NAMES, counted, shown, type_name, typed_floats
 
 from .config import LearnerConfig
-from .jsonfile import empty, toml_words
+from .jsonfile import a_folder, empty, toml_words
 from .robot_url import parse_robot_url
 from .session import MS_FIELDS, MS_RANGE, SEED_RANGE
 from .tomlplace import Written, header, misplaced, table_not_value
@@ -420,9 +420,24 @@ def _name_keys(where: str, what: str, raw: object) -> str:
     return out
 
 
-def load_study(path: str | Path) -> Study:
-    """Read and check a study file (StudyFileError, one line, if it cannot be used)."""
+STUDY_FILE = "study.toml"  # a study folder's copy of its study file (replay/studydata.py)
+
+
+def study_file_of(path: str | Path) -> Path:
+    """The study file a path argument names: a file as it is, a study folder's own (`protocol check FOLDER`
+    checks the folder's protocol); StudyFileError for another folder, saying what was expected (it said the
+    system's "cannot read: Is a directory")."""
     path = Path(path)
+    if path.is_dir():
+        if (path / STUDY_FILE).is_file():
+            return path / STUDY_FILE
+        raise StudyFileError(a_folder(path, "study file", f"a study's TOML file or a study folder (one holding {STUDY_FILE})"))
+    return path
+
+
+def load_study(path: str | Path) -> Study:
+    """Read and check a study file (StudyFileError, one line, if it cannot be used); a study folder, its own."""
+    path = study_file_of(path)
     try:
         text = path.read_text(encoding="utf-8-sig")  # an editor's byte order mark is no TOML error
     except (OSError, UnicodeDecodeError) as err:
