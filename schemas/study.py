@@ -261,6 +261,12 @@ def parse_study(text: str, source: str = "study") -> Study:
             _check(study, written)
         except msgspec.ValidationError as err:
             bad = _placed(str(err), raw, written) or _where(str(err), raw, written)
+            if "missing required field" in str(err) and text.strip() and not text.endswith("\n"):
+                # a file cut mid-table is valid TOML up to its cut: what is missing is said with where it ends
+                # (it said only "needs a [phase] table"); a file whose last line is whole ends with a newline
+                lines = text.count("\n") + 1
+                bad.what += (f"; the file ends at line {lines} without a final newline: cut short there? (a copy or "
+                             "a save that did not finish: put back a whole copy)")
             raise StudyFileError(_line(source, bad, written)) from None
         except _Bad as bad:
             raise StudyFileError(_line(source, bad, written)) from None
