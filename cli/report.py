@@ -75,5 +75,8 @@ def run(args) -> int:
           + (f"; left out: {', '.join(report.excluded)}" if report.excluded else ""))
     if report.read_whole:  # a damaged input, on stderr, -q or not (cli/main.py `warn`: -q hid it with the summary)
         print(f"pairplay report: read whole from a damaged file: {', '.join(report.read_whole)}", file=sys.stderr)
+    if report.unreadable:  # cited from the journal; the files themselves cannot be read now (stderr, as above)
+        print(f"pairplay report: unreadable policy files, cited from the journal: {'; '.join(report.unreadable)}",
+              file=sys.stderr)
     print(f"report: {out / 'report.md'}")
     return 0
