@@ -280,7 +280,7 @@ def interrupted_what(signum: int = 0) -> str:
     """`interrupted (Ctrl-C)` or `interrupted (SIGTERM)`: the start of a stopped verb's line
     (`signum`, else the signal that stopped the verb)."""
     signum = signum or signal_received()
-    return "interrupted (Ctrl-C)" if signum in (0, signal.SIGINT) else f"interrupted ({signal.Signals(signum).name})"
+    return f"interrupted ({signals.said(signum or signal.SIGINT)})"
 
 
 QUIET_TRACKER = "ignore::UserWarning:multiprocessing.resource_tracker"

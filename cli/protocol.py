@@ -20,6 +20,7 @@ import sys
 import time
 from pathlib import Path
 
+from pairplay import signals
 from pairplay.cli.args import int_between, output_file, output_folder, session_id
 from pairplay.core.personas import persona
 from pairplay.lists import comma_items
@@ -330,7 +331,7 @@ def _serve(data: StudyData, args) -> int:
             if server.console.thread is not None:
                 server.console.thread.join(shutdown_wait(stop, 10.0, reserve=0.3))
             server.close(shutdown_wait(stop, 10.0, reserve=0.2))
-    print(f"pairplay protocol serve: stopped ({getattr(stop, 'why', '') or 'done'})", file=sys.stderr)  # not a result
+    print(f"pairplay protocol serve: stopped ({signals.said(getattr(stop, 'why', '')) or 'done'})", file=sys.stderr)  # not a result
     return 0
 
 
@@ -382,7 +383,7 @@ def _pilot(data: StudyData, args) -> int:
             if not stop.is_set():
                 raise
     if stop.is_set():
-        print(f"pairplay protocol pilot: interrupted ({stop.why}); `pairplay protocol status {data.given}` shows what is left", file=sys.stderr)
+        print(f"pairplay protocol pilot: interrupted ({signals.said(stop.why)}); `pairplay protocol status {data.given}` shows what is left", file=sys.stderr)
         return 0
     print(f"plan complete; `pairplay report {data.given}` writes the report")
     return 0
