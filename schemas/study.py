@@ -33,7 +33,7 @@ from pairplay.nearest import nearest
 from pairplay.numbers import TYPE_NAMES, counted, shown, type_name, typed_floats
 
 from .config import LearnerConfig
-from .jsonfile import a_folder, empty, toml_words
+from .jsonfile import MAX_SAID, a_folder, empty, toml_words, unknown_keys
 from .robot_url import parse_robot_url
 from .session import MS_FIELDS, MS_RANGE, SEED_RANGE
 from .tomlplace import Written, header, misplaced, table_not_value
@@ -260,6 +260,14 @@ def parse_study(text: str, source: str = "study") -> Study:
             study = msgspec.convert(raw, Study)
             _check(study, written)
         except msgspec.ValidationError as err:
+            if "unknown field" in str(err) and len(every := unknown_keys(raw, Study)) > 1:  # all at once, not one a run
+                lines = []
+                for where, key in every[:MAX_SAID]:
+                    message = f"Object contains unknown field `{key}`" + (f" - at `$.{where}`" if where else "")
+                    lines.append(_line("", _placed(message, raw, written) or _where(message, raw, written), written)
+                                 .removeprefix(": "))
+                more = f"; and {len(every) - MAX_SAID} more" if len(every) > MAX_SAID else ""
+                raise StudyFileError(f"{source}: {'; '.join(lines)}{more}") from None
             bad = _placed(str(err), raw, written) or _where(str(err), raw, written)
             if "missing required field" in str(err) and text.strip() and not text.endswith("\n"):
                 # a file cut mid-table is valid TOML up to its cut: what is missing is said with where it ends
