@@ -173,6 +173,8 @@ def _run(args) -> int:
                 tmp.unlink(missing_ok=True)
                 raise OSError(err.errno, err.strerror, str(args.folder)) from None
             study_path = tmp
+        elif not Path(study_path).exists():  # named with its option, as every refusal of an option's value
+            raise StudyDataError(str(no_study_file(study_path)), "--study")
         else:
             text, source = _study_file(study_path)  # a name neither a file nor bundled: the bundled ones said
             parse_study(text, source)

@@ -85,3 +85,11 @@ def test_a_misspelt_value_of_a_study_file_names_the_one_it_resembles(pairplay_cl
     (tmp_path / "s.toml").write_text(text.replace(line, wrong, 1))
     r = pairplay_cli("protocol", "check", tmp_path / "s.toml")
     assert r.returncode == 2 and said in r.stderr, r.stderr
+
+
+def test_init_names_the_study_option_it_refuses(pairplay_cli, tmp_path):
+    r = pairplay_cli("protocol", "init", tmp_path / "s", "--study", "thesis-c7", cwd=tmp_path)
+    lines = r.stderr.strip().splitlines()
+    assert r.returncode == 2 and len(lines) == 1, r
+    assert "thesis-c7: no such study file, nor a bundled study (did you mean 'thesis-ch7'?)" in lines[0], lines
+    assert lines[0].endswith("(--study)"), lines
