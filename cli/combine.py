@@ -47,11 +47,17 @@ LEARNED = ("q-learning", "lspi", "pi-reuse")  # policies a session learned (not 
 
 def _policy_paths(paths: list[Path]) -> list[Path]:
     """Files as given; a folder stands for every *.json below it (a study's policies/).
-    InputError for a path that does not exist, a folder without policy files, a file given twice."""
+    InputError for a path that does not exist, a folder without policy files, a file given twice, a study folder
+    (its other JSON files are no policies: its policies/ is meant)."""
+    from pairplay.replay.copies import study_root
+
     out: dict[Path, Path] = {}
     for p in paths:
         if not p.exists():
             raise InputError("no such policy file or folder", p)
+        if study_root(p) == p.resolve():  # its settings.json was read as a policy ("no "format" field"), no hint
+            raise InputError(f"a study folder, not policy files: give its games' policies, {p / 'policies'} "
+                             f"(or {p / 'merged'} for its bias policies)", p)
         found = sorted(p.rglob("*.json")) if p.is_dir() else [p]
         if not found:
             raise InputError("holds no policy files (*.json)", p)

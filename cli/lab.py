@@ -19,6 +19,7 @@ import sys
 import threading
 from pathlib import Path
 
+from pairplay import signals
 from pairplay.schemas.policy import PolicyFileError
 from pairplay.outputs import check_folder
 from pairplay.services.recorder import check_new_recording
@@ -116,7 +117,7 @@ def run(args: argparse.Namespace) -> int:
               file=sys.stderr)
         return 2
     if getattr(stop, "why", "") and summary:
-        return print_interrupted(summary, path, stop.why, config.rounds,  # no reading the file back: 2 s
+        return print_interrupted(summary, path, signals.said(stop.why), config.rounds,  # no reading the file back: 2 s
                                  "the id stays taken: choose another --session", "lab")  # (lab has no --force)
     from pairplay.replay.fold import fold_any
     from pairplay.replay.reader import read_any_log
@@ -128,7 +129,7 @@ def run(args: argparse.Namespace) -> int:
         when = "before the session started" if fold.config is None else \
             f"after the session had completed all {counted(config.rounds, 'round')}" if e is not None and e.reason == "completed" \
             else f"after {len(fold.rounds)} of {counted(config.rounds, 'round')}"
-        print(f"pairplay lab: interrupted ({stop.why}) {when}; recorded {counted(len(recorded.events), 'event')} to {path}"
+        print(f"pairplay lab: interrupted ({signals.said(stop.why)}) {when}; recorded {counted(len(recorded.events), 'event')} to {path}"
               + (f" (read back, it is not whole: {recorded.note})" if recorded.note else ""), file=sys.stderr)
         return 0  # the status is the signal's (cli/main.py)
     ended = "no SessionEnded recorded" if e is None else e.reason + (f" ({e.detail})" if e.detail else "")

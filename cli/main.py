@@ -63,6 +63,7 @@ from pairplay.cli import interrupts
 from pairplay.cli.interrupts import DeferredInterrupt
 from pairplay.cli.args import check_study_folders
 from pairplay.errors import UserError, out_of_threads
+from pairplay.nearest import nearest
 
 # verb -> (module, one-line help)
 VERBS: dict[str, tuple[str, str]] = {
@@ -115,8 +116,19 @@ class Parser(argparse.ArgumentParser):
         return namespace, extra
 
     def error(self, message: str):
-        self.exit(2, f"{self.prog}: {self.choice_missing(message) or self.dash_value(message) or message} "
+        self.exit(2, f"{self.prog}: {self.choice_missing(message) or self.dash_value(message) or self.choice_near(message)} "
                      f"(see {self.prog} --help)\n")
+
+    @staticmethod
+    def choice_near(message: str) -> str:
+        """argparse's `invalid choice: 'human-phse1' (choose from ...)` with the choice it resembles
+        (pairplay/nearest.py, as every refusal of a name: `--preset human-phse1`, `--algorithm q-lerning` had
+        no hint), else `message` as it is."""
+        m = re.fullmatch(r"(argument \S+: invalid choice: '(.*)') \(choose from (.*)\)", message, re.S)
+        if not m:
+            return message
+        near = nearest(m.group(2), re.findall(r"'([^']*)'", m.group(3)) or m.group(3).split(", "))
+        return f"{m.group(1)} (did you mean '{near}'?) (choose from {m.group(3)})" if near else message
 
     @staticmethod
     def dash_value(message: str) -> str:
@@ -269,7 +281,7 @@ def interrupted_what(signum: int = 0) -> str:
     """`interrupted (Ctrl-C)` or `interrupted (SIGTERM)`: the start of a stopped verb's line
     (`signum`, else the signal that stopped the verb)."""
     signum = signum or signal_received()
-    return "interrupted (Ctrl-C)" if signum in (0, signal.SIGINT) else f"interrupted ({signal.Signals(signum).name})"
+    return f"interrupted ({signals.said(signum or signal.SIGINT)})"
 
 
 QUIET_TRACKER = "ignore::UserWarning:multiprocessing.resource_tracker"

@@ -20,13 +20,14 @@ import sys
 import time
 from pathlib import Path
 
+from pairplay import signals
 from pairplay.cli.args import int_between, output_file, output_folder, session_id
 from pairplay.core.personas import persona
 from pairplay.lists import comma_items
 from pairplay.replay import studyjournal
 from pairplay.replay.studydata import JOURNAL, REGISTER_AT_ONCE, StudyData, StudyDataError, repair_journal
 from pairplay.schemas.study import (StudyFileError, bundled_studies, bundled_text, example_text, no_study_file,
-                                    parse_study)
+                                    parse_study, study_file_of)
 from pairplay.numbers import counted
 
 EXAMPLE_NAME = "thesis-ch7"
@@ -86,8 +87,10 @@ def _study_file(name: str) -> tuple[str, str]:
     is refused with the bundled ones: `--study thesis-ch8` said only "No such file or directory")."""
     if _bundled(name):
         return bundled_text(name), f"{name} (shipped example)" if name == EXAMPLE_NAME else f"{name} (bundled study)"
+    path = study_file_of(name)  # a study folder: its own study file
+    name = str(path)
     try:
-        return Path(name).read_text(encoding="utf-8-sig"), name  # as load_study: a byte order mark is fine
+        return path.read_text(encoding="utf-8-sig"), name  # as load_study: a byte order mark is fine
     except UnicodeDecodeError:  # as load_study says it (a random or binary file was a traceback)
         raise StudyFileError(f"{name}: cannot read: not UTF-8 text") from None
     except FileNotFoundError:
@@ -170,13 +173,15 @@ def _run(args) -> int:
                 tmp.unlink(missing_ok=True)
                 raise OSError(err.errno, err.strerror, str(args.folder)) from None
             study_path = tmp
+        elif not Path(study_path).exists():  # named with its option, as every refusal of an option's value
+            raise StudyDataError(str(no_study_file(study_path)), "--study")
         else:
             text, source = _study_file(study_path)  # a name neither a file nor bundled: the bundled ones said
             parse_study(text, source)
-        try:
-            data = StudyData.create(args.folder, study_path, args.key_file)
+        try:  # (another study's folder: its study file, schemas/study.py study_file_of)
+            data = StudyData.create(args.folder, study_file_of(study_path), args.key_file)
         finally:
-            if study_path != args.study:
+            if study_path != args.study:  # ours, the bundled study's copy
                 Path(study_path).unlink()
         print(f"study folder {data.given} ({data.study.study.id}); key file: {data.key_file or 'none'}")
         print("\n".join(describe(data.study)))
@@ -235,6 +240,15 @@ def _items(text: str, option: str) -> list[str]:
         raise StudyDataError(f"{option} {exc}") from None
 
 
+def _persona(key: str, option: str) -> str:
+    """The key of the persona `key` names; StudyDataError naming `option` if none (it said only "unknown persona
+    'ashly' ...", not which option held it: every refusal of an option's value names the option)."""
+    try:
+        return persona(key).key
+    except KeyError as err:
+        raise StudyDataError(err.args[0], option) from None
+
+
 def _robot(args):
     """(RobotChoice or None, overridden?) from --robot; StudyDataError if it is wrong."""
     from pairplay.services.robot.choice import NO_ROBOT, RobotChoice, check_choice
@@ -279,9 +293,14 @@ def _serve(data: StudyData, args) -> int:
         raise StudyDataError("--certfile and --keyfile go together")
     pilot = {}
     for pair in _items(args.pilot, "--pilot") if args.pilot is not None else []:
-        pid, _, key = pair.partition("=")
-        data.participant(pid)
-        pilot[pid] = persona(key).key
+        pid, equals, key = pair.partition("=")
+        if not equals:  # `--pilot p01` was "unknown persona ''"
+            raise StudyDataError(f"{pair!r} is not ID=PERSONA (p01=tatiana)", "--pilot")
+        try:
+            data.participant(pid)
+        except StudyDataError as err:
+            raise StudyDataError(err.what, "--pilot") from None
+        pilot[pid] = _persona(key, "--pilot")
     stop = threading.Event()
     runners = []
     # a signal stops the running game at once, with its name and the shutdown's deadline (its recording finished)
@@ -314,7 +333,7 @@ def _serve(data: StudyData, args) -> int:
             if server.console.thread is not None:
                 server.console.thread.join(shutdown_wait(stop, 10.0, reserve=0.3))
             server.close(shutdown_wait(stop, 10.0, reserve=0.2))
-    print(f"pairplay protocol serve: stopped ({getattr(stop, 'why', '') or 'done'})", file=sys.stderr)  # not a result
+    print(f"pairplay protocol serve: stopped ({signals.said(getattr(stop, 'why', '')) or 'done'})", file=sys.stderr)  # not a result
     return 0
 
 
@@ -330,7 +349,7 @@ def _pilot(data: StudyData, args) -> int:
     if len(keys) != len(ids):
         raise StudyDataError(f"--personas names {counted(len(keys), 'persona')} for {counted(len(ids), 'registered participant')} "
                              f"({', '.join(ids) or 'none'})")
-    personas = {pid: persona(k).key for pid, k in zip(ids, keys)}
+    personas = {pid: _persona(k, "--personas") for pid, k in zip(ids, keys)}
     robot = None
     if args.robot:
         robot = RobotChoice(args.robot) if args.robot != NO_ROBOT else None
@@ -366,7 +385,7 @@ def _pilot(data: StudyData, args) -> int:
             if not stop.is_set():
                 raise
     if stop.is_set():
-        print(f"pairplay protocol pilot: interrupted ({stop.why}); `pairplay protocol status {data.given}` shows what is left", file=sys.stderr)
+        print(f"pairplay protocol pilot: interrupted ({signals.said(stop.why)}); `pairplay protocol status {data.given}` shows what is left", file=sys.stderr)
         return 0
     print(f"plan complete; `pairplay report {data.given}` writes the report")
     return 0

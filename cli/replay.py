@@ -28,6 +28,7 @@ import argparse
 import sys
 import time
 
+from pairplay import signals
 from pairplay.cli.args import session_id, speed
 from pairplay.errors import InputError
 from pairplay.livelock import LIVE, is_live
@@ -105,7 +106,7 @@ def run(args: argparse.Namespace) -> int:
         if not outbox.close(shutdown_wait(stop, 30.0, reserve=0.2)):
             n -= outbox.pending()
         took = time.perf_counter() - t0
-    stopped = f"; stopped by {stop.why} after {n} of {len(log.events)}" if getattr(stop, "why", "") else ""
+    stopped = f"; stopped by {signals.said(stop.why)} after {n} of {len(log.events)}" if getattr(stop, "why", "") else ""
     # interrupted, the line goes to stderr, as every verb's (stdout holds results only); -q leaves out the
     # summary of a replay that went through (cli/main.py QUIET_SUMMARIES)
     if stopped or not getattr(args, "quiet", False):

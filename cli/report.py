@@ -18,8 +18,8 @@ from pathlib import Path
 
 from pairplay.cli.args import output_folder
 from pairplay.numbers import counted
-from pairplay.replay.studydata import StudyDataError
-from pairplay.schemas.policy import PolicyFileError
+from pairplay.replay.studydata import StudyDataError, not_a_study_folder
+from pairplay.schemas.policy import PolicyFileError, read_policy
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -42,6 +42,15 @@ def run(args) -> int:
 
     from pairplay.replay.copies import Copies
 
+    try:
+        if args.reference is not None:  # a wrong --reference refused before the work (it waited for the games)
+            read_policy(args.reference)
+    except PolicyFileError as err:
+        print(f"pairplay report: {err}", file=sys.stderr)
+        return 2
+    if args.folder.is_file():  # it said "cannot write there" of its report/ (a file where a folder is needed)
+        print(f"pairplay report: {not_a_study_folder(args.folder)}", file=sys.stderr)
+        return 2
     out = check_output_folder(args.out or args.folder / "report", args.force, HUMAN_OUTPUTS,
                               HUMAN_MANIFEST)  # before any work
     copies = Copies("report", [args.folder])  # a report beyond report/ is a copy their deletion must know
@@ -66,5 +75,8 @@ def run(args) -> int:
           + (f"; left out: {', '.join(report.excluded)}" if report.excluded else ""))
     if report.read_whole:  # a damaged input, on stderr, -q or not (cli/main.py `warn`: -q hid it with the summary)
         print(f"pairplay report: read whole from a damaged file: {', '.join(report.read_whole)}", file=sys.stderr)
+    if report.unreadable:  # cited from the journal; the files themselves cannot be read now (stderr, as above)
+        print(f"pairplay report: unreadable policy files, cited from the journal: {'; '.join(report.unreadable)}",
+              file=sys.stderr)
     print(f"report: {out / 'report.md'}")
     return 0

@@ -16,6 +16,7 @@ import argparse
 import sys
 import threading
 
+from pairplay import signals
 from pairplay.cli.args import session_id
 from pairplay.core.geometry import N_CARDS
 from pairplay.errors import OptionError, UserError
@@ -173,5 +174,5 @@ def _serve(args: argparse.Namespace) -> int:
               flush=True)
         bridge.run(stop)
     if getattr(stop, "why", ""):  # the status is the signal's (cli/main.py); it said nothing
-        print(f"pairplay robot: stopped ({stop.why})", file=sys.stderr)  # every verb's line: stderr
+        print(f"pairplay robot: stopped ({signals.said(stop.why)})", file=sys.stderr)  # every verb's line: stderr
     return 0

@@ -12,6 +12,7 @@ import argparse
 import sys
 import threading
 
+from pairplay import signals
 from pairplay.services.bus import BusError, add_bus_arguments, options_from_args, stop_on_signals
 
 
@@ -33,5 +34,5 @@ def run(args: argparse.Namespace) -> int:
         print(f"pairplay router: {err}", file=sys.stderr)
         return 2
     if getattr(stop, "why", ""):  # the status is the signal's (cli/main.py: 130, 143)
-        print(f"pairplay router: stopped ({stop.why})", file=sys.stderr, flush=True)  # every verb's interrupted line: stderr
+        print(f"pairplay router: stopped ({signals.said(stop.why)})", file=sys.stderr, flush=True)  # every verb's interrupted line: stderr
     return 0

@@ -27,6 +27,7 @@ import threading
 import time
 from pathlib import Path
 
+from pairplay import signals
 from pairplay.cli.args import output_folder, session_id
 from pairplay.errors import OptionError
 from pairplay.lists import comma_items
@@ -124,7 +125,7 @@ def run(args: argparse.Namespace) -> int:
     stop_on_signals(stop)
     code = _run(args, stop)
     if code == 0 and getattr(stop, "why", ""):  # the status is the signal's (cli/main.py); it said nothing
-        print(f"pairplay run {args.service}: stopped ({stop.why})", file=sys.stderr)  # every verb's line: stderr
+        print(f"pairplay run {args.service}: stopped ({signals.said(stop.why)})", file=sys.stderr)  # every verb's line: stderr
     return code
 
 

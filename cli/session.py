@@ -35,6 +35,7 @@ from pathlib import Path
 
 import msgspec
 
+from pairplay import signals
 from pairplay import __version__
 from pairplay.core.rng import STREAMS_VERSION
 from pairplay.schemas.config import DEFAULT_REWARD_BONUS, REWARD_BONUS_RULES, LearnerConfig, LSPIConfig, lspi_unused
@@ -292,10 +293,10 @@ def _run(args: argparse.Namespace, config: SessionConfig, path: Path, summary: d
         return 0
     if getattr(stop, "why", ""):
         if kept and not summary.get("started"):  # its file holds no session: the earlier ones get their names back
-            print(f"pairplay session: interrupted ({stop.why}) before the session started; {path}: the earlier "
+            print(f"pairplay session: interrupted ({signals.said(stop.why)}) before the session started; {path}: the earlier "
                   f"recordings are kept (--force replaces them once a new session starts)", file=sys.stderr)
             return 0
-        return print_interrupted(summary, path, stop.why, config.rounds, "the id stays taken: --force reuses it")
+        return print_interrupted(summary, path, signals.said(stop.why), config.rounds, "the id stays taken: --force reuses it")
     from pairplay.replay.delivery import delivery_line
     from pairplay.replay.fold import fold_any
     recorded = read_back(path, "session")

@@ -43,6 +43,7 @@ import threading
 from dataclasses import dataclass
 from pathlib import Path
 
+from pairplay import signals
 from pairplay.cli.args import (add_force, file_in, float_at_least, int_at_least, output_file, port_or_any,
                                 session_id, speed)
 from pairplay.errors import InputError, OptionError, OutputError, UserError
@@ -152,18 +153,18 @@ def run(args: argparse.Namespace) -> int:
             say(f"saved {kept.path}: {_counts(done)}; partial: {args.recording} {LIVE}, view it again once "
                   "its session has ended")
             return 0
-        print(f"pairplay view: interrupted ({done.why}) after {_counts(done)}, before the source ended; "
+        print(f"pairplay view: interrupted ({signals.said(done.why)}) after {_counts(done)}, before the source ended; "
               f"the partial view is in {kept.path}", file=sys.stderr)
         return 0
     except NothingDrawn as stopped:  # a signal before the first event: nothing to save (exit 128 + signal)
-        print(f"pairplay view: interrupted ({stopped}) before any event was drawn; nothing saved", file=sys.stderr)
+        print(f"pairplay view: interrupted ({signals.said(str(stopped))}) before any event was drawn; nothing saved", file=sys.stderr)
         return 0
     except RrdWriteFailed as err:  # the temporary .rrd is gone (output_path); nothing saved
         raise OutputError(f"writing the .rrd failed ({err}); nothing saved", rrd or "the view's output") from None
     if rrd is not None and not done.partial:
         copies.journal([rrd])
     if done.partial:
-        print(f"pairplay view: interrupted ({done.why}) after {_counts(done)}, before the source ended; nothing saved",
+        print(f"pairplay view: interrupted ({signals.said(done.why)}) after {_counts(done)}, before the source ended; nothing saved",
               file=sys.stderr)
     else:
         say(f"saved {rrd}: {_counts(done)}" if rrd is not None else

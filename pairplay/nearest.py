@@ -5,7 +5,7 @@ swapped in a word of five or more, `ashly` for `ashley`, `rouns` for `rounds`), 
 or none. A word that differs from a known one only in its digits is another one of a numbered kind, not a
 misspelling of it (`phase3` beside phase1 and phase2, `thesis-ch8` beside thesis-ch7): no hint, the list
 of what there is says it; the refusal then says it (`(did you mean `rounds`?)`) and, with none, what is known. Used by
-the study and sweep files' keys, every JSON file's keys, a public function's argument names (pairplay/arguments.py) and a name from a fixed list (a persona);
+the study and sweep files' keys and values, every JSON file's keys, a public function's argument names (pairplay/arguments.py), a name from a fixed list (a persona) and an option's choices (cli/main.py Parser);
 before, each place called difflib with its own copy of the cutoff, and a misspelt persona had no hint.
 Standard library only (every layer imports this).
 """

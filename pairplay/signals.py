@@ -55,6 +55,17 @@ FINALIZER_RETRY_S = 0.01  # a signal held while a finalizer runs is delivered ag
 _WEAKREF_FILES = ("weakref.py", "_weakrefset.py")  # the standard library's weak-reference callbacks live here
 
 
+def said(why: object) -> str:
+    """What a verb's line on stderr calls the signal `why` (its number, or its name as `stop.why` holds it):
+    "Ctrl-C" for SIGINT, its name for another (SIGTERM), anything else as it is. One rule for every verb's
+    `interrupted (...)` and `stopped (...)` line: the verbs without a bus said "(Ctrl-C)", those with one
+    "(SIGINT)", their stop's name (a new user's trial). What a recording keeps (SessionEnded's reason) is its
+    name, data, not a line: unchanged."""
+    if isinstance(why, int) and not isinstance(why, bool):
+        why = signal.Signals(why).name if why in set(signal.Signals) else str(why)
+    return "Ctrl-C" if why == "SIGINT" else str(why)
+
+
 def handle(handler: object, signals: tuple[int, ...] = SIGNALS) -> None:
     """Install `handler` for each of `signals` not ignored (module rule). Main thread only."""
     for signum in signals:

@@ -58,7 +58,7 @@ from pairplay.outputs import (OutputError, check_output, check_places, manifest_
 from pairplay.schemas import journal as j
 from pairplay.schemas.jsonfile import in_words, without_bom
 from pairplay.schemas.policy import read_policy, write_policy
-from pairplay.schemas.study import Study, StudyFileError, load_study
+from pairplay.schemas.study import STUDY_FILE, Study, StudyFileError, load_study
 from pairplay.numbers import counted
 
 from .fold import fold_any
@@ -67,7 +67,7 @@ from .reader import read_any_log
 from .rebuild import Rebuilt, rebuild_recording, write_outputs
 from .wal import wal_path
 
-STUDY_FILE, JOURNAL, SETTINGS = "study.toml", "journal.jsonl", "settings.json"
+JOURNAL, SETTINGS = "journal.jsonl", "settings.json"  # and STUDY_FILE, schemas/study.py
 # what `pairplay report` writes in <folder>/report (report/human.py), and its manifest: here, below the report,
 # since a participant's deletion removes those files (and only those: a user's notes.md there stays)
 REPORT_OUTPUTS = ("picks.csv", "games.png", "phases.png", "users-*.png", "merged.png", "attention.csv",
@@ -104,6 +104,8 @@ def open_key_file(path: Path):
     """The key file for appending, created (with the folder it is in) readable by its owner only, and
     made so if it was not (a key file written 0644 by pairplay <= 0.3, or by hand). `StudyDataError`
     if it cannot be made (the path says where)."""
+    if path.is_dir():  # it said the system's "Is a directory"
+        raise StudyDataError("a folder, not a key file: give the path of a CSV file (made if missing)", path)
     try:
         path.parent.mkdir(mode=KEY_FOLDER_MODE, parents=True, exist_ok=True)
         fd = os.open(path, os.O_WRONLY | os.O_APPEND | os.O_CREAT, KEY_FILE_MODE)
@@ -219,7 +221,7 @@ class StudyData:
             raise StudyDataError("is a folder where the study's journal is written; a folder is never replaced: "
                                  "remove or rename it", self.given / JOURNAL)
         if not (self.folder / JOURNAL).is_file():
-            raise StudyDataError(f"{self.given}: not a study folder (no {JOURNAL}; `pairplay protocol init` makes one)")
+            raise not_a_study_folder(self.given)
         self._lock = threading.RLock()
         self._hold: int | None = None
         self._stamp: tuple = ()
@@ -1059,6 +1061,17 @@ def _take_lock(folder: Path, given: Path, verb: str) -> int | None:
                              "for it to finish (one writer per study folder): run this again when it has", given) from None
 
 
+def not_a_study_folder(given: Path) -> StudyDataError:
+    """The refusal of a study folder argument that is none: a file said as a file (a study TOML given for its
+    folder was "not a study folder (no journal.jsonl ...)", `report FILE` "cannot write there"), with the verb
+    that makes a folder of it."""
+    if given.is_file():
+        made = f"`pairplay protocol init FOLDER --study {given}` makes one of it" if given.suffix == ".toml" else \
+            "give the folder `pairplay protocol init` made"
+        return StudyDataError(f"{given}: a file, not a study folder: {made}")
+    return StudyDataError(f"{given}: not a study folder (no {JOURNAL}; `pairplay protocol init` makes one)")
+
+
 def repair_journal(folder: str | Path) -> studyjournal.Repaired:
     """`pairplay protocol repair`: the journal's last line a crash cut set aside beside it, under the folder's
     writer lock (replay/studyjournal.py); StudyDataError if it is no study folder or a line that is not the
@@ -1066,7 +1079,7 @@ def repair_journal(folder: str | Path) -> studyjournal.Repaired:
     given = Path(folder)
     resolved = given.resolve()
     if not (resolved / JOURNAL).is_file():
-        raise StudyDataError(f"{given}: not a study folder (no {JOURNAL}; `pairplay protocol init` makes one)")
+        raise not_a_study_folder(given)
     fd = _take_lock(resolved, given, "protocol repair")
     try:
         return studyjournal.repair(resolved / JOURNAL, given / JOURNAL, given)

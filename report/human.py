@@ -49,7 +49,7 @@ from pairplay import __version__, csvcell
 from pairplay.core.actions import ACTION_NAMES
 from pairplay.core.geometry import N_STATES, STATE_NAMES
 from pairplay.replay.studydata import REPORT_MANIFEST, REPORT_OUTPUTS, StudyData, StudyDataError, named
-from pairplay.schemas.policy import read_policy
+from pairplay.schemas.policy import PolicyFileError, read_policy
 
 from pairplay.report import plots
 from pairplay.report.study import markdown_table
@@ -125,6 +125,9 @@ class HumanReport:
     scripted: list[str] = field(default_factory=list)  # the sessions scripted personas played
     # games whose recording is damaged where no event was (reader.EventLog.loss_free): reported whole, said
     read_whole: list[str] = field(default_factory=list)
+    # policy files the report cites (a bias policy, the games' policies it was combined from) that cannot be read
+    # now: cited from the journal, each said with why (a cut one was cited as if whole: a new user's trial)
+    unreadable: list[str] = field(default_factory=list)
 
 
 def human_report(folder: str | Path, out: str | Path | None = None, reference: str | Path | None = None,
@@ -217,9 +220,16 @@ def human_report(folder: str | Path, out: str | Path | None = None, reference: s
     ref = read_policy(reference) if reference else None
     panels = []
     by_policy = {g.ended.policy: g for g in data.state.games.values() if g.ended is not None and g.ended.policy}
+    unreadable: list[str] = []
     for phase_id, c in data.state.combined.items():
         personas = sorted({by_policy[p].scripted for p in c.inputs if p in by_policy and by_policy[p].scripted})
         merged_path = data.folder / c.output
+        for cited in (c.output, *c.inputs):
+            if (data.folder / cited).is_file():
+                try:
+                    read_policy(data.folder / cited)
+                except PolicyFileError as err:  # its text after the file's name: why
+                    unreadable.append(f"{cited} ({str(err).split(': ', 1)[-1]})")
         names = data.user_names(c)  # a persona as what it is, not the `human:<id>` its session ran as
         rules: dict[str, int] = defaultdict(int)
         for r in c.decided_by:
@@ -237,7 +247,8 @@ def human_report(folder: str | Path, out: str | Path | None = None, reference: s
         sections += [f"## The bias policy of {phase_id} (algorithm 4, figure 7.5)", "",
                      f"Combined by the combiner service from {counted(len(c.inputs), 'policy file')} of "
                      f"{', '.join(names.get(u, u) for u in c.users)} "
-                     f"(`{c.output}`{'' if merged_path.is_file() else ', file since removed'}); "
+                     f"(`{c.output}`{'' if merged_path.is_file() else ', file since removed'}"
+                     f"{', its file unreadable now' if any(u.startswith(c.output + ' (') for u in unreadable) else ''}); "
                      f"{exact} of {counted(N_STATES - 1, 'state')} say the exact position (codes 33-44); rules: "
                      + "; ".join(f"{k} x{v}" for k, v in sorted(rules.items(), key=lambda kv: -kv[1])) + "."
                      + (f" **Combined from scripted games** (personas {', '.join(personas)}): a rehearsal's bias "
@@ -302,13 +313,15 @@ def human_report(folder: str | Path, out: str | Path | None = None, reference: s
             f"pairplay {__version__}; study `{study.study.id}` (seed {study.study.seed}); "
             f"{counted(len({s.participant for s in games}), 'participant')}, {counted(len(games), 'valid game')}"
             + (f"; left out: {', '.join(excluded)}" if excluded else "")
-            + (f"; read whole from a damaged file: {', '.join(read_whole)}" if read_whole else "") + ". Phases: "
+            + (f"; read whole from a damaged file: {', '.join(read_whole)}" if read_whole else "")
+            + (f"; **unreadable policy files, cited from the journal**: {', '.join(unreadable)}" if unreadable else "")
+            + ". Phases: "
             + "; ".join(f"{p.id}: {counted(p.games, 'game')} x {counted(p.rounds, 'round')}, {p.algorithm} ({p.preset})"
                         + (f" on the bias of {p.bias}" if p.bias else "") for p in study.phase)
             + f". Re-run: `pairplay report {data.folder}`.", ""]
     (out / "report.md").write_text("\n".join(head + sections))
     return HumanReport(out, games, excluded, curves, q_rows, att, rehearsal=rehearsal,
-                       scripted=[g.session for g in scripted], read_whole=read_whole)
+                       scripted=[g.session for g in scripted], read_whole=read_whole, unreadable=unreadable)
 
 
 def questionnaire_rows(data: StudyData, sessions: set[str]) -> list[list[str]]:

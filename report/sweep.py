@@ -56,7 +56,7 @@ from pairplay.nearest import nearest
 from pairplay.numbers import counted, shown, type_name, typed_floats
 from pairplay.outputs import manifest_name, output_file, output_folder, write_text
 from pairplay.processes import check_workers, worker_pool
-from pairplay.schemas.jsonfile import empty, in_words, toml_words, without_bom
+from pairplay.schemas.jsonfile import MAX_SAID, empty, in_words, toml_words, without_bom
 from pairplay.schemas.tomlplace import TOP, Written, misplaced, table_not_value
 from pairplay.core.geometry import PERFECT_PICKS
 from pairplay.core.rng import SEED_RANGE
@@ -117,15 +117,20 @@ def as_toml(value) -> str:
         str(value).lower() if isinstance(value, bool) else repr(value)
 
 
+def _no_setting(key: str, place: str) -> str:
+    """`PLACE: no study setting `KEY`` with the one it resembles (else the settings known)."""
+    near = nearest(key, SWEEPABLE)  # a misspelt setting
+    return (f"{place}: no study setting `{key}`"
+            + (f" (did you mean `{near}`?)" if near else f"; known: {', '.join(sorted(SWEEPABLE))}"))
+
+
 def _typed(path: str, at: tuple, value, written: Written):
     """The value of the study setting at `at` (("study", key) or ("grid", key, n)) as its StudySettings field
     takes it; GridError `FILE: [table] key: what` (schemas/tomlplace.py Written), the value as typed."""
     key = at[1]
     want = SWEEPABLE.get(key)
     if want is None:
-        near = nearest(key, SWEEPABLE)  # a misspelt setting
-        raise GridError(f"{path}: {written.place(at[:2])}: no study setting `{key}`"
-                        + (f" (did you mean `{near}`?)" if near else f"; known: {', '.join(sorted(SWEEPABLE))}"))
+        raise GridError(f"{path}: {_no_setting(key, written.place(at[:2]))}")
     if key == "personas" and isinstance(value, list) and all(isinstance(v, str) for v in value):
         # a TOML list of names (["ashley", "helmut"]) is the list it says, as the study's "ashley,helmut"
         # (it was refused: "is not a str"); its names are checked as the study's (StudySettings.check)
@@ -191,11 +196,17 @@ def _read_grid(path: str, parse_float) -> Grid:
         raise GridError(f"{path}: not TOML (not UTF-8 text)") from None
     written = Written(text, data)  # the file's places and values in its own words (schemas/tomlplace.py)
     _check_places(path, data, written)
-    unknown = sorted(set(data) - {"study", "grid", "seeds", "reuse"})
+    # every unknown key at once, the file's top first (one a run, fixed and rerun for the next, was a trial)
+    unknown = []
+    for key in [k for k in data if k not in ("study", "grid", "seeds", "reuse")]:
+        near = nearest(key, ["seeds", "reuse"])
+        unknown.append(f"{written.place((key,))}: no such key at {TOP}"
+                       + (f" (did you mean `{near}`?)" if near else "; it takes [study], [grid], seeds, reuse"))
+    unknown += [_no_setting(key, written.place((table, key))) for table in ("study", "grid")
+                for key in data.get(table, {}) if key not in SWEEPABLE]
     if unknown:
-        near = nearest(unknown[0], ["seeds", "reuse"])
-        raise GridError(f"{path}: {written.place((unknown[0],))}: no such key at {TOP}"
-                        + (f" (did you mean `{near}`?)" if near else "; it takes [study], [grid], seeds, reuse"))
+        raise GridError(f"{path}: {'; '.join(unknown[:MAX_SAID])}"
+                        + (f"; and {len(unknown) - MAX_SAID} more" if len(unknown) > MAX_SAID else ""))
     base = {k: _typed(path, ("study", k), v, written) for k, v in data.get("study", {}).items()}
     axes = {}
     for k, values in data.get("grid", {}).items():

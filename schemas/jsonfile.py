@@ -31,7 +31,9 @@ it there"; a TOML file's syntax alike (`toml_words`: tomllib's "(at end of docum
 the file ends on).
 A key an older pairplay's file holds and this one retired is said
 to be retired, with what replaced it (a Struct's `RETIRED` table, `retired_key`),
-never as a typo of another key.
+never as a typo of another key. Every unknown or retired key of a file is said at once, in the
+file's order (`unknown_keys`; the study and sweep files too), the first MAX_SAID by name and the
+rest counted: msgspec stops at the first, and a file of two was fixed and rerun for each.
 """
 
 from __future__ import annotations
@@ -57,6 +59,14 @@ def without_bom(data: bytes) -> bytes:
     """`data` without a leading UTF-8 byte order mark (what encoding="utf-8-sig" does for text): every
     JSON or TOML input a user may have saved from an editor is read through this or utf-8-sig."""
     return data[len(BOM):] if data.startswith(BOM) else data
+
+
+def a_folder(path, what: str, give: str) -> str:
+    """What a file input that is a folder is told, naming it: "<path>: a folder, not a <what>: give <give>".
+    Every JSON or TOML input reads through this (a policy, the robot config, the calibration, a study file): it
+    said the system's "cannot read: Is a directory", not what was expected there (a new user's trial:
+    `protocol check STUDY_FOLDER`, `report --reference FOLDER`)."""
+    return f"{path}: a folder, not a {what}: give {give}"
 
 
 def empty(data: bytes | str) -> str:
@@ -136,18 +146,71 @@ def in_words(exc: Exception, struct: type | None = None, data: bytes | None = No
         said = f"must hold {bound} {counted(int(length[3] or length[5]), item)}" + (
             f", holds {length[6]}" if length[6] else "")
     elif unknown := re.fullmatch(r"Object contains unknown field `(.+)`", what):
-        key, keys = unknown[1], sorted(_keys_at(struct, where))
-        near = nearest(key, keys)
-        if (retired := retired_key(_struct_at(struct, where), key)) is not None:  # an older pairplay's file
-            said = retired
-        else:
-            said = f"no key `{key}` is known here" + (f" (did you mean `{near}`?)" if near
-                                                       else f"; the keys: {', '.join(keys)}" if keys else "")
+        said = _unknown_said(struct, where, unknown[1])
+        every = _every_unknown(struct, data)  # all of them at once: one at a time, a rerun each, was a trial
+        if len(every) > 1:
+            shown = [f"{w}: {_unknown_said(struct, w, k)}" if w else _unknown_said(struct, w, k)
+                     for w, k in every[:MAX_SAID]]
+            return "; ".join(shown) + (f"; and {len(every) - MAX_SAID} more" if len(every) > MAX_SAID else "")
     elif missing := re.fullmatch(r"Object missing required field `(.+)`", what):
         said = f"needs the key `{missing[1]}`"
     elif enum := re.fullmatch(r"Invalid enum value (.+)", what):
         said = f"{enum[1]} is not one of the values it takes"
     return f"{where}: {said}" if where else said
+
+
+MAX_SAID = 5  # unknown keys said by name on the one line; the rest counted ("and N more")
+
+
+def _unknown_said(struct: type | None, where: str, key: str) -> str:
+    """What is said of the key `key` that the table at `where` does not take: retired (with what replaced it),
+    or unknown with the key it resembles (else the keys it takes)."""
+    if (retired := retired_key(_struct_at(struct, where), key)) is not None:  # an older pairplay's file
+        return retired
+    keys = sorted(_keys_at(struct, where))
+    near = nearest(key, keys)
+    return f"no key `{key}` is known here" + (f" (did you mean `{near}`?)" if near
+                                               else f"; the keys: {', '.join(keys)}" if keys else "")
+
+
+def _every_unknown(struct: type | None, data: bytes | None) -> list[tuple[str, str]]:
+    """(where, key) of every key of the JSON text `data` that the Struct read there does not take, in the
+    file's order (msgspec stops at the first: a file with two retired keys was refused for one, then, rerun,
+    for the next); [] if `data` is not JSON or no Struct is given."""
+    if struct is None or data is None:
+        return []
+    try:
+        value = msgspec.json.decode(data)
+    except msgspec.DecodeError:
+        return []
+    return unknown_keys(value, struct)
+
+
+def unknown_keys(value: object, struct: type) -> list[tuple[str, str]]:
+    """(where, key) of every key of `value` (a JSON or TOML file read as plain dicts and lists) that the Struct
+    `struct` would refuse there, in the file's order; `where` is msgspec's path (`phase[0]`, `speech`, "" at the
+    top). The files' checks name them all at once (msgspec stops at the first)."""
+    found: list[tuple[str, str]] = []
+
+    def walk(value: object, kind: object, where: str) -> None:
+        kind = _struct_in(kind)
+        origin, args = typing.get_origin(kind), typing.get_args(kind)
+        if isinstance(kind, type) and issubclass(kind, msgspec.Struct) and isinstance(value, dict):
+            fields = {f.encode_name: f.type for f in msgspec.structs.fields(kind)}
+            for key, item in value.items():
+                if key in fields:
+                    walk(item, fields[key], f"{where}.{key}" if where else key)
+                elif kind.__struct_config__.forbid_unknown_fields:
+                    found.append((where, key))
+        elif origin in (list, tuple) and args and isinstance(value, list):
+            for n, item in enumerate(value):
+                walk(item, args[0], f"{where}[{n}]")
+        elif origin is dict and len(args) == 2 and isinstance(value, dict):
+            for key, item in value.items():
+                walk(item, args[1], f"{where}.{key}" if where else key)
+
+    walk(value, struct, "")
+    return found
 
 
 def retired_key(struct: object, key: str) -> str | None:
@@ -269,6 +332,8 @@ class JsonFileKind(Generic[T]):
         path = path_argument(path, f"read_{self.noun}")
         try:
             data = path.read_bytes()
+        except IsADirectoryError:
+            raise self.error(a_folder(path, self.what, "the path of one file")) from None
         except OSError as exc:
             raise self.error(f"{path}: cannot read: {exc.strerror}") from None
         return self.decode(data, str(path))

@@ -33,7 +33,7 @@ from pairplay.nearest import nearest
 from pairplay.numbers import TYPE_NAMES, counted, shown, type_name, typed_floats
 
 from .config import LearnerConfig
-from .jsonfile import empty, toml_words
+from .jsonfile import MAX_SAID, a_folder, empty, toml_words, unknown_keys
 from .robot_url import parse_robot_url
 from .session import MS_FIELDS, MS_RANGE, SEED_RANGE
 from .tomlplace import Written, header, misplaced, table_not_value
@@ -260,7 +260,21 @@ def parse_study(text: str, source: str = "study") -> Study:
             study = msgspec.convert(raw, Study)
             _check(study, written)
         except msgspec.ValidationError as err:
+            if "unknown field" in str(err) and len(every := unknown_keys(raw, Study)) > 1:  # all at once, not one a run
+                lines = []
+                for where, key in every[:MAX_SAID]:
+                    message = f"Object contains unknown field `{key}`" + (f" - at `$.{where}`" if where else "")
+                    lines.append(_line("", _placed(message, raw, written) or _where(message, raw, written), written)
+                                 .removeprefix(": "))
+                more = f"; and {len(every) - MAX_SAID} more" if len(every) > MAX_SAID else ""
+                raise StudyFileError(f"{source}: {'; '.join(lines)}{more}") from None
             bad = _placed(str(err), raw, written) or _where(str(err), raw, written)
+            if "missing required field" in str(err) and text.strip() and not text.endswith("\n"):
+                # a file cut mid-table is valid TOML up to its cut: what is missing is said with where it ends
+                # (it said only "needs a [phase] table"); a file whose last line is whole ends with a newline
+                lines = text.count("\n") + 1
+                bad.what += (f"; the file ends at line {lines} without a final newline: cut short there? (a copy or "
+                             "a save that did not finish: put back a whole copy)")
             raise StudyFileError(_line(source, bad, written)) from None
         except _Bad as bad:
             raise StudyFileError(_line(source, bad, written)) from None
@@ -294,7 +308,8 @@ def _where(message: str, raw: object, written: Written) -> _Bad:
     if enum:
         options = _options(path)
         said = f"must be one of {', '.join(options)}" if options else "is not one of the values it takes"
-        return _Bad(path, f"{said}, got {written.typed(path, _at(raw, path))}")
+        near = nearest(str(_at(raw, path)), options)  # `preset = "human-phse1"`: the one meant (pairplay/nearest.py)
+        return _Bad(path, f"{said}, got {written.typed(path, _at(raw, path))}" + (f" (did you mean {near!r}?)" if near else ""))
     unknown = re.fullmatch(r"Object contains unknown field `(.+)`", what)
     if unknown:
         key, shape = unknown[1], _shape(path)
@@ -419,9 +434,24 @@ def _name_keys(where: str, what: str, raw: object) -> str:
     return out
 
 
-def load_study(path: str | Path) -> Study:
-    """Read and check a study file (StudyFileError, one line, if it cannot be used)."""
+STUDY_FILE = "study.toml"  # a study folder's copy of its study file (replay/studydata.py)
+
+
+def study_file_of(path: str | Path) -> Path:
+    """The study file a path argument names: a file as it is, a study folder's own (`protocol check FOLDER`
+    checks the folder's protocol); StudyFileError for another folder, saying what was expected (it said the
+    system's "cannot read: Is a directory")."""
     path = Path(path)
+    if path.is_dir():
+        if (path / STUDY_FILE).is_file():
+            return path / STUDY_FILE
+        raise StudyFileError(a_folder(path, "study file", f"a study's TOML file or a study folder (one holding {STUDY_FILE})"))
+    return path
+
+
+def load_study(path: str | Path) -> Study:
+    """Read and check a study file (StudyFileError, one line, if it cannot be used); a study folder, its own."""
+    path = study_file_of(path)
     try:
         text = path.read_text(encoding="utf-8-sig")  # an editor's byte order mark is no TOML error
     except (OSError, UnicodeDecodeError) as err:

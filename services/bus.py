@@ -77,7 +77,7 @@ import zenoh.ext
 
 from pairplay import signals
 from pairplay.errors import UserError
-from pairplay.schemas.jsonfile import empty
+from pairplay.schemas.jsonfile import a_folder, empty
 from pairplay.services.zenohcheck import MODES, exposed, type_errors
 
 log = logging.getLogger("pairplay.bus")
@@ -151,6 +151,9 @@ class ConfigFileError(BusError, ValueError):
 def read_config_file(path: str) -> dict[str, Any]:
     try:
         text = Path(path).read_text(encoding="utf-8-sig")  # a byte order mark is no JSON5 error
+    except IsADirectoryError:
+        raise ConfigFileError(f"cannot use the Zenoh config: {a_folder(path, 'Zenoh config', 'its JSON5 file')}",
+                              f"--zenoh-config {path}") from None
     except OSError as err:
         raise ConfigFileError(f"cannot use the Zenoh config: {err.strerror or err}", f"--zenoh-config {path}") from None
     except UnicodeDecodeError as err:  # not text at all

@@ -69,7 +69,7 @@ def test_an_interrupted_session_prints_its_one_interrupted_line_on_stderr_and_no
     assert len(lines) == 1, err
     (line,) = lines
     # (a signal before the game started: "recorded 1 event to ...", its recorder's own; later: "N events")
-    assert line.startswith("pairplay session: interrupted (SIGINT) ") and re.search(
+    assert line.startswith("pairplay session: interrupted (Ctrl-C) ") and re.search(
         rf"\d+ events? to {re.escape(str(tmp_path / 'int1.mcap'))}", line), line
 
 

@@ -165,3 +165,21 @@ def test_a_study_folders_cut_settings_say_where_and_what_to_do(pairplay_cli, tmp
         "pairplay protocol status: not the study's settings: cut short: it ends inside its JSON at line 1 (byte 14, "
         'its end): a copy or a save that did not finish? put back a whole copy; it is {"key_file": "<path or '
         f'empty>"}} ({folder / "settings.json"})\n'), r.stderr
+
+
+@pytest.mark.parametrize("cut_after", ['robot = "virtual"', "# Phase 1 (7.2): half of the users"])
+def test_a_study_file_cut_between_tables_says_where_it_ends(pairplay_cli, tmp_path, cut_after):
+    """A study file cut before its [[phase]] tables is valid TOML up to the cut: it said only "needs a [phase]
+    table", not that the file was cut (it ends without a newline: a whole file's last line has one)."""
+    from pairplay.schemas.study import example_text
+    text = example_text()
+    cut = text[:text.index(cut_after) + len(cut_after)]
+    (tmp_path / "cut.toml").write_text(cut)
+    r = pairplay_cli("protocol", "check", tmp_path / "cut.toml")
+    lines = r.stderr.strip().splitlines()
+    assert r.returncode == 2 and len(lines) == 1, r
+    assert "needs a [phase] table; the file ends at line " in lines[0] and "cut short there?" in lines[0], lines
+    assert f"line {cut.count(chr(10)) + 1} " in lines[0], lines
+    (tmp_path / "whole.toml").write_text(cut + "\n")  # ends as a whole file does: no word of a cut
+    r = pairplay_cli("protocol", "check", tmp_path / "whole.toml")
+    assert r.returncode == 2 and r.stderr.rstrip().endswith("needs a [phase] table"), r

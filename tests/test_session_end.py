@@ -14,6 +14,7 @@ from pathlib import Path
 import pytest
 from busutil import collect, wait_until
 
+from pairplay import signals
 from pairplay.replay.reader import read_log
 from pairplay.replay.rebuild import NoWholeRound, rebuild_recording, write_outputs
 from pairplay.replay.recover import recover
@@ -243,7 +244,7 @@ def test_a_session_stopped_before_its_game_started_records_why_it_holds_no_sessi
     finally:
         if p.poll() is None:
             p.kill()
-    assert sig.name in out, out
+    assert signals.said(sig) in out, out  # the verb's line: Ctrl-C for SIGINT (pairplay/signals.py said)
     path = tmp_path / "early.mcap"
     log = read_log(path)
     assert log.whole and ended(path) == []

@@ -157,7 +157,7 @@ def test_force_keeps_the_earlier_recordings_until_the_new_session_has_started(tm
     finally:
         p.kill()
     assert p.returncode == 130, err
-    assert err.strip() == (f"pairplay session: interrupted (SIGINT) before the session started; {tmp_path / 'dup.mcap'}: "
+    assert err.strip() == (f"pairplay session: interrupted (Ctrl-C) before the session started; {tmp_path / 'dup.mcap'}: "
                            "the earlier recordings are kept (--force replaces them once a new session starts)"), err
     assert {p.name: p.read_bytes() for p in recordings_of(tmp_path / "dup.mcap")} == before  # before: none left
     assert sorted(f.name for f in tmp_path.iterdir()) == ["dup.2.mcap", "dup.mcap"]

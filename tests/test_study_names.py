@@ -19,7 +19,7 @@ def test_a_study_file_neither_there_nor_bundled_lists_the_bundled_ones(pairplay_
     assert r.returncode == 2 and r.stdout == "", r
     assert r.stderr == (f"pairplay {' '.join(verb[:2])}: {name}: no such study file, nor a bundled study{hint}; "
                         "the bundled studies: thesis-ch7 (`pairplay protocol example` prints one to edit); "
-                        "or give the path of a study TOML file\n")
+                        "or give the path of a study TOML file" + (" (--study)" if "--study" in verb else "") + "\n")
     assert not (tmp_path / "ST").exists()
 
 

@@ -182,3 +182,49 @@ def test_the_other_input_files_refuse_a_misspelt_key_at_every_level(tmp_path):
                        ('[grid]\nrouns = [3]\n', "[grid] rouns: no study setting `rouns` (did you mean `rounds`?)")]:
         (tmp_path / "g.toml").write_text(text)
         refused(GridError, lambda: read_grid(tmp_path / "g.toml"), said)
+
+
+def test_every_unknown_or_retired_key_of_a_json_file_is_named_at_once(tmp_path):
+    """A robot config with two retired keys (and a typo, and one in a nested table) named them one at a time:
+    fix one, rerun, told the next (a new user's trial). msgspec stops at the first; the line names all, in the
+    file's order, each as the one alone is said (schemas/jsonfile.py `unknown_keys`); past 5, "and N more"."""
+    from pairplay.services.robot.backends import load_robot_config
+    from pairplay.services.robot.calibration import CalibrationError, load_calibration
+
+    (tmp_path / "old.json").write_text(json.dumps({"iristk_subscriber_wait_s": 5.0, "yaw_sgn": 1,
+                                                   "iristk_wait_for_subscriber": True, "speech": {"exakt": "x"}}))
+    with pytest.raises(ValueError) as err:
+        load_robot_config(str(tmp_path / "old.json"))
+    line = str(err.value)
+    said = ["the key `iristk_subscriber_wait_s` was retired", "no key `yaw_sgn` is known here (did you mean `yaw_sign`?)",
+            "the key `iristk_wait_for_subscriber` was retired", "speech: no key `exakt` is known here (did you mean `exact`?)"]
+    assert "\n" not in line and all(s in line for s in said), line
+    assert [line.index(s) for s in said] == sorted(line.index(s) for s in said), line  # the file's order
+    many = {**{f"extra{n}": n for n in range(7)}}
+    (tmp_path / "many.json").write_text(json.dumps(many))
+    with pytest.raises(ValueError) as err:
+        load_robot_config(str(tmp_path / "many.json"))
+    assert "`extra4`" in str(err.value) and "`extra5`" not in str(err.value) and str(err.value).endswith("; and 2 more")
+    calibration = json.loads(resources.files("pairplay.services.robot").joinpath("calibration_default.json").read_text())
+    (tmp_path / "cal.json").write_text(json.dumps({**calibration, "bogus": 1, "bogus2": 2}))
+    with pytest.raises(CalibrationError) as err:
+        load_calibration(tmp_path / "cal.json")
+    assert "`bogus`" in str(err.value) and "`bogus2`" in str(err.value), str(err.value)
+
+
+def test_every_unknown_key_of_a_study_or_sweep_file_is_named_at_once(tmp_path):
+    from pairplay.report.sweep import GridError, read_grid
+    from pairplay.schemas.study import StudyFileError, example_text, parse_study
+
+    text = example_text().replace("seed = 0", "sed = 0\nrobt = \"virtual\"").replace("rounds = 5", "rouns = 5")
+    with pytest.raises(StudyFileError) as err:
+        parse_study(text, "s.toml")
+    line = str(err.value)
+    assert line.startswith("s.toml: [study] sed: [study] has no key `sed` (did you mean `seed`?); [study] robt: ") \
+        and '[[phase]] "phase1" rouns: ' in line and '[[phase]] "phase2" rouns: ' in line and "\n" not in line, line
+    (tmp_path / "g.toml").write_text('sedes = 3\n[study]\ngams = 2\nrouns = 3\n[grid]\nrewrd_bonus = ["match"]\n')
+    with pytest.raises(GridError) as err:
+        read_grid(tmp_path / "g.toml")
+    line = str(err.value)
+    assert all(s in line for s in ["sedes: no such key at", "[study] gams: no study setting `gams`", "[study] rouns: ",
+                                   "[grid] rewrd_bonus: no study setting `rewrd_bonus` (did you mean `reward_bonus`?)"]), line

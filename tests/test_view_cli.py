@@ -26,6 +26,7 @@ import msgspec
 import numpy as np
 import pytest
 
+from pairplay import signals
 from pairplay.bench.view import scripted_events, write_recording
 from pairplay.services.view.drive import drive
 from pairplay.services.view.output import ViewOutput, finish, open_stream
@@ -78,7 +79,7 @@ def test_an_interrupted_view_keeps_a_partial_view_under_a_name_that_says_so(tmp_
     assert "Traceback" not in r.stderr
     assert r.stdout == ""  # the interrupted line is not a result: stderr, as every verb's
     [line] = [x for x in r.stderr.splitlines() if x.startswith("pairplay view: interrupted (")]
-    assert line.startswith(f"pairplay view: interrupted ({sig.name}) after ") and "before the source ended" in line, line
+    assert line.startswith(f"pairplay view: interrupted ({signals.said(sig)}) after ") and "before the source ended" in line, line
     assert "saved" not in line and line.endswith("the partial view is in v.partial.2.rrd"), line
     assert not (tmp_path / "v.rrd").exists()  # the complete view's name is not taken by a partial one
     assert (tmp_path / "v.partial.rrd").read_bytes() == b"an earlier partial view"

@@ -17,7 +17,7 @@ from typing import Callable
 
 import msgspec
 
-from pairplay.schemas.jsonfile import empty, in_words, without_bom
+from pairplay.schemas.jsonfile import a_folder, empty, in_words, without_bom
 from pairplay.schemas.robot import GESTURE_PRESETS, PRESET_NOTES, BoardCalibration, RobotActed, RobotConfig
 from pairplay.schemas.robot_url import FORMS, parse_robot_url  # noqa: F401 (FORMS: the --robot help)
 
@@ -49,6 +49,8 @@ def load_robot_config(path: str | None) -> RobotConfig:
         if empty(raw):
             raise ValueError(f"robot config {path}: {empty(raw)}")
         config = msgspec.json.decode(without_bom(raw), type=RobotConfig)
+    except IsADirectoryError:
+        raise ValueError(a_folder(path, "robot config", "its JSON file")) from None
     except OSError as exc:
         raise ValueError(f"cannot read robot config {path}: {exc}") from exc
     except msgspec.DecodeError as exc:

@@ -18,7 +18,7 @@ from pathlib import Path
 import msgspec
 
 from pairplay.core.geometry import COLS, N_CARDS, ROWS, card_of
-from pairplay.schemas.jsonfile import empty, in_words, without_bom
+from pairplay.schemas.jsonfile import a_folder, empty, in_words, without_bom
 from pairplay.schemas.robot import BoardCalibration, Point
 
 DEFAULT_FILE = "calibration_default.json"
@@ -38,6 +38,8 @@ def load_calibration(path: str | Path | None = None) -> BoardCalibration:
     else:
         try:
             raw = Path(path).read_bytes()
+        except IsADirectoryError:
+            raise CalibrationError(a_folder(path, "calibration file", "its JSON file")) from None
         except OSError as exc:
             raise CalibrationError(f"cannot read calibration {path}: {exc}") from exc
         where = str(path)
