@@ -206,10 +206,11 @@ def _on_folder(data: StudyData, args) -> int:
     if args.action == "status":
         if not data.state.participants:  # an empty plan is not a complete one
             print(f"nobody is registered: `pairplay protocol register {data.given}` first")
-        if data.key_file is not None and data.key_file.is_file():
-            for pid in data.unjournaled_key_ids():  # a crash between the key line and the journal line
-                print(f"{pid}: in the key file, never journaled (a crash cut its registration): no data, the id is "
-                      "not given again")
+        notes, key_problem = data.id_notes()  # ids some record shows, the journal does not register (a crash
+        if key_problem:  # between the key line and the journal line, a hand edit); an unreachable key file is said
+            print(key_problem)
+        for pid, note in notes.items():
+            print(f"{pid}: {note}")
         for step in data.plan():
             mark = "done" if step.done else ("blocked" if step.blocked else "open")
             print(f"[{mark:7}] {step.label}" + (f"  ({step.blocked})" if step.blocked and not step.done else ""))

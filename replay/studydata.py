@@ -78,6 +78,8 @@ REPORT_MANIFEST = manifest_name("report")
 # `rebuild --out STUDY/policies --force` replaced a game's policy; `study --out STUDY --force` took the folder)
 PROTOCOL_MANIFEST = manifest_name("protocol")
 TABLES = ("participants.csv", "sessions.csv", "answers.csv")
+# records of given ids (`StudyData.records_of_ids`) whose words a note picks out
+KEY_RECORD, TORN_RECORD = "the key file", "a torn journal line set aside"
 SUBFOLDERS = {"recordings": ".mcap", "policies": ".policy.json", "merged": ".policy.json"}  # and the files each holds
 
 
@@ -145,8 +147,12 @@ class StudyState:
     # ids given out: a registration left in the journal, or a deletion (it removed its one registration line
     # and keeps no id). Ids are given in order, so the next is one past both this count and the highest left.
     ids_given: int = 0
+    # every id a line names (a registration, a game, an export, a copy's participants, a combination's users):
+    # a line whose registration was removed by hand still shows the id was given (StudyData.ids_on_record)
+    named: set[str] = field(default_factory=set)
 
     def evolve(self, e: j.JournalEvent) -> None:
+        self.named |= ids_named_by(e)
         if isinstance(e, j.StudyCreated):
             self.created = e
         elif isinstance(e, j.ParticipantRegistered):
@@ -176,6 +182,15 @@ class StudyState:
             # deleted id was not the highest: p02 of p01..p03 deleted, the next was p05)
             self.ids_given += 1
             self.next_number = max(self.next_number, self.ids_given + 1)
+
+
+def ids_named_by(e: j.JournalEvent) -> set[str]:
+    """The participant ids a journal line names: its `participant`, a copy's `participants`, a combination's
+    `human:<id>` users."""
+    ids = {getattr(e, "participant", "")} | set(getattr(e, "participants", ()))
+    if isinstance(e, j.BiasCombined):
+        ids |= {u.removeprefix("human:") for u in e.users if u.startswith("human:")}
+    return ids - {"", "deleted"}
 
 
 @dataclass(frozen=True)
@@ -439,24 +454,77 @@ class StudyData:
             raise StudyDataError(f"cannot read the key file: {getattr(err, 'strerror', None) or err}", key) from None
 
     def ids_on_record(self) -> set[str]:
-        """Every id a record shows was given, beyond the journal's registrations: the key file's lines (written
-        before the journal line: a crash between them leaves the key line alone), participants.csv (the tables
-        as last written) and the registrations of torn lines `protocol repair` set aside. None is given again."""
-        ids = set(self.key_file_ids()) | studyjournal.torn_ids(self.folder / JOURNAL)
+        """Every id a record shows was given, beyond the journal's registrations (`records_of_ids`). None is
+        given again."""
+        return set(self.records_of_ids())
+
+    def records_of_ids(self, key_file: bool = True) -> dict[str, list[str]]:
+        """{id: the records that show it given, by their names}: the key file's lines (written before
+        the journal line: a crash between them leaves the key line alone), participants.csv (the tables as last
+        written), the registrations of torn lines `protocol repair` set aside, the journal's lines (a game, an
+        export... whose registration a hand edit removed), and the names of exports/, recordings/ and policies/
+        (a session's name holds its participant's id: `session_id`). A hand edit that removed an id from some
+        records leaves it in the others: it is never given again, and `unregistered_ids` says where it is.
+        `key_file` False: the key file left out (`protocol status` beside an unreachable one)."""
+        found: dict[str, list[str]] = {}
+
+        def add(ids, place: str) -> None:
+            for pid in ids:
+                found.setdefault(pid, [])
+                if place not in found[pid]:
+                    found[pid].append(place)
+
+        add(self.key_file_ids() if key_file else [], KEY_RECORD)
         try:
             with open(self.folder / "participants.csv", encoding="utf-8", newline="") as f:
-                ids |= {r[0] for r in list(csv.reader(f))[1:] if r}
+                add([r[0] for r in list(csv.reader(f))[1:] if r], "participants.csv")
         except FileNotFoundError:
             pass
         except (OSError, UnicodeDecodeError, csv.Error) as err:
             raise StudyDataError(f"cannot read it: {getattr(err, 'strerror', None) or err}",
                                  self.given / "participants.csv") from None
-        return ids
+        add(studyjournal.torn_ids(self.folder / JOURNAL), TORN_RECORD)
+        add(self.state.named - set(self.state.participants), "other journal lines")
+        session = re.compile(rf"(?<![A-Za-z0-9]){re.escape(self.study.study.id)}-(p[0-9]+)-")
+        for sub, pattern in (("exports", re.compile(r"(p[0-9]+)\.zip")), ("recordings", session), ("policies", session)):
+            try:
+                names = [f.name for f in (self.folder / sub).iterdir()]
+            except FileNotFoundError:
+                continue
+            except OSError as err:
+                raise StudyDataError(f"cannot list it: {err.strerror or err}", self.given / sub) from None
+            add(sorted(m[1] for m in map(pattern.fullmatch if sub == "exports" else pattern.search, names) if m), f"{sub}/")
+        return found
 
-    def unjournaled_key_ids(self) -> list[str]:
-        """Key-file ids with no registration in the journal (a crash between the two, a torn line set aside):
-        ids given to someone who has no data here; never given again (`ids_on_record`)."""
-        return [i for i in dict.fromkeys(self.key_file_ids()) if i not in self.state.participants]
+    def unregistered_ids(self, key_file: bool = True) -> dict[str, str]:
+        """{id: what it is} for each id a record shows given (`records_of_ids`) that the journal does not register:
+        a crash between the key-file line and the journal line, a torn line set aside, a hand edit. None has data
+        the study can use; none is given again. Said by `protocol status` and listed by the console."""
+        notes = {}
+        for pid, places in self.records_of_ids(key_file).items():
+            if pid in self.state.participants:
+                continue
+            if KEY_RECORD in places and set(places) <= {KEY_RECORD, TORN_RECORD}:
+                notes[pid] = ("in the key file only: not registered (a crash cut its registration, or a hand edit): "
+                              "no data here; the id is not given again")
+            else:
+                notes[pid] = f"not registered in the journal, but named in {', '.join(places)}: the id is not given again"
+        return dict(sorted(notes.items(), key=lambda kv: (len(kv[0]), kv[0])))
+
+    def id_notes(self) -> tuple[dict[str, str], str]:
+        """(`unregistered_ids`, "" or why the key file's ids are left out of it): what `protocol status` and the
+        console say of the ids the journal does not register. A key file not there or unreadable (an unmounted
+        drive) is said, not raised: these only read, beside it (a registration refuses: `key_file_ids`)."""
+        try:
+            return self.unregistered_ids(), ""
+        except StudyDataError as err:
+            if self.key_file is None:
+                raise
+            try:
+                self.key_file_ids()
+            except StudyDataError as key:
+                return self.unregistered_ids(key_file=False), f"the ids of the key file are not checked here: {one_line(key)}"
+            raise err from None
 
     def register_many(self, joins: str, count: int = 1, label: str = "", *, count_name: str = "--count",
                       label_name: str = "--name") -> list[str]:

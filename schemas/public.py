@@ -4,10 +4,9 @@ Rule: `pairplay.SessionConfig(bogus=1)` is refused as every public function refu
 (pairplay/arguments.py `call_arguments`: an ArgumentError, one line, the unknown argument and the one
 it resembles), not with msgspec's "Unexpected keyword argument 'bogus'". A Struct takes no `__init__` or
 `__new__` of its own, so the check is its metaclass's `__call__`; msgspec lets a metaclass derive from its
-StructMeta from 0.20 on (`msgspec.StructMeta`). On msgspec 0.19, the lowest pyproject declares, StructMeta
-cannot be derived from: there the Struct is a plain one and keeps msgspec's words (its values are checked as
-before, by the functions it is given to). Decoding never calls the constructor: a file's keys are checked by
-the decoder (schemas/jsonfile.py).
+StructMeta from 0.20 on (`msgspec.StructMeta`), the lowest pyproject declares (on 0.19 the Struct kept
+msgspec's words). Decoding never calls the constructor: a file's keys are checked by the decoder
+(schemas/jsonfile.py).
 """
 
 from __future__ import annotations
@@ -20,15 +19,13 @@ from pairplay.arguments import call_arguments
 
 _SIGNATURES: dict[type, inspect.Signature] = {}
 
-if hasattr(msgspec, "StructMeta"):
-    class PublicStructMeta(msgspec.StructMeta):
-        """The metaclass of a public Struct: its arguments checked before msgspec builds it."""
 
-        def __call__(cls, *args, **kwargs):
-            signature = _SIGNATURES.get(cls)
-            if signature is None:  # once per class
-                signature = _SIGNATURES[cls] = inspect.signature(cls)
-            call_arguments(cls.__name__, signature, args, kwargs)
-            return super().__call__(*args, **kwargs)
-else:  # msgspec 0.19 (module rule)
-    PublicStructMeta = type(msgspec.Struct)
+class PublicStructMeta(msgspec.StructMeta):
+    """The metaclass of a public Struct: its arguments checked before msgspec builds it."""
+
+    def __call__(cls, *args, **kwargs):
+        signature = _SIGNATURES.get(cls)
+        if signature is None:  # once per class
+            signature = _SIGNATURES[cls] = inspect.signature(cls)
+        call_arguments(cls.__name__, signature, args, kwargs)
+        return super().__call__(*args, **kwargs)

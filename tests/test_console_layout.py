@@ -105,3 +105,33 @@ def test_every_button_is_clickable_and_the_page_never_scrolls_sideways(browser, 
             ctx.close()
         finally:
             server.close()
+
+
+def test_an_id_in_the_key_file_only_is_listed_as_what_it_is(browser, tmp_path):
+    """Bob's registration and participants.csv row removed by hand, his key-file line left: `protocol status` said
+    it, the console listed p01 alone (the experimenter saw nothing wrong). It lists p02 as not registered, in the
+    state and on the page, and not as a participant (no export or deletion is offered for it)."""
+    data = StudyData.create(tmp_path / "study", STUDY, tmp_path / "keys" / "k.csv")
+    assert [data.register("phase1", name) for name in ("Alice", "Bob")] == ["p01", "p02"]
+    data.write_tables()
+    journal, table = data.folder / "journal.jsonl", data.folder / "participants.csv"
+    journal.write_bytes(b"".join(line for line in journal.read_bytes().splitlines(keepends=True)
+                                 if not (b'"ParticipantRegistered"' in line and b'"p02"' in line)))
+    table.write_text("".join(r for r in table.read_text().splitlines(keepends=True) if not r.startswith("p02,")))
+    note = ("in the key file only: not registered (a crash cut its registration, or a hand edit): no data here; "
+            "the id is not given again")
+    with Bus(BusOptions()) as bus:
+        server = StudyLabServer(StudyRunner(StudyData(data.folder), bus)).start()
+        try:
+            state = _api(server, "state")
+            assert [p["id"] for p in state["participants"]] == ["p01"], state["participants"]
+            assert state["unregistered"] == [{"id": "p02", "note": note}], state
+            ctx = browser.new_context(viewport={"width": 1366, "height": 900}, bypass_csp=True)
+            page = ctx.new_page()
+            page.goto(server.console_url)
+            page.wait_for_function("document.querySelectorAll('#participants li').length == 2", timeout=15000)
+            assert page.inner_text("#participants li.unregistered") == f"p02: {note}"
+            assert page.eval_on_selector_all("#data-participant option", "os => os.map(o => o.value)") == ["p01"]
+            ctx.close()
+        finally:
+            server.close()

@@ -112,7 +112,11 @@ class Console:
             url = self.board_url(live.session)  # None until the lab's board for this game is up
             if url:  # a key only with a URL to open (a client waiting for "board_url" got null and failed)
                 live_d["board_url"] = url
+        # ids a record shows given that the journal does not register (a crash, a hand edit): listed as what they
+        # are, beside the participants, so that the experimenter sees the inconsistency (`protocol status` says it too)
+        notes, key_problem = data.id_notes()
         return {
+            "unregistered": [{"id": pid, "note": note} for pid, note in notes.items()], "key_file_problem": key_problem,
             "study": {"id": data.study.study.id, "title": data.study.study.title, "folder": str(data.folder),
                       "phases": [p.id for p in data.study.phase], "key_file": bool(data.key_file)},
             "participants": [{"id": pid, "joins": r.joins, "scripted": data.scripted_as(pid),

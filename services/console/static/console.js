@@ -48,6 +48,9 @@ function render(s) {
   }
   const ul = $("participants"); ul.innerHTML = "";
   s.participants.forEach((p) => ul.appendChild(el("li", `${p.id} (joins ${p.joins}; ${p.games} valid game(s)${p.scripted ? `; scripted: ${p.scripted}` : ""})`)));
+  // an id a record shows given that the journal does not register (a crash, a hand edit): what it is, never a participant
+  s.unregistered.forEach((u) => { const li = el("li", `${u.id}: ${u.note}`); li.className = "unregistered"; ul.appendChild(li); });
+  if (s.key_file_problem) { const li = el("li", s.key_file_problem); li.className = "unregistered"; ul.appendChild(li); }
   const sel = $("data-participant"), keep = sel.value; sel.innerHTML = "";
   s.participants.forEach((p) => sel.appendChild(el("option", p.id)));
   if ([...sel.options].some((o) => o.value === keep)) sel.value = keep;
