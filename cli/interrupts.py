@@ -4,8 +4,9 @@ Rule: the pairplay command's SIGINT handler raises KeyboardInterrupt at once,
 except while the main thread holds numba's compiler lock (compiling a kernel,
 or loading one from the cache). Then the interrupt is held: a helper thread
 waits for the lock (it is free once the main thread has left the compiler) and
-delivers the interrupt to the main thread again (`_thread.interrupt_main`, as the signal
-that came). A
+delivers the interrupt to the main thread again (pairplay/signals.py `send_to_main`: the
+signal that came, sent to the main thread, so that it also wakes a wait the main thread
+has gone on to). A
 second Ctrl-C while one is held interrupts at once.
 
 Why: numba compiles through llvmlite, which calls back into Python from C
@@ -42,7 +43,6 @@ written" for outputs that were all there.
 
 from __future__ import annotations
 
-import _thread
 import signal
 import sys
 import threading
@@ -112,5 +112,4 @@ class DeferredInterrupt:
     def _deliver_after(self, lock, signum: int) -> None:
         with lock._lock:  # free once the main thread has left numba's compiler
             self._redelivered = True
-            # as the signal that came: SIGINT may be ignored (pairplay/signals.py), and interrupt_main then does nothing
-            _thread.interrupt_main(signum)
+            signals.send_to_main(signum)

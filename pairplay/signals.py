@@ -102,10 +102,17 @@ def in_finalizer(frame) -> bool:
     return False
 
 
+def send_to_main(signum: int) -> None:
+    """`signum` to the main thread, as a real signal: it wakes a sleep or a wait the main thread is blocked in
+    (`_thread.interrupt_main` only sets the flag, and the interrupt waited for the wait's end: a study held in
+    numba's compiler then interrupted only when its next 5-second wait ended)."""
+    import threading
+    signal.pthread_kill(threading.main_thread().ident, signum)
+
+
 def deliver_again(signum: int, before=None, delay_s: float = FINALIZER_RETRY_S) -> None:
-    """`signum` comes to the main thread's handler again `delay_s` seconds from now, as the signal that came
-    (`_thread.interrupt_main`); `before()` runs first, in the helper thread (it must only set flags)."""
-    import _thread
+    """`signum` comes to the main thread's handler again `delay_s` seconds from now (`send_to_main`);
+    `before()` runs first, in the helper thread (it must only set flags)."""
     import threading
     import time
 
@@ -113,5 +120,5 @@ def deliver_again(signum: int, before=None, delay_s: float = FINALIZER_RETRY_S) 
         time.sleep(delay_s)
         if before is not None:
             before()
-        _thread.interrupt_main(signum)
+        send_to_main(signum)
     threading.Thread(target=again, name="pairplay-interrupt", daemon=True).start()

@@ -696,8 +696,8 @@ def test_a_ctrl_c_inside_a_finalizer_is_not_swallowed(tmp_path, kind, handler):
         "        pass\n"
         + FINALIZERS[kind] + HANDLERS[handler] +
         "try:\n"
-        "    drop()\n"  # the interrupt may land anywhere once the finalizer is left: here or in the sleep
-        "    time.sleep(5)\n"
+        "    drop()\n"  # the interrupt may land anywhere once the finalizer is left: here or in the sleep,
+        "    time.sleep(120)\n"  # which it wakes (it waited for the sleep's end: 5 s a test)
         "    print('not interrupted')\n"
         "except KeyboardInterrupt:\n"
         "    print('interrupted')\n")
@@ -721,7 +721,7 @@ def test_a_ctrl_c_inside_numbas_compiler_waits_for_the_compile_then_interrupts(t
         "        os.kill(os.getpid(), signal.SIGINT)\n"
         "        time.sleep(0.3)\n"
         "        print('compile finished', flush=True)\n"
-        "    time.sleep(5)\n"
+        "    time.sleep(120)\n"  # the interrupt wakes it (it waited for the sleep's end)
         "    print('not interrupted')\n"
         "except KeyboardInterrupt:\n"
         "    print('interrupted after the compile')\n")
