@@ -69,9 +69,15 @@ def run_through_router(tmp_path, session: str, rounds: int, cache_samples: int, 
     rec_thread = threading.Thread(target=recorder.run, args=(rec_stop,), daemon=True)
     rec_thread.start()
     board = Node(board_bus, ParticipantLogic(), session, stop=stop)
+
+    def play() -> None:  # and leave the bus once the session has ended for it, as its own process would: the
+        board.run(stop)  # session waits for its external services to leave (before, 20 s of settle_timeout_s)
+        board.close(1.0)
+        board_bus.close()
     if remote_participant:  # else the session's own process plays too, and goes on while the router is down
         board.start()
-        board.run_in_thread(stop)
+        board_thread = threading.Thread(target=play, daemon=True)
+        board_thread.start()
     nodes: dict = {}
     done: dict = {}
     runner = threading.Thread(target=lambda: done.setdefault("path", run_session(
@@ -101,11 +107,12 @@ def run_through_router(tmp_path, session: str, rounds: int, cache_samples: int, 
         while time.monotonic() < deadline and (not recorder.ended or recorder._refill_at is not None
                                                or recorder._link_lost_ns is not None or len(recorder.inbox)):
             time.sleep(0.02)
-        board.close(1.0)
     finally:
         stop.set()
         rec_stop.set()
         rec_thread.join(5)
+        if remote_participant:
+            board_thread.join(10)
         recorder.close()
         for bus in (rec_bus, board_bus):
             bus.close()
