@@ -386,7 +386,10 @@ def test_a_restarted_recorder_continues_the_sessions_record_and_marks_the_gap(tm
     # before: the new recorder wrote <session>.1.mcap without the session's start; verify refused
     # it and the events of the gap were in neither file
     env = dict(os.environ, PYTHONUNBUFFERED="1")
-    p = session_proc(tmp_path, "--participant", "sim:ashley", "--rounds", "40", "--session", "rr1",
+    # 12 rounds (~60 of the participant's events each): the 350 it is let handle before the new recorder is up, and
+    # ~5 rounds after, recorded live; the session is held (Holding) in between, whatever the load (before: 40 rounds,
+    # whose last ~34 only played on after the checks' events)
+    p = session_proc(tmp_path, "--participant", "sim:ashley", "--rounds", "12", "--session", "rr1",
                      "--external", "recorder", "--external", "participant")
 
     def recorder(endpoint):
