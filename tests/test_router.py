@@ -107,6 +107,8 @@ def run_through_router(tmp_path, session: str, rounds: int, cache_samples: int, 
         while time.monotonic() < deadline and (not recorder.ended or recorder._refill_at is not None
                                                or recorder._link_lost_ns is not None or len(recorder.inbox)):
             time.sleep(0.02)
+        if not remote_participant:  # never started: its Outbox's thread only (play closes a started one)
+            board.close(1.0)
     finally:
         stop.set()
         rec_stop.set()
