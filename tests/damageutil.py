@@ -13,12 +13,12 @@ from pairplay.schemas.keys import event_key
 from pairplay.schemas.session import SessionConfig
 
 
-def small_chunked_session(path, session: str):
-    """A real recording of a 3-round session at `path`, written by the recorder's writer in small chunks (about
-    20), to be damaged."""
+def small_chunked_session(path, session: str, rounds: int = 3):
+    """A real recording of a 3-round session (or `rounds`) at `path`, written by the recorder's writer in small
+    chunks (about 20 for 3 rounds), to be damaged."""
     from loopback_session import loopback_events
 
-    config = SessionConfig(session=session, participant="sim:deaf", persona="deaf", seed=4, rounds=3)
+    config = SessionConfig(session=session, participant="sim:deaf", persona="deaf", seed=4, rounds=rounds)
     w = EventLogWriter(path, chunk_size=4096)
     w.add_metadata("pairplay.session", {"session": config.session})
     for i, e in enumerate(loopback_events(config)):
