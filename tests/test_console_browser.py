@@ -34,7 +34,7 @@ from pairplay.services.node import Driver
 from pairplay.services.protocol import StudyRunner
 from pairplay.services.scripted import ScriptedPlayer, answers_for
 
-from labutil import open_page
+from labutil import card_centers, open_page
 
 STUDY = Path(__file__).parent / "data" / "pilot-study.toml"
 PERSONAS = {"p01": "tatiana", "p02": "blind", "p03": "deaf", "p04": "vincent"}
@@ -44,8 +44,7 @@ def play_on_the_board(page, inbox: queue.Queue, session: str, persona_key: str) 
     """The persona plays the game on the board page: it reads the game's events from the bus and
     clicks what it chose (cards, the wrong-suggestion button); returns the clicks made."""
     player = Driver(ScriptedPlayer(persona_key), session, clock=time.time_ns)
-    boxes = {i: page.locator(f"[data-card='{i}']").bounding_box() for i in range(18)}
-    centers = {i: (b["x"] + b["width"] / 2, b["y"] + b["height"] / 2) for i, b in boxes.items()}
+    centers = card_centers(page)
     clicks = 0
     while not player.logic.done:
         key, payload = inbox.get(timeout=30)
