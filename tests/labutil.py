@@ -85,6 +85,15 @@ def open_page(browser, url: str, width: int = 1024, height: int = 600):
     return page
 
 
+def card_centers(page) -> dict:
+    """card -> (x, y), the centre of each card on the page in viewport pixels (what `page.mouse.click`
+    takes): one evaluate for the 18 cards, not a locator round trip each."""
+    rects = page.evaluate("""() => Array.from({length: 18}, (_, i) => {
+        const r = document.querySelector(`[data-card='${i}']`).getBoundingClientRect();
+        return [r.x + r.width / 2, r.y + r.height / 2]; })""")
+    return {i: tuple(c) for i, c in enumerate(rects)}
+
+
 def wait_phase(page, *phases: str, timeout_ms: int = 10000) -> None:
     page.wait_for_function(f"window.pairplay.state && {list(phases)!r}.includes(window.pairplay.state.phase)",
                            timeout=timeout_ms)
