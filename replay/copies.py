@@ -154,8 +154,9 @@ class Copies:
             root = study_root(place)
             if root is None or root in self._held:
                 continue
-            try:
-                fd = folderlock.take(root, self.verb)
+            try:  # a short holder (a register, an export) is waited for, as by every writer of the folder
+                fd = folderlock.take(root, self.verb, folderlock.WAIT_S,
+                                     folderlock.say_waiting(self.verb, self._typed.get(root, root)))
             except folderlock.FolderBusy as busy:
                 raise OutputError(f"another pairplay writes this study folder: {busy.holder or 'a process'}; this "
                                   f"`pairplay {self.verb}` would write into it ({place}): run it when that one has "

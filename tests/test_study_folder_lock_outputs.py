@@ -77,6 +77,30 @@ def test_a_verb_writing_into_a_served_study_folder_is_refused_and_writes_nothing
     assert (folder / ".pairplay-lock").read_bytes() == b""  # and its own lock released
 
 
+def test_a_verb_writing_into_a_study_folder_waits_for_a_short_holder_then_writes(study):
+    """A short holder (a register, an export) is waited for, as every other writer of the folder waits for it
+    (tests/test_study_lock_wait.py): `recover` of a game's recording in the folder was refused at once."""
+    import os
+    import subprocess
+    import sys
+
+    from pairplay import folderlock
+    folder, rec, cut = study
+    fd = folderlock.take(folder, "participant export")  # this process holds the folder, as a short verb
+    recover = subprocess.Popen([sys.executable, "-m", "pairplay", "recover", str(cut), "--quiet"],
+                               stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        said = recover.stderr.readline()  # it waits, and says so, before the holder ends
+        assert said.startswith("pairplay recover: waiting up to ") and \
+            f"participant export (pid {os.getpid()}, since " in said, said
+        assert recover.poll() is None
+    finally:
+        folderlock.release(fd)
+    out, err = recover.communicate(timeout=60)
+    assert recover.returncode == 0 and err == "", (out, err)
+    assert (folder / ".pairplay-lock").read_bytes() == b""  # its own lock released
+
+
 def test_a_verb_run_in_process_releases_the_folders_lock_however_it_ends(study, capsys, pairplay):
     """The lock a verb's output took is released when it ends (cli/main.py), refused or not: a second verb in the
     same process (a test, a script calling main) is not refused by the first one's lock."""
