@@ -107,7 +107,8 @@ def send_to_main(signum: int) -> None:
     (`_thread.interrupt_main` only sets the flag, and the interrupt waited for the wait's end: a study held in
     numba's compiler then interrupted only when its next 5-second wait ended)."""
     import threading
-    signal.pthread_kill(threading.main_thread().ident, signum)
+    if callable(signal.getsignal(signum)):  # as interrupt_main: nothing once no Python handler takes it (a
+        signal.pthread_kill(threading.main_thread().ident, signum)  # default SIGTERM would kill the process)
 
 
 def deliver_again(signum: int, before=None, delay_s: float = FINALIZER_RETRY_S) -> None:
