@@ -139,7 +139,7 @@ def run(args: argparse.Namespace) -> int:
             # (pairplay/folderlock.py), and a copy of a participant's data that their deletion would not know is
             # never kept (replay/copies.py)
             kept.path.unlink(missing_ok=True)
-            print(f"pairplay view: interrupted ({done.why}) after {_counts(done)}, before the source ended; nothing "
+            print(f"pairplay view: interrupted ({signals.said(done.why)}) after {_counts(done)}, before the source ended; nothing "
                   "saved: its study folder is busy (another pairplay writes it), and the partial view, a copy of "
                   "its participant's data, could not be journaled there", file=sys.stderr)
             return 0
