@@ -211,6 +211,9 @@ def _on_folder(data: StudyData, args) -> int:
             print(key_problem)
         for pid, note in notes.items():
             print(f"{pid}: {note}")
+        for problem in data.fold_problems():  # a hand edit the tables cannot fold: every writing verb refuses it
+            print(f"{data.given / JOURNAL}: does not fold into consistent tables: {problem}: every verb that writes "
+                  f"the folder refuses it until the line is put back (a backup of {JOURNAL})")
         for step in data.plan():
             mark = "done" if step.done else ("blocked" if step.blocked else "open")
             print(f"[{mark:7}] {step.label}" + (f"  ({step.blocked})" if step.blocked and not step.done else ""))

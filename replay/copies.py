@@ -136,6 +136,7 @@ class Copies:
         (its output files or folders) cannot take the journal line of it (a copy the deletion would not know)."""
         for root in self._lines([Path(p) for p in places], None):
             journal = self._typed.get(root, root) / JOURNAL
+            self._studies[root].check_folds()  # a journal a line more would not mend (a registration removed by hand)
             try:  # opened for appending, nothing written: what the append will need (a read-only mount refuses)
                 os.close(os.open(root / JOURNAL, os.O_WRONLY | os.O_APPEND))
             except OSError as err:

@@ -292,7 +292,9 @@ class StudyData:
         the write's length when this object was made read-only) and refuses to write from a stale copy: a
         journal changed since this object read or wrote it (by a process that took no lock: a pairplay
         before the lock, a hand edit) would be overwritten by what this one holds in memory (a deletion
-        undone, an id given twice), so the write is refused and the verb is to be started again."""
+        undone, an id given twice), so the write is refused and the verb is to be started again. Nor does it write
+        on a journal that does not fold into consistent tables (`check_folds`: a registration removed by hand), which
+        a line more would not mend: the verb's line journaled, its tables failing, a retry's line journaled again."""
         with self._lock:
             taken = None
             if self._hold is None:
@@ -303,11 +305,50 @@ class StudyData:
                                          "nothing was written from the stale copy: start this verb again (a running "
                                          "`protocol serve`: stop and start it; was its .pairplay-lock removed?)",
                                          self.given / JOURNAL)
+                self.check_folds()  # before anything is written, whatever the verb (a line, a table, a file)
                 yield
                 self._stamp = self._journal_stamp()
             finally:
                 if taken is not None:
                     self.close()
+
+    def fold_problems(self) -> list[str]:
+        """What of the journal as it stands does not fold into consistent tables, one item each, naming the lines
+        (none: it does): a game, its end, pause or mark of a participant no line registers (their registration
+        removed by hand), a game or a registration of a phase the study file does not have. `protocol status`
+        lists them; every write refuses while there is one (`check_folds`). Why: a `register` on a folder whose
+        p02 registration was removed by hand journaled a new id, then its tables failed ("no participant 'p02'",
+        participants.csv left stale), and a retry gave yet another id."""
+        phases = {p.id for p in self.study.phase}
+        registered = self.state.participants
+        if all(g.participant in registered and g.phase in phases for g in self.state.games.values()) and \
+                all(r.joins in phases for r in registered.values()):
+            return []  # (the usual case: no second read of the journal)
+        games = {g.session: g for g in self.state.games.values()}
+        unregistered: dict[str, list[int]] = {}
+        problems = []
+        for n, e in studyjournal.numbered((self.folder / JOURNAL).read_bytes()):
+            game = games.get(getattr(e, "session", ""))
+            if game is not None and game.participant not in registered:
+                unregistered.setdefault(game.participant, []).append(n)
+            if isinstance(e, j.GameStarted) and e.phase not in phases:
+                problems.append(f"line {n} starts game {e.session} of phase {e.phase!r}, which the study file has not")
+            if isinstance(e, j.ParticipantRegistered) and e.participant in registered and e.joins not in phases:
+                problems.append(f"line {n} registers {e.participant} for phase {e.joins!r}, which the study file has not")
+        for pid, lines in unregistered.items():
+            problems.insert(0, f"{pid} has {counted(len(lines), 'game line')} ({_line_numbers(lines)}) and no registration "
+                            "line (removed by hand?)")
+        return problems
+
+    def check_folds(self) -> None:
+        """StudyDataError, one line naming the journal, what does not fold (`fold_problems`) and what to do, if the
+        journal as it stands does not fold into consistent tables: before any write (module rule of `_writing`)."""
+        problems = self.fold_problems()
+        if problems:
+            raise StudyDataError(f"does not fold into consistent tables: {'; '.join(problems)}; nothing was written: "
+                                 f"put back the line that was removed or changed (a backup of {JOURNAL}), then run "
+                                 f"this again (`pairplay protocol status {self.given}` lists what does not fold)",
+                                 self.given / JOURNAL)
 
     def _check_study_file(self) -> None:
         """The study file is fixed once the study is created: its bytes against the SHA-256 the journal's
@@ -572,7 +613,8 @@ class StudyData:
         phase = self.study.phase_by_id(phase_id)
         upto = ids.index(phase_id)
         return [pid for pid, r in self.state.participants.items()
-                if r.joins == phase_id or (phase.players == "all" and ids.index(r.joins) < upto)]
+                if r.joins == phase_id or (phase.players == "all" and r.joins in ids and ids.index(r.joins) < upto)]
+        # (a registration of a phase the study has not, a hand edit: no phase's player; `fold_problems` says it)
 
     # -- the plan ------------------------------------------------------------
     def games_of(self, pid: str, phase: str | None = None) -> list[Game]:
@@ -1249,6 +1291,12 @@ def write_game_policy(folder: Path, rebuilt: Rebuilt, force: bool = False) -> st
     policy, curve = write_outputs(rebuilt, folder / "policies", force=force)
     curve.unlink()
     return policy.relative_to(folder).as_posix()
+
+
+def _line_numbers(lines: list[int]) -> str:
+    """`lines 7, 9, 12` (the first few of them, `...` beyond): which lines of the journal a problem is on."""
+    shown = ", ".join(map(str, lines[:5])) + (", ..." if len(lines) > 5 else "")
+    return f"line {shown}" if len(lines) == 1 else f"lines {shown}"
 
 
 def one_line(err: Exception) -> str:

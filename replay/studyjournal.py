@@ -96,6 +96,19 @@ def events_of(data: bytes, named: Path, folder: Path, repairing: bool = False) -
     return events
 
 
+def numbered(data: bytes) -> list[tuple[int, j.JournalEvent]]:
+    """(line number from 1, event) of each line of journal bytes that reads, numbered as `events_of` names a line
+    (a refusal that names the line a problem is on: replay/studydata.py `fold_problems`)."""
+    found = []
+    for n, line in enumerate(_lines(data), 1):
+        if line.strip():
+            try:
+                found.append((n, j.decode_line(line)))
+            except (msgspec.DecodeError, msgspec.ValidationError):
+                continue  # events_of says it
+    return found
+
+
 _REGISTERED = re.compile(rb'"event"\s*:\s*"ParticipantRegistered".*?"participant"\s*:\s*"([^"\\]+)"')
 
 

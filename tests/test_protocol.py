@@ -928,3 +928,55 @@ def test_a_cited_policy_file_that_cannot_be_read_is_said(played, tmp_path, capsy
     md = (data.folder / "report" / "report.md").read_text()
     assert f"**unreadable policy files, cited from the journal**: {cited} (" in md
     assert (f"`{cited}`, its file unreadable now" in md) == (which == "merged")
+
+
+def _unregistered_by_hand(folder: Path, pid: str) -> None:
+    """What a hand edit leaves: `pid`'s registration line gone from the journal (their games' lines stay)."""
+    journal = folder / "journal.jsonl"
+    journal.write_bytes(b"".join(line for line in journal.read_bytes().splitlines(keepends=True)
+                                 if not (b'"ParticipantRegistered"' in line and f'"{pid}"'.encode() in line)))
+
+
+def _files(folder: Path) -> dict[str, bytes]:
+    return {f.relative_to(folder).as_posix(): f.read_bytes() for f in sorted(folder.rglob("*")) if f.is_file()}
+
+
+def test_a_journal_that_does_not_fold_is_refused_by_every_writing_verb_before_it_writes(played, tmp_path, capsys):
+    """A new user's trial: p02 played, then their registration line was removed from the journal by hand; `protocol
+    register` journaled a new id, then its tables failed ("no participant 'p02'", exit 2), participants.csv stayed
+    stale, and a retry registered yet another id. Every verb that writes the folder (a journal line, a table, a copy
+    journaled there) now checks first that the journal folds into consistent tables, and refuses in one line naming
+    the journal, the lines and what to do, before any write; `protocol status` lists what does not fold."""
+    from pairplay.cli.main import main
+
+    data = copy_study(played, tmp_path)
+    folder, key = data.folder, tmp_path / "keys.csv"
+    p01 = data.games_of("p01")
+    lines = [n for n, line in enumerate((folder / "journal.jsonl").read_bytes().splitlines(), 1)
+             if b'"GameStarted"' not in line and any(f'"{g.session}"'.encode() in line for g in data.games_of("p02"))]
+    _unregistered_by_hand(folder, "p02")
+    before, keys = _files(folder), key.read_bytes()
+    verbs = [["protocol", "register", folder], ["protocol", "register", folder, "--count", "3"],
+             ["protocol", "mark-invalid", folder, p01[0].session, "--reason", "a test"],
+             ["protocol", "pilot", folder, "--personas", "tatiana,deaf,vincent"],
+             ["protocol", "serve", folder, "--listen", "127.0.0.1:0"],
+             ["participant", "export", folder, "p01"], ["participant", "delete", folder, "p01", "--yes"],
+             ["report", folder], ["report", folder, "--out", tmp_path / "elsewhere"],
+             ["rebuild", folder / p01[0].recording, "--out", tmp_path / "rebuilt", "--no-plot"],
+             ["combine", *(folder / g.ended.policy for g in p01[:2]), "-o", tmp_path / "merged.json"]]
+    for argv in verbs:
+        assert main([str(a) for a in argv]) == 2, argv
+        out, err = capsys.readouterr()
+        said = err.strip().splitlines()
+        assert len(said) == 1 and "Traceback" not in err, (argv, err)
+        assert (f"{folder / 'journal.jsonl'}" in said[0] and "does not fold into consistent tables: p02 has" in said[0]
+                and "and no registration line (removed by hand?)" in said[0] and "nothing was written" in said[0]
+                and "put back the line" in said[0]), (argv, said)
+        assert _files(folder) == before and key.read_bytes() == keys, argv  # no id journaled, no table, no key line
+        assert not [p for p in ("elsewhere", "rebuilt", "merged.json") if (tmp_path / p).exists()], argv
+    # the status says what does not fold (it only reads), and the ids it shows
+    assert main(["protocol", "status", str(folder)]) == 0
+    out, err = capsys.readouterr()
+    [problem] = [line for line in out.splitlines() if "does not fold" in line]
+    assert problem.startswith(f"{folder / 'journal.jsonl'}: does not fold into consistent tables: p02 has "), problem
+    assert f"({'lines ' if len(lines) > 1 else 'line '}" in problem and err == "", (out, err)
