@@ -76,7 +76,9 @@ def run(args) -> int:
     if report.read_whole:  # a damaged input, on stderr, -q or not (cli/main.py `warn`: -q hid it with the summary)
         print(f"pairplay report: read whole from a damaged file: {', '.join(report.read_whole)}", file=sys.stderr)
     if report.unreadable:  # cited from the journal; the files themselves cannot be read now (stderr, as above)
-        print(f"pairplay report: unreadable policy files, cited from the journal: {'; '.join(report.unreadable)}",
-              file=sys.stderr)
+        # a report missing what it cites is not a whole report: exit 1, "done, and the answer is no" (README's exit
+        # status table), the partial report written, as `replay --verify` of a partial recording (it was exit 0)
+        print(f"pairplay report: not a whole report: unreadable policy files, cited from the journal: "
+              f"{'; '.join(report.unreadable)}", file=sys.stderr)
     print(f"report: {out / 'report.md'}")
-    return 0
+    return 1 if report.unreadable else 0

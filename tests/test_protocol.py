@@ -913,7 +913,9 @@ def test_the_report_leaves_out_a_game_whose_recording_is_cut(played, tmp_path):
 def test_a_cited_policy_file_that_cannot_be_read_is_said(played, tmp_path, capsys, which):
     """The report cites the bias policy and the games' policies it was combined from (from the journal); one
     cut short (a copy that did not finish) was cited as if whole: no word in report.md, none on the command
-    line, exit 0 (a new user's trial). Now each is named with why, in report.md and on stderr (one line)."""
+    line, exit 0 (a new user's trial). Now each is named with why, in report.md and on stderr (one line). A report
+    missing what it cites is not a whole report: exit 1 (README's exit status table: "done, and the answer is no";
+    it was exit 0 with a warning), the partial report still written, as `replay --verify` of a partial recording."""
     from pairplay.cli.main import main
 
     data = copy_study(played, tmp_path)
@@ -921,10 +923,13 @@ def test_a_cited_policy_file_that_cannot_be_read_is_said(played, tmp_path, capsy
     cited = combined.output if which == "merged" else combined.inputs[0]
     path = data.folder / cited
     path.write_bytes(path.read_bytes()[:200])
-    assert main(["report", str(data.folder)]) == 0
-    err = capsys.readouterr().err.strip().splitlines()
+    assert main(["report", str(data.folder)]) == 1
+    out, err = capsys.readouterr()
+    err = err.strip().splitlines()
     said = [line for line in err if "unreadable" in line]
     assert len(said) == 1 and f"{cited} (corrupt or not a policy file: cut short" in said[0], err
+    assert said[0].startswith("pairplay report: not a whole report: unreadable policy files, cited from the journal: ")
+    assert out.strip().splitlines()[-1] == f"report: {data.folder / 'report' / 'report.md'}", out
     md = (data.folder / "report" / "report.md").read_text()
     assert f"**unreadable policy files, cited from the journal**: {cited} (" in md
     assert (f"`{cited}`, its file unreadable now" in md) == (which == "merged")
