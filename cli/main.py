@@ -391,7 +391,9 @@ def _main(argv: list[str], arm=None) -> int:
         if code is not None or (running and err.__traceback__.tb_next is None):  # raised here: run had returned
             interrupts.late = interrupts.late or interrupts.received or signal.SIGINT
             return code or 0
-        print(f"pairplay {args.verb}: {interrupted_what()}; nothing more was written", file=sys.stderr)
+        # (what it removed, if the signal came as it waited to journal its outputs: replay/copies.py Interrupted)
+        print(f"pairplay {args.verb}: {interrupted_what()}; {getattr(err, 'said', '') or 'nothing more was written'}",
+              file=sys.stderr)
         return exit_code_of(signal_received() or signal.SIGINT)
     except SystemError as err:  # Ctrl-C inside a compiled kernel: numba reports it as a SystemError around it
         if not isinstance(err.__cause__ or err.__context__, KeyboardInterrupt):

@@ -95,10 +95,10 @@ def run(args: argparse.Namespace) -> int:
     check_outputs(outputs, args.force, inputs=args.recordings)
     with output_folder(out, args.force, owned=REBUILD_OUTPUTS, among_others=True, manifest=MANIFEST) as staged:
         lines = write_all(done, staged, out, args)
-    for rebuilt in done:  # each recording's policy and curve are its participant's; the figure is everyone's
-        copies.journal(output_paths(rebuilt, out), inputs=[rebuilt.source])
-    if done and not args.no_plot:
-        copies.journal([figure])
+    # each recording's policy and curve are its participant's; the figure is everyone's (one call: a line that cannot
+    # be written removes every output still waiting for its line, replay/copies.py journal_each)
+    copies.journal_each([(output_paths(rebuilt, out), [rebuilt.source]) for rebuilt in done]
+                        + ([([figure], None)] if done and not args.no_plot else []))
     work_done()  # everything is written: a signal from now on is reported, and undoes nothing
     print("\n".join(lines))
     from pairplay.cli.main import warn

@@ -65,10 +65,12 @@ def run(args) -> int:
             with output_folder(out, args.force, owned=HUMAN_OUTPUTS, manifest=HUMAN_MANIFEST) as tmp:
                 report = human_report(args.folder, tmp, args.reference, include_scripted=args.include_scripted)
                 written = [out / f.relative_to(tmp) for f in sorted(tmp.rglob("*")) if f.is_file()]
+            # journaled under the lock it was written under: no other writer between (a line that cannot be written
+            # removes the copy, replay/copies.py journal_each; the lock retaken after it once let a wait time out)
+            copies.journal_each([(written, None)], data=data)
     except (StudyDataError, PolicyFileError, ValueError) as err:
         print(f"pairplay report: {err}", file=sys.stderr)
         return 2
-    copies.journal(written)
     if report.rehearsal:
         print(f"a rehearsal: {counted(len(report.games), 'scripted game')}, no person played")
     print(f"{counted(len(report.games), 'valid game')} of {counted(len({g.participant for g in report.games}), 'participant')}"

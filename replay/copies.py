@@ -22,12 +22,13 @@ kernel's at the process's end), and refuses at once, in one line, beside another
 
 from __future__ import annotations
 
+import contextlib
 import os
 from pathlib import Path
 from typing import Iterable
 
 from pairplay import folderlock
-from pairplay.errors import OutputError
+from pairplay.errors import OutputError, UserError
 from pairplay.outputs import is_owned
 from pairplay.schemas import journal as j
 
@@ -176,14 +177,71 @@ class Copies:
 
     def journal(self, written: Iterable[str | Path], inputs: Iterable[str | Path] | None = None) -> None:
         """Journal each file of `written` (in place now) made of `inputs` (default: all of the verb's) in the
-        studies whose data they hold, one CopyWritten each, but for the ones their deletion erases by itself."""
-        written = [Path(w) for w in written if Path(w).is_file()]
-        for root, pids in self._lines(written, inputs).items():
-            # the journal read afresh, under the folder's writer lock: the verb itself may have journaled
-            # meanwhile (report's PolicyBuilt lines), and a copy read before would be refused as stale
-            with StudyData(self._typed[root], writer=self.verb, held=self.hand_over(root)) as data:
-                for w in written:
-                    if erased_anyway(data, pids, self.verb, w):
-                        continue
-                    data.append(j.CopyWritten(participants=sorted(pids), verb=self.verb, path=str(w.resolve()),
-                                              sha256=sha256_of(w)))
+        studies whose data they hold (`journal_each`)."""
+        self.journal_each([(written, inputs)])
+
+    def journal_each(self, groups: Iterable[tuple[Iterable[str | Path], Iterable[str | Path] | None]],
+                     data: StudyData | None = None) -> None:
+        """Journal each file of each group (files in place now, the inputs they were made of: None for all of the
+        verb's) in the studies whose data they hold, one CopyWritten each, but for the ones their deletion erases by
+        itself. `data`: the study folder's StudyData the verb holds the writer lock with (report: its lines under the
+        lock its output was written under), used for its folder. A line that cannot be written (the folder's lock
+        not free when the wait for a short holder ends, a signal during that wait, a journal refused) leaves no copy
+        its participants' deletion would not know: every file still waiting for its line is removed, and the error
+        says so in its one line (OutputError; a signal's KeyboardInterrupt carries it in `said`, cli/main.py). Why:
+        the outputs are renamed into place before their line, and `rebuild --out elsewhere` of a study's recording
+        whose folder a register held past the wait left its policy there, unjournaled."""
+        pending: list[tuple[Path, set[str], Path]] = []  # (study, whose data, file) for each line to write
+        for written, inputs in groups:
+            files = [Path(w) for w in written if Path(w).is_file()]
+            for root, pids in self._lines(files, inputs).items():
+                pending += [(root, pids, w) for w in files
+                            if not erased_anyway(self._studies[root], pids, self.verb, w)]
+        try:
+            for root in dict.fromkeys(root for root, _, _ in pending):
+                mine = data is not None and data.folder == root
+                # the journal read afresh, under the folder's writer lock: the verb itself may have journaled
+                # meanwhile (report's PolicyBuilt lines), and a copy read before would be refused as stale
+                with contextlib.nullcontext(data) if mine else \
+                        StudyData(self._typed[root], writer=self.verb, held=self.hand_over(root)) as study:
+                    for line in [p for p in pending if p[0] == root]:
+                        _, pids, w = line
+                        if not erased_anyway(study, pids, self.verb, w):
+                            study.append(j.CopyWritten(participants=sorted(pids), verb=self.verb,
+                                                       path=str(w.resolve()), sha256=sha256_of(w)))
+                        pending.remove(line)
+        except BaseException as err:
+            files = list(dict.fromkeys(w for _, _, w in pending))
+            removed = _removed(files)
+            if not removed:
+                raise
+            said = (f"{removed}: {'a copy' if len(files) == 1 else 'copies'} of participants' data whose line could not "
+                    f"be written in their study's journal (their deletion would not know {'it' if len(files) == 1 else 'them'})")
+            if isinstance(err, KeyboardInterrupt):
+                raise Interrupted(said) from None
+            what = err.what if isinstance(err, UserError) else str(err)
+            where = err.where if isinstance(err, UserError) else ""
+            raise OutputError(f"{what}; {said}", where) from None
+
+
+def _removed(files: list[Path]) -> str:
+    """Remove `files` (outputs whose journal line could not be written): "removed A, B" as it says them."""
+    gone, kept = [], []
+    for f in files:
+        try:
+            f.unlink()
+            gone.append(str(f))
+        except FileNotFoundError:
+            continue
+        except OSError as err:  # said, never passed over: remove it by hand
+            kept.append(f"{f} ({err.strerror or err}: remove it by hand)")
+    return "; ".join(([f"removed {', '.join(gone)}"] if gone else []) + ([f"NOT removed {', '.join(kept)}"] if kept else []))
+
+
+class Interrupted(KeyboardInterrupt):
+    """A signal stopped the verb while it waited to journal its outputs: they were removed (`said`, its line's
+    end after `interrupted (...)`, cli/main.py)."""
+
+    def __init__(self, said: str):
+        super().__init__(said)
+        self.said = said

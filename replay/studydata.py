@@ -940,8 +940,15 @@ class StudyData:
             atomic_write(out, buf.getvalue())
             # where it went and what it wrote, so that their deletion erases it while it is this file unchanged, and
             # names it otherwise (a copy handed on is beyond its reach)
-            self.append(j.ParticipantExported(participant=pid, path=str(out.resolve()),
-                                              sha256=hashlib.sha256(buf.getvalue()).hexdigest()))
+            try:
+                self.append(j.ParticipantExported(participant=pid, path=str(out.resolve()),
+                                                  sha256=hashlib.sha256(buf.getvalue()).hexdigest()))
+            except BaseException as err:  # (a full disk, a signal) no export their deletion would not know is left
+                out.unlink(missing_ok=True)
+                if not isinstance(err, Exception):
+                    raise
+                raise StudyDataError(f"{one_line(err)}; the export {out} was removed: its journal line could not be "
+                                     "written (their deletion would not know it)") from None
             return out
 
     def delete_participant(self, pid: str) -> "Deletion":

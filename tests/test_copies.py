@@ -235,3 +235,60 @@ def test_a_signal_while_a_stopped_view_waits_for_its_busy_study_folder_exits_at_
     assert "nothing saved" in lines[0] and "study folder is busy" in lines[0], lines
     assert not list(rrd.parent.glob("*")), list(rrd.parent.glob("*"))  # no copy the deletion would not know
     assert (data.folder / "journal.jsonl").read_bytes() == before and not _copies(StudyData(data.folder))
+
+
+@pytest.mark.parametrize("how", ["busy", "signal"])
+def test_a_copy_whose_journal_line_cannot_be_written_once_it_is_made_is_removed_and_said(
+        played, tmp_path, capsys, monkeypatch, how):  # noqa: F811
+    """Each verb's outputs are renamed into place before their journal line, which takes the study folder's
+    writer lock again: a short holder (a register, an export) that held it past the wait, or a signal during the
+    wait, left the copy there, unjournaled, a copy its participants' deletion would never know (exit 2 saying the
+    folder was busy, or 130 saying "nothing more was written"). Now every output still waiting for its line is
+    removed and the one line says so; a report's line is written under the lock its report was written under."""
+    from pairplay import folderlock
+    from pairplay.replay import copies
+    from pairplay.replay.studydata import StudyData
+
+    data = copy_study(played, tmp_path)
+    folder, out = data.folder, tmp_path / "elsewhere"
+    g1, other = _game(data, "p01", 0), _game(data, "p02", 0)
+    rec1, cut = folder / g1.recording, folder / _game(data, "p01", 1).recording  # a game's recording cut: recover copies it
+    cut.write_bytes(cut.read_bytes()[: cut.stat().st_size * 2 // 3])
+    runs = {"rebuild": ["rebuild", rec1, "--out", out / "rebuilt"],
+            "view": ["view", "--recording", rec1, "--out", out / "view.rrd"],
+            "counterfactual": ["counterfactual", rec1, "--fit-only", "--out", out / "cf"],
+            "recover": ["recover", cut, "-o", out / "recovered.mcap"],
+            "combine": ["combine", folder / g1.ended.policy, folder / other.ended.policy, "-o", out / "merged.json"],
+            "report": ["report", folder, "--out", out / "report"]}
+    monkeypatch.setattr(folderlock, "WAIT_S", 0.3)
+    real, held = copies.StudyData, []
+
+    def busy_meanwhile(*args, **kw):  # the journal line's StudyData (a writer): another holds the folder now
+        if kw.get("writer"):
+            if how == "signal":
+                raise KeyboardInterrupt  # as a signal during the wait (pairplay/folderlock.py)
+            held.append(folderlock.take(folder, "participant export"))
+        return real(*args, **kw)
+
+    monkeypatch.setattr(copies, "StudyData", busy_meanwhile)
+    before = (folder / "journal.jsonl").read_bytes()
+    try:
+        for verb, argv in runs.items():
+            code = main([str(a) for a in [*argv, "--quiet"]])
+            while held:
+                folderlock.release(held.pop())
+            err = [x for x in capsys.readouterr().err.strip().splitlines() if "waiting up to" not in x]
+            left = sorted(str(f) for f in out.rglob("*") if f.is_file() and ".pairplay-" not in f.name)
+            if verb == "report":  # journaled under its own lock: nobody came between
+                assert code == 0 and len(_copies(StudyData(folder))) == len(left) > 0, (code, err)
+                continue
+            assert code == (2 if how == "busy" else 130), (verb, code, err)
+            assert len(err) == 1 and "Traceback" not in err[0], (verb, err)
+            assert left == [], (verb, left)  # no copy the deletion would not know
+            said = "another pairplay writes this study folder: participant export" if how == "busy" else "interrupted"
+            assert err[0].startswith(f"pairplay {verb}: {said}") and "; removed " in err[0], (verb, err)
+            assert "whose line could not be written in their study's journal" in err[0], (verb, err)
+            assert (folder / "journal.jsonl").read_bytes() == before, verb
+    finally:
+        for fd in held:
+            folderlock.release(fd)

@@ -985,3 +985,30 @@ def test_a_journal_that_does_not_fold_is_refused_by_every_writing_verb_before_it
     [problem] = [line for line in out.splitlines() if "does not fold" in line]
     assert problem.startswith(f"{folder / 'journal.jsonl'}: does not fold into consistent tables: p02 has "), problem
     assert f"({'lines ' if len(lines) > 1 else 'line '}" in problem and err == "", (out, err)
+
+
+def test_an_export_whose_journal_line_cannot_be_written_is_removed_and_said(played, tmp_path, capsys, monkeypatch):
+    """`participant export -o` wrote the zip, then its journal line (ParticipantExported, what their deletion erases
+    it by): a line that could not be written (a full disk) left the zip there, a copy of all their data the
+    deletion would never know. Now the zip is removed, and the one line says so."""
+    import errno
+
+    from pairplay.cli.main import main
+
+    data = copy_study(played, tmp_path)
+    real = StudyData.append
+
+    def full_disk(self, event):
+        if isinstance(event, j.ParticipantExported):
+            raise OSError(errno.ENOSPC, "No space left on device", str(self.folder / "journal.jsonl"))
+        return real(self, event)
+
+    monkeypatch.setattr(StudyData, "append", full_disk)
+    before = (data.folder / "journal.jsonl").read_bytes()
+    for out in (tmp_path / "handed" / "p01.zip", None):
+        assert main(["participant", "export", str(data.folder), "p01", *(["-o", str(out)] if out else [])]) == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        zip_ = out or data.folder / "exports" / "p01.zip"
+        assert len(err) == 1 and "No space left on device" in err[0], err
+        assert f"the export {zip_} was removed: its journal line could not be written" in err[0], err
+        assert not zip_.exists() and (data.folder / "journal.jsonl").read_bytes() == before
