@@ -7,7 +7,9 @@ place, unless the deletion erases it by itself (a file named after the game besi
 the report's own files in report/, exports/<id>.zip). Whose data an input holds the journal says (`holders`):
 the game whose recording or policy it is, the games a bias policy combined, everyone who played for the whole
 folder. Before any work the verb checks that the journal can take the line (`Copies.check`): a copy its
-participant's deletion would not know is never made. `pairplay participant delete` (replay/studydata.py
+participant's deletion would not know is never made; and a line that cannot be written once the file is in place
+(the folder's lock not free when the wait ends, a signal in the wait) removes the file, said in the verb's one line
+(`Copies.journal_each`). `pairplay participant delete` (replay/studydata.py
 `delete_participant`) then erases each journaled copy that is still pairplay's own, unchanged file (the same path,
 a regular file, the bytes it wrote) and names every other one: changed since, or gone from there.
 A file made from a copy (a recording copied elsewhere by hand, an export unzipped) is beyond what pairplay can

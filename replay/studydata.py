@@ -15,7 +15,8 @@ the places above: replay/copies.py) is journaled too (CopyWritten, with the SHA-
 the deletion erases each journaled copy that is still pairplay's own, unchanged file, and names the others
 (changed since, or gone from there: `copies_of`, `_settle`).
 The state (who is registered, which game is next, what is done) is the fold of
-the journal (`StudyState`); the plan (`plan`) follows from the study file and
+the journal (`StudyState`), which must fold into consistent tables before anything is written (`check_folds`: a
+registration removed by hand is refused, not written on); the plan (`plan`) follows from the study file and
 that state. How a game ended and its policy come from its recording
 (`game_end`); what a stopped server could not journal (the policy of a game
 completed before a signal cut its questionnaire, the end of a game whose
