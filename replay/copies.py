@@ -217,8 +217,8 @@ class Copies:
             removed = _removed(files)
             if not removed:
                 raise
-            said = (f"{removed}: {'a copy' if len(files) == 1 else 'copies'} of participants' data whose line could not "
-                    f"be written in their study's journal (their deletion would not know {'it' if len(files) == 1 else 'them'})")
+            said = (f"{removed}: each a copy of participants' data whose line could not be written in their study's "
+                    "journal (their deletion would not know it)")
             if isinstance(err, KeyboardInterrupt):
                 raise Interrupted(said) from None
             what = err.what if isinstance(err, UserError) else str(err)
