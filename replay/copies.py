@@ -215,15 +215,15 @@ class Copies:
         except BaseException as err:
             files = list(dict.fromkeys(w for _, _, w in pending))
             removed = _removed(files)
-            if not removed:
-                raise
+            if not removed or not isinstance(err, (UserError, OSError, KeyboardInterrupt)):
+                raise  # (a bug of ours stays a traceback; its copies are removed all the same)
             said = (f"{removed}: each a copy of participants' data whose line could not be written in their study's "
                     "journal (their deletion would not know it)")
             if isinstance(err, KeyboardInterrupt):
                 raise Interrupted(said) from None
-            what = err.what if isinstance(err, UserError) else str(err)
-            where = err.where if isinstance(err, UserError) else ""
-            raise OutputError(f"{what}; {said}", where) from None
+            if isinstance(err, OSError):  # a full disk: said as every verb says it (`what (where)`)
+                raise OutputError(f"{err.strerror or err}; {said}", err.filename or "") from None
+            raise OutputError(f"{err.what}; {said}", err.where) from None
 
 
 def _removed(files: list[Path]) -> str:
