@@ -314,13 +314,15 @@ def said_source(recovered: dict[str, str]) -> str:
     """The file a recovered one (its RECOVERED metadata) was made of, in words that fit what it is: "the recording
     it continues" (a restarted recorder's copy: services/recorder.py `earlier_losses`) or "the recording it was
     recovered from" (`pairplay recover`); verify said the latter of a continued file (a new user's trial)."""
-    bus, shed = recovered.get("bus") == "true", recovered.get("shed") == "true"
-    if bus and shed:  # a live recorder's own record of holes, each under its cause (`Recorder._note_bus_lost`)
-        return "this recording on the bus (no refill gave it back) or shed by its recorder at the exit"
-    if bus:  # a live recorder's own record of what the bus lost (netns)
+    bus, shed, flood = (recovered.get(k) == "true" for k in ("bus", "shed", "flood"))
+    if bus and not shed and not flood:  # a live recorder's own record of what the bus lost (netns)
         return "this recording on the bus (no refill gave it back)"
-    if shed:  # what its recorder took off the bus and shed at the exit (a flood, or the signal's deadline passed)
-        return "this recording at its recorder's exit (shed, still queued when the recording stopped)"
+    if shed and not bus and not flood:  # what its recorder took off the bus and shed at the exit (a flood, or the
+        return "this recording at its recorder's exit (shed, still queued when the recording stopped)"  # deadline)
+    if bus or shed or flood:  # a live recorder's own record of holes, each under its cause (`Recorder._note_bus_lost`)
+        causes = (["on the bus (no refill gave it back)"] * bus + ["shed by its recorder's full inbox in a flood"] * flood
+                  + ["shed by its recorder at the exit"] * shed)
+        return f"this recording {' or '.join(causes)}"
     return "the recording it continues" if recovered.get("continued") else "the recording it was recovered from"
 
 
@@ -331,10 +333,11 @@ def said_source_made(recovered: dict[str, str]) -> str:
     damaged file"."""
     if recovered.get("continued"):
         return "continues a damaged recording"
-    bus, shed = recovered.get("bus") == "true", recovered.get("shed") == "true"
-    if bus or shed:  # a live recorder's own record: what the bus lost, and what it shed itself at the exit, apart
-        # (a hole the exit's shedding left was said to be the bus's, and counted twice: shed, then lost)
+    bus, shed, flood = (recovered.get(k) == "true" for k in ("bus", "shed", "flood"))
+    if bus or shed or flood:  # a live recorder's own record: what the bus lost, and what it shed itself, apart
+        # (a hole its shedding left, at the exit or in a flood, was said to be the bus's, and counted twice)
         return " and ".join(["events lost on the bus that no refill gave back"] * bus
+                            + ["events its recorder's full inbox shed in a flood (no refill gave them back)"] * flood
                             + ["events its recorder shed at the exit (still queued when the recording stopped)"] * shed)
     return "recovered from a damaged file"
 

@@ -342,6 +342,10 @@ class Inbox:
         self._buckets: dict[str, str] = {}  # key -> its allowance (_bucket_of)
         self.shed: Counter = Counter()  # (source, why) -> messages shed, since the last take_shed
         self.shed_total = 0
+        # a list to keep what a full inbox sheds of a known source, (key, payload), for its owner to say what it was
+        # (`take_shed_items`; the recorder: a hole they leave in its file is its own shedding, not the bus's); None:
+        # only counted
+        self.shed_items: list | None = None
 
     def put(self, key: str, payload: bytes) -> bool:
         """Queue one sample; False if it was shed. Never waits beyond a short lock.
@@ -352,7 +356,7 @@ class Inbox:
         size = len(payload)
         with self._lock:
             if size > self.max_payload or self._count[bucket] >= cap or self._bytes + size > self.max_bytes:
-                self._shed_one(key, size, bucket, cap)
+                self._shed_one(key, payload, bucket, cap)
                 return False
             self._items.append((key, payload, self.clock()))
             self._count[bucket] += 1
@@ -372,11 +376,14 @@ class Inbox:
                 self._buckets[key] = bucket
         return bucket
 
-    def _shed_one(self, key: str, size: int, bucket: str, cap: int) -> None:
+    def _shed_one(self, key: str, payload: bytes, bucket: str, cap: int) -> None:
+        size = len(payload)
         why = ("larger than %d bytes" % self.max_payload if size > self.max_payload else
                "inbox full for this source" if self._count[bucket] >= cap else "inbox full")
         self.shed[(source_of(key), why)] += 1
         self.shed_total += 1
+        if self.shed_items is not None and bucket and size <= self.max_payload:  # (a made-up source's: no hole)
+            self.shed_items.append((key, payload))
 
     def control(self, item: Any) -> None:
         """Queue an item for the service thread that is never shed (a query to answer)."""
@@ -465,6 +472,14 @@ class Inbox:
             return _NOTHING_SHED  # counted meanwhile, after this read under the GIL, is the next call's)
         with self._cond:
             out, self.shed = self.shed, Counter()
+        return out
+
+    def take_shed_items(self) -> list:
+        """What was kept of the messages shed since the last call (`shed_items`), oldest first."""
+        if not self.shed_items:
+            return []
+        with self._cond:
+            out, self.shed_items = self.shed_items, []
         return out
 
 
