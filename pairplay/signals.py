@@ -116,15 +116,25 @@ def send_to_main(signum: int) -> None:
         signal.pthread_kill(threading.main_thread().ident, signum)  # default SIGTERM would kill the process)
 
 
-def wait_cut(event, timeout_s: float) -> bool:
-    """`event.wait(timeout_s)` on the way out of a verb stopping on a signal: whether it was set; a second signal
-    (`again`, SIGINT or SIGTERM alike) cuts it with KeyboardInterrupt (module rule). Main thread."""
+def wait_cut(waited, timeout_s: float | None = None) -> bool:
+    """A wait on the way out of a verb stopping on a signal: an Event's (whether it was set) or a thread's end
+    (whether it ended), for at most `timeout_s` (None: no limit); in the main thread a second signal (`again`,
+    SIGINT or SIGTERM alike) cuts it with KeyboardInterrupt (module rule). Elsewhere it only waits: a signal
+    is the main thread's to act on."""
+    import threading
     import time
-    end = time.monotonic() + timeout_s
-    while not event.wait(max(0.0, min(WAIT_POLL_S, end - time.monotonic()))):
-        if again:
+    if isinstance(waited, threading.Thread):
+        def wait(s: float) -> bool:
+            waited.join(s)
+            return not waited.is_alive()
+    else:
+        wait = waited.wait
+    main = threading.current_thread() is threading.main_thread()
+    end = None if timeout_s is None else time.monotonic() + timeout_s
+    while not wait(WAIT_POLL_S if end is None else max(0.0, min(WAIT_POLL_S, end - time.monotonic()))):
+        if again and main:
             raise KeyboardInterrupt
-        if time.monotonic() >= end:
+        if end is not None and time.monotonic() >= end:
             return False
     return True
 

@@ -74,3 +74,27 @@ def test_a_second_sigterm_cuts_the_wait_as_a_second_sigint_does(folder):
     began = time.monotonic()
     proc.send_signal(signal.SIGTERM)
     assert _ended(proc, 10) == "cut" and time.monotonic() - began < 5
+
+
+def test_a_second_signal_cuts_the_session_s_wait_for_its_recorder_thread_in_the_main_thread_only(monkeypatch):
+    """services/session.py waits for its recorder thread's last step without a limit (cut, the file would be finished
+    under the batch it writes); a second SIGINT cut that join, a second SIGTERM was not heard. `signals.wait_cut`
+    ends on either in the main thread; in another (a study's game thread) it only waits, the signal the main
+    thread's to act on."""
+    import threading
+
+    from pairplay import signals
+
+    hung = threading.Event()
+    thread = threading.Thread(target=hung.wait, daemon=True)
+    thread.start()
+    monkeypatch.setattr(signals, "again", signal.SIGTERM)
+    with pytest.raises(KeyboardInterrupt):
+        signals.wait_cut(thread)
+    waited: list = []
+    other = threading.Thread(target=lambda: waited.append(signals.wait_cut(thread, 0.2)))
+    other.start()
+    other.join(10)
+    assert waited == [False]
+    hung.set()
+    assert signals.wait_cut(thread, 10)
