@@ -310,6 +310,7 @@ def pass_stop(source: threading.Event, target: threading.Event) -> None:
     target.set()
 
 
+SHED_KEPT = 20_000  # Inbox.shed_items holds at most this many between two takes
 _NOTHING_SHED: Counter = Counter()  # Inbox.take_shed's answer when nothing was shed (shared: never changed)
 
 
@@ -382,7 +383,9 @@ class Inbox:
                "inbox full for this source" if self._count[bucket] >= cap else "inbox full")
         self.shed[(source_of(key), why)] += 1
         self.shed_total += 1
-        if self.shed_items is not None and bucket and size <= self.max_payload:  # (a made-up source's: no hole)
+        # (a made-up source's leaves no hole; at most SHED_KEPT between two takes: a consumer held up in a flood
+        # must not grow what the inbox bounds; past it a hole's cause is not known, and said as the bus's)
+        if self.shed_items is not None and bucket and size <= self.max_payload and len(self.shed_items) < SHED_KEPT:
             self.shed_items.append((key, payload))
 
     def control(self, item: Any) -> None:
