@@ -15,6 +15,7 @@ and defaults to the human-phase schedules of thesis 7.2 (cli/session.py).
 from __future__ import annotations
 
 import argparse
+import signal
 import sys
 import threading
 from pathlib import Path
@@ -101,12 +102,13 @@ def run(args: argparse.Namespace) -> int:
         path = run_lab(config, out, host=host, port=port, bus_options=bus_options, robot=robot_choice(args),
                        stop=stop, on_ready=ready, linger_s=args.linger, ssl_certfile=args.certfile,
                        ssl_keyfile=args.keyfile, summary=summary)
-    except KeyboardInterrupt:  # a second Ctrl-C: the shutdown of the first was cut short
+    except KeyboardInterrupt:  # a second signal: the shutdown of the first was cut short
         if not stop.is_set():
             raise
-        print(f"pairplay lab: interrupted again (Ctrl-C) while stopping; {out} holds what was recorded up to now "
-              f"and may lack its end: pairplay recover {out} completes it", file=sys.stderr)
-        return 130
+        again = signals.again or signal.SIGINT  # (a second SIGTERM cuts it too: pairplay/signals.py `wait_cut`)
+        print(f"pairplay lab: interrupted again ({signals.said(again)}) while stopping; {out} holds what was recorded "
+              f"up to now and may lack its end: pairplay recover {out} completes it", file=sys.stderr)
+        return 128 + again
     except TimeoutError as err:  # a service the game waits for never came (the eye tracker, say)
         print(f"pairplay lab: the session did not start: {err}", file=sys.stderr)
         return 1

@@ -241,7 +241,7 @@ def main(argv: list[str] | None = None, exiting: bool = False) -> int:
         return code
     finally:
         interrupts.received = interrupts.late = 0  # said in this call's status; a later main() starts afresh
-        signals.stopping = 0
+        signals.stopping = signals.again = 0
         if not exiting:
             for s, handler in saved.items():
                 signal.signal(s, handler)

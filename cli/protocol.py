@@ -287,7 +287,7 @@ def _serve(data: StudyData, args) -> int:
 
     from pairplay.services.bus import Bus, BusOptions, shutdown_wait, stop_on_signals
     from pairplay.services.console.server import StudyLabServer
-    from pairplay.services.protocol import StudyRunner
+    from pairplay.services.protocol import JOURNALED_WAIT_S, StudyRunner
 
     host, _, port = args.listen.rpartition(":")
     if not host or not port.isdigit():
@@ -333,7 +333,11 @@ def _serve(data: StudyData, args) -> int:
             if not cut:  # its end is this process's own last fact: journaled, however loaded the machine, before
                 # the bounded waits on the rest of the step (before, the join below took what the deadline left,
                 # nothing at load 15+, and the process exited without the game's GameEnded)
-                runner.wait_journaled()
+                # (bounded, and a second signal of either kind cuts it: a journal write that never came held it)
+                if not runner.wait_journaled():
+                    print(f"pairplay protocol serve: gave up after {JOURNALED_WAIT_S:.0f} s waiting for the journal "
+                          f"to record the end of game {runner.live.session}; `pairplay protocol status {data.given}` "
+                          "shows the study, and the next serve journals the game from its recording", file=sys.stderr)
             if server.console.thread is not None:
                 server.console.thread.join(shutdown_wait(stop, 10.0, reserve=0.3))
             server.close(shutdown_wait(stop, 10.0, reserve=0.2))

@@ -28,6 +28,7 @@ them back; there is no resume of an ended or interrupted session.
 from __future__ import annotations
 
 import argparse
+import signal
 import sys
 import threading
 from datetime import datetime, timezone
@@ -273,16 +274,17 @@ def _run(args: argparse.Namespace, config: SessionConfig, path: Path, summary: d
         path = run_session(config, path, bus_options=bus_options,
                            external=tuple(args.external), stop=stop, on_bus=announce, summary=summary,
                            robot=None if "robot" in args.external else robot_choice(args))
-    except KeyboardInterrupt:  # a second Ctrl-C: the shutdown of the first was cut short
+    except KeyboardInterrupt:  # a second signal: the shutdown of the first was cut short
         if "events" not in summary:  # run_session did not get to say whether the game had started
             summary["started"] = None
         if stop.is_set() and "recorder" not in args.external:
-            print(f"pairplay session: interrupted again (Ctrl-C) while stopping; {path} holds what was recorded "
-                  f"up to now and may lack its end: pairplay recover {path} completes it"
+            again = signals.again or signal.SIGINT  # (a second SIGTERM cuts it too: pairplay/signals.py `wait_cut`)
+            print(f"pairplay session: interrupted again ({signals.said(again)}) while stopping; {path} holds what was "
+                  f"recorded up to now and may lack its end: pairplay recover {path} completes it"
                   + (f"; the earlier recordings are kept beside it, named *{REPLACED}: if it holds no session (the "
                      "game had not started), remove it and give them their names back" if kept else ""),
                   file=sys.stderr)
-            return 130
+            return 128 + again
         raise
     except (ConfigFileError, BusOpenError) as err:
         print(f"pairplay session: {err}", file=sys.stderr)

@@ -38,7 +38,10 @@ main thread).
 A verb that stops on signals itself (services/bus.py `stop_on_signals`) raises
 nothing: it notes the signal in `stopping`, which a wait that is not its stop
 event's reads to end at once (pairplay/folderlock.py: a study folder's lock
-waited for up to 8 s after the signal, then refused as busy, exit 2).
+waited for up to 8 s after the signal, then refused as busy, exit 2). A second signal while it stops is
+noted in `again`: a second SIGINT raises KeyboardInterrupt from its handler, a second SIGTERM raises nothing
+there, so a wait on the way out that a second signal must cut (`wait_cut`) ends on either, as the user meant
+(a `protocol serve` waiting for its journal took a second SIGTERM and waited on).
 
 Imports nothing but `signal` when loaded (its C part is loaded with the interpreter).
 """
@@ -51,6 +54,8 @@ SIGNALS = (signal.SIGINT, signal.SIGTERM)
 
 received = 0  # the first signal `record` met (0: none)
 stopping = 0  # the signal a verb's own handler took to stop on (services/bus.py stop_on_signals); 0: none
+again = 0  # a second signal that handler took while stopping on the first (module rule); 0: none
+WAIT_POLL_S = 0.05  # how often `wait_cut` looks for a second signal
 FINALIZER_RETRY_S = 0.01  # a signal held while a finalizer runs is delivered again this much later
 _WEAKREF_FILES = ("weakref.py", "_weakrefset.py")  # the standard library's weak-reference callbacks live here
 
@@ -109,6 +114,29 @@ def send_to_main(signum: int) -> None:
     import threading
     if callable(signal.getsignal(signum)):  # as interrupt_main: nothing once no Python handler takes it (a
         signal.pthread_kill(threading.main_thread().ident, signum)  # default SIGTERM would kill the process)
+
+
+def wait_cut(waited, timeout_s: float | None = None) -> bool:
+    """A wait on the way out of a verb stopping on a signal: an Event's (whether it was set) or a thread's end
+    (whether it ended), for at most `timeout_s` (None: no limit); in the main thread a second signal (`again`,
+    SIGINT or SIGTERM alike) cuts it with KeyboardInterrupt (module rule). Elsewhere it only waits: a signal
+    is the main thread's to act on."""
+    import threading
+    import time
+    if isinstance(waited, threading.Thread):
+        def wait(s: float) -> bool:
+            waited.join(s)
+            return not waited.is_alive()
+    else:
+        wait = waited.wait
+    main = threading.current_thread() is threading.main_thread()
+    end = None if timeout_s is None else time.monotonic() + timeout_s
+    while not wait(WAIT_POLL_S if end is None else max(0.0, min(WAIT_POLL_S, end - time.monotonic()))):
+        if again and main:
+            raise KeyboardInterrupt
+        if end is not None and time.monotonic() >= end:
+            return False
+    return True
 
 
 def deliver_again(signum: int, before=None, delay_s: float = FINALIZER_RETRY_S) -> None:

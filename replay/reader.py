@@ -314,13 +314,15 @@ def said_source(recovered: dict[str, str]) -> str:
     """The file a recovered one (its RECOVERED metadata) was made of, in words that fit what it is: "the recording
     it continues" (a restarted recorder's copy: services/recorder.py `earlier_losses`) or "the recording it was
     recovered from" (`pairplay recover`); verify said the latter of a continued file (a new user's trial)."""
-    bus, shed = recovered.get("bus") == "true", recovered.get("shed") == "true"
-    if bus and shed:  # a live recorder's own record of holes, each under its cause (`Recorder._note_bus_lost`)
-        return "this recording on the bus (no refill gave it back) or shed by its recorder at the exit"
-    if bus:  # a live recorder's own record of what the bus lost (netns)
+    bus, shed, flood = (recovered.get(k) == "true" for k in ("bus", "shed", "flood"))
+    if bus and not shed and not flood:  # a live recorder's own record of what the bus lost (netns)
         return "this recording on the bus (no refill gave it back)"
-    if shed:  # what its recorder took off the bus and shed at the exit (a flood, or the signal's deadline passed)
-        return "this recording at its recorder's exit (shed, still queued when the recording stopped)"
+    if shed and not bus and not flood:  # what its recorder took off the bus and shed at the exit (a flood, or the
+        return "this recording at its recorder's exit (shed, still queued when the recording stopped)"  # deadline)
+    if bus or shed or flood:  # a live recorder's own record of holes, each under its cause (`Recorder._note_bus_lost`)
+        causes = (["on the bus (no refill gave it back)"] * bus + ["shed by its recorder's full inbox in a flood"] * flood
+                  + ["shed by its recorder at the exit"] * shed)
+        return f"this recording {' or '.join(causes)}"
     return "the recording it continues" if recovered.get("continued") else "the recording it was recovered from"
 
 
@@ -331,10 +333,11 @@ def said_source_made(recovered: dict[str, str]) -> str:
     damaged file"."""
     if recovered.get("continued"):
         return "continues a damaged recording"
-    bus, shed = recovered.get("bus") == "true", recovered.get("shed") == "true"
-    if bus or shed:  # a live recorder's own record: what the bus lost, and what it shed itself at the exit, apart
-        # (a hole the exit's shedding left was said to be the bus's, and counted twice: shed, then lost)
+    bus, shed, flood = (recovered.get(k) == "true" for k in ("bus", "shed", "flood"))
+    if bus or shed or flood:  # a live recorder's own record: what the bus lost, and what it shed itself, apart
+        # (a hole its shedding left, at the exit or in a flood, was said to be the bus's, and counted twice)
         return " and ".join(["events lost on the bus that no refill gave back"] * bus
+                            + ["events its recorder's full inbox shed in a flood (no refill gave them back)"] * flood
                             + ["events its recorder shed at the exit (still queued when the recording stopped)"] * shed)
     return "recovered from a damaged file"
 
@@ -348,11 +351,17 @@ def said_source_cut(recovered: dict[str, str]) -> str:
     return f"recovered from a cut file{f' ({source})' if source else ''}: the events after its cut are lost"
 
 
+# the RECOVERED record's counts that add up across the copies of a recording (`carry_recovery`): what its journal
+# gave back or refused, the chunks lost, the events the bus lost and its recorder shed (services/recorder.py
+# `_note_bus_lost`); `messages` and `last_round` are the newest file's own
+COUNTED = ("from_journal", "journal_refused", "lost_chunks", "lost_count", "shed_count")
+
+
 def carry_recovery(earlier: dict[str, str], new: dict[str, str], marks_moved: bool = True) -> dict[str, str]:
     """The RECOVERED record of a recovery, `new`, with the losses of the recovery before it (`earlier`: {} if its
     source was never recovered) carried forward (replay/recover.py's rule): the damaged parts and losses of both,
-    the earlier first; a cut before the Data End stays a cut; journal counts add up; `earlier` names the earlier
-    sources, oldest first. `marks_moved`: `new`'s LOST_AT_KEY holds the earlier marks already, moved into its
+    the earlier first; a cut before the Data End stays a cut; the counts (`COUNTED`) add up; `earlier` names the
+    earlier sources, oldest first. `marks_moved`: `new`'s LOST_AT_KEY holds the earlier marks already, moved into its
     count (recover); else (`folded_recovery` of a file an older recover made twice) the earlier marks before
     `new`'s first are kept (nothing the newer recovery lost came before them) and those after it are left to
     it (where they fall past a newer loss is not known; every verb stops comparing at the first). An earlier
@@ -365,10 +374,14 @@ def carry_recovery(earlier: dict[str, str], new: dict[str, str], marks_moved: bo
         merged.pop("continued", None)
     for key in ("damaged", "lost"):
         merged[key] = json.dumps(_listed(earlier.get(key)) + _listed(new.get(key)))
-    merged["earlier"] = json.dumps(_listed(earlier.get("earlier")) + [earlier.get("source", "")])
+    # a live recorder's own record names its own file as its source (services/recorder.py `_note_bus_lost`): carried
+    # into a record of that same file (a restarted recorder's `earlier_losses`) it is no earlier copy; named as one,
+    # the restarted recorder took the losses for carried already and recorded none of them
+    same = Path(earlier.get("source", "")).name == Path(new.get("source", "")).name
+    merged["earlier"] = json.dumps(_listed(earlier.get("earlier")) + [earlier.get("source", "")] * (not same))
     if recovered_cut(earlier):  # an earlier cut before the Data End: its tail is lost from every copy
         merged["truncated"], merged[DATA_COMPLETE_KEY] = "true", "false"
-    for key in ("from_journal", "journal_refused", "lost_chunks"):
+    for key in COUNTED:  # (every count of what a copy lost or took: the newest's alone forgot the earlier ones')
         if key in earlier:
             merged[key] = str(_number(earlier[key]) + _number(new.get(key, "0")))
     if not marks_moved and LOST_AT_KEY in earlier and LOST_AT_KEY in new:

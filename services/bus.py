@@ -310,6 +310,7 @@ def pass_stop(source: threading.Event, target: threading.Event) -> None:
     target.set()
 
 
+SHED_KEPT = 20_000  # Inbox.shed_items holds at most this many between two takes
 _NOTHING_SHED: Counter = Counter()  # Inbox.take_shed's answer when nothing was shed (shared: never changed)
 
 
@@ -342,6 +343,10 @@ class Inbox:
         self._buckets: dict[str, str] = {}  # key -> its allowance (_bucket_of)
         self.shed: Counter = Counter()  # (source, why) -> messages shed, since the last take_shed
         self.shed_total = 0
+        # a list to keep what a full inbox sheds of a known source, (key, payload), for its owner to say what it was
+        # (`take_shed_items`; the recorder: a hole they leave in its file is its own shedding, not the bus's); None:
+        # only counted
+        self.shed_items: list | None = None
 
     def put(self, key: str, payload: bytes) -> bool:
         """Queue one sample; False if it was shed. Never waits beyond a short lock.
@@ -352,7 +357,7 @@ class Inbox:
         size = len(payload)
         with self._lock:
             if size > self.max_payload or self._count[bucket] >= cap or self._bytes + size > self.max_bytes:
-                self._shed_one(key, size, bucket, cap)
+                self._shed_one(key, payload, bucket, cap)
                 return False
             self._items.append((key, payload, self.clock()))
             self._count[bucket] += 1
@@ -372,11 +377,16 @@ class Inbox:
                 self._buckets[key] = bucket
         return bucket
 
-    def _shed_one(self, key: str, size: int, bucket: str, cap: int) -> None:
+    def _shed_one(self, key: str, payload: bytes, bucket: str, cap: int) -> None:
+        size = len(payload)
         why = ("larger than %d bytes" % self.max_payload if size > self.max_payload else
                "inbox full for this source" if self._count[bucket] >= cap else "inbox full")
         self.shed[(source_of(key), why)] += 1
         self.shed_total += 1
+        # (a made-up source's leaves no hole; at most SHED_KEPT between two takes: a consumer held up in a flood
+        # must not grow what the inbox bounds; past it a hole's cause is not known, and said as the bus's)
+        if self.shed_items is not None and bucket and size <= self.max_payload and len(self.shed_items) < SHED_KEPT:
+            self.shed_items.append((key, payload))
 
     def control(self, item: Any) -> None:
         """Queue an item for the service thread that is never shed (a query to answer)."""
@@ -465,6 +475,14 @@ class Inbox:
             return _NOTHING_SHED  # counted meanwhile, after this read under the GIL, is the next call's)
         with self._cond:
             out, self.shed = self.shed, Counter()
+        return out
+
+    def take_shed_items(self) -> list:
+        """What was kept of the messages shed since the last call (`shed_items`), oldest first."""
+        if not self.shed_items:
+            return []
+        with self._cond:
+            out, self.shed_items = self.shed_items, []
         return out
 
 
@@ -1063,14 +1081,16 @@ def _replies(replies: queue.SimpleQueue, wait_s: float, stop: threading.Event | 
 
 def stop_on_signals(stop: threading.Event, then: Callable[[], object] | None = None) -> None:
     """SIGINT/SIGTERM set `stop`, name the signal in `stop.why` and start the shutdown's
-    `stop.deadline` (a second SIGINT still interrupts); then call `then()` (it must only set
-    flags). `stop` is set and `then` called by a thread started from the handler: a handler
+    `stop.deadline` (a second SIGINT still interrupts; a second of either cuts `signals.wait_cut`); then
+    call `then()` (it must only set flags). `stop` is set and `then` called by a thread started from the handler: a handler
     runs on the main thread between two of its bytecodes, possibly while that thread holds the
     lock of the Event it waits on. Main thread only."""
     def handler(signum, frame):
         # a signal taken already (its name in `why`), not a stop set by the work's own end: the first Ctrl-C
         # as a session finished its file was read as a second one and the file left cut (a new user's trial)
         taken = bool(getattr(stop, "why", ""))
+        if taken:  # a second signal: a wait that a second one cuts ends on SIGTERM too (signals.wait_cut)
+            signals.again = signals.again or signum
         if taken and signum == signal.SIGINT:
             if signals.in_finalizer(frame):  # raised there it would be swallowed (pairplay/signals.py)
                 signals.deliver_again(signum)

@@ -36,7 +36,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Callable
 
-from pairplay import __version__
+from pairplay import __version__, signals
 from pairplay.core.policies import partial_inputs, users_from_policies
 from pairplay.replay.delivery import delivery_counts, delivery_line
 from pairplay.replay.reader import read_any_log
@@ -57,6 +57,10 @@ from pairplay.services.session import run_session
 from pairplay.numbers import counted
 
 log = logging.getLogger("pairplay.protocol")
+# how long a process stopped by a signal waits for its running game's end to be journaled (`wait_journaled`): what
+# the machine needs to finish the recording and write the journal at load 15+ is seconds; a write that never comes
+# (a hung disk) held it for ever
+JOURNALED_WAIT_S = 20.0
 
 
 @dataclass
@@ -210,12 +214,14 @@ class StudyRunner:
             self._journaled.set()
             self._busy.release()
 
-    def wait_journaled(self) -> None:
-        """Wait until the running game's end is journaled (at once if none is running). The process's own
-        last fact, written as soon as its session has stopped (`_play`): every wait before it takes its time
-        from the signal's deadline, so this takes what the machine needs to write the file and the journal,
-        not what another process does; a second Ctrl-C still interrupts it."""
-        self._journaled.wait()
+    def wait_journaled(self, timeout_s: float | None = None) -> bool:
+        """Wait until the running game's end is journaled (at once if none is running); whether it was. The
+        process's own last fact, written as soon as its session has stopped (`_play`): every wait before it takes
+        its time from the signal's deadline, so this takes what the machine needs to write the file and the
+        journal, not what another process does, up to `timeout_s` (JOURNALED_WAIT_S: a journal write that never
+        comes, a hung disk, held the process for ever); a second signal, SIGINT or SIGTERM, cuts it
+        (KeyboardInterrupt: pairplay/signals.py `wait_cut`; a second SIGTERM was not heard)."""
+        return signals.wait_cut(self._journaled, JOURNALED_WAIT_S if timeout_s is None else timeout_s)
 
     def _play(self, config: SessionConfig, phase, recording: str, player, on_event) -> Game:
         """The started game (journaled GameStarted) played to its end; its GameEnded journaled."""

@@ -138,6 +138,19 @@ BUS_LOST = "lost on the bus"  # what the RECOVERED record of holes no refill gav
 # what it says of the holes the recorder's own shedding at the exit left (`drain`): they came, and were counted among
 # UNRECORDED_AT_EXIT (its MessageRejected count, `unrecorded_at_exit`); said once, under that cause
 SHED_AT_EXIT = "shed at the exit"
+# and of those a full inbox shed mid-session (a flood: Inbox.put, counted as its MessageRejected "inbox full" count)
+# that no refill gave back: they came, and were counted there; said once, under that cause, as the exit's are
+SHED_LIVE = "shed by its full inbox"
+SHED_NOTED = 1_000_000  # shed seqs kept to say a hole's cause (`_take_shed`); past them a hole is said as the bus's
+
+
+class _Stamp(msgspec.Struct):
+    """What a shed message's hole needs of it: its source and seq (a full decode cost 6x, in a flood)."""
+    source: str
+    seq: int
+
+
+_stamp = msgspec.json.Decoder(_Stamp).decode
 _REFILL = object()  # inbox control item: Zenoh reported messages lost for good
 
 
@@ -470,22 +483,33 @@ def same_live_session(bus: Bus, session: str, path: Path, timeout_s: float = 3.0
     return answered > 0
 
 
-def _runs(first: int, last: int, marked: list[int]) -> list[tuple[int, int, bool]]:
-    """seqs `first`..`last` as maximal runs (a, b, whether they are `marked`: sorted, each within the range), in
-    order; as many steps as `marked` has, whatever the range (a forged seq may leave a hole of billions)."""
-    out: list[tuple[int, int, bool]] = []
+def _runs(first: int, last: int, marked: list[tuple[int, str]]) -> list[tuple[int, int, str]]:
+    """seqs `first`..`last` as maximal runs (a, b, the cause they are `marked` with, "" for none: `marked` is
+    (seq, cause), sorted, each seq within the range and once), in order; as many steps as `marked` has, whatever
+    the range (a forged seq may leave a hole of billions)."""
+    out: list[tuple[int, int, str]] = []
     at = first
-    for q in marked:
+    for q, cause in marked:
         if q > at:
-            out.append((at, q - 1, False))
-        if out and out[-1][2] and out[-1][1] == q - 1:
-            out[-1] = (out[-1][0], q, True)
+            out.append((at, q - 1, ""))
+        if out and out[-1][2] == cause and out[-1][1] == q - 1:
+            out[-1] = (out[-1][0], q, cause)
         else:
-            out.append((q, q, True))
+            out.append((q, q, cause))
         at = q + 1
     if at <= last:
-        out.append((at, last, False))
+        out.append((at, last, ""))
     return out
+
+
+def _shed_stamp(key: str, payload: bytes) -> tuple[str, int] | None:
+    """(source, seq) of a message the recorder shed, if its payload says the source its key names; else None."""
+    source = key.split("/")[2] if key.count("/") == 3 else ""
+    try:
+        stamp = _stamp(payload)
+    except (msgspec.DecodeError, msgspec.ValidationError):
+        return None
+    return (source, stamp.seq) if stamp.source == source and source else None
 
 
 def _holes(seen: dict[str, set[int]]) -> dict[str, list[tuple[int, int]]]:
@@ -576,6 +600,9 @@ class Recorder:
         self._earlier_recorded = False  # what the earlier recordings lost is recorded in the file (_note_earlier_lost)
         self._copied_top: dict[str, int] = {}  # per source, its highest seq copied from the earlier recordings
         self._shed_at_exit: list[tuple[str, bytes]] = []  # (key, payload) `drain` shed: their holes are not the bus's
+        self._shed_live: dict[str, set[int]] = {}  # per source, the seqs its full inbox shed (`_take_shed`): nor these
+        self._shed_live_n = 0
+        self.inbox.shed_items = []  # (what it sheds kept for `_take_shed`)
         self._held: dict[str, set[int]] = {}  # per source but ours, the seqs written (`_seen`: none decoded again)
         self.links: list[dict] = []  # the outages recorded (LINK_METADATA)
         self._ended_ns: int | None = None
@@ -793,7 +820,10 @@ class Recorder:
         recorder cut off for 5 s at load 20 lost 9 game events and the file said it was whole (test_netns).
         A hole's events that came and were shed at the exit (`drain`: a flood, or the deadline passed) are said
         apart, as SHED_AT_EXIT (`shed` "true", `shed_count`): they are counted among UNRECORDED_AT_EXIT already,
-        and were said to be lost on the bus, and counted as lost too (an external `run recorder`'s close)."""
+        and were said to be lost on the bus, and counted as lost too (an external `run recorder`'s close). So are
+        those its full inbox shed mid-session (a flood, `_take_shed`), as SHED_LIVE (`flood` "true", `shed_count`):
+        counted in its "inbox full" MessageRejected count already. One cause per missing event, each counted once:
+        `lost_count` the bus's, `shed_count` the recorder's own."""
         seen = self._seen()
         holes = self._bus_holes()
         tails = [s for s in self._tails() if s not in (answered or ())] if due else []
@@ -808,17 +838,18 @@ class Recorder:
                 where.setdefault((source, decode_event(payload).seq), i)
         shed = self._shed_seqs(holes)
         parts, marks, count = [], [], 0
-        shed_parts, shed_count = [], 0
+        shed_parts, shed_count, causes = [], 0, set()
         for source in sorted(seen):
             for a, b in holes.get(source, ()):
                 ordered = shed.get(source, [])
-                inside = ordered[bisect.bisect_right(ordered, a):bisect.bisect_left(ordered, b)]
-                for first, last, was_shed in _runs(a + 1, b - 1, inside):
+                inside = ordered[bisect.bisect_right(ordered, (a, "\uffff")):bisect.bisect_left(ordered, (b, ""))]
+                for first, last, cause in _runs(a + 1, b - 1, inside):
                     n = last - first + 1
                     what = f"seq {first}" if n == 1 else f"seqs {first}-{last}"
-                    if was_shed:  # it came, and the exit shed it: counted there (UNRECORDED_AT_EXIT), not again
+                    if cause:  # it came, and the recorder shed it: counted there (its MessageRejected count), not again
                         shed_count += n
-                        shed_parts.append(f"{source} {what} ({counted(n, 'event')} {SHED_AT_EXIT})")
+                        causes.add(cause)
+                        shed_parts.append((cause, f"{source} {what} ({counted(n, 'event')} {cause})"))
                     else:
                         count += n
                         parts.append(f"{source} {what} ({counted(n, 'event')})")
@@ -833,34 +864,36 @@ class Recorder:
         if parts:
             log.warning("recorder: not refilled, recorded as lost: %s", "; ".join(parts))
         if shed_parts:
-            log.warning("recorder: recorded as shed at the exit: %s", "; ".join(shed_parts))
+            log.warning("recorder: recorded as shed by the recorder: %s", "; ".join(p for _, p in shed_parts))
         record = {"source": self.path.name, "truncated": "false", "data_complete": "true"}
         if parts:
             record["bus"] = "true"
-        if shed_parts:  # (`shed_count` of them are among `unrecorded_at_exit`: not in `lost_count`)
+        # (`shed_count` of them are among its MessageRejected counts, `unrecorded_at_exit` the exit's: not in `lost_count`)
+        if SHED_AT_EXIT in causes:
             record["shed"] = "true"
-        reasons = [f"{BUS_LOST}, not refilled"] * bool(parts) + [SHED_AT_EXIT] * bool(shed_parts)
+        if SHED_LIVE in causes:
+            record["flood"] = "true"
+        reasons = [f"{BUS_LOST}, not refilled"] * bool(parts) + [c for c in (SHED_AT_EXIT, SHED_LIVE) if c in causes]
         self._guarded(self.writer.add_metadata, RECOVERED, {
             **record, "reason": "; ".join(reasons),
-            "damaged": json.dumps([f"{BUS_LOST}: {p}" for p in parts] + [f"{SHED_AT_EXIT}: {p}" for p in shed_parts]),
-            "lost": json.dumps(parts + shed_parts), "lost_count": str(count), "shed_count": str(shed_count),
+            "damaged": json.dumps([f"{BUS_LOST}: {p}" for p in parts] + [f"{c}: {p}" for c, p in shed_parts]),
+            "lost": json.dumps(parts + [p for _, p in shed_parts]), "lost_count": str(count), "shed_count": str(shed_count),
             "lost_chunks": "0", LOST_AT_KEY: json.dumps(sorted(marks)), "messages": str(len(kept))})
 
-    def _shed_seqs(self, holes: dict[str, list[tuple[int, int]]]) -> dict[str, list[int]]:
-        """Per source with a hole in the file, the seqs of its messages `drain` shed at the exit (decoded only
-        then: a flood's shed messages cost nothing more at the usual close); one that does not decode is none."""
-        out: dict[str, set[int]] = {}
+    def _shed_seqs(self, holes: dict[str, list[tuple[int, int]]]) -> dict[str, list[tuple[int, str]]]:
+        """Per source with a hole in the file, the seqs of its messages the recorder shed, each with its cause:
+        SHED_LIVE, its full inbox mid-session (`_shed_live`), or SHED_AT_EXIT, `drain` at the exit (decoded only
+        then: a flood's shed messages cost nothing more at the usual close; one that does not decode is none).
+        A seq shed twice (a repeat) is said under the later cause."""
+        out: dict[str, dict[int, str]] = {}
+        for source, seqs in self._shed_live.items():
+            if source in holes:
+                out[source] = dict.fromkeys(seqs, SHED_LIVE)
         for key, payload in self._shed_at_exit:
-            source = key.split("/")[2] if key.count("/") == 3 else ""
-            if source not in holes:
-                continue
-            try:
-                event = decode_event(payload)
-            except (msgspec.DecodeError, msgspec.ValidationError):
-                continue
-            if event.source == source:
-                out.setdefault(source, set()).add(event.seq)
-        return {source: sorted(seqs) for source, seqs in out.items()}  # (sorted: each hole's share by bisection)
+            stamp = _shed_stamp(key, payload)
+            if stamp is not None and stamp[0] in holes:
+                out.setdefault(stamp[0], {})[stamp[1]] = SHED_AT_EXIT
+        return {source: sorted(seqs.items()) for source, seqs in out.items()}  # (sorted: each hole's share by bisection)
 
     def _fill_hole(self, key: str, payload: bytes) -> bool:
         """Write a refilled event older than the last one of its key in the file (every check but
@@ -958,9 +991,7 @@ class Recorder:
         items = self.inbox.get_many(max(wait, 0.0005), TAKE)
         try:
             self._publish(self.refusals.tick(self.clock()) if self.refusals.pending() else [])
-            shed = self.inbox.take_shed()
-            if shed:
-                self.refusals.shed(shed)
+            self._take_shed()
             took = bool(items)
             if took:
                 started = time.monotonic()
@@ -986,6 +1017,20 @@ class Recorder:
         except RecordingFailed:
             return False
         return took
+
+    def _take_shed(self) -> None:
+        """What the inbox shed since the last step, recorded as a MessageRejected count (`refusals`), and, of a
+        known source's, its seq noted (`_shed_live`, at most SHED_NOTED): a hole no refill gives back there is
+        said under that cause when the file closes (`_note_bus_lost`), counted once; it was said to be lost on the
+        bus too, and counted as shed and as lost."""
+        shed = self.inbox.take_shed()
+        if shed:
+            self.refusals.shed(shed)
+        for key, payload in self.inbox.take_shed_items():
+            stamp = _shed_stamp(key, payload) if self._shed_live_n < SHED_NOTED else None
+            if stamp is not None:
+                self._shed_live.setdefault(stamp[0], set()).add(stamp[1])
+                self._shed_live_n += 1
 
     def _note_backlog(self) -> None:
         """A flush whose oldest message waited longer than the loss bound (the recorder fell
@@ -1255,9 +1300,7 @@ class Recorder:
         except Exception as err:
             log.exception("recorder failed")
             self._fail(f"recorder error {type(err).__name__}: {err}")
-        shed = self.inbox.take_shed()
-        if shed:
-            self.refusals.shed(shed)
+        self._take_shed()
         if self.failure is None:  # off the bus mid-session and never back
             for service, left_ns in sorted(self._absent.items()):
                 if self._ended_ns is None or left_ns < self._ended_ns - LINK_SLACK_NS:  # (slack: the hosts' clocks)

@@ -24,6 +24,7 @@ from pathlib import Path
 
 import logging
 
+from pairplay import signals
 from pairplay.core.personas import persona
 from pairplay.errors import InputError, UserError
 from pairplay.nearest import nearest
@@ -283,8 +284,9 @@ def close_all(nodes: list[Node], bridge, recorder: Recorder | None, recorder_thr
     recorder_stop.set()
     if recorder_thread is not None:  # None: it could not start
         # its own work (a step: what its inbox held, BATCH_S at most, and a due flush), never a wait on
-        # another: not cut by the deadline, or the file would be finished under the batch it writes
-        recorder_thread.join()
+        # another: not cut by the deadline, or the file would be finished under the batch it writes; a second
+        # signal cuts it, SIGTERM as SIGINT (a second SIGTERM was not heard: pairplay/signals.py `wait_cut`)
+        signals.wait_cut(recorder_thread)
     # the recorder's own deadline: the shutdown's, less what closing the bus keeps; what the services hold is
     # taken again when the recorder closes: a service's thread the deadline did not wait for may have
     # published more meanwhile (a learner working through its inbox after a SIGINT)

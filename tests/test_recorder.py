@@ -114,3 +114,39 @@ def test_a_hole_the_exit_shed_is_said_once_under_its_cause_and_a_hole_of_the_bus
     result = verify_recording(log.path)
     assert not result.ok and "shed at the exit" in result.error and "game seq 2 (1 event) lost" in result.error
 
+
+
+def test_a_hole_a_full_inbox_left_mid_session_is_said_once_as_shed_not_also_as_lost_on_the_bus(tmp_path):
+    """A flood mid-session fills the recorder's inbox: what it sheds is counted (its MessageRejected "inbox full"
+    count). The hole that left in the file, when no refill gave it back, was also said to be lost on the bus and
+    counted again (`lost_count`), as the exit's shedding was before SHED_AT_EXIT. Now it is said under its cause
+    (SHED_LIVE, `flood` "true"), counted once in `shed_count`; the bus's hole beside it is still the bus's."""
+    import json
+
+    from pairplay.services.verify import verify_recording
+
+    rec = Recorder(None, "r1", tmp_path / "r1.mcap")
+    rec.inbox.per_source = 1  # (a flood's worth: the second message of a source waiting is shed)
+    cfg = SessionConfig(session="r1", participant="sim:ashley", persona="ashley", seed=9, rounds=1)
+    assert rec.record(*message(ev.SessionStarted(config=cfg)), 1)
+    # seq 2 never comes (lost on the bus); 3 is taken; 4 and 5 are shed (the inbox holds 3); 6 ends the session
+    assert rec.inbox.put(*message(ev.RoundStarted(round=0, faces=[i // 2 for i in range(18)]), seq=3))
+    assert not rec.inbox.put(*message(ev.CardRevealed(round=0, turn=0, card=0, face=0, pick=0), seq=4))
+    assert not rec.inbox.put(*message(ev.CardRevealed(round=0, turn=0, card=1, face=0, pick=1), seq=5))
+    rec.step(0)
+    assert rec.record(*message(ev.SessionEnded(), seq=6), 6)
+    assert rec.close() is None
+    log = read_log(tmp_path / "r1.mcap")
+    assert [r.event.seq for r in log.events if r.event.source == "game"] == [1, 3, 6]
+    [shed] = [r.event for r in log.events if isinstance(r.event, ev.MessageRejected)]
+    assert shed.reason.startswith("2 messages ") and "inbox full" in shed.reason, shed.reason
+    lost = log.metadata["pairplay.recovered"]
+    assert (lost["lost_count"], lost["shed_count"], lost["bus"], lost["flood"]) == ("1", "2", "true", "true"), lost
+    assert "shed" not in lost  # (not at the exit)
+    assert json.loads(lost["lost"]) == ["game seq 2 (1 event)", "game seqs 4-5 (2 events shed by its full inbox)"]
+    assert json.loads(lost["damaged"]) == ["lost on the bus: game seq 2 (1 event)",
+                                           "shed by its full inbox: game seqs 4-5 (2 events shed by its full inbox)"]
+    assert log.missing.startswith("events lost on the bus that no refill gave back and events its recorder's full "
+                                  "inbox shed in a flood (no refill gave them back) (r1.mcap): "), log.missing
+    result = verify_recording(log.path)
+    assert not result.ok and "shed by its full inbox" in result.error and "game seq 2 (1 event) lost" in result.error
