@@ -139,14 +139,32 @@ def reset_options(options: Any) -> Persona | None:
     return persona(options["persona"]) if "persona" in options else None
 
 
+def _member(space: spaces.Space, value: Any) -> bool:
+    """Whether `value` is in `space` (Discrete(88), or its batch: MultiDiscrete), by Gymnasium 1.4's rule
+    written out here: an integer (a Python int, or a numpy integer whose dtype casts safely to the space's:
+    not uint64) 0..87; a batch an array or sequence of the batch's shape whose dtype casts safely (no float,
+    no string, no object). Not `space.contains`: its rule differs over the declared range (1.1-1.2.2 took a
+    batch [0, 1, 3.5, 2] and np.uint64(3); 1.1-1.3 raised numpy's OverflowError on 2**70)."""
+    if not space.shape:
+        if isinstance(value, int):
+            return 0 <= value < N_ACTIONS
+        return (isinstance(value, (np.generic, np.ndarray)) and value.shape == () and
+                np.issubdtype(value.dtype, np.integer) and np.can_cast(value.dtype, space.dtype) and
+                0 <= int(value) < N_ACTIONS)
+    if isinstance(value, Sequence) and not isinstance(value, (str, bytes)):
+        value = np.array(value)
+    return bool(isinstance(value, np.ndarray) and value.shape == space.shape and
+                np.can_cast(value.dtype, space.dtype) and np.all(value >= 0) and np.all(value < N_ACTIONS))
+
+
 def action(space: spaces.Space, value: Any) -> None:
     """Raises unless `value` belongs to `space`: Discrete(88) for one env, its batch for the vector env
-    (Gymnasium's own membership, one rule for both: integers, numpy's too, 0..87; no float, no string,
-    no bool: Gymnasium takes True as 1 and a bool array as codes 0 and 1, where reset(seed=True) was
-    refused; pairplay/arguments.py: a bool is never an integer)."""
+    (one rule for both, `_member`: integers, numpy's too, 0..87; no float, no string, no bool: Gymnasium
+    takes True as 1 and a bool array as codes 0 and 1, where reset(seed=True) was refused;
+    pairplay/arguments.py: a bool is never an integer)."""
     try:
-        ok = space.contains(value) and not _bools(value)
-    except (TypeError, ValueError):  # a ragged list, say: numpy cannot make it an array
+        ok = _member(space, value) and not _bools(value)
+    except (TypeError, ValueError, OverflowError):  # a ragged list, say: numpy cannot make it an array
         ok = False
     if not ok:
         what = (f"action {value!r} is not one of the {N_ACTIONS} composite codes" if not space.shape else
