@@ -147,6 +147,10 @@ CASES = [
     Case("protocol pilot --personas empty", ["protocol", "pilot", "study", "--personas", ""],
          "--personas '' names nothing"),
     Case("protocol serve --pilot empty", ["protocol", "serve", "study", "--pilot", ""], "--pilot '' names nothing"),
+    # a misspelt persona is said before the count of them (one of two names counted for one participant, p01:
+    # it said "--personas names 2 personas for 1 registered participant", and only then the misspelling)
+    Case("protocol pilot --personas misspelt and too many", ["protocol", "pilot", "study", "--personas", "ashly,blind"],
+         "unknown persona 'ashly' (did you mean 'ashley'?)"),
     Case("session --game-index -1", SIM + ["--game-index", "-1"], "--game-index: must be at least 0"),
     Case("session --rounds 0", SIM[:3] + ["--rounds", "0"], "--rounds: must be at least 1"),
     Case("session --policy with q-learning", SIM + ["--policy", "existing.json"], "--policy is used only by"),
