@@ -147,6 +147,16 @@ CASES = [
     Case("protocol pilot --personas empty", ["protocol", "pilot", "study", "--personas", ""],
          "--personas '' names nothing"),
     Case("protocol serve --pilot empty", ["protocol", "serve", "study", "--pilot", ""], "--pilot '' names nothing"),
+    # a new user's trial: a misspelt option was argparse's "unrecognized arguments: --forse", with no hint (every
+    # other misspelt name had one: pairplay/nearest.py); said in pairplay's words, with the option it resembles
+    Case("study --forse", ["study", "--forse"], "unknown option --forse (did you mean --force?)"),
+    Case("combine --forse with a value", ["combine", "policies", "--forse", "1"],
+         "unknown option --forse (did you mean --force?) (see"),
+    Case("protocol init --key-fiel=FILE", ["protocol", "init", "st", "--study", "thesis-ch7", "--key-fiel=k.csv"],
+         "unknown option --key-fiel=k.csv (did you mean --key-file?)"),
+    # ...and before what is missing, which it may be misspelt: "the following arguments are required: --study"
+    Case("protocol init --studdy", ["protocol", "init", "st", "--studdy", "thesis-ch7"],
+         "unknown option --studdy (did you mean --study?)"),
     # a misspelt persona is said before the count of them (one of two names counted for one participant, p01:
     # it said "--personas names 2 personas for 1 registered participant", and only then the misspelling)
     Case("protocol pilot --personas misspelt and too many", ["protocol", "pilot", "study", "--personas", "ashly,blind"],
