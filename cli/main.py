@@ -88,6 +88,31 @@ VERBS: dict[str, tuple[str, str]] = {
     "robot": ("pairplay.cli.robot", "perform a session's suggestions on a robot (virtual, IrisTK, Furhat), or --try one"),
 }
 
+# A word a user types as a verb that is another verb's action or option (`pairplay verify x.mcap` is `pairplay
+# replay --verify`; `pairplay init` is `pairplay protocol init`): not a verb, it is answered with the command it
+# stands for, before any verb it resembles (`record` resembles `recover`, but records nothing). Only words that
+# mean one command: `check` (protocol check, replay --verify), `repair` (protocol repair, recover) and `play`
+# (replay, lab) mean several, and the verb they resemble, if any, is said (pairplay/nearest.py).
+# tests/test_cli_usage.py checks every command here parses.
+VERB_ALIASES: dict[str, str] = {
+    "verify": "pairplay replay --verify",
+    "record": "pairplay session",
+    "train": "pairplay study --train-only",
+    "simulate": "pairplay study",
+    "merge": "pairplay combine",
+    "watch": "pairplay view",
+    "try": "pairplay robot --try",
+    "init": "pairplay protocol init",
+    "register": "pairplay protocol register",
+    "status": "pairplay protocol status",
+    "pilot": "pairplay protocol pilot",
+    "serve": "pairplay protocol serve",
+    "export": "pairplay participant export",
+    "delete": "pairplay participant delete",
+    "help": "pairplay --help",
+    "version": "pairplay --version",
+}
+
 
 class HelpFormatter(argparse.HelpFormatter):
     """Every option's help ends with its default, unless the help already states it
@@ -124,16 +149,18 @@ class Parser(argparse.ArgumentParser):
                 or self.choice_near(message))
         self.exit(2, f"{self.prog}: {what} (see {self.prog} --help)\n")
 
-    @staticmethod
-    def choice_near(message: str) -> str:
+    def choice_near(self, message: str) -> str:
         """argparse's `invalid choice: 'human-phse1' (choose from ...)` with the choice it resembles
         (pairplay/nearest.py, as every refusal of a name: `--preset human-phse1`, `--algorithm q-lerning` had
-        no hint), else `message` as it is."""
-        m = re.fullmatch(r"(argument \S+: invalid choice: '(.*)') \(choose from (.*)\)", message, re.S)
+        no hint), a word that is not a verb with the command it stands for (VERB_ALIASES: `pairplay verify`
+        had no hint), else `message` as it is."""
+        m = re.fullmatch(r"(argument (\S+): invalid choice: '(.*)') \(choose from (.*)\)", message, re.S)
         if not m:
             return message
-        near = nearest(m.group(2), re.findall(r"'([^']*)'", m.group(3)) or m.group(3).split(", "))
-        return f"{m.group(1)} (did you mean '{near}'?) (choose from {m.group(3)})" if near else message
+        what, word, choices = m.group(1), m.group(3), m.group(4)
+        alias = VERB_ALIASES.get(word) if m.group(2) == "VERB" and self.prog == "pairplay" else None
+        near = alias or nearest(word, re.findall(r"'([^']*)'", choices) or choices.split(", "))
+        return f"{what} (did you mean '{near}'?) (choose from {choices})" if near else message
 
     def unrecognized(self, extra: list[str]) -> str:
         """The line of the arguments this parser did not take (`extra`, as argparse leaves them): each unknown

@@ -2,7 +2,7 @@
 
 Before: argparse reported arguments no parser took from the top parser, as `pairplay: unrecognized
 arguments: --bogus`, whatever the verb; then (a new user's trial) in argparse's words with no hint of the
-option meant (`--forse`)."""
+option meant (`--forse`), and a word that is not a verb but another verb's option (`pairplay verify`) with none."""
 
 from __future__ import annotations
 
@@ -205,3 +205,25 @@ def test_a_misspelt_option_of_every_verb_and_action_names_the_one_it_resembles(v
                 f"{prog}: unknown option {typo} (did you mean {option}?) (see {prog} --help)"], (argv, err)
             checked += 1
     assert checked, verb
+
+
+@pytest.mark.parametrize("word, meant", [("verify", "'pairplay replay --verify'"), ("init", "'pairplay protocol init'"),
+                                         ("merge", "'pairplay combine'"), ("record", "'pairplay session'"),
+                                         ("sesion", "'session'"), ("protocl", "'protocol'")])
+def test_a_word_that_is_not_a_verb_names_the_command_meant(word, meant, capsys):
+    """A new user's trial: `pairplay verify x.mcap` listed the verbs, no hint (it is `replay --verify`); a
+    misspelt verb names the verb it resembles; `record` is `session` (what records), not `recover`."""
+    with pytest.raises(SystemExit) as end:
+        main([word, "x.mcap"])
+    assert end.value.code == 2
+    [line] = capsys.readouterr().err.splitlines()
+    assert line.startswith(f"pairplay: argument VERB: invalid choice: '{word}' (did you mean {meant}?)"), line
+
+
+def test_every_word_taken_for_a_verb_stands_for_a_command_that_parses():
+    from hints import bad_command
+
+    from pairplay.cli.main import VERB_ALIASES
+    assert not set(VERB_ALIASES) & set(VERBS)
+    for word, command in VERB_ALIASES.items():
+        assert command.startswith("pairplay ") and bad_command(command) == "", (word, command)
