@@ -163,7 +163,7 @@ def test_a_game_waits_for_a_comma_list_of_services_and_refuses_a_name_that_is_no
         main(["run", "game", "--participant", "sim:ashley", "--wait-for", "learner,foo"])
     assert end.value.code == 2
     err = capsys.readouterr().err
-    assert err.count("\n") == 1 and "foo: not a service to wait for" in err, err
+    assert err.count("\n") == 1 and "'foo': not a service to wait for" in err, err
 
 
 def _misspelt(option: str) -> str:
