@@ -88,8 +88,8 @@ VERBS: dict[str, tuple[str, str]] = {
     "robot": ("pairplay.cli.robot", "perform a session's suggestions on a robot (virtual, IrisTK, Furhat), or --try one"),
 }
 
-# A word a user types as a verb that is another verb's action or option (`pairplay verify x.mcap` is `pairplay
-# replay --verify`; `pairplay init` is `pairplay protocol init`): not a verb, it is answered with the command it
+# A word a user types as a verb that is another verb's action or option (verify x.mcap is `pairplay replay
+# --verify`; init is `pairplay protocol init`): not a verb, it is answered with the command it
 # stands for, before any verb it resembles (`record` resembles `recover`, but records nothing). Only words that
 # mean one command: `check` (protocol check, replay --verify), `repair` (protocol repair, recover) and `play`
 # (replay, lab) mean several, and the verb they resemble, if any, is said (pairplay/nearest.py).
@@ -152,8 +152,8 @@ class Parser(argparse.ArgumentParser):
     def choice_near(self, message: str) -> str:
         """argparse's `invalid choice: 'human-phse1' (choose from ...)` with the choice it resembles
         (pairplay/nearest.py, as every refusal of a name: `--preset human-phse1`, `--algorithm q-lerning` had
-        no hint), a word that is not a verb with the command it stands for (VERB_ALIASES: `pairplay verify`
-        had no hint), else `message` as it is."""
+        no hint), a word that is not a verb with the command it stands for (VERB_ALIASES: the word
+        verify had no hint: it is replay --verify), else `message` as it is."""
         m = re.fullmatch(r"(argument (\S+): invalid choice: '(.*)') \(choose from (.*)\)", message, re.S)
         if not m:
             return message
