@@ -32,6 +32,7 @@ from pairplay.bench.goals import MISSED, goal_text, verdict
 from pairplay.cli.args import count, output_file
 from pairplay.errors import InputError, OptionError
 from pairplay.lists import comma_items
+from pairplay.nearest import hinted
 from pairplay.outputs import check_output, write_text
 from pairplay.numbers import counted
 
@@ -216,7 +217,9 @@ def run(args) -> int:
         return 2
     unknown = [n for n in names if n not in SOURCES]
     if unknown:
-        print(f"pairplay bench: unknown source(s) {unknown}; known: {', '.join(SOURCES)}", file=sys.stderr)
+        said = ", ".join(hinted(n, SOURCES) for n in unknown)  # `cor`: the one meant (pairplay/nearest.py)
+        print(f"pairplay bench: unknown source{'s' * (len(unknown) > 1)} {said}; known: {', '.join(SOURCES)} (--only)",
+              file=sys.stderr)
         return 2
     if args.readme is not None:
         check_readme(args.readme, names, args.quick)

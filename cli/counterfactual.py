@@ -56,6 +56,7 @@ def parse_arms(text: str) -> list[tuple[str, str]]:
     from pairplay.report.counterfactual import ARM_TEXT
 
     from pairplay.lists import comma_items
+    from pairplay.nearest import nearest
 
     arms: list[tuple[str, str]] = []
     try:
@@ -69,7 +70,12 @@ def parse_arms(text: str) -> list[tuple[str, str]]:
         elif kind in ("reuse", "fixed") and path:
             arms.append((item, path))
         else:
-            raise OptionError(f"unknown arm {item!r}: give same, q, final, oracle, alone, reuse:FILE or fixed:FILE",
+            # the arm meant (pairplay/nearest.py): `sme` is same, `reus:p.json` reuse:p.json, `reuse` lacks its file
+            meant = kind if kind in ("reuse", "fixed") else nearest(kind, [*ARM_TEXT, "reuse", "fixed"])
+            if meant in ("reuse", "fixed"):
+                meant = f"{meant}:{path or 'FILE'}"
+            hint = f" (did you mean {meant!r}?)" if meant else ""
+            raise OptionError(f"unknown arm {item!r}{hint}: give same, q, final, oracle, alone, reuse:FILE or fixed:FILE",
                               "--policy")
     names = [a[0] for a in arms]
     if len(set(names)) != len(names):

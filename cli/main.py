@@ -88,6 +88,31 @@ VERBS: dict[str, tuple[str, str]] = {
     "robot": ("pairplay.cli.robot", "perform a session's suggestions on a robot (virtual, IrisTK, Furhat), or --try one"),
 }
 
+# A word a user types as a verb that is another verb's action or option (verify x.mcap is `pairplay replay
+# --verify`; init is `pairplay protocol init`): not a verb, it is answered with the command it
+# stands for, before any verb it resembles (`record` resembles `recover`, but records nothing). Only words that
+# mean one command: `check` (protocol check, replay --verify), `repair` (protocol repair, recover) and `play`
+# (replay, lab) mean several, and the verb they resemble, if any, is said (pairplay/nearest.py).
+# tests/test_cli_usage.py checks every command here parses.
+VERB_ALIASES: dict[str, str] = {
+    "verify": "pairplay replay --verify",
+    "record": "pairplay session",
+    "train": "pairplay study --train-only",
+    "simulate": "pairplay study",
+    "merge": "pairplay combine",
+    "watch": "pairplay view",
+    "try": "pairplay robot --try",
+    "init": "pairplay protocol init",
+    "register": "pairplay protocol register",
+    "status": "pairplay protocol status",
+    "pilot": "pairplay protocol pilot",
+    "serve": "pairplay protocol serve",
+    "export": "pairplay participant export",
+    "delete": "pairplay participant delete",
+    "help": "pairplay --help",
+    "version": "pairplay --version",
+}
+
 
 class HelpFormatter(argparse.HelpFormatter):
     """Every option's help ends with its default, unless the help already states it
@@ -107,28 +132,81 @@ class Parser(argparse.ArgumentParser):
     """argparse, with a usage mistake on ONE line: `pairplay <verb>: <what>`, exit 2.
 
     An unrecognized argument is reported by the innermost parser that met it (`pairplay protocol
-    check: unrecognized arguments: --bogus`), not by the top one, which is where argparse says it."""
+    check: unknown option --bogus`), not by the top one, which is where argparse says it, in pairplay's
+    words: each unknown option with the option of that parser it resembles (`unknown option --forse (did
+    you mean --force?)`: argparse said "unrecognized arguments: --forse"), and before what is missing, which
+    it may be misspelt (`protocol init st --studdy s.toml` said "required: --study")."""
 
     def parse_known_args(self, args=None, namespace=None):
+        self._given = list(sys.argv[1:] if args is None else args)  # what this parser was handed (`error`)
         namespace, extra = super().parse_known_args(args, namespace)
         if extra and not hasattr(namespace, "_usage_parser"):  # the innermost parser returns first
             namespace._usage_parser = self
         return namespace, extra
 
     def error(self, message: str):
-        self.exit(2, f"{self.prog}: {self.choice_missing(message) or self.dash_value(message) or self.choice_near(message)} "
-                     f"(see {self.prog} --help)\n")
+        what = (self.choice_missing(message) or self.unknown_before_missing(message) or self.dash_value(message)
+                or self.choice_near(message))
+        self.exit(2, f"{self.prog}: {what} (see {self.prog} --help)\n")
 
-    @staticmethod
-    def choice_near(message: str) -> str:
+    def choice_near(self, message: str) -> str:
         """argparse's `invalid choice: 'human-phse1' (choose from ...)` with the choice it resembles
         (pairplay/nearest.py, as every refusal of a name: `--preset human-phse1`, `--algorithm q-lerning` had
-        no hint), else `message` as it is."""
-        m = re.fullmatch(r"(argument \S+: invalid choice: '(.*)') \(choose from (.*)\)", message, re.S)
+        no hint), a word that is not a verb with the command it stands for (VERB_ALIASES: the word
+        verify had no hint: it is replay --verify), else `message` as it is."""
+        m = re.fullmatch(r"(argument (\S+): invalid choice: '(.*)') \(choose from (.*)\)", message, re.S)
         if not m:
             return message
-        near = nearest(m.group(2), re.findall(r"'([^']*)'", m.group(3)) or m.group(3).split(", "))
-        return f"{m.group(1)} (did you mean '{near}'?) (choose from {m.group(3)})" if near else message
+        what, word, choices = m.group(1), m.group(3), m.group(4)
+        alias = VERB_ALIASES.get(word) if m.group(2) == "VERB" and self.prog == "pairplay" else None
+        near = alias or nearest(word, re.findall(r"'([^']*)'", choices) or choices.split(", "))
+        return f"{what} (did you mean '{near}'?) (choose from {choices})" if near else message
+
+    def unrecognized(self, extra: list[str]) -> str:
+        """The line of the arguments this parser did not take (`extra`, as argparse leaves them): each unknown
+        option with the option it resembles (pairplay/nearest.py), then any stray word (`_option_for`: a
+        recording given without its option). A word right after an unknown option is taken for its value and
+        not said again (`--bogus 1`: the option is the mistake)."""
+        options, words = [], []
+        values = extra.index("--") if "--" in extra else len(extra)  # after `--`, words only
+        for i, word in enumerate(extra):
+            if i < values and self.unknown_option(word):
+                options.append(word)
+            elif i != values and not (0 < i <= values and self.unknown_option(extra[i - 1])):
+                words.append(word)
+        parts = []
+        if options:
+            said = []
+            for option in options:
+                near = nearest(option.split("=", 1)[0], [o for o in self._option_string_actions if o.startswith("--")])
+                said.append(f"{option} (did you mean {near}?)" if near else option)
+            parts.append(f"unknown option{'s' * (len(options) > 1)} {', '.join(said)}")
+        if words:
+            parts.append(f"unexpected argument{'s' * (len(words) > 1)} {' '.join(words)}{_option_for(self, words)}")
+        return "; ".join(parts)
+
+    def unknown_option(self, word: str) -> bool:
+        """Whether `word` is an option (it starts with '-', and is no negative number) this parser does not take,
+        as argparse reads one: `--name=VALUE`, an unambiguous beginning of a long option, `-vq`."""
+        if len(word) < 2 or not word.startswith("-") or re.fullmatch(r"-\d+|-\d*\.\d+", word):
+            return False
+        name = word.split("=", 1)[0]
+        if name in self._option_string_actions or word == "--":
+            return False
+        if name.startswith("--"):
+            return not (self.allow_abbrev and any(o.startswith(name) for o in self._option_string_actions))
+        return word[:2] not in self._option_string_actions
+
+    def unknown_before_missing(self, message: str) -> str:
+        """argparse's `the following arguments are required: ...` said as the unknown options given, when some
+        were (`unrecognized`): the missing one may be one of them misspelt (`--studdy s.toml` for --study),
+        and they are refused either way; else ""."""
+        if not message.startswith("the following arguments are required: "):
+            return ""
+        given = getattr(self, "_given", [])
+        if "--" in given:  # what follows `--` is a value, never an option
+            given = given[:given.index("--")]
+        return self.unrecognized([w for w in given if self.unknown_option(w)])
 
     @staticmethod
     def dash_value(message: str) -> str:
@@ -357,7 +435,7 @@ def _main(argv: list[str], arm=None) -> int:
     parser, chosen = build_parser(argv)
     args, extra = parser.parse_known_args(argv)
     if extra:  # said by the parser of the verb (or its action) that met them, naming it
-        args._usage_parser.error(f"unrecognized arguments: {' '.join(extra)}{_option_for(args._usage_parser, extra)}")
+        args._usage_parser.error(args._usage_parser.unrecognized(extra))
     if not args.verb:  # a mistake: one line, as any (module rule); `pairplay --help` prints the help on stdout
         print(f"pairplay: no verb given: one of {', '.join(VERBS)} (see pairplay --help)", file=sys.stderr)
         return 2

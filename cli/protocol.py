@@ -352,12 +352,14 @@ def _pilot(data: StudyData, args) -> int:
     from pairplay.services.protocol import StudyRunner, scripted_players
     from pairplay.services.robot.choice import NO_ROBOT, RobotChoice, check_choice
 
-    keys = _items(args.personas, "--personas")
+    # every name is read before they are counted: a misspelt one (`ashly`) is said with the one it resembles,
+    # not as a count that is wrong (it was: the count was checked first, and a name past the count never)
+    keys = [_persona(k, "--personas") for k in _items(args.personas, "--personas")]
     ids = list(data.state.participants)
     if len(keys) != len(ids):
         raise StudyDataError(f"--personas names {counted(len(keys), 'persona')} for {counted(len(ids), 'registered participant')} "
                              f"({', '.join(ids) or 'none'})")
-    personas = {pid: _persona(k, "--personas") for pid, k in zip(ids, keys)}
+    personas = dict(zip(ids, keys))
     robot = None
     if args.robot:
         robot = RobotChoice(args.robot) if args.robot != NO_ROBOT else None

@@ -31,6 +31,7 @@ from pairplay import signals
 from pairplay.cli.args import output_folder, session_id
 from pairplay.errors import OptionError
 from pairplay.lists import comma_items
+from pairplay.nearest import hinted
 from pairplay.outputs import check_folder
 from pairplay.schemas.trust import SERVICES as BUS_SERVICES
 from pairplay.services.bus import Bus, Deadline, add_bus_arguments, deadline_of, options_from_args, stop_on_signals
@@ -52,7 +53,8 @@ def services_to_wait_for(text: str) -> list[str]:
         raise argparse.ArgumentTypeError(str(err)) from None
     unknown = [n for n in names if n not in WAITABLE]
     if unknown or not names:
-        raise argparse.ArgumentTypeError(f"{', '.join(unknown) or repr(text)}: not a service to wait for "
+        raise argparse.ArgumentTypeError(f"{', '.join(hinted(n, WAITABLE) for n in unknown) or repr(text)}: "
+                                         f"not a service to wait for "
                                          f"(one of {', '.join(sorted(WAITABLE))})")
     return names
 

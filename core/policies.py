@@ -15,6 +15,7 @@ import msgspec
 
 from pairplay.arguments import at, given, instance_argument, integer_argument, list_argument
 from pairplay.errors import ArgumentError, InputError, OptionError
+from pairplay.nearest import hinted
 from pairplay.schemas.config import DEFAULT_REWARD_BONUS, LearnerConfig, LSPIConfig, Persona
 from pairplay.schemas.policy import PolicyFile, UserInfo
 
@@ -124,7 +125,7 @@ def check_exclude(policies: list[PolicyFile], exclude) -> None:
     known = sorted({p.participant for p in policies})
     unknown = sorted(set(exclude) - set(known))
     if unknown:
-        raise OptionError(f"no policy of {', '.join(map(repr, unknown))}; participants: {', '.join(known)}",
+        raise OptionError(f"no policy of {', '.join(hinted(u, known) for u in unknown)}; participants: {', '.join(known)}",
                           f"--exclude {','.join(sorted(exclude))}")
 
 

@@ -48,6 +48,7 @@ def bad_options(argv: list[str], line: str) -> list[str]:
     """The options `line` (shown by the verb `argv` ran) names outside its `pairplay ...` commands that
     the verb lacks, and what is wrong with each command it names."""
     line = re.sub(r"^pairplay [^:]*: ", "", line)  # the line's own `pairplay VERB:` prefix
+    line = _without_typed_options(line)
     wrong = [f"`{c}`: {why}" for c in COMMAND.findall(line) if (why := bad_command(c))]
     rest = COMMAND.sub("", line)
     rest = re.sub(r"\(see pairplay [^)]*--help\)", "", rest)  # the usage pointer names its own verb
@@ -59,3 +60,12 @@ def bad_options(argv: list[str], line: str) -> list[str]:
     known = verb_options(argv)
     wrong += [o for o in OPTION.findall(rest) if o not in known]
     return wrong
+
+
+def _without_typed_options(line: str) -> str:
+    """`line` without the unknown options it echoes (`unknown option --forse (did you mean --force?)`, cli/main.py
+    Parser.unrecognized): what the user typed, not what the line tells them to type; the option meant stays."""
+    m = re.search(r"unknown options? (.*?)(?=; |\(see |$)", line)
+    if not m:
+        return line
+    return line[:m.start(1)] + re.sub(r"(^|, )-\S+", r"\1", m.group(1)) + line[m.end(1):]

@@ -1,7 +1,8 @@
-"""Every usage mistake names its verb (and action): `pairplay session: unrecognized arguments: --bogus`.
+"""Every usage mistake names its verb (and action): `pairplay session: unknown option --bogus`.
 
 Before: argparse reported arguments no parser took from the top parser, as `pairplay: unrecognized
-arguments: --bogus`, whatever the verb."""
+arguments: --bogus`, whatever the verb; then (a new user's trial) in argparse's words with no hint of the
+option meant (`--forse`), and a word that is not a verb but another verb's option (`pairplay verify`) with none."""
 
 from __future__ import annotations
 
@@ -30,7 +31,7 @@ def test_an_unknown_option_is_refused_in_one_line_naming_the_verb(verb, capsys):
     out, err = capsys.readouterr()
     prog = " ".join(["pairplay", verb] + MINIMAL[verb][:1] * (verb in ("protocol", "participant")))
     assert out == "" and err.strip().splitlines() == [
-        f"{prog}: unrecognized arguments: --bogus 1 (see {prog} --help)"], err
+        f"{prog}: unknown option --bogus (see {prog} --help)"], err
 
 
 def test_a_missing_argument_and_a_stray_one_at_the_top_still_say_who(capsys):
@@ -39,7 +40,7 @@ def test_a_missing_argument_and_a_stray_one_at_the_top_still_say_who(capsys):
     assert capsys.readouterr().err.startswith("pairplay session: the following arguments are required: --participant")
     with pytest.raises(SystemExit):
         main(["--bogus"])
-    assert capsys.readouterr().err.startswith("pairplay: unrecognized arguments: --bogus")
+    assert capsys.readouterr().err.startswith("pairplay: unknown option --bogus")
 
 
 @pytest.mark.parametrize("argv", [["-v", "session", "--participant", "sim:blind"], ["-q", "--verbose", "study"],
@@ -162,4 +163,67 @@ def test_a_game_waits_for_a_comma_list_of_services_and_refuses_a_name_that_is_no
         main(["run", "game", "--participant", "sim:ashley", "--wait-for", "learner,foo"])
     assert end.value.code == 2
     err = capsys.readouterr().err
-    assert err.count("\n") == 1 and "foo: not a service to wait for" in err, err
+    assert err.count("\n") == 1 and "'foo': not a service to wait for" in err, err
+
+
+def _misspelt(option: str) -> str:
+    """`option` with its last two letters swapped (`--force` -> `--forec`): a typo no option begins with."""
+    return option[:-2] + option[-1] + option[-2]
+
+
+def _every_parser(verb: str):
+    """(argv that reaches it, its prog, parser) for `verb` and every action of it."""
+    import argparse
+
+    from pairplay.cli.main import build_parser
+    _, p = build_parser([verb])
+    yield [verb, *MINIMAL[verb]], " ".join(["pairplay", verb] + MINIMAL[verb][:1] * (verb in ("protocol", "participant"))), p
+    for a in p._actions:
+        if isinstance(a, argparse._SubParsersAction):
+            for name, nested in a.choices.items():
+                yield [verb, name], f"pairplay {verb} {name}", nested
+
+
+@pytest.mark.parametrize("verb", list(VERBS))
+def test_a_misspelt_option_of_every_verb_and_action_names_the_one_it_resembles(verb, capsys):
+    """A new user's trial: `--forse` was "unrecognized arguments: --forse". Every option of every verb (and
+    action) with a letter pair swapped is refused in one line naming the option it resembles, and before a
+    required argument that is missing (the actions are given nothing else: `protocol init --studdy`)."""
+    from pairplay.nearest import nearest
+    checked = 0
+    for argv, prog, p in _every_parser(verb):
+        known = sorted(o for o in p._option_string_actions if o.startswith("--"))
+        for option in (o for o in known if len(o) >= 7):
+            typo = _misspelt(option)
+            if any(o.startswith(typo) for o in known) or nearest(typo, known) != option:
+                continue  # a swap that makes (the beginning of) another option, or resembles another one more
+            with pytest.raises(SystemExit) as end:
+                main([*argv, typo])
+            assert end.value.code == 2
+            out, err = capsys.readouterr()
+            assert out == "" and err.splitlines() == [
+                f"{prog}: unknown option {typo} (did you mean {option}?) (see {prog} --help)"], (argv, err)
+            checked += 1
+    assert checked, verb
+
+
+@pytest.mark.parametrize("word, meant", [("verify", "'pairplay replay --verify'"), ("init", "'pairplay protocol init'"),
+                                         ("merge", "'pairplay combine'"), ("record", "'pairplay session'"),
+                                         ("sesion", "'session'"), ("protocl", "'protocol'")])
+def test_a_word_that_is_not_a_verb_names_the_command_meant(word, meant, capsys):
+    """A new user's trial: `pairplay verify x.mcap` listed the verbs, no hint (it is `replay --verify`); a
+    misspelt verb names the verb it resembles; `record` is `session` (what records), not `recover`."""
+    with pytest.raises(SystemExit) as end:
+        main([word, "x.mcap"])
+    assert end.value.code == 2
+    [line] = capsys.readouterr().err.splitlines()
+    assert line.startswith(f"pairplay: argument VERB: invalid choice: '{word}' (did you mean {meant}?)"), line
+
+
+def test_every_word_taken_for_a_verb_stands_for_a_command_that_parses():
+    from hints import bad_command
+
+    from pairplay.cli.main import VERB_ALIASES
+    assert not set(VERB_ALIASES) & set(VERBS)
+    for word, command in VERB_ALIASES.items():
+        assert command.startswith("pairplay ") and bad_command(command) == "", (word, command)
