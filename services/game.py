@@ -69,6 +69,10 @@ class GameLogic:
     consumes = frozenset({"CardPicked", "CardObserved", "WrongSuggestionPressed", "GazeFixated"}) | CONTROL
     PLAYERS = PLAYERS
     CONTROL = CONTROL
+    # inputs whose whole effect is the session's end: a verification of a stopped session ends the game where
+    # its recorded SessionEnded says (node.py resume), never where the file holds the input (the recorder
+    # orders two sources' messages as they reach it, not as the game took them)
+    ENDS_SESSION = frozenset({"SessionAborted"})
     sources = {tag: (frozenset({"experimenter"}) if tag in CONTROL else PLAYERS) for tag in consumes} \
         | {"GazeFixated": frozenset({"tracker"})}
     GAZE_KEPT = 64  # fixations kept for a first pick that arrives after them

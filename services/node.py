@@ -257,6 +257,8 @@ class Driver:
         live game handled no input after it, so inputs stop being fed once it is the
         only output left to recompute, and the logic is ended as the shell ended it
         (`logic.end(reason, detail)`): its round and turn counts are compared too.
+        An input whose whole effect is that end (the logic's ENDS_SESSION: the experimenter's abort) is
+        not fed: the recorder may have filed it before inputs the live game took first.
         """
         own = [e for e in recorded if e.source == self.logic.name and e.session == self.session]
         self.held_back = deque(e for e in own if type(e).__name__ not in SHELL_TAGS)
@@ -270,6 +272,8 @@ class Driver:
                     break
                 if e.source == self.logic.name or e.session != self.session:
                     continue
+                if stopped is not None and type(e).__name__ in getattr(self.logic, "ENDS_SESSION", ()):
+                    continue  # applied where the recorded end says, below (an abort filed before inputs taken first)
                 key = event_key(e.session, e.source, type(e).__name__)
                 if e.seq <= self.guard.last_seq.get(key, 0):
                     continue  # a duplicate the live service rejected then

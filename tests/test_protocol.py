@@ -134,7 +134,7 @@ def test_the_plan_refuses_steps_out_of_order(tmp_path):
 
 class Stopping(ScriptedPlayer):
     """Plays round 1 only. (An abort that crosses a touch in flight may be recorded before the touch the
-    game took first: the recording cannot order two sources' messages the way the game saw them.)"""
+    game took first: verify ends the game where its recorded SessionEnded says, test below.)"""
 
     def handle(self, e):
         if getattr(e, "round", 0) >= 1:
@@ -169,6 +169,26 @@ def test_an_aborted_game_is_journaled_with_its_reason_and_stays_open(tmp_path):
     assert data.session_id(pid, "phase1", 0).endswith("-r1")  # a retry gets a new recording
     result = verify_recording(data.folder / game.recording)
     assert result.ok, result
+
+
+def test_an_abort_recorded_before_inputs_the_game_took_first_verifies_in_any_order_a_recorder_can_hold(tmp_path):
+    """A recorder writes each source in its own order, but the sources among each other as they reach it: under
+    load the experimenter's SessionAborted was written before board picks the game had taken first, and verify
+    fed it there: the game ended a turn early and the recording FAILed (1 of 4 lowest-deps runs at load 60). The
+    game's recorded SessionEnded says where the abort was taken; verify ends the game there, whatever the file's
+    order of the abort among the other sources' events."""
+    from pairplay.services.verify import verify_events
+
+    data, _, game, _ = aborted_in_round(tmp_path, Stopping("tatiana"), 1, "participant felt unwell")
+    events = [r.event for r in read_log(data.folder / game.recording).events]
+    abort = next(i for i, e in enumerate(events) if type(e).__name__ == "SessionAborted")
+    others = events[:abort] + events[abort + 1:]
+    assert verify_events(events).ok
+    moved = [i for i in range(1, abort) if others[i - 1].source == "board"]  # before board picks taken first
+    assert moved, "no board input before the abort: nothing to move it ahead of"
+    for at in moved[-6:]:
+        held = others[:at] + [events[abort]] + others[at:]
+        assert verify_events(held).ok, (at, verify_events(held))
 
 
 def test_an_abort_the_game_takes_after_its_grace_still_ends_with_the_experimenters_reason(tmp_path, monkeypatch):
