@@ -73,7 +73,6 @@ from pairplay.schemas.jsonfile import MCAP_MAGIC
 from pairplay.numbers import counted
 
 _HEAD = struct.Struct("<BQ")
-_CHUNK_HEAD = struct.Struct("<QQQI")
 _READERS: dict[int, Callable[[ReadDataStream, int], Any]] = {
     0x01: lambda s, n: Header.read(s), 0x02: lambda s, n: Footer.read(s), 0x03: lambda s, n: Schema.read(s),
     0x04: lambda s, n: Channel.read(s), 0x05: Message.read, 0x06: lambda s, n: Chunk.read(s),
@@ -207,6 +206,11 @@ def _parse(opcode: int, content: bytes) -> Any:
             raise Unreadable(f"MessageIndex declares {counted(len(content), 'byte')} but its fields take {_INDEX_HEAD.size + n}")
         flat = struct.unpack_from(f"<{n // 8}Q", content, _INDEX_HEAD.size)
         return MessageIndex(channel_id=channel_id, records=list(zip(flat[::2], flat[1::2])))
+    if opcode == 0x06:  # a chunk read by its fixed fields, without mcap's stream object (speed), when they
+        # take its content exactly; anything else is read by mcap's reader below, which says what does not parse
+        chunk = _chunk_exactly(content)
+        if chunk is not None:
+            return chunk
     reader = _READERS.get(opcode)
     if reader is None:
         raise Unreadable(f"unknown opcode 0x{opcode:02x}")
@@ -218,6 +222,29 @@ def _parse(opcode: int, content: bytes) -> Any:
     if opcode != 0x05 and stream.count != len(content):
         raise Unreadable(f"{_name(opcode)} declares {counted(len(content), 'byte')} but its fields take {stream.count}")
     return record
+
+
+_CHUNK_FIXED = struct.Struct("<QQQII")  # a Chunk's start and end times, sizes, CRC and its compression's length
+
+
+def _chunk_exactly(content: bytes) -> Chunk | None:
+    """The Chunk `content` holds when its fields take it exactly (what mcap's `Chunk.read` makes of it then), else
+    None (a short or overlong content: mcap's reader and the length check say so in their words)."""
+    if len(content) < _CHUNK_FIXED.size + 8:
+        return None
+    start, end, size, crc, named = _CHUNK_FIXED.unpack_from(content)
+    at = _CHUNK_FIXED.size + named
+    if at + 8 > len(content):
+        return None
+    (length,) = struct.unpack_from("<Q", content, at)
+    if at + 8 + length != len(content):
+        return None
+    try:
+        compression = str(content[_CHUNK_FIXED.size:at], "utf-8")
+    except UnicodeDecodeError:
+        return None
+    return Chunk(message_start_time=start, message_end_time=end, uncompressed_size=size, uncompressed_crc=crc,
+                 compression=compression, data=content[at + 8:])
 
 
 def _name(opcode: int) -> str:
