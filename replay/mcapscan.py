@@ -318,11 +318,12 @@ def _open_chunk(chunk: Chunk) -> _Opened:
     previous = start
     head, message_head = _HEAD.unpack_from, _MESSAGE_IN_CHUNK.unpack_from
     fixed = _MESSAGE_IN_CHUNK.size  # a Message record's opcode, length and fixed fields: 31 bytes
+    least = _MESSAGE_HEAD.size  # a Message's content holds at least its fixed fields (22 bytes)
     last_head = size - fixed  # the last offset where a whole Message head fits
     while pos < size:
         if pos <= last_head:  # most records are messages: one unpack reads the head and the fixed fields (speed)
             opcode, length, channel_id, sequence, log_time, publish_time = message_head(data, pos)
-            if opcode == 0x05 and length >= _MESSAGE_HEAD.size:
+            if opcode == 0x05 and length >= least:
                 stop = pos + 9 + length
                 if stop > size:
                     raise Unreadable(f"a {_name(opcode)} at byte {pos} of the chunk's data runs past its end")
