@@ -94,8 +94,16 @@ class SessionFold:
         return self
 
     def fold(self, events) -> "SessionFold":
+        """`evolve` of each event in order, its steps inlined (a call and three attribute look-ups per event
+        were a third of rebuild's fold)."""
+        counts, handlers = self.counts, _HANDLERS
         for e in events:
-            self.evolve(e)
+            self.events += 1
+            name = type(e).__name__
+            counts[name] = counts.get(name, 0) + 1
+            handler = handlers.get(name)
+            if handler is not None:
+                handler(self, e)
         return self
 
     def whole_rounds(self) -> list[int]:

@@ -73,7 +73,6 @@ from pairplay.schemas.jsonfile import MCAP_MAGIC
 from pairplay.numbers import counted
 
 _HEAD = struct.Struct("<BQ")
-_CHUNK_HEAD = struct.Struct("<QQQI")
 _READERS: dict[int, Callable[[ReadDataStream, int], Any]] = {
     0x01: lambda s, n: Header.read(s), 0x02: lambda s, n: Footer.read(s), 0x03: lambda s, n: Schema.read(s),
     0x04: lambda s, n: Channel.read(s), 0x05: Message.read, 0x06: lambda s, n: Chunk.read(s),
@@ -113,8 +112,10 @@ class ChunkSeen:
     intact: bool
     messages: list[tuple[int, int, int]] = field(default_factory=list)  # (offset in chunk, channel, log time)
     listed: int = 0  # a chunk that does not open: the messages its Message Indexes list (lost with it)
-    by_channel: dict[int, set[tuple[int, int]]] | None = field(default=None, repr=False)  # channel -> (offset, time)
+    # channel -> its messages' (log time, offset) in file order, as its Message Index lists them
+    by_channel: dict[int, list[tuple[int, int]]] | None = field(default=None, repr=False)
     indexed: set[int] = field(default_factory=set)  # the channels whose Message Index after it was read
+    in_order: bool = False  # its messages' log times never go back in file order (`_Opened.in_order`)
 
 
 @dataclass
@@ -123,6 +124,7 @@ class Scan:
 
     path: str
     records: list[Any] = field(default_factory=list)  # data-section records in file order, chunks opened
+    metadata_records: list[Metadata] = field(default_factory=list)  # its Metadata records, in file order
     damage: list[Damage] = field(default_factory=list)
     truncated: bool = False  # the file stops before its end
     cut_at: int = -1  # where it stops
@@ -204,6 +206,11 @@ def _parse(opcode: int, content: bytes) -> Any:
             raise Unreadable(f"MessageIndex declares {counted(len(content), 'byte')} but its fields take {_INDEX_HEAD.size + n}")
         flat = struct.unpack_from(f"<{n // 8}Q", content, _INDEX_HEAD.size)
         return MessageIndex(channel_id=channel_id, records=list(zip(flat[::2], flat[1::2])))
+    if opcode == 0x06:  # a chunk read by its fixed fields, without mcap's stream object (speed), when they
+        # take its content exactly; anything else is read by mcap's reader below, which says what does not parse
+        chunk = _chunk_exactly(content)
+        if chunk is not None:
+            return chunk
     reader = _READERS.get(opcode)
     if reader is None:
         raise Unreadable(f"unknown opcode 0x{opcode:02x}")
@@ -215,6 +222,29 @@ def _parse(opcode: int, content: bytes) -> Any:
     if opcode != 0x05 and stream.count != len(content):
         raise Unreadable(f"{_name(opcode)} declares {counted(len(content), 'byte')} but its fields take {stream.count}")
     return record
+
+
+_CHUNK_FIXED = struct.Struct("<QQQII")  # a Chunk's start and end times, sizes, CRC and its compression's length
+
+
+def _chunk_exactly(content: bytes) -> Chunk | None:
+    """The Chunk `content` holds when its fields take it exactly (what mcap's `Chunk.read` makes of it then), else
+    None (a short or overlong content: mcap's reader and the length check say so in their words)."""
+    if len(content) < _CHUNK_FIXED.size + 8:
+        return None
+    start, end, size, crc, named = _CHUNK_FIXED.unpack_from(content)
+    at = _CHUNK_FIXED.size + named
+    if at + 8 > len(content):
+        return None
+    (length,) = struct.unpack_from("<Q", content, at)
+    if at + 8 + length != len(content):
+        return None
+    try:
+        compression = str(content[_CHUNK_FIXED.size:at], "utf-8")
+    except UnicodeDecodeError:
+        return None
+    return Chunk(message_start_time=start, message_end_time=end, uncompressed_size=size, uncompressed_crc=crc,
+                 compression=compression, data=content[at + 8:])
 
 
 def _name(opcode: int) -> str:
@@ -239,7 +269,35 @@ def _decompress(chunk: Chunk) -> bytes:
     raise Unreadable(f"unknown compression {chunk.compression!r}")
 
 
-def _open_chunk(chunk: Chunk) -> tuple[list[Any], list[tuple[int, int, int]]]:
+def _message_maker() -> Callable[[int, int, bytes, int, int], Message]:
+    """mcap's Message made from (channel_id, log_time, data, publish_time, sequence) with positional arguments
+    when its dataclass has its fields in that order (mcap 1.x), with keywords if a version changes them: one is
+    made per message, and keywords cost twice as much (measured, a sixth of a scan's time)."""
+    from dataclasses import fields
+
+    if tuple(f.name for f in fields(Message)) == ("channel_id", "log_time", "data", "publish_time", "sequence"):
+        return Message
+    return lambda channel_id, log_time, data, publish_time, sequence: Message(
+        channel_id=channel_id, log_time=log_time, data=data, publish_time=publish_time, sequence=sequence)
+
+
+_new_message = _message_maker()
+
+
+@dataclass
+class _Opened:
+    """A chunk's records, and what its messages say that the walker checks after (facts gathered in the one pass
+    over its messages, so that the walker need not make another: see `_Walker.chunk`, `_Walker.message_index`)."""
+
+    records: list[Any]
+    messages: list[tuple[int, int, int]]  # (offset in chunk, channel, log time), file order
+    in_order: bool  # every message's log time is at least the one before it in the chunk
+    first_seq: dict[int, int]  # channel -> its first non-zero sequence number in the chunk
+    last_seq: dict[int, int]  # channel -> its last non-zero sequence number in the chunk
+    seq_rising: bool  # each channel's non-zero sequence numbers rise within the chunk
+
+
+def _open_chunk(chunk: Chunk) -> _Opened:
     """The records inside a chunk, after every check the chunk allows (Unreadable if one fails)."""
     try:
         data = _decompress(chunk)
@@ -252,36 +310,58 @@ def _open_chunk(chunk: Chunk) -> tuple[list[Any], list[tuple[int, int, int]]]:
     if chunk.uncompressed_crc and zlib.crc32(data) != chunk.uncompressed_crc:
         raise Unreadable(f"CRC mismatch (recorded {chunk.uncompressed_crc:#010x}, computed {zlib.crc32(data):#010x})")
     records, messages, pos, size = [], [], 0, len(data)
+    add_record, add_message, make = records.append, messages.append, _new_message
+    first_seq: dict[int, int] = {}
+    last_seq: dict[int, int] = {}
+    in_order = seq_rising = True
     start, end = chunk.message_start_time, chunk.message_end_time
+    previous = start
     head, message_head = _HEAD.unpack_from, _MESSAGE_IN_CHUNK.unpack_from
+    fixed = _MESSAGE_IN_CHUNK.size  # a Message record's opcode, length and fixed fields: 31 bytes
+    least = _MESSAGE_HEAD.size  # a Message's content holds at least its fixed fields (22 bytes)
+    last_head = size - fixed  # the last offset where a whole Message head fits
     while pos < size:
+        if pos <= last_head:  # most records are messages: one unpack reads the head and the fixed fields (speed)
+            opcode, length, channel_id, sequence, log_time, publish_time = message_head(data, pos)
+            if opcode == 0x05 and length >= least:
+                stop = pos + 9 + length
+                if stop > size:
+                    raise Unreadable(f"a {_name(opcode)} at byte {pos} of the chunk's data runs past its end")
+                if not start <= log_time <= end:
+                    raise Unreadable(f"a message logged at {log_time} lies outside the chunk's time range "
+                                     f"{start}-{end}")
+                add_record(make(channel_id, log_time, data[pos + fixed:stop], publish_time, sequence))
+                add_message((pos, channel_id, log_time))
+                if log_time < previous:
+                    in_order = False
+                previous = log_time
+                if sequence:
+                    seen = last_seq.get(channel_id)
+                    if seen is None:
+                        first_seq[channel_id] = sequence
+                    elif sequence <= seen:
+                        seq_rising = False
+                    last_seq[channel_id] = sequence
+                pos = stop
+                continue
         if size - pos < 9:
             raise Unreadable(f"a record header is cut at byte {pos} of the chunk's data")
         opcode, length = head(data, pos)
         stop = pos + 9 + length
         if stop > size:
             raise Unreadable(f"a {_name(opcode)} at byte {pos} of the chunk's data runs past its end")
-        if opcode == 0x05 and length >= _MESSAGE_HEAD.size:  # most records: parsed here, as _parse does (speed)
-            _, _, channel_id, sequence, log_time, publish_time = message_head(data, pos)
-            if not start <= log_time <= end:
-                raise Unreadable(f"a message logged at {log_time} lies outside the chunk's time range "
-                                 f"{start}-{end}")
-            records.append(Message(channel_id=channel_id, sequence=sequence, log_time=log_time,
-                                   publish_time=publish_time, data=data[pos + 9 + _MESSAGE_HEAD.size:stop]))
-            messages.append((pos, channel_id, log_time))
-            pos = stop
-            continue
-        record = _parse(opcode, data[pos + 9:stop])
+        record = _parse(opcode, data[pos + 9:stop])  # a Message here is too short: Unreadable
         if not isinstance(record, _IN_CHUNK):
             raise Unreadable(f"a {type(record).__name__} record inside a chunk")
-        if isinstance(record, Message):
+        if isinstance(record, Message):  # (not reached: kept so that no message escapes the checks)
             if not start <= record.log_time <= end:
                 raise Unreadable(f"a message logged at {record.log_time} lies outside the chunk's time range "
                                  f"{start}-{end}")
             messages.append((pos, record.channel_id, record.log_time))
+            in_order, seq_rising = False, False  # the walker's own checks then run message by message
         records.append(record)
         pos = stop
-    return records, messages
+    return _Opened(records, messages, in_order, first_seq, last_seq, seq_rising)
 
 
 class _Walker:
@@ -406,7 +486,9 @@ class _Walker:
                 return scan
             elif isinstance(record, (Schema, Channel, Metadata)):
                 scan.records.append(record)
-                self.metadata += isinstance(record, Metadata)
+                if isinstance(record, Metadata):
+                    self.metadata += 1
+                    scan.metadata_records.append(record)
             elif opcode == 0x09:
                 self.attachments += 1
             elif isinstance(record, Message):
@@ -459,7 +541,7 @@ class _Walker:
         self.scan.chunks.append(seen)
         part = f"chunk {n} (bytes {pos}-{end})"
         try:
-            records, seen.messages = _open_chunk(chunk)
+            opened = _open_chunk(chunk)
         except Unreadable as err:
             self.damage(pos, part, f"{err}: its records are not read", lost="its messages")
             self.lost_chunk = (len(self.scan.damage) - 1, seen)
@@ -468,17 +550,31 @@ class _Walker:
         if previous is not None and chunk.message_start_time < previous.start:
             self.damage(pos, part, f"starts at log time {chunk.message_start_time}, before chunk {previous.number}"
                         f" ({previous.start}): chunks out of order")
+        records, seen.messages, seen.in_order = opened.records, opened.messages, opened.in_order
         seen.intact = True
         self.last_intact = seen
         self.messages += len(seen.messages)
         last_seq = self.last_seq
-        for record in records:
-            if type(record) is Message and record.sequence:
-                last = last_seq.get(record.channel_id)
-                if last is not None and record.sequence <= last[0]:
-                    self.sequence(pos, record, part, n)  # says what is wrong
-                else:
-                    last_seq[record.channel_id] = (record.sequence, n)
+        # each channel's sequence numbers rise: within the chunk (checked as it was opened) and from the chunks
+        # before; then each channel's last number is the chunk's last. Else, message by message, to say where
+        rising = opened.seq_rising
+        if rising:
+            for channel, first in opened.first_seq.items():
+                last = last_seq.get(channel)
+                if last is not None and first <= last[0]:
+                    rising = False
+                    break
+        if rising:
+            for channel, number in opened.last_seq.items():
+                last_seq[channel] = (number, n)
+        else:
+            for record in records:
+                if type(record) is Message and record.sequence:
+                    last = last_seq.get(record.channel_id)
+                    if last is not None and record.sequence <= last[0]:
+                        self.sequence(pos, record, part, n)  # says what is wrong
+                    else:
+                        last_seq[record.channel_id] = (record.sequence, n)
         self.scan.records.extend(records)
         return seen
 
@@ -504,10 +600,18 @@ class _Walker:
             return
         chunk.indexed.add(index.channel_id)
         if chunk.by_channel is None:  # once per chunk, not once per index
-            chunk.by_channel = {}
+            by_channel: dict[int, list[tuple[int, int]]] = {}
             for off, ch, t in chunk.messages:
-                chunk.by_channel.setdefault(ch, set()).add((off, t))
-        mine = chunk.by_channel.get(index.channel_id, set())
+                entries = by_channel.get(ch)
+                if entries is None:
+                    by_channel[ch] = [(t, off)]
+                else:
+                    entries.append((t, off))
+            chunk.by_channel = by_channel
+        in_file_order = chunk.by_channel.get(index.channel_id, [])
+        if chunk.in_order and index.records == in_file_order:
+            return  # the chunk's very messages of the channel, in their order, whose log times never go back
+        mine = {(off, t) for t, off in in_file_order}
         listed = {(off, t) for t, off in index.records}
         if listed != mine:
             self.damage(pos, f"message index of chunk {chunk.number} (byte {pos})",
