@@ -6,12 +6,16 @@ wrapped around the shell's steps in both processes: the bus callback
 (`Node._on_message`), the service thread taking the message (`Inbox.get`),
 the guard (`Guard.check`), the logic (`handle`), numbering (`Driver._stamp`),
 encoding and queueing (`Node.publish`) and each put (`Bus.put`,
-`Bus.put_batched`). Times are `time.perf_counter()` (CLOCK_MONOTONIC on
-Linux: one clock for both processes). For every first pick that got a
-suggestion it prints the p25/p50/p75 of each stage, in microseconds, beside
-the row's own figures. The hooks cost a few microseconds per stage: compare
-stages, not the total with the bench's. A diagnostic for docs/bus.md, not a
-bench row.
+`Bus.put_batched`, each put also on its own: in the bench only the game's
+SuggestionRequested has a subscriber in another process, so its CardRevealed
+and CardObserved never reach the wire and the "three puts" are the express
+one's), and Python's cyclic collections in either process (`gc.callbacks`).
+Times are `time.perf_counter()` (CLOCK_MONOTONIC on Linux: one clock for both
+processes). For every first pick that got a suggestion it prints the
+p25/p50/p75 of each stage, in microseconds, beside the row's own figures, and
+how many picks a collection started during. The hooks cost a few
+microseconds per stage: compare stages, not the total with the bench's. A
+diagnostic for docs/bus.md, not a bench row.
 
     .venv/bin/python tools/latency_trace.py [--turns 500]
 """
@@ -20,6 +24,8 @@ from __future__ import annotations
 
 import argparse
 import atexit
+import bisect
+import gc
 import json
 import os
 import subprocess
@@ -39,6 +45,10 @@ STAGES = [  # (name, from, to): stamps of one pick's way, in order
     ("game: message in -> events out", "got:CardPicked", "decided:CardPicked"),
     ("game encode + queue", "decided:CardPicked", "published"),
     ("game puts (3 events)", "published", "sent"),
+    ("  of which CardRevealed (batched)", "pb0:CardRevealed", "pb1:CardRevealed"),
+    ("  of which CardObserved (batched)", "pb0:CardObserved", "pb1:CardObserved"),
+    ("  of which SuggestionRequested", "put0:SuggestionRequested", "put1:SuggestionRequested"),
+    ("SuggestionRequested put -> learner callback", "put0:SuggestionRequested", "L:cb:SuggestionRequested"),
     ("network -> learner callback", "sent", "L:cb:SuggestionRequested"),
     ("learner callback -> learner thread", "L:cb:SuggestionRequested", "L:got:SuggestionRequested"),
     ("learner guard", "L:guard0:SuggestionRequested", "L:guard1:SuggestionRequested"),
@@ -47,6 +57,7 @@ STAGES = [  # (name, from, to): stamps of one pick's way, in order
     ("learner encode + queue", "L:decided:SuggestionRequested", "L:published"),
     ("learner put", "L:published", "L:sent"),
     ("network -> bench", "L:sent", "ARRIVED"),
+    ("learner's put -> bench", "L:put0:SuggestionMade", "ARRIVED"),
     ("total", "PICK", "ARRIVED"),
 ]
 
@@ -80,8 +91,14 @@ def install_hooks(out: str) -> list:
     wrap(node.Driver, "_stamp", "stamp0", "stamp1")
     wrap(runner.Node, "publish", None, "published")
     wrap(bus.Outbox, "publish_here", None, "sent")
+    wrap(bus.Bus, "put", "put0", "put1", key_tag)
+    wrap(bus.Bus, "put_batched", "pb0", "pb1", key_tag)
     for logic in (GameLogic, LearnerLogic):
         wrap(logic, "handle", "handle0", "handle1", lambda args, _r: type(args[1]).__name__)
+
+    def collected(phase: str, info: dict) -> None:  # a cyclic collection, any thread (gc.callbacks)
+        stamps.append(("gc0" if phase == "start" else "gc1", str(info.get("generation")), clock()))
+    gc.callbacks.append(collected)
 
     def dump() -> None:
         with open(out, "w") as f:
@@ -103,6 +120,32 @@ def first_after(stamps: list, name: str, start: float, end: float) -> float | No
         if start <= at <= end and w == what and (not tag or t == tag):
             return at
     return None
+
+
+def collections_in_picks(game: list, learner: list, skip: int = 20) -> dict[str, tuple[int, int, float]]:
+    """Per process: (picks a cyclic collection started during, picks, the p50 of those collections in us),
+    over first picks that got a suggestion, from the pick's put to the suggestion's arrival."""
+    game = sorted(game, key=lambda s: s[2])
+    picks = [s[2] for s in game if s[0] == "PICK"]
+    arrivals = [s[2] for s in game if s[0] == "ARRIVED"]
+    windows = []
+    for start, following in zip(picks, picks[1:] + [float("inf")]):
+        j = bisect.bisect(arrivals, start)
+        if j < len(arrivals) and arrivals[j] < following:
+            windows.append((start, arrivals[j]))
+    windows = windows[skip:]
+    out = {}
+    for name, stamps in (("game", game), ("learner", sorted(learner, key=lambda s: s[2]))):
+        starts = [s[2] for s in stamps if s[0] == "gc0"]
+        ends = [s[2] for s in stamps if s[0] == "gc1"]
+        hit, took = set(), []
+        for a, b in zip(starts, ends):
+            k = bisect.bisect(windows, (a, float("inf"))) - 1
+            if k >= 0 and windows[k][0] <= a <= windows[k][1]:
+                hit.add(k)
+                took.append((b - a) * 1e6)
+        out[name] = (len(hit), len(windows), float(np.median(took)) if took else 0.0)
+    return out
 
 
 def stages(game: list, learner: list) -> dict[str, list[float]]:
@@ -171,6 +214,8 @@ def main() -> int:
         if values:
             v = np.percentile(values[20:] or values, [25, 50, 75])
             print(f"  {stage:38s} p25 {v[0]:7.1f}  p50 {v[1]:7.1f}  p75 {v[2]:7.1f}  (n={len(values)})")
+    for name, (hit, n, took) in collections_in_picks(stamps, learner).items():
+        print(f"  a cyclic collection in the {name}'s process during {hit} of {n} picks (p50 {took:.0f} us each)")
     return 0
 
 
