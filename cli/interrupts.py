@@ -85,6 +85,8 @@ class DeferredInterrupt:
 
     def handler(self, signum, frame) -> None:
         global received
+        if not signals.arrived(signum):
+            return  # a copy of a held signal sent again (pairplay/signals.py send_to_main): taken already
         redelivered, self._redelivered = self._redelivered, False
         if not redelivered:  # a held interrupt comes back (_deliver_after): it is the same signal, not a second
             received = signum
@@ -112,4 +114,4 @@ class DeferredInterrupt:
     def _deliver_after(self, lock, signum: int) -> None:
         with lock._lock:  # free once the main thread has left numba's compiler
             self._redelivered = True
-            signals.send_to_main(signum)
+        signals.send_to_main(signum)  # (sent again until taken: not while holding the compiler's lock)

@@ -31,7 +31,10 @@ A handler that raises KeyboardInterrupt must not raise it inside a finalizer
 garbage collector runs in the main thread, where Python prints the exception as
 "Exception ignored" and swallows it (a study went on and exited 0 after a
 Ctrl-C: CI, fresh clone of 61bc185). It delivers the signal again a moment
-later instead (`deliver_again`); finalizers are short. A generator closed by the
+later instead (`deliver_again`); finalizers are short. A signal sent to the main
+thread that way (`send_to_main`) is sent again until the handler has taken it: one that
+lands as the main thread enters a blocking call wakes nothing; the copies that
+come after the first was taken are dropped (`arrived`). A generator closed by the
 collector or the callback of a bare `weakref.ref` is not seen (none runs in our
 main thread).
 
@@ -57,6 +60,11 @@ stopping = 0  # the signal a verb's own handler took to stop on (services/bus.py
 again = 0  # a second signal that handler took while stopping on the first (module rule); 0: none
 WAIT_POLL_S = 0.05  # how often `wait_cut` looks for a second signal
 FINALIZER_RETRY_S = 0.01  # a signal held while a finalizer runs is delivered again this much later
+RESEND_S = 0.02  # a signal sent to the main thread is sent again this often until its handler took it
+RESEND_FOR_S = 5.0  # and for at most this long
+DUPLICATE_S = 0.25  # a copy sent again that comes this soon after the send is the same signal (`arrived`)
+_owed: dict[int, bool] = {}  # signals `send_to_main` sent whose handler has not run yet
+_resent_at: dict[int, float] = {}  # when each was last sent again
 _WEAKREF_FILES = ("weakref.py", "_weakrefset.py")  # the standard library's weak-reference callbacks live here
 
 
@@ -110,10 +118,33 @@ def in_finalizer(frame) -> bool:
 def send_to_main(signum: int) -> None:
     """`signum` to the main thread, as a real signal: it wakes a sleep or a wait the main thread is blocked in
     (`_thread.interrupt_main` only sets the flag, and the interrupt waited for the wait's end: a study held in
-    numba's compiler then interrupted only when its next 5-second wait ended)."""
+    numba's compiler then interrupted only when its next 5-second wait ended). Called from a helper thread.
+
+    Sent again every RESEND_S until the main thread's handler has taken it (`arrived`), for at most RESEND_FOR_S:
+    a signal that lands as the main thread is entering a blocking call (the GIL handed to this thread as that
+    one lets it go for the call) runs nothing and wakes nothing, and the call slept on (1 of ~240 runs of
+    test_a_ctrl_c_inside_a_finalizer_is_not_swallowed at load 4-8; a 120-s sleep)."""
     import threading
-    if callable(signal.getsignal(signum)):  # as interrupt_main: nothing once no Python handler takes it (a
-        signal.pthread_kill(threading.main_thread().ident, signum)  # default SIGTERM would kill the process)
+    import time
+    main = threading.main_thread().ident
+    _owed[signum] = True
+    end = time.monotonic() + RESEND_FOR_S
+    while callable(signal.getsignal(signum)):  # as interrupt_main: nothing once no Python handler takes it (a
+        signal.pthread_kill(main, signum)  # default SIGTERM would kill the process)
+        time.sleep(RESEND_S)
+        if not _owed.get(signum) or time.monotonic() >= end:
+            return
+        _resent_at[signum] = time.monotonic()  # before the send: a handler that runs from here on knows it
+
+
+def arrived(signum: int) -> bool:
+    """Whether a handler that `send_to_main` may target is to act on this `signum`: False for the copy of a
+    signal sent again whose first copy the handler has taken already (module rule; `send_to_main`). Called
+    first by such a handler (main thread)."""
+    import time
+    if _owed.pop(signum, False):
+        return True
+    return time.monotonic() - _resent_at.get(signum, float("-inf")) > DUPLICATE_S
 
 
 def wait_cut(waited, timeout_s: float | None = None) -> bool:

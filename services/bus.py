@@ -1086,6 +1086,8 @@ def stop_on_signals(stop: threading.Event, then: Callable[[], object] | None = N
     runs on the main thread between two of its bytecodes, possibly while that thread holds the
     lock of the Event it waits on. Main thread only."""
     def handler(signum, frame):
+        if not signals.arrived(signum):
+            return  # a copy of a held second Ctrl-C sent again (pairplay/signals.py send_to_main): taken already
         # a signal taken already (its name in `why`), not a stop set by the work's own end: the first Ctrl-C
         # as a session finished its file was read as a second one and the file left cut (a new user's trial)
         taken = bool(getattr(stop, "why", ""))

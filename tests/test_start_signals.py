@@ -195,3 +195,39 @@ def test_every_handler_pairplay_installs_leaves_an_ignored_sigint_ignored():
     finally:
         for s, handler in saved.items():
             signal.signal(s, handler)
+
+
+def test_a_signal_sent_to_the_main_thread_that_wakes_nothing_is_sent_again_and_taken_once(tmp_path):
+    """A signal that lands as the main thread enters a blocking call (the GIL handed to the sender as the main
+    thread lets it go for the call) wakes nothing: a held Ctrl-C sent back that way let a 120-s sleep run on
+    (1 of ~240 runs of the finalizer test at load 4-8). Here the first copy is lost on purpose: the sleep is
+    woken by the copy sent again, and the handler acts once however many copies come."""
+    script = tmp_path / "lost.py"
+    script.write_text(
+        "import signal, threading, time\n"
+        "from pairplay import signals\n"
+        "real, sent = signal.pthread_kill, []\n"
+        "def lossy(ident, signum):\n"
+        "    sent.append(signum)\n"
+        "    if len(sent) > 1:\n"  # the first copy wakes nothing, as in the race
+        "        real(ident, signum)\n"
+        "signal.pthread_kill = lossy\n"
+        "acted = []\n"
+        "def handler(signum, frame):\n"
+        "    if signals.arrived(signum):\n"
+        "        acted.append(signum)\n"
+        "        raise KeyboardInterrupt\n"
+        "signals.handle(handler)\n"
+        "threading.Thread(target=signals.send_to_main, args=(signal.SIGINT,), daemon=True).start()\n"
+        "t = time.monotonic()\n"
+        "try:\n"
+        "    time.sleep(30)\n"
+        "except KeyboardInterrupt:\n"
+        "    pass\n"
+        "signal.pthread_kill = real\n"
+        "for _ in range(3):\n"  # a copy that comes after the first was taken is dropped
+        "    real(threading.main_thread().ident, signal.SIGINT)\n"
+        "    time.sleep(0.01)\n"
+        "print(len(acted), len(sent) >= 2, round(time.monotonic() - t) < 5)\n")
+    r = subprocess.run([sys.executable, str(script)], capture_output=True, text=True, timeout=60)
+    assert r.stdout.split() == ["1", "True", "True"], (r.stdout, r.stderr)
