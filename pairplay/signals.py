@@ -42,9 +42,11 @@ A verb that stops on signals itself (services/bus.py `stop_on_signals`) raises
 nothing: it notes the signal in `stopping`, which a wait that is not its stop
 event's reads to end at once (pairplay/folderlock.py: a study folder's lock
 waited for up to 8 s after the signal, then refused as busy, exit 2). A second signal while it stops is
-noted in `again`: a second SIGINT raises KeyboardInterrupt from its handler, a second SIGTERM raises nothing
-there, so a wait on the way out that a second signal must cut (`wait_cut`) ends on either, as the user meant
-(a `protocol serve` waiting for its journal took a second SIGTERM and waited on).
+noted in `again` (the line says which) and raises KeyboardInterrupt from its handler, SIGINT and SIGTERM
+alike: a second SIGTERM once raised nothing and was heard only in the waits that looked for it (a new user's
+trial: two SIGTERMs 0.02-0.3 s apart, never "interrupted again"); a wait on the way out that a second signal
+must cut (`wait_cut`) ends on either too, as the user meant (a `protocol serve` waiting for its journal took a
+second SIGTERM and waited on).
 
 Imports nothing but `signal` when loaded (its C part is loaded with the interpreter).
 """

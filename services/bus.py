@@ -1081,7 +1081,7 @@ def _replies(replies: queue.SimpleQueue, wait_s: float, stop: threading.Event | 
 
 def stop_on_signals(stop: threading.Event, then: Callable[[], object] | None = None) -> None:
     """SIGINT/SIGTERM set `stop`, name the signal in `stop.why` and start the shutdown's
-    `stop.deadline` (a second SIGINT still interrupts; a second of either cuts `signals.wait_cut`); then
+    `stop.deadline` (a second SIGINT or SIGTERM interrupts: KeyboardInterrupt); then
     call `then()` (it must only set flags). `stop` is set and `then` called by a thread started from the handler: a handler
     runs on the main thread between two of its bytecodes, possibly while that thread holds the
     lock of the Event it waits on. Main thread only."""
@@ -1093,7 +1093,7 @@ def stop_on_signals(stop: threading.Event, then: Callable[[], object] | None = N
         taken = bool(getattr(stop, "why", ""))
         if taken:  # a second signal: a wait that a second one cuts ends on SIGTERM too (signals.wait_cut)
             signals.again = signals.again or signum
-        if taken and signum == signal.SIGINT:
+        if taken:  # a second SIGINT or SIGTERM cuts the shutdown (a second SIGTERM was heard only in wait_cut)
             if signals.in_finalizer(frame):  # raised there it would be swallowed (pairplay/signals.py)
                 signals.deliver_again(signum)
                 return
