@@ -135,7 +135,15 @@ class Parser(argparse.ArgumentParser):
     check: unknown option --bogus`), not by the top one, which is where argparse says it, in pairplay's
     words: each unknown option with the option of that parser it resembles (`unknown option --forse (did
     you mean --force?)`: argparse said "unrecognized arguments: --forse"), and before what is missing, which
-    it may be misspelt (`protocol init st --studdy s.toml` said "required: --study")."""
+    it may be misspelt (`protocol init st --studdy s.toml` said "required: --study").
+
+    No abbreviations: argparse takes any unambiguous beginning of an option for it, so `--for` or `--fo` was
+    `--force` and replaced outputs without a word (a new user's trial), and a typo that begins an option
+    ran as that option; an option is given whole (`--for` is refused, naming --force)."""
+
+    def __init__(self, *args, **kwargs):
+        kwargs.setdefault("allow_abbrev", False)  # every parser of the command line: the verbs' and actions' too
+        super().__init__(*args, **kwargs)
 
     def parse_known_args(self, args=None, namespace=None):
         self._given = list(sys.argv[1:] if args is None else args)  # what this parser was handed (`error`)
@@ -178,7 +186,9 @@ class Parser(argparse.ArgumentParser):
         if options:
             said = []
             for option in options:
-                near = nearest(option.split("=", 1)[0], [o for o in self._option_string_actions if o.startswith("--")])
+                name, known = option.split("=", 1)[0], [o for o in self._option_string_actions if o.startswith("--")]
+                begun = [o for o in known if o.startswith(name)] if name.startswith("--") and len(name) > 2 else []
+                near = begun[0] if len(begun) == 1 else nearest(name, known)  # (no abbreviations: said whole)
                 said.append(f"{option} (did you mean {near}?)" if near else option)
             parts.append(f"unknown option{'s' * (len(options) > 1)} {', '.join(said)}")
         if words:

@@ -40,7 +40,8 @@ from pairplay.numbers import counted
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("recording", metavar="REC")
-    p.add_argument("-o", "--output", type=output_file(into=True),
+    # --out as every other verb names it (options are given whole: `--out` had worked as the beginning of --output)
+    p.add_argument("-o", "--out", "--output", dest="output", type=output_file(into=True),
                    help="output file (default <stem>.recovered.mcap beside REC; a folder: that name in it)")
     add_force(p, "an existing output file")
     p.add_argument("--discard-journal", action="store_true",

@@ -176,7 +176,7 @@ def test_a_sweep_cell_file_that_is_a_folder_is_refused_naming_the_cell_before_an
 # default name, or, where the verb has none, is refused naming the option; a folder's option is a folder.
 # (prog, option) -> the arguments typed and: ("into", the file written) or ("refused", the option the line names)
 TRAILING_SLASH = {
-    ("pairplay recover", "-o/--output"): (["recover", "cut.mcap", "-o", "o/"], ("into", "o/cut.recovered.mcap")),
+    ("pairplay recover", "-o/--out/--output"): (["recover", "cut.mcap", "-o", "o/"], ("into", "o/cut.recovered.mcap")),
     ("pairplay view", "--out"): (["view", "--recording", "rec.mcap", "--out", "o/"], ("into", "o/rec.rrd")),
     ("pairplay participant export", "-o/--out"): (["participant", "export", "study", "p01", "-o", "o/."],
                                                   ("into", "o/p01.zip")),

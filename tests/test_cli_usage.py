@@ -227,3 +227,16 @@ def test_every_word_taken_for_a_verb_stands_for_a_command_that_parses():
     assert not set(VERB_ALIASES) & set(VERBS)
     for word, command in VERB_ALIASES.items():
         assert command.startswith("pairplay ") and bad_command(command) == "", (word, command)
+
+
+@pytest.mark.parametrize("argv, given, meant", [(["study"], "--for", "--force"), (["study"], "--fo", "--force"),
+                                                (["report", "x"], "--ou", "--out"),
+                                                (["protocol", "init", "st"], "--stu", "--study")])
+def test_the_beginning_of_an_option_is_not_taken_for_it(argv, given, meant, capsys):
+    """A new user's trial: `pairplay study --fo` replaced a finished study's report (argparse takes any
+    unambiguous beginning of an option for it: --fo was --force). An option is given whole."""
+    with pytest.raises(SystemExit) as end:
+        main([*argv, given])
+    assert end.value.code == 2
+    err = capsys.readouterr().err
+    assert f"unknown option {given} (did you mean {meant}?)" in err and len(err.splitlines()) == 1, err

@@ -121,7 +121,7 @@ def test_every_pairplay_command_the_code_names_parses():
     assert wrong == []
 
 
-SHOWN_AS_MISTAKES = {"pairplay --out x study", "pairplay verify x.mcap"}  # the README shows what the command line says of them
+SHOWN_AS_MISTAKES = {"pairplay --out x study", "pairplay verify x.mcap", "pairplay study --fo"}  # the README shows what the command line says of them
 
 
 def test_every_pairplay_command_the_docs_name_parses():
