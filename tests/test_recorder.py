@@ -18,6 +18,16 @@ def message(event, source="game", seq=1, session="r1"):
     return event_key("r1", source, type(event).__name__), encode_event(e)
 
 
+def flooding(path):
+    """A recorder of session r1 whose SessionStarted (game seq 1) is written and whose inbox sheds a source's
+    second waiting message (a flood's worth)."""
+    rec = Recorder(None, "r1", path)
+    rec.inbox.per_source = 1
+    cfg = SessionConfig(session="r1", participant="sim:ashley", persona="ashley", seed=9, rounds=1)
+    assert rec.record(*message(ev.SessionStarted(config=cfg)), 1)
+    return rec
+
+
 def test_the_recorder_keeps_good_messages_and_refuses_bad_ones(tmp_path):
     rec = Recorder(None, "r1", tmp_path / "r1.mcap", clock=iter(range(10**9, 10**10)).__next__)
     cfg = SessionConfig(session="r1", participant="sim:ashley", persona="ashley", seed=9, rounds=1,
@@ -125,10 +135,7 @@ def test_a_hole_a_full_inbox_left_mid_session_is_said_once_as_shed_not_also_as_l
 
     from pairplay.services.verify import verify_recording
 
-    rec = Recorder(None, "r1", tmp_path / "r1.mcap")
-    rec.inbox.per_source = 1  # (a flood's worth: the second message of a source waiting is shed)
-    cfg = SessionConfig(session="r1", participant="sim:ashley", persona="ashley", seed=9, rounds=1)
-    assert rec.record(*message(ev.SessionStarted(config=cfg)), 1)
+    rec = flooding(tmp_path / "r1.mcap")
     # seq 2 never comes (lost on the bus); 3 is taken; 4 and 5 are shed (the inbox holds 3); 6 ends the session
     assert rec.inbox.put(*message(ev.RoundStarted(round=0, faces=[i // 2 for i in range(18)]), seq=3))
     assert not rec.inbox.put(*message(ev.CardRevealed(round=0, turn=0, card=0, face=0, pick=0), seq=4))

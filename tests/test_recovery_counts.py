@@ -8,10 +8,9 @@ import json
 from pairplay.replay.reader import RECOVERED, read_log
 from pairplay.replay.recover import recover
 from pairplay.schemas import events as ev
-from pairplay.schemas.session import SessionConfig
 from pairplay.services.recorder import Recorder
 
-from test_recorder import message
+from test_recorder import flooding, message
 
 
 def _tail_zeroed(src, dst, n=37):
@@ -22,10 +21,7 @@ def _tail_zeroed(src, dst, n=37):
 
 
 def test_the_loss_counts_of_every_copy_of_a_recording_add_up(tmp_path):
-    first = Recorder(None, "r1", tmp_path / "r1.mcap")
-    first.inbox.per_source = 1  # (a flood's worth: the second message of a source waiting is shed)
-    cfg = SessionConfig(session="r1", participant="sim:ashley", persona="ashley", seed=9, rounds=1)
-    assert first.record(*message(ev.SessionStarted(config=cfg)), 1)
+    first = flooding(tmp_path / "r1.mcap")
     # seq 2 lost on the bus; 3 taken; 4 shed by the full inbox; 5 taken
     assert first.inbox.put(*message(ev.RoundStarted(round=0, faces=[i // 2 for i in range(18)]), seq=3))
     assert not first.inbox.put(*message(ev.CardRevealed(round=0, turn=0, card=0, face=0, pick=0), seq=4))
