@@ -18,7 +18,8 @@ the thread that takes it off the bus appends it to the write-ahead journal besid
 replay/wal.py), which a thread writes to the OS every 5 ms; a SIGKILL then loses only what was
 received in the last 5 ms + scheduling, whatever the backlog, and `pairplay recover` adds from
 the journal what the cut file lacks, through the live checks (services/walmerge.py). The
-journal is removed once the file is complete and fsync'd; a restarted recorder takes the
+journal is removed once the file is complete and fsync'd, in one step with the file's end that a signal
+does not cut (`close`: a second Ctrl-C between them left a stale journal); a restarted recorder takes the
 earlier file's journal too (`_continue`). A close is done by its
 deadline; what is still queued then is counted and recorded, not waited for. The session config, seed and software version
 go into MCAP metadata ("pairplay.session") when SessionStarted passes, the
