@@ -20,7 +20,8 @@ import sys
 import threading
 from pathlib import Path
 
-from pairplay import signals
+from pairplay import signals, testpause
+from pairplay.cli import interrupts
 from pairplay.schemas.policy import PolicyFileError
 from pairplay.outputs import check_folder
 from pairplay.services.recorder import check_new_recording
@@ -28,7 +29,7 @@ from pairplay.services.bus import LOOPBACK_ANY_PORT, MODES, BusOptions, stop_on_
 
 from pairplay.cli.args import duration, output_folder
 from pairplay.cli.robot import add_robot_arguments, check_robot_args, probe_robot_args, robot_choice
-from pairplay.cli.session import add_config_arguments, config_from_args, print_interrupted, read_back
+from pairplay.cli.session import add_config_arguments, config_from_args, cut_line, print_interrupted, read_back
 from pairplay.numbers import counted
 
 LOOPBACK = "127.0.0.1"
@@ -102,12 +103,12 @@ def run(args: argparse.Namespace) -> int:
         path = run_lab(config, out, host=host, port=port, bus_options=bus_options, robot=robot_choice(args),
                        stop=stop, on_ready=ready, linger_s=args.linger, ssl_certfile=args.certfile,
                        ssl_keyfile=args.keyfile, summary=summary)
+        interrupts.work_done()  # the recording is finished: a signal from now on cuts nothing (cli/session.py cut_line)
     except KeyboardInterrupt:  # a second signal: the shutdown of the first was cut short
         if not stop.is_set():
             raise
         again = signals.again or signal.SIGINT  # (a second SIGTERM cuts it too: pairplay/signals.py `wait_cut`)
-        print(f"pairplay lab: interrupted again ({signals.said(again)}) while stopping; {out} holds what was recorded "
-              f"up to now and may lack its end: pairplay recover {out} completes it", file=sys.stderr)
+        print(cut_line("lab", out, again, summary), file=sys.stderr)
         return 128 + again
     except TimeoutError as err:  # a service the game waits for never came (the eye tracker, say)
         print(f"pairplay lab: the session did not start: {err}", file=sys.stderr)
@@ -118,6 +119,7 @@ def run(args: argparse.Namespace) -> int:
         print(f"pairplay lab: cannot serve the pages: {err.strerror or err} (--listen {args.listen})",
               file=sys.stderr)
         return 2
+    testpause.pause("recording-finished")
     if getattr(stop, "why", "") and summary:
         return print_interrupted(summary, path, signals.said(stop.why), config.rounds,  # no reading the file back: 2 s
                                  "the id stays taken: choose another --session", "lab")  # (lab has no --force)

@@ -329,6 +329,9 @@ def main(argv: list[str] | None = None, exiting: bool = False) -> int:
         return code
     finally:
         interrupts.received = interrupts.late = 0  # said in this call's status; a later main() starts afresh
+        outputs = sys.modules.get("pairplay.outputs")
+        if outputs is not None:
+            outputs.written.clear()  # (`nothing_more`: this call's outputs)
         signals.stopping = signals.again = 0
         if not exiting:
             for s, handler in saved.items():
@@ -348,6 +351,20 @@ def _summary_silenced(quiet: bool):
         return
     with open(os.devnull, "w") as sink, contextlib.redirect_stdout(sink):
         yield
+
+
+def nothing_more() -> str:
+    """The end of the line of a verb a signal stopped part way: the outputs it had put in place before the signal
+    (pairplay/outputs.py `written`, those still there: a verb removes what its journal could not take,
+    replay/copies.py), kept whole, then that nothing more was written. It said only "nothing more was written",
+    of a `rebuild` whose folder was in place (a signal as it went on to its journal lines or its listing). The
+    outputs module is only looked up: a verb that writes none never loads it."""
+    outputs = sys.modules.get("pairplay.outputs")
+    kept = [p for p in dict.fromkeys(getattr(outputs, "written", ())) if os.path.lexists(p)]
+    if not kept:
+        return "nothing more was written"
+    shown = ", ".join(map(str, kept[:3])) + (f" and {len(kept) - 3} more" if len(kept) > 3 else "")
+    return f"{shown} {'was' if len(kept) == 1 else 'were'} written whole before it and kept; nothing more was written"
 
 
 def signal_received() -> int:
@@ -480,13 +497,13 @@ def _main(argv: list[str], arm=None) -> int:
             interrupts.late = interrupts.late or interrupts.received or signal.SIGINT
             return code or 0
         # (what it removed, if the signal came as it waited to journal its outputs: replay/copies.py Interrupted)
-        print(f"pairplay {args.verb}: {interrupted_what()}; {getattr(err, 'said', '') or 'nothing more was written'}",
+        print(f"pairplay {args.verb}: {interrupted_what()}; {getattr(err, 'said', '') or nothing_more()}",
               file=sys.stderr)
         return exit_code_of(signal_received() or signal.SIGINT)
     except SystemError as err:  # Ctrl-C inside a compiled kernel: numba reports it as a SystemError around it
         if not isinstance(err.__cause__ or err.__context__, KeyboardInterrupt):
             raise
-        print(f"pairplay {args.verb}: {interrupted_what()}; nothing more was written", file=sys.stderr)
+        print(f"pairplay {args.verb}: {interrupted_what()}; {nothing_more()}", file=sys.stderr)
         return exit_code_of(signal_received() or signal.SIGINT)
     except UserError as err:  # a fix naming an option this verb lacks is left out (errors.UserError)
         print(f"pairplay {_who(args)}: {err.line(options_of(chosen, args))}", file=sys.stderr)

@@ -25,6 +25,10 @@ holds nothing more is stale: recover never removes a user's file unasked, it
 names `--discard-journal`, which removes such a journal (and only such a one:
 refused, nothing changed, when the journal holds something the file lacks or
 cannot be read, or when the file is not complete).
+A cut REC's journal is kept too, after its events went into the output, and the line says so: it is the
+write-ahead log of what REC lacks (services/recorder.py), REC's only other half; removed, REC alone would
+recover to less, and the output may be written elsewhere (-o) or lost. Recover never changes its input:
+the two are removed by hand once the output is kept (a new user's trial found the journal left, unsaid).
 """
 
 from __future__ import annotations
@@ -88,7 +92,9 @@ def run(args: argparse.Namespace) -> int:
     if done.journal is not None:
         journal = (f"; {counted(done.from_journal, 'event')} taken from its journal {done.journal.name}"
                    f"{f', {done.journal_refused} of its messages refused (recorded as refusals)' if done.journal_refused else ''}"
-                   f"{f' (read up to its torn tail: {done.journal_torn})' if done.journal_torn else ''}")
+                   f"{f' (read up to its torn tail: {done.journal_torn})' if done.journal_torn else ''}"
+                   f"; {args.recording} and its journal are kept as they were (the journal recovers it again; remove "
+                   "the two once the output is kept)")
     earlier = f"; what its source had lost is carried over ({done.earlier_lost})" if done.earlier_lost else ""
     print(f"{args.recording}: {state}; {counted(done.messages, 'message')} kept in {done.output}{earlier}{journal}{ended}")
     if done.journal_error:  # what it held (up to the last 5 ms before a crash) is not in the output: said, not silent,

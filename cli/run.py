@@ -22,12 +22,14 @@ restarted by --session alone follow the config the session was started with.
 from __future__ import annotations
 
 import argparse
+import signal
 import sys
 import threading
 import time
 from pathlib import Path
 
-from pairplay import signals
+from pairplay import signals, testpause
+from pairplay.cli import interrupts
 from pairplay.cli.args import output_folder, session_id
 from pairplay.errors import OptionError
 from pairplay.lists import comma_items
@@ -125,13 +127,22 @@ def refuse_unused(args: argparse.Namespace) -> None:
 def run(args: argparse.Namespace) -> int:
     stop = threading.Event()
     stop_on_signals(stop)
-    code = _run(args, stop)
+    recording: dict = {}  # the recorder's file, once it has one (_run)
+    try:
+        code = _run(args, stop, recording)
+    except KeyboardInterrupt:  # a second signal cut the shutdown: what the recording is, as the disk holds it
+        if not stop.is_set() or "path" not in recording:
+            raise
+        from pairplay.cli.session import cut_line
+        again = signals.again or signal.SIGINT
+        print(cut_line("run recorder", recording["path"], again, {}), file=sys.stderr)
+        return 128 + again
     if code == 0 and getattr(stop, "why", ""):  # the status is the signal's (cli/main.py); it said nothing
         print(f"pairplay run {args.service}: stopped ({signals.said(stop.why)})", file=sys.stderr)  # every verb's line: stderr
     return code
 
 
-def _run(args: argparse.Namespace, stop: threading.Event) -> int:
+def _run(args: argparse.Namespace, stop: threading.Event, recording: dict) -> int:
     refuse_unused(args)
     config = None
     if args.service == "game" and args.participant:
@@ -166,6 +177,7 @@ def _run(args: argparse.Namespace, stop: threading.Event) -> int:
         if args.service == "recorder":
             from pairplay.services.recorder import RECORDER_SWITCH_S, Recorder
             recorder = Recorder(bus, args.session, path, on_failure=lambda _why: stop.set(), restart=restart)
+            recording["path"] = recorder.path
             sys.setswitchinterval(RECORDER_SWITCH_S)  # this process is the recorder alone (see its rule)
             recorder.start()
             game = GameWatch(bus, args.session)  # a session whose end never reached us: its game is gone
@@ -184,6 +196,8 @@ def _run(args: argparse.Namespace, stop: threading.Event) -> int:
                 # stopped: done by the shutdown's deadline (started by the signal), less the bus's close
                 failure = recorder.close(stopped_by=getattr(stop, "why", "") if stop.is_set() else "",
                                          deadline=Deadline(deadline_of(stop).left(0.1)) if stop.is_set() else None)
+            interrupts.work_done()  # the file is finished: a signal from now on cuts nothing (cli/session.py cut_line)
+            testpause.pause("recording-finished")
             if failure is not None:
                 print(f"pairplay run recorder: writing {recorder.path} failed ({failure}); the file is readable "
                       f"up to the failure: pairplay recover {recorder.path}", file=sys.stderr)

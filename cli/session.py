@@ -36,8 +36,9 @@ from pathlib import Path
 
 import msgspec
 
-from pairplay import signals
+from pairplay import signals, testpause
 from pairplay import __version__
+from pairplay.cli import interrupts
 from pairplay.core.rng import STREAMS_VERSION
 from pairplay.schemas.config import DEFAULT_REWARD_BONUS, REWARD_BONUS_RULES, LearnerConfig, LSPIConfig, lspi_unused
 from pairplay.schemas.keys import check_chunk
@@ -52,8 +53,8 @@ from pairplay.cli.args import (add_force, count, float_between, game_index, outp
 from pairplay.core.geometry import PICKS_UNIT
 from pairplay.cli.robot import add_robot_arguments, check_robot_args, probe_robot_args, robot_choice
 from pairplay.services.bus import BusOpenError, ConfigFileError, add_bus_arguments, options_from_args, stop_on_signals
-from pairplay.services.recorder import (FORCE_SESSION_HINT, REPLACED, check_new_recording, check_not_folders, set_aside,
-                                        settle_aside)
+from pairplay.services.recorder import (FORCE_SESSION_HINT, REPLACED, check_new_recording, check_not_folders,
+                                        finished_whole, set_aside, settle_aside)
 from pairplay.services.runner import waiting_for
 from pairplay.services.session import run_session
 from pairplay.numbers import counted
@@ -209,6 +210,23 @@ def print_interrupted(summary: dict, path: Path, why: str, rounds: int, taken: s
     return 0
 
 
+def cut_line(verb: str, path: Path, again: int, summary: dict) -> str:
+    """The one line of a verb whose shutdown a second signal (`again`) cut (session, lab, run recorder), saying
+    what its recording is as the disk holds it (services/recorder.py `finished_whole`), not as far as the cut
+    shutdown got to note it: finished whole (the signal came after the file's end, before the verb said so), or
+    cut, and how to complete it. It said "may lack its end" of a whole file; and a second Ctrl-C as the summary
+    was printed said "nothing more was written" with no summary, the recording whole (a new user's trial: once
+    in 6 runs). Once the recording is finished the verb calls cli/interrupts.py `work_done` (a signal then cuts
+    nothing: the summary is printed, and the status is still the signal's); this line is for the signal that
+    came before that, inside the shutdown."""
+    head = f"pairplay {verb}: interrupted again ({signals.said(again)}) while stopping; "
+    if finished_whole(path):
+        events = f" ({counted(summary['events'], 'event')})" if summary.get("events") is not None else ""
+        return head + f"{path} was finished before it: the recording is whole{events}, its end written"
+    return head + (f"{path} holds what was recorded up to now and may lack its end: pairplay recover {path} "
+                   "completes it")
+
+
 def read_back(path: Path, verb: str):
     """The recording a session just wrote, read back for its summary (`pairplay session`, `pairplay lab`)
     through the reader every verb uses (replay/reader.py `read_log`), so it is judged as they judge it: what it
@@ -274,13 +292,13 @@ def _run(args: argparse.Namespace, config: SessionConfig, path: Path, summary: d
         path = run_session(config, path, bus_options=bus_options,
                            external=tuple(args.external), stop=stop, on_bus=announce, summary=summary,
                            robot=None if "robot" in args.external else robot_choice(args))
+        interrupts.work_done()  # the recording is finished: a signal from now on cuts nothing (see `cut_line`)
     except KeyboardInterrupt:  # a second signal: the shutdown of the first was cut short
         if "events" not in summary:  # run_session did not get to say whether the game had started
             summary["started"] = None
         if stop.is_set() and "recorder" not in args.external:
             again = signals.again or signal.SIGINT  # (a second SIGTERM cuts it too: pairplay/signals.py `wait_cut`)
-            print(f"pairplay session: interrupted again ({signals.said(again)}) while stopping; {path} holds what was "
-                  f"recorded up to now and may lack its end: pairplay recover {path} completes it"
+            print(cut_line("session", path, again, summary)
                   + (f"; the earlier recordings are kept beside it, named *{REPLACED}: if it holds no session (the "
                      "game had not started), remove it and give them their names back" if kept else ""),
                   file=sys.stderr)
@@ -289,6 +307,7 @@ def _run(args: argparse.Namespace, config: SessionConfig, path: Path, summary: d
     except (ConfigFileError, BusOpenError) as err:
         print(f"pairplay session: {err}", file=sys.stderr)
         return 2
+    testpause.pause("recording-finished")
     if "recorder" in args.external:
         if not getattr(args, "quiet", False):
             print(f"session {config.session} over; the external recorder writes its file")

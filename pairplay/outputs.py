@@ -36,6 +36,10 @@ The one exception is a live recording (services/recorder.py): it streams to
 its final name so that a crash loses at most its last 0.1 s (`pairplay
 recover` completes it), and it never replaces a file (`free_path`); while its recorder
 lives it is locked (pairplay/livelock.py) and `check_output` refuses it, `force` or not.
+
+Each output, once renamed into place, is noted in `written` in the same step (pairplay/signals.py `held`), so
+that a verb a signal stops after that says what it wrote whole (cli/main.py), not "nothing more was written":
+a Ctrl-C as `rebuild` or `study` went on after its folder was in place said that of a folder it had written.
 """
 
 from __future__ import annotations
@@ -49,17 +53,18 @@ import logging
 import os
 import re
 import shutil
-import signal
-import threading
 from pathlib import Path
 from typing import IO, Iterable, Iterator
 
-from pairplay import signals
+from pairplay import signals, testpause
 from pairplay.errors import OutputError
 from pairplay.livelock import LIVE, is_live
 from pairplay.numbers import counted
 
 FORCE_FIX = "--force replaces it"  # shown only by a verb that has --force (errors.UserError `fix`)
+
+
+written: list[Path] = []  # every output renamed into place by this process, in order (module rule; cli/main.py)
 
 
 def _existing_ancestor(path: Path) -> Path:
@@ -273,7 +278,9 @@ def output_path(path: str | Path, force: bool = False) -> Iterator[Path]:
             yield tmp
             if not tmp.exists():
                 raise OutputError("nothing was written", path)
-            _commit(tmp, path, force)
+            with signals.held():  # in place and noted, or neither (module rule)
+                _commit(tmp, path, force)
+                written.append(path)
         except OSError as err:
             raise _named_for_user(err, tmp, path) from err
         done = True
@@ -401,7 +408,7 @@ def output_folder(path: str | Path, force: bool = False, owned: tuple[str, ...] 
     every other file stays, and one of them that `owned` names is said in one warning (`_say_left`:
     the user's, or one an older pairplay wrote before the manifests, to remove by hand if stale).
     SIGINT/SIGTERM wait while the files are moved
-    in (`_signals_held`): the folder is the earlier run's or this one's, never half of each.
+    in (pairplay/signals.py `held`): the folder is the earlier run's or this one's, never half of each.
     `among_others`: `path` may hold other files (`rebuild --out`: the caller checked its own
     outputs with check_outputs); a file written replaces its namesake only with `force`, and
     without it a namesake that appeared meanwhile refuses the whole (nothing moved in) (`rebuild
@@ -435,13 +442,15 @@ def output_folder(path: str | Path, force: bool = False, owned: tuple[str, ...] 
             kept = [] if force else [f for f in (earlier or ()) if f not in ours and (path / f).is_file()]
             write_manifest(tmp / manifest, sorted({*ours, *kept}))
         if not nameless and (not path.exists() or _is_empty_dir(path)):
-            os.replace(tmp, path)  # rename(2) onto an empty folder is atomic
-            done = True
+            with signals.held():  # in place and noted, or neither (module rule)
+                os.replace(tmp, path)  # rename(2) onto an empty folder is atomic
+                written.append(path)
+                done = True
         else:
             # file by file into the earlier run's folder: a Ctrl-C in this loop (milliseconds) left the folder
             # half this run's and half the earlier one's, "nothing more was written" (a new user's trial), so
             # the loop finishes first and the signal is delivered after it
-            with _signals_held():
+            with signals.held():
                 files = [(src, path / src.relative_to(tmp)) for src in sorted(tmp.rglob("*")) if src.is_file()]
                 if not force:
                     for _, dst in files:
@@ -449,41 +458,24 @@ def output_folder(path: str | Path, force: bool = False, owned: tuple[str, ...] 
                             raise OutputError("appeared while it was being written; not replaced", dst)
                 # all or nothing: a folder where a file goes, or a file where a folder goes, refuses the whole
                 check_places(path, files=[dst.relative_to(path).as_posix() for _, dst in files])
-                written = set()
+                moved = set()
                 for src, dst in files:
                     _mkdir(dst.parent)
                     os.replace(src, dst)
-                    written.add(dst.relative_to(path).as_posix())
+                    moved.add(dst.relative_to(path).as_posix())
                 # only the files an earlier run of this writer wrote (its manifest) are stale; one named
                 # like them that no run listed (the user's, or an older pairplay's) stays, and is said
-                left = _remove_stale(path, written, owned, listed=set(earlier or ()) if force else set())
+                left = _remove_stale(path, moved, owned, listed=set(earlier or ()) if force else set())
+                written.append(path)
                 done = True  # before the held signal is delivered
             if left and force:
                 _say_left(path, left, manifest)
+        testpause.pause("folder-written")
     finally:
         if tmp.exists():
             shutil.rmtree(tmp, ignore_errors=True)
         if not done:
             _remove_empty(created)
-
-
-@contextlib.contextmanager
-def _signals_held() -> Iterator[None]:
-    """SIGINT and SIGTERM wait until the block is over, then are delivered to the handlers they would
-    have met (main thread only: Python runs signal handlers there; elsewhere nothing is held)."""
-    if threading.current_thread() is not threading.main_thread():
-        yield
-        return
-    came: list[int] = []
-    before = {s: signal.getsignal(s) for s in signals.SIGNALS}
-    signals.handle(lambda signum, _frame: came.append(signum))  # an ignored signal stays ignored (pairplay/signals.py)
-    try:
-        yield
-    finally:
-        for s, handler in before.items():
-            signal.signal(s, handler)
-        if came:
-            signal.raise_signal(came[0])
 
 
 def is_owned(relative: str, owned: tuple[str, ...]) -> bool:

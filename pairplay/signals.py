@@ -48,6 +48,11 @@ trial: two SIGTERMs 0.02-0.3 s apart, never "interrupted again"); a wait on the 
 must cut (`wait_cut`) ends on either too, as the user meant (a `protocol serve` waiting for its journal took a
 second SIGTERM and waited on).
 
+A step that must be whole once begun (a file renamed into place and said so; a recording finished and its
+journal removed: services/recorder.py `Recorder.close`) runs under `held`: SIGINT and SIGTERM wait until
+it is over, then meet the handlers they would have met (a second signal then cuts what follows it). The
+step is short (a rename, an fsync, an unlink): the signal is late by that much, never lost.
+
 Imports nothing but `signal` when loaded (its C part is loaded with the interpreter).
 """
 
@@ -184,3 +189,28 @@ def deliver_again(signum: int, before=None, delay_s: float = FINALIZER_RETRY_S) 
             before()
         send_to_main(signum)
     threading.Thread(target=again, name="pairplay-interrupt", daemon=True).start()
+
+
+def held():
+    """A context manager: SIGINT and SIGTERM wait until its block is over, then are delivered to the handlers
+    they would have met (module rule). Main thread only: Python runs signal handlers there; elsewhere nothing
+    is held. An ignored signal stays ignored (`handle`)."""
+    import contextlib
+    import threading
+
+    @contextlib.contextmanager
+    def hold():
+        if threading.current_thread() is not threading.main_thread():
+            yield
+            return
+        came: list[int] = []
+        before = {s: signal.getsignal(s) for s in SIGNALS}
+        handle(lambda signum, _frame: came.append(signum))
+        try:
+            yield
+        finally:
+            for s, handler in before.items():
+                signal.signal(s, handler)
+            for signum in came:  # each in order: a first one stops, a second cuts (services/bus.py stop_on_signals)
+                signal.raise_signal(signum)
+    return hold()

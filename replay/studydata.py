@@ -51,7 +51,7 @@ from pathlib import Path
 
 import msgspec
 
-from pairplay import __version__, csvcell, folderlock
+from pairplay import __version__, csvcell, folderlock, signals, testpause
 from pairplay.errors import InputError, UserError
 from pairplay.livelock import LIVE, is_live
 from pairplay.outputs import (OutputError, check_output, check_places, manifest_name, output_file, read_manifest,
@@ -88,6 +88,31 @@ class StudyDataError(UserError, ValueError):
     """A request the study folder cannot satisfy: what, and where (a file, a folder, an option) as every
     refusal says it, `what (where)` (pairplay/errors.py UserError: it said `<path> exists (use --force to
     replace it)`, `key file <path>: <why>`, `<folder>: already a study folder`, unlike every other verb)."""
+
+
+@contextlib.contextmanager
+def journaled_or_removed(path: Path):
+    """The block that journals `path`, a file of the study folder just written (a game's policy, a bias policy):
+    the file first, then its line, as every writer of the folder orders them (replay/copies.py `journal_each`);
+    a line that cannot be written (the journal refused, a signal) removes the file, so the folder holds no file
+    its journal does not know (a participant's deletion reads the journal: `files_of`, `merged_using`). The block
+    calls `done()` on what it yields right after the line is written, under pairplay/signals.py `held` there: a
+    signal then is delivered after it and removes nothing. A process killed between the two (SIGKILL) leaves the
+    file: its writer replaces it on its next run (build_missing_policies writes with force; StudyRunner.combine
+    removes a bias policy no line names first) and a deletion erases a game's (`files_of`: named after it)."""
+    state = {"journaled": False}
+
+    @contextlib.contextmanager
+    def line():
+        with signals.held():
+            yield
+            state["journaled"] = True
+    try:
+        yield line
+    except BaseException:
+        if not state["journaled"]:
+            path.unlink(missing_ok=True)
+        raise
 
 
 def atomic_write(path: Path, data: bytes) -> None:
@@ -434,6 +459,16 @@ class StudyData:
             self.write_folder_manifest()
             return event
 
+    def append_naming(self, event: j.JournalEvent, written: str) -> j.JournalEvent:
+        """`append` the line that names `written`, a file of the folder (relative path; "" for none) just put in
+        place: the file is removed if the line is not written (`journaled_or_removed`)."""
+        if not written:
+            return self.append(event)
+        with journaled_or_removed(self.folder / written) as line:
+            testpause.pause("policy-written")
+            with line():
+                return self.append(event)
+
     def write_folder_manifest(self) -> None:
         """The study folder's manifest (PROTOCOL_MANIFEST, pairplay/outputs.py's format): its files as the journal
         says them (the study file, settings, journal, tables, each game's recording, its recorder's journal and
@@ -779,7 +814,8 @@ class StudyData:
                 if g.ended is None:
                     if path.is_file() and not wal_path(path).exists() and _finished_game(path) \
                             and not self._not_this_games_file(g, path):  # another session's end is not its
-                        ended = self.append(game_end(self.folder, g.session, g.participant, path, force=True))
+                        ended = game_end(self.folder, g.session, g.participant, path, force=True)
+                        ended = self.append_naming(ended, ended.policy)
                         lines.append(f"{g.session}: journaled {ended.outcome} from its recording (the server "
                                      "stopped before it said how the game ended)")
                         changed += 1
@@ -812,7 +848,7 @@ class StudyData:
                 if why:
                     lines.append(f"{g.session}: completed, but {was}no policy built: {why}")
                     continue
-                self.append(j.PolicyBuilt(session=g.session, participant=g.participant, policy=policy))
+                self.append_naming(j.PolicyBuilt(session=g.session, participant=g.participant, policy=policy), policy)
                 lines.append(f"{g.session}: {was}policy built from its recording: {policy}")
                 changed += 1
             if changed:
@@ -886,6 +922,8 @@ class StudyData:
         for g in self.games_of(pid):
             files.append(self.folder / g.recording)
             files.append(wal_path(self.folder / g.recording))  # a killed recorder's journal: their data too
+            # a policy built from their game whose line a killed process did not write (journaled_or_removed)
+            files += list((self.folder / "policies").glob(f"{g.session}.*"))
             files += set_aside_of(self.folder / g.recording)  # an earlier recording a cut-short --force set aside
             if g.ended is not None and g.ended.policy:
                 files.append(self.folder / g.ended.policy)
@@ -895,7 +933,7 @@ class StudyData:
         for torn in self.folder.glob(f"{JOURNAL}{studyjournal.TORN}-*"):
             if torn.is_file() and any(n in torn.read_bytes() for n in named):
                 files.append(torn)
-        return [f for f in files if f.is_file()]
+        return [f for f in dict.fromkeys(files) if f.is_file()]
 
     def merged_using(self, pid: str) -> list[str]:
         """The merged policies combined from `pid`'s games."""

@@ -28,6 +28,7 @@ done steps, the combination and the report.
 
 from __future__ import annotations
 
+import contextlib
 import logging
 import secrets
 import threading
@@ -36,11 +37,12 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Callable
 
-from pairplay import __version__, signals
+from pairplay import __version__, signals, testpause
 from pairplay.core.policies import partial_inputs, users_from_policies
 from pairplay.replay.delivery import delivery_counts, delivery_line
 from pairplay.replay.reader import read_any_log
-from pairplay.replay.studydata import Game, StudyData, StudyDataError, game_end, one_line, recording_damage
+from pairplay.replay.studydata import (Game, StudyData, StudyDataError, game_end, journaled_or_removed, one_line,
+                                       recording_damage)
 from pairplay.schemas import events as ev
 from pairplay.schemas import journal as j
 from pairplay.schemas.envelope import stamped
@@ -340,8 +342,9 @@ class StudyRunner:
     def _finish(self, config: SessionConfig, path: Path, answered: bool) -> Game:
         """The game's GameEnded journaled from its recording, read back with the reader's checks (`game_end`):
         a recording that lost events gets no policy, and that is said here too, as a robot it could not reach."""
-        self.data.append(game_end(self.data.folder, config.session, config.participant.split(":", 1)[1], path,
-                                  answered, self._abort_reason))
+        ended = game_end(self.data.folder, config.session, config.participant.split(":", 1)[1], path, answered,
+                         self._abort_reason)
+        self.data.append_naming(ended, ended.policy)  # no policy file without its line (journaled_or_removed)
         recorded = read_any_log(path, only=frozenset({"RobotActed"}))
         damaged = recording_damage(recorded)
         if damaged:
@@ -457,57 +460,72 @@ class StudyRunner:
             session = f"{self.data.study.study.id}-combine-{phase_id}"
             request_id = secrets.token_hex(6)
             output = f"merged/{phase_id}-bias.policy.json"
-            answer: list[ev.PolicyCombined] = []
-            got = threading.Event()
-
-            def on_answer(_key, payload):
-                try:
-                    e = ev.decode_event(payload)
-                except Exception:
-                    return
-                if isinstance(e, ev.PolicyCombined) and e.request_id == request_id:
-                    answer.append(e)
-                    got.set()
-            stop = threading.Event()
-            bus = self.bus.scope()  # the combiner's declarations and threads go with the step (services/bus.py Bus)
-            node = None
-            try:
-                bus.subscribe(event_key(session, "combiner", "PolicyCombined"), on_answer)
-                node = Node(bus, CombinerLogic(self.data.folder), session, resume=False)
-                node.start()
-                node.run_in_thread(stop)
-                request = stamped(ev.CombineRequested(request_id=request_id, policies=inputs, seed=self.data.study.study.seed,
-                                                      output_path=output),
-                                  session=session, source="experimenter", seq=1, time_ns=time.time_ns())
-                bus.put(event_key(session, "experimenter", "CombineRequested"), ev.encode_event(request))
-                waited = time.monotonic() + timeout_s
-                while not got.wait(0.05):  # a signal does not wait for the combiner (interrupt)
-                    if self.interrupted is not None:
-                        raise StudyDataError(f"interrupted ({getattr(self.interrupted, 'why', '')}) while combining")
-                    if time.monotonic() > waited:
-                        raise StudyDataError(f"the combiner did not answer within {timeout_s:.0f} s")
-            finally:
-                stop.set()
-                if node is not None:
-                    node.finish(shutdown_wait(self.interrupted, 2.0, reserve=0.3),
-                                shutdown_wait(self.interrupted, 0.5, reserve=0.25))
-                bus.close(shutdown_wait(self.interrupted, 1.0, reserve=0.2))
-            result = answer[0]
-            if not result.ok:
-                raise StudyDataError(f"the combiner refused: {result.error}")
-            policies = [read_policy(self.data.folder / p) for p in inputs]
-            _, profiles = users_from_policies(policies, self.data.study.study.seed)
-            event = j.BiasCombined(
-                phase=phase_id, from_phase=phase.bias, request_id=request_id, inputs=inputs, users=result.users,
-                output=output, actions=result.actions, decided_by=result.decided_by,
-                profiles={u: {"speech": p.info.speech, "head": p.info.head, "facial": float(p.info.facial),
-                              "gaze": float(p.info.gaze), "compared_states": float(p.info.compared_states)}
-                          for u, p in profiles.items()},
-                partial=partial_inputs(policies, inputs))
-            return self.data.append(event)
+            guard = contextlib.nullcontext(contextlib.nullcontext)  # combined already: its file is journaled
+            if phase_id not in self.data.state.combined:
+                # no BiasCombined names it: a combination killed before its line left it (the combiner writes no
+                # file over another, and the step was stuck on "exists" for good)
+                (self.data.folder / output).unlink(missing_ok=True)
+                guard = journaled_or_removed(self.data.folder / output)
+            with guard as line:
+                return self._combine(phase_id, phase, inputs, session, request_id, output, timeout_s, line)
         finally:
             self.live.state = "idle"
             self._busy.release()
+
+    def _combine(self, phase_id, phase, inputs: list[str], session: str, request_id: str, output: str,
+                 timeout_s: float, line) -> j.BiasCombined:
+        """`combine`'s request to the combiner service and its journal line (`line`: replay/studydata.py
+        `journaled_or_removed`, which removes the bias policy if the line is not written)."""
+        answer: list[ev.PolicyCombined] = []
+        got = threading.Event()
+
+        def on_answer(_key, payload):
+            try:
+                e = ev.decode_event(payload)
+            except Exception:
+                return
+            if isinstance(e, ev.PolicyCombined) and e.request_id == request_id:
+                answer.append(e)
+                got.set()
+        stop = threading.Event()
+        bus = self.bus.scope()  # the combiner's declarations and threads go with the step (services/bus.py Bus)
+        node = None
+        try:
+            bus.subscribe(event_key(session, "combiner", "PolicyCombined"), on_answer)
+            node = Node(bus, CombinerLogic(self.data.folder), session, resume=False)
+            node.start()
+            node.run_in_thread(stop)
+            request = stamped(ev.CombineRequested(request_id=request_id, policies=inputs, seed=self.data.study.study.seed,
+                                                  output_path=output),
+                              session=session, source="experimenter", seq=1, time_ns=time.time_ns())
+            bus.put(event_key(session, "experimenter", "CombineRequested"), ev.encode_event(request))
+            waited = time.monotonic() + timeout_s
+            while not got.wait(0.05):  # a signal does not wait for the combiner (interrupt)
+                if self.interrupted is not None:
+                    raise StudyDataError(f"interrupted ({getattr(self.interrupted, 'why', '')}) while combining")
+                if time.monotonic() > waited:
+                    raise StudyDataError(f"the combiner did not answer within {timeout_s:.0f} s")
+        finally:
+            stop.set()
+            if node is not None:
+                node.finish(shutdown_wait(self.interrupted, 2.0, reserve=0.3),
+                            shutdown_wait(self.interrupted, 0.5, reserve=0.25))
+            bus.close(shutdown_wait(self.interrupted, 1.0, reserve=0.2))
+        result = answer[0]
+        if not result.ok:
+            raise StudyDataError(f"the combiner refused: {result.error}")
+        policies = [read_policy(self.data.folder / p) for p in inputs]
+        _, profiles = users_from_policies(policies, self.data.study.study.seed)
+        event = j.BiasCombined(
+            phase=phase_id, from_phase=phase.bias, request_id=request_id, inputs=inputs, users=result.users,
+            output=output, actions=result.actions, decided_by=result.decided_by,
+            profiles={u: {"speech": p.info.speech, "head": p.info.head, "facial": float(p.info.facial),
+                          "gaze": float(p.info.gaze), "compared_states": float(p.info.compared_states)}
+                      for u, p in profiles.items()},
+            partial=partial_inputs(policies, inputs))
+        testpause.pause("bias-written")
+        with line():
+            return self.data.append(event)
 
     # -- the whole protocol, for pilots and tests ----------------------------
     def run_plan(self, players: Callable[[str, str, int], object], on_step: Callable | None = None) -> list:

@@ -18,7 +18,8 @@ the thread that takes it off the bus appends it to the write-ahead journal besid
 replay/wal.py), which a thread writes to the OS every 5 ms; a SIGKILL then loses only what was
 received in the last 5 ms + scheduling, whatever the backlog, and `pairplay recover` adds from
 the journal what the cut file lacks, through the live checks (services/walmerge.py). The
-journal is removed once the file is complete and fsync'd; a restarted recorder takes the
+journal is removed once the file is complete and fsync'd, in one step with the file's end that a signal
+does not cut (`close`: a second Ctrl-C between them left a stale journal); a restarted recorder takes the
 earlier file's journal too (`_continue`). A close is done by its
 deadline; what is still queued then is counted and recorded, not waited for. The session config, seed and software version
 go into MCAP metadata ("pairplay.session") when SessionStarted passes, the
@@ -76,7 +77,7 @@ from typing import Callable
 
 import msgspec
 
-from pairplay import __version__
+from pairplay import __version__, signals, testpause
 from pairplay.errors import OutputError
 from pairplay.livelock import LIVE, hold, is_live, release
 from pairplay.numbers import counted
@@ -85,6 +86,7 @@ from pairplay.replay.reader import LOST_AT_KEY, RECOVERED, _listed, carry_recove
 from pairplay.replay.wal import JournalWriter, NotAJournal, read_journal, wal_path
 from pairplay.replay.writer import FLUSH_INTERVAL_NS, LOSS_BOUND_NS, EventLogWriter
 from pairplay.schemas.checked import check_event
+from pairplay.schemas.jsonfile import MCAP_MAGIC
 from pairplay.schemas.events import RecordingGap, decode_event, encode_event
 from pairplay.schemas.envelope import Nanos, stamped
 from pairplay.schemas.keys import alive_key, event_key, query_key, session_keys
@@ -524,6 +526,25 @@ def _holes(seen: dict[str, set[int]]) -> dict[str, list[tuple[int, int]]]:
     return out
 
 
+def finished_whole(path: str | Path) -> bool:
+    """Whether the recording at `path` was finished by its recorder (Recorder.close): its end written (the
+    file ends with MCAP's magic) and no journal beside it (removed in the same step as the end's fsync). What
+    a verb says of a recording after a second signal cut its shutdown (cli/session.py `cut_line`): read from
+    the disk, not from what the cut shutdown got to note."""
+    path = Path(path)
+    if wal_path(path).exists():
+        return False
+    try:
+        with open(path, "rb") as f:
+            f.seek(0, os.SEEK_END)
+            if f.tell() < 2 * len(MCAP_MAGIC):
+                return False
+            f.seek(-len(MCAP_MAGIC), os.SEEK_END)
+            return f.read() == MCAP_MAGIC
+    except OSError:
+        return False
+
+
 def _fsync(path: Path) -> None:
     """Push a closed file's data to the disk (before its journal goes)."""
     fd = os.open(path, os.O_RDONLY)
@@ -583,6 +604,7 @@ class Recorder:
         self.kept: list[tuple[str, bytes]] = []
         self.seq = 0
         self.ended = False
+        self.whole = False  # its end written and on disk, its journal removed (close)
         self._lock = threading.Lock()
         self._overlap = 0
         self._backlog_noted_ns = -10**18
@@ -1332,14 +1354,25 @@ class Recorder:
                     "ended_ns": str(self.clock()), "session_ended": str(self.ended).lower(), "stopped_by": stopped_by,
                     "unrecorded_at_exit": str(unrecorded),
                     "max_flush_age_ms": f"{self.writer.max_flush_age_ns / 1e6:.1f}"})
-                self._guarded(self.writer.close)
-                self._guarded(_fsync, self.path)
             except RecordingFailed:
                 pass
-        else:
-            self.writer.abandon()
-        if self.journal is not None:  # kept unless the file is complete and on disk: recover reads it
-            self.journal.close(remove=self.failure is None)
+        # The file's end, its fsync and its journal's removal are one step a signal does not cut (pairplay/signals.py
+        # `held`: milliseconds): a second Ctrl-C between the end and the removal left a stale journal beside a whole
+        # file (a new user's trial), which every verb then took for a crash's. A signal before the step leaves the
+        # file without its end and the journal beside it (`pairplay recover`); one in it is delivered after it.
+        with signals.held():
+            if self.failure is None:
+                try:
+                    self._guarded(self.writer.close)
+                    self._guarded(_fsync, self.path)
+                except RecordingFailed:
+                    pass
+            else:
+                self.writer.abandon()
+            self.whole = self.failure is None
+            testpause.pause("recorder-whole")
+            if self.journal is not None:  # kept unless the file is complete and on disk: recover reads it
+                self.journal.close(remove=self.whole)
         self.release()  # the journal gone: nothing of ours is live any more
         if self.outbox is not None:
             self.outbox.close(deadline.left(cap=0.5))

@@ -187,6 +187,19 @@ def test_recover_reads_a_torn_journal_up_to_its_tear_and_says_so(tmp_path, pairp
     assert [r.event.seq for r in log.events if r.event.source == "participant"] == list(range(1, 20))
 
 
+def test_recover_says_that_a_cut_recordings_journal_is_kept_and_why(tmp_path, pairplay_cli):
+    """After a recovery the journal beside the cut file stays (recover never changes its input; it is what the cut
+    file lacks), and the line says so and what to do (it was left with no word: a new user's trial)."""
+    events = [start()] + [pick(s) for s in range(1, 21)]
+    path = cut_recording(tmp_path, events[:11])
+    journal = journal_of(path, events)
+    ran = pairplay_cli("recover", path)
+    assert ran.returncode == 0, ran.stderr
+    assert (f"taken from its journal j1.mcap.journal; {path} and its journal are kept as they were (the journal "
+            "recovers it again; remove the two once the output is kept)") in ran.stdout, ran.stdout
+    assert journal.exists() and (tmp_path / "j1.recovered.mcap").exists()
+
+
 @pytest.mark.parametrize("damage", ["header", "garbage"])
 def test_recover_says_when_the_journal_beside_it_is_unreadable(tmp_path, pairplay_cli, damage):
     """A journal damaged in its header, or garbage under the journal's name, was dropped without a word and

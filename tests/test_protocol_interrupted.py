@@ -397,3 +397,79 @@ def test_a_game_journaled_from_a_recording_whose_answers_do_not_decode_is_answer
     assert ended.reason.startswith("recording damaged: 1 message in it does not decode (") \
         and ended.reason.endswith(": no policy built"), ended.reason
     assert not list((data.folder / "policies").glob(f"{cut.session}*"))
+
+
+# -- a file of the folder and its journal line: the file first, no file without its line (journaled_or_removed) --
+
+def _hand_edit_once(path: Path, journal: Path, go: Path) -> threading.Thread:
+    """Once `path` is written, the journal is changed as another process would (its time), then the held
+    verb goes on (pairplay/testpause.py): the line it then writes is refused (a stale copy)."""
+    def edit():
+        while not path.exists():
+            time.sleep(0.01)
+        st = journal.stat()
+        os.utime(journal, ns=(st.st_atime_ns, st.st_mtime_ns + 1_000_000))
+        go.touch()
+    thread = threading.Thread(target=edit, daemon=True)
+    thread.start()
+    return thread
+
+
+def test_a_combination_whose_line_is_refused_leaves_no_bias_policy(tmp_path, monkeypatch):
+    """Before: the combiner's file stayed in merged/ with no BiasCombined (a participant's deletion, which reads
+    the journal, would not know it)."""
+    data = completed_without_policy(tmp_path, stripped=0)
+    output = data.folder / "merged" / "phase2-bias.policy.json"
+    go = tmp_path / "go"
+    monkeypatch.setenv("PAIRPLAY_TEST_PAUSE", f"bias-written:{go}")
+    editor = _hand_edit_once(output, data.folder / "journal.jsonl", go)
+    with Bus(BusOptions()) as bus:
+        with pytest.raises(StudyDataError, match="changed by another process"):
+            StudyRunner(data, bus).combine("phase2")
+    editor.join(10)
+    assert not output.exists()
+    assert not any(isinstance(e, j.BiasCombined) for e in StudyData(tmp_path / "study").read_journal())
+
+
+def test_a_combination_killed_before_its_line_is_combined_again(tmp_path):
+    """A combination killed between its file and its line (its BiasCombined not written) left merged/ a file
+    no line names; before, the next combination was refused for good ("the combiner refused: ... exists")."""
+    data = completed_without_policy(tmp_path, stripped=0)
+    with Bus(BusOptions()) as bus:
+        StudyRunner(data, bus).combine("phase2")
+    journal = data.folder / "journal.jsonl"
+    journal.write_bytes(b"".join(j.encode_line(e) for e in data.read_journal() if not isinstance(e, j.BiasCombined)))
+    data = StudyData(data.folder)
+    assert (data.folder / "merged" / "phase2-bias.policy.json").is_file() and "phase2" not in data.state.combined
+    with Bus(BusOptions()) as bus:
+        combined = StudyRunner(data, bus).combine("phase2")
+    assert combined.output == "merged/phase2-bias.policy.json" and (data.folder / combined.output).is_file()
+    assert sum(isinstance(e, j.BiasCombined) for e in StudyData(data.folder).read_journal()) == 1
+
+
+def test_a_built_policy_whose_line_is_refused_is_removed(tmp_path, monkeypatch):
+    """Before: build_missing_policies' file stayed in policies/ with no PolicyBuilt."""
+    data = completed_without_policy(tmp_path, stripped=1)
+    game = next(g for g in data.state.games.values() if not g.ended.policy)
+    policy = data.folder / "policies" / f"{game.session}.policy.json"
+    go = tmp_path / "go"
+    monkeypatch.setenv("PAIRPLAY_TEST_PAUSE", f"policy-written:{go}")
+    editor = _hand_edit_once(policy, data.folder / "journal.jsonl", go)
+    with pytest.raises(StudyDataError, match="changed by another process"):
+        data.build_missing_policies()
+    editor.join(10)
+    assert not policy.exists()
+
+
+def test_a_deletion_erases_a_policy_a_killed_build_left_without_its_line(tmp_path):
+    """A build killed between a game's policy and its PolicyBuilt left the file unnamed by the journal; before,
+    deleting the participant left it (files_of read only the journal's names)."""
+    from pairplay.replay.rebuild import rebuild_recording
+    from pairplay.replay.studydata import write_game_policy
+
+    data = completed_without_policy(tmp_path, stripped=1)
+    game = next(g for g in data.state.games.values() if not g.ended.policy)
+    left = data.folder / write_game_policy(data.folder, rebuild_recording(data.folder / game.recording), force=True)
+    assert left.is_file()
+    StudyData(data.folder).delete_participant(game.participant)
+    assert not left.exists()

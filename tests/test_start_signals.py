@@ -173,9 +173,9 @@ def test_the_command_installs_its_handlers_before_it_loads_anything():
 def test_every_handler_pairplay_installs_leaves_an_ignored_sigint_ignored():
     """Each place that installs SIGINT/SIGTERM handlers, in a process that started with SIGINT ignored:
     SIGINT stays ignored, SIGTERM is handled (before, each took SIGINT back: cli/interrupts.py's two,
-    services/bus.py stop_on_signals, pairplay/outputs.py's hold around a rename)."""
+    services/bus.py stop_on_signals, pairplay/signals.py's hold around a rename)."""
     from pairplay.cli import interrupts
-    from pairplay.outputs import _signals_held
+    from pairplay import signals
     from pairplay.services.bus import stop_on_signals
 
     saved = {s: signal.getsignal(s) for s in (signal.SIGINT, signal.SIGTERM)}
@@ -183,7 +183,7 @@ def test_every_handler_pairplay_installs_leaves_an_ignored_sigint_ignored():
         "DeferredInterrupt.install": lambda: interrupts.DeferredInterrupt().install(),
         "work_done": interrupts.work_done,
         "stop_on_signals": lambda: stop_on_signals(threading.Event()),
-        "_signals_held": _signals_held,  # a context manager: checked inside it
+        "signals.held": signals.held,  # a context manager: checked inside it
     }
     try:
         for name, install in installs.items():

@@ -1,0 +1,156 @@
+"""A second signal in the window between "the recording is whole" and "the user was told" (a new user's trial).
+
+Each verb that records is a real `pairplay` process on loopback; it gets a first signal, then is held at a
+named moment of its shutdown (pairplay/testpause.py, PAIRPLAY_TEST_PAUSE: test-only), gets its second signal
+there, and is let go. What it then says must be true of the file the disk holds:
+
+- held once its recording was finished (`recording-finished`: session, lab, run recorder), the second signal
+  cuts nothing: the verb says its summary line (it said "interrupted (Ctrl-C); nothing more was written",
+  with no summary, of a whole recording: once in 6 runs of the trial);
+- held once a verb's output is in place (`folder-written`, pairplay/outputs.py), a Ctrl-C that stops the verb
+  says the output is there, whole (it said "nothing more was written" of a folder `rebuild` had written);
+- held between the file's end and its journal's removal (`recorder-whole`, services/recorder.py `close`), the
+  journal is removed all the same and the line says the recording is whole (a stale `<name>.mcap.journal`
+  was left beside a whole file, and the line said it "may lack its end").
+"""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import threading
+from pathlib import Path
+
+from mcap.reader import make_reader
+
+from pairplay.replay.wal import wal_path
+
+ROOT = Path(__file__).resolve().parents[1]
+LIMIT_S = 300.0  # a safety net for a process that never gets there (a loaded machine), not a goal
+
+
+class Held:
+    """One verb's process, held at `moment` until the test lets it go."""
+
+    def __init__(self, tmp: Path, moment: str, args: list[str], ready: str):
+        self.go = tmp / f"go-{moment}"
+        env = dict(os.environ, PYTHONUNBUFFERED="1", PAIRPLAY_TEST_PAUSE=f"{moment}:{self.go}")
+        self.proc = subprocess.Popen([sys.executable, "-m", "pairplay", *args], cwd=tmp, env=env, text=True,
+                                     stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+        self.out: list[str] = []
+        self.err: list[str] = []
+        self.ready, self.paused = threading.Event(), threading.Event()
+        self.readers = [threading.Thread(target=self._read, args=(self.proc.stdout, self.out, ready), daemon=True),
+                        threading.Thread(target=self._read, args=(self.proc.stderr, self.err, ready), daemon=True)]
+        for r in self.readers:
+            r.start()
+
+    def _read(self, stream, lines: list[str], ready: str) -> None:
+        for line in stream:
+            lines.append(line)
+            if ready in line:
+                self.ready.set()
+            if line.startswith("pairplay-test: paused at"):
+                self.paused.set()
+        self.ready.set()
+        self.paused.set()  # ended: nothing more to wait for
+
+    def run(self, first: int, second: int) -> tuple[int, list[str]]:
+        """First signal once ready, second once held; let go; its status and its stderr lines but the pause's."""
+        assert self.ready.wait(LIMIT_S), "never ready"
+        assert self.proc.poll() is None, "".join(self.out + self.err)
+        self.proc.send_signal(first)
+        assert self.paused.wait(LIMIT_S), "never held"
+        assert self.proc.poll() is None, "".join(self.out + self.err)  # held, not gone
+        self.proc.send_signal(second)
+        self.go.touch()
+        code = self.proc.wait(LIMIT_S)
+        for r in self.readers:
+            r.join(10)
+        return code, [line.rstrip("\n") for line in self.err if not line.startswith("pairplay-test:")]
+
+
+    def once(self, sig: int) -> tuple[int, list[str]]:
+        """One signal once held (the verb's first); let go; as `run`."""
+        assert self.paused.wait(LIMIT_S), "never held"
+        assert self.proc.poll() is None, "".join(self.out + self.err)
+        self.proc.send_signal(sig)
+        self.go.touch()
+        code = self.proc.wait(LIMIT_S)
+        for r in self.readers:
+            r.join(10)
+        return code, [line.rstrip("\n") for line in self.err if not line.startswith("pairplay-test:")]
+
+
+def whole(path: Path) -> bool:
+    """The recording has its end (MCAP's summary and footer, read by the mcap library) and no journal beside it."""
+    with open(path, "rb") as f:
+        summary = make_reader(f).get_summary()
+    return summary is not None and not wal_path(path).exists()
+
+
+def session(tmp: Path, name: str) -> list[str]:
+    return ["session", "--participant", "sim:ashley", "--rounds", "300", "--session", name, "--out", str(tmp / "rec")]
+
+
+def test_a_second_ctrl_c_as_the_session_is_summed_up_leaves_its_summary(tmp_path):
+    held = Held(tmp_path, "recording-finished", session(tmp_path, "told"), "bus listening")
+    code, err = held.run(signal.SIGINT, signal.SIGINT)
+    path = tmp_path / "rec" / "told.mcap"
+    assert code == 130, err
+    assert whole(path)
+    assert len(err) == 1 and err[0].startswith("pairplay session: interrupted (Ctrl-C) "), err
+    assert f"to {Path('rec') / 'told.mcap'}" in err[0] or str(path) in err[0], err
+    assert "nothing more was written" not in err[0] and "Traceback" not in "".join(err), err
+
+
+def test_a_second_ctrl_c_between_the_files_end_and_its_journals_removal(tmp_path):
+    held = Held(tmp_path, "recorder-whole", session(tmp_path, "cut"), "bus listening")
+    code, err = held.run(signal.SIGINT, signal.SIGINT)
+    path = tmp_path / "rec" / "cut.mcap"
+    assert code == 130, err
+    assert whole(path), sorted(p.name for p in path.parent.iterdir())  # its journal removed with its end
+    assert len(err) == 1 and err[0].startswith("pairplay session: interrupted again (Ctrl-C) while stopping; "), err
+    assert "the recording is whole" in err[0] and "may lack its end" not in err[0], err
+
+
+def test_a_second_sigterm_to_a_recorder_as_it_finishes(tmp_path):
+    held = Held(tmp_path, "recorder-whole", ["run", "recorder", "--session", "rec", "--out", str(tmp_path / "rec")],
+                "listening")
+    code, err = held.run(signal.SIGTERM, signal.SIGTERM)
+    path = tmp_path / "rec" / "rec.mcap"
+    assert code == 143, err
+    assert whole(path), sorted(p.name for p in path.parent.iterdir())
+    assert len(err) == 1 and err[0].startswith("pairplay run recorder: interrupted again (SIGTERM) while stopping; "), err
+    assert "the recording is whole" in err[0], err
+
+
+def test_a_second_ctrl_c_to_a_recorder_once_its_file_is_finished(tmp_path):
+    held = Held(tmp_path, "recording-finished", ["run", "recorder", "--session", "rec", "--out",
+                                                 str(tmp_path / "rec")], "listening")
+    code, err = held.run(signal.SIGINT, signal.SIGINT)
+    assert code == 130, err
+    assert whole(tmp_path / "rec" / "rec.mcap")
+    assert err == ["pairplay run recorder: stopped (Ctrl-C)"], err
+
+
+def test_a_second_ctrl_c_as_the_lab_is_summed_up_leaves_its_summary(tmp_path):
+    held = Held(tmp_path, "recording-finished", ["lab", "--participant", "human:p1", "--session", "lab", "--out",
+                                                 str(tmp_path / "rec")], "bus listening")
+    code, err = held.run(signal.SIGINT, signal.SIGINT)
+    assert code == 130, err
+    assert whole(tmp_path / "rec" / "lab.mcap")
+    assert len(err) == 1 and err[0].startswith("pairplay lab: interrupted (Ctrl-C) before the session started"), err
+
+
+def test_a_ctrl_c_once_a_verbs_outputs_are_in_place_says_they_are(tmp_path):
+    sample = ROOT / "recordings" / "samples" / "sim-ashley.mcap"
+    (tmp_path / "out").mkdir()
+    held = Held(tmp_path, "folder-written", ["rebuild", str(sample), "--out", "out", "--no-plot"], "")
+    code, err = held.once(signal.SIGINT)
+    assert code == 130, err
+    assert (tmp_path / "out" / "sim-ashley.policy.json").is_file()
+    assert err == ["pairplay rebuild: interrupted (Ctrl-C); out was written whole before it and kept; nothing more "
+                   "was written"], err
