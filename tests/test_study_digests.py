@@ -30,9 +30,9 @@ from pairplay.report.study import StudySettings, output_digests, run_study
 PINNED = json.loads((Path(__file__).parent / "data" / "study_digests.json").read_text())
 
 
-def _check(name: str, seed: str, tmp_path: Path) -> None:
+def _check(name: str, seed: str, tmp_path: Path, figures_in_background: bool = True) -> None:
     pinned = PINNED[name]
-    run_study(StudySettings(seed=int(seed), **pinned["settings"]), tmp_path)
+    run_study(StudySettings(seed=int(seed), **pinned["settings"]), tmp_path, figures_in_background=figures_in_background)
     got = output_digests(tmp_path)
     want = pinned["seeds"][seed]
     assert sorted(got) == sorted(want), "the study wrote a different set of files"
@@ -42,7 +42,10 @@ def _check(name: str, seed: str, tmp_path: Path) -> None:
 
 @pytest.mark.parametrize("seed", sorted(PINNED["reduced"]["seeds"]))
 def test_a_reduced_study_writes_the_pinned_bytes(seed, tmp_path):
-    _check("reduced", seed, tmp_path)
+    # the figures drawn here, not in a spawned child: the digests leave them out, and the child's start-up (an
+    # interpreter, numpy and pyplot) cost more than drawing them (the two seeds 8.3 -> 6.8 s of CPU, -n 0, load 43);
+    # the slow full study keeps the child, as `pairplay study` and `pairplay bench` run it
+    _check("reduced", seed, tmp_path, figures_in_background=False)
 
 
 @pytest.mark.slow
