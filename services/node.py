@@ -113,7 +113,7 @@ class Driver:
     def _stamp(self, events: Iterable[Event]) -> list[Event]:
         out = []
         for e in events:
-            if self._unmarked and self.logic.placed(e) is not None:
+            if self._unmarked and self.held_back and self.logic.placed(e) is not None:
                 continue  # a mark resume makes over a log from before the marks (resume's rule)
             if self.held_back and not isinstance(e, (MessageRejected, ServiceStarted)):
                 recorded = self.held_back.popleft()
@@ -296,7 +296,8 @@ class Driver:
         marks, one without a mark was not taken (refused: it changed nothing) and is not fed while
         recorded outputs are left to compare; beyond them (a log cut after it) it is fed in file order.
         A log without any mark (made before ControlTaken) is fed in file order, as it always was, and
-        the marks the logic makes then are dropped: the log has none to compare them with.
+        the marks the logic makes among its recorded outputs are dropped: the log has none to compare
+        them with (one beyond them is owed: a game restarted after taking its first pause, unmarked).
         """
         own = [e for e in recorded if e.source == self.logic.name and e.session == self.session]
         self.held_back = deque(e for e in own if type(e).__name__ not in SHELL_TAGS)

@@ -131,3 +131,25 @@ def test_replay_verify_says_pass_for_a_pause_filed_on_the_wrong_side(tmp_path, c
     assert main(["replay", str(path), "--verify"]) == 0
     out = capsys.readouterr().out
     assert "DIFFERS" not in out and out.splitlines()[-1].startswith("verify: PASS up to where the session stopped")
+
+
+def test_a_game_restarted_over_such_a_log_is_where_the_live_game_was():
+    """A restart re-feeds the recorded log the same way (services/node.py `resume`): the game that took touch 1
+    and then the pause, its log holding the pause first, comes back with the card up and paused; one that
+    crashed between taking its first pause and publishing the mark publishes the mark it owes."""
+    from pairplay.services.game import GameLogic
+    from pairplay.services.node import Driver
+
+    live = Live()
+    live.take("touch1", "board", ev.CardPicked(round=0, turn=0, card=0), 100.0)
+    live.take("pause1", "experimenter", ev.SessionPaused(reason="a question"), 101.0)
+    log = list(live.log)
+    log.remove(live.named["pause1"])
+    log.insert(log.index(live.named["touch1"]), live.named["pause1"])
+    restarted = Driver(GameLogic(live.config), S, clock=lambda: 10**18)
+    assert restarted.resume(log) == [] and restarted.mismatches == []
+    assert restarted.logic.paused and restarted.logic.first == 0
+    unmarked = [e for e in live.log if type(e).__name__ != "ControlTaken"]
+    restarted = Driver(GameLogic(live.config), S, clock=lambda: 10**18)
+    owed = restarted.resume(unmarked)
+    assert [type(e).__name__ for e in owed] == ["ControlTaken"] and restarted.logic.paused
