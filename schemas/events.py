@@ -11,7 +11,7 @@ row * 6 + col; card sets are 18-bit masks.
 Who publishes what (source = the service name):
   game:        SessionStarted, RoundStarted, CardRevealed, PickRejected,
                CardObserved (first-pick source), SuggestionRequested,
-               TurnResolved, RoundEnded, SessionEnded
+               TurnResolved, RoundEnded, SessionEnded, ControlTaken
   participant: CardPicked, CardObserved (intended source), SuggestionPerceived
   board:       CardPicked, WrongSuggestionPressed, QuestionnaireAnswered (the lab's pages)
   tracker:     GazeFixated (an eye tracker)
@@ -254,6 +254,18 @@ class SessionResumed(Event, tag="SessionResumed"):
     """The experimenter resumed a paused game."""
 
 
+class ControlTaken(Event, tag="ControlTaken"):
+    """The game took the experimenter's SessionPaused or SessionResumed here, in its own numbered stream:
+    after the inputs its earlier outputs answer, before those its later outputs answer. A recorder files
+    the console's message as it reaches it, not as the game took it, so it may sit on the other side of a
+    touch in flight; verify and a restart feed it where this event stands (services/node.py `resume`).
+    A refused control (already paused, already running) has none: it changed nothing."""
+
+    control: str  # the tag taken: "SessionPaused" | "SessionResumed"
+    control_source: str
+    control_seq: Seq
+
+
 class SessionAborted(Event, tag="SessionAborted"):
     """The experimenter stopped the game; the game ends it (SessionEnded "aborted", the reason as detail)."""
 
@@ -324,7 +336,7 @@ EVENT_TYPES: tuple[type[Event], ...] = (
     WrongSuggestionPressed, TurnResolved, RewardGiven, QUpdated, LSPIUpdated, RoundEnded,
     CombineRequested, PolicyCombined, QuestionnaireAnswered, MessageRejected, SessionEnded, RecordingGap,
     SessionPaused, SessionResumed, SessionAborted,
-) + _robot_events() + (GazeFixated,)
+) + _robot_events() + (GazeFixated, ControlTaken)
 EVENT_BY_TAG: dict[str, type[Event]] = {t.__struct_config__.tag: t for t in EVENT_TYPES}
 AnyEvent = Union[EVENT_TYPES]  # type: ignore[valid-type]
 

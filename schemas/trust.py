@@ -47,6 +47,7 @@ PUBLISHERS: dict[str, frozenset[str]] = {
     "TurnResolved": GAME,
     "RoundEnded": GAME,
     "SessionEnded": GAME,
+    "ControlTaken": GAME,
     "CardObserved": GAME | PLAYERS,  # first-pick (game) or intended (the player)
     "CardPicked": PLAYERS,
     "SuggestionPerceived": frozenset({"participant"}),
@@ -60,10 +61,10 @@ PUBLISHERS: dict[str, frozenset[str]] = {
     "CombineRequested": CLIENTS,
     "PolicyCombined": frozenset({"combiner"}),
     "RecordingGap": frozenset({"recorder"}),
-    "GazeFixated": frozenset({"tracker"}),
+    "GazeFixated": frozenset({"tracker"}),  # an eye tracker (observed source "gaze", issue 14)
     "SessionPaused": CLIENTS,  # the experimenter's console (issue 15)
     "SessionResumed": CLIENTS,
-    "SessionAborted": CLIENTS,  # an eye tracker (observed source "gaze", issue 14)
+    "SessionAborted": CLIENTS,
 }
 ONCE_PER_SESSION = frozenset({"SessionStarted", "SessionEnded"})
 # who starts and ends a session (the game): one process per session, numbering every event it publishes.

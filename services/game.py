@@ -25,6 +25,10 @@ without a suggestion (a silent tracker must not stall a person's game).
 The experimenter's SessionPaused / SessionResumed / SessionAborted (the console)
 are inputs like any other: while paused every touch is refused with the
 reason; an abort ends the session at once (SessionEnded "aborted", the reason as its detail).
+A pause or resume taken is answered with ControlTaken (naming it): the recorder files the console's
+message as it reaches it, which may be the other side of a touch in flight, and verify feeds it where
+the game's own numbered stream says it was taken (node.py `resume`), as it ends an aborted game where
+its SessionEnded says.
 """
 
 from __future__ import annotations
@@ -73,6 +77,9 @@ class GameLogic:
     # its recorded SessionEnded says (node.py resume), never where the file holds the input (the recorder
     # orders two sources' messages as they reach it, not as the game took them)
     ENDS_SESSION = frozenset({"SessionAborted"})
+    # inputs the game answers with a mark of its own where it took them (ControlTaken): resume and verify feed
+    # each where its mark stands among the game's outputs, not where the file holds it (node.py resume)
+    PLACED = frozenset({"SessionPaused", "SessionResumed"})
     sources = {tag: (frozenset({"experimenter"}) if tag in CONTROL else PLAYERS) for tag in consumes} \
         | {"GazeFixated": frozenset({"tracker"})}
     GAZE_KEPT = 64  # fixations kept for a first pick that arrives after them
@@ -109,6 +116,11 @@ class GameLogic:
             return e
         r, t, now_r, now_t = map(int, old.groups())
         return msgspec.structs.replace(e, reason=f"pick {elsewhen((r, t), (now_r, now_t))}")
+
+    @staticmethod
+    def placed(e: ev.Event) -> tuple[str, str, int] | None:
+        """The input (source, tag, seq) an output of the game marks the place of (ControlTaken); else None."""
+        return (e.control_source, e.control, e.control_seq) if isinstance(e, ev.ControlTaken) else None
 
     def end(self, reason: str, detail: str = "") -> list[ev.Event]:
         """End the session early (interrupted, aborted or failed), saying how far it got; [] if it is over."""
@@ -178,14 +190,14 @@ class GameLogic:
         return out + self._resolve(e)
 
     def _control(self, e: ev.Event) -> list[ev.Event]:
-        """The experimenter's console (services/protocol.py): pause, resume, abort."""
+        """The experimenter's console (services/protocol.py): pause, resume (ControlTaken says where), abort."""
         if isinstance(e, ev.SessionAborted):
             return self.end("aborted", e.reason)
         pause = isinstance(e, ev.SessionPaused)
         if pause == self.paused:
             raise Rejected("the session is already " + ("paused" if pause else "running"))
         self.paused = pause
-        return []
+        return [ev.ControlTaken(control=type(e).__name__, control_source=e.source, control_seq=e.seq)]
 
     def _observed(self, e: ev.CardObserved) -> list[ev.Event]:
         if self.config.observed_source != "intended" or e.observed_source != "intended":

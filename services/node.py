@@ -99,6 +99,7 @@ class Driver:
         self.held_back: deque[Event] = deque()  # recorded outputs a resume must not repeat
         self.mismatches: list[str] = []
         self.replaying = False  # during resume/verify: rejections were already recorded live
+        self._unmarked = False  # during a resume over a log without the logic's marks (resume's rule)
 
     @property
     def last_seq(self) -> dict[str, int]:
@@ -112,6 +113,8 @@ class Driver:
     def _stamp(self, events: Iterable[Event]) -> list[Event]:
         out = []
         for e in events:
+            if self._unmarked and self.held_back and self.logic.placed(e) is not None:
+                continue  # a mark resume makes over a log from before the marks (resume's rule)
             if self.held_back and not isinstance(e, (MessageRejected, ServiceStarted)):
                 recorded = self.held_back.popleft()
                 if not self.same(recorded, e):
@@ -236,6 +239,33 @@ class Driver:
             log.exception("%s failed on %s", self.logic.name, type(event).__name__)
             return self.reject(f"internal error {type(err).__name__}: {err}", key, event.source, event.seq, payload)
 
+    def _marked(self, recorded: list[Event], own: list[Event]) -> tuple[bool, set[tuple], dict[int, Event]]:
+        """Whether the log holds the logic's marks, the (source, tag, seq) of the inputs they mark, and
+        {seq of a recorded mark: the recorded input it marks} (resume's rule)."""
+        placed = getattr(self.logic, "placed", None)
+        if placed is None:
+            return False, set(), {}
+        marks = {placed(e): e.seq for e in own if placed(e) is not None}
+        tags = getattr(self.logic, "PLACED", frozenset())
+        inputs = {(e.source, type(e).__name__, e.seq): e for e in recorded
+                  if e.session == self.session and type(e).__name__ in tags}
+        return bool(marks), set(marks), {seq: inputs[named] for named, seq in marks.items() if named in inputs}
+
+    def _place(self, at_mark: dict[int, Event]) -> list[Event]:
+        """Feed the inputs whose recorded mark is the next output to recompute (resume's rule)."""
+        out: list[Event] = []
+        while self.held_back and self.held_back[0].seq in at_mark:
+            out += self._refeed(at_mark.pop(self.held_back[0].seq))
+        return out
+
+    def _refeed(self, e: Event) -> list[Event]:
+        """Feed a recorded input again, unless the live service took its seq already (a duplicate it rejected)."""
+        key = event_key(e.session, e.source, type(e).__name__)
+        if e.seq <= self.guard.last_seq.get(key, 0):
+            return []
+        self.guard.note(key, e)
+        return self.feed(e)
+
     def _only_left(self, event: Event) -> bool:
         """Whether `event` is the one recorded output left to recompute."""
         return len(self.held_back) == 1 and self.held_back[0] is event
@@ -259,30 +289,47 @@ class Driver:
         (`logic.end(reason, detail)`): its round and turn counts are compared too.
         An input whose whole effect is that end (the logic's ENDS_SESSION: the experimenter's abort) is
         not fed: the recorder may have filed it before inputs the live game took first.
+        An input the logic marks where it took it (its PLACED tags, answered by an output `placed(output)`
+        names: the game's ControlTaken for a pause or resume) is fed where its recorded mark stands among
+        the outputs, once every output before the mark is recomputed, not where the file holds it (the
+        recorder filed it as it reached it: maybe the other side of a touch in flight). In a log with
+        marks, one without a mark was not taken (refused: it changed nothing) and is not fed while
+        recorded outputs are left to compare; beyond them (a log cut after it) it is fed in file order.
+        A log without any mark (made before ControlTaken) is fed in file order, as it always was, and
+        the marks the logic makes among its recorded outputs are dropped: the log has none to compare
+        them with (one beyond them is owed: a game restarted after taking its first pause, unmarked).
         """
         own = [e for e in recorded if e.source == self.logic.name and e.session == self.session]
         self.held_back = deque(e for e in own if type(e).__name__ not in SHELL_TAGS)
         self.seq = max([self.seq] + [e.seq for e in own])  # new outputs continue the numbering
         out = self._stamp([announce]) if announce is not None else []
+        has_marks, marked, at_mark = self._marked(recorded, own)
+        placed_tags = getattr(self.logic, "PLACED", frozenset()) if has_marks else frozenset()
         self.replaying = True
+        self._unmarked = hasattr(self.logic, "placed") and not has_marks  # the logic's marks are dropped (_stamp)
+        refused: list[Event] = []  # placed inputs without a mark: not taken live
         try:
             out += self.start() if start else []
             for e in recorded:
+                out += self._place(at_mark)
                 if stopped is not None and self._only_left(stopped):
                     break
                 if e.source == self.logic.name or e.session != self.session:
                     continue
-                if stopped is not None and type(e).__name__ in getattr(self.logic, "ENDS_SESSION", ()):
+                tag = type(e).__name__
+                if stopped is not None and tag in getattr(self.logic, "ENDS_SESSION", ()):
                     continue  # applied where the recorded end says, below (an abort filed before inputs taken first)
-                key = event_key(e.session, e.source, type(e).__name__)
-                if e.seq <= self.guard.last_seq.get(key, 0):
-                    continue  # a duplicate the live service rejected then
-                self.guard.note(key, e)
-                out += self.feed(e)
+                if tag in placed_tags and (self.held_back or (e.source, tag, e.seq) in marked):
+                    refused += [] if (e.source, tag, e.seq) in marked else [e]
+                    continue  # fed at its mark (_place), or not taken live (no mark): a refusal changed nothing
+                out += self._refeed(e)
+            out += self._place(at_mark)
+            for e in refused:  # taken from the log all the same: a later delivery of it is skipped (guard.cut)
+                self.guard.note(event_key(e.session, e.source, type(e).__name__), e)
             if stopped is not None and self._only_left(stopped) and not self.logic.done:
                 out += self._stamp(self.logic.end(stopped.reason, stopped.detail))
         finally:
-            self.replaying = False
+            self.replaying = self._unmarked = False
             self.guard.cut = dict(self.guard.last_seq)  # deliveries up to here repeat the log (guard.py)
         # anything still held back was recorded but not recomputed: a divergence
         self.mismatches += [f"recorded {type(e).__name__} seq {e.seq} was not recomputed" for e in self.held_back]

@@ -5,7 +5,9 @@ participant), a fresh logic in a Driver is fed the recording's events from the
 other sources, each source's in its own sequence order (whatever order the
 recorder wrote them in), and the Driver holds an input until what it depends on
 has been handled (node.py's `NotYet`, a source's later events waiting behind its
-earlier ones), so every order a recorder can hold gives the same verdict; and every event it derives is compared, field by field
+earlier ones), and the experimenter's pause and resume where the game's ControlTaken
+says it took them (an abort where its SessionEnded says: node.py `resume`), so every
+order a recorder can hold gives the same verdict; and every event it derives is compared, field by field
 without the envelope's wall time and sequence number, with the event the live
 service recorded, one by one in order. A recomputed event the recording lacks
 or a recorded one never recomputed is a failure too, unless the recording was

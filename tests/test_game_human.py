@@ -44,6 +44,18 @@ class Table:
         return 0, next(c for c in range(18) if self.faces[c] != self.faces[0])
 
 
+class Recorded(Table):
+    """A Table whose log holds the inputs too, each before what it caused, as a recorder holds them;
+    `send` returns the input as stamped."""
+
+    def send(self, source, event, at_s):
+        self.seq[source] = self.seq.get(source, 0) + 1
+        e = stamped(event, session="t", source=source, seq=self.seq[source], time_ns=int(at_s * 1e9))
+        self.log.append(e)
+        self.publish(self.game.receive(event_key("t", source, type(event).__name__), encode_event(e)))
+        return e
+
+
 def test_the_ignore_rule_times_the_picks_on_the_page_clock_and_records_both():
     t = Table()
     a, b = t.miss()
@@ -108,12 +120,6 @@ def test_inputs_for_another_round_are_refused_with_rounds_counted_from_1_and_old
     either wording; a changed number still fails."""
     import msgspec
 
-    class Recorded(Table):  # the inputs are in the log too, as a recorder holds them
-        def send(self, source, event, at_s):
-            self.seq[source] = self.seq.get(source, 0) + 1
-            e = stamped(event, session="t", source=source, seq=self.seq[source], time_ns=int(at_s * 1e9))
-            self.log.append(e)
-            self.publish(self.game.receive(event_key("t", source, type(event).__name__), encode_event(e)))
     t = Recorded()
     t.send("board", ev.CardPicked(round=1, turn=3, card=0), 1.0)
     t.send("board", ev.WrongSuggestionPressed(round=0, turn=2, attempt=0), 1.5)

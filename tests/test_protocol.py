@@ -496,9 +496,10 @@ def test_the_game_obeys_the_experimenter_and_only_the_experimenter():
                 game.receive(f"pairplay/s/{source}/{type(e).__name__}", ev.encode_event(e))]
 
     assert send(ev.SessionPaused(reason="fire alarm"), "board")[0].startswith("MessageRejected")  # not the board's
-    assert send(ev.SessionPaused(reason="fire alarm"), "experimenter") == []
+    assert send(ev.SessionPaused(reason="fire alarm"), "experimenter") == ["ControlTaken:"]  # where it took it
+    assert send(ev.SessionPaused(reason="again"), "experimenter") == ["MessageRejected:the session is already paused"]
     assert send(ev.CardPicked(round=0, turn=0, card=3), "board") == ["PickRejected:the session is paused"]
-    assert send(ev.SessionResumed(), "experimenter") == []
+    assert send(ev.SessionResumed(), "experimenter") == ["ControlTaken:"]
     assert send(ev.CardPicked(round=0, turn=0, card=3), "board")[0] == "CardRevealed:"
     assert send(ev.SessionAborted(reason="tired"), "experimenter") == ["SessionEnded:aborted"]
     assert game.logic.done

@@ -45,10 +45,11 @@ def test_every_sample_decodes_whole_and_validates_against_todays_schemas(path):
             current[type(event).__name__].validate(data)  # and today's
 
 
-# event types newer than the catalogue samples (LSPIUpdated: than the format-1 one), and the sample that holds each
+# event types newer than the catalogue samples (LSPIUpdated, ControlTaken: than the format-1 one), and the sample
+# that holds each
 LATER = {"GazeFixated": "human-gaze-fmt2.mcap", "SessionPaused": "console-fmt2.mcap",
          "SessionResumed": "console-fmt2.mcap", "SessionAborted": "console-fmt2.mcap",
-         "LSPIUpdated": "catalogue-fmt2.mcap"}
+         "LSPIUpdated": "catalogue-fmt2.mcap", "ControlTaken": "catalogue-fmt2.mcap"}
 
 
 @pytest.mark.parametrize("fmt", FORMATS)

@@ -214,6 +214,7 @@ def catalogue_sample(out: Path) -> None:
         ev.CombineRequested(request_id="r1", recordings=["a.mcap"], seed=1),
         ev.PolicyCombined(request_id="r1", inputs=["a.mcap"], actions=[35] * 24, decided_by=["equal; equal"] * 24),
         ev.QuestionnaireAnswered(questionnaire="phase1", answers={"q1": "4"}),
+        ev.ControlTaken(control="SessionPaused", control_source="experimenter", control_seq=1),
         ev.MessageRejected(reason="malformed payload", key=f"pairplay/{s}/participant/CardPicked", excerpt="{not"),
         ev.RecordingGap(earlier_file=f"{s}.mcap", copied=20, last_copied_ns=Nanos(1_796_000_000_123_456_789),
                         resumed_ns=Nanos(1_796_000_001_123_456_789),
