@@ -182,3 +182,50 @@ def test_a_recorder_killed_mid_session_gets_the_robots_reports_of_its_outage_ref
     counted = sum(int(e.reason.split()[0]) for e in log.of("MessageRejected")
                   if "not reported" in e.reason and e.reason.split()[0].isdigit())
     assert counted == len(tail), (counted, sorted(tail))  # not-reported: the tail only, none of the outage's (how many: load)
+
+
+def test_a_restarted_recorders_refill_asks_again_a_live_service_that_has_not_answered_yet(tmp_path):
+    """A service on the bus whose answer to the restart's refill comes after the ask's REFILL_TIMEOUT_S (its
+    thread busy: at load 40-66 the game's, learner's or participant's) is asked again, and the one RecordingGap
+    says what every ask gave. Before, the first ask decided: the service was recorded as unanswered and what it
+    would have given back as lost (test_recorder_continues_losses' live restart named the missing events;
+    test_faults' restarted recorder lacked a source in `refilled_from`).
+
+    Real parts: the game's Node on a real bus, its queries answered only once the test lets its thread run
+    (until then each waits in its inbox, as behind a busy step); a real Recorder, then a second one restarted."""
+    import threading
+
+    from pairplay.schemas.session import SessionConfig
+    from pairplay.services.bus import Deadline
+    from pairplay.services.game import GameLogic
+    from pairplay.services.recorder import Recorder
+    from pairplay.services.runner import Node
+
+    from busutil import listener
+
+    s = "slow"
+    config = SessionConfig(session=s, participant="human:t", seed=1, rounds=3, observed_source="first-pick",
+                           ignore_rule="time")
+    path = tmp_path / f"{s}.mcap"
+    with listener() as bus:
+        first = Recorder(bus, s, path)
+        first.start()
+        game = Node(bus, GameLogic(config), s, resume=False)
+        game.start()  # its ServiceStarted, SessionStarted, RoundStarted: recorded by the first recorder
+        assert wait_until(lambda: first.step(0.05) and False or
+                          sum(k.split("/")[2] == "game" for k, _ in first.kept) >= 3, 60)
+        first.close()
+        second = Recorder(bus, s, path, restart=True)
+        second.start()  # its first ask: the game's thread has not run, its answer waits
+        gaps = lambda: [k for k, _ in second.kept if k.endswith("/RecordingGap")]  # noqa: E731
+        stop = threading.Event()
+        game.run_in_thread(stop)  # the game's thread runs now: the next ask is answered
+        try:
+            assert wait_until(lambda: second.step(0.05) and False or bool(gaps()), 120)
+        finally:
+            second.close(deadline=Deadline(5.0))
+            stop.set()
+            game.thread.join(10)
+            game.close()
+    [gap] = [r.event for r in read_log(second.path).events if isinstance(r.event, ev.RecordingGap)]
+    assert gap.refilled_from == ["game"] and gap.unanswered == [], gap
