@@ -135,6 +135,7 @@ REFILLS = 5  # a gap's refill is asked again this often while the file still has
 # REFILL_TIMEOUT_S * 2): at load 20 a service's answer came after the first ones, and the recorder gave up silently
 REFILL_BACKOFF_S = 8.0
 REFILL_TIMEOUT_S = 3.0
+SAME_SESSION_ASKS = 3  # a restarted recorder asks a live session this often, while it is on the bus and silent
 BUS_LOST = "lost on the bus"  # what the RECOVERED record of holes no refill gave back says (`_note_bus_lost`)
 # what it says of the holes the recorder's own shedding at the exit left (`drain`): they came, and were counted among
 # UNRECORDED_AT_EXIT (its MessageRejected count, `unrecorded_at_exit`); said once, under that cause
@@ -450,12 +451,16 @@ def recorded_before(path: Path, session: str, until: Path | None = None
     return held, journals, losses
 
 
-def same_live_session(bus: Bus, session: str, path: Path, timeout_s: float = 3.0) -> bool:
+def same_live_session(bus: Bus, session: str, path: Path, timeout_s: float = 3.0,
+                      stop: threading.Event | None = None) -> bool:
     """Whether the services of `session` on the bus now are the ones its recordings at `path` recorded:
     each one that answers (SENT_QUERY) sent, under the sequence number of its first event in them (the
     files and what their journals add: `recorded_before`), the very bytes they hold (a ServiceStarted
     carries its service's start time, so a new session that reuses the id differs). False if the
-    recording holds no event of another service, or nobody answers."""
+    recording holds no event of another service, or nobody answers. Nobody answering while a service of the
+    session is on the bus (its token) is asked again (SAME_SESSION_ASKS, each ask longer): a live service
+    busy past the ask's timeout (load 40-66) had the restarted recorder refuse its own session; with none on
+    the bus the refusal is at once. `stop` set: no more asks."""
     first: dict[str, tuple[int, bytes]] = {}
     for key, data, _ in recorded_before(path, session)[0]:
         source = key.split("/")[2] if key.count("/") == 3 else ""
@@ -469,19 +474,27 @@ def same_live_session(bus: Bus, session: str, path: Path, timeout_s: float = 3.0
     if not first:
         return False
     after = ",".join(f"{s}:{seq - 1}" for s, (seq, _) in sorted(first.items()))
-    answered = 0
-    for payload in bus.query(f"{query_key(session, '*', SENT_QUERY)}?after={after}", timeout_s):
-        try:
-            name, items = msgspec.msgpack.decode(payload, type=tuple[str, list[tuple[str, bytes]]])
-        except msgspec.DecodeError:
-            continue
-        if name not in first:
-            continue  # a service that joined after the earlier file stopped: nothing to compare
-        seq, data = first[name]
-        if not any(p == data for _, p in items[:1]):
+    for ask in range(SAME_SESSION_ASKS):
+        answered = 0
+        for payload in bus.query(f"{query_key(session, '*', SENT_QUERY)}?after={after}", timeout_s * min(2, 1 + ask),
+                                 stop):
+            try:
+                name, items = msgspec.msgpack.decode(payload, type=tuple[str, list[tuple[str, bytes]]])
+            except msgspec.DecodeError:
+                continue
+            if name not in first:
+                continue  # a service that joined after the earlier file stopped: nothing to compare
+            seq, data = first[name]
+            if not any(p == data for _, p in items[:1]):
+                return False
+            answered += 1
+        if answered:
+            return True
+        if stop is not None and stop.is_set():
             return False
-        answered += 1
-    return answered > 0
+        if not bus.alive_now(alive_key(session, "*"), stop=stop) - {alive_key(session, Recorder.name)}:
+            return False  # nobody of the session on the bus: nobody to wait for
+    return False
 
 
 def _runs(first: int, last: int, marked: list[tuple[int, str]]) -> list[tuple[int, int, str]]:

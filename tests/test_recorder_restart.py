@@ -229,3 +229,51 @@ def test_a_restarted_recorders_refill_asks_again_a_live_service_that_has_not_ans
             game.close()
     [gap] = [r.event for r in read_log(second.path).events if isinstance(r.event, ev.RecordingGap)]
     assert gap.refilled_from == ["game"] and gap.unanswered == [], gap
+
+
+def test_a_restarted_recorder_asks_again_a_live_session_that_has_not_answered_yet(tmp_path):
+    """Whether the session on the bus is the recording's (`same_live_session`) was one ask of 3 s: a live service
+    busy past it (load 40-66) had the restarted recorder refuse its own session ("no live session on the bus
+    sent what it holds"). Now, while a service of the session is on the bus (its token), a silent one is asked
+    again; with nobody of the session there, the answer is no at once.
+
+    Real parts: the game's Node on a real bus, its queries answered only once the test lets its thread run (the
+    first ask waits in its inbox, as behind a busy step), a real recording of its events."""
+    import threading
+
+    from pairplay.schemas.session import SessionConfig
+    from pairplay.services.game import GameLogic
+    from pairplay.services.recorder import Recorder, same_live_session
+    from pairplay.services.runner import Node
+
+    from busutil import connector, listener
+
+    s = "silent"
+    config = SessionConfig(session=s, participant="human:t", seed=1, rounds=3, observed_source="first-pick",
+                           ignore_rule="time")
+    path = tmp_path / f"{s}.mcap"
+    with listener() as bus:
+        first = Recorder(bus, s, path)
+        first.start()
+        game = Node(bus, GameLogic(config), s, resume=False)
+        game.start()
+        assert wait_until(lambda: first.step(0.05) and False or
+                          sum(k.split("/")[2] == "game" for k, _ in first.kept) >= 3, 60)
+        first.close()
+        said: list[bool] = []
+        stop = threading.Event()
+        with connector(bus) as client:  # the restarted recorder's own bus
+            asking = threading.Thread(target=lambda: said.append(same_live_session(client, s, path)), daemon=True)
+            asking.start()
+            try:
+                # the game runs once it holds a second ask (the first timed out unanswered), or the asking ended
+                assert wait_until(lambda: len(game.inbox) >= 2 or not asking.is_alive(), 120)
+                game.run_in_thread(stop)
+                asking.join(60)
+            finally:
+                stop.set()
+                game.thread.join(10)
+                game.close()
+        assert said == [True], said
+        with connector(bus) as client:  # nobody of the session on the bus now: no, at once (one ask)
+            assert not same_live_session(client, s, path)
