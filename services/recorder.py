@@ -51,7 +51,7 @@ every bus, not only a recovering one (a plain bus loses what its queue held when
 full queue, and Zenoh says nothing: test_netns lost 9 game events so, the file whole), and a jump in a
 source's sequence numbers asks for the refill too. It is asked again while a hole is left (`REFILLS`,
 each later and with a longer timeout: `REFILL_BACKOFF_S`), a restarted recorder's while a source of its
-file has not answered (a live service busy past the ask's timeout), and what no refill gave back (the refills
+file on the bus has not answered (a live service busy past the ask's timeout), and what no refill gave back (the refills
 given up, a service that did not answer or no longer had them, a recording closed before the refill
 after an outage) is recorded when the file closes, as `pairplay recover` records a damaged file's
 losses (reader.RECOVERED, `bus` "true": `_note_bus_lost`): every verb then says the session is partial.
@@ -782,7 +782,7 @@ class Recorder:
                                unanswered=sorted(set(sources) - set(answered)))
             self._publish([gap])
             return answered
-        # a restarted recorder's refill: a source of the file that did not answer is asked again (`REFILLS`, each
+        # a restarted recorder's refill: a source of the file that did not answer, on the bus, is asked again (`REFILLS`, each
         # later and longer, as after an outage); one RecordingGap says what all the asks gave. Before, one ask of
         # REFILL_TIMEOUT_S decided: at load 40-66 a live service answered after it, and what it would have given
         # back (the events of the predecessor's damaged chunk, the gap's) was recorded as lost, or missing
@@ -790,7 +790,7 @@ class Recorder:
         done["refilled"] += refilled
         done["answered"].update(answered)
         unanswered = sorted(set(sources) - done["answered"])
-        if unanswered and self._refills_left > 0:
+        if unanswered and self._refills_left > 0 and self._on_bus(unanswered):
             self._continuing = done
             self._refills_left -= 1
             self._refill_at = time.monotonic() + min(REFILL_BACKOFF_S, RELINK_SETTLE_S * 2 ** tries)
@@ -800,6 +800,11 @@ class Recorder:
         self._refills_left = REFILLS
         self._continued_gap(done, unanswered)
         return answered
+
+    def _on_bus(self, services: list[str]) -> bool:
+        """Whether any of `services` is on the bus now (its token): only such a one may still answer."""
+        alive = self.bus.alive_now(alive_key(self.session, "*"))
+        return any(alive_key(self.session, s) in alive for s in services)
 
     def _continued_gap(self, done: dict, unanswered: list[str]) -> None:
         """Record the restart's gap (RecordingGap of `earlier_file`) as the refill's asks `done` gave it, and what the
