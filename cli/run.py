@@ -166,8 +166,11 @@ def _run(args: argparse.Namespace, stop: threading.Event, recording: dict) -> in
     try:
         if args.service == "recorder":
             # a recorder restarted within the live session continues its file; a new session's is refused,
-            # before the listening line (asking the bus takes up to 3 s; a refusal is the one line said)
-            restart = earlier is not None and same_live_session(bus, args.session, path)
+            # before the listening line (asking the bus takes up to 3 s, more while a service of the session is on the bus
+            # and silent; a refusal is the one line said)
+            restart = earlier is not None and same_live_session(bus, args.session, path, stop=stop)
+            if stop.is_set():  # a signal while it asked: nothing recorded, the signal's line (run)
+                return 0
             if earlier is not None and not restart:
                 raise RecordingExists(earlier, args.session, "no live session on the bus sent what it holds; "
                                       "choose another --session (a recording is never replaced)")

@@ -14,7 +14,10 @@ The kernel drops the lock when the holder
 ends, however it ends (SIGKILL too), so a lock is never stale, and the file stays, empty when nobody
 writes (`protocol init` makes it; removing a locked file lets a third process lock a new one beside a
 holder of the old). Read-only verbs
-(`protocol status`) take no lock and run beside a writer. Why: two servers on one folder each kept
+(`protocol status`) take no lock and run beside a writer. A user's mistake a writer can see without the lock (a
+study file edited since the study was created: the journal's first line, which nothing rewrites) is said before
+it takes the lock: waiting first said "another pairplay writes this study folder", or waited for a register,
+and then said the edit as a second line (replay/studydata.py `_created_unlocked`). Why: two servers on one folder each kept
 the journal in memory and gave the same id to two people (`p05,Carla` and `p05,Dieter` in the key
 file), started one game twice, and undid a `participant delete` from a stale copy. flock, as
 pairplay/livelock.py says why: not fcntl record locks.

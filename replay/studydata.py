@@ -270,6 +270,8 @@ class StudyData:
         if held is not None:
             self._hold = held
         elif writer:
+            if not study_file_edited_ok:  # the user's mistake said before any wait for another writer (`_check_study_file`)
+                self._check_study_file(self._created_unlocked())
             self._hold = self._take(writer)
         try:
             self.state = StudyState()
@@ -278,7 +280,7 @@ class StudyData:
             self._stamp = self._journal_stamp()
             self.study_file_changed = ""
             try:
-                self._check_study_file()
+                self._check_study_file(self.state.created)
             except StudyDataError as changed:
                 if not study_file_edited_ok:
                     raise
@@ -376,14 +378,28 @@ class StudyData:
                                  f"this again (`pairplay protocol status {self.given}` lists what does not fold)",
                                  self.given / JOURNAL)
 
-    def _check_study_file(self) -> None:
+    def _created_unlocked(self) -> j.StudyCreated | None:
+        """The journal's first line, read without the writer lock: `protocol init` wrote it whole with the folder and
+        nothing rewrites it (appends come after it), so another writer cannot change it under us. None if it does
+        not read as a StudyCreated line: the read under the lock says what is wrong, in its words."""
+        try:
+            with open(self.folder / JOURNAL, "rb") as f:
+                first = f.readline()
+            return studyjournal.events_of(first, self.given / JOURNAL, self.given)[0] if first.endswith(b"\n") else None
+        except (OSError, studyjournal.JournalDamaged):
+            return None
+
+    def _check_study_file(self, created: j.StudyCreated | None) -> None:
         """The study file is fixed once the study is created: its bytes against the SHA-256 the journal's
-        first line recorded (StudyCreated). An edited file is refused, since the folder's games were played
+        first line (`created`, StudyCreated) recorded. An edited file is refused, since the folder's games were played
         under the old one (pilot played 2-round games beside 5-round ones, the report left games out). A
         journal without a StudyCreated is refused before this (replay/studyjournal.py: it lost its beginning);
         one with an empty hash was not written by pairplay's `protocol init` (every one records it): there is
-        nothing to check against, and it is read as it was."""
-        recorded = self.state.created.study_file_sha256 if self.state.created is not None else ""
+        nothing to check against, and it is read as it was. A writer checks it before it takes the folder's lock
+        as well (from the first line alone, `_created_unlocked`): an edited file is the user's mistake, said as
+        such, where waiting for the lock first said "another pairplay writes this study folder" of a pilot
+        that was itself about to refuse the same edit (test_study_guard, under load)."""
+        recorded = created.study_file_sha256 if created is not None else ""
         path = self.given / STUDY_FILE
         try:
             text = path.read_bytes()

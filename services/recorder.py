@@ -51,7 +51,8 @@ written then, and a RecordingGap (`earlier_file` "": this file) records it. The 
 every bus, not only a recovering one (a plain bus loses what its queue held when a link closes under a
 full queue, and Zenoh says nothing: test_netns lost 9 game events so, the file whole), and a jump in a
 source's sequence numbers asks for the refill too. It is asked again while a hole is left (`REFILLS`,
-each later and with a longer timeout: `REFILL_BACKOFF_S`), and what no refill gave back (the refills
+each later and with a longer timeout: `REFILL_BACKOFF_S`), a restarted recorder's while a source of its
+file on the bus has not answered (a live service busy past the ask's timeout), and what no refill gave back (the refills
 given up, a service that did not answer or no longer had them, a recording closed before the refill
 after an outage) is recorded when the file closes, as `pairplay recover` records a damaged file's
 losses (reader.RECOVERED, `bus` "true": `_note_bus_lost`): every verb then says the session is partial.
@@ -136,6 +137,7 @@ REFILLS = 5  # a gap's refill is asked again this often while the file still has
 # REFILL_TIMEOUT_S * 2): at load 20 a service's answer came after the first ones, and the recorder gave up silently
 REFILL_BACKOFF_S = 8.0
 REFILL_TIMEOUT_S = 3.0
+SAME_SESSION_ASKS = 3  # a restarted recorder asks a live session this often, while it is on the bus and silent
 BUS_LOST = "lost on the bus"  # what the RECOVERED record of holes no refill gave back says (`_note_bus_lost`)
 # what it says of the holes the recorder's own shedding at the exit left (`drain`): they came, and were counted among
 # UNRECORDED_AT_EXIT (its MessageRejected count, `unrecorded_at_exit`); said once, under that cause
@@ -451,12 +453,16 @@ def recorded_before(path: Path, session: str, until: Path | None = None
     return held, journals, losses
 
 
-def same_live_session(bus: Bus, session: str, path: Path, timeout_s: float = 3.0) -> bool:
+def same_live_session(bus: Bus, session: str, path: Path, timeout_s: float = 3.0,
+                      stop: threading.Event | None = None) -> bool:
     """Whether the services of `session` on the bus now are the ones its recordings at `path` recorded:
     each one that answers (SENT_QUERY) sent, under the sequence number of its first event in them (the
     files and what their journals add: `recorded_before`), the very bytes they hold (a ServiceStarted
     carries its service's start time, so a new session that reuses the id differs). False if the
-    recording holds no event of another service, or nobody answers."""
+    recording holds no event of another service, or nobody answers. Nobody answering while a service of the
+    session is on the bus (its token) is asked again (SAME_SESSION_ASKS, each ask longer): a live service
+    busy past the ask's timeout (load 40-66) had the restarted recorder refuse its own session; with none on
+    the bus the refusal is at once. `stop` set: no more asks."""
     first: dict[str, tuple[int, bytes]] = {}
     for key, data, _ in recorded_before(path, session)[0]:
         source = key.split("/")[2] if key.count("/") == 3 else ""
@@ -470,19 +476,27 @@ def same_live_session(bus: Bus, session: str, path: Path, timeout_s: float = 3.0
     if not first:
         return False
     after = ",".join(f"{s}:{seq - 1}" for s, (seq, _) in sorted(first.items()))
-    answered = 0
-    for payload in bus.query(f"{query_key(session, '*', SENT_QUERY)}?after={after}", timeout_s):
-        try:
-            name, items = msgspec.msgpack.decode(payload, type=tuple[str, list[tuple[str, bytes]]])
-        except msgspec.DecodeError:
-            continue
-        if name not in first:
-            continue  # a service that joined after the earlier file stopped: nothing to compare
-        seq, data = first[name]
-        if not any(p == data for _, p in items[:1]):
+    for ask in range(SAME_SESSION_ASKS):
+        answered = 0
+        for payload in bus.query(f"{query_key(session, '*', SENT_QUERY)}?after={after}", timeout_s * min(2, 1 + ask),
+                                 stop):
+            try:
+                name, items = msgspec.msgpack.decode(payload, type=tuple[str, list[tuple[str, bytes]]])
+            except msgspec.DecodeError:
+                continue
+            if name not in first:
+                continue  # a service that joined after the earlier file stopped: nothing to compare
+            seq, data = first[name]
+            if not any(p == data for _, p in items[:1]):
+                return False
+            answered += 1
+        if answered:
+            return True
+        if stop is not None and stop.is_set():
             return False
-        answered += 1
-    return answered > 0
+        if not bus.alive_now(alive_key(session, "*"), stop=stop) - {alive_key(session, Recorder.name)}:
+            return False  # nobody of the session on the bus: nobody to wait for
+    return False
 
 
 def _runs(first: int, last: int, marked: list[tuple[int, str]]) -> list[tuple[int, int, str]]:
@@ -609,6 +623,9 @@ class Recorder:
         self._overlap = 0
         self._backlog_noted_ns = -10**18
         self.continued: dict | None = None
+        # a restarted recorder's refill asked again for the sources that did not answer yet (`refill`): what the
+        # asks so far gave (resumed_ns, refilled, answered), until its RecordingGap is recorded
+        self._continuing: dict | None = None
         self._earlier_lost: dict | None = None  # what the earlier recordings lost, until recorded (_note_earlier_lost)
         self._link_lost_ns: int | None = None  # when the link to the router went, until the refill after it
         self._refill_at: float | None = None  # monotonic time of the next refill (relink), if one is due
@@ -787,20 +804,59 @@ class Recorder:
                                unanswered=sorted(set(sources) - set(answered)))
             self._publish([gap])
             return answered
-        self._note_earlier_lost(not set(sources) - set(answered))  # unless this gave it back
-        gap = RecordingGap(earlier_file=self.continued["earlier_file"], copied=self.continued["copied"],
-                           last_copied_ns=Nanos(self.continued["last_copied_ns"]), resumed_ns=Nanos(resumed_ns),
-                           refilled=refilled, refilled_from=sorted(answered),
-                           unanswered=sorted(set(sources) - set(answered)))
-        self._publish([gap])
-        log.info("recorder: gap recorded: %d events refilled from %s", refilled, ", ".join(answered) or "nobody")
+        # a restarted recorder's refill: a source of the file that did not answer, on the bus, is asked again (`REFILLS`, each
+        # later and longer, as after an outage); one RecordingGap says what all the asks gave. Before, one ask of
+        # REFILL_TIMEOUT_S decided: at load 40-66 a live service answered after it, and what it would have given
+        # back (the events of the predecessor's damaged chunk, the gap's) was recorded as lost, or missing
+        done = self._continuing or {"resumed_ns": resumed_ns, "refilled": 0, "answered": set()}
+        done["refilled"] += refilled
+        done["answered"].update(answered)
+        unanswered = sorted(set(sources) - done["answered"])
+        if unanswered and self._refills_left > 0 and self._on_bus(unanswered):
+            self._continuing = done
+            self._refills_left -= 1
+            self._refill_at = time.monotonic() + min(REFILL_BACKOFF_S, RELINK_SETTLE_S * 2 ** tries)
+            log.info("recorder: no answer yet from %s to the restart's refill: asked again", ", ".join(unanswered))
+            return answered
+        self._continuing = None
+        self._refills_left = REFILLS
+        self._continued_gap(done, unanswered)
         return answered
+
+    def _on_bus(self, services: list[str]) -> bool:
+        """Whether any of `services` is on the bus now (its token): only such a one may still answer."""
+        alive = self.bus.alive_now(alive_key(self.session, "*"))
+        return any(alive_key(self.session, s) in alive for s in services)
+
+    def _continued_gap(self, done: dict, unanswered: list[str]) -> None:
+        """Record the restart's gap (RecordingGap of `earlier_file`) as the refill's asks `done` gave it, and what the
+        earlier recordings lost unless they gave it back (`_note_earlier_lost`)."""
+        self._note_earlier_lost(not unanswered)  # unless this gave it back
+        answered = sorted(done["answered"])
+        gap = RecordingGap(earlier_file=self.continued["earlier_file"], copied=self.continued["copied"],
+                           last_copied_ns=Nanos(self.continued["last_copied_ns"]), resumed_ns=Nanos(done["resumed_ns"]),
+                           refilled=done["refilled"], refilled_from=answered, unanswered=unanswered)
+        self._publish([gap])
+        log.info("recorder: gap recorded: %d events refilled from %s", done["refilled"], ", ".join(answered) or "nobody")
 
     def _last_refill(self, deadline: Deadline) -> list[str] | None:
         """At close, the refill still due (an outage or a jump too recent to have been asked about, or one asked
         again) is asked now, in what the close's deadline leaves: the sources that answered; None if none was due
         or it could not be asked (the link down, no time left: then every source's tail is unknown)."""
-        if self.bus is None or self.failure is not None or (self._refill_at is None and self._link_lost_ns is None):
+        if self.bus is None or self.failure is not None:
+            return None
+        if self._continuing is not None:  # the restart's refill, asked again: a last ask in what the deadline leaves
+            self._refill_at, self._refills_left = None, 0
+            left = deadline.left(FINISH_S, cap=REFILL_TIMEOUT_S)
+            try:
+                if self._link_down or left < 0.05:
+                    self._continued_gap(self._continuing, sorted(set(self._contiguous()) - self._continuing["answered"]))
+                    self._continuing = None
+                else:
+                    self.refill(timeout_s=left)
+            except RecordingFailed:
+                return None
+        if self._refill_at is None and self._link_lost_ns is None:
             return None
         if not self._bus_holes() and not self._tails():
             return None  # (a jump that closed by itself, an outage after which every source was heard: nothing to ask)
@@ -1142,6 +1198,12 @@ class Recorder:
     def _maybe_refill(self) -> None:
         if self._refill_at is None or time.monotonic() < self._refill_at or self._link_down:
             return  # (the link's return schedules one anyway)
+        if self._continuing is not None:  # the restart's refill asked again (it asks for every hole: an outage's too)
+            self._refill_at = None
+            self.refill()
+            if self._refill_at is None and self._link_lost_ns is not None:
+                self._refill_at = time.monotonic()  # an outage's own refill, next (its records: LINK_METADATA)
+            return
         since = self._link_lost_ns if self._link_lost_ns is not None else self.clock()
         self._refill_at = self._link_lost_ns = None
         self.refill(since_ns=since)

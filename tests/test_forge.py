@@ -286,6 +286,18 @@ def test_the_live_view_follows_a_session_whose_game_goes_on_after_a_forged_end()
             source.close()
 
 
+def next_event(seen: queue.Queue, proc: subprocess.Popen) -> ev.Event:
+    """The next of the game's events the forger sees, waited for as long as the game's process runs (it ends by
+    itself if it cannot start: its --wait-for's limit). Before, each was waited for 60 s: at load 42-52 the game
+    process's start-up took longer, and 6 of 6 runs failed on `queue.Empty` with the code right."""
+    while True:
+        try:
+            return decode_event(seen.get(timeout=0.5))
+        except queue.Empty:
+            if proc.poll() is not None and seen.empty():
+                raise AssertionError(f"the game ended before its events came: {proc.stderr.read()}") from None
+
+
 def test_a_game_in_a_process_of_its_own_ends_the_session_on_a_forged_end_with_one_line(tmp_path):
     # `pairplay run game`: every listener is in another process, so a fitting forged end may have been taken
     # (before: the game waited for ever for the suggestion a stopped learner would never make)
@@ -297,7 +309,7 @@ def test_a_game_in_a_process_of_its_own_ends_the_session_on_a_forged_end_with_on
              "--seed", "1", "--rounds", "300", "--connect", endpoint, "--wait-for", "recorder", "--wait-for",
              "learner", "--wait-for", "participant"],
             stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True, env=dict(os.environ, PYTHONUNBUFFERED="1")))
-        while not (isinstance(e := decode_event(seen.get(timeout=60)), ev.SuggestionRequested) and e.round >= 1):
+        while not (isinstance(e := next_event(seen, game[0]), ev.SuggestionRequested) and e.round >= 1):
             pass
         client.put(*forge("forge5", ev.SessionEnded(reason="completed", rounds_played=1), e.seq + 1))
         game[0].wait(60)

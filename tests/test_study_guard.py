@@ -195,6 +195,30 @@ def test_a_study_file_edited_in_the_folder_is_refused_by_every_verb_that_reads_i
     assert done.returncode == 0, done.stderr
 
 
+def test_a_writer_says_the_edited_study_file_before_it_meets_another_writers_lock(tmp_path, pairplay):
+    """The edit is the user's mistake: said as such beside a writer that holds the folder, not "another pairplay
+    writes this study folder" (the test above, under load: `register` met the lock of the pilot started beside it,
+    which was itself about to refuse the edit). A writer checks the study file before it takes the lock."""
+    data = a_study(tmp_path)
+    server = serving(data.folder)  # it holds the folder from here; the file is edited beside it
+    toml = data.folder / "study.toml"
+    toml.write_bytes(toml.read_bytes().replace(b"rounds = 2", b"rounds = 5", 1))
+    try:
+        ran = all_at_once(pairplay, {
+            "protocol register": ["protocol", "register", str(data.folder)],
+            "protocol pilot": ["protocol", "pilot", str(data.folder), "--personas", "blind,deaf"],
+            "protocol mark-invalid": ["protocol", "mark-invalid", str(data.folder), "pilot-p01-phase1-g1",
+                                      "--reason", "x"],
+            "protocol serve": ["protocol", "serve", str(data.folder)],
+            "report": ["report", str(data.folder)]})
+    finally:
+        stopped(server)
+    for verb, done in ran.items():
+        lines = done.stderr.strip().splitlines()
+        assert done.returncode == 2 and len(lines) == 1, (verb, done.returncode, done.stderr)
+        assert lines[0].startswith(f"pairplay {verb}: changed since the study was created"), (verb, lines)
+
+
 def test_a_journal_without_the_study_files_hash_is_read_as_it_was(tmp_path):
     """Every journal `protocol init` wrote records the hash (the field is required since the first journal);
     one without it (an empty hash: made by hand) has nothing to check against and is read as before."""
