@@ -15,7 +15,7 @@ from .events import EVENT_TYPES
 
 # tag -> (published by, meaning)
 CATALOGUE: dict[str, tuple[str, str]] = {
-    "ServiceStarted": ("any service", "a service is up; `resumed_events` > 0 when it rebuilt its state from the log"),
+    "ServiceStarted": ("any service", "a service is up; `resumed_events` > 0 when it rebuilt its state from the log; `marks`: the inputs it marks where it took them (the game: pause and resume, ControlTaken)"),
     "SessionStarted": ("game", "the session's full config: participant, seed, rounds, learner, observed-card source, version"),
     "RoundStarted": ("game", "a new deal: the face of each of the 18 cards (the outcome of the deal stream)"),
     "CardPicked": ("participant / board", "an input: a card was touched; the game may reject it"),

@@ -48,6 +48,11 @@ class ServiceStarted(Event, tag="ServiceStarted"):
     service: str
     version: str = ""
     resumed_events: Count = 0  # events folded from the log when it restarted
+    # the inputs this service marks where it took them (its logic's PLACED: the game's pause and resume, each
+    # answered by a ControlTaken): a log whose ServiceStarted names them holds a mark for each one taken, so
+    # one without a mark was refused, even in a log with no mark at all (services/node.py resume); [] in a
+    # log made before the marks, which is fed in file order
+    marks: list[str] = []
 
 
 class SessionStarted(Event, tag="SessionStarted"):

@@ -249,7 +249,11 @@ class Driver:
         tags = getattr(self.logic, "PLACED", frozenset())
         inputs = {(e.source, type(e).__name__, e.seq): e for e in recorded
                   if e.session == self.session and type(e).__name__ in tags}
-        return bool(marks), set(marks), {seq: inputs[named] for named, seq in marks.items() if named in inputs}
+        # a log whose service said it marks these inputs (its ServiceStarted) is marked with no mark in it too:
+        # a game that took no pause, and refused one after its last touch that was filed before that touch
+        declared = any(isinstance(e, ServiceStarted) and tags and tags <= set(e.marks) for e in own)
+        return bool(marks) or declared, set(marks), \
+            {seq: inputs[named] for named, seq in marks.items() if named in inputs}
 
     def _place(self, at_mark: dict[int, Event]) -> list[Event]:
         """Feed the inputs whose recorded mark is the next output to recompute (resume's rule)."""
@@ -295,7 +299,9 @@ class Driver:
         recorder filed it as it reached it: maybe the other side of a touch in flight). In a log with
         marks, one without a mark was not taken (refused: it changed nothing) and is not fed while
         recorded outputs are left to compare; beyond them (a log cut after it) it is fed in file order.
-        A log without any mark (made before ControlTaken) is fed in file order, as it always was, and
+        A log is marked when it holds a mark or its service's ServiceStarted names the tags it marks (`marks`:
+        a game that took no pause has no mark, and one it refused after its last touch may be filed before it).
+        A log without either (made before ControlTaken) is fed in file order, as it always was, and
         the marks the logic makes among its recorded outputs are dropped: the log has none to compare
         them with (one beyond them is owed: a game restarted after taking its first pause, unmarked).
         """

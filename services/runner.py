@@ -245,7 +245,8 @@ class Node:
             recorded = []  # the session has not started: nothing to catch up with
         elif self.game_watch is not None:
             self.game_watch.existed()
-        announce = ServiceStarted(service=self.logic.name, version=__version__, resumed_events=len(recorded))
+        announce = ServiceStarted(service=self.logic.name, version=__version__, resumed_events=len(recorded),
+                                  marks=sorted(getattr(self.logic, "PLACED", ())))
         if recorded:
             log.info("%s resumes from %d recorded events", self.logic.name, len(recorded))
             self.resumed_events = len(recorded)

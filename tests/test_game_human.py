@@ -17,15 +17,18 @@ from pairplay.services.verify import verify_events
 class Table:
     """A game and a learner wired together; `send(source, event, at_s)` is an input."""
 
-    def __init__(self, **fields):
+    def __init__(self, announce: bool = False, **fields):
+        """`announce`: the game's ServiceStarted first, naming the inputs it marks, as services/runner.py's."""
         fields = {"observed_source": "first-pick", "ignore_rule": "time", "ignore_clock": "page"} | fields
         self.config = SessionConfig(session="t", participant="human:p1", seed=1, rounds=1, **fields)
         self.game = Driver(GameLogic(self.config), "t", lambda: 0)
         self.learner = Driver(LearnerLogic(), "t", lambda: 0)
         self.log: list = []
         self.seq: dict[str, int] = {}
+        if announce:
+            self.publish(self.game._stamp([ev.ServiceStarted(service="game", marks=sorted(GameLogic.PLACED))]))
         self.publish(self.game.start())
-        self.faces = self.log[1].faces
+        self.faces = next(e for e in self.log if isinstance(e, ev.RoundStarted)).faces
 
     def publish(self, events):
         for e in events:

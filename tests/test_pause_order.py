@@ -27,8 +27,8 @@ class Live(Recorded):
     was published, each input before what it caused); `take(name, source, event, at_s)` is an input,
     named, and says what the game published for it."""
 
-    def __init__(self):
-        super().__init__()
+    def __init__(self, announce: bool = False):
+        super().__init__(announce=announce)
         self.named: dict[str, object] = {}
 
     def take(self, name: str, source: str, event, at_s: float) -> list[str]:
@@ -153,3 +153,28 @@ def test_a_game_restarted_over_such_a_log_is_where_the_live_game_was():
     restarted = Driver(GameLogic(live.config), S, clock=lambda: 10**18)
     owed = restarted.resume(unmarked)
     assert [type(e).__name__ for e in owed] == ["ControlTaken"] and restarted.logic.paused
+
+
+def test_a_refused_pause_after_the_last_touch_filed_before_it_verifies_in_a_game_that_took_no_pause(tmp_path):
+    """A game that took no pause holds no mark; a pause that came after its last touch (refused: the game had
+    ended) was filed before that touch. Read as a log from before the marks, the pause was fed there, the
+    last touch refused as paused: DIFFERS. The game's ServiceStarted now says it marks what it takes, so a
+    control without a mark in its log was not taken, mark or none elsewhere."""
+    def whole_round(announce: bool) -> Live:
+        live = Live(announce=announce)
+        pairs: dict[int, list[int]] = {}
+        for card, face in enumerate(live.faces):
+            pairs.setdefault(face, []).append(card)
+        t = 100.0
+        for turn, (a, b) in enumerate(pairs.values()):
+            live.take("first", "board", ev.CardPicked(round=0, turn=turn, card=a), t)
+            live.take("last", "board", ev.CardPicked(round=0, turn=turn, card=b), t + 1)
+            t += 2
+        assert any(type(e).__name__ == "SessionEnded" for e in live.log)
+        assert "ControlTaken" not in live.take("late", "experimenter", ev.SessionPaused(reason="too late"), t)
+        return live
+
+    assert verdict(filed(whole_round(True), tmp_path / "late.mcap", ("late", "last", False))) == (True, [])
+    # a log from before the marks (no ServiceStarted naming them) is fed in file order, as it always was
+    ok, mismatches = verdict(filed(whole_round(False), tmp_path / "old.mcap", ("late", "last", False)))
+    assert not ok and any("the session is paused" in m for m in mismatches), mismatches
