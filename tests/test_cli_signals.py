@@ -29,6 +29,8 @@ from pairplay import signals
 from pairplay.cli.main import main
 from pairplay.cli.rebuild import MANIFEST
 
+from busutil import wait_until
+
 SAMPLE = Path(__file__).resolve().parents[1] / "recordings" / "samples" / "sim-ashley.mcap"
 
 
@@ -277,13 +279,6 @@ def test_a_sweep_interrupted_after_its_cells_keeps_them_and_says_so(tmp_path, mo
     assert "0 computed" in capsys.readouterr().out
 
 
-def _wait_for_file(path: Path, timeout_s: float = 60.0) -> bool:
-    deadline = time.monotonic() + timeout_s
-    while not path.exists() and time.monotonic() < deadline:
-        time.sleep(0.05)
-    return path.exists()
-
-
 @pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM])
 def test_a_second_signal_while_a_session_stops_cuts_its_shutdown_whichever_it_is(tmp_path, sig):
     """The README says a second SIGTERM while a session stops cuts it short as a second Ctrl-C does; a new user's
@@ -295,8 +290,11 @@ def test_a_second_signal_while_a_session_stops_cuts_its_shutdown_whichever_it_is
     try:
         first = p.stdout.readline()
         assert "bus listening" in first, first
-        assert _wait_for_file(tmp_path / "rec" / "tw.mcap")
-        time.sleep(1.0)  # the game under way: its stop takes ~0.3 s (one before it started takes ~0.02 s)
+        # the game under way (its stop takes ~0.3 s; one before it started takes ~0.02 s): its second round
+        # in the recorder's journal (a fixed 1-s sleep was before the game's start at load 17-30: "interrupted
+        # before the session started", twice in helpers' suites)
+        journal = tmp_path / "rec" / "tw.mcap.journal"  # (it holds each event's payload, its tag in it)
+        assert wait_until(lambda: journal.exists() and b"RoundEnded" in journal.read_bytes(), 60)
         p.send_signal(sig)
         time.sleep(0.03)  # (two at once are one: the kernel keeps one pending signal of a kind)
         p.send_signal(sig)  # the first one's shutdown takes ~0.3 s
