@@ -35,6 +35,12 @@ def recording_file(path: str | Path, function: str = "") -> Path:
     is a path at all (pairplay/arguments.py: read_log(None) was a TypeError of pathlib's)."""
     path = path_argument(path, function) if function else Path(path)
     if not path.exists():
+        from .wal import wal_path
+        if wal_path(path).exists():  # the recording moved or removed, what its recorder took still beside it
+            raise InputError(f"no such recording; its journal is here ({wal_path(path).name}: what its recorder "
+                             f"received): `touch {path}` (an empty file, as a recorder killed before its first "
+                             f"flush leaves one), then `pairplay recover {path}` rebuilds the recording from it",
+                             path)
         raise InputError("no such recording", path)
     if path.is_dir():
         raise InputError("a folder, not a recording (give the .mcap files)", path)

@@ -313,6 +313,23 @@ def test_a_file_of_nothing_beside_its_journal_is_recovered_from_it_and_named_so_
     assert ran.returncode == 2 and "not a recording" in ran.stderr and "journal" not in ran.stderr, ran.stderr
 
 
+@pytest.mark.parametrize("verb", [["recover"], ["replay", "--verify"], ["rebuild"]])
+def test_a_missing_recording_whose_journal_is_left_names_it_and_how_to_recover(tmp_path, pairplay_cli, verb):
+    """A new user's trial: the recording removed, its journal left beside where it was; `recover` said only
+    "no such recording", not a word of the journal that holds its events. Its line names the journal and the
+    two commands that rebuild the recording from it, which then work as said."""
+    events = [start()] + [pick(s) for s in range(1, 4)]
+    path = tmp_path / "j1.mcap"
+    journal_of(path, events)
+    ran = pairplay_cli(*verb, path, cwd=tmp_path)
+    lines = ran.stderr.strip().splitlines()
+    assert ran.returncode == 2 and len(lines) == 1, ran.stderr
+    assert "j1.mcap.journal" in lines[0] and f"`touch {path}`" in lines[0] and f"`pairplay recover {path}`" in lines[0]
+    path.touch()  # as the line says
+    ran = pairplay_cli("recover", path, cwd=tmp_path)
+    assert ran.returncode == 0 and "4 events taken from its journal" in ran.stdout, (ran.stdout, ran.stderr)
+
+
 # -- stray journals ------------------------------------------------------------------
 @pytest.mark.parametrize("verb", [["rebuild"], ["recover"], ["replay", "--verify"], ["view", "--no-save", "--recording"],
                                   ["counterfactual", "--fit-only"]])
