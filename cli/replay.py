@@ -30,7 +30,7 @@ import time
 
 from pairplay import signals
 from pairplay.cli.args import session_id, speed
-from pairplay.errors import InputError
+from pairplay.errors import InputError, OptionError
 from pairplay.livelock import LIVE, is_live
 from pairplay.numbers import counted
 
@@ -39,7 +39,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     from pairplay.services.bus import add_bus_arguments
 
     p.add_argument("recording", metavar="REC")
-    p.add_argument("--speed", type=speed, default=1.0, help="N times real time (0.0001..1000000), or max (default 1)")
+    p.add_argument("--speed", type=speed, default=None, help="N times real time (0.0001..1000000), or max (default 1)")
     p.add_argument("--as", dest="as_session", metavar="SESSION", type=session_id,
                    help="re-publish under this session id")
     p.add_argument("--verify", action="store_true", help="re-run fresh services on the recorded inputs and compare; exit 0 PASS (the last line says if "
@@ -50,6 +50,12 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     from pairplay.replay.check import read_session
 
+    if args.verify:  # (an option of the replay on the bus given with --verify did nothing, without a word: a trial)
+        given = [o for o, v in (("--speed", args.speed), ("--as", args.as_session)) if v is not None]
+        if given:
+            raise OptionError(f"--verify re-runs the recording's services here, off the bus: {' and '.join(given)} "
+                              f"{'apply' if len(given) > 1 else 'applies'} to a replay on the bus only; give one "
+                              "or the other", given[0])
     log = read_session(args.recording)  # a file holding no session is one line on stderr, exit 2
     if args.verify:
         from pairplay.services.verify import verify_recording
@@ -102,7 +108,7 @@ def run(args: argparse.Namespace) -> int:
               f"{' '.join(bus.locators()) or '(no listener)'}", flush=True)
         t0 = time.perf_counter()
         outbox = Outbox(bus, "replay")  # a publish that waits on a slow subscriber never holds up a signal
-        n = republish(outbox, log.events, args.speed, stop, args.as_session)
+        n = republish(outbox, log.events, 1.0 if args.speed is None else args.speed, stop, args.as_session)
         if not outbox.close(shutdown_wait(stop, 30.0, reserve=0.2)):
             n -= outbox.pending()
         took = time.perf_counter() - t0

@@ -88,6 +88,10 @@ CASES = [
     Case("replay a zero-byte file", ["replay", "empty.mcap", "--speed", "max"], "the file is empty"),
     Case("replay random bytes", ["replay", "random.mcap", "--speed", "max"], "not a recording: not an MCAP file"),
     Case("verify random bytes", ["replay", "random.mcap", "--verify"], "not a recording: not an MCAP file"),
+    # a trial: the replay's pace and session id were accepted with --verify, which does not replay on the bus
+    Case("verify with --speed", ["replay", "rec.mcap", "--verify", "--speed", "2"],
+         "--verify re-runs the recording's services here, off the bus: --speed applies to a replay on the bus only"),
+    Case("verify with --as", ["replay", "rec.mcap", "--verify", "--as", "other"], "--as applies to a replay on the bus"),
     Case("view a zero-byte file", ["view", "--recording", "empty.mcap"], "the file is empty"),
     Case("view random bytes", ["view", "--recording", "random.mcap"], "not a recording: not an MCAP file"),
     Case("view a session the recording does not hold",
