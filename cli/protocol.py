@@ -368,7 +368,9 @@ def stopped_line(runners: list, stop) -> str:
         return ""
     summary, ended = game.summary, runners[0].data.state.games.get(game.session)
     ended = ended.ended if ended is not None else None
-    if not summary.get("started") and "events" in summary:
+    if summary.get("ended") == "completed":  # the signal came after its last round (its questionnaire, its end)
+        how = f"had completed all {counted(game.rounds, 'round')}"
+    elif not summary.get("started") and "events" in summary:
         how = "stopped before it started"
     else:
         how = f"stopped after {summary.get('rounds_played', 0)} of {counted(game.rounds, 'round')}"
