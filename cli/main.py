@@ -278,6 +278,8 @@ def add_log_options(p: argparse.ArgumentParser, default=False) -> None:
 QUIET_SUMMARIES = frozenset({"study", "sweep", "rebuild", "recover", "combine", "counterfactual", "report",
                              "participant", "protocol init", "protocol mark-invalid", "protocol pilot",
                              "protocol check"})
+# the verbs whose second word is an action (their add_subparsers, dest "action": `_named`, `_who`)
+VERBS_WITH_ACTIONS = frozenset({"protocol", "participant"})
 LOG_FORMAT = "%(levelname)s %(name)s: %(message)s"
 _handler: logging.Handler | None = None
 
@@ -311,7 +313,7 @@ def main(argv: list[str] | None = None, exiting: bool = False) -> int:
         if exiting and in_main:  # one noted while the command loaded, when it returned before it armed (a mistake)
             interrupts.late = interrupts.late or signals.take()
     except KeyboardInterrupt:  # a signal before the verb ran (while its modules load)
-        verb = argv[0] if argv and argv[0] in VERBS else ""
+        verb = _named(argv)
         print(f"pairplay{' ' + verb if verb else ''}: {interrupted_what()}; nothing more was written", file=sys.stderr)
         code = exit_code_of(signal_received() or signal.SIGINT)
     try:
@@ -321,7 +323,7 @@ def main(argv: list[str] | None = None, exiting: bool = False) -> int:
                 for s in saved:
                     signal.signal(s, signal.SIG_IGN)
             if interrupts.late:  # a signal after the work was done: its status, and one line saying so
-                verb = argv[0] if argv and argv[0] in VERBS else ""
+                verb = _named(argv)
                 done = "" if code == 0 else f" with status {code}"
                 print(f"pairplay{' ' + verb if verb else ''}: {interrupted_what(interrupts.late)} after it had "
                       f"finished{done}; nothing was undone", file=sys.stderr)
@@ -497,13 +499,13 @@ def _main(argv: list[str], arm=None) -> int:
             interrupts.late = interrupts.late or interrupts.received or signal.SIGINT
             return code or 0
         # (what it removed, if the signal came as it waited to journal its outputs: replay/copies.py Interrupted)
-        print(f"pairplay {args.verb}: {interrupted_what()}; {getattr(err, 'said', '') or nothing_more()}",
+        print(f"pairplay {_who(args)}: {interrupted_what()}; {getattr(err, 'said', '') or nothing_more()}",
               file=sys.stderr)
         return exit_code_of(signal_received() or signal.SIGINT)
     except SystemError as err:  # Ctrl-C inside a compiled kernel: numba reports it as a SystemError around it
         if not isinstance(err.__cause__ or err.__context__, KeyboardInterrupt):
             raise
-        print(f"pairplay {args.verb}: {interrupted_what()}; {nothing_more()}", file=sys.stderr)
+        print(f"pairplay {_who(args)}: {interrupted_what()}; {nothing_more()}", file=sys.stderr)
         return exit_code_of(signal_received() or signal.SIGINT)
     except UserError as err:  # a fix naming an option this verb lacks is left out (errors.UserError)
         print(f"pairplay {_who(args)}: {err.line(options_of(chosen, args))}", file=sys.stderr)
@@ -569,6 +571,16 @@ def _option_for(parser: argparse.ArgumentParser, extra: list[str]) -> str:
     if not words[0].endswith(".mcap") or len(takes) != 1:
         return ""
     return f"; a recording is given with {takes[0].option_strings[0]} {words[0]}"
+
+
+def _named(argv: list[str]) -> str:
+    """The verb of `argv` as its lines name it, with its action where it has one (`protocol serve`: `_who`), ""
+    if argv names no verb: for the lines main() says without the parsed arguments (a signal as the verb loaded,
+    or once it had finished). They named the verb alone (`pairplay protocol: ...` of `protocol serve`)."""
+    if not argv or argv[0] not in VERBS:
+        return ""
+    action = argv[1] if len(argv) > 1 and not argv[1].startswith("-") else ""
+    return f"{argv[0]} {action}" if action and argv[0] in VERBS_WITH_ACTIONS else argv[0]
 
 
 def _who(args: argparse.Namespace) -> str:

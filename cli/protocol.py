@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import signal
 import sys
 import time
 from pathlib import Path
@@ -285,9 +286,7 @@ def warn_unreachable(runner, verb: str) -> None:
 def _serve(data: StudyData, args) -> int:
     import threading
 
-    from pairplay.services.bus import Bus, BusOptions, shutdown_wait, stop_on_signals
-    from pairplay.services.console.server import StudyLabServer
-    from pairplay.services.protocol import JOURNALED_WAIT_S, StudyRunner
+    from pairplay.services.bus import stop_on_signals
 
     host, _, port = args.listen.rpartition(":")
     if not host or not port.isdigit():
@@ -309,6 +308,22 @@ def _serve(data: StudyData, args) -> int:
     runners = []
     # a signal stops the running game at once, with its name and the shutdown's deadline (its recording finished)
     stop_on_signals(stop, then=lambda: [r.interrupt(stop) for r in runners])
+    try:
+        _serving(data, args, stop, runners, pilot, robot, overridden, host, port)
+    except KeyboardInterrupt:  # a second signal cut the shutdown: the game's recording as the disk holds it
+        return cut(runners, "serve", stop)
+    print(f"pairplay protocol serve: stopped ({signals.said(getattr(stop, 'why', '')) or 'done'})"
+          f"{stopped_line(runners, stop)}", file=sys.stderr)  # not a result
+    return 0
+
+
+def _serving(data: StudyData, args, stop, runners: list, pilot: dict, robot, overridden: bool, host: str,
+             port: str) -> None:
+    """`_serve` once its options are checked: the console served until `stop` (a signal)."""
+    from pairplay.services.bus import Bus, BusOptions, shutdown_wait
+    from pairplay.services.console.server import StudyLabServer
+    from pairplay.services.protocol import JOURNALED_WAIT_S, StudyRunner
+
     with Bus(BusOptions(mode="router"), stop=stop) as bus:
         runner = StudyRunner(data, bus, robot=robot)
         runners.append(runner)
@@ -341,8 +356,44 @@ def _serve(data: StudyData, args) -> int:
             if server.console.thread is not None:
                 server.console.thread.join(shutdown_wait(stop, 10.0, reserve=0.3))
             server.close(shutdown_wait(stop, 10.0, reserve=0.2))
-    print(f"pairplay protocol serve: stopped ({signals.said(getattr(stop, 'why', '')) or 'done'})", file=sys.stderr)  # not a result
-    return 0
+
+
+def stopped_line(runners: list, stop) -> str:
+    """"; game S ..." of the game a signal stopped (services/protocol.py StudyRunner.stopped), as `session` says its
+    own (cli/session.py print_interrupted): how far it got, how the journal ended it, its recording; "" if none
+    was running. serve said only "stopped (Ctrl-C)" and pilot "interrupted (Ctrl-C)" of a game they cut (a new
+    user's trial)."""
+    game = runners[0].stopped if runners and stop.is_set() else None
+    if game is None:
+        return ""
+    summary, ended = game.summary, runners[0].data.state.games.get(game.session)
+    ended = ended.ended if ended is not None else None
+    if summary.get("ended") == "completed":  # the signal came after its last round (its questionnaire, its end)
+        how = f"had completed all {counted(game.rounds, 'round')}"
+    elif not summary.get("started") and "events" in summary:
+        how = "stopped before it started"
+    else:
+        how = f"stopped after {summary.get('rounds_played', 0)} of {counted(game.rounds, 'round')}"
+    recorded = f"recorded {counted(summary['events'], 'event')} to {game.path}" if "events" in summary else \
+        f"its recording {game.path}"
+    journal = f"journaled {ended.outcome}" + (f" ({ended.reason})" if ended.reason else "") if ended is not None \
+        else "its end not journaled (the next serve, pilot or report journals it from its recording)"
+    return f"; game {game.session} {how}, {journal}; {recorded}"
+
+
+def cut(runners: list, verb: str, stop) -> int:
+    """What serve or pilot says when a second signal cut its shutdown (KeyboardInterrupt): the line of
+    cli/session.py `cut_line` of the game the first signal stopped (its recording: whole, or `pairplay recover` it),
+    the signal's status. With no game running, or none whose recording was begun, the KeyboardInterrupt goes on to
+    cli/main.py's line."""
+    from pairplay.cli.session import cut_line
+
+    game = runners[0].stopped if runners and stop.is_set() else None
+    if game is None or not game.path.exists():
+        raise KeyboardInterrupt
+    again = signals.again or signal.SIGINT  # (either signal cuts it: pairplay/signals.py `wait_cut`)
+    print(cut_line(f"protocol {verb}", game.path, again, game.summary), file=sys.stderr)
+    return 128 + again
 
 
 def _pilot(data: StudyData, args) -> int:
@@ -394,8 +445,11 @@ def _pilot(data: StudyData, args) -> int:
         except StudyDataError:
             if not stop.is_set():
                 raise
+        except KeyboardInterrupt:  # a second signal cut the shutdown: the game's recording as the disk holds it
+            return cut(runners, "pilot", stop)
     if stop.is_set():
-        print(f"pairplay protocol pilot: interrupted ({signals.said(stop.why)}); `pairplay protocol status {data.given}` shows what is left", file=sys.stderr)
+        print(f"pairplay protocol pilot: interrupted ({signals.said(stop.why)}){stopped_line(runners, stop)}; "
+              f"`pairplay protocol status {data.given}` shows what is left", file=sys.stderr)
         return 0
     print(f"plan complete; `pairplay report {data.given}` writes the report")
     return 0

@@ -218,8 +218,10 @@ def cut_line(verb: str, path: Path, again: int, summary: dict) -> str:
     was printed said "nothing more was written" with no summary, the recording whole (a new user's trial: once
     in 6 runs). Once the recording is finished the verb calls cli/interrupts.py `work_done` (a signal then cuts
     nothing: the summary is printed, and the status is still the signal's); this line is for the signal that
-    came before that, inside the shutdown."""
+    came before that, inside the shutdown. A recorder closing in another thread (`protocol serve`'s game) is let
+    finish its held step first (pairplay/signals.py `held_elsewhere_over`), as one in the main thread would."""
     head = f"pairplay {verb}: interrupted again ({signals.said(again)}) while stopping; "
+    signals.held_elsewhere_over()  # a recording another thread is finishing (serve's game): its held step ends first
     if finished_whole(path):
         events = f" ({counted(summary['events'], 'event')})" if summary.get("events") is not None else ""
         return head + f"{path} was finished before it: the recording is whole{events}, its end written"

@@ -51,7 +51,11 @@ second SIGTERM and waited on).
 A step that must be whole once begun (a file renamed into place and said so; a recording finished and its
 journal removed: services/recorder.py `Recorder.close`) runs under `held`: SIGINT and SIGTERM wait until
 it is over, then meet the handlers they would have met (a second signal then cuts what follows it). The
-step is short (a rename, an fsync, an unlink): the signal is late by that much, never lost.
+step is short (a rename, an fsync, an unlink): the signal is late by that much, never lost. In a thread
+other than the main one nothing can be held (signals reach the main thread): there the step is counted
+(`_elsewhere`), and a verb about to say what a cut left on disk waits for such steps to be over
+(`held_elsewhere_over`, cli/session.py `cut_line`): `protocol serve` finishes a game's recording in the
+console's thread, and its second signal said "may lack its end" of a file a moment from whole.
 
 Imports nothing but `signal` when loaded (its C part is loaded with the interpreter).
 """
@@ -68,6 +72,8 @@ again = 0  # a second signal that handler took while stopping on the first (modu
 WAIT_POLL_S = 0.05  # how often `wait_cut` looks for a second signal
 FINALIZER_RETRY_S = 0.01  # a signal held while a finalizer runs is delivered again this much later
 RESEND_S = 0.02  # a signal sent to the main thread is sent again this often until its handler took it
+HELD_ELSEWHERE_S = 5.0  # how long `held_elsewhere_over` waits for another thread's held step (an fsync, loaded)
+_elsewhere: list = []  # the held steps running in threads other than the main one (module rule)
 RESEND_FOR_S = 5.0  # and for at most this long
 DUPLICATE_S = 0.25  # a copy sent again that comes this soon after the send is the same signal (`arrived`)
 _owed: dict[int, bool] = {}  # signals `send_to_main` sent whose handler has not run yet
@@ -201,7 +207,12 @@ def held():
     @contextlib.contextmanager
     def hold():
         if threading.current_thread() is not threading.main_thread():
-            yield
+            token = object()
+            _elsewhere.append(token)  # (list.append and remove are atomic: no lock, nothing else to import)
+            try:
+                yield
+            finally:
+                _elsewhere.remove(token)
             return
         came: list[int] = []
         before = {s: signal.getsignal(s) for s in SIGNALS}
@@ -214,3 +225,16 @@ def held():
             for signum in came:  # each in order: a first one stops, a second cuts (services/bus.py stop_on_signals)
                 signal.raise_signal(signum)
     return hold()
+
+
+def held_elsewhere_over(timeout_s: float = HELD_ELSEWHERE_S) -> bool:
+    """Wait until no other thread is in a `held` step (module rule), at most `timeout_s`; whether none is. The
+    steps are milliseconds: what a signal in the main thread's own step would wait for too."""
+    import time
+
+    end = time.monotonic() + timeout_s
+    while _elsewhere:
+        if time.monotonic() >= end:
+            return False
+        time.sleep(0.005)
+    return True

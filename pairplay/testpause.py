@@ -1,7 +1,7 @@
 """A test-only pause at a named moment of a verb: how a test lands a real signal in a window of milliseconds.
 
 Rule: `pause(moment)` does nothing unless the environment names that moment,
-`PAIRPLAY_TEST_PAUSE=<moment>:<go-file>`; then it says `pairplay-test: paused at <moment>` on stderr and
+`PAIRPLAY_TEST_PAUSE=<moment>:<go-file>` (several joined by `;`: a first signal at one, a second at another); then it says `pairplay-test: paused at <moment>` on stderr and
 waits until <go-file> exists (the test sends its signal, then makes the file). The wait is a plain sleep,
 so a signal meets whatever handler is in place at that moment, as it would in a real run that happened to
 be there (tests/test_cut_signals.py). Nobody sets the variable in use; its moments are named where they are
@@ -18,8 +18,8 @@ def pause(moment: str) -> None:
     """Wait here until the test's go-file exists, if the environment names `moment` (module rule)."""
     import os
 
-    named = os.environ.get(VARIABLE, "")
-    if not named.startswith(moment + ":"):
+    named = next((m for m in os.environ.get(VARIABLE, "").split(";") if m.startswith(moment + ":")), "")
+    if not named:
         return
     import sys
     import time

@@ -66,6 +66,16 @@ JOURNALED_WAIT_S = 20.0
 
 
 @dataclass
+class Running:
+    """The game being played: its session, recording (as the study folder was given), rounds and run_session's
+    summary (filled as the session stops: started, ended, rounds_played, events)."""
+    session: str
+    path: Path
+    rounds: int
+    summary: dict
+
+
+@dataclass
 class Live:
     """What the console shows of the running game, folded from its events as they pass."""
     session: str = ""
@@ -133,6 +143,11 @@ class StudyRunner:
         self._journaled.set()
         self._control_seq = 0
         self._game_bus: Bus | None = None  # the running game's scope of `bus` (_play)
+        # the game being played (_play to run_game's end), and the one the process's signal stopped (`interrupt`):
+        # what serve and pilot name on their way out (cli/protocol.py `stopped_line`), its recording and summary;
+        # in serve the game runs in the console's thread, so the verb's main thread learns of it only here
+        self.running: Running | None = None
+        self.stopped: Running | None = None
 
     # -- a game --------------------------------------------------------------
     def config_for(self, pid: str, phase_id: str, game: int, scripted: str = "") -> SessionConfig:
@@ -213,6 +228,7 @@ class StudyRunner:
                 raise
         finally:
             self.live.state = "idle"
+            self.running = None
             self._journaled.set()
             self._busy.release()
 
@@ -240,7 +256,11 @@ class StudyRunner:
             from pairplay.services.lab.hub import LabHub
             hub = self.lab.add(LabHub(config, token=token))  # the board page: /s/<session>/board?t=<token>
         self._stop, self._abort_reason, self._control_seq = threading.Event(), "", 0
+        summary: dict = {}
+        self.running = Running(config.session, self.data.given / recording, config.rounds, summary)
+        testpause.pause("game-set-up")
         if self.interrupted is not None:  # a signal came while this game was being set up
+            self.stopped = self.stopped or self.running
             pass_stop(self.interrupted, self._stop)
         self._skip.clear()
         answered = threading.Event()
@@ -269,7 +289,6 @@ class StudyRunner:
                 time.sleep(0.05)  # the answer reaches the recorder on its own thread
 
         # the game waits for the board: the lab's hub, a scripted player, or a board elsewhere on the bus
-        summary: dict = {}
         stop = self._stop
         ended = None
         try:
@@ -317,6 +336,7 @@ class StudyRunner:
         the signal's name and deadline, its recording finished; no step starts after it. Only sets flags
         (called right after the signal, services/bus.py stop_on_signals)."""
         self.interrupted = stop
+        self.stopped = self.stopped or self.running
         if self._stop is not None and not self._stop.is_set():
             pass_stop(stop, self._stop)
         self._skip.set()
