@@ -8,7 +8,9 @@ the participant is quick) and not delivered (failed: also a stale one the robot
 could not have taken, unreachable, which the driver records failed, not
 superseded), naming the commonest reason a suggestion failed. A session whose robot could not be reached said
 so only under -v, and its summary said nothing: this line is what `session`,
-`lab` and `protocol serve/pilot` print after a game with a robot.
+`lab` and `protocol serve/pilot` print after a game with a robot. `troubled` says
+whether it reports a real failure (failed, unacknowledged): `protocol serve` logs
+only that as a warning, the normal line (superseded, in flight at the end) as info.
 """
 
 from __future__ import annotations
@@ -21,6 +23,15 @@ from pairplay.numbers import counted
 
 DELIVERED = ("done", "sent", "aborted", "stopped")
 UNCONFIRMED = ("unacknowledged", "in-flight")
+# what went wrong with the robot, not the session's normal course: a suggestion superseded (the participant was
+# quicker) or in flight when the session ended is normal; one failed, or never confirmed by a robot that was
+# asked (its reply did not come, its connection died), is not
+TROUBLE = ("failed", "unacknowledged")
+
+
+def troubled(others: Counter) -> bool:
+    """Whether `delivery_counts`'s outcome counts hold a real failure (TROUBLE): a warning, not the usual line."""
+    return any(others[o] for o in TROUBLE)
 
 
 def delivery_counts(acted: Iterable[RobotActed]) -> tuple[int, int, Counter, str, str]:

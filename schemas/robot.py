@@ -20,13 +20,15 @@ the robot acknowledged it, or why it failed. Outcomes:
                    a command was written just before the connection died, or the
                    connection died while its reply was awaited (see `unconfirmed`)
   "failed"         not delivered (robot unreachable or not connected yet, nobody
-                   subscribed on the broker, access refused, bridge closed; also
+                   subscribed on the broker, access refused, the bridge closed
+                   while the robot could not take it; also
                    when a newer suggestion came while it could not be written;
                    see `error` and `unsent`), or the robot reports it failed
                    (Realtime response.speak.end "failed": true)
   "nothing"        the "do nothing" action: nothing to send
-  "in-flight"      sent, and the session ended while the robot's acknowledgement was
-                   still awaited (it may have come after the recording closed)
+  "in-flight"      the session ended while it was on its way: the robot's acknowledgement
+                   still awaited (it may have come after the recording closed), or
+                   commands the robot could take not yet due (see `unsent`)
 
 The calibration and the robot config are files a researcher edits, so they are
 strict: an unknown field is an error, not a silently ignored typo. New fields of

@@ -39,7 +39,7 @@ from typing import Callable
 
 from pairplay import __version__, signals, testpause
 from pairplay.core.policies import partial_inputs, users_from_policies
-from pairplay.replay.delivery import delivery_counts, delivery_line
+from pairplay.replay.delivery import delivery_counts, delivery_line, troubled
 from pairplay.replay.reader import read_any_log
 from pairplay.replay.studydata import (Game, StudyData, StudyDataError, game_end, journaled_or_removed, one_line,
                                        recording_damage)
@@ -372,9 +372,10 @@ class StudyRunner:
         if self.robot is not None:  # a robot it could not reach is said, not only under -v
             acted = recorded.of("RobotActed")
             line = self.delivery[config.session] = delivery_line(acted)
-            total, delivered, *_ = delivery_counts(acted)
-            if delivered < total and self.warns_undelivered:
-                log.warning("%s: %s", config.session, line)
+            if line and self.warns_undelivered:  # a real failure is a warning, the normal summary info
+                # (replay/delivery.py `troubled`): it was a WARNING for every game whose robot was ever superseded
+                say = log.warning if troubled(delivery_counts(acted)[2]) else log.info
+                say("%s: %s", config.session, line)
         self.data.write_tables()
         return self.data.state.games[config.session]
 

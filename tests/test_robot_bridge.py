@@ -5,7 +5,7 @@ from __future__ import annotations
 import threading
 import time
 
-from busutil import listener, wait_until
+from busutil import collect, listener, wait_until
 from robot_doubles.harness import FAST
 from robot_doubles.iristk_broker import IrisTKBroker
 from robot_doubles.iristk_furhat import IrisTKFurhat
@@ -134,3 +134,40 @@ def test_a_stopped_bridge_leaves_the_robot_its_share_of_the_signals_deadline_to_
     finally:
         bridge.close()
         bus.close()
+
+
+def test_a_session_that_ended_by_itself_gives_the_robot_its_settle_time_whichever_the_bridge_saw_first():
+    """The session's end against the bridge's close (bridge.py `run`): a session that ends by itself stops its
+    services with its own deadline (services/session.py SETTLE_S, 30 s). A bridge that saw that stop before the
+    game's SessionEnded took it for a signal and gave the robot 1 s (STOPPED_SETTLE_S): a head turn's return still
+    due was cut, "failed: bridge closed before delivery" (a new user's 1-round session, once in 4 runs). Now the
+    deadline decides: the robot finishes the head turn, as when the bridge saw the end first.
+
+    Made deterministic: the stop comes while the head is turned, no SessionEnded at all, as the bridge saw it."""
+    import msgspec
+
+    from pairplay.services.bus import Deadline
+    from pairplay.services.session import SETTLE_S
+
+    hold_s = 2.5  # the head turn's hold: longer than the 1 s a stopped bridge gave the robot
+    config = msgspec.structs.replace(FAST, head_turn_lead_s=0.0, head_turn_hold_s=hold_s)
+    bus = listener()
+    published = collect(bus, event_key(SESSION, "robot", "RobotActed"))
+    bridge = RobotBridge(bus, SESSION, "virtual", config=config).start()
+    driver = bridge.robot
+    stop = threading.Event()
+    thread = bridge.run_in_thread(stop)
+    try:
+        bus.put(*made(1, code_of_parts(0, 0, 3, 0), 0))  # a head turn: card, beside, then (hold_s) rest
+        assert wait_until(lambda: len(driver.transport.performed) == 2, 10), driver.transport.performed
+        stop.deadline = Deadline(SETTLE_S)  # as services/session.py stops the services of a session that ended
+        stop.set()
+        thread.join(SETTLE_S)
+        assert not thread.is_alive()
+        assert wait_until(lambda: not published.empty(), 10)
+    finally:
+        bridge.close()
+        bus.close()
+    acted = [ev.decode_event(payload) for _, payload in list(published.queue)]
+    assert [(a.suggestion_seq, a.outcome) for a in acted] == [(1, "sent")], [(a.outcome, a.error) for a in acted]
+    assert len(acted[0].commands) == 3 and not acted[0].unsent  # the head came back to the participant

@@ -252,3 +252,21 @@ def test_the_virtual_robot_replies_where_no_thread_can_start():
                        text=True, timeout=120)
     assert r.returncode == 0 and "Traceback" not in r.stderr, r.stderr[-3000:]
     assert r.stdout.strip() == str([(0, "done"), (1, "done"), (2, "done"), (3, "done"), (4, "sent"), (5, "sent")])
+
+
+def test_a_suggestion_on_its_way_when_the_bridge_closes_is_in_flight_not_failed():
+    """The session's end against the robot's writes (driver.py `_shutdown`): a head turn whose return is not yet
+    due when the bridge closes was "failed: bridge closed before delivery" (a new user's 1-round session, once in
+    4 runs); the robot could take it, the session ended while it was on its way: "in-flight", its return unsent."""
+    collector = Collector()
+    config = msgspec.structs.replace(FAST, head_turn_lead_s=0.0, head_turn_hold_s=60.0)  # held until the close
+    driver = open_robot("virtual", collector.on_acted, config=config)
+    try:
+        driver.perform(suggestion(code_of_parts(0, 0, 3, 0), seq=1))  # a head turn: card, beside, (60 s) rest
+        assert wait_until(lambda: len(driver.transport.performed) == 2)  # the rest look is all that is left
+    finally:
+        driver.close()
+    acted = collector.by_seq()[1]
+    assert acted.outcome == "in-flight", (acted.outcome, acted.error)
+    assert wire_types(acted.commands) == ["look", "look"] and wire_types(acted.unsent) == ["look"]
+    assert "bridge closed" not in acted.error and "on their way" in acted.error

@@ -14,7 +14,11 @@ that stamp, so sequence numbers stay strictly increasing.
 After SessionEnded the bridge still takes what arrives until the bus has been
 quiet for END_QUIET_S (another service's message may overtake a learner's),
 waits (up to `settle_s`) for the robot to report every open suggestion, then
-leaves the bus.
+leaves the bus. Stopped, it waits what the stop's shutdown deadline leaves, at
+most `settle_s`: a signal's 1.1 s leaves ~0.2 s, a session that ended by itself
+(its own 30 s) the whole of it, whether the bridge saw that stop or the game's
+SessionEnded first. What is still open then is "in-flight", or "failed" only
+if the robot could not take it (services/robot/driver.py `_shutdown`).
 
 RobotActed is an observation of the world, not a function of the log: a
 replay or verify never recomputes it (the bridge is not a replayable logic).
@@ -72,7 +76,7 @@ from pairplay.services.robot.driver import RobotDriver, Suggestion
 log = logging.getLogger("pairplay.robot.bridge")
 NAME = "robot"
 END_QUIET_S = 0.25  # after SessionEnded, stop once no message came for this long
-STOPPED_SETTLE_S = 1.0  # stopped by a signal or the experimenter: wait this long for the robot's replies
+STOPPED_SETTLE_S = 1.0  # orphaned (the game left) or a stopped in-process learner: the wait's scale (run, take_published)
 STOPPED_RESERVE_S = 0.6  # stopped: done this long before the shutdown's deadline (the session waits until 0.55)
 # stopped: of what the deadline leaves the bridge, this much is the robot's close (the driver sends what is due, reports
 # what is open and closes the connection: a Realtime robot's close handshake, up to its close_timeout of 1 s), taken
@@ -270,12 +274,15 @@ class RobotBridge:
         while self.step(timeout_s=0.0 if stop.is_set() else END_QUIET_S):
             pass
         self.take_published(stop)
-        # stopped (a signal, the experimenter): what the robot has not acknowledged within a second, or
-        # what the shutdown's deadline leaves, is recorded as in flight, and the process exits promptly
+        # stopped: the robot reports what is open for what the shutdown's deadline leaves, at most settle_s, and
+        # what it has not reported then is recorded as in flight; the deadline, not who won the race, decides.
+        # A signal's 1.1 s leaves it ~0.2 s and the process exits promptly; a session that ended by itself stops
+        # its services with its own 30 s (services/session.py SETTLE_S), and a bridge that saw that stop before
+        # the SessionEnded waits as long as one that saw the end first (it waited 1 s, STOPPED_SETTLE_S, and a
+        # head turn's return still due was cut: "1 failed" once in 4 runs of a 1-round session, now in-flight)
         if stop.is_set():
             deadline = deadline_of(stop)
-            self.close(deadline.left(STOPPED_RESERVE_S + 0.05 + ROBOT_CLOSE_SHARE_S, min(self.settle_s, STOPPED_SETTLE_S)),
-                       deadline)
+            self.close(deadline.left(STOPPED_RESERVE_S + 0.05 + ROBOT_CLOSE_SHARE_S, self.settle_s), deadline)
         elif orphaned:  # nobody records what the robot still reports: do not wait for it
             self.close(min(self.settle_s, STOPPED_SETTLE_S))
         else:
