@@ -103,7 +103,7 @@ def test_a_stopped_bridge_leaves_the_robot_its_share_of_the_signals_deadline_to_
     closed = threading.Event()
     real_close, real_wait_idle, real_driver_close = transport.close, driver.wait_idle, driver.close
 
-    def wait_idle(timeout: float) -> bool:  # the wait for the robot's replies takes all it was given
+    def wait_idle(timeout: float, **_) -> bool:  # the wait for the robot's replies takes all it was given
         given["replies"] = timeout
         now[0] += timeout
         return False
@@ -171,3 +171,42 @@ def test_a_session_that_ended_by_itself_gives_the_robot_its_settle_time_whicheve
     acted = [ev.decode_event(payload) for _, payload in list(published.queue)]
     assert [(a.suggestion_seq, a.outcome) for a in acted] == [(1, "sent")], [(a.outcome, a.error) for a in acted]
     assert len(acted[0].commands) == 3 and not acted[0].unsent  # the head came back to the participant
+
+
+def test_a_stopped_bridge_does_not_wait_for_reports_an_unreachable_robot_cannot_send():
+    """A stopped bridge waits what the stop's deadline leaves for the robot's reports (at most settle_s): once that
+    was the session's own 30 s, each game of a pilot with an unreachable robot waited its whole settle time, 15 s
+    (a test of four games took 63 s, 3 s before). An unreachable robot reports nothing: the wait ends at once and
+    the open suggestion is failed, naming why. Here the settle time and the deadline are an hour: the bridge
+    still ends (within the join's 60 s, which a wait of an hour cannot)."""
+    import socket
+
+    import msgspec
+
+    from pairplay.services.bus import Deadline
+
+    with socket.socket() as s:  # a port nobody listens on: the robot is unreachable
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    bus = listener()
+    published = collect(bus, event_key(SESSION, "robot", "RobotActed"))
+    config = msgspec.structs.replace(FAST, give_up_s=3600.0)  # (nor does the driver give the suggestion up first)
+    bridge = RobotBridge(bus, SESSION, f"iristk://127.0.0.1:{port}", config=config, settle_s=3600.0).start()
+    driver = bridge.robot
+    stop = threading.Event()
+    thread = bridge.run_in_thread(stop)
+    try:
+        assert wait_until(lambda: driver.unreachable, 10)  # its first connect was refused
+        bus.put(*made(1, code_of_parts(2, 0, 0, 0), 0))  # a speech it cannot take
+        time.sleep(0.3)  # (the bridge takes it; nothing to wait on: the robot acts on nothing)
+        stop.deadline = Deadline(3600.0)
+        stop.set()
+        thread.join(60)
+        assert not thread.is_alive(), "the bridge waited for reports an unreachable robot cannot send"
+        assert wait_until(lambda: not published.empty(), 10)
+    finally:
+        bridge.close()
+        bus.close()
+    acted = [ev.decode_event(payload) for _, payload in list(published.queue)]
+    assert [(a.suggestion_seq, a.outcome) for a in acted] == [(1, "failed")], [(a.outcome, a.error) for a in acted]
+    assert "unreachable" in acted[0].error, acted[0].error

@@ -130,7 +130,7 @@ def test_suggestions_a_slow_closing_robot_never_reported_are_counted_not_lost(tm
         finish(self, perf, outcome, error)
 
     monkeypatch.setattr(RobotDriver, "_finish", slow_finish)
-    monkeypatch.setattr(RobotDriver, "wait_idle", lambda self, timeout: wait_idle(self, min(timeout, 0.5)))
+    monkeypatch.setattr(RobotDriver, "wait_idle", lambda self, timeout, **kw: wait_idle(self, min(timeout, 0.5), **kw))
     monkeypatch.setattr(bridge_module, "ROBOT_CLOSE_S", 0.3)
     config = SessionConfig(session="slow-close", participant="sim:wasim", persona="wasim", seed=4, rounds=2)
     try:

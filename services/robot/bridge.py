@@ -320,9 +320,11 @@ class RobotBridge:
         if robot is None:
             return
         settle_s = self.settle_s if settle_s is None else settle_s
-        if not robot.wait_idle(settle_s):  # INFO: nothing is lost, the file records them as cut (README, logging)
-            log.info("robot %s: suggestions still open after %.1f s; reporting them as they are",
-                        robot.transport.url, settle_s)
+        # (an unreachable robot's reports cannot come: each game of a pilot with one waited its whole settle time,
+        # 15 s, once a stopped bridge was given it)
+        if not robot.wait_idle(settle_s, until_unreachable=True):  # INFO: nothing is lost, the file records them
+            log.info("robot %s: suggestions still open %s; reporting them as they are", robot.transport.url,
+                     "(it is unreachable)" if robot.unreachable else f"after {settle_s:.1f} s")
         if deadline is None:
             robot.close(ROBOT_CLOSE_S)
         else:

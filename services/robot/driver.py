@@ -93,6 +93,7 @@ from pairplay.services.robot.transport import (
 )
 
 log = logging.getLogger("pairplay.robot")
+IDLE_POLL_S = 0.05  # how often `wait_idle(until_unreachable=True)` looks whether the robot is unreachable
 # outcomes whose commands still awaiting a promised reply are recorded as unconfirmed
 UNCONFIRMED_IF_WAITING = ("unacknowledged", "in-flight", "superseded", "aborted")
 
@@ -230,14 +231,28 @@ class RobotDriver:
             self._pending += 1
         self._inbox.put(("suggest", suggestion, steps, self._clock_ns(), time.monotonic()))
 
-    def wait_idle(self, timeout: float) -> bool:
-        """Block until every queued suggestion has its RobotActed; False on timeout."""
+    def wait_idle(self, timeout: float, until_unreachable: bool = False) -> bool:
+        """Block until every queued suggestion has its RobotActed; False on timeout, or, with
+        `until_unreachable`, as soon as the robot cannot take commands (`unreachable`: what is open will not
+        be reported by it; looked at every IDLE_POLL_S, as nothing notifies a lost connection here)."""
+        end = time.monotonic() + timeout
         with self._idle:
-            return self._idle.wait_for(lambda: self._pending == 0, timeout)
+            while self._pending:
+                left = end - time.monotonic()
+                if left <= 0 or (until_unreachable and self.unreachable):
+                    return False
+                self._idle.wait(min(left, IDLE_POLL_S) if until_unreachable else left)
+            return True
 
     @property
     def connected(self) -> bool:
         return self._connected
+
+    @property
+    def unreachable(self) -> bool:
+        """Whether the robot cannot take commands now: not connected, and its last connect failed or its
+        connection was lost (not the first attempt still under way)."""
+        return not self._connected and bool(self._last_error)
 
     def close(self, timeout: float = 5.0) -> None:
         """Send what is due, report every open suggestion, close the connection."""
