@@ -274,7 +274,7 @@ CASES = [
     Case("robot --try a code out of range", ["robot", "--try", "88"], "action codes are integers 0..87"),
     # a session with a robot it cannot reach ran to exit 0, every suggestion failed, said only under -v
     Case("session with an unreachable robot", SIM + ["--robot", f"furhat://127.0.0.1:{CLOSED}?key=secret"],
-         f"does not accept a connection: Connection refused; --robot-unreachable-ok starts the session anyway"),
+         "does not accept a connection: Connection refused; --robot-unreachable-ok starts the session anyway"),
     Case("lab with an unreachable robot", ["lab", "--participant", "human:p1", "--robot",
                                            f"iristk://127.0.0.1:{CLOSED}"], "--robot-unreachable-ok"),
     # item 7: meaningless input to combine and profile

@@ -25,7 +25,6 @@ import pytest
 from pairplay.replay.reader import read_log
 from pairplay.replay.studydata import StudyData
 from pairplay.schemas import events as ev
-from pairplay.schemas.events import decode_event
 from pairplay.services.bus import Bus, BusOptions
 from pairplay.services.console.server import StudyLabServer
 from pairplay.services.node import Driver

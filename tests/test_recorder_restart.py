@@ -187,6 +187,27 @@ def test_a_recorder_killed_mid_session_gets_the_robots_reports_of_its_outage_ref
     assert counted == len(tail), (counted, sorted(tail))  # not-reported: the tail only, none of the outage's (how many: load)
 
 
+def _a_recorded_game_not_yet_running(bus, session: str, path):
+    """A game's Node on `bus`, started (its ServiceStarted, SessionStarted, RoundStarted published and recorded
+    to `path` by a recorder, closed since) but its thread not run: its queries wait in its inbox until the test
+    runs it (`game.run_in_thread`), as behind a busy step."""
+    from pairplay.schemas.session import SessionConfig
+    from pairplay.services.game import GameLogic
+    from pairplay.services.recorder import Recorder
+    from pairplay.services.runner import Node
+
+    config = SessionConfig(session=session, participant="human:t", seed=1, rounds=3, observed_source="first-pick",
+                           ignore_rule="time")
+    first = Recorder(bus, session, path)
+    first.start()
+    game = Node(bus, GameLogic(config), session, resume=False)
+    game.start()
+    assert wait_until(lambda: first.step(0.05) and False or
+                      sum(k.split("/")[2] == "game" for k, _ in first.kept) >= 3, 60)
+    first.close()
+    return game
+
+
 def test_a_restarted_recorders_refill_asks_again_a_live_service_that_has_not_answered_yet(tmp_path):
     """A service on the bus whose answer to the restart's refill comes after the ask's REFILL_TIMEOUT_S (its
     thread busy: at load 40-66 the game's, learner's or participant's) is asked again, and the one RecordingGap
@@ -198,26 +219,15 @@ def test_a_restarted_recorders_refill_asks_again_a_live_service_that_has_not_ans
     (until then each waits in its inbox, as behind a busy step); a real Recorder, then a second one restarted."""
     import threading
 
-    from pairplay.schemas.session import SessionConfig
     from pairplay.services.bus import Deadline
-    from pairplay.services.game import GameLogic
     from pairplay.services.recorder import Recorder
-    from pairplay.services.runner import Node
 
     from busutil import listener
 
     s = "slow"
-    config = SessionConfig(session=s, participant="human:t", seed=1, rounds=3, observed_source="first-pick",
-                           ignore_rule="time")
     path = tmp_path / f"{s}.mcap"
     with listener() as bus:
-        first = Recorder(bus, s, path)
-        first.start()
-        game = Node(bus, GameLogic(config), s, resume=False)
-        game.start()  # its ServiceStarted, SessionStarted, RoundStarted: recorded by the first recorder
-        assert wait_until(lambda: first.step(0.05) and False or
-                          sum(k.split("/")[2] == "game" for k, _ in first.kept) >= 3, 60)
-        first.close()
+        game = _a_recorded_game_not_yet_running(bus, s, path)
         second = Recorder(bus, s, path, restart=True)
         second.start()  # its first ask: the game's thread has not run, its answer waits
         gaps = lambda: [k for k, _ in second.kept if k.endswith("/RecordingGap")]  # noqa: E731
@@ -244,25 +254,14 @@ def test_a_restarted_recorder_asks_again_a_live_session_that_has_not_answered_ye
     first ask waits in its inbox, as behind a busy step), a real recording of its events."""
     import threading
 
-    from pairplay.schemas.session import SessionConfig
-    from pairplay.services.game import GameLogic
-    from pairplay.services.recorder import Recorder, same_live_session
-    from pairplay.services.runner import Node
+    from pairplay.services.recorder import same_live_session
 
     from busutil import connector, listener
 
     s = "silent"
-    config = SessionConfig(session=s, participant="human:t", seed=1, rounds=3, observed_source="first-pick",
-                           ignore_rule="time")
     path = tmp_path / f"{s}.mcap"
     with listener() as bus:
-        first = Recorder(bus, s, path)
-        first.start()
-        game = Node(bus, GameLogic(config), s, resume=False)
-        game.start()
-        assert wait_until(lambda: first.step(0.05) and False or
-                          sum(k.split("/")[2] == "game" for k, _ in first.kept) >= 3, 60)
-        first.close()
+        game = _a_recorded_game_not_yet_running(bus, s, path)
         said: list[bool] = []
         stop = threading.Event()
         with connector(bus) as client:  # the restarted recorder's own bus

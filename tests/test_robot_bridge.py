@@ -101,7 +101,7 @@ def test_a_stopped_bridge_leaves_the_robot_its_share_of_the_signals_deadline_to_
     now = [0.0]  # the deadline's clock: seconds charged to the shutdown so far
     given: dict[str, float] = {}
     closed = threading.Event()
-    real_close, real_wait_idle, real_driver_close = transport.close, driver.wait_idle, driver.close
+    real_close, real_driver_close = transport.close, driver.close
 
     def wait_idle(timeout: float, **_) -> bool:  # the wait for the robot's replies takes all it was given
         given["replies"] = timeout
