@@ -64,18 +64,16 @@ class Held:
         self.proc.send_signal(first)
         assert self.paused.wait(LIMIT_S), "never held"
         assert self.proc.poll() is None, "".join(self.out + self.err)  # held, not gone
-        self.proc.send_signal(second)
-        self.go.touch()
-        code = self.proc.wait(LIMIT_S)
-        for r in self.readers:
-            r.join(10)
-        return code, [line.rstrip("\n") for line in self.err if not line.startswith("pairplay-test:")]
-
+        return self._signal_and_let_go(second)
 
     def once(self, sig: int) -> tuple[int, list[str]]:
         """One signal once held (the verb's first); let go; as `run`."""
         assert self.paused.wait(LIMIT_S), "never held"
         assert self.proc.poll() is None, "".join(self.out + self.err)
+        return self._signal_and_let_go(sig)
+
+    def _signal_and_let_go(self, sig: int) -> tuple[int, list[str]]:
+        """`sig` to the held process, then its go-file; its status and its stderr lines but the pause's."""
         self.proc.send_signal(sig)
         self.go.touch()
         code = self.proc.wait(LIMIT_S)

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import threading
-import time
 
 from busutil import collect, listener, wait_until
 from robot_doubles.harness import FAST
@@ -198,7 +197,7 @@ def test_a_stopped_bridge_does_not_wait_for_reports_an_unreachable_robot_cannot_
     try:
         assert wait_until(lambda: driver.unreachable, 10)  # its first connect was refused
         bus.put(*made(1, code_of_parts(2, 0, 0, 0), 0))  # a speech it cannot take
-        time.sleep(0.3)  # (the bridge takes it; nothing to wait on: the robot acts on nothing)
+        assert wait_until(lambda: driver._pending == 1, 10)  # the driver holds it, open
         stop.deadline = Deadline(3600.0)
         stop.set()
         thread.join(60)
