@@ -39,7 +39,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     from pairplay.services.bus import add_bus_arguments
 
     p.add_argument("recording", metavar="REC")
-    p.add_argument("--speed", type=speed, default=None, help="N times real time (0.0001..1000000), or max (default 1)")
+    p.add_argument("--speed", type=speed, default=None, help="N times real time (0.0001..1000000), or 0 or max: as fast as possible (default 1)")
     p.add_argument("--as", dest="as_session", metavar="SESSION", type=session_id,
                    help="re-publish under this session id")
     p.add_argument("--verify", action="store_true", help="re-run fresh services on the recorded inputs and compare; exit 0 PASS (the last line says if "

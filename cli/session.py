@@ -175,7 +175,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     add_config_arguments(p)
     p.add_argument("--out", type=output_folder, default="recordings", help="folder of the recording (default recordings/); a session "
                    "whose recording (<session>.mcap or <session>.<k>.mcap) exists there is refused unless --force")
-    add_force(p, "the session's existing recordings (<session>.mcap and <session>.<k>.mcap)")
+    add_force(p, "the session's existing recordings (<session>.mcap and <session>.<k>.mcap, and the journals a "
+                 "cut one left beside them: recover a cut session first to keep what its journal holds)")
     add_robot_arguments(p)
     p.add_argument("--external", action="append", default=[], choices=("learner", "participant", "game", "recorder", "robot"),
                    help="leave this service to another process (`pairplay run`)")

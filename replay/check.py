@@ -37,7 +37,7 @@ def recording_file(path: str | Path, function: str = "") -> Path:
     if not path.exists():
         from .wal import wal_path
         if wal_path(path).exists():  # the recording moved or removed, what its recorder took still beside it
-            raise InputError(f"no such recording; its journal is here ({wal_path(path).name}: what its recorder "
+            raise InputError(f"no such recording; its journal is here ({wal_path(path)}: what its recorder "
                              f"received): `touch {path}` (an empty file, as a recorder killed before its first "
                              f"flush leaves one), then `pairplay recover {path}` rebuilds the recording from it",
                              path)

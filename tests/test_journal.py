@@ -324,7 +324,7 @@ def test_a_missing_recording_whose_journal_is_left_names_it_and_how_to_recover(t
     ran = pairplay_cli(*verb, path, cwd=tmp_path)
     lines = ran.stderr.strip().splitlines()
     assert ran.returncode == 2 and len(lines) == 1, ran.stderr
-    assert "j1.mcap.journal" in lines[0] and f"`touch {path}`" in lines[0] and f"`pairplay recover {path}`" in lines[0]
+    assert f"({wal_path(path)}:" in lines[0] and f"`touch {path}`" in lines[0] and f"`pairplay recover {path}`" in lines[0]
     path.touch()  # as the line says
     ran = pairplay_cli("recover", path, cwd=tmp_path)
     assert ran.returncode == 0 and "4 events taken from its journal" in ran.stdout, (ran.stdout, ran.stderr)
