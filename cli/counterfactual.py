@@ -135,7 +135,7 @@ def run(args: argparse.Namespace) -> int:
     events = [r.event for r in log.events]
     turns = turns_from_events(events, str(rec), note)
     config = turns.config
-    from pairplay.cli.main import warn
+    from pairplay.cli.main import left_journals, warn
 
     # warnings about the fit, on stderr, -q or not (cli/main.py: on stdout, -q hid them with the summary)
     for why in turns.skipped:
@@ -145,6 +145,7 @@ def run(args: argparse.Namespace) -> int:
                                f"{counted(len(turns.observations.first), 'turn')} of its intact parts")
     elif log.loss_free:  # damaged where no event was: fitted whole, the damage said (reader.EventLog.loss_free)
         warn("counterfactual", f"{rec}: {log.loss_free}")
+    left_journals("counterfactual", [rec, *args.fit_also])  # what a cut one's journal holds beyond it
     others = [read_turns(path) for path in args.fit_also]
     for other in others:
         if other.config.participant != config.participant or other.config.observed_source != config.observed_source:

@@ -345,6 +345,16 @@ def warn(verb: str, line: str) -> None:
     print(f"pairplay {verb}: {line}", file=sys.stderr, flush=True)
 
 
+def left_journals(verb: str, recordings) -> None:
+    """`warn` of each recording read whose recorder's journal beside it holds what it lacks (replay/recover.py
+    `journal_left`): every verb that reads a recording says it, whatever else it said of the file."""
+    from pairplay.replay.recover import journal_left
+    for path in recordings:
+        line = journal_left(path)
+        if line:
+            warn(verb, f"{path}: {line}")
+
+
 @contextlib.contextmanager
 def _summary_silenced(quiet: bool):
     """stdout dropped while a verb of QUIET_SUMMARIES runs under -q (module rule); stderr untouched."""

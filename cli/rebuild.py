@@ -101,13 +101,14 @@ def run(args: argparse.Namespace) -> int:
                         + ([([figure], None)] if done and not args.no_plot else []))
     work_done()  # everything is written: a signal from now on is reported, and undoes nothing
     print("\n".join(lines))
-    from pairplay.cli.main import warn
+    from pairplay.cli.main import left_journals, warn
 
     for rebuilt in done:  # warnings about the result, on stderr, -q or not (cli/main.py: -q hid them with the listing)
         if rebuilt.partial:  # the damage (the note) is said here, once, short (reader.EventLog.brief)
             warn("rebuild", f"{rebuilt.source}: PARTIAL session: {rebuilt.partial}")
         if rebuilt.damage_read:
             warn("rebuild", f"{rebuilt.source}: {rebuilt.damage_read}")
+    left_journals("rebuild", [rebuilt.source for rebuilt in done])
     return 0
 
 

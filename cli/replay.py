@@ -80,6 +80,8 @@ def run(args: argparse.Namespace) -> int:
             print("the file is cut (a crash?): the session's end is missing; its last events were lost")
         if v.error:
             print(f"error: {v.error}")
+        from pairplay.cli.main import left_journals
+        left_journals("replay", [args.recording])  # what the file lacks that its journal holds, and how to add it
         print(f"verified {v.reach}")
         print(v.verdict)
         return 0 if v.ok else 1  # PASS of what the file holds, even cut or stopped early (services/verify.py)
@@ -91,7 +93,7 @@ def run(args: argparse.Namespace) -> int:
 
     if not log.events:
         raise InputError(f"holds no events to replay{' (' + log.brief + ')' if log.brief else ''}", args.recording)
-    from pairplay.cli.main import warn
+    from pairplay.cli.main import left_journals, warn
 
     # warnings about the result, on stderr, -q or not (cli/main.py: they were on stdout)
     if log.missing:  # what a damaged or cut file, or messages that do not decode, lost: not re-published, said
@@ -99,6 +101,7 @@ def run(args: argparse.Namespace) -> int:
                        f"{counted(len(log.events), 'event')} of its intact parts")
     elif log.loss_free:  # damaged where no event was: every event replayed, the damage said (reader.EventLog.loss_free)
         warn("replay", f"{args.recording}: {log.loss_free}")
+    left_journals("replay", [args.recording])
     stop = threading.Event()
     stop_on_signals(stop)
     with Bus(options_from_args(args), stop=stop) as bus:

@@ -49,7 +49,7 @@ from pairplay.cli.args import (add_force, file_in, float_at_least, int_at_least,
 from pairplay.errors import InputError, OptionError, OutputError, UserError
 from pairplay.livelock import LIVE, is_live
 from pairplay.outputs import check_output, output_path
-from pairplay.cli.main import warn
+from pairplay.cli.main import left_journals, warn
 from pairplay.replay.check import read_session
 from pairplay.services.bus import add_bus_arguments
 from pairplay.services.view import DEFAULT_GRPC_PORT, DEFAULT_WEB_PORT, RrdWriteFailed  # without loading rerun (slow)
@@ -104,6 +104,7 @@ def run(args: argparse.Namespace) -> int:
     live, lost, held = False, "", None
     if args.recording:
         held = read_session(args.recording)  # a file holding no session is refused before rerun loads
+        left_journals("view", [args.recording])  # a cut one's journal beside it holds more: said before it is drawn
         live = held.live or is_live(args.recording)  # its recorder still writes it: what it holds is a part
         # a damaged file that lost events in its middle draws a part too (as rebuild refuses to pass it off as whole;
         # a new user's trial: saved as d.rrd, the whole name, and -q hid the damage)

@@ -40,6 +40,7 @@ from pairplay.schemas.session import SessionConfig
 from .check import no_whole_round, read_session
 from .fold import READS, SessionFold, fold_any, stream_seed
 from .reader import recovered_cut, recovered_lost, said_source_cut
+from .recover import journal_more
 from .forgery import contradiction
 from pairplay.numbers import counted
 
@@ -135,7 +136,7 @@ def rebuild_recording(path: str | Path) -> Rebuilt:
         raise RebuildError(f"{forged}: not rebuilt", path)
     empty = no_whole_round((r.event for r in log.events), log.truncated, log.damaged)
     if empty:
-        raise NoWholeRound(f"{empty}; nothing to rebuild", path)
+        raise NoWholeRound(f"{empty}; nothing to rebuild{journal_more(path)}", path)
     # a damaged part that lost no event (a summary's CRC, an index) leaves the session whole: its policy is the
     # learner's, not partial (a new user's trial: flagged PARTIAL without --partial); said in `damage_read`
     # a cut after the data section's end (in the summary) lost none either

@@ -86,6 +86,7 @@ class Recovered:
     journal_torn: str = ""  # where the journal stops short of a frame's end ("" if it does not)
     journal_error: str = ""  # a journal beside it that could not be read at all: why (its records are not used)
     journal_present: int = 0  # records of the journal the file holds already
+    journal_ends: bool = False  # the session's SessionEnded is among what the journal adds
     complete: bool = False  # the file is whole and its journal (if any) holds nothing it lacks: nothing written
     lost: list[str] = field(default_factory=list)  # each damaged part that lost messages, and what: "chunk 7 (...): its 18 messages"
     lost_messages: int | None = 0  # how many messages those parts held (None: not known, unreadable bytes' records)
@@ -130,6 +131,7 @@ def recover(path: str | Path, output: str | Path | None = None, force: bool = Fa
                                                           for key, *_ in added.items)):
         raise InputError(log.no_session, path)
     complete = checked.whole and not (added is not None and added.items)  # and nothing more to add
+    journal_ends = added is not None and any(key.rsplit("/", 1)[-1] == "SessionEnded" for key, *_ in added.items)
     # the source's own recovery record, if it was recovered before: its losses are carried forward (module rule)
     earlier = folded_recovery(checked.records)
     lost_parts = [f"{d.part}: {d.lost}" for d in checked.damage if d.lost_at >= 0]
@@ -143,7 +145,7 @@ def recover(path: str | Path, output: str | Path | None = None, force: bool = Fa
                          from_journal=added.taken if added else 0, journal_refused=added.refused if added else 0,
                          journal_present=added.present if added is not None else 0,
                          journal_torn=journal.torn if journal is not None else "", journal_error=journal_error,
-                         complete=complete, **lost_words)
+                         complete=complete, journal_ends=journal_ends, **lost_words)
     check_output(output, force)  # only an output that will be written (a complete file writes none)
     messages, ended, last_round = 0, False, -1
     schema_ids: dict[int, int] = {}
@@ -225,7 +227,7 @@ def recover(path: str | Path, output: str | Path | None = None, force: bool = Fa
                      journal=journal.path if journal is not None else None,
                      from_journal=added.taken if added else 0, journal_refused=added.refused if added else 0,
                      journal_torn=journal.torn if journal is not None else "", journal_error=journal_error,
-                     **lost_words)
+                     journal_ends=journal_ends, **lost_words)
 
 
 def _lost_count(checked) -> int | None:
@@ -263,3 +265,43 @@ def _round_of(payload: bytes) -> int:
         return int(json.loads(payload).get("round", -1))
     except (ValueError, AttributeError):
         return -1
+
+
+def journal_left(path: str | Path) -> str:
+    """The one line every verb that reads a recording says when its recorder's journal beside it holds what it
+    lacks ("" when not): how many events (its SessionEnded among them, if so), and that `pairplay recover` adds
+    them, or that its recovered copy (`default_output`) is there already. A file cut by a crash was read as
+    PARTIAL, or "PASS as far as the file goes", not a word of the journal holding the rest (a new user's trial).
+    Counted as recover counts them (services/walmerge.admit: the live checks), so the line and recover's agree;
+    read only when a journal is there, never of a live file (its recorder writes both: pairplay/livelock.py),
+    and a journal that cannot be read or adds nothing says nothing (recover's own line names those)."""
+    from pairplay.livelock import is_live
+    from pairplay.numbers import counted
+    from pairplay.services.walmerge import admit  # the live checks (services/ holds them; recover takes them given)
+
+    path = Path(path)
+    journal = wal_path(path)
+    if not journal.is_file() or is_live(path):
+        return ""
+    try:
+        done = recover(path, admit=admit, write=False)
+    except (InputError, OutputError, OSError):
+        return ""
+    if done.complete or not (done.from_journal or done.journal_refused):
+        return ""
+    more = counted(done.from_journal, "event") + (" more" if done.from_journal else "")
+    refused = f" ({counted(done.journal_refused, 'message')} refused by the live checks)" if done.journal_refused else ""
+    ended = ", the session's end (SessionEnded) among them" if done.journal_ends else ""
+    recovered = default_output(path)
+    if recovered.is_file():
+        return (f"its recorder's journal {journal.name} beside it holds {more} than the file{ended}{refused}; "
+                f"{recovered} is beside it (`pairplay recover`'s copy with them): give that instead")
+    return (f"its recorder's journal {journal.name} beside it holds {more} than the file{ended}{refused}: "
+            f"`pairplay recover {path}` adds them (to {recovered.name})")
+
+
+def journal_more(path: str | Path) -> str:
+    """`journal_left` as the end of a refusal's line ("; its recorder's journal ..."), "" when it says nothing: a
+    file cut before its first round ended is refused, and the rest of its session may be in the journal."""
+    left = journal_left(path)
+    return f"; {left}" if left else ""

@@ -68,6 +68,7 @@ from dataclasses import dataclass, field
 
 from pairplay.errors import InputError
 from pairplay.replay.check import check_recording, no_whole_round
+from pairplay.replay.recover import journal_more
 from pairplay.replay.forgery import contradiction
 from pairplay.replay.reader import read_any_log, recovered_cut, recovered_lost, said_source, said_source_made
 from pairplay.schemas.events import RoundEnded, SessionEnded, SessionStarted
@@ -262,5 +263,5 @@ def verify_recording(path) -> Verification:
     result.error = "; ".join(errors) or result.error
     empty = no_whole_round((r.event for r in log.events), log.truncated, log.damaged)
     if empty and result.ok and not result.ended:  # a PASS about nothing whole (a FAIL, a damaged part, says so)
-        raise InputError(f"{empty}; nothing to verify", path)
+        raise InputError(f"{empty}; nothing to verify{journal_more(path)}", path)
     return result
