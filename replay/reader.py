@@ -268,10 +268,25 @@ LOST_AT_KEY = "lost_at_messages"
 DATA_COMPLETE_KEY = "data_complete"  # in it: "true" when the source's data section was read to its Data End
 
 
+JOURNAL_WHOLE_KEY = "journal_whole"  # in it: "true" when its recorder's journal beside it was read to its end
+
+
 def recovered_cut(recovered: dict[str, str]) -> bool:
     """Whether the file a recovered one was made from was cut before its data section's end (a cut after it,
-    in the summary, lost no message); one recovered before recover said so is taken as cut, as it was."""
-    return recovered.get("truncated") == "true" and recovered.get(DATA_COMPLETE_KEY) != "true"
+    in the summary, lost no message), and what its cut lost is not back: one recovered before recover said so
+    is taken as cut, as it was. A cut whose recorder's journal (replay/wal.py) was read to its end and gave
+    back the session's end (SessionEnded) lost none of the session: the journal holds every message the
+    recorder received, in order, so it holds all of them up to that end (a new user's trial: the copy
+    `pairplay recover` completed from the journal was "recovered from a cut file: the events after its cut are
+    lost", its policy partial, and a study game read from it had none)."""
+    cut = recovered.get("truncated") == "true" and recovered.get(DATA_COMPLETE_KEY) != "true"
+    return cut and not journal_restored(recovered)
+
+
+def journal_restored(recovered: dict[str, str]) -> bool:
+    """Whether a recovered file's recorder's journal was read to its end and the session's end is in the file:
+    then what the journal added is the session's whole rest (`recovered_cut`), not a part of it."""
+    return recovered.get(JOURNAL_WHOLE_KEY) == "true" and recovered.get("session_ended") == "true"
 
 
 def recovered_lost(recovered: dict[str, str]) -> bool:
@@ -380,7 +395,7 @@ def carry_recovery(earlier: dict[str, str], new: dict[str, str], marks_moved: bo
     same = Path(earlier.get("source", "")).name == Path(new.get("source", "")).name
     merged["earlier"] = json.dumps(_listed(earlier.get("earlier")) + [earlier.get("source", "")] * (not same))
     if recovered_cut(earlier):  # an earlier cut before the Data End: its tail is lost from every copy
-        merged["truncated"], merged[DATA_COMPLETE_KEY] = "true", "false"
+        merged["truncated"], merged[DATA_COMPLETE_KEY], merged[JOURNAL_WHOLE_KEY] = "true", "false", "false"
     for key in COUNTED:  # (every count of what a copy lost or took: the newest's alone forgot the earlier ones')
         if key in earlier:
             merged[key] = str(_number(earlier[key]) + _number(new.get(key, "0")))

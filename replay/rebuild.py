@@ -39,7 +39,7 @@ from pairplay.schemas.session import SessionConfig
 
 from .check import no_whole_round, read_session
 from .fold import READS, SessionFold, fold_any, stream_seed
-from .reader import recovered_cut, recovered_lost, said_source_cut
+from .reader import journal_restored, recovered_cut, recovered_lost, said_source_cut
 from .recover import journal_more
 from .forgery import contradiction
 from pairplay.numbers import counted
@@ -84,7 +84,8 @@ def partial_reason(fold: SessionFold, note: str = "", recovered: dict[str, str] 
         # the session whole: recovering it does not make it partial (a new user's trial: it did)
         lost, cut = recovered_lost(recovered), recovered_cut(recovered)
         damaged = recovered.get("damaged", "[]") not in ("", "[]")
-        added = recovered.get("from_journal", "0") not in ("", "0")
+        # events its journal added are a partial session's unless they are its whole rest (reader.journal_restored)
+        added = recovered.get("from_journal", "0") not in ("", "0") and not journal_restored(recovered)
         if lost or cut or added or not (damaged or recovered.get("truncated") == "true"):
             # a cut source in the words every verb says it in (reader.said_source_cut)
             why.append("completed by pairplay recover" + (" from a damaged file" if lost else

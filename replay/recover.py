@@ -55,8 +55,8 @@ from mcap.writer import CompressionType, Writer
 from typing import Callable
 
 from pairplay.errors import InputError, OutputError
-from pairplay.replay.reader import (DATA_COMPLETE_KEY, LOST_AT_KEY, RECOVERED, carry_recovery, folded_recovery,
-                                    recovered_losses, said_source_cut, said_source_lost)
+from pairplay.replay.reader import (DATA_COMPLETE_KEY, JOURNAL_WHOLE_KEY, LOST_AT_KEY, RECOVERED, carry_recovery,
+                                    folded_recovery, recovered_losses, said_source_cut, said_source_lost)
 from pairplay.schemas.events import EVENT_BY_TAG
 from pairplay.schemas.jsonschema import schema_text
 from pairplay.schemas.keys import parse_event_key
@@ -219,7 +219,8 @@ def recover(path: str | Path, output: str | Path | None = None, force: bool = Fa
             **({"journal": journal.path.name if journal is not None else journal_error,
                 "from_journal": str(added.taken if added else 0),
                 "journal_refused": str(added.refused if added else 0),
-                "journal_torn": journal.torn if journal is not None else ""}
+                "journal_torn": journal.torn if journal is not None else "",
+                JOURNAL_WHOLE_KEY: str(journal is not None and not journal.torn).lower()}
                if journal is not None or journal_error else {})}))
         writer.finish()
     return Recovered(output, messages, checked.truncated, reason, damaged, ended, last_round,

@@ -66,6 +66,7 @@ from .fold import fold_any
 from . import studyjournal
 from .reader import read_any_log
 from .rebuild import Rebuilt, rebuild_recording, write_outputs
+from .recover import default_output
 from .wal import wal_path
 
 JOURNAL, SETTINGS = "journal.jsonl", "settings.json"  # and STUDY_FILE, schemas/study.py
@@ -747,6 +748,21 @@ class StudyData:
         raise StudyDataError(f"no phase {phase!r}")
 
     # -- a game's recording --------------------------------------------------
+    def game_recording(self, g: Game) -> tuple[Path, str]:
+        """(the file that stands for game `g`'s recording, "" or the words naming it): the one its GameStarted
+        names, or, when that one was not finished (its recorder's journal beside it) or is gone (`recover`'s line
+        says to remove the cut file and its journal once its output is kept), the copy `pairplay recover` wrote
+        beside it (`<stem>.recovered.mcap`, replay/recover.py `default_output`: written whole or not at all,
+        pairplay/outputs.py), named "its recovered copy recordings/<stem>.recovered.mcap". Every reader of a
+        game's recording goes through it: the study kept naming the cut file, and said "not finished ... recover
+        completes it" after the user had done exactly that (a new user's trial). The copy is judged as any game's
+        file is (`recording_of`, `not_this_game`): one of another session, or cut still, is not the game."""
+        path = self.folder / g.recording
+        copy = default_output(path)
+        if (wal_path(path).exists() or not path.exists()) and copy.is_file() and not is_live(path):
+            return copy, f"its recovered copy {copy.relative_to(self.folder).as_posix()}"
+        return path, ""
+
     def recording_of(self, g: Game):
         """(its read recording (reader.EventLog), "") if game `g`'s recording can stand for the game, else (None,
         why not, in the words the report names the game by): missing; holding no session (a 0-byte file, the
@@ -759,7 +775,7 @@ class StudyData:
         silently be no picks."""
         from .check import check_recording, no_whole_round
 
-        path = self.folder / g.recording
+        path, _ = self.game_recording(g)
         if not path.is_file():
             return None, "recording missing"
         try:
@@ -826,13 +842,14 @@ class StudyData:
         lines, changed = [], 0
         with self._writing():
             for g in list(self.state.games.values()):
-                path = self.folder / g.recording
+                path, copy = self.game_recording(g)  # (the copy `pairplay recover` made of a cut one, named)
+                source = copy or "its recording"
                 if g.ended is None:
                     if path.is_file() and not wal_path(path).exists() and _finished_game(path) \
                             and not self._not_this_games_file(g, path):  # another session's end is not its
                         ended = game_end(self.folder, g.session, g.participant, path, force=True)
                         ended = self.append_naming(ended, ended.policy)
-                        lines.append(f"{g.session}: journaled {ended.outcome} from its recording (the server "
+                        lines.append(f"{g.session}: journaled {ended.outcome} from {source} (the server "
                                      "stopped before it said how the game ended)")
                         changed += 1
                     continue  # otherwise running here or elsewhere, or cut: shown as running, as it was
@@ -841,21 +858,23 @@ class StudyData:
                     continue
                 was = f"its policy {g.ended.policy} is missing; " if gone else ""
                 why = ""
+                named = copy or f"its recording {g.recording}"
                 if not path.is_file():
                     why = f"its recording {g.recording} is missing"
                 elif wal_path(path).exists():
                     why = (f"its recording {g.recording} was not finished (its recorder's journal is beside it: "
-                           "`pairplay recover` completes it)")
+                           f"`pairplay recover {path}` writes its recovered copy beside it, which the next serve, "
+                           "pilot or report builds it from)")
                 else:
                     try:
                         rebuilt = rebuild_recording(path)
                     except (InputError, OSError) as err:
-                        why = f"its recording {g.recording} cannot be read: {one_line(err)}"
+                        why = f"{named} cannot be read: {one_line(err)}"
                     else:
                         if rebuilt.partial:
-                            why = f"its recording {g.recording} is partial: {rebuilt.partial}"
+                            why = f"{named} is partial: {rebuilt.partial}"
                         elif self.not_this_game(g, rebuilt.config):  # (a `session --force` over it)
-                            why = f"its recording {g.recording} is not this game's: {self.not_this_game(g, rebuilt.config)}"
+                            why = f"{named} is not this game's: {self.not_this_game(g, rebuilt.config)}"
                     if not why:
                         try:  # force: ours, of this recording (the file a build cut before its journal line wrote)
                             policy = write_game_policy(self.folder, rebuilt, force=True)
@@ -865,7 +884,7 @@ class StudyData:
                     lines.append(f"{g.session}: completed, but {was}no policy built: {why}")
                     continue
                 self.append_naming(j.PolicyBuilt(session=g.session, participant=g.participant, policy=policy), policy)
-                lines.append(f"{g.session}: {was}policy built from its recording: {policy}")
+                lines.append(f"{g.session}: {was}policy built from {source}: {policy}")
                 changed += 1
             if changed:
                 self.write_tables()
@@ -878,7 +897,7 @@ class StudyData:
         reader's words): a QuestionnaireAnswered that does not decode was left out with no word."""
         rows = []
         for g in self.state.games.values():
-            path = self.folder / g.recording
+            path, _ = self.game_recording(g)
             if not path.is_file():
                 continue
             log = read_any_log(path)

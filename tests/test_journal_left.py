@@ -94,3 +94,32 @@ def test_a_cut_file_refused_for_no_whole_round_names_the_journal_in_its_line(who
     assert line.endswith(f"; its recorder's journal left.mcap.journal beside it holds {lacks} events more than the "
                          f"file, the session's end (SessionEnded) among them: `pairplay recover {path}` adds them "
                          "(to left.recovered.mcap)"), line
+
+
+def test_a_copy_whose_journal_gave_back_the_sessions_rest_is_whole(whole, tmp_path, pairplay_cli):
+    """What recover completed from a journal read to its end, the session's end among it, is the session whole:
+    it was "recovered from a cut file: the events after its cut are lost", its policy partial (and a study game read
+    from it had none), though the journal had given back every event the recorder received (reader.journal_restored).
+    A journal that did not hold the end leaves the copy partial, as before."""
+    path, _ = cut_with_journal(whole, tmp_path)
+    assert pairplay_cli("recover", path).returncode == 0
+    copy = tmp_path / "left.recovered.mcap"
+    ran = pairplay_cli("replay", "--verify", copy)
+    assert ran.returncode == 0 and ran.stdout.splitlines()[-1] == "verify: PASS", ran.stdout
+    ran = pairplay_cli("rebuild", copy, "--no-plot", "--out", tmp_path / "out")
+    assert ran.returncode == 0 and "PARTIAL" not in ran.stderr, ran.stderr
+    # the journal without the session's end (it stops where the file does, a few events on): a part, said so
+    short = tmp_path / "short"
+    short.mkdir()
+    data = whole.read_bytes()
+    cut = short / "left.mcap"
+    cut.write_bytes(data[:len(data) // 2])
+    held = len(read_log(cut).events)
+    j = JournalWriter(cut, "left")
+    for r in read_log(whole).events[:held + 5]:
+        j.add((r.key, r.payload))
+    j.close()
+    assert pairplay_cli("recover", cut).returncode == 0
+    ran = pairplay_cli("rebuild", short / "left.recovered.mcap", "--no-plot", "--out", short / "out")
+    assert ran.returncode == 0 and "PARTIAL session" in ran.stderr and "the events after its cut are lost" in ran.stderr, \
+        ran.stderr

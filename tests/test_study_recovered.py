@@ -1,0 +1,74 @@
+"""A study game whose recording was cut, then completed by `pairplay recover`, is read from the recovered copy.
+
+A new user's trial: `pairplay recover` of a cut game's recording writes `<stem>.recovered.mcap` beside it, but the
+study kept naming the cut file, so every `protocol serve`, `pilot` and `report` said "not finished ... recover
+completes it" after the user had done exactly that. Now the study reads the recovered copy when its game's
+recording was not finished (its recorder's journal beside it) or is gone (recover's line says to remove the two
+once the copy is kept), says it does (replay/studydata.py `game_recording`), and the line before recover names
+the command and what the next verb does then. Real processes: `pairplay report` and `pairplay recover`.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from pairplay.replay.mcapscan import scan
+from pairplay.replay.reader import read_log
+from pairplay.replay.studydata import StudyData
+from pairplay.replay.wal import JournalWriter, wal_path
+from pairplay.schemas import journal as j
+
+from test_protocol_interrupted import completed_without_policy
+
+
+def cut_by_a_crash(path: Path, session: str) -> None:
+    """The game's finished recording made what a killed recorder leaves: the file cut, and its journal
+    beside it holding everything the recorder received."""
+    events = read_log(path).events
+    last = scan(path).chunks[-1]
+    path.write_bytes(path.read_bytes()[:last.offset + last.length // 2])  # inside its last chunk
+    journal = JournalWriter(path, session)
+    for r in events:
+        journal.add((r.key, r.payload))
+    journal.close()
+    assert not read_log(path).of("SessionEnded")
+
+
+def test_a_cut_games_recording_recovered_is_built_from_its_recovered_copy_and_said(tmp_path, pairplay_cli):
+    data = completed_without_policy(tmp_path, stripped=1)
+    games = list(data.state.games.values())
+    built, unended = games[0], games[1]  # completed without its policy; its end never journaled
+    ends = [e for e in data.read_journal() if not (isinstance(e, j.GameEnded) and e.session == unended.session)]
+    (data.folder / "journal.jsonl").write_bytes(b"".join(j.encode_line(e) for e in ends))
+    for g in (built, unended):
+        cut_by_a_crash(data.folder / g.recording, g.session)
+    folder = data.folder
+    ran = pairplay_cli("report", folder)
+    recording = folder / built.recording
+    assert (f"pairplay report: {built.session}: completed, but no policy built: its recording {built.recording} was "
+            f"not finished (its recorder's journal is beside it: `pairplay recover {recording}` writes its recovered "
+            "copy beside it, which the next serve, pilot or report builds it from)") in ran.stderr.splitlines(), ran
+    assert unended.session not in ran.stderr  # cut, its end unknown: shown as running, as before
+    for g in (built, unended):
+        ran = pairplay_cli("recover", folder / g.recording)
+        assert ran.returncode == 0, ran
+    ran = pairplay_cli("report", folder, "--force")
+    said = [line for line in ran.stderr.splitlines() if "recovered" in line]
+    stem = Path(built.recording).stem
+    assert said == [f"pairplay report: {built.session}: policy built from its recovered copy "
+                    f"recordings/{stem}.recovered.mcap: policies/{stem}.recovered.policy.json",
+                    f"pairplay report: {unended.session}: journaled completed from its recovered copy "
+                    f"recordings/{Path(unended.recording).stem}.recovered.mcap (the server stopped before it said "
+                    "how the game ended)"], ran.stderr
+    state = StudyData(folder).state
+    assert state.games[built.session].ended.policy == f"policies/{stem}.recovered.policy.json"
+    assert state.games[unended.session].ended.outcome == "completed" and state.games[unended.session].ended.policy
+    assert "recovered" not in pairplay_cli("report", folder, "--force").stderr  # said once
+    # the cut file and its journal removed, as recover's line says once the copy is kept: the copy still stands
+    (folder / built.recording).unlink()
+    wal_path(folder / built.recording).unlink()
+    reread = StudyData(folder)
+    path, named = reread.game_recording(reread.state.games[built.session])
+    assert path.name == f"{stem}.recovered.mcap" and named.startswith("its recovered copy")
+    log, why = reread.recording_of(reread.state.games[built.session])
+    assert log is not None and why == "", why
