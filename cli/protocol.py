@@ -21,7 +21,7 @@ import sys
 import time
 from pathlib import Path
 
-from pairplay import signals
+from pairplay import signals, testpause
 from pairplay.cli.args import int_between, output_file, output_folder, session_id
 from pairplay.core.personas import persona
 from pairplay.lists import comma_items
@@ -349,6 +349,7 @@ def _serving(data: StudyData, args, stop, runners: list, pilot: dict, robot, ove
                 # the bounded waits on the rest of the step (before, the join below took what the deadline left,
                 # nothing at load 15+, and the process exited without the game's GameEnded)
                 # (bounded, and a second signal of either kind cuts it: a journal write that never came held it)
+                testpause.pause("serve-stopping")  # (a test's second signal lands here: the first is handled)
                 if not runner.wait_journaled():
                     print(f"pairplay protocol serve: gave up after {JOURNALED_WAIT_S:.0f} s waiting for the journal "
                           f"to record the end of game {runner.live.session}; `pairplay protocol status {data.given}` "
@@ -384,15 +385,29 @@ def stopped_line(runners: list, stop) -> str:
 def cut(runners: list, verb: str, stop) -> int:
     """What serve or pilot says when a second signal cut its shutdown (KeyboardInterrupt): the line of
     cli/session.py `cut_line` of the game the first signal stopped (its recording: whole, or `pairplay recover` it),
-    the signal's status. With no game running, or none whose recording was begun, the KeyboardInterrupt goes on to
-    cli/main.py's line."""
+    the signal's status; of one stopped before its recording began, that, and what the journal holds of it and what
+    the next serve does with it (replay/studydata.py `build_missing_policies`: journaled aborted, played again).
+    With no game running, the KeyboardInterrupt goes on to cli/main.py's line."""
     from pairplay.cli.session import cut_line
+    from pairplay.replay.wal import wal_path
 
     game = runners[0].stopped if runners and stop.is_set() else None
-    if game is None or not game.path.exists():
+    if game is None:
         raise KeyboardInterrupt
     again = signals.again or signal.SIGINT  # (either signal cuts it: pairplay/signals.py `wait_cut`)
-    print(cut_line(f"protocol {verb}", game.path, again, game.summary), file=sys.stderr)
+    signals.held_elsewhere_over()  # a recorder the game's thread is starting or finishing: its held step ends first
+    if game.path.exists() or wal_path(game.path).exists():
+        print(cut_line(f"protocol {verb}", game.path, again, game.summary), file=sys.stderr)
+        return 128 + again
+    # stopped before its recording began: main's "nothing more was written" hid a started game with no end
+    started = runners[0].data.state.games.get(game.session)
+    ended = started.ended if started is not None else None
+    what = (f"journaled {ended.outcome}" + (f" ({ended.reason})" if ended.reason else "") + f"; no recording of it "
+            f"was written ({game.path})" if ended is not None else
+            "the journal holds its start and no end, and no recording of it was written "
+            f"({game.path}); the next serve, pilot or report journals it aborted, and its step is played again")
+    print(f"pairplay protocol {verb}: interrupted again ({signals.said(again)}) while stopping; game {game.session} "
+          f"was stopped before its recording began: {what}", file=sys.stderr)
     return 128 + again
 
 

@@ -81,6 +81,7 @@ REPORT_MANIFEST = manifest_name("report")
 PROTOCOL_MANIFEST = manifest_name("protocol")
 TABLES = ("participants.csv", "sessions.csv", "answers.csv")
 # records of given ids (`StudyData.records_of_ids`) whose words a note picks out
+NEVER_RECORDED = "stopped before its recording began"  # the reason of a game a signal stopped that early
 KEY_RECORD, TORN_RECORD = "the key file", "a torn journal line set aside"
 SUBFOLDERS = {"recordings": ".mcap", "policies": ".policy.json", "merged": ".policy.json"}  # and the files each holds
 
@@ -834,7 +835,9 @@ class StudyData:
         truth): the policy of every completed game journaled without one (a signal during its
         questionnaire: PolicyBuilt), and the end of every game whose recording is finished and ended
         but whose end was never journaled (a process gone while it read the recording back:
-        GameEnded, as `game_end`). One line for each game said: done, or why its policy is not (a
+        GameEnded, as `game_end`), and the end of every game stopped before its recording began (a second signal
+        as `protocol serve` stopped it: `_never_recorded`; journaled aborted, so its step is played again). One
+        line for each game said: done, or why its policy is not (a
         recording missing, unfinished, unreadable or partial: the game is left as it is, and the
         combination refuses to go without it, StudyRunner.combine). A completed game whose journaled
         policy file is gone (deleted by hand) is built again the same way and journaled (PolicyBuilt): it
@@ -851,6 +854,11 @@ class StudyData:
                         ended = self.append_naming(ended, ended.policy)
                         lines.append(f"{g.session}: journaled {ended.outcome} from {source} (the server "
                                      "stopped before it said how the game ended)")
+                        changed += 1
+                    elif self._never_recorded(g):
+                        self.append(j.GameEnded(session=g.session, participant=g.participant, outcome="aborted",
+                                                reason=NEVER_RECORDED, rounds_played=0, policy="", questionnaire=False))
+                        lines.append(f"{g.session}: journaled aborted ({NEVER_RECORDED}); its step is played again")
                         changed += 1
                     continue  # otherwise running here or elsewhere, or cut: shown as running, as it was
                 gone = bool(g.ended.policy) and not (self.folder / g.ended.policy).is_file()
@@ -889,6 +897,16 @@ class StudyData:
             if changed:
                 self.write_tables()
         return lines
+
+    def _never_recorded(self, g: Game) -> bool:
+        """Whether game `g`, journaled as started and never as ended, was stopped before its recording began: no
+        recording, no recorder's journal, no copy of one (a cut-short --force's, recover's), and not started by
+        this object (a game it runs has its GameStarted journaled before its recorder starts). No other process
+        runs a game of the folder while this one writes it (pairplay/folderlock.py), so nothing will record it:
+        a second signal as `protocol serve` stopped it before then left it "running" for ever (a new user's trial)."""
+        path = self.folder / g.recording
+        return g.session not in self._started_here and not path.exists() and not wal_path(path).exists() \
+            and not default_output(path).exists() and not set_aside_of(path)
 
     # -- derived tables ------------------------------------------------------
     def answers(self) -> list[dict]:
