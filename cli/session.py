@@ -54,7 +54,7 @@ from pairplay.core.geometry import PICKS_UNIT
 from pairplay.cli.robot import add_robot_arguments, check_robot_args, probe_robot_args, robot_choice
 from pairplay.services.bus import BusOpenError, ConfigFileError, add_bus_arguments, options_from_args, stop_on_signals
 from pairplay.services.recorder import (FORCE_SESSION_HINT, REPLACED, check_new_recording, check_not_folders,
-                                        finished_whole, set_aside, settle_aside)
+                                        earlier_outputs, finished_whole, set_aside, settle_aside)
 from pairplay.services.runner import waiting_for
 from pairplay.services.session import run_session
 from pairplay.numbers import counted
@@ -176,7 +176,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--out", type=output_folder, default="recordings", help="folder of the recording (default recordings/); a session "
                    "whose recording (<session>.mcap or <session>.<k>.mcap) exists there is refused unless --force")
     add_force(p, "the session's existing recordings (<session>.mcap and <session>.<k>.mcap, and the journals a "
-                 "cut one left beside them: recover a cut session first to keep what its journal holds)")
+                 "cut one left beside them: recover a cut session first to keep what its journal holds); recover's "
+                 "and view's outputs of the earlier session stay, named")
     add_robot_arguments(p)
     p.add_argument("--external", action="append", default=[], choices=("learner", "participant", "game", "recorder", "robot"),
                    help="leave this service to another process (`pairplay run`)")
@@ -262,7 +263,7 @@ def run(args: argparse.Namespace) -> int:
         check_not_folders(path)
     summary: dict = {"started": False}  # run_session's, once it has stopped
     if not args.force or "recorder" in args.external:
-        return _run(args, config, path, summary)
+        return _left_beside(path, summary, _run(args, config, path, summary))
     # --force: the earlier recordings are set aside, not removed, until the new one holds a session (a
     # stop before the game started gives them back); before, a Ctrl-C there had already removed them
     aside = set_aside(path)
@@ -270,6 +271,18 @@ def run(args: argparse.Namespace) -> int:
         code = _run(args, config, path, summary, kept=bool(aside))
     finally:  # "started" is missing when a second Ctrl-C cut the shutdown short: both are kept
         settle_aside(aside, path, replaced=summary.get("started"))
+    return _left_beside(path, summary, code)
+
+
+def _left_beside(path: Path, summary: dict, code: int) -> int:
+    """`code`, once the outputs of an earlier session of this id left beside the new recording (recover's copy,
+    view's .rrd: services/recorder.py `earlier_outputs`) are named in one line on stderr, -q or not: kept, never
+    removed (they are the user's), and not this session's."""
+    left = earlier_outputs(path) if summary.get("started") else []
+    if left:
+        from pairplay.cli.main import warn
+        warn("session", f"{path}: left beside it: {'; '.join(left)} (not this session's; kept: remove it "
+                        "once it is not needed)")
     return code
 
 

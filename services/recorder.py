@@ -289,6 +289,22 @@ def set_aside(path: str | Path) -> list[tuple[Path, Path]]:
     return aside
 
 
+def earlier_outputs(path: str | Path) -> list[str]:
+    """What other verbs made of an earlier session's recordings that stays beside `path`, the new session's, in
+    words ("X.recovered.mcap, recover's output of the earlier session"): `pairplay recover`'s copies
+    (`<stem>.recovered.mcap`, `<stem>.<k>.recovered.mcap`, recovered again) and `pairplay view`'s default
+    output (`<stem>.rrd`). `session --force` replaces the session's recordings and their journals, never the
+    user's outputs (a new user's trial: recover's copy stayed beside the new file, unnamed); said once a new
+    session is recorded, when nothing of the new one can have made them yet."""
+    path = Path(path)
+    stem = glob.escape(path.stem)
+    recovered = sorted(path.parent.glob(f"{stem}.recovered.mcap")) + sorted(
+        path.parent.glob(f"{stem}.*.recovered.mcap"))
+    views = sorted(path.parent.glob(f"{stem}.rrd"))
+    return ([f"{p.name}, recover's output of the earlier session" for p in dict.fromkeys(recovered)]
+            + [f"{p.name}, view's output of the earlier session" for p in views])
+
+
 def settle_aside(aside: list[tuple[Path, Path]], path: str | Path, replaced: bool | None) -> None:
     """The end of `set_aside`: `replaced` (the new recording holds a session), the earlier files are
     removed; False, the new recording and its journal, which hold no session, are removed and the earlier

@@ -25,8 +25,9 @@ def cut_by_a_crash(path: Path, session: str) -> None:
     """The game's finished recording made what a killed recorder leaves: the file cut, and its journal
     beside it holding everything the recorder received."""
     events = read_log(path).events
-    last = scan(path).chunks[-1]
-    path.write_bytes(path.read_bytes()[:last.offset + last.length // 2])  # inside its last chunk
+    [end] = [r.log_time_ns for r in events if type(r.event).__name__ == "SessionEnded"]
+    [chunk] = [c for c in scan(path).chunks if any(t == end for _, _, t in c.messages)]
+    path.write_bytes(path.read_bytes()[:chunk.offset + chunk.length // 2])  # inside the chunk of its end
     journal = JournalWriter(path, session)
     for r in events:
         journal.add((r.key, r.payload))
