@@ -66,7 +66,7 @@ from .fold import fold_any
 from . import studyjournal
 from .reader import read_any_log
 from .rebuild import Rebuilt, rebuild_recording, write_outputs
-from .recover import default_output
+from .recover import default_output, journal_left, journal_more
 from .wal import wal_path
 
 JOURNAL, SETTINGS = "journal.jsonl", "settings.json"  # and STUDY_FILE, schemas/study.py
@@ -792,7 +792,7 @@ class StudyData:
             return None, f"recording damaged: {log.lost}"
         why = no_whole_round([r.event for r in log.events], log.truncated, log.damaged)
         if why:
-            return None, f"recording {why}"
+            return None, f"recording {why}{journal_more(path)}"
         why = self.not_this_game(g, log.of("SessionStarted")[0].config)
         if why:
             return None, f"recording is not this game's: {why}"
@@ -801,7 +801,7 @@ class StudyData:
             # "5 valid games", its partial rounds in the figures)
             # (a recovered copy of a cut file: its source's cut, in the reader's words: reader.EventLog.source_cut)
             cut = f"truncated: {log.brief}; " if log.truncated else f"{log.source_cut}; " if log.source_cut else ""
-            return None, f"recording {cut}no SessionEnded: its rounds are a part of the game"
+            return None, f"recording {cut}no SessionEnded: its rounds are a part of the game{journal_more(path)}"
         return log, ""
 
     def not_this_game(self, g: Game, config) -> str:
@@ -855,6 +855,10 @@ class StudyData:
                         lines.append(f"{g.session}: journaled {ended.outcome} from {source} (the server "
                                      "stopped before it said how the game ended)")
                         changed += 1
+                    elif g.session not in self._started_here and (left := journal_left(path)):
+                        # cut, and its journal holds the rest: said at each start until recovered (it was silent)
+                        lines.append(f"{g.session}: its end not journaled: {g.recording}: {left}; the next serve, "
+                                     "pilot or report journals it from that copy")
                     elif self._never_recorded(g):
                         self.append(j.GameEnded(session=g.session, participant=g.participant, outcome="aborted",
                                                 reason=NEVER_RECORDED, rounds_played=0, policy="", questionnaire=False))

@@ -49,7 +49,19 @@ def test_a_cut_games_recording_recovered_is_built_from_its_recovered_copy_and_sa
     assert (f"pairplay report: {built.session}: completed, but no policy built: its recording {built.recording} was "
             f"not finished (its recorder's journal is beside it: `pairplay recover {recording}` writes its recovered "
             "copy beside it, which the next serve, pilot or report builds it from)") in ran.stderr.splitlines(), ran
-    assert unended.session not in ran.stderr  # cut, its end unknown: shown as running, as before
+    # the report leaves the cut game out, saying why and where the rest of it is
+    [left_out] = [line for line in (folder / "report" / "report.md").read_text().splitlines()
+                  if f"{built.session} (recording" in line]
+    assert f"no SessionEnded: its rounds are a part of the game; its recorder's journal {recording.name}.journal beside " \
+           f"it holds " in left_out and f"`pairplay recover {recording}` adds them" in left_out, left_out
+    # cut, its end not journaled: shown as running, as before, and said, with what its journal holds (it was silent)
+    [line] = [line for line in ran.stderr.splitlines() if unended.session in line]
+    unended_path = folder / unended.recording
+    assert line.startswith(f"pairplay report: {unended.session}: its end not journaled: {unended.recording}: its "
+                           f"recorder's journal {unended_path.name}.journal beside it holds "), line
+    assert line.endswith(f"events more than the file, the session's end (SessionEnded) among them: `pairplay recover "
+                         f"{unended_path}` adds them (to {Path(unended.recording).stem}.recovered.mcap); the next "
+                         "serve, pilot or report journals it from that copy"), line
     for g in (built, unended):
         ran = pairplay_cli("recover", folder / g.recording)
         assert ran.returncode == 0, ran
