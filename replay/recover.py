@@ -290,15 +290,19 @@ def journal_left(path: str | Path) -> str:
         return ""
     if done.complete or not (done.from_journal or done.journal_refused):
         return ""
-    more = counted(done.from_journal, "event") + (" more" if done.from_journal else "")
-    refused = f" ({counted(done.journal_refused, 'message')} refused by the live checks)" if done.journal_refused else ""
-    ended = ", the session's end (SessionEnded) among them" if done.journal_ends else ""
+    refused = counted(done.journal_refused, "message")
+    if done.from_journal:
+        more = (f"{counted(done.from_journal, 'event')} more than the file"
+                + (", the session's end (SessionEnded) among them" if done.journal_ends else "")
+                + (f" (and {refused} the live checks refuse)" if done.journal_refused else ""))
+    else:  # only what the live recorder would have refused: recover records the refusals
+        more = f"{refused} the file lacks, refused by the live checks (recorded as refusals)"
     recovered = default_output(path)
     if recovered.is_file():
-        return (f"its recorder's journal {journal.name} beside it holds {more} than the file{ended}{refused}; "
-                f"{recovered} is beside it (`pairplay recover`'s copy with them): give that instead")
-    return (f"its recorder's journal {journal.name} beside it holds {more} than the file{ended}{refused}: "
-            f"`pairplay recover {path}` adds them (to {recovered.name})")
+        return (f"its recorder's journal {journal.name} beside it holds {more}; {recovered} is beside it "
+                "(`pairplay recover`'s copy with them): give that instead")
+    return (f"its recorder's journal {journal.name} beside it holds {more}: `pairplay recover {path}` adds them "
+            f"(to {recovered.name})")
 
 
 def journal_more(path: str | Path) -> str:
