@@ -11,7 +11,8 @@ the recorded one (services/verify.py); exit 1 if any differs. Its last line
 is the verdict: `verify: PASS` for a whole session, `verify: PASS up to where
 the session stopped (...)` for one stopped early, `verify: PASS as far as the
 file goes: the file is cut, the session's end is missing (...)` for a file cut
-by a crash (also after `pairplay recover`): exit 0 for these (what the file
+by a crash (also after `pairplay recover`, unless the recorder's journal it read
+gave back the session's end: reader.journal_restored): exit 0 for these (what the file
 holds is right), and the line says what is missing. Replay's first
 line names its bus endpoint, so a view can attach (`pairplay view --session S
 --connect ENDPOINT`). A REC that is missing, empty, not MCAP or without events
