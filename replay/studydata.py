@@ -979,6 +979,7 @@ class StudyData:
         for g in self.games_of(pid):
             files.append(self.folder / g.recording)
             files.append(wal_path(self.folder / g.recording))  # a killed recorder's journal: their data too
+            files.append(default_output(self.folder / g.recording))  # recover's copy: it stands for a cut one
             # a policy built from their game whose line a killed process did not write (journaled_or_removed)
             files += list((self.folder / "policies").glob(f"{g.session}.*"))
             files += set_aside_of(self.folder / g.recording)  # an earlier recording a cut-short --force set aside

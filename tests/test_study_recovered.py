@@ -10,6 +10,7 @@ the command and what the next verb does then. Real processes: `pairplay report` 
 
 from __future__ import annotations
 
+import zipfile
 from pathlib import Path
 
 from pairplay.replay.mcapscan import scan
@@ -77,6 +78,11 @@ def test_a_cut_games_recording_recovered_is_built_from_its_recovered_copy_and_sa
     assert state.games[built.session].ended.policy == f"policies/{stem}.recovered.policy.json"
     assert state.games[unended.session].ended.outcome == "completed" and state.games[unended.session].ended.policy
     assert "recovered" not in pairplay_cli("report", folder, "--force").stderr  # said once
+    # the participant's export carries the copy that stands for the game's recording (it held the cut file only)
+    ran = pairplay_cli("participant", "export", folder, built.participant)
+    assert ran.returncode == 0, ran
+    with zipfile.ZipFile(folder / "exports" / f"{built.participant}.zip") as z:
+        assert any(n.endswith(f"{stem}.recovered.mcap") for n in z.namelist()), z.namelist()
     # the cut file and its journal removed, as recover's line says once the copy is kept: the copy still stands
     (folder / built.recording).unlink()
     wal_path(folder / built.recording).unlink()
