@@ -86,7 +86,6 @@ class Recovered:
     journal_torn: str = ""  # where the journal stops short of a frame's end ("" if it does not)
     journal_error: str = ""  # a journal beside it that could not be read at all: why (its records are not used)
     journal_present: int = 0  # records of the journal the file holds already
-    journal_ends: bool = False  # the session's SessionEnded is among what the journal adds
     complete: bool = False  # the file is whole and its journal (if any) holds nothing it lacks: nothing written
     lost: list[str] = field(default_factory=list)  # each damaged part that lost messages, and what: "chunk 7 (...): its 18 messages"
     lost_messages: int | None = 0  # how many messages those parts held (None: not known, unreadable bytes' records)
@@ -120,10 +119,7 @@ def recover(path: str | Path, output: str | Path | None = None, force: bool = Fa
     checked = scan(path)
     added = None
     if journal is not None:  # what the journal holds that the file lacks, decided before anything is written
-        topics = {r.id: r.topic for r in checked.summary_records + checked.records if isinstance(r, Channel)}
-        recorded = [(topics[r.channel_id], r.data) for r in checked.records
-                    if isinstance(r, Message) and r.channel_id in topics]
-        added = admit(journal.session, recorded, journal.records)
+        added = admit(journal.session, _recorded(checked), journal.records)
     # what it would write holds no session (no SessionStarted in the file, none its journal adds): refused in the
     # reader's words, as every verb refuses such a file (reader.EventLog.no_session); a cut or damaged one was
     # copied, exit 0, a file no verb takes (a new user's trial: "recover" 0, "replay --verify" 2 of one file)
@@ -131,7 +127,6 @@ def recover(path: str | Path, output: str | Path | None = None, force: bool = Fa
                                                           for key, *_ in added.items)):
         raise InputError(log.no_session, path)
     complete = checked.whole and not (added is not None and added.items)  # and nothing more to add
-    journal_ends = added is not None and any(key.rsplit("/", 1)[-1] == "SessionEnded" for key, *_ in added.items)
     # the source's own recovery record, if it was recovered before: its losses are carried forward (module rule)
     earlier = folded_recovery(checked.records)
     lost_parts = [f"{d.part}: {d.lost}" for d in checked.damage if d.lost_at >= 0]
@@ -145,7 +140,7 @@ def recover(path: str | Path, output: str | Path | None = None, force: bool = Fa
                          from_journal=added.taken if added else 0, journal_refused=added.refused if added else 0,
                          journal_present=added.present if added is not None else 0,
                          journal_torn=journal.torn if journal is not None else "", journal_error=journal_error,
-                         complete=complete, journal_ends=journal_ends, **lost_words)
+                         complete=complete, **lost_words)
     check_output(output, force)  # only an output that will be written (a complete file writes none)
     messages, ended, last_round = 0, False, -1
     schema_ids: dict[int, int] = {}
@@ -228,7 +223,7 @@ def recover(path: str | Path, output: str | Path | None = None, force: bool = Fa
                      journal=journal.path if journal is not None else None,
                      from_journal=added.taken if added else 0, journal_refused=added.refused if added else 0,
                      journal_torn=journal.torn if journal is not None else "", journal_error=journal_error,
-                     journal_ends=journal_ends, **lost_words)
+                     **lost_words)
 
 
 def _lost_count(checked) -> int | None:
@@ -268,40 +263,55 @@ def _round_of(payload: bytes) -> int:
         return -1
 
 
+
+def _recorded(checked) -> list[tuple[str, bytes]]:
+    """The (key, payload) of every message an `mcapscan.scan` read, in file order."""
+    topics = {r.id: r.topic for r in checked.summary_records + checked.records if isinstance(r, Channel)}
+    return [(topics[r.channel_id], r.data) for r in checked.records if isinstance(r, Message) and r.channel_id in topics]
+
+
 def journal_left(path: str | Path) -> str:
-    """The one line every verb that reads a recording says when its recorder's journal beside it holds what it
-    lacks ("" when not): how many events (its SessionEnded among them, if so), and that `pairplay recover` adds
-    them, or that its recovered copy (`default_output`) is there already. A file cut by a crash was read as
-    PARTIAL, or "PASS as far as the file goes", not a word of the journal holding the rest (a new user's trial).
-    Counted as recover counts them (services/walmerge.admit: the live checks), so the line and recover's agree;
-    read only when a journal is there, never of a live file (its recorder writes both: pairplay/livelock.py),
-    and a journal that cannot be read or adds nothing says nothing (recover's own line names those)."""
+    """The one line every verb that reads a recording says when its recorder's journal beside it holds messages
+    it lacks ("" when not): how many (the session's end among them, if so), and that `pairplay recover` adds them,
+    or that its recovered copy (`default_output`) is there already. A file cut by a crash was read as PARTIAL, or
+    "PASS as far as the file goes", not a word of the journal holding the rest (a new user's trial). Counted as
+    recover counts what is there already (services/walmerge.py: a record of the journal the file holds, byte for
+    byte, once per copy); what recover then refuses through the live checks, a forgery, it records as a refusal.
+    Read only when a journal is there, never of a live file (its recorder writes both: pairplay/livelock.py);
+    a journal that cannot be read, is another session's, or adds nothing says nothing (recover names those)."""
+    from collections import Counter
+
     from pairplay.livelock import is_live
     from pairplay.numbers import counted
-    from pairplay.services.walmerge import admit  # the live checks (services/ holds them; recover takes them given)
 
     path = Path(path)
-    journal = wal_path(path)
-    if not journal.is_file() or is_live(path):
+    beside = wal_path(path)
+    if not beside.is_file() or is_live(path):
         return ""
     try:
-        done = recover(path, admit=admit, write=False)
-    except (InputError, OutputError, OSError):
+        journal, _ = _journal_beside(path, read_any_log(path, only=frozenset()))
+        checked = scan(path)
+    except (InputError, OSError):
         return ""
-    if done.complete or not (done.from_journal or done.journal_refused):
+    if journal is None:
         return ""
-    refused = counted(done.journal_refused, "message")
-    if done.from_journal:
-        more = (f"{counted(done.from_journal, 'event')} more than the file"
-                + (", the session's end (SessionEnded) among them" if done.journal_ends else "")
-                + (f" (and {refused} the live checks refuse)" if done.journal_refused else ""))
-    else:  # only what the live recorder would have refused: recover records the refusals
-        more = f"{refused} the file lacks, refused by the live checks (recorded as refusals)"
+    held = Counter(_recorded(checked))
+    lacks = []
+    for key, payload, _ in journal.records:
+        if held[(key, payload)] > 0:
+            held[(key, payload)] -= 1
+        else:
+            lacks.append(key)
+    if not lacks:
+        return ""
+    ended = any(key.rsplit("/", 1)[-1] == "SessionEnded" for key in lacks)
+    more = f"{counted(len(lacks), 'message')} the file lacks" + (", the session's end (SessionEnded) among them"
+                                                                  if ended else "")
     recovered = default_output(path)
     if recovered.is_file():
-        return (f"its recorder's journal {journal.name} beside it holds {more}; {recovered} is beside it "
+        return (f"its recorder's journal {beside.name} beside it holds {more}; {recovered} is beside it "
                 "(`pairplay recover`'s copy with them): give that instead")
-    return (f"its recorder's journal {journal.name} beside it holds {more}: `pairplay recover {path}` adds them "
+    return (f"its recorder's journal {beside.name} beside it holds {more}: `pairplay recover {path}` adds them "
             f"(to {recovered.name})")
 
 

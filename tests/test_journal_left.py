@@ -54,7 +54,7 @@ def test_every_verb_reading_a_cut_recording_names_the_journal_that_holds_more(wh
     assert ran.returncode == code, (ran.stdout, ran.stderr)
     said = [line for line in ran.stderr.splitlines() if "journal" in line]
     assert said == [f"pairplay {verb[0]}: {path}: its recorder's journal {wal_path(path).name} beside it holds "
-                    f"{lacks} events more than the file, the session's end (SessionEnded) among them: "
+                    f"{lacks} messages the file lacks, the session's end (SessionEnded) among them: "
                     f"`pairplay recover {path}` adds them (to left.recovered.mcap)"], ran.stderr
     # as the line says: recover adds them, and the line then names the recovered copy
     ran = pairplay_cli("recover", path, cwd=tmp_path)
@@ -65,7 +65,7 @@ def test_every_verb_reading_a_cut_recording_names_the_journal_that_holds_more(wh
     assert ran.returncode == code, (ran.stdout, ran.stderr)
     said = [line for line in ran.stderr.splitlines() if "journal" in line]
     assert said == [f"pairplay {verb[0]}: {path}: its recorder's journal {wal_path(path).name} beside it holds "
-                    f"{lacks} events more than the file, the session's end (SessionEnded) among them; "
+                    f"{lacks} messages the file lacks, the session's end (SessionEnded) among them; "
                     f"{tmp_path / 'left.recovered.mcap'} is beside it (`pairplay recover`'s copy with them): give "
                     "that instead"], ran.stderr
 
@@ -91,8 +91,8 @@ def test_a_cut_file_refused_for_no_whole_round_names_the_journal_in_its_line(who
     assert ran.returncode == 2 and ran.stdout == "", (ran.stdout, ran.stderr)
     [line] = ran.stderr.splitlines()
     assert "holds no whole round: the file is cut before round 1 of 3 ended" in line, line
-    assert line.endswith(f"; its recorder's journal left.mcap.journal beside it holds {lacks} events more than the "
-                         f"file, the session's end (SessionEnded) among them: `pairplay recover {path}` adds them "
+    assert line.endswith(f"; its recorder's journal left.mcap.journal beside it holds {lacks} messages the file "
+                         f"lacks, the session's end (SessionEnded) among them: `pairplay recover {path}` adds them "
                          "(to left.recovered.mcap)"), line
 
 

@@ -60,7 +60,7 @@ def test_a_cut_games_recording_recovered_is_built_from_its_recovered_copy_and_sa
     unended_path = folder / unended.recording
     assert line.startswith(f"pairplay report: {unended.session}: its end not journaled: {unended.recording}: its "
                            f"recorder's journal {unended_path.name}.journal beside it holds "), line
-    assert line.endswith(f"events more than the file, the session's end (SessionEnded) among them: `pairplay recover "
+    assert line.endswith(f"messages the file lacks, the session's end (SessionEnded) among them: `pairplay recover "
                          f"{unended_path}` adds them (to {Path(unended.recording).stem}.recovered.mcap); the next "
                          "serve, pilot or report journals it from that copy"), line
     for g in (built, unended):
