@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import queue
 import signal
+import subprocess
 import time
 from contextlib import contextmanager
 
@@ -42,7 +43,7 @@ def recorder_process(bus: Bus, session: str, out):
     from cli_zygote import shared
     from pairplay.schemas.keys import alive_key
     proc = shared().start(["run", "recorder", "--session", session, "--out", str(out), "--connect",
-                           bus.locators()[0]], quiet=True)
+                           bus.locators()[0]], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     try:
         assert wait_until(lambda: alive_key(session, "recorder") in bus.alive_now(alive_key(session, "*")), 30)
         yield proc

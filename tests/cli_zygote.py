@@ -251,23 +251,23 @@ class Zygote:
             self.proc.stdin.flush()
         return rid, box, box.get(timeout=60)["pid"]
 
-    def start(self, args: list[str], cwd: Path | None = None, text: bool = True, merge_stderr: bool = False,
-              quiet: bool = False) -> "Forked":
-        """`python -m pairplay ARGS` forked and running: a Popen-like `Forked` whose stdout and stderr (or both in
-        stdout: `merge_stderr`, as stderr=STDOUT) are read as it writes; `quiet`: both to /dev/null (DEVNULL)."""
+    def start(self, args: list[str], cwd: Path | None = None, stdout: int = subprocess.PIPE,
+              stderr: int = subprocess.PIPE, text: bool = True) -> "Forked":
+        """`python -m pairplay ARGS` forked and running: a Popen-like `Forked`. `stdout` and `stderr` as Popen's:
+        subprocess.PIPE (read as it writes), DEVNULL, or for stderr STDOUT (into stdout's pipe)."""
         n = next(self._files)
-        out, err = self.scratch / f"live-{n}.out", self.scratch / f"live-{n}.err"
-        if quiet:
-            out = err = Path(os.devnull)
-        else:
-            os.mkfifo(out)
-            if merge_stderr:
-                err = out
+        paths = {}
+        for name, how in (("out", stdout), ("err", stderr)):
+            if how == subprocess.DEVNULL:
+                paths[name] = Path(os.devnull)
+            elif how == subprocess.STDOUT:
+                paths[name] = paths["out"]
             else:
-                os.mkfifo(err)
-        rid, box, pid = self._send(args, Path(cwd or os.getcwd()), out, err, live=True)
-        return Forked(self, ["pairplay", *args], rid, box, pid, None if quiet else out,
-                      None if quiet or merge_stderr else err, text)
+                paths[name] = self.scratch / f"live-{n}.{name}"
+                os.mkfifo(paths[name])
+        rid, box, pid = self._send(args, Path(cwd or os.getcwd()), paths["out"], paths["err"], live=True)
+        return Forked(self, ["pairplay", *args], rid, box, pid, paths["out"] if stdout == subprocess.PIPE else None,
+                      paths["err"] if stderr == subprocess.PIPE else None, text)
 
     def close(self) -> None:
         self.proc.stdin.close()
@@ -285,7 +285,7 @@ class Zygote:
 
 class Forked:
     """A command the zygote forked, as subprocess.Popen(stdout=PIPE, stderr=PIPE) gives one: `pid`, `stdout`
-    and `stderr` (None when merged into stdout, or sent to /dev/null) read as it writes, `poll`, `wait`, `communicate`, `send_signal`,
+    and `stderr` (None unless subprocess.PIPE) read as it writes, `poll`, `wait`, `communicate`, `send_signal`,
     `terminate`, `kill`, `returncode` (-N for a signal N, as Popen). Its exit is the zygote's reply: the zygote
     is its parent and reaps it."""
 

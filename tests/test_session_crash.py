@@ -3,6 +3,7 @@ log with no reward lost or counted twice, as if it had never crashed; a recorder
 holding everything older than its flush interval, and `recover` completes it."""
 
 import signal
+import subprocess
 import threading
 from collections import Counter
 
@@ -32,7 +33,7 @@ from cli_zygote import shared
 def spawn(*args):
     """`pairplay run ARGS`, forked from this test process's zygote (tests/cli_zygote.py): SIGKILL and a restart,
     not its start-up, are what is tested (each `python -m pairplay` paid ~0.9 s of CPU importing)."""
-    return shared().start(["run", *args], text=False, merge_stderr=True)
+    return shared().start(["run", *args], stderr=subprocess.STDOUT, text=False)
 
 
 @pytest.mark.parametrize("victim", ["learner", "participant", "game"])
