@@ -97,7 +97,10 @@ def _child(request: dict) -> None:
     os.chdir(request["cwd"])
     null = os.open(os.devnull, os.O_RDONLY)
     out = os.open(request["out"], os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o644)
-    err = os.open(request["err"], os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o644)
+    # stderr into stdout's pipe (STDOUT): the one opened end, not the path again (the test unlinks a named pipe
+    # once its reader is open: a second open of the path could make a file of that name, read by no one)
+    err = os.dup(out) if request["err"] == request["out"] else \
+        os.open(request["err"], os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o644)
     for fd, target in ((null, 0), (out, 1), (err, 2)):
         os.dup2(fd, target)
         os.close(fd)
