@@ -5,10 +5,8 @@ from __future__ import annotations
 import queue
 import signal
 import subprocess
-import sys
 import time
 from contextlib import contextmanager
-from typing import Iterator
 
 from pairplay.services.bus import Bus, BusOptions
 
@@ -38,13 +36,14 @@ def wait_until(predicate, timeout_s: float = 20.0, every_s: float = 0.02) -> boo
 
 
 @contextmanager
-def recorder_process(bus: Bus, session: str, out, stderr=subprocess.DEVNULL) -> Iterator[subprocess.Popen]:
+def recorder_process(bus: Bus, session: str, out):
     """`pairplay run recorder` for `session` into folder `out`, connected to `bus`, once its token is
-    up; killed and reaped at the end if it is still running (a test that failed half-way)."""
+    up; killed and reaped at the end if it is still running (a test that failed half-way). Forked from this
+    test process's zygote (tests/cli_zygote.py): its tests SIGKILL it; its start-up is not what they test."""
+    from cli_zygote import shared
     from pairplay.schemas.keys import alive_key
-    proc = subprocess.Popen([sys.executable, "-m", "pairplay", "run", "recorder", "--session", session,
-                             "--out", str(out), "--connect", bus.locators()[0]],
-                            stdout=subprocess.DEVNULL, stderr=stderr, text=True)
+    proc = shared().start(["run", "recorder", "--session", session, "--out", str(out), "--connect",
+                           bus.locators()[0]], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     try:
         assert wait_until(lambda: alive_key(session, "recorder") in bus.alive_now(alive_key(session, "*")), 30)
         yield proc
@@ -54,7 +53,7 @@ def recorder_process(bus: Bus, session: str, out, stderr=subprocess.DEVNULL) -> 
             proc.wait()
 
 
-def sigkill(proc: subprocess.Popen) -> None:
+def sigkill(proc) -> None:
     """SIGKILL a process and reap it."""
     proc.send_signal(signal.SIGKILL)
     proc.wait(10)

@@ -13,6 +13,12 @@ Why: the command-line mistakes table runs ~70 commands; each paid 0.2-1.6 s of C
 start and pairplay's import: numba, zenoh, numpy) for a few milliseconds of work, about 60 s of
 CPU of a suite that must finish in minutes on two cores.
 
+`Zygote.start` (and `shared()`, one zygote per test process) forks a long-running command the test talks to
+while it runs (a router, a service killed and started again, a session on the bus): `Forked` is what
+subprocess.Popen(stdout=PIPE, stderr=PIPE) gives, its streams named pipes (FIFOs) read as it writes. For what the
+command does on the bus, not for how it starts or stops: a handled signal (SIGINT, SIGTERM) and start-up keep
+their own `python -m pairplay`; SIGKILL is the kernel's, the same to either.
+
 Protocol (JSON lines): request {"id", "args", "cwd", "out", "err", "read_only"} on the zygote's stdin;
 replies {"id", "pid"} when forked and {"id", "code", "cpu"} (os.waitstatus_to_exitcode; its CPU
 seconds) when it ended.
@@ -23,11 +29,13 @@ from __future__ import annotations
 
 import gc
 import importlib
+import itertools
 import json
 import os
 import pkgutil
 import queue
 import selectors
+import signal
 import subprocess
 import sys
 import threading
@@ -89,11 +97,17 @@ def _child(request: dict) -> None:
     os.chdir(request["cwd"])
     null = os.open(os.devnull, os.O_RDONLY)
     out = os.open(request["out"], os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o644)
-    err = os.open(request["err"], os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o644)
+    # stderr into stdout's pipe (STDOUT): the one opened end, not the path again (the test unlinks a named pipe
+    # once its reader is open: a second open of the path could make a file of that name, read by no one)
+    err = os.dup(out) if request["err"] == request["out"] else \
+        os.open(request["err"], os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o644)
     for fd, target in ((null, 0), (out, 1), (err, 2)):
         os.dup2(fd, target)
         os.close(fd)
     sys.stdin = open(0, closefd=False)
+    if request.get("live"):  # read as it writes (PYTHONUNBUFFERED's purpose for a pipe): a line is sent whole
+        sys.stdout.reconfigure(line_buffering=True)
+        sys.stderr.reconfigure(line_buffering=True)
     sys.argv = ["pairplay", *request["args"]]
     try:
         runpy.run_module("pairplay", run_name="__main__", alter_sys=True)
@@ -192,6 +206,7 @@ class Zygote:
         self.import_output = self._err_path.read_text()
         self._lock = threading.Lock()
         self._next = 0
+        self._files = itertools.count(1)  # the commands' file names (next() is atomic)
         self._waiting: dict[str, queue.Queue] = {}
         self._reader = threading.Thread(target=self._read, daemon=True)
         self._reader.start()
@@ -208,17 +223,9 @@ class Zygote:
             read_only: tuple[str, Path] | None = None) -> subprocess.CompletedProcess:
         """`read_only`: ("tmpfs" or "bind", folder): the command runs in a mount namespace of its own in which that
         folder is read-only (_read_only; needs root), as under `unshare --mount --propagation private`."""
-        with self._lock:
-            self._next += 1
-            rid = str(self._next)
-            box = self._waiting[rid] = queue.Queue()
-        out, err = self.scratch / f"cmd-{rid}.out", self.scratch / f"cmd-{rid}.err"
-        request = {"id": rid, "args": list(args), "cwd": str(cwd), "out": str(out), "err": str(err),
-                   "read_only": [read_only[0], str(read_only[1])] if read_only else None}
-        with self._lock:
-            self.proc.stdin.write(json.dumps(request) + "\n")
-            self.proc.stdin.flush()
-        pid = box.get(timeout=60)["pid"]
+        n = next(self._files)
+        out, err = self.scratch / f"cmd-{n}.out", self.scratch / f"cmd-{n}.err"
+        rid, box, pid = self._send(args, cwd, out, err, read_only)
         try:
             ended = box.get(timeout=timeout)
         except queue.Empty:
@@ -234,6 +241,37 @@ class Zygote:
         err.unlink()
         return result
 
+    def _send(self, args: list[str], cwd: Path, out: Path, err: Path, read_only=None, live=False):
+        """Ask for a fork: (request id, its reply queue, the child's pid)."""
+        with self._lock:
+            self._next += 1
+            rid = str(self._next)
+            box = self._waiting[rid] = queue.Queue()
+        request = {"id": rid, "args": list(args), "cwd": str(cwd), "out": str(out), "err": str(err),
+                   "read_only": [read_only[0], str(read_only[1])] if read_only else None, "live": live}
+        with self._lock:
+            self.proc.stdin.write(json.dumps(request) + "\n")
+            self.proc.stdin.flush()
+        return rid, box, box.get(timeout=60)["pid"]
+
+    def start(self, args: list[str], cwd: Path | None = None, stdout: int = subprocess.PIPE,
+              stderr: int = subprocess.PIPE, text: bool = True) -> "Forked":
+        """`python -m pairplay ARGS` forked and running: a Popen-like `Forked`. `stdout` and `stderr` as Popen's:
+        subprocess.PIPE (read as it writes), DEVNULL, or for stderr STDOUT (into stdout's pipe)."""
+        n = next(self._files)
+        paths = {}
+        for name, how in (("out", stdout), ("err", stderr)):
+            if how == subprocess.DEVNULL:
+                paths[name] = Path(os.devnull)
+            elif how == subprocess.STDOUT:
+                paths[name] = paths["out"]
+            else:
+                paths[name] = self.scratch / f"live-{n}.{name}"
+                os.mkfifo(paths[name])
+        rid, box, pid = self._send(args, Path(cwd or os.getcwd()), paths["out"], paths["err"], live=True)
+        return Forked(self, ["pairplay", *args], rid, box, pid, paths["out"] if stdout == subprocess.PIPE else None,
+                      paths["err"] if stderr == subprocess.PIPE else None, text)
+
     def close(self) -> None:
         self.proc.stdin.close()
         self.proc.wait(timeout=60)
@@ -247,6 +285,102 @@ class Zygote:
     def __exit__(self, *exc) -> None:
         self.close()
 
+
+class Forked:
+    """A command the zygote forked, as subprocess.Popen(stdout=PIPE, stderr=PIPE) gives one: `pid`, `stdout`
+    and `stderr` (None unless subprocess.PIPE) read as it writes, `poll`, `wait`, `communicate`, `send_signal`,
+    `terminate`, `kill`, `returncode` (-N for a signal N, as Popen). Its exit is the zygote's reply: the zygote
+    is its parent and reaps it."""
+
+    def __init__(self, zygote: Zygote, args: list[str], rid: str, box: queue.Queue, pid: int, out: Path | None,
+                 err: Path | None, text: bool):
+        self.args, self.pid, self.returncode = args, pid, None
+        self._zygote, self._rid, self._box = zygote, rid, box
+        # the child opens its ends first (out, then err): these opens wait for it, in that order
+        self.stdout = self._open(out, text) if out is not None else None
+        self.stderr = self._open(err, text) if err is not None else None
+
+    def _open(self, fifo: Path, text: bool):
+        opened: list = []
+        opener = threading.Thread(target=lambda: opened.append(open(fifo, "r" if text else "rb")), daemon=True)
+        opener.start()
+        opener.join(60)
+        if not opened:
+            self.kill()
+            raise RuntimeError(f"the forked command {self.args} never opened {fifo}")
+        fifo.unlink()
+        return opened[0]
+
+    def _ended(self, reply: dict) -> int:
+        self.returncode = reply["code"]
+        self._zygote.cpu += reply["cpu"]
+        with self._zygote._lock:
+            self._zygote._waiting.pop(self._rid, None)
+        return self.returncode
+
+    def poll(self) -> int | None:
+        if self.returncode is None:
+            try:
+                self._ended(self._box.get_nowait())
+            except queue.Empty:
+                pass
+        return self.returncode
+
+    def wait(self, timeout: float | None = None) -> int:
+        if self.returncode is None:
+            try:
+                self._ended(self._box.get(timeout=timeout))
+            except queue.Empty:
+                raise subprocess.TimeoutExpired(self.args, timeout) from None
+        return self.returncode
+
+    def communicate(self, timeout: float | None = None) -> tuple:
+        """(stdout, stderr) to their ends (stderr None when merged), then the exit, as Popen's."""
+        got: dict = {}
+        readers = [threading.Thread(target=lambda n=n, f=f: got.__setitem__(n, f.read()), daemon=True)
+                   for n, f in (("out", self.stdout), ("err", self.stderr)) if f is not None]
+        for reader in readers:
+            reader.start()
+        for reader in readers:
+            reader.join(timeout)
+            if reader.is_alive():
+                raise subprocess.TimeoutExpired(self.args, timeout)
+        self.wait(timeout)
+        for f in (self.stdout, self.stderr):
+            if f is not None:
+                f.close()
+        return got.get("out"), got.get("err")
+
+    def send_signal(self, sig: int) -> None:
+        if self.poll() is None:  # (once reaped, its pid may be another process's)
+            os.kill(self.pid, sig)
+
+    def terminate(self) -> None:
+        self.send_signal(signal.SIGTERM)
+
+    def kill(self) -> None:
+        self.send_signal(signal.SIGKILL)
+
+
+_SHARED: list[Zygote] = []
+
+
+def shared() -> Zygote:
+    """This test process's zygote (the `pairplay_cli` fixture's too), started at the first call, closed at exit."""
+    with _SHARED_LOCK:
+        if not _SHARED:
+            import atexit
+            import shutil
+            import tempfile
+            scratch = Path(tempfile.mkdtemp(prefix="pairplay-zygote-"))
+            zygote = Zygote(scratch=scratch)
+            assert zygote.import_output == "" and zygote.threads == 1, (zygote.import_output, zygote.threads)
+            _SHARED.append(zygote)
+            atexit.register(lambda: (zygote.close(), shutil.rmtree(scratch, ignore_errors=True)))
+        return _SHARED[0]
+
+
+_SHARED_LOCK = threading.Lock()
 
 if __name__ == "__main__":
     serve()

@@ -47,24 +47,21 @@ def browser():
 
 
 @pytest.fixture(scope="session")
-def pairplay_cli(tmp_path_factory):
+def pairplay_cli():
     """`pairplay_cli(*args, cwd=None, timeout=120)` -> subprocess.CompletedProcess of `python -m pairplay
     ARGS` (text stdout and stderr), each a process of its own forked from one that imported pairplay
-    once per test process (tests/cli_zygote.py): for tests of what a command does, not of how a process
-    starts or stops (signals, Ctrl-C, start-up and exit timing keep their own `python -m pairplay`).
-    pairplay's import printing anything fails the first test that uses it."""
-    from cli_zygote import Zygote
+    once per test process (tests/cli_zygote.py `shared`, which also forks the long-running commands a test
+    talks to: `shared().start`): for tests of what a command does, not of how a process starts or stops
+    (signals, Ctrl-C, start-up and exit timing keep their own `python -m pairplay`). pairplay's import
+    printing anything fails the first test that uses it."""
+    from cli_zygote import shared
 
-    zygote = Zygote(scratch=tmp_path_factory.mktemp("zygote"))
-    assert zygote.import_output == "" and zygote.threads == 1, (zygote.import_output, zygote.threads)
+    zygote = shared()
 
     def run(*args, cwd=None, timeout=120):
         return zygote.run([str(a) for a in args], Path(cwd or os.getcwd()), timeout=timeout)
 
-    try:
-        yield run
-    finally:
-        zygote.close()
+    return run
 
 
 def pytest_xdist_auto_num_workers(config) -> int:

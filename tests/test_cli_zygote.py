@@ -86,3 +86,29 @@ def test_a_command_ends_as_the_interpreters_exit_would_end_it(tmp_path, left):
     r = subprocess.run([sys.executable, str(script)], cwd=tmp_path, capture_output=True, text=True, timeout=60)
     assert (r.returncode, r.stdout, r.stderr) == (3, out, ""), r
     assert (tmp_path / "out.txt").read_text() == written
+
+
+def test_a_started_command_is_read_as_it_writes_signalled_and_reaped_as_popen_gives_it(tmp_path):
+    """`Zygote.start` (the long-running commands the tests kill or talk to: a router, restarted services,
+    SIGKILLed recorders): its first line is read while it runs, a signal reaches it, its exit is Popen's
+    (-9 for SIGKILL), and `communicate` gives both streams, or stdout with stderr in it (STDOUT)."""
+    import signal
+    import subprocess
+
+    from cli_zygote import shared
+    router = shared().start(["router", "--listen", "tcp/127.0.0.1:0"], cwd=tmp_path)
+    try:
+        assert router.stdout.readline().startswith("listening tcp/127.0.0.1:")  # while it runs
+        assert router.poll() is None and router.returncode is None
+        router.send_signal(signal.SIGKILL)
+        assert router.wait(30) == -signal.SIGKILL and router.returncode == -signal.SIGKILL
+    finally:
+        router.kill()  # (a no-op once reaped: its pid may be another's)
+    said = shared().start(["--version"], cwd=tmp_path)
+    out, err = said.communicate(timeout=30)
+    assert said.returncode == 0 and out.startswith("pairplay ") and err == "", (out, err)
+    refused = shared().start(["session", "--rounds", "0"], cwd=tmp_path, stderr=subprocess.STDOUT, text=False)
+    out, err = refused.communicate(timeout=30)
+    assert refused.returncode == 2 and out.startswith(b"pairplay session: ") and err is None, out
+    quiet = shared().start(["--version"], cwd=tmp_path, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    assert quiet.stdout is None and quiet.stderr is None and quiet.wait(30) == 0

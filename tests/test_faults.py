@@ -43,12 +43,21 @@ from pairplay.services.runner import Node
 from pairplay.services.verify import verify_recording
 
 from busutil import wait_until
+from cli_zygote import shared
 
 
 def session_proc(tmp_path, *args, env=None, preexec_fn=None):
+    """`pairplay session --out tmp_path ARGS` as its own process: for the tests of how it starts or stops (a
+    handled signal, its environment, its limits)."""
     return subprocess.Popen([sys.executable, "-m", "pairplay", "session", "--out", str(tmp_path), *args],
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, preexec_fn=preexec_fn,
                             env=dict(os.environ, PYTHONUNBUFFERED="1", **(env or {})))
+
+
+def session_forked(tmp_path, *args):
+    """The same session forked from this test process's zygote (tests/cli_zygote.py): for what it does on its
+    bus and in its file, ending as it ends by itself (each `python -m pairplay` paid ~0.9 s of CPU importing)."""
+    return shared().start(["session", "--out", str(tmp_path), *args])
 
 
 def first_line(proc) -> str:
@@ -101,7 +110,7 @@ def flood(endpoint: str, session: str, n: int, bus: Bus | None = None) -> None:
 def test_a_flood_of_10000_messages_is_refused_and_recorded_and_the_session_finishes(tmp_path):
     # before: ~100 messages at once froze `pairplay session` for good (4 of 4 bursts)
     # 60 rounds: the flood (under a second) lands well inside the session, also on a loaded machine
-    p = session_proc(tmp_path, "--participant", "sim:ashley", "--rounds", "60", "--session", "flood1",
+    p = session_forked(tmp_path, "--participant", "sim:ashley", "--rounds", "60", "--session", "flood1",
                      "--seed", "1")
     try:
         endpoint = endpoint_of(first_line(p))
@@ -336,7 +345,7 @@ def test_a_zenoh_config_file_keeps_our_defaults_for_every_key_it_does_not_set(tm
     assert cfg["transport"]["link"]["tx"]["lease"] == 12000
     z = BusOptions(mode="router", zenoh_config=str(path)).to_zenoh()
     assert json.loads(z.get_json("scouting/multicast/enabled")) is False
-    p = session_proc(tmp_path, "--participant", "sim:ashley", "--rounds", "1", "--session", "cfg1",
+    p = session_forked(tmp_path, "--participant", "sim:ashley", "--rounds", "1", "--session", "cfg1",
                      "--zenoh-config", str(path))
     try:
         line = first_line(p)
@@ -351,7 +360,7 @@ def test_a_zenoh_config_file_keeps_our_defaults_for_every_key_it_does_not_set(tm
 def test_a_bad_zenoh_config_file_is_one_line_and_exit_2(tmp_path):
     path = tmp_path / "bad.json5"
     path.write_text("{ mode: ")
-    p = session_proc(tmp_path, "--participant", "sim:ashley", "--zenoh-config", str(path))
+    p = session_forked(tmp_path, "--participant", "sim:ashley", "--zenoh-config", str(path))
     out, err = p.communicate(timeout=30)
     assert p.returncode == 2 and len(err.strip().splitlines()) == 1 and "bad.json5" in err
 
@@ -385,17 +394,15 @@ class Holding(ParticipantLogic):
 def test_a_restarted_recorder_continues_the_sessions_record_and_marks_the_gap(tmp_path):
     # before: the new recorder wrote <session>.1.mcap without the session's start; verify refused
     # it and the events of the gap were in neither file
-    env = dict(os.environ, PYTHONUNBUFFERED="1")
     # 12 rounds (~60 of the participant's events each): the 350 it is let handle before the new recorder is up, and
     # ~5 rounds after, recorded live; the session is held (Holding) in between, whatever the load (before: 40 rounds,
     # whose last ~34 only played on after the checks' events)
-    p = session_proc(tmp_path, "--participant", "sim:ashley", "--rounds", "12", "--session", "rr1",
-                     "--external", "recorder", "--external", "participant")
+    p = session_forked(tmp_path, "--participant", "sim:ashley", "--rounds", "12", "--session", "rr1",
+                       "--external", "recorder", "--external", "participant")
 
-    def recorder(endpoint):
-        return subprocess.Popen([sys.executable, "-m", "pairplay", "run", "recorder", "--session", "rr1", "--out",
-                                 str(tmp_path), "--connect", endpoint], stdout=subprocess.DEVNULL,
-                                stderr=subprocess.PIPE, text=True, env=env)
+    def recorder(endpoint):  # SIGKILLed, then one that ends with the session: forked (session_forked)
+        return shared().start(["run", "recorder", "--session", "rr1", "--out", str(tmp_path), "--connect", endpoint],
+                              stdout=subprocess.DEVNULL)
     # The session goes on only as its participant (here, a client of its bus) lets it: before, it played on
     # during the gap and the new recorder's start-up, and at load 8+ it could end before the new recorder
     # was on the bus, which then waited for an end it had missed (not done 30 s after the session's).

@@ -16,10 +16,7 @@ recorded (a second ServiceStarted with `resumed_events`, and the service's absen
 
 from __future__ import annotations
 
-import os
 import signal
-import subprocess
-import sys
 import threading
 import time
 from collections import Counter
@@ -40,6 +37,7 @@ from pairplay.services.session import run_session
 from pairplay.services.verify import verify_recording
 
 from busutil import wait_until
+from cli_zygote import shared
 from test_router import free_port, start_router
 
 
@@ -77,11 +75,11 @@ def held_participant(session: str, endpoint: str, recover: bool, gate: threading
         bus.close()
 
 
-def spawn(victim: str, session: str, endpoint: str, recover: bool) -> subprocess.Popen:
+def spawn(victim: str, session: str, endpoint: str, recover: bool):
+    """The victim's own process, forked from this test process's zygote (tests/cli_zygote.py): SIGKILL and a
+    restart, not its start-up, are what is tested (each `python -m pairplay` paid ~0.9 s of CPU importing)."""
     verb = ["robot", "--robot", "virtual"] if victim == "robot" else ["run", victim]
-    return subprocess.Popen([sys.executable, "-m", "pairplay", *verb, "--session", session, "--connect", endpoint,
-                             *(["--recover"] if recover else [])], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                            text=True, env=dict(os.environ, PYTHONUNBUFFERED="1"))
+    return shared().start([*verb, "--session", session, "--connect", endpoint, *(["--recover"] if recover else [])])
 
 
 def restart_mid_session(tmp_path, victim: str, recover: bool, rounds: int = 10):

@@ -13,10 +13,8 @@ Real zenoh on loopback, the forger a second bus session (a Zenoh client of the s
 
 from __future__ import annotations
 
-import os
 import queue
 import subprocess
-import sys
 import threading
 import time
 from pathlib import Path
@@ -36,12 +34,13 @@ from pairplay.services.guard import Guard
 from pairplay.services.session import run_session
 
 from busutil import connector, wait_until
+from cli_zygote import shared
 
 
 def session_proc(tmp_path, *args):
-    return subprocess.Popen([sys.executable, "-m", "pairplay", "session", "--out", str(tmp_path), *args],
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-                            env=dict(os.environ, PYTHONUNBUFFERED="1"))
+    """`pairplay session --out tmp_path ARGS`, forked from this test process's zygote (tests/cli_zygote.py): what
+    it does with a forgery on its bus, not how it starts (each `python -m pairplay` paid ~0.9 s of CPU)."""
+    return shared().start(["session", "--out", str(tmp_path), *args])
 
 
 def said(err: str) -> list[str]:
@@ -286,7 +285,7 @@ def test_the_live_view_follows_a_session_whose_game_goes_on_after_a_forged_end()
             source.close()
 
 
-def next_event(seen: queue.Queue, proc: subprocess.Popen) -> ev.Event:
+def next_event(seen: queue.Queue, proc) -> ev.Event:
     """The next of the game's events the forger sees, waited for as long as the game's process runs (it ends by
     itself if it cannot start: its --wait-for's limit). Before, each was waited for 60 s: at load 42-52 the game
     process's start-up took longer, and 6 of 6 runs failed on `queue.Empty` with the code right."""
@@ -304,11 +303,10 @@ def test_a_game_in_a_process_of_its_own_ends_the_session_on_a_forged_end_with_on
     game = []
 
     def forger(client, seen, endpoint):
-        game.append(subprocess.Popen(
-            [sys.executable, "-m", "pairplay", "run", "game", "--participant", "sim:ashley", "--session", "forge5",
-             "--seed", "1", "--rounds", "300", "--connect", endpoint, "--wait-for", "recorder", "--wait-for",
-             "learner", "--wait-for", "participant"],
-            stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True, env=dict(os.environ, PYTHONUNBUFFERED="1")))
+        game.append(shared().start(  # its own process (forked: tests/cli_zygote.py)
+            ["run", "game", "--participant", "sim:ashley", "--session", "forge5", "--seed", "1", "--rounds", "300",
+             "--connect", endpoint, "--wait-for", "recorder", "--wait-for", "learner", "--wait-for", "participant"],
+            stdout=subprocess.DEVNULL))
         while not (isinstance(e := next_event(seen, game[0]), ev.SuggestionRequested) and e.round >= 1):
             pass
         client.put(*forge("forge5", ev.SessionEnded(reason="completed", rounds_played=1), e.seq + 1))

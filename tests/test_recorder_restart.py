@@ -9,10 +9,8 @@ MCAP lacks it (`earlier_records`)."""
 
 from __future__ import annotations
 
-import os
 import signal
 import subprocess
-import sys
 import time
 
 from pairplay.replay.reader import read_any_log, read_log
@@ -20,15 +18,15 @@ from pairplay.replay.wal import MAGIC, read_journal, wal_path
 from pairplay.schemas import events as ev
 
 from busutil import wait_until
+from cli_zygote import shared
 from test_faults import endpoint_of, first_line, session_proc
 
-ENV = dict(os.environ, PYTHONUNBUFFERED="1")
 
-
-def recorder(tmp_path, session: str, endpoint: str) -> subprocess.Popen:
-    return subprocess.Popen([sys.executable, "-m", "pairplay", "run", "recorder", "--session", session, "--out",
-                             str(tmp_path), "--connect", endpoint], stdout=subprocess.DEVNULL,
-                            stderr=subprocess.PIPE, text=True, env=ENV)
+def recorder(tmp_path, session: str, endpoint: str):
+    """`pairplay run recorder` forked from this test process's zygote (tests/cli_zygote.py): SIGKILLed, or ended
+    by its session's end; its start-up is not what is tested (each `python -m pairplay` paid ~0.9 s of CPU)."""
+    return shared().start(["run", "recorder", "--session", session, "--out", str(tmp_path), "--connect", endpoint],
+                          stdout=subprocess.DEVNULL)
 
 
 def kill_before_first_flush(tmp_path, session: str, endpoint: str) -> None:

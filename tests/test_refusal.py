@@ -12,7 +12,6 @@ Real zenoh on loopback; the forger is a second bus session (a Zenoh client of th
 from __future__ import annotations
 
 import subprocess
-import sys
 import threading
 import time
 
@@ -27,6 +26,7 @@ from pairplay.services.bus import Bus, BusOptions
 from pairplay.services.session import run_session
 
 from busutil import wait_until
+from cli_zygote import shared
 from test_forge import forge, message
 
 SETTLES_S = 30.0  # a session that stops at once is done in a few seconds even at load 30; before: never
@@ -187,9 +187,8 @@ def test_a_game_run_alone_whose_start_a_service_refuses_ends_the_session_in_one_
     from pairplay.services.participant import ParticipantLogic
     from pairplay.services.runner import Node
 
-    game = subprocess.Popen([sys.executable, "-m", "pairplay", "run", "game", "--participant", "human:p1",
-                             "--session", "ref5", "--wait-for", "participant"],
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    game = shared().start(["run", "game", "--participant", "human:p1", "--session", "ref5", "--wait-for",
+                           "participant"])  # its own process, forked (tests/cli_zygote.py): what it does, not its start
     stop = threading.Event()
     try:
         endpoint = game.stdout.readline().split()[1]

@@ -9,8 +9,6 @@ records and records the gap (RecordingGap)."""
 from __future__ import annotations
 
 import socket
-import subprocess
-import sys
 import threading
 import time
 
@@ -26,6 +24,8 @@ from pairplay.services.runner import Node
 from pairplay.services.session import run_session
 from pairplay.services.verify import verify_recording
 
+from cli_zygote import shared
+
 
 def free_port() -> int:
     with socket.socket() as s:
@@ -33,9 +33,10 @@ def free_port() -> int:
         return s.getsockname()[1]
 
 
-def start_router(port: int) -> subprocess.Popen:
-    p = subprocess.Popen([sys.executable, "-m", "pairplay", "router", "--listen", f"tcp/127.0.0.1:{port}"],
-                         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+def start_router(port: int):
+    """`pairplay router` on that port, listening: forked from this test process's zygote (tests/cli_zygote.py;
+    its start-up and its signals are not what the tests that use it test: it is killed, SIGKILL, or ended)."""
+    p = shared().start(["router", "--listen", f"tcp/127.0.0.1:{port}"])
     assert p.stdout.readline().startswith(f"listening tcp/127.0.0.1:{port}")
     return p
 

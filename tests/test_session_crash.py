@@ -2,10 +2,8 @@
 log with no reward lost or counted twice, as if it had never crashed; a recorder killed with SIGKILL leaves a readable file
 holding everything older than its flush interval, and `recover` completes it."""
 
-import os
 import signal
 import subprocess
-import sys
 import threading
 from collections import Counter
 
@@ -29,12 +27,13 @@ from pairplay.services.session import run_session
 from pairplay.services.verify import verify_recording
 
 from busutil import collect, listener, recorder_process, sigkill, wait_until
+from cli_zygote import shared
 
 
 def spawn(*args):
-    env = dict(os.environ, PYTHONUNBUFFERED="1")
-    return subprocess.Popen([sys.executable, "-m", "pairplay", "run", *args], stdout=subprocess.PIPE,
-                            stderr=subprocess.STDOUT, env=env)
+    """`pairplay run ARGS`, forked from this test process's zygote (tests/cli_zygote.py): SIGKILL and a restart,
+    not its start-up, are what is tested (each `python -m pairplay` paid ~0.9 s of CPU importing)."""
+    return shared().start(["run", *args], stderr=subprocess.STDOUT, text=False)
 
 
 @pytest.mark.parametrize("victim", ["learner", "participant", "game"])
