@@ -197,8 +197,8 @@ def check_readme(path: Path, names: list[str], quick: bool) -> None:
     if partial:
         raise OptionError(f"--readme rewrites the README's whole table from a full run; {' and '.join(partial)} "
                           "would replace it with part of one: give --readme without them", "--readme")
+    check_output(path, force=True)  # first: a pipe there is refused, not read (reading one waits for a writer)
     _readme_parts(path)
-    check_output(path, force=True)
 
 
 def write_readme(path: Path, text: str) -> None:

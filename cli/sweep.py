@@ -146,11 +146,12 @@ def run(args) -> int:
     out = check_folder(args.out or Path("out") / f"sweep-{args.grid.stem.removeprefix('sweep-')}")
     copy = out / "grid.toml"
     text = args.grid.read_text()
+    check_sweep_places(out, grid)  # before any work: a folder where a file goes is not one of ours to replace
+    # (first: a folder at grid.toml was "the sweep of another grid", and with --force the OS's "Is a directory";
+    # a pipe at sweep.md was "holds files but no sweep ... or --force", which --force would not have done)
     if out.is_dir() and any(out.iterdir()) and not copy.exists() and not args.force:  # not a sweep's folder
         raise OutputError("holds files but no sweep (no grid.toml); give another --out, or --force to write "
                           "the sweep's files there", out)
-    check_sweep_places(out, grid)  # before any work: a folder where a file goes is not one of ours to replace
-    # (first: a folder at grid.toml was "the sweep of another grid", and with --force the OS's "Is a directory")
     other_grid = copy.exists() and not same_grid(copy, grid)
     if other_grid and not args.force:
         print(f"pairplay sweep: {out} holds the sweep of another grid ({copy}); give another --out or --force",

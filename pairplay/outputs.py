@@ -53,6 +53,7 @@ import logging
 import os
 import re
 import shutil
+import stat
 from pathlib import Path
 from typing import IO, Iterable, Iterator
 
@@ -113,13 +114,48 @@ def _file_id(path: Path) -> tuple[int, int] | None:
     return st.st_dev, st.st_ino
 
 
+# What may stand where a file is written: nothing, or a regular file (replaced with `force`). Anything else is
+# refused in one line naming what it is, `force` or not (`check_kind`): as root, `combine -o mynull --force` (a
+# character device), `-o myfifo --force` and `view --out mynull --force` replaced the device or pipe with a regular
+# file, and `combine -o /dev/null` said "exists; --force replaces it", inviting the system's /dev/null to go. A
+# symbolic link is refused too: replacing it loses the link, writing through it writes wherever it points.
+_KINDS = {stat.S_IFCHR: "a character device", stat.S_IFBLK: "a block device", stat.S_IFIFO: "a named pipe (FIFO)",
+          stat.S_IFSOCK: "a socket", stat.S_IFLNK: "a symbolic link"}
+
+
+def special_kind(path: str | Path, follow: bool = False) -> str | None:
+    """What stands at `path` (not followed if a link, unless `follow`: a file appended to, not replaced) when it
+    is neither nothing, a regular file nor a folder: "a character device", "a named pipe (FIFO)", "a symbolic
+    link (to X)"...; None otherwise."""
+    try:
+        mode = (os.stat if follow else os.lstat)(path).st_mode
+    except OSError:  # nothing there (or not to be told: the write itself says)
+        return None
+    if stat.S_ISREG(mode) or stat.S_ISDIR(mode):
+        return None
+    kind = _KINDS.get(stat.S_IFMT(mode), "not a regular file")
+    if stat.S_ISLNK(mode):
+        kind += f" (to {os.readlink(path)})"
+    return kind
+
+
+def check_kind(path: str | Path) -> None:
+    """OutputError if `path` holds something a written file may not replace (`special_kind`), `force` or not;
+    its line gives no `--force` hint, since --force would not."""
+    kind = special_kind(path)
+    if kind is not None:
+        raise OutputError(f"is {kind}, not a regular file; pairplay replaces only a regular file, --force or not: "
+                          "give another name", path)
+
+
 def check_output(path: str | Path, force: bool = False, inputs: Iterable[str | Path] = ()) -> Path:
     """`path` as a Path if a file may be written there; OutputError otherwise.
 
-    Refused: a folder, one of the verb's `inputs` (by any name, `force` or not: `combine a.json b.json
-    -o a.json --force` replaced its own input, silently), an existing file (unless `force`), a place
-    whose nearest existing folder is a file or read-only."""
+    Refused: a folder, a device, pipe, socket or link (`check_kind`, `force` or not), one of the verb's `inputs`
+    (by any name, `force` or not: `combine a.json b.json -o a.json --force` replaced its own input, silently),
+    an existing file (unless `force`), a place whose nearest existing folder is a file or read-only."""
     path = Path(path)
+    check_kind(path)
     if path.is_dir():
         raise OutputError("is a folder; give a file name", path)
     me = _file_id(path)
@@ -153,7 +189,7 @@ def check_folder(path: str | Path) -> Path:
     """`path` as a Path if it is, or can become, a folder we write into; OutputError otherwise."""
     path = Path(path)
     if path.exists() and not path.is_dir():
-        raise OutputError("is a file, not a folder", path)
+        raise OutputError(f"is {special_kind(path) or 'a file'}, not a folder", path)
     if path.is_dir():
         if not os.access(path, os.W_OK | os.X_OK):
             raise OutputError("cannot write there: the folder is read-only", path)
@@ -231,6 +267,7 @@ def _mkdir(path: Path) -> None:
 
 def _commit(tmp: Path, path: Path, force: bool) -> None:
     if force:
+        check_kind(path)  # again: a pipe or device made there while we worked is not replaced either
         os.replace(tmp, path)
         return
     try:
@@ -324,10 +361,10 @@ def check_output_folder(path: str | Path, force: bool = False, owned: tuple[str,
     `manifest`: the writer's own); OutputError otherwise (call it before the work)."""
     path = check_folder(path)
     check_theirs(path, owned, manifest)
+    check_places(path, owned)  # first: --force would not help (a folder, a pipe where a file goes), so no hint of it
     if path.exists() and not _is_empty_dir(path) and not force:
         raise OutputError("exists and is not empty", path, fix="--force replaces the files written there",
                           option="--force")
-    check_places(path, owned)
     return path
 
 
@@ -369,6 +406,7 @@ def check_places(path: Path, owned: tuple[str, ...] = (), files: Iterable[str] =
         return
     for rel in files:
         target = path / rel
+        check_kind(target)
         if target.is_dir() and not target.is_symlink():
             raise OutputError("is a folder where a file is written; a folder is never replaced, --force or not: "
                               "remove or rename it", target)
@@ -380,6 +418,8 @@ def check_places(path: Path, owned: tuple[str, ...] = (), files: Iterable[str] =
             literal += 1
         _check_above(path, path.joinpath(*parts[:literal], "x"))
         for old in sorted(path.glob(pattern)):
+            if is_owned(old.relative_to(path).as_posix(), (pattern,)):
+                check_kind(old)
             if old.is_dir() and not old.is_symlink() and is_owned(old.relative_to(path).as_posix(), (pattern,)):
                 raise OutputError("is a folder where a file is written; a folder is never replaced, --force or "
                                   "not: remove or rename it", old)

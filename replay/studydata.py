@@ -55,7 +55,7 @@ from pairplay import __version__, csvcell, folderlock, signals, testpause
 from pairplay.errors import InputError, UserError
 from pairplay.livelock import LIVE, is_live
 from pairplay.outputs import (OutputError, check_output, check_places, manifest_name, output_file, read_manifest,
-                              remove_written, set_aside_of, write_manifest)
+                              remove_written, set_aside_of, special_kind, write_manifest)
 from pairplay.schemas import journal as j
 from pairplay.schemas.jsonfile import in_words, without_bom
 from pairplay.schemas.policy import read_policy, write_policy
@@ -134,6 +134,9 @@ def open_key_file(path: Path):
     if it cannot be made (the path says where)."""
     if path.is_dir():  # it said the system's "Is a directory"
         raise StudyDataError("a folder, not a key file: give the path of a CSV file (made if missing)", path)
+    kind = special_kind(path, follow=True)  # a link to the user's key file is theirs to keep; appended through
+    if kind is not None:  # a named pipe: `protocol init --key-file FIFO` waited for ever; a device took the names
+        raise StudyDataError(f"is {kind}, not a key file: give the path of a regular CSV file (made if missing)", path)
     try:
         path.parent.mkdir(mode=KEY_FOLDER_MODE, parents=True, exist_ok=True)
         fd = os.open(path, os.O_WRONLY | os.O_APPEND | os.O_CREAT, KEY_FILE_MODE)
