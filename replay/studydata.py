@@ -37,6 +37,7 @@ from __future__ import annotations
 
 import contextlib
 import csv
+import fnmatch
 import hashlib
 import io
 import logging
@@ -126,6 +127,24 @@ def atomic_write(path: Path, data: bytes) -> None:
 
 
 KEY_FILE_MODE, KEY_FOLDER_MODE = 0o600, 0o700  # the one file that links ids to names: its owner only
+
+
+def other_work(folder: Path) -> list[str]:
+    """What the folder `folder` holds that makes it no place for a new study (`StudyData.create`), sorted, a folder
+    named with a `/`: every entry but a hidden one (`.DS_Store`, `.git`: a file manager's or the user's own, not
+    work), though another pairplay verb's manifest (`.pairplay-*.manifest`) is work (that verb's outputs are
+    there), and but what a `create` cut short leaves (the study file, the settings, its folders empty), which it
+    writes again. Empty if `folder` is missing or is not a folder (check_places says that)."""
+    if not folder.is_dir():
+        return []
+
+    def work(p: Path) -> bool:
+        if p.name.startswith("."):
+            return fnmatch.fnmatchcase(p.name, manifest_name("*"))
+        if p.name in (STUDY_FILE, SETTINGS):
+            return False
+        return not (p.name in SUBFOLDERS and p.is_dir() and not p.is_symlink() and not any(p.iterdir()))
+    return sorted(p.name + ("/" if p.is_dir() else "") for p in folder.iterdir() if work(p))
 
 
 def open_key_file(path: Path):
@@ -428,6 +447,13 @@ class StudyData:
         if (folder / JOURNAL).exists():
             # not "already a study folder": a folder named `study` is a word of it, and the line then left out where
             raise StudyDataError(f"already initialised ({JOURNAL} is there); give another folder", given)
+        others = other_work(folder)
+        if others:  # `protocol init wt1` where the README's walkthrough left recordings/, rebuilt/, merged.json: rc 0,
+            # then `session`/`rebuild --out` there were refused (only `protocol` writes a study folder) and the
+            # unrelated recordings sat among the study's; a new study starts in a new or empty folder
+            shown = ", ".join(others[:3]) + (f" and {len(others) - 3} more" if len(others) > 3 else "")
+            raise StudyDataError(f"holds other work ({shown}); a study folder is made in a new or empty folder "
+                                 "(hidden files aside): give another folder", given)
         if key_file is not None:
             key = Path(key_file).resolve()
             if key.is_relative_to(folder):
