@@ -47,7 +47,7 @@ from pathlib import Path
 from pairplay.cli.args import output_folder, workers
 from pairplay.cli.progress import bar as progress
 from pairplay.errors import OptionError, OutputError
-from pairplay.outputs import check_folder, write_text
+from pairplay.outputs import check_folder, hold, write_text
 from pairplay.report.sweep import (GridError, check_scheduler, check_sweep_memory, finished_cells, is_cell_file,
                                     read_grid, run_sweep, summary_files, summary_to_write,
                                     write_sweep)
@@ -143,7 +143,9 @@ def run(args) -> int:
     else:
         check_scheduler(args.scheduler)
     # out/sweep-<grid>, the grid's "sweep-" said once (examples/sweep-psi.toml wrote out/sweep-sweep-psi)
-    out = check_folder(args.out or Path("out") / f"sweep-{args.grid.stem.removeprefix('sweep-')}")
+    out = args.out or Path("out") / f"sweep-{args.grid.stem.removeprefix('sweep-')}"
+    hold(out, "sweep")  # one writer per output (pairplay/outputs.py): two sweeps of one folder computed every cell twice
+    out = check_folder(out)
     copy = out / "grid.toml"
     text = args.grid.read_text()
     check_sweep_places(out, grid)  # before any work: a folder where a file goes is not one of ours to replace

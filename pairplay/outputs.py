@@ -48,16 +48,18 @@ import contextlib
 import errno
 import fnmatch
 import glob
+import hashlib
 import json
 import logging
 import os
 import re
 import shutil
 import stat
+import tempfile
 from pathlib import Path
 from typing import IO, Iterable, Iterator
 
-from pairplay import signals, testpause
+from pairplay import folderlock, signals, testpause
 from pairplay.errors import OutputError
 from pairplay.livelock import LIVE, is_live
 from pairplay.numbers import counted
@@ -66,6 +68,54 @@ FORCE_FIX = "--force replaces it"  # shown only by a verb that has --force (erro
 
 
 written: list[Path] = []  # every output renamed into place by this process, in order (module rule; cli/main.py)
+
+
+# -- one writer per output -----------------------------------------------------------------------------------
+# Two `pairplay sweep sweep-psi.toml` on the same output 1 s apart both computed every cell (rc 0 and 0): the work
+# done twice, each writing over the other's cells. A verb writing an output (a folder of them: sweep, study,
+# counterfactual, report, rebuild --out; a file: view --out, combine -o, recover -o) holds that output's writer
+# lock from before its checks until it ends (`hold`; the kernel drops it however the process ends), and a second
+# writer of the same output is refused at once, in one line naming the holder: its work would be done twice, and
+# the outputs it meets half written by the other. The lock file is kept outside the output, in a folder of the
+# user's in the system's temporary folder (`LOCKS`), named after the output's absolute path (symbolic links
+# resolved: two names of one folder are one output), so that no output holds a file of it and a folder not yet
+# made can be locked. flock, as pairplay/folderlock.py says why; a people's study folder keeps its own lock there.
+
+_HELD_OUTPUTS: dict[Path, int] = {}  # output (resolved) -> the descriptor of its lock held by this process
+
+
+def _locks_folder() -> Path:
+    return Path(tempfile.gettempdir()) / f"pairplay-outputs-{os.getuid()}"
+
+
+def hold(path: str | Path, verb: str) -> None:
+    """Take the writer lock of the output `path` (a file or a folder) for `verb` (`pairplay VERB`) until the
+    process ends or `release_held`; OutputError "busy" naming the holder if another process holds it. Taken
+    again by the same process: nothing to do. A system without the locks' folder or locks: the verb goes on
+    unlocked (as a study folder's lock, pairplay/folderlock.py)."""
+    key = Path(path).resolve()
+    if key in _HELD_OUTPUTS:
+        return
+    folder = _locks_folder()
+    try:
+        folder.mkdir(mode=0o700, exist_ok=True)
+    except OSError:
+        return
+    name = hashlib.sha256(os.fsencode(key)).hexdigest()[:32] + ".lock"
+    try:
+        fd = folderlock.take_file(folder / name, f"pairplay {verb}")
+    except folderlock.FolderBusy as busy:
+        who = busy.holder or "another pairplay (it has not said which yet)"
+        raise OutputError(f"busy: {who} writes it; wait for it to end, or give another output", path) from None
+    if fd is not None:
+        _HELD_OUTPUTS[key] = fd
+
+
+def release_held() -> None:
+    """Release every output's writer lock this process holds (cli/main.py, when a verb ends however it ends: a
+    verb run in-process, a test's, leaves none)."""
+    while _HELD_OUTPUTS:
+        folderlock.release(_HELD_OUTPUTS.popitem()[1])
 
 
 def _existing_ancestor(path: Path) -> Path:
