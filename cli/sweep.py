@@ -144,7 +144,7 @@ def run(args) -> int:
         check_scheduler(args.scheduler)
     # out/sweep-<grid>, the grid's "sweep-" said once (examples/sweep-psi.toml wrote out/sweep-sweep-psi)
     out = args.out or Path("out") / f"sweep-{args.grid.stem.removeprefix('sweep-')}"
-    hold(out, "sweep")  # one writer per output (pairplay/outputs.py): two sweeps of one folder computed every cell twice
+    hold(out, "sweep")  # one writer per output (pairplay/outputs.py): two sweeps of one folder computed each cell twice
     out = check_folder(out)
     copy = out / "grid.toml"
     text = args.grid.read_text()

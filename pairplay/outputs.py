@@ -1,4 +1,4 @@
-"""Every file pairplay writes for a user goes through here: no clobber, atomic.
+"""Every file pairplay writes for a user goes through here: no clobber, atomic, one writer per output.
 
 Rule: an existing output is never replaced unless the caller says `force`
 (the verbs' `--force`); a write goes to a temporary file beside its target
@@ -22,7 +22,9 @@ lists (a people's study folder's: `rebuild --out STUDY/policies` is refused a ga
 files moved in together the same way. A folder
 standing where a file is written, or a file where a folder is needed, is refused
 (`check_places`, from `check_output_folder` before the work): a folder is never
-replaced or removed, `force` or not. Refusals are
+replaced or removed, `force` or not; nor is anything but a regular file (a device, a pipe, a socket, a
+symbolic link: `check_kind`, `force` or not, its line offering no --force). A verb holds its output's writer
+lock (`hold`) from before its checks to its end: a second writer of it is refused at once. Refusals are
 `OutputError`s naming the path, raised before any work where the caller
 checks first (`check_output`, `check_outputs`, `check_folder`: each makes the
 folders it needs and a file there, then removes them, so a place the system

@@ -228,10 +228,10 @@ def journals_of(path: Path) -> list[Path]:
 
 def check_not_folders(path: str | Path) -> None:
     """OutputError naming it if the recording `path`, one of its `<stem>.<k>.mcap`, a journal or a file set
-    aside of the session is a folder, a device, a pipe, a socket or a link (outputs.special_kind): it is no recording, and not pairplay's to
-    replace or rename, --force or not. Called before anything starts: `session --force` ran the whole
-    session, then exited 2, the folder renamed `<id>.mcap.replaced`; without --force it said "has a
-    recording already; --force replaces it", which did not."""
+    aside of the session is a folder, a device, a pipe, a socket or a link (outputs.special_kind): it is no
+    recording, and not pairplay's to replace or rename, --force or not. Called before anything starts:
+    `session --force` ran the whole session, then exited 2, the folder renamed `<id>.mcap.replaced`; without
+    --force it said "has a recording already; --force replaces it", which did not."""
     path = Path(path)
     for p in [path, *recordings_of(path), *journals_of(path), *set_aside_of(path)]:
         kind = special_kind(p)  # a device, pipe, socket or link: `session --force` renamed it aside, then removed it

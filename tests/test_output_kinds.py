@@ -16,26 +16,10 @@ import stat
 from pathlib import Path
 
 import pytest
+from test_outputs import ONE_GAME_STUDY
 
 SAMPLES = Path(__file__).resolve().parents[1] / "recordings" / "samples"
 
-ONE_GAME_STUDY = """[study]
-id = "one"
-title = "one game"
-seed = 0
-ignore_window_ms = 1500
-wrong_suggestion_button = true
-robot = "none"
-
-[[phase]]
-id = "phase1"
-title = "phase 1"
-games = 1
-rounds = 1
-algorithm = "q-learning"
-preset = "human-phase1"
-players = "new"
-"""
 GRID = """seeds = 1
 [study]
 personas = "blind"
@@ -67,7 +51,8 @@ VERBS = {
 
 @pytest.fixture(scope="module")
 def template(tmp_path_factory, pairplay_cli) -> Path:
-    """A folder with what the verbs read: a recording, a cut one, rebuilt policies, a study file, a grid."""
+    """A folder with what the verbs read: a recording, a cut one, rebuilt policies, a study file and a study folder,
+    a grid."""
     root = tmp_path_factory.mktemp("kinds")
     shutil.copy(SAMPLES / "sim-ashley.mcap", root / "R.mcap")
     data = (SAMPLES / "sim-ashley.mcap").read_bytes()
@@ -76,6 +61,8 @@ def template(tmp_path_factory, pairplay_cli) -> Path:
     assert r.returncode == 0, r.stderr
     (root / "one.toml").write_text(ONE_GAME_STUDY)
     (root / "grid.toml").write_text(GRID)
+    r = pairplay_cli("protocol", "init", "study", "--study", "one.toml", cwd=root)  # for a report (test_output_writers)
+    assert r.returncode == 0, r.stderr
     for folder in ("rb", "st", "cf", "sw", "rec"):
         (root / folder).mkdir()
     return root

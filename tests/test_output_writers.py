@@ -17,34 +17,7 @@ import sys
 from pathlib import Path
 
 import pytest
-
-SAMPLES = Path(__file__).resolve().parents[1] / "recordings" / "samples"
-GRID = """seeds = 1
-[study]
-personas = "blind"
-games = 1
-rounds = 3
-eval_rounds = 1
-[grid]
-reward_bonus = ["correct"]
-"""
-ONE_GAME_STUDY = """[study]
-id = "one"
-title = "one game"
-seed = 0
-ignore_window_ms = 1500
-wrong_suggestion_button = true
-robot = "none"
-
-[[phase]]
-id = "phase1"
-title = "phase 1"
-games = 1
-rounds = 1
-algorithm = "q-learning"
-preset = "human-phase1"
-players = "new"
-"""
+from test_output_kinds import GRID, ONE_GAME_STUDY, SAMPLES, template  # noqa: F401  (the module's fixture)
 
 
 def test_a_second_sweep_of_one_output_is_refused_while_the_first_writes(tmp_path, pairplay_cli):
@@ -70,28 +43,13 @@ def test_a_second_sweep_of_one_output_is_refused_while_the_first_writes(tmp_path
     assert r.returncode == 0 and "nothing to do" in r.stdout, r.stderr
 
 
-@pytest.fixture(scope="module")
-def template(tmp_path_factory, pairplay_cli) -> Path:
-    root = tmp_path_factory.mktemp("writers")
-    shutil.copy(SAMPLES / "sim-ashley.mcap", root / "R.mcap")
-    data = (SAMPLES / "sim-ashley.mcap").read_bytes()
-    (root / "cut.mcap").write_bytes(data[:len(data) * 2 // 3])
-    r = pairplay_cli("rebuild", "R.mcap", "--out", "rebuilt", "--no-plot", cwd=root)
-    assert r.returncode == 0, r.stderr
-    (root / "grid.toml").write_text(GRID)
-    (root / "one.toml").write_text(ONE_GAME_STUDY)
-    r = pairplay_cli("protocol", "init", "pf", "--study", "one.toml", cwd=root)
-    assert r.returncode == 0, r.stderr
-    return root
-
-
 # verb -> (its arguments, the output it writes)
 WRITERS = {
     "sweep": (("sweep", "grid.toml", "--out", "sw"), "sw"),
     "study": (("study", "--out", "st", "--games", "1", "--rounds", "3", "--personas", "blind", "--eval-rounds", "1",
                "--train-only"), "st"),
     "counterfactual": (("counterfactual", "R.mcap", "--fit-only", "--out", "cf"), "cf"),
-    "report": (("report", "pf", "--out", "rp"), "rp"),
+    "report": (("report", "study", "--out", "rp"), "rp"),
     "rebuild": (("rebuild", "R.mcap", "--out", "rb", "--no-plot"), "rb"),
     "view": (("view", "--recording", "R.mcap", "--out", "R.rrd"), "R.rrd"),
     "combine": (("combine", "rebuilt/", "-o", "merged.json"), "merged.json"),
