@@ -54,7 +54,10 @@ WRITERS = {
     "view": (("view", "--recording", "R.mcap", "--out", "R.rrd"), "R.rrd"),
     "combine": (("combine", "rebuilt/", "-o", "merged.json"), "merged.json"),
     "recover": (("recover", "cut.mcap", "-o", "fixed.mcap"), "fixed.mcap"),
+    "protocol init": (("protocol", "init", "new", "--study", "one.toml"), "new"),
+    "bench --readme": (("bench", "--readme", "BENCH.md"), "BENCH.md"),
 }
+NO_FORCE = ("protocol init", "bench --readme")
 
 
 @pytest.mark.parametrize("verb", WRITERS)
@@ -69,7 +72,7 @@ def test_every_writer_of_an_output_is_refused_while_another_writes_it(verb, temp
     before = sorted(p.relative_to(root).as_posix() for p in root.rglob("*"))
     outputs.hold(root / out, "sweep")  # by another name of it: the lock is the output's, however it is named
     try:
-        r = pairplay_cli(*args, "--force", cwd=root, timeout=180)
+        r = pairplay_cli(*args, *(() if verb in NO_FORCE else ("--force",)), cwd=root, timeout=180)
     finally:
         outputs.release_held()
     assert r.returncode == 2 and r.stderr.count("\n") == 1, (r.stdout, r.stderr)
