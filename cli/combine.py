@@ -36,7 +36,7 @@ from pairplay.core.policies import (by_participant, check_distinct, check_exclud
                                     combined_policy_file, common_reward_bonus, partial_inputs, users_from_policies)
 from pairplay.errors import InputError, OptionError
 from pairplay.lists import comma_items
-from pairplay.outputs import check_output
+from pairplay.outputs import check_output, hold
 from pairplay.schemas.policy import read_policy, write_policy
 from pairplay.cli.args import add_force, output_file, seed_number, update_count
 from pairplay.numbers import counted
@@ -184,6 +184,7 @@ def _action_lines(policies, min_updates: int) -> list[str]:
 
 def run_combine(args) -> int:
     if args.out is not None:
+        hold(args.out, "combine")  # one writer per output (pairplay/outputs.py)
         check_output(args.out, args.force)  # before any work
     policies, files = _load(args)
     if args.out is not None:

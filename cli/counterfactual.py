@@ -108,7 +108,7 @@ def run(args: argparse.Namespace) -> int:
     from pairplay.core.rng import game_seed
     from pairplay.core.userfit import fit_user, pooled
     from pairplay.errors import InputError
-    from pairplay.outputs import check_output_folder
+    from pairplay.outputs import check_output_folder, hold
     from pairplay.replay.check import check_recording, read_session
     from pairplay.replay.rebuild import output_stem, rebuild_events
     from pairplay.replay.turns import read_turns, turns_from_events
@@ -123,6 +123,7 @@ def run(args: argparse.Namespace) -> int:
     rec = check_recording(args.recording)
     stem = output_stem(rec)
     out = Path(args.out) if args.out else Path("out") / "counterfactual" / stem
+    hold(out, "counterfactual")  # one writer per output (pairplay/outputs.py)
     check_output_folder(out, args.force, COUNTERFACTUAL_OUTPUTS, COUNTERFACTUAL_MANIFEST)
     from pairplay.replay.copies import Copies
     # a study's recording fitted (or its policies played): a copy of its participant's data their deletion must know

@@ -491,10 +491,13 @@ def _main(argv: list[str], arm=None) -> int:
         with _summary_silenced(args.quiet and (args.verb in QUIET_SUMMARIES or _who(args) in QUIET_SUMMARIES)):
             try:
                 code = int(module.run(args) or 0)
-            finally:  # the study folders' locks its outputs took (replay/copies.py), however it ended
-                copies = sys.modules.get("pairplay.replay.copies")
+            finally:  # the study folders' locks its outputs took (replay/copies.py), however it ended, and its
+                copies = sys.modules.get("pairplay.replay.copies")  # outputs' own (pairplay/outputs.py `hold`)
                 if copies is not None:
                     copies.release_held()
+                outputs = sys.modules.get("pairplay.outputs")
+                if outputs is not None:
+                    outputs.release_held()
         stopped = signal_received()  # at once: a signal the verb's own handler (a bus verb's) met while it ran
         interrupts.work_done()
         if stopped:

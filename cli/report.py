@@ -36,7 +36,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 def run(args) -> int:
     from pairplay.cli.protocol import built_missing_policies
-    from pairplay.outputs import check_output_folder, output_folder
+    from pairplay.outputs import check_output_folder, hold, output_folder
     from pairplay.replay.studydata import StudyData
     from pairplay.report.human import HUMAN_MANIFEST, HUMAN_OUTPUTS, human_report
 
@@ -51,6 +51,7 @@ def run(args) -> int:
     if args.folder.is_file():  # it said "cannot write there" of its report/ (a file where a folder is needed)
         print(f"pairplay report: {not_a_study_folder(args.folder)}", file=sys.stderr)
         return 2
+    hold(args.out or args.folder / "report", "report")  # one writer per output (pairplay/outputs.py)
     out = check_output_folder(args.out or args.folder / "report", args.force, HUMAN_OUTPUTS,
                               HUMAN_MANIFEST)  # before any work
     copies = Copies("report", [args.folder])  # a report beyond report/ is a copy their deletion must know

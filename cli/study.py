@@ -96,11 +96,12 @@ def settings_of(args):
 
 
 def run(args) -> int:
-    from pairplay.outputs import check_output_folder
+    from pairplay.outputs import check_output_folder, hold
 
     settings = settings_of(args)  # every option first, before anything is written
     from pairplay.report.study import STUDY_MANIFEST, STUDY_OUTPUTS, first_rounds_text, run_study, text_table
 
+    hold(args.out, "study")  # one writer per output (pairplay/outputs.py): a second one is refused, not run twice
     check_output_folder(args.out, args.force, STUDY_OUTPUTS, STUDY_MANIFEST)  # a folder where a file of it goes: refused now
 
     report = run_study(settings, args.out, _bar(args.quiet), force=args.force)

@@ -48,7 +48,7 @@ from pairplay.cli.args import (add_force, file_in, float_at_least, int_at_least,
                                 session_id, speed)
 from pairplay.errors import InputError, OptionError, OutputError, UserError
 from pairplay.livelock import LIVE, is_live
-from pairplay.outputs import check_output, output_path
+from pairplay.outputs import check_output, hold, output_path
 from pairplay.cli.main import left_journals, warn
 from pairplay.replay.check import read_session
 from pairplay.services.bus import add_bus_arguments
@@ -121,6 +121,7 @@ def run(args: argparse.Namespace) -> int:
     say = print if not getattr(args, "quiet", False) else (lambda *_, **__: None)
     if rrd is not None:
         # before any work: an existing .rrd stays unless --force, and the recording viewed always
+        hold(rrd, "view")  # one writer per output (pairplay/outputs.py)
         check_output(rrd, args.force, inputs=[args.recording] if args.recording else [])
     from pairplay.replay.copies import Copies
     copies = Copies("view", [args.recording] if args.recording else [])  # a study's recording drawn elsewhere: a
