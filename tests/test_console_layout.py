@@ -107,6 +107,53 @@ def test_every_button_is_clickable_and_the_page_never_scrolls_sideways(browser, 
             server.close()
 
 
+# A new user's trial at 1280x900: the plan's numbers from 10 on were cut at the panel's edge (".0. p01: phase2
+# game 1": the list's markers are drawn in its padding, which held one digit), and the Games table's headers
+# broke letter by letter ("sessio n", "w h o": every cell could break anywhere, headers too).
+WORDS_BROKEN = """() => {
+  const bad = [];
+  for (const th of document.querySelectorAll('th')) {
+    const text = th.firstChild;
+    if (!text || text.nodeType !== Node.TEXT_NODE) continue;
+    let at = 0;
+    for (const word of text.data.split(' ')) {
+      const range = document.createRange();
+      range.setStart(text, at); range.setEnd(text, at + word.length);
+      if (word && range.getClientRects().length > 1) bad.push(word);
+      at += word.length + 1;
+    }
+  }
+  return bad;
+}"""
+MARKERS_CUT = """() => {
+  const ol = document.getElementById('plan');
+  const item = ol.querySelector('li:last-child');
+  const style = getComputedStyle(item);
+  const ctx = document.createElement('canvas').getContext('2d');
+  ctx.font = `${style.fontWeight} ${style.fontSize} ${style.fontFamily}`;
+  // the widest marker of a plan of up to 99 steps (this one has fewer: the trial's had 10+), in the items' font
+  const marker = ctx.measureText(`${Math.max(ol.children.length, 99)}. `).width;
+  return [ol.children.length, marker, parseFloat(getComputedStyle(ol).paddingLeft)];
+}"""
+
+
+@pytest.mark.parametrize("width,height", [(1280, 900), (1024, 768)])
+def test_no_header_breaks_inside_a_word_and_every_plan_number_shows(browser, played, width, height):
+    with Bus(BusOptions()) as bus:
+        server = StudyLabServer(StudyRunner(StudyData(played), bus)).start()
+        try:
+            ctx = browser.new_context(viewport={"width": width, "height": height}, bypass_csp=True)
+            page = ctx.new_page()
+            page.goto(server.console_url)
+            page.wait_for_function("document.querySelectorAll('#games tbody tr').length == 8", timeout=15000)
+            assert page.evaluate(WORDS_BROKEN) == []
+            steps, marker, room = page.evaluate(MARKERS_CUT)
+            assert steps > 0 and marker <= room, (steps, marker, room)
+            ctx.close()
+        finally:
+            server.close()
+
+
 def test_an_id_in_the_key_file_only_is_listed_as_what_it_is(browser, tmp_path):
     """Bob's registration and participants.csv row removed by hand, his key-file line left: `protocol status` said
     it, the console listed p01 alone (the experimenter saw nothing wrong). It lists p02 as not registered, in the
