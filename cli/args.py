@@ -266,6 +266,19 @@ def note_given(action: argparse.Action) -> None:
     action.__class__ = Noted
 
 
+def option_policy(path, option: str):
+    """The policy file `path` an option names (`option`: as typed, `--policy reuse:p.json`); its refusal names the
+    option, in place of the path it starts with: "nope.json: cannot read" named no option (a new user's trial)."""
+    from pairplay.errors import OptionError, UserError
+    from pairplay.schemas.policy import read_policy
+
+    try:
+        return read_policy(path)
+    except UserError as err:
+        what = err.what.removeprefix(f"{path}: ").removeprefix(f"{Path(path)}: ")
+        raise OptionError(f"{option}: {what}", option.split()[0]) from None
+
+
 def add_force(p: argparse.ArgumentParser, what: str = "existing outputs") -> None:
     p.add_argument("--force", action="store_true", help=f"replace {what} (never replaced without it)")
 

@@ -19,7 +19,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from pairplay.cli.args import add_force, count, int_at_least, note_given, output_folder, seed_number
+from pairplay.cli.args import add_force, count, int_at_least, note_given, option_policy, output_folder, seed_number
 from pairplay.numbers import counted
 
 ARMS_HELP = ("comma-separated arms: same (the recorded learner, replayed: checks the fit), q (Q-learning from "
@@ -103,19 +103,6 @@ def parse_arms(text: str) -> list[tuple[str, str]]:
     return arms
 
 
-def read_arm_policy(arm: str, path: str):
-    """The policy file of arm `arm` (reuse:FILE, fixed:FILE); an unreadable one is an OptionError naming
-    the option and the arm (it said "nope.json: cannot read", not which option or arm gave the file)."""
-    from pairplay.errors import OptionError, UserError
-    from pairplay.schemas.policy import read_policy
-
-    try:
-        return read_policy(path)
-    except UserError as err:
-        what = err.what.removeprefix(f"{path}: ").removeprefix(f"{Path(path)}: ")  # the arm names the file
-        raise OptionError(f"--policy {arm}: {what}", "--policy") from None
-
-
 def check_size(arms: int, seeds: int, rounds: int, lspi: int = 0) -> None:
     """OptionError if the arms' batches (`lspi` of them LSPI arms) would hold more than core/simulate.py
     MEMORY_LIMIT (`--rounds 100000000` was a MemoryError traceback), naming --seeds if the default 10 would fit."""
@@ -161,7 +148,7 @@ def run(args: argparse.Namespace) -> int:
     # a study's recording fitted (or its policies played): a copy of its participant's data their deletion must know
     copies = Copies("counterfactual", [rec, *args.fit_also, *(path for _, path in arms_wanted if path)])
     copies.check([out])
-    files = {path: read_arm_policy(name, path) for name, path in arms_wanted if path}
+    files = {path: option_policy(path, f"--policy {name}") for name, path in arms_wanted if path}
 
     log = read_session(rec)
     note = log.missing  # what its damage, cut and undecodable messages lost (reader.EventLog), as rebuild's

@@ -311,6 +311,11 @@ CASES = [
          "counterfactual: --policy reuse:nope.json: cannot read: No such file or directory"),
     Case("counterfactual --policy fixed of a folder", ["counterfactual", "rec.mcap", "--policy", "fixed:policies",
                                                         "--out", "cf12"], "--policy fixed:policies: "),
+    # a policy file an option names: the refusal names the option ("nope.json: cannot read" named none)
+    Case("session --policy a missing file", SIM + ["--algorithm", "pi-reuse", "--policy", "nope.json"],
+         "session: --policy nope.json: cannot read: No such file or directory"),
+    Case("report --reference a missing file", ["report", "study", "--reference", "nope.json"],
+         "report: --reference nope.json: cannot read: No such file or directory"),
     # one policy of a participant has no profile (algorithm 3): merged as perceiving everything, exit 0 (a trial)
     Case("combine one policy", ["combine", "policies/blind/game-00.json", "-o", "m1.json"],
          "a merge (algorithm 4) weighs each participant by its profile (algorithm 3), which compares two or more "
