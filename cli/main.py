@@ -58,7 +58,7 @@ import signal
 import sys
 import threading
 
-from pairplay import __version__, signals, threadstart
+from pairplay import __version__, environment, signals, threadstart
 from pairplay.cli import interrupts
 from pairplay.cli.interrupts import DeferredInterrupt
 from pairplay.cli.args import check_study_folders
@@ -479,6 +479,11 @@ def _main(argv: list[str], arm=None) -> int:
         print(f"pairplay: no verb given: one of {', '.join(VERBS)} (see pairplay --help)", file=sys.stderr)
         return 2
     configure_logging(args.verbose, args.quiet)
+    try:  # before the verb's modules load: they read pairplay's environment variables as they do
+        environment.check()
+    except UserError as err:
+        print(f"pairplay {args.verb}: {err.line()}", file=sys.stderr)
+        return 2
     module = importlib.import_module(VERBS[args.verb][0])
     if arm is not None:  # its modules loaded (build_parser imported the verb's): a signal raises from now on
         arm()

@@ -152,9 +152,23 @@ def _try_writing(folder: Path) -> None:
             probe.touch(exist_ok=False)
             probe.unlink()
         except OSError as err:
-            raise OutputError(f"cannot write there: {err.strerror or err}", folder) from None
+            raise OutputError(f"cannot write there: {_refusal(err, folder)}", folder) from None
     finally:
         _remove_empty(created)
+
+
+def _refusal(err: OSError, folder: Path) -> str:
+    """The system's refusal to make `folder` or a file in it, in words true of it. ENOENT where the folder
+    above exists is a file system that makes no new entries (/proc, /sys): its own "No such file or
+    directory" read as if /proc did not exist (a new user's trial: `combine -o /proc/m.json`)."""
+    said = err.strerror or str(err)
+    if err.errno != errno.ENOENT:
+        return said
+    above = folder if folder.is_dir() else _existing_ancestor(folder)
+    if not above.is_dir():
+        return said
+    there = "the folder exists" if above == folder else f"{above} exists"
+    return f"its file system makes no new files or folders there (it answered {said!r}, though {there})"
 
 
 def _file_id(path: Path) -> tuple[int, int] | None:

@@ -46,6 +46,7 @@ import re
 import secrets
 import threading
 import time
+import unicodedata
 import zipfile
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -538,7 +539,8 @@ class StudyData:
     def register(self, joins: str, label: str = "") -> str:
         """Register a participant for phase `joins`; returns the new pseudonymous id.
 
-        `label` (a name, an e-mail...) goes only to the key file; refused without one."""
+        `label` (a name, an e-mail...) goes only to the key file; refused without one, and with a control
+        character (`register_many`, the one way in)."""
         with self._writing():
             try:
                 self.study.phase_by_id(joins)
@@ -558,7 +560,7 @@ class StudyData:
             pid = f"p{max([self.state.next_number, self.state.ids_given + len(unjournaled) + 1] + numbers):02d}"
             if label:
                 with open_key_file(self.key_file) as f:
-                    csvcell.writer(f).writerow([pid, label.replace("\r", " ").replace("\n", " ")])  # never a formula (pairplay/csvcell.py)
+                    csvcell.writer(f).writerow([pid, label])  # never a formula (pairplay/csvcell.py)
             self.append(j.ParticipantRegistered(participant=pid, joins=joins))
             return pid
 
@@ -659,6 +661,10 @@ class StudyData:
             raise StudyDataError(f"{count_name} must be a whole number 1..{REGISTER_AT_ONCE}, got {count!r}")
         if label and count != 1:
             raise StudyDataError(f"{label_name} registers one participant: leave out {count_name}")
+        control = next((c for c in label if unicodedata.category(c) == "Cc"), None)
+        if control is not None:  # a newline became a space in the key file without a word (a new user's trial)
+            raise StudyDataError(f"{label_name} holds a control character ({control!r} at {label.index(control)}): "
+                                 "give the name as one line of text, without tabs")
         return [self.register(joins, label) for _ in range(count)]
 
     def mark_invalid(self, session: str, reason: str) -> j.SessionMarkedInvalid:
