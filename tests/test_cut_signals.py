@@ -220,3 +220,45 @@ def test_a_second_signal_as_an_interrupted_verb_exits_is_no_traceback(tmp_path, 
     assert code == 130, err
     assert err == ["pairplay counterfactual: interrupted (Ctrl-C); cf was written whole before it and kept; "
                    "nothing more was written"], err
+
+
+def test_a_second_signal_after_a_forced_session_is_summed_up_says_what_the_disk_holds(tmp_path):
+    """A new user's trial: a second Ctrl-C during `session --force` said the earlier recordings were "kept beside
+    it, named *.replaced" while none was on disk (the game had started: --force replaced them). Held once the
+    session is summed up (services/session.py: it is known the game started), SIGINT then SIGTERM (distinct
+    signals: both are taken, in that order): the line says what the folder holds."""
+    rec = tmp_path / "rec"
+    rec.mkdir()
+    earlier = rec / "s.mcap"
+    earlier.write_bytes(SAMPLE.read_bytes())
+    args = ["session", "--participant", "sim:ashley", "--rounds", "2", "--session", "s", "--out", "rec", "--force"]
+    held = Held(tmp_path, "session-summed", args, "")
+    assert held.paused.wait(LIMIT_S), "never held"
+    assert held.proc.poll() is None, "".join(held.out + held.err)
+    held.proc.send_signal(signal.SIGINT)
+    code, err = held._signal_and_let_go(signal.SIGTERM)
+    assert code == 130, err  # the first signal's status (cli/main.py)
+    left = sorted(p.name for p in rec.iterdir())
+    assert left == ["s.mcap"] and whole(earlier), left  # the new recording, whole; the earlier one replaced
+    with open(earlier, "rb") as f:
+        events = make_reader(f).get_summary().statistics.message_count
+    assert err == [f"pairplay session: interrupted again (SIGTERM) while stopping; {Path('rec') / 's.mcap'} was "
+                   f"finished before it: the recording is whole ({events} events), its end written; the earlier "
+                   "recordings are removed: the game had started, and --force replaced them"], err
+
+
+@pytest.mark.parametrize("verb", ["session", "lab"])
+def test_a_second_ctrl_c_as_the_recording_is_finished_counts_its_events(tmp_path, verb):
+    """`lab`'s line of a recording finished before the second signal left out the count `session`'s gave (a new
+    user's trial): both count what the file's end says."""
+    args = (session(tmp_path, "n") if verb == "session" else
+            ["lab", "--participant", "human:p1", "--session", "n", "--out", str(tmp_path / "rec")])
+    held = Held(tmp_path, "recorder-whole", args, "bus listening")
+    code, err = held.run(signal.SIGINT, signal.SIGINT)
+    path = tmp_path / "rec" / "n.mcap"
+    assert code == 130, err
+    assert whole(path)
+    with open(path, "rb") as f:
+        events = make_reader(f).get_summary().statistics.message_count
+    assert len(err) == 1 and err[0].endswith(f"was finished before it: the recording is whole ({events} events), "
+                                             "its end written"), err
