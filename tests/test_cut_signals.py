@@ -262,3 +262,16 @@ def test_a_second_ctrl_c_as_the_recording_is_finished_counts_its_events(tmp_path
         events = make_reader(f).get_summary().statistics.message_count
     assert len(err) == 1 and err[0].endswith(f"was finished before it: the recording is whole ({events} events), "
                                              "its end written"), err
+
+
+def test_a_signal_once_a_sweeps_summary_is_in_place_says_it_is(tmp_path):
+    """A sweep stopped once its summary folder was in place said only that its cells were kept, for the same
+    command to resume from them: its summary, written whole, is said too."""
+    (tmp_path / "grid.toml").write_text('seeds = 1\n[study]\npersonas = "blind"\ngames = 1\nrounds = 20\n'
+                                        'eval_rounds = 5\n[grid]\nreward_bonus = ["correct", "consistent"]\n')
+    held = Held(tmp_path, "folder-written", ["sweep", "grid.toml", "--out", "sw"], "")
+    code, err = held.once(signal.SIGTERM)
+    assert code == 143, err
+    assert (tmp_path / "sw" / "sweep.md").is_file()
+    assert err == [f"pairplay sweep: interrupted (SIGTERM); 2 of 2 cells finished, kept in {Path('sw') / 'cells'}; its "
+                   f"summary {Path('sw') / 'sweep.md'} was written whole before it and kept; nothing more was written"], err
