@@ -423,7 +423,15 @@ def entry() -> None:
     # add lines to an interruption's one line. The tracker is a child process: it reads this variable.
     os.environ["PYTHONWARNINGS"] = ",".join(filter(None, (os.environ.get("PYTHONWARNINGS"), QUIET_TRACKER)))
     threadstart.guard()  # a thread that dies as it starts is refused, not waited for (pairplay/threadstart.py)
-    _end(main(exiting=True), sys.argv[1:])
+    try:
+        code = main(exiting=True)
+    except SystemExit as done:  # argparse's --help, --version and usage lines (Parser.error): the same end
+        if done.code is not None and type(done.code) is not int:
+            raise  # a message to print: the interpreter's own exit says it (none of ours)
+        code = done.code or 0
+        interrupts.work_done()  # (its handler: a signal from here on is said by `_end`, as any verb's)
+        interrupts.late = interrupts.late or signals.take()  # one that came as it parsed (cli/start.py noted it)
+    _end(code, sys.argv[1:])
 
 
 def _end(code: int, argv: list[str]) -> None:

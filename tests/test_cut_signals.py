@@ -275,3 +275,13 @@ def test_a_signal_once_a_sweeps_summary_is_in_place_says_it_is(tmp_path):
     assert (tmp_path / "sw" / "sweep.md").is_file()
     assert err == [f"pairplay sweep: interrupted (SIGTERM); 2 of 2 cells finished, kept in {Path('sw') / 'cells'}; its "
                    f"summary {Path('sw') / 'sweep.md'} was written whole before it and kept; nothing more was written"], err
+
+
+def test_a_signal_as_a_usage_mistake_exits_is_said_too(tmp_path):
+    """argparse's refusal ends the command by SystemExit, which went through the interpreter's teardown, not
+    cli/main.py `_end`: the same end as every verb's now, a signal there said."""
+    held = Held(tmp_path, "exiting", ["study", "--bogus"], "")
+    code, err = held.once(signal.SIGINT)
+    assert code == 130, err
+    assert err == ["pairplay study: unknown option --bogus (see pairplay study --help)",
+                   "pairplay study: interrupted (Ctrl-C) after it had finished with status 2; nothing was undone"], err
