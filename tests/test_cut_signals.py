@@ -26,6 +26,7 @@ from pathlib import Path
 import pytest
 from mcap.reader import make_reader
 
+from pairplay.numbers import counted
 from pairplay.replay.wal import wal_path
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -243,7 +244,7 @@ def test_a_second_signal_after_a_forced_session_is_summed_up_says_what_the_disk_
     with open(earlier, "rb") as f:
         events = make_reader(f).get_summary().statistics.message_count
     assert err == [f"pairplay session: interrupted again (SIGTERM) while stopping; {Path('rec') / 's.mcap'} was "
-                   f"finished before it: the recording is whole ({events} events), its end written; the earlier "
+                   f"finished before it: the recording is whole ({counted(events, 'event')}), its end written; the earlier "
                    "recordings are removed: the game had started, and --force replaced them"], err
 
 
@@ -260,8 +261,8 @@ def test_a_second_ctrl_c_as_the_recording_is_finished_counts_its_events(tmp_path
     assert whole(path)
     with open(path, "rb") as f:
         events = make_reader(f).get_summary().statistics.message_count
-    assert len(err) == 1 and err[0].endswith(f"was finished before it: the recording is whole ({events} events), "
-                                             "its end written"), err
+    assert len(err) == 1 and err[0].endswith(f"was finished before it: the recording is whole "
+                                             f"({counted(events, 'event')}), its end written"), err
 
 
 def test_a_signal_once_a_sweeps_summary_is_in_place_says_it_is(tmp_path):
