@@ -253,6 +253,32 @@ def file_in(value: Path | IntoFolder | None, default_name: str) -> Path | None:
     return value.folder / default_name if isinstance(value, IntoFolder) else value
 
 
+def note_given(action: argparse.Action) -> None:
+    """Make `action` note its dest in the namespace's `_given` when its option is on the command line
+    (a default looks the same as a value given once parsed; the help still shows the default)."""
+    base = type(action)
+
+    class Noted(base):
+        def __call__(self, parser, namespace, values, option_string=None):
+            namespace._given = getattr(namespace, "_given", ()) + ((self.dest, option_string or self.dest),)
+            super().__call__(parser, namespace, values, option_string)
+
+    action.__class__ = Noted
+
+
+def option_policy(path, option: str):
+    """The policy file `path` an option names (`option`: as typed, `--policy reuse:p.json`); its refusal names the
+    option, in place of the path it starts with: "nope.json: cannot read" named no option (a new user's trial)."""
+    from pairplay.errors import OptionError, UserError
+    from pairplay.schemas.policy import read_policy
+
+    try:
+        return read_policy(path)
+    except UserError as err:
+        what = err.what.removeprefix(f"{path}: ").removeprefix(f"{Path(path)}: ")
+        raise OptionError(f"{option}: {what}", option.split()[0]) from None
+
+
 def add_force(p: argparse.ArgumentParser, what: str = "existing outputs") -> None:
     p.add_argument("--force", action="store_true", help=f"replace {what} (never replaced without it)")
 

@@ -33,7 +33,7 @@ from pairplay.cli.args import count, output_file
 from pairplay.errors import InputError, OptionError
 from pairplay.lists import comma_items
 from pairplay.nearest import hinted
-from pairplay.outputs import check_output, write_text
+from pairplay.outputs import check_output, hold, write_text
 from pairplay.numbers import counted
 
 # name -> module providing bench_rows(quick)
@@ -197,8 +197,8 @@ def check_readme(path: Path, names: list[str], quick: bool) -> None:
     if partial:
         raise OptionError(f"--readme rewrites the README's whole table from a full run; {' and '.join(partial)} "
                           "would replace it with part of one: give --readme without them", "--readme")
+    check_output(path, force=True)  # first: a pipe there is refused, not read (reading one waits for a writer)
     _readme_parts(path)
-    check_output(path, force=True)
 
 
 def write_readme(path: Path, text: str) -> None:
@@ -222,6 +222,7 @@ def run(args) -> int:
               file=sys.stderr)
         return 2
     if args.readme is not None:
+        hold(args.readme, "bench")  # one writer per output (pairplay/outputs.py): two benches rewrite one README
         check_readme(args.readme, names, args.quick)
     started = datetime.datetime.now(datetime.timezone.utc)
     loads = [os.getloadavg()]

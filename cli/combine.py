@@ -6,7 +6,9 @@ participant, picked by the seed, enters the combination (algorithm 4). Refused
 before anything is written (one line, exit 2): a file that cannot be read, a
 policy given twice (the same file, a folder named twice, or two files holding
 the same learning: it would weigh double), a profile of a participant with a
-single policy (algorithm 3 compares policies: it would say 0% / 0%), an
+single policy (algorithm 3 compares policies: it would say 0% / 0%), a merge
+of such a participant (algorithm 4 weighs each by that profile: one policy was
+merged as a participant perceiving every channel, "hearing=equal" everywhere), an
 --exclude naming no participant, policies of different reward rules (the
 files of each rule are named; a profile too: a participant's policies would
 differ by the rule, not by what the participant perceives), a learned policy that learned nothing (0 rounds,
@@ -36,7 +38,7 @@ from pairplay.core.policies import (by_participant, check_distinct, check_exclud
                                     combined_policy_file, common_reward_bonus, partial_inputs, users_from_policies)
 from pairplay.errors import InputError, OptionError
 from pairplay.lists import comma_items
-from pairplay.outputs import check_output
+from pairplay.outputs import check_output, hold
 from pairplay.schemas.policy import read_policy, write_policy
 from pairplay.cli.args import add_force, output_file, seed_number, update_count
 from pairplay.numbers import counted
@@ -184,6 +186,7 @@ def _action_lines(policies, min_updates: int) -> list[str]:
 
 def run_combine(args) -> int:
     if args.out is not None:
+        hold(args.out, "combine")  # one writer per output (pairplay/outputs.py)
         check_output(args.out, args.force)  # before any work
     policies, files = _load(args)
     if args.out is not None:
@@ -200,6 +203,8 @@ def run_combine(args) -> int:
     if not kept:
         raise OptionError("no policies left to combine", f"--exclude {args.exclude}")
     reward_rule = common_reward_bonus([p for p, _ in kept], [f for _, f in kept])
+    # a participant of one policy has no profile: merged as one who perceives everything (a new user's trial)
+    check_profiles_computable([p for p, _ in kept], [f for _, f in kept], merge=True)
     users, profiles = users_from_policies(policies, args.seed, exclude)
     if args.actions:  # the same representative policies, with action-level information, then wholes kept
         groups = by_participant(policies, exclude)

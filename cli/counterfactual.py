@@ -9,7 +9,9 @@ match. Everything goes into the --out folder, written whole or not at all
 (report/counterfactual.py); a non-empty folder is replaced only with --force,
 checked before any work. A REC that is missing, empty, not MCAP, without a
 session or without a resolved turn, an unknown arm, a policy file that cannot
-be read: one line, exit 2, nothing written.
+be read (named with its arm, `--policy reuse:FILE: cannot read`), an arms' option
+(--policy, --seeds, --seed, --rounds) given with --fit-only, which plays no arm:
+one line, exit 2, nothing written.
 """
 
 from __future__ import annotations
@@ -17,7 +19,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from pairplay.cli.args import add_force, count, int_at_least, output_folder, seed_number
+from pairplay.cli.args import add_force, count, int_at_least, note_given, option_policy, output_folder, seed_number
 from pairplay.numbers import counted
 
 ARMS_HELP = ("comma-separated arms: same (the recorded learner, replayed: checks the fit), q (Q-learning from "
@@ -46,8 +48,26 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--rounds", type=count, default=None,
                    help="rounds each arm plays (default: as many as the recording completed)")
     p.add_argument("--out", type=output_folder, default=None, help="output folder (default: out/counterfactual/<recording name>)")
-    p.add_argument("--fit-only", action="store_true", help="write the fitted user alone, play no arm")
+    p.add_argument("--fit-only", action="store_true",
+                   help="write the fitted user alone, play no arm (--policy, --seeds, --seed, --rounds refused)")
     add_force(p, "the files of a non-empty --out folder")
+    for action in p._actions:  # the arms' options, refused with --fit-only rather than ignored (`refuse_fit_only`)
+        if action.dest in ARM_OPTIONS:
+            note_given(action)
+
+
+ARM_OPTIONS = ("policy", "seeds", "seed", "rounds")  # what only the arms use: --fit-only plays none
+
+
+def refuse_fit_only(args: argparse.Namespace) -> None:
+    """OptionError naming the first arms' option given with --fit-only, which plays no arm (a new user's
+    trial: `--fit-only --policy same` exited 0, the arm ignored without a word)."""
+    from pairplay.errors import OptionError
+
+    for dest, option in getattr(args, "_given", ()):
+        if args.fit_only and dest in ARM_OPTIONS:
+            raise OptionError(f"{option} {getattr(args, dest)} is not taken with --fit-only: it plays no arm; "
+                              f"leave out one or the other", option)
 
 
 def parse_arms(text: str) -> list[tuple[str, str]]:
@@ -108,27 +128,28 @@ def run(args: argparse.Namespace) -> int:
     from pairplay.core.rng import game_seed
     from pairplay.core.userfit import fit_user, pooled
     from pairplay.errors import InputError
-    from pairplay.outputs import check_output_folder
+    from pairplay.outputs import check_output_folder, hold
     from pairplay.replay.check import check_recording, read_session
     from pairplay.replay.rebuild import output_stem, rebuild_events
     from pairplay.replay.turns import read_turns, turns_from_events
     from pairplay.report.counterfactual import (ARM_TEXT, COUNTERFACTUAL_MANIFEST, COUNTERFACTUAL_OUTPUTS, Recorded,
                                                console_text, write_counterfactual)
-    from pairplay.schemas.policy import read_policy
     from pairplay.schemas.session import MODE_OF_ALGORITHM
 
+    refuse_fit_only(args)
     arms_wanted = parse_arms(args.policy)
     if args.rounds and not args.fit_only:  # before any work
         check_size(len(arms_wanted), args.seeds, args.rounds)
     rec = check_recording(args.recording)
     stem = output_stem(rec)
     out = Path(args.out) if args.out else Path("out") / "counterfactual" / stem
+    hold(out, "counterfactual")  # one writer per output (pairplay/outputs.py)
     check_output_folder(out, args.force, COUNTERFACTUAL_OUTPUTS, COUNTERFACTUAL_MANIFEST)
     from pairplay.replay.copies import Copies
     # a study's recording fitted (or its policies played): a copy of its participant's data their deletion must know
     copies = Copies("counterfactual", [rec, *args.fit_also, *(path for _, path in arms_wanted if path)])
     copies.check([out])
-    files = {path: read_policy(path) for _, path in arms_wanted if path}
+    files = {path: option_policy(path, f"--policy {name}") for name, path in arms_wanted if path}
 
     log = read_session(rec)
     note = log.missing  # what its damage, cut and undecodable messages lost (reader.EventLog), as rebuild's

@@ -58,7 +58,7 @@ import signal
 import sys
 import threading
 
-from pairplay import __version__, signals, testpause, threadstart
+from pairplay import __version__, environment, signals, testpause, threadstart
 from pairplay.cli import interrupts
 from pairplay.cli.interrupts import DeferredInterrupt
 from pairplay.cli.args import check_study_folders
@@ -519,6 +519,11 @@ def _main(argv: list[str], arm=None) -> int:
         print(f"pairplay: no verb given: one of {', '.join(VERBS)} (see pairplay --help)", file=sys.stderr)
         return 2
     configure_logging(args.verbose, args.quiet)
+    try:  # before the verb's modules load: they read pairplay's environment variables as they do
+        environment.check()
+    except UserError as err:
+        print(f"pairplay {args.verb}: {err.line()}", file=sys.stderr)
+        return 2
     module = importlib.import_module(VERBS[args.verb][0])
     if arm is not None:  # its modules loaded (build_parser imported the verb's): a signal raises from now on
         arm()
@@ -531,10 +536,13 @@ def _main(argv: list[str], arm=None) -> int:
         with _summary_silenced(args.quiet and (args.verb in QUIET_SUMMARIES or _who(args) in QUIET_SUMMARIES)):
             try:
                 code = int(module.run(args) or 0)
-            finally:  # the study folders' locks its outputs took (replay/copies.py), however it ended
-                copies = sys.modules.get("pairplay.replay.copies")
+            finally:  # the study folders' locks its outputs took (replay/copies.py), however it ended, and its
+                copies = sys.modules.get("pairplay.replay.copies")  # outputs' own (pairplay/outputs.py `hold`)
                 if copies is not None:
                     copies.release_held()
+                outputs = sys.modules.get("pairplay.outputs")
+                if outputs is not None:
+                    outputs.release_held()
         stopped = signal_received()  # at once: a signal the verb's own handler (a bus verb's) met while it ran
         interrupts.work_done()
         if stopped:

@@ -162,7 +162,8 @@ def _run(args) -> int:
         print("\n".join(describe(parse_study(text, source))))
         return 0
     if args.action == "init":
-        from pairplay.outputs import check_folder
+        from pairplay.outputs import check_folder, hold
+        hold(args.folder, "protocol init")  # two inits of one new folder: one writer per output (pairplay/outputs.py)
         check_folder(args.folder)  # a place the system refuses, named as given, before anything is written
         study_path = args.study
         if _bundled(args.study):

@@ -62,10 +62,11 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     from pairplay.cli.interrupts import work_done
     from pairplay.errors import InputError, OutputError
-    from pairplay.outputs import check_folder, check_outputs, check_theirs, output_folder
+    from pairplay.outputs import check_folder, check_outputs, check_theirs, hold, output_folder
     from pairplay.replay.check import check_recording
     from pairplay.replay.rebuild import output_paths, rebuild_recording
 
+    hold(args.out, "rebuild")  # one writer per output folder (pairplay/outputs.py): a second is refused
     out = check_folder(args.out)
     check_theirs(out, REBUILD_OUTPUTS, MANIFEST)  # another verb's file there is not ours to replace: said before the work
     from pairplay.replay.copies import Copies

@@ -73,7 +73,9 @@ def run(args: argparse.Namespace) -> int:
                               f"one is not complete ({_not_complete(done)}): recover it without the option",
                               args.recording)
         return _complete(args, done)
+    from pairplay.outputs import hold
     from pairplay.replay.copies import Copies
+    hold(args.output or default_output(Path(args.recording)), "recover")  # one writer per output (pairplay/outputs.py)
     copies = Copies("recover", [args.recording])  # a study's recording copied beyond recordings/: their deletion knows
     copies.check([args.output or default_output(Path(args.recording))])
     done = recover(args.recording, args.output, force=args.force, admit=admit)

@@ -15,7 +15,9 @@ by a crash (also after `pairplay recover`, unless the recorder's journal it read
 gave back the session's end: reader.journal_restored): exit 0 for these (what the file
 holds is right), and the line says what is missing. Replay's first
 line names its bus endpoint, so a view can attach (`pairplay view --session S
---connect ENDPOINT`). A REC that is missing, empty, not MCAP or without events
+--connect ENDPOINT`: it misses what was replayed before it joined, and says so);
+to view a replay whole, the view starts first and the replay joins it (`view
+--session S --listen E`, then `replay REC --as S --connect E`: README). A REC that is missing, empty, not MCAP or without events
 or holding no session (no SessionStarted: replay/check.py `read_session`) is
 refused (one line on stderr, exit 2), in both modes; `--verify` also refuses
 a file cut (or without its session's end) before its first round ended

@@ -16,10 +16,10 @@ import argparse
 import sys
 from pathlib import Path
 
-from pairplay.cli.args import output_folder
+from pairplay.cli.args import option_policy, output_folder
 from pairplay.numbers import counted
 from pairplay.replay.studydata import StudyDataError, not_a_study_folder
-from pairplay.schemas.policy import PolicyFileError, read_policy
+from pairplay.schemas.policy import PolicyFileError
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -36,21 +36,18 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 def run(args) -> int:
     from pairplay.cli.protocol import built_missing_policies
-    from pairplay.outputs import check_output_folder, output_folder
+    from pairplay.outputs import check_output_folder, hold, output_folder
     from pairplay.replay.studydata import StudyData
     from pairplay.report.human import HUMAN_MANIFEST, HUMAN_OUTPUTS, human_report
 
     from pairplay.replay.copies import Copies
 
-    try:
-        if args.reference is not None:  # a wrong --reference refused before the work (it waited for the games)
-            read_policy(args.reference)
-    except PolicyFileError as err:
-        print(f"pairplay report: {err}", file=sys.stderr)
-        return 2
+    if args.reference is not None:  # a wrong --reference refused before the work (it waited for the games)
+        option_policy(args.reference, f"--reference {args.reference}")
     if args.folder.is_file():  # it said "cannot write there" of its report/ (a file where a folder is needed)
         print(f"pairplay report: {not_a_study_folder(args.folder)}", file=sys.stderr)
         return 2
+    hold(args.out or args.folder / "report", "report")  # one writer per output (pairplay/outputs.py)
     out = check_output_folder(args.out or args.folder / "report", args.force, HUMAN_OUTPUTS,
                               HUMAN_MANIFEST)  # before any work
     copies = Copies("report", [args.folder])  # a report beyond report/ is a copy their deletion must know

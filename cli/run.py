@@ -30,7 +30,7 @@ from pathlib import Path
 
 from pairplay import signals, testpause
 from pairplay.cli import interrupts
-from pairplay.cli.args import output_folder, session_id
+from pairplay.cli.args import note_given, output_folder, session_id
 from pairplay.errors import OptionError
 from pairplay.lists import comma_items
 from pairplay.nearest import hinted
@@ -78,29 +78,16 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     for action in extra._actions:
         if action.dest not in known and action.option_strings:
             p._add_action(action)
-            _note_given(action)
+            note_given(action)
     for action in p._actions:
         if action.dest in ("participant", "wait_for", "out"):
-            _note_given(action)
+            note_given(action)
 
 
 # options besides the bus's and --session that a service uses; the session's options (the game's, with
 # --participant) are in CONFIG: any other a service is given is refused (module rule)
 USES = {"game": {"participant", "wait_for"}, "recorder": {"out"}, "combiner": {"out"},
         "learner": set(), "participant": set()}
-
-
-def _note_given(action: argparse.Action) -> None:
-    """Make `action` note its dest in the namespace's `_given` when its option is on the command line
-    (a default looks the same as a value given once parsed; the help still shows the default)."""
-    base = type(action)
-
-    class Noted(base):
-        def __call__(self, parser, namespace, values, option_string=None):
-            namespace._given = getattr(namespace, "_given", ()) + ((self.dest, option_string or self.dest),)
-            super().__call__(parser, namespace, values, option_string)
-
-    action.__class__ = Noted
 
 
 def refuse_unused(args: argparse.Namespace) -> None:

@@ -44,12 +44,11 @@ from pairplay.schemas.config import DEFAULT_REWARD_BONUS, REWARD_BONUS_RULES, Le
 from pairplay.schemas.keys import check_chunk
 from pairplay.errors import OptionError, UserError
 from pairplay.outputs import check_folder
-from pairplay.schemas.policy import read_policy
 from pairplay.schemas.session import (IGNORE_CLOCKS, MS_RANGE, OBSERVED_SOURCES, SessionConfig, learner_overrides,
                                       lspi_overrides)
 
-from pairplay.cli.args import (add_force, count, float_between, game_index, output_folder, positive_number, seed_number,
-                               session_id, session_rounds)
+from pairplay.cli.args import (add_force, count, float_between, game_index, option_policy, output_folder,
+                               positive_number, seed_number, session_id, session_rounds)
 from pairplay.core.geometry import PICKS_UNIT
 from pairplay.cli.robot import add_robot_arguments, check_robot_args, probe_robot_args, robot_choice
 from pairplay.services.bus import BusOpenError, ConfigFileError, add_bus_arguments, options_from_args, stop_on_signals
@@ -158,7 +157,7 @@ def _config_from_args(args: argparse.Namespace) -> SessionConfig:
                           f"{never} (preset {preset_name}); give --rounds 2 or more", f"--rounds {rounds}")
     actions = []
     if args.policy:
-        actions = list(read_policy(args.policy).greedy)
+        actions = list(option_policy(args.policy, f"--policy {args.policy}").greedy)  # its refusal names --policy
     config = SessionConfig(
         session=session, participant=args.participant, persona=who if sim else "", seed=args.seed,
         rounds=rounds, game_index=args.game_index, algorithm=args.algorithm,

@@ -87,8 +87,8 @@ def settings_of(args):
     named = [k for k in optional if given[k] is not None]
     if given["reuse_last"] is None:  # not given: the default must fit a short study (`--rounds 20` was refused
         given["reuse_last"] = default_reuse_last(given["rounds"])  # for the default's 50: a new user's trial)
-    settings = StudySettings(**{k: v for k, v in given.items() if not (k in optional and v is None)})
-    try:
+    try:  # each setting alone is checked as StudySettings is made (its __post_init__), the rest by check
+        settings = StudySettings(**{k: v for k, v in given.items() if not (k in optional and v is None)})
         settings.check(spell=option, given=named)
     except SettingError as exc:
         raise OptionError(f"{option(exc.key)}: {exc.what}", option(exc.key)) from None
@@ -96,11 +96,12 @@ def settings_of(args):
 
 
 def run(args) -> int:
-    from pairplay.outputs import check_output_folder
+    from pairplay.outputs import check_output_folder, hold
 
     settings = settings_of(args)  # every option first, before anything is written
     from pairplay.report.study import STUDY_MANIFEST, STUDY_OUTPUTS, first_rounds_text, run_study, text_table
 
+    hold(args.out, "study")  # one writer per output (pairplay/outputs.py): a second one is refused, not run twice
     check_output_folder(args.out, args.force, STUDY_OUTPUTS, STUDY_MANIFEST)  # a folder where a file of it goes: refused now
 
     report = run_study(settings, args.out, _bar(args.quiet), force=args.force)

@@ -47,7 +47,7 @@ from pathlib import Path
 from pairplay.cli.args import output_folder, workers
 from pairplay.cli.progress import bar as progress
 from pairplay.errors import OptionError, OutputError
-from pairplay.outputs import check_folder, write_text, written
+from pairplay.outputs import check_folder, hold, write_text, written
 from pairplay.report.sweep import (GridError, check_scheduler, check_sweep_memory, finished_cells, is_cell_file,
                                     read_grid, run_sweep, summary_files, summary_to_write,
                                     write_sweep)
@@ -147,14 +147,17 @@ def run(args) -> int:
     else:
         check_scheduler(args.scheduler)
     # out/sweep-<grid>, the grid's "sweep-" said once (examples/sweep-psi.toml wrote out/sweep-sweep-psi)
-    out = check_folder(args.out or Path("out") / f"sweep-{args.grid.stem.removeprefix('sweep-')}")
+    out = args.out or Path("out") / f"sweep-{args.grid.stem.removeprefix('sweep-')}"
+    hold(out, "sweep")  # one writer per output (pairplay/outputs.py): two sweeps of one folder computed each cell twice
+    out = check_folder(out)
     copy = out / "grid.toml"
     text = args.grid.read_text()
+    check_sweep_places(out, grid)  # before any work: a folder where a file goes is not one of ours to replace
+    # (first: a folder at grid.toml was "the sweep of another grid", and with --force the OS's "Is a directory";
+    # a pipe at sweep.md was "holds files but no sweep ... or --force", which --force would not have done)
     if out.is_dir() and any(out.iterdir()) and not copy.exists() and not args.force:  # not a sweep's folder
         raise OutputError("holds files but no sweep (no grid.toml); give another --out, or --force to write "
                           "the sweep's files there", out)
-    check_sweep_places(out, grid)  # before any work: a folder where a file goes is not one of ours to replace
-    # (first: a folder at grid.toml was "the sweep of another grid", and with --force the OS's "Is a directory")
     other_grid = copy.exists() and not same_grid(copy, grid)
     if other_grid and not args.force:
         print(f"pairplay sweep: {out} holds the sweep of another grid ({copy}); give another --out or --force",

@@ -18,7 +18,9 @@ was saved as `<stem>.rrd`, a part passed off as the whole), and so is a
 damaged recording that lost events in its middle or holds messages that do
 not decode (reader.EventLog.lost; rebuild's rule: never passed off as whole),
 its result line saying it is partial and a line on stderr naming the damage (a
-damage that lost no event too), -q or not (cli/main.py `warn`). Output: one line of result
+damage that lost no event too), -q or not (cli/main.py `warn`); so is a live view
+that never got some of the session's events (joined a session or replay under way
+with no recorder's log: a source's seq above 1, services/view/sources.py). Output: one line of result
 on stdout (saved); interrupted, its one line goes to stderr, as every verb's;
 what the view does is INFO (-v); what it noticed (a malformed message, a gap)
 is a WARNING.
@@ -48,7 +50,7 @@ from pairplay.cli.args import (add_force, file_in, float_at_least, int_at_least,
                                 session_id, speed)
 from pairplay.errors import InputError, OptionError, OutputError, UserError
 from pairplay.livelock import LIVE, is_live
-from pairplay.outputs import check_output, output_path
+from pairplay.outputs import check_output, hold, output_path
 from pairplay.cli.main import left_journals, warn
 from pairplay.replay.check import read_session
 from pairplay.services.bus import add_bus_arguments
@@ -121,6 +123,7 @@ def run(args: argparse.Namespace) -> int:
     say = print if not getattr(args, "quiet", False) else (lambda *_, **__: None)
     if rrd is not None:
         # before any work: an existing .rrd stays unless --force, and the recording viewed always
+        hold(rrd, "view")  # one writer per output (pairplay/outputs.py)
         check_output(rrd, args.force, inputs=[args.recording] if args.recording else [])
     from pairplay.replay.copies import Copies
     copies = Copies("view", [args.recording] if args.recording else [])  # a study's recording drawn elsewhere: a
@@ -131,7 +134,7 @@ def run(args: argparse.Namespace) -> int:
             done = _view(args, tmp, held)
             # never under the name of a complete view (module rule), nor one of a live recording: it was saved
             # as s1.rrd, a part of the session passed off as the whole (a new user's trial)
-            if (done.partial or live or lost) and rrd is not None:
+            if (done.partial or live or lost or done.missed) and rrd is not None:
                 raise KeptPartial(keep_partial(tmp, rrd, args.force))
     except KeptPartial as kept:
         try:
@@ -149,6 +152,10 @@ def run(args: argparse.Namespace) -> int:
             said = f"is damaged ({lost})" if held.damaged else f"was {lost}"
             say(f"saved {kept.path}: {_counts(done)}; partial")
             warn("view", f"{args.recording} {said}; the view is partial ({kept.path})")  # -q or not (cli/main.py)
+            return 0
+        if not done.partial and done.missed:  # a live session that lost events before the view got them: said
+            # (each source's loss is a WARNING on stderr as it is noted, -q or not: sources.SequenceGaps)
+            say(f"saved {kept.path}: {_counts(done)}; partial: {missed_text(done.missed)}")
             return 0
         if not done.partial:  # a live recording, drawn as far as it goes: a result, said on stdout
             say(f"saved {kept.path}: {_counts(done)}; partial: {args.recording} {LIVE}, view it again once "
@@ -169,10 +176,17 @@ def run(args: argparse.Namespace) -> int:
               file=sys.stderr)
     else:
         say(f"saved {rrd}: {_counts(done)}" if rrd is not None else
-              f"viewed {_counts(done)}{f'; partial: {args.recording} {LIVE}' if live else ''}")
+              f"viewed {_counts(done)}{f'; partial: {args.recording} {LIVE}' if live else ''}"
+              f"{f'; partial: {missed_text(done.missed)}' if done.missed else ''}")
         if held is not None and held.loss_free:  # a damage that lost no event: drawn whole, the damage said as every
             warn("view", f"{args.recording}: {held.loss_free}")  # verb says it (reader.EventLog.loss_free), on stderr
     return 0
+
+
+def missed_text(n: int) -> str:
+    """What a live view that lost `n` events says (their notes in the view name each source and seq)."""
+    return (f"{counted(n, 'event')} of the session never reached the view (published before it joined, with "
+            "no recorder's log to catch up from, or dropped); see its notes")
 
 
 def _counts(done: "Viewed") -> str:
@@ -200,6 +214,7 @@ class Viewed:
     q_logged: int
     partial: bool = False
     why: str = ""
+    missed: int = 0  # a live session's events the view never got (sources.SequenceGaps): a part, not the whole
 
 
 def partial_name(rrd: Path, n: int = 1) -> Path:
@@ -276,7 +291,7 @@ def _view(args: argparse.Namespace, tmp_rrd: Path | None, held=None) -> Viewed:
             if summary.events == 0:
                 raise InputError("no event of this session arrived; nothing saved", f"--session {args.session}")
         viewed = Viewed(summary.events, summary.notes, summary.q_logged, partial=summary.stopped,
-                        why=stop.why if summary.stopped else "")
+                        why=stop.why if summary.stopped else "", missed=0 if args.recording else source.gaps.missed)
         if args.serve and not args.exit_when_done and not stop.is_set():
             log.info("%d events drawn; still serving; Ctrl-C to stop", summary.events)
             while not stop.wait(0.5):

@@ -129,13 +129,17 @@ def check_exclude(policies: list[PolicyFile], exclude) -> None:
                           f"--exclude {','.join(sorted(exclude))}")
 
 
-def check_profiles_computable(policies: list[PolicyFile], names: list[str]) -> None:
+def check_profiles_computable(policies: list[PolicyFile], names: list[str], merge: bool = False) -> None:
     """InputError if a participant has one policy: algorithm 3 finds incompatibilities between a
-    user's policies, so one policy always gives 0% / 0%, a result it did not compute."""
+    user's policies, so one policy always gives 0% / 0%, a result it did not compute. A `merge`
+    (algorithm 4, thesis 6.1.3) weighs each participant's actions by that profile: one policy would
+    enter as a participant perceiving every channel ("hearing=equal; visual=equal" in every state)."""
     alone = [(p.participant, name) for (p, name) in zip(policies, names)
              if sum(q.participant == p.participant for q in policies) == 1]
     if alone:
-        raise InputError("a profile (algorithm 3) compares two or more policies of a participant; only one of "
+        what = ("a merge (algorithm 4) weighs each participant by its profile (algorithm 3), which compares"
+                if merge else "a profile (algorithm 3) compares")
+        raise InputError(f"{what} two or more policies of a participant; only one of "
                          + _some([f"{who} ({name})" for who, name in alone]))
 
 

@@ -19,7 +19,8 @@ thread has stopped; after an exception, or an interruption of the caller's wait
 (KeyboardInterrupt, a signal handler's exception), no new piece starts. The helper threads
 are daemons, so an interrupted caller does not wait for them at exit.
 PAIRPLAY_THREADS=n caps the threads (e.g. 1 when several studies share the
-machine); `pairplay sweep`'s local processes run one thread each.
+machine; anything but a positive integer is refused by the command line,
+pairplay/environment.py); `pairplay sweep`'s local processes run one thread each.
 """
 
 from __future__ import annotations
@@ -28,6 +29,8 @@ import contextlib
 import os
 import threading
 from typing import Callable
+
+from pairplay import environment
 
 
 def _cores() -> int:
@@ -38,9 +41,10 @@ def _cores() -> int:
 
 
 def _workers() -> int:
-    """The cores this process may use, or fewer by PAIRPLAY_THREADS (a positive integer; anything else is ignored)."""
-    asked = os.environ.get("PAIRPLAY_THREADS", "")
-    return min(_cores(), int(asked)) if asked.isdigit() and int(asked) > 0 else _cores()
+    """The cores this process may use, or fewer by PAIRPLAY_THREADS (pairplay/environment.py: a value it cannot
+    take is refused by the command line before a verb runs)."""
+    asked = environment.threads()
+    return _cores() if asked is None else min(_cores(), asked)
 
 
 WORKERS = _workers()

@@ -63,7 +63,13 @@ def take(folder: str | Path, verb: str, wait: float = 0.0, waiting: Callable[[st
     `waiting(holder)` once when it starts to wait for a holder that named itself (module rule). None if the
     folder cannot hold a lock file (read-only: the verb's own check refuses it in its words) or its file
     system has no locks (the verb goes on unlocked, as a recording does: livelock.hold)."""
-    path = Path(folder) / LOCK_FILE
+    return take_file(Path(folder) / LOCK_FILE, verb, wait, waiting)
+
+
+def take_file(path: str | Path, verb: str, wait: float = 0.0,
+              waiting: Callable[[str], None] | None = None) -> int | None:
+    """`take` of the lock file `path` itself (pairplay/outputs.py `hold`: one writer per output, its lock file
+    kept outside the output)."""
     try:
         fd = os.open(path, os.O_RDWR | os.O_CREAT | os.O_CLOEXEC, 0o644)
     except OSError:

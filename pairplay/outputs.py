@@ -1,4 +1,4 @@
-"""Every file pairplay writes for a user goes through here: no clobber, atomic.
+"""Every file pairplay writes for a user goes through here: no clobber, atomic, one writer per output.
 
 Rule: an existing output is never replaced unless the caller says `force`
 (the verbs' `--force`); a write goes to a temporary file beside its target
@@ -22,7 +22,9 @@ lists (a people's study folder's: `rebuild --out STUDY/policies` is refused a ga
 files moved in together the same way. A folder
 standing where a file is written, or a file where a folder is needed, is refused
 (`check_places`, from `check_output_folder` before the work): a folder is never
-replaced or removed, `force` or not. Refusals are
+replaced or removed, `force` or not; nor is anything but a regular file (a device, a pipe, a socket, a
+symbolic link: `check_kind`, `force` or not, its line offering no --force). A verb holds its output's writer
+lock (`hold`) from before its checks to its end: a second writer of it is refused at once. Refusals are
 `OutputError`s naming the path, raised before any work where the caller
 checks first (`check_output`, `check_outputs`, `check_folder`: each makes the
 folders it needs and a file there, then removes them, so a place the system
@@ -48,15 +50,18 @@ import contextlib
 import errno
 import fnmatch
 import glob
+import hashlib
 import json
 import logging
 import os
 import re
 import shutil
+import stat
+import tempfile
 from pathlib import Path
 from typing import IO, Iterable, Iterator
 
-from pairplay import signals, testpause
+from pairplay import folderlock, signals, testpause
 from pairplay.errors import OutputError
 from pairplay.livelock import LIVE, is_live
 from pairplay.numbers import counted
@@ -65,6 +70,54 @@ FORCE_FIX = "--force replaces it"  # shown only by a verb that has --force (erro
 
 
 written: list[Path] = []  # every output renamed into place by this process, in order (module rule; cli/main.py)
+
+
+# -- one writer per output -----------------------------------------------------------------------------------
+# Two `pairplay sweep sweep-psi.toml` on the same output 1 s apart both computed every cell (rc 0 and 0): the work
+# done twice, each writing over the other's cells. A verb writing an output (a folder of them: sweep, study,
+# counterfactual, report, rebuild --out; a file: view --out, combine -o, recover -o) holds that output's writer
+# lock from before its checks until it ends (`hold`; the kernel drops it however the process ends), and a second
+# writer of the same output is refused at once, in one line naming the holder: its work would be done twice, and
+# the outputs it meets half written by the other. The lock file is kept outside the output, in a folder of the
+# user's in the system's temporary folder (`LOCKS`), named after the output's absolute path (symbolic links
+# resolved: two names of one folder are one output), so that no output holds a file of it and a folder not yet
+# made can be locked. flock, as pairplay/folderlock.py says why; a people's study folder keeps its own lock there.
+
+_HELD_OUTPUTS: dict[Path, int] = {}  # output (resolved) -> the descriptor of its lock held by this process
+
+
+def _locks_folder() -> Path:
+    return Path(tempfile.gettempdir()) / f"pairplay-outputs-{os.getuid()}"
+
+
+def hold(path: str | Path, verb: str) -> None:
+    """Take the writer lock of the output `path` (a file or a folder) for `verb` (`pairplay VERB`) until the
+    process ends or `release_held`; OutputError "busy" naming the holder if another process holds it. Taken
+    again by the same process: nothing to do. A system without the locks' folder or locks: the verb goes on
+    unlocked (as a study folder's lock, pairplay/folderlock.py)."""
+    key = Path(path).resolve()
+    if key in _HELD_OUTPUTS:
+        return
+    folder = _locks_folder()
+    try:
+        folder.mkdir(mode=0o700, exist_ok=True)
+    except OSError:
+        return
+    name = hashlib.sha256(os.fsencode(key)).hexdigest()[:32] + ".lock"
+    try:
+        fd = folderlock.take_file(folder / name, f"pairplay {verb}")
+    except folderlock.FolderBusy as busy:
+        who = busy.holder or "another pairplay (it has not said which yet)"
+        raise OutputError(f"busy: {who} writes it; wait for it to end, or give another output", path) from None
+    if fd is not None:
+        _HELD_OUTPUTS[key] = fd
+
+
+def release_held() -> None:
+    """Release every output's writer lock this process holds (cli/main.py, when a verb ends however it ends: a
+    verb run in-process, a test's, leaves none)."""
+    while _HELD_OUTPUTS:
+        folderlock.release(_HELD_OUTPUTS.popitem()[1])
 
 
 def _existing_ancestor(path: Path) -> Path:
@@ -99,9 +152,23 @@ def _try_writing(folder: Path) -> None:
             probe.touch(exist_ok=False)
             probe.unlink()
         except OSError as err:
-            raise OutputError(f"cannot write there: {err.strerror or err}", folder) from None
+            raise OutputError(f"cannot write there: {_refusal(err, folder)}", folder) from None
     finally:
         _remove_empty(created)
+
+
+def _refusal(err: OSError, folder: Path) -> str:
+    """The system's refusal to make `folder` or a file in it, in words true of it. ENOENT where the folder
+    above exists is a file system that makes no new entries (/proc, /sys): its own "No such file or
+    directory" read as if /proc did not exist (a new user's trial: `combine -o /proc/m.json`)."""
+    said = err.strerror or str(err)
+    if err.errno != errno.ENOENT:
+        return said
+    above = folder if folder.is_dir() else _existing_ancestor(folder)
+    if not above.is_dir():
+        return said
+    there = "the folder exists" if above == folder else f"{above} exists"
+    return f"its file system makes no new files or folders there (it answered {said!r}, though {there})"
 
 
 def _file_id(path: Path) -> tuple[int, int] | None:
@@ -113,13 +180,48 @@ def _file_id(path: Path) -> tuple[int, int] | None:
     return st.st_dev, st.st_ino
 
 
+# What may stand where a file is written: nothing, or a regular file (replaced with `force`). Anything else is
+# refused in one line naming what it is, `force` or not (`check_kind`): as root, `combine -o mynull --force` (a
+# character device), `-o myfifo --force` and `view --out mynull --force` replaced the device or pipe with a regular
+# file, and `combine -o /dev/null` said "exists; --force replaces it", inviting the system's /dev/null to go. A
+# symbolic link is refused too: replacing it loses the link, writing through it writes wherever it points.
+_KINDS = {stat.S_IFCHR: "a character device", stat.S_IFBLK: "a block device", stat.S_IFIFO: "a named pipe (FIFO)",
+          stat.S_IFSOCK: "a socket", stat.S_IFLNK: "a symbolic link"}
+
+
+def special_kind(path: str | Path, follow: bool = False) -> str | None:
+    """What stands at `path` (not followed if a link, unless `follow`: a file appended to, not replaced) when it
+    is neither nothing, a regular file nor a folder: "a character device", "a named pipe (FIFO)", "a symbolic
+    link (to X)"...; None otherwise."""
+    try:
+        mode = (os.stat if follow else os.lstat)(path).st_mode
+    except OSError:  # nothing there (or not to be told: the write itself says)
+        return None
+    if stat.S_ISREG(mode) or stat.S_ISDIR(mode):
+        return None
+    kind = _KINDS.get(stat.S_IFMT(mode), "not a regular file")
+    if stat.S_ISLNK(mode):
+        kind += f" (to {os.readlink(path)})"
+    return kind
+
+
+def check_kind(path: str | Path) -> None:
+    """OutputError if `path` holds something a written file may not replace (`special_kind`), `force` or not;
+    its line gives no `--force` hint, since --force would not."""
+    kind = special_kind(path)
+    if kind is not None:
+        raise OutputError(f"is {kind}, not a regular file; pairplay replaces only a regular file, --force or not: "
+                          "give another name", path)
+
+
 def check_output(path: str | Path, force: bool = False, inputs: Iterable[str | Path] = ()) -> Path:
     """`path` as a Path if a file may be written there; OutputError otherwise.
 
-    Refused: a folder, one of the verb's `inputs` (by any name, `force` or not: `combine a.json b.json
-    -o a.json --force` replaced its own input, silently), an existing file (unless `force`), a place
-    whose nearest existing folder is a file or read-only."""
+    Refused: a folder, a device, pipe, socket or link (`check_kind`, `force` or not), one of the verb's `inputs`
+    (by any name, `force` or not: `combine a.json b.json -o a.json --force` replaced its own input, silently),
+    an existing file (unless `force`), a place whose nearest existing folder is a file or read-only."""
     path = Path(path)
+    check_kind(path)
     if path.is_dir():
         raise OutputError("is a folder; give a file name", path)
     me = _file_id(path)
@@ -153,7 +255,7 @@ def check_folder(path: str | Path) -> Path:
     """`path` as a Path if it is, or can become, a folder we write into; OutputError otherwise."""
     path = Path(path)
     if path.exists() and not path.is_dir():
-        raise OutputError("is a file, not a folder", path)
+        raise OutputError(f"is {special_kind(path) or 'a file'}, not a folder", path)
     if path.is_dir():
         if not os.access(path, os.W_OK | os.X_OK):
             raise OutputError("cannot write there: the folder is read-only", path)
@@ -231,6 +333,7 @@ def _mkdir(path: Path) -> None:
 
 def _commit(tmp: Path, path: Path, force: bool) -> None:
     if force:
+        check_kind(path)  # again: a pipe or device made there while we worked is not replaced either
         os.replace(tmp, path)
         return
     try:
@@ -324,10 +427,10 @@ def check_output_folder(path: str | Path, force: bool = False, owned: tuple[str,
     `manifest`: the writer's own); OutputError otherwise (call it before the work)."""
     path = check_folder(path)
     check_theirs(path, owned, manifest)
+    check_places(path, owned)  # first: --force would not help (a folder, a pipe where a file goes), so no hint of it
     if path.exists() and not _is_empty_dir(path) and not force:
         raise OutputError("exists and is not empty", path, fix="--force replaces the files written there",
                           option="--force")
-    check_places(path, owned)
     return path
 
 
@@ -369,6 +472,7 @@ def check_places(path: Path, owned: tuple[str, ...] = (), files: Iterable[str] =
         return
     for rel in files:
         target = path / rel
+        check_kind(target)
         if target.is_dir() and not target.is_symlink():
             raise OutputError("is a folder where a file is written; a folder is never replaced, --force or not: "
                               "remove or rename it", target)
@@ -380,6 +484,8 @@ def check_places(path: Path, owned: tuple[str, ...] = (), files: Iterable[str] =
             literal += 1
         _check_above(path, path.joinpath(*parts[:literal], "x"))
         for old in sorted(path.glob(pattern)):
+            if is_owned(old.relative_to(path).as_posix(), (pattern,)):
+                check_kind(old)
             if old.is_dir() and not old.is_symlink() and is_owned(old.relative_to(path).as_posix(), (pattern,)):
                 raise OutputError("is a folder where a file is written; a folder is never replaced, --force or "
                                   "not: remove or rename it", old)

@@ -37,6 +37,7 @@ from __future__ import annotations
 
 import contextlib
 import csv
+import fnmatch
 import hashlib
 import io
 import logging
@@ -45,6 +46,7 @@ import re
 import secrets
 import threading
 import time
+import unicodedata
 import zipfile
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -55,7 +57,7 @@ from pairplay import __version__, csvcell, folderlock, signals, testpause
 from pairplay.errors import InputError, UserError
 from pairplay.livelock import LIVE, is_live
 from pairplay.outputs import (OutputError, check_output, check_places, manifest_name, output_file, read_manifest,
-                              remove_written, set_aside_of, write_manifest)
+                              remove_written, set_aside_of, special_kind, write_manifest)
 from pairplay.schemas import journal as j
 from pairplay.schemas.jsonfile import in_words, without_bom
 from pairplay.schemas.policy import read_policy, write_policy
@@ -130,12 +132,33 @@ def atomic_write(path: Path, data: bytes) -> None:
 KEY_FILE_MODE, KEY_FOLDER_MODE = 0o600, 0o700  # the one file that links ids to names: its owner only
 
 
+def other_work(folder: Path) -> list[str]:
+    """What the folder `folder` holds that makes it no place for a new study (`StudyData.create`), sorted, a folder
+    named with a `/`: every entry but a hidden one (`.DS_Store`, `.git`: a file manager's or the user's own, not
+    work), though another pairplay verb's manifest (`.pairplay-*.manifest`) is work (that verb's outputs are
+    there), and but what a `create` cut short leaves (the study file, the settings, its folders empty), which it
+    writes again. Empty if `folder` is missing or is not a folder (check_places says that)."""
+    if not folder.is_dir():
+        return []
+
+    def work(p: Path) -> bool:
+        if p.name.startswith("."):
+            return fnmatch.fnmatchcase(p.name, manifest_name("*"))
+        if p.name in (STUDY_FILE, SETTINGS):
+            return False
+        return not (p.name in SUBFOLDERS and p.is_dir() and not p.is_symlink() and not any(p.iterdir()))
+    return sorted(p.name + ("/" if p.is_dir() else "") for p in folder.iterdir() if work(p))
+
+
 def open_key_file(path: Path):
     """The key file for appending, created (with the folder it is in) readable by its owner only, and
     made so if it was not (a key file written 0644 by pairplay <= 0.3, or by hand). `StudyDataError`
     if it cannot be made (the path says where)."""
     if path.is_dir():  # it said the system's "Is a directory"
         raise StudyDataError("a folder, not a key file: give the path of a CSV file (made if missing)", path)
+    kind = special_kind(path, follow=True)  # a link to the user's key file is theirs to keep; appended through
+    if kind is not None:  # a named pipe: `protocol init --key-file FIFO` waited for ever; a device took the names
+        raise StudyDataError(f"is {kind}, not a key file: give the path of a regular CSV file (made if missing)", path)
     try:
         path.parent.mkdir(mode=KEY_FOLDER_MODE, parents=True, exist_ok=True)
         fd = os.open(path, os.O_WRONLY | os.O_APPEND | os.O_CREAT, KEY_FILE_MODE)
@@ -427,6 +450,13 @@ class StudyData:
         if (folder / JOURNAL).exists():
             # not "already a study folder": a folder named `study` is a word of it, and the line then left out where
             raise StudyDataError(f"already initialised ({JOURNAL} is there); give another folder", given)
+        others = other_work(folder)
+        if others:  # `protocol init wt1` where the README's walkthrough left recordings/, rebuilt/, merged.json: rc 0,
+            # then `session`/`rebuild --out` there were refused (only `protocol` writes a study folder) and the
+            # unrelated recordings sat among the study's; a new study starts in a new or empty folder
+            shown = ", ".join(others[:3]) + (f" and {len(others) - 3} more" if len(others) > 3 else "")
+            raise StudyDataError(f"holds other work ({shown}); a study folder is made in a new or empty folder "
+                                 "(hidden files aside): give another folder", given)
         if key_file is not None:
             key = Path(key_file).resolve()
             if key.is_relative_to(folder):
@@ -509,7 +539,8 @@ class StudyData:
     def register(self, joins: str, label: str = "") -> str:
         """Register a participant for phase `joins`; returns the new pseudonymous id.
 
-        `label` (a name, an e-mail...) goes only to the key file; refused without one."""
+        `label` (a name, an e-mail...) goes only to the key file; refused without one, and with a control
+        character (`register_many`, the one way in)."""
         with self._writing():
             try:
                 self.study.phase_by_id(joins)
@@ -529,7 +560,7 @@ class StudyData:
             pid = f"p{max([self.state.next_number, self.state.ids_given + len(unjournaled) + 1] + numbers):02d}"
             if label:
                 with open_key_file(self.key_file) as f:
-                    csvcell.writer(f).writerow([pid, label.replace("\r", " ").replace("\n", " ")])  # never a formula (pairplay/csvcell.py)
+                    csvcell.writer(f).writerow([pid, label])  # never a formula (pairplay/csvcell.py)
             self.append(j.ParticipantRegistered(participant=pid, joins=joins))
             return pid
 
@@ -630,6 +661,10 @@ class StudyData:
             raise StudyDataError(f"{count_name} must be a whole number 1..{REGISTER_AT_ONCE}, got {count!r}")
         if label and count != 1:
             raise StudyDataError(f"{label_name} registers one participant: leave out {count_name}")
+        control = next((c for c in label if unicodedata.category(c) == "Cc"), None)
+        if control is not None:  # a newline became a space in the key file without a word (a new user's trial)
+            raise StudyDataError(f"{label_name} holds a control character ({control!r} at {label.index(control)}): "
+                                 "give the name as one line of text, without tabs")
         return [self.register(joins, label) for _ in range(count)]
 
     def mark_invalid(self, session: str, reason: str) -> j.SessionMarkedInvalid:

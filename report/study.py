@@ -46,7 +46,7 @@ from pairplay.core.policies import to_policy_file
 from pairplay.core.reward import BONUS_RULE_TEXT
 from pairplay.core.rng import GAME_INDEX_RANGE, SEED_RANGE
 from pairplay.core.simulate import MEMORY_LIMIT, batch_bytes, gigabytes
-from pairplay.arguments import checked_dataclass, flag_argument, given, instance_argument, is_integer, path_argument
+from pairplay.arguments import at, checked_dataclass, flag_argument, given, instance_argument, is_integer, path_argument
 from pairplay.errors import OptionError
 from pairplay.lists import comma_items
 from pairplay.numbers import counted, shown, type_name
@@ -84,6 +84,17 @@ class StudySettings:
     algorithm: str = "q-learning"  # or "lspi" (core/lspi.py)
     lspi_ridge: float = LSPIConfig().ridge
     lspi_every: int = LSPIConfig().improve_every
+
+    def __post_init__(self) -> None:
+        """Each setting checked alone where a script makes it (`check_values`), naming
+        `pairplay.StudySettings(<setting>)`: `rounds="20"`, `rounds=0`, `personas=""` were taken and said only
+        by run_study, as "(rounds)" (a new user's trial). What depends on the whole study (its memory, the
+        settings only LSPI or the speed-up take) is `check`'s, when the study is known."""
+        try:
+            self.check_values()
+        except SettingError as err:
+            err.where = at("StudySettings", err.key)
+            raise
 
     def lspi(self) -> LSPIConfig | None:
         """LSPI's settings when the study learns by LSPI (ValueError if they cannot run)."""
@@ -127,15 +138,9 @@ class StudySettings:
         """Whether run_study runs the speed-up (algorithm 5): it holds each persona out of the others."""
         return not self.train_only and len(self.persona_list()) >= 2
 
-    def check(self, speed_up: bool | None = None, spell: Callable[[str], str] = str,
-              compare_learners: bool | None = None, given: Collection[str] = ()) -> list:
-        """The personas, once every setting is known to make the study asked for; raises SettingError
-        (its `key`, the setting's field name) for the first that core cannot run or that would run
-        something else. `speed_up`: whether the speed-up runs (default: as run_study decides; a sweep
-        says `reuse`). `compare_learners`: whether LSPI is compared with Q-learning by snapshots (default: as
-        run_study decides, lspi without train_only; a sweep's cells do not). `spell` names a setting in
-        the message (the CLI's `--reuse-last`). `given`: the settings the user gave (the options on the
-        command line, the keys of a sweep's cell), for those that only some algorithm takes."""
+    def check_values(self) -> list:
+        """The personas, once each setting alone is of its kind and in its range (SettingError, `key` the
+        field, for the first that is not); run at construction and by `check`."""
         self.check_kinds()
         personas = self.persona_list()
         lo, hi = SEED_RANGE
@@ -158,9 +163,6 @@ class StudySettings:
             if getattr(self, key) > top:
                 raise SettingError(key, f"must be 1..{top} (each game is a game index of core/rng.py), "
                                    f"got {getattr(self, key)}")
-        self.check_memory(personas, speed_up if speed_up is not None else self.runs_speed_up(),
-                          self.algorithm == "lspi" and not self.train_only if compare_learners is None
-                          else compare_learners, spell)
         for key in ("psi", "psi_decay"):
             if not 0 <= getattr(self, key) <= 1:  # also refuses nan
                 raise SettingError(key, f"must be between 0 and 1, got {shown(getattr(self, key))}")
@@ -168,13 +170,28 @@ class StudySettings:
             raise SettingError("reward_bonus", f"must be one of {', '.join(REWARD_BONUS_RULES)}, got {self.reward_bonus!r}")
         if self.algorithm not in study.LEARNING_ALGORITHMS:
             raise SettingError("algorithm", f"must be one of {', '.join(study.LEARNING_ALGORITHMS)}, got {self.algorithm!r}")
-        unused = lspi_unused(self.algorithm, [spell(k) for k in LSPI_SETTINGS if k in given], spell("algorithm"))
-        if unused:  # (session's rule: Q-learning would ignore them)
-            raise SettingError("algorithm", unused)
         try:
             self.lspi()
         except ValueError as exc:
             raise SettingError("lspi_ridge" if "ridge" in str(exc) else "lspi_every", str(exc)) from None
+        return personas
+
+    def check(self, speed_up: bool | None = None, spell: Callable[[str], str] = str,
+              compare_learners: bool | None = None, given: Collection[str] = ()) -> list:
+        """The personas, once every setting is known to make the study asked for; raises SettingError
+        (its `key`, the setting's field name) for the first that core cannot run or that would run
+        something else. `speed_up`: whether the speed-up runs (default: as run_study decides; a sweep
+        says `reuse`). `compare_learners`: whether LSPI is compared with Q-learning by snapshots (default: as
+        run_study decides, lspi without train_only; a sweep's cells do not). `spell` names a setting in
+        the message (the CLI's `--reuse-last`). `given`: the settings the user gave (the options on the
+        command line, the keys of a sweep's cell), for those that only some algorithm takes."""
+        personas = self.check_values()
+        self.check_memory(personas, speed_up if speed_up is not None else self.runs_speed_up(),
+                          self.algorithm == "lspi" and not self.train_only if compare_learners is None
+                          else compare_learners, spell)
+        unused = lspi_unused(self.algorithm, [spell(k) for k in LSPI_SETTINGS if k in given], spell("algorithm"))
+        if unused:  # (session's rule: Q-learning would ignore them)
+            raise SettingError("algorithm", unused)
         if compare_learners is None:
             compare_learners = self.algorithm == "lspi" and not self.train_only
         if compare_learners and self.rounds < SPEED_EVERY:  # no snapshot: the comparison was dropped silently

@@ -104,11 +104,15 @@ class Grid:
     def cells(self) -> list[Cell]:
         return [Cell(s, seed) for s in self.settings() for seed in self.seeds]
 
-    def study_settings(self, cell: Cell) -> StudySettings:
+    def given(self, cell: Cell) -> dict:
+        """The StudySettings fields `cell` sets (the rest are the study's defaults)."""
         given = {**self.base, **dict(cell.setting), "seed": cell.seed}
         if "reuse_last" not in given:  # not in the grid: the study's default for the cell's rounds (50 refused rounds = 20)
             given["reuse_last"] = default_reuse_last(given.get("rounds", StudySettings.rounds))
-        return StudySettings(**given)
+        return given
+
+    def study_settings(self, cell: Cell) -> StudySettings:
+        return StudySettings(**self.given(cell))
 
 
 def as_toml(value) -> str:
@@ -249,11 +253,12 @@ def _read_grid(path: str, parse_float) -> Grid:
         raise GridError(f"{path}: reuse: must be true or false, got {typed(('reuse',), reuse)}")
     grid = Grid(base, axes, tuple(seeds), reuse)
     for s in grid.settings():  # every cell's settings, before any cell runs: each must make the study asked for
-        settings = grid.study_settings(Cell(s, grid.seeds[0]))
-        try:
-            personas = settings.check(speed_up=grid.reuse, compare_learners=False, given={*base, *dict(s)})
+        given = grid.given(Cell(s, grid.seeds[0]))
+        try:  # each setting alone is checked as StudySettings is made, the rest by check
+            personas = StudySettings(**given).check(speed_up=grid.reuse, compare_learners=False,
+                                                    given={*base, *dict(s)})
         except SettingError as exc:
-            value = getattr(settings, exc.key)
+            value = given.get(exc.key, getattr(StudySettings, exc.key))
             # where the value came from, as the file has it (a TOML 2 became 2.0 for a float setting, 1_000 1000:
             # pairplay/numbers.py, schemas/tomlplace.py); a setting the file does not give is the study's default
             at = ("study", exc.key) if exc.key in base else _axis_at(exc.key, value, axes) if exc.key in axes else None

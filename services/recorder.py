@@ -82,7 +82,7 @@ from pairplay import __version__, signals, testpause
 from pairplay.errors import OutputError
 from pairplay.livelock import LIVE, hold, is_live, release
 from pairplay.numbers import counted
-from pairplay.outputs import REPLACED, set_aside_of
+from pairplay.outputs import REPLACED, set_aside_of, special_kind
 from pairplay.replay.reader import LOST_AT_KEY, RECOVERED, _listed, carry_recovery, said_source_lost
 from pairplay.replay.wal import JournalWriter, NotAJournal, read_journal, wal_path
 from pairplay.replay.writer import FLUSH_INTERVAL_NS, LOSS_BOUND_NS, EventLogWriter
@@ -228,18 +228,20 @@ def journals_of(path: Path) -> list[Path]:
 
 def check_not_folders(path: str | Path) -> None:
     """OutputError naming it if the recording `path`, one of its `<stem>.<k>.mcap`, a journal or a file set
-    aside of the session is a folder: it is no recording, and not pairplay's to
-    replace or rename, --force or not. Called before anything starts: `session --force` ran the whole
-    session, then exited 2, the folder renamed `<id>.mcap.replaced`; without --force it said "has a
-    recording already; --force replaces it", which did not."""
+    aside of the session is a folder, a device, a pipe, a socket or a link (outputs.special_kind): it is no
+    recording, and not pairplay's to replace or rename, --force or not. Called before anything starts:
+    `session --force` ran the whole session, then exited 2, the folder renamed `<id>.mcap.replaced`; without
+    --force it said "has a recording already; --force replaces it", which did not."""
     path = Path(path)
     for p in [path, *recordings_of(path), *journals_of(path), *set_aside_of(path)]:
-        if p.is_dir():  # which file it stands for, by its name (a `.replaced` was called the recording)
+        kind = special_kind(p)  # a device, pipe, socket or link: `session --force` renamed it aside, then removed it
+        if p.is_dir() or kind:  # which file it stands for, by its name (a `.replaced` was called the recording)
             what = (f"`session --force` keeps the earlier recording (named *{REPLACED})" if p.name.endswith(REPLACED)
                     else "a killed recorder's journal is kept" if p.name.endswith(".journal")
                     else "the session's recording is written")
-            raise OutputError(f"is a folder where {what}; a folder is never replaced or renamed, --force or not: "
-                              "remove or rename it", p)
+            kind = kind or "a folder"
+            raise OutputError(f"is {kind} where {what}; only a regular file is ever replaced or renamed, --force or "
+                              "not: remove or rename it", p)
 
 
 def check_new_recording(path: str | Path, hint: str = NEW_SESSION_HINT, set_aside_too: bool = True) -> Path:

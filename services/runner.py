@@ -21,14 +21,13 @@ from __future__ import annotations
 
 import gc
 import logging
-import os
 import threading
 import time
 from typing import Any, Callable
 
 import msgspec
 
-from pairplay import __version__
+from pairplay import __version__, environment
 from pairplay.schemas.envelope import Event
 from pairplay.schemas.events import ServiceStarted, decode_event, encode_event
 from pairplay.schemas.keys import alive_key, event_key, query_key, session_keys, source_keys
@@ -40,7 +39,7 @@ from pairplay.services.node import Driver, Logic
 log = logging.getLogger("pairplay.runner")
 # a game waits this long for the services it needs (Node.start), then one line, exit 2; a slow or
 # loaded lab machine (services started by hand, or at nice 19 under load 30: over 30 s) sets more
-WAIT_FOR_S = float(os.environ.get("PAIRPLAY_WAIT_FOR_S", "30"))
+WAIT_FOR_S = environment.wait_for_s()  # (pairplay/environment.py: `PAIRPLAY_WAIT_FOR_S=abc` was a traceback)
 LOG_QUERY = "log"
 SENT_QUERY = "sent"
 

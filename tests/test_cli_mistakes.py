@@ -65,6 +65,10 @@ TAKEN_PORT = TAKEN.getsockname()[1]
 CLOSED = _closed_port()
 SIM = ["session", "--participant", "sim:blind", "--rounds", "2"]
 
+PROC_X = ("cannot write there: its file system makes no new files or folders there (it answered 'No such file or "
+          "directory', though /proc exists) (/proc/x)")
+PROC = ("cannot write there: its file system makes no new files or folders there (it answered 'No such file or "
+        "directory', though the folder exists) (/proc)")
 CASES = [
     # a trial: the 'time' rule's settings with another rule were ignored without a word, exit 0 (as LSPI's were)
     Case("session --ignore-window-ms with perceived", SIM + ["--ignore-rule", "perceived", "--ignore-window-ms", "700"],
@@ -291,6 +295,33 @@ CASES = [
          "unknown source 'cor' (did you mean 'core'?); known: core, lspi, bus, view, robot, lab (--only)"),
     Case("run --wait-for a typo", ["run", "game", "--participant", "sim:blind", "--wait-for", "learnr,recorder"],
          "'learnr' (did you mean 'learner'?): not a service to wait for"),
+    # options only the arms take, with --fit-only that plays none: ignored, exit 0 (a new user's trial)
+    Case("counterfactual --fit-only --policy", ["counterfactual", "rec.mcap", "--fit-only", "--policy", "same",
+                                                 "--out", "cf"],
+         "--policy same is not taken with --fit-only: it plays no arm"),
+    Case("counterfactual --fit-only --seeds", ["counterfactual", "rec.mcap", "--seeds", "3", "--fit-only",
+                                                "--out", "cf"], "--seeds 3 is not taken with --fit-only"),
+    Case("counterfactual --fit-only --seed", ["counterfactual", "rec.mcap", "--fit-only", "--seed", "0",
+                                               "--out", "cf"], "--seed 0 is not taken with --fit-only"),
+    Case("counterfactual --fit-only --rounds", ["counterfactual", "rec.mcap", "--fit-only", "--rounds", "5",
+                                                 "--out", "cf"], "--rounds 5 is not taken with --fit-only"),
+    # the unreadable file's arm and option named ("nope.json: cannot read" named neither)
+    Case("counterfactual --policy reuse of a missing file", ["counterfactual", "rec.mcap", "--policy",
+                                                               "same,reuse:nope.json", "--out", "cf12"],
+         "counterfactual: --policy reuse:nope.json: cannot read: No such file or directory"),
+    Case("counterfactual --policy fixed of a folder", ["counterfactual", "rec.mcap", "--policy", "fixed:policies",
+                                                        "--out", "cf12"], "--policy fixed:policies: "),
+    # a policy file an option names: the refusal names the option ("nope.json: cannot read" named none)
+    Case("session --policy a missing file", SIM + ["--algorithm", "pi-reuse", "--policy", "nope.json"],
+         "session: --policy nope.json: cannot read: No such file or directory"),
+    Case("report --reference a missing file", ["report", "study", "--reference", "nope.json"],
+         "report: --reference nope.json: cannot read: No such file or directory"),
+    # one policy of a participant has no profile (algorithm 3): merged as perceiving everything, exit 0 (a trial)
+    Case("combine one policy", ["combine", "policies/blind/game-00.json", "-o", "m1.json"],
+         "a merge (algorithm 4) weighs each participant by its profile (algorithm 3), which compares two or more "
+         "policies of a participant; only one of blind (policies/blind/game-00.json)"),
+    Case("combine one policy of one of two participants", ["combine", "policies/deaf", "policies/blind/game-01.json"],
+         "only one of blind (policies/blind/game-01.json)"),
     Case("counterfactual --policy a typo", ["counterfactual", "rec.mcap", "--policy", "same,fnal", "--out", "cf"],
          "unknown arm 'fnal' (did you mean 'final'?)"),
     Case("counterfactual --policy reuse without its file", ["counterfactual", "rec.mcap", "--policy", "reuse",
@@ -406,21 +437,24 @@ CASES = [
     # opens and before any line (session printed "bus listening ..." first; lab served its pages and blamed
     # --listen; run recorder printed "listening")
     Case("session --out where no folder can be made", SIM + ["--out", "/proc/x"],
-         "cannot write there: No such file or directory (/proc/x)"),
+         PROC_X),
     Case("lab --out where no folder can be made", ["lab", "--participant", "human:p1", "--out", "/proc/x"],
-         "cannot write there: No such file or directory (/proc/x)"),
+         PROC_X),
     Case("run recorder --out where no folder can be made", ["run", "recorder", "--session", "s", "--out", "/proc/x"],
-         "cannot write there: No such file or directory (/proc/x)"),
+         PROC_X),
     Case("rebuild --out where no folder can be made", ["rebuild", "rec.mcap", "--out", "/proc/x"], "(/proc/x)"),
     Case("recover -o where no file can be made", ["recover", "cut.mcap", "-o", "/proc/x.mcap"], "(/proc)"),
-    Case("combine -o where no file can be made", ["combine", "policies", "-o", "/proc/m.json"], "(/proc)"),
+    # /proc's "No such file or directory" was said as the reason, of a folder that exists (a new user's trial)
+    Case("combine -o where no file can be made", ["combine", "policies", "-o", "/proc/m.json"],
+         "cannot write there: its file system makes no new files or folders there (it answered 'No such file or "
+         "directory', though the folder exists) (/proc)"),
     Case("counterfactual --out where no folder can be made", ["counterfactual", "rec.mcap", "--out", "/proc/x"],
          "(/proc/x)"),
     Case("sweep --out where no folder can be made", ["sweep", "grid.toml", "--out", "/proc/x"], "(/proc/x)"),
     Case("participant export -o where no file can be made", ["participant", "export", "study", "p01", "-o",
-                                                             "/proc/p.zip"], "cannot write there: No such file or directory (/proc)"),
+                                                             "/proc/p.zip"], PROC),
     Case("protocol init where no folder can be made", ["protocol", "init", "/proc/st", "--study", "thesis-ch7"],
-         "cannot write there: No such file or directory (/proc/st)"),
+         PROC_X.replace("/proc/x", "/proc/st")),
 ]
 
 

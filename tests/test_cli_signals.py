@@ -232,9 +232,14 @@ def test_every_verb_a_signal_after_its_run_returned_is_one_line_and_its_status(
     shutil.copy(SAMPLE, tmp_path / "a.mcap")
     assert main(["rebuild", str(tmp_path / "a.mcap"), "--out", str(tmp_path / "rb"), "--no-plot"]) == 0
     policy = str(tmp_path / "rb" / "a.policy.json")
+    if verb == "combine":  # a merge takes two or more policies of a participant (algorithm 3's profile)
+        import msgspec
+        from pairplay.schemas.policy import read_policy, write_policy
+        first = read_policy(policy)
+        write_policy(tmp_path / "b.json", msgspec.structs.replace(first, q=[[v + 0.5 for v in row] for row in first.q]))
     args = {"rebuild": ["rebuild", str(tmp_path / "a.mcap"), "--out", str(tmp_path / "rb2"), "--no-plot"],
             "recover": ["recover", str(tmp_path / "a.mcap"), "--out", str(tmp_path / "r.mcap")],
-            "combine": ["combine", policy, "-o", str(tmp_path / "m.json")]}[verb]
+            "combine": ["combine", policy, str(tmp_path / "b.json"), "-o", str(tmp_path / "m.json")]}[verb]
     capsys.readouterr()
     import pairplay.cli.main as cli_main
     _signal_after(monkeypatch, cli_main, "signal_received", signal.SIGTERM)  # asked as soon as run() returned

@@ -93,6 +93,9 @@ def test_a_request_the_command_line_refuses_is_refused_by_the_console_in_the_sam
         ({"phase": "phase1", "count": 0}, "`count` must be a whole number 1..50, got 0"),
         ({"phase": "phase1", "extra": 1}, "no key `extra` is known here; the keys: count, label, phase"),
         ({"phase": "phase1", "lable": "Anna"}, "no key `lable` is known here (did you mean `label`?)"),
+        # a newline became a space in the key file without a word (a new user's trial): refused as the CLI does
+        ({"phase": "phase1", "label": 'Bob\n,evil"'}, "a name (`label`) holds a control character ('\\n' at 3): "
+                                                     "give the name as one line of text, without tabs"),
     ]
     for body, said in cases:
         status, answer = call(f"{server.url}/api/console/register?token={t}", body)

@@ -3,7 +3,8 @@
 A new user's trial (2026-12-01): the console said the board was "connected" as soon as the lab's board
 service joined the bus, before any board page was open ("waiting for the board page" never showed); and
 at 1280x900 and 1366x768 the Games table overflowed its panel (a click on "mark invalid" landed on the
-data panel's Delete), at 1920x1080 the page scrolled sideways (the bias table's gaze column cut).
+data panel's Delete), at 1920x1080 the page scrolled sideways (the bias table's gaze column cut). Another
+(2026-12-02) at 1280x900: the plan's step 10 showed ".0.", the Games table's headers broke letter by letter.
 """
 
 from __future__ import annotations
@@ -89,8 +90,39 @@ BUTTONS_CLICKABLE = """() => {
 }"""
 
 
+# A new user's trial at 1280x900: the plan's numbers from 10 on were cut at the panel's edge (".0. p01: phase2
+# game 1": the list's markers are drawn in its padding, which held one digit), and the Games table's headers
+# broke letter by letter ("sessio n", "w h o": every cell could break anywhere, headers too).
+WORDS_BROKEN = """() => {
+  const bad = [];
+  for (const th of document.querySelectorAll('th')) {
+    const text = th.firstChild;
+    if (!text || text.nodeType !== Node.TEXT_NODE) continue;
+    let at = 0;
+    for (const word of text.data.split(' ')) {
+      const range = document.createRange();
+      range.setStart(text, at); range.setEnd(text, at + word.length);
+      if (word && range.getClientRects().length > 1) bad.push(word);
+      at += word.length + 1;
+    }
+  }
+  return bad;
+}"""
+MARKERS_CUT = """() => {
+  const ol = document.getElementById('plan');
+  const item = ol.querySelector('li:last-child');
+  const style = getComputedStyle(item);
+  const ctx = document.createElement('canvas').getContext('2d');
+  ctx.font = `${style.fontWeight} ${style.fontSize} ${style.fontFamily}`;
+  // the widest marker of a plan of up to 99 steps (this one has fewer: the trial's had 10+), in the items' font
+  const marker = ctx.measureText(`${Math.max(ol.children.length, 99)}. `).width;
+  return [ol.children.length, marker, parseFloat(getComputedStyle(ol).paddingLeft)];
+}"""
+
+
 @pytest.mark.parametrize("width,height", [(1280, 900), (1366, 768), (1920, 1080), (1024, 768)])
-def test_every_button_is_clickable_and_the_page_never_scrolls_sideways(browser, played, width, height):
+def test_every_button_is_clickable_no_header_breaks_in_a_word_and_the_page_never_scrolls_sideways(
+        browser, played, width, height):
     with Bus(BusOptions()) as bus:
         server = StudyLabServer(StudyRunner(StudyData(played), bus)).start()
         try:
@@ -102,6 +134,9 @@ def test_every_button_is_clickable_and_the_page_never_scrolls_sideways(browser, 
             sideways = page.evaluate("[document.documentElement.scrollWidth, document.documentElement.clientWidth]")
             assert sideways[0] <= sideways[1], f"the page scrolls sideways at {width}x{height}: {sideways}"
             assert page.evaluate(BUTTONS_CLICKABLE) == []
+            assert page.evaluate(WORDS_BROKEN) == []
+            steps, marker, room = page.evaluate(MARKERS_CUT)
+            assert steps > 0 and marker <= room, (steps, marker, room)
             ctx.close()
         finally:
             server.close()

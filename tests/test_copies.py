@@ -50,8 +50,9 @@ def test_every_verb_that_writes_a_participants_data_elsewhere_journals_it_and_th
             ["view", "--recording", str(rec1), "--out", str(out / "view.rrd")],
             ["counterfactual", str(rec1), "--fit-only", "--out", str(out / "cf")],
             ["recover", str(rec2), "-o", str(out / "recovered.mcap")],
-            ["combine", str(folder / g1.ended.policy), str(folder / other.ended.policy), "-o",
-             str(out / "merged.json")]]
+            ["combine", *(str(folder / g.ended.policy) for g in (g1, _game(data, "p01", 1), other,
+                                                                 _game(data, "p02", 1))), "-o",
+             str(out / "merged.json")]]  # two policies a participant: a merge weighs each by its profile
     for argv in runs:
         assert main([*argv, "--quiet"]) == 0, (argv, capsys.readouterr())
     journaled = {e.path: e for e in _copies(data)}
@@ -258,7 +259,8 @@ def test_a_copy_whose_journal_line_cannot_be_written_once_it_is_made_is_removed_
             "view": ["view", "--recording", rec1, "--out", out / "view.rrd"],
             "counterfactual": ["counterfactual", rec1, "--fit-only", "--out", out / "cf"],
             "recover": ["recover", cut, "-o", out / "recovered.mcap"],
-            "combine": ["combine", folder / g1.ended.policy, folder / other.ended.policy, "-o", out / "merged.json"],
+            "combine": ["combine", *(folder / g.ended.policy for g in (g1, _game(data, "p01", 1), other,
+                                                                       _game(data, "p02", 1))), "-o", out / "merged.json"],
             "report": ["report", folder, "--out", out / "report"]}
     monkeypatch.setattr(folderlock, "WAIT_S", 0.3)
     real, held = copies.StudyData, []

@@ -68,3 +68,50 @@ def test_the_walkthroughs_listing_says_what_a_fresh_folder_holds():
     said = line.split("#", 1)[1]
     assert "blind-g0.mcap" in said and "deaf-g1.mcap" in said, line
     assert "samples/" not in said or "in a checkout" in said, line
+
+
+def test_the_readmes_way_to_watch_a_replay_views_it_whole(tmp_path):
+    """A new user's trial: the README said to attach `pairplay view --session S --connect ENDPOINT` to the
+    endpoint `pairplay replay REC` prints; a small recording replays in half a second at the default speed, and
+    the view then found no bus (exit 2). The README's two commands, as written (the port a free one, the
+    recording a copy of a sample under the README's name), in two real processes: the view, once it says it
+    listens, gets every event the replay published."""
+    import os
+    import shlex
+    import shutil
+    import socket
+    import subprocess
+    import sys
+
+    text = README.read_text()
+    view_line = next(line for line in text.splitlines() if line.startswith("pairplay view --session replay1 --listen"))
+    replay_line = next(line for line in text.splitlines() if line.startswith("pairplay replay ") and "--as replay1" in line)
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+
+    def argv(line: str) -> list[str]:
+        words = shlex.split(line.split("#")[0].replace("7450", str(port)))
+        assert words[0] == "pairplay"
+        return [sys.executable, "-m", "pairplay", *words[1:]]
+
+    recording = next(w for w in shlex.split(replay_line.split("#")[0]) if w.endswith(".mcap"))
+    (tmp_path / recording).parent.mkdir(parents=True, exist_ok=True)
+    sample = README.parent / "recordings" / "samples" / "sim-helmut-fmt2.mcap"
+    shutil.copy(sample, tmp_path / recording)
+    env = dict(os.environ, PYTHONUNBUFFERED="1")
+    view = subprocess.Popen(argv(view_line), cwd=tmp_path, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            env=env)
+    try:
+        for line in view.stderr:  # -v: the view says when it listens
+            if "listening to session replay1" in line:
+                break
+        replay = subprocess.run(argv(replay_line), cwd=tmp_path, capture_output=True, text=True, timeout=300, env=env)
+        assert replay.returncode == 0, replay.stderr
+        replayed = int(replay.stdout.split("replayed ")[1].split(" ")[0])
+        out, _ = view.communicate(timeout=300)
+    finally:
+        if view.poll() is None:
+            view.kill()
+            view.wait()
+    assert view.returncode == 0 and out.startswith(f"saved recordings/replay1.rrd: {replayed} events, 0 notes"), out

@@ -104,23 +104,29 @@ def test_a_merge_of_a_partial_policy_is_flagged_partial_and_said_once(tmp_path, 
     why = "interrupted (SIGINT) after 3 of 10 rounds"
     partial = msgspec.structs.replace(policy_file.FILE.decode(policy_bytes), partial=why)
     policy_file.write_policy(tmp_path / "a.json", partial)
-    policy_file.write_policy(tmp_path / "b.json", other_policy(policy_bytes))
-    assert main(["combine", str(tmp_path / "a.json"), str(tmp_path / "b.json"), "-o", str(tmp_path / "m.json")]) == 0
+    # two policies a participant (a merge weighs each by its profile, algorithm 3): ashley's a and b, helmut's c and d
+    ashley = other_policy(policy_bytes, partial.participant)
+    policy_file.write_policy(tmp_path / "b.json", msgspec.structs.replace(ashley, q=[[v + 2.0 for v in ashley.q[0]],
+                                                                                 *ashley.q[1:]]))
+    helmut = other_policy(policy_bytes)
+    policy_file.write_policy(tmp_path / "c.json", helmut)
+    policy_file.write_policy(tmp_path / "d.json", msgspec.structs.replace(helmut, q=[[v + 1.0 for v in helmut.q[0]],
+                                                                                 *helmut.q[1:]]))
+    files = [str(tmp_path / f"{n}.json") for n in "abcd"]
+    assert main(["combine", *files, "-o", str(tmp_path / "m.json")]) == 0
     out = capsys.readouterr().out
     merged = policy_file.read_policy(tmp_path / "m.json")
     assert merged.partial == f"made of a partial policy: {tmp_path / 'a.json'} ({why})", merged.partial
     assert out.count("PARTIAL") == 1 and f"PARTIAL merge: {merged.partial}" in out, out
     # a warning about the result: on stderr too, -q or not (cli/main.py `warn`: -q hid it with the listing)
-    assert main(["combine", str(tmp_path / "a.json"), str(tmp_path / "b.json"), "-o", str(tmp_path / "m.json"),
-                 "--force", "-q"]) == 0
+    assert main(["combine", *files, "-o", str(tmp_path / "m.json"), "--force", "-q"]) == 0
     out, err = capsys.readouterr()
     assert out == "" and err == f"pairplay combine: PARTIAL merge: {merged.partial}\n", (out, err)
     [answer] = CombinerLogic(tmp_path).handle(ev.CombineRequested(request_id="r", policies=["a.json", "b.json"],
                                                                   output_path="bus.json"))
     assert answer.ok and policy_file.read_policy(tmp_path / "bus.json").partial == f"made of a partial policy: a.json ({why})"
     # a partial policy of a participant left out takes no part
-    assert main(["combine", str(tmp_path / "a.json"), str(tmp_path / "b.json"), "--exclude", "ashley",
-                 "-o", str(tmp_path / "w.json")]) == 0
+    assert main(["combine", *files, "--exclude", "ashley", "-o", str(tmp_path / "w.json")]) == 0
     assert "PARTIAL" not in capsys.readouterr().out and policy_file.read_policy(tmp_path / "w.json").partial == ""
 
 

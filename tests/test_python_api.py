@@ -2,7 +2,8 @@
 
 A new user's trial (README "Scripting pairplay from Python") met raw errors from deep inside for
 ordinary mistakes: read_log("nope.mcap") a FileNotFoundError, users_from_policies(paths) and
-combine(["x"]) AttributeErrors, run_study(StudySettings(rounds="20")) a comparison's TypeError,
+combine(["x"]) AttributeErrors, run_study(StudySettings(rounds="20")) a comparison's TypeError (now refused
+by StudySettings itself, naming it),
 fold_events([1, 2]) an empty fold, run_study into a folder of an earlier run "--force replaces"
 (in Python the argument is force=True). Every function of `pairplay.API` gets mistakes here
 (pairplay/arguments.py's rule: a UserError, one line, what and where; the wrong kind also a
@@ -93,11 +94,20 @@ CASES = [
     ("fit_user", lambda m: pairplay.fit_user(m.turns.observations, "bogus"), ValueError, "source must be one of"),
     ("run_arms", lambda m: pairplay.run_arms("blind", [], [0], 10), TypeError, "persona must be a Persona"),
     ("run_study", lambda m: pairplay.run_study({"seed": 1}, m.tmp / "s"), TypeError, "args must be a StudySettings"),
-    ("run_study", lambda m: pairplay.run_study(S(rounds="20"), m.tmp / "s"), TypeError, "must be an integer, got str '20' (rounds)"),
-    ("run_study", lambda m: pairplay.run_study(S(seed=1.5), m.tmp / "s"), TypeError, "must be an integer"),
-    ("run_study", lambda m: pairplay.run_study(S(personas=["blind"]), m.tmp / "s"), TypeError, "comma-separated"),
-    ("run_study", lambda m: pairplay.run_study(S(train_only=1), m.tmp / "s"), TypeError, "true or false"),
-    ("run_study", lambda m: pairplay.run_study(S(personas="nobody"), m.tmp / "s"), ValueError, "unknown persona"),
+    # a setting alone is refused where it is made, naming StudySettings (it was said by run_study as "(rounds)")
+    ("StudySettings", lambda m: S(rounds="20"), TypeError,
+     "must be an integer, got str '20' (pairplay.StudySettings(rounds))"),
+    ("StudySettings", lambda m: S(rounds=0), ValueError, "must be at least 1, got 0 (pairplay.StudySettings(rounds))"),
+    ("StudySettings", lambda m: S(personas=""), ValueError, "names no persona"),
+    ("StudySettings", lambda m: S(seed=1.5), TypeError, "must be an integer, got float 1.5 (pairplay.StudySettings(seed))"),
+    ("StudySettings", lambda m: S(personas=["blind"]), TypeError, "comma-separated"),
+    ("StudySettings", lambda m: S(train_only=1), TypeError, "true or false"),
+    ("StudySettings", lambda m: S(personas="nobody"), ValueError, "unknown persona 'nobody'"),
+    ("StudySettings", lambda m: S(psi=float("nan")), ValueError, "must be between 0 and 1, got nan (pairplay.StudySettings(psi))"),
+    ("StudySettings", lambda m: S(algorithm="sarsa"), ValueError, "(pairplay.StudySettings(algorithm))"),
+    # what depends on the whole study is run_study's (the speed-up's snapshots every 10 rounds)
+    ("run_study", lambda m: pairplay.run_study(S(personas="blind,deaf", rounds=5), m.tmp / "s"), ValueError,
+     "must be at least 10 when the speed-up runs"),
     ("run_study", lambda m: pairplay.run_study(S(personas="blind", games=1, rounds=10), None), TypeError,
      "(pairplay.run_study(out))"),
     ("run_study", lambda m: pairplay.run_study(S(personas="blind", games=1, rounds=10), m.tmp / "earlier"),

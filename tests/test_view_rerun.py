@@ -250,3 +250,40 @@ def test_a_view_that_joins_a_running_session_catches_up_from_the_recorder(tmp_pa
         recorder.close()
     assert result["s"].events == len(events)  # each event once: the log, then live, no repeats
     assert np.array_equal(view.model.q, q) and not view.model.q_partial
+
+
+def test_a_view_that_joins_a_session_under_way_with_no_recorder_says_what_it_missed(tmp_path):
+    """A new user's trial: `pairplay view --session S --connect` attached to a replay already under way saved
+    "live.rrd: 2547 events" of 2552, the session's first five (its start among them) missed without a word.
+    Each source's seq starts at 1: a source first seen above it lost its first events. The view notes them,
+    names its .rrd partial (never passed off as whole) and says so: each source's loss on stderr, the
+    saved line on stdout. A real `pairplay view`
+    process on a real bus; the first events are published before it subscribes (nobody hears them)."""
+    events, q = scripted_events(rounds=1, seed=7, session="join1")
+    early = 5
+    with open_bus() as session_bus:
+        _publish(session_bus, events[:early])  # no subscriber yet: gone, as a replay's start before the view
+        view = subprocess.Popen([sys.executable, "-m", "pairplay", "view", "--session", "join1", "--connect",
+                                 session_bus.locators()[0], "--out", "join1.rrd"], cwd=tmp_path,
+                                stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        try:
+            _wait_matching(session_bus, event_key("join1", events[early].source, tag_of(type(events[early]))),
+                           timeout=300)
+            _publish(session_bus, events[early:])
+            out, err = view.communicate(timeout=300)
+        finally:
+            if view.poll() is None:
+                view.kill()
+                view.wait()
+    partial = tmp_path / "join1.partial.rrd"
+    missed = (f"{early} events of the session never reached the view (published before it joined, with no "
+              "recorder's log to catch up from, or dropped); see its notes")
+    assert view.returncode == 0, err
+    assert out.startswith(f"saved {partial.name}: {len(events) - early} events") and out.rstrip().endswith(
+        f"; partial: {missed}"), out
+    lines = err.splitlines()  # each source's loss, as noted (a WARNING, -q or not)
+    assert len(lines) == 2 and all("missing before seq" in n and "published before the view joined" in n
+                                   for n in lines), err
+    assert partial.exists() and not (tmp_path / "join1.rrd").exists()
+    texts = [r["TextLog:text"][0] for r in read_rrd(partial)["events"]]
+    assert any("missing before seq" in t and "published before the view joined" in t for t in texts), texts
