@@ -35,7 +35,13 @@ signal landed in WeakSet._remove).
 Once a verb's work is done (its outputs complete; `work_done`, called by a
 verb before it prints its result, and by cli/main.py when the verb returns),
 a signal stops nothing: it is recorded in `late`, and the command still
-exits 128 + its number, saying on one line that the work was done (cli/main.py).
+exits 128 + its number, saying on one line that the work was done (cli/main.py),
+up to the process's last step (cli/main.py `_end`). The same once a verb was
+stopped and says so (cli/main.py calls `work_done` as it catches the
+KeyboardInterrupt): a signal then raises nothing more, its status is the first's.
+Before, one raised in the line's print or in the exit's clean-up escaped as a
+KeyboardInterrupt traceback (`python -m pairplay`: exit 1; a new user's trial at
+load 35, a copy of a held signal sent again, `send_to_main`, or a second Ctrl-C).
 Before, a signal just after `rebuild` wrote its outputs exited 130 with no
 line at all (the interpreter's teardown met it), or said "nothing more was
 written" for outputs that were all there.

@@ -108,7 +108,7 @@ def run(args: argparse.Namespace) -> int:
         if not stop.is_set():
             raise
         again = signals.again or signal.SIGINT  # (a second SIGTERM cuts it too: pairplay/signals.py `wait_cut`)
-        print(cut_line("lab", out, again, summary), file=sys.stderr)
+        print(cut_line("lab", out, again), file=sys.stderr)
         return 128 + again
     except TimeoutError as err:  # a service the game waits for never came (the eye tracker, say)
         print(f"pairplay lab: the session did not start: {err}", file=sys.stderr)

@@ -58,7 +58,7 @@ import signal
 import sys
 import threading
 
-from pairplay import __version__, environment, signals, threadstart
+from pairplay import __version__, environment, signals, testpause, threadstart
 from pairplay.cli import interrupts
 from pairplay.cli.interrupts import DeferredInterrupt
 from pairplay.cli.args import check_study_folders
@@ -303,8 +303,9 @@ def configure_logging(verbose: bool, quiet: bool) -> int:
 
 def main(argv: list[str] | None = None, exiting: bool = False) -> int:
     """Run one verb (module rule); its exit status. `exiting`: the process ends with this status
-    (entry): a signal after the status is decided is ignored, not left to the interpreter's teardown
-    (where Python's default handler killed the process: 130 with no line)."""
+    (entry): a signal from here on stops nothing and is recorded (cli/interrupts.py `late`), for `entry` to
+    say up to its last step (`_end`); not left to the interpreter's teardown (where Python's default handler
+    killed the process: 130 with no line)."""
     argv = list(sys.argv[1:] if argv is None else argv)
     in_main = threading.current_thread() is threading.main_thread()
     saved = {s: signal.getsignal(s) for s in (signal.SIGINT, signal.SIGTERM)} if in_main else {}
@@ -313,24 +314,21 @@ def main(argv: list[str] | None = None, exiting: bool = False) -> int:
         if exiting and in_main:  # one noted while the command loaded, when it returned before it armed (a mistake)
             interrupts.late = interrupts.late or signals.take()
     except KeyboardInterrupt:  # a signal before the verb ran (while its modules load)
+        if in_main:
+            interrupts.work_done()  # stopped: a signal from now on raises nothing more (as in _main)
         verb = _named(argv)
         print(f"pairplay{' ' + verb if verb else ''}: {interrupted_what()}; nothing more was written", file=sys.stderr)
         code = exit_code_of(signal_received() or signal.SIGINT)
     try:
+        if in_main and (exiting or code not in INTERRUPTED):
+            interrupts.work_done()  # the work is over (done, refused or interrupted): a signal now stops nothing
         if in_main and code not in INTERRUPTED:
-            interrupts.work_done()  # the work is over (done, or refused): a signal now stops nothing
-            if exiting:
-                for s in saved:
-                    signal.signal(s, signal.SIG_IGN)
-            if interrupts.late:  # a signal after the work was done: its status, and one line saying so
-                verb = _named(argv)
-                done = "" if code == 0 else f" with status {code}"
-                print(f"pairplay{' ' + verb if verb else ''}: {interrupted_what(interrupts.late)} after it had "
-                      f"finished{done}; nothing was undone", file=sys.stderr)
-                code = exit_code_of(interrupts.late)
+            code = said_late(argv, code)
         return code
     finally:
-        interrupts.received = interrupts.late = 0  # said in this call's status; a later main() starts afresh
+        interrupts.received = 0  # said in this call's status; a later main() starts afresh
+        if not exiting:
+            interrupts.late = 0
         outputs = sys.modules.get("pairplay.outputs")
         if outputs is not None:
             outputs.written.clear()  # (`nothing_more`: this call's outputs)
@@ -338,6 +336,19 @@ def main(argv: list[str] | None = None, exiting: bool = False) -> int:
         if not exiting:
             for s, handler in saved.items():
                 signal.signal(s, handler)
+
+
+def said_late(argv: list[str], code: int) -> int:
+    """`code`, or the status of a signal that came once the work was done (cli/interrupts.py `late`, taken),
+    with its one line saying so (module rule)."""
+    late, interrupts.late = interrupts.late, 0
+    if not late:
+        return code
+    verb = _named(argv)
+    done = "" if code == 0 else f" with status {code}"
+    print(f"pairplay{' ' + verb if verb else ''}: {interrupted_what(late)} after it had finished{done}; nothing was "
+          "undone", file=sys.stderr)
+    return exit_code_of(late)
 
 
 def warn(verb: str, line: str) -> None:
@@ -406,33 +417,62 @@ INTERRUPTED = (130, 143)  # exit_code_of SIGINT, SIGTERM
 
 
 def entry() -> None:
-    """The `pairplay` command (and `python -m pairplay`): `main()`, then exit with its code.
-
-    After an interruption (exit 130 or 143) the exit handlers run and the process ends
-    with os._exit, skipping only the interpreter's teardown of its objects (a
-    second guard besides cli/interrupts.py, which keeps Ctrl-C out of numba's
-    compiler: native objects half-built by an interrupted compile aborted the
-    process at exit with "double free detected" in CI). Every output is already
-    closed or removed by then (the verbs' context managers ran while
-    KeyboardInterrupt unwound the stack). The same when a thread of ours is still
-    running once the verb returned (a start a signal did not wait for, loading
-    compiled kernels; a Zenoh close or publish left to the exit by a shutdown's
-    deadline): the teardown would end it inside native code, and the process
-    aborted ("FATAL: exception not rethrown", SIGABRT) after its recording was
-    finished."""
+    """The `pairplay` command (and `python -m pairplay`): `main()`, then exit with its code (`_end`)."""
     # The pools' semaphores are unlinked by multiprocessing's resource tracker when we end with os._exit
-    # (below): its report of them ("leaked semaphore objects") is that clean-up, not a fault, and would
+    # (`_end`): its report of them ("leaked semaphore objects") is that clean-up, not a fault, and would
     # add lines to an interruption's one line. The tracker is a child process: it reads this variable.
     os.environ["PYTHONWARNINGS"] = ",".join(filter(None, (os.environ.get("PYTHONWARNINGS"), QUIET_TRACKER)))
     threadstart.guard()  # a thread that dies as it starts is refused, not waited for (pairplay/threadstart.py)
-    code = main(exiting=True)
-    if code in INTERRUPTED or _threads_left() or _signalled():
-        atexit._run_exitfuncs()  # what was registered to run at exit still runs (multiprocessing's clean-up)
-        for stream in (sys.stdout, sys.stderr):
-            with contextlib.suppress(Exception):
-                stream.flush()
-        os._exit(code)
-    sys.exit(code)
+    try:
+        code = main(exiting=True)
+    except SystemExit as done:  # argparse's --help, --version and usage lines (Parser.error): the same end
+        if done.code is not None and type(done.code) is not int:
+            raise  # a message to print: the interpreter's own exit says it (none of ours)
+        code = done.code or 0
+        interrupts.work_done()  # (its handler: a signal from here on is said by `_end`, as any verb's)
+        interrupts.late = interrupts.late or signals.take()  # one that came as it parsed (cli/start.py noted it)
+    _end(code, sys.argv[1:])
+
+
+def _end(code: int, argv: list[str]) -> None:
+    """End the process with `code`, or with the status of a signal that came up to its last step, said.
+
+    What the interpreter's exit does that can be seen is done here, under main()'s handler (a signal is
+    recorded, cli/interrupts.py `late`): threads that are not daemons joined, the exit handlers run
+    (multiprocessing's clean-up, logging's, rerun's flush), a completed verb's garbage collected (its
+    finalizers: an open file flushed), stdout and stderr flushed. Then both signals are ignored, a late one is
+    said (`said_late`), and the process ends with os._exit: the status is decided only there, and nothing
+    follows it but the exit. The interpreter's teardown of its objects is skipped, always. It took 1.3-3 s
+    after `counterfactual` had printed what it wrote (numba's, matplotlib's objects torn down; load 14) with
+    SIGINT ignored: a Ctrl-C there exited 0, no line, 7 of 10 times (a new user's trial). It aborted the
+    process after an interrupted compile ("double free detected" in CI: native objects half-built; with
+    cli/interrupts.py, which keeps Ctrl-C out of numba's compiler), and after a session with a thread of ours
+    still running ("FATAL: exception not rethrown", SIGABRT: a Zenoh close left to the exit by a shutdown's
+    deadline); it took 6-15 s after `protocol serve` had returned (load 40-60), past the 2 s a signalled
+    process has (issue 12). Every output is closed or removed before main() returns (the verbs' context
+    managers)."""
+    import gc
+
+    cut = code in INTERRUPTED or _threads_left() or _signalled()
+    if not cut:  # (a thread of ours left, an interrupted compile's objects: not waited for, not collected)
+        threading._shutdown()  # as the interpreter's exit: the threads that are not daemons (a library's) joined
+    atexit._run_exitfuncs()  # what was registered to run at exit still runs (multiprocessing's clean-up)
+    if not cut:
+        gc.collect()
+    _flush()
+    testpause.pause("exiting")
+    for s in signals.SIGNALS:  # the status is decided now (signal.signal runs a pending handler first)
+        signal.signal(s, signal.SIG_IGN)
+    if code not in INTERRUPTED:
+        code = said_late(argv, code)
+        _flush()
+    os._exit(code)
+
+
+def _flush() -> None:
+    for stream in (sys.stdout, sys.stderr):
+        with contextlib.suppress(Exception):
+            stream.flush()
 
 
 def _signalled() -> bool:
@@ -513,6 +553,7 @@ def _main(argv: list[str], arm=None) -> int:
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())  # no second error at exit's flush
         return 0
     except KeyboardInterrupt as err:
+        interrupts.work_done()  # stopped: a signal from now on (a second, a copy sent again) raises nothing more
         if code is not None or (running and err.__traceback__.tb_next is None):  # raised here: run had returned
             interrupts.late = interrupts.late or interrupts.received or signal.SIGINT
             return code or 0
@@ -523,6 +564,7 @@ def _main(argv: list[str], arm=None) -> int:
     except SystemError as err:  # Ctrl-C inside a compiled kernel: numba reports it as a SystemError around it
         if not isinstance(err.__cause__ or err.__context__, KeyboardInterrupt):
             raise
+        interrupts.work_done()  # (as a KeyboardInterrupt's)
         print(f"pairplay {_who(args)}: {interrupted_what()}; {nothing_more()}", file=sys.stderr)
         return exit_code_of(signal_received() or signal.SIGINT)
     except UserError as err:  # a fix naming an option this verb lacks is left out (errors.UserError)

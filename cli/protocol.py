@@ -398,7 +398,7 @@ def cut(runners: list, verb: str, stop) -> int:
     again = signals.again or signal.SIGINT  # (either signal cuts it: pairplay/signals.py `wait_cut`)
     signals.held_elsewhere_over()  # a recorder the game's thread is starting or finishing: its held step ends first
     if game.path.exists() or wal_path(game.path).exists():
-        print(cut_line(f"protocol {verb}", game.path, again, game.summary), file=sys.stderr)
+        print(cut_line(f"protocol {verb}", game.path, again), file=sys.stderr)
         return 128 + again
     # stopped before its recording began: main's "nothing more was written" hid a started game with no end
     started = runners[0].data.state.games.get(game.session)

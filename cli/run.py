@@ -122,7 +122,7 @@ def run(args: argparse.Namespace) -> int:
             raise
         from pairplay.cli.session import cut_line
         again = signals.again or signal.SIGINT
-        print(cut_line("run recorder", recording["path"], again, {}), file=sys.stderr)
+        print(cut_line("run recorder", recording["path"], again), file=sys.stderr)
         return 128 + again
     if code == 0 and getattr(stop, "why", ""):  # the status is the signal's (cli/main.py); it said nothing
         print(f"pairplay run {args.service}: stopped ({signals.said(stop.why)})", file=sys.stderr)  # every verb's line: stderr

@@ -52,8 +52,9 @@ from pairplay.cli.args import (add_force, count, float_between, game_index, opti
 from pairplay.core.geometry import PICKS_UNIT
 from pairplay.cli.robot import add_robot_arguments, check_robot_args, probe_robot_args, robot_choice
 from pairplay.services.bus import BusOpenError, ConfigFileError, add_bus_arguments, options_from_args, stop_on_signals
+from pairplay.outputs import set_aside_of
 from pairplay.services.recorder import (FORCE_SESSION_HINT, REPLACED, check_new_recording, check_not_folders,
-                                        earlier_outputs, finished_whole, set_aside, settle_aside)
+                                        earlier_outputs, finished_count, finished_whole, set_aside, settle_aside)
 from pairplay.services.runner import waiting_for
 from pairplay.services.session import run_session
 from pairplay.numbers import counted
@@ -211,23 +212,46 @@ def print_interrupted(summary: dict, path: Path, why: str, rounds: int, taken: s
     return 0
 
 
-def cut_line(verb: str, path: Path, again: int, summary: dict) -> str:
-    """The one line of a verb whose shutdown a second signal (`again`) cut (session, lab, run recorder), saying
-    what its recording is as the disk holds it (services/recorder.py `finished_whole`), not as far as the cut
-    shutdown got to note it: finished whole (the signal came after the file's end, before the verb said so), or
-    cut, and how to complete it. It said "may lack its end" of a whole file; and a second Ctrl-C as the summary
-    was printed said "nothing more was written" with no summary, the recording whole (a new user's trial: once
-    in 6 runs). Once the recording is finished the verb calls cli/interrupts.py `work_done` (a signal then cuts
-    nothing: the summary is printed, and the status is still the signal's); this line is for the signal that
-    came before that, inside the shutdown. A recorder closing in another thread (`protocol serve`'s game) is let
-    finish its held step first (pairplay/signals.py `held_elsewhere_over`), as one in the main thread would."""
+def cut_line(verb: str, path: Path, again: int) -> str:
+    """The one line of a verb whose shutdown a second signal (`again`) cut (session, lab, run recorder, protocol
+    serve and pilot), saying what its recording is as the disk holds it (services/recorder.py `finished_whole`,
+    `finished_count`), not as far as the cut shutdown got to note it: finished whole, with the events its end
+    counts (the signal came after the file's end, before the verb said so), or cut, and how to complete it. It
+    said "may lack its end" of a whole file; and a second Ctrl-C as the summary was printed said "nothing more
+    was written" with no summary, the recording whole (a new user's trial: once in 6 runs); `lab`'s line left out
+    the count `session`'s gave (the summary the cut shutdown had filled, or not). Once the recording is finished
+    the verb calls cli/interrupts.py `work_done` (a signal then cuts nothing: the summary is printed, and the
+    status is still the signal's); this line is for the signal that came before that, inside the shutdown. A
+    recorder closing in another thread (`protocol serve`'s game) is let finish its held step first
+    (pairplay/signals.py `held_elsewhere_over`), as one in the main thread would."""
     head = f"pairplay {verb}: interrupted again ({signals.said(again)}) while stopping; "
     signals.held_elsewhere_over()  # a recording another thread is finishing (serve's game): its held step ends first
     if finished_whole(path):
-        events = f" ({counted(summary['events'], 'event')})" if summary.get("events") is not None else ""
+        count = finished_count(path)
+        events = f" ({counted(count, 'event')})" if count is not None else ""
         return head + f"{path} was finished before it: the recording is whole{events}, its end written"
     return head + (f"{path} holds what was recorded up to now and may lack its end: pairplay recover {path} "
                    "completes it")
+
+
+def aside_line(verb: str, path: Path, again: int, aside: list, started: bool | None) -> str:
+    """`cut_line` of a `session --force` whose shutdown a second signal cut, once its earlier recordings
+    (`aside`, services/recorder.py `set_aside`) were settled (`settle_aside`): what the disk then holds. Given
+    back (the game had not started: the new file, which holds no session, removed), the line of a first
+    signal there; else the recording's line and the earlier ones as they are: kept beside it, named
+    *.replaced (not known whether the game had started), or removed (it had: --force replaced them). It said
+    they were kept beside it, the replace done and no *.replaced on disk (a new user's trial)."""
+    kept = set_aside_of(path)
+    if aside and started is False and not kept:
+        return (f"pairplay {verb}: interrupted again ({signals.said(again)}) while stopping, before the session "
+                f"started; {path}: the earlier recordings are kept (--force replaces them once a new session starts)")
+    line = cut_line(verb, path, again)
+    if kept:
+        return line + (f"; the earlier recordings are kept beside it, named *{REPLACED} ({', '.join(p.name for p in kept)}): "
+                       "if it holds no session (the game had not started), remove it and give them their names back")
+    if aside:
+        return line + "; the earlier recordings are removed: the game had started, and --force replaced them"
+    return line
 
 
 def read_back(path: Path, verb: str):
@@ -261,15 +285,19 @@ def run(args: argparse.Namespace) -> int:
     elif "recorder" not in args.external:  # --force sets recordings aside, never a folder: refused before the work
         check_not_folders(path)
     summary: dict = {"started": False}  # run_session's, once it has stopped
+    aside: list = []
     if not args.force or "recorder" in args.external:
-        return _left_beside(path, summary, _run(args, config, path, summary))
-    # --force: the earlier recordings are set aside, not removed, until the new one holds a session (a
-    # stop before the game started gives them back); before, a Ctrl-C there had already removed them
-    aside = set_aside(path)
-    try:
-        code = _run(args, config, path, summary, kept=bool(aside))
-    finally:  # "started" is missing when a second Ctrl-C cut the shutdown short: both are kept
-        settle_aside(aside, path, replaced=summary.get("started"))
+        code = _run(args, config, path, summary)
+    else:
+        # --force: the earlier recordings are set aside, not removed, until the new one holds a session (a
+        # stop before the game started gives them back); before, a Ctrl-C there had already removed them
+        aside = set_aside(path)
+        try:
+            code = _run(args, config, path, summary, kept=bool(aside))
+        finally:  # "started" is None when a second Ctrl-C cut the shutdown short before it was known: both kept
+            settle_aside(aside, path, replaced=summary.get("started"))
+    if summary.get("cut"):  # said once the earlier recordings are settled: what the disk then holds
+        print(aside_line("session", path, summary["cut"], aside, summary.get("started")), file=sys.stderr)
     return _left_beside(path, summary, code)
 
 
@@ -313,10 +341,7 @@ def _run(args: argparse.Namespace, config: SessionConfig, path: Path, summary: d
             summary["started"] = None
         if stop.is_set() and "recorder" not in args.external:
             again = signals.again or signal.SIGINT  # (a second SIGTERM cuts it too: pairplay/signals.py `wait_cut`)
-            print(cut_line("session", path, again, summary)
-                  + (f"; the earlier recordings are kept beside it, named *{REPLACED}: if it holds no session (the "
-                     "game had not started), remove it and give them their names back" if kept else ""),
-                  file=sys.stderr)
+            summary["cut"] = again  # its line is said by `run`, once the earlier recordings are settled
             return 128 + again
         raise
     except (ConfigFileError, BusOpenError) as err:

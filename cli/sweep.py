@@ -47,7 +47,7 @@ from pathlib import Path
 from pairplay.cli.args import output_folder, workers
 from pairplay.cli.progress import bar as progress
 from pairplay.errors import OptionError, OutputError
-from pairplay.outputs import check_folder, hold, write_text
+from pairplay.outputs import check_folder, hold, write_text, written
 from pairplay.report.sweep import (GridError, check_scheduler, check_sweep_memory, finished_cells, is_cell_file,
                                     read_grid, run_sweep, summary_files, summary_to_write,
                                     write_sweep)
@@ -77,8 +77,12 @@ def stopped(out: Path, grid, made: list[Path], had_copy: bool, why: str) -> int 
     own way (cli/main.py's line for a signal)."""
     kept = len(finished_cells(out, grid))  # a cell being written is not among them: its temporary file is gone
     if kept:
-        print(f"pairplay sweep: {why}; {kept} of {counted(len(grid.cells()), 'cell')} finished, kept in {out / 'cells'}: "
-              "the same command resumes from them", file=sys.stderr)
+        # the summary already in place (pairplay/outputs.py `written`: its folder renamed into place) is said: a
+        # signal just after it said only that the cells were kept, for the same command to resume from them
+        summed = Path(out) in written
+        print(f"pairplay sweep: {why}; {kept} of {counted(len(grid.cells()), 'cell')} finished, kept in {out / 'cells'}"
+              + (f"; its summary {out / 'sweep.md'} was written whole before it and kept; nothing more was written"
+                 if summed else ": the same command resumes from them"), file=sys.stderr)
         return 0
     if not had_copy:
         (out / "grid.toml").unlink(missing_ok=True)

@@ -577,6 +577,21 @@ def finished_whole(path: str | Path) -> bool:
         return False
 
 
+def finished_count(path: str | Path) -> int | None:
+    """The number of messages (events) a recording `finished_whole` holds, as its end (MCAP's statistics) says;
+    None if it cannot be read. What a verb's line after a second signal counts (cli/session.py `cut_line`):
+    from the disk, the same for every verb (the summary a cut shutdown got to fill had it for `session` and
+    not for `lab`: a new user's trial)."""
+    from mcap.reader import make_reader
+
+    try:
+        with open(path, "rb") as f:
+            statistics = make_reader(f).get_summary().statistics
+    except Exception:  # (mcap raises its own errors, and AttributeError for a summary without statistics)
+        return None
+    return None if statistics is None else statistics.message_count
+
+
 def _fsync(path: Path) -> None:
     """Push a closed file's data to the disk (before its journal goes)."""
     fd = os.open(path, os.O_RDONLY)

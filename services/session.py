@@ -24,7 +24,7 @@ from pathlib import Path
 
 import logging
 
-from pairplay import signals
+from pairplay import signals, testpause
 from pairplay.core.personas import persona
 from pairplay.errors import InputError, UserError
 from pairplay.nearest import nearest
@@ -208,6 +208,7 @@ def run_session(config: SessionConfig, path: str | Path, *, bus: Bus | None = No
                            started=game is not None and game.driver.seq > 0,
                            rounds_played=game.logic.round if game is not None else 0,
                            ended=game.logic.ended if game is not None else "")
+            testpause.pause("session-summed")  # (tests/test_cut_signals.py: a second signal once it is known)
     if failure is not None:
         raise RecordingFailed(failure, recorder.path)
     where = recorder.path if recorder is not None else f"session {config.session}"

@@ -112,7 +112,7 @@ def _child(request: dict) -> None:
     try:
         runpy.run_module("pairplay", run_name="__main__", alter_sys=True)
         code = 0
-    except SystemExit as done:  # entry's sys.exit
+    except SystemExit as done:  # (entry ends with os._exit, cli/main.py `_end`: only a non-int exit comes here)
         if done.code is not None and type(done.code) is not int:
             raise  # a message to print: the interpreter's own exit says it
         code = done.code or 0

@@ -23,8 +23,10 @@ import sys
 import threading
 from pathlib import Path
 
+import pytest
 from mcap.reader import make_reader
 
+from pairplay.numbers import counted
 from pairplay.replay.wal import wal_path
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -32,11 +34,14 @@ LIMIT_S = 300.0  # a safety net for a process that never gets there (a loaded ma
 
 
 class Held:
-    """One verb's process, held at `moment` until the test lets it go."""
+    """One verb's process, held at `moment` until the test lets it go (and at `then` after it, if given)."""
 
-    def __init__(self, tmp: Path, moment: str, args: list[str], ready: str):
-        self.go = tmp / f"go-{moment}"
-        env = dict(os.environ, PYTHONUNBUFFERED="1", PAIRPLAY_TEST_PAUSE=f"{moment}:{self.go}")
+    def __init__(self, tmp: Path, moment: str, args: list[str], ready: str, then: str = ""):
+        self.go, self.go_then = tmp / f"go-{moment}", tmp / f"go-{then}"
+        pauses = f"{moment}:{self.go}" + (f";{then}:{self.go_then}" if then else "")
+        env = dict(os.environ, PYTHONUNBUFFERED="1", PAIRPLAY_TEST_PAUSE=pauses)
+        self.then = then
+        self.paused_then = threading.Event()
         self.proc = subprocess.Popen([sys.executable, "-m", "pairplay", *args], cwd=tmp, env=env, text=True,
                                      stdout=subprocess.PIPE, stderr=subprocess.PIPE)
         self.out: list[str] = []
@@ -54,8 +59,11 @@ class Held:
                 self.ready.set()
             if line.startswith("pairplay-test: paused at"):
                 self.paused.set()
+            if self.then and line.rstrip("\n") == f"pairplay-test: paused at {self.then}":
+                self.paused_then.set()
         self.ready.set()
         self.paused.set()  # ended: nothing more to wait for
+        self.paused_then.set()
 
     def run(self, first: int, second: int) -> tuple[int, list[str]]:
         """First signal once ready, second once held; let go; its status and its stderr lines but the pause's."""
@@ -71,6 +79,17 @@ class Held:
         assert self.paused.wait(LIMIT_S), "never held"
         assert self.proc.poll() is None, "".join(self.out + self.err)
         return self._signal_and_let_go(sig)
+
+    def at_both(self, first: int, second: int) -> tuple[int, list[str]]:
+        """`first` once held at the first moment, let go; `second` once held at `then`; as `run`."""
+        assert self.paused.wait(LIMIT_S), "never held"
+        assert self.proc.poll() is None, "".join(self.out + self.err)
+        self.proc.send_signal(first)
+        self.go.touch()
+        assert self.paused_then.wait(LIMIT_S), "never held again"
+        assert self.proc.poll() is None, "".join(self.out + self.err)
+        self.go = self.go_then
+        return self._signal_and_let_go(second)
 
     def _signal_and_let_go(self, sig: int) -> tuple[int, list[str]]:
         """`sig` to the held process, then its go-file; its status and its stderr lines but the pause's."""
@@ -152,3 +171,118 @@ def test_a_ctrl_c_once_a_verbs_outputs_are_in_place_says_they_are(tmp_path):
     assert (tmp_path / "out" / "sim-ashley.policy.json").is_file()
     assert err == ["pairplay rebuild: interrupted (Ctrl-C); out was written whole before it and kept; nothing more "
                    "was written"], err
+
+
+SAMPLE = ROOT / "recordings" / "samples" / "sim-ashley.mcap"
+# verbs whose work is done when held at `exiting` (cli/main.py `_end`: the process's last step before its status
+# is decided); each prints what it wrote first (-q not given)
+ENDED = {
+    "counterfactual": (["counterfactual", str(SAMPLE), "--seeds", "2", "--out", "cf"], "cf/counterfactual.md"),
+    "rebuild": (["rebuild", str(SAMPLE), "--out", "out", "--no-plot"], "out/sim-ashley.policy.json"),
+    "session": (["session", "--participant", "sim:ashley", "--rounds", "2", "--session", "s", "--out", "rec"],
+                "rec/s.mcap"),
+}
+
+
+@pytest.mark.parametrize("verb, sig", [("counterfactual", signal.SIGINT), ("rebuild", signal.SIGTERM),
+                                       ("session", signal.SIGINT)])
+def test_a_signal_as_a_finished_verb_exits_says_it_came_after_the_work(tmp_path, verb, sig):
+    """A new user's trial: a Ctrl-C 0.03-0.4 s after `counterfactual` had written its folder, the process still
+    running (the interpreter's teardown: 1.3-3 s at load 14, SIGINT ignored), exited 0 with no line, 7 of 10
+    times. Held at its last step, the signal gives its status and the line of a signal after the work."""
+    args, output = ENDED[verb]
+    held = Held(tmp_path, "exiting", args, "")
+    code, err = held.once(sig)
+    assert code == 128 + sig, err
+    assert (tmp_path / output).is_file()
+    said = "Ctrl-C" if sig == signal.SIGINT else "SIGTERM"
+    assert err[-1:] == [f"pairplay {verb}: interrupted ({said}) after it had finished; nothing was undone"], err
+    assert "Traceback" not in "".join(err), err
+    assert held.out, "its result was printed before"
+
+
+def test_a_ctrl_c_once_counterfactuals_folder_is_in_place_says_it_is(tmp_path):
+    held = Held(tmp_path, "folder-written", ENDED["counterfactual"][0], "")
+    code, err = held.once(signal.SIGINT)
+    assert code == 130, err
+    assert (tmp_path / "cf" / "counterfactual.md").is_file()
+    assert err == ["pairplay counterfactual: interrupted (Ctrl-C); cf was written whole before it and kept; "
+                   "nothing more was written"], err
+
+
+@pytest.mark.parametrize("second", [signal.SIGINT, signal.SIGTERM])
+def test_a_second_signal_as_an_interrupted_verb_exits_is_no_traceback(tmp_path, second):
+    """A new user's trial at load 35: `counterfactual` ended with a KeyboardInterrupt traceback, exit 1, after its
+    Ctrl-C (a second signal, or a copy of a held one sent again, met the handler that raises as the process ended:
+    cli/main.py `_end`). Stopped once its folder was in place, then held as it exits, the second signal changes
+    nothing: one line, the first signal's status."""
+    held = Held(tmp_path, "folder-written", ENDED["counterfactual"][0], "", then="exiting")
+    code, err = held.at_both(signal.SIGINT, second)
+    assert code == 130, err
+    assert err == ["pairplay counterfactual: interrupted (Ctrl-C); cf was written whole before it and kept; "
+                   "nothing more was written"], err
+
+
+def test_a_second_signal_after_a_forced_session_is_summed_up_says_what_the_disk_holds(tmp_path):
+    """A new user's trial: a second Ctrl-C during `session --force` said the earlier recordings were "kept beside
+    it, named *.replaced" while none was on disk (the game had started: --force replaced them). Held once the
+    session is summed up (services/session.py: it is known the game started), SIGINT then SIGTERM (distinct
+    signals: both are taken, in that order): the line says what the folder holds."""
+    rec = tmp_path / "rec"
+    rec.mkdir()
+    earlier = rec / "s.mcap"
+    earlier.write_bytes(SAMPLE.read_bytes())
+    args = ["session", "--participant", "sim:ashley", "--rounds", "2", "--session", "s", "--out", "rec", "--force"]
+    held = Held(tmp_path, "session-summed", args, "")
+    assert held.paused.wait(LIMIT_S), "never held"
+    assert held.proc.poll() is None, "".join(held.out + held.err)
+    held.proc.send_signal(signal.SIGINT)
+    code, err = held._signal_and_let_go(signal.SIGTERM)
+    assert code == 130, err  # the first signal's status (cli/main.py)
+    left = sorted(p.name for p in rec.iterdir())
+    assert left == ["s.mcap"] and whole(earlier), left  # the new recording, whole; the earlier one replaced
+    with open(earlier, "rb") as f:
+        events = make_reader(f).get_summary().statistics.message_count
+    assert err == [f"pairplay session: interrupted again (SIGTERM) while stopping; {Path('rec') / 's.mcap'} was "
+                   f"finished before it: the recording is whole ({counted(events, 'event')}), its end written; the earlier "
+                   "recordings are removed: the game had started, and --force replaced them"], err
+
+
+@pytest.mark.parametrize("verb", ["session", "lab"])
+def test_a_second_ctrl_c_as_the_recording_is_finished_counts_its_events(tmp_path, verb):
+    """`lab`'s line of a recording finished before the second signal left out the count `session`'s gave (a new
+    user's trial): both count what the file's end says."""
+    args = (session(tmp_path, "n") if verb == "session" else
+            ["lab", "--participant", "human:p1", "--session", "n", "--out", str(tmp_path / "rec")])
+    held = Held(tmp_path, "recorder-whole", args, "bus listening")
+    code, err = held.run(signal.SIGINT, signal.SIGINT)
+    path = tmp_path / "rec" / "n.mcap"
+    assert code == 130, err
+    assert whole(path)
+    with open(path, "rb") as f:
+        events = make_reader(f).get_summary().statistics.message_count
+    assert len(err) == 1 and err[0].endswith(f"was finished before it: the recording is whole "
+                                             f"({counted(events, 'event')}), its end written"), err
+
+
+def test_a_signal_once_a_sweeps_summary_is_in_place_says_it_is(tmp_path):
+    """A sweep stopped once its summary folder was in place said only that its cells were kept, for the same
+    command to resume from them: its summary, written whole, is said too."""
+    (tmp_path / "grid.toml").write_text('seeds = 1\n[study]\npersonas = "blind"\ngames = 1\nrounds = 20\n'
+                                        'eval_rounds = 5\n[grid]\nreward_bonus = ["correct", "consistent"]\n')
+    held = Held(tmp_path, "folder-written", ["sweep", "grid.toml", "--out", "sw"], "")
+    code, err = held.once(signal.SIGTERM)
+    assert code == 143, err
+    assert (tmp_path / "sw" / "sweep.md").is_file()
+    assert err == [f"pairplay sweep: interrupted (SIGTERM); 2 of 2 cells finished, kept in {Path('sw') / 'cells'}; its "
+                   f"summary {Path('sw') / 'sweep.md'} was written whole before it and kept; nothing more was written"], err
+
+
+def test_a_signal_as_a_usage_mistake_exits_is_said_too(tmp_path):
+    """argparse's refusal ends the command by SystemExit, which went through the interpreter's teardown, not
+    cli/main.py `_end`: the same end as every verb's now, a signal there said."""
+    held = Held(tmp_path, "exiting", ["study", "--bogus"], "")
+    code, err = held.once(signal.SIGINT)
+    assert code == 130, err
+    assert err == ["pairplay study: unknown option --bogus (see pairplay study --help)",
+                   "pairplay study: interrupted (Ctrl-C) after it had finished with status 2; nothing was undone"], err
