@@ -26,7 +26,7 @@ from pairplay.services.bus import Bus, BusOptions
 from pairplay.services.protocol import StudyRunner
 from pairplay.services.scripted import ScriptedPlayer
 
-from test_protocol_interrupted import STUDY, study_with
+from test_protocol_interrupted import STUDY, api, study_with
 
 LIMIT_S = 300
 
@@ -136,3 +136,24 @@ def test_a_step_played_again_before_its_cut_games_end_was_journaled_counts_once(
     assert [g.session for g in after.state.games.values() if g.valid_complete] == [f"{session}-r1"]
     assert "1 valid game of 1 participant" in ran.stdout + ran.stderr, ran
     assert [e for e in after.read_journal() if isinstance(e, j.SessionMarkedInvalid)][0].session == session
+
+
+def test_the_next_serve_journals_the_cut_game_says_so_and_its_console_lists_it_completed(tmp_path):
+    """The restarted console listed the cut game as 'running', and offered its step again."""
+    data, session = cut_by_a_second_ctrl_c(tmp_path)
+    proc = subprocess.Popen([sys.executable, "-m", "pairplay", "protocol", "serve", str(data.folder)], cwd=tmp_path,
+                            text=True, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                            env=dict(os.environ, PYTHONUNBUFFERED="1"))
+    try:
+        console = next(line for line in proc.stdout if "experimenter console:" in line)
+        base, token = console.split("experimenter console: ", 1)[1].strip().split("/console?token=")
+        state = api(f"{base}/api/console/state", token)
+        [game] = [g for g in state["games"] if g["session"] == session]
+        assert (game["outcome"], game["rounds"], game["questionnaire"]) == ("completed", 2, True), game
+        assert next(s for s in state["plan"] if not s["done"])["label"] == "p01: phase1 game 2", state["plan"]
+    finally:
+        proc.send_signal(signal.SIGTERM)
+        out, err = proc.communicate(timeout=LIMIT_S)
+    assert any(line.startswith(f"pairplay protocol serve: {session}: journaled completed from its cut recording "
+                               f"recordings/{session}.mcap: it was cut after the game's end")
+               for line in err.splitlines()), err
