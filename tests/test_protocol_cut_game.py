@@ -15,8 +15,10 @@ Ctrl-C lands while the recorder is held before its file's end (pairplay/testpaus
 from __future__ import annotations
 
 import os
+import shutil
 import signal
 import subprocess
+import zipfile
 import sys
 
 from pairplay.replay.studydata import StudyData
@@ -157,3 +159,24 @@ def test_the_next_serve_journals_the_cut_game_says_so_and_its_console_lists_it_c
     assert any(line.startswith(f"pairplay protocol serve: {session}: journaled completed from its cut recording "
                                f"recordings/{session}.mcap: it was cut after the game's end")
                for line in err.splitlines()), err
+
+
+def test_an_export_and_a_mark_invalid_journal_the_cut_game_first(tmp_path, pairplay_cli):
+    """The participant's export said the cut game was "running" (its README); mark-invalid marked a game with no end."""
+    data, session = cut_by_a_second_ctrl_c(tmp_path)
+    other = shutil.copytree(data.folder, tmp_path / "copy")  # the same cut game, for the second verb
+    folder = data.folder
+    ran = pairplay_cli("participant", "export", folder, "p01")
+    assert ran.returncode == 0, ran
+    assert ran.stderr.startswith(f"pairplay participant export: {session}: journaled completed from its cut "
+                                 f"recording recordings/{session}.mcap: "), ran.stderr
+    with zipfile.ZipFile(folder / "exports" / "p01.zip") as z:
+        readme = z.read("README.txt").decode()
+    assert "running" not in readme, readme
+    assert StudyData(folder).state.games[session].ended.outcome == "completed"
+    ran = pairplay_cli("protocol", "mark-invalid", other, session, "--reason", "a rehearsal")
+    assert ran.returncode == 0, ran
+    assert ran.stderr.startswith(f"pairplay protocol mark-invalid: {session}: journaled completed from its cut "
+                                 f"recording recordings/{session}.mcap: "), ran.stderr
+    game = StudyData(other).state.games[session]
+    assert (game.ended.outcome, game.invalid) == ("completed", "a rehearsal"), game
