@@ -912,11 +912,12 @@ class StudyData:
         return lines
 
     def _cut(self, g: Game, path: Path) -> CutEnd | None:
-        """What the cut recording of game `g` (journaled as started, never as ended) says of its end (replay/cutgame.py),
-        or None when it is not a cut recording of a game left by a process gone: started by this object (it runs
-        here), written by a live recorder, nothing recorded (`_never_recorded`), or a file of another session
-        (`not_this_game`: left as it is). `path`: the file standing for its recording (`game_recording`). No other
-        process runs a game of the folder while this one writes it (pairplay/folderlock.py)."""
+        """What the cut recording of game `g` (journaled as started, never as ended) says of its end
+        (replay/cutgame.py), or None when it is not a cut recording of a game left by a process gone: started by
+        this object (it runs here), written by a live recorder, nothing recorded (`_never_recorded`), or a file of
+        another session (`not_this_game`: left as it is). `path`: the file standing for its recording
+        (`game_recording`). No other process runs a game of the folder while this one writes it
+        (pairplay/folderlock.py)."""
         original = self.folder / g.recording
         if g.session in self._started_here or is_live(original):
             return None
@@ -935,7 +936,9 @@ class StudyData:
             return (f" ({CUT_BEFORE_END}: {source}, after {counted(cut.rounds, 'whole round')}); its step is "
                     "played again")
         said = f" from {source}: it was cut after the game's end (its SessionEnded is in {cut.where})"
-        if cut.outcome == "completed" and not copy:
+        if cut.outcome != "completed":  # (interrupted, aborted by the experimenter: its SessionEnded says)
+            return f"{said}; its step is played again"
+        if not copy:
             said += (f"; its policy: `pairplay recover {original}` writes its recovered copy, which the next serve, "
                      "pilot or report builds it from")
         return said
@@ -970,7 +973,8 @@ class StudyData:
         if (cut := self._cut(g, path)) is not None:
             return f"{head}; the next serve, pilot or report journals it {cut.outcome}{self._cut_words(g, copy, cut)}"
         if self._never_recorded(g):
-            return f"{head}; {NEVER_RECORDED}: the next serve, pilot or report journals it aborted, and its step is played again"
+            return (f"{head}; {NEVER_RECORDED}: the next serve, pilot or report journals it aborted, and its step "
+                    "is played again")
         if path.is_file() and (other := self._not_this_games_file(g, path)):
             return f"{head}; {copy or f'its recording {g.recording}'} is not this game's ({other}): move it away"
         return f"{head}; its recording {g.recording} is missing"

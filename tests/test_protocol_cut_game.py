@@ -18,8 +18,8 @@ import os
 import shutil
 import signal
 import subprocess
-import zipfile
 import sys
+import zipfile
 
 from pairplay.replay.studydata import StudyData
 from pairplay.replay.wal import JournalWriter, read_journal, wal_path
@@ -52,7 +52,8 @@ def cut_by_a_second_ctrl_c(tmp_path) -> tuple[StudyData, str]:
     said = [line.rstrip("\n") for line in err]
     assert proc.wait(LIMIT_S) == 130, said
     recording = data.folder / "recordings" / f"{session}.mcap"
-    assert said[-1].startswith(f"pairplay protocol pilot: interrupted again (Ctrl-C) while stopping; {recording} "), said
+    assert said[-1].startswith(f"pairplay protocol pilot: interrupted again (Ctrl-C) while stopping; {recording} "), \
+        said
     assert said[-1].endswith(f"; game {session}: the journal holds its start and no end: the next serve, pilot or "
                              f"report journals it from its recording (`pairplay protocol status {data.folder}` says "
                              "how)"), said
