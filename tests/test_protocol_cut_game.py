@@ -21,6 +21,8 @@ import subprocess
 import sys
 import zipfile
 
+import msgspec
+
 from pairplay.replay.studydata import StudyData
 from pairplay.replay.wal import JournalWriter, read_journal, wal_path
 from pairplay.schemas import journal as j
@@ -181,3 +183,29 @@ def test_an_export_and_a_mark_invalid_journal_the_cut_game_first(tmp_path, pairp
                                  f"recording recordings/{session}.mcap: "), ran.stderr
     game = StudyData(other).state.games[session]
     assert (game.ended.outcome, game.invalid) == ("completed", "a rehearsal"), game
+
+
+def test_a_cut_game_whose_end_says_interrupted_is_journaled_aborted_as_it_says_and_played_again(tmp_path,
+                                                                                                pairplay_cli):
+    from pairplay.schemas.events import decode_event, encode_event
+
+    data, session = cut_by_a_second_ctrl_c(tmp_path)
+    recording = data.folder / "recordings" / f"{session}.mcap"
+    records = read_journal(wal_path(recording)).records
+    recording.write_bytes(recording.read_bytes()[:1024])  # the end in the journal alone
+    wal_path(recording).unlink()
+    journal = JournalWriter(recording, session)
+    for key, payload, _ in records:
+        if key.endswith("/SessionEnded"):  # a game a signal stopped before its last round
+            payload = encode_event(msgspec.structs.replace(decode_event(payload), reason="interrupted",
+                                                           detail="SIGINT"))
+        journal.add((key, payload))
+    journal.close()
+    ran = pairplay_cli("report", data.folder)
+    assert (f"pairplay report: {session}: journaled aborted from its cut recording recordings/{session}.mcap: it was "
+            "cut after the game's end (its SessionEnded is in its recorder's journal beside it); its step is played "
+            "again") in ran.stderr.splitlines(), ran.stderr
+    after = StudyData(data.folder)
+    assert (after.state.games[session].ended.outcome, after.state.games[session].ended.reason) == \
+        ("aborted", "interrupted: SIGINT")
+    assert after.next_step().label == "p01: phase1 game 1"
