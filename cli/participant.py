@@ -55,6 +55,9 @@ def run(args) -> int:
 
 def _on_folder(data: StudyData, args) -> int:
     if args.action == "export":  # its default named as given (a refusal named the resolved study folder)
+        # a game left without its end is journaled first, and said: its README said "running" of it for ever
+        from pairplay.cli.protocol import built_missing_policies
+        built_missing_policies(data, "participant export")
         out = file_in(args.out, f"{args.participant}.zip") or args.folder / "exports" / f"{args.participant}.zip"
         path = data.export_participant(args.participant, out, force=args.force)
         print(f"{args.participant}: {path}")

@@ -216,11 +216,20 @@ def _on_folder(data: StudyData, args) -> int:
         for problem in data.fold_problems():  # a hand edit the tables cannot fold: every writing verb refuses it
             print(f"{data.given / JOURNAL}: does not fold into consistent tables: {problem}: every verb that writes "
                   f"the folder refuses it until the line is put back (a backup of {JOURNAL})")
+        # a game started and never ended (a second signal, a crash): what its recording holds and what the next
+        # serve, pilot or report does with it, on its step's line (it showed "[open]", no word of it)
+        unended: dict[tuple, list[str]] = {}
+        for g in data.state.games.values():
+            if note := data.unended_note(g):
+                unended.setdefault((g.participant, g.phase, g.game), []).append(note)
         for step in data.plan():
             mark = "done" if step.done else ("blocked" if step.blocked else "open")
-            print(f"[{mark:7}] {step.label}" + (f"  ({step.blocked})" if step.blocked and not step.done else ""))
+            notes = [step.blocked] if step.blocked and not step.done else []
+            notes += unended.get((step.participant, step.phase, step.game), []) if step.kind == "play" else []
+            print(f"[{mark:7}] {step.label}" + "".join(f"  ({n})" for n in notes))
         return 0
-    if args.action == "mark-invalid":
+    if args.action == "mark-invalid":  # a game left without its end is journaled first: its mark is of its end
+        built_missing_policies(data, "protocol mark-invalid")
         marked = data.mark_invalid(args.session, args.reason)
         print(f"{args.session} marked invalid: {marked.reason}")
         return 0
@@ -397,11 +406,15 @@ def cut(runners: list, verb: str, stop) -> int:
         raise KeyboardInterrupt
     again = signals.again or signal.SIGINT  # (either signal cuts it: pairplay/signals.py `wait_cut`)
     signals.held_elsewhere_over()  # a recorder the game's thread is starting or finishing: its held step ends first
+    started = runners[0].data.state.games.get(game.session)
     if game.path.exists() or wal_path(game.path).exists():
-        print(cut_line(f"protocol {verb}", game.path, again), file=sys.stderr)
+        # a game whose end the journal does not hold yet: what becomes of it (it was left "running", unsaid)
+        owed = (f"; game {game.session}: the journal holds its start and no end: the next serve, pilot or report "
+                "journals it from its recording (`pairplay protocol status "
+                f"{runners[0].data.given}` says how)") if started is not None and started.ended is None else ""
+        print(cut_line(f"protocol {verb}", game.path, again) + owed, file=sys.stderr)
         return 128 + again
     # stopped before its recording began: main's "nothing more was written" hid a started game with no end
-    started = runners[0].data.state.games.get(game.session)
     ended = started.ended if started is not None else None
     what = (f"journaled {ended.outcome}" + (f" ({ended.reason})" if ended.reason else "") + f"; no recording of it "
             f"was written ({game.path})" if ended is not None else

@@ -64,11 +64,12 @@ from pairplay.schemas.policy import read_policy, write_policy
 from pairplay.schemas.study import STUDY_FILE, Study, StudyFileError, load_study
 from pairplay.numbers import counted
 
+from .cutgame import CUT_BEFORE_END, CutEnd, cut_end
 from .fold import fold_any
 from . import studyjournal
 from .reader import read_any_log
 from .rebuild import Rebuilt, rebuild_recording, write_outputs
-from .recover import default_output, journal_left, journal_more
+from .recover import default_output, journal_more
 from .wal import wal_path
 
 JOURNAL, SETTINGS = "journal.jsonl", "settings.json"  # and STUDY_FILE, schemas/study.py
@@ -889,17 +890,25 @@ class StudyData:
                         ended = self.append_naming(ended, ended.policy)
                         lines.append(f"{g.session}: journaled {ended.outcome} from {source} (the server "
                                      "stopped before it said how the game ended)")
+                        lines += self._counted_once(g)
                         changed += 1
-                    elif g.session not in self._started_here and (left := journal_left(path)):
-                        # cut, and its journal holds the rest: said at each start until recovered (it was silent)
-                        lines.append(f"{g.session}: its end not journaled: {g.recording}: {left}; the next serve, "
-                                     "pilot or report journals it from that copy")
+                    elif (cut := self._cut(g, path)) is not None:
+                        # a second signal as the recorder finished, a crash: it was left "running", said by nothing,
+                        # and its step played again as if never played (a new user's trial)
+                        self.append(j.GameEnded(session=g.session, participant=g.participant, outcome=cut.outcome,
+                                                reason=cut.reason, rounds_played=cut.rounds, policy="",
+                                                questionnaire=cut.answered))
+                        lines.append(f"{g.session}: journaled {cut.outcome}{self._cut_words(g, copy, cut)}")
+                        lines += self._counted_once(g)
+                        changed += 1
                     elif self._never_recorded(g):
                         self.append(j.GameEnded(session=g.session, participant=g.participant, outcome="aborted",
                                                 reason=NEVER_RECORDED, rounds_played=0, policy="", questionnaire=False))
                         lines.append(f"{g.session}: journaled aborted ({NEVER_RECORDED}); its step is played again")
                         changed += 1
-                    continue  # otherwise running here or elsewhere, or cut: shown as running, as it was
+                    elif g.session not in self._started_here and (note := self.unended_note(g)):
+                        lines.append(note)  # another session's file: said at each start, left as it is
+                    continue  # otherwise running (here, or a recorder writes it): as it was
                 gone = bool(g.ended.policy) and not (self.folder / g.ended.policy).is_file()
                 if g.ended.outcome != "completed" or (g.ended.policy and not gone):
                     continue
@@ -936,6 +945,74 @@ class StudyData:
             if changed:
                 self.write_tables()
         return lines
+
+    def _cut(self, g: Game, path: Path) -> CutEnd | None:
+        """What the cut recording of game `g` (journaled as started, never as ended) says of its end
+        (replay/cutgame.py), or None when it is not a cut recording of a game left by a process gone: started by
+        this object (it runs here), written by a live recorder, nothing recorded (`_never_recorded`), or a file of
+        another session (`not_this_game`: left as it is). `path`: the file standing for its recording
+        (`game_recording`). No other process runs a game of the folder while this one writes it
+        (pairplay/folderlock.py)."""
+        original = self.folder / g.recording
+        if g.session in self._started_here or is_live(original):
+            return None
+        if not path.exists() and not wal_path(original).exists():
+            return None
+        if path.is_file() and self._not_this_games_file(g, path):
+            return None
+        return cut_end(path, original, g.session)
+
+    def _cut_words(self, g: Game, copy: str, cut: CutEnd) -> str:
+        """The rest of a cut game's line after its outcome (`build_missing_policies`, `protocol status` in the
+        future tense): where its end was found and what becomes of its policy, or that its step is played again."""
+        original = self.folder / g.recording
+        source = copy or f"its cut recording {g.recording}"
+        if cut.ended is None:
+            return (f" ({CUT_BEFORE_END}: {source}, after {counted(cut.rounds, 'whole round')}); its step is "
+                    "played again")
+        said = f" from {source}: it was cut after the game's end (its SessionEnded is in {cut.where})"
+        if cut.outcome != "completed":  # (interrupted, aborted by the experimenter: its SessionEnded says)
+            return f"{said}; its step is played again"
+        if not copy:
+            said += (f"; its policy: `pairplay recover {original}` writes its recovered copy, which the next serve, "
+                     "pilot or report builds it from")
+        return said
+
+    def _counted_once(self, g: Game) -> list[str]:
+        """Game `g` just journaled completed counts once with its step (the study's rule, docs/study.md): when its
+        step was played again before its end was journaled (its replay completed first: counted, combined,
+        reported), `g` is marked invalid, and said; [] otherwise. Both had counted as valid games (a new user's
+        trial: 13 valid games of a 12-game plan)."""
+        if not self.state.games[g.session].valid_complete:
+            return []
+        first = next((o for o in self.state.games.values() if o.session != g.session and o.valid_complete
+                      and (o.participant, o.phase, o.game) == (g.participant, g.phase, g.game)), None)
+        if first is None:
+            return []
+        reason = f"its step was played again as {first.session} before its end was journaled; {first.session} counts"
+        self.append(j.SessionMarkedInvalid(session=g.session, participant=g.participant, reason=reason))
+        return [f"{g.session}: marked invalid: {reason}"]
+
+    def unended_note(self, g: Game) -> str:
+        """What the next serve, pilot or report does with game `g`, journaled as started and never as ended, in
+        words for `protocol status` (which reads beside a writer and writes nothing): "" if it is running (a live
+        recorder writes it) or `g` has ended. Status showed such a game's step as open, no word of its recording
+        (a new user's trial)."""
+        if g.ended is not None or is_live(self.folder / g.recording):
+            return ""
+        path, copy = self.game_recording(g)
+        head = f"{g.session}: its end is not journaled"
+        if path.is_file() and not wal_path(path).exists() and _finished_game(path) \
+                and not self._not_this_games_file(g, path):
+            return f"{head}; {copy or 'its recording'} holds it: the next serve, pilot or report journals it"
+        if (cut := self._cut(g, path)) is not None:
+            return f"{head}; the next serve, pilot or report journals it {cut.outcome}{self._cut_words(g, copy, cut)}"
+        if self._never_recorded(g):
+            return (f"{head}; {NEVER_RECORDED}: the next serve, pilot or report journals it aborted, and its step "
+                    "is played again")
+        if path.is_file() and (other := self._not_this_games_file(g, path)):
+            return f"{head}; {copy or f'its recording {g.recording}'} is not this game's ({other}): move it away"
+        return f"{head}; its recording {g.recording} is missing"
 
     def _never_recorded(self, g: Game) -> bool:
         """Whether game `g`, journaled as started and never as ended, was stopped before its recording began: no

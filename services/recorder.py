@@ -1404,6 +1404,7 @@ class Recorder:
         unless the bus brought it already (a repeat is skipped): the file says how the session
         ended, with no hole below its end, even when the signal's deadline passed before the bus
         brought them (a starved machine)."""
+        testpause.pause("recorder-closing")  # (a test's first signal lands here: the session has ended)
         deadline = deadline or Deadline(CLOSE_S)
         unrecorded = 0
         try:
@@ -1451,6 +1452,7 @@ class Recorder:
                     "max_flush_age_ms": f"{self.writer.max_flush_age_ns / 1e6:.1f}"})
             except RecordingFailed:
                 pass
+        testpause.pause("recorder-ending")  # (a test's second signal lands here: before the file's end is written)
         # The file's end, its fsync and its journal's removal are one step a signal does not cut (pairplay/signals.py
         # `held`: milliseconds): a second Ctrl-C between the end and the removal left a stale journal beside a whole
         # file (a new user's trial), which every verb then took for a crash's. A signal before the step leaves the

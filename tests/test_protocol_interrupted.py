@@ -330,7 +330,8 @@ def test_a_game_whose_end_was_never_journaled_is_journaled_from_its_finished_rec
     """The process went while it read a finished game back (a signal then, the console's step cut at the
     exit): its GameStarted has no GameEnded. Before: it stayed "running" for ever, its step open to be
     played again. Now its end, policy and questionnaire come from the recording; a game whose recording
-    is not finished (a recorder's journal beside it: running elsewhere, or killed) is left as it is."""
+    is not finished (a recorder's journal beside it, no live recorder: one killed) is journaled from what it holds,
+    its policy once recovered (tests/test_protocol_cut_game.py)."""
     data = completed_without_policy(tmp_path, stripped=0)
     games = list(data.state.games.values())
     ends = {e.session: e for e in data.read_journal() if isinstance(e, j.GameEnded)}
@@ -344,13 +345,16 @@ def test_a_game_whose_end_was_never_journaled_is_journaled_from_its_finished_rec
     data = StudyData(data.folder)
     assert data.state.games[cut.session].ended is None and not data.state.games[cut.session].valid_complete
 
-    assert data.build_missing_policies() == [f"{cut.session}: journaled completed from its recording (the server "
-                                             "stopped before it said how the game ended)"]
+    assert data.build_missing_policies() == [
+        f"{cut.session}: journaled completed from its recording (the server stopped before it said how the game ended)",
+        f"{running.session}: journaled completed from its cut recording {running.recording}: it was cut after the "
+        f"game's end (its SessionEnded is in the file); its policy: `pairplay recover {data.folder / running.recording}` "
+        "writes its recovered copy, which the next serve, pilot or report builds it from"]
     ended = StudyData(data.folder).state.games[cut.session].ended
     assert ended == j.GameEnded(session=cut.session, participant=cut.participant, outcome="completed", rounds_played=2,
                                 policy=ends[cut.session].policy, questionnaire=True, time_ns=ended.time_ns)
     assert (data.folder / ended.policy).is_file()
-    assert data.state.games[running.session].ended is None  # not finished: left as it was
+    assert data.state.games[running.session].ended.policy == ""  # not finished: its policy once recovered
 
 
 def test_a_combination_of_a_partial_policy_journals_its_profiles_as_partial(tmp_path):

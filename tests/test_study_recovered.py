@@ -55,14 +55,14 @@ def test_a_cut_games_recording_recovered_is_built_from_its_recovered_copy_and_sa
                   if f"{built.session} (recording" in line]
     assert f"no SessionEnded: its rounds are a part of the game; its recorder's journal {recording.name}.journal beside " \
            f"it holds " in left_out and f"`pairplay recover {recording}` adds them" in left_out, left_out
-    # cut, its end not journaled: shown as running, as before, and said, with what its journal holds (it was silent)
+    # cut, its end not journaled: journaled from the end its recorder's journal holds, and said (it was silent, then
+    # shown as running until recovered: tests/test_protocol_cut_game.py)
     [line] = [line for line in ran.stderr.splitlines() if unended.session in line]
     unended_path = folder / unended.recording
-    assert line.startswith(f"pairplay report: {unended.session}: its end not journaled: {unended.recording}: its "
-                           f"recorder's journal {unended_path.name}.journal beside it holds "), line
-    assert line.endswith(f"messages the file lacks, the session's end (SessionEnded) among them: `pairplay recover "
-                         f"{unended_path}` adds them (to {Path(unended.recording).stem}.recovered.mcap); the next "
-                         "serve, pilot or report journals it from that copy"), line
+    assert line == (f"pairplay report: {unended.session}: journaled completed from its cut recording "
+                    f"{unended.recording}: it was cut after the game's end (its SessionEnded is in its recorder's "
+                    f"journal beside it); its policy: `pairplay recover {unended_path}` writes its recovered copy, "
+                    "which the next serve, pilot or report builds it from"), line
     for g in (built, unended):
         ran = pairplay_cli("recover", folder / g.recording)
         assert ran.returncode == 0, ran
@@ -71,9 +71,9 @@ def test_a_cut_games_recording_recovered_is_built_from_its_recovered_copy_and_sa
     stem = Path(built.recording).stem
     assert said == [f"pairplay report: {built.session}: policy built from its recovered copy "
                     f"recordings/{stem}.recovered.mcap: policies/{stem}.recovered.policy.json",
-                    f"pairplay report: {unended.session}: journaled completed from its recovered copy "
-                    f"recordings/{Path(unended.recording).stem}.recovered.mcap (the server stopped before it said "
-                    "how the game ended)"], ran.stderr
+                    f"pairplay report: {unended.session}: policy built from its recovered copy "
+                    f"recordings/{Path(unended.recording).stem}.recovered.mcap: "
+                    f"policies/{Path(unended.recording).stem}.recovered.policy.json"], ran.stderr
     state = StudyData(folder).state
     assert state.games[built.session].ended.policy == f"policies/{stem}.recovered.policy.json"
     assert state.games[unended.session].ended.outcome == "completed" and state.games[unended.session].ended.policy
