@@ -11,7 +11,6 @@ option's range is checked before any work; the printed tables say their unit
 from __future__ import annotations
 
 import argparse
-import sys
 from pathlib import Path
 
 from pairplay.cli.args import (add_force, count, fraction, non_negative, output_folder, positive_number, seed_number,

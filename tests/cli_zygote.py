@@ -5,7 +5,8 @@ that draw import it (and nothing else: no thread, no socket, no file), then fork
 `python -m pairplay ARGS` is: its own working folder, stdin from /dev/null, stdout and stderr
 to files, `pairplay.__main__` run as __main__ (runpy, as `-m` does), and the interpreter's own
 exit (threads joined, atexit handlers, flushes, the final collection; the modules' teardown only where
-it has something to do: `_exit`) unless the verb ends with os._exit. Only the import is shared:
+it has something to do: `_exit`) unless the verb ends with os._exit (the command's `entry` always does:
+cli/main.py `_end`; `_exit` is for a non-int exit and test_cli_zygote's own case). Only the import is shared:
 what an import prints is checked once, on the zygote's own stderr (`Zygote.import_output`),
 where a real start-up would print it before every command.
 
