@@ -252,8 +252,16 @@ def check_outputs(paths: Iterable[str | Path], force: bool = False, inputs: Iter
 
 
 def check_folder(path: str | Path) -> Path:
-    """`path` as a Path if it is, or can become, a folder we write into; OutputError otherwise."""
+    """`path` as a Path if it is, or can become, a folder we write into; OutputError otherwise. A symbolic link
+    to a folder is that folder (returned resolved): the output's own rename lands on the folder it names, where
+    one onto the link failed with a bare "Not a directory" naming a temporary folder, and a link that names no
+    folder (dangling, or to a file) is refused naming what it is (it said "cannot write there: File exists")."""
     path = Path(path)
+    if path.is_symlink():
+        if not path.is_dir():
+            raise OutputError(f"is {special_kind(path)}, which names no folder: give a folder (or make the one "
+                              "it names)", path)
+        path = Path(os.path.realpath(path))
     if path.exists() and not path.is_dir():
         raise OutputError(f"is {special_kind(path) or 'a file'}, not a folder", path)
     if path.is_dir():

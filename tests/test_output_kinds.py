@@ -144,3 +144,35 @@ def test_a_special_file_where_a_folder_is_written_is_named(template, tmp_path, p
     os.mkfifo(root / "out")
     r = pairplay_cli("rebuild", "R.mcap", "--out", "out", "--no-plot", cwd=root)
     assert r.returncode == 2 and "is a named pipe (FIFO), not a folder" in r.stderr, r.stderr
+
+
+@pytest.mark.parametrize("verb", ["rebuild", "study"])
+def test_a_link_to_an_empty_folder_as_the_output_folder_fills_the_folder_it_names(verb, template, tmp_path,
+                                                                                    pairplay_cli):
+    """A trial (trial25): `rebuild R --out link4` with link4 -> an empty folder said "Not a directory
+    (.link4.<pid>.<hex>.tmp -> link4)": the output's rename onto the link. The folder it names is the output."""
+    root = tmp_path / "w"
+    shutil.copytree(template, root, symlinks=True)
+    (root / "real").mkdir()
+    os.symlink("real", root / "link")
+    args = ("rebuild", "R.mcap", "--out", "link", "--no-plot") if verb == "rebuild" else \
+        ("study", "--out", "link", *STUDY)
+    r = pairplay_cli(*args, cwd=root, timeout=300)
+    assert r.returncode == 0, r.stderr
+    assert (root / "link").is_symlink() and os.readlink(root / "link") == "real"  # the link stays a link
+    assert any(p.is_file() for p in (root / "real").iterdir()), list((root / "real").iterdir())
+    assert not list(root.glob(".*.tmp")) and not list((root / "real").glob(".*.tmp"))
+
+
+@pytest.mark.parametrize("target", ["nowhere", "R.mcap"])
+def test_a_link_naming_no_folder_as_the_output_folder_is_named(target, template, tmp_path, pairplay_cli):
+    """A dangling link (or one to a file) where a folder of outputs goes said "cannot write there: File exists"."""
+    root = tmp_path / "w"
+    shutil.copytree(template, root, symlinks=True)
+    os.symlink(target, root / "out")
+    for force in ((), ("--force",)):
+        r = pairplay_cli("rebuild", "R.mcap", "--out", "out", "--no-plot", *force, cwd=root)
+        assert r.returncode == 2 and r.stderr.count("\n") == 1, r.stderr
+        assert f"is a symbolic link (to {target}), which names no folder" in r.stderr and "(out)" in r.stderr, \
+            r.stderr
+    assert os.readlink(root / "out") == target
