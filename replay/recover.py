@@ -97,6 +97,12 @@ def default_output(path: Path) -> Path:
     return path.with_name(path.stem + ".recovered.mcap")
 
 
+class NoSession(InputError):
+    """`recover`'s refusal of a recording that holds no session (no SessionStarted in the file, none its journal
+    adds): what a verb cut before its session started leaves, nothing to recover (cli/session.py `cut_line` says
+    so, not "pairplay recover completes it")."""
+
+
 def recover(path: str | Path, output: str | Path | None = None, force: bool = False,
             admit: Callable | None = None, write: bool = True) -> Recovered:
     """Copy the intact records of `path` into a complete file (see rule), and with `admit`
@@ -125,7 +131,7 @@ def recover(path: str | Path, output: str | Path | None = None, force: bool = Fa
     # copied, exit 0, a file no verb takes (a new user's trial: "recover" 0, "replay --verify" 2 of one file)
     if log.no_session and not (added is not None and any(key.rsplit("/", 1)[-1] == "SessionStarted"
                                                           for key, *_ in added.items)):
-        raise InputError(log.no_session, path)
+        raise NoSession(log.no_session, path)
     complete = checked.whole and not (added is not None and added.items)  # and nothing more to add
     # the source's own recovery record, if it was recovered before: its losses are carried forward (module rule)
     earlier = folded_recovery(checked.records)

@@ -286,3 +286,23 @@ def test_a_signal_as_a_usage_mistake_exits_is_said_too(tmp_path):
     assert code == 130, err
     assert err == ["pairplay study: unknown option --bogus (see pairplay study --help)",
                    "pairplay study: interrupted (Ctrl-C) after it had finished with status 2; nothing was undone"], err
+
+
+def test_a_second_ctrl_c_before_the_session_started_does_not_send_to_recover(tmp_path):
+    """A new user's trial: cut by a second Ctrl-C before its recording held a SessionStarted, the line said
+    "pairplay recover X.mcap completes it", and recover then refused the file ("holds no session"). Held before
+    the file's end is written (`recorder-ending`) of a session whose game waits for a board (no SessionStarted
+    yet): the line says it holds no session and names the file and its journal to remove, and recover refuses it."""
+    args = ["session", "--participant", "human:p1", "--session", "n", "--out", str(tmp_path / "rec")]
+    held = Held(tmp_path, "recorder-ending", args, "bus listening")
+    code, err = held.run(signal.SIGINT, signal.SIGINT)
+    path = tmp_path / "rec" / "n.mcap"
+    assert code == 130, err
+    assert len(err) == 1 and "pairplay recover" not in err[0], err
+    assert f"{path} holds no session" in err[0], err
+    if wal_path(path).exists():
+        assert err[0].endswith(f"there is nothing to recover, {path} and its journal {wal_path(path)} can be removed"), err
+    else:
+        assert err[0].endswith(f"there is nothing to recover, {path} can be removed"), err
+    done = subprocess.run([sys.executable, "-m", "pairplay", "recover", str(path)], capture_output=True, text=True)
+    assert done.returncode == 2 and "holds no session" in done.stderr, done.stderr
