@@ -257,14 +257,18 @@ def aside_line(verb: str, path: Path, again: int, aside: list, started: bool | N
     signal there; else the recording's line and the earlier ones as they are: kept beside it, named
     *.replaced (not known whether the game had started), or removed (it had: --force replaced them). It said
     they were kept beside it, the replace done and no *.replaced on disk (a new user's trial)."""
+    from pairplay.replay.wal import wal_path
+
     kept = set_aside_of(path)
     if aside and started is False and not kept:
         return (f"pairplay {verb}: interrupted again ({signals.said(again)}) while stopping, before the session "
                 f"started; {path}: the earlier recordings are kept (--force replaces them once a new session starts)")
     line = cut_line(verb, path, again)
     if kept:
+        journal = wal_path(path)
+        remove = f"remove it and its journal {journal.name}" if journal.exists() else "remove it"
         return line + (f"; the earlier recordings are kept beside it, named *{REPLACED} ({', '.join(p.name for p in kept)}): "
-                       "if it holds no session (the game had not started), remove it and give them their names back")
+                       f"if it holds no session (the game had not started), {remove} and give them their names back")
     if aside:
         return line + "; the earlier recordings are removed: the game had started, and --force replaced them"
     return line
