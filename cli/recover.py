@@ -29,6 +29,9 @@ A cut REC's journal is kept too, after its events went into the output, and the 
 write-ahead log of what REC lacks (services/recorder.py), REC's only other half; removed, REC alone would
 recover to less, and the output may be written elsewhere (-o) or lost. Recover never changes its input:
 the two are removed by hand once the output is kept (a new user's trial found the journal left, unsaid).
+A journal beside a complete REC that is another recording's of the same session id (replay/recover.py
+`NotItsJournal`: a cut `session --force` over REC left it, and REC was given its name back) is named as not
+REC's, and nothing is written (exit 0): recover had taken it, refused its records and written a copy.
 """
 
 from __future__ import annotations
@@ -154,6 +157,11 @@ def _complete(args: argparse.Namespace, done) -> int:
             raise OptionError(f"--discard-journal: {done.journal_error}; it was not removed", journal)
         print(f"{said}; the journal beside it is unreadable")
         _journal_unreadable(args, done)
+        return 0
+    if done.not_its_journal:  # another recording's journal: none of it is this file's, and it is not stale either
+        if args.discard_journal:
+            raise OptionError(f"--discard-journal: {done.not_its_journal}; it was not removed", journal)
+        print(f"{said}; {done.not_its_journal}")
         return 0
     if done.journal is None:
         if args.discard_journal:

@@ -216,7 +216,10 @@ def cut_line(verb: str, path: Path, again: int) -> str:
     """The one line of a verb whose shutdown a second signal (`again`) cut (session, lab, run recorder, protocol
     serve and pilot), saying what its recording is as the disk holds it (services/recorder.py `finished_whole`,
     `finished_count`), not as far as the cut shutdown got to note it: finished whole, with the events its end
-    counts (the signal came after the file's end, before the verb said so), or cut, and how to complete it. It
+    counts (the signal came after the file's end, before the verb said so), or cut, and how to complete it, or, cut
+    before its session started (no SessionStarted in the file nor its journal), that it holds no session and can be
+    removed with its journal: `pairplay recover` refuses such a file (replay/recover.py `NoSession`), and the line had
+    told to recover it (a new user's trial). It
     said "may lack its end" of a whole file; and a second Ctrl-C as the summary was printed said "nothing more
     was written" with no summary, the recording whole (a new user's trial: once in 6 runs); `lab`'s line left out
     the count `session`'s gave (the summary the cut shutdown had filled, or not). Once the recording is finished
@@ -224,12 +227,25 @@ def cut_line(verb: str, path: Path, again: int) -> str:
     status is still the signal's); this line is for the signal that came before that, inside the shutdown. A
     recorder closing in another thread (`protocol serve`'s game) is let finish its held step first
     (pairplay/signals.py `held_elsewhere_over`), as one in the main thread would."""
+    from pairplay.replay.recover import NoSession, recover
+    from pairplay.replay.wal import wal_path
+    from pairplay.services.walmerge import admit
+
     head = f"pairplay {verb}: interrupted again ({signals.said(again)}) while stopping; "
     signals.held_elsewhere_over()  # a recording another thread is finishing (serve's game): its held step ends first
     if finished_whole(path):
         count = finished_count(path)
         events = f" ({counted(count, 'event')})" if count is not None else ""
         return head + f"{path} was finished before it: the recording is whole{events}, its end written"
+    journal = wal_path(path)
+    try:  # what `pairplay recover` would do with it, decided as it decides (nothing is written here)
+        recover(path, admit=admit, write=False)
+    except NoSession as err:  # cut before the session started: recover refuses it, so the line does not name it
+        beside = f" and its journal {journal}" if journal.exists() else ""
+        return head + (f"{path} {err.what}; it was cut before the session started: there is nothing to recover, "
+                       f"{path}{beside} can be removed")
+    except UserError:  # not readable as a recording (yet): recover says why, in its own line
+        pass
     return head + (f"{path} holds what was recorded up to now and may lack its end: pairplay recover {path} "
                    "completes it")
 
@@ -241,14 +257,18 @@ def aside_line(verb: str, path: Path, again: int, aside: list, started: bool | N
     signal there; else the recording's line and the earlier ones as they are: kept beside it, named
     *.replaced (not known whether the game had started), or removed (it had: --force replaced them). It said
     they were kept beside it, the replace done and no *.replaced on disk (a new user's trial)."""
+    from pairplay.replay.wal import wal_path
+
     kept = set_aside_of(path)
     if aside and started is False and not kept:
         return (f"pairplay {verb}: interrupted again ({signals.said(again)}) while stopping, before the session "
                 f"started; {path}: the earlier recordings are kept (--force replaces them once a new session starts)")
     line = cut_line(verb, path, again)
     if kept:
+        journal = wal_path(path)
+        remove = f"remove it and its journal {journal.name}" if journal.exists() else "remove it"
         return line + (f"; the earlier recordings are kept beside it, named *{REPLACED} ({', '.join(p.name for p in kept)}): "
-                       "if it holds no session (the game had not started), remove it and give them their names back")
+                       f"if it holds no session (the game had not started), {remove} and give them their names back")
     if aside:
         return line + "; the earlier recordings are removed: the game had started, and --force replaced them"
     return line

@@ -67,7 +67,7 @@ from pairplay.arguments import flag_argument, path_argument
 from .check import check_recording
 from .mcapscan import scan
 from .reader import read_any_log
-from .wal import NotAJournal, read_journal, wal_path
+from .wal import RECORDING_STARTED, NotAJournal, read_journal, wal_path
 from .writer import CHUNK_SIZE, PROFILE
 
 
@@ -85,6 +85,7 @@ class Recovered:
     journal_refused: int = 0  # records of it refused by the live checks (recorded as refusals)
     journal_torn: str = ""  # where the journal stops short of a frame's end ("" if it does not)
     journal_error: str = ""  # a journal beside it that could not be read at all: why (its records are not used)
+    not_its_journal: str = ""  # a journal beside a whole file that is another recording's: why (NotItsJournal)
     journal_present: int = 0  # records of the journal the file holds already
     complete: bool = False  # the file is whole and its journal (if any) holds nothing it lacks: nothing written
     lost: list[str] = field(default_factory=list)  # each damaged part that lost messages, and what: "chunk 7 (...): its 18 messages"
@@ -95,6 +96,20 @@ class Recovered:
 
 def default_output(path: Path) -> Path:
     return path.with_name(path.stem + ".recovered.mcap")
+
+
+class NoSession(InputError):
+    """`recover`'s refusal of a recording that holds no session (no SessionStarted in the file, none its journal
+    adds): what a verb cut before its session started leaves, nothing to recover (cli/session.py `cut_line` says
+    so, not "pairplay recover completes it")."""
+
+
+class NotItsJournal(InputError):
+    """The journal beside a recording is of another recording of its session id (its header's
+    `recording_started_ns` is not the file's started_ns, replay/wal.py): what a cut `session --force` over the
+    file left when the user gave the earlier file its name back. None of its records are the file's: a whole
+    file is complete, and said so with the journal named (recover took it and wrote a copy: a new user's
+    trial); a cut one is refused."""
 
 
 def recover(path: str | Path, output: str | Path | None = None, force: bool = False,
@@ -115,8 +130,14 @@ def recover(path: str | Path, output: str | Path | None = None, force: bool = Fa
     if output.resolve() == path.resolve():
         raise OutputError("recover writes a new file; give an output path other than the input", output)
     log = read_any_log(path)
-    journal, journal_error = _journal_beside(path, log) if admit is not None else (None, "")
     checked = scan(path)
+    try:
+        journal, journal_error = _journal_beside(path, log) if admit is not None else (None, "")
+        not_its = ""
+    except NotItsJournal as err:
+        if not checked.whole:
+            raise
+        journal, journal_error, not_its = None, "", err.what
     added = None
     if journal is not None:  # what the journal holds that the file lacks, decided before anything is written
         added = admit(journal.session, _recorded(checked), journal.records)
@@ -125,7 +146,7 @@ def recover(path: str | Path, output: str | Path | None = None, force: bool = Fa
     # copied, exit 0, a file no verb takes (a new user's trial: "recover" 0, "replay --verify" 2 of one file)
     if log.no_session and not (added is not None and any(key.rsplit("/", 1)[-1] == "SessionStarted"
                                                           for key, *_ in added.items)):
-        raise InputError(log.no_session, path)
+        raise NoSession(log.no_session, path)
     complete = checked.whole and not (added is not None and added.items)  # and nothing more to add
     # the source's own recovery record, if it was recovered before: its losses are carried forward (module rule)
     earlier = folded_recovery(checked.records)
@@ -140,7 +161,7 @@ def recover(path: str | Path, output: str | Path | None = None, force: bool = Fa
                          from_journal=added.taken if added else 0, journal_refused=added.refused if added else 0,
                          journal_present=added.present if added is not None else 0,
                          journal_torn=journal.torn if journal is not None else "", journal_error=journal_error,
-                         complete=complete, **lost_words)
+                         complete=complete, not_its_journal=not_its, **lost_words)
     check_output(output, force)  # only an output that will be written (a complete file writes none)
     messages, ended, last_round = 0, False, -1
     schema_ids: dict[int, int] = {}
@@ -249,11 +270,26 @@ def _journal_beside(path: Path, log):
         journal = read_journal(beside)
     except (NotAJournal, OSError) as err:
         return None, f"{beside.name} not read: {err}"
-    session = log.metadata.get("pairplay.recorder", {}).get("session", "")
+    recorder = log.metadata.get("pairplay.recorder", {})
+    session = recorder.get("session", "")
     if session and journal.session != session:
         raise InputError(f"the journal beside it ({beside.name}) is of session {journal.session!r}, "
                          f"not {session!r}; move it away", path)
+    mine, its = recorder.get("started_ns", ""), journal.header.get(RECORDING_STARTED, "")
+    if mine and its and mine != its:  # same session id, another recording of it (`session --force` over this file)
+        raise NotItsJournal(f"the journal beside it ({beside.name}) is not this file's: it is of another recording "
+                            f"of session {journal.session!r} (started {_when(its)}, this file {_when(mine)}); "
+                            "move it away", path)
     return journal, ""
+
+
+def _when(ns: str) -> str:
+    """A recorder's started_ns in words (UTC, to the second)."""
+    from datetime import datetime, timezone
+    try:
+        return datetime.fromtimestamp(int(ns) / 1e9, timezone.utc).strftime("%Y-%m-%d %H:%M:%S UTC")
+    except (ValueError, OverflowError, OSError):
+        return repr(ns)
 
 
 def _round_of(payload: bytes) -> int:

@@ -21,7 +21,9 @@ Format (little-endian; all integers unsigned):
   late), CRC-32 (u32, zlib's) of the head's first 16 bytes and the body; then
   the body: a MessagePack array of [key (str), payload (bin)] pairs. The first
   frame's body is instead a MessagePack map naming the recording (`session`,
-  `recording`, `software_version`, `started_ns`), its count 0. One frame per
+  `recording`, `software_version`, `started_ns`, and `recording_started_ns`: the `started_ns` of the
+  recording's own metadata, "pairplay.recorder", which tells a file's journal from another recording's of
+  the same name: `session --force` over it, cut, left its journal beside the earlier file), its count 0. One frame per
   write: a write cut by the kill (a torn tail) fails its length or CRC check,
   and the journal is read up to it (`read_journal`, `Journal.torn` says where
   and why). One CRC per frame, not per record: per record it cost ~1.5 us per
@@ -47,6 +49,7 @@ from pairplay.numbers import counted
 MAGIC = b"\x89pairplay journal 1\n"  # 20 bytes: no MCAP reader takes it for a recording
 assert len(MAGIC) == 20
 SUFFIX = ".journal"
+RECORDING_STARTED = "recording_started_ns"  # header key: the started_ns of the recording it journals (module rule)
 PERIOD_S = 0.005  # the journal thread writes what was received at least this often
 _HEAD = struct.Struct("<IIQI")  # body length, count, taken_ns, crc32
 MAX_FRAME = 1 << 30  # a frame's body longer than this is damage, not data (a period's messages are a few MB)
@@ -84,7 +87,7 @@ class JournalWriter:
 
     def __init__(self, recording: str | Path, session: str, *, software_version: str = "",
                  clock: Callable[[], int] = time.time_ns, period_s: float = PERIOD_S,
-                 on_failure: Callable[[str], None] | None = None):
+                 on_failure: Callable[[str], None] | None = None, recording_started_ns: int | None = None):
         self.path = wal_path(recording)
         self.clock, self.period_s, self.on_failure = clock, period_s, on_failure
         self.pending: list[tuple[str, bytes]] = []
@@ -96,7 +99,8 @@ class JournalWriter:
         self._fd = os.open(self.path, os.O_WRONLY | os.O_CREAT | os.O_EXCL | os.O_APPEND, 0o600)
         fcntl.flock(self._fd, fcntl.LOCK_EX | fcntl.LOCK_NB)  # live while we write it (pairplay/livelock.py)
         header = _encode({"session": session, "recording": Path(recording).name,
-                          "software_version": software_version, "started_ns": str(clock())})
+                          "software_version": software_version, "started_ns": str(clock()),
+                          **({RECORDING_STARTED: str(recording_started_ns)} if recording_started_ns is not None else {})})
         self._write(MAGIC + _frame(header, 0, clock()))
 
     def start(self) -> None:

@@ -204,7 +204,7 @@ class RecordingExists(OutputError):
             original = existing.name[:-len(REPLACED)]
             what = ("a recording set aside by a `session --force` that was cut short before it settled (killed, or "
                     "a second Ctrl-C): it may be the only copy of the earlier session")
-            hint = f"give it its name back (mv {existing.name} {original}, after removing what stands there) or remove it"
+            hint = f"give it its name back (mv {existing.name} {original}{standing(existing.with_name(original))}) or remove it"
         super().__init__(f"session {session} has {what}; {hint}", existing)
         self.existing, self.live = existing, live
         self._has, self._hint = what, hint
@@ -214,6 +214,18 @@ class RecordingExists(OutputError):
         session id, names the file (`SessionConfig(session="a")` to "r3.mcap" was "session r3 has a recording
         already; choose another --session"), and a function has no --session."""
         self.what = f"the path given has {self._has} ({self.existing.name}); {self._hint.replace('--session', 'path')}"
+
+
+def standing(original: Path) -> str:
+    """", after removing X and its journal X.journal" (what of them is there; "" if nothing): what stands where a
+    file set aside (*.replaced) gets its name back. The journal is named: left beside the earlier file, it is
+    another recording's, and `pairplay recover` took it for the file's (a new user's trial: "after removing what
+    stands there" was followed, the journal left)."""
+    there = [p for p in (original, wal_path(original)) if p.exists()]
+    if not there:
+        return ""
+    names = there[0].name if len(there) == 1 else f"{there[0].name} and its journal {there[1].name}"
+    return f", after removing {names}"
 
 
 def journals_of(path: Path) -> list[Path]:
@@ -637,8 +649,9 @@ class Recorder:
         except BaseException:
             self.release()
             raise
+        self.started_ns = clock()  # in the file's metadata and its journal's header: which file a journal is of
         self._guarded(self.writer.add_metadata, "pairplay.recorder",
-                      {"session": session, "software_version": __version__, "started_ns": str(clock())})
+                      {"session": session, "software_version": __version__, "started_ns": str(self.started_ns)})
         self.journal: JournalWriter | None = None  # made by start (a recorder on a bus)
         self._journal_add = None
         self.inbox = Inbox(clock=clock, per_source=PER_SOURCE)
@@ -1030,7 +1043,7 @@ class Recorder:
     def start(self) -> None:
         """Open the journal (FileExistsError if one is there: never replaced), then subscribe."""
         self.journal = JournalWriter(self.path, self.session, software_version=__version__, clock=self.clock,
-                                     on_failure=self._on_journal_failure)
+                                     on_failure=self._on_journal_failure, recording_started_ns=self.started_ns)
         self._journal_add = self.journal.add
         self.journal.start()
         self.bus.subscribe(session_keys(self.session), self.enqueue, self._on_miss, drain=True)

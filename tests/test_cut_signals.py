@@ -286,3 +286,56 @@ def test_a_signal_as_a_usage_mistake_exits_is_said_too(tmp_path):
     assert code == 130, err
     assert err == ["pairplay study: unknown option --bogus (see pairplay study --help)",
                    "pairplay study: interrupted (Ctrl-C) after it had finished with status 2; nothing was undone"], err
+
+
+def test_a_second_ctrl_c_before_the_session_started_does_not_send_to_recover(tmp_path):
+    """A new user's trial: cut by a second Ctrl-C before its recording held a SessionStarted, the line said
+    "pairplay recover X.mcap completes it", and recover then refused the file ("holds no session"). Held before
+    the file's end is written (`recorder-ending`) of a session whose game waits for a board (no SessionStarted
+    yet): the line says it holds no session and names the file and its journal to remove, and recover refuses it."""
+    args = ["session", "--participant", "human:p1", "--session", "n", "--out", str(tmp_path / "rec")]
+    held = Held(tmp_path, "recorder-ending", args, "bus listening")
+    code, err = held.run(signal.SIGINT, signal.SIGINT)
+    path = tmp_path / "rec" / "n.mcap"
+    assert code == 130, err
+    assert len(err) == 1 and "pairplay recover" not in err[0], err
+    assert f"{path} holds no session" in err[0], err
+    if wal_path(path).exists():
+        assert err[0].endswith(f"there is nothing to recover, {path} and its journal {wal_path(path)} can be removed"), err
+    else:
+        assert err[0].endswith(f"there is nothing to recover, {path} can be removed"), err
+    done = subprocess.run([sys.executable, "-m", "pairplay", "recover", str(path)], capture_output=True, text=True)
+    assert done.returncode == 2 and "holds no session" in done.stderr, done.stderr
+
+
+def test_a_forced_session_cut_twice_names_its_journal_and_recover_tells_it_from_the_earlier_files(tmp_path):
+    """A new user's trial: a second Ctrl-C of `session --force` over an earlier recording kept it as s0.mcap.replaced
+    and advised "mv s0.mcap.replaced s0.mcap, after removing what stands there", naming not the cut recording's
+    journal s0.mcap.journal; left beside the earlier file, `pairplay recover s0.mcap` took it for the file's
+    ("complete already; ... 0 events taken from its journal, N of its messages refused") and wrote a copy. The
+    line and the next `session --force`'s refusal name the journal; recover of the earlier file with that journal
+    left beside it says the journal is not this file's and writes nothing."""
+    rec = tmp_path / "rec"
+    first = subprocess.run([sys.executable, "-m", "pairplay", "session", "--participant", "sim:ashley", "--rounds", "2",
+                            "--session", "s0", "--out", str(rec), "-q"], cwd=tmp_path, capture_output=True, text=True)
+    assert first.returncode == 0, first.stderr
+    path = rec / "s0.mcap"
+    with open(path, "rb") as f:
+        earlier = f.read()
+    held = Held(tmp_path, "recorder-ending", [*session(tmp_path, "s0"), "--force"], "bus listening")
+    code, err = held.run(signal.SIGINT, signal.SIGINT)
+    assert code == 130, err
+    assert (rec / "s0.mcap.replaced").read_bytes() == earlier and wal_path(path).exists(), sorted(rec.iterdir())
+    assert len(err) == 1 and f"remove it and its journal {wal_path(path).name} and give them" in err[0], err
+    again = subprocess.run([sys.executable, "-m", "pairplay", *session(tmp_path, "s0"), "--force"], cwd=tmp_path,
+                           capture_output=True, text=True)
+    assert again.returncode == 2, again.stderr
+    assert ("mv s0.mcap.replaced s0.mcap, after removing s0.mcap and its journal s0.mcap.journal)"
+            in again.stderr), again.stderr
+    path.unlink()  # the advice half followed: the journal is left beside the earlier file
+    (rec / "s0.mcap.replaced").rename(path)
+    done = subprocess.run([sys.executable, "-m", "pairplay", "recover", str(path)], capture_output=True, text=True)
+    assert done.returncode == 0, done.stderr
+    assert "the journal beside it (s0.mcap.journal) is not this file's: it is of another recording of session 's0'" \
+        in done.stdout and "nothing written" in done.stdout, done.stdout
+    assert sorted(p.name for p in rec.iterdir()) == ["s0.mcap", "s0.mcap.journal"]
