@@ -244,8 +244,8 @@ def cut_line(verb: str, path: Path, again: int) -> str:
         beside = f" and its journal {journal}" if journal.exists() else ""
         return head + (f"{path} {err.what}; it was cut before the session started: there is nothing to recover, "
                        f"{path}{beside} can be removed")
-    except UserError:  # not readable as a recording (yet): recover says why, in its own line
-        pass
+    except Exception:  # (UserError: not readable as a recording yet; anything else recover meets, an OSError
+        pass  # say): recover says why in its own line; a second signal's line is never lost to it (a traceback)
     return head + (f"{path} holds what was recorded up to now and may lack its end: pairplay recover {path} "
                    "completes it")
 
