@@ -27,6 +27,17 @@ def made(seq: int, action: int, turn: int, target: int = 10, observed: int = 3) 
     return event_key(SESSION, "learner", "SuggestionMade"), ev.encode_event(event)
 
 
+def stop_and_wait_for_its_report(stop: threading.Event, thread: threading.Thread, deadline, join_s: float,
+                                 published, why: str = "") -> None:
+    """Stop a bridge's thread with `deadline` (as a session's stop does), assert it ended within `join_s`, and wait
+    for the RobotActed it publishes as it ends (in `published`)."""
+    stop.deadline = deadline
+    stop.set()
+    thread.join(join_s)
+    assert not thread.is_alive(), why
+    assert wait_until(lambda: not published.empty(), 10)
+
+
 def test_suggestions_become_robot_acts_recorded_with_every_rejection(tmp_path):
     broker = IrisTKBroker().start()
     furhat = IrisTKFurhat(broker.port, speech_s=5.0).start()  # still speaking when the smile comes
@@ -159,11 +170,8 @@ def test_a_session_that_ended_by_itself_gives_the_robot_its_settle_time_whicheve
     try:
         bus.put(*made(1, code_of_parts(0, 0, 3, 0), 0))  # a head turn: card, beside, then (hold_s) rest
         assert wait_until(lambda: len(driver.transport.performed) == 2, 10), driver.transport.performed
-        stop.deadline = Deadline(SETTLE_S)  # as services/session.py stops the services of a session that ended
-        stop.set()
-        thread.join(SETTLE_S)
-        assert not thread.is_alive()
-        assert wait_until(lambda: not published.empty(), 10)
+        # as services/session.py stops the services of a session that ended
+        stop_and_wait_for_its_report(stop, thread, Deadline(SETTLE_S), SETTLE_S, published)
     finally:
         bridge.close()
         bus.close()
@@ -198,11 +206,8 @@ def test_a_stopped_bridge_does_not_wait_for_reports_an_unreachable_robot_cannot_
         assert wait_until(lambda: driver.unreachable, 10)  # its first connect was refused
         bus.put(*made(1, code_of_parts(2, 0, 0, 0), 0))  # a speech it cannot take
         assert wait_until(lambda: driver._pending == 1, 10)  # the driver holds it, open
-        stop.deadline = Deadline(3600.0)
-        stop.set()
-        thread.join(60)
-        assert not thread.is_alive(), "the bridge waited for reports an unreachable robot cannot send"
-        assert wait_until(lambda: not published.empty(), 10)
+        stop_and_wait_for_its_report(stop, thread, Deadline(3600.0), 60, published,
+                                     "the bridge waited for reports an unreachable robot cannot send")
     finally:
         bridge.close()
         bus.close()
