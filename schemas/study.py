@@ -79,7 +79,9 @@ class Phase(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
     `players`: "new" (those registered for this phase) or "all" (also everyone
     of the earlier phases: the thesis's phase 2). `bias`: the phase whose
     policies are combined (algorithm 4, through the combiner service) into this
-    phase's bias policy (pi-reuse). `learner`: fields of LearnerConfig that
+    phase's bias policy (pi-reuse); it plays 2 or more games a participant, since
+    each participant's profile (algorithm 3) compares their policies (thesis 7.2:
+    "the minimum required"). `learner`: fields of LearnerConfig that
     override the preset's. `questionnaires`: answered after every game.
     """
 
@@ -189,8 +191,12 @@ def _check(study: Study, written: Written) -> None:
             raise _Bad(bias, f"{typed(bias, p.bias)} is not an earlier phase (earlier: {', '.join(seen) or 'none'})")
         if p.bias and p.algorithm != "pi-reuse":
             raise _Bad(bias, "only a pi-reuse phase uses a bias policy")
-        if p.bias and study.phase_by_id(p.bias).games < 1:
-            raise _Bad(bias, f"phase {typed(bias, p.bias)} plays no games")
+        if p.bias and study.phase_by_id(p.bias).games < 2:
+            # thesis 7.2: phase 1's two games are "the minimum required to generate the policies needed for the
+            # user information extraction" (algorithm 3 compares a user's policies; one gives no profile)
+            raise _Bad(bias, f"phase {typed(bias, p.bias)} plays {study.phase_by_id(p.bias).games} game per "
+                             "participant; a bias phase needs 2 or more (algorithm 3 compares each participant's "
+                             "policies: thesis 7.2)")
         for name in p.questionnaires:
             if name not in study.questionnaire:
                 raise _Bad(where + ("questionnaires",), f"no [questionnaire.{name}] in the file")

@@ -12,8 +12,10 @@ state and the merged information; with `output_path` the combined policy file
 is written too. Paths are taken relative to, and must stay inside, the
 combiner's directory (`--out` of `pairplay run combiner`, default the current
 one). Anything wrong with the request (a missing or corrupt file, no
-users left, a policy given twice, mixed reward rules, an output_path that
-exists: it is never replaced) is answered with ok=false and the reason: the combiner keeps running.
+users left, a policy given twice, mixed reward rules, a user of one policy
+(no profile: algorithm 3 compares two or more), an output_path that exists:
+it is never replaced) is answered with ok=false and the reason: the combiner
+keeps running.
 """
 
 from __future__ import annotations
@@ -22,8 +24,8 @@ from pathlib import Path
 
 from pairplay import __version__
 from pairplay.core.combine import combine
-from pairplay.core.policies import (check_distinct, combined_policy_file, common_reward_bonus, partial_inputs,
-                                    users_from_policies)
+from pairplay.core.policies import (check_distinct, check_profiles_computable, combined_policy_file,
+                                    common_reward_bonus, partial_inputs, users_from_policies)
 from pairplay.errors import UserError
 from pairplay.replay.rebuild import RebuildError, rebuild_recording
 from pairplay.schemas import events as ev
@@ -68,6 +70,9 @@ class CombinerLogic:
         check_distinct(policies, inputs)
         kept = [(p, name) for p, name in zip(policies, inputs) if p.participant not in set(r.exclude)]
         rule = common_reward_bonus([p for p, _ in kept], [name for _, name in kept])
+        # as `pairplay combine`: a participant of one policy has no profile, and would be merged as one who
+        # perceives every channel
+        check_profiles_computable([p for p, _ in kept], [name for _, name in kept], merge=True)
         merged = combine(users)
         out = ""
         if r.output_path:

@@ -49,12 +49,10 @@ def counts() -> tuple[int, int, int]:
 
 
 def test_every_step_of_a_pilot_gives_back_its_threads_sockets_and_declarations(tmp_path):
-    # the pilot with one game a player in phase 1, and two players (the fewest a combination takes), both in phase 2
-    # too ("all"): each kind of step (a game of each phase, the combination) still comes after another on the one
-    # bus, four games in all; before, eight games only repeated them
-    study = tmp_path / "pilot-study.toml"
-    study.write_text(STUDY.read_text().replace("games = 2\n", "games = 1\n", 1))
-    data = StudyData.create(tmp_path / "study", study, key_file=tmp_path / "keys.csv")
+    # the pilot with two players (the fewest a combination takes) of two games in phase 1 (the fewest a profile
+    # takes), both in phase 2 too ("all"): each kind of step (a game of each phase, the combination) comes after
+    # another on the one bus, six games in all
+    data = StudyData.create(tmp_path / "study", STUDY, key_file=tmp_path / "keys.csv")
     ids = [data.register("phase1"), data.register("phase1")]
     after: list[tuple[str, tuple[int, int, int]]] = []
     with Bus(BusOptions()) as bus:
@@ -76,5 +74,5 @@ def test_every_step_of_a_pilot_gives_back_its_threads_sockets_and_declarations(t
 
         runner.warns_undelivered = False  # superseded suggestions are no news here
         runner.run_plan(scripted_players(runner, dict(zip(ids, PERSONAS))), on_step=on_step)
-        assert data.next_step() is None and len(after) == 4  # 3 more games and the combination
+        assert data.next_step() is None and len(after) == 6  # 5 more games and the combination
         assert not bus._declared and not bus._scopes  # the study's bus itself declared nothing that stays

@@ -4,8 +4,8 @@ reason, without stopping."""
 
 import queue
 
-from pairplay.core.combine import User, combine, extract_info
-from pairplay.core.policies import greedy_of, q_of
+from pairplay.core.combine import combine
+from pairplay.core.policies import users_from_policies
 from pairplay.replay.rebuild import rebuild_recording
 from pairplay.schemas import events as ev
 from pairplay.schemas.envelope import stamped
@@ -23,8 +23,9 @@ from busutil import collect, connector, listener, wait_until
 def test_combine_requests_over_the_bus(tmp_path):
     recs = []
     for who in ("ashley", "vincent"):
-        cfg = SessionConfig(session=f"c-{who}", participant=f"sim:{who}", persona=who, seed=1, rounds=6)
-        recs.append(str(run_session(cfg, tmp_path / f"{cfg.session}.mcap")))
+        for seed in (1, 2):  # two games each: a profile (algorithm 3) compares a user's policies
+            cfg = SessionConfig(session=f"c-{who}-{seed}", participant=f"sim:{who}", persona=who, seed=seed, rounds=6)
+            recs.append(str(run_session(cfg, tmp_path / f"{cfg.session}.mcap")))
     with listener() as server, connector(server) as client:
         node = Node(server, CombinerLogic(tmp_path), "lab", resume=False)
         node.start()
@@ -47,11 +48,7 @@ def test_combine_requests_over_the_bus(tmp_path):
         assert wait_until(lambda: node.step(0.05) or node.driver.rejections == 1, 10)
     ok, bad, outside = sorted(got, key=lambda e: e.request_id)
     assert not outside.ok and "outside the combiner's directory" in outside.error
-    users = []
-    for rec in recs:
-        policy = rebuild_recording(rec).policy
-        users.append(User(policy.participant, greedy_of(policy), q_of(policy),
-                          extract_info(greedy_of(policy)[None]).info))
+    users, _ = users_from_policies([rebuild_recording(rec).policy for rec in recs], 0)
     expected = combine(users)
     assert ok.ok and ok.actions == [int(a) for a in expected.policy] and ok.decided_by == expected.rules
     assert ok.users == ["ashley", "vincent"]
@@ -80,3 +77,16 @@ def test_a_recording_with_no_whole_round_is_refused_with_its_reason_and_nothing_
                                                 output_path="m.json"))
     assert not answer.ok and "holds no whole round: the recording stops before round 1 of " in answer.error
     assert "cut.mcap" in answer.error and not (tmp_path / "m.json").exists()
+
+
+def test_a_user_of_one_policy_is_refused_as_pairplay_combine_refuses_it(tmp_path):
+    """A participant with one policy has no profile (algorithm 3 compares two or more): `pairplay combine` refused
+    it, while the combiner service merged it as a participant who perceives every channel."""
+    recs = []
+    for who in ("ashley", "vincent"):
+        cfg = SessionConfig(session=f"one-{who}", participant=f"sim:{who}", persona=who, seed=1, rounds=3)
+        recs.append(run_session(cfg, tmp_path / f"{cfg.session}.mcap").name)
+    [answer] = CombinerLogic(tmp_path).handle(ev.CombineRequested(request_id="r", recordings=recs,
+                                                                  output_path="m.json"))
+    assert not answer.ok and "two or more policies of a participant" in answer.error
+    assert not (tmp_path / "m.json").exists()

@@ -127,7 +127,8 @@ def test_the_combiner_service_refuses_what_combine_refuses(study_dir):
     [twice] = logic.handle(ev.CombineRequested(request_id="twice", policies=[same, same, deaf]))
     assert not twice.ok and "given twice" in twice.error and same in twice.error
     before = (study_dir / "report.md").read_bytes()
-    [over] = logic.handle(ev.CombineRequested(request_id="over", policies=[same, deaf], output_path="report.md"))
+    both = [same, "policies/blind/game-01.json", deaf, "policies/deaf/game-01.json"]  # two each: profiles
+    [over] = logic.handle(ev.CombineRequested(request_id="over", policies=both, output_path="report.md"))
     assert not over.ok and "exists" in over.error and (study_dir / "report.md").read_bytes() == before
 
 

@@ -68,6 +68,9 @@ BASE = example_text()
     (("preset = \"human-phase1\"", "preset = \"human-phase1\"\nlearner = { epsilon_jump = 1 }", 1),
      '[[phase]] "phase1" learner.epsilon_jump: [phase.learner] has no key `epsilon_jump`'),
     (("algorithm = \"pi-reuse\"", "algorithm = \"q-learning\"", 1), '[[phase]] "phase2" bias: only a pi-reuse phase uses a bias policy'),
+    # a bias phase of one game a participant: no profile (algorithm 3 compares a participant's policies); the
+    # combiner merged each as perceiving every channel (thesis 7.2: 2 games are "the minimum required")
+    (("games = 2", "games = 1", 1), '[[phase]] "phase2" bias: phase "phase1" plays 1 game per participant; a bias phase needs 2 or more'),
     (("[study]", "[study", 1), "not valid TOML"),
     # a pi-reuse phase that never reuses (its one round under human-phase2 is the last, on the new policy
     # alone; psi 0) was accepted: Q-learning, called pi-reuse in the journal and the report
