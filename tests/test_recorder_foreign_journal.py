@@ -97,3 +97,38 @@ def test_a_restarted_recorder_leaves_another_recordings_journal_of_its_session_i
     assert read_journal(wal_path(path)).header[RECORDING_STARTED] == theirs.header[RECORDING_STARTED]
     assert len(log.of("SessionStarted")) == 1
 
+
+def test_a_cut_games_end_is_never_read_from_another_recordings_journal(tmp_path):
+    """A study game cut before its end (replay/cutgame.py `cut_end`) read its SessionEnded from the journal beside
+    its file by session id alone: another recording's journal of the id there gave the game that recording's end
+    (journaled completed, its step not played again). Now only the file's own journal is read (or one written
+    before journals named their recording, as before). Real parts: a recorded game's MCAP, cut inside the chunk
+    of its end, and a real journal beside it."""
+    import shutil
+
+    from pairplay.replay.cutgame import CUT_BEFORE_END, cut_end
+    from pairplay.replay.mcapscan import scan
+    from pairplay.replay.wal import RECORDER_METADATA, JournalWriter
+
+    path = tmp_path / "sample-sim-ashley.mcap"
+    shutil.copy(Path(__file__).parent.parent / "recordings" / "samples" / "sim-ashley-fmt2.mcap", path)
+    log = read_log(path)
+    session, started = log.metadata[RECORDER_METADATA]["session"], int(log.metadata[RECORDER_METADATA]["started_ns"])
+    [end] = [r.log_time_ns for r in log.events if type(r.event).__name__ == "SessionEnded"]
+    [chunk] = [c for c in scan(path).chunks if any(t == end for _, _, t in c.messages)]
+    path.write_bytes(path.read_bytes()[:chunk.offset + chunk.length // 2])  # inside the chunk of its end
+    assert not read_any_log(path).of("SessionEnded") and read_any_log(path).metadata[RECORDER_METADATA]
+
+    def with_journal(recording_started_ns):
+        wal_path(path).unlink(missing_ok=True)
+        journal = JournalWriter(path, session, recording_started_ns=recording_started_ns)
+        for r in log.events:
+            journal.add((r.key, r.payload))
+        journal.close()
+        return cut_end(path, path, session)
+
+    foreign = with_journal(started + 1)
+    assert (foreign.ended, foreign.reason, foreign.answered) == (None, CUT_BEFORE_END, False), foreign
+    for own in (started, None):  # its own journal, or one older than the key: its end is read there, as before
+        cut = with_journal(own)
+        assert cut.outcome == "completed" and cut.where == "its recorder's journal beside it", (own, cut)
