@@ -13,7 +13,9 @@ they were asked; the second was refused at once, told to stop a holder that ende
 The kernel drops the lock when the holder
 ends, however it ends (SIGKILL too), so a lock is never stale, and the file stays, empty when nobody
 writes (`protocol init` makes it; removing a locked file lets a third process lock a new one beside a
-holder of the old). Read-only verbs
+holder of the old). An output's lock file (`take_file`, pairplay/outputs.py `hold`) is removed, safely: its holder
+removes it while holding it (`release`'s `remove`), and every writer checks, once it holds a lock, that the name
+still names its file, else opens the name again (docs/architecture.md, "Output locks"). Read-only verbs
 (`protocol status`) take no lock and run beside a writer. A user's mistake a writer can see without the lock (a
 study file edited since the study was created: the journal's first line, which nothing rewrites) is said before
 it takes the lock: waiting first said "another pairplay writes this study folder", or waited for a register,
@@ -39,7 +41,7 @@ import time
 from pathlib import Path
 from typing import Callable
 
-from pairplay import signals
+from pairplay import signals, testpause
 
 LOCK_FILE = ".pairplay-lock"
 # verbs that hold a folder for minutes to hours: a writer beside them is refused at once (waiting is useless)
@@ -69,36 +71,45 @@ def take(folder: str | Path, verb: str, wait: float = 0.0, waiting: Callable[[st
 def take_file(path: str | Path, verb: str, wait: float = 0.0,
               waiting: Callable[[str], None] | None = None) -> int | None:
     """`take` of the lock file `path` itself (pairplay/outputs.py `hold`: one writer per output, its lock file
-    kept outside the output)."""
-    try:
-        fd = os.open(path, os.O_RDWR | os.O_CREAT | os.O_CLOEXEC, 0o644)
-    except OSError:
-        try:  # made by another user (a shared lab account): a read-only descriptor locks as well
-            fd = os.open(path, os.O_RDONLY | os.O_CLOEXEC)
+    kept outside the output, and removed by its holder as it lets go: `release`'s `remove`). The lock taken is
+    the one of the file `path` names once it is held: a descriptor opened on a file its holder removed as we
+    waited (or that was replaced) is locked alone, beside the next writer's, so it is opened again (`_names`)."""
+    deadline, said, again = time.monotonic() + wait, False, False
+    while True:
+        try:
+            fd = os.open(path, os.O_RDWR | os.O_CREAT | os.O_CLOEXEC, 0o644)
         except OSError:
+            try:  # made by another user (a shared lab account): a read-only descriptor locks as well
+                fd = os.open(path, os.O_RDONLY | os.O_CLOEXEC)
+            except OSError:
+                return None
+        if not again:  # (a test lands the holder's removal here: tests/test_output_locks.py)
+            testpause.pause("lock-opened")
+        try:
+            while True:
+                try:
+                    fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+                    break
+                except BlockingIOError:
+                    who = holder(path)  # "" for a moment after the holder took it, before it wrote its line
+                    if is_long(who) or time.monotonic() >= deadline:
+                        raise FolderBusy(who) from None
+                    if signals.stopping:  # the verb is stopping on a signal (module rule): no wait for another
+                        raise KeyboardInterrupt
+                    if who and not said and waiting is not None:
+                        waiting(who)
+                        said = True
+                    time.sleep(POLL_S)  # (a signal here unwinds: the descriptor is closed below)
+        except OSError:  # no locks on this file system
+            os.close(fd)
             return None
-    deadline, said = time.monotonic() + wait, False
-    try:
-        while True:
-            try:
-                fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
-                break
-            except BlockingIOError:
-                who = holder(path)  # "" for a moment after the holder took it, before it wrote its line
-                if is_long(who) or time.monotonic() >= deadline:
-                    raise FolderBusy(who) from None
-                if signals.stopping:  # the verb is stopping on a signal (module rule): no wait for another
-                    raise KeyboardInterrupt
-                if who and not said and waiting is not None:
-                    waiting(who)
-                    said = True
-                time.sleep(POLL_S)  # (a signal here unwinds: the descriptor is closed below)
-    except OSError:  # no locks on this file system
-        os.close(fd)
-        return None
-    except BaseException:  # FolderBusy, a KeyboardInterrupt while waiting
-        os.close(fd)
-        raise
+        except BaseException:  # FolderBusy, a KeyboardInterrupt while waiting
+            os.close(fd)
+            raise
+        if _names(path, fd):
+            break
+        os.close(fd)  # removed by its holder as it let go (or replaced): the lock of another file; again
+        again = True
     stamp = time.strftime("%Y-%m-%d %H:%M:%S UTC", time.gmtime())
     try:
         os.ftruncate(fd, 0)
@@ -106,6 +117,18 @@ def take_file(path: str | Path, verb: str, wait: float = 0.0,
     except OSError:  # a read-only descriptor: the lock holds, the refusal cannot say who
         pass
     return fd
+
+
+def _names(path: str | Path, fd: int) -> bool:
+    """Whether `path` names the file open as `fd` (same device and inode): False once it was removed or replaced.
+    One that cannot be looked at otherwise is taken as named (its open worked: a retry would loop for ever)."""
+    try:
+        there, mine = os.stat(path), os.fstat(fd)
+    except FileNotFoundError:
+        return False
+    except OSError:
+        return True
+    return (there.st_dev, there.st_ino) == (mine.st_dev, mine.st_ino)
 
 
 def waiting_line(who: str, folder: str | Path) -> str:
@@ -131,13 +154,20 @@ def holder(path: str | Path) -> str:
         return ""
 
 
-def release(fd: int | None) -> None:
+def release(fd: int | None, remove: str | Path | None = None) -> None:
     """Empty the lock file and close a descriptor `take` gave (the lock goes with it); never raises. Empty: a
-    folder nobody writes holds the same bytes before and after a verb that changed nothing (a refused one)."""
+    folder nobody writes holds the same bytes before and after a verb that changed nothing (a refused one).
+    `remove`: the lock file `fd` holds, removed instead, while it is still held, so that lock files do not
+    pile up (an output's: pairplay/outputs.py `hold`); a writer that opened it meanwhile finds, once it holds
+    it, that the name is no longer its file's and opens the name again (`take_file`). Not a study folder's
+    own (`take`): an older pairplay beside this one would hold the removed file unaware."""
     if fd is None:
         return
     try:
-        os.ftruncate(fd, 0)
+        if remove is not None and _names(remove, fd):
+            os.unlink(remove)
+        else:
+            os.ftruncate(fd, 0)
     except OSError:
         pass
     try:

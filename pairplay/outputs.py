@@ -82,8 +82,12 @@ written: list[Path] = []  # every output renamed into place by this process, in 
 # user's in the system's temporary folder (`LOCKS`), named after the output's absolute path (symbolic links
 # resolved: two names of one folder are one output), so that no output holds a file of it and a folder not yet
 # made can be locked. flock, as pairplay/folderlock.py says why; a people's study folder keeps its own lock there.
+# The lock file is removed as its holder lets go, while it holds it (`release_held`; folderlock `release`), and a
+# writer checks, once it holds a lock, that the name is still its file's, else opens it again (folderlock
+# `take_file`): so the folder holds the outputs written now and those a killed writer left (until their next
+# writer), where it kept one file per output ever written (docs/architecture.md, "Output locks").
 
-_HELD_OUTPUTS: dict[Path, int] = {}  # output (resolved) -> the descriptor of its lock held by this process
+_HELD_OUTPUTS: dict[Path, tuple[int, Path]] = {}  # output (resolved) -> (its lock's descriptor, its lock file)
 
 
 def _locks_folder() -> Path:
@@ -110,14 +114,15 @@ def hold(path: str | Path, verb: str) -> None:
         who = busy.holder or "another pairplay (it has not said which yet)"
         raise OutputError(f"busy: {who} writes it; wait for it to end, or give another output", path) from None
     if fd is not None:
-        _HELD_OUTPUTS[key] = fd
+        _HELD_OUTPUTS[key] = (fd, folder / name)
 
 
 def release_held() -> None:
     """Release every output's writer lock this process holds (cli/main.py, when a verb ends however it ends: a
     verb run in-process, a test's, leaves none)."""
     while _HELD_OUTPUTS:
-        folderlock.release(_HELD_OUTPUTS.popitem()[1])
+        fd, lock = _HELD_OUTPUTS.popitem()[1]
+        folderlock.release(fd, remove=lock)  # its lock file goes with it: the folder holds the outputs held now
 
 
 def _existing_ancestor(path: Path) -> Path:

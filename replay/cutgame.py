@@ -5,7 +5,8 @@ recording is cut (its recorder's journal beside it, or the file without its end)
 `SessionEnded` says, found in the file or, when the file lacks it, in the recorder's journal beside it (the
 journal holds every event the recorder received: replay/wal.py); no such event: the recording was cut before the
 game's end, and the game is aborted (its step is played again). Read only: nothing is written here. A journal of
-another session, or one that cannot be read, is not read (recover's own line names it).
+another session, or of another recording of the session id (replay/wal.py `not_its`), or one that cannot be read,
+is not read (recover's own line names it).
 """
 
 from __future__ import annotations
@@ -17,7 +18,7 @@ from pairplay.errors import InputError
 
 from .fold import fold_any
 from .reader import read_any_log
-from .wal import NotAJournal, read_journal, wal_path
+from .wal import RECORDER_METADATA, NotAJournal, not_its, read_journal, wal_path
 
 CUT_BEFORE_END = "its recording was cut before the game's end"  # the GameEnded reason of such a game
 
@@ -60,7 +61,10 @@ def cut_end(path: Path, journal_of: Path, session: str) -> CutEnd:
         rounds = len(fold_any(r.event for r in log.events).whole_rounds())
         answered = bool(log.of("QuestionnaireAnswered"))
     if ended is None or not answered:  # the answers come after the game's end: the journal may hold them alone
-        for key, payload in _journal_events(wal_path(journal_of), session, ("SessionEnded", "QuestionnaireAnswered")):
+        # (the file's own metadata tells its journal from another recording's: a recovered copy keeps it)
+        mine = log.metadata.get(RECORDER_METADATA, {}) if log is not None else {}
+        for key, payload in _journal_events(wal_path(journal_of), session, ("SessionEnded", "QuestionnaireAnswered"),
+                                            mine):
             if key == "QuestionnaireAnswered":
                 answered = True
             elif ended is None and getattr(payload, "source", "") == "game":
@@ -70,9 +74,10 @@ def cut_end(path: Path, journal_of: Path, session: str) -> CutEnd:
     return CutEnd(ended, where, rounds, answered)
 
 
-def _journal_events(journal: Path, session: str, tags: tuple[str, ...]):
+def _journal_events(journal: Path, session: str, tags: tuple[str, ...], metadata: dict[str, str]):
     """(tag, decoded event) of each record of `tags` in the recorder's journal `journal` of `session`, in order;
-    none when there is no journal, it cannot be read, or it is of another session."""
+    none when there is no journal, it cannot be read, or it is of another session or of another recording than the
+    one whose recorder metadata is `metadata` (wal.not_its)."""
     from pairplay.schemas.events import decode_event
 
     if not journal.is_file():
@@ -81,7 +86,7 @@ def _journal_events(journal: Path, session: str, tags: tuple[str, ...]):
         read = read_journal(journal)
     except (NotAJournal, OSError):
         return
-    if read.session != session:
+    if read.session != session or not_its(read, metadata):
         return
     for key, payload, _ in read.records:
         tag = key.rsplit("/", 1)[-1]

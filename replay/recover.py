@@ -67,7 +67,7 @@ from pairplay.arguments import flag_argument, path_argument
 from .check import check_recording
 from .mcapscan import scan
 from .reader import read_any_log
-from .wal import RECORDING_STARTED, NotAJournal, read_journal, wal_path
+from .wal import RECORDER_METADATA, NotAJournal, not_its, read_journal, wal_path
 from .writer import CHUNK_SIZE, PROFILE
 
 
@@ -270,26 +270,15 @@ def _journal_beside(path: Path, log):
         journal = read_journal(beside)
     except (NotAJournal, OSError) as err:
         return None, f"{beside.name} not read: {err}"
-    recorder = log.metadata.get("pairplay.recorder", {})
+    recorder = log.metadata.get(RECORDER_METADATA, {})
     session = recorder.get("session", "")
     if session and journal.session != session:
         raise InputError(f"the journal beside it ({beside.name}) is of session {journal.session!r}, "
                          f"not {session!r}; move it away", path)
-    mine, its = recorder.get("started_ns", ""), journal.header.get(RECORDING_STARTED, "")
-    if mine and its and mine != its:  # same session id, another recording of it (`session --force` over this file)
-        raise NotItsJournal(f"the journal beside it ({beside.name}) is not this file's: it is of another recording "
-                            f"of session {journal.session!r} (started {_when(its)}, this file {_when(mine)}); "
-                            "move it away", path)
+    other = not_its(journal, recorder)
+    if other:  # same session id, another recording of it (`session --force` over this file)
+        raise NotItsJournal(f"the journal beside it ({beside.name}) is not this file's: {other}; move it away", path)
     return journal, ""
-
-
-def _when(ns: str) -> str:
-    """A recorder's started_ns in words (UTC, to the second)."""
-    from datetime import datetime, timezone
-    try:
-        return datetime.fromtimestamp(int(ns) / 1e9, timezone.utc).strftime("%Y-%m-%d %H:%M:%S UTC")
-    except (ValueError, OverflowError, OSError):
-        return repr(ns)
 
 
 def _round_of(payload: bytes) -> int:

@@ -50,6 +50,7 @@ MAGIC = b"\x89pairplay journal 1\n"  # 20 bytes: no MCAP reader takes it for a r
 assert len(MAGIC) == 20
 SUFFIX = ".journal"
 RECORDING_STARTED = "recording_started_ns"  # header key: the started_ns of the recording it journals (module rule)
+RECORDER_METADATA = "pairplay.recorder"  # the recording's own metadata record, whose started_ns the header repeats
 PERIOD_S = 0.005  # the journal thread writes what was received at least this often
 _HEAD = struct.Struct("<IIQI")  # body length, count, taken_ns, crc32
 MAX_FRAME = 1 << 30  # a frame's body longer than this is damage, not data (a period's messages are a few MB)
@@ -178,6 +179,29 @@ class Journal:
     @property
     def session(self) -> str:
         return str(self.header.get("session", ""))
+
+
+def not_its(journal: Journal, metadata: dict[str, str]) -> str:
+    """Why `journal` is not the journal of the recording whose RECORDER_METADATA is `metadata` ("" if it may be):
+    another recording of its session id (the header's RECORDING_STARTED is not the file's `started_ns`). One of
+    them without it (a journal written before the key existed, a file cut before its metadata reached the disk)
+    is taken as the file's, as before the key. Every reader that takes a journal's records for a file's asks
+    (replay/recover.py, services/recorder.py `earlier_records`, replay/cutgame.py): by the session id alone, a
+    restarted recorder merged another recording's events into its file."""
+    mine, its = str(metadata.get("started_ns", "")), journal.header.get(RECORDING_STARTED, "")
+    if not mine or not its or mine == its:
+        return ""
+    return (f"it is of another recording of session {journal.session!r} (started {_when(its)}, "
+            f"this file {_when(mine)})")
+
+
+def _when(ns: str) -> str:
+    """A recorder's started_ns in words (UTC, to the second)."""
+    from datetime import datetime, timezone
+    try:
+        return datetime.fromtimestamp(int(ns) / 1e9, timezone.utc).strftime("%Y-%m-%d %H:%M:%S UTC")
+    except (ValueError, OverflowError, OSError):
+        return repr(ns)
 
 
 class NotAJournal(ValueError):

@@ -16,9 +16,9 @@ import msgspec
 from pairplay.numbers import counted, shown
 
 from .keys import check_chunk
-from .config import REWARD_BONUS_RULES, UNSTATED_REWARD_BONUS, LearnerConfig, LSPIConfig
+from .config import LEARNER_RANGES, REWARD_BONUS_RULES, UNSTATED_REWARD_BONUS, LearnerConfig, LSPIConfig
 from .policy import N_ACTIONS, N_STATES
-from .public import PublicStructMeta
+from .public import FieldError, PublicStructMeta, check_kinds
 
 SEED_RANGE = (0, 2**64 - 1)  # every seed here has its own streams (core/rng.py game_seed, derivation 2)
 GAME_INDEX_RANGE = (0, 2**63 - 1)  # a game of a seed: core/rng.py hashes it as a signed 64-bit count
@@ -98,40 +98,52 @@ class SessionConfig(msgspec.Struct, frozen=True, kw_only=True, metaclass=PublicS
         except msgspec.ValidationError as err:
             raise ValueError(f"learner schedule {self.learner!r}: {err}") from None
 
-    def validate(self) -> None:
-        """Raise ValueError with a clear reason if the config cannot run."""
+    def __post_init__(self) -> None:
+        """Each field alone, where the config is made or decoded (schemas/public.py rule): of its kind, and in its
+        range or one of its values (FieldError; the constructor says it as `pairplay.SessionConfig(<field>)`, a
+        recording's or a message's is malformed input). Not here: what depends on other fields, and what only
+        running needs (`validate`): a learner key this pairplay does not know and LSPI's settings (plain mappings
+        a newer pairplay may extend; the learner's known keys are in range here), and a stream derivation this
+        pairplay does not know (read, not run)."""
+        check_kinds(self)
         if not self.session or any(c in self.session for c in "/*$#?@ "):
-            raise ValueError(f"session id {self.session!r} must be non-empty, without / * $ # ? @ or spaces")
+            raise FieldError("session", f"session id {self.session!r} must be non-empty, without / * $ # ? @ or "
+                             "spaces")
         if self.rounds < 1:
-            raise ValueError(f"rounds must be >= 1, got {self.rounds}")
+            raise FieldError("rounds", f"rounds must be >= 1, got {self.rounds}")
+        if not SEED_RANGE[0] <= self.seed <= SEED_RANGE[1]:  # (stream derivation 1's narrower range: validate)
+            raise FieldError("seed", f"seed {self.seed} is outside the accepted range {SEED_RANGE[0]}..{SEED_RANGE[1]}")
         if not GAME_INDEX_RANGE[0] <= self.game_index <= GAME_INDEX_RANGE[1]:
-            raise ValueError(f"game index must be {GAME_INDEX_RANGE[0]}..{GAME_INDEX_RANGE[1]}, got {self.game_index}")
-        if self.algorithm not in ALGORITHMS:
-            raise ValueError(f"algorithm {self.algorithm!r} is not one of {ALGORITHMS}")
-        if self.observed_source not in OBSERVED_SOURCES:
-            raise ValueError(f"observed_source {self.observed_source!r} is not one of {OBSERVED_SOURCES}")
-        if self.ignore_rule not in IGNORE_RULES:
-            raise ValueError(f"ignore_rule {self.ignore_rule!r} is not one of {IGNORE_RULES}")
-        if self.algorithm in ("pi-reuse", "fixed") and not self.policy_actions:
-            raise ValueError(f"algorithm {self.algorithm!r} needs policy_actions (a bias or fixed policy)")
+            raise FieldError("game_index", f"game index must be {GAME_INDEX_RANGE[0]}..{GAME_INDEX_RANGE[1]}, got "
+                             f"{self.game_index}")
+        for key, values in (("algorithm", ALGORITHMS), ("observed_source", OBSERVED_SOURCES),
+                            ("ignore_rule", IGNORE_RULES), ("reward_bonus", REWARD_BONUS_RULES),
+                            ("ignore_clock", IGNORE_CLOCKS)):
+            if getattr(self, key) not in values:
+                raise FieldError(key, f"{key} {getattr(self, key)!r} is not one of {values}")
         if self.policy_actions and (len(self.policy_actions) != N_STATES
                                     or not all(0 <= a < N_ACTIONS for a in self.policy_actions)):
             # checked here, not first by the learner: the game started a session its learner then refused
-            raise ValueError(f"policy_actions must be {N_STATES} action codes 0..{N_ACTIONS - 1}, got "
-                             f"{counted(len(self.policy_actions), 'code')}")
+            raise FieldError("policy_actions", f"policy_actions must be {N_STATES} action codes 0..{N_ACTIONS - 1}, "
+                             f"got {counted(len(self.policy_actions), 'code')}")
         for key in MS_FIELDS:
             if not MS_RANGE[0] <= getattr(self, key) <= MS_RANGE[1]:  # also refuses nan
-                raise ValueError(f"{key} must be {MS_RANGE[0]:g}..{MS_RANGE[1]:g}, got {shown(getattr(self, key))}")
-        if self.reward_bonus not in REWARD_BONUS_RULES:
-            raise ValueError(f"reward_bonus {self.reward_bonus!r} is not one of {REWARD_BONUS_RULES}")
-        if self.ignore_clock not in IGNORE_CLOCKS:
-            raise ValueError(f"ignore_clock {self.ignore_clock!r} is not one of {IGNORE_CLOCKS}")
+                raise FieldError(key, f"{key} must be {MS_RANGE[0]:g}..{MS_RANGE[1]:g}, got "
+                                 f"{shown(getattr(self, key))}")
+        for key, value in self.learner.items():  # the schedule's known keys (an unknown one: validate's)
+            low, high = LEARNER_RANGES.get(key, (None, None))
+            if value is not None and low is not None and not low <= value <= high:  # also refuses nan
+                raise FieldError("learner", f"learner {key} must be {low}..{high}, got {shown(value)}")
+
+    def validate(self) -> None:
+        """Raise ValueError with a clear reason if the config cannot run (each field alone was checked where
+        it was made: `__post_init__`)."""
+        if self.algorithm in ("pi-reuse", "fixed") and not self.policy_actions:
+            raise ValueError(f"algorithm {self.algorithm!r} needs policy_actions (a bias or fixed policy)")
         if self.participant.startswith("sim:") and not self.persona:
             raise ValueError("a simulated participant needs a persona")
         if self.streams not in (1, 2):
             raise ValueError(f"stream derivation {self.streams} is not one this pairplay knows (1, 2)")
-        if self.streams >= 2 and not SEED_RANGE[0] <= self.seed <= SEED_RANGE[1]:
-            raise ValueError(f"seed {self.seed} is outside the accepted range {SEED_RANGE[0]}..{SEED_RANGE[1]}")
         if self.streams == 1 and not 0 <= self.seed <= 2**32 - 1:
             raise ValueError(f"seed {self.seed}: stream derivation 1 (pairplay <= 0.2) takes seeds 0..{2**32 - 1} "
                              "only (it cut them to 32 bits); use streams=2")
@@ -173,16 +185,12 @@ def _overrides(config, default) -> dict:
 
 def config_argument(config, function: str) -> SessionConfig:
     """`config` handed to a public function (pairplay/arguments.py): ArgumentError unless it is a
-    SessionConfig whose every field is of its kind (msgspec's constructor checks none: rounds="20" or
-    True got through), InputError, naming the function, for one `validate` refuses."""
-    from pairplay.arguments import at, given, instance_argument
-    from pairplay.errors import ArgumentError, InputError
+    SessionConfig (each of its fields was checked where it was made: `__post_init__`; rounds="20" or True got
+    through msgspec's constructor, and was refused here only), InputError, naming the function, for one
+    `validate` refuses."""
+    from pairplay.arguments import at, instance_argument
+    from pairplay.errors import InputError
     instance_argument(config, SessionConfig, function, "config", "a SessionConfig (pairplay.SessionConfig(session=..., ...))")
-    try:
-        msgspec.convert(msgspec.to_builtins(config), SessionConfig)
-    except (msgspec.ValidationError, TypeError) as exc:
-        from .jsonfile import in_words
-        raise ArgumentError(f"config.{in_words(exc, SessionConfig)}", at(function, "config")) from None
     try:
         config.validate()
     except ValueError as exc:

@@ -20,7 +20,8 @@ received in the last 5 ms + scheduling, whatever the backlog, and `pairplay reco
 the journal what the cut file lacks, through the live checks (services/walmerge.py). The
 journal is removed once the file is complete and fsync'd, in one step with the file's end that a signal
 does not cut (`close`: a second Ctrl-C between them left a stale journal); a restarted recorder takes the
-earlier file's journal too (`_continue`). A close is done by its
+earlier file's journal too (`_continue`), if it is that file's (replay/wal.py `not_its`: another recording's of
+the session id is left where it is, its events never merged). A close is done by its
 deadline; what is still queued then is counted and recorded, not waited for. The session config, seed and software version
 go into MCAP metadata ("pairplay.session") when SessionStarted passes, the
 recorder's own into "pairplay.recorder". It answers restarting services with
@@ -84,7 +85,7 @@ from pairplay.livelock import LIVE, hold, is_live, release
 from pairplay.numbers import counted
 from pairplay.outputs import REPLACED, set_aside_of, special_kind
 from pairplay.replay.reader import LOST_AT_KEY, RECOVERED, _listed, carry_recovery, said_source_lost
-from pairplay.replay.wal import JournalWriter, NotAJournal, read_journal, wal_path
+from pairplay.replay.wal import RECORDER_METADATA, JournalWriter, NotAJournal, not_its, read_journal, wal_path
 from pairplay.replay.writer import FLUSH_INTERVAL_NS, LOSS_BOUND_NS, EventLogWriter
 from pairplay.schemas.checked import check_event
 from pairplay.schemas.jsonfile import MCAP_MAGIC
@@ -378,9 +379,13 @@ def earlier_records(earlier: Path, session: str, before: list[tuple[str, bytes, 
             log.warning("recorder: the journal %s is not read: %s", beside, err)
             account = {"earlier_journal": beside.name, "not_read": str(err)}
         else:
-            if journal.session != session:
-                log.warning("recorder: the journal %s is of session %r: not taken", beside, journal.session)
-                account = {"earlier_journal": beside.name, "not_read": f"of session {journal.session!r}"}
+            # another recording's (of the session id, not of this file) is never taken: its events are not the file's
+            other = (f"of session {journal.session!r}" if journal.session != session
+                     else not_its(journal, next((dict(r.metadata) for r in checked.metadata_records
+                                                 if r.name == RECORDER_METADATA), {})))
+            if other:
+                log.warning("recorder: the journal %s is not taken: %s (it is left there)", beside, other)
+                account = {"earlier_journal": beside.name, "not_read": other}
                 journal = None
             else:
                 admitted = admit(session, [(k, p) for k, p, _ in (*before, *held)], journal.records)
@@ -650,7 +655,7 @@ class Recorder:
             self.release()
             raise
         self.started_ns = clock()  # in the file's metadata and its journal's header: which file a journal is of
-        self._guarded(self.writer.add_metadata, "pairplay.recorder",
+        self._guarded(self.writer.add_metadata, RECORDER_METADATA,
                       {"session": session, "software_version": __version__, "started_ns": str(self.started_ns)})
         self.journal: JournalWriter | None = None  # made by start (a recorder on a bus)
         self._journal_add = None

@@ -27,8 +27,8 @@ def human(**fields) -> SessionConfig:
     ({"ignore_window_ms": -1.0}, "ignore_window_ms must be 0..60000, got -1"),
 ])
 def test_a_person_cannot_be_asked_what_only_a_simulation_reports(fields, words):
-    config = human(**fields)
-    for check in (config.validate, lambda: GameLogic(config)):  # the game refuses it too: no stalled session
+    # a field alone is refused where the config is made (its __post_init__): no config, no game to start
+    for check in (lambda: human(**fields).validate(), lambda: GameLogic(human(**fields))):  # the game refuses it too
         with pytest.raises(ValueError, match=words.replace("(", r"\(").replace(")", r"\)")):
             check()
 

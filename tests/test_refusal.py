@@ -32,13 +32,6 @@ from test_forge import forge, message
 SETTLES_S = 30.0  # a session that stops at once is done in a few seconds even at load 30; before: never
 
 
-def unlearnable(session: str, rounds: int = 3) -> SessionConfig:
-    """A config of a fixed policy of one action, not one per state: refused by SessionConfig.validate
-    (before, only the learner checked its length, and refused the start the game had published)."""
-    return SessionConfig(session=session, participant="sim:ashley", persona="ashley", seed=1, rounds=rounds,
-                         algorithm="fixed", policy_actions=[0])
-
-
 def run_in_thread(config: SessionConfig, path, **kwargs) -> tuple[threading.Thread, dict]:
     """run_session in a daemon thread (a hung one must not hang the test run); `out`: its result or error."""
     out: dict = {}
@@ -63,18 +56,15 @@ def finished(thread: threading.Thread, stop: threading.Event, timeout_s: float =
     return True
 
 
-def test_a_policy_the_learner_cannot_take_is_refused_at_the_config_before_the_session_starts(tmp_path):
-    """SessionConfig.validate checks policy_actions' length and codes: the game never starts a session its
-    learner would refuse (before: it published the start, and the learner refused it)."""
+def test_a_policy_the_learner_cannot_take_is_refused_where_the_config_is_made():
+    """SessionConfig checks policy_actions' length and codes where it is made (its __post_init__): the game never
+    starts a session its learner would refuse (before: it published the start, and the learner refused it)."""
     with pytest.raises(ValueError, match="policy_actions must be 24 action codes 0..87, got 1 code"):
-        unlearnable("ref0").validate()
+        SessionConfig(session="ref0", participant="sim:ashley", persona="ashley", seed=1, rounds=3,
+                      algorithm="fixed", policy_actions=[0])
     with pytest.raises(ValueError, match="policy_actions must be 24 action codes"):
         SessionConfig(session="ref0", participant="sim:ashley", persona="ashley", seed=1, rounds=3,
-                      algorithm="fixed", policy_actions=[88] * 24).validate()
-    thread, out = run_in_thread(unlearnable("ref0"), tmp_path / "ref0.mcap", stop=threading.Event(),
-                                settle_timeout_s=5)
-    thread.join(30)
-    assert isinstance(out.get("error"), ValueError) and "policy_actions must be" in str(out["error"]), out
+                      algorithm="fixed", policy_actions=[88] * 24)
 
 
 def test_a_learner_in_another_process_that_refuses_the_start_stops_the_session(tmp_path):
