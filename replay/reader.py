@@ -39,6 +39,7 @@ from pairplay.schemas.jsonfile import MCAP_MAGIC
 from pairplay.schemas.events import EVENT_BY_TAG, decode_event
 
 from .mcapscan import Damage, scan
+from pairplay.schemas.nesting import JsonDecoder, json_loads
 
 
 class RecordedEvent(NamedTuple):
@@ -64,7 +65,7 @@ class _Tagged(msgspec.Struct):
     seq: int = 0
 
 
-_tagged = msgspec.json.Decoder(_Tagged)
+_tagged = JsonDecoder(_Tagged)
 
 
 def unknown_tag(payload: bytes) -> str | None:
@@ -304,12 +305,12 @@ def said_source_lost(recovered: dict[str, str]) -> str:
     if not recovered_lost(recovered):
         return ""
     try:
-        parts = [str(p) for p in json.loads(recovered.get("lost", "[]") or "[]")]
+        parts = [str(p) for p in json_loads(recovered.get("lost", "[]") or "[]")]
     except (ValueError, TypeError):
         parts = []
     source = Path(recovered.get("source", "")).name
     try:  # a recovered file recovered again: the files before its source (replay/recover.py `earlier`), oldest first
-        earlier = [Path(str(e)).name for e in json.loads(recovered.get("earlier", "[]") or "[]") if e]
+        earlier = [Path(str(e)).name for e in json_loads(recovered.get("earlier", "[]") or "[]") if e]
     except (ValueError, TypeError):
         earlier = []
     if source and earlier:
@@ -401,7 +402,7 @@ def carry_recovery(earlier: dict[str, str], new: dict[str, str], marks_moved: bo
             merged[key] = str(_number(earlier[key]) + _number(new.get(key, "0")))
     if not marks_moved and LOST_AT_KEY in earlier and LOST_AT_KEY in new:
         try:
-            old, mine = (sorted(int(n) for n in json.loads(m[LOST_AT_KEY])) for m in (earlier, new))
+            old, mine = (sorted(int(n) for n in json_loads(m[LOST_AT_KEY])) for m in (earlier, new))
         except (ValueError, TypeError):
             old, mine = [], []
         merged[LOST_AT_KEY] = json.dumps(sorted({*mine, *(n for n in old if not mine or n <= mine[0])}))
@@ -424,7 +425,7 @@ def folded_recovery(records: list) -> dict[str, str]:
 
 def _listed(text: str | None) -> list[str]:
     try:
-        value = json.loads(text or "[]")
+        value = json_loads(text or "[]")
     except ValueError:
         return [text] if text else []
     return [str(v) for v in value] if isinstance(value, list) else [str(value)]
@@ -451,7 +452,7 @@ def recovered_losses(records: list, own: list[tuple[int, int | None]] = (),
     if LOST_AT_KEY not in recovered:
         return None
     try:
-        wanted = sorted(int(n) for n in json.loads(recovered[LOST_AT_KEY]))
+        wanted = sorted(int(n) for n in json_loads(recovered[LOST_AT_KEY]))
     except (ValueError, TypeError):
         return None
     lost = sorted(own)

@@ -71,6 +71,7 @@ from .reader import read_any_log
 from .rebuild import Rebuilt, rebuild_recording, write_outputs
 from .recover import default_output, journal_more
 from .wal import wal_path
+from pairplay.schemas.nesting import json_decode
 
 JOURNAL, SETTINGS = "journal.jsonl", "settings.json"  # and STUDY_FILE, schemas/study.py
 # what `pairplay report` writes in <folder>/report (report/human.py), and its manifest: here, below the report,
@@ -1429,7 +1430,7 @@ def _settings(path: Path) -> dict:
         return {}
     data = without_bom(path.read_bytes())
     try:
-        return msgspec.structs.asdict(msgspec.json.decode(data, type=FolderSettings))
+        return msgspec.structs.asdict(json_decode(data, type=FolderSettings))
     except (msgspec.DecodeError, msgspec.ValidationError) as err:
         raise StudyDataError(f"not the study's settings: {in_words(err, FolderSettings, data)}; it is "
                              f"{{\"key_file\": \"<path or empty>\"}}", path) from None

@@ -45,6 +45,7 @@ from typing import Callable
 
 import msgspec
 from pairplay.numbers import counted
+from pairplay.schemas.nesting import MsgpackDecoder, msgpack_decode
 
 MAGIC = b"\x89pairplay journal 1\n"  # 20 bytes: no MCAP reader takes it for a recording
 assert len(MAGIC) == 20
@@ -55,7 +56,7 @@ PERIOD_S = 0.005  # the journal thread writes what was received at least this of
 _HEAD = struct.Struct("<IIQI")  # body length, count, taken_ns, crc32
 MAX_FRAME = 1 << 30  # a frame's body longer than this is damage, not data (a period's messages are a few MB)
 _encode = msgspec.msgpack.Encoder().encode
-_records = msgspec.msgpack.Decoder(list[tuple[str, bytes]])
+_records = MsgpackDecoder(list[tuple[str, bytes]])
 
 
 def wal_path(recording: str | Path) -> Path:
@@ -236,7 +237,7 @@ def read_journal(path: str | Path) -> Journal:
     if not frames:
         raise NotAJournal(f"{path}: the journal's header is {'damaged' if torn else 'missing'}")
     try:
-        header = msgspec.msgpack.decode(frames[0][0], type=dict[str, str])
+        header = msgpack_decode(frames[0][0], type=dict[str, str])
     except (msgspec.DecodeError, msgspec.ValidationError) as err:
         raise NotAJournal(f"{path}: the journal's header is unreadable ({err})") from None
     journal = Journal(path, header, torn=torn, frames=len(frames))

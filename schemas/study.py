@@ -37,6 +37,7 @@ from .jsonfile import MAX_SAID, a_folder, empty, toml_words, unknown_keys
 from .robot_url import parse_robot_url
 from .session import MS_FIELDS, MS_RANGE, SEED_RANGE
 from .tomlplace import Written, header, misplaced, table_not_value
+from .nesting import toml_loads
 
 ID = re.compile(r"^[a-z0-9][a-z0-9_-]{0,39}$")
 PRESETS = ("virtual", "human-phase1", "human-phase2")
@@ -258,7 +259,7 @@ def parse_study(text: str, source: str = "study") -> Study:
         raise StudyFileError(f"{source}: {empty(text)}")
     with typed_floats() as parse_float:  # a number a line echoes, as the file has it (pairplay/numbers.py)
         try:
-            raw = tomllib.loads(text, parse_float=parse_float)
+            raw = toml_loads(text, parse_float=parse_float)
         except tomllib.TOMLDecodeError as err:
             raise StudyFileError(f"{source}: not valid TOML: {toml_words(err, text)}") from None
         written = Written(text, raw)

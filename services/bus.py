@@ -79,6 +79,7 @@ from pairplay import signals
 from pairplay.errors import UserError
 from pairplay.schemas.jsonfile import a_folder, empty
 from pairplay.services.zenohcheck import MODES, exposed, type_errors
+from pairplay.schemas.nesting import TOO_DEEP, json_loads
 
 log = logging.getLogger("pairplay.bus")
 LOOPBACK_ANY_PORT = "tcp/127.0.0.1:0"
@@ -167,6 +168,8 @@ def read_config_file(path: str) -> dict[str, Any]:
         said += (": cut short (a copy or a save that did not finish? put back a whole copy), or a quote or bracket "
                  "left open" if "Unexpected end of input" in said else ": correct it there")
         raise ConfigFileError(f"cannot use the Zenoh config: not JSON5: {said}", f"--zenoh-config {path}") from None
+    except RecursionError:  # json5 recurses per level too (schemas/nesting.py)
+        raise ConfigFileError(f"cannot use the Zenoh config: not JSON5: {TOO_DEEP}", f"--zenoh-config {path}") from None
     if not isinstance(data, dict):
         raise ConfigFileError("cannot use the Zenoh config: the top level must be an object", f"--zenoh-config {path}")
     return data
@@ -939,7 +942,7 @@ class Bus:
             if reply.ok is None:
                 continue
             try:
-                info = json.loads(reply.ok.payload.to_bytes())
+                info = json_loads(reply.ok.payload.to_bytes())
             except ValueError:
                 continue
             if isinstance(info, dict) and "locators" in info:

@@ -35,6 +35,7 @@ from pairplay.schemas.jsonfile import in_words
 
 from pairplay.services.protocol import StudyRunner
 from pairplay.numbers import counted
+from pairplay.schemas.nesting import json_decode
 
 log = logging.getLogger("pairplay.console")
 STATIC = Path(__file__).parent / "static"
@@ -146,7 +147,7 @@ async def _body(request: Request) -> dict:
     if not raw:
         return {}
     try:
-        body = msgspec.json.decode(raw)
+        body = json_decode(raw)
     except msgspec.DecodeError:
         raise StudyDataError("the request is not JSON") from None
     if not isinstance(body, dict):

@@ -28,6 +28,7 @@ from pairplay.services.robot.realtime import RealtimeTransport
 from pairplay.services.robot.render import Renderer
 from pairplay.services.robot.transport import Transport
 from pairplay.services.robot.virtual import VirtualTransport
+from pairplay.schemas.nesting import json_decode
 
 
 def make_transport(url: str, config: RobotConfig | None = None) -> tuple[Transport, RobotConfig]:
@@ -48,7 +49,7 @@ def load_robot_config(path: str | None) -> RobotConfig:
             raw = f.read()
         if empty(raw):
             raise ValueError(f"robot config {path}: {empty(raw)}")
-        config = msgspec.json.decode(without_bom(raw), type=RobotConfig)
+        config = json_decode(without_bom(raw), type=RobotConfig)
     except IsADirectoryError:
         raise ValueError(a_folder(path, "robot config", "its JSON file")) from None
     except OSError as exc:

@@ -20,6 +20,7 @@ import msgspec
 from pairplay.core.geometry import COLS, N_CARDS, ROWS, card_of
 from pairplay.schemas.jsonfile import a_folder, empty, in_words, without_bom
 from pairplay.schemas.robot import BoardCalibration, Point
+from pairplay.schemas.nesting import json_decode
 
 DEFAULT_FILE = "calibration_default.json"
 MAX_DISTANCE_M = 10.0  # a card farther than this from the robot is a unit mistake
@@ -46,7 +47,7 @@ def load_calibration(path: str | Path | None = None) -> BoardCalibration:
         if empty(raw):
             raise CalibrationError(f"calibration {where}: {empty(raw)}")
     try:
-        calibration = msgspec.json.decode(without_bom(raw), type=BoardCalibration)
+        calibration = json_decode(without_bom(raw), type=BoardCalibration)
     except msgspec.DecodeError as exc:  # ValidationError is a subclass
         raise CalibrationError(f"calibration {where} is not valid: "
                                f"{in_words(exc, BoardCalibration, without_bom(raw))}") from exc
