@@ -1102,8 +1102,6 @@ def stop_on_signals(stop: threading.Event, then: Callable[[], object] | None = N
     said "nothing more was written" of the game it cut (once at load 5.4; tests/test_protocol_cut_game.py and
     tests/test_cut_signals.py hold the thread at `signal-stopping` to land the second signal there)."""
     def handler(signum, frame):
-        if not signals.arrived(signum):
-            return  # a copy of a held second Ctrl-C sent again (pairplay/signals.py send_to_main): taken already
         # a signal taken already (its name in `why`), not a stop set by the work's own end: the first Ctrl-C
         # as a session finished its file was read as a second one and the file left cut (a new user's trial)
         taken = bool(getattr(stop, "why", ""))
