@@ -71,7 +71,9 @@ from __future__ import annotations
 
 import signal
 
-SIGNALS = (signal.SIGINT, signal.SIGTERM)
+# SIGHUP: the terminal closed or the ssh link dropped; before, it killed every verb at once, no line, a live
+# session's recording left cut (a hostile user's trial, trial28 F8): the same stop as SIGTERM's, exit 129
+SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
 
 received = 0  # the first signal `record` met (0: none)
 stopping = 0  # the signal a verb's own handler took to stop on (services/bus.py stop_on_signals); 0: none
