@@ -5,7 +5,8 @@ exit 2, before it is opened (pairplay/inputs.py).
 A new user's trial (trial26): a FIFO given as an input made `rebuild`, `replay --verify`, `recover` and `combine`
 block silently until a signal (opening a FIFO for reading waits for a writer). Each verb that reads a file the user
 names meets it: one shared check (pairplay/inputs.py `check_input`), called by every reader of such a file; a
-pipe inside a folder given as input (`combine rebuilt/`) is refused alike by the reader of that file.
+pipe inside a folder given as input (`combine rebuilt/`; a study folder's journal, key file, game recordings; a
+recording's journal beside it) is said alike by the reader of that file.
 Each run has a timeout only as a net: on main's code the pipes' runs hung until it.
 """
 
@@ -153,3 +154,56 @@ def test_a_pipe_inside_a_folder_given_as_input_is_refused(verb, template, tmp_pa
     args = ("combine", "rebuilt/", "-o", "m.json") if verb == "combine" else ("profile", "rebuilt/")
     r = pairplay_cli(*args, cwd=root, timeout=90)
     _refused(r, "is a named pipe (FIFO), not a regular file", root / "rebuilt" / "x.json", before, root, args)
+
+
+@pytest.mark.parametrize("verb", ["report", "participant export"])
+def test_a_pipe_at_a_study_games_recording_is_said_not_waited_on(verb, template, tmp_path, pairplay_cli):
+    """A study folder's recordings are read by `report` and zipped by `participant export`: a pipe standing at a
+    game's recording was "recording missing" to the report, and left out of the export silently (rc 0)."""
+    root = tmp_path / "w"
+    shutil.copytree(template, root, symlinks=True)
+    (root / GAME).unlink()
+    os.mkfifo(root / GAME)
+    before = _files(root)
+    args = ("report", "study", "--out", "rep") if verb == "report" else ("participant", "export", "study", "p01",
+                                                                          "-o", "p01.zip")
+    r = pairplay_cli(*args, cwd=root, timeout=90)
+    _refused(r, "is a named pipe (FIFO), not a regular file", root / GAME, before, root, args)
+
+
+def test_a_pipe_beside_a_recording_as_its_journal_is_said_not_waited_on(template, tmp_path, pairplay_cli):
+    """`recover cut.mcap` reads the recorder's journal beside it (cut.mcap.journal): a pipe there is said (the
+    journal unread, in recover's words for an unreadable one) and the recording recovered, not waited on."""
+    root = tmp_path / "w"
+    shutil.copytree(template, root, symlinks=True)
+    os.mkfifo(root / "cut.mcap.journal")
+    r = pairplay_cli("recover", "cut.mcap", "-o", "fixed.mcap", cwd=root, timeout=90)
+    assert r.returncode == 0 and r.stderr.count("\n") == 1, (r.returncode, r.stderr)
+    assert "cut.mcap.journal is a named pipe (FIFO), not a regular file" in r.stderr, r.stderr
+    assert (root / "fixed.mcap").is_file()
+
+
+def test_a_pipe_at_a_study_folders_journal_is_named(template, tmp_path, pairplay_cli):
+    """A study folder is read from its journal first: a pipe there was "not a study folder (no journal.jsonl)"."""
+    root = tmp_path / "w"
+    shutil.copytree(template, root, symlinks=True)
+    (root / "study" / "journal.jsonl").unlink()
+    os.mkfifo(root / "study" / "journal.jsonl")
+    before = _files(root)
+    r = pairplay_cli("protocol", "status", "study", cwd=root, timeout=90)
+    _refused(r, "is a named pipe (FIFO), not a regular file", root / "study" / "journal.jsonl", before, root,
+             "protocol status")
+
+
+def test_a_pipe_at_a_studys_key_file_is_named_not_waited_on(template, tmp_path, pairplay_cli):
+    """A study's key file is read before an id is given (`register`): a pipe put in its place was waited on."""
+    root = tmp_path / "w"
+    shutil.copytree(template, root, symlinks=True)
+    r = pairplay_cli("protocol", "init", "keyed", "--study", "one.toml", "--key-file", "keys/k.csv", cwd=root)
+    assert r.returncode == 0, r.stderr
+    (root / "keys" / "k.csv").unlink()
+    os.mkfifo(root / "keys" / "k.csv")
+    before = _files(root)
+    r = pairplay_cli("protocol", "register", "keyed", "--name", "Ann", cwd=root, timeout=90)
+    _refused(r, "is a named pipe (FIFO), not a regular file", root / "keys" / "k.csv", before, root,
+             "protocol register")
