@@ -607,6 +607,8 @@ class StudyData:
                     found[pid].append(place)
 
         add(self.key_file_ids() if key_file else [], KEY_RECORD)
+        if said := refusal(self.folder / "participants.csv"):  # before opening: a pipe blocked (pairplay/inputs.py)
+            raise StudyDataError(said, self.given / "participants.csv")
         try:
             with open(self.folder / "participants.csv", encoding="utf-8", newline="") as f:
                 add([r[0] for r in list(csv.reader(f))[1:] if r], "participants.csv")

@@ -207,3 +207,20 @@ def test_a_pipe_at_a_studys_key_file_is_named_not_waited_on(template, tmp_path, 
     r = pairplay_cli("protocol", "register", "keyed", "--name", "Ann", cwd=root, timeout=90)
     _refused(r, "is a named pipe (FIFO), not a regular file", root / "keys" / "k.csv", before, root,
              "protocol register")
+
+
+@pytest.mark.parametrize("name", ["participants.csv", "journal.jsonl.torn-1"])
+def test_a_pipe_among_a_study_folders_records_of_ids_is_not_waited_on(name, template, tmp_path, pairplay_cli):
+    """`register` reads every record of the ids given (participants.csv, the torn lines `repair` set aside) before
+    it gives one: a pipe at participants.csv is named; one named like a torn line's file holds no id and is not
+    opened (it was: both waited on the pipe)."""
+    root = tmp_path / "w"
+    shutil.copytree(template, root, symlinks=True)
+    (root / "study" / name).unlink(missing_ok=True)
+    os.mkfifo(root / "study" / name)
+    before = _files(root)
+    r = pairplay_cli("protocol", "register", "study", cwd=root, timeout=90)
+    if name == "participants.csv":
+        _refused(r, "is a named pipe (FIFO), not a regular file", root / "study" / name, before, root, "register")
+    else:
+        assert r.returncode == 0 and r.stdout == "p02\n", (r.returncode, r.stdout, r.stderr)
