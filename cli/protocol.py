@@ -24,6 +24,7 @@ from pathlib import Path
 from pairplay import signals, testpause
 from pairplay.cli.args import int_between, output_file, output_folder, session_id
 from pairplay.core.personas import persona
+from pairplay.inputs import check_input, check_option_file
 from pairplay.lists import comma_items
 from pairplay.replay import studyjournal
 from pairplay.replay.studydata import JOURNAL, REGISTER_AT_ONCE, StudyData, StudyDataError, repair_journal
@@ -90,6 +91,7 @@ def _study_file(name: str) -> tuple[str, str]:
         return bundled_text(name), f"{name} (shipped example)" if name == EXAMPLE_NAME else f"{name} (bundled study)"
     path = study_file_of(name)  # a study folder: its own study file
     name = str(path)
+    check_input(path, StudyFileError)  # before opening: a pipe blocked (pairplay/inputs.py)
     try:
         return path.read_text(encoding="utf-8-sig"), name  # as load_study: a byte order mark is fine
     except UnicodeDecodeError:  # as load_study says it (a random or binary file was a traceback)
@@ -302,6 +304,9 @@ def _serve(data: StudyData, args) -> int:
     robot, overridden = _robot(args)
     if bool(args.certfile) != bool(args.keyfile):
         raise StudyDataError("--certfile and --keyfile go together")
+    for option, f in (("--certfile", args.certfile), ("--keyfile", args.keyfile)):
+        if f:  # before the bus and the console start: uvicorn opens them only then (a pipe blocked it)
+            check_option_file(f, option)
     pilot = {}
     for pair in _items(args.pilot, "--pilot") if args.pilot is not None else []:
         pid, equals, key = pair.partition("=")

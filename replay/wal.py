@@ -44,6 +44,7 @@ from pathlib import Path
 from typing import Callable
 
 import msgspec
+from pairplay.inputs import refusal
 from pairplay.numbers import counted
 from pairplay.schemas.nesting import MsgpackDecoder, msgpack_decode
 
@@ -66,7 +67,10 @@ def wal_path(recording: str | Path) -> Path:
 
 
 def is_journal(path: str | Path) -> bool:
-    """Whether `path` starts with the journal's MAGIC (False if it cannot be read)."""
+    """Whether `path` starts with the journal's MAGIC (False if it cannot be read, or is no regular file: a
+    pipe is never opened, which blocked: pairplay/inputs.py)."""
+    if refusal(path):
+        return False
     try:
         with open(path, "rb") as f:
             return f.read(len(MAGIC)) == MAGIC
@@ -213,6 +217,8 @@ def read_journal(path: str | Path) -> Journal:
     """Read a journal up to its end or its first torn or damaged frame (see the module rule).
     NotAJournal if it does not start with MAGIC and an intact header frame; OSError if unreadable."""
     path = Path(path)
+    if said := refusal(path):  # a pipe beside a recording: `recover` waited on it (pairplay/inputs.py)
+        raise NotAJournal(f"{path} {said}")
     data = path.read_bytes()
     if data[:len(MAGIC)] != MAGIC:
         raise NotAJournal(f"{path} is not a recorder's journal (no journal magic)")

@@ -52,6 +52,7 @@ import numpy as np
 
 from pairplay import csvcell
 from pairplay.errors import OptionError
+from pairplay.inputs import check_input
 from pairplay.nearest import nearest
 from pairplay.numbers import counted, shown, type_name, typed_floats
 from pairplay.outputs import manifest_name, output_file, output_folder, write_text
@@ -184,6 +185,7 @@ def read_grid(path: str | Path) -> Grid:
 
 
 def _read_grid(path: str, parse_float) -> Grid:
+    check_input(path, GridError)  # before opening: a pipe blocked (pairplay/inputs.py)
     try:
         with open(path, "rb") as f:
             raw = f.read()

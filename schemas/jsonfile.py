@@ -46,6 +46,7 @@ from typing import Generic, TypeVar
 
 import msgspec
 from pairplay.arguments import flag_argument, instance_argument, path_argument
+from pairplay.inputs import check_input
 from pairplay.nearest import nearest
 from pairplay.numbers import counted, type_name
 from .nesting import JsonDecoder, json_decode
@@ -331,6 +332,7 @@ class JsonFileKind(Generic[T]):
     def read(self, path) -> T:
         """The checked value of the file at `path`; the kind's error if it cannot be read or used."""
         path = path_argument(path, f"read_{self.noun}")
+        check_input(path, self.error)  # before opening: a pipe blocked its reader (pairplay/inputs.py)
         try:
             data = path.read_bytes()
         except IsADirectoryError:

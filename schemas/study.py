@@ -29,6 +29,7 @@ from typing import Literal, Union
 
 import msgspec
 
+from pairplay.inputs import check_input
 from pairplay.nearest import nearest
 from pairplay.numbers import TYPE_NAMES, counted, shown, type_name, typed_floats
 
@@ -459,6 +460,7 @@ def study_file_of(path: str | Path) -> Path:
 def load_study(path: str | Path) -> Study:
     """Read and check a study file (StudyFileError, one line, if it cannot be used); a study folder, its own."""
     path = study_file_of(path)
+    check_input(path, StudyFileError)  # before opening: a pipe blocked (pairplay/inputs.py)
     try:
         text = path.read_text(encoding="utf-8-sig")  # an editor's byte order mark is no TOML error
     except (OSError, UnicodeDecodeError) as err:

@@ -77,6 +77,7 @@ import zenoh.ext
 
 from pairplay import signals, testpause
 from pairplay.errors import UserError
+from pairplay.inputs import refusal
 from pairplay.schemas.jsonfile import a_folder, empty
 from pairplay.services.zenohcheck import MODES, exposed, type_errors
 from pairplay.schemas.nesting import TOO_DEEP, json_loads
@@ -150,6 +151,8 @@ class ConfigFileError(BusError, ValueError):
 
 
 def read_config_file(path: str) -> dict[str, Any]:
+    if said := refusal(path):  # before opening: a pipe blocked (pairplay/inputs.py)
+        raise ConfigFileError(f"cannot use the Zenoh config: {said}", f"--zenoh-config {path}")
     try:
         text = Path(path).read_text(encoding="utf-8-sig")  # a byte order mark is no JSON5 error
     except IsADirectoryError:

@@ -17,6 +17,7 @@ from typing import Callable
 
 import msgspec
 
+from pairplay.inputs import refusal
 from pairplay.schemas.jsonfile import a_folder, empty, in_words, without_bom
 from pairplay.schemas.robot import GESTURE_PRESETS, PRESET_NOTES, BoardCalibration, RobotActed, RobotConfig
 from pairplay.schemas.robot_url import FORMS, parse_robot_url  # noqa: F401 (FORMS: the --robot help)
@@ -44,6 +45,8 @@ def load_robot_config(path: str | None) -> RobotConfig:
     """A RobotConfig JSON file (strict), or the defaults for None."""
     if path is None:
         return RobotConfig()
+    if said := refusal(path):  # before opening: a pipe blocked (pairplay/inputs.py)
+        raise ValueError(f"robot config {path}: {said}")
     try:
         with open(path, "rb") as f:
             raw = f.read()

@@ -18,6 +18,7 @@ from pathlib import Path
 import msgspec
 
 from pairplay.core.geometry import COLS, N_CARDS, ROWS, card_of
+from pairplay.inputs import refusal
 from pairplay.schemas.jsonfile import a_folder, empty, in_words, without_bom
 from pairplay.schemas.robot import BoardCalibration, Point
 from pairplay.schemas.nesting import json_decode
@@ -37,6 +38,8 @@ def load_calibration(path: str | Path | None = None) -> BoardCalibration:
         raw = resources.files("pairplay.services.robot").joinpath(DEFAULT_FILE).read_bytes()
         where = f"packaged {DEFAULT_FILE}"
     else:
+        if said := refusal(path):  # before opening: a pipe blocked (pairplay/inputs.py)
+            raise CalibrationError(f"calibration {path}: {said}")
         try:
             raw = Path(path).read_bytes()
         except IsADirectoryError:
