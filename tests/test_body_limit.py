@@ -10,6 +10,7 @@ reset through clear_refs first) must stay within 100 MB of its RSS before. No ti
 
 from __future__ import annotations
 
+import contextlib
 import queue
 import socket
 import threading
@@ -75,7 +76,8 @@ def _post(url: str, path: str, chunked: bool) -> bytes:
         sender = threading.Thread(target=_send_body, args=(sock, False), daemon=True)
         sender.start()
         line = answers.readline()
-    sock.shutdown(socket.SHUT_RDWR)  # the sender stops at once, whatever the server did
+    with contextlib.suppress(OSError):  # the server may have closed it first (ENOTCONN): as meant
+        sock.shutdown(socket.SHUT_RDWR)  # the sender stops at once, whatever the server did
     if sender is not None:
         sender.join()
     sock.close()
