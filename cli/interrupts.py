@@ -49,7 +49,6 @@ written" for outputs that were all there.
 
 from __future__ import annotations
 
-import signal
 import sys
 import threading
 

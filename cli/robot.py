@@ -24,7 +24,7 @@ from pairplay.lists import comma_items
 from pairplay.schemas.policy import N_ACTIONS
 
 from pairplay.services.bus import Bus, add_bus_arguments, options_from_args, stop_on_signals
-from pairplay.services.robot.backends import FORMS, load_robot_config, open_robot, parse_robot_url
+from pairplay.services.robot.backends import FORMS, load_robot_config, open_robot
 from pairplay.services.robot.bridge import RobotBridge
 from pairplay.services.robot.choice import CONNECT_PROBE_S, RobotChoice, check_choice, robot_unreachable, start_bridge
 from pairplay.services.robot.calibration import CalibrationError, load_calibration

@@ -43,7 +43,7 @@ import logging
 import math
 import time
 import tomllib
-from dataclasses import asdict, dataclass, fields
+from dataclasses import dataclass, fields
 from pathlib import Path
 from typing import Any, Callable, Iterable
 
@@ -523,16 +523,16 @@ def check_scheduler(address: str) -> None:
             with ThreadPoolExecutor(1) as pool:
                 said = pool.submit(probe).result()
     except ConnectionRefusedError:
-        raise refuse(f"nothing listens at that address (connection refused)") from None
+        raise refuse("nothing listens at that address (connection refused)") from None
     except socket.gaierror:
         raise refuse(f"the host {host} is not known (no address found for it)") from None
     except (TimeoutError, asyncio.TimeoutError):  # socket.timeout too; Dask's connect says "Timed out" below
         raise refuse(f"no Dask scheduler answered within {SCHEDULER_TIMEOUT_S} s") from None
     except MemoryError:  # its first bytes, read as a Dask frame's length, asked for exbibytes
-        raise refuse(f"something that is not a Dask scheduler answered "
+        raise refuse("something that is not a Dask scheduler answered "
                      "(bytes that are no Dask message)") from None
     except CommClosedError:  # (an OSError) the other end closed the connection in the handshake
-        raise refuse(f"something that is not a Dask scheduler answered "
+        raise refuse("something that is not a Dask scheduler answered "
                      "(it closed the connection)") from None
     except OSError as err:
         if "timed out" in str(err).lower():  # Dask's connect: "Timed out trying to connect to ... after 10 s"
@@ -546,7 +546,7 @@ def check_scheduler(address: str) -> None:
     kind = said.get("type") if isinstance(said, dict) else None
     if kind != "Scheduler":
         raise refuse(f"a Dask {kind}, not a scheduler, answered" if isinstance(kind, str)
-                     else f"something that is not a Dask scheduler answered")
+                     else "something that is not a Dask scheduler answered")
 
 
 def run_sweep(grid: Grid, out: str | Path, *, scheduler: str | None = None, workers: int = 1,

@@ -15,7 +15,6 @@ import msgspec
 
 from pairplay.numbers import counted, shown
 
-from .keys import check_chunk
 from .config import LEARNER_RANGES, REWARD_BONUS_RULES, UNSTATED_REWARD_BONUS, LearnerConfig, LSPIConfig
 from .policy import N_ACTIONS, N_STATES
 from .public import FieldError, PublicStructMeta, check_kinds

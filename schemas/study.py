@@ -31,7 +31,7 @@ import msgspec
 
 from pairplay.inputs import check_input
 from pairplay.nearest import nearest
-from pairplay.numbers import TYPE_NAMES, counted, shown, type_name, typed_floats
+from pairplay.numbers import TYPE_NAMES, counted, type_name, typed_floats
 
 from .config import LearnerConfig
 from .jsonfile import MAX_SAID, a_folder, empty, toml_words, unknown_keys

@@ -5,7 +5,7 @@ import pytest
 
 from pairplay.core.actionlevel import (action_values, combine_actions, extract_action_info, whole_actions)
 from pairplay.core.actions import code_of_parts
-from pairplay.core.combine import User, combine, extract_info
+from pairplay.core.combine import User, combine
 from pairplay.core.geometry import CELL_INDEX, N_STATES, STATE_INDEX
 from pairplay.schemas.policy import UserInfo
 

@@ -8,7 +8,6 @@ import os
 import signal
 import subprocess
 import sys
-import threading
 import time
 
 import pytest
@@ -148,4 +147,4 @@ def test_session_force_refuses_a_running_sessions_recording_and_it_keeps_its_own
     log = read_log(tmp_path / "recF" / "dupF.mcap")
     started = [r.event.config.participant for r in log.events if isinstance(r.event, ev.SessionStarted)]
     assert started == ["sim:blind"], started
-    assert f"recorded " in err and "recF/dupF.mcap" in err, err
+    assert "recorded " in err and "recF/dupF.mcap" in err, err

@@ -14,7 +14,6 @@ import os
 import shutil
 import subprocess
 import sys
-from pathlib import Path
 
 import pytest
 from test_output_kinds import GRID, ONE_GAME_STUDY, SAMPLES, template  # noqa: F401  (the module's fixture)

@@ -6,7 +6,6 @@ import dataclasses
 import json
 import math
 import socket
-import time
 
 import msgspec
 import pytest

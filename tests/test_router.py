@@ -12,7 +12,6 @@ import socket
 import threading
 import time
 
-import pytest
 
 from pairplay.replay.reader import read_log
 from pairplay.schemas import events as ev

@@ -11,7 +11,7 @@ from pairplay.core.personas import PERSONAS
 from pairplay.core.rng import STREAMS_VERSION, game_seed
 from pairplay.schemas import events as ev
 from pairplay.schemas.session import SessionConfig
-from pairplay.services.verify import verify_events, verify_recording
+from pairplay.services.verify import verify_recording
 
 from loopback_session import loopback_events
 

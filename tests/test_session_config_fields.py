@@ -25,7 +25,7 @@ from pairplay.schemas import events as ev
 from pairplay.schemas.events import decode_event
 from pairplay.schemas.keys import event_key
 
-from busutil import collect, listener, recorder_process, wait_until
+from busutil import collect, listener, recorder_process
 
 SAMPLES = sorted((Path(__file__).parent.parent / "recordings" / "samples").glob("*.mcap"))
 

@@ -27,7 +27,7 @@ import numpy as np
 import pytest
 
 from pairplay import signals
-from pairplay.bench.view import scripted_events, write_recording
+from pairplay.bench.view import scripted_events
 from pairplay.services.view.drive import drive
 from pairplay.services.view.output import ViewOutput, finish, open_stream
 from pairplay.services.view.readback import read_rrd, segmentation, tensor
