@@ -1,0 +1,116 @@
+"""Events built from outside input stay within the bus's limits (schemas/trust.py: MAX_PAYLOAD, clip).
+
+A listener sheds a payload over MAX_PAYLOAD unread: an event of ours that copied a hostile message's
+text past it was lost to every listener, and the recording had a hole no refill filled (trial28 F21:
+a forged 60,000-character source made the game's refusal 120 KB; verify FAIL, rebuild refused)."""
+
+import threading
+
+from pairplay.replay.reader import read_log
+from pairplay.schemas import events as ev
+from pairplay.schemas.envelope import stamped
+from pairplay.schemas.keys import alive_key, event_key
+from pairplay.schemas.session import SessionConfig
+from pairplay.schemas.trust import MAX_PAYLOAD
+from pairplay.services.guard import Guard, Refusals
+from pairplay.services.session import run_session
+from pairplay.services.verify import verify_recording
+
+from busutil import connector, wait_until
+
+SESSION = "lim1"
+HUGE = 60_000  # characters: the forged message itself is under MAX_PAYLOAD, its refusal quoted it twice
+
+
+def forged_pick(source: str = "p" * HUGE, session: str = SESSION) -> tuple[str, bytes]:
+    """A valid-looking CardPicked on the participant's key claiming a 60,000-character source."""
+    e = stamped(ev.CardPicked(round=0, turn=0, card=3), session=session, source=source, seq=1, time_ns=1)
+    payload = ev.encode_event(e)
+    assert len(payload) <= MAX_PAYLOAD  # taken off the bus and read: its refusal is what must fit
+    return event_key(SESSION, "participant", "CardPicked"), payload
+
+
+def test_a_refusal_quoting_a_huge_source_fits_the_bus_and_says_what_was_cut():
+    key, payload = forged_pick()
+    verdict = Guard(SESSION, own="game").check(key, payload)
+    assert verdict.reason and len(verdict.reason) > HUGE  # the guard's reason quotes the source
+    refusals = Refusals()
+    out = refusals.refuse(1, verdict.reason, key, verdict.event.source, verdict.event.seq, payload)
+    assert refusals.recorded and len(out) == 1
+    rejected = stamped(out[0], session=SESSION, source="game", seq=2, time_ns=2)
+    assert len(ev.encode_event(rejected)) <= MAX_PAYLOAD
+    assert "more characters cut]" in rejected.reason and "more characters cut]" in rejected.offending_source
+    # the worst text: control characters, 6 bytes each in JSON, in the reason, the key and the source
+    worst = "\x01" * HUGE
+    out = Refusals().refuse(1, worst, worst, worst, 1, worst.encode())
+    assert len(ev.encode_event(stamped(out[0], session=SESSION, source="game", seq=2, time_ns=2))) <= MAX_PAYLOAD
+
+
+def test_a_forged_message_with_a_huge_source_leaves_the_recording_whole(tmp_path):
+    path = tmp_path / f"{SESSION}.mcap"
+    config = SessionConfig(session=SESSION, participant="sim:wasim", persona="wasim", seed=2, rounds=2)
+    box = {}
+    ready = threading.Event()
+
+    def on_bus(bus):
+        box["bus"] = bus
+        ready.set()
+
+    # the game waits for the intruder's token, so the forgery lands while every service listens
+    runner = threading.Thread(target=lambda: run_session(config, path, on_bus=on_bus, nodes_out=box,
+                                                         wait_also=("intruder",)))
+    runner.start()
+    assert ready.wait(30)
+    with connector(box["bus"]) as intruder:
+        everyone = {alive_key(SESSION, s) for s in ("recorder", "learner", "participant", "game")}
+        assert wait_until(lambda: everyone <= intruder.alive_now(alive_key(SESSION, "*")), timeout_s=60)
+        intruder.put(*forged_pick())
+        intruder.alive(alive_key(SESSION, "intruder"))
+        runner.join(120)
+    assert not runner.is_alive()
+    recorded = read_log(path)
+    refusals = [r.event for r in recorded.events if isinstance(r.event, ev.MessageRejected)
+                and r.event.key.endswith("participant/CardPicked")]
+    # every listener's refusal was recorded (the game's too: it was the one lost), none shed as too large
+    assert {"game", "recorder"} <= {r.source for r in refusals}
+    assert all("more characters cut]" in r.offending_source for r in refusals)
+    assert not [r.event for r in recorded.events if isinstance(r.event, ev.MessageRejected) and "larger than" in r.event.reason]
+    assert verify_recording(path).verdict == "verify: PASS"
+
+
+def test_an_abort_off_the_bus_with_a_huge_reason_ends_the_session_within_the_bus_limit():
+    # a SessionAborted that fits the bus, its reason copied as the game's SessionEnded detail, with more around it
+    from pairplay.services.game import GameLogic
+    from pairplay.services.node import Driver
+    game = Driver(GameLogic(SessionConfig(session=SESSION, participant="sim:wasim", persona="wasim", seed=2, rounds=2)),
+                  SESSION, clock=lambda: 5)
+    game.start()
+    abort = stamped(ev.SessionAborted(reason=""), session=SESSION, source="experimenter", seq=1, time_ns=1)
+    abort = stamped(ev.SessionAborted(reason="R" * (MAX_PAYLOAD - len(ev.encode_event(abort)))), session=SESSION,
+                    source="experimenter", seq=1, time_ns=1)
+    payload = ev.encode_event(abort)
+    assert len(payload) == MAX_PAYLOAD  # as large as the bus takes
+    out = game.receive(event_key(SESSION, "experimenter", "SessionAborted"), payload)
+    end = next(e for e in out if isinstance(e, ev.SessionEnded))
+    assert end.reason == "aborted" and "more characters cut]" in end.detail
+    assert len(ev.encode_event(end)) <= MAX_PAYLOAD
+
+
+def test_the_console_refuses_an_over_long_pause_or_abort_reason_in_one_line(tmp_path):
+    from test_console_api import STUDY, call
+    from pairplay.replay.studydata import StudyData
+    from pairplay.services.bus import Bus, BusOptions
+    from pairplay.services.console.server import ConsoleServer
+    from pairplay.services.protocol import StudyRunner
+    data = StudyData.create(tmp_path / "study", STUDY)
+    with Bus(BusOptions()) as bus:
+        runner = StudyRunner(data, bus)
+        server = ConsoleServer(runner).start()
+        try:
+            for action in ("pause", "abort"):
+                status, answer = call(f"{server.url}/api/console/control/{action}?token={server.token}",
+                                      {"reason": "R" * 65_400})
+                assert status == 400 and answer["error"] == "a reason is at most 1,000 characters, this one has 65,400"
+            assert not runner.live.paused
+        finally:
+            server.close()
