@@ -114,3 +114,13 @@ def test_the_console_refuses_an_over_long_pause_or_abort_reason_in_one_line(tmp_
             assert not runner.live.paused
         finally:
             server.close()
+
+
+def test_the_combiners_answer_to_a_request_of_huge_paths_fits_the_bus(tmp_path):
+    from pairplay.services.combiner import CombinerLogic
+    # two paths of 30,000 characters: the request fits the bus; the answer echoes both and its error quotes one
+    request = ev.CombineRequested(request_id="r1", policies=["../" + "x" * 30_000, "y" * 30_000])
+    assert len(ev.encode_event(stamped(request, session=SESSION, source="console", seq=1, time_ns=1))) <= MAX_PAYLOAD
+    [answer] = CombinerLogic(tmp_path).handle(request)
+    assert not answer.ok and answer.error
+    assert len(ev.encode_event(stamped(answer, session=SESSION, source="combiner", seq=1, time_ns=1))) <= MAX_PAYLOAD
