@@ -124,3 +124,34 @@ def test_the_combiners_answer_to_a_request_of_huge_paths_fits_the_bus(tmp_path):
     [answer] = CombinerLogic(tmp_path).handle(request)
     assert not answer.ok and answer.error
     assert len(ev.encode_event(stamped(answer, session=SESSION, source="combiner", seq=1, time_ns=1))) <= MAX_PAYLOAD
+
+
+def test_a_session_whose_learner_never_answers_says_so_once(tmp_path, monkeypatch, caplog):
+    # trial28 F19: a liveliness token with no learner behind it started a session that waited for ever without a word
+    from pairplay.services import unanswered
+    monkeypatch.setattr(unanswered, "SAY_AFTER_S", 0.5)
+    config = SessionConfig(session="lim2", participant="sim:wasim", persona="wasim", seed=2, rounds=2)
+    box, ready, stop = {}, threading.Event(), threading.Event()
+
+    def on_bus(bus):
+        box["bus"] = bus
+        ready.set()
+
+    caplog.set_level("WARNING", logger="pairplay.session")
+    runner = threading.Thread(target=lambda: run_session(config, tmp_path / "lim2.mcap", external=("learner",),
+                                                         on_bus=on_bus, stop=stop))
+    runner.start()
+    try:
+        assert ready.wait(30)
+        with connector(box["bus"]) as impostor:
+            impostor.alive(alive_key("lim2", "learner"))  # a token, and no learner
+            said = lambda: [r.getMessage() for r in caplog.records if "is the learner running?" in r.getMessage()]
+            assert wait_until(said, timeout_s=60)
+            assert said()[0].startswith("waiting ") and "for the learner's SuggestionMade to SuggestionRequested seq " in said()[0]
+            stop.set()
+            runner.join(60)
+    finally:
+        stop.set()
+        runner.join(60)
+    assert not runner.is_alive()
+    assert len(said()) == 1  # once for the request, not every 0.1 s
