@@ -400,8 +400,8 @@ class StudyRunner:
         bus's MAX_PAYLOAD is refused here (StudyDataError): every listener would shed it unread, and the
         experimenter be told "ok" for a pause the game never took (trial28 F20)."""
         if len(payload) > MAX_PAYLOAD:
-            raise StudyDataError(f"that would be a message of {counted(len(payload), 'byte')}, over the bus's limit "
-                                 f"of {counted(MAX_PAYLOAD, 'byte')}: shorten it")
+            raise StudyDataError(f"that would be a message of {len(payload):,} bytes, over the bus's limit "
+                                 f"of {MAX_PAYLOAD:,} bytes: shorten it")
         bus = self._game_bus
         try:
             if bus is None:
@@ -446,10 +446,10 @@ class StudyRunner:
             raise StudyDataError("the game is not over yet" if live.state == "playing" else "no questionnaire is awaited")
         name, items = self.questions_for(live.participant, live.phase)
         clean = check_answers(items, answers)
-        live.questionnaire_token = ""  # one answer per game
         e = stamped(ev.QuestionnaireAnswered(questionnaire=name, answers=clean), session=session, source="board",
                     seq=1, time_ns=time.time_ns())
         self._put(event_key(session, "board", "QuestionnaireAnswered"), ev.encode_event(e))
+        live.questionnaire_token = ""  # one answer per game: once published (answers refused may be sent again)
         return e
 
     def pause(self, reason: str = "") -> None:

@@ -155,3 +155,27 @@ def test_a_session_whose_learner_never_answers_says_so_once(tmp_path, monkeypatc
         runner.join(60)
     assert not runner.is_alive()
     assert len(said()) == 1  # once for the request, not every 0.1 s
+
+
+def test_questionnaire_answers_too_large_for_the_bus_are_refused_in_one_line(tmp_path):
+    from test_console_api import STUDY
+    from pairplay.replay.studydata import StudyData, StudyDataError
+    from pairplay.services.bus import Bus, BusOptions
+    from pairplay.services.protocol import StudyRunner
+    import pytest
+    study = tmp_path / "study.toml"  # the pilot study, its text items allowing 20,000 characters each
+    study.write_text(STUDY.read_text().replace('kind = "text"\n', 'kind = "text"\nmax_chars = 20000\n'))
+    data = StudyData.create(tmp_path / "study", study)
+    pid = data.register("phase1")
+    with Bus(BusOptions()) as bus:
+        runner = StudyRunner(data, bus)
+        runner._game_bus = bus  # the state of a game that just ended and awaits its questionnaire
+        runner.live.session, runner.live.participant, runner.live.phase = "lim3", pid, "phase1"
+        runner.live.state, runner.live.questionnaire_token = "questionnaire", "t0k"
+        name, items = runner.questions_for(pid, "phase1")
+        answers = {i.id: "\u20ac" * 20_000 if i.kind == "text" else (i.options[0] if i.kind == "choice" else "3")
+                   for i in items}  # 40,000 euro signs: 120,000 bytes
+        with pytest.raises(StudyDataError, match="over the bus's limit of 65,536 bytes: shorten it"):
+            runner.answer_questionnaire("lim3", "t0k", answers)
+        shorter = {k: v[:100] for k, v in answers.items()}  # the page may send them again, shortened
+        assert runner.answer_questionnaire("lim3", "t0k", shorter).answers == shorter
