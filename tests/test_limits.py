@@ -13,10 +13,9 @@ from pairplay.schemas.keys import alive_key, event_key
 from pairplay.schemas.session import SessionConfig
 from pairplay.schemas.trust import MAX_PAYLOAD
 from pairplay.services.guard import Guard, Refusals
-from pairplay.services.session import run_session
 from pairplay.services.verify import verify_recording
 
-from busutil import connector, wait_until
+from busutil import connector, session_in_thread, wait_until
 
 SESSION = "lim1"
 HUGE = 60_000  # characters: the forged message itself is under MAX_PAYLOAD, its refusal quoted it twice
@@ -49,18 +48,8 @@ def test_a_refusal_quoting_a_huge_source_fits_the_bus_and_says_what_was_cut():
 def test_a_forged_message_with_a_huge_source_leaves_the_recording_whole(tmp_path):
     path = tmp_path / f"{SESSION}.mcap"
     config = SessionConfig(session=SESSION, participant="sim:wasim", persona="wasim", seed=2, rounds=2)
-    box = {}
-    ready = threading.Event()
-
-    def on_bus(bus):
-        box["bus"] = bus
-        ready.set()
-
     # the game waits for the intruder's token, so the forgery lands while every service listens
-    runner = threading.Thread(target=lambda: run_session(config, path, on_bus=on_bus, nodes_out=box,
-                                                         wait_also=("intruder",)))
-    runner.start()
-    assert ready.wait(30)
+    runner, box = session_in_thread(config, path, wait_also=("intruder",))
     with connector(box["bus"]) as intruder:
         everyone = {alive_key(SESSION, s) for s in ("recorder", "learner", "participant", "game")}
         assert wait_until(lambda: everyone <= intruder.alive_now(alive_key(SESSION, "*")), timeout_s=60)
@@ -131,18 +120,10 @@ def test_a_session_whose_learner_never_answers_says_so_once(tmp_path, monkeypatc
     from pairplay.services import unanswered
     monkeypatch.setattr(unanswered, "SAY_AFTER_S", 0.5)
     config = SessionConfig(session="lim2", participant="sim:wasim", persona="wasim", seed=2, rounds=2)
-    box, ready, stop = {}, threading.Event(), threading.Event()
-
-    def on_bus(bus):
-        box["bus"] = bus
-        ready.set()
-
+    stop = threading.Event()
     caplog.set_level("WARNING", logger="pairplay.session")
-    runner = threading.Thread(target=lambda: run_session(config, tmp_path / "lim2.mcap", external=("learner",),
-                                                         on_bus=on_bus, stop=stop))
-    runner.start()
+    runner, box = session_in_thread(config, tmp_path / "lim2.mcap", external=("learner",), stop=stop)
     try:
-        assert ready.wait(30)
         with connector(box["bus"]) as impostor:
             impostor.alive(alive_key("lim2", "learner"))  # a token, and no learner
             said = lambda: [r.getMessage() for r in caplog.records if "is the learner running?" in r.getMessage()]
