@@ -160,3 +160,14 @@ def test_questionnaire_answers_too_large_for_the_bus_are_refused_in_one_line(tmp
             runner.answer_questionnaire("lim3", "t0k", answers)
         shorter = {k: v[:100] for k, v in answers.items()}  # the page may send them again, shortened
         assert runner.answer_questionnaire("lim3", "t0k", shorter).answers == shorter
+
+
+def test_a_message_shed_as_too_large_is_counted_in_words_not_with_a_literal_N():
+    from pairplay.services.bus import Inbox
+    inbox = Inbox(max_payload=10)
+    assert not inbox.put(event_key(SESSION, "board", "CardPicked"), b"x" * 11)
+    refusals = Refusals()
+    refusals.shed(inbox.take_shed())
+    [count] = refusals.tick(1, force=True)
+    assert count.reason == ("1 message refused and not recorded one by one (limit 20/s): "
+                            "shed unread (larger than the bus's payload limit)")
