@@ -16,6 +16,13 @@ Rule: a message is taken only if
   a listener cannot see between two it can: rejections are rate-limited
   (`REJECTIONS_PER_S`);
 - its envelope is in range (schemas/envelope.py: seq 1..2^53, time_ns 0..2^63).
+Every event pairplay builds fits `MAX_PAYLOAD` by construction, whatever outside text it
+copies (a listener sheds a larger one unread: a hole in the recording no refill fills; trial28
+F20, F21): outside text is bounded where it enters (a console reason over `MAX_REASON`
+characters is refused in one line) and every copy of it in our own events is `clip`ped
+(`MAX_REASON` characters of a reason, `MAX_NAME` of a key or source, with a marker saying how
+much was cut). Even a reason of escaped control characters (6 bytes each in JSON) is then far
+below the limit.
 One session has one SessionStarted and one SessionEnded: a second is refused, and
 so is one that does not fit its source's sequence (services/guard.py; issue
 "forge": Zenoh names no publisher per message, so whatever came first claiming
@@ -29,6 +36,8 @@ from __future__ import annotations
 
 MAX_PAYLOAD = 64 * 1024  # bytes
 MAX_SEQ_JUMP = 10_000
+MAX_REASON = 1000  # characters of a reason (a refusal's, the experimenter's pause or abort) in an event
+MAX_NAME = 200  # characters of a key or a source name copied into an event (real ones are far shorter)
 REJECTIONS_PER_S = 20  # recorded one by one per service and second; beyond that, counted
 PLAYERS = frozenset({"participant", "board"})
 SERVICES = frozenset({"game", "learner", "participant", "board", "robot", "combiner", "recorder", "tracker"})
@@ -80,3 +89,11 @@ def publisher_refusal(tag: str, source: str) -> str | None:
     if source not in allowed:
         return f"{tag} is published only by {', '.join(sorted(allowed))}, not by {source!r}"
     return None
+
+
+def clip(text: str, most: int) -> str:
+    """`text` cut to its first `most` characters, with a marker saying how much was cut
+    (unchanged if it fits): how outside text is copied into our own events (see rule)."""
+    if len(text) <= most:
+        return text
+    return f"{text[:most]}... [{len(text) - most} more characters cut]"

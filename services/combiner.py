@@ -15,7 +15,9 @@ one). Anything wrong with the request (a missing or corrupt file, no
 users left, a policy given twice, mixed reward rules, a user of one policy
 (no profile: algorithm 3 compares two or more), an output_path that exists:
 it is never replaced) is answered with ok=false and the reason: the combiner
-keeps running.
+keeps running. The answer copies the request's text (its id and inputs, a path in an
+error): one that would not fit the bus's MAX_PAYLOAD (a listener sheds it unread) is
+answered instead with ok=false saying so, the error clipped (schemas/trust.py).
 """
 
 from __future__ import annotations
@@ -30,6 +32,9 @@ from pairplay.errors import UserError
 from pairplay.replay.rebuild import RebuildError, rebuild_recording
 from pairplay.schemas import events as ev
 from pairplay.schemas.policy import PolicyFile, PolicyFileError, read_policy, write_policy
+from pairplay.schemas.trust import MAX_NAME, MAX_PAYLOAD, MAX_REASON, clip
+
+ENVELOPE = 1024  # bytes left for the envelope stamped on the answer (session, source, seq, time)
 
 
 class CombinerLogic:
@@ -57,11 +62,12 @@ class CombinerLogic:
         try:
             policies = [read_policy(self._inside(p)) for p in r.policies]
             policies += [rebuild_recording(self._inside(p)).policy for p in r.recordings]
-            return [self._combine(r, inputs, policies)]
+            answer = self._combine(r, inputs, policies)
         except (OSError, PolicyFileError, RebuildError, ValueError, UserError) as err:
             # a requester on the bus gives no command-line option: str() leaves out a fix naming one
-            return [ev.PolicyCombined(request_id=r.request_id, inputs=inputs, actions=[], ok=False,
-                                      error=f"{type(err).__name__}: {err}")]
+            answer = ev.PolicyCombined(request_id=r.request_id, inputs=inputs, actions=[], ok=False,
+                                       error=clip(f"{type(err).__name__}: {err}", MAX_REASON))
+        return [fitting(answer)]
 
     def _combine(self, r: ev.CombineRequested, inputs: list[str], policies: list[PolicyFile]) -> ev.PolicyCombined:
         users, _ = users_from_policies(policies, r.seed, exclude=set(r.exclude))
@@ -84,3 +90,14 @@ class CombinerLogic:
                                  decided_by=list(merged.rules), output_path=out, users=[u.name for u in users],
                                  speech_error=merged.info.speech, head_error=merged.info.head,
                                  facial=merged.info.facial, gaze=merged.info.gaze)
+
+
+def fitting(answer: ev.PolicyCombined) -> ev.PolicyCombined:
+    """`answer`, or if it would be over the bus's MAX_PAYLOAD once stamped, an ok=false answer saying so
+    (see rule: the requester would never hear of its request otherwise, nor the recording hold it)."""
+    size = len(ev.encode_event(answer)) + ENVELOPE
+    if size <= MAX_PAYLOAD:
+        return answer
+    return ev.PolicyCombined(request_id=clip(answer.request_id, MAX_NAME), inputs=[], actions=[], ok=False,
+                             error=f"the answer would be about {size:,} bytes, over the bus's limit of {MAX_PAYLOAD:,}: "
+                                   "name fewer or shorter inputs")

@@ -43,6 +43,7 @@ from pairplay.core.geometry import N_CARDS, state_of
 from pairplay.core.rng import UniformStream
 from pairplay.schemas import events as ev
 from pairplay.schemas.session import SessionConfig
+from pairplay.schemas.trust import MAX_REASON, clip
 
 from pairplay.services.node import Rejected, stream_seed
 
@@ -127,7 +128,8 @@ class GameLogic:
         if self.done:
             return []
         self.done, self.ended = True, reason
-        return [ev.SessionEnded(reason=reason, rounds_played=self.round, detail=detail, round=self.round,
+        # the detail may copy outside text (an abort's reason off the bus): clipped, so the end fits the bus
+        return [ev.SessionEnded(reason=reason, rounds_played=self.round, detail=clip(detail, MAX_REASON), round=self.round,
                                 turns_in_round=self.turn)]
 
     def _deal(self) -> list[ev.Event]:

@@ -68,7 +68,8 @@ import msgspec
 from pairplay.schemas.envelope import Event
 from pairplay.schemas.events import MessageRejected, decode_event
 from pairplay.schemas.keys import parse_event_key
-from pairplay.schemas.trust import MAX_PAYLOAD, MAX_SEQ_JUMP, ONCE_PER_SESSION, REJECTIONS_PER_S, publisher_refusal
+from pairplay.schemas.trust import (MAX_NAME, MAX_PAYLOAD, MAX_REASON, MAX_SEQ_JUMP, ONCE_PER_SESSION, REJECTIONS_PER_S,
+                                    clip, publisher_refusal)
 from pairplay.numbers import counted
 
 EXCERPT = 200
@@ -274,14 +275,21 @@ class Refusals:
         self.in_window = 0
         self.held: Counter = Counter()  # (source, kind) -> refusals not recorded one by one yet
         self.total = 0
+        self.recorded = False  # the last refusal was recorded one by one (not only counted)
 
     def refuse(self, now_ns: int, reason: str, key: str, source: str = "", seq: int = 0,
                payload: bytes = b"") -> list[MessageRejected]:
+        """The MessageRejected events to publish for one refusal (`recorded`: whether it was recorded one
+        by one). The reason, key and source may quote a hostile message (a 60,000-character source): each
+        is clipped (schemas/trust.py clip), so the refusal always fits the bus's MAX_PAYLOAD; a larger
+        one was shed unread by every listener, a hole in the recording (trial28 F21)."""
         self.total += 1
         out = self.tick(now_ns)
-        if self.in_window < self.per_s:
+        self.recorded = self.in_window < self.per_s
+        if self.recorded:
             self.in_window += 1
-            out.append(MessageRejected(reason=reason, key=str(key), offending_source=source, offending_seq=seq,
+            out.append(MessageRejected(reason=clip(reason, MAX_REASON), key=clip(str(key), MAX_NAME),
+                                       offending_source=clip(source, MAX_NAME), offending_seq=seq,
                                        excerpt=payload[:EXCERPT].decode("utf-8", "replace")))
         else:
             self._hold(source, reason)

@@ -139,7 +139,7 @@ class Driver:
             self.refusals.total += 1
             return []
         out = self.refusals.refuse(self.clock(), reason, key, source, seq, payload)
-        if any(e.reason == reason for e in out):  # logged as recorded: one by one up to the rate, then counted
+        if self.refusals.recorded:  # logged as recorded: one by one up to the rate, then counted
             log.warning("%s rejected %s from %r seq %s: %s", self.logic.name, key, source, seq, reason[:300])
         return self._stamp(out)
 

@@ -49,6 +49,7 @@ from pairplay.schemas.envelope import stamped
 from pairplay.schemas.keys import event_key
 from pairplay.schemas.policy import read_policy
 from pairplay.schemas.session import SessionConfig, learner_overrides
+from pairplay.schemas.trust import MAX_PAYLOAD, MAX_REASON
 
 from pairplay.services.bus import Bus, BusClosed, pass_stop, shutdown_wait
 from pairplay.services.combiner import CombinerLogic
@@ -389,13 +390,18 @@ class StudyRunner:
     # -- control -------------------------------------------------------------
     def _control(self, event: ev.Event) -> None:
         """Publish one of the experimenter's events on the running game's bus."""
-        self._control_seq += 1
-        e = stamped(event, session=self.live.session, source="experimenter", seq=self._control_seq,
+        e = stamped(event, session=self.live.session, source="experimenter", seq=self._control_seq + 1,
                     time_ns=time.time_ns())
         self._put(event_key(self.live.session, "experimenter", type(event).__name__), ev.encode_event(e))
+        self._control_seq += 1  # only once published: a refused event leaves no hole in the numbers
 
     def _put(self, key: str, payload: bytes) -> None:
-        """Publish on the running game's scope of the bus (its publishers go with the game)."""
+        """Publish on the running game's scope of the bus (its publishers go with the game). An event over the
+        bus's MAX_PAYLOAD is refused here (StudyDataError): every listener would shed it unread, and the
+        experimenter be told "ok" for a pause the game never took (trial28 F20)."""
+        if len(payload) > MAX_PAYLOAD:
+            raise StudyDataError(f"that would be a message of {len(payload):,} bytes, over the bus's limit "
+                                 f"of {MAX_PAYLOAD:,} bytes: shorten it")
         bus = self._game_bus
         try:
             if bus is None:
@@ -410,15 +416,16 @@ class StudyRunner:
         anyway, its end "aborted" with the same reason."""
         if not reason.strip():
             raise StudyDataError("an abort needs a reason")
+        reason = bounded_reason(reason)
         stop = self._stop
         if stop is None or self.live.state not in ("playing", "questionnaire"):
             raise StudyDataError("no game is running")
-        self._abort_reason = f"aborted: {reason.strip()}"
+        self._abort_reason = f"aborted: {reason}"
         if self.live.state == "questionnaire":  # the game is over: just stop waiting for the answers
             self._skip.set()
             return
-        self._control(ev.SessionAborted(reason=reason.strip()))
-        stop.aborted = reason.strip()  # the end's detail if the stop below ends the game first (session.end_reason)
+        self._control(ev.SessionAborted(reason=reason))
+        stop.aborted = reason  # the end's detail if the stop below ends the game first (session.end_reason)
         try:
             threading.Timer(grace_s, stop.set).start()
         except RuntimeError:  # out of threads (`ulimit -v`): no grace, the session is stopped now
@@ -439,19 +446,20 @@ class StudyRunner:
             raise StudyDataError("the game is not over yet" if live.state == "playing" else "no questionnaire is awaited")
         name, items = self.questions_for(live.participant, live.phase)
         clean = check_answers(items, answers)
-        live.questionnaire_token = ""  # one answer per game
         e = stamped(ev.QuestionnaireAnswered(questionnaire=name, answers=clean), session=session, source="board",
                     seq=1, time_ns=time.time_ns())
         self._put(event_key(session, "board", "QuestionnaireAnswered"), ev.encode_event(e))
+        live.questionnaire_token = ""  # one answer per game: once published (answers refused may be sent again)
         return e
 
     def pause(self, reason: str = "") -> None:
+        reason = bounded_reason(reason)  # refused whatever the state: the input itself is wrong
         if self.live.state != "playing":
             raise StudyDataError("no game is being played")
         if self.live.paused:
             raise StudyDataError("the game is already paused")
-        self.live.paused = True
-        self._control(ev.SessionPaused(reason=reason.strip()))
+        self._control(ev.SessionPaused(reason=reason))
+        self.live.paused = True  # only once published: a pause refused here paused nothing
         self.data.append(j.GamePaused(session=self.live.session, participant=self.live.participant))
 
     def resume(self) -> None:
@@ -572,6 +580,15 @@ class StudyRunner:
             if on_step is not None:
                 on_step(step, done[-1])
         return done
+
+
+def bounded_reason(reason: str) -> str:
+    """The experimenter's pause or abort reason, stripped; StudyDataError if over MAX_REASON characters
+    (the console answers 400): it goes into an event on the bus, which must fit MAX_PAYLOAD (trial28 F20)."""
+    reason = reason.strip()
+    if len(reason) > MAX_REASON:
+        raise StudyDataError(f"a reason is at most {MAX_REASON:,} characters, this one has {len(reason):,}")
+    return reason
 
 
 def check_answers(items, answers) -> dict[str, str]:

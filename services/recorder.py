@@ -1315,7 +1315,7 @@ class Recorder:
     def _reject(self, reason: str, key: str, payload: bytes, event=None, source: str = "", seq: int = 0) -> bool:
         out = self.refusals.refuse(self.clock(), reason, key, getattr(event, "source", source),
                                    getattr(event, "seq", seq), payload)
-        if any(e.reason == reason for e in out):
+        if self.refusals.recorded:
             log.warning("recorder rejected %s: %s", key, reason[:300])
         self._publish(out)
         return False

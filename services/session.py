@@ -43,6 +43,7 @@ from pairplay.services.refusal import published_seq
 from pairplay.services.robot.bridge import ROBOT_CLOSE_S
 from pairplay.services.robot.choice import RobotChoice, start_bridge
 from pairplay.services.runner import Node, Stopped, start_unless_stopped
+from pairplay.services.unanswered import RequestWatch
 
 log = logging.getLogger("pairplay.session")
 
@@ -140,6 +141,7 @@ def run_session(config: SessionConfig, path: str | Path, *, bus: Bus | None = No
         # a service that refuses the game's own start or end: the session stops at once (services/refusal.py);
         # subscribed before the game starts, told which game is this session's once there is one
         refusals = RefusalWatch(bus, config.session, None)
+        requests = RequestWatch(bus, config.session)  # before the game starts: its first request is seen
         if robot is not None:
             bridge = start_unless_stopped(lambda: start_bridge(bus, config.session, robot), stop, "robot")
         if bridge is not None:
@@ -174,7 +176,8 @@ def run_session(config: SessionConfig, path: str | Path, *, bus: Bus | None = No
             needed.append("game")
         watch = forgery_watch(game, nodes, recorder, bridge, [s for s in needed if s in external])
         failure = watch_services(bus, config.session, nodes, [s for s in needed if s in external or s == "robot"],
-                                 stop, settle_timeout_s, broken=lambda: watch.verdict() or refusals.verdict())
+                                 stop, settle_timeout_s, broken=lambda: watch.verdict() or refusals.verdict(),
+                                 waiting=requests.line)
         own_end = end_game(game, stop, failure, recorder)
         if not failure and not stop.is_set():
             # an external recorder stays until everyone else left: do not wait for it
@@ -331,18 +334,22 @@ def end_reason(stop: threading.Event, failure: str) -> tuple[str, str]:
 
 
 def watch_services(bus: Bus, session: str, nodes: list[Node], external: list[str], stop: threading.Event,
-                   grace_s: float, broken=lambda: "") -> str:
+                   grace_s: float, broken=lambda: "", waiting=lambda: "") -> str:
     """Wait until the in-process nodes are done or `stop`; return why a needed service failed ("" if none):
     an in-process node's thread died, or an external service's token was gone for `grace_s` (a crashed
     service restarted within that time resumes from the log, services/runner.py), or `broken()` names
     why the session cannot go on: a forged start or end the game saw (ForgedEvent), a service that
-    refused the game's own start or end (services/refusal.py); checked every 0.1 s, so it stops within that."""
+    refused the game's own start or end (services/refusal.py); checked every 0.1 s, so it stops within that.
+    `waiting()` names a wait worth a word (services/unanswered.py): said as a warning, the session goes on."""
     missing_since: dict[str, float] = {}
     checked = 0.0
     while not stop.is_set():
         why = broken()
         if why:
             return why
+        said = waiting()
+        if said:
+            log.warning(said)
         running = [n for n in nodes if n.thread is not None and n.thread.is_alive()]
         dead = [n.logic.name for n in nodes if n.thread is not None and not n.thread.is_alive() and not n.logic.done]
         if dead:

@@ -5,6 +5,7 @@ from __future__ import annotations
 import queue
 import signal
 import subprocess
+import threading
 import time
 from contextlib import contextmanager
 
@@ -24,6 +25,23 @@ def collect(bus: Bus, key_expr: str) -> queue.Queue:
     q: queue.Queue = queue.Queue()
     bus.subscribe(key_expr, lambda k, p: q.put((k, p)))
     return q
+
+
+def session_in_thread(config, path, **options) -> tuple[threading.Thread, dict]:
+    """`run_session(config, path, **options)` in a thread, once its bus is up: (the thread, a dict with the
+    session's "bus" and its in-process nodes by name)."""
+    from pairplay.services.session import run_session
+    box: dict = {}
+    ready = threading.Event()
+
+    def on_bus(bus):
+        box["bus"] = bus
+        ready.set()
+
+    runner = threading.Thread(target=lambda: run_session(config, path, on_bus=on_bus, nodes_out=box, **options))
+    runner.start()
+    assert ready.wait(30)
+    return runner, box
 
 
 def wait_until(predicate, timeout_s: float = 20.0, every_s: float = 0.02) -> bool:

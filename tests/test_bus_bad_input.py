@@ -4,7 +4,6 @@ illegal picks. Each is rejected with a reason, recorded as a rejection, and no
 service stops or changes what it learns."""
 
 import itertools
-import threading
 from collections import deque
 
 import numpy as np
@@ -21,9 +20,8 @@ from pairplay.services.game import GameLogic
 from pairplay.services.learner import LearnerLogic
 from pairplay.services.node import Driver
 from pairplay.services.participant import ParticipantLogic
-from pairplay.services.session import run_session
 
-from busutil import connector, wait_until
+from busutil import connector, session_in_thread, wait_until
 
 SESSION = "bad1"
 CONFIG = SessionConfig(session=SESSION, participant="sim:wasim", persona="wasim", seed=2, rounds=3)
@@ -129,18 +127,8 @@ def test_bad_input_is_rejected_with_a_reason_and_changes_nothing(noise, at):
 @given(noise=st.lists(live_noise_item, min_size=5, max_size=15))
 def test_bad_input_on_the_live_bus_is_recorded_as_rejections(tmp_path_factory, noise):
     path = tmp_path_factory.mktemp("bad") / "bad1.mcap"
-    box = {}
-    ready = threading.Event()
-
-    def on_bus(bus):
-        box["bus"] = bus
-        ready.set()
-
     # the game waits for the intruder's token, so all the noise lands while the services run
-    runner = threading.Thread(target=lambda: run_session(CONFIG, path, on_bus=on_bus, nodes_out=box,
-                                                         wait_also=("intruder",)))
-    runner.start()
-    assert ready.wait(10)
+    runner, box = session_in_thread(CONFIG, path, wait_also=("intruder",))
     with connector(box["bus"]) as intruder:
         everyone = {alive_key(SESSION, s) for s in ("recorder", "learner", "participant", "game")}
         assert wait_until(lambda: everyone <= intruder.alive_now(alive_key(SESSION, "*")))  # all subscribed
