@@ -39,8 +39,14 @@ async function submit(ev) {
     if (fs.dataset.kind === "text") { const v = fs.querySelector("textarea").value.trim(); if (v) answers[id] = v; }
     else { const c = fs.querySelector("input:checked"); if (c) answers[id] = c.value; }
   });
-  const r = await fetch("/api/questionnaire/answer", {method: "POST", headers: {"content-type": "application/json"},
-                                                     body: JSON.stringify({session, token, answers})});
+  let r;
+  try {
+    r = await fetch("/api/questionnaire/answer", {method: "POST", headers: {"content-type": "application/json"},
+                                                 body: JSON.stringify({session, token, answers})});
+  } catch (e) {  // never sent (the server is unreachable): the answers stay on the form, to send again
+    status("The answers could not be sent (no connection to the lab server): please press Send again", true);
+    return;
+  }
   const data = await r.json().catch(() => ({}));
   if (!r.ok) { status(data.error || "could not send", true); return; }
   $("q-form").innerHTML = ""; status("Thank you! Your answers are recorded.");

@@ -40,7 +40,10 @@
         delay = Math.min(delay * 2, 2000);
       };
     }
-    link.send = (obj) => { if (link.open) { link.ws.send(JSON.stringify(obj)); return true; } return false; };
+    // true only if the message went out: a socket that is closing (before its onclose) drops what it is given
+    // without a word, so "open" is the socket's own state, not only ours
+    link.up = () => link.open && link.ws.readyState === WebSocket.OPEN;
+    link.send = (obj) => { if (link.up()) { link.ws.send(JSON.stringify(obj)); return true; } return false; };
     // the raw WebSocket round trip: {rtt (ms), sent (performance.now()), server_ns (the server's clock)}
     link.ping = () => new Promise((resolve) => {
       const t = performance.now();
