@@ -67,3 +67,24 @@ def test_a_touch_while_offline_is_dropped_and_the_board_goes_on(browser, lab):
                            "!document.getElementById('wrong').disabled", timeout=10000)
     assert page.errors == []
     page.context.close()
+
+
+def control(lab, event: ev.Event, seq: int) -> None:
+    """The experimenter's console's message on the game's bus (as services/protocol.py `_control`)."""
+    e = stamped(event, session=SESSION, source="experimenter", seq=seq, time_ns=time.time_ns())
+    lab.bus.put(event_key(SESSION, "experimenter", type(event).__name__), ev.encode_event(e))
+
+
+def test_the_experimenters_pause_shows_on_the_board_until_the_resume(browser, lab):
+    page = open_page(browser, lab.urls.board)
+    page.wait_for_function("window.pairplay.canTouch()", timeout=10000)
+    control(lab, ev.SessionPaused(reason="a break"), 1)
+    page.wait_for_function("window.pairplay.state.paused", timeout=10000)
+    assert page.evaluate("window.pairplay.canTouch()") is False
+    assert page.text_content("#prompt") == "The game is paused: please wait"
+    assert page.evaluate("document.body.classList.contains('paused')")
+    control(lab, ev.SessionResumed(), 2)
+    page.wait_for_function("!window.pairplay.state.paused && window.pairplay.canTouch()", timeout=10000)
+    assert page.text_content("#prompt") != "The game is paused: please wait"
+    assert page.errors == []
+    page.context.close()

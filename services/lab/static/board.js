@@ -26,7 +26,7 @@
   }
   api.canTouch = () => {  // for scripts and tests: would a touch on a covered card be sent now?
     const s = api.state;
-    return !!s && api.role === "player" && link.up() && performance.now() >= holdUntil && pending < 0 &&
+    return !!s && api.role === "player" && !s.paused && link.up() && performance.now() >= holdUntil && pending < 0 &&
       ["first", "looking", "thinking", "second"].includes(s.phase);
   };
   const nextId = () => { msgId += 1; sessionStorage.setItem("pairplay-msg", msgId); return msgId; };
@@ -34,7 +34,7 @@
 
   function touch(i, pageMs) {
     const s = api.state;
-    if (!s || api.role !== "player" || performance.now() < holdUntil) return;
+    if (!s || api.role !== "player" || s.paused || performance.now() < holdUntil) return;
     if (!["first", "looking", "thinking", "second"].includes(s.phase) || s.cards[i].state !== "down") return;
     if (pending >= 0 || (s.first >= 0 && s.first === i)) return;
     // the card waits for the game's answer only if the touch went out: a touch while offline is dropped
@@ -46,7 +46,7 @@
   }
   wrong.addEventListener("click", (ev) => {
     const s = api.state;
-    if (!s || api.role !== "player" || s.phase !== "second" || s.attempt < 0) return;
+    if (!s || api.role !== "player" || s.paused || s.phase !== "second" || s.attempt < 0) return;
     // disabled only once sent: offline, the press is dropped and the button stays as the view says
     if (link.send({ type: "wrong", id: nextId(), round: s.round, turn: s.turn, attempt: s.attempt,
                     page_ms: performance.timeOrigin + ev.timeStamp })) wrong.disabled = true;
@@ -82,18 +82,20 @@
       drawCard(cards[i], state, face, extra.trim());
     }
     const player = api.role === "player";
-    wrong.disabled = !(player && link.up() && s.phase === "second" && s.attempt >= 0 && !holding);
+    wrong.disabled = !(player && link.up() && !s.paused && s.phase === "second" && s.attempt >= 0 && !holding);
     wrong.classList.toggle("hidden", api.role === "viewer");
     const text = {
       starting: "Waiting for the game to start…", first: "Pick a card", looking: "Look for its pair",
       thinking: "The robot is thinking…", second: "Find its pair", over: "The game is over. Thank you!",
     }[s.phase] || "";
     // offline, the page says so whatever else redraws it (a turn-back timer): it takes no touch until back
-    prompt.textContent = offline ? offline : holding ? "Not a pair" : (s.notice && player ? s.notice.reason : text);
+    prompt.textContent = offline ? offline : s.paused ? "The game is paused: please wait" :
+      holding ? "Not a pair" : (s.notice && player ? s.notice.reason : text);
     prompt.dataset.phase = s.phase;
     document.body.classList.toggle("read-only", !player);
     document.body.dataset.role = api.role;
     document.body.dataset.phase = s.phase;
+    document.body.classList.toggle("paused", !!s.paused);
   }
 
   function onState(s, role) {
