@@ -88,3 +88,29 @@ def test_the_experimenters_pause_shows_on_the_board_until_the_resume(browser, la
     assert page.text_content("#prompt") != "The game is paused: please wait"
     assert page.errors == []
     page.context.close()
+
+
+def test_a_duplicated_tab_does_not_fight_the_first_in_a_reconnect_loop(browser, lab):
+    first = open_page(browser, lab.urls.board)
+    first.wait_for_function("window.pairplay.role === 'player'", timeout=10000)
+    taken = first.evaluate("window.pairplayLab.client")
+    # a duplicated tab: Chrome's "Duplicate tab" (and window.open) copies the tab's sessionStorage, its id too
+    twin_ctx = browser.new_context(viewport={"width": 1024, "height": 600}, bypass_csp=True)
+    twin_ctx.add_init_script(f"sessionStorage.setItem('pairplay-client', '{taken}')")
+    twin = twin_ctx.new_page()
+    twin_errors: list[str] = []
+    twin.on("pageerror", lambda e: twin_errors.append(str(e)))
+    twin.goto(lab.urls.board)
+    # the first page lost its id to a live twin: it takes a fresh one and comes back once, read-only
+    first.wait_for_function(f"window.pairplay.link.connects === 2 && window.pairplay.link.up() && "
+                            f"window.pairplay.role === 'viewer' && window.pairplayLab.client !== '{taken}'",
+                            timeout=10000)
+    twin.wait_for_function("window.pairplay.state && window.pairplay.role === 'player'", timeout=10000)
+    # both still connected after a round trip each: no page evicted the other again
+    for page in (first, twin):
+        page.evaluate("window.pairplay.link.ping()")
+    assert [first.evaluate("window.pairplay.link.connects"), twin.evaluate("window.pairplay.link.connects")] == [2, 1]
+    assert first.evaluate("sessionStorage.getItem('pairplay-client')") != taken  # a reload of it stays the other tab
+    assert first.errors == [] and twin_errors == []
+    first.context.close()
+    twin_ctx.close()
