@@ -84,11 +84,13 @@
     const player = api.role === "player";
     wrong.disabled = !(player && link.up() && !s.paused && s.phase === "second" && s.attempt >= 0 && !holding);
     wrong.classList.toggle("hidden", api.role === "viewer");
-    const text = {
+    let text = {
       starting: "Waiting for the game to start…", first: "Pick a card", looking: "Look for its pair",
       thinking: "The robot is thinking…", second: "Find its pair", over: "The game is over. Thank you!",
     }[s.phase] || "";
     // offline, the page says so whatever else redraws it (a turn-back timer): it takes no touch until back
+    // a game the experimenter (or a signal) stopped asks no questionnaire: the page says it was stopped
+    if (s.phase === "over" && stopped(s)) text = "The game was stopped. Thank you!";
     prompt.textContent = offline ? offline : s.paused ? "The game is paused: please wait" :
       holding ? "Not a pair" : (s.notice && player ? s.notice.reason : text);
     prompt.dataset.phase = s.phase;
@@ -116,12 +118,13 @@
     if (pending >= 0 && s.notice && s.notice.card === pending) pending = -1;
     api.state = s;
     api.role = role;
-    if (s.phase === "over" && role === "player" && !api.askedQuestionnaire) askQuestionnaire();
+    if (s.phase === "over" && role === "player" && !stopped(s) && !api.askedQuestionnaire) askQuestionnaire();
     banner.classList.toggle("hidden", role === "player");
     if (role === "viewer") banner.textContent = "Read-only: another screen is playing this session";
     render();
   }
-  // In a study (services/console), a questionnaire follows the game: the board becomes it.
+  const stopped = (s) => ["aborted", "interrupted"].includes(s.ended);  // SessionEnded's reason
+  // In a study (services/console), a questionnaire follows a game that was not stopped: the board becomes it.
   async function askQuestionnaire() {
     api.askedQuestionnaire = true;
     const { session, token } = window.pairplayLab;

@@ -1,0 +1,103 @@
+"""A served study's pages under real use (trial27), in a real headless Chromium, one study for the module.
+
+Rules tested: the participant's page follows the game's true end (an aborted game asks no
+questionnaire: the board says it was stopped and the questionnaire link is dead; a skipped
+questionnaire closes on the page that shows it).
+"""
+
+from __future__ import annotations
+
+import threading
+import urllib.error
+import urllib.request
+from pathlib import Path
+
+import pytest
+
+from labutil import open_page, wait_phase
+from pairplay.replay.studydata import StudyData
+from pairplay.services.bus import Bus, BusOptions
+from pairplay.services.console.server import StudyLabServer
+from pairplay.services.protocol import StudyRunner
+from pairplay.services.scripted import ScriptedPlayer
+
+STUDY = Path(__file__).parent / "data" / "pilot-study.toml"
+
+
+@pytest.fixture(scope="module")
+def served(browser, tmp_path_factory):
+    tmp = tmp_path_factory.mktemp("served")
+    study = tmp / "study.toml"
+    # 1-round games (a 1-round pi-reuse phase reuses only if told to), missed pairs turned back quickly
+    study.write_text(STUDY.read_text().replace("rounds = 2", "rounds = 1").replace("[study]", "[study]\nturn_back_ms = 30")
+                     .replace('preset = "human-phase2"', 'preset = "human-phase2"\nlearner = { reuse_rounds = 1 }'))
+    data = StudyData.create(tmp / "study", study)
+    with Bus(BusOptions()) as bus:
+        runner = StudyRunner(data, bus)
+        server = StudyLabServer(runner).start()
+        ctx = browser.new_context(viewport={"width": 1366, "height": 900}, bypass_csp=True)
+        console = ctx.new_page()
+        console.goto(server.console_url)
+        try:
+            yield data, runner, server, console
+        finally:
+            ctx.close()
+            server.close()
+
+
+def status_of(url: str) -> int:
+    try:
+        with urllib.request.urlopen(url, timeout=10) as r:
+            return r.status
+    except urllib.error.HTTPError as err:
+        return err.code
+
+
+def test_an_aborted_game_asks_no_questionnaire(browser, served):
+    data, runner, server, console = served
+    console.fill("#register-count", "1")
+    console.click("#register")
+    console.wait_for_function("document.querySelectorAll('#participants li').length == 1", timeout=10000)
+    console.click("#run-next")
+    link = console.wait_for_selector("#board-link", timeout=30000)
+    q_link = console.wait_for_selector("#questionnaire-link", timeout=10000).get_attribute("href")
+    board = open_page(browser, server.url + link.get_attribute("href"))
+    wait_phase(board, "first")
+    board.click("[data-card='0']")
+    wait_phase(board, "looking", "thinking", "second")
+    console.fill("#abort-reason", "robot froze")
+    console.click("#abort")
+    board.wait_for_function("document.body.dataset.phase === 'over'", timeout=15000)
+    # the board says the game was stopped, and does not turn into a questionnaire that refuses the answers
+    board.wait_for_function("document.getElementById('prompt').textContent === 'The game was stopped. Thank you!'",
+                            timeout=10000)
+    console.wait_for_function("document.getElementById('live-state').textContent === 'idle'", timeout=15000)
+    assert "/s/" in board.url and "questionnaire" not in board.url
+    assert status_of(server.url + q_link.replace("/questionnaire?", "/api/questionnaire?")) == 403
+    games = list(data.state.games.values())
+    assert [g.ended.outcome for g in games] == ["aborted"]
+    assert board.errors == []
+    board.context.close()
+
+
+def test_a_skipped_questionnaire_closes_on_the_page(browser, served):
+    data, runner, server, console = served
+    step = data.next_step()
+    # a scripted player that answers nothing: the questionnaire waits for a person
+    player = ScriptedPlayer("tatiana", think_ms=0.0, glance_ms=0.0)
+    game = threading.Thread(target=runner.run_game, args=(step.participant, step.phase, step.game),
+                            kwargs={"player": player}, daemon=True)
+    game.start()
+    console.wait_for_function("document.getElementById('live-state').textContent === 'questionnaire'",
+                              timeout=60000)
+    q_link = console.get_attribute("#questionnaire-link", "href")
+    q = browser.new_context(bypass_csp=True).new_page()
+    q.goto(server.url + q_link)
+    q.wait_for_selector("#q-send", timeout=10000)
+    console.click("#skip-questionnaire")
+    game.join(30)
+    assert not game.is_alive()
+    q.wait_for_function("document.getElementById('q-status').textContent === 'The questionnaire is closed. Thank you!'",
+                        timeout=10000)
+    assert q.query_selector("#q-send") is None  # the form is gone: nobody answers into the void
+    q.context.close()
