@@ -2,11 +2,14 @@
 
 Rules tested: the participant's page follows the game's true end (an aborted game asks no
 questionnaire: the board says it was stopped and the questionnaire link is dead; a skipped
-questionnaire closes on the page that shows it).
+questionnaire closes on the page that shows it); the console's refusal stays on screen until the
+experimenter acts again; a console whose server does not answer says so and turns its controls off
+until a poll gets an answer.
 """
 
 from __future__ import annotations
 
+import json
 import threading
 import urllib.error
 import urllib.request
@@ -51,6 +54,17 @@ def status_of(url: str) -> int:
             return r.status
     except urllib.error.HTTPError as err:
         return err.code
+
+
+def post(server, path: str, body: dict) -> dict:
+    req = urllib.request.Request(f"{server.url}{path}?token={server.token}", data=json.dumps(body).encode(),
+                                 headers={"content-type": "application/json"}, method="POST")
+    with urllib.request.urlopen(req, timeout=10) as r:
+        return json.loads(r.read())
+
+
+def message(console) -> tuple[str, str]:
+    return console.inner_text("#message"), console.get_attribute("#message", "class") or ""
 
 
 def test_an_aborted_game_asks_no_questionnaire(browser, served):
@@ -101,3 +115,38 @@ def test_a_skipped_questionnaire_closes_on_the_page(browser, served):
                         timeout=10000)
     assert q.query_selector("#q-send") is None  # the form is gone: nobody answers into the void
     q.context.close()
+
+
+def test_a_refusal_stays_until_the_experimenter_acts_again(served):
+    data, runner, server, console = served
+    console.select_option("#data-participant", "p01")
+    console.fill("#delete-confirm", "not-p01")
+    console.click("#delete")
+    console.wait_for_function("document.getElementById('message').className === 'error'", timeout=10000)
+    refusal = message(console)
+    # the console redraws (a registration made elsewhere shows up): the refusal is still there
+    post(server, "/api/console/register", {"phase": "phase1", "count": 1})
+    console.wait_for_function("document.querySelectorAll('#participants li').length == 2", timeout=10000)
+    assert message(console) == refusal
+    # the experimenter acts again: the refusal goes
+    console.click("#register")
+    console.wait_for_function("document.getElementById('message').textContent.startsWith('registered ')",
+                              timeout=10000)
+
+
+def test_a_console_whose_server_does_not_answer_says_so(served):
+    data, runner, server, console = served
+    # the server stops answering the console's polls (as when it is gone: fetch fails)
+    console.route("**/api/console/state*", lambda route: route.abort())
+    console.wait_for_function("document.getElementById('message').textContent.startsWith("
+                              "'the lab server does not answer')", timeout=10000)
+    assert console.evaluate("[...document.querySelectorAll('button')].every(b => b.disabled)")
+    console.unroute("**/api/console/state*")
+    console.wait_for_function("!document.getElementById('register').disabled", timeout=10000)
+    assert not console.inner_text("#message").startswith("the lab server does not answer")
+    assert console.is_enabled("#run-next") and console.is_enabled("#export")
+    # the real thing: the server stops
+    server.close()
+    console.wait_for_function("document.getElementById('message').textContent.startsWith("
+                              "'the lab server does not answer')", timeout=10000)
+    assert console.is_disabled("#register")

@@ -3,15 +3,38 @@
 const token = new URLSearchParams(location.search).get("token") || "";
 const $ = (id) => document.getElementById(id);
 let last = null;
+// A refusal stays on screen until the experimenter acts again (the next poll does not replace it), and
+// a server that does not answer is said, every control off until a poll gets an answer again.
+let held = false;  // a refusal is on screen
+let down = false;  // the last request got no answer at all
+const GONE = "the lab server does not answer (stopped?): the controls work again once it does";
 
 async function api(path, body) {
-  const r = await fetch(path + (path.includes("?") ? "&" : "?") + "token=" + encodeURIComponent(token),
-                        body === undefined ? {} : {method: "POST", headers: {"content-type": "application/json"},
-                                                   body: JSON.stringify(body)});
+  let r;
+  try {
+    r = await fetch(path + (path.includes("?") ? "&" : "?") + "token=" + encodeURIComponent(token),
+                    body === undefined ? {} : {method: "POST", headers: {"content-type": "application/json"},
+                                               body: JSON.stringify(body)});
+  } catch (e) { serverGone(); throw e; }  // no answer (fetch's TypeError), not a refusal
   const data = await r.json().catch(() => ({error: "bad answer from the lab server"}));
-  if (!r.ok) { say(data.error || ("HTTP " + r.status), true); throw new Error(data.error); }
+  if (!r.ok) { held = true; say(data.error || ("HTTP " + r.status), true); throw new Error(data.error); }
   return data;
 }
+function serverGone() {
+  if (!down) {
+    down = true;
+    document.querySelectorAll("button, input, select").forEach((b) => { if (!b.disabled) { b.disabled = true; b.dataset.off = "1"; } });
+  }
+  say(GONE, true);
+}
+function serverBack() {
+  if (!down) return;
+  down = false;
+  document.querySelectorAll("[data-off]").forEach((b) => { b.disabled = false; delete b.dataset.off; });
+  if (!held) say("");
+}
+// acting again (any button) is when a refusal on screen may go
+document.addEventListener("click", (ev) => { if (ev.target.closest("button")) held = false; }, true);
 function say(text, error) { const m = $("message"); m.textContent = text; m.className = error ? "error" : ""; }
 function el(tag, text, cls) { const e = document.createElement(tag); if (text !== undefined) e.textContent = text; if (cls) e.className = cls; return e; }
 
@@ -108,13 +131,17 @@ function render(s) {
     b.onclick = () => { const why = prompt(`Why is ${g.session} invalid?`); if (why) api("/api/console/control/invalid", {session: g.session, reason: why}).then(() => say(`${g.session} marked invalid`)); };
     r.insertCell().appendChild(b);
   });
-  if (s.last.step) say(`${s.last.step}: ${s.last.message}`, !s.last.ok);
+  if (s.last.step && !held) say(`${s.last.step}: ${s.last.message}`, !s.last.ok);
   $("report-link").innerHTML = "";
   if (s.report) { const a = el("a", "report.md"); a.href = "/api/console/report/report.md?token=" + encodeURIComponent(token); a.id = "report-md"; $("report-link").appendChild(a); }
 }
 
 async function poll() {
-  try { render(await api("/api/console/state")); } catch (e) { /* said */ }
+  try {
+    const s = await api("/api/console/state");
+    serverBack();
+    render(s);
+  } catch (e) { /* said: a refusal, or that the server does not answer */ }
   setTimeout(poll, 250);
 }
 
