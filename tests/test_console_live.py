@@ -40,6 +40,8 @@ def served(browser, tmp_path_factory):
         server = StudyLabServer(runner).start()
         ctx = browser.new_context(viewport={"width": 1366, "height": 900}, bypass_csp=True)
         console = ctx.new_page()
+        console.errors = []
+        console.on("pageerror", lambda e: console.errors.append(str(e)))
         console.goto(server.console_url)
         try:
             yield data, runner, server, console
@@ -132,6 +134,7 @@ def test_a_refusal_stays_until_the_experimenter_acts_again(served):
     console.click("#register")
     console.wait_for_function("document.getElementById('message').textContent.startsWith('registered ')",
                               timeout=10000)
+    assert console.errors == []  # a refused button is said, not thrown at the page
 
 
 def test_a_console_whose_server_does_not_answer_says_so(served):
