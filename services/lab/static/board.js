@@ -88,9 +88,9 @@
       starting: "Waiting for the game to start…", first: "Pick a card", looking: "Look for its pair",
       thinking: "The robot is thinking…", second: "Find its pair", over: "The game is over. Thank you!",
     }[s.phase] || "";
-    // offline, the page says so whatever else redraws it (a turn-back timer): it takes no touch until back
     // a game the experimenter (or a signal) stopped asks no questionnaire: the page says it was stopped
     if (s.phase === "over" && stopped(s)) text = "The game was stopped. Thank you!";
+    // offline, the page says so whatever else redraws it (a turn-back timer): it takes no touch until back
     prompt.textContent = offline ? offline : s.paused ? "The game is paused: please wait" :
       holding ? "Not a pair" : (s.notice && player ? s.notice.reason : text);
     prompt.dataset.phase = s.phase;
