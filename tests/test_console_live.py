@@ -32,7 +32,8 @@ def served(browser, tmp_path_factory):
     tmp = tmp_path_factory.mktemp("served")
     study = tmp / "study.toml"
     # 1-round games (a 1-round pi-reuse phase reuses only if told to), missed pairs turned back quickly
-    study.write_text(STUDY.read_text().replace("rounds = 2", "rounds = 1").replace("[study]", "[study]\nturn_back_ms = 30")
+    study.write_text(STUDY.read_text().replace("rounds = 2", "rounds = 1")
+                     .replace("[study]", "[study]\nturn_back_ms = 30")
                      .replace('preset = "human-phase2"', 'preset = "human-phase2"\nlearner = { reuse_rounds = 1 }'))
     data = StudyData.create(tmp / "study", study)
     with Bus(BusOptions()) as bus:
