@@ -90,7 +90,7 @@ class Live:
     suggestion: str = ""
     robot: str = ""
     paused: bool = False
-    state: str = "idle"  # idle | playing | questionnaire | combining
+    state: str = "idle"  # idle | playing | questionnaire | ended (aborted: no questionnaire) | combining
     # a board (a scripted player, or a board elsewhere) is on the game's bus; when the lab serves the board,
     # the console says a board page is connected instead (services/console/app.py)
     board: bool = False
@@ -111,7 +111,10 @@ class Live:
         elif name == "RoundEnded":
             self.picks_per_round.append(2 * e.turns)
         elif name == "SessionEnded":
-            self.state = "questionnaire"
+            if e.reason == "aborted":  # an aborted game asks nothing: its questionnaire link is dead (403)
+                self.state, self.questionnaire_token = "ended", ""
+            else:
+                self.state = "questionnaire"
         elif name == "ServiceStarted" and e.service == "board":
             self.board = True
 
@@ -229,6 +232,7 @@ class StudyRunner:
                 raise
         finally:
             self.live.state = "idle"
+            self.live.questionnaire_token = ""  # the game is over: no questionnaire link of it works now
             self.running = None
             self._journaled.set()
             self._busy.release()
@@ -422,6 +426,7 @@ class StudyRunner:
             raise StudyDataError("no game is running")
         self._abort_reason = f"aborted: {reason}"
         if self.live.state == "questionnaire":  # the game is over: just stop waiting for the answers
+            self.live.questionnaire_token = ""  # the open questionnaire page is told it is closed (403)
             self._skip.set()
             return
         self._control(ev.SessionAborted(reason=reason))
@@ -434,6 +439,7 @@ class StudyRunner:
     def skip_questionnaire(self) -> None:
         if self.live.state != "questionnaire":
             raise StudyDataError("no questionnaire is awaited")
+        self.live.questionnaire_token = ""  # the open questionnaire page is told it is closed (403)
         self._skip.set()
 
     def answer_questionnaire(self, session: str, token: str, answers: dict) -> ev.QuestionnaireAnswered:

@@ -15,7 +15,12 @@ refusal is published as a MessageRejected, so the recording holds it.
 Pages: one "player" board per session acts; every other board page is
 read-only ("viewer") until the player leaves, when the oldest viewer takes
 over; a page that reloads keeps its `client` id (the browser tab's
-sessionStorage) and so its role. A mirror page is read-only. Every page gets
+sessionStorage) and so its role. A board connection with the id of one still
+open is taken for that tab reloading (its old socket may not have closed yet):
+the old one is closed with REPLACED. A page that gets REPLACED while alive is
+not the reloaded tab but a twin that copied its sessionStorage (a duplicated
+tab): it takes a fresh id and comes back once as another tab (common.js), so
+two live tabs never evict each other in a loop. A mirror page is read-only. Every page gets
 the whole view again on (re)connecting, so a page resumes from the server's
 state. Publishing runs on the hub's own thread: neither a bus callback nor
 the web server's event loop waits on a publish.
@@ -47,6 +52,7 @@ from pairplay.schemas.nesting import JsonDecoder
 
 log = logging.getLogger("pairplay.lab")
 MAX_MESSAGE = 4096  # bytes: a page's messages are small; longer ones are refused and recorded
+REPLACED = 4000  # WebSocket close code: a newer page came with this page's client id (see the module rule)
 MAX_FRAME = 65536  # bytes: uvicorn closes the connection on a bigger frame (nothing to record but the close)
 
 
@@ -246,7 +252,7 @@ class LabHub:
             c.sender.cancel()
         if close:
             try:
-                await c.ws.close(code=4000)
+                await c.ws.close(code=REPLACED)
             except Exception:  # already gone
                 pass
         if c.role == "player":  # keep the seat for a reload, then the oldest read-only board takes over

@@ -6,7 +6,8 @@ that reconnects (or a second page) draws exactly what the log says. The board
 view never carries the face of a covered card (a participant could read the
 page's traffic); the mirror view adds the suggestion in words and the card
 region its visual part points at (core.interpretation's VIS_SET, thesis 4.2),
-and what the robot did (RobotActed). Malformed event content changes nothing.
+and what the robot did (RobotActed); whether the experimenter has paused the game
+(ControlTaken: what the game took). Malformed event content changes nothing.
 """
 
 from __future__ import annotations
@@ -50,6 +51,7 @@ class LabModel:
     matches: int = 0
     robot: list[dict] = field(default_factory=list)  # the robot's last acts, newest last
     notice: dict | None = None  # the game's last refusal of a board input
+    paused: bool = False  # the experimenter paused the game (as the game took it: ControlTaken)
     ended: str = ""
     events: int = 0
 
@@ -147,6 +149,11 @@ class LabModel:
             "done_ns": int(e.done_ns),
         }])[-5:]
 
+    def _ControlTaken(self, e) -> None:
+        # what the game took, not what the console asked: a refused pause or resume changed nothing
+        if e.control in ("SessionPaused", "SessionResumed"):
+            self.paused = e.control == "SessionPaused"
+
     def _SessionEnded(self, e) -> None:
         self.ended = e.reason or "ended"
 
@@ -171,7 +178,7 @@ class LabModel:
                 "phase": self.phase(), "cards": cards, "observed": self.observed, "first": self.first,
                 "attempt": self.suggestion["attempt"] if self.suggestion else -1, "matches": self.matches,
                 "last_turn": self.last_turn, "turn_back_ms": self.turn_back_ms, "notice": self.notice,
-                "ended": self.ended}
+                "ended": self.ended, "paused": self.paused and not self.ended}
 
     def mirror_view(self) -> dict:
         """The robot's stand-in: the board as the participant sees it, the suggestion, the robot."""

@@ -3,15 +3,44 @@
 const token = new URLSearchParams(location.search).get("token") || "";
 const $ = (id) => document.getElementById(id);
 let last = null;
+// A refusal stays on screen until the experimenter acts again (the next poll does not replace it), and
+// a server that does not answer is said, every control off until a poll gets an answer again.
+let held = false;  // a refusal is on screen
+let down = false;  // the last request got no answer at all
+const GONE = "the lab server does not answer (stopped?): the controls work again once it does";
 
 async function api(path, body) {
-  const r = await fetch(path + (path.includes("?") ? "&" : "?") + "token=" + encodeURIComponent(token),
-                        body === undefined ? {} : {method: "POST", headers: {"content-type": "application/json"},
-                                                   body: JSON.stringify(body)});
+  let r;
+  try {
+    r = await fetch(path + (path.includes("?") ? "&" : "?") + "token=" + encodeURIComponent(token),
+                    body === undefined ? {} : {method: "POST", headers: {"content-type": "application/json"},
+                                               body: JSON.stringify(body)});
+  } catch (e) { serverGone(); e.said = true; throw e; }  // no answer (fetch's TypeError), not a refusal
   const data = await r.json().catch(() => ({error: "bad answer from the lab server"}));
-  if (!r.ok) { say(data.error || ("HTTP " + r.status), true); throw new Error(data.error); }
+  if (!r.ok) {
+    held = true;
+    say(data.error || ("HTTP " + r.status), true);
+    throw Object.assign(new Error(data.error), {said: true});
+  }
   return data;
 }
+function serverGone() {
+  if (!down) {
+    down = true;
+    document.querySelectorAll("button, input, select").forEach((b) => { if (!b.disabled) { b.disabled = true; b.dataset.off = "1"; } });
+  }
+  say(GONE, true);
+}
+function serverBack() {
+  if (!down) return;
+  down = false;
+  document.querySelectorAll("[data-off]").forEach((b) => { b.disabled = false; delete b.dataset.off; });
+  if (!held) say("");
+}
+// acting again (any button) is when a refusal on screen may go
+document.addEventListener("click", (ev) => { if (ev.target.closest("button")) held = false; }, true);
+// a control's handler: what api() refused or could not send is said on the page, not thrown at it
+const act = (fn) => (ev) => { Promise.resolve().then(() => fn(ev)).catch((e) => { if (!e || !e.said) throw e; }); };
 function say(text, error) { const m = $("message"); m.textContent = text; m.className = error ? "error" : ""; }
 function el(tag, text, cls) { const e = document.createElement(tag); if (text !== undefined) e.textContent = text; if (cls) e.className = cls; return e; }
 
@@ -105,34 +134,40 @@ function render(s) {
     [g.session, g.participant + (g.scripted ? ` (scripted: ${g.scripted})` : ""), g.phase, g.game, g.outcome + (g.reason ? ` (${g.reason})` : "") + (g.invalid ? ` invalid: ${g.invalid}` : ""),
      g.questionnaire ? "answered" : "-"].forEach((v) => r.insertCell().textContent = v);
     const b = el("button", "mark invalid"); b.disabled = !!g.invalid || g.outcome === "running";
-    b.onclick = () => { const why = prompt(`Why is ${g.session} invalid?`); if (why) api("/api/console/control/invalid", {session: g.session, reason: why}).then(() => say(`${g.session} marked invalid`)); };
+    b.onclick = () => { const why = prompt(`Why is ${g.session} invalid?`); if (why) api("/api/console/control/invalid", {session: g.session, reason: why}).then(() => say(`${g.session} marked invalid`), (e) => { if (!e.said) throw e; }); };
     r.insertCell().appendChild(b);
   });
-  if (s.last.step) say(`${s.last.step}: ${s.last.message}`, !s.last.ok);
+  if (s.last.step && !held) say(`${s.last.step}: ${s.last.message}`, !s.last.ok);
   $("report-link").innerHTML = "";
   if (s.report) { const a = el("a", "report.md"); a.href = "/api/console/report/report.md?token=" + encodeURIComponent(token); a.id = "report-md"; $("report-link").appendChild(a); }
 }
 
 async function poll() {
-  try { render(await api("/api/console/state")); } catch (e) { /* said */ }
+  try {
+    const s = await api("/api/console/state");
+    serverBack();
+    render(s);
+  } catch (e) {  // a refusal, or no answer: said by api(); anything else is a fault of this page, reported
+    if (!e || !e.said) setTimeout(() => { throw e; });
+  }
   setTimeout(poll, 250);
 }
 
-$("register-form").onsubmit = async (ev) => {
-  ev.preventDefault();
+$("register-form").onsubmit = (ev) => { ev.preventDefault(); register(); };
+const register = act(async () => {
   const r = await api("/api/console/register", {phase: $("register-phase").value, count: parseInt($("register-count").value, 10) || 1, label: $("register-label").value});
   $("register-label").value = ""; say("registered " + r.registered.join(", "));
-};
-$("run-next").onclick = async () => { const r = await api("/api/console/next", {}); say("started: " + r.started); };
-$("pause").onclick = () => api("/api/console/control/pause", {});
-$("resume").onclick = () => api("/api/console/control/resume", {});
-$("abort").onclick = () => api("/api/console/control/abort", {reason: $("abort-reason").value});
-$("skip-questionnaire").onclick = () => api("/api/console/control/skip-questionnaire", {});
-$("export").onclick = async () => {
+});
+$("run-next").onclick = act(async () => { const r = await api("/api/console/next", {}); say("started: " + r.started); });
+$("pause").onclick = act(() => api("/api/console/control/pause", {}));
+$("resume").onclick = act(() => api("/api/console/control/resume", {}));
+$("abort").onclick = act(() => api("/api/console/control/abort", {reason: $("abort-reason").value}));
+$("skip-questionnaire").onclick = act(() => api("/api/console/control/skip-questionnaire", {}));
+$("export").onclick = act(async () => {
   const r = await api("/api/console/export", {participant: $("data-participant").value});
   const res = $("data-result"); res.innerHTML = ""; const a = el("a", "download " + r.export.split("/").pop()); a.href = r.export + "?token=" + encodeURIComponent(token); a.id = "export-link"; res.appendChild(a);
-};
-$("delete").onclick = async () => {
+});
+$("delete").onclick = act(async () => {
   const pid = $("data-participant").value;
   const r = await api("/api/console/delete", {participant: pid, confirm: $("delete-confirm").value});
   $("delete-confirm").value = "";
@@ -141,6 +176,6 @@ $("delete").onclick = async () => {
     r.erased_copies.map(p => `; erased pairplay's unchanged copy ${p}`).join("") +
     r.not_erased.map(p => `; NOT erased, a copy made outside the study folder's own places (changed or moved): ${p} (erase it by hand)`).join("") +
     r.kept.map(k => `; kept ${k.file}, not written by the report` + (k.names_them ? ` (it names ${pid}: edit it by hand)` : "")).join("");
-};
-$("report").onclick = () => api("/api/console/report", {});
+});
+$("report").onclick = act(() => api("/api/console/report", {}));
 poll();

@@ -41,18 +41,49 @@ async function submit(ev) {
   });
   // the link's session and token in the URL too: the server checks them before it reads the body
   const link = `session=${encodeURIComponent(session)}&token=${encodeURIComponent(token)}`;
-  const r = await fetch(`/api/questionnaire/answer?${link}`, {method: "POST", headers: {"content-type": "application/json"},
-                                                              body: JSON.stringify({session, token, answers})});
+  let r;
+  try {
+    r = await fetch(`/api/questionnaire/answer?${link}`, {method: "POST", headers: {"content-type": "application/json"},
+                                                          body: JSON.stringify({session, token, answers})});
+  } catch (e) {  // never sent (the server is unreachable): the answers stay on the form, to send again
+    status("The answers could not be sent (no connection to the lab server): please press Send again", true);
+    return;
+  }
   const data = await r.json().catch(() => ({}));
   if (!r.ok) { status(data.error || "could not send", true); return; }
+  answered = true;
   $("q-form").innerHTML = ""; status("Thank you! Your answers are recorded.");
 }
 
+// The page follows the game's questionnaire until it is answered: once the link stops working (the
+// experimenter skipped it, or aborted), the form goes and the page says the questionnaire is closed.
+let built = false, answered = false, loaded = false, cut = false;  // loaded: the link worked once
 async function load() {
-  const r = await fetch(`/api/questionnaire?session=${encodeURIComponent(session)}&token=${encodeURIComponent(token)}`);
+  if (answered) return;
+  let r;
+  try {
+    r = await fetch(`/api/questionnaire?session=${encodeURIComponent(session)}&token=${encodeURIComponent(token)}`);
+  } catch (e) {  // the lab server does not answer: say so, keep what is typed, try again
+    status("No connection to the lab server: retrying…", true);
+    cut = true;
+    setTimeout(load, 1000);
+    return;
+  }
+  if (answered) return;
+  if (cut) { cut = false; status(""); }
   const q = await r.json().catch(() => ({}));
-  if (!r.ok) { status(q.error || "this link does not work", true); return; }
+  if (!r.ok) {
+    $("q-wait").hidden = true;
+    if (loaded) {  // it worked before: a refusal now is the questionnaire closed, not a wrong link
+      $("q-form").innerHTML = ""; status("The questionnaire is closed. Thank you!");
+    }
+    else status(q.error || "this link does not work", true);
+    return;
+  }
+  loaded = true;
   if (!q.ready) { $("q-wait").hidden = false; setTimeout(load, 300); return; }
-  $("q-wait").hidden = true; build(q);
+  $("q-wait").hidden = true;
+  if (!built) { build(q); built = true; }
+  setTimeout(load, 1000);
 }
 load();

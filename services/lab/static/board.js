@@ -12,6 +12,7 @@
   let msgId = Number(sessionStorage.getItem("pairplay-msg") || 0);
   let seenTurn = null;  // id of the last resolved turn drawn (null: nothing drawn yet)
   let holdUntil = 0, holdTimer = null, pending = -1;
+  let offline = "";  // what the page says while its WebSocket is down ("": connected)
 
   const cards = [];
   for (let i = 0; i < 18; i++) {
@@ -25,7 +26,7 @@
   }
   api.canTouch = () => {  // for scripts and tests: would a touch on a covered card be sent now?
     const s = api.state;
-    return !!s && api.role === "player" && link.open && performance.now() >= holdUntil && pending < 0 &&
+    return !!s && api.role === "player" && !s.paused && link.up() && performance.now() >= holdUntil && pending < 0 &&
       ["first", "looking", "thinking", "second"].includes(s.phase);
   };
   const nextId = () => { msgId += 1; sessionStorage.setItem("pairplay-msg", msgId); return msgId; };
@@ -33,19 +34,22 @@
 
   function touch(i, pageMs) {
     const s = api.state;
-    if (!s || api.role !== "player" || performance.now() < holdUntil) return;
+    if (!s || api.role !== "player" || s.paused || performance.now() < holdUntil) return;
     if (!["first", "looking", "thinking", "second"].includes(s.phase) || s.cards[i].state !== "down") return;
     if (pending >= 0 || (s.first >= 0 && s.first === i)) return;
+    // the card waits for the game's answer only if the touch went out: a touch while offline is dropped
+    // (the page says "Reconnecting…"), never left pending for an answer that cannot come
+    if (!link.send({ type: "pick", id: nextId(), round: s.round, turn: s.turn, card: i, page_ms: pageMs })) return;
+    api.sent += 1;
     pending = i;
     cards[i].classList.add("pending");
-    if (link.send({ type: "pick", id: nextId(), round: s.round, turn: s.turn, card: i, page_ms: pageMs })) api.sent += 1;
   }
   wrong.addEventListener("click", (ev) => {
     const s = api.state;
-    if (!s || api.role !== "player" || s.phase !== "second" || s.attempt < 0) return;
-    wrong.disabled = true;
-    link.send({ type: "wrong", id: nextId(), round: s.round, turn: s.turn, attempt: s.attempt,
-                page_ms: performance.timeOrigin + ev.timeStamp });
+    if (!s || api.role !== "player" || s.paused || s.phase !== "second" || s.attempt < 0) return;
+    // disabled only once sent: offline, the press is dropped and the button stays as the view says
+    if (link.send({ type: "wrong", id: nextId(), round: s.round, turn: s.turn, attempt: s.attempt,
+                    page_ms: performance.timeOrigin + ev.timeStamp })) wrong.disabled = true;
   });
 
   function drawCard(b, state, face, extra) {
@@ -78,17 +82,22 @@
       drawCard(cards[i], state, face, extra.trim());
     }
     const player = api.role === "player";
-    wrong.disabled = !(player && s.phase === "second" && s.attempt >= 0 && !holding);
+    wrong.disabled = !(player && link.up() && !s.paused && s.phase === "second" && s.attempt >= 0 && !holding);
     wrong.classList.toggle("hidden", api.role === "viewer");
-    const text = {
+    let text = {
       starting: "Waiting for the game to start…", first: "Pick a card", looking: "Look for its pair",
       thinking: "The robot is thinking…", second: "Find its pair", over: "The game is over. Thank you!",
     }[s.phase] || "";
-    prompt.textContent = holding ? "Not a pair" : (s.notice && player ? s.notice.reason : text);
+    // a game the experimenter (or a signal) stopped asks no questionnaire: the page says it was stopped
+    if (s.phase === "over" && stopped(s)) text = "The game was stopped. Thank you!";
+    // offline, the page says so whatever else redraws it (a turn-back timer): it takes no touch until back
+    prompt.textContent = offline ? offline : s.paused ? "The game is paused: please wait" :
+      holding ? "Not a pair" : (s.notice && player ? s.notice.reason : text);
     prompt.dataset.phase = s.phase;
     document.body.classList.toggle("read-only", !player);
     document.body.dataset.role = api.role;
     document.body.dataset.phase = s.phase;
+    document.body.classList.toggle("paused", !!s.paused);
   }
 
   function onState(s, role) {
@@ -109,12 +118,13 @@
     if (pending >= 0 && s.notice && s.notice.card === pending) pending = -1;
     api.state = s;
     api.role = role;
-    if (s.phase === "over" && role === "player" && !api.askedQuestionnaire) askQuestionnaire();
+    if (s.phase === "over" && role === "player" && !stopped(s) && !api.askedQuestionnaire) askQuestionnaire();
     banner.classList.toggle("hidden", role === "player");
     if (role === "viewer") banner.textContent = "Read-only: another screen is playing this session";
     render();
   }
-  // In a study (services/console), a questionnaire follows the game: the board becomes it.
+  const stopped = (s) => ["aborted", "interrupted"].includes(s.ended);  // SessionEnded's reason
+  // In a study (services/console), a questionnaire follows a game that was not stopped: the board becomes it.
   async function askQuestionnaire() {
     api.askedQuestionnaire = true;
     const { session, token } = window.pairplayLab;
@@ -128,9 +138,10 @@
     onState,
     onLink: (up, code) => {
       document.body.classList.toggle("offline", !up);
+      offline = up ? "" : code === 4403 ? "This link is not valid" : "Reconnecting…";
       if (!up) {
-        pending = -1;
-        prompt.textContent = code === 4403 ? "This link is not valid" : "Reconnecting…";
+        pending = -1;  // a touch in flight is answered by the view sent on reconnecting, or not at all
+        prompt.textContent = offline;
         wrong.disabled = true;
       }
     },
