@@ -710,10 +710,21 @@ class StudyData:
         game = self.state.games.get(session)
         if game is None:
             raise StudyDataError(f"no session {session!r} in this study")
+        if game.ended is None:  # the console's page disables its button for it; its API marked one mid-game
+            # (trial27 F10): a mark before the game's end, the step then offered again beside the game still playing
+            raise StudyDataError(f"{session}: the game is running: abort it or wait for its end" if self.running(game)
+                                 else f"{session}: {self.unended_note(game) or 'its end is not journaled'}; mark it "
+                                 "once its end is journaled")
         event = self.append(j.SessionMarkedInvalid(session=session, participant=game.participant,
                                                    reason=reason.strip()))
         self.write_tables()
         return event
+
+    def running(self, g: Game) -> bool:
+        """Whether game `g` is being played now: journaled as started and not ended, and either run by this
+        object (the folder's one writer: pairplay/folderlock.py) or its recording still held by a live recorder
+        (pairplay/livelock.py). The rule by which a running game is not marked, exported or deleted."""
+        return g.ended is None and (g.session in self._started_here or is_live(self.folder / g.recording))
 
     def participant(self, pid: str) -> j.ParticipantRegistered:
         p = self.state.participants.get(pid)
@@ -1153,8 +1164,11 @@ class StudyData:
         mine = {g.ended.policy for g in self.games_of(pid) if g.ended is not None and g.ended.policy}
         return [c.output for c in self.state.combined.values() if mine & set(c.inputs)]
 
-    def export_participant(self, pid: str, out: str | Path | None = None, force: bool = False) -> Path:
-        """One zip of `pid`'s recordings, policies, answers and journal lines, with a README."""
+    def export_participant(self, pid: str, out: str | Path | None = None, force: bool = False,
+                           left_out: list[str] | None = None) -> Path:
+        """One zip of `pid`'s recordings, policies, answers and journal lines, with a README. A running game's
+        files (`running`: its recording half-written, without its footer) are left out, and said in the README
+        and by the sessions appended to `left_out`."""
         with self._writing():
             self.participant(pid)
             out = Path(out) if out else self.folder / "exports" / f"{pid}.zip"
@@ -1175,7 +1189,12 @@ class StudyData:
             games = self.games_of(pid)
             answers = [r for r in self.answers() if r["participant"] == pid]
             lines = [e for e in self.read_journal() if getattr(e, "participant", None) == pid]
-            files = [f for f in self.files_of(pid) if f.parent.name != "exports"]
+            running = [g.session for g in games if self.running(g)]  # (an export during a game shipped its
+            # half-written recording and the recorder's journal, the README calling it the game's every event)
+            files = [f for f in self.files_of(pid) if f.parent.name != "exports"
+                     and not any(f.name.startswith(f"{session}.") for session in running)]
+            if left_out is not None:
+                left_out += running
             for f in files:  # before the zip opens one: a pipe blocked it (pairplay/inputs.py)
                 if said := refusal(f):
                     raise StudyDataError(f"{pid}'s data cannot be exported whole: {said}",
@@ -1219,7 +1238,7 @@ class StudyData:
             # per study folder), no other process can be running a game of it, so a game journaled as started
             # and never ended was the game of a process that died (SIGKILL, a power cut) and is deleted with the
             # rest. It was "running" for ever: nothing could end it, and the participant could not be erased.
-            running = [g.session for g in self.games_of(pid) if g.ended is None and g.session in self._started_here]
+            running = [g.session for g in self.games_of(pid) if self.running(g)]
             if running:
                 raise StudyDataError(f"{pid} has a game running ({running[0]}): abort it first", self.given)
             merged = self.merged_using(pid)
@@ -1620,7 +1639,8 @@ def _export_readme(pid: str, study: str, games: list[Game], files: list[Path], a
     lines = [f"Data of participant {pid} in study {study} (pairplay {__version__})", "",
              "Everything pairplay holds about this pseudonymous participant:", ""]
     for g in games:
-        status = g.ended.outcome if g.ended else "running"
+        status = g.ended.outcome if g.ended else \
+            "running when exported: its files are left out (half-written); export again after its end"
         lines.append(f"- game {g.session}: phase {g.phase}, game {g.game + 1}, {status}"
                      + (f", marked invalid: {g.invalid}" if g.invalid else ""))
     lines += ["", "Files:", ""]

@@ -131,6 +131,7 @@ $("skip-questionnaire").onclick = () => api("/api/console/control/skip-questionn
 $("export").onclick = async () => {
   const r = await api("/api/console/export", {participant: $("data-participant").value});
   const res = $("data-result"); res.innerHTML = ""; const a = el("a", "download " + r.export.split("/").pop()); a.href = r.export + "?token=" + encodeURIComponent(token); a.id = "export-link"; res.appendChild(a);
+  if (r.left_out && r.left_out.length) res.appendChild(el("span", " (left out: " + r.left_out.join("; ") + ")"));
 };
 $("delete").onclick = async () => {
   const pid = $("data-participant").value;
