@@ -290,6 +290,8 @@ def warn_unreachable(runner, verb: str) -> None:
         return
     why = robot_unreachable(runner.robot.url)
     if why:
+        runner.robot_warning = (f"the robot did not accept a connection when `protocol {verb}` started: {why} "
+                                f"({runner.robot.url.split('?')[0]}); its games record what it cannot deliver as failed")
         print(f"pairplay protocol {verb}: warning: the robot does not accept a connection now: {why} "
               f"(--robot {runner.robot.url.split('?')[0]}); its games record what it cannot deliver as failed",
               file=sys.stderr, flush=True)

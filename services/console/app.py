@@ -119,6 +119,7 @@ class Console:
         notes, key_problem = data.id_notes()
         return {
             "unregistered": [{"id": pid, "note": note} for pid, note in notes.items()], "key_file_problem": key_problem,
+            "robot_warning": self.runner.robot_warning,
             "study": {"id": data.study.study.id, "title": data.study.study.title, "folder": str(data.folder),
                       "phases": [p.id for p in data.study.phase], "key_file": bool(data.key_file)},
             "participants": [{"id": pid, "joins": r.joins, "scripted": data.scripted_as(pid),

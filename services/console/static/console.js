@@ -75,6 +75,7 @@ function render(s) {
   $("live-picks").textContent = L.session ? L.picks : "";
   $("live-suggestion").textContent = L.suggestion;
   $("live-robot").textContent = L.robot;
+  $("robot-warning").textContent = s.robot_warning || ""; $("robot-warning").hidden = !s.robot_warning;
   const q = $("live-questionnaire"); q.innerHTML = "";
   if (L.questionnaire_url) { const a = el("a", L.state === "questionnaire" ? "awaiting answers: open the questionnaire" : "after the game"); a.href = L.questionnaire_url; a.id = "questionnaire-link"; a.target = "_blank"; q.appendChild(a); }
   $("pause").disabled = L.state !== "playing" || L.paused;
