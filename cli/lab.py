@@ -26,6 +26,7 @@ from pairplay.inputs import check_option_file
 from pairplay.outputs import check_folder
 from pairplay.services.recorder import check_new_recording
 from pairplay.services.bus import LOOPBACK_ANY_PORT, MODES, BusOptions, stop_on_signals
+from pairplay.services.lab.reach import plain_beyond_loopback
 
 from pairplay.cli.args import duration, output_folder
 from pairplay.cli.robot import add_robot_arguments, check_robot_args, probe_robot_args, robot_choice
@@ -89,9 +90,9 @@ def run(args: argparse.Namespace) -> int:
                              connect=list(args.connect or []), zenoh_config=args.zenoh_config)
 
     def ready(urls, bus) -> None:
-        if host not in (LOOPBACK, "localhost", "::1") and not args.certfile:
-            print("pairplay lab: warning: serving beyond loopback without TLS (README: serving the board "
-                  "beyond loopback)", file=sys.stderr)
+        warning = plain_beyond_loopback(host, tls=bool(args.certfile))  # the same line as `protocol serve`'s
+        if warning:
+            print(f"pairplay lab: {warning}", file=sys.stderr)
         print(f"session {config.session}: {config.participant}, {counted(config.rounds, 'round')}, {config.algorithm}, "
               f"observed card: {config.observed_source}", flush=True)
         print(f"board:  {urls.board}", flush=True)

@@ -290,6 +290,8 @@ def warn_unreachable(runner, verb: str) -> None:
         return
     why = robot_unreachable(runner.robot.url)
     if why:
+        runner.robot_warning = (f"the robot did not accept a connection when `protocol {verb}` started: {why} "
+                                f"({runner.robot.url.split('?')[0]}); its games record what it cannot deliver as failed")
         print(f"pairplay protocol {verb}: warning: the robot does not accept a connection now: {why} "
               f"(--robot {runner.robot.url.split('?')[0]}); its games record what it cannot deliver as failed",
               file=sys.stderr, flush=True)
@@ -335,6 +337,7 @@ def _serving(data: StudyData, args, stop, runners: list, pilot: dict, robot, ove
     """`_serve` once its options are checked: the console served until `stop` (a signal)."""
     from pairplay.services.bus import Bus, BusOptions, shutdown_wait
     from pairplay.services.console.server import StudyLabServer
+    from pairplay.services.lab.reach import plain_beyond_loopback
     from pairplay.services.protocol import JOURNALED_WAIT_S, StudyRunner
 
     with Bus(BusOptions(mode="router"), stop=stop) as bus:
@@ -348,6 +351,9 @@ def _serving(data: StudyData, args, stop, runners: list, pilot: dict, robot, ove
                                     ssl_keyfile=args.keyfile).start()
         except OSError as err:
             raise StudyDataError(f"cannot serve the console: {err.strerror or err}", f"--listen {args.listen}") from None
+        warning = plain_beyond_loopback(host.strip("[]"), tls=bool(args.certfile))  # as `pairplay lab`'s: the
+        if warning:  # console's token, which exports and deletes participants' data, is sent in clear text
+            print(f"pairplay protocol serve: {warning}", file=sys.stderr, flush=True)
         warn_unreachable(runner, "serve")
         print(f"experimenter console: {server.console_url}", flush=True)
         print(f"bus (boards and scripted players connect here): {' '.join(bus.locators())}", flush=True)

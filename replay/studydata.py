@@ -171,6 +171,22 @@ def open_key_file(path: Path):
     return open(fd, "a", encoding="utf-8", newline="")
 
 
+def key_file_rows(path: Path) -> list[list[str]]:
+    """The key file's lines as csv reads them (a quoted cell may hold a CR), blank ones left out: `id,name,study`
+    (`StudyData.key_owner`; `id,name` from an older pairplay, whose study is not said). StudyDataError if it is not
+    there or cannot be read."""
+    if said := refusal(path):  # before opening: a pipe blocked (pairplay/inputs.py)
+        raise StudyDataError(said, path)
+    try:
+        with open(path, encoding="utf-8", newline="") as f:
+            return [r for r in csv.reader(f) if r]
+    except FileNotFoundError:
+        raise StudyDataError("the key file is not there (an unmounted drive?): the ids it holds cannot be "
+                             "checked, and one of them would be given again; make it reachable first", path) from None
+    except (OSError, UnicodeDecodeError, csv.Error) as err:
+        raise StudyDataError(f"cannot read the key file: {getattr(err, 'strerror', None) or err}", path) from None
+
+
 @dataclass
 class Game:
     session: str
@@ -469,6 +485,12 @@ class StudyData:
                                      "(names never sit beside the recordings)")
             open_key_file(Path(key_file)).close()  # made now, owner-only: a path that cannot hold it is said here (as
             # given), not at the first registration with a name (an existing key file is kept, only its mode tightened)
+            held = key_file_rows(Path(key_file))
+            if held:  # the README's ~/private/keys.csv typed again for a second study: each study then called the
+                # other's people crash leftovers and advised removing their lines, another study's only link to them
+                raise StudyDataError(f"--key-file {key_file}: holds {counted(len(held), 'line')} already (another "
+                                     "study's?): a key file belongs to one study, whose deletions erase its lines; "
+                                     "give a new path (one per study, e.g. ~/private/<study>-keys.csv)")
         text = Path(study_file).read_bytes()
         folder.mkdir(parents=True, exist_ok=True)
         for sub in SUBFOLDERS:
@@ -564,27 +586,31 @@ class StudyData:
             numbers = [int(i[1:]) + 1 for i in on_record if i[1:].isdigit()]
             pid = f"p{max([self.state.next_number, self.state.ids_given + len(unjournaled) + 1] + numbers):02d}"
             if label:
-                with open_key_file(self.key_file) as f:
-                    csvcell.writer(f).writerow([pid, label])  # never a formula (pairplay/csvcell.py)
+                with open_key_file(self.key_file) as f:  # never a formula (pairplay/csvcell.py)
+                    csvcell.writer(f).writerow([pid, label, self.key_owner])
             self.append(j.ParticipantRegistered(participant=pid, joins=joins))
             return pid
 
+    @property
+    def key_owner(self) -> str:
+        """This study in its key file's lines (their third cell): its id and the time it was created, so two
+        folders made from one study file differ. A key file belongs to one study (`create` refuses one holding
+        lines); this keeps two that share one anyway (an empty one taken twice, an older pairplay) apart."""
+        created = self.state.created
+        return f"{created.study}@{created.time_ns}" if created is not None else ""
+
+    def _own_key_line(self, row: list[str]) -> bool:
+        # a line of two cells (an older pairplay's) does not say its study: it stays this study's, as it was
+        return len(row) < 3 or csvcell.value(row[2]) == self.key_owner
+
     def key_file_ids(self) -> list[str]:
-        """The ids of the key file's lines, in its order (one id twice: given twice by pairplay <= this fix);
-        StudyDataError if the study has one that cannot be read (an unmounted drive): its ids are not known."""
+        """The ids of this study's lines of the key file, in its order (one id twice: given twice by pairplay <=
+        this fix); another study's lines are not read. StudyDataError if the study has one that cannot be read
+        (an unmounted drive): its ids are not known."""
         key = self.key_file
         if key is None:
             return []
-        if said := refusal(key):  # before opening: a pipe blocked (pairplay/inputs.py)
-            raise StudyDataError(said, key)
-        try:
-            with open(key, encoding="utf-8", newline="") as f:  # as csv reads it: a quoted cell may hold a CR
-                return [r[0] for r in csv.reader(f) if r]
-        except FileNotFoundError:
-            raise StudyDataError("the key file is not there (an unmounted drive?): the ids it holds cannot be "
-                                 "checked, and one of them would be given again; make it reachable first", key) from None
-        except (OSError, UnicodeDecodeError, csv.Error) as err:
-            raise StudyDataError(f"cannot read the key file: {getattr(err, 'strerror', None) or err}", key) from None
+        return [r[0] for r in key_file_rows(key) if self._own_key_line(r)]
 
     def ids_on_record(self) -> set[str]:
         """Every id a record shows was given, beyond the journal's registrations (`records_of_ids`). None is
@@ -684,17 +710,33 @@ class StudyData:
         game = self.state.games.get(session)
         if game is None:
             raise StudyDataError(f"no session {session!r} in this study")
+        if game.ended is None:  # the console's page disables its button for it; its API marked one mid-game
+            # (trial27 F10): a mark before the game's end, the step then offered again beside the game still playing
+            raise StudyDataError(f"{session}: the game is running: abort it or wait for its end" if self.running(game)
+                                 else f"{session}: {self.unended_note(game) or 'its end is not journaled'}; mark it "
+                                 "once its end is journaled")
         event = self.append(j.SessionMarkedInvalid(session=session, participant=game.participant,
                                                    reason=reason.strip()))
         self.write_tables()
         return event
 
+    def running(self, g: Game) -> bool:
+        """Whether game `g` is being played now: journaled as started and not ended, and either run by this
+        object (the folder's one writer: pairplay/folderlock.py) or its recording still held by a live recorder
+        (pairplay/livelock.py). The rule by which a running game is not marked, exported or deleted."""
+        return g.ended is None and (g.session in self._started_here or is_live(self.folder / g.recording))
+
     def participant(self, pid: str) -> j.ParticipantRegistered:
         p = self.state.participants.get(pid)
         if p is None and self.key_file is not None and self.key_file.is_file() and pid in self.key_file_ids():
+            # a line of this study's (its third cell says so); one of an older pairplay's two cells may be another
+            # study's sharing the file (trial27 F8): that one is said, not advised away
+            told = all(len(r) >= 3 for r in key_file_rows(self.key_file) if r[0] == pid and self._own_key_line(r))
             raise StudyDataError(f"{pid} is in the key file but was never journaled (a crash cut its registration): "
                                  "nothing of theirs is in the study; the id is not given again; to erase their "
-                                 f"name, remove its line from the key file {self.key_file} by hand")
+                                 f"name, remove its line from the key file {self.key_file} by hand"
+                                 + ("" if told else " (if it is this study's: a line of two cells, written by an "
+                                    "older pairplay, does not say its study, and another study may share the file)"))
         if p is None:
             raise StudyDataError(f"no participant {pid!r} in study {self.study.study.id!r} "
                                  f"(registered: {', '.join(self.state.participants) or 'none'})")
@@ -1122,8 +1164,11 @@ class StudyData:
         mine = {g.ended.policy for g in self.games_of(pid) if g.ended is not None and g.ended.policy}
         return [c.output for c in self.state.combined.values() if mine & set(c.inputs)]
 
-    def export_participant(self, pid: str, out: str | Path | None = None, force: bool = False) -> Path:
-        """One zip of `pid`'s recordings, policies, answers and journal lines, with a README."""
+    def export_participant(self, pid: str, out: str | Path | None = None, force: bool = False,
+                           left_out: list[str] | None = None) -> Path:
+        """One zip of `pid`'s recordings, policies, answers and journal lines, with a README. A running game's
+        files (`running`: its recording half-written, without its footer) are left out, and said in the README
+        and by the sessions appended to `left_out`."""
         with self._writing():
             self.participant(pid)
             out = Path(out) if out else self.folder / "exports" / f"{pid}.zip"
@@ -1144,7 +1189,12 @@ class StudyData:
             games = self.games_of(pid)
             answers = [r for r in self.answers() if r["participant"] == pid]
             lines = [e for e in self.read_journal() if getattr(e, "participant", None) == pid]
-            files = [f for f in self.files_of(pid) if f.parent.name != "exports"]
+            running = [g.session for g in games if self.running(g)]  # (an export during a game shipped its
+            # half-written recording and the recorder's journal, the README calling it the game's every event)
+            files = [f for f in self.files_of(pid) if f.parent.name != "exports"
+                     and not any(f.name.startswith(f"{session}.") for session in running)]
+            if left_out is not None:
+                left_out += running
             for f in files:  # before the zip opens one: a pipe blocked it (pairplay/inputs.py)
                 if said := refusal(f):
                     raise StudyDataError(f"{pid}'s data cannot be exported whole: {said}",
@@ -1188,7 +1238,7 @@ class StudyData:
             # per study folder), no other process can be running a game of it, so a game journaled as started
             # and never ended was the game of a process that died (SIGKILL, a power cut) and is deleted with the
             # rest. It was "running" for ever: nothing could end it, and the participant could not be erased.
-            running = [g.session for g in self.games_of(pid) if g.ended is None and g.session in self._started_here]
+            running = [g.session for g in self.games_of(pid) if self.running(g)]
             if running:
                 raise StudyDataError(f"{pid} has a game running ({running[0]}): abort it first", self.given)
             merged = self.merged_using(pid)
@@ -1272,9 +1322,8 @@ class StudyData:
         key = self.key_file
         if key is None or not key.is_file():
             return False
-        with open(key, encoding="utf-8", newline="") as f:  # as csv reads it: a quoted cell may hold a CR
-            rows = list(csv.reader(f))
-        kept = [r for r in rows if not r or r[0] != pid]
+        rows = key_file_rows(key)
+        kept = [r for r in rows if r[0] != pid or not self._own_key_line(r)]  # another study's p01 is not theirs
         if len(kept) == len(rows):
             return False
         buf = io.StringIO()
@@ -1590,7 +1639,8 @@ def _export_readme(pid: str, study: str, games: list[Game], files: list[Path], a
     lines = [f"Data of participant {pid} in study {study} (pairplay {__version__})", "",
              "Everything pairplay holds about this pseudonymous participant:", ""]
     for g in games:
-        status = g.ended.outcome if g.ended else "running"
+        status = g.ended.outcome if g.ended else \
+            "running when exported: its files are left out (half-written); export again after its end"
         lines.append(f"- game {g.session}: phase {g.phase}, game {g.game + 1}, {status}"
                      + (f", marked invalid: {g.invalid}" if g.invalid else ""))
     lines += ["", "Files:", ""]

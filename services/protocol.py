@@ -107,7 +107,9 @@ class Live:
         elif name == "SuggestionMade":
             self.suggestion = f"{e.action}: {e.action_name} ({e.chosen_by}, epsilon {e.epsilon:.2f})"
         elif name == "RobotActed":
-            self.robot = f"{e.backend}: {e.outcome} {', '.join(e.commands)[:120]}"
+            # its reason with it: "failed" alone said nothing of an unreachable robot (trial27 F13)
+            self.robot = f"{e.backend}: {e.outcome}" + (f" ({e.error})" if e.error else "") \
+                + f" {', '.join(e.commands)[:120]}"
         elif name == "RoundEnded":
             self.picks_per_round.append(2 * e.turns)
         elif name == "SessionEnded":
@@ -132,6 +134,9 @@ class StudyRunner:
         self.robot = robot if robot is not None else (None if url == NO_ROBOT else RobotChoice(url))
         self.questionnaire_timeout_s = questionnaire_timeout_s
         self.live = Live()
+        # the robot not accepting a connection when the verb started (cli/protocol.py warn_unreachable): shown by
+        # the console too, not only on the terminal, which the experimenter at the console may not see
+        self.robot_warning = ""
         self.delivery: dict[str, str] = {}  # session -> what its robot delivered (replay/delivery.py)
         # a WARNING when a game's robot did not get every suggestion; off where each game's line says it already
         # (`protocol pilot`: the line came twice, a WARNING and the step's, for every game: a new user's trial)

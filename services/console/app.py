@@ -119,6 +119,7 @@ class Console:
         notes, key_problem = data.id_notes()
         return {
             "unregistered": [{"id": pid, "note": note} for pid, note in notes.items()], "key_file_problem": key_problem,
+            "robot_warning": self.runner.robot_warning,
             "study": {"id": data.study.study.id, "title": data.study.study.title, "folder": str(data.folder),
                       "phases": [p.id for p in data.study.phase], "key_file": bool(data.key_file)},
             "participants": [{"id": pid, "joins": r.joins, "scripted": data.scripted_as(pid),
@@ -258,8 +259,10 @@ def console_routes(console: Console) -> list:
 
     async def export(request: Request) -> Response:
         asked = _read(await _body(request), ParticipantRequest)
-        path = data.export_participant(asked.participant, force=True)
-        return JSONResponse({"export": f"/api/console/exports/{path.name}"})
+        left_out: list[str] = []  # a running game's files: not in the zip, and said (its README says it too)
+        path = data.export_participant(asked.participant, force=True, left_out=left_out)
+        return JSONResponse({"export": f"/api/console/exports/{path.name}", "left_out": [
+            f"{session}: running: its files are left out; export again after its end" for session in left_out]})
 
     async def download(request: Request) -> Response:
         name = request.path_params["name"]

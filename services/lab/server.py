@@ -24,6 +24,7 @@ from pairplay.schemas.session import SessionConfig
 from pairplay.services.bus import SHUTDOWN_S, BusOptions, Deadline, shutdown_wait
 from pairplay.services.lab.app import Lab, create_app
 from pairplay.services.lab.hub import MAX_FRAME, LabHub
+from pairplay.services.lab.reach import reachable_host
 from pairplay.services.robot.choice import RobotChoice
 from pairplay.services.session import run_session
 
@@ -64,8 +65,7 @@ class WebServer:
 
     def base_url(self) -> str:
         host, port = self.address
-        host = "127.0.0.1" if host in ("0.0.0.0", "") else f"[{host}]" if ":" in host else host
-        return f"{self.scheme}://{host}:{port}"
+        return f"{self.scheme}://{reachable_host(host)}:{port}"  # a wildcard: the address the touch screen can open
 
     def stop(self, timeout_s: float = 10.0) -> None:
         """Ask uvicorn to stop; wait for its thread at most `timeout_s` (a stopped process takes what

@@ -104,6 +104,7 @@ function render(s) {
   $("live-picks").textContent = L.session ? L.picks : "";
   $("live-suggestion").textContent = L.suggestion;
   $("live-robot").textContent = L.robot;
+  $("robot-warning").textContent = s.robot_warning || ""; $("robot-warning").hidden = !s.robot_warning;
   const q = $("live-questionnaire"); q.innerHTML = "";
   if (L.questionnaire_url) { const a = el("a", L.state === "questionnaire" ? "awaiting answers: open the questionnaire" : "after the game"); a.href = L.questionnaire_url; a.id = "questionnaire-link"; a.target = "_blank"; q.appendChild(a); }
   $("pause").disabled = L.state !== "playing" || L.paused;
@@ -166,6 +167,7 @@ $("skip-questionnaire").onclick = act(() => api("/api/console/control/skip-quest
 $("export").onclick = act(async () => {
   const r = await api("/api/console/export", {participant: $("data-participant").value});
   const res = $("data-result"); res.innerHTML = ""; const a = el("a", "download " + r.export.split("/").pop()); a.href = r.export + "?token=" + encodeURIComponent(token); a.id = "export-link"; res.appendChild(a);
+  if (r.left_out && r.left_out.length) res.appendChild(el("span", " (left out: " + r.left_out.join("; ") + ")"));
 });
 $("delete").onclick = act(async () => {
   const pid = $("data-participant").value;
