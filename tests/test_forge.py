@@ -19,6 +19,7 @@ import threading
 import time
 from pathlib import Path
 
+import msgspec
 import pytest
 
 from pairplay.replay.forgery import contradiction
@@ -262,6 +263,45 @@ def test_a_forged_end_every_service_refuses_is_recorded_and_the_session_plays_to
     assert named and "forged: SessionEnded seq 2 claiming source 'game'" in named[0].reason
     assert any(isinstance(x, ev.MessageRejected) and x.source == "recorder" and "not after the events" in x.reason
                for x in events)
+
+
+def test_a_replayed_old_start_of_the_same_session_every_listener_refuses_leaves_it_playing(tmp_path):
+    # trial28 F14: an old recording of the same session id replayed into a live one. Its SessionStarted has the
+    # seq of the game's own (2): every listener refused it as a duplicate, but the session was stopped "failed
+    # ... taken by learner, participant, recorder": they had taken the game's own start at that (key, seq)
+    old = SessionConfig(session="rp1", participant="sim:ashley", persona="ashley", seed=1, rounds=3)
+    (tmp_path / "a").mkdir()
+    run_session(old, tmp_path / "a" / "rp1.mcap")
+    [start] = [r for r in read_log(tmp_path / "a" / "rp1.mcap").events if isinstance(r.event, ev.SessionStarted)]
+    box: dict = {}
+    ready = threading.Event()
+
+    def on_bus(bus):
+        box["bus"] = bus
+        ready.set()
+
+    def run():
+        box["path"] = run_session(msgspec.structs.replace(old, seed=2), tmp_path / "b" / "rp1.mcap", on_bus=on_bus,
+                                  wait_also=("forger",))
+    (tmp_path / "b").mkdir()
+    runner = threading.Thread(target=run, daemon=True)
+    runner.start()
+    assert ready.wait(30)
+    with connector(box["bus"]) as client:
+        seen = game_events(client, "rp1")
+        client.alive(alive_key("rp1", "forger"))  # the game starts now
+        while not isinstance(decode_event(seen.get(timeout=60)), ev.SuggestionRequested):
+            pass
+        client.put(start.key, start.payload)  # the old recording's start, as `pairplay replay` puts it
+        runner.join(60)
+    assert not runner.is_alive() and box.get("path") is not None  # no ForgedEvent: it played to its end
+    events = [r.event for r in read_log(tmp_path / "b" / "rp1.mcap").events]
+    assert [x.reason for x in events if isinstance(x, ev.SessionEnded)] == ["completed"]
+    named = [x for x in events if isinstance(x, ev.MessageRejected) and x.source == "game"]
+    assert named and "forged: SessionStarted seq 2 claiming source 'game'" in named[0].reason
+    refused = {x.source for x in events if isinstance(x, ev.MessageRejected) and x.offending_seq == 2
+               and "duplicate or out of order" in x.reason}
+    assert {"learner", "participant", "recorder"} <= refused, refused
 
 
 def test_the_live_view_follows_a_session_whose_game_goes_on_after_a_forged_end():
