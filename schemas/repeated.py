@@ -2,7 +2,7 @@
 
 Rule: every JSON input a user can edit (policy and fitted-user files, the robot config, the board
 calibration, a study's settings.json and journal lines, a sweep's cell files, an output folder's
-manifest) is checked by `refuse_repeated` before it is read; a repeated key is a
+manifest; the Zenoh config, JSON5, alike) is checked by `refuse_repeated` before it is read; a repeated key is a
 msgspec.ValidationError "Object contains the key `K` more than once - at `$.WHERE`", which every
 caller already refuses and words (`jsonfile.in_words`: "WHERE: the key `K` is given twice ...").
 
@@ -19,11 +19,13 @@ says what is wrong with it in its own words.
 
 from __future__ import annotations
 
-import json
+from typing import Any, Callable
 
 import msgspec
 
 from .nesting import json_loads
+
+Loads = Callable[..., Any]  # a reader of JSON text taking `object_pairs_hook` (json's loads; json5's for the Zenoh config)
 
 
 class _Repeated(Exception):
@@ -46,7 +48,7 @@ def _pairs(pairs: list[tuple[str, object]]) -> dict:
     return value
 
 
-def _where(data: bytes | str, key: str) -> str:
+def _where(data: bytes | str, key: str, loads: Loads) -> str:
     """msgspec's path (`learner`, `q[0]`; "" at the top) of the first object of `data` holding `key` twice:
     parsed again (only for a file being refused) with a hook that records, for each object, whether it repeats
     `key`, then the tree walked for the object that does."""
@@ -58,7 +60,7 @@ def _where(data: bytes | str, key: str) -> str:
             found.append(value)
         return value
 
-    top = json_loads(data, object_pairs_hook=mark)
+    top = loads(data, object_pairs_hook=mark)
     if not found:
         return ""
     target = found[0]
@@ -83,23 +85,23 @@ def _where(data: bytes | str, key: str) -> str:
         return ""
 
 
-def repeated_key(data: bytes | str) -> tuple[str, str] | None:
+def repeated_key(data: bytes | str, loads: Loads = json_loads) -> tuple[str, str] | None:
     """(where, key) of the first key given twice in one object of the JSON text `data` (where as msgspec
-    writes a path, "" at the top), or None if none is, or if `data` is not JSON the json module reads (its
+    writes a path, "" at the top), or None if none is, or if `data` is not JSON that `loads` reads (its
     reader says why)."""
     try:
-        json_loads(data, object_pairs_hook=_pairs)
+        loads(data, object_pairs_hook=_pairs)
     except _Repeated as repeated:
-        return _where(data, repeated.key), repeated.key
+        return _where(data, repeated.key, loads), repeated.key
     except (ValueError, RecursionError):  # not JSON (UnicodeDecodeError, too many digits too): the reader says
         return None
     return None
 
 
-def refuse_repeated(data: bytes | str) -> None:
+def refuse_repeated(data: bytes | str, loads: Loads = json_loads) -> None:
     """msgspec.ValidationError naming the key (and where) if the JSON text `data` gives a key twice in one
-    object (module rule); nothing otherwise."""
-    if (found := repeated_key(data)) is not None:
+    object (module rule); nothing otherwise. `loads`: what reads it (json5.loads for a JSON5 file)."""
+    if (found := repeated_key(data, loads)) is not None:
         where, key = found
         raise msgspec.ValidationError(f"Object contains the key `{key}` more than once"
                                       + (f" - at `${'' if where.startswith('[') else '.'}{where}`" if where else ""))
