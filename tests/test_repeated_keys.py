@@ -58,43 +58,64 @@ def test_a_nested_key_given_twice_is_named_where_it_is(policy_bytes):
     assert repeated_key(b'{"a": {"c": 1}, "b": {"c": 2}}') is None  # the same key in two objects is fine
 
 
-def test_every_json_file_a_user_edits_refuses_a_key_given_twice(tmp_path, caplog):
-    """The robot config, the calibration, a study's settings.json, a sweep cell, a journal line and an output
-    folder's manifest: each read a repeated key last-wins; each refuses it naming the key."""
-    from pairplay.outputs import MANIFEST_FORMAT, read_manifest
-    from pairplay.replay.studydata import _settings
-    from pairplay.report.sweep import _check_cell, read_grid
-    from pairplay.schemas.journal import decode_line
+def _robot_config(tmp_path):
     from pairplay.services.robot.backends import load_robot_config
-    from pairplay.services.robot.calibration import load_calibration
-
     (tmp_path / "robot.json").write_bytes(b'{"gaze_speed": "fast", "gaze_speed": "medium"}')
     with pytest.raises(ValueError, match=r"robot\.json.*the key `gaze_speed` is given twice"):
         load_robot_config(str(tmp_path / "robot.json"))
 
+
+def _calibration(tmp_path):
+    from pairplay.services.robot.calibration import load_calibration
     calibration = resources.files("pairplay.services.robot").joinpath("calibration_default.json").read_bytes()
     (tmp_path / "calibration.json").write_bytes(calibration.replace(b'{', b'{"description": "moved", ', 1))
     with pytest.raises(Exception, match=r"calibration\.json.*the key `description` is given twice"):
         load_calibration(tmp_path / "calibration.json")
 
+
+def _settings(tmp_path):
+    from pairplay.replay.studydata import _settings
     (tmp_path / "settings.json").write_bytes(b'{"key_file": "keys.csv", "key_file": ""}')
     with pytest.raises(Exception, match=r"the key `key_file` is given twice") as err:
         _settings(tmp_path / "settings.json")
     assert "settings.json" in str(err.value)
 
+
+def _cell(tmp_path):
+    from pairplay.report.sweep import _check_cell, read_grid
     (tmp_path / "grid.toml").write_bytes(b'seeds = 1\n[study]\npersonas = "blind"\n')
     grid = read_grid(tmp_path / "grid.toml")
-    cell = grid.cells()[0]
     (tmp_path / "cell.json").write_bytes(b'{"setting": [], "seed": 5, "seed": 0, "measures": {}}')
     with pytest.raises(ValueError, match=r"not a cell file: the key `seed` is given twice"):
-        _check_cell(tmp_path / "cell.json", grid, cell)
+        _check_cell(tmp_path / "cell.json", grid, grid.cells()[0])
 
-    line = (b'{"event": "ParticipantRegistered", "participant": "p01", "participant": "p02", "joins": "a"}\n')
+
+def _journal_line(tmp_path):
+    from pairplay.schemas.journal import decode_line
+    line = b'{"event": "ParticipantRegistered", "participant": "p01", "participant": "p02", "joins": "a"}\n'
     with pytest.raises(msgspec.ValidationError, match="the key `participant` more than once"):
         decode_line(line)
 
+
+def _manifest(tmp_path):
+    from pairplay.outputs import MANIFEST_FORMAT, read_manifest
     (tmp_path / "manifest.json").write_bytes(
         b'{"format": "%s", "files": ["a.txt"], "files": ["b.txt"]}' % MANIFEST_FORMAT.encode())
-    with caplog.at_level(logging.WARNING, logger="pairplay.outputs"):
+    logger = logging.getLogger("pairplay.outputs")
+    said: list[str] = []
+    handler = logging.Handler()
+    handler.emit = lambda record: said.append(record.getMessage())
+    logger.addHandler(handler)
+    try:
         assert read_manifest(tmp_path / "manifest.json") == []
-    assert "the key `files` more than once" in caplog.text, caplog.text
+    finally:
+        logger.removeHandler(handler)
+    assert any("the key `files` more than once" in s for s in said), said
+
+
+@pytest.mark.parametrize("case", [_robot_config, _calibration, _settings, _cell, _journal_line, _manifest],
+                         ids=lambda f: f.__name__.strip("_"))
+def test_every_json_file_a_user_edits_refuses_a_key_given_twice(tmp_path, case):
+    """The robot config, the calibration, a study's settings.json, a sweep cell, a journal line and an output
+    folder's manifest: each read a repeated key last-wins; each refuses it naming the key."""
+    case(tmp_path)
