@@ -66,6 +66,7 @@ from pairplay.errors import OutputError
 from pairplay.livelock import LIVE, is_live
 from pairplay.numbers import counted
 from pairplay.schemas.nesting import json_loads
+from pairplay.schemas.repeated import refuse_repeated
 
 FORCE_FIX = "--force replaces it"  # shown only by a verb that has --force (errors.UserError `fix`)
 
@@ -678,7 +679,9 @@ def read_manifest(path: Path, owned: tuple[str, ...] = ()) -> list[str]:
     if not path.is_file():
         return []
     try:
-        data = json_loads(path.read_text(encoding="utf-8"))
+        text = path.read_text(encoding="utf-8")
+        refuse_repeated(text)  # a second "files" would silently win
+        data = json_loads(text)
         if data.get("format") != MANIFEST_FORMAT or not all(isinstance(f, str) for f in data["files"]):
             raise ValueError("not a pairplay manifest")
     except (OSError, ValueError, AttributeError, KeyError, TypeError) as err:

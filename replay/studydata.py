@@ -73,6 +73,7 @@ from .rebuild import Rebuilt, rebuild_recording, write_outputs
 from .recover import default_output, journal_more
 from .wal import wal_path
 from pairplay.schemas.nesting import json_decode
+from pairplay.schemas.repeated import refuse_repeated
 
 JOURNAL, SETTINGS = "journal.jsonl", "settings.json"  # and STUDY_FILE, schemas/study.py
 # what `pairplay report` writes in <folder>/report (report/human.py), and its manifest: here, below the report,
@@ -1495,6 +1496,7 @@ def _settings(path: Path) -> dict:
         return {}
     data = without_bom(path.read_bytes())
     try:
+        refuse_repeated(data)  # a key given twice: msgspec would keep the last, silently
         return msgspec.structs.asdict(json_decode(data, type=FolderSettings))
     except (msgspec.DecodeError, msgspec.ValidationError) as err:
         raise StudyDataError(f"not the study's settings: {in_words(err, FolderSettings, data)}; it is "

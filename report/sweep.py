@@ -64,6 +64,7 @@ from pairplay.core.rng import SEED_RANGE
 from pairplay.core.study import FIRST_ROUNDS
 from pairplay.report.study import SettingError, StudySettings, default_reuse_last
 from pairplay.schemas.nesting import json_loads, toml_loads
+from pairplay.schemas.repeated import refuse_repeated
 
 log = logging.getLogger("pairplay.sweep")
 
@@ -365,6 +366,7 @@ def _check_cell(path: Path, grid: Grid, cell: Cell) -> dict[str, float]:
     if empty(data):
         raise ValueError(empty(data))
     try:
+        refuse_repeated(without_bom(data))  # a measure given twice: json would keep the last, silently
         found = msgspec.convert(json_loads(without_bom(data)), CellFile)  # json: NaN is read, then refused below
     except ValueError as err:  # json.JSONDecodeError, msgspec.ValidationError (in the file's words: in_words)
         raise ValueError(f"not a cell file: {' '.join(in_words(err, CellFile).split())}") from None
@@ -388,7 +390,9 @@ def is_cell_file(path: Path) -> bool:
     not a manifest (pairplay/outputs.py): cells are written one by one as each finishes, and a stopped sweep's
     are kept to resume from, so a list written at the end would miss them; each cell file says what it is."""
     try:
-        found = msgspec.convert(json_loads(without_bom(path.read_bytes())), CellFile)
+        data = without_bom(path.read_bytes())
+        refuse_repeated(data)
+        found = msgspec.convert(json_loads(data), CellFile)
     except (OSError, ValueError, RecursionError):  # not readable, not JSON, not a cell
         return False
     return Cell(tuple(tuple(kv) for kv in found.setting), found.seed).id == path.stem

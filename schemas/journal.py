@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import msgspec
 from .nesting import JsonDecoder
+from .repeated import refuse_repeated
 
 
 class JournalEvent(msgspec.Struct, frozen=True, kw_only=True, tag_field="event"):
@@ -151,6 +152,9 @@ _encoder = msgspec.json.Encoder()
 
 
 def decode_line(line: bytes | str) -> JournalEvent:
+    """The event of one journal line; msgspec.ValidationError for a key given twice (`repeated`: msgspec keeps
+    the last, so a second "participant" moved a line to another participant), DecodeError for what is no event."""
+    refuse_repeated(line)
     return _decoder.decode(line)
 
 

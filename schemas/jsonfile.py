@@ -34,6 +34,8 @@ to be retired, with what replaced it (a Struct's `RETIRED` table, `retired_key`)
 never as a typo of another key. Every unknown or retired key of a file is said at once, in the
 file's order (`unknown_keys`; the study and sweep files too), the first MAX_SAID by name and the
 rest counted: msgspec stops at the first, and a file of two was fixed and rerun for each.
+A key given twice in one object is refused, naming it (`repeated.refuse_repeated`): msgspec kept the
+last, and a second `"partial": ""` passed a partial policy off as whole.
 """
 
 from __future__ import annotations
@@ -50,6 +52,7 @@ from pairplay.inputs import check_input
 from pairplay.nearest import nearest
 from pairplay.numbers import counted, type_name
 from .nesting import JsonDecoder, json_decode
+from .repeated import refuse_repeated
 
 T = TypeVar("T")
 BOM = b"\xef\xbb\xbf"  # UTF-8's byte order mark: Notepad and other editors start a saved file with it
@@ -154,6 +157,8 @@ def in_words(exc: Exception, struct: type | None = None, data: bytes | None = No
             shown = [f"{w}: {_unknown_said(struct, w, k)}" if w else _unknown_said(struct, w, k)
                      for w, k in every[:MAX_SAID]]
             return "; ".join(shown) + (f"; and {len(every) - MAX_SAID} more" if len(every) > MAX_SAID else "")
+    elif twice := re.fullmatch(r"Object contains the key `(.+)` more than once", what):  # repeated.py
+        said = f"the key `{twice[1]}` is given twice (read so, the last would silently win): keep one"
     elif missing := re.fullmatch(r"Object missing required field `(.+)`", what):
         said = f"needs the key `{missing[1]}`"
     elif enum := re.fullmatch(r"Invalid enum value (.+)", what):
@@ -310,6 +315,7 @@ class JsonFileKind(Generic[T]):
                 raise self.error(f"{source}: {self.what} version {said.version} is newer than this pairplay "
                                  f"(reads up to {self.version}); upgrade pairplay")
         try:
+            refuse_repeated(data)  # msgspec keeps the last of a key given twice, without a word
             return self._decoder.decode(data)
         except self.error as exc:
             raise self.error(f"{source}: {exc}") from None

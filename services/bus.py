@@ -72,14 +72,16 @@ from pathlib import Path
 from typing import Any, Callable
 
 import json5
+import msgspec
 import zenoh
 import zenoh.ext
 
 from pairplay import signals, testpause
 from pairplay.errors import UserError
 from pairplay.inputs import refusal
-from pairplay.schemas.jsonfile import a_folder, empty
-from pairplay.services.zenohcheck import MODES, exposed, type_errors
+from pairplay.schemas.jsonfile import a_folder, empty, in_words
+from pairplay.schemas.repeated import refuse_repeated
+from pairplay.services.zenohcheck import MODES, exposed, scouting_beyond, type_errors
 from pairplay.schemas.nesting import TOO_DEEP, json_loads
 
 log = logging.getLogger("pairplay.bus")
@@ -175,6 +177,10 @@ def read_config_file(path: str) -> dict[str, Any]:
         raise ConfigFileError(f"cannot use the Zenoh config: not JSON5: {TOO_DEEP}", f"--zenoh-config {path}") from None
     if not isinstance(data, dict):
         raise ConfigFileError("cannot use the Zenoh config: the top level must be an object", f"--zenoh-config {path}")
+    try:  # json5 keeps the last of a key given twice: `{multicast: {enabled: false, enabled: true}}` turned it on
+        refuse_repeated(text, json5.loads)
+    except msgspec.ValidationError as err:
+        raise ConfigFileError(f"cannot use the Zenoh config: {in_words(err)}", f"--zenoh-config {path}") from None
     return data
 
 
@@ -1046,10 +1052,15 @@ def _open(options: BusOptions) -> zenoh.Session:
     mode) as a BusOpenError naming the options (one line for the user)."""
     _init_zenoh_log()
     config = options.to_zenoh()
-    exposed_to = exposed(options.to_dict())
+    cfg = options.to_dict()
+    exposed_to = exposed(cfg)
     if exposed_to:  # every verb's bus, in one line (services/zenohcheck.py)
         log.warning("the bus listens beyond loopback without TLS (%s): anyone on that network can read and write "
                     "the session; use tls/ endpoints (docs/bus.md, \"Security\")", " ".join(exposed_to))
+    if scouted := scouting_beyond(cfg):  # UDP on every interface: multicast scouting opened it without a word
+        log.warning("the bus scouts beyond loopback (%s): anyone on that network can find the session and "
+                    "connect to it; turn scouting off, or use tls/ endpoints (docs/bus.md, \"Security\")",
+                    "; ".join(scouted))
     try:
         return zenoh.open(config)
     except Exception as err:

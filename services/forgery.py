@@ -5,8 +5,9 @@ bus can publish a start or an end claiming source "game". The game gets every me
 keys and names one it did not publish (services/guard.py `forged`). Every listener refuses a start
 or end that does not fit the game's sequence (guard.py); one that fits is taken. The session then:
 - plays on when the forgery was refused everywhere it can tell: no listener in this process took
-  it (their guards' `took`: the learner, the participant, the robot bridge, the lab's board, the
-  recorder), and no consumer of the event runs in another process, or its seq lies more than
+  it (their guards' `took_message`: the learner, the participant, the robot bridge, the lab's board,
+  the recorder; that message, by its bytes, not whatever they took at its key and seq: a replayed
+  old recording's start, at the seq of the game's own, is refused by all), and no consumer of the event runs in another process, or its seq lies more than
   MAX_SEQ_JUMP above what the game had published (every guard refuses that jump);
   the forgery stays in the file as the game's refusal (a MessageRejected "forged: ...");
 - stops otherwise (`verdict` names why), within the 0.1 s the session's watch loop checks it
@@ -47,13 +48,15 @@ class ForgeryWatch:
         """"" to play on; else why the session stops: the forgery named, and who took it or might have."""
         if self.game is None:
             return ""
-        for event, reason in list(self.game.driver.guard.forged):
+        for event, reason, message in list(self.game.driver.guard.forged):
             tag = type(event).__name__ if event is not None else ""
             if tag not in ONCE_PER_SESSION:
                 continue
             what = reason.removeprefix("forged: ")
-            at = (event_key(event.session, event.source, tag), event.seq)
-            took = [name for name, guard in self.listeners if at in guard.took]
+            key = event_key(event.session, event.source, tag)
+            # that very message, not its (key, seq): the listeners took the game's own start at that seq, and a
+            # replayed old recording's copy of it, refused by all, was said taken and stopped the session (F14)
+            took = [name for name, guard in self.listeners if guard.took_message(key, event.seq, message)]
             if took:
                 return f"{what}; taken by {', '.join(took)}"
             elsewhere = [s for s in self.external if s in consumers(tag)]

@@ -59,6 +59,7 @@ is recorded, one way or the other; none stops the service.
 
 from __future__ import annotations
 
+import hashlib
 import re
 from collections import Counter
 from typing import Callable, NamedTuple
@@ -112,11 +113,15 @@ class Guard:
         # that would show an end it took was not the source's may never reach it (see rule)
         self.by_tag = False
         self.names_forgeries = False  # a message on our own keys is not ours: a forgery (see rule)
-        self.forged: list[tuple[Event, str]] = []  # forged starts and ends on our own keys, why (`_forged`)
+        # forged starts and ends on our own keys, why, and the message's identity (`identity`; `_forged`)
+        self.forged: list[tuple[Event, str, bytes]] = []
         self.last_seq: dict[str, int] = {}  # per key
         self.top_seq: dict[str, int] = {}  # per source: the highest taken
         self.once: dict[str, tuple[str, int]] = {}  # ONCE_PER_SESSION tag taken -> (its key, its seq)
-        self.took: set[tuple[str, int]] = set()  # (key, seq) of every start and end ever taken (a slot given back too)
+        # (key, seq) of every start and end ever taken (a slot given back too) -> the identities of the messages
+        # taken there (`identity`; None: folded from a log, its bytes unknown). By identity, not (key, seq): a
+        # replayed old start at the seq of the game's own was called taken, and the session stopped (trial28 F14)
+        self.took: dict[tuple[str, int], set[bytes | None]] = {}
         self.marks: dict[str, tuple[int, int]] = {}  # per source: seq of the start and of the end taken from it
         self.notices: list[tuple[str, str, str, int]] = []  # (reason, key, source, seq) to record (_conflict)
         self.cut: dict[str, int] = {}  # per key: the last seq a resume took from the log (see rule)
@@ -195,7 +200,7 @@ class Guard:
             if seq <= top and (self.whole or k.tag != "SessionStarted"):
                 return Verdict(event, f"{k.tag} seq {seq} claiming {source!r} is not after the events {source} "
                                       f"already published (seq {top}): not {source}'s; refused")
-            self._take_once(k.tag, key, source, seq)
+            self._take_once(k.tag, key, source, seq, identity(payload))
         self.last_seq[key] = seq  # note(), inlined: seq is above both already or equal to top
         if seq > top:
             self.top_seq[source] = seq
@@ -217,7 +222,7 @@ class Guard:
         if event is not None and type(event).__name__ in ONCE_PER_SESSION and len(self.forged) < FORGED_KEPT:
             # what the session acts on (services/forgery.py); every other forgery is only refused and recorded,
             # so a flood of them cannot grow this list (each refusal is counted: Refusals)
-            self.forged.append((event, reason))
+            self.forged.append((event, reason, identity(payload)))
         return Verdict(event, reason)
 
     def note(self, key: str, event: Event) -> None:
@@ -228,11 +233,19 @@ class Guard:
         if tag in ONCE_PER_SESSION and tag not in self.once:
             self._take_once(tag, key, event.source, event.seq)
 
-    def _take_once(self, tag: str, key: str, source: str, seq: int) -> None:
+    def took_message(self, key: str, seq: int, message: bytes) -> bool:
+        """Whether this guard took the start or end of identity `message` (`identity`) at (`key`, `seq`): the
+        session asks it of a forgery (services/forgery.py). One folded from a log (its bytes unknown) counts as
+        that message: a service that resumed cannot tell, and a start or end it may have taken stops the session."""
+        taken = self.took.get((key, seq), ())
+        return message in taken or None in taken
+
+    def _take_once(self, tag: str, key: str, source: str, seq: int, message: bytes | None = None) -> None:
         """Take a source's SessionStarted/SessionEnded: remember where, so that a later event of the
-        source that contradicts it (`_conflict`) can be noticed with one dict lookup per message."""
+        source that contradicts it (`_conflict`) can be noticed with one dict lookup per message; and
+        which message it was (`message`, its `identity`; None from a log), so a copy at its seq is not it."""
         self.once[tag] = (key, seq)
-        self.took.add((key, seq))
+        self.took.setdefault((key, seq), set()).add(message)
         start, end = self.marks.get(source, (-1, NO_END))
         self.marks[source] = (seq, end) if tag == "SessionStarted" else (start, seq)
 
@@ -290,7 +303,7 @@ class Refusals:
             self.in_window += 1
             out.append(MessageRejected(reason=clip(reason, MAX_REASON), key=clip(str(key), MAX_NAME),
                                        offending_source=clip(source, MAX_NAME), offending_seq=seq,
-                                       excerpt=payload[:EXCERPT].decode("utf-8", "replace")))
+                                       excerpt=excerpt(payload)))
         else:
             self._hold(source, reason)
         return out
@@ -333,6 +346,18 @@ class Refusals:
 
     def pending(self) -> bool:
         return bool(self.held)
+
+
+def excerpt(payload: bytes) -> str:
+    """A refusal's excerpt of the message it refused (MessageRejected.excerpt): its first EXCERPT bytes as text."""
+    return bytes(payload[:EXCERPT]).decode("utf-8", "replace")
+
+
+def identity(payload: bytes) -> bytes:
+    """What tells one message from another at the same key and seq (a replayed or forged copy of a start
+    or end): a digest of its bytes, as every listener in the process got them. Only taken for starts and
+    ends, never on the hot path."""
+    return hashlib.blake2b(payload, digest_size=16).digest()
 
 
 def event_key_of(key: str, tag: str) -> str:

@@ -8,9 +8,12 @@ participant never picks) and one that refused its real end never ends: either wa
 waited for ever, or played on without it, and never said why (only the recorder's refusal of the
 start was watched). So the session watches every service's MessageRejected and acts on a refusal
 of the game's own start or end:
-- "the game's own": the offending key is the game's SessionStarted/SessionEnded key and the
-  offending seq is the one the game published there (its Outbox's `sent`). A refusal of a
-  forged start or end is not (services/forgery.py: another seq; the game's own "forged: ..."
+- "the game's own": the offending key is the game's SessionStarted/SessionEnded key, the
+  offending seq is the one the game published there (its Outbox's `sent`), and the refusal's
+  excerpt (the message's first bytes) is that of the game's message. A refusal of a forged start
+  or end is not (services/forgery.py: another seq, or at the same seq other bytes: a replayed old
+  recording's start at the seq of the game's own was refused by every listener, and the session
+  was stopped as if they had refused the game's, trial28 F14; the game's own "forged: ..."
   refusals are the game's, not a listener's), nor a "contradicted: " notice (services/guard.py:
   it names the start or end the service took, turned out not to be the game's);
 - a refused start stops the session at once: the game ends it "failed", naming the service and
@@ -33,7 +36,7 @@ import threading
 from pairplay.errors import UserError
 from pairplay.schemas.events import MessageRejected, decode_event
 from pairplay.schemas.keys import event_key, session_keys
-from pairplay.services.guard import CONTRADICTED
+from pairplay.services.guard import CONTRADICTED, excerpt
 
 KEPT = 1000  # refusals naming the game's start or end key kept until judged; more are dropped unjudged
 WHAT = {"SessionStarted": "start", "SessionEnded": "end"}
@@ -69,11 +72,18 @@ def published_seq(node, tag: str, newest: bool | None = None) -> int | None:
     """The seq of a node's own `tag` event once its Outbox has published it (None before): the first,
     or with `newest` the last one (by default the game's end, near the end of what it sent; its start
     is near the beginning). Also the robot bridge's count of its in-process learner's suggestions."""
+    payload = published(node, tag, newest)
+    return None if payload is None else decode_event(payload).seq
+
+
+def published(node, tag: str, newest: bool | None = None) -> bytes | None:
+    """The payload of a node's own `tag` event once its Outbox has published it (None before), the first or
+    the last as `published_seq` says."""
     key = event_key(node.session, node.logic.name, tag)
     newest = tag == "SessionEnded" if newest is None else newest
     for k, payload in (reversed(node.outbox.sent) if newest else node.outbox.sent):
         if k == key:
-            return decode_event(payload).seq
+            return payload
     return None
 
 
@@ -85,7 +95,8 @@ class RefusalWatch:
         self.game, self.tags = game, tags
         self.keys = {event_key(session, "game", tag): tag for tag in tags}
         self.seqs: dict[str, int] = {}  # tag -> the seq the game published it with (published_seq)
-        self.kept: list[tuple[str, int, str, str]] = []  # (tag, offending seq, service, reason) to judge
+        self.excerpts: dict[str, str] = {}  # tag -> the excerpt a refusal of the game's own gives (guard.excerpt)
+        self.kept: list[tuple[str, int, str, str, str]] = []  # (tag, offending seq, service, reason, excerpt) to judge
         self.found: dict[str, list[tuple[str, str]]] = {}  # tag -> [(service, reason)] of the game's own refused
         self._lock = threading.Lock()  # Zenoh's threads append, the watch loop judges
         # every source's refusals (the Node's by-tag subscription's form: services/runner.py)
@@ -105,7 +116,7 @@ class RefusalWatch:
             return  # of another start or end than the game's, known by now: a flood of those keeps nothing
         with self._lock:
             if len(self.kept) < KEPT:
-                self.kept.append((tag, e.offending_seq, e.source, e.reason))
+                self.kept.append((tag, e.offending_seq, e.source, e.reason, e.excerpt))
 
     def verdict(self) -> str:
         """"" to go on; else the line of the first of the game's own events a service refused."""
@@ -120,18 +131,21 @@ class RefusalWatch:
         """Move the refusals kept so far into `found` (the game's own) or drop them (see rule)."""
         with self._lock:
             kept, self.kept = self.kept, []
-        for tag, seq, source, reason in kept:
+        for tag, seq, source, reason, said in kept:
             real = self.seqs.get(tag)
             if real is None:
                 # a game that has not ended has published no end: no scan of all it sent (a forged end's refusal)
                 ended = tag != "SessionEnded" or self.game.logic.done
-                real = published_seq(self.game, tag) if ended else None
-                if real is None:  # not published yet (the refusal overtook the game's Outbox): judged later
+                payload = published(self.game, tag) if ended else None
+                if payload is None:  # not published yet (the refusal overtook the game's Outbox): judged later
                     with self._lock:
-                        self.kept.append((tag, seq, source, reason))
+                        self.kept.append((tag, seq, source, reason, said))
                     continue
-                self.seqs[tag] = real
-            if seq == real:
+                real = self.seqs[tag] = decode_event(payload).seq
+                self.excerpts[tag] = excerpt(payload)
+            # at the game's seq, and its bytes (a copy at that seq is not the game's: see rule); a refusal without
+            # an excerpt cannot tell, and counts as of the game's own
+            if seq == real and (not said or said == self.excerpts[tag]):
                 self.found.setdefault(tag, []).append((source, reason))
 
     def error(self, where) -> UserError | None:

@@ -7,7 +7,10 @@ file is refused, naming the key (`{"mode": 5}` was taken without a word: our mod
 whose listeners reach beyond loopback (any address but 127.0.0.0/8, ::1 and localhost, over any
 link but a unix socket) without TLS (`tls/`, `quic/`) lets anyone on the network read and write
 the session: every verb that opens such a bus says so in one warning line (stderr, the
-log's), as `pairplay lab --listen` does for its web server.
+log's), as `pairplay lab --listen` does for its web server. Scouting that reaches beyond
+loopback (`scouting_beyond`: multicast scouting, which opens UDP on every interface whatever
+the listeners, or gossip) is said alike, in a line of its own: a config that turned multicast
+on opened 0.0.0.0 and 224.0.0.224:7446 without a word (trial28 F17).
 """
 
 from __future__ import annotations
@@ -96,3 +99,21 @@ def exposed(cfg: dict) -> list[str]:
     if isinstance(endpoints, dict):  # per mode
         endpoints = endpoints.get(cfg.get("mode", ""), [])
     return [e for e in endpoints if isinstance(e, str) and _host(e)[0] not in SECURE_LINKS and beyond_loopback(e)]
+
+
+MULTICAST = "224.0.0.224:7446"  # Zenoh's default scouting group
+
+
+def scouting_beyond(cfg: dict) -> list[str]:
+    """The scouting of a whole config (BusOptions.to_dict) that reaches beyond loopback, in words: multicast
+    scouting (Zenoh opens UDP on every interface, 0.0.0.0, and joins its group, 224.0.0.224:7446 by default,
+    whatever the listen endpoints) and gossip (peers pass on the addresses of others, and it connects to them);
+    [] with both off, as pairplay's defaults have them (bus.safe_defaults). What the warning names."""
+    scouting = cfg.get("scouting") or {}
+    multicast, gossip = scouting.get("multicast") or {}, scouting.get("gossip") or {}
+    found = []
+    if multicast.get("enabled") is True:
+        found.append(f"multicast scouting on UDP {multicast.get('address', MULTICAST)}")
+    if gossip.get("enabled") is True:
+        found.append("gossip scouting")
+    return found

@@ -19,6 +19,7 @@ import threading
 import time
 from pathlib import Path
 
+import msgspec
 import pytest
 
 from pairplay.replay.forgery import contradiction
@@ -230,11 +231,10 @@ def test_rebuild_and_verify_report_a_forged_end_instead_of_a_session_of_0_rounds
     assert not contradiction(r.event for r in read_log(SAMPLE).events)
 
 
-def test_a_forged_end_every_service_refuses_is_recorded_and_the_session_plays_to_its_end(tmp_path):
-    # the trial's sloppy forger: an end at a seq the game passed long ago; every listener refuses it.
-    # In-process, the game waiting for the forger's token: a 3-round session is over in a blink, and the
-    # forger must be subscribed before it starts
-    config = SessionConfig(session="forge3", participant="sim:ashley", persona="ashley", seed=1, rounds=3)
+def forged_in_process(path: Path, config: SessionConfig, key: str, payload: bytes) -> bool:
+    """`run_session` of `config` into `path` in this process, its game waiting for a forger's token: the forger,
+    subscribed before the game starts (a 3-round session is over in a blink), puts `payload` on `key` once the game
+    asked for its first suggestion. Whether the session played to its end (False: it raised, e.g. ForgedEvent)."""
     box: dict = {}
     ready = threading.Event()
 
@@ -243,18 +243,26 @@ def test_a_forged_end_every_service_refuses_is_recorded_and_the_session_plays_to
         ready.set()
 
     def run():
-        box["path"] = run_session(config, tmp_path / "forge3.mcap", on_bus=on_bus, wait_also=("forger",))
+        box["path"] = run_session(config, path, on_bus=on_bus, wait_also=("forger",))
     runner = threading.Thread(target=run, daemon=True)
     runner.start()
     assert ready.wait(30)
     with connector(box["bus"]) as client:
-        seen = game_events(client, "forge3")
-        client.alive(alive_key("forge3", "forger"))  # the game starts now
+        seen = game_events(client, config.session)
+        client.alive(alive_key(config.session, "forger"))  # the game starts now
         while not isinstance(decode_event(seen.get(timeout=60)), ev.SuggestionRequested):
             pass
-        client.put(*forge("forge3", ev.SessionEnded(reason="forged"), 2))
+        client.put(key, payload)
         runner.join(60)
-    assert not runner.is_alive() and box.get("path") is not None  # no ForgedEvent: it played to its end
+    return not runner.is_alive() and box.get("path") is not None
+
+
+def test_a_forged_end_every_service_refuses_is_recorded_and_the_session_plays_to_its_end(tmp_path):
+    # the trial's sloppy forger: an end at a seq the game passed long ago; every listener refuses it.
+    # In-process, the game waiting for the forger's token: a 3-round session is over in a blink, and the
+    # forger must be subscribed before it starts
+    config = SessionConfig(session="forge3", participant="sim:ashley", persona="ashley", seed=1, rounds=3)
+    assert forged_in_process(tmp_path / "forge3.mcap", config, *forge("forge3", ev.SessionEnded(reason="forged"), 2))
     events = [r.event for r in read_log(tmp_path / "forge3.mcap").events]
     assert [x.reason for x in events if isinstance(x, ev.SessionEnded)] == ["completed"]
     assert len(read_log(tmp_path / "forge3.mcap").of("RoundEnded")) == 3
@@ -262,6 +270,26 @@ def test_a_forged_end_every_service_refuses_is_recorded_and_the_session_plays_to
     assert named and "forged: SessionEnded seq 2 claiming source 'game'" in named[0].reason
     assert any(isinstance(x, ev.MessageRejected) and x.source == "recorder" and "not after the events" in x.reason
                for x in events)
+
+
+def test_a_replayed_old_start_of_the_same_session_every_listener_refuses_leaves_it_playing(tmp_path):
+    # trial28 F14: an old recording of the same session id replayed into a live one. Its SessionStarted has the
+    # seq of the game's own (2): every listener refused it as a duplicate, but the session was stopped "failed
+    # ... taken by learner, participant, recorder": they had taken the game's own start at that (key, seq)
+    old = SessionConfig(session="rp1", participant="sim:ashley", persona="ashley", seed=1, rounds=3)
+    (tmp_path / "a").mkdir()
+    run_session(old, tmp_path / "a" / "rp1.mcap")
+    [start] = [r for r in read_log(tmp_path / "a" / "rp1.mcap").events if isinstance(r.event, ev.SessionStarted)]
+    (tmp_path / "b").mkdir()
+    # the old recording's start, as `pairplay replay` puts it; no ForgedEvent, no StartRefused: it plays to its end
+    assert forged_in_process(tmp_path / "b" / "rp1.mcap", msgspec.structs.replace(old, seed=2), start.key, start.payload)
+    events = [r.event for r in read_log(tmp_path / "b" / "rp1.mcap").events]
+    assert [x.reason for x in events if isinstance(x, ev.SessionEnded)] == ["completed"]
+    named = [x for x in events if isinstance(x, ev.MessageRejected) and x.source == "game"]
+    assert named and "forged: SessionStarted seq 2 claiming source 'game'" in named[0].reason
+    refused = {x.source for x in events if isinstance(x, ev.MessageRejected) and x.offending_seq == 2
+               and "duplicate or out of order" in x.reason}
+    assert {"learner", "participant", "recorder"} <= refused, refused
 
 
 def test_the_live_view_follows_a_session_whose_game_goes_on_after_a_forged_end():

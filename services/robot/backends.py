@@ -30,6 +30,7 @@ from pairplay.services.robot.render import Renderer
 from pairplay.services.robot.transport import Transport
 from pairplay.services.robot.virtual import VirtualTransport
 from pairplay.schemas.nesting import json_decode
+from pairplay.schemas.repeated import refuse_repeated
 
 
 def make_transport(url: str, config: RobotConfig | None = None) -> tuple[Transport, RobotConfig]:
@@ -52,6 +53,7 @@ def load_robot_config(path: str | None) -> RobotConfig:
             raw = f.read()
         if empty(raw):
             raise ValueError(f"robot config {path}: {empty(raw)}")
+        refuse_repeated(without_bom(raw))  # a key given twice: msgspec would keep the last, silently
         config = json_decode(without_bom(raw), type=RobotConfig)
     except IsADirectoryError:
         raise ValueError(a_folder(path, "robot config", "its JSON file")) from None

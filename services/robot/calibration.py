@@ -22,6 +22,7 @@ from pairplay.inputs import refusal
 from pairplay.schemas.jsonfile import a_folder, empty, in_words, without_bom
 from pairplay.schemas.robot import BoardCalibration, Point
 from pairplay.schemas.nesting import json_decode
+from pairplay.schemas.repeated import refuse_repeated
 
 DEFAULT_FILE = "calibration_default.json"
 MAX_DISTANCE_M = 10.0  # a card farther than this from the robot is a unit mistake
@@ -50,6 +51,7 @@ def load_calibration(path: str | Path | None = None) -> BoardCalibration:
         if empty(raw):
             raise CalibrationError(f"calibration {where}: {empty(raw)}")
     try:
+        refuse_repeated(without_bom(raw))  # a key given twice: msgspec would keep the last, silently
         calibration = json_decode(without_bom(raw), type=BoardCalibration)
     except msgspec.DecodeError as exc:  # ValidationError is a subclass
         raise CalibrationError(f"calibration {where} is not valid: "
