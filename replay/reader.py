@@ -11,7 +11,11 @@ message is decoded with msgspec into its event class; a message of an event
 type this version does not know (a newer pairplay's) is counted and kept as an
 `UnknownEvent` by its tag; any other message that does not decode is kept as a
 `BadMessage` with the reason (a recording is evidence: nothing is dropped
-silently). A message that does not decode is an event every verb reading the
+silently). Identical copies of one event (its session, source and seq, the same
+bytes: a message stored twice, a chunk written again) are read once and counted
+(`copies`, said by `copied` in the line every verb says of the file: `loss_free`,
+`missing`); a differing event of the same (session, source, seq) is kept, for
+replay/forgery.py to judge. A message that does not decode is an event every verb reading the
 file lacks (a Q update among them: a Q-table the learner never had), so such a
 file is damaged as one that lost a part: `EventLog.undecoded` says so in the one
 line every verb uses (rebuild, counterfactual, replay and verify, view, report),
@@ -109,6 +113,18 @@ class EventLog:
     # session is not), in one short line (from its RECOVERED metadata); "" if its source lost no
     # message (an index, a CRC: the session is whole) or it is no recovered file
     source_lost: str = ""
+    # identical copies of one event (its session, source and seq, the same bytes) read once (module rule: `copied`)
+    copies: int = 0
+
+    @property
+    def copied(self) -> str:
+        """The identical copies of events the file held, read once, in one short line ("" if none): a file whose
+        every message was stored twice (a copying tool, a chunk written again) was folded twice, exit 0: a
+        policy of doubled visits and Q updated twice (a hostile user's trial). A copy changes nothing, so it is
+        said, not a loss; a differing event of the same (session, source, seq) is no copy (replay/forgery.py)."""
+        if not self.copies:
+            return ""
+        return f"{counted(self.copies, 'identical copy', 'identical copies')} of events read once"
 
     @property
     def whole(self) -> bool:
@@ -152,10 +168,13 @@ class EventLog:
         events are the session's, so no verb marks its output partial, and none is silent of it (a new user's
         trial: verify FAILed it, view, counterfactual and report said nothing); verify PASSes it when the damage
         is all after the data section (`data_intact`)."""
-        if self.whole or self.missing or self.lost_from >= 0:
+        if self.missing or self.lost_from >= 0:
             return ""
+        if self.whole:  # whole, but for copies of events (`copied`): said all the same
+            return self.copied
         what = "damaged" if self.damage else "cut after its data section"
-        return f"the file is {what}, no event lost ({self.brief}): pairplay recover makes a whole copy"
+        said = f"the file is {what}, no event lost ({self.brief}): pairplay recover makes a whole copy"
+        return "; ".join(n for n in (said, self.copied) if n)
 
     @property
     def data_intact(self) -> bool:
@@ -191,7 +210,9 @@ class EventLog:
         when its damage lost none (an index, a summary, a cut after the Data End): such a file is whole to a verb
         that reads its events (counterfactual, view, replay said "not whole" of it, and marked their output
         partial)."""
-        return self.note if (self.lost or self.cut_lost or self.source_cut) else ""
+        if not (self.lost or self.cut_lost or self.source_cut):
+            return ""
+        return "; ".join(n for n in (self.note, self.copied) if n)  # (copies said too: `loss_free` is "" here)
 
     @property
     def no_session(self) -> str:
@@ -512,6 +533,22 @@ def _read_log(path: str | Path, only: frozenset[str] | None = None) -> EventLog:
     skipped: dict[str, int] = log.skipped
     decode, head = decode_event, _tagged.decode
     append = log.events.append
+    # (session, source, seq) -> the bytes of the first event read of it: an identical one after it is a copy (a file
+    # whose every message was stored twice, a chunk written again), read once; one that differs is kept, for
+    # replay/forgery.py to judge (a contradiction)
+    seen: dict[tuple[str, str, int], bytes] = {}
+
+    def copy(at: tuple[str, str, int], data: bytes, event: Event | None = None) -> bool | None:
+        """Whether `data` (decoded: `event`) is a copy of the first event read of `at`: None if it is the first,
+        True if the same bytes or (decoded) an equal event (another encoder's spacing: forgery.py's test),
+        False if it differs (or is not decoded yet: its bytes differ)."""
+        first = seen.setdefault(at, data)
+        if first is data:
+            return None
+        if first == data:
+            return True
+        return event is not None and _decoded(first) == event
+
     records = checked.summary_records + checked.records
     own = [(len(checked.summary_records) + at, n) for at, n in checked.losses()]
     lost = sorted({at for at, _ in own})
@@ -540,13 +577,22 @@ def _read_log(path: str | Path, only: frozenset[str] | None = None) -> EventLog:
             data = record.data
             if tag is not None:
                 try:
-                    if head(data).type == tag:
-                        skipped[tag] = skipped.get(tag, 0) + 1
+                    h = head(data)
+                    copied = copy((h.session, h.source, h.seq), data) if h.type == tag else False
+                    if copied:
+                        log.copies += 1  # an identical copy of one event read: once (module rule)
                         continue
+                    if copied is None:
+                        skipped[tag] = skipped.get(tag, 0) + 1
+                        continue  # (other bytes of a seq read: decoded wholly below, to compare)
                 except (msgspec.DecodeError, msgspec.ValidationError):
                     pass  # decoded wholly below: a bad message is kept as one
             try:
-                append(RecordedEvent(key, decode(data), record.log_time, data))
+                e = decode(data)
+                if copy((e.session, e.source, e.seq), data, e):
+                    log.copies += 1  # an identical copy of one event read: once (module rule)
+                    continue
+                append(RecordedEvent(key, e, record.log_time, data))
             except (msgspec.DecodeError, msgspec.ValidationError) as err:
                 tag = unknown_tag(record.data)
                 if tag is not None:
@@ -578,6 +624,14 @@ def _read_log(path: str | Path, only: frozenset[str] | None = None) -> EventLog:
         log.error = f"{LIVE}, read as far as it goes; {log.error}"
         log.brief = f"{LIVE}, read as far as it goes; {log.brief}"
     return log
+
+
+def _decoded(data: bytes) -> Event | None:
+    """`data` decoded (None if it does not decode): the first event of a seq, kept as bytes, to compare."""
+    try:
+        return decode_event(data)
+    except (msgspec.DecodeError, msgspec.ValidationError):
+        return None
 
 
 def read_events(path: str | Path) -> list[Event]:

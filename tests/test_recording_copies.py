@@ -1,0 +1,97 @@
+"""Identical copies of one event in a recording are read once by every verb, and said (replay/reader.py rule).
+
+A hostile user's trial (trial28 F1): a recording whose every message was stored twice (same channel, times,
+sequence, bytes) rebuilt with exit 0 into a wrong policy (visits doubled, Q updated twice), not flagged; view drew
+twice the events. The files are made here from a frozen sample with the mcap library's own Writer."""
+
+from __future__ import annotations
+
+import json
+import shutil
+
+import pytest
+
+from pairplay.cli.main import main
+from pairplay.replay.reader import read_log
+
+from rewrite_mcap import SAMPLE, rewritten
+
+TWICE = lambda channel, message: [message, message]  # noqa: E731
+
+
+@pytest.fixture(scope="module")
+def files(tmp_path_factory):
+    d = tmp_path_factory.mktemp("copies")
+    original = d / "orig.mcap"
+    shutil.copyfile(SAMPLE, original)
+    return {"orig": original,
+            "twice": rewritten(d / "twice.mcap", each=TWICE),  # MCAP sequence repeated: mcapscan says so too
+            "twice_renumbered": rewritten(d / "twice_renumbered.mcap", each=TWICE, renumber=True)}  # MCAP-whole
+
+
+def _run(capsys, *argv):
+    code = main(list(argv))
+    said = capsys.readouterr()
+    return code, said.out + said.err
+
+
+@pytest.mark.parametrize("kind", ["twice", "twice_renumbered"])
+def test_the_reader_reads_each_event_once_and_says_the_copies(files, kind):
+    orig, log = read_log(files["orig"]), read_log(files[kind])
+    assert [r.payload for r in log.events] == [r.payload for r in orig.events]
+    assert log.copies == len(orig.events)
+    said = f"{len(orig.events)} identical copies of events read once"
+    assert said in log.loss_free and not log.missing, log.loss_free[-200:]
+
+
+@pytest.mark.parametrize("kind", ["twice", "twice_renumbered"])
+def test_rebuild_of_a_doubled_recording_is_the_original_policy_and_says_so(files, kind, tmp_path, capsys):
+    code, out = _run(capsys, "rebuild", str(files["orig"]), "--out", str(tmp_path / "o"))
+    assert code == 0, out
+    code, out = _run(capsys, "rebuild", str(files[kind]), "--out", str(tmp_path / "d"))
+    assert code == 0 and "identical copies of events read once" in out, out[-400:]
+    want = json.loads((tmp_path / "o" / "orig.policy.json").read_text())
+    got = json.loads((tmp_path / "d" / f"{kind}.policy.json").read_text())
+    assert got["visits"] == want["visits"] and got["q"] == want["q"] and not got.get("partial")
+    assert (tmp_path / "d" / f"{kind}.curve.csv").read_text() == (tmp_path / "o" / "orig.curve.csv").read_text()
+
+
+def test_verify_and_view_of_a_doubled_recording_read_it_once(files, tmp_path, capsys):
+    p = files["twice_renumbered"]
+    code, out = _run(capsys, "replay", str(p), "--verify")
+    assert code == 0 and out.strip().splitlines()[-1].endswith("identical copies of events read once"), out[-400:]
+    code, out = _run(capsys, "view", "--recording", str(p), "--out", str(tmp_path / "v.rrd"))
+    n = len(read_log(files["orig"]).events)
+    assert code == 0 and f"saved {tmp_path / 'v.rrd'}: {n} events" in out, out[-400:]
+    assert f"{n} identical copies of events read once" in out, out[-400:]
+
+
+def _second(topic_end: str, change):
+    """A rewrite's `each`: every message kept, and after each one of a channel ending `topic_end` a second one,
+    its bytes changed by `change`."""
+    def each(channel, message):
+        if not channel.topic.endswith(topic_end):
+            return [message]
+        return [message, type(message)(channel_id=message.channel_id, sequence=message.sequence,
+                                       log_time=message.log_time, publish_time=message.publish_time,
+                                       data=change(message.data))]
+    return each
+
+
+def test_a_copy_spaced_otherwise_is_the_same_event_read_once(files, tmp_path):
+    """The same event, encoded by another tool (its JSON spaced otherwise): a copy, as replay/forgery.py judges it;
+    a skipped one (rebuild decodes only what its fold reads) too."""
+    p = rewritten(tmp_path / "spaced.mcap", each=_second("/RoundEnded", lambda d: d.replace(b'"round":', b'"round": ')))
+    assert read_log(p).copies == 4
+    p = rewritten(tmp_path / "spaced2.mcap", each=_second("/CardPicked", lambda d: d.replace(b'"type":', b'"type": ')))
+    orig = read_log(files["orig"], only=frozenset({"SessionStarted"}))
+    log = read_log(p, only=frozenset({"SessionStarted"}))
+    assert log.copies > 0 and log.skipped == orig.skipped
+
+
+def test_a_differing_event_of_the_same_game_seq_is_no_copy_but_a_contradiction(files, tmp_path, capsys):
+    """A copy must be the same event: a game event of the same seq that differs is kept, and refused as forged."""
+    p = rewritten(tmp_path / "forged.mcap", each=_second("/RoundEnded", lambda d: d.replace(b'"turns":', b'"turns":1')))
+    assert read_log(p).copies == 0
+    code, out = _run(capsys, "rebuild", str(p), "--out", str(tmp_path / "f"))
+    assert code == 2 and "two events claim source 'game'" in out, out[-400:]
