@@ -533,22 +533,7 @@ def _read_log(path: str | Path, only: frozenset[str] | None = None) -> EventLog:
     skipped: dict[str, int] = log.skipped
     decode, head = decode_event, _tagged.decode
     append = log.events.append
-    # (session, source, seq) -> the bytes of the first event read of it: an identical one after it is a copy (a file
-    # whose every message was stored twice, a chunk written again), read once; one that differs is kept, for
-    # replay/forgery.py to judge (a contradiction)
-    seen: dict[tuple[str, str, int], bytes] = {}
-
-    def copy(at: tuple[str, str, int], data: bytes, event: Event | None = None) -> bool | None:
-        """Whether `data` (decoded: `event`) is a copy of the first event read of `at`: None if it is the first,
-        True if the same bytes or (decoded) an equal event (another encoder's spacing: forgery.py's test),
-        False if it differs (or is not decoded yet: its bytes differ)."""
-        first = seen.setdefault(at, data)
-        if first is data:
-            return None
-        if first == data:
-            return True
-        return event is not None and _decoded(first) == event
-
+    copy = FirstOfEach().copy  # an identical copy of an event read before is read once (module rule)
     records = checked.summary_records + checked.records
     own = [(len(checked.summary_records) + at, n) for at, n in checked.losses()]
     lost = sorted({at for at, _ in own})
@@ -624,6 +609,37 @@ def _read_log(path: str | Path, only: frozenset[str] | None = None) -> EventLog:
         log.error = f"{LIVE}, read as far as it goes; {log.error}"
         log.brief = f"{LIVE}, read as far as it goes; {log.brief}"
     return log
+
+
+class FirstOfEach:
+    """The first event read of each (session, source, seq) (module rule): an identical one after it is a copy (a
+    file whose every message was stored twice, a chunk written again: read once, counted); one that differs is
+    kept, for replay/forgery.py to judge (a contradiction). The reader's and recover's (which copies no copy)."""
+
+    def __init__(self) -> None:
+        self._seen: dict[tuple[str, str, int], bytes] = {}  # -> the bytes of the first event read of it
+
+    def copy(self, at: tuple[str, str, int], data: bytes, event: Event | None = None) -> bool | None:
+        """Whether `data` (decoded: `event`) is a copy of the first event read of `at`: None if it is the first,
+        True if the same bytes or (decoded) an equal event (another encoder's spacing: forgery.py's test),
+        False if it differs (or is not decoded yet and its bytes differ)."""
+        first = self._seen.setdefault(at, data)
+        if first is data:
+            return None
+        if first == data:
+            return True
+        return event is not None and _decoded(first) == event
+
+    def copy_of(self, data: bytes) -> bool:
+        """Whether the message `data` is a copy of an event read before (False for one that does not decode: a
+        bad message is evidence, kept)."""
+        try:
+            head = _tagged.decode(data)
+        except (msgspec.DecodeError, msgspec.ValidationError):
+            return False
+        at = (head.session, head.source, head.seq)
+        same = self.copy(at, data)
+        return bool(same) or (same is False and self.copy(at, data, _decoded(data)) is True)
 
 
 def _decoded(data: bytes) -> Event | None:

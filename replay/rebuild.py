@@ -86,7 +86,9 @@ def partial_reason(fold: SessionFold, note: str = "", recovered: dict[str, str] 
         damaged = recovered.get("damaged", "[]") not in ("", "[]")
         # events its journal added are a partial session's unless they are its whole rest (reader.journal_restored)
         added = recovered.get("from_journal", "0") not in ("", "0") and not journal_restored(recovered)
-        if lost or cut or added or not (damaged or recovered.get("truncated") == "true"):
+        # (a whole file recovered to drop identical copies of events, replay/recover.py, lost none either)
+        copies = recovered.get("copies_dropped", "0") not in ("", "0")
+        if lost or cut or added or not (damaged or copies or recovered.get("truncated") == "true"):
             # a cut source in the words every verb says it in (reader.said_source_cut)
             why.append("completed by pairplay recover" + (" from a damaged file" if lost else
                                                            f": {said_source_cut(recovered)}" if cut else ""))

@@ -95,3 +95,18 @@ def test_a_differing_event_of_the_same_game_seq_is_no_copy_but_a_contradiction(f
     assert read_log(p).copies == 0
     code, out = _run(capsys, "rebuild", str(p), "--out", str(tmp_path / "f"))
     assert code == 2 and "two events claim source 'game'" in out, out[-400:]
+
+
+@pytest.mark.parametrize("kind", ["twice", "twice_renumbered"])
+def test_recover_copies_each_event_once_and_its_copy_rebuilds_whole(files, kind, tmp_path, capsys):
+    """recover copied the copies along (a "whole copy" every verb still read twice); a whole file with copies was
+    "complete already", nothing written. Now its copy holds each event once, said; rebuilt, not partial."""
+    out = tmp_path / "r.mcap"
+    code, said = _run(capsys, "recover", str(files[kind]), "-o", str(out))
+    n = len(read_log(files["orig"]).events)
+    assert code == 0 and f"{n} identical copies of events not copied; {n} messages kept in {out}" in said, said[-300:]
+    log = read_log(out)
+    assert log.whole and log.copies == 0 and len(log.events) == n
+    code, said = _run(capsys, "rebuild", str(out), "--out", str(tmp_path / "rb"))
+    assert code == 0 and "PARTIAL" not in said, said[-300:]
+    assert not json.loads((tmp_path / "rb" / "r.policy.json").read_text()).get("partial")
