@@ -41,6 +41,8 @@ from pairplay.numbers import counted
 from pairplay.schemas.envelope import Event
 from pairplay.schemas.jsonfile import MCAP_MAGIC
 from pairplay.schemas.events import EVENT_BY_TAG, decode_event
+from pairplay.schemas.keys import ROOT as KEY_ROOT
+from pairplay.schemas.trust import STARTERS
 
 from .mcapscan import Damage, scan
 
@@ -115,6 +117,9 @@ class EventLog:
     source_lost: str = ""
     # identical copies of one event (its session, source and seq, the same bytes) read once (module rule: `copied`)
     copies: int = 0
+    # where a starting source's (the game's: schemas/trust.py STARTERS) seq skips numbers between two events read:
+    # (source, seq before, seq after), in order (`gaps`)
+    seq_jumps: list[tuple[str, int, int]] = field(default_factory=list)
 
     @property
     def copied(self) -> str:
@@ -125,6 +130,21 @@ class EventLog:
         if not self.copies:
             return ""
         return f"{counted(self.copies, 'identical copy', 'identical copies')} of events read once"
+
+    @property
+    def gaps(self) -> str:
+        """The events of the game missing from a file that lost no part, in one short line ("" if none, or if a lost
+        part, a message that does not decode or the file it was recovered from lost them: they say so): the game
+        numbers its events 1, 2, 3, ... (replay/forgery.py), so a skipped number is an event the file lacks
+        although every byte of it checks out (a copying tool that dropped the RoundEnded: view said "0 notes",
+        rebuild "the session ended (completed) before round 1": a hostile user's trial)."""
+        if not self.seq_jumps or self.lost_at or self.source_lost:
+            return ""
+        n = sum(after - before - 1 for _, before, after in self.seq_jumps)
+        source, before, after = self.seq_jumps[0]
+        more = len(self.seq_jumps) - 1
+        return (f"{counted(n, 'event')} of {source!r} missing: its seq jumps from {before} to {after}"
+                + (f" and in {counted(more, 'other place')}" if more else ""))
 
     @property
     def whole(self) -> bool:
@@ -141,18 +161,23 @@ class EventLog:
     def undecoded(self) -> str:
         """The messages in the file that do not decode, in one short line ("" if none): how many, the first's
         channel and reason (a new user's trial: rebuilt, then fitted, with exit 0 and no word)."""
-        if not self.bad:
-            return ""
-        first = self.bad[0]
-        one = len(self.bad) == 1
-        return (f"{len(self.bad)} message{'' if one else 's'} in it {'does' if one else 'do'} not decode "
-                f"({first.key or 'no channel'}: {first.reason[:80]})")
+        said = []
+        for wrong in (False, True):  # what does not decode; what its key does not name (`disagreement`)
+            bad = [m for m in self.bad if m.reason.startswith(DISAGREES) == wrong]
+            if bad:
+                one = len(bad) == 1
+                what = (f"{'is' if one else 'are'} not what {'its' if one else 'their'} key names" if wrong
+                        else f"{'does' if one else 'do'} not decode")
+                why = bad[0].reason.removeprefix(DISAGREES).lstrip(":, ")
+                said.append(f"{len(bad)} message{'' if one else 's'} in it {what} "
+                            f"({bad[0].key or 'no channel'}: {why[:80]})")
+        return "; ".join(said)
 
     @property
     def damaged(self) -> str:
         """What is damaged in the file, in one short line ("" if nothing): its damaged parts (`brief`) and
         the messages that do not decode (`undecoded`); a cut alone is not damage."""
-        return "; ".join(n for n in (self.brief if self.damage else "", self.undecoded) if n)
+        return "; ".join(n for n in (self.brief if self.damage else "", self.undecoded, self.gaps) if n)
 
     @property
     def source_cut(self) -> str:
@@ -190,7 +215,7 @@ class EventLog:
         every message decodes and it is no recovery of a file that lost some): "damaged: ..." or "truncated: ..."
         (`brief`), what the file it was recovered from lost (`source_lost`, `source_cut`), and `undecoded`."""
         cut = "" if self.whole else f"{'damaged' if self.damage else 'truncated'}: {self.brief}"
-        return "; ".join(n for n in (cut, self.source_lost, self.source_cut, self.undecoded) if n)
+        return "; ".join(n for n in (cut, self.source_lost, self.source_cut, self.undecoded, self.gaps) if n)
 
     @property
     def lost(self) -> str:
@@ -200,7 +225,7 @@ class EventLog:
         such a file lacks events its session had (rebuild: refused without --partial; view: a partial view;
         report: the game left out); a damage that lost no event (a summary's CRC) is not a loss."""
         own = any(d.lost_at >= 0 for d in self.damage)
-        return "; ".join(n for n in (self.brief if own else "", self.source_lost, self.undecoded) if n)
+        return "; ".join(n for n in (self.brief if own else "", self.source_lost, self.undecoded, self.gaps) if n)
 
     @property
     def missing(self) -> str:
@@ -236,7 +261,8 @@ class EventLog:
             cut = ", cut short" if self.truncated else ""
             return (f"holds no session: an MCAP file with no messages ({counted(size, 'byte')}{cut}): the recording "
                     "holds nothing")
-        if not self.events and not self.skipped and foreign:
+        # (pairplay events on keys that name other ones are no other program's: said as damage, below)
+        if not self.events and not self.skipped and foreign > sum(m.reason.startswith(DISAGREES) for m in self.bad):
             topics = sorted({topic for topic, _ in self.channels.values()})[:2]
             return (f"holds no session: not a pairplay recording ({counted(foreign, 'message')}, none a pairplay event; "
                     f"channels {', '.join(repr(t) for t in topics)})")
@@ -529,11 +555,14 @@ def _read_log(path: str | Path, only: frozenset[str] | None = None) -> EventLog:
     log = EventLog(str(path))
     checked = scan(path)
     # channel -> (its topic, its tag if its events are only counted, else None): one look-up per message
-    route: dict[int, tuple[str, str | None]] = {}
+    # channel -> (its topic, its tag if its events are only counted, else None, its topic's parts: what an event on
+    # it must name: `disagreement`)
+    route: dict[int, tuple[str, str | None, tuple[str, ...]]] = {}
     skipped: dict[str, int] = log.skipped
     decode, head = decode_event, _tagged.decode
     append = log.events.append
     copy = FirstOfEach().copy  # an identical copy of an event read before is read once (module rule)
+    numbered: list[tuple[str, str, int]] = []  # (session, source, seq) of each starting source's event read (`gaps`)
     records = checked.summary_records + checked.records
     own = [(len(checked.summary_records) + at, n) for at, n in checked.losses()]
     lost = sorted({at for at, _ in own})
@@ -558,26 +587,36 @@ def _read_log(path: str | Path, only: frozenset[str] | None = None) -> EventLog:
                                           record.log_time, record.data))
                 log.lost_at.append(len(log.events))
                 continue
-            key, tag = routed
+            key, tag, parts = routed
             data = record.data
             if tag is not None:
                 try:
                     h = head(data)
-                    copied = copy((h.session, h.source, h.seq), data) if h.type == tag else False
+                    agrees = parts == (KEY_ROOT, h.session, h.source, h.type)  # else decoded below, to be said
+                    copied = copy((h.session, h.source, h.seq), data) if agrees else False
                     if copied:
                         log.copies += 1  # an identical copy of one event read: once (module rule)
                         continue
                     if copied is None:
                         skipped[tag] = skipped.get(tag, 0) + 1
+                        if h.source in STARTERS:
+                            numbered.append((h.session, h.source, h.seq))
                         continue  # (other bytes of a seq read: decoded wholly below, to compare)
                 except (msgspec.DecodeError, msgspec.ValidationError):
                     pass  # decoded wholly below: a bad message is kept as one
             try:
                 e = decode(data)
+                wrong = disagreement(parts, e)
+                if wrong:  # changes nothing, as on the bus (services/guard.py): kept as a bad message, said
+                    log.bad.append(BadMessage(key, wrong, record.log_time, data))
+                    log.lost_at.append(len(log.events))
+                    continue
                 if copy((e.session, e.source, e.seq), data, e):
                     log.copies += 1  # an identical copy of one event read: once (module rule)
                     continue
                 append(RecordedEvent(key, e, record.log_time, data))
+                if e.source in STARTERS:
+                    numbered.append((e.session, e.source, e.seq))
             except (msgspec.DecodeError, msgspec.ValidationError) as err:
                 tag = unknown_tag(record.data)
                 if tag is not None:
@@ -589,7 +628,7 @@ def _read_log(path: str | Path, only: frozenset[str] | None = None) -> EventLog:
             log.channels[record.id] = (record.topic, str(record.schema_id))
             tag = record.topic.rsplit("/", 1)[-1]
             route[record.id] = (record.topic, tag if only is not None and tag in EVENT_BY_TAG and tag not in only
-                                else None)
+                                else None, tuple(record.topic.split("/")))
         elif isinstance(record, Schema):
             log.schemas[record.id] = (record.name, record.encoding, record.data)
         elif isinstance(record, Metadata):
@@ -599,6 +638,7 @@ def _read_log(path: str | Path, only: frozenset[str] | None = None) -> EventLog:
             if log.lost_from < 0:
                 log.lost_from = len(log.events)
     log.truncated, log.damage, log.data_complete = checked.truncated, checked.damage, checked.data_complete
+    log.seq_jumps = seq_jumps(numbered)
     if recovered:
         log.metadata[RECOVERED] = recovered
     log.source_lost = said_source_lost(log.metadata.get(RECOVERED, {}))
@@ -640,6 +680,38 @@ class FirstOfEach:
         at = (head.session, head.source, head.seq)
         same = self.copy(at, data)
         return bool(same) or (same is False and self.copy(at, data, _decoded(data)) is True)
+
+
+def disagreement(parts: tuple[str, ...], e: Event) -> str:
+    """Why event `e` on a channel whose topic is split into `parts` is not the event its key names ("" if it is):
+    the key `pairplay/<session>/<source>/<tag>` names its session, source and type, as on the bus, where a guard
+    refuses a message whose key disagrees with its envelope (services/guard.py); in a file it was accepted, read as
+    its payload said (a copy whose every topic named another session: rebuild, verify, view said nothing of it: a
+    hostile user's trial)."""
+    said = (type(e).__name__, e.session, e.source)
+    if parts == (KEY_ROOT, said[1], said[2], said[0]):
+        return ""
+    if len(parts) != 4 or parts[0] != KEY_ROOT:
+        return f"{DISAGREES}, no pairplay event key"
+    named = (parts[3], parts[1], parts[2])
+    what = next(i for i in range(3) if named[i] != said[i])
+    return (f"{DISAGREES}: it names {('type', 'session', 'source')[what]} {named[what]!r}, its payload "
+            f"{said[what]!r}")
+
+
+DISAGREES = "its key disagrees with its payload"  # how `disagreement` starts (`EventLog.undecoded` counts them apart)
+
+
+def seq_jumps(numbered: list[tuple[str, str, int]]) -> list[tuple[str, int, int]]:
+    """Where each (session, source)'s seqs, sorted, skip numbers: (source, seq before, seq after), by seq."""
+    by: dict[tuple[str, str], list[int]] = {}
+    for session, source, seq in numbered:
+        by.setdefault((session, source), []).append(seq)
+    jumps = []
+    for (_, source), seqs in by.items():
+        seqs.sort()
+        jumps += [(source, a, b) for a, b in zip(seqs, seqs[1:]) if b > a + 1]
+    return jumps
 
 
 def _decoded(data: bytes) -> Event | None:
