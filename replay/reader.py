@@ -132,6 +132,35 @@ class EventLog:
         return f"{counted(self.copies, 'identical copy', 'identical copies')} of events read once"
 
     @property
+    def foreign_schemas(self) -> str:
+        """The channels of pairplay events whose schema is not pairplay's, in one short line ("" if none): the
+        events decode all the same (pairplay reads the JSON, not the schema), but the file misdescribes them to any
+        other MCAP reader (Foxglove), and `recover` copies it along (schemas replaced by `{"type":"string"}` or by
+        bytes that are not JSON passed every verb with no word: a hostile user's trial). A schema is pairplay's if it
+        is a JSON Schema ("jsonschema") named as its channel's event, a JSON object of that title and of type
+        "object" (what schemas/jsonschema.py writes; the exact text changes as events gain fields, so is not
+        compared)."""
+        wrong = []
+        for topic, schema_id in self.channels.values():
+            tag = topic.rsplit("/", 1)[-1]
+            if tag in EVENT_BY_TAG:
+                why = not_pairplays(tag, self.schemas.get(int(schema_id)))
+                if why:
+                    wrong.append(f"{tag}: {why}")
+        if not wrong:
+            return ""
+        many = len(wrong) > 1
+        return (f"{counted(len(wrong), 'channel')}{chr(39) + ' schemas are' if many else chr(39) + 's schema is'} not "
+                f"pairplay's ({wrong[0]}{', ...' if many else ''}): {'their' if many else 'its'} events are read as "
+                "their JSON says")
+
+    @property
+    def said_too(self) -> str:
+        """What every verb says of a file beside what it lost, in one short line ("" if nothing): identical copies
+        read once (`copied`), schemas that are not pairplay's (`foreign_schemas`); neither loses an event."""
+        return "; ".join(n for n in (self.copied, self.foreign_schemas) if n)
+
+    @property
     def gaps(self) -> str:
         """The events of the game missing from a file that lost no part, in one short line ("" if none, or if a lost
         part, a message that does not decode or the file it was recovered from lost them: they say so): the game
@@ -195,11 +224,11 @@ class EventLog:
         is all after the data section (`data_intact`)."""
         if self.missing or self.lost_from >= 0:
             return ""
-        if self.whole:  # whole, but for copies of events (`copied`): said all the same
-            return self.copied
+        if self.whole:  # whole, but for copies of events, or schemas that are not pairplay's: said all the same
+            return self.said_too
         what = "damaged" if self.damage else "cut after its data section"
         said = f"the file is {what}, no event lost ({self.brief}): pairplay recover makes a whole copy"
-        return "; ".join(n for n in (said, self.copied) if n)
+        return "; ".join(n for n in (said, self.said_too) if n)
 
     @property
     def data_intact(self) -> bool:
@@ -237,7 +266,7 @@ class EventLog:
         partial)."""
         if not (self.lost or self.cut_lost or self.source_cut):
             return ""
-        return "; ".join(n for n in (self.note, self.copied) if n)  # (copies said too: `loss_free` is "" here)
+        return "; ".join(n for n in (self.note, self.said_too) if n)  # (said too: `loss_free` is "" here)
 
     @property
     def no_session(self) -> str:
@@ -680,6 +709,23 @@ class FirstOfEach:
         at = (head.session, head.source, head.seq)
         same = self.copy(at, data)
         return bool(same) or (same is False and self.copy(at, data, _decoded(data)) is True)
+
+
+def not_pairplays(tag: str, schema: tuple[str, str, bytes] | None) -> str:
+    """Why `schema` (name, encoding, data) is not pairplay's schema of event `tag` ("" if it is: see
+    `EventLog.foreign_schemas`)."""
+    if schema is None:
+        return "no schema"
+    name, encoding, data = schema
+    if name != tag or encoding != "jsonschema":
+        return f"named {name!r} ({encoding})"
+    try:
+        text = json.loads(data)
+    except (ValueError, UnicodeDecodeError):
+        return "not JSON"
+    if not isinstance(text, dict) or text.get("title") != tag or text.get("type") != "object":
+        return "not the JSON Schema of its event"
+    return ""
 
 
 def disagreement(parts: tuple[str, ...], e: Event) -> str:

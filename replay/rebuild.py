@@ -152,9 +152,9 @@ def rebuild_recording(path: str | Path) -> Rebuilt:
     recovered = log.metadata.get("pairplay.recovered") or {}
     rebuilt = rebuild_events((r.event for r in log.events), str(path), log.truncated, note,
                              recovered, log.metadata.get("pairplay.recorder.end"), skipped=log.skipped)
-    # said as every verb says it (reader.EventLog.loss_free), and so are identical copies of events read once
-    # (`copied`) in a file that lost some too
-    rebuilt.damage_read = log.loss_free or log.copied
+    # said as every verb says it (reader.EventLog.loss_free), and so are identical copies of events read once and
+    # schemas that are not pairplay's (`said_too`) in a file that lost some too
+    rebuilt.damage_read = log.loss_free or log.said_too
     rebuilt.damaged_rounds = damaged_rounds([r.event for r in log.events], log.lost_at)
     if log.lost:  # the file's own damage, or its source's if it was recovered (reader.EventLog.source_lost)
         rebuilt.lost = f"the file is damaged ({log.lost})" if log.damaged else log.lost

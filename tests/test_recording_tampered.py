@@ -4,6 +4,8 @@ frozen sample with the mcap library's own Writer (tests/rewrite_mcap.py)."""
 
 from __future__ import annotations
 
+import json
+
 import pytest
 
 from pairplay.cli.main import main
@@ -57,3 +59,20 @@ def test_events_on_keys_naming_another_session_are_said_and_not_read(which, tmp_
     for verb, (code, out) in said.items():
         assert code != 0 or verb == "view", (verb, out)
         assert words in out and "PASS" not in out, (verb, out)
+
+
+@pytest.mark.parametrize("schema, why", [(b'{"type":"string"}', "not the JSON Schema of its event"),
+                                         (b"\xff\xfe not json", "not JSON")])
+def test_schemas_that_are_not_pairplays_are_said_by_every_verb(schema, why, tmp_path, capsys):
+    """F5: every schema replaced (by another JSON Schema, by bytes that are not JSON): the events still decode (the
+    JSON is read, not the schema), but the file misdescribes them to other MCAP readers; every verb passed it with
+    no word. Now said, nothing lost: rebuild and view whole, verify PASS, each with the line."""
+    p = rewritten(tmp_path / "schemas.mcap", schema=lambda data: schema)
+    words = f"channels' schemas are not pairplay's (ServiceStarted: {why}, ...)"
+    log = read_log(p)
+    assert words in log.loss_free and not log.missing, log.loss_free
+    said = _verbs(capsys, p, tmp_path)
+    for verb, (code, out) in said.items():
+        assert code == 0 and words in out, (verb, out)
+    assert said["verify"][1].strip().splitlines()[-1].startswith("verify: PASS; ")
+    assert (tmp_path / "v.rrd").exists() and not json.loads((tmp_path / "rb" / "schemas.policy.json").read_text())["partial"]
