@@ -2,7 +2,7 @@
 broken copying tool would change it (tests of what every verb reading a recording says of such a file:
 replay/reader.py). What may change: each message (`each`: its copies, or none), each channel's topic (`topic`),
 each schema's bytes (`schema`), the MCAP sequence numbers (`renumber`: 1, 2, 3, ... over the file, so the copies
-pass every check of the MCAP format)."""
+pass every check of the MCAP format); `chunk_size` as the Writer's."""
 
 from __future__ import annotations
 
@@ -15,11 +15,11 @@ SAMPLE = Path(__file__).resolve().parents[1] / "recordings" / "samples" / "sim-a
 
 
 def rewritten(dst, src=SAMPLE, each=lambda channel, message: [message], topic=lambda t: t,
-              schema=lambda data: data, renumber: bool = False):
+              schema=lambda data: data, renumber: bool = False, chunk_size: int = 1024 * 1024):
     """`src` written again to `dst` (see the module rule); `dst`."""
     with open(src, "rb") as f, open(dst, "wb") as out:
         reader = make_reader(f)
-        w = Writer(out)
+        w = Writer(out, chunk_size=chunk_size)
         w.start(profile="", library="pairplay tests (rewrite_mcap)")
         schemas: dict[int, int] = {}
         channels: dict[int, int] = {}

@@ -12,6 +12,7 @@ import shutil
 import pytest
 
 from pairplay.cli.main import main
+from pairplay.replay.mcapscan import scan
 from pairplay.replay.reader import read_log
 
 from rewrite_mcap import SAMPLE, rewritten
@@ -110,3 +111,18 @@ def test_recover_copies_each_event_once_and_its_copy_rebuilds_whole(files, kind,
     code, said = _run(capsys, "rebuild", str(out), "--out", str(tmp_path / "rb"))
     assert code == 0 and "PARTIAL" not in said, said[-300:]
     assert not json.loads((tmp_path / "rb" / "r.policy.json").read_text()).get("partial")
+
+
+def test_a_chunk_written_twice_is_read_once(files, tmp_path, capsys):
+    """A chunk's bytes written again right after it (trial28's dupchunk.mcap: rebuild exit 0, '799 events', 'no
+    event lost'): its events are read once, the copies said, the policy the original's."""
+    p = rewritten(tmp_path / "chunked.mcap", chunk_size=4096)
+    c = scan(p).chunks[2]
+    data = p.read_bytes()
+    end = c.offset + c.length
+    (tmp_path / "dupchunk.mcap").write_bytes(data[:end] + data[c.offset:end] + data[end:])
+    log = read_log(tmp_path / "dupchunk.mcap")
+    assert [r.payload for r in log.events] == [r.payload for r in read_log(files["orig"]).events]
+    assert log.copies == len(c.messages) and f"{log.copies} identical copies of events read once" in log.loss_free
+    code, out = _run(capsys, "rebuild", str(tmp_path / "dupchunk.mcap"), "--out", str(tmp_path / "d"))
+    assert code == 0 and "identical copies of events read once" in out, out[-300:]
