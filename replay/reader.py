@@ -584,14 +584,16 @@ def _read_log(path: str | Path, only: frozenset[str] | None = None) -> EventLog:
     log = EventLog(str(path))
     checked = scan(path)
     # channel -> (its topic, its tag if its events are only counted, else None): one look-up per message
-    # channel -> (its topic, its tag if its events are only counted, else None, its topic's parts: what an event on
-    # it must name: `disagreement`)
-    route: dict[int, tuple[str, str | None, tuple[str, ...]]] = {}
+    # channel -> (its topic, its tag if its events are only counted, else None, and what an event on it must be: the
+    # session, source and event class its topic names (None: no pairplay event key): `disagreement`)
+    route: dict[int, tuple[str, str | None, str | None, str | None, type | None]] = {}
     skipped: dict[str, int] = log.skipped
     decode, head = decode_event, _tagged.decode
     append = log.events.append
-    copy = FirstOfEach().copy  # an identical copy of an event read before is read once (module rule)
-    numbered: list[tuple[str, str, int]] = []  # (session, source, seq) of each starting source's event read (`gaps`)
+    # the first event read of each (session, source, seq): an identical one after it is a copy, read once (module
+    # rule; FirstOfEach's test, inlined: a call per message was 50% more time for a read); its keys: `gaps`
+    firsts = FirstOfEach()
+    seen = firsts.seen.setdefault
     records = checked.summary_records + checked.records
     own = [(len(checked.summary_records) + at, n) for at, n in checked.losses()]
     lost = sorted({at for at, _ in own})
@@ -616,36 +618,34 @@ def _read_log(path: str | Path, only: frozenset[str] | None = None) -> EventLog:
                                           record.log_time, record.data))
                 log.lost_at.append(len(log.events))
                 continue
-            key, tag, parts = routed
+            key, tag, k_session, k_source, k_type = routed
             data = record.data
             if tag is not None:
                 try:
                     h = head(data)
-                    agrees = parts == (KEY_ROOT, h.session, h.source, h.type)  # else decoded below, to be said
-                    copied = copy((h.session, h.source, h.seq), data) if agrees else False
-                    if copied:
-                        log.copies += 1  # an identical copy of one event read: once (module rule)
-                        continue
-                    if copied is None:
-                        skipped[tag] = skipped.get(tag, 0) + 1
-                        if h.source in STARTERS:
-                            numbered.append((h.session, h.source, h.seq))
-                        continue  # (other bytes of a seq read: decoded wholly below, to compare)
+                    if h.type == tag and h.session == k_session and h.source == k_source:  # else decoded below
+                        first = seen(((h.session, h.source, h.seq)), data)
+                        if first is data:
+                            skipped[tag] = skipped.get(tag, 0) + 1
+                            continue
+                        if first == data:
+                            log.copies += 1  # an identical copy of one event read: once (module rule)
+                            continue
+                        # (other bytes of a seq read: decoded wholly below, to compare)
                 except (msgspec.DecodeError, msgspec.ValidationError):
                     pass  # decoded wholly below: a bad message is kept as one
             try:
                 e = decode(data)
-                wrong = disagreement(parts, e)
-                if wrong:  # changes nothing, as on the bus (services/guard.py): kept as a bad message, said
-                    log.bad.append(BadMessage(key, wrong, record.log_time, data))
+                if type(e) is not k_type or e.session != k_session or e.source != k_source:
+                    # changes nothing, as on the bus (services/guard.py): kept as a bad message, said
+                    log.bad.append(BadMessage(key, disagreement(key, e), record.log_time, data))
                     log.lost_at.append(len(log.events))
                     continue
-                if copy((e.session, e.source, e.seq), data, e):
+                first = seen((e.session, e.source, e.seq), data)
+                if first is not data and (first == data or _decoded(first) == e):
                     log.copies += 1  # an identical copy of one event read: once (module rule)
                     continue
                 append(RecordedEvent(key, e, record.log_time, data))
-                if e.source in STARTERS:
-                    numbered.append((e.session, e.source, e.seq))
             except (msgspec.DecodeError, msgspec.ValidationError) as err:
                 tag = unknown_tag(record.data)
                 if tag is not None:
@@ -656,8 +656,10 @@ def _read_log(path: str | Path, only: frozenset[str] | None = None) -> EventLog:
         elif isinstance(record, Channel):
             log.channels[record.id] = (record.topic, str(record.schema_id))
             tag = record.topic.rsplit("/", 1)[-1]
+            parts = record.topic.split("/")
+            named = (parts[1], parts[2]) if len(parts) == 4 and parts[0] == KEY_ROOT else (None, None)
             route[record.id] = (record.topic, tag if only is not None and tag in EVENT_BY_TAG and tag not in only
-                                else None, tuple(record.topic.split("/")))
+                                else None, *named, EVENT_BY_TAG.get(tag) if named[0] is not None else None)
         elif isinstance(record, Schema):
             log.schemas[record.id] = (record.name, record.encoding, record.data)
         elif isinstance(record, Metadata):
@@ -667,7 +669,7 @@ def _read_log(path: str | Path, only: frozenset[str] | None = None) -> EventLog:
             if log.lost_from < 0:
                 log.lost_from = len(log.events)
     log.truncated, log.damage, log.data_complete = checked.truncated, checked.damage, checked.data_complete
-    log.seq_jumps = seq_jumps(numbered)
+    log.seq_jumps = seq_jumps([at for at in firsts.seen if at[1] in STARTERS])
     if recovered:
         log.metadata[RECOVERED] = recovered
     log.source_lost = said_source_lost(log.metadata.get(RECOVERED, {}))
@@ -686,13 +688,13 @@ class FirstOfEach:
     kept, for replay/forgery.py to judge (a contradiction). The reader's and recover's (which copies no copy)."""
 
     def __init__(self) -> None:
-        self._seen: dict[tuple[str, str, int], bytes] = {}  # -> the bytes of the first event read of it
+        self.seen: dict[tuple[str, str, int], bytes] = {}  # -> the bytes of the first event read of it
 
     def copy(self, at: tuple[str, str, int], data: bytes, event: Event | None = None) -> bool | None:
         """Whether `data` (decoded: `event`) is a copy of the first event read of `at`: None if it is the first,
         True if the same bytes or (decoded) an equal event (another encoder's spacing: forgery.py's test),
         False if it differs (or is not decoded yet and its bytes differ)."""
-        first = self._seen.setdefault(at, data)
+        first = self.seen.setdefault(at, data)
         if first is data:
             return None
         if first == data:
@@ -728,12 +730,13 @@ def not_pairplays(tag: str, schema: tuple[str, str, bytes] | None) -> str:
     return ""
 
 
-def disagreement(parts: tuple[str, ...], e: Event) -> str:
-    """Why event `e` on a channel whose topic is split into `parts` is not the event its key names ("" if it is):
+def disagreement(key: str, e: Event) -> str:
+    """Why event `e` on a channel whose topic is `key` is not the event its key names ("" if it is):
     the key `pairplay/<session>/<source>/<tag>` names its session, source and type, as on the bus, where a guard
     refuses a message whose key disagrees with its envelope (services/guard.py); in a file it was accepted, read as
     its payload said (a copy whose every topic named another session: rebuild, verify, view said nothing of it: a
     hostile user's trial)."""
+    parts = tuple(key.split("/"))
     said = (type(e).__name__, e.session, e.source)
     if parts == (KEY_ROOT, said[1], said[2], said[0]):
         return ""
