@@ -83,7 +83,6 @@ class DeferredInterrupt:
 
     def __init__(self):
         self.held = False  # an interrupt waits for the compiler
-        self._redelivered = False
         self._retrying = False  # a signal held in a finalizer is to come back (_again)
 
     def install(self) -> None:
@@ -91,10 +90,11 @@ class DeferredInterrupt:
 
     def handler(self, signum, frame) -> None:
         global received
-        if not signals.arrived(signum):
-            return  # a copy of a held signal sent again (pairplay/signals.py send_to_main): taken already
-        redelivered, self._redelivered = self._redelivered, False
-        if not redelivered:  # a held interrupt comes back (_deliver_after): it is the same signal, not a second
+        # a held interrupt comes back (_deliver_after, a finalizer's retry): the same signal, not a second. Told by
+        # how it came (pairplay/signals.py `resent`: delivered by send_to_main), not by a flag set before it was
+        # sent (a Ctrl-C from outside between the two was the flag's)
+        redelivered = signals.resent()
+        if not redelivered:
             received = signum
         if signals.in_finalizer(frame):  # raised here, it would be printed and swallowed (module rule)
             if not self._retrying:
@@ -115,9 +115,8 @@ class DeferredInterrupt:
 
     def _again(self) -> None:  # a signal held in a finalizer comes back (signals.deliver_again)
         self._retrying = False
-        self._redelivered = True
 
     def _deliver_after(self, lock, signum: int) -> None:
         with lock._lock:  # free once the main thread has left numba's compiler
-            self._redelivered = True
-        signals.send_to_main(signum)  # (sent again until taken: not while holding the compiler's lock)
+            pass
+        signals.send_to_main(signum)  # (woken for until taken: not while holding the compiler's lock)

@@ -18,11 +18,11 @@ import argparse
 import signal
 import sys
 import threading
-from pathlib import Path
 
 from pairplay import signals, testpause
 from pairplay.cli import interrupts
 from pairplay.schemas.policy import PolicyFileError
+from pairplay.inputs import check_option_file
 from pairplay.outputs import check_folder
 from pairplay.services.recorder import check_new_recording
 from pairplay.services.bus import LOOPBACK_ANY_PORT, MODES, BusOptions, stop_on_signals
@@ -71,9 +71,9 @@ def run(args: argparse.Namespace) -> int:
         host, port = parse_listen(args.listen)
         if bool(args.certfile) != bool(args.keyfile):
             raise ValueError("--certfile and --keyfile go together")
-        for f in (args.certfile, args.keyfile):
-            if f and not Path(f).is_file():
-                raise ValueError(f"{f}: no such file")
+        for option, f in (("--certfile", args.certfile), ("--keyfile", args.keyfile)):
+            if f:  # before the bus and the pages start: uvicorn opens them only then (a pipe blocked it)
+                check_option_file(f, option)
         out = check_folder(args.out) / f"{config.session}.mcap"  # before the bus and the pages start
         # a person's recording is never replaced: no --force here
         check_new_recording(out, hint="choose another --session (a person's recording is never replaced)")

@@ -308,7 +308,7 @@ def main(argv: list[str] | None = None, exiting: bool = False) -> int:
     killed the process: 130 with no line)."""
     argv = list(sys.argv[1:] if argv is None else argv)
     in_main = threading.current_thread() is threading.main_thread()
-    saved = {s: signal.getsignal(s) for s in (signal.SIGINT, signal.SIGTERM)} if in_main else {}
+    saved = {s: signal.getsignal(s) for s in signals.SIGNALS} if in_main else {}
     try:
         code = _main(argv, _arm if exiting and in_main else None)
         if exiting and in_main:  # one noted while the command loaded, when it returned before it armed (a mistake)
@@ -413,7 +413,7 @@ def interrupted_what(signum: int = 0) -> str:
 
 
 QUIET_TRACKER = "ignore::UserWarning:multiprocessing.resource_tracker"
-INTERRUPTED = (130, 143)  # exit_code_of SIGINT, SIGTERM
+INTERRUPTED = tuple(exit_code_of(s) for s in signals.SIGNALS)  # 130, 143, 129: SIGINT, SIGTERM, SIGHUP
 
 
 def entry() -> None:

@@ -24,6 +24,7 @@ from pathlib import Path
 from pairplay import signals, testpause
 from pairplay.cli.args import int_between, output_file, output_folder, session_id
 from pairplay.core.personas import persona
+from pairplay.inputs import check_input, check_option_file
 from pairplay.lists import comma_items
 from pairplay.replay import studyjournal
 from pairplay.replay.studydata import JOURNAL, REGISTER_AT_ONCE, StudyData, StudyDataError, repair_journal
@@ -90,6 +91,7 @@ def _study_file(name: str) -> tuple[str, str]:
         return bundled_text(name), f"{name} (shipped example)" if name == EXAMPLE_NAME else f"{name} (bundled study)"
     path = study_file_of(name)  # a study folder: its own study file
     name = str(path)
+    check_input(path, StudyFileError)  # before opening: a pipe blocked (pairplay/inputs.py)
     try:
         return path.read_text(encoding="utf-8-sig"), name  # as load_study: a byte order mark is fine
     except UnicodeDecodeError:  # as load_study says it (a random or binary file was a traceback)
@@ -296,14 +298,15 @@ def warn_unreachable(runner, verb: str) -> None:
 def _serve(data: StudyData, args) -> int:
     import threading
 
-    from pairplay.services.bus import stop_on_signals
-
     host, _, port = args.listen.rpartition(":")
     if not host or not port.isdigit():
         raise StudyDataError(f"--listen {args.listen!r}: use HOST:PORT")
     robot, overridden = _robot(args)
     if bool(args.certfile) != bool(args.keyfile):
         raise StudyDataError("--certfile and --keyfile go together")
+    for option, f in (("--certfile", args.certfile), ("--keyfile", args.keyfile)):
+        if f:  # before the bus and the console start: uvicorn opens them only then (a pipe blocked it)
+            check_option_file(f, option)
     pilot = {}
     for pair in _items(args.pilot, "--pilot") if args.pilot is not None else []:
         pid, equals, key = pair.partition("=")
@@ -317,7 +320,7 @@ def _serve(data: StudyData, args) -> int:
     stop = threading.Event()
     runners = []
     # a signal stops the running game at once, with its name and the shutdown's deadline (its recording finished)
-    stop_on_signals(stop, then=lambda: [r.interrupt(stop) for r in runners])
+    stop_runners_on_signals(stop, runners)
     try:
         _serving(data, args, stop, runners, pilot, robot, overridden, host, port)
     except KeyboardInterrupt:  # a second signal cut the shutdown: the game's recording as the disk holds it
@@ -369,12 +372,25 @@ def _serving(data: StudyData, args, stop, runners: list, pilot: dict, robot, ove
             server.close(shutdown_wait(stop, 10.0, reserve=0.2))
 
 
+def stop_runners_on_signals(stop, runners: list) -> None:
+    """SIGINT/SIGTERM stop the verb (services/bus.py stop_on_signals) and each of `runners`' running game: the game
+    running as the signal came, and that no step follows, noted in the handler itself (StudyRunner.signal_came:
+    what `cut` and `stopped_line` read, whichever thread gets there first), the games' stop flags set by the
+    handler's thread (StudyRunner.interrupt)."""
+    from pairplay.services.bus import stop_on_signals
+
+    stop_on_signals(stop, then=lambda: [r.interrupt(stop) for r in runners],
+                    now=lambda: [r.signal_came(stop) for r in runners])
+
+
 def stopped_line(runners: list, stop) -> str:
     """"; game S ..." of the game a signal stopped (services/protocol.py StudyRunner.stopped), as `session` says its
     own (cli/session.py print_interrupted): how far it got, how the journal ended it, its recording; "" if none
     was running. serve said only "stopped (Ctrl-C)" and pilot "interrupted (Ctrl-C)" of a game they cut (a new
     user's trial)."""
-    game = runners[0].stopped if runners and stop.is_set() else None
+    from pairplay.services.bus import signal_taken
+
+    game = runners[0].stopped if runners and signal_taken(stop) else None
     if game is None:
         return ""
     summary, ended = game.summary, runners[0].data.state.games.get(game.session)
@@ -397,11 +413,14 @@ def cut(runners: list, verb: str, stop) -> int:
     cli/session.py `cut_line` of the game the first signal stopped (its recording: whole, or `pairplay recover` it),
     the signal's status; of one stopped before its recording began, that, and what the journal holds of it and what
     the next serve does with it (replay/studydata.py `build_missing_policies`: journaled aborted, played again).
-    With no game running, the KeyboardInterrupt goes on to cli/main.py's line."""
+    With no game running, the KeyboardInterrupt goes on to cli/main.py's line. Which game, decided from what the
+    first signal's handler set (services/bus.py `signal_taken`, StudyRunner.signal_came), not from `stop.is_set()`:
+    the thread that sets it may not have run yet (the generic line came instead, once at load 5.4)."""
     from pairplay.cli.session import cut_line
     from pairplay.replay.wal import wal_path
+    from pairplay.services.bus import signal_taken
 
-    game = runners[0].stopped if runners and stop.is_set() else None
+    game = runners[0].stopped if runners and signal_taken(stop) else None
     if game is None:
         raise KeyboardInterrupt
     again = signals.again or signal.SIGINT  # (either signal cuts it: pairplay/signals.py `wait_cut`)
@@ -428,7 +447,7 @@ def cut(runners: list, verb: str, stop) -> int:
 def _pilot(data: StudyData, args) -> int:
     import threading
 
-    from pairplay.services.bus import Bus, BusOptions, stop_on_signals
+    from pairplay.services.bus import Bus, BusOptions, signal_taken
     from pairplay.services.protocol import StudyRunner, scripted_players
     from pairplay.services.robot.choice import NO_ROBOT, RobotChoice, check_choice
 
@@ -451,7 +470,7 @@ def _pilot(data: StudyData, args) -> int:
     t0 = time.perf_counter()
     stop, runners = threading.Event(), []
     # a signal stops the running game at once, with its name and the shutdown's deadline; no step after it
-    stop_on_signals(stop, then=lambda: [r.interrupt(stop) for r in runners])
+    stop_runners_on_signals(stop, runners)
     with Bus(BusOptions(), stop=stop) as bus:
         runner = StudyRunner(data, bus, robot=robot)
         runners.append(runner)
@@ -472,11 +491,11 @@ def _pilot(data: StudyData, args) -> int:
         try:
             runner.run_plan(scripted_players(runner, personas), on_step=said)
         except StudyDataError:
-            if not stop.is_set():
+            if not signal_taken(stop):
                 raise
         except KeyboardInterrupt:  # a second signal cut the shutdown: the game's recording as the disk holds it
             return cut(runners, "pilot", stop)
-    if stop.is_set():
+    if signal_taken(stop):  # (run_plan ends on the handler's flag: `stop` may not be set yet)
         print(f"pairplay protocol pilot: interrupted ({signals.said(stop.why)}){stopped_line(runners, stop)}; "
               f"`pairplay protocol status {data.given}` shows what is left", file=sys.stderr)
         return 0

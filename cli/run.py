@@ -36,7 +36,7 @@ from pairplay.lists import comma_items
 from pairplay.nearest import hinted
 from pairplay.outputs import check_folder
 from pairplay.schemas.trust import SERVICES as BUS_SERVICES
-from pairplay.services.bus import Bus, Deadline, add_bus_arguments, deadline_of, options_from_args, stop_on_signals
+from pairplay.services.bus import Bus, Deadline, add_bus_arguments, deadline_of, options_from_args, signal_taken, stop_on_signals
 from pairplay.services.forgery import EVERY_LISTENER, ForgeryWatch
 from pairplay.services.refusal import RefusalWatch
 from pairplay.services.runner import GameWatch, Node, Stopped, start_unless_stopped, waiting_for
@@ -118,7 +118,7 @@ def run(args: argparse.Namespace) -> int:
     try:
         code = _run(args, stop, recording)
     except KeyboardInterrupt:  # a second signal cut the shutdown: what the recording is, as the disk holds it
-        if not stop.is_set() or "path" not in recording:
+        if not signal_taken(stop) or "path" not in recording:  # (the handler's note: services/bus.py signal_taken)
             raise
         from pairplay.cli.session import cut_line
         again = signals.again or signal.SIGINT

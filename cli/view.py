@@ -267,7 +267,7 @@ def _view(args: argparse.Namespace, tmp_rrd: Path | None, held=None) -> Viewed:
     for line in where:  # where to watch it: a result of --serve/--spawn, said at once
         print(line, flush=True)
     stop = threading.Event()
-    saved_handlers = {sig: signal.getsignal(sig) for sig in (signal.SIGINT, signal.SIGTERM)}
+    saved_handlers = {sig: signal.getsignal(sig) for sig in signals.SIGNALS}
     stop_on_signals(stop)
     live = not args.recording
     view = RerunView(rec, q_interval_s=args.q_interval,

@@ -49,6 +49,7 @@ from .actions import HEARING_EXACT, HEARING_PARTS, N_ACTIONS, N_VISUAL, VISUAL_P
 from .geometry import (CELL_INDEX, CELL_NAMES, CELLS, COLS, N_CARDS, N_STATES, NOT_ONE_CARD_STATE, ROWS,
                        SPATIAL_STATES, STATE_INDEX, card_col, card_of, card_row)
 from .interpretation import HEAR_SET, VIS_SET, cards_meant, hearing_meaning, visual_meaning
+from pairplay.schemas.nesting import json_decode
 
 FRAMES = ("robot's frame", "columns from the right", "rows from the bottom", "both mirrored")
 FRAME_KEYS = ("canonical", "mirror-columns", "mirror-rows", "mirror-both")
@@ -162,7 +163,7 @@ class _FramePersonaFile(msgspec.Struct, forbid_unknown_fields=True):
 
 def parse_frame_personas(data: bytes) -> dict[str, FramedPersona]:
     """Framed personas by key from the JSON text of a frame persona file."""
-    return {p.persona.key: p for p in msgspec.json.decode(data, type=_FramePersonaFile).personas}
+    return {p.persona.key: p for p in json_decode(data, type=_FramePersonaFile).personas}
 
 
 # Their own table: the default study's personas (core/personas.py) are the thesis's and stay as they are.

@@ -19,6 +19,7 @@ from pairplay.nearest import nearest
 from pairplay.schemas.config import Persona
 
 from .interpretation import reading_code
+from pairplay.schemas.nesting import json_decode
 
 
 class _PersonaFile(msgspec.Struct, forbid_unknown_fields=True):
@@ -45,7 +46,7 @@ class _ReadingPersonaFile(msgspec.Struct, forbid_unknown_fields=True):
 
 def parse_personas(data: bytes, kind=_PersonaFile) -> dict[str, Persona]:
     """Personas by key from the JSON text of a persona file."""
-    personas = msgspec.json.decode(data, type=kind).personas
+    personas = json_decode(data, type=kind).personas
     return {p.key: p for p in personas}
 
 

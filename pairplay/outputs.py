@@ -65,6 +65,7 @@ from pairplay import folderlock, signals, testpause
 from pairplay.errors import OutputError
 from pairplay.livelock import LIVE, is_live
 from pairplay.numbers import counted
+from pairplay.schemas.nesting import json_loads
 
 FORCE_FIX = "--force replaces it"  # shown only by a verb that has --force (errors.UserError `fix`)
 
@@ -677,7 +678,7 @@ def read_manifest(path: Path, owned: tuple[str, ...] = ()) -> list[str]:
     if not path.is_file():
         return []
     try:
-        data = json.loads(path.read_text(encoding="utf-8"))
+        data = json_loads(path.read_text(encoding="utf-8"))
         if data.get("format") != MANIFEST_FORMAT or not all(isinstance(f, str) for f in data["files"]):
             raise ValueError("not a pairplay manifest")
     except (OSError, ValueError, AttributeError, KeyError, TypeError) as err:

@@ -1,7 +1,7 @@
 """Child processes that never outlive an interruption: the parent owns Ctrl-C; work that
 must not be interrupted half-way runs off the main thread.
 
-Rule: a pool's workers ignore SIGINT. A terminal's Ctrl-C reaches the whole
+Rule: a pool's workers ignore SIGINT and SIGHUP. A terminal's Ctrl-C (or hang-up) reaches the whole
 foreground process group; if each worker also raised KeyboardInterrupt, every
 one would print its own traceback and the user would see a screenful instead
 of the verb's one line. The parent alone is interrupted, and on the way out
@@ -61,6 +61,9 @@ def off_main_thread(fn: Callable[..., T], *args) -> T:
     return done.result()
 
 
+# what the terminal sends to every process of its foreground group, the workers too: the parent alone stops on it and
+# ends them (a Ctrl-C, and a hang-up: the terminal closed)
+GROUP_SIGNALS = {signal.SIGINT, signal.SIGHUP}
 PARENT_POLL_S = 0.25  # a worker whose parent died ends within this (and its own scheduling)
 
 
@@ -72,9 +75,10 @@ def _watch_parent(parent: int) -> None:
 
 
 def _worker_start(parent: int) -> None:
-    """A pool worker's initializer: SIGINT ignored (module rule), and the parent watched."""
-    signal.signal(signal.SIGINT, signal.SIG_IGN)  # a Ctrl-C that came while starting up is discarded with it
-    signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})
+    """A pool worker's initializer: SIGINT and SIGHUP ignored (module rule), and the parent watched."""
+    for signum in GROUP_SIGNALS:  # a Ctrl-C (or a hang-up) that came while starting up is discarded with it
+        signal.signal(signum, signal.SIG_IGN)
+    signal.pthread_sigmask(signal.SIG_UNBLOCK, GROUP_SIGNALS)
     if os.getppid() != parent:  # it died while we started
         os._exit(1)
     threading.Thread(target=_watch_parent, args=(parent,), name="pairplay-parent-watch", daemon=True).start()
@@ -87,7 +91,7 @@ class _ParentInterruptedPool(ProcessPoolExecutor):
     instead of printing a traceback from the child's start-up."""
 
     def submit(self, fn, /, *args, **kwargs):
-        blocked = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
+        blocked = signal.pthread_sigmask(signal.SIG_BLOCK, GROUP_SIGNALS)
         try:
             return super().submit(fn, *args, **kwargs)
         finally:

@@ -31,12 +31,19 @@ A handler that raises KeyboardInterrupt must not raise it inside a finalizer
 garbage collector runs in the main thread, where Python prints the exception as
 "Exception ignored" and swallows it (a study went on and exited 0 after a
 Ctrl-C: CI, fresh clone of 61bc185). It delivers the signal again a moment
-later instead (`deliver_again`); finalizers are short. A signal sent to the main
-thread that way (`send_to_main`) is sent again until the handler has taken it: one that
-lands as the main thread enters a blocking call wakes nothing; the copies that
-come after the first was taken are dropped (`arrived`). A generator closed by the
-collector or the callback of a bare `weakref.ref` is not seen (none runs in our
-main thread).
+later instead (`deliver_again`); finalizers are short. A signal delivered to the
+main thread that way (`send_to_main`) is owed under a token of its own and woken for
+by WAKE (SIGUSR2), sent again until the main thread's WAKE handler has taken the token:
+one that lands as the main thread enters a blocking call wakes nothing. The WAKE
+handler hands each owed signal to the handler in place for it, once (`resent()` is
+true during that call); a WAKE with nothing owed does nothing. So a copy is never
+taken for a second signal, nor a second signal for a copy: SIGINT and SIGTERM only
+ever come from outside. Before, the signal itself was sent again and its copies told
+from a second Ctrl-C by time (a copy within 0.25 s of its send was dropped): a main
+thread descheduled longer took a copy for a second Ctrl-C, and a user's second Ctrl-C
+within that time was dropped. A generator closed by the collector or the callback of a
+bare `weakref.ref` is not seen (none runs in our main thread). WAKE's handler is
+installed with every handler (`handle`, main thread); `kill -USR2` does nothing else.
 
 A verb that stops on signals itself (services/bus.py `stop_on_signals`) raises
 nothing: it notes the signal in `stopping`, which a wait that is not its stop
@@ -64,7 +71,9 @@ from __future__ import annotations
 
 import signal
 
-SIGNALS = (signal.SIGINT, signal.SIGTERM)
+# SIGHUP: the terminal closed or the ssh link dropped; before, it killed every verb at once, no line, a live
+# session's recording left cut (a hostile user's trial, trial28 F8): the same stop as SIGTERM's, exit 129
+SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
 
 received = 0  # the first signal `record` met (0: none)
 stopping = 0  # the signal a verb's own handler took to stop on (services/bus.py stop_on_signals); 0: none
@@ -75,9 +84,9 @@ RESEND_S = 0.02  # a signal sent to the main thread is sent again this often unt
 HELD_ELSEWHERE_S = 5.0  # how long `held_elsewhere_over` waits for another thread's held step (an fsync, loaded)
 _elsewhere: list = []  # the held steps running in threads other than the main one (module rule)
 RESEND_FOR_S = 5.0  # and for at most this long
-DUPLICATE_S = 0.25  # a copy sent again that comes this soon after the send is the same signal (`arrived`)
-_owed: dict[int, bool] = {}  # signals `send_to_main` sent whose handler has not run yet
-_resent_at: dict[int, float] = {}  # when each was last sent again
+WAKE = signal.SIGUSR2  # what `send_to_main` sends: the main thread's cue to take what is owed (module rule)
+_owed: dict[object, int] = {}  # token -> signal: what `send_to_main` delivers whose handler has not run yet
+_delivering = 0  # > 0 while `_wake` runs a handler for an owed signal (`resent`)
 _WEAKREF_FILES = ("weakref.py", "_weakrefset.py")  # the standard library's weak-reference callbacks live here
 
 
@@ -93,10 +102,13 @@ def said(why: object) -> str:
 
 
 def handle(handler: object, signals: tuple[int, ...] = SIGNALS) -> None:
-    """Install `handler` for each of `signals` not ignored (module rule). Main thread only."""
+    """Install `handler` for each of `signals` not ignored (module rule), and WAKE's (`send_to_main`) if it is
+    not in place yet. Main thread only."""
     for signum in signals:
         if signal.getsignal(signum) is not signal.SIG_IGN:
             signal.signal(signum, handler)
+    if signal.getsignal(WAKE) is not _wake:
+        signal.signal(WAKE, _wake)
 
 
 def ignored(signum: int) -> bool:
@@ -129,35 +141,59 @@ def in_finalizer(frame) -> bool:
 
 
 def send_to_main(signum: int) -> None:
-    """`signum` to the main thread, as a real signal: it wakes a sleep or a wait the main thread is blocked in
-    (`_thread.interrupt_main` only sets the flag, and the interrupt waited for the wait's end: a study held in
-    numba's compiler then interrupted only when its next 5-second wait ended). Called from a helper thread.
+    """`signum` to the main thread's handler for it, woken by a real signal: it wakes a sleep or a wait the main
+    thread is blocked in (`_thread.interrupt_main` only sets the flag, and the interrupt waited for the wait's
+    end: a study held in numba's compiler then interrupted only when its next 5-second wait ended). Called from a
+    helper thread.
 
-    Sent again every RESEND_S until the main thread's handler has taken it (`arrived`), for at most RESEND_FOR_S:
-    a signal that lands as the main thread is entering a blocking call (the GIL handed to this thread as that
-    one lets it go for the call) runs nothing and wakes nothing, and the call slept on (1 of ~240 runs of
-    test_a_ctrl_c_inside_a_finalizer_is_not_swallowed at load 4-8; a 120-s sleep)."""
+    Owed under a token of its own, and WAKE sent every RESEND_S until the main thread's WAKE handler has taken
+    the token (`_wake`), for at most RESEND_FOR_S (module rule): a signal that lands as the main thread is
+    entering a blocking call (the GIL handed to this thread as that one lets it go for the call) runs nothing and
+    wakes nothing, and the call slept on (1 of ~240 runs of test_a_ctrl_c_inside_a_finalizer_is_not_swallowed at
+    load 4-8; a 120-s sleep). Nothing once no Python handler takes `signum` (a default SIGTERM would kill the
+    process); without WAKE's handler (none was installed through `handle`) `signum` itself is sent, once."""
     import threading
     import time
     main = threading.main_thread().ident
-    _owed[signum] = True
+    token = object()
+    _owed[token] = signum
     end = time.monotonic() + RESEND_FOR_S
-    while callable(signal.getsignal(signum)):  # as interrupt_main: nothing once no Python handler takes it (a
-        signal.pthread_kill(main, signum)  # default SIGTERM would kill the process)
-        time.sleep(RESEND_S)
-        if not _owed.get(signum) or time.monotonic() >= end:
+    while token in _owed:
+        if not callable(signal.getsignal(signum)):
+            _owed.pop(token, None)
             return
-        _resent_at[signum] = time.monotonic()  # before the send: a handler that runs from here on knows it
+        if signal.getsignal(WAKE) is not _wake:
+            _owed.pop(token, None)
+            signal.pthread_kill(main, signum)
+            return
+        signal.pthread_kill(main, WAKE)
+        time.sleep(RESEND_S)
+        if time.monotonic() >= end:  # still owed: the next WAKE (another's) delivers it; never lost
+            return
 
 
-def arrived(signum: int) -> bool:
-    """Whether a handler that `send_to_main` may target is to act on this `signum`: False for the copy of a
-    signal sent again whose first copy the handler has taken already (module rule; `send_to_main`). Called
-    first by such a handler (main thread)."""
-    import time
-    if _owed.pop(signum, False):
-        return True
-    return time.monotonic() - _resent_at.get(signum, float("-inf")) > DUPLICATE_S
+def _wake(_signum: int, frame) -> None:
+    """WAKE's handler (main thread): each signal owed (`send_to_main`) to the handler in place for it now, once,
+    in the order they were sent (module rule). One that raises leaves the rest owed: their WAKE comes again."""
+    global _delivering
+    for token in list(_owed):
+        signum = _owed.pop(token, None)
+        if signum is None:
+            continue
+        handler = signal.getsignal(signum)
+        if not callable(handler):  # (as a real signal would meet no Python handler: nothing to deliver it to)
+            continue
+        _delivering += 1
+        try:
+            handler(signum, frame)
+        finally:
+            _delivering -= 1
+
+
+def resent() -> bool:
+    """Whether the handler running now runs for a signal `send_to_main` delivered (one taken before and held:
+    cli/interrupts.py), not for one that came from outside (module rule)."""
+    return _delivering > 0
 
 
 def wait_cut(waited, timeout_s: float | None = None) -> bool:

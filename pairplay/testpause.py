@@ -25,6 +25,10 @@ def pause(moment: str) -> None:
     import time
 
     go = named[len(moment) + 1:]
-    print(f"pairplay-test: paused at {moment}", file=sys.stderr, flush=True)
+    # one write, the line and its end: print's two writes interleaved with another thread's pause (a test holds two
+    # threads at once: tests/test_cut_signals.py) into "...signal-stoppingpairplay-test: paused at ...", and the
+    # test never saw its moment
+    sys.stderr.write(f"pairplay-test: paused at {moment}\n")
+    sys.stderr.flush()
     while not os.path.exists(go):
         time.sleep(POLL_S)

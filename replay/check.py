@@ -24,15 +24,17 @@ from pathlib import Path
 
 from pairplay.arguments import path_argument
 from pairplay.errors import InputError
+from pairplay.inputs import check_input
 from pairplay.schemas.jsonfile import MCAP_MAGIC
 from pairplay.numbers import counted
 
 
 
 def recording_file(path: str | Path, function: str = "") -> Path:
-    """`path` as a Path if it names a file: InputError "no such recording" or "a folder" (every verb's
-    words) otherwise; given `function` (a public function's name), first an ArgumentError unless `path`
-    is a path at all (pairplay/arguments.py: read_log(None) was a TypeError of pathlib's)."""
+    """`path` as a Path if it names a file: InputError "no such recording", "a folder" (every verb's
+    words) or "is a named pipe (FIFO)..." (pairplay/inputs.py: anything but a regular file or a link to one)
+    otherwise; given `function` (a public function's name), first an ArgumentError unless `path` is a path at all
+    (pairplay/arguments.py: read_log(None) was a TypeError of pathlib's)."""
     path = path_argument(path, function) if function else Path(path)
     if not path.exists():
         from .wal import wal_path
@@ -44,6 +46,7 @@ def recording_file(path: str | Path, function: str = "") -> Path:
         raise InputError("no such recording", path)
     if path.is_dir():
         raise InputError("a folder, not a recording (give the .mcap files)", path)
+    check_input(path)  # a pipe, a device: opening one for reading blocked, or read endless zeros
     return path
 
 

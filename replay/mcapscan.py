@@ -86,6 +86,13 @@ _IN_CHUNK = (Schema, Channel, Message)
 _SUMMARY = (Schema, Channel, ChunkIndex, AttachmentIndex, Statistics, MetadataIndex, SummaryOffset)
 
 
+# The largest uncompressed chunk read, in bytes. pairplay's writer closes a chunk once it holds 256 KiB
+# (replay/writer.CHUNK_SIZE), so one of its chunks is that plus a message of at most 64 KiB
+# (schemas/trust.MAX_PAYLOAD); other writers' chunks are a few MB (mcap's default is 1 MiB). A larger declared
+# size is a damaged or hostile chunk, refused before anything is allocated for it.
+MAX_CHUNK = 64 * 1024 * 1024
+
+
 class Unreadable(ValueError):
     """Bytes that are not the record they claim to be."""
 
@@ -256,16 +263,30 @@ def _name(opcode: int) -> str:
 
 
 def _decompress(chunk: Chunk) -> bytes:
+    """The chunk's data decompressed, never more than its declared uncompressed size (+1 byte, so that a chunk
+    holding more says so) and never a declared size above MAX_CHUNK: Unreadable otherwise. A hostile file's
+    "bomb" chunk (a few KB of zstd that decompress to GBs, whether it declares the GBs or a few KB) made
+    every verb allocate the whole decompressed size before the size check (3.2 GB for a 191 KB file; trial28
+    F15): zstandard's `decompress` sizes its output by the frame's own content size, whatever
+    `max_output_size` says, so that size is checked first; lz4 is read at most up to the declared size."""
+    declared = chunk.uncompressed_size
+    if declared > MAX_CHUNK:
+        raise Unreadable(f"declares {counted(declared, 'byte')} uncompressed, more than any chunk a recorder writes "
+                         f"({counted(MAX_CHUNK, 'byte')}): not read")
     if chunk.compression == "":
         return chunk.data
     if chunk.compression == "zstd":
         import zstandard
 
-        return zstandard.ZstdDecompressor().decompress(chunk.data, max_output_size=chunk.uncompressed_size)
+        framed = zstandard.frame_content_size(chunk.data)  # -1: the frame does not say
+        if framed > declared:
+            raise Unreadable(f"decompresses to {counted(framed, 'byte')} (its zstd frame says), "
+                             f"the chunk says {declared}")
+        return zstandard.ZstdDecompressor().decompress(chunk.data, max_output_size=declared)
     if chunk.compression == "lz4":
         import lz4.frame
 
-        return lz4.frame.decompress(chunk.data)
+        return lz4.frame.LZ4FrameDecompressor().decompress(chunk.data, max_length=declared + 1)
     raise Unreadable(f"unknown compression {chunk.compression!r}")
 
 
@@ -305,6 +326,9 @@ def _open_chunk(chunk: Chunk) -> _Opened:
         raise
     except Exception as err:
         raise Unreadable(f"{chunk.compression} data does not decompress ({type(err).__name__})") from None
+    if len(data) > chunk.uncompressed_size:  # read no further than one byte past the declared size: "more than"
+        raise Unreadable(f"decompresses to more than {counted(chunk.uncompressed_size, 'byte')}, the chunk says "
+                         f"{chunk.uncompressed_size}")
     if len(data) != chunk.uncompressed_size:
         raise Unreadable(f"decompresses to {counted(len(data), 'byte')}, the chunk says {chunk.uncompressed_size}")
     if chunk.uncompressed_crc and zlib.crc32(data) != chunk.uncompressed_crc:

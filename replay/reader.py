@@ -45,6 +45,7 @@ from pairplay.schemas.keys import ROOT as KEY_ROOT
 from pairplay.schemas.trust import STARTERS
 
 from .mcapscan import Damage, scan
+from pairplay.schemas.nesting import JsonDecoder, json_loads
 
 
 class RecordedEvent(NamedTuple):
@@ -70,7 +71,7 @@ class _Tagged(msgspec.Struct):
     seq: int = 0
 
 
-_tagged = msgspec.json.Decoder(_Tagged)
+_tagged = JsonDecoder(_Tagged)
 
 
 def unknown_tag(payload: bytes) -> str | None:
@@ -380,12 +381,12 @@ def said_source_lost(recovered: dict[str, str]) -> str:
     if not recovered_lost(recovered):
         return ""
     try:
-        parts = [str(p) for p in json.loads(recovered.get("lost", "[]") or "[]")]
+        parts = [str(p) for p in json_loads(recovered.get("lost", "[]") or "[]")]
     except (ValueError, TypeError):
         parts = []
     source = Path(recovered.get("source", "")).name
     try:  # a recovered file recovered again: the files before its source (replay/recover.py `earlier`), oldest first
-        earlier = [Path(str(e)).name for e in json.loads(recovered.get("earlier", "[]") or "[]") if e]
+        earlier = [Path(str(e)).name for e in json_loads(recovered.get("earlier", "[]") or "[]") if e]
     except (ValueError, TypeError):
         earlier = []
     if source and earlier:
@@ -477,7 +478,7 @@ def carry_recovery(earlier: dict[str, str], new: dict[str, str], marks_moved: bo
             merged[key] = str(_number(earlier[key]) + _number(new.get(key, "0")))
     if not marks_moved and LOST_AT_KEY in earlier and LOST_AT_KEY in new:
         try:
-            old, mine = (sorted(int(n) for n in json.loads(m[LOST_AT_KEY])) for m in (earlier, new))
+            old, mine = (sorted(int(n) for n in json_loads(m[LOST_AT_KEY])) for m in (earlier, new))
         except (ValueError, TypeError):
             old, mine = [], []
         merged[LOST_AT_KEY] = json.dumps(sorted({*mine, *(n for n in old if not mine or n <= mine[0])}))
@@ -500,7 +501,7 @@ def folded_recovery(records: list) -> dict[str, str]:
 
 def _listed(text: str | None) -> list[str]:
     try:
-        value = json.loads(text or "[]")
+        value = json_loads(text or "[]")
     except ValueError:
         return [text] if text else []
     return [str(v) for v in value] if isinstance(value, list) else [str(value)]
@@ -527,7 +528,7 @@ def recovered_losses(records: list, own: list[tuple[int, int | None]] = (),
     if LOST_AT_KEY not in recovered:
         return None
     try:
-        wanted = sorted(int(n) for n in json.loads(recovered[LOST_AT_KEY]))
+        wanted = sorted(int(n) for n in json_loads(recovered[LOST_AT_KEY]))
     except (ValueError, TypeError):
         return None
     lost = sorted(own)
@@ -721,8 +722,8 @@ def not_pairplays(tag: str, schema: tuple[str, str, bytes] | None) -> str:
     name, encoding, data = schema
     if name != tag or encoding != "jsonschema":
         return f"named {name!r} ({encoding})"
-    try:
-        text = json.loads(data)
+    try:  # (nesting's: a hostile file's schema nested deep is no RecursionError)
+        text = json_loads(data)
     except (ValueError, UnicodeDecodeError):
         return "not JSON"
     if not isinstance(text, dict) or text.get("title") != tag or text.get("type") != "object":

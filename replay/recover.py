@@ -69,6 +69,7 @@ from .mcapscan import scan
 from .reader import FirstOfEach, read_any_log
 from .wal import RECORDER_METADATA, NotAJournal, not_its, read_journal, wal_path
 from .writer import CHUNK_SIZE, PROFILE
+from pairplay.schemas.nesting import json_loads
 
 
 @dataclass
@@ -289,7 +290,7 @@ def _journal_beside(path: Path, log):
 
 def _round_of(payload: bytes) -> int:
     try:
-        return int(json.loads(payload).get("round", -1))
+        return int(json_loads(payload).get("round", -1))
     except (ValueError, AttributeError):
         return -1
 

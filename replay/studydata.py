@@ -55,6 +55,7 @@ import msgspec
 
 from pairplay import __version__, csvcell, folderlock, signals, testpause
 from pairplay.errors import InputError, UserError
+from pairplay.inputs import refusal
 from pairplay.livelock import LIVE, is_live
 from pairplay.outputs import (OutputError, check_output, check_places, manifest_name, output_file, read_manifest,
                               remove_written, set_aside_of, special_kind, write_manifest)
@@ -71,6 +72,7 @@ from .reader import read_any_log
 from .rebuild import Rebuilt, rebuild_recording, write_outputs
 from .recover import default_output, journal_more
 from .wal import wal_path
+from pairplay.schemas.nesting import json_decode
 
 JOURNAL, SETTINGS = "journal.jsonl", "settings.json"  # and STUDY_FILE, schemas/study.py
 # what `pairplay report` writes in <folder>/report (report/human.py), and its manifest: here, below the report,
@@ -287,6 +289,8 @@ class StudyData:
         if (self.folder / JOURNAL).is_dir():  # it said "not a study folder (no journal.jsonl ...)": there is one
             raise StudyDataError("is a folder where the study's journal is written; a folder is never replaced: "
                                  "remove or rename it", self.given / JOURNAL)
+        if said := refusal(self.folder / JOURNAL):  # a pipe: it was "not a study folder"; read, it blocked
+            raise StudyDataError(said, self.given / JOURNAL)
         if not (self.folder / JOURNAL).is_file():
             raise not_a_study_folder(self.given)
         self._lock = threading.RLock()
@@ -571,6 +575,8 @@ class StudyData:
         key = self.key_file
         if key is None:
             return []
+        if said := refusal(key):  # before opening: a pipe blocked (pairplay/inputs.py)
+            raise StudyDataError(said, key)
         try:
             with open(key, encoding="utf-8", newline="") as f:  # as csv reads it: a quoted cell may hold a CR
                 return [r[0] for r in csv.reader(f) if r]
@@ -602,6 +608,8 @@ class StudyData:
                     found[pid].append(place)
 
         add(self.key_file_ids() if key_file else [], KEY_RECORD)
+        if said := refusal(self.folder / "participants.csv"):  # before opening: a pipe blocked (pairplay/inputs.py)
+            raise StudyDataError(said, self.given / "participants.csv")
         try:
             with open(self.folder / "participants.csv", encoding="utf-8", newline="") as f:
                 add([r[0] for r in list(csv.reader(f))[1:] if r], "participants.csv")
@@ -813,6 +821,8 @@ class StudyData:
         from .check import check_recording, no_whole_round
 
         path, _ = self.game_recording(g)
+        if said := refusal(path):  # a pipe there was "recording missing" (pairplay/inputs.py)
+            return None, f"recording {path.name} {said}"
         if not path.is_file():
             return None, "recording missing"
         try:
@@ -1085,7 +1095,9 @@ class StudyData:
 
     # -- export and deletion -------------------------------------------------
     def files_of(self, pid: str) -> list[Path]:
-        """Every file of the folder that holds `pid`'s data (recordings and their journals, policies, exports)."""
+        """Every file of the folder that holds `pid`'s data (recordings and their journals, policies, exports); a
+        pipe, a device or a socket standing at one of their names too (a deletion removes it, an export refuses it:
+        it was left out of the export silently, and reading it would have blocked)."""
         self.participant(pid)
         files = []
         for g in self.games_of(pid):
@@ -1103,7 +1115,7 @@ class StudyData:
         for torn in self.folder.glob(f"{JOURNAL}{studyjournal.TORN}-*"):
             if torn.is_file() and any(n in torn.read_bytes() for n in named):
                 files.append(torn)
-        return [f for f in dict.fromkeys(files) if f.is_file()]
+        return [f for f in dict.fromkeys(files) if f.is_file() or refusal(f)]
 
     def merged_using(self, pid: str) -> list[str]:
         """The merged policies combined from `pid`'s games."""
@@ -1133,6 +1145,10 @@ class StudyData:
             answers = [r for r in self.answers() if r["participant"] == pid]
             lines = [e for e in self.read_journal() if getattr(e, "participant", None) == pid]
             files = [f for f in self.files_of(pid) if f.parent.name != "exports"]
+            for f in files:  # before the zip opens one: a pipe blocked it (pairplay/inputs.py)
+                if said := refusal(f):
+                    raise StudyDataError(f"{pid}'s data cannot be exported whole: {said}",
+                                         self.given / f.relative_to(self.folder))
             buf = io.BytesIO()
             with zipfile.ZipFile(buf, "w", zipfile.ZIP_DEFLATED) as z:
                 for f in files:
@@ -1185,7 +1201,8 @@ class StudyData:
                 raise StudyDataError(f"{pid}: {self.given / live[0].relative_to(self.folder)} {LIVE}: stop its "
                                      "session first")
             key = self.key_file
-            if key is not None and not key.is_file():  # before anything is deleted: their name stays in it
+            if key is not None and not key.is_file() and not refusal(key):  # before anything is deleted: their
+                # name stays in it (a pipe there is refused for what it is, by key_file_ids)
                 raise StudyDataError(f"{pid}: the key file {key} is not there (an unmounted drive?): their name "
                                      "would stay in it; make it reachable first, then delete")
             lines = self.key_file_ids().count(pid)
@@ -1429,7 +1446,7 @@ def _settings(path: Path) -> dict:
         return {}
     data = without_bom(path.read_bytes())
     try:
-        return msgspec.structs.asdict(msgspec.json.decode(data, type=FolderSettings))
+        return msgspec.structs.asdict(json_decode(data, type=FolderSettings))
     except (msgspec.DecodeError, msgspec.ValidationError) as err:
         raise StudyDataError(f"not the study's settings: {in_words(err, FolderSettings, data)}; it is "
                              f"{{\"key_file\": \"<path or empty>\"}}", path) from None

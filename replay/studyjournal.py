@@ -29,6 +29,7 @@ from pathlib import Path
 
 import msgspec
 
+from pairplay.inputs import refusal
 from pairplay.numbers import counted
 from pairplay.outputs import write_bytes
 from pairplay.schemas import journal as j
@@ -123,6 +124,8 @@ def torn_ids(journal: Path) -> set[str]:
     """The ids registered by torn lines `repair` set aside beside `journal` (module rule)."""
     ids = set()
     for aside in journal.parent.glob(f"{journal.name}{TORN}-*"):
+        if refusal(aside):  # never opened (a pipe blocked `register`: pairplay/inputs.py); one holds no id
+            continue
         try:
             pid = torn_registration(aside.read_bytes())
         except OSError:

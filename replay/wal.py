@@ -44,7 +44,9 @@ from pathlib import Path
 from typing import Callable
 
 import msgspec
+from pairplay.inputs import refusal
 from pairplay.numbers import counted
+from pairplay.schemas.nesting import MsgpackDecoder, msgpack_decode
 
 MAGIC = b"\x89pairplay journal 1\n"  # 20 bytes: no MCAP reader takes it for a recording
 assert len(MAGIC) == 20
@@ -55,7 +57,7 @@ PERIOD_S = 0.005  # the journal thread writes what was received at least this of
 _HEAD = struct.Struct("<IIQI")  # body length, count, taken_ns, crc32
 MAX_FRAME = 1 << 30  # a frame's body longer than this is damage, not data (a period's messages are a few MB)
 _encode = msgspec.msgpack.Encoder().encode
-_records = msgspec.msgpack.Decoder(list[tuple[str, bytes]])
+_records = MsgpackDecoder(list[tuple[str, bytes]])
 
 
 def wal_path(recording: str | Path) -> Path:
@@ -65,7 +67,10 @@ def wal_path(recording: str | Path) -> Path:
 
 
 def is_journal(path: str | Path) -> bool:
-    """Whether `path` starts with the journal's MAGIC (False if it cannot be read)."""
+    """Whether `path` starts with the journal's MAGIC (False if it cannot be read, or is no regular file: a
+    pipe is never opened, which blocked: pairplay/inputs.py)."""
+    if refusal(path):
+        return False
     try:
         with open(path, "rb") as f:
             return f.read(len(MAGIC)) == MAGIC
@@ -212,6 +217,8 @@ def read_journal(path: str | Path) -> Journal:
     """Read a journal up to its end or its first torn or damaged frame (see the module rule).
     NotAJournal if it does not start with MAGIC and an intact header frame; OSError if unreadable."""
     path = Path(path)
+    if said := refusal(path):  # a pipe beside a recording: `recover` waited on it (pairplay/inputs.py)
+        raise NotAJournal(f"{path} {said}")
     data = path.read_bytes()
     if data[:len(MAGIC)] != MAGIC:
         raise NotAJournal(f"{path} is not a recorder's journal (no journal magic)")
@@ -236,7 +243,7 @@ def read_journal(path: str | Path) -> Journal:
     if not frames:
         raise NotAJournal(f"{path}: the journal's header is {'damaged' if torn else 'missing'}")
     try:
-        header = msgspec.msgpack.decode(frames[0][0], type=dict[str, str])
+        header = msgpack_decode(frames[0][0], type=dict[str, str])
     except (msgspec.DecodeError, msgspec.ValidationError) as err:
         raise NotAJournal(f"{path}: the journal's header is unreadable ({err})") from None
     journal = Journal(path, header, torn=torn, frames=len(frames))

@@ -52,6 +52,7 @@ import numpy as np
 
 from pairplay import csvcell
 from pairplay.errors import OptionError
+from pairplay.inputs import check_input
 from pairplay.nearest import nearest
 from pairplay.numbers import counted, shown, type_name, typed_floats
 from pairplay.outputs import manifest_name, output_file, output_folder, write_text
@@ -62,6 +63,7 @@ from pairplay.core.geometry import PERFECT_PICKS
 from pairplay.core.rng import SEED_RANGE
 from pairplay.core.study import FIRST_ROUNDS
 from pairplay.report.study import SettingError, StudySettings, default_reuse_last
+from pairplay.schemas.nesting import json_loads, toml_loads
 
 log = logging.getLogger("pairplay.sweep")
 
@@ -183,13 +185,14 @@ def read_grid(path: str | Path) -> Grid:
 
 
 def _read_grid(path: str, parse_float) -> Grid:
+    check_input(path, GridError)  # before opening: a pipe blocked (pairplay/inputs.py)
     try:
         with open(path, "rb") as f:
             raw = f.read()
         if empty(raw):  # (read as a grid of nothing, it ran the default study, exit 0: a new user's trial)
             raise GridError(f"{path}: {empty(raw)}")
         text = without_bom(raw).decode("utf-8")
-        data = tomllib.loads(text, parse_float=parse_float)
+        data = toml_loads(text, parse_float=parse_float)
     except FileNotFoundError:
         raise GridError(f"{path}: no such file") from None
     except IsADirectoryError:  # it said `Is a directory (bad)`: the system's words, not what to give
@@ -362,7 +365,7 @@ def _check_cell(path: Path, grid: Grid, cell: Cell) -> dict[str, float]:
     if empty(data):
         raise ValueError(empty(data))
     try:
-        found = msgspec.convert(json.loads(without_bom(data)), CellFile)  # json: NaN is read, then refused below
+        found = msgspec.convert(json_loads(without_bom(data)), CellFile)  # json: NaN is read, then refused below
     except ValueError as err:  # json.JSONDecodeError, msgspec.ValidationError (in the file's words: in_words)
         raise ValueError(f"not a cell file: {' '.join(in_words(err, CellFile).split())}") from None
     if found.seed != cell.seed or found.setting != [tuple(kv) for kv in json.loads(json.dumps(cell.setting))]:
@@ -385,7 +388,7 @@ def is_cell_file(path: Path) -> bool:
     not a manifest (pairplay/outputs.py): cells are written one by one as each finishes, and a stopped sweep's
     are kept to resume from, so a list written at the end would miss them; each cell file says what it is."""
     try:
-        found = msgspec.convert(json.loads(without_bom(path.read_bytes())), CellFile)
+        found = msgspec.convert(json_loads(without_bom(path.read_bytes())), CellFile)
     except (OSError, ValueError, RecursionError):  # not readable, not JSON, not a cell
         return False
     return Cell(tuple(tuple(kv) for kv in found.setting), found.seed).id == path.stem

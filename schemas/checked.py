@@ -28,6 +28,7 @@ import msgspec
 
 from .envelope import MAX_NS, NS_PER_S, TAG_FIELD, Nanos
 from .events import EVENT_TYPES, decode_event
+from .nesting import JsonDecoder
 
 MAX_SEC, MAX_SEC_NSEC = divmod(MAX_NS, NS_PER_S)
 
@@ -67,7 +68,7 @@ def _twin(event_type: type) -> type:
 
 CHECKED_TYPES: tuple[type, ...] = tuple(_twin(t) for t in EVENT_TYPES)
 CHECKED_BY_TAG: dict[str, type] = {t.__struct_config__.tag: t for t in CHECKED_TYPES}
-_decoder = msgspec.json.Decoder(Union[CHECKED_TYPES])  # type: ignore[valid-type]
+_decoder = JsonDecoder(Union[CHECKED_TYPES])  # type: ignore[valid-type]
 
 
 def check_event(payload: bytes):

@@ -31,6 +31,7 @@ import msgspec
 
 from .envelope import Event, Nanos, Seq, dec_hook, enc_hook
 from .session import SessionConfig
+from .nesting import JsonDecoder
 
 
 # Ranges of the fields, checked on decode (where a message enters; schemas/trust.py)
@@ -345,7 +346,7 @@ EVENT_TYPES: tuple[type[Event], ...] = (
 EVENT_BY_TAG: dict[str, type[Event]] = {t.__struct_config__.tag: t for t in EVENT_TYPES}
 AnyEvent = Union[EVENT_TYPES]  # type: ignore[valid-type]
 
-_decoder = msgspec.json.Decoder(AnyEvent, dec_hook=dec_hook)
+_decoder = JsonDecoder(AnyEvent, dec_hook=dec_hook)
 _encoder = msgspec.json.Encoder(enc_hook=enc_hook)
 
 

@@ -21,6 +21,7 @@ that had used their data.
 from __future__ import annotations
 
 import msgspec
+from .nesting import JsonDecoder
 
 
 class JournalEvent(msgspec.Struct, frozen=True, kw_only=True, tag_field="event"):
@@ -145,7 +146,7 @@ AnyJournal = JOURNAL_TYPES[0]
 for _t in JOURNAL_TYPES[1:]:
     AnyJournal = AnyJournal | _t  # type: ignore[assignment]
 
-_decoder = msgspec.json.Decoder(AnyJournal)
+_decoder = JsonDecoder(AnyJournal)
 _encoder = msgspec.json.Encoder()
 
 

@@ -46,8 +46,10 @@ from typing import Generic, TypeVar
 
 import msgspec
 from pairplay.arguments import flag_argument, instance_argument, path_argument
+from pairplay.inputs import check_input
 from pairplay.nearest import nearest
 from pairplay.numbers import counted, type_name
+from .nesting import JsonDecoder, json_decode
 
 T = TypeVar("T")
 BOM = b"\xef\xbb\xbf"  # UTF-8's byte order mark: Notepad and other editors start a saved file with it
@@ -180,7 +182,7 @@ def _every_unknown(struct: type | None, data: bytes | None) -> list[tuple[str, s
     if struct is None or data is None:
         return []
     try:
-        value = msgspec.json.decode(data)
+        value = json_decode(data)
     except msgspec.DecodeError:
         return []
     return unknown_keys(value, struct)
@@ -262,7 +264,7 @@ class _Format(msgspec.Struct):
     version: object = None  # any JSON here: a version that is no integer is worded by the whole decode
 
 
-_format_decoder = msgspec.json.Decoder(_Format)
+_format_decoder = JsonDecoder(_Format)
 
 
 class JsonFileKind(Generic[T]):
@@ -273,7 +275,7 @@ class JsonFileKind(Generic[T]):
         self.error, self.what = error, what
         self.from_recording = from_recording  # what makes one of a recording, said when given a recording
         self._encoder = msgspec.json.Encoder()
-        self._decoder = msgspec.json.Decoder(struct)
+        self._decoder = JsonDecoder(struct)
         self._struct = struct
         # the format and version this pairplay writes: the Struct's defaults (its `format` and `version`)
         defaults = {f.name: f.default for f in msgspec.structs.fields(struct)}
@@ -330,6 +332,7 @@ class JsonFileKind(Generic[T]):
     def read(self, path) -> T:
         """The checked value of the file at `path`; the kind's error if it cannot be read or used."""
         path = path_argument(path, f"read_{self.noun}")
+        check_input(path, self.error)  # before opening: a pipe blocked its reader (pairplay/inputs.py)
         try:
             data = path.read_bytes()
         except IsADirectoryError:

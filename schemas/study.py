@@ -29,6 +29,7 @@ from typing import Literal, Union
 
 import msgspec
 
+from pairplay.inputs import check_input
 from pairplay.nearest import nearest
 from pairplay.numbers import TYPE_NAMES, counted, shown, type_name, typed_floats
 
@@ -37,6 +38,7 @@ from .jsonfile import MAX_SAID, a_folder, empty, toml_words, unknown_keys
 from .robot_url import parse_robot_url
 from .session import MS_FIELDS, MS_RANGE, SEED_RANGE
 from .tomlplace import Written, header, misplaced, table_not_value
+from .nesting import toml_loads
 
 ID = re.compile(r"^[a-z0-9][a-z0-9_-]{0,39}$")
 PRESETS = ("virtual", "human-phase1", "human-phase2")
@@ -258,7 +260,7 @@ def parse_study(text: str, source: str = "study") -> Study:
         raise StudyFileError(f"{source}: {empty(text)}")
     with typed_floats() as parse_float:  # a number a line echoes, as the file has it (pairplay/numbers.py)
         try:
-            raw = tomllib.loads(text, parse_float=parse_float)
+            raw = toml_loads(text, parse_float=parse_float)
         except tomllib.TOMLDecodeError as err:
             raise StudyFileError(f"{source}: not valid TOML: {toml_words(err, text)}") from None
         written = Written(text, raw)
@@ -458,6 +460,7 @@ def study_file_of(path: str | Path) -> Path:
 def load_study(path: str | Path) -> Study:
     """Read and check a study file (StudyFileError, one line, if it cannot be used); a study folder, its own."""
     path = study_file_of(path)
+    check_input(path, StudyFileError)  # before opening: a pipe blocked (pairplay/inputs.py)
     try:
         text = path.read_text(encoding="utf-8-sig")  # an editor's byte order mark is no TOML error
     except (OSError, UnicodeDecodeError) as err:

@@ -30,6 +30,7 @@ import tomllib
 from typing import Collection, Mapping, Sequence
 
 from pairplay.numbers import shown
+from .nesting import toml_loads
 
 # the keys above a file's first `[table]` line: a place named in words, where a table is named by its header
 TOP = "the top of the file"
@@ -97,7 +98,7 @@ def _names(dotted: str) -> tuple[str, ...]:
     out = []
     for m in re.finditer(_KEY, dotted):
         k = m.group(0)
-        out.append(tomllib.loads(f"k = {k}")["k"] if k[0] in "\"'" else k)
+        out.append(toml_loads(f"k = {k}")["k"] if k[0] in "\"'" else k)
     return tuple(out)
 
 
@@ -208,7 +209,7 @@ class Written:
         text = self.values.get(tuple(path))
         if text is not None:
             try:
-                read = tomllib.loads(f"v = {text}")["v"]
+                read = toml_loads(f"v = {text}")["v"]
             except tomllib.TOMLDecodeError:
                 read = None
             if read == value or (read != read and value != value):  # nan is nan

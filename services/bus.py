@@ -75,10 +75,12 @@ import json5
 import zenoh
 import zenoh.ext
 
-from pairplay import signals
+from pairplay import signals, testpause
 from pairplay.errors import UserError
+from pairplay.inputs import refusal
 from pairplay.schemas.jsonfile import a_folder, empty
 from pairplay.services.zenohcheck import MODES, exposed, type_errors
+from pairplay.schemas.nesting import TOO_DEEP, json_loads
 
 log = logging.getLogger("pairplay.bus")
 LOOPBACK_ANY_PORT = "tcp/127.0.0.1:0"
@@ -149,6 +151,8 @@ class ConfigFileError(BusError, ValueError):
 
 
 def read_config_file(path: str) -> dict[str, Any]:
+    if said := refusal(path):  # before opening: a pipe blocked (pairplay/inputs.py)
+        raise ConfigFileError(f"cannot use the Zenoh config: {said}", f"--zenoh-config {path}")
     try:
         text = Path(path).read_text(encoding="utf-8-sig")  # a byte order mark is no JSON5 error
     except IsADirectoryError:
@@ -167,6 +171,8 @@ def read_config_file(path: str) -> dict[str, Any]:
         said += (": cut short (a copy or a save that did not finish? put back a whole copy), or a quote or bracket "
                  "left open" if "Unexpected end of input" in said else ": correct it there")
         raise ConfigFileError(f"cannot use the Zenoh config: not JSON5: {said}", f"--zenoh-config {path}") from None
+    except RecursionError:  # json5 recurses per level too (schemas/nesting.py)
+        raise ConfigFileError(f"cannot use the Zenoh config: not JSON5: {TOO_DEEP}", f"--zenoh-config {path}") from None
     if not isinstance(data, dict):
         raise ConfigFileError("cannot use the Zenoh config: the top level must be an object", f"--zenoh-config {path}")
     return data
@@ -300,6 +306,14 @@ def shutdown_wait(stop: threading.Event | None, cap: float, reserve: float = 0.0
     if stop is None or not stop.is_set():
         return cap
     return deadline_of(stop).left(reserve, cap)
+
+
+def signal_taken(stop: threading.Event) -> str:
+    """The signal's name if `stop_on_signals` took one for `stop` (or `pass_stop` passed one on), else "": set in
+    the handler itself, unlike `stop.is_set()`, which a thread the handler starts sets, late on a loaded machine
+    (`stop_on_signals`). Whether a KeyboardInterrupt is a second signal's, and what a verb says of the game or file
+    the first stopped, is decided from this."""
+    return getattr(stop, "why", "")
 
 
 def pass_stop(source: threading.Event, target: threading.Event) -> None:
@@ -939,7 +953,7 @@ class Bus:
             if reply.ok is None:
                 continue
             try:
-                info = json.loads(reply.ok.payload.to_bytes())
+                info = json_loads(reply.ok.payload.to_bytes())
             except ValueError:
                 continue
             if isinstance(info, dict) and "locators" in info:
@@ -1079,15 +1093,21 @@ def _replies(replies: queue.SimpleQueue, wait_s: float, stop: threading.Event | 
         yield reply
 
 
-def stop_on_signals(stop: threading.Event, then: Callable[[], object] | None = None) -> None:
+def stop_on_signals(stop: threading.Event, then: Callable[[], object] | None = None,
+                    now: Callable[[], object] | None = None) -> None:
     """SIGINT/SIGTERM set `stop`, name the signal in `stop.why` and start the shutdown's
     `stop.deadline` (a second SIGINT or SIGTERM interrupts: KeyboardInterrupt); then
     call `then()` (it must only set flags). `stop` is set and `then` called by a thread started from the handler: a handler
     runs on the main thread between two of its bytecodes, possibly while that thread holds the
-    lock of the Event it waits on. Main thread only."""
+    lock of the Event it waits on. Main thread only.
+
+    What the verb reads to say what a signal did is decided in the handler itself, never by that thread: `stop.why`
+    (`signal_taken`), and `now()`, called in the handler before the thread starts, which may only assign attributes
+    (no lock, no Event). The thread may run late on a loaded machine, after a second signal's KeyboardInterrupt has
+    reached the verb: `protocol pilot` read `stop.is_set()` and the stopped game that `then` set, found neither, and
+    said "nothing more was written" of the game it cut (once at load 5.4; tests/test_protocol_cut_game.py and
+    tests/test_cut_signals.py hold the thread at `signal-stopping` to land the second signal there)."""
     def handler(signum, frame):
-        if not signals.arrived(signum):
-            return  # a copy of a held second Ctrl-C sent again (pairplay/signals.py send_to_main): taken already
         # a signal taken already (its name in `why`), not a stop set by the work's own end: the first Ctrl-C
         # as a session finished its file was read as a second one and the file left cut (a new user's trial)
         taken = bool(getattr(stop, "why", ""))
@@ -1105,6 +1125,8 @@ def stop_on_signals(stop: threading.Event, then: Callable[[], object] | None = N
             return
         stop.why = signal.Signals(signum).name  # what ended the session, for its SessionEnded
         deadline_of(stop)  # the shutdown's time starts now, not when a thread notices
+        if now is not None:  # (plain attributes: what was running as the signal came, decided here; see the rule)
+            now()
         # Setting an Event takes its lock, which the main thread holds for a moment inside `stop.wait()`
         # (or any Event's wait): from the handler, running on that thread, the set waited for ever (a
         # router froze on SIGTERM, 1 of ~10 runs of test_cli_signals). So a thread of its own sets the
@@ -1120,6 +1142,7 @@ def stop_on_signals(stop: threading.Event, then: Callable[[], object] | None = N
 
 def _stop_now(stop: threading.Event, then: Callable[[], object] | None, signum: int) -> None:
     """stop_on_signals' work that takes locks, off the signal handler's thread."""
+    testpause.pause("signal-stopping")  # (a test holds this thread here: a loaded machine runs it late)
     log.info("signal %s: stopping", signal.Signals(signum).name)
     stop.set()
     if then is not None:

@@ -331,12 +331,19 @@ class StudyRunner:
                 on_event(e)
         return see
 
+    def signal_came(self, stop: threading.Event) -> None:
+        """The process got a signal (`stop`): no step starts after it, and the game running now is the one it
+        stopped (`stopped`). Plain attributes only: called in the signal's handler itself (services/bus.py
+        stop_on_signals `now`), so what serve and pilot say after a second signal does not depend on whether the
+        thread that runs `interrupt` got there first (it had not, once at load 5.4: pilot named no game)."""
+        self.interrupted = stop
+        self.stopped = self.stopped or self.running
+
     def interrupt(self, stop: threading.Event) -> None:
         """The process got a signal (`stop`, services/bus.py stop_on_signals): the running game stops with
         the signal's name and deadline, its recording finished; no step starts after it. Only sets flags
         (called right after the signal, services/bus.py stop_on_signals)."""
-        self.interrupted = stop
-        self.stopped = self.stopped or self.running
+        self.signal_came(stop)
         if self._stop is not None and not self._stop.is_set():
             pass_stop(stop, self._stop)
         self._skip.set()

@@ -97,6 +97,7 @@ from pairplay.services.bus import MISSED, HEARTBEAT_S, Bus, Deadline, Inbox, Out
 from pairplay.services.guard import Guard, Refusals
 from pairplay.services.runner import LOG_QUERY, SENT_QUERY
 from pairplay.services.walmerge import admit
+from pairplay.schemas.nesting import JsonDecoder, msgpack_decode
 
 log = logging.getLogger("pairplay.recorder")
 END_METADATA = "pairplay.recorder.end"  # how the recording ended (Recorder.close)
@@ -155,7 +156,7 @@ class _Stamp(msgspec.Struct):
     seq: int
 
 
-_stamp = msgspec.json.Decoder(_Stamp).decode
+_stamp = JsonDecoder(_Stamp).decode
 _REFILL = object()  # inbox control item: Zenoh reported messages lost for good
 
 
@@ -516,7 +517,7 @@ def same_live_session(bus: Bus, session: str, path: Path, timeout_s: float = 3.0
         for payload in bus.query(f"{query_key(session, '*', SENT_QUERY)}?after={after}", timeout_s * min(2, 1 + ask),
                                  stop):
             try:
-                name, items = msgspec.msgpack.decode(payload, type=tuple[str, list[tuple[str, bytes]]])
+                name, items = msgpack_decode(payload, type=tuple[str, list[tuple[str, bytes]]])
             except msgspec.DecodeError:
                 continue
             if name not in first:
@@ -811,7 +812,7 @@ class Recorder:
         answered, refilled = [], 0
         for payload in self.bus.query(f"{query_key(self.session, '*', SENT_QUERY)}?after={after}", timeout_s):
             try:
-                name, items = msgspec.msgpack.decode(payload, type=tuple[str, list[tuple[str, bytes]]])
+                name, items = msgpack_decode(payload, type=tuple[str, list[tuple[str, bytes]]])
             except msgspec.DecodeError as err:
                 log.warning("recorder: unreadable refill: %s", err)
                 continue

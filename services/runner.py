@@ -35,6 +35,7 @@ from pairplay.schemas.trust import SOURCES, STARTERS
 
 from pairplay.services.bus import MISSED, Bus, Inbox, Outbox
 from pairplay.services.node import Driver, Logic
+from pairplay.schemas.nesting import msgpack_decode
 
 log = logging.getLogger("pairplay.runner")
 # a game waits this long for the services it needs (Node.start), then one line, exit 2; a slow or
@@ -49,7 +50,7 @@ def fetch_log(bus: Bus, session: str, timeout_s: float = 5.0, stop: threading.Ev
     batches = []
     for payload in bus.query(query_key(session, "recorder", LOG_QUERY), timeout_s, stop=stop):
         try:
-            index, items = msgspec.msgpack.decode(payload, type=tuple[int, list[tuple[str, bytes]]])
+            index, items = msgpack_decode(payload, type=tuple[int, list[tuple[str, bytes]]])
         except msgspec.DecodeError as err:
             log.warning("unreadable log batch from the recorder: %s", err)
             continue

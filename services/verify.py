@@ -63,7 +63,6 @@ verified: its whole life is in the file, and the verdict says where it stopped.
 
 from __future__ import annotations
 
-import json
 from dataclasses import dataclass, field
 
 from pairplay.errors import InputError
@@ -78,6 +77,7 @@ from pairplay.services.learner import LearnerLogic
 from pairplay.services.node import SHELL_TAGS, Driver
 from pairplay.services.participant import ParticipantLogic
 from pairplay.numbers import counted
+from pairplay.schemas.nesting import json_loads
 
 
 @dataclass
@@ -248,7 +248,7 @@ def verify_recording(path) -> Verification:
             # (a gap in the game's seq in a file whose every part checks out: events missing, not a damaged part)
             why = "events are missing from it" if log.gaps else "no event lost, but the file is damaged"
             result.reach = f"the {counted(result.events, 'event')} the file holds ({why})"
-    lost = json.loads(recovered.get("damaged", "[]") or "[]")
+    lost = json_loads(recovered.get("damaged", "[]") or "[]")
     if lost and not recovered_lost(recovered):  # its damaged parts lost no message (an index, a CRC): whole
         result.reach = f"{result.reach} ({said_source_made(recovered)}; no message was lost)"
     elif lost and first_lost > 0:  # compared up to the first lost part, as in the damaged file itself

@@ -130,7 +130,8 @@ def command_handlers():
     """The pairplay command's own SIGINT/SIGTERM handlers (cli/main.py installs them for the command), for an
     in-process main(); pytest's come back after (main restores what it found)."""
     from pairplay.cli.interrupts import DeferredInterrupt
-    saved = {s: signal.getsignal(s) for s in (signal.SIGINT, signal.SIGTERM)}
+    from pairplay.signals import SIGNALS
+    saved = {s: signal.getsignal(s) for s in SIGNALS}
     DeferredInterrupt().install()
     yield
     for s, handler in saved.items():
@@ -152,10 +153,11 @@ def _files(root: Path) -> set[str]:
     return {str(p.relative_to(root)) for p in root.rglob("*")}
 
 
-@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM], ids=["SIGINT", "SIGTERM"])
+@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM, signal.SIGHUP], ids=["SIGINT", "SIGTERM", "SIGHUP"])
 def test_rebuild_interrupted_part_way_leaves_nothing_it_created_not_even_its_folder(
         sig, tmp_path, monkeypatch, capsys, command_handlers):
-    """Before: the outputs were removed but the --out folder rebuild had made stayed, empty."""
+    """Before: the outputs were removed but the --out folder rebuild had made stayed, empty. SIGHUP (the terminal
+    closed) killed it outright, no line, 129 by the signal (a hostile user's trial): now stopped as SIGTERM stops it."""
     import pairplay.replay.rebuild as rebuild
     shutil.copy(SAMPLE, tmp_path / "a.mcap")
     before = _files(tmp_path)
@@ -164,7 +166,7 @@ def test_rebuild_interrupted_part_way_leaves_nothing_it_created_not_even_its_fol
     out, err = capsys.readouterr()
     assert _files(tmp_path) == before
     assert out == ""  # no result line for outputs that were removed
-    said = "Ctrl-C" if sig == signal.SIGINT else "SIGTERM"
+    said = "Ctrl-C" if sig == signal.SIGINT else sig.name
     assert err.splitlines() == [f"pairplay rebuild: interrupted ({said}); nothing more was written"]
 
 

@@ -36,9 +36,11 @@ LIMIT_S = 300.0  # a safety net for a process that never gets there (a loaded ma
 class Held:
     """One verb's process, held at `moment` until the test lets it go (and at `then` after it, if given)."""
 
-    def __init__(self, tmp: Path, moment: str, args: list[str], ready: str, then: str = ""):
+    def __init__(self, tmp: Path, moment: str, args: list[str], ready: str, then: str = "", hold: str = ""):
+        """`hold`: a moment held for good (its go-file is never made), in whichever thread reaches it."""
         self.go, self.go_then = tmp / f"go-{moment}", tmp / f"go-{then}"
-        pauses = f"{moment}:{self.go}" + (f";{then}:{self.go_then}" if then else "")
+        pauses = f"{moment}:{self.go}" + (f";{then}:{self.go_then}" if then else "") + \
+            (f";{hold}:{tmp / 'go-never'}" if hold else "")
         env = dict(os.environ, PYTHONUNBUFFERED="1", PAIRPLAY_TEST_PAUSE=pauses)
         self.then = then
         self.paused_then = threading.Event()
@@ -121,6 +123,33 @@ def test_a_second_ctrl_c_as_the_session_is_summed_up_leaves_its_summary(tmp_path
     assert len(err) == 1 and err[0].startswith("pairplay session: interrupted (Ctrl-C) "), err
     assert f"to {Path('rec') / 'told.mcap'}" in err[0] or str(path) in err[0], err
     assert "nothing more was written" not in err[0] and "Traceback" not in "".join(err), err
+
+
+def test_a_recorders_second_ctrl_c_is_said_as_such_though_the_first_signals_thread_has_not_run(tmp_path):
+    """The thread the first signal's handler starts (services/bus.py stop_on_signals: it sets the stop flag) runs
+    late on a loaded machine. `run recorder`'s cut path read that flag: a second Ctrl-C before the thread ran was
+    said as cli/main.py's "interrupted (Ctrl-C); nothing more was written" (as `protocol pilot`'s, once at load
+    5.4). A recorder finishing as its session ended, its first signal's thread held for good (`signal-stopping`),
+    the first signal as it starts to finish, the second before the file's end: the cut line, from what the
+    handler itself noted (services/bus.py `signal_taken`)."""
+    from test_faults import endpoint_of, first_line, session_proc
+
+    game = session_proc(tmp_path, "--participant", "sim:ashley", "--rounds", "2", "--session", "late", "--external",
+                        "recorder")
+    try:
+        args = ["run", "recorder", "--session", "late", "--out", str(tmp_path), "--connect",
+                endpoint_of(first_line(game))]
+        held = Held(tmp_path, "recorder-closing", args, "", then="recorder-ending", hold="signal-stopping")
+        code, err = held.at_both(signal.SIGINT, signal.SIGINT)
+    finally:
+        game.kill()
+        game.communicate()
+    path = tmp_path / "late.mcap"
+    assert code == 130, err
+    # (its last line: a loaded machine may add a recorder's WARNING of suggestions the robot did not act on)
+    assert err[-1].startswith(f"pairplay run recorder: interrupted again (Ctrl-C) while stopping; {path} "), err
+    assert "nothing more was written" not in "".join(err) and "Traceback" not in "".join(err), err
+    assert wal_path(path).exists()  # cut before its end: its journal kept for `pairplay recover`
 
 
 def test_a_second_ctrl_c_between_the_files_end_and_its_journals_removal(tmp_path):

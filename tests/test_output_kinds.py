@@ -49,20 +49,25 @@ VERBS = {
 }
 
 
-@pytest.fixture(scope="module")
-def template(tmp_path_factory, pairplay_cli) -> Path:
-    """A folder with what the verbs read: a recording, a cut one, rebuilt policies, a study file and a study folder,
-    a grid."""
-    root = tmp_path_factory.mktemp("kinds")
+def make_inputs(root: Path, pairplay_cli) -> None:
+    """What the verbs read, in the folder `root`: a recording, a cut one, rebuilt policies, a study file and a study
+    folder (tests/test_input_kinds.py too)."""
     shutil.copy(SAMPLES / "sim-ashley.mcap", root / "R.mcap")
     data = (SAMPLES / "sim-ashley.mcap").read_bytes()
     (root / "cut.mcap").write_bytes(data[:len(data) * 2 // 3])
     r = pairplay_cli("rebuild", "R.mcap", SAMPLES / "sim-helmut-fmt2.mcap", "--out", "rebuilt", "--no-plot", cwd=root)
     assert r.returncode == 0, r.stderr
     (root / "one.toml").write_text(ONE_GAME_STUDY)
-    (root / "grid.toml").write_text(GRID)
     r = pairplay_cli("protocol", "init", "study", "--study", "one.toml", cwd=root)  # for a report (test_output_writers)
     assert r.returncode == 0, r.stderr
+
+
+@pytest.fixture(scope="module")
+def template(tmp_path_factory, pairplay_cli) -> Path:
+    """A folder with what the verbs read (`make_inputs`), a grid, and the folders the verbs write into."""
+    root = tmp_path_factory.mktemp("kinds")
+    make_inputs(root, pairplay_cli)
+    (root / "grid.toml").write_text(GRID)
     for folder in ("rb", "st", "cf", "sw", "rec"):
         (root / folder).mkdir()
     return root

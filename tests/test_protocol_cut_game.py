@@ -35,21 +35,37 @@ from test_protocol_interrupted import STUDY, api, study_with
 LIMIT_S = 300
 
 
-def cut_by_a_second_ctrl_c(tmp_path) -> tuple[StudyData, str]:
-    """A study of 2 whose `protocol pilot` got two Ctrl-C as its first game's recorder finished: (its folder read,
-    the game's session)."""
+def pilot_paused(tmp_path, moments: tuple[str, ...]) -> tuple[StudyData, str, subprocess.Popen]:
+    """A study of 2 and its `protocol pilot` process, to pause at each of `moments` (pairplay/testpause.py): (its
+    folder, its first game's session, the process)."""
     data = study_with(tmp_path, STUDY.read_text(), participants=2)
     session = data.session_id(next(iter(data.state.participants)), "phase1", 0)
-    moments = ("recorder-closing", "recorder-ending")
     proc = subprocess.Popen([sys.executable, "-m", "pairplay", "protocol", "pilot", str(data.folder), "--personas",
                              "tatiana,blind"], cwd=tmp_path, text=True, stdout=subprocess.DEVNULL,
                             stderr=subprocess.PIPE,
                             env=dict(os.environ, PYTHONUNBUFFERED="1", PAIRPLAY_TEST_PAUSE=";".join(
                                 f"{m}:{tmp_path / f'go-{m}'}" for m in moments)))
+    return data, session, proc
+
+
+def paused_at(err, moment: str) -> None:
+    """The process's next test pause (its stderr's lines `err`) is at `moment`."""
+    assert next(line for line in err if line.startswith("pairplay-test:")) == f"pairplay-test: paused at {moment}\n"
+
+
+def cut_by_a_second_ctrl_c(tmp_path, first_signal_late: bool = False) -> tuple[StudyData, str]:
+    """A study of 2 whose `protocol pilot` got two Ctrl-C as its first game's recorder finished: (its folder read,
+    the game's session). `first_signal_late`: the thread the first signal's handler starts (services/bus.py
+    stop_on_signals: it sets the stop flag and stops the game) is held until the process has ended, as a loaded
+    machine may run it late."""
+    moments = ("recorder-closing", "recorder-ending")
+    data, session, proc = pilot_paused(tmp_path, moments + ("signal-stopping",) * first_signal_late)
     err = iter(proc.stderr)
     for moment in moments:  # the first as the game's recorder starts to finish, the second before the file's end
-        assert next(line for line in err if line.startswith("pairplay-test:")) == f"pairplay-test: paused at {moment}\n"
+        paused_at(err, moment)
         proc.send_signal(signal.SIGINT)
+        if first_signal_late and moment == moments[0]:
+            paused_at(err, "signal-stopping")  # (held for good: its go-file is never made)
         (tmp_path / f"go-{moment}").touch()
     said = [line.rstrip("\n") for line in err]
     assert proc.wait(LIMIT_S) == 130, said
@@ -63,6 +79,33 @@ def cut_by_a_second_ctrl_c(tmp_path) -> tuple[StudyData, str]:
     data = StudyData(data.folder)
     assert data.state.games[session].ended is None
     return data, session
+
+
+def test_the_cut_line_is_decided_by_the_first_signals_handler_not_by_its_thread(tmp_path):
+    """Once at load 5.4 the second Ctrl-C's line was cli/main.py's "interrupted (Ctrl-C); nothing more was written":
+    the thread the first signal's handler starts sets the stop flag and names the stopped game, and pilot's cut path
+    read both; that thread had not run yet. Here it is held until the process has ended: the line is the cut game's
+    (the assertions of `cut_by_a_second_ctrl_c`), decided from what the handler itself noted."""
+    data, session = cut_by_a_second_ctrl_c(tmp_path, first_signal_late=True)
+    assert data.state.games[session].ended is None
+
+
+def test_a_first_signal_whose_thread_runs_late_still_ends_the_plan_after_its_game(tmp_path):
+    """The same late thread, one signal: the plan stops after the game the signal came in and pilot says so. Before,
+    the next step was decided from a flag that thread sets: the plan went on and its next game started."""
+    data, session, proc = pilot_paused(tmp_path, ("recorder-closing", "signal-stopping"))
+    err = iter(proc.stderr)
+    paused_at(err, "recorder-closing")
+    proc.send_signal(signal.SIGINT)
+    paused_at(err, "signal-stopping")  # (held for good: its go-file is never made)
+    (tmp_path / "go-recorder-closing").touch()
+    said = [line.rstrip("\n") for line in err]
+    assert proc.wait(LIMIT_S) == 130, said
+    assert said[-1].startswith(f"pairplay protocol pilot: interrupted (Ctrl-C); game {session} had completed all 2 "
+                               "rounds, journaled completed; "), said
+    after = StudyData(data.folder)
+    assert list(after.state.games) == [session], after.state.games  # no game after it
+    assert after.state.games[session].ended.outcome == "completed"
 
 
 def test_a_game_cut_after_its_end_is_said_by_status_and_journaled_completed_by_the_next_verb(tmp_path, pairplay_cli):

@@ -19,11 +19,12 @@ SERVE_TAIL = r"""
 import sys, threading
 from pairplay.replay.studydata import StudyData
 from pairplay.services import protocol
-from pairplay.services.bus import Bus, BusOptions, stop_on_signals
+from pairplay.cli.protocol import stop_runners_on_signals
+from pairplay.services.bus import Bus, BusOptions
 
 protocol.JOURNALED_WAIT_S = float(sys.argv[2])
 stop, runners = threading.Event(), []
-stop_on_signals(stop, then=lambda: [r.interrupt(stop) for r in runners])
+stop_runners_on_signals(stop, runners)
 with Bus(BusOptions(), stop=stop) as bus:
     runner = protocol.StudyRunner(StudyData(sys.argv[1]), bus)
     runners.append(runner)

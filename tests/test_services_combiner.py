@@ -90,3 +90,21 @@ def test_a_user_of_one_policy_is_refused_as_pairplay_combine_refuses_it(tmp_path
                                                                   output_path="m.json"))
     assert not answer.ok and "two or more policies of a participant" in answer.error
     assert not (tmp_path / "m.json").exists()
+
+
+def test_a_named_pipe_named_by_a_request_is_refused_and_the_next_request_answered(tmp_path):
+    """A CombineRequested naming a FIFO in the combiner's directory blocked `pairplay run combiner` for good, every
+    later request unanswered (a hostile user's trial, trial28 F12): the input check (pairplay/inputs.py) refuses it."""
+    import os
+    import threading
+
+    os.mkfifo(tmp_path / "fifo.json")
+    answers = []
+    worker = threading.Thread(target=lambda: answers.extend(CombinerLogic(tmp_path).handle(
+        ev.CombineRequested(request_id="r", policies=["fifo.json"], recordings=[], output_path="m.json"))),
+        daemon=True)
+    worker.start()
+    worker.join(30)
+    if worker.is_alive():  # unblock the reader so the test process can end
+        os.close(os.open(tmp_path / "fifo.json", os.O_WRONLY | os.O_NONBLOCK))
+    assert answers and not answers[0].ok and "named pipe" in answers[0].error, answers

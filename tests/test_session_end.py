@@ -33,8 +33,10 @@ def ended(path):
     return [r.event for r in read_log(path).events if isinstance(r.event, ev.SessionEnded)]
 
 
-@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM])
+@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM, signal.SIGHUP])
 def test_a_signalled_session_records_it_was_interrupted_and_how_far_it_got(tmp_path, sig, pairplay_cli):
+    """SIGHUP (the terminal closed, the ssh link dropped) killed a session at once, no line, its recording cut (a
+    hostile user's trial, trial28 F8): now the same stop as SIGTERM's."""
     p = subprocess.Popen([sys.executable, "-m", "pairplay", "session", "--participant", "sim:wasim", "--rounds",
                           "5000", "--session", "sig", "--out", str(tmp_path)], stdout=subprocess.PIPE,
                          stderr=subprocess.STDOUT, text=True, env=dict(os.environ, PYTHONUNBUFFERED="1"))
@@ -59,6 +61,7 @@ def test_a_signalled_session_records_it_was_interrupted_and_how_far_it_got(tmp_p
             p.kill()
         if watcher is not None:
             watcher.close()
+    assert p.returncode == 128 + sig, out
     path = tmp_path / "sig.mcap"
     assert read_log(path).whole, out
     [end] = ended(path)

@@ -200,8 +200,8 @@ def test_every_handler_pairplay_installs_leaves_an_ignored_sigint_ignored():
 def test_a_signal_sent_to_the_main_thread_that_wakes_nothing_is_sent_again_and_taken_once(tmp_path):
     """A signal that lands as the main thread enters a blocking call (the GIL handed to the sender as the main
     thread lets it go for the call) wakes nothing: a held Ctrl-C sent back that way let a 120-s sleep run on
-    (1 of ~240 runs of the finalizer test at load 4-8). Here the first copy is lost on purpose: the sleep is
-    woken by the copy sent again, and the handler acts once however many copies come."""
+    (1 of ~240 runs of the finalizer test at load 4-8). Here the first wake is lost on purpose: the sleep is
+    woken by the one sent again, and the handler acts once however many wakes come."""
     script = tmp_path / "lost.py"
     script.write_text(
         "import signal, threading, time\n"
@@ -209,14 +209,13 @@ def test_a_signal_sent_to_the_main_thread_that_wakes_nothing_is_sent_again_and_t
         "real, sent = signal.pthread_kill, []\n"
         "def lossy(ident, signum):\n"
         "    sent.append(signum)\n"
-        "    if len(sent) > 1:\n"  # the first copy wakes nothing, as in the race
+        "    if len(sent) > 1:\n"  # the first wake wakes nothing, as in the race
         "        real(ident, signum)\n"
         "signal.pthread_kill = lossy\n"
         "acted = []\n"
         "def handler(signum, frame):\n"
-        "    if signals.arrived(signum):\n"
-        "        acted.append(signum)\n"
-        "        raise KeyboardInterrupt\n"
+        "    acted.append((signum, signals.resent()))\n"
+        "    raise KeyboardInterrupt\n"
         "signals.handle(handler)\n"
         "threading.Thread(target=signals.send_to_main, args=(signal.SIGINT,), daemon=True).start()\n"
         "t = time.monotonic()\n"
@@ -225,9 +224,58 @@ def test_a_signal_sent_to_the_main_thread_that_wakes_nothing_is_sent_again_and_t
         "except KeyboardInterrupt:\n"
         "    pass\n"
         "signal.pthread_kill = real\n"
-        "for _ in range(3):\n"  # a copy that comes after the first was taken is dropped
-        "    real(threading.main_thread().ident, signal.SIGINT)\n"
+        "for _ in range(3):\n"  # a wake that comes after the signal was taken delivers nothing
+        "    real(threading.main_thread().ident, signals.WAKE)\n"
         "    time.sleep(0.01)\n"
-        "print(len(acted), len(sent) >= 2, round(time.monotonic() - t) < 5)\n")
+        "print(acted == [(signal.SIGINT, True)], len(sent) >= 2, round(time.monotonic() - t) < 5)\n")
     r = subprocess.run([sys.executable, str(script)], capture_output=True, text=True, timeout=60)
-    assert r.stdout.split() == ["1", "True", "True"], (r.stdout, r.stderr)
+    assert r.stdout.split() == ["True", "True", "True"], (r.stdout, r.stderr)
+
+
+def test_a_late_copy_is_not_a_second_signal_and_a_second_signal_is_never_taken_for_a_copy(tmp_path):
+    """A signal sent to the main thread is sent again until taken (`send_to_main`). Its copies were the signal
+    itself, told from a second Ctrl-C by time: one that came within 0.25 s of its send was dropped. So a main
+    thread descheduled longer than that took a copy for a second Ctrl-C (a verb stopping on its first was cut),
+    and a user's own second Ctrl-C within that time was dropped. Now the copies are WAKE, and what they deliver is
+    owed under a token: SIGINT only comes from outside. A real process, `stop_on_signals`' handler (a verb's), a
+    first signal delivered by `send_to_main` (its first send lost, so it is sent again); the clock those copies
+    were judged by moves only when the script says: a second SIGINT at once is a second signal, and a copy that
+    comes a second late is none."""
+    script = tmp_path / "copies.py"
+    script.write_text(
+        "import os, signal, threading, time\n"
+        "from pairplay import signals\n"
+        "from pairplay.services.bus import stop_on_signals\n"
+        "clock = [1000.0]\n"
+        "time.monotonic = lambda: clock[0]\n"  # (what the copies were told apart by; sleeps are real)
+        "real, sent, late = signal.pthread_kill, [], []\n"
+        "def copies(ident, signum):\n"
+        "    sent.append(signum)\n"
+        "    if len(sent) == 1:\n"
+        "        return\n"  # the first send wakes nothing: it is sent again
+        "    real(ident, signum)\n"
+        "    late.append((ident, signum))\n"  # and a copy of that one comes late
+        "signal.pthread_kill = copies\n"
+        "stop = threading.Event()\n"
+        "stop_on_signals(stop)\n"
+        "threading.Thread(target=signals.send_to_main, args=(signal.SIGINT,), daemon=True).start()\n"
+        "while not getattr(stop, 'why', ''):\n"
+        "    time.sleep(0.01)\n"
+        "signal.pthread_kill = real\n"
+        "try:\n"  # the user's second Ctrl-C, no time after the copy
+        "    os.kill(os.getpid(), signal.SIGINT)\n"
+        "    time.sleep(0.05)\n"
+        "    print('second: dropped')\n"
+        "except KeyboardInterrupt:\n"
+        "    print('second: cuts')\n"
+        "clock[0] += 1.0\n"  # the main thread descheduled for a second
+        "try:\n"
+        "    real(*late[0])\n"
+        "    time.sleep(0.05)\n"
+        "    print('late copy: nothing')\n"
+        "except KeyboardInterrupt:\n"
+        "    print('late copy: a second signal')\n"
+        "print(stop.why, signals.again)\n")
+    r = subprocess.run([sys.executable, str(script)], capture_output=True, text=True, timeout=60)
+    assert r.stdout.splitlines() == ["second: cuts", "late copy: nothing", f"SIGINT {int(signal.SIGINT)}"], \
+        (r.stdout, r.stderr)

@@ -51,7 +51,8 @@ def a_study(tmp_path: Path, registered: int = 2) -> StudyData:
 
 
 def serving(folder: Path) -> subprocess.Popen:
-    """A `protocol serve` of `folder` once it has printed its console (it holds the folder then)."""
+    """A `protocol serve` of `folder` once it has printed its console (it holds the folder then); its URL is
+    `proc.console_url`."""
     proc = subprocess.Popen([sys.executable, "-m", "pairplay", "protocol", "serve", str(folder)],
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
                             env=dict(os.environ, PYTHONUNBUFFERED="1"))
@@ -65,6 +66,7 @@ def serving(folder: Path) -> subprocess.Popen:
             proc.wait()
             pytest.fail(f"serve ended before its console: {''.join(err)}")
     threading.Thread(target=lambda: proc.stdout.read(), daemon=True).start()
+    proc.console_url = line.split("experimenter console:", 1)[1].strip()
     return proc
 
 

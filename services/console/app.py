@@ -3,7 +3,9 @@
 Rule: every console route needs the experimenter token (`?token=` or the
 `X-Pairplay-Token` header), compared in constant time; a wrong one gets 403 and
 nothing else. The questionnaire routes need the running game's own
-questionnaire token instead, which is useless once the answers are in. A
+questionnaire token instead (the link's `?session=&token=`, checked before a
+body is read), which is useless once the answers are in. Every body is at most
+64 KiB: the lab app refuses a longer one before any route (lab/bodylimit.py). A
 request the study refuses (a step out of order, a bad answer, an abort without
 a reason) is answered 400 with `{"error": "<one line>"}`; nothing a request
 sends can raise out of a route. Steps (a game, a combination, a report) run in
@@ -35,10 +37,10 @@ from pairplay.schemas.jsonfile import in_words
 
 from pairplay.services.protocol import StudyRunner
 from pairplay.numbers import counted
+from pairplay.schemas.nesting import json_decode
 
 log = logging.getLogger("pairplay.console")
 STATIC = Path(__file__).parent / "static"
-MAX_BODY = 64 * 1024
 
 
 class Console:
@@ -140,13 +142,13 @@ def _describe(result) -> str:
 
 
 async def _body(request: Request) -> dict:
+    """The request's JSON object ({} for no body): at most 64 KiB, the lab app's BodyLimit refused a longer one
+    before any route or token check (services/lab/bodylimit.py)."""
     raw = await request.body()
-    if len(raw) > MAX_BODY:
-        raise StudyDataError("request too large")
     if not raw:
         return {}
     try:
-        body = msgspec.json.decode(raw)
+        body = json_decode(raw)
     except msgspec.DecodeError:
         raise StudyDataError("the request is not JSON") from None
     if not isinstance(body, dict):
@@ -300,11 +302,16 @@ def console_routes(console: Console) -> list:
     async def q_page(request: Request) -> Response:
         return FileResponse(STATIC / "questionnaire.html")
 
-    async def q_items(request: Request) -> Response:
+    def questionnaire_link_ok(request: Request) -> bool:
+        """The link's `?session=&token=` are the running game's and its questionnaire token is still unused."""
         live = runner.live
         token = request.query_params.get("token", "")
-        if not live.questionnaire_token or not hmac.compare_digest(token.encode(), live.questionnaire_token.encode()) \
-                or request.query_params.get("session") != live.session:
+        return bool(live.questionnaire_token) and hmac.compare_digest(token.encode(), live.questionnaire_token.encode()) \
+            and request.query_params.get("session") == live.session
+
+    async def q_items(request: Request) -> Response:
+        live = runner.live
+        if not questionnaire_link_ok(request):
             return JSONResponse({"error": "this questionnaire link is not the current game's"}, status_code=403)
         name, items = runner.questions_for(live.participant, live.phase)
         q = data.study.questionnaire[name]
@@ -312,6 +319,10 @@ def console_routes(console: Console) -> list:
                              "items": [msgspec.to_builtins(i) for i in items]})
 
     async def q_answer(request: Request) -> Response:
+        # the link's token before the body is read, as every other route that takes a body (trial28 F13: anyone
+        # who reached the port could post here); the body's session and token are the runner's to check again
+        if not questionnaire_link_ok(request):
+            return JSONResponse({"error": "this questionnaire link is not the current game's"}, status_code=403)
         try:
             asked = _read(await _body(request), AnswerRequest)
             runner.answer_questionnaire(asked.session, asked.token, asked.answers)

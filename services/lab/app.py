@@ -3,7 +3,8 @@
 Rule: `create_app(lab)` builds a Starlette app from `PAGES` (modules with a
 `routes()` function) plus `/static`; the sessions it serves are `lab.hubs`
 (session id -> LabHub), so a page reaches a session only through its id and
-its token (`Lab.hub_for`). Responses carry no-store and a same-origin content
+its token (`Lab.hub_for`). A request body above 64 KiB is refused before any
+route reads it (`bodylimit.BodyLimit`). Responses carry no-store and a same-origin content
 security policy: pages load nothing from elsewhere.
 """
 
@@ -19,6 +20,7 @@ from starlette.staticfiles import StaticFiles
 from starlette.types import ASGIApp, Receive, Scope, Send
 
 from pairplay.services.lab import board, mirror
+from pairplay.services.lab.bodylimit import BodyLimit
 from pairplay.services.lab.hub import LabHub
 
 STATIC = Path(__file__).resolve().parent / "static"
@@ -67,6 +69,6 @@ def create_app(lab: Lab, pages=PAGES) -> Starlette:
     routes = [r for page in pages for r in page.routes()]
     routes.append(Mount("/static", StaticFiles(directory=STATIC), name="static"))
     routes.append(Route("/favicon.ico", lambda request: Response(status_code=204)))  # browsers ask; nothing to show
-    app = Starlette(routes=routes, middleware=[Middleware(SecurityHeaders)])
+    app = Starlette(routes=routes, middleware=[Middleware(SecurityHeaders), Middleware(BodyLimit)])
     app.state.lab = lab
     return app

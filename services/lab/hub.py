@@ -43,6 +43,7 @@ from pairplay.services.game import elsewhen
 from pairplay.services.lab.model import LabModel
 from pairplay.services.runner import Node
 from pairplay.numbers import counted
+from pairplay.schemas.nesting import JsonDecoder
 
 log = logging.getLogger("pairplay.lab")
 MAX_MESSAGE = 4096  # bytes: a page's messages are small; longer ones are refused and recorded
@@ -71,7 +72,7 @@ class Ping(msgspec.Struct, tag="ping", forbid_unknown_fields=True):
 
 
 PageMessage = Union[Pick, Wrong, Ping]
-_decode = msgspec.json.Decoder(PageMessage).decode
+_decode = JsonDecoder(PageMessage).decode
 _encode = msgspec.json.Encoder().encode
 
 

@@ -17,6 +17,7 @@ from typing import Callable
 
 import msgspec
 
+from pairplay.inputs import refusal
 from pairplay.schemas.jsonfile import a_folder, empty, in_words, without_bom
 from pairplay.schemas.robot import GESTURE_PRESETS, PRESET_NOTES, BoardCalibration, RobotActed, RobotConfig
 from pairplay.schemas.robot_url import FORMS, parse_robot_url  # noqa: F401 (FORMS: the --robot help)
@@ -28,6 +29,7 @@ from pairplay.services.robot.realtime import RealtimeTransport
 from pairplay.services.robot.render import Renderer
 from pairplay.services.robot.transport import Transport
 from pairplay.services.robot.virtual import VirtualTransport
+from pairplay.schemas.nesting import json_decode
 
 
 def make_transport(url: str, config: RobotConfig | None = None) -> tuple[Transport, RobotConfig]:
@@ -43,12 +45,14 @@ def load_robot_config(path: str | None) -> RobotConfig:
     """A RobotConfig JSON file (strict), or the defaults for None."""
     if path is None:
         return RobotConfig()
+    if said := refusal(path):  # before opening: a pipe blocked (pairplay/inputs.py)
+        raise ValueError(f"robot config {path}: {said}")
     try:
         with open(path, "rb") as f:
             raw = f.read()
         if empty(raw):
             raise ValueError(f"robot config {path}: {empty(raw)}")
-        config = msgspec.json.decode(without_bom(raw), type=RobotConfig)
+        config = json_decode(without_bom(raw), type=RobotConfig)
     except IsADirectoryError:
         raise ValueError(a_folder(path, "robot config", "its JSON file")) from None
     except OSError as exc:

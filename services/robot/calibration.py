@@ -18,8 +18,10 @@ from pathlib import Path
 import msgspec
 
 from pairplay.core.geometry import COLS, N_CARDS, ROWS, card_of
+from pairplay.inputs import refusal
 from pairplay.schemas.jsonfile import a_folder, empty, in_words, without_bom
 from pairplay.schemas.robot import BoardCalibration, Point
+from pairplay.schemas.nesting import json_decode
 
 DEFAULT_FILE = "calibration_default.json"
 MAX_DISTANCE_M = 10.0  # a card farther than this from the robot is a unit mistake
@@ -36,6 +38,8 @@ def load_calibration(path: str | Path | None = None) -> BoardCalibration:
         raw = resources.files("pairplay.services.robot").joinpath(DEFAULT_FILE).read_bytes()
         where = f"packaged {DEFAULT_FILE}"
     else:
+        if said := refusal(path):  # before opening: a pipe blocked (pairplay/inputs.py)
+            raise CalibrationError(f"calibration {path}: {said}")
         try:
             raw = Path(path).read_bytes()
         except IsADirectoryError:
@@ -46,7 +50,7 @@ def load_calibration(path: str | Path | None = None) -> BoardCalibration:
         if empty(raw):
             raise CalibrationError(f"calibration {where}: {empty(raw)}")
     try:
-        calibration = msgspec.json.decode(without_bom(raw), type=BoardCalibration)
+        calibration = json_decode(without_bom(raw), type=BoardCalibration)
     except msgspec.DecodeError as exc:  # ValidationError is a subclass
         raise CalibrationError(f"calibration {where} is not valid: "
                                f"{in_words(exc, BoardCalibration, without_bom(raw))}") from exc

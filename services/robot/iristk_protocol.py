@@ -50,6 +50,7 @@ from dataclasses import dataclass
 
 from pairplay.schemas.robot_url import DEFAULT_PORTS
 from pairplay.schemas.robot import check_name_filter
+from pairplay.schemas.nesting import json_loads
 
 EVENT_CLASS = "iristk.system.Event"
 LOCATION_CLASS = "iristk.situated.Location"
@@ -190,7 +191,7 @@ class FrameReader:
 def decode_event(frame: EventFrame) -> dict:
     """The event object of a frame; ValueError with the reason if it is not one."""
     try:
-        event = json.loads(frame.payload)
+        event = json_loads(frame.payload)
     except (UnicodeDecodeError, json.JSONDecodeError, RecursionError) as exc:
         raise ValueError(f"EVENT {frame.name}: payload is not JSON ({exc})") from None
     if not isinstance(event, dict):

@@ -50,6 +50,7 @@ from pairplay.services.robot.render import Command, Gesture, Look, Say, StopSpee
 from pairplay.services.robot.transport import (
     GESTURE_END, SPEECH_END, SPEECH_START, AccessRefused, Deliver, Disconnected, Rejected, Reply, Wire,
 )
+from pairplay.schemas.nesting import json_loads
 
 log = logging.getLogger("pairplay.robot.realtime")
 
@@ -214,7 +215,7 @@ def _object(raw: str | bytes) -> dict | None:
     if not isinstance(raw, str):
         return None
     try:
-        value = json.loads(raw)
+        value = json_loads(raw)
     except json.JSONDecodeError:
         return None
     return value if isinstance(value, dict) else None

@@ -18,7 +18,6 @@ from __future__ import annotations
 
 import heapq
 import itertools
-import json
 import logging
 import threading
 import time
@@ -27,6 +26,7 @@ import msgspec
 
 from pairplay.services.robot.render import Command, Gesture, Say, StopSpeech
 from pairplay.services.robot.transport import GESTURE_END, SPEECH_END, SPEECH_START, Deliver, Reply, Wire
+from pairplay.schemas.nesting import json_loads
 
 log = logging.getLogger("pairplay.robot.virtual")
 
@@ -67,7 +67,7 @@ class VirtualTransport:
     def send(self, wire: Wire) -> None:
         if self._deliver is None:
             raise ConnectionError("virtual robot not connected")
-        message = json.loads(wire.data)
+        message = json_loads(wire.data)
         self.performed.append((time.time_ns(), wire.text))
         log.debug("virtual robot performs %s", wire.text)  # RobotActed records it; a session stays readable
         kind, command_id = message["type"], message["id"]

@@ -39,8 +39,10 @@ async function submit(ev) {
     if (fs.dataset.kind === "text") { const v = fs.querySelector("textarea").value.trim(); if (v) answers[id] = v; }
     else { const c = fs.querySelector("input:checked"); if (c) answers[id] = c.value; }
   });
-  const r = await fetch("/api/questionnaire/answer", {method: "POST", headers: {"content-type": "application/json"},
-                                                     body: JSON.stringify({session, token, answers})});
+  // the link's session and token in the URL too: the server checks them before it reads the body
+  const link = `session=${encodeURIComponent(session)}&token=${encodeURIComponent(token)}`;
+  const r = await fetch(`/api/questionnaire/answer?${link}`, {method: "POST", headers: {"content-type": "application/json"},
+                                                              body: JSON.stringify({session, token, answers})});
   const data = await r.json().catch(() => ({}));
   if (!r.ok) { status(data.error || "could not send", true); return; }
   $("q-form").innerHTML = ""; status("Thank you! Your answers are recorded.");
