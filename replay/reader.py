@@ -152,8 +152,7 @@ class EventLog:
             return ""
         many = len(wrong) > 1
         return (f"{counted(len(wrong), 'channel')}{chr(39) + ' schemas are' if many else chr(39) + 's schema is'} not "
-                f"pairplay's ({wrong[0]}{', ...' if many else ''}): {'their' if many else 'its'} events are read as "
-                "their JSON says")
+                f"pairplay's ({wrong[0]}{', ...' if many else ''}): the events are read as their JSON says")
 
     @property
     def said_too(self) -> str:
@@ -196,7 +195,7 @@ class EventLog:
             bad = [m for m in self.bad if m.reason.startswith(DISAGREES) == wrong]
             if bad:
                 one = len(bad) == 1
-                what = (f"{'is' if one else 'are'} not what {'its' if one else 'their'} key names" if wrong
+                what = (("is not what its key names" if one else "are not what their key names") if wrong
                         else f"{'does' if one else 'do'} not decode")
                 why = bad[0].reason.removeprefix(DISAGREES).lstrip(":, ")
                 said.append(f"{len(bad)} message{'' if one else 's'} in it {what} "
