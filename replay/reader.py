@@ -15,7 +15,10 @@ silently). Identical copies of one event (its session, source and seq, the same
 bytes: a message stored twice, a chunk written again) are read once and counted
 (`copies`, said by `copied` in the line every verb says of the file: `loss_free`,
 `missing`); a differing event of the same (session, source, seq) is kept, for
-replay/forgery.py to judge. A message that does not decode is an event every verb reading the
+replay/forgery.py to judge. An event whose channel's key names another session,
+source or type is not read: a `BadMessage`, as on the bus (`disagreement`). A
+gap in the game's seq in a file that lost no part is events missing (`gaps`),
+and event channels whose schema is not pairplay's are said (`foreign_schemas`). A message that does not decode is an event every verb reading the
 file lacks (a Q update among them: a Q-table the learner never had), so such a
 file is damaged as one that lost a part: `EventLog.undecoded` says so in the one
 line every verb uses (rebuild, counterfactual, replay and verify, view, report),
