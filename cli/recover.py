@@ -101,6 +101,8 @@ def run(args: argparse.Namespace) -> int:
                    f"; {args.recording} and its journal are kept as they were (the journal recovers it again; remove "
                    "the two once the output is kept)")
     earlier = f"; what its source had lost is carried over ({done.earlier_lost})" if done.earlier_lost else ""
+    if done.copies:  # each event once in the copy (a whole file with copies is no complete one: replay/recover.py)
+        state += f"; {counted(done.copies, 'identical copy', 'identical copies')} of events not copied"
     print(f"{args.recording}: {state}; {counted(done.messages, 'message')} kept in {done.output}{earlier}{journal}{ended}")
     if done.journal_error:  # what it held (up to the last 5 ms before a crash) is not in the output: said, not silent,
         _journal_unreadable(args, done)  # -q or not

@@ -111,7 +111,10 @@ def run(args: argparse.Namespace) -> int:
         # a damaged file that lost events in its middle draws a part too (as rebuild refuses to pass it off as whole;
         # a new user's trial: saved as d.rrd, the whole name, and -q hid the damage)
         # (messages that do not decode are events lost too: reader.EventLog.lost)
-        lost = held.lost
+        # and so does a cut file (its session's later events are not in it), as a damaged one does: one rule for
+        # both (a hostile user's trial: a cut file's view was saved under the complete name, a damaged one's as
+        # .partial.rrd); a file its recorder still writes is `live`, said so
+        lost = held.lost or ("" if live else held.missing)
         if args.session:  # before rerun loads and anything is drawn
             if not any(r.event.session == args.session for r in held.events):
                 raise InputError(f"holds no events of session {args.session}; nothing saved", args.recording)

@@ -11,7 +11,14 @@ message is decoded with msgspec into its event class; a message of an event
 type this version does not know (a newer pairplay's) is counted and kept as an
 `UnknownEvent` by its tag; any other message that does not decode is kept as a
 `BadMessage` with the reason (a recording is evidence: nothing is dropped
-silently). A message that does not decode is an event every verb reading the
+silently). Identical copies of one event (its session, source and seq, the same
+bytes: a message stored twice, a chunk written again) are read once and counted
+(`copies`, said by `copied` in the line every verb says of the file: `loss_free`,
+`missing`); a differing event of the same (session, source, seq) is kept, for
+replay/forgery.py to judge. An event whose channel's key names another session,
+source or type is not read: a `BadMessage`, as on the bus (`disagreement`). A
+gap in the game's seq in a file that lost no part is events missing (`gaps`),
+and event channels whose schema is not pairplay's are said (`foreign_schemas`). A message that does not decode is an event every verb reading the
 file lacks (a Q update among them: a Q-table the learner never had), so such a
 file is damaged as one that lost a part: `EventLog.undecoded` says so in the one
 line every verb uses (rebuild, counterfactual, replay and verify, view, report),
@@ -37,6 +44,8 @@ from pairplay.numbers import counted
 from pairplay.schemas.envelope import Event
 from pairplay.schemas.jsonfile import MCAP_MAGIC
 from pairplay.schemas.events import EVENT_BY_TAG, decode_event
+from pairplay.schemas.keys import ROOT as KEY_ROOT
+from pairplay.schemas.trust import STARTERS
 
 from .mcapscan import Damage, scan
 from pairplay.schemas.nesting import JsonDecoder, json_loads
@@ -110,6 +119,64 @@ class EventLog:
     # session is not), in one short line (from its RECOVERED metadata); "" if its source lost no
     # message (an index, a CRC: the session is whole) or it is no recovered file
     source_lost: str = ""
+    # identical copies of one event (its session, source and seq, the same bytes) read once (module rule: `copied`)
+    copies: int = 0
+    # where a starting source's (the game's: schemas/trust.py STARTERS) seq skips numbers between two events read:
+    # (source, seq before, seq after), in order (`gaps`)
+    seq_jumps: list[tuple[str, int, int]] = field(default_factory=list)
+
+    @property
+    def copied(self) -> str:
+        """The identical copies of events the file held, read once, in one short line ("" if none): a file whose
+        every message was stored twice (a copying tool, a chunk written again) was folded twice, exit 0: a
+        policy of doubled visits and Q updated twice (a hostile user's trial). A copy changes nothing, so it is
+        said, not a loss; a differing event of the same (session, source, seq) is no copy (replay/forgery.py)."""
+        if not self.copies:
+            return ""
+        return f"{counted(self.copies, 'identical copy', 'identical copies')} of events read once"
+
+    @property
+    def foreign_schemas(self) -> str:
+        """The channels of pairplay events whose schema is not pairplay's, in one short line ("" if none): the
+        events decode all the same (pairplay reads the JSON, not the schema), but the file misdescribes them to any
+        other MCAP reader (Foxglove), and `recover` copies it along (schemas replaced by `{"type":"string"}` or by
+        bytes that are not JSON passed every verb with no word: a hostile user's trial). A schema is pairplay's if it
+        is a JSON Schema ("jsonschema") named as its channel's event, a JSON object of that title and of type
+        "object" (what schemas/jsonschema.py writes; the exact text changes as events gain fields, so is not
+        compared)."""
+        wrong = []
+        for topic, schema_id in self.channels.values():
+            tag = topic.rsplit("/", 1)[-1]
+            if tag in EVENT_BY_TAG:
+                why = not_pairplays(tag, self.schemas.get(int(schema_id)))
+                if why:
+                    wrong.append(f"{tag}: {why}")
+        if not wrong:
+            return ""
+        many = len(wrong) > 1
+        return (f"{counted(len(wrong), 'channel')}{chr(39) + ' schemas are' if many else chr(39) + 's schema is'} not "
+                f"pairplay's ({wrong[0]}{', ...' if many else ''}): the events are read as their JSON says")
+
+    @property
+    def said_too(self) -> str:
+        """What every verb says of a file beside what it lost, in one short line ("" if nothing): identical copies
+        read once (`copied`), schemas that are not pairplay's (`foreign_schemas`); neither loses an event."""
+        return "; ".join(n for n in (self.copied, self.foreign_schemas) if n)
+
+    @property
+    def gaps(self) -> str:
+        """The events of the game missing from a file that lost no part, in one short line ("" if none, or if a lost
+        part, a message that does not decode or the file it was recovered from lost them: they say so): the game
+        numbers its events 1, 2, 3, ... (replay/forgery.py), so a skipped number is an event the file lacks
+        although every byte of it checks out (a copying tool that dropped the RoundEnded: view said "0 notes",
+        rebuild "the session ended (completed) before round 1": a hostile user's trial)."""
+        if not self.seq_jumps or self.lost_at or self.source_lost:
+            return ""
+        n = sum(after - before - 1 for _, before, after in self.seq_jumps)
+        source, before, after = self.seq_jumps[0]
+        more = len(self.seq_jumps) - 1
+        return (f"{counted(n, 'event')} of {source!r} missing: its seq jumps from {before} to {after}"
+                + (f" and in {counted(more, 'other place')}" if more else ""))
 
     @property
     def whole(self) -> bool:
@@ -126,18 +193,23 @@ class EventLog:
     def undecoded(self) -> str:
         """The messages in the file that do not decode, in one short line ("" if none): how many, the first's
         channel and reason (a new user's trial: rebuilt, then fitted, with exit 0 and no word)."""
-        if not self.bad:
-            return ""
-        first = self.bad[0]
-        one = len(self.bad) == 1
-        return (f"{len(self.bad)} message{'' if one else 's'} in it {'does' if one else 'do'} not decode "
-                f"({first.key or 'no channel'}: {first.reason[:80]})")
+        said = []
+        for wrong in (False, True):  # what does not decode; what its key does not name (`disagreement`)
+            bad = [m for m in self.bad if m.reason.startswith(DISAGREES) == wrong]
+            if bad:
+                one = len(bad) == 1
+                what = (("is not what its key names" if one else "are not what their key names") if wrong
+                        else f"{'does' if one else 'do'} not decode")
+                why = bad[0].reason.removeprefix(DISAGREES).lstrip(":, ")
+                said.append(f"{len(bad)} message{'' if one else 's'} in it {what} "
+                            f"({bad[0].key or 'no channel'}: {why[:80]})")
+        return "; ".join(said)
 
     @property
     def damaged(self) -> str:
         """What is damaged in the file, in one short line ("" if nothing): its damaged parts (`brief`) and
         the messages that do not decode (`undecoded`); a cut alone is not damage."""
-        return "; ".join(n for n in (self.brief if self.damage else "", self.undecoded) if n)
+        return "; ".join(n for n in (self.brief if self.damage else "", self.undecoded, self.gaps) if n)
 
     @property
     def source_cut(self) -> str:
@@ -153,10 +225,13 @@ class EventLog:
         events are the session's, so no verb marks its output partial, and none is silent of it (a new user's
         trial: verify FAILed it, view, counterfactual and report said nothing); verify PASSes it when the damage
         is all after the data section (`data_intact`)."""
-        if self.whole or self.missing or self.lost_from >= 0:
+        if self.missing or self.lost_from >= 0:
             return ""
+        if self.whole:  # whole, but for copies of events, or schemas that are not pairplay's: said all the same
+            return self.said_too
         what = "damaged" if self.damage else "cut after its data section"
-        return f"the file is {what}, no event lost ({self.brief}): pairplay recover makes a whole copy"
+        said = f"the file is {what}, no event lost ({self.brief}): pairplay recover makes a whole copy"
+        return "; ".join(n for n in (said, self.said_too) if n)
 
     @property
     def data_intact(self) -> bool:
@@ -172,7 +247,7 @@ class EventLog:
         every message decodes and it is no recovery of a file that lost some): "damaged: ..." or "truncated: ..."
         (`brief`), what the file it was recovered from lost (`source_lost`, `source_cut`), and `undecoded`."""
         cut = "" if self.whole else f"{'damaged' if self.damage else 'truncated'}: {self.brief}"
-        return "; ".join(n for n in (cut, self.source_lost, self.source_cut, self.undecoded) if n)
+        return "; ".join(n for n in (cut, self.source_lost, self.source_cut, self.undecoded, self.gaps) if n)
 
     @property
     def lost(self) -> str:
@@ -182,7 +257,7 @@ class EventLog:
         such a file lacks events its session had (rebuild: refused without --partial; view: a partial view;
         report: the game left out); a damage that lost no event (a summary's CRC) is not a loss."""
         own = any(d.lost_at >= 0 for d in self.damage)
-        return "; ".join(n for n in (self.brief if own else "", self.source_lost, self.undecoded) if n)
+        return "; ".join(n for n in (self.brief if own else "", self.source_lost, self.undecoded, self.gaps) if n)
 
     @property
     def missing(self) -> str:
@@ -192,7 +267,9 @@ class EventLog:
         when its damage lost none (an index, a summary, a cut after the Data End): such a file is whole to a verb
         that reads its events (counterfactual, view, replay said "not whole" of it, and marked their output
         partial)."""
-        return self.note if (self.lost or self.cut_lost or self.source_cut) else ""
+        if not (self.lost or self.cut_lost or self.source_cut):
+            return ""
+        return "; ".join(n for n in (self.note, self.said_too) if n)  # (said too: `loss_free` is "" here)
 
     @property
     def no_session(self) -> str:
@@ -216,7 +293,8 @@ class EventLog:
             cut = ", cut short" if self.truncated else ""
             return (f"holds no session: an MCAP file with no messages ({counted(size, 'byte')}{cut}): the recording "
                     "holds nothing")
-        if not self.events and not self.skipped and foreign:
+        # (pairplay events on keys that name other ones are no other program's: said as damage, below)
+        if not self.events and not self.skipped and foreign > sum(m.reason.startswith(DISAGREES) for m in self.bad):
             topics = sorted({topic for topic, _ in self.channels.values()})[:2]
             return (f"holds no session: not a pairplay recording ({counted(foreign, 'message')}, none a pairplay event; "
                     f"channels {', '.join(repr(t) for t in topics)})")
@@ -509,10 +587,16 @@ def _read_log(path: str | Path, only: frozenset[str] | None = None) -> EventLog:
     log = EventLog(str(path))
     checked = scan(path)
     # channel -> (its topic, its tag if its events are only counted, else None): one look-up per message
-    route: dict[int, tuple[str, str | None]] = {}
+    # channel -> (its topic, its tag if its events are only counted, else None, and what an event on it must be: the
+    # session, source and event class its topic names (None: no pairplay event key): `disagreement`)
+    route: dict[int, tuple[str, str | None, str | None, str | None, type | None]] = {}
     skipped: dict[str, int] = log.skipped
     decode, head = decode_event, _tagged.decode
     append = log.events.append
+    # the first event read of each (session, source, seq): an identical one after it is a copy, read once (module
+    # rule; FirstOfEach's test, inlined: a call per message was 50% more time for a read); its keys: `gaps`
+    firsts = FirstOfEach()
+    seen = firsts.seen.setdefault
     records = checked.summary_records + checked.records
     own = [(len(checked.summary_records) + at, n) for at, n in checked.losses()]
     lost = sorted({at for at, _ in own})
@@ -537,17 +621,34 @@ def _read_log(path: str | Path, only: frozenset[str] | None = None) -> EventLog:
                                           record.log_time, record.data))
                 log.lost_at.append(len(log.events))
                 continue
-            key, tag = routed
+            key, tag, k_session, k_source, k_type = routed
             data = record.data
             if tag is not None:
                 try:
-                    if head(data).type == tag:
-                        skipped[tag] = skipped.get(tag, 0) + 1
-                        continue
+                    h = head(data)
+                    if h.type == tag and h.session == k_session and h.source == k_source:  # else decoded below
+                        first = seen(((h.session, h.source, h.seq)), data)
+                        if first is data:
+                            skipped[tag] = skipped.get(tag, 0) + 1
+                            continue
+                        if first == data:
+                            log.copies += 1  # an identical copy of one event read: once (module rule)
+                            continue
+                        # (other bytes of a seq read: decoded wholly below, to compare)
                 except (msgspec.DecodeError, msgspec.ValidationError):
                     pass  # decoded wholly below: a bad message is kept as one
             try:
-                append(RecordedEvent(key, decode(data), record.log_time, data))
+                e = decode(data)
+                if type(e) is not k_type or e.session != k_session or e.source != k_source:
+                    # changes nothing, as on the bus (services/guard.py): kept as a bad message, said
+                    log.bad.append(BadMessage(key, disagreement(key, e), record.log_time, data))
+                    log.lost_at.append(len(log.events))
+                    continue
+                first = seen((e.session, e.source, e.seq), data)
+                if first is not data and (first == data or _decoded(first) == e):
+                    log.copies += 1  # an identical copy of one event read: once (module rule)
+                    continue
+                append(RecordedEvent(key, e, record.log_time, data))
             except (msgspec.DecodeError, msgspec.ValidationError) as err:
                 tag = unknown_tag(record.data)
                 if tag is not None:
@@ -558,8 +659,10 @@ def _read_log(path: str | Path, only: frozenset[str] | None = None) -> EventLog:
         elif isinstance(record, Channel):
             log.channels[record.id] = (record.topic, str(record.schema_id))
             tag = record.topic.rsplit("/", 1)[-1]
+            parts = record.topic.split("/")
+            named = (parts[1], parts[2]) if len(parts) == 4 and parts[0] == KEY_ROOT else (None, None)
             route[record.id] = (record.topic, tag if only is not None and tag in EVENT_BY_TAG and tag not in only
-                                else None)
+                                else None, *named, EVENT_BY_TAG.get(tag) if named[0] is not None else None)
         elif isinstance(record, Schema):
             log.schemas[record.id] = (record.name, record.encoding, record.data)
         elif isinstance(record, Metadata):
@@ -569,6 +672,7 @@ def _read_log(path: str | Path, only: frozenset[str] | None = None) -> EventLog:
             if log.lost_from < 0:
                 log.lost_from = len(log.events)
     log.truncated, log.damage, log.data_complete = checked.truncated, checked.damage, checked.data_complete
+    log.seq_jumps = seq_jumps([at for at in firsts.seen if at[1] in STARTERS])
     if recovered:
         log.metadata[RECOVERED] = recovered
     log.source_lost = said_source_lost(log.metadata.get(RECOVERED, {}))
@@ -579,6 +683,95 @@ def _read_log(path: str | Path, only: frozenset[str] | None = None) -> EventLog:
         log.error = f"{LIVE}, read as far as it goes; {log.error}"
         log.brief = f"{LIVE}, read as far as it goes; {log.brief}"
     return log
+
+
+class FirstOfEach:
+    """The first event read of each (session, source, seq) (module rule): an identical one after it is a copy (a
+    file whose every message was stored twice, a chunk written again: read once, counted); one that differs is
+    kept, for replay/forgery.py to judge (a contradiction). The reader's and recover's (which copies no copy)."""
+
+    def __init__(self) -> None:
+        self.seen: dict[tuple[str, str, int], bytes] = {}  # -> the bytes of the first event read of it
+
+    def copy(self, at: tuple[str, str, int], data: bytes, event: Event | None = None) -> bool | None:
+        """Whether `data` (decoded: `event`) is a copy of the first event read of `at`: None if it is the first,
+        True if the same bytes or (decoded) an equal event (another encoder's spacing: forgery.py's test),
+        False if it differs (or is not decoded yet and its bytes differ)."""
+        first = self.seen.setdefault(at, data)
+        if first is data:
+            return None
+        if first == data:
+            return True
+        return event is not None and _decoded(first) == event
+
+    def copy_of(self, data: bytes) -> bool:
+        """Whether the message `data` is a copy of an event read before (False for one that does not decode: a
+        bad message is evidence, kept)."""
+        try:
+            head = _tagged.decode(data)
+        except (msgspec.DecodeError, msgspec.ValidationError):
+            return False
+        at = (head.session, head.source, head.seq)
+        same = self.copy(at, data)
+        return bool(same) or (same is False and self.copy(at, data, _decoded(data)) is True)
+
+
+def not_pairplays(tag: str, schema: tuple[str, str, bytes] | None) -> str:
+    """Why `schema` (name, encoding, data) is not pairplay's schema of event `tag` ("" if it is: see
+    `EventLog.foreign_schemas`)."""
+    if schema is None:
+        return "no schema"
+    name, encoding, data = schema
+    if name != tag or encoding != "jsonschema":
+        return f"named {name!r} ({encoding})"
+    try:  # (nesting's: a hostile file's schema nested deep is no RecursionError)
+        text = json_loads(data)
+    except (ValueError, UnicodeDecodeError):
+        return "not JSON"
+    if not isinstance(text, dict) or text.get("title") != tag or text.get("type") != "object":
+        return "not the JSON Schema of its event"
+    return ""
+
+
+def disagreement(key: str, e: Event) -> str:
+    """Why event `e` on a channel whose topic is `key` is not the event its key names ("" if it is):
+    the key `pairplay/<session>/<source>/<tag>` names its session, source and type, as on the bus, where a guard
+    refuses a message whose key disagrees with its envelope (services/guard.py); in a file it was accepted, read as
+    its payload said (a copy whose every topic named another session: rebuild, verify, view said nothing of it: a
+    hostile user's trial)."""
+    parts = tuple(key.split("/"))
+    said = (type(e).__name__, e.session, e.source)
+    if parts == (KEY_ROOT, said[1], said[2], said[0]):
+        return ""
+    if len(parts) != 4 or parts[0] != KEY_ROOT:
+        return f"{DISAGREES}, no pairplay event key"
+    named = (parts[3], parts[1], parts[2])
+    what = next(i for i in range(3) if named[i] != said[i])
+    return (f"{DISAGREES}: it names {('type', 'session', 'source')[what]} {named[what]!r}, its payload "
+            f"{said[what]!r}")
+
+
+DISAGREES = "its key disagrees with its payload"  # how `disagreement` starts (`EventLog.undecoded` counts them apart)
+
+
+def seq_jumps(numbered: list[tuple[str, str, int]]) -> list[tuple[str, int, int]]:
+    """Where each (session, source)'s seqs, sorted, skip numbers: (source, seq before, seq after), by seq."""
+    by: dict[tuple[str, str], list[int]] = {}
+    for session, source, seq in numbered:
+        by.setdefault((session, source), []).append(seq)
+    jumps = []
+    for (_, source), seqs in by.items():
+        seqs.sort()
+        jumps += [(source, a, b) for a, b in zip(seqs, seqs[1:]) if b > a + 1]
+    return jumps
+
+
+def _decoded(data: bytes) -> Event | None:
+    """`data` decoded (None if it does not decode): the first event of a seq, kept as bytes, to compare."""
+    try:
+        return decode_event(data)
+    except (msgspec.DecodeError, msgspec.ValidationError):
+        return None
 
 
 def read_events(path: str | Path) -> list[Event]:

@@ -86,7 +86,9 @@ def partial_reason(fold: SessionFold, note: str = "", recovered: dict[str, str] 
         damaged = recovered.get("damaged", "[]") not in ("", "[]")
         # events its journal added are a partial session's unless they are its whole rest (reader.journal_restored)
         added = recovered.get("from_journal", "0") not in ("", "0") and not journal_restored(recovered)
-        if lost or cut or added or not (damaged or recovered.get("truncated") == "true"):
+        # (a whole file recovered to drop identical copies of events, replay/recover.py, lost none either)
+        copies = recovered.get("copies_dropped", "0") not in ("", "0")
+        if lost or cut or added or not (damaged or copies or recovered.get("truncated") == "true"):
             # a cut source in the words every verb says it in (reader.said_source_cut)
             why.append("completed by pairplay recover" + (" from a damaged file" if lost else
                                                            f": {said_source_cut(recovered)}" if cut else ""))
@@ -150,8 +152,9 @@ def rebuild_recording(path: str | Path) -> Rebuilt:
     recovered = log.metadata.get("pairplay.recovered") or {}
     rebuilt = rebuild_events((r.event for r in log.events), str(path), log.truncated, note,
                              recovered, log.metadata.get("pairplay.recorder.end"), skipped=log.skipped)
-    if loss_free:  # said as every verb says it (reader.EventLog.loss_free)
-        rebuilt.damage_read = log.loss_free
+    # said as every verb says it (reader.EventLog.loss_free), and so are identical copies of events read once and
+    # schemas that are not pairplay's (`said_too`) in a file that lost some too
+    rebuilt.damage_read = log.loss_free or log.said_too
     rebuilt.damaged_rounds = damaged_rounds([r.event for r in log.events], log.lost_at)
     if log.lost:  # the file's own damage, or its source's if it was recovered (reader.EventLog.source_lost)
         rebuilt.lost = f"the file is damaged ({log.lost})" if log.damaged else log.lost

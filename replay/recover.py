@@ -66,7 +66,7 @@ from pairplay.arguments import flag_argument, path_argument
 
 from .check import check_recording
 from .mcapscan import scan
-from .reader import read_any_log
+from .reader import FirstOfEach, read_any_log
 from .wal import RECORDER_METADATA, NotAJournal, not_its, read_journal, wal_path
 from .writer import CHUNK_SIZE, PROFILE
 from pairplay.schemas.nesting import json_loads
@@ -93,6 +93,7 @@ class Recovered:
     lost_messages: int | None = 0  # how many messages those parts held (None: not known, unreadable bytes' records)
     earlier_lost: str = ""  # what the source's own source lost, carried forward (a recovered file recovered again)
     earlier_cut: str = ""  # what the source's own source lost to its cut (reader.said_source_cut), likewise
+    copies: int = 0  # identical copies of events in the source, not copied (reader.FirstOfEach)
 
 
 def default_output(path: Path) -> Path:
@@ -148,7 +149,8 @@ def recover(path: str | Path, output: str | Path | None = None, force: bool = Fa
     if log.no_session and not (added is not None and any(key.rsplit("/", 1)[-1] == "SessionStarted"
                                                           for key, *_ in added.items)):
         raise NoSession(log.no_session, path)
-    complete = checked.whole and not (added is not None and added.items)  # and nothing more to add
+    # and nothing more to add, and no identical copies of events in it (a copy has none: reader.FirstOfEach)
+    complete = checked.whole and not (added is not None and added.items) and not log.copies
     # the source's own recovery record, if it was recovered before: its losses are carried forward (module rule)
     earlier = folded_recovery(checked.records)
     lost_parts = [f"{d.part}: {d.lost}" for d in checked.damage if d.lost_at >= 0]
@@ -164,7 +166,8 @@ def recover(path: str | Path, output: str | Path | None = None, force: bool = Fa
                          journal_torn=journal.torn if journal is not None else "", journal_error=journal_error,
                          complete=complete, not_its_journal=not_its, **lost_words)
     check_output(output, force)  # only an output that will be written (a complete file writes none)
-    messages, ended, last_round = 0, False, -1
+    messages, ended, last_round, copies = 0, False, -1, 0
+    firsts = FirstOfEach()
     schema_ids: dict[int, int] = {}
     channel_ids: dict[int, int] = {}
     topics: dict[int, str] = {}
@@ -196,6 +199,9 @@ def recover(path: str | Path, output: str | Path | None = None, force: bool = Fa
                         dict(record.metadata))
                     topics[record.id] = record.topic
             elif isinstance(record, Message):
+                if firsts.copy_of(record.data):  # an identical copy of an event written: not copied again
+                    copies += 1
+                    continue
                 if record.channel_id in channel_ids:
                     writer.add_message(channel_ids[record.channel_id], record.log_time, record.data,
                                        record.publish_time, record.sequence)
@@ -232,7 +238,7 @@ def recover(path: str | Path, output: str | Path | None = None, force: bool = Fa
             DATA_COMPLETE_KEY: str(checked.data_complete).lower(), "reason": reason, "damaged": json.dumps(damaged), "lost_chunks": str(len(checked.lost_chunks)),
             LOST_AT_KEY: json.dumps(lost_at), "lost": json.dumps([f"{d.part}: {d.lost}" for d in checked.damage if d.lost_at >= 0]),
             "completed": "summary, indexes and CRCs written by pairplay recover",
-            "session_ended": str(ended).lower(), "last_round": str(last_round),
+            "session_ended": str(ended).lower(), "last_round": str(last_round), "copies_dropped": str(copies),
             **({"journal": journal.path.name if journal is not None else journal_error,
                 "from_journal": str(added.taken if added else 0),
                 "journal_refused": str(added.refused if added else 0),
@@ -245,7 +251,7 @@ def recover(path: str | Path, output: str | Path | None = None, force: bool = Fa
                      journal=journal.path if journal is not None else None,
                      from_journal=added.taken if added else 0, journal_refused=added.refused if added else 0,
                      journal_torn=journal.torn if journal is not None else "", journal_error=journal_error,
-                     **lost_words)
+                     copies=copies, **lost_words)
 
 
 def _lost_count(checked) -> int | None:

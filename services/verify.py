@@ -245,7 +245,9 @@ def verify_recording(path) -> Verification:
     elif log.damaged:  # damaged parts and messages that do not decode, in the words every verb uses (reader.EventLog)
         result.damaged = log.damaged
         if first_lost < 0:
-            result.reach = f"the {counted(result.events, 'event')} the file holds (no event lost, but the file is damaged)"
+            # (a gap in the game's seq in a file whose every part checks out: events missing, not a damaged part)
+            why = "events are missing from it" if log.gaps else "no event lost, but the file is damaged"
+            result.reach = f"the {counted(result.events, 'event')} the file holds ({why})"
     lost = json_loads(recovered.get("damaged", "[]") or "[]")
     if lost and not recovered_lost(recovered):  # its damaged parts lost no message (an index, a CRC): whole
         result.reach = f"{result.reach} ({said_source_made(recovered)}; no message was lost)"

@@ -770,7 +770,8 @@ def test_the_report_leaves_out_a_game_whose_recording_holds_no_session_or_no_who
     words = [(empty, "recording holds no session: the file is empty (0 bytes)"),
              (header, "recording holds no session: an MCAP file with no"),
              (unstarted, "recording holds no session: "),
-             (no_round, "recording holds no whole round: ")]
+             # (its RoundEnded removed: the game's seq skips their numbers, said as events missing: trial28 F3)
+             (no_round, "recording damaged: 2 events of 'game' missing: its seq jumps from ")]
     for g, why in words:
         assert g.session not in reported, g.session
         [left] = [e for e in report.excluded if e.startswith(g.session + " (")]

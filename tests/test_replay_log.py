@@ -164,12 +164,14 @@ def test_reading_only_what_the_fold_reads_gives_the_same_fold_and_keeps_bad_mess
     w.close()
     whole, some = read_log(path), read_log(path, only=READS)
     assert some.skipped == {"CardPicked": 30} and not whole.skipped
-    assert {type(r.event).__name__ for r in some.events} == {"QUpdated", "RoundEnded"}
-    assert len(some.bad) == len(whole.bad) == 1
+    # the RoundEnded on a CardPicked channel is not what its key names: a bad message too, whole or not
+    # (reader.disagreement: trial28 F2, where it was read as an event)
+    assert {type(r.event).__name__ for r in some.events} == {"QUpdated"}
+    assert len(some.bad) == len(whole.bad) == 2 and "it names type 'CardPicked'" in some.bad[1].reason
     a = fold_events(r.event for r in whole.events)
     b = fold_events(r.event for r in some.events).count(some.skipped)
-    assert (a.q == b.q).all() and a.counts == b.counts and a.events == b.events == 61
-    assert a.turns_per_round() == b.turns_per_round() == [1]
+    assert (a.q == b.q).all() and a.counts == b.counts and a.events == b.events == 60
+    assert a.turns_per_round() == b.turns_per_round()
 
 
 def test_a_round_a_session_stopped_in_is_no_row_of_the_curve_nor_a_round_played():

@@ -1,0 +1,78 @@
+"""A recording tampered with so that every MCAP check passes, read by every verb: what is wrong is said, never read
+as whole (replay/reader.py rule; a hostile user's trial, trial28 F2, F3, F5). The files are made here from a
+frozen sample with the mcap library's own Writer (tests/rewrite_mcap.py)."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+
+from pairplay.cli.main import main
+from pairplay.replay.reader import read_log
+
+from rewrite_mcap import rewritten
+
+SESSION = "sample-sim-ashley"
+
+
+def _run(capsys, *argv):
+    code = main(list(argv))
+    said = capsys.readouterr()
+    return code, said.out + said.err
+
+
+def _verbs(capsys, p, tmp_path):
+    """(exit status, what it said) of rebuild, verify and view of `p`."""
+    return {"rebuild": _run(capsys, "rebuild", str(p), "--out", str(tmp_path / "rb")),
+            "verify": _run(capsys, "replay", str(p), "--verify"),
+            "view": _run(capsys, "view", "--recording", str(p), "--out", str(tmp_path / "v.rrd"))}
+
+
+def test_missing_game_events_are_said_by_every_verb(tmp_path, capsys):
+    """F3: the RoundEnded dropped (the game's seq skips 4 numbers, every MCAP check passes): view saved a whole
+    view, "0 notes"; rebuild refused it as "the session ended (completed) before round 1"."""
+    p = rewritten(tmp_path / "noroundend.mcap", each=lambda c, m: [] if c.topic.endswith("/RoundEnded") else [m])
+    gap = "4 events of 'game' missing: its seq jumps from 61 to 63 and in 3 other places"
+    assert read_log(p).missing == gap
+    said = _verbs(capsys, p, tmp_path)
+    code, out = said["rebuild"]
+    assert code == 2 and f"the file is damaged ({gap})" in out and "ended (completed) before" not in out, out
+    code, out = said["verify"]
+    assert code == 1 and "verify: FAIL" in out and gap in out and "no event lost" not in out, out
+    code, out = said["view"]
+    assert code == 0 and gap in out and (tmp_path / "v.partial.rrd").exists(), out
+
+
+@pytest.mark.parametrize("which", ["every", "RoundEnded"])
+def test_events_on_keys_naming_another_session_are_said_and_not_read(which, tmp_path, capsys):
+    """F2: every topic (or the RoundEnded's) renamed to another session, payloads unchanged: rebuild exit 0,
+    verify PASS, view "0 notes". As on the bus (services/guard.py), an event whose key disagrees with it is not
+    taken; here it is said as the file's damage."""
+    def topic(t):
+        return t.replace(f"/{SESSION}/", "/s2/") if which == "every" or t.endswith("/RoundEnded") else t
+    p = rewritten(tmp_path / "other.mcap", topic=topic)
+    words = f"not what their key names (pairplay/s2/"
+    log = read_log(p)
+    assert words in log.damaged and f"it names session 's2', its payload '{SESSION}'" in log.damaged, log.damaged
+    said = _verbs(capsys, p, tmp_path)
+    for verb, (code, out) in said.items():
+        assert code != 0 or verb == "view", (verb, out)
+        assert words in out and "PASS" not in out, (verb, out)
+
+
+@pytest.mark.parametrize("schema, why", [(b'{"type":"string"}', "not the JSON Schema of its event"),
+                                         (b"\xff\xfe not json", "not JSON")])
+def test_schemas_that_are_not_pairplays_are_said_by_every_verb(schema, why, tmp_path, capsys):
+    """F5: every schema replaced (by another JSON Schema, by bytes that are not JSON): the events still decode (the
+    JSON is read, not the schema), but the file misdescribes them to other MCAP readers; every verb passed it with
+    no word. Now said, nothing lost: rebuild and view whole, verify PASS, each with the line."""
+    p = rewritten(tmp_path / "schemas.mcap", schema=lambda data: schema)
+    words = f"channels' schemas are not pairplay's (ServiceStarted: {why}, ...)"
+    log = read_log(p)
+    assert words in log.loss_free and not log.missing, log.loss_free
+    said = _verbs(capsys, p, tmp_path)
+    for verb, (code, out) in said.items():
+        assert code == 0 and words in out, (verb, out)
+    assert said["verify"][1].strip().splitlines()[-1].startswith("verify: PASS; ")
+    assert (tmp_path / "v.rrd").exists() and not json.loads((tmp_path / "rb" / "schemas.policy.json").read_text())["partial"]
