@@ -34,6 +34,8 @@ Who can put a message on a key at all is Zenoh's access control
 
 from __future__ import annotations
 
+from pairplay.numbers import counted
+
 MAX_PAYLOAD = 64 * 1024  # bytes
 MAX_SEQ_JUMP = 10_000
 MAX_REASON = 1000  # characters of a reason (a refusal's, the experimenter's pause or abort) in an event
@@ -96,4 +98,4 @@ def clip(text: str, most: int) -> str:
     (unchanged if it fits): how outside text is copied into our own events (see rule)."""
     if len(text) <= most:
         return text
-    return f"{text[:most]}... [{len(text) - most} more characters cut]"
+    return f"{text[:most]}... [{counted(len(text) - most, 'more character', 'more characters')} cut]"

@@ -29,6 +29,7 @@ from pairplay.core.combine import combine
 from pairplay.core.policies import (check_distinct, check_profiles_computable, combined_policy_file,
                                     common_reward_bonus, partial_inputs, users_from_policies)
 from pairplay.errors import UserError
+from pairplay.numbers import counted
 from pairplay.replay.rebuild import RebuildError, rebuild_recording
 from pairplay.schemas import events as ev
 from pairplay.schemas.policy import PolicyFile, PolicyFileError, read_policy, write_policy
@@ -99,5 +100,5 @@ def fitting(answer: ev.PolicyCombined) -> ev.PolicyCombined:
     if size <= MAX_PAYLOAD:
         return answer
     return ev.PolicyCombined(request_id=clip(answer.request_id, MAX_NAME), inputs=[], actions=[], ok=False,
-                             error=f"the answer would be about {size:,} bytes, over the bus's limit of {MAX_PAYLOAD:,}: "
+                             error=f"the answer would be about {counted(size, 'byte', spec=',')}, over the bus's limit of {MAX_PAYLOAD:,}: "
                                    "name fewer or shorter inputs")

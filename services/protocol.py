@@ -409,7 +409,7 @@ class StudyRunner:
         bus's MAX_PAYLOAD is refused here (StudyDataError): every listener would shed it unread, and the
         experimenter be told "ok" for a pause the game never took (trial28 F20)."""
         if len(payload) > MAX_PAYLOAD:
-            raise StudyDataError(f"that would be a message of {len(payload):,} bytes, over the bus's limit "
+            raise StudyDataError(f"that would be a message of {counted(len(payload), 'byte', spec=',')}, over the bus's limit "
                                  f"of {MAX_PAYLOAD:,} bytes: shorten it")
         bus = self._game_bus
         try:

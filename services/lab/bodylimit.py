@@ -18,6 +18,8 @@ import logging
 
 from starlette.types import ASGIApp, Message, Receive, Scope, Send
 
+from pairplay.numbers import counted
+
 log = logging.getLogger("pairplay.lab")
 MAX_BODY = 64 * 1024  # bytes: every body the lab takes is a small JSON object (a console request, the answers)
 
@@ -40,7 +42,7 @@ class BodyLimit:
             part = message.get("body", b"")
             size += len(part)
             if size > self.limit:
-                return await self.refuse(scope, send, f"a body of more than {self.limit} bytes (sent without a length)")
+                return await self.refuse(scope, send, f"a body of more than {counted(self.limit, 'byte')} (sent without a length)")
             parts.append(part)
             if not message.get("more_body", False):
                 break
@@ -63,7 +65,7 @@ class BodyLimit:
         for hub in list(getattr(lab, "hubs", {}).values()):
             hub.record_refusal(f"HTTP request refused: {what}, the limit is {self.limit}", f"http{path[:64]}",
                                str(client))
-        text = f'{{"error":"request too large: the limit is {self.limit} bytes"}}'.encode()
+        text = f'{{"error":"request too large: the limit is {counted(self.limit, "byte")}"}}'.encode()
         await send({"type": "http.response.start", "status": 413,
                     "headers": [(b"content-type", b"application/json"), (b"content-length", str(len(text)).encode()),
                                 (b"connection", b"close")]})
