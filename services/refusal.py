@@ -31,7 +31,7 @@ from __future__ import annotations
 import threading
 
 from pairplay.errors import UserError
-from pairplay.schemas.events import MessageRejected, decode_event
+from pairplay.schemas.events import MessageRejected, decode_event, own_seq
 from pairplay.schemas.keys import event_key, session_keys
 from pairplay.services.guard import CONTRADICTED
 
@@ -73,7 +73,7 @@ def published_seq(node, tag: str, newest: bool | None = None) -> int | None:
     newest = tag == "SessionEnded" if newest is None else newest
     for k, payload in (reversed(node.outbox.sent) if newest else node.outbox.sent):
         if k == key:
-            return decode_event(payload).seq
+            return own_seq(payload)
     return None
 
 

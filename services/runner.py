@@ -29,7 +29,7 @@ import msgspec
 
 from pairplay import __version__, environment
 from pairplay.schemas.envelope import Event
-from pairplay.schemas.events import ServiceStarted, decode_event, encode_event
+from pairplay.schemas.events import ServiceStarted, decode_event, encode_event, own_seq
 from pairplay.schemas.keys import alive_key, event_key, query_key, session_keys, source_keys
 from pairplay.schemas.trust import SOURCES, STARTERS
 
@@ -72,7 +72,7 @@ def answer_sent(outbox: Outbox, name: str, query) -> None:
             after = int(seq)
 
     def reply() -> None:
-        items = [(k, p) for k, p in outbox.sent if decode_event(p).seq > after]
+        items = [(k, p) for k, p in outbox.sent if own_seq(p) > after]
         Bus.answer(query, [msgspec.msgpack.encode((name, items))])
     outbox.call(reply)
 
