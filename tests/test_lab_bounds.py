@@ -22,6 +22,7 @@ from pairplay.schemas import events as ev
 from pairplay.schemas.envelope import SEQ_MAX, stamped
 from pairplay.schemas.events import decode_event, encode_event, own_seq
 from pairplay.services.guard import Refusals
+from pairplay.services.runner import sent_after
 
 HUGE = 2**64 + 5
 
@@ -88,3 +89,11 @@ def test_a_process_reads_the_seq_of_its_own_payload_that_its_peers_refuse():
                                    "time_ns": 1, "reason": "r", "key": "k", "offending_seq": HUGE})
     assert own_seq(refused) == 7
     assert own_seq(b"\xff not json") == -1
+
+
+def test_a_sent_query_reads_a_seq_only_as_far_as_the_bus_bound():
+    """A refill query's parameters come from anyone on the bus: 5000 digits raised in int() on Zenoh's thread."""
+    assert sent_after("after=game:12,learner:3", "game") == 12
+    assert sent_after("after=game:" + "9" * 5000, "game") == SEQ_MAX
+    assert sent_after("after=game:" + "9" * 17, "game") == SEQ_MAX
+    assert sent_after("after=learner:3", "game") == 0
