@@ -62,3 +62,11 @@ def test_escaped_shows_each_control_character_and_leaves_the_rest():
     assert escaped("a\nb\tc\x1b[2J\u2028\udcff é") == "a\\nb\\tc\\x1b[2J\\u2028\\udcff é"
     assert escaped("plain/path.mcap") == "plain/path.mcap"
     assert UserError("no such recording", "x\ny.mcap").line() == "no such recording (x\\ny.mcap)"
+
+
+def test_a_sessions_result_line_names_its_odd_folder_escaped(pairplay_cli, tmp_path):
+    out = tmp_path / f"o{ODD}ut"
+    done = pairplay_cli("session", "--participant", "sim:ashley", "--session", "s9", "--rounds", "1", "--out", str(out))
+    assert done.returncode == 0, done.stderr
+    said = [line for line in done.stdout.splitlines() if line.startswith("recorded ")]
+    assert said and said[0].endswith(f" to {escaped(out / 's9.mcap')}"), done.stdout
