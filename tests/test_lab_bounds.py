@@ -10,6 +10,7 @@ traceback decoding its own outbox (services/session.py own_tail), exit 1, the re
 from __future__ import annotations
 
 import json
+import logging
 import signal
 import subprocess
 import sys
@@ -21,6 +22,7 @@ from pairplay.replay.reader import read_log
 from pairplay.schemas import events as ev
 from pairplay.schemas.envelope import SEQ_MAX, stamped
 from pairplay.schemas.events import decode_event, encode_event, own_seq
+from pairplay.services.bus import Bus, Outbox
 from pairplay.services.guard import Refusals
 from pairplay.services.runner import sent_after
 
@@ -62,10 +64,12 @@ def test_a_page_id_beyond_the_bus_bound_is_refused_and_the_lab_still_ends_cleanl
     assert proc.returncode == 143 and "Traceback" not in err and "interrupted (SIGTERM" in err, err
     log = read_log(tmp_path / "big.mcap")
     assert not log.truncated and not log.bad, log.error
-    rejected = [r.event for r in log.events if isinstance(r.event, ev.MessageRejected) and r.event.source == "board"]
-    assert [r.offending_seq for r in rejected][:2] == [0, 1], rejected
+    rejected = [r.event for r in log.events if isinstance(r.event, ev.MessageRejected) and r.event.source == "board"
+                and r.event.offending_source == "page:hostile"]
+    assert [(r.offending_seq, r.reason.split(":")[0]) for r in rejected] == [(0, "malformed message"), (1, "card 99 is not on the board (0..17)")], rejected
     assert str(HUGE) in rejected[0].excerpt
-    assert isinstance(log.events[-1].event, ev.SessionEnded) and log.events[-1].event.reason.startswith("interrupted")
+    ended = [r.event for r in log.events if isinstance(r.event, ev.SessionEnded)]
+    assert len(ended) == 1 and ended[0].reason.startswith("interrupted"), ended
 
 
 def test_a_refusal_of_an_out_of_range_seq_or_unencodable_text_is_still_recorded_and_decodes():
@@ -97,3 +101,18 @@ def test_a_sent_query_reads_a_seq_only_as_far_as_the_bus_bound():
     assert sent_after("after=game:" + "9" * 5000, "game") == SEQ_MAX
     assert sent_after("after=game:" + "9" * 17, "game") == SEQ_MAX
     assert sent_after("after=learner:3", "game") == 0
+
+
+def test_a_failed_call_on_an_outbox_is_logged_by_its_name_not_none(caplog):
+    """The board's refill answer raised on its outbox's thread and the WARNING said 'could not publish None'."""
+    def refill_answer():
+        raise ValueError("payload its peers refuse")
+
+    with Bus() as bus:
+        outbox = Outbox(bus, "board")
+        with caplog.at_level(logging.WARNING, logger="pairplay.bus"):
+            outbox.call(refill_answer)
+            assert outbox.flush(30)
+        outbox.close(1.0)
+    said = [r.getMessage() for r in caplog.records if "could not publish" in r.getMessage()]
+    assert said and "publish None" not in said[0] and "(a call, refill_answer)" in said[0], said
