@@ -36,7 +36,7 @@ from pairplay.core.combine import COMPARED_STATES, combine, extract_info, traine
 from pairplay.core.geometry import STATE_NAMES
 from pairplay.core.policies import (by_participant, check_distinct, check_exclude, check_profiles_computable,
                                     combined_policy_file, common_reward_bonus, partial_inputs, users_from_policies)
-from pairplay.errors import InputError, OptionError
+from pairplay.errors import InputError, OptionError, escaped
 from pairplay.lists import comma_items
 from pairplay.outputs import check_output, hold
 from pairplay.schemas.policy import read_policy, write_policy
@@ -228,7 +228,7 @@ def run_combine(args) -> int:
         print(f"\nPARTIAL merge: {partial}")
         print(f"pairplay combine: PARTIAL merge: {partial}", file=sys.stderr)
     if args.out:
-        print(f"\nwrote {args.out}")
+        print(f"\nwrote {escaped(args.out)}")
     return 0
 
 

@@ -21,6 +21,7 @@ import threading
 
 from pairplay import signals, testpause
 from pairplay.cli import interrupts
+from pairplay.errors import escaped
 from pairplay.schemas.policy import PolicyFileError
 from pairplay.inputs import check_option_file
 from pairplay.outputs import check_folder
@@ -134,12 +135,12 @@ def run(args: argparse.Namespace) -> int:
         when = "before the session started" if fold.config is None else \
             f"after the session had completed all {counted(config.rounds, 'round')}" if e is not None and e.reason == "completed" \
             else f"after {len(fold.rounds)} of {counted(config.rounds, 'round')}"
-        print(f"pairplay lab: interrupted ({signals.said(stop.why)}) {when}; recorded {counted(len(recorded.events), 'event')} to {path}"
+        print(f"pairplay lab: interrupted ({signals.said(stop.why)}) {when}; recorded {counted(len(recorded.events), 'event')} to {escaped(path)}"
               + (f" (read back, it is not whole: {recorded.note})" if recorded.note else ""), file=sys.stderr)
         return 0  # the status is the signal's (cli/main.py)
     ended = "no SessionEnded recorded" if e is None else e.reason + (f" ({e.detail})" if e.detail else "")
     if not getattr(args, "quiet", False):  # a summary of the file it wrote: -q leaves it out (cli/main.py QUIET_SUMMARIES)
-        print(f"recorded {counted(len(recorded.events), 'event')} to {path}")
+        print(f"recorded {counted(len(recorded.events), 'event')} to {escaped(path)}")
         print(f"rounds played: {len(fold.turns_per_round())} of {config.rounds}; rejections: {len(fold.rejections)}; "
               f"ended: {ended}")
         from pairplay.replay.delivery import delivery_line

@@ -62,7 +62,7 @@ from pairplay import __version__, environment, signals, testpause, threadstart
 from pairplay.cli import interrupts
 from pairplay.cli.interrupts import DeferredInterrupt
 from pairplay.cli.args import check_study_folders
-from pairplay.errors import UserError, out_of_threads
+from pairplay.errors import UserError, escaped, out_of_threads
 from pairplay.nearest import nearest
 
 # verb -> (module, one-line help)
@@ -352,8 +352,9 @@ def said_late(argv: list[str], code: int) -> int:
 
 
 def warn(verb: str, line: str) -> None:
-    """A warning about a verb's result: one line on stderr, `pairplay <verb>: <line>`, -q or not (module rule)."""
-    print(f"pairplay {verb}: {line}", file=sys.stderr, flush=True)
+    """A warning about a verb's result: one line on stderr, `pairplay <verb>: <line>`, -q or not (module rule);
+    a path's or a value's control characters escaped (pairplay/errors.py `escaped`)."""
+    print(f"pairplay {verb}: {escaped(line)}", file=sys.stderr, flush=True)
 
 
 def left_journals(verb: str, recordings) -> None:
@@ -558,7 +559,7 @@ def _main(argv: list[str], arm=None) -> int:
             interrupts.late = interrupts.late or interrupts.received or signal.SIGINT
             return code or 0
         # (what it removed, if the signal came as it waited to journal its outputs: replay/copies.py Interrupted)
-        print(f"pairplay {_who(args)}: {interrupted_what()}; {getattr(err, 'said', '') or nothing_more()}",
+        print(f"pairplay {_who(args)}: {interrupted_what()}; {escaped(getattr(err, 'said', '') or nothing_more())}",
               file=sys.stderr)
         return exit_code_of(signal_received() or signal.SIGINT)
     except SystemError as err:  # Ctrl-C inside a compiled kernel: numba reports it as a SystemError around it
@@ -571,7 +572,7 @@ def _main(argv: list[str], arm=None) -> int:
         print(f"pairplay {_who(args)}: {err.line(options_of(chosen, args))}", file=sys.stderr)
         return 2
     except OSError as err:  # the file system or network refused: the user's setup, not our bug
-        print(f"pairplay {_who(args)}: {os_error_line(err)}", file=sys.stderr)
+        print(f"pairplay {_who(args)}: {escaped(os_error_line(err))}", file=sys.stderr)
         return 2
     except MemoryError:  # the machine's or the process's limit (`ulimit -v`), like a full disk: the user's setup
         # (a trial under `ulimit -v 2000000`: `view` ended in a traceback while rerun's modules loaded)
@@ -587,7 +588,7 @@ def _main(argv: list[str], arm=None) -> int:
         line = recording_failed_line(err)
         if line is None:
             raise
-        print(f"pairplay {_who(args)}: {line}", file=sys.stderr)
+        print(f"pairplay {_who(args)}: {escaped(line)}", file=sys.stderr)
         return 1  # a session that failed: README's exit table
 
 

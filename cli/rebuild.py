@@ -37,6 +37,7 @@ from pathlib import Path
 
 from pairplay.cli.args import add_force, output_folder
 from pairplay.core.geometry import PERFECT_PICKS, PICKS_UNIT
+from pairplay.errors import escaped
 from pairplay.numbers import counted
 from pairplay.outputs import manifest_name
 
@@ -101,7 +102,7 @@ def run(args: argparse.Namespace) -> int:
     copies.journal_each([(output_paths(rebuilt, out), [rebuilt.source]) for rebuilt in done]
                         + ([([figure], None)] if done and not args.no_plot else []))
     work_done()  # everything is written: a signal from now on is reported, and undoes nothing
-    print("\n".join(lines))
+    print("\n".join(escaped(line) for line in lines))  # a path's newline would split its line (errors.escaped)
     from pairplay.cli.main import left_journals, warn
 
     for rebuilt in done:  # warnings about the result, on stderr, -q or not (cli/main.py: -q hid them with the listing)

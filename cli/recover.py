@@ -40,7 +40,7 @@ import argparse
 from pathlib import Path
 
 from pairplay.cli.args import add_force, file_in, output_file
-from pairplay.errors import OptionError
+from pairplay.errors import OptionError, escaped
 from pairplay.numbers import counted
 
 
@@ -103,7 +103,7 @@ def run(args: argparse.Namespace) -> int:
     earlier = f"; what its source had lost is carried over ({done.earlier_lost})" if done.earlier_lost else ""
     if done.copies:  # each event once in the copy (a whole file with copies is no complete one: replay/recover.py)
         state += f"; {counted(done.copies, 'identical copy', 'identical copies')} of events not copied"
-    print(f"{args.recording}: {state}; {counted(done.messages, 'message')} kept in {done.output}{earlier}{journal}{ended}")
+    print(escaped(f"{args.recording}: {state}; {counted(done.messages, 'message')} kept in {done.output}{earlier}{journal}{ended}"))
     if done.journal_error:  # what it held (up to the last 5 ms before a crash) is not in the output: said, not silent,
         _journal_unreadable(args, done)  # -q or not
     return 0
@@ -157,23 +157,23 @@ def _complete(args: argparse.Namespace, done) -> int:
     if done.journal_error:  # unreadable: what it holds is unknown, so it is never called stale
         if args.discard_journal:
             raise OptionError(f"--discard-journal: {done.journal_error}; it was not removed", journal)
-        print(f"{said}; the journal beside it is unreadable")
+        print(escaped(f"{said}; the journal beside it is unreadable"))
         _journal_unreadable(args, done)
         return 0
     if done.not_its_journal:  # another recording's journal: none of it is this file's, and it is not stale either
         if args.discard_journal:
             raise OptionError(f"--discard-journal: {done.not_its_journal}; it was not removed", journal)
-        print(f"{said}; {done.not_its_journal}")
+        print(escaped(f"{said}; {done.not_its_journal}"))
         return 0
     if done.journal is None:
         if args.discard_journal:
             raise OptionError("--discard-journal: there is no journal beside it", args.recording)
-        print(said)
+        print(escaped(said))
         return 0
     held = f"its journal {journal.name} holds nothing more ({counted(done.journal_present, 'event')}, all in the file)"
     if args.discard_journal:
         journal.unlink()
-        print(f"{said}; {held}: removed (--discard-journal)")
+        print(escaped(f"{said}; {held}: removed (--discard-journal)"))
         return 0
-    print(f"{said}; {held}: it is stale; `pairplay recover {args.recording} --discard-journal` removes it")
+    print(escaped(f"{said}; {held}: it is stale; `pairplay recover {args.recording} --discard-journal` removes it"))
     return 0

@@ -17,6 +17,7 @@ import sys
 from pathlib import Path
 
 from pairplay.cli.args import option_policy, output_folder
+from pairplay.errors import escaped
 from pairplay.numbers import counted
 from pairplay.replay.studydata import StudyDataError, not_a_study_folder
 from pairplay.schemas.policy import PolicyFileError
@@ -79,5 +80,5 @@ def run(args) -> int:
         # status table), the partial report written, as `replay --verify` of a partial recording (it was exit 0)
         print(f"pairplay report: not a whole report: unreadable policy files, cited from the journal: "
               f"{'; '.join(report.unreadable)}", file=sys.stderr)
-    print(f"report: {out / 'report.md'}")
+    print(f"report: {escaped(out / 'report.md')}")
     return 1 if report.unreadable else 0

@@ -42,7 +42,7 @@ from pairplay.cli import interrupts
 from pairplay.core.rng import STREAMS_VERSION
 from pairplay.schemas.config import DEFAULT_REWARD_BONUS, REWARD_BONUS_RULES, LearnerConfig, LSPIConfig, lspi_unused
 from pairplay.schemas.keys import check_chunk
-from pairplay.errors import OptionError, UserError
+from pairplay.errors import OptionError, UserError, escaped
 from pairplay.outputs import check_folder
 from pairplay.schemas.session import (IGNORE_CLOCKS, MS_RANGE, OBSERVED_SOURCES, SessionConfig, learner_overrides,
                                       lspi_overrides)
@@ -200,14 +200,14 @@ def print_interrupted(summary: dict, path: Path, why: str, rounds: int, taken: s
     and starts `pairplay <verb>:` as every one-line message does (`verb`: session or lab; it had none)."""
     if summary.get("ended") == "completed":  # the signal came after the last round: nothing was cut short
         print(f"pairplay {verb}: interrupted ({why}) after the session had completed all {counted(rounds, 'round')}; recorded "
-              f"{counted(summary['events'], 'event')} to {path}; nothing was undone", file=sys.stderr)
+              f"{counted(summary['events'], 'event')} to {escaped(path)}; nothing was undone", file=sys.stderr)
     elif summary["started"]:
         print(f"pairplay {verb}: interrupted ({why}) after {summary['rounds_played']} of {counted(rounds, 'round')}; recorded "
-              f"{counted(summary['events'], 'event')} to {path}"
+              f"{counted(summary['events'], 'event')} to {escaped(path)}"
               + (f" ({counted(summary['unrecorded'], 'message')} shed or unrecorded, counted in it)" if summary['unrecorded'] else ""),
               file=sys.stderr)
     else:
-        print(f"pairplay {verb}: interrupted ({why}) before the session started; recorded {counted(summary['events'], 'event')} to {path}, "
+        print(f"pairplay {verb}: interrupted ({why}) before the session started; recorded {counted(summary['events'], 'event')} to {escaped(path)}, "
               f"no session in it ({taken})", file=sys.stderr)
     return 0
 
@@ -236,17 +236,17 @@ def cut_line(verb: str, path: Path, again: int) -> str:
     if finished_whole(path):
         count = finished_count(path)
         events = f" ({counted(count, 'event')})" if count is not None else ""
-        return head + f"{path} was finished before it: the recording is whole{events}, its end written"
+        return head + f"{escaped(path)} was finished before it: the recording is whole{events}, its end written"
     journal = wal_path(path)
     try:  # what `pairplay recover` would do with it, decided as it decides (nothing is written here)
         recover(path, admit=admit, write=False)
     except NoSession as err:  # cut before the session started: recover refuses it, so the line does not name it
         beside = f" and its journal {journal}" if journal.exists() else ""
-        return head + (f"{path} {err.what}; it was cut before the session started: there is nothing to recover, "
-                       f"{path}{beside} can be removed")
+        return head + (f"{escaped(path)} {err.what}; it was cut before the session started: there is nothing to recover, "
+                       f"{escaped(path)}{beside} can be removed")
     except Exception:  # (UserError: not readable as a recording yet; anything else recover meets, an OSError
         pass  # say): recover says why in its own line; a second signal's line is never lost to it (a traceback)
-    return head + (f"{path} holds what was recorded up to now and may lack its end: pairplay recover {path} "
+    return head + (f"{escaped(path)} holds what was recorded up to now and may lack its end: pairplay recover {escaped(path)} "
                    "completes it")
 
 
@@ -262,7 +262,7 @@ def aside_line(verb: str, path: Path, again: int, aside: list, started: bool | N
     kept = set_aside_of(path)
     if aside and started is False and not kept:
         return (f"pairplay {verb}: interrupted again ({signals.said(again)}) while stopping, before the session "
-                f"started; {path}: the earlier recordings are kept (--force replaces them once a new session starts)")
+                f"started; {escaped(path)}: the earlier recordings are kept (--force replaces them once a new session starts)")
     line = cut_line(verb, path, again)
     if kept:
         journal = wal_path(path)
@@ -285,7 +285,7 @@ def read_back(path: Path, verb: str):
 
     recorded = read_any_log(path)
     if recorded.note:
-        print(f"pairplay {verb}: the recording {path} read back is not whole: {recorded.note} (the summary counts "
+        print(f"pairplay {verb}: the recording {escaped(path)} read back is not whole: {recorded.note} (the summary counts "
               f"what it holds; `pairplay replay --verify` of it says more)", file=sys.stderr)
     return recorded
 
@@ -328,7 +328,7 @@ def _left_beside(path: Path, summary: dict, code: int) -> int:
     left = earlier_outputs(path) if summary.get("started") else []
     if left:
         from pairplay.cli.main import warn
-        warn("session", f"{path}: left beside it: {'; '.join(left)} (not this session's; kept: remove it "
+        warn("session", f"{escaped(path)}: left beside it: {'; '.join(left)} (not this session's; kept: remove it "
                         "once it is not needed)")
     return code
 
@@ -374,7 +374,7 @@ def _run(args: argparse.Namespace, config: SessionConfig, path: Path, summary: d
         return 0
     if getattr(stop, "why", ""):
         if kept and not summary.get("started"):  # its file holds no session: the earlier ones get their names back
-            print(f"pairplay session: interrupted ({signals.said(stop.why)}) before the session started; {path}: the earlier "
+            print(f"pairplay session: interrupted ({signals.said(stop.why)}) before the session started; {escaped(path)}: the earlier "
                   f"recordings are kept (--force replaces them once a new session starts)", file=sys.stderr)
             return 0
         return print_interrupted(summary, path, signals.said(stop.why), config.rounds, "the id stays taken: --force reuses it")
@@ -384,7 +384,7 @@ def _run(args: argparse.Namespace, config: SessionConfig, path: Path, summary: d
     fold = fold_any(r.event for r in recorded.events)
     picks = fold.picks_per_round()
     if not getattr(args, "quiet", False):  # a summary of the file it wrote: -q leaves it out (cli/main.py QUIET_SUMMARIES)
-        print(f"recorded {counted(len(recorded.events), 'event')} to {path}")
+        print(f"recorded {counted(len(recorded.events), 'event')} to {escaped(path)}")
         print(f"rounds played: {len(picks)}; {PICKS_UNIT}: {picks[:10]}{' ...' if len(picks) > 10 else ''}")
         print(f"rejections: {len(fold.rejections)}; Q updates: {fold.counts.get('QUpdated', 0)}"
               + (f"; LSPI samples: {fold.counts.get('LSPIUpdated', 0)}" if config.algorithm == "lspi" else ""))

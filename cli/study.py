@@ -17,7 +17,7 @@ from pairplay.cli.args import (add_force, count, fraction, non_negative, output_
                                update_count)
 from pairplay.core.geometry import PICKS_UNIT
 from pairplay.core.personas import PERSONAS
-from pairplay.errors import OptionError
+from pairplay.errors import OptionError, escaped
 from pairplay.schemas.config import DEFAULT_REWARD_BONUS, REWARD_BONUS_RULES as BONUS_RULES
 
 # the study's modules load in run(): `pairplay --help` stays quick
@@ -105,7 +105,7 @@ def run(args) -> int:
 
     report = run_study(settings, args.out, _bar(args.quiet), force=args.force)
     if settings.train_only:
-        print(f"training: {report.timings['training']:.2f} s; policies and curves in {report.out}")
+        print(f"training: {report.timings['training']:.2f} s; policies and curves in {escaped(report.out)}")
         return 0
     print(f"learned policies against the references: {PICKS_UNIT}, epsilon 0")
     print(text_table(report.evaluation))

@@ -48,7 +48,7 @@ from pathlib import Path
 from pairplay import signals
 from pairplay.cli.args import (add_force, file_in, float_at_least, int_at_least, output_file, port_or_any,
                                 session_id, speed)
-from pairplay.errors import InputError, OptionError, OutputError, UserError
+from pairplay.errors import InputError, OptionError, OutputError, UserError, escaped
 from pairplay.livelock import LIVE, is_live
 from pairplay.outputs import check_output, hold, output_path
 from pairplay.cli.main import left_journals, warn
@@ -123,7 +123,8 @@ def run(args: argparse.Namespace) -> int:
     rrd = None if args.no_save else (file_in(args.out, _default_rrd(args).name) or _default_rrd(args))
     # a summary of the file it wrote: -q leaves it out; where to watch the view (--serve, --spawn) is a result
     # -q keeps (it was silenced with the summary: view was one of cli/main.py QUIET_SUMMARIES)
-    say = print if not getattr(args, "quiet", False) else (lambda *_, **__: None)
+    # a result line, its path's control characters escaped (errors.escaped: a newline split it in two)
+    say = (lambda line: print(escaped(line))) if not getattr(args, "quiet", False) else (lambda *_, **__: None)
     if rrd is not None:
         # before any work: an existing .rrd stays unless --force, and the recording viewed always
         hold(rrd, "view")  # one writer per output (pairplay/outputs.py)
@@ -164,8 +165,8 @@ def run(args: argparse.Namespace) -> int:
             say(f"saved {kept.path}: {_counts(done)}; partial: {args.recording} {LIVE}, view it again once "
                   "its session has ended")
             return 0
-        print(f"pairplay view: interrupted ({signals.said(done.why)}) after {_counts(done)}, before the source ended; "
-              f"the partial view is in {kept.path}", file=sys.stderr)
+        print(escaped(f"pairplay view: interrupted ({signals.said(done.why)}) after {_counts(done)}, before the source "
+                      f"ended; the partial view is in {kept.path}"), file=sys.stderr)
         return 0
     except NothingDrawn as stopped:  # a signal before the first event: nothing to save (exit 128 + signal)
         print(f"pairplay view: interrupted ({signals.said(str(stopped))}) before any event was drawn; nothing saved", file=sys.stderr)

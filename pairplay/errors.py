@@ -32,11 +32,13 @@ class UserError(Exception):
     def line(self, options: frozenset[str] | set[str] | None = None) -> str:
         """What and where, on one line: `where` is added unless the text names it already, as a
         whole name (a folder `here` is not named by "there", nor `out` by "out/study"); then the
-        `fix`, unless `options` (those of the verb showing the line; None: every option) lack its `option`."""
-        text = " ".join(self.what.split())
+        `fix`, unless `options` (those of the verb showing the line; None: every option) lack its `option`.
+        A control character of either (a path's or a value's newline) is shown escaped (`escaped`)."""
+        text = escaped(" ".join(self.what.split()))
         if self.fix and (options is None or not self.option or self.option in options):
             text = f"{text}; {self.fix}"
-        return f"{text} ({self.where})" if self.where and not names(text, self.where) else text
+        where = escaped(self.where)
+        return f"{text} ({where})" if where and not names(text, where) else text
 
     def __str__(self) -> str:
         """The line wherever it is shown with no verb's options known (a log, an event's error field, a
@@ -59,6 +61,24 @@ class OutputError(UserError):
 
 class OptionError(UserError, ValueError):
     """An option's value is out of its range or meaningless with the others."""
+
+
+# what a line must not hold raw: control characters (C0, DEL, C1: a newline split "one line" in two, an ESC
+# drives the terminal), the Unicode line and paragraph separators, and lone surrogates (a file name's bytes
+# that are not UTF-8, as os.fsdecode gives them: printing one raised UnicodeEncodeError)
+_UNSHOWABLE = re.compile("[\x00-\x1f\x7f-\x9f\u2028\u2029\ud800-\udfff]")
+
+
+def escaped(text: object) -> str:
+    """`text` (a path, a user's value, a line holding them) as one line shows it: each control character,
+    line separator or lone surrogate as its Python escape (`\\n`, `\\x1b`, `\\udcff`), the rest as it is.
+    Every line pairplay prints with a path or a value in it goes through this (trial28 F10: `rebuild` of
+    `x\\ny.mcap` printed its result lines split at the newline)."""
+    text = str(text)
+    if _UNSHOWABLE.search(text) is None:  # the usual case: nothing to escape
+        return text
+    return _UNSHOWABLE.sub(lambda m: m.group().encode("unicode_escape", "backslashreplace").decode("ascii")
+                           if not 0xD800 <= ord(m.group()) <= 0xDFFF else f"\\u{ord(m.group()):04x}", text)
 
 
 def names(text: str, where: str) -> bool:

@@ -4,7 +4,7 @@ Rule: a value a user gave (an option, a file's key) is echoed by `shown(value)`:
 an integral float without its `.0` (`--psi 0` was said "got 0.0", `epsilon_start
 = 2` "got 2.0": options and TOML integers become floats on the way in), any other
 number as Python's shortest exact text (0.95, 1e-300, nan, inf), anything else
-as str(); a float of a file read under `typed_floats` as the file has it (`1e7`). `type_name(kind)` is a Python type's name as a sentence says it ("an
+as str() (an integer of 21 digits or more as "a number of 31 digits"); a float of a file read under `typed_floats` as the file has it (`1e7`). `type_name(kind)` is a Python type's name as a sentence says it ("an
 integer", not "a int"). A count is said with its noun by `counted(n, noun)`:
 "1 participant", "2 participants" (a fixed plural said "1 participants").
 Standard library only (every layer imports this).
@@ -19,6 +19,7 @@ import math
 # the text of each float a file being read gave (`typed_floats`): shown() says it as typed
 _TYPED: contextvars.ContextVar[dict | None] = contextvars.ContextVar("pairplay_typed_floats", default=None)
 
+HUGE = 10**20  # an integer this large or larger is said by its number of digits (`shown`)
 # a type's name in a sentence: "is not an integer", "must be a number" (the sweep said "is not a int")
 TYPE_NAMES = {"int": "an integer", "float": "a number", "str": "text", "bool": "true or false",
               "list": "a list", "dict": "a table", "array": "a list", "object": "a table"}  # (msgspec: array, object)
@@ -31,6 +32,10 @@ def shown(value: object) -> str:
         return typed[value]
     if isinstance(value, float) and math.isfinite(value) and value.is_integer() and abs(value) < 1e16:
         return str(int(value))
+    if isinstance(value, int) and not isinstance(value, bool) and abs(value) >= HUGE:
+        # by its size: a line stays short, and str() of an int over 4300 digits raises ValueError
+        digits = len(str(abs(value))) if abs(value).bit_length() < 10_000 else f"about {int(abs(value).bit_length() * 0.30103)}"
+        return f"{'-' if value < 0 else ''}a number of {digits} digits"
     return str(value)
 
 

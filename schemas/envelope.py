@@ -33,7 +33,8 @@ MAX_NS = 2**63 - 1  # fits MCAP's unsigned 64-bit times (and every int64 reader)
 # Ranges, checked on decode (schemas/trust.py): a sequence number stays exact in a
 # JavaScript reader (2^53); a time lies in 0..MAX_NS (a time_ns of -1 passed every check
 # once, then killed the recorder inside the MCAP writer).
-Seq = Annotated[int, msgspec.Meta(ge=0, le=2**53)]
+SEQ_MAX = 2**53
+Seq = Annotated[int, msgspec.Meta(ge=0, le=SEQ_MAX)]
 
 
 class Nanos(int):

@@ -25,11 +25,16 @@ from pairplay.errors import InputError
 
 from .config import REWARD_BONUS_RULES, UNSTATED_REWARD_BONUS, LearnerConfig, LSPIConfig, Persona
 from .jsonfile import JsonFileKind
-from pairplay.numbers import counted
+from pairplay.numbers import counted, shown
 
 FORMAT = "pairplay.policy"
 VERSION = 1
 N_STATES, N_ACTIONS = 24, 88  # pinned here so the contract does not import core
+# the states' names, in the order of a policy's rows (core/geometry.py STATE_NAMES, pinned: tests/test_policy_bounds.py)
+STATE_NAMES = ("TOP_LEFT_L0", "TOP_LEFT_L1", "TOP_LEFT_L2", "TOP_L0", "TOP_L1", "TOP_RIGHT_L0", "TOP_RIGHT_L1",
+               "TOP_RIGHT_L2", "LEFT_L0", "LEFT_L1", "LEFT_L2", "MATCH_L0", "RIGHT_L0", "RIGHT_L1", "RIGHT_L2",
+               "BOTTOM_LEFT_L0", "BOTTOM_LEFT_L1", "BOTTOM_LEFT_L2", "BOTTOM_L0", "BOTTOM_L1", "BOTTOM_RIGHT_L0",
+               "BOTTOM_RIGHT_L1", "BOTTOM_RIGHT_L2", "NOT_ONE_CARD")
 # what a policy file's `algorithm` may say: a session's learners (schemas/session.py ALGORITHMS, which imports this
 # module: written out here), a merge, the oracle's; any other value was read and used as a policy (a new user's
 # trial: `session --algorithm fixed --policy` of a file saying "algorithm": "banana")
@@ -37,6 +42,9 @@ ALGORITHMS = ("q-learning", "lspi", "pi-reuse", "fixed", "combined", "oracle")
 # |Q| at most this: a Q-value estimates the expected reward of one suggestion, whose rewards are a few
 # units (core/reward.py: -3..+2); a file with 1e308 was merged and profiled as if it meant something.
 Q_LIMIT = 1e6
+# a count (rounds, a state's visits) at most this: exact in every JSON reader, as the bus's seqs, and a sum of
+# a study's files stays inside numpy's int64 (visits of 10**30 raised OverflowError in profile and combine)
+COUNT_LIMIT = 2**53
 
 
 class PolicyFileError(InputError):
@@ -95,6 +103,13 @@ class PolicyFile(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_field
         if len(self.states) != N_STATES or len(self.greedy) != N_STATES or len(self.visits) != N_STATES:
             raise PolicyFileError(f"a policy has {N_STATES} states; this file has "
                                   f"{counted(len(self.states), 'name')}, {counted(len(self.greedy), 'action')}, {len(self.visits)} visit counts")
+        # rows are read by position: a file naming its states in another order was read as if its row 0 were
+        # TOP_LEFT_L0 though it said NOT_ONE_CARD (trial28 F7). Refused, not mapped by name: pairplay writes
+        # them in this order only, so another order is a file someone changed, whose rows may not follow it
+        wrong = next((i for i, (name, want) in enumerate(zip(self.states, STATE_NAMES)) if name != want), None)
+        if wrong is not None:
+            raise PolicyFileError(f"states[{wrong}]: must be {STATE_NAMES[wrong]!r} (a policy names the {N_STATES} "
+                                  f"states in pairplay's order, one row each), got {self.states[wrong]!r}")
         if len(self.q) != N_STATES or any(len(row) != N_ACTIONS for row in self.q):
             raise PolicyFileError(f"the Q-table must be {N_STATES} x {N_ACTIONS}")
         bad = [a for a in self.greedy if not 0 <= a < N_ACTIONS]
@@ -107,18 +122,21 @@ class PolicyFile(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_field
         self._check_numbers()
 
     def _check_numbers(self) -> None:
-        """Counts are counts, the participant is named, Q-values are rewards' size (Q_LIMIT): a file with
-        `"rounds": -3`, negative visits, `"participant": ""` or Q of 1e308 was combined and profiled."""
+        """Every number within its range, the participant named: counts are counts (0..COUNT_LIMIT), seed and
+        game as a session takes them, Q-values a reward's size (Q_LIMIT), error shares 0..1. A file with
+        `"rounds": -3`, negative visits, `"participant": ""` or Q of 1e308 was combined and profiled; one with
+        visits of 10**30 was a traceback in profile and combine (OverflowError in numpy's int64)."""
+        from .session import GAME_INDEX_RANGE, SEED_RANGE  # (session.py imports this module)
+
         if not self.participant.strip():
             raise PolicyFileError("participant: empty; a policy names the persona or participant it was learned with")
-        if self.rounds < 0:
-            raise PolicyFileError(f"rounds: must be at least 0, got {self.rounds}")
-        for key in ("seed", "game"):
-            if getattr(self, key) is not None and getattr(self, key) < 0:
-                raise PolicyFileError(f"{key}: must be at least 0, got {getattr(self, key)}")
-        bad = [(s, v) for s, v in enumerate(self.visits) if v < 0]
-        if bad:
-            raise PolicyFileError(f"visits: must be at least 0, got {bad[0][1]} for state {bad[0][0]}")
+        _within("version", self.version, 1, VERSION)
+        _within("rounds", self.rounds, 0, COUNT_LIMIT)
+        for key, (low, high) in (("seed", SEED_RANGE), ("game", GAME_INDEX_RANGE)):
+            if getattr(self, key) is not None:
+                _within(key, getattr(self, key), low, high)
+        for s, v in enumerate(self.visits):
+            _within(f"visits[{s}]", v, 0, COUNT_LIMIT, " (updates of the state)")
         for s, row in enumerate(self.q):
             for a, v in enumerate(row):
                 if not -Q_LIMIT <= v <= Q_LIMIT:  # also refuses nan
@@ -128,6 +146,13 @@ class PolicyFile(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_field
             for key in ("speech", "head"):
                 if not 0 <= getattr(self.info, key) <= 1:
                     raise PolicyFileError(f"info.{key}: an error share is 0..1, got {getattr(self.info, key)}")
+            _within("info.compared_states", self.info.compared_states, 0, N_STATES)
+
+
+def _within(key: str, value: int, low: int, high: int, what: str = "") -> None:
+    """PolicyFileError "key: must be low..high, got value" unless it lies there (a huge value said by its size)."""
+    if not low <= value <= high:
+        raise PolicyFileError(f"{key}: must be {low}..{high}{what}, got {shown(value)}")
 
 
 FILE = JsonFileKind(PolicyFile, PolicyFileError, "policy file",

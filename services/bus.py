@@ -648,7 +648,8 @@ class Outbox:
             # the bus closed under a stopping process (a signal at start-up): counted, INFO (README's logging
             # rule: a WARNING is for data a running session lost or refused)
             closing = getattr(self.bus, "_closed", False)
-            log.log(logging.INFO if closing else logging.WARNING, "%s could not publish %s: %s", self.name, key, err)
+            what = key if key is not None else f"(a call, {getattr(item, '__name__', item)!s:.80})"  # not "None"
+            log.log(logging.INFO if closing else logging.WARNING, "%s could not publish %s: %s", self.name, what, err)
 
     def pending(self) -> int:
         return self._pending

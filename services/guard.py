@@ -66,7 +66,7 @@ from typing import Callable, NamedTuple
 
 import msgspec
 
-from pairplay.schemas.envelope import Event
+from pairplay.schemas.envelope import SEQ_MAX, Event
 from pairplay.schemas.events import MessageRejected, decode_event
 from pairplay.schemas.keys import parse_event_key
 from pairplay.schemas.trust import (MAX_NAME, MAX_PAYLOAD, MAX_REASON, MAX_SEQ_JUMP, ONCE_PER_SESSION, REJECTIONS_PER_S,
@@ -217,7 +217,7 @@ class Guard:
             self.skipped += 1  # our own from before a restart, as the log gave it (a cache's replay): see rule
             return QUIET
         what = (f"{type(event).__name__} seq {event.seq} claiming source {event.source!r}" if event is not None
-                else f"a malformed message")
+                else "a malformed message")
         reason = f"forged: {what} on {key} was not published by this {self.own} (another process on the bus)"
         if event is not None and type(event).__name__ in ONCE_PER_SESSION and len(self.forged) < FORGED_KEPT:
             # what the session acts on (services/forgery.py); every other forgery is only refused and recorded,
@@ -279,8 +279,22 @@ class Guard:
                              taken[0], source, taken[1]))
 
 
+def recordable(text: str) -> str:
+    """`text` as an event can carry it: one that UTF-8 cannot encode (a lone surrogate) with it escaped.
+    A refusal is about what came from outside; a MessageRejected that cannot be encoded, or that its
+    peers refuse (an offending seq above the bus's bound), is a refusal lost (module rule: every refusal
+    is recorded), so `Refusals.refuse` bounds each of its fields before it builds one."""
+    try:
+        text.encode()
+        return text
+    except UnicodeEncodeError:
+        return text.encode("utf-8", "backslashreplace").decode()
+
+
 class Refusals:
-    """Refusals -> MessageRejected events, rate-limited with counts (see rule)."""
+    """Refusals -> MessageRejected events, rate-limited with counts (see rule). A refusal's fields are
+    bounded as the bus checks them (`recordable`): its seq 0 and the reason saying the number if it lies
+    beyond the bus's (a page's `id` of 2**64 made a MessageRejected every peer refused)."""
 
     def __init__(self, per_s: int = REJECTIONS_PER_S):
         self.per_s = per_s
@@ -301,8 +315,11 @@ class Refusals:
         self.recorded = self.in_window < self.per_s
         if self.recorded:
             self.in_window += 1
-            out.append(MessageRejected(reason=clip(reason, MAX_REASON), key=clip(str(key), MAX_NAME),
-                                       offending_source=clip(source, MAX_NAME), offending_seq=seq,
+            if not (type(seq) is int and 0 <= seq <= SEQ_MAX):  # (a page's id, a made-up number: see recordable)
+                reason, seq = f"{reason} (its seq {str(seq)[:40]} is beyond the bus's 0..{SEQ_MAX})", 0
+            out.append(MessageRejected(reason=recordable(clip(reason, MAX_REASON)),
+                                       key=recordable(clip(str(key), MAX_NAME)),
+                                       offending_source=recordable(clip(source, MAX_NAME)), offending_seq=seq,
                                        excerpt=excerpt(payload)))
         else:
             self._hold(source, reason)

@@ -621,7 +621,10 @@ def check_answers(items, answers) -> dict[str, str]:
         if not isinstance(value, (str, int)) or isinstance(value, bool):
             raise StudyDataError(f"question {item.id!r}: the answer must be text or a number")
         text = str(value).strip()
-        if item.kind == "likert" and not (text.isdigit() and 1 <= int(text) <= item.scale):
+        # ASCII digits, and few: str.isdigit() also takes '²' (int() then raised: a 500 and a traceback), and a
+        # number is bounded before it is read (a 4301-digit answer is past Python's int() limit)
+        if item.kind == "likert" and not (text.isascii() and text.isdigit() and len(text) <= 9
+                                          and 1 <= int(text) <= item.scale):
             raise StudyDataError(f"question {item.id!r}: a Likert answer is 1..{item.scale}")
         if item.kind == "choice" and text not in item.options:
             raise StudyDataError(f"question {item.id!r}: {text[:40]!r} is not one of its options")

@@ -89,7 +89,7 @@ from pairplay.replay.wal import RECORDER_METADATA, JournalWriter, NotAJournal, n
 from pairplay.replay.writer import FLUSH_INTERVAL_NS, LOSS_BOUND_NS, EventLogWriter
 from pairplay.schemas.checked import check_event
 from pairplay.schemas.jsonfile import MCAP_MAGIC
-from pairplay.schemas.events import RecordingGap, decode_event, encode_event
+from pairplay.schemas.events import RecordingGap, decode_event, encode_event, own_seq
 from pairplay.schemas.envelope import Nanos, stamped
 from pairplay.schemas.keys import alive_key, event_key, query_key, session_keys
 
@@ -758,7 +758,7 @@ class Recorder:
             return
         seen = self._seen()
         with self._lock:
-            seen[self.name] = {decode_event(p).seq for k, p in self.kept if k.split("/")[2] == self.name}
+            seen[self.name] = {own_seq(p) for k, p in self.kept if k.split("/")[2] == self.name}
         holes = any(seqs and len(seqs) < max(seqs) for seqs in seen.values())
         if refilled and not holes:
             log.info("recorder: what the earlier recording lost was refilled by the services")

@@ -34,7 +34,7 @@ from __future__ import annotations
 import threading
 
 from pairplay.errors import UserError
-from pairplay.schemas.events import MessageRejected, decode_event
+from pairplay.schemas.events import MessageRejected, decode_event, own_seq
 from pairplay.schemas.keys import event_key, session_keys
 from pairplay.services.guard import CONTRADICTED, excerpt
 
@@ -73,7 +73,7 @@ def published_seq(node, tag: str, newest: bool | None = None) -> int | None:
     or with `newest` the last one (by default the game's end, near the end of what it sent; its start
     is near the beginning). Also the robot bridge's count of its in-process learner's suggestions."""
     payload = published(node, tag, newest)
-    return None if payload is None else decode_event(payload).seq
+    return None if payload is None else own_seq(payload)
 
 
 def published(node, tag: str, newest: bool | None = None) -> bytes | None:
@@ -141,7 +141,7 @@ class RefusalWatch:
                     with self._lock:
                         self.kept.append((tag, seq, source, reason, said))
                     continue
-                real = self.seqs[tag] = decode_event(payload).seq
+                real = self.seqs[tag] = own_seq(payload)
                 self.excerpts[tag] = excerpt(payload)
             # at the game's seq, and its bytes (a copy at that seq is not the game's: see rule); a refusal without
             # an excerpt cannot tell, and counts as of the game's own

@@ -28,8 +28,8 @@ from typing import Any, Callable
 import msgspec
 
 from pairplay import __version__, environment
-from pairplay.schemas.envelope import Event
-from pairplay.schemas.events import ServiceStarted, decode_event, encode_event
+from pairplay.schemas.envelope import SEQ_MAX, Event
+from pairplay.schemas.events import ServiceStarted, decode_event, encode_event, own_seq
 from pairplay.schemas.keys import alive_key, event_key, query_key, session_keys, source_keys
 from pairplay.schemas.trust import SOURCES, STARTERS
 
@@ -62,18 +62,26 @@ def fetch_log(bus: Bus, session: str, timeout_s: float = 5.0, stop: threading.Ev
     return events
 
 
+def sent_after(parameters: str, name: str) -> int:
+    """The seq after which `name` is asked what it sent (`after=<source>:<seq>,...`; 0 if not asked). A number
+    is read only as far as the bus's seqs go: a longer one (a query's parameters come from anyone on the bus)
+    asks for nothing (SEQ_MAX), and 5000 digits are never given to int(), whose limit raised on Zenoh's thread."""
+    after = 0
+    for part in parameters.replace("after=", "").split(","):
+        source, _, seq = part.partition(":")
+        if source == name and seq.isascii() and seq.isdigit():
+            after = min(int(seq), SEQ_MAX) if len(seq) <= 16 else SEQ_MAX
+    return after
+
+
 def answer_sent(outbox: Outbox, name: str, query) -> None:
     """Answer `.../_query/<name>/sent?after=<source>:<seq>,...` with what we published after
     that sequence number: msgpack (name, [(key, payload), ...]); from the outbox thread,
     after everything queued before it."""
-    after = 0
-    for part in str(query.parameters).replace("after=", "").split(","):
-        source, _, seq = part.partition(":")
-        if source == name and seq.isascii() and seq.isdigit():
-            after = int(seq)
+    after = sent_after(str(query.parameters), name)
 
     def reply() -> None:
-        items = [(k, p) for k, p in outbox.sent if decode_event(p).seq > after]
+        items = [(k, p) for k, p in outbox.sent if own_seq(p) > after]
         Bus.answer(query, [msgspec.msgpack.encode((name, items))])
     outbox.call(reply)
 

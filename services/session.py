@@ -28,7 +28,7 @@ from pairplay import signals, testpause
 from pairplay.core.personas import persona
 from pairplay.errors import InputError, UserError
 from pairplay.nearest import nearest
-from pairplay.schemas.events import decode_event, encode_event
+from pairplay.schemas.events import encode_event, own_seq
 from pairplay.schemas.keys import alive_key, check_chunk, event_key
 from pairplay.arguments import at, path_argument
 from pairplay.schemas.session import SessionConfig, config_argument
@@ -411,7 +411,7 @@ def wait_all_recorded(recorder: Recorder, nodes: list[Node], bridge, timeout_s: 
     tail = own_tail(recorder, nodes, bridge, own)
     covered = dict(recorder.top_seq)
     for key, payload in tail:  # written by the recorder itself (Recorder.close): not missing
-        source, seq = key.split("/")[-2], decode_event(payload).seq
+        source, seq = key.split("/")[-2], own_seq(payload)
         covered[source] = max(covered.get(source, 0), seq)
     missing = Counter({(name, "published, not received when the recording stopped"): seq - covered.get(name, 0)
                        for name, seq in last.items() if covered.get(name, 0) < seq})
@@ -441,14 +441,14 @@ def own_tail(recorder: Recorder, nodes: list[Node], bridge, own=()) -> list[tupl
         top = recorder.top_seq.get(name, 0)
         mine = []
         for key, payload in reversed(outbox.in_hand()):
-            seq = decode_event(payload).seq
-            if seq <= top:
-                break
+            seq = own_seq(payload)
+            if 0 <= seq <= top:
+                break  # (-1: a payload of ours its peers refuse; the recorder refuses and records it)
             if (key, seq) not in seen:  # (in_hand may give one twice)
                 seen.add((key, seq))
                 mine.append((key, payload))
         tail.extend(reversed(mine))
-    tail.extend((key, payload) for key, payload in own if (key, decode_event(payload).seq) not in seen)
+    tail.extend((key, payload) for key, payload in own if (key, own_seq(payload)) not in seen)
     return tail
 
 

@@ -254,9 +254,22 @@ CASES = [
     Case("view --speed 1e-300", ["view", "--recording", "rec.mcap", "--speed", "1e-300", "--out", "new.rrd"],
          "--speed: must be max (or 0, as fast as possible) or 0.0001..1e+06 times real time"),
     Case("combine a policy of -3 rounds", ["combine", "policies", "bad/rounds-neg.json", "-o", "m.json"],
-         "bad/rounds-neg.json: corrupt or not a policy file: rounds: must be at least 0, got -3"),
+         "bad/rounds-neg.json: corrupt or not a policy file: rounds: must be 0..9007199254740992, got -3"),
     Case("profile a policy of negative visits", ["profile", "policies/blind", "bad/visits-neg.json"],
-         "bad/visits-neg.json: corrupt or not a policy file: visits: must be at least 0, got -100 for state 0"),
+         "bad/visits-neg.json: corrupt or not a policy file: visits[0]: must be 0..9007199254740992 (updates of the "
+         "state), got -100"),
+    # beyond int64: a traceback (OverflowError in core/policies.py check_distinct) in both verbs (trial28 F6)
+    Case("profile a policy of visits 10**30", ["profile", "policies/blind", "bad/visits-huge.json"],
+         "bad/visits-huge.json: corrupt or not a policy file: visits[1]: must be 0..9007199254740992 (updates of "
+         "the state), got a number of 31 digits"),
+    Case("combine a policy of visits 10**30", ["combine", "policies", "bad/visits-huge.json", "-o", "m.json"],
+         "bad/visits-huge.json: corrupt or not a policy file: visits[1]: must be 0..9007199254740992"),
+    # rows are read by position: the reversed names were read silently as pairplay's order (trial28 F7)
+    Case("profile a policy whose states are in another order", ["profile", "policies/blind", "bad/states-reversed.json"],
+         "bad/states-reversed.json: corrupt or not a policy file: states[0]: must be 'TOP_LEFT_L0' (a policy names "
+         "the 24 states in pairplay's order, one row each), got 'NOT_ONE_CARD'"),
+    Case("combine a policy of a seed beyond 64 bits", ["combine", "policies", "bad/seed-huge.json", "-o", "m.json"],
+         "bad/seed-huge.json: corrupt or not a policy file: seed: must be 0..18446744073709551615, got 18446744073709551616"),
     Case("combine a policy of no participant", ["combine", "policies", "bad/participant-empty.json", "-o", "m.json"],
          "bad/participant-empty.json: corrupt or not a policy file: participant: empty"),
     Case("session --policy with a Q of 1e308", SIM + ["--algorithm", "pi-reuse", "--policy", "bad/q-huge.json"],
@@ -505,8 +518,13 @@ def _fixtures(root: Path) -> None:
     (root / "bad").mkdir()
     q_huge = [row[:] for row in good["q"]]
     q_huge[0][0] = 1e308
+    visits_more = [good["visits"][0] + 1] + good["visits"][1:]
     for name, change in (("rounds-neg", {"rounds": -3}), ("visits-neg", {"visits": [-100] + good["visits"][1:]}),
-                         ("participant-empty", {"participant": ""}), ("q-huge", {"q": q_huge})):
+                         ("participant-empty", {"participant": ""}), ("q-huge", {"q": q_huge}),
+                         ("visits-huge", {"visits": good["visits"][:1] + [10**30] + good["visits"][2:]}),
+                         # (one visit more: not the same learning as game-00, which is refused as given twice)
+                         ("states-reversed", {"states": good["states"][::-1], "visits": visits_more}),
+                         ("seed-huge", {"seed": 2**64, "visits": visits_more})):
         (root / "bad" / f"{name}.json").write_text(json.dumps({**good, **change}))
     q_text = [row[:] for row in good["q"]]
     q_text[0][1] = "x"

@@ -130,7 +130,10 @@ def test_answers_are_checked_against_the_items():
     for bad, why in [({**good, "followed": "6"}, "1..5"), ({**good, "followed": True}, "text or a number"),
                      ({**good, "contradictory": "shrugged"}, "not one of"), ({**good, "best-round": "1"}, "no question"),
                      ({k: v for k, v in good.items() if k != "gaze"}, "needs an answer"),
-                     ({**good, "comments": "x" * 2001}, "at most"), ([1, 2], "object")]:
+                     ({**good, "comments": "x" * 2001}, "at most"), ([1, 2], "object"),
+                     # a digit that is not ASCII ('²': int() raised ValueError, a 500), a number past int()'s limit
+                     ({**good, "followed": "\u00b2"}, "1..5"), ({**good, "followed": "9" * 5000}, "1..5"),
+                     ({**good, "followed": 10**30}, "1..5")]:
         with pytest.raises(StudyDataError, match=why):
             check_answers(items, bad)
 

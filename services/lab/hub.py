@@ -40,7 +40,7 @@ import msgspec
 
 from pairplay.core.geometry import N_CARDS
 from pairplay.schemas import events as ev
-from pairplay.schemas.events import EVENT_BY_TAG
+from pairplay.schemas.events import EVENT_BY_TAG, Count, Int64, Seq
 from pairplay.schemas.session import SessionConfig
 
 from pairplay.services.bus import Bus
@@ -57,19 +57,24 @@ MAX_FRAME = 65536  # bytes: uvicorn closes the connection on a bigger frame (not
 
 
 # -- what a page may send (JSON, tagged by "type") ----------------------------------------
+# Every number a page sends is bounded here, where it enters (a message out of bounds is malformed, refused and
+# recorded like any): the id as the bus's sequence numbers (`Seq`: it becomes a MessageRejected's offending_seq,
+# and an id of 2**64 was taken as the page's last one, then refused by every peer in that rejection, and killed
+# the lab's shutdown), round, turn and attempt as the events' counts; a card, whose
+# refusal names the board's cards, as any 64-bit integer
 class Pick(msgspec.Struct, tag="pick", forbid_unknown_fields=True):
-    id: int  # the page's message counter: strictly increasing per page (client id)
-    round: int
-    turn: int
-    card: int
+    id: Seq  # the page's message counter: strictly increasing per page (client id)
+    round: Count
+    turn: Count
+    card: Int64  # any card off the board is refused in words below
     page_ms: float  # performance.timeOrigin + performance.now() at the touch
 
 
 class Wrong(msgspec.Struct, tag="wrong", forbid_unknown_fields=True):
-    id: int
-    round: int
-    turn: int
-    attempt: int  # the suggestion the participant judged wrong
+    id: Seq
+    round: Count
+    turn: Count
+    attempt: Count  # the suggestion the participant judged wrong
     page_ms: float
 
 
