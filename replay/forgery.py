@@ -8,8 +8,10 @@ so another process on the bus can publish an event claiming any source, and a re
 before the live checks of services/guard.py noticed it (or by an older pairplay) may hold it. A
 file where two different events claim the same (session, game, seq), where the game started or
 ended the same session twice, or where it published after its SessionEnded, holds at least
-one event that was not the game's: folding it would take whichever came first (a forged
-end before any round rebuilt as a session of 0 rounds, exit 0). `contradiction` names the first
+one event that was not the game's (two different events of one seq of another source that one
+process publishes as, the learner's, the participant's, the robot's, likewise: `ONE_PUBLISHER`):
+folding it would take whichever came first (a forged end before any round rebuilt as a session
+of 0 rounds, exit 0). `contradiction` names the first
 such pair, with both positions (the events' indices in the order given, from 0), so the verb can
 refuse the file in one line instead. Identical copies of one event (a copy, a refill) are not a
 contradiction. Pure: events in, words out.
@@ -22,6 +24,10 @@ from typing import Iterable
 from pairplay.schemas.envelope import Event
 from pairplay.schemas.trust import ONCE_PER_SESSION, STARTERS
 
+# the sources one process publishes as, numbering its events 1, 2, 3, ...: two different events of one of them at one
+# seq are a contradiction too (a file holding two learner QUpdated of one seq rebuilt, exit 0, a policy the learner
+# never had: a new user's trial, trial29 F2); "board" is every lab page's, "recorder" a restarted one's too
+ONE_PUBLISHER = frozenset({"game", "learner", "participant", "robot"})
 # what a source may publish after its end (its shell), or that is judged on its own (a second start or end)
 AFTER_END = frozenset({"ServiceStarted", "MessageRejected"}) | ONCE_PER_SESSION
 
@@ -36,7 +42,7 @@ def contradiction(events: Iterable[Event]) -> str:
     once: dict[tuple[str, str, str], tuple[int, Event]] = {}
     ends: dict[tuple[str, str], tuple[int, Event]] = {}
     for pos, e in enumerate(events):
-        if e.source not in STARTERS:
+        if e.source not in ONE_PUBLISHER:
             continue
         tag = type(e).__name__
         at = (e.session, e.source, e.seq)
@@ -45,6 +51,8 @@ def contradiction(events: Iterable[Event]) -> str:
             return (f"two events claim source {e.source!r} seq {e.seq}: {_named(first[1], first[0])} and "
                     f"{_named(e, pos)}; one of them is not {e.source}'s (forged on the bus?)")
         seen.setdefault(at, (pos, e))
+        if e.source not in STARTERS:
+            continue
         if tag in ONCE_PER_SESSION:
             earlier = once.get((e.session, e.source, tag))
             if earlier is not None and earlier[1] != e:

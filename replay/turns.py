@@ -26,6 +26,7 @@ from pairplay.schemas import events as ev
 from pairplay.schemas.session import SessionConfig
 
 from .check import read_session
+from .forgery import contradiction
 
 
 @dataclass
@@ -44,7 +45,13 @@ def _later(e, than) -> bool:
 
 
 def turns_from_events(events, source: str = "", note: str = "") -> RecordedTurns:
-    """The first session's turns; InputError if there is no session or no resolved turn."""
+    """The first session's turns; InputError if there is no session or no resolved turn, or if the events contradict
+    themselves about who published what (replay/forgery.py, as rebuild checks it: the first of two different
+    events of one seq was taken: trial29 F2)."""
+    events = list(events)
+    forged = contradiction(events)
+    if forged:
+        raise InputError(f"{forged}: not fitted", source)
     config: SessionConfig | None = None
     partner = None
     covered = ALL_CARDS

@@ -100,6 +100,20 @@ def test_a_differing_event_of_the_same_game_seq_is_no_copy_but_a_contradiction(f
     assert code == 2 and "two events claim source 'game'" in out, out[-400:]
 
 
+
+@pytest.mark.parametrize("verb", [("rebuild", "--out", "{t}/f"), ("counterfactual", "--fit-only", "--out", "{t}/cf")])
+def test_a_differing_learner_event_of_the_same_seq_is_a_contradiction_too(files, tmp_path, capsys, verb):
+    """A new user's trial (trial29 F2): a second QUpdated of the learner's at one seq, its value changed, rebuilt with
+    exit 0 into a policy the learner never had (only `replay --verify` failed it). One process publishes as the
+    learner, numbering its events: two different events at one seq are a contradiction, as the game's are."""
+    def changed(data: bytes) -> bytes:
+        e = json.loads(data)
+        e["q_after"] += 1.0
+        return json.dumps(e).encode()
+    p = rewritten(tmp_path / "forged.mcap", each=_second("/QUpdated", changed))
+    code, out = _run(capsys, verb[0], str(p), *(a.replace("{t}", str(tmp_path)) for a in verb[1:]))
+    assert code == 2 and "two events claim source 'learner'" in out, out[-400:]
+
 @pytest.mark.parametrize("kind", ["twice", "twice_renumbered"])
 def test_recover_copies_each_event_once_and_its_copy_rebuilds_whole(files, kind, tmp_path, capsys):
     """recover copied the copies along (a "whole copy" every verb still read twice); a whole file with copies was
