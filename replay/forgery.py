@@ -36,13 +36,15 @@ def _named(e: Event, pos: int) -> str:
     return f"{type(e).__name__} seq {e.seq} (event {pos})"
 
 
-def contradiction(events: Iterable[Event]) -> str:
-    """The first contradiction among a session's `events` (see rule), in words; "" if none."""
+def contradiction(events: Iterable[Event], one_publisher: frozenset[str] = ONE_PUBLISHER) -> str:
+    """The first contradiction among a session's `events` (see rule), in words; "" if none. `one_publisher`: the
+    sources whose seqs are checked (STARTERS alone for a file its reader found no two events of one seq in:
+    reader.EventLog.differing; the other sources' check was a tenth of a rebuild)."""
     seen: dict[tuple[str, str, int], tuple[int, Event]] = {}
     once: dict[tuple[str, str, str], tuple[int, Event]] = {}
     ends: dict[tuple[str, str], tuple[int, Event]] = {}
     for pos, e in enumerate(events):
-        if e.source not in ONE_PUBLISHER:
+        if e.source not in one_publisher and e.source not in STARTERS:
             continue
         tag = type(e).__name__
         at = (e.session, e.source, e.seq)

@@ -131,6 +131,8 @@ class EventLog:
     source_lost: str = ""
     # identical copies of one event (its session, source and seq, the same bytes) read once (module rule: `copied`)
     copies: int = 0
+    # events read at a (session, source, seq) an earlier, different event holds: replay/forgery.py's to judge
+    differing: int = 0
     # where a starting source's (the game's: schemas/trust.py STARTERS) seq skips numbers between two events read:
     # (source, seq before, seq after), in order (`gaps`)
     seq_jumps: list[tuple[str, int, int]] = field(default_factory=list)
@@ -661,9 +663,11 @@ def _read_log(path: str | Path, only: frozenset[str] | None = None) -> EventLog:
                     log.lost_at.append(len(log.events))
                     continue
                 first = seen((e.session, e.source, e.seq), data)
-                if first is not data and (first == data or _decoded(first) == e):
-                    log.copies += 1  # an identical copy of one event read: once (module rule)
-                    continue
+                if first is not data:
+                    if first == data or _decoded(first) == e:
+                        log.copies += 1  # an identical copy of one event read: once (module rule)
+                        continue
+                    log.differing += 1  # another event at a seq read: kept, for replay/forgery.py
                 append(RecordedEvent(key, e, record.log_time, data))
             except (msgspec.DecodeError, msgspec.ValidationError, RecursionError) as err:
                 if isinstance(err, RecursionError):
