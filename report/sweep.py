@@ -41,6 +41,7 @@ import itertools
 import json
 import logging
 import math
+import sys
 import time
 import tomllib
 from dataclasses import dataclass, fields
@@ -51,7 +52,7 @@ import msgspec
 import numpy as np
 
 from pairplay import csvcell
-from pairplay.errors import OptionError
+from pairplay.errors import OptionError, escaped
 from pairplay.inputs import check_input
 from pairplay.nearest import nearest
 from pairplay.numbers import counted, shown, type_name, typed_floats
@@ -553,6 +554,45 @@ def check_scheduler(address: str) -> None:
                      else "something that is not a Dask scheduler answered")
 
 
+NO_WORKER_S = 30.0  # how long a sweep waits for a cluster with no worker (none yet, or every one lost) before it stops
+WORKER_POLL_S = 1.0  # how often a sweep waiting for its cells asks the scheduler how many workers it has
+
+
+def _finished_while_workers(client, address: str, futures: list, kept: Callable[[], int], total: int,
+                            cells: Path) -> Iterable:
+    """Each future of `futures` as it finishes, for as long as the cluster has a worker to run them.
+
+    A scheduler answers with no worker at all (none started, or every one gone: a cluster whose workers
+    died overnight) and its tasks wait for ever: a trial's sweep printed nothing for 10 minutes. So the
+    wait wakes every WORKER_POLL_S to ask the scheduler for its workers; with none, it says so once on
+    stderr, and after NO_WORKER_S with none it raises OptionError naming --scheduler, how many cells are
+    kept (`kept()` of `total`, in `cells`) and that the same command resumes from them. A worker that
+    joins in time ends the wait; nothing is said of one that comes back within a poll."""
+    from dask.distributed import wait
+
+    pending = set(futures)
+    alone_since = None
+    while pending:
+        try:
+            done, pending = wait(pending, timeout=WORKER_POLL_S, return_when="FIRST_COMPLETED")
+        except TimeoutError:
+            done = set()
+        yield from done
+        if done or not pending or client.nthreads():
+            alone_since = None
+            continue
+        now = time.monotonic()
+        if alone_since is None:
+            alone_since = now
+            print(f"pairplay sweep: the Dask scheduler at {escaped(address)} has no worker to run the cells; waiting up "
+                  f"to {NO_WORKER_S:g} s for one (`dask worker {escaped(address)}` starts one)", file=sys.stderr, flush=True)
+        elif now - alone_since >= NO_WORKER_S:
+            raise OptionError(f"the Dask scheduler there has had no worker for {NO_WORKER_S:g} s; "
+                              f"{kept()} of {counted(total, 'cell')} finished, kept in {cells}: start a worker "
+                              f"(`dask worker {address}`) and the same command resumes from them",
+                              f"--scheduler {address}")
+
+
 def run_sweep(grid: Grid, out: str | Path, *, scheduler: str | None = None, workers: int = 1,
               progress: Callable[[int], None] | None = None) -> SweepRun:
     """Compute every cell of `grid` that `out`/cells/ does not hold yet; see the module rule.
@@ -580,7 +620,7 @@ def run_sweep(grid: Grid, out: str | Path, *, scheduler: str | None = None, work
             progress(1)
 
     if scheduler:
-        from dask.distributed import Client, as_completed
+        from dask.distributed import Client
         check_scheduler(scheduler)  # the whole handshake within the timeout (Client's covers the connect only)
         try:
             client = Client(scheduler, timeout=f"{SCHEDULER_TIMEOUT_S}s")
@@ -588,7 +628,8 @@ def run_sweep(grid: Grid, out: str | Path, *, scheduler: str | None = None, work
             raise _scheduler_refused(scheduler, "the Dask scheduler there stopped answering") from None
         with client:
             futures = [client.submit(_run_cell, grid, c, key=f"pairplay-cell-{c.id}", pure=True) for c in todo]
-            for future in as_completed(futures):
+            for future in _finished_while_workers(client, scheduler, futures, lambda: len(finished_cells(out, grid)),
+                                                  len(cells), out / "cells"):
                 store(*future.result())
         where = f"dask {scheduler}"
     elif workers > 1:

@@ -108,6 +108,45 @@ def test_a_dask_cluster_of_two_workers_gives_the_same_tables(two_seeds, tmp_path
     assert _tables(tmp_path / "dask") == _tables(folder / "out")
 
 
+def test_a_cluster_with_no_worker_is_said_and_ends_in_one_line_naming_the_cells_kept(tmp_path, capsys, monkeypatch):
+    """A trial: `pairplay sweep --scheduler` at a scheduler with no worker (none started; or its only worker
+    killed 3 s into the sweep) printed nothing for 10 minutes, waiting on cells nobody would run. Now a
+    sweep says once that the cluster has no worker, and after NO_WORKER_S with none ends in one line naming
+    --scheduler and the cells kept, exit 2; a sweep whose worker was lost after a cell keeps that cell."""
+    distributed = pytest.importorskip("dask.distributed")
+    from pairplay.cli.main import main
+    from pairplay.report import sweep
+
+    monkeypatch.setattr(sweep, "NO_WORKER_S", 1.0)
+    monkeypatch.setattr(sweep, "WORKER_POLL_S", 0.2)
+    grid = _grid(tmp_path)
+    with distributed.LocalCluster(n_workers=0, threads_per_worker=1, processes=True, host="127.0.0.1",
+                                  dashboard_address=None) as cluster:
+        address = cluster.scheduler_address
+        assert main(["sweep", str(grid), "--out", str(tmp_path / "none"), "--scheduler", address, "-q"]) == 2
+        err = capsys.readouterr().err
+        assert err.count("\n") == 2, err  # the wait said once, then the line that ends it
+        assert "has no worker to run the cells; waiting up to 1 s" in err
+        assert f"has had no worker for 1 s; 0 of 4 cells finished" in err and f"(--scheduler {address})" in err
+        assert not (tmp_path / "none").exists()  # nothing kept: nothing it made stays
+
+        # a worker that does one cell and is then lost: the cell is kept, the same command resumes
+        cluster.scale(1)
+        cluster.wait_for_workers(1)
+        real_store = sweep._write_json_atomic
+
+        def store_then_lose_the_worker(path, data):
+            real_store(path, data)
+            if len(list(path.parent.glob("*.json"))) == 1:
+                cluster.scale(0)
+        monkeypatch.setattr(sweep, "_write_json_atomic", store_then_lose_the_worker)
+        assert main(["sweep", str(grid), "--out", str(tmp_path / "lost"), "--scheduler", address, "-q"]) == 2
+        err = capsys.readouterr().err
+        kept = len(list((tmp_path / "lost" / "cells").glob("*.json")))
+        assert 1 <= kept < 4 and f"{kept} of 4 cells finished, kept in {tmp_path / 'lost' / 'cells'}" in err, err
+        assert "the same command resumes from them" in err and err.count("\n") == 2, err
+
+
 @pytest.mark.parametrize("text,needle", [
     ("seeds = 0", "seeds = 0"),
     ("seeds = 1_000_000", "seeds = 1_000_000: 1 setting x 1000000 seeds"),  # as typed, not 1000000
