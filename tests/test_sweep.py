@@ -127,7 +127,7 @@ def test_a_cluster_with_no_worker_is_said_and_ends_in_one_line_naming_the_cells_
         err = capsys.readouterr().err
         assert err.count("\n") == 2, err  # the wait said once, then the line that ends it
         assert "has no worker to run the cells; waiting up to 1 s" in err
-        assert f"has had no worker for 1 s; 0 of 4 cells finished" in err and f"(--scheduler {address})" in err
+        assert "has had no worker for 1 s; 0 of 4 cells finished" in err and f"(--scheduler {address})" in err
         assert not (tmp_path / "none").exists()  # nothing kept: nothing it made stays
 
         # a worker that does one cell and is then lost: the cell is kept, the same command resumes
