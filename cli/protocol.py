@@ -26,7 +26,7 @@ from pairplay.cli.args import int_between, output_file, output_folder, session_i
 from pairplay.core.personas import persona
 from pairplay.inputs import check_input, check_option_file
 from pairplay.lists import comma_items
-from pairplay.replay import studyjournal
+from pairplay.replay import biases, studyjournal
 from pairplay.replay.studydata import JOURNAL, REGISTER_AT_ONCE, StudyData, StudyDataError, repair_journal
 from pairplay.schemas.study import (StudyFileError, bundled_studies, bundled_text, example_text, no_study_file,
                                     parse_study, study_file_of)
@@ -227,13 +227,14 @@ def _on_folder(data: StudyData, args) -> int:
         for step in data.plan():
             mark = "done" if step.done else ("blocked" if step.blocked else "open")
             notes = [step.blocked] if step.blocked and not step.done else []
+            notes += [step.note] if step.note else []  # a bias policy made with a game marked invalid since
             notes += unended.get((step.participant, step.phase, step.game), []) if step.kind == "play" else []
             print(f"[{mark:7}] {step.label}" + "".join(f"  ({n})" for n in notes))
         return 0
     if args.action == "mark-invalid":  # a game left without its end is journaled first: its mark is of its end
         built_missing_policies(data, "protocol mark-invalid")
         marked = data.mark_invalid(args.session, args.reason)
-        print(f"{args.session} marked invalid: {marked.reason}")
+        print(data.marked_line(marked))  # (and what it did to a bias policy combined from the game)
         return 0
     if args.action in ("pilot", "serve"):
         # a completed game a signal left without its policy gets it now, from its recording
@@ -486,8 +487,8 @@ def _pilot(data: StudyData, args) -> int:
         warn_unreachable(runner, "pilot")
 
         def said(step, result) -> None:
-            what = f"{counted(len(result.users), 'user')} combined" if step.kind == "combine" else \
-                f"{result.ended.outcome}, {counted(result.ended.rounds_played, 'round')}"
+            what = f"{counted(len(result.users), 'user')} {biases.combined_words(data.state, result)}" \
+                if step.kind == "combine" else f"{result.ended.outcome}, {counted(result.ended.rounds_played, 'round')}"
             if getattr(result, "partial", ""):  # a combination of a partial policy, as `pairplay profile` says it
                 what += f"; PARTIAL profile: {result.partial}"
             robot = runner.delivery.get(getattr(result, "session", ""), "")

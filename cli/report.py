@@ -72,7 +72,10 @@ def run(args) -> int:
     if report.rehearsal:
         print(f"a rehearsal: {counted(len(report.games), 'scripted game')}, no person played")
     print(f"{counted(len(report.games), 'valid game')} of {counted(len({g.participant for g in report.games}), 'participant')}"
-          + (f"; left out: {', '.join(report.excluded)}" if report.excluded else ""))
+          + (f"; left out: {', '.join(report.excluded)}" if report.excluded else "")
+          # counted, but said: their bias policy was made with a game marked invalid since (replay/biases.py)
+          + (f"; played on a bias policy made with a game marked invalid since: {', '.join(flawed)}" if
+             (flawed := [f"{g.session} ({g.bias})" for g in report.games if g.bias_flawed]) else ""))
     if report.read_whole:  # a damaged input, on stderr, -q or not (cli/main.py `warn`: -q hid it with the summary)
         print(f"pairplay report: read whole from a damaged file: {', '.join(report.read_whole)}", file=sys.stderr)
     if report.unreadable:  # cited from the journal; the files themselves cannot be read now (stderr, as above)

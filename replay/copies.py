@@ -61,7 +61,7 @@ def holders(data: StudyData, rel: str) -> set[str]:
                 or rel.startswith(f"policies/{g.session}.")):
             found.add(g.participant)
     by_policy = {g.ended.policy: g.participant for g in games if g.ended is not None and g.ended.policy}
-    for combined in data.state.combined.values():
+    for combined in data.state.combinations:  # an earlier bias policy, kept for the record, too
         if rel == combined.output:
             found |= {by_policy[i] for i in combined.inputs if i in by_policy}
     parts = rel.split("/")

@@ -6,6 +6,8 @@ Rule: one folder per study, readable without pairplay:
   recordings/<session>.mcap    one MCAP file per game: every event, questionnaire answers included
   policies/<session>.policy.json   the policy each game learned (rebuilt from its recording)
   merged/<phase>-bias.policy.json  the bias policy of a pi-reuse phase, with the rule of each state
+  merged/<phase>-bias-v<n>.policy.json  the phase's bias policy combined again after a game it took was marked
+                               invalid (replay/biases.py); the earlier file stays, for the games played on it
   participants.csv, sessions.csv, answers.csv   tables derived from the above (`write_tables`)
   exports/<id>.zip             a participant's data, on request (`export_participant`): the only place
                                inside the folder an export goes (a copy elsewhere in it survived the
@@ -67,7 +69,7 @@ from pairplay.numbers import counted
 
 from .cutgame import CUT_BEFORE_END, CutEnd, cut_end
 from .fold import fold_any
-from . import studyjournal
+from . import biases, studyjournal
 from .reader import read_any_log
 from .rebuild import Rebuilt, rebuild_recording, write_outputs
 from .recover import default_output, journal_more
@@ -212,7 +214,10 @@ class StudyState:
     created: j.StudyCreated | None = None
     participants: dict[str, j.ParticipantRegistered] = field(default_factory=dict)
     games: dict[str, Game] = field(default_factory=dict)
-    combined: dict[str, j.BiasCombined] = field(default_factory=dict)  # phase -> its bias
+    combined: dict[str, j.BiasCombined] = field(default_factory=dict)  # phase -> its current bias (its last)
+    # every combination, in order: one made again (a game it took marked invalid since) keeps the earlier one's
+    # file and line, for the games played on it (replay/biases.py)
+    combinations: list[j.BiasCombined] = field(default_factory=list)
     deletions: list[j.ParticipantDeleted] = field(default_factory=list)
     next_number: int = 1
     # ids given out: a registration left in the journal, or a deletion (it removed its one registration line
@@ -246,6 +251,7 @@ class StudyState:
             self.games[e.session].invalid = e.reason
         elif isinstance(e, j.BiasCombined):
             self.combined[e.phase] = e
+            self.combinations.append(e)
         elif isinstance(e, j.ParticipantDeleted):
             self.deletions.append(e)
             # ids are never reused, even after a deletion took the highest one; nor skipped: the deleted one
@@ -274,6 +280,9 @@ class Step:
     done: bool = False
     blocked: str = ""  # why it cannot run yet ("" = it can)
     scripted: str = ""  # a persona played it (a rehearsal): the label says so
+    # what the experimenter should know of it beyond done/blocked (replay/biases.py: a combination whose bias
+    # policy was made with a game marked invalid since; a game played on such a policy)
+    note: str = ""
 
     @property
     def label(self) -> str:
@@ -555,7 +564,7 @@ class StudyData:
             files |= {g.recording, f"{g.recording}.journal"}
             if g.ended is not None and g.ended.policy:
                 files.add(g.ended.policy)
-        files |= {c.output for c in self.state.combined.values()}
+        files |= {c.output for c in self.state.combinations}  # an earlier bias policy too: kept for the record
         files |= {f"exports/{pid}.zip" for pid in self.state.participants}
         write_manifest(self.folder / PROTOCOL_MANIFEST, sorted(files))
 
@@ -704,8 +713,9 @@ class StudyData:
         return [self.register(joins, label) for _ in range(count)]
 
     def mark_invalid(self, session: str, reason: str) -> j.SessionMarkedInvalid:
-        """Journal a game as invalid (left out of every report); the reason is required and kept as
-        given, stripped. Raises StudyDataError for an unknown session or an empty reason."""
+        """Journal a game as invalid (left out of every report, its step asked again); the reason is required and
+        kept as given, stripped. A bias policy combined from the game is combined again, into a new file, once the
+        step is played again (replay/biases.py). Raises StudyDataError for an unknown session or an empty reason."""
         if not reason.strip():  # the report says why a game is left out: a blank is no answer
             raise StudyDataError("marking a session invalid needs a reason")
         game = self.state.games.get(session)
@@ -720,6 +730,13 @@ class StudyData:
                                                    reason=reason.strip()))
         self.write_tables()
         return event
+
+    def marked_line(self, marked: j.SessionMarkedInvalid) -> str:
+        """The one line that says a mark (`protocol mark-invalid`, the console's answer): the game, the reason, and
+        what it did to a bias policy combined from the game (replay/biases.py `marked_note`: it said only
+        "marked invalid", and the plan kept the bias policy made with it, a new user's trial)."""
+        note = biases.marked_note(self.state, marked.session)
+        return f"{marked.session} marked invalid: {marked.reason}" + (f"; {note}" if note else "")
 
     def running(self, g: Game) -> bool:
         """Whether game `g` is being played now: journaled as started and not ended, and either run by this
@@ -797,21 +814,29 @@ class StudyData:
                 earlier = [s for s in steps if s.phase == phase.bias and s.kind == "play"]
                 players = {s.participant for s in earlier}
                 waiting = not earlier or not all(s.done for s in earlier)
-                done = phase.id in self.state.combined
+                # a bias policy made with a game marked invalid since is combined again (replay/biases.py)
+                flaw = biases.flawed(self.state, phase.id)
+                done = phase.id in self.state.combined and flaw is None
                 # nobody registered is not "games not all played": that said to play games nobody could
                 # (an empty study, a new user's trial); what to do first is to register people
                 why = (f"nobody plays {phase.bias} yet: register its participants first (at least 2)" if not earlier
                        else f"it needs at least 2 players: register another participant for {phase.bias}"
                        if len(players) < 2 else ("the games of " + phase.bias + " are not all played") if waiting
                        else "")
-                steps.append(Step("combine", phase.id, done=done, blocked="" if done else why))
-                if not done:
+                steps.append(Step("combine", phase.id, done=done, blocked="" if done else why,
+                                  note=biases.step_note(self.state, phase.id)))
+                if flaw is not None:  # no game starts on it
+                    blocked = (f"the bias policy of {phase.id} ({flaw.output}) was {biases.flaw_words(self.state, flaw)}: "
+                               "combine it again first")
+                elif not done:
                     blocked = f"the bias policy of {phase.id} is not combined yet"
             for pid in self.players(phase.id):
-                done_games = {g.game: g.scripted for g in self.games_of(pid, phase.id) if g.valid_complete}
+                done_games = {g.game: g for g in self.games_of(pid, phase.id) if g.valid_complete}
                 for game in range(phase.games):
-                    steps.append(Step("play", phase.id, pid, game, done=game in done_games, blocked=blocked,
-                                      scripted=done_games.get(game, "")))
+                    g = done_games.get(game)
+                    steps.append(Step("play", phase.id, pid, game, done=g is not None, blocked=blocked,
+                                      scripted=g.scripted if g else "",
+                                      note=biases.game_note(self.state, g) if g else ""))
         return steps
 
     def next_step(self) -> Step | None:
@@ -1112,12 +1137,14 @@ class StudyData:
                 "participants.csv": (["participant", "joins", "registered_utc", "scripted"],
                                      [[pid, r.joins, _utc(r.time_ns), self.scripted_as(pid)]
                                       for pid, r in self.state.participants.items()]),
+                # bias_flawed: the bias policy it was played on was made with a game marked invalid since
+                # (replay/biases.py: the game stays valid; said wherever its bias policy is named)
                 "sessions.csv": (["session", "participant", "phase", "game", "outcome", "reason", "rounds_played",
-                                  "invalid", "recording", "policy", "bias", "scripted"],
+                                  "invalid", "recording", "policy", "bias", "scripted", "bias_flawed"],
                                  [[g.session, g.participant, g.phase, g.game + 1,
                                    g.ended.outcome if g.ended else "running", g.ended.reason if g.ended else "",
                                    g.ended.rounds_played if g.ended else 0, g.invalid, g.recording,
-                                   g.ended.policy if g.ended else "", g.bias, g.scripted]
+                                   g.ended.policy if g.ended else "", g.bias, g.scripted, self.bias_flaw(g)]
                                   for g in self.state.games.values()]),
             }
             answers = self.answers()
@@ -1160,10 +1187,15 @@ class StudyData:
                 files.append(torn)
         return [f for f in dict.fromkeys(files) if f.is_file() or refusal(f)]
 
+    def bias_flaw(self, g: Game) -> str:
+        """What is wrong with the bias policy game `g` was played on ("" if nothing, or none): replay/biases.py."""
+        c = biases.bias_of(self.state, g)
+        return biases.flaw_words(self.state, c) if c is not None else ""
+
     def merged_using(self, pid: str) -> list[str]:
-        """The merged policies combined from `pid`'s games."""
+        """The merged policies combined from `pid`'s games (an earlier bias policy, kept for the record, too)."""
         mine = {g.ended.policy for g in self.games_of(pid) if g.ended is not None and g.ended.policy}
-        return [c.output for c in self.state.combined.values() if mine & set(c.inputs)]
+        return [c.output for c in self.state.combinations if mine & set(c.inputs)]
 
     def export_participant(self, pid: str, out: str | Path | None = None, force: bool = False,
                            left_out: list[str] | None = None) -> Path:

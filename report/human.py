@@ -3,7 +3,8 @@
 Rule: `human_report(folder, out)` reads only the study folder (replay/studydata.py):
 the journal says which recording is which game of which participant in which
 phase, the recordings say what happened. Games marked invalid or aborted are
-listed and left out of every figure and table, and so is a game whose recording
+listed and left out of every figure and table (a game played on a bias policy made with a game marked invalid
+since is counted, played honestly, and named as such with its bias policy: replay/biases.py), and so is a game whose recording
 lost events (a damaged part, messages that do not decode, parts the file a recovered one was made from
 lost: reader.EventLog.lost,
 the loss rebuild refuses without --partial): its picks would be a part passed
@@ -26,6 +27,8 @@ ran as (StudyData.user_names). It writes:
   phases.png  (figure 7.3b)       mean picks per round: phase 1 (its games averaged) vs phase 2 ...
   users-<phase>.png (figure 7.6)  a reuse phase: returning users (who played before) vs new users
   merged.png  (figure 7.5)        each bias policy: state code vs action code, with a reference policy if given
+                                  (every one a phase had: one made with a game marked invalid since, flagged,
+                                  and the one combined again in its place; replay/biases.py)
   attention.csv                   per participant and phase: suggestions, ignored (pick interval under the
                                   window, 7.1.2), wrong-suggestion presses (7.1.3), bias share (pi-reuse)
   questionnaire.csv               per item, phase and group: n, mean/median (Likert), counts (choice)
@@ -48,6 +51,7 @@ import numpy as np
 from pairplay import __version__, csvcell
 from pairplay.core.actions import ACTION_NAMES
 from pairplay.core.geometry import N_STATES, STATE_NAMES
+from pairplay.replay import biases
 from pairplay.replay.studydata import REPORT_MANIFEST, REPORT_OUTPUTS, StudyData, StudyDataError, named
 from pairplay.schemas.policy import PolicyFileError, read_policy
 
@@ -70,6 +74,8 @@ class GameStats:
     returning: bool
     picks: list[int] = field(default_factory=list)  # per round
     scripted: str = ""  # the persona that played it instead of a person
+    bias: str = ""  # the bias policy file it was played on (a pi-reuse game), "" for none
+    bias_flawed: str = ""  # that bias policy was made with a game marked invalid since (replay/biases.py)
     suggestions: int = 0
     ignored: int = 0  # turns resolved under the ignore window
     turns: int = 0
@@ -159,6 +165,7 @@ def human_report(folder: str | Path, out: str | Path | None = None, reference: s
             excluded.append(f"{g.session} ({why})")
             continue
         games.append(game_stats(log, g, data.returning(g.participant, g.phase), study.phase_by_id(g.phase).rounds))
+        games[-1].bias, games[-1].bias_flawed = g.bias, data.bias_flaw(g)
         if log.loss_free:  # every event read: the game counts, its file's damage said (a new user's trial: no word)
             read_whole.append(f"{g.session} ({log.loss_free})")
     if not games:  # why each game was left out, the first named (a folder of games whose recordings hold no session
@@ -170,10 +177,11 @@ def human_report(folder: str | Path, out: str | Path | None = None, reference: s
     # picks per round, per game and phase (figures 7.3a, 7.3b, 7.6)
     with open(out / "picks.csv", "w", newline="") as f:
         w = csvcell.writer(f)
-        w.writerow(["participant", "phase", "game", "returning", "round", "picks", "scripted"])
+        w.writerow(["participant", "phase", "game", "returning", "round", "picks", "scripted", "bias", "bias_flawed"])
         for s in games:
             for r, p in enumerate(s.picks):
-                w.writerow([s.participant, s.phase, s.game + 1, int(s.returning), r + 1, p, s.scripted])
+                w.writerow([s.participant, s.phase, s.game + 1, int(s.returning), r + 1, p, s.scripted, s.bias,
+                            s.bias_flawed])
     curves: dict[str, np.ndarray] = {}
     sections: list[str] = []
     first = study.phase[0]
@@ -214,14 +222,15 @@ def human_report(folder: str | Path, out: str | Path | None = None, reference: s
         sections += [f"## {p.id}: returning against new users (figure 7.6)", "",
                      f"Returning users played {', '.join(q.id for q in study.phase[:study.phase.index(p)])} before; "
                      "the last row is the share of suggestions pi-reuse took from the bias policy (figure 7.4's "
-                     "bars).", "", markdown_table(rows), "", f"![users](users-{p.id}.png)", ""]
+                     "bars). " + played_on_words(bias), "", markdown_table(rows), "", f"![users](users-{p.id}.png)", ""]
 
     # the merged policies (figure 7.5)
     ref = read_policy(reference) if reference else None
     panels = []
     by_policy = {g.ended.policy: g for g in data.state.games.values() if g.ended is not None and g.ended.policy}
     unreadable: list[str] = []
-    for phase_id, c in data.state.combined.items():
+    for c in data.state.combinations:  # an earlier one too: games were played on it (replay/biases.py)
+        phase_id = c.phase
         personas = sorted({by_policy[p].scripted for p in c.inputs if p in by_policy and by_policy[p].scripted})
         merged_path = data.folder / c.output
         for cited in (c.output, *c.inputs):
@@ -243,8 +252,20 @@ def human_report(folder: str | Path, out: str | Path | None = None, reference: s
             if s_ < N_STATES - 1:
                 state_rows.append([f"{s_} {STATE_NAMES[s_]}", f"{a}: {ACTION_NAMES[a]}", named(rule, names)])
         exact = sum(1 for a in c.actions[:N_STATES - 1] if 33 <= a <= 44)
-        panels.append((f"{phase_id} bias ({counted(len(c.users), 'user')})", np.asarray(c.actions)))
-        sections += [f"## The bias policy of {phase_id} (algorithm 4, figure 7.5)", "",
+        # a phase's bias policies, each named by its file when it had more than one, a flawed one flagged
+        flaw, later = biases.flaw_words(data.state, c), biases.replaced_by(data.state, c)
+        several = len(biases.versions(data.state, phase_id)) > 1
+        panels.append((f"{phase_id} bias ({counted(len(c.users), 'user')})" + (f", {Path(c.output).stem}" if several
+                                                                              else "")
+                       + (" (made with an invalid game)" if flaw else ""), np.asarray(c.actions)))
+        flagged = ([f"**Made with a game marked invalid since**: {flaw.removeprefix('made with ')}"
+                    + (f"; replaced by `{later.output}`" if later else "; not combined again yet")
+                    + ". The games played on it are still counted: they were played honestly on the bias policy of "
+                      "their time (marking them invalid has them played again on the new one).", ""] if flaw
+                   else [f"Replaced by `{later.output}`.", ""] if later else [])
+        on = ", ".join(g.session for g in biases.played_on(data.state, c)) or "none"
+        sections += [f"## The bias policy of {phase_id}" + (f", `{c.output}`" if several or flaw else "")
+                     + " (algorithm 4, figure 7.5)", "", *flagged, f"Games played on it: {on}.", "",
                      f"Combined by the combiner service from {counted(len(c.inputs), 'policy file')} of "
                      f"{', '.join(names.get(u, u) for u in c.users)} "
                      f"(`{c.output}`{'' if merged_path.is_file() else ', file since removed'}"
@@ -309,12 +330,15 @@ def human_report(folder: str | Path, out: str | Path | None = None, reference: s
         title = f"# {study.study.title or study.study.id}: the human-world report"
         note = [f"{counted(len(scripted), 'game')} played by scripted personas ({', '.join(kinds)}) are left out of every "
                 "figure and table (`pairplay report --include-scripted` pools them).", ""] if scripted else []
+    on_flawed = [s for s in games if s.bias_flawed]
     head = [title, "", *note,
             f"pairplay {__version__}; study `{study.study.id}` (seed {study.study.seed}); "
             f"{counted(len({s.participant for s in games}), 'participant')}, {counted(len(games), 'valid game')}"
             + (f"; left out: {', '.join(excluded)}" if excluded else "")
             + (f"; read whole from a damaged file: {', '.join(read_whole)}" if read_whole else "")
             + (f"; **unreadable policy files, cited from the journal**: {', '.join(unreadable)}" if unreadable else "")
+            + (f"; **played on a bias policy made with a game marked invalid since** (counted: played honestly; "
+               f"see its section): {', '.join(s.session for s in on_flawed)}" if on_flawed else "")
             + ". Phases: "
             + "; ".join(f"{p.id}: {counted(p.games, 'game')} x {counted(p.rounds, 'round')}, {p.algorithm} ({p.preset})"
                         + (f" on the bias of {p.bias}" if p.bias else "") for p in study.phase)
@@ -322,6 +346,18 @@ def human_report(folder: str | Path, out: str | Path | None = None, reference: s
     (out / "report.md").write_text("\n".join(head + sections))
     return HumanReport(out, games, excluded, curves, q_rows, att, rehearsal=rehearsal,
                        scripted=[g.session for g in scripted], read_whole=read_whole, unreadable=unreadable)
+
+
+def played_on_words(games: list[GameStats]) -> str:
+    """"Played on <bias file> (N games), ..." of a reuse phase's reported games, each flawed one flagged
+    (replay/biases.py): the bias policy each game used, said where the phase's figures are."""
+    by_bias: dict[str, list[GameStats]] = defaultdict(list)
+    for s in games:
+        by_bias[s.bias].append(s)
+    return "Played on: " + "; ".join(
+        f"`{bias or 'no bias policy'}` ({counted(len(ss), 'game')}: {', '.join(s.session for s in ss)})"
+        + (f", **{ss[0].bias_flawed}**" if ss[0].bias_flawed else "")
+        for bias, ss in by_bias.items()) + "." if games else ""
 
 
 def questionnaire_rows(data: StudyData, sessions: set[str]) -> list[list[str]]:

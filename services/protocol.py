@@ -17,18 +17,19 @@ Rule: `StudyRunner` runs the steps of a study folder's plan (replay/studydata.py
 - a combination: a CombineRequested to the combiner service (services/combiner.py)
   naming the policy files of the earlier phase's valid games; its PolicyCombined
   (the merged greedy policy and the rule that decided each state) and every
-  user's profile (algorithm 3, over the same files) are journaled.
+  user's profile (algorithm 3, over the same files) are journaled. Each writes a
+  file of its own (replay/biases.py): one made again, after a game it took was
+  marked invalid, keeps the earlier one for the games played on it.
 Steps run one at a time. Pause, resume and abort are the experimenter's events
 on the game's bus (SessionPaused, SessionResumed, SessionAborted, source
 "experimenter"): the game obeys them (it refuses touches while paused, ends the
 session on an abort) and the recording holds them, so a replay decides the
 same; the journal says it too. `mark_invalid` keeps a game out of the plan's
-done steps, the combination and the report.
+done steps, the combination and the report (a combination that took it is made again).
 """
 
 from __future__ import annotations
 
-import contextlib
 import logging
 import secrets
 import threading
@@ -39,6 +40,7 @@ from typing import Callable
 
 from pairplay import __version__, signals, testpause
 from pairplay.core.policies import partial_inputs, users_from_policies
+from pairplay.replay import biases
 from pairplay.replay.delivery import delivery_counts, delivery_line, troubled
 from pairplay.replay.reader import read_any_log
 from pairplay.replay.studydata import (Game, StudyData, StudyDataError, game_end, journaled_or_removed, one_line,
@@ -166,6 +168,9 @@ class StudyRunner:
             combined = self.data.state.combined.get(phase.id)
             if combined is None:
                 raise StudyDataError(f"{phase.id} reuses the bias policy of {phase.bias}: combine it first")
+            if biases.flawed(self.data.state, phase.id) is not None:  # (the plan blocks it too: check_step)
+                raise StudyDataError(f"{phase.id}'s bias policy {combined.output} was "
+                                     f"{biases.flaw_words(self.data.state, combined)}: combine it again first")
             actions = list(combined.actions)
         config = SessionConfig(
             session=self.data.session_id(pid, phase_id, game), participant=f"human:{pid}", seed=study.study.seed,
@@ -489,6 +494,9 @@ class StudyRunner:
             raise StudyDataError(f"{phase_id} has no bias policy to combine")
         if step.blocked:
             raise StudyDataError(f"combining for {phase_id}: {step.blocked}")
+        if step.done:  # a bias policy is made once, and again only when a game it took is marked invalid
+            raise StudyDataError(f"the bias policy of {phase_id} is combined already "
+                                 f"({self.data.state.combined[phase_id].output})")
         if not self._busy.acquire(blocking=False):
             raise StudyDataError("a step is already running")
         try:
@@ -504,16 +512,15 @@ class StudyRunner:
                     raise StudyDataError(f"combining for {phase_id}: {why}; mark the game invalid to combine "
                                          "without it")
             inputs = [g.ended.policy for g in games]
-            session = f"{self.data.study.study.id}-combine-{phase_id}"
+            # a new file for each combination: one made again keeps the earlier one (replay/biases.py)
+            output = biases.next_output(self.data.state, phase_id)
+            version = len(biases.versions(self.data.state, phase_id)) + 1  # (the bus session of each its own)
+            session = f"{self.data.study.study.id}-combine-{phase_id}" + (f"-v{version}" if version > 1 else "")
             request_id = secrets.token_hex(6)
-            output = f"merged/{phase_id}-bias.policy.json"
-            guard = contextlib.nullcontext(contextlib.nullcontext)  # combined already: its file is journaled
-            if phase_id not in self.data.state.combined:
-                # no BiasCombined names it: a combination killed before its line left it (the combiner writes no
-                # file over another, and the step was stuck on "exists" for good)
-                (self.data.folder / output).unlink(missing_ok=True)
-                guard = journaled_or_removed(self.data.folder / output)
-            with guard as line:
+            # no BiasCombined names it (next_output is past every one's): a combination killed before its line
+            # left it (the combiner writes no file over another, and the step was stuck on "exists" for good)
+            (self.data.folder / output).unlink(missing_ok=True)
+            with journaled_or_removed(self.data.folder / output) as line:
                 return self._combine(phase_id, phase, inputs, session, request_id, output, timeout_s, line)
         finally:
             self.live.state = "idle"

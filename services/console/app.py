@@ -32,6 +32,7 @@ from starlette.staticfiles import StaticFiles
 from pairplay.core.actions import ACTION_NAMES
 from pairplay.core.geometry import N_STATES, STATE_NAMES
 from pairplay.outputs import output_folder
+from pairplay.replay import biases
 from pairplay.replay.studydata import StudyDataError, named
 from pairplay.schemas.jsonfile import in_words
 
@@ -66,7 +67,8 @@ class Console:
             try:
                 result = work()
                 robot = self.runner.delivery.get(getattr(result, "session", ""), "")
-                self.last = {"step": label, "ok": True, "message": _describe(result) + (f"; {robot}" if robot else "")}
+                self.last = {"step": label, "ok": True,
+                             "message": _describe(result, self.data) + (f"; {robot}" if robot else "")}
             except StudyDataError as err:
                 self.last = {"step": label, "ok": False, "message": str(err)}
             except Exception as err:  # a step must never take the console down with it
@@ -85,12 +87,14 @@ class Console:
     def state(self) -> dict:
         data, live = self.data, self.runner.live
         plan = [{"kind": s.kind, "phase": s.phase, "participant": s.participant, "game": s.game, "done": s.done,
-                 "blocked": s.blocked, "label": s.label} for s in data.plan()]
+                 "blocked": s.blocked, "label": s.label, "note": s.note} for s in data.plan()]
         nxt = next((p for p in plan if not p["done"]), None)
         games = [{"session": g.session, "participant": g.participant, "phase": g.phase, "game": g.game + 1,
                   "outcome": g.ended.outcome if g.ended else "running", "reason": g.ended.reason if g.ended else "",
                   "rounds": g.ended.rounds_played if g.ended else 0, "invalid": g.invalid,
-                  "questionnaire": bool(g.ended and g.ended.questionnaire), "scripted": g.scripted}
+                  "questionnaire": bool(g.ended and g.ended.questionnaire), "scripted": g.scripted,
+                  # the bias policy it was played on, and what is wrong with it (replay/biases.py): it stays valid
+                  "bias": g.bias, "bias_flawed": data.bias_flaw(g)}
                  for g in data.state.games.values()]
         combined = {}
         for phase, c in data.state.combined.items():
@@ -99,6 +103,12 @@ class Console:
                 "users": [names.get(u, u) for u in c.users], "output": c.output,
                 "profiles": {names.get(u, u): p for u, p in c.profiles.items()},
                 "partial": f"PARTIAL profile: {c.partial}" if c.partial else "",  # as `pairplay profile` says it
+                # made with a game marked invalid since: combined again into a new file (replay/biases.py); the
+                # earlier files of the phase, kept for the games played on them, each with what is wrong with it
+                "flawed": biases.flaw_words(data.state, c),
+                "earlier": [{"output": e.output, "flawed": biases.flaw_words(data.state, e),
+                             "played_on": [g.session for g in biases.played_on(data.state, e)]}
+                            for e in biases.versions(data.state, phase)[:-1]],
                 "states": [{"state": f"{s} {STATE_NAMES[s]}", "action": f"{a}: {ACTION_NAMES[a]}",
                             "rule": named(r, names)}
                            for s, (a, r) in enumerate(zip(c.actions, c.decided_by)) if s < N_STATES - 1]}
@@ -131,14 +141,15 @@ class Console:
         }
 
 
-def _describe(result) -> str:
+def _describe(result, data=None) -> str:
     if result is None:
         return "done"
     if hasattr(result, "ended") and getattr(result, "ended", None) is not None:
         e = result.ended
         return f"{result.session}: {e.outcome}" + (f" ({e.reason})" if e.reason else "") + f", {counted(e.rounds_played, 'round')}"
     if hasattr(result, "users"):
-        return f"bias policy of {result.phase}: {counted(len(result.users), 'user')} combined into {result.output}"
+        return (f"bias policy of {result.phase}: {counted(len(result.users), 'user')} "
+                + (biases.combined_words(data.state, result) if data is not None else f"combined into {result.output}"))
     return str(result)
 
 
@@ -251,8 +262,8 @@ def console_routes(console: Console) -> list:
             runner.abort(asked.reason)
         elif action == "skip-questionnaire":
             runner.skip_questionnaire()
-        elif action == "invalid":
-            data.mark_invalid(asked.session, asked.reason)
+        elif action == "invalid":  # said as `protocol mark-invalid` says it: what it did to a bias policy too
+            return JSONResponse({"ok": action, "said": data.marked_line(data.mark_invalid(asked.session, asked.reason))})
         else:
             raise StudyDataError(f"no action {action!r}")
         return JSONResponse({"ok": action})

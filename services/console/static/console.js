@@ -86,7 +86,7 @@ function render(s) {
 
   const plan = $("plan"); plan.innerHTML = "";
   s.plan.forEach((p) => {
-    const li = el("li", p.label + (p.blocked && !p.done ? ` (${p.blocked})` : ""));
+    const li = el("li", p.label + (p.blocked && !p.done ? ` (${p.blocked})` : "") + (p.note ? ` (${p.note})` : ""));
     li.className = p.done ? "done" : (p.blocked ? "blocked" : "");
     if (s.next && p.label === s.next.label) li.classList.add("next");
     plan.appendChild(li);
@@ -116,6 +116,9 @@ function render(s) {
   const comb = $("combined"); comb.innerHTML = "";
   for (const [phase, c] of Object.entries(s.combined)) {
     comb.appendChild(el("h3", `${phase}: ${c.users.join(", ")} -> ${c.output}`));
+    // a bias policy made with a game marked invalid since; the earlier ones kept for the games played on them
+    if (c.flawed) { const w = el("p", `${c.output} was ${c.flawed}: the plan combines it again`, "partial"); w.id = "flawed-" + phase; comb.appendChild(w); }
+    c.earlier.forEach((e) => comb.appendChild(el("p", `earlier: ${e.output}` + (e.flawed ? `, ${e.flawed}` : "") + `; played on it: ${e.played_on.join(", ") || "none"}`)));
     const t = el("table"); const hd = t.insertRow(); ["user", "speech incompatible", "head incompatible", "smile", "gaze"].forEach((h) => hd.appendChild(el("th", h)));
     for (const [u, p] of Object.entries(c.profiles)) {
       const r = t.insertRow(); [u, (100 * p.speech).toFixed(1) + "%", (100 * p.head).toFixed(1) + "%", p.facial ? "yes" : "no", p.gaze ? "yes" : "no"].forEach((v) => r.insertCell().textContent = v);
@@ -132,10 +135,10 @@ function render(s) {
   const tb = $("games").tBodies[0]; tb.innerHTML = "";
   s.games.forEach((g) => {
     const r = tb.insertRow(); if (g.invalid) r.className = "invalid";
-    [g.session, g.participant + (g.scripted ? ` (scripted: ${g.scripted})` : ""), g.phase, g.game, g.outcome + (g.reason ? ` (${g.reason})` : "") + (g.invalid ? ` invalid: ${g.invalid}` : ""),
+    [g.session, g.participant + (g.scripted ? ` (scripted: ${g.scripted})` : ""), g.phase, g.game, g.outcome + (g.reason ? ` (${g.reason})` : "") + (g.invalid ? ` invalid: ${g.invalid}` : "") + (g.bias_flawed ? ` (played on ${g.bias}, ${g.bias_flawed})` : ""),
      g.questionnaire ? "answered" : "-"].forEach((v) => r.insertCell().textContent = v);
     const b = el("button", "mark invalid"); b.disabled = !!g.invalid || g.outcome === "running";
-    b.onclick = () => { const why = prompt(`Why is ${g.session} invalid?`); if (why) api("/api/console/control/invalid", {session: g.session, reason: why}).then(() => say(`${g.session} marked invalid`), (e) => { if (!e.said) throw e; }); };
+    b.onclick = () => { const why = prompt(`Why is ${g.session} invalid?`); if (why) api("/api/console/control/invalid", {session: g.session, reason: why}).then((r) => say(r.said || `${g.session} marked invalid`), (e) => { if (!e.said) throw e; }); };
     r.insertCell().appendChild(b);
   });
   if (s.last.step && !held) say(`${s.last.step}: ${s.last.message}`, !s.last.ok);
