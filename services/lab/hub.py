@@ -140,8 +140,11 @@ class LabHub:
 
     SEAT_KEPT_S = 3.0  # a reloading player's tab gets its seat back within this
 
-    def __init__(self, config: SessionConfig, token: str | None = None):
+    def __init__(self, config: SessionConfig, token: str | None = None, questionnaire: bool = False):
         self.config = config
+        # a questionnaire follows this game (a study's game whose participant is asked one): the board asks for it
+        # at the end only then; `pairplay lab` has none, and asking there logged a 404 in every game (trial27 F12)
+        self.questionnaire = questionnaire
         self.session = config.session
         self.token = token or secrets.token_urlsafe(18)
         self.model = LabModel()
@@ -195,6 +198,7 @@ class LabHub:
     def view(self, client: Client) -> dict:
         with self.lock:
             view = self.model.mirror_view() if client.page == "mirror" else self.model.board_view()
+        view["questionnaire"] = self.questionnaire
         return {"type": "state", "role": client.role, "state": view}
 
     def _redraw_all(self) -> None:
