@@ -19,6 +19,8 @@ from labutil import human_config, open_page, running_lab, wait_phase
 from pairplay.replay.reader import read_log
 from pairplay.services.lab.hub import LATE_MS
 
+from test_lab_bounds import _reply
+
 OFF = {"offline": True, "latency": 0, "downloadThroughput": -1, "uploadThroughput": -1}
 ON = {"offline": False, "latency": 0, "downloadThroughput": -1, "uploadThroughput": -1}
 
@@ -59,13 +61,6 @@ def test_a_board_whose_network_drops_says_reconnecting_drops_the_touch_and_comes
 
 def _ws_url(board_url: str, client: str) -> str:
     return board_url.replace("http://", "ws://").replace("/board?", "/ws?") + f"&page=board&client={client}"
-
-
-def _reply(ws) -> dict:
-    while True:
-        message = json.loads(ws.recv(timeout=60))
-        if message["type"] != "state":
-            return message
 
 
 def test_a_touch_that_arrives_later_than_the_heartbeat_allows_is_refused_and_recorded(tmp_path):
