@@ -41,6 +41,7 @@ def test_a_board_whose_network_drops_says_reconnecting_drops_the_touch_and_comes
         _network(page, cdp, up=False)
         # the socket is not closed (half-open): only the heartbeat can tell
         page.wait_for_function("document.getElementById('prompt').textContent === 'Reconnecting…'", timeout=20000)
+        assert page.evaluate("window.pairplay.link.lost") >= 1  # the heartbeat, not a close, found it
         assert not page.evaluate("window.pairplay.canTouch()")
         page.click("[data-card='4']")  # a touch while down: dropped, never sent, never waited for
         assert page.evaluate("window.pairplay.sent") == 0
