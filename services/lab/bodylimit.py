@@ -85,10 +85,11 @@ class BodyLimit:
 
     async def refuse(self, scope: Scope, send: Send, what: str, status: int = 413, error: str = "") -> None:
         client, path = (scope.get("client") or ("?", 0))[0], scope.get("path", "?")
-        limit = f"{self.limit} bytes" if status == 413 else f"{self.read_s:g} s"
+        limit = counted(self.limit, "byte") if status == 413 else f"{self.read_s:g} s"
         log.warning("refused %s to %s from %s: the limit is %s", what, path, client, limit)
         lab = getattr(getattr(scope.get("app"), "state", None), "lab", None)  # Starlette puts itself in the scope
         for hub in list(getattr(lab, "hubs", {}).values()):
+            # the recorded line names the limit as a number of bytes, as before (readers may match it)
             hub.record_refusal(f"HTTP request refused: {what}, the limit is {self.limit if status == 413 else limit}",
                                f"http{path[:64]}", str(client))
         error = error or f"request too large: the limit is {counted(self.limit, 'byte')}"
