@@ -269,7 +269,8 @@ class StudyRunner:
         hub = None
         if player is None and self.lab is not None:
             from pairplay.services.lab.hub import LabHub
-            hub = self.lab.add(LabHub(config, token=token))  # the board page: /s/<session>/board?t=<token>
+            # the board page: /s/<session>/board?t=<token>; it turns into the questionnaire only if one is asked
+            hub = self.lab.add(LabHub(config, token=token, questionnaire=asks))
         self._stop, self._abort_reason, self._control_seq = threading.Event(), "", 0
         summary: dict = {}
         self.running = Running(config.session, self.data.given / recording, config.rounds, summary)

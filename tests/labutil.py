@@ -80,6 +80,9 @@ def open_page(browser, url: str, width: int = 1024, height: int = 600):
     errors: list[str] = []
     page.on("pageerror", lambda e: errors.append(str(e)))
     page.errors = errors
+    logged: list[str] = []  # what the page logs as an error (a failed fetch's 404 is one, not a page error)
+    page.on("console", lambda m: logged.append(m.text) if m.type == "error" else None)
+    page.console_errors = logged
     page.goto(url)
     page.wait_for_function("window.pairplay && window.pairplay.state !== null", timeout=15000)
     return page

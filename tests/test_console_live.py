@@ -111,6 +111,13 @@ def test_a_skipped_questionnaire_closes_on_the_page(browser, served):
     q = browser.new_context(bypass_csp=True).new_page()
     q.goto(server.url + q_link)
     q.wait_for_selector("#q-send", timeout=10000)
+    # a poll never answered (a half-open connection) is said, and the page goes on once polls are answered
+    polls = lambda url: "/api/questionnaire?" in url  # noqa: E731 (the same predicate unroutes it)
+    q.route(polls, lambda route: None)
+    q.wait_for_function("document.getElementById('q-status').textContent === "
+                        "'No connection to the lab server: retrying…'", timeout=20000)
+    q.unroute(polls)
+    q.wait_for_function("document.getElementById('q-status').textContent === ''", timeout=10000)
     console.click("#skip-questionnaire")
     game.join(30)
     assert not game.is_alive()
@@ -150,6 +157,13 @@ def test_a_console_whose_server_does_not_answer_says_so(served):
     console.wait_for_function("!document.getElementById('register').disabled", timeout=10000)
     assert not console.inner_text("#message").startswith("the lab server does not answer")
     assert console.is_enabled("#run-next") and console.is_enabled("#export")
+    # a poll that is never answered (a half-open connection: the network dropped without closing it) is no
+    # answer either: before, the fetch waited for ever and the console kept its last view without a word
+    console.route("**/api/console/state*", lambda route: None)
+    console.wait_for_function("document.getElementById('message').textContent.startsWith("
+                              "'the lab server does not answer')", timeout=20000)
+    console.unroute("**/api/console/state*")
+    console.wait_for_function("!document.getElementById('register').disabled", timeout=10000)
     # the real thing: the server stops
     server.close()
     console.wait_for_function("document.getElementById('message').textContent.startsWith("

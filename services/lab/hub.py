@@ -12,6 +12,18 @@ message of its page (`id` not increasing), or is about a turn or suggestion
 that is no longer open (stale) is refused: the page is told why, and the
 refusal is published as a MessageRejected, so the recording holds it.
 
+Late input: a touch (or press) that reaches the hub more than LATE_MS after its
+page made it is refused as late, not played (trial29 F7: a touch made just
+before a Wi-Fi drop was held by the browser and played 25 s later, its timing
+counted toward the ignore window). The page's heartbeat (common.js) stops
+taking touches once a ping goes unanswered for its deadline; what the page
+sent before it noticed may still arrive late, and this check drops it. Page and
+server clocks are different machines' clocks, so lateness is not the difference
+of two stamps: each message with the page's clock (`page_ms`: pings, touches)
+gives `arrived - page_ms`, and a message's lateness is its value above the
+smallest seen on that connection (the offset plus the fastest delivery; both
+clocks run at one rate). The heartbeat's pings keep that smallest fresh.
+
 Pages: one "player" board per session acts; every other board page is
 read-only ("viewer") until the player leaves, when the oldest viewer takes
 over; a page that reloads keeps its `client` id (the browser tab's
@@ -30,6 +42,7 @@ from __future__ import annotations
 
 import asyncio
 import logging
+import math
 import queue
 import secrets
 import threading
@@ -54,6 +67,9 @@ log = logging.getLogger("pairplay.lab")
 MAX_MESSAGE = 4096  # bytes: a page's messages are small; longer ones are refused and recorded
 REPLACED = 4000  # WebSocket close code: a newer page came with this page's client id (see the module rule)
 MAX_FRAME = 65536  # bytes: uvicorn closes the connection on a bigger frame (nothing to record but the close)
+# ms: common.js's heartbeat deadline (DEADLINE_MS) plus its beat (BEAT_MS): a page that was still taking
+# touches had heard from the server within this; a touch later than this was held by a network that was down
+LATE_MS = 4000.0
 
 
 # -- what a page may send (JSON, tagged by "type") ----------------------------------------
@@ -79,7 +95,8 @@ class Wrong(msgspec.Struct, tag="wrong", forbid_unknown_fields=True):
 
 
 class Ping(msgspec.Struct, tag="ping", forbid_unknown_fields=True):
-    t: float  # echoed back at once: the raw WebSocket round trip (bench)
+    t: float  # echoed back at once: the raw WebSocket round trip (bench), and the page's heartbeat (common.js)
+    page_ms: Union[float, None] = None  # the page's clock when sent: the baseline of late input (module rule)
 
 
 PageMessage = Union[Pick, Wrong, Ping]
@@ -112,6 +129,7 @@ class Client:
     def __init__(self, ws, page: str, client_id: str, role: str):
         self.ws, self.page, self.id, self.role = ws, page, client_id, role
         self.last_id = 0
+        self.fastest_ms = float("inf")  # smallest (arrival - page_ms) on this connection (the module's late rule)
         self.outbox: asyncio.Queue = asyncio.Queue()
         self.state_pending = False
         self.sender: asyncio.Task | None = None
@@ -122,8 +140,11 @@ class LabHub:
 
     SEAT_KEPT_S = 3.0  # a reloading player's tab gets its seat back within this
 
-    def __init__(self, config: SessionConfig, token: str | None = None):
+    def __init__(self, config: SessionConfig, token: str | None = None, questionnaire: bool = False):
         self.config = config
+        # a questionnaire follows this game (a study's game whose participant is asked one): the board asks for it
+        # at the end only then; `pairplay lab` has none, and asking there logged a 404 in every game (trial27 F12)
+        self.questionnaire = questionnaire
         self.session = config.session
         self.token = token or secrets.token_urlsafe(18)
         self.model = LabModel()
@@ -177,6 +198,7 @@ class LabHub:
     def view(self, client: Client) -> dict:
         with self.lock:
             view = self.model.mirror_view() if client.page == "mirror" else self.model.board_view()
+        view["questionnaire"] = self.questionnaire
         return {"type": "state", "role": client.role, "state": view}
 
     def _redraw_all(self) -> None:
@@ -275,6 +297,7 @@ class LabHub:
         except (msgspec.DecodeError, msgspec.ValidationError) as err:
             self._refuse(c, f"malformed message: {err}", raw)
             return
+        late_ms = self._lateness(c, msg.page_ms) if msg.page_ms is not None else 0.0
         if isinstance(msg, Ping):
             c.outbox.put_nowait({"type": "pong", "t": msg.t, "server_ns": time.time_ns()})  # server clock: offset
             return
@@ -308,8 +331,21 @@ class LabHub:
                 return
             event = ev.WrongSuggestionPressed(round=msg.round, turn=msg.turn, attempt=msg.attempt,
                                               page_time_ms=msg.page_ms)
+        if late_ms > LATE_MS:  # checked last: a message wrong in any other way says that first
+            self._refuse(c, f"late: made {late_ms / 1000:.1f} s before it arrived (more than {LATE_MS / 1000:g} s: the "
+                            "network held it while the page was cut off)", raw, msg.id)
+            return
         # stamped now: the envelope's time_ns is the server's clock of the touch
         self._out.put(self.node.stamp([event]))
+
+    @staticmethod
+    def _lateness(c: Client, page_ms: float) -> float:
+        """How much later than its connection's fastest message this one arrived, in ms (the module's rule)."""
+        if not math.isfinite(page_ms):  # JSON's 1e999: no clock; it must not become everyone's baseline
+            return 0.0
+        offset = time.monotonic_ns() / 1e6 - page_ms
+        c.fastest_ms = min(c.fastest_ms, offset)
+        return offset - c.fastest_ms
 
     def _refuse(self, c: Client, reason: str, raw: bytes, msg_id: int = 0) -> None:
         self.rejections += 1

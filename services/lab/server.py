@@ -23,6 +23,7 @@ import uvicorn
 from pairplay.schemas.session import SessionConfig
 from pairplay.services.bus import SHUTDOWN_S, BusOptions, Deadline, shutdown_wait
 from pairplay.services.lab.app import Lab, create_app
+from pairplay.services.lab.deadlines import DeadlineH11
 from pairplay.services.lab.hub import MAX_FRAME, LabHub
 from pairplay.services.lab.reach import reachable_host
 from pairplay.services.robot.choice import RobotChoice
@@ -32,7 +33,8 @@ from pairplay.services.session import run_session
 class WebServer:
     def __init__(self, app, host: str = "127.0.0.1", port: int = 0, ssl_certfile: str | None = None,
                  ssl_keyfile: str | None = None):
-        config = uvicorn.Config(app, host=host, port=port, log_level="warning", lifespan="off",
+        # DeadlineH11: a request's head within READ_S, at most MAX_CONNECTIONS open (deadlines.py)
+        config = uvicorn.Config(app, host=host, port=port, log_level="warning", lifespan="off", http=DeadlineH11,
                                 ws_max_size=MAX_FRAME, ws_ping_interval=5.0, ws_ping_timeout=10.0,
                                 ssl_certfile=ssl_certfile, ssl_keyfile=ssl_keyfile, access_log=False,
                                 timeout_graceful_shutdown=2)  # open pages must not hold up a SIGTERM

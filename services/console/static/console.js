@@ -8,12 +8,16 @@ let last = null;
 let held = false;  // a refusal is on screen
 let down = false;  // the last request got no answer at all
 const GONE = "the lab server does not answer (stopped?): the controls work again once it does";
+// A poll (a GET) with no answer within POLL_DEADLINE_MS counts as no answer: on a network that dropped without
+// closing the connection (half-open TCP) a fetch waits for minutes, and the page kept its last view without a
+// word (trial29 F7's kind). Only reads: a POST may take a while (a combine) and is not to be sent twice.
+const POLL_DEADLINE_MS = 5000;
 
 async function api(path, body) {
   let r;
   try {
     r = await fetch(path + (path.includes("?") ? "&" : "?") + "token=" + encodeURIComponent(token),
-                    body === undefined ? {} : {method: "POST", headers: {"content-type": "application/json"},
+                    body === undefined ? {signal: AbortSignal.timeout(POLL_DEADLINE_MS)} : {method: "POST", headers: {"content-type": "application/json"},
                                                body: JSON.stringify(body)});
   } catch (e) { serverGone(); e.said = true; throw e; }  // no answer (fetch's TypeError), not a refusal
   const data = await r.json().catch(() => ({error: "bad answer from the lab server"}));

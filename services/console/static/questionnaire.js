@@ -62,8 +62,11 @@ async function load() {
   if (answered) return;
   let r;
   try {
-    r = await fetch(`/api/questionnaire?session=${encodeURIComponent(session)}&token=${encodeURIComponent(token)}`);
-  } catch (e) {  // the lab server does not answer: say so, keep what is typed, try again
+    // no answer within 5 s is none: on a half-open connection (a network that dropped without closing it) a
+    // fetch waits for minutes, and the page would keep its last view without a word
+    r = await fetch(`/api/questionnaire?session=${encodeURIComponent(session)}&token=${encodeURIComponent(token)}`,
+                    {signal: AbortSignal.timeout(5000)});
+  } catch (e) {  // the lab server does not answer (or not in time): say so, keep what is typed, try again
     status("No connection to the lab server: retrying…", true);
     cut = true;
     setTimeout(load, 1000);

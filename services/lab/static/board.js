@@ -118,13 +118,17 @@
     if (pending >= 0 && s.notice && s.notice.card === pending) pending = -1;
     api.state = s;
     api.role = role;
-    if (s.phase === "over" && role === "player" && !stopped(s) && !api.askedQuestionnaire) askQuestionnaire();
+    if (s.phase === "over" && role === "player" && s.questionnaire && !stopped(s) && !api.askedQuestionnaire) {
+      askQuestionnaire();
+    }
     banner.classList.toggle("hidden", role === "player");
     if (role === "viewer") banner.textContent = "Read-only: another screen is playing this session";
     render();
   }
   const stopped = (s) => ["aborted", "interrupted"].includes(s.ended);  // SessionEnded's reason
-  // In a study (services/console), a questionnaire follows a game that was not stopped: the board becomes it.
+  // In a study (services/console), a questionnaire follows a game that was not stopped if the participant is
+  // asked one (the view's `questionnaire`, hub.py): the board becomes it. Elsewhere (`pairplay lab`) it asks
+  // nothing: the route is the study's, and asking logged a 404 (403 for a participant asked nothing).
   async function askQuestionnaire() {
     api.askedQuestionnaire = true;
     const { session, token } = window.pairplayLab;

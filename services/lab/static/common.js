@@ -1,5 +1,11 @@
 // What every lab page shares: the session and token from the URL, the tab's client id,
 // and a WebSocket that reconnects and asks for the whole view again (hub.py).
+// Heartbeat rule: the page pings every BEAT_MS; a ping that nothing from the server has followed within
+// DEADLINE_MS means the socket is down even though it did not close (a Wi-Fi drop leaves TCP half-open and
+// the browser holds what the page sends, to deliver it when the network is back: trial29 F7). The page then
+// abandons that socket, says so (onLink(false)), takes no input, and opens a new one until it connects.
+// The page pings, not the server: only the page can stop taking touches, and a browser answers the server's
+// protocol pings (uvicorn's ws_ping_interval) without telling the page.
 "use strict";
 (function () {
   const parts = location.pathname.split("/");  // /s/<session>/<page>
@@ -12,18 +18,27 @@
   };
   let client = sessionStorage.getItem("pairplay-client") || fresh();  // one per tab, kept across reloads
   const now = () => performance.timeOrigin + performance.now();  // the page's clock, ms
+  // a few seconds: well above a lab network's round trip (1-20 ms) and a loaded server's answer, short enough
+  // that a touch made after a drop is dropped; a throttled timer (a hidden tab) only checks later, never early
+  const BEAT_MS = 1000, DEADLINE_MS = 3000;
 
   function connect(page, handlers) {
     const proto = location.protocol === "https:" ? "wss:" : "ws:";
     const url = () => `${proto}//${location.host}/s/${encodeURIComponent(session)}/ws?t=${encodeURIComponent(token)}` +
       `&page=${page}&client=${client}`;
-    const link = { ws: null, open: false, connects: 0, pings: new Map(), client };
+    const link = { ws: null, open: false, connects: 0, lost: 0, pings: new Map(), client };
     let delay = 200;
+    let beatSent = -1, heard = -1;  // performance.now() of the last heartbeat ping, of the last message heard
     function open() {
       const ws = new WebSocket(url());
       link.ws = ws;
-      ws.onopen = () => { link.open = true; link.connects += 1; delay = 200; handlers.onLink(true); };
+      ws.onopen = () => {
+        link.open = true; link.connects += 1; delay = 200; beatSent = -1; heard = performance.now();
+        handlers.onLink(true);
+        beat();
+      };
       ws.onmessage = (m) => {
+        heard = performance.now();
         let msg;
         try { msg = JSON.parse(m.data); } catch (e) { return; }
         if (msg.type === "state") handlers.onState(msg.state, msg.role);
@@ -34,6 +49,7 @@
         }
       };
       ws.onclose = (ev) => {
+        if (ws !== link.ws) return;  // a socket the heartbeat abandoned: its late close says nothing
         link.open = false;
         handlers.onLink(false, ev.code);
         if (ev.code === 4403) return;  // refused: wrong token; retrying will not help
@@ -52,15 +68,41 @@
         delay = Math.min(delay * 2, 2000);
       };
     }
+    // the heartbeat (see the rule at the top): a new ping only once the last one was answered (or anything
+    // came after it), so a page never piles pings into a socket that holds them
+    function beat() {
+      if (!link.up()) return;
+      const t = performance.now();
+      if (beatSent >= 0 && heard < beatSent) {
+        if (t - beatSent > DEADLINE_MS) lose();
+        return;
+      }
+      beatSent = t;
+      link.ws.send(JSON.stringify({ type: "ping", t, page_ms: now() }));
+    }
+    function lose() {
+      // the socket is abandoned, not waited for: its close handshake cannot pass a dead network either. Its
+      // handlers go, so nothing it delivers late is taken; what it holds may still arrive, and the hub refuses
+      // a touch that comes later than this deadline allows (hub.py LATE_MS)
+      const ws = link.ws;
+      link.ws = null;
+      link.open = false;
+      link.lost += 1;
+      ws.onopen = ws.onmessage = null;
+      try { ws.close(); } catch (e) { /* closing a dead socket: nothing to do */ }
+      handlers.onLink(false, 0);
+      open();
+    }
+    setInterval(beat, BEAT_MS);
     // true only if the message went out: a socket that is closing (before its onclose) drops what it is given
     // without a word, so "open" is the socket's own state, not only ours
-    link.up = () => link.open && link.ws.readyState === WebSocket.OPEN;
+    link.up = () => link.open && !!link.ws && link.ws.readyState === WebSocket.OPEN;
     link.send = (obj) => { if (link.up()) { link.ws.send(JSON.stringify(obj)); return true; } return false; };
     // the raw WebSocket round trip: {rtt (ms), sent (performance.now()), server_ns (the server's clock)}
     link.ping = () => new Promise((resolve) => {
       const t = performance.now();
       link.pings.set(t, resolve);
-      link.send({ type: "ping", t });
+      link.send({ type: "ping", t, page_ms: now() });
     });
     open();
     return link;

@@ -1,0 +1,88 @@
+"""A request that is not sent whole in time is answered 408 and closed; no more than MAX_CONNECTIONS are held.
+
+Rule (services/lab/deadlines.py, bodylimit.py): the lab server (here a real `protocol serve`, the console's)
+gives a request's head and its body READ_S each; a connection beyond MAX_CONNECTIONS is closed as soon as it is
+accepted. The trial (trial29 F11): 900 connections each sending a POST's headers with Content-Length: 60000 and
+100 bytes of body, then nothing, were all held 20 s and more. Real sockets; no timing is asserted: each slow
+connection is read until the server answers or closes it.
+"""
+
+from __future__ import annotations
+
+import socket
+from pathlib import Path
+from urllib.parse import urlsplit
+
+from pairplay.replay.studydata import StudyData
+from pairplay.services.lab.deadlines import MAX_CONNECTIONS
+
+from test_study_guard import serving, stopped
+
+STUDY = Path(__file__).parent / "data" / "pilot-study.toml"
+
+
+def _open(netloc: str, sent: bytes) -> socket.socket:
+    host, port = netloc.rsplit(":", 1)
+    sock = socket.create_connection((host, int(port)))
+    if sent:
+        sock.sendall(sent)
+    return sock
+
+
+def _answer(sock: socket.socket) -> bytes:
+    """All the server sends until it closes the connection (b"" if it closed without a word)."""
+    sock.settimeout(120)  # a bound, not a measure: before the fix this waited for ever
+    got = b""
+    try:
+        while chunk := sock.recv(65536):
+            got += chunk
+    except ConnectionResetError:
+        pass
+    sock.close()
+    return got
+
+
+def _still_open(sock: socket.socket) -> bool:
+    """Nothing has come on `sock` and it is not closed (a read would wait)."""
+    sock.setblocking(False)
+    try:
+        sock.recv(1, socket.MSG_PEEK)
+    except BlockingIOError:
+        return True
+    finally:
+        sock.setblocking(True)
+    return False
+
+
+def _get_state(netloc: str, token: str) -> bytes:
+    sock = _open(netloc, f"GET /api/console/state?token={token} HTTP/1.1\r\nHost: {netloc}\r\n"
+                         "Connection: close\r\n\r\n".encode())
+    return _answer(sock).split(b"\r\n", 1)[0]
+
+
+def test_slow_heads_and_bodies_are_answered_408_and_connections_are_capped(tmp_path):
+    data = StudyData.create(tmp_path / "study", STUDY)
+    proc = serving(data.folder)
+    try:
+        url = urlsplit(proc.console_url)
+        token = url.query.split("token=", 1)[1]
+        netloc = url.netloc
+        body = (f"POST /api/console/register?token={token} HTTP/1.1\r\nHost: {netloc}\r\n"
+                "Content-Type: application/json\r\nContent-Length: 60000\r\n\r\n").encode() + b"{" * 100
+        head = f"GET /api/console/state?token={token} HTTP/1.1\r\nHost: {netloc}\r\n".encode()  # no end of head
+        slow = [_open(netloc, body) for _ in range(20)] + [_open(netloc, head) for _ in range(20)] \
+            + [_open(netloc, b"") for _ in range(20)]
+        # meanwhile the console answers
+        assert all(_still_open(s) for s in slow)
+        assert _get_state(netloc, token) == b"HTTP/1.1 200 OK"
+        # the cap: connections beyond it are closed at once, unanswered; those within it wait for their deadline
+        extra = 5
+        fillers = [_open(netloc, b"") for _ in range(MAX_CONNECTIONS - len(slow) + extra)]
+        answers = [_answer(s) for s in slow + fillers]
+        assert all(a.startswith(b"HTTP/1.1 408 ") for a in answers[:len(slow)]), {a[:40] for a in answers}
+        assert b"a body must come whole within" in answers[0]
+        assert sum(a == b"" for a in answers) == extra
+        assert sum(a.startswith(b"HTTP/1.1 408 ") for a in answers) == MAX_CONNECTIONS
+        assert _get_state(netloc, token) == b"HTTP/1.1 200 OK"  # and it takes connections again
+    finally:
+        stopped(proc)
