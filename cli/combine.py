@@ -162,8 +162,8 @@ def run_profile(args) -> int:
     # nothing): in the output, which may go to a file, and on stderr, which a reader of the terminal sees
     partial = partial_inputs(policies, names)
     if partial:
-        print(f"\nPARTIAL profile: {partial}")
-        print(f"pairplay profile: PARTIAL profile: {partial}", file=sys.stderr)
+        print(f"\nPARTIAL profile: {escaped(partial)}")
+        print(f"pairplay profile: PARTIAL profile: {escaped(partial)}", file=sys.stderr)
     return 0
 
 
@@ -225,8 +225,8 @@ def run_combine(args) -> int:
     for s, (a, rule) in enumerate(zip(merged.policy, merged.rules)):
         print(f"{s:2d} {STATE_NAMES[s]:16s} {int(a):2d} {ACTIONS[int(a)].name:55s} {rule}")
     if partial:  # in the listing and on stderr, -q or not, as profile's (cli/main.py `warn`: -q hid it)
-        print(f"\nPARTIAL merge: {partial}")
-        print(f"pairplay combine: PARTIAL merge: {partial}", file=sys.stderr)
+        print(f"\nPARTIAL merge: {escaped(partial)}")
+        print(f"pairplay combine: PARTIAL merge: {escaped(partial)}", file=sys.stderr)
     if args.out:
         print(f"\nwrote {escaped(args.out)}")
     return 0

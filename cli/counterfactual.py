@@ -20,6 +20,7 @@ import argparse
 from pathlib import Path
 
 from pairplay.cli.args import add_force, count, int_at_least, note_given, option_policy, output_folder, seed_number
+from pairplay.errors import escaped
 from pairplay.numbers import counted
 
 ARMS_HELP = ("comma-separated arms: same (the recorded learner, replayed: checks the fit), q (Q-learning from "
@@ -229,6 +230,6 @@ def run(args: argparse.Namespace) -> int:
     paths = write_counterfactual(out, stem, model, recorded, runs, texts, args.force,
                                  read_whole=f"{rec.name}: {log.loss_free}" if log.loss_free else "")
     copies.journal(paths)
-    print(console_text(model, recorded, runs, texts))
-    print("wrote " + ", ".join(str(p) for p in paths))
+    print("\n".join(escaped(line) for line in console_text(model, recorded, runs, texts).splitlines()))  # file names
+    print(escaped("wrote " + ", ".join(str(p) for p in paths)))
     return 0

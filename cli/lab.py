@@ -94,8 +94,8 @@ def run(args: argparse.Namespace) -> int:
         warning = plain_beyond_loopback(host, tls=bool(args.certfile))  # the same line as `protocol serve`'s
         if warning:
             print(f"pairplay lab: {warning}", file=sys.stderr)
-        print(f"session {config.session}: {config.participant}, {counted(config.rounds, 'round')}, {config.algorithm}, "
-              f"observed card: {config.observed_source}", flush=True)
+        print(escaped(f"session {config.session}: {config.participant}, {counted(config.rounds, 'round')}, "
+                      f"{config.algorithm}, observed card: {config.observed_source}"), flush=True)
         print(f"board:  {urls.board}", flush=True)
         print(f"mirror: {urls.mirror}", flush=True)
         print(f"bus listening on {' '.join(bus.locators()) or '(no listener)'}", flush=True)
@@ -148,7 +148,7 @@ def run(args: argparse.Namespace) -> int:
         if robot:
             print(robot)
     elif e is None or e.reason != "completed":  # how a session that did not complete ended is still said
-        print(f"ended: {ended}")
+        print(f"ended: {escaped(ended)}")
     if recorded.note:  # said by read_back; as `pairplay session`
         return 1
     return 0 if e is not None and e.reason in ("completed", "interrupted", "aborted") else 1  # as `pairplay session`

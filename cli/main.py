@@ -62,7 +62,7 @@ from pairplay import __version__, environment, signals, testpause, threadstart
 from pairplay.cli import interrupts
 from pairplay.cli.interrupts import DeferredInterrupt
 from pairplay.cli.args import check_study_folders
-from pairplay.errors import UserError, escaped, out_of_threads
+from pairplay.errors import UserError, command_word, escaped, out_of_threads
 from pairplay.nearest import nearest
 
 # verb -> (module, one-line help)
@@ -508,8 +508,8 @@ def _arm() -> None:
 def _main(argv: list[str], arm=None) -> int:
     misplaced = _options_before_the_verb(argv)
     if misplaced:
-        print(f"pairplay: options go after the verb: pairplay {misplaced[0]} {' '.join(misplaced[1:])} ... "
-              f"(see pairplay {misplaced[0]} --help)",
+        print(escaped(f"pairplay: options go after the verb: pairplay {misplaced[0]} {' '.join(misplaced[1:])} ... "
+                      f"(see pairplay {misplaced[0]} --help)"),
               file=sys.stderr)
         return 2
     parser, chosen = build_parser(argv)
@@ -603,7 +603,7 @@ def recording_failed_line(err: BaseException) -> str | None:
         return None
     path = err.path or "the recording"
     return (f"writing {path} failed ({err.reason}); the session stopped; the file is readable up to the "
-            f"failure: pairplay recover {path}")
+            f"failure: pairplay recover {command_word(err.path) if err.path else path}")
 
 
 def options_of(verb: argparse.ArgumentParser | None, args: argparse.Namespace) -> frozenset[str]:

@@ -21,6 +21,7 @@ import sys
 from pathlib import Path
 
 from pairplay.cli.args import file_in, key_chunk, output_file
+from pairplay.errors import escaped
 from pairplay.replay.studydata import StudyData, StudyDataError
 from pairplay.numbers import counted
 from pairplay.outputs import check_folder
@@ -60,7 +61,7 @@ def _on_folder(data: StudyData, args) -> int:
         built_missing_policies(data, "participant export")
         out = file_in(args.out, f"{args.participant}.zip") or args.folder / "exports" / f"{args.participant}.zip"
         path = data.export_participant(args.participant, out, force=args.force)
-        print(f"{args.participant}: {path}")
+        print(escaped(f"{args.participant}: {path}"))
         return 0
     data.participant(args.participant)
     check_folder(args.folder)  # it writes in it: a folder one may not write in is one line, named as given
@@ -73,12 +74,13 @@ def _on_folder(data: StudyData, args) -> int:
           + (", their line of the key file" if gone.key_file_line_removed else "")
           + f" (deletion {gone.deletion})")
     for m in gone.merged_policies_using_them:
-        print(f"merged policy combined from their games (kept; re-combine without them if needed): {m}")
+        print(escaped(f"merged policy combined from their games (kept; re-combine without them if needed): {m}"))
     for c in erased.copies:
         if c.erased:
-            print(f"erased {copy_words(c, args.participant)}: {c.path} (pairplay's own file, unchanged: the bytes it wrote)")
+            print(escaped(f"erased {copy_words(c, args.participant)}: {c.path} (pairplay's own file, unchanged: the "
+                          "bytes it wrote)"))
     for line in left_lines(args.folder, args.participant, erased):  # on stderr: -q never hides a copy left
-        print(line, file=sys.stderr)
+        print(escaped(line), file=sys.stderr)
     return 0
 
 

@@ -30,6 +30,7 @@ from pairplay.replay import biases, studyjournal
 from pairplay.replay.studydata import JOURNAL, REGISTER_AT_ONCE, StudyData, StudyDataError, repair_journal
 from pairplay.schemas.study import (StudyFileError, bundled_studies, bundled_text, example_text, no_study_file,
                                     parse_study, study_file_of)
+from pairplay.errors import command_word, escaped
 from pairplay.numbers import counted
 
 EXAMPLE_NAME = "thesis-ch7"
@@ -107,19 +108,19 @@ def _repair(folder: Path) -> int:
     done = repair_journal(folder)
     journal = folder / JOURNAL
     if done.aside is not None:
-        print(f"set aside the cut last line of {journal} ({counted(len(done.torn), 'byte')}, what a crash left of "
-              f"the event it wrote) in {folder / done.aside.name}; the journal keeps its "
-              f"{counted(done.kept, 'whole line')}: the study goes on from them (a game whose end was cut is "
-              "journaled from its recording by the next serve, pilot or report)")
+        print(escaped(f"set aside the cut last line of {journal} ({counted(len(done.torn), 'byte')}, what a crash left "
+                      f"of the event it wrote) in {folder / done.aside.name}; the journal keeps its "
+                      f"{counted(done.kept, 'whole line')}: the study goes on from them (a game whose end was cut is "
+                      "journaled from its recording by the next serve, pilot or report)"))
         pid = studyjournal.torn_registration(done.torn)
         if pid:
-            print(f"the cut line was the registration of {pid}: that id will not be given again; its key-file "
-                  "line, if any, stays (`protocol status` lists it)")
+            print(escaped(f"the cut line was the registration of {pid}: that id will not be given again; its "
+                          "key-file line, if any, stays (`protocol status` lists it)"))
     elif done.newline:
-        print(f"{journal}: its last line was whole but for its end of line: added; nothing set aside "
-              f"({counted(done.kept, 'line')})")
+        print(escaped(f"{journal}: its last line was whole but for its end of line: added; nothing set aside "
+                      f"({counted(done.kept, 'line')})"))
     else:
-        print(f"{journal}: nothing to repair: every line is whole ({counted(done.kept, 'line')})")
+        print(escaped(f"{journal}: nothing to repair: every line is whole ({counted(done.kept, 'line')})"))
     return 0
 
 
@@ -187,8 +188,8 @@ def _run(args) -> int:
         finally:
             if study_path != args.study:  # ours, the bundled study's copy
                 Path(study_path).unlink()
-        print(f"study folder {data.given} ({data.study.study.id}); key file: {data.key_file or 'none'}")
-        print("\n".join(describe(data.study)))
+        print(escaped(f"study folder {data.given} ({data.study.study.id}); key file: {data.key_file or 'none'}"))
+        print("\n".join(escaped(line) for line in describe(data.study)))
         return 0
     if args.action == "repair":
         return _repair(args.folder)
@@ -209,15 +210,15 @@ def _on_folder(data: StudyData, args) -> int:
         return 0
     if args.action == "status":
         if not data.state.participants:  # an empty plan is not a complete one
-            print(f"nobody is registered: `pairplay protocol register {data.given}` first")
+            print(f"nobody is registered: `pairplay protocol register {command_word(data.given)}` first")
         notes, key_problem = data.id_notes()  # ids some record shows, the journal does not register (a crash
         if key_problem:  # between the key line and the journal line, a hand edit); an unreachable key file is said
-            print(key_problem)
+            print(escaped(key_problem))
         for pid, note in notes.items():
-            print(f"{pid}: {note}")
+            print(escaped(f"{pid}: {note}"))
         for problem in data.fold_problems():  # a hand edit the tables cannot fold: every writing verb refuses it
-            print(f"{data.given / JOURNAL}: does not fold into consistent tables: {problem}: every verb that writes "
-                  f"the folder refuses it until the line is put back (a backup of {JOURNAL})")
+            print(escaped(f"{data.given / JOURNAL}: does not fold into consistent tables: {problem}: every verb that "
+                          f"writes the folder refuses it until the line is put back (a backup of {JOURNAL})"))
         # a game started and never ended (a second signal, a crash): what its recording holds and what the next
         # serve, pilot or report does with it, on its step's line (it showed "[open]", no word of it)
         unended: dict[tuple, list[str]] = {}
@@ -229,12 +230,12 @@ def _on_folder(data: StudyData, args) -> int:
             notes = [step.blocked] if step.blocked and not step.done else []
             notes += [step.note] if step.note else []  # a bias policy made with a game marked invalid since
             notes += unended.get((step.participant, step.phase, step.game), []) if step.kind == "play" else []
-            print(f"[{mark:7}] {step.label}" + "".join(f"  ({n})" for n in notes))
+            print(escaped(f"[{mark:7}] {step.label}" + "".join(f"  ({n})" for n in notes)))
         return 0
     if args.action == "mark-invalid":  # a game left without its end is journaled first: its mark is of its end
         built_missing_policies(data, "protocol mark-invalid")
         marked = data.mark_invalid(args.session, args.reason)
-        print(data.marked_line(marked))  # (and what it did to a bias policy combined from the game)
+        print(escaped(data.marked_line(marked)))  # (and what it did to a bias policy combined from the game)
         return 0
     if args.action in ("pilot", "serve"):
         # a completed game a signal left without its policy gets it now, from its recording
@@ -247,7 +248,7 @@ def built_missing_policies(data: StudyData, verb: str) -> None:
     """StudyData.build_missing_policies, each game it built or could not build said on stderr (a note,
     not a result: the verb goes on)."""
     for line in data.build_missing_policies():
-        print(f"pairplay {verb}: {line}", file=sys.stderr, flush=True)
+        print(f"pairplay {verb}: {escaped(line)}", file=sys.stderr, flush=True)
 
 
 def _items(text: str, option: str) -> list[str]:
@@ -372,7 +373,8 @@ def _serving(data: StudyData, args, stop, runners: list, pilot: dict, robot, ove
                 testpause.pause("serve-stopping")  # (a test's second signal lands here: the first is handled)
                 if not runner.wait_journaled():
                     print(f"pairplay protocol serve: gave up after {JOURNALED_WAIT_S:.0f} s waiting for the journal "
-                          f"to record the end of game {runner.live.session}; `pairplay protocol status {data.given}` "
+                          f"to record the end of game {runner.live.session}; `pairplay protocol status "
+                          f"{command_word(data.given)}` "
                           "shows the study, and the next serve journals the game from its recording", file=sys.stderr)
             if server.console.thread is not None:
                 server.console.thread.join(shutdown_wait(stop, 10.0, reserve=0.3))
@@ -412,7 +414,7 @@ def stopped_line(runners: list, stop) -> str:
         f"its recording {game.path}"
     journal = f"journaled {ended.outcome}" + (f" ({ended.reason})" if ended.reason else "") if ended is not None \
         else "its end not journaled (the next serve, pilot or report journals it from its recording)"
-    return f"; game {game.session} {how}, {journal}; {recorded}"
+    return escaped(f"; game {game.session} {how}, {journal}; {recorded}")
 
 
 def cut(runners: list, verb: str, stop) -> int:
@@ -437,8 +439,8 @@ def cut(runners: list, verb: str, stop) -> int:
         # a game whose end the journal does not hold yet: what becomes of it (it was left "running", unsaid)
         owed = (f"; game {game.session}: the journal holds its start and no end: the next serve, pilot or report "
                 "journals it from its recording (`pairplay protocol status "
-                f"{runners[0].data.given}` says how)") if started is not None and started.ended is None else ""
-        print(cut_line(f"protocol {verb}", game.path, again) + owed, file=sys.stderr)
+                f"{command_word(runners[0].data.given)}` says how)") if started is not None and started.ended is None else ""
+        print(cut_line(f"protocol {verb}", game.path, again) + escaped(owed), file=sys.stderr)
         return 128 + again
     # stopped before its recording began: main's "nothing more was written" hid a started game with no end
     ended = started.ended if started is not None else None
@@ -446,8 +448,8 @@ def cut(runners: list, verb: str, stop) -> int:
             f"was written ({game.path})" if ended is not None else
             "the journal holds its start and no end, and no recording of it was written "
             f"({game.path}); the next serve, pilot or report journals it aborted, and its step is played again")
-    print(f"pairplay protocol {verb}: interrupted again ({signals.said(again)}) while stopping; game {game.session} "
-          f"was stopped before its recording began: {what}", file=sys.stderr)
+    print(escaped(f"pairplay protocol {verb}: interrupted again ({signals.said(again)}) while stopping; game "
+                  f"{game.session} was stopped before its recording began: {what}"), file=sys.stderr)
     return 128 + again
 
 
@@ -494,7 +496,7 @@ def _pilot(data: StudyData, args) -> int:
             robot = runner.delivery.get(getattr(result, "session", ""), "")
             what += f"; {robot}" if robot else ""
             played = dataclasses.replace(step, scripted=getattr(result, "scripted", ""))  # "p01 (scripted: blind)"
-            print(f"{time.perf_counter() - t0:7.1f} s  {played.label}: {what}", flush=True)
+            print(escaped(f"{time.perf_counter() - t0:7.1f} s  {played.label}: {what}"), flush=True)
         try:
             runner.run_plan(scripted_players(runner, personas), on_step=said)
         except StudyDataError:
@@ -503,8 +505,8 @@ def _pilot(data: StudyData, args) -> int:
         except KeyboardInterrupt:  # a second signal cut the shutdown: the game's recording as the disk holds it
             return cut(runners, "pilot", stop)
     if signal_taken(stop):  # (run_plan ends on the handler's flag: `stop` may not be set yet)
-        print(f"pairplay protocol pilot: interrupted ({signals.said(stop.why)}){stopped_line(runners, stop)}; "
-              f"`pairplay protocol status {data.given}` shows what is left", file=sys.stderr)
+        print(escaped(f"pairplay protocol pilot: interrupted ({signals.said(stop.why)}){stopped_line(runners, stop)}; ")
+              + f"`pairplay protocol status {command_word(data.given)}` shows what is left", file=sys.stderr)
         return 0
-    print(f"plan complete; `pairplay report {data.given}` writes the report")
+    print(f"plan complete; `pairplay report {command_word(data.given)}` writes the report")  # typed, the folder
     return 0

@@ -40,7 +40,7 @@ import argparse
 from pathlib import Path
 
 from pairplay.cli.args import add_force, file_in, output_file
-from pairplay.errors import OptionError, escaped
+from pairplay.errors import OptionError, command_word, escaped
 from pairplay.numbers import counted
 
 
@@ -175,5 +175,5 @@ def _complete(args: argparse.Namespace, done) -> int:
         journal.unlink()
         print(escaped(f"{said}; {held}: removed (--discard-journal)"))
         return 0
-    print(escaped(f"{said}; {held}: it is stale; `pairplay recover {args.recording} --discard-journal` removes it"))
+    print(escaped(f"{said}; {held}: it is stale; `pairplay recover {command_word(args.recording)} --discard-journal` removes it"))
     return 0

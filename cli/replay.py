@@ -33,7 +33,7 @@ import time
 
 from pairplay import signals
 from pairplay.cli.args import session_id, speed
-from pairplay.errors import InputError, OptionError
+from pairplay.errors import InputError, OptionError, escaped
 from pairplay.livelock import LIVE, is_live
 from pairplay.numbers import counted
 
@@ -70,23 +70,23 @@ def run(args: argparse.Namespace) -> int:
             state = "ok" if c.ok(v.excused) else "DIFFERS"
             print(f"{c.service:12s} {c.compared:7d} derived events compared: {state}"
                   f"{'' if not c.extra else f' ({c.extra} recomputed beyond {beyond})'}")
-            for m in c.mismatches[:5]:
-                print(f"    {m}")
+            for m in c.mismatches[:5]:  # (a recording's values: a session's name may hold anything)
+                print(f"    {escaped(m)}")
         if v.unknown:
             print(f"{counted(sum(v.unknown.values()), 'event')} of types this version does not know, not compared: "
-                  + ", ".join(f"{tag} ({n})" for tag, n in sorted(v.unknown.items())))
+                  + escaped(", ".join(f"{tag} ({n})" for tag, n in sorted(v.unknown.items()))))
         if v.truncated and not v.ended and is_live(args.recording):
             print(f"the file {LIVE}: verified as far as it goes; verify it again once the session has ended")
         elif v.truncated and not v.ended and v.source_cut:  # a whole copy of a cut file: its source's cut, in the
-            print(f"the session's end is missing: {v.source_cut}")  # reader's words (reader.EventLog.source_cut)
+            print(f"the session's end is missing: {escaped(v.source_cut)}")  # reader's words (reader.EventLog.source_cut)
         elif v.truncated and not v.ended:
             print("the file is cut (a crash?): the session's end is missing; its last events were lost")
         if v.error:
-            print(f"error: {v.error}")
+            print(f"error: {escaped(v.error)}")
         from pairplay.cli.main import left_journals
         left_journals("replay", [args.recording])  # what the file lacks that its journal holds, and how to add it
-        print(f"verified {v.reach}")
-        print(v.verdict)
+        print(escaped(f"verified {v.reach}"))
+        print(escaped(v.verdict))
         return 0 if v.ok else 1  # PASS of what the file holds, even cut or stopped early (services/verify.py)
 
     import threading
@@ -110,7 +110,7 @@ def run(args: argparse.Namespace) -> int:
     with Bus(options_from_args(args), stop=stop) as bus:
         # a view attaches here: pairplay view --session S --connect <this endpoint>
         sessions = {args.as_session} if args.as_session else {r.event.session for r in log.events}
-        print(f"replaying session {', '.join(sorted(sessions))}; bus listening on "
+        print(f"replaying session {escaped(', '.join(sorted(sessions)))}; bus listening on "
               f"{' '.join(bus.locators()) or '(no listener)'}", flush=True)
         t0 = time.perf_counter()
         outbox = Outbox(bus, "replay")  # a publish that waits on a slow subscriber never holds up a signal

@@ -72,16 +72,16 @@ def run(args) -> int:
     if report.rehearsal:
         print(f"a rehearsal: {counted(len(report.games), 'scripted game')}, no person played")
     print(f"{counted(len(report.games), 'valid game')} of {counted(len({g.participant for g in report.games}), 'participant')}"
-          + (f"; left out: {', '.join(report.excluded)}" if report.excluded else "")
+          + (f"; left out: {escaped(', '.join(report.excluded))}" if report.excluded else "")
           # counted, but said: their bias policy was made with a game marked invalid since (replay/biases.py)
-          + (f"; played on a bias policy made with a game marked invalid since: {', '.join(flawed)}" if
+          + (f"; played on a bias policy made with a game marked invalid since: {escaped(', '.join(flawed))}" if
              (flawed := [f"{g.session} ({g.bias})" for g in report.games if g.bias_flawed]) else ""))
     if report.read_whole:  # a damaged input, on stderr, -q or not (cli/main.py `warn`: -q hid it with the summary)
-        print(f"pairplay report: read whole from a damaged file: {', '.join(report.read_whole)}", file=sys.stderr)
+        print(f"pairplay report: read whole from a damaged file: {escaped(', '.join(report.read_whole))}", file=sys.stderr)
     if report.unreadable:  # cited from the journal; the files themselves cannot be read now (stderr, as above)
         # a report missing what it cites is not a whole report: exit 1, "done, and the answer is no" (README's exit
         # status table), the partial report written, as `replay --verify` of a partial recording (it was exit 0)
         print(f"pairplay report: not a whole report: unreadable policy files, cited from the journal: "
-              f"{'; '.join(report.unreadable)}", file=sys.stderr)
+              f"{escaped('; '.join(report.unreadable))}", file=sys.stderr)
     print(f"report: {escaped(out / 'report.md')}")
     return 1 if report.unreadable else 0

@@ -31,7 +31,7 @@ from pathlib import Path
 from pairplay import signals, testpause
 from pairplay.cli import interrupts
 from pairplay.cli.args import note_given, output_folder, session_id
-from pairplay.errors import OptionError
+from pairplay.errors import OptionError, command_word, escaped
 from pairplay.lists import comma_items
 from pairplay.nearest import hinted
 from pairplay.outputs import check_folder
@@ -189,8 +189,9 @@ def _run(args: argparse.Namespace, stop: threading.Event, recording: dict) -> in
             interrupts.work_done()  # the file is finished: a signal from now on cuts nothing (cli/session.py cut_line)
             testpause.pause("recording-finished")
             if failure is not None:
-                print(f"pairplay run recorder: writing {recorder.path} failed ({failure}); the file is readable "
-                      f"up to the failure: pairplay recover {recorder.path}", file=sys.stderr)
+                print(escaped(f"pairplay run recorder: writing {recorder.path} failed ({failure}); the file is "
+                              "readable up to the failure: ") + f"pairplay recover {command_word(recorder.path)}",
+                      file=sys.stderr)
                 return 1
             return 0
         if args.service == "combiner":

@@ -42,7 +42,7 @@ from pairplay.cli import interrupts
 from pairplay.core.rng import STREAMS_VERSION
 from pairplay.schemas.config import DEFAULT_REWARD_BONUS, REWARD_BONUS_RULES, LearnerConfig, LSPIConfig, lspi_unused
 from pairplay.schemas.keys import check_chunk
-from pairplay.errors import OptionError, UserError, escaped
+from pairplay.errors import OptionError, UserError, command_word, escaped
 from pairplay.outputs import check_folder
 from pairplay.schemas.session import (IGNORE_CLOCKS, MS_RANGE, OBSERVED_SOURCES, SessionConfig, learner_overrides,
                                       lspi_overrides)
@@ -246,7 +246,7 @@ def cut_line(verb: str, path: Path, again: int) -> str:
                        f"{escaped(path)}{beside} can be removed")
     except Exception:  # (UserError: not readable as a recording yet; anything else recover meets, an OSError
         pass  # say): recover says why in its own line; a second signal's line is never lost to it (a traceback)
-    return head + (f"{escaped(path)} holds what was recorded up to now and may lack its end: pairplay recover {escaped(path)} "
+    return head + (f"{escaped(path)} holds what was recorded up to now and may lack its end: pairplay recover {command_word(path)} "
                    "completes it")
 
 
@@ -395,7 +395,7 @@ def _run(args: argparse.Namespace, config: SessionConfig, path: Path, summary: d
     if e is None:
         print("ended: no SessionEnded recorded")
     elif e.reason != "completed":
-        print(f"ended: {e.reason}{f' ({e.detail})' if e.detail else ''} after {e.rounds_played} of "
+        print(f"ended: {escaped(e.reason)}{f' ({escaped(e.detail)})' if e.detail else ''} after {e.rounds_played} of "
               f"{counted(config.rounds, 'round')}")
     if recorded.note:  # the session's recording lacks what the summary would count: not a clean run
         return 1

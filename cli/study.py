@@ -125,5 +125,5 @@ def run(args) -> int:
         print(text_table(report.reuse))
     print()
     print("  ".join(f"{k}: {v:.2f} s" for k, v in report.timings.items()))
-    print(f"report: {report.out / 'report.md'}")
+    print(f"report: {escaped(report.out / 'report.md')}")
     return 0

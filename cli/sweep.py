@@ -46,7 +46,7 @@ from pathlib import Path
 
 from pairplay.cli.args import output_folder, workers
 from pairplay.cli.progress import bar as progress
-from pairplay.errors import OptionError, OutputError
+from pairplay.errors import OptionError, OutputError, escaped
 from pairplay.outputs import check_folder, hold, write_text, written
 from pairplay.report.sweep import (GridError, check_scheduler, check_sweep_memory, finished_cells, is_cell_file,
                                     read_grid, run_sweep, summary_files, summary_to_write,
@@ -80,9 +80,10 @@ def stopped(out: Path, grid, made: list[Path], had_copy: bool, why: str) -> int 
         # the summary already in place (pairplay/outputs.py `written`: its folder renamed into place) is said: a
         # signal just after it said only that the cells were kept, for the same command to resume from them
         summed = Path(out) in written
-        print(f"pairplay sweep: {why}; {kept} of {counted(len(grid.cells()), 'cell')} finished, kept in {out / 'cells'}"
-              + (f"; its summary {out / 'sweep.md'} was written whole before it and kept; nothing more was written"
-                 if summed else ": the same command resumes from them"), file=sys.stderr)
+        print(escaped(f"pairplay sweep: {why}; {kept} of {counted(len(grid.cells()), 'cell')} finished, kept in "
+                      f"{out / 'cells'}" + (f"; its summary {out / 'sweep.md'} was written whole before it and kept; "
+                                            "nothing more was written" if summed else
+                                            ": the same command resumes from them")), file=sys.stderr)
         return 0
     if not had_copy:
         (out / "grid.toml").unlink(missing_ok=True)
@@ -140,7 +141,7 @@ def run(args) -> int:
     try:
         grid = read_grid(args.grid)
     except GridError as exc:
-        print(f"pairplay sweep: {exc}", file=sys.stderr)
+        print(f"pairplay sweep: {escaped(exc)}", file=sys.stderr)
         return 2
     if args.scheduler is None:  # before anything is written (run_sweep checks it again)
         check_sweep_memory(grid, args.workers)
@@ -160,7 +161,7 @@ def run(args) -> int:
                           "the sweep's files there", out)
     other_grid = copy.exists() and not same_grid(copy, grid)
     if other_grid and not args.force:
-        print(f"pairplay sweep: {out} holds the sweep of another grid ({copy}); give another --out or --force",
+        print(escaped(f"pairplay sweep: {out} holds the sweep of another grid ({copy}); give another --out or --force"),
               file=sys.stderr)
         return 2
     if other_grid:  # --force: the other grid's cells no longer count
@@ -184,7 +185,7 @@ def run(args) -> int:
         # but a deleted figure or a junk sweep.md stayed so too ("nothing to do"): those are written again
         redo = summary_to_write(out, grid, finished_cells(out, grid))
         if not redo:
-            print(f"nothing to do: {every} were finished; {out / 'sweep.md'} is as it was")
+            print(escaped(f"nothing to do: {every} were finished; {out / 'sweep.md'} is as it was"))
             return 0
         if not any((out / f).exists() for f in redo) and len(redo) == len(summary_files(grid, finished_cells(out, grid))):
             redo = None  # no summary yet (a run stopped after its cells): written as any run's, its usual line
@@ -214,9 +215,9 @@ def run(args) -> int:
             stopped(out, grid, made, had_copy, "failed")  # "another grid's sweep"); finished cells stay to resume
         raise
     if redo is not None:
-        print(f"{every} were finished; written again (missing or unreadable): {', '.join(redo)}; the rest is as "
-              f"it was; {out / 'sweep.md'}")
+        print(escaped(f"{every} were finished; written again (missing or unreadable): {', '.join(redo)}; the rest is "
+                      f"as it was; {out / 'sweep.md'}"))
         return 0
     print(f"{counted(result.cells, 'cell')} ({counted(len(grid.settings()), 'setting')} x {counted(len(grid.seeds), 'seed')}), {result.computed} "
-          f"computed in {result.wall_s:.1f} s on {result.where}; {out / 'sweep.md'}")
+          f"computed in {result.wall_s:.1f} s on {result.where}; {escaped(out / 'sweep.md')}")
     return 0

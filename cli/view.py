@@ -266,7 +266,7 @@ def _view(args: argparse.Namespace, tmp_rrd: Path | None, held=None) -> Viewed:
             raise
         raise OptionError(str(err), "--spawn" if args.spawn else "the view's output") from None
     for line in where:  # where to watch it: a result of --serve/--spawn, said at once
-        print(line, flush=True)
+        print(escaped(line), flush=True)
     stop = threading.Event()
     saved_handlers = {sig: signal.getsignal(sig) for sig in signals.SIGNALS}
     stop_on_signals(stop)

@@ -13,6 +13,7 @@ imports this).
 from __future__ import annotations
 
 import re
+import shlex
 
 
 class UserError(Exception):
@@ -79,6 +80,33 @@ def escaped(text: object) -> str:
         return text
     return _UNSHOWABLE.sub(lambda m: m.group().encode("unicode_escape", "backslashreplace").decode("ascii")
                            if not 0xD800 <= ord(m.group()) <= 0xDFFF else f"\\u{ord(m.group()):04x}", text)
+
+
+def command_word(text: object) -> str:
+    """`text` (a path, a user's value) as one word of a command a line suggests (`pairplay report <folder>`
+    writes the report): typed as shown, it is the same path. `shlex.quote`d (a space or a `$` neither splits nor
+    expands it); holding what `escaped` would escape, in the $'...' form of bash and zsh with those escapes
+    instead, so the line stays one line and the word still the path (trial29 F4: `protocol pilot`'s last line
+    suggested `pairplay report we ird` split over three lines: typed, not the folder)."""
+    text = str(text)
+    if _UNSHOWABLE.search(text) is None:
+        return shlex.quote(text)
+    inner = text.replace("\\", "\\\\").replace("'", "\\'")
+    return "$'" + _UNSHOWABLE.sub(_shell_escape, inner) + "'"
+
+
+def _shell_escape(m: re.Match) -> str:
+    """One unshowable character as $'...' gives it back: a lone surrogate of a file name's byte that is not
+    UTF-8 (os.fsdecode's U+DC80-U+DCFF) as that byte, C1 and the separators as their code point."""
+    c = ord(m.group())
+    if c in _SHELL_NAMED:
+        return _SHELL_NAMED[c]
+    if c < 0x80 or 0xDC80 <= c <= 0xDCFF:
+        return f"\\x{c & 0xFF:02x}"
+    return f"\\u{c:04x}"
+
+
+_SHELL_NAMED = {9: "\\t", 10: "\\n", 13: "\\r"}
 
 
 def names(text: str, where: str) -> bool:

@@ -138,7 +138,8 @@ def waiting_line(who: str, folder: str | Path) -> str:
 
 def say_waiting(verb: str, folder: str | Path) -> Callable[[str], None]:
     """`take`'s `waiting` for the command `pairplay VERB`: its line on stderr (`folder` as the user gave it)."""
-    return lambda who: print(f"pairplay {verb}: {waiting_line(who, folder)}", file=sys.stderr, flush=True)
+    from pairplay.errors import escaped  # (the folder as given, the holder's line as its lock file says it)
+    return lambda who: print(f"pairplay {verb}: {escaped(waiting_line(who, folder))}", file=sys.stderr, flush=True)
 
 
 def is_long(holder_line: str) -> bool:

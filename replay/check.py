@@ -23,7 +23,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from pairplay.arguments import path_argument
-from pairplay.errors import InputError
+from pairplay.errors import InputError, command_word
 from pairplay.inputs import check_input
 from pairplay.schemas.jsonfile import MCAP_MAGIC
 from pairplay.numbers import counted
@@ -40,8 +40,8 @@ def recording_file(path: str | Path, function: str = "") -> Path:
         from .wal import wal_path
         if wal_path(path).exists():  # the recording moved or removed, what its recorder took still beside it
             raise InputError(f"no such recording; its journal is here ({wal_path(path)}: what its recorder "
-                             f"received): `touch {path}` (an empty file, as a recorder killed before its first "
-                             f"flush leaves one), then `pairplay recover {path}` rebuilds the recording from it",
+                             f"received): `touch {command_word(path)}` (an empty file, as a recorder killed before its first "
+                             f"flush leaves one), then `pairplay recover {command_word(path)}` rebuilds the recording from it",
                              path)
         raise InputError("no such recording", path)
     if path.is_dir():
@@ -70,13 +70,13 @@ def check_recording(path: str | Path, journal_ok: bool = False, function: str = 
                 return path
             what = "the file is empty (0 bytes)" if not head else f"cut inside MCAP's magic ({counted(len(head), 'byte')})"
             raise InputError(f"{what}: its recorder stopped before it wrote a record; the journal beside it "
-                             f"({wal_path(path).name}) holds what it received: `pairplay recover {path}`", path)
+                             f"({wal_path(path).name}) holds what it received: `pairplay recover {command_word(path)}`", path)
         if not head:
             raise InputError("the file is empty (0 bytes), not a recording", path)  # every input's words (jsonfile.empty)
     if head != MCAP_MAGIC:
         from .wal import SUFFIX, is_journal
         if is_journal(path):  # a recorder's journal left beside a recording it did not finish
-            beside = str(path)[:-len(SUFFIX)] if path.name.endswith(SUFFIX) else "the recording"  # as given: pasteable
+            beside = command_word(str(path)[:-len(SUFFIX)]) if path.name.endswith(SUFFIX) else "the recording"  # pasteable
             raise InputError(f"a recorder's write-ahead journal, not a recording: `pairplay recover {beside}` "
                              f"adds what it holds to the recording beside it", path)
         raise InputError("not a recording: not an MCAP file (it does not begin as one)", path)

@@ -54,7 +54,7 @@ from mcap.writer import CompressionType, Writer
 
 from typing import Callable
 
-from pairplay.errors import InputError, OutputError
+from pairplay.errors import InputError, OutputError, command_word
 from pairplay.replay.reader import (DATA_COMPLETE_KEY, JOURNAL_WHOLE_KEY, LOST_AT_KEY, RECOVERED, carry_recovery,
                                     folded_recovery, recovered_losses, said_source_cut, said_source_lost)
 from pairplay.schemas.events import EVENT_BY_TAG
@@ -343,7 +343,7 @@ def journal_left(path: str | Path) -> str:
     if recovered.is_file():
         return (f"its recorder's journal {beside.name} beside it holds {more}; {recovered} is beside it "
                 "(`pairplay recover`'s copy with them): give that instead")
-    return (f"its recorder's journal {beside.name} beside it holds {more}: `pairplay recover {path}` adds them "
+    return (f"its recorder's journal {beside.name} beside it holds {more}: `pairplay recover {command_word(path)}` adds them "
             f"(to {recovered.name})")
 
 

@@ -56,7 +56,7 @@ from pathlib import Path
 import msgspec
 
 from pairplay import __version__, csvcell, folderlock, signals, testpause
-from pairplay.errors import InputError, UserError
+from pairplay.errors import InputError, UserError, command_word
 from pairplay.inputs import refusal
 from pairplay.livelock import LIVE, is_live
 from pairplay.outputs import (OutputError, check_output, check_places, manifest_name, output_file, read_manifest,
@@ -431,7 +431,7 @@ class StudyData:
         if problems:
             raise StudyDataError(f"does not fold into consistent tables: {'; '.join(problems)}; nothing was written: "
                                  f"put back the line that was removed or changed (a backup of {JOURNAL}), then run "
-                                 f"this again (`pairplay protocol status {self.given}` lists what does not fold)",
+                                 f"this again (`pairplay protocol status {command_word(self.given)}` lists what does not fold)",
                                  self.given / JOURNAL)
 
     def _created_unlocked(self) -> j.StudyCreated | None:
@@ -997,7 +997,7 @@ class StudyData:
                     why = f"its recording {g.recording} is missing"
                 elif wal_path(path).exists():
                     why = (f"its recording {g.recording} was not finished (its recorder's journal is beside it: "
-                           f"`pairplay recover {path}` writes its recovered copy beside it, which the next serve, "
+                           f"`pairplay recover {command_word(path)}` writes its recovered copy beside it, which the next serve, "
                            "pilot or report builds it from)")
                 else:
                     try:
@@ -1052,7 +1052,7 @@ class StudyData:
         if cut.outcome != "completed":  # (interrupted, aborted by the experimenter: its SessionEnded says)
             return f"{said}; its step is played again"
         if not copy:
-            said += (f"; its policy: `pairplay recover {original}` writes its recovered copy, which the next serve, "
+            said += (f"; its policy: `pairplay recover {command_word(original)}` writes its recovered copy, which the next serve, "
                      "pilot or report builds it from")
         return said
 

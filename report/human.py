@@ -49,6 +49,7 @@ from pathlib import Path
 import numpy as np
 
 from pairplay import __version__, csvcell
+from pairplay.errors import command_word
 from pairplay.core.actions import ACTION_NAMES
 from pairplay.core.geometry import N_STATES, STATE_NAMES
 from pairplay.replay import biases
@@ -342,7 +343,7 @@ def human_report(folder: str | Path, out: str | Path | None = None, reference: s
             + ". Phases: "
             + "; ".join(f"{p.id}: {counted(p.games, 'game')} x {counted(p.rounds, 'round')}, {p.algorithm} ({p.preset})"
                         + (f" on the bias of {p.bias}" if p.bias else "") for p in study.phase)
-            + f". Re-run: `pairplay report {data.folder}`.", ""]
+            + f". Re-run: `pairplay report {command_word(data.folder)}`.", ""]
     (out / "report.md").write_text("\n".join(head + sections))
     return HumanReport(out, games, excluded, curves, q_rows, att, rehearsal=rehearsal,
                        scripted=[g.session for g in scripted], read_whole=read_whole, unreadable=unreadable)

@@ -165,3 +165,48 @@ def test_a_service_killed_and_restarted_mid_session_resumes_from_the_log(tmp_pat
     assert [a["service"] for a in absences] == [victim]
     assert int(absences[0]["back_ns"]) > int(absences[0]["left_ns"]) > 0
     assert verify_recording(path).ok
+
+
+def test_a_robot_bridge_still_reading_the_log_is_not_on_the_bus_so_its_first_start_resumes_nothing(tmp_path):
+    """trial29 F1: the bridge declared its token (what the waiting game starts the session on) before it read the
+    log, so a game could start in between and the bridge's FIRST start said `resumed_events=4`, the session's first
+    events taken for its own earlier life. Held just before its log query (pairplay/testpause.py `log-query`), the
+    bridge is not on the bus yet, and its one start resumes nothing (services/runner.py `join_log`)."""
+    import os
+    import subprocess
+    import sys
+
+    port = free_port()
+    endpoint = f"tcp/127.0.0.1:{port}"
+    session = "rs-robot-first"
+    config = SessionConfig(session=session, participant="sim:ashley", persona="ashley", seed=3, rounds=2)
+    stop, box = threading.Event(), {}
+    runner = threading.Thread(target=lambda: box.setdefault("path", run_session(
+        config, tmp_path / f"{session}.mcap", bus_options=BusOptions(mode="router", listen=[endpoint]),
+        external=("robot",), on_bus=lambda bus: box.setdefault("bus", bus), stop=stop)), daemon=True)
+    go = tmp_path / "go"
+    # its own process, not the zygote's fork: the pause is named in its environment
+    bridge = subprocess.Popen([sys.executable, "-m", "pairplay", "robot", "--robot", "virtual", "--session", session,
+                               "--connect", endpoint], stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True,
+                              env={**os.environ, "PAIRPLAY_TEST_PAUSE": f"log-query:{go}"})
+    try:
+        runner.start()
+        assert next(line for line in bridge.stderr if line.startswith("pairplay-test:")) == \
+            "pairplay-test: paused at log-query\n"
+        assert wait_until(lambda: "bus" in box, 30)
+        assert alive_key(session, "robot") not in box["bus"].alive_now(alive_key(session, "*"))
+        go.touch()
+        runner.join(60)
+        assert not runner.is_alive(), "the session did not finish"
+        assert bridge.wait(30) == 0, bridge.stderr.read()[-2000:]
+    finally:
+        go.touch()
+        stop.set()
+        runner.join(10)
+        if bridge.poll() is None:
+            bridge.kill()
+            bridge.wait()
+    events = [r.event for r in read_log(box["path"]).events]
+    starts = [e for e in events if isinstance(e, ev.ServiceStarted) and e.source == "robot"]
+    assert [e.resumed_events for e in starts] == [0]
+    assert [e.reason for e in events if isinstance(e, ev.SessionEnded)] == ["completed"]

@@ -24,7 +24,9 @@ RobotActed is an observation of the world, not a function of the log: a
 replay or verify never recomputes it (the bridge is not a replayable logic).
 A bridge that joins a session under way (restarted after a crash: `pairplay
 robot ... --session S` again) does not perform old suggestions again. It reads
-the recorder's log first (services/runner.py `fetch_log`): its numbering
+the recorder's log first, and only then puts its token on the bus (services/runner.py
+`join_log`: a game waiting for it cannot start the session while it reads, so a first
+start resumes nothing; declared first, trial29 F1 saw "resumed_events=4"): its numbering
 continues the log's last RobotActed (a bridge starting again from 1 had every
 report refused as a repeat), the log is its cut point (services/guard.py: what
 a recovering bus's caches replay to a late joiner is skipped, not performed),
@@ -64,12 +66,12 @@ from typing import Callable
 from pairplay import __version__
 from pairplay.schemas import events as ev
 from pairplay.schemas.envelope import Event
-from pairplay.schemas.keys import alive_key, event_key, query_key, session_keys
+from pairplay.schemas.keys import event_key, query_key, session_keys
 from pairplay.schemas.robot import BoardCalibration, RobotActed, RobotConfig
 
 from pairplay.services.bus import Bus, Deadline, Inbox, Outbox, deadline_of
 from pairplay.services.node import Driver, Rejected
-from pairplay.services.runner import GAME_GONE_S, SENT_QUERY, GameWatch, answer_sent, fetch_log
+from pairplay.services.runner import GAME_GONE_S, SENT_QUERY, GameWatch, answer_sent, join_log
 from pairplay.services.robot.backends import open_robot
 from pairplay.services.robot.driver import RobotDriver, Suggestion
 
@@ -204,13 +206,12 @@ class RobotBridge:
         for tag in self.logic.listens:  # Zenoh then does not even send the others here
             self.bus.subscribe(f"{session_keys(self.session)[:-2]}*/{tag}", self._inbox.put)
         self.bus.queryable(query_key(self.session, NAME, SENT_QUERY), self._inbox.control)  # a recorder's refill
-        self.bus.alive(alive_key(self.session, NAME))
         self.game_watch = GameWatch(self.bus, self.session, self.game_gone_s)
         self.backend = self.robot.transport.url
-        recorded = fetch_log(self.bus, self.session, stop=stop)
-        if not any(isinstance(e, ev.SessionStarted) for e in recorded):
-            recorded = []  # the session has not started: nothing to catch up with
-        else:
+        # the token (what a waiting game starts on) only once the log is read (runner.join_log): declared first, a
+        # game could start the session in between and this first start resume its first events (trial29 F1)
+        recorded = join_log(self.bus, self.session, NAME, stop)
+        if recorded:
             self.game_watch.existed()  # a game gone before we watched never shows its token (runner.GameWatch)
         announce = ev.ServiceStarted(service=f"{NAME} {self.backend}", version=__version__,
                                      resumed_events=len(recorded))
