@@ -153,13 +153,21 @@ def test_a_profile_of_a_partial_policy_says_it_is_partial_in_its_output_and_on_s
     assert "PARTIAL" not in captured.out and captured.err == "", captured
 
 
-@pytest.mark.parametrize("verb", [
+# every verb that reads a policy file it is given (each reads it through schemas/policy.py): {a} the file tried
+POLICY_READERS = [
     ["session", "--participant", "sim:deaf", "--algorithm", "fixed", "--policy", "{a}"],
     ["session", "--participant", "sim:deaf", "--algorithm", "pi-reuse", "--policy", "{a}"],
     ["combine", "{a}", "{b}"],
     ["profile", "{a}", "{c}"],
     ["counterfactual", str(SAMPLE), "--policy", "fixed:{a}", "--out", "{tmp}/cf"],
-], ids=lambda v: " ".join(v[:4:3] if v[0] == "session" else v[:1]))
+]
+
+
+def _reader_id(v: list[str]) -> str:
+    return " ".join(v[:4:3] if v[0] == "session" else v[:1])
+
+
+@pytest.mark.parametrize("verb", POLICY_READERS, ids=_reader_id)
 def test_a_policy_file_of_an_unknown_algorithm_is_refused_naming_the_file_and_the_value(tmp_path, policy_bytes,
                                                                                            capsys, verb):
     """A new user's trial: a policy file saying "algorithm": "banana" was taken by `session --algorithm fixed`
@@ -239,13 +247,7 @@ def _greedy_changed(policy_bytes: bytes, tied: bool) -> tuple[dict, int]:
     return data, state
 
 
-@pytest.mark.parametrize("verb", [
-    ["session", "--participant", "sim:deaf", "--algorithm", "fixed", "--policy", "{a}"],
-    ["session", "--participant", "sim:deaf", "--algorithm", "pi-reuse", "--policy", "{a}"],
-    ["combine", "{a}", "{b}"],
-    ["profile", "{a}", "{c}"],
-    ["counterfactual", str(SAMPLE), "--policy", "fixed:{a}", "--out", "{tmp}/cf"],
-], ids=lambda v: " ".join(v[:4:3] if v[0] == "session" else v[:1]))
+@pytest.mark.parametrize("verb", POLICY_READERS, ids=_reader_id)
 def test_a_policy_whose_greedy_is_not_its_q_tables_is_refused_naming_the_state(tmp_path, policy_bytes, capsys, verb):
     """trial29 F5: a policy file whose greedy[s] is no argmax of its own q[s] was taken: combine and profile read
     greedy, pi-reuse reads q, so one file was two policies. Wherever a policy file is read (schemas/policy.py), one
