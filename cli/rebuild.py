@@ -7,7 +7,9 @@ never collide: X.mcap and X.recovered.mcap keep theirs apart; the curve's
 --no-plot, one figure of every recording's picks per round (learning curves;
 18 picks is perfect play). Before anything is written: every REC must be an
 MCAP file, none given twice, no two giving the same output names, and no
-output may exist unless --force, and every REC must hold a session (a
+output may exist unless --force, no session may be in two RECs (X.mcap and the
+X.recovered.mcap `recover` writes beside it: two policies of one learning;
+replay/onesession.py), and every REC must hold a session (a
 SessionStarted: replay/check.py `read_session`; a stub left by an old
 version's failed start, another program's MCAP) with a round recorded whole
 (`no_whole_round`: a file cut, or a session stopped, before round 1 ended gave
@@ -82,6 +84,8 @@ def run(args: argparse.Namespace) -> int:
             raise InputError(f"given twice (also as {seen[key]})", rec)
         seen[key] = rec
     done, empty = rebuilt_each(args)  # one holding no session: refused, nothing written
+    from pairplay.replay.onesession import check_once
+    check_once((rebuilt.source, rebuilt.started) for rebuilt in done)  # X.mcap and X.recovered.mcap: one session
     for rebuilt in done:
         if rebuilt.lost and not args.partial:  # it was exit 0 with a PARTIAL policy and a 1,500-character line, twice
             raise InputError(f"{rebuilt.lost}: its policy would lack the updates lost with it", rebuilt.source,

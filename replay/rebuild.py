@@ -46,6 +46,7 @@ from .fold import READS, SessionFold, fold_any, stream_seed
 from .reader import journal_restored, recovered_cut, recovered_lost, said_source_cut
 from .recover import journal_more
 from .forgery import ONE_PUBLISHER, contradiction
+from .onesession import Started, started
 from pairplay.numbers import counted
 
 
@@ -69,6 +70,7 @@ class Rebuilt:
     lost: str = ""  # what the file lost in its middle, short: a damaged part, or parts lost before a recover
     damage_read: str = ""  # a damage that lost no event (the policy is whole): said, not a partial session
     damaged_rounds: frozenset[int] = frozenset()  # the rounds whose events the file's damage took some of
+    started: Started = Started(None)  # which session the file holds (onesession.py: each once in a batch)
 
 
 def partial_reason(fold: SessionFold, note: str = "", recovered: dict[str, str] | None = None) -> str:
@@ -167,6 +169,7 @@ def rebuild_recording(path: str | Path) -> Rebuilt:
     rebuilt.damage_read = "; ".join(n for n in (log.loss_free or log.said_too,
                                                 f"{aside} (the policy does not depend on them)" if aside else "") if n)
     rebuilt.damaged_rounds = damaged_rounds([r.event for r in log.events], log.lost_at)
+    rebuilt.started = started(log)
     lost = log.lost_of(POLICY_SOURCES)
     if lost:  # the file's own damage, or its source's if it was recovered (reader.EventLog.source_lost)
         rebuilt.lost = f"the file is damaged ({lost})" if log.damaged else lost

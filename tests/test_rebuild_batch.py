@@ -1,5 +1,6 @@
 """`pairplay rebuild` of a batch of recordings (`rebuild recordings/*.mcap`): one recording that holds no whole
-round (cli/rebuild.py `rebuilt_each`; trial30 #3).
+round, and one session in two files (X.mcap and the X.recovered.mcap `recover` writes beside it); and the same
+session given twice to counterfactual's fit (cli/rebuild.py `rebuilt_each`, replay/onesession.py; trial30 #3, #4).
 The files are the frozen sample, written again with the mcap library's own Writer (tests/rewrite_mcap.py)."""
 
 from __future__ import annotations
@@ -50,3 +51,22 @@ def test_a_recording_of_no_whole_round_in_a_batch_says_to_leave_it_out_and_parti
     [line] = out.splitlines()
     assert code == 2 and "none of the 2 recordings holds a whole round" in line and not (tmp_path / "c").exists()
 
+
+def test_one_session_in_two_files_of_a_batch_is_refused_naming_both(tmp_path, capsys):
+    """trial30 #4: a recording and the copy `pairplay recover` wrote beside it were rebuilt into two policies of
+    one session, exit 0 (profile and combine then refused the folder). Refused in one line naming both, and
+    which is the recovered copy; nothing written. A copy under another name is the same session too; so is a
+    recording given to counterfactual's fit twice under two names (its turns counted double)."""
+    cut = tmp_path / "x.mcap"
+    cut.write_bytes(SAMPLE.read_bytes()[:-200])  # cut in its summary: `recover` writes x.recovered.mcap
+    assert _run(capsys, "recover", cut)[0] == 0
+    copy = tmp_path / "x.recovered.mcap"
+    code, out = _run(capsys, "rebuild", cut, copy, "--out", tmp_path / "rb")
+    [line] = out.splitlines()
+    assert code == 2 and f"{cut} and {copy} hold the same session 'sample-sim-ashley'" in line, line
+    assert "x.recovered.mcap was recovered from x.mcap" in line and not (tmp_path / "rb").exists(), line
+    other = shutil.copy(SAMPLE, tmp_path / "other.mcap")
+    code, out = _run(capsys, "rebuild", SAMPLE, other, "--out", tmp_path / "rb", "--partial")
+    assert code == 2 and f"{SAMPLE} and {other} hold the same session" in out and not (tmp_path / "rb").exists()
+    code, out = _run(capsys, "counterfactual", SAMPLE, "--fit-also", other, "--fit-only", "--out", tmp_path / "cf")
+    assert code == 2 and f"{SAMPLE} and {other} hold the same session" in out and not (tmp_path / "cf").exists()
