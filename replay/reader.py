@@ -714,8 +714,13 @@ def _read_log(path: str | Path, only: frozenset[str] | None = None) -> EventLog:
             tag = record.topic.rsplit("/", 1)[-1]
             parts = record.topic.split("/")
             named = (parts[1], parts[2]) if len(parts) == 4 and parts[0] == KEY_ROOT else (None, None)
+            # a channel's record again (the summary's copy, a writer that repeats it in every chunk, as MCAP lets
+            # it) keeps the seqs read on it: new ones, a chunk's seqs dropped, were holes its other channels' seqs
+            # surrounded
+            known = route.get(record.id)
+            numbers = known[5] if known is not None and known[0] == record.topic else array("q")
             route[record.id] = (record.topic, tag if only is not None and tag in EVENT_BY_TAG and tag not in only
-                                else None, *named, EVENT_BY_TAG.get(tag) if named[0] is not None else None, array("q"))
+                                else None, *named, EVENT_BY_TAG.get(tag) if named[0] is not None else None, numbers)
         elif isinstance(record, Schema):
             log.schemas[record.id] = (record.name, record.encoding, record.data)
         elif isinstance(record, Metadata):

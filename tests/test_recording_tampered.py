@@ -148,3 +148,17 @@ def test_a_hole_in_the_participants_seq_is_said_and_leaves_the_policy_whole(tmp_
     for verb in ("verify", "view", "counterfactual", "recover"):
         assert gap in said[verb][1], (verb, said[verb])
     assert said["verify"][0] == 1
+
+
+def test_channels_repeated_in_every_chunk_leave_no_hole(tmp_path):
+    """A writer may repeat each channel's record in every chunk (MCAP lets it): the reader kept the seqs read on a
+    channel per record, so each repeat dropped the seqs read before it and the other channels' seqs of the same
+    source around them read as holes. A file of every event, its channels repeated, has none; a dropped event
+    is still found."""
+    p = rewritten(tmp_path / "repeated.mcap", chunk_size=4096, repeat_channels=True)
+    for only in (None, CURVE_READS):
+        log = read_log(p, only=only)
+        assert log.whole and not log.seq_jumps and not log.missing, log.missing
+    p = rewritten(tmp_path / "hole.mcap", chunk_size=4096, repeat_channels=True,
+                  each=_seq_changed("learner", 100, None))
+    assert read_log(p, only=CURVE_READS).missing == "1 event of 'learner' missing: its seq jumps from 99 to 101"
