@@ -84,8 +84,6 @@ def run(args: argparse.Namespace) -> int:
             raise InputError(f"given twice (also as {seen[key]})", rec)
         seen[key] = rec
     done, empty = rebuilt_each(args)  # one holding no session: refused, nothing written
-    from pairplay.replay.onesession import check_once
-    check_once((rebuilt.source, rebuilt.started) for rebuilt in done)  # X.mcap and X.recovered.mcap: one session
     for rebuilt in done:
         if rebuilt.lost and not args.partial:  # it was exit 0 with a PARTIAL policy and a 1,500-character line, twice
             raise InputError(f"{rebuilt.lost}: its policy would lack the updates lost with it", rebuilt.source,
@@ -97,6 +95,8 @@ def run(args: argparse.Namespace) -> int:
                 raise OutputError(f"{planned[path.resolve()][1]} and {rebuilt.source} would write the same output; "
                                   "rename one", path)
             planned[path.resolve()] = (path, rebuilt.source)
+    from pairplay.replay.onesession import check_once
+    check_once((rebuilt.source, rebuilt.started) for rebuilt in done)  # X.mcap and X.recovered.mcap: one session
     figure = out / FIGURE
     # named as given: "exists (/tmp/.../rq/x.policy.json)" for `--out rq` (the resolved key)
     outputs = [path for path, _ in planned.values()] + ([figure] if done and not args.no_plot else [])
@@ -143,7 +143,7 @@ def rebuilt_each(args: argparse.Namespace) -> tuple[list, list]:
                                    fix="leave it out, or --partial rebuilds the others without it") from None
             empty.append(err)
     if not done:
-        raise NoWholeRound(f"none of the {len(args.recordings)} recordings holds a whole round; the first "
+        raise NoWholeRound(f"none of the {counted(len(args.recordings), 'recording')} holds a whole round; the first "
                            f"{empty[0].what}", empty[0].where)
     return done, empty
 

@@ -45,3 +45,20 @@ def rewritten(dst, src=SAMPLE, each=lambda channel, message: [message], topic=la
             w.add_metadata(name, dict(meta))
         w.finish()
     return Path(dst)
+
+
+def another_session(dst, k: int = 1, src=SAMPLE):
+    """`src` written again as another session (`k` ns later a start, the same events otherwise): what a batch
+    needs of several recordings, each a session of its own (replay/onesession.py: a copy of one file is the same
+    session, refused twice in one batch); `dst`."""
+    import dataclasses
+    import json
+
+    def each(channel, message):
+        if not channel.topic.endswith("/SessionStarted"):
+            return [message]
+        event = json.loads(message.data)
+        t = event["time_ns"]
+        event["time_ns"] = t + k if isinstance(t, int) else {**t, "nsec": (t["nsec"] + k) % 1_000_000_000}
+        return [dataclasses.replace(message, data=json.dumps(event, separators=(",", ":")).encode())]
+    return rewritten(dst, src, each=each)
