@@ -168,7 +168,15 @@ def run(args: argparse.Namespace) -> int:
     elif log.loss_free:  # damaged where no event was: fitted whole, the damage said (reader.EventLog.loss_free)
         warn("counterfactual", f"{rec}: {log.loss_free}")
     left_journals("counterfactual", [rec, *args.fit_also])  # what a cut one's journal holds beyond it
+    seen = {rec.resolve()}
+    for path in args.fit_also:
+        if Path(path).resolve() in seen:
+            raise InputError("given twice", path)
+        seen.add(Path(path).resolve())
     others = [read_turns(path) for path in args.fit_also]
+    from pairplay.replay.onesession import check_once, started
+    # one session's turns twice (REC and its recovered copy, or a copy of it): counted double in the fit
+    check_once([(str(rec), started(log))] + [(other.source, other.started) for other in others])
     for other in others:
         if other.config.participant != config.participant or other.config.observed_source != config.observed_source:
             raise InputError(f"participant {other.config.participant} ({other.config.observed_source}) is not "
@@ -179,11 +187,6 @@ def run(args: argparse.Namespace) -> int:
         if other.note:
             warn("counterfactual", f"{other.source}: not whole ({other.note}); fitting the "
                                    f"{counted(len(other.observations.first), 'turn')} of its intact parts")
-    seen = {rec.resolve()}
-    for path in args.fit_also:
-        if Path(path).resolve() in seen:
-            raise InputError("given twice", path)
-        seen.add(Path(path).resolve())
     fit = fit_user(pooled([turns.observations] + [o.observations for o in others]), config.observed_source)
     model = cf.to_user_model(fit, recording=rec.name, fitted_on=[rec.name] + [Path(p).name for p in args.fit_also], session=config.session, participant=config.participant,
                              observed_source=config.observed_source, software=__version__)

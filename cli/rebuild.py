@@ -7,11 +7,14 @@ never collide: X.mcap and X.recovered.mcap keep theirs apart; the curve's
 --no-plot, one figure of every recording's picks per round (learning curves;
 18 picks is perfect play). Before anything is written: every REC must be an
 MCAP file, none given twice, no two giving the same output names, and no
-output may exist unless --force, and every REC must hold a session (a
+output may exist unless --force, no session may be in two RECs (X.mcap and the
+X.recovered.mcap `recover` writes beside it: two policies of one learning;
+replay/onesession.py), and every REC must hold a session (a
 SessionStarted: replay/check.py `read_session`; a stub left by an old
 version's failed start, another program's MCAP) with a round recorded whole
 (`no_whole_round`: a file cut, or a session stopped, before round 1 ended gave
-a policy of 0 rounds, exit 0), and, unless --partial, none may have lost events
+a policy of 0 rounds, exit 0; with --partial, such a file of a batch is left out,
+said, and the others rebuilt: `rebuilt_each`), and, unless --partial, none may have lost events
 in its middle (`Rebuilt.lost`: a damaged part, or a recover of a damaged file;
 its policy lacks updates the learner made: it was exit 0, flagged, and a
 1,500-character damage line printed twice) (one line, exit 2, nothing
@@ -56,7 +59,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--partial", action="store_true",
                    help="also rebuild a recording that lost events in its middle (a damaged file, or one recovered "
                         "from one), exit 0: its policy lacks the lost updates and is flagged partial (without it: "
-                        "refused, exit 2, nothing written)")
+                        "refused, exit 2, nothing written); and leave out, with a warning, a recording of a batch "
+                        "that holds no whole round (without it: the batch is refused)")
     add_force(p, "existing policy files, curves and the figure in --out")
 
 
@@ -65,7 +69,7 @@ def run(args: argparse.Namespace) -> int:
     from pairplay.errors import InputError, OutputError
     from pairplay.outputs import check_folder, check_outputs, check_theirs, hold, output_folder
     from pairplay.replay.check import check_recording
-    from pairplay.replay.rebuild import output_paths, rebuild_recording
+    from pairplay.replay.rebuild import output_paths
 
     hold(args.out, "rebuild")  # one writer per output folder (pairplay/outputs.py): a second is refused
     out = check_folder(args.out)
@@ -79,7 +83,7 @@ def run(args: argparse.Namespace) -> int:
         if key in seen:
             raise InputError(f"given twice (also as {seen[key]})", rec)
         seen[key] = rec
-    done = [rebuild_recording(rec) for rec in args.recordings]  # one holding no session: refused, nothing written
+    done, empty = rebuilt_each(args)  # one holding no session: refused, nothing written
     for rebuilt in done:
         if rebuilt.lost and not args.partial:  # it was exit 0 with a PARTIAL policy and a 1,500-character line, twice
             raise InputError(f"{rebuilt.lost}: its policy would lack the updates lost with it", rebuilt.source,
@@ -91,6 +95,8 @@ def run(args: argparse.Namespace) -> int:
                 raise OutputError(f"{planned[path.resolve()][1]} and {rebuilt.source} would write the same output; "
                                   "rename one", path)
             planned[path.resolve()] = (path, rebuilt.source)
+    from pairplay.replay.onesession import check_once
+    check_once((rebuilt.source, rebuilt.started) for rebuilt in done)  # X.mcap and X.recovered.mcap: one session
     figure = out / FIGURE
     # named as given: "exists (/tmp/.../rq/x.policy.json)" for `--out rq` (the resolved key)
     outputs = [path for path, _ in planned.values()] + ([figure] if done and not args.no_plot else [])
@@ -105,6 +111,8 @@ def run(args: argparse.Namespace) -> int:
     print("\n".join(escaped(line) for line in lines))  # a path's newline would split its line (errors.escaped)
     from pairplay.cli.main import left_journals, warn
 
+    for err in empty:  # left out with --partial (`rebuilt_each`): said first, in the refusal's words
+        warn("rebuild", f"{err.where}: left out (--partial): {err.what}")
     for rebuilt in done:  # warnings about the result, on stderr, -q or not (cli/main.py: -q hid them with the listing)
         if rebuilt.partial:  # the damage (the note) is said here, once, short (reader.EventLog.brief)
             warn("rebuild", f"{rebuilt.source}: PARTIAL session: {rebuilt.partial}")
@@ -112,6 +120,32 @@ def run(args: argparse.Namespace) -> int:
             warn("rebuild", f"{rebuilt.source}: {rebuilt.damage_read}")
     left_journals("rebuild", [rebuilt.source for rebuilt in done])
     return 0
+
+
+def rebuilt_each(args: argparse.Namespace) -> tuple[list, list]:
+    """Each REC rebuilt (replay/rebuild.py), and the refusals of those that hold no whole round (`NoWholeRound`)
+    left out with --partial: one such file in a batch (`rebuild recordings/*.mcap`: a session interrupted at
+    once among them) refused the whole batch, with or without --partial, and its line did not say what to do
+    (trial30 #3). Without --partial it still refuses the batch (nothing written), its line saying to leave it
+    out or give --partial; with it, it is left out and said, the others rebuilt; a batch of none but such
+    files is refused (nothing to rebuild)."""
+    from pairplay.replay.rebuild import NoWholeRound, rebuild_recording
+
+    done, empty = [], []
+    for rec in args.recordings:
+        try:
+            done.append(rebuild_recording(rec))
+        except NoWholeRound as err:
+            if len(args.recordings) == 1:
+                raise
+            if not args.partial:
+                raise NoWholeRound(err.what, err.where, option="--partial",
+                                   fix="leave it out, or --partial rebuilds the others without it") from None
+            empty.append(err)
+    if not done:
+        raise NoWholeRound(f"none of the {counted(len(args.recordings), 'recording')} holds a whole round; the first "
+                           f"{empty[0].what}", empty[0].where)
+    return done, empty
 
 
 def write_all(done, staged: Path, out: Path, args: argparse.Namespace) -> list[str]:

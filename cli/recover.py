@@ -101,12 +101,17 @@ def run(args: argparse.Namespace) -> int:
                    f"; {args.recording} and its journal are kept as they were (the journal recovers it again; remove "
                    "the two once the output is kept)")
     earlier = f"; what its source had lost is carried over ({done.earlier_lost})" if done.earlier_lost else ""
+    earlier += f"; {done.gaps}: {NOT_BACK}" if done.gaps else ""
     if done.copies:  # each event once in the copy (a whole file with copies is no complete one: replay/recover.py)
         state += f"; {counted(done.copies, 'identical copy', 'identical copies')} of events not copied"
     print(escaped(f"{args.recording}: {state}; {counted(done.messages, 'message')} kept in {done.output}{earlier}{journal}{ended}"))
     if done.journal_error:  # what it held (up to the last 5 ms before a crash) is not in the output: said, not silent,
         _journal_unreadable(args, done)  # -q or not
     return 0
+
+
+# what recover says of events missing from a source's seq in a file that lost no part (reader.EventLog.gaps)
+NOT_BACK = "no recover gives them back"
 
 
 def _journal_unreadable(args: argparse.Namespace, done) -> None:
@@ -149,7 +154,8 @@ def _complete(args: argparse.Namespace, done) -> int:
     # a whole file recovered from a damaged or cut one: its session still lacks what its source lost, said in the
     # reader's words (reader.EventLog.source_lost, source_cut), as every verb says it (a new user's trial: "nothing
     # to recover" of a copy that had lost 229 messages, and no word of the loss)
-    lost = "; ".join(n for n in (done.earlier_lost, done.earlier_cut) if n)
+    # (and the events missing from a source's seq: reader.EventLog.gaps)
+    lost = "; ".join(n for n in (done.earlier_lost, done.earlier_cut, done.gaps and f"{done.gaps}: {NOT_BACK}") if n)
     said = f"{args.recording}: complete already ({counted(done.messages, 'message')}"
     said += f"; {lost}" if lost else ""
     said += ")" if done.ended else "; the session's end was not recorded: a partial session)"

@@ -16,10 +16,10 @@ bytes: a message stored twice, a chunk written again) are read once and counted
 (`copies`, said by `copied` in the line every verb says of the file: `loss_free`,
 `missing`); a differing event of the same (session, source, seq) is kept, for
 replay/forgery.py to judge. A read told `only` some tags looks no further into
-the events it does not read than their tag, but for the game's (its seq is
+the events it does not read than their tag and seq, but for the game's (its copies are
 checked): their copies change nothing it makes, and are counted with them. An event whose channel's key names another session,
 source or type is not read: a `BadMessage`, as on the bus (`disagreement`). A
-gap in the game's seq in a file that lost no part is events missing (`gaps`),
+gap in any source's seq in a file that lost no part is events missing (`gaps`),
 and event channels whose schema is not pairplay's are said (`foreign_schemas`). A message that does not decode is an event every verb reading the
 file lacks (a Q update among them: a Q-table the learner never had), so such a
 file is damaged as one that lost a part: `EventLog.undecoded` says so in the one
@@ -32,6 +32,7 @@ from __future__ import annotations
 
 import gc
 import json
+from array import array
 from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -43,7 +44,7 @@ from mcap.records import Channel, Message, Metadata, Schema
 
 from pairplay.livelock import LIVE, is_live
 from pairplay.numbers import counted
-from pairplay.schemas.envelope import Event
+from pairplay.schemas.envelope import Event, Seq
 from pairplay.schemas.jsonfile import MCAP_MAGIC
 from pairplay.schemas.events import EVENT_BY_TAG, decode_event
 from pairplay.schemas.events import _decoder as _event_decoder
@@ -74,7 +75,7 @@ class _Tagged(msgspec.Struct):
     type: str
     session: str = ""
     source: str = ""
-    seq: int = 0
+    seq: Seq = 0  # (in range, as the event's: else decoded wholly, a bad message; `seq_jumps` keeps them in int64)
 
 
 _tagged = JsonDecoder(_Tagged)
@@ -82,9 +83,12 @@ _tagged = JsonDecoder(_Tagged)
 
 class _Typed(msgspec.Struct):
     type: str
+    seq: Seq = 0
 
 
-_typed = JsonDecoder(_Typed)  # only the tag: what an event a verb does not read is checked for (speed)
+# only the tag and the seq: what an event a verb does not read is checked for (speed; its seq: `gaps`, from the one
+# parse the tag needed: the rest of the payload is skipped unread either way)
+_typed = JsonDecoder(_Typed)
 
 
 def unknown_tag(payload: bytes) -> str | None:
@@ -133,8 +137,8 @@ class EventLog:
     copies: int = 0
     # events read at a (session, source, seq) an earlier, different event holds: replay/forgery.py's to judge
     differing: int = 0
-    # where a starting source's (the game's: schemas/trust.py STARTERS) seq skips numbers between two events read:
-    # (source, seq before, seq after), in order (`gaps`)
+    # where a source's seq skips numbers between two events read (every source's: each numbers its events 1, 2,
+    # 3, ..., services/node.py): (source, seq before, seq after), by source, then seq (`gaps`)
     seq_jumps: list[tuple[str, int, int]] = field(default_factory=list)
 
     @property
@@ -177,18 +181,35 @@ class EventLog:
 
     @property
     def gaps(self) -> str:
-        """The events of the game missing from a file that lost no part, in one short line ("" if none, or if a lost
-        part, a message that does not decode or the file it was recovered from lost them: they say so): the game
-        numbers its events 1, 2, 3, ... (replay/forgery.py), so a skipped number is an event the file lacks
-        although every byte of it checks out (a copying tool that dropped the RoundEnded: view said "0 notes",
-        rebuild "the session ended (completed) before round 1": a hostile user's trial)."""
+        """The events missing from a file that lost no part, in one short line ("" if none, or if a lost part, a
+        message that does not decode or the file it was recovered from lost them: they say so): `gaps_of` every
+        source."""
+        return self.gaps_of()
+
+    def gaps_of(self, sources: frozenset[str] | None = None, but: frozenset[str] = frozenset()) -> str:
+        """`gaps` of the sources in `sources` (None: every one) but those in `but`, in one short line, one clause
+        per source: every source numbers its events 1, 2, 3, ... per session (the game, the learner, the
+        participant, the robot, the board's server, the recorder, the experimenter's console: one numbering
+        each, resumed after a restart: services/node.py, services/protocol.py), so a skipped number is an event
+        the file lacks although every byte of it checks out (a copying tool that dropped the RoundEnded: view
+        said "0 notes", rebuild "the session ended (completed) before round 1"; a learner's QUpdated seq 16
+        rewritten as 999: rebuild and view said nothing, verify only DIFFERS: hostile users' trials). A seq far
+        past the source's others (999 after 141) is such a jump too: its events between are not in the file.
+        Events before a source's first one in the file are not counted (a recorder that joined late never had
+        them), as the recorder counts holes (services/recorder.py `_holes`)."""
         if not self.seq_jumps or self.lost_at or self.source_lost:
             return ""
-        n = sum(after - before - 1 for _, before, after in self.seq_jumps)
-        source, before, after = self.seq_jumps[0]
-        more = len(self.seq_jumps) - 1
-        return (f"{counted(n, 'event')} of {source!r} missing: its seq jumps from {before} to {after}"
-                + (f" and in {counted(more, 'other place')}" if more else ""))
+        by: dict[str, list[tuple[int, int]]] = {}
+        for source, before, after in self.seq_jumps:
+            if (sources is None or source in sources) and source not in but:
+                by.setdefault(source, []).append((before, after))
+        said = []
+        for source, jumps in by.items():
+            n = sum(after - before - 1 for before, after in jumps)
+            (before, after), more = jumps[0], len(jumps) - 1
+            said.append(f"{counted(n, 'event')} of {source!r} missing: its seq jumps from {before} to {after}"
+                        + (f" and in {counted(more, 'other place')}" if more else ""))
+        return "; ".join(said)
 
     @property
     def whole(self) -> bool:
@@ -268,8 +289,14 @@ class EventLog:
         file is whole, its session is not) and the messages that do not decode (`undecoded`). What is made of
         such a file lacks events its session had (rebuild: refused without --partial; view: a partial view;
         report: the game left out); a damage that lost no event (a summary's CRC) is not a loss."""
+        return self.lost_of()
+
+    def lost_of(self, sources: frozenset[str] | None = None) -> str:
+        """`lost`, of its holes in seqs (`gaps_of`) only those of `sources` (None: every source's): what a verb
+        whose output is made of those sources' events lacks (rebuild's policy: the game's and the learner's)."""
         own = any(d.lost_at >= 0 for d in self.damage)
-        return "; ".join(n for n in (self.brief if own else "", self.source_lost, self.undecoded, self.gaps) if n)
+        return "; ".join(n for n in (self.brief if own else "", self.source_lost, self.undecoded,
+                                     self.gaps_of(sources)) if n)
 
     @property
     def missing(self) -> str:
@@ -598,15 +625,15 @@ def read_any_log(path: str | Path, only: frozenset[str] | None = None) -> EventL
 def _read_log(path: str | Path, only: frozenset[str] | None = None) -> EventLog:
     log = EventLog(str(path))
     checked = scan(path)
-    # channel -> (its topic, its tag if its events are only counted, else None): one look-up per message
     # channel -> (its topic, its tag if its events are only counted, else None, and what an event on it must be: the
-    # session, source and event class its topic names (None: no pairplay event key): `disagreement`)
-    route: dict[int, tuple[str, str | None, str | None, str | None, type | None]] = {}
+    # session, source and event class its topic names (None: no pairplay event key): `disagreement`; and the seqs
+    # of the events read on it (`gaps`: one append per message, grouped by source once at the end)): one look-up
+    route: dict[int, tuple[str, str | None, str | None, str | None, type | None, array]] = {}
     skipped: dict[str, int] = log.skipped
     decode, head, type_of = _event_decoder.raw, _tagged.raw, _typed.raw  # (RecursionError caught below: nesting.py)
     append = log.events.append
     # the first event read of each (session, source, seq): an identical one after it is a copy, read once (module
-    # rule; FirstOfEach's test, inlined: a call per message was 50% more time for a read); its keys: `gaps`
+    # rule; FirstOfEach's test, inlined: a call per message was 50% more time for a read)
     firsts = FirstOfEach()
     seen = firsts.seen.setdefault
     records = checked.summary_records + checked.records
@@ -633,18 +660,21 @@ def _read_log(path: str | Path, only: frozenset[str] | None = None) -> EventLog:
                                           record.log_time, record.data))
                 log.lost_at.append(len(log.events))
                 continue
-            key, tag, k_session, k_source, k_type = routed
+            key, tag, k_session, k_source, k_type, numbers = routed
             data = record.data
             if tag is not None:
                 try:
-                    if k_source not in STARTERS:  # not read, no seq checked (only the game's): its copies change
-                        # nothing the verb makes, and are not looked for: only its tag is decoded (a copy check
-                        # for each was an eighth of a rebuild, under the bench's 0.8x goal)
-                        if type_of(data).type == tag:  # (else decoded below: a bad message is kept as one)
+                    if k_source not in STARTERS:  # not read, no copy looked for (only the game's): its copies
+                        # change nothing the verb makes: only its tag and seq are decoded (a copy check for each
+                        # was an eighth of a rebuild, under the bench's 0.8x goal); its seq for `gaps`
+                        typed = type_of(data)
+                        if typed.type == tag:  # (else decoded below: a bad message is kept as one)
+                            numbers.append(typed.seq)
                             skipped[tag] = skipped.get(tag, 0) + 1
                             continue
                     h = head(data)
                     if h.type == tag and h.session == k_session and h.source == k_source:  # else decoded below
+                        numbers.append(h.seq)
                         first = seen(((h.session, h.source, h.seq)), data)
                         if first is data:
                             skipped[tag] = skipped.get(tag, 0) + 1
@@ -662,6 +692,7 @@ def _read_log(path: str | Path, only: frozenset[str] | None = None) -> EventLog:
                     log.bad.append(BadMessage(key, disagreement(key, e), record.log_time, data))
                     log.lost_at.append(len(log.events))
                     continue
+                numbers.append(e.seq)
                 first = seen((e.session, e.source, e.seq), data)
                 if first is not data:
                     if first == data or _decoded(first) == e:
@@ -683,8 +714,13 @@ def _read_log(path: str | Path, only: frozenset[str] | None = None) -> EventLog:
             tag = record.topic.rsplit("/", 1)[-1]
             parts = record.topic.split("/")
             named = (parts[1], parts[2]) if len(parts) == 4 and parts[0] == KEY_ROOT else (None, None)
+            # a channel's record again (the summary's copy, a writer that repeats it in every chunk, as MCAP lets
+            # it) keeps the seqs read on it: new ones, a chunk's seqs dropped, were holes its other channels' seqs
+            # surrounded
+            known = route.get(record.id)
+            numbers = known[5] if known is not None and known[0] == record.topic else array("q")
             route[record.id] = (record.topic, tag if only is not None and tag in EVENT_BY_TAG and tag not in only
-                                else None, *named, EVENT_BY_TAG.get(tag) if named[0] is not None else None)
+                                else None, *named, EVENT_BY_TAG.get(tag) if named[0] is not None else None, numbers)
         elif isinstance(record, Schema):
             log.schemas[record.id] = (record.name, record.encoding, record.data)
         elif isinstance(record, Metadata):
@@ -694,7 +730,7 @@ def _read_log(path: str | Path, only: frozenset[str] | None = None) -> EventLog:
             if log.lost_from < 0:
                 log.lost_from = len(log.events)
     log.truncated, log.damage, log.data_complete = checked.truncated, checked.damage, checked.data_complete
-    log.seq_jumps = seq_jumps([at for at in firsts.seen if at[1] in STARTERS])
+    log.seq_jumps = seq_jumps(route.values())
     if recovered:
         log.metadata[RECOVERED] = recovered
     log.source_lost = said_source_lost(log.metadata.get(RECOVERED, {}))
@@ -776,15 +812,32 @@ def disagreement(key: str, e: Event) -> str:
 DISAGREES = "its key disagrees with its payload"  # how `disagreement` starts (`EventLog.undecoded` counts them apart)
 
 
-def seq_jumps(numbered: list[tuple[str, str, int]]) -> list[tuple[str, int, int]]:
-    """Where each (session, source)'s seqs, sorted, skip numbers: (source, seq before, seq after), by seq."""
-    by: dict[tuple[str, str], list[int]] = {}
-    for session, source, seq in numbered:
-        by.setdefault((session, source), []).append(seq)
+def seq_jumps(routes) -> list[tuple[str, int, int]]:
+    """Where each (session, source)'s seqs, sorted, skip numbers: (source, seq before, seq after), by source in
+    the order its first channel came, then by seq. `routes`: `_read_log`'s channels (topic, tag, session, source,
+    class, the seqs read on it: an array of int64, as Seq bounds them); a channel of no pairplay key holds none.
+    Marked in a table of the source's span, not sorted (a set of a 5,000-round session's seqs was 4% of its
+    rebuild); a span far wider than the seqs (a forged seq 2^53) is sorted instead."""
+    import numpy as np  # (here: a read that meets no seq needs none)
+
+    by: dict[tuple[str, str], array] = {}
+    for _, _, session, source, _, numbers in routes:
+        if numbers:
+            by.setdefault((session, source), array("q")).extend(numbers)
     jumps = []
-    for (_, source), seqs in by.items():
-        seqs.sort()
-        jumps += [(source, a, b) for a, b in zip(seqs, seqs[1:]) if b > a + 1]
+    for (_, source), numbers in by.items():
+        seqs = np.frombuffer(numbers, dtype=np.int64)
+        low, high = int(seqs.min()), int(seqs.max())
+        if high - low < 4 * len(seqs):
+            held = np.zeros(high - low + 1, dtype=bool)
+            held[seqs - low] = True
+            if held.all():
+                continue  # every number from the first to the last: no gap
+            ordered = np.flatnonzero(held) + low
+        else:
+            ordered = np.unique(seqs)
+        at = np.flatnonzero(np.diff(ordered) > 1)
+        jumps += [(source, int(ordered[i]), int(ordered[i + 1])) for i in at]
     return jumps
 
 

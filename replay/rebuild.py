@@ -15,9 +15,12 @@ policy from a partial session (interrupted, aborted, failed, cut short,
 damaged or completed by `pairplay recover` of a file that lost events; a
 damage that lost none, or a cut after the data section, recovered or not, leaves it whole) says why in its file's `partial`
 field and in `Rebuilt.partial`; one whose file lost events in its middle (a
-damaged part; a recover of such a file) says what in `Rebuilt.lost`: its
+damaged part; a recover of such a file; a hole in the game's or the learner's
+seq: `POLICY_SOURCES`) says what in `Rebuilt.lost`: its
 policy lacks updates the learner made, so it is no state the learner was ever
-in (`pairplay rebuild` writes it only with --partial).
+in (`pairplay rebuild` writes it only with --partial). A hole in another
+source's seq (the participant's, the robot's) is said in `damage_read`: the
+policy is made of none of their events, so it is whole.
 """
 
 from __future__ import annotations
@@ -36,13 +39,14 @@ from pairplay.core.personas import persona
 from pairplay.core.policies import to_policy_file
 from pairplay.schemas.policy import PolicyFile, write_policy
 from pairplay.schemas.session import SessionConfig
-from pairplay.schemas.trust import STARTERS
+from pairplay.schemas.trust import PUBLISHERS, STARTERS
 
 from .check import no_whole_round, read_session
 from .fold import READS, SessionFold, fold_any, stream_seed
 from .reader import journal_restored, recovered_cut, recovered_lost, said_source_cut
 from .recover import journal_more
 from .forgery import ONE_PUBLISHER, contradiction
+from .onesession import Started, started
 from pairplay.numbers import counted
 
 
@@ -66,6 +70,7 @@ class Rebuilt:
     lost: str = ""  # what the file lost in its middle, short: a damaged part, or parts lost before a recover
     damage_read: str = ""  # a damage that lost no event (the policy is whole): said, not a partial session
     damaged_rounds: frozenset[int] = frozenset()  # the rounds whose events the file's damage took some of
+    started: Started = Started(None)  # which session the file holds (onesession.py: each once in a batch)
 
 
 def partial_reason(fold: SessionFold, note: str = "", recovered: dict[str, str] | None = None) -> str:
@@ -150,17 +155,32 @@ def rebuild_recording(path: str | Path) -> Rebuilt:
     # messages in the file that do not decode are events the fold cannot take (a Q update among them: a Q-table
     # the learner never had); the reader keeps them in `bad` (a new user's trial: rebuilt with exit 0, no word)
     bad = log.undecoded
-    note = "; ".join(n for n in (note, bad) if n)
+    # events missing from a source the policy is made of (a hole in the learner's or the game's seq: an update, a
+    # round's end): a policy the learner never had, flagged as a damaged file's (a game's hole refused without
+    # --partial, but its policy written with it was not flagged); a hole in another source's (the participant's,
+    # the robot's) changes no policy: said (`damage_read`), the policy whole (trial29 F10: both passed silently)
+    gaps, aside = log.gaps_of(POLICY_SOURCES), log.gaps_of(but=POLICY_SOURCES)
+    note = "; ".join(n for n in (note, bad, gaps) if n)
     recovered = log.metadata.get("pairplay.recovered") or {}
     rebuilt = rebuild_events((r.event for r in log.events), str(path), log.truncated, note,
                              recovered, log.metadata.get("pairplay.recorder.end"), skipped=log.skipped)
     # said as every verb says it (reader.EventLog.loss_free), and so are identical copies of events read once and
     # schemas that are not pairplay's (`said_too`) in a file that lost some too
-    rebuilt.damage_read = log.loss_free or log.said_too
+    rebuilt.damage_read = "; ".join(n for n in (log.loss_free or log.said_too,
+                                                f"{aside} (the policy does not depend on them)" if aside else "") if n)
     rebuilt.damaged_rounds = damaged_rounds([r.event for r in log.events], log.lost_at)
-    if log.lost:  # the file's own damage, or its source's if it was recovered (reader.EventLog.source_lost)
-        rebuilt.lost = f"the file is damaged ({log.lost})" if log.damaged else log.lost
+    rebuilt.started = started(log)
+    lost = log.lost_of(POLICY_SOURCES)
+    if lost:  # the file's own damage, or its source's if it was recovered (reader.EventLog.source_lost)
+        rebuilt.lost = f"the file is damaged ({lost})" if log.damaged else lost
     return rebuilt
+
+
+# the events a policy file is made of (fold.py: the config, the Q updates, the rounds recorded whole, the end that
+# says whether the session completed), and the sources that publish them (the game, the learner): a hole in
+# their seqs is a policy the learner never had (reader.EventLog.gaps_of)
+POLICY_TAGS = ("SessionStarted", "QUpdated", "LSPIUpdated", "RoundEnded", "SessionEnded")
+POLICY_SOURCES = frozenset().union(*(PUBLISHERS[tag] for tag in POLICY_TAGS))
 
 
 CURVE_READS = READS | {"RoundStarted"}  # what rebuild decodes: the fold's events, and where rounds start

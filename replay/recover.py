@@ -94,6 +94,9 @@ class Recovered:
     earlier_lost: str = ""  # what the source's own source lost, carried forward (a recovered file recovered again)
     earlier_cut: str = ""  # what the source's own source lost to its cut (reader.said_source_cut), likewise
     copies: int = 0  # identical copies of events in the source, not copied (reader.FirstOfEach)
+    # events missing from a source's seq in a file that lost no part (reader.EventLog.gaps): not in the file, nor in
+    # any copy of it; said (a hole in the learner's seq was "complete already", no word: trial29 F10)
+    gaps: str = ""
 
 
 def default_output(path: Path) -> Path:
@@ -155,7 +158,7 @@ def recover(path: str | Path, output: str | Path | None = None, force: bool = Fa
     earlier = folded_recovery(checked.records)
     lost_parts = [f"{d.part}: {d.lost}" for d in checked.damage if d.lost_at >= 0]
     lost_words = dict(lost=lost_parts, lost_messages=_lost_count(checked), earlier_lost=said_source_lost(earlier),
-                      earlier_cut=said_source_cut(earlier))
+                      earlier_cut=said_source_cut(earlier), gaps=log.gaps)
     if complete or not write:
         return Recovered(None, sum(isinstance(r, Message) for r in checked.records), checked.truncated,
                          "" if checked.whole else checked.describe(), [str(d) for d in checked.damage],

@@ -27,6 +27,7 @@ from pairplay.schemas.session import SessionConfig
 
 from .check import read_session
 from .forgery import contradiction
+from .onesession import Started, started
 
 
 @dataclass
@@ -37,6 +38,7 @@ class RecordedTurns:
     picks_per_round: list[int]  # complete rounds only (RoundEnded)
     note: str = ""  # what is wrong with the file, if anything
     skipped: list[str] = field(default_factory=list)  # turns that could not be read, and why
+    started: Started = Started(None)  # which session the file holds (onesession.py: each once in a fit)
 
 
 def _later(e, than) -> bool:
@@ -108,4 +110,6 @@ def read_turns(path) -> RecordedTurns:
     """A recording's turns (see the module rule); InputError naming the file if it has none to fit."""
     log = read_session(path, function="read_turns")
     note = log.missing  # what its damage, cut and undecodable messages lost (reader.EventLog), as rebuild's
-    return turns_from_events((r.event for r in log.events), str(path), note)
+    turns = turns_from_events((r.event for r in log.events), str(path), note)
+    turns.started = started(log)
+    return turns

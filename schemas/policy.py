@@ -39,6 +39,8 @@ STATE_NAMES = ("TOP_LEFT_L0", "TOP_LEFT_L1", "TOP_LEFT_L2", "TOP_L0", "TOP_L1", 
 # module: written out here), a merge, the oracle's; any other value was read and used as a policy (a new user's
 # trial: `session --algorithm fixed --policy` of a file saying "algorithm": "banana")
 ALGORITHMS = ("q-learning", "lspi", "pi-reuse", "fixed", "combined", "oracle")
+# the algorithms whose greedy actions are their Q-table's argmax (rebuild and study write them so: `_check_greedy`)
+GREEDY_OF_Q = ("q-learning", "lspi", "pi-reuse", "fixed")
 # |Q| at most this: a Q-value estimates the expected reward of one suggestion, whose rewards are a few
 # units (core/reward.py: -3..+2); a file with 1e308 was merged and profiled as if it meant something.
 Q_LIMIT = 1e6
@@ -120,6 +122,27 @@ class PolicyFile(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_field
         if self.rules and len(self.rules) != N_STATES:
             raise PolicyFileError(f"a merged policy names one rule per state ({N_STATES})")
         self._check_numbers()
+        self._check_greedy()
+
+    def _check_greedy(self) -> None:
+        """A learner's greedy actions are its Q-table's: greedy[s] is among the actions of the highest q[s][a]
+        (any of a tie: the writer breaks ties by a seeded draw, core/learning.py `greedy`). Compared exactly: the
+        file's floats are written in shortest round-trip form (module rule), so they read back as the very
+        doubles the writer took the maximum of. `combine` and `profile` read `greedy`, pi-reuse reads `q`: a file
+        whose two disagree (a hand edit, a damaged copy) was combined and profiled as one policy and played as
+        another, exit 0 (trial29 F5). A merged policy's greedy is its rules' (algorithm 4), not its Q-table's, and
+        an oracle's is its user model's: not compared (`GREEDY_OF_Q`)."""
+        if self.algorithm not in GREEDY_OF_Q:
+            return
+        for s, (a, row) in enumerate(zip(self.greedy, self.q)):
+            best = max(row)
+            if row[a] != best:
+                tied = [i for i, v in enumerate(row) if v == best]
+                named = ", ".join(map(str, tied[:3])) + (f" and {len(tied) - 3} more" if len(tied) > 3 else "")
+                raise PolicyFileError(f"greedy[{s}] ({STATE_NAMES[s]}): action {a} is not a best action of its "
+                                      f"Q-table's row q[{s}] (q {row[a]!r}; the best, {best!r}: action"
+                                      f"{'s' if len(tied) > 1 else ''} {named}): a {self.algorithm} policy's greedy "
+                                      "actions are its Q-table's (the file was changed?)")
 
     def _check_numbers(self) -> None:
         """Every number within its range, the participant named: counts are counts (0..COUNT_LIMIT), seed and

@@ -15,8 +15,11 @@ SAMPLE = Path(__file__).resolve().parents[1] / "recordings" / "samples" / "sim-a
 
 
 def rewritten(dst, src=SAMPLE, each=lambda channel, message: [message], topic=lambda t: t,
-              schema=lambda data: data, renumber: bool = False, chunk_size: int = 1024 * 1024):
-    """`src` written again to `dst` (see the module rule); `dst`."""
+              schema=lambda data: data, renumber: bool = False, chunk_size: int = 1024 * 1024,
+              repeat_channels: bool = False):
+    """`src` written again to `dst` (see the module rule); `dst`. `repeat_channels`: every channel's record again at
+    the start of each chunk, as MCAP lets a writer do (so a chunk is read on its own: the Go `mcap` tool's
+    files); the library's Writer writes each once, so its chunk builder is given them here."""
     with open(src, "rb") as f, open(dst, "wb") as out:
         reader = make_reader(f)
         w = Writer(out, chunk_size=chunk_size)
@@ -31,6 +34,10 @@ def rewritten(dst, src=SAMPLE, each=lambda channel, message: [message], topic=la
                 channels[c.id] = w.register_channel(topic(c.topic), c.message_encoding, schemas.get(c.schema_id, 0),
                                                     dict(c.metadata))
             for copy in each(c, m):
+                builder = w._Writer__chunk_builder  # (the Writer's own, name-mangled: no public way to repeat)
+                if repeat_channels and builder.num_messages == 0:
+                    for record in w._Writer__channels.values():
+                        builder.add_channel(record)
                 n += 1
                 w.add_message(channels[c.id], copy.log_time, copy.data, copy.publish_time,
                               n if renumber else copy.sequence)
@@ -38,3 +45,20 @@ def rewritten(dst, src=SAMPLE, each=lambda channel, message: [message], topic=la
             w.add_metadata(name, dict(meta))
         w.finish()
     return Path(dst)
+
+
+def another_session(dst, k: int = 1, src=SAMPLE):
+    """`src` written again as another session (`k` ns later a start, the same events otherwise): what a batch
+    needs of several recordings, each a session of its own (replay/onesession.py: a copy of one file is the same
+    session, refused twice in one batch); `dst`."""
+    import dataclasses
+    import json
+
+    def each(channel, message):
+        if not channel.topic.endswith("/SessionStarted"):
+            return [message]
+        event = json.loads(message.data)
+        t = event["time_ns"]
+        event["time_ns"] = t + k if isinstance(t, int) else {**t, "nsec": (t["nsec"] + k) % 1_000_000_000}
+        return [dataclasses.replace(message, data=json.dumps(event, separators=(",", ":")).encode())]
+    return rewritten(dst, src, each=each)

@@ -166,9 +166,12 @@ def test_profile_actions_prints_both_extractions(tmp_path, capsys):
     other = q.copy()
     other[:, S, UP_LEFT_WORDS] = other[:, S, LEFT_UP_WORDS] = -1.0  # a second user who rejects both pairs
     other[:, S, EXACT] = 2.0
+    other[1, S, UP_LEFT_WORDS] = -1.5  # (two policies of one user, not one policy twice: combine refuses that)
+    greedy = policies.copy()
+    greedy[:, S] = EXACT  # its greedy action is its Q-table's (a policy file's rule: schemas/policy.py)
     for i in range(2):
         write_policy(tmp_path / f"o{i}.json", to_policy_file(other[i], np.zeros((N_STATES, 88), dtype=np.int64),
-                                                             policies[i], algorithm="q-learning", participant="o"))
+                                                             greedy[i], algorithm="q-learning", participant="o"))
     target = tmp_path.parent / "merged.json"
     assert main(["combine", str(tmp_path), "--actions", "-o", str(target)]) == 0
     from pairplay.schemas.policy import read_policy

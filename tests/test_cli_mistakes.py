@@ -432,7 +432,7 @@ CASES = [
     Case("rebuild a file cut before its first round", ["rebuild", "cut.mcap", "--out", "out"],
          "holds no whole round: the file is cut before round 1 of "),
     Case("rebuild a session stopped in round 1 beside a good one", ["rebuild", "rec.mcap", "stopped0.mcap", "--out",
-                                                                    "out"], "nothing to rebuild (stopped0.mcap)"),
+                                                                    "out"], "nothing to rebuild; leave it out, or --partial rebuilds the others without it (stopped0.mcap)"),
     Case("combine a policy of 0 rounds", ["combine", "policies", "zero.json"], "holds no whole round"),
     Case("profile a policy of 0 rounds", ["profile", "policies", "zero.json"], "holds no whole round"),
     # an empty or blank id was taken (`--session ''` fell back to a made-up id); a refused atomic write

@@ -30,6 +30,7 @@ from pairplay.cli.main import main
 from pairplay.cli.rebuild import MANIFEST
 
 from busutil import wait_until
+from rewrite_mcap import another_session
 
 SAMPLE = Path(__file__).resolve().parents[1] / "recordings" / "samples" / "sim-ashley.mcap"
 
@@ -177,8 +178,8 @@ def test_rebuild_force_interrupted_part_way_leaves_the_earlier_policies_all_of_t
     Ctrl-C after the first recording's left DIR holding its new policy beside the second's old one.
     Now everything is written beside DIR first and moved in as a whole (outputs.output_folder)."""
     import pairplay.replay.rebuild as rebuild
-    for name in ("a", "b"):
-        shutil.copy(SAMPLE, tmp_path / f"{name}.mcap")
+    for k, name in enumerate(("a", "b")):  # two sessions (one session in two files is refused: replay/onesession.py)
+        another_session(tmp_path / f"{name}.mcap", k, SAMPLE)
     out = tmp_path / "out"
     out.mkdir()
     earlier = {f"{n}.{kind}": "earlier run" for n in ("a", "b") for kind in ("policy.json", "curve.csv")}

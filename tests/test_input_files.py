@@ -153,13 +153,21 @@ def test_a_profile_of_a_partial_policy_says_it_is_partial_in_its_output_and_on_s
     assert "PARTIAL" not in captured.out and captured.err == "", captured
 
 
-@pytest.mark.parametrize("verb", [
+# every verb that reads a policy file it is given (each reads it through schemas/policy.py): {a} the file tried
+POLICY_READERS = [
     ["session", "--participant", "sim:deaf", "--algorithm", "fixed", "--policy", "{a}"],
     ["session", "--participant", "sim:deaf", "--algorithm", "pi-reuse", "--policy", "{a}"],
     ["combine", "{a}", "{b}"],
     ["profile", "{a}", "{c}"],
     ["counterfactual", str(SAMPLE), "--policy", "fixed:{a}", "--out", "{tmp}/cf"],
-], ids=lambda v: " ".join(v[:4:3] if v[0] == "session" else v[:1]))
+]
+
+
+def _reader_id(v: list[str]) -> str:
+    return " ".join(v[:4:3] if v[0] == "session" else v[:1])
+
+
+@pytest.mark.parametrize("verb", POLICY_READERS, ids=_reader_id)
 def test_a_policy_file_of_an_unknown_algorithm_is_refused_naming_the_file_and_the_value(tmp_path, policy_bytes,
                                                                                            capsys, verb):
     """A new user's trial: a policy file saying "algorithm": "banana" was taken by `session --algorithm fixed`
@@ -226,3 +234,47 @@ def test_an_empty_user_model_file_is_said_to_be_empty(tmp_path):
     with pytest.raises(InputError) as err:
         usermodel.read_user_model(tmp_path / "u.json")
     assert str(err.value) == f"{tmp_path / 'u.json'}: the file is empty"
+
+
+def _greedy_changed(policy_bytes: bytes, tied: bool) -> tuple[dict, int]:
+    """The sample's policy with the greedy action of its first learned state changed to another action of the
+    highest Q (`tied`) or to one below it; and that state."""
+    data = json.loads(policy_bytes)
+    state = next(s for s, row in enumerate(data["q"]) if min(row) < max(row) and row.count(max(row)) > 1)
+    row = data["q"][state]
+    data["greedy"][state] = next(a for a, v in enumerate(row)
+                                 if (v == max(row)) == tied and a != data["greedy"][state])
+    return data, state
+
+
+@pytest.mark.parametrize("verb", POLICY_READERS, ids=_reader_id)
+def test_a_policy_whose_greedy_is_not_its_q_tables_is_refused_naming_the_state(tmp_path, policy_bytes, capsys, verb):
+    """trial29 F5: a policy file whose greedy[s] is no argmax of its own q[s] was taken: combine and profile read
+    greedy, pi-reuse reads q, so one file was two policies. Wherever a policy file is read (schemas/policy.py), one
+    line naming the file and the state, exit 2."""
+    from pairplay.cli.main import main
+
+    data, state = _greedy_changed(policy_bytes, tied=False)
+    (tmp_path / "a.json").write_text(json.dumps(data))
+    policy_file.write_policy(tmp_path / "b.json", other_policy(policy_bytes))
+    policy_file.write_policy(tmp_path / "c.json", other_policy(policy_bytes, "ashley"))
+    args = [a.format(a=tmp_path / "a.json", b=tmp_path / "b.json", c=tmp_path / "c.json", tmp=tmp_path)
+            for a in verb]
+    assert main(args) == 2
+    [line] = capsys.readouterr().err.splitlines()
+    name = policy_file.STATE_NAMES[state]
+    assert f"{tmp_path / 'a.json'}: " in line and f"greedy[{state}] ({name}): action " in line, line
+    assert f"is not a best action of its Q-table's row q[{state}]" in line, line
+    assert not (tmp_path / "cf").exists()
+
+
+def test_a_greedy_action_tied_for_the_best_of_its_q_is_read(tmp_path, policy_bytes):
+    """A tie is the writer's to break (a seeded draw): any action of the highest Q is the greedy one; and a merged
+    policy's greedy is its rules', not its Q-table's (combine's output is read back)."""
+    data, state = _greedy_changed(policy_bytes, tied=True)
+    (tmp_path / "a.json").write_text(json.dumps(data))
+    assert policy_file.read_policy(tmp_path / "a.json").greedy[state] == data["greedy"][state]
+    data["algorithm"] = "combined"
+    data["greedy"][state] = next(a for a, v in enumerate(data["q"][state]) if v < max(data["q"][state]))
+    (tmp_path / "m.json").write_text(json.dumps(data))
+    assert policy_file.read_policy(tmp_path / "m.json").algorithm == "combined"

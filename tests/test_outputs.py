@@ -17,6 +17,8 @@ from pairplay.errors import OutputError
 from pairplay.outputs import check_outputs, output_file, output_folder, output_path, write_bytes, write_text
 from pairplay.schemas.policy import read_policy
 
+from rewrite_mcap import another_session
+
 SAMPLE = Path(__file__).resolve().parents[1] / "recordings" / "samples" / "sim-ashley.mcap"
 
 
@@ -106,6 +108,10 @@ def test_rebuild_names_outputs_by_file_so_a_recovered_copy_keeps_its_own(tmp_pat
     r = pairplay("recover", "X.mcap", cwd=tmp_path)
     assert r.returncode == 0 and (tmp_path / "X.recovered.mcap").exists(), r.stderr
     r = pairplay("rebuild", "X.mcap", "X.recovered.mcap", "--out", "rebuilt", cwd=tmp_path)
+    assert r.returncode == 2 and "X.mcap and X.recovered.mcap hold the same session" in r.stderr  # (onesession.py)
+    r = pairplay("rebuild", "X.mcap", "--out", "rebuilt", cwd=tmp_path)
+    assert r.returncode == 0, r.stderr
+    r = pairplay("rebuild", "X.recovered.mcap", "--out", "rebuilt", "--no-plot", cwd=tmp_path)  # beside it, alone
     assert r.returncode == 0, r.stderr
     names = sorted(p.name for p in (tmp_path / "rebuilt").iterdir() if p.name != ".pairplay-rebuild.manifest")
     assert names == ["X.curve.csv", "X.policy.json", "X.recovered.curve.csv", "X.recovered.policy.json",
@@ -241,8 +247,8 @@ def test_a_forced_rebuild_of_fewer_recordings_keeps_none_of_the_earlier_ones_out
     --force removes what an earlier rebuild wrote there and this one does not; the user's files stay, one
     named like a policy too. Without --force, a rebuild of another recording adds to the folder (and to the
     manifest, so a later --force removes those as well)."""
-    for name in "ABCE":
-        shutil.copy(SAMPLE, tmp_path / f"{name}.mcap")
+    for k, name in enumerate("ABCE"):  # four sessions (one session in two files is refused: replay/onesession.py)
+        another_session(tmp_path / f"{name}.mcap", k, SAMPLE)
     assert pairplay("rebuild", "A.mcap", "B.mcap", "C.mcap", "--out", "D", cwd=tmp_path).returncode == 0
     d = tmp_path / "D"
     (d / "notes.txt").write_text("the user's")

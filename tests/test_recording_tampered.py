@@ -4,12 +4,14 @@ frozen sample with the mcap library's own Writer (tests/rewrite_mcap.py)."""
 
 from __future__ import annotations
 
+import dataclasses
 import json
 
 import pytest
 
 from pairplay.cli.main import main
 from pairplay.replay.reader import read_log
+from pairplay.replay.rebuild import CURVE_READS
 
 from rewrite_mcap import rewritten
 
@@ -76,3 +78,87 @@ def test_schemas_that_are_not_pairplays_are_said_by_every_verb(schema, why, tmp_
         assert code == 0 and words in out, (verb, out)
     assert said["verify"][1].strip().splitlines()[-1].startswith("verify: PASS; ")
     assert (tmp_path / "v.rrd").exists() and not json.loads((tmp_path / "rb" / "schemas.policy.json").read_text())["partial"]
+
+
+def _seq_changed(source: str, seq: int, new: int | None):
+    """`rewritten`'s `each`: the event of `source` at `seq` given the seq `new` (None: dropped), every other kept."""
+    def each(channel, message):
+        if f"/{source}/" not in channel.topic:
+            return [message]
+        event = json.loads(message.data)
+        if event["seq"] != seq:
+            return [message]
+        if new is None:
+            return []
+        event["seq"] = new
+        return [dataclasses.replace(message, data=json.dumps(event, separators=(",", ":")).encode())]
+    return each
+
+
+def _every_verb(capsys, p, tmp_path):
+    """`_verbs` and rebuild --partial, counterfactual --fit-only and recover of `p`."""
+    said = _verbs(capsys, p, tmp_path)
+    said["rebuild --partial"] = _run(capsys, "rebuild", str(p), "--out", str(tmp_path / "rp"), "--partial")
+    said["counterfactual"] = _run(capsys, "counterfactual", str(p), "--fit-only", "--out", str(tmp_path / "cf"))
+    said["recover"] = _run(capsys, "recover", str(p), "-o", str(tmp_path / "r.mcap"))
+    return said
+
+
+def _partial(tmp_path, folder: str, p) -> str:
+    return json.loads((tmp_path / folder / f"{p.stem}.policy.json").read_text())["partial"]
+
+
+@pytest.mark.parametrize("source, seq, new, gap", [
+    ("learner", 16, 999, "858 events of 'learner' missing: its seq jumps from 15 to 17 and in 1 other place"),
+    ("game", 61, None, "1 event of 'game' missing: its seq jumps from 60 to 62")])
+def test_a_hole_in_the_seq_of_a_source_the_policy_is_made_of_is_said_and_flags_the_policy(source, seq, new, gap,
+                                                                                           tmp_path, capsys):
+    """trial29 F10: the learner's seq 16 rewritten as 999 (every MCAP check passes): rebuild wrote a whole policy and
+    view "0 notes", exit 0, no word; only verify failed, DIFFERS lines not naming the hole (the reader checked the
+    game's seq alone). And a hole in the game's seq was refused by rebuild, but written with --partial unflagged.
+    Now every verb says the hole, in the reader's words; rebuild refuses it without --partial and flags the policy
+    with it; recover says no copy gives the events back."""
+    p = rewritten(tmp_path / "hole.mcap", each=_seq_changed(source, seq, new))
+    assert read_log(p).missing == gap
+    assert read_log(p, only=CURVE_READS).missing == gap  # (rebuild's read: the learner's events by tag and seq)
+    said = _every_verb(capsys, p, tmp_path)
+    code, out = said["rebuild"]
+    assert code == 2 and f"the file is damaged ({gap})" in out and "--partial" in out, out
+    code, out = said["rebuild --partial"]
+    assert code == 0 and f"PARTIAL session: {gap}" in out and _partial(tmp_path, "rp", p) == gap, out
+    code, out = said["verify"]
+    assert code == 1 and f"verify: FAIL: the file is damaged ({gap})" in out, out
+    code, out = said["view"]
+    assert code == 0 and gap in out and (tmp_path / "v.partial.rrd").exists(), out
+    code, out = said["counterfactual"]
+    assert code == 0 and f"not whole ({gap})" in out, out
+    code, out = said["recover"]
+    assert code == 0 and f"{gap}: no recover gives them back" in out, out
+
+
+def test_a_hole_in_the_participants_seq_is_said_and_leaves_the_policy_whole(tmp_path, capsys):
+    """trial29 F10, another source: the participant's seq 10 dropped. The policy is made of the game's and the
+    learner's events alone: rebuild writes it whole, exit 0, and says the hole; the verbs that read the
+    participant's events (verify, view, counterfactual) say the file lacks one."""
+    p = rewritten(tmp_path / "phole.mcap", each=_seq_changed("participant", 10, None))
+    gap = "1 event of 'participant' missing: its seq jumps from 9 to 11"
+    said = _every_verb(capsys, p, tmp_path)
+    code, out = said["rebuild"]
+    assert code == 0 and f"{gap} (the policy does not depend on them)" in out and not _partial(tmp_path, "rb", p), out
+    for verb in ("verify", "view", "counterfactual", "recover"):
+        assert gap in said[verb][1], (verb, said[verb])
+    assert said["verify"][0] == 1
+
+
+def test_channels_repeated_in_every_chunk_leave_no_hole(tmp_path):
+    """A writer may repeat each channel's record in every chunk (MCAP lets it): the reader kept the seqs read on a
+    channel per record, so each repeat dropped the seqs read before it and the other channels' seqs of the same
+    source around them read as holes. A file of every event, its channels repeated, has none; a dropped event
+    is still found."""
+    p = rewritten(tmp_path / "repeated.mcap", chunk_size=4096, repeat_channels=True)
+    for only in (None, CURVE_READS):
+        log = read_log(p, only=only)
+        assert log.whole and not log.seq_jumps and not log.missing, log.missing
+    p = rewritten(tmp_path / "hole.mcap", chunk_size=4096, repeat_channels=True,
+                  each=_seq_changed("learner", 100, None))
+    assert read_log(p, only=CURVE_READS).missing == "1 event of 'learner' missing: its seq jumps from 99 to 101"
