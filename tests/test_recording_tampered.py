@@ -54,7 +54,7 @@ def test_events_on_keys_naming_another_session_are_said_and_not_read(which, tmp_
     def topic(t):
         return t.replace(f"/{SESSION}/", "/s2/") if which == "every" or t.endswith("/RoundEnded") else t
     p = rewritten(tmp_path / "other.mcap", topic=topic)
-    words = f"not what their key names (pairplay/s2/"
+    words = "not what their key names (pairplay/s2/"
     log = read_log(p)
     assert words in log.damaged and f"it names session 's2', its payload '{SESSION}'" in log.damaged, log.damaged
     said = _verbs(capsys, p, tmp_path)
