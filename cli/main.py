@@ -458,11 +458,12 @@ def _end(code: int, argv: list[str]) -> None:
     if not cut:  # (a thread of ours left, an interrupted compile's objects: not waited for, not collected)
         threading._shutdown()  # as the interpreter's exit: the threads that are not daemons (a library's) joined
     atexit._run_exitfuncs()  # what was registered to run at exit still runs (multiprocessing's clean-up)
+    if not cut:
+        gc.collect()
+    # after the collection: a semaphore finalized there tells the tracker, which a stopped tracker would start again
     if "multiprocessing.resource_tracker" in sys.modules:  # (never imported: no tracker, and no import here)
         from pairplay.processes import stop_resource_tracker
         stop_resource_tracker()  # ended and reaped before we end: no child of the verb outlives it
-    if not cut:
-        gc.collect()
     _flush()
     testpause.pause("exiting")
     for s in signals.SIGNALS:  # the status is decided now (signal.signal runs a pending handler first)
