@@ -335,7 +335,7 @@ def _zstd_frames(data: bytes, declared: int) -> bytes:
         frame = view[pos:end]
         framed = zstandard.frame_content_size(frame)  # -1: the frame does not say
         if made + framed > declared:
-            said = "its zstd frame says" if not out else f"its {len(out) + 1} zstd frames say"
+            said = "its zstd frame says" if not out else f"its {counted(len(out) + 1, 'zstd frame')} say"
             raise Unreadable(f"decompresses to {counted(made + framed, 'byte')} ({said}), the chunk says {declared}")
         # room + 1: a frame making more than the chunk says is said by the size check ("more than"), and a room of
         # 0 is no max_output_size to zstandard
