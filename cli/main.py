@@ -460,6 +460,10 @@ def _end(code: int, argv: list[str]) -> None:
     atexit._run_exitfuncs()  # what was registered to run at exit still runs (multiprocessing's clean-up)
     if not cut:
         gc.collect()
+    # after the collection: a semaphore finalized there tells the tracker, which a stopped tracker would start again
+    if "multiprocessing.resource_tracker" in sys.modules:  # (never imported: no tracker, and no import here)
+        from pairplay.processes import stop_resource_tracker
+        stop_resource_tracker()  # ended and reaped before we end: no child of the verb outlives it
     _flush()
     testpause.pause("exiting")
     for s in signals.SIGNALS:  # the status is decided now (signal.signal runs a pending handler first)

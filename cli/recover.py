@@ -104,6 +104,8 @@ def run(args: argparse.Namespace) -> int:
     earlier += f"; {done.gaps}: {NOT_BACK}" if done.gaps else ""
     if done.copies:  # each event once in the copy (a whole file with copies is no complete one: replay/recover.py)
         state += f"; {counted(done.copies, 'identical copy', 'identical copies')} of events not copied"
+    if done.schemas_left_out:  # the copy describes its events by pairplay's schemas only (replay/recover.py)
+        state += f"; {done.schemas_left_out}"
     print(escaped(f"{args.recording}: {state}; {counted(done.messages, 'message')} kept in {done.output}{earlier}{journal}{ended}"))
     if done.journal_error:  # what it held (up to the last 5 ms before a crash) is not in the output: said, not silent,
         _journal_unreadable(args, done)  # -q or not

@@ -274,7 +274,10 @@ def _decompress(chunk: Chunk) -> bytes:
     "bomb" chunk (a few KB of zstd that decompress to GBs, whether it declares the GBs or a few KB) made
     every verb allocate the whole decompressed size before the size check (3.2 GB for a 191 KB file; trial28
     F15): zstandard's `decompress` sizes its output by the frame's own content size, whatever
-    `max_output_size` says, so that size is checked first; lz4 is read at most up to the declared size."""
+    `max_output_size` says, so that size is checked first; lz4 is read at most up to the declared size.
+    Every frame of the data is decompressed, in turn, and its bytes after the last frame are a finding: zstd's
+    and lz4's decoders stop at the end of the first frame, so a second frame, or bytes that are no frame, were
+    dropped without a word (the CRC and the size are of what was decompressed: they held)."""
     declared = chunk.uncompressed_size
     if declared > MAX_CHUNK:
         raise Unreadable(f"declares {counted(declared, 'byte')} uncompressed, more than any chunk a recorder writes "
@@ -282,18 +285,91 @@ def _decompress(chunk: Chunk) -> bytes:
     if chunk.compression == "":
         return chunk.data
     if chunk.compression == "zstd":
-        import zstandard
-
-        framed = zstandard.frame_content_size(chunk.data)  # -1: the frame does not say
-        if framed > declared:
-            raise Unreadable(f"decompresses to {counted(framed, 'byte')} (its zstd frame says), "
-                             f"the chunk says {declared}")
-        return zstandard.ZstdDecompressor().decompress(chunk.data, max_output_size=declared)
+        return _zstd_frames(chunk.data, declared)
     if chunk.compression == "lz4":
-        import lz4.frame
-
-        return lz4.frame.LZ4FrameDecompressor().decompress(chunk.data, max_length=declared + 1)
+        return _lz4_frames(chunk.data, declared)
     raise Unreadable(f"unknown compression {chunk.compression!r}")
+
+
+_ZSTD_MAGIC = b"\x28\xb5\x2f\xfd"  # a zstd frame's first bytes (RFC 8878 3.1.1)
+
+
+def _zstd_frame_end(data: memoryview, pos: int) -> int:
+    """Where the zstd frame at `pos` ends (RFC 8878 3.1.1: its header, its blocks up to the one marked last, its
+    checksum when the header says it has one); Unreadable if no frame starts there or it is cut short. The
+    decoder says nothing of where a frame ends, so the blocks' headers are walked (a chunk's frame has a few)."""
+    import zstandard
+
+    if data[pos:pos + 4] != _ZSTD_MAGIC:
+        if not pos:
+            raise Unreadable("zstd data does not decompress (it does not start with a zstd frame)")
+        raise Unreadable(f"zstd data holds {counted(len(data) - pos, 'byte')} after its last frame that are no "
+                         f"zstd frame")
+    try:
+        at = pos + zstandard.frame_header_size(data[pos:])
+        checksum = zstandard.get_frame_parameters(data[pos:]).has_checksum
+    except zstandard.ZstdError:
+        raise Unreadable("zstd data does not decompress (a frame header that does not parse)") from None
+    last = False
+    while not last:
+        if at + 3 > len(data):
+            break
+        head = int.from_bytes(data[at:at + 3], "little")
+        last, kind, size = head & 1, (head >> 1) & 3, head >> 3
+        if kind == 3:
+            raise Unreadable("zstd data does not decompress (a block of the reserved type)")
+        at += 3 + (1 if kind == 1 else size)  # an RLE block holds its one byte
+    end = at + 4 * checksum
+    if not last or end > len(data):
+        raise Unreadable("zstd data does not decompress (its last frame is cut short)")
+    return end
+
+
+def _zstd_frames(data: bytes, declared: int) -> bytes:
+    """Every zstd frame of `data` decompressed, together at most `declared` + 1 bytes (`_decompress`)."""
+    import zstandard
+
+    view, out, pos, made = memoryview(data), [], 0, 0
+    while pos < len(view) or not out:
+        end = _zstd_frame_end(view, pos)
+        frame = view[pos:end]
+        framed = zstandard.frame_content_size(frame)  # -1: the frame does not say
+        if made + framed > declared:
+            said = "its zstd frame says" if not out else f"its {counted(len(out) + 1, 'zstd frame')} say"
+            raise Unreadable(f"decompresses to {counted(made + framed, 'byte')} ({said}), the chunk says {declared}")
+        # room + 1: a frame making more than the chunk says is said by the size check ("more than"), and a room of
+        # 0 is no max_output_size to zstandard
+        out.append(zstandard.ZstdDecompressor().decompress(frame, max_output_size=declared - made + 1))
+        made += len(out[-1])
+        pos = end
+        if made > declared:
+            break  # more than declared: said by the size check
+    return out[0] if len(out) == 1 else b"".join(out)
+
+
+def _lz4_frames(data: bytes, declared: int) -> bytes:
+    """Every lz4 frame of `data` decompressed, together at most `declared` + 1 bytes (`_decompress`)."""
+    import lz4.frame
+
+    out, rest, made = [], data, 0
+    while rest or not out:
+        decompressor = lz4.frame.LZ4FrameDecompressor()
+        try:
+            out.append(decompressor.decompress(rest, max_length=declared - made + 1))
+        except RuntimeError:  # lz4's word for data that is no frame
+            if not out:
+                raise
+            out.append(b"")
+        made += len(out[-1])
+        if made > declared:
+            break  # more than declared: said by the size check
+        if not decompressor.eof:
+            if len(out) == 1:
+                raise Unreadable("lz4 data does not decompress (its frame is cut short)")
+            raise Unreadable(f"lz4 data holds {counted(len(rest), 'byte')} after its last frame that are no whole "
+                             f"lz4 frame")
+        rest = decompressor.unused_data or b""
+    return out[0] if len(out) == 1 else b"".join(out)
 
 
 def _message_maker() -> Callable[[int, int, bytes, int, int], Message]:

@@ -55,8 +55,10 @@ from mcap.writer import CompressionType, Writer
 from typing import Callable
 
 from pairplay.errors import InputError, OutputError, command_word
+from pairplay.numbers import counted
 from pairplay.replay.reader import (DATA_COMPLETE_KEY, JOURNAL_WHOLE_KEY, LOST_AT_KEY, RECOVERED, carry_recovery,
-                                    folded_recovery, recovered_losses, said_source_cut, said_source_lost)
+                                    folded_recovery, not_pairplays, recovered_losses, said_source_cut,
+                                    said_source_lost)
 from pairplay.schemas.events import EVENT_BY_TAG
 from pairplay.schemas.jsonschema import schema_text
 from pairplay.schemas.keys import parse_event_key
@@ -97,6 +99,7 @@ class Recovered:
     # events missing from a source's seq in a file that lost no part (reader.EventLog.gaps): not in the file, nor in
     # any copy of it; said (a hole in the learner's seq was "complete already", no word: trial29 F10)
     gaps: str = ""
+    schemas_left_out: str = ""  # the source's schemas that are not pairplay's, not copied (`_PairplaySchemas`)
 
 
 def default_output(path: Path) -> Path:
@@ -171,12 +174,13 @@ def recover(path: str | Path, output: str | Path | None = None, force: bool = Fa
     check_output(output, force)  # only an output that will be written (a complete file writes none)
     messages, ended, last_round, copies = 0, False, -1, 0
     firsts = FirstOfEach()
-    schema_ids: dict[int, int] = {}
+    sources: dict[int, Schema] = {}  # the source's Schema records, by id
     channel_ids: dict[int, int] = {}
     topics: dict[int, str] = {}
     with output_file(output, "wb", force) as out:
         writer = Writer(out, chunk_size=CHUNK_SIZE, compression=CompressionType.ZSTD, enable_data_crcs=True)
         writer.start(profile=PROFILE, library="pairplay recover")
+        schemas = _PairplaySchemas(writer)
         # the summary's Schemas and Channels first: they name the channels of messages whose own
         # records were in a lost chunk
         # where each damaged part's lost records were, as the number of messages written before them: the
@@ -193,12 +197,11 @@ def recover(path: str | Path, output: str | Path | None = None, force: bool = Fa
                 lost_at.append(messages)
                 losses.pop(0)
             if isinstance(record, Schema):
-                if record.id not in schema_ids:
-                    schema_ids[record.id] = writer.register_schema(record.name, record.encoding, record.data)
+                sources.setdefault(record.id, record)  # written only with a channel it is pairplay's schema of
             elif isinstance(record, Channel):
                 if record.id not in channel_ids:
                     channel_ids[record.id] = writer.register_channel(
-                        record.topic, record.message_encoding, schema_ids.get(record.schema_id, 0),
+                        record.topic, record.message_encoding, schemas.of(record, sources.get(record.schema_id)),
                         dict(record.metadata))
                     topics[record.id] = record.topic
             elif isinstance(record, Message):
@@ -223,9 +226,8 @@ def recover(path: str | Path, output: str | Path | None = None, force: bool = Fa
             for key, payload, log_ns, seq in added.items:
                 channel = by_topic.get(key)
                 if channel is None:
-                    tag = parse_event_key(key).tag
-                    schema = writer.register_schema(tag, "jsonschema", schema_text(EVENT_BY_TAG[tag]).encode())
-                    channel = by_topic[key] = writer.register_channel(key, "json", schema)
+                    channel = by_topic[key] = writer.register_channel(key, "json", schemas.event(
+                        parse_event_key(key).tag))
                 last_ns = max(last_ns, log_ns)  # log times never go back in a file (writer.py)
                 writer.add_message(channel, last_ns, payload, last_ns, seq & 0xFFFFFFFF)
                 messages += 1
@@ -234,6 +236,7 @@ def recover(path: str | Path, output: str | Path | None = None, force: bool = Fa
                 if tag == "RoundStarted":
                     last_round = max(last_round, _round_of(payload))
         lost_at += [messages] * len(losses)  # a part lost after the last record read
+        left_out = schemas.left_out(sources)
         damaged = [str(d) for d in checked.damage]
         reason = "" if checked.whole else checked.describe()
         writer.add_metadata(RECOVERED, carry_recovery(earlier, {
@@ -242,6 +245,7 @@ def recover(path: str | Path, output: str | Path | None = None, force: bool = Fa
             LOST_AT_KEY: json.dumps(lost_at), "lost": json.dumps([f"{d.part}: {d.lost}" for d in checked.damage if d.lost_at >= 0]),
             "completed": "summary, indexes and CRCs written by pairplay recover",
             "session_ended": str(ended).lower(), "last_round": str(last_round), "copies_dropped": str(copies),
+            **({"schemas_left_out": left_out} if left_out else {}),
             **({"journal": journal.path.name if journal is not None else journal_error,
                 "from_journal": str(added.taken if added else 0),
                 "journal_refused": str(added.refused if added else 0),
@@ -254,7 +258,48 @@ def recover(path: str | Path, output: str | Path | None = None, force: bool = Fa
                      journal=journal.path if journal is not None else None,
                      from_journal=added.taken if added else 0, journal_refused=added.refused if added else 0,
                      journal_torn=journal.torn if journal is not None else "", journal_error=journal_error,
-                     copies=copies, **lost_words)
+                     copies=copies, schemas_left_out=left_out, **lost_words)
+
+
+class _PairplaySchemas:
+    """The schemas a recovered copy holds: pairplay's alone. A channel of a pairplay event keeps its source's
+    schema when it is pairplay's schema of that event (reader.not_pairplays), else it is given pairplay's, once per
+    event (as a channel the journal adds is); any other channel has none (schema id 0: MCAP's schemaless). So a
+    Schema record of the source that is not pairplay's, one a hand-made or hostile file added (`{"type":"string"}`
+    in place of an event's, bytes that are not JSON, one no channel uses), is left out, and `left_out` says so:
+    copied along, the copy misdescribed its events to every other MCAP reader (Foxglove) and passed them on
+    unsaid."""
+
+    def __init__(self, writer: Writer):
+        self.writer = writer
+        self.written: dict[int, int] = {}  # source schema id -> the copy's
+        self.events: dict[str, int] = {}  # event tag -> the copy's id of pairplay's schema of it
+
+    def of(self, channel: Channel, schema: Schema | None) -> int:
+        """The copy's schema id for `channel`, whose source schema is `schema` (None: none, or not read)."""
+        tag = channel.topic.rsplit("/", 1)[-1]
+        if tag not in EVENT_BY_TAG:
+            return 0
+        if schema is not None and not not_pairplays(tag, (schema.name, schema.encoding, schema.data)):
+            if schema.id not in self.written:
+                self.written[schema.id] = self.writer.register_schema(schema.name, schema.encoding, schema.data)
+            return self.written[schema.id]
+        return self.event(tag)
+
+    def event(self, tag: str) -> int:
+        """The copy's id of pairplay's own schema of event `tag`."""
+        if tag not in self.events:
+            self.events[tag] = self.writer.register_schema(tag, "jsonschema", schema_text(EVENT_BY_TAG[tag]).encode())
+        return self.events[tag]
+
+    def left_out(self, sources: dict[int, Schema]) -> str:
+        """The source's schemas not copied, in one short line ("" if none): how many, the first named."""
+        out = [s for i, s in sources.items() if i not in self.written]
+        if not out:
+            return ""
+        first = out[0].name[:40] or "(no name)"
+        return (f"{counted(len(out), 'schema')} not pairplay's left out ({first!r}"
+                f"{', ...' if len(out) > 1 else ''}): the events' channels have pairplay's")
 
 
 def _lost_count(checked) -> int | None:
@@ -317,7 +362,6 @@ def journal_left(path: str | Path) -> str:
     from collections import Counter
 
     from pairplay.livelock import is_live
-    from pairplay.numbers import counted
 
     path = Path(path)
     beside = wal_path(path)

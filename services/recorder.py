@@ -341,7 +341,7 @@ def settle_aside(aside: list[tuple[Path, Path]], path: str | Path, replaced: boo
             os.replace(kept, original)
 
 
-def earlier_records(earlier: Path, session: str, before: list[tuple[str, bytes, int]] = ()
+def earlier_records(earlier: Path, session: str, before: list[tuple[str, bytes, int]] = (), say: bool = True
                     ) -> tuple[list[tuple[str, bytes, int]], dict | None, dict]:
     """What an earlier recording of `session` holds: every readable message of the file (a crash may
     have cut it: what was read before the cut) as (key, payload, log_time_ns) in file order, then
@@ -351,15 +351,17 @@ def earlier_records(earlier: Path, session: str, before: list[tuple[str, bytes, 
     file lost that its journal does not give back (`earlier_losses`: {} if nothing). A recorder
     killed before its first flush leaves a file of no message: all it received is in its journal.
     `before`: what the session's recordings older than `earlier` hold (`recorded_before`), which
-    the journal's records are checked after, as the live recorder checked them."""
+    the journal's records are checked after, as the live recorder checked them. `say`: log what is not read or
+    taken (False for a look that the continuing recorder's own reading follows: `recorded_before`)."""
     from mcap.records import Channel, Message
+    warn, inform = (log.warning, log.info) if say else (_unsaid, _unsaid)
     from pairplay.replay.mcapscan import scan
     topics: dict[int, str] = {}
     held: list[tuple[str, bytes, int]] = []
     try:
         checked = scan(earlier)
     except OSError as err:  # gone or unreadable since it was listed: nothing of it is held
-        log.warning("recorder: %s is not read: %s", earlier, err)
+        warn("recorder: %s is not read: %s", earlier, err)
         return held, None, {}
     records = checked.summary_records + checked.records
     at_message: list[int] = []  # for each record, how many messages of the file come before it
@@ -370,14 +372,14 @@ def earlier_records(earlier: Path, session: str, before: list[tuple[str, bytes, 
         elif isinstance(record, Message) and record.channel_id in topics:
             held.append((topics[record.channel_id], record.data, record.log_time))
     if checked.truncated:  # the cut of a crashed file: everything before it is kept
-        log.info("recorder: %s ends early (%s); %d messages read", earlier, checked.describe(), len(held))
+        inform("recorder: %s ends early (%s); %d messages read", earlier, checked.describe(), len(held))
     beside = wal_path(earlier)
     journal, account, added = None, None, []
     if beside.exists():
         try:
             journal = read_journal(beside)
         except (NotAJournal, OSError) as err:
-            log.warning("recorder: the journal %s is not read: %s", beside, err)
+            warn("recorder: the journal %s is not read: %s", beside, err)
             account = {"earlier_journal": beside.name, "not_read": str(err)}
         else:
             # another recording's (of the session id, not of this file) is never taken: its events are not the file's
@@ -385,7 +387,7 @@ def earlier_records(earlier: Path, session: str, before: list[tuple[str, bytes, 
                      else not_its(journal, next((dict(r.metadata) for r in checked.metadata_records
                                                  if r.name == RECORDER_METADATA), {})))
             if other:
-                log.warning("recorder: the journal %s is not taken: %s (it is left there)", beside, other)
+                warn("recorder: the journal %s is not taken: %s (it is left there)", beside, other)
                 account = {"earlier_journal": beside.name, "not_read": other}
                 journal = None
             else:
@@ -461,7 +463,11 @@ def earlier_losses(earlier: Path, checked, records: list, at_message: list[int],
     return folded
 
 
-def recorded_before(path: Path, session: str, until: Path | None = None
+def _unsaid(*_args) -> None:
+    """A log call not made (`earlier_records`'s `say`)."""
+
+
+def recorded_before(path: Path, session: str, until: Path | None = None, say: bool = True
                     ) -> tuple[list[tuple[str, bytes, int]], list[dict], list[dict]]:
     """What the session's recordings at `path` hold together (`recordings_of`, oldest first up to
     `until` if given, each read by `earlier_records`), each message once (a restarted recorder's file
@@ -470,12 +476,12 @@ def recorded_before(path: Path, session: str, until: Path | None = None
     (`earlier_losses`). Returns ([(key, payload, log_time_ns)], [account], [losses]). The newest file alone
     is not enough: a restarted recorder's copy reaches its disk only at its flushes and is not in
     its journal (which holds what it received), so killed before its first flush it leaves only
-    what came live, and the older files still hold the rest."""
+    what came live, and the older files still hold the rest. `say`: as `earlier_records`'s."""
     held: list[tuple[str, bytes, int]] = []
     seen: set[tuple[str, bytes]] = set()
     journals, losses = [], []
     for earlier in recordings_of(path):
-        records, journal, lost = earlier_records(earlier, session, held)
+        records, journal, lost = earlier_records(earlier, session, held, say)
         for key, payload, log_ns in records:
             if (key, payload) not in seen:
                 seen.add((key, payload))
@@ -500,7 +506,9 @@ def same_live_session(bus: Bus, session: str, path: Path, timeout_s: float = 3.0
     busy past the ask's timeout (load 40-66) had the restarted recorder refuse its own session; with none on
     the bus the refusal is at once. `stop` set: no more asks."""
     first: dict[str, tuple[int, bytes]] = {}
-    for key, data, _ in recorded_before(path, session)[0]:
+    # (unsaid: a recorder that continues reads them again and says what it does not take; said here too, each
+    # warning came twice)
+    for key, data, _ in recorded_before(path, session, say=False)[0]:
         source = key.split("/")[2] if key.count("/") == 3 else ""
         if source and source != Recorder.name:
             try:

@@ -79,8 +79,12 @@ def test_a_restarted_recorder_leaves_another_recordings_journal_of_its_session_i
         p.send_signal(signal.SIGTERM)
         p.communicate(timeout=60)
         assert second.wait(timeout=30) == 0, second.stderr.read()
+        said = second.stderr.read()
     finally:
         _stop(p, first, second)
+    # said once: the recorder read the earlier recordings twice (is it the same live session; then its copy),
+    # and each reading logged its warning
+    assert said.count("is not taken") == 1, said
     log = read_log(restarted)
     assert log.whole
     account = log.metadata["pairplay.recorder.journal"]

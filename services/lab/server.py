@@ -33,7 +33,9 @@ from pairplay.services.session import run_session
 class WebServer:
     def __init__(self, app, host: str = "127.0.0.1", port: int = 0, ssl_certfile: str | None = None,
                  ssl_keyfile: str | None = None):
-        # DeadlineH11: a request's head within READ_S, at most MAX_CONNECTIONS open (deadlines.py)
+        # DeadlineH11: a request's head within READ_S, at most MAX_CONNECTIONS open (deadlines.py). A class, never
+        # "auto": uvicorn would take httptools when it is importable (a user's venv may hold it), which bounds no
+        # request head's size (h11 refuses one past 16 KiB) and has none of these deadlines (tests/test_lab_h11.py)
         config = uvicorn.Config(app, host=host, port=port, log_level="warning", lifespan="off", http=DeadlineH11,
                                 ws_max_size=MAX_FRAME, ws_ping_interval=5.0, ws_ping_timeout=10.0,
                                 ssl_certfile=ssl_certfile, ssl_keyfile=ssl_keyfile, access_log=False,
