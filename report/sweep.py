@@ -4,7 +4,8 @@ Rule: a sweep is read from a TOML file (`read_grid`): fixed study settings in
 [study], lists of values in [grid] (the sweep is their product), and the
 seeds (`seeds = 5` for 0..4, or a list). `personas` is a comma-separated
 string or a TOML list of names, as fixed in [study] and as each value of a
-[grid] axis (`personas = [["blind", "deaf"], ["blind"]]`). Each (setting, seed) is one cell:
+[grid] axis (`personas = [["blind", "deaf"], ["blind"]]`; the same personas in another order are the same
+value, `_axis_value`). Each (setting, seed) is one cell:
 `cell_measures` runs the study's training, evaluation (and, with
 `reuse = true`, the policy-reuse experiment) through `pairplay.core.study` and
 returns plain numbers, so a cell's result depends on its settings and seed
@@ -137,6 +138,29 @@ def _no_setting(key: str, place: str) -> str:
             + (f" (did you mean `{near}`?)" if near else f"; known: {', '.join(sorted(SWEEPABLE))}"))
 
 
+def _axis_value(key: str, value) -> object:
+    """What an axis value is, for the grid's repeat check: a `personas` value is the set of personas it
+    names, whatever their order ("deaf,blind" is "blind,deaf": each persona's games are seeded by its key,
+    core/study.py `train`, and each measure is named by it, so the order changes no number; a trial's
+    sweep computed both, twice the work for identical rows); any other value is itself (its repr: 1 is
+    not True)."""
+    if key == "personas" and isinstance(value, str):
+        from pairplay.core.personas import persona
+        from pairplay.lists import comma_items
+
+        def known(name: str) -> str:
+            try:
+                return persona(name).key  # a name and its key are one persona
+            except KeyError:  # refused with its own line by the study's check, after this one
+                return name
+
+        try:
+            return tuple(sorted(map(known, comma_items(value))))  # sorted, not a set: "blind,blind" is its own mistake
+        except ValueError:  # `a,,b`: the study's check says it
+            return repr(value)
+    return repr(value)
+
+
 def _typed(path: str, at: tuple, value, written: Written):
     """The value of the study setting at `at` (("study", key) or ("grid", key, n)) as its StudySettings field
     takes it; GridError `FILE: [table] key: what` (schemas/tomlplace.py Written), the value as typed."""
@@ -228,10 +252,15 @@ def _read_grid(path: str, parse_float) -> Grid:
             raise GridError(f"{path}: {written.place(('grid', k))}: must be a non-empty list of values, "
                             f"got {written.typed(('grid', k), values)}")
         axes[k] = [_typed(path, ("grid", k, n), v, written) for n, v in enumerate(values)]
-        again = next((n for n, v in enumerate(axes[k]) if repr(v) in map(repr, axes[k][:n])), None)
+        same = [_axis_value(k, v) for v in axes[k]]
+        again = next((n for n, v in enumerate(same) if v in same[:n]), None)
         if again is not None:
-            raise GridError(f"{path}: {written.place(('grid', k))}: repeats a value "
-                            f"({written.typed(('grid', k, again), values[again])})")
+            first = same.index(same[again])
+            said = written.typed(("grid", k, again), values[again])
+            if repr(axes[k][first]) != repr(axes[k][again]):  # the same personas in another order
+                said += (f" = {written.typed(('grid', k, first), values[first])}: the same personas in another "
+                         "order, the same cells")
+            raise GridError(f"{path}: {written.place(('grid', k))}: repeats a value ({said})")
     clash = sorted(set(base) & set(axes))
     if clash:
         raise GridError(f"{path}: {written.place(('grid', clash[0]))}: both fixed in [study] and swept in [grid]")
