@@ -645,8 +645,8 @@ def _cell_result(future, address: str, by_id: dict[str, Cell]) -> tuple[str, dic
     """A Dask cell's (id, measures); each way the cluster can lose it is WorkerLost in our words (Dask's
     were two tracebacks, exit 1): the scheduler gone (the future cancelled, "scheduler-connection-lost"),
     a cell whose workers died one after another (KilledWorker: the cell is named, it may need more memory
-    than a worker has), or the cell's own exception on a worker (pairplay missing there, or another
-    version: its type and message, and where)."""
+    than a worker has), or the cell's own exception on a worker (out of memory there, say: its type and
+    message, and which cell; `check_cluster_pairplay` has refused a worker without this pairplay before)."""
     from distributed.client import FutureCancelledError
     from distributed.scheduler import KilledWorker
 
@@ -662,7 +662,7 @@ def _cell_result(future, address: str, by_id: dict[str, Cell]) -> tuple[str, dic
     except Exception as err:  # noqa: BLE001 - raised on a worker: said, with where it ran (never a bug of ours here)
         why = " ".join(str(err).split())[:ERROR_SAID]
         raise WorkerLost(f"{which} failed on a Dask worker: {type(err).__name__}{': ' + why if why else ''} "
-                         "(the workers need this pairplay installed)") from None
+                         "(its traceback is in the worker's log)") from None
 
 
 # what each Dask worker evaluates before any cell: the module a cell runs in, and the version that answers
