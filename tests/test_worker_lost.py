@@ -170,3 +170,41 @@ def test_a_dask_worker_that_cannot_load_pairplay_is_one_line_naming_it_before_an
     assert "cannot load pairplay (ImportError: no pairplay on this worker): install pairplay " in err, err
     assert err.rstrip().endswith(f"(--scheduler {address})"), err
     assert not (tmp_path / "out").exists()
+
+
+def _faulty_worker_cluster(tmp_path: Path, fault: str, scheduler_env: dict | None = None):
+    """A real `dask scheduler` and one `dask worker` whose cells meet `fault` (a sitecustomize.py on its
+    PYTHONPATH replaces report/sweep.py cell_measures in that worker only). Returns (address, processes)."""
+    site = tmp_path / "site"
+    site.mkdir()
+    (site / "sitecustomize.py").write_text(
+        "import os, signal\nimport pairplay.report.sweep as sweep\n\n"
+        f"def cell_measures(settings, reuse=False):\n    {fault}\n\nsweep.cell_measures = cell_measures\n")
+    address = f"tcp://127.0.0.1:{_free_port()}"
+    scheduler = _dask("scheduler", "--host", "127.0.0.1", "--port", address.rsplit(":", 1)[1],
+                      "--dashboard-address", "127.0.0.1:0", cwd=tmp_path, env={**os.environ, **(scheduler_env or {})})
+    worker = _dask("worker", address, "--nthreads", "1", "--nworkers", "1", "--no-dashboard", cwd=tmp_path,
+                   env={**os.environ, "PYTHONPATH": str(site)})
+    return address, (worker, scheduler)
+
+
+@pytest.mark.parametrize("fault, env, said", [
+    ("raise RuntimeError('out of luck')", {},
+     "failed on a Dask worker: RuntimeError: out of luck (its traceback is in the worker's log)"),
+    # the worker dies under the cell, as the OOM killer's SIGKILL would; the scheduler gives up at once
+    ("os.kill(os.getpid(), signal.SIGKILL)", {"DASK_DISTRIBUTED__SCHEDULER__ALLOWED_FAILURES": "0"},
+     "killed every Dask worker that ran it (Dask's KilledWorker"),
+])
+def test_a_cell_that_fails_or_kills_its_dask_worker_is_one_line_naming_the_cell(tmp_path, fault, env, said):
+    pytest.importorskip("dask.distributed")
+    (tmp_path / "grid.toml").write_text(LONG.format(rounds=20))
+    address, processes = _faulty_worker_cluster(tmp_path, fault, env)
+    try:
+        _wait_for_a_worker(address)
+        sweep = _pairplay("sweep", "grid.toml", "--scheduler", address, "--out", "out", "-q", cwd=tmp_path)
+        err = _one_line(sweep)
+    finally:
+        _stop(*processes)
+    assert err.startswith("pairplay sweep: cell "), err
+    assert "reward_bonus=" in err and said in err, err
+    assert err.rstrip().endswith("nothing more was written") and not (tmp_path / "out").exists(), err
