@@ -9,7 +9,9 @@ check, init, ...`, `pairplay run`'s service alike), argparse's own refusals (Par
 system refused), whenever it comes (before the work or during it: a full disk
 part way). A session whose recording could not be written (`RecordingFailed`,
 whichever verb ran it) is one line and exit 1, a session that failed (README's
-exit table). Anything else is a bug of ours and keeps its traceback.
+exit table), and so is work lost with a worker process or a Dask cluster (`WorkerLost`:
+killed by the out-of-memory killer, a scheduler that stopped answering), the line ending with what
+was kept. Anything else is a bug of ours and keeps its traceback.
 
 A signal, at any moment (while the verb loads, waits, works or shuts down),
 ends the verb with 128 + its number: 130 for SIGINT (Ctrl-C), 143 for
@@ -62,7 +64,7 @@ from pairplay import __version__, environment, signals, testpause, threadstart
 from pairplay.cli import interrupts
 from pairplay.cli.interrupts import DeferredInterrupt
 from pairplay.cli.args import check_study_folders
-from pairplay.errors import UserError, command_word, escaped, out_of_threads
+from pairplay.errors import UserError, WorkerLost, command_word, escaped, out_of_threads
 from pairplay.nearest import nearest
 
 # verb -> (module, one-line help)
@@ -575,6 +577,9 @@ def _main(argv: list[str], arm=None) -> int:
     except UserError as err:  # a fix naming an option this verb lacks is left out (errors.UserError)
         print(f"pairplay {_who(args)}: {err.line(options_of(chosen, args))}", file=sys.stderr)
         return 2
+    except WorkerLost as err:  # a worker process or a cluster lost: one line, what stayed, exit 1 (errors.py)
+        print(f"pairplay {_who(args)}: {escaped(str(err))}; {escaped(nothing_more())}", file=sys.stderr)
+        return 1
     except OSError as err:  # the file system or network refused: the user's setup, not our bug
         print(f"pairplay {_who(args)}: {escaped(os_error_line(err))}", file=sys.stderr)
         return 2

@@ -34,6 +34,9 @@ line says why and so; with none finished, nothing the sweep made stays
 (`stopped`). A cell that fails (a fault, not a mistake: every setting is checked
 before any work, its memory included, report/study.py) leaves the same: with no
 cell finished, no grid.toml that would refuse the corrected grid's re-run.
+Work lost with a worker process or the Dask cluster (pairplay.errors.WorkerLost: a
+worker killed, the scheduler gone, a cell failed on a Dask worker) is the same
+stop, its line saying what happened, exit 1 (README's exit table).
 """
 
 from __future__ import annotations
@@ -46,7 +49,7 @@ from pathlib import Path
 
 from pairplay.cli.args import output_folder, workers
 from pairplay.cli.progress import bar as progress
-from pairplay.errors import OptionError, OutputError, escaped
+from pairplay.errors import OptionError, OutputError, WorkerLost, escaped
 from pairplay.outputs import check_folder, hold, write_text, written
 from pairplay.report.sweep import (GridError, check_scheduler, check_sweep_memory, finished_cells, is_cell_file,
                                     read_grid, run_sweep, summary_files, summary_to_write,
@@ -210,6 +213,10 @@ def run(args) -> int:
         if stopped(out, grid, made, had_copy, os_error_line(err)) is None:
             raise  # nothing kept: cli/main.py says the line (README: exit 2, nothing written)
         return 2
+    except WorkerLost as err:  # a worker process or the cluster lost (errors.py): the cells finished stay, exit 1
+        if stopped(out, grid, made, had_copy, str(err)) is None:
+            raise  # nothing kept: cli/main.py says the line (nothing it made stays)
+        return 1
     except Exception:  # a cell failed (a fault, not the user's): with no cell finished, nothing it made stays,
         if not finished_cells(out, grid):  # so a corrected grid runs into the same --out (it was refused as
             stopped(out, grid, made, had_copy, "failed")  # "another grid's sweep"); finished cells stay to resume

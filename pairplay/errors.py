@@ -64,6 +64,14 @@ class OptionError(UserError, ValueError):
     """An option's value is out of its range or meaningless with the others."""
 
 
+class WorkerLost(Exception):
+    """Work handed to another process was lost: a pool's worker process died (the OOM killer's SIGKILL),
+    a Dask scheduler stopped answering, a cell failed on a Dask worker. Not the user's mistake and not a
+    bug of ours: `pairplay.cli.main` says `str(err)` on ONE line, what is kept after it, and exits 1
+    (README's exit table: a verb that lost a part it needs, as a session that lost a service). The
+    message says what happened in our words; the verb that knows what it kept adds that."""
+
+
 # what a line must not hold raw: control characters (C0, DEL, C1: a newline split "one line" in two, an ESC
 # drives the terminal), the Unicode line and paragraph separators, and lone surrogates (a file name's bytes
 # that are not UTF-8, as os.fsdecode gives them: printing one raised UnicodeEncodeError)

@@ -26,6 +26,13 @@ differ. Not prctl(PR_SET_PDEATHSIG): Linux sends that when the *thread* that for
 child ends, and a pool's workers are started by whichever thread submits (off_main_thread's
 among them), which may end long before the process.
 
+A worker that dies while the pool holds work (SIGKILL from the system's out-of-memory killer, a crash)
+breaks the pool: every waiting future, and every later `submit`, raises BrokenProcessPool, whose text
+names no process and no cause (a trial: its traceback, exit 1). `result_of` and the pool's `submit`
+turn it into `pairplay.errors.WorkerLost` naming the worker that died and how (`died_how`: the signal
+or exit status, from the pool's record of every process it started), which the command line says in
+one line, exit 1.
+
 `off_main_thread` runs a call that Python cannot safely interrupt (numba's
 compiler: see cli/interrupts.py) in a thread while the main thread waits for
 it. Ctrl-C interrupts the wait at once; the call is abandoned, still running,
@@ -42,7 +49,10 @@ import signal
 import threading
 import time
 from concurrent.futures import Future, ProcessPoolExecutor
+from concurrent.futures.process import BrokenProcessPool
 from typing import Callable, Iterator, TypeVar
+
+from pairplay.errors import WorkerLost
 
 T = TypeVar("T")
 
@@ -90,12 +100,60 @@ class _ParentInterruptedPool(ProcessPoolExecutor):
     initializer could ignore SIGINT, waits blocked and is discarded by `_worker_start`
     instead of printing a traceback from the child's start-up."""
 
+    def __init__(self, *args, **kwargs):
+        super().__init__(*args, **kwargs)
+        # every worker it started, by pid: the pool forgets a dead one, and `died_how` must find it after
+        self.started: dict[int, multiprocessing.process.BaseProcess] = {}
+
+    def _spawn_process(self):
+        super()._spawn_process()
+        self.started.update(self._processes)
+
     def submit(self, fn, /, *args, **kwargs):
         blocked = signal.pthread_sigmask(signal.SIG_BLOCK, GROUP_SIGNALS)
         try:
             return super().submit(fn, *args, **kwargs)
+        except BrokenProcessPool:  # a worker died before: said as the waiting futures say it (`result_of`)
+            raise worker_lost(self) from None
         finally:
             signal.pthread_sigmask(signal.SIG_SETMASK, blocked)  # a Ctrl-C that came meanwhile is raised now
+
+
+def died_how(pool: ProcessPoolExecutor) -> str:
+    """How the pool's worker that broke it ended: "killed by signal 9 (SIGKILL: ...)", "exit status 3".
+    The one that died first is not known; a signal other than SIGTERM is preferred, as the pool ends the
+    others with SIGTERM once one died."""
+    manager = getattr(pool, "_executor_manager_thread", None)
+    if manager is not None and manager is not threading.current_thread():
+        # it marks the futures broken, then ends and joins the workers: until then a dead worker's exit
+        # status may be unread (read by its join, not here: a test's line said "how is not known")
+        manager.join(timeout=5)
+    ended = [p.exitcode for p in getattr(pool, "started", {}).values() if p.exitcode is not None]
+    if not ended:
+        return "how is not known"
+    code = min(ended, key=lambda c: (c == -signal.SIGTERM, c >= 0))
+    if code >= 0:
+        return f"exit status {code}"
+    try:
+        name = signal.Signals(-code).name
+    except ValueError:
+        name = "?"
+    why = ": the system's out-of-memory killer sends it" if -code == signal.SIGKILL else ""
+    return f"killed by signal {-code} ({name}{why})"
+
+
+def worker_lost(pool: ProcessPoolExecutor) -> WorkerLost:
+    """The WorkerLost of a pool broken by a worker's death (module rule)."""
+    return WorkerLost(f"a worker process died ({died_how(pool)}) while it held work")
+
+
+def result_of(pool: ProcessPoolExecutor, future: Future):
+    """`future.result()` of work submitted to `pool`; a dead worker is WorkerLost (module rule), not
+    BrokenProcessPool. An exception the work itself raised is raised as it is."""
+    try:
+        return future.result()
+    except BrokenProcessPool:
+        raise worker_lost(pool) from None
 
 
 def max_workers() -> int:

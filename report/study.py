@@ -52,7 +52,7 @@ from pairplay.lists import comma_items
 from pairplay.numbers import counted, shown, type_name
 from pairplay.schemas.config import DEFAULT_REWARD_BONUS, LearnerConfig, LSPIConfig, REWARD_BONUS_RULES, lspi_unused
 from pairplay.outputs import manifest_name, output_folder
-from pairplay.processes import off_main_thread, process_pool, stop_pool
+from pairplay.processes import off_main_thread, process_pool, result_of, stop_pool
 from pairplay.schemas.policy import write_policy
 
 from pairplay.report import future, plots
@@ -512,7 +512,7 @@ class _Figures:
         try:
             if not abandon:
                 for job in self._jobs:
-                    job.result()
+                    result_of(self._pool, job)  # jobs are only the child's: a dead child is WorkerLost
         finally:
             if self._pool is not None:
                 stop_pool(self._pool, abandon)

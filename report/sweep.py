@@ -4,7 +4,8 @@ Rule: a sweep is read from a TOML file (`read_grid`): fixed study settings in
 [study], lists of values in [grid] (the sweep is their product), and the
 seeds (`seeds = 5` for 0..4, or a list). `personas` is a comma-separated
 string or a TOML list of names, as fixed in [study] and as each value of a
-[grid] axis (`personas = [["blind", "deaf"], ["blind"]]`). Each (setting, seed) is one cell:
+[grid] axis (`personas = [["blind", "deaf"], ["blind"]]`; the same personas in another order are the same
+value, `_axis_value`). Each (setting, seed) is one cell:
 `cell_measures` runs the study's training, evaluation (and, with
 `reuse = true`, the policy-reuse experiment) through `pairplay.core.study` and
 returns plain numbers, so a cell's result depends on its settings and seed
@@ -12,7 +13,10 @@ only, wherever it runs. `run_sweep` runs the cells that have no result yet:
 in this process (or `workers` local processes), or on a Dask distributed
 cluster (`scheduler` = its address); each finished cell is written at once to
 cells/<id>.json (atomically), so an interrupted sweep resumes without
-recomputing finished cells. A cell file is checked whole when read
+recomputing finished cells. Work lost with a worker process or the cluster (a worker
+killed, the scheduler gone, a cell failed on a Dask worker) is `WorkerLost` in our words
+(`_cell_result`, pairplay/processes.py `result_of`), and a cluster whose workers cannot
+load this pairplay is refused before any cell (`check_cluster_pairplay`). A cell file is checked whole when read
 (`read_cells`: a msgspec CellFile, its seed and setting the cell's, its
 measures exactly the cell's, each a finite number); one that cannot be used
 is not a finished cell: it is computed again, with a warning naming the file
@@ -36,6 +40,7 @@ Measures (picks per round: 18 is perfect play, lower is better):
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import itertools
 import json
@@ -44,6 +49,7 @@ import math
 import sys
 import time
 import tomllib
+from concurrent.futures import CancelledError
 from dataclasses import dataclass, fields
 from pathlib import Path
 from typing import Any, Callable, Iterable
@@ -52,12 +58,12 @@ import msgspec
 import numpy as np
 
 from pairplay import csvcell
-from pairplay.errors import OptionError, escaped
+from pairplay.errors import OptionError, WorkerLost, escaped
 from pairplay.inputs import check_input
 from pairplay.nearest import nearest
 from pairplay.numbers import counted, shown, type_name, typed_floats
 from pairplay.outputs import manifest_name, output_file, output_folder, write_text
-from pairplay.processes import check_workers, worker_pool
+from pairplay.processes import check_workers, result_of, worker_pool
 from pairplay.schemas.jsonfile import MAX_SAID, empty, in_words, toml_words, without_bom
 from pairplay.schemas.tomlplace import TOP, Written, misplaced, table_not_value
 from pairplay.core.geometry import PERFECT_PICKS
@@ -130,6 +136,29 @@ def _no_setting(key: str, place: str) -> str:
     near = nearest(key, SWEEPABLE)  # a misspelt setting
     return (f"{place}: no study setting `{key}`"
             + (f" (did you mean `{near}`?)" if near else f"; known: {', '.join(sorted(SWEEPABLE))}"))
+
+
+def _axis_value(key: str, value) -> object:
+    """What an axis value is, for the grid's repeat check: a `personas` value is the set of personas it
+    names, whatever their order ("deaf,blind" is "blind,deaf": each persona's games are seeded by its key,
+    core/study.py `train`, and each measure is named by it, so the order changes no number; a trial's
+    sweep computed both, twice the work for identical rows); any other value is itself (its repr: 1 is
+    not True)."""
+    if key == "personas" and isinstance(value, str):
+        from pairplay.core.personas import persona
+        from pairplay.lists import comma_items
+
+        def known(name: str) -> str:
+            try:
+                return persona(name).key  # a name and its key are one persona
+            except KeyError:  # refused with its own line by the study's check, after this one
+                return name
+
+        try:
+            return tuple(sorted(map(known, comma_items(value))))  # sorted, not a set: "blind,blind" is its own mistake
+        except ValueError:  # `a,,b`: the study's check says it
+            return repr(value)
+    return repr(value)
 
 
 def _typed(path: str, at: tuple, value, written: Written):
@@ -223,10 +252,15 @@ def _read_grid(path: str, parse_float) -> Grid:
             raise GridError(f"{path}: {written.place(('grid', k))}: must be a non-empty list of values, "
                             f"got {written.typed(('grid', k), values)}")
         axes[k] = [_typed(path, ("grid", k, n), v, written) for n, v in enumerate(values)]
-        again = next((n for n, v in enumerate(axes[k]) if repr(v) in map(repr, axes[k][:n])), None)
+        same = [_axis_value(k, v) for v in axes[k]]
+        again = next((n for n, v in enumerate(same) if v in same[:n]), None)
         if again is not None:
-            raise GridError(f"{path}: {written.place(('grid', k))}: repeats a value "
-                            f"({written.typed(('grid', k, again), values[again])})")
+            first = same.index(same[again])
+            said = written.typed(("grid", k, again), values[again])
+            if repr(axes[k][first]) != repr(axes[k][again]):  # the same personas in another order
+                said += (f" = {written.typed(('grid', k, first), values[first])}: the same personas in another "
+                         "order, the same cells")
+            raise GridError(f"{path}: {written.place(('grid', k))}: repeats a value ({said})")
     clash = sorted(set(base) & set(axes))
     if clash:
         raise GridError(f"{path}: {written.place(('grid', clash[0]))}: both fixed in [study] and swept in [grid]")
@@ -556,6 +590,7 @@ def check_scheduler(address: str) -> None:
 
 NO_WORKER_S = 30.0  # how long a sweep waits for a cluster with no worker (none yet, or every one lost) before it stops
 WORKER_POLL_S = 1.0  # how often a sweep waiting for its cells asks the scheduler how many workers it has
+ERROR_SAID = 200  # the most of a worker's exception text a line shows (one line, not a traceback's worth)
 
 
 def _finished_while_workers(client, address: str, futures: list, kept: Callable[[], int], total: int,
@@ -577,8 +612,17 @@ def _finished_while_workers(client, address: str, futures: list, kept: Callable[
             done, pending = wait(pending, timeout=WORKER_POLL_S, return_when="FIRST_COMPLETED")
         except TimeoutError:
             done = set()
+        except CancelledError:  # FuturesCancelledError: the scheduler lost ("scheduler-connection-lost")
+            raise _scheduler_lost(address) from None
         yield from done
-        if done or not pending or client.nthreads():
+        if done or not pending:
+            alone_since = None
+            continue
+        try:
+            workers = client.nthreads()
+        except OSError:  # CommClosedError, a timeout: the scheduler is gone (its cancelled futures say it too)
+            raise _scheduler_lost(address) from None
+        if workers:
             alone_since = None
             continue
         now = time.monotonic()
@@ -591,6 +635,80 @@ def _finished_while_workers(client, address: str, futures: list, kept: Callable[
                               f"{kept()} of {counted(total, 'cell')} finished, kept in {cells}: start a worker "
                               f"(`dask worker {address}`) and the same command resumes from them",
                               f"--scheduler {address}")
+
+
+def _scheduler_lost(address: str) -> WorkerLost:
+    return WorkerLost(f"the Dask scheduler at {address} stopped answering (connection lost)")
+
+
+def _cell_result(future, address: str, by_id: dict[str, Cell]) -> tuple[str, dict]:
+    """A Dask cell's (id, measures); each way the cluster can lose it is WorkerLost in our words (Dask's
+    were two tracebacks, exit 1): the scheduler gone (the future cancelled, "scheduler-connection-lost"),
+    a cell whose workers died one after another (KilledWorker: the cell is named, it may need more memory
+    than a worker has), or the cell's own exception on a worker (out of memory there, say: its type and
+    message, and which cell; `check_cluster_pairplay` has refused a worker without this pairplay before)."""
+    from distributed.client import FutureCancelledError
+    from distributed.scheduler import KilledWorker
+
+    cell = by_id.get(str(future.key).removeprefix("pairplay-cell-"))
+    which = f"cell {cell.id} ({setting_label(cell.setting)}, seed {cell.seed})" if cell else f"task {future.key}"
+    try:
+        return future.result()
+    except FutureCancelledError:
+        raise _scheduler_lost(address) from None
+    except KilledWorker:
+        raise WorkerLost(f"{which} killed every Dask worker that ran it (Dask's KilledWorker: it may need more "
+                         "memory than a worker has)") from None
+    except Exception as err:  # noqa: BLE001 - raised on a worker: said, with where it ran (never a bug of ours here)
+        why = " ".join(str(err).split())[:ERROR_SAID]
+        raise WorkerLost(f"{which} failed on a Dask worker: {type(err).__name__}{': ' + why if why else ''} "
+                         "(its traceback is in the worker's log)") from None
+
+
+# what each Dask worker evaluates before any cell: the module a cell runs in, and the version that answers
+WORKER_LOADS = "__import__('pairplay.report.sweep').__version__"
+
+
+def check_cluster_pairplay(client, address: str) -> None:
+    """OptionError naming --scheduler unless every worker of the cluster loads this pairplay (README: the
+    workers need it installed). A worker that could not (not installed there, or broken) failed to read
+    its first cell and died, its error only in its own log; the sweep then waited, saying nothing, or
+    that the cluster had no worker (a trial). Asked with `eval` of WORKER_LOADS, a builtin a worker
+    unpickles without pairplay; another version is refused too: its cells would not be this one's."""
+    from pairplay import __version__
+
+    try:
+        said = client.run(eval, WORKER_LOADS, on_error="return")
+    except OSError:
+        raise _scheduler_lost(address) from None
+    for worker, got in sorted(said.items()):
+        if isinstance(got, BaseException):
+            why = " ".join(str(got).split())[:ERROR_SAID]
+            what = f"cannot load pairplay ({type(got).__name__}{': ' + why if why else ''})"
+        elif got != __version__:
+            what = f"has pairplay {shown(got)}, not this {__version__}"
+        else:
+            continue
+        raise OptionError(f"the Dask worker {worker} {what}: install pairplay {__version__} where the workers run "
+                          "(pip install -e '.[cluster]'), then the same command", f"--scheduler {address}")
+
+
+@contextlib.contextmanager
+def _dask_quiet() -> Iterable[None]:
+    """Dask's own log lines off the terminal while a sweep waits on its cluster: a scheduler lost printed
+    Dask's ERROR traceback before the sweep's one line (`_cell_result` says what happened)."""
+    def not_dasks(record: logging.LogRecord) -> bool:
+        return record.name.partition(".")[0] not in ("distributed", "tornado")
+
+    # on the handlers, not the loggers: Dask's config gives its loggers levels of their own (distributed.client)
+    handlers = list(logging.root.handlers)
+    for handler in handlers:
+        handler.addFilter(not_dasks)
+    try:
+        yield
+    finally:
+        for handler in handlers:
+            handler.removeFilter(not_dasks)
 
 
 def run_sweep(grid: Grid, out: str | Path, *, scheduler: str | None = None, workers: int = 1,
@@ -626,17 +744,18 @@ def run_sweep(grid: Grid, out: str | Path, *, scheduler: str | None = None, work
             client = Client(scheduler, timeout=f"{SCHEDULER_TIMEOUT_S}s")
         except OSError:  # it answered the check a moment ago (a new user's trial: "Timed out trying to connect ..." alone)
             raise _scheduler_refused(scheduler, "the Dask scheduler there stopped answering") from None
-        with client:
+        with _dask_quiet(), client:
+            check_cluster_pairplay(client, scheduler)  # before any cell: a worker without it dies on its first
             futures = [client.submit(_run_cell, grid, c, key=f"pairplay-cell-{c.id}", pure=True) for c in todo]
             for future in _finished_while_workers(client, scheduler, futures, lambda: len(finished_cells(out, grid)),
                                                   len(cells), out / "cells"):
-                store(*future.result())
+                store(*_cell_result(future, scheduler, by_id))
         where = f"dask {scheduler}"
     elif workers > 1:
         from concurrent.futures import as_completed as done_first
         with worker_pool(workers) as pool:
             for future in done_first([pool.submit(_run_cell_alone, grid, c) for c in todo]):
-                store(*future.result())
+                store(*result_of(pool, future))  # a worker killed (out of memory): WorkerLost, not a traceback
         where = f"{counted(workers, 'local process', 'local processes')}"
     else:
         for c in todo:

@@ -10,27 +10,9 @@ import time
 from pathlib import Path
 
 import pytest
+from childprocs import alive as _alive, children as _children
 
 EXAMPLES = Path(__file__).parent.parent / "examples"
-
-
-def _children(pid: int) -> list[int]:
-    found = []
-    for task in Path(f"/proc/{pid}/task").glob("*"):
-        try:
-            found += [int(c) for c in (task / "children").read_text().split()]
-        except OSError:
-            pass
-    return found
-
-
-def _alive(pid: int) -> bool:
-    """Running, not a zombie waiting for whoever reaps it (in a container pid 1 may never)."""
-    try:
-        stat = Path(f"/proc/{pid}/stat").read_text()
-    except OSError:
-        return False
-    return stat.rsplit(")", 1)[1].split()[0] != "Z"
 
 
 def test_a_study_killed_by_sigkill_leaves_no_worker_behind(tmp_path):

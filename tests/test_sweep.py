@@ -168,11 +168,32 @@ def test_a_cluster_with_no_worker_is_said_and_ends_in_one_line_naming_the_cells_
     ("[study]\npersonas = ['blind', '']", "each item of the list is one persona's name"),
     ("[study]\npersonas = ['blind', 3]", r"\[study\] personas: must be text, got \['blind', 3\]"),
     ("[grid]\npersonas = [['blind', 'blind']]", "names blind twice"),
+    # the same personas in another order: the same cells (a trial: both computed, identical rows)
+    ("[grid]\npersonas = [['blind', 'deaf'], ['deaf', 'blind']]",
+     r"\[grid\] personas: repeats a value \(\['deaf', 'blind'\] = \['blind', 'deaf'\]: the same personas in another order"),
+    ("[grid]\npersonas = ['blind,deaf', 'deaf, Blind']", r"repeats a value \('deaf, Blind' = 'blind,deaf': the same personas"),
 ])
 def test_a_grid_that_cannot_run_is_refused_naming_the_file_and_key(tmp_path, text, needle):
     with pytest.raises(GridError, match=needle) as info:
         read_grid(_grid(tmp_path, text))
     assert str(tmp_path / "grid.toml") in str(info.value)
+
+
+def test_the_order_of_personas_changes_no_measure_so_a_grid_takes_one_order():
+    """Why the grid refuses `personas = [["blind","deaf"], ["deaf","blind"]]`: each persona's games are seeded
+    by its key (core/study.py train) and each measure named by it, so another order gives the same numbers,
+    the policy-reuse experiment's too."""
+    from pairplay.report.study import StudySettings
+    from pairplay.report.sweep import cell_measures
+
+    def measures(personas: str) -> dict:
+        return cell_measures(StudySettings(personas=personas, games=2, rounds=30, eval_rounds=5, seed=3,
+                                           reuse_last=10), reuse=True)
+
+    forward, backward = measures("blind,deaf,vincent"), measures("vincent,deaf,blind")
+    assert forward.keys() == backward.keys()
+    # all/ratio is a mean of the personas' ratios: summed in another order it may differ in its last bit
+    assert forward == {k: pytest.approx(v, rel=1e-12, abs=0) for k, v in backward.items()}
 
 
 def test_personas_may_be_a_toml_list_the_same_sweep_as_the_string(tmp_path):
