@@ -815,6 +815,11 @@ class StudyData:
         return steps
 
     def next_step(self) -> Step | None:
+        """The plan's first step not done; None when it is complete, and when nobody is registered: a study's
+        first step is then to register people, which is no step of the plan (its blocked combination was the
+        console's "next" while `protocol status` said to register first: trial27 F12a)."""
+        if not self.state.participants:
+            return None
         for s in self.plan():
             if not s.done:
                 return s

@@ -157,6 +157,11 @@ class StudyRunner:
         # in serve the game runs in the console's thread, so the verb's main thread learns of it only here
         self.running: Running | None = None
         self.stopped: Running | None = None
+        # every questionnaire link this process gave (token -> its session) and the ones answered: a link no longer
+        # the current game's is told apart from one that never was (`spent_link`; trial27 F12b: a participant who
+        # reloaded the page after sending saw "this questionnaire link is not the current game's", as an error)
+        self._links: dict[str, str] = {}
+        self._answered: set[str] = set()
 
     # -- a game --------------------------------------------------------------
     def config_for(self, pid: str, phase_id: str, game: int, scripted: str = "") -> SessionConfig:
@@ -258,6 +263,8 @@ class StudyRunner:
         # what this participant is asked, not whether the phase names a questionnaire: one whose items are all
         # for the others (`ask = "returning"` for a new participant) asks nothing, and nothing is waited for
         asks = bool(self.questions_for(pid, phase_id)[1])
+        if asks:
+            self._links[token] = config.session
         self.live = Live(session=config.session, participant=pid, phase=phase_id, game=game,
                          rounds=config.rounds, state="playing", board=player is not None, scripted=config.scripted,
                          questionnaire_token=token if asks else "", board_token=token)
@@ -461,7 +468,16 @@ class StudyRunner:
                     seq=1, time_ns=time.time_ns())
         self._put(event_key(session, "board", "QuestionnaireAnswered"), ev.encode_event(e))
         live.questionnaire_token = ""  # one answer per game: once published (answers refused may be sent again)
+        self._answered.add(token)
         return e
+
+    def spent_link(self, session: str, token: str) -> str:
+        """What became of a questionnaire link this process gave that is no longer the current game's: "answered"
+        (its answers are recorded), "closed" (its game ended without them: skipped, aborted, timed out), "" if it
+        is no link given here (wrong, or of an earlier process)."""
+        if not token or self._links.get(token) != session:
+            return ""
+        return "answered" if token in self._answered else "closed"
 
     def pause(self, reason: str = "") -> None:
         reason = bounded_reason(reason)  # refused whatever the state: the input itself is wrong

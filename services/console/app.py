@@ -86,7 +86,8 @@ class Console:
         data, live = self.data, self.runner.live
         plan = [{"kind": s.kind, "phase": s.phase, "participant": s.participant, "game": s.game, "done": s.done,
                  "blocked": s.blocked, "label": s.label} for s in data.plan()]
-        nxt = next((p for p in plan if not p["done"]), None)
+        step = data.next_step()  # none while nobody is registered: the page says to register first
+        nxt = next((p for p in plan if step is not None and p["label"] == step.label), None)
         games = [{"session": g.session, "participant": g.participant, "phase": g.phase, "game": g.game + 1,
                   "outcome": g.ended.outcome if g.ended else "running", "reason": g.ended.reason if g.ended else "",
                   "rounds": g.ended.rounds_played if g.ended else 0, "invalid": g.invalid,
@@ -312,10 +313,18 @@ def console_routes(console: Console) -> list:
         return bool(live.questionnaire_token) and hmac.compare_digest(token.encode(), live.questionnaire_token.encode()) \
             and request.query_params.get("session") == live.session
 
+    def refused_link(request: Request) -> Response:
+        """403 for a link that is not the running game's questionnaire's: a link of this process's already
+        answered or closed says so (`spent`: the page thanks or says closed, not an error), any other is wrong."""
+        spent = runner.spent_link(request.query_params.get("session", ""), request.query_params.get("token", ""))
+        said = {"answered": "your answers are recorded", "closed": "this questionnaire is closed"}
+        return JSONResponse({"error": said.get(spent, "this questionnaire link is not the current game's"),
+                             "spent": spent}, status_code=403)
+
     async def q_items(request: Request) -> Response:
         live = runner.live
         if not questionnaire_link_ok(request):
-            return JSONResponse({"error": "this questionnaire link is not the current game's"}, status_code=403)
+            return refused_link(request)
         name, items = runner.questions_for(live.participant, live.phase)
         q = data.study.questionnaire[name]
         return JSONResponse({"title": q.title, "intro": q.intro, "ready": live.state == "questionnaire",
@@ -325,7 +334,7 @@ def console_routes(console: Console) -> list:
         # the link's token before the body is read, as every other route that takes a body (trial28 F13: anyone
         # who reached the port could post here); the body's session and token are the runner's to check again
         if not questionnaire_link_ok(request):
-            return JSONResponse({"error": "this questionnaire link is not the current game's"}, status_code=403)
+            return refused_link(request)
         try:
             asked = _read(await _body(request), AnswerRequest)
             runner.answer_questionnaire(asked.session, asked.token, asked.answers)
