@@ -134,6 +134,20 @@ def atomic_write(path: Path, data: bytes) -> None:
 
 
 KEY_FILE_MODE, KEY_FOLDER_MODE = 0o600, 0o700  # the one file that links ids to names: its owner only
+# the first line `protocol init` writes in a key file: a plain CSV header whose third column names the study that
+# owns the file (`StudyData.key_owner`), so that a second init refuses it while it holds no participant yet
+# (trial29 F9: an empty key file was taken by two studies)
+KEY_HEADER = ("id", "name", "study")
+
+
+def key_header(owner: str) -> list[str]:
+    """The key file's header line of the study `owner` (`StudyData.key_owner`): `id,name,study <owner>`."""
+    return [KEY_HEADER[0], KEY_HEADER[1], f"{KEY_HEADER[2]} {owner}"]
+
+
+def is_key_header(row: list[str]) -> bool:
+    """Whether a key file's first line is the header `protocol init` wrote (`key_header`)."""
+    return len(row) >= 3 and tuple(row[:2]) == KEY_HEADER[:2] and row[2].split(" ", 1)[0] == KEY_HEADER[2]
 
 
 def other_work(folder: Path) -> list[str]:
@@ -154,12 +168,28 @@ def other_work(folder: Path) -> list[str]:
     return sorted(p.name + ("/" if p.is_dir() else "") for p in folder.iterdir() if work(p))
 
 
+def study_folder_holding(path: Path) -> Path | None:
+    """The people's study folder `path` lies in (a folder above it with the study folder's manifest, or its
+    journal and study file: one made before the manifest), None if none. Real names never sit in one (trial29 F8:
+    a key file in ANOTHER study's folder, even its recordings/, was taken: names beside its pseudonymous data)."""
+    for folder in Path(path).resolve().parents:
+        if (folder / PROTOCOL_MANIFEST).is_file() or ((folder / JOURNAL).is_file() and (folder / STUDY_FILE).is_file()):
+            return folder
+    return None
+
+
 def open_key_file(path: Path):
     """The key file for appending, created (with the folder it is in) readable by its owner only, and
     made so if it was not (a key file written 0644 by pairplay <= 0.3, or by hand). `StudyDataError`
-    if it cannot be made (the path says where)."""
+    if it cannot be made (the path says where), or if it is inside a people's study folder
+    (`study_folder_holding`): every writer of real names opens it here."""
     if path.is_dir():  # it said the system's "Is a directory"
         raise StudyDataError("a folder, not a key file: give the path of a CSV file (made if missing)", path)
+    inside = study_folder_holding(path)
+    if inside is not None:
+        raise StudyDataError(f"is inside the study folder {inside}: a key file of real names never lies in a study "
+                             "folder, this study's or another's (they are shared and archived as plain files); give "
+                             "a path outside every study folder", path)
     kind = special_kind(path, follow=True)  # a link to the user's key file is theirs to keep; appended through
     if kind is not None:  # a named pipe: `protocol init --key-file FIFO` waited for ever; a device took the names
         raise StudyDataError(f"is {kind}, not a key file: give the path of a regular CSV file (made if missing)", path)
@@ -172,15 +202,16 @@ def open_key_file(path: Path):
     return open(fd, "a", encoding="utf-8", newline="")
 
 
-def key_file_rows(path: Path) -> list[list[str]]:
+def key_file_rows(path: Path, header: bool = False) -> list[list[str]]:
     """The key file's lines as csv reads them (a quoted cell may hold a CR), blank ones left out: `id,name,study`
-    (`StudyData.key_owner`; `id,name` from an older pairplay, whose study is not said). StudyDataError if it is not
-    there or cannot be read."""
+    (`StudyData.key_owner`; `id,name` from an older pairplay, whose study is not said), after the header line
+    `protocol init` writes (KEY_HEADER; left out unless `header`). StudyDataError if it is not there or cannot be read."""
     if said := refusal(path):  # before opening: a pipe blocked (pairplay/inputs.py)
         raise StudyDataError(said, path)
     try:
         with open(path, encoding="utf-8", newline="") as f:
-            return [r for r in csv.reader(f) if r]
+            rows = [r for r in csv.reader(f) if r]
+            return rows[1:] if rows and is_key_header(rows[0]) and not header else rows
     except FileNotFoundError:
         raise StudyDataError("the key file is not there (an unmounted drive?): the ids it holds cannot be "
                              "checked, and one of them would be given again; make it reachable first", path) from None
@@ -484,14 +515,19 @@ class StudyData:
             if key.is_relative_to(folder):
                 raise StudyDataError(f"--key-file {key_file}: must be outside the study folder {given} "
                                      "(names never sit beside the recordings)")
-            open_key_file(Path(key_file)).close()  # made now, owner-only: a path that cannot hold it is said here (as
-            # given), not at the first registration with a name (an existing key file is kept, only its mode tightened)
-            held = key_file_rows(Path(key_file))
+            try:  # made now, owner-only: a path that cannot hold it is said here (as given), not at the first
+                # registration with a name (an existing key file is kept, only its mode tightened)
+                open_key_file(Path(key_file)).close()
+            except StudyDataError as err:
+                raise StudyDataError(err.what, f"--key-file {key_file}") from None
+            held = key_file_rows(Path(key_file), header=True)  # its header too: a study's before anyone registers
             if held:  # the README's ~/private/keys.csv typed again for a second study: each study then called the
                 # other's people crash leftovers and advised removing their lines, another study's only link to them
-                raise StudyDataError(f"--key-file {key_file}: holds {counted(len(held), 'line')} already (another "
-                                     "study's?): a key file belongs to one study, whose deletions erase its lines; "
-                                     "give a new path (one per study, e.g. ~/private/<study>-keys.csv)")
+                whose = f"the key file of study {held[0][2].split(' ', 1)[1]}" if is_key_header(held[0]) and \
+                    " " in held[0][2] else f"holds {counted(len(held), 'line')} already (another study's?)"
+                raise StudyDataError(f"--key-file {key_file}: {whose}: a key file belongs to one study, whose "
+                                     "deletions erase its lines; give a new path (one per study, e.g. "
+                                     "~/private/<study>-keys.csv)")
         text = Path(study_file).read_bytes()
         folder.mkdir(parents=True, exist_ok=True)
         for sub in SUBFOLDERS:
@@ -503,7 +539,15 @@ class StudyData:
         study = load_study(folder / STUDY_FILE)
         created = j.StudyCreated(study=study.study.id, study_file_sha256=hashlib.sha256(text).hexdigest(),
                                  software_version=__version__, time_ns=time.time_ns())
-        atomic_write(folder / JOURNAL, j.encode_line(created))
+        if key_file is not None:  # the key file names its study before anyone registers: no other init takes it
+            with open_key_file(Path(key_file)) as f:
+                csvcell.writer(f).writerow(key_header(f"{created.study}@{created.time_ns}"))
+        try:
+            atomic_write(folder / JOURNAL, j.encode_line(created))
+        except BaseException:  # no study was made: its header goes (a retry of this init takes the file again)
+            if key_file is not None:
+                os.truncate(key_file, 0)  # (it was empty: `held` above refused any other)
+            raise
         made = cls(given)
         made.write_folder_manifest()
         return made
@@ -1328,8 +1372,9 @@ class StudyData:
         key = self.key_file
         if key is None or not key.is_file():
             return False
-        rows = key_file_rows(key)
-        kept = [r for r in rows if r[0] != pid or not self._own_key_line(r)]  # another study's p01 is not theirs
+        rows = key_file_rows(key, header=True)  # its header stays: the file is still the study's
+        kept = [r for n, r in enumerate(rows) if r[0] != pid or not self._own_key_line(r)
+                or (n == 0 and is_key_header(r))]  # another study's p01 is not theirs
         if len(kept) == len(rows):
             return False
         buf = io.StringIO()
