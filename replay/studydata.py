@@ -242,6 +242,7 @@ class StudyState:
     """The fold of a journal."""
     created: j.StudyCreated | None = None
     participants: dict[str, j.ParticipantRegistered] = field(default_factory=dict)
+    consent: dict[str, j.ConsentGiven] = field(default_factory=dict)  # participant -> their last consent recorded
     games: dict[str, Game] = field(default_factory=dict)
     combined: dict[str, j.BiasCombined] = field(default_factory=dict)  # phase -> its bias
     deletions: list[j.ParticipantDeleted] = field(default_factory=list)
@@ -262,6 +263,8 @@ class StudyState:
             self.ids_given += 1
             number = int(e.participant[1:]) if e.participant[1:].isdigit() else 0
             self.next_number = max(self.next_number, number + 1, self.ids_given + 1)
+        elif isinstance(e, j.ConsentGiven):
+            self.consent[e.participant] = e
         elif isinstance(e, j.GameStarted):
             self.games[e.session] = Game(e.session, e.participant, e.phase, e.game, e.recording, e.bias,
                                          scripted=e.scripted)
@@ -608,11 +611,12 @@ class StudyData:
     def key_file(self) -> Path | None:
         return Path(self.settings["key_file"]) if self.settings.get("key_file") else None
 
-    def register(self, joins: str, label: str = "") -> str:
+    def register(self, joins: str, label: str = "", consent: bool = False) -> str:
         """Register a participant for phase `joins`; returns the new pseudonymous id.
 
         `label` (a name, an e-mail...) goes only to the key file; refused without one, and with a control
-        character (`register_many`, the one way in)."""
+        character (`register_many`, the one way in). `consent`: the person signed the study's consent form now
+        (`record_consent`); without it the id plays only as a persona (a rehearsal) until it is recorded."""
         with self._writing():
             try:
                 self.study.phase_by_id(joins)
@@ -634,7 +638,34 @@ class StudyData:
                 with open_key_file(self.key_file) as f:  # never a formula (pairplay/csvcell.py)
                     csvcell.writer(f).writerow([pid, label, self.key_owner])
             self.append(j.ParticipantRegistered(participant=pid, joins=joins))
+            if consent:
+                self.record_consent(pid)
             return pid
+
+    # -- informed consent ----------------------------------------------------
+    def record_consent(self, pid: str) -> j.ConsentGiven:
+        """Journal that registered participant `pid` gave their informed consent now, to the study file's
+        `consent_form` (ConsentGiven). Refused if it is recorded already to that form (a new version of the form,
+        an ethics amendment, is recorded again)."""
+        with self._writing():
+            self.participant(pid)
+            form = self.study.study.consent_form
+            had = self.state.consent.get(pid)
+            if had is not None and had.form == form:
+                raise StudyDataError(f"{pid}: consent to {consent_words(had)} is recorded already")
+            return self.append(j.ConsentGiven(participant=pid, form=form))
+
+    def check_consent(self, pid: str) -> None:
+        """StudyDataError unless a person's consent is recorded for `pid`: the rule before any game a person
+        plays (services/protocol.py). A persona needs none (no person, no personal data: `protocol pilot`,
+        `serve --pilot`). A study folder made before consent was recorded (no ConsentGiven in its journal) is
+        read as it is; its people's next games wait for `protocol consent`."""
+        if pid not in self.state.consent:
+            raise StudyDataError(f"{pid} has no consent recorded: a person plays only once their informed consent is "
+                                 f"recorded (`pairplay protocol consent {self.given} {pid}`, or the console's "
+                                 "Record consent, once they have signed the consent form"
+                                 + (f" {self.study.study.consent_form!r}" if self.study.study.consent_form else "")
+                                 + "); a persona (pilot) needs none")
 
     @property
     def key_owner(self) -> str:
@@ -733,7 +764,7 @@ class StudyData:
             raise err from None
 
     def register_many(self, joins: str, count: int = 1, label: str = "", *, count_name: str = "--count",
-                      label_name: str = "--name") -> list[str]:
+                      label_name: str = "--name", consent: bool = False) -> list[str]:
         """Register `count` participants for phase `joins` (the rule of the CLI and the console alike): a
         label names one person, so it goes with a count of 1 only. `count_name` / `label_name` are the
         caller's words for them (the CLI's options, the console's JSON keys). Raises StudyDataError."""
@@ -745,7 +776,7 @@ class StudyData:
         if control is not None:  # a newline became a space in the key file without a word (a new user's trial)
             raise StudyDataError(f"{label_name} holds a control character ({control!r} at {label.index(control)}): "
                                  "give the name as one line of text, without tabs")
-        return [self.register(joins, label) for _ in range(count)]
+        return [self.register(joins, label, consent) for _ in range(count)]
 
     def mark_invalid(self, session: str, reason: str) -> j.SessionMarkedInvalid:
         """Journal a game as invalid (left out of every report); the reason is required and kept as
@@ -1158,8 +1189,11 @@ class StudyData:
         with self._writing():
             tables = {
                 # scripted: the personas that played a participant's games instead of a person (a rehearsal)
-                "participants.csv": (["participant", "joins", "registered_utc", "scripted"],
-                                     [[pid, r.joins, _utc(r.time_ns), self.scripted_as(pid)]
+                # consent: when a person's informed consent was given ("" if not recorded) and to which form
+                "participants.csv": (["participant", "joins", "registered_utc", "scripted", "consent_utc",
+                                      "consent_form"],
+                                     [[pid, r.joins, _utc(r.time_ns), self.scripted_as(pid),
+                                       *self.consent_cells(pid)]
                                       for pid, r in self.state.participants.items()]),
                 "sessions.csv": (["session", "participant", "phase", "game", "outcome", "reason", "rounds_played",
                                   "invalid", "recording", "policy", "bias", "scripted"],
@@ -1184,6 +1218,11 @@ class StudyData:
                 atomic_write(self.folder / name, buf.getvalue().encode())
                 paths.append(self.folder / name)
             return paths
+
+    def consent_cells(self, pid: str) -> list[str]:
+        """[when consent was given (UTC), the form's version] of `pid`, ["", ""] if not recorded."""
+        c = self.state.consent.get(pid)
+        return [_utc(c.time_ns), c.form] if c is not None else ["", ""]
 
     # -- export and deletion -------------------------------------------------
     def files_of(self, pid: str) -> list[Path]:
@@ -1259,9 +1298,17 @@ class StudyData:
                 w.writerow(cols)
                 w.writerows([[r[c] for c in cols] for r in answers])
                 z.writestr("answers.csv", text.getvalue())
+                # their row of participants.csv: registration and consent (when given, to which form)
+                text = io.StringIO()
+                w = csvcell.writer(text)
+                w.writerow(["participant", "joins", "registered_utc", "consent_utc", "consent_form"])
+                w.writerow([pid, self.state.participants[pid].joins, _utc(self.state.participants[pid].time_ns),
+                            *self.consent_cells(pid)])
+                z.writestr("participant.csv", text.getvalue())
                 z.writestr("journal.jsonl", b"".join(j.encode_line(e) for e in lines))
                 z.writestr("README.txt", _export_readme(pid, self.study.study.id, games, files, answers,
-                                                        self.merged_using(pid), self.folder))
+                                                        self.merged_using(pid), self.folder,
+                                                        self.state.consent.get(pid)))
             atomic_write(out, buf.getvalue())
             # where it went and what it wrote, so that their deletion erases it while it is this file unchanged, and
             # names it otherwise (a copy handed on is beyond its reach)
@@ -1276,12 +1323,13 @@ class StudyData:
                                      "written (their deletion would not know it)") from None
             return out
 
-    def delete_participant(self, pid: str) -> "Deletion":
+    def delete_participant(self, pid: str, consent_withdrawn: bool = False) -> "Deletion":
         """Erase `pid` everywhere pairplay put their data (see the module rule); the deletion is journaled
         without their id. Refused while one of their games is running. The copies journaled beyond the folder's
         own places (an export outside it, a verb's output: `copies_of`) are erased if still pairplay's unchanged
         files. What it did with them, and what it could not erase (a changed or moved copy, the files of report/
-        the report did not write: a user's notes may name them), is returned to be said."""
+        the report did not write: a user's notes may name them), is returned to be said. `consent_withdrawn`: the
+        person withdrew their consent: the anonymous line says so (their ConsentGiven goes with their lines)."""
         with self._writing():
             self.participant(pid)
             # Running is what this process started and has not ended: holding the folder's writer lock (one writer
@@ -1351,7 +1399,7 @@ class StudyData:
             deleted = self.append(j.ParticipantDeleted(
                 deletion=secrets.token_hex(6), sessions_removed=len(sessions), files_removed=len(files),
                 journal_lines_removed=removed, merged_policies_using_them=merged, key_file_line_removed=key_removed,
-                copies_erased=len(erased)))
+                copies_erased=len(erased), consent_withdrawn=consent_withdrawn))
             self.write_tables()
             return Deletion(deleted, left, [c for c in copies if c.fate])
 
@@ -1686,9 +1734,15 @@ def _utc(ns: int) -> str:
     return time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime(ns / 1e9)) if ns else ""
 
 
+def consent_words(c: j.ConsentGiven) -> str:
+    """A recorded consent in words: `form 'v2 2026-11' given 2026-12-03T10:00:00Z`."""
+    return (f"form {c.form!r}" if c.form else "the study's form (its version not named)") + f" given {_utc(c.time_ns)}"
+
+
 def _export_readme(pid: str, study: str, games: list[Game], files: list[Path], answers: list[dict],
-                   merged: list[str], folder: Path) -> str:
+                   merged: list[str], folder: Path, consent: j.ConsentGiven | None = None) -> str:
     lines = [f"Data of participant {pid} in study {study} (pairplay {__version__})", "",
+             f"Informed consent: {consent_words(consent) if consent is not None else 'not recorded'}", "",
              "Everything pairplay holds about this pseudonymous participant:", ""]
     for g in games:
         status = g.ended.outcome if g.ended else \
@@ -1710,7 +1764,9 @@ def _export_readme(pid: str, study: str, games: list[Game], files: list[Path], a
     lines += [f"- answers.csv: {counted(len(answers) - lost, 'questionnaire answer')} (one row per item)"
               + (f", and {counted(lost, 'row')} for answers a damaged recording lost (column `lost`: why)"
                  if lost else ""),
-              "- journal.jsonl: the study journal's lines about this participant (registration, games, marks)", ""]
+              "- participant.csv: their registration and informed consent (when given, to which form's version)",
+              "- journal.jsonl: the study journal's lines about this participant (registration, consent, games, "
+              "marks)", ""]
     if merged:
         lines += ["Merged policies combined from this participant's games (kept in the study; not included): "
                   + ", ".join(merged), ""]

@@ -1,7 +1,8 @@
 """The protocol of a study with people (thesis 7.2), step by step, on the bus.
 
 Rule: `StudyRunner` runs the steps of a study folder's plan (replay/studydata.py):
-- a game: one recorded session (services/session.py) of a registered participant,
+- a game: one recorded session (services/session.py) of a registered participant (a person only with
+  their informed consent journaled, ConsentGiven; a persona in a rehearsal needs none),
   configured by its phase: `human:<id>`, the observed card is the first pick, the
   ignore rule is the pick interval with the study's window (7.1.2), the phase's
   learner preset, for pi-reuse the phase's bias policy; the recording stays open
@@ -215,6 +216,8 @@ class StudyRunner:
             self.check_step(pid, phase_id, game)
             if player is None and pid in self.scripted:
                 player = scripted_players(self, self.scripted)(pid, phase_id, game)
+            if player is None:  # a person plays, on the board: only with their informed consent recorded
+                self.data.check_consent(pid)  # (a persona needs none: no person, no personal data)
             scripted = scripted_persona(player)
             config = self.config_for(pid, phase_id, game, scripted)
             phase = self.data.study.phase_by_id(phase_id)

@@ -92,7 +92,7 @@ def test_a_request_the_command_line_refuses_is_refused_by_the_console_in_the_sam
         ({"phase": "phase1", "count": 2, "label": "Anna"}, "a name (`label`) registers one participant: leave out `count`"),
         ({"phase": "phase1", "count": "2"}, "count: must be an integer, got text"),
         ({"phase": "phase1", "count": 0}, "`count` must be a whole number 1..50, got 0"),
-        ({"phase": "phase1", "extra": 1}, "no key `extra` is known here; the keys: count, label, phase"),
+        ({"phase": "phase1", "extra": 1}, "no key `extra` is known here; the keys: consent, count, label, phase"),
         ({"phase": "phase1", "lable": "Anna"}, "no key `lable` is known here (did you mean `label`?)"),
         # a newline became a space in the key file without a word (a new user's trial): refused as the CLI does
         ({"phase": "phase1", "label": 'Bob\n,evil"'}, "a name (`label`) holds a control character ('\\n' at 3): "
@@ -151,7 +151,7 @@ def test_a_game_that_fails_to_start_is_journaled_ended_and_the_console_says_why(
         server = ConsoleServer(StudyRunner(data, bus, robot=RobotChoice("furhat://"))).start()
         try:
             t = server.token
-            call(f"{server.url}/api/console/register?token={t}", {"phase": "phase1", "count": 2})
+            call(f"{server.url}/api/console/register?token={t}", {"phase": "phase1", "count": 2, "consent": True})
             status, answer = call(f"{server.url}/api/console/next?token={t}", {})
             assert status == 200, answer
             deadline = time.monotonic() + 20

@@ -32,7 +32,7 @@ from starlette.staticfiles import StaticFiles
 from pairplay.core.actions import ACTION_NAMES
 from pairplay.core.geometry import N_STATES, STATE_NAMES
 from pairplay.outputs import output_folder
-from pairplay.replay.studydata import StudyDataError, named
+from pairplay.replay.studydata import StudyDataError, consent_words, named
 from pairplay.schemas.jsonfile import in_words
 
 from pairplay.services.protocol import StudyRunner
@@ -124,8 +124,10 @@ class Console:
             "study": {"id": data.study.study.id, "title": data.study.study.title, "folder": str(data.folder),
                       "phases": [p.id for p in data.study.phase], "key_file": bool(data.key_file)},
             "participants": [{"id": pid, "joins": r.joins, "scripted": data.scripted_as(pid),
-                              "games": sum(1 for g in data.games_of(pid) if g.valid_complete)}
+                              "games": sum(1 for g in data.games_of(pid) if g.valid_complete),
+                              "consent": consent_words(data.state.consent[pid]) if pid in data.state.consent else ""}
                              for pid, r in data.state.participants.items()],
+            "consent_form": data.study.study.consent_form,
             "plan": plan, "next": nxt, "games": games, "combined": combined, "live": live_d,
             "busy": self.busy(), "last": self.last, "deletions": len(data.state.deletions),
             "report": (data.folder / "report" / "report.md").is_file(),
@@ -166,6 +168,7 @@ class RegisterRequest(_Request):
     phase: str | None = None  # the first phase's by default
     count: int = 1
     label: str = ""  # a name for the key file: one participant only
+    consent: bool = False  # they signed the study's consent form now: recorded (ConsentGiven)
 
 
 class ControlRequest(_Request):
@@ -176,6 +179,7 @@ class ControlRequest(_Request):
 class ParticipantRequest(_Request):
     participant: str = ""
     confirm: str = ""  # a deletion: the participant's id typed again
+    consent_withdrawn: bool = False  # a deletion because the person withdrew their consent: the journal says so
 
 
 class AnswerRequest(_Request):
@@ -223,9 +227,15 @@ def console_routes(console: Console) -> list:
     async def register(request: Request) -> Response:
         asked = _read(await _body(request), RegisterRequest)
         ids = data.register_many(asked.phase or data.study.phase[0].id, asked.count, asked.label,
-                                 count_name="`count`", label_name="a name (`label`)")
+                                 count_name="`count`", label_name="a name (`label`)", consent=asked.consent)
         data.write_tables()
-        return JSONResponse({"registered": ids})
+        return JSONResponse({"registered": ids, "consent": asked.consent})
+
+    async def consent(request: Request) -> Response:
+        asked = _read(await _body(request), ParticipantRequest)
+        given = data.record_consent(asked.participant)
+        data.write_tables()
+        return JSONResponse({"consent": asked.participant, "form": given.form})
 
     async def start_next(request: Request) -> Response:
         step = data.next_step()
@@ -238,6 +248,8 @@ def console_routes(console: Console) -> list:
             console.start(step.label, lambda: runner.combine(step.phase))
         else:
             runner.check_step(step.participant, step.phase, step.game)
+            if step.participant not in runner.scripted:  # a person's game: refused now, not in the step's thread
+                data.check_consent(step.participant)
             console.start(step.label, lambda: runner.run_game(step.participant, step.phase, step.game))
         return JSONResponse({"started": step.label})
 
@@ -277,7 +289,7 @@ def console_routes(console: Console) -> list:
         pid = asked.participant
         if asked.confirm != pid:
             raise StudyDataError("type the participant's id to confirm the deletion")
-        erased = data.delete_participant(pid)
+        erased = data.delete_participant(pid, consent_withdrawn=asked.consent_withdrawn)
         return JSONResponse({"deleted": msgspec.to_builtins(erased.event), "not_erased": erased.elsewhere,
                              "erased_copies": [c.path for c in erased.copies if c.erased],
                              "kept": [{"file": rel, "names_them": names} for rel, names in erased.left]})
@@ -348,6 +360,7 @@ def console_routes(console: Console) -> list:
         Route("/api/console/register", guarded(register), methods=["POST"]),
         Route("/api/console/next", guarded(start_next), methods=["POST"]),
         Route("/api/console/control/{action}", guarded(control), methods=["POST"]),
+        Route("/api/console/consent", guarded(consent), methods=["POST"]),
         Route("/api/console/export", guarded(export), methods=["POST"]),
         Route("/api/console/exports/{name}", guarded(download)),
         Route("/api/console/delete", guarded(delete), methods=["POST"]),
