@@ -518,11 +518,8 @@ class StudyData:
             if key.is_relative_to(folder):
                 raise StudyDataError(f"--key-file {key_file}: must be outside the study folder {given} "
                                      "(names never sit beside the recordings)")
-            try:  # made now, owner-only: a path that cannot hold it is said here (as given), not at the first
-                # registration with a name (an existing key file is kept, only its mode tightened)
-                open_key_file(Path(key_file)).close()
-            except StudyDataError as err:
-                raise StudyDataError(err.what, f"--key-file {key_file}") from None
+            open_key_file(Path(key_file)).close()  # made now, owner-only: a path that cannot hold it is said here (as
+            # given), not at the first registration with a name (an existing key file is kept, only its mode tightened)
             held = key_file_rows(Path(key_file), header=True)  # its header too: a study's before anyone registers
             if held:  # the README's ~/private/keys.csv typed again for a second study: each study then called the
                 # other's people crash leftovers and advised removing their lines, another study's only link to them

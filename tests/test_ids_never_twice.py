@@ -31,7 +31,7 @@ def a_study(cli, tmp_path: Path) -> tuple[Path, Path]:
 
 def register(cli, folder: Path, name: str) -> str:
     r = cli("protocol", "register", folder, "--name", name)
-    assert r.returncode == 0 and r.stderr == "", r
+    assert r.returncode == 0 and r.stderr.startswith("pairplay protocol register: no consent recorded"), r
     return r.stdout.strip()
 
 
