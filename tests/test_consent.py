@@ -20,8 +20,7 @@ from pairplay.replay.studydata import StudyData, StudyDataError
 from pairplay.schemas.study import StudyFileError, parse_study
 from pairplay.services.bus import Bus, BusOptions
 from pairplay.services.console.server import ConsoleServer
-from pairplay.services.protocol import StudyRunner
-from pairplay.services.scripted import ScriptedPlayer
+from pairplay.services.protocol import StudyRunner, scripted_players
 
 from test_console_api import call
 
@@ -82,7 +81,7 @@ def test_a_persons_game_is_refused_without_consent_a_personas_is_not(tmp_path):
             runner.run_game("p01", "phase1", 0)  # a person, on the board
         assert not data.state.games and "GameStarted" not in (data.folder / "journal.jsonl").read_text()
         # a persona plays (a rehearsal: pilot, serve --pilot): no person, nothing to consent to
-        played = runner.run_game("p01", "phase1", 0, ScriptedPlayer("tatiana", think_ms=0.0, glance_ms=0.0))
+        played = runner.run_game("p01", "phase1", 0, scripted_players(runner, {"p01": "tatiana"})("p01", "phase1", 0))
         assert played.ended.outcome == "completed" and played.scripted == "tatiana"
         data.record_consent("p02")
         runner.check_step("p02", "phase1", 0)
