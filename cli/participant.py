@@ -39,6 +39,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     d.add_argument("folder", type=Path)
     d.add_argument("participant", type=key_chunk("participant id"))
     d.add_argument("--yes", action="store_true", help="confirm the deletion")
+    d.add_argument("--consent-withdrawn", action="store_true",
+                   help="the person withdrew their consent: the journal's anonymous line of the deletion says so")
 
 
 def run(args) -> int:
@@ -67,12 +69,13 @@ def _on_folder(data: StudyData, args) -> int:
     check_folder(args.folder)  # it writes in it: a folder one may not write in is one line, named as given
     if not args.yes:
         raise StudyDataError(f"deleting {args.participant} cannot be undone: add --yes")
-    erased = data.delete_participant(args.participant)
+    erased = data.delete_participant(args.participant, consent_withdrawn=args.consent_withdrawn)
     gone = erased.event
     print(f"deleted: {counted(gone.sessions_removed, 'game')}, {counted(gone.files_removed, 'file')}, "
           f"{counted(gone.journal_lines_removed, 'journal line')}"
           + (", their line of the key file" if gone.key_file_line_removed else "")
-          + f" (deletion {gone.deletion})")
+          + f" (deletion {gone.deletion}" + ("; consent withdrawn, journaled without their id" if gone.consent_withdrawn
+                                           else "") + ")")
     for m in gone.merged_policies_using_them:
         print(escaped(f"merged policy combined from their games (kept; re-combine without them if needed): {m}"))
     for c in erased.copies:

@@ -1,4 +1,4 @@
-"""`pairplay protocol`: a study with people (thesis 7.2): check, example, init, register, status, serve, pilot.
+"""`pairplay protocol`: a study with people (thesis 7.2): check, example, init, register, consent, status, serve, pilot.
 
 Rule: every subcommand works on a study folder (replay/studydata.py) and
 prints what it did; a mistake (a bad study file, an unknown participant, a step
@@ -22,12 +22,13 @@ import time
 from pathlib import Path
 
 from pairplay import signals, testpause
-from pairplay.cli.args import int_between, output_file, output_folder, session_id
+from pairplay.cli.args import int_between, key_chunk, output_file, output_folder, session_id
 from pairplay.core.personas import persona
 from pairplay.inputs import check_input, check_option_file
 from pairplay.lists import comma_items
 from pairplay.replay import biases, studyjournal
-from pairplay.replay.studydata import JOURNAL, REGISTER_AT_ONCE, StudyData, StudyDataError, repair_journal
+from pairplay.replay.studydata import (JOURNAL, REGISTER_AT_ONCE, StudyData, StudyDataError, consent_words,
+                                       repair_journal)
 from pairplay.schemas.study import (StudyFileError, bundled_studies, bundled_text, example_text, no_study_file,
                                     parse_study, study_file_of)
 from pairplay.errors import command_word, escaped
@@ -54,6 +55,13 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     r.add_argument("--name", default="", help="written to the key file only (refused without one)")
     r.add_argument("--count", type=int_between(1, REGISTER_AT_ONCE, "as the console: one request registers a few dozen at most"),
                    default=1, help=f"register this many (default 1, at most {REGISTER_AT_ONCE})")
+    r.add_argument("--consent", action="store_true",
+                   help="they signed the study's consent form (its consent_form) now: records their consent; "
+                        "without it they play only as personas (a rehearsal) until `protocol consent`")
+    co = sub.add_parser("consent", help="record a registered participant's informed consent (given now, to the "
+                                        "study's consent form)")
+    co.add_argument("folder", type=Path)
+    co.add_argument("participant", type=key_chunk("participant id"))
     s = sub.add_parser("status", help="the plan: every step, done or next, and why a step is blocked")
     s.add_argument("folder", type=Path)
     pl = sub.add_parser("pilot", help="run the open steps of the plan with scripted participants (core personas)")
@@ -127,7 +135,9 @@ def _repair(folder: Path) -> int:
 def describe(study) -> list[str]:
     lines = [f"study {study.study.id}: {study.study.title}",
              f"  seed {study.study.seed}, ignore window {study.study.ignore_window_ms:g} ms, robot {study.study.robot}, "
-             f"wrong-suggestion button {'on' if study.study.wrong_suggestion_button else 'off'}"]
+             f"wrong-suggestion button {'on' if study.study.wrong_suggestion_button else 'off'}",
+             f"  consent form: {study.study.consent_form!r}" if study.study.consent_form else
+             "  consent form: not named (consent is recorded without its version: set [study] consent_form)"]
     for p in study.phase:
         cfg = study.learner_config(p)
         lines.append(f"  {p.id}: {p.players} players, {counted(p.games, 'game')} x {counted(p.rounds, 'round')}, {p.algorithm} "
@@ -204,9 +214,19 @@ def _on_folder(data: StudyData, args) -> int:
         from pairplay.outputs import check_folder  # given (serve served its console and failed at each step)
         check_folder(args.folder)
     if args.action == "register":
-        for pid in data.register_many(args.phase or data.study.phase[0].id, args.count, args.name):
+        for pid in data.register_many(args.phase or data.study.phase[0].id, args.count, args.name,
+                                      consent=args.consent):
             print(pid)
         data.write_tables()
+        if not args.consent:  # a note, not a result: a person's game waits for their consent
+            print(f"pairplay protocol register: no consent recorded: a person plays once it is "
+                  f"(`pairplay protocol consent {data.given} ID`, or --consent at registration); a persona "
+                  "(pilot) needs none", file=sys.stderr)
+        return 0
+    if args.action == "consent":
+        given = data.record_consent(args.participant)
+        data.write_tables()
+        print(f"{args.participant}: consent recorded: {consent_words(given)}")
         return 0
     if args.action == "status":
         if not data.state.participants:  # an empty plan is not a complete one
@@ -216,6 +236,10 @@ def _on_folder(data: StudyData, args) -> int:
             print(escaped(key_problem))
         for pid, note in notes.items():
             print(escaped(f"{pid}: {note}"))
+        for pid in data.state.participants:  # a person's game is refused until it is recorded
+            if pid not in data.state.consent:
+                print(f"{pid}: no consent recorded: plays only as a persona until `pairplay protocol consent "
+                      f"{command_word(data.given)} {pid}`")
         for problem in data.fold_problems():  # a hand edit the tables cannot fold: every writing verb refuses it
             print(escaped(f"{data.given / JOURNAL}: does not fold into consistent tables: {problem}: every verb that "
                           f"writes the folder refuses it until the line is put back (a backup of {JOURNAL})"))

@@ -136,6 +136,20 @@ def atomic_write(path: Path, data: bytes) -> None:
 
 
 KEY_FILE_MODE, KEY_FOLDER_MODE = 0o600, 0o700  # the one file that links ids to names: its owner only
+# the first line `protocol init` writes in a key file: a plain CSV header whose third column names the study that
+# owns the file (`StudyData.key_owner`), so that a second init refuses it while it holds no participant yet
+# (trial29 F9: an empty key file was taken by two studies)
+KEY_HEADER = ("id", "name", "study")
+
+
+def key_header(owner: str) -> list[str]:
+    """The key file's header line of the study `owner` (`StudyData.key_owner`): `id,name,study <owner>`."""
+    return [KEY_HEADER[0], KEY_HEADER[1], f"{KEY_HEADER[2]} {owner}"]
+
+
+def is_key_header(row: list[str]) -> bool:
+    """Whether a key file's first line is the header `protocol init` wrote (`key_header`)."""
+    return len(row) >= 3 and tuple(row[:2]) == KEY_HEADER[:2] and row[2].split(" ", 1)[0] == KEY_HEADER[2]
 
 
 def other_work(folder: Path) -> list[str]:
@@ -156,12 +170,28 @@ def other_work(folder: Path) -> list[str]:
     return sorted(p.name + ("/" if p.is_dir() else "") for p in folder.iterdir() if work(p))
 
 
+def study_folder_holding(path: Path) -> Path | None:
+    """The people's study folder `path` lies in (a folder above it with the study folder's manifest, or its
+    journal and study file: one made before the manifest), None if none. Real names never sit in one (trial29 F8:
+    a key file in ANOTHER study's folder, even its recordings/, was taken: names beside its pseudonymous data)."""
+    for folder in Path(path).resolve().parents:
+        if (folder / PROTOCOL_MANIFEST).is_file() or ((folder / JOURNAL).is_file() and (folder / STUDY_FILE).is_file()):
+            return folder
+    return None
+
+
 def open_key_file(path: Path):
     """The key file for appending, created (with the folder it is in) readable by its owner only, and
     made so if it was not (a key file written 0644 by pairplay <= 0.3, or by hand). `StudyDataError`
-    if it cannot be made (the path says where)."""
+    if it cannot be made (the path says where), or if it is inside a people's study folder
+    (`study_folder_holding`): every writer of real names opens it here."""
     if path.is_dir():  # it said the system's "Is a directory"
         raise StudyDataError("a folder, not a key file: give the path of a CSV file (made if missing)", path)
+    inside = study_folder_holding(path)
+    if inside is not None:
+        raise StudyDataError(f"is inside the study folder {inside}: a key file of real names never lies in a study "
+                             "folder, this study's or another's (they are shared and archived as plain files); give "
+                             "a path outside every study folder", path)
     kind = special_kind(path, follow=True)  # a link to the user's key file is theirs to keep; appended through
     if kind is not None:  # a named pipe: `protocol init --key-file FIFO` waited for ever; a device took the names
         raise StudyDataError(f"is {kind}, not a key file: give the path of a regular CSV file (made if missing)", path)
@@ -174,15 +204,16 @@ def open_key_file(path: Path):
     return open(fd, "a", encoding="utf-8", newline="")
 
 
-def key_file_rows(path: Path) -> list[list[str]]:
+def key_file_rows(path: Path, header: bool = False) -> list[list[str]]:
     """The key file's lines as csv reads them (a quoted cell may hold a CR), blank ones left out: `id,name,study`
-    (`StudyData.key_owner`; `id,name` from an older pairplay, whose study is not said). StudyDataError if it is not
-    there or cannot be read."""
+    (`StudyData.key_owner`; `id,name` from an older pairplay, whose study is not said), after the header line
+    `protocol init` writes (KEY_HEADER; left out unless `header`). StudyDataError if it is not there or cannot be read."""
     if said := refusal(path):  # before opening: a pipe blocked (pairplay/inputs.py)
         raise StudyDataError(said, path)
     try:
         with open(path, encoding="utf-8", newline="") as f:
-            return [r for r in csv.reader(f) if r]
+            rows = [r for r in csv.reader(f) if r]
+            return rows[1:] if rows and is_key_header(rows[0]) and not header else rows
     except FileNotFoundError:
         raise StudyDataError("the key file is not there (an unmounted drive?): the ids it holds cannot be "
                              "checked, and one of them would be given again; make it reachable first", path) from None
@@ -213,6 +244,7 @@ class StudyState:
     """The fold of a journal."""
     created: j.StudyCreated | None = None
     participants: dict[str, j.ParticipantRegistered] = field(default_factory=dict)
+    consent: dict[str, j.ConsentGiven] = field(default_factory=dict)  # participant -> their last consent recorded
     games: dict[str, Game] = field(default_factory=dict)
     combined: dict[str, j.BiasCombined] = field(default_factory=dict)  # phase -> its current bias (its last)
     # every combination, in order: one made again (a game it took marked invalid since) keeps the earlier one's
@@ -236,6 +268,8 @@ class StudyState:
             self.ids_given += 1
             number = int(e.participant[1:]) if e.participant[1:].isdigit() else 0
             self.next_number = max(self.next_number, number + 1, self.ids_given + 1)
+        elif isinstance(e, j.ConsentGiven):
+            self.consent[e.participant] = e
         elif isinstance(e, j.GameStarted):
             self.games[e.session] = Game(e.session, e.participant, e.phase, e.game, e.recording, e.bias,
                                          scripted=e.scripted)
@@ -495,12 +529,14 @@ class StudyData:
                                      "(names never sit beside the recordings)")
             open_key_file(Path(key_file)).close()  # made now, owner-only: a path that cannot hold it is said here (as
             # given), not at the first registration with a name (an existing key file is kept, only its mode tightened)
-            held = key_file_rows(Path(key_file))
+            held = key_file_rows(Path(key_file), header=True)  # its header too: a study's before anyone registers
             if held:  # the README's ~/private/keys.csv typed again for a second study: each study then called the
                 # other's people crash leftovers and advised removing their lines, another study's only link to them
-                raise StudyDataError(f"--key-file {key_file}: holds {counted(len(held), 'line')} already (another "
-                                     "study's?): a key file belongs to one study, whose deletions erase its lines; "
-                                     "give a new path (one per study, e.g. ~/private/<study>-keys.csv)")
+                whose = f"the key file of study {held[0][2].split(' ', 1)[1]}" if is_key_header(held[0]) and \
+                    " " in held[0][2] else f"holds {counted(len(held), 'line')} already (another study's?)"
+                raise StudyDataError(f"--key-file {key_file}: {whose}: a key file belongs to one study, whose "
+                                     "deletions erase its lines; give a new path (one per study, e.g. "
+                                     "~/private/<study>-keys.csv)")
         text = Path(study_file).read_bytes()
         folder.mkdir(parents=True, exist_ok=True)
         for sub in SUBFOLDERS:
@@ -512,7 +548,15 @@ class StudyData:
         study = load_study(folder / STUDY_FILE)
         created = j.StudyCreated(study=study.study.id, study_file_sha256=hashlib.sha256(text).hexdigest(),
                                  software_version=__version__, time_ns=time.time_ns())
-        atomic_write(folder / JOURNAL, j.encode_line(created))
+        if key_file is not None:  # the key file names its study before anyone registers: no other init takes it
+            with open_key_file(Path(key_file)) as f:
+                csvcell.writer(f).writerow(key_header(f"{created.study}@{created.time_ns}"))
+        try:
+            atomic_write(folder / JOURNAL, j.encode_line(created))
+        except BaseException:  # no study was made: its header goes (a retry of this init takes the file again)
+            if key_file is not None:
+                os.truncate(key_file, 0)  # (it was empty: `held` above refused any other)
+            raise
         made = cls(given)
         made.write_folder_manifest()
         return made
@@ -573,11 +617,12 @@ class StudyData:
     def key_file(self) -> Path | None:
         return Path(self.settings["key_file"]) if self.settings.get("key_file") else None
 
-    def register(self, joins: str, label: str = "") -> str:
+    def register(self, joins: str, label: str = "", consent: bool = False) -> str:
         """Register a participant for phase `joins`; returns the new pseudonymous id.
 
         `label` (a name, an e-mail...) goes only to the key file; refused without one, and with a control
-        character (`register_many`, the one way in)."""
+        character (`register_many`, the one way in). `consent`: the person signed the study's consent form now
+        (`record_consent`); without it the id plays only as a persona (a rehearsal) until it is recorded."""
         with self._writing():
             try:
                 self.study.phase_by_id(joins)
@@ -599,7 +644,34 @@ class StudyData:
                 with open_key_file(self.key_file) as f:  # never a formula (pairplay/csvcell.py)
                     csvcell.writer(f).writerow([pid, label, self.key_owner])
             self.append(j.ParticipantRegistered(participant=pid, joins=joins))
+            if consent:
+                self.record_consent(pid)
             return pid
+
+    # -- informed consent ----------------------------------------------------
+    def record_consent(self, pid: str) -> j.ConsentGiven:
+        """Journal that registered participant `pid` gave their informed consent now, to the study file's
+        `consent_form` (ConsentGiven). Refused if it is recorded already to that form (a new version of the form,
+        an ethics amendment, is recorded again)."""
+        with self._writing():
+            self.participant(pid)
+            form = self.study.study.consent_form
+            had = self.state.consent.get(pid)
+            if had is not None and had.form == form:
+                raise StudyDataError(f"{pid}: consent to {consent_words(had)} is recorded already")
+            return self.append(j.ConsentGiven(participant=pid, form=form))
+
+    def check_consent(self, pid: str) -> None:
+        """StudyDataError unless a person's consent is recorded for `pid`: the rule before any game a person
+        plays (services/protocol.py). A persona needs none (no person, no personal data: `protocol pilot`,
+        `serve --pilot`). A study folder made before consent was recorded (no ConsentGiven in its journal) is
+        read as it is; its people's next games wait for `protocol consent`."""
+        if pid not in self.state.consent:
+            raise StudyDataError(f"{pid} has no consent recorded: a person plays only once their informed consent is "
+                                 f"recorded (`pairplay protocol consent {self.given} {pid}`, or the console's "
+                                 "Record consent, once they have signed the consent form"
+                                 + (f" {self.study.study.consent_form!r}" if self.study.study.consent_form else "")
+                                 + "); a persona (pilot) needs none")
 
     @property
     def key_owner(self) -> str:
@@ -698,7 +770,7 @@ class StudyData:
             raise err from None
 
     def register_many(self, joins: str, count: int = 1, label: str = "", *, count_name: str = "--count",
-                      label_name: str = "--name") -> list[str]:
+                      label_name: str = "--name", consent: bool = False) -> list[str]:
         """Register `count` participants for phase `joins` (the rule of the CLI and the console alike): a
         label names one person, so it goes with a count of 1 only. `count_name` / `label_name` are the
         caller's words for them (the CLI's options, the console's JSON keys). Raises StudyDataError."""
@@ -710,7 +782,7 @@ class StudyData:
         if control is not None:  # a newline became a space in the key file without a word (a new user's trial)
             raise StudyDataError(f"{label_name} holds a control character ({control!r} at {label.index(control)}): "
                                  "give the name as one line of text, without tabs")
-        return [self.register(joins, label) for _ in range(count)]
+        return [self.register(joins, label, consent) for _ in range(count)]
 
     def mark_invalid(self, session: str, reason: str) -> j.SessionMarkedInvalid:
         """Journal a game as invalid (left out of every report, its step asked again); the reason is required and
@@ -840,6 +912,11 @@ class StudyData:
         return steps
 
     def next_step(self) -> Step | None:
+        """The plan's first step not done; None when it is complete, and when nobody is registered: a study's
+        first step is then to register people, which is no step of the plan (its blocked combination was the
+        console's "next" while `protocol status` said to register first: trial27 F12a)."""
+        if not self.state.participants:
+            return None
         for s in self.plan():
             if not s.done:
                 return s
@@ -1134,8 +1211,11 @@ class StudyData:
         with self._writing():
             tables = {
                 # scripted: the personas that played a participant's games instead of a person (a rehearsal)
-                "participants.csv": (["participant", "joins", "registered_utc", "scripted"],
-                                     [[pid, r.joins, _utc(r.time_ns), self.scripted_as(pid)]
+                # consent: when a person's informed consent was given ("" if not recorded) and to which form
+                "participants.csv": (["participant", "joins", "registered_utc", "scripted", "consent_utc",
+                                      "consent_form"],
+                                     [[pid, r.joins, _utc(r.time_ns), self.scripted_as(pid),
+                                       *self.consent_cells(pid)]
                                       for pid, r in self.state.participants.items()]),
                 # bias_flawed: the bias policy it was played on was made with a game marked invalid since
                 # (replay/biases.py: the game stays valid; said wherever its bias policy is named)
@@ -1162,6 +1242,11 @@ class StudyData:
                 atomic_write(self.folder / name, buf.getvalue().encode())
                 paths.append(self.folder / name)
             return paths
+
+    def consent_cells(self, pid: str) -> list[str]:
+        """[when consent was given (UTC), the form's version] of `pid`, ["", ""] if not recorded."""
+        c = self.state.consent.get(pid)
+        return [_utc(c.time_ns), c.form] if c is not None else ["", ""]
 
     # -- export and deletion -------------------------------------------------
     def files_of(self, pid: str) -> list[Path]:
@@ -1242,9 +1327,17 @@ class StudyData:
                 w.writerow(cols)
                 w.writerows([[r[c] for c in cols] for r in answers])
                 z.writestr("answers.csv", text.getvalue())
+                # their row of participants.csv: registration and consent (when given, to which form)
+                text = io.StringIO()
+                w = csvcell.writer(text)
+                w.writerow(["participant", "joins", "registered_utc", "consent_utc", "consent_form"])
+                w.writerow([pid, self.state.participants[pid].joins, _utc(self.state.participants[pid].time_ns),
+                            *self.consent_cells(pid)])
+                z.writestr("participant.csv", text.getvalue())
                 z.writestr("journal.jsonl", b"".join(j.encode_line(e) for e in lines))
                 z.writestr("README.txt", _export_readme(pid, self.study.study.id, games, files, answers,
-                                                        self.merged_using(pid), self.folder))
+                                                        self.merged_using(pid), self.folder,
+                                                        self.state.consent.get(pid)))
             atomic_write(out, buf.getvalue())
             # where it went and what it wrote, so that their deletion erases it while it is this file unchanged, and
             # names it otherwise (a copy handed on is beyond its reach)
@@ -1259,12 +1352,13 @@ class StudyData:
                                      "written (their deletion would not know it)") from None
             return out
 
-    def delete_participant(self, pid: str) -> "Deletion":
+    def delete_participant(self, pid: str, consent_withdrawn: bool = False) -> "Deletion":
         """Erase `pid` everywhere pairplay put their data (see the module rule); the deletion is journaled
         without their id. Refused while one of their games is running. The copies journaled beyond the folder's
         own places (an export outside it, a verb's output: `copies_of`) are erased if still pairplay's unchanged
         files. What it did with them, and what it could not erase (a changed or moved copy, the files of report/
-        the report did not write: a user's notes may name them), is returned to be said."""
+        the report did not write: a user's notes may name them), is returned to be said. `consent_withdrawn`: the
+        person withdrew their consent: the anonymous line says so (their ConsentGiven goes with their lines)."""
         with self._writing():
             self.participant(pid)
             # Running is what this process started and has not ended: holding the folder's writer lock (one writer
@@ -1334,7 +1428,7 @@ class StudyData:
             deleted = self.append(j.ParticipantDeleted(
                 deletion=secrets.token_hex(6), sessions_removed=len(sessions), files_removed=len(files),
                 journal_lines_removed=removed, merged_policies_using_them=merged, key_file_line_removed=key_removed,
-                copies_erased=len(erased)))
+                copies_erased=len(erased), consent_withdrawn=consent_withdrawn))
             self.write_tables()
             return Deletion(deleted, left, [c for c in copies if c.fate])
 
@@ -1355,8 +1449,9 @@ class StudyData:
         key = self.key_file
         if key is None or not key.is_file():
             return False
-        rows = key_file_rows(key)
-        kept = [r for r in rows if r[0] != pid or not self._own_key_line(r)]  # another study's p01 is not theirs
+        rows = key_file_rows(key, header=True)  # its header stays: the file is still the study's
+        kept = [r for n, r in enumerate(rows) if r[0] != pid or not self._own_key_line(r)
+                or (n == 0 and is_key_header(r))]  # another study's p01 is not theirs
         if len(kept) == len(rows):
             return False
         buf = io.StringIO()
@@ -1668,9 +1763,15 @@ def _utc(ns: int) -> str:
     return time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime(ns / 1e9)) if ns else ""
 
 
+def consent_words(c: j.ConsentGiven) -> str:
+    """A recorded consent in words: `form 'v2 2026-11' given 2026-12-03T10:00:00Z`."""
+    return (f"form {c.form!r}" if c.form else "the study's form (its version not named)") + f" given {_utc(c.time_ns)}"
+
+
 def _export_readme(pid: str, study: str, games: list[Game], files: list[Path], answers: list[dict],
-                   merged: list[str], folder: Path) -> str:
+                   merged: list[str], folder: Path, consent: j.ConsentGiven | None = None) -> str:
     lines = [f"Data of participant {pid} in study {study} (pairplay {__version__})", "",
+             f"Informed consent: {consent_words(consent) if consent is not None else 'not recorded'}", "",
              "Everything pairplay holds about this pseudonymous participant:", ""]
     for g in games:
         status = g.ended.outcome if g.ended else \
@@ -1692,7 +1793,9 @@ def _export_readme(pid: str, study: str, games: list[Game], files: list[Path], a
     lines += [f"- answers.csv: {counted(len(answers) - lost, 'questionnaire answer')} (one row per item)"
               + (f", and {counted(lost, 'row')} for answers a damaged recording lost (column `lost`: why)"
                  if lost else ""),
-              "- journal.jsonl: the study journal's lines about this participant (registration, games, marks)", ""]
+              "- participant.csv: their registration and informed consent (when given, to which form's version)",
+              "- journal.jsonl: the study journal's lines about this participant (registration, consent, games, "
+              "marks)", ""]
     if merged:
         lines += ["Merged policies combined from this participant's games (kept in the study; not included): "
                   + ", ".join(merged), ""]

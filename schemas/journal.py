@@ -2,7 +2,7 @@
 
 Rule: the games themselves are recorded by the bus recorder (one MCAP file per
 game); the journal records the study around them: who was registered (a
-pseudonymous id, never a name), which game of which phase a session was, how it
+pseudonymous id, never a name) and their consent (ConsentGiven), which game of which phase a session was, how it
 ended, what the experimenter paused, aborted or marked invalid and why, the
 bias policies combined, where a participant's data was exported or copied by a verb (CopyWritten), the
 participants deleted. A study's state is the fold
@@ -39,6 +39,15 @@ class StudyCreated(JournalEvent, tag="StudyCreated"):
 class ParticipantRegistered(JournalEvent, tag="ParticipantRegistered"):
     participant: str  # pseudonymous id, e.g. p01
     joins: str  # the phase they first play
+
+
+class ConsentGiven(JournalEvent, tag="ConsentGiven"):
+    """A person's informed consent, recorded by the experimenter who holds their signed form: the form's version
+    (the study file's `consent_form` then; "" if it names none) and, in `time_ns`, when it was given. A person's
+    game is refused without one (services/protocol.py); a persona playing in a rehearsal needs none."""
+
+    participant: str
+    form: str = ""
 
 
 class GameStarted(JournalEvent, tag="GameStarted"):
@@ -139,9 +148,12 @@ class ParticipantDeleted(JournalEvent, tag="ParticipantDeleted"):
     merged_policies_using_them: list[str] = []
     key_file_line_removed: bool = False
     copies_erased: int = 0  # journaled copies outside the folder's own places, erased as pairplay's unchanged files
+    # the person withdrew their consent (`participant delete --consent-withdrawn`): their ConsentGiven went with
+    # their other lines; this anonymous line keeps that it was withdrawn, and when
+    consent_withdrawn: bool = False
 
 
-JOURNAL_TYPES = (StudyCreated, ParticipantRegistered, GameStarted, GamePaused, GameResumed, GameEnded,
+JOURNAL_TYPES = (StudyCreated, ParticipantRegistered, ConsentGiven, GameStarted, GamePaused, GameResumed, GameEnded,
                  PolicyBuilt, SessionMarkedInvalid, BiasCombined, ParticipantExported, CopyWritten, ParticipantDeleted)
 AnyJournal = JOURNAL_TYPES[0]
 for _t in JOURNAL_TYPES[1:]:

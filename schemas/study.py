@@ -112,6 +112,9 @@ class StudyHead(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
     turn_back_ms: float = 1500.0  # a missed pair stays face up this long on the board
     wrong_suggestion_button: bool = True
     robot: str = "virtual"
+    # the version of the informed-consent form participants sign (as the ethics board approved it, e.g.
+    # "v2 2026-11"): registering a person records their consent to it, with the time (journal ConsentGiven)
+    consent_form: str = ""
 
 
 class Study(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
@@ -174,6 +177,10 @@ def _check(study: Study, written: Written) -> None:
             why = str(err).removeprefix("--robot ")
             forms = "" if "use one of" in why else " (virtual, none, iristk://HOST[:PORT] or furhat://HOST[:PORT])"
             raise _Bad(("study", "robot"), f"{why}{forms}") from None
+    form = study.study.consent_form
+    if len(form) > 100 or any(not c.isprintable() for c in form) or form != form.strip():
+        raise _Bad(("study", "consent_form"), f"{typed(('study', 'consent_form'), form[:40])} must be one line of at "
+                                              "most 100 printable characters, no space at its ends (a version: \"v2 2026-11\")")
     if not study.phase:
         raise _Bad((), "a study needs at least one [[phase]]")
     seen: list[str] = []

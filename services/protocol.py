@@ -1,7 +1,8 @@
 """The protocol of a study with people (thesis 7.2), step by step, on the bus.
 
 Rule: `StudyRunner` runs the steps of a study folder's plan (replay/studydata.py):
-- a game: one recorded session (services/session.py) of a registered participant,
+- a game: one recorded session (services/session.py) of a registered participant (a person only with
+  their informed consent journaled, ConsentGiven; a persona in a rehearsal needs none),
   configured by its phase: `human:<id>`, the observed card is the first pick, the
   ignore rule is the pick interval with the study's window (7.1.2), the phase's
   learner preset, for pi-reuse the phase's bias policy; the recording stays open
@@ -159,6 +160,11 @@ class StudyRunner:
         # in serve the game runs in the console's thread, so the verb's main thread learns of it only here
         self.running: Running | None = None
         self.stopped: Running | None = None
+        # every questionnaire link this process gave (token -> its session) and the ones answered: a link no longer
+        # the current game's is told apart from one that never was (`spent_link`; trial27 F12b: a participant who
+        # reloaded the page after sending saw "this questionnaire link is not the current game's", as an error)
+        self._links: dict[str, str] = {}
+        self._answered: set[str] = set()
 
     # -- a game --------------------------------------------------------------
     def config_for(self, pid: str, phase_id: str, game: int, scripted: str = "") -> SessionConfig:
@@ -215,6 +221,8 @@ class StudyRunner:
             self.check_step(pid, phase_id, game)
             if player is None and pid in self.scripted:
                 player = scripted_players(self, self.scripted)(pid, phase_id, game)
+            if player is None:  # a person plays, on the board: only with their informed consent recorded
+                self.data.check_consent(pid)  # (a persona needs none: no person, no personal data)
             scripted = scripted_persona(player)
             config = self.config_for(pid, phase_id, game, scripted)
             phase = self.data.study.phase_by_id(phase_id)
@@ -263,6 +271,8 @@ class StudyRunner:
         # what this participant is asked, not whether the phase names a questionnaire: one whose items are all
         # for the others (`ask = "returning"` for a new participant) asks nothing, and nothing is waited for
         asks = bool(self.questions_for(pid, phase_id)[1])
+        if asks:
+            self._links[token] = config.session
         self.live = Live(session=config.session, participant=pid, phase=phase_id, game=game,
                          rounds=config.rounds, state="playing", board=player is not None, scripted=config.scripted,
                          questionnaire_token=token if asks else "", board_token=token)
@@ -467,7 +477,16 @@ class StudyRunner:
                     seq=1, time_ns=time.time_ns())
         self._put(event_key(session, "board", "QuestionnaireAnswered"), ev.encode_event(e))
         live.questionnaire_token = ""  # one answer per game: once published (answers refused may be sent again)
+        self._answered.add(token)
         return e
+
+    def spent_link(self, session: str, token: str) -> str:
+        """What became of a questionnaire link this process gave that is no longer the current game's: "answered"
+        (its answers are recorded), "closed" (its game ended without them: skipped, aborted, timed out), "" if it
+        is no link given here (wrong, or of an earlier process)."""
+        if not token or self._links.get(token) != session:
+            return ""
+        return "answered" if token in self._answered else "closed"
 
     def pause(self, reason: str = "") -> None:
         reason = bounded_reason(reason)  # refused whatever the state: the input itself is wrong

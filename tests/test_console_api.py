@@ -53,7 +53,7 @@ def test_the_api_needs_the_experimenter_token(lab):
     status, body = call(f"{server.url}/api/console/register?token=nope", {"phase": "phase1"})
     assert status == 403
     status, body = call(f"{server.url}/api/console/state?token={server.token}")
-    assert status == 200 and body["study"]["id"] == "pilot" and body["next"]["blocked"]
+    assert status == 200 and body["study"]["id"] == "pilot" and body["next"] is None  # nobody registered yet
 
 
 def test_malformed_and_refused_requests_get_one_line(lab):
@@ -92,7 +92,7 @@ def test_a_request_the_command_line_refuses_is_refused_by_the_console_in_the_sam
         ({"phase": "phase1", "count": 2, "label": "Anna"}, "a name (`label`) registers one participant: leave out `count`"),
         ({"phase": "phase1", "count": "2"}, "count: must be an integer, got text"),
         ({"phase": "phase1", "count": 0}, "`count` must be a whole number 1..50, got 0"),
-        ({"phase": "phase1", "extra": 1}, "no key `extra` is known here; the keys: count, label, phase"),
+        ({"phase": "phase1", "extra": 1}, "no key `extra` is known here; the keys: consent, count, label, phase"),
         ({"phase": "phase1", "lable": "Anna"}, "no key `lable` is known here (did you mean `label`?)"),
         # a newline became a space in the key file without a word (a new user's trial): refused as the CLI does
         ({"phase": "phase1", "label": 'Bob\n,evil"'}, "a name (`label`) holds a control character ('\\n' at 3): "
@@ -151,7 +151,7 @@ def test_a_game_that_fails_to_start_is_journaled_ended_and_the_console_says_why(
         server = ConsoleServer(StudyRunner(data, bus, robot=RobotChoice("furhat://"))).start()
         try:
             t = server.token
-            call(f"{server.url}/api/console/register?token={t}", {"phase": "phase1", "count": 2})
+            call(f"{server.url}/api/console/register?token={t}", {"phase": "phase1", "count": 2, "consent": True})
             status, answer = call(f"{server.url}/api/console/next?token={t}", {})
             assert status == 200, answer
             deadline = time.monotonic() + 20
@@ -178,10 +178,11 @@ def test_an_empty_study_says_to_register_participants_first(lab, pairplay_cli):
     console and `protocol status`, of a study nobody was registered in (a new user's trial)."""
     server, data = lab
     _, state = call(f"{server.url}/api/console/state?token={server.token}")
-    assert "register its participants first" in state["next"]["blocked"], state["next"]
-    assert "not all played" not in state["next"]["blocked"]
+    assert state["next"] is None, state["next"]  # no step: registering comes first (trial27 F12a)
+    assert "register its participants first" in state["plan"][0]["blocked"], state["plan"]  # (the combination)
+    assert "not all played" not in state["plan"][0]["blocked"]
     status, answer = call(f"{server.url}/api/console/next?token={server.token}", {})
-    assert status == 400 and "register its participants first" in answer["error"], answer
+    assert status == 400 and answer["error"] == "nobody is registered: register participants first", answer
     r = pairplay_cli("protocol", "status", data.folder)
     assert r.returncode == 0 and "not all played" not in r.stdout, r.stdout
     assert r.stdout.splitlines()[0] == f"nobody is registered: `pairplay protocol register {data.folder}` first"

@@ -137,6 +137,7 @@ def test_the_whole_protocol_from_the_console(browser, tmp_path, capsys, robot, r
             for phase in ("phase1", "phase2"):
                 page.select_option("#register-phase", phase)
                 page.fill("#register-count", "2")
+                page.check("#register-consent")  # they signed the consent form: recorded with them
                 page.click("#register")
                 page.wait_for_function(f"document.querySelectorAll('#participants li').length == "
                                        f"{2 if phase == 'phase1' else 4}", timeout=10000)

@@ -40,7 +40,7 @@ def test_the_board_is_connected_when_a_board_page_is_not_when_the_lab_joins_the_
     with Bus(BusOptions()) as bus:
         server = StudyLabServer(StudyRunner(data, bus)).start()
         try:
-            _api(server, "register", {"phase": "phase1", "count": 2})
+            _api(server, "register", {"phase": "phase1", "count": 2, "consent": True})
             ctx = browser.new_context(viewport={"width": 1366, "height": 900}, bypass_csp=True)
             console = ctx.new_page()
             console.goto(server.console_url)
@@ -70,7 +70,7 @@ def played(tmp_path_factory):
     """A study whose whole plan was played (8 games, a combination), some games marked invalid: full tables."""
     root = tmp_path_factory.mktemp("layout")
     data = StudyData.create(root / "study", STUDY)
-    ids = [data.register("phase1"), data.register("phase1"), data.register("phase2"), data.register("phase2")]
+    ids = [data.register(phase, consent=True) for phase in ("phase1", "phase1", "phase2", "phase2")]
     with Bus(BusOptions()) as bus:
         runner = StudyRunner(data, bus)
         runner.run_plan(scripted_players(runner, dict(zip(ids, PERSONAS))))

@@ -73,8 +73,10 @@ def message(console) -> tuple[str, str]:
 def test_an_aborted_game_asks_no_questionnaire(browser, served):
     data, runner, server, console = served
     console.fill("#register-count", "1")
+    console.check("#register-consent")  # they signed the consent form: a person plays only then
     console.click("#register")
     console.wait_for_function("document.querySelectorAll('#participants li').length == 1", timeout=10000)
+    assert "consent: the study's form (its version not named) given " in console.inner_text("#participants li")
     console.click("#run-next")
     link = console.wait_for_selector("#board-link", timeout=30000)
     q_link = console.wait_for_selector("#questionnaire-link", timeout=10000).get_attribute("href")

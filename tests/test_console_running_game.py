@@ -42,7 +42,7 @@ def test_a_running_game_is_not_marked_invalid_and_its_files_are_left_out_of_an_e
         server = ConsoleServer(StudyRunner(data, bus)).start()
         t = server.token
         try:
-            call(f"{server.url}/api/console/register?token={t}", {"phase": "phase1", "count": 2})
+            call(f"{server.url}/api/console/register?token={t}", {"phase": "phase1", "count": 2, "consent": True})
             status, answer = call(f"{server.url}/api/console/next?token={t}", {})
             assert status == 200, answer
             state = _until(server, lambda s: any(g["outcome"] == "running" for g in s["games"])

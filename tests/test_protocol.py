@@ -106,7 +106,7 @@ def test_the_plan_runs_to_the_end_and_every_recording_verifies(played):
 
 def test_names_stay_in_the_key_file_outside_the_study(played, tmp_path):
     root, ids = played
-    assert (root / "keys.csv").read_text().strip().rsplit(",", 1)[0] == "p01,First Person"  # and its study (3rd cell)
+    assert (root / "keys.csv").read_text().splitlines()[1].rsplit(",", 1)[0] == "p01,First Person"  # and its study (3rd cell)
     for f in (root / "study").rglob("*"):
         if f.is_file():
             assert b"First Person" not in f.read_bytes(), f
@@ -303,7 +303,7 @@ def test_the_key_file_is_its_owners_alone_from_init_to_deletion(tmp_path):
     import stat
     key = tmp_path / "private" / "keys.csv"
     data = StudyData.create(tmp_path / "study", STUDY, key_file=key)
-    assert key.is_file() and key.read_text() == ""  # made at init: a path that cannot hold it is said there
+    assert key.is_file() and key.read_text().startswith("id,name,study pilot@")  # made at init: a path that cannot hold it is said there
 
     def mode(p: Path) -> int:
         return stat.S_IMODE(p.stat().st_mode)
@@ -560,7 +560,7 @@ def test_a_name_is_never_a_formula_in_the_key_file_and_reads_back_the_same(tmp_p
     r = pairplay_cli("protocol", "register", tmp_path / "study", f"--name={name}")
     assert r.returncode == 0, r.stderr
     with open(key, encoding="utf-8", newline="") as f:
-        [[pid, written, _study]] = list(csv.reader(f))  # its study in the third cell (tests/test_key_file_owner.py)
+        [_header, [pid, written, _study]] = list(csv.reader(f))  # its study in the third cell (tests/test_key_file_owner.py)
     assert pid == r.stdout.strip()
     assert not written.startswith(("=", "+", "@")) and written in (name, "'" + name)
     assert not written.startswith("-") or written == "-3"  # a plain number stays a number

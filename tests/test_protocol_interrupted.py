@@ -56,7 +56,7 @@ def study_with(tmp_path: Path, text: str, participants: int = 1) -> StudyData:
     toml.write_text(text)
     data = StudyData.create(tmp_path / "study", toml)
     for _ in range(participants):
-        data.register("phase1")
+        data.register("phase1", consent=True)
     return data
 
 

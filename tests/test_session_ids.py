@@ -106,7 +106,7 @@ def test_a_study_game_over_a_recording_the_journal_does_not_know_is_refused(tmp_
     from test_protocol import STUDY
 
     data = StudyData.create(tmp_path / "s", STUDY)
-    pid = data.register("phase1")
+    pid = data.register("phase1", consent=True)
     stray = data.folder / "recordings" / f"{data.session_id(pid, 'phase1', 0)}.2.mcap"
     stray.parent.mkdir(parents=True, exist_ok=True)
     stray.write_bytes(b"a copied folder's file")

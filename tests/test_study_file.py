@@ -41,7 +41,7 @@ BASE = example_text()
     (("rounds = 5", "rouns = 5", 1), '[[phase]] "phase1" rouns: [[phase]] has no key `rouns` (did you mean `rounds`?)'),
     # a table where none is taken: named by its header, with the keys its table takes (it was msgspec's
     # "study: Object contains unknown field `grid`")
-    (("seed = 0", "seed = 0\n[study.grid]\nx = 1", 1), "s.toml: [study.grid]: [study] has no table `grid`; its keys: id, "),
+    (("seed = 0", "seed = 0\n[study.grid]\nx = 1", 1), "s.toml: [study.grid]: [study] has no table `grid`; its keys: consent_form, id, "),
     (("bias = \"phase1\"", "bias = \"phase3\"", 1), '[[phase]] "phase2" bias: "phase3" is not an earlier phase (earlier: phase1)'),
     (("questionnaires = [\"after-game\"]", "questionnaires = [\"exit\"]", 1), '[[phase]] "phase1" questionnaires: no [questionnaire.exit] in the file'),
     (("scale = 5", "scale = 40", 1), '[[questionnaire.after-game.item]] "followed" scale: a Likert scale has 2..11 points, got 40'),

@@ -31,7 +31,7 @@ def folder(tmp_path) -> Path:
 
 def test_a_register_waits_for_a_short_holder_says_for_whom_and_registers(folder):
     fd = folderlock.take(folder, "participant export")  # this process holds the folder, as a short verb
-    register = subprocess.Popen([sys.executable, "-m", "pairplay", "protocol", "register", str(folder)],
+    register = subprocess.Popen([sys.executable, "-m", "pairplay", "protocol", "register", str(folder), "--consent"],
                                 stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     try:
         said = register.stderr.readline()  # it waits, and says so, before the holder ends

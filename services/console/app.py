@@ -33,7 +33,7 @@ from pairplay.core.actions import ACTION_NAMES
 from pairplay.core.geometry import N_STATES, STATE_NAMES
 from pairplay.outputs import output_folder
 from pairplay.replay import biases
-from pairplay.replay.studydata import StudyDataError, named
+from pairplay.replay.studydata import StudyDataError, consent_words, named
 from pairplay.schemas.jsonfile import in_words
 
 from pairplay.services.protocol import StudyRunner
@@ -88,7 +88,8 @@ class Console:
         data, live = self.data, self.runner.live
         plan = [{"kind": s.kind, "phase": s.phase, "participant": s.participant, "game": s.game, "done": s.done,
                  "blocked": s.blocked, "label": s.label, "note": s.note} for s in data.plan()]
-        nxt = next((p for p in plan if not p["done"]), None)
+        step = data.next_step()  # none while nobody is registered: the page says to register first
+        nxt = next((p for p in plan if step is not None and p["label"] == step.label), None)
         games = [{"session": g.session, "participant": g.participant, "phase": g.phase, "game": g.game + 1,
                   "outcome": g.ended.outcome if g.ended else "running", "reason": g.ended.reason if g.ended else "",
                   "rounds": g.ended.rounds_played if g.ended else 0, "invalid": g.invalid,
@@ -133,8 +134,10 @@ class Console:
             "study": {"id": data.study.study.id, "title": data.study.study.title, "folder": str(data.folder),
                       "phases": [p.id for p in data.study.phase], "key_file": bool(data.key_file)},
             "participants": [{"id": pid, "joins": r.joins, "scripted": data.scripted_as(pid),
-                              "games": sum(1 for g in data.games_of(pid) if g.valid_complete)}
+                              "games": sum(1 for g in data.games_of(pid) if g.valid_complete),
+                              "consent": consent_words(data.state.consent[pid]) if pid in data.state.consent else ""}
                              for pid, r in data.state.participants.items()],
+            "consent_form": data.study.study.consent_form,
             "plan": plan, "next": nxt, "games": games, "combined": combined, "live": live_d,
             "busy": self.busy(), "last": self.last, "deletions": len(data.state.deletions),
             "report": (data.folder / "report" / "report.md").is_file(),
@@ -176,6 +179,7 @@ class RegisterRequest(_Request):
     phase: str | None = None  # the first phase's by default
     count: int = 1
     label: str = ""  # a name for the key file: one participant only
+    consent: bool = False  # they signed the study's consent form now: recorded (ConsentGiven)
 
 
 class ControlRequest(_Request):
@@ -186,6 +190,7 @@ class ControlRequest(_Request):
 class ParticipantRequest(_Request):
     participant: str = ""
     confirm: str = ""  # a deletion: the participant's id typed again
+    consent_withdrawn: bool = False  # a deletion because the person withdrew their consent: the journal says so
 
 
 class AnswerRequest(_Request):
@@ -233,9 +238,15 @@ def console_routes(console: Console) -> list:
     async def register(request: Request) -> Response:
         asked = _read(await _body(request), RegisterRequest)
         ids = data.register_many(asked.phase or data.study.phase[0].id, asked.count, asked.label,
-                                 count_name="`count`", label_name="a name (`label`)")
+                                 count_name="`count`", label_name="a name (`label`)", consent=asked.consent)
         data.write_tables()
-        return JSONResponse({"registered": ids})
+        return JSONResponse({"registered": ids, "consent": asked.consent})
+
+    async def consent(request: Request) -> Response:
+        asked = _read(await _body(request), ParticipantRequest)
+        given = data.record_consent(asked.participant)
+        data.write_tables()
+        return JSONResponse({"consent": asked.participant, "form": given.form})
 
     async def start_next(request: Request) -> Response:
         step = data.next_step()
@@ -248,6 +259,8 @@ def console_routes(console: Console) -> list:
             console.start(step.label, lambda: runner.combine(step.phase))
         else:
             runner.check_step(step.participant, step.phase, step.game)
+            if step.participant not in runner.scripted:  # a person's game: refused now, not in the step's thread
+                data.check_consent(step.participant)
             console.start(step.label, lambda: runner.run_game(step.participant, step.phase, step.game))
         return JSONResponse({"started": step.label})
 
@@ -287,7 +300,7 @@ def console_routes(console: Console) -> list:
         pid = asked.participant
         if asked.confirm != pid:
             raise StudyDataError("type the participant's id to confirm the deletion")
-        erased = data.delete_participant(pid)
+        erased = data.delete_participant(pid, consent_withdrawn=asked.consent_withdrawn)
         return JSONResponse({"deleted": msgspec.to_builtins(erased.event), "not_erased": erased.elsewhere,
                              "erased_copies": [c.path for c in erased.copies if c.erased],
                              "kept": [{"file": rel, "names_them": names} for rel, names in erased.left]})
@@ -323,10 +336,18 @@ def console_routes(console: Console) -> list:
         return bool(live.questionnaire_token) and hmac.compare_digest(token.encode(), live.questionnaire_token.encode()) \
             and request.query_params.get("session") == live.session
 
+    def refused_link(request: Request) -> Response:
+        """403 for a link that is not the running game's questionnaire's: a link of this process's already
+        answered or closed says so (`spent`: the page thanks or says closed, not an error), any other is wrong."""
+        spent = runner.spent_link(request.query_params.get("session", ""), request.query_params.get("token", ""))
+        said = {"answered": "your answers are recorded", "closed": "this questionnaire is closed"}
+        return JSONResponse({"error": said.get(spent, "this questionnaire link is not the current game's"),
+                             "spent": spent}, status_code=403)
+
     async def q_items(request: Request) -> Response:
         live = runner.live
         if not questionnaire_link_ok(request):
-            return JSONResponse({"error": "this questionnaire link is not the current game's"}, status_code=403)
+            return refused_link(request)
         name, items = runner.questions_for(live.participant, live.phase)
         q = data.study.questionnaire[name]
         return JSONResponse({"title": q.title, "intro": q.intro, "ready": live.state == "questionnaire",
@@ -336,7 +357,7 @@ def console_routes(console: Console) -> list:
         # the link's token before the body is read, as every other route that takes a body (trial28 F13: anyone
         # who reached the port could post here); the body's session and token are the runner's to check again
         if not questionnaire_link_ok(request):
-            return JSONResponse({"error": "this questionnaire link is not the current game's"}, status_code=403)
+            return refused_link(request)
         try:
             asked = _read(await _body(request), AnswerRequest)
             runner.answer_questionnaire(asked.session, asked.token, asked.answers)
@@ -350,6 +371,7 @@ def console_routes(console: Console) -> list:
         Route("/api/console/register", guarded(register), methods=["POST"]),
         Route("/api/console/next", guarded(start_next), methods=["POST"]),
         Route("/api/console/control/{action}", guarded(control), methods=["POST"]),
+        Route("/api/console/consent", guarded(consent), methods=["POST"]),
         Route("/api/console/export", guarded(export), methods=["POST"]),
         Route("/api/console/exports/{name}", guarded(download)),
         Route("/api/console/delete", guarded(delete), methods=["POST"]),

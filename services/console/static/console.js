@@ -75,12 +75,19 @@ function render(s) {
   $("title").textContent = s.study.title || s.study.id;
   $("study-line").textContent = `study ${s.study.id}, folder ${s.study.folder}; key file: ${s.study.key_file ? "yes (outside the folder)" : "none (ids only)"}`;
   $("label-wrap").style.display = s.study.key_file ? "" : "none";
+  // consent is recorded with the study file's form: what the experimenter confirms the person signed
+  $("consent-text").textContent = `signed the consent form${s.consent_form ? ` "${s.consent_form}"` : ""} (records consent now)`;
   const phases = $("register-phase");
   if (phases.options.length !== s.study.phases.length) {
     phases.innerHTML = ""; s.study.phases.forEach((p) => phases.appendChild(el("option", p)));
   }
   const ul = $("participants"); ul.innerHTML = "";
-  s.participants.forEach((p) => ul.appendChild(el("li", `${p.id} (joins ${p.joins}; ${p.games} valid game(s)${p.scripted ? `; scripted: ${p.scripted}` : ""})`)));
+  s.participants.forEach((p) => {
+    const li = el("li", `${p.id} (joins ${p.joins}; ${p.games} valid game(s)${p.scripted ? `; scripted: ${p.scripted}` : ""}; ` +
+                        (p.consent ? `consent: ${p.consent})` : "no consent recorded: plays only as a persona)"));
+    if (!p.consent) li.classList.add("no-consent");
+    ul.appendChild(li);
+  });
   // an id a record shows given that the journal does not register (a crash, a hand edit): what it is, never a participant
   s.unregistered.forEach((u) => { const li = el("li", `${u.id}: ${u.note}`); li.className = "unregistered"; ul.appendChild(li); });
   if (s.key_file_problem) { const li = el("li", s.key_file_problem); li.className = "unregistered"; ul.appendChild(li); }
@@ -163,14 +170,20 @@ async function poll() {
 
 $("register-form").onsubmit = (ev) => { ev.preventDefault(); register(); };
 const register = act(async () => {
-  const r = await api("/api/console/register", {phase: $("register-phase").value, count: parseInt($("register-count").value, 10) || 1, label: $("register-label").value});
-  $("register-label").value = ""; say("registered " + r.registered.join(", "));
+  const r = await api("/api/console/register", {phase: $("register-phase").value, count: parseInt($("register-count").value, 10) || 1, label: $("register-label").value,
+                                               consent: $("register-consent").checked});
+  $("register-label").value = ""; $("register-consent").checked = false;
+  say("registered " + r.registered.join(", ") + (r.consent ? " (consent recorded)" : " (no consent recorded: Record consent once signed)"));
 });
 $("run-next").onclick = act(async () => { const r = await api("/api/console/next", {}); say("started: " + r.started); });
 $("pause").onclick = act(() => api("/api/console/control/pause", {}));
 $("resume").onclick = act(() => api("/api/console/control/resume", {}));
 $("abort").onclick = act(() => api("/api/console/control/abort", {reason: $("abort-reason").value}));
 $("skip-questionnaire").onclick = act(() => api("/api/console/control/skip-questionnaire", {}));
+$("record-consent").onclick = act(async () => {
+  const r = await api("/api/console/consent", {participant: $("data-participant").value});
+  say(`${r.consent}: consent recorded` + (r.form ? ` (form "${r.form}")` : ""));
+});
 $("export").onclick = act(async () => {
   const r = await api("/api/console/export", {participant: $("data-participant").value});
   const res = $("data-result"); res.innerHTML = ""; const a = el("a", "download " + r.export.split("/").pop()); a.href = r.export + "?token=" + encodeURIComponent(token); a.id = "export-link"; res.appendChild(a);
@@ -178,9 +191,10 @@ $("export").onclick = act(async () => {
 });
 $("delete").onclick = act(async () => {
   const pid = $("data-participant").value;
-  const r = await api("/api/console/delete", {participant: pid, confirm: $("delete-confirm").value});
-  $("delete-confirm").value = "";
-  $("data-result").textContent = `deleted ${pid}: ${r.deleted.sessions_removed} games, ${r.deleted.files_removed} files` +
+  const r = await api("/api/console/delete", {participant: pid, confirm: $("delete-confirm").value,
+                                             consent_withdrawn: $("delete-withdrawn").checked});
+  $("delete-confirm").value = ""; $("delete-withdrawn").checked = false;
+  $("data-result").textContent = `deleted ${pid}${r.deleted.consent_withdrawn ? " (consent withdrawn)" : ""}: ${r.deleted.sessions_removed} games, ${r.deleted.files_removed} files` +
     (r.deleted.merged_policies_using_them.length ? `; merged policies that used them: ${r.deleted.merged_policies_using_them.join(", ")}` : "") +
     r.erased_copies.map(p => `; erased pairplay's unchanged copy ${p}`).join("") +
     r.not_erased.map(p => `; NOT erased, a copy made outside the study folder's own places (changed or moved): ${p} (erase it by hand)`).join("") +

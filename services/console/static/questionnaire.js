@@ -50,7 +50,7 @@ async function submit(ev) {
     return;
   }
   const data = await r.json().catch(() => ({}));
-  if (!r.ok) { status(data.error || "could not send", true); return; }
+  if (!r.ok && data.spent !== "answered") { status(data.error || "could not send", true); return; }  // (sent twice: recorded)
   answered = true;
   $("q-form").innerHTML = ""; status("Thank you! Your answers are recorded.");
 }
@@ -77,7 +77,9 @@ async function load() {
   const q = await r.json().catch(() => ({}));
   if (!r.ok) {
     $("q-wait").hidden = true;
-    if (loaded) {  // it worked before: a refusal now is the questionnaire closed, not a wrong link
+    if (q.spent === "answered") {  // sent already (a reload after sending): thanked, not an error
+      $("q-form").innerHTML = ""; status("Thank you! Your answers are recorded.");
+    } else if (loaded || q.spent === "closed") {  // it worked before: the questionnaire closed, not a wrong link
       $("q-form").innerHTML = ""; status("The questionnaire is closed. Thank you!");
     }
     else status(q.error || "this link does not work", true);
