@@ -200,6 +200,7 @@ class Game:
     bias: str = ""
     ended: j.GameEnded | None = None
     invalid: str = ""
+    invalid_ns: int = 0  # when it was marked invalid (its SessionMarkedInvalid's time)
     paused: bool = False
     scripted: str = ""  # the persona that played instead of a person (a rehearsal); "" for a person
 
@@ -249,6 +250,7 @@ class StudyState:
             self.games[e.session].paused = isinstance(e, j.GamePaused)
         elif isinstance(e, j.SessionMarkedInvalid) and e.session in self.games:
             self.games[e.session].invalid = e.reason
+            self.games[e.session].invalid_ns = e.time_ns
         elif isinstance(e, j.BiasCombined):
             self.combined[e.phase] = e
             self.combinations.append(e)
@@ -715,12 +717,16 @@ class StudyData:
     def mark_invalid(self, session: str, reason: str) -> j.SessionMarkedInvalid:
         """Journal a game as invalid (left out of every report, its step asked again); the reason is required and
         kept as given, stripped. A bias policy combined from the game is combined again, into a new file, once the
-        step is played again (replay/biases.py). Raises StudyDataError for an unknown session or an empty reason."""
+        step is played again (replay/biases.py). Raises StudyDataError for an unknown session, an empty reason, or
+        a game marked already (its first reason stays: a second mark replaced it everywhere)."""
         if not reason.strip():  # the report says why a game is left out: a blank is no answer
             raise StudyDataError("marking a session invalid needs a reason")
         game = self.state.games.get(session)
         if game is None:
             raise StudyDataError(f"no session {session!r} in this study")
+        if game.invalid:  # a second mark replaced the first reason in every reader (a new user's trial)
+            raise StudyDataError(f"{session} is marked invalid already ({game.invalid}, "
+                                 f"{_utc(game.invalid_ns) or 'time not journaled'}); nothing written")
         if game.ended is None:  # the console's page disables its button for it; its API marked one mid-game
             # (trial27 F10): a mark before the game's end, the step then offered again beside the game still playing
             raise StudyDataError(f"{session}: the game is running: abort it or wait for its end" if self.running(game)

@@ -194,3 +194,20 @@ def test_the_console_s_mark_answers_what_the_command_line_says(played, tmp_path)
     assert status == 200 and answer["said"].startswith(f"{INVALID} marked invalid: wrong instructions; the bias "
                                                        f"policy of phase2 ({V1}) was combined from it")
     assert state["next"]["label"] == "p01: phase1 game 2" and state["combined"]["phase2"]["flawed"]
+
+
+def sessions_csv(folder: Path) -> dict[str, dict[str, str]]:
+    with open(folder / "sessions.csv") as f:
+        return {r["session"]: r for r in csv.DictReader(f)}
+
+
+def test_a_second_mark_is_refused_naming_the_first(played, tmp_path, pairplay_cli):
+    """A second mark of the same game was accepted and its reason replaced the first in every reader."""
+    folder, _ = marked(played, tmp_path, pairplay_cli)
+    journal = (folder / "journal.jsonl").read_bytes()
+    ran = pairplay_cli("protocol", "mark-invalid", "s", INVALID, "--reason", "again", cwd=tmp_path)
+    assert ran.returncode == 2 and ran.stdout == ""
+    line, = ran.stderr.splitlines()
+    assert f"{INVALID} is marked invalid already (wrong instructions, 20" in line and line.endswith("nothing written")
+    assert (folder / "journal.jsonl").read_bytes() == journal
+    assert sessions_csv(folder)[INVALID]["invalid"] == "wrong instructions"
