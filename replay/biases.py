@@ -15,9 +15,9 @@ for them, on the new bias policy). All of it is a fold of the journal: nothing h
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Callable
 
-from pairplay.numbers import counted
+from pairplay.numbers import agreement, counted
 from pairplay.schemas import journal as j
 
 if TYPE_CHECKING:
@@ -94,12 +94,14 @@ def marked_note(state: "StudyState", session: str) -> str:
     for c in state.combined.values():
         if not policy or policy not in c.inputs:
             continue
-        on = played_on(state, c)
+        on = [g for g in played_on(state, c) if not g.invalid]  # one marked already is played again anyway
         said.append(f"the bias policy of {c.phase} ({c.output}) was combined from it: the plan asks for the game "
                     f"again, then the combination again, into a new file (this one kept for the record)"
-                    + (f"; {counted(len(on), 'game')} played on it ({_sessions(on)}) stay valid, played honestly on "
-                       "the bias policy of their time (the report names it and flags it): mark them invalid too to "
-                       "have them played again on the new one" if on else "; no game was played on it"))
+                    + (f"; {counted(len(on), 'game')} played on it ({_sessions(on)}) "
+                       f"{agreement(len(on), 'stays', 'stay')} valid, played honestly on the bias policy of their "
+                       f"time (the report names it and flags it): mark {agreement(len(on), 'it', 'them')} invalid "
+                       f"too to have {agreement(len(on), 'it', 'them')} played again on the new one" if on
+                       else "; no game was played on it"))
     return "; ".join(said)
 
 

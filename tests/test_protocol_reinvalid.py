@@ -211,3 +211,19 @@ def test_a_second_mark_is_refused_naming_the_first(played, tmp_path, pairplay_cl
     assert f"{INVALID} is marked invalid already (wrong instructions, 20" in line and line.endswith("nothing written")
     assert (folder / "journal.jsonl").read_bytes() == journal
     assert sessions_csv(folder)[INVALID]["invalid"] == "wrong instructions"
+
+
+def test_one_game_on_the_flawed_policy_is_said_in_the_singular_and_a_marked_one_is_said_marked(played, tmp_path,
+                                                                                               pairplay_cli):
+    """"1 game played on it (...) stay valid ...: mark them invalid", the game marked already counted among those
+    that "stay valid", and the report's "Games played on it" listed a game marked invalid as if counted."""
+    shutil.copytree(played, tmp_path / "s")
+    assert pairplay_cli("protocol", "mark-invalid", "s", PHASE2[0], "--reason", "fire alarm",
+                        cwd=tmp_path).returncode == 0
+    ran = pairplay_cli("protocol", "mark-invalid", "s", INVALID, "--reason", "wrong instructions", cwd=tmp_path)
+    assert ran.returncode == 0, ran.stderr
+    assert (f"; 1 game played on it ({PHASE2[1]}) stays valid, played honestly on the bias policy of their time (the "
+            "report names it and flags it): mark it invalid too to have it played again on the new one\n") in ran.stdout
+    assert pairplay_cli("report", "s", cwd=tmp_path).returncode == 0
+    assert (f"Games played on it: {PHASE2[0]} (marked invalid: fire alarm), {PHASE2[1]}."
+            in (tmp_path / "s" / "report" / "report.md").read_text())
