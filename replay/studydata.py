@@ -220,6 +220,9 @@ class StudyState:
     # file and line, for the games played on it (replay/biases.py)
     combinations: list[j.BiasCombined] = field(default_factory=list)
     deletions: list[j.ParticipantDeleted] = field(default_factory=list)
+    # the bias policies made with a deleted participant's game marked invalid since: kept by their deletion
+    # without the id (replay/biases.py flags them as it flags one made with a game still in the journal)
+    flaws_kept: list[j.FlawKept] = field(default_factory=list)
     next_number: int = 1
     # ids given out: a registration left in the journal, or a deletion (it removed its one registration line
     # and keeps no id). Ids are given in order, so the next is one past both this count and the highest left.
@@ -256,6 +259,7 @@ class StudyState:
             self.combinations.append(e)
         elif isinstance(e, j.ParticipantDeleted):
             self.deletions.append(e)
+            self.flaws_kept += e.flaws_kept
             # ids are never reused, even after a deletion took the highest one; nor skipped: the deleted one
             # counts once, as the one id it was (a `+= 1` on top of the highest left skipped one when the
             # deleted id was not the highest: p02 of p01..p03 deleted, the next was p05)
@@ -1281,6 +1285,7 @@ class StudyData:
             if running:
                 raise StudyDataError(f"{pid} has a game running ({running[0]}): abort it first", self.given)
             merged = self.merged_using(pid)
+            flaws = biases.flaws_of(self.state, pid, lambda text: _redact(text, pid))
             files = self.files_of(pid)
             sessions = {g.session for g in self.games_of(pid)}
             live = [f for f in files + [x for g in sessions for x in (self.folder / "recordings").glob(f"{g}.*")]
@@ -1340,7 +1345,7 @@ class StudyData:
             deleted = self.append(j.ParticipantDeleted(
                 deletion=secrets.token_hex(6), sessions_removed=len(sessions), files_removed=len(files),
                 journal_lines_removed=removed, merged_policies_using_them=merged, key_file_line_removed=key_removed,
-                copies_erased=len(erased)))
+                copies_erased=len(erased), flaws_kept=flaws))
             self.write_tables()
             return Deletion(deleted, left, [c for c in copies if c.fate])
 
