@@ -78,6 +78,9 @@ def _on_folder(data: StudyData, args) -> int:
                                            else "") + ")")
     for m in gone.merged_policies_using_them:
         print(escaped(f"merged policy combined from their games (kept; re-combine without them if needed): {m}"))
+    for k in gone.flaws_kept:  # the flaw outlives the person (replay/biases.py): said, as status goes on saying it
+        print(escaped(f"merged policy made with their game marked invalid since ({k.reason}): {k.merged} (kept "
+                      "flagged without their id; the plan combines it again if it is current)"))
     for c in erased.copies:
         if c.erased:
             print(escaped(f"erased {copy_words(c, args.participant)}: {c.path} (pairplay's own file, unchanged: the "

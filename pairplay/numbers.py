@@ -6,7 +6,8 @@ an integral float without its `.0` (`--psi 0` was said "got 0.0", `epsilon_start
 number as Python's shortest exact text (0.95, 1e-300, nan, inf), anything else
 as str() (an integer of 21 digits or more as "a number of 31 digits"); a float of a file read under `typed_floats` as the file has it (`1e7`). `type_name(kind)` is a Python type's name as a sentence says it ("an
 integer", not "a int"). A count is said with its noun by `counted(n, noun)`:
-"1 participant", "2 participants" (a fixed plural said "1 participants").
+"1 participant", "2 participants" (a fixed plural said "1 participants"), and a word that agrees with a
+count by `agreement(n, one, many)` ("1 game stays", "2 games stay").
 Standard library only (every layer imports this).
 """
 
@@ -68,3 +69,9 @@ def counted(n: object, noun: str, many: str = "", spec: str = "") -> str:
     counted(3, "policy", "policies") -> "3 policies". `many`: the plural when it is not noun + "s";
     `spec`: the number's format (",": 12,345)."""
     return f"{n:{spec}} {noun if n == 1 else many or noun + 's'}"
+
+
+def agreement(n: int, one: str, many: str) -> str:
+    """The word that agrees with a count `n` (module rule): agreement(1, "stays", "stay") -> "stays",
+    agreement(2, "it", "them") -> "them"."""
+    return one if n == 1 else many

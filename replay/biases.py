@@ -10,14 +10,18 @@ flawed bias policy meanwhile. The games already played on it stay valid (`played
 them honestly, on the bias policy the study had then, and a second game of the same phase would find them
 returning users, which the design does not have; the report names the bias policy each game used and flags
 a flawed one, and the experimenter who wants them played again marks them invalid too (then the plan asks
-for them, on the new bias policy). All of it is a fold of the journal: nothing here writes.
+for them, on the new bias policy). A flaw is a fact about the merged file, not about the person: a
+participant's deletion removes their games and marks, and keeps each flaw they made without their id
+(`flaws_of`, journal ParticipantDeleted `flaws_kept`), which `invalid_inputs` counts as "a game of a deleted
+participant" (it was forgotten: the plan played new games on the flawed file, and nothing flagged the games played
+on it). All of it is a fold of the journal: nothing here writes.
 """
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Callable
 
-from pairplay.numbers import counted
+from pairplay.numbers import agreement, counted
 from pairplay.schemas import journal as j
 
 if TYPE_CHECKING:
@@ -39,10 +43,25 @@ def _by_policy(state: "StudyState") -> dict[str, "Game"]:
     return {g.ended.policy: g for g in state.games.values() if g.ended is not None and g.ended.policy}
 
 
-def invalid_inputs(state: "StudyState", c: j.BiasCombined) -> list["Game"]:
-    """The games marked invalid whose policy combination `c` took (none: it is sound)."""
+DELETED_GAME = "a game of a deleted participant"  # a flaw kept by a deletion names no one
+
+
+def invalid_inputs(state: "StudyState", c: j.BiasCombined) -> list[tuple[str, str]]:
+    """(game, reason) of each game marked invalid whose policy combination `c` took (none: it is sound); a
+    deleted participant's game as DELETED_GAME, from the flaws their deletion kept."""
     by_policy = _by_policy(state)
-    return [by_policy[p] for p in c.inputs if p in by_policy and by_policy[p].invalid]
+    bad = [by_policy[p] for p in c.inputs if p in by_policy and by_policy[p].invalid]
+    return [(g.session, g.invalid) for g in bad] + [(DELETED_GAME, k.reason) for k in state.flaws_kept
+                                                     if k.merged == c.output]
+
+
+def flaws_of(state: "StudyState", pid: str, redact: Callable[[str], str]) -> list[j.FlawKept]:
+    """The flaws participant `pid`'s games marked invalid made in the combinations that took them, as their
+    deletion keeps them: the bias policy, the reason (`redact`ed of the id) and the mark's time (module rule)."""
+    by_policy = _by_policy(state)
+    return [j.FlawKept(merged=c.output, reason=redact(g.invalid), marked_ns=g.invalid_ns)
+            for c in state.combinations for p in c.inputs
+            if (g := by_policy.get(p)) is not None and g.invalid and g.participant == pid]
 
 
 def flawed(state: "StudyState", phase: str) -> j.BiasCombined | None:
@@ -59,7 +78,7 @@ def played_on(state: "StudyState", c: j.BiasCombined) -> list["Game"]:
 def flaw_words(state: "StudyState", c: j.BiasCombined) -> str:
     """"made with <session> (marked invalid since: <reason>), ..." of each; "" if `c` is sound."""
     bad = invalid_inputs(state, c)
-    return "made with " + ", ".join(f"{g.session} (marked invalid since: {g.invalid})" for g in bad) if bad else ""
+    return "made with " + ", ".join(f"{who} (marked invalid since: {why})" for who, why in bad) if bad else ""
 
 
 def replaced_by(state: "StudyState", c: j.BiasCombined) -> j.BiasCombined | None:
@@ -94,12 +113,14 @@ def marked_note(state: "StudyState", session: str) -> str:
     for c in state.combined.values():
         if not policy or policy not in c.inputs:
             continue
-        on = played_on(state, c)
+        on = [g for g in played_on(state, c) if not g.invalid]  # one marked already is played again anyway
         said.append(f"the bias policy of {c.phase} ({c.output}) was combined from it: the plan asks for the game "
                     f"again, then the combination again, into a new file (this one kept for the record)"
-                    + (f"; {counted(len(on), 'game')} played on it ({_sessions(on)}) stay valid, played honestly on "
-                       "the bias policy of their time (the report names it and flags it): mark them invalid too to "
-                       "have them played again on the new one" if on else "; no game was played on it"))
+                    + (f"; {counted(len(on), 'game')} played on it ({_sessions(on)}) "
+                       f"{agreement(len(on), 'stays', 'stay')} valid, played honestly on the bias policy of their "
+                       f"time (the report names it and flags it): mark {agreement(len(on), 'it', 'them')} invalid "
+                       f"too to have {agreement(len(on), 'it', 'them')} played again on the new one" if on
+                       else "; no game was played on it"))
     return "; ".join(said)
 
 

@@ -231,6 +231,7 @@ class Game:
     bias: str = ""
     ended: j.GameEnded | None = None
     invalid: str = ""
+    invalid_ns: int = 0  # when it was marked invalid (its SessionMarkedInvalid's time)
     paused: bool = False
     scripted: str = ""  # the persona that played instead of a person (a rehearsal); "" for a person
 
@@ -251,6 +252,9 @@ class StudyState:
     # file and line, for the games played on it (replay/biases.py)
     combinations: list[j.BiasCombined] = field(default_factory=list)
     deletions: list[j.ParticipantDeleted] = field(default_factory=list)
+    # the bias policies made with a deleted participant's game marked invalid since: kept by their deletion
+    # without the id (replay/biases.py flags them as it flags one made with a game still in the journal)
+    flaws_kept: list[j.FlawKept] = field(default_factory=list)
     next_number: int = 1
     # ids given out: a registration left in the journal, or a deletion (it removed its one registration line
     # and keeps no id). Ids are given in order, so the next is one past both this count and the highest left.
@@ -283,11 +287,13 @@ class StudyState:
             self.games[e.session].paused = isinstance(e, j.GamePaused)
         elif isinstance(e, j.SessionMarkedInvalid) and e.session in self.games:
             self.games[e.session].invalid = e.reason
+            self.games[e.session].invalid_ns = e.time_ns
         elif isinstance(e, j.BiasCombined):
             self.combined[e.phase] = e
             self.combinations.append(e)
         elif isinstance(e, j.ParticipantDeleted):
             self.deletions.append(e)
+            self.flaws_kept += e.flaws_kept
             # ids are never reused, even after a deletion took the highest one; nor skipped: the deleted one
             # counts once, as the one id it was (a `+= 1` on top of the highest left skipped one when the
             # deleted id was not the highest: p02 of p01..p03 deleted, the next was p05)
@@ -787,12 +793,16 @@ class StudyData:
     def mark_invalid(self, session: str, reason: str) -> j.SessionMarkedInvalid:
         """Journal a game as invalid (left out of every report, its step asked again); the reason is required and
         kept as given, stripped. A bias policy combined from the game is combined again, into a new file, once the
-        step is played again (replay/biases.py). Raises StudyDataError for an unknown session or an empty reason."""
+        step is played again (replay/biases.py). Raises StudyDataError for an unknown session, an empty reason, or
+        a game marked already (its first reason stays: a second mark replaced it everywhere)."""
         if not reason.strip():  # the report says why a game is left out: a blank is no answer
             raise StudyDataError("marking a session invalid needs a reason")
         game = self.state.games.get(session)
         if game is None:
             raise StudyDataError(f"no session {session!r} in this study")
+        if game.invalid:  # a second mark replaced the first reason in every reader (a new user's trial)
+            raise StudyDataError(f"{session} is marked invalid already ({game.invalid}, "
+                                 f"{_utc(game.invalid_ns) or 'time not journaled'}); nothing written")
         if game.ended is None:  # the console's page disables its button for it; its API marked one mid-game
             # (trial27 F10): a mark before the game's end, the step then offered again beside the game still playing
             raise StudyDataError(f"{session}: the game is running: abort it or wait for its end" if self.running(game)
@@ -1369,6 +1379,7 @@ class StudyData:
             if running:
                 raise StudyDataError(f"{pid} has a game running ({running[0]}): abort it first", self.given)
             merged = self.merged_using(pid)
+            flaws = biases.flaws_of(self.state, pid, lambda text: _redact(text, pid))
             files = self.files_of(pid)
             sessions = {g.session for g in self.games_of(pid)}
             live = [f for f in files + [x for g in sessions for x in (self.folder / "recordings").glob(f"{g}.*")]
@@ -1428,7 +1439,7 @@ class StudyData:
             deleted = self.append(j.ParticipantDeleted(
                 deletion=secrets.token_hex(6), sessions_removed=len(sessions), files_removed=len(files),
                 journal_lines_removed=removed, merged_policies_using_them=merged, key_file_line_removed=key_removed,
-                copies_erased=len(erased), consent_withdrawn=consent_withdrawn))
+                copies_erased=len(erased), consent_withdrawn=consent_withdrawn, flaws_kept=flaws))
             self.write_tables()
             return Deletion(deleted, left, [c for c in copies if c.fate])
 

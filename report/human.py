@@ -264,7 +264,9 @@ def human_report(folder: str | Path, out: str | Path | None = None, reference: s
                     + ". The games played on it are still counted: they were played honestly on the bias policy of "
                       "their time (marking them invalid has them played again on the new one).", ""] if flaw
                    else [f"Replaced by `{later.output}`.", ""] if later else [])
-        on = ", ".join(g.session for g in biases.played_on(data.state, c)) or "none"
+        # a game marked invalid is left out of the figures: said so here, or it read as counted on this policy
+        on = ", ".join(g.session + (f" (marked invalid: {g.invalid})" if g.invalid else "")
+                       for g in biases.played_on(data.state, c)) or "none"
         sections += [f"## The bias policy of {phase_id}" + (f", `{c.output}`" if several or flaw else "")
                      + " (algorithm 4, figure 7.5)", "", *flagged, f"Games played on it: {on}.", "",
                      f"Combined by the combiner service from {counted(len(c.inputs), 'policy file')} of "

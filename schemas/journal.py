@@ -138,6 +138,16 @@ class CopyWritten(JournalEvent, kw_only=True, tag="CopyWritten"):
     by: str = "pairplay"
 
 
+class FlawKept(msgspec.Struct, frozen=True, kw_only=True):
+    """A bias policy made with a game of the deleted participant that was marked invalid since: the flaw is a fact
+    about the merged file, not the person, so the deletion keeps it without their id (replay/biases.py reads it:
+    status, sessions.csv and the report went on flagging nothing, and the plan played new games on the file)."""
+
+    merged: str  # the bias policy (a BiasCombined output)
+    reason: str  # the mark's reason, the id redacted from it
+    marked_ns: int = 0  # when the game was marked invalid
+
+
 class ParticipantDeleted(JournalEvent, tag="ParticipantDeleted"):
     """A participant was erased; no id is kept, only what the deletion touched."""
 
@@ -151,6 +161,7 @@ class ParticipantDeleted(JournalEvent, tag="ParticipantDeleted"):
     # the person withdrew their consent (`participant delete --consent-withdrawn`): their ConsentGiven went with
     # their other lines; this anonymous line keeps that it was withdrawn, and when
     consent_withdrawn: bool = False
+    flaws_kept: list[FlawKept] = []  # the bias policies made with their games marked invalid since (FlawKept)
 
 
 JOURNAL_TYPES = (StudyCreated, ParticipantRegistered, ConsentGiven, GameStarted, GamePaused, GameResumed, GameEnded,

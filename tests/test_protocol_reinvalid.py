@@ -194,3 +194,76 @@ def test_the_console_s_mark_answers_what_the_command_line_says(played, tmp_path)
     assert status == 200 and answer["said"].startswith(f"{INVALID} marked invalid: wrong instructions; the bias "
                                                        f"policy of phase2 ({V1}) was combined from it")
     assert state["next"]["label"] == "p01: phase1 game 2" and state["combined"]["phase2"]["flawed"]
+
+
+def sessions_csv(folder: Path) -> dict[str, dict[str, str]]:
+    with open(folder / "sessions.csv") as f:
+        return {r["session"]: r for r in csv.DictReader(f)}
+
+
+def test_a_deletion_keeps_the_flaw_without_the_id(played, tmp_path, pairplay_cli):
+    """Deleting p01, whose game the bias policy took and was marked invalid since, removed the mark with them: status
+    showed "[done] combine" and p02's phase-2 game plain done, sessions.csv `bias_flawed` was empty, the report
+    flagged nothing, and the plan would play new games on the flawed file (a new user's trial, trial32 A)."""
+    folder, _ = marked(played, tmp_path, pairplay_cli)
+    ran = pairplay_cli("participant", "delete", "s", "p01", "--yes", cwd=tmp_path)
+    assert ran.returncode == 0, ran.stderr
+    assert f"merged policy made with their game marked invalid since (wrong instructions): {V1}" in ran.stdout
+    assert "p01" not in (folder / "journal.jsonl").read_text()  # kept without the id
+    kept = "made with a game of a deleted participant (marked invalid since: wrong instructions)"
+    status = pairplay_cli("protocol", "status", "s", cwd=tmp_path).stdout.splitlines()
+    combine = next(line for line in status if "combine" in line)
+    assert not combine.startswith("[done") and f"{V1} was {kept}" in combine
+    p02 = next(x for x in status if "p02 (scripted:" in x and "phase2" in x)
+    assert p02.startswith("[done   ]") and f"played on {V1}, {kept}" in p02
+    assert sessions_csv(folder)[PHASE2[1]]["bias_flawed"] == kept
+    state = Console(StudyRunner(StudyData(folder), None), "token").state()
+    assert state["combined"]["phase2"]["flawed"] == kept
+    ran = pairplay_cli("report", "s", cwd=tmp_path)
+    assert ran.returncode == 0, ran.stderr
+    assert f"played on a bias policy made with a game marked invalid since: {PHASE2[1]} ({V1})" in ran.stdout
+    assert (f"**Made with a game marked invalid since**: a game of a deleted participant (marked invalid since: "
+            "wrong instructions); not combined again yet") in (folder / "report" / "report.md").read_text()
+
+
+def test_a_deletion_after_the_combination_again_keeps_the_earlier_one_flagged(played, tmp_path, pairplay_cli):
+    """After the combination again (V2), p01's deletion left V1 "Replaced by V2." with no reason, and p02's game
+    played on it unflagged in status, sessions.csv and the report."""
+    folder, _ = marked(played, tmp_path, pairplay_cli)
+    assert pairplay_cli("protocol", "pilot", "s", "--personas", "blind,deaf", cwd=tmp_path).returncode == 0
+    assert pairplay_cli("participant", "delete", "s", "p01", "--yes", cwd=tmp_path).returncode == 0
+    kept = "made with a game of a deleted participant (marked invalid since: wrong instructions)"
+    assert sessions_csv(folder)[PHASE2[1]]["bias_flawed"] == kept
+    status = pairplay_cli("protocol", "status", "s", cwd=tmp_path).stdout
+    assert "[done   ] combine" in status and f"played on {V1}, {kept}" in status  # V2 is sound: done
+    assert pairplay_cli("report", "s", cwd=tmp_path).returncode == 0
+    assert (f"**Made with a game marked invalid since**: a game of a deleted participant (marked invalid since: "
+            f"wrong instructions); replaced by `{V2}`") in (folder / "report" / "report.md").read_text()
+
+
+def test_a_second_mark_is_refused_naming_the_first(played, tmp_path, pairplay_cli):
+    """A second mark of the same game was accepted and its reason replaced the first in every reader."""
+    folder, _ = marked(played, tmp_path, pairplay_cli)
+    journal = (folder / "journal.jsonl").read_bytes()
+    ran = pairplay_cli("protocol", "mark-invalid", "s", INVALID, "--reason", "again", cwd=tmp_path)
+    assert ran.returncode == 2 and ran.stdout == ""
+    line, = ran.stderr.splitlines()
+    assert f"{INVALID} is marked invalid already (wrong instructions, 20" in line and line.endswith("nothing written")
+    assert (folder / "journal.jsonl").read_bytes() == journal
+    assert sessions_csv(folder)[INVALID]["invalid"] == "wrong instructions"
+
+
+def test_one_game_on_the_flawed_policy_is_said_in_the_singular_and_a_marked_one_is_said_marked(played, tmp_path,
+                                                                                               pairplay_cli):
+    """"1 game played on it (...) stay valid ...: mark them invalid", the game marked already counted among those
+    that "stay valid", and the report's "Games played on it" listed a game marked invalid as if counted."""
+    shutil.copytree(played, tmp_path / "s")
+    assert pairplay_cli("protocol", "mark-invalid", "s", PHASE2[0], "--reason", "fire alarm",
+                        cwd=tmp_path).returncode == 0
+    ran = pairplay_cli("protocol", "mark-invalid", "s", INVALID, "--reason", "wrong instructions", cwd=tmp_path)
+    assert ran.returncode == 0, ran.stderr
+    assert (f"; 1 game played on it ({PHASE2[1]}) stays valid, played honestly on the bias policy of their time (the "
+            "report names it and flags it): mark it invalid too to have it played again on the new one\n") in ran.stdout
+    assert pairplay_cli("report", "s", cwd=tmp_path).returncode == 0
+    assert (f"Games played on it: {PHASE2[0]} (marked invalid: fire alarm), {PHASE2[1]}."
+            in (tmp_path / "s" / "report" / "report.md").read_text())
