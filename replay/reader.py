@@ -46,7 +46,7 @@ from pairplay.livelock import LIVE, is_live
 from pairplay.numbers import counted
 from pairplay.schemas.envelope import Event, Seq
 from pairplay.schemas.jsonfile import MCAP_MAGIC
-from pairplay.schemas.events import EVENT_BY_TAG, SessionEnded, decode_event
+from pairplay.schemas.events import EVENT_BY_TAG, RewardGiven, SessionEnded, decode_event
 from pairplay.schemas.events import _decoder as _event_decoder
 from pairplay.schemas.keys import ROOT as KEY_ROOT
 from pairplay.schemas.trust import STARTERS
@@ -765,8 +765,18 @@ def _read_log(path: str | Path, only: frozenset[str] | None = None) -> EventLog:
                 log.lost_from = len(log.events)
     log.truncated, log.damage, log.data_complete = checked.truncated, checked.damage, checked.data_complete
     log.seq_jumps, log.repeated = seq_jumps(route.values())
-    log.unanswered = unanswered(route.values(), {r.event.session: r.event.reason for r in log.events
-                                                 if type(r.event) is SessionEnded})
+    ended_by, learned = {}, {}
+    if "RewardGiven" not in skipped:  # (decoded: whether each learned is known)
+        for r in log.events:
+            kind = type(r.event)
+            if kind is SessionEnded:
+                ended_by[r.event.session] = r.event.reason
+            elif kind is RewardGiven and r.event.learned and r.event.source == "learner":
+                learned.setdefault(r.event.session, set()).add(r.event.seq)
+    else:
+        ended_by = {r.event.session: r.event.reason for r in log.events if type(r.event) is SessionEnded}
+        learned = None
+    log.unanswered = unanswered(route.values(), ended_by, learned)
     if recovered:
         log.metadata[RECOVERED] = recovered
     log.source_lost = said_source_lost(log.metadata.get(RECOVERED, {}))
@@ -899,17 +909,22 @@ def seq_jumps(routes) -> tuple[list[tuple[str, int, int]], list[tuple[str, int]]
 # trial: the learner's last Q update dropped, rebuild wrote a whole, wrong policy, exit 0)
 ANSWERED = (("game", "SuggestionRequested", "learner", "SuggestionMade"),
             ("learner", "SuggestionMade", "learner", "RewardGiven"))
+UPDATES = ("QUpdated", "LSPIUpdated")  # what follows each learner's RewardGiven that learned (`unanswered`)
 
 
-def unanswered(routes, ended_by: dict[str, str]) -> list[tuple[str, int, str, int, str, str]]:
+def unanswered(routes, ended_by: dict[str, str],
+               learned: dict[str, set] | None = None) -> list[tuple[str, int, str, int, str, str]]:
     """The pairs of `ANSWERED` whose answers are fewer than what they answer: (answering source, answers,
     what they answer, how many, its tag, the source of what they answer), counted from the distinct seqs read on each channel (`_read_log`'s
     routes; an identical copy counts once), per session. A session that did not complete (`ended_by`: its
     SessionEnded's reason by session: a signal, an abort; none recorded) may end between a request and its
-    answer: one unanswered there is its end, not a loss."""
+    answer: one unanswered there is its end, not a loss. `learned`: by session, the seqs of the learner's
+    RewardGiven that learned, each followed by its update (QUpdated or LSPIUpdated: services/learner.py `_reward`;
+    its last Q update dropped alone), None if the read did not decode them."""
     import numpy as np
 
-    paired = {(asker, asked) for asker, asked, _, _ in ANSWERED} | {(by, answer) for _, _, by, answer in ANSWERED}
+    paired = ({(asker, asked) for asker, asked, _, _ in ANSWERED} | {(by, answer) for _, _, by, answer in ANSWERED}
+              | {("learner", tag) for tag in UPDATES})
     seqs: dict[tuple[str, str, str], list] = {}  # (session, source, tag) -> the seqs read on its channels
     for _, _, session, source, kind, numbers in routes:
         if numbers and kind is not None and (source, kind.__name__) in paired:  # (only these: speed)
@@ -923,6 +938,11 @@ def unanswered(routes, ended_by: dict[str, str]) -> list[tuple[str, int, str, in
             n_answered = count.get((session, answerer, answer), 0)
             if n_asked and n_answered + slack < n_asked:
                 out.append((answerer, n_answered, asked, n_asked, answer, asker))
+        n_learned = len((learned or {}).get(session, ()))
+        updates = {tag: count.get((session, "learner", tag), 0) for tag in UPDATES}
+        if n_learned > sum(updates.values()) + slack:
+            tag = max(updates, key=updates.get)
+            out.append(("learner", updates[tag], "RewardGiven that learned", n_learned, tag, "learner"))
     return out
 
 

@@ -236,3 +236,21 @@ def test_a_repeated_seq_and_a_seq_far_past_are_said_as_such(seq, new, gap, tmp_p
     p = rewritten(tmp_path / "renumbered.mcap", each=_seq_changed("participant", seq, new))
     for only in (None, CURVE_READS):
         assert gap in read_log(p, only=only).missing, read_log(p, only=only).missing
+
+
+def test_a_q_update_dropped_and_the_seqs_after_it_renumbered_is_said(tmp_path, capsys):
+    """The learner's last QUpdated dropped and its later events renumbered down one (no hole in its seq, every
+    request answered, every suggestion settled): its RewardGiven that learned outnumber its Q updates."""
+    last_q = max(r.event.seq for r in read_log(SAMPLE).events if type(r.event).__name__ == "QUpdated")
+
+    def each(channel, message):
+        event = json.loads(message.data)
+        if "/learner/" not in channel.topic or event["seq"] < last_q:
+            return [message]
+        if event["seq"] == last_q:
+            return []
+        event["seq"] -= 1
+        return [dataclasses.replace(message, data=json.dumps(event, separators=(",", ":")).encode())]
+    p = rewritten(tmp_path / "renumbered.mcap", each=each)
+    gap = "the last events of 'learner' missing: 9 QUpdated for the 10 RewardGiven that learned of 'learner'"
+    _refused_and_flagged(capsys, p, tmp_path, gap)
