@@ -46,7 +46,7 @@ from pairplay.livelock import LIVE, is_live
 from pairplay.numbers import counted
 from pairplay.schemas.envelope import Event, Seq
 from pairplay.schemas.jsonfile import MCAP_MAGIC
-from pairplay.schemas.events import EVENT_BY_TAG, decode_event
+from pairplay.schemas.events import EVENT_BY_TAG, RewardGiven, SessionEnded, decode_event
 from pairplay.schemas.events import _decoder as _event_decoder
 from pairplay.schemas.keys import ROOT as KEY_ROOT
 from pairplay.schemas.trust import STARTERS
@@ -140,6 +140,12 @@ class EventLog:
     # where a source's seq skips numbers between two events read (every source's: each numbers its events 1, 2,
     # 3, ..., services/node.py): (source, seq before, seq after), by source, then seq (`gaps`)
     seq_jumps: list[tuple[str, int, int]] = field(default_factory=list)
+    # what a source answers one for one that it answered fewer of, its last events not in the file (seq cannot
+    # see a tail): (the answering source, its answers, what they answer, how many, its tag): `unanswered`, `gaps`
+    unanswered: list[tuple[str, int, str, int, str, str]] = field(default_factory=list)
+    # a seq held by more than one event just before a hole in its source's seqs (one renumbered, not lost):
+    # (source, seq) (`gaps`)
+    repeated: list[tuple[str, int]] = field(default_factory=list)
 
     @property
     def copied(self) -> str:
@@ -194,21 +200,49 @@ class EventLog:
         the file lacks although every byte of it checks out (a copying tool that dropped the RoundEnded: view
         said "0 notes", rebuild "the session ended (completed) before round 1"; a learner's QUpdated seq 16
         rewritten as 999: rebuild and view said nothing, verify only DIFFERS: hostile users' trials). A seq far
-        past the source's others (999 after 141) is such a jump too: its events between are not in the file.
-        Events before a source's first one in the file are not counted (a recorder that joined late never had
-        them), as the recorder counts holes (services/recorder.py `_holes`)."""
-        if not self.seq_jumps or self.lost_at or self.source_lost:
+        past the source's others is said as that, not as the events between (a seq 189 rewritten as 999 was "800
+        events missing"), and a hole after a seq held twice as a seq repeated (21 rewritten as 20 was "1 event
+        missing"). A first seq past 1 of the game or the learner is a hole at the start (`FROM_ONE`; another
+        source's events before its first one in the file are not counted, as the recorder counts holes:
+        services/recorder.py `_holes`: the board's start is not in a pilot's recordings). The end
+        no seq shows: the learner's answers fewer than what they answer (`unanswered`) are its last events
+        missing (its last Q update among them: rebuild wrote a whole, wrong policy: a new user's trial)."""
+        if not (self.seq_jumps or self.unanswered) or self.lost_at or self.source_lost:
             return ""
         by: dict[str, list[tuple[int, int]]] = {}
         for source, before, after in self.seq_jumps:
             if (sources is None or source in sources) and source not in but:
                 by.setdefault(source, []).append((before, after))
+        twice = set(self.repeated) if not self.copies else set()  # (copies hold every seq twice: no sign there)
         said = []
         for source, jumps in by.items():
-            n = sum(after - before - 1 for before, after in jumps)
-            (before, after), more = jumps[0], len(jumps) - 1
-            said.append(f"{counted(n, 'event')} of {source!r} missing: its seq jumps from {before} to {after}"
-                        + (f" and in {counted(more, 'other place')}" if more else ""))
+            clauses, n, holes = [], 0, []
+            last = max(after for _, after in jumps)
+            for before, after in jumps:
+                if before == 0:
+                    first = "event" if after == 2 else counted(after - 1, "event")
+                    clauses.append(f"its first {first} missing: its seq starts at {after}")
+                elif after == last and after - before - 1 > before:  # far past the rest: a seq renumbered
+                    clauses.append(f"an event has seq {after}, far past its others (the last {before})")
+                elif (source, before) in twice:
+                    clauses.append(f"seq {before} held by two events, none by {before + 1}: one renumbered")
+                else:
+                    n += after - before - 1
+                    holes.append((before, after))
+            if holes:
+                (before, after), more = holes[0], len(holes) - 1
+                clauses.insert(0, f"{counted(n, 'event')} missing: its seq jumps from {before} to {after}"
+                               + (f" and in {counted(more, 'other place')}" if more else ""))
+            # (one hole alone: said as before, "N events of 'x' missing: ...")
+            alone = holes and len(clauses) == 1
+            said.append(clauses[0].replace(" missing:", f" of {source!r} missing:", 1) if alone
+                        else f"{source!r}: " + ", ".join(clauses))
+        for source, answers, asked, n_asked, answer, asker in self.unanswered:
+            # (a source with holes said: they are the answers missing; one clause a source)
+            if (sources is None or source in sources) and source not in but and source not in by:
+                by[source] = []
+                said.append(f"the last events of {source!r} missing: {answers} {answer} for the "
+                            f"{n_asked} {asked} of {asker!r}")
         return "; ".join(said)
 
     @property
@@ -730,7 +764,19 @@ def _read_log(path: str | Path, only: frozenset[str] | None = None) -> EventLog:
             if log.lost_from < 0:
                 log.lost_from = len(log.events)
     log.truncated, log.damage, log.data_complete = checked.truncated, checked.damage, checked.data_complete
-    log.seq_jumps = seq_jumps(route.values())
+    log.seq_jumps, log.repeated = seq_jumps(route.values())
+    ended_by, learned = {}, {}
+    if "RewardGiven" not in skipped:  # (decoded: whether each learned is known)
+        for r in log.events:
+            kind = type(r.event)
+            if kind is SessionEnded:
+                ended_by[r.event.session] = r.event.reason
+            elif kind is RewardGiven and r.event.learned and r.event.source == "learner":
+                learned.setdefault(r.event.session, set()).add(r.event.seq)
+    else:
+        ended_by = {r.event.session: r.event.reason for r in log.events if type(r.event) is SessionEnded}
+        learned = None
+    log.unanswered = unanswered(route.values(), ended_by, learned)
     if recovered:
         log.metadata[RECOVERED] = recovered
     log.source_lost = said_source_lost(log.metadata.get(RECOVERED, {}))
@@ -812,9 +858,17 @@ def disagreement(key: str, e: Event) -> str:
 DISAGREES = "its key disagrees with its payload"  # how `disagreement` starts (`EventLog.undecoded` counts them apart)
 
 
-def seq_jumps(routes) -> list[tuple[str, int, int]]:
+# the sources whose seq 1 (their ServiceStarted) every recording of their session holds: the game's and the
+# learner's, one process each, recorded from their start (services/session.py, the protocol's games, a restart
+# resumes the numbering: services/runner.py; `replay --as` publishes the recorded seqs). Not the board's: every lab
+# page and a protocol's scripted player publish as it, a pilot's recordings start at its seq 2 (test_copies)
+FROM_ONE = STARTERS | {"learner"}
+
+
+def seq_jumps(routes) -> tuple[list[tuple[str, int, int]], list[tuple[str, int]]]:
     """Where each (session, source)'s seqs, sorted, skip numbers: (source, seq before, seq after), by source in
-    the order its first channel came, then by seq. `routes`: `_read_log`'s channels (topic, tag, session, source,
+    the order its first channel came, then by seq; a first seq past 1 of a source of `FROM_ONE` is a jump from 0. And the seqs before such a jump held by more than
+    one event (source, seq): a seq repeated, the next one renumbered, not lost. `routes`: `_read_log`'s channels (topic, tag, session, source,
     class, the seqs read on it: an array of int64, as Seq bounds them); a channel of no pairplay key holds none.
     Marked in a table of the source's span, not sorted (a set of a 5,000-round session's seqs was 4% of its
     rebuild); a span far wider than the seqs (a forged seq 2^53) is sorted instead."""
@@ -824,21 +878,72 @@ def seq_jumps(routes) -> list[tuple[str, int, int]]:
     for _, _, session, source, _, numbers in routes:
         if numbers:
             by.setdefault((session, source), array("q")).extend(numbers)
-    jumps = []
+    jumps, repeated = [], []
     for (_, source), numbers in by.items():
         seqs = np.frombuffer(numbers, dtype=np.int64)
         low, high = int(seqs.min()), int(seqs.max())
         if high - low < 4 * len(seqs):
             held = np.zeros(high - low + 1, dtype=bool)
             held[seqs - low] = True
-            if held.all():
+            if held.all() and low <= 1:
                 continue  # every number from the first to the last: no gap
             ordered = np.flatnonzero(held) + low
         else:
             ordered = np.unique(seqs)
         at = np.flatnonzero(np.diff(ordered) > 1)
-        jumps += [(source, int(ordered[i]), int(ordered[i + 1])) for i in at]
-    return jumps
+        if low > 1 and source in FROM_ONE:  # its seq starts at 1, resumed after a restart: a hole at the start
+            jumps.append((source, 0, int(ordered[0])))
+        found = [(source, int(ordered[i]), int(ordered[i + 1])) for i in at]
+        if found:  # (only then: counting every source's seqs was a cost for nothing)
+            values, times = np.unique(seqs, return_counts=True)
+            twice = set(values[times > 1].tolist())
+            repeated += [(source, before) for _, before, _ in found if before in twice]
+        jumps += found
+    return jumps, repeated
+
+
+# what a source answers one for one in a session that ran to its end (services/learner.py): every game's
+# SuggestionRequested by the learner's SuggestionMade (its request_seq), every SuggestionMade by the learner's
+# RewardGiven that settles it (not every TurnResolved: a turn resolved with no suggestion, under "gaze", has none).
+# Seq cannot see a source's tail (its last events dropped: no number after them); these pairs can (a new user's
+# trial: the learner's last Q update dropped, rebuild wrote a whole, wrong policy, exit 0)
+ANSWERED = (("game", "SuggestionRequested", "learner", "SuggestionMade"),
+            ("learner", "SuggestionMade", "learner", "RewardGiven"))
+UPDATES = ("QUpdated", "LSPIUpdated")  # what follows each learner's RewardGiven that learned (`unanswered`)
+
+
+def unanswered(routes, ended_by: dict[str, str],
+               learned: dict[str, set] | None = None) -> list[tuple[str, int, str, int, str, str]]:
+    """The pairs of `ANSWERED` whose answers are fewer than what they answer: (answering source, answers,
+    what they answer, how many, its tag, the source of what they answer), counted from the distinct seqs read on each channel (`_read_log`'s
+    routes; an identical copy counts once), per session. A session that did not complete (`ended_by`: its
+    SessionEnded's reason by session: a signal, an abort; none recorded) may end between a request and its
+    answer: one unanswered there is its end, not a loss. `learned`: by session, the seqs of the learner's
+    RewardGiven that learned, each followed by its update (QUpdated or LSPIUpdated: services/learner.py `_reward`;
+    its last Q update dropped alone), None if the read did not decode them."""
+    import numpy as np
+
+    paired = ({(asker, asked) for asker, asked, _, _ in ANSWERED} | {(by, answer) for _, _, by, answer in ANSWERED}
+              | {("learner", tag) for tag in UPDATES})
+    seqs: dict[tuple[str, str, str], list] = {}  # (session, source, tag) -> the seqs read on its channels
+    for _, _, session, source, kind, numbers in routes:
+        if numbers and kind is not None and (source, kind.__name__) in paired:  # (only these: speed)
+            seqs.setdefault((session, source, kind.__name__), []).append(np.frombuffer(numbers, dtype=np.int64))
+    count = {at: len(np.unique(np.concatenate(held))) for at, held in seqs.items()}
+    out = []
+    for session in {at[0] for at in count}:
+        slack = 0 if ended_by.get(session) == "completed" else 1
+        for asker, asked, answerer, answer in ANSWERED:
+            n_asked = count.get((session, asker, asked), 0)
+            n_answered = count.get((session, answerer, answer), 0)
+            if n_asked and n_answered + slack < n_asked:
+                out.append((answerer, n_answered, asked, n_asked, answer, asker))
+        n_learned = len((learned or {}).get(session, ()))
+        updates = {tag: count.get((session, "learner", tag), 0) for tag in UPDATES}
+        if n_learned > sum(updates.values()) + slack:
+            tag = max(updates, key=updates.get)
+            out.append(("learner", updates[tag], "RewardGiven that learned", n_learned, tag, "learner"))
+    return out
 
 
 def _decoded(data: bytes) -> Event | None:

@@ -13,7 +13,7 @@ from pairplay.cli.main import main
 from pairplay.replay.reader import read_log
 from pairplay.replay.rebuild import CURVE_READS
 
-from rewrite_mcap import rewritten
+from rewrite_mcap import SAMPLE, rewritten
 
 SESSION = "sample-sim-ashley"
 
@@ -109,7 +109,8 @@ def _partial(tmp_path, folder: str, p) -> str:
 
 
 @pytest.mark.parametrize("source, seq, new, gap", [
-    ("learner", 16, 999, "858 events of 'learner' missing: its seq jumps from 15 to 17 and in 1 other place"),
+    ("learner", 16, 999, "'learner': 1 event missing: its seq jumps from 15 to 17, an event has seq 999, far past "
+                         "its others (the last 141)"),
     ("game", 61, None, "1 event of 'game' missing: its seq jumps from 60 to 62")])
 def test_a_hole_in_the_seq_of_a_source_the_policy_is_made_of_is_said_and_flags_the_policy(source, seq, new, gap,
                                                                                            tmp_path, capsys):
@@ -162,3 +163,94 @@ def test_channels_repeated_in_every_chunk_leave_no_hole(tmp_path):
     p = rewritten(tmp_path / "hole.mcap", chunk_size=4096, repeat_channels=True,
                   each=_seq_changed("learner", 100, None))
     assert read_log(p, only=CURVE_READS).missing == "1 event of 'learner' missing: its seq jumps from 99 to 101"
+
+
+def _dropped(source: str, seqs):
+    """`rewritten`'s `each`: the events of `source` whose seq is in `seqs` dropped, every other kept."""
+    def each(channel, message):
+        return [] if f"/{source}/" in channel.topic and json.loads(message.data)["seq"] in seqs else [message]
+    return each
+
+
+def _refused_and_flagged(capsys, p, tmp_path, gap):
+    """rebuild of `p` refused without --partial and flagged with it, in the reader's words `gap`."""
+    assert read_log(p).missing == gap
+    assert read_log(p, only=CURVE_READS).missing == gap  # (rebuild's read: the learner's events by tag and seq)
+    code, out = _run(capsys, "rebuild", str(p), "--out", str(tmp_path / "rb"))
+    assert code == 2 and f"the file is damaged ({gap})" in out and "--partial" in out, out
+    code, out = _run(capsys, "rebuild", str(p), "--out", str(tmp_path / "rp"), "--partial")
+    assert code == 0 and _partial(tmp_path, "rp", p) == gap, out
+
+
+@pytest.mark.parametrize("source, seqs, gap", [
+    ("learner", range(1, 13), "'learner': its first 12 events missing: its seq starts at 13"),
+    ("game", {1}, "'game': its first event missing: its seq starts at 2")])
+def test_a_hole_at_the_start_of_a_seq_is_said_and_refused(source, seqs, gap, tmp_path, capsys):
+    """trial32 E: the learner's seqs 1..12 (its ServiceStarted and first Q update) or the game's seq 1 dropped:
+    rebuild wrote a whole policy, exit 0, no word (events before a source's first one in the file were not
+    counted). Every source's seq starts at 1 in a recording of its session: a first seq past 1 is a hole."""
+    _refused_and_flagged(capsys, rewritten(tmp_path / "head.mcap", each=_dropped(source, seqs)), tmp_path, gap)
+
+
+@pytest.mark.parametrize("last_q, gap", [
+    (True, "the last events of 'learner' missing: 55 SuggestionMade for the 65 SuggestionRequested of 'game'"),
+    (False, "the last events of 'learner' missing: 64 RewardGiven for the 65 SuggestionMade of 'learner'")])
+def test_the_learners_last_events_dropped_are_said_and_refused(last_q, gap, tmp_path, capsys):
+    """trial32 E: the learner's events from its last Q update on dropped (no seq after them shows a hole):
+    rebuild wrote a whole, wrong policy, exit 0, no word. The requests the learner answered fewer of say it, and
+    so do its suggestions when only its last event (the RewardGiven settling the last one) is dropped."""
+    learner = [r.event for r in read_log(SAMPLE).events if r.event.source == "learner"]
+    start = (max(e.seq for e in learner if type(e).__name__ == "QUpdated") if last_q
+             else max(e.seq for e in learner))
+    p = rewritten(tmp_path / "tail.mcap", each=_dropped("learner", range(start, 10**6)))
+    _refused_and_flagged(capsys, p, tmp_path, gap)
+
+
+def _ended_by_a_signal(each):
+    """`each`, and the game's SessionEnded made an end by SIGINT (as the game writes it on one)."""
+    def changed(channel, message):
+        if channel.topic.endswith("/SessionEnded"):
+            event = json.loads(message.data)
+            event.update(reason="interrupted", detail="SIGINT")
+            message = dataclasses.replace(message, data=json.dumps(event, separators=(",", ":")).encode())
+        return each(channel, message)
+    return changed
+
+
+def test_a_request_unanswered_at_a_signals_end_is_no_loss_but_two_are(tmp_path, capsys):
+    """A session ended by a signal may stop between the game's last request and the learner's answer: that one
+    unanswered request is its end, not a loss; two are the learner's last events missing."""
+    made = sorted(r.event.seq for r in read_log(SAMPLE).events if type(r.event).__name__ == "SuggestionMade")
+    one = rewritten(tmp_path / "one.mcap", each=_ended_by_a_signal(_dropped("learner", range(made[-1], 10**6))))
+    assert not read_log(one).missing and not read_log(one, only=CURVE_READS).missing
+    two = rewritten(tmp_path / "two.mcap", each=_ended_by_a_signal(_dropped("learner", range(made[-2], 10**6))))
+    assert "the last events of 'learner' missing" in read_log(two).missing
+
+
+@pytest.mark.parametrize("seq, new, gap", [
+    (21, 20, "'participant': seq 20 held by two events, none by 21: one renumbered"),
+    (30, 999, "an event has seq 999, far past its others (the last 261)")])
+def test_a_repeated_seq_and_a_seq_far_past_are_said_as_such(seq, new, gap, tmp_path, capsys):
+    """trial32 E: a seq rewritten 21 -> 20 (two events seq 20, none 21) was said "1 event ... missing: jumps from
+    20 to 22", one rewritten far past the others as hundreds of events missing: each is said as what it is."""
+    p = rewritten(tmp_path / "renumbered.mcap", each=_seq_changed("participant", seq, new))
+    for only in (None, CURVE_READS):
+        assert gap in read_log(p, only=only).missing, read_log(p, only=only).missing
+
+
+def test_a_q_update_dropped_and_the_seqs_after_it_renumbered_is_said(tmp_path, capsys):
+    """The learner's last QUpdated dropped and its later events renumbered down one (no hole in its seq, every
+    request answered, every suggestion settled): its RewardGiven that learned outnumber its Q updates."""
+    last_q = max(r.event.seq for r in read_log(SAMPLE).events if type(r.event).__name__ == "QUpdated")
+
+    def each(channel, message):
+        event = json.loads(message.data)
+        if "/learner/" not in channel.topic or event["seq"] < last_q:
+            return [message]
+        if event["seq"] == last_q:
+            return []
+        event["seq"] -= 1
+        return [dataclasses.replace(message, data=json.dumps(event, separators=(",", ":")).encode())]
+    p = rewritten(tmp_path / "renumbered.mcap", each=each)
+    gap = "the last events of 'learner' missing: 9 QUpdated for the 10 RewardGiven that learned of 'learner'"
+    _refused_and_flagged(capsys, p, tmp_path, gap)
