@@ -48,7 +48,7 @@ from pathlib import Path
 from pairplay import signals
 from pairplay.cli.args import (add_force, file_in, float_at_least, int_at_least, output_file, port_or_any,
                                 session_id, speed)
-from pairplay.errors import InputError, OptionError, OutputError, UserError, escaped
+from pairplay.errors import InputError, OptionError, OutputError, UserError, escaped, folded
 from pairplay.livelock import LIVE, is_live
 from pairplay.outputs import check_output, hold, output_path
 from pairplay.cli.main import left_journals, warn
@@ -264,7 +264,7 @@ def _view(args: argparse.Namespace, tmp_rrd: Path | None, held=None) -> Viewed:
     except (RuntimeError, ValueError) as err:  # a viewer that cannot start
         if isinstance(err, UserError):
             raise
-        raise OptionError(str(err), "--spawn" if args.spawn else "the view's output") from None
+        raise OptionError(folded(err), "--spawn" if args.spawn else "the view's output") from None
     for line in where:  # where to watch it: a result of --serve/--spawn, said at once
         print(escaped(line), flush=True)
     stop = threading.Event()
@@ -304,7 +304,7 @@ def _view(args: argparse.Namespace, tmp_rrd: Path | None, held=None) -> Viewed:
         try:
             finish(rec, shutdown_wait(stop, 1e9, reserve=0.2))  # stopped: the .rrd's footer within the deadline
         except RuntimeError as err:
-            raise RrdWriteFailed(str(err)) from None
+            raise RrdWriteFailed(folded(err)) from None  # rerun's words: maybe lines
         for sig, handler in saved_handlers.items():  # run() may be called in-process (tests, tools)
             signal.signal(sig, handler)
     return viewed

@@ -34,8 +34,12 @@ class UserError(Exception):
         """What and where, on one line: `where` is added unless the text names it already, as a
         whole name (a folder `here` is not named by "there", nor `out` by "out/study"); then the
         `fix`, unless `options` (those of the verb showing the line; None: every option) lack its `option`.
-        A control character of either (a path's or a value's newline) is shown escaped (`escaped`)."""
-        text = escaped(" ".join(self.what.split()))
+        A control character of either (a path's or a value's newline) is shown escaped (`escaped`), never
+        folded into a space: `what` often holds a path (`<folder>: not a study folder`), and
+        `/tmp/no<TAB>su<NEWLINE>ch` said as "/tmp/no su ch" named another path (trial32 F). Folding was the
+        first way to keep the line one line, before `escaped`; a library's message that may span lines
+        is folded where it enters a line (`folded`), and our own words hold no newline."""
+        text = escaped(self.what)
         if self.fix and (options is None or not self.option or self.option in options):
             text = f"{text}; {self.fix}"
         where = escaped(self.where)
@@ -88,6 +92,13 @@ def escaped(text: object) -> str:
         return text
     return _UNSHOWABLE.sub(lambda m: m.group().encode("unicode_escape", "backslashreplace").decode("ascii")
                            if not 0xD800 <= ord(m.group()) <= 0xDFFF else f"\\u{ord(m.group()):04x}", text)
+
+
+def folded(text: object) -> str:
+    """A library's message (an exception's text we did not write: Dask's, Zenoh's, a viewer's) on one line,
+    its newlines and runs of blanks folded into one space. Never for a path or a user's value: those are
+    `escaped`, so the line names the very path (a folded tab or newline names another)."""
+    return " ".join(str(text).split())
 
 
 def command_word(text: object) -> str:

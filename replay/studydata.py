@@ -56,7 +56,7 @@ from pathlib import Path
 import msgspec
 
 from pairplay import __version__, csvcell, folderlock, signals, testpause
-from pairplay.errors import InputError, UserError, command_word
+from pairplay.errors import InputError, UserError, command_word, folded
 from pairplay.inputs import refusal
 from pairplay.livelock import LIVE, is_live
 from pairplay.outputs import (OutputError, check_output, check_places, manifest_name, output_file, read_manifest,
@@ -1722,8 +1722,11 @@ def _line_numbers(lines: list[int]) -> str:
 
 
 def one_line(err: Exception) -> str:
-    """An error as one line: a UserError's own line, else its message with its newlines folded."""
-    return err.line() if isinstance(err, (InputError, OutputError)) else " ".join(str(err).split())
+    """An error as one line: a UserError's own line (its paths escaped, not folded), else its message
+    with its newlines folded (a library's words)."""
+    if isinstance(err, UserError):
+        return err.line() if isinstance(err, (InputError, OutputError)) else str(err)
+    return folded(err)
 
 
 def _id(text_id: str) -> str:

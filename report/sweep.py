@@ -58,7 +58,7 @@ import msgspec
 import numpy as np
 
 from pairplay import csvcell
-from pairplay.errors import OptionError, WorkerLost, escaped
+from pairplay.errors import OptionError, WorkerLost, escaped, folded
 from pairplay.inputs import check_input
 from pairplay.nearest import nearest
 from pairplay.numbers import counted, shown, type_name, typed_floats
@@ -404,7 +404,7 @@ def _check_cell(path: Path, grid: Grid, cell: Cell) -> dict[str, float]:
         refuse_repeated(without_bom(data))  # a measure given twice: json would keep the last, silently
         found = msgspec.convert(json_loads(without_bom(data)), CellFile)  # json: NaN is read, then refused below
     except ValueError as err:  # json.JSONDecodeError, msgspec.ValidationError (in the file's words: in_words)
-        raise ValueError(f"not a cell file: {' '.join(in_words(err, CellFile).split())}") from None
+        raise ValueError(f"not a cell file: {folded(in_words(err, CellFile))}") from None
     if found.seed != cell.seed or found.setting != [tuple(kv) for kv in json.loads(json.dumps(cell.setting))]:
         raise ValueError("holds another cell's setting or seed")
     want = measure_names(grid.study_settings(cell), grid.reuse)
@@ -576,10 +576,10 @@ def check_scheduler(address: str) -> None:
     except OSError as err:
         if "timed out" in str(err).lower():  # Dask's connect: "Timed out trying to connect to ... after 10 s"
             raise refuse(f"no Dask scheduler answered within {SCHEDULER_TIMEOUT_S} s") from None
-        why = err.strerror or " ".join(str(err).split()) or type(err).__name__  # "Network is unreachable"
+        why = err.strerror or folded(err) or type(err).__name__  # "Network is unreachable"
         raise refuse(f"cannot connect ({why})") from None
     except Exception as err:  # noqa: BLE001 - whatever else the other end did: the address is wrong
-        why = " ".join(str(err).split())
+        why = folded(err)
         raise refuse(f"no Dask scheduler answered ({type(err).__name__}{': ' + why if why else ''})"
                      ) from None
     kind = said.get("type") if isinstance(said, dict) else None
@@ -660,7 +660,7 @@ def _cell_result(future, address: str, by_id: dict[str, Cell]) -> tuple[str, dic
         raise WorkerLost(f"{which} killed every Dask worker that ran it (Dask's KilledWorker: it may need more "
                          "memory than a worker has)") from None
     except Exception as err:  # noqa: BLE001 - raised on a worker: said, with where it ran (never a bug of ours here)
-        why = " ".join(str(err).split())[:ERROR_SAID]
+        why = folded(err)[:ERROR_SAID]
         raise WorkerLost(f"{which} failed on a Dask worker: {type(err).__name__}{': ' + why if why else ''} "
                          "(its traceback is in the worker's log)") from None
 
@@ -683,7 +683,7 @@ def check_cluster_pairplay(client, address: str) -> None:
         raise _scheduler_lost(address) from None
     for worker, got in sorted(said.items()):
         if isinstance(got, BaseException):
-            why = " ".join(str(got).split())[:ERROR_SAID]
+            why = folded(got)[:ERROR_SAID]
             what = f"cannot load pairplay ({type(got).__name__}{': ' + why if why else ''})"
         elif got != __version__:
             what = f"has pairplay {shown(got)}, not this {__version__}"

@@ -77,7 +77,7 @@ import zenoh
 import zenoh.ext
 
 from pairplay import signals, testpause
-from pairplay.errors import UserError
+from pairplay.errors import UserError, folded
 from pairplay.inputs import refusal
 from pairplay.schemas.jsonfile import a_folder, empty, in_words
 from pairplay.schemas.repeated import refuse_repeated
@@ -186,7 +186,7 @@ def read_config_file(path: str) -> dict[str, Any]:
 
 def _zenoh_reason(err: Exception) -> str:
     """Zenoh's message without the Rust source location it ends with."""
-    text = " ".join(str(err).split())
+    text = folded(err)
     cut = text.find(" at /")
     return (text[:cut] if cut > 0 else text).rstrip(" .!") or type(err).__name__
 

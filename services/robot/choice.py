@@ -14,6 +14,7 @@ from __future__ import annotations
 import socket
 from dataclasses import dataclass
 
+from pairplay.errors import folded
 from pairplay.services.bus import Bus
 from pairplay.services.robot.backends import load_robot_config, parse_robot_url
 from pairplay.services.robot.bridge import RobotBridge
@@ -45,7 +46,7 @@ def robot_unreachable(url: str, timeout_s: float = CONNECT_PROBE_S) -> str:
     try:
         socket.create_connection((host, port), timeout=timeout_s).close()
     except OSError as err:
-        return err.strerror or ("no answer within %g s" % timeout_s if isinstance(err, TimeoutError) else str(err))
+        return err.strerror or ("no answer within %g s" % timeout_s if isinstance(err, TimeoutError) else folded(err))
     return ""
 
 
