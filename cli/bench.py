@@ -24,13 +24,12 @@ import importlib
 import json
 import os
 import platform
-import shlex
 import sys
 from pathlib import Path
 
 from pairplay.bench.goals import MISSED, goal_text, verdict
 from pairplay.cli.args import count, output_file
-from pairplay.errors import InputError, OptionError
+from pairplay.errors import InputError, OptionError, command_word
 from pairplay.lists import comma_items
 from pairplay.nearest import hinted
 from pairplay.outputs import check_output, hold, write_text
@@ -169,7 +168,7 @@ def markdown(rows: list[dict], runs: int, started: datetime.datetime, loads: lis
 
 def readme_command(runs: int, path: Path) -> str:
     """The command that writes the README's table, as the header names it."""
-    return f"pairplay bench --runs {runs} --readme {shlex.quote(str(path))}"
+    return f"pairplay bench --runs {runs} --readme {command_word(path)}"
 
 
 def _readme_parts(path: Path) -> tuple[str, str]:

@@ -220,7 +220,7 @@ def _on_folder(data: StudyData, args) -> int:
         data.write_tables()
         if not args.consent:  # a note, not a result: a person's game waits for their consent
             print(f"pairplay protocol register: no consent recorded: a person plays once it is "
-                  f"(`pairplay protocol consent {data.given} ID`, or --consent at registration); a persona "
+                  f"(`pairplay protocol consent {command_word(data.given)} ID`, or --consent at registration); a persona "
                   "(pilot) needs none", file=sys.stderr)
         return 0
     if args.action == "consent":
@@ -239,7 +239,7 @@ def _on_folder(data: StudyData, args) -> int:
         for pid in data.state.participants:  # a person's game is refused until it is recorded
             if pid not in data.state.consent:
                 print(f"{pid}: no consent recorded: plays only as a persona until `pairplay protocol consent "
-                      f"{command_word(data.given)} {pid}`")
+                      f"{command_word(data.given)} {command_word(pid)}`")
         for problem in data.fold_problems():  # a hand edit the tables cannot fold: every writing verb refuses it
             print(escaped(f"{data.given / JOURNAL}: does not fold into consistent tables: {problem}: every verb that "
                           f"writes the folder refuses it until the line is put back (a backup of {JOURNAL})"))

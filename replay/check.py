@@ -76,9 +76,10 @@ def check_recording(path: str | Path, journal_ok: bool = False, function: str = 
     if head != MCAP_MAGIC:
         from .wal import SUFFIX, is_journal
         if is_journal(path):  # a recorder's journal left beside a recording it did not finish
-            beside = command_word(str(path)[:-len(SUFFIX)]) if path.name.endswith(SUFFIX) else "the recording"  # pasteable
-            raise InputError(f"a recorder's write-ahead journal, not a recording: `pairplay recover {beside}` "
-                             f"adds what it holds to the recording beside it", path)
+            how = (f"`pairplay recover {command_word(str(path)[:-len(SUFFIX)])}` adds what it holds to the recording "
+                   "beside it") if path.name.endswith(SUFFIX) else \
+                "`pairplay recover RECORDING` adds what it holds to the recording it was written beside"  # renamed
+            raise InputError(f"a recorder's write-ahead journal, not a recording: {how}", path)
         raise InputError("not a recording: not an MCAP file (it does not begin as one)", path)
     return path
 

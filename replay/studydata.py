@@ -674,8 +674,8 @@ class StudyData:
         read as it is; its people's next games wait for `protocol consent`."""
         if pid not in self.state.consent:
             raise StudyDataError(f"{pid} has no consent recorded: a person plays only once their informed consent is "
-                                 f"recorded (`pairplay protocol consent {self.given} {pid}`, or the console's "
-                                 "Record consent, once they have signed the consent form"
+                                 f"recorded (`pairplay protocol consent {command_word(self.given)} {command_word(pid)}`, "
+                                 "or the console's Record consent, once they have signed the consent form"
                                  + (f" {self.study.study.consent_form!r}" if self.study.study.consent_form else "")
                                  + "); a persona (pilot) needs none")
 
@@ -1597,7 +1597,7 @@ def not_a_study_folder(given: Path) -> StudyDataError:
     folder was "not a study folder (no journal.jsonl ...)", `report FILE` "cannot write there"), with the verb
     that makes a folder of it."""
     if given.is_file():
-        made = f"`pairplay protocol init FOLDER --study {given}` makes one of it" if given.suffix == ".toml" else \
+        made = f"`pairplay protocol init FOLDER --study {command_word(given)}` makes one of it" if given.suffix == ".toml" else \
             "give the folder `pairplay protocol init` made"
         return StudyDataError(f"{given}: a file, not a study folder: {made}")
     return StudyDataError(f"{given}: not a study folder (no {JOURNAL}; `pairplay protocol init` makes one)")

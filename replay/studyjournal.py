@@ -29,6 +29,7 @@ from pathlib import Path
 
 import msgspec
 
+from pairplay.errors import command_word
 from pairplay.inputs import refusal
 from pairplay.numbers import counted
 from pairplay.outputs import write_bytes
@@ -79,7 +80,7 @@ def events_of(data: bytes, named: Path, folder: Path, repairing: bool = False) -
                 raise JournalDamaged(
                     f"{named}:{n}: its last line is cut short ({counted(len(line), 'byte')}, no end of line): "
                     "pairplay stopped while it wrote it (a crash, a power cut, a full disk); `pairplay protocol "
-                    f"repair {folder}` sets it aside in a file beside the journal and keeps every whole line",
+                    f"repair {command_word(folder)}` sets it aside in a file beside the journal and keeps every whole line",
                     n, True) from None
             raise JournalDamaged(
                 f"{named}:{n}: {_why(err, line)}; not a crash's cut last line"

@@ -28,7 +28,6 @@ from __future__ import annotations
 
 import contextlib
 import hashlib
-import shlex
 import time
 from dataclasses import dataclass, field, fields, replace
 from pathlib import Path
@@ -47,7 +46,7 @@ from pairplay.core.reward import BONUS_RULE_TEXT
 from pairplay.core.rng import GAME_INDEX_RANGE, SEED_RANGE
 from pairplay.core.simulate import MEMORY_LIMIT, batch_bytes, gigabytes
 from pairplay.arguments import at, checked_dataclass, flag_argument, given, instance_argument, is_integer, path_argument
-from pairplay.errors import OptionError
+from pairplay.errors import OptionError, command_word
 from pairplay.lists import comma_items
 from pairplay.numbers import counted, shown, type_name
 from pairplay.schemas.config import DEFAULT_REWARD_BONUS, LearnerConfig, LSPIConfig, REWARD_BONUS_RULES, lspi_unused
@@ -267,7 +266,7 @@ class StudySettings:
             if isinstance(value, bool):
                 words.append(option)  # a flag: only ever shown when set (the default is False)
             else:
-                words += [option, shlex.quote(repr(value) if isinstance(value, float) else str(value))]
+                words += [option, command_word(repr(value) if isinstance(value, float) else value)]
         return " ".join(words)
 
 

@@ -58,7 +58,7 @@ import msgspec
 import numpy as np
 
 from pairplay import csvcell
-from pairplay.errors import OptionError, WorkerLost, escaped, folded
+from pairplay.errors import OptionError, WorkerLost, command_word, escaped, folded
 from pairplay.inputs import check_input
 from pairplay.nearest import nearest
 from pairplay.numbers import counted, shown, type_name, typed_floats
@@ -629,11 +629,11 @@ def _finished_while_workers(client, address: str, futures: list, kept: Callable[
         if alone_since is None:
             alone_since = now
             print(f"pairplay sweep: the Dask scheduler at {escaped(address)} has no worker to run the cells; waiting up "
-                  f"to {NO_WORKER_S:g} s for one (`dask worker {escaped(address)}` starts one)", file=sys.stderr, flush=True)
+                  f"to {NO_WORKER_S:g} s for one (`dask worker {command_word(address)}` starts one)", file=sys.stderr, flush=True)
         elif now - alone_since >= NO_WORKER_S:
             raise OptionError(f"the Dask scheduler there has had no worker for {NO_WORKER_S:g} s; "
                               f"{kept()} of {counted(total, 'cell')} finished, kept in {cells}: start a worker "
-                              f"(`dask worker {address}`) and the same command resumes from them",
+                              f"(`dask worker {command_word(address)}`) and the same command resumes from them",
                               f"--scheduler {address}")
 
 
