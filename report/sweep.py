@@ -601,8 +601,9 @@ def _finished_while_workers(client, address: str, futures: list, kept: Callable[
     died overnight) and its tasks wait for ever: a trial's sweep printed nothing for 10 minutes. So the
     wait wakes every WORKER_POLL_S to ask the scheduler for its workers; with none, it says so once on
     stderr, and after NO_WORKER_S with none it raises OptionError naming --scheduler, how many cells are
-    kept (`kept()` of `total`, in `cells`) and that the same command resumes from them. A worker that
-    joins in time ends the wait; nothing is said of one that comes back within a poll."""
+    kept (`kept()` of `total`, in `cells`; "none kept" when none: that folder is gone once the sweep ends)
+    and that the same command resumes from them. A worker that joins in time ends the wait; nothing is said
+    of one that comes back within a poll."""
     from dask.distributed import wait
 
     pending = set(futures)
@@ -631,9 +632,12 @@ def _finished_while_workers(client, address: str, futures: list, kept: Callable[
             print(f"pairplay sweep: the Dask scheduler at {escaped(address)} has no worker to run the cells; waiting up "
                   f"to {NO_WORKER_S:g} s for one (`dask worker {command_word(address)}` starts one)", file=sys.stderr, flush=True)
         elif now - alone_since >= NO_WORKER_S:
-            raise OptionError(f"the Dask scheduler there has had no worker for {NO_WORKER_S:g} s; "
-                              f"{kept()} of {counted(total, 'cell')} finished, kept in {cells}: start a worker "
-                              f"(`dask worker {command_word(address)}`) and the same command resumes from them",
+            finished = kept()  # none: the empty folder is removed on the way out, so no folder is named
+            said = (f"{finished} of {counted(total, 'cell')} finished, kept in {cells}: start a worker (`dask worker "
+                    f"{command_word(address)}`) and the same command resumes from them") if finished else \
+                (f"0 of {counted(total, 'cell')} finished (none kept): start a worker (`dask worker "
+                 f"{command_word(address)}`) and run the same command again")
+            raise OptionError(f"the Dask scheduler there has had no worker for {NO_WORKER_S:g} s; {said}",
                               f"--scheduler {address}")
 
 

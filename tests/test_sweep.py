@@ -12,7 +12,7 @@ from pathlib import Path
 
 import pytest
 
-from pairplay.errors import OptionError
+from pairplay.errors import OptionError, escaped
 from pairplay.report.sweep import Cell, GridError, finished_cells, read_grid, run_sweep, summarise, write_sweep
 
 GRID = """
@@ -123,12 +123,15 @@ def test_a_cluster_with_no_worker_is_said_and_ends_in_one_line_naming_the_cells_
     with distributed.LocalCluster(n_workers=0, threads_per_worker=1, processes=True, host="127.0.0.1",
                                   dashboard_address=None) as cluster:
         address = cluster.scheduler_address
-        assert main(["sweep", str(grid), "--out", str(tmp_path / "none"), "--scheduler", address, "-q"]) == 2
+        none = tmp_path / "no\tne"  # a path said escaped, as every line says it (trial32 D)
+        assert main(["sweep", str(grid), "--out", str(none), "--scheduler", address, "-q"]) == 2
         err = capsys.readouterr().err
         assert err.count("\n") == 2, err  # the wait said once, then the line that ends it
-        assert "has no worker to run the cells; waiting up to 1 s" in err
-        assert "has had no worker for 1 s; 0 of 4 cells finished" in err and f"(--scheduler {address})" in err
-        assert not (tmp_path / "none").exists()  # nothing kept: nothing it made stays
+        assert f"has no worker to run the cells; waiting up to 1 s for one (`dask worker {address}` starts one)" in err
+        # trial32 D: "0 of 4 cells finished, kept in <out>/cells" of a folder removed on the way out
+        assert ("has had no worker for 1 s; 0 of 4 cells finished (none kept): start a worker "
+                f"(`dask worker {address}`) and run the same command again (--scheduler {address})") in err, err
+        assert not none.exists()  # nothing kept: nothing it made stays
 
         # a worker that does one cell and is then lost: the cell is kept, the same command resumes
         cluster.scale(1)
@@ -140,10 +143,11 @@ def test_a_cluster_with_no_worker_is_said_and_ends_in_one_line_naming_the_cells_
             if len(list(path.parent.glob("*.json"))) == 1:
                 cluster.scale(0)
         monkeypatch.setattr(sweep, "_write_json_atomic", store_then_lose_the_worker)
-        assert main(["sweep", str(grid), "--out", str(tmp_path / "lost"), "--scheduler", address, "-q"]) == 2
+        lost = tmp_path / "lo\nst"
+        assert main(["sweep", str(grid), "--out", str(lost), "--scheduler", address, "-q"]) == 2
         err = capsys.readouterr().err
-        kept = len(list((tmp_path / "lost" / "cells").glob("*.json")))
-        assert 1 <= kept < 4 and f"{kept} of 4 cells finished, kept in {tmp_path / 'lost' / 'cells'}" in err, err
+        kept = len(list((lost / "cells").glob("*.json")))
+        assert 1 <= kept < 4 and f"{kept} of 4 cells finished, kept in {escaped(lost / 'cells')}: " in err, err
         assert "the same command resumes from them" in err and err.count("\n") == 2, err
 
 
