@@ -109,7 +109,8 @@ def journaled_or_removed(path: Path):
     calls `done()` on what it yields right after the line is written, under pairplay/signals.py `held` there: a
     signal then is delivered after it and removes nothing. A process killed between the two (SIGKILL) leaves the
     file: its writer replaces it on its next run (build_missing_policies writes with force; StudyRunner.combine
-    removes a bias policy no line names first) and a deletion erases a game's (`files_of`: named after it)."""
+    removes what services/biasfile.py proves a killed combination's, and refuses any other file at its place)
+    and a deletion erases a game's (`files_of`: named after it)."""
     state = {"journaled": False}
 
     @contextlib.contextmanager

@@ -267,3 +267,17 @@ def test_one_game_on_the_flawed_policy_is_said_in_the_singular_and_a_marked_one_
     assert pairplay_cli("report", "s", cwd=tmp_path).returncode == 0
     assert (f"Games played on it: {PHASE2[0]} (marked invalid: fire alarm), {PHASE2[1]}."
             in (tmp_path / "s" / "report" / "report.md").read_text())
+
+
+def test_pilot_refuses_a_file_of_the_researcher_where_the_new_bias_policy_goes(played, tmp_path, pairplay_cli):
+    """trial32 J: the file the docs name as the next bias policy, put there by the researcher (`pairplay combine
+    ... -o s/merged/phase2-bias-v2.policy.json`), was removed and replaced by the combination, rc 0, no word.
+    Now the combination refuses in one line naming it, and the file stays (tests/test_combine_place.py)."""
+    folder, _ = marked(played, tmp_path, pairplay_cli)
+    (folder / V2).write_text('{"mine": true}\n')
+    ran = pairplay_cli("protocol", "pilot", "s", "--personas", "blind,deaf", cwd=tmp_path)
+    assert ran.returncode == 2, (ran.stdout, ran.stderr)
+    assert ran.stderr.endswith(f"exists, not a combination of this study: move it away (s/{V2})\n"), ran.stderr
+    assert len(ran.stderr.splitlines()) == 1, ran.stderr
+    assert (folder / V2).read_text() == '{"mine": true}\n'
+    assert [e.output for e in StudyData(folder).read_journal() if isinstance(e, j.BiasCombined)] == [V1]
