@@ -464,3 +464,36 @@ def test_a_deletion_erases_a_policy_a_killed_build_left_without_its_line(tmp_pat
     assert left.is_file()
     StudyData(data.folder).delete_participant(game.participant)
     assert not left.exists()
+
+
+def test_a_build_keeps_a_file_of_the_researcher_beside_the_game_s_policy(tmp_path):
+    """The build wrote policies/<session>.curve.csv with force and then removed it: a researcher's file of that
+    name (`pairplay rebuild` writes one) was replaced and deleted without a word. Nor is a file at the policy's
+    place replaced unless it is this build's own, to the byte (a build killed before its line left it)."""
+    data = completed_without_policy(tmp_path, stripped=2)
+    lacking = [g for g in data.state.games.values() if not g.ended.policy]
+    curve = data.folder / "policies" / f"{lacking[0].session}.curve.csv"
+    curve.write_text("mine\n")
+    mine = data.folder / "policies" / f"{lacking[1].session}.policy.json"
+    mine.write_text('{"mine": true}\n')
+    lines = data.build_missing_policies()
+    assert curve.read_text() == "mine\n" and mine.read_text() == '{"mine": true}\n'
+    assert lines[0] == f"{lacking[0].session}: policy built from its recording: policies/{lacking[0].session}.policy.json"
+    assert lines[1] == (f"{lacking[1].session}: completed, but no policy built: its policy cannot be written: exists, "
+                        f"not this game's policy as pairplay builds it: move it away ({mine})"), lines
+    state = StudyData(data.folder).state
+    assert [bool(state.games[g.session].ended.policy) for g in lacking] == [True, False]
+
+
+def test_a_build_killed_before_its_line_is_journaled_from_the_file_it_left(tmp_path):
+    """The file a build killed before its PolicyBuilt left is this build's to the byte: taken, journaled."""
+    data = completed_without_policy(tmp_path, stripped=1)
+    [game] = [g for g in data.state.games.values() if not g.ended.policy]
+    data.build_missing_policies()
+    built = data.folder / "policies" / f"{game.session}.policy.json"
+    kept = built.read_bytes()
+    journal = data.folder / "journal.jsonl"
+    journal.write_bytes(b"".join(j.encode_line(e) for e in data.read_journal() if not isinstance(e, j.PolicyBuilt)))
+    [line] = StudyData(data.folder).build_missing_policies()
+    assert line.endswith(f"policy built from its recording: policies/{game.session}.policy.json"), line
+    assert built.read_bytes() == kept
