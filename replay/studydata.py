@@ -126,11 +126,12 @@ def journaled_or_removed(path: Path):
         raise
 
 
-def atomic_write(path: Path, data: bytes) -> None:
+def atomic_write(path: Path, data: bytes, force: bool = True) -> None:
     """Write `data` to `path` through a temporary file renamed when complete (pairplay/outputs.py
     `output_file`: removed on any failure, with the folders made for it; a refusal names `path`, not the
-    temporary file: `participant export -o /proc/p.zip` said "(/proc/.p.zip.<pid>.tmp)")."""
-    with output_file(path, "wb", force=True) as f:
+    temporary file: `participant export -o /proc/p.zip` said "(/proc/.p.zip.<pid>.tmp)"). `force`: the
+    study folder's own files are replaced; a user's output (an export's -o) only with their --force."""
+    with output_file(path, "wb", force=force) as f:
         f.write(data)
         f.flush()
         os.fsync(f.fileno())
@@ -1349,7 +1350,8 @@ class StudyData:
                 z.writestr("README.txt", _export_readme(pid, self.study.study.id, games, files, answers,
                                                         self.merged_using(pid), self.folder,
                                                         self.state.consent.get(pid)))
-            atomic_write(out, buf.getvalue())
+            # with the verb's --force only: a file put there while the zip was made is not replaced either
+            atomic_write(out, buf.getvalue(), force)
             # where it went and what it wrote, so that their deletion erases it while it is this file unchanged, and
             # names it otherwise (a copy handed on is beyond its reach)
             try:
