@@ -17,13 +17,12 @@ place first, "a killed combination's leftover", which deleted a researcher's fil
 from __future__ import annotations
 
 import contextlib
-import errno
 import os
 import re
 import stat
 from pathlib import Path
 
-from pairplay.outputs import _remove_dead_temps
+from pairplay.outputs import NO_HARD_LINKS, _remove_dead_temps
 from pairplay.replay.studydata import StudyDataError
 
 SUFFIX = ".combining"
@@ -31,7 +30,6 @@ SUFFIX = ".combining"
 # through output_file: `.<that>.<pid>.<hex>.tmp`), which a SIGKILL while writing leaves
 _LEFTOVER = re.compile(r"\.(?P<name>[^/]+\.policy\.json)\.[0-9a-f]{12}\.combining")
 _WRITING = re.compile(r"\.(?P<combining>\.[^/]+\.combining)\.\d+\.[0-9a-f]{6}\.tmp")
-NO_LINKS = (errno.EPERM, errno.ENOTSUP, errno.EOPNOTSUPP, errno.EXDEV, errno.EMLINK)  # as pairplay/outputs.py
 REFUSED = "exists, not a combination of this study: move it away"
 
 
@@ -79,7 +77,7 @@ def put_in_place(folder: Path, temp: str, output: str, given: Path):
     except FileExistsError:
         raise StudyDataError(REFUSED, given / output) from None
     except OSError as err:  # a file system without hard links: checked, then renamed (a kill then proves nothing)
-        if err.errno not in NO_LINKS:
+        if err.errno not in NO_HARD_LINKS:
             raise
         check_free(folder, output, given)
         os.rename(tmp, out)
