@@ -36,7 +36,7 @@ REFUSED = "exists, not a combination of this study: move it away"
 def temp_name(output: str, request_id: str) -> str:
     """The hidden name, relative to the study folder as `output`, the combiner writes `output` under."""
     out = Path(output)
-    return str(out.with_name(f".{out.name}.{request_id}{SUFFIX}"))
+    return out.with_name(f".{out.name}.{request_id}{SUFFIX}").as_posix()
 
 
 def remove_leftovers(folder: Path, output: str, named: set[str]) -> None:
@@ -53,7 +53,7 @@ def remove_leftovers(folder: Path, output: str, named: set[str]) -> None:
         if (m := _LEFTOVER.fullmatch(path.name)) is None or not _regular(path):
             continue
         placed = merged / m["name"]
-        if str(Path(output).parent / m["name"]) not in named and _regular(placed) \
+        if (Path(output).parent / m["name"]).as_posix() not in named and _regular(placed) \
                 and os.path.samestat(placed.lstat(), path.lstat()):
             placed.unlink()  # its line never written: the file is this hidden one, not anybody's
         path.unlink(missing_ok=True)
