@@ -18,6 +18,7 @@ import argparse
 import dataclasses
 import signal
 import sys
+import tempfile
 import time
 from pathlib import Path
 
@@ -180,10 +181,14 @@ def _run(args) -> int:
         check_folder(args.folder)  # a place the system refuses, named as given, before anything is written
         study_path = args.study
         if _bundled(args.study):
-            tmp = args.folder.resolve().parent / f".{args.study}.toml"
-            tmp.parent.mkdir(parents=True, exist_ok=True)
+            parent = args.folder.resolve().parent
+            parent.mkdir(parents=True, exist_ok=True)
+            # a name of its own (O_EXCL): `.thesis-ch7.toml` there, the user's, was replaced and then removed
+            fd, name = tempfile.mkstemp(prefix=f".{args.study}.", suffix=".toml", dir=parent)
+            tmp = Path(name)
             try:
-                tmp.write_text(bundled_text(args.study), encoding="utf-8")
+                with open(fd, "w", encoding="utf-8") as f:
+                    f.write(bundled_text(args.study))
             except OSError as err:  # a full disk: said of the folder asked for, not of our file, which goes
                 tmp.unlink(missing_ok=True)
                 raise OSError(err.errno, err.strerror, str(args.folder)) from None

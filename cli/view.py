@@ -35,7 +35,6 @@ from __future__ import annotations
 
 import argparse
 import contextlib
-import errno
 import itertools
 import logging
 import os
@@ -50,7 +49,7 @@ from pairplay.cli.args import (add_force, file_in, float_at_least, int_at_least,
                                 session_id, speed)
 from pairplay.errors import InputError, OptionError, OutputError, UserError, escaped, folded
 from pairplay.livelock import LIVE, is_live
-from pairplay.outputs import check_output, hold, output_path
+from pairplay.outputs import NO_HARD_LINKS, check_output, hold, output_path
 from pairplay.cli.main import left_journals, warn
 from pairplay.replay.check import read_session
 from pairplay.services.bus import add_bus_arguments
@@ -239,7 +238,7 @@ def keep_partial(tmp: Path, rrd: Path, force: bool) -> Path:
         except FileExistsError:
             continue
         except OSError as err:  # a file system without hard links
-            if err.errno not in (errno.EPERM, errno.ENOTSUP, errno.EOPNOTSUPP, errno.EXDEV, errno.EMLINK):
+            if err.errno not in NO_HARD_LINKS:
                 raise
             if partial_name(rrd, n).exists():
                 continue

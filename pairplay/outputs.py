@@ -346,6 +346,10 @@ def _mkdir(path: Path) -> None:
         raise OutputError("cannot write there: the folder is read-only", _existing_ancestor(path / "x")) from None
 
 
+# what os.link raises on a file system without hard links (then: checked, then renamed)
+NO_HARD_LINKS = (errno.EPERM, errno.ENOTSUP, errno.EOPNOTSUPP, errno.EXDEV, errno.EMLINK)
+
+
 def _commit(tmp: Path, path: Path, force: bool) -> None:
     if force:
         check_kind(path)  # again: a pipe or device made there while we worked is not replaced either
@@ -357,7 +361,7 @@ def _commit(tmp: Path, path: Path, force: bool) -> None:
         tmp.unlink(missing_ok=True)
         raise OutputError("appeared while it was being written; not replaced", path) from None
     except OSError as err:  # a file system without hard links: check, then rename
-        if err.errno not in (errno.EPERM, errno.ENOTSUP, errno.EOPNOTSUPP, errno.EXDEV, errno.EMLINK):
+        if err.errno not in NO_HARD_LINKS:
             raise
         if path.exists():
             tmp.unlink(missing_ok=True)

@@ -63,7 +63,7 @@ from pairplay.outputs import (OutputError, check_output, check_places, manifest_
                               remove_written, set_aside_of, special_kind, write_manifest)
 from pairplay.schemas import journal as j
 from pairplay.schemas.jsonfile import in_words, without_bom
-from pairplay.schemas.policy import read_policy, write_policy
+from pairplay.schemas.policy import encode_policy, read_policy, write_policy
 from pairplay.schemas.study import STUDY_FILE, Study, StudyFileError, load_study
 from pairplay.numbers import counted
 
@@ -71,7 +71,7 @@ from .cutgame import CUT_BEFORE_END, CutEnd, cut_end
 from .fold import fold_any
 from . import biases, studyjournal
 from .reader import read_any_log
-from .rebuild import Rebuilt, rebuild_recording, write_outputs
+from .rebuild import Rebuilt, output_paths, rebuild_recording
 from .recover import default_output, journal_more
 from .wal import wal_path
 from pairplay.schemas.nesting import json_decode
@@ -109,7 +109,8 @@ def journaled_or_removed(path: Path):
     calls `done()` on what it yields right after the line is written, under pairplay/signals.py `held` there: a
     signal then is delivered after it and removes nothing. A process killed between the two (SIGKILL) leaves the
     file: its writer replaces it on its next run (build_missing_policies writes with force; StudyRunner.combine
-    removes a bias policy no line names first) and a deletion erases a game's (`files_of`: named after it)."""
+    removes what services/biasfile.py proves a killed combination's, and refuses any other file at its place)
+    and a deletion erases a game's (`files_of`: named after it)."""
     state = {"journaled": False}
 
     @contextlib.contextmanager
@@ -125,11 +126,12 @@ def journaled_or_removed(path: Path):
         raise
 
 
-def atomic_write(path: Path, data: bytes) -> None:
+def atomic_write(path: Path, data: bytes, force: bool = True) -> None:
     """Write `data` to `path` through a temporary file renamed when complete (pairplay/outputs.py
     `output_file`: removed on any failure, with the folders made for it; a refusal names `path`, not the
-    temporary file: `participant export -o /proc/p.zip` said "(/proc/.p.zip.<pid>.tmp)")."""
-    with output_file(path, "wb", force=True) as f:
+    temporary file: `participant export -o /proc/p.zip` said "(/proc/.p.zip.<pid>.tmp)"). `force`: the
+    study folder's own files are replaced; a user's output (an export's -o) only with their --force."""
+    with output_file(path, "wb", force=force) as f:
         f.write(data)
         f.flush()
         os.fsync(f.fileno())
@@ -1348,7 +1350,8 @@ class StudyData:
                 z.writestr("README.txt", _export_readme(pid, self.study.study.id, games, files, answers,
                                                         self.merged_using(pid), self.folder,
                                                         self.state.consent.get(pid)))
-            atomic_write(out, buf.getvalue())
+            # with the verb's --force only: a file put there while the zip was made is not replaced either
+            atomic_write(out, buf.getvalue(), force)
             # where it went and what it wrote, so that their deletion erases it while it is this file unchanged, and
             # names it otherwise (a copy handed on is beyond its reach)
             try:
@@ -1709,10 +1712,19 @@ def _finished_game(path: Path) -> bool:
 
 def write_game_policy(folder: Path, rebuilt: Rebuilt, force: bool = False) -> str:
     """A game's rebuilt policy written to <folder>/policies (its learning curve is in the recording and
-    the report: not kept); returns its path relative to `folder`."""
-    policy, curve = write_outputs(rebuilt, folder / "policies", force=force)
-    curve.unlink()
-    return policy.relative_to(folder).as_posix()
+    the report: not written); returns its path relative to `folder`. A file already there is never replaced:
+    with `force` (a build a kill may have cut before its journal line) one that is this build's to the byte is
+    taken as it is (the killed build's, written whole: pairplay/outputs.py), any other refused by name. Before,
+    `force` replaced whatever was there, and the curve written beside it (with force) and then removed took
+    a researcher's <session>.curve.csv (`pairplay rebuild` writes one) with it, without a word."""
+    path = output_paths(rebuilt, folder / "policies")[0]
+    data = encode_policy(rebuilt.policy)
+    if force and os.path.lexists(path):
+        if not (path.is_file() and not path.is_symlink() and path.read_bytes() == data):
+            raise OutputError("exists, not this game's policy as pairplay builds it: move it away", path)
+    else:
+        write_policy(path, rebuilt.policy)
+    return path.relative_to(folder).as_posix()
 
 
 def _line_numbers(lines: list[int]) -> str:

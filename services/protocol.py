@@ -54,6 +54,7 @@ from pairplay.schemas.policy import read_policy
 from pairplay.schemas.session import SessionConfig, learner_overrides
 from pairplay.schemas.trust import MAX_PAYLOAD, MAX_REASON
 
+from pairplay.services import biasfile
 from pairplay.services.bus import Bus, BusClosed, pass_stop, shutdown_wait
 from pairplay.services.combiner import CombinerLogic
 from pairplay.services.recorder import RecordingExists, check_new_recording
@@ -537,19 +538,23 @@ class StudyRunner:
             version = len(biases.versions(self.data.state, phase_id)) + 1  # (the bus session of each its own)
             session = f"{self.data.study.study.id}-combine-{phase_id}" + (f"-v{version}" if version > 1 else "")
             request_id = secrets.token_hex(6)
-            # no BiasCombined names it (next_output is past every one's): a combination killed before its line
-            # left it (the combiner writes no file over another, and the step was stuck on "exists" for good)
-            (self.data.folder / output).unlink(missing_ok=True)
-            with journaled_or_removed(self.data.folder / output) as line:
-                return self._combine(phase_id, phase, inputs, session, request_id, output, timeout_s, line)
+            # what a killed combination left goes; any other file at `output` is refused, never removed (it
+            # removed whatever was there: a researcher's own file of that name went without a word, trial32 J)
+            biasfile.remove_leftovers(self.data.folder, output, {c.output for c in self.data.state.combinations})
+            biasfile.check_free(self.data.folder, output, self.data.given)
+            temp = biasfile.temp_name(output, request_id)
+            with journaled_or_removed(self.data.folder / temp) as line:
+                return self._combine(phase_id, phase, inputs, session, request_id, (temp, output), timeout_s, line)
         finally:
             self.live.state = "idle"
             self._busy.release()
 
-    def _combine(self, phase_id, phase, inputs: list[str], session: str, request_id: str, output: str,
+    def _combine(self, phase_id, phase, inputs: list[str], session: str, request_id: str, names: tuple[str, str],
                  timeout_s: float, line) -> j.BiasCombined:
         """`combine`'s request to the combiner service and its journal line (`line`: replay/studydata.py
-        `journaled_or_removed`, which removes the bias policy if the line is not written)."""
+        `journaled_or_removed`, which removes the bias policy if the line is not written). The combiner writes
+        `names`' temporary one, put in place of its `output` with the line (services/biasfile.py)."""
+        temp, output = names
         answer: list[ev.PolicyCombined] = []
         got = threading.Event()
 
@@ -570,7 +575,7 @@ class StudyRunner:
             node.start()
             node.run_in_thread(stop)
             request = stamped(ev.CombineRequested(request_id=request_id, policies=inputs, seed=self.data.study.study.seed,
-                                                  output_path=output),
+                                                  output_path=temp),
                               session=session, source="experimenter", seq=1, time_ns=time.time_ns())
             bus.put(event_key(session, "experimenter", "CombineRequested"), ev.encode_event(request))
             waited = time.monotonic() + timeout_s
@@ -598,7 +603,7 @@ class StudyRunner:
                       for u, p in profiles.items()},
             partial=partial_inputs(policies, inputs))
         testpause.pause("bias-written")
-        with line():
+        with line(), biasfile.put_in_place(self.data.folder, temp, output, self.data.given):
             return self.data.append(event)
 
     # -- the whole protocol, for pilots and tests ----------------------------

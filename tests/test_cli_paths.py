@@ -323,3 +323,13 @@ def test_a_folder_where_a_study_file_or_a_set_aside_copy_goes_is_named_for_what_
     assert sorted(p.relative_to(root) for p in root.rglob("*")) == before  # nothing written, nothing renamed
     assert said in line and named in line and "already a study folder" not in line, line
     assert "not a study folder" not in line and "File exists" not in line and "(or its journal)" not in line, line
+
+
+def test_init_with_a_bundled_study_keeps_a_file_of_its_copy_s_name_beside_the_folder(tmp_path):
+    """`protocol init F --study thesis-ch7` wrote the bundled study to `.thesis-ch7.toml` beside F and removed
+    it: a file of that name there was replaced and deleted without a word. Its copy takes a name of its own now."""
+    (tmp_path / ".thesis-ch7.toml").write_text("mine\n")
+    assert main(["protocol", "init", str(tmp_path / "study"), "--study", "thesis-ch7", "--quiet"]) == 0
+    assert (tmp_path / ".thesis-ch7.toml").read_text() == "mine\n"
+    assert sorted(p.name for p in tmp_path.iterdir()) == [".thesis-ch7.toml", "study"]
+    assert "thesis-ch7" in (tmp_path / "study" / "study.toml").read_text()

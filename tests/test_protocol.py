@@ -297,6 +297,27 @@ def test_an_export_never_replaces_a_file_of_the_study_folder(played, tmp_path):
         assert "use --force" not in str(info.value)
 
 
+def test_an_export_never_replaces_a_file_put_at_its_output_while_it_zipped_unless_forced(tmp_path, monkeypatch):
+    """Checked before the zip was made, then written with force whatever --force said: a file put at -o
+    meanwhile (a second export, the user's) was replaced without a word."""
+    from pairplay.outputs import OutputError
+    from pairplay.replay import studydata
+
+    data = StudyData.create(tmp_path / "s", STUDY)
+    pid = data.register("phase1")
+    out = tmp_path / "p.zip"
+    readme = studydata._export_readme
+
+    def meanwhile(*args, **kw):  # the README is the zip's last part: the file appears as the zip is made
+        out.write_text("mine\n")
+        return readme(*args, **kw)
+    monkeypatch.setattr(studydata, "_export_readme", meanwhile)
+    with pytest.raises(OutputError, match=r"^exists \(.*p\.zip\)$"):
+        data.export_participant(pid, out)
+    assert out.read_text() == "mine\n"
+    assert data.export_participant(pid, out, force=True) == out and zipfile.is_zipfile(out)
+
+
 def test_the_key_file_is_its_owners_alone_from_init_to_deletion(tmp_path):
     """The key file is the one file that links ids to names: it was written 0644 (its folder too), made
     only at the first registration with a name (a researcher's trial)."""

@@ -406,10 +406,11 @@ def test_a_game_journaled_from_a_recording_whose_answers_do_not_decode_is_answer
 # -- a file of the folder and its journal line: the file first, no file without its line (journaled_or_removed) --
 
 def _hand_edit_once(path: Path, journal: Path, go: Path) -> threading.Thread:
-    """Once `path` is written, the journal is changed as another process would (its time), then the held
-    verb goes on (pairplay/testpause.py): the line it then writes is refused (a stale copy)."""
+    """Once `path` is written (a glob pattern in its last part), the journal is changed as another process
+    would (its time), then the held verb goes on (pairplay/testpause.py): the line it then writes is refused
+    (a stale copy)."""
     def edit():
-        while not path.exists():
+        while not list(path.parent.glob(path.name)):
             time.sleep(0.01)
         st = journal.stat()
         os.utime(journal, ns=(st.st_atime_ns, st.st_mtime_ns + 1_000_000))
@@ -426,29 +427,15 @@ def test_a_combination_whose_line_is_refused_leaves_no_bias_policy(tmp_path, mon
     output = data.folder / "merged" / "phase2-bias.policy.json"
     go = tmp_path / "go"
     monkeypatch.setenv("PAIRPLAY_TEST_PAUSE", f"bias-written:{go}")
-    editor = _hand_edit_once(output, data.folder / "journal.jsonl", go)
+    # the combiner writes it under a hidden name, put in place with the line (services/biasfile.py)
+    editor = _hand_edit_once(output.with_name(".phase2-bias.policy.json.*.combining"), data.folder / "journal.jsonl",
+                             go)
     with Bus(BusOptions()) as bus:
         with pytest.raises(StudyDataError, match="changed by another process"):
             StudyRunner(data, bus).combine("phase2")
     editor.join(10)
-    assert not output.exists()
+    assert not output.exists() and list((data.folder / "merged").iterdir()) == []
     assert not any(isinstance(e, j.BiasCombined) for e in StudyData(tmp_path / "study").read_journal())
-
-
-def test_a_combination_killed_before_its_line_is_combined_again(tmp_path):
-    """A combination killed between its file and its line (its BiasCombined not written) left merged/ a file
-    no line names; before, the next combination was refused for good ("the combiner refused: ... exists")."""
-    data = completed_without_policy(tmp_path, stripped=0)
-    with Bus(BusOptions()) as bus:
-        StudyRunner(data, bus).combine("phase2")
-    journal = data.folder / "journal.jsonl"
-    journal.write_bytes(b"".join(j.encode_line(e) for e in data.read_journal() if not isinstance(e, j.BiasCombined)))
-    data = StudyData(data.folder)
-    assert (data.folder / "merged" / "phase2-bias.policy.json").is_file() and "phase2" not in data.state.combined
-    with Bus(BusOptions()) as bus:
-        combined = StudyRunner(data, bus).combine("phase2")
-    assert combined.output == "merged/phase2-bias.policy.json" and (data.folder / combined.output).is_file()
-    assert sum(isinstance(e, j.BiasCombined) for e in StudyData(data.folder).read_journal()) == 1
 
 
 def test_a_built_policy_whose_line_is_refused_is_removed(tmp_path, monkeypatch):
@@ -477,3 +464,36 @@ def test_a_deletion_erases_a_policy_a_killed_build_left_without_its_line(tmp_pat
     assert left.is_file()
     StudyData(data.folder).delete_participant(game.participant)
     assert not left.exists()
+
+
+def test_a_build_keeps_a_file_of_the_researcher_beside_the_game_s_policy(tmp_path):
+    """The build wrote policies/<session>.curve.csv with force and then removed it: a researcher's file of that
+    name (`pairplay rebuild` writes one) was replaced and deleted without a word. Nor is a file at the policy's
+    place replaced unless it is this build's own, to the byte (a build killed before its line left it)."""
+    data = completed_without_policy(tmp_path, stripped=2)
+    lacking = [g for g in data.state.games.values() if not g.ended.policy]
+    curve = data.folder / "policies" / f"{lacking[0].session}.curve.csv"
+    curve.write_text("mine\n")
+    mine = data.folder / "policies" / f"{lacking[1].session}.policy.json"
+    mine.write_text('{"mine": true}\n')
+    lines = data.build_missing_policies()
+    assert curve.read_text() == "mine\n" and mine.read_text() == '{"mine": true}\n'
+    assert lines[0] == f"{lacking[0].session}: policy built from its recording: policies/{lacking[0].session}.policy.json"
+    assert lines[1] == (f"{lacking[1].session}: completed, but no policy built: its policy cannot be written: exists, "
+                        f"not this game's policy as pairplay builds it: move it away ({mine})"), lines
+    state = StudyData(data.folder).state
+    assert [bool(state.games[g.session].ended.policy) for g in lacking] == [True, False]
+
+
+def test_a_build_killed_before_its_line_is_journaled_from_the_file_it_left(tmp_path):
+    """The file a build killed before its PolicyBuilt left is this build's to the byte: taken, journaled."""
+    data = completed_without_policy(tmp_path, stripped=1)
+    [game] = [g for g in data.state.games.values() if not g.ended.policy]
+    data.build_missing_policies()
+    built = data.folder / "policies" / f"{game.session}.policy.json"
+    kept = built.read_bytes()
+    journal = data.folder / "journal.jsonl"
+    journal.write_bytes(b"".join(j.encode_line(e) for e in data.read_journal() if not isinstance(e, j.PolicyBuilt)))
+    [line] = StudyData(data.folder).build_missing_policies()
+    assert line.endswith(f"policy built from its recording: policies/{game.session}.policy.json"), line
+    assert built.read_bytes() == kept

@@ -267,3 +267,46 @@ def test_one_game_on_the_flawed_policy_is_said_in_the_singular_and_a_marked_one_
     assert pairplay_cli("report", "s", cwd=tmp_path).returncode == 0
     assert (f"Games played on it: {PHASE2[0]} (marked invalid: fire alarm), {PHASE2[1]}."
             in (tmp_path / "s" / "report" / "report.md").read_text())
+
+
+def test_pilot_refuses_a_file_of_the_researcher_where_the_new_bias_policy_goes(played, tmp_path, pairplay_cli):
+    """trial32 J: the file the docs name as the next bias policy, put there by the researcher (`pairplay combine
+    ... -o s/merged/phase2-bias-v2.policy.json`), was removed and replaced by the combination, rc 0, no word.
+    Now the combination refuses in one line naming it, and the file stays (tests/test_combine_place.py)."""
+    folder, _ = marked(played, tmp_path, pairplay_cli)
+    (folder / V2).write_text('{"mine": true}\n')
+    ran = pairplay_cli("protocol", "pilot", "s", "--personas", "blind,deaf", cwd=tmp_path)
+    assert ran.returncode == 2, (ran.stdout, ran.stderr)
+    assert ran.stderr.endswith(f"exists, not a combination of this study: move it away (s/{V2})\n"), ran.stderr
+    assert len(ran.stderr.splitlines()) == 1, ran.stderr
+    assert (folder / V2).read_text() == '{"mine": true}\n'
+    assert [e.output for e in StudyData(folder).read_journal() if isinstance(e, j.BiasCombined)] == [V1]
+
+
+def test_a_pilot_killed_as_it_combined_leaves_what_the_next_pilot_removes(played, tmp_path, pairplay_cli):
+    """A real SIGKILL of `protocol pilot` once the combiner has written the new bias policy (its hidden name,
+    before the link and the line): the next pilot removes it and combines into the same place; no other file
+    of merged/ is touched."""
+    import os
+    import signal
+    import subprocess
+    import sys
+
+    folder, _ = marked(played, tmp_path, pairplay_cli)
+    env = dict(os.environ, PAIRPLAY_TEST_PAUSE=f"bias-written:{tmp_path / 'never'}")
+    pilot = subprocess.Popen([sys.executable, "-m", "pairplay", "protocol", "pilot", "s", "--personas", "blind,deaf"],
+                             cwd=tmp_path, env=env, stderr=subprocess.PIPE, stdout=subprocess.DEVNULL, text=True)
+    try:
+        for line in pilot.stderr:  # until it is held there (pairplay/testpause.py)
+            if line.startswith("pairplay-test: paused at bias-written"):
+                break
+        hidden = [p.name for p in (folder / "merged").glob(".*.combining")]
+        assert len(hidden) == 1 and hidden[0].startswith(".phase2-bias-v2.policy.json."), hidden
+    finally:
+        pilot.send_signal(signal.SIGKILL)
+        pilot.wait()
+        pilot.stderr.close()
+    ran = pairplay_cli("protocol", "pilot", "s", "--personas", "blind,deaf", cwd=tmp_path)
+    assert ran.returncode == 0, ran.stderr
+    assert sorted(p.name for p in (folder / "merged").iterdir()) == sorted([Path(V1).name, Path(V2).name])
+    assert [e.output for e in StudyData(folder).read_journal() if isinstance(e, j.BiasCombined)] == [V1, V2]
