@@ -136,11 +136,54 @@ print(peak())
 """
 
 
+# Every child `_python` starts: SIGTERM is its Ctrl-C (the study's interruption path stops and reaps its figure
+# worker: report/study.py _Figures), and multiprocessing's resource tracker, if it started one, is ended and reaped
+# before it exits (pairplay/processes.py stop_resource_tracker). Imported only when used: the floor's child measures
+# a process that imports numpy and numba alone.
+_CHILD = """
+import atexit, signal, sys
+def _stopped(signum, frame):
+    raise KeyboardInterrupt
+signal.signal(signal.SIGTERM, _stopped)
+@atexit.register
+def _tracker_reaped():
+    if "multiprocessing.resource_tracker" in sys.modules:
+        from pairplay.processes import stop_resource_tracker
+        stop_resource_tracker()
+"""
+CHILD_STOP_S = 2.0  # what an interrupted bench gives its child to stop before it is killed
+
+
 def _python(code: str, *args: str, env: dict | None = None) -> tuple[str, float]:
+    """Run `code` in a fresh Python; its stdout and wall time. Interrupted (the bench's Ctrl-C, SIGTERM, SIGHUP),
+    the child is stopped and reaped before this raises, its own children with it: before (trial32 I), subprocess.run
+    killed it with SIGKILL and returned unwaited, and its study's figure worker outlived the bench by 1.5-2 s."""
     t = time.perf_counter()
-    out = subprocess.run([sys.executable, "-c", code, *args], capture_output=True, text=True, check=True,
-                         env=env or os.environ.copy()).stdout
+    with subprocess.Popen([sys.executable, "-c", _CHILD + code, *args], stdout=subprocess.PIPE,
+                          stderr=subprocess.PIPE, text=True, env=env or os.environ.copy()) as proc:
+        try:
+            out, err = proc.communicate()
+        except BaseException:
+            _stopped(proc)
+            raise
+    if proc.returncode:
+        raise subprocess.CalledProcessError(proc.returncode, proc.args, out, err)
     return out, time.perf_counter() - t
+
+
+def _stopped(proc: subprocess.Popen) -> None:
+    """SIGTERM (`_CHILD`: its Ctrl-C), waited for CHILD_STOP_S; then SIGKILL. Reaped either way (a child that
+    ended by itself as the signal came has its status read by `poll`)."""
+    if proc.poll() is None:
+        proc.terminate()
+        try:
+            proc.wait(CHILD_STOP_S)
+        except subprocess.TimeoutExpired:
+            pass
+        finally:  # not ended in time, or a second signal cut the wait
+            if proc.poll() is None:
+                proc.kill()
+                proc.wait()
 
 
 def study_run(cache_dir: str | None = None) -> dict:

@@ -34,7 +34,9 @@ def _answer(host: str, port: int, request: bytes) -> bytes:
     return answer.split(b"\r\n", 1)[0]
 
 
-def test_the_lab_server_is_h11_even_with_httptools_importable():
+def test_the_lab_server_is_h11_even_with_httptools_importable(caplog, capfd):
+    """And the 400 is said by pairplay's logger, in its words, with the client; uvicorn prints nothing of its own
+    (trial32 H: "WARNING:  Invalid HTTP request received.", uvicorn's handler and words)."""
     server = WebServer(create_app(Lab())).start()
     try:
         assert issubclass(server.server.config.http_protocol_class, H11Protocol)
@@ -47,3 +49,6 @@ def test_the_lab_server_is_h11_even_with_httptools_importable():
         assert _answer(host, port, big) == b"HTTP/1.1 400 Bad Request"
     finally:
         server.stop()
+    said = [(r.name, r.getMessage()) for r in caplog.records if "400" in r.getMessage()]
+    assert said == [("pairplay.lab", f"answered 400 to a request from {host}: not HTTP, or a head over 16 KiB")]
+    assert "Invalid HTTP request" not in capfd.readouterr().err

@@ -83,3 +83,46 @@ def test_an_interrupted_sweep_leaves_no_process_of_its_group_behind(tmp_path, si
         if sweep.poll() is None:
             os.killpg(sweep.pid, signal.SIGKILL)
             sweep.wait()
+
+
+# a stand-in for the bench's study child (bench/core.py _STUDY): a pool worker holding work, as the study's figure
+# worker, and multiprocessing's resource tracker beside it
+_POOL_CHILD = """
+import time
+from pairplay.processes import worker_pool
+with worker_pool(1) as pool:
+    pool.submit(time.sleep, 600).result()
+"""
+_BENCH_PARENT = "import sys; from pairplay.bench.core import _python; _python(sys.argv[1])"
+
+
+def test_an_interrupted_bench_leaves_no_child_of_its_child_behind(tmp_path):
+    """trial32 I, its kind: `pairplay bench` interrupted while its study ran in a child exited in 0.3-0.7 s, but the
+    child's figure worker and resource tracker stayed in its group 1.4-2.4 s more: subprocess.run killed the child
+    with SIGKILL and returned unwaited. bench/core.py `_python` stops its child as a Ctrl-C would and reaps it.
+    Real parts: the bench's own `_python` in a process group of its own, a real pool in its child, a real SIGINT
+    once the worker runs; the group is looked at as soon as the parent has exited."""
+    parent = subprocess.Popen([sys.executable, "-c", _BENCH_PARENT, _POOL_CHILD], cwd=tmp_path,
+                              stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True, start_new_session=True)
+    try:
+        deadline = time.monotonic() + 120
+        while parent.poll() is None and time.monotonic() < deadline and not any(
+                b"spawn_main" in _cmdline(pid) for pid, state in _group(parent.pid) if state != "Z"):
+            time.sleep(0.05)
+        assert parent.poll() is None, parent.stderr.read()
+        parent.send_signal(signal.SIGINT)
+        err = parent.communicate(timeout=30)[1]
+        left = _group(parent.pid)
+        assert parent.returncode != 0 and "KeyboardInterrupt" in err, err
+        assert not left, f"processes of the bench's group left after its exit: {left}"
+    finally:
+        if parent.poll() is None:
+            os.killpg(parent.pid, signal.SIGKILL)
+            parent.wait()
+
+
+def _cmdline(pid: int) -> bytes:
+    try:
+        return Path(f"/proc/{pid}/cmdline").read_bytes()
+    except OSError:
+        return b""

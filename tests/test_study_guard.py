@@ -57,7 +57,9 @@ def serving(folder: Path) -> subprocess.Popen:
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
                             env=dict(os.environ, PYTHONUNBUFFERED="1"))
     err: list[str] = []
-    threading.Thread(target=lambda: err.extend(proc.stderr), daemon=True).start()
+    proc.err = err  # its stderr's lines, read as they come (whole once `proc.err_read` has ended)
+    proc.err_read = threading.Thread(target=lambda: err.extend(proc.stderr), daemon=True)
+    proc.err_read.start()
     line = ""
     while "experimenter console:" not in line:
         line = proc.stdout.readline()

@@ -15,13 +15,14 @@ A body must also come whole within deadlines.READ_S of its request's head: one
 still coming then is answered 408, the connection closed, logged and recorded
 the same way (trial29 F11: a request that sent its headers and 100 bytes of a
 60,000-byte body, then nothing, was held for ever; 900 of them were). The
-request's head has the same deadline (deadlines.DeadlineH11).
+request's head has the same deadline (deadlines.DeadlineH11). The log says the
+first refusal from a client at once and counts the rest of its burst
+(serverlog.py); each is recorded.
 """
 
 from __future__ import annotations
 
 import asyncio
-import logging
 
 import msgspec
 
@@ -29,8 +30,8 @@ from starlette.types import ASGIApp, Message, Receive, Scope, Send
 
 from pairplay.numbers import counted
 from pairplay.services.lab.deadlines import READ_S
+from pairplay.services.lab.serverlog import bursts
 
-log = logging.getLogger("pairplay.lab")
 MAX_BODY = 64 * 1024  # bytes: every body the lab takes is a small JSON object (a console request, the answers)
 
 
@@ -86,7 +87,11 @@ class BodyLimit:
     async def refuse(self, scope: Scope, send: Send, what: str, status: int = 413, error: str = "") -> None:
         client, path = (scope.get("client") or ("?", 0))[0], scope.get("path", "?")
         limit = counted(self.limit, "byte") if status == 413 else f"{self.read_s:g} s"
-        log.warning("refused %s to %s from %s: the limit is %s", what, path, client, limit)
+        # the terminal's line, one for a burst from the client (serverlog.py); the recordings' below, one a request
+        why = f"over the limit of {limit}" if status == 413 else f"not sent whole within {limit}"
+        bursts.said(asyncio.get_running_loop(), ("body", status, client),
+                    f"refused {what} to {path} from {client}: the limit is {limit}",
+                    lambda n: f"refused {counted(n, 'more request body', 'more request bodies')} from {client} {why}")
         lab = getattr(getattr(scope.get("app"), "state", None), "lab", None)  # Starlette puts itself in the scope
         for hub in list(getattr(lab, "hubs", {}).values()):
             # the recorded line names the limit as a number of bytes, as before (readers may match it)

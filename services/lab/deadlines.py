@@ -19,6 +19,12 @@ a slow Wi-Fi's many times over. uvicorn's own `limit_concurrency` is not the
 cap: it answers 503 only once a request head has come, so connections that
 send nothing are never counted out. This is uvicorn's h11 protocol with those
 two rules added (its `http` option takes a protocol class).
+
+Its lines: the cap is said once when reached and once when left; a head
+timed out, a request that is not HTTP (answered 400) and an upgrade to a
+protocol it does not serve are said for each client in bursts (serverlog.py:
+the first at once, the rest counted), with the client: uvicorn's own words for
+the last two name none and are dropped (serverlog.UvicornLines).
 """
 
 from __future__ import annotations
@@ -27,6 +33,9 @@ import logging
 
 import h11
 from uvicorn.protocols.http.h11_impl import H11Protocol
+
+from pairplay.numbers import counted
+from pairplay.services.lab.serverlog import bursts
 
 log = logging.getLogger("pairplay.lab")
 READ_S = 10.0  # seconds for a request's head, and (bodylimit.py) for its body
@@ -86,7 +95,33 @@ class DeadlineH11(H11Protocol):
         if self.transport.is_closing() or self.transport.get_protocol() is not self:
             return
         if self.cycle is cycle and self.conn.their_state is h11.IDLE:
-            log.warning("closed a connection from %s: no whole request head within %g s",
-                        (self.client or ("?",))[0], READ_S)
+            client = self._client()
+            bursts.said(self.loop, ("no head", client),
+                        f"closed a connection from {client}: no whole request head within {READ_S:g} s",
+                        lambda n: f"closed {counted(n, 'more connection')} from {client} that sent no whole request "
+                                  f"head within {READ_S:g} s")
             self.transport.write(TIMED_OUT)
             self.transport.close()
+
+    def send_400_response(self, msg: str) -> None:
+        """uvicorn's answer to a request h11 cannot read (not HTTP, or a head past its 16 KiB), said with the
+        client (uvicorn's own line, without it, is dropped: serverlog.SAID_BY_US)."""
+        client = self._client()
+        bursts.said(self.loop, ("not http", client),
+                    f"answered 400 to a request from {client}: not HTTP, or a head over 16 KiB",
+                    lambda n: f"answered 400 to {counted(n, 'more request')} from {client} that were not HTTP, "
+                              "or had a head over 16 KiB")
+        super().send_400_response(msg)
+
+    def _unsupported_upgrade_warning(self) -> None:
+        """A request asking for a protocol other than WebSocket (h2c...): answered as plain HTTP, said with the
+        client (uvicorn's private hook: on a uvicorn without it, its own line is said in ours)."""
+        client = self._client()
+        bursts.said(self.loop, ("upgrade", client),
+                    f"a request from {client} asked to upgrade to a protocol the lab server does not serve: "
+                    "answered as plain HTTP",
+                    lambda n: f"{counted(n, 'more request')} from {client} asked to upgrade to a protocol the lab "
+                              "server does not serve: answered as plain HTTP")
+
+    def _client(self) -> str:
+        return str((self.client or ("?",))[0])

@@ -26,6 +26,7 @@ from pairplay.services.lab.app import Lab, create_app
 from pairplay.services.lab.deadlines import DeadlineH11
 from pairplay.services.lab.hub import MAX_FRAME, LabHub
 from pairplay.services.lab.reach import reachable_host
+from pairplay.services.lab.serverlog import bursts, quiet_uvicorn
 from pairplay.services.robot.choice import RobotChoice
 from pairplay.services.session import run_session
 
@@ -36,7 +37,10 @@ class WebServer:
         # DeadlineH11: a request's head within READ_S, at most MAX_CONNECTIONS open (deadlines.py). A class, never
         # "auto": uvicorn would take httptools when it is importable (a user's venv may hold it), which bounds no
         # request head's size (h11 refuses one past 16 KiB) and has none of these deadlines (tests/test_lab_h11.py)
-        config = uvicorn.Config(app, host=host, port=port, log_level="warning", lifespan="off", http=DeadlineH11,
+        # log_config None: no handler of uvicorn's; its lines are said in ours (serverlog.quiet_uvicorn)
+        quiet_uvicorn()
+        config = uvicorn.Config(app, host=host, port=port, log_config=None, log_level="warning", lifespan="off",
+                                http=DeadlineH11,
                                 ws_max_size=MAX_FRAME, ws_ping_interval=5.0, ws_ping_timeout=10.0,
                                 ssl_certfile=ssl_certfile, ssl_keyfile=ssl_keyfile, access_log=False,
                                 timeout_graceful_shutdown=2)  # open pages must not hold up a SIGTERM
@@ -77,6 +81,7 @@ class WebServer:
         self.server.should_exit = True
         if self.thread is not None:
             self.thread.join(timeout_s)
+        bursts.flush()  # the counts of bursts still open are said: their timers die with the server's loop
 
 
 def _bind(host: str, port: int) -> socket.socket:
