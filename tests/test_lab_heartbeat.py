@@ -174,3 +174,81 @@ def test_pings_held_with_a_touch_do_not_move_the_baseline(tmp_path):
         path = lab.wait()
     events = [r.event for r in read_log(path).events]
     assert [e.card for e in events if type(e).__name__ == "CardPicked"] == [5]
+
+
+# The page's side of trial32 G, in real headless Chromium. A device's sleep is modelled from the page's view: the
+# wall clock (Date.now) goes on while performance.now() stands still (Chromium cannot sleep a page's clock). The
+# page's events around it are dispatched by hand: headless Chromium fires none of them (CDP's
+# Page.setWebLifecycleState, a minimized window or a tab brought over it left the page visible and unfrozen).
+SLEEP = """([away, back]) => {
+    const target = ["pagehide", "pageshow"].includes(away) ? window : document;
+    const hidden = (on) => {
+        Object.defineProperty(document, "hidden", {configurable: true, get: () => on});
+        Object.defineProperty(document, "visibilityState", {configurable: true, get: () => on ? "hidden" : "visible"});
+    };
+    if (away) { if (away === "visibilitychange") hidden(true); target.dispatchEvent(new Event(away)); }
+    const before = Date.now.bind(Date);  // a page that slept before: its 10 s stay
+    Date.now = () => before() + 10000;  // 10 s asleep: the wall clock went on, the page's clock did not
+    if (back) { if (back === "visibilitychange") hidden(false); target.dispatchEvent(new Event(back)); }
+}"""
+WAKES = [("visibilitychange", "visibilitychange"), ("freeze", "resume"), ("pagehide", "pageshow")]
+
+
+def _renewed(page, times: int, why: str) -> None:
+    """The page replaced its live socket `times` times so far, the last for `why`, is connected again and still
+    the player."""
+    page.wait_for_function(f"(window.pairplay.link.renewed || []).length === {times} && "
+                           f"window.pairplay.link.renewed[{times - 1}] === {why!r} && "
+                           f"window.pairplay.link.connects === {times + 1} && window.pairplay.canTouch()",
+                           timeout=15000)
+    assert page.evaluate("window.pairplay.role") == "player"  # the hub took the new socket as this tab's: its seat
+    assert page.evaluate("window.pairplay.link.lost") == 0  # not the heartbeat's doing
+
+
+def test_a_board_back_from_sleep_opens_a_new_socket_and_plays_on(browser, tmp_path):
+    """Hidden, frozen or away (pagehide) while the device slept: back, the board opens a new socket (a fresh
+    baseline for the hub's late rule) and keeps its seat; asleep while visible (no event at all), its heartbeat
+    sees its clock fell behind the wall clock and does the same."""
+    config = human_config("lab-woke", rounds=1)
+    with running_lab(tmp_path, config) as lab:
+        page = open_page(browser, lab.urls.board)
+        wait_phase(page, "first")
+        page.wait_for_function("window.pairplay.canTouch()")
+        for n, (away, back) in enumerate(WAKES, start=1):
+            page.evaluate(SLEEP, [away, back])
+            _renewed(page, n, "woke")
+        page.evaluate(SLEEP, [None, None])  # asleep while visible
+        _renewed(page, len(WAKES) + 1, "slept")
+        page.click("[data-card='2']")
+        wait_phase(page, "looking", "thinking", "second")
+        assert page.errors == []
+        lab.stop.set()
+        path = lab.wait()
+    events = [r.event for r in read_log(path).events]
+    assert [e.card for e in events if type(e).__name__ == "CardPicked"] == [2]
+    assert not [e for e in events if type(e).__name__ == "MessageRejected"]
+
+
+def test_a_touch_refused_as_late_says_so_on_the_board_and_the_board_reconnects(browser, tmp_path):
+    """The hub refuses a touch as late (here one whose page_ms is 20 s old): the board does not stay silent
+    with a card that does not turn; it opens a new socket and asks for the touch again."""
+    config = human_config("lab-again", rounds=1)
+    with running_lab(tmp_path, config) as lab:
+        page = open_page(browser, lab.urls.board)
+        wait_phase(page, "first")
+        page.wait_for_function("window.pairplay.canTouch()")
+        page.evaluate("""() => { const p = window.pairplay, s = p.state;
+            p.link.send({type: "pick", id: p.nextId(), round: s.round, turn: s.turn, card: 4,
+                         page_ms: window.pairplayLab.now() - 20000}); }""")
+        _renewed(page, 1, "late")
+        assert page.inner_text("#prompt") == "That touch came too late: please touch again"
+        page.click("[data-card='4']")
+        wait_phase(page, "looking", "thinking", "second")
+        assert page.inner_text("#prompt") != "That touch came too late: please touch again"
+        assert page.errors == []
+        lab.stop.set()
+        path = lab.wait()
+    events = [r.event for r in read_log(path).events]
+    assert [e.card for e in events if type(e).__name__ == "CardPicked"] == [4]
+    late = [e for e in events if type(e).__name__ == "MessageRejected" and e.reason.startswith("late: ")]
+    assert len(late) == 1  # recorded as every refusal is
