@@ -101,6 +101,10 @@ class Live:
     questionnaire_token: str = ""  # the per-game token of the questionnaire page
     scripted: str = ""  # the persona playing instead of a person (a rehearsal): the console says so
     board_token: str = ""  # the board page's token (the same, when there is a questionnaire)
+    # MessageRejected of the game (a page's late or stale touch, a malformed message): how many, the last's reason;
+    # before, the console showed none (trial32 G: a board whose every touch was refused as late, and no word)
+    refused: int = 0
+    last_refused: str = ""
 
     def see(self, e: ev.Event) -> None:
         name = type(e).__name__
@@ -123,6 +127,9 @@ class Live:
                 self.state = "questionnaire"
         elif name == "ServiceStarted" and e.service == "board":
             self.board = True
+        elif name == "MessageRejected":
+            self.refused += 1
+            self.last_refused = e.reason[:200]  # a line of the console's panel, not the record
 
 
 class StudyRunner:

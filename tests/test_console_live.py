@@ -148,6 +148,29 @@ def test_a_refusal_stays_until_the_experimenter_acts_again(served):
     assert console.errors == []  # a refused button is said, not thrown at the page
 
 
+def test_the_console_shows_what_the_game_refused_a_late_touch_among_them(browser, served):
+    """Trial32 G: a board whose touches were all refused as late said nothing on the console; the running game's
+    refusals are now counted there, with the last one's reason."""
+    data, runner, server, console = served
+    console.click("#run-next")
+    link = console.wait_for_selector("#board-link", timeout=30000)
+    board = open_page(browser, server.url + link.get_attribute("href"))
+    wait_phase(board, "first")
+    board.wait_for_function("window.pairplay.canTouch()")
+    assert console.inner_text("#live-refused") == ""
+    board.evaluate("""() => { const p = window.pairplay, s = p.state;
+        p.link.send({type: "pick", id: p.nextId(), round: s.round, turn: s.turn, card: 4,
+                     page_ms: window.pairplayLab.now() - 20000}); }""")
+    console.wait_for_function("document.getElementById('live-refused').textContent.startsWith('1 (last: late: ')",
+                              timeout=15000)
+    board.wait_for_function("window.pairplay.canTouch()", timeout=15000)  # reconnected (test_lab_heartbeat)
+    console.fill("#abort-reason", "test over")
+    console.click("#abort")
+    console.wait_for_function("document.getElementById('live-state').textContent === 'idle'", timeout=15000)
+    assert board.errors == [] and console.errors == []
+    board.context.close()
+
+
 def test_a_console_whose_server_does_not_answer_says_so(served):
     data, runner, server, console = served
     # the server stops answering the console's polls (as when it is gone: fetch fails)

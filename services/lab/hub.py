@@ -24,6 +24,19 @@ gives `arrived - page_ms`, and a message's lateness is its value above the
 smallest seen on that connection (the offset plus the fastest delivery; both
 clocks run at one rate). The heartbeat's pings keep that smallest fresh.
 
+A page's clock can jump (trial32 G): `performance.now()` does not tick while the
+device sleeps (MDN "Ticking during sleep"), so a tablet whose screen was off for
+10 s with its socket kept sends everything 10 s "later" than the smallest
+offset, for ever. The baseline follows such a page: once its last REBASE_PINGS
+pings agree on an offset (within AGREE_MS of each other) more than AGREE_MS
+above the baseline, and were made at least SPAN_MS apart on the page's clock, their
+smallest offset becomes the baseline. A held network cannot pass for that: what
+it held arrives in one burst, so messages made SPAN_MS apart arrive with
+offsets SPAN_MS apart, not within AGREE_MS; and a page's heartbeat sends at
+most one ping into a socket that stopped answering before it abandons it
+(common.js), so a held touch arrives with at most one held ping. A late refusal
+tells the page (`"late": true`), which opens a new socket (a fresh baseline).
+
 Pages: one "player" board per session acts; every other board page is
 read-only ("viewer") until the player leaves, when the oldest viewer takes
 over; a page that reloads keeps its `client` id (the browser tab's
@@ -41,6 +54,7 @@ the web server's event loop waits on a publish.
 from __future__ import annotations
 
 import asyncio
+import collections
 import logging
 import math
 import queue
@@ -70,6 +84,12 @@ MAX_FRAME = 65536  # bytes: uvicorn closes the connection on a bigger frame (not
 # ms: common.js's heartbeat deadline (DEADLINE_MS) plus its beat (BEAT_MS): a page that was still taking
 # touches had heard from the server within this; a touch later than this was held by a network that was down
 LATE_MS = 4000.0
+# the baseline follows a page whose clock jumped (the module rule): its last REBASE_PINGS pings, made at least
+# SPAN_MS apart on its clock (the heartbeat pings every second), agree within AGREE_MS (a lab network's and a loaded
+# server's jitter is tens of ms; a held burst spreads its offsets by the time between the messages it held)
+REBASE_PINGS = 3
+SPAN_MS = 1500.0
+AGREE_MS = 500.0
 
 
 # -- what a page may send (JSON, tagged by "type") ----------------------------------------
@@ -130,6 +150,7 @@ class Client:
         self.ws, self.page, self.id, self.role = ws, page, client_id, role
         self.last_id = 0
         self.fastest_ms = float("inf")  # smallest (arrival - page_ms) on this connection (the module's late rule)
+        self.pings: collections.deque = collections.deque(maxlen=REBASE_PINGS)  # (page_ms, offset) of the last pings
         self.outbox: asyncio.Queue = asyncio.Queue()
         self.state_pending = False
         self.sender: asyncio.Task | None = None
@@ -297,7 +318,7 @@ class LabHub:
         except (msgspec.DecodeError, msgspec.ValidationError) as err:
             self._refuse(c, f"malformed message: {err}", raw)
             return
-        late_ms = self._lateness(c, msg.page_ms) if msg.page_ms is not None else 0.0
+        late_ms = self._lateness(c, msg.page_ms, isinstance(msg, Ping)) if msg.page_ms is not None else 0.0
         if isinstance(msg, Ping):
             c.outbox.put_nowait({"type": "pong", "t": msg.t, "server_ns": time.time_ns()})  # server clock: offset
             return
@@ -333,23 +354,43 @@ class LabHub:
                                               page_time_ms=msg.page_ms)
         if late_ms > LATE_MS:  # checked last: a message wrong in any other way says that first
             self._refuse(c, f"late: made {late_ms / 1000:.1f} s before it arrived (more than {LATE_MS / 1000:g} s: the "
-                            "network held it while the page was cut off)", raw, msg.id)
+                            "network held it while the page was cut off, or the page's clock stopped)", raw, msg.id,
+                         late=True)  # the page opens a new socket (common.js): a fresh baseline
             return
         # stamped now: the envelope's time_ns is the server's clock of the touch
         self._out.put(self.node.stamp([event]))
 
-    @staticmethod
-    def _lateness(c: Client, page_ms: float) -> float:
-        """How much later than its connection's fastest message this one arrived, in ms (the module's rule)."""
+    def _lateness(self, c: Client, page_ms: float, ping: bool) -> float:
+        """How much later than its connection's baseline this message arrived, in ms (the module's rule)."""
         if not math.isfinite(page_ms):  # JSON's 1e999: no clock; it must not become everyone's baseline
             return 0.0
         offset = time.monotonic_ns() / 1e6 - page_ms
         c.fastest_ms = min(c.fastest_ms, offset)
+        if ping:
+            c.pings.append((page_ms, offset))
+            self._rebase(c)
         return offset - c.fastest_ms
 
-    def _refuse(self, c: Client, reason: str, raw: bytes, msg_id: int = 0) -> None:
+    def _rebase(self, c: Client) -> None:
+        """The baseline follows the page's clock if its last pings agree on a larger offset (the module's rule)."""
+        if len(c.pings) < REBASE_PINGS:
+            return
+        made = [p for p, _ in c.pings]
+        offsets = [o for _, o in c.pings]
+        if max(made) - min(made) < SPAN_MS or max(offsets) - min(offsets) > AGREE_MS:
+            return  # too close together on the page's clock to tell from a burst, or not agreeing: held or jittery
+        jump = min(offsets) - c.fastest_ms
+        if jump > AGREE_MS:  # jitter within AGREE_MS is no jump: the baseline stays the fastest
+            c.fastest_ms = min(offsets)
+            log.info("lab %s: a %s page's clock jumped %.1f s (slept?): its late baseline follows", self.session,
+                     c.page, jump / 1000)
+
+    def _refuse(self, c: Client, reason: str, raw: bytes, msg_id: int = 0, late: bool = False) -> None:
         self.rejections += 1
-        c.outbox.put_nowait({"type": "rejected", "reason": reason, "id": msg_id})
+        told = {"type": "rejected", "reason": reason, "id": msg_id}
+        if late:
+            told["late"] = True
+        c.outbox.put_nowait(told)
         self.record_refusal(reason, f"ws/{self.session}/{c.page}", f"page:{c.id}", msg_id, raw)
 
     def record_refusal(self, reason: str, where: str, who: str = "", seq: int = 0, raw: bytes = b"") -> None:

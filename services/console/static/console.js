@@ -115,6 +115,8 @@ function render(s) {
   $("live-picks").textContent = L.session ? L.picks : "";
   $("live-suggestion").textContent = L.suggestion;
   $("live-robot").textContent = L.robot;
+  // what the game refused (a board's late touch among them): the experimenter sees a page that cannot play
+  $("live-refused").textContent = L.session && L.refused ? `${L.refused} (last: ${L.last_refused})` : "";
   $("robot-warning").textContent = s.robot_warning || ""; $("robot-warning").hidden = !s.robot_warning;
   const q = $("live-questionnaire"); q.innerHTML = "";
   if (L.questionnaire_url) { const a = el("a", L.state === "questionnaire" ? "awaiting answers: open the questionnaire" : "after the game"); a.href = L.questionnaire_url; a.id = "questionnaire-link"; a.target = "_blank"; q.appendChild(a); }

@@ -13,6 +13,9 @@
   let seenTurn = null;  // id of the last resolved turn drawn (null: nothing drawn yet)
   let holdUntil = 0, holdTimer = null, pending = -1;
   let offline = "";  // what the page says while its WebSocket is down ("": connected)
+  // the hub refused the last touch as late (its clock stopped while the device slept: common.js opens a new
+  // socket): the page asks for it again, rather than leave the card simply not turning; gone at the next touch
+  let again = false;
 
   const cards = [];
   for (let i = 0; i < 18; i++) {
@@ -40,6 +43,7 @@
     // the card waits for the game's answer only if the touch went out: a touch while offline is dropped
     // (the page says "Reconnecting…"), never left pending for an answer that cannot come
     if (!link.send({ type: "pick", id: nextId(), round: s.round, turn: s.turn, card: i, page_ms: pageMs })) return;
+    again = false;
     api.sent += 1;
     pending = i;
     cards[i].classList.add("pending");
@@ -49,7 +53,7 @@
     if (!s || api.role !== "player" || s.paused || s.phase !== "second" || s.attempt < 0) return;
     // disabled only once sent: offline, the press is dropped and the button stays as the view says
     if (link.send({ type: "wrong", id: nextId(), round: s.round, turn: s.turn, attempt: s.attempt,
-                    page_ms: performance.timeOrigin + ev.timeStamp })) wrong.disabled = true;
+                    page_ms: performance.timeOrigin + ev.timeStamp })) { wrong.disabled = true; again = false; }
   });
 
   function drawCard(b, state, face, extra) {
@@ -92,7 +96,8 @@
     if (s.phase === "over" && stopped(s)) text = "The game was stopped. Thank you!";
     // offline, the page says so whatever else redraws it (a turn-back timer): it takes no touch until back
     prompt.textContent = offline ? offline : s.paused ? "The game is paused: please wait" :
-      holding ? "Not a pair" : (s.notice && player ? s.notice.reason : text);
+      holding ? "Not a pair" : again && player ? "That touch came too late: please touch again" :
+      (s.notice && player ? s.notice.reason : text);
     prompt.dataset.phase = s.phase;
     document.body.classList.toggle("read-only", !player);
     document.body.dataset.role = api.role;
@@ -114,6 +119,8 @@
       }
     }
     seenTurn = lt ? lt.id : 0;
+    const was = api.state;
+    if (was && (s.round !== was.round || s.turn !== was.turn || s.phase !== was.phase)) again = false;  // moved on
     if (pending >= 0 && (s.cards[pending].state !== "down" || s.turn !== (api.state && api.state.turn))) pending = -1;
     if (pending >= 0 && s.notice && s.notice.card === pending) pending = -1;
     api.state = s;
@@ -149,7 +156,7 @@
         wrong.disabled = true;
       }
     },
-    onRejected: (m) => { api.rejected.push(m); pending = -1; render(); },
+    onRejected: (m) => { api.rejected.push(m); pending = -1; if (m.late) again = true; render(); },
   });
   api.link = link;
 })();
