@@ -52,6 +52,8 @@ message when the Data End was read (`data_complete`), and is still damage: a
 finding that makes the file not `whole` (verify FAILs naming it; "no event lost,
 but the file is damaged"), never a file called whole. `counted_messages`, the
 Statistics' count, is kept only from a summary whose CRC held.
+`stream` walks the same way, giving the data section's records to a reader a chunk's at a
+time instead of keeping them (LostPart at a part whose records are lost).
 """
 
 from __future__ import annotations

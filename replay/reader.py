@@ -25,6 +25,8 @@ file lacks (a Q update among them: a Q-table the learner never had), so such a
 file is damaged as one that lost a part: `EventLog.undecoded` says so in the one
 line every verb uses (rebuild, counterfactual, replay and verify, view, report),
 `damaged` and `note` join it to the file's damaged parts and its cut.
+`stream_log` reads a file as `read_any_log` does, its events given to a fold a chunk's at a time and not kept (a
+file whose losses or repeated seqs can be judged only at its end is NotStreamed: read it whole).
 `EventDecoderFactory` plugs the same decoding into mcap's own readers.
 """
 

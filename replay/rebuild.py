@@ -20,7 +20,8 @@ seq: `POLICY_SOURCES`) says what in `Rebuilt.lost`: its
 policy lacks updates the learner made, so it is no state the learner was ever
 in (`pairplay rebuild` writes it only with --partial). A hole in another
 source's seq (the participant's, the robot's) is said in `damage_read`: the
-policy is made of none of their events, so it is whole.
+policy is made of none of their events, so it is whole. The events are folded as they are read
+(reader.stream_log), none kept; a file that lost some is read whole first, the same policy either way.
 """
 
 from __future__ import annotations
