@@ -194,12 +194,12 @@ def rebuild_recording(path: str | Path) -> Rebuilt:
 
 def _streamed(path: str | Path) -> tuple[EventLog, "_Seen"]:
     """The recording at `path` read and folded as it is read (reader.stream_log); NotStreamed for a file that lost
-    events, holds no session (said in read_session's words) or holds differing events of one seq (every
-    publisher's seqs are judged then: forgery.py), which is read whole."""
+    events, holds a seq twice (a differing event among them: every one-publisher source's seqs are judged then,
+    forgery.py) or holds no session (said in read_session's words), which is read whole."""
     path = check_recording(path, function="rebuild_recording")
-    seen = _Seen(STARTERS)
+    seen = _Seen(STARTERS)  # (a stream has no differing events: stream_log reads none)
     log = stream_log(path, CURVE_READS, seen)
-    if seen.first is None or log.differing:
+    if seen.first is None:
         raise NotStreamed(path)
     return log, seen
 
