@@ -40,12 +40,38 @@ def contradiction(events: Iterable[Event], one_publisher: frozenset[str] = ONE_P
     """The first contradiction among a session's `events` (see rule), in words; "" if none. `one_publisher`: the
     sources whose seqs are checked (STARTERS alone for a file its reader found no two events of one seq in:
     reader.EventLog.differing; the other sources' check was a tenth of a rebuild)."""
-    seen: dict[tuple[str, str, int], tuple[int, Event]] = {}
-    once: dict[tuple[str, str, str], tuple[int, Event]] = {}
-    ends: dict[tuple[str, str], tuple[int, Event]] = {}
-    for pos, e in enumerate(events):
-        if e.source not in one_publisher and e.source not in STARTERS:
-            continue
+    return Contradictions(one_publisher).take(events)
+
+
+class Contradictions:
+    """`contradiction` of events given a batch at a time (a rebuild folds a file's events as they are read): `take`
+    each batch in order; `found` is the first contradiction in words ("" so far)."""
+
+    def __init__(self, one_publisher: frozenset[str] = ONE_PUBLISHER) -> None:
+        self.judged = one_publisher | STARTERS  # the sources whose events are looked at
+        self.found = ""
+        self.pos = 0  # the events taken before this batch (a contradiction names both events' positions)
+        self.seen: dict[tuple[str, str, int], tuple[int, Event]] = {}
+        self.once: dict[tuple[str, str, str], tuple[int, Event]] = {}
+        self.ends: dict[tuple[str, str], tuple[int, Event]] = {}
+
+    def take(self, events: Iterable[Event]) -> str:
+        """`found` after `events`, the next ones in order (none is looked at once one is found)."""
+        if self.found:
+            return self.found
+        judged, pos = self.judged, self.pos
+        for e in events:
+            if e.source in judged:
+                self.found = self._judge(e, pos)
+                if self.found:
+                    break
+            pos += 1
+        self.pos = pos
+        return self.found
+
+    def _judge(self, e: Event, pos: int) -> str:
+        """The contradiction event `e`, at `pos`, makes with those before it ("" if none)."""
+        seen, once, ends = self.seen, self.once, self.ends
         tag = type(e).__name__
         at = (e.session, e.source, e.seq)
         first = seen.get(at)
@@ -54,7 +80,7 @@ def contradiction(events: Iterable[Event], one_publisher: frozenset[str] = ONE_P
                     f"{_named(e, pos)}; one of them is not {e.source}'s (forged on the bus?)")
         seen.setdefault(at, (pos, e))
         if e.source not in STARTERS:
-            continue
+            return ""
         if tag in ONCE_PER_SESSION:
             earlier = once.get((e.session, e.source, tag))
             if earlier is not None and earlier[1] != e:
@@ -63,9 +89,9 @@ def contradiction(events: Iterable[Event], one_publisher: frozenset[str] = ONE_P
             once.setdefault((e.session, e.source, tag), (pos, e))
             if tag == "SessionEnded":
                 ends.setdefault((e.session, e.source), (pos, e))
-            continue
+            return ""
         end = ends.get((e.session, e.source))
         if end is not None and e.seq > end[1].seq and tag not in AFTER_END:
             return (f"{e.source}'s {_named(end[1], end[0])} is followed by its {_named(e, pos)}: that end was not "
                     f"{e.source}'s (forged on the bus?)")
-    return ""
+        return ""

@@ -52,6 +52,8 @@ message when the Data End was read (`data_complete`), and is still damage: a
 finding that makes the file not `whole` (verify FAILs naming it; "no event lost,
 but the file is damaged"), never a file called whole. `counted_messages`, the
 Statistics' count, is kept only from a summary whose CRC held.
+`stream` walks the same way, giving the data section's records to a reader a chunk's at a
+time instead of keeping them (LostPart at a part whose records are lost).
 """
 
 from __future__ import annotations
@@ -91,6 +93,11 @@ _SUMMARY = (Schema, Channel, ChunkIndex, AttachmentIndex, Statistics, MetadataIn
 # (schemas/trust.MAX_PAYLOAD); other writers' chunks are a few MB (mcap's default is 1 MiB). A larger declared
 # size is a damaged or hostile chunk, refused before anything is allocated for it.
 MAX_CHUNK = 64 * 1024 * 1024
+
+
+class LostPart(Exception):
+    """A part whose records are lost, met by `stream`: where its records were among those given is a reader's to
+    mark, and a streaming reader has given the ones before it away (it reads the file whole instead)."""
 
 
 class Unreadable(ValueError):
@@ -471,9 +478,14 @@ def _open_chunk(chunk: Chunk) -> _Opened:
 
 
 class _Walker:
-    def __init__(self, path: str, data: bytes):
+    def __init__(self, path: str, data: bytes, sink: Callable[[list[Any]], None] | None = None):
         self.data = data
         self.scan = Scan(path, size=len(data))
+        # where the data section's records go as they are read: kept in `scan.records`, or given to `sink` a chunk's
+        # (a record's) at a time and not kept (`stream`: a 5,000-round file's records were 600 MB)
+        self.sink = sink if sink is not None else self.scan.records.extend
+        self.streamed = sink is not None
+        self.records = 0  # the data section's records read (`Damage.lost_at` counts them)
         self.last_seq: dict[int, tuple[int, int]] = {}  # channel -> (sequence, chunk number)
         self.last_intact: ChunkSeen | None = None  # the last chunk whose records were read
         self.lost_chunk: tuple[int, ChunkSeen] | None = None  # the last chunk that did not open, its Damage's index
@@ -488,8 +500,10 @@ class _Walker:
         self.spans: list[tuple[int, int, int]] = []  # unreadable bytes whose records are lost: (start, end, Damage index)
 
     def damage(self, offset: int, part: str, what: str, lost: str = "") -> None:
-        """A finding; `lost`: what it lost (records that are not read), said where they were."""
-        self.scan.damage.append(Damage(offset, part, what, len(self.scan.records) if lost else -1, lost))
+        """A finding; `lost`: what it lost (records that are not read), said where they were (LostPart if streamed)."""
+        if lost and self.streamed:
+            raise LostPart(part)
+        self.scan.damage.append(Damage(offset, part, what, self.records if lost else -1, lost))
 
     def record_at(self, pos: int) -> tuple[int, int, Any]:
         """(opcode, end, record) of the record at `pos` (Unreadable if it is not one)."""
@@ -591,7 +605,8 @@ class _Walker:
                 self.footer(pos, end, record, summary_start=pos)
                 return scan
             elif isinstance(record, (Schema, Channel, Metadata)):
-                scan.records.append(record)
+                self.records += 1
+                self.sink([record])
                 if isinstance(record, Metadata):
                     self.metadata += 1
                     scan.metadata_records.append(record)
@@ -599,7 +614,8 @@ class _Walker:
                 self.attachments += 1
             elif isinstance(record, Message):
                 self.sequence(pos, record, "message", -1)
-                scan.records.append(record)
+                self.records += 1
+                self.sink([record])
                 self.messages += 1
             pos = end
         scan.truncated, scan.cut_at = True, pos
@@ -653,6 +669,10 @@ class _Walker:
             self.lost_chunk = (len(self.scan.damage) - 1, seen)
             return seen
         previous = self.last_intact
+        if previous is not None and self.streamed:
+            # streamed: only the chunk read last is checked against the Message Indexes after it (`message_index`,
+            # `only_indexes`); an earlier one's list of messages is kept only for a caller of `scan` to look at
+            previous.messages, previous.by_channel = [], None
         if previous is not None and chunk.message_start_time < previous.start:
             self.damage(pos, part, f"starts at log time {chunk.message_start_time}, before chunk {previous.number}"
                         f" ({previous.start}): chunks out of order")
@@ -681,7 +701,8 @@ class _Walker:
                         self.sequence(pos, record, part, n)  # says what is wrong
                     else:
                         last_seq[record.channel_id] = (record.sequence, n)
-        self.scan.records.extend(records)
+        self.records += len(records)
+        self.sink(records)
         return seen
 
     def sequence(self, pos: int, message: Message, part: str, n: int) -> None:
@@ -911,6 +932,15 @@ def scan(path: str | Path) -> Scan:
     """Check a whole file (see the module rule); OSError if it cannot be read."""
     data = Path(path).read_bytes()
     return _Walker(str(path), data).walk()
+
+
+def stream(path: str | Path, sink: Callable[[list[Any]], None]) -> Scan:
+    """`scan`, the data section's records given to `sink` as they are read (a chunk's at a time, in file order),
+    not kept in `Scan.records`: a reader that folds them as they come holds one chunk's, not the file's. The
+    findings are `scan`'s; those made after a record was given (a later chunk's damage, the summary's) are known
+    only when it returns."""
+    data = Path(path).read_bytes()
+    return _Walker(str(path), data, sink).walk()
 
 
 def scan_bytes(data: bytes, path: str = "") -> Scan:

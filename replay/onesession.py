@@ -30,6 +30,12 @@ class Started(NamedTuple):
 def started(log: EventLog) -> Started:
     """The session `log` holds (module rule)."""
     first = next((r.event for r in log.events if type(r.event).__name__ == "SessionStarted"), None)
+    return started_by(first, log)
+
+
+def started_by(first, log: EventLog) -> Started:
+    """The session `log` holds, given its first SessionStarted (`first`, None if none): for a log whose events were
+    folded as they were read, not kept (reader.stream_log)."""
     key = None if first is None else (first.session, first.seq, int(first.time_ns))
     return Started(key, Path(log.metadata.get(RECOVERED, {}).get("source", "")).name)
 

@@ -25,6 +25,8 @@ file lacks (a Q update among them: a Q-table the learner never had), so such a
 file is damaged as one that lost a part: `EventLog.undecoded` says so in the one
 line every verb uses (rebuild, counterfactual, replay and verify, view, report),
 `damaged` and `note` join it to the file's damaged parts and its cut.
+`stream_log` reads a file as `read_any_log` does, its events given to a fold a chunk's at a time and not kept (a
+file whose losses or repeated seqs can be judged only at its end is NotStreamed: read it whole).
 `EventDecoderFactory` plugs the same decoding into mcap's own readers.
 """
 
@@ -659,17 +661,7 @@ def read_any_log(path: str | Path, only: frozenset[str] | None = None) -> EventL
 def _read_log(path: str | Path, only: frozenset[str] | None = None) -> EventLog:
     log = EventLog(str(path))
     checked = scan(path)
-    # channel -> (its topic, its tag if its events are only counted, else None, and what an event on it must be: the
-    # session, source and event class its topic names (None: no pairplay event key): `disagreement`; and the seqs
-    # of the events read on it (`gaps`: one append per message, grouped by source once at the end)): one look-up
-    route: dict[int, tuple[str, str | None, str | None, str | None, type | None, array]] = {}
-    skipped: dict[str, int] = log.skipped
-    decode, head, type_of = _event_decoder.raw, _tagged.raw, _typed.raw  # (RecursionError caught below: nesting.py)
-    append = log.events.append
-    # the first event read of each (session, source, seq): an identical one after it is a copy, read once (module
-    # rule; FirstOfEach's test, inlined: a call per message was 50% more time for a read)
-    firsts = FirstOfEach()
-    seen = firsts.seen.setdefault
+    reading = _Reading(log, only)
     records = checked.summary_records + checked.records
     own = [(len(checked.summary_records) + at, n) for at, n in checked.losses()]
     lost = sorted({at for at, _ in own})
@@ -686,107 +678,217 @@ def _read_log(path: str | Path, only: frozenset[str] | None = None) -> EventLog:
             marked.append(_LOST_HERE)
             before = at
         records = marked + records[before:]
-    for record in records:
-        if type(record) is Message:  # most records (mcap's record classes have no subclasses)
-            routed = route.get(record.channel_id)
-            if routed is None:
-                log.bad.append(BadMessage("", f"message on unknown channel {record.channel_id}",
-                                          record.log_time, record.data))
-                log.lost_at.append(len(log.events))
-                continue
-            key, tag, k_session, k_source, k_type, numbers = routed
-            data = record.data
-            if tag is not None:
+    reading.take(records, log.events)
+    reading.ends(log.events)
+    return reading.finish(checked, recovered)
+
+
+class NotStreamed(Exception):
+    """A file `stream_log` does not read as it goes (a part or a message lost, a recovered file's source's losses:
+    where they were is known only at its end): read it whole (`read_any_log`)."""
+
+
+def stream_log(path: str | Path, only: frozenset[str] | None, each: Callable[[list[RecordedEvent]], None]) -> EventLog:
+    """`read_any_log(path, only)` of a file whose every part was read (none lost, no message that does not decode,
+    no loss recorded by a recover: NotStreamed, before or after `each` was called, for any other), its events given
+    to `each` a chunk's at a time, in file order, and not kept (`EventLog.events` is empty): a verb that folds them as
+    they come holds one chunk's records, not the file's (rebuild: a 5,000-round file's were 600 MB, and reading
+    them all first kept it under its 0.8x goal). Everything else of the EventLog is `read_any_log`'s: the summary's
+    channels are taken first, as there, after the fact (they name only channels whose messages the data section's
+    own Channel records name too: one they alone name is a message on an unknown channel, NotStreamed)."""
+    from .check import recording_file
+    from .mcapscan import LostPart, stream
+
+    path = recording_file(path, "read_log")
+    log = EventLog(str(path))
+    reading = _Reading(log, only, firsts=False)
+
+    def sink(records: list) -> None:
+        events: list[RecordedEvent] = []
+        reading.take(records, events)
+        if log.lost_at:  # a message that does not decode, or on no channel: `lost_at` marks it among the events
+            raise NotStreamed(path)
+        reading.ends(events)
+        reading.passed += len(events)
+        if events:
+            each(events)
+
+    with gc_paused():
+        try:
+            checked = stream(path, sink)
+        except LostPart:
+            raise NotStreamed(path) from None
+        recovered = folded_recovery(checked.metadata_records)
+        # a seq read twice (a copy, or a differing event: `copies`, `differing`) is judged against the first bytes
+        # read of it, which a stream does not keep
+        if checked.losses() or recovered_losses([], (), recovered) or seq_twice(reading.route.values()):
+            raise NotStreamed(path)
+        if checked.summary_records:  # first, as `_read_log` reads them (the order of `channels` and of `gaps`)
+            channels, schemas, route = log.channels, log.schemas, reading.route
+            log.channels, log.schemas, reading.route = {}, {}, {}
+            reading.take(checked.summary_records, [])
+            log.channels.update(channels)
+            log.schemas.update(schemas)
+            reading.route.update(route)
+        return reading.finish(checked, recovered)
+
+
+def _first(at: tuple[str, str, int], data: bytes) -> bytes:
+    """`_Reading.take`'s look-up of the first event read of `at` when none is kept (`stream_log`): each is the first."""
+    return data
+
+
+def seq_twice(routes) -> bool:
+    """Whether some (session, source) has a seq read more than once among the events on `routes` (`_read_log`'s
+    channels; `seq_jumps`' table of each source's span, or a sort when the span is far wider than its seqs)."""
+    import numpy as np
+
+    for numbers in _seqs_by_source(routes).values():
+        seqs = np.frombuffer(numbers, dtype=np.int64)
+        low, high = int(seqs.min()), int(seqs.max())
+        if high - low < 4 * len(seqs):
+            held = np.zeros(high - low + 1, dtype=bool)
+            held[seqs - low] = True
+            if np.count_nonzero(held) < len(seqs):
+                return True
+        elif len(np.unique(seqs)) < len(seqs):
+            return True
+    return False
+
+
+class _Reading:
+    """`_read_log`'s and `stream_log`'s one reading of records into an EventLog (module rule): `take` each batch of
+    records in file order, `ends` of the events each gave, then `finish`."""
+
+    def __init__(self, log: EventLog, only: frozenset[str] | None, firsts: bool = True) -> None:
+        self.log, self.only = log, only
+        # channel -> (its topic, its tag if its events are only counted, else None, and what an event on it must be:
+        # the session, source and event class its topic names (None: no pairplay event key): `disagreement`; and the
+        # seqs of the events read on it (`gaps`: one append per message, grouped by source once at the end)): one
+        # look-up
+        self.route: dict[int, tuple[str, str | None, str | None, str | None, type | None, array]] = {}
+        # the first event read of each (session, source, seq): an identical one after it is a copy, read once (module
+        # rule; FirstOfEach's test, inlined: a call per message was 50% more time for a read); none kept by
+        # `stream_log`, which reads a file with no seq read twice (its first bytes, kept, were a third of its memory)
+        self.firsts = FirstOfEach() if firsts else None
+        self.passed = 0  # the events read before this batch (`lost_at` counts them)
+        self.ended_by: dict[str, str] = {}  # session -> its SessionEnded's reason (`unanswered`)
+        self.learned: dict[str, set] = {}  # session -> the seqs of the learner's RewardGiven that learned
+
+    def take(self, records: list, events: list[RecordedEvent]) -> None:
+        """Read `records` (file order), their events appended to `events`."""
+        log, only, route = self.log, self.only, self.route
+        skipped: dict[str, int] = log.skipped
+        decode, head, type_of = _event_decoder.raw, _tagged.raw, _typed.raw  # (RecursionError caught: nesting.py)
+        append = events.append
+        seen = self.firsts.seen.setdefault if self.firsts is not None else _first
+        for record in records:
+            if type(record) is Message:  # most records (mcap's record classes have no subclasses)
+                routed = route.get(record.channel_id)
+                if routed is None:
+                    log.bad.append(BadMessage("", f"message on unknown channel {record.channel_id}",
+                                              record.log_time, record.data))
+                    log.lost_at.append(self.passed + len(events))
+                    continue
+                key, tag, k_session, k_source, k_type, numbers = routed
+                data = record.data
+                if tag is not None:
+                    try:
+                        if k_source not in STARTERS:  # not read, no copy looked for (only the game's): its copies
+                            # change nothing the verb makes: only its tag and seq are decoded (a copy check for each
+                            # was an eighth of a rebuild, under the bench's 0.8x goal); its seq for `gaps`
+                            typed = type_of(data)
+                            if typed.type == tag:  # (else decoded below: a bad message is kept as one)
+                                numbers.append(typed.seq)
+                                skipped[tag] = skipped.get(tag, 0) + 1
+                                continue
+                        h = head(data)
+                        if h.type == tag and h.session == k_session and h.source == k_source:  # else decoded below
+                            numbers.append(h.seq)
+                            first = seen(((h.session, h.source, h.seq)), data)
+                            if first is data:
+                                skipped[tag] = skipped.get(tag, 0) + 1
+                                continue
+                            if first == data:
+                                log.copies += 1  # an identical copy of one event read: once (module rule)
+                                continue
+                            # (other bytes of a seq read: decoded wholly below, to compare)
+                    except (msgspec.DecodeError, msgspec.ValidationError, RecursionError):
+                        pass  # decoded wholly below: a bad message is kept as one
                 try:
-                    if k_source not in STARTERS:  # not read, no copy looked for (only the game's): its copies
-                        # change nothing the verb makes: only its tag and seq are decoded (a copy check for each
-                        # was an eighth of a rebuild, under the bench's 0.8x goal); its seq for `gaps`
-                        typed = type_of(data)
-                        if typed.type == tag:  # (else decoded below: a bad message is kept as one)
-                            numbers.append(typed.seq)
-                            skipped[tag] = skipped.get(tag, 0) + 1
-                            continue
-                    h = head(data)
-                    if h.type == tag and h.session == k_session and h.source == k_source:  # else decoded below
-                        numbers.append(h.seq)
-                        first = seen(((h.session, h.source, h.seq)), data)
-                        if first is data:
-                            skipped[tag] = skipped.get(tag, 0) + 1
-                            continue
-                        if first == data:
+                    e = decode(data)
+                    if type(e) is not k_type or e.session != k_session or e.source != k_source:
+                        # changes nothing, as on the bus (services/guard.py): kept as a bad message, said
+                        log.bad.append(BadMessage(key, disagreement(key, e), record.log_time, data))
+                        log.lost_at.append(self.passed + len(events))
+                        continue
+                    numbers.append(e.seq)
+                    first = seen((e.session, e.source, e.seq), data)
+                    if first is not data:
+                        if first == data or _decoded(first) == e:
                             log.copies += 1  # an identical copy of one event read: once (module rule)
                             continue
-                        # (other bytes of a seq read: decoded wholly below, to compare)
-                except (msgspec.DecodeError, msgspec.ValidationError, RecursionError):
-                    pass  # decoded wholly below: a bad message is kept as one
-            try:
-                e = decode(data)
-                if type(e) is not k_type or e.session != k_session or e.source != k_source:
-                    # changes nothing, as on the bus (services/guard.py): kept as a bad message, said
-                    log.bad.append(BadMessage(key, disagreement(key, e), record.log_time, data))
-                    log.lost_at.append(len(log.events))
-                    continue
-                numbers.append(e.seq)
-                first = seen((e.session, e.source, e.seq), data)
-                if first is not data:
-                    if first == data or _decoded(first) == e:
-                        log.copies += 1  # an identical copy of one event read: once (module rule)
-                        continue
-                    log.differing += 1  # another event at a seq read: kept, for replay/forgery.py
-                append(RecordedEvent(key, e, record.log_time, data))
-            except (msgspec.DecodeError, msgspec.ValidationError, RecursionError) as err:
-                if isinstance(err, RecursionError):
-                    err = msgspec.DecodeError(TOO_DEEP)
-                tag = unknown_tag(record.data)
-                if tag is not None:
-                    log.unknown.append(UnknownEvent(key, tag, record.log_time, record.data))
-                else:
-                    log.bad.append(BadMessage(key, str(err), record.log_time, record.data))
-                    log.lost_at.append(len(log.events))
-        elif isinstance(record, Channel):
-            log.channels[record.id] = (record.topic, str(record.schema_id))
-            tag = record.topic.rsplit("/", 1)[-1]
-            parts = record.topic.split("/")
-            named = (parts[1], parts[2]) if len(parts) == 4 and parts[0] == KEY_ROOT else (None, None)
-            # a channel's record again (the summary's copy, a writer that repeats it in every chunk, as MCAP lets
-            # it) keeps the seqs read on it: new ones, a chunk's seqs dropped, were holes its other channels' seqs
-            # surrounded
-            known = route.get(record.id)
-            numbers = known[5] if known is not None and known[0] == record.topic else array("q")
-            route[record.id] = (record.topic, tag if only is not None and tag in EVENT_BY_TAG and tag not in only
-                                else None, *named, EVENT_BY_TAG.get(tag) if named[0] is not None else None, numbers)
-        elif isinstance(record, Schema):
-            log.schemas[record.id] = (record.name, record.encoding, record.data)
-        elif isinstance(record, Metadata):
-            log.metadata[record.name] = dict(record.metadata)
-        elif record is _LOST_HERE:
-            log.lost_at.append(len(log.events))
-            if log.lost_from < 0:
-                log.lost_from = len(log.events)
-    log.truncated, log.damage, log.data_complete = checked.truncated, checked.damage, checked.data_complete
-    log.seq_jumps, log.repeated = seq_jumps(route.values())
-    ended_by, learned = {}, {}
-    if "RewardGiven" not in skipped:  # (decoded: whether each learned is known)
-        for r in log.events:
+                        log.differing += 1  # another event at a seq read: kept, for replay/forgery.py
+                    append(RecordedEvent(key, e, record.log_time, data))
+                except (msgspec.DecodeError, msgspec.ValidationError, RecursionError) as err:
+                    if isinstance(err, RecursionError):
+                        err = msgspec.DecodeError(TOO_DEEP)
+                    tag = unknown_tag(record.data)
+                    if tag is not None:
+                        log.unknown.append(UnknownEvent(key, tag, record.log_time, record.data))
+                    else:
+                        log.bad.append(BadMessage(key, str(err), record.log_time, record.data))
+                        log.lost_at.append(self.passed + len(events))
+            elif isinstance(record, Channel):
+                log.channels[record.id] = (record.topic, str(record.schema_id))
+                tag = record.topic.rsplit("/", 1)[-1]
+                parts = record.topic.split("/")
+                named = (parts[1], parts[2]) if len(parts) == 4 and parts[0] == KEY_ROOT else (None, None)
+                # a channel's record again (the summary's copy, a writer that repeats it in every chunk, as MCAP lets
+                # it) keeps the seqs read on it: new ones, a chunk's seqs dropped, were holes its other channels' seqs
+                # surrounded
+                known = route.get(record.id)
+                numbers = known[5] if known is not None and known[0] == record.topic else array("q")
+                route[record.id] = (record.topic, tag if only is not None and tag in EVENT_BY_TAG and tag not in only
+                                    else None, *named, EVENT_BY_TAG.get(tag) if named[0] is not None else None, numbers)
+            elif isinstance(record, Schema):
+                log.schemas[record.id] = (record.name, record.encoding, record.data)
+            elif isinstance(record, Metadata):
+                log.metadata[record.name] = dict(record.metadata)
+            elif record is _LOST_HERE:
+                log.lost_at.append(self.passed + len(events))
+                if log.lost_from < 0:
+                    log.lost_from = self.passed + len(events)
+
+    def ends(self, events: list[RecordedEvent]) -> None:
+        """Note each session's end and the learner's RewardGiven that learned among `events` (`unanswered`)."""
+        ended_by, learned = self.ended_by, self.learned
+        for r in events:
             kind = type(r.event)
             if kind is SessionEnded:
                 ended_by[r.event.session] = r.event.reason
             elif kind is RewardGiven and r.event.learned and r.event.source == "learner":
                 learned.setdefault(r.event.session, set()).add(r.event.seq)
-    else:
-        ended_by = {r.event.session: r.event.reason for r in log.events if type(r.event) is SessionEnded}
-        learned = None
-    log.unanswered = unanswered(route.values(), ended_by, learned)
-    if recovered:
-        log.metadata[RECOVERED] = recovered
-    log.source_lost = said_source_lost(log.metadata.get(RECOVERED, {}))
-    log.error = "" if checked.whole else checked.describe()
-    log.brief = "" if checked.whole else checked.brief()
-    if log.truncated and is_live(path):  # not cut: its recorder is still writing it (pairplay/livelock.py)
-        log.live = True
-        log.error = f"{LIVE}, read as far as it goes; {log.error}"
-        log.brief = f"{LIVE}, read as far as it goes; {log.brief}"
-    return log
+
+    def finish(self, checked, recovered: dict[str, str]) -> EventLog:
+        """The EventLog, after its last records: what the scan found, the holes in seqs, what is unanswered."""
+        log, path = self.log, self.log.path
+        route, skipped = self.route, log.skipped
+        log.truncated, log.damage, log.data_complete = checked.truncated, checked.damage, checked.data_complete
+        log.seq_jumps, log.repeated = seq_jumps(route.values())
+        # (RewardGiven decoded, not skipped: whether each learned is known)
+        learned = self.learned if "RewardGiven" not in skipped else None
+        log.unanswered = unanswered(route.values(), self.ended_by, learned)
+        if recovered:
+            log.metadata[RECOVERED] = recovered
+        log.source_lost = said_source_lost(log.metadata.get(RECOVERED, {}))
+        log.error = "" if checked.whole else checked.describe()
+        log.brief = "" if checked.whole else checked.brief()
+        if log.truncated and is_live(path):  # not cut: its recorder is still writing it (pairplay/livelock.py)
+            log.live = True
+            log.error = f"{LIVE}, read as far as it goes; {log.error}"
+            log.brief = f"{LIVE}, read as far as it goes; {log.brief}"
+        return log
 
 
 class FirstOfEach:
@@ -874,12 +976,8 @@ def seq_jumps(routes) -> tuple[list[tuple[str, int, int]], list[tuple[str, int]]
     rebuild); a span far wider than the seqs (a forged seq 2^53) is sorted instead."""
     import numpy as np  # (here: a read that meets no seq needs none)
 
-    by: dict[tuple[str, str], array] = {}
-    for _, _, session, source, _, numbers in routes:
-        if numbers:
-            by.setdefault((session, source), array("q")).extend(numbers)
     jumps, repeated = [], []
-    for (_, source), numbers in by.items():
+    for (_, source), numbers in _seqs_by_source(routes).items():
         seqs = np.frombuffer(numbers, dtype=np.int64)
         low, high = int(seqs.min()), int(seqs.max())
         if high - low < 4 * len(seqs):
@@ -900,6 +998,16 @@ def seq_jumps(routes) -> tuple[list[tuple[str, int, int]], list[tuple[str, int]]
             repeated += [(source, before) for _, before, _ in found if before in twice]
         jumps += found
     return jumps, repeated
+
+
+def _seqs_by_source(routes) -> dict[tuple[str, str], array]:
+    """The seqs read on `routes` (`_read_log`'s channels) by (session, source), in the order their first channel
+    came."""
+    by: dict[tuple[str, str], array] = {}
+    for _, _, session, source, _, numbers in routes:
+        if numbers:
+            by.setdefault((session, source), array("q")).extend(numbers)
+    return by
 
 
 # what a source answers one for one in a session that ran to its end (services/learner.py): every game's

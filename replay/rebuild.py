@@ -20,7 +20,8 @@ seq: `POLICY_SOURCES`) says what in `Rebuilt.lost`: its
 policy lacks updates the learner made, so it is no state the learner was ever
 in (`pairplay rebuild` writes it only with --partial). A hole in another
 source's seq (the participant's, the robot's) is said in `damage_read`: the
-policy is made of none of their events, so it is whole.
+policy is made of none of their events, so it is whole. The events are folded as they are read
+(reader.stream_log), none kept; a file that lost some is read whole first, the same policy either way.
 """
 
 from __future__ import annotations
@@ -41,12 +42,13 @@ from pairplay.schemas.policy import PolicyFile, write_policy
 from pairplay.schemas.session import SessionConfig
 from pairplay.schemas.trust import PUBLISHERS, STARTERS
 
-from .check import no_whole_round, read_session
+from .check import check_recording, no_whole_round, read_session
 from .fold import READS, SessionFold, fold_any, stream_seed
-from .reader import journal_restored, recovered_cut, recovered_lost, said_source_cut
+from .reader import (EventLog, NotStreamed, RecordedEvent, journal_restored, recovered_cut, recovered_lost,
+                     said_source_cut, stream_log)
 from .recover import journal_more
-from .forgery import ONE_PUBLISHER, contradiction
-from .onesession import Started, started
+from .forgery import ONE_PUBLISHER, Contradictions
+from .onesession import Started, started_by
 from pairplay.numbers import counted
 
 
@@ -107,7 +109,14 @@ def rebuild_events(events, source: str = "", truncated: bool = False, note: str 
     """`events` folded and the learner's policy rebuilt; RebuildError without a SessionStarted.
     `ended` is the recorder's "pairplay.recorder.end" metadata, if the file has it; `skipped`, by
     tag, the events read_log did not decode because the fold only counts them."""
-    fold = fold_any(events).count(skipped or {})
+    return rebuild_fold(fold_any(events), source, truncated, note, recovered, ended, skipped)
+
+
+def rebuild_fold(fold: SessionFold, source: str = "", truncated: bool = False, note: str = "",
+                 recovered: dict[str, str] | None = None, ended: dict[str, str] | None = None,
+                 skipped: dict[str, int] | None = None) -> Rebuilt:
+    """`rebuild_events` of the events `fold` folded (fold.py), as they were read."""
+    fold = fold.count(skipped or {})
     if fold.config is None:
         if ended and ended.get("stopped_by"):
             raise RebuildError(f"{source or 'events'}: no SessionStarted: the recording was stopped "
@@ -135,16 +144,22 @@ def rebuild_recording(path: str | Path) -> Rebuilt:
     """The recording at `path` rebuilt; InputError (RebuildError) if it is not a session recording, or if
     it contradicts itself about who published what (replay/forgery.py: a forged start or end), NoWholeRound
     if its session has no round recorded whole."""
-    # the events the fold only counts are not decoded (speed), but rounds' starts are: damaged_rounds needs them
-    log = read_session(path, only=CURVE_READS, function="rebuild_recording")
+    # its events folded as they are read (reader.stream_log), none kept; a file that lost some (a part, a message
+    # that does not decode) is read whole, as before: where they were lost is known at its end (`damaged_rounds`)
+    try:
+        log, seen = _streamed(path)
+    except NotStreamed:
+        # the events the fold only counts are not decoded (speed), but rounds' starts are: damaged_rounds needs them
+        log = read_session(path, only=CURVE_READS, function="rebuild_recording")
+        seen = _Seen(ONE_PUBLISHER if log.differing else STARTERS)  # (speed: forgery.py)
+        seen(log.events)
     # who published what, first (a forged end before any round is named as that, not as "no whole round"):
     # among the decoded events (every one a fold reads: the game's start, rounds' ends, refusals and end
     # among them); `replay --verify` checks every event (replay/forgery.py)
-    forged = contradiction((r.event for r in log.events),
-                           ONE_PUBLISHER if log.differing else STARTERS)  # (speed: forgery.py)
+    forged = seen.forged.found
     if forged:
         raise RebuildError(f"{forged}: not rebuilt", path)
-    empty = no_whole_round((r.event for r in log.events), log.truncated, log.damaged)
+    empty = no_whole_round(seen.said, log.truncated, log.damaged)
     if empty:
         raise NoWholeRound(f"{empty}; nothing to rebuild{journal_more(path)}", path)
     # a damaged part that lost no event (a summary's CRC, an index) leaves the session whole: its policy is the
@@ -162,18 +177,64 @@ def rebuild_recording(path: str | Path) -> Rebuilt:
     gaps, aside = log.gaps_of(POLICY_SOURCES), log.gaps_of(but=POLICY_SOURCES)
     note = "; ".join(n for n in (note, bad, gaps) if n)
     recovered = log.metadata.get("pairplay.recovered") or {}
-    rebuilt = rebuild_events((r.event for r in log.events), str(path), log.truncated, note,
-                             recovered, log.metadata.get("pairplay.recorder.end"), skipped=log.skipped)
+    rebuilt = rebuild_fold(seen.fold, str(path), log.truncated, note, recovered,
+                           log.metadata.get("pairplay.recorder.end"), skipped=log.skipped)
     # said as every verb says it (reader.EventLog.loss_free), and so are identical copies of events read once and
     # schemas that are not pairplay's (`said_too`) in a file that lost some too
     rebuilt.damage_read = "; ".join(n for n in (log.loss_free or log.said_too,
                                                 f"{aside} (the policy does not depend on them)" if aside else "") if n)
+    # (a file streamed lost no event: `lost_at` is empty, its events not kept)
     rebuilt.damaged_rounds = damaged_rounds([r.event for r in log.events], log.lost_at)
-    rebuilt.started = started(log)
+    rebuilt.started = started_by(seen.first, log)
     lost = log.lost_of(POLICY_SOURCES)
     if lost:  # the file's own damage, or its source's if it was recovered (reader.EventLog.source_lost)
         rebuilt.lost = f"the file is damaged ({lost})" if log.damaged else lost
     return rebuilt
+
+
+def _streamed(path: str | Path) -> tuple[EventLog, "_Seen"]:
+    """The recording at `path` read and folded as it is read (reader.stream_log); NotStreamed for a file that lost
+    events, holds a seq twice (a differing event among them: every one-publisher source's seqs are judged then,
+    forgery.py) or holds no session (said in read_session's words), which is read whole."""
+    path = check_recording(path, function="rebuild_recording")
+    seen = _Seen(STARTERS)  # (a stream has no differing events: stream_log reads none)
+    log = stream_log(path, CURVE_READS, seen)
+    if seen.first is None:
+        raise NotStreamed(path)
+    return log, seen
+
+
+class _Seen:
+    """What rebuild makes of a recording's events, given a chunk's at a time as they are read (reader.stream_log) or
+    all at once: their fold (fold.py), the first contradiction among them (forgery.py `Contradictions`), the first
+    SessionStarted (onesession.py) and what `no_whole_round` looks at (`said`: that start, the game's first
+    RoundEnded and its SessionEnded, in order: it stops at the first such RoundEnded, else says the last end)."""
+
+    def __init__(self, one_publisher: frozenset[str]) -> None:
+        self.fold = SessionFold()
+        self.forged = Contradictions(one_publisher)
+        self.first = None  # the first SessionStarted
+        self.said: list = []
+        self.round_ended = False
+
+    def __call__(self, recorded: list[RecordedEvent]) -> None:
+        events = [r.event for r in recorded]
+        self.fold.fold(events)
+        self.forged.take(events)
+        for e in events:
+            tag = type(e).__name__
+            if tag not in _SAID:
+                continue
+            if tag == "SessionStarted":
+                if self.first is None:
+                    self.first = e
+                    self.said.append(e)
+            elif e.source == "game" and (tag == "SessionEnded" or not self.round_ended):
+                self.round_ended = self.round_ended or tag == "RoundEnded"
+                self.said.append(e)
+
+
+_SAID = frozenset({"SessionStarted", "RoundEnded", "SessionEnded"})  # what `_Seen.said` keeps (check.no_whole_round)
 
 
 # the events a policy file is made of (fold.py: the config, the Q updates, the rounds recorded whole, the end that
