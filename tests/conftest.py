@@ -9,8 +9,10 @@ its own process with its own browser, ports (port 0) and tmp_path.
 
 from __future__ import annotations
 
+import logging
 import os
 import signal
+import sys
 from pathlib import Path
 
 import pytest
@@ -20,6 +22,21 @@ import pytest
 # they start (which inherit the ignored signal) failed only when started so. Each test process takes it back.
 if signal.getsignal(signal.SIGINT) is signal.SIG_IGN:
     signal.signal(signal.SIGINT, signal.default_int_handler)
+
+
+
+@pytest.fixture(autouse=True)
+def _cli_log_handler_left():
+    """A verb run in-process (`main([...])`, cli/main.py configure_logging) leaves its root handler writing to the
+    stderr of its time: pytest's capture of that test, closed after it. A later test's log line then went to a
+    closed stream, and logging printed "--- Logging error ---" with the test's source on the real stderr (a
+    stderr assertion of tests/test_lab_log_bursts failed so in the full run). Removed after each test."""
+    yield
+    cli = sys.modules.get("pairplay.cli.main")
+    if cli is not None and cli._handler is not None:
+        logging.getLogger().removeHandler(cli._handler)
+        cli._handler = None
+
 
 CHROMIUM = Path("/usr/bin/chromium")
 CHROMIUM_ARGS = ["--no-sandbox", "--disable-gpu", "--disable-dev-shm-usage", "--disable-background-networking",
