@@ -131,6 +131,8 @@ LIVE_SESSION_HINT = "choose another --session (a live session's recording is nev
 JOURNAL_METADATA = "pairplay.recorder.journal"  # what a restarted recorder took from the earlier file's journal
 ABSENCE_METADATA = "pairplay.recorder.absence"  # a service off the bus mid-session (_alive)
 LINK_METADATA = "pairplay.recorder.link"  # an outage of the recorder's link to its router (_link)
+HEAD_METADATA = "pairplay.recorder.head"  # a source's first events, sent before the recorder listened, asked for (_catch_up)
+HEAD_ASKS = 3  # a source whose head did not come is asked this often (each later, as a refill: REFILL_BACKOFF_S)
 LINK_SLACK_NS = 500_000_000  # a token may be reported gone this long before our own link is
 RELINK_SETTLE_S = 4 * HEARTBEAT_S  # after the link is back: Zenoh's recovery first, then the refill
 REFILL_QUIET_S = 3.0  # after a refill, a message repeating one refilled is skipped quietly (it was in flight)
@@ -694,6 +696,10 @@ class Recorder:
         self._refills_left = REFILLS
         self._outage_pending = False  # a link outage no refill has been answered after yet (its tail not known)
         self._last_seq: dict[str, int] = {}  # per source, its highest seq written (a jump past it: a hole, refilled)
+        # per source first heard past its seq 1 (it published before this recorder listened): its first live seq and
+        # the asks left, until its head is held (`_catch_up`)
+        self._heads: dict[str, list[int]] = {}
+        self._head_at: float | None = None  # monotonic time of the next ask for a head, if one is due
         self._recv_ns: dict[str, int] = {}  # per source, when its latest event was taken (a tail lost: `_tails`)
         self._back_ns = 0  # when the link to the router last came back from an outage
         self._earlier_recorded = False  # what the earlier recordings lost is recorded in the file (_note_earlier_lost)
@@ -1255,7 +1261,51 @@ class Recorder:
                     f"for {absence['absent_ms']} ms" if back_ns is not None else "and did not come back")
         self._guarded(self.writer.add_metadata, ABSENCE_METADATA, absence)
 
+    def _catch_up(self, timeout_s: float = REFILL_TIMEOUT_S) -> None:
+        """Ask each source first heard past its seq 1 for what it sent before (`.../_query/<source>/sent?after=
+        <source>:0`, the refill's query) and write it (`_fill_hole`: below what came live). A head that came is
+        recorded (HEAD_METADATA: source, first_live, caught_up); one that did not is asked again (HEAD_ASKS, each
+        later), then left: the reader says the file lacks it, as it does."""
+        self._head_at = None
+        due = {s: v for s, v in self._heads.items() if min(self._held.get(s, {v[0]})) > 1}
+        for source in set(self._heads) - set(due):
+            del self._heads[source]  # held meanwhile (a refill's answer)
+        for source, (first_live, _) in sorted(due.items()):
+            got = 0
+            for payload in self.bus.query(f"{query_key(self.session, source, SENT_QUERY)}?after={source}:0",
+                                          timeout_s):
+                try:
+                    _, items = msgpack_decode(payload, type=tuple[str, list[tuple[str, bytes]]])
+                except msgspec.DecodeError as err:
+                    log.warning("recorder: unreadable answer for %s's first events: %s", source, err)
+                    continue
+                for key, data in items:
+                    try:
+                        stamp = _stamp(data)
+                    except (msgspec.DecodeError, msgspec.ValidationError):
+                        continue  # (what does not decode is not asked for: `_fill_hole` would refuse it anyway)
+                    if stamp.source != source or not 0 < stamp.seq < first_live \
+                            or stamp.seq in self._held.get(source, ()):
+                        continue
+                    got += self._fill_hole(key, data)
+            held = self._held.get(source, set())
+            if all(n in held for n in range(1, first_live)):
+                del self._heads[source]
+                log.info("recorder: %s's first %d event(s), sent before this recorder listened, asked for and recorded",
+                         source, got)
+                self._guarded(self.writer.add_metadata, HEAD_METADATA,
+                              {"source": source, "first_live": str(first_live), "caught_up": str(got)})
+            elif self._heads[source][1] > 1:
+                self._heads[source][1] -= 1
+                self._head_at = time.monotonic() + REFILL_BACKOFF_S / 4
+            else:  # left: the file lacks them, and every verb says so (replay/reader.py: a hole at the start)
+                del self._heads[source]
+                log.warning("recorder: %s's events before its seq %d, sent before this recorder listened, did not come "
+                            "when asked %d times", source, first_live, HEAD_ASKS)
+
     def _maybe_refill(self) -> None:
+        if self._head_at is not None and time.monotonic() >= self._head_at and not self._link_down:
+            self._catch_up()
         if self._refill_at is None or time.monotonic() < self._refill_at or self._link_down:
             return  # (the link's return schedules one anyway)
         if self._continuing is not None:  # the restart's refill asked again (it asks for every hole: an outage's too)
@@ -1296,6 +1346,13 @@ class Recorder:
         self._held.setdefault(event.source, set()).add(event.seq)
         self._recv_ns[event.source] = received_ns
         last = self._last_seq.get(event.source)
+        if last is None and event.seq > 1 and self.bus is not None and self.continued is None:
+            # its first events went out before this recorder listened (a service started before it: docs/bus.md
+            # "Starting in any order"): nothing was lost, they are in its own record; asked for now, as a late
+            # joiner catches up. Before, the file lacked them and every verb called it damaged (trial33 F).
+            # (A restarted recorder's refill asks for every source's head already: `refill`.)
+            self._heads[event.source] = [event.seq, HEAD_ASKS]
+            self._head_at = time.monotonic() if self._head_at is None else self._head_at
         if last is None or event.seq > last:
             self._last_seq[event.source] = event.seq
             if last is not None and event.seq > last + 1 and self._refill_at is None and self.bus is not None:
@@ -1469,6 +1526,12 @@ class Recorder:
                 pass
         if self.failure is None:
             try:
+                if self._heads and not self._link_down:  # a head still due: asked once more in what the deadline leaves
+                    left = deadline.left(FINISH_S, cap=REFILL_TIMEOUT_S)
+                    if left >= 0.05:
+                        for v in self._heads.values():
+                            v[1] = 1
+                        self._catch_up(timeout_s=left)
                 due = self._outage_pending
                 answered = self._last_refill(deadline)
                 self._note_earlier_lost(False)  # (closed before its refill: what the earlier recordings lost, still)

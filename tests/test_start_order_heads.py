@@ -1,0 +1,79 @@
+"""A service started before the recorder (docs/bus.md "Starting in any order") sent its first events to nobody:
+nothing was lost, they are in its own record, and the recorder asks for them when it first hears the service past
+its seq 1 (services/recorder.py `_catch_up`). Before, the file lacked them, and since the reader says a hole at the
+start of the game's or the learner's seq (trial32 E) every verb called a correct distributed run damaged: `session`
+exit 1, rebuild refused without --partial, verify FAILed (trial33 F). Real processes behind a real router."""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+
+from pairplay.replay.reader import read_log
+
+from test_router import free_port, start_router
+
+PY = [sys.executable, "-m", "pairplay"]
+ENV = dict(os.environ, PYTHONUNBUFFERED="1")
+
+
+def started(args: list[str], first: str) -> subprocess.Popen:
+    """A pairplay process, once its stdout said `first` (it is on the bus and has published its start)."""
+    p = subprocess.Popen([*PY, *args], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=ENV)
+    for _ in range(5):
+        line = p.stdout.readline()
+        if line.startswith(first) or not line:
+            break
+    assert line.startswith(first), (line, p.stderr.read() if p.poll() is not None else "")
+    return p
+
+
+def whole(path, tmp_path) -> None:
+    """The recording holds every event of each sender from its seq 1, and rebuild and verify take it as whole."""
+    log = read_log(path)
+    assert not log.damaged, log.damaged
+    assert log.metadata.get("pairplay.recorder.head", {}).get("caught_up", "0") != "0", log.metadata
+    rebuilt = subprocess.run([*PY, "rebuild", str(path), "--out", str(tmp_path / "rb")], capture_output=True, text=True)
+    assert rebuilt.returncode == 0, rebuilt.stderr
+    verified = subprocess.run([*PY, "replay", str(path), "--verify"], capture_output=True, text=True)
+    assert verified.returncode == 0 and "verify: PASS" in verified.stdout, verified.stdout + verified.stderr
+
+
+def test_a_learner_started_before_the_session_s_recorder_is_recorded_from_its_first_event(tmp_path):
+    port = free_port()
+    router = start_router(port)
+    endpoint = f"tcp/127.0.0.1:{port}"
+    learner = started(["run", "learner", "--session", "first", "--connect", endpoint], "learner running in session")
+    try:
+        session = subprocess.run([*PY, "session", "--participant", "sim:ashley", "--seed", "3", "--rounds", "3",
+                                  "--session", "first", "--external", "learner", "--connect", endpoint,
+                                  "--out", str(tmp_path)], capture_output=True, text=True, env=ENV, timeout=120)
+        assert session.returncode == 0, session.stderr
+        learner.wait(30)
+        whole(tmp_path / "first.mcap", tmp_path)
+    finally:
+        for p in (learner, router):
+            if p.poll() is None:
+                p.kill()
+            p.wait()
+
+
+def test_a_recorder_started_after_the_session_records_it_from_every_sender_s_first_event(tmp_path):
+    port = free_port()
+    router = start_router(port)
+    endpoint = f"tcp/127.0.0.1:{port}"
+    session = started(["session", "--participant", "sim:ashley", "--seed", "3", "--rounds", "3", "--session", "late",
+                       "--external", "recorder", "--connect", endpoint, "--out", str(tmp_path / "unused")],
+                      "session late:")
+    try:
+        recorder = subprocess.run([*PY, "run", "recorder", "--session", "late", "--connect", endpoint,
+                                   "--out", str(tmp_path)], capture_output=True, text=True, env=ENV, timeout=120)
+        assert recorder.returncode == 0, recorder.stderr
+        assert session.wait(30) == 0, session.stderr.read()
+        whole(tmp_path / "late.mcap", tmp_path)
+    finally:
+        for p in (session, router):
+            if p.poll() is None:
+                p.kill()
+            p.wait()
