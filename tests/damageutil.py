@@ -57,12 +57,16 @@ def _rewritten(path, tag: str, broken: bool) -> int:
     [first] = [r for r in log.events if type(r.event).__name__ == tag][:1]
     tmp = path.with_name(path.name + ".damaging")
     w = EventLogWriter(tmp, chunk_size=4096)
-    for r in log.events:
-        w.write(r.key, b'{"type":"broken"' if broken and r is first else r.payload, log_time_ns=r.log_time_ns,
+    # each log time made unique (+ its index, in ns): events may share one (a recorder writes what it asked for
+    # at the file's latest time: services/recorder.py `_catch_up`), and the caller finds the event's chunk by it
+    for i, r in enumerate(log.events):
+        w.write(r.key, b'{"type":"broken"' if broken and r is first else r.payload, log_time_ns=r.log_time_ns + i,
                 sequence=r.event.seq)
+        if r is first:
+            when = r.log_time_ns + i
     w.close()
     os.replace(tmp, path)
-    return first.log_time_ns
+    return when
 
 
 def _replace(path, data: bytes) -> None:

@@ -948,10 +948,10 @@ def test_the_report_leaves_out_a_game_whose_recording_is_cut(played, tmp_path):
 
     events = read_log(path).events  # written again in 4 KB chunks, cut in the one after the last round's start
     w = EventLogWriter(path, chunk_size=4096)
-    for r in events:
-        w.write(r.key, r.payload, log_time_ns=r.log_time_ns, sequence=r.event.seq)
+    for i, r in enumerate(events):  # each log time unique (+ its index, in ns): events may share one (damageutil)
+        w.write(r.key, r.payload, log_time_ns=r.log_time_ns + i, sequence=r.event.seq)
     w.close()
-    last = [r.log_time_ns for r in events if type(r.event).__name__ == "RoundStarted"][-1]
+    last = [r.log_time_ns + i for i, r in enumerate(events) if type(r.event).__name__ == "RoundStarted"][-1]
     chunks = scan(path).chunks
     [at] = [i for i, c in enumerate(chunks) if any(t == last for _, _, t in c.messages)]
     path.write_bytes(path.read_bytes()[:chunks[at + 1].offset + chunks[at + 1].length // 2])
