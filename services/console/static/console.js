@@ -97,7 +97,8 @@ function render(s) {
 
   const plan = $("plan"); plan.innerHTML = "";
   s.plan.forEach((p) => {
-    const li = el("li", p.label + (p.blocked && !p.done ? ` (${p.blocked})` : "") + (p.note ? ` (${p.note})` : ""));
+    const li = el("li", p.label + (p.blocked && !p.done ? ` (${p.blocked})` : "")
+      + (p.waits && !p.done ? ` (waits for consent: ${p.waits})` : "") + (p.note ? ` (${p.note})` : ""));
     li.className = p.done ? "done" : (p.blocked ? "blocked" : "");
     if (s.next && p.label === s.next.label) li.classList.add("next");
     plan.appendChild(li);
