@@ -100,6 +100,13 @@ def test_a_persons_step_waiting_for_consent_says_so_in_the_console(tmp_path):
             waits = {(p["participant"], p["game"]): p["waits"] for p in state["plan"] if p["kind"] == "play"}
             assert waits[("p01", 0)] == "no consent recorded" and waits[("p02", 0)] == "", waits
             assert state["next"]["waits"] == "no consent recorded"
+            problems = {p["id"]: p["consent_problem"] for p in state["participants"]}
+            assert problems == {"p01": "no consent recorded", "p02": ""}, problems
+            data.change_consent_form("v3")  # p02 consented to v2 only: waits again, and the page says why
+            _, state = call(f"{server.url}/api/console/state?token={server.token}")
+            assert state["consent_form"] == "v3"
+            assert state["participants"][1]["consent_problem"] == \
+                "consent to 'v2 2026-11' only, the study's consent form is now 'v3'", state["participants"]
             runner.scripted = {"p01": "blind"}  # serve --pilot p01=blind: a persona needs none
             _, state = call(f"{server.url}/api/console/state?token={server.token}")
             assert state["next"]["waits"] == ""

@@ -137,7 +137,9 @@ class Console:
                       "phases": [p.id for p in data.study.phase], "key_file": bool(data.key_file)},
             "participants": [{"id": pid, "joins": r.joins, "scripted": data.scripted_as(pid),
                               "games": sum(1 for g in data.games_of(pid) if g.valid_complete),
-                              "consent": consent_words(data.state.consent[pid]) if pid in data.state.consent else ""}
+                              "consent": consent_words(data.state.consent[pid]) if pid in data.state.consent else "",
+                              # why a person's game waits ("" if it does not): none, or to an earlier form only
+                              "consent_problem": data.consent_problem(pid)}
                              for pid, r in data.state.participants.items()],
             "consent_form": data.consent_form,  # the study's form now (`protocol consent-form`)
             "plan": plan, "next": nxt, "games": games, "combined": combined, "live": live_d,
