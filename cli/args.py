@@ -16,6 +16,7 @@ session after its bus had started).
 from __future__ import annotations
 
 import argparse
+import datetime
 import math
 import os
 from pathlib import Path
@@ -163,6 +164,19 @@ update_count = int_between(0, UPDATES_MAX, "a state's updates are counted in 64 
 non_negative = int_at_least(0)
 positive_number = float_at_least(0, above=True)  # a ridge penalty
 
+
+
+def time_ns(text: str) -> int:
+    """An ISO 8601 time (`2026-11-20T14:30`, `2026-11-20`, `...Z`, `...+01:00`) in ns since the epoch; one without
+    a zone is this computer's local time, as a person reads a clock (the future is the verb's to refuse)."""
+    try:
+        when = datetime.datetime.fromisoformat(text.strip())
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not an ISO time (2026-11-20T14:30, 2026-11-20T13:30Z): {text!r}") from None
+    try:
+        return int(when.astimezone().timestamp() * 1_000_000_000)
+    except (OverflowError, OSError, ValueError):  # a year 1 or 9999 time the clock cannot hold
+        raise argparse.ArgumentTypeError(f"a time out of range: {text!r}") from None
 
 
 def key_chunk(what: str):

@@ -23,12 +23,12 @@ import time
 from pathlib import Path
 
 from pairplay import signals, testpause
-from pairplay.cli.args import int_between, key_chunk, output_file, output_folder, session_id
+from pairplay.cli.args import int_between, key_chunk, output_file, output_folder, session_id, time_ns
 from pairplay.core.personas import persona
 from pairplay.inputs import check_input, check_option_file
 from pairplay.lists import comma_items
 from pairplay.replay import biases, studyjournal
-from pairplay.replay.studydata import (JOURNAL, REGISTER_AT_ONCE, StudyData, StudyDataError, consent_words,
+from pairplay.replay.studydata import (JOURNAL, REGISTER_AT_ONCE, TABLES, StudyData, StudyDataError, consent_words,
                                        repair_journal)
 from pairplay.schemas.study import (StudyFileError, bundled_studies, bundled_text, example_text, no_study_file,
                                     parse_study, study_file_of)
@@ -63,6 +63,14 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                                         "study's consent form)")
     co.add_argument("folder", type=Path)
     co.add_argument("participant", type=key_chunk("participant id"))
+    co.add_argument("--form", help="the version of the form they signed (default: the study's consent form now)")
+    co.add_argument("--given-at", type=time_ns, metavar="ISO-TIME",
+                    help="when they signed, if before now (a consent held on paper): journaled as given then, "
+                         "recorded now; without a zone, this computer's local time")
+    cf = sub.add_parser("consent-form", help="the study's consent form from now on (an ethics amendment): people "
+                                             "who consented to an earlier one play once they consent to it")
+    cf.add_argument("folder", type=Path)
+    cf.add_argument("form", help='the new form\'s version ("v2 2026-11")')
     s = sub.add_parser("status", help="the plan: every step, done or next, and why a step is blocked")
     s.add_argument("folder", type=Path)
     pl = sub.add_parser("pilot", help="run the open steps of the plan with scripted participants (core personas)")
@@ -121,10 +129,18 @@ def _repair(folder: Path) -> int:
                       f"of the event it wrote) in {folder / done.aside.name}; the journal keeps its "
                       f"{counted(done.kept, 'whole line')}: the study goes on from them (a game whose end was cut is "
                       "journaled from its recording by the next serve, pilot or report)"))
+        # the tables held what the torn line said (a consent's row): written again from the journal left
+        print(escaped(f"{', '.join(TABLES)} written again from the journal's {counted(done.kept, 'whole line')}"))
         pid = studyjournal.torn_registration(done.torn)
+        kind, named = studyjournal.torn_event(done.torn)
         if pid:
             print(escaped(f"the cut line was the registration of {pid}: that id will not be given again; its "
                           "key-file line, if any, stays (`protocol status` lists it)"))
+        elif kind == "ConsentGiven" and named:  # the tables said it held: written again, without it
+            print(escaped(f"the cut line was {named}'s consent (ConsentGiven): it is not recorded now; record it "
+                          f"again (`pairplay protocol consent {command_word(folder)} {command_word(named)}`)"))
+        elif kind:
+            print(escaped(f"the cut line was a {kind}" + (f" of {named}" if named else "")))
     elif done.newline:
         print(escaped(f"{journal}: its last line was whole but for its end of line: added; nothing set aside "
                       f"({counted(done.kept, 'line')})"))
@@ -229,9 +245,21 @@ def _on_folder(data: StudyData, args) -> int:
                   "(pilot) needs none", file=sys.stderr)
         return 0
     if args.action == "consent":
-        given = data.record_consent(args.participant)
+        given = data.record_consent(args.participant, args.form, args.given_at or 0)
         data.write_tables()
-        print(f"{args.participant}: consent recorded: {consent_words(given)}")
+        print(escaped(f"{args.participant}: consent recorded: {consent_words(given)}"))
+        if problem := data.consent_problem(args.participant):  # a form of before (on paper): they still wait
+            print(escaped(f"pairplay protocol consent: {args.participant} has {problem}: their next game waits for "
+                          "their consent to it"), file=sys.stderr)
+        return 0
+    if args.action == "consent-form":
+        _, earlier = data.change_consent_form(args.form)
+        data.write_tables()
+        print(escaped(f"consent form from now on: {data.consent_form!r} (the study file's {data.study.study.consent_form!r}"
+                      " stays as it was made)"))
+        if earlier:  # each next game waits: said now, not at the board
+            print(escaped(f"consent to an earlier form only: {', '.join(earlier)}: their next game waits for their "
+                          f"consent to {data.consent_form!r} (`pairplay protocol consent {command_word(data.given)} ID`)"))
         return 0
     if args.action == "status":
         if not data.state.participants:  # an empty plan is not a complete one
@@ -241,10 +269,13 @@ def _on_folder(data: StudyData, args) -> int:
             print(escaped(key_problem))
         for pid, note in notes.items():
             print(escaped(f"{pid}: {note}"))
+        if data.state.consent_form is not None:  # an amendment: the form is not the study file's
+            print(escaped(f"consent form: {data.consent_form!r} (`protocol consent-form`; the study file's: "
+                          f"{data.study.study.consent_form!r})"))
         for pid in data.state.participants:  # a person's game is refused until it is recorded
-            if pid not in data.state.consent:
-                print(f"{pid}: no consent recorded: plays only as a persona until `pairplay protocol consent "
-                      f"{command_word(data.given)} {command_word(pid)}`")
+            if problem := data.consent_problem(pid):
+                print(escaped(f"{pid}: {problem}: plays only as a persona until `pairplay protocol consent "
+                              f"{command_word(data.given)} {command_word(pid)}`"))
         for problem in data.fold_problems():  # a hand edit the tables cannot fold: every writing verb refuses it
             print(escaped(f"{data.given / JOURNAL}: does not fold into consistent tables: {problem}: every verb that "
                           f"writes the folder refuses it until the line is put back (a backup of {JOURNAL})"))
@@ -255,8 +286,10 @@ def _on_folder(data: StudyData, args) -> int:
             if note := data.unended_note(g):
                 unended.setdefault((g.participant, g.phase, g.game), []).append(note)
         for step in data.plan():
-            mark = "done" if step.done else ("blocked" if step.blocked else "open")
+            mark = "done" if step.done else ("blocked" if step.blocked else "waits" if step.waits else "open")
             notes = [step.blocked] if step.blocked and not step.done else []
+            notes += [f"waits for consent: {step.waits}; a persona may play it (pilot)"] if step.waits and not \
+                step.blocked else []
             notes += [step.note] if step.note else []  # a bias policy made with a game marked invalid since
             notes += unended.get((step.participant, step.phase, step.game), []) if step.kind == "play" else []
             print(escaped(f"[{mark:7}] {step.label}" + "".join(f"  ({n})" for n in notes)))
@@ -349,6 +382,8 @@ def _serve(data: StudyData, args) -> int:
             data.participant(pid)
         except StudyDataError as err:
             raise StudyDataError(err.what, "--pilot") from None
+        if pid in pilot:  # one silently won: say it
+            raise StudyDataError(f"{pid} named twice", "--pilot")
         pilot[pid] = _persona(key, "--pilot")
     stop = threading.Event()
     runners = []

@@ -64,7 +64,7 @@ from pairplay.outputs import (OutputError, check_output, check_places, manifest_
 from pairplay.schemas import journal as j
 from pairplay.schemas.jsonfile import in_words, without_bom
 from pairplay.schemas.policy import encode_policy, read_policy, write_policy
-from pairplay.schemas.study import STUDY_FILE, Study, StudyFileError, load_study
+from pairplay.schemas.study import CONSENT_FORM_RULE, STUDY_FILE, Study, StudyFileError, consent_form_ok, load_study
 from pairplay.numbers import counted
 
 from .cutgame import CUT_BEFORE_END, CutEnd, cut_end
@@ -248,6 +248,9 @@ class StudyState:
     created: j.StudyCreated | None = None
     participants: dict[str, j.ParticipantRegistered] = field(default_factory=dict)
     consent: dict[str, j.ConsentGiven] = field(default_factory=dict)  # participant -> their last consent recorded
+    consents: dict[str, dict[str, j.ConsentGiven]] = field(default_factory=dict)  # participant -> form -> its consent
+    # the consent form from the last ConsentFormChanged (an ethics amendment); None: the study file's
+    consent_form: str | None = None
     games: dict[str, Game] = field(default_factory=dict)
     combined: dict[str, j.BiasCombined] = field(default_factory=dict)  # phase -> its current bias (its last)
     # every combination, in order: one made again (a game it took marked invalid since) keeps the earlier one's
@@ -276,6 +279,9 @@ class StudyState:
             self.next_number = max(self.next_number, number + 1, self.ids_given + 1)
         elif isinstance(e, j.ConsentGiven):
             self.consent[e.participant] = e
+            self.consents.setdefault(e.participant, {})[e.form] = e
+        elif isinstance(e, j.ConsentFormChanged):
+            self.consent_form = e.form
         elif isinstance(e, j.GameStarted):
             self.games[e.session] = Game(e.session, e.participant, e.phase, e.game, e.recording, e.bias,
                                          scripted=e.scripted)
@@ -325,6 +331,9 @@ class Step:
     # what the experimenter should know of it beyond done/blocked (replay/biases.py: a combination whose bias
     # policy was made with a game marked invalid since; a game played on such a policy)
     note: str = ""
+    # a person's game that waits for their consent (StudyData.consent_problem): it runs once it is recorded, or
+    # played by a persona (a rehearsal needs none); it showed as [open] and was refused when run
+    waits: str = ""
 
     @property
     def label(self) -> str:
@@ -657,28 +666,67 @@ class StudyData:
             return pid
 
     # -- informed consent ----------------------------------------------------
-    def record_consent(self, pid: str) -> j.ConsentGiven:
-        """Journal that registered participant `pid` gave their informed consent now, to the study file's
-        `consent_form` (ConsentGiven). Refused if it is recorded already to that form (a new version of the form,
-        an ethics amendment, is recorded again)."""
+    @property
+    def consent_form(self) -> str:
+        """The consent form a person's game needs consent to: the last `protocol consent-form` (an ethics
+        amendment, journaled ConsentFormChanged), else the study file's `consent_form` (fixed with the folder)."""
+        return self.state.consent_form if self.state.consent_form is not None else self.study.study.consent_form
+
+    def record_consent(self, pid: str, form: str | None = None, given_ns: int = 0) -> j.ConsentGiven:
+        """Journal that registered participant `pid` gave their informed consent to `form` (default: the study's
+        `consent_form` now), now or at `given_ns` (a consent held on paper, recorded later: both times kept;
+        refused in the future). Refused if it is recorded already to that form: a new version of the form
+        (`change_consent_form`, an ethics amendment) is recorded again."""
         with self._writing():
             self.participant(pid)
-            form = self.study.study.consent_form
-            had = self.state.consent.get(pid)
-            if had is not None and had.form == form:
+            form = self.consent_form if form is None else form
+            if not consent_form_ok(form):
+                raise StudyDataError(f"consent form {form[:40]!r} {CONSENT_FORM_RULE}")
+            if given_ns > time.time_ns():  # a typo of the year, a clock: a consent is never journaled ahead
+                raise StudyDataError(f"{pid}: consent given at {_utc(given_ns)} is in the future (now "
+                                     f"{_utc(time.time_ns())}): give the time they signed")
+            had = self.state.consents.get(pid, {}).get(form)
+            if had is not None:
                 raise StudyDataError(f"{pid}: consent to {consent_words(had)} is recorded already")
-            return self.append(j.ConsentGiven(participant=pid, form=form))
+            return self.append(j.ConsentGiven(participant=pid, form=form, given_ns=given_ns))
+
+    def change_consent_form(self, form: str) -> tuple[j.ConsentFormChanged, list[str]]:
+        """Journal `form` as the study's consent form from now on (an ethics amendment: the study file stays as
+        it was made); returns its line and the participants whose consent is to an earlier form only: their
+        next game waits for their consent to this one. Refused if it is the form already."""
+        with self._writing():
+            if not consent_form_ok(form):
+                raise StudyDataError(f"consent form {form[:40]!r} {CONSENT_FORM_RULE}")
+            if form == self.consent_form:
+                raise StudyDataError(f"the study's consent form is {form!r} already")
+            line = self.append(j.ConsentFormChanged(form=form))
+            return line, [pid for pid in self.state.participants if pid in self.state.consent
+                          and form not in self.state.consents.get(pid, {})]
+
+    def consent_problem(self, pid: str) -> str:
+        """Why `pid`'s consent does not let a person play: "" if it is recorded to the study's form of now;
+        none recorded; or only to an earlier form (the study's form changed since: `change_consent_form`)."""
+        form = self.consent_form
+        held = self.state.consents.get(pid, {})
+        if form in held:
+            return ""
+        if not held:
+            return "no consent recorded"
+        return (f"consent to {', '.join(repr(f) if f else 'the unnamed form' for f in held)} only, the study's consent "
+                f"form is now {form!r}")
 
     def check_consent(self, pid: str) -> None:
-        """StudyDataError unless a person's consent is recorded for `pid`: the rule before any game a person
-        plays (services/protocol.py). A persona needs none (no person, no personal data: `protocol pilot`,
-        `serve --pilot`). A study folder made before consent was recorded (no ConsentGiven in its journal) is
-        read as it is; its people's next games wait for `protocol consent`."""
-        if pid not in self.state.consent:
-            raise StudyDataError(f"{pid} has no consent recorded: a person plays only once their informed consent is "
+        """StudyDataError unless a person's consent is recorded for `pid` to the study's consent form of now: the
+        rule before any game a person plays (services/protocol.py). A persona needs none (no person, no
+        personal data: `protocol pilot`, `serve --pilot`). A study folder made before consent was recorded (no
+        ConsentGiven in its journal) is read as it is; its people's next games wait for `protocol consent`;
+        so do those whose consent is to an earlier form once the form changes."""
+        problem = self.consent_problem(pid)
+        if problem:
+            raise StudyDataError(f"{pid} has {problem}: a person plays only once their informed consent is "
                                  f"recorded (`pairplay protocol consent {command_word(self.given)} {command_word(pid)}`, "
                                  "or the console's Record consent, once they have signed the consent form"
-                                 + (f" {self.study.study.consent_form!r}" if self.study.study.consent_form else "")
+                                 + (f" {self.consent_form!r}" if self.consent_form else "")
                                  + "); a persona (pilot) needs none")
 
     @property
@@ -920,7 +968,8 @@ class StudyData:
                     g = done_games.get(game)
                     steps.append(Step("play", phase.id, pid, game, done=g is not None, blocked=blocked,
                                       scripted=g.scripted if g else "",
-                                      note=biases.game_note(self.state, g) if g else ""))
+                                      note=biases.game_note(self.state, g) if g else "",
+                                      waits="" if g else self.consent_problem(pid)))
         return steps
 
     def next_step(self) -> Step | None:
@@ -1225,7 +1274,7 @@ class StudyData:
                 # scripted: the personas that played a participant's games instead of a person (a rehearsal)
                 # consent: when a person's informed consent was given ("" if not recorded) and to which form
                 "participants.csv": (["participant", "joins", "registered_utc", "scripted", "consent_utc",
-                                      "consent_form"],
+                                      "consent_form", "consent_recorded_utc"],
                                      [[pid, r.joins, _utc(r.time_ns), self.scripted_as(pid),
                                        *self.consent_cells(pid)]
                                       for pid, r in self.state.participants.items()]),
@@ -1256,9 +1305,10 @@ class StudyData:
             return paths
 
     def consent_cells(self, pid: str) -> list[str]:
-        """[when consent was given (UTC), the form's version] of `pid`, ["", ""] if not recorded."""
+        """[when consent was given (UTC), the form's version, when it was recorded (UTC)] of `pid`'s last
+        consent recorded, ["", "", ""] if none."""
         c = self.state.consent.get(pid)
-        return [_utc(c.time_ns), c.form] if c is not None else ["", ""]
+        return [_utc(c.given_ns or c.time_ns), c.form, _utc(c.time_ns)] if c is not None else ["", "", ""]
 
     # -- export and deletion -------------------------------------------------
     def files_of(self, pid: str) -> list[Path]:
@@ -1342,7 +1392,7 @@ class StudyData:
                 # their row of participants.csv: registration and consent (when given, to which form)
                 text = io.StringIO()
                 w = csvcell.writer(text)
-                w.writerow(["participant", "joins", "registered_utc", "consent_utc", "consent_form"])
+                w.writerow(["participant", "joins", "registered_utc", "consent_utc", "consent_form", "consent_recorded_utc"])
                 w.writerow([pid, self.state.participants[pid].joins, _utc(self.state.participants[pid].time_ns),
                             *self.consent_cells(pid)])
                 z.writestr("participant.csv", text.getvalue())
@@ -1371,9 +1421,16 @@ class StudyData:
         own places (an export outside it, a verb's output: `copies_of`) are erased if still pairplay's unchanged
         files. What it did with them, and what it could not erase (a changed or moved copy, the files of report/
         the report did not write: a user's notes may name them), is returned to be said. `consent_withdrawn`: the
-        person withdrew their consent: the anonymous line says so (their ConsentGiven goes with their lines)."""
+        person withdrew their consent: the anonymous line says so (their ConsentGiven goes with their lines);
+        refused for a person whose consent was never recorded (nothing journaled to withdraw: the line would say a
+        consent the journal never held; a consent held on paper is recorded first, `record_consent(given_ns=)`)."""
         with self._writing():
             self.participant(pid)
+            if consent_withdrawn and pid not in self.state.consent:
+                raise StudyDataError(f"{pid} has no consent recorded: there is none to withdraw (delete without "
+                                     "--consent-withdrawn, or first record the consent they gave on paper: "
+                                     f"`pairplay protocol consent {command_word(self.given)} {command_word(pid)} "
+                                     "--given-at ISO-TIME`)")
             # Running is what this process started and has not ended: holding the folder's writer lock (one writer
             # per study folder), no other process can be running a game of it, so a game journaled as started
             # and never ended was the game of a process that died (SIGKILL, a power cut) and is deleted with the
@@ -1587,10 +1644,11 @@ def _take_lock(folder: Path, given: Path, verb: str) -> int | None:
         return folderlock.take(folder, verb, folderlock.WAIT_S, waiting)
     except folderlock.FolderBusy as busy:
         who = busy.holder or "a process"
-        if folderlock.is_long(busy.holder):
+        if folderlock.is_long(busy.holder):  # serve has a console to work in; a pilot none: it ends by itself
+            fix = ("wait for it to end, or stop it" if busy.holder.startswith("protocol pilot")
+                   else "stop it, or work in its console")
             raise StudyDataError(f"another pairplay writes this study folder: {who}; one writer per study folder: "
-                                 "stop it, or work in its console (`pairplay protocol status` reads beside it)",
-                                 given) from None
+                                 f"{fix} (`pairplay protocol status` reads beside it)", given) from None
         raise StudyDataError(f"another pairplay writes this study folder: {who}; waited {folderlock.WAIT_S:g} s "
                              "for it to finish (one writer per study folder): run this again when it has", given) from None
 
@@ -1608,17 +1666,25 @@ def not_a_study_folder(given: Path) -> StudyDataError:
 
 def repair_journal(folder: str | Path) -> studyjournal.Repaired:
     """`pairplay protocol repair`: the journal's last line a crash cut set aside beside it, under the folder's
-    writer lock (replay/studyjournal.py); StudyDataError if it is no study folder or a line that is not the
-    torn last one is damaged (nothing changed then)."""
+    writer lock (replay/studyjournal.py), the tables (participants.csv...) and the manifest then written again
+    from the journal left; StudyDataError if it is no study folder or a line that is not the torn last one is
+    damaged (nothing changed then)."""
     given = Path(folder)
     resolved = given.resolve()
     if not (resolved / JOURNAL).is_file():
         raise not_a_study_folder(given)
     fd = _take_lock(resolved, given, "protocol repair")
     try:
-        return studyjournal.repair(resolved / JOURNAL, given / JOURNAL, given)
-    except studyjournal.JournalDamaged as err:
-        raise StudyDataError(str(err)) from None
+        try:
+            done = studyjournal.repair(resolved / JOURNAL, given / JOURNAL, given)
+        except studyjournal.JournalDamaged as err:
+            raise StudyDataError(str(err)) from None
+        if done.aside is not None:  # the tables and manifest said what the line set aside held (a consent): they
+            held, fd = fd, None     # are written again from the journal as it is now, under the same lock
+            with StudyData(given, study_file_edited_ok=True, held=held) as data:
+                data.write_tables()
+                data.write_folder_manifest()
+        return done
     finally:
         folderlock.release(fd)
 
@@ -1790,8 +1856,10 @@ def _utc(ns: int) -> str:
 
 
 def consent_words(c: j.ConsentGiven) -> str:
-    """A recorded consent in words: `form 'v2 2026-11' given 2026-12-03T10:00:00Z`."""
-    return (f"form {c.form!r}" if c.form else "the study's form (its version not named)") + f" given {_utc(c.time_ns)}"
+    """A recorded consent in words: `form 'v2 2026-11' given 2026-12-03T10:00:00Z`, and `(recorded ...)` after
+    it when it was given before it was recorded (`--given-at`)."""
+    return ((f"form {c.form!r}" if c.form else "the study's form (its version not named)")
+            + f" given {_utc(c.given_ns or c.time_ns)}" + (f" (recorded {_utc(c.time_ns)})" if c.given_ns else ""))
 
 
 def _export_readme(pid: str, study: str, games: list[Game], files: list[Path], answers: list[dict],

@@ -121,6 +121,17 @@ def torn_registration(tail: bytes) -> str:
     return m.group(1).decode("utf-8", "replace") if m else ""
 
 
+_EVENT = re.compile(rb'^\s*\{\s*"event"\s*:\s*"([A-Za-z]+)"')
+_PARTICIPANT = re.compile(rb'"participant"\s*:\s*"([^"\\]+)"')
+
+
+def torn_event(tail: bytes) -> tuple[str, str]:
+    """(the event type, the participant) a torn line was, as far as what is left of it says ("" for what it
+    does not say): `repair` names what it set aside (a person's ConsentGiven: to be recorded again)."""
+    kind, pid = _EVENT.search(tail), _PARTICIPANT.search(tail)
+    return (kind.group(1).decode() if kind else "", pid.group(1).decode("utf-8", "replace") if pid else "")
+
+
 def torn_ids(journal: Path) -> set[str]:
     """The ids registered by torn lines `repair` set aside beside `journal` (module rule)."""
     ids = set()

@@ -43,11 +43,23 @@ class ParticipantRegistered(JournalEvent, tag="ParticipantRegistered"):
 
 class ConsentGiven(JournalEvent, tag="ConsentGiven"):
     """A person's informed consent, recorded by the experimenter who holds their signed form: the form's version
-    (the study file's `consent_form` then; "" if it names none) and, in `time_ns`, when it was given. A person's
-    game is refused without one (services/protocol.py); a persona playing in a rehearsal needs none."""
+    (the study's consent form then, or the one `--form` named; "" if it names none) and, in `time_ns`, when it was
+    recorded. A person's game is refused without one to the study's form of now (services/protocol.py); a persona
+    playing in a rehearsal needs none."""
 
     participant: str
     form: str = ""
+    # when the person signed, when it was before it was recorded (a consent held on paper, `--given-at`);
+    # 0: given when recorded (time_ns). Both are kept: an audit reads when it was given and when journaled
+    given_ns: int = 0
+
+
+class ConsentFormChanged(JournalEvent, tag="ConsentFormChanged"):
+    """The study's consent form from now on (an ethics amendment: `protocol consent-form`), instead of the study
+    file's `consent_form`, which is fixed with the folder. A person whose consent is to an earlier form plays
+    only once their consent to this one is recorded."""
+
+    form: str
 
 
 class GameStarted(JournalEvent, tag="GameStarted"):
@@ -164,8 +176,8 @@ class ParticipantDeleted(JournalEvent, tag="ParticipantDeleted"):
     flaws_kept: list[FlawKept] = []  # the bias policies made with their games marked invalid since (FlawKept)
 
 
-JOURNAL_TYPES = (StudyCreated, ParticipantRegistered, ConsentGiven, GameStarted, GamePaused, GameResumed, GameEnded,
-                 PolicyBuilt, SessionMarkedInvalid, BiasCombined, ParticipantExported, CopyWritten, ParticipantDeleted)
+JOURNAL_TYPES = (StudyCreated, ParticipantRegistered, ConsentGiven, ConsentFormChanged, GameStarted, GamePaused,
+                 GameResumed, GameEnded, PolicyBuilt, SessionMarkedInvalid, BiasCombined, ParticipantExported, CopyWritten, ParticipantDeleted)
 AnyJournal = JOURNAL_TYPES[0]
 for _t in JOURNAL_TYPES[1:]:
     AnyJournal = AnyJournal | _t  # type: ignore[assignment]

@@ -178,9 +178,8 @@ def _check(study: Study, written: Written) -> None:
             forms = "" if "use one of" in why else " (virtual, none, iristk://HOST[:PORT] or furhat://HOST[:PORT])"
             raise _Bad(("study", "robot"), f"{why}{forms}") from None
     form = study.study.consent_form
-    if len(form) > 100 or any(not c.isprintable() for c in form) or form != form.strip():
-        raise _Bad(("study", "consent_form"), f"{typed(('study', 'consent_form'), form[:40])} must be one line of at "
-                                              "most 100 printable characters, no space at its ends (a version: \"v2 2026-11\")")
+    if not consent_form_ok(form):
+        raise _Bad(("study", "consent_form"), f"{typed(('study', 'consent_form'), form[:40])} {CONSENT_FORM_RULE}")
     if not study.phase:
         raise _Bad((), "a study needs at least one [[phase]]")
     seen: list[str] = []
@@ -450,6 +449,15 @@ def _name_keys(where: str, what: str, raw: object) -> str:
 
 
 STUDY_FILE = "study.toml"  # a study folder's copy of its study file (replay/studydata.py)
+
+
+CONSENT_FORM_RULE = 'must be one line of at most 100 printable characters, no space at its ends (a version: "v2 2026-11")'
+
+
+def consent_form_ok(form: str) -> bool:
+    """Whether `form` is a consent form's version (CONSENT_FORM_RULE): the study file's, and one named later
+    (`protocol consent-form`, `protocol consent --form`): it lands in tables, exports and lines said to a user."""
+    return len(form) <= 100 and all(c.isprintable() for c in form) and form == form.strip()
 
 
 def study_file_of(path: str | Path) -> Path:

@@ -61,12 +61,14 @@ def test_a_short_holder_that_does_not_end_in_time_is_refused_after_the_wait(fold
     assert StudyData(folder, writer="protocol register").register("phase1") == "p01"  # free now
 
 
-@pytest.mark.parametrize("long", ["protocol serve", "protocol pilot"])  # folderlock.LONG_HOLDERS
-def test_a_long_holder_is_refused_at_once_and_named(folder, long):
+# folderlock.LONG_HOLDERS, each with what to do about it: a pilot has no console (trial33 H: "work in its console")
+@pytest.mark.parametrize("long, fix", [("protocol serve", "stop it, or work in its console"),
+                                       ("protocol pilot", "wait for it to end, or stop it")])
+def test_a_long_holder_is_refused_at_once_and_named(folder, long, fix):
     with StudyData(folder, writer=long):
         start = time.monotonic()
         with pytest.raises(StudyDataError, match=rf"^another pairplay writes this study folder: {long} \(pid "
-                                                 rf"{os.getpid()}, since .*\); one writer per study folder: stop it"):
+                                                 rf"{os.getpid()}, since .*\); one writer per study folder: {fix} "):
             StudyData(folder, writer="protocol register")
         assert time.monotonic() - start < 2.0  # no wait (WAIT_S is 8 s): it holds the folder for hours
 

@@ -87,7 +87,9 @@ class Console:
     def state(self) -> dict:
         data, live = self.data, self.runner.live
         plan = [{"kind": s.kind, "phase": s.phase, "participant": s.participant, "game": s.game, "done": s.done,
-                 "blocked": s.blocked, "label": s.label, "note": s.note} for s in data.plan()]
+                 "blocked": s.blocked, "label": s.label, "note": s.note,
+                 # a person's game waits for their consent; one a persona plays here (serve --pilot) does not
+                 "waits": "" if s.participant in self.runner.scripted else s.waits} for s in data.plan()]
         step = data.next_step()  # none while nobody is registered: the page says to register first
         nxt = next((p for p in plan if step is not None and p["label"] == step.label), None)
         games = [{"session": g.session, "participant": g.participant, "phase": g.phase, "game": g.game + 1,
@@ -135,9 +137,11 @@ class Console:
                       "phases": [p.id for p in data.study.phase], "key_file": bool(data.key_file)},
             "participants": [{"id": pid, "joins": r.joins, "scripted": data.scripted_as(pid),
                               "games": sum(1 for g in data.games_of(pid) if g.valid_complete),
-                              "consent": consent_words(data.state.consent[pid]) if pid in data.state.consent else ""}
+                              "consent": consent_words(data.state.consent[pid]) if pid in data.state.consent else "",
+                              # why a person's game waits ("" if it does not): none, or to an earlier form only
+                              "consent_problem": data.consent_problem(pid)}
                              for pid, r in data.state.participants.items()],
-            "consent_form": data.study.study.consent_form,
+            "consent_form": data.consent_form,  # the study's form now (`protocol consent-form`)
             "plan": plan, "next": nxt, "games": games, "combined": combined, "live": live_d,
             "busy": self.busy(), "last": self.last, "deletions": len(data.state.deletions),
             "report": (data.folder / "report" / "report.md").is_file(),

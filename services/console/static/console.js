@@ -75,7 +75,7 @@ function render(s) {
   $("title").textContent = s.study.title || s.study.id;
   $("study-line").textContent = `study ${s.study.id}, folder ${s.study.folder}; key file: ${s.study.key_file ? "yes (outside the folder)" : "none (ids only)"}`;
   $("label-wrap").style.display = s.study.key_file ? "" : "none";
-  // consent is recorded with the study file's form: what the experimenter confirms the person signed
+  // consent is recorded with the study's form now: what the experimenter confirms the person signed
   $("consent-text").textContent = `signed the consent form${s.consent_form ? ` "${s.consent_form}"` : ""} (records consent now)`;
   const phases = $("register-phase");
   if (phases.options.length !== s.study.phases.length) {
@@ -84,8 +84,10 @@ function render(s) {
   const ul = $("participants"); ul.innerHTML = "";
   s.participants.forEach((p) => {
     const li = el("li", `${p.id} (joins ${p.joins}; ${p.games} valid game(s)${p.scripted ? `; scripted: ${p.scripted}` : ""}; ` +
-                        (p.consent ? `consent: ${p.consent})` : "no consent recorded: plays only as a persona)"));
-    if (!p.consent) li.classList.add("no-consent");
+                        (p.consent ? `consent: ${p.consent}` : "no consent recorded") +
+                        // a consent to an earlier form only (protocol consent-form): they wait as without one
+                        (p.consent_problem ? (p.consent ? `; ${p.consent_problem}` : "") + ": plays only as a persona)" : ")"));
+    if (p.consent_problem) li.classList.add("no-consent");
     ul.appendChild(li);
   });
   // an id a record shows given that the journal does not register (a crash, a hand edit): what it is, never a participant
@@ -97,7 +99,8 @@ function render(s) {
 
   const plan = $("plan"); plan.innerHTML = "";
   s.plan.forEach((p) => {
-    const li = el("li", p.label + (p.blocked && !p.done ? ` (${p.blocked})` : "") + (p.note ? ` (${p.note})` : ""));
+    const li = el("li", p.label + (p.blocked && !p.done ? ` (${p.blocked})` : "")
+      + (p.waits && !p.done ? ` (waits for consent: ${p.waits})` : "") + (p.note ? ` (${p.note})` : ""));
     li.className = p.done ? "done" : (p.blocked ? "blocked" : "");
     if (s.next && p.label === s.next.label) li.classList.add("next");
     plan.appendChild(li);
