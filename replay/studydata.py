@@ -1382,7 +1382,7 @@ class StudyData:
             if running:
                 raise StudyDataError(f"{pid} has a game running ({running[0]}): abort it first", self.given)
             merged = self.merged_using(pid)
-            flaws = biases.flaws_of(self.state, pid, lambda text: _redact(text, pid))
+            flaws = biases.flaws_of(self.state, pid)  # the flaw, not the mark's words (biases.py rule)
             files = self.files_of(pid)
             sessions = {g.session for g in self.games_of(pid)}
             live = [f for f in files + [x for g in sessions for x in (self.folder / "recordings").glob(f"{g}.*")]
@@ -1397,6 +1397,10 @@ class StudyData:
                 raise StudyDataError(f"{pid}: the key file {key} is not there (an unmounted drive?): their name "
                                      "would stay in it; make it reachable first, then delete")
             lines = self.key_file_ids().count(pid)
+            # their name, as the key file holds it: a kept line of another's that wrote it (a mark's reason, "Anna
+            # Schmidt's mother came in") keeps it no more than their id (trial33 C: the key file's line went, the
+            # journal kept the name)
+            name = self._key_name(pid) if lines == 1 else ""
             if lines > 1:  # an id given twice (a crash, a torn registration, before ids_on_record): two people
                 raise StudyDataError(f"{pid}: the key file {key} holds {counted(lines, 'line')} for this id (it was given "
                                      "twice after a crash); nothing was deleted, since it would erase both people: "
@@ -1424,7 +1428,7 @@ class StudyData:
                     else:
                         kept.append(_redacted(msgspec.structs.replace(e, participants=others), pid))
                 else:  # a combination of their games, a note naming them: kept without the id
-                    kept.append(_redacted(e, pid))
+                    kept.append(_unnamed(_redacted(_withheld(e), pid), name))
             for m in merged:
                 _redact_policy_file(self.folder / m, pid)
             key_removed = self._drop_from_key_file(pid)
@@ -1437,7 +1441,7 @@ class StudyData:
             # derived files that held their rows: the tables are rewritten, the report's files are removed (it
             # is stale without them); a file of the user's in report/ (notes.md) stays, and is said
             report = self.folder / "report"
-            left = [(f"report/{rel}", _names(report / rel, pid))
+            left = [(f"report/{rel}", _names(report / rel, pid, name))
                     for rel in remove_written(report, REPORT_OUTPUTS, REPORT_MANIFEST)]
             deleted = self.append(j.ParticipantDeleted(
                 deletion=secrets.token_hex(6), sessions_removed=len(sessions), files_removed=len(files),
@@ -1458,6 +1462,14 @@ class StudyData:
                 if (isinstance(e, j.ParticipantExported) and e.participant == pid
                     and not Path(e.path).is_relative_to(self.folder))
                 or (isinstance(e, j.CopyWritten) and pid in e.participants)]
+
+    def _key_name(self, pid: str) -> str:
+        """The name this study's line of the key file gives `pid` ("" without one)."""
+        key = self.key_file
+        if key is None or not key.is_file():
+            return ""
+        return next((csvcell.value(r[1]) for r in key_file_rows(key) if r[0] == pid and len(r) > 1
+                     and self._own_key_line(r)), "")
 
     def _drop_from_key_file(self, pid: str) -> bool:
         key = self.key_file
@@ -1567,12 +1579,28 @@ class Deletion:
         return [c.path for c in self.copies if not c.erased]
 
 
-def _names(path: Path, pid: str) -> bool:
-    """Whether the file `path` holds the id `pid` as a whole id (its bytes; a figure's pixels cannot tell)."""
+def _names(path: Path, pid: str, name: str = "") -> bool:
+    """Whether the file `path` holds the id `pid` as a whole id, or their `name` (`_name_pattern`) (its bytes;
+    a figure's pixels cannot tell)."""
     try:
-        return re.search(_id(pid).encode(), path.read_bytes()) is not None
+        text = path.read_bytes()
     except OSError:
         return False
+    pattern = _name_pattern(name)
+    return re.search(_id(pid).encode(), text) is not None or (
+        pattern is not None and re.search(pattern, text.decode("utf-8", "replace"), re.IGNORECASE) is not None)
+
+
+def _name_pattern(name: str) -> str | None:
+    """A pattern of a person's `name` (from the key file) as whole words, None for one of fewer than two letters
+    (it would find every "a")."""
+    name = name.strip()
+    return rf"(?<!\w){re.escape(name)}(?!\w)" if sum(c.isalpha() for c in name) >= 2 else None
+
+
+def mentions(text: str, pid: str) -> bool:
+    """Whether `text` holds the id `pid` as a whole id (p01 is not in p010)."""
+    return re.search(_id(pid), text) is not None
 
 
 API_WRITE = "a write through pairplay's Python API"  # the holder's words of a StudyData made without a writer
@@ -1776,6 +1804,26 @@ def _redacted(value, pid: str):
         return msgspec.structs.replace(value, **{f: _redacted(getattr(value, f), pid)
                                                  for f in value.__struct_fields__})
     return value
+
+
+def _unnamed(e: j.JournalEvent, name: str) -> j.JournalEvent:
+    """`e`, a line kept by a deletion, with `name` (the deleted person's, from the key file) replaced by "deleted"
+    in its free text, the `reason` a person typed (another's game's mark or end: "Anna Schmidt's mother came
+    in"), whole words in any case. Only there: a name may be any word ("phase1"), and the ids, phases and files
+    the other fields hold are no one's words (`_name_pattern`)."""
+    pattern, reason = _name_pattern(name), getattr(e, "reason", None)
+    if pattern is None or not isinstance(reason, str):
+        return e
+    return msgspec.structs.replace(e, reason=re.sub(pattern, "deleted", reason, flags=re.IGNORECASE))
+
+
+def _withheld(e: j.JournalEvent) -> j.JournalEvent:
+    """`e`, an earlier deletion's line without the mark reasons an older pairplay kept in its flaws (the words
+    about a person deleted then: replay/biases.py rule); any other line as it is."""
+    if not isinstance(e, j.ParticipantDeleted) or all(k.reason == biases.WITHHELD for k in e.flaws_kept):
+        return e
+    return msgspec.structs.replace(e, flaws_kept=[msgspec.structs.replace(k, reason=biases.WITHHELD)
+                                                  for k in e.flaws_kept])
 
 
 def _redact_policy_file(path: Path, pid: str) -> None:
