@@ -48,7 +48,6 @@ import re
 import secrets
 import threading
 import time
-import unicodedata
 import zipfile
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -56,12 +55,13 @@ from pathlib import Path
 import msgspec
 
 from pairplay import __version__, csvcell, folderlock, signals, testpause
-from pairplay.errors import InputError, UserError, command_word, folded
+from pairplay.errors import InputError, UserError, command_word, escaped, folded, unshowable
 from pairplay.inputs import refusal
 from pairplay.livelock import LIVE, is_live
 from pairplay.outputs import (OutputError, check_output, check_places, manifest_name, output_file, read_manifest,
                               remove_written, set_aside_of, special_kind, write_manifest)
 from pairplay.schemas import journal as j
+from pairplay.schemas.trust import MAX_REASON
 from pairplay.schemas.jsonfile import in_words, without_bom
 from pairplay.schemas.policy import encode_policy, read_policy, write_policy
 from pairplay.schemas.study import STUDY_FILE, Study, StudyFileError, load_study
@@ -280,7 +280,9 @@ class StudyState:
             self.games[e.session] = Game(e.session, e.participant, e.phase, e.game, e.recording, e.bias,
                                          scripted=e.scripted)
         elif isinstance(e, j.GameEnded) and e.session in self.games:
-            self.games[e.session].ended = e
+            # its reason escaped as every free text read from a journal (`refuse_control`: an older pairplay took
+            # a NUL, an ESC), so no reader writes one raw (sessions.csv, the report, status)
+            self.games[e.session].ended = msgspec.structs.replace(e, reason=escaped(e.reason))
             self.games[e.session].paused = False
         elif isinstance(e, j.PolicyBuilt) and e.session in self.games and self.games[e.session].ended is not None:
             game = self.games[e.session]
@@ -288,7 +290,7 @@ class StudyState:
         elif isinstance(e, (j.GamePaused, j.GameResumed)) and e.session in self.games:
             self.games[e.session].paused = isinstance(e, j.GamePaused)
         elif isinstance(e, j.SessionMarkedInvalid) and e.session in self.games:
-            self.games[e.session].invalid = e.reason
+            self.games[e.session].invalid = escaped(e.reason)  # (as GameEnded's above)
             self.games[e.session].invalid_ns = e.time_ns
         elif isinstance(e, j.BiasCombined):
             self.combined[e.phase] = e
@@ -786,19 +788,20 @@ class StudyData:
             raise StudyDataError(f"{count_name} must be a whole number 1..{REGISTER_AT_ONCE}, got {count!r}")
         if label and count != 1:
             raise StudyDataError(f"{label_name} registers one participant: leave out {count_name}")
-        control = next((c for c in label if unicodedata.category(c) == "Cc"), None)
-        if control is not None:  # a newline became a space in the key file without a word (a new user's trial)
-            raise StudyDataError(f"{label_name} holds a control character ({control!r} at {label.index(control)}): "
-                                 "give the name as one line of text, without tabs")
+        # a newline became a space in the key file without a word (a new user's trial)
+        refuse_control(label, label_name, "the name")
         return [self.register(joins, label, consent) for _ in range(count)]
 
     def mark_invalid(self, session: str, reason: str) -> j.SessionMarkedInvalid:
         """Journal a game as invalid (left out of every report, its step asked again); the reason is required and
         kept as given, stripped. A bias policy combined from the game is combined again, into a new file, once the
         step is played again (replay/biases.py). Raises StudyDataError for an unknown session, an empty reason, or
-        a game marked already (its first reason stays: a second mark replaced it everywhere)."""
+        a game marked already (its first reason stays: a second mark replaced it everywhere), or a reason that is
+        not one line of at most MAX_REASON characters (`refuse_control`)."""
         if not reason.strip():  # the report says why a game is left out: a blank is no answer
             raise StudyDataError("marking a session invalid needs a reason")
+        # a NUL or an ESC went raw into sessions.csv and report.md (trial33 I); bounded as a pause's reason is
+        refuse_control(reason, "the reason", "it", MAX_REASON)
         game = self.state.games.get(session)
         if game is None:
             raise StudyDataError(f"no session {session!r} in this study")
@@ -1781,6 +1784,20 @@ def named(text: str, names: dict[str, str]) -> str:
         return text
     pattern = "|".join(_id(i) for i in sorted(names, key=len, reverse=True))
     return re.sub(pattern, lambda m: names[m.group(0)], text)
+
+
+def refuse_control(text: str, what: str, as_what: str, limit: int = 0) -> None:
+    """The rule of every free text a study takes from the experimenter (a mark's, a pause's or an abort's reason,
+    a name for the key file): one line, without a control character (a newline, a tab, a NUL, an ESC: each
+    went raw into a CSV or the report) and, with a `limit`, at most that many characters once stripped; else
+    StudyDataError saying which and where. A study file's texts are checked by schemas/study.py (ids, the
+    consent form), a questionnaire's answers by services/protocol.py check_answers. What an older pairplay
+    journaled unchecked is escaped where it is read (StudyState.evolve)."""
+    if (bad := unshowable(text)) is not None:
+        raise StudyDataError(f"{what} holds a control character ({bad.group()!r} at {bad.start()}): give "
+                             f"{as_what} as one line of text, without tabs")
+    if limit and len(text.strip()) > limit:
+        raise StudyDataError(f"{what} is at most {limit:,} characters, this one has {len(text.strip()):,}")
 
 
 def _redact(text: str, pid: str) -> str:

@@ -19,10 +19,10 @@ from pathlib import Path
 
 import pytest
 
-from pairplay.replay.studydata import StudyData
+from pairplay.replay.studydata import StudyData, StudyDataError
 from pairplay.services.bus import Bus, BusOptions
 from pairplay.services.console.app import Console
-from pairplay.services.protocol import StudyRunner
+from pairplay.services.protocol import StudyRunner, check_answers
 
 STUDY = Path(__file__).parent / "data" / "pilot-study.toml"
 P01_G2, P02_G1 = "pilot-p01-phase1-g2", "pilot-p02-phase1-g1"  # p01's game the bias policy took; p02's game
@@ -116,6 +116,68 @@ def test_a_kept_flaw_an_older_pairplay_wrote_with_its_reason_is_read_withheld_an
     assert "epilepsy" not in (folder / "sessions.csv").read_text()
     assert pairplay_cli("participant", "delete", "s", "p02", "--yes", cwd=tmp_path).returncode == 0
     assert "epilepsy" not in text_of(folder)
+
+
+@pytest.mark.parametrize("reason, shown", [("left\x1b[31m early", r"'\x1b' at 4"), ("a\nb", r"'\n' at 1"),
+                                           ("nul\x00", r"'\x00' at 3")])
+def test_a_mark_reason_with_a_control_character_is_refused_in_one_line(played, tmp_path, pairplay_cli, reason,
+                                                                      shown):
+    """An ESC (the CLI) or a NUL (the console) went raw into sessions.csv and report.md (trial33 I)."""
+    folder = copy(played, tmp_path)
+    journal = (folder / "journal.jsonl").read_bytes()
+    ran = pairplay_cli("protocol", "mark-invalid", "s", P02_G1, "--reason", reason, cwd=tmp_path)
+    assert ran.returncode == 2 and ran.stdout == ""
+    assert ran.stderr == (f"pairplay protocol mark-invalid: the reason holds a control character ({shown}): give it "
+                          "as one line of text, without tabs\n")
+    assert (folder / "journal.jsonl").read_bytes() == journal
+
+
+def test_the_console_refuses_a_control_character_in_every_reason(played, tmp_path):
+    """The console's mark, pause and abort: 400 with one line, nothing journaled."""
+    from test_console_api import call
+    from pairplay.services.console.server import ConsoleServer
+
+    folder = copy(played, tmp_path)
+    journal = (folder / "journal.jsonl").read_bytes()
+    with Bus(BusOptions()) as bus:
+        server = ConsoleServer(StudyRunner(StudyData(folder), bus)).start()
+        try:
+            answers = [call(f"{server.url}/api/console/control/{action}?token={server.token}", body)
+                       for action, body in (("invalid", {"session": P02_G1, "reason": "nul\x00"}),
+                                            ("pause", {"reason": "esc\x1b"}), ("abort", {"reason": "x\x00"}))]
+        finally:
+            server.close()
+    for status, answer in answers:
+        assert status == 400 and "holds a control character" in answer["error"], answer
+    assert (folder / "journal.jsonl").read_bytes() == journal
+
+
+def test_a_reason_an_older_pairplay_journaled_raw_is_written_escaped(played, tmp_path, pairplay_cli):
+    """A journal holding a mark's ESC and NUL (taken before this fix): sessions.csv, status and the report show
+    them escaped, never raw."""
+    folder = copy(played, tmp_path)
+    assert pairplay_cli("protocol", "mark-invalid", "s", P02_G1, "--reason", "RAW", cwd=tmp_path).returncode == 0
+    journal = folder / "journal.jsonl"
+    journal.write_text(journal.read_text().replace("RAW", "left\\u001b[31m early\\u0000"))
+    # the next write of the tables (another mark) writes them from the journal
+    assert pairplay_cli("protocol", "mark-invalid", "s", P01_G2, "--reason", "x", cwd=tmp_path).returncode == 0
+    status = pairplay_cli("protocol", "status", "s", cwd=tmp_path)
+    assert pairplay_cli("report", "s", cwd=tmp_path).returncode == 0
+    for said in (status.stdout, (folder / "sessions.csv").read_text(), (folder / "report" / "report.md").read_text()):
+        assert "\x1b" not in said and "\x00" not in said
+    assert sessions_csv(folder)[P02_G1]["invalid"] == r"left\x1b[31m early\x00"
+
+
+def test_a_questionnaire_answer_holds_lines_but_no_other_control_character():
+    """A person's free text may run over lines; a NUL or an ESC would land raw in answers.csv."""
+    from pairplay.schemas.study import parse_study  # the items of a real study file
+
+    items = parse_study(STUDY.read_text()).questions("after-game", returning=False)
+    item = next(i for i in items if i.id == "comments")  # its free text
+    assert check_answers([item], {item.id: "one\nand two\tthree"}) == {item.id: "one\nand two\tthree"}
+    for bad in ("nul\x00", "esc\x1b[2J"):
+        with pytest.raises(StudyDataError, match="holds a control character"):
+            check_answers([item], {item.id: bad})
 
 
 def test_the_console_shows_nothing_of_a_deleted_person_it_held_beside_the_journal(played, tmp_path):
