@@ -78,9 +78,10 @@ def _on_folder(data: StudyData, args) -> int:
                                            else "") + ")")
     for m in gone.merged_policies_using_them:
         print(escaped(f"merged policy combined from their games (kept; re-combine without them if needed): {m}"))
-    for k in gone.flaws_kept:  # the flaw outlives the person (replay/biases.py): said, as status goes on saying it
-        print(escaped(f"merged policy made with their game marked invalid since ({k.reason}): {k.merged} (kept "
-                      "flagged without their id; the plan combines it again if it is current)"))
+    for k in gone.flaws_kept:  # the flaw outlives the person (replay/biases.py): said, as status goes on saying it;
+        # the mark's reason does not (their words about the person): said withheld, as every reader says it
+        print(escaped(f"merged policy made with their game marked invalid since: {k.merged} (kept flagged without "
+                      f"their id, {k.reason}; the plan combines it again if it is current)"))
     for c in erased.copies:
         if c.erased:
             print(escaped(f"erased {copy_words(c, args.participant)}: {c.path} (pairplay's own file, unchanged: the "
@@ -108,5 +109,6 @@ def left_lines(folder: Path, pid: str, erased) -> list[str]:
              f"(and any copy of it) by hand" for c in erased.copies if not c.erased]
     for rel, names in erased.left:
         lines.append(f"kept {folder / rel}: not written by the report (the user's)"
-                     + (f"; it names {pid}: edit it by hand" if names else f"; check it does not mention {pid}"))
+                     + (f"; it names {pid} (their id, or their name from the key file): edit it by hand" if names
+                        else f"; check it does not mention {pid}"))
     return lines

@@ -82,6 +82,12 @@ class WorkerLost(Exception):
 _UNSHOWABLE = re.compile("[\x00-\x1f\x7f-\x9f\u2028\u2029\ud800-\udfff]")
 
 
+def unshowable(text: str) -> re.Match | None:
+    """The first character of `text` that `escaped` would escape (None: it shows as it is): what a free text a
+    user gives (a reason, a name) is refused for, since it would land raw in a CSV or a report."""
+    return _UNSHOWABLE.search(text)
+
+
 def escaped(text: object) -> str:
     """`text` (a path, a user's value, a line holding them) as one line shows it: each control character,
     line separator or lone surrogate as its Python escape (`\\n`, `\\x1b`, `\\udcff`), the rest as it is.

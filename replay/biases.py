@@ -14,12 +14,16 @@ for them, on the new bias policy). A flaw is a fact about the merged file, not a
 participant's deletion removes their games and marks, and keeps each flaw they made without their id
 (`flaws_of`, journal ParticipantDeleted `flaws_kept`), which `invalid_inputs` counts as "a game of a deleted
 participant" (it was forgotten: the plan played new games on the flawed file, and nothing flagged the games played
-on it). All of it is a fold of the journal: nothing here writes.
+on it). The flaw kept is which bias policy, that a game it took was marked invalid, and when; never the mark's
+free-text reason, which is the experimenter's words about that person's game (a name, a health note, why they
+left: trial33 C kept "(Anna Schmidt) told us she has epilepsy" in the journal, status, sessions.csv and the report
+after a withdrawal of consent): it is WITHHELD, in what the deletion writes and in how a kept flaw is read (an older
+pairplay's deletion wrote the reason). All of it is a fold of the journal: nothing here writes.
 """
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING, Callable
+from typing import TYPE_CHECKING
 
 from pairplay.numbers import agreement, counted
 from pairplay.schemas import journal as j
@@ -44,6 +48,7 @@ def _by_policy(state: "StudyState") -> dict[str, "Game"]:
 
 
 DELETED_GAME = "a game of a deleted participant"  # a flaw kept by a deletion names no one
+WITHHELD = "reason withheld: its participant was deleted"  # what a kept flaw says in place of the mark's reason
 
 
 def invalid_inputs(state: "StudyState", c: j.BiasCombined) -> list[tuple[str, str]]:
@@ -51,15 +56,16 @@ def invalid_inputs(state: "StudyState", c: j.BiasCombined) -> list[tuple[str, st
     deleted participant's game as DELETED_GAME, from the flaws their deletion kept."""
     by_policy = _by_policy(state)
     bad = [by_policy[p] for p in c.inputs if p in by_policy and by_policy[p].invalid]
-    return [(g.session, g.invalid) for g in bad] + [(DELETED_GAME, k.reason) for k in state.flaws_kept
+    # a kept flaw's own reason is never shown: an older pairplay's deletion kept the mark's words (module rule)
+    return [(g.session, g.invalid) for g in bad] + [(DELETED_GAME, WITHHELD) for k in state.flaws_kept
                                                      if k.merged == c.output]
 
 
-def flaws_of(state: "StudyState", pid: str, redact: Callable[[str], str]) -> list[j.FlawKept]:
+def flaws_of(state: "StudyState", pid: str) -> list[j.FlawKept]:
     """The flaws participant `pid`'s games marked invalid made in the combinations that took them, as their
-    deletion keeps them: the bias policy, the reason (`redact`ed of the id) and the mark's time (module rule)."""
+    deletion keeps them: the bias policy and the mark's time, the reason WITHHELD (module rule)."""
     by_policy = _by_policy(state)
-    return [j.FlawKept(merged=c.output, reason=redact(g.invalid), marked_ns=g.invalid_ns)
+    return [j.FlawKept(merged=c.output, reason=WITHHELD, marked_ns=g.invalid_ns)
             for c in state.combinations for p in c.inputs
             if (g := by_policy.get(p)) is not None and g.invalid and g.participant == pid]
 

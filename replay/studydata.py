@@ -48,7 +48,6 @@ import re
 import secrets
 import threading
 import time
-import unicodedata
 import zipfile
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -56,12 +55,13 @@ from pathlib import Path
 import msgspec
 
 from pairplay import __version__, csvcell, folderlock, signals, testpause
-from pairplay.errors import InputError, UserError, command_word, folded
+from pairplay.errors import InputError, UserError, command_word, escaped, folded, unshowable
 from pairplay.inputs import refusal
 from pairplay.livelock import LIVE, is_live
 from pairplay.outputs import (OutputError, check_output, check_places, manifest_name, output_file, read_manifest,
                               remove_written, set_aside_of, special_kind, write_manifest)
 from pairplay.schemas import journal as j
+from pairplay.schemas.trust import MAX_REASON
 from pairplay.schemas.jsonfile import in_words, without_bom
 from pairplay.schemas.policy import encode_policy, read_policy, write_policy
 from pairplay.schemas.study import CONSENT_FORM_RULE, STUDY_FILE, Study, StudyFileError, consent_form_ok, load_study
@@ -286,7 +286,9 @@ class StudyState:
             self.games[e.session] = Game(e.session, e.participant, e.phase, e.game, e.recording, e.bias,
                                          scripted=e.scripted)
         elif isinstance(e, j.GameEnded) and e.session in self.games:
-            self.games[e.session].ended = e
+            # its reason escaped as every free text read from a journal (`refuse_control`: an older pairplay took
+            # a NUL, an ESC), so no reader writes one raw (sessions.csv, the report, status)
+            self.games[e.session].ended = msgspec.structs.replace(e, reason=escaped(e.reason))
             self.games[e.session].paused = False
         elif isinstance(e, j.PolicyBuilt) and e.session in self.games and self.games[e.session].ended is not None:
             game = self.games[e.session]
@@ -294,7 +296,7 @@ class StudyState:
         elif isinstance(e, (j.GamePaused, j.GameResumed)) and e.session in self.games:
             self.games[e.session].paused = isinstance(e, j.GamePaused)
         elif isinstance(e, j.SessionMarkedInvalid) and e.session in self.games:
-            self.games[e.session].invalid = e.reason
+            self.games[e.session].invalid = escaped(e.reason)  # (as GameEnded's above)
             self.games[e.session].invalid_ns = e.time_ns
         elif isinstance(e, j.BiasCombined):
             self.combined[e.phase] = e
@@ -834,19 +836,20 @@ class StudyData:
             raise StudyDataError(f"{count_name} must be a whole number 1..{REGISTER_AT_ONCE}, got {count!r}")
         if label and count != 1:
             raise StudyDataError(f"{label_name} registers one participant: leave out {count_name}")
-        control = next((c for c in label if unicodedata.category(c) == "Cc"), None)
-        if control is not None:  # a newline became a space in the key file without a word (a new user's trial)
-            raise StudyDataError(f"{label_name} holds a control character ({control!r} at {label.index(control)}): "
-                                 "give the name as one line of text, without tabs")
+        # a newline became a space in the key file without a word (a new user's trial)
+        refuse_control(label, label_name, "the name")
         return [self.register(joins, label, consent) for _ in range(count)]
 
     def mark_invalid(self, session: str, reason: str) -> j.SessionMarkedInvalid:
         """Journal a game as invalid (left out of every report, its step asked again); the reason is required and
         kept as given, stripped. A bias policy combined from the game is combined again, into a new file, once the
         step is played again (replay/biases.py). Raises StudyDataError for an unknown session, an empty reason, or
-        a game marked already (its first reason stays: a second mark replaced it everywhere)."""
+        a game marked already (its first reason stays: a second mark replaced it everywhere), or a reason that is
+        not one line of at most MAX_REASON characters (`refuse_control`)."""
         if not reason.strip():  # the report says why a game is left out: a blank is no answer
             raise StudyDataError("marking a session invalid needs a reason")
+        # a NUL or an ESC went raw into sessions.csv and report.md (trial33 I); bounded as a pause's reason is
+        refuse_control(reason, "the reason", "it", MAX_REASON)
         game = self.state.games.get(session)
         if game is None:
             raise StudyDataError(f"no session {session!r} in this study")
@@ -1439,7 +1442,7 @@ class StudyData:
             if running:
                 raise StudyDataError(f"{pid} has a game running ({running[0]}): abort it first", self.given)
             merged = self.merged_using(pid)
-            flaws = biases.flaws_of(self.state, pid, lambda text: _redact(text, pid))
+            flaws = biases.flaws_of(self.state, pid)  # the flaw, not the mark's words (biases.py rule)
             files = self.files_of(pid)
             sessions = {g.session for g in self.games_of(pid)}
             live = [f for f in files + [x for g in sessions for x in (self.folder / "recordings").glob(f"{g}.*")]
@@ -1454,6 +1457,10 @@ class StudyData:
                 raise StudyDataError(f"{pid}: the key file {key} is not there (an unmounted drive?): their name "
                                      "would stay in it; make it reachable first, then delete")
             lines = self.key_file_ids().count(pid)
+            # their name, as the key file holds it: a kept line of another's that wrote it (a mark's reason, "Anna
+            # Schmidt's mother came in") keeps it no more than their id (trial33 C: the key file's line went, the
+            # journal kept the name)
+            name = self._key_name(pid) if lines == 1 else ""
             if lines > 1:  # an id given twice (a crash, a torn registration, before ids_on_record): two people
                 raise StudyDataError(f"{pid}: the key file {key} holds {counted(lines, 'line')} for this id (it was given "
                                      "twice after a crash); nothing was deleted, since it would erase both people: "
@@ -1481,7 +1488,7 @@ class StudyData:
                     else:
                         kept.append(_redacted(msgspec.structs.replace(e, participants=others), pid))
                 else:  # a combination of their games, a note naming them: kept without the id
-                    kept.append(_redacted(e, pid))
+                    kept.append(_unnamed(_redacted(_withheld(e), pid), name))
             for m in merged:
                 _redact_policy_file(self.folder / m, pid)
             key_removed = self._drop_from_key_file(pid)
@@ -1494,7 +1501,7 @@ class StudyData:
             # derived files that held their rows: the tables are rewritten, the report's files are removed (it
             # is stale without them); a file of the user's in report/ (notes.md) stays, and is said
             report = self.folder / "report"
-            left = [(f"report/{rel}", _names(report / rel, pid))
+            left = [(f"report/{rel}", _names(report / rel, pid, name))
                     for rel in remove_written(report, REPORT_OUTPUTS, REPORT_MANIFEST)]
             deleted = self.append(j.ParticipantDeleted(
                 deletion=secrets.token_hex(6), sessions_removed=len(sessions), files_removed=len(files),
@@ -1515,6 +1522,14 @@ class StudyData:
                 if (isinstance(e, j.ParticipantExported) and e.participant == pid
                     and not Path(e.path).is_relative_to(self.folder))
                 or (isinstance(e, j.CopyWritten) and pid in e.participants)]
+
+    def _key_name(self, pid: str) -> str:
+        """The name this study's line of the key file gives `pid` ("" without one)."""
+        key = self.key_file
+        if key is None or not key.is_file():
+            return ""
+        return next((csvcell.value(r[1]) for r in key_file_rows(key) if r[0] == pid and len(r) > 1
+                     and self._own_key_line(r)), "")
 
     def _drop_from_key_file(self, pid: str) -> bool:
         key = self.key_file
@@ -1624,12 +1639,28 @@ class Deletion:
         return [c.path for c in self.copies if not c.erased]
 
 
-def _names(path: Path, pid: str) -> bool:
-    """Whether the file `path` holds the id `pid` as a whole id (its bytes; a figure's pixels cannot tell)."""
+def _names(path: Path, pid: str, name: str = "") -> bool:
+    """Whether the file `path` holds the id `pid` as a whole id, or their `name` (`_name_pattern`) (its bytes;
+    a figure's pixels cannot tell)."""
     try:
-        return re.search(_id(pid).encode(), path.read_bytes()) is not None
+        text = path.read_bytes()
     except OSError:
         return False
+    pattern = _name_pattern(name)
+    return re.search(_id(pid).encode(), text) is not None or (
+        pattern is not None and re.search(pattern, text.decode("utf-8", "replace"), re.IGNORECASE) is not None)
+
+
+def _name_pattern(name: str) -> str | None:
+    """A pattern of a person's `name` (from the key file) as whole words, None for one of fewer than two letters
+    (it would find every "a")."""
+    name = name.strip()
+    return rf"(?<!\w){re.escape(name)}(?!\w)" if sum(c.isalpha() for c in name) >= 2 else None
+
+
+def mentions(text: str, pid: str) -> bool:
+    """Whether `text` holds the id `pid` as a whole id (p01 is not in p010)."""
+    return re.search(_id(pid), text) is not None
 
 
 API_WRITE = "a write through pairplay's Python API"  # the holder's words of a StudyData made without a writer
@@ -1821,6 +1852,20 @@ def named(text: str, names: dict[str, str]) -> str:
     return re.sub(pattern, lambda m: names[m.group(0)], text)
 
 
+def refuse_control(text: str, what: str, as_what: str, limit: int = 0) -> None:
+    """The rule of every free text a study takes from the experimenter (a mark's, a pause's or an abort's reason,
+    a name for the key file): one line, without a control character (a newline, a tab, a NUL, an ESC: each
+    went raw into a CSV or the report) and, with a `limit`, at most that many characters once stripped; else
+    StudyDataError saying which and where. A study file's texts are checked by schemas/study.py (ids, the
+    consent form), a questionnaire's answers by services/protocol.py check_answers. What an older pairplay
+    journaled unchecked is escaped where it is read (StudyState.evolve)."""
+    if (bad := unshowable(text)) is not None:
+        raise StudyDataError(f"{what} holds a control character ({bad.group()!r} at {bad.start()}): give "
+                             f"{as_what} as one line of text, without tabs")
+    if limit and len(text.strip()) > limit:
+        raise StudyDataError(f"{what} is at most {limit:,} characters, this one has {len(text.strip()):,}")
+
+
 def _redact(text: str, pid: str) -> str:
     """`text` with the pseudonym `pid` (as an id, in `human:<id>` and in session names) replaced by "deleted"."""
     return re.sub(_id(pid), "deleted", text)
@@ -1842,6 +1887,26 @@ def _redacted(value, pid: str):
         return msgspec.structs.replace(value, **{f: _redacted(getattr(value, f), pid)
                                                  for f in value.__struct_fields__})
     return value
+
+
+def _unnamed(e: j.JournalEvent, name: str) -> j.JournalEvent:
+    """`e`, a line kept by a deletion, with `name` (the deleted person's, from the key file) replaced by "deleted"
+    in its free text, the `reason` a person typed (another's game's mark or end: "Anna Schmidt's mother came
+    in"), whole words in any case. Only there: a name may be any word ("phase1"), and the ids, phases and files
+    the other fields hold are no one's words (`_name_pattern`)."""
+    pattern, reason = _name_pattern(name), getattr(e, "reason", None)
+    if pattern is None or not isinstance(reason, str):
+        return e
+    return msgspec.structs.replace(e, reason=re.sub(pattern, "deleted", reason, flags=re.IGNORECASE))
+
+
+def _withheld(e: j.JournalEvent) -> j.JournalEvent:
+    """`e`, an earlier deletion's line without the mark reasons an older pairplay kept in its flaws (the words
+    about a person deleted then: replay/biases.py rule); any other line as it is."""
+    if not isinstance(e, j.ParticipantDeleted) or all(k.reason == biases.WITHHELD for k in e.flaws_kept):
+        return e
+    return msgspec.structs.replace(e, flaws_kept=[msgspec.structs.replace(k, reason=biases.WITHHELD)
+                                                  for k in e.flaws_kept])
 
 
 def _redact_policy_file(path: Path, pid: str) -> None:

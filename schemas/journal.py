@@ -156,7 +156,9 @@ class FlawKept(msgspec.Struct, frozen=True, kw_only=True):
     status, sessions.csv and the report went on flagging nothing, and the plan played new games on the file)."""
 
     merged: str  # the bias policy (a BiasCombined output)
-    reason: str  # the mark's reason, the id redacted from it
+    # not the mark's reason (the experimenter's words about the deleted person's game: replay/biases.py):
+    # "reason withheld: its participant was deleted" (an older pairplay kept the reason, the id redacted)
+    reason: str
     marked_ns: int = 0  # when the game was marked invalid
 
 

@@ -32,6 +32,7 @@ done steps, the combination and the report (a combination that took it is made a
 from __future__ import annotations
 
 import logging
+import re
 import secrets
 import threading
 import time
@@ -40,12 +41,13 @@ from pathlib import Path
 from typing import Callable
 
 from pairplay import __version__, signals, testpause
+from pairplay.errors import unshowable
 from pairplay.core.policies import partial_inputs, users_from_policies
 from pairplay.replay import biases
 from pairplay.replay.delivery import delivery_counts, delivery_line, troubled
 from pairplay.replay.reader import read_any_log
 from pairplay.replay.studydata import (Game, StudyData, StudyDataError, game_end, journaled_or_removed, one_line,
-                                       recording_damage)
+                                       recording_damage, refuse_control)
 from pairplay.schemas import events as ev
 from pairplay.schemas import journal as j
 from pairplay.schemas.envelope import stamped
@@ -634,11 +636,17 @@ class StudyRunner:
 
 def bounded_reason(reason: str) -> str:
     """The experimenter's pause or abort reason, stripped; StudyDataError if over MAX_REASON characters
-    (the console answers 400): it goes into an event on the bus, which must fit MAX_PAYLOAD (trial28 F20)."""
+    (the console answers 400): it goes into an event on the bus, which must fit MAX_PAYLOAD (trial28 F20); or
+    if it holds a control character (studydata.refuse_control: an abort's reason is the game's journaled end,
+    written to sessions.csv and the report)."""
+    refuse_control(reason, "the reason", "it")
     reason = reason.strip()
     if len(reason) > MAX_REASON:
         raise StudyDataError(f"a reason is at most {MAX_REASON:,} characters, this one has {len(reason):,}")
     return reason
+
+
+ANSWER_LINES = re.compile("[\n\r\t]")  # what a questionnaire's text answer may hold of the control characters
 
 
 def check_answers(items, answers) -> dict[str, str]:
@@ -669,6 +677,11 @@ def check_answers(items, answers) -> dict[str, str]:
             raise StudyDataError(f"question {item.id!r}: {text[:40]!r} is not one of its options")
         if len(text) > item.max_chars:
             raise StudyDataError(f"question {item.id!r}: at most {counted(item.max_chars, 'character')}")
+        # a person's text may run over lines (a textarea), nothing else unshowable: a NUL or an ESC went raw into
+        # answers.csv and the report (the rule of every free text: studydata.refuse_control)
+        if (bad := unshowable(ANSWER_LINES.sub("", text))) is not None:
+            raise StudyDataError(f"question {item.id!r}: the answer holds a control character ({bad.group()!r}): "
+                                 "give it as text (new lines and tabs are fine)")
         out[item.id] = text
     return out
 

@@ -208,9 +208,11 @@ def test_a_deletion_keeps_the_flaw_without_the_id(played, tmp_path, pairplay_cli
     folder, _ = marked(played, tmp_path, pairplay_cli)
     ran = pairplay_cli("participant", "delete", "s", "p01", "--yes", cwd=tmp_path)
     assert ran.returncode == 0, ran.stderr
-    assert f"merged policy made with their game marked invalid since (wrong instructions): {V1}" in ran.stdout
-    assert "p01" not in (folder / "journal.jsonl").read_text()  # kept without the id
-    kept = "made with a game of a deleted participant (marked invalid since: wrong instructions)"
+    assert f"merged policy made with their game marked invalid since: {V1} (kept flagged without their id, reason withheld: its participant was deleted" \
+        in ran.stdout
+    journal = (folder / "journal.jsonl").read_text()
+    assert "p01" not in journal and "wrong instructions" not in journal  # kept without the id, nor their words
+    kept = "made with a game of a deleted participant (marked invalid since: reason withheld: its participant was deleted)"
     status = pairplay_cli("protocol", "status", "s", cwd=tmp_path).stdout.splitlines()
     combine = next(line for line in status if "combine" in line)
     assert not combine.startswith("[done") and f"{V1} was {kept}" in combine
@@ -223,7 +225,7 @@ def test_a_deletion_keeps_the_flaw_without_the_id(played, tmp_path, pairplay_cli
     assert ran.returncode == 0, ran.stderr
     assert f"played on a bias policy made with a game marked invalid since: {PHASE2[1]} ({V1})" in ran.stdout
     assert (f"**Made with a game marked invalid since**: a game of a deleted participant (marked invalid since: "
-            "wrong instructions); not combined again yet") in (folder / "report" / "report.md").read_text()
+            "reason withheld: its participant was deleted); not combined again yet") in (folder / "report" / "report.md").read_text()
 
 
 def test_a_deletion_after_the_combination_again_keeps_the_earlier_one_flagged(played, tmp_path, pairplay_cli):
@@ -232,13 +234,13 @@ def test_a_deletion_after_the_combination_again_keeps_the_earlier_one_flagged(pl
     folder, _ = marked(played, tmp_path, pairplay_cli)
     assert pairplay_cli("protocol", "pilot", "s", "--personas", "blind,deaf", cwd=tmp_path).returncode == 0
     assert pairplay_cli("participant", "delete", "s", "p01", "--yes", cwd=tmp_path).returncode == 0
-    kept = "made with a game of a deleted participant (marked invalid since: wrong instructions)"
+    kept = "made with a game of a deleted participant (marked invalid since: reason withheld: its participant was deleted)"
     assert sessions_csv(folder)[PHASE2[1]]["bias_flawed"] == kept
     status = pairplay_cli("protocol", "status", "s", cwd=tmp_path).stdout
     assert "[done   ] combine" in status and f"played on {V1}, {kept}" in status  # V2 is sound: done
     assert pairplay_cli("report", "s", cwd=tmp_path).returncode == 0
     assert (f"**Made with a game marked invalid since**: a game of a deleted participant (marked invalid since: "
-            f"wrong instructions); replaced by `{V2}`") in (folder / "report" / "report.md").read_text()
+            f"reason withheld: its participant was deleted); replaced by `{V2}`") in (folder / "report" / "report.md").read_text()
 
 
 def test_a_second_mark_is_refused_naming_the_first(played, tmp_path, pairplay_cli):

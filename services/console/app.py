@@ -33,10 +33,10 @@ from pairplay.core.actions import ACTION_NAMES
 from pairplay.core.geometry import N_STATES, STATE_NAMES
 from pairplay.outputs import output_folder
 from pairplay.replay import biases
-from pairplay.replay.studydata import StudyDataError, consent_words, named
+from pairplay.replay.studydata import StudyDataError, consent_words, mentions, named
 from pairplay.schemas.jsonfile import in_words
 
-from pairplay.services.protocol import StudyRunner
+from pairplay.services.protocol import Live, StudyRunner
 from pairplay.numbers import counted
 from pairplay.schemas.nesting import json_decode
 
@@ -82,6 +82,15 @@ class Console:
             self.last = {"step": label, "ok": False, "message": f"the step could not start: {err}"}
             return
         self.thread = thread  # only once started: the server's shutdown joins it
+
+    def forget(self, pid: str) -> None:
+        """After `pid`'s deletion: the page shows nothing of theirs it held beside the journal (their last game's
+        live panel, the outcome line of a step of theirs, an abort's reason in it), as the study folder keeps
+        none (docs/study.md: a deletion)."""
+        if self.runner.live.participant == pid:  # their game is over (a running one is not deleted)
+            self.runner.live = Live()
+        if mentions(f"{self.last['step']} {self.last['message']}", pid):
+            self.last = {"step": "", "ok": True, "message": ""}
 
     # -- what the page shows -------------------------------------------------
     def state(self) -> dict:
@@ -305,6 +314,7 @@ def console_routes(console: Console) -> list:
         if asked.confirm != pid:
             raise StudyDataError("type the participant's id to confirm the deletion")
         erased = data.delete_participant(pid, consent_withdrawn=asked.consent_withdrawn)
+        console.forget(pid)
         return JSONResponse({"deleted": msgspec.to_builtins(erased.event), "not_erased": erased.elsewhere,
                              "erased_copies": [c.path for c in erased.copies if c.erased],
                              "kept": [{"file": rel, "names_them": names} for rel, names in erased.left]})
