@@ -13,7 +13,6 @@ import csv
 import io
 import json
 import zipfile
-from pathlib import Path
 
 from pairplay.errors import command_word
 from pairplay.replay.studydata import StudyData

@@ -81,6 +81,9 @@ def test_a_deletion_keeps_the_flaw_and_withholds_the_marks_reason(played, tmp_pa
     ran = pairplay_cli("protocol", "mark-invalid", "s", P02_G1, "--reason", "anna schmidt's mother came in",
                        cwd=tmp_path)
     assert ran.returncode == 0, ran.stderr
+    if withdrawn:  # a consent is withdrawn only once it is recorded (the pilot's personas played without one)
+        ran = pairplay_cli("protocol", "consent", "s", "p01", cwd=tmp_path)
+        assert ran.returncode == 0, ran.stderr
     ran = pairplay_cli("participant", "delete", "s", "p01", "--yes", *withdrawn, cwd=tmp_path)
     assert ran.returncode == 0, ran.stderr
     assert f"merged policy made with their game marked invalid since: {V1} (kept flagged without their id, " \

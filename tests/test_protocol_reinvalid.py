@@ -224,7 +224,7 @@ def test_a_deletion_keeps_the_flaw_without_the_id(played, tmp_path, pairplay_cli
     ran = pairplay_cli("report", "s", cwd=tmp_path)
     assert ran.returncode == 0, ran.stderr
     assert f"played on a bias policy made with a game marked invalid since: {PHASE2[1]} ({V1})" in ran.stdout
-    assert (f"**Made with a game marked invalid since**: a game of a deleted participant (marked invalid since: "
+    assert ("**Made with a game marked invalid since**: a game of a deleted participant (marked invalid since: "
             "reason withheld: its participant was deleted); not combined again yet") in (folder / "report" / "report.md").read_text()
 
 
