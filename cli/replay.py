@@ -1,11 +1,12 @@
 """`pairplay replay REC`: re-publish a recording on the bus, or --verify it.
 
 Rule: replay publishes every recorded message, byte for byte, on its own key,
-in file order, paced by the recorded log times divided by --speed (1 = as it
+in file order but for the session's end, published after the events filed after
+it (a recorder or view of the replay kept none of them: services/replayer.py), paced by the recorded log times divided by --speed (1 = as it
 happened; `max` = as fast as the bus takes them, BLOCK publishers, nothing
 dropped), so the viewer shows it as if live. `--as SESSION` re-publishes under
 another session id (the envelope's session is rewritten), so a replay never
-collides with a live session of the same id. `--verify` does not touch the bus:
+collides with a live session of the same id (its SessionStarted's config names it too). `--verify` does not touch the bus:
 fresh services are fed the recorded inputs and every derived event must equal
 the recorded one (services/verify.py); exit 1 if any differs. Its last line
 is the verdict: `verify: PASS` for a whole session, `verify: PASS up to where
