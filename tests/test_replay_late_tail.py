@@ -51,3 +51,24 @@ def test_a_recorder_keeps_a_replays_events_sent_after_its_session_ended(tmp_path
         sorted((r.event.source, r.event.seq) for r in original.events if r.event.source != "recorder")
     assert type(copy.events[-1].event).__name__ == "SessionEnded" and not copy.missing
     assert verify_recording(out / "lt1.mcap").ok  # (the trial's copy FAILed: "2 recomputed beyond the recording")
+
+
+def test_a_live_view_of_a_replay_gets_the_events_sent_after_its_session_ended(tmp_path):
+    # the README's pair (view --listen, then replay --as): the view ended 0.5 s after the replayed SessionEnded and
+    # saved 2551 of 2552 as whole: the robot's last RobotActed, 1.3 s after the one before it (trial33 L addendum)
+    import threading
+
+    from pairplay.services.view.sources import LiveSource
+    src = late_tail(tmp_path)
+    original = read_log(src)
+    with Bus(BusOptions(mode="router")) as hub, Bus(BusOptions(mode="client", listen=[], connect=hub.locators())) as bus:
+        source = LiveSource(bus, "lt2", catch_up=False)
+        got, stop = [], threading.Event()
+        viewer = threading.Thread(target=lambda: got.extend(e for e, _ in source.items(stop) if e is not None))
+        viewer.start()
+        done = shared().run(["replay", str(src), "--as", "lt2", "--speed", "100", "--connect", hub.locators()[0]],
+                            tmp_path, timeout=120)
+        viewer.join(60)
+        stop.set()
+        assert done.returncode == 0, done.stderr
+    assert sorted((e.source, e.seq) for e in got) == sorted((r.event.source, r.event.seq) for r in original.events)
