@@ -1,11 +1,12 @@
 """`pairplay replay REC`: re-publish a recording on the bus, or --verify it.
 
 Rule: replay publishes every recorded message, byte for byte, on its own key,
-in file order, paced by the recorded log times divided by --speed (1 = as it
+in file order but for the session's end, published after the events filed after
+it (a recorder or view of the replay kept none of them: services/replayer.py), paced by the recorded log times divided by --speed (1 = as it
 happened; `max` = as fast as the bus takes them, BLOCK publishers, nothing
 dropped), so the viewer shows it as if live. `--as SESSION` re-publishes under
 another session id (the envelope's session is rewritten), so a replay never
-collides with a live session of the same id. `--verify` does not touch the bus:
+collides with a live session of the same id (its SessionStarted's config names it too). `--verify` does not touch the bus:
 fresh services are fed the recorded inputs and every derived event must equal
 the recorded one (services/verify.py); exit 1 if any differs. Its last line
 is the verdict: `verify: PASS` for a whole session, `verify: PASS up to where
@@ -61,7 +62,7 @@ def run(args: argparse.Namespace) -> int:
                               "or the other", given[0])
     log = read_session(args.recording)  # a file holding no session is one line on stderr, exit 2
     if args.verify:
-        from pairplay.services.verify import verify_recording
+        from pairplay.services.verify import SHOWN, verify_recording
 
         v = verify_recording(args.recording)
         beyond = ("the damaged part, not compared" if v.lost_part else
@@ -70,8 +71,14 @@ def run(args: argparse.Namespace) -> int:
             state = "ok" if c.ok(v.excused) else "DIFFERS"
             print(f"{c.service:12s} {c.compared:7d} derived events compared: {state}"
                   f"{'' if not c.extra else f' ({c.extra} recomputed beyond {beyond})'}")
-            for m in c.mismatches[:5]:  # (a recording's values: a session's name may hold anything)
+            for m in c.mismatches[:SHOWN]:  # (a recording's values: a session's name may hold anything)
                 print(f"    {escaped(m)}")
+            if len(c.mismatches) > SHOWN:
+                print(f"    ... and {counted(len(c.mismatches) - SHOWN, 'more difference')}")
+            for b in c.beyond:  # what was recomputed and is not in the file (a FAIL named none of them)
+                print(f"    recomputed, not in the recording: {escaped(b)}")
+            if c.extra > len(c.beyond):
+                print(f"    ... and {c.extra - len(c.beyond)} more recomputed")
         if v.unknown:
             print(f"{counted(sum(v.unknown.values()), 'event')} of types this version does not know, not compared: "
                   + escaped(", ".join(f"{tag} ({n})" for tag, n in sorted(v.unknown.items()))))

@@ -94,8 +94,12 @@ def publisher_refusal(tag: str, source: str) -> str | None:
 
 
 def clip(text: str, most: int) -> str:
-    """`text` cut to its first `most` characters, with a marker saying how much was cut
-    (unchanged if it fits): how outside text is copied into our own events (see rule)."""
+    """`text` cut to at most its first `most` characters, with a marker saying how much was cut
+    (unchanged if it fits): how outside text is copied into our own events (see rule). The cut is
+    at the last space within them when one is in their second half (a reason cut mid-word, or
+    mid-parenthesis, read as if it said that much: trial33 L), else at `most` (one long word)."""
     if len(text) <= most:
         return text
-    return f"{text[:most]}... [{counted(len(text) - most, 'more character', 'more characters')} cut]"
+    space = text.rfind(" ", 0, most + 1)
+    cut = space if space > most // 2 else most
+    return f"{text[:cut]}... [{counted(len(text) - cut, 'more character', 'more characters')} cut]"

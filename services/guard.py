@@ -84,6 +84,7 @@ NO_END = 2**62  # above every seq (schemas/envelope.py Seq): no end taken yet
 # after its end too) and a start or end itself (a second one is refused: it cannot displace the one taken)
 UNCONTRADICTING = frozenset({"ServiceStarted", "MessageRejected"}) | ONCE_PER_SESSION
 KEYS_CACHED = 4096
+KIND_MAX = 160  # of a counted refusal's reason (Refusals.kind): our own reasons fit whole
 FORGED_KEPT = 1000  # forged starts and ends kept for the session to judge (services/forgery.py); the rest are refused
 
 
@@ -328,7 +329,8 @@ class Refusals:
     @staticmethod
     def kind(source: str, reason: str) -> tuple[str, str]:
         """What a refusal is counted under: (its source, its reason without numbers and details)."""
-        return source[:40], re.sub(r"\d+", "N", reason.split(":", 1)[0])[:100]
+        # clipped at a word with its marker (a cut "(lost on the bus" read as the whole reason: trial33 L)
+        return source[:40], clip(re.sub(r"\d+", "N", reason.split(":", 1)[0]), KIND_MAX)
 
     @staticmethod
     def counted(rejection: MessageRejected) -> tuple[tuple[str, str], int] | None:

@@ -80,12 +80,23 @@ from pairplay.numbers import counted
 from pairplay.schemas.nesting import json_loads
 
 
+SHOWN = 5  # of a service's differences, listed by `replay --verify` (then how many more)
+
+
+def said(e) -> str:
+    """A recomputed event in a line: its type, seq and round/turn where it has them (a FAIL for events
+    recomputed beyond the recording named none of them, even with -v: trial33 L)."""
+    where = ", ".join(f"{k} {getattr(e, k)}" for k in ("round", "turn") if isinstance(getattr(e, k, None), int))
+    return f"{type(e).__name__} seq {e.seq}{f' ({where})' if where else ''}"
+
+
 @dataclass
 class ServiceCheck:
     service: str
     compared: int
     mismatches: list[str] = field(default_factory=list)
     extra: int = 0  # recomputed but not in the recording
+    beyond: list[str] = field(default_factory=list)  # the first SHOWN of them, in words (`said`)
 
     def ok(self, truncated: bool) -> bool:
         return not self.mismatches and (self.extra == 0 or truncated)
@@ -175,7 +186,7 @@ def verify_events(events, source: str = "", truncated: bool = False) -> Verifica
         owed = driver.resume(events, stopped=stopped if logic.name == "game" else None)
         if truncated:  # the cut may fall between an input and its outputs
             driver.mismatches = [m for m in driver.mismatches if "was not recomputed" not in m]
-        checks.append(ServiceCheck(logic.name, recorded, driver.mismatches, len(owed)))
+        checks.append(ServiceCheck(logic.name, recorded, driver.mismatches, len(owed), [said(e) for e in owed[:SHOWN]]))
     how = stopped_how(end, config.rounds, truncated)
     rounds_recorded = sum(1 for e in events if isinstance(e, RoundEnded) and e.source == "game")
     return Verification(source, checks, truncated, stopped=how, reach=reach_of(end, config.rounds, how),

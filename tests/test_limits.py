@@ -171,3 +171,24 @@ def test_a_message_shed_as_too_large_is_counted_in_words_not_with_a_literal_N():
     [count] = refusals.tick(1, force=True)
     assert count.reason == ("1 message refused and not recorded one by one (limit 20/s): "
                             "shed unread (larger than the bus's payload limit)")
+
+
+def test_a_counted_refusals_reason_is_whole_or_cut_at_a_word_with_its_marker():
+    # trial33 L: "shed unread (suggestion not reported, ... (lost on the bus" was cut at 100 characters
+    from collections import Counter
+
+    from pairplay.services.recorder import UNREPORTED
+    refusals = Refusals()
+    refusals.shed(Counter({("robot", UNREPORTED): 5}))
+    [count] = refusals.tick(1, force=True)
+    assert count.reason.endswith(f"shed unread ({UNREPORTED})")
+    refusals.shed(Counter({("robot", "word " * 60): 1}))
+    [count] = refusals.tick(2, force=True)
+    said = count.reason.split(": ", 1)[1]
+    assert said.endswith("more characters cut]") and "word... [" in said  # at a word, not "wo"
+
+
+def test_clip_cuts_at_a_word_and_counts_what_it_cut():
+    from pairplay.schemas.trust import clip
+    assert clip("alpha beta gamma", 12) == "alpha beta... [6 more characters cut]"
+    assert clip("x" * 20, 8) == "xxxxxxxx... [12 more characters cut]"  # one long word: at the limit

@@ -50,3 +50,21 @@ def test_max_speed_never_waits_and_as_session_moves_the_events():
     assert t.slept == []
     assert [k for k, _ in bus.sent] == ["pairplay/s2/participant/CardPicked"] * 3
     assert all(decode_event(p).session == "s2" for _, p in bus.sent)
+
+
+def test_the_sessions_end_goes_out_after_what_was_filed_after_it_and_as_moves_the_config_too():
+    # trial33 L: the robot's last RobotActed filed after SessionEnded were lost by a recorder of the replay, and
+    # the SessionStarted's config still named the original session (the copy's verify FAILed)
+    from pairplay.schemas.session import SessionConfig
+    bus, t = FakeBus(), FakeTime()
+    start = stamped(ev.SessionStarted(config=SessionConfig(session="s1", participant="sim:ashley", seed=1, rounds=1)), session="s1",
+                    source="game", seq=1, time_ns=0)
+    end = stamped(ev.SessionEnded(reason="completed", rounds_played=1), session="s1", source="game", seq=2, time_ns=1)
+    late = recorded(2, 0.5)
+    events = [RecordedEvent("pairplay/s1/game/SessionStarted", start, 0, encode_event(start)),
+              RecordedEvent("pairplay/s1/game/SessionEnded", end, 0, encode_event(end))] + late
+    assert republish(bus, events, speed=1.0, as_session="s2", clock=t.clock, sleep=t.sleep) == 4
+    sent = [decode_event(p) for _, p in bus.sent]
+    assert [type(e).__name__ for e in sent] == ["SessionStarted", "CardPicked", "CardPicked", "SessionEnded"]
+    assert t.now == 0.5  # at their recorded times, the end with the last of them
+    assert sent[0].config.session == "s2" and {e.session for e in sent} == {"s2"}

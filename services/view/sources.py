@@ -12,7 +12,11 @@ thread takes them, so no Python runs on Zenoh's receive path and a slow view
 never holds the session's BLOCK publishers back. If the view falls more than
 `capacity` samples behind, the oldest are overwritten; the view notices the gap
 in the senders' sequence numbers and says so (a view, unlike the recorder, may
-lose frames; the recording is the truth). A SessionEnded ends the live view only while its
+lose frames; the recording is the truth). A SessionEnded ends the live view once nothing more
+came for its grace and no source of the session but its recorder is on the bus (their
+liveliness tokens), as the recorder closes: a live robot's last RobotActed comes up to
+seconds after the end (the virtual robot's, 1.3 s after its previous one), and the view
+saved the rest as whole without it (trial33 L). It ends it only while its
 source publishes nothing after it but its shell's events: one the game goes on after was not
 its end (forged on the bus: docs/bus.md "Forged starts and ends"), said as a note. A view that joins a running session
 first asks the recorder for the log so far (the query restarting services
@@ -36,7 +40,7 @@ import zenoh
 from pairplay.replay.forgery import AFTER_END
 from pairplay.replay.reader import EventLog, read_any_log
 from pairplay.schemas.events import decode_event
-from pairplay.schemas.keys import parse_event_key, session_keys
+from pairplay.schemas.keys import alive_key, parse_event_key, session_keys
 
 from pairplay.services.runner import fetch_log
 from pairplay.numbers import counted
@@ -112,7 +116,7 @@ class LiveSource:
 
     def __init__(self, bus, session: str, *, capacity: int = 100_000, catch_up: bool = True,
                  stop: threading.Event | None = None):
-        self.session = session
+        self.session, self.bus = session, bus
         self.gaps = SequenceGaps()
         self.ended = False
         self.ended_by = None  # the SessionEnded taken as the end: undone if its source goes on (issue "forge")
@@ -152,13 +156,20 @@ class LiveSource:
                     idle_since = idle_since or now
                     yield None, None  # caught up: a coalescing view may draw what it holds
                     if self.ended and now - idle_since >= grace_s:
-                        return
+                        if not self._sources_on_bus(stop):
+                            return
+                        idle_since = now  # (its late reports are the session's: see rule)
                     time.sleep(poll_s)
                     continue
                 idle_since = None
                 yield from self._decode(str(sample.key_expr), sample.payload.to_bytes())
         finally:
             self.close()
+
+    def _sources_on_bus(self, stop: threading.Event) -> bool:
+        """Whether a source of the session other than its recorder (which waits for them too) is on the bus."""
+        alive = self.bus.alive_now(alive_key(self.session, "*"), timeout_s=0.3, stop=stop)
+        return any(k != alive_key(self.session, "recorder") for k in alive)
 
     def close(self) -> None:
         try:
