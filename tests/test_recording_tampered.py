@@ -315,3 +315,18 @@ def test_a_seq_0_is_said_as_such_not_as_a_first_event_missing(tmp_path):
     """trial33 G: a learner's seq 1 rewritten as 0 was said "its first event missing: its seq starts at 2"."""
     p = rewritten(tmp_path / "zero.mcap", each=_seq_changed("learner", 1, 0))
     assert read_log(p).missing == "'learner': an event has seq 0 (seqs start at 1; its next is 2)", read_log(p).missing
+
+
+def test_a_verify_that_fails_does_not_say_it_verified_the_whole_session(tmp_path, capsys):
+    """trial33 E: verify's FAIL came after "verified the whole session (N rounds)": a FAIL verified nothing.
+    (A Q update's value changed: every seq whole, the learner's recomputed update differs.)"""
+    def each(channel, message):
+        event = json.loads(message.data)
+        if not channel.topic.endswith("/QUpdated") or event["seq"] != 4:
+            return [message]
+        event["q_after"] = 7.0
+        return [dataclasses.replace(message, data=json.dumps(event, separators=(",", ":")).encode())]
+    p = rewritten(tmp_path / "q.mcap", each=each)
+    code, out = _run(capsys, "replay", str(p), "--verify")
+    assert code == 1 and "DIFFERS" in out and "verify: FAIL" in out, out
+    assert "verified the whole session" not in out and "compared the whole session (4 rounds)" in out, out
