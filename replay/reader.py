@@ -1015,40 +1015,35 @@ def _seqs_by_source(routes) -> dict[tuple[str, str], array]:
 # every game's SuggestionRequested by the learner's SuggestionMade (its request_seq), every SuggestionMade by the
 # learner's RewardGiven that settles it (not every TurnResolved: a turn resolved with no suggestion, under "gaze",
 # has none), every pick (the participant's, or a board's) by the game's CardRevealed or PickRejected naming it
-# (its pick_seq; a pick after the game's end by its MessageRejected). Seq cannot see a source's tail (its last
-# events dropped: no number after them) nor an event cut and the rest renumbered; these pairs can, both ways: fewer
+# (its pick_seq; not its MessageRejected: one of a malformed pick names no pick recorded). Seq cannot see a
+# source's tail (its last events dropped: no number after them) nor an event cut and the rest renumbered; these
+# pairs can, both ways: fewer
 # answers than asks are the answerer's events missing, more answers than asks the asker's (a new user's trials:
 # the learner's last Q update dropped, rebuild wrote a whole, wrong policy, exit 0; the participant's last pick, or
 # every one of its events, dropped: no verb said it; a game's request cut and renumbered: counterfactual fitted
-# fewer picks silently). (asking sources, what they ask, answering sources, what answers, what may answer too)
+# fewer picks silently). (asking sources, what they ask, answering sources, what answers, its refusal if any)
 ANSWERED = ((("game",), "SuggestionRequested", ("learner",), "SuggestionMade", ()),
             (("learner",), "SuggestionMade", ("learner",), "RewardGiven", ()),
             (("participant", "board"), "CardPicked", ("game",), "CardRevealed",
-             ("PickRejected", "MessageRejected")))
-# what an answer implies was asked, though not every ask is answered so (a turn resolved with no suggestion, a pick
-# refused): more answers than asks are the asker's events missing; (asking source, what it asks, answering
-# source, what answers)
-IMPLIED = (("game", "TurnResolved", "learner", "RewardGiven"),)
+             ("PickRejected",)))
 UPDATES = ("QUpdated", "LSPIUpdated")  # what follows each learner's RewardGiven that learned (`unanswered`)
 
 
 def unanswered(routes, ended_by: dict[str, str],
                learned: dict[str, set] | None = None) -> list[tuple[str, int, str]]:
-    """The pairs of `ANSWERED` whose answers are fewer, or more, than what they answer, and of `IMPLIED` whose
-    answers are more: (the source whose events are missing, at least how many, what shows it), counted from the
-    distinct seqs read on each channel (`_read_log`'s routes; an identical copy counts once), per session. A
-    session that did not complete (`ended_by`: its SessionEnded's reason by session: a signal, an abort; none
-    recorded) may end between a request and its answer: one unanswered there is its end, not a loss (answers
-    outnumbering asks have no such end). `learned`: by session, the seqs of the learner's RewardGiven that
-    learned, each followed by its update (QUpdated or LSPIUpdated: services/learner.py `_reward`; its last Q
-    update dropped alone), None if the read did not decode them. Said with no "last": a count cannot tell where
-    (an event cut from the middle and the rest renumbered is counted the same)."""
+    """The pairs of `ANSWERED` whose answers are fewer, or more, than what they answer: (the source whose events
+    are missing, at least how many, what shows it), counted from the distinct seqs read on each channel (`_read_log`'s
+    routes; an identical copy counts once), per session. A session that did not complete (`ended_by`: its SessionEnded's
+    reason by session: a signal, an abort; none recorded) may end between a request and its answer: one unanswered there
+    is its end, not a loss (answers outnumbering asks have no such end). `learned`: by session, the seqs of the
+    learner's RewardGiven that learned, each followed by its update (QUpdated or LSPIUpdated: services/learner.py
+    `_reward`; its last Q update dropped alone), None if the read did not decode them. Said with no "last": a count
+    cannot tell where (an event cut from the middle and the rest renumbered is counted the same)."""
     import numpy as np
 
     paired = {("learner", tag) for tag in UPDATES}
-    for askers, asked, answerers, answer, too in ANSWERED:
-        paired |= {(s, asked) for s in askers} | {(s, t) for s in answerers for t in (answer, *too)}
-    paired |= {(s, t) for asker, asked, by, answer in IMPLIED for s, t in ((asker, asked), (by, answer))}
+    for askers, asked, answerers, answer, refusal in ANSWERED:
+        paired |= {(s, asked) for s in askers} | {(s, t) for s in answerers for t in (answer, *refusal)}
     seqs: dict[tuple[str, str, str], list] = {}  # (session, source, tag) -> the seqs read on its channels
     for _, _, session, source, kind, numbers in routes:
         if numbers and kind is not None and (source, kind.__name__) in paired:  # (only these: speed)
@@ -1059,22 +1054,17 @@ def unanswered(routes, ended_by: dict[str, str],
         def n(sources, *tags):
             return sum(count.get((session, s, t), 0) for s in sources for t in tags)
         slack = 0 if ended_by.get(session) == "completed" else 1
-        for askers, asked, answerers, answer, too in ANSWERED:
-            n_asked, n_answered = n(askers, asked), n(answerers, answer)
-            whom = " or ".join(repr(s) for s in askers if n((s,), asked)) or repr(askers[0])
-            if n_asked and n_answered + n(answerers, *too) + slack < n_asked:
-                out.append((answerers[0], n_asked - n_answered - n(answerers, *too),
-                            f"{n_answered} {answer} for the {n_asked} {asked} of {whom}"))
-            elif n_answered + n(answerers, *too[:1]) > n_asked:  # an answer to no ask: the ask is missing
-                # (a pick is answered by one CardRevealed or PickRejected: a MessageRejected may be of anything)
-                out.append((_asker(askers, n_asked, n(answerers, *too[:1]), lambda s: n((s,), asked)),
-                            n_answered + n(answerers, *too[:1]) - n_asked,
-                            f"the {n_answered} {answer}{' and ' + str(n(answerers, *too[:1])) + ' ' + too[0] if too and n(answerers, *too[:1]) else ''}"
-                            f" of {answerers[0]!r} answer {n_asked} {asked}"))
-        for asker, asked, by, answer in IMPLIED:
-            if n((by,), answer) > n((asker,), asked):
-                out.append((asker, n((by,), answer) - n((asker,), asked),
-                            f"the {n((by,), answer)} {answer} of {by!r} follow {n((asker,), asked)} {asked}"))
+        for askers, asked, answerers, answer, refusal in ANSWERED:
+            n_asked, n_answered, refused = n(askers, asked), n(answerers, answer), n(answerers, *refusal)
+            if n_asked and n_answered + refused + slack < n_asked:  # asks unanswered: the answerer's missing
+                whom = " or ".join(repr(s) for s in askers if n((s,), asked))
+                out.append((answerers[0], n_asked - n_answered - refused,
+                            f"{n_answered} {answer}{f' and {refused} {refusal[0]}' if refused else ''} for the "
+                            f"{n_asked} {asked} of {whom}"))
+            elif n_answered + refused > n_asked:  # answers to no ask: the asker's missing
+                out.append((_asker(askers, n_asked, refused, lambda s: n((s,), asked)), n_answered + refused - n_asked,
+                            f"the {n_answered} {answer}{f' and {refused} {refusal[0]}' if refused else ''} of "
+                            f"{answerers[0]!r} answer {n_asked} {asked}"))
         n_learned = len((learned or {}).get(session, ()))
         updates = {tag: count.get((session, "learner", tag), 0) for tag in UPDATES}
         if n_learned > sum(updates.values()) + slack:

@@ -301,11 +301,12 @@ def test_the_participants_first_last_or_every_event_dropped_is_said_by_every_ver
 @pytest.mark.parametrize("tag, gap", [
     ("SuggestionRequested", "1 event of 'game' missing: the 65 SuggestionMade of 'learner' answer 64 "
                             "SuggestionRequested"),
-    ("TurnResolved", "1 event of 'game' missing: the 65 RewardGiven of 'learner' follow 64 TurnResolved")])
+    ("CardRevealed", "1 event of 'game' missing: 129 CardRevealed and 1 PickRejected for the 131 CardPicked of "
+                     "'participant' or 'board'")])
 def test_a_game_event_cut_and_the_rest_renumbered_is_said_and_refused(tag, gap, tmp_path, capsys):
-    """trial33 G: a game's request or turn cut from the middle and its later seqs renumbered (no hole in its seq):
-    rebuild exit 0 silent, counterfactual fitted fewer picks silently. The learner answers each request once and
-    settles each suggestion after its turn: its answers to no request say the game's event missing."""
+    """trial33 G: a game's request or reveal cut from the middle and its later seqs renumbered (no hole in its seq):
+    rebuild exit 0 silent, counterfactual fitted fewer picks silently. The learner answers each request once (its
+    answers to no request say the game's event missing), the game each pick (picks it answered none of say it)."""
     seq = sorted(r.event.seq for r in read_log(SAMPLE).events
                  if r.event.source == "game" and type(r.event).__name__ == tag)[30]
     _refused_and_flagged(capsys, rewritten(tmp_path / "g.mcap", each=_cut_and_renumbered("game", seq)), tmp_path, gap)
