@@ -1048,7 +1048,7 @@ def unanswered(routes, ended_by: dict[str, str],
     for _, _, session, source, kind, numbers in routes:
         if numbers and kind is not None and (source, kind.__name__) in paired:  # (only these: speed)
             seqs.setdefault((session, source, kind.__name__), []).append(np.frombuffer(numbers, dtype=np.int64))
-    count = {at: len(np.unique(np.concatenate(held))) for at, held in seqs.items()}
+    count = {at: _distinct(np.concatenate(held)) for at, held in seqs.items()}
     out = []
     for session in sorted({at[0] for at in count}):
         def n(sources, *tags):
@@ -1072,6 +1072,19 @@ def unanswered(routes, ended_by: dict[str, str],
             out.append(("learner", n_learned - sum(updates.values()),
                         f"{updates[tag]} {tag} for the {n_learned} RewardGiven that learned"))
     return out
+
+
+def _distinct(seqs) -> int:
+    """How many distinct numbers `seqs` (an int64 array) holds: marked in a table of its span, as `seq_jumps` does
+    (a sort of a 5,000-round session's picks was 3% of its rebuild), sorted if the span is far wider."""
+    import numpy as np
+
+    low, high = int(seqs.min()), int(seqs.max())
+    if high - low >= 4 * len(seqs):
+        return len(np.unique(seqs))
+    held = np.zeros(high - low + 1, dtype=bool)
+    held[seqs - low] = True
+    return int(np.count_nonzero(held))
 
 
 def _asker(askers: tuple[str, ...], n_asked: int, refused: int, asks) -> str:
