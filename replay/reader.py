@@ -961,11 +961,15 @@ def disagreement(key: str, e: Event) -> str:
 DISAGREES = "its key disagrees with its payload"  # how `disagreement` starts (`EventLog.undecoded` counts them apart)
 
 
-# the sources whose seq 1 (their ServiceStarted) every recording of their session holds: the game's and the
-# learner's, one process each, recorded from their start (services/session.py, the protocol's games, a restart
-# resumes the numbering: services/runner.py; `replay --as` publishes the recorded seqs). Not the board's: every lab
-# page and a protocol's scripted player publish as it, a pilot's recordings start at its seq 2 (test_copies)
-FROM_ONE = STARTERS | {"learner"}
+# the sources whose seq 1 (their ServiceStarted) every recording of their session holds: the game's, the
+# learner's, the participant's and the robot's, one process each, recorded from their start (services/session.py,
+# the protocol's games, a restart resumes the numbering: services/runner.py; `replay --as` publishes the recorded
+# seqs; one started before the recorder listened is asked for its first events: services/recorder.py
+# `_catch_up`). Not the board's: every lab page and a protocol's scripted player publish as it, and a pilot's
+# scripted player's ServiceStarted, its seq 1, is published as its Node starts, before run_session starts the
+# recorder (services/protocol.py `_play`: a pilot's recordings start the board at 2, test_copies); nor the
+# experimenter's console's (one for many games)
+FROM_ONE = STARTERS | {"learner", "participant", "robot"}
 
 
 def seq_jumps(routes) -> tuple[list[tuple[str, int, int]], list[tuple[str, int]]]:

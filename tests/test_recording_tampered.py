@@ -273,14 +273,15 @@ _PICKS = "CardRevealed and 1 PickRejected of 'game' answer"
 
 
 @pytest.mark.parametrize("seqs, gap", [
-    (range(1, 6), f"2 events of 'participant' missing: the 130 {_PICKS} 129 CardPicked"),
+    (range(1, 6), "'participant': its first 5 events missing: its seq starts at 6"),
     (range(259, 10**6), f"1 event of 'participant' missing: the 130 {_PICKS} 130 CardPicked"),
     (range(0, 10**6), f"130 events of 'participant' missing: the 130 {_PICKS} 1 CardPicked")])
 def test_the_participants_first_last_or_every_event_dropped_is_said_by_every_verb(seqs, gap, tmp_path, capsys):
     """trial33 E: the participant's seqs 1..5, its last pick (and what it perceived before it), or every event of it
     dropped: rebuild exit 0 silent, recover "complete already", view not .partial, verify "verified the whole
-    session" (its seq was checked between its events only, not at its start or end). The game answers every pick
-    with a CardRevealed or PickRejected: more of them than picks are the picker's events missing. The policy
+    session" (its seq was checked between its events only, not at its start or end). Its seq starts at 1 (as the
+    game's and the learner's); the game answers every pick with a CardRevealed or PickRejected: more of them than
+    picks are the picker's events missing. The policy
     does not depend on them (rebuild writes it whole, saying so), every other verb says them."""
     p = rewritten(tmp_path / "p.mcap", each=_dropped("participant", seqs))
     assert read_log(p).missing == gap and read_log(p, only=CURVE_READS).missing == gap
@@ -331,3 +332,23 @@ def test_a_verify_that_fails_does_not_say_it_verified_the_whole_session(tmp_path
     code, out = _run(capsys, "replay", str(p), "--verify")
     assert code == 1 and "DIFFERS" in out and "verify: FAIL" in out, out
     assert "verified the whole session" not in out and "compared the whole session (4 rounds)" in out, out
+
+
+def test_the_robots_first_event_dropped_is_said(tmp_path, capsys):
+    """trial33 E: a robot's seq 1 (its ServiceStarted) dropped: every verb silent, verify PASS. The robot's bridge
+    is one process from the session's start (asked for its first events if it started before the recorder), its
+    seq starts at 1; the policy does not depend on it."""
+    from pairplay.schemas.events import SessionConfig
+    from pairplay.services.robot.choice import RobotChoice
+    from pairplay.services.session import run_session
+
+    config = SessionConfig(session="robot-head", participant="sim:ashley", persona="ashley", seed=0, rounds=1)
+    whole = run_session(config, tmp_path / "whole.mcap", robot=RobotChoice("virtual?time_scale=0"))
+    assert not read_log(whole).missing and any(r.event.source == "robot" for r in read_log(whole).events)
+    p = rewritten(tmp_path / "r.mcap", src=whole, each=_dropped("robot", {1}))
+    gap = "'robot': its first event missing: its seq starts at 2"
+    assert read_log(p).missing == gap and read_log(p, only=CURVE_READS).missing == gap
+    code, out = _run(capsys, "rebuild", str(p), "--out", str(tmp_path / "rb"))
+    assert code == 0 and f"{gap} (the policy does not depend on them)" in out, out
+    code, out = _run(capsys, "replay", str(p), "--verify")
+    assert code == 1 and gap in out, out
