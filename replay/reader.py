@@ -741,18 +741,12 @@ def _first(at: tuple[str, str, int], data: bytes) -> bytes:
 
 def seq_twice(routes) -> bool:
     """Whether some (session, source) has a seq read more than once among the events on `routes` (`_read_log`'s
-    channels; `seq_jumps`' table of each source's span, or a sort when the span is far wider than its seqs)."""
+    channels; counted by `_distinct`)."""
     import numpy as np
 
     for numbers in _seqs_by_source(routes).values():
         seqs = np.frombuffer(numbers, dtype=np.int64)
-        low, high = int(seqs.min()), int(seqs.max())
-        if high - low < 4 * len(seqs):
-            held = np.zeros(high - low + 1, dtype=bool)
-            held[seqs - low] = True
-            if np.count_nonzero(held) < len(seqs):
-                return True
-        elif len(np.unique(seqs)) < len(seqs):
+        if _distinct(seqs) < len(seqs):
             return True
     return False
 
