@@ -1025,6 +1025,11 @@ ANSWERED = ((("game",), "SuggestionRequested", ("learner",), "SuggestionMade", (
             (("participant", "board"), "CardPicked", ("game",), "CardRevealed",
              ("PickRejected",)))
 UPDATES = ("QUpdated", "LSPIUpdated")  # what follows each learner's RewardGiven that learned (`unanswered`)
+# in a session with a robot (its ServiceStarted or a RobotActed in the file), the robot's RobotActed for each
+# learner's SuggestionMade (services/robot/bridge.py: superseded ones too), unless the recorder's MessageRejected
+# count the ones it never had (services/recorder.py `_unreported_suggestions`, a shed: said there already)
+ROBOT = (("robot", "ServiceStarted"), ("robot", "RobotActed"), ("learner", "SuggestionMade"),
+         ("recorder", "MessageRejected"))
 
 
 def unanswered(routes, ended_by: dict[str, str],
@@ -1039,7 +1044,7 @@ def unanswered(routes, ended_by: dict[str, str],
     cannot tell where (an event cut from the middle and the rest renumbered is counted the same)."""
     import numpy as np
 
-    paired = {("learner", tag) for tag in UPDATES}
+    paired = {("learner", tag) for tag in UPDATES} | set(ROBOT)
     for askers, asked, answerers, answer, refusal in ANSWERED:
         paired |= {(s, asked) for s in askers} | {(s, t) for s in answerers for t in (answer, *refusal)}
     seqs: dict[tuple[str, str, str], list] = {}  # (session, source, tag) -> the seqs read on its channels
@@ -1063,6 +1068,11 @@ def unanswered(routes, ended_by: dict[str, str],
                 out.append((_asker(askers, n_asked, refused, lambda s: n((s,), asked)), n_answered + refused - n_asked,
                             f"the {n_answered} {answer}{f' and {refused} {refusal[0]}' if refused else ''} of "
                             f"{answerers[0]!r} answer {n_asked} {asked}"))
+        made, acted = n(("learner",), "SuggestionMade"), n(("robot",), "RobotActed")
+        # (only in a session that completed: a cut or a signal's end falls among the robot's acts, which lag)
+        if n(("robot",), "ServiceStarted") + acted and not n(("recorder",), "MessageRejected") and not slack \
+                and acted < made:
+            out.append(("robot", made - acted, f"{acted} RobotActed for the {made} SuggestionMade of 'learner'"))
         n_learned = len((learned or {}).get(session, ()))
         updates = {tag: count.get((session, "learner", tag), 0) for tag in UPDATES}
         if n_learned > sum(updates.values()) + slack:

@@ -334,19 +334,32 @@ def test_a_verify_that_fails_does_not_say_it_verified_the_whole_session(tmp_path
     assert "verified the whole session" not in out and "compared the whole session (4 rounds)" in out, out
 
 
-def test_the_robots_first_event_dropped_is_said(tmp_path, capsys):
-    """trial33 E: a robot's seq 1 (its ServiceStarted) dropped: every verb silent, verify PASS. The robot's bridge
-    is one process from the session's start (asked for its first events if it started before the recorder), its
-    seq starts at 1; the policy does not depend on it."""
+@pytest.fixture(scope="module")
+def robot_session(tmp_path_factory):
+    """A real one-round session with the virtual robot (its bridge publishes as 'robot')."""
     from pairplay.schemas.events import SessionConfig
     from pairplay.services.robot.choice import RobotChoice
     from pairplay.services.session import run_session
 
     config = SessionConfig(session="robot-head", participant="sim:ashley", persona="ashley", seed=0, rounds=1)
-    whole = run_session(config, tmp_path / "whole.mcap", robot=RobotChoice("virtual?time_scale=0"))
+    whole = run_session(config, tmp_path_factory.mktemp("robot") / "whole.mcap",
+                        robot=RobotChoice("virtual?time_scale=0"))
     assert not read_log(whole).missing and any(r.event.source == "robot" for r in read_log(whole).events)
-    p = rewritten(tmp_path / "r.mcap", src=whole, each=_dropped("robot", {1}))
-    gap = "'robot': its first event missing: its seq starts at 2"
+    return whole
+
+
+@pytest.mark.parametrize("which", ["first", "last"])
+def test_the_robots_first_or_last_event_dropped_is_said(which, robot_session, tmp_path, capsys):
+    """trial33 E: a robot's seq 1 (its ServiceStarted) or its last RobotActed dropped: every verb silent, verify
+    PASS. The robot's bridge is one process from the session's start (asked for its first events if it started
+    before the recorder): its seq starts at 1; it reports every suggestion it had (a RobotActed each, or the
+    recorder counts the ones it never had). The policy does not depend on it."""
+    robot = [r.event for r in read_log(robot_session).events if r.event.source == "robot"]
+    made = sum(type(r.event).__name__ == "SuggestionMade" for r in read_log(robot_session).events)
+    seqs = {1} if which == "first" else {max(e.seq for e in robot if type(e).__name__ == "RobotActed")}
+    gap = ("'robot': its first event missing: its seq starts at 2" if which == "first" else
+           f"1 event of 'robot' missing: {made - 1} RobotActed for the {made} SuggestionMade of 'learner'")
+    p = rewritten(tmp_path / "r.mcap", src=robot_session, each=_dropped("robot", seqs))
     assert read_log(p).missing == gap and read_log(p, only=CURVE_READS).missing == gap
     code, out = _run(capsys, "rebuild", str(p), "--out", str(tmp_path / "rb"))
     assert code == 0 and f"{gap} (the policy does not depend on them)" in out, out
