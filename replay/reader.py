@@ -142,8 +142,9 @@ class EventLog:
     # where a source's seq skips numbers between two events read (every source's: each numbers its events 1, 2,
     # 3, ..., services/node.py): (source, seq before, seq after), by source, then seq (`gaps`)
     seq_jumps: list[tuple[str, int, int]] = field(default_factory=list)
-    # what a source answers one for one that it answered fewer of, its last events not in the file (seq cannot
-    # see a tail): (the answering source, its answers, what they answer, how many, its tag): `unanswered`, `gaps`
+    # events missing that no seq shows (a source's tail, an event cut and the rest renumbered), seen as answers
+    # fewer or more than what they answer: (the source missing them, at least how many, what shows it):
+    # `unanswered`, `gaps`
     unanswered: list[tuple[str, int, str]] = field(default_factory=list)
     # a seq held by more than one event just before a hole in its source's seqs (one renumbered, not lost):
     # (source, seq) (`gaps`)
@@ -967,12 +968,13 @@ FROM_ONE = STARTERS | {"learner", "participant", "robot"}
 
 
 def seq_jumps(routes) -> tuple[list[tuple[str, int, int]], list[tuple[str, int]]]:
-    """Where each (session, source)'s seqs, sorted, skip numbers: (source, seq before, seq after), by source in
-    the order its first channel came, then by seq; a first seq past 1 of a source of `FROM_ONE` is a jump from -1. And the seqs before such a jump held by more than
-    one event (source, seq): a seq repeated, the next one renumbered, not lost. `routes`: `_read_log`'s channels (topic, tag, session, source,
-    class, the seqs read on it: an array of int64, as Seq bounds them); a channel of no pairplay key holds none.
-    Marked in a table of the source's span, not sorted (a set of a 5,000-round session's seqs was 4% of its
-    rebuild); a span far wider than the seqs (a forged seq 2^53) is sorted instead."""
+    """Where each (session, source)'s seqs, sorted, skip numbers: (source, seq before, seq after), by source in the
+    order its first channel came, then by seq; a first seq past 1 of a source of `FROM_ONE` is a jump from -1. And
+    the seqs before such a jump held by more than one event (source, seq): a seq repeated, the next one renumbered,
+    not lost. `routes`: `_read_log`'s channels (topic, tag, session, source, class, the seqs read on it: an array of
+    int64, as Seq bounds them); a channel of no pairplay key holds none. Marked in a table of the source's span, not
+    sorted (a set of a 5,000-round session's seqs was 4% of its rebuild); a span far wider than the seqs (a forged
+    seq 2^53) is sorted instead."""
     import numpy as np  # (here: a read that meets no seq needs none)
 
     jumps, repeated = [], []
@@ -1013,13 +1015,13 @@ def _seqs_by_source(routes) -> dict[tuple[str, str], array]:
 # every game's SuggestionRequested by the learner's SuggestionMade (its request_seq), every SuggestionMade by the
 # learner's RewardGiven that settles it (not every TurnResolved: a turn resolved with no suggestion, under "gaze",
 # has none), every pick (the participant's, or a board's) by the game's CardRevealed or PickRejected naming it
-# (its pick_seq; not its MessageRejected: one of a malformed pick names no pick recorded). Seq cannot see a
-# source's tail (its last events dropped: no number after them) nor an event cut and the rest renumbered; these
-# pairs can, both ways: fewer
-# answers than asks are the answerer's events missing, more answers than asks the asker's (a new user's trials:
-# the learner's last Q update dropped, rebuild wrote a whole, wrong policy, exit 0; the participant's last pick, or
-# every one of its events, dropped: no verb said it; a game's request cut and renumbered: counterfactual fitted
-# fewer picks silently). (asking sources, what they ask, answering sources, what answers, its refusal if any)
+# (its pick_seq; not its MessageRejected: one of a malformed pick names no pick recorded). Seq cannot see a source's
+# tail (its last events dropped: no number after them) nor an event cut and the rest renumbered; these pairs can,
+# both ways: fewer answers than asks are the answerer's events missing, more answers than asks the asker's (a new
+# user's trials: the learner's last Q update dropped, rebuild wrote a whole, wrong policy, exit 0; the participant's
+# last pick, or every one of its events, dropped: no verb said it; a game's request cut and renumbered:
+# counterfactual fitted fewer picks silently). (asking sources, what they ask, answering sources, what answers, its
+# refusal if any)
 ANSWERED = ((("game",), "SuggestionRequested", ("learner",), "SuggestionMade", ()),
             (("learner",), "SuggestionMade", ("learner",), "RewardGiven", ()),
             (("participant", "board"), "CardPicked", ("game",), "CardRevealed",
@@ -1034,14 +1036,14 @@ ROBOT = (("robot", "ServiceStarted"), ("robot", "RobotActed"), ("learner", "Sugg
 
 def unanswered(routes, ended_by: dict[str, str],
                learned: dict[str, set] | None = None) -> list[tuple[str, int, str]]:
-    """The pairs of `ANSWERED` whose answers are fewer, or more, than what they answer: (the source whose events
-    are missing, at least how many, what shows it), counted from the distinct seqs read on each channel (`_read_log`'s
-    routes; an identical copy counts once), per session. A session that did not complete (`ended_by`: its SessionEnded's
-    reason by session: a signal, an abort; none recorded) may end between a request and its answer: one unanswered there
-    is its end, not a loss (answers outnumbering asks have no such end). `learned`: by session, the seqs of the
-    learner's RewardGiven that learned, each followed by its update (QUpdated or LSPIUpdated: services/learner.py
-    `_reward`; its last Q update dropped alone), None if the read did not decode them. Said with no "last": a count
-    cannot tell where (an event cut from the middle and the rest renumbered is counted the same)."""
+    """The pairs of `ANSWERED` whose answers are fewer, or more, than what they answer: (the source whose events are
+    missing, at least how many, what shows it), counted from the distinct seqs read on each channel (`_read_log`'s
+    routes; an identical copy counts once), per session. A session that did not complete (`ended_by`: its
+    SessionEnded's reason by session: a signal, an abort; none recorded) may end between a request and its answer:
+    one unanswered there is its end, not a loss (answers outnumbering asks have no such end). `learned`: by session,
+    the seqs of the learner's RewardGiven that learned, each followed by its update (QUpdated or LSPIUpdated:
+    services/learner.py `_reward`; its last Q update dropped alone), None if the read did not decode them. Said with
+    no "last": a count cannot tell where (an event cut from the middle and the rest renumbered is counted the same)."""
     import numpy as np
 
     paired = {("learner", tag) for tag in UPDATES} | set(ROBOT)
