@@ -142,9 +142,10 @@ class EventLog:
     # where a source's seq skips numbers between two events read (every source's: each numbers its events 1, 2,
     # 3, ..., services/node.py): (source, seq before, seq after), by source, then seq (`gaps`)
     seq_jumps: list[tuple[str, int, int]] = field(default_factory=list)
-    # what a source answers one for one that it answered fewer of, its last events not in the file (seq cannot
-    # see a tail): (the answering source, its answers, what they answer, how many, its tag): `unanswered`, `gaps`
-    unanswered: list[tuple[str, int, str, int, str, str]] = field(default_factory=list)
+    # events missing that no seq shows (a source's tail, an event cut and the rest renumbered), seen as answers
+    # fewer or more than what they answer: (the source missing them, at least how many, what shows it):
+    # `unanswered`, `gaps`
+    unanswered: list[tuple[str, int, str]] = field(default_factory=list)
     # a seq held by more than one event just before a hole in its source's seqs (one renumbered, not lost):
     # (source, seq) (`gaps`)
     repeated: list[tuple[str, int]] = field(default_factory=list)
@@ -221,7 +222,9 @@ class EventLog:
             clauses, n, holes = [], 0, []
             last = max(after for _, after in jumps)
             for before, after in jumps:
-                if before == 0:
+                if before == 0:  # seq 0 read: no source numbers an event 0 (a seq 1 rewritten as 0)
+                    clauses.append(f"an event has seq 0 (seqs start at 1; its next is {after})")
+                elif before == -1:  # (`seq_jumps`' mark of a first seq past 1)
                     first = "event" if after == 2 else counted(after - 1, "event")
                     clauses.append(f"its first {first} missing: its seq starts at {after}")
                 elif after == last and after - before - 1 > before:  # far past the rest: a seq renumbered
@@ -239,12 +242,11 @@ class EventLog:
             alone = holes and len(clauses) == 1
             said.append(clauses[0].replace(" missing:", f" of {source!r} missing:", 1) if alone
                         else f"{source!r}: " + ", ".join(clauses))
-        for source, answers, asked, n_asked, answer, asker in self.unanswered:
+        for source, n, shows in self.unanswered:
             # (a source with holes said: they are the answers missing; one clause a source)
             if (sources is None or source in sources) and source not in but and source not in by:
                 by[source] = []
-                said.append(f"the last events of {source!r} missing: {answers} {answer} for the "
-                            f"{n_asked} {asked} of {asker!r}")
+                said.append(f"{counted(n, 'event')} of {source!r} missing: {shows}")
         return "; ".join(said)
 
     @property
@@ -740,18 +742,12 @@ def _first(at: tuple[str, str, int], data: bytes) -> bytes:
 
 def seq_twice(routes) -> bool:
     """Whether some (session, source) has a seq read more than once among the events on `routes` (`_read_log`'s
-    channels; `seq_jumps`' table of each source's span, or a sort when the span is far wider than its seqs)."""
+    channels; counted by `_distinct`)."""
     import numpy as np
 
     for numbers in _seqs_by_source(routes).values():
         seqs = np.frombuffer(numbers, dtype=np.int64)
-        low, high = int(seqs.min()), int(seqs.max())
-        if high - low < 4 * len(seqs):
-            held = np.zeros(high - low + 1, dtype=bool)
-            held[seqs - low] = True
-            if np.count_nonzero(held) < len(seqs):
-                return True
-        elif len(np.unique(seqs)) < len(seqs):
+        if _distinct(seqs) < len(seqs):
             return True
     return False
 
@@ -960,20 +956,25 @@ def disagreement(key: str, e: Event) -> str:
 DISAGREES = "its key disagrees with its payload"  # how `disagreement` starts (`EventLog.undecoded` counts them apart)
 
 
-# the sources whose seq 1 (their ServiceStarted) every recording of their session holds: the game's and the
-# learner's, one process each, recorded from their start (services/session.py, the protocol's games, a restart
-# resumes the numbering: services/runner.py; `replay --as` publishes the recorded seqs). Not the board's: every lab
-# page and a protocol's scripted player publish as it, a pilot's recordings start at its seq 2 (test_copies)
-FROM_ONE = STARTERS | {"learner"}
+# the sources whose seq 1 (their ServiceStarted) every recording of their session holds: the game's, the
+# learner's, the participant's and the robot's, one process each, recorded from their start (services/session.py,
+# the protocol's games, a restart resumes the numbering: services/runner.py; `replay --as` publishes the recorded
+# seqs; one started before the recorder listened is asked for its first events: services/recorder.py
+# `_catch_up`). Not the board's: every lab page and a protocol's scripted player publish as it, and a pilot's
+# scripted player's ServiceStarted, its seq 1, is published as its Node starts, before run_session starts the
+# recorder (services/protocol.py `_play`: a pilot's recordings start the board at 2, test_copies); nor the
+# experimenter's console's (one for many games)
+FROM_ONE = STARTERS | {"learner", "participant", "robot"}
 
 
 def seq_jumps(routes) -> tuple[list[tuple[str, int, int]], list[tuple[str, int]]]:
-    """Where each (session, source)'s seqs, sorted, skip numbers: (source, seq before, seq after), by source in
-    the order its first channel came, then by seq; a first seq past 1 of a source of `FROM_ONE` is a jump from 0. And the seqs before such a jump held by more than
-    one event (source, seq): a seq repeated, the next one renumbered, not lost. `routes`: `_read_log`'s channels (topic, tag, session, source,
-    class, the seqs read on it: an array of int64, as Seq bounds them); a channel of no pairplay key holds none.
-    Marked in a table of the source's span, not sorted (a set of a 5,000-round session's seqs was 4% of its
-    rebuild); a span far wider than the seqs (a forged seq 2^53) is sorted instead."""
+    """Where each (session, source)'s seqs, sorted, skip numbers: (source, seq before, seq after), by source in the
+    order its first channel came, then by seq; a first seq past 1 of a source of `FROM_ONE` is a jump from -1. And
+    the seqs before such a jump held by more than one event (source, seq): a seq repeated, the next one renumbered,
+    not lost. `routes`: `_read_log`'s channels (topic, tag, session, source, class, the seqs read on it: an array of
+    int64, as Seq bounds them); a channel of no pairplay key holds none. Marked in a table of the source's span, not
+    sorted (a set of a 5,000-round session's seqs was 4% of its rebuild); a span far wider than the seqs (a forged
+    seq 2^53) is sorted instead."""
     import numpy as np  # (here: a read that meets no seq needs none)
 
     jumps, repeated = [], []
@@ -990,7 +991,7 @@ def seq_jumps(routes) -> tuple[list[tuple[str, int, int]], list[tuple[str, int]]
             ordered = np.unique(seqs)
         at = np.flatnonzero(np.diff(ordered) > 1)
         if low > 1 and source in FROM_ONE:  # its seq starts at 1, resumed after a restart: a hole at the start
-            jumps.append((source, 0, int(ordered[0])))
+            jumps.append((source, -1, int(ordered[0])))  # (-1: its start; a seq 0 read is a jump from 0)
         found = [(source, int(ordered[i]), int(ordered[i + 1])) for i in at]
         if found:  # (only then: counting every source's seqs was a cost for nothing)
             values, times = np.unique(seqs, return_counts=True)
@@ -1010,48 +1011,99 @@ def _seqs_by_source(routes) -> dict[tuple[str, str], array]:
     return by
 
 
-# what a source answers one for one in a session that ran to its end (services/learner.py): every game's
-# SuggestionRequested by the learner's SuggestionMade (its request_seq), every SuggestionMade by the learner's
-# RewardGiven that settles it (not every TurnResolved: a turn resolved with no suggestion, under "gaze", has none).
-# Seq cannot see a source's tail (its last events dropped: no number after them); these pairs can (a new user's
-# trial: the learner's last Q update dropped, rebuild wrote a whole, wrong policy, exit 0)
-ANSWERED = (("game", "SuggestionRequested", "learner", "SuggestionMade"),
-            ("learner", "SuggestionMade", "learner", "RewardGiven"))
+# what a source answers one for one in a session that ran to its end (services/learner.py, services/game.py):
+# every game's SuggestionRequested by the learner's SuggestionMade (its request_seq), every SuggestionMade by the
+# learner's RewardGiven that settles it (not every TurnResolved: a turn resolved with no suggestion, under "gaze",
+# has none), every pick (the participant's, or a board's) by the game's CardRevealed or PickRejected naming it
+# (its pick_seq; not its MessageRejected: one of a malformed pick names no pick recorded). Seq cannot see a source's
+# tail (its last events dropped: no number after them) nor an event cut and the rest renumbered; these pairs can,
+# both ways: fewer answers than asks are the answerer's events missing, more answers than asks the asker's (a new
+# user's trials: the learner's last Q update dropped, rebuild wrote a whole, wrong policy, exit 0; the participant's
+# last pick, or every one of its events, dropped: no verb said it; a game's request cut and renumbered:
+# counterfactual fitted fewer picks silently). (asking sources, what they ask, answering sources, what answers, its
+# refusal if any)
+ANSWERED = ((("game",), "SuggestionRequested", ("learner",), "SuggestionMade", ()),
+            (("learner",), "SuggestionMade", ("learner",), "RewardGiven", ()),
+            (("participant", "board"), "CardPicked", ("game",), "CardRevealed",
+             ("PickRejected",)))
 UPDATES = ("QUpdated", "LSPIUpdated")  # what follows each learner's RewardGiven that learned (`unanswered`)
+# in a session with a robot (its ServiceStarted or a RobotActed in the file), the robot's RobotActed for each
+# learner's SuggestionMade (services/robot/bridge.py: superseded ones too), unless the recorder's MessageRejected
+# count the ones it never had (services/recorder.py `_unreported_suggestions`, a shed: said there already)
+ROBOT = (("robot", "ServiceStarted"), ("robot", "RobotActed"), ("learner", "SuggestionMade"),
+         ("recorder", "MessageRejected"))
 
 
 def unanswered(routes, ended_by: dict[str, str],
-               learned: dict[str, set] | None = None) -> list[tuple[str, int, str, int, str, str]]:
-    """The pairs of `ANSWERED` whose answers are fewer than what they answer: (answering source, answers,
-    what they answer, how many, its tag, the source of what they answer), counted from the distinct seqs read on each channel (`_read_log`'s
+               learned: dict[str, set] | None = None) -> list[tuple[str, int, str]]:
+    """The pairs of `ANSWERED` whose answers are fewer, or more, than what they answer: (the source whose events are
+    missing, at least how many, what shows it), counted from the distinct seqs read on each channel (`_read_log`'s
     routes; an identical copy counts once), per session. A session that did not complete (`ended_by`: its
-    SessionEnded's reason by session: a signal, an abort; none recorded) may end between a request and its
-    answer: one unanswered there is its end, not a loss. `learned`: by session, the seqs of the learner's
-    RewardGiven that learned, each followed by its update (QUpdated or LSPIUpdated: services/learner.py `_reward`;
-    its last Q update dropped alone), None if the read did not decode them."""
+    SessionEnded's reason by session: a signal, an abort; none recorded) may end between a request and its answer:
+    one unanswered there is its end, not a loss (answers outnumbering asks have no such end). `learned`: by session,
+    the seqs of the learner's RewardGiven that learned, each followed by its update (QUpdated or LSPIUpdated:
+    services/learner.py `_reward`; its last Q update dropped alone), None if the read did not decode them. Said with
+    no "last": a count cannot tell where (an event cut from the middle and the rest renumbered is counted the same)."""
     import numpy as np
 
-    paired = ({(asker, asked) for asker, asked, _, _ in ANSWERED} | {(by, answer) for _, _, by, answer in ANSWERED}
-              | {("learner", tag) for tag in UPDATES})
+    paired = {("learner", tag) for tag in UPDATES} | set(ROBOT)
+    for askers, asked, answerers, answer, refusal in ANSWERED:
+        paired |= {(s, asked) for s in askers} | {(s, t) for s in answerers for t in (answer, *refusal)}
     seqs: dict[tuple[str, str, str], list] = {}  # (session, source, tag) -> the seqs read on its channels
     for _, _, session, source, kind, numbers in routes:
         if numbers and kind is not None and (source, kind.__name__) in paired:  # (only these: speed)
             seqs.setdefault((session, source, kind.__name__), []).append(np.frombuffer(numbers, dtype=np.int64))
-    count = {at: len(np.unique(np.concatenate(held))) for at, held in seqs.items()}
+    count = {at: _distinct(np.concatenate(held)) for at, held in seqs.items()}
     out = []
-    for session in {at[0] for at in count}:
+    for session in sorted({at[0] for at in count}):
+        def n(sources, *tags):
+            return sum(count.get((session, s, t), 0) for s in sources for t in tags)
         slack = 0 if ended_by.get(session) == "completed" else 1
-        for asker, asked, answerer, answer in ANSWERED:
-            n_asked = count.get((session, asker, asked), 0)
-            n_answered = count.get((session, answerer, answer), 0)
-            if n_asked and n_answered + slack < n_asked:
-                out.append((answerer, n_answered, asked, n_asked, answer, asker))
+        for askers, asked, answerers, answer, refusal in ANSWERED:
+            n_asked, n_answered, refused = n(askers, asked), n(answerers, answer), n(answerers, *refusal)
+            if n_asked and n_answered + refused + slack < n_asked:  # asks unanswered: the answerer's missing
+                whom = " or ".join(repr(s) for s in askers if n((s,), asked))
+                out.append((answerers[0], n_asked - n_answered - refused,
+                            f"{n_answered} {answer}{f' and {refused} {refusal[0]}' if refused else ''} for the "
+                            f"{n_asked} {asked} of {whom}"))
+            elif n_answered + refused > n_asked:  # answers to no ask: the asker's missing
+                out.append((_asker(askers, n_asked, refused, lambda s: n((s,), asked)), n_answered + refused - n_asked,
+                            f"the {n_answered} {answer}{f' and {refused} {refusal[0]}' if refused else ''} of "
+                            f"{answerers[0]!r} answer {n_asked} {asked}"))
+        made, acted = n(("learner",), "SuggestionMade"), n(("robot",), "RobotActed")
+        # (only in a session that completed: a cut or a signal's end falls among the robot's acts, which lag)
+        if n(("robot",), "ServiceStarted") + acted and not n(("recorder",), "MessageRejected") and not slack \
+                and acted < made:
+            out.append(("robot", made - acted, f"{acted} RobotActed for the {made} SuggestionMade of 'learner'"))
         n_learned = len((learned or {}).get(session, ()))
         updates = {tag: count.get((session, "learner", tag), 0) for tag in UPDATES}
         if n_learned > sum(updates.values()) + slack:
             tag = max(updates, key=updates.get)
-            out.append(("learner", updates[tag], "RewardGiven that learned", n_learned, tag, "learner"))
+            out.append(("learner", n_learned - sum(updates.values()),
+                        f"{updates[tag]} {tag} for the {n_learned} RewardGiven that learned"))
     return out
+
+
+def _distinct(seqs) -> int:
+    """How many distinct numbers `seqs` (an int64 array) holds: marked in a table of its span, as `seq_jumps` does
+    (a sort of a 5,000-round session's picks was 3% of its rebuild), sorted if the span is far wider."""
+    import numpy as np
+
+    low, high = int(seqs.min()), int(seqs.max())
+    if high - low >= 4 * len(seqs):
+        return len(np.unique(seqs))
+    held = np.zeros(high - low + 1, dtype=bool)
+    held[seqs - low] = True
+    return int(np.count_nonzero(held))
+
+
+def _asker(askers: tuple[str, ...], n_asked: int, refused: int, asks) -> str:
+    """Whose asks are missing among `askers` (`unanswered`): the first (the participant), unless it asked none and
+    another's asks were more than the refusals (`refused`): a pilot's scripted player picks as the board; a board's
+    stray pick refused (a lab page's touch) makes no player of it."""
+    if asks(askers[0]) or n_asked <= refused:
+        return askers[0]
+    return max(askers, key=asks)
 
 
 def _decoded(data: bytes) -> Event | None:

@@ -193,8 +193,8 @@ def test_a_hole_at_the_start_of_a_seq_is_said_and_refused(source, seqs, gap, tmp
 
 
 @pytest.mark.parametrize("last_q, gap", [
-    (True, "the last events of 'learner' missing: 55 SuggestionMade for the 65 SuggestionRequested of 'game'"),
-    (False, "the last events of 'learner' missing: 64 RewardGiven for the 65 SuggestionMade of 'learner'")])
+    (True, "10 events of 'learner' missing: 55 SuggestionMade for the 65 SuggestionRequested of 'game'"),
+    (False, "1 event of 'learner' missing: 64 RewardGiven for the 65 SuggestionMade of 'learner'")])
 def test_the_learners_last_events_dropped_are_said_and_refused(last_q, gap, tmp_path, capsys):
     """trial32 E: the learner's events from its last Q update on dropped (no seq after them shows a hole):
     rebuild wrote a whole, wrong policy, exit 0, no word. The requests the learner answered fewer of say it, and
@@ -224,7 +224,7 @@ def test_a_request_unanswered_at_a_signals_end_is_no_loss_but_two_are(tmp_path, 
     one = rewritten(tmp_path / "one.mcap", each=_ended_by_a_signal(_dropped("learner", range(made[-1], 10**6))))
     assert not read_log(one).missing and not read_log(one, only=CURVE_READS).missing
     two = rewritten(tmp_path / "two.mcap", each=_ended_by_a_signal(_dropped("learner", range(made[-2], 10**6))))
-    assert "the last events of 'learner' missing" in read_log(two).missing
+    assert "events of 'learner' missing: " in read_log(two).missing
 
 
 @pytest.mark.parametrize("seq, new, gap", [
@@ -252,5 +252,116 @@ def test_a_q_update_dropped_and_the_seqs_after_it_renumbered_is_said(tmp_path, c
         event["seq"] -= 1
         return [dataclasses.replace(message, data=json.dumps(event, separators=(",", ":")).encode())]
     p = rewritten(tmp_path / "renumbered.mcap", each=each)
-    gap = "the last events of 'learner' missing: 9 QUpdated for the 10 RewardGiven that learned of 'learner'"
+    gap = "1 event of 'learner' missing: 9 QUpdated for the 10 RewardGiven that learned"
     _refused_and_flagged(capsys, p, tmp_path, gap)
+
+
+def _cut_and_renumbered(source: str, seq: int):
+    """`rewritten`'s `each`: the event of `source` at `seq` dropped and its later seqs one less (no hole in its seq)."""
+    def each(channel, message):
+        event = json.loads(message.data)
+        if f"/{source}/" not in channel.topic or event["seq"] < seq:
+            return [message]
+        if event["seq"] == seq:
+            return []
+        event["seq"] -= 1
+        return [dataclasses.replace(message, data=json.dumps(event, separators=(",", ":")).encode())]
+    return each
+
+
+_PICKS = "CardRevealed and 1 PickRejected of 'game' answer"
+
+
+@pytest.mark.parametrize("seqs, gap", [
+    (range(1, 6), "'participant': its first 5 events missing: its seq starts at 6"),
+    (range(259, 10**6), f"1 event of 'participant' missing: the 130 {_PICKS} 130 CardPicked"),
+    (range(0, 10**6), f"130 events of 'participant' missing: the 130 {_PICKS} 1 CardPicked")])
+def test_the_participants_first_last_or_every_event_dropped_is_said_by_every_verb(seqs, gap, tmp_path, capsys):
+    """trial33 E: the participant's seqs 1..5, its last pick (and what it perceived before it), or every event of it
+    dropped: rebuild exit 0 silent, recover "complete already", view not .partial, verify "verified the whole
+    session" (its seq was checked between its events only, not at its start or end). Its seq starts at 1 (as the
+    game's and the learner's); the game answers every pick with a CardRevealed or PickRejected: more of them than
+    picks are the picker's events missing. The policy
+    does not depend on them (rebuild writes it whole, saying so), every other verb says them."""
+    p = rewritten(tmp_path / "p.mcap", each=_dropped("participant", seqs))
+    assert read_log(p).missing == gap and read_log(p, only=CURVE_READS).missing == gap
+    said = _verbs(capsys, p, tmp_path)
+    code, out = said["rebuild"]
+    assert code == 0 and f"{gap} (the policy does not depend on them)" in out, out
+    assert _partial(tmp_path, "rb", p) == "", out
+    code, out = said["verify"]
+    assert code == 1 and gap in out and "verified the whole session" not in out, out
+    code, out = said["view"]
+    assert code == 0 and gap in out and (tmp_path / "v.partial.rrd").exists(), out
+    code, out = _run(capsys, "recover", str(p), "--out", str(tmp_path / "r.mcap"))
+    assert f"{gap}: no recover gives them back" in out, out
+    code, out = _run(capsys, "counterfactual", str(p), "--fit-only", "--out", str(tmp_path / "cf"))
+    assert "not whole" in out and gap in out, out
+
+
+@pytest.mark.parametrize("tag, gap", [
+    ("SuggestionRequested", "1 event of 'game' missing: the 65 SuggestionMade of 'learner' answer 64 "
+                            "SuggestionRequested"),
+    ("CardRevealed", "1 event of 'game' missing: 129 CardRevealed and 1 PickRejected for the 131 CardPicked of "
+                     "'participant' or 'board'")])
+def test_a_game_event_cut_and_the_rest_renumbered_is_said_and_refused(tag, gap, tmp_path, capsys):
+    """trial33 G: a game's request or reveal cut from the middle and its later seqs renumbered (no hole in its seq):
+    rebuild exit 0 silent, counterfactual fitted fewer picks silently. The learner answers each request once (its
+    answers to no request say the game's event missing), the game each pick (picks it answered none of say it)."""
+    seq = sorted(r.event.seq for r in read_log(SAMPLE).events
+                 if r.event.source == "game" and type(r.event).__name__ == tag)[30]
+    _refused_and_flagged(capsys, rewritten(tmp_path / "g.mcap", each=_cut_and_renumbered("game", seq)), tmp_path, gap)
+
+
+def test_a_seq_0_is_said_as_such_not_as_a_first_event_missing(tmp_path):
+    """trial33 G: a learner's seq 1 rewritten as 0 was said "its first event missing: its seq starts at 2"."""
+    p = rewritten(tmp_path / "zero.mcap", each=_seq_changed("learner", 1, 0))
+    assert read_log(p).missing == "'learner': an event has seq 0 (seqs start at 1; its next is 2)", read_log(p).missing
+
+
+def test_a_verify_that_fails_does_not_say_it_verified_the_whole_session(tmp_path, capsys):
+    """trial33 E: verify's FAIL came after "verified the whole session (N rounds)": a FAIL verified nothing.
+    (A Q update's value changed: every seq whole, the learner's recomputed update differs.)"""
+    def each(channel, message):
+        event = json.loads(message.data)
+        if not channel.topic.endswith("/QUpdated") or event["seq"] != 4:
+            return [message]
+        event["q_after"] = 7.0
+        return [dataclasses.replace(message, data=json.dumps(event, separators=(",", ":")).encode())]
+    p = rewritten(tmp_path / "q.mcap", each=each)
+    code, out = _run(capsys, "replay", str(p), "--verify")
+    assert code == 1 and "DIFFERS" in out and "verify: FAIL" in out, out
+    assert "verified the whole session" not in out and "compared the whole session (4 rounds)" in out, out
+
+
+@pytest.fixture(scope="module")
+def robot_session(tmp_path_factory):
+    """A real one-round session with the virtual robot (its bridge publishes as 'robot')."""
+    from pairplay.schemas.events import SessionConfig
+    from pairplay.services.robot.choice import RobotChoice
+    from pairplay.services.session import run_session
+
+    config = SessionConfig(session="robot-head", participant="sim:ashley", persona="ashley", seed=0, rounds=1)
+    whole = run_session(config, tmp_path_factory.mktemp("robot") / "whole.mcap",
+                        robot=RobotChoice("virtual?time_scale=0"))
+    assert not read_log(whole).missing and any(r.event.source == "robot" for r in read_log(whole).events)
+    return whole
+
+
+@pytest.mark.parametrize("which", ["first", "last"])
+def test_the_robots_first_or_last_event_dropped_is_said(which, robot_session, tmp_path, capsys):
+    """trial33 E: a robot's seq 1 (its ServiceStarted) or its last RobotActed dropped: every verb silent, verify
+    PASS. The robot's bridge is one process from the session's start (asked for its first events if it started
+    before the recorder): its seq starts at 1; it reports every suggestion it had (a RobotActed each, or the
+    recorder counts the ones it never had). The policy does not depend on it."""
+    robot = [r.event for r in read_log(robot_session).events if r.event.source == "robot"]
+    made = sum(type(r.event).__name__ == "SuggestionMade" for r in read_log(robot_session).events)
+    seqs = {1} if which == "first" else {max(e.seq for e in robot if type(e).__name__ == "RobotActed")}
+    gap = ("'robot': its first event missing: its seq starts at 2" if which == "first" else
+           f"1 event of 'robot' missing: {made - 1} RobotActed for the {made} SuggestionMade of 'learner'")
+    p = rewritten(tmp_path / "r.mcap", src=robot_session, each=_dropped("robot", seqs))
+    assert read_log(p).missing == gap and read_log(p, only=CURVE_READS).missing == gap
+    code, out = _run(capsys, "rebuild", str(p), "--out", str(tmp_path / "rb"))
+    assert code == 0 and f"{gap} (the policy does not depend on them)" in out, out
+    code, out = _run(capsys, "replay", str(p), "--verify")
+    assert code == 1 and gap in out, out
