@@ -1863,7 +1863,7 @@ def refuse_control(text: str, what: str, as_what: str, limit: int = 0) -> None:
         raise StudyDataError(f"{what} holds a control character ({bad.group()!r} at {bad.start()}): give "
                              f"{as_what} as one line of text, without tabs")
     if limit and len(text.strip()) > limit:
-        raise StudyDataError(f"{what} is at most {limit:,} characters, this one has {len(text.strip()):,}")
+        raise StudyDataError(f"{what} is at most {counted(limit, 'character', spec=',')}, this one has {len(text.strip()):,}")
 
 
 def _redact(text: str, pid: str) -> str:
