@@ -128,7 +128,11 @@ def run(args: argparse.Namespace) -> int:
         print(cut_line("run recorder", recording["path"], again), file=sys.stderr)
         return 128 + again
     if code == 0 and getattr(stop, "why", ""):  # the status is the signal's (cli/main.py); it said nothing
-        print(f"pairplay run {args.service}: stopped ({signals.said(stop.why)})", file=sys.stderr)  # every verb's line: stderr
+        # a file that holds no session still takes its id, as `pairplay session` interrupted before its start says
+        empty = (f" before session {args.session} started: {escaped(str(recording['path']))} holds no session (the id "
+                 f"stays taken: remove the file, or `pairplay session --force`, to reuse it)"
+                 if recording.get("empty") else "")
+        print(f"pairplay run {args.service}: stopped ({signals.said(stop.why)}){empty}", file=sys.stderr)
     return code
 
 
@@ -190,6 +194,8 @@ def _run(args: argparse.Namespace, stop: threading.Event, recording: dict) -> in
                 failure = recorder.close(stopped_by=getattr(stop, "why", "") if stop.is_set() else "",
                                          deadline=Deadline(deadline_of(stop).left(0.1)) if stop.is_set() else None)
             interrupts.work_done()  # the file is finished: a signal from now on cuts nothing (cli/session.py cut_line)
+            if not restart and not recorder.holds_session:  # kept (check_new_recording's rule), and said so
+                recording["empty"] = True
             testpause.pause("recording-finished")
             if failure is not None:
                 print(escaped(f"pairplay run recorder: writing {recorder.path} failed ({failure}); the file is "

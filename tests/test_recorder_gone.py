@@ -5,7 +5,8 @@ remaining rounds unrecorded and exited 0 saying "the external recorder writes it
 --wait-for recorder` the same. Now the game is held while no recorder is on the bus (a restarted one refills
 what it missed: tests/test_recorder_restart.py), a warning names the round at once, and with none back within
 the settle time (30 s) the process exits 1 with one line naming the rounds not recorded.
-"""
+A recorder stopped before its session started (trial33 M) says that its file holds no session and keeps
+the id, as `pairplay session` says it."""
 
 from __future__ import annotations
 
@@ -103,6 +104,29 @@ def test_a_distributed_game_waiting_for_a_recorder_that_dies_is_held_and_fails(t
     last = [x for x in err if x.strip()][-1]
     assert last.startswith("pairplay run game: the recorder left the bus at round "), said
     assert "not recorded" in last and ".." not in last, last
+
+
+def test_a_recorder_stopped_before_its_session_started_says_its_file_holds_none(tmp_path, pairplay_cli):
+    session = "rnone"
+    p = session_proc(tmp_path, "--participant", "sim:ashley", "--rounds", "3", "--session", "other",
+                     "--external", "recorder")  # a bus to connect to, no session of that id on it
+    try:
+        endpoint = endpoint_of(first_line(p))
+        rec = subprocess.Popen([sys.executable, "-m", "pairplay", "run", "recorder", "--session", session, "--out",
+                                str(tmp_path), "--connect", endpoint], stdout=subprocess.PIPE,
+                               stderr=subprocess.PIPE, text=True, env=dict(os.environ, PYTHONUNBUFFERED="1"))
+        assert rec.stdout.readline().startswith("listening")
+        assert wait_until(lambda: (tmp_path / f"{session}.mcap").exists(), 60, 0.05)
+        rec.send_signal(signal.SIGINT)
+        out, err = rec.communicate(timeout=60)
+    finally:
+        p.kill()
+        p.wait()
+    assert rec.returncode == 130, err
+    lines = [x for x in err.splitlines() if x.strip()]
+    assert len(lines) == 1, err
+    assert lines[0].startswith("pairplay run recorder: stopped (Ctrl-C)"), err
+    assert f"{session}.mcap" in lines[0] and "no session" in lines[0] and "--force" in lines[0], err
 
 
 def test_a_held_session_whose_recorder_is_restarted_goes_on_to_its_end_recorded_whole(tmp_path, pairplay_cli):
