@@ -129,11 +129,19 @@ def run(args: argparse.Namespace) -> int:
         return 128 + again
     if code == 0 and getattr(stop, "why", ""):  # the status is the signal's (cli/main.py); it said nothing
         # a file that holds no session still takes its id, as `pairplay session` interrupted before its start says
-        empty = (f" before session {args.session} started: {escaped(str(recording['path']))} holds no session (the id "
-                 f"stays taken: remove the file, or `pairplay session --force`, to reuse it)"
-                 if recording.get("empty") else "")
+        empty = f" before session {args.session} started: {holds_none(recording['path'])}" if recording.get("empty") else ""
         print(f"pairplay run {args.service}: stopped ({signals.said(stop.why)}){empty}", file=sys.stderr)
+    elif code == 0 and recording.get("empty"):  # its game left the bus without starting the session (it gave up)
+        print(f"pairplay run recorder: session {args.session}'s game left the bus without starting it: "
+              f"{holds_none(recording['path'])}", file=sys.stderr)
+        return 1
     return code
+
+
+def holds_none(path) -> str:
+    """What a recorder's line says of a file that holds no session: kept, and the id it takes."""
+    return (f"{escaped(str(path))} holds no session (the id stays taken: remove the file, or "
+            "`pairplay session --force`, to reuse it)")
 
 
 def _run(args: argparse.Namespace, stop: threading.Event, recording: dict) -> int:

@@ -162,3 +162,30 @@ def test_a_held_session_whose_recorder_is_restarted_goes_on_to_its_end_recorded_
         assert seqs == list(range(1, len(seqs) + 1)), source
     ran = pairplay_cli("replay", "--verify", tmp_path / f"{session}.1.mcap")
     assert ran.returncode == 0, ran.stdout + ran.stderr
+
+
+def test_a_recorder_whose_game_gave_up_says_its_file_holds_no_session(tmp_path):
+    """trial33 M's side note: the game gave up waiting for a service and left; its recorder exited 0, its empty
+    file keeping the id without a word. Now one line and exit 1 (its session was not recorded)."""
+    session = "rgaveup"
+    env = dict(os.environ, PYTHONUNBUFFERED="1", PAIRPLAY_WAIT_FOR_S="2")
+    game = subprocess.Popen([sys.executable, "-m", "pairplay", "run", "game", "--participant", "sim:ashley",
+                             "--session", session, "--wait-for", "learner,recorder", "--listen", "tcp/127.0.0.1:0"],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
+    rec = None
+    try:
+        endpoint = first_line(game).split()[1]
+        rec = subprocess.Popen([sys.executable, "-m", "pairplay", "run", "recorder", "--session", session, "--out",
+                                str(tmp_path), "--connect", endpoint], stdout=subprocess.PIPE,
+                               stderr=subprocess.PIPE, text=True, env=env)
+        game.communicate(timeout=120)  # no learner came: it gives up
+        out, err = rec.communicate(timeout=120)
+    finally:
+        for proc in (game, rec):
+            if proc is not None and proc.poll() is None:
+                proc.kill()
+                proc.wait()
+    assert game.returncode != 0
+    lines = [x for x in err.splitlines() if x.strip()]
+    assert rec.returncode == 1, err  # (its last line: the recorder's close warns first that the game was gone)
+    assert "left the bus without starting it" in lines[-1] and "holds no session" in lines[-1], err
