@@ -23,8 +23,8 @@ from __future__ import annotations
 import gc
 import logging
 import threading
-from collections import deque
 import time
+from collections import deque
 from typing import Any, Callable
 
 import msgspec

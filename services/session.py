@@ -190,7 +190,7 @@ def run_session(config: SessionConfig, path: str | Path, *, bus: Bus | None = No
         said = recorder_watch.line() if recorder_watch is not None else ""
         if said:  # what came after the last check, said too
             log.warning(said)
-        # taken before anything else ends: an external recorder leaves the bus once the session has
+        # taken before anything else ends: an external recorder leaves the bus once the session has ended
         not_recorded = recorder_watch.lost(config.rounds if game.logic.done else game.logic.round + 1) \
             if recorder_watch is not None else ""
         own_end = end_game(game, stop, failure, recorder)
