@@ -22,6 +22,7 @@ restarted by --session alone follow the config the session was started with.
 from __future__ import annotations
 
 import argparse
+import logging
 import signal
 import sys
 import threading
@@ -39,10 +40,12 @@ from pairplay.schemas.trust import SERVICES as BUS_SERVICES
 from pairplay.services.bus import Bus, Deadline, add_bus_arguments, deadline_of, options_from_args, signal_taken, stop_on_signals
 from pairplay.services.forgery import EVERY_LISTENER, ForgeryWatch
 from pairplay.services.refusal import RefusalWatch
-from pairplay.services.runner import GameWatch, Node, Stopped, start_unless_stopped, waiting_for
+from pairplay.services.runner import GAME_GONE_S, GameWatch, Node, Stopped, start_unless_stopped, waiting_for
 
 SERVICES = ("game", "learner", "participant", "recorder", "combiner")  # what `run` runs
 WAITABLE = BUS_SERVICES - {"game"}  # what a game can wait for: every other service on the bus
+
+log = logging.getLogger("pairplay.run")
 
 
 def services_to_wait_for(text: str) -> list[str]:
@@ -125,8 +128,20 @@ def run(args: argparse.Namespace) -> int:
         print(cut_line("run recorder", recording["path"], again), file=sys.stderr)
         return 128 + again
     if code == 0 and getattr(stop, "why", ""):  # the status is the signal's (cli/main.py); it said nothing
-        print(f"pairplay run {args.service}: stopped ({signals.said(stop.why)})", file=sys.stderr)  # every verb's line: stderr
+        # a file that holds no session still takes its id, as `pairplay session` interrupted before its start says
+        empty = f" before session {args.session} started: {holds_none(recording['path'])}" if recording.get("empty") else ""
+        print(f"pairplay run {args.service}: stopped ({signals.said(stop.why)}){empty}", file=sys.stderr)
+    elif code == 0 and recording.get("empty"):  # its game left the bus without starting the session (it gave up)
+        print(f"pairplay run recorder: session {args.session}'s game left the bus without starting it: "
+              f"{holds_none(recording['path'])}", file=sys.stderr)
+        return 1
     return code
+
+
+def holds_none(path) -> str:
+    """What a recorder's line says of a file that holds no session: kept, and the id it takes."""
+    return (f"{escaped(str(path))} holds no session (the id stays taken: remove the file, or "
+            "`pairplay session --force`, to reuse it)")
 
 
 def _run(args: argparse.Namespace, stop: threading.Event, recording: dict) -> int:
@@ -187,6 +202,8 @@ def _run(args: argparse.Namespace, stop: threading.Event, recording: dict) -> in
                 failure = recorder.close(stopped_by=getattr(stop, "why", "") if stop.is_set() else "",
                                          deadline=Deadline(deadline_of(stop).left(0.1)) if stop.is_set() else None)
             interrupts.work_done()  # the file is finished: a signal from now on cuts nothing (cli/session.py cut_line)
+            if not restart and not recorder.holds_session:  # kept (check_new_recording's rule), and said so
+                recording["empty"] = True
             testpause.pause("recording-finished")
             if failure is not None:
                 print(escaped(f"pairplay run recorder: writing {recorder.path} failed ({failure}); the file is "
@@ -218,6 +235,13 @@ def _run(args: argparse.Namespace, stop: threading.Event, recording: dict) -> in
         # game would wait for it for ever: it ends the session, one line (services/refusal.py); subscribed
         # before the start. Its end refused: the refusing service's own process ends (runner.GameWatch)
         refusals = RefusalWatch(bus, args.session, node, tags=("SessionStarted",)) if args.service == "game" else None
+        # a game that waits for a recorder is held while it is off the bus, and fails if none is back in time
+        recorder_watch = None
+        if args.service == "game" and "recorder" in args.wait_for:
+            from pairplay.services.recorderwatch import RecorderWatch
+            recorder_watch = RecorderWatch(bus, args.session, lambda: logic.round,
+                                           connect=" ".join(args.connect) or " ".join(bus.locators()))
+            node.hold = recorder_watch.held
         try:
             start_unless_stopped(lambda: node.start(wait_for=tuple(args.wait_for)), stop, args.service)
         except Stopped:
@@ -230,17 +254,29 @@ def _run(args: argparse.Namespace, stop: threading.Event, recording: dict) -> in
         # a game alone in its process: every listener is elsewhere, so a forged start or end that fits the
         # game's sequence may have been taken (services/forgery.py): the game ends the session, one line
         watch = ForgeryWatch(node, [], external=EVERY_LISTENER) if args.service == "game" else None
-        forged = refused = ""
+        forged = refused = gone = ""
         while thread.is_alive() and not stop.wait(0.05):
             forged = watch.verdict() if watch is not None else ""
             refused = refusals.verdict() if refusals is not None and not forged else ""
-            if forged or refused:
+            if recorder_watch is not None:
+                said = recorder_watch.line()
+                if said:
+                    log.warning(said)
+                if recorder_watch.gone_for() > GAME_GONE_S:  # the session's settle time (runner.GameWatch's)
+                    gone = f"recorder left the bus and did not come back within {GAME_GONE_S:g} s"
+            if forged or refused or gone:
                 stop.set()
+        said = recorder_watch.line() if recorder_watch is not None else ""
+        if said:  # what came after the last check, said too
+            log.warning(said)
+        # taken before the end: a recorder leaves the bus once the session has ended
+        not_recorded = recorder_watch.lost(logic.config.rounds if logic.done else logic.round + 1) \
+            if recorder_watch is not None else ""
         if stop.is_set():
             thread.join(deadline_of(stop).left(0.5, 0.2))
         if args.service == "game" and not logic.done:  # stopped: the session's end says why and how far
             from pairplay.services.session import end_reason
-            reason, detail = end_reason(stop, forged or refused)
+            reason, detail = end_reason(stop, forged or refused or gone)
             with node._lock:
                 node.publish(node.driver._stamp(logic.end(reason, detail)))
             node.close(deadline_of(stop).left(0.3, 0.5))  # let the recorder take it before the bus closes
@@ -250,6 +286,9 @@ def _run(args: argparse.Namespace, stop: threading.Event, recording: dict) -> in
             raise ForgedEvent(f"{forged}: the game ended the session", f"session {args.session}")
         if refused:
             raise refusals.error(f"session {args.session}")
+        if not_recorded:  # one line, exit 1: a session that failed (README's exit table)
+            print(f"pairplay run game: {escaped(not_recorded)}", file=sys.stderr)
+            return 1
         return 0
     finally:
         deadline = deadline_of(stop) if stop.is_set() else Deadline(1.0)

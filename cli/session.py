@@ -369,6 +369,9 @@ def _run(args: argparse.Namespace, config: SessionConfig, path: Path, summary: d
         return 2
     testpause.pause("recording-finished")
     if "recorder" in args.external:
+        if summary.get("not_recorded"):  # its recorder left the bus and none came back (services/recorderwatch.py)
+            print(f"pairplay session: {escaped(summary['not_recorded'])}", file=sys.stderr)
+            return 1
         if not getattr(args, "quiet", False):
             print(f"session {config.session} over; the external recorder writes its file")
         return 0

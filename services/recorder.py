@@ -680,6 +680,7 @@ class Recorder:
         self.kept: list[tuple[str, bytes]] = []
         self.seq = 0
         self.ended = False
+        self.holds_session = False  # a SessionStarted was written (`pairplay run recorder`: else its line says so)
         self.whole = False  # its end written and on disk, its journal removed (close)
         self._lock = threading.Lock()
         self._overlap = 0
@@ -1372,6 +1373,7 @@ class Recorder:
                 self._refill_at = time.monotonic() + RELINK_SETTLE_S
         tag = type(event).__name__
         if tag == "SessionStarted":
+            self.holds_session = True
             c = event.config  # a SessionConfig in the twin too (only Nanos fields differ)
             self._guarded(self.writer.add_metadata, "pairplay.session", {
                 "config": msgspec.json.encode(c).decode(), "session": c.session, "participant": c.participant,

@@ -24,6 +24,7 @@ import gc
 import logging
 import threading
 import time
+from collections import deque
 from typing import Any, Callable
 
 import msgspec
@@ -203,6 +204,10 @@ class Node:
         self.game_gone_s = GAME_GONE_S  # see GameWatch
         self.game_watch: GameWatch | None = None
         self._keys: dict[tuple[str, str], str] = {}  # (source, tag) -> key (publish); sources are ours, tags a fixed set
+        # `hold()` true: inputs wait aside, in order, and queries are still answered (a restarted recorder's
+        # refill asks what we sent): a game whose external recorder left the bus (services/recorderwatch.py)
+        self.hold: Callable[[], bool] | None = None
+        self._held: deque = deque()
     def _on_message(self, key: str, payload: bytes) -> None:
         self.inbox.put(key, payload)  # Zenoh's thread: hand over, never wait
 
@@ -317,7 +322,8 @@ class Node:
         up only this thread, never the session's end (`end_game` takes the lock) or a signal
         (handled on the main thread; run() on the main thread leaves publishing to the Outbox)."""
         here = threading.get_ident() != threading.main_thread().ident
-        item = self.inbox.get(timeout_s)
+        holding = self.hold is not None and self.hold()
+        item = self._held.popleft() if self._held and not holding else self.inbox.get(timeout_s)
         try:
             shed = self.inbox.take_shed()
             if shed or self.driver.refusals.held:  # (Refusals.pending, read inline: once per step)
@@ -328,6 +334,9 @@ class Node:
             key, payload, _ = item
             if key is None:  # a restarted recorder asks what we sent
                 answer_sent(self.outbox, self.logic.name, payload)
+                return True
+            if holding:  # taken once the hold ends, before anything that came after it
+                self._held.append(item)
                 return True
             with self._lock:
                 self.publish(self.driver.receive(key, payload), wake=not here)

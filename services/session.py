@@ -11,7 +11,9 @@ Every session ends with a SessionEnded that says why: "completed" (the game
 played every round), "interrupted" (SIGINT/SIGTERM: `stop.why` names the
 signal), "aborted" (the caller's `stop` without a signal: the experimenter) or
 "failed" (a service the session needs left the bus and did not come back within
-`settle_timeout_s`, or refused the game's start: services/refusal.py), with how far it got; the robot's suggestions still awaiting
+`settle_timeout_s`, or refused the game's start: services/refusal.py), with how far it got. An external
+recorder off the bus holds the game until one is back (services/recorderwatch.py); none back, the rounds it
+missed are said (`summary["not_recorded"]`); the robot's suggestions still awaiting
 an acknowledgement are recorded as "in-flight" (schemas/robot.py).
 """
 
@@ -38,6 +40,7 @@ from pairplay.services.game import GameLogic
 from pairplay.services.learner import LearnerLogic
 from pairplay.services.participant import ParticipantLogic
 from pairplay.services.recorder import Recorder, RecordingFailed, check_new_recording
+from pairplay.services.recorderwatch import RecorderWatch
 from pairplay.services.refusal import EndRefused, RefusalWatch, StartRefused  # noqa: F401  (StartRefused: re-exported)
 from pairplay.services.refusal import published_seq
 from pairplay.services.robot.bridge import ROBOT_CLOSE_S
@@ -124,7 +127,8 @@ def run_session(config: SessionConfig, path: str | Path, *, bus: Bus | None = No
     if config.observed_source == "gaze":
         needed.append("tracker")  # the eye tracker: without it no turn gets a suggestion
     nodes = []
-    bridge = game = None
+    bridge = game = recorder_watch = None
+    not_recorded = ""  # an external recorder left the bus and none came back: the rounds it missed (RecorderWatch)
     own_end: list = []  # the game's SessionEnded if the session's stop ended it (end_game)
     # Everything from here on is undone by the `finally` whatever fails, a thread that could not start included
     # (`ulimit -v`): a bus left open kept zenoh-python's threads, which are not daemons, and the process hung
@@ -167,6 +171,10 @@ def run_session(config: SessionConfig, path: str | Path, *, bus: Bus | None = No
         if "game" not in external:
             game = Node(bus, GameLogic(config), config.session, resume=False, stop=stop)
             nodes.append(game)
+            if "recorder" in external:  # held while its recorder is off the bus (services/recorderwatch.py)
+                recorder_watch = RecorderWatch(bus, config.session, lambda: game.logic.round,
+                                               connect=" ".join(bus.options.connect) or " ".join(bus.locators()))
+                game.hold = recorder_watch.held
             if nodes_out is not None:
                 nodes_out["game"] = game
             start_unless_stopped(lambda: game.start(wait_for=tuple(needed) + tuple(wait_also)), stop, "game")
@@ -177,7 +185,14 @@ def run_session(config: SessionConfig, path: str | Path, *, bus: Bus | None = No
         watch = forgery_watch(game, nodes, recorder, bridge, [s for s in needed if s in external])
         failure = watch_services(bus, config.session, nodes, [s for s in needed if s in external or s == "robot"],
                                  stop, settle_timeout_s, broken=lambda: watch.verdict() or refusals.verdict(),
-                                 waiting=requests.line)
+                                 waiting=lambda: "; ".join(filter(None, (requests.line(),
+                                                                        recorder_watch and recorder_watch.line()))))
+        said = recorder_watch.line() if recorder_watch is not None else ""
+        if said:  # what came after the last check, said too
+            log.warning(said)
+        # taken before anything else ends: an external recorder leaves the bus once the session has ended
+        not_recorded = recorder_watch.lost(config.rounds if game.logic.done else game.logic.round + 1) \
+            if recorder_watch is not None else ""
         own_end = end_game(game, stop, failure, recorder)
         if not failure and not stop.is_set():
             # an external recorder stays until everyone else left: do not wait for it
@@ -212,6 +227,10 @@ def run_session(config: SessionConfig, path: str | Path, *, bus: Bus | None = No
                            rounds_played=game.logic.round if game is not None else 0,
                            ended=game.logic.ended if game is not None else "")
             testpause.pause("session-summed")  # (tests/test_cut_signals.py: a second signal once it is known)
+        if not_recorded and summary is not None:  # the caller says it (cli/session.py), once
+            summary["not_recorded"] = not_recorded
+        elif not_recorded:
+            log.error(not_recorded)
     if failure is not None:
         raise RecordingFailed(failure, recorder.path)
     where = recorder.path if recorder is not None else f"session {config.session}"

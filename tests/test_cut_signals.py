@@ -179,7 +179,8 @@ def test_a_second_ctrl_c_to_a_recorder_once_its_file_is_finished(tmp_path):
     code, err = held.run(signal.SIGINT, signal.SIGINT)
     assert code == 130, err
     assert whole(tmp_path / "rec" / "rec.mcap")
-    assert err == ["pairplay run recorder: stopped (Ctrl-C)"], err
+    # (no session came: its line says the file holds none and keeps the id, tests/test_recorder_gone.py)
+    assert len(err) == 1 and err[0].startswith("pairplay run recorder: stopped (Ctrl-C) before session rec started: "), err
 
 
 def test_a_second_ctrl_c_as_the_lab_is_summed_up_leaves_its_summary(tmp_path):
