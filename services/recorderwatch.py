@@ -17,6 +17,7 @@ import threading
 import time
 from typing import Callable
 
+from pairplay.errors import command_word
 from pairplay.schemas.keys import alive_key
 
 
@@ -39,10 +40,9 @@ class RecorderWatch:
                 self.seen, self.gone_since, self.left_round = True, None, None
             elif self.seen and self.gone_since is None:
                 self.gone_since, self.left_round = self.clock(), self.round_now() + 1
-                where = f" --connect {self.connect}" if self.connect else " --connect <this bus>"
                 self._said.append(f"the recorder left the bus at round {self.left_round}: the game is held until one "
-                                  f"is back; restart it (`pairplay run recorder --session {self.session}{where}`) "
-                                  "to refill what it missed")
+                                  f"is back; restart it (`pairplay run recorder --session {command_word(self.session)} "
+                                  f"--connect {command_word(self.connect or 'ENDPOINT')}`) to refill what it missed")
 
     def held(self) -> bool:
         """True while the recorder that was on the bus is gone: the game takes no input (Node.hold)."""
