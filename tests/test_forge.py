@@ -152,6 +152,17 @@ def test_an_end_the_game_contradicts_is_noticed_and_gives_its_slot_back_to_the_r
     assert not g.notices
 
 
+def test_a_refill_gives_back_a_start_behind_the_games_own_events_that_a_live_message_may_not():
+    """A restarted recorder's file lost the game's SessionStarted with a damaged chunk; the refill (`overlap`)
+    asks the game for it, and it is behind the game's events by definition. Before, the recorder's guard (whole)
+    refused it as a start behind its source's events, and the copy lacked the session's start."""
+    for overlap, taken in ((False, False), (True, True)):
+        g = Guard("s", whole=True)
+        assert g.check(*message("s", ev.RoundStarted(round=0, faces=[i // 2 for i in range(18)]), 5)).reason is None
+        start = ev.SessionStarted(config=SessionConfig(session="s", participant="sim:ashley", seed=0, rounds=1))
+        assert (g.check(*message("s", start, 2), overlap=overlap).reason is None) is taken
+
+
 def test_a_second_end_cannot_displace_the_one_taken():
     g = Guard("s", whole=True)
     g.check(*message("s", ev.SessionEnded(reason="completed"), 7))
