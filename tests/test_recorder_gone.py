@@ -16,6 +16,8 @@ import sys
 import os
 import threading
 
+import pytest
+
 from busutil import wait_until
 from test_faults import endpoint_of, first_line, session_proc
 from test_recorder_restart import recorder
@@ -91,6 +93,7 @@ def _service(tmp_path, *args):
                             stderr=subprocess.PIPE, text=True, env=dict(os.environ, PYTHONUNBUFFERED="1"))
 
 
+@pytest.mark.slow  # 30 s of the game's settle time (the session's case runs by default)
 def test_a_distributed_game_waiting_for_a_recorder_that_dies_is_held_and_fails(tmp_path):
     session = "rgone2"
     game = _service(tmp_path, "game", "--participant", "sim:ashley", "--rounds", "5000", "--session", session,
@@ -174,6 +177,7 @@ def test_a_held_session_whose_recorder_is_restarted_goes_on_to_its_end_recorded_
     assert ran.returncode == 0, ran.stdout + ran.stderr
 
 
+@pytest.mark.slow  # 30 s of the game's settle time (the session's case runs by default)
 def test_a_recorder_whose_game_gave_up_says_its_file_holds_no_session(tmp_path):
     """trial33 M's side note: the game gave up waiting for a service and left; its recorder exited 0, its empty
     file keeping the id without a word. Now one line and exit 1 (its session was not recorded)."""
