@@ -21,6 +21,9 @@ from pairplay.errors import command_word
 from pairplay.schemas.keys import alive_key
 
 
+RECHECK_S = 1.0  # while held, how often the bus is asked whether the recorder's token is back (`held`)
+
+
 class RecorderWatch:
     def __init__(self, bus, session: str, round_now: Callable[[], int], connect: str = "", clock=time.monotonic):
         self.session, self.round_now, self.connect, self.clock = session, round_now, connect, clock
@@ -29,6 +32,7 @@ class RecorderWatch:
         self.gone_since: float | None = None
         self.left_round: int | None = None  # the round (from 1) it left at, until a recorder is back
         self._said: list[str] = []  # what to say once (`line`)
+        self.bus, self._recheck_at = bus, 0.0
         bus.watch_alive(alive_key(session, "recorder"), self._on_token)
 
     def _on_token(self, _key: str, up: bool) -> None:
@@ -45,7 +49,17 @@ class RecorderWatch:
                                   f"--connect {command_word(self.connect or 'ENDPOINT')}`) to refill what it missed")
 
     def held(self) -> bool:
-        """True while the recorder that was on the bus is gone: the game takes no input (Node.hold)."""
+        """True while the recorder that was on the bus is gone: the game takes no input (Node.hold). While it is,
+        the bus is asked every RECHECK_S whether the token is back: after a cut of the recorder host's link the
+        token's return reached no watcher, and the game stayed held for good (tests/test_netns.py, 180 s)."""
+        if self.gone_since is None:
+            return False
+        now = self.clock()
+        if now >= self._recheck_at:
+            self._recheck_at = now + RECHECK_S
+            key = alive_key(self.session, "recorder")
+            if key in self.bus.alive_now(key, timeout_s=0.3):
+                self._on_token(key, True)
         return self.gone_since is not None
 
     def gone_for(self) -> float:
