@@ -86,17 +86,23 @@ def simulator_rate(games: int, rounds: int, repeats: int = 3, workers: int = 1,
     so the untimed first run (`warm_then_best`) pays that and the timed ones do not. `cpu`:
     the process's CPU time (all its threads: with one worker, the rate per core
     whatever else the shared machine runs), else the wall time (several workers).
+
+    Each run's result is dropped before the next, as a caller of batches does. Holding all of them
+    (4 x 50 MiB of Q-tables and counts at 2,048 games) made every run fault in fresh memory: numpy
+    asks for transparent huge pages on arrays of 4 MiB and more, and with the kernel's THP defrag
+    "madvise" the faulting thread compacts memory itself; 0.25-0.30 s of system time a run on this
+    12-hour-old machine, so the batch of 2,048 measured 1.7-1.9 M/s where it plays 6-8 M/s.
     """
     personas = list(PERSONAS.values())
     chosen = [personas[i % len(personas)] for i in range(games)]
     seeds = [game_seed(0, p.key, i) for i, p in enumerate(chosen)]
-    results = []
+    steps = [0]
 
     def run() -> None:
         with threads.at_most(workers):
-            results.append(run_games(chosen, seeds, rounds))
+            steps[0] = int(run_games(chosen, seeds, rounds).picks.sum()) // 2
     best = warm_then_best(run, repeats, time.process_time if cpu else time.perf_counter)
-    return int(results[-1].picks.sum()) // 2 / best, int(results[-1].picks.sum()) // 2
+    return steps[0] / best, steps[0]
 
 
 # ru_maxrss survives fork and exec on Linux (a child started by a big bench process reports the

@@ -118,6 +118,26 @@ def test_quick_mode_times_warm_runs_as_the_full_mode_does(monkeypatch):
     assert hashed[0] == 2048 and hashed[-1] == 0, hashed
 
 
+def test_the_steps_rows_hold_one_result_at_a_time(monkeypatch):
+    """The batch of 2,048 measured 1.7-1.9 M/s where it plays 6-8 M/s: simulator_rate kept every run's
+    result, so each run faulted in 50 MiB of fresh memory (huge pages the kernel compacted for, as system
+    time inside the CPU timing). No run's Q-table may be alive when the next run starts."""
+    import weakref
+    from pairplay.bench import core
+
+    alive, real = [], core.run_games
+
+    def run_games(*args, **kwargs):  # the real games; how many earlier results live on, written down
+        alive.append(sum(ref() is not None for ref in refs))
+        result = real(*args, **kwargs)
+        refs.append(weakref.ref(result.q))
+        return result
+    refs: list = []
+    monkeypatch.setattr(core, "run_games", run_games)
+    core.simulator_rate(64, 5, repeats=3)
+    assert alive == [0, 0, 0, 0], alive
+
+
 def test_the_scaling_rows_base_is_a_warm_run(monkeypatch):
     """A new user's trial: the scaling rows' base (8 x 10 games x 500 rounds) was the first training of the
     process, cold, so the rows beside it always said "met". Every timed training now follows an untimed
