@@ -1052,6 +1052,7 @@ class Recorder:
         with self._lock:
             self.kept.append((key, payload))
         self._held.setdefault(verdict.event.source, set()).add(verdict.event.seq)
+        self._noted(verdict.event, self.clock())
         return True
 
     @property
@@ -1371,6 +1372,14 @@ class Recorder:
                 # held, with no word from Zenoh when the bus does not recover: test_netns), or is still on its
                 # way (another key): asked for once the way has had its time; refill asks only if a hole is left
                 self._refill_at = time.monotonic() + RELINK_SETTLE_S
+        self._noted(event, received_ns)
+        return True
+
+    def _noted(self, event, received_ns: int) -> None:
+        """What a session's start or end written to the file tells the recorder, whichever way it came: live
+        (`record`), or asked for (`_fill_hole`: a head caught up, a refill). Only the live way set these before,
+        so a recorder that first heard the game past its seq 1 wrote the whole session and then said the file
+        "holds no session" and to remove it, with exit 1, and the file had no "pairplay.session" (trial34 K)."""
         tag = type(event).__name__
         if tag == "SessionStarted":
             self.holds_session = True
@@ -1387,7 +1396,6 @@ class Recorder:
             # (data queued behind a backlog): by receipt time it looked absent and never back (_close_absences)
             stamp = event.time_ns if isinstance(event.time_ns, int) else event.time_ns.sec * 10**9 + event.time_ns.nsec
             self._ended_ns = min(received_ns, stamp)
-        return True
 
     def _reject(self, reason: str, key: str, payload: bytes, event=None, source: str = "", seq: int = 0) -> bool:
         out = self.refusals.refuse(self.clock(), reason, key, getattr(event, "source", source),
