@@ -92,6 +92,7 @@ from pairplay.schemas.jsonfile import MCAP_MAGIC
 from pairplay.schemas.events import RecordingGap, decode_event, encode_event, own_seq
 from pairplay.schemas.envelope import Nanos, stamped
 from pairplay.schemas.keys import alive_key, event_key, query_key, session_keys
+from pairplay.schemas.trust import SOURCES
 
 from pairplay.services.bus import MISSED, HEARTBEAT_S, Bus, Deadline, Inbox, Outbox
 from pairplay.services.guard import Guard, Refusals
@@ -1129,7 +1130,9 @@ class Recorder:
         on their way, which then need no refill)."""
         seen = self._seen()
         contiguous = self._contiguous(seen)
-        upto = {source: seq for source, seq in asked_upto(str(query.parameters)).items() if source != self.name}
+        # (the services' names, or a source the file holds: made-up names in a query's parameters are not kept)
+        upto = {source: seq for source, seq in asked_upto(str(query.parameters)).items()
+                if source != self.name and (source in SOURCES or source in contiguous)}
         lacking = {source for source, seq in upto.items() if contiguous.get(source, 0) < seq}
         if lacking & self._asked and (self._refill_at is None or self._refill_at > time.monotonic()):
             self._refill_at = time.monotonic()

@@ -86,3 +86,11 @@ def test_what_no_refill_gives_back_is_said_by_the_session(tmp_path, monkeypatch)
     said = summary.get("not_recorded", "")  # and now the session too (before: nothing, exit 0)
     assert said.startswith("the recording lacks events lost on the bus that no refill gave back: game seq ") \
         and "(session left2)" in said, said
+
+
+def test_a_held_questions_parameters_come_from_anyone_and_are_read_as_far_as_they_make_sense():
+    # what is not a source and a number of at most 16 digits is left out (int() of 5000 digits raised on Zenoh's
+    # thread in the refill's twin, runner.sent_after)
+    assert recorded.asked_upto("upto=game:12,learner:abc,:5,robot:" + "9" * 17 + ",participant:3") \
+        == {"game": 12, "participant": 3}
+    assert recorded.asked_upto("") == {} and recorded.asked_upto("upto=" + "x:1," * 3) == {"x": 1}
