@@ -25,7 +25,9 @@ the session id is left where it is, its events never merged). A close is done by
 deadline; what is still queued then is counted and recorded, not waited for. The session config, seed and software version
 go into MCAP metadata ("pairplay.session") when SessionStarted passes, the
 recorder's own into "pairplay.recorder". It answers restarting services with
-the log so far (`pairplay/<session>/_query/recorder/log`, msgpack batches).
+the log so far (`pairplay/<session>/_query/recorder/log`, msgpack batches), and a
+service about to leave with what it holds of each source (`.../_query/recorder/held`,
+services/recorded.py): a source asked for twice while the file lacks its events is refilled at once.
 
 A session id is taken once it has a recording: a NEW session whose recording
 (`<session>.mcap` or any `<session>.<k>.mcap`) exists is refused before anything

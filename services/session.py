@@ -13,7 +13,9 @@ signal), "aborted" (the caller's `stop` without a signal: the experimenter) or
 "failed" (a service the session needs left the bus and did not come back within
 `settle_timeout_s`, or refused the game's start: services/refusal.py), with how far it got. An external
 recorder off the bus holds the game until one is back (services/recorderwatch.py); none back, the rounds it
-missed are said (`summary["not_recorded"]`); the robot's suggestions still awaiting
+missed are said (`summary["not_recorded"]`). With an external recorder every service leaves only once it holds
+the service's events, and the holes it has once all have left are said the same way (services/recorded.py).
+The robot's suggestions still awaiting
 an acknowledgement are recorded as "in-flight" (schemas/robot.py).
 """
 
