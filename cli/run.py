@@ -240,7 +240,7 @@ def _run(args: argparse.Namespace, stop: threading.Event, recording: dict) -> in
         recorder_watch = None
         if args.service == "game" and "recorder" in args.wait_for:
             from pairplay.services.recorderwatch import RecorderWatch
-            recorder_watch = RecorderWatch(bus, args.session, lambda: logic.round,
+            recorder_watch = RecorderWatch(bus, args.session, lambda: logic.round, over=lambda: logic.done,
                                            connect=" ".join(args.connect) or " ".join(bus.locators()))
             node.hold = recorder_watch.held
         try:

@@ -15,7 +15,8 @@ records (services/bus.py `Outbox.sent`), which die with the process. In the four
 host's link came back 5 s after a cut, the game (held meanwhile) played its last rounds in 0.9 s, and the
 refill 1 s after the link's return found the game, the learner and the participant gone: their 2-4
 events each lost with the link were a hole in the file, and the session exited 0 saying nothing.
-Nothing is asked when no recorder is on the bus (its token: the game's hold covers a recorder gone).
+A recorder not on the bus when asked (its token) left after the game's end (before, the game's hold covers a
+recorder gone): that is said the same way, as what the file may lack.
 """
 
 from __future__ import annotations
@@ -118,16 +119,18 @@ def _held(bus: Bus, session: str, upto: dict[str, int], stop: threading.Event, s
 def until_recorded(bus: Bus, session: str, upto: dict[str, int], serve: Callable[[float], None],
                    stop: threading.Event, wait_s: float | None = None) -> str:
     """Wait until the recorder holds every event of `upto` (source -> its last seq), `serve(seconds)`
-    answering the refill's queries meanwhile (see rule). Returns "" once it does, or if no recorder is on
-    the bus, or once `stop` is set; else, after `wait_s` (RECORDED_WAIT_S), what it still lacks, in words."""
+    answering the refill's queries meanwhile (see rule). Returns "" once it does, or once `stop` is set; else, after `wait_s` (RECORDED_WAIT_S), what it still lacks, in words, or that the recorder
+    left the bus without saying (`_left`)."""
     wait_s = RECORDED_WAIT_S if wait_s is None else wait_s
     upto = {source: seq for source, seq in upto.items() if seq > 0}
     if not upto:
         return ""
     held, asked = _held(bus, session, upto, stop, serve,
                         lambda h: all(h.contiguous.get(s, 0) >= n for s, n in upto.items()), wait_s)
-    if stop.is_set() or not asked:
+    if stop.is_set():
         return ""
+    if not asked:
+        return _left(session, upto)
     if held is None:
         return f"the recorder did not say within {wait_s:g} s whether it holds {', '.join(sorted(upto))}'s events"
     lacking = said_holes(Held(held.contiguous, held.top, {s: h for s, h in held.holes.items() if s in upto}), upto)
@@ -135,15 +138,26 @@ def until_recorded(bus: Bus, session: str, upto: dict[str, int], serve: Callable
             if lacking else "")
 
 
+def _left(session: str, upto: dict[str, int]) -> str:
+    """The words for a recorder gone from the bus when asked what it holds. Asked only once the game has ended
+    (a recorder gone before is the game's hold, services/recorderwatch.py): a recorder that left (a crash, a
+    signal) after the game's end but before the services' last events (the robot's last reports) reached it
+    let the session exit 0 saying "the external recorder writes its file" (trial34 A)."""
+    return (f"the recorder left the bus after the game ended, before it said it holds the last events of "
+            f"{', '.join(sorted(upto))}: its file may lack them (session {session}; `pairplay rebuild` of it says what)")
+
+
 def recording_lacks(bus: Bus, session: str, upto: dict[str, int], stop: threading.Event) -> str:
-    """Every hole the recording has now, and what it lacks of `upto`, in words ("" if none, or if no recorder
-    is on the bus: a recorder gone is said by the game's hold, services/recorderwatch.py). A recorder busy
-    with a refill answers late: asked again for at most RECORDED_WAIT_S."""
+    """Every hole the recording has now, and what it lacks of `upto`, in words ("" if none), or that the recorder
+    left the bus without saying (`_left`). A recorder busy with a refill answers late: asked again for at most
+    RECORDED_WAIT_S."""
     upto = {source: seq for source, seq in upto.items() if seq > 0}
     held, asked = _held(bus, session, upto, stop, lambda seconds: stop.wait(seconds), lambda _h: True,
                         RECORDED_WAIT_S)
-    if stop.is_set() or not asked:
+    if stop.is_set():
         return ""
+    if not asked:
+        return _left(session, upto)
     if held is None:
         return f"the recorder did not say whether it holds every event (session {session})"
     lacking = said_holes(held, upto)

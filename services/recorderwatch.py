@@ -25,8 +25,12 @@ RECHECK_S = 1.0  # while held, how often the bus is asked whether the recorder's
 
 
 class RecorderWatch:
-    def __init__(self, bus, session: str, round_now: Callable[[], int], connect: str = "", clock=time.monotonic):
-        self.session, self.round_now, self.connect, self.clock = session, round_now, connect, clock
+    def __init__(self, bus, session: str, round_now: Callable[[], int], connect: str = "", clock=time.monotonic,
+                 over: Callable[[], bool] = lambda: False):
+        # `over()`: the game has ended. A recorder that leaves then holds no game back (nothing is left to
+        # hold); whether it took the services' last events is asked of it at their end (services/recorded.py),
+        # and its absence said there. Before, its drop said "at round 21 of 20: the game is held" (trial34 A).
+        self.session, self.round_now, self.connect, self.clock, self.over = session, round_now, connect, clock, over
         self._lock = threading.Lock()
         self.seen = False
         self.gone_since: float | None = None
@@ -42,7 +46,7 @@ class RecorderWatch:
                     self._said.append(f"a recorder is back on the bus (it refills what it missed from round "
                                       f"{self.left_round}); the game goes on")
                 self.seen, self.gone_since, self.left_round = True, None, None
-            elif self.seen and self.gone_since is None:
+            elif self.seen and self.gone_since is None and not self.over():
                 self.gone_since, self.left_round = self.clock(), self.round_now() + 1
                 self._said.append(f"the recorder left the bus at round {self.left_round}: the game is held until one "
                                   f"is back; restart it (`pairplay run recorder --session {command_word(self.session)} "

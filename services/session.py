@@ -180,6 +180,7 @@ def run_session(config: SessionConfig, path: str | Path, *, bus: Bus | None = No
             nodes.append(game)
             if "recorder" in external:  # held while its recorder is off the bus (services/recorderwatch.py)
                 recorder_watch = RecorderWatch(bus, config.session, lambda: game.logic.round,
+                                               over=lambda: game.logic.done,
                                                connect=" ".join(bus.options.connect) or " ".join(bus.locators()))
                 game.hold = recorder_watch.held
             if nodes_out is not None:
@@ -207,7 +208,10 @@ def run_session(config: SessionConfig, path: str | Path, *, bus: Bus | None = No
                                settle_timeout_s, broken=refusals.verdict)
             if "recorder" in external and not not_recorded:  # every service has left but ours, each once the
                 # recorder held its events, or not in time: what the recording lacks now is said (services/recorded.py)
-                not_recorded = recording_lacks(bus, config.session, {n.logic.name: n.driver.seq for n in nodes}, stop)
+                upto = {n.logic.name: n.driver.seq for n in nodes}
+                if bridge is not None:  # the robot's last reports come after the game's end (trial34 A)
+                    upto["robot"] = bridge.shell.seq
+                not_recorded = recording_lacks(bus, config.session, upto, stop)
         if hold is not None and not failure and recorder is not None:
             hold(recorder)
         if recorder is not None:

@@ -94,3 +94,39 @@ def test_a_held_questions_parameters_come_from_anyone_and_are_read_as_far_as_the
     assert recorded.asked_upto("upto=game:12,learner:abc,:5,robot:" + "9" * 17 + ",participant:3") \
         == {"game": 12, "participant": 3}
     assert recorded.asked_upto("") == {} and recorded.asked_upto("upto=" + "x:1," * 3) == {"x": 1}
+
+
+def test_a_recorder_that_leaves_after_the_games_end_is_said_by_the_session(tmp_path, monkeypatch):
+    """trial34 A: an external recorder stopped the moment the game's SessionEnded reached it (a crash or a signal
+    then) left the services' last events (a robot's last reports) out of its file, and the session exited 0
+    saying "the external recorder writes its file". Now the session says the recorder left before it said it
+    holds the services' last events (`pairplay session` exits 1 on it)."""
+    session = "gone1"
+    monkeypatch.setattr(recorded, "RECORDED_WAIT_S", 2.0)
+    router = Bus(BusOptions(mode="router"))
+    rec_bus = Bus(BusOptions(mode="client", connect=router.locators()[:1]))
+    recorder = Recorder(rec_bus, session, tmp_path / f"{session}.mcap")
+    stop, summary = threading.Event(), {}
+    take = recorder.enqueue
+
+    def then_leave(key: str, payload: bytes) -> None:
+        take(key, payload)
+        if key.endswith("/game/SessionEnded"):  # its thread stops, its Zenoh session closes: its token goes
+            threading.Thread(target=lambda: (stop.set(), rec_bus.close()), daemon=True).start()
+    recorder.enqueue = then_leave
+    try:
+        recorder.start()
+        thread = threading.Thread(target=recorder.run, args=(stop,), daemon=True)
+        thread.start()
+        config = SessionConfig(session=session, participant="sim:ashley", persona="ashley", seed=1, rounds=ROUNDS)
+        run_session(config, tmp_path / "unused.mcap", bus=router, external=("recorder",), settle_timeout_s=10,
+                    summary=summary)
+    finally:
+        stop.set()
+        thread.join(10)
+        recorder.close()
+        rec_bus.close()
+        router.close()
+    said = summary.get("not_recorded", "")
+    assert said.startswith("the recorder left the bus after the game ended, before it said it holds ") \
+        and "(session gone1;" in said, said
