@@ -173,7 +173,8 @@ def run_session(config: SessionConfig, path: str | Path, *, bus: Bus | None = No
             nodes.append(game)
             if "recorder" in external:  # held while its recorder is off the bus (services/recorderwatch.py)
                 recorder_watch = RecorderWatch(bus, config.session, lambda: game.logic.round,
-                                               connect=" ".join(bus.options.connect) or " ".join(bus.locators()))
+                                               connect=" ".join(bus.options.connect) or " ".join(bus.locators()),
+                                               settle_s=settle_timeout_s)
                 game.hold = recorder_watch.held
             if nodes_out is not None:
                 nodes_out["game"] = game
