@@ -161,6 +161,9 @@ def _run(args: argparse.Namespace, stop: threading.Event, recording: dict) -> in
     if args.service == "game" and args.participant:
         from pairplay.cli.session import config_from_args
         config = config_from_args(args)
+        if "robot" in args.wait_for:  # a bridge elsewhere (`pairplay robot`): its SessionStarted says one is expected
+            import msgspec
+            config = msgspec.structs.replace(config, robot="external")
         args.session = config.session
     elif not args.session:
         raise OptionError(f"--session is required for the {args.service}", "--session")

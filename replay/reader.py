@@ -48,7 +48,7 @@ from pairplay.livelock import LIVE, is_live
 from pairplay.numbers import counted
 from pairplay.schemas.envelope import Event, Seq
 from pairplay.schemas.jsonfile import MCAP_MAGIC
-from pairplay.schemas.events import EVENT_BY_TAG, RewardGiven, SessionEnded, SuggestionMade, decode_event
+from pairplay.schemas.events import EVENT_BY_TAG, RewardGiven, SessionEnded, SessionStarted, SuggestionMade, decode_event
 from pairplay.schemas.events import _decoder as _event_decoder
 from pairplay.schemas.keys import ROOT as KEY_ROOT
 from pairplay.schemas.trust import STARTERS
@@ -792,6 +792,7 @@ class _Reading:
         self.passed = 0  # the events read before this batch (`lost_at` counts them)
         self.ended_by: dict[str, str] = {}  # session -> its SessionEnded's reason (`unanswered`)
         self.learned: dict[str, set] = {}  # session -> the seqs of the learner's RewardGiven that learned
+        self.robots: dict[str, str] = {}  # session -> the robot its SessionStarted names ("" none: `unanswered`)
         # channel of an event that names a seq (`NAMES`) -> its topic and the seqs its events name (`misnamed`):
         # read by a small decoder of that field alone, whether or not the read decodes the event (rebuild's does
         # not decode SuggestionMade); kept across a channel's record again, as `route`'s seqs are
@@ -895,12 +896,15 @@ class _Reading:
                     log.lost_from = self.passed + len(events)
 
     def ends(self, events: list[RecordedEvent]) -> None:
-        """Note each session's end and the learner's RewardGiven that learned among `events` (`unanswered`)."""
+        """Note each session's end, its robot and the learner's RewardGiven that learned among `events`
+        (`unanswered`)."""
         ended_by, learned = self.ended_by, self.learned
         for r in events:
             kind = type(r.event)
             if kind is SessionEnded:
                 ended_by[r.event.session] = r.event.reason
+            elif kind is SessionStarted:
+                self.robots[r.event.session] = r.event.config.robot
             elif kind is RewardGiven and r.event.learned and r.event.source == "learner":
                 learned.setdefault(r.event.session, set()).add(r.event.seq)
 
@@ -912,7 +916,9 @@ class _Reading:
         log.seq_jumps, log.repeated = seq_jumps(route.values())
         # (RewardGiven decoded, not skipped: whether each learned is known)
         learned = self.learned if "RewardGiven" not in skipped else None
-        log.unanswered = unanswered(route.values(), self.ended_by, learned) + \
+        # (SessionStarted decoded, not skipped: whether its robot is known)
+        robots = self.robots if "SessionStarted" not in skipped else None
+        log.unanswered = unanswered(route.values(), self.ended_by, learned, robots) + \
             misnamed(route, self.names, self.ended_by)
         if recovered:
             log.metadata[RECOVERED] = recovered
@@ -1073,15 +1079,18 @@ ROBOT = (("robot", "ServiceStarted"), ("robot", "RobotActed"), ("learner", "Sugg
          ("recorder", "MessageRejected"))
 
 
-def unanswered(routes, ended_by: dict[str, str],
-               learned: dict[str, set] | None = None) -> list[tuple[str, str]]:
+def unanswered(routes, ended_by: dict[str, str], learned: dict[str, set] | None = None,
+               robots: dict[str, str] | None = None) -> list[tuple[str, str]]:
     """The pairs of `ANSWERED` whose answers are fewer, or more, than what they answer: (the source whose events are
     missing, the clause saying at least how many of what kind, and what shows it: `_missing`), counted from the distinct seqs read on each channel (`_read_log`'s
     routes; an identical copy counts once), per session. A session that did not complete (`ended_by`: its
     SessionEnded's reason by session: a signal, an abort; none recorded) may end between a request and its answer:
     one unanswered there is its end, not a loss (answers outnumbering asks have no such end). `learned`: by session,
     the seqs of the learner's RewardGiven that learned, each followed by its update (QUpdated or LSPIUpdated:
-    services/learner.py `_reward`; its last Q update dropped alone), None if the read did not decode them. Said by
+    services/learner.py `_reward`; its last Q update dropped alone), None if the read did not decode them. `robots`: by
+    session, the robot its SessionStarted names (SessionConfig.robot), None if not decoded: one named while no event
+    of 'robot' is read and the learner made suggestions is "the robot sent nothing" (its RobotActed are counted only
+    when it sent some: a file without any was said by no verb, trial33 E's robot). Said by
     kind, with no "last": a count cannot tell where (an event cut from the middle and the rest renumbered is counted
     the same: "the last events of 'learner' missing" placed a cut of round 2 of 6 at the end: trial33 G)."""
     import numpy as np
@@ -1094,6 +1103,7 @@ def unanswered(routes, ended_by: dict[str, str],
         if numbers and kind is not None and (source, kind.__name__) in paired:  # (only these: speed)
             seqs.setdefault((session, source, kind.__name__), []).append(np.frombuffer(numbers, dtype=np.int64))
     count = {at: _distinct(np.concatenate(held)) for at, held in seqs.items()}
+    robot_sent = {session for _, _, session, source, _, numbers in routes if source == "robot" and numbers}
     out = []
     for session in sorted({at[0] for at in count}):
         def n(sources, *tags):
@@ -1111,6 +1121,10 @@ def unanswered(routes, ended_by: dict[str, str],
                                     n_answered + refused - n_asked, asked,
                                     f"the {answers} of {answerers[0]!r} answer {n_asked}"))
         made, acted, starts = n(("learner",), "SuggestionMade"), n(("robot",), "RobotActed"), n(("robot",), "ServiceStarted")
+        robot = (robots or {}).get(session, "")
+        if robot and made and session not in robot_sent:  # (a robot sends its ServiceStarted before the game starts)
+            out.append(("robot", f"the robot sent nothing: no event of 'robot' in a session started with robot "
+                                 f"{robot!r}, for the {made} SuggestionMade of 'learner'"))
         # (only in a session that completed: a cut or a signal's end falls among the robot's acts, which lag; and
         # by a robot that started once: one killed and restarted never acted on what was suggested while it was
         # down, and sent nothing for it: test_faults_restart's robot case)

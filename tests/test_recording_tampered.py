@@ -389,3 +389,22 @@ def test_the_robots_first_or_last_event_dropped_is_said(which, robot_session, tm
     assert code == 0 and f"{gap} (the policy does not depend on them)" in out, out
     code, out = _run(capsys, "replay", str(p), "--verify")
     assert code == 1 and gap in out, out
+
+
+def test_a_robot_that_sent_nothing_in_a_session_started_with_one_is_said(robot_session, tmp_path, capsys):
+    """trial33 E's robot, all of it: every event of the robot dropped from a session started with one was said by no
+    verb (the RobotActed were counted only when the robot sent some). The session's SessionStarted names the robot
+    it was started with (by kind: no host, no key); one named, none of its events read, is said by every verb."""
+    [start] = read_log(robot_session).of("SessionStarted")
+    assert start.config.robot == "virtual"
+    [start] = read_log(SAMPLE).of("SessionStarted")  # a session without one (and every older recording): nothing
+    assert start.config.robot == "" and not read_log(SAMPLE).missing
+    made = sum(type(r.event).__name__ == "SuggestionMade" for r in read_log(robot_session).events)
+    gap = (f"the robot sent nothing: no event of 'robot' in a session started with robot 'virtual', for the {made} "
+           "SuggestionMade of 'learner'")
+    p = rewritten(tmp_path / "r.mcap", src=robot_session, each=_dropped("robot", range(0, 10**6)))
+    assert read_log(p).missing == gap and read_log(p, only=CURVE_READS).missing == gap, read_log(p).missing
+    code, out = _run(capsys, "rebuild", str(p), "--out", str(tmp_path / "rb"))
+    assert code == 0 and f"{gap} (the policy does not depend on them)" in out, out
+    code, out = _run(capsys, "replay", str(p), "--verify")
+    assert code == 1 and gap in out and "verify: FAIL" in out, out
