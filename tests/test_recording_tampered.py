@@ -321,6 +321,18 @@ def test_a_game_event_cut_and_the_rest_renumbered_is_said_and_refused(tag, gap, 
     assert code == 0 and f"{gap}: no recover gives them back" in out, out
 
 
+def test_a_rounds_deal_cut_leaves_its_turns_out_of_a_fit(tmp_path, capsys):
+    """A game's RoundStarted cut (and its later seqs renumbered): counterfactual fitted the round's turns under the
+    round before's deal, turns impossible under it: the likelihood was NaN, a traceback (ValueError: zero-size array)
+    once the fit's interval was empty. A turn is fitted under its own round's deal only."""
+    seqs = sorted(r.event.seq for r in read_log(SAMPLE).events
+                  if r.event.source == "game" and type(r.event).__name__ == "RoundStarted")
+    p = rewritten(tmp_path / "g.mcap", each=_cut_and_renumbered("game", seqs[2]))
+    code, out = _run(capsys, "counterfactual", str(p), "--fit-only", "--out", str(tmp_path / "cf"))
+    assert code == 0 and "turn left out of the fit: round 3 (20 turns): no RoundStarted before it" in out, out
+    assert "not whole ('game': its seqs renumbered" in out and "Traceback" not in out, out
+
+
 def test_a_participant_event_cut_and_the_rest_renumbered_is_said(tmp_path, capsys):
     """trial33 G, the participant's kind: what it perceived of a suggestion cut from the middle and its later seqs
     renumbered (no hole, as many picks as the game answered): no verb said it. The game's answers name the picks
