@@ -48,7 +48,7 @@ from pairplay.livelock import LIVE, is_live
 from pairplay.numbers import counted
 from pairplay.schemas.envelope import Event, Seq
 from pairplay.schemas.jsonfile import MCAP_MAGIC
-from pairplay.schemas.events import EVENT_BY_TAG, RewardGiven, SessionEnded, SessionStarted, SuggestionMade, decode_event
+from pairplay.schemas.events import EVENT_BY_TAG, Count, RewardGiven, SessionEnded, SessionStarted, decode_event
 from pairplay.schemas.events import _decoder as _event_decoder
 from pairplay.schemas.keys import ROOT as KEY_ROOT
 from pairplay.schemas.trust import STARTERS
@@ -94,18 +94,32 @@ _typed = JsonDecoder(_Typed)
 
 
 class _TypedNamed(_Typed):
-    """`_Typed`, and the seq an event of `NAMES` names: its request_seq or its pick_seq (0: a recording from before
-    the field), read in the same parse (`misnamed`)."""
+    """`_Typed`, and what an event of `NAMES` or `TURNS` names: its request_seq or its pick_seq (0: a recording from
+    before the field), or its round and turn, read in the same parse (`misnamed`, `_named_value`)."""
 
     request_seq: Seq = 0
     pick_seq: Seq = 0
+    round: Count = 0
+    turn: Count = 0
 
 
 class _TaggedNamed(_Tagged):
-    """`_Tagged`, and the seq named, as `_TypedNamed`."""
+    """`_Tagged`, and what it names, as `_TypedNamed`."""
 
     request_seq: Seq = 0
     pick_seq: Seq = 0
+    round: Count = 0
+    turn: Count = 0
+
+
+def _named_value(kind: str, e) -> int:
+    """What event `e` of tag `kind` (`NAMES`, `TURNS`) names, as one number: the seq it names, or its turn
+    (round << 32 | turn: both under 2**31)."""
+    if kind == "SuggestionMade":
+        return e.request_seq
+    if kind in ("CardRevealed", "PickRejected"):
+        return e.pick_seq
+    return e.round << 32 | e.turn
 
 
 _typed_named = JsonDecoder(_TypedNamed)
@@ -793,7 +807,8 @@ class _Reading:
         self.ended_by: dict[str, str] = {}  # session -> its SessionEnded's reason (`unanswered`)
         self.learned: dict[str, set] = {}  # session -> the seqs of the learner's RewardGiven that learned
         self.robots: dict[str, str] = {}  # session -> the robot its SessionStarted names ("" none: `unanswered`)
-        # channel of an event that names a seq (`NAMES`) -> its topic and the seqs its events name (`misnamed`):
+        # channel of an event that names a seq or a turn (`NAMES`, `TURNS`) -> its topic and what its events name
+        # (`misnamed`, `unresolved`):
         # read by a small decoder of that field alone, whether or not the read decodes the event (rebuild's does
         # not decode SuggestionMade); kept across a channel's record again, as `route`'s seqs are
         self.names: dict[int, tuple[str, array]] = {}
@@ -826,7 +841,7 @@ class _Reading:
                             if typed.type == tag:  # (else decoded below: a bad message is kept as one)
                                 numbers.append(typed.seq)
                                 if naming is not None:
-                                    naming[1].append(typed.request_seq or typed.pick_seq)
+                                    naming[1].append(_named_value(tag, typed))
                                 skipped[tag] = skipped.get(tag, 0) + 1
                                 continue
                         h = head(data) if naming is None else _tagged_named.raw(data)
@@ -835,7 +850,7 @@ class _Reading:
                             first = seen(((h.session, h.source, h.seq)), data)
                             if first is data:
                                 if naming is not None:
-                                    naming[1].append(h.request_seq or h.pick_seq)
+                                    naming[1].append(_named_value(tag, h))
                                 skipped[tag] = skipped.get(tag, 0) + 1
                                 continue
                             if first == data:
@@ -853,7 +868,7 @@ class _Reading:
                         continue
                     numbers.append(e.seq)
                     if naming is not None:
-                        naming[1].append(e.request_seq if k_type is SuggestionMade else e.pick_seq)
+                        naming[1].append(_named_value(k_type.__name__, e))
                     first = seen((e.session, e.source, e.seq), data)
                     if first is not data:
                         if first == data or _decoded(first) == e:
@@ -882,7 +897,7 @@ class _Reading:
                 numbers = known[5] if known is not None and known[0] == record.topic else array("q")
                 route[record.id] = (record.topic, tag if only is not None and tag in EVENT_BY_TAG and tag not in only
                                     else None, *named, EVENT_BY_TAG.get(tag) if named[0] is not None else None, numbers)
-                if (named[1], tag) in NAMES:
+                if (named[1], tag) in NAMES or (named[1], tag) in TURNS:
                     had = names.get(record.id)
                     names[record.id] = (record.topic, had[1] if had is not None and had[0] == record.topic
                                         else array("q"))
@@ -919,7 +934,7 @@ class _Reading:
         # (SessionStarted decoded, not skipped: whether its robot is known)
         robots = self.robots if "SessionStarted" not in skipped else None
         log.unanswered = unanswered(route.values(), self.ended_by, learned, robots) + \
-            misnamed(route, self.names, self.ended_by)
+            misnamed(route, self.names, self.ended_by) + unresolved(route, self.names, self.ended_by)
         if recovered:
             log.metadata[RECOVERED] = recovered
         log.source_lost = said_source_lost(log.metadata.get(RECOVERED, {}))
@@ -1159,6 +1174,43 @@ NAMES = {("learner", "SuggestionMade"): (("game",), "SuggestionRequested", "requ
          ("game", "PickRejected"): (("participant", "board"), "CardPicked", "pick_seq")}
 
 
+# a learner's RewardGiven settles a suggestion of a turn the game resolves (services/learner.py: on its TurnResolved,
+# or at a press of the wrong-suggestion button within it): every turn one settles has the game's TurnResolved in a
+# session that completed. Seen by round and turn, as neither names the other's seq: a TurnResolved cut and the
+# game's later seqs renumbered after the last request (which no request_seq shows)
+TURNS = {("learner", "RewardGiven"): ("game", "TurnResolved"), ("game", "TurnResolved"): None}
+
+
+def unresolved(route: dict, names: dict[int, tuple[str, array]], ended_by: dict[str, str]) -> list[tuple[str, str]]:
+    """The sessions whose learner settled turns (`TURNS`) the game resolved none of: ("game", the clause), one a
+    session. Past the last turn resolved in a session that did not complete is its end (an abort leaves a suggestion
+    unsettled, its RewardGiven said so), not counted."""
+    import numpy as np
+
+    turns: dict[tuple[str, str], list] = {}  # (session, tag) -> the turns its events name
+    for channel, (topic, numbers) in names.items():
+        routed = route.get(channel)
+        if routed is not None and routed[0] == topic and numbers and (routed[3], routed[4].__name__) in TURNS:
+            turns.setdefault((routed[2], routed[4].__name__), []).append(np.frombuffer(numbers, dtype=np.int64))
+    out = []
+    for (session, tag), held in turns.items():
+        if tag != "RewardGiven" or (session, "TurnResolved") not in turns:
+            continue  # (no TurnResolved at all: a session that stopped in its first turn, or the seqs say it)
+        settled = np.unique(np.concatenate(held))
+        resolved = np.unique(np.concatenate(turns[(session, "TurnResolved")]))
+        off = settled[~np.isin(settled, resolved)]
+        if ended_by.get(session) != "completed":
+            off = off[off < resolved.max()]
+        if off.size:
+            first = int(off[0])
+            turn = f"round {(first >> 32) + 1} turn {(first & 0xFFFFFFFF) + 1}"
+            out.append(("game", f"{counted(off.size, 'TurnResolved', 'TurnResolved')} of 'game' missing ("
+                                + (f"a RewardGiven of 'learner' settles {turn}, which no TurnResolved resolves)"
+                                   if off.size == 1 else f"RewardGiven of 'learner' settle {off.size} turns no "
+                                   f"TurnResolved resolves, the first {turn})")))
+    return out
+
+
 def misnamed(route: dict, names: dict[int, tuple[str, array]], ended_by: dict[str, str]) -> list[tuple[str, str]]:
     """The sources whose seqs, as other sources' events name them (`NAMES`), hold no event of the kind named:
     (the source, the clause saying so), one a source and session. `route`: `_Reading.route` (channel id -> topic,
@@ -1172,7 +1224,7 @@ def misnamed(route: dict, names: dict[int, tuple[str, array]], ended_by: dict[st
     by: dict[tuple[str, tuple, str, str], set] = {}  # the same -> the tags naming them
     for channel, (topic, numbers) in names.items():
         routed = route.get(channel)
-        if routed is None or routed[0] != topic or not numbers:
+        if routed is None or routed[0] != topic or not numbers or (routed[3], routed[4].__name__) not in NAMES:
             continue
         _, _, session, source, kind, _ = routed
         sources, tag, name = NAMES[(source, kind.__name__)]

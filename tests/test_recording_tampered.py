@@ -306,14 +306,18 @@ def test_the_participants_first_last_or_every_event_dropped_is_said_by_every_ver
     # an event of another kind, which nothing answers one for one: the seqs the learner's answers name move off the
     # game's requests (before: rebuild, recover, counterfactual silent, counterfactual fitted fewer picks: trial33 G)
     ("TurnResolved", "'game': its seqs renumbered (an event cut or added): the request_seq of 34 SuggestionMade of "
-                     "'learner' name no SuggestionRequested (the first: 135)")])
+                     "'learner' name no SuggestionRequested (the first: 135)"),
+    # the last turn's, after the last request (no request_seq moves): the learner's reward settles it
+    ("last TurnResolved", "1 TurnResolved of 'game' missing (a RewardGiven of 'learner' settles round 4 turn 16, "
+                          "which no TurnResolved resolves)")])
 def test_a_game_event_cut_and_the_rest_renumbered_is_said_and_refused(tag, gap, tmp_path, capsys):
     """trial33 G: a game's request or reveal cut from the middle and its later seqs renumbered (no hole in its seq):
     rebuild exit 0 silent, counterfactual fitted fewer picks silently. The learner answers each request once (its
     answers to no request say the game's event missing), the game each pick (picks it answered none of say it)."""
     seqs = sorted(r.event.seq for r in read_log(SAMPLE).events
-                  if r.event.source == "game" and type(r.event).__name__ == tag)
-    p = rewritten(tmp_path / "g.mcap", each=_cut_and_renumbered("game", seqs[min(30, len(seqs) // 2)]))
+                  if r.event.source == "game" and type(r.event).__name__ == tag.split()[-1])
+    p = rewritten(tmp_path / "g.mcap", each=_cut_and_renumbered("game", seqs[-1 if tag.startswith("last")
+                                                                             else min(30, len(seqs) // 2)]))
     _refused_and_flagged(capsys, p, tmp_path, gap)
     code, out = _run(capsys, "counterfactual", str(p), "--fit-only", "--out", str(tmp_path / "cf"))
     assert f"not whole ({gap})" in out, out
