@@ -82,6 +82,9 @@ def _on_folder(data: StudyData, args) -> int:
         # the mark's reason does not (their words about the person): said withheld, as every reader says it
         print(escaped(f"merged policy made with their game marked invalid since: {k.merged} (kept flagged without "
                       f"their id, {k.reason}; the plan combines it again if it is current)"))
+    if erased.unnamed:  # another's words about them, rewritten: said, so the experimenter can read what is kept
+        print(f"their name (from the key file, whole or a part of it) replaced by `deleted` in "
+              f"{counted(erased.unnamed, 'kept reason')} of other people's games (`pairplay protocol status` shows them)")
     for c in erased.copies:
         if c.erased:
             print(escaped(f"erased {copy_words(c, args.participant)}: {c.path} (pairplay's own file, unchanged: the "
@@ -109,6 +112,7 @@ def left_lines(folder: Path, pid: str, erased) -> list[str]:
              f"(and any copy of it) by hand" for c in erased.copies if not c.erased]
     for rel, names in erased.left:
         lines.append(f"kept {folder / rel}: not written by the report (the user's)"
-                     + (f"; it names {pid} (their id, or their name from the key file): edit it by hand" if names
+                     + (f"; it names {pid} (their id, or their name or a part of it, from the key file): edit it by "
+                        "hand" if names
                         else f"; check it does not mention {pid}"))
     return lines

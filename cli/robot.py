@@ -170,6 +170,7 @@ def _serve(args: argparse.Namespace) -> int:
     stop_on_signals(stop)
     with Bus(options_from_args(args), stop=stop) as bus:
         bridge = bridge_from_args(bus, args.session, args, stop)
+        bridge.confirm_recorded = True  # the recorder is another process (services/recorded.py)
         print(f"robot bridge for session {args.session} on {bridge.backend}; bus {' '.join(bus.locators())}",
               flush=True)
         bridge.run(stop)

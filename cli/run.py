@@ -245,6 +245,7 @@ def _run(args: argparse.Namespace, stop: threading.Event, recording: dict) -> in
         # a game given its config starts the session; every other service, and a game
         # restarted by session id alone, catches up from the recorder's log
         node = Node(bus, logic, args.session, resume=not (args.service == "game" and args.participant), stop=stop)
+        node.confirm_recorded = True  # the recorder is another process: leave once it holds ours (services/recorded.py)
         # a game alone in its process: a service elsewhere that refuses its start can take no part, and the
         # game would wait for it for ever: it ends the session, one line (services/refusal.py); subscribed
         # before the start. Its end refused: the refusing service's own process ends (runner.GameWatch)
@@ -289,6 +290,8 @@ def _run(args: argparse.Namespace, stop: threading.Event, recording: dict) -> in
             if recorder_watch is not None else ""
         if stop.is_set():
             thread.join(deadline_of(stop).left(0.5, 0.2))
+        elif args.service == "game" and not not_recorded and node.lacking:  # said as a session's failure, below
+            not_recorded = f"{node.lacking} (session {args.session})"
         if args.service == "game" and not logic.done:  # stopped: the session's end says why and how far
             from pairplay.services.session import end_reason
             reason, detail = end_reason(stop, forged or refused or gone)

@@ -1476,7 +1476,7 @@ class StudyData:
             copies = [_settle(e, {f.resolve() for f in files}) for e in self.copies_of(pid)]
             erased = {c.path for c in copies if c.erased}
             _tidy_manifests({Path(c.path).parent for c in copies if c.erased})
-            kept, removed = [], 0
+            kept, removed, unnamed = [], 0, 0
             for e in self.read_journal():
                 if getattr(e, "participant", None) == pid or getattr(e, "session", None) in sessions:
                     removed += 1
@@ -1488,7 +1488,9 @@ class StudyData:
                     else:
                         kept.append(_redacted(msgspec.structs.replace(e, participants=others), pid))
                 else:  # a combination of their games, a note naming them: kept without the id
-                    kept.append(_unnamed(_redacted(_withheld(e), pid), name))
+                    line = _redacted(_withheld(e), pid)
+                    kept.append(_unnamed(line, name))
+                    unnamed += kept[-1] is not line
             for m in merged:
                 _redact_policy_file(self.folder / m, pid)
             key_removed = self._drop_from_key_file(pid)
@@ -1508,7 +1510,7 @@ class StudyData:
                 journal_lines_removed=removed, merged_policies_using_them=merged, key_file_line_removed=key_removed,
                 copies_erased=len(erased), consent_withdrawn=consent_withdrawn, flaws_kept=flaws))
             self.write_tables()
-            return Deletion(deleted, left, [c for c in copies if c.fate])
+            return Deletion(deleted, left, [c for c in copies if c.fate], unnamed)
 
     def copies_of(self, pid: str) -> list[j.ParticipantExported | j.CopyWritten]:
         """The copies of `pid`'s data the journal says were made beyond the places their deletion erases by
@@ -1632,6 +1634,7 @@ class Deletion:
     event: j.ParticipantDeleted
     left: list[tuple[str, bool]]
     copies: list[Copy]
+    unnamed: int = 0  # kept lines of others whose reason named them (`_unnamed`): their name replaced, said
 
     @property
     def elsewhere(self) -> list[str]:
@@ -1652,10 +1655,19 @@ def _names(path: Path, pid: str, name: str = "") -> bool:
 
 
 def _name_pattern(name: str) -> str | None:
-    """A pattern of a person's `name` (from the key file) as whole words, None for one of fewer than two letters
-    (it would find every "a")."""
-    name = name.strip()
-    return rf"(?<!\w){re.escape(name)}(?!\w)" if sum(c.isalpha() for c in name) >= 2 else None
+    """A pattern of a person's `name` (from the key file) in free text, in any case: the whole name, its parts
+    joined by a space, hyphen, dot, underscore or nothing ("Anna-Schmidt", "annaschmidt@uni.de"), or any part
+    of two letters or more alone ("Anna's mother", "A. Schmidt", "the Schmidts"), each as whole words; None for
+    a name with no such part (one letter would find every "a"). An experimenter writes "Anna's mother", not
+    "Anna Schmidt's mother": matching the whole name alone left a first name and a surname that still said
+    who the deleted person was (trial34 D). A part that is also a word ("May") is taken too: erring towards
+    erasure."""
+    parts = [w for w in re.findall(r"[^\W\d_]+", name) if len(w) >= 2]
+    if not parts:
+        return None
+    joined = r"[\s\-._]*".join(map(re.escape, parts))
+    alone = "|".join(map(re.escape, sorted(parts, key=len, reverse=True)))
+    return rf"(?<![^\W_])(?:{joined}|{alone})s?(?![^\W_])"  # an underscore parts words here ("Schmidt_Anna")
 
 
 def mentions(text: str, pid: str) -> bool:
@@ -1891,13 +1903,15 @@ def _redacted(value, pid: str):
 
 def _unnamed(e: j.JournalEvent, name: str) -> j.JournalEvent:
     """`e`, a line kept by a deletion, with `name` (the deleted person's, from the key file) replaced by "deleted"
-    in its free text, the `reason` a person typed (another's game's mark or end: "Anna Schmidt's mother came
-    in"), whole words in any case. Only there: a name may be any word ("phase1"), and the ids, phases and files
-    the other fields hold are no one's words (`_name_pattern`)."""
+    in its free text, the `reason` a person typed (another's game's mark or end: "Anna's mother came in"), in
+    any case (`_name_pattern`: the name, its joined forms, its parts). Only there: a name may be any word
+    ("phase1"), and the ids, phases and files the other fields hold are no one's words. `e` itself when its
+    reason does not name them (the deletion counts the lines it rewrote, and says so)."""
     pattern, reason = _name_pattern(name), getattr(e, "reason", None)
     if pattern is None or not isinstance(reason, str):
         return e
-    return msgspec.structs.replace(e, reason=re.sub(pattern, "deleted", reason, flags=re.IGNORECASE))
+    unnamed = re.sub(pattern, "deleted", reason, flags=re.IGNORECASE)
+    return e if unnamed == reason else msgspec.structs.replace(e, reason=unnamed)
 
 
 def _withheld(e: j.JournalEvent) -> j.JournalEvent:

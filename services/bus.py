@@ -915,19 +915,29 @@ class Bus:
         finally:
             query.drop()
 
-    def query(self, selector: str, timeout_s: float = 2.0, stop: threading.Event | None = None) -> list[bytes]:
+    def query(self, selector: str, timeout_s: float = 2.0, stop: threading.Event | None = None,
+              meanwhile: Callable[[], None] | None = None) -> list[bytes]:
         """Payloads of every ok reply to a query (errors are logged, not raised); returns
-        early, with what came, once `stop` is set."""
+        early, with what came, once `stop` is set. `meanwhile()`, if given, is called while no
+        reply waits (it must return within milliseconds): a service that asks the recorder
+        whether it holds its events answers the recorder's refill so (services/recorded.py)."""
         out = []
         # no consolidation: a queryable may answer with many replies on one key
         replies = _get(self.session.get, selector, timeout=timeout_s,
                        consolidation=zenoh.QueryConsolidation(zenoh.ConsolidationMode.NONE))
-        for reply in _replies(replies, timeout_s + 1.0, stop):
+        for reply in _replies(replies, timeout_s + 1.0, stop, meanwhile):
             if reply.ok is not None:
                 out.append(reply.ok.payload.to_bytes())
             else:
                 log.warning("query %s: error reply %s", selector, reply.err.payload.to_bytes()[:200])
         return out
+
+    def release(self, declared) -> None:
+        """Undeclare one declaration now (a queryable nobody will answer any more: a query to it would wait
+        its whole timeout), not at the bus's close."""
+        with self._lock:
+            self._declared = [d for d in self._declared if d is not declared]
+        _undeclare(declared)
 
     def alive(self, key: str):
         """Declare a liveliness token: others see this service while it runs."""
@@ -1089,17 +1099,23 @@ def _get(start: Callable[..., Any], *args: Any, **kwargs: Any) -> queue.SimpleQu
     return replies
 
 
-def _replies(replies: queue.SimpleQueue, wait_s: float, stop: threading.Event | None):
+def _replies(replies: queue.SimpleQueue, wait_s: float, stop: threading.Event | None,
+             meanwhile: Callable[[], None] | None = None):
     """The replies of a get (`_get`) as they come, for at most `wait_s` seconds, until every reply
-    came or `stop` is set (a shutdown does not wait out a query)."""
+    came or `stop` is set (a shutdown does not wait out a query); `meanwhile()` called while none waits."""
     deadline = time.monotonic() + wait_s
     while not (stop is not None and stop.is_set()):
         left = deadline - time.monotonic()
         if left <= 0:
             return
         try:
-            reply = replies.get(timeout=min(left, 0.002 if stop is not None else left))
+            if meanwhile is not None:
+                reply = replies.get_nowait()
+            else:
+                reply = replies.get(timeout=min(left, 0.002 if stop is not None else left))
         except queue.Empty:
+            if meanwhile is not None:
+                meanwhile()
             continue
         if reply is _DONE:
             return

@@ -25,7 +25,9 @@ the session id is left where it is, its events never merged). A close is done by
 deadline; what is still queued then is counted and recorded, not waited for. The session config, seed and software version
 go into MCAP metadata ("pairplay.session") when SessionStarted passes, the
 recorder's own into "pairplay.recorder". It answers restarting services with
-the log so far (`pairplay/<session>/_query/recorder/log`, msgpack batches).
+the log so far (`pairplay/<session>/_query/recorder/log`, msgpack batches), and a
+service about to leave with what it holds of each source (`.../_query/recorder/held`,
+services/recorded.py): a source asked for twice while the file lacks its events is refilled at once.
 
 A session id is taken once it has a recording: a NEW session whose recording
 (`<session>.mcap` or any `<session>.<k>.mcap`) exists is refused before anything
@@ -92,9 +94,11 @@ from pairplay.schemas.jsonfile import MCAP_MAGIC
 from pairplay.schemas.events import RecordingGap, decode_event, encode_event, own_seq
 from pairplay.schemas.envelope import Nanos, stamped
 from pairplay.schemas.keys import alive_key, event_key, query_key, session_keys
+from pairplay.schemas.trust import SOURCES
 
 from pairplay.services.bus import MISSED, HEARTBEAT_S, Bus, Deadline, Inbox, Outbox
 from pairplay.services.guard import Guard, Refusals
+from pairplay.services.recorded import HELD_QUERY, Held, asked_upto
 from pairplay.services.runner import LOG_QUERY, SENT_QUERY
 from pairplay.services.walmerge import admit
 from pairplay.schemas.nesting import JsonDecoder, msgpack_decode
@@ -586,6 +590,17 @@ def _holes(seen: dict[str, set[int]]) -> dict[str, list[tuple[int, int]]]:
     return out
 
 
+def _missing(seqs: set[int]) -> list[tuple[int, int]]:
+    """The seqs missing from 1 up to the highest of `seqs`, as (first, last) runs (a source's head too: what it
+    published before the recorder listened, while it is not caught up)."""
+    out, at = [], 1
+    for q in sorted(seqs):
+        if q > at:
+            out.append((at, q - 1))
+        at = q + 1
+    return out
+
+
 def finished_whole(path: str | Path) -> bool:
     """Whether the recording at `path` was finished by its recorder (Recorder.close): its end written (the
     file ends with MCAP's magic) and no journal beside it (removed in the same step as the end's fsync). What
@@ -695,6 +710,7 @@ class Recorder:
         self._quiet_until_ns = 0
         self._link_down = False
         self._refills_left = REFILLS
+        self._asked: set[str] = set()  # sources a `held` question found lacking (_answer_held): asked again, refilled
         self._outage_pending = False  # a link outage no refill has been answered after yet (its tail not known)
         self._last_seq: dict[str, int] = {}  # per source, its highest seq written (a jump past it: a hole, refilled)
         # per source first heard past its seq 1 (it published before this recorder listened): its first live seq and
@@ -1052,6 +1068,7 @@ class Recorder:
         with self._lock:
             self.kept.append((key, payload))
         self._held.setdefault(verdict.event.source, set()).add(verdict.event.seq)
+        self._noted(verdict.event, self.clock())
         return True
 
     @property
@@ -1071,6 +1088,8 @@ class Recorder:
         self.journal.start()
         self.bus.subscribe(session_keys(self.session), self.enqueue, self._on_miss, drain=True)
         self.bus.queryable(query_key(self.session, self.name, LOG_QUERY), self.inbox.control)
+        # a service about to leave asks whether we hold what it published (services/recorded.py): answered in turn
+        self.bus.queryable(query_key(self.session, self.name, HELD_QUERY), lambda q: self.inbox.control(("held", q)))
         # the link to the router watched on every bus: a plain one loses what its queue held when the link closes
         # (a 5 s cut under load: test_netns); before, only a recovering bus, and such an outage passed for every
         # service's absence, with no refill
@@ -1106,6 +1125,26 @@ class Recorder:
         batches = [msgspec.msgpack.encode((i // BATCH, items[i:i + BATCH])) for i in range(0, len(items), BATCH)]
         if self.outbox is not None:
             self.outbox.call(lambda: Bus.answer(query, batches))
+
+    def _answer_held(self, query) -> None:
+        """What we hold (services/recorded.py `Held`), after everything taken before the question. A source
+        asked for again while we still lack its events up to the seq it asks (`upto`) is refilled now: it is
+        on the bus, about to leave with its record of what it sent (the first ask may overtake its last events
+        on their way, which then need no refill)."""
+        seen = self._seen()
+        contiguous = self._contiguous(seen)
+        # (the services' names, or a source the file holds: made-up names in a query's parameters are not kept)
+        upto = {source: seq for source, seq in asked_upto(str(query.parameters)).items()
+                if source != self.name and (source in SOURCES or source in contiguous)}
+        lacking = {source for source, seq in upto.items() if contiguous.get(source, 0) < seq}
+        if lacking & self._asked and (self._refill_at is None or self._refill_at > time.monotonic()):
+            self._refill_at = time.monotonic()
+        self._asked = (self._asked - set(upto)) | lacking  # (several services ask in turn: each its own)
+        held = Held(contiguous=contiguous, top={s: max(q) for s, q in seen.items() if q},
+                    holes={s: h for s, q in seen.items() if (h := _missing(q))})
+        payload = msgspec.msgpack.encode(held)
+        if self.outbox is not None:
+            self.outbox.call(lambda: Bus.answer(query, [payload]))
 
     # -- writer side (one thread) -----------------------------------------
     def _guarded(self, fn, *args, **kwargs):
@@ -1204,6 +1243,8 @@ class Recorder:
                 raise RecordingFailed(payload[1])
             elif isinstance(payload, tuple) and payload[0] == "alive":
                 self._alive(*payload[1:])
+            elif isinstance(payload, tuple) and payload[0] == "held":
+                self._answer_held(payload[1])
             elif isinstance(payload, tuple):
                 self._link(*payload[1:])
             else:  # a query for the log
@@ -1371,6 +1412,14 @@ class Recorder:
                 # held, with no word from Zenoh when the bus does not recover: test_netns), or is still on its
                 # way (another key): asked for once the way has had its time; refill asks only if a hole is left
                 self._refill_at = time.monotonic() + RELINK_SETTLE_S
+        self._noted(event, received_ns)
+        return True
+
+    def _noted(self, event, received_ns: int) -> None:
+        """What a session's start or end written to the file tells the recorder, whichever way it came: live
+        (`record`), or asked for (`_fill_hole`: a head caught up, a refill). Only the live way set these before,
+        so a recorder that first heard the game past its seq 1 wrote the whole session and then said the file
+        "holds no session" and to remove it, with exit 1, and the file had no "pairplay.session" (trial34 K)."""
         tag = type(event).__name__
         if tag == "SessionStarted":
             self.holds_session = True
@@ -1387,7 +1436,6 @@ class Recorder:
             # (data queued behind a backlog): by receipt time it looked absent and never back (_close_absences)
             stamp = event.time_ns if isinstance(event.time_ns, int) else event.time_ns.sec * 10**9 + event.time_ns.nsec
             self._ended_ns = min(received_ns, stamp)
-        return True
 
     def _reject(self, reason: str, key: str, payload: bytes, event=None, source: str = "", seq: int = 0) -> bool:
         out = self.refusals.refuse(self.clock(), reason, key, getattr(event, "source", source),

@@ -37,6 +37,7 @@ from pairplay.schemas.trust import SOURCES, STARTERS
 
 from pairplay.services.bus import MISSED, Bus, Inbox, Outbox
 from pairplay.services.node import Driver, Logic
+from pairplay.services.recorded import FLUSH_S, until_recorded
 from pairplay.schemas.nesting import msgpack_decode
 
 log = logging.getLogger("pairplay.runner")
@@ -107,6 +108,16 @@ def answer_sent(outbox: Outbox, name: str, query) -> None:
         items = [(k, p) for k, p in outbox.sent if own_seq(p) > after]
         Bus.answer(query, [msgspec.msgpack.encode((name, items))])
     outbox.call(reply)
+
+
+def serve_sent(inbox: Inbox, outbox: Outbox, name: str, seconds: float) -> None:
+    """For `seconds`, answer what the recorder asks of what we sent (`sent?after=`) from `inbox`, the session
+    over (services/recorded.py); anything else that comes then is dropped, as it was when the service ended."""
+    until = time.monotonic() + seconds
+    while (left := until - time.monotonic()) > 0:
+        item = inbox.get(left)
+        if item is not None and item[0] is None:
+            answer_sent(outbox, name, item[1])
 
 
 def waiting_for(services, timeout_s: float = WAIT_FOR_S) -> str:
@@ -208,6 +219,11 @@ class Node:
         # refill asks what we sent): a game whose external recorder left the bus (services/recorderwatch.py)
         self.hold: Callable[[], bool] | None = None
         self._held: deque = deque()
+        # its recorder is another process: once its session has ended, it stays on the bus until the recorder
+        # holds every event it published, answering the refill (services/recorded.py); `lacking`: what it did not
+        self.confirm_recorded = False
+        self.lacking = ""
+        self._sent_query = None  # its queryable (`start`), released when its thread ends: nobody answers it then
     def _on_message(self, key: str, payload: bytes) -> None:
         self.inbox.put(key, payload)  # Zenoh's thread: hand over, never wait
 
@@ -262,7 +278,7 @@ class Node:
         """Subscribe, announce, catch up; with `wait_for`, first wait for those services' tokens.
         Raises Stopped if the stop flag is set meanwhile."""
         self.subscribe()
-        self.bus.queryable(query_key(self.session, self.logic.name, SENT_QUERY), self.inbox.control)
+        self._sent_query = self.bus.queryable(query_key(self.session, self.logic.name, SENT_QUERY), self.inbox.control)
         if self.logic.name != "game":
             self.game_watch = GameWatch(self.bus, self.session, self.game_gone_s)
         if wait_for:
@@ -358,6 +374,19 @@ class Node:
                 break
         with self._lock:  # `pairplay run` may end the game from its main thread meanwhile
             self.publish(self.driver.tick(self.inbox.take_shed(), force=True))
+        if self.confirm_recorded and self.logic.done and not stop.is_set():
+            self.outbox.flush(FLUSH_S)  # (what it published last: the recorder is asked about it next)
+            self.lacking = until_recorded(self.bus, self.session, {self.logic.name: self.driver.seq},
+                                          lambda s: serve_sent(self.inbox, self.outbox, self.logic.name, s), stop)
+            if self.lacking:
+                log.warning("%s: %s", self.logic.name, self.lacking)
+        if self.logic.done and self._sent_query is not None:
+            # nobody takes the inbox from here on: a refill's question to us would wait its whole timeout, and hold up
+            # the recorder's thread with it (3-7 s), while it is asked what it holds by those still on the bus
+            self.bus.release(self._sent_query)
+            self._sent_query = None
+            while self.inbox.get(0) is not None:  # (a question queued meanwhile: dropped, so Zenoh finishes it)
+                pass
         if self.driver.guard.skipped:
             log.info("%s skipped %d deliveries its log already held", self.logic.name, self.driver.guard.skipped)
 

@@ -13,7 +13,9 @@ signal), "aborted" (the caller's `stop` without a signal: the experimenter) or
 "failed" (a service the session needs left the bus and did not come back within
 `settle_timeout_s`, or refused the game's start: services/refusal.py), with how far it got. An external
 recorder off the bus holds the game until one is back (services/recorderwatch.py); none back, the rounds it
-missed are said (`summary["not_recorded"]`); the robot's suggestions still awaiting
+missed are said (`summary["not_recorded"]`). With an external recorder every service leaves only once it holds
+the service's events, and the holes it has once all have left are said the same way (services/recorded.py).
+The robot's suggestions still awaiting
 an acknowledgement are recorded as "in-flight" (schemas/robot.py).
 """
 
@@ -43,6 +45,7 @@ from pairplay.services.game import GameLogic
 from pairplay.services.learner import LearnerLogic
 from pairplay.services.participant import ParticipantLogic
 from pairplay.services.recorder import Recorder, RecordingFailed, check_new_recording
+from pairplay.services.recorded import recording_lacks
 from pairplay.services.recorderwatch import RecorderWatch
 from pairplay.services.refusal import EndRefused, RefusalWatch, StartRefused  # noqa: F401  (StartRefused: re-exported)
 from pairplay.services.refusal import published_seq
@@ -157,6 +160,7 @@ def run_session(config: SessionConfig, path: str | Path, *, bus: Bus | None = No
         if robot is not None:
             bridge = start_unless_stopped(lambda: start_bridge(bus, config.session, robot), stop, "robot")
         if bridge is not None:
+            bridge.confirm_recorded = "recorder" in external  # (services/recorded.py, as its nodes below)
             bridge.run_in_thread(stop)
         if bridge is not None or "robot" in external:  # a bridge on the robot's own host: `pairplay robot`
             needed.append("robot")
@@ -169,6 +173,8 @@ def run_session(config: SessionConfig, path: str | Path, *, bus: Bus | None = No
         if "participant" not in external and config.participant.startswith("sim:"):
             nodes.append(Node(bus, ParticipantLogic(), config.session, stop=stop))
         for node in nodes:
+            # its recorder elsewhere: it leaves the bus once the recorder holds its events (services/recorded.py)
+            node.confirm_recorded = "recorder" in external
             start_unless_stopped(node.start, stop, node.logic.name)
             node.run_in_thread(stop)
             if nodes_out is not None:
@@ -178,6 +184,7 @@ def run_session(config: SessionConfig, path: str | Path, *, bus: Bus | None = No
                 bridge.published_suggestions = lambda learner=node: published_seq(learner, "SuggestionMade", True) or 0
         if "game" not in external:
             game = Node(bus, GameLogic(config), config.session, resume=False, stop=stop)
+            game.confirm_recorded = "recorder" in external
             nodes.append(game)
             if "recorder" in external:  # held while its recorder is off the bus (services/recorderwatch.py)
                 recorder_watch = RecorderWatch(bus, config.session, lambda: game.logic.round,
@@ -207,6 +214,9 @@ def run_session(config: SessionConfig, path: str | Path, *, bus: Bus | None = No
             # an external recorder stays until everyone else left: do not wait for it
             wait_external_exit(bus, config.session, [s for s in external if s in needed and s != "recorder"], stop,
                                settle_timeout_s, broken=refusals.verdict)
+            if "recorder" in external and not not_recorded:  # every service has left but ours, each once the
+                # recorder held its events, or not in time: what the recording lacks now is said (services/recorded.py)
+                not_recorded = recording_lacks(bus, config.session, {n.logic.name: n.driver.seq for n in nodes}, stop)
         if hold is not None and not failure and recorder is not None:
             hold(recorder)
         if recorder is not None:

@@ -29,6 +29,11 @@ P01_G2, P02_G1 = "pilot-p01-phase1-g2", "pilot-p02-phase1-g1"  # p01's game the 
 V1 = "merged/phase2-bias.policy.json"
 WITHHELD = "reason withheld: its participant was deleted"  # replay/biases.py WITHHELD, as every reader says it
 SECRET = "p01 (Anna Schmidt) told us she has epilepsy, stopped"
+# another's mark naming them as an experimenter writes (trial34 D: only the whole "Anna Schmidt" went; a first name,
+# a surname, joined forms and an e-mail said who p01 was), and what the deletion leaves of it
+NAMED = ("anna schmidt's mother came in; Anna's bag; the SCHMIDTS; A. Schmidt; Anna-Schmidt; annaschmidt@uni.de; "
+         "Schmidt_Anna; a banana")
+UNNAMED = "deleted's mother came in; deleted's bag; the deleted; A. deleted; deleted; deleted@uni.de; deleted_deleted; a banana"
 
 
 @pytest.fixture(scope="module")
@@ -78,8 +83,7 @@ def test_a_deletion_keeps_the_flaw_and_withholds_the_marks_reason(played, tmp_pa
     ran = pairplay_cli("protocol", "mark-invalid", "s", P01_G2, "--reason", SECRET, cwd=tmp_path)
     assert ran.returncode == 0, ran.stderr
     # another person's mark that names them: their name goes as their id does
-    ran = pairplay_cli("protocol", "mark-invalid", "s", P02_G1, "--reason", "anna schmidt's mother came in",
-                       cwd=tmp_path)
+    ran = pairplay_cli("protocol", "mark-invalid", "s", P02_G1, "--reason", NAMED, cwd=tmp_path)
     assert ran.returncode == 0, ran.stderr
     if withdrawn:  # a consent is withdrawn only once it is recorded (the pilot's personas played without one)
         ran = pairplay_cli("protocol", "consent", "s", "p01", cwd=tmp_path)
@@ -88,15 +92,18 @@ def test_a_deletion_keeps_the_flaw_and_withholds_the_marks_reason(played, tmp_pa
     assert ran.returncode == 0, ran.stderr
     assert f"merged policy made with their game marked invalid since: {V1} (kept flagged without their id, " \
            f"{WITHHELD};" in ran.stdout and "Anna" not in ran.stdout and "epilepsy" not in ran.stdout
+    assert "their name (from the key file, whole or a part of it) replaced by `deleted` in 1 kept reason of other " \
+           "people's games" in ran.stdout
     assert pairplay_cli("report", "s", cwd=tmp_path).returncode == 0
     kept = f"a game of a deleted participant (marked invalid since: {WITHHELD})"  # beside p02's game's mark
     status = pairplay_cli("protocol", "status", "s", cwd=tmp_path).stdout
     state = json.dumps(Console(StudyRunner(StudyData(folder), None), "token").state())
     for said in (text_of(folder), status, state):
-        assert "epilepsy" not in said and "anna" not in said.lower() and "p01" not in said
+        assert "epilepsy" not in said and "anna" not in said.lower() and "schmidt" not in said.lower() \
+            and "p01" not in said
     assert kept in status and kept in state and kept in (folder / "report" / "report.md").read_text()
     assert kept in sessions_csv(folder)["pilot-p02-phase2-g1"]["bias_flawed"]
-    assert sessions_csv(folder)[P02_G1]["invalid"] == "deleted's mother came in"  # p02's own words stay
+    assert sessions_csv(folder)[P02_G1]["invalid"] == UNNAMED  # p02's own words stay
 
 
 def test_a_kept_flaw_an_older_pairplay_wrote_with_its_reason_is_read_withheld_and_dropped_at_the_next_deletion(
@@ -213,8 +220,8 @@ def test_a_file_of_the_users_in_report_that_names_them_by_name_is_said_to_name_t
     the key file it had just read said whose name it was."""
     folder = copy(played, tmp_path)
     assert pairplay_cli("report", "s", cwd=tmp_path).returncode == 0
-    (folder / "report" / "notes.md").write_text("ANNA SCHMIDT was tired\n")
+    (folder / "report" / "notes.md").write_text("Schmidt was tired\n")  # a part of the name (trial34 D)
     ran = pairplay_cli("participant", "delete", "s", "p01", "--yes", cwd=tmp_path)
     assert ran.returncode == 0, ran.stderr
     line, = [x for x in ran.stderr.splitlines() if "notes.md" in x]
-    assert "it names p01 (their id, or their name from the key file): edit it by hand" in line
+    assert "it names p01 (their id, or their name or a part of it, from the key file): edit it by hand" in line

@@ -79,7 +79,8 @@ def test_four_hosts_and_5_s_cuts_of_the_robot_and_the_recorder_links(hosts, tmp_
                                     *[a for server_ip, _ in LINKS.values() for a in ("--listen", f"tcp/{server_ip}:7447")]),
                               stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
     first = server.stdout.readline()
-    recorder = subprocess.Popen(in_ns("recorder", *py, "run", "recorder", "--session", "ns1", "--out", str(tmp_path),
+    # -v: what each refill gave, and from whom, in recorder.log (INFO): a hole's cause is read there
+    recorder = subprocess.Popen(in_ns("recorder", *py, "run", "recorder", "-v", "--session", "ns1", "--out", str(tmp_path),
                                       "--connect", f"tcp/{LINKS['recorder'][0]}:7447"),
                                 stdout=subprocess.DEVNULL, stderr=open(tmp_path / "recorder.log", "w"), env=env)
     robot = subprocess.Popen(in_ns("robot", *py, "robot", "--session", "ns1", "--robot", "virtual",
@@ -102,7 +103,11 @@ def test_four_hosts_and_5_s_cuts_of_the_robot_and_the_recorder_links(hosts, tmp_
         link("recorder", False)  # the recorder's host is cut off for 5 s
         time.sleep(5.0)
         link("recorder", True)
-        out, err = server.communicate(timeout=180)
+        try:
+            out, err = server.communicate(timeout=180)
+        except subprocess.TimeoutExpired:  # what the session said (held? waiting for whom?) is the failure's clue
+            server.kill()
+            raise AssertionError(f"the session did not end in 180 s: {server.communicate()[1][-1500:]}") from None
         robot.wait(timeout=60)
         board.wait(timeout=60)
         recorder.wait(timeout=60)

@@ -77,3 +77,50 @@ def test_a_recorder_started_after_the_session_records_it_from_every_sender_s_fir
             if p.poll() is None:
                 p.kill()
             p.wait()
+
+
+def test_a_recorder_that_joins_a_game_under_way_holds_its_session(tmp_path):
+    """A recorder first started after the game's SessionStarted went out (restarted in another directory: the
+    restart line's command has no --out) caught that start up from the game (`_catch_up`), wrote the whole
+    session, then said its file "holds no session" and to remove it, exit 1, and the file had no
+    "pairplay.session" metadata: only a SessionStarted heard live counted (trial34 K). Real parts: the game's
+    Node on a real bus, a pick published as the board does, a real Recorder."""
+    import threading
+
+    from pairplay.schemas import events as ev
+    from pairplay.schemas.envelope import stamped
+    from pairplay.schemas.events import encode_event
+    from pairplay.schemas.keys import event_key
+    from pairplay.schemas.session import SessionConfig
+    from pairplay.services.bus import Deadline
+    from pairplay.services.game import GameLogic
+    from pairplay.services.recorder import Recorder
+    from pairplay.services.runner import Node
+
+    from busutil import listener, wait_until
+
+    s = "joined"
+    config = SessionConfig(session=s, participant="human:t", seed=1, rounds=3, observed_source="first-pick",
+                           ignore_rule="time")
+    with listener() as bus:
+        game = Node(bus, GameLogic(config), s, resume=False)
+        game.start()  # its ServiceStarted, SessionStarted and RoundStarted go to nobody
+        stop = threading.Event()
+        game.run_in_thread(stop)
+        recorder = Recorder(bus, s, tmp_path / f"{s}.mcap")
+        recorder.start()
+        try:
+            pick = stamped(ev.CardPicked(round=0, turn=0, card=0), session=s, source="board", seq=1, time_ns=1)
+            bus.put(event_key(s, "board", "CardPicked"), encode_event(pick))  # the game answers past its seq 3
+            assert wait_until(lambda: recorder.step(0.05) and False or recorder.holds_session, 60), \
+                [k for k, _ in recorder.kept]
+        finally:
+            recorder.close(deadline=Deadline(5.0))
+            stop.set()
+            game.thread.join(10)
+            game.close()
+    log = read_log(tmp_path / f"{s}.mcap")
+    assert log.metadata["pairplay.session"]["session"] == s, log.metadata
+    game_seqs = sorted(r.event.seq for r in log.events if r.event.source == "game")
+    assert game_seqs == list(range(1, len(game_seqs) + 1)) and len(game_seqs) > 3, game_seqs
+    assert any(isinstance(r.event, ev.SessionStarted) for r in log.events)

@@ -71,7 +71,8 @@ from pairplay.schemas.robot import BoardCalibration, RobotActed, RobotConfig
 
 from pairplay.services.bus import Bus, Deadline, Inbox, Outbox, deadline_of
 from pairplay.services.node import Driver, Rejected
-from pairplay.services.runner import GAME_GONE_S, SENT_QUERY, GameWatch, answer_sent, join_log
+from pairplay.services.recorded import FLUSH_S, until_recorded
+from pairplay.services.runner import GAME_GONE_S, SENT_QUERY, GameWatch, answer_sent, join_log, serve_sent
 from pairplay.services.robot.backends import open_robot
 from pairplay.services.robot.driver import RobotDriver, Suggestion
 
@@ -146,6 +147,9 @@ class RobotBridge:
         self.game_watch: GameWatch | None = None
         # an in-process learner: the seq of its last SuggestionMade published (0: none yet); see rule
         self.published_suggestions: Callable[[], int] | None = None
+        # its recorder is another process: ended by itself, it leaves once the recorder holds every RobotActed it
+        # published, answering the refill meanwhile (services/recorded.py; services/runner.py Node's too)
+        self.confirm_recorded = False
 
     def _perform(self, suggestion: Suggestion) -> None:
         if self.robot is None:
@@ -287,7 +291,7 @@ class RobotBridge:
         elif orphaned:  # nobody records what the robot still reports: do not wait for it
             self.close(min(self.settle_s, STOPPED_SETTLE_S))
         else:
-            self.close(self.settle_s)
+            self.close(self.settle_s, stop=stop)
 
     def take_published(self, stop: threading.Event) -> bool:
         """Take what an in-process learner published and our inbox has not brought yet (see rule), for
@@ -314,9 +318,11 @@ class RobotBridge:
         self.thread = thread
         return thread
 
-    def close(self, settle_s: float | None = None, deadline: Deadline | None = None) -> None:
+    def close(self, settle_s: float | None = None, deadline: Deadline | None = None,
+              stop: threading.Event | None = None) -> None:
         """Let the robot report what is open (for at most `settle_s`), then close its connection;
-        all of it `STOPPED_RESERVE_S` before `deadline`, if given (a stopped session's shutdown)."""
+        all of it `STOPPED_RESERVE_S` before `deadline`, if given (a stopped session's shutdown). Given
+        the session's `stop` and `confirm_recorded`, stay until the recorder holds what we published."""
         robot, self.robot = self.robot, None
         if robot is None:
             return
@@ -331,4 +337,12 @@ class RobotBridge:
         else:
             robot.close(deadline.left(STOPPED_RESERVE_S + 0.05, ROBOT_CLOSE_S))
         self.cut("the robot driver had not reported it when the bridge closed")
+        if self.confirm_recorded and stop is not None and deadline is None:
+            self._outbox.flush(FLUSH_S)  # (what it published last: the recorder is asked about it next)
+            with self._lock:
+                upto = {NAME: self.shell.seq}
+            lacking = until_recorded(self.bus, self.session, upto,
+                                     lambda s: serve_sent(self._inbox, self._outbox, NAME, s), stop)
+            if lacking:  # (the session's process says every hole of the recording: services/session.py)
+                log.warning("robot: %s", lacking)
         self._outbox.close(1.0 if deadline is None else deadline.left(STOPPED_RESERVE_S, 1.0))
