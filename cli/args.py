@@ -16,7 +16,6 @@ session after its bus had started).
 from __future__ import annotations
 
 import argparse
-import datetime
 import math
 import os
 from pathlib import Path
@@ -167,16 +166,13 @@ positive_number = float_at_least(0, above=True)  # a ridge penalty
 
 
 def time_ns(text: str) -> int:
-    """An ISO 8601 time (`2026-11-20T14:30`, `2026-11-20`, `...Z`, `...+01:00`) in ns since the epoch; one without
-    a zone is this computer's local time, as a person reads a clock (the future is the verb's to refuse)."""
+    """An argparse type: an ISO 8601 time in ns since the epoch (pairplay/isotime.py, the console's parser too;
+    the future is the verb's to refuse)."""
+    from pairplay.isotime import iso_time_ns
     try:
-        when = datetime.datetime.fromisoformat(text.strip())
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"not an ISO time (2026-11-20T14:30, 2026-11-20T13:30Z): {text!r}") from None
-    try:
-        return int(when.astimezone().timestamp() * 1_000_000_000)
-    except (OverflowError, OSError, ValueError):  # a year 1 or 9999 time the clock cannot hold
-        raise argparse.ArgumentTypeError(f"a time out of range: {text!r}") from None
+        return iso_time_ns(text)
+    except ValueError as err:
+        raise argparse.ArgumentTypeError(str(err)) from None
 
 
 def key_chunk(what: str):

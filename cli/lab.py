@@ -7,7 +7,9 @@ and the mirror page and publishes the person's touches as events. It prints
 the board's and the mirror's URLs, each with the session's token, and writes
 recordings/<session>.mcap. The web server listens on 127.0.0.1 (a free port)
 unless `--listen HOST:PORT` says otherwise; `--certfile/--keyfile` serve it
-over TLS (README, "Serving the board beyond loopback"). The session options
+over TLS (README, "Serving the board beyond loopback"). No consent is checked: a
+study's people play from `protocol serve`, which checks it; the lab says so at its
+start (NO_CONSENT_CHECKED). The session options
 are `pairplay session`'s; a person's session refuses what a person cannot do
 and defaults to the human-phase schedules of thesis 7.2 (cli/session.py).
 """
@@ -35,6 +37,11 @@ from pairplay.cli.session import add_config_arguments, config_from_args, cut_lin
 from pairplay.numbers import counted
 
 LOOPBACK = "127.0.0.1"
+# The lab is one session outside any study folder: no consent is held here to check, so none is (a person's
+# game in a study is played from `protocol serve`, which refuses it without their consent). Said at the start,
+# beside the URLs: `--participant human:p01` looks like a study's id, and a researcher expected the check.
+NO_CONSENT_CHECKED = ("consent: not checked here (one session outside any study folder; a study's games, each "
+                      "person's consent checked first, run from `pairplay protocol serve FOLDER`)")
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -99,6 +106,7 @@ def run(args: argparse.Namespace) -> int:
         print(f"board:  {urls.board}", flush=True)
         print(f"mirror: {urls.mirror}", flush=True)
         print(f"bus listening on {' '.join(bus.locators()) or '(no listener)'}", flush=True)
+        print(NO_CONSENT_CHECKED, flush=True)
 
     summary: dict = {}
     try:

@@ -17,6 +17,8 @@ An option a service does not use is refused in one line, never ignored: the
 session's options (--algorithm, --policy, --rounds, ...) belong to the game that
 starts the session; a learner, a participant, a recorder, a combiner and a game
 restarted by --session alone follow the config the session was started with.
+A game that waits for a recorder (--wait-for recorder) is held while none is on the bus, and the session fails
+once it has been gone `--settle` seconds (30 by default, as a session's settle time for any service it needs).
 """
 
 from __future__ import annotations
@@ -31,10 +33,11 @@ from pathlib import Path
 
 from pairplay import signals, testpause
 from pairplay.cli import interrupts
-from pairplay.cli.args import note_given, output_folder, session_id
+from pairplay.cli.args import duration, note_given, output_folder, session_id
 from pairplay.errors import OptionError, command_word, escaped
 from pairplay.lists import comma_items
 from pairplay.nearest import hinted
+from pairplay.numbers import shown
 from pairplay.outputs import check_folder
 from pairplay.schemas.trust import SERVICES as BUS_SERVICES
 from pairplay.services.bus import Bus, Deadline, add_bus_arguments, deadline_of, options_from_args, signal_taken, stop_on_signals
@@ -73,6 +76,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--wait-for", action="extend", type=services_to_wait_for, default=[], metavar="SERVICES",
                    help=f"game: services to wait for before starting, comma-separated or the option repeated "
                         f"(of {', '.join(sorted(WAITABLE))})")
+    p.add_argument("--settle", type=duration, default=GAME_GONE_S, metavar="SECONDS",
+                   help=f"game with --wait-for recorder: how long the recorder may be off the bus, the game held, "
+                        f"before the session fails (default {GAME_GONE_S:g}, 0..3600)")
     add_bus_arguments(p)
     known = {a.dest for a in p._actions}
     from pairplay.cli.session import add_config_arguments
@@ -83,25 +89,30 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
             p._add_action(action)
             note_given(action)
     for action in p._actions:
-        if action.dest in ("participant", "wait_for", "out"):
+        if action.dest in ("participant", "wait_for", "out", "settle"):
             note_given(action)
 
 
 # options besides the bus's and --session that a service uses; the session's options (the game's, with
 # --participant) are in CONFIG: any other a service is given is refused (module rule)
-USES = {"game": {"participant", "wait_for"}, "recorder": {"out"}, "combiner": {"out"},
+USES = {"game": {"participant", "wait_for", "settle"}, "recorder": {"out"}, "combiner": {"out"},
         "learner": set(), "participant": set()}
 
 
 def refuse_unused(args: argparse.Namespace) -> None:
     """OptionError naming the first option given that `args.service` would not use (module rule)."""
     starts = args.service == "game" and bool(args.participant)
+    given = dict((dest, option) for dest, option in getattr(args, "_given", ()))
+    if args.service == "game" and "settle" in given and "recorder" not in args.wait_for:  # it would change nothing
+        raise OptionError(f"{given['settle']} {shown(args.settle)} is the time a recorder the game waits for may be off "
+                          "the bus: give --wait-for recorder too", given["settle"])
     for dest, option in getattr(args, "_given", ()):
         if dest in USES[args.service] or (starts and dest not in ("out",)):
             continue
         value = getattr(args, dest)
-        shown = " ".join(map(str, value)) if isinstance(value, list) else value
-        if dest in ("participant", "wait_for"):
+        # (as typed: `--turn-back-ms 5` was echoed "5.0")
+        said = " ".join(map(str, value)) if isinstance(value, list) else shown(value)
+        if dest in ("participant", "wait_for", "settle"):
             why = "used by the game only"
         elif dest == "out":
             why = "used by the recorder and the combiner only"
@@ -111,7 +122,7 @@ def refuse_unused(args: argparse.Namespace) -> None:
         else:
             why = (f"a session's option: the {args.service} follows the config the game started the session with "
                    f"(pairplay run game --participant ... {option} ...)")
-        raise OptionError(f"{option} {shown} is not taken by pairplay run {args.service}: {why}", option)
+        raise OptionError(f"{option} {said} is not taken by pairplay run {args.service}: {why}", option)
 
 
 def run(args: argparse.Namespace) -> int:
@@ -150,6 +161,9 @@ def _run(args: argparse.Namespace, stop: threading.Event, recording: dict) -> in
     if args.service == "game" and args.participant:
         from pairplay.cli.session import config_from_args
         config = config_from_args(args)
+        if "robot" in args.wait_for:  # a bridge elsewhere (`pairplay robot`): its SessionStarted says one is expected
+            import msgspec
+            config = msgspec.structs.replace(config, robot="external")
         args.session = config.session
     elif not args.session:
         raise OptionError(f"--session is required for the {args.service}", "--session")
@@ -241,7 +255,8 @@ def _run(args: argparse.Namespace, stop: threading.Event, recording: dict) -> in
         if args.service == "game" and "recorder" in args.wait_for:
             from pairplay.services.recorderwatch import RecorderWatch
             recorder_watch = RecorderWatch(bus, args.session, lambda: logic.round, over=lambda: logic.done,
-                                           connect=" ".join(args.connect) or " ".join(bus.locators()))
+                                           connect=" ".join(args.connect) or " ".join(bus.locators()),
+                                           settle_s=args.settle)
             node.hold = recorder_watch.held
         try:
             start_unless_stopped(lambda: node.start(wait_for=tuple(args.wait_for)), stop, args.service)
@@ -263,8 +278,8 @@ def _run(args: argparse.Namespace, stop: threading.Event, recording: dict) -> in
                 said = recorder_watch.line()
                 if said:
                     log.warning(said)
-                if recorder_watch.gone_for() > GAME_GONE_S:  # the session's settle time (runner.GameWatch's)
-                    gone = f"recorder left the bus and did not come back within {GAME_GONE_S:g} s"
+                if recorder_watch.gone_for() > args.settle:  # the session's settle time (--settle)
+                    gone = f"recorder left the bus and did not come back within {args.settle:g} s"
             if forged or refused or gone:
                 stop.set()
         said = recorder_watch.line() if recorder_watch is not None else ""

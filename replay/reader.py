@@ -48,7 +48,7 @@ from pairplay.livelock import LIVE, is_live
 from pairplay.numbers import counted
 from pairplay.schemas.envelope import Event, Seq
 from pairplay.schemas.jsonfile import MCAP_MAGIC
-from pairplay.schemas.events import EVENT_BY_TAG, RewardGiven, SessionEnded, decode_event
+from pairplay.schemas.events import EVENT_BY_TAG, Count, RewardGiven, SessionEnded, SessionStarted, decode_event
 from pairplay.schemas.events import _decoder as _event_decoder
 from pairplay.schemas.keys import ROOT as KEY_ROOT
 from pairplay.schemas.trust import STARTERS
@@ -91,6 +91,39 @@ class _Typed(msgspec.Struct):
 # only the tag and the seq: what an event a verb does not read is checked for (speed; its seq: `gaps`, from the one
 # parse the tag needed: the rest of the payload is skipped unread either way)
 _typed = JsonDecoder(_Typed)
+
+
+class _TypedNamed(_Typed):
+    """`_Typed`, and what an event of `NAMES` or `TURNS` names: its request_seq or its pick_seq (0: a recording from
+    before the field), or its round and turn, read in the same parse (`misnamed`, `_named_value`)."""
+
+    request_seq: Seq = 0
+    pick_seq: Seq = 0
+    round: Count = 0
+    turn: Count = 0
+
+
+class _TaggedNamed(_Tagged):
+    """`_Tagged`, and what it names, as `_TypedNamed`."""
+
+    request_seq: Seq = 0
+    pick_seq: Seq = 0
+    round: Count = 0
+    turn: Count = 0
+
+
+def _named_value(kind: str, e) -> int:
+    """What event `e` of tag `kind` (`NAMES`, `TURNS`) names, as one number: the seq it names, or its turn
+    (round << 32 | turn: both under 2**31)."""
+    if kind == "SuggestionMade":
+        return e.request_seq
+    if kind in ("CardRevealed", "PickRejected"):
+        return e.pick_seq
+    return e.round << 32 | e.turn
+
+
+_typed_named = JsonDecoder(_TypedNamed)
+_tagged_named = JsonDecoder(_TaggedNamed)
 
 
 def unknown_tag(payload: bytes) -> str | None:
@@ -143,9 +176,10 @@ class EventLog:
     # 3, ..., services/node.py): (source, seq before, seq after), by source, then seq (`gaps`)
     seq_jumps: list[tuple[str, int, int]] = field(default_factory=list)
     # events missing that no seq shows (a source's tail, an event cut and the rest renumbered), seen as answers
-    # fewer or more than what they answer: (the source missing them, at least how many, what shows it):
-    # `unanswered`, `gaps`
-    unanswered: list[tuple[str, int, str]] = field(default_factory=list)
+    # fewer or more than what they answer, or as seqs named by another source's events (a request_seq, a pick_seq)
+    # that hold no event of the kind named: (the source missing them, the clause saying what and what shows it):
+    # `unanswered`, `misnamed`, `gaps`
+    unanswered: list[tuple[str, str]] = field(default_factory=list)
     # a seq held by more than one event just before a hole in its source's seqs (one renumbered, not lost):
     # (source, seq) (`gaps`)
     repeated: list[tuple[str, int]] = field(default_factory=list)
@@ -207,9 +241,11 @@ class EventLog:
         events missing"), and a hole after a seq held twice as a seq repeated (21 rewritten as 20 was "1 event
         missing"). A first seq past 1 of the game or the learner is a hole at the start (`FROM_ONE`; another
         source's events before its first one in the file are not counted, as the recorder counts holes:
-        services/recorder.py `_holes`: the board's start is not in a pilot's recordings). The end
-        no seq shows: the learner's answers fewer than what they answer (`unanswered`) are its last events
-        missing (its last Q update among them: rebuild wrote a whole, wrong policy: a new user's trial)."""
+        services/recorder.py `_holes`: the board's start is not in a pilot's recordings). What no seq shows
+        (a source's end, an event cut and the rest renumbered): answers fewer or more than what they answer
+        (`unanswered`: the learner's last Q update dropped, rebuild wrote a whole, wrong policy: a new user's
+        trial), a seq another source's event names holding no event of the kind named (`misnamed`); said by
+        what is missing, never "the last": a count cannot tell where."""
         if not (self.seq_jumps or self.unanswered) or self.lost_at or self.source_lost:
             return ""
         by: dict[str, list[tuple[int, int]]] = {}
@@ -242,11 +278,11 @@ class EventLog:
             alone = holes and len(clauses) == 1
             said.append(clauses[0].replace(" missing:", f" of {source!r} missing:", 1) if alone
                         else f"{source!r}: " + ", ".join(clauses))
-        for source, n, shows in self.unanswered:
+        for source, clause in self.unanswered:
             # (a source with holes said: they are the answers missing; one clause a source)
             if (sources is None or source in sources) and source not in but and source not in by:
                 by[source] = []
-                said.append(f"{counted(n, 'event')} of {source!r} missing: {shows}")
+                said.append(clause)
         return "; ".join(said)
 
     @property
@@ -770,10 +806,16 @@ class _Reading:
         self.passed = 0  # the events read before this batch (`lost_at` counts them)
         self.ended_by: dict[str, str] = {}  # session -> its SessionEnded's reason (`unanswered`)
         self.learned: dict[str, set] = {}  # session -> the seqs of the learner's RewardGiven that learned
+        self.robots: dict[str, str] = {}  # session -> the robot its SessionStarted names ("" none: `unanswered`)
+        # channel of an event that names a seq or a turn (`NAMES`, `TURNS`) -> its topic and what its events name
+        # (`misnamed`, `unresolved`):
+        # read by a small decoder of that field alone, whether or not the read decodes the event (rebuild's does
+        # not decode SuggestionMade); kept across a channel's record again, as `route`'s seqs are
+        self.names: dict[int, tuple[str, array]] = {}
 
     def take(self, records: list, events: list[RecordedEvent]) -> None:
         """Read `records` (file order), their events appended to `events`."""
-        log, only, route = self.log, self.only, self.route
+        log, only, route, names = self.log, self.only, self.route, self.names
         skipped: dict[str, int] = log.skipped
         decode, head, type_of = _event_decoder.raw, _tagged.raw, _typed.raw  # (RecursionError caught: nesting.py)
         append = events.append
@@ -788,21 +830,27 @@ class _Reading:
                     continue
                 key, tag, k_session, k_source, k_type, numbers = routed
                 data = record.data
+                naming = names.get(record.channel_id)  # (an event naming a seq: `misnamed`; its field read in
+                # the same parse as its tag, or from the event decoded)
                 if tag is not None:
                     try:
                         if k_source not in STARTERS:  # not read, no copy looked for (only the game's): its copies
                             # change nothing the verb makes: only its tag and seq are decoded (a copy check for each
                             # was an eighth of a rebuild, under the bench's 0.8x goal); its seq for `gaps`
-                            typed = type_of(data)
+                            typed = type_of(data) if naming is None else _typed_named.raw(data)
                             if typed.type == tag:  # (else decoded below: a bad message is kept as one)
                                 numbers.append(typed.seq)
+                                if naming is not None:
+                                    naming[1].append(_named_value(tag, typed))
                                 skipped[tag] = skipped.get(tag, 0) + 1
                                 continue
-                        h = head(data)
+                        h = head(data) if naming is None else _tagged_named.raw(data)
                         if h.type == tag and h.session == k_session and h.source == k_source:  # else decoded below
                             numbers.append(h.seq)
                             first = seen(((h.session, h.source, h.seq)), data)
                             if first is data:
+                                if naming is not None:
+                                    naming[1].append(_named_value(tag, h))
                                 skipped[tag] = skipped.get(tag, 0) + 1
                                 continue
                             if first == data:
@@ -819,6 +867,8 @@ class _Reading:
                         log.lost_at.append(self.passed + len(events))
                         continue
                     numbers.append(e.seq)
+                    if naming is not None:
+                        naming[1].append(_named_value(k_type.__name__, e))
                     first = seen((e.session, e.source, e.seq), data)
                     if first is not data:
                         if first == data or _decoded(first) == e:
@@ -847,6 +897,10 @@ class _Reading:
                 numbers = known[5] if known is not None and known[0] == record.topic else array("q")
                 route[record.id] = (record.topic, tag if only is not None and tag in EVENT_BY_TAG and tag not in only
                                     else None, *named, EVENT_BY_TAG.get(tag) if named[0] is not None else None, numbers)
+                if (named[1], tag) in NAMES or (named[1], tag) in TURNS:
+                    had = names.get(record.id)
+                    names[record.id] = (record.topic, had[1] if had is not None and had[0] == record.topic
+                                        else array("q"))
             elif isinstance(record, Schema):
                 log.schemas[record.id] = (record.name, record.encoding, record.data)
             elif isinstance(record, Metadata):
@@ -857,12 +911,15 @@ class _Reading:
                     log.lost_from = self.passed + len(events)
 
     def ends(self, events: list[RecordedEvent]) -> None:
-        """Note each session's end and the learner's RewardGiven that learned among `events` (`unanswered`)."""
+        """Note each session's end, its robot and the learner's RewardGiven that learned among `events`
+        (`unanswered`)."""
         ended_by, learned = self.ended_by, self.learned
         for r in events:
             kind = type(r.event)
             if kind is SessionEnded:
                 ended_by[r.event.session] = r.event.reason
+            elif kind is SessionStarted:
+                self.robots[r.event.session] = r.event.config.robot
             elif kind is RewardGiven and r.event.learned and r.event.source == "learner":
                 learned.setdefault(r.event.session, set()).add(r.event.seq)
 
@@ -874,7 +931,10 @@ class _Reading:
         log.seq_jumps, log.repeated = seq_jumps(route.values())
         # (RewardGiven decoded, not skipped: whether each learned is known)
         learned = self.learned if "RewardGiven" not in skipped else None
-        log.unanswered = unanswered(route.values(), self.ended_by, learned)
+        # (SessionStarted decoded, not skipped: whether its robot is known)
+        robots = self.robots if "SessionStarted" not in skipped else None
+        log.unanswered = unanswered(route.values(), self.ended_by, learned, robots) + \
+            misnamed(route, self.names, self.ended_by) + unresolved(route, self.names, self.ended_by)
         if recovered:
             log.metadata[RECOVERED] = recovered
         log.source_lost = said_source_lost(log.metadata.get(RECOVERED, {}))
@@ -1034,16 +1094,20 @@ ROBOT = (("robot", "ServiceStarted"), ("robot", "RobotActed"), ("learner", "Sugg
          ("recorder", "MessageRejected"))
 
 
-def unanswered(routes, ended_by: dict[str, str],
-               learned: dict[str, set] | None = None) -> list[tuple[str, int, str]]:
+def unanswered(routes, ended_by: dict[str, str], learned: dict[str, set] | None = None,
+               robots: dict[str, str] | None = None) -> list[tuple[str, str]]:
     """The pairs of `ANSWERED` whose answers are fewer, or more, than what they answer: (the source whose events are
-    missing, at least how many, what shows it), counted from the distinct seqs read on each channel (`_read_log`'s
+    missing, the clause saying at least how many of what kind, and what shows it: `_missing`), counted from the distinct seqs read on each channel (`_read_log`'s
     routes; an identical copy counts once), per session. A session that did not complete (`ended_by`: its
     SessionEnded's reason by session: a signal, an abort; none recorded) may end between a request and its answer:
     one unanswered there is its end, not a loss (answers outnumbering asks have no such end). `learned`: by session,
     the seqs of the learner's RewardGiven that learned, each followed by its update (QUpdated or LSPIUpdated:
-    services/learner.py `_reward`; its last Q update dropped alone), None if the read did not decode them. Said with
-    no "last": a count cannot tell where (an event cut from the middle and the rest renumbered is counted the same)."""
+    services/learner.py `_reward`; its last Q update dropped alone), None if the read did not decode them. `robots`: by
+    session, the robot its SessionStarted names (SessionConfig.robot), None if not decoded: one named while no event
+    of 'robot' is read and the learner made suggestions is "the robot sent nothing" (its RobotActed are counted only
+    when it sent some: a file without any was said by no verb, trial33 E's robot). Said by
+    kind, with no "last": a count cannot tell where (an event cut from the middle and the rest renumbered is counted
+    the same: "the last events of 'learner' missing" placed a cut of round 2 of 6 at the end: trial33 G)."""
     import numpy as np
 
     paired = {("learner", tag) for tag in UPDATES} | set(ROBOT)
@@ -1054,6 +1118,7 @@ def unanswered(routes, ended_by: dict[str, str],
         if numbers and kind is not None and (source, kind.__name__) in paired:  # (only these: speed)
             seqs.setdefault((session, source, kind.__name__), []).append(np.frombuffer(numbers, dtype=np.int64))
     count = {at: _distinct(np.concatenate(held)) for at, held in seqs.items()}
+    robot_sent = {session for _, _, session, source, _, numbers in routes if source == "robot" and numbers}
     out = []
     for session in sorted({at[0] for at in count}):
         def n(sources, *tags):
@@ -1061,28 +1126,132 @@ def unanswered(routes, ended_by: dict[str, str],
         slack = 0 if ended_by.get(session) == "completed" else 1
         for askers, asked, answerers, answer, refusal in ANSWERED:
             n_asked, n_answered, refused = n(askers, asked), n(answerers, answer), n(answerers, *refusal)
+            answers = f"{n_answered} {answer}{f' and {refused} {refusal[0]}' if refused else ''}"
             if n_asked and n_answered + refused + slack < n_asked:  # asks unanswered: the answerer's missing
                 whom = " or ".join(repr(s) for s in askers if n((s,), asked))
-                out.append((answerers[0], n_asked - n_answered - refused,
-                            f"{n_answered} {answer}{f' and {refused} {refusal[0]}' if refused else ''} for the "
-                            f"{n_asked} {asked} of {whom}"))
+                out.append(_missing(answerers[0], n_asked - n_answered - refused, " or ".join((answer, *refusal)),
+                                    f"{answers if refused else n_answered} for the {n_asked} {asked} of {whom}"))
             elif n_answered + refused > n_asked:  # answers to no ask: the asker's missing
-                out.append((_asker(askers, n_asked, refused, lambda s: n((s,), asked)), n_answered + refused - n_asked,
-                            f"the {n_answered} {answer}{f' and {refused} {refusal[0]}' if refused else ''} of "
-                            f"{answerers[0]!r} answer {n_asked} {asked}"))
+                out.append(_missing(_asker(askers, n_asked, refused, lambda s: n((s,), asked)),
+                                    n_answered + refused - n_asked, asked,
+                                    f"the {answers} of {answerers[0]!r} answer {n_asked}"))
         made, acted, starts = n(("learner",), "SuggestionMade"), n(("robot",), "RobotActed"), n(("robot",), "ServiceStarted")
+        robot = (robots or {}).get(session, "")
+        if robot and made and session not in robot_sent:  # (a robot sends its ServiceStarted before the game starts)
+            out.append(("robot", f"the robot sent nothing: no event of 'robot' in a session started with robot "
+                                 f"{robot!r}, for the {made} SuggestionMade of 'learner'"))
         # (only in a session that completed: a cut or a signal's end falls among the robot's acts, which lag; and
         # by a robot that started once: one killed and restarted never acted on what was suggested while it was
         # down, and sent nothing for it: test_faults_restart's robot case)
         if starts + acted and starts <= 1 and not n(("recorder",), "MessageRejected") and not slack \
                 and acted < made:
-            out.append(("robot", made - acted, f"{acted} RobotActed for the {made} SuggestionMade of 'learner'"))
+            out.append(_missing("robot", made - acted, "RobotActed", f"{acted} for the {made} SuggestionMade of 'learner'"))
         n_learned = len((learned or {}).get(session, ()))
         updates = {tag: count.get((session, "learner", tag), 0) for tag in UPDATES}
         if n_learned > sum(updates.values()) + slack:
             tag = max(updates, key=updates.get)
-            out.append(("learner", n_learned - sum(updates.values()),
-                        f"{updates[tag]} {tag} for the {n_learned} RewardGiven that learned"))
+            out.append(_missing("learner", n_learned - sum(updates.values()), tag,
+                                f"{updates[tag]} for the {n_learned} RewardGiven that learned"))
+    return out
+
+
+def _missing(source: str, n: int, what: str, shows: str) -> tuple[str, str]:
+    """`unanswered`'s finding: `n` events of kind `what` of `source` missing, `shows` saying how it is known
+    ("1 QUpdated of 'learner' missing (9 for the 10 RewardGiven that learned)"): what is missing by its kind
+    and count, never "the last events": a count cannot tell where they were."""
+    return source, f"{counted(n, what, what)} of {source!r} missing ({shows})"
+
+
+# the events that name another source's event by its seq, and what they name (services/learner.py: a SuggestionMade's
+# request_seq is the game's SuggestionRequested it answers; services/game.py: a CardRevealed's or PickRejected's
+# pick_seq the CardPicked it answers, the participant's or a board's): (source, tag) -> the sources named and the
+# kind of event each named seq must hold. An event cut from the named source and its later seqs renumbered leaves no
+# hole and, with a matching cut elsewhere or an event of another kind, no count unpaired (a game's TurnResolved cut:
+# rebuild, recover and counterfactual said nothing, counterfactual fitted fewer picks: trial33 G), but the seqs named
+# after it move off their events
+NAMES = {("learner", "SuggestionMade"): (("game",), "SuggestionRequested", "request_seq"),
+         ("game", "CardRevealed"): (("participant", "board"), "CardPicked", "pick_seq"),
+         ("game", "PickRejected"): (("participant", "board"), "CardPicked", "pick_seq")}
+
+
+# a learner's RewardGiven settles a suggestion of a turn the game resolves (services/learner.py: on its TurnResolved,
+# or at a press of the wrong-suggestion button within it): every turn one settles has the game's TurnResolved in a
+# session that completed. Seen by round and turn, as neither names the other's seq: a TurnResolved cut and the
+# game's later seqs renumbered after the last request (which no request_seq shows)
+TURNS = {("learner", "RewardGiven"): ("game", "TurnResolved"), ("game", "TurnResolved"): None}
+
+
+def unresolved(route: dict, names: dict[int, tuple[str, array]], ended_by: dict[str, str]) -> list[tuple[str, str]]:
+    """The sessions whose learner settled turns (`TURNS`) the game resolved none of: ("game", the clause), one a
+    session. Past the last turn resolved in a session that did not complete is its end (an abort leaves a suggestion
+    unsettled, its RewardGiven said so), not counted."""
+    import numpy as np
+
+    turns: dict[tuple[str, str], list] = {}  # (session, tag) -> the turns its events name
+    for channel, (topic, numbers) in names.items():
+        routed = route.get(channel)
+        if routed is not None and routed[0] == topic and numbers and (routed[3], routed[4].__name__) in TURNS:
+            turns.setdefault((routed[2], routed[4].__name__), []).append(np.frombuffer(numbers, dtype=np.int64))
+    out = []
+    for (session, tag), held in turns.items():
+        if tag != "RewardGiven" or (session, "TurnResolved") not in turns:
+            continue  # (no TurnResolved at all: a session that stopped in its first turn, or the seqs say it)
+        settled = np.unique(np.concatenate(held))
+        resolved = np.unique(np.concatenate(turns[(session, "TurnResolved")]))
+        off = settled[~np.isin(settled, resolved)]
+        if ended_by.get(session) != "completed":
+            off = off[off < resolved.max()]
+        if off.size:
+            first = int(off[0])
+            turn = f"round {(first >> 32) + 1} turn {(first & 0xFFFFFFFF) + 1}"
+            out.append(("game", f"{counted(off.size, 'TurnResolved', 'TurnResolved')} of 'game' missing ("
+                                + (f"a RewardGiven of 'learner' settles {turn}, which no TurnResolved resolves)"
+                                   if off.size == 1 else f"RewardGiven of 'learner' settle {off.size} turns no "
+                                   f"TurnResolved resolves, the first {turn})")))
+    return out
+
+
+def misnamed(route: dict, names: dict[int, tuple[str, array]], ended_by: dict[str, str]) -> list[tuple[str, str]]:
+    """The sources whose seqs, as other sources' events name them (`NAMES`), hold no event of the kind named:
+    (the source, the clause saying so), one a source and session. `route`: `_Reading.route` (channel id -> topic,
+    tag, session, source, class, seqs read); `names`: `_Reading.names`. A seq named past the last of its kind in a
+    session that did not complete is its end (the recording stopped before the event named was written), not
+    counted; a 0 names nothing (a recording from before the field)."""
+    import numpy as np
+
+    held: dict[tuple[str, str, str], list] = {}  # (session, source, tag) -> the seqs read on its channels
+    named: dict[tuple[str, tuple, str, str], list] = {}  # (session, sources named, tag named, field) -> seqs named
+    by: dict[tuple[str, tuple, str, str], set] = {}  # the same -> the tags naming them
+    for channel, (topic, numbers) in names.items():
+        routed = route.get(channel)
+        if routed is None or routed[0] != topic or not numbers or (routed[3], routed[4].__name__) not in NAMES:
+            continue
+        _, _, session, source, kind, _ = routed
+        sources, tag, name = NAMES[(source, kind.__name__)]
+        named.setdefault((session, sources, tag, name), []).append(np.frombuffer(numbers, dtype=np.int64))
+        by.setdefault((session, sources, tag, name), set()).add((source, kind.__name__))
+    if not named:
+        return []
+    for _, _, session, source, kind, numbers in route.values():
+        if numbers and kind is not None:
+            held.setdefault((session, source, kind.__name__), []).append(np.frombuffer(numbers, dtype=np.int64))
+    out = []
+    for (session, sources, tag, name), seqs in named.items():
+        seqs = np.unique(np.concatenate(seqs))
+        seqs = seqs[seqs > 0]
+        targets = [np.concatenate(held[(session, s, tag)]) for s in sources if (session, s, tag) in held]
+        target = np.unique(np.concatenate(targets)) if targets else seqs[:0]
+        if not seqs.size or seqs.size > target.size:
+            continue  # nothing named, or more named than held: the counts say it (`unanswered`)
+        off = seqs[~np.isin(seqs, target)]
+        if ended_by.get(session) != "completed":
+            off = off[off < target.max()]  # (past the last one read: the recording's end, not a renumbering)
+        if off.size:
+            whose = next((s for s in sources if (session, s, tag) in held), sources[0])
+            naming = sorted(by[(session, sources, tag, name)])
+            of = " or ".join(t for _, t in naming) + f" of {naming[0][0]!r}"  # (one source names each kind)
+            out.append((whose, f"{whose!r}: its seqs renumbered (an event cut or added): the {name} of {off.size} {of}"
+                               f" {'names' if off.size == 1 else 'name'} no {tag} (the first: {int(off[0])})"))
     return out
 
 

@@ -22,6 +22,7 @@ from pairplay.core.geometry import ALL_CARDS, N_CARDS
 from pairplay.core.user import known_partners
 from pairplay.core.userfit import Observations
 from pairplay.errors import InputError
+from pairplay.numbers import counted
 from pairplay.schemas import events as ev
 from pairplay.schemas.session import SessionConfig
 
@@ -55,7 +56,7 @@ def turns_from_events(events, source: str = "", note: str = "") -> RecordedTurns
     if forged:
         raise InputError(f"{forged}: not fitted", source)
     config: SessionConfig | None = None
-    partner = None
+    partner, deal_round = None, -1  # the deal read, and its round
     covered = ALL_CARDS
     made: dict[tuple[int, int], ev.SuggestionMade] = {}
     perceived: dict[tuple[int, int], ev.SuggestionPerceived] = {}
@@ -63,6 +64,7 @@ def turns_from_events(events, source: str = "", note: str = "") -> RecordedTurns
     partners: list[np.ndarray] = []
     picks: list[int] = []
     skipped: list[str] = []
+    undealt: dict[int, int] = {}  # round -> its turns resolved with no deal of it read
     events = list(events)
     for e in events:  # the session, and each turn's last suggestion (file order need not be turn order)
         if isinstance(e, ev.SessionStarted) and config is None:
@@ -76,13 +78,14 @@ def turns_from_events(events, source: str = "", note: str = "") -> RecordedTurns
         if config is None or e.session != config.session:
             continue
         if isinstance(e, ev.RoundStarted):
-            partner = known_partners(np.asarray(e.faces, dtype=np.int64))[0]
+            partner, deal_round = known_partners(np.asarray(e.faces, dtype=np.int64))[0], e.round
             covered = ALL_CARDS
         elif isinstance(e, ev.RoundEnded):
             picks.append(2 * e.turns)
         elif isinstance(e, ev.TurnResolved):
-            if partner is None:
-                skipped.append(f"round {e.round + 1} turn {e.turn + 1}: no RoundStarted before it")
+            if partner is None or e.round != deal_round:  # (its round's deal not read: another round's is no deal
+                # of it: an impossible turn under it made the fit's likelihood NaN, a traceback: a cut RoundStarted)
+                undealt[e.round] = undealt.get(e.round, 0) + 1  # said once a round (below)
                 continue
             if partner[e.first] >= N_CARDS:  # a malformed deal: the first card's face appears once
                 skipped.append(f"round {e.round + 1} turn {e.turn + 1}: card {e.first} has no partner in the deal")
@@ -95,6 +98,7 @@ def turns_from_events(events, source: str = "", note: str = "") -> RecordedTurns
             partners.append(partner)
             if e.matched:
                 covered &= ~((1 << e.first) | (1 << e.second))
+    skipped += [f"round {r + 1} ({counted(n, 'turn')}): no RoundStarted before it" for r, n in undealt.items()]
     if config is None:
         raise InputError("no SessionStarted: not a pairplay session recording", source)
     if not rows:  # what left none, if the file is damaged or cut (a new user's trial: the damage unnamed)

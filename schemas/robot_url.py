@@ -32,10 +32,21 @@ OVERRIDES = {
 }
 
 
+def _split(url: str):
+    """`url` split as a URL (`virtual?time_scale=0` has no `://`)."""
+    return urlsplit(url if "://" in url else url.replace("virtual", "virtual://", 1))
+
+
+def robot_kind(url: str) -> str:
+    """Which robot a --robot URL names, its scheme alone (`virtual`, `iristk`, `furhat`): what a session's config
+    records of it (SessionConfig.robot; its host and its parameters, a key among them, are not recorded)."""
+    return _split(url).scheme
+
+
 def parse_robot_url(url: str, config: RobotConfig | None = None) -> tuple[str, str, int, RobotConfig, dict]:
     """(scheme, host, port, effective config, extra params) of a --robot URL; ValueError if wrong."""
     config = config or RobotConfig()
-    parts = urlsplit(url if "://" in url else url.replace("virtual", "virtual://", 1))
+    parts = _split(url)
     scheme = parts.scheme
     if scheme not in OVERRIDES:
         raise ValueError(f"--robot {url!r}: unknown backend {scheme!r}; use one of {FORMS}")

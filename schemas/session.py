@@ -82,6 +82,11 @@ class SessionConfig(msgspec.Struct, frozen=True, kw_only=True, metaclass=PublicS
     # `protocol pilot`, `protocol serve --pilot`): the core persona that touched the board; "" for a person's
     # game, a simulated participant's (sim:, whose persona is `persona`) and every older recording.
     scripted: str = ""
+    # The robot the session was started with, by kind (schemas/robot_url.py `robot_kind`: "virtual", "iristk",
+    # "furhat"; "external" for a bridge in a process of its own, `session --external robot`, `run game --wait-for
+    # robot`); "" for none and every older recording. A session that names one and holds no event of it is said
+    # (replay/reader.py `unanswered`: "the robot sent nothing"): before, no verb noticed a robot absent altogether.
+    robot: str = ""
 
     def lspi_config(self) -> LSPIConfig:
         """LSPI's settings as the strict Struct (ValueError if unknown keys or values that cannot run)."""

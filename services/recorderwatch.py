@@ -19,18 +19,23 @@ from typing import Callable
 
 from pairplay.errors import command_word
 from pairplay.schemas.keys import alive_key
+from pairplay.services.runner import GAME_GONE_S
 
 
 RECHECK_S = 1.0  # while held, how often the bus is asked whether the recorder's token is back (`held`)
 
 
 class RecorderWatch:
+    """`settle_s`: how long the game waits for a recorder to come back (the session's settle time, `pairplay run game
+    --settle`), said in its lines: the caller ends the session once `gone_for()` passes it."""
+
     def __init__(self, bus, session: str, round_now: Callable[[], int], connect: str = "", clock=time.monotonic,
-                 over: Callable[[], bool] = lambda: False):
+                 settle_s: float = GAME_GONE_S, over: Callable[[], bool] = lambda: False):
         # `over()`: the game has ended. A recorder that leaves then holds no game back (nothing is left to
         # hold); whether it took the services' last events is asked of it at their end (services/recorded.py),
         # and its absence said there. Before, its drop said "at round 21 of 20: the game is held" (trial34 A).
         self.session, self.round_now, self.connect, self.clock, self.over = session, round_now, connect, clock, over
+        self.settle_s = settle_s
         self._lock = threading.Lock()
         self.seen = False
         self.gone_since: float | None = None
@@ -49,7 +54,7 @@ class RecorderWatch:
             elif self.seen and self.gone_since is None and not self.over():
                 self.gone_since, self.left_round = self.clock(), self.round_now() + 1
                 self._said.append(f"the recorder left the bus at round {self.left_round}: the game is held until one "
-                                  f"is back; restart it (`pairplay run recorder --session {command_word(self.session)} "
+                                  f"is back (up to {self.settle_s:g} s); restart it (`pairplay run recorder --session {command_word(self.session)} "
                                   f"--connect {command_word(self.connect or 'ENDPOINT')}`) to refill what it missed")
 
     def held(self) -> bool:
@@ -83,5 +88,6 @@ class RecorderWatch:
             return ""
         first = self.left_round
         rounds = f"round {first}" if first >= last_round else f"rounds {first}..{last_round}"
-        return (f"the recorder left the bus at round {first} and none came back: {rounds} not recorded "
+        return (f"the recorder left the bus at round {first} and none came back within {self.settle_s:g} s: {rounds} "
+                f"not recorded "
                 f"(session {self.session})")

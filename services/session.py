@@ -28,12 +28,15 @@ from pathlib import Path
 
 import logging
 
+import msgspec
+
 from pairplay import signals, testpause
 from pairplay.core.personas import persona
 from pairplay.errors import InputError, UserError
 from pairplay.nearest import nearest
 from pairplay.schemas.events import encode_event, own_seq
 from pairplay.schemas.keys import alive_key, check_chunk, event_key
+from pairplay.schemas.robot_url import robot_kind
 from pairplay.arguments import at, path_argument
 from pairplay.schemas.session import SessionConfig, config_argument
 from pairplay.services.bus import CLOSE_TIMEOUT_S, Bus, BusOptions, Deadline, deadline_of
@@ -100,6 +103,11 @@ def run_session(config: SessionConfig, path: str | Path, *, bus: Bus | None = No
     the process is done within `SHUTDOWN_S` of the signal, its recording finished.
     A caller's `config` or `path` that cannot run is refused first (schemas/session.py config_argument)."""
     config = config_argument(config, "run_session")
+    # the robot it is started with, recorded in its SessionStarted by kind (a robot that then sends nothing is said
+    # by every reader of the file); a game elsewhere records its own
+    kind = robot_kind(robot.url) if robot is not None else "external" if "robot" in external else ""
+    if kind and not config.robot and "game" not in external:
+        config = msgspec.structs.replace(config, robot=kind)
     try:
         startable(config)
     except ValueError as exc:
@@ -181,7 +189,8 @@ def run_session(config: SessionConfig, path: str | Path, *, bus: Bus | None = No
             if "recorder" in external:  # held while its recorder is off the bus (services/recorderwatch.py)
                 recorder_watch = RecorderWatch(bus, config.session, lambda: game.logic.round,
                                                over=lambda: game.logic.done,
-                                               connect=" ".join(bus.options.connect) or " ".join(bus.locators()))
+                                               connect=" ".join(bus.options.connect) or " ".join(bus.locators()),
+                                               settle_s=settle_timeout_s)
                 game.hold = recorder_watch.held
             if nodes_out is not None:
                 nodes_out["game"] = game

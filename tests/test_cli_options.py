@@ -61,6 +61,13 @@ REFUSED = {
     "run game --turn-back-ms inf": (["run", "game", "--participant", "sim:blind", "--turn-back-ms", "inf"],
                                     "not a finite number"),
     "lab --linger nan": (["lab", *MINIMAL["lab"]] + ["--linger", "nan"], "--linger: not a finite number"),
+    # the game's wait for its recorder's return was a fixed 30 s (trial33 K's leftover): an option, checked as --linger
+    "run game --settle nan": (["run", "game", "--participant", "sim:blind", "--wait-for", "recorder", "--settle", "nan"],
+                              "--settle: not a finite number: 'nan'"),
+    "run game --settle -1": (["run", "game", "--participant", "sim:blind", "--wait-for", "recorder", "--settle", "-1"],
+                             "--settle: must be at least 0, got -1"),
+    "run game --settle 1e9": (["run", "game", "--participant", "sim:blind", "--wait-for", "recorder", "--settle",
+                               "1e9"], "--settle: must be 0..3600 (seconds to wait: an hour at most), got 1e9"),
     "study --lspi-ridge 0": (["study", "--lspi-ridge", "0"], "--lspi-ridge: must be above 0"),
     "sweep --workers 0": (["sweep", "g.toml", "--workers", "0"], "--workers: must be at least 1"),
     "bench --runs 0": (["bench", "--runs", "0"], "--runs: must be at least 1"),

@@ -102,7 +102,8 @@ def test_the_console_refuses_the_next_step_of_a_person_without_consent_and_recor
             _, state = call(url % "state")
             assert state["participants"][0]["consent"] == "" and state["consent_form"] == "v2 2026-11"
             status, body = call(url % "consent", {"participant": "p01"})
-            assert status == 200 and body == {"consent": "p01", "form": "v2 2026-11"}, body
+            assert status == 200 and body["consent"] == "p01" and body["form"] == "v2 2026-11", body
+            assert body["given"].startswith("form 'v2 2026-11' given ") and "recorded" not in body["given"], body
             status, body = call(url % "register", {"phase": "phase1", "consent": True})
             assert status == 200 and body["registered"] == ["p02"] and body["consent"] is True
             _, state = call(url % "state")

@@ -144,3 +144,66 @@ def test_repair_of_a_torn_consent_names_it_and_writes_the_tables_again(tmp_path,
         [("p01", "v2 2026-11"), ("p02", "")]
     assert pairplay_cli("protocol", "consent", folder, "p02").returncode == 0
     assert json.loads(path.read_text().splitlines()[-1])["participant"] == "p02"
+
+
+def test_the_console_records_a_consent_held_on_paper_as_given_then(browser, tmp_path):
+    """The console's Record consent takes when they signed, parsed as `protocol consent --given-at` parses it (one
+    parser, pairplay/isotime.py): before, it had no such field and a consent held on paper was journaled "now",
+    after the games it covered (trial33 D)."""
+    import argparse
+
+    from pairplay.cli.args import time_ns
+    data = StudyData.create(tmp_path / "study", study_with_form(tmp_path))
+    data.register_many("phase1", count=3)
+    with Bus(BusOptions()) as bus:
+        server = ConsoleServer(StudyRunner(data, bus)).start()
+        ctx = browser.new_context(viewport={"width": 1366, "height": 900}, bypass_csp=True)
+        try:
+            console = ctx.new_page()
+            errors = []
+            console.on("pageerror", lambda e: errors.append(str(e)))
+            console.goto(server.console_url)
+            console.wait_for_function("document.querySelectorAll('#participants li').length == 3", timeout=10000)
+
+            def record(pid: str, given_at: str) -> None:
+                console.select_option("#data-participant", pid)
+                console.fill("#consent-given-at", given_at)
+                console.click("#record-consent")
+
+            def refused(words: str) -> str:
+                """The refusal on the page once it holds `words` (the one before stays there until replaced)."""
+                console.wait_for_function("([w]) => document.getElementById('message').className === 'error' && "
+                                          "document.getElementById('message').textContent.includes(w)", arg=[words],
+                                          timeout=10000)
+                return console.inner_text("#message")
+
+            record("p01", "2026-11-20T10:00Z")
+            console.wait_for_function("document.querySelector('#participants li').textContent.includes('recorded ')",
+                                      timeout=10000)
+            shown = console.inner_text("#participants li")
+            assert "consent: form 'v2 2026-11' given 2026-11-20T10:00:00Z (recorded 20" in shown, shown
+            assert console.input_value("#consent-given-at") == ""  # not carried over to the next person
+            [given] = [e for e in journal(data.folder) if e["event"] == "ConsentGiven"]
+            assert given["participant"] == "p01" and given["given_ns"] == 1795168800 * 10**9
+            # what the CLI refuses, the console refuses in the same words; nothing journaled
+            lines = len(journal(data.folder))
+            for text in ("yesterday", "20-11-2026"):
+                try:
+                    time_ns(text)
+                    raise AssertionError(f"the CLI takes {text!r}")
+                except argparse.ArgumentTypeError as err:
+                    cli_words = str(err)
+                record("p02", text)
+                said = refused(cli_words)
+                assert said == f"when they signed (`given_at`): {cli_words}", said
+            record("p02", "2099-01-01")
+            assert "p02: consent given at 2099-01-01" in refused("is in the future")
+            assert len(journal(data.folder)) == lines
+            record("p03", "")  # blank: given now, as without --given-at
+            console.wait_for_function("document.querySelectorAll('#participants li')[2].textContent.includes('given ')",
+                                      timeout=10000)
+            assert "(recorded" not in console.inner_text("#participants li >> nth=2")
+            assert errors == []
+        finally:
+            ctx.close()
+            server.close()

@@ -501,8 +501,8 @@ def test_recover_of_a_complete_file_writes_nothing_and_names_a_stale_journal(tmp
     ran = pairplay_cli("recover", path)
     assert ran.returncode == 0 and ran.stderr == "", ran.stderr
     # (its picks have no answer of the game: said too, as in any file whose game events went: trial33 E)
-    assert ran.stdout.strip() == f"{path}: complete already ({len(read_log(path).events)} messages; 10 events of " \
-        "'game' missing: 0 CardRevealed for the 10 CardPicked of 'participant': no recover gives them back; the " \
+    assert ran.stdout.strip() == f"{path}: complete already ({len(read_log(path).events)} messages; 10 CardRevealed " \
+        "or PickRejected of 'game' missing (0 for the 10 CardPicked of 'participant'): no recover gives them back; the " \
         "session's end was not recorded: a partial session); nothing to recover, nothing written", ran.stdout
     assert not (tmp_path / "j1.recovered.mcap").exists()
     (tmp_path / "j1.recovered.mcap").write_bytes(b"an older version's copy")  # not refused: nothing is written

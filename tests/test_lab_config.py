@@ -118,6 +118,10 @@ def test_pairplay_lab_says_where_the_board_is_and_stops_on_sigterm(tmp_path, tls
     finally:
         if proc.poll() is None:
             proc.kill()
+    # no study folder, no consent to check: said beside the URLs (a researcher expected `protocol serve`'s check;
+    # before, not a word: trial33 H)
+    assert "\nconsent: not checked here (one session outside any study folder; a study's games, each person's " \
+           "consent checked first, run from `pairplay protocol serve FOLDER`)\n" in out, out
     # the game may not have started the session yet (it waits for its services): either way the signal is named
     assert proc.returncode == 143 and "interrupted (SIGTERM" in err and "Traceback" not in err, out + err
     assert "interrupted" not in out, out  # stdout holds results only

@@ -31,6 +31,7 @@ from starlette.staticfiles import StaticFiles
 
 from pairplay.core.actions import ACTION_NAMES
 from pairplay.core.geometry import N_STATES, STATE_NAMES
+from pairplay.isotime import iso_time_ns
 from pairplay.outputs import output_folder
 from pairplay.replay import biases
 from pairplay.replay.studydata import StudyDataError, consent_words, mentions, named
@@ -206,6 +207,13 @@ class ParticipantRequest(_Request):
     consent_withdrawn: bool = False  # a deletion because the person withdrew their consent: the journal says so
 
 
+class ConsentRequest(_Request):
+    participant: str = ""
+    # when they signed, if before now (a consent held on paper), as `protocol consent --given-at` takes it
+    # (pairplay/isotime.py, one parser for both); "" is now
+    given_at: str = ""
+
+
 class AnswerRequest(_Request):
     session: str = ""
     token: str = ""
@@ -256,10 +264,14 @@ def console_routes(console: Console) -> list:
         return JSONResponse({"registered": ids, "consent": asked.consent})
 
     async def consent(request: Request) -> Response:
-        asked = _read(await _body(request), ParticipantRequest)
-        given = data.record_consent(asked.participant)
+        asked = _read(await _body(request), ConsentRequest)
+        try:  # the CLI's parser: the same texts taken, the same refused in the same words
+            given_ns = iso_time_ns(asked.given_at) if asked.given_at.strip() else 0
+        except ValueError as err:
+            raise StudyDataError(f"when they signed (`given_at`): {err}") from None
+        given = data.record_consent(asked.participant, given_ns=given_ns)  # the future refused there, as for the CLI
         data.write_tables()
-        return JSONResponse({"consent": asked.participant, "form": given.form})
+        return JSONResponse({"consent": asked.participant, "form": given.form, "given": consent_words(given)})
 
     async def start_next(request: Request) -> Response:
         step = data.next_step()

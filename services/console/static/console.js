@@ -186,8 +186,10 @@ $("resume").onclick = act(() => api("/api/console/control/resume", {}));
 $("abort").onclick = act(() => api("/api/console/control/abort", {reason: $("abort-reason").value}));
 $("skip-questionnaire").onclick = act(() => api("/api/console/control/skip-questionnaire", {}));
 $("record-consent").onclick = act(async () => {
-  const r = await api("/api/console/consent", {participant: $("data-participant").value});
-  say(`${r.consent}: consent recorded` + (r.form ? ` (form "${r.form}")` : ""));
+  // given_at as typed: the server parses it as the CLI's --given-at does, and refuses in its words
+  const r = await api("/api/console/consent", {participant: $("data-participant").value, given_at: $("consent-given-at").value});
+  $("consent-given-at").value = "";
+  say(`${r.consent}: consent recorded: ${r.given}`);
 });
 $("export").onclick = act(async () => {
   const r = await api("/api/console/export", {participant: $("data-participant").value});
