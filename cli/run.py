@@ -286,7 +286,8 @@ def _run(args: argparse.Namespace, stop: threading.Event, recording: dict) -> in
         if said:  # what came after the last check, said too
             log.warning(said)
         # taken before the end: a recorder leaves the bus once the session has ended
-        not_recorded = recorder_watch.lost(logic.config.rounds if logic.done else logic.round + 1) \
+        not_recorded = recorder_watch.lost(logic.config.rounds if logic.done else logic.round + 1,
+                                           getattr(stop, "why", "") if stop.is_set() else "") \
             if recorder_watch is not None else ""
         if stop.is_set():
             thread.join(deadline_of(stop).left(0.5, 0.2))

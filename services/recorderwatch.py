@@ -82,12 +82,17 @@ class RecorderWatch:
             said, self._said = "; ".join(self._said), []
         return said
 
-    def lost(self, last_round: int) -> str:
-        """If the recorder is gone now: which rounds no recording holds (`last_round`: the game's last, from 1)."""
+    def lost(self, last_round: int, signal: str = "") -> str:
+        """If the recorder is gone now: which rounds no recording holds (`last_round`: the game's last, from 1).
+        `signal`: the signal that stopped the session while it was held ("SIGINT"), said instead of "none came
+        back within 30 s", which read as the settle time having passed (trial34 H)."""
         if self.left_round is None:
             return ""
         first = self.left_round
         rounds = f"round {first}" if first >= last_round else f"rounds {first}..{last_round}"
+        if signal:
+            return (f"interrupted ({signal}) while held for the recorder (it left the bus at round {first}): {rounds} "
+                    f"not recorded (session {self.session})")
         return (f"the recorder left the bus at round {first} and none came back within {self.settle_s:g} s: {rounds} "
                 f"not recorded "
                 f"(session {self.session})")

@@ -208,7 +208,8 @@ def run_session(config: SessionConfig, path: str | Path, *, bus: Bus | None = No
         if said:  # what came after the last check, said too
             log.warning(said)
         # taken before anything else ends: an external recorder leaves the bus once the session has ended
-        not_recorded = recorder_watch.lost(config.rounds if game.logic.done else game.logic.round + 1) \
+        not_recorded = recorder_watch.lost(config.rounds if game.logic.done else game.logic.round + 1,
+                                           getattr(stop, "why", "") if stop.is_set() else "") \
             if recorder_watch is not None else ""
         own_end = end_game(game, stop, failure, recorder)
         if not failure and not stop.is_set():

@@ -89,6 +89,31 @@ def test_a_session_whose_external_recorder_dies_is_held_says_it_and_fails(tmp_pa
     assert "traceback" not in said.lower()
 
 
+def test_a_held_session_stopped_by_a_signal_names_the_signal(tmp_path):
+    """trial34 H: SIGINT to a session held for its recorder exited 130 at once, but its last line said "none came
+    back", read as the settle time having passed; the signal was not said."""
+    session = "rheld"
+    p = session_proc(tmp_path, "--participant", "sim:ashley", "--rounds", "5000", "--session", session,
+                     "--external", "recorder")
+    try:
+        endpoint = endpoint_of(first_line(p))
+        err = _stderr_lines(p)
+        _killed_mid_session(tmp_path, session, endpoint, lambda: _recorded_rounds(tmp_path / f"{session}.mcap"))
+        assert wait_until(lambda: any("the recorder left the bus at round" in x for x in err), 60, 0.05), err
+        p.send_signal(signal.SIGINT)
+        p.wait(timeout=30)
+    finally:
+        if p.poll() is None:
+            p.kill()
+            p.wait()
+    said = "".join(err)
+    assert p.returncode == 130, said
+    last = [x for x in err if x.strip()][-1]
+    assert last.startswith("pairplay session: interrupted (SIGINT) while held for the recorder (it left the bus at "
+                           "round "), said
+    assert "not recorded (session rheld)" in last and "none came back" not in last, last
+
+
 def _service(tmp_path, *args):
     return subprocess.Popen([sys.executable, "-m", "pairplay", "run", *args], stdout=subprocess.PIPE,
                             stderr=subprocess.PIPE, text=True, env=dict(os.environ, PYTHONUNBUFFERED="1"))
