@@ -85,8 +85,10 @@ SHOWN = 5  # of a service's differences, listed by `replay --verify` (then how m
 
 def said(e) -> str:
     """A recomputed event in a line: its type, seq and round/turn where it has them (a FAIL for events
-    recomputed beyond the recording named none of them, even with -v: trial33 L)."""
-    where = ", ".join(f"{k} {getattr(e, k)}" for k in ("round", "turn") if isinstance(getattr(e, k, None), int))
+    recomputed beyond the recording named none of them, even with -v: trial33 L), counted from 1 as every line
+    a person reads counts them ("rounds 1-18 of 20 recorded whole"); the events' fields count from 0, and one
+    output said "round 18" of both the 19th round and the 18th (trial34 C)."""
+    where = ", ".join(f"{k} {getattr(e, k) + 1}" for k in ("round", "turn") if isinstance(getattr(e, k, None), int))
     return f"{type(e).__name__} seq {e.seq}{f' ({where})' if where else ''}"
 
 

@@ -16,4 +16,5 @@ def test_verify_lists_the_events_recomputed_beyond_the_recording(tmp_path, pairp
     done = pairplay_cli("replay", path, "--verify")
     assert done.returncode == 1 and done.stdout.splitlines()[-1].startswith("verify: FAIL")
     assert "DIFFERS (1 recomputed beyond the recording)" in done.stdout
-    assert "    recomputed, not in the recording: RewardGiven seq 141 (round 3, turn 15)\n" in done.stdout
+    # counted from 1, as the verdict's "rounds 1-N of M recorded whole" (trial34 C: the event's 0-based fields)
+    assert "    recomputed, not in the recording: RewardGiven seq 141 (round 4, turn 16)\n" in done.stdout
