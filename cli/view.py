@@ -114,6 +114,13 @@ def run(args: argparse.Namespace) -> int:
         # both (a hostile user's trial: a cut file's view was saved under the complete name, a damaged one's as
         # .partial.rrd); a file its recorder still writes is `live`, said so
         lost = held.lost or ("" if live else held.missing)
+        if not lost and not live and not held.of("SessionEnded"):
+            # closed whole by a recorder stopped before the session's end (SIGTERM; no SessionEnded): the rest of the
+            # session is in no file, as a cut one's; rebuild says PARTIAL, the view was saved under the whole name
+            # with 0 notes (trial34 B)
+            stopped = held.metadata.get("pairplay.recorder.end", {}).get("stopped_by", "")
+            lost = ("closed before its session's end (no SessionEnded recorded"
+                    + (f"; its recorder was stopped: {stopped})" if stopped else ")"))
         if args.session:  # before rerun loads and anything is drawn
             if not any(r.event.session == args.session for r in held.events):
                 raise InputError(f"holds no events of session {args.session}; nothing saved", args.recording)

@@ -109,6 +109,18 @@ def test_a_view_prints_one_line_of_result_and_its_steps_only_with_verbose(tmp_pa
     assert "cut.mcap was truncated: " in r.stderr and "the view is partial (cut.partial.rrd)" in r.stderr, r.stderr
 
 
+def test_a_recording_closed_before_its_sessions_end_is_viewed_as_partial(tmp_path, pairplay_cli):
+    """trial34 B: a recorder stopped mid-session (SIGTERM) closes its file whole but without a SessionEnded; rebuild
+    said PARTIAL, the view was saved under the complete name with 0 notes and no word."""
+    from rewrite_mcap import rewritten
+    rewritten(tmp_path / "stopped.mcap", each=lambda c, m: [] if c.topic.endswith("/SessionEnded") else [m])
+    r = pairplay_cli("view", "--recording", "stopped.mcap", cwd=tmp_path)
+    [line] = r.stdout.splitlines()
+    assert r.returncode == 0 and line.startswith("saved stopped.partial.rrd: ") and line.endswith("; partial"), r.stdout
+    assert not (tmp_path / "stopped.rrd").exists()
+    assert "stopped.mcap was closed before its session's end (no SessionEnded recorded)" in r.stderr, r.stderr
+
+
 class Ticks:
     """A clock that moves `step` seconds at each reading."""
 
