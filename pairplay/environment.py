@@ -1,9 +1,13 @@
 """pairplay's own environment variables: read here, and a value they cannot take refused, never ignored.
 
 Rule: PAIRPLAY_THREADS (a positive integer: the most threads a computation
-uses, core/threads.py) and PAIRPLAY_WAIT_FOR_S (a positive number of seconds:
-how long a game waits for the services it needs, services/runner.py) are read
-by `threads()` and `wait_for_s()`, which give None / the default for a value
+uses, core/threads.py), PAIRPLAY_WAIT_FOR_S (a positive number of seconds:
+how long a game waits for the services it needs, services/runner.py) and
+PAIRPLAY_SETTLE_S (a positive number of seconds: the settle time, how long a
+session or a service waits for a service that left the bus, the game or an
+external recorder, to come back before it ends: services/runner.py
+GAME_GONE_S) are read by `threads()`, `wait_for_s()` and `settle_s()`, which
+give None / the default for a value
 they cannot take, so that importing a module never fails on one. The command
 line calls `check()` before a verb runs: such a value is a user's mistake, one
 line, exit 2 (cli/main.py), naming the variable and what it takes.
@@ -19,6 +23,7 @@ import os
 from pairplay.errors import UserError
 
 WAIT_FOR_S = 30.0  # a game's wait for its services when PAIRPLAY_WAIT_FOR_S is not set
+SETTLE_S = 30.0  # the settle time when PAIRPLAY_SETTLE_S is not set (a test's dead recorder waits less)
 
 
 def _threads(text: str) -> int:
@@ -27,17 +32,22 @@ def _threads(text: str) -> int:
     return int(text)
 
 
-def _seconds(text: str) -> float:
-    try:
-        value = float(text)
-    except ValueError:
-        value = math.nan
-    if not (math.isfinite(value) and value > 0):
-        raise ValueError("a positive number of seconds: how long a game waits for the services it needs")
-    return value
+def _seconds(what: str):
+    """A parser of a positive, finite number of seconds; its refusal says `what` they are."""
+    def parse(text: str) -> float:
+        try:
+            value = float(text)
+        except ValueError:
+            value = math.nan
+        if not (math.isfinite(value) and value > 0):
+            raise ValueError(f"a positive number of seconds: {what}")
+        return value
+    return parse
 
 
-VARIABLES = {"PAIRPLAY_THREADS": _threads, "PAIRPLAY_WAIT_FOR_S": _seconds}
+VARIABLES = {"PAIRPLAY_THREADS": _threads,
+             "PAIRPLAY_WAIT_FOR_S": _seconds("how long a game waits for the services it needs"),
+             "PAIRPLAY_SETTLE_S": _seconds("how long a session waits for a service that left the bus to come back")}
 
 
 def _read(name: str):
@@ -60,6 +70,12 @@ def wait_for_s() -> float:
     """PAIRPLAY_WAIT_FOR_S, or WAIT_FOR_S."""
     value = _read("PAIRPLAY_WAIT_FOR_S")
     return WAIT_FOR_S if value is None else value
+
+
+def settle_s() -> float:
+    """PAIRPLAY_SETTLE_S, or SETTLE_S."""
+    value = _read("PAIRPLAY_SETTLE_S")
+    return SETTLE_S if value is None else value
 
 
 def check() -> None:

@@ -125,7 +125,10 @@ def waiting_for(services, timeout_s: float = WAIT_FOR_S) -> str:
     return f"waiting up to {timeout_s:g} s for: {', '.join(services)}" if services else ""
 
 
-GAME_GONE_S = 30.0  # a service whose session's game left the bus this long ago ends (GameWatch)
+# a service whose session's game left the bus this long ago ends (GameWatch); a session whose needed service (its
+# external recorder: services/recorderwatch.py) did fails (services/session.py): the settle time, 30 s unless
+# PAIRPLAY_SETTLE_S says (pairplay/environment.py; tests of a recorder that never comes back shorten it)
+GAME_GONE_S = environment.settle_s()
 
 
 class GameWatch:

@@ -51,7 +51,7 @@ from pairplay.services.refusal import EndRefused, RefusalWatch, StartRefused  # 
 from pairplay.services.refusal import published_seq
 from pairplay.services.robot.bridge import ROBOT_CLOSE_S
 from pairplay.services.robot.choice import RobotChoice, start_bridge
-from pairplay.services.runner import Node, Stopped, start_unless_stopped
+from pairplay.services.runner import GAME_GONE_S, Node, Stopped, start_unless_stopped
 from pairplay.services.unanswered import RequestWatch
 
 log = logging.getLogger("pairplay.session")
@@ -76,7 +76,7 @@ def forgery_watch(game: Node | None, nodes: list[Node], recorder: Recorder | Non
 
 def run_session(config: SessionConfig, path: str | Path, *, bus: Bus | None = None,
                 bus_options: BusOptions | None = None, external: tuple[str, ...] = (),
-                stop: threading.Event | None = None, settle_timeout_s: float = 30.0,
+                stop: threading.Event | None = None, settle_timeout_s: float = GAME_GONE_S,
                 on_bus=None, nodes_out: dict | None = None, wait_also: tuple[str, ...] = (),
                 robot: RobotChoice | None = None, extra_nodes=None, hold=None, summary: dict | None = None) -> Path:
     """Run one session to its end (or `stop`); return the recording's path.

@@ -94,34 +94,43 @@ def pytest_xdist_auto_num_workers(config) -> int:
     return 0 if "slow" in marks.replace("not slow", "") else 3
 
 
-# Files whose tests take the longest, longest first (summed test time of a full run on 3 workers, 2026-12-02
-# 01:43 UTC, at load 25-30 from other suites: 2,297 s; test_sweep 220 s, test_protocol 193 s, test_cli_mistakes 155 s;
-# every file of 6 s or more): with whole files per worker (--dist loadfile) the files go out in this order, so
-# that the run ends on short files and no worker is left alone with a long one (test_study_guard, 57 s, and
-# test_cli_out_of_threads, 31 s in one test, were not listed and went out in alphabetical order, late).
+# Files whose tests take the longest, longest first (summed test time, setups included, of a full run on 3 workers,
+# 2026-12-03 07:19 UTC, main ce43397, at load 6-12 from other suites: 1,734 s; test_sweep 141 s, test_protocol 140 s,
+# test_cli_mistakes 87 s, test_recorder_gone 62 s; every file of 5 s or more): with whole files per worker
+# (--dist loadfile) the files go out in this order, so that the run ends on short files and no worker is left alone
+# with a long one. The list of 2026-12-02 lacked test_recorder_gone, test_cut_signals (56 s), test_start_order_heads
+# (41 s), test_worker_lost (34 s) and test_protocol_cut_game/_reinvalid (30 s each), which then went out in
+# alphabetical order after every listed file: replaying that run's test times through xdist's loadfile scheduling
+# (a worker takes its next file when 2 of its tests are left), the last worker ended at 597.6 s with the old list,
+# 579.5 s with this one, against 577.9 s (a third of the sum) for a perfect split, and 639.0 s in alphabetical order.
+# Measure again when a file's time changes much (a run's --junitxml, its test times summed by file).
 # pytest-xdist >= 3.5 sorts the files by their NUMBER of tests (test_cli_mistakes' 189 rows first, test_study_batch's
 # 3 late), which ignored this list; pytest_configure turns that off where xdist lets it (3.8's
 # --no-loadscope-reorder; an option in addopts would be refused by 3.5-3.7, which pyproject allows).
-# test_study_batch stays first: it is short and compiles the numba kernels into their cache before the files
-# that start many processes.
+# test_study_batch stays first: it compiles the numba kernels into their cache before the files
+# that start many processes (the controller warms them too: pytest_configure) and is the longest single test.
 LONGEST_FIRST = ("test_study_batch.py", "test_sweep.py", "test_protocol.py", "test_cli_mistakes.py",
-                 "test_session_end.py", "test_console_browser.py", "test_router.py", "test_lab_browser.py",
-                 "test_mcap_damage.py", "test_outputs.py", "test_faults_restart.py", "test_study_cli.py",
-                 "test_session_crash.py", "test_faults.py", "test_journal.py", "test_cli_full_disk.py",
-                 "test_counterfactual.py", "test_study_digests.py", "test_view_cli.py",
-                 "test_protocol_interrupted.py", "test_cli_out_of_threads.py", "test_recorder_restart.py",
-                 "test_cli_signals.py", "test_faults_startup.py", "test_faults_signals.py", "test_python_api.py",
-                 "test_recorder_continues_losses.py", "test_security.py", "test_study_guard.py",
-                 "test_cli_logging.py", "test_session_robot.py", "test_session_cli.py", "test_determinism.py",
-                 "test_progress.py", "test_forge.py", "test_lab_config.py", "test_bus_bad_input.py",
-                 "test_livelock.py", "test_robot_iristk.py", "test_bench_goals.py", "test_report_figures.py",
-                 "test_protocol_threads.py", "test_copies.py", "test_lspi_study.py", "test_kernels_cache.py",
-                 "test_console_layout.py", "test_session_readback.py", "test_unknown_keys.py",
-                 "test_robot_realtime.py", "test_recorder_holes.py", "test_refusal.py", "test_hints.py",
-                 "test_start_signals.py", "test_recover_again.py", "test_replay_samples.py", "test_reuse.py",
-                 "test_view_rerun.py", "test_warnings_stderr.py", "test_lspi_session.py", "test_cli_paths.py",
-                 "test_study_folder_outputs.py", "test_session_ids.py", "test_study_file.py", "test_live_reading.py",
-                 "test_zenohcheck.py", "test_bus_direct.py", "test_no_session.py")
+                 "test_recorder_gone.py", "test_cut_signals.py", "test_start_order_heads.py", "test_session_end.py",
+                 "test_outputs.py", "test_protocol_interrupted.py", "test_worker_lost.py",
+                 "test_recorder_restart.py", "test_protocol_cut_game.py", "test_protocol_reinvalid.py",
+                 "test_study_cli.py", "test_faults.py", "test_console_browser.py", "test_lab_browser.py",
+                 "test_mcap_damage.py", "test_cli_signals.py", "test_cli_full_disk.py", "test_faults_restart.py",
+                 "test_cli_logging.py", "test_console_live.py", "test_faults_signals.py", "test_combine_place.py",
+                 "test_study_guard.py", "test_lab_heartbeat.py", "test_session_readback.py",
+                 "test_processes_orphan.py", "test_cli_out_of_threads.py", "test_chunk_bomb.py",
+                 "test_counterfactual.py", "test_robot_iristk.py", "test_journal.py", "test_session_crash.py",
+                 "test_robot_realtime.py", "test_slow_requests.py", "test_deletion_withholds.py", "test_copies.py",
+                 "test_refusal.py", "test_lines_escaped.py", "test_session_robot.py", "test_input_kinds.py",
+                 "test_view_rerun.py", "test_protocol_threads.py", "test_faults_startup.py",
+                 "test_protocol_signals.py", "test_board_live.py", "test_recorder_holes.py",
+                 "test_cli_environment.py", "test_output_locks.py", "test_recording_tampered.py",
+                 "test_python_api.py", "test_journal_left.py", "test_router.py", "test_protocol_journal_wait.py",
+                 "test_zenoh_log.py", "test_security.py", "test_view_cli.py", "test_output_kinds.py",
+                 "test_console_layout.py", "test_replay_late_tail.py", "test_study_recovered.py",
+                 "test_session_force_left.py", "test_forge.py", "test_cli_zygote.py", "test_output_writers.py",
+                 "test_recorder_foreign_journal.py", "test_start_signals.py", "test_verify_stopped.py",
+                 "test_ids_never_twice.py", "test_docs.py", "test_session_cli.py", "test_session_ids.py",
+                 "test_bus_direct.py", "test_robot_virtual.py", "test_study_folder_lock_outputs.py")
 
 
 def pytest_configure(config) -> None:

@@ -9,6 +9,7 @@ import socket
 
 import msgspec
 import pytest
+from busutil import wait_until
 from robot_doubles.furhat_realtime import FurhatRealtimeServer
 from robot_doubles.harness import FAMILIES, FAST, PATIENCE_S, OBSERVED, TARGET, Collector, suggestion
 
@@ -81,7 +82,9 @@ def test_the_client_waits_for_response_auth_with_access_even_without_a_key(stage
     server, driver = robot(answers_auth=False)
     driver.perform(suggestion(EXACT))
     # the attempt runs beside the driver (driver.py): once it failed on the auth, the reason is the auth's
-    assert collector.wait_for(lambda c: any("request.auth" in r.getMessage() for r in caplog.records))
+    # (polled: a log record notifies no one, and the collector's wait_for, woken only by what the driver reports,
+    # checked it at its timeout: 10 s of the default suite's)
+    assert wait_until(lambda: any("request.auth" in r.getMessage() for r in caplog.records), PATIENCE_S)
     driver.close()
     assert collector.acted[0].outcome == "failed" and server.requests == []
     assert "request.auth" in collector.acted[0].error

@@ -2,7 +2,12 @@
 nothing was lost, they are in its own record, and the recorder asks for them when it first hears the service past
 its seq 1 (services/recorder.py `_catch_up`). Before, the file lacked them, and since the reader says a hole at the
 start of the game's or the learner's seq (trial32 E) every verb called a correct distributed run damaged: `session`
-exit 1, rebuild refused without --partial, verify FAILed (trial33 F). Real processes behind a real router."""
+exit 1, rebuild refused without --partial, verify FAILed (trial33 F). Real processes behind a real router, each
+forked from this test process's zygote (tests/cli_zygote.py): what they do on the bus and in the file is tested,
+not how they start or stop (each `python -m pairplay` paid ~0.9 s of CPU importing, 5 of them a case), but the
+late recorder, a `python -m pairplay` of its own: forked, it joined within ~0.1 s of the session's start and 1 run in
+9 lacked the robot's seq 1 (the file "'robot': its first event missing"; not yet understood, left to its own task);
+its own start-up's 1-3 s is the lateness this case had."""
 
 from __future__ import annotations
 
@@ -10,17 +15,15 @@ import os
 import subprocess
 import sys
 
+from cli_zygote import shared
 from pairplay.replay.reader import read_log
 
 from test_router import free_port, start_router
 
-PY = [sys.executable, "-m", "pairplay"]
-ENV = dict(os.environ, PYTHONUNBUFFERED="1")
 
-
-def started(args: list[str], first: str) -> subprocess.Popen:
+def started(args: list[str], first: str):
     """A pairplay process, once its stdout said `first` (it is on the bus and has published its start)."""
-    p = subprocess.Popen([*PY, *args], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=ENV)
+    p = shared().start(args)
     for _ in range(5):
         line = p.stdout.readline()
         if line.startswith(first) or not line:
@@ -29,29 +32,29 @@ def started(args: list[str], first: str) -> subprocess.Popen:
     return p
 
 
-def whole(path, tmp_path) -> None:
+def whole(path, tmp_path, pairplay_cli) -> None:
     """The recording holds every event of each sender from its seq 1, and rebuild and verify take it as whole."""
     log = read_log(path)
     assert not log.damaged, log.damaged
     assert log.metadata.get("pairplay.recorder.head", {}).get("caught_up", "0") != "0", log.metadata
-    rebuilt = subprocess.run([*PY, "rebuild", str(path), "--out", str(tmp_path / "rb")], capture_output=True, text=True)
+    rebuilt = pairplay_cli("rebuild", path, "--out", tmp_path / "rb")
     assert rebuilt.returncode == 0, rebuilt.stderr
-    verified = subprocess.run([*PY, "replay", str(path), "--verify"], capture_output=True, text=True)
+    verified = pairplay_cli("replay", path, "--verify")
     assert verified.returncode == 0 and "verify: PASS" in verified.stdout, verified.stdout + verified.stderr
 
 
-def test_a_learner_started_before_the_session_s_recorder_is_recorded_from_its_first_event(tmp_path):
+def test_a_learner_started_before_the_session_s_recorder_is_recorded_from_its_first_event(tmp_path, pairplay_cli):
     port = free_port()
     router = start_router(port)
     endpoint = f"tcp/127.0.0.1:{port}"
     learner = started(["run", "learner", "--session", "first", "--connect", endpoint], "learner running in session")
     try:
-        session = subprocess.run([*PY, "session", "--participant", "sim:ashley", "--seed", "3", "--rounds", "3",
-                                  "--session", "first", "--external", "learner", "--connect", endpoint,
-                                  "--out", str(tmp_path)], capture_output=True, text=True, env=ENV, timeout=120)
+        session = pairplay_cli("session", "--participant", "sim:ashley", "--seed", "3", "--rounds", "3",
+                               "--session", "first", "--external", "learner", "--connect", endpoint,
+                               "--out", tmp_path, timeout=120)
         assert session.returncode == 0, session.stderr
         learner.wait(30)
-        whole(tmp_path / "first.mcap", tmp_path)
+        whole(tmp_path / "first.mcap", tmp_path, pairplay_cli)
     finally:
         for p in (learner, router):
             if p.poll() is None:
@@ -59,7 +62,7 @@ def test_a_learner_started_before_the_session_s_recorder_is_recorded_from_its_fi
             p.wait()
 
 
-def test_a_recorder_started_after_the_session_records_it_from_every_sender_s_first_event(tmp_path):
+def test_a_recorder_started_after_the_session_records_it_from_every_sender_s_first_event(tmp_path, pairplay_cli):
     port = free_port()
     router = start_router(port)
     endpoint = f"tcp/127.0.0.1:{port}"
@@ -67,11 +70,12 @@ def test_a_recorder_started_after_the_session_records_it_from_every_sender_s_fir
                        "--external", "recorder", "--connect", endpoint, "--out", str(tmp_path / "unused")],
                       "session late:")
     try:
-        recorder = subprocess.run([*PY, "run", "recorder", "--session", "late", "--connect", endpoint,
-                                   "--out", str(tmp_path)], capture_output=True, text=True, env=ENV, timeout=120)
+        recorder = subprocess.run([sys.executable, "-m", "pairplay", "run", "recorder", "--session", "late",
+                                   "--connect", endpoint, "--out", str(tmp_path)], capture_output=True, text=True,
+                                  env=dict(os.environ, PYTHONUNBUFFERED="1"), timeout=120)
         assert recorder.returncode == 0, recorder.stderr
         assert session.wait(30) == 0, session.stderr.read()
-        whole(tmp_path / "late.mcap", tmp_path)
+        whole(tmp_path / "late.mcap", tmp_path, pairplay_cli)
     finally:
         for p in (session, router):
             if p.poll() is None:
