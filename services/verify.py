@@ -229,7 +229,12 @@ def verify_recording(path) -> Verification:
     # fed and each source's events re-sorted by seq (node.py `resume`, `in_source_order`); the events alone are kept,
     # not the file's records and each event's bytes (reader.events_of: a 5,000-round file's verify peaked at 1.6 GB)
     # (not MCAP at all: refused, as the verbs do)
-    log, events = events_of(check_recording(path, function="verify_recording"))
+    return verify_read(path, *events_of(check_recording(path, function="verify_recording")))
+
+
+def verify_read(path, log, events: list) -> Verification:
+    """`verify_recording` of the recording at `path` read already: its EventLog and its events in file order
+    (reader.events_of; check.session_events, which refuses a file holding no session first: `replay --verify`)."""
     forged = contradiction(events)
     if forged:
         raise InputError(f"{forged}: not verified", path)

@@ -88,3 +88,85 @@ def test_verify_says_of_a_file_streamed_what_it_says_of_it_read_whole(tmp_path, 
     whole_only(monkeypatch)
     assert streamed == [dataclasses.asdict(verify_recording(p)) for p in paths]
 
+
+
+def never_whole(monkeypatch) -> None:
+    """A file read whole (the reader's list of every record) fails the test."""
+    def whole(path, only=None):
+        raise AssertionError(f"{path} read whole")
+    monkeypatch.setattr(reader, "_read_log", whole)
+
+
+def test_replay_verify_reads_a_whole_file_once_as_it_comes(monkeypatch, capsys):
+    # `replay --verify` read the file whole to check it holds a session, kept that read, and verify read it again
+    from pairplay.cli.main import main
+
+    never_whole(monkeypatch)
+    assert main(["replay", str(MANY), "--verify"]) == 0
+    assert capsys.readouterr().out.splitlines()[-1] == "verify: PASS"
+
+# -- a study's report -----------------------------------------------------------------------------------------------
+
+STUDY = """[study]
+id = "one"
+title = "one game"
+seed = 0
+ignore_window_ms = 1500
+wrong_suggestion_button = true
+robot = "none"
+
+[[phase]]
+id = "phase1"
+title = "phase 1"
+games = 1
+rounds = 40
+algorithm = "q-learning"
+preset = "human-phase1"
+players = "new"
+"""
+
+
+@pytest.fixture(scope="module")
+def study(tmp_path_factory, pairplay_cli) -> Path:
+    """A study folder with one scripted game of 40 rounds played over the bus (`protocol pilot`)."""
+    where = tmp_path_factory.mktemp("study")
+    (where / "one.toml").write_text(STUDY)
+    for args in (("protocol", "init", "pf", "--study", "one.toml"), ("protocol", "register", "pf"),
+                 ("protocol", "pilot", "pf", "--personas", "blind", "-q")):
+        ran = pairplay_cli(*args, cwd=where, timeout=180)
+        assert ran.returncode == 0, ran.stderr
+    return where / "pf"
+
+
+def test_a_reports_read_of_a_game_holds_a_chunk_not_the_file(study):
+    # every game's recording was read whole (its records, every event and its bytes): 19.6x the file's size here,
+    # for each game of a report; its stats are folded as the file is read now (2.5x)
+    from pairplay.replay.studydata import StudyData
+    from pairplay.report.human import StatsFold
+
+    data = StudyData(study)
+    g = next(iter(data.state.games.values()))
+    path, _ = data.game_recording(g)
+    read = peak_of(lambda: data.recording_of(g, lambda: StatsFold(40)))
+    whole = peak_of(lambda: read_any_log(path))
+    assert read < 0.3 * whole, (read, whole)
+
+
+def test_a_report_of_games_streamed_is_the_report_of_them_read_whole(study, tmp_path, monkeypatch):
+    from pairplay.report.human import human_report
+
+    streamed = human_report(study, tmp_path / "streamed")
+    whole_only(monkeypatch)
+    whole = human_report(study, tmp_path / "whole")
+    assert [dataclasses.asdict(s) for s in streamed.games] == [dataclasses.asdict(s) for s in whole.games]
+    assert streamed.games[0].picks and len(streamed.games[0].picks) == 40
+    for name in ("picks.csv", "attention.csv", "report.md"):
+        assert (tmp_path / "streamed" / name).read_bytes() == (tmp_path / "whole" / name).read_bytes(), name
+
+
+def test_a_report_never_reads_a_game_whole(study, tmp_path, monkeypatch):
+    from pairplay.report.human import human_report
+
+    never_whole(monkeypatch)
+    assert len(human_report(study, tmp_path / "report").games) == 1
+
