@@ -170,3 +170,31 @@ def test_a_report_never_reads_a_game_whole(study, tmp_path, monkeypatch):
     never_whole(monkeypatch)
     assert len(human_report(study, tmp_path / "report").games) == 1
 
+
+# -- counterfactual ---------------------------------------------------------------------------------------------------
+
+def test_a_fits_read_holds_the_events_not_the_files_records_and_bytes():
+    # counterfactual's recording and every --fit-also one were read whole (records, events, bytes): 17x the file's size
+    from pairplay.replay.turns import read_turns
+
+    fitted = peak_of(lambda: read_turns(MANY))
+    whole = peak_of(lambda: read_any_log(MANY))
+    assert fitted < 0.7 * whole, (fitted, whole)
+
+
+def test_turns_read_as_they_come_are_the_turns_read_whole(tmp_path, monkeypatch):
+    from pairplay.errors import InputError
+    from pairplay.replay.turns import read_turns
+
+    def turns(path):
+        try:
+            t = read_turns(path)
+        except InputError as err:
+            return str(err)
+        return (t.config, t.picks_per_round, t.note, t.skipped, t.started,
+                [a.tolist() for a in t.observations])
+
+    paths = files(tmp_path)
+    streamed = [turns(p) for p in paths]
+    whole_only(monkeypatch)
+    assert streamed == [turns(p) for p in paths]
