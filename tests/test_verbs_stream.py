@@ -198,3 +198,32 @@ def test_turns_read_as_they_come_are_the_turns_read_whole(tmp_path, monkeypatch)
     streamed = [turns(p) for p in paths]
     whole_only(monkeypatch)
     assert streamed == [turns(p) for p in paths]
+
+
+# -- view -----------------------------------------------------------------------------------------------------------
+
+def test_a_views_read_holds_the_events_not_the_files_records_and_bytes():
+    # the view drew from the file read whole (its records, every event and its bytes); it needs every event before
+    # it draws (what the file lost names the .rrd), and keeps them alone now
+    from pairplay.services.view.sources import recording_items
+
+    drawn = peak_of(lambda: list(recording_items(MANY)))
+    whole = peak_of(lambda: read_any_log(MANY))
+    assert drawn < 0.7 * whole, (drawn, whole)
+
+
+def test_view_reads_a_whole_file_once_as_it_comes(monkeypatch, tmp_path, capsys):
+    from pairplay.cli.main import main
+
+    never_whole(monkeypatch)
+    assert main(["view", "--recording", str(MANY), "--out", str(tmp_path / "v.rrd")]) == 0
+    assert (tmp_path / "v.rrd").stat().st_size > 0
+
+
+def test_a_view_drawn_as_read_is_the_view_of_the_file_read_whole(tmp_path, monkeypatch):
+    from pairplay.services.view.sources import recording_items
+
+    paths = files(tmp_path)
+    drawn = [list(recording_items(p)) for p in paths]
+    whole_only(monkeypatch)
+    assert drawn == [list(recording_items(p)) for p in paths]
