@@ -26,7 +26,10 @@ file is damaged as one that lost a part: `EventLog.undecoded` says so in the one
 line every verb uses (rebuild, counterfactual, replay and verify, view, report),
 `damaged` and `note` join it to the file's damaged parts and its cut.
 `stream_log` reads a file as `read_any_log` does, its events given to a fold a chunk's at a time and not kept (a
-file whose losses or repeated seqs can be judged only at its end is NotStreamed: read it whole).
+file whose losses or repeated seqs can be judged only at its end is NotStreamed: read it whole). `fold_log` is
+how a verb reads a recording: streamed, or whole for a file a stream cannot judge, the same fold either way
+(rebuild, verify, view, counterfactual, a study's report); `events_of` keeps the events alone for a verb that
+needs them all at once, never the file's records and each event's bytes.
 `EventDecoderFactory` plugs the same decoding into mcap's own readers.
 """
 

@@ -69,10 +69,10 @@ from pairplay.schemas.study import CONSENT_FORM_RULE, STUDY_FILE, Study, StudyFi
 from pairplay.numbers import counted
 
 from .cutgame import CUT_BEFORE_END, CutEnd, cut_end
-from .fold import fold_any
+from .fold import Summed
 from . import biases, studyjournal
 from .check import RoundWatch
-from .reader import events_of, fold_log, read_any_log
+from .reader import events_of, fold_log
 from .rebuild import Rebuilt, output_paths, rebuild_recording
 from .recover import default_output, journal_more
 from .wal import wal_path
@@ -1084,7 +1084,7 @@ class StudyData:
         """`not_this_game` of the session the recording at `path` starts ("" if it starts none or cannot be read:
         what reads it next says so)."""
         try:
-            started = read_any_log(path, only=frozenset({"SessionStarted"})).of("SessionStarted")
+            _, started = events_of(path, only=frozenset({"SessionStarted"}), tags=frozenset({"SessionStarted"}))
         except (InputError, OSError):
             return ""
         return self.not_this_game(g, started[0].config) if started else ""
@@ -1758,8 +1758,8 @@ def game_end(folder: Path, session: str, participant: str, path: Path, answered:
     reason, in the reader's words; a completed game keeps its outcome (the next start's
     build_missing_policies says again why it has no policy; the combination refuses to go without it).
     Before, a partial policy was written and journaled as the game's, with no word."""
-    recorded = read_any_log(path)
-    fold = fold_any(r.event for r in recorded.events)
+    recorded, summed = fold_log(path, None, Summed)  # summed up as it is read, nothing of it kept (fold.Summed)
+    fold = summed.fold
     ended = fold.ended
     completed = ended is not None and ended.reason == "completed"
     damaged = recording_damage(recorded)
@@ -1771,7 +1771,7 @@ def game_end(folder: Path, session: str, participant: str, path: Path, answered:
     if damaged:
         reason = "; ".join(r for r in (reason, f"recording {damaged}: no policy built") if r)
     if answered is None:
-        answered = bool(recorded.of("QuestionnaireAnswered")) or bool(lost_answers(recorded, False, False))
+        answered = summed.answered or bool(lost_answers(recorded, False, False))
     return j.GameEnded(session=session, participant=participant, outcome="completed" if completed else "aborted",
                        reason=reason, rounds_played=len(fold.whole_rounds()), policy=policy, questionnaire=answered)
 
@@ -1807,10 +1807,12 @@ def lost_answers(log, decoded: bool, journaled: bool) -> list[str]:
 def _finished_game(path: Path) -> bool:
     """Is the recording whole and does it hold its game's end?"""
     try:
-        recorded = read_any_log(path, only=frozenset({"SessionEnded"}))
+        # its ends kept as it is read, nothing else (reader.events_of)
+        recorded, ends = events_of(path, only=frozenset({"SessionStarted", "SessionEnded"}),
+                                   tags=frozenset({"SessionEnded"}))
     except (InputError, OSError):
         return False
-    return recorded.whole and bool(recorded.of("SessionEnded"))
+    return recorded.whole and bool(ends)
 
 
 def write_game_policy(folder: Path, rebuilt: Rebuilt, force: bool = False) -> str:

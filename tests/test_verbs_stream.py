@@ -227,3 +227,35 @@ def test_a_view_drawn_as_read_is_the_view_of_the_file_read_whole(tmp_path, monke
     drawn = [list(recording_items(p)) for p in paths]
     whole_only(monkeypatch)
     assert drawn == [list(recording_items(p)) for p in paths]
+
+
+# -- what a session's end says of its recording ---------------------------------------------------------------------
+
+def test_a_sessions_summary_reads_its_recording_once_as_it_comes(monkeypatch, tmp_path, capsys):
+    # `pairplay session` and `pairplay lab` read their recording back whole for their summary (cli/session.py
+    # read_back): a 5,000-round session's was 930 MB
+    from pairplay.cli.main import main
+
+    never_whole(monkeypatch)
+    code = main(["session", "--participant", "sim:blind", "--rounds", "2", "--session", "sum", "--out", str(tmp_path)])
+    out = capsys.readouterr().out
+    monkeypatch.undo()
+    assert code == 0 and f"recorded {len(read_any_log(tmp_path / 'sum.mcap').events)} events" in out, out
+
+
+def test_a_study_games_end_is_summed_up_as_its_recording_is_read(study, tmp_path, monkeypatch):
+    # a study server's game end (studydata.game_end), a cut game's end (cutgame.cut_end), whether a game's file is
+    # finished, another game's file and the robot's acts (services/protocol.py) read the recording whole
+    from pairplay.replay import studydata
+    from pairplay.replay.cutgame import cut_end
+    from pairplay.replay.studydata import StudyData, game_end
+
+    data = StudyData(study)
+    g = next(iter(data.state.games.values()))
+    path, _ = data.game_recording(g)
+    said = (game_end(tmp_path, g.session, g.participant, path), cut_end(path, path, g.session),
+            studydata._finished_game(path), data._not_this_games_file(g, path))
+    never_whole(monkeypatch)
+    assert (game_end(tmp_path, g.session, g.participant, path, force=True), cut_end(path, path, g.session),
+            studydata._finished_game(path), data._not_this_games_file(g, path)) == said
+    assert said[0].outcome == "completed" and said[1].rounds == 40 and said[2] and said[3] == ""
