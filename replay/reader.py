@@ -41,7 +41,7 @@ from array import array
 from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Callable, Iterator, NamedTuple, Optional
+from typing import Any, Callable, NamedTuple, Optional
 
 import msgspec
 from mcap.decoder import DecoderFactory
@@ -398,11 +398,6 @@ class EventLog:
     def of(self, *tags: str) -> list[Event]:
         """The events with one of these tags, in order."""
         return [r.event for r in self.events if type(r.event).__name__ in tags]
-
-
-def iter_records(path: str | Path) -> Iterator[Any]:
-    """Every record of the file's intact parts, in file order (see `mcapscan`)."""
-    yield from scan(path).records
 
 
 @contextmanager
