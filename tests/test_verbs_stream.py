@@ -5,7 +5,7 @@ and its bytes (reader.read_any_log): a 5,000-round recording's verify peaked at 
 a chunk's at a time (reader.stream_log) and keeps what it folds (the report: counts; verify: the events alone, which
 it needs all at once); a file a stream cannot judge (a lost part, a message that does not decode, a seq read twice,
 no session) is read whole, as before. What each verb makes is the same either way. Real recordings (the samples),
-real damage (damageutil, rewrite_mcap); the memory is tracemalloc's peak, no time is asserted.
+real damage (damageutil); the memory is tracemalloc's peak, no time is asserted.
 """
 
 from __future__ import annotations
@@ -19,8 +19,8 @@ import pytest
 from pairplay.replay import reader
 from pairplay.replay.reader import NotStreamed, read_any_log
 
-from damageutil import damage, small_chunked_session
-from rewrite_mcap import rewritten
+from damageutil import copies, lost_part, undecodable
+from test_outputs import ONE_GAME_STUDY
 
 SAMPLES = Path(__file__).resolve().parents[1] / "recordings" / "samples"
 MANY = SAMPLES / "sim-helmut-fmt2.mcap"  # the samples' longest session
@@ -42,20 +42,6 @@ def whole_only(monkeypatch) -> None:
     def refused(path, only, each):
         raise NotStreamed(path)
     monkeypatch.setattr(reader, "stream_log", refused)
-
-
-def lost_part(path):
-    small_chunked_session(path, "lost")
-    damage(path, "chunk")
-
-
-def undecodable(path):
-    small_chunked_session(path, "bad")
-    damage(path, "undecodable")
-
-
-def copies(path):
-    rewritten(path, each=lambda channel, message: [message, message])
 
 
 def files(tmp_path) -> list[Path]:
@@ -107,23 +93,7 @@ def test_replay_verify_reads_a_whole_file_once_as_it_comes(monkeypatch, capsys):
 
 # -- a study's report -----------------------------------------------------------------------------------------------
 
-STUDY = """[study]
-id = "one"
-title = "one game"
-seed = 0
-ignore_window_ms = 1500
-wrong_suggestion_button = true
-robot = "none"
-
-[[phase]]
-id = "phase1"
-title = "phase 1"
-games = 1
-rounds = 40
-algorithm = "q-learning"
-preset = "human-phase1"
-players = "new"
-"""
+STUDY = ONE_GAME_STUDY.replace("rounds = 1\n", "rounds = 40\n")  # one scripted game of 40 rounds
 
 
 @pytest.fixture(scope="module")
