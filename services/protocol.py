@@ -409,7 +409,8 @@ class StudyRunner:
                          self._abort_reason)
         self.data.append_naming(ended, ended.policy)  # no policy file without its line (journaled_or_removed)
         # the robot's RobotActed kept as it is read, nothing else (reader.events_of)
-        recorded, acted = events_of(path, only=frozenset({"SessionStarted", "RobotActed"}), tags=frozenset({"RobotActed"}))
+        recorded, acted = events_of(path, only=frozenset({"SessionStarted", "RobotActed"}),
+                                    tags=frozenset({"RobotActed"}))
         damaged = recording_damage(recorded)
         if damaged:
             log.warning("%s: its recording is %s: no policy built", config.session, damaged)
