@@ -130,7 +130,7 @@ def run(args: argparse.Namespace) -> int:
     from pairplay.core.userfit import fit_user, pooled
     from pairplay.errors import InputError
     from pairplay.outputs import check_output_folder, hold
-    from pairplay.replay.check import check_recording, read_session
+    from pairplay.replay.check import check_recording, session_events
     from pairplay.replay.rebuild import output_stem, rebuild_events
     from pairplay.replay.turns import read_turns, turns_from_events
     from pairplay.report.counterfactual import (ARM_TEXT, COUNTERFACTUAL_MANIFEST, COUNTERFACTUAL_OUTPUTS, Recorded,
@@ -152,9 +152,10 @@ def run(args: argparse.Namespace) -> int:
     copies.check([out])
     files = {path: option_policy(path, f"--policy {name}") for name, path in arms_wanted if path}
 
-    log = read_session(rec)
+    # its events alone kept, not the file's records and their bytes (check.session_events): fitted in one pass, and
+    # played again for the final policy (rebuild_events)
+    log, events = session_events(rec)
     note = log.missing  # what its damage, cut and undecodable messages lost (reader.EventLog), as rebuild's
-    events = [r.event for r in log.events]
     turns = turns_from_events(events, str(rec), note)
     config = turns.config
     from pairplay.cli.main import left_journals, warn
@@ -174,9 +175,10 @@ def run(args: argparse.Namespace) -> int:
             raise InputError("given twice", path)
         seen.add(Path(path).resolve())
     others = [read_turns(path) for path in args.fit_also]
-    from pairplay.replay.onesession import check_once, started
+    from pairplay.replay.onesession import check_once, started_by
     # one session's turns twice (REC and its recovered copy, or a copy of it): counted double in the fit
-    check_once([(str(rec), started(log))] + [(other.source, other.started) for other in others])
+    first = next(e for e in events if type(e).__name__ == "SessionStarted")  # (check.session_events: one is)
+    check_once([(str(rec), started_by(first, log))] + [(other.source, other.started) for other in others])
     for other in others:
         if other.config.participant != config.participant or other.config.observed_source != config.observed_source:
             raise InputError(f"participant {other.config.participant} ({other.config.observed_source}) is not "

@@ -33,7 +33,8 @@ from pairplay.services.lab.reach import plain_beyond_loopback
 
 from pairplay.cli.args import duration, output_folder
 from pairplay.cli.robot import add_robot_arguments, check_robot_args, probe_robot_args, robot_choice
-from pairplay.cli.session import add_config_arguments, config_from_args, cut_line, print_interrupted, read_back
+from pairplay.cli.session import (add_config_arguments, config_from_args, cut_line, print_interrupted, read_back,
+                                  sum_up)
 from pairplay.numbers import counted
 
 LOOPBACK = "127.0.0.1"
@@ -133,26 +134,23 @@ def run(args: argparse.Namespace) -> int:
     if getattr(stop, "why", "") and summary:
         return print_interrupted(summary, path, signals.said(stop.why), config.rounds,  # no reading the file back: 2 s
                                  "the id stays taken: choose another --session", "lab")  # (lab has no --force)
-    from pairplay.replay.fold import fold_any
-    from pairplay.replay.reader import read_any_log
-
-    recorded = read_any_log(path) if getattr(stop, "why", "") else read_back(path, "lab")  # (a signal: one line)
-    fold = fold_any(r.event for r in recorded.events)
+    recorded, summed = sum_up(path) if getattr(stop, "why", "") else read_back(path, "lab")  # (a signal: one line)
+    fold = summed.fold
     e = fold.ended
     if getattr(stop, "why", ""):  # a signal: ONE line, as `pairplay session`
         when = "before the session started" if fold.config is None else \
             f"after the session had completed all {counted(config.rounds, 'round')}" if e is not None and e.reason == "completed" \
             else f"after {len(fold.rounds)} of {counted(config.rounds, 'round')}"
-        print(f"pairplay lab: interrupted ({signals.said(stop.why)}) {when}; recorded {counted(len(recorded.events), 'event')} to {escaped(path)}"
+        print(f"pairplay lab: interrupted ({signals.said(stop.why)}) {when}; recorded {counted(summed.events, 'event')} to {escaped(path)}"
               + (f" (read back, it is not whole: {recorded.note})" if recorded.note else ""), file=sys.stderr)
         return 0  # the status is the signal's (cli/main.py)
     ended = "no SessionEnded recorded" if e is None else e.reason + (f" ({e.detail})" if e.detail else "")
     if not getattr(args, "quiet", False):  # a summary of the file it wrote: -q leaves it out (cli/main.py QUIET_SUMMARIES)
-        print(f"recorded {counted(len(recorded.events), 'event')} to {escaped(path)}")
+        print(f"recorded {counted(summed.events, 'event')} to {escaped(path)}")
         print(f"rounds played: {len(fold.turns_per_round())} of {config.rounds}; rejections: {len(fold.rejections)}; "
               f"ended: {ended}")
         from pairplay.replay.delivery import delivery_line
-        robot = delivery_line(recorded.of("RobotActed"))
+        robot = delivery_line(summed.kept)
         if robot:
             print(robot)
     elif e is None or e.reason != "completed":  # how a session that did not complete ended is still said

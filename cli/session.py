@@ -280,14 +280,22 @@ def read_back(path: Path, verb: str):
     lacks (a damaged part, a cut, messages that do not decode: `EventLog.note`) is said in ONE line on stderr,
     naming the file, and the verb exits 1; the summary then counts what the file holds. Its summary read the
     file with no check: a recording that lost a chunk after it was closed was summed up as a session of
-    fewer events, exit 0."""
-    from pairplay.replay.reader import read_any_log
-
-    recorded = read_any_log(path)
+    fewer events, exit 0. (the EventLog, its `fold.Summed`): summed up as it is read, nothing of it kept (a
+    5,000-round session's summary held its file's records, events and bytes: 930 MB)."""
+    recorded, summed = sum_up(path)
     if recorded.note:
         print(f"pairplay {verb}: the recording {escaped(path)} read back is not whole: {recorded.note} (the summary counts "
               f"what it holds; `pairplay replay --verify` of it says more)", file=sys.stderr)
-    return recorded
+    return recorded, summed
+
+
+def sum_up(path: Path):
+    """(the EventLog, its `fold.Summed` keeping the robot's RobotActed) of the recording at `path`, read as it comes
+    (reader.fold_log)."""
+    from pairplay.replay.fold import Summed
+    from pairplay.replay.reader import fold_log
+
+    return fold_log(path, None, lambda: Summed(frozenset({"RobotActed"})))
 
 
 def run(args: argparse.Namespace) -> int:
@@ -382,16 +390,15 @@ def _run(args: argparse.Namespace, config: SessionConfig, path: Path, summary: d
             return 0
         return print_interrupted(summary, path, signals.said(stop.why), config.rounds, "the id stays taken: --force reuses it")
     from pairplay.replay.delivery import delivery_line
-    from pairplay.replay.fold import fold_any
-    recorded = read_back(path, "session")
-    fold = fold_any(r.event for r in recorded.events)
+    recorded, summed = read_back(path, "session")
+    fold = summed.fold
     picks = fold.picks_per_round()
     if not getattr(args, "quiet", False):  # a summary of the file it wrote: -q leaves it out (cli/main.py QUIET_SUMMARIES)
-        print(f"recorded {counted(len(recorded.events), 'event')} to {escaped(path)}")
+        print(f"recorded {counted(summed.events, 'event')} to {escaped(path)}")
         print(f"rounds played: {len(picks)}; {PICKS_UNIT}: {picks[:10]}{' ...' if len(picks) > 10 else ''}")
         print(f"rejections: {len(fold.rejections)}; Q updates: {fold.counts.get('QUpdated', 0)}"
               + (f"; LSPI samples: {fold.counts.get('LSPIUpdated', 0)}" if config.algorithm == "lspi" else ""))
-        robot = delivery_line(recorded.of("RobotActed"))
+        robot = delivery_line(summed.kept)
         if robot:
             print(robot)
     e = fold.ended

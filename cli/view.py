@@ -51,7 +51,7 @@ from pairplay.errors import InputError, OptionError, OutputError, UserError, esc
 from pairplay.livelock import LIVE, is_live
 from pairplay.outputs import NO_HARD_LINKS, check_output, hold, output_path
 from pairplay.cli.main import left_journals, warn
-from pairplay.replay.check import read_session
+from pairplay.replay.check import session_events
 from pairplay.services.bus import add_bus_arguments
 from pairplay.services.view import DEFAULT_GRPC_PORT, DEFAULT_WEB_PORT, RrdWriteFailed  # without loading rerun (slow)
 from pairplay.numbers import counted
@@ -102,9 +102,12 @@ def _default_rrd(args: argparse.Namespace) -> Path:
 def run(args: argparse.Namespace) -> int:
     if not args.recording and not args.session:
         raise OptionError("give --session ID (live) or --recording REC", "what to view")
-    live, lost, held = False, "", None
+    live, lost, held, events = False, "", None, None
     if args.recording:
-        held = read_session(args.recording)  # a file holding no session is refused before rerun loads
+        # a file holding no session is refused before rerun loads; read whole, not drawn as it is read: what it lost
+        # is known at its end, and decides the .rrd's name before anything is drawn (then drawn from this one read:
+        # a second could differ, a recover beside it); its events alone kept, not its records and their bytes
+        held, events = session_events(args.recording)
         left_journals("view", [args.recording])  # a cut one's journal beside it holds more: said before it is drawn
         live = held.live or is_live(args.recording)  # its recorder still writes it: what it holds is a part
         # a damaged file that lost events in its middle draws a part too (as rebuild refuses to pass it off as whole;
@@ -122,7 +125,7 @@ def run(args: argparse.Namespace) -> int:
             lost = ("closed before its session's end (no SessionEnded recorded"
                     + (f"; its recorder was stopped: {stopped})" if stopped else ")"))
         if args.session:  # before rerun loads and anything is drawn
-            if not any(r.event.session == args.session for r in held.events):
+            if not any(e.session == args.session for e in events):
                 raise InputError(f"holds no events of session {args.session}; nothing saved", args.recording)
     if args.no_save and not (args.serve or args.spawn):
         raise OptionError("--no-save leaves no output; add --serve or --spawn", "--no-save")
@@ -141,7 +144,7 @@ def run(args: argparse.Namespace) -> int:
         copies.check([rrd])
     try:
         with output_path(rrd, args.force) if rrd is not None else contextlib.nullcontext() as tmp:
-            done = _view(args, tmp, held)
+            done = _view(args, tmp, held, events)
             # never under the name of a complete view (module rule), nor one of a live recording: it was saved
             # as s1.rrd, a part of the session passed off as the whole (a new user's trial)
             if (done.partial or live or lost or done.missed) and rrd is not None:
@@ -254,9 +257,9 @@ def keep_partial(tmp: Path, rrd: Path, force: bool) -> Path:
     raise AssertionError("unreachable")
 
 
-def _view(args: argparse.Namespace, tmp_rrd: Path | None, held=None) -> Viewed:
-    """Draw into the temporary .rrd (renamed by the caller when this returns); `held`: the recording as `run`
-    read and checked it (reader.EventLog), drawn so, never read a second time."""
+def _view(args: argparse.Namespace, tmp_rrd: Path | None, held=None, events=None) -> Viewed:
+    """Draw into the temporary .rrd (renamed by the caller when this returns); `held`, `events`: the recording as
+    `run` read and checked it (check.session_events), drawn so, never read a second time."""
     from pairplay.services.bus import open_bus, options_from_args, shutdown_wait, stop_on_signals
     from pairplay.services.view.drive import drive, lowered_priority
     from pairplay.services.view.output import ViewOutput, finish, open_stream
@@ -283,7 +286,7 @@ def _view(args: argparse.Namespace, tmp_rrd: Path | None, held=None) -> Viewed:
         if args.recording:
             log.info("drawing %s%s; Ctrl-C to stop", args.recording, f" at {args.speed:g}x" if args.speed else "")
             summary = drive(view, recording_items(args.recording, speed=args.speed, session=args.session, stop=stop,
-                                                   log=held),
+                                                   log=held, events=events),
                             stop=stop, echo=_echo)
             if summary.events == 0 and stop.is_set():
                 raise NothingDrawn(stop.why)

@@ -283,15 +283,15 @@ def check_folder(path: str | Path) -> Path:
 
 def _temp_name(path: Path) -> Path:
     """A temporary name beside `path`: `.<name>.<pid>.<random>.tmp`; those a killed process left (SIGKILL:
-    nothing of ours runs) are removed by the next writer of the same `path` (`_remove_dead_temps`)."""
-    _remove_dead_temps(path)
+    nothing of ours runs) are removed by the next writer of the same `path` (`remove_dead_temps`)."""
+    remove_dead_temps(path)
     return path.with_name(f".{path.name}.{os.getpid()}.{os.urandom(3).hex()}.tmp")
 
 
 _TEMP_HEX = re.compile(r"[0-9a-f]{6}")  # _temp_name's os.urandom(3).hex()
 
 
-def _remove_dead_temps(path: Path) -> None:
+def remove_dead_temps(path: Path) -> None:
     """Remove what `_temp_name` made beside `path` for a process that is gone (a `rebuild --force` killed
     with SIGKILL left `.<name>.<pid>.<hex>.tmp` folders of up to ~1 MB for good); a live process's, or one
     whose process cannot be told, stays. Best effort: a temporary that cannot be removed is left."""

@@ -96,6 +96,46 @@ def read_session(path: str | Path, only: frozenset[str] | None = None, function:
     return log
 
 
+def session_events(path: str | Path, only: frozenset[str] | None = None, function: str = ""):
+    """`read_session` for a verb that needs a recording's events alone: (the EventLog, its events in file order),
+    read as reader.events_of reads them (as they come: the file's records and each event's bytes are not kept;
+    `EventLog.events` is empty but for a file read whole). InputError as `read_session`'s."""
+    from .reader import events_of
+    path = check_recording(path, function=function)
+    log, events = events_of(path, only)
+    if not any(type(e).__name__ == "SessionStarted" for e in events):  # (then read whole: reader.fold_log)
+        raise InputError(log.no_session, path)
+    return log, events
+
+
+class RoundWatch:
+    """What `no_whole_round` looks at, taken from a recording's events as they are read (a verb's fold:
+    reader.fold_log), so nothing else of them is kept: `first`, the first SessionStarted, and `said`: that start,
+    the game's first RoundEnded and its SessionEnded, in order (it stops at the first such RoundEnded, else says
+    the last end). `no_whole_round(watch.said, ...)` is `no_whole_round` of every event."""
+
+    def __init__(self) -> None:
+        self.first = None
+        self.said: list = []
+        self.round_ended = False
+
+    def take(self, events) -> None:
+        for e in events:
+            tag = type(e).__name__
+            if tag not in _SAID:
+                continue
+            if tag == "SessionStarted":
+                if self.first is None:
+                    self.first = e
+                    self.said.append(e)
+            elif e.source == "game" and (tag == "SessionEnded" or not self.round_ended):
+                self.round_ended = self.round_ended or tag == "RoundEnded"
+                self.said.append(e)
+
+
+_SAID = frozenset({"SessionStarted", "RoundEnded", "SessionEnded"})  # what `RoundWatch.said` keeps
+
+
 def no_whole_round(events, truncated: bool = False, damaged: str = "") -> str:
     """Why the session of `events` (a recording's, in file order) has no round recorded whole, in
     words ("" if it has one: a RoundEnded of its game). `truncated`: the file is cut (reader.EventLog);

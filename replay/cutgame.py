@@ -16,8 +16,8 @@ from pathlib import Path
 
 from pairplay.errors import InputError
 
-from .fold import fold_any
-from .reader import read_any_log
+from .fold import Summed
+from .reader import fold_log
 from .wal import RECORDER_METADATA, NotAJournal, not_its, read_journal, wal_path
 
 CUT_BEFORE_END = "its recording was cut before the game's end"  # the GameEnded reason of such a game
@@ -51,15 +51,15 @@ def cut_end(path: Path, journal_of: Path, session: str) -> CutEnd:
     (module rule). A file that cannot be read at all holds nothing; its journal may still hold the end."""
     ended, where, rounds, answered = None, "", 0, False
     try:
-        log = read_any_log(path) if path.is_file() else None
+        # summed up as it is read, nothing of it kept (fold.Summed)
+        log, summed = fold_log(path, None, Summed) if path.is_file() else (None, None)
     except (InputError, OSError):
         log = None
     if log is not None:
-        ends = [e for e in log.of("SessionEnded") if getattr(e, "source", "") == "game"]
-        if ends:
-            ended, where = ends[-1], "the file"
-        rounds = len(fold_any(r.event for r in log.events).whole_rounds())
-        answered = bool(log.of("QuestionnaireAnswered"))
+        if summed.game_end is not None:
+            ended, where = summed.game_end, "the file"
+        rounds = len(summed.fold.whole_rounds())
+        answered = summed.answered
     if ended is None or not answered:  # the answers come after the game's end: the journal may hold them alone
         # (the file's own metadata tells its journal from another recording's: a recovered copy keeps it)
         mine = log.metadata.get(RECORDER_METADATA, {}) if log is not None else {}

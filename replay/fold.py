@@ -202,6 +202,35 @@ def fold_events(events) -> SessionFold:
     return fold
 
 
+class Summed:
+    """A session's recording summed up as it is read, a chunk's events at a time (reader.fold_log: none kept): its
+    fold (`fold_any` of them), how many events, the game's last SessionEnded, whether it holds the questionnaire's
+    answers, and the events of the `keep` tags (the robot's RobotActed: a delivery line). For the code that says
+    how a session went from its recording (session, lab, a study server's game end): a 5,000-round session's read
+    back was its file's records, events and bytes, 930 MB."""
+
+    def __init__(self, keep: frozenset[str] = frozenset()) -> None:
+        self.fold = SessionFold()
+        self.events = 0
+        self.game_end = None
+        self.answered = False
+        self.keep, self.kept = keep, []
+
+    def __call__(self, recorded: list) -> None:
+        events = [r.event for r in recorded]
+        self.fold.fold(events)
+        self.events += len(events)
+        keep = self.keep
+        for e in events:
+            tag = type(e).__name__
+            if tag == "SessionEnded" and getattr(e, "source", "") == "game":
+                self.game_end = e
+            elif tag == "QuestionnaireAnswered":
+                self.answered = True
+            if tag in keep:
+                self.kept.append(e)
+
+
 def fold_any(events) -> SessionFold:
     """The fold of `events` (events, in order), none too: an empty fold. For the code that folds what a session
     recorded, whatever it recorded (a session a signal stopped before its first event: lab, session, a study

@@ -42,7 +42,7 @@ from pairplay.schemas.policy import PolicyFile, write_policy
 from pairplay.schemas.session import SessionConfig
 from pairplay.schemas.trust import PUBLISHERS, STARTERS
 
-from .check import check_recording, no_whole_round, read_session
+from .check import RoundWatch, check_recording, no_whole_round, read_session
 from .fold import READS, SessionFold, fold_any, stream_seed
 from .reader import (EventLog, NotStreamed, RecordedEvent, journal_restored, recovered_cut, recovered_lost,
                      said_source_cut, stream_log)
@@ -204,37 +204,21 @@ def _streamed(path: str | Path) -> tuple[EventLog, "_Seen"]:
     return log, seen
 
 
-class _Seen:
+class _Seen(RoundWatch):
     """What rebuild makes of a recording's events, given a chunk's at a time as they are read (reader.stream_log) or
-    all at once: their fold (fold.py), the first contradiction among them (forgery.py `Contradictions`), the first
-    SessionStarted (onesession.py) and what `no_whole_round` looks at (`said`: that start, the game's first
-    RoundEnded and its SessionEnded, in order: it stops at the first such RoundEnded, else says the last end)."""
+    all at once: their fold (fold.py), the first contradiction among them (forgery.py `Contradictions`), and what
+    `no_whole_round` looks at (check.py `RoundWatch`: the first SessionStarted, onesession.py, among it)."""
 
     def __init__(self, one_publisher: frozenset[str]) -> None:
+        super().__init__()
         self.fold = SessionFold()
         self.forged = Contradictions(one_publisher)
-        self.first = None  # the first SessionStarted
-        self.said: list = []
-        self.round_ended = False
 
     def __call__(self, recorded: list[RecordedEvent]) -> None:
         events = [r.event for r in recorded]
         self.fold.fold(events)
         self.forged.take(events)
-        for e in events:
-            tag = type(e).__name__
-            if tag not in _SAID:
-                continue
-            if tag == "SessionStarted":
-                if self.first is None:
-                    self.first = e
-                    self.said.append(e)
-            elif e.source == "game" and (tag == "SessionEnded" or not self.round_ended):
-                self.round_ended = self.round_ended or tag == "RoundEnded"
-                self.said.append(e)
-
-
-_SAID = frozenset({"SessionStarted", "RoundEnded", "SessionEnded"})  # what `_Seen.said` keeps (check.no_whole_round)
+        self.take(events)
 
 
 # the events a policy file is made of (fold.py: the config, the Q updates, the rounds recorded whole, the end that

@@ -137,6 +137,10 @@ def recover(path: str | Path, output: str | Path | None = None, force: bool = Fa
     force, write = flag_argument(force, "recover", "force"), flag_argument(write, "recover", "write")
     if output.resolve() == path.resolve():
         raise OutputError("recover writes a new file; give an output path other than the input", output)
+    # read whole, not as it comes: the copy starts with the summary's Schemas and Channels (read after the data),
+    # marks each lost part where its records were (known at the file's end), copies an event once (every first
+    # kept) and, before anything is written, decides whether there is anything to write (`complete`) and what the
+    # journal adds (against every message the file holds); a file that lost nothing is not copied at all
     log = read_any_log(path)
     checked = scan(path)
     try:

@@ -51,6 +51,7 @@ import time
 import zipfile
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any, Callable
 
 import msgspec
 
@@ -68,9 +69,10 @@ from pairplay.schemas.study import CONSENT_FORM_RULE, STUDY_FILE, Study, StudyFi
 from pairplay.numbers import counted
 
 from .cutgame import CUT_BEFORE_END, CutEnd, cut_end
-from .fold import fold_any
+from .fold import Summed
 from . import biases, studyjournal
-from .reader import read_any_log
+from .check import RoundWatch
+from .reader import events_of, fold_log
 from .rebuild import Rebuilt, output_paths, rebuild_recording
 from .recover import default_output, journal_more
 from .wal import wal_path
@@ -1017,47 +1019,50 @@ class StudyData:
             return copy, f"its recovered copy {copy.relative_to(self.folder).as_posix()}"
         return path, ""
 
-    def recording_of(self, g: Game):
-        """(its read recording (reader.EventLog), "") if game `g`'s recording can stand for the game, else (None,
-        why not, in the words the report names the game by): missing; holding no session (a 0-byte file, the
-        ~1 KB an interrupted `session --force` leaves: reader.EventLog.no_session, the reader's words); damaged (events
-        lost: EventLog.lost, a recovered file's source's losses among them); holding no whole round
-        (check.no_whole_round); not this game's (`not_this_game`: a `session --force --session <its id> --out
-        STUDY/recordings` replaced it with another session); or without the game's SessionEnded (a cut file:
+    def recording_of(self, g: Game, make: Callable[[], Callable[[list], Any]] = lambda: _ignored):
+        """(its read recording (reader.EventLog), `make()`'s fold of its events, "") if game `g`'s recording can stand
+        for the game, else (None, None, why not, in the words the report names the game by): missing; holding no
+        session (a 0-byte file, the ~1 KB an interrupted `session --force` leaves: reader.EventLog.no_session, the
+        reader's words); damaged (events lost: EventLog.lost, a recovered file's source's losses among them); holding no
+        whole round (check.no_whole_round); not this game's (`not_this_game`: a `session --force --session <its id>
+        --out STUDY/recordings` replaced it with another session); or without the game's SessionEnded (a cut file:
         its rounds are a part of the game). A
         journal that says "completed" does not make a file that holds none of it the game: its picks would
-        silently be no picks."""
+        silently be no picks.
+        The fold is given the events (lists of reader.RecordedEvent) as they are read, a chunk's at a time, none kept
+        (reader.fold_log: a report of many long sessions held each file's records and events whole; the EventLog's
+        `events` is empty but for a file read whole); the fold of a file refused is dropped."""
         from .check import check_recording, no_whole_round
 
         path, _ = self.game_recording(g)
         if said := refusal(path):  # a pipe there was "recording missing" (pairplay/inputs.py)
-            return None, f"recording {path.name} {said}"
+            return None, None, f"recording {path.name} {said}"
         if not path.is_file():
-            return None, "recording missing"
+            return None, None, "recording missing"
         try:
             check_recording(path)
-            log = read_any_log(path)
+            log, (watch, fold) = fold_log(path, None, lambda: _Watched(make()))
         except InputError as err:  # not MCAP at all, or a file of nothing: no session either
-            return None, f"recording holds no session: {err.what}"
+            return None, None, f"recording holds no session: {err.what}"
         except OSError as err:
-            return None, f"recording unreadable: {err.strerror or err}"
-        if log.no_session:
-            return None, f"recording {log.no_session}"
+            return None, None, f"recording unreadable: {err.strerror or err}"
+        if watch.first is None:  # no SessionStarted (the file was read whole: its EventLog says why, reader.fold_log)
+            return None, None, f"recording {log.no_session}"
         if log.lost:  # (a new user's trial: messages that do not decode were left out of its picks, no word)
-            return None, f"recording damaged: {log.lost}"
-        why = no_whole_round([r.event for r in log.events], log.truncated, log.damaged)
+            return None, None, f"recording damaged: {log.lost}"
+        why = no_whole_round(watch.said, log.truncated, log.damaged)
         if why:
-            return None, f"recording {why}{journal_more(path)}"
-        why = self.not_this_game(g, log.of("SessionStarted")[0].config)
+            return None, None, f"recording {why}{journal_more(path)}"
+        why = self.not_this_game(g, watch.first.config)
         if why:
-            return None, f"recording is not this game's: {why}"
-        if not any(getattr(e, "source", "") == "game" for e in log.of("SessionEnded")):
+            return None, None, f"recording is not this game's: {why}"
+        if not any(type(e).__name__ == "SessionEnded" for e in watch.said):  # (the game's: RoundWatch)
             # its rounds are a part of the game, not the game (a new user's trial: a cut recording was one of
             # "5 valid games", its partial rounds in the figures)
             # (a recovered copy of a cut file: its source's cut, in the reader's words: reader.EventLog.source_cut)
             cut = f"truncated: {log.brief}; " if log.truncated else f"{log.source_cut}; " if log.source_cut else ""
-            return None, f"recording {cut}no SessionEnded: its rounds are a part of the game{journal_more(path)}"
-        return log, ""
+            return None, None, f"recording {cut}no SessionEnded: its rounds are a part of the game{journal_more(path)}"
+        return log, fold, ""
 
     def not_this_game(self, g: Game, config) -> str:
         """Why a session's config (its SessionStarted's) is not game `g`'s as the journal and plan say, in
@@ -1079,7 +1084,7 @@ class StudyData:
         """`not_this_game` of the session the recording at `path` starts ("" if it starts none or cannot be read:
         what reads it next says so)."""
         try:
-            started = read_any_log(path, only=frozenset({"SessionStarted"})).of("SessionStarted")
+            _, started = events_of(path, only=frozenset({"SessionStarted"}), tags=frozenset({"SessionStarted"}))
         except (InputError, OSError):
             return ""
         return self.not_this_game(g, started[0].config) if started else ""
@@ -1253,14 +1258,15 @@ class StudyData:
             path, _ = self.game_recording(g)
             if not path.is_file():
                 continue
-            log = read_any_log(path)
-            started = log.of("SessionStarted")
+            # the answers and the session's start kept as the file is read, nothing else (reader.events_of)
+            log, kept = events_of(path, tags=frozenset({"SessionStarted", "QuestionnaireAnswered"}))
+            started = [e for e in kept if type(e).__name__ == "SessionStarted"]
             if started and self.not_this_game(g, started[0].config):  # another session's answers are not its
                 continue  # participant's (a `session --force` over a study game's recording)
             row = {"participant": g.participant, "phase": g.phase, "game": g.game + 1, "session": g.session,
                    "returning": int(self.returning(g.participant, g.phase)), "valid": int(not g.invalid),
                    "scripted": g.scripted}
-            answered = log.of("QuestionnaireAnswered")
+            answered = [e for e in kept if type(e).__name__ == "QuestionnaireAnswered"]
             for e in answered:
                 for item, answer in e.answers.items():
                     rows.append(row | {"questionnaire": e.questionnaire, "item": item, "answer": answer, "lost": ""})
@@ -1764,8 +1770,8 @@ def game_end(folder: Path, session: str, participant: str, path: Path, answered:
     reason, in the reader's words; a completed game keeps its outcome (the next start's
     build_missing_policies says again why it has no policy; the combination refuses to go without it).
     Before, a partial policy was written and journaled as the game's, with no word."""
-    recorded = read_any_log(path)
-    fold = fold_any(r.event for r in recorded.events)
+    recorded, summed = fold_log(path, None, Summed)  # summed up as it is read, nothing of it kept (fold.Summed)
+    fold = summed.fold
     ended = fold.ended
     completed = ended is not None and ended.reason == "completed"
     damaged = recording_damage(recorded)
@@ -1777,7 +1783,7 @@ def game_end(folder: Path, session: str, participant: str, path: Path, answered:
     if damaged:
         reason = "; ".join(r for r in (reason, f"recording {damaged}: no policy built") if r)
     if answered is None:
-        answered = bool(recorded.of("QuestionnaireAnswered")) or bool(lost_answers(recorded, False, False))
+        answered = summed.answered or bool(lost_answers(recorded, False, False))
     return j.GameEnded(session=session, participant=participant, outcome="completed" if completed else "aborted",
                        reason=reason, rounds_played=len(fold.whole_rounds()), policy=policy, questionnaire=answered)
 
@@ -1813,10 +1819,12 @@ def lost_answers(log, decoded: bool, journaled: bool) -> list[str]:
 def _finished_game(path: Path) -> bool:
     """Is the recording whole and does it hold its game's end?"""
     try:
-        recorded = read_any_log(path, only=frozenset({"SessionEnded"}))
+        # its ends kept as it is read, nothing else (reader.events_of)
+        recorded, ends = events_of(path, only=frozenset({"SessionStarted", "SessionEnded"}),
+                                   tags=frozenset({"SessionEnded"}))
     except (InputError, OSError):
         return False
-    return recorded.whole and bool(recorded.of("SessionEnded"))
+    return recorded.whole and bool(ends)
 
 
 def write_game_policy(folder: Path, rebuilt: Rebuilt, force: bool = False) -> str:
@@ -1974,3 +1982,18 @@ def _export_readme(pid: str, study: str, games: list[Game], files: list[Path], a
                   + ", ".join(merged), ""]
     lines += ["Names are never stored with the data: the participant is known only by the id above."]
     return "\n".join(lines) + "\n"
+
+
+def _ignored(recorded: list) -> None:
+    """`StudyData.recording_of`'s fold when its caller folds nothing."""
+
+
+class _Watched(tuple):
+    """`StudyData.recording_of`'s fold: (check.RoundWatch, the caller's fold), both given each chunk's events."""
+
+    def __new__(cls, fold):
+        return super().__new__(cls, (RoundWatch(), fold))
+
+    def __call__(self, recorded: list) -> None:
+        self[0].take(r.event for r in recorded)
+        self[1](recorded)

@@ -26,9 +26,9 @@ from pairplay.numbers import counted
 from pairplay.schemas import events as ev
 from pairplay.schemas.session import SessionConfig
 
-from .check import read_session
+from .check import session_events
 from .forgery import contradiction
-from .onesession import Started, started
+from .onesession import Started, started_by
 
 
 @dataclass
@@ -112,8 +112,8 @@ def turns_from_events(events, source: str = "", note: str = "") -> RecordedTurns
 
 def read_turns(path) -> RecordedTurns:
     """A recording's turns (see the module rule); InputError naming the file if it has none to fit."""
-    log = read_session(path, function="read_turns")
+    log, events = session_events(path, function="read_turns")  # (the events alone kept: check.session_events)
     note = log.missing  # what its damage, cut and undecodable messages lost (reader.EventLog), as rebuild's
-    turns = turns_from_events((r.event for r in log.events), str(path), note)
-    turns.started = started(log)
+    turns = turns_from_events(events, str(path), note)
+    turns.started = started_by(next((e for e in events if type(e).__name__ == "SessionStarted"), None), log)
     return turns

@@ -85,25 +85,40 @@ class GameStats:
     per_round_suggestions: list[int] = field(default_factory=list)
 
 
-def game_stats(log, g, returning: bool, rounds: int) -> GameStats:
-    """The stats of game `g` from its read recording (reader.EventLog)."""
-    s = GameStats(g.session, g.participant, g.phase, g.game, returning,
-                  from_bias=[0] * rounds, per_round_suggestions=[0] * rounds, scripted=g.scripted)
-    for e in log.of("RoundEnded", "SuggestionMade", "TurnResolved", "WrongSuggestionPressed"):
-        name = type(e).__name__
-        if name == "RoundEnded":
-            s.picks.append(2 * e.turns)
-        elif name == "SuggestionMade":
-            s.suggestions += 1
-            if e.round < rounds:
-                s.per_round_suggestions[e.round] += 1
-                s.from_bias[e.round] += e.chosen_by == "bias"
-        elif name == "TurnResolved":
-            s.turns += 1
-            s.ignored += e.ignored_by_time
-        else:
-            s.presses += 1
-    return s
+class StatsFold:
+    """A game's stats (GameStats' counts) folded from its recording's events as they are read, a chunk's at a time
+    (StudyData.recording_of: none kept, a report of many long sessions held every file whole)."""
+
+    def __init__(self, rounds: int) -> None:
+        self.rounds = rounds
+        self.picks: list[int] = []
+        self.from_bias, self.per_round_suggestions = [0] * rounds, [0] * rounds
+        self.suggestions = self.turns = self.ignored = self.presses = 0
+
+    def __call__(self, recorded: list) -> None:
+        rounds = self.rounds
+        for r in recorded:
+            e = r.event
+            name = type(e).__name__
+            if name == "RoundEnded":
+                self.picks.append(2 * e.turns)
+            elif name == "SuggestionMade":
+                self.suggestions += 1
+                if e.round < rounds:
+                    self.per_round_suggestions[e.round] += 1
+                    self.from_bias[e.round] += e.chosen_by == "bias"
+            elif name == "TurnResolved":
+                self.turns += 1
+                self.ignored += e.ignored_by_time
+            elif name == "WrongSuggestionPressed":
+                self.presses += 1
+
+
+def game_stats(fold: StatsFold, g, returning: bool) -> GameStats:
+    """The stats of game `g` from its recording's fold."""
+    return GameStats(g.session, g.participant, g.phase, g.game, returning, picks=fold.picks, scripted=g.scripted,
+                     suggestions=fold.suggestions, ignored=fold.ignored, turns=fold.turns, presses=fold.presses,
+                     from_bias=fold.from_bias, per_round_suggestions=fold.per_round_suggestions)
 
 
 def _mean_curve(curves: list[list[int]], rounds: int) -> np.ndarray:
@@ -161,11 +176,13 @@ def human_report(folder: str | Path, out: str | Path | None = None, reference: s
         if g.scripted and not (include_scripted or rehearsal):
             excluded.append(f"{g.session} (scripted: {g.scripted})")
             continue
-        log, why = data.recording_of(g)  # missing, no session, damaged, no whole round, another game's
+        rounds = study.phase_by_id(g.phase).rounds
+        # missing, no session, damaged, no whole round, another game's; its stats folded as it is read
+        log, fold, why = data.recording_of(g, lambda: StatsFold(rounds))
         if log is None:
             excluded.append(f"{g.session} ({why})")
             continue
-        games.append(game_stats(log, g, data.returning(g.participant, g.phase), study.phase_by_id(g.phase).rounds))
+        games.append(game_stats(fold, g, data.returning(g.participant, g.phase)))
         games[-1].bias, games[-1].bias_flawed = g.bias, data.bias_flaw(g)
         if log.loss_free:  # every event read: the game counts, its file's damage said (a new user's trial: no word)
             read_whole.append(f"{g.session} ({log.loss_free})")

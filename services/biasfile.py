@@ -22,7 +22,7 @@ import re
 import stat
 from pathlib import Path
 
-from pairplay.outputs import NO_HARD_LINKS, _remove_dead_temps
+from pairplay.outputs import NO_HARD_LINKS, remove_dead_temps
 from pairplay.replay.studydata import StudyDataError
 
 SUFFIX = ".combining"
@@ -48,7 +48,7 @@ def remove_leftovers(folder: Path, output: str, named: set[str]) -> None:
         return
     for path in merged.iterdir():
         if (m := _WRITING.fullmatch(path.name)) is not None:
-            _remove_dead_temps(merged / m["combining"])  # only a dead process's (it checks the pid)
+            remove_dead_temps(merged / m["combining"])  # only a dead process's (it checks the pid)
             continue
         if (m := _LEFTOVER.fullmatch(path.name)) is None or not _regular(path):
             continue

@@ -45,7 +45,7 @@ from pairplay.errors import unshowable
 from pairplay.core.policies import partial_inputs, users_from_policies
 from pairplay.replay import biases
 from pairplay.replay.delivery import delivery_counts, delivery_line, troubled
-from pairplay.replay.reader import read_any_log
+from pairplay.replay.reader import events_of
 from pairplay.replay.studydata import (Game, StudyData, StudyDataError, game_end, journaled_or_removed, one_line,
                                        recording_damage, refuse_control)
 from pairplay.schemas import events as ev
@@ -408,12 +408,13 @@ class StudyRunner:
         ended = game_end(self.data.folder, config.session, config.participant.split(":", 1)[1], path, answered,
                          self._abort_reason)
         self.data.append_naming(ended, ended.policy)  # no policy file without its line (journaled_or_removed)
-        recorded = read_any_log(path, only=frozenset({"RobotActed"}))
+        # the robot's RobotActed kept as it is read, nothing else (reader.events_of)
+        recorded, acted = events_of(path, only=frozenset({"SessionStarted", "RobotActed"}),
+                                    tags=frozenset({"RobotActed"}))
         damaged = recording_damage(recorded)
         if damaged:
             log.warning("%s: its recording is %s: no policy built", config.session, damaged)
         if self.robot is not None:  # a robot it could not reach is said, not only under -v
-            acted = recorded.of("RobotActed")
             line = self.delivery[config.session] = delivery_line(acted)
             if line and self.warns_undelivered:  # a real failure is a warning, the normal summary info
                 # (replay/delivery.py `troubled`): it was a WARNING for every game whose robot was ever superseded

@@ -89,3 +89,25 @@ def damaged_when_written(monkeypatch, module, how: str, tag: str = "") -> None:
         return path
 
     monkeypatch.setattr(module, "run_session", damaged_after_it_is_written)
+
+
+# files a stream cannot judge (reader.stream_log: NotStreamed), each read whole by the verbs: where a lost part's or a
+# bad message's events were, and whether a seq read again is a copy, is known only from what came before and after
+
+def lost_part(path):
+    """A real recording with a chunk damaged: its events lost."""
+    small_chunked_session(path, "lost")
+    damage(path, "chunk")
+
+
+def undecodable(path):
+    """A real recording with a message that does not decode."""
+    small_chunked_session(path, "bad")
+    damage(path, "undecodable")
+
+
+def copies(path):
+    """A real recording with every message stored twice."""
+    from rewrite_mcap import rewritten
+
+    rewritten(path, each=lambda channel, message: [message, message])

@@ -334,6 +334,19 @@ def test_a_killed_writers_temporaries_are_removed_by_the_next_writer_and_a_live_
     assert (out / "a.txt").read_text() == "a" and (tmp_path / "report.md").read_text() == "whole"
 
 
+
+def test_a_dead_writers_temporaries_are_removed_through_the_public_helper_the_combiner_uses_too(tmp_path):
+    """services/biasfile.py removed a killed combination's temporaries through outputs' private
+    `_remove_dead_temps`: the helper is public (`remove_dead_temps`), one function, and the combiner's is it."""
+    from pairplay import outputs
+    from pairplay.services import biasfile
+
+    dead = tmp_path / ".x.policy.json.99999999.abcdef.tmp"  # above every pid_max: no such process
+    dead.write_text("half")
+    outputs.remove_dead_temps(tmp_path / "x.policy.json")
+    assert not dead.exists()
+    assert biasfile.remove_dead_temps is outputs.remove_dead_temps and not hasattr(outputs, "_remove_dead_temps")
+
 ONE_GAME_STUDY = """[study]
 id = "one"
 title = "one game"

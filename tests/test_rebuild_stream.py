@@ -21,7 +21,7 @@ from pairplay.replay import rebuild as rb
 from pairplay.replay.reader import NotStreamed, read_any_log, stream_log
 from pairplay.replay.rebuild import CURVE_READS, curve_rows, rebuild_recording
 
-from damageutil import damage, small_chunked_session
+from damageutil import copies, lost_part, undecodable
 from rewrite_mcap import rewritten
 
 SAMPLES = Path(__file__).resolve().parents[1] / "recordings" / "samples"
@@ -85,20 +85,6 @@ def test_a_repeated_channel_record_and_the_summary_order_the_channels_as_read_wh
     streamed = stream_log(path, CURVE_READS, given.extend)
     whole = read_any_log(path, CURVE_READS)
     assert given == whole.events and fields(streamed) == fields(whole)
-
-
-def lost_part(path):
-    small_chunked_session(path, "lost")
-    damage(path, "chunk")
-
-
-def undecodable(path):
-    small_chunked_session(path, "bad")
-    damage(path, "undecodable")
-
-
-def copies(path):
-    rewritten(path, each=lambda channel, message: [message, message])
 
 
 @pytest.mark.parametrize("make", [lost_part, undecodable, copies])

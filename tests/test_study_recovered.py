@@ -92,5 +92,5 @@ def test_a_cut_games_recording_recovered_is_built_from_its_recovered_copy_and_sa
     reread = StudyData(folder)
     path, named = reread.game_recording(reread.state.games[built.session])
     assert path.name == f"{stem}.recovered.mcap" and named.startswith("its recovered copy")
-    log, why = reread.recording_of(reread.state.games[built.session])
+    log, _, why = reread.recording_of(reread.state.games[built.session])
     assert log is not None and why == "", why

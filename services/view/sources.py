@@ -38,7 +38,7 @@ import msgspec
 import zenoh
 
 from pairplay.replay.forgery import AFTER_END
-from pairplay.replay.reader import EventLog, read_any_log
+from pairplay.replay.reader import EventLog, events_of
 from pairplay.schemas.events import decode_event
 from pairplay.schemas.keys import alive_key, parse_event_key, session_keys
 
@@ -77,20 +77,24 @@ class SequenceGaps:
 
 def recording_items(path: str | Path, *, speed: float = 0.0, session: str | None = None,
                     sleep=None, clock=time.monotonic, stop: threading.Event | None = None,
-                    log: EventLog | None = None) -> Iterator[Item]:
+                    log: EventLog | None = None, events: list | None = None) -> Iterator[Item]:
     """Events of one session of a recording, paced by `speed` (0: as fast as possible). The pacing
     waits on `stop` (`sleep` defaults to `stop.wait`): a signal never waits for the next event.
     `log`: the recording read already (cli/view.py reads it to check it first): drawn as read, not read
-    again (a file a `recover` or a recorder changes beside the view could differ, or fail, the second time)."""
+    again (a file a `recover` or a recorder changes beside the view could differ, or fail, the second time);
+    `events`: its events, if it was read keeping them alone (reader.events_of), else those of `log.events`. Read here,
+    its events alone are kept (reader.events_of), not its records and their bytes."""
     stop = stop if stop is not None else threading.Event()
     sleep = sleep or stop.wait
-    log = log if log is not None else read_any_log(path)
+    if log is None:
+        log, events = events_of(path)
+    elif events is None:
+        events = [r.event for r in log.events]
     chosen = session
     t0_event = t0_wall = None
     for bad in log.bad:
         yield None, f"recording message on {bad.key or '?'} does not decode: {bad.reason}"
-    for record in log.events:
-        event = record.event
+    for event in events:
         if chosen is None and event.session:
             chosen = event.session
         if event.session != chosen:
