@@ -117,7 +117,7 @@ def run(args: argparse.Namespace) -> int:
         # both (a hostile user's trial: a cut file's view was saved under the complete name, a damaged one's as
         # .partial.rrd); a file its recorder still writes is `live`, said so
         lost = held.lost or ("" if live else held.missing)
-        if not lost and not live and not held.of("SessionEnded"):
+        if not lost and not live and not any(type(e).__name__ == "SessionEnded" for e in events):
             # closed whole by a recorder stopped before the session's end (SIGTERM; no SessionEnded): the rest of the
             # session is in no file, as a cut one's; rebuild says PARTIAL, the view was saved under the whole name
             # with 0 notes (trial34 B)
