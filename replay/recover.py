@@ -67,6 +67,7 @@ from pairplay.outputs import check_output, output_file
 from pairplay.arguments import flag_argument, path_argument
 
 from .check import check_recording
+from .continued import continued_in
 from .mcapscan import scan
 from .reader import FirstOfEach, read_any_log
 from .wal import RECORDER_METADATA, NotAJournal, not_its, read_journal, wal_path
@@ -362,14 +363,21 @@ def journal_left(path: str | Path) -> str:
     recover counts what is there already (services/walmerge.py: a record of the journal the file holds, byte for
     byte, once per copy); what recover then refuses through the live checks, a forgery, it records as a refusal.
     Read only when a journal is there, never of a live file (its recorder writes both: pairplay/livelock.py);
-    a journal that cannot be read, is another session's, or adds nothing says nothing (recover names those)."""
+    a journal that cannot be read, is another session's, or adds nothing says nothing (recover names those).
+    A file a restarted recorder continued (replay/continued.py) says that file instead, journal or not."""
     from collections import Counter
 
     from pairplay.livelock import is_live
 
     path = Path(path)
     beside = wal_path(path)
-    if not beside.is_file() or is_live(path):
+    if is_live(path):
+        return ""
+    later = continued_in(path)
+    if later is not None:  # the session goes on, whole, in a restarted recorder's file: that, not recover (trial34 N)
+        return (f"a restarted recorder continued it in {later.name} beside it, which holds the whole session from "
+                f"this file's events on: give that instead")
+    if not beside.is_file():
         return ""
     try:
         journal, _ = _journal_beside(path, read_any_log(path, only=frozenset()))

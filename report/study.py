@@ -46,7 +46,7 @@ from pairplay.core.reward import BONUS_RULE_TEXT
 from pairplay.core.rng import GAME_INDEX_RANGE, SEED_RANGE
 from pairplay.core.simulate import MEMORY_LIMIT, batch_bytes, gigabytes
 from pairplay.arguments import at, checked_dataclass, flag_argument, given, instance_argument, is_integer, path_argument
-from pairplay.errors import OptionError, command_word
+from pairplay.errors import OptionError, OutputError, command_word
 from pairplay.lists import comma_items
 from pairplay.numbers import counted, shown, type_name
 from pairplay.schemas.config import DEFAULT_REWARD_BONUS, LearnerConfig, LSPIConfig, REWARD_BONUS_RULES, lspi_unused
@@ -536,12 +536,18 @@ def run_study(args: StudySettings, out: Path, progress_bar: Callable = _no_bar, 
     The folder is built beside `out` and renamed when complete (pairplay.outputs.output_folder):
     OutputError, before any work, if `out` exists with files in it and not `force`; with `force`,
     an earlier study's files there that this one does not write are removed (STUDY_OUTPUTS); an
-    interrupted study leaves nothing. Raises SettingError (an OptionError), before any work, for a
+    interrupted study leaves nothing; OutputError, before any work, for an `out` inside a people's study
+    folder (`pairplay protocol init`'s: only protocol writes there). Raises SettingError (an OptionError), before any work, for a
     setting that cannot run as asked (StudySettings.check); ArgumentError for `args` that are no
     StudySettings, `out` no path, `force` not True or False (pairplay/arguments.py)."""
     instance_argument(args, StudySettings, "run_study", "args", "a StudySettings (pairplay.StudySettings(seed=1, ...))")
     out = path_argument(out, "run_study", "out")
     force = flag_argument(force, "run_study", "force")
+    from pairplay.replay.copies import study_root
+    if study_root(out) is not None:  # as `pairplay study --out` is refused there (cli/args.py check_study_folders):
+        # the API wrote a report, figures and a policies/ folder beside a people's study's policy files (trial34 M)
+        raise OutputError(f"inside a people's study folder ({study_root(out)}) only `pairplay protocol` writes; give "
+                          "run_study's out elsewhere", out)
     personas = args.check()
     return_freed_memory()
     with output_folder(out, force, owned=STUDY_OUTPUTS, manifest=STUDY_MANIFEST) as tmp:

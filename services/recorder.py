@@ -86,6 +86,7 @@ from pairplay.errors import OutputError
 from pairplay.livelock import LIVE, hold, is_live, release
 from pairplay.numbers import counted
 from pairplay.outputs import REPLACED, set_aside_of, special_kind
+from pairplay.replay.continued import recordings_of  # noqa: F401  (re-exported: tests, callers)
 from pairplay.replay.reader import LOST_AT_KEY, RECOVERED, _listed, carry_recovery, said_source_lost
 from pairplay.replay.wal import RECORDER_METADATA, JournalWriter, NotAJournal, not_its, read_journal, wal_path
 from pairplay.replay.writer import FLUSH_INTERVAL_NS, LOSS_BOUND_NS, EventLogWriter
@@ -164,19 +165,6 @@ class _Stamp(msgspec.Struct):
 
 _stamp = JsonDecoder(_Stamp).decode
 _REFILL = object()  # inbox control item: Zenoh reported messages lost for good
-
-
-def recordings_of(path: Path) -> list[Path]:
-    """A session's existing recordings: `path` and every `<stem>.<k>.mcap` beside it (k = 1, 2 ...),
-    in that order (gaps in k allowed: any of them makes the session id taken)."""
-    path = Path(path)
-    numbered = []
-    if path.parent.is_dir():
-        for p in path.parent.glob(f"{glob.escape(path.stem)}.*{glob.escape(path.suffix)}"):
-            k = p.name[len(path.stem) + 1:len(p.name) - len(path.suffix)]
-            if k.isascii() and k.isdigit():
-                numbered.append((int(k), p))
-    return ([path] if path.exists() else []) + [p for _, p in sorted(numbered)]
 
 
 def latest_file(path: Path) -> Path | None:

@@ -204,3 +204,20 @@ def test_the_readme_script_runs_as_written_over_an_earlier_study(tmp_path, pairp
     assert "'focus'" in done.stdout and "learned/oracle" in done.stdout, done.stdout
     assert (tmp_path / "out" / "blind-deaf" / "report.md").is_file()
     assert len(list((tmp_path / "out" / "blind-deaf" / "policies").rglob("*.json"))) == 6  # 2 personas x 3 games
+
+
+def test_run_study_refuses_an_out_inside_a_peoples_study_folder(tmp_path):
+    """trial34 M: `pairplay study --out S1/policies` is refused, but `run_study(..., "S1/policies")` wrote a report,
+    figures and a policies/ folder beside the study's policy files. Refused before any work, as the verb is."""
+    import pairplay
+    from pairplay.errors import OutputError
+    from pairplay.replay.copies import JOURNAL, STUDY_FILE
+
+    folder = tmp_path / "S1"
+    (folder / "policies").mkdir(parents=True)
+    (folder / JOURNAL).write_text("")
+    (folder / STUDY_FILE).write_text("")
+    with pytest.raises(OutputError) as err:
+        pairplay.run_study(pairplay.StudySettings(personas="blind", games=1, rounds=10), folder / "policies", force=True)
+    assert "inside a people's study folder" in str(err.value) and "only `pairplay protocol` writes" in str(err.value)
+    assert sorted(p.name for p in (folder / "policies").iterdir()) == []

@@ -284,3 +284,43 @@ def test_a_restarted_recorder_asks_again_a_live_session_that_has_not_answered_ye
     # (3 + 6 + 6 s unanswered: 15 of the test's 18 s) to the same False
     with listener() as empty:
         assert not same_live_session(empty, s, path)
+
+
+
+def test_the_earlier_file_of_a_restarted_recorder_names_the_file_that_continues_it(tmp_path, pairplay_cli):
+    """trial34 N: after a restart in place, every verb reading the killed recorder's file (`rebuild`, `replay
+    --verify`, `view`) said PARTIAL and "`pairplay recover` adds them" (its journal), and nothing of the restarted
+    recorder's file beside it that holds the whole session: following the advice made a third, partial copy. Now
+    the line every such verb says (replay/recover.py `journal_left`) names that file instead."""
+    from loopback_session import loopback_events
+    from pairplay.replay.continued import continued_in
+    from pairplay.replay.recover import journal_left
+    from pairplay.replay.writer import EventLogWriter
+    from pairplay.schemas.envelope import stamped
+    from pairplay.schemas.events import Nanos, encode_event
+    from pairplay.schemas.keys import event_key
+    from pairplay.schemas.session import SessionConfig
+
+    config = SessionConfig(session="c2", participant="sim:deaf", persona="deaf", seed=4, rounds=3)
+    events = list(loopback_events(config))
+    gap = stamped(ev.RecordingGap(earlier_file="c2.mcap", copied=len(events) // 2, last_copied_ns=Nanos(1),
+                                  resumed_ns=Nanos(2)), session="c2", source="recorder", seq=1, time_ns=3)
+
+    def write(path, chosen) -> None:
+        w = EventLogWriter(path)
+        for i, e in enumerate(chosen):
+            w.write(event_key(e.session, e.source, type(e).__name__), encode_event(e), log_time_ns=10**18 + i,
+                    sequence=e.seq)
+        w.close()
+    earlier, later = tmp_path / "c2.mcap", tmp_path / "c2.1.mcap"
+    write(earlier, events[:len(events) // 2])  # the part the killed recorder wrote
+    write(later, events)  # a file named as a continuation that does not say it continues c2.mcap: not taken
+    assert continued_in(earlier) is None
+    later.unlink()
+    write(later, [*events, gap])
+    assert continued_in(earlier) == later
+    line = journal_left(earlier)
+    assert line == "a restarted recorder continued it in c2.1.mcap beside it, which holds the whole session from " \
+                   "this file's events on: give that instead", line
+    ran = pairplay_cli("rebuild", earlier, "--out", tmp_path / "rb", "--partial")
+    assert "a restarted recorder continued it in c2.1.mcap" in ran.stderr, ran.stdout + ran.stderr
