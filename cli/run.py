@@ -35,7 +35,7 @@ from pairplay import signals, testpause
 from pairplay.cli import interrupts
 from pairplay.cli.args import duration, note_given, output_folder, session_id
 from pairplay.errors import OptionError, command_word, escaped
-from pairplay.lists import comma_items
+from pairplay.lists import comma_items, repeated
 from pairplay.nearest import hinted
 from pairplay.numbers import shown
 from pairplay.outputs import check_folder
@@ -64,6 +64,8 @@ def services_to_wait_for(text: str) -> list[str]:
         raise argparse.ArgumentTypeError(f"{', '.join(hinted(n, WAITABLE) for n in unknown) or repr(text)}: "
                                          f"not a service to wait for "
                                          f"(one of {', '.join(sorted(WAITABLE))})")
+    if twice := repeated(names):
+        raise argparse.ArgumentTypeError(f"{text!r} names {twice} twice: each service is waited for once")
     return names
 
 
