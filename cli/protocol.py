@@ -423,7 +423,7 @@ def _serving(data: StudyData, args, stop, runners: list, pilot: dict, robot, ove
             print(f"pairplay protocol serve: {warning}", file=sys.stderr, flush=True)
         warn_unreachable(runner, "serve")
         print(f"experimenter console: {server.console_url}", flush=True)
-        print(f"bus (boards and scripted players connect here): {' '.join(bus.locators())}", flush=True)
+        print(f"bus (boards and scripted players connect here): {bus.listening()}", flush=True)
         cut = True  # a second Ctrl-C (KeyboardInterrupt) cuts the shutdown short: nothing more is waited for
         try:
             while not stop.wait(0.2):

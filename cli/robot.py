@@ -170,7 +170,7 @@ def _serve(args: argparse.Namespace) -> int:
     stop_on_signals(stop)
     with Bus(options_from_args(args), stop=stop) as bus:
         bridge = bridge_from_args(bus, args.session, args, stop)
-        print(f"robot bridge for session {args.session} on {bridge.backend}; bus {' '.join(bus.locators())}",
+        print(f"robot bridge for session {args.session} on {bridge.backend}; bus listening on {bus.listening()}",
               flush=True)
         bridge.run(stop)
     if getattr(stop, "why", ""):  # the status is the signal's (cli/main.py); it said nothing

@@ -37,7 +37,7 @@ from pairplay.cli.args import duration, note_given, output_folder, session_id
 from pairplay.errors import OptionError, command_word, escaped
 from pairplay.lists import comma_items, repeated
 from pairplay.nearest import hinted
-from pairplay.numbers import shown
+from pairplay.numbers import counted, shown
 from pairplay.outputs import check_folder
 from pairplay.schemas.trust import SERVICES as BUS_SERVICES
 from pairplay.services.bus import Bus, Deadline, add_bus_arguments, deadline_of, options_from_args, signal_taken, stop_on_signals
@@ -194,7 +194,7 @@ def _run(args: argparse.Namespace, stop: threading.Event, recording: dict) -> in
                                       "choose another --session (a recording is never replaced)")
         # the first line: where we listen (an orchestrator connects there), and what a game waits for
         waits = waiting_for(args.wait_for) if args.service == "game" else ""
-        print(f"listening {' '.join(bus.locators()) or '(no listener)'}{' - ' + waits if waits else ''}", flush=True)
+        print(f"listening {bus.listening()}{' - ' + waits if waits else ''}", flush=True)
         if args.service == "recorder":
             from pairplay.services.recorder import RECORDER_SWITCH_S, Recorder
             recorder = Recorder(bus, args.session, path, on_failure=lambda _why: stop.set(), restart=restart)
@@ -226,6 +226,9 @@ def _run(args: argparse.Namespace, stop: threading.Event, recording: dict) -> in
                               "readable up to the failure: ") + f"pairplay recover {command_word(recorder.path)}",
                       file=sys.stderr)
                 return 1
+            if not recording.get("empty"):  # the one line a person looks for on its host, as `pairplay session` says it
+                # (it said nothing at its end: trial34 J); a file that holds no session is said by run()
+                print(f"recorded {counted(recorder.writer.count, 'event')} to {escaped(str(recorder.path))}", flush=True)
             return 0
         if args.service == "combiner":
             from pairplay.services.combiner import CombinerLogic
