@@ -99,7 +99,7 @@ def parse_arms(text: str) -> list[tuple[str, str]]:
             raise OptionError(f"unknown arm {item!r}{hint}: give same, q, final, oracle, alone, reuse:FILE or fixed:FILE",
                               "--policy")
     if twice := repeated(a[0] for a in arms):
-        raise OptionError(f"names the arm {twice} twice: each arm is measured once", "--policy")
+        raise OptionError(f"the arm {twice} is given twice: each arm is measured once", "--policy")
     return arms
 
 

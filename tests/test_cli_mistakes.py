@@ -149,7 +149,7 @@ CASES = [
     Case("run game --wait-for a service twice", ["run", "game", "--wait-for", "learner,learner"],
          "'learner,learner' names learner twice: each service is waited for once"),
     Case("counterfactual --policy an arm twice", ["counterfactual", "rec.mcap", "--policy", "same,final,same",
-                                                  "--out", "cf"], "names the arm same twice: each arm is measured once"),
+                                                  "--out", "cf"], "the arm same is given twice: each arm is measured once"),
     Case("study --personas a persona twice", ["study", "--personas", "blind,blind"],
          "--personas: names blind twice: each persona is trained once"),
     # a comma list that names nothing is refused too: `bench --only ""` measured nothing and exited 0 with an
