@@ -157,6 +157,21 @@ def holds_none(path) -> str:
             "`pairplay session --force`, to reuse it)")
 
 
+def _none_held(earlier: Path) -> str:
+    """The way out for an id taken by a recording that holds no session (a recorder stopped before its session
+    began: the stop line said to remove it), "" for one that holds a session: "has a recording already" alone
+    gave no way out, and not the one the stop line had given (trial34 E)."""
+    from pairplay.replay.check import journal_holds_no_session
+    from pairplay.replay.reader import read_any_log
+    from pairplay.replay.wal import wal_path
+    journal = wal_path(earlier)
+    if not read_any_log(earlier).no_session or (journal.exists() and not journal_holds_no_session(journal)):
+        return ""
+    both = f"{escaped(earlier.name)} and its journal" if journal.exists() else escaped(earlier.name)
+    return f"it holds no session (its recorder stopped before the session began): remove {both} to reuse the id, " \
+           "or choose another --session"
+
+
 def _run(args: argparse.Namespace, stop: threading.Event, recording: dict) -> int:
     refuse_unused(args)
     config = None
@@ -190,8 +205,9 @@ def _run(args: argparse.Namespace, stop: threading.Event, recording: dict) -> in
             if stop.is_set():  # a signal while it asked: nothing recorded, the signal's line (run)
                 return 0
             if earlier is not None and not restart:
-                raise RecordingExists(earlier, args.session, "no live session on the bus sent what it holds; "
-                                      "choose another --session (a recording is never replaced)")
+                raise RecordingExists(earlier, args.session, _none_held(earlier) or
+                                      "no live session on the bus sent what it holds; choose another --session (a "
+                                      "recording is never replaced)")
         # the first line: where we listen (an orchestrator connects there), and what a game waits for
         waits = waiting_for(args.wait_for) if args.service == "game" else ""
         print(f"listening {bus.listening()}{' - ' + waits if waits else ''}", flush=True)

@@ -69,7 +69,7 @@ def check_recording(path: str | Path, journal_ok: bool = False, function: str = 
             if journal_ok:
                 return path
             what = "the file is empty (0 bytes)" if not head else f"cut inside MCAP's magic ({counted(len(head), 'byte')})"
-            if none := _journal_holds_no_session(wal_path(path)):  # recover would only say the same (trial34 E)
+            if none := journal_holds_no_session(wal_path(path)):  # recover would only say the same (trial34 E)
                 raise InputError(f"{what}: its recorder stopped before it wrote a record, and the journal beside it "
                                  f"({wal_path(path).name}) {none}: no session was recorded (remove both to reuse "
                                  "its session id)", path)
@@ -88,10 +88,11 @@ def check_recording(path: str | Path, journal_ok: bool = False, function: str = 
     return path
 
 
-def _journal_holds_no_session(journal: Path) -> str:
+def journal_holds_no_session(journal: Path) -> str:
     """What a recorder's journal holds when no session is in it ("holds nothing", "holds 3 messages but no
     SessionStarted"): the words `recover` would refuse it in; "" if it holds a session's start or cannot be read
-    (recover reads it then, and says what it finds)."""
+    (recover reads it then, and says what it finds). Asked before a verb points to recover, or to a file's
+    journal as what keeps a session id taken (cli/run.py)."""
     from .wal import NotAJournal, read_journal
     try:
         records = read_journal(journal).records

@@ -53,3 +53,27 @@ def test_a_robot_bridge_that_listens_nowhere_says_so():
                 robot.kill()
                 robot.wait()
     assert first == "robot bridge for session says2 on virtual; bus listening on (no listener)\n", first
+
+
+def test_a_recorder_again_over_a_file_of_no_session_says_the_way_out_its_stop_gave(tmp_path, pairplay_cli):
+    """A recorder stopped before its session began keeps the id taken ("remove the file ... to reuse it"); a second
+    one on that id said only "has a recording already; no live session on the bus sent what it holds; choose
+    another --session" of a file that holds no session (trial34 E)."""
+    s = "again1"
+    with listener() as bus:
+        rec = shared().start(["run", "recorder", "--session", s, "--out", str(tmp_path), "--connect",
+                              bus.locators()[0]])
+        try:
+            assert wait_until(lambda: alive_key(s, "recorder") in bus.alive_now(alive_key(s, "*")), 30)
+            rec.send_signal(signal.SIGINT)
+            assert rec.wait(60) == 130
+            stopped = rec.stderr.read()
+        finally:
+            if rec.poll() is None:
+                rec.kill()
+                rec.wait()
+        assert "holds no session (the id stays taken: remove the file" in stopped, stopped
+        ran = pairplay_cli("run", "recorder", "--session", s, "--out", tmp_path, "--connect", bus.locators()[0])
+    assert ran.returncode == 2 and len(ran.stderr.splitlines()) == 1, ran
+    assert f"session {s} has a recording already; it holds no session (its recorder stopped before the session " \
+           f"began): remove {s}.mcap to reuse the id, or choose another --session" in ran.stderr, ran
