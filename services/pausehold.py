@@ -25,6 +25,8 @@ from pairplay.services.game import PAUSED
 
 # the player's inputs the game takes (GameLogic.consumes less the console and the gaze tracker)
 INPUTS = (ev.CardPicked, ev.CardObserved, ev.WrongSuggestionPressed)
+# what the game answers a player's input with (a press's MessageRejected aside: no player reads those)
+ANSWERS = (ev.CardRevealed, ev.PickRejected, ev.SuggestionRequested)
 # what a player logic reads of the game for its hold, besides what it plays by
 CONSUMES = frozenset({"ControlTaken", "SuggestionRequested", "PickRejected", "CardRevealed", "SessionEnded"})
 
@@ -66,7 +68,7 @@ class PauseHold:
 
     def _answers(self, e: ev.Event) -> bool:
         o = self.open
-        if o is None or (e.round, e.turn) != (o.round, o.turn):
+        if o is None or not isinstance(e, ANSWERS) or (e.round, e.turn) != (o.round, o.turn):
             return False
         if isinstance(o, ev.CardPicked):
             if isinstance(e, ev.CardRevealed):

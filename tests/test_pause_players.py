@@ -132,3 +132,16 @@ def test_a_press_or_an_observed_card_in_flight_at_the_pause_is_made_again_and_on
         later = ev.CardPicked(round=0, turn=0, card=2)
         assert hold.send([later]) == []  # held while paused
         assert hold.saw(control("SessionResumed")) == [later]
+
+
+def test_the_hold_reads_any_event_of_the_game_with_an_input_open():
+    """An event with no turn (RoundStarted, SessionStarted) read while an input is open is no answer, and no
+    error (the logic's Node would record an internal error and drop the event)."""
+    from pairplay.services.pausehold import PauseHold
+
+    hold = PauseHold("participant")
+    pick = ev.CardPicked(round=0, turn=0, card=3)
+    hold.send([pick])
+    for e in (ev.RoundStarted(round=1, faces=[i // 2 for i in range(18)]), ev.SessionStarted(config=SessionConfig(
+            session="s", participant="sim:ashley", persona="ashley", seed=1, rounds=2))):
+        assert hold.saw(e) == [] and hold.open is pick
