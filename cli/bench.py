@@ -30,7 +30,7 @@ from pathlib import Path
 from pairplay.bench.goals import MISSED, goal_text, verdict
 from pairplay.cli.args import count, output_file
 from pairplay.errors import InputError, OptionError, command_word
-from pairplay.lists import comma_items
+from pairplay.lists import comma_items, repeated
 from pairplay.nearest import hinted
 from pairplay.outputs import check_output, hold, write_text
 from pairplay.numbers import counted
@@ -213,6 +213,10 @@ def run(args) -> int:
         names = comma_items(args.only)
     except ValueError as exc:  # `a,,b` measured a and b without a word
         print(f"pairplay bench: {exc} (--only)", file=sys.stderr)
+        return 2
+    if twice := repeated(names):  # measured twice, its rows twice in the table (trial34 G)
+        print(f"pairplay bench: {args.only!r} names {twice} twice: each source is measured once (--only)",
+              file=sys.stderr)
         return 2
     unknown = [n for n in names if n not in SOURCES]
     if unknown:

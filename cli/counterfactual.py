@@ -76,7 +76,7 @@ def parse_arms(text: str) -> list[tuple[str, str]]:
     from pairplay.errors import OptionError
     from pairplay.report.counterfactual import ARM_TEXT
 
-    from pairplay.lists import comma_items
+    from pairplay.lists import comma_items, repeated
     from pairplay.nearest import nearest
 
     arms: list[tuple[str, str]] = []
@@ -98,9 +98,8 @@ def parse_arms(text: str) -> list[tuple[str, str]]:
             hint = f" (did you mean {meant!r}?)" if meant else ""
             raise OptionError(f"unknown arm {item!r}{hint}: give same, q, final, oracle, alone, reuse:FILE or fixed:FILE",
                               "--policy")
-    names = [a[0] for a in arms]
-    if len(set(names)) != len(names):
-        raise OptionError("an arm is given twice", "--policy")
+    if twice := repeated(a[0] for a in arms):
+        raise OptionError(f"the arm {twice} is given twice: each arm is measured once", "--policy")
     return arms
 
 

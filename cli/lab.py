@@ -106,7 +106,7 @@ def run(args: argparse.Namespace) -> int:
                       f"{config.algorithm}, observed card: {config.observed_source}"), flush=True)
         print(f"board:  {urls.board}", flush=True)
         print(f"mirror: {urls.mirror}", flush=True)
-        print(f"bus listening on {' '.join(bus.locators()) or '(no listener)'}", flush=True)
+        print(f"bus listening on {bus.listening()}", flush=True)
         print(NO_CONSENT_CHECKED, flush=True)
 
     summary: dict = {}

@@ -63,10 +63,11 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                                         "study's consent form)")
     co.add_argument("folder", type=Path)
     co.add_argument("participant", type=key_chunk("participant id"))
-    co.add_argument("--form", help="the version of the form they signed (default: the study's consent form now)")
+    co.add_argument("--form", help="the version of the form they signed, one the study has had (default: the "
+                                   "study's consent form now)")
     co.add_argument("--given-at", type=time_ns, metavar="ISO-TIME",
-                    help="when they signed, if before now (a consent held on paper): journaled as given then, "
-                         "recorded now; without a zone, this computer's local time")
+                    help="when they signed, if before now (a consent held on paper), not before the study folder "
+                         "was made: journaled as given then, recorded now; without a zone, this computer's local time")
     cf = sub.add_parser("consent-form", help="the study's consent form from now on (an ethics amendment): people "
                                              "who consented to an earlier one play once they consent to it")
     cf.add_argument("folder", type=Path)
@@ -245,7 +246,7 @@ def _on_folder(data: StudyData, args) -> int:
                   "(pilot) needs none", file=sys.stderr)
         return 0
     if args.action == "consent":
-        given = data.record_consent(args.participant, args.form, args.given_at or 0)
+        given = data.record_consent(args.participant, args.form, args.given_at)
         data.write_tables()
         print(escaped(f"{args.participant}: consent recorded: {consent_words(given)}"))
         if problem := data.consent_problem(args.participant):  # a form of before (on paper): they still wait
@@ -422,7 +423,7 @@ def _serving(data: StudyData, args, stop, runners: list, pilot: dict, robot, ove
             print(f"pairplay protocol serve: {warning}", file=sys.stderr, flush=True)
         warn_unreachable(runner, "serve")
         print(f"experimenter console: {server.console_url}", flush=True)
-        print(f"bus (boards and scripted players connect here): {' '.join(bus.locators())}", flush=True)
+        print(f"bus (boards and scripted players connect here): {bus.listening()}", flush=True)
         cut = True  # a second Ctrl-C (KeyboardInterrupt) cuts the shutdown short: nothing more is waited for
         try:
             while not stop.wait(0.2):

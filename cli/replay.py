@@ -126,7 +126,7 @@ def run(args: argparse.Namespace) -> int:
         # a view attaches here: pairplay view --session S --connect <this endpoint>
         sessions = {args.as_session} if args.as_session else {r.event.session for r in log.events}
         print(f"replaying session {escaped(', '.join(sorted(sessions)))}; bus listening on "
-              f"{' '.join(bus.locators()) or '(no listener)'}", flush=True)
+              f"{bus.listening()}", flush=True)
         t0 = time.perf_counter()
         outbox = Outbox(bus, "replay")  # a publish that waits on a slow subscriber never holds up a signal
         n = republish(outbox, log.events, 1.0 if args.speed is None else args.speed, stop, args.as_session)

@@ -171,7 +171,7 @@ def _serve(args: argparse.Namespace) -> int:
     with Bus(options_from_args(args), stop=stop) as bus:
         bridge = bridge_from_args(bus, args.session, args, stop)
         bridge.confirm_recorded = True  # the recorder is another process (services/recorded.py)
-        print(f"robot bridge for session {args.session} on {bridge.backend}; bus {' '.join(bus.locators())}",
+        print(f"robot bridge for session {args.session} on {bridge.backend}; bus listening on {bus.listening()}",
               flush=True)
         bridge.run(stop)
     if getattr(stop, "why", ""):  # the status is the signal's (cli/main.py); it said nothing

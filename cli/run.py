@@ -35,9 +35,9 @@ from pairplay import signals, testpause
 from pairplay.cli import interrupts
 from pairplay.cli.args import duration, note_given, output_folder, session_id
 from pairplay.errors import OptionError, command_word, escaped
-from pairplay.lists import comma_items
+from pairplay.lists import comma_items, repeated
 from pairplay.nearest import hinted
-from pairplay.numbers import shown
+from pairplay.numbers import counted, shown
 from pairplay.outputs import check_folder
 from pairplay.schemas.trust import SERVICES as BUS_SERVICES
 from pairplay.services.bus import Bus, Deadline, add_bus_arguments, deadline_of, options_from_args, signal_taken, stop_on_signals
@@ -64,6 +64,8 @@ def services_to_wait_for(text: str) -> list[str]:
         raise argparse.ArgumentTypeError(f"{', '.join(hinted(n, WAITABLE) for n in unknown) or repr(text)}: "
                                          f"not a service to wait for "
                                          f"(one of {', '.join(sorted(WAITABLE))})")
+    if twice := repeated(names):
+        raise argparse.ArgumentTypeError(f"{text!r} names {twice} twice: each service is waited for once")
     return names
 
 
@@ -155,6 +157,21 @@ def holds_none(path) -> str:
             "`pairplay session --force`, to reuse it)")
 
 
+def _none_held(earlier: Path) -> str:
+    """The way out for an id taken by a recording that holds no session (a recorder stopped before its session
+    began: the stop line said to remove it), "" for one that holds a session: "has a recording already" alone
+    gave no way out, and not the one the stop line had given (trial34 E)."""
+    from pairplay.replay.check import journal_holds_no_session
+    from pairplay.replay.reader import read_any_log
+    from pairplay.replay.wal import wal_path
+    journal = wal_path(earlier)
+    if not read_any_log(earlier).no_session or (journal.exists() and not journal_holds_no_session(journal)):
+        return ""
+    both = f"{escaped(earlier.name)} and its journal" if journal.exists() else escaped(earlier.name)
+    return f"it holds no session (its recorder stopped before the session began): remove {both} to reuse the id, " \
+           "or choose another --session"
+
+
 def _run(args: argparse.Namespace, stop: threading.Event, recording: dict) -> int:
     refuse_unused(args)
     config = None
@@ -188,11 +205,12 @@ def _run(args: argparse.Namespace, stop: threading.Event, recording: dict) -> in
             if stop.is_set():  # a signal while it asked: nothing recorded, the signal's line (run)
                 return 0
             if earlier is not None and not restart:
-                raise RecordingExists(earlier, args.session, "no live session on the bus sent what it holds; "
-                                      "choose another --session (a recording is never replaced)")
+                raise RecordingExists(earlier, args.session, _none_held(earlier) or
+                                      "no live session on the bus sent what it holds; choose another --session (a "
+                                      "recording is never replaced)")
         # the first line: where we listen (an orchestrator connects there), and what a game waits for
         waits = waiting_for(args.wait_for) if args.service == "game" else ""
-        print(f"listening {' '.join(bus.locators()) or '(no listener)'}{' - ' + waits if waits else ''}", flush=True)
+        print(f"listening {bus.listening()}{' - ' + waits if waits else ''}", flush=True)
         if args.service == "recorder":
             from pairplay.services.recorder import RECORDER_SWITCH_S, Recorder
             recorder = Recorder(bus, args.session, path, on_failure=lambda _why: stop.set(), restart=restart)
@@ -224,6 +242,9 @@ def _run(args: argparse.Namespace, stop: threading.Event, recording: dict) -> in
                               "readable up to the failure: ") + f"pairplay recover {command_word(recorder.path)}",
                       file=sys.stderr)
                 return 1
+            if not recording.get("empty"):  # the one line a person looks for on its host, as `pairplay session` says it
+                # (it said nothing at its end: trial34 J); a file that holds no session is said by run()
+                print(f"recorded {counted(recorder.writer.count, 'event')} to {escaped(str(recorder.path))}", flush=True)
             return 0
         if args.service == "combiner":
             from pairplay.services.combiner import CombinerLogic

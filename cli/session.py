@@ -351,7 +351,7 @@ def _run(args: argparse.Namespace, config: SessionConfig, path: Path, summary: d
         # the first line says where we listen and what the game waits for (started elsewhere: --external)
         waits = waiting_for([f"{x} (started elsewhere)" for x in args.external if x != "game"])
         client = f" - client of {' '.join(args.connect)}" if args.connect else ""
-        print(f"session {config.session}: bus listening on {' '.join(bus.locators()) or '(no listener)'}{client}"
+        print(f"session {config.session}: bus listening on {bus.listening()}{client}"
               f"{' - ' + waits if waits else ''}", flush=True)
         if config.participant.startswith("human:"):
             print("a person plays on a board: `pairplay lab` serves one (this session waits for picks from "

@@ -69,6 +69,10 @@ def check_recording(path: str | Path, journal_ok: bool = False, function: str = 
             if journal_ok:
                 return path
             what = "the file is empty (0 bytes)" if not head else f"cut inside MCAP's magic ({counted(len(head), 'byte')})"
+            if none := journal_holds_no_session(wal_path(path)):  # recover would only say the same (trial34 E)
+                raise InputError(f"{what}: its recorder stopped before it wrote a record, and the journal beside it "
+                                 f"({wal_path(path).name}) {none}: no session was recorded (remove both to reuse "
+                                 "its session id)", path)
             raise InputError(f"{what}: its recorder stopped before it wrote a record; the journal beside it "
                              f"({wal_path(path).name}) holds what it received: `pairplay recover {command_word(path)}`", path)
         if not head:
@@ -82,6 +86,21 @@ def check_recording(path: str | Path, journal_ok: bool = False, function: str = 
             raise InputError(f"a recorder's write-ahead journal, not a recording: {how}", path)
         raise InputError("not a recording: not an MCAP file (it does not begin as one)", path)
     return path
+
+
+def journal_holds_no_session(journal: Path) -> str:
+    """What a recorder's journal holds when no session is in it ("holds nothing", "holds 3 messages but no
+    SessionStarted"): the words `recover` would refuse it in; "" if it holds a session's start or cannot be read
+    (recover reads it then, and says what it finds). Asked before a verb points to recover, or to a file's
+    journal as what keeps a session id taken (cli/run.py)."""
+    from .wal import NotAJournal, read_journal
+    try:
+        records = read_journal(journal).records
+    except (NotAJournal, OSError):
+        return ""
+    if any(key.rsplit("/", 1)[-1] == "SessionStarted" for key, *_ in records):
+        return ""
+    return f"holds {counted(len(records), 'message')} but no SessionStarted" if records else "holds nothing"
 
 
 def read_session(path: str | Path, only: frozenset[str] | None = None, function: str = ""):

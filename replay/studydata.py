@@ -253,6 +253,7 @@ class StudyState:
     consents: dict[str, dict[str, j.ConsentGiven]] = field(default_factory=dict)  # participant -> form -> its consent
     # the consent form from the last ConsentFormChanged (an ethics amendment); None: the study file's
     consent_form: str | None = None
+    forms_changed: list[str] = field(default_factory=list)  # every ConsentFormChanged's form, in order
     games: dict[str, Game] = field(default_factory=dict)
     combined: dict[str, j.BiasCombined] = field(default_factory=dict)  # phase -> its current bias (its last)
     # every combination, in order: one made again (a game it took marked invalid since) keeps the earlier one's
@@ -284,6 +285,7 @@ class StudyState:
             self.consents.setdefault(e.participant, {})[e.form] = e
         elif isinstance(e, j.ConsentFormChanged):
             self.consent_form = e.form
+            self.forms_changed.append(e.form)
         elif isinstance(e, j.GameStarted):
             self.games[e.session] = Game(e.session, e.participant, e.phase, e.game, e.recording, e.bias,
                                          scripted=e.scripted)
@@ -676,29 +678,49 @@ class StudyData:
         amendment, journaled ConsentFormChanged), else the study file's `consent_form` (fixed with the folder)."""
         return self.state.consent_form if self.state.consent_form is not None else self.study.study.consent_form
 
-    def record_consent(self, pid: str, form: str | None = None, given_ns: int = 0) -> j.ConsentGiven:
+    @property
+    def forms_had(self) -> list[str]:
+        """Every consent form the study has had, in order: the study file's, then each `protocol consent-form`'s."""
+        return list(dict.fromkeys([self.study.study.consent_form, *self.state.forms_changed]))
+
+    def record_consent(self, pid: str, form: str | None = None, given_ns: int | None = None) -> j.ConsentGiven:
         """Journal that registered participant `pid` gave their informed consent to `form` (default: the study's
-        `consent_form` now), now or at `given_ns` (a consent held on paper, recorded later: both times kept;
-        refused in the future). Refused if it is recorded already to that form: a new version of the form
-        (`change_consent_form`, an ethics amendment) is recorded again."""
+        `consent_form` now), now (None) or at `given_ns` (a consent held on paper, recorded later: both times kept).
+        A journaled consent cannot be taken back, so what can only be a typo is refused: a form the study never
+        had (`forms_had`), a time in the future or before the study folder was made (2016 for 2026; 1970-01-01
+        was the journal's "given when recorded", 0, and became now). Refused if it is recorded already to that
+        form: a new version of the form (`change_consent_form`, an ethics amendment) is recorded again."""
         with self._writing():
             self.participant(pid)
             form = self.consent_form if form is None else form
             if not consent_form_ok(form):
                 raise StudyDataError(f"consent form {form[:40]!r} {CONSENT_FORM_RULE}")
-            if given_ns > time.time_ns():  # a typo of the year, a clock: a consent is never journaled ahead
+            if form not in self.forms_had:
+                raise StudyDataError(f"{pid}: consent form {form[:40]!r} is not one this study has had ("
+                                     + ", ".join(repr(f) if f else "the unnamed form" for f in self.forms_had)
+                                     + "): give the version they signed")
+            now = time.time_ns()
+            if given_ns is not None and given_ns > now:  # a typo of the year, a clock: never journaled ahead
                 raise StudyDataError(f"{pid}: consent given at {_utc(given_ns)} is in the future (now "
-                                     f"{_utc(time.time_ns())}): give the time they signed")
+                                     f"{_utc(now)}): give the time they signed")
+            made = self.state.created.time_ns if self.state.created is not None else 0
+            if given_ns is not None and given_ns < made:
+                raise StudyDataError(f"{pid}: consent given at {_utc(given_ns) or '1970-01-01T00:00:00Z'} is before "
+                                     f"the study folder was made ({_utc(made)}): give the time they signed, "
+                                     f"between then and now")
             had = self.state.consents.get(pid, {}).get(form)
             if had is not None:
                 raise StudyDataError(f"{pid}: consent to {consent_words(had)} is recorded already")
-            return self.append(j.ConsentGiven(participant=pid, form=form, given_ns=given_ns))
+            return self.append(j.ConsentGiven(participant=pid, form=form, given_ns=given_ns or 0))
 
     def change_consent_form(self, form: str) -> tuple[j.ConsentFormChanged, list[str]]:
         """Journal `form` as the study's consent form from now on (an ethics amendment: the study file stays as
         it was made); returns its line and the participants whose consent is to an earlier form only: their
-        next game waits for their consent to this one. Refused if it is the form already."""
+        next game waits for their consent to this one. Refused if it is the form already, or names none (""
+        is the study file's "not named", never an amendment)."""
         with self._writing():
+            if not form:
+                raise StudyDataError("consent form '': an amendment names the new form's version (\"v2 2026-11\")")
             if not consent_form_ok(form):
                 raise StudyDataError(f"consent form {form[:40]!r} {CONSENT_FORM_RULE}")
             if form == self.consent_form:

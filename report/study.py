@@ -47,7 +47,7 @@ from pairplay.core.rng import GAME_INDEX_RANGE, SEED_RANGE
 from pairplay.core.simulate import MEMORY_LIMIT, batch_bytes, gigabytes
 from pairplay.arguments import at, checked_dataclass, flag_argument, given, instance_argument, is_integer, path_argument
 from pairplay.errors import OptionError, OutputError, command_word
-from pairplay.lists import comma_items
+from pairplay.lists import comma_items, repeated
 from pairplay.numbers import counted, shown, type_name
 from pairplay.schemas.config import DEFAULT_REWARD_BONUS, LearnerConfig, LSPIConfig, REWARD_BONUS_RULES, lspi_unused
 from pairplay.outputs import manifest_name, output_folder
@@ -112,12 +112,12 @@ class StudySettings:
         chosen = []
         for name in names:
             try:
-                p = persona(name)
+                chosen.append(persona(name))
             except KeyError as exc:
                 raise SettingError("personas", exc.args[0]) from None
-            if p.key in [c.key for c in chosen]:  # trained twice, its policy files would collide (game-00.json of the same key)
-                raise SettingError("personas", f"names {p.key} twice: each persona is trained once")
-            chosen.append(p)
+        # by key, a name and its key being one persona: trained twice, its policy files would collide
+        if twice := repeated(p.key for p in chosen):
+            raise SettingError("personas", f"names {twice} twice: each persona is trained once")
         return chosen
 
     def check_kinds(self) -> None:

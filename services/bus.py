@@ -964,6 +964,11 @@ class Bus:
                 out.add(str(reply.ok.key_expr))
         return out
 
+    def listening(self) -> str:
+        """The endpoints it listens on as every verb says them: `(no listener)` for a client, which listens on none
+        (a joined empty list printed `bus ` with nothing after it: `pairplay robot --connect`, trial34 J)."""
+        return " ".join(self.locators()) or "(no listener)"
+
     def locators(self) -> list[str]:
         """The endpoints this session really listens on (ports chosen by the OS)."""
         zid = str(self.session.zid())

@@ -67,6 +67,7 @@ _OLD_ELSEWHEN = re.compile(r"pick for round (-?\d+) turn (-?\d+), but the game i
 PLAYERS = frozenset({"participant", "board"})
 # the experimenter's console
 CONTROL = frozenset({"SessionPaused", "SessionResumed", "SessionAborted"})
+PAUSED = "the session is paused"  # why a paused game refuses an input (a player logic holds it: services/pausehold.py)
 
 
 class GameLogic:
@@ -149,7 +150,7 @@ class GameLogic:
         if type(e).__name__ in self.CONTROL:
             return self._control(e)
         if self.paused and not isinstance(e, (ev.CardPicked, ev.GazeFixated)):
-            raise Rejected(f"the session is paused; {type(e).__name__} ignored")
+            raise Rejected(f"{PAUSED}; {type(e).__name__} ignored")
         if isinstance(e, ev.CardPicked):
             return self._pick(e)
         if isinstance(e, ev.GazeFixated):
@@ -165,7 +166,7 @@ class GameLogic:
             return [ev.PickRejected(round=e.round, turn=e.turn, card=e.card, reason=reason,
                                     pick_source=e.source, pick_seq=e.seq)]
         if self.paused:
-            return refuse("the session is paused")
+            return refuse(PAUSED)
         if (e.round, e.turn) != (self.round, self.turn):
             return refuse(f"pick {elsewhen((e.round, e.turn), (self.round, self.turn))}")
         if self.first >= 0 and self.attempt < 0 and self.config.observed_source != "gaze":

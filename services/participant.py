@@ -9,7 +9,8 @@ the response (SuggestionPerceived, then the second pick), and when the game
 resolves the turn the memory update. It waits for what each step needs
 (NotYet): a suggestion that overtook the game's CardRevealed is kept until the
 card is shown. It reads the faces from RoundStarted, as a person sees the
-cards it turns; it never reads another participant's state.
+cards it turns; it never reads another participant's state. An input a paused game
+refused is made again once it runs (services/pausehold.py).
 """
 
 from __future__ import annotations
@@ -22,13 +23,15 @@ from pairplay.core.rng import UniformStream
 from pairplay.core.user import SimulatedUsers
 from pairplay.schemas import events as ev
 
+from pairplay.services.game import PAUSED
 from pairplay.services.node import NotYet, Rejected, refused_start, stream_seed
+from pairplay.services.pausehold import CONSUMES as PAUSE_READS, PauseHold
 
 
 class ParticipantLogic:
     name = "participant"
     consumes = frozenset({"SessionStarted", "RoundStarted", "CardRevealed", "PickRejected", "SuggestionMade",
-                          "TurnResolved", "SessionEnded"})
+                          "TurnResolved", "SessionEnded"}) | PAUSE_READS
     sources = {tag: frozenset({"game"}) for tag in consumes} | {"SuggestionMade": frozenset({"learner"})}
 
     def __init__(self, persona_key: str | None = None):
@@ -38,11 +41,19 @@ class ParticipantLogic:
         self.refused = ""  # why we refused the session's start (refused_start)
         self.stage = "idle"  # idle -> first -> observed -> second -> idle
         self.round, self.turn = -1, -1
+        self.hold = PauseHold(self.name)  # its inputs while an experimenter has the game paused
 
     def start(self) -> list[ev.Event]:
         return []
 
     def handle(self, e: ev.Event) -> list[ev.Event]:
+        # a paused game refuses every input: they wait in the hold until it runs again
+        if isinstance(e, ev.ControlTaken):
+            return self.hold.saw(e)
+        self.hold.saw(e)
+        return self.hold.send(self._play(e))
+
+    def _play(self, e: ev.Event) -> list[ev.Event]:
         if isinstance(e, ev.SessionStarted):
             return self._configure(e)
         if self.users is None:
@@ -57,7 +68,7 @@ class ParticipantLogic:
         if isinstance(e, ev.TurnResolved):
             return self._resolved(e)
         if isinstance(e, ev.PickRejected):
-            if e.pick_source == self.name:
+            if e.pick_source == self.name and e.reason != PAUSED:  # refused paused: made again on the resume
                 raise Rejected(f"the game refused our pick of card {e.card}: {e.reason}")
             return []
         if isinstance(e, ev.SessionEnded):

@@ -16,6 +16,9 @@ the first when it considered the suggestion and `glance_ms` after otherwise
 (an offset on its clock, `offset_ns`), so the game's ignore rule (7.1.2) sees
 the persona's attention, not the speed of the script.
 
+Paused from the console, it holds its touches until the game runs again and
+makes again the one the game refused (services/pausehold.py), as a person would.
+
 Questionnaire answers come from the persona's features (`answers_for`):
 attention to speech follows hearing, to head movements sight, following the
 robot focus; free text names the persona. They exist so that a pilot's report
@@ -37,12 +40,13 @@ from pairplay.schemas.study import Item
 
 from pairplay.services.node import NotYet
 from pairplay.services.participant import end_turn, intend_second, partner_of
+from pairplay.services.pausehold import CONSUMES as PAUSE_READS, PauseHold
 
 
 class ScriptedPlayer:
     name = "board"
     consumes = frozenset({"SessionStarted", "RoundStarted", "CardRevealed", "SuggestionMade", "TurnResolved",
-                          "SessionEnded", "PickRejected"})
+                          "SessionEnded"}) | PAUSE_READS
     sources = {tag: frozenset({"game"}) for tag in consumes} | {"SuggestionMade": frozenset({"learner"})}
 
     def __init__(self, persona_key: str, *, press_wrong: bool = True, questions: list[Item] | None = None,
@@ -60,6 +64,7 @@ class ScriptedPlayer:
         self.picks = 0
         self.presses = 0
         self.answered = False
+        self.hold = PauseHold(self.name)  # its inputs while the console has the game paused
 
     def clock(self) -> int:
         """The clock of this player's Node: wall time plus the simulated reaction times."""
@@ -69,6 +74,13 @@ class ScriptedPlayer:
         return []
 
     def handle(self, e: ev.Event) -> list[ev.Event]:
+        # a paused game refuses every input: they wait in the hold until it runs again
+        if isinstance(e, ev.ControlTaken):
+            return self.hold.saw(e)
+        self.hold.saw(e)
+        return self.hold.send(self._play(e))
+
+    def _play(self, e: ev.Event) -> list[ev.Event]:
         if isinstance(e, ev.SessionStarted):
             c = e.config
             self.observed_first = c.observed_source == "first-pick"

@@ -142,6 +142,16 @@ CASES = [
          "--personas 'blind,' has an empty item (item 2 of 2)"),
     Case("protocol serve --pilot with an empty pair", ["protocol", "serve", "study", "--pilot", ",p01=blind"],
          "--pilot ',p01=blind' has an empty item (item 1 of 2)"),
+    # an item named twice where each names one thing done once is refused (pairplay/lists.py `repeated`): `bench
+    # --only core,core` measured core twice and printed both sets of rows (trial34 G)
+    Case("bench --only a source twice", ["bench", "--only", "core,core", "--quick"],
+         "'core,core' names core twice: each source is measured once (--only)"),
+    Case("run game --wait-for a service twice", ["run", "game", "--wait-for", "learner,learner"],
+         "'learner,learner' names learner twice: each service is waited for once"),
+    Case("counterfactual --policy an arm twice", ["counterfactual", "rec.mcap", "--policy", "same,final,same",
+                                                  "--out", "cf"], "the arm same is given twice: each arm is measured once"),
+    Case("study --personas a persona twice", ["study", "--personas", "blind,blind"],
+         "--personas: names blind twice: each persona is trained once"),
     # a comma list that names nothing is refused too: `bench --only ""` measured nothing and exited 0 with an
     # empty table, `counterfactual --policy ""` quietly only fitted (a shell variable left empty)
     Case("bench --only empty", ["bench", "--only", ""], "'' names nothing: give one or more, comma-separated (--only)"),

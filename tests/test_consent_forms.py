@@ -29,6 +29,17 @@ def one_line(r) -> str:
     return r.stderr
 
 
+def made_earlier(folder) -> None:
+    """The study folder as if made on 2026-11-01 (its StudyCreated's time): a consent signed on paper before the
+    test ran is after it, as in a study under way (a time before the folder was made is refused)."""
+    path = folder / "journal.jsonl"
+    lines = path.read_text().splitlines(keepends=True)
+    created = json.loads(lines[0])
+    assert created["event"] == "StudyCreated"
+    created["time_ns"] = 1793491200 * 10**9
+    path.write_text(json.dumps(created, separators=(",", ":")) + "\n" + "".join(lines[1:]))
+
+
 def test_a_new_consent_form_is_journaled_and_people_consent_to_it_again(tmp_path, pairplay_cli):
     folder = tmp_path / "st a;b"  # a folder a shell splits: every suggested command quotes it
     assert pairplay_cli("protocol", "init", folder, "--study", study_with_form(tmp_path, "v1")).returncode == 0
@@ -69,6 +80,7 @@ def test_a_consent_held_on_paper_is_journaled_as_given_then_and_recorded_now(tmp
     folder = tmp_path / "study"
     assert pairplay_cli("protocol", "init", folder, "--study", study_with_form(tmp_path)).returncode == 0
     assert pairplay_cli("protocol", "register", folder, "--count", "2").returncode == 0
+    made_earlier(folder)
     r = pairplay_cli("protocol", "consent", folder, "p01", "--given-at", "2026-11-20T10:00Z")
     assert r.returncode == 0, r
     assert r.stdout.startswith("p01: consent recorded: form 'v2 2026-11' given 2026-11-20T10:00:00Z (recorded 20"), r
@@ -155,6 +167,8 @@ def test_the_console_records_a_consent_held_on_paper_as_given_then(browser, tmp_
     from pairplay.cli.args import time_ns
     data = StudyData.create(tmp_path / "study", study_with_form(tmp_path))
     data.register_many("phase1", count=3)
+    made_earlier(data.folder)
+    data = StudyData(data.folder)
     with Bus(BusOptions()) as bus:
         server = ConsoleServer(StudyRunner(data, bus)).start()
         ctx = browser.new_context(viewport={"width": 1366, "height": 900}, bypass_csp=True)
@@ -170,10 +184,10 @@ def test_the_console_records_a_consent_held_on_paper_as_given_then(browser, tmp_
                 console.fill("#consent-given-at", given_at)
                 console.click("#record-consent")
 
-            def refused(words: str) -> str:
-                """The refusal on the page once it holds `words` (the one before stays there until replaced)."""
-                console.wait_for_function("([w]) => document.getElementById('message').className === 'error' && "
-                                          "document.getElementById('message').textContent.includes(w)", arg=[words],
+            def refusal(naming: str) -> str:
+                # the refusal of this record, not the one before it still on screen (the same class)
+                console.wait_for_function("t => document.getElementById('message').className === 'error' && "
+                                          "document.getElementById('message').textContent.includes(t)", arg=naming,
                                           timeout=10000)
                 return console.inner_text("#message")
 
@@ -194,10 +208,14 @@ def test_the_console_records_a_consent_held_on_paper_as_given_then(browser, tmp_
                 except argparse.ArgumentTypeError as err:
                     cli_words = str(err)
                 record("p02", text)
-                said = refused(cli_words)
+                said = refusal(text)
                 assert said == f"when they signed (`given_at`): {cli_words}", said
             record("p02", "2099-01-01")
-            assert "p02: consent given at 2099-01-01" in refused("is in the future")
+            said = refusal("2099-01-01")
+            assert "p02: consent given at 2099-01-01" in said and "is in the future" in said
+            record("p02", "2016-11-20T10:00Z")  # a typo of the year: before the study folder was made
+            said = refusal("2016-11-20")
+            assert "p02: consent given at 2016-11-20T10:00:00Z is before the study folder was made (2026-11-01" in said
             assert len(journal(data.folder)) == lines
             record("p03", "")  # blank: given now, as without --given-at
             console.wait_for_function("document.querySelectorAll('#participants li')[2].textContent.includes('given ')",
@@ -206,4 +224,41 @@ def test_the_console_records_a_consent_held_on_paper_as_given_then(browser, tmp_
             assert errors == []
         finally:
             ctx.close()
+            server.close()
+
+
+def test_a_consent_time_before_the_study_and_a_form_it_never_had_are_refused_at_every_door(tmp_path, pairplay_cli):
+    """Before (trial34 I): `--given-at 1970-01-01T00:00Z` was journaled given_ns 0, the "given when recorded" value,
+    so the time given became now without a word; 1999 (a typo of the year) was journaled for good; `consent-form ''`
+    made the unnamed form the amendment; `consent --form v9` journaled a consent to a form the study never had.
+    Each is refused in one line naming what is taken, by the CLI and the console's Record consent alike, and
+    nothing is journaled."""
+    folder = tmp_path / "study"
+    assert pairplay_cli("protocol", "init", folder, "--study", study_with_form(tmp_path)).returncode == 0
+    assert pairplay_cli("protocol", "register", folder, "--count", "3").returncode == 0
+    lines = len(journal(folder))
+    for when in ("1970-01-01T00:00Z", "1969-12-31T23:59Z", "1999-01-01T00:00Z"):
+        said = one_line(pairplay_cli("protocol", "consent", folder, "p01", "--given-at", when))
+        assert f"p01: consent given at {when[:16]}:00Z is before the study folder was made (20" in said, said
+        assert "give the time they signed, between then and now" in said
+    said = one_line(pairplay_cli("protocol", "consent", folder, "p01", "--form", "v9"))
+    assert "consent form 'v9' is not one this study has had ('v2 2026-11'): give the version they signed" in said
+    said = one_line(pairplay_cli("protocol", "consent-form", folder, ""))
+    assert "consent form '': an amendment names the new form's version" in said, said
+    assert len(journal(folder)) == lines
+    assert pairplay_cli("protocol", "consent-form", folder, "v3").returncode == 0
+    r = pairplay_cli("protocol", "consent", folder, "p01", "--form", "v2 2026-11")  # an earlier form: one it had
+    assert r.returncode == 0 and "form 'v2 2026-11'" in r.stdout, r
+
+    data = StudyData(folder)
+    with Bus(BusOptions()) as bus:
+        server = ConsoleServer(StudyRunner(data, bus)).start()
+        try:
+            lines = len(journal(folder))
+            status, said = call(f"{server.url}/api/console/consent?token={server.token}",
+                                {"participant": "p02", "given_at": "1970-01-01T00:00Z"})
+            assert status == 400 and "p02: consent given at 1970-01-01T00:00:00Z is before the study folder was " \
+                "made" in json.dumps(said), said
+            assert len(journal(folder)) == lines
+        finally:
             server.close()

@@ -603,3 +603,23 @@ def test_a_participants_export_carries_a_recording_a_cut_short_force_set_aside(t
     data.append(j.GameStarted(session=data.session_id(pid, "phase1", 0), participant=pid, phase="phase1", game=0,
                               recording=str(recording.relative_to(data.folder))))
     assert aside in data.files_of(pid)
+
+
+def test_a_recorder_killed_before_its_session_began_is_said_to_hold_none_not_sent_to_recover(tmp_path, pairplay_cli):
+    """A real `pairplay run recorder` SIGKILLed while it waits for its session: a file of 0 bytes and a journal
+    of its header alone. Before (trial34 E): every reader said "the journal beside it holds what it received:
+    `pairplay recover ...`", and recover then said the recording holds nothing. The journal is read first: it
+    holds nothing, so no session was recorded, said in one line (exit 2), both named."""
+    with listener() as bus, recorder_process(bus, "m4", tmp_path) as rec:
+        assert wait_until(lambda: wal_path(tmp_path / "m4.mcap").exists(), 30)
+        sigkill(rec)
+    path = tmp_path / "m4.mcap"
+    assert path.stat().st_size == 0 and not read_journal(wal_path(path)).records
+    for verb in (["rebuild", path, "--out", tmp_path / "rb"], ["replay", path, "--verify"]):
+        ran = pairplay_cli(*verb)
+        assert ran.returncode == 2 and len(ran.stderr.splitlines()) == 1, ran
+        assert "the file is empty (0 bytes): its recorder stopped before it wrote a record, and the journal beside " \
+               "it (m4.mcap.journal) holds nothing: no session was recorded (remove both to reuse its session id)" \
+               in ran.stderr and "pairplay recover" not in ran.stderr, ran.stderr
+    ran = pairplay_cli("recover", path)  # which agrees
+    assert ran.returncode == 2 and "holds no session" in ran.stderr, ran

@@ -266,10 +266,10 @@ def console_routes(console: Console) -> list:
     async def consent(request: Request) -> Response:
         asked = _read(await _body(request), ConsentRequest)
         try:  # the CLI's parser: the same texts taken, the same refused in the same words
-            given_ns = iso_time_ns(asked.given_at) if asked.given_at.strip() else 0
+            given_ns = iso_time_ns(asked.given_at) if asked.given_at.strip() else None
         except ValueError as err:
             raise StudyDataError(f"when they signed (`given_at`): {err}") from None
-        given = data.record_consent(asked.participant, given_ns=given_ns)  # the future refused there, as for the CLI
+        given = data.record_consent(asked.participant, given_ns=given_ns)  # the future, the past before the study refused there, as for the CLI
         data.write_tables()
         return JSONResponse({"consent": asked.participant, "form": given.form, "given": consent_words(given)})
 
