@@ -1251,7 +1251,7 @@ def unresolved(route: dict, names: dict[int, tuple[str, array]], ended_by: dict[
             turn = f"round {(first >> 32) + 1} turn {(first & 0xFFFFFFFF) + 1}"
             out.append(("game", f"{counted(off.size, 'TurnResolved', 'TurnResolved')} of 'game' missing ("
                                 + (f"a RewardGiven of 'learner' settles {turn}, which no TurnResolved resolves)"
-                                   if off.size == 1 else f"RewardGiven of 'learner' settle {off.size} turns no "
+                                   if off.size == 1 else f"RewardGiven of 'learner' settle {counted(off.size, 'turn')} no "
                                    f"TurnResolved resolves, the first {turn})")))
     return out
 
