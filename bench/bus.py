@@ -58,7 +58,7 @@ from pairplay.schemas.session import SessionConfig
 from pairplay.services.bus import Bus, BusOptions, Inbox
 
 
-def _spawn(*args: str) -> subprocess.Popen:
+def spawn_module(*args: str) -> subprocess.Popen:
     return subprocess.Popen([sys.executable, "-m", *args], stdout=subprocess.PIPE, stderr=subprocess.DEVNULL,
                             env=dict(os.environ, PYTHONUNBUFFERED="1"))
 
@@ -149,12 +149,12 @@ def latency_rows(turns: int) -> list[dict]:
                            observed_source="first-pick", ignore_rule="time", software_version="bench")
     with Bus() as bus:
         endpoint = bus.locators()[0]
-        echo_proc = _spawn("pairplay.bench.bus", "echo", endpoint)
+        echo_proc = spawn_module("pairplay.bench.bus", "echo", endpoint)
         # its own process, idle for a turn like the raw echo's when asked (warm right after the raw's answer,
         # the same process answered the floor 1.2x as fast as the raw echo: measured)
-        floor_proc = _spawn("pairplay.bench.bus", "floor", endpoint)
+        floor_proc = spawn_module("pairplay.bench.bus", "floor", endpoint)
         # two peers linked directly: the raw reference's topology
-        learner = _spawn("pairplay", "run", "learner", "--session", session, "--connect", endpoint, "--mode", "peer")
+        learner = spawn_module("pairplay", "run", "learner", "--session", session, "--connect", endpoint, "--mode", "peer")
         try:
             pongs: queue.Queue = queue.Queue()
             bus.subscribe("bench/pong", lambda _k, p: pongs.put(time.perf_counter()))
@@ -271,7 +271,7 @@ def _raw_run(bus: Bus, endpoint: str, tmp: str, n: int, i: int) -> float:
     from mcap.records import Message
 
     _wait(lambda: "bench/alive/rawrec" not in bus.alive_now("bench/alive/*"))  # the previous one has gone
-    raw = _spawn("pairplay.bench.bus", "rawrec", endpoint, f"{tmp}/raw{i}.mcap", str(n))
+    raw = spawn_module("pairplay.bench.bus", "rawrec", endpoint, f"{tmp}/raw{i}.mcap", str(n))
     try:
         assert _wait(lambda: "bench/alive/rawrec" in bus.alive_now("bench/alive/*")), "raw recorder did not start"
         key = "bench/raw/participant/CardPicked"
@@ -291,7 +291,7 @@ def _recorder_run(bus: Bus, endpoint: str, tmp: str, n: int, i: int) -> tuple[fl
     from pairplay.replay.reader import read_log
 
     session = f"bench-rec-{i}"
-    rec = _spawn("pairplay", "run", "recorder", "--session", session, "--out", tmp, "--connect", endpoint)
+    rec = spawn_module("pairplay", "run", "recorder", "--session", session, "--out", tmp, "--connect", endpoint)
     try:
         assert _wait(lambda: alive_key(session, "recorder") in bus.alive_now(alive_key(session, "*")))
         key = event_key(session, "participant", "CardPicked")

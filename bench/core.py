@@ -40,12 +40,12 @@ def _bandit(q, steps, key):
     """Epsilon-greedy Q-learning on a bandit: 4 SplitMix64 draws, an argmax over 88 and an update per step."""
     for i in range(steps):
         base = np.uint64(4 * i)
-        s = np.int64(kernels._draw(key, base) * q.shape[0])
-        if kernels._draw(key, base + np.uint64(1)) < 0.1:
-            a = np.int64(kernels._draw(key, base + np.uint64(2)) * q.shape[1])
+        s = np.int64(kernels.draw(key, base) * q.shape[0])
+        if kernels.draw(key, base + np.uint64(1)) < 0.1:
+            a = np.int64(kernels.draw(key, base + np.uint64(2)) * q.shape[1])
         else:
             a = np.argmax(q[s])
-        q[s, a] += 0.1 * (kernels._draw(key, base + np.uint64(3)) - q[s, a])
+        q[s, a] += 0.1 * (kernels.draw(key, base + np.uint64(3)) - q[s, a])
     return q
 
 

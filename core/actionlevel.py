@@ -52,7 +52,7 @@ from pairplay.schemas.config import DEFAULT_REWARD_BONUS
 from pairplay.schemas.policy import UserInfo
 
 from .actions import HEARING_NOTHING, N_ACTIONS, VISUAL_NOTHING, code_of
-from .combine import (_HEAD, _SPEECH, COMPARED_STATES, Combined, User, _exempt_head, _exempt_speech, combine,
+from .combine import (VISUAL_HEAD, HEARING_SPEECH, COMPARED_STATES, Combined, User, exempt_head, exempt_speech, combine,
                       extract_info, incompatible, parts)
 from pairplay.numbers import counted
 
@@ -112,8 +112,8 @@ def extract_action_info(policies: np.ndarray, q_tables: np.ndarray,
         if not recognised(values[s, actions]).all():
             return False
         h, v = parts(actions[~whole[s, actions]])
-        family = _SPEECH[h] if speech else _HEAD[v]
-        return not incompatible(family, s, _exempt_speech if speech else _exempt_head)
+        family = HEARING_SPEECH[h] if speech else VISUAL_HEAD[v]
+        return not incompatible(family, s, exempt_speech if speech else exempt_head)
 
     speech = [s for s in base.speech_states if not synonyms_at(s, True)]
     head = [s for s in base.head_states if not synonyms_at(s, False)]

@@ -49,9 +49,9 @@ from .geometry import N_STATES, SPATIAL_STATES, STATE_INDEX, CELL_INDEX
 COMPARED_STATES = np.arange(len(SPATIAL_STATES))  # the 23 spatial states
 MATCH_STATE = int(STATE_INDEX[CELL_INDEX["MATCH"], 0])
 
-_SPEECH = np.array([s for s, _ in HEARING_PARTS])
+HEARING_SPEECH = np.array([s for s, _ in HEARING_PARTS])
 _FACIAL = np.array([f for _, f in HEARING_PARTS])
-_HEAD = np.array([h for h, _ in VISUAL_PARTS])
+VISUAL_HEAD = np.array([h for h, _ in VISUAL_PARTS])
 _GAZE = np.array([g for _, g in VISUAL_PARTS])
 
 
@@ -61,11 +61,11 @@ def parts(actions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return a // N_VISUAL, a % N_VISUAL
 
 
-def _exempt_speech(speech: int, state: int) -> bool:
+def exempt_speech(speech: int, state: int) -> bool:
     return speech == 0 or speech == SPEECH_EXACT or (speech == SPEECH_RIGHT_CARD and state == MATCH_STATE)
 
 
-def _exempt_head(head: int, state: int) -> bool:
+def exempt_head(head: int, state: int) -> bool:
     return head == 0 or (head == HEAD_NOD and state == MATCH_STATE)
 
 
@@ -104,9 +104,9 @@ def extract_info(policies: np.ndarray, states: Sequence[int] = COMPARED_STATES) 
     if states.size == 0:
         raise InputError("no states to compare", at("extract_info", "states"))
     h, v = parts(policies)
-    speech, facial, head, gaze = _SPEECH[h], _FACIAL[h], _HEAD[v], _GAZE[v]
-    speech_states = [int(s) for s in states if incompatible(speech[:, s], s, _exempt_speech)]
-    head_states = [int(s) for s in states if incompatible(head[:, s], s, _exempt_head)]
+    speech, facial, head, gaze = HEARING_SPEECH[h], _FACIAL[h], VISUAL_HEAD[v], _GAZE[v]
+    speech_states = [int(s) for s in states if incompatible(speech[:, s], s, exempt_speech)]
+    head_states = [int(s) for s in states if incompatible(head[:, s], s, exempt_head)]
     n = len(states)
     info = UserInfo(speech=len(speech_states) / n, head=len(head_states) / n,
                     facial=bool(facial[:, states].any()), gaze=bool(gaze[:, states].any()),

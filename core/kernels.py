@@ -1,7 +1,7 @@
 """The compiled inner loops of core/: draws, deal, user, learner, reward, game and oracle (numba).
 
 Rule: one code path. Each rule is one scalar function of one game (`_user_*`,
-`_suggest`, `_learn`, `_reward`, `_deal`, `_draw`); the batch kernels below call
+`_suggest`, `_learn`, `_reward`, `_deal`, `draw`); the batch kernels below call
 them in a loop over games, whether the batch holds one game (a live service:
 core/user.py, core/learning.py, core/rng.py, core/board.py call these with a
 batch of one) or thousands (core/simulate.py's `play`, which runs a whole game
@@ -111,7 +111,7 @@ _DTYPES = {t: np.dtype(t) for t in (bool, np.bool_, np.int8, np.int32, np.int64,
 # --- scalar rules -----------------------------------------------------------------------------
 
 @njit(cache=True, inline="always")
-def _draw(key, index):
+def draw(key, index):
     """SplitMix64: uniform [0, 1) draw number `index` of the stream `key` (core/rng.py)."""
     z = key + (np.uint64(index) + _ONE) * _GAMMA
     z = (z ^ (z >> _S30)) * _M1
@@ -335,7 +335,7 @@ def draw_block(keys, pos, k, games, out):
     for i in range(games.size):
         g = games[i]
         for j in range(k):
-            out[i, j] = _draw(keys[g], pos[g] + np.uint64(j))
+            out[i, j] = draw(keys[g], pos[g] + np.uint64(j))
         pos[g] += np.uint64(k)
 
 
@@ -407,8 +407,8 @@ def learners_suggest(q, states, keys, pos, epsilon, mode, psi, psi_decay, table,
     for g in range(states.size):
         s = states[g]
         k, p = keys[g], pos[g]
-        actions[g], how[g] = _suggest(q, g, s, _draw(k, p), _draw(k, p + np.uint64(1)), _draw(k, p + np.uint64(2)),
-                                      _draw(k, p + np.uint64(3)), epsilon[g], mode, psi[g], table[g, s])
+        actions[g], how[g] = _suggest(q, g, s, draw(k, p), draw(k, p + np.uint64(1)), draw(k, p + np.uint64(2)),
+                                      draw(k, p + np.uint64(3)), epsilon[g], mode, psi[g], table[g, s])
         pos[g] = p + np.uint64(DRAWS_PER_SUGGESTION)
         if mode == MODE_REUSE:
             psi[g] = psi[g] * psi_decay
@@ -474,12 +474,12 @@ def _play_round(t, g, r, keys, pos, m, table, p_consider, q_hear, capacity, sees
         ku, pu = keys[g, USER], pos[g, USER]
         pos[g, USER] += np.uint64(DRAWS_PER_TURN)
         covered = ALL_CARDS & ~matched
-        first = _user_first_pick(memory[g], partner, covered, _draw(ku, pu))
+        first = _user_first_pick(memory[g], partner, covered, draw(ku, pu))
         covered &= ~(1 << first)
         match = partner[first]
         from_memory = (memory[g] >> match) & 1 == 1
         nis = _user_nis(memory[g], covered)
-        intended = match if from_memory else _pick(nis, _draw(ku, pu + np.uint64(1)))
+        intended = match if from_memory else _pick(nis, draw(ku, pu + np.uint64(1)))
         observed = first if first_pick_observed else intended
         state = _state(t, observed, match, covered)
         if m == MODE_FIXED:
@@ -487,14 +487,14 @@ def _play_round(t, g, r, keys, pos, m, table, p_consider, q_hear, capacity, sees
         else:
             ka, pa = keys[g, AGENT], pos[g, AGENT]
             pos[g, AGENT] += np.uint64(DRAWS_PER_SUGGESTION)
-            action, _ = _suggest(q, g, state, _draw(ka, pa), _draw(ka, pa + np.uint64(1)),
-                                 _draw(ka, pa + np.uint64(2)), _draw(ka, pa + np.uint64(3)),
+            action, _ = _suggest(q, g, state, draw(ka, pa), draw(ka, pa + np.uint64(1)),
+                                 draw(ka, pa + np.uint64(2)), draw(ka, pa + np.uint64(3)),
                                  epsilon, m, p, table[g, state])
             if m == MODE_REUSE:
                 p = p * psi_decay
         second, considered, consistent, cand = _user_respond(
-            t, action, observed, match, intended, from_memory, nis, _draw(ku, pu + np.uint64(2)),
-            _draw(ku, pu + np.uint64(3)), _draw(ku, pu + np.uint64(4)), p_consider[g], q_hear[g],
+            t, action, observed, match, intended, from_memory, nis, draw(ku, pu + np.uint64(2)),
+            draw(ku, pu + np.uint64(3)), draw(ku, pu + np.uint64(4)), p_consider[g], q_hear[g],
             sees[g, 0], sees[g, 1], sees[g, 2], reading[g], frame)
         hit = second == match
         _user_end_turn(g, first, second, hit, memory, stamp, clock, capacity)
@@ -545,7 +545,7 @@ def play(t, games, until, rounds, keys, pos, mode, cfg, table, p_consider, q_hea
         while round_index[g] < stop:
             r = round_index[g]
             for j in range(N_CARDS):
-                u_deal[j] = _draw(keys[g, DEAL], pos[g, DEAL] + np.uint64(j))
+                u_deal[j] = draw(keys[g, DEAL], pos[g, DEAL] + np.uint64(j))
             pos[g, DEAL] += np.uint64(N_CARDS)
             _deal(u_deal, partner, order)
             memory[g] = 0
@@ -566,7 +566,7 @@ def play(t, games, until, rounds, keys, pos, mode, cfg, table, p_consider, q_hea
             round_index[g] = r
             if snapshot_every > 0 and r % snapshot_every == 0 and r <= snapshots.shape[1] * snapshot_every:
                 for s in range(N_STATES):
-                    u_snap[s] = _draw(keys[g, SNAPSHOT], pos[g, SNAPSHOT] + np.uint64(s))
+                    u_snap[s] = draw(keys[g, SNAPSHOT], pos[g, SNAPSHOT] + np.uint64(s))
                 pos[g, SNAPSHOT] += np.uint64(N_STATES)
                 for s in range(N_STATES):
                     snapshots[g, r // snapshot_every - 1, s] = _greedy(q, g, s, u_snap[s])

@@ -108,8 +108,8 @@ class Learner:
         self.stream, self.config, self.mode = stream, config, mode
         self.q = np.zeros((n_games, N_STATES, N_ACTIONS))
         self.counts = np.zeros((n_games, N_STATES, N_ACTIONS), dtype=np.int32)  # updates per (s, a)
-        self.bias = None if bias is None else _policy_table(bias, n_games)
-        self.policy = None if policy is None else _policy_table(policy, n_games)
+        self.bias = None if bias is None else policy_table(bias, n_games)
+        self.policy = None if policy is None else policy_table(policy, n_games)
         self.psi = np.zeros(n_games)
         self._n = n_games
         table = self.bias if mode == "reuse" else self.policy  # the action a bias or fixed policy takes
@@ -207,7 +207,7 @@ class Learner:
                                b(rewards, n, np.float64), b(mask, n, bool), self._per_round(ALPHA, round_index))
 
 
-def _policy_table(policy: np.ndarray, n_games: int) -> np.ndarray:
+def policy_table(policy: np.ndarray, n_games: int) -> np.ndarray:
     table = np.asarray(policy, dtype=np.int64)
     if table.ndim == 1:
         table = np.broadcast_to(table, (n_games, table.size))

@@ -17,7 +17,7 @@ and the draw's index. So a batch of streams is a few uint64 array operations
 per draw (no per-game Python loop, no buffers), and skipping ahead is adding
 to a counter (a restarted service catches up with its log in O(1)). Keys come
 from numpy's SeedSequence hashing of (game seed, role), 64 bits each. The
-draws themselves are core/kernels.py's `_draw`, the one the compiled simulator
+draws themselves are core/kernels.py's `draw`, the one the compiled simulator
 uses inline.
 
 Game seeds (`game_seed`, derivation STREAMS_VERSION = 2): every seed 0..2**64-1

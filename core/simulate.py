@@ -29,7 +29,7 @@ from . import kernels, threads
 from .geometry import N_CARDS, N_STATES
 from .actions import N_ACTIONS
 from .games import check_observed_source
-from .learning import MODES, _policy_table, schedule_tables
+from .learning import MODES, policy_table, schedule_tables
 from .lspi import play_lspi
 from .reward import BONUS_CODES, simulated_reward
 from .rng import ROLES, stream_keys
@@ -153,7 +153,7 @@ def run_games(personas: Sequence[Persona], seeds: Sequence[int], rounds: int | S
     for name, source in (("reuse", bias), ("fixed", policy)):
         rows = mode_code == MODES[name]
         if rows.any():
-            table[rows] = _policy_table(source, n)[rows]
+            table[rows] = policy_table(source, n)[rows]
     p_consider, q_hear, capacity, sees = persona_arrays(personas)
     reading = reading_codes(personas)
     frame = frames_of(frames, n)

@@ -52,7 +52,7 @@ from pairplay.numbers import counted
 from pairplay.schemas.envelope import Event, Seq
 from pairplay.schemas.jsonfile import MCAP_MAGIC
 from pairplay.schemas.events import EVENT_BY_TAG, Count, RewardGiven, SessionEnded, SessionStarted, decode_event
-from pairplay.schemas.events import _decoder as _event_decoder
+from pairplay.schemas.events import event_decoder as _event_decoder
 from pairplay.schemas.keys import ROOT as KEY_ROOT
 from pairplay.schemas.trust import STARTERS
 
@@ -578,12 +578,12 @@ def carry_recovery(earlier: dict[str, str], new: dict[str, str], marks_moved: bo
     if "continued" not in new:  # (said of the newest: a recovered copy of a continued file is a recovered file)
         merged.pop("continued", None)
     for key in ("damaged", "lost"):
-        merged[key] = json.dumps(_listed(earlier.get(key)) + _listed(new.get(key)))
+        merged[key] = json.dumps(listed_values(earlier.get(key)) + listed_values(new.get(key)))
     # a live recorder's own record names its own file as its source (services/recorder.py `_note_bus_lost`): carried
     # into a record of that same file (a restarted recorder's `earlier_losses`) it is no earlier copy; named as one,
     # the restarted recorder took the losses for carried already and recorded none of them
     same = Path(earlier.get("source", "")).name == Path(new.get("source", "")).name
-    merged["earlier"] = json.dumps(_listed(earlier.get("earlier")) + [earlier.get("source", "")] * (not same))
+    merged["earlier"] = json.dumps(listed_values(earlier.get("earlier")) + [earlier.get("source", "")] * (not same))
     if recovered_cut(earlier):  # an earlier cut before the Data End: its tail is lost from every copy
         merged["truncated"], merged[DATA_COMPLETE_KEY], merged[JOURNAL_WHOLE_KEY] = "true", "false", "false"
     for key in COUNTED:  # (every count of what a copy lost or took: the newest's alone forgot the earlier ones')
@@ -612,7 +612,7 @@ def folded_recovery(records: list) -> dict[str, str]:
     return folded
 
 
-def _listed(text: str | None) -> list[str]:
+def listed_values(text: str | None) -> list[str]:
     try:
         value = json_loads(text or "[]")
     except ValueError:

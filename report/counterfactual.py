@@ -143,9 +143,9 @@ def picks_band(picks: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 
 
 def counterfactual_figure(recorded: Recorded, runs: dict, path: Path, title: str) -> None:
-    from .plots import _pyplot, _save
+    from .plots import pyplot, save_figure
 
-    plt = _pyplot()
+    plt = pyplot()
     fig, (ax, bx) = plt.subplots(1, 2, figsize=(11, 4.2), gridspec_kw={"width_ratios": [3, 2]})
     colours = plt.rcParams["axes.prop_cycle"].by_key()["color"]
     for k, (name, r) in enumerate(runs.items()):
@@ -174,7 +174,7 @@ def counterfactual_figure(recorded: Recorded, runs: dict, path: Path, title: str
     bx.legend(fontsize=7)
     fig.suptitle(title, fontsize=10)
     fig.tight_layout()
-    _save(fig, path, 110)
+    save_figure(fig, path, 110)
 
 
 COUNTERFACTUAL_OUTPUTS = ("*.usermodel.json", "counterfactual.csv", "counterfactual.md", "counterfactual.png")

@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 
 
-def _pyplot():
+def pyplot():
     """matplotlib's pyplot on the headless Agg backend, imported on first use (the study draws in a child)."""
     import matplotlib
     matplotlib.use("Agg")
@@ -100,7 +100,7 @@ def learning_curves(curves: dict[str, np.ndarray], names: dict[str, str], path: 
     `curves[persona]` is (games, rounds). Panels whose personas are missing are
     left out; returns the panel titles drawn.
     """
-    plt = _pyplot()
+    plt = pyplot()
     panels = [(f, a, b) for f, a, b in FIGURE_6_4 if a in curves and b in curves]
     if not panels:
         panels = [("all", *list(curves)[:2])] if len(curves) >= 2 else [("all", next(iter(curves)), None)]
@@ -120,14 +120,14 @@ def learning_curves(curves: dict[str, np.ndarray], names: dict[str, str], path: 
     axes[0][0].set_ylabel(PICKS_UNIT)
     fig.suptitle(f"mean over games, {smooth}-round moving window; shaded band: \u00b11 sd over games", fontsize=9)
     _fit(fig, left=0.7, bottom=0.6, top=0.7, wspace=0.06)
-    _save(fig, path, dpi=110)
+    save_figure(fig, path, dpi=110)
     return [p[0] for p in panels]
 
 
 def comparison_bars(labels: list[str], series: dict[str, np.ndarray], path: Path, ylabel: str,
                     title: str = "") -> None:
     """Grouped bars: one group per label, one bar per series (e.g. alone/learned/oracle)."""
-    plt = _pyplot()
+    plt = pyplot()
     fig, ax = plt.subplots(figsize=(max(6, 1.1 * len(labels) + 2), 3.8))
     width = 0.8 / len(series)
     x = np.arange(len(labels))
@@ -141,7 +141,7 @@ def comparison_bars(labels: list[str], series: dict[str, np.ndarray], path: Path
     ax.legend(frameon=False, ncol=len(series))
     _fit(fig, left=_left_of_labels(labels, 20, 0.7, share=0.5), bottom=_under_labels(labels, 20),
          top=0.4 if title else 0.2)
-    _save(fig, path, dpi=110)
+    save_figure(fig, path, dpi=110)
 
 
 def profiles(keys: list[str], names: dict[str, str], infos: list, features: list[tuple[int, int, int, int]],
@@ -151,7 +151,7 @@ def profiles(keys: list[str], names: dict[str, str], infos: list, features: list
     `trained` (optional, one UserInfo or None per persona): the same shares over
     the well-trained states only, drawn as black ticks on the bars.
     """
-    plt = _pyplot()
+    plt = pyplot()
     fig, (left, right) = plt.subplots(1, 2, figsize=(12, 4.2))
     x = np.arange(len(keys))
     left.bar(x - 0.2, [100 * i.speech for i in infos], 0.4, label="speech incompatibility %")
@@ -182,13 +182,13 @@ def profiles(keys: list[str], names: dict[str, str], infos: list, features: list
     shown = [names.get(k, k) for k in keys]
     _fit(fig, left=_left_of_labels(shown, 25, 0.75), bottom=_under_labels(shown, 25), top=0.4,
          wspace=0.13)
-    _save(fig, path, dpi=110)
+    save_figure(fig, path, dpi=110)
 
 
 def merged_policies(panels: list[tuple[str, dict[str, np.ndarray], np.ndarray]], state_count: int,
                     path: Path) -> None:
     """Figure 6.6: state code vs action code of the input policies and their merge (blue x)."""
-    plt = _pyplot()
+    plt = pyplot()
     fig, axes = plt.subplots(1, len(panels), figsize=(5.2 * len(panels), 4.2), squeeze=False)
     markers = ["o", "s", "^", "v", "D", "P", "*", "h"]
     states = np.arange(state_count)
@@ -206,13 +206,13 @@ def merged_policies(panels: list[tuple[str, dict[str, np.ndarray], np.ndarray]],
         ax.grid(alpha=0.3)
         ax.legend(frameon=False, fontsize=8, loc="upper right")
     _fit(fig, left=0.7, bottom=0.6, top=0.4, wspace=0.14)
-    _save(fig, path, dpi=110)
+    save_figure(fig, path, dpi=110)
 
 
 def reuse_curves(keys: list[str], names: dict[str, str], curves: np.ndarray, oracle: list[float],
                  path: Path, smooth: int = 10) -> None:
     """Online picks per round, Q-learning from scratch vs pi-reuse, one small panel per held-out persona."""
-    plt = _pyplot()
+    plt = pyplot()
     cols = 4
     rows = (len(keys) + cols - 1) // cols
     fig, axes = plt.subplots(rows, cols, figsize=(3.4 * cols, 2.6 * rows), squeeze=False, sharex=True, sharey=True)
@@ -234,17 +234,17 @@ def reuse_curves(keys: list[str], names: dict[str, str], curves: np.ndarray, ora
     fig.supxlabel("round")
     fig.supylabel(f"{PICKS_UNIT}, {smooth}-round mean")
     _fit(fig, left=0.8, bottom=0.75, top=0.35, wspace=0.07, hspace=0.22)
-    _save(fig, path, dpi=100)
+    save_figure(fig, path, dpi=100)
 
 
-def _save(fig, path: Path, dpi: int, force: bool = False) -> None:
+def save_figure(fig, path: Path, dpi: int, force: bool = False) -> None:
     """Write the figure whole or not at all (a temporary file renamed; pairplay.outputs); `force`
     replaces an existing one. A refusal by the system is an OSError naming `path`."""
     from pairplay.outputs import output_path
 
     with output_path(path, force) as tmp:
         fig.savefig(tmp, dpi=dpi, format="png")
-    _pyplot().close(fig)
+    pyplot().close(fig)
 
 
 FIGURES = ("learning_curves", "comparison_bars", "profiles", "merged_policies", "reuse_curves", "algorithm_curves",
@@ -258,7 +258,7 @@ def draw(name: str | None, *args) -> None:
     child imports matplotlib and numpy only.
     """
     if name is None:  # the study's figure process starts with this: matplotlib loads while the study computes
-        _pyplot()
+        pyplot()
         return
     if name not in FIGURES:
         raise ValueError(f"unknown figure {name!r}")
@@ -270,7 +270,7 @@ def grouped_bars_with_spread(labels: list[str], series: dict[str, np.ndarray], r
     """Bars per label and series: the mean over replicates with a 1-sd error bar; a tick marks the reference.
 
     `series[name]` is (replicates, labels) in picks per round."""
-    plt = _pyplot()
+    plt = pyplot()
     n = len(series)
     width = 0.8 / n
     x = np.arange(len(labels))
@@ -286,13 +286,13 @@ def grouped_bars_with_spread(labels: list[str], series: dict[str, np.ndarray], r
     ax.set_title(title, fontsize=10)
     ax.legend(fontsize=8, ncol=2)
     _fit(fig, left=_left_of_labels(labels, 20, 0.7), bottom=_under_labels(labels, 20), top=0.4)
-    _save(fig, path, dpi=110)
+    save_figure(fig, path, dpi=110)
 
 
 def sweep_measure(labels: list[str], mean: list[float], low: list[float], high: list[float], path: Path,
                   measure: str, seeds: int) -> None:
     """One sweep measure across the grid: the mean over seeds with its 95% confidence interval."""
-    plt = _pyplot()
+    plt = pyplot()
     mean, low, high = map(np.asarray, (mean, low, high))
     x = np.arange(len(labels))
     fig, ax = plt.subplots(figsize=(max(6.0, 0.28 * len(labels) + 3), 4.2))
@@ -303,7 +303,7 @@ def sweep_measure(labels: list[str], mean: list[float], low: list[float], high: 
     ax.set_title(f"{measure}: mean over {counted(seeds, 'seed')}, 95% confidence interval", fontsize=10)
     ax.grid(axis="y", alpha=0.3)
     fig.tight_layout()
-    _save(fig, path, dpi=100, force=True)  # a resumed sweep draws its figures again
+    save_figure(fig, path, dpi=100, force=True)  # a resumed sweep draws its figures again
 
 
 def human_curves(curves: dict[str, np.ndarray], path: Path, title: str, dashed: tuple[str, ...] = ()) -> None:
@@ -312,7 +312,7 @@ def human_curves(curves: dict[str, np.ndarray], path: Path, title: str, dashed: 
     As in the thesis, Q-learning curves are drawn with circles and pi-reuse ones
     with diamonds: a label naming a reuse phase or a phase-2 group gets diamonds
     when it is in `dashed` or contains "phase2"; 18 (perfect play) is marked."""
-    plt = _pyplot()
+    plt = pyplot()
     fig, ax = plt.subplots(figsize=(5.6, 3.8))
     for label, c in curves.items():
         rounds = np.arange(1, len(c) + 1)
@@ -334,7 +334,7 @@ def human_curves(curves: dict[str, np.ndarray], path: Path, title: str, dashed: 
 def human_merged(panels: list[tuple[str, np.ndarray]], reference: tuple[str, np.ndarray] | None,
                  state_count: int, path: Path) -> None:
     """Figure 7.5: state code vs action code of each merged policy (blue x), a reference (green +)."""
-    plt = _pyplot()
+    plt = pyplot()
     fig, axes = plt.subplots(1, len(panels), figsize=(5.6 * len(panels), 4.2), squeeze=False)
     states = np.arange(state_count)
     for ax, (title, merged) in zip(axes[0], panels):
@@ -359,7 +359,7 @@ def algorithm_curves(curves: np.ndarray, algorithms: list[str], personas: list[s
 
     `curves` is (n_alg, P, games, rounds); the oracle's picks per round are a dashed line.
     """
-    plt = _pyplot()
+    plt = pyplot()
     n = len(personas)
     cols = min(4, n)
     rows_ = -(-n // cols)
@@ -385,7 +385,7 @@ def algorithm_curves(curves: np.ndarray, algorithms: list[str], personas: list[s
     fig.suptitle(f"online picks per round, mean over games ({smooth}-round window); band: \u00b11 sd over games",
                  fontsize=9)
     _fit(fig, left=0.8, bottom=0.6, top=0.65, wspace=0.07, hspace=0.3)
-    _save(fig, path, dpi=100)
+    save_figure(fig, path, dpi=100)
 
 
 def frame_calibration(labels: list[str], series: dict[str, np.ndarray], lengths: list[int], accuracy: np.ndarray,
@@ -393,7 +393,7 @@ def frame_calibration(labels: list[str], series: dict[str, np.ndarray], lengths:
     """Future work 2: merged policies across mirrored users (left) and the calibration round's accuracy (right).
 
     `series[arm]` is (replicates, personas) picks per round; `accuracy` is (personas, lengths), shares 0..1."""
-    plt = _pyplot()
+    plt = pyplot()
     fig, (ax, ax2) = plt.subplots(1, 2, figsize=(12.5, 4.4), gridspec_kw={"width_ratios": [2.2, 1]})
     width = 0.8 / len(series)
     x = np.arange(len(labels))
@@ -422,4 +422,4 @@ def frame_calibration(labels: list[str], series: dict[str, np.ndarray], lengths:
     ax2.legend(fontsize=7, frameon=False, loc="lower right")
     _fit(fig, left=_left_of_labels(labels, 12, 0.8, 8, share=0.5), bottom=max(0.75, _under_labels(labels, 12, 8)),
          top=0.4, wspace=0.13)
-    _save(fig, path, dpi=100)
+    save_figure(fig, path, dpi=100)

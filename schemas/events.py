@@ -346,13 +346,13 @@ EVENT_TYPES: tuple[type[Event], ...] = (
 EVENT_BY_TAG: dict[str, type[Event]] = {t.__struct_config__.tag: t for t in EVENT_TYPES}
 AnyEvent = Union[EVENT_TYPES]  # type: ignore[valid-type]
 
-_decoder = JsonDecoder(AnyEvent, dec_hook=dec_hook)
+event_decoder = JsonDecoder(AnyEvent, dec_hook=dec_hook)
 _encoder = msgspec.json.Encoder(enc_hook=enc_hook)
 
 
 def decode_event(payload: bytes) -> Event:
     """Decode one JSON event; raises msgspec.ValidationError / DecodeError with a reason."""
-    return _decoder.decode(payload)
+    return event_decoder.decode(payload)
 
 
 class _Envelope(msgspec.Struct):

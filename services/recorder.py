@@ -87,7 +87,7 @@ from pairplay.livelock import LIVE, hold, is_live, release
 from pairplay.numbers import counted
 from pairplay.outputs import REPLACED, set_aside_of, special_kind
 from pairplay.replay.continued import recordings_of  # noqa: F401  (re-exported: tests, callers)
-from pairplay.replay.reader import LOST_AT_KEY, RECOVERED, _listed, carry_recovery, said_source_lost
+from pairplay.replay.reader import LOST_AT_KEY, RECOVERED, listed_values, carry_recovery, said_source_lost
 from pairplay.replay.wal import RECORDER_METADATA, JournalWriter, NotAJournal, not_its, read_journal, wal_path
 from pairplay.replay.writer import FLUSH_INTERVAL_NS, LOSS_BOUND_NS, EventLogWriter
 from pairplay.schemas.checked import check_event
@@ -746,7 +746,7 @@ class Recorder:
                 last_ns = max(last_ns, log_ns)
         if losses:  # what the earlier files lost that no journal gives back: recorded as recover records it
             # a later file that continued an earlier one carries its losses already (named in its `earlier`)
-            carried = {Path(e).name for one in losses for e in _listed(one.get("earlier"))}
+            carried = {Path(e).name for one in losses for e in listed_values(one.get("earlier"))}
             losses = [one for one in losses if Path(one.get("source", "")).name not in carried]
             lost: dict = {}
             marks = []

@@ -57,10 +57,10 @@ def _preload() -> None:
     for info in pkgutil.iter_modules(importlib.import_module("pairplay").__path__, "pairplay."):
         if info.name != "pairplay.__main__":  # run per command, as `-m` runs it
             importlib.import_module(info.name)
-    # pyplot, as the verbs that draw import it (report/plots.py's _pyplot, rebuild's curves: Agg): ~1 s of
+    # pyplot, as the verbs that draw import it (report/plots.py's pyplot, rebuild's curves: Agg): ~1 s of
     # CPU per drawing command (rebuild, sweep, counterfactual, protocol report); it starts no thread
-    from pairplay.report.plots import _pyplot
-    _pyplot()
+    from pairplay.report.plots import pyplot
+    pyplot()
 
 
 def _read_only(how: str, place: str) -> None:

@@ -25,7 +25,7 @@ def figures(monkeypatch):
 
     def capture(fig, path, dpi):
         drawn[path.name] = fig
-    monkeypatch.setattr(plots, "_save", capture)
+    monkeypatch.setattr(plots, "save_figure", capture)
     return drawn
 
 

@@ -182,7 +182,7 @@ def main() -> int:
     from pairplay.bench import bus as bench_bus
     from pairplay.services.bus import Bus
     clock = time.perf_counter
-    put, subscribe, spawn = Bus.put, Bus.subscribe, bench_bus._spawn
+    put, subscribe, spawn = Bus.put, Bus.subscribe, bench_bus.spawn_module
 
     def traced_put(self, key, payload):
         if key.endswith("/board/CardPicked"):
@@ -203,7 +203,7 @@ def main() -> int:
             return subprocess.Popen([sys.executable, __file__, "--learner-child", *argv[1:]], stdout=subprocess.PIPE,
                                     env=dict(os.environ, PYTHONUNBUFFERED="1", **{TRACE_ENV: learner_out}))
         return spawn(*argv)
-    Bus.put, Bus.subscribe, bench_bus._spawn = traced_put, traced_subscribe, traced_spawn
+    Bus.put, Bus.subscribe, bench_bus.spawn_module = traced_put, traced_subscribe, traced_spawn
     rows = bench_bus.latency_rows(args.turns)
     with open(learner_out) as f:
         learner = json.load(f)
