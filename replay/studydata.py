@@ -96,6 +96,11 @@ KEY_RECORD, TORN_RECORD = "the key file", "a torn journal line set aside"
 SUBFOLDERS = {"recordings": ".mcap", "policies": ".policy.json", "merged": ".policy.json"}  # and the files each holds
 
 
+# how long before its study folder was made a consent may have been signed (`record_consent`): paper forms signed at
+# recruitment, weeks before the folder, are taken; a year's typo (2016 for 2026) is not
+CONSENT_BEFORE_STUDY_NS = 365 * 24 * 3600 * 10**9
+
+
 class StudyDataError(UserError, ValueError):
     """A request the study folder cannot satisfy: what, and where (a file, a folder, an option) as every
     refusal says it, `what (where)` (pairplay/errors.py UserError: it said `<path> exists (use --force to
@@ -687,8 +692,9 @@ class StudyData:
         """Journal that registered participant `pid` gave their informed consent to `form` (default: the study's
         `consent_form` now), now (None) or at `given_ns` (a consent held on paper, recorded later: both times kept).
         A journaled consent cannot be taken back, so what can only be a typo is refused: a form the study never
-        had (`forms_had`), a time in the future or before the study folder was made (2016 for 2026; 1970-01-01
-        was the journal's "given when recorded", 0, and became now). Refused if it is recorded already to that
+        had (`forms_had`), a time in the future or more than a year before the study folder was made (2016 for
+        2026; 1970-01-01 was the journal's "given when recorded", 0, and became now; CONSENT_BEFORE_STUDY_NS:
+        forms signed at recruitment, before the folder was made, are a study's everyday case). Refused if it is recorded already to that
         form: a new version of the form (`change_consent_form`, an ethics amendment) is recorded again."""
         with self._writing():
             self.participant(pid)
@@ -704,10 +710,10 @@ class StudyData:
                 raise StudyDataError(f"{pid}: consent given at {_utc(given_ns)} is in the future (now "
                                      f"{_utc(now)}): give the time they signed")
             made = self.state.created.time_ns if self.state.created is not None else 0
-            if given_ns is not None and given_ns < made:
-                raise StudyDataError(f"{pid}: consent given at {_utc(given_ns) or '1970-01-01T00:00:00Z'} is before "
-                                     f"the study folder was made ({_utc(made)}): give the time they signed, "
-                                     f"between then and now")
+            if given_ns is not None and given_ns < made - CONSENT_BEFORE_STUDY_NS:
+                raise StudyDataError(f"{pid}: consent given at {_utc(given_ns) or '1970-01-01T00:00:00Z'} is more "
+                                     f"than a year before the study folder was made ({_utc(made)}): give the time "
+                                     f"they signed, from a year before then up to now")
             had = self.state.consents.get(pid, {}).get(form)
             if had is not None:
                 raise StudyDataError(f"{pid}: consent to {consent_words(had)} is recorded already")

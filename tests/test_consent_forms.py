@@ -215,7 +215,8 @@ def test_the_console_records_a_consent_held_on_paper_as_given_then(browser, tmp_
             assert "p02: consent given at 2099-01-01" in said and "is in the future" in said
             record("p02", "2016-11-20T10:00Z")  # a typo of the year: before the study folder was made
             said = refusal("2016-11-20")
-            assert "p02: consent given at 2016-11-20T10:00:00Z is before the study folder was made (2026-11-01" in said
+            assert "p02: consent given at 2016-11-20T10:00:00Z is more than a year before the study folder was made " \
+                "(2026-11-01" in said
             assert len(journal(data.folder)) == lines
             record("p03", "")  # blank: given now, as without --given-at
             console.wait_for_function("document.querySelectorAll('#participants li')[2].textContent.includes('given ')",
@@ -239,8 +240,15 @@ def test_a_consent_time_before_the_study_and_a_form_it_never_had_are_refused_at_
     lines = len(journal(folder))
     for when in ("1970-01-01T00:00Z", "1969-12-31T23:59Z", "1999-01-01T00:00Z"):
         said = one_line(pairplay_cli("protocol", "consent", folder, "p01", "--given-at", when))
-        assert f"p01: consent given at {when[:16]}:00Z is before the study folder was made (20" in said, said
-        assert "give the time they signed, between then and now" in said
+        assert f"p01: consent given at {when[:16]}:00Z is more than a year before the study folder was made (20" \
+            in said, said
+        assert "give the time they signed, from a year before then up to now" in said
+    # a form signed at recruitment, a month before the folder was made, is a study's everyday case: taken
+    import datetime
+    month_before = (datetime.datetime.now() - datetime.timedelta(days=30)).strftime("%Y-%m-%dT%H:%M")
+    ran = pairplay_cli("protocol", "consent", folder, "p03", "--given-at", month_before)
+    assert ran.returncode == 0, ran.stderr
+    lines += 1
     said = one_line(pairplay_cli("protocol", "consent", folder, "p01", "--form", "v9"))
     assert "consent form 'v9' is not one this study has had ('v2 2026-11'): give the version they signed" in said
     said = one_line(pairplay_cli("protocol", "consent-form", folder, ""))
@@ -257,8 +265,8 @@ def test_a_consent_time_before_the_study_and_a_form_it_never_had_are_refused_at_
             lines = len(journal(folder))
             status, said = call(f"{server.url}/api/console/consent?token={server.token}",
                                 {"participant": "p02", "given_at": "1970-01-01T00:00Z"})
-            assert status == 400 and "p02: consent given at 1970-01-01T00:00:00Z is before the study folder was " \
-                "made" in json.dumps(said), said
+            assert status == 400 and "p02: consent given at 1970-01-01T00:00:00Z is more than a year before the " \
+                "study folder was made" in json.dumps(said), said
             assert len(journal(folder)) == lines
         finally:
             server.close()
