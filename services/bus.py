@@ -897,21 +897,25 @@ class Bus:
                 log.exception("router link listener failed")
         return self._keep(self.session.info.declare_transport_events_listener(on_event))
 
-    def queryable(self, key_expr: str, on_query: Callable[[zenoh.Query], None]):
-        """Hand each query on `key_expr` to `on_query`, which must not wait: it passes the
+    def queryable(self, key_expr: str, on_query: Callable[["Asked"], None]):
+        """Hand each query on `key_expr` to `on_query` (as an `Asked`), which must not wait: it passes the
         query on (an Inbox's `control`), and the service answers it later with `answer`."""
         def handler(query: zenoh.Query) -> None:
             try:
-                on_query(query)
+                on_query(Asked(query, key_expr))
             except Exception:
                 log.exception("queryable %s failed", key_expr)
         return self._keep(self.session.declare_queryable(key_expr, handler))
 
     @staticmethod
-    def answer(query: zenoh.Query, payloads: list[bytes]) -> None:
+    def answer(query: "Asked | zenoh.Query", payloads: list[bytes]) -> None:
+        """Reply `payloads` to `query`, on its queryable's own key (`Asked`): access control lets a host reply
+        only on the keys of the sources it may answer for, and a question to every source (`_query/*/sent`)
+        answered on its own wildcard key matched none (docs/examples/zenoh-tls-server.json5)."""
+        key = query.answer_key if isinstance(query, Asked) else query.key_expr
         try:
             for payload in payloads:
-                query.reply(query.key_expr, payload)
+                query.reply(key, payload)
         finally:
             query.drop()
 
@@ -1081,6 +1085,18 @@ def _open(options: BusOptions) -> zenoh.Session:
         return zenoh.open(config)
     except Exception as err:
         raise BusOpenError(f"cannot open the bus: {_zenoh_reason(err)}", options.where()) from None
+
+
+class Asked:
+    """A query as a service gets it (Bus.queryable): Zenoh's Query, and the key it is answered on
+    (`answer_key`: the queryable's, concrete, of the one source it answers for)."""
+    __slots__ = ("query", "answer_key")
+
+    def __init__(self, query: zenoh.Query, answer_key: str):
+        self.query, self.answer_key = query, answer_key
+
+    def __getattr__(self, name: str):
+        return getattr(self.query, name)
 
 
 def open_bus(options: BusOptions | None = None, stop: threading.Event | None = None) -> Bus:
