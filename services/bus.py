@@ -921,17 +921,24 @@ class Bus:
 
     def query(self, selector: str, timeout_s: float = 2.0, stop: threading.Event | None = None,
               meanwhile: Callable[[], None] | None = None) -> list[bytes]:
-        """Payloads of every ok reply to a query (errors are logged, not raised); returns
-        early, with what came, once `stop` is set. `meanwhile()`, if given, is called while no
-        reply waits (it must return within milliseconds): a service that asks the recorder
-        whether it holds its events answers the recorder's refill so (services/recorded.py)."""
+        """Payloads of every ok reply to a query (`query_replies` without who sent them)."""
+        return [payload for _, payload in self.query_replies(selector, timeout_s, stop, meanwhile)]
+
+    def query_replies(self, selector: str, timeout_s: float = 2.0, stop: threading.Event | None = None,
+                      meanwhile: Callable[[], None] | None = None) -> list[tuple[str, bytes]]:
+        """(the ZenohId of the session that replied, payload) of every ok reply to a query (errors are logged,
+        not raised); returns early, with what came, once `stop` is set. `meanwhile()`, if given, is called while
+        no reply waits (it must return within milliseconds): a service that asks the recorder whether it holds
+        its events answers the recorder's refill so (services/recorded.py). Who replied is what tells two
+        answers for one source apart (services/answers.py)."""
         out = []
         # no consolidation: a queryable may answer with many replies on one key
         replies = _get(self.session.get, selector, timeout=timeout_s,
                        consolidation=zenoh.QueryConsolidation(zenoh.ConsolidationMode.NONE))
         for reply in _replies(replies, timeout_s + 1.0, stop, meanwhile):
             if reply.ok is not None:
-                out.append(reply.ok.payload.to_bytes())
+                replier = reply.replier_id
+                out.append((str(replier.zid) if replier is not None else "", reply.ok.payload.to_bytes()))
             else:
                 log.warning("query %s: error reply %s", selector, reply.err.payload.to_bytes()[:200])
         return out
