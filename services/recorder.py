@@ -492,7 +492,8 @@ def same_live_session(bus: Bus, session: str, path: Path, timeout_s: float = 3.0
     recording holds no event of another service, or nobody answers. Nobody answering while a service of the
     session is on the bus (its token) is asked again (SAME_SESSION_ASKS, each ask longer): a live service
     busy past the ask's timeout (load 40-66) had the restarted recorder refuse its own session; with none on
-    the bus the refusal is at once. `stop` set: no more asks."""
+    the bus the refusal is at once. `stop` set: no more asks. Several sessions answering as one source are
+    weighed by `_same_answers` (an empty answer never outvotes the source's bytes: trial34 O)."""
     first: dict[str, tuple[int, bytes]] = {}
     # (unsaid: a recorder that continues reads them again and says what it does not take; said here too, each
     # warning came twice)
