@@ -64,6 +64,24 @@ def game_on_bus():
         game.close()
 
 
+def pick(bus: Bus, s: str) -> None:
+    """The board's first pick: the game answers it past its seq 3 (its first events went to nobody)."""
+    picked = stamped(ev.CardPicked(round=0, turn=0, card=0), session=s, source="board", seq=1, time_ns=1)
+    bus.put(event_key(s, "board", "CardPicked"), encode_event(picked))
+
+
+def recording(bus: Bus, s: str, out) -> Recorder:
+    """A Recorder of `s` into folder `out`, started; then a pick, and the recorder stepped until it holds the
+    session (the game's head caught up: `_catch_up`). The caller closes it."""
+    recorder = Recorder(bus, s, out / f"{s}.mcap")
+    recorder.start()
+    pick(bus, s)
+    if not wait_until(lambda: recorder.step(0.05) and False or recorder.holds_session, 60):
+        recorder.close(deadline=Deadline(5.0))
+        raise AssertionError([k for k, _ in recorder.kept])
+    return recorder
+
+
 def rejections(kept) -> list[ev.MessageRejected]:
     return [e for e in (decode_event(p) for k, p in kept if k.endswith("/MessageRejected"))
             if isinstance(e, ev.MessageRejected)]
@@ -77,16 +95,9 @@ def test_two_answers_that_differ_for_a_head_event_are_taken_from_neither_and_rec
     with listener() as bus, connector(bus) as forger:
         game_on_bus(bus, s)
         forger_zid = forging(bus, forger, s, [(event_key(s, "game", "ServiceStarted"), forged_start(s))])
-        recorder = Recorder(bus, s, tmp_path / f"{s}.mcap")
-        recorder.start()
-        try:
-            pick = stamped(ev.CardPicked(round=0, turn=0, card=0), session=s, source="board", seq=1, time_ns=1)
-            bus.put(event_key(s, "board", "CardPicked"), encode_event(pick))  # the game answers past its seq 3
-            assert wait_until(lambda: recorder.step(0.05) and False or recorder.holds_session, 60), \
-                [k for k, _ in recorder.kept]
-            said = [r for r in rejections(recorder.kept) if "forged answer" in r.reason]
-        finally:
-            recorder.close(deadline=Deadline(5.0))
+        recorder = recording(bus, s, tmp_path)
+        said = [r for r in rejections(recorder.kept) if "forged answer" in r.reason]
+        recorder.close(deadline=Deadline(5.0))
     assert len(said) == 1, said
     assert said[0].offending_source == "game" and said[0].offending_seq == 1
     assert forger_zid in said[0].reason and str(bus.session.zid()) in said[0].reason, said[0].reason
@@ -107,14 +118,8 @@ def test_a_forger_s_answer_does_not_make_a_restarted_recorder_refuse_its_own_liv
     s = "forgedsame"
     with listener() as bus, connector(bus) as forger:
         game_on_bus(bus, s)
-        recorder = Recorder(bus, s, tmp_path / f"{s}.mcap")
-        recorder.start()
-        try:
-            pick = stamped(ev.CardPicked(round=0, turn=0, card=0), session=s, source="board", seq=1, time_ns=1)
-            bus.put(event_key(s, "board", "CardPicked"), encode_event(pick))
-            assert wait_until(lambda: recorder.step(0.05) and False or recorder.holds_session, 60)
-        finally:
-            recorder.close(deadline=Deadline(5.0))
+        recorder = recording(bus, s, tmp_path)
+        recorder.close(deadline=Deadline(5.0))
         assert same_live_session(bus, s, tmp_path / f"{s}.mcap")  # the game alone: the same session
         forging(bus, forger, s, [] if forged == "empty" else [(event_key(s, "game", "ServiceStarted"),
                                                                 forged_start(s))])
@@ -137,8 +142,7 @@ def test_two_answers_that_differ_in_a_restarted_recorder_s_refill_are_taken_from
         try:
             sent = []
             bus.subscribe(f"pairplay/{s}/game/*", lambda k, p: sent.append(decode_event(p).seq))
-            pick = stamped(ev.CardPicked(round=0, turn=0, card=0), session=s, source="board", seq=1, time_ns=1)
-            bus.put(event_key(s, "board", "CardPicked"), encode_event(pick))  # the game publishes its seq 4 on
+            pick(bus, s)  # the game publishes its seq 4 on
             assert wait_until(lambda: 4 in sent, 60), sent
             forger_zid = forging(bus, forger, s, [(event_key(s, "game", "ServiceStarted"),
                                                    encode_event(stamped(ev.ServiceStarted(service="game FORGED"),
@@ -173,12 +177,8 @@ def test_a_log_answered_differently_by_two_sessions_is_taken_from_neither(tmp_pa
     s = "forgedlog"
     with listener() as bus, connector(bus) as forger:
         game_on_bus(bus, s)
-        recorder = Recorder(bus, s, tmp_path / f"{s}.mcap")
-        recorder.start()
+        recorder = recording(bus, s, tmp_path)
         try:
-            pick = stamped(ev.CardPicked(round=0, turn=0, card=0), session=s, source="board", seq=1, time_ns=1)
-            bus.put(event_key(s, "board", "CardPicked"), encode_event(pick))
-            assert wait_until(lambda: recorder.step(0.05) and False or recorder.holds_session, 60)
             serving = threading.Event()
             helper = threading.Thread(target=lambda: [recorder.step(0.05) for _ in iter(serving.is_set, True)],
                                       daemon=True)
