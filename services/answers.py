@@ -12,14 +12,14 @@ recorder wrote its forged learner event). Keeping other hosts off a source's que
   claim), so pairplay has no source's session to compare with.
 - An event (source, seq) is taken only if every session that gave it gave the same bytes; two that differ are a
   `Conflict`: neither is taken, both are named (the recorder records a MessageRejected; the seq stays a hole,
-  which the file says).
+  which the file says, and no later answer fills it: `Recorder._undisputed`).
 - An answer with nothing in it gives nothing and contradicts nothing: it never outvotes another session's events
   (the addendum: a forger's empty answer made a restarted recorder refuse its own live session).
 - A question to the recorder (its log, what it holds) is answered by one recorder: answers of several sessions
   that differ are taken as no answer, said in a warning naming them (`one_answer`).
 
-What this does not do: a forger that answers alone (the source slow or gone), or with the very bytes the source
-sent (it listened), is taken. Only access control keeps it off the bus."""
+What this does not do: a forger that answers first and alone (the source slow, or gone before it is asked), or
+with the very bytes the source sent (it listened), is taken. Only access control keeps it off the bus."""
 
 from __future__ import annotations
 

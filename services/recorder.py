@@ -723,7 +723,8 @@ class Recorder:
         # per source first heard past its seq 1 (it published before this recorder listened): its first live seq and
         # the asks left, until its head is held (`_catch_up`)
         self._heads: dict[str, list[int]] = {}
-        self._forged: set[tuple] = set()  # answers that differ, recorded once each though asked again (`_conflicts`)
+        self._forged: set[tuple] = set()  # answers that differ, recorded once each though asked again (`_undisputed`)
+        self._disputed: set[tuple[str, int]] = set()  # (source, seq) two answers gave differently: taken from nobody
         self._head_at: float | None = None  # monotonic time of the next ask for a head, if one is due
         self._recv_ns: dict[str, int] = {}  # per source, when its latest event was taken (a tail lost: `_tails`)
         self._back_ns = 0  # when the link to the router last came back from an outage
@@ -853,8 +854,7 @@ class Recorder:
                                                       timeout_s),
                                lambda err: log.warning("recorder: unreadable refill: %s", err))
         answered = answers.answered
-        self._conflicts(answers.conflicts)  # neither taken: the seq stays a hole, asked again, then said
-        for key, data in answers.events:
+        for key, data in self._undisputed(answers):  # (two that differ: neither; the seq stays a hole, said)
             try:
                 event = decode_event(data)
             except (msgspec.DecodeError, msgspec.ValidationError):
@@ -912,13 +912,23 @@ class Recorder:
         self._continued_gap(done, unanswered)
         return answered
 
-    def _conflicts(self, conflicts: list) -> None:
-        """Record each pair of answers that differ for one event (services/answers.py `Conflict`): a
-        MessageRejected naming both sessions; the event is taken from neither (trial34 O)."""
-        for c in conflicts:
-            if c not in self._forged:
-                self._forged.add(c)
+    def _undisputed(self, answers) -> list[tuple[str, bytes]]:
+        """The events of `answers` (services/answers.py `Sent`) that may be taken: each pair of answers that differ
+        for one event is recorded (a MessageRejected naming both sessions, once) and that (source, seq) is taken
+        from nobody after, a later answer from one session alone included (trial34 O, old config: the learner gone,
+        the forger's lone answer to the next refill was taken); it stays a hole, which the file says."""
+        for c in answers.conflicts:
+            self._disputed.add((c.source, c.seq))
+            pair = (c.source, c.seq, frozenset((c.replier, c.other)))  # (asked again, they may come in the other order)
+            if pair not in self._forged:
+                self._forged.add(pair)
                 self._reject(c.said(), c.key, c.data, source=c.source, seq=c.seq)
+        taken = []
+        for key, data in answers.events:
+            stamp = _stamp(data)  # (every event of `answers` decodes so far: services/answers.py)
+            if (stamp.source, stamp.seq) not in self._disputed:
+                taken.append((key, data))
+        return taken
 
     def _on_bus(self, services: list[str]) -> bool:
         """Whether any of `services` is on the bus now (its token): only such a one may still answer."""
@@ -1333,8 +1343,7 @@ class Recorder:
             answers = sent_answers(
                 self.bus.query_replies(f"{query_key(self.session, source, SENT_QUERY)}?after={source}:0", timeout_s),
                 lambda err: log.warning("recorder: unreadable answer for %s's first events: %s", source, err))
-            self._conflicts(answers.conflicts)  # neither taken: the head stays a hole, asked again, then said
-            for key, data in answers.events:
+            for key, data in self._undisputed(answers):  # (two that differ: neither; the head stays a hole, said)
                 stamp = _stamp(data)  # (what does not decode is not among the events: `_fill_hole` would refuse it)
                 if stamp.source != source or not 0 < stamp.seq < first_live or stamp.seq in self._held.get(source, ()):
                     continue
