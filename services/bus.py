@@ -897,37 +897,48 @@ class Bus:
                 log.exception("router link listener failed")
         return self._keep(self.session.info.declare_transport_events_listener(on_event))
 
-    def queryable(self, key_expr: str, on_query: Callable[[zenoh.Query], None]):
-        """Hand each query on `key_expr` to `on_query`, which must not wait: it passes the
+    def queryable(self, key_expr: str, on_query: Callable[["Asked"], None]):
+        """Hand each query on `key_expr` to `on_query` (as an `Asked`), which must not wait: it passes the
         query on (an Inbox's `control`), and the service answers it later with `answer`."""
         def handler(query: zenoh.Query) -> None:
             try:
-                on_query(query)
+                on_query(Asked(query, key_expr))
             except Exception:
                 log.exception("queryable %s failed", key_expr)
         return self._keep(self.session.declare_queryable(key_expr, handler))
 
     @staticmethod
-    def answer(query: zenoh.Query, payloads: list[bytes]) -> None:
+    def answer(query: "Asked | zenoh.Query", payloads: list[bytes]) -> None:
+        """Reply `payloads` to `query`, on its queryable's own key (`Asked`): access control lets a host reply
+        only on the keys of the sources it may answer for, and a question to every source (`_query/*/sent`)
+        answered on its own wildcard key matched none (docs/examples/zenoh-tls-server.json5)."""
+        key = query.answer_key if isinstance(query, Asked) else query.key_expr
         try:
             for payload in payloads:
-                query.reply(query.key_expr, payload)
+                query.reply(key, payload)
         finally:
             query.drop()
 
     def query(self, selector: str, timeout_s: float = 2.0, stop: threading.Event | None = None,
               meanwhile: Callable[[], None] | None = None) -> list[bytes]:
-        """Payloads of every ok reply to a query (errors are logged, not raised); returns
-        early, with what came, once `stop` is set. `meanwhile()`, if given, is called while no
-        reply waits (it must return within milliseconds): a service that asks the recorder
-        whether it holds its events answers the recorder's refill so (services/recorded.py)."""
+        """Payloads of every ok reply to a query (`query_replies` without who sent them)."""
+        return [payload for _, payload in self.query_replies(selector, timeout_s, stop, meanwhile)]
+
+    def query_replies(self, selector: str, timeout_s: float = 2.0, stop: threading.Event | None = None,
+                      meanwhile: Callable[[], None] | None = None) -> list[tuple[str, bytes]]:
+        """(the ZenohId of the session that replied, payload) of every ok reply to a query (errors are logged,
+        not raised); returns early, with what came, once `stop` is set. `meanwhile()`, if given, is called while
+        no reply waits (it must return within milliseconds): a service that asks the recorder whether it holds
+        its events answers the recorder's refill so (services/recorded.py). Who replied is what tells two
+        answers for one source apart (services/answers.py)."""
         out = []
         # no consolidation: a queryable may answer with many replies on one key
         replies = _get(self.session.get, selector, timeout=timeout_s,
                        consolidation=zenoh.QueryConsolidation(zenoh.ConsolidationMode.NONE))
         for reply in _replies(replies, timeout_s + 1.0, stop, meanwhile):
             if reply.ok is not None:
-                out.append(reply.ok.payload.to_bytes())
+                replier = reply.replier_id
+                out.append((str(replier.zid) if replier is not None else "", reply.ok.payload.to_bytes()))
             else:
                 log.warning("query %s: error reply %s", selector, reply.err.payload.to_bytes()[:200])
         return out
@@ -1081,6 +1092,18 @@ def _open(options: BusOptions) -> zenoh.Session:
         return zenoh.open(config)
     except Exception as err:
         raise BusOpenError(f"cannot open the bus: {_zenoh_reason(err)}", options.where()) from None
+
+
+class Asked:
+    """A query as a service gets it (Bus.queryable): Zenoh's Query, and the key it is answered on
+    (`answer_key`: the queryable's, concrete, of the one source it answers for)."""
+    __slots__ = ("query", "answer_key")
+
+    def __init__(self, query: zenoh.Query, answer_key: str):
+        self.query, self.answer_key = query, answer_key
+
+    def __getattr__(self, name: str):
+        return getattr(self.query, name)
 
 
 def open_bus(options: BusOptions | None = None, stop: threading.Event | None = None) -> Bus:

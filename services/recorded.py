@@ -31,6 +31,7 @@ import msgspec
 from pairplay.numbers import counted
 from pairplay.schemas.keys import alive_key, query_key
 from pairplay.schemas.nesting import msgpack_decode
+from pairplay.services.answers import one_answer
 from pairplay.services.bus import Bus
 
 log = logging.getLogger("pairplay.recorded")
@@ -71,7 +72,9 @@ def ask_held(bus: Bus, session: str, upto: dict[str, int], stop: threading.Event
     """The recorder's `Held`, or None if no recorder answered within `timeout_s`; `meanwhile()` is called
     while the answer has not come (Bus.query)."""
     selector = f"{query_key(session, 'recorder', HELD_QUERY)}?{upto_parameters(upto)}"
-    for payload in bus.query(selector, timeout_s, stop=stop, meanwhile=meanwhile):
+    # one recorder's answer: two sessions' that differ are none (one of them is not the recorder: services/answers.py)
+    for payload in one_answer(bus.query_replies(selector, timeout_s, stop=stop, meanwhile=meanwhile),
+                              f"what the recorder of session {session} holds"):
         try:
             return msgpack_decode(payload, type=Held)
         except msgspec.DecodeError as err:

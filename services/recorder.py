@@ -97,12 +97,12 @@ from pairplay.schemas.envelope import Nanos, stamped
 from pairplay.schemas.keys import alive_key, event_key, query_key, session_keys
 from pairplay.schemas.trust import SOURCES
 
+from pairplay.services.answers import sent_answers, stamp_of
 from pairplay.services.bus import MISSED, HEARTBEAT_S, Bus, Deadline, Inbox, Outbox
 from pairplay.services.guard import Guard, Refusals
 from pairplay.services.recorded import HELD_QUERY, Held, asked_upto
 from pairplay.services.runner import LOG_QUERY, SENT_QUERY
 from pairplay.services.walmerge import admit
-from pairplay.schemas.nesting import JsonDecoder, msgpack_decode
 
 log = logging.getLogger("pairplay.recorder")
 END_METADATA = "pairplay.recorder.end"  # how the recording ended (Recorder.close)
@@ -157,13 +157,7 @@ SHED_LIVE = "shed by its full inbox"
 SHED_NOTED = 1_000_000  # shed seqs kept to say a hole's cause (`_take_shed`); past them a hole is said as the bus's
 
 
-class _Stamp(msgspec.Struct):
-    """What a shed message's hole needs of it: its source and seq (a full decode cost 6x, in a flood)."""
-    source: str
-    seq: int
-
-
-_stamp = JsonDecoder(_Stamp).decode
+_stamp = stamp_of  # what a shed message's hole needs of it: its source and seq (a full decode cost 6x)
 _REFILL = object()  # inbox control item: Zenoh reported messages lost for good
 
 
@@ -498,7 +492,8 @@ def same_live_session(bus: Bus, session: str, path: Path, timeout_s: float = 3.0
     recording holds no event of another service, or nobody answers. Nobody answering while a service of the
     session is on the bus (its token) is asked again (SAME_SESSION_ASKS, each ask longer): a live service
     busy past the ask's timeout (load 40-66) had the restarted recorder refuse its own session; with none on
-    the bus the refusal is at once. `stop` set: no more asks."""
+    the bus the refusal is at once. `stop` set: no more asks. Several sessions answering as one source are
+    weighed by `_same_answers` (an empty answer never outvotes the source's bytes: trial34 O)."""
     first: dict[str, tuple[int, bytes]] = {}
     # (unsaid: a recorder that continues reads them again and says what it does not take; said here too, each
     # warning came twice)
@@ -515,26 +510,50 @@ def same_live_session(bus: Bus, session: str, path: Path, timeout_s: float = 3.0
         return False
     after = ",".join(f"{s}:{seq - 1}" for s, (seq, _) in sorted(first.items()))
     for ask in range(SAME_SESSION_ASKS):
-        answered = 0
-        for payload in bus.query(f"{query_key(session, '*', SENT_QUERY)}?after={after}", timeout_s * min(2, 1 + ask),
-                                 stop):
-            try:
-                name, items = msgpack_decode(payload, type=tuple[str, list[tuple[str, bytes]]])
-            except msgspec.DecodeError:
-                continue
-            if name not in first:
-                continue  # a service that joined after the earlier file stopped: nothing to compare
-            seq, data = first[name]
-            if not any(p == data for _, p in items[:1]):
-                return False
-            answered += 1
-        if answered:
-            return True
+        answers = sent_answers(bus.query_replies(f"{query_key(session, '*', SENT_QUERY)}?after={after}",
+                                                 timeout_s * min(2, 1 + ask), stop))
+        same = _same_answers(first, answers)
+        if same is not None:
+            return same
         if stop is not None and stop.is_set():
             return False
         if not bus.alive_now(alive_key(session, "*"), stop=stop) - {alive_key(session, Recorder.name)}:
             return False  # nobody of the session on the bus: nobody to wait for
     return False
+
+
+def _same_answers(first: dict[str, tuple[int, bytes]], answers) -> bool | None:
+    """What the answers (services/answers.py `Sent`) say of the recordings whose first event of each source is
+    `first`: True if a source sent those very bytes under that seq; False if a source answered and none of its
+    answers holds them (a new session under the id: its service has other bytes there, or none); None if no
+    source of the file answered. A source whose answers differ at that seq (one sent the file's bytes, another
+    other bytes) counts as not answering: one of them is not the source (said, a warning naming both); an empty
+    answer beside one that holds the bytes is no answer, never a "no" (trial34 O, addendum: a forger's empty
+    answer made the restarted recorder refuse its own live session)."""
+    verdict = None
+    for name, (seq, data) in sorted(first.items()):
+        given = {(replier, p) for replier, source, items in answers.replies if source == name
+                 for _, p in items if _seq_of(p) == seq}
+        if not any(source == name for _, source, _ in answers.replies):
+            continue  # a service that joined after the earlier file stopped: nothing to compare
+        if any(p == data for _, p in given) and any(p != data for _, p in given):
+            log.warning("recorder: forged answer: sessions %s answered as %s with other bytes at seq %d than %s, "
+                        "which sent the recording's: one of them is not %s's; its answer not taken",
+                        ", ".join(sorted({r for r, p in given if p != data})), name, seq,
+                        ", ".join(sorted({r for r, p in given if p == data})), name)
+            continue
+        if any(p == data for _, p in given):
+            verdict = True if verdict is None else verdict
+        else:
+            return False
+    return verdict
+
+
+def _seq_of(data: bytes) -> int | None:
+    try:
+        return _stamp(data).seq
+    except (msgspec.DecodeError, msgspec.ValidationError):
+        return None
 
 
 def _runs(first: int, last: int, marked: list[tuple[int, str]]) -> list[tuple[int, int, str]]:
@@ -704,6 +723,8 @@ class Recorder:
         # per source first heard past its seq 1 (it published before this recorder listened): its first live seq and
         # the asks left, until its head is held (`_catch_up`)
         self._heads: dict[str, list[int]] = {}
+        self._forged: set[tuple] = set()  # answers that differ, recorded once each though asked again (`_undisputed`)
+        self._disputed: set[tuple[str, int]] = set()  # (source, seq) two answers gave differently: taken from nobody
         self._head_at: float | None = None  # monotonic time of the next ask for a head, if one is due
         self._recv_ns: dict[str, int] = {}  # per source, when its latest event was taken (a tail lost: `_tails`)
         self._back_ns = 0  # when the link to the router last came back from an outage
@@ -828,24 +849,21 @@ class Recorder:
         seen = self._seen()
         sources = self._contiguous(seen)
         after = ",".join(f"{s}:{n}" for s, n in sorted(sources.items()))
-        answered, refilled = [], 0
-        for payload in self.bus.query(f"{query_key(self.session, '*', SENT_QUERY)}?after={after}", timeout_s):
+        refilled = 0
+        answers = sent_answers(self.bus.query_replies(f"{query_key(self.session, '*', SENT_QUERY)}?after={after}",
+                                                      timeout_s),
+                               lambda err: log.warning("recorder: unreadable refill: %s", err))
+        answered = answers.answered
+        for key, data in self._undisputed(answers):  # (two that differ: neither; the seq stays a hole, said)
             try:
-                name, items = msgpack_decode(payload, type=tuple[str, list[tuple[str, bytes]]])
-            except msgspec.DecodeError as err:
-                log.warning("recorder: unreadable refill: %s", err)
+                event = decode_event(data)
+            except (msgspec.DecodeError, msgspec.ValidationError):
                 continue
-            answered.append(name)
-            for key, data in items:
-                try:
-                    event = decode_event(data)
-                except (msgspec.DecodeError, msgspec.ValidationError):
-                    continue
-                if self.record(key, data, self.clock(), quiet=True):
-                    refilled += 1
-                elif event.seq not in seen.get(event.source, ()) and self._fill_hole(key, data):
-                    refilled += 1  # below what came live on its key since: a hole Zenoh did not close
-                seen.setdefault(event.source, set()).add(event.seq)
+            if self.record(key, data, self.clock(), quiet=True):
+                refilled += 1
+            elif event.seq not in seen.get(event.source, ()) and self._fill_hole(key, data):
+                refilled += 1  # below what came live on its key since: a hole Zenoh did not close
+            seen.setdefault(event.source, set()).add(event.seq)
         self._overlap = len(self.inbox)  # what came meanwhile may repeat the refill: no rejections for that
         self._quiet_until_ns = self.clock() + int(REFILL_QUIET_S * 1e9)  # nor for what was still on its way
         if since_ns is not None:
@@ -893,6 +911,24 @@ class Recorder:
         self._refills_left = REFILLS
         self._continued_gap(done, unanswered)
         return answered
+
+    def _undisputed(self, answers) -> list[tuple[str, bytes]]:
+        """The events of `answers` (services/answers.py `Sent`) that may be taken: each pair of answers that differ
+        for one event is recorded (a MessageRejected naming both sessions, once) and that (source, seq) is taken
+        from nobody after, a later answer from one session alone included (trial34 O, old config: the learner gone,
+        the forger's lone answer to the next refill was taken); it stays a hole, which the file says."""
+        for c in answers.conflicts:
+            self._disputed.add((c.source, c.seq))
+            pair = (c.source, c.seq, frozenset((c.replier, c.other)))  # (asked again, they may come in the other order)
+            if pair not in self._forged:
+                self._forged.add(pair)
+                self._reject(c.said(), c.key, c.data, source=c.source, seq=c.seq)
+        taken = []
+        for key, data in answers.events:
+            stamp = _stamp(data)  # (every event of `answers` decodes so far: services/answers.py)
+            if (stamp.source, stamp.seq) not in self._disputed:
+                taken.append((key, data))
+        return taken
 
     def _on_bus(self, services: list[str]) -> bool:
         """Whether any of `services` is on the bus now (its token): only such a one may still answer."""
@@ -1304,25 +1340,17 @@ class Recorder:
             del self._heads[source]  # held meanwhile (a refill's answer)
         for source, (first_live, _) in sorted(due.items()):
             got = 0
-            for payload in self.bus.query(f"{query_key(self.session, source, SENT_QUERY)}?after={source}:0",
-                                          timeout_s):
-                try:
-                    _, items = msgpack_decode(payload, type=tuple[str, list[tuple[str, bytes]]])
-                except msgspec.DecodeError as err:
-                    log.warning("recorder: unreadable answer for %s's first events: %s", source, err)
+            answers = sent_answers(
+                self.bus.query_replies(f"{query_key(self.session, source, SENT_QUERY)}?after={source}:0", timeout_s),
+                lambda err: log.warning("recorder: unreadable answer for %s's first events: %s", source, err))
+            for key, data in self._undisputed(answers):  # (two that differ: neither; the head stays a hole, said)
+                stamp = _stamp(data)  # (what does not decode is not among the events: `_fill_hole` would refuse it)
+                if stamp.source != source or not 0 < stamp.seq < first_live or stamp.seq in self._held.get(source, ()):
                     continue
-                for key, data in items:
-                    try:
-                        stamp = _stamp(data)
-                    except (msgspec.DecodeError, msgspec.ValidationError):
-                        continue  # (what does not decode is not asked for: `_fill_hole` would refuse it anyway)
-                    if stamp.source != source or not 0 < stamp.seq < first_live \
-                            or stamp.seq in self._held.get(source, ()):
-                        continue
-                    # at the file's latest log time, not now: now would lift the log times of the live events
-                    # taken after it, which the writer keeps monotonic (a pilot's board start made 4 events of
-                    # one log time so, and tests/damageutil found two chunks holding "the" event of a time)
-                    got += self._fill_hole(key, data, log_time_ns=0)
+                # at the file's latest log time, not now: now would lift the log times of the live events
+                # taken after it, which the writer keeps monotonic (a pilot's board start made 4 events of
+                # one log time so, and tests/damageutil found two chunks holding "the" event of a time)
+                got += self._fill_hole(key, data, log_time_ns=0)
             if got:  # what was in flight meanwhile repeats it: skipped quietly, as after a refill
                 self._quiet_until_ns = self.clock() + int(REFILL_QUIET_S * 1e9)
             held = self._held.get(source, set())

@@ -39,6 +39,7 @@ from pairplay.services.bus import MISSED, Bus, Inbox, Outbox
 from pairplay.services.node import Driver, Logic
 from pairplay.services.recorded import FLUSH_S, until_recorded
 from pairplay.schemas.nesting import msgpack_decode
+from pairplay.services.answers import one_answer
 
 log = logging.getLogger("pairplay.runner")
 # a game waits this long for the services it needs (Node.start), then one line, exit 2; a slow or
@@ -52,7 +53,9 @@ def fetch_log(bus: Bus, session: str, timeout_s: float = 5.0, stop: threading.Ev
     """The session's events the recorder holds, in its order ([] if no recorder answers)."""
     testpause.pause("log-query")  # (a test holds a joining service here: tests/test_faults_restart.py)
     batches = []
-    for payload in bus.query(query_key(session, "recorder", LOG_QUERY), timeout_s, stop=stop):
+    # one recorder's log: two sessions' that differ are none (one of them is not the recorder: services/answers.py)
+    for payload in one_answer(bus.query_replies(query_key(session, "recorder", LOG_QUERY), timeout_s, stop=stop),
+                              f"session {session}'s log"):
         try:
             index, items = msgpack_decode(payload, type=tuple[int, list[tuple[str, bytes]]])
         except msgspec.DecodeError as err:

@@ -109,3 +109,50 @@ def test_tls_and_access_control_refuse_visibly_and_let_the_rights_through(tmp_pa
     events = [r.event for r in read_log(tmp_path / "sec1.mcap").events]
     assert not [e for e in events if isinstance(e, ev.SessionEnded) and e.reason == "forged"]
     assert [e for e in events if isinstance(e, RobotActed) and e.source == "robot"]
+
+
+def test_a_host_answers_only_for_the_sources_it_may_publish(tmp_path, certs):
+    """trial34 O: the robot host (its rights: put robot/**) answered the recorder's catch-up question
+    `_query/learner/sent` with a forged learner event, which the recorder wrote. Under the example's access control
+    a host declares queryables, replies and tokens only for the sources it may publish: the robot's queryable on the
+    learner's question gets no query and its reply never reaches the asker, while its own source's answer does."""
+    from pairplay.schemas.keys import alive_key, query_key
+    router = Bus(BusOptions(mode="router", listen=["tls/127.0.0.1:0"],
+                            zenoh_config=str(render("zenoh-tls-server.json5", certs, tmp_path))))
+    try:
+        endpoint = [e for e in router.locators() if e.startswith("tls/")][0]
+        connect = [endpoint.replace("127.0.0.1", "localhost")]  # the name the server's certificate carries
+
+        def client(host: str) -> Bus:
+            return Bus(BusOptions(mode="client", connect=connect,
+                                  zenoh_config=str(render("zenoh-tls-client.json5", certs, tmp_path, host))))
+        asked: list[str] = []
+        with client("server") as server, client("robot") as robot, client("board") as asker:
+            def answering(who: str, what: bytes):
+                def on_query(query) -> None:
+                    asked.append(who)
+                    Bus.answer(query, [what])
+                return on_query
+            server.queryable(query_key("sec2", "learner", "sent"), answering("server", b"learner's own"))
+            robot.queryable(query_key("sec2", "learner", "sent"), answering("forger", b"forged by the robot host"))
+            robot.queryable(query_key("sec2", "robot", "sent"), answering("robot", b"robot's own"))
+            robot.alive(alive_key("sec2", "learner"))
+            robot.alive(alive_key("sec2", "robot"))
+            # a declaration takes a moment to reach the router: ask until both rightful answers came (each ask
+            # gathers every reply), then once more, so the forger had as long as the rightful ones
+            got: list[bytes] = []
+            deadline = time.monotonic() + 30
+            while not {b"learner's own", b"robot's own"} <= set(got) and time.monotonic() < deadline:
+                got += asker.query(query_key("sec2", "*", "sent") + "?after=learner:0", timeout_s=1.0)
+            before = len(asked)
+            got += asker.query(query_key("sec2", "learner", "sent") + "?after=learner:0", timeout_s=1.0)
+            # (a question to every source reaches the robot's session, which hands it to each of its queryables:
+            # there its reply on the learner's key is what the router drops)
+            asked_learner = asked[before:]
+            tokens = asker.alive_now(alive_key("sec2", "*"), timeout_s=1.0)
+    finally:
+        router.close()
+    assert b"learner's own" in got and b"robot's own" in got
+    assert b"forged by the robot host" not in got
+    assert asked_learner == ["server"]  # the learner's own question reaches the server's session only
+    assert tokens == {alive_key("sec2", "robot")}  # nor let announce itself as the learner
