@@ -34,17 +34,8 @@ from pairplay.errors import OutputError, UserError
 from pairplay.outputs import is_owned
 from pairplay.schemas import journal as j
 
-from .studydata import JOURNAL, REPORT_OUTPUTS, STUDY_FILE, StudyData, sha256_of
-
-
-def study_root(path: str | Path) -> Path | None:
-    """The study folder (`pairplay protocol init`: its journal and study file) that is `path` or holds it, resolved;
-    None if there is none."""
-    p = Path(path).resolve()
-    for folder in (p, *p.parents):
-        if (folder / JOURNAL).is_file() and (folder / STUDY_FILE).is_file():
-            return folder
-    return None
+from .studydata import JOURNAL, REPORT_OUTPUTS, StudyData, sha256_of
+from .studyroot import study_root  # noqa: F401  (re-exported: the verbs' output checks)
 
 
 def holders(data: StudyData, rel: str) -> set[str]:

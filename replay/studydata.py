@@ -72,6 +72,7 @@ from .cutgame import CUT_BEFORE_END, CutEnd, cut_end
 from .fold import Summed
 from . import biases, studyjournal
 from .check import RoundWatch
+from .studyroot import JOURNAL  # noqa: F401  (one name: a study folder's journal; re-exported)
 from .reader import events_of, fold_log
 from .rebuild import Rebuilt, output_paths, rebuild_recording
 from .recover import default_output, journal_more
@@ -79,7 +80,7 @@ from .wal import wal_path
 from pairplay.schemas.nesting import json_decode
 from pairplay.schemas.repeated import refuse_repeated
 
-JOURNAL, SETTINGS = "journal.jsonl", "settings.json"  # and STUDY_FILE, schemas/study.py
+SETTINGS = "settings.json"  # and JOURNAL (replay/studyroot.py), STUDY_FILE (schemas/study.py)
 # what `pairplay report` writes in <folder>/report (report/human.py), and its manifest: here, below the report,
 # since a participant's deletion removes those files (and only those: a user's notes.md there stays)
 REPORT_OUTPUTS = ("picks.csv", "games.png", "phases.png", "users-*.png", "merged.png", "attention.csv",

@@ -543,7 +543,7 @@ def run_study(args: StudySettings, out: Path, progress_bar: Callable = _no_bar, 
     instance_argument(args, StudySettings, "run_study", "args", "a StudySettings (pairplay.StudySettings(seed=1, ...))")
     out = path_argument(out, "run_study", "out")
     force = flag_argument(force, "run_study", "force")
-    from pairplay.replay.copies import study_root
+    from pairplay.replay.studyroot import study_root
     if study_root(out) is not None:  # as `pairplay study --out` is refused there (cli/args.py check_study_folders):
         # the API wrote a report, figures and a policies/ folder beside a people's study's policy files (trial34 M)
         raise OutputError(f"inside a people's study folder ({study_root(out)}) only `pairplay protocol` writes; give "

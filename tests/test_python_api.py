@@ -211,7 +211,8 @@ def test_run_study_refuses_an_out_inside_a_peoples_study_folder(tmp_path):
     figures and a policies/ folder beside the study's policy files. Refused before any work, as the verb is."""
     import pairplay
     from pairplay.errors import OutputError
-    from pairplay.replay.copies import JOURNAL, STUDY_FILE
+    from pairplay.replay.studyroot import JOURNAL
+    from pairplay.schemas.study import STUDY_FILE
 
     folder = tmp_path / "S1"
     (folder / "policies").mkdir(parents=True)
@@ -221,3 +222,17 @@ def test_run_study_refuses_an_out_inside_a_peoples_study_folder(tmp_path):
         pairplay.run_study(pairplay.StudySettings(personas="blind", games=1, rounds=10), folder / "policies", force=True)
     assert "inside a people's study folder" in str(err.value) and "only `pairplay protocol` writes" in str(err.value)
     assert sorted(p.name for p in (folder / "policies").iterdir()) == []
+
+
+def test_run_study_does_not_load_the_study_data_layer(tmp_path):
+    """The study-folder check in run_study imported replay/copies.py, and with it the study's data layer (~44
+    modules): the simulated study's peak rose from 191-192 to 196-199 MiB (issue 16's goal is 200). Its check asks
+    the light replay/studyroot.py."""
+    import subprocess
+    import sys
+
+    code = ("import sys, pairplay; pairplay.run_study(pairplay.StudySettings(personas='blind', games=1, rounds=10), "
+            f"{str(tmp_path / 'out')!r}); print(sorted(m for m in sys.modules if m.startswith('pairplay.replay.')))")
+    ran = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
+    assert ran.returncode == 0, ran.stderr
+    assert "pairplay.replay.studydata" not in ran.stdout and "pairplay.replay.copies" not in ran.stdout, ran.stdout
