@@ -71,26 +71,47 @@ class Sent(NamedTuple):
     replies: list[tuple[str, str, list[tuple[str, bytes]]]]
 
 
-def sent_answers(replies: list[tuple[str, bytes]], unreadable: Callable[[str], None] | None = None) -> Sent:
-    """The answers (replier, payload) to a `sent` question read and paired (see the rule). An item that does not
-    decode is left out (the recorder's checks would refuse it); an unreadable reply is passed to `unreadable`."""
+def answering_as(reply_key: str) -> str | None:
+    """The source a reply sent on `reply_key` (`pairplay/<session>/_query/<source>/<question>`) speaks for; None
+    for a key of no such shape."""
+    parts = reply_key.split("/")
+    return parts[3] if len(parts) == 5 and parts[0] == "pairplay" and parts[2] == "_query" and parts[3] else None
+
+
+def sent_answers(replies: list[tuple], unreadable: Callable[[str], None] | None = None,
+                 foreign: Callable[[str, str, bytes, str, int], None] | None = None) -> Sent:
+    """The answers (replier, payload, reply key) to a `sent` question (`Bus.query_replies(with_key=True)`) read
+    and paired (see the rule). An item that does not decode is left out (the recorder's checks would refuse it);
+    an unreadable reply is passed to `unreadable`. An item of another source than the one its reply was sent as
+    (the reply's key, which access control limits per host: a robot host answering its own question with the
+    learner's events, trial35 O1) is never taken: passed to `foreign(why, key, data, source, seq)` to record."""
     read: list[tuple[str, str, list[tuple[str, bytes]]]] = []
-    for replier, payload in replies:
+    speaks_for: dict[int, str | None] = {}
+    for reply in replies:
+        replier, payload = reply[0], reply[1]
         try:
             name, items = msgpack_decode(payload, type=tuple[str, list[tuple[str, bytes]]])
         except msgspec.DecodeError as err:
             if unreadable is not None:
                 unreadable(f"{err} (from {replier})")
             continue
+        speaks_for[len(read)] = answering_as(reply[2]) if len(reply) > 2 else name
         read.append((replier, name, items))
     first: dict[tuple[str, int], tuple[str, bytes, str]] = {}  # (source, seq): (key, data, replier) first given
     order: list[tuple[str, int]] = []
     conflicts: dict[tuple[str, int], Conflict] = {}
-    for replier, _, items in read:
+    for i, (replier, _, items) in enumerate(read):
         for key, data in items:
             try:
                 stamp = stamp_of(data)
             except (msgspec.DecodeError, msgspec.ValidationError):
+                continue
+            as_source, key_source = speaks_for[i], key.split("/")[2] if key.count("/") >= 3 else ""
+            if stamp.source != as_source or key_source != as_source:
+                if foreign is not None:
+                    foreign(f"forged answer: {replier or 'a session'} answered as {as_source!r} with "
+                            f"{stamp.source!r}'s seq {stamp.seq} on {key}: not taken", key, data, stamp.source,
+                            stamp.seq)
                 continue
             at = (stamp.source, stamp.seq)
             if at not in first:
@@ -99,7 +120,7 @@ def sent_answers(replies: list[tuple[str, bytes]], unreadable: Callable[[str], N
             elif first[at][1] != data and at not in conflicts:
                 k, d, r = first[at]
                 conflicts[at] = Conflict(stamp.source, stamp.seq, k, d, r, key, data, replier)
-    return Sent(answered=sorted({name for _, name, _ in read}),
+    return Sent(answered=sorted({speaks_for[i] for i in range(len(read)) if speaks_for[i]}),
                 events=[first[at][:2] for at in order if at not in conflicts],
                 conflicts=list(conflicts.values()), replies=read)
 

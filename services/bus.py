@@ -925,12 +925,14 @@ class Bus:
         return [payload for _, payload in self.query_replies(selector, timeout_s, stop, meanwhile)]
 
     def query_replies(self, selector: str, timeout_s: float = 2.0, stop: threading.Event | None = None,
-                      meanwhile: Callable[[], None] | None = None) -> list[tuple[str, bytes]]:
+                      meanwhile: Callable[[], None] | None = None, with_key: bool = False) -> list[tuple]:
         """(the ZenohId of the session that replied, payload) of every ok reply to a query (errors are logged,
         not raised); returns early, with what came, once `stop` is set. `meanwhile()`, if given, is called while
         no reply waits (it must return within milliseconds): a service that asks the recorder whether it holds
         its events answers the recorder's refill so (services/recorded.py). Who replied is what tells two
-        answers for one source apart (services/answers.py)."""
+        answers for one source apart (services/answers.py). `with_key`: (replier, payload, the key the reply was
+        sent on): the key a host may reply on is what access control limits (docs/examples), so it, not the
+        payload's own words, says which source an answer may speak for."""
         out = []
         # no consolidation: a queryable may answer with many replies on one key
         replies = _get(self.session.get, selector, timeout=timeout_s,
@@ -938,7 +940,8 @@ class Bus:
         for reply in _replies(replies, timeout_s + 1.0, stop, meanwhile):
             if reply.ok is not None:
                 replier = reply.replier_id
-                out.append((str(replier.zid) if replier is not None else "", reply.ok.payload.to_bytes()))
+                who, payload = str(replier.zid) if replier is not None else "", reply.ok.payload.to_bytes()
+                out.append((who, payload, str(reply.ok.key_expr)) if with_key else (who, payload))
             else:
                 log.warning("query %s: error reply %s", selector, reply.err.payload.to_bytes()[:200])
         return out

@@ -511,7 +511,7 @@ def same_live_session(bus: Bus, session: str, path: Path, timeout_s: float = 3.0
     after = ",".join(f"{s}:{seq - 1}" for s, (seq, _) in sorted(first.items()))
     for ask in range(SAME_SESSION_ASKS):
         answers = sent_answers(bus.query_replies(f"{query_key(session, '*', SENT_QUERY)}?after={after}",
-                                                 timeout_s * min(2, 1 + ask), stop))
+                                                 timeout_s * min(2, 1 + ask), stop, with_key=True))
         same = _same_answers(first, answers)
         if same is not None:
             return same
@@ -851,8 +851,8 @@ class Recorder:
         after = ",".join(f"{s}:{n}" for s, n in sorted(sources.items()))
         refilled = 0
         answers = sent_answers(self.bus.query_replies(f"{query_key(self.session, '*', SENT_QUERY)}?after={after}",
-                                                      timeout_s),
-                               lambda err: log.warning("recorder: unreadable refill: %s", err))
+                                                      timeout_s, with_key=True),
+                               lambda err: log.warning("recorder: unreadable refill: %s", err), self._foreign)
         answered = answers.answered
         for key, data in self._undisputed(answers):  # (two that differ: neither; the seq stays a hole, said)
             try:
@@ -911,6 +911,13 @@ class Recorder:
         self._refills_left = REFILLS
         self._continued_gap(done, unanswered)
         return answered
+
+    def _foreign(self, why: str, key: str, data: bytes, source: str, seq: int) -> None:
+        """An answer's event of another source than the one its reply was sent as (services/answers.py): refused
+        and recorded, once per (source, seq, key)."""
+        if (source, seq, key) not in self._forged:
+            self._forged.add((source, seq, key))
+            self._reject(why, key, data, source=source, seq=seq)
 
     def _undisputed(self, answers) -> list[tuple[str, bytes]]:
         """The events of `answers` (services/answers.py `Sent`) that may be taken: each pair of answers that differ
@@ -1341,8 +1348,10 @@ class Recorder:
         for source, (first_live, _) in sorted(due.items()):
             got = 0
             answers = sent_answers(
-                self.bus.query_replies(f"{query_key(self.session, source, SENT_QUERY)}?after={source}:0", timeout_s),
-                lambda err: log.warning("recorder: unreadable answer for %s's first events: %s", source, err))
+                self.bus.query_replies(f"{query_key(self.session, source, SENT_QUERY)}?after={source}:0", timeout_s,
+                                       with_key=True),
+                lambda err: log.warning("recorder: unreadable answer for %s's first events: %s", source, err),
+                self._foreign)
             for key, data in self._undisputed(answers):  # (two that differ: neither; the head stays a hole, said)
                 stamp = _stamp(data)  # (what does not decode is not among the events: `_fill_hole` would refuse it)
                 if stamp.source != source or not 0 < stamp.seq < first_live or stamp.seq in self._held.get(source, ()):

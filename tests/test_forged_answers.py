@@ -207,3 +207,42 @@ def test_a_log_answered_differently_by_two_sessions_is_taken_from_neither(tmp_pa
             recorder.close(deadline=Deadline(5.0))
     assert got == []
     assert zid in caplog.text and "not the recorder" in caplog.text, caplog.text
+
+
+def test_an_answer_for_another_source_than_the_one_it_was_sent_as_is_never_taken(tmp_path):
+    """trial35 O1: under the fixed example's access control the robot host may answer only its own question, and
+    it answered that (`_query/robot/sent`) with the learner's events, seqs its learner had not sent yet: alone,
+    the restart's refill wrote 26 forged QUpdated (q_after 99). An answer's event is taken only for the source its
+    reply was sent as (the reply's key, which access control limits per host): refused and recorded."""
+    from test_recorder_restart import _a_recorded_game_not_yet_running
+
+    s = "foreignsrc"
+    path = tmp_path / f"{s}.mcap"
+    stop = threading.Event()
+    ahead = encode_event(stamped(ev.ServiceStarted(service="game FORGED"), session=s, source="game", seq=40,
+                                 time_ns=1))
+    with listener() as bus, connector(bus) as forger:
+        game = _a_recorded_game_not_yet_running(bus, s, path)  # seqs 1-3 recorded, that recorder closed
+        game.run_in_thread(stop)
+        try:
+            forger.queryable(query_key(s, "robot", SENT_QUERY),  # its own question: the ACL lets it answer this
+                             lambda q: Bus.answer(q, [msgspec.msgpack.encode(
+                                 ("robot", [(event_key(s, "game", "ServiceStarted"), ahead)]))]))
+            zid = str(forger.session.zid())
+            assert wait_until(lambda: zid in {r for r, _ in bus.query_replies(query_key(s, "robot", SENT_QUERY),
+                                                                             0.5)}, 30)
+            second = Recorder(bus, s, path, restart=True)
+            second.start()
+            try:
+                assert wait_until(lambda: second.step(0.05) and False or
+                                  any(k.endswith("/RecordingGap") for k, _ in second.kept), 120)
+                said = [r for r in rejections(second.kept) if "forged answer" in r.reason]
+            finally:
+                second.close(deadline=Deadline(5.0))
+        finally:
+            stop.set()
+            game.thread.join(10)
+            game.close()
+    assert said and "answered as 'robot' with 'game''s seq 40" in said[0].reason, said
+    log = read_log(second.path)
+    assert not [r for r in log.events if isinstance(r.event, ev.ServiceStarted) and "FORGED" in r.event.service]
