@@ -66,6 +66,14 @@ def run(args: argparse.Namespace) -> int:
             raise OptionError(f"{LIVE}: recover it once its session has stopped; nothing written", live)
 
     args.output = file_in(args.output, default_output(Path(args.recording)).name)  # `-o out/`: into out/
+    from pairplay.replay.continued import continued_in
+    later = continued_in(args.recording)
+    if later is not None:  # said first, as every verb says it (replay/recover.py journal_left): its recovered copy is
+        # a part of a session whole beside it (trial35 N1: a third, partial copy and no word of S.1.mcap)
+        from pairplay.cli.main import warn
+        warn("recover", f"{args.recording}: a restarted recorder continued it in {later.name} beside it, which holds "
+                        "the whole session from this file's events on: give that to the verbs; this recovers the "
+                        "earlier part alone")
     if args.discard_journal:  # decided before anything is written: only a stale journal is removed
         from pairplay.replay.copies import Copies
         # removing it writes the study folder it may be in: the folder's lock first (replay/copies.py module rule)

@@ -324,3 +324,5 @@ def test_the_earlier_file_of_a_restarted_recorder_names_the_file_that_continues_
                    "this file's events on: give that instead", line
     ran = pairplay_cli("rebuild", earlier, "--out", tmp_path / "rb", "--partial")
     assert "a restarted recorder continued it in c2.1.mcap" in ran.stderr, ran.stdout + ran.stderr
+    ran = pairplay_cli("recover", earlier)  # (trial35 N1: recover alone said nothing of it)
+    assert "a restarted recorder continued it in c2.1.mcap beside it" in ran.stderr, ran.stdout + ran.stderr
