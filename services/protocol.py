@@ -96,6 +96,10 @@ class Live:
     suggestion: str = ""
     robot: str = ""
     paused: bool = False
+    # the game's first RoundStarted seen: it is on the bus and takes the experimenter's controls. A pause sent
+    # before (the game not yet subscribed) reached nobody, was answered ok and shown paused while the game played
+    # every round, and its Resume was refused "not paused" (trial35 F1)
+    started: bool = False
     state: str = "idle"  # idle | playing | questionnaire | ended (aborted: no questionnaire) | combining
     # a board (a scripted player, or a board elsewhere) is on the game's bus; when the lab serves the board,
     # the console says a board page is connected instead (services/console/app.py)
@@ -111,7 +115,7 @@ class Live:
     def see(self, e: ev.Event) -> None:
         name = type(e).__name__
         if name == "RoundStarted":
-            self.round, self.picks = e.round, 0
+            self.round, self.picks, self.started = e.round, 0, True
         elif name == "CardRevealed":
             self.picks += 1
         elif name == "SuggestionMade":
@@ -503,6 +507,8 @@ class StudyRunner:
         reason = bounded_reason(reason)  # refused whatever the state: the input itself is wrong
         if self.live.state != "playing":
             raise StudyDataError("no game is being played")
+        if not self.live.started:  # (see Live.started)
+            raise StudyDataError("the game is starting (its first round has not begun): pause once it has")
         if self.live.paused:
             raise StudyDataError("the game is already paused")
         self._control(ev.SessionPaused(reason=reason))

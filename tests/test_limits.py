@@ -6,6 +6,8 @@ a forged 60,000-character source made the game's refusal 120 KB; verify FAIL, re
 
 import threading
 
+import pytest
+
 from pairplay.replay.reader import read_log
 from pairplay.schemas import events as ev
 from pairplay.schemas.envelope import stamped
@@ -103,6 +105,26 @@ def test_the_console_refuses_an_over_long_pause_or_abort_reason_in_one_line(tmp_
             assert not runner.live.paused
         finally:
             server.close()
+
+
+def test_a_pause_before_the_game_has_begun_is_refused_not_shown_as_taken(tmp_path):
+    """trial35 F1: a console Pause in a game's first moment, before the game was on the bus, was answered ok and
+    shown paused while the game played every round; its Resume was refused "not paused". Refused until the game's
+    first RoundStarted is seen."""
+    from test_console_api import STUDY
+    from pairplay.replay.studydata import StudyData
+    from pairplay.services.bus import Bus, BusOptions
+    from pairplay.services.protocol import StudyRunner
+    from pairplay.replay.studydata import StudyDataError
+    data = StudyData.create(tmp_path / "study", STUDY)
+    with Bus(BusOptions()) as bus:
+        runner = StudyRunner(data, bus)
+        runner.live.state, runner.live.session = "playing", "s"  # a game just started: no RoundStarted seen yet
+        with pytest.raises(StudyDataError, match="the game is starting"):
+            runner.pause()
+        assert not runner.live.paused
+        runner.live.see(ev.RoundStarted(round=0, faces=[0] * 18))
+        assert runner.live.started
 
 
 def test_the_combiners_answer_to_a_request_of_huge_paths_fits_the_bus(tmp_path):
