@@ -1701,8 +1701,24 @@ def _name_pattern(name: str) -> str | None:
     if not parts:
         return None
     joined = r"[\s\-._]*".join(map(re.escape, parts))
-    alone = "|".join(map(re.escape, sorted(parts, key=len, reverse=True)))
+    # and as an English keyboard writes them (trial35 D1: "Mueller", "Jurgen", "Zoe", "OBrien" stayed): each word
+    # without its apostrophes and hyphens, each part without its accents, and German's umlauts as ae, oe, ue, ss
+    words = [v for w in name.split() for v in (w, w.replace("'", "\u2019"), w.replace("\u2019", "'"),
+                                               re.sub(r"['\u2019\-]", "", w))]
+    forms = {f for w in parts + [w for w in words if len(w) >= 2] for f in _spellings(w)}
+    alone = "|".join(map(re.escape, sorted(forms, key=len, reverse=True)))
     return rf"(?<![^\W_])(?:{joined}|{alone})s?(?![^\W_])"  # an underscore parts words here ("Schmidt_Anna")
+
+
+def _spellings(word: str) -> set[str]:
+    """`word` as written, without its accents ("Zoë" -> "Zoe", "Müller" -> "Muller") and with German's umlauts and
+    sharp s spelled out ("Mueller", "Strasse")."""
+    import unicodedata
+    plain = "".join(c for c in unicodedata.normalize("NFKD", word) if not unicodedata.combining(c))
+    spelled = word
+    for a, b in (("ä", "ae"), ("ö", "oe"), ("ü", "ue"), ("Ä", "Ae"), ("Ö", "Oe"), ("Ü", "Ue"), ("ß", "ss")):
+        spelled = spelled.replace(a, b)
+    return {word, plain, spelled}
 
 
 def mentions(text: str, pid: str) -> bool:

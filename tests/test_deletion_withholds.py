@@ -225,3 +225,17 @@ def test_a_file_of_the_users_in_report_that_names_them_by_name_is_said_to_name_t
     assert ran.returncode == 0, ran.stderr
     line, = [x for x in ran.stderr.splitlines() if "notes.md" in x]
     assert "it names p01 (their id, or their name or a part of it, from the key file): edit it by hand" in line
+
+
+@pytest.mark.parametrize("name, said, left", [
+    ("Jürgen Müller", "jürgen's dad; MÜLLER; Mueller; Juergen; Jurgen; Muller; a mule",
+     "deleted's dad; deleted; deleted; deleted; deleted; deleted; a mule"),
+    ("Zoë O'Brien", "O'Brien's kid; O\u2019Brien; OBrien; Brien; Zoe; zoë; ZOË; a zoo",
+     "deleted's kid; deleted; deleted; deleted; deleted; deleted; deleted; a zoo")])
+def test_a_name_goes_from_kept_reasons_in_the_spellings_a_keyboard_gives_it(name, said, left):
+    """trial35 D1: "Mueller", "Juergen", "Jurgen", "Zoe", "OBrien" stayed in another person's kept reason after
+    the deletion of Jürgen Müller and Zoë O'Brien: only the spellings of the key file went."""
+    import re
+
+    from pairplay.replay.studydata import _name_pattern
+    assert re.sub(_name_pattern(name), "deleted", said, flags=re.IGNORECASE) == left
