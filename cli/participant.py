@@ -85,6 +85,10 @@ def _on_folder(data: StudyData, args) -> int:
     if erased.unnamed:  # another's words about them, rewritten: said, so the experimenter can read what is kept
         print(f"their name (from the key file, whole or a part of it) replaced by `deleted` in "
               f"{counted(erased.unnamed, 'kept reason')} of other people's games (`pairplay protocol status` shows them)")
+    if erased.no_key_line:  # on stderr, as what a deletion could not erase (below)
+        print(escaped(f"{args.participant} had no line in the key file {erased.no_key_line}: their name is not known "
+                      "here, so the kept reasons of other people's games were not checked for it: read them "
+                      "(`pairplay protocol status`)"), file=sys.stderr)
     for c in erased.copies:
         if c.erased:
             print(escaped(f"erased {copy_words(c, args.participant)}: {c.path} (pairplay's own file, unchanged: the "

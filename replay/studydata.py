@@ -1545,7 +1545,8 @@ class StudyData:
                 journal_lines_removed=removed, merged_policies_using_them=merged, key_file_line_removed=key_removed,
                 copies_erased=len(erased), consent_withdrawn=consent_withdrawn, flaws_kept=flaws))
             self.write_tables()
-            return Deletion(deleted, left, [c for c in copies if c.fate], unnamed)
+            return Deletion(deleted, left, [c for c in copies if c.fate], unnamed,
+                            str(key) if key is not None and lines == 0 else "")
 
     def copies_of(self, pid: str) -> list[j.ParticipantExported | j.CopyWritten]:
         """The copies of `pid`'s data the journal says were made beyond the places their deletion erases by
@@ -1670,6 +1671,9 @@ class Deletion:
     left: list[tuple[str, bool]]
     copies: list[Copy]
     unnamed: int = 0  # kept lines of others whose reason named them (`_unnamed`): their name replaced, said
+    # the study's key file, when it holds no line of theirs (a hand edit): their name is unknown, so no kept text
+    # was checked for it; said (trial35 D2: nothing was)
+    no_key_line: str = ""
 
     @property
     def elsewhere(self) -> list[str]:

@@ -239,3 +239,19 @@ def test_a_name_goes_from_kept_reasons_in_the_spellings_a_keyboard_gives_it(name
 
     from pairplay.replay.studydata import _name_pattern
     assert re.sub(_name_pattern(name), "deleted", said, flags=re.IGNORECASE) == left
+
+
+def test_a_deletion_of_someone_the_key_file_has_no_line_of_says_their_name_was_not_checked(played, tmp_path,
+                                                                                          pairplay_cli):
+    """trial35 D2: their key-file line gone by a hand edit, the deletion scrubbed no name from the kept reasons and
+    said nothing of it."""
+    folder = copy(played, tmp_path)
+    keys = tmp_path / "private" / "keys.csv"
+    keys.write_text("".join(line for line in keys.read_text().splitlines(True) if not line.startswith("p01,")))
+    ran = pairplay_cli("protocol", "mark-invalid", "s", P02_G1, "--reason", "Anna's mother came in", cwd=tmp_path)
+    assert ran.returncode == 0, ran.stderr
+    ran = pairplay_cli("participant", "delete", "s", "p01", "--yes", cwd=tmp_path)
+    assert ran.returncode == 0, ran.stderr
+    assert f"p01 had no line in the key file {keys}: their name is not known here, so the kept reasons of other " \
+           "people's games were not checked for it" in ran.stderr, ran.stderr
+    assert folder.is_dir()

@@ -328,7 +328,7 @@ def console_routes(console: Console) -> list:
         erased = data.delete_participant(pid, consent_withdrawn=asked.consent_withdrawn)
         console.forget(pid)
         return JSONResponse({"deleted": msgspec.to_builtins(erased.event), "not_erased": erased.elsewhere,
-                             "erased_copies": [c.path for c in erased.copies if c.erased], "unnamed": erased.unnamed,
+                             "erased_copies": [c.path for c in erased.copies if c.erased], "unnamed": erased.unnamed, "no_key_line": erased.no_key_line,
                              "kept": [{"file": rel, "names_them": names} for rel, names in erased.left]})
 
     async def report(request: Request) -> Response:

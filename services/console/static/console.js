@@ -204,6 +204,7 @@ $("delete").onclick = act(async () => {
   $("data-result").textContent = `deleted ${pid}${r.deleted.consent_withdrawn ? " (consent withdrawn)" : ""}: ${r.deleted.sessions_removed} games, ${r.deleted.files_removed} files` +
     (r.deleted.merged_policies_using_them.length ? `; merged policies that used them: ${r.deleted.merged_policies_using_them.join(", ")}` : "") +
     (r.unnamed ? `; their name replaced by "deleted" in ${r.unnamed} kept reason${r.unnamed > 1 ? "s" : ""} of other people's games` : "") +
+    (r.no_key_line ? `; they had no line in the key file: their name is not known here, so other people's kept reasons were not checked for it` : "") +
     r.erased_copies.map(p => `; erased pairplay's unchanged copy ${p}`).join("") +
     r.not_erased.map(p => `; NOT erased, a copy made outside the study folder's own places (changed or moved): ${p} (erase it by hand)`).join("") +
     r.kept.map(k => `; kept ${k.file}, not written by the report` + (k.names_them ? ` (it names ${pid}: edit it by hand)` : "")).join("");
