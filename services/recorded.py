@@ -151,16 +151,15 @@ def _left(session: str, upto: dict[str, int]) -> str:
 
 
 def recording_lacks(bus: Bus, session: str, upto: dict[str, int], stop: threading.Event) -> str:
-    """Every hole the recording has now, and what it lacks of `upto`, in words ("" if none), or that the recorder
-    left the bus without saying (`_left`). A recorder busy with a refill answers late: asked again for at most
-    RECORDED_WAIT_S."""
+    """Every hole the recording has now, and what it lacks of `upto`, in words ("" if none, or if no recorder is
+    on the bus: one that left before the services had their answers is said by them, `until_recorded`). A
+    recorder busy with a refill answers late: asked again for at most RECORDED_WAIT_S."""
     upto = {source: seq for source, seq in upto.items() if seq > 0}
     held, asked = _held(bus, session, upto, stop, lambda seconds: stop.wait(seconds), lambda _h: True,
                         RECORDED_WAIT_S)
-    if stop.is_set():
+    if stop.is_set() or not asked:  # (a recorder that held every service's events may leave before this is
+        # asked: the services asked it first, `until_recorded`, and one gone before them is said there)
         return ""
-    if not asked:
-        return _left(session, upto)
     if held is None:
         return f"the recorder did not say whether it holds every event (session {session})"
     lacking = said_holes(held, upto)
