@@ -15,8 +15,10 @@ records (services/bus.py `Outbox.sent`), which die with the process. In the four
 host's link came back 5 s after a cut, the game (held meanwhile) played its last rounds in 0.9 s, and the
 refill 1 s after the link's return found the game, the learner and the participant gone: their 2-4
 events each lost with the link were a hole in the file, and the session exited 0 saying nothing.
-A recorder not on the bus when asked (its token) left after the game's end (before, the game's hold covers a
-recorder gone): that is said the same way, as what the file may lack.
+A recorder not on the bus when a service asks (its token) left after the game's end (before, the game's hold
+covers a recorder gone) and before that service had its answer: the service says so (`_left`), and the session's
+process with it. One gone when the session asks last (`recording_lacks`) may have left rightly, once every service
+had its answer: not said.
 """
 
 from __future__ import annotations
@@ -142,10 +144,10 @@ def until_recorded(bus: Bus, session: str, upto: dict[str, int], serve: Callable
 
 
 def _left(session: str, upto: dict[str, int]) -> str:
-    """The words for a recorder gone from the bus when asked what it holds. Asked only once the game has ended
-    (a recorder gone before is the game's hold, services/recorderwatch.py): a recorder that left (a crash, a
-    signal) after the game's end but before the services' last events (the robot's last reports) reached it
-    let the session exit 0 saying "the external recorder writes its file" (trial34 A)."""
+    """The words for a recorder gone from the bus when a service asks what it holds. Asked only once the game has
+    ended (a recorder gone before is the game's hold, services/recorderwatch.py): a recorder that left (a crash, a
+    signal) after the game's end but before the service had its answer let the session exit 0 saying "the external
+    recorder writes its file" (trial34 A)."""
     return (f"the recorder left the bus after the game ended, before it said it holds the last events of "
             f"{', '.join(sorted(upto))}: its file may lack them (session {session}; `pairplay rebuild` of it says what)")
 
