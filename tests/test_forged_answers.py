@@ -34,14 +34,28 @@ def forged_start(s: str) -> bytes:
                                 seq=1, time_ns=1))
 
 
-def forging(bus: Bus, forger: Bus, s: str, items: list[tuple[str, bytes]]) -> str:
-    """`forger` answers the game's question with `items`, as the game; returns its ZenohId once its answer
+def forging(bus: Bus, forger: Bus, s: str, items: list[tuple[str, bytes]], source: str = "game") -> str:
+    """`forger` answers `source`'s question with `items`, as `source`; returns its ZenohId once its answer
     reaches `bus` (a queryable takes a moment to be known)."""
-    forger.queryable(query_key(s, "game", SENT_QUERY),
-                     lambda q: Bus.answer(q, [msgspec.msgpack.encode(("game", items))]))
+    forger.queryable(query_key(s, source, SENT_QUERY),
+                     lambda q: Bus.answer(q, [msgspec.msgpack.encode((source, items))]))
     zid = str(forger.session.zid())
-    assert wait_until(lambda: zid in {r for r, _ in bus.query_replies(query_key(s, "game", SENT_QUERY), 0.5)}, 30)
+    assert wait_until(lambda: zid in {r for r, _ in bus.query_replies(query_key(s, source, SENT_QUERY), 0.5)}, 30)
     return zid
+
+
+def refilled(bus: Bus, s: str, path) -> tuple[list[ev.MessageRejected], object]:
+    """A recorder restarted on `path` (its refill asks every source), stepped until its RecordingGap is written,
+    then closed: (its rejections that say a forged answer, its file read back)."""
+    second = Recorder(bus, s, path, restart=True)
+    second.start()
+    try:
+        assert wait_until(lambda: second.step(0.05) and False or
+                          any(k.endswith("/RecordingGap") for k, _ in second.kept), 120)
+        said = [r for r in rejections(second.kept) if "forged answer" in r.reason]
+    finally:
+        second.close(deadline=Deadline(5.0))
+    return said, read_log(second.path)
 
 
 @pytest.fixture
@@ -156,21 +170,13 @@ def test_two_answers_that_differ_in_a_restarted_recorder_s_refill_are_taken_from
                                                    encode_event(stamped(ev.ServiceStarted(service="game FORGED"),
                                                                         session=s, source="game", seq=4,
                                                                         time_ns=1)))])
-            second = Recorder(bus, s, path, restart=True)
-            second.start()
-            try:
-                assert wait_until(lambda: second.step(0.05) and False or
-                                  any(k.endswith("/RecordingGap") for k, _ in second.kept), 120)
-                said = [r for r in rejections(second.kept) if "forged answer" in r.reason]
-            finally:
-                second.close(deadline=Deadline(5.0))
+            said, log = refilled(bus, s, path)
         finally:
             stop.set()
             game.thread.join(10)
             game.close()
     assert len(said) == 1 and (said[0].offending_source, said[0].offending_seq) == ("game", 4), said
     assert forger_zid in said[0].reason, said[0].reason
-    log = read_log(second.path)
     assert not [r for r in log.events if isinstance(r.event, ev.ServiceStarted) and "FORGED" in r.event.service]
     game_seqs = {r.event.seq for r in log.events if r.event.source == "game"}
     assert 4 not in game_seqs and {1, 2, 3, 5} <= game_seqs, game_seqs  # seq 4: neither taken, a hole said
@@ -225,24 +231,12 @@ def test_an_answer_for_another_source_than_the_one_it_was_sent_as_is_never_taken
         game = _a_recorded_game_not_yet_running(bus, s, path)  # seqs 1-3 recorded, that recorder closed
         game.run_in_thread(stop)
         try:
-            forger.queryable(query_key(s, "robot", SENT_QUERY),  # its own question: the ACL lets it answer this
-                             lambda q: Bus.answer(q, [msgspec.msgpack.encode(
-                                 ("robot", [(event_key(s, "game", "ServiceStarted"), ahead)]))]))
-            zid = str(forger.session.zid())
-            assert wait_until(lambda: zid in {r for r, _ in bus.query_replies(query_key(s, "robot", SENT_QUERY),
-                                                                             0.5)}, 30)
-            second = Recorder(bus, s, path, restart=True)
-            second.start()
-            try:
-                assert wait_until(lambda: second.step(0.05) and False or
-                                  any(k.endswith("/RecordingGap") for k, _ in second.kept), 120)
-                said = [r for r in rejections(second.kept) if "forged answer" in r.reason]
-            finally:
-                second.close(deadline=Deadline(5.0))
+            # its own question: the ACL lets it answer this
+            forging(bus, forger, s, [(event_key(s, "game", "ServiceStarted"), ahead)], source="robot")
+            said, log = refilled(bus, s, path)
         finally:
             stop.set()
             game.thread.join(10)
             game.close()
     assert said and "answered as 'robot' with 'game''s seq 40" in said[0].reason, said
-    log = read_log(second.path)
     assert not [r for r in log.events if isinstance(r.event, ev.ServiceStarted) and "FORGED" in r.event.service]

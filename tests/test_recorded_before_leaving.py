@@ -25,6 +25,33 @@ from pairplay.services.session import run_session
 ROUNDS = 2
 
 
+def _played(tmp_path, session: str, monkeypatch, enqueue) -> tuple[dict, Recorder]:
+    """The session played on a router bus (`run_session`, recorder external), its recorder in a Zenoh session of its
+    own whose `enqueue` is `enqueue(the real one, the recorder's stop, its bus)`: (the session's summary, the
+    recorder, closed)."""
+    monkeypatch.setattr(recorded, "RECORDED_WAIT_S", 2.0)
+    router = Bus(BusOptions(mode="router"))
+    rec_bus = Bus(BusOptions(mode="client", connect=router.locators()[:1]))
+    recorder = Recorder(rec_bus, session, tmp_path / f"{session}.mcap")
+    stop = threading.Event()
+    recorder.enqueue = enqueue(recorder.enqueue, stop, rec_bus)
+    summary: dict = {}
+    try:
+        recorder.start()
+        thread = threading.Thread(target=recorder.run, args=(stop,), daemon=True)
+        thread.start()
+        config = SessionConfig(session=session, participant="sim:ashley", persona="ashley", seed=1, rounds=ROUNDS)
+        run_session(config, tmp_path / "unused.mcap", bus=router, external=("recorder",), settle_timeout_s=10,
+                    summary=summary)
+    finally:
+        stop.set()
+        thread.join(10)
+        recorder.close()
+        rec_bus.close()
+        router.close()
+    return summary, recorder
+
+
 def _play(tmp_path, session: str, monkeypatch, from_record: bool) -> tuple[dict, object]:
     """The session played with the game's last RoundEnded lost to the recorder (`from_record`: and to the game's
     own record of what it sent, a bounded one); (the session's summary, the recording read back)."""
@@ -45,27 +72,9 @@ def _play(tmp_path, session: str, monkeypatch, from_record: bool) -> tuple[dict,
                 if sum(k.endswith("/RoundEnded") for k, _ in self.sent) == ROUNDS:
                     self.sent.pop()
         monkeypatch.setattr(Outbox, "_publish", unrecorded)
-    monkeypatch.setattr(recorded, "RECORDED_WAIT_S", 2.0)
-    router = Bus(BusOptions(mode="router"))
-    rec_bus = Bus(BusOptions(mode="client", connect=router.locators()[:1]))
-    recorder = Recorder(rec_bus, session, tmp_path / f"{session}.mcap")
-    take = recorder.enqueue
-    recorder.enqueue = lambda key, payload: None if last_round_end(key) else take(key, payload)  # lost on the way
-    stop = threading.Event()
-    summary: dict = {}
-    try:
-        recorder.start()
-        thread = threading.Thread(target=recorder.run, args=(stop,), daemon=True)
-        thread.start()
-        config = SessionConfig(session=session, participant="sim:ashley", persona="ashley", seed=1, rounds=ROUNDS)
-        run_session(config, tmp_path / "unused.mcap", bus=router, external=("recorder",), settle_timeout_s=10,
-                    summary=summary)
-    finally:
-        stop.set()
-        thread.join(10)
-        recorder.close()
-        rec_bus.close()
-        router.close()
+    summary, recorder = _played(tmp_path, session, monkeypatch,
+                                lambda take, stop, rec_bus: lambda key, payload: None if last_round_end(key)
+                                else take(key, payload))  # lost on the way
     assert len(ends) >= ROUNDS  # the loss happened
     return summary, read_log(recorder.path)
 
@@ -101,32 +110,13 @@ def test_a_recorder_that_leaves_after_the_games_end_is_said_by_the_session(tmp_p
     then) left the services' last events (a robot's last reports) out of its file, and the session exited 0
     saying "the external recorder writes its file". Now the session says the recorder left before it said it
     holds the services' last events (`pairplay session` exits 1 on it)."""
-    session = "gone1"
-    monkeypatch.setattr(recorded, "RECORDED_WAIT_S", 2.0)
-    router = Bus(BusOptions(mode="router"))
-    rec_bus = Bus(BusOptions(mode="client", connect=router.locators()[:1]))
-    recorder = Recorder(rec_bus, session, tmp_path / f"{session}.mcap")
-    stop, summary = threading.Event(), {}
-    take = recorder.enqueue
-
-    def then_leave(key: str, payload: bytes) -> None:
-        take(key, payload)
-        if key.endswith("/game/SessionEnded"):  # its thread stops, its Zenoh session closes: its token goes
-            threading.Thread(target=lambda: (stop.set(), rec_bus.close()), daemon=True).start()
-    recorder.enqueue = then_leave
-    try:
-        recorder.start()
-        thread = threading.Thread(target=recorder.run, args=(stop,), daemon=True)
-        thread.start()
-        config = SessionConfig(session=session, participant="sim:ashley", persona="ashley", seed=1, rounds=ROUNDS)
-        run_session(config, tmp_path / "unused.mcap", bus=router, external=("recorder",), settle_timeout_s=10,
-                    summary=summary)
-    finally:
-        stop.set()
-        thread.join(10)
-        recorder.close()
-        rec_bus.close()
-        router.close()
+    def then_leave(take, stop, rec_bus):
+        def enqueue(key: str, payload: bytes) -> None:
+            take(key, payload)
+            if key.endswith("/game/SessionEnded"):  # its thread stops, its Zenoh session closes: its token goes
+                threading.Thread(target=lambda: (stop.set(), rec_bus.close()), daemon=True).start()
+        return enqueue
+    summary, _ = _played(tmp_path, "gone1", monkeypatch, then_leave)
     said = summary.get("not_recorded", "")
     assert said.startswith("the recorder left the bus after the game ended, before it said it holds ") \
         and "(session gone1;" in said, said
