@@ -64,7 +64,7 @@ class Sent(NamedTuple):
     """What the answers to a `sent` question (services/runner.py SENT_QUERY) give: `answered`, the sources that
     answered; `events`, (key, payload) in the order they came, one per (source, seq), only those every session
     that gave them agrees on; `conflicts`, the (source, seq) they do not; `replies`, each reply read:
-    (replier, source it answers as, its items)."""
+    (replier, the source it answers as: its reply key's when given, else its own word, its items)."""
     answered: list[str]
     events: list[tuple[str, bytes]]
     conflicts: list[Conflict]
@@ -86,7 +86,6 @@ def sent_answers(replies: list[tuple], unreadable: Callable[[str], None] | None 
     (the reply's key, which access control limits per host: a robot host answering its own question with the
     learner's events, trial35 O1) is never taken: passed to `foreign(why, key, data, source, seq)` to record."""
     read: list[tuple[str, str, list[tuple[str, bytes]]]] = []
-    speaks_for: dict[int, str | None] = {}
     for reply in replies:
         replier, payload = reply[0], reply[1]
         try:
@@ -95,18 +94,17 @@ def sent_answers(replies: list[tuple], unreadable: Callable[[str], None] | None 
             if unreadable is not None:
                 unreadable(f"{err} (from {replier})")
             continue
-        speaks_for[len(read)] = answering_as(reply[2]) if len(reply) > 2 else name
-        read.append((replier, name, items))
+        read.append((replier, (answering_as(reply[2]) or "") if len(reply) > 2 else name, items))
     first: dict[tuple[str, int], tuple[str, bytes, str]] = {}  # (source, seq): (key, data, replier) first given
     order: list[tuple[str, int]] = []
     conflicts: dict[tuple[str, int], Conflict] = {}
-    for i, (replier, _, items) in enumerate(read):
+    for replier, as_source, items in read:
         for key, data in items:
             try:
                 stamp = stamp_of(data)
             except (msgspec.DecodeError, msgspec.ValidationError):
                 continue
-            as_source, key_source = speaks_for[i], key.split("/")[2] if key.count("/") >= 3 else ""
+            key_source = key.split("/")[2] if key.count("/") >= 3 else ""
             if stamp.source != as_source or key_source != as_source:
                 if foreign is not None:
                     foreign(f"forged answer: {replier or 'a session'} answered as {as_source!r} with "
@@ -120,7 +118,7 @@ def sent_answers(replies: list[tuple], unreadable: Callable[[str], None] | None 
             elif first[at][1] != data and at not in conflicts:
                 k, d, r = first[at]
                 conflicts[at] = Conflict(stamp.source, stamp.seq, k, d, r, key, data, replier)
-    return Sent(answered=sorted({speaks_for[i] for i in range(len(read)) if speaks_for[i]}),
+    return Sent(answered=sorted({as_source for _, as_source, _ in read if as_source}),
                 events=[first[at][:2] for at in order if at not in conflicts],
                 conflicts=list(conflicts.values()), replies=read)
 
