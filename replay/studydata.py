@@ -1704,9 +1704,11 @@ def _name_pattern(name: str) -> str | None:
     parts = [w for w in re.findall(r"[^\W\d_]+", name) if len(w) >= 2]
     if not parts:
         return None
-    joined = r"[\s\-._]*".join(map(re.escape, parts))
+    # joined over every spelling of each part ("juergenmueller@uni.de" as "Anna-Schmidt": trial36 D3)
+    joined = r"[\s\-._]*".join("(?:" + "|".join(map(re.escape, sorted(_spellings(w), key=len, reverse=True))) + ")"
+                                 for w in parts)
     # and as an English keyboard writes them (trial35 D1: "Mueller", "Jurgen", "Zoe", "OBrien" stayed): each word
-    # without its apostrophes and hyphens, each part without its accents, and German's umlauts as ae, oe, ue, ss
+    # without its apostrophes and hyphens, each part in every spelling `_spellings` gives
     words = [v for w in name.split() for v in (w, w.replace("'", "\u2019"), w.replace("\u2019", "'"),
                                                re.sub(r"['\u2019\-]", "", w))]
     forms = {f for w in parts + [w for w in words if len(w) >= 2] for f in _spellings(w)}
@@ -1714,15 +1716,30 @@ def _name_pattern(name: str) -> str | None:
     return rf"(?<![^\W_])(?:{joined}|{alone})s?(?![^\W_])"  # an underscore parts words here ("Schmidt_Anna")
 
 
+# letters as a keyboard without them writes them (`_spellings`): NFKD leaves these whole (no combining mark to drop), so
+# "Søndergård" stayed "Søndergard" and "Łukasz" never became "Lukasz" (trial36 D3); and each spelled out, as German
+# and the Nordic languages write them without the letter ("Mueller", "Soendergaard")
+KEYBOARD_LETTERS = {"ø": "o", "ł": "l", "æ": "ae", "œ": "oe", "đ": "d", "þ": "th", "ı": "i", "ß": "ss"}
+SPELLED_OUT = {"ä": "ae", "ö": "oe", "ü": "ue", "ø": "oe", "å": "aa", "æ": "ae", "œ": "oe", "ß": "ss", "ł": "l",
+               "đ": "d", "þ": "th", "ı": "i"}
+
+
 def _spellings(word: str) -> set[str]:
-    """`word` as written, without its accents ("Zoë" -> "Zoe", "Müller" -> "Muller") and with German's umlauts and
-    sharp s spelled out ("Mueller", "Strasse")."""
+    """`word` (lower case: the pattern ignores case) as written, without its accents and with the letters NFKD
+    keeps whole written plainly ("zoë" -> "zoe", "müller" -> "muller", "søndergård" -> "sondergard"), with umlauts
+    and Nordic letters spelled out ("mueller", "soendergaard", "strasse"), and in every mix of these."""
     import unicodedata
-    plain = "".join(c for c in unicodedata.normalize("NFKD", word) if not unicodedata.combining(c))
-    spelled = word
-    for a, b in (("ä", "ae"), ("ö", "oe"), ("ü", "ue"), ("Ä", "Ae"), ("Ö", "Oe"), ("Ü", "Ue"), ("ß", "ss")):
-        spelled = spelled.replace(a, b)
-    return {word, plain, spelled}
+
+    def unmarked(text: str) -> str:
+        return "".join(c for c in unicodedata.normalize("NFKD", text) if not unicodedata.combining(c))
+    import itertools
+    # each letter as written, plainly, or spelled out, in every mix ("sondergaard": ø plain, å spelled out); a
+    # name's letters with more than one way are few, and past 6 of them only the three whole ways are taken
+    ways = [sorted({c, "".join(KEYBOARD_LETTERS.get(u, u) for u in unmarked(c)), unmarked(SPELLED_OUT.get(c, c))})
+            for c in word.lower()]
+    if sum(len(w) > 1 for w in ways) > 6:
+        return {"".join(w[i] if len(w) > i else w[0] for w in ways) for i in range(3)}
+    return {"".join(mix) for mix in itertools.product(*ways)}
 
 
 def mentions(text: str, pid: str) -> bool:

@@ -231,7 +231,11 @@ def test_a_file_of_the_users_in_report_that_names_them_by_name_is_said_to_name_t
     ("Jürgen Müller", "jürgen's dad; MÜLLER; Mueller; Juergen; Jurgen; Muller; a mule",
      "deleted's dad; deleted; deleted; deleted; deleted; deleted; a mule"),
     ("Zoë O'Brien", "O'Brien's kid; O\u2019Brien; OBrien; Brien; Zoe; zoë; ZOË; a zoo",
-     "deleted's kid; deleted; deleted; deleted; deleted; deleted; deleted; a zoo")])
+     "deleted's kid; deleted; deleted; deleted; deleted; deleted; deleted; a zoo"),
+    # trial36 D3: letters NFKD keeps whole, Nordic spellings, their mixes, and the joined forms of every spelling
+    ("Łukasz Søndergård", "Lukasz's dad; Sondergard; Soendergaard; Sondergaard; lukasz.sondergard@uni.dk; a sonde",
+     "deleted's dad; deleted; deleted; deleted; deleted@uni.dk; a sonde"),
+    ("Jürgen Müller", "juergenmueller@uni.de; jurgenmuller; Jürgens", "deleted@uni.de; deleted; deleted")])
 def test_a_name_goes_from_kept_reasons_in_the_spellings_a_keyboard_gives_it(name, said, left):
     """trial35 D1: "Mueller", "Juergen", "Jurgen", "Zoe", "OBrien" stayed in another person's kept reason after
     the deletion of Jürgen Müller and Zoë O'Brien: only the spellings of the key file went."""
