@@ -55,6 +55,19 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="remove the journal beside a complete REC when it holds nothing REC lacks (a stale one)")
 
 
+def _continued(recording) -> None:
+    """Said once recover has done its work (a refusal stays one line, trial36 R1), as every verb says it
+    (replay/recover.py journal_left): a file a restarted recorder continued is a part of a session whole beside it
+    (trial35 N1: recover wrote a third, partial copy and said nothing of S.1.mcap)."""
+    from pairplay.replay.continued import continued_in
+    later = continued_in(recording)
+    if later is not None:
+        from pairplay.cli.main import warn
+        warn("recover", f"{recording}: a restarted recorder continued it in {later.name} beside it, which holds "
+                        "the whole session from this file's events on: give that to the verbs; this recovers the "
+                        "earlier part alone")
+
+
 def run(args: argparse.Namespace) -> int:
     from pairplay.livelock import LIVE, is_live
     from pairplay.replay.recover import default_output, recover
@@ -66,14 +79,6 @@ def run(args: argparse.Namespace) -> int:
             raise OptionError(f"{LIVE}: recover it once its session has stopped; nothing written", live)
 
     args.output = file_in(args.output, default_output(Path(args.recording)).name)  # `-o out/`: into out/
-    from pairplay.replay.continued import continued_in
-    later = continued_in(args.recording)
-    if later is not None:  # said first, as every verb says it (replay/recover.py journal_left): its recovered copy is
-        # a part of a session whole beside it (trial35 N1: a third, partial copy and no word of S.1.mcap)
-        from pairplay.cli.main import warn
-        warn("recover", f"{args.recording}: a restarted recorder continued it in {later.name} beside it, which holds "
-                        "the whole session from this file's events on: give that to the verbs; this recovers the "
-                        "earlier part alone")
     if args.discard_journal:  # decided before anything is written: only a stale journal is removed
         from pairplay.replay.copies import Copies
         # removing it writes the study folder it may be in: the folder's lock first (replay/copies.py module rule)
@@ -90,6 +95,7 @@ def run(args: argparse.Namespace) -> int:
     copies = Copies("recover", [args.recording])  # a study's recording copied beyond recordings/: their deletion knows
     copies.check([args.output or default_output(Path(args.recording))])
     done = recover(args.recording, args.output, force=args.force, admit=admit)
+    _continued(args.recording)
     if not done.complete:
         copies.journal([done.output])
     if done.complete:

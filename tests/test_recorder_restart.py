@@ -324,5 +324,10 @@ def test_the_earlier_file_of_a_restarted_recorder_names_the_file_that_continues_
                    "this file's events on: give that instead", line
     ran = pairplay_cli("rebuild", earlier, "--out", tmp_path / "rb", "--partial")
     assert "a restarted recorder continued it in c2.1.mcap" in ran.stderr, ran.stdout + ran.stderr
+    data = earlier.read_bytes()  # cut, as the kill left it: recover writes its copy
+    earlier.write_bytes(data[:len(data) * 2 // 3])
     ran = pairplay_cli("recover", earlier)  # (trial35 N1: recover alone said nothing of it)
+    assert ran.returncode == 0 and (tmp_path / "c2.recovered.mcap").is_file(), ran.stdout + ran.stderr
     assert "a restarted recorder continued it in c2.1.mcap beside it" in ran.stderr, ran.stdout + ran.stderr
+    ran = pairplay_cli("recover", earlier)  # over its own output: the refusal alone (trial36 R1: the warning first)
+    assert ran.returncode == 2 and len(ran.stderr.strip().splitlines()) == 1, ran.stderr
