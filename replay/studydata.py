@@ -1489,8 +1489,11 @@ class StudyData:
             key = self.key_file
             if key is not None and not key.is_file() and not refusal(key):  # before anything is deleted: their
                 # name stays in it (a pipe there is refused for what it is, by key_file_ids)
-                raise StudyDataError(f"{pid}: the key file {key} is not there (an unmounted drive?): their name "
-                                     "would stay in it; make it reachable first, then delete")
+                # (a folder at its path was "not there", trial36 K1)
+                there, fix = (("is a folder, not the key file", "put the key file back there first") if key.is_dir()
+                              else ("is not there (an unmounted drive?)", "make it reachable first"))
+                raise StudyDataError(f"{pid}: the key file {key} {there}: their name would stay in it; {fix}, "
+                                     "then delete")
             lines = self.key_file_ids().count(pid)
             # their name, as the key file holds it: a kept line of another's that wrote it (a mark's reason, "Anna
             # Schmidt's mother came in") keeps it no more than their id (trial33 C: the key file's line went, the

@@ -259,3 +259,16 @@ def test_a_deletion_of_someone_the_key_file_has_no_line_of_says_their_name_was_n
     assert f"p01 had no line in the key file {keys}: their name is not known here, so the kept reasons of other " \
            "people's games were not checked for it" in ran.stderr, ran.stderr
     assert folder.is_dir()
+
+
+def test_a_folder_where_the_key_file_should_be_is_said_as_a_folder(played, tmp_path, pairplay_cli):
+    """trial36 K1: the refusal was right, its words ("is not there (an unmounted drive?)") wrong."""
+    folder = copy(played, tmp_path)
+    keys = tmp_path / "private" / "keys.csv"
+    keys.unlink()
+    keys.mkdir()
+    ran = pairplay_cli("participant", "delete", "s", "p01", "--yes", cwd=tmp_path)
+    assert ran.returncode == 2 and len(ran.stderr.strip().splitlines()) == 1, ran.stderr
+    assert f"p01: the key file {keys} is a folder, not the key file: their name would stay in it; put the key file " \
+           "back there first, then delete" in ran.stderr, ran.stderr
+    assert (folder / "recordings").is_dir() and any((folder / "recordings").iterdir())  # nothing deleted
