@@ -365,9 +365,11 @@ def warn_unreachable(runner, verb: str) -> None:
 def _serve(data: StudyData, args) -> int:
     import threading
 
-    host, _, port = args.listen.rpartition(":")
-    if not host or not port.isdigit():
-        raise StudyDataError(f"--listen {args.listen!r}: use HOST:PORT")
+    from pairplay.cli.lab import parse_listen
+    try:  # the lab's parser, its range check with it: 99999 was taken as port 34463 (trial36 P1)
+        host, port = parse_listen(args.listen)
+    except ValueError as err:
+        raise StudyDataError(str(err)) from None
     robot, overridden = _robot(args)
     if bool(args.certfile) != bool(args.keyfile):
         raise StudyDataError("--certfile and --keyfile go together")
@@ -400,7 +402,7 @@ def _serve(data: StudyData, args) -> int:
 
 
 def _serving(data: StudyData, args, stop, runners: list, pilot: dict, robot, overridden: bool, host: str,
-             port: str) -> None:
+             port: int) -> None:
     """`_serve` once its options are checked: the console served until `stop` (a signal)."""
     from pairplay.services.bus import Bus, BusOptions, shutdown_wait
     from pairplay.services.console.server import StudyLabServer
@@ -414,7 +416,7 @@ def _serving(data: StudyData, args, stop, runners: list, pilot: dict, robot, ove
         if overridden and robot is None:
             runner.robot = None
         try:
-            server = StudyLabServer(runner, host=host.strip("[]"), port=int(port), ssl_certfile=args.certfile,
+            server = StudyLabServer(runner, host=host, port=port, ssl_certfile=args.certfile,
                                     ssl_keyfile=args.keyfile).start()
         except OSError as err:
             raise StudyDataError(f"cannot serve the console: {err.strerror or err}", f"--listen {args.listen}") from None

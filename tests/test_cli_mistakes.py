@@ -367,6 +367,9 @@ CASES = [
          f"Address already in use (--listen 127.0.0.1:{TAKEN_PORT})"),
     Case("protocol serve --listen a port in use", ["protocol", "serve", "study", "--listen", f"127.0.0.1:{TAKEN_PORT}"],
          f"cannot serve the console: Address already in use (--listen 127.0.0.1:{TAKEN_PORT})"),  # the lab's words
+    # trial36 P1: serve took 99999 as port 34463 (99999 mod 65536) where the lab refuses it
+    Case("protocol serve --listen a port past 65535", ["protocol", "serve", "study", "--listen", "127.0.0.1:99999"],
+         "--listen '127.0.0.1:99999': use HOST:PORT, e.g. 127.0.0.1:8080 (port 0: a free one)"),
     # read-only places (a read-only tmpfs mounted at ./ro)
     Case("study --out on a read-only file system", ["study", "--quiet", "--out", "ro/study"], "read-only", readonly=True),
     Case("session --out on a read-only file system", SIM + ["--out", "ro/rec"], "read-only", readonly=True),
