@@ -119,6 +119,25 @@ def test_a_held_session_stopped_by_a_signal_names_the_signal(tmp_path):
     assert "not recorded (session rheld)" in last and "none came back" not in last, last
 
 
+def test_a_session_stopped_while_it_waits_for_its_recorder_says_it_was_interrupted(tmp_path):
+    """trial36 W1: Ctrl-C while `session --external recorder` waited for a recorder that never came: exit 130 and
+    only "session H3 over; the external recorder writes its file"."""
+    p = session_proc(tmp_path, "--participant", "sim:ashley", "--rounds", "5", "--session", "never",
+                     "--external", "recorder")
+    try:
+        first_line(p)
+        p.send_signal(signal.SIGINT)
+        out, err = p.communicate(timeout=30)
+    finally:
+        if p.poll() is None:
+            p.kill()
+            p.wait()
+    assert p.returncode == 130, err
+    assert "over; the external recorder writes its file" not in out, out
+    assert err.strip().splitlines()[-1] == "pairplay session: interrupted (Ctrl-C); session never: what was recorded, " \
+        "if its external recorder joined, is in that recorder's file", err
+
+
 def _service(tmp_path, *args):
     return subprocess.Popen([sys.executable, "-m", "pairplay", "run", *args], stdout=subprocess.PIPE,
                             stderr=subprocess.PIPE, text=True, env=dict(os.environ, PYTHONUNBUFFERED="1", **SETTLE))
