@@ -1704,9 +1704,14 @@ def _name_pattern(name: str) -> str | None:
     "Anna Schmidt's mother": matching the whole name alone left a first name and a surname that still said
     who the deleted person was (trial34 D). A part that is also a word ("May") is taken too: erring towards
     erasure."""
+    # a name in a script written without spaces (Chinese, Japanese): "王伟的妈妈来了" has no word boundary around 王伟,
+    # and "李 娜" no part of two letters; such a name is found anywhere in the text, whole (its spaces dropped) or
+    # by each word of two characters or more (trial36 D4)
+    unspaced = [w for w in ("".join(name.split()), *name.split()) if len(w) >= 2 and _unspaced_script(w)]
+    anywhere = "|".join(map(re.escape, sorted(set(unspaced), key=len, reverse=True)))
     parts = [w for w in re.findall(r"[^\W\d_]+", name) if len(w) >= 2]
     if not parts:
-        return None
+        return anywhere or None
     # joined over every spelling of each part ("juergenmueller@uni.de" as "Anna-Schmidt": trial36 D3)
     joined = r"[\s\-._]*".join("(?:" + "|".join(map(re.escape, sorted(_spellings(w), key=len, reverse=True))) + ")"
                                  for w in parts)
@@ -1716,7 +1721,15 @@ def _name_pattern(name: str) -> str | None:
                                                re.sub(r"['\u2019\-]", "", w))]
     forms = {f for w in parts + [w for w in words if len(w) >= 2] for f in _spellings(w)}
     alone = "|".join(map(re.escape, sorted(forms, key=len, reverse=True)))
-    return rf"(?<![^\W_])(?:{joined}|{alone})s?(?![^\W_])"  # an underscore parts words here ("Schmidt_Anna")
+    bounded = rf"(?<![^\W_])(?:{joined}|{alone})s?(?![^\W_])"  # an underscore parts words here ("Schmidt_Anna")
+    return f"{anywhere}|{bounded}" if anywhere else bounded
+
+
+def _unspaced_script(word: str) -> bool:
+    """Whether `word` holds a letter of a script written without spaces between words (Han, Hiragana, Katakana)."""
+    import unicodedata
+    return any(unicodedata.name(c, "").startswith(("CJK UNIFIED", "CJK COMPATIBILITY", "HIRAGANA", "KATAKANA"))
+               for c in word)
 
 
 # letters as a keyboard without them writes them (`_spellings`): NFKD leaves these whole (no combining mark to drop), so

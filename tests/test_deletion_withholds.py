@@ -235,7 +235,11 @@ def test_a_file_of_the_users_in_report_that_names_them_by_name_is_said_to_name_t
     # trial36 D3: letters NFKD keeps whole, Nordic spellings, their mixes, and the joined forms of every spelling
     ("Łukasz Søndergård", "Lukasz's dad; Sondergard; Soendergaard; Sondergaard; lukasz.sondergard@uni.dk; a sonde",
      "deleted's dad; deleted; deleted; deleted; deleted@uni.dk; a sonde"),
-    ("Jürgen Müller", "juergenmueller@uni.de; jurgenmuller; Jürgens", "deleted@uni.de; deleted; deleted")])
+    ("Jürgen Müller", "juergenmueller@uni.de; jurgenmuller; Jürgens", "deleted@uni.de; deleted; deleted"),
+    # trial36 D4: a name in a script written without spaces, inside a sentence; one of one-character parts
+    ("王伟", "王伟的妈妈来了; 伟大", "deleted的妈妈来了; 伟大"),
+    ("李 娜", "李娜来了; a banana", "deleted来了; a banana"),
+    ("山田 太郎", "山田太郎さん; 太郎くん", "deletedさん; deletedくん")])
 def test_a_name_goes_from_kept_reasons_in_the_spellings_a_keyboard_gives_it(name, said, left):
     """trial35 D1: "Mueller", "Juergen", "Jurgen", "Zoe", "OBrien" stayed in another person's kept reason after
     the deletion of Jürgen Müller and Zoë O'Brien: only the spellings of the key file went."""
